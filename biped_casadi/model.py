@@ -104,7 +104,9 @@ class BipedModel:
     ``impact_full(q, dq)`` -> (q+, dq+, F, dq_pre, v_old_stance): also the impulse on
     the new stance foot, the post-impact velocity before relabelling and the velocity
     of the old stance foot after impact;
-    ``forward_dynamics(q, dq, u)`` -> ddq; ``ground_reaction(q, dq, u)`` -> (Fx, Fz);
+    ``forward_dynamics(q, dq, u)`` -> ddq; ``ground_reaction(q, dq, u)`` -> (Fx, Fz) on
+    the stance foot (Newton's law for the centre of mass); ``ground_reaction_acc(q, dq,
+    ddq)`` the same from the accelerations;
     ``energy(q, dq)`` -> (K, V, E); ``com(q)``; ``points(q)`` (2x6: stance foot, stance
     knee, hip, torso top, swing knee, swing foot); ``angular_momentum(q, dq, p)`` about
     a point p.
@@ -142,7 +144,10 @@ class BipedModel:
             for j in range(5):
                 C[k, j] = sum(0.5 * (dD[j][k, i] + dD[i][k, j] - dD[j][i, k]) * dq[i]
                               for i in range(5))
-        H = ca.mtimes(C, dq) + G
+        # H = C dq + G, with C dq = d/dt(dK/ddq) - dK/dq - D ddq; the same vector as
+        # mtimes(C, dq) from the Christoffel symbols, in a third of the operations
+        K_dq = 0.5 * ca.dot(dq, ca.mtimes(D, dq))
+        H = ca.jtimes(ca.mtimes(D, dq), q, dq) - ca.gradient(K_dq, q) + G
         Bm = ca.DM(B_INPUT)
         ddq = ca.solve(D, ca.mtimes(Bm, u) - H)
 
@@ -154,6 +159,8 @@ class BipedModel:
         dcom = ca.jtimes(com, q, dq)
         ddcom = ca.jtimes(dcom, q, dq) + ca.jtimes(com, q, ddq)
         grf = M * (ddcom + ca.vertcat(0, p.g))
+        acc = ca.SX.sym("ddq", 5)
+        grf_acc = M * (ca.jtimes(dcom, q, dq) + ca.jtimes(com, q, acc) + ca.vertcat(0, p.g))
 
         self.D = _fn("D", [q], [D], ["q"], ["D"])
         self.H = _fn("H", [q, dq], [H], ["q", "dq"], ["H"])
@@ -166,6 +173,8 @@ class BipedModel:
                                     ["q", "dq", "u"], ["ddq"])
         self.ground_reaction = _fn("ground_reaction", [q, dq, u], [grf[0], grf[1]],
                                    ["q", "dq", "u"], ["Fx", "Fz"])
+        self.ground_reaction_acc = _fn("ground_reaction_acc", [q, dq, acc],
+                                       [grf_acc[0], grf_acc[1]], ["q", "dq", "ddq"], ["Fx", "Fz"])
         self.energy = _fn("energy", [q, dq], [K, V, K + V], ["q", "dq"], ["K", "V", "E"])
         self.com = _fn("com", [q], [com], ["q"], ["com"])
         self.com_velocity = _fn("com_velocity", [q, dq], [dcom], ["q", "dq"], ["dcom"])

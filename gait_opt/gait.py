@@ -1,0 +1,268 @@
+"""The reference gait q^d(t): evaluation, physical checks, and a self-describing file."""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from biped_casadi import RobotParams, rabbit
+
+from .options import GaitOptions
+from .reference import quintic_hermite, reference_dynamics
+
+__all__ = ["Gait", "GaitFileError", "FORMAT", "FORMAT_VERSION"]
+
+FORMAT = "biped-casadi-gait"
+FORMAT_VERSION = 1
+#: the reference is tabulated (and so defined) on [0, EXTENT * T]
+EXTENT = 2.0
+
+
+class GaitFileError(ValueError):
+    """A gait file that cannot be used: unreadable, corrupted, other format or version,
+    or made for other robot parameters."""
+
+
+class Gait:
+    """A cyclic reference step of duration ``T`` (SPEC section 2).
+
+    ``q(t)``, ``dq(t)``, ``ddq(t)``, ``u(t)``: t a float or array in [0, 2 T] (past T the
+    reference continues smoothly: the Bezier polynomials of q_a^d evaluated past s = 1
+    and q_u^d continued by the unactuated row); shapes (5,) / (4,) or (5, N) / (4, N).
+    ``alpha`` (4 x (M+1)) Bezier coefficients of q_a^d in s = t / T; ``x0`` = (q_u^d(0),
+    dq_u^d(0)).  ``step_length``, ``speed``, ``cost``; ``solver_stats``; ``check()``
+    computes every physical and consistency figure on a dense grid.
+    """
+
+    def __init__(self, model, options: GaitOptions, alpha, x0, T, solver_stats=None):
+        self.model = model
+        self.options = options
+        self.alpha = np.array(alpha, dtype=float).reshape(4, options.bezier_degree + 1)
+        self.x0 = np.array(x0, dtype=float).ravel()
+        self.T = float(T)
+        if self.x0.shape != (2,) or not np.all(np.isfinite(self.x0)) or not np.all(np.isfinite(self.alpha)):
+            raise ValueError("gait: x0 must be 2 finite numbers and alpha finite")
+        if not (math.isfinite(self.T) and self.T > 0):
+            raise ValueError(f"gait: T must be positive, got {T!r}")
+        self.solver_stats = dict(solver_stats or {})
+        self._ref = reference_dynamics(model, options.bezier_degree)
+        self._tabulate()
+
+    # --------------------------------------------------------------- tabulation
+    def _tabulate(self):
+        n = self.options.polish_steps
+        n_ext = int(round(EXTENT * n))
+        F = self._ref.integrate(n_ext)
+        X = np.array(F(self.x0, 0.0, 1.0 / n, self.alpha, self.T))
+        X = np.hstack([self.x0[:, None], X])
+        s = np.arange(n_ext + 1) / n
+        finite = np.all(np.isfinite(X), axis=0)
+        if not finite.all():        # the passive continuation blew up: shorten the domain
+            last = int(np.argmin(finite)) - 1
+            X, s = X[:, :last + 1], s[:last + 1]
+        self._s = s
+        self._X = X
+        qa, dqa, ddqa = self._qa(s)
+        q = np.vstack([X[0], qa])
+        dq = np.vstack([X[1], dqa])
+        self._A = np.array(self._ref.ddqu.map(s.size)(q, dq, ddqa)).ravel()
+        self.t_max = float(s[-1] * self.T)
+
+    def _qa(self, s):
+        s = np.atleast_1d(s)
+        out = self._ref.qa.map(s.size)(self.alpha, s[None, :], self.T)
+        return tuple(np.array(o) for o in out)
+
+    def _eval(self, t):
+        t_arr = np.asarray(t, dtype=float)
+        scalar = t_arr.ndim == 0
+        t1 = np.atleast_1d(t_arr).ravel()
+        if not np.all(np.isfinite(t1)):
+            raise ValueError("gait: t must be finite")
+        if np.any(t1 < -1e-12) or np.any(t1 > self.t_max + 1e-12):
+            raise ValueError(f"gait: t must lie in [0, {self.t_max:.6g}] (2 T), got "
+                             f"[{t1.min():.6g}, {t1.max():.6g}]")
+        tg = self._s * self.T
+        qu, dqu, _ = quintic_hermite(tg, self._X[0], self._X[1], self._A, t1)
+        qa, dqa, ddqa = self._qa(t1 / self.T)
+        q, dq = np.vstack([qu, qa]), np.vstack([dqu, dqa])
+        # ddq_u from the unactuated row itself (the interpolant's second derivative would
+        # lose ~1e-7 to cancellation), so eq. (1) row 1 holds to round-off at any t
+        ddqu = np.array(self._ref.ddqu.map(t1.size)(q, dq, ddqa))
+        res = (q, dq, np.vstack([ddqu, ddqa]))
+        return tuple(r[:, 0] for r in res) if scalar else res
+
+    def q(self, t):
+        """q^d(t): shape (5,) for a float t, (5, N) for an array."""
+        return self._eval(t)[0]
+
+    def dq(self, t):
+        return self._eval(t)[1]
+
+    def ddq(self, t):
+        return self._eval(t)[2]
+
+    def u(self, t):
+        """Reference torques u^d(t) = rows 2..5 of D ddq^d + H (B = [0; I])."""
+        q, dq, ddq = self._eval(t)
+        q2, dq2, ddq2 = (np.atleast_2d(v.T).T for v in (q, dq, ddq))
+        u = np.array(self._ref.torque.map(q2.shape[1])(q2, dq2, ddq2))
+        return u[:, 0] if np.ndim(t) == 0 else u
+
+    def state_at(self, t):
+        """(q_u^d(t), dq_u^d(t))."""
+        q, dq, _ = self._eval(float(t))
+        return np.array([q[0], dq[0]])
+
+    # ---------------------------------------------------------------- figures
+    @property
+    def step_length(self) -> float:
+        return float(self.model.swing_foot(self.q(self.T))[0])
+
+    @property
+    def speed(self) -> float:
+        return self.step_length / self.T
+
+    @property
+    def cost(self) -> float:
+        """Integral of u'u over the step divided by the step length (Simpson, 2001 pts)."""
+        t = np.linspace(0, self.T, 2001)
+        uu = np.sum(self.u(t)**2, axis=0)
+        h = t[1] - t[0]
+        integral = h / 3 * (uu[0] + uu[-1] + 4 * uu[1:-1:2].sum() + 2 * uu[2:-1:2].sum())
+        return float(integral / (self.step_length if self.options.cost ==
+                                 "torque_squared_per_length" else 1.0))
+
+    def check(self, n: int = 2001) -> dict:
+        """Physical validity and dynamic consistency on a dense grid of ``n`` points."""
+        m = self.model
+        t = np.linspace(0, self.T, n)
+        q, dq, ddq = self._eval(t)
+        u = np.array(self._ref.torque.map(n)(q, dq, ddq))
+        Fx, Fz = (np.array(v).ravel() for v in m.ground_reaction_acc.map(n)(q, dq, ddq))
+        xs, zs = (np.array(v).ravel() for v in m.swing_foot.map(n)(q))
+        qm, dqm = q[:, -1], dq[:, -1]
+        qp, dqp, F, _, v_old = (np.array(v).ravel() for v in m.impact_full(qm, dqm))
+        _, dz_end = m.swing_foot_velocity(qm, dqm)
+        # unactuated row of eq. (1) with the reference accelerations
+        D = np.array(m.D.map(n)(q)).reshape(5, 5, n, order="F")
+        H = np.array(m.H.map(n)(q, dq))
+        row1 = np.einsum("jn,jn->n", D[0], ddq) + H[0]
+        inner = slice(1, n - 1)
+        s = t / self.T
+        profile = self.options.clearance * 4 * s * (1 - s)
+        return dict(
+            n_points=n,
+            max_abs_torque=float(np.max(np.abs(u))),
+            min_normal_force=float(np.min(Fz)),
+            max_friction_ratio=float(np.max(np.abs(Fx) / np.maximum(Fz, 1e-300))),
+            min_swing_height_inside=float(np.min(zs[inner])),
+            min_clearance_margin=float(np.min(zs[inner] - profile[inner])),
+            swing_height_at_T=float(zs[-1]),
+            strike_velocity=float(dz_end),
+            liftoff_velocity=float(v_old[1]),
+            impact_impulse=F.tolist(),
+            impact_friction_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else math.inf,
+            max_stance_knee=float(np.max(q[1])),
+            min_swing_knee=float(np.min(q[4])),
+            periodicity_q=float(np.max(np.abs(qp - q[:, 0]))),
+            periodicity_dq=float(np.max(np.abs(dqp - dq[:, 0]))),
+            unactuated_row_residual=float(np.max(np.abs(row1))),
+        )
+
+    def reintegration_error(self, n: int = 201) -> float:
+        """Max |q_u(t) - q_u^d(t)| on [0, T] when the unactuated row is integrated
+        independently (CVODES, tolerances 1e-13) from x0 with q_a = q_a^d(t) imposed."""
+        import casadi as ca
+        x = ca.SX.sym("x", 2)
+        t = ca.SX.sym("t")
+        qa, dqa, ddqa = self._ref.qa(self.alpha, t / self.T, self.T)
+        q = ca.vertcat(x[0], qa)
+        dq = ca.vertcat(x[1], dqa)
+        ode = ca.vertcat(x[1], self._ref.ddqu(q, dq, ddqa))
+        grid = np.linspace(0, self.T, n)
+        F = ca.integrator("reintegrate", "cvodes", {"x": x, "t": t, "ode": ode}, 0.0, grid[1:],
+                          {"abstol": 1e-13, "reltol": 1e-13, "max_num_steps": 100000})
+        X = np.array(F(x0=self.x0)["xf"])
+        return float(np.max(np.abs(X[0] - self.q(grid[1:])[0])))
+
+    def summary(self) -> dict:
+        c = self.check()
+        return dict(T=self.T, step_length=self.step_length, speed=self.speed, cost=self.cost,
+                    peak_torque=c["max_abs_torque"], min_normal_force=c["min_normal_force"],
+                    max_friction_ratio=c["max_friction_ratio"],
+                    periodicity_q=c["periodicity_q"], periodicity_dq=c["periodicity_dq"],
+                    swing_height_at_T=c["swing_height_at_T"],
+                    unactuated_row_residual=c["unactuated_row_residual"],
+                    reintegration_error=self.reintegration_error(),
+                    solve_time=self.solver_stats.get("total_time"),
+                    ipopt_iterations=self.solver_stats.get("iterations"),
+                    ipopt_status=self.solver_stats.get("status"))
+
+    # --------------------------------------------------------------- file I/O
+    def to_dict(self) -> dict:
+        body = dict(format=FORMAT, version=FORMAT_VERSION,
+                    robot=self.model.params.to_dict(), options=self.options.to_dict(),
+                    solution=dict(T=self.T, alpha=self.alpha.tolist(), x0=self.x0.tolist()),
+                    solver_stats=_jsonable(self.solver_stats))
+        return body
+
+    def save(self, path) -> Path:
+        """Write a self-describing JSON file (format, version, robot, options, solution,
+        and a SHA-256 checksum of the rest)."""
+        path = Path(path)
+        body = self.to_dict()
+        body["sha256"] = _digest(body)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(body, indent=1))
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def load(cls, path, model=None) -> "Gait":
+        """Read a gait file.  With ``model``, the file must have been made for the same
+        robot parameters.  Raises :class:`GaitFileError` with the reason."""
+        path = Path(path)
+        if not path.is_file():
+            raise GaitFileError(f"gait file not found: {path}")
+        try:
+            body = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise GaitFileError(f"gait file {path} is not valid JSON (corrupted?): {e}") from None
+        if not isinstance(body, dict) or body.get("format") != FORMAT:
+            raise GaitFileError(f"{path} is not a {FORMAT} file")
+        if body.get("version") != FORMAT_VERSION:
+            raise GaitFileError(f"{path} has format version {body.get('version')!r}; this "
+                                f"toolkit reads version {FORMAT_VERSION}")
+        digest = body.pop("sha256", None)
+        if digest != _digest(body):
+            raise GaitFileError(f"gait file {path} is corrupted (checksum mismatch)")
+        try:
+            params = RobotParams.from_dict(body["robot"])
+            opts = GaitOptions.from_dict(body["options"])
+            sol = body["solution"]
+        except (KeyError, TypeError, ValueError) as e:
+            raise GaitFileError(f"gait file {path} has invalid contents: {e}") from None
+        if model is None:
+            model = rabbit(params)
+        elif model.params != params:
+            diff = [k for k, v in params.to_dict().items() if model.params.to_dict()[k] != v]
+            raise GaitFileError(f"gait file {path} was made for other robot parameters "
+                                f"(differ in: {', '.join(diff)})")
+        return cls(model, opts, sol["alpha"], sol["x0"], sol["T"],
+                   solver_stats=body.get("solver_stats"))
+
+    def __repr__(self):
+        return (f"Gait(T={self.T:.4f} s, step={self.step_length:.4f} m, "
+                f"speed={self.speed:.4f} m/s, robot={self.model.params.name})")
+
+
+def _digest(body: dict) -> str:
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
+
+
+def _jsonable(d):
+    return json.loads(json.dumps(d, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))

@@ -1,0 +1,112 @@
+"""Options of the reference-gait problem (SPEC section 2 defaults)."""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+__all__ = ["GaitOptions"]
+
+COSTS = ("torque_squared_per_length", "torque_squared")
+SCHEMES = ("legendre", "radau")
+
+
+@dataclass(frozen=True)
+class GaitOptions:
+    """Everything that defines the reference-gait problem; all have defaults.
+
+    speed: average forward speed (step length / T), m/s.
+    step_length_bounds: bounds on the step length chosen by the optimiser, m.
+    step_time_bounds: bounds on the step duration T, s.
+    mu: friction coefficient for the stance foot and the impact impulse.
+    torque_limit: |u_i| bound, N m.
+    min_normal_force: lower bound of the stance normal force, N.
+    clearance: swing-foot height bound inside the step, z_sw >= clearance * 4 s (1 - s)
+        with s = t / T (a parabola: 0 at both ends, `clearance` mid-step), m.
+    min_liftoff_speed / min_strike_speed: the swing foot leaves the ground upward after
+        impact and strikes it downward with at least these vertical speeds, m/s.
+    stance_knee_max / swing_knee_min: no hyperextension, q2 <= stance_knee_max and
+        q5 >= swing_knee_min over the whole step (enforced on the Bezier coefficients,
+        hence exactly, not only at nodes).
+    n_intervals, degree, scheme: direct collocation of the unactuated row
+        (Legendre or Radau points).
+    bezier_degree: degree of the actuated-joint polynomials.
+    cost: 'torque_squared_per_length' (integral of u'u over the step / step length) or
+        'torque_squared' (the integral alone).
+    polish_steps: RK4 steps per step for the exact unactuated trajectory.
+    ipopt: extra IPOPT options (name -> value), e.g. {'max_iter': 500}.
+    expand: expand the NLP to SX before solving (faster iterations, slower build).
+    """
+
+    speed: float = 0.75
+    step_length_bounds: tuple = (0.2, 0.8)
+    step_time_bounds: tuple = (0.2, 1.5)
+    mu: float = 0.6
+    torque_limit: float = 150.0
+    min_normal_force: float = 0.0
+    clearance: float = 0.03
+    min_liftoff_speed: float = 0.02
+    min_strike_speed: float = 0.02
+    stance_knee_max: float = 0.0
+    swing_knee_min: float = 0.0
+    n_intervals: int = 30
+    degree: int = 3
+    scheme: str = "legendre"
+    bezier_degree: int = 6
+    cost: str = "torque_squared_per_length"
+    polish_steps: int = 2000
+    ipopt: dict = field(default_factory=dict)
+    expand: bool = False
+
+    def __post_init__(self):
+        def pos(name):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise ValueError(f"gait option {name!r} must be a positive number, got {v!r}")
+
+        def nonneg(name):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                raise ValueError(f"gait option {name!r} must be a non-negative number, got {v!r}")
+
+        for n in ("speed", "mu", "torque_limit"):
+            pos(n)
+        for n in ("min_normal_force", "clearance", "min_liftoff_speed", "min_strike_speed"):
+            nonneg(n)
+        for n in ("step_length_bounds", "step_time_bounds"):
+            lo_hi = tuple(getattr(self, n))
+            if len(lo_hi) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in lo_hi) \
+                    or not 0 < lo_hi[0] < lo_hi[1]:
+                raise ValueError(f"gait option {n!r} must be (low, high) with 0 < low < high, got {lo_hi!r}")
+            object.__setattr__(self, n, tuple(float(v) for v in lo_hi))
+        for n, lo in (("n_intervals", 4), ("degree", 1), ("bezier_degree", 4), ("polish_steps", 100)):
+            v = getattr(self, n)
+            if not isinstance(v, int) or isinstance(v, bool) or v < lo:
+                raise ValueError(f"gait option {n!r} must be an integer >= {lo}, got {v!r}")
+        if self.scheme not in SCHEMES:
+            raise ValueError(f"gait option 'scheme' must be one of {SCHEMES}, got {self.scheme!r}")
+        if self.cost not in COSTS:
+            raise ValueError(f"gait option 'cost' must be one of {COSTS}, got {self.cost!r}")
+        if not isinstance(self.ipopt, dict):
+            raise ValueError("gait option 'ipopt' must be a dict of IPOPT options")
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["step_length_bounds"] = list(self.step_length_bounds)
+        d["step_time_bounds"] = list(self.step_time_bounds)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "GaitOptions":
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise ValueError(f"unknown gait option(s): {', '.join(sorted(unknown))}")
+        d = dict(d)
+        for n in ("step_length_bounds", "step_time_bounds"):
+            if n in d:
+                d[n] = tuple(d[n])
+        return cls(**d)
+
+    def replace(self, **changes) -> "GaitOptions":
+        return dataclasses.replace(self, **changes)

@@ -1,0 +1,138 @@
+"""Reference-gait parametrisation shared by the optimiser, the Gait object and the
+Poincaré analysis.
+
+q_a^d(t): a Bezier polynomial of degree M in s = t / T (4 x (M+1) coefficients alpha).
+Being a polynomial, it and all its time derivatives exist everywhere and continue
+smoothly past T (SPEC section 3: the reference after T is the same polynomial
+evaluated for s > 1).
+
+q_u^d(t): the solution of the unactuated row of eq. (1),
+    D11(q) ddq_u + D12(q) ddq_a^d + H1(q, dq) = 0,  q = (q_u, q_a^d(t)),
+from (q_u(0), dq_u(0)); it is integrated with fixed-step RK4 (error ~1e-12 at the
+default 2000 steps per step) and evaluated between grid points by quintic Hermite
+interpolation of (q_u, dq_u, ddq_u); ddq_u at any t is the unactuated row evaluated at
+the interpolated state.  Past T the same ODE continues it, so the whole
+reference is C^2 (indeed smooth) across T.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+from math import comb
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["ReferenceDynamics", "reference_dynamics", "bernstein", "quintic_hermite"]
+
+
+def bernstein(M: int, s):
+    """Bernstein basis b_{k,M}(s), k = 0..M (list; s numeric or CasADi)."""
+    return [comb(M, k) * s**k * (1 - s)**(M - k) for k in range(M + 1)]
+
+
+class ReferenceDynamics:
+    """CasADi Functions of the gait parametrisation for one model and Bezier degree.
+
+    ``qa(alpha, s, T)`` -> (qa, dqa, ddqa) with time derivatives;
+    ``ddqu(q, dq, ddqa)`` the unactuated row of eq. (1) solved for ddq_u;
+    ``torque(q, dq, ddq)`` rows 2..5 of D ddq + H (B = [0; I]);
+    ``full(x, alpha, s, T)`` -> (q, dq, ddq) with x = (q_u, dq_u);
+    ``rk4(x, s, ds, alpha, T)`` one RK4 step of the unactuated row in s = t / T;
+    ``integrate(n)`` -> Function(x0, s0, ds, alpha, T) -> 2 x n states after each step.
+    """
+
+    def __init__(self, model, degree: int):
+        if degree < 3:
+            raise ValueError(f"bezier_degree must be >= 3, got {degree}")
+        self.model = model
+        self.degree = M = degree
+        alpha = ca.SX.sym("alpha", 4, M + 1)
+        s = ca.SX.sym("s")
+        T = ca.SX.sym("T")
+        b = bernstein(M, s)
+        b1 = bernstein(M - 1, s)
+        b2 = bernstein(M - 2, s)
+        qa = sum(alpha[:, k] * b[k] for k in range(M + 1))
+        dqa = M * sum((alpha[:, k + 1] - alpha[:, k]) * b1[k] for k in range(M)) / T
+        ddqa = M * (M - 1) * sum((alpha[:, k + 2] - 2 * alpha[:, k + 1] + alpha[:, k]) * b2[k]
+                                 for k in range(M - 1)) / T**2
+        self.qa = ca.Function("qa", [alpha, s, T], [qa, dqa, ddqa],
+                              ["alpha", "s", "T"], ["qa", "dqa", "ddqa"])
+
+        q, dq = model.q_sym, model.dq_sym
+        D, H = model.D_expr, model.H_expr
+        dd_a = ca.SX.sym("ddqa", 4)
+        ddqu = -(ca.mtimes(D[0, 1:], dd_a) + H[0]) / D[0, 0]
+        self.ddqu = ca.Function("ddqu", [q, dq, dd_a], [ddqu], ["q", "dq", "ddqa"], ["ddqu"])
+        ddq = ca.SX.sym("ddq", 5)
+        self.torque = ca.Function("torque", [q, dq, ddq], [(ca.mtimes(D, ddq) + H)[1:]],
+                                  ["q", "dq", "ddq"], ["u"])
+
+        x = ca.SX.sym("x", 2)
+        qa_, dqa_, ddqa_ = self.qa(alpha, s, T)
+        qf = ca.vertcat(x[0], qa_)
+        dqf = ca.vertcat(x[1], dqa_)
+        a_u = self.ddqu(qf, dqf, ddqa_)
+        self.full = ca.Function("full", [x, alpha, s, T], [qf, dqf, ca.vertcat(a_u, ddqa_)],
+                                ["x", "alpha", "s", "T"], ["q", "dq", "ddq"])
+        # unactuated row as a first-order ODE in s: dx/ds = T * (dq_u, ddq_u)
+        f = ca.Function("f_s", [x, s, alpha, T], [T * ca.vertcat(x[1], a_u)])
+        ds = ca.SX.sym("ds")
+        k1 = f(x, s, alpha, T)
+        k2 = f(x + ds / 2 * k1, s + ds / 2, alpha, T)
+        k3 = f(x + ds / 2 * k2, s + ds / 2, alpha, T)
+        k4 = f(x + ds * k3, s + ds, alpha, T)
+        xn = x + ds / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        self.rk4 = ca.Function("rk4", [x, s, ds, alpha, T], [xn, s + ds],
+                               ["x", "s", "ds", "alpha", "T"], ["x_next", "s_next"])
+        self._integrators = {}
+
+    def integrate(self, n: int) -> ca.Function:
+        """Function(x0, s0, ds, alpha, T) -> X (2 x n): RK4 states after each of n steps."""
+        if n not in self._integrators:
+            x0 = ca.MX.sym("x0", 2)
+            s0 = ca.MX.sym("s0")
+            ds = ca.MX.sym("ds")
+            alpha = ca.MX.sym("alpha", 4, self.degree + 1)
+            T = ca.MX.sym("T")
+            step = ca.Function("step", [x0, s0, ds, alpha, T],
+                               [*self.rk4(x0, s0, ds, alpha, T)])
+            acc = step.mapaccum("rk4_acc", n, [0, 1], [0, 1])
+            X, _ = acc(x0, s0, ds, alpha, T)
+            self._integrators[n] = ca.Function(f"unactuated_rk4_{n}", [x0, s0, ds, alpha, T],
+                                               [X], ["x0", "s0", "ds", "alpha", "T"], ["X"])
+        return self._integrators[n]
+
+
+@lru_cache(maxsize=16)
+def reference_dynamics(model, degree: int) -> ReferenceDynamics:
+    """Cached :class:`ReferenceDynamics` per (model, Bezier degree)."""
+    return ReferenceDynamics(model, degree)
+
+
+# quintic Hermite interpolation on a uniform grid --------------------------------
+# p(th) = sum c_i th^i on th in [0, 1]; conditions p, p', p'' at both ends.
+_HERMITE_A = np.array([
+    [1, 0, 0, 0, 0, 0],
+    [0, 1, 0, 0, 0, 0],
+    [0, 0, 2, 0, 0, 0],
+    [1, 1, 1, 1, 1, 1],
+    [0, 1, 2, 3, 4, 5],
+    [0, 0, 2, 6, 12, 20],
+], dtype=float)
+_HERMITE_AINV = np.linalg.inv(_HERMITE_A)
+
+
+def quintic_hermite(t_grid, y, dy, ddy, t):
+    """Value and first two derivatives at ``t`` of the quintic Hermite interpolant of
+    (y, dy, ddy) given on the uniform grid ``t_grid``.  Vectorised over ``t``."""
+    t = np.asarray(t, dtype=float)
+    h = t_grid[1] - t_grid[0]
+    i = np.clip(((t - t_grid[0]) // h).astype(int), 0, len(t_grid) - 2)
+    th = (t - t_grid[i]) / h
+    rhs = np.stack([y[i], h * dy[i], h**2 * ddy[i], y[i + 1], h * dy[i + 1], h**2 * ddy[i + 1]])
+    c = _HERMITE_AINV @ rhs                      # 6 x N polynomial coefficients
+    powers = np.stack([th**k for k in range(6)])
+    d1 = np.stack([k * th**(k - 1) if k else 0 * th for k in range(6)])
+    d2 = np.stack([k * (k - 1) * th**(k - 2) if k > 1 else 0 * th for k in range(6)])
+    return (np.sum(c * powers, 0), np.sum(c * d1, 0) / h, np.sum(c * d2, 0) / h**2)
