@@ -89,7 +89,8 @@ _EXTRA_COMMANDS: list = []
 
 
 def _register_extras():
-    from . import cli_commands  # noqa: F401  (registers the remaining subcommands)
+    if not _EXTRA_COMMANDS:
+        from . import cli_commands  # noqa: F401  (registers the remaining subcommands)
 
 
 def main(argv=None) -> int:

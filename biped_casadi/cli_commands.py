@@ -1,4 +1,13 @@
-"""Subcommands beyond ``biped model``; each registers itself with the parser."""
+"""Subcommands beyond ``biped model``.  Each module listed here defines
+``register(subparsers)``; one line per module keeps additions independent."""
 from __future__ import annotations
 
-from .cli import _EXTRA_COMMANDS  # noqa: F401
+import importlib
+
+from .cli import _EXTRA_COMMANDS
+
+MODULES = [
+]
+
+for _name in MODULES:
+    _EXTRA_COMMANDS.append(importlib.import_module(f"biped_casadi.{_name}").register)
