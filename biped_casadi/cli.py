@@ -17,7 +17,20 @@ class UserError(Exception):
 
 
 def _print_json(obj):
-    print(json.dumps(obj, indent=None, default=_json_default))
+    """One JSON object on stdout; non-finite numbers (inf, nan) become null."""
+    print(json.dumps(_finite(obj), indent=None, default=_json_default, allow_nan=False))
+
+
+def _finite(o):
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _finite(o.tolist())
+    if isinstance(o, (float, np.floating)):
+        return float(o) if np.isfinite(o) else None
+    return o
 
 
 def _json_default(o):

@@ -7,6 +7,7 @@ import importlib
 from .cli import _EXTRA_COMMANDS
 
 MODULES = [
+    "cli_analysis",
 ]
 
 for _name in MODULES:

@@ -1,0 +1,115 @@
+"""The restricted Poincaré map: exact AD Jacobian against finite differences of an
+independent SciPy implementation, the fixed point for any M1, the batched variational
+Jacobian, and the singular outputs of eq. (24)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis import poincare_eigenvalues, poincare_map, singular_m1_values
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from scipy_poincare import ScipyPoincare  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def pm(model, gait):
+    return poincare_map(model, gait)
+
+
+def random_nonsingular(pm, rng, n):
+    out = []
+    while len(out) < n:
+        M1 = rng.uniform(-3, 3, 4)
+        if not pm.is_singular(M1):
+            out.append(M1)
+    return np.array(out)
+
+
+def test_spec_surface(model, gait):
+    r = poincare_eigenvalues(model, gait, [0.0, 0.0, 0.0, 0.0])
+    assert r.A.shape == (2, 2)
+    assert r.eigenvalues.shape == (2,)
+    assert r.max_abs == pytest.approx(np.max(np.abs(np.linalg.eigvals(r.A))), rel=1e-12)
+    assert r.status in ("stable", "unstable")
+    with pytest.raises(ValueError, match="M1"):
+        poincare_eigenvalues(model, gait, [1.0, 2.0])
+    with pytest.raises(ValueError, match="finite"):
+        poincare_eigenvalues(model, gait, [np.nan, 0, 0, 0])
+
+
+def test_ad_jacobian_matches_scipy_finite_differences(model, gait, pm, rng):
+    sp = ScipyPoincare(model, gait)
+    for M1 in [np.zeros(4), random_nonsingular(pm, rng, 1)[0]]:
+        A_ad = pm.analyse(M1).A
+        A_fd = sp.jacobian(M1, h=1e-4)
+        rel = np.max(np.abs(A_ad - A_fd)) / np.max(np.abs(A_fd))
+        assert rel <= 1e-6, (M1, A_ad, A_fd)
+
+
+def test_fixed_point_for_random_M1(pm, rng):
+    for M1 in random_nonsingular(pm, rng, 4):
+        x1, tau_i = pm.evaluate(pm.x_star, M1)
+        assert np.max(np.abs(x1 - pm.x_star)) <= 1e-8
+        assert tau_i == pytest.approx(pm.T, abs=1e-8)
+
+
+def test_map_moves_off_the_fixed_point(pm):
+    """A perturbation is mapped to first order by A^z (second-order remainder)."""
+    M1 = np.zeros(4)
+    A = pm.analyse(M1).A
+    for d in (1e-3, 5e-4):
+        dx = np.array([d, -2 * d])
+        x1, _ = pm.evaluate(pm.x_star + dx, M1)
+        err = np.linalg.norm(x1 - pm.x_star - A @ dx)
+        assert err < 50 * np.linalg.norm(dx) ** 2
+        assert np.linalg.norm(x1 - pm.x_star) > 0.1 * np.linalg.norm(dx)
+
+
+def test_variational_batch_matches_full_ad(pm, rng):
+    M1s = np.vstack([np.zeros(4), random_nonsingular(pm, rng, 3)])
+    status, A, ev, max_abs = pm.jacobian_batch(M1s)
+    for i, M1 in enumerate(M1s):
+        r = pm.analyse(M1)
+        assert status[i] == r.status
+        assert np.max(np.abs(A[i] - r.A)) <= 1e-6 * np.max(np.abs(r.A))
+        assert max_abs[i] == pytest.approx(r.max_abs, rel=1e-6)
+
+
+def test_eigenvalues_depend_on_M1(pm):
+    a = pm.analyse(np.zeros(4)).max_abs
+    b = pm.analyse(np.array([1.1 * singular_m1_values(pm.model, pm.gait)[0], 0, 0, 0])).max_abs
+    assert max(a, b) > 2 * min(a, b)
+
+
+def test_singular_values_eq24(model, gait, pm):
+    sv = singular_m1_values(model, gait)
+    D = np.array(model.D(gait.q(gait.T)))
+    np.testing.assert_allclose(sv * D[0, 1:], D[0, 0], rtol=1e-12)
+    for j in range(4):
+        M1 = np.zeros(4)
+        M1[j] = sv[j]
+        assert pm.analyse(M1).status == "singular"
+    # for the first two components the singular set starts exactly at the eq. (24)
+    # value; approaching it from below, max|lambda| blows up (Fig. 2's jump)
+    for j in (0, 1):
+        vals = sv[j] * np.array([0.5, 0.99, 0.9999])
+        M1s = np.zeros((3, 4))
+        M1s[:, j] = vals
+        status, _, _, mx = pm.jacobian_batch(M1s)
+        assert list(status) == ["unstable"] * 3 or "stable" in status[:1]
+        assert mx[2] > 1e3 * mx[0]
+        assert mx[2] > mx[1] > mx[0] or mx[0] < 1
+
+
+def test_other_robot_refused(gait):
+    import dataclasses
+
+    from analysis import PoincareMap
+    from biped_casadi import RABBIT, BipedModel
+    other = BipedModel(dataclasses.replace(RABBIT, m_torso=13.0))
+    with pytest.raises(ValueError, match="robot parameters"):
+        PoincareMap(other, gait)
