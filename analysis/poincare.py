@@ -241,12 +241,12 @@ class PoincareMap:
         min_den = float(np.min(np.abs(d)))
         nan2 = np.full((2, 2), np.nan)
         if self.is_singular(M1):
-            return PoincareResult(M1, nan2, np.full(2, np.nan + 0j), math.inf, "singular",
+            return PoincareResult(M1, nan2, np.full(2, complex(np.nan, np.nan)), math.inf, "singular",
                                   self.x_star, min_denominator=min_den,
                                   message="D11 - D12 M1 vanishes or changes sign on the step")
         br = self.find_impact(self.x_star, M1)
         if br is None:
-            return PoincareResult(M1, nan2, np.full(2, np.nan + 0j), math.inf, "no_impact",
+            return PoincareResult(M1, nan2, np.full(2, complex(np.nan, np.nan)), math.inf, "no_impact",
                                   self.x_star, min_denominator=min_den,
                                   message="no valid swing-foot impact within 2 T")
         A, xn, ti = (np.array(v) for v in self.map_jac(self.x_star, M1, br[2]))
@@ -254,7 +254,7 @@ class PoincareMap:
 
     def _result(self, M1, A, xn, ti, min_den):
         if not np.all(np.isfinite(A)):
-            return PoincareResult(M1, A, np.full(2, np.nan + 0j), math.inf, "no_impact",
+            return PoincareResult(M1, A, np.full(2, complex(np.nan, np.nan)), math.inf, "no_impact",
                                   self.x_star, tau_impact=ti, min_denominator=min_den,
                                   message="integration of the zero dynamics broke down")
         ev = np.linalg.eigvals(A)
@@ -314,7 +314,7 @@ class PoincareMap:
         out: list = [None] * len(M1s)
         idx = np.flatnonzero(~sing)
         for i in np.flatnonzero(sing):
-            out[i] = PoincareResult(M1s[i], np.full((2, 2), np.nan), np.full(2, np.nan + 0j),
+            out[i] = PoincareResult(M1s[i], np.full((2, 2), np.nan), np.full(2, complex(np.nan, np.nan)),
                                     math.inf, "singular", self.x_star,
                                     min_denominator=float(np.abs(den[i]).min()),
                                     message="D11 - D12 M1 vanishes or changes sign on the step")

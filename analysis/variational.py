@@ -15,6 +15,10 @@ is linearised by AD at (q^d(T), dq^d(T)), and v_c enters the post-impact segment
 forcing linear in (y_i, dy_i).  Both segments use RK4 on the same grids as
 :class:`analysis.poincare.PoincareMap`, whose full AD Jacobian this reproduces to
 integration accuracy (tests/test_poincare.py).
+
+The result is one SX Function ``A_fn(M1) -> A^z`` (the tables are numbers inside it):
+cheap to evaluate (mapped over threads for sweeps) and differentiable in M1 to any
+order, which the output-selection NLP uses.
 """
 from __future__ import annotations
 
@@ -60,6 +64,7 @@ class VariationalJacobian:
         JD = ca.Function("JD", [q, dq], [ca.jacobian(ca.vertcat(qp, dqp), ca.vertcat(q, dq))])
         self.J_impact = np.array(JD(qT, dqT))                 # 10 x 10
         self.dqT, self.ddqT = dqT, ddqT
+        self._build()
 
     def _table(self, times, with_vc=False):
         g = self.gait
@@ -77,61 +82,65 @@ class VariationalJacobian:
             a = v_correction(t, 1.0, 0.0, T)      # v_c = a y_i + b dy_i (per component)
             b = v_correction(t, 0.0, 1.0, T)
             tab.update(a=np.stack(a), b=np.stack(b))
-        shape = times.shape
-        return {k: v.reshape(v.shape[:-1] + shape) for k, v in tab.items()}
+        return tab          # every entry (..., 3K): stage-major (t, mid, end) per step
 
-    @staticmethod
-    def _coefficients(tab, M1):
-        """Jq, Jdq (n, K, 3) and, with v_c, the forcing Fy, Fdy (n, K, 3, 4)."""
-        den = tab["D11"][None] - np.einsum("nj,jks->nks", M1, tab["D12"])
-        Jq = (tab["w0"][None] - np.einsum("nj,jks->nks", M1, tab["wa"])) / den
-        Jdq = (-tab["h0"][None] + np.einsum("nj,jks->nks", M1, tab["ha"])) / den
-        if "a" not in tab:
-            return Jq, Jdq, None, None
-        wa, ha, D12 = tab["wa"], tab["ha"], tab["D12"]
-        a, b = tab["a"], tab["b"]
-        Fy = (wa * a[0] - ha * a[1] - D12 * a[2]) / den[:, None]
-        Fdy = (wa * b[0] - ha * b[1] - D12 * b[2]) / den[:, None]
-        return Jq, Jdq, np.moveaxis(Fy, 1, -1), np.moveaxis(Fdy, 1, -1)
+    def _segment(self, tab, h, M1, S, forcing: bool):
+        """RK4 on the variational equation dS/dt = [[0, 1], [Jq, Jdq]] S (+ [0; F])
+        over one segment; symbolic in M1 (SX)."""
+        K = tab["D11"].size // 3
+        D11 = ca.DM(tab["D11"].reshape(-1))                       # (3K,) stage-major
+        den = D11 - ca.mtimes(ca.DM(tab["D12"].reshape(4, -1)).T, M1)
+        Jq = (ca.DM(tab["w0"].reshape(-1)) - ca.mtimes(ca.DM(tab["wa"].reshape(4, -1)).T, M1)) / den
+        Jdq = (-ca.DM(tab["h0"].reshape(-1)) + ca.mtimes(ca.DM(tab["ha"].reshape(4, -1)).T, M1)) / den
+        if forcing:
+            # v_c = a(t) y_i + b(t) dy_i per component: forcing columns 2..5 (y_i), 6..9 (dy_i)
+            wa, ha, D12 = (tab[k].reshape(4, -1) for k in ("wa", "ha", "D12"))
+            a, b = tab["a"].reshape(3, -1), tab["b"].reshape(3, -1)
+            Fy = (wa * a[0] - ha * a[1] - D12 * a[2])              # 4 x 3K (numbers)
+            Fdy = (wa * b[0] - ha * b[1] - D12 * b[2])
 
-    @staticmethod
-    def _rk4(S, h, Jq, Jdq, F=None):
-        """Integrate dS/dt = [[0, 1], [Jq, Jdq]] S (+ [0; F]) over the grid; S (n, 2, c)."""
-        def rhs(S, k, st):
-            d0 = S[:, 1]
-            d1 = Jq[:, k, st, None] * S[:, 0] + Jdq[:, k, st, None] * S[:, 1]
-            if F is not None:
-                d1 = d1 + F[:, k, st]
-            return np.stack([d0, d1], axis=1)
-        for k in range(Jq.shape[1]):
-            k1 = rhs(S, k, 0)
-            k2 = rhs(S + h / 2 * k1, k, 1)
-            k3 = rhs(S + h / 2 * k2, k, 1)
-            k4 = rhs(S + h * k3, k, 2)
+        def rhs(S, i):
+            d1 = Jq[i] * S[0, :] + Jdq[i] * S[1, :]
+            if forcing:
+                d1 = d1 + ca.horzcat(ca.DM.zeros(1, 2), ca.DM(Fy[:, i]).T,
+                                     ca.DM(Fdy[:, i]).T) / den[i]
+            return ca.vertcat(S[1, :], d1)
+
+        for k in range(K):
+            i0, im, i1 = 3 * k, 3 * k + 1, 3 * k + 2
+            k1 = rhs(S, i0)
+            k2 = rhs(S + h / 2 * k1, im)
+            k3 = rhs(S + h / 2 * k2, im)
+            k4 = rhs(S + h * k3, i1)
             S = S + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         return S
 
-    def jacobians(self, M1s: np.ndarray) -> np.ndarray:
+    def _build(self):
+        M1 = ca.SX.sym("M1", 4)
+        P = self._segment(self.pre, self.h_pre, M1, ca.SX.eye(2), forcing=False)
+        MT = ca.vertcat(1, -M1)
+        dtau = -ca.dot(MT, ca.DM(self.grad_z)) * P[0, :] / self.zdot            # 1 x 2
+        dq_m = ca.mtimes(MT, P[0, :]) + ca.mtimes(ca.DM(self.dqT), dtau)       # 5 x 2
+        ddq_m = ca.mtimes(MT, P[1, :]) + ca.mtimes(ca.DM(self.ddqT), dtau)
+        plus = ca.mtimes(ca.DM(self.J_impact), ca.vertcat(dq_m, ddq_m))       # 10 x 2
+        dqp, ddqp = plus[:5, :], plus[5:, :]
+        dy = dqp[1:, :] + ca.mtimes(M1, dqp[0, :])
+        ddy = ddqp[1:, :] + ca.mtimes(M1, ddqp[0, :])
+        W = ca.vertcat(dqp[0, :], ddqp[0, :], dy, ddy)                         # 10 x 2
+        S0 = ca.horzcat(ca.SX.eye(2), ca.SX.zeros(2, 8))
+        S = self._segment(self.post, self.h_post, M1, S0, forcing=True)
+        A = ca.mtimes(S, W)
+        self.A_fn = ca.Function("A_z", [M1], [A], ["M1"], ["A"])
+        tr = A[0, 0] + A[1, 1]
+        det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+        self.trace_det = ca.Function("trace_det", [M1], [tr, det], ["M1"], ["trace", "det"])
+        self._maps = {}
+
+    def jacobians(self, M1s: np.ndarray, threads: int = 2) -> np.ndarray:
         """A^z (n, 2, 2) for an (n, 4) array of non-singular M1."""
         M1s = np.asarray(M1s, dtype=float)
         n = len(M1s)
-        Jq, Jdq, _, _ = self._coefficients(self.pre, M1s)
-        P = self._rk4(np.repeat(np.eye(2)[None], n, 0), self.h_pre, Jq, Jdq)   # (n,2,2)
-        MT = np.concatenate([np.ones((n, 1)), -M1s], axis=1)                  # (n,5)
-        dtau = -(MT @ self.grad_z)[:, None] * P[:, 0] / self.zdot             # (n,2)
-        dq_m = MT[:, :, None] * P[:, None, 0] + self.dqT[None, :, None] * dtau[:, None]
-        ddq_m = MT[:, :, None] * P[:, None, 1] + self.ddqT[None, :, None] * dtau[:, None]
-        plus = np.einsum("ij,njc->nic", self.J_impact, np.concatenate([dq_m, ddq_m], axis=1))
-        dqp, ddqp = plus[:, :5], plus[:, 5:]
-        dy = dqp[:, 1:] + M1s[:, :, None] * dqp[:, None, 0]
-        ddy = ddqp[:, 1:] + M1s[:, :, None] * ddqp[:, None, 0]
-        W = np.concatenate([dqp[:, :1], ddqp[:, :1], dy, ddy], axis=1)         # (n,10,2)
-        Jq, Jdq, Fy, Fdy = self._coefficients(self.post, M1s)
-        # sensitivity of the post-impact state to (z+, y_i, dy_i): S (n, 2, 10)
-        S = np.zeros((n, 2, 10))
-        S[:, 0, 0] = S[:, 1, 1] = 1.0
-        F = np.zeros(Fy.shape[:3] + (10,))
-        F[..., 2:6] = Fy
-        F[..., 6:10] = Fdy
-        S = self._rk4(S, self.h_post, Jq, Jdq, F)
-        return S @ W
+        if n not in self._maps:
+            self._maps[n] = self.A_fn.map(n, "thread", threads)
+        A = np.array(self._maps[n](M1s.T))                  # 2 x 2n
+        return A.reshape(2, n, 2).transpose(1, 0, 2)
