@@ -1,0 +1,81 @@
+"""Output selection (paper §V-B): swing height, a and b, both groups, the M1 NLP."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from analysis import poincare_eigenvalues
+from analysis.output_design import (conjecture_figures, domain_grid, group_of, optimize_m1,
+                                    solve_ab, swing_height_at_Td, taylor_ab)
+from analysis.sweep_cache import grid_best
+
+
+@pytest.fixture(scope="module")
+def tay(model, gait):
+    return taylor_ab(model, gait)
+
+
+def test_taylor_coefficients_against_finite_differences(model, gait, tay):
+    """a, b (AD) against z_sw along q^d(T) + M_T dq: the remainder is O(dq^3)."""
+    assert abs(tay.z0) < 1e-10
+    M1 = np.array([0.5, -1.0, 2.0, 0.3])
+    rem = []
+    for d in (2e-2, 1e-2, 5e-3):
+        z = swing_height_at_Td(model, gait, M1[None], d)[0]
+        rem.append(z - (tay.a(M1)[0] * d + tay.b(M1)[0] * d**2))
+    ratios = [rem[0] / rem[1], rem[1] / rem[2]]
+    np.testing.assert_allclose(ratios, 8.0, rtol=0.05)
+
+
+def test_both_groups_satisfy_a_b_zero(model, gait, tay, rng):
+    m2, m3 = rng.uniform(-10, 10, (2, 20))
+    s = solve_ab(tay, m2, m3)
+    for M in (s.group1, s.group2):
+        ok = np.all(np.isfinite(M), axis=1)
+        assert ok.sum() >= 10
+        np.testing.assert_allclose(tay.a(M[ok]), 0, atol=1e-12)
+        np.testing.assert_allclose(tay.b(M[ok]), 0, atol=1e-10)
+        np.testing.assert_allclose(M[ok, 1], m2[ok])
+        np.testing.assert_allclose(M[ok, 2], m3[ok])
+    # the two groups are different roots, and group_of tells them apart
+    i = np.flatnonzero(s.discriminant > 1e-6)[0]
+    assert np.max(np.abs(s.group1[i] - s.group2[i])) > 1e-6
+    assert group_of(tay, s.group1[i]) == 1 and group_of(tay, s.group2[i]) == 2
+    # and on a group z_sw stays ~0 to third order for an error on q_u
+    for d in (1e-2, 5e-3):
+        z = swing_height_at_Td(model, gait, s.group1[i][None], d)[0]
+        assert abs(z) < 50 * d**3
+
+
+def test_conjecture_figures_are_computed(model, gait):
+    from analysis.sweep_cache import grid_results
+    P, st, mx = grid_results(model, gait)
+    zsw = swing_height_at_Td(model, gait, P)
+    c = conjecture_figures(zsw, mx, st)
+    assert c["n_stable"] == int(np.sum(st == "stable")) > 0
+    assert c["max_abs_zsw_stable"] >= 0 and 0 <= c["fraction_unstable_below"] <= 1
+
+
+@pytest.fixture(scope="module")
+def nlp2(model, gait):
+    return optimize_m1(model, gait, group=2, n_best=6, n_ipopt=1, n_random=0)
+
+
+def test_m1_nlp_group2(model, gait, tay, nlp2):
+    r = nlp2
+    assert r.group == 2
+    assert abs(r.a) < 1e-9 and abs(r.b) < 1e-9
+    # the reported max|lambda| is the full-AD map's at the returned M1
+    check = poincare_eigenvalues(model, gait, r.M1)
+    assert check.max_abs == pytest.approx(r.max_abs, rel=1e-9, abs=1e-12)
+    assert r.status == "stable"
+    # no worse than the best point of the 9^4 grid, nor than the group's coarse map
+    gb = grid_best(model, gait)
+    assert r.max_abs <= gb["max_abs"]
+    s = domain_grid(tay, 41)
+    from analysis import poincare_map
+    P = s.group2.reshape(-1, 4)
+    P = P[np.all(np.isfinite(P), axis=1)]
+    st, _, _, mx = poincare_map(model, gait).jacobian_batch(P)
+    assert r.max_abs <= np.min(mx[st != "singular"]) + 1e-12
+    assert r.eigenvalue_uncertainty < 1e-2
