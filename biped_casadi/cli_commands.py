@@ -8,6 +8,7 @@ from .cli import _EXTRA_COMMANDS
 
 MODULES = [
     "cli_analysis",
+    "cli_design",
 ]
 
 for _name in MODULES:
