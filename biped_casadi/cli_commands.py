@@ -7,6 +7,7 @@ import importlib
 from .cli import _EXTRA_COMMANDS
 
 MODULES = [
+    "cli_sweep",
     "cli_analysis",
     "cli_design",
 ]
