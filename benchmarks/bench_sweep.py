@@ -141,7 +141,8 @@ def main(argv=None):
     # --------------------------------------------------------------- (b) the 9^4 grid
     grid_rows = []
     if not args.skip_grid:
-        gait_path = Path(tempfile.mkdtemp(prefix="bench_sweep_")) / "gait.json"
+        tmp = tempfile.TemporaryDirectory(prefix="bench_sweep_")
+        gait_path = Path(tmp.name) / "gait.json"
         gait.save(gait_path)
         print("\n(b) the 9^4 grid end to end (`biped sweep --grid 9 --range -10 10 --out DIR "
               "--json` in a fresh process)")
@@ -170,6 +171,7 @@ def main(argv=None):
         print(f"  best: M1 = {best['M1']}, max|lambda| = {best['max_abs']:.6g}")
         w = grid_rows[0][1]
         print(f"  target < 30 s on 2 cores: {'met' if w < 30 else 'MISSED'} ({w:.2f} s)")
+        tmp.cleanup()
 
     # -------------------------------------------- (c) side by side with the baseline
     print(f"\n(c) {len(pts)} random non-singular M1 of the grid, same points, same run")
