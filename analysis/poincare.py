@@ -288,7 +288,7 @@ class PoincareMap:
         ok = np.flatnonzero(~sing)
         for a in range(0, len(ok), chunk):
             part = ok[a:a + chunk]
-            A[part] = self.variational.jacobians(M1s[part])
+            A[part] = self.variational.jacobians(M1s[part], threads=self.threads)
         with np.errstate(invalid="ignore"):
             ev = np.linalg.eigvals(np.where(np.isfinite(A), A, 0.0))
         max_abs = np.where(sing, np.inf, np.abs(ev).max(axis=1))
