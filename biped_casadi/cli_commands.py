@@ -7,6 +7,7 @@ import importlib
 from .cli import _EXTRA_COMMANDS
 
 MODULES = [
+    "cli_simulate",
     "cli_sweep",
     "cli_analysis",
     "cli_design",

@@ -1,0 +1,250 @@
+"""Restricted Poincaré map of the virtual-constraint (HZD) controller and its eigenvalue,
+for the comparison of paper §V-C.
+
+On the constraint surface Z = {H0 q = h_d(theta)}, theta = c q, the configuration is a
+function of the phase alone, q = Q(theta) = [H0; c]^-1 [h_d(theta); theta], and the
+zero dynamics is the unactuated row of eq. (1) along that curve:
+
+    D_1(Q) (Q' ddtheta + Q'' dtheta^2) + H_1(Q, Q' dtheta) = 0.
+
+theta being strictly monotonic, it is used as the independent variable: the state on Z
+is w = dtheta, with dw/dtheta = ddtheta / w.  The impact on Z happens at the fixed phase
+theta^- where z_sw(Q(theta)) = 0 (found with ``casadi.rootfinder``), whatever the
+velocity: so the hybrid zero dynamics has a one-dimensional restricted Poincaré map.
+Section: theta_s = c q^d(0.75 T) (the time-varying controller's section, SPEC §4, seen
+on the same orbit).  One application: integrate w from theta_s to theta^- (RK4 in
+theta), apply the impact map and relabelling, theta^+ = c q^+, w^+ = c dq^+, integrate
+from theta^+ back to theta_s.  Its derivative at the fixed point, by AD through the
+whole discrete map, is the eigenvalue.
+
+Cross-check (Westervelt, Grizzle et al., the HZD book, ch. 5-6): with the angular
+momentum about the stance foot sigma = D_1(q) dq, sigma^2 / 2 obeys an exactly
+integrable equation on Z, and the map is affine in it with slope delta_zero^2, where
+delta_zero = sigma^+ / sigma^- across the impact of the orbit.  delta_zero depends only
+on the impact configuration and velocity direction of the orbit, not on the outputs
+or phase variable chosen: for one orbit the eigenvalue is the same for every choice
+(paper §V-C, "the stability of an orbit is independent of the choice of the output").
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from biped_casadi.controllers import HIP_PHASE, VirtualConstraints, fit_virtual_constraints
+
+__all__ = ["VCEigenResult", "VirtualConstraintMap", "vc_eigenvalue"]
+
+
+@dataclass
+class VCEigenResult:
+    """The HZD restricted Poincaré map of a virtual-constraint controller at its fixed
+    point.
+
+    eigenvalue: dP/dw at the fixed point (AD); status 'stable' | 'unstable' |
+    'singular' | 'no_impact'; w_star: dtheta at the section on the HZD orbit; x_star:
+    (q_u, dq_u) there; reference_x: the reference's (q_u^d, dq_u^d)(0.75 T);
+    orbit_mismatch: max |x_star - reference_x| (how exactly the constraints reproduce
+    the reference orbit); delta_zero_squared: the closed-form eigenvalue (module
+    docstring); fixed_point_residual: |P(w*) - w*|."""
+    eigenvalue: float
+    status: str
+    theta_section: float
+    theta_plus: float
+    theta_minus: float
+    w_star: float
+    x_star: np.ndarray
+    reference_x: np.ndarray
+    orbit_mismatch: float
+    fixed_point_residual: float
+    delta_zero_squared: float
+    min_denominator: float
+    constraints: dict = field(default_factory=dict)
+    message: str = ""
+
+    @property
+    def max_abs(self) -> float:
+        return abs(self.eigenvalue)
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        return np.array([self.eigenvalue])
+
+    def to_dict(self) -> dict:
+        return dict(controller="vc", eigenvalue=self.eigenvalue,
+                    eigenvalues=[[self.eigenvalue, 0.0]], max_abs=self.max_abs,
+                    status=self.status, theta_section=self.theta_section,
+                    theta_plus=self.theta_plus, theta_minus=self.theta_minus,
+                    w_star=self.w_star, x_star=self.x_star.tolist(),
+                    reference_x=self.reference_x.tolist(), orbit_mismatch=self.orbit_mismatch,
+                    fixed_point_residual=self.fixed_point_residual,
+                    delta_zero_squared=self.delta_zero_squared,
+                    min_denominator=self.min_denominator, constraints=self.constraints,
+                    message=self.message)
+
+
+class VirtualConstraintMap:
+    """P(w) and dP/dw for one set of virtual constraints; CasADi Functions built once.
+
+    ``evaluate(w)`` -> P(w); ``derivative(w)`` -> dP/dw; ``analyse()`` ->
+    :class:`VCEigenResult`.  ``n_steps``: RK4 steps in theta over one step.
+    """
+
+    def __init__(self, model, gait, constraints: VirtualConstraints, n_steps: int = 1000):
+        if gait.model.params != model.params:
+            raise ValueError("gait was made for other robot parameters than the model")
+        if not isinstance(constraints, VirtualConstraints):
+            raise ValueError("constraints must be a VirtualConstraints")
+        if not isinstance(n_steps, int) or n_steps < 20:
+            raise ValueError(f"n_steps must be an integer >= 20, got {n_steps!r}")
+        self.model, self.gait, self.vc = model, gait, constraints
+        self.n_steps = n_steps
+        self.T = gait.T
+        c = constraints.c
+        self.theta_s = float(c @ gait.q(0.75 * self.T))
+        self.reference_x = gait.state_at(0.75 * self.T)
+        self._build_curve()
+        self._find_impact()
+        self._build_map()
+
+    # ---------------------------------------------------------------- curve
+    def _build_curve(self):
+        m, vc = self.model, self.vc
+        th = ca.SX.sym("theta")
+        w = ca.SX.sym("w")
+        Pinv = ca.DM(np.linalg.inv(vc.P))
+        h, dh, ddh = vc.h(th)
+        Q = ca.mtimes(Pinv, ca.vertcat(h, th))
+        Q1 = ca.mtimes(Pinv, ca.vertcat(dh, 1))
+        Q2 = ca.mtimes(Pinv, ca.vertcat(ddh, 0))
+        D1 = m.D(Q)[0, :]
+        H1 = m.H(Q, Q1 * w)[0]
+        den = ca.mtimes(D1, Q1)
+        ddth = -(ca.mtimes(D1, Q2) * w**2 + H1) / den
+        self.curve = ca.Function("hzd_curve", [th], [Q, Q1, den], ["theta"], ["q", "dq_dtheta", "den"])
+        self.zero_dynamics = ca.Function("hzd_dw_dtheta", [th, w], [ddth / w], ["theta", "w"], ["dw"])
+        xs, zs = m.swing_foot(Q)
+        _, dzs = m.swing_foot_velocity(Q, Q1)
+        self.foot = ca.Function("hzd_foot", [th], [xs, zs, dzs], ["theta"], ["x_sw", "z_sw", "dz_dtheta"])
+        hs = ca.SX.sym("h")
+        f = self.zero_dynamics
+        k1 = f(th, w)
+        k2 = f(th + hs / 2, w + hs / 2 * k1)
+        k3 = f(th + hs / 2, w + hs / 2 * k2)
+        k4 = f(th + hs, w + hs * k3)
+        self.rk4 = ca.Function("hzd_rk4", [w, th, hs], [w + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4), th + hs],
+                               ["w", "theta", "h"], ["w_next", "theta_next"])
+
+    def _find_impact(self):
+        """theta^- with z_sw(Q(theta^-)) = 0 near the reference's impact (rootfinder)."""
+        th = ca.MX.sym("theta")
+        _, z, _ = self.foot(th)
+        rf = ca.rootfinder("hzd_impact_phase", "newton", ca.Function("z_sw", [th], [z]),
+                           {"abstol": 1e-15, "max_iter": 50, "error_on_fail": False})
+        self.theta_minus = float(rf(self.vc.theta_minus))
+        qm = np.array(self.curve(self.theta_minus)[0]).ravel()
+        qp = self.model.E @ qm
+        self.theta_plus = float(self.vc.c @ qp)
+
+    # ------------------------------------------------------------------ map
+    def _build_map(self):
+        m, vc = self.model, self.vc
+        span = self.theta_minus - self.theta_plus
+        self.n_pre = max(4, int(round(self.n_steps * (self.theta_minus - self.theta_s) / span)))
+        self.n_post = max(4, self.n_steps - self.n_pre)
+        w = ca.MX.sym("w")
+        acc_pre = self.rk4.mapaccum("hzd_pre", self.n_pre, [0, 1], [0, 1])
+        acc_post = self.rk4.mapaccum("hzd_post", self.n_post, [0, 1], [0, 1])
+        W, _ = acc_pre(w, self.theta_s, (self.theta_minus - self.theta_s) / self.n_pre)
+        w_m = W[-1]
+        q_m, Q1_m, _ = self.curve(self.theta_minus)
+        q_p, dq_p = m.impact(q_m, Q1_m * w_m)
+        w_p = ca.mtimes(ca.DM(vc.c).T, dq_p)
+        W2, _ = acc_post(w_p, self.theta_plus, (self.theta_s - self.theta_plus) / self.n_post)
+        w_next = W2[-1]
+        self.map = ca.Function("hzd_poincare_map", [w], [w_next, ca.jacobian(w_next, w), w_m, w_p],
+                               ["w"], ["w_next", "dP_dw", "w_minus", "w_plus"])
+
+    def evaluate(self, w) -> float:
+        return float(self.map(w)[0])
+
+    def derivative(self, w) -> float:
+        return float(self.map(w)[1])
+
+    # -------------------------------------------------------------- analysis
+    def _checks(self) -> tuple[str, str, float]:
+        """Singularity of the zero dynamics and validity of the impact on the orbit."""
+        n = 801
+        ths = np.linspace(self.theta_plus, self.theta_minus, n)
+        _, _, den = (np.array(v).ravel() for v in self.curve.map(n)(ths[None, :]))
+        min_den = float(np.min(np.abs(den)))
+        if den.min() * den.max() <= 0:
+            return "singular", "D_1 Q'(theta) vanishes on the step: the controller is singular", min_den
+        xs, zs, dz = (np.array(v).ravel() for v in self.foot.map(n)(ths[None, :]))
+        if np.any(zs[1:-1] <= 0):
+            return "no_impact", "the swing foot touches the ground inside the step", min_den
+        if not (xs[-1] > 0 and dz[-1] * np.sign(self.theta_minus - self.theta_plus) < 0):
+            return "no_impact", "the impact of the HZD orbit is not valid (x_sw > 0, moving down)", min_den
+        return "", "", min_den
+
+    def analyse(self) -> VCEigenResult:
+        """Fixed point by Newton's method on P(w) - w, eigenvalue dP/dw there (AD)."""
+        m, vc = self.model, self.vc
+        qs = self.gait.q(0.75 * self.T)
+        dqs = self.gait.dq(0.75 * self.T)
+        w = float(vc.c @ dqs)
+        status, message, min_den = self._checks()
+        nan = math.nan
+        common = dict(theta_section=self.theta_s, theta_plus=self.theta_plus,
+                      theta_minus=self.theta_minus, reference_x=self.reference_x,
+                      min_denominator=min_den, constraints=vc.to_dict())
+        if status:
+            return VCEigenResult(eigenvalue=nan, status=status, w_star=nan,
+                                 x_star=np.full(2, nan), orbit_mismatch=nan,
+                                 fixed_point_residual=nan, delta_zero_squared=nan,
+                                 message=message, **common)
+        for _ in range(12):
+            wn, dP, _, _ = (float(v) for v in self.map(w))
+            step = (wn - w) / (1.0 - dP)
+            w += step
+            if abs(step) < 1e-13 * max(1.0, abs(w)):
+                break
+        wn, dP, w_m, w_p = (float(v) for v in self.map(w))
+        q, Q1, _ = (np.array(v).ravel() for v in self.curve(self.theta_s))
+        x_star = np.array([q[0], Q1[0] * w])
+        # closed-form check: delta_zero^2 from the angular momentum about the stance foot
+        q_m, Q1_m, _ = (np.array(v).ravel() for v in self.curve(self.theta_minus))
+        q_p, dq_p = (np.array(v).ravel() for v in m.impact(q_m, Q1_m))
+        sigma_m = float(np.array(m.D(q_m))[0] @ Q1_m)
+        sigma_p = float(np.array(m.D(q_p))[0] @ dq_p)
+        delta2 = (sigma_p / sigma_m) ** 2
+        return VCEigenResult(eigenvalue=dP, status="stable" if abs(dP) < 1 else "unstable",
+                             w_star=w, x_star=x_star,
+                             orbit_mismatch=float(np.max(np.abs(x_star - self.reference_x))),
+                             fixed_point_residual=abs(wn - w), delta_zero_squared=delta2,
+                             message=f"HZD orbit: dtheta at the section {w:.12g} rad/s "
+                                     f"(reference {float(vc.c @ dqs):.12g})",
+                             **common)
+
+
+_MAPS: dict = {}
+
+
+def vc_eigenvalue(model, gait, constraints: VirtualConstraints | None = None,
+                  phase=HIP_PHASE, H0=None, n_steps: int = 1000) -> VCEigenResult:
+    """Eigenvalue of the 1-D restricted Poincaré map of the virtual-constraint controller
+    fitted to ``gait`` (``constraints``, or fitted here with phase variable theta =
+    ``phase`` q and outputs H0 q - h_d(theta)).  Maps are cached per constraints."""
+    if constraints is None:
+        key = (id(gait), tuple(np.asarray(phase, float).ravel()),
+               None if H0 is None else tuple(np.asarray(H0, float).ravel()), n_steps)
+        hit = _MAPS.get(key)
+        if hit is not None and hit[0] is gait:
+            return hit[1].analyse()
+        constraints = fit_virtual_constraints(gait, c=phase, H0=H0)
+        vmap = VirtualConstraintMap(model, gait, constraints, n_steps)
+        _MAPS[key] = (gait, vmap)
+        return vmap.analyse()
+    return VirtualConstraintMap(model, gait, constraints, n_steps).analyse()

@@ -1,0 +1,150 @@
+"""``biped simulate``: full-order closed-loop walking with the time-varying controller
+(paper §III) or virtual constraints (§V-C); paper Fig. 5 and Fig. 6, a stick-figure GIF."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .cli import UserError, _print_json
+
+
+def _load_gait(path):
+    """The gait of ``--gait FILE``, or the default gait (optimised once, then cached)."""
+    from gait_opt import Gait
+    if path:
+        return Gait.load(path)
+    import gait_opt
+    if hasattr(gait_opt, "default_gait"):
+        return gait_opt.default_gait()
+    return gait_opt.optimize_gait(_rabbit())
+
+
+def _rabbit():
+    from . import rabbit
+    return rabbit()
+
+
+def _positive(value, name):
+    if not (math.isfinite(value) and value > 0):
+        raise UserError(f"{name} must be a positive number, got {value!r}")
+    return value
+
+
+def _controller(kind, model, gait, M1, gains):
+    from .controllers import TimeVaryingController, VirtualConstraintController
+    if kind == "tv":
+        return TimeVaryingController(model, gait, M1, gains)
+    return VirtualConstraintController(model, gait, gains=gains)
+
+
+def cmd_simulate(args):
+    from .controllers import Gains
+    from .simulate import (SimulationOptions, animate, perturbed_initial_state, plot_fig5,
+                           plot_fig6, simulate)
+    # ---- arguments
+    M1 = np.zeros(4) if args.m1 is None else np.array(args.m1, dtype=float)
+    if M1.shape != (4,):
+        raise UserError(f"--m1 takes 4 numbers, got {M1.size}")
+    if not np.all(np.isfinite(M1)):
+        raise UserError("--m1 values must be finite")
+    if args.controller == "vc" and args.m1 is not None and not args.compare:
+        raise UserError("--m1 applies to the time-varying controller (--controller tv, "
+                        "or --compare)")
+    if args.steps < 1:
+        raise UserError(f"--steps must be a positive integer, got {args.steps}")
+    q_err, dq_err = args.perturb
+    if not (math.isfinite(q_err) and math.isfinite(dq_err)):
+        raise UserError("--perturb values must be finite")
+    _positive(args.mu, "--mu")
+    _positive(args.eps, "--eps")
+    if args.animate and not args.animate.lower().endswith(".gif"):
+        raise UserError(f"--animate writes a GIF: the file name must end in .gif, got "
+                        f"{args.animate!r}")
+    gait = _load_gait(args.gait)
+    model = gait.model
+    gains = Gains(eps=args.eps)
+    opts = SimulationOptions(steps=args.steps, mu=args.mu, jit=args.jit)
+    q0, dq0 = perturbed_initial_state(gait, q_err, dq_err)
+
+    # ---- simulate
+    ctrl = _controller(args.controller, model, gait, M1, gains)
+    if args.controller == "tv" and ctrl.singularity().singular:
+        raise UserError(f"M1 = {M1.tolist()} makes the controller singular on the reference "
+                        "step (D11 - D12 M1 vanishes, eq. 24)")
+    res = simulate(ctrl, q0, dq0, opts)
+    runs = [res]
+    if args.compare:
+        other = "vc" if args.controller == "tv" else "tv"
+        runs.append(simulate(_controller(other, model, gait, M1, gains), q0, dq0, opts))
+
+    # ---- figures
+    figures = {}
+    if args.plot:
+        out = Path(args.plot)
+        out.mkdir(parents=True, exist_ok=True)
+        figures["fig5"] = str(plot_fig5(runs, out / "fig5_qu_error.png"))
+        figures["fig6"] = str(plot_fig6(runs, gait, out / "fig6_swing_torques.png"))
+    if args.animate:
+        Path(args.animate).parent.mkdir(parents=True, exist_ok=True)
+        figures["animation"] = str(animate(res, model, args.animate))
+
+    # ---- report
+    if args.json:
+        d = res.summary()
+        d["perturbation"] = [q_err, dq_err]
+        if args.compare:
+            d["compare"] = runs[1].summary()
+        if figures:
+            d["figures"] = figures
+        _print_json(d)
+        return 0
+    for r in runs:
+        print(f"{r.controller['controller']}: status {r.status}"
+              + (f" - {r.message}" if r.message else ""))
+        if r.controller["controller"] == "tv":
+            print(f"  M1 = {r.controller['M1']}")
+        print("  step   t_impact [s]  duration/T   q_u - q_u^d(T)   dq_u - dq_u^d(T)")
+        for s in r.steps:
+            print(f"  {s.index + 1:4d}   {s.t_impact:11.6f}  {s.duration / gait.T:10.6f}"
+                  f"   {s.qu_error:+.6e}    {s.dqu_error:+.6e}")
+        sm = r.summary()
+        print(f"  peak |u| {sm['peak_torque']:.1f} N m, min F_z {sm['min_normal_force']:.1f} N,"
+              f" max |F_x|/F_z {sm['max_friction_ratio']:.3f}")
+    for k, v in figures.items():
+        print(f"{k}: {v}")
+    return 0
+
+
+def register(sub):
+    p = sub.add_parser(
+        "simulate", help="full-order closed-loop walking (time-varying or virtual constraints)",
+        description="Simulate the full-order hybrid closed loop (state q, dq, tau) for N steps "
+                    "from the reference state perturbed by Q_ERR rad on every joint and DQ_ERR "
+                    "rad/s on every velocity (paper §V-C uses 0.01 0.1). The run stops at the "
+                    "first invalid state and says why (status fell, scuffed, slipped, "
+                    "negative_normal_force, singular, no_impact, ...). --json prints {status, "
+                    "steps: [{t_impact, qu_error, dqu_error, ...}], ...} with the errors "
+                    "q_u - q_u^d(T), dq_u - dq_u^d(T) just before each impact.")
+    p.add_argument("--gait", metavar="FILE", help="gait file from 'biped gait' (default: the "
+                   "default RABBIT gait, optimised once and cached)")
+    p.add_argument("--controller", choices=("tv", "vc"), default="tv",
+                   help="tv: time-varying outputs [M1, I] q (default); vc: virtual constraints")
+    p.add_argument("--m1", nargs="+", type=float, metavar="M1",
+                   help="the 4 components of M1 for --controller tv (default 0 0 0 0)")
+    p.add_argument("--steps", type=int, default=10, metavar="N", help="number of steps (10)")
+    p.add_argument("--perturb", nargs=2, type=float, default=(0.0, 0.0),
+                   metavar=("Q_ERR", "DQ_ERR"), help="initial error on every joint (rad) and "
+                   "every velocity (rad/s) (default 0 0)")
+    p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (0.6)")
+    p.add_argument("--eps", type=float, default=0.02,
+                   help="epsilon of the output PD, eq. (13), with Kp = 1, Kd = 2 (0.02)")
+    p.add_argument("--compare", action="store_true",
+                   help="also run the other controller from the same state (Fig. 5/6 overlay)")
+    p.add_argument("--jit", action="store_true",
+                   help="compile the closed loop to C first (needs a C compiler; faster)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--plot", metavar="DIR", help="write Fig. 5 and Fig. 6 (PNG) into DIR")
+    p.add_argument("--animate", metavar="FILE.gif", help="write a stick-figure GIF")
+    p.set_defaults(func=cmd_simulate)

@@ -1,0 +1,310 @@
+"""Full-order hybrid closed-loop simulation (paper eq. 9, §V-C) checked against the
+reference and the Poincaré analysis, and its refusal to continue past invalid states.
+
+Tolerances (RK4 with the default 2000 steps per T, the gait's own scheme):
+- unperturbed runs repeat the reference: impact times to 1e-9 s, pre-impact states to
+  ~1e-9 in the first step; the time-varying closed loop amplifies round-off and
+  truncation by its eigenvalues step to step (M1 = 0 is unstable, |lambda| ~ 12; the
+  random M1 is drawn with |lambda| < 30), so the bound is 1e-9 * 30^k at step k;
+- section errors of a 1e-6 perturbation follow delta x_{k+1} = A^z delta x_k to 1e-3
+  relative (nonlinear terms ~ |delta x|, the map's own discretisation ~ 1e-10);
+- the VC step-to-step ratio of dq_u errors converges to its eigenvalue: 2e-3 relative
+  from a 1e-4 perturbation (nonlinear terms), 2 % for the paper's large perturbation.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from analysis.virtual_constraints import vc_eigenvalue
+from biped_casadi.cli import main as biped_main
+from biped_casadi.controllers import TimeVaryingController, VirtualConstraintController
+from biped_casadi.simulate import (PAPER_PERTURBATION, STATUSES, SimulationOptions, Simulator,
+                                   perturbed_initial_state, simulate)
+
+
+@pytest.fixture(scope="module")
+def random_m1(gait, model):
+    """A random output matrix M1 (components in [-3, 3]) not singular on the step and
+    with max|lambda| < 30, so that round-off stays small over three steps (near-singular
+    M1 give eigenvalues in the thousands)."""
+    from analysis import poincare_eigenvalues
+    rng = np.random.default_rng(7)
+    for _ in range(100):
+        M1 = rng.uniform(-3, 3, 4)
+        if TimeVaryingController(model, gait, M1).singularity().singular:
+            continue
+        if poincare_eigenvalues(model, gait, M1).max_abs < 30:
+            return M1
+    raise AssertionError("no suitable random M1 found")
+
+
+@pytest.fixture(scope="module")
+def tv0(model, gait):
+    return TimeVaryingController(model, gait, np.zeros(4))
+
+
+@pytest.fixture(scope="module")
+def tvr(model, gait, random_m1):
+    return TimeVaryingController(model, gait, random_m1)
+
+
+@pytest.fixture(scope="module")
+def vc(model, gait):
+    return VirtualConstraintController(model, gait)
+
+
+@pytest.fixture(scope="module")
+def stable_m1(model, gait):
+    """The most stable M1 of a coarse 5^4 grid on [-10, 10]^4 (exact A^z)."""
+    from analysis import PoincareMap
+    v = np.linspace(-10, 10, 5)
+    pts = np.array(np.meshgrid(v, v, v, v, indexing="ij")).reshape(4, -1).T
+    status, _, _, max_abs = PoincareMap(model, gait).jacobian_batch(pts)
+    i = int(np.argmin(np.where(status == "stable", max_abs, np.inf)))
+    assert status[i] == "stable"
+    return pts[i]
+
+
+# -------------------------------------------------- the reference is repeated
+@pytest.mark.parametrize("which", ["tv_M1_zero", "tv_M1_random", "vc"])
+def test_unperturbed_run_repeats_reference(gait, tv0, tvr, vc, which):
+    ctrl = {"tv_M1_zero": tv0, "tv_M1_random": tvr, "vc": vc}[which]
+    res = simulate(ctrl, options=SimulationOptions(steps=3))
+    assert res.status == "ok" and len(res.steps) == 3
+    qT, dqT = gait.q(gait.T), gait.dq(gait.T)
+    q0, dq0 = gait.q(0.0), gait.dq(0.0)
+    for k, s in enumerate(res.steps):
+        tol = 1e-9 * 30.0**k                       # growth by |lambda| < 30 per step
+        assert abs(s.duration - gait.T) < tol
+        assert abs(s.t_impact - (k + 1) * gait.T) < 3 * tol
+        np.testing.assert_allclose(s.q_minus, qT, atol=tol)
+        np.testing.assert_allclose(s.dq_minus, dqT, atol=10 * tol)
+        np.testing.assert_allclose(s.q_plus, q0, atol=tol)
+        np.testing.assert_allclose(s.dq_plus, dq0, atol=10 * tol)
+        assert abs(s.step_length - gait.step_length) < tol
+    # along the first step the torques are the reference torques and the outputs vanish
+    first = res.step == 0
+    np.testing.assert_allclose(res.u[first], gait.u(res.tau[first]).T, atol=1e-6)
+    assert np.max(np.abs(res.y[first])) < 1e-9
+    assert np.all(np.diff(res.t) >= 0)
+
+
+def test_impacts_are_on_the_guard(tvr):
+    """Every impact is located on the SPEC §4 guard: z_sw = 0, x_sw > 0, moving down."""
+    m = tvr.model
+    res = simulate(tvr, *perturbed_initial_state(tvr.gait, 1e-5, 1e-4),
+                   options=SimulationOptions(steps=2))
+    assert res.status == "ok"
+    assert max(abs(s.duration - tvr.gait.T) for s in res.steps) > 1e-7   # not on the grid
+    for s in res.steps:
+        x, z = (float(v) for v in m.swing_foot(s.q_minus))
+        _, dz = (float(v) for v in m.swing_foot_velocity(s.q_minus, s.dq_minus))
+        assert abs(z) < 1e-13 and x > 0 and dz < 0
+        assert s.impulse[1] > 0 and abs(s.impulse[0]) <= 0.6 * s.impulse[1]
+
+
+# ----------------------------------------------- against the Poincaré analysis
+@pytest.mark.parametrize("which", ["zero", "stable"])
+def test_tv_section_errors_follow_Az(model, gait, tv0, stable_m1, which):
+    """Time-varying control: the (q_u, dq_u) error at tau = 0.75 T propagates step to
+    step as delta x_{k+1} = A^z delta x_k, A^z the exact Jacobian of the restricted
+    Poincaré map (analysis.poincare_eigenvalues); for a stable M1 it contracts."""
+    from analysis import poincare_eigenvalues
+    ctrl = tv0 if which == "zero" else TimeVaryingController(model, gait, stable_m1)
+    M1 = ctrl.M1
+    A = poincare_eigenvalues(model, gait, M1).A
+    q0, dq0 = gait.q(0.0), gait.dq(0.0)
+    q0[0] += 1e-6
+    dq0[0] -= 2e-6
+    res = simulate(ctrl, q0, dq0, SimulationOptions(steps=4 if which == "stable" else 3))
+    assert res.status == "ok"
+    E = res.section_errors
+    assert np.all(np.isfinite(E))
+    for k in range(len(E) - 1):
+        pred = A @ E[k]
+        assert np.linalg.norm(E[k + 1] - pred) <= 1e-3 * np.linalg.norm(pred) + 1e-10
+    norms = np.linalg.norm(E, axis=1)
+    if which == "stable":
+        assert norms[-1] < norms[0]
+    else:
+        assert norms[-1] > 10 * norms[0]           # M1 = 0 is unstable for this gait
+
+
+def test_vc_error_ratio_converges_to_eigenvalue(model, gait, vc):
+    """Virtual constraints: the configuration at impact is the reference one and the
+    step-to-step ratio of dq_u errors before impact tends to the 1-D map's eigenvalue."""
+    lam = vc_eigenvalue(model, gait).eigenvalue
+    q0, dq0 = perturbed_initial_state(gait, 0.0, 1e-4)
+    res = simulate(vc, q0, dq0, SimulationOptions(steps=5))
+    assert res.status == "ok"
+    assert np.max(np.abs(res.qu_errors)) < 1e-10
+    ratios = res.dqu_errors[1:] / res.dqu_errors[:-1]
+    assert abs(ratios[-1] - lam) < 2e-3 * lam
+
+
+def test_paper_fig5_perturbation_vc(model, gait, vc):
+    """Paper §V-C: from 0.01 rad on each joint and 0.1 rad/s on each velocity the
+    virtual-constraint controller walks on, with the desired configuration at every
+    impact and the velocity error shrinking by about its eigenvalue per step."""
+    lam = vc_eigenvalue(model, gait).eigenvalue
+    res = simulate(vc, *perturbed_initial_state(gait, *PAPER_PERTURBATION),
+                   options=SimulationOptions(steps=8))
+    assert res.status == "ok", res.message
+    assert np.max(np.abs(res.qu_errors)) < 1e-9
+    d = np.abs(res.dqu_errors)
+    assert np.all(np.diff(d) < 0)
+    assert abs(res.dqu_errors[-1] / res.dqu_errors[-2] - lam) < 0.02 * lam
+
+
+def test_paper_fig5_perturbation_tv_reports_status(model, gait, stable_m1):
+    """The same perturbation with time-varying control ends in a definite status; when
+    the run stops, the last logged state (or impact) is the invalid one and every
+    earlier state satisfies all the checks: nothing continues silently."""
+    ctrl = TimeVaryingController(model, gait, stable_m1)
+    opts = SimulationOptions(steps=6)
+    res = simulate(ctrl, *perturbed_initial_state(gait, *PAPER_PERTURBATION), options=opts)
+    assert res.status in STATUSES
+    ok_nodes = slice(0, -1) if res.status != "ok" else slice(None)
+    assert np.all(res.Fz[ok_nodes] >= 0)
+    assert np.all(np.abs(res.Fx[ok_nodes]) <= opts.mu * res.Fz[ok_nodes])
+    if res.status == "ok":
+        assert len(res.steps) == 6
+    else:
+        assert res.message and res.failure_time <= res.t[-1] + 1e-12
+        if res.status == "slipped" and "impulse" in res.message:
+            F = res.steps[-1].impulse
+            assert abs(F[0]) > opts.mu * F[1]
+
+
+# ------------------------------------------------------------- statuses
+def test_status_slipped_when_reference_leaves_cone(gait, vc):
+    """mu = 0.3 is below the reference's friction demand: the run stops as 'slipped' at
+    the first time |F_x| > 0.3 F_z on the reference (within one RK4 step)."""
+    m = gait.model
+    opts = SimulationOptions(steps=1, mu=0.3)
+    res = simulate(vc, options=opts)
+    t = np.linspace(0, gait.T, 20001)
+    Fx, Fz = (np.array(v).ravel() for v in m.ground_reaction_acc.map(t.size)(
+        gait.q(t), gait.dq(t), gait.ddq(t)))
+    t_first = t[np.argmax(np.abs(Fx) > 0.3 * Fz)]
+    assert res.status == "slipped"
+    assert abs(res.failure_time - t_first) <= gait.T / opts.rk4_steps + 1e-4
+    assert abs(res.Fx[-1]) > 0.3 * res.Fz[-1]
+    assert np.all(np.abs(res.Fx[:-1]) <= 0.3 * res.Fz[:-1])
+
+
+def test_status_negative_normal_force(gait, tv0):
+    """A normal-force floor above the reference's minimum stops the run where F_z^d(t)
+    first drops below it."""
+    m = gait.model
+    t = np.linspace(0, gait.T, 20001)
+    _, Fz = (np.array(v).ravel() for v in m.ground_reaction_acc.map(t.size)(
+        gait.q(t), gait.dq(t), gait.ddq(t)))
+    floor = Fz.min() + 0.3 * (Fz[0] - Fz.min())
+    res = simulate(tv0, options=SimulationOptions(steps=1, min_normal_force=float(floor)))
+    assert res.status == "negative_normal_force"
+    t_first = t[np.argmax(Fz < floor)]
+    assert abs(res.failure_time - t_first) <= gait.T / 2000 + 1e-4
+    assert res.Fz[-1] < floor and np.all(res.Fz[:-1] >= floor)
+
+
+def test_status_scuffed_foot_starts_in_ground(gait, vc):
+    """-0.01 rad on every joint puts the swing foot below the ground behind the stance
+    foot at t = 0: scuffed immediately."""
+    q0, dq0 = perturbed_initial_state(gait, -0.01, 0.0)
+    assert float(gait.model.swing_foot(q0)[1]) < 0
+    res = simulate(vc, q0, dq0, SimulationOptions(steps=2))
+    assert res.status == "scuffed" and res.failure_time == 0.0 and not res.steps
+
+
+def test_status_fell(gait, vc):
+    """'fell' when the hip is lower than min_hip_height or the torso leans more than
+    max_torso_angle: thresholds beyond the reference's extremes let it walk; a hip
+    level above its lowest point (at t = 0 on this gait: checked) stops the run at once;
+    a lean threshold inside its range stops it where the reference first exceeds it."""
+    m = gait.model
+    t = np.linspace(0, gait.T, 20001)
+    q = gait.q(t)
+    hip = np.array(m.points.map(t.size)(q)).reshape(2, 6, t.size, order="F")[1, 2]
+    lean = np.abs(q[0] + q[1] + q[2])
+    assert hip[0] <= hip.min() + 1e-9 and lean.max() > lean[0] + 1e-3
+    ok = simulate(vc, options=SimulationOptions(steps=1, min_hip_height=hip.min() - 1e-3,
+                                                max_torso_angle=lean.max() + 1e-3))
+    assert ok.status == "ok"
+    low = simulate(vc, options=SimulationOptions(steps=1, min_hip_height=hip.min() + 1e-3))
+    assert low.status == "fell" and "hip" in low.message and low.failure_time == 0.0
+    level = float(0.5 * (lean[0] + lean.max()))
+    bent = simulate(vc, options=SimulationOptions(steps=1, max_torso_angle=level))
+    assert bent.status == "fell" and "torso" in bent.message and not bent.steps
+    assert abs(bent.failure_time - t[np.argmax(lean > level)]) <= gait.T / 2000 + 1e-4
+
+
+def test_status_no_impact_and_singular(model, gait, tv0):
+    res = simulate(tv0, options=SimulationOptions(steps=1, horizon=0.9))
+    assert res.status == "no_impact" and res.failure_time == pytest.approx(0.9 * gait.T)
+    # eq. (24): D11 - D12 M1 crosses zero during the step
+    D = np.array(model.D(gait.q(0.5 * gait.T)))
+    sing = TimeVaryingController(model, gait, [D[0, 0] / D[0, 1], 0, 0, 0])
+    res = simulate(sing, options=SimulationOptions(steps=1))
+    assert res.status == "singular"
+    rep = sing.singularity()
+    assert rep.singular
+    scale = max(abs(rep.min_value), abs(rep.max_value))
+    den = res.denominator
+    assert abs(den[-1]) < 0.01 * scale and np.all(np.abs(den[:-1]) >= 0.01 * scale)
+    assert 0 < res.failure_time < gait.T
+
+
+def test_bad_input(gait, vc):
+    with pytest.raises(ValueError, match="q0"):
+        simulate(vc, np.zeros(4), np.zeros(5))
+    with pytest.raises(ValueError, match="dq0"):
+        simulate(vc, np.zeros(5), np.full(5, np.nan))
+    with pytest.raises(ValueError, match="rk4_steps"):
+        SimulationOptions(rk4_steps=1001)
+    with pytest.raises(ValueError, match="mu"):
+        SimulationOptions(mu=-1.0)
+    with pytest.raises(ValueError, match="q_error"):
+        perturbed_initial_state(gait, [0.1, 0.2], 0.0)
+    with pytest.raises(ValueError, match="options"):
+        Simulator(vc, options={"steps": 2})
+
+
+# ---------------------------------------------------------------- CLI
+def test_cli_simulate_json(gait, tmp_path, capsys):
+    path = gait.save(tmp_path / "gait.json")
+    rc = biped_main(["simulate", "--gait", str(path), "--controller", "vc", "--steps", "2",
+                     "--perturb", "0.001", "0.01", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["status"] == "ok" and len(out["steps"]) == 2
+    for s in out["steps"]:
+        assert {"t_impact", "qu_error", "dqu_error"} <= set(s)
+        assert abs(s["qu_error"]) < 1e-9           # VC: configuration at impact is exact
+    assert out["steps"][1]["t_impact"] > out["steps"][0]["t_impact"] > 0
+
+
+def test_cli_simulate_figures(gait, tmp_path, capsys):
+    from PIL import Image
+    path = gait.save(tmp_path / "gait.json")
+    rc = biped_main(["simulate", "--gait", str(path), "--controller", "tv", "--steps", "2",
+                     "--compare", "--plot", str(tmp_path / "fig"),
+                     "--animate", str(tmp_path / "walk.gif")])
+    text = capsys.readouterr().out
+    assert rc == 0 and "tv: status ok" in text and "vc: status ok" in text
+    for name in ("fig5_qu_error.png", "fig6_swing_torques.png"):
+        with Image.open(tmp_path / "fig" / name) as im:
+            assert im.size[0] > 300 and im.size[1] > 300
+    with Image.open(tmp_path / "walk.gif") as im:
+        assert im.n_frames >= 25 * 2 * gait.T - 1      # 25 frames per simulated second
+
+
+def test_cli_simulate_bad_input(gait, tmp_path, capsys):
+    path = gait.save(tmp_path / "gait.json")
+    assert biped_main(["simulate", "--gait", str(path), "--m1", "1", "2", "3"]) == 2
+    assert "--m1" in capsys.readouterr().err
+    assert biped_main(["simulate", "--gait", str(path), "--animate", "x.mp4"]) == 2
+    assert ".gif" in capsys.readouterr().err
+    assert biped_main(["simulate", "--gait", str(tmp_path / "missing.json")]) == 2
