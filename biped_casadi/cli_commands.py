@@ -8,6 +8,7 @@ from .cli import _EXTRA_COMMANDS
 
 MODULES = [
     "cli_simulate",
+    "cli_gait",
     "cli_sweep",
     "cli_analysis",
     "cli_design",

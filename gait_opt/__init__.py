@@ -2,5 +2,7 @@
 from .options import GaitOptions
 from .gait import Gait, GaitFileError
 from .optimize import GaitOptimizationError, optimize_gait
+from .cache import default_gait
 
-__all__ = ["optimize_gait", "Gait", "GaitOptions", "GaitOptimizationError", "GaitFileError"]
+__all__ = ["optimize_gait", "default_gait", "Gait", "GaitOptions", "GaitOptimizationError",
+           "GaitFileError"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -189,15 +190,45 @@ class Gait:
         X = np.array(F(x0=self.x0)["xf"])
         return float(np.max(np.abs(X[0] - self.q(grid[1:])[0])))
 
+    def violations(self, check: dict | None = None, tol: float = 1e-7) -> list:
+        """Constraints of ``options`` violated on the dense grid of :meth:`check` (not
+        only at the collocation nodes): [(family, worst amount)], worst first; empty
+        for a valid gait.  Amounts in N m, N, m, m/s, rad; friction as a ratio."""
+        c = check or self.check()
+        o = self.options
+        F = c["impact_impulse"]
+        amounts = {
+            "torque limit": c["max_abs_torque"] - o.torque_limit,
+            "normal force": o.min_normal_force - c["min_normal_force"],
+            "friction cone": c["max_friction_ratio"] - o.mu,
+            "swing foot above ground": (-c["min_swing_height_inside"] + 2 * tol
+                                        if c["min_swing_height_inside"] <= 0 else 0.0),
+            "swing-foot clearance": -c["min_clearance_margin"],
+            "strike velocity": c["strike_velocity"] + o.min_strike_speed,
+            "lift-off velocity": o.min_liftoff_speed - c["liftoff_velocity"],
+            "impact impulse cone": max(-F[1], abs(F[0]) - o.mu * F[1]),
+            "stance knee (hyperextension)": c["max_stance_knee"] - o.stance_knee_max,
+            "swing knee (hyperextension)": o.swing_knee_min - c["min_swing_knee"],
+        }
+        bad = [(k, float(v)) for k, v in amounts.items() if v > tol]
+        return sorted(bad, key=lambda t: -t[1])
+
     def summary(self) -> dict:
+        """Every figure of the gait: physics on a dense grid and consistency."""
         c = self.check()
         return dict(T=self.T, step_length=self.step_length, speed=self.speed, cost=self.cost,
                     peak_torque=c["max_abs_torque"], min_normal_force=c["min_normal_force"],
                     max_friction_ratio=c["max_friction_ratio"],
+                    min_swing_height_inside=c["min_swing_height_inside"],
+                    strike_velocity=c["strike_velocity"], liftoff_velocity=c["liftoff_velocity"],
+                    impact_friction_ratio=c["impact_friction_ratio"],
+                    max_stance_knee=c["max_stance_knee"], min_swing_knee=c["min_swing_knee"],
                     periodicity_q=c["periodicity_q"], periodicity_dq=c["periodicity_dq"],
                     swing_height_at_T=c["swing_height_at_T"],
                     unactuated_row_residual=c["unactuated_row_residual"],
                     reintegration_error=self.reintegration_error(),
+                    dense_grid_points=c["n_points"],
+                    dense_grid_violations=[list(v) for v in self.violations(c)],
                     solve_time=self.solver_stats.get("total_time"),
                     ipopt_iterations=self.solver_stats.get("iterations"),
                     ipopt_status=self.solver_stats.get("status"))
@@ -216,7 +247,7 @@ class Gait:
         path = Path(path)
         body = self.to_dict()
         body["sha256"] = _digest(body)
-        tmp = path.with_name(path.name + ".tmp")
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")     # atomic replace
         tmp.write_text(json.dumps(body, indent=1))
         tmp.replace(path)
         return path

@@ -9,6 +9,7 @@ __all__ = ["GaitOptions"]
 
 COSTS = ("torque_squared_per_length", "torque_squared")
 SCHEMES = ("legendre", "radau")
+DERIVATIVES = ("structured", "casadi")
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,10 @@ class GaitOptions:
     polish_steps: RK4 steps per step for the exact unactuated trajectory.
     ipopt: extra IPOPT options (name -> value), e.g. {'max_iter': 500}.
     expand: expand the NLP to SX before solving (faster iterations, slower build).
+    derivatives: how IPOPT's exact derivatives (constraint Jacobian, objective gradient,
+        Hessian of the Lagrangian, all by AD) are built: 'structured' (per-point and
+        boundary SX derivatives scattered into the global sparsity; see optimize.py) or
+        'casadi' (CasADi differentiates the whole MX graph: the slow baseline).
     """
 
     speed: float = 0.75
@@ -57,6 +62,7 @@ class GaitOptions:
     polish_steps: int = 2000
     ipopt: dict = field(default_factory=dict)
     expand: bool = False
+    derivatives: str = "structured"
 
     def __post_init__(self):
         def pos(name):
@@ -85,6 +91,9 @@ class GaitOptions:
                 raise ValueError(f"gait option {n!r} must be an integer >= {lo}, got {v!r}")
         if self.scheme not in SCHEMES:
             raise ValueError(f"gait option 'scheme' must be one of {SCHEMES}, got {self.scheme!r}")
+        if self.derivatives not in DERIVATIVES:
+            raise ValueError(f"gait option 'derivatives' must be one of {DERIVATIVES}, "
+                             f"got {self.derivatives!r}")
         if self.cost not in COSTS:
             raise ValueError(f"gait option 'cost' must be one of {COSTS}, got {self.cost!r}")
         if not isinstance(self.ipopt, dict):

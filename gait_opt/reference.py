@@ -62,7 +62,7 @@ class ReferenceDynamics:
         q, dq = model.q_sym, model.dq_sym
         D, H = model.D_expr, model.H_expr
         dd_a = ca.SX.sym("ddqa", 4)
-        ddqu = -(ca.mtimes(D[0, 1:], dd_a) + H[0]) / D[0, 0]
+        ddqu = ca.cse(-(ca.mtimes(D[0, 1:], dd_a) + H[0]) / D[0, 0])
         self.ddqu = ca.Function("ddqu", [q, dq, dd_a], [ddqu], ["q", "dq", "ddqa"], ["ddqu"])
         ddq = ca.SX.sym("ddq", 5)
         self.torque = ca.Function("torque", [q, dq, ddq], [(ca.mtimes(D, ddq) + H)[1:]],
@@ -82,7 +82,7 @@ class ReferenceDynamics:
         k2 = f(x + ds / 2 * k1, s + ds / 2, alpha, T)
         k3 = f(x + ds / 2 * k2, s + ds / 2, alpha, T)
         k4 = f(x + ds * k3, s + ds, alpha, T)
-        xn = x + ds / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        xn = ca.cse(x + ds / 6 * (k1 + 2 * k2 + 2 * k3 + k4))   # common subexpressions
         self.rk4 = ca.Function("rk4", [x, s, ds, alpha, T], [xn, s + ds],
                                ["x", "s", "ds", "alpha", "T"], ["x_next", "s_next"])
         self._integrators = {}

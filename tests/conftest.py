@@ -16,3 +16,11 @@ def model():
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def gait(model):
+    """The default reference gait (SPEC section 2), from the on-disk cache
+    ($BIPED_CACHE_DIR or ~/.cache/biped-casadi): solved at most once per machine."""
+    from gait_opt import default_gait
+    return default_gait(model)

@@ -1,0 +1,99 @@
+"""``biped gait``: optimise the reference gait (SPEC section 2), print its figures, save
+it, and optionally draw it.  Reads top to bottom; every computation is in ``gait_opt``.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+
+from .cli import UserError, _load_model, _print_json
+
+
+def register(sub):
+    p = sub.add_parser(
+        "gait", help="optimise, check and save the cyclic reference gait",
+        description="Optimise the cyclic reference step (direct collocation + IPOPT, then "
+                    "the exact periodic orbit), check it on a dense grid, print its "
+                    "figures and save it to a self-describing JSON file.")
+    p.add_argument("--speed", type=float, default=0.75, metavar="V",
+                   help="average speed in m/s (default 0.75)")
+    p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
+    p.add_argument("--torque-limit", type=float, default=150.0, metavar="U",
+                   help="|u| bound in N m (default 150)")
+    p.add_argument("--intervals", type=int, default=30, metavar="N",
+                   help="collocation intervals (default 30)")
+    p.add_argument("--scheme", choices=("legendre", "radau"), default="legendre",
+                   help="collocation points (default legendre)")
+    p.add_argument("--max-iter", type=int, default=None, metavar="K",
+                   help="IPOPT iteration limit (default 500)")
+    p.add_argument("--params", metavar="FILE", help="robot parameters (.toml or .json); "
+                   "default: RABBIT")
+    p.add_argument("--out", metavar="FILE", default="gait.json",
+                   help="where to save the gait (default gait.json)")
+    p.add_argument("--plot", metavar="DIR",
+                   help="write gait_stick.png and gait_profiles.png into DIR")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_gait)
+
+
+def cmd_gait(args):
+    from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
+
+    for name in ("speed", "mu", "torque_limit"):
+        v = getattr(args, name)
+        if not (math.isfinite(v) and v > 0):
+            raise UserError(f"--{name.replace('_', '-')} must be a positive number, got {v:g}")
+    if args.intervals < 4:
+        raise UserError(f"--intervals must be >= 4, got {args.intervals}")
+    if args.max_iter is not None and args.max_iter < 1:
+        raise UserError(f"--max-iter must be >= 1, got {args.max_iter}")
+    out = Path(args.out)
+    if not out.parent.is_dir():
+        raise UserError(f"--out: directory {out.parent} does not exist")
+    model = _load_model(args.params)
+    options = GaitOptions(speed=args.speed, mu=args.mu, torque_limit=args.torque_limit,
+                          n_intervals=args.intervals, scheme=args.scheme,
+                          ipopt={} if args.max_iter is None else {"max_iter": args.max_iter})
+
+    if not args.json and sys.stderr.isatty():
+        print(f"optimising the gait at {args.speed:g} m/s ...", file=sys.stderr, flush=True)
+    try:
+        gait = optimize_gait(model, options)
+    except GaitOptimizationError as e:
+        raise UserError(str(e)) from None
+    gait.save(out)
+    s = gait.summary()
+    s["file"] = str(out)
+    if args.plot:
+        from gait_opt.plots import plot_gait
+        s["plots"] = [str(p) for p in plot_gait(gait, Path(args.plot))]
+
+    if args.json:
+        _print_json(s)
+        return 0
+    print(f"reference gait of {model.params.name}, saved to {out}")
+    print(f"  step time T          {s['T']:.6f} s")
+    print(f"  step length          {s['step_length']:.6f} m")
+    print(f"  speed                {s['speed']:.6f} m/s")
+    print(f"  cost                 {s['cost']:.6f} N^2 m s (int u'u dt / step length)")
+    print(f"  peak torque          {s['peak_torque']:.3f} N m   (limit {args.torque_limit:g})")
+    print(f"  min normal force     {s['min_normal_force']:.3f} N")
+    print(f"  max friction ratio   {s['max_friction_ratio']:.4f}   (mu {args.mu:g}); "
+          f"at impact {s['impact_friction_ratio']:.4f}")
+    print(f"  swing foot           min height inside the step {s['min_swing_height_inside']:.2e} m, "
+          f"strike {s['strike_velocity']:.3f} m/s, lift-off {s['liftoff_velocity']:.3f} m/s")
+    print(f"  dense-grid check     {s['dense_grid_points']} points: "
+          + ("all constraints hold" if not s["dense_grid_violations"] else
+             "VIOLATED " + "; ".join(f"{n} by {v:.3g}" for n, v in s["dense_grid_violations"])))
+    print("  consistency")
+    print(f"    periodicity q      {s['periodicity_q']:.2e} rad")
+    print(f"    periodicity dq     {s['periodicity_dq']:.2e} rad/s")
+    print(f"    z_sw(T)            {s['swing_height_at_T']:.2e} m")
+    print(f"    unactuated row     {s['reintegration_error']:.2e} rad (independent reintegration)")
+    print(f"  solve time           {s['solve_time']:.2f} s, IPOPT {s['ipopt_iterations']} "
+          f"iterations ({s['ipopt_status']})")
+    for p in s.get("plots", []):
+        print(f"  plot                 {p}")
+    return 0

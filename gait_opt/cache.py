@@ -1,0 +1,96 @@
+"""On-disk cache of optimised gaits, so the default gait is solved once per machine.
+
+A cached gait lives in ``<cache_dir>/gait-<key>.json`` (the ordinary gait file format),
+``key`` a SHA-256 of the robot parameters, the gait options and :data:`CACHE_VERSION`
+(bumped whenever the optimiser's result for the same options changes).  A cached file
+is used only if it loads cleanly (checksum, format version, robot parameters), was made
+with the same options, and is still an exact periodic orbit; anything else is
+recomputed and overwritten, never trusted.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+from biped_casadi import rabbit
+
+from .gait import FORMAT_VERSION, Gait, GaitFileError
+from .optimize import optimize_gait
+from .options import GaitOptions
+
+__all__ = ["default_gait", "cache_dir", "cache_path", "CACHE_VERSION"]
+
+#: version of the optimiser's output for given options (part of the cache key)
+CACHE_VERSION = 1
+
+#: a cached gait must still close through the impact to this accuracy
+_PERIODICITY_TOL = 1e-8
+
+
+def cache_dir(path=None) -> Path:
+    """``path``, else $BIPED_CACHE_DIR, else ~/.cache/biped-casadi."""
+    if path is not None:
+        return Path(path)
+    env = os.environ.get("BIPED_CACHE_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "biped-casadi"
+
+
+def cache_key(model, options: GaitOptions) -> str:
+    body = dict(robot=model.params.to_dict(), options=options.to_dict(),
+                cache_version=CACHE_VERSION, format_version=FORMAT_VERSION)
+    return hashlib.sha256(json.dumps(body, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def cache_path(model=None, options: GaitOptions | None = None, cache_dir_=None) -> Path:
+    model = model or rabbit()
+    options = options or GaitOptions()
+    return cache_dir(cache_dir_) / f"gait-{cache_key(model, options)[:20]}.json"
+
+
+def _usable(path: Path, model, options: GaitOptions):
+    """The cached gait, or None (with the reason) when it must be recomputed."""
+    try:
+        g = Gait.load(path, model=model)
+    except GaitFileError as e:
+        return None, str(e)
+    if g.options != options:
+        return None, "made with other options"
+    c = g.check(n=3)
+    worst = max(c["periodicity_q"], c["periodicity_dq"], abs(c["swing_height_at_T"]))
+    if not worst <= _PERIODICITY_TOL:
+        return None, f"not periodic (residual {worst:.2e})"
+    return g, ""
+
+
+def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
+                 **overrides) -> Gait:
+    """The optimal gait for ``options`` (default: SPEC section 2), from the cache when a
+    valid file exists, else optimised and stored.  ``overrides`` replace option fields.
+
+    ``gait.solver_stats['cache']`` says 'hit' or why it was (re)computed."""
+    model = model or rabbit()
+    options = options or GaitOptions()
+    if not isinstance(options, GaitOptions):
+        raise ValueError(f"options must be GaitOptions, got {type(options).__name__}")
+    if overrides:
+        options = options.replace(**overrides)
+    path = cache_path(model, options, cache_dir)
+    reason = "no cached file"
+    if path.exists():
+        g, reason = _usable(path, model, options)
+        if g is not None:
+            g.solver_stats["cache"] = "hit"
+            g.solver_stats["cache_file"] = str(path)
+            return g
+    g = optimize_gait(model, options)
+    note = f"computed ({reason})"
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        g.save(path)
+        g.solver_stats["cache_file"] = str(path)
+    except OSError as e:          # a read-only cache is not fatal: the gait is still valid
+        note += f"; not stored: {e}"
+    g.solver_stats["cache"] = note
+    return g

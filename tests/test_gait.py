@@ -1,0 +1,387 @@
+"""The reference gait (SPEC section 2): physical validity on a dense grid, dynamic
+consistency checked by an independent integrator, the file format, the cache, the
+optimiser's exact derivatives, failures, and ``biped gait``.
+
+The default gait comes from the session fixture ``gait`` (on-disk cache); the 0.5 and
+1.0 m/s gaits are solved here from the built-in initial guess, once per module.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from math import comb
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from biped_casadi import RobotParams, rabbit
+from gait_opt import (Gait, GaitFileError, GaitOptimizationError, GaitOptions, default_gait,
+                      optimize_gait)
+from gait_opt.optimize import build_problem, initial_guess
+
+N_DENSE = 2001
+
+
+@pytest.fixture(scope="module")
+def gaits(model, gait):
+    """Gaits at 0.5, 0.75 (cached default) and 1.0 m/s; the two others solved here from
+    the built-in initial guess (no warm start)."""
+    out = {0.75: gait}
+    for v in (0.5, 1.0):
+        out[v] = optimize_gait(model, speed=v)
+    return out
+
+
+SPEEDS = (0.5, 0.75, 1.0)
+
+
+# ------------------------------------------------------------------ helpers
+def bezier(alpha, s, T):
+    """q_a^d and its first two time derivatives, evaluated here with numpy from the
+    Bernstein form (independent of the toolkit's own evaluation)."""
+    M = alpha.shape[1] - 1
+    s = np.atleast_1d(s)
+
+    def bern(m, k):
+        return comb(m, k) * s**k * (1 - s)**(m - k)
+
+    qa = sum(alpha[:, [k]] * bern(M, k) for k in range(M + 1))
+    d1 = sum((alpha[:, [k + 1]] - alpha[:, [k]]) * bern(M - 1, k) for k in range(M)) * M / T
+    d2 = sum((alpha[:, [k + 2]] - 2 * alpha[:, [k + 1]] + alpha[:, [k]]) * bern(M - 2, k)
+             for k in range(M - 1)) * M * (M - 1) / T**2
+    return qa, d1, d2
+
+
+def dense_physics(m, g, n=N_DENSE):
+    """Torques, contact force, swing foot on a dense grid, from the model directly."""
+    t = np.linspace(0.0, g.T, n)
+    q, dq, ddq = g.q(t), g.dq(t), g.ddq(t)
+    D = np.array(m.D.map(n)(q)).reshape(5, 5, n, order="F")
+    H = np.array(m.H.map(n)(q, dq))
+    tau = np.einsum("ijn,jn->in", D, ddq) + H          # = B u with B = [0; I]
+    Fx, Fz = (np.array(v).ravel() for v in m.ground_reaction_acc.map(n)(q, dq, ddq))
+    xs, zs = (np.array(v).ravel() for v in m.swing_foot.map(n)(q))
+    return dict(t=t, q=q, dq=dq, tau=tau, Fx=Fx, Fz=Fz, xs=xs, zs=zs)
+
+
+# ------------------------------------------------------- the default problem
+def test_default_gait_is_the_known_optimum(gait):
+    # the optimum of SPEC section 2 (30 Legendre intervals of degree 3, Bezier degree 6)
+    assert gait.T == pytest.approx(0.6903909221, rel=1e-6)
+    assert gait.cost == pytest.approx(575.2778858, rel=1e-6)
+    assert gait.speed == pytest.approx(0.75, abs=1e-10)
+    assert 0.2 <= gait.step_length <= 0.8
+
+
+@pytest.mark.parametrize("v", SPEEDS)
+def test_converges_at_each_speed(gaits, v):
+    g = gaits[v]
+    assert g.solver_stats["status"] == "Solve_Succeeded"
+    assert g.speed == pytest.approx(v, abs=1e-10)
+    assert g.options.speed == v
+    assert g.solver_stats["dense_grid_violations"] == []
+
+
+# ------------------------------------------------ physical validity (dense)
+@pytest.mark.parametrize("v", SPEEDS)
+def test_dense_grid_physics(model, gaits, v):
+    g = gaits[v]
+    o = g.options
+    d = dense_physics(model, g)
+    # the unactuated joint gets no torque; the actuated torques respect the limit
+    assert np.max(np.abs(d["tau"][0])) < 1e-8
+    assert np.max(np.abs(d["tau"][1:])) <= o.torque_limit
+    # unilateral contact and friction cone of the stance foot all along the step
+    assert np.min(d["Fz"]) >= 0.0
+    assert np.all(np.abs(d["Fx"]) <= o.mu * d["Fz"])
+    # swing foot strictly above the ground inside the step, on it at T
+    assert np.min(d["zs"][1:-1]) > 0.0
+    assert abs(d["zs"][-1]) < 1e-10
+    # no knee hyperextension
+    assert np.max(d["q"][1]) <= 0.0 and np.min(d["q"][4]) >= 0.0
+
+
+@pytest.mark.parametrize("v", SPEEDS)
+def test_impact_is_a_valid_strike(model, gaits, v):
+    g = gaits[v]
+    qT, dqT = g.q(g.T), g.dq(g.T)
+    _, dz = model.swing_foot_velocity(qT, dqT)
+    assert float(dz) < -g.options.min_strike_speed + 1e-9          # strikes downward
+    _, _, F, _, v_old = (np.array(x).ravel() for x in model.impact_full(qT, dqT))
+    assert v_old[1] >= g.options.min_liftoff_speed - 1e-9          # old foot lifts upward
+    assert F[1] > 0 and abs(F[0]) <= g.options.mu * F[1]           # impulse inside the cone
+    # after the impact the new swing foot rises (it starts on the ground, moving up)
+    t = np.linspace(0, 0.05 * g.T, 50)[1:]
+    assert np.all(np.array(model.swing_foot.map(t.size)(g.q(t))[1]) > 0)
+
+
+def test_active_limit_holds_between_nodes(model):
+    """With an active torque limit the node constraints alone let |u| exceed it between
+    nodes; optimize_gait tightens them until the dense grid is valid."""
+    g = optimize_gait(model, torque_limit=20.0)
+    d = dense_physics(model, g)
+    assert np.max(np.abs(d["tau"][1:])) <= 20.0
+    assert np.max(np.abs(d["tau"][1:])) > 19.99                   # and it is active
+    first = g.solver_stats["refinements"][0]
+    assert first["violations"][0][0] == "torque limit"
+    assert g.solver_stats["dense_grid_violations"] == []
+
+
+def test_dense_grid_figures_agree_with_check(model, gait):
+    d = dense_physics(model, gait)
+    c = gait.check(N_DENSE)
+    assert c["max_abs_torque"] == pytest.approx(np.max(np.abs(d["tau"][1:])), rel=1e-10)
+    assert c["min_normal_force"] == pytest.approx(np.min(d["Fz"]), rel=1e-10)
+    assert gait.violations(c) == []
+
+
+# ----------------------------------------------------- dynamic consistency
+@pytest.mark.parametrize("v", SPEEDS)
+def test_unactuated_row_reintegrated_independently(model, gaits, v):
+    """q_u from scipy's DOP853 with q_a = q_a^d(t) imposed reproduces q_u^d(t)."""
+    g = gaits[v]
+    T = g.T
+
+    def rhs(t, x):
+        qa, dqa, ddqa = (a[:, 0] for a in bezier(g.alpha, t / T, T))
+        q, dq = np.r_[x[0], qa], np.r_[x[1], dqa]
+        D = np.array(model.D(q))
+        H = np.array(model.H(q, dq)).ravel()
+        return [x[1], -(D[0, 1:] @ ddqa + H[0]) / D[0, 0]]
+
+    t = np.linspace(0.0, T, 1201)
+    sol = solve_ivp(rhs, (0.0, T), g.q(0.0)[[0]].tolist() + g.dq(0.0)[[0]].tolist(),
+                    method="DOP853", rtol=1e-13, atol=1e-13, t_eval=t)
+    assert sol.success
+    assert np.max(np.abs(sol.y[0] - g.q(t)[0])) <= 1e-8
+    assert np.max(np.abs(sol.y[1] - g.dq(t)[0])) <= 1e-7
+    # and the actuated joints are the Bezier polynomials, as evaluated independently
+    qa, dqa, ddqa = bezier(g.alpha, t / T, T)
+    assert np.max(np.abs(qa - g.q(t)[1:])) < 1e-12
+    assert np.max(np.abs(ddqa - g.ddq(t)[1:])) < 1e-9
+
+
+@pytest.mark.parametrize("v", SPEEDS)
+def test_periodic_through_impact(model, gaits, v):
+    g = gaits[v]
+    qT, dqT = g.q(g.T), g.dq(g.T)
+    assert abs(float(model.swing_foot(qT)[1])) <= 1e-10
+    qp, dqp = (np.array(x).ravel() for x in model.impact(qT, dqT))
+    assert np.max(np.abs(qp - g.q(0.0))) <= 1e-8
+    assert np.max(np.abs(dqp - g.dq(0.0))) <= 1e-8
+    assert g.reintegration_error() <= 1e-8
+
+
+# ------------------------------------------------------------ evaluation
+def test_shapes_and_past_T(gait):
+    T = gait.T
+    for f in (gait.q, gait.dq, gait.ddq):
+        assert f(0.3 * T).shape == (5,)
+        assert f(np.linspace(0, T, 7)).shape == (5, 7)
+    assert gait.u(0.3 * T).shape == (4,)
+    assert gait.u(np.linspace(0, T, 7)).shape == (4, 7)
+    assert np.allclose(gait.q(np.array([0.3 * T]))[:, 0], gait.q(0.3 * T), atol=0)
+    # defined past T (SPEC section 3) and C^2 across it
+    eps = 1e-7
+    for f in (gait.q, gait.dq, gait.ddq):
+        assert np.max(np.abs(f(T + eps) - f(T - eps))) < 1e-4
+    assert np.all(np.isfinite(gait.q(np.linspace(T, 1.5 * T, 20))))
+    with pytest.raises(ValueError, match="t must lie"):
+        gait.q(-0.1)
+
+
+def test_ddq_is_the_derivative_of_dq(gait):
+    t = np.linspace(0.02, gait.T - 0.02, 300)
+    h = 1e-5
+    fd = (gait.dq(t + h) - gait.dq(t - h)) / (2 * h)
+    scale = np.max(np.abs(gait.ddq(t)))
+    assert np.max(np.abs(fd - gait.ddq(t))) < 1e-6 * scale
+    fd_q = (gait.q(t + h) - gait.q(t - h)) / (2 * h)
+    assert np.max(np.abs(fd_q - gait.dq(t))) < 1e-6 * np.max(np.abs(gait.dq(t)))
+
+
+# ------------------------------------------------------------- the file
+def test_save_load_round_trip(gait, tmp_path):
+    path = gait.save(tmp_path / "g.json")
+    g2 = Gait.load(path, model=gait.model)
+    assert g2.T == gait.T and g2.options == gait.options
+    t = np.linspace(0, gait.T, 101)
+    assert np.array_equal(g2.alpha, gait.alpha)
+    assert np.max(np.abs(g2.q(t) - gait.q(t))) == 0.0
+    body = json.loads(path.read_text())
+    assert body["format"] == "biped-casadi-gait" and body["robot"]["name"] == "RABBIT"
+
+
+def test_corrupted_file_is_refused(gait, tmp_path):
+    path = gait.save(tmp_path / "g.json")
+    text = path.read_text()
+    i = text.index('"T": ') + len('"T": ') + 4           # a digit of T
+    flipped = text[:i] + str((int(text[i]) + 1) % 10) + text[i + 1:]
+    path.write_text(flipped)
+    with pytest.raises(GaitFileError, match="corrupted"):
+        Gait.load(path)
+    path.write_text(text[: len(text) // 2])
+    with pytest.raises(GaitFileError, match="not valid JSON"):
+        Gait.load(path)
+    with pytest.raises(GaitFileError, match="not found"):
+        Gait.load(tmp_path / "missing.json")
+
+
+def test_other_format_version_is_refused(gait, tmp_path):
+    path = gait.save(tmp_path / "g.json")
+    body = json.loads(path.read_text())
+    body["version"] = 99
+    path.write_text(json.dumps(body))
+    with pytest.raises(GaitFileError, match="format version 99"):
+        Gait.load(path)
+
+
+def test_other_robot_is_refused(gait, tmp_path):
+    path = gait.save(tmp_path / "g.json")
+    other = rabbit(RobotParams(m_torso=13.0))
+    with pytest.raises(GaitFileError, match="other robot parameters.*m_torso"):
+        Gait.load(path, model=other)
+
+
+# ------------------------------------------------------------- the cache
+def test_cache_reuses_and_recomputes(model, gait, tmp_path, monkeypatch):
+    calls = []
+
+    def fake_optimize(m, options):
+        calls.append(options)
+        return Gait(m, options, gait.alpha, gait.x0, gait.T)
+
+    import gait_opt.cache as cache
+    monkeypatch.setattr(cache, "optimize_gait", fake_optimize)
+    g1 = default_gait(model, cache_dir=tmp_path)
+    assert len(calls) == 1 and g1.solver_stats["cache"].startswith("computed")
+    files = list(tmp_path.glob("gait-*.json"))
+    assert len(files) == 1
+    g2 = default_gait(model, cache_dir=tmp_path)
+    assert len(calls) == 1 and g2.solver_stats["cache"] == "hit" and g2.T == gait.T
+    # a corrupted cache file is recomputed, not trusted
+    text = files[0].read_text()
+    files[0].write_text(text.replace('"T": 0.69', '"T": 0.68', 1))
+    g3 = default_gait(model, cache_dir=tmp_path)
+    assert len(calls) == 2 and "corrupted" in g3.solver_stats["cache"]
+    assert Gait.load(files[0]).T == gait.T            # and the file is repaired
+    # other options or another robot: another key
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path))
+    assert cache.cache_path(model, GaitOptions(speed=0.5)) != files[0]
+    assert cache.cache_path(rabbit(RobotParams(m_torso=13.0))) != files[0]
+    assert cache.cache_path(model) == files[0]
+
+
+# ------------------------------------------------------------- failures
+def test_unreachable_speed_fails_clearly(model):
+    with pytest.raises(GaitOptimizationError, match=r"speed 5 m/s is out of reach") as e:
+        optimize_gait(model, speed=5.0)
+    assert e.value.status == "not_run" and e.value.violations[0][0] == "speed"
+
+
+def test_infeasible_request_names_ipopt_status_and_families(model):
+    # 2 N m cannot carry the robot; a short iteration budget keeps the test fast
+    with pytest.raises(GaitOptimizationError) as e:
+        optimize_gait(model, torque_limit=2.0, ipopt={"max_iter": 15})
+    msg = str(e.value)
+    assert "IPOPT status 'Maximum_Iterations_Exceeded'" in msg
+    assert "torque limit (off by" in msg
+    assert e.value.violations and all(v > 0 for _, v in e.value.violations)
+
+
+def test_bad_options_are_value_errors(model):
+    with pytest.raises(ValueError, match="'mu'"):
+        optimize_gait(model, mu=-1.0)
+    with pytest.raises(ValueError, match="'derivatives'"):
+        GaitOptions(derivatives="numeric")
+
+
+# ------------------------------------------------ the optimiser's derivatives
+@pytest.fixture(scope="module")
+def small_problem(model):
+    opts = GaitOptions(n_intervals=5)
+    prob = build_problem(model, opts)
+    rng = np.random.default_rng(7)
+    w = initial_guess(model, opts) + 0.01 * rng.standard_normal(prob.lbx.size)
+    lam = rng.standard_normal(prob.lbg.size)
+    return prob, w, lam
+
+
+def test_structured_derivatives_match_casadi_ad(small_problem):
+    prob, w, lam = small_problem
+    x, f, g = prob.nlp["x"], prob.nlp["f"], prob.nlp["g"]
+    lf = 0.7
+    ref = ca.Function("ref", [x], [ca.jacobian(g, x), ca.gradient(f, x),
+                                   ca.triu(ca.hessian(lf * f + ca.dot(ca.DM(lam), g), x)[0])])
+    J_ref, gf_ref, H_ref = (np.array(v.full()) for v in ref(w))
+    _, J = prob.jac_g(w, [])
+    _, gf = prob.grad_f(w, [])
+    H = prob.hess_lag(w, [], lf, lam)
+    assert np.max(np.abs(J.full() - J_ref)) <= 1e-10 * np.max(np.abs(J_ref))
+    assert np.max(np.abs(gf.full() - gf_ref)) <= 1e-12 * max(1, np.max(np.abs(gf_ref)))
+    assert np.max(np.abs(H.full() - H_ref)) <= 1e-10 * np.max(np.abs(H_ref))
+    assert H.sparsity().is_triu()
+
+
+def test_structured_derivatives_match_finite_differences(small_problem):
+    prob, w, lam = small_problem
+    rng = np.random.default_rng(3)
+    d = rng.standard_normal(w.size)
+    h = 1e-6
+    lf = 0.7
+
+    def g_of(x):
+        return np.array(prob.jac_g(x, [])[0]).ravel()
+
+    def grad_lag(x):
+        _, J = prob.jac_g(x, [])
+        _, gf = prob.grad_f(x, [])
+        return lf * np.array(gf).ravel() + np.array(J.T @ lam).ravel()
+
+    J = prob.jac_g(w, [])[1]
+    fd = (g_of(w + h * d) - g_of(w - h * d)) / (2 * h)
+    Jd = np.array(J @ d).ravel()
+    assert np.max(np.abs(fd - Jd)) <= 1e-6 * np.max(np.abs(Jd))
+    Hu = prob.hess_lag(w, [], lf, lam)
+    Hfull = Hu + Hu.T - ca.diag(ca.diag(Hu))
+    Hd = np.array(Hfull @ d).ravel()
+    fd = (grad_lag(w + h * d) - grad_lag(w - h * d)) / (2 * h)
+    assert np.max(np.abs(fd - Hd)) <= 1e-5 * np.max(np.abs(Hd))
+
+
+# ------------------------------------------------------------- the CLI
+def run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "biped_casadi", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_cli_gait_json(tmp_path):
+    out = tmp_path / "g.json"
+    r = run("gait", "--json", "--out", str(out), "--plot", str(tmp_path / "plots"))
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert s["T"] == pytest.approx(0.6903909221, rel=1e-6)
+    assert s["speed"] == pytest.approx(0.75)
+    assert s["peak_torque"] <= 150 and s["min_normal_force"] >= 0
+    assert s["max_friction_ratio"] <= 0.6 and s["dense_grid_violations"] == []
+    assert max(s["periodicity_q"], s["periodicity_dq"]) <= 1e-8
+    assert abs(s["swing_height_at_T"]) <= 1e-10 and s["reintegration_error"] <= 1e-8
+    assert s["ipopt_iterations"] > 0 and s["solve_time"] > 0
+    assert Gait.load(out).T == s["T"]
+    for name in ("gait_stick.png", "gait_profiles.png"):
+        png = tmp_path / "plots" / name
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+
+
+def test_cli_gait_errors(tmp_path):
+    r = run("gait", "--speed", "5", "--out", str(tmp_path / "g.json"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.count("\n") == 1 and "speed 5 m/s is out of reach" in r.stderr
+    r = run("gait", "--mu", "0")
+    assert r.returncode == 2 and "--mu must be a positive number" in r.stderr
+    r = run("gait", "--torque-limit", "2", "--max-iter", "5", "--out", str(tmp_path / "g.json"))
+    assert r.returncode == 2 and "IPOPT status" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "g.json").exists()
