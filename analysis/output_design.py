@@ -302,6 +302,8 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
         for Mx, how in found:
             if Mx is None or pm.is_singular(Mx):
                 continue
+            if constrained and group_of(tay, Mx) != group:
+                continue                  # Newton may cross to the other group's root
             val = float(pm.jacobian_batch(Mx[None])[3][0])
             history.append(dict(start=M1.tolist(), M1=Mx.tolist(), max_abs=val, how=how))
     if not history:

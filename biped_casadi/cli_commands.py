@@ -12,6 +12,7 @@ MODULES = [
     "cli_sweep",
     "cli_analysis",
     "cli_design",
+    "cli_reproduce",
 ]
 
 for _name in MODULES:

@@ -1,0 +1,357 @@
+"""``biped reproduce``: the paper end to end on the embedded default (RABBIT, default
+gait), with figures (PNG and PDF), ``summary.json`` and ``report.md``.
+
+Stages run in order; each shows its progress, a failed stage is reported (with its
+error) and the stages that do not need its results still run.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["reproduce", "ReproduceOptions", "PAPER"]
+
+#: the paper's published figures (Wang & Chevallereau), for the side-by-side table
+PAPER = dict(
+    D11_T=24.2445,
+    D12_T=[13.4347, 3.6283, 0.5375, 0.0410],
+    singular_values=[1.8046, 6.6821, 45.1060, 592.7751],
+    grid_counts=dict(stable=19, unstable=5363, singular_or_no_impact=6561 - 19 - 5363),
+    example_M1=[1.9121, -4.0, -3.0, -1.4090],
+    example_max_abs=0.2392,
+    tv_convergence_steps=4,
+)
+
+
+@dataclass
+class ReproduceOptions:
+    """Resolution of every stage; ``quick`` gives the coarse variant (<= 3 min)."""
+    quick: bool = False
+    line_points: int = 401          # Fig. 2: points per component on [-10, 10]
+    grid_n: int = 9                 # the paper's 9^4 grid
+    domain_n: int = 81              # Fig. 4: (M1(2), M1(3)) grid per group
+    domain_range: tuple = (-10.0, 10.0)
+    nlp_starts: int = 10
+    sim_steps: int = 10
+    animation_steps: int = 4
+    progress: bool = True
+
+    @classmethod
+    def make(cls, quick: bool = False, **kw):
+        if quick:
+            base = dict(quick=True, line_points=101, domain_n=41, nlp_starts=4,
+                        sim_steps=6, animation_steps=2)
+            base.update(kw)
+            return cls(**base)
+        return cls(**kw)
+
+
+@dataclass
+class _Context:
+    out: Path
+    opts: ReproduceOptions
+    summary: dict = field(default_factory=dict)
+    figures: dict = field(default_factory=dict)
+    data: dict = field(default_factory=dict)
+    model: object = None
+    gait: object = None
+
+    def log(self, msg):
+        if self.opts.progress:
+            print(msg, file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------- the stages
+def stage_gait(ctx: _Context):
+    import gait_opt
+    from biped_casadi import rabbit
+    ctx.model = rabbit()
+    ctx.gait = g = gait_opt.default_gait(ctx.model)
+    s = g.summary()
+    ctx.summary["gait"] = s
+    g.save(ctx.out / "gait.json")
+    try:
+        from gait_opt.plots import plot_gait
+        ctx.figures["gait"] = [str(p) for p in plot_gait(g, ctx.out / "figures")]
+    except ImportError:
+        pass
+    ctx.log(f"   T = {s['T']:.4f} s, step {s['step_length']:.4f} m, cost {s['cost']:.2f}")
+
+
+def stage_singular(ctx: _Context):
+    from analysis import singular_m1_values
+    D = np.array(ctx.model.D(ctx.gait.q(ctx.gait.T)))
+    sv = singular_m1_values(ctx.model, ctx.gait)
+    ctx.summary["singular"] = dict(D11_T=float(D[0, 0]), D12_T=D[0, 1:].tolist(),
+                                   singular_values=sv.tolist())
+    ctx.data["singular_values"] = sv
+
+
+def stage_fig2(ctx: _Context):
+    from analysis.sweep import one_d_sweeps, plot_fig2
+    vals = np.linspace(-10, 10, ctx.opts.line_points)
+    r = one_d_sweeps(ctx.model, ctx.gait, vals, out_dir=ctx.out / "sweeps" / "fig2",
+                     progress=ctx.opts.progress)
+    ctx.figures["fig2"] = [str(p) for p in plot_fig2(r, r.singular_values,
+                                                      ctx.out / "figures" / "fig2")]
+    best = []
+    for j, part in enumerate(r.results):
+        b = part.best()
+        best.append(None if b is None else dict(M1=b[0].tolist(), max_abs=b[1]))
+    ctx.summary["fig2"] = dict(points_per_component=len(vals), best_per_component=best,
+                               stable_per_component=[int(p.counts["stable"]) for p in r.results])
+
+
+def stage_grid(ctx: _Context):
+    from analysis.sweep import grid_points, run_sweep
+    n = ctx.opts.grid_n
+    P = grid_points(n, -10.0, 10.0)
+    r = run_sweep(ctx.model, ctx.gait, P, out_dir=ctx.out / "sweeps" / f"grid{n}",
+                  progress=ctx.opts.progress)
+    ctx.data["grid"] = r
+    st = r.status
+    stable = np.flatnonzero(st == "stable")
+    best = None
+    if stable.size:
+        i = stable[np.argmin(r.max_abs[stable])]
+        best = dict(M1=r.points[i].tolist(), max_abs=float(r.max_abs[i]))
+    ctx.summary["grid"] = dict(n=n, n_points=len(P), counts=dict(r.counts), best_stable=best,
+                               elapsed=r.elapsed)
+    ctx.log(f"   counts: {dict(r.counts)}")
+
+
+def stage_fig3(ctx: _Context):
+    from analysis.figures import plot_fig3
+    from analysis.output_design import conjecture_figures, swing_height_at_Td
+    r = ctx.data["grid"]
+    zsw = swing_height_at_Td(ctx.model, ctx.gait, r.points, 1e-2)
+    c = conjecture_figures(zsw, r.max_abs, r.status)
+    ctx.summary["conjecture"] = c
+    ctx.figures["fig3"] = plot_fig3(zsw, r.max_abs, r.status, ctx.out / "figures" / "fig3")
+
+
+def stage_fig4(ctx: _Context):
+    from analysis.figures import plot_fig4
+    from analysis.output_design import domain_grid, taylor_ab
+    from analysis.sweep import run_sweep
+    tay = taylor_ab(ctx.model, ctx.gait)
+    lo, hi = ctx.opts.domain_range
+    n = ctx.opts.domain_n
+    s = domain_grid(tay, n, lo, hi)
+    maps, res = {}, {}
+    cell = ((hi - lo) / (n - 1)) ** 2
+    for k, M in ((1, s.group1), (2, s.group2)):
+        P = M.reshape(-1, 4)
+        real = np.all(np.isfinite(P), axis=1)
+        mx = np.full(len(P), np.nan)
+        if real.any():
+            r = run_sweep(ctx.model, ctx.gait, P[real], out_dir=ctx.out / "sweeps" / f"group{k}",
+                          progress=ctx.opts.progress)
+            mx[real] = r.max_abs
+            stable = np.zeros(len(P), bool)
+            stable[np.flatnonzero(real)] = r.status == "stable"
+        else:
+            stable = np.zeros(len(P), bool)
+        maps[k] = mx.reshape(n, n)
+        i = int(np.nanargmin(np.where(np.isfinite(mx), mx, np.nan))) if np.isfinite(mx).any() else None
+        res[k] = dict(stable_points=int(stable.sum()), real_points=int(real.sum()),
+                      stable_area=float(stable.sum() * cell),
+                      best=None if i is None else dict(M1=P[i].tolist(), max_abs=float(mx[i])))
+    ctx.data["domains"] = res
+    best = {k: (np.array(v["best"]["M1"]) if v["best"] else None) for k, v in res.items()}
+    ctx.figures["fig4"] = plot_fig4(s.m2, s.m3, maps[1], maps[2], ctx.out / "figures" / "fig4",
+                                    best=best)
+    ctx.summary["taylor"] = dict(grad_zsw=tay.grad.tolist(), hess_zsw=tay.hess.tolist(),
+                                 zsw_T=tay.z0)
+    ctx.summary["domains"] = dict(grid=n, range=[lo, hi], groups=res)
+    ctx.log("   stable area: " + ", ".join(f"group {k}: {v['stable_area']:.2f}"
+                                          for k, v in res.items()))
+
+
+def stage_m1(ctx: _Context):
+    from analysis import poincare_eigenvalues
+    from analysis.output_design import optimize_m1
+    out = {}
+    k = ctx.opts.nlp_starts
+    for name, grp in (("group1", 1), ("group2", 2), ("free", None)):
+        t = time.perf_counter()
+        r = optimize_m1(ctx.model, ctx.gait, group=grp, n_best=k, n_ipopt=min(4, k),
+                        n_random=0 if ctx.opts.quick else 2)
+        out[name] = r.to_dict()
+        ctx.log(f"   {name}: max|lambda| = {r.max_abs:.3g} (+- {r.eigenvalue_uncertainty:.1g}) "
+                f"in {time.perf_counter() - t:.1f} s")
+    ex = poincare_eigenvalues(ctx.model, ctx.gait, PAPER["example_M1"])
+    out["paper_example_M1"] = dict(M1=PAPER["example_M1"], max_abs=ex.max_abs, status=ex.status)
+    best = min((v for kk, v in out.items() if kk in ("group1", "group2")),
+               key=lambda v: v["max_abs"])
+    ctx.data["chosen_M1"] = np.array(best["M1"])
+    out["chosen_for_simulation"] = best["M1"]
+    ctx.summary["m1_nlp"] = out
+
+
+def stage_vc(ctx: _Context):
+    from analysis import poincare_eigenvalues
+    from analysis.virtual_constraints import vc_eigenvalue
+    vc = vc_eigenvalue(ctx.model, ctx.gait)
+    M1 = ctx.data.get("chosen_M1", np.zeros(4))
+    tv = poincare_eigenvalues(ctx.model, ctx.gait, M1)
+    tv0 = poincare_eigenvalues(ctx.model, ctx.gait, np.zeros(4))
+    ctx.summary["vc_comparison"] = dict(vc=vc.to_dict(), tv_chosen=dict(
+        M1=M1.tolist(), max_abs=tv.max_abs, eigenvalues=[[e.real, e.imag] for e in tv.eigenvalues]),
+        tv_M1_zero=dict(max_abs=tv0.max_abs, status=tv0.status))
+
+
+def _steps_to_converge(res, tol=1e-3):
+    """1-based index of the step from which |dq_u error| stays below tol (None if never)."""
+    errs = [abs(s.dqu_error) for s in res.steps]
+    for k in range(len(errs)):
+        if all(e < tol for e in errs[k:]):
+            return k + 1
+    return None
+
+
+def stage_sim(ctx: _Context):
+    """Paper §V-C: TV with the chosen M1 and VC from the same perturbed state.
+
+    First the paper's perturbation (0.01 rad, 0.1 rad/s on every joint) at mu = 0.6 with
+    the M1 of the NLP, then the stable points of the 9^4 grid; when no time-varying run
+    walks, the perturbation is scaled down until the chosen M1 walks, and Fig. 5/6 show
+    that run (the report says which)."""
+    from biped_casadi.controllers import TimeVaryingController, VirtualConstraintController
+    from biped_casadi.simulate import (PAPER_PERTURBATION, SimulationOptions, animate,
+                                       perturbed_initial_state, plot_fig5, plot_fig6, simulate)
+    g, m = ctx.gait, ctx.model
+    M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(4)), float)
+    opts = SimulationOptions(steps=ctx.opts.sim_steps, mu=0.6)
+    vcc = VirtualConstraintController(m, g)
+
+    def run(M1, scale):
+        q0, dq0 = perturbed_initial_state(g, PAPER_PERTURBATION[0] * scale,
+                                          PAPER_PERTURBATION[1] * scale)
+        return simulate(TimeVaryingController(m, g, M1), q0, dq0, opts), (q0, dq0)
+
+    def brief(r):
+        return dict(r.summary(), steps_to_converge=_steps_to_converge(r))
+
+    out = dict(paper_perturbation=list(PAPER_PERTURBATION), mu=0.6, M1=M1.tolist())
+    tv, x0 = run(M1, 1.0)
+    vc_paper = simulate(vcc, *x0, opts)
+    out["paper"] = dict(tv=brief(tv), vc=brief(vc_paper))
+    ctx.log(f"   paper perturbation: TV {tv.status}, VC {vc_paper.status}")
+    chosen, scale = M1, 1.0
+    if tv.status != "ok":
+        grid = ctx.data.get("grid")
+        tried, found = 0, None
+        if grid is not None:
+            idx = np.flatnonzero(grid.status == "stable")
+            for i in idx[np.argsort(grid.max_abs[idx])][:30]:
+                tried += 1
+                r, _ = run(grid.points[i], 1.0)
+                if r.status == "ok":
+                    found = (grid.points[i], r)
+                    break
+        out["grid_search"] = dict(tried=tried, walking_M1=None if found is None else found[0].tolist())
+        ctx.log(f"   stable grid points tried at the paper's perturbation: {tried}, "
+                f"walking: {'none' if found is None else found[0].tolist()}")
+        if found is not None:
+            chosen, tv = found
+        else:
+            for scale in (0.5, 0.2, 0.1, 0.05, 0.02, 0.01):
+                tv, x0 = run(M1, scale)
+                if tv.status == "ok":
+                    break
+    q0, dq0 = perturbed_initial_state(g, PAPER_PERTURBATION[0] * scale, PAPER_PERTURBATION[1] * scale)
+    vc = simulate(vcc, q0, dq0, opts)
+    out["figures_run"] = dict(M1=np.asarray(chosen).tolist(), scale=scale,
+                              perturbation=[PAPER_PERTURBATION[0] * scale, PAPER_PERTURBATION[1] * scale],
+                              tv=brief(tv), vc=brief(vc))
+    out["tv"], out["vc"] = out["figures_run"]["tv"], out["figures_run"]["vc"]
+    ctx.log(f"   figures: perturbation x{scale:g}: TV {tv.status}, VC {vc.status}")
+    note = "" if scale == 1.0 else f" (perturbation x{scale:g} of the paper's)"
+    figs = ctx.out / "figures"
+    for ext in (".png", ".pdf"):
+        plot_fig5([tv, vc], figs / f"fig5_qu_error{ext}",
+                  title="Fig. 5: q_u error at the end of each step" + note)
+        plot_fig6([tv, vc], g, figs / f"fig6_swing_torques{ext}",
+                  title="Fig. 6: swing-leg torques" + note)
+    ctx.figures["fig5"] = [str(figs / f"fig5_qu_error{e}") for e in (".png", ".pdf")]
+    ctx.figures["fig6"] = [str(figs / f"fig6_swing_torques{e}") for e in (".png", ".pdf")]
+    if ctx.opts.animation_steps:
+        ctx.figures["animation"] = [str(animate(tv, m, figs / "walk_tv.gif",
+                                                max_steps=ctx.opts.animation_steps))]
+    ctx.summary["simulation"] = out
+
+
+STAGES = [
+    ("gait", stage_gait, ()),
+    ("singular outputs (eq. 24)", stage_singular, ("gait",)),
+    ("Fig. 2: 1-D sweeps", stage_fig2, ("gait",)),
+    ("9^4 grid", stage_grid, ("gait",)),
+    ("Fig. 3 and the conjecture", stage_fig3, ("9^4 grid",)),
+    ("a, b and Fig. 4", stage_fig4, ("gait",)),
+    ("M1 NLP", stage_m1, ("gait",)),
+    ("virtual constraints", stage_vc, ("gait",)),
+    ("Fig. 5, Fig. 6, animation", stage_sim, ("gait",)),
+]
+
+
+def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> dict:
+    """Run every stage into ``out_dir``; returns the summary (also in summary.json)."""
+    opts = ReproduceOptions.make(quick, **kw)
+    out = Path(out_dir)
+    (out / "figures").mkdir(parents=True, exist_ok=True)
+    ctx = _Context(out, opts)
+    status = {}
+    t_all = time.perf_counter()
+    for k, (name, fn, needs) in enumerate(STAGES, start=1):
+        missing = [n for n in needs if status.get(n, {}).get("status") != "ok"]
+        if missing:
+            status[name] = dict(status="skipped", reason=f"needs: {', '.join(missing)}")
+            ctx.log(f"[{k}/{len(STAGES)}] {name}: skipped (needs {', '.join(missing)})")
+            continue
+        ctx.log(f"[{k}/{len(STAGES)}] {name} ...")
+        t = time.perf_counter()
+        try:
+            fn(ctx)
+            status[name] = dict(status="ok", time=time.perf_counter() - t)
+            ctx.log(f"[{k}/{len(STAGES)}] {name}: done in {time.perf_counter() - t:.1f} s")
+        except Exception as e:          # a failed stage is reported, the others go on
+            status[name] = dict(status="failed", error=f"{type(e).__name__}: {e}",
+                                time=time.perf_counter() - t,
+                                traceback=traceback.format_exc(limit=6))
+            ctx.log(f"[{k}/{len(STAGES)}] {name}: FAILED ({type(e).__name__}: {e})")
+    ctx.summary["stages"] = status
+    ctx.summary["figures"] = ctx.figures
+    ctx.summary["paper"] = PAPER
+    ctx.summary["options"] = dict(opts.__dict__)
+    ctx.summary["total_time"] = time.perf_counter() - t_all
+    (out / "summary.json").write_text(json.dumps(_clean(ctx.summary), indent=1, allow_nan=False))
+    from .report import write_report
+    write_report(out, _clean(ctx.summary))
+    ctx.log(f"report: {out / 'report.md'}  ({ctx.summary['total_time']:.0f} s)")
+    return ctx.summary
+
+
+def _clean(o):
+    if isinstance(o, dict):
+        return {str(k): _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _clean(o.tolist())
+    if isinstance(o, (np.floating, float)):
+        return float(o) if math.isfinite(o) else None
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.bool_,)):
+        return bool(o)
+    if isinstance(o, Path):
+        return str(o)
+    return o
