@@ -1,0 +1,31 @@
+"""`biped reproduce --quick` end to end into a temporary folder."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+
+def test_reproduce_quick(tmp_path, gait):
+    out = tmp_path / "rep"
+    r = subprocess.run([sys.executable, "-m", "biped_casadi", "reproduce", "--quick",
+                        "--out", str(out), "--json"], capture_output=True, text=True,
+                       timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    head = json.loads(r.stdout)
+    assert all(v["status"] == "ok" for v in head["stages"].values()), head["stages"]
+    s = json.loads((out / "summary.json").read_text())
+    for key in ("gait", "singular", "fig2", "grid", "conjecture", "taylor", "domains",
+                "m1_nlp", "vc_comparison", "simulation", "stages", "figures", "paper",
+                "total_time"):
+        assert key in s, key
+    assert sum(s["grid"]["counts"].values()) == 9**4
+    assert s["m1_nlp"]["group1"]["group"] == 1 and s["m1_nlp"]["group2"]["group"] == 2
+    for name in ("fig2", "fig3", "fig4", "fig5_qu_error", "fig6_swing_torques"):
+        for ext in (".png", ".pdf"):
+            f = out / "figures" / f"{name}{ext}"
+            assert f.is_file() and f.stat().st_size > 1000, f
+    assert (out / "figures" / "walk_tv.gif").stat().st_size > 1000
+    report = (out / "report.md").read_text()
+    assert "| quantity | paper | ours |" in report and "figures/fig4.png" in report
+    assert (out / "gait.json").is_file()
