@@ -199,8 +199,19 @@ class PoincareMap:
         return self._D11 - _check_M1(M1) @ self._D12
 
     def is_singular(self, M1) -> bool:
-        d = self.denominator(M1)
-        return bool(np.min(d) * np.max(d) <= 0 or np.min(np.abs(d)) < 1e-9 * np.max(np.abs(d)))
+        """eq. (23)-(24): D11 - D12 M1 vanishes or changes sign on the step."""
+        return bool(self._screen(_check_M1(M1)[None])[2][0])
+
+    def _screen(self, M1s):
+        """Validated (n, 4) M1 array, D11 - D12 M1 along the step (n, 1001), singular mask."""
+        M1s = np.asarray(M1s, dtype=float)
+        if M1s.ndim != 2 or M1s.shape[1] != 4:
+            raise ValueError(f"M1s must be an (n, 4) array, got shape {M1s.shape}")
+        if not np.all(np.isfinite(M1s)):
+            raise ValueError("M1s must be finite")
+        den = self._D11[None, :] - M1s @ self._D12
+        sing = (den.min(1) * den.max(1) <= 0) | (np.abs(den).min(1) < 1e-9 * np.abs(den).max(1))
+        return M1s, den, sing
 
     def find_impact(self, x, M1):
         """First valid impact after 0.75T within the horizon (z_sw crosses 0 downward with
@@ -277,13 +288,7 @@ class PoincareMap:
         """Statuses, A^z (n, 2, 2) and max|lambda| for an (n, 4) array of M1 by the
         vectorised variational equation (fast path for sweeps; agrees with
         :meth:`analyse` to integration accuracy).  Singular M1 get NaN."""
-        M1s = np.asarray(M1s, dtype=float)
-        if M1s.ndim != 2 or M1s.shape[1] != 4:
-            raise ValueError(f"M1s must be an (n, 4) array, got shape {M1s.shape}")
-        if not np.all(np.isfinite(M1s)):
-            raise ValueError("M1s must be finite")
-        den = self._D11[None, :] - M1s @ self._D12
-        sing = (den.min(1) * den.max(1) <= 0) | (np.abs(den).min(1) < 1e-9 * np.abs(den).max(1))
+        M1s, den, sing = self._screen(M1s)
         A = np.full((len(M1s), 2, 2), np.nan)
         ok = np.flatnonzero(~sing)
         for a in range(0, len(ok), chunk):
@@ -304,13 +309,7 @@ class PoincareMap:
         singular cases are screened first, the others evaluated with
         ``map(..., 'thread')`` starting Newton at tau = T (the fixed point's impact time),
         which converges in one or two iterations."""
-        M1s = np.asarray(M1s, dtype=float)
-        if M1s.ndim != 2 or M1s.shape[1] != 4:
-            raise ValueError(f"M1s must be an (n, 4) array, got shape {M1s.shape}")
-        if not np.all(np.isfinite(M1s)):
-            raise ValueError("M1s must be finite")
-        den = self._D11[None, :] - M1s @ self._D12
-        sing = (den.min(1) * den.max(1) <= 0) | (np.abs(den).min(1) < 1e-9 * np.abs(den).max(1))
+        M1s, den, sing = self._screen(M1s)
         out: list = [None] * len(M1s)
         idx = np.flatnonzero(~sing)
         for i in np.flatnonzero(sing):
