@@ -389,10 +389,11 @@ def initial_guess(model, opts: GaitOptions):
     L0 = float(np.clip(0.45 * np.sqrt(opts.speed / 0.75), lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)))
     T0 = float(np.clip(L0 / opts.speed, *opts.step_time_bounds))
     kappa, lean = 0.15, 0.05
-    from scipy.optimize import brentq  # local import: only the guess needs it
     p = model.params
-    a = brentq(lambda a: p.L_tibia * np.sin(a) + p.L_femur * np.sin(a - kappa)
-               + p.L_femur * np.sin(a) + p.L_tibia * np.sin(a - kappa) - L0, 0.0, 1.2)
+    # both legs bent by kappa, feet L0 apart: (L_t + L_f)(sin a + sin(a - kappa)) = L0,
+    # i.e. 2 (L_t + L_f) cos(kappa/2) sin(a - kappa/2) = L0
+    ratio = L0 / (2 * (p.L_tibia + p.L_femur) * np.cos(kappa / 2))
+    a = kappa / 2 + float(np.arcsin(np.clip(ratio, -0.95, 0.95)))
     phi = np.array([a, a - kappa, lean, -a, kappa - a])  # femur_sw = -a, tibia_sw = kappa - a
     qT = np.r_[phi[0], np.diff(phi)]
     q0 = model.E @ qT
