@@ -77,11 +77,9 @@ def stage_gait(ctx: _Context):
     s = g.summary()
     ctx.summary["gait"] = s
     g.save(ctx.out / "gait.json")
-    try:
-        from gait_opt.plots import plot_gait
-        ctx.figures["gait"] = [str(p) for p in plot_gait(g, ctx.out / "figures")]
-    except ImportError:
-        pass
+    from gait_opt.plots import plot_gait
+    ctx.figures["gait"] = [str(p) for p in plot_gait(g, ctx.out / "figures",
+                                                      formats=("png", "pdf"))]
     ctx.log(f"   T = {s['T']:.4f} s, step {s['step_length']:.4f} m, cost {s['cost']:.2f}")
 
 

@@ -9,9 +9,10 @@ import numpy as np
 __all__ = ["plot_gait"]
 
 
-def plot_gait(gait, directory) -> list:
-    """Write ``gait_stick.png`` (stick diagram of the step over the ground) and
-    ``gait_profiles.png`` (q^d(t), u^d(t)) into ``directory``; returns their paths."""
+def plot_gait(gait, directory, formats=("png",)) -> list:
+    """Write ``gait_stick.<ext>`` (stick diagram of the step over the ground) and
+    ``gait_profiles.<ext>`` (q^d(t), u^d(t)) into ``directory`` for every extension in
+    ``formats``; returns their paths."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -41,8 +42,9 @@ def plot_gait(gait, directory) -> list:
     ax.set_title(f"one step: T = {T:.3f} s, step {gait.step_length:.3f} m, "
                  f"{gait.speed:.2f} m/s (stance leg blue, swing leg red)")
     ax.legend(loc="upper left")
-    stick = directory / "gait_stick.png"
-    fig.savefig(stick, dpi=120, bbox_inches="tight")
+    stick = [directory / f"gait_stick.{ext}" for ext in formats]
+    for p in stick:
+        fig.savefig(p, dpi=120, bbox_inches="tight")
     plt.close(fig)
 
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
@@ -56,7 +58,8 @@ def plot_gait(gait, directory) -> list:
     a2.set_xlabel("t (s)")
     a2.legend(ncol=4, fontsize=8)
     a1.set_title("reference joint profiles and torques over one step")
-    prof = directory / "gait_profiles.png"
-    fig.savefig(prof, dpi=120, bbox_inches="tight")
+    prof = [directory / f"gait_profiles.{ext}" for ext in formats]
+    for p in prof:
+        fig.savefig(p, dpi=120, bbox_inches="tight")
     plt.close(fig)
-    return [stick, prof]
+    return stick + prof

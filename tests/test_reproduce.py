@@ -21,7 +21,8 @@ def test_reproduce_quick(tmp_path, gait):
         assert key in s, key
     assert sum(s["grid"]["counts"].values()) == 9**4
     assert s["m1_nlp"]["group1"]["group"] == 1 and s["m1_nlp"]["group2"]["group"] == 2
-    for name in ("fig2", "fig3", "fig4", "fig5_qu_error", "fig6_swing_torques"):
+    for name in ("gait_stick", "gait_profiles", "fig2", "fig3", "fig4", "fig5_qu_error",
+                 "fig6_swing_torques"):
         for ext in (".png", ".pdf"):
             f = out / "figures" / f"{name}{ext}"
             assert f.is_file() and f.stat().st_size > 1000, f
