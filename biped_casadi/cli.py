@@ -121,6 +121,10 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"biped {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:        # output piped into `head` and the like
+        import os
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     return int(rc or 0)
 
 
