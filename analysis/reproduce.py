@@ -263,13 +263,15 @@ def stage_sim(ctx: _Context):
             chosen, tv = found
         else:
             # the largest scaled perturbation under which one of the NLP's M1 walks and
-            # converges (|dq_u error| < 1e-3 by the last step); the fastest of those
+            # converges (|dq_u error| < 1e-3 within half the simulated steps); the
+            # fastest of those
             cands = ctx.data.get("nlp_M1", {"chosen": M1})
             walked = None
+            half = max(1, (ctx.opts.sim_steps + 1) // 2)
             for scale in (0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005):
                 walked = [(_steps_to_converge(r), name, Mc, r) for name, Mc in cands.items()
                           for r in [run(Mc, scale)[0]]
-                          if r.status == "ok" and _steps_to_converge(r) is not None]
+                          if r.status == "ok" and (_steps_to_converge(r) or 10**9) <= half]
                 if walked:
                     break
             if walked:
