@@ -90,7 +90,7 @@ def write_report(out: Path, s: dict) -> Path:
                  f"{_f(_g(sim, 'paper', 'vc', 'status'))}, |dq_u error| < 1e-3 "
                  + (f"from step {conv}" if conv else
                     f"not within {len(vsteps)} steps (last {_f(abs(vsteps[-1]['dqu_error']) if vsteps else None, '.2g')})"),
-                 "its eigenvalue 0.54 sets the rate"))
+                 f"its eigenvalue {_f(_g(s, 'vc_comparison', 'vc', 'eigenvalue'), '.3g')} sets the rate"))
     fr = _g(sim, "figures_run") or {}
     pert = _f(fr.get("perturbation"))
     rows.append((f"Fig. 5 run (perturbation {pert}): steps until |dq_u error| < 1e-3, "
