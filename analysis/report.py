@@ -83,7 +83,7 @@ def write_report(out: Path, s: dict) -> Path:
     rows.append(("paper's perturbation (0.01 rad, 0.1 rad/s on every joint), mu = 0.6: "
                  "time-varying run", "walks, converges in ~4 steps",
                  f"{_f(_g(sim, 'paper', 'tv', 'status'))}: {_f(_g(sim, 'paper', 'tv', 'message'))}",
-                 "our gait leaves little friction margin at impact (ratio 0.52 of 0.6)"))
+                 "our gait needs much of the friction cone at impact already; see the message"))
     vsteps = _g(sim, "paper", "vc", "steps") or []
     conv = _g(sim, "paper", "vc", "steps_to_converge")
     rows.append(("... virtual-constraint run", "walks, converges more slowly",
