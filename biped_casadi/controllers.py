@@ -24,6 +24,8 @@ same ODE for q_u^d), i.e. the reference is smooth (C-infinity) across T.
 """
 from __future__ import annotations
 
+import abc
+
 import math
 from dataclasses import dataclass, field
 
@@ -126,15 +128,16 @@ def _denominator_report(values) -> SingularityReport:
                              changes_sign=bool(d.min() * d.max() <= 0))
 
 
-class _Controller:
+class _Controller(abc.ABC):
     """Shared numeric wrappers around ``law`` (built by the subclasses)."""
 
     name = "controller"
     n_ref = 0
     n_par = 0
 
-    def step_start(self, q, dq) -> StepStart:           # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def step_start(self, q, dq) -> StepStart:
+        """The per-step parameters fixed at the start of a step (just after an impact)."""
 
     def evaluate(self, q, dq, tau, r, p) -> ControlOutput:
         """The control law at one state (numeric), with an explicit reference state."""
