@@ -173,7 +173,16 @@ class M1Result:
 def _epigraph_nlp(pm, tay, constrained: bool, den_margin: float):
     """min rho over (M1, rho) with the Jury conditions of a 2x2 A^z scaled by rho:
     rho^2 -+ det >= 0, rho^2 + det -+ rho tr >= 0 (all eigenvalues in |z| <= rho);
-    a = b = 0 when ``constrained``; D11 - D12 M1 >= margin along the step."""
+    a = b = 0 when ``constrained``; D11 - D12 M1 >= margin along the step.
+    Built once per map, group kind and margin."""
+    key = ("epigraph", constrained, den_margin, tay.grad.tobytes(), tay.hess.tobytes())
+    cache = pm.__dict__.setdefault("_design_functions", {})
+    if key not in cache:
+        cache[key] = _build_epigraph_nlp(pm, tay, constrained, den_margin)
+    return cache[key]
+
+
+def _build_epigraph_nlp(pm, tay, constrained: bool, den_margin: float):
     var = pm.variational
     M1 = ca.SX.sym("M1", 4)
     rho = ca.SX.sym("rho")
@@ -198,17 +207,26 @@ def _epigraph_nlp(pm, tay, constrained: bool, den_margin: float):
     return solver, np.array(lbg), np.array(ubg)
 
 
+def _deadbeat_residual(pm, tay, constrained: bool) -> ca.Function:
+    """(trace, det[, a, b]) of A^z and its Jacobian in M1, as one Function (built once
+    per map and group kind)."""
+    key = ("deadbeat", constrained, tay.grad.tobytes(), tay.hess.tobytes())
+    cache = pm.__dict__.setdefault("_design_functions", {})
+    if key not in cache:
+        X = ca.SX.sym("M1", 4)
+        tr, det = pm.variational.trace_det(X)
+        res = [tr, det]
+        if constrained:
+            MT = ca.vertcat(1, -X)
+            res += [ca.dot(ca.DM(tay.grad), MT), 0.5 * ca.mtimes([MT.T, ca.DM(tay.hess), MT])]
+        r = ca.vertcat(*res)
+        cache[key] = ca.Function("deadbeat", [X], [r, ca.jacobian(r, X)])
+    return cache[key]
+
+
 def _deadbeat_newton(pm, tay, M1, constrained: bool, iters: int = 30):
     """Newton on trace = det = 0 (and a = b = 0): the deadbeat point near M1."""
-    var = pm.variational
-    X = ca.SX.sym("M1", 4)
-    tr, det = var.trace_det(X)
-    res = [tr, det]
-    if constrained:
-        MT = ca.vertcat(1, -X)
-        res += [ca.dot(ca.DM(tay.grad), MT), 0.5 * ca.mtimes([MT.T, ca.DM(tay.hess), MT])]
-    r = ca.vertcat(*res)
-    F = ca.Function("deadbeat", [X], [r, ca.jacobian(r, X)])
+    F = _deadbeat_residual(pm, tay, constrained)
     x = np.array(M1, float)
     for _ in range(iters):
         rv, J = (np.array(v) for v in F(x))
