@@ -7,7 +7,6 @@ error) and the stages that do not need its results still run.
 from __future__ import annotations
 
 import json
-import math
 import sys
 import time
 import traceback
@@ -342,26 +341,9 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> dict:
     ctx.summary["paper"] = PAPER
     ctx.summary["options"] = dict(opts.__dict__)
     ctx.summary["total_time"] = time.perf_counter() - t_all
-    (out / "summary.json").write_text(json.dumps(_clean(ctx.summary), indent=1, allow_nan=False))
+    from biped_casadi.cli import json_safe
+    (out / "summary.json").write_text(json.dumps(json_safe(ctx.summary), indent=1, allow_nan=False))
     from .report import write_report
-    write_report(out, _clean(ctx.summary))
+    write_report(out, json_safe(ctx.summary))
     ctx.log(f"report: {out / 'report.md'}  ({ctx.summary['total_time']:.0f} s)")
     return ctx.summary
-
-
-def _clean(o):
-    if isinstance(o, dict):
-        return {str(k): _clean(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _clean(o.tolist())
-    if isinstance(o, (np.floating, float)):
-        return float(o) if math.isfinite(o) else None
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, (np.bool_,)):
-        return bool(o)
-    if isinstance(o, Path):
-        return str(o)
-    return o

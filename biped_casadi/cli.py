@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -18,18 +19,26 @@ class UserError(Exception):
 
 def _print_json(obj):
     """One JSON object on stdout; non-finite numbers (inf, nan) become null."""
-    print(json.dumps(_finite(obj), indent=None, default=_json_default, allow_nan=False))
+    print(json.dumps(json_safe(obj), indent=None, default=_json_default, allow_nan=False))
 
 
-def _finite(o):
+def json_safe(o):
+    """Plain JSON types for ``o``: numpy scalars and arrays unpacked, non-finite numbers
+    as None, paths as strings, dict keys as strings."""
     if isinstance(o, dict):
-        return {k: _finite(v) for k, v in o.items()}
+        return {str(k): json_safe(v) for k, v in o.items()}
     if isinstance(o, (list, tuple)):
-        return [_finite(v) for v in o]
+        return [json_safe(v) for v in o]
     if isinstance(o, np.ndarray):
-        return _finite(o.tolist())
+        return json_safe(o.tolist())
+    if isinstance(o, (bool, np.bool_)):
+        return bool(o)
     if isinstance(o, (float, np.floating)):
         return float(o) if np.isfinite(o) else None
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, Path):
+        return str(o)
     return o
 
 
