@@ -1,14 +1,12 @@
-"""Stability analysis of time-varying output control: restricted Poincaré map, sweeps
-over M1, output selection."""
-from .poincare import (STATUSES, PoincareMap, PoincareResult, poincare_eigenvalues,
+"""Stability analysis, design and reproduction on top of the robot (:mod:`biped_casadi`)
+and its reference gaits (:mod:`gait_opt`): the restricted Poincaré map and its exact
+Jacobian, sweeps over M1, output selection, the virtual-constraint comparison, figures,
+the report of ``biped reproduce`` and the ``biped`` command line (:mod:`analysis.cli`).
+"""
+from .poincare import (METHODS, STATUSES, PoincareMap, PoincareResult, poincare_eigenvalues,
                        poincare_map, singular_m1_values)
+from .virtual_constraints import VCEigenResult, VirtualConstraintMap, vc_eigenvalue
 
-def __getattr__(name):          # the virtual-constraint map on first use (it builds more)
-    if name == "vc_eigenvalue":
-        from .virtual_constraints import vc_eigenvalue
-        return vc_eigenvalue
-    raise AttributeError(f"module 'analysis' has no attribute {name!r}")
-
-
-__all__ = ["vc_eigenvalue", "poincare_eigenvalues", "PoincareMap", "PoincareResult", "poincare_map",
-           "singular_m1_values", "STATUSES"]
+__all__ = ["poincare_eigenvalues", "PoincareMap", "PoincareResult", "poincare_map",
+           "singular_m1_values", "STATUSES", "METHODS", "vc_eigenvalue", "VCEigenResult",
+           "VirtualConstraintMap"]

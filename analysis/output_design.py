@@ -17,10 +17,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+
+from biped_casadi.caching import cached
+from biped_casadi.output_law import decoupling_denominator
+from biped_casadi.results import Result, internal
 
 from .poincare import poincare_eigenvalues, poincare_map
 
@@ -30,13 +34,12 @@ __all__ = ["swing_height_at_Td", "TaylorAB", "taylor_ab", "solve_ab", "ABSolutio
 
 # ------------------------------------------------------------------ eq. (25)-(26)
 def swing_height_at_Td(model, gait, M1s, dqu: float = 1e-2) -> np.ndarray:
-    """Z_sw(q^d(T^d) + M_T dq_u) for each row of an (n, 4) array of M1 (eq. 26)."""
+    """Z_sw(q^d(T^d) + M_T dq_u) for each row of an (n, nu) array of M1 (eq. 26)."""
     M1s = np.atleast_2d(np.asarray(M1s, dtype=float))
-    if M1s.shape[1] != 4:
-        raise ValueError(f"M1s must be (n, 4), got {M1s.shape}")
+    if M1s.shape[1] != model.nu:
+        raise ValueError(f"M1s must be (n, {model.nu}), got {M1s.shape}")
     qT = gait.q(gait.T)
-    MT = np.hstack([np.ones((len(M1s), 1)), -M1s])
-    q = qT[:, None] + dqu * MT.T
+    q = qT[:, None] + dqu * _MT(M1s).T
     return np.array(model.swing_foot.map(len(M1s))(q)[1]).ravel()
 
 
@@ -48,6 +51,11 @@ class TaylorAB:
     hess: np.ndarray   # (5, 5)
     z0: float          # Z_sw(q^d(T^d)), ~0 for a consistent gait
 
+    @property
+    def cache_key(self):
+        """The coefficients themselves."""
+        return (tuple(self.grad), tuple(self.hess.ravel()), self.z0)
+
     def a(self, M1s):
         MT = _MT(M1s)
         return MT @ self.grad
@@ -58,6 +66,7 @@ class TaylorAB:
 
 
 def _MT(M1s):
+    """M_T = [1, -M1]' of eq. (26), one row per M1."""
     M1s = np.atleast_2d(np.asarray(M1s, dtype=float))
     return np.hstack([np.ones((len(M1s), 1)), -M1s])
 
@@ -147,7 +156,15 @@ def domain_grid(tay: TaylorAB, n: int = 81, lo: float = -10.0, hi: float = 10.0)
 
 # ------------------------------------------------------------------ the M1 NLP
 @dataclass
-class M1Result:
+class M1Result(Result):
+    """The M1 chosen by :func:`optimize_m1`.
+
+    ``max_abs`` and ``eigenvalues`` are verified by the full-AD Poincaré map;
+    ``max_abs_nlp`` is the NLP's own value (variational A^z); ``status`` is the stability
+    status of the chosen M1 ('stable' or 'unstable'); ``success`` means stable.
+    ``history`` (left out of ``to_dict``) lists every local solution found.
+    """
+
     M1: np.ndarray
     max_abs: float               # verified by the full-AD Poincaré map
     eigenvalues: np.ndarray
@@ -159,32 +176,20 @@ class M1Result:
     eigenvalue_uncertainty: float
     starts: int
     solve_time: float
-    history: list = field(default_factory=list)
+    message: str = ""
+    history: list = internal(default_factory=list)
 
-    def to_dict(self) -> dict:
-        return dict(M1=self.M1.tolist(), max_abs=self.max_abs,
-                    eigenvalues=[[float(e.real), float(e.imag)] for e in self.eigenvalues],
-                    group=self.group, a=self.a, b=self.b, status=self.status,
-                    max_abs_nlp=self.max_abs_nlp,
-                    eigenvalue_uncertainty=self.eigenvalue_uncertainty,
-                    starts=self.starts, solve_time=self.solve_time)
+    SUCCESS = ("stable",)
 
 
+@cached(maxsize=8)
 def _epigraph_nlp(pm, tay, constrained: bool, den_margin: float):
     """min rho over (M1, rho) with the Jury conditions of a 2x2 A^z scaled by rho:
     rho^2 -+ det >= 0, rho^2 + det -+ rho tr >= 0 (all eigenvalues in |z| <= rho);
     a = b = 0 when ``constrained``; D11 - D12 M1 >= margin along the step.
     Built once per map, group kind and margin."""
-    key = ("epigraph", constrained, den_margin, tay.grad.tobytes(), tay.hess.tobytes())
-    cache = pm.__dict__.setdefault("_design_functions", {})
-    if key not in cache:
-        cache[key] = _build_epigraph_nlp(pm, tay, constrained, den_margin)
-    return cache[key]
-
-
-def _build_epigraph_nlp(pm, tay, constrained: bool, den_margin: float):
     var = pm.variational
-    M1 = ca.SX.sym("M1", 4)
+    M1 = ca.SX.sym("M1", pm.nu)
     rho = ca.SX.sym("rho")
     tr, det = var.trace_det(M1)
     g = [rho**2 - det, rho**2 + det, rho**2 + det - rho * tr, rho**2 + det + rho * tr]
@@ -194,7 +199,8 @@ def _build_epigraph_nlp(pm, tay, constrained: bool, den_margin: float):
         g += [ca.dot(ca.DM(tay.grad), MT), 0.5 * ca.mtimes([MT.T, ca.DM(tay.hess), MT])]
         lbg += [0.0, 0.0]
         ubg += [0.0, 0.0]
-    den = ca.DM(pm._D11[::10]) - ca.mtimes(ca.DM(pm._D12[:, ::10]).T, M1)
+    den = decoupling_denominator(ca.DM(pm.D11_table[::10]),
+                                 ca.DM(pm.D12_table[:, ::10]).T, M1)          # eq. (24)
     g.append(den)
     nd = den.numel()
     lbg += [den_margin] * nd
@@ -207,21 +213,18 @@ def _build_epigraph_nlp(pm, tay, constrained: bool, den_margin: float):
     return solver, np.array(lbg), np.array(ubg)
 
 
+@cached(maxsize=8)
 def _deadbeat_residual(pm, tay, constrained: bool) -> ca.Function:
     """(trace, det[, a, b]) of A^z and its Jacobian in M1, as one Function (built once
     per map and group kind)."""
-    key = ("deadbeat", constrained, tay.grad.tobytes(), tay.hess.tobytes())
-    cache = pm.__dict__.setdefault("_design_functions", {})
-    if key not in cache:
-        X = ca.SX.sym("M1", 4)
-        tr, det = pm.variational.trace_det(X)
-        res = [tr, det]
-        if constrained:
-            MT = ca.vertcat(1, -X)
-            res += [ca.dot(ca.DM(tay.grad), MT), 0.5 * ca.mtimes([MT.T, ca.DM(tay.hess), MT])]
-        r = ca.vertcat(*res)
-        cache[key] = ca.Function("deadbeat", [X], [r, ca.jacobian(r, X)])
-    return cache[key]
+    X = ca.SX.sym("M1", pm.nu)
+    tr, det = pm.variational.trace_det(X)
+    res = [tr, det]
+    if constrained:
+        MT = ca.vertcat(1, -X)
+        res += [ca.dot(ca.DM(tay.grad), MT), 0.5 * ca.mtimes([MT.T, ca.DM(tay.hess), MT])]
+    r = ca.vertcat(*res)
+    return ca.Function("deadbeat", [X], [r, ca.jacobian(r, X)])
 
 
 def _deadbeat_newton(pm, tay, M1, constrained: bool, iters: int = 30):
@@ -330,16 +333,21 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
     ranked = sorted(history, key=lambda h: h["max_abs"])
     verified = []
     for h in ranked[:3]:
-        r = poincare_eigenvalues(model, gait, h["M1"])
+        r = poincare_eigenvalues(model, gait, h["M1"], method="ad")
         verified.append((r.max_abs, np.array(h["M1"]), h["max_abs"]))
     _, M1, val = min(verified, key=lambda v: v[0])
-    r = poincare_eigenvalues(model, gait, M1)
+    r = poincare_eigenvalues(model, gait, M1, method="ad")
     # integration-error estimate of A^z: a map with twice the RK4 steps
-    fine = poincare_map(model, gait, n_pre=2 * pm.n_pre, n_post=2 * pm.n_post).analyse(M1)
+    fine = poincare_map(model, gait, n_pre=2 * pm.n_pre, n_post=2 * pm.n_post).analyse(
+        M1, method="ad")
     dA = float(np.max(np.abs(fine.A - r.A)))
     unc = float(max(abs(fine.max_abs - r.max_abs), math.sqrt(dA * np.max(np.abs(r.A)))))
+    label = f"group {group}" if constrained else "all components free"
     return M1Result(M1=M1, max_abs=r.max_abs, eigenvalues=r.eigenvalues,
                     group=group_of(tay, M1) if constrained else group_of(tay, M1, 1e-9),
                     a=float(tay.a(M1)[0]), b=float(tay.b(M1)[0]), status=r.status,
                     max_abs_nlp=val, eigenvalue_uncertainty=unc, starts=len(cand),
-                    solve_time=time.perf_counter() - t0, history=history)
+                    solve_time=time.perf_counter() - t0,
+                    message=f"{label}: max|lambda| = {r.max_abs:.3g} (verified by the "
+                            f"full-AD map) from {len(cand)} starts",
+                    history=history)

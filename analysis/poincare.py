@@ -1,46 +1,68 @@
 """The restricted Poincaré map P^z of the hybrid zero dynamics (paper §IV, SPEC §4) and
-its exact Jacobian A^z by algorithmic differentiation.
+its exact Jacobian A^z.
 
-Zero dynamics (paper eq. 19 with M2 = I): with v = v^d + v_c and q_a = v - M1 q_u,
-
-    (D11 - D12 M1) ddq_u = -D12 (ddv^d + ddv_c) - H1(q, dq),    v^d = M1 q_u^d + q_a^d.
-
-The reference q_u^d(tau) enters through its own ODE (the unactuated row with q_a = q_a^d),
-integrated alongside in the same scheme, so that past T it continues exactly as the gait
-defines it and on the periodic orbit q_u == q_u^d holds to round-off in the discrete map.
+Zero dynamics (paper eq. 19 with M2 = I): the outputs follow v = v^d + v_c, so
+q_a = v - M1 q_u (eq. 10), and the first row of eq. (1) gives ddq_u (eq. 23 with
+ddv = ddv^d + ddv_c); both come from :mod:`biped_casadi.output_law`.  The reference
+state (q_u^d, dq_u^d) is integrated alongside in the same scheme, so that past T it
+continues exactly as the gait defines it and on the periodic orbit q_u == q_u^d holds to
+round-off in the discrete map.
 
 One application from the section tau = 0.75 T: integrate to the impact time tau_i
 (z_sw = 0, x_sw > 0, foot moving down; tau_i found by Newton, ``casadi.rootfinder``, on a
 time-scaled RK4 integration, so d tau_i / dx comes from the implicit-function theorem),
 apply the impact map and relabelling, compute y_i, dy_i (eq. 17), integrate the zero
-dynamics with v_c from tau = 0 to 0.75 T.  A^z = dP^z/dx by AD through all of it.
+dynamics with v_c from tau = 0 to 0.75 T.
+
+Two ways to A^z, which agree to integration accuracy (tests/test_poincare.py):
+
+- ``method="variational"`` (default): the variational equation along the orbit
+  (:mod:`analysis.variational`), one SX Function of M1, well under a millisecond per M1;
+- ``method="ad"``: AD through the whole discrete map (~0.3 s per M1), for verification
+  and for the map away from the fixed point.
 
 Integration is fixed-step RK4 (``n_pre`` steps from 0.75 T to the impact, ``n_post``
-from 0 to 0.75 T); the Jacobian is the exact derivative of that discrete map, which
-agrees with finite differences of a tolerance-1e-12 integration to ~1e-8 relative at
-the defaults (tests/test_poincare.py measures it).
+from 0 to 0.75 T); the Jacobian is the exact derivative of that discrete map.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+import os
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
-from biped_casadi.correction import v_correction
+from biped_casadi import require_same_robot
+from biped_casadi.caching import cached
+from biped_casadi.controllers import PAPER_REJOIN
+from biped_casadi.numerics import as_number, as_vector, rk4_step
+from biped_casadi.output_law import (SECTION, check_M1, coordinates_from_outputs, correction,
+                                     decoupling_denominator, is_singular, outputs,
+                                     unactuated_acceleration)
+from biped_casadi.results import Result
+
+from .variational import variational_jacobian
 
 __all__ = ["PoincareMap", "PoincareResult", "poincare_eigenvalues", "singular_m1_values",
-           "STATUSES", "poincare_map"]
+           "STATUSES", "METHODS", "poincare_map"]
 
 #: status of an analysed M1 (SPEC section 4)
 STATUSES = ("stable", "unstable", "singular", "no_impact")
-SECTION = 0.75   # tau = 0.75 T
+#: how A^z is computed
+METHODS = ("variational", "ad")
 
 
 @dataclass
-class PoincareResult:
-    """Linearised restricted Poincaré map at the fixed point for one M1."""
+class PoincareResult(Result):
+    """Linearised restricted Poincaré map at the fixed point for one M1.
+
+    ``status`` is one of :data:`STATUSES`; ``success`` means A^z was computed (the
+    status is 'stable' or 'unstable').  ``fixed_point_residual`` is |P(x*) - x*|
+    (computed by ``method='ad'`` only, NaN otherwise); ``tau_impact`` the impact time of
+    the orbit; ``min_denominator`` the smallest |D11 - D12 M1| on the step (eq. 24).
+    """
+
     M1: np.ndarray
     A: np.ndarray               # 2x2 Jacobian A^z
     eigenvalues: np.ndarray     # complex, |.| descending
@@ -49,173 +71,172 @@ class PoincareResult:
     x_star: np.ndarray          # (q_u^d(0.75T), dq_u^d(0.75T))
     fixed_point_residual: float = math.nan
     tau_impact: float = math.nan
-    min_denominator: float = math.nan   # min over the step of |D11 - D12 M1|
+    min_denominator: float = math.nan
+    method: str = "variational"
     message: str = ""
 
-    def to_dict(self) -> dict:
-        return dict(M1=self.M1.tolist(), A=self.A.tolist(),
-                    eigenvalues=[[float(e.real), float(e.imag)] for e in self.eigenvalues],
-                    max_abs=self.max_abs, status=self.status, x_star=self.x_star.tolist(),
-                    fixed_point_residual=self.fixed_point_residual,
-                    tau_impact=self.tau_impact, min_denominator=self.min_denominator,
-                    message=self.message)
-
-
-def _check_M1(M1) -> np.ndarray:
-    a = np.asarray(M1, dtype=float)
-    if a.shape != (4,):
-        raise ValueError(f"M1 must have 4 components, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"M1 must be finite, got {a.tolist()}")
-    return a
+    SUCCESS = ("stable", "unstable")
 
 
 class PoincareMap:
     """P^z and A^z for one (model, gait) pair.  Build once, evaluate for many M1.
 
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+        The reference step, made for ``model``.
+    n_pre, n_post : int
+        RK4 steps from the section to the impact, and from the impact to the section.
+    n_scan : int
+        Steps of the scan for the first valid impact away from the fixed point.
+    horizon : float
+        The swing foot must strike before ``horizon * T``.
+    rejoin : float
+        Rejoin time of v_c as a fraction of T (the paper: 1/2).
+    threads : int, optional
+        Threads for batch evaluation (default: the cores, at most 8).
+
+    Notes
+    -----
     ``evaluate(x, M1)`` -> (x_next, tau_impact) for any section state x = (q_u, dq_u);
-    ``analyse(M1)`` -> :class:`PoincareResult` at the fixed point x* = the gait's state at
-    0.75 T; ``analyse_batch(M1s)`` the same for an (n, 4) array, in parallel threads.
+    ``analyse(M1)`` -> :class:`PoincareResult` at the fixed point x* = the gait's state
+    at 0.75 T; ``jacobian_batch(M1s)`` the same for an (n, nu) array, vectorised.
     """
 
     def __init__(self, model, gait, n_pre: int = 80, n_post: int = 240, n_scan: int = 250,
-                 horizon: float = 2.0, threads: int | None = None):
-        if gait.model.params != model.params:
-            raise ValueError("gait was made for other robot parameters than the model")
+                 horizon: float = 2.0, rejoin: float = PAPER_REJOIN, threads: int | None = None):
+        require_same_robot(model, gait)
         self.model, self.gait = model, gait
+        self.nu = model.nu
         self.T = T = gait.T
         self.n_pre, self.n_post, self.n_scan = n_pre, n_post, n_scan
         self.horizon = horizon
+        self.rejoin = as_number(rejoin, "rejoin", positive=True)
+        if self.rejoin > SECTION:
+            raise ValueError(f"rejoin must be in (0, {SECTION}], got {rejoin!r}")
         self.tau_s = SECTION * T
         self.x_star = gait.state_at(self.tau_s)
-        self.ref_s = self.x_star.copy()          # reference (q_u^d, dq_u^d) at 0.75 T
-        self.ref_0 = np.array(gait.x0, dtype=float)
-        import os
+        self.ref_s = gait.state(self.tau_s)           # reference state at the section
+        self.ref_0 = np.asarray(gait.r0, dtype=float)
         self.threads = threads or max(1, min(os.cpu_count() or 1, 8))
         self._build()
-        self._denominator_table()
-        self._variational = None
+        t = np.linspace(0, T, 1001)
+        D = np.array(model.D.map(t.size)(gait.q(t))).reshape(model.nq, model.nq, t.size,
+                                                              order="F")
+        #: D11 and D12 along the reference on [0, T] (1001 points), for eq. (23)-(24)
+        self.D11_table, self.D12_table = D[0, 0], D[0, 1:]
+
+    @property
+    def cache_key(self):
+        """What the map depends on: the gait and the discretisation."""
+        return (self.gait.cache_key, self.n_pre, self.n_post, self.n_scan, self.horizon,
+                self.rejoin)
 
     # ---------------------------------------------------------------- build
-    def _build(self):
-        m, g, T = self.model, self.gait, self.T
-        ref = g._ref
-        alpha = ca.DM(g.alpha)
-        M1 = ca.SX.sym("M1", 4)
-        yi = ca.SX.sym("yi", 4)
-        dyi = ca.SX.sym("dyi", 4)
-        z = ca.SX.sym("z", 4)          # (q_u, dq_u, q_u^d, dq_u^d)
+    def _zero_dynamics(self):
+        """The zero dynamics of eq. (19) as a Function of (z, tau, M1, y_i, dy_i), with
+        z = (q_u, dq_u, reference state)."""
+        m, nu = self.model, self.nu
+        ref = self.gait.symbolic()
+        nr = self.gait.n_state
+        M1 = ca.SX.sym("M1", nu)
+        yi, dyi = ca.SX.sym("yi", nu), ca.SX.sym("dyi", nu)
+        z = ca.SX.sym("z", 2 + nr)
         tau = ca.SX.sym("tau")
-        qa_d, dqa_d, ddqa_d = ref.qa(alpha, tau / T, T)
-        # reference: unactuated row with q_a = q_a^d
-        qd = ca.vertcat(z[2], qa_d)
-        dqd = ca.vertcat(z[3], dqa_d)
-        ddr = ref.ddqu(qd, dqd, ddqa_d)
-        vc, dvc, ddvc = v_correction(tau, yi, dyi, T)
-        qa = qa_d + M1 * (z[2] - z[0]) + vc
-        dqa = dqa_d + M1 * (z[3] - z[1]) + dvc
-        ddv = M1 * ddr + ddqa_d + ddvc
-        q = ca.vertcat(z[0], qa)
-        dq = ca.vertcat(z[1], dqa)
-        D = m.D(q)
-        H = m.H(q, dq)
-        den = D[0, 0] - ca.mtimes(D[0, 1:], M1)
-        ddqu = (-ca.mtimes(D[0, 1:], ddv) - H[0]) / den          # eq. (19)
-        rhs = ca.vertcat(z[1], ddqu, z[3], ddr)
-        f = ca.Function("zero_dynamics", [z, tau, M1, yi, dyi], [rhs],
+        qd, dqd, ddqd, dr = ref(tau, z[2:])
+        vc, dvc, ddvc = correction(tau, yi, dyi, self.rejoin * self.T)
+        q = coordinates_from_outputs(M1, z[0], outputs(M1, qd) + vc)        # eq. (10)
+        dq = coordinates_from_outputs(M1, z[1], outputs(M1, dqd) + dvc)
+        ddv = outputs(M1, ddqd) + ddvc
+        ddqu = unactuated_acceleration(m.D(q), m.H(q, dq), M1, ddv)         # eq. (19)
+        f = ca.Function("zero_dynamics", [z, tau, M1, yi, dyi], [ca.vertcat(z[1], ddqu, dr)],
                         ["z", "tau", "M1", "yi", "dyi"], ["dz"])
-        self.zero_dynamics = f
-        self.configuration = ca.Function("zd_configuration", [z, tau, M1, yi, dyi], [q, dq],
-                                         ["z", "tau", "M1", "yi", "dyi"], ["q", "dq"])
-        h = ca.SX.sym("h")
-        k1 = f(z, tau, M1, yi, dyi)
-        k2 = f(z + h / 2 * k1, tau + h / 2, M1, yi, dyi)
-        k3 = f(z + h / 2 * k2, tau + h / 2, M1, yi, dyi)
-        k4 = f(z + h * k3, tau + h, M1, yi, dyi)
-        step = ca.Function("zd_rk4", [z, tau, h, M1, yi, dyi],
-                           [z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), tau + h])
-        self._step = step
+        conf = ca.Function("zd_configuration", [z, tau, M1, yi, dyi], [q, dq],
+                           ["z", "tau", "M1", "yi", "dyi"], ["q", "dq"])
+        return f, conf
 
-        q0, dq0 = self.configuration(z, tau, M1, ca.DM.zeros(4), ca.DM.zeros(4))  # v_c = 0
+    def _build(self):
+        m, T, nu = self.model, self.T, self.nu
+        f, self.configuration = self._zero_dynamics()
+        self.zero_dynamics = f
+        nz = f.size1_in(0)
+        z, tau, h = ca.SX.sym("z", nz), ca.SX.sym("tau"), ca.SX.sym("h")
+        M1, yi, dyi = ca.SX.sym("M1", nu), ca.SX.sym("yi", nu), ca.SX.sym("dyi", nu)
+        z_next = rk4_step(lambda zz, c: f(zz, tau + c * h, M1, yi, dyi), z, h)
+        step = ca.Function("zd_rk4", [z, tau, h, M1, yi, dyi], [z_next, tau + h])
+
+        zero = ca.DM.zeros(nu)
+        q0, dq0 = self.configuration(z, tau, M1, zero, zero)        # v_c = 0 after rejoin
         xs, zsw = m.swing_foot(q0)
-        dxs, dzsw = m.swing_foot_velocity(q0, dq0)
+        _, dzsw = m.swing_foot_velocity(q0, dq0)
         self.guard = ca.Function("guard", [z, tau, M1], [zsw, xs, dzsw],
                                  ["z", "tau", "M1"], ["z_sw", "x_sw", "dz_sw"])
-        zero4 = ca.DM.zeros(4)
 
         # pre-impact segment 0.75T -> tau_i, time-scaled (MX)
         x = ca.MX.sym("x", 2)
-        M1m = ca.MX.sym("M1", 4)
+        M1m = ca.MX.sym("M1", nu)
         ti = ca.MX.sym("tau_i")
         zs0 = ca.vertcat(x, ca.DM(self.ref_s))
-        acc_pre = step.mapaccum("pre_acc", self.n_pre, [0, 1], [0, 1])
-        hpre = (ti - self.tau_s) / self.n_pre
-        Zpre, _ = acc_pre(zs0, self.tau_s, hpre, M1m, zero4, zero4)
-        z_minus = Zpre[:, -1]
-        self.pre = ca.Function("pre_impact", [x, M1m, ti], [z_minus], ["x", "M1", "tau_i"], ["z"])
-        zg, _, _ = self.guard(z_minus, ti, M1m)
-        G = ca.Function("guard_residual", [ti, x, M1m], [zg])
-        rf = ca.rootfinder("impact_time", "newton", G,
+        Zpre, _ = step.mapaccum("pre_acc", self.n_pre, [0, 1], [0, 1])(
+            zs0, self.tau_s, (ti - self.tau_s) / self.n_pre, M1m, zero, zero)
+        self.pre = ca.Function("pre_impact", [x, M1m, ti], [Zpre[:, -1]],
+                               ["x", "M1", "tau_i"], ["z"])
+        zg, _, _ = self.guard(Zpre[:, -1], ti, M1m)
+        rf = ca.rootfinder("impact_time", "newton", ca.Function("guard_residual", [ti, x, M1m], [zg]),
                            {"abstol": 1e-14, "max_iter": 30, "error_on_fail": False})
         t_guess = ca.MX.sym("tau_guess")
         tau_i = rf(t_guess, x, M1m)
-        z_m = self.pre(x, M1m, tau_i)
-        q_m, dq_m = self.configuration(z_m, tau_i, M1m, zero4, zero4)
+        q_m, dq_m = self.configuration(self.pre(x, M1m, tau_i), tau_i, M1m, zero, zero)
         q_p, dq_p = m.impact(q_m, dq_m)
-        Mq = lambda v: M1m * v[0] + v[1:]                               # noqa: E731
-        qd0 = ca.vertcat(self.ref_0[0], ref.qa(alpha, 0, T)[0])
-        dqd0 = ca.vertcat(self.ref_0[1], ref.qa(alpha, 0, T)[1])
-        y_i = Mq(q_p) - Mq(qd0)
-        dy_i = Mq(dq_p) - Mq(dqd0)
+        q_d0, dq_d0, _ = self.gait.evaluate(0.0)
+        y_i = outputs(M1m, q_p) - outputs(M1m, ca.DM(q_d0))                # eq. (17)
+        dy_i = outputs(M1m, dq_p) - outputs(M1m, ca.DM(dq_d0))
         z_p = ca.vertcat(q_p[0], dq_p[0], ca.DM(self.ref_0))
-        acc_post = step.mapaccum("post_acc", self.n_post, [0, 1], [0, 1])
-        Zpost, _ = acc_post(z_p, 0.0, self.tau_s / self.n_post, M1m, y_i, dy_i)
+        Zpost, _ = step.mapaccum("post_acc", self.n_post, [0, 1], [0, 1])(
+            z_p, 0.0, self.tau_s / self.n_post, M1m, y_i, dy_i)
         x_next = Zpost[:2, -1]
         self.map = ca.Function("poincare_map", [x, M1m, t_guess], [x_next, tau_i],
                                ["x", "M1", "tau_guess"], ["x_next", "tau_i"])
-        A = ca.jacobian(x_next, x)
-        self.map_jac = ca.Function("poincare_jacobian", [x, M1m, t_guess], [A, x_next, tau_i],
+        self.map_jac = ca.Function("poincare_jacobian", [x, M1m, t_guess],
+                                   [ca.jacobian(x_next, x), x_next, tau_i],
                                    ["x", "M1", "tau_guess"], ["A", "x_next", "tau_i"])
         # scan for the first valid impact (for states away from the fixed point)
         hs = (self.horizon * T - self.tau_s) / self.n_scan
-        acc_scan = step.mapaccum("scan_acc", self.n_scan, [0, 1], [0, 1])
-        Zs, taus = acc_scan(zs0, self.tau_s, hs, M1m, zero4, zero4)
+        Zs, taus = step.mapaccum("scan_acc", self.n_scan, [0, 1], [0, 1])(
+            zs0, self.tau_s, hs, M1m, zero, zero)
         gz, gx, gd = self.guard.map(self.n_scan)(Zs, taus, M1m)
         self.scan = ca.Function("impact_scan", [x, M1m], [taus, gz, gx, gd],
                                 ["x", "M1"], ["tau", "z_sw", "x_sw", "dz_sw"])
-        self._batch = {}
-
-    def _denominator_table(self, n: int = 1001):
-        """D11 and D12 along the reference on [0, T] for the singularity test (eq. 23-24)."""
-        t = np.linspace(0, self.T, n)
-        q = self.gait.q(t)
-        D = np.array(self.model.D.map(n)(q)).reshape(5, 5, n, order="F")
-        self._D11 = D[0, 0]
-        self._D12 = D[0, 1:]          # 4 x n
 
     # ----------------------------------------------------------- evaluation
+    @property
+    def variational(self):
+        """The variational-equation Jacobian of this map (:mod:`analysis.variational`)."""
+        return variational_jacobian(self.model, self.gait, self.tau_s, self.n_pre,
+                                    self.n_post, self.rejoin)
+
     def denominator(self, M1) -> np.ndarray:
-        """D11 - D12 M1 along the reference (1001 points on [0, T])."""
-        return self._D11 - _check_M1(M1) @ self._D12
+        """D11 - D12 M1 along the reference (1001 points on [0, T]), eq. (24)."""
+        return decoupling_denominator(self.D11_table, self.D12_table, check_M1(M1, self.nu))
 
     def is_singular(self, M1) -> bool:
-        """eq. (23)-(24): D11 - D12 M1 vanishes or changes sign on the step."""
-        return bool(self._screen(_check_M1(M1)[None])[2][0])
+        """Eq. (23)-(24): D11 - D12 M1 vanishes or changes sign on the step."""
+        return bool(self.screen(check_M1(M1, self.nu)[None])[2][0])
 
-    def _screen(self, M1s):
-        """Validated (n, 4) M1 array, D11 - D12 M1 along the step (n, 1001), singular mask."""
+    def screen(self, M1s):
+        """Validated (n, nu) M1 array, D11 - D12 M1 along the step (n, 1001), singular mask."""
         M1s = np.asarray(M1s, dtype=float)
-        if M1s.ndim != 2 or M1s.shape[1] != 4:
-            raise ValueError(f"M1s must be an (n, 4) array, got shape {M1s.shape}")
+        if M1s.ndim != 2 or M1s.shape[1] != self.nu:
+            raise ValueError(f"M1s must be an (n, {self.nu}) array, got shape {M1s.shape}")
         if not np.all(np.isfinite(M1s)):
             raise ValueError("M1s must be finite")
-        den = self._D11[None, :] - M1s @ self._D12
-        sing = (den.min(1) * den.max(1) <= 0) | (np.abs(den).min(1) < 1e-9 * np.abs(den).max(1))
-        return M1s, den, sing
+        den = decoupling_denominator(self.D11_table, self.D12_table, M1s.T)    # (n, 1001)
+        return M1s, den, is_singular(den, axis=1)
 
     def find_impact(self, x, M1):
         """First valid impact after 0.75T within the horizon (z_sw crosses 0 downward with
-        x_sw > 0): a bracket [tau_a, tau_b] on the scan grid, or None."""
+        x_sw > 0): (tau_a, tau_b, linear guess) on the scan grid, or None."""
         taus, gz, gx, gd = (np.array(v).ravel() for v in self.scan(x, M1))
         prev = np.r_[self.tau_s, taus[:-1]]
         gz0 = float(self.guard(ca.vertcat(x, self.ref_s), self.tau_s, M1)[0])
@@ -225,70 +246,86 @@ class PoincareMap:
         if not hit.any():
             return None
         k = int(np.argmax(hit))
-        # linear interpolation inside the bracket as Newton's start
         t_lin = prev[k] + (taus[k] - prev[k]) * prev_z[k] / (prev_z[k] - gz[k])
         return prev[k], taus[k], t_lin
 
     def evaluate(self, x, M1):
-        """P^z(x) for a section state x = (q_u, dq_u) and output matrix M1; returns
-        (x_next, tau_impact) or raises ValueError when no valid impact occurs."""
-        x = np.asarray(x, dtype=float).ravel()
-        if x.shape != (2,) or not np.all(np.isfinite(x)):
-            raise ValueError(f"x must be 2 finite numbers (q_u, dq_u), got {x.tolist()}")
-        M1 = _check_M1(M1)
+        """P^z(x) for a section state x = (q_u, dq_u) and outputs M1.
+
+        Returns
+        -------
+        tuple
+            (x_next, tau_impact).
+
+        Raises
+        ------
+        ValueError
+            When no valid impact occurs within the horizon.
+        """
+        x = as_vector(np.ravel(x), 2, "x")
+        M1 = check_M1(M1, self.nu)
         br = self.find_impact(x, M1)
         if br is None:
-            raise ValueError("no valid impact of the swing foot within the horizon (2 T)")
+            raise ValueError(f"no valid impact of the swing foot within the horizon "
+                             f"({self.horizon:g} T)")
         xn, ti = self.map(x, M1, br[2])
         ti = float(ti)
         if not (br[0] - 1e-9 <= ti <= br[1] + 1e-9):
             raise ValueError("impact-time Newton left the bracket of the first impact")
         return np.array(xn).ravel(), ti
 
-    def analyse(self, M1) -> PoincareResult:
-        """A^z, eigenvalues and status (SPEC section 4) at the fixed point for one M1."""
-        M1 = _check_M1(M1)
-        d = self.denominator(M1)
-        min_den = float(np.min(np.abs(d)))
-        nan2 = np.full((2, 2), np.nan)
+    def analyse(self, M1, method: str = "variational") -> PoincareResult:
+        """A^z, eigenvalues and status (SPEC section 4) at the fixed point for one M1.
+
+        Parameters
+        ----------
+        M1 : array_like
+        method : {'variational', 'ad'}
+            See the module docstring.
+
+        Returns
+        -------
+        PoincareResult
+        """
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        M1 = check_M1(M1, self.nu)
+        min_den = float(np.min(np.abs(self.denominator(M1))))
         if self.is_singular(M1):
-            return PoincareResult(M1, nan2, np.full(2, complex(np.nan, np.nan)), math.inf, "singular",
-                                  self.x_star, min_denominator=min_den,
-                                  message="D11 - D12 M1 vanishes or changes sign on the step")
+            return self._undefined(M1, "singular", min_den, method,
+                                   "D11 - D12 M1 vanishes or changes sign on the step (eq. 24)")
+        if method == "variational":
+            A = self.variational.jacobian(M1)
+            return self._result(M1, A, None, self.T, min_den, method)
         br = self.find_impact(self.x_star, M1)
         if br is None:
-            return PoincareResult(M1, nan2, np.full(2, complex(np.nan, np.nan)), math.inf, "no_impact",
-                                  self.x_star, min_denominator=min_den,
-                                  message="no valid swing-foot impact within 2 T")
+            return self._undefined(M1, "no_impact", min_den, method,
+                                   f"no valid swing-foot impact within {self.horizon:g} T")
         A, xn, ti = (np.array(v) for v in self.map_jac(self.x_star, M1, br[2]))
-        return self._result(M1, A, xn.ravel(), ti.item(), min_den)
+        return self._result(M1, A, xn.ravel(), ti.item(), min_den, method)
 
-    def _result(self, M1, A, xn, ti, min_den):
+    def _undefined(self, M1, status, min_den, method, message, tau=math.nan, A=None):
+        nan2 = np.full((2, 2), np.nan) if A is None else A
+        return PoincareResult(M1, nan2, np.full(2, complex(np.nan, np.nan)), math.inf, status,
+                              self.x_star, tau_impact=tau, min_denominator=min_den,
+                              method=method, message=message)
+
+    def _result(self, M1, A, xn, ti, min_den, method):
         if not np.all(np.isfinite(A)):
-            return PoincareResult(M1, A, np.full(2, complex(np.nan, np.nan)), math.inf, "no_impact",
-                                  self.x_star, tau_impact=ti, min_denominator=min_den,
-                                  message="integration of the zero dynamics broke down")
-        ev = np.linalg.eigvals(A)
+            return self._undefined(M1, "no_impact", min_den, method,
+                                   "integration of the zero dynamics broke down", ti, A)
+        ev = np.linalg.eigvals(A).astype(complex)       # [re, im] pairs in to_dict()
         ev = ev[np.argsort(-np.abs(ev))]
         mx = float(np.max(np.abs(ev)))
+        res = math.nan if xn is None else float(np.max(np.abs(xn - self.x_star)))
         return PoincareResult(M1, A, ev, mx, "stable" if mx < 1 else "unstable", self.x_star,
-                              fixed_point_residual=float(np.max(np.abs(xn - self.x_star))),
-                              tau_impact=ti, min_denominator=min_den)
-
-    @property
-    def variational(self):
-        """The batched variational-equation Jacobian (analysis.variational)."""
-        if self._variational is None:
-            from .variational import VariationalJacobian
-            self._variational = VariationalJacobian(self.model, self.gait, self.tau_s,
-                                                    self.n_pre, self.n_post)
-        return self._variational
+                              fixed_point_residual=res, tau_impact=ti, min_denominator=min_den,
+                              method=method)
 
     def jacobian_batch(self, M1s, chunk: int = 512):
-        """Statuses, A^z (n, 2, 2) and max|lambda| for an (n, 4) array of M1 by the
-        vectorised variational equation (fast path for sweeps; agrees with
-        :meth:`analyse` to integration accuracy).  Singular M1 get NaN."""
-        M1s, den, sing = self._screen(M1s)
+        """Statuses, A^z (n, 2, 2), eigenvalues and max|lambda| for an (n, nu) array of
+        M1 by the vectorised variational equation.  Singular M1 get NaN."""
+        M1s, den, sing = self.screen(M1s)
         A = np.full((len(M1s), 2, 2), np.nan)
         ok = np.flatnonzero(~sing)
         for a in range(0, len(ok), chunk):
@@ -305,38 +342,34 @@ class PoincareMap:
         return status, A, ev, max_abs
 
     def analyse_batch(self, M1s, chunk: int = 64) -> list[PoincareResult]:
-        """:meth:`analyse` (full AD through the discrete map) for an (n, 4) array;
-        singular cases are screened first, the others evaluated with
-        ``map(..., 'thread')`` starting Newton at tau = T (the fixed point's impact time),
-        which converges in one or two iterations."""
-        M1s, den, sing = self._screen(M1s)
+        """:meth:`analyse` with ``method='ad'`` for an (n, nu) array; singular cases are
+        screened first, the others evaluated with ``map(..., 'thread')`` starting Newton
+        at tau = T (the fixed point's impact time), which converges in one or two
+        iterations."""
+        M1s, den, sing = self.screen(M1s)
         out: list = [None] * len(M1s)
-        idx = np.flatnonzero(~sing)
         for i in np.flatnonzero(sing):
-            out[i] = PoincareResult(M1s[i], np.full((2, 2), np.nan), np.full(2, complex(np.nan, np.nan)),
-                                    math.inf, "singular", self.x_star,
-                                    min_denominator=float(np.abs(den[i]).min()),
-                                    message="D11 - D12 M1 vanishes or changes sign on the step")
+            out[i] = self._undefined(M1s[i], "singular", float(np.abs(den[i]).min()), "ad",
+                                     "D11 - D12 M1 vanishes or changes sign on the step")
+        idx = np.flatnonzero(~sing)
         for a in range(0, len(idx), chunk):
             part = idx[a:a + chunk]
             n = len(part)
-            f = self._batch_fn(n)
-            A, xn, ti = (np.array(v) for v in f(np.repeat(self.x_star[:, None], n, 1),
-                                                  M1s[part].T, np.full((1, n), self.T)))
+            A, xn, ti = (np.array(v) for v in self.batch_function(n)(
+                np.repeat(self.x_star[:, None], n, 1), M1s[part].T, np.full((1, n), self.T)))
             for j, i in enumerate(part):
-                Aj = A[:, 2 * j:2 * j + 2]
                 tij = float(ti[0, j])
                 if not (np.isfinite(tij) and abs(tij - self.T) < 0.05 * self.T):
-                    out[i] = self.analyse(M1s[i])      # unusual: full scan
+                    out[i] = self.analyse(M1s[i], method="ad")      # unusual: full scan
                 else:
-                    out[i] = self._result(M1s[i], Aj, xn[:, j], tij,
-                                          float(np.abs(den[i]).min()))
+                    out[i] = self._result(M1s[i], A[:, 2 * j:2 * j + 2], xn[:, j], tij,
+                                          float(np.abs(den[i]).min()), "ad")
         return out
 
-    def _batch_fn(self, n):
-        if n not in self._batch:
-            self._batch[n] = self.map_jac.map(n, "thread", self.threads)
-        return self._batch[n]
+    @cached(maxsize=4)
+    def batch_function(self, n: int) -> ca.Function:
+        """``map_jac`` mapped over n M1 on threads."""
+        return self.map_jac.map(n, "thread", self.threads)
 
 
 def singular_m1_values(model, gait) -> np.ndarray:
@@ -345,18 +378,31 @@ def singular_m1_values(model, gait) -> np.ndarray:
     return D[0, 0] / D[0, 1:]
 
 
-_CACHE: dict = {}
+@cached(maxsize=8)
+def poincare_map(model, gait, **options) -> PoincareMap:
+    """The :class:`PoincareMap` of a model, gait and options, built once (memoised by
+    content: the gait's digest and the options)."""
+    return PoincareMap(model, gait, **options)
 
 
-def poincare_map(model, gait, **kw) -> PoincareMap:
-    """A cached :class:`PoincareMap` per (model, gait object, options)."""
-    key = (id(model), id(gait), tuple(sorted(kw.items())))
-    pm = _CACHE.get(key)
-    if pm is None or pm.gait is not gait or pm.model is not model:
-        pm = _CACHE[key] = PoincareMap(model, gait, **kw)
-    return pm
+def poincare_eigenvalues(m, g, M1, method: str = "variational") -> PoincareResult:
+    """A^z, its eigenvalues and the status of SPEC §4 for outputs M1 (SPEC section 5).
 
+    Parameters
+    ----------
+    m : BipedModel
+    g : Reference
+        The gait, made for ``m``.
+    M1 : array_like
+        One number per actuated joint.
+    method : {'variational', 'ad'}
+        'variational' (default, well under a millisecond per call once the map is built)
+        or 'ad' (automatic differentiation through the whole discrete map, ~0.3 s; also
+        gives the fixed-point residual).
 
-def poincare_eigenvalues(m, g, M1) -> PoincareResult:
-    """SPEC section 5: ``r.A`` (2x2 A^z), ``r.eigenvalues``, ``r.max_abs``, ``r.status``."""
-    return poincare_map(m, g).analyse(M1)
+    Returns
+    -------
+    PoincareResult
+        ``r.A`` (2x2 A^z), ``r.eigenvalues``, ``r.max_abs``, ``r.status``.
+    """
+    return poincare_map(m, g).analyse(M1, method=method)

@@ -29,7 +29,8 @@ def _rel(out: Path, p) -> str:
         return str(p)
 
 
-def write_report(out: Path, s: dict) -> Path:
+def _comparison_rows(s: dict) -> list:
+    """(quantity, paper, ours, why they differ) rows of the paper-vs-ours table."""
     P = s.get("paper", {})
     rows = []
     ns = "our reference gait is our own optimum (SPEC §2), not the paper's gait from its ref. [6]"
@@ -98,7 +99,25 @@ def write_report(out: Path, s: dict) -> Path:
                  _f(_g(fr, "tv", "steps_to_converge")), f"M1 = {_f(fr.get('M1'), '.4f')}"))
     rows.append((f"Fig. 5 run (perturbation {pert}): steps until |dq_u error| < 1e-3, "
                  "virtual constraints", "more than TV", _f(_g(fr, "vc", "steps_to_converge")), ""))
+    return rows
 
+
+def write_report(out: Path, s: dict) -> Path:
+    """Write ``report.md`` into ``out`` from the summary ``s`` of :func:`reproduce`.
+
+    Parameters
+    ----------
+    out : Path
+        The reproduction folder (figures are linked relative to it).
+    s : dict
+        The summary (JSON types).
+
+    Returns
+    -------
+    Path
+        The report.
+    """
+    rows = _comparison_rows(s)
     lines = ["# Reproduction of Wang & Chevallereau, time-varying control of RABBIT", ""]
     g = s.get("gait", {})
     if g:

@@ -15,6 +15,22 @@ from pathlib import Path
 
 import numpy as np
 
+from biped_casadi import (PAPER_PERTURBATION, SimulationOptions, TimeVaryingController,
+                          VirtualConstraintController, perturbed_initial_state, rabbit,
+                          simulate)
+from biped_casadi.results import json_safe
+from gait_opt import default_gait
+
+from .output_design import (conjecture_figures, domain_grid, optimize_m1,
+                            swing_height_at_Td, taylor_ab)
+from .plots import (conjecture_plot, gait_profiles_plot, gait_stick_plot, one_d_sweeps_plot,
+                    save_figure, stable_domains_plot, swing_torques_plot,
+                    unactuated_error_plot, walking_animation)
+from .poincare import poincare_eigenvalues, singular_m1_values
+from .report import write_report
+from .sweep import grid_points, one_d_sweeps, run_sweep
+from .virtual_constraints import vc_eigenvalue
+
 __all__ = ["reproduce", "ReproduceOptions", "PAPER"]
 
 #: the paper's published figures (Wang & Chevallereau), for the side-by-side table
@@ -68,22 +84,23 @@ class _Context:
 
 
 # ---------------------------------------------------------------- the stages
+FORMATS = ("png", "pdf")
+
+
 def stage_gait(ctx: _Context):
-    import gait_opt
-    from biped_casadi import rabbit
     ctx.model = rabbit()
-    ctx.gait = g = gait_opt.default_gait(ctx.model)
+    ctx.gait = g = default_gait(ctx.model)
     s = g.summary()
     ctx.summary["gait"] = s
     g.save(ctx.out / "gait.json")
-    from gait_opt.plots import plot_gait
-    ctx.figures["gait"] = [str(p) for p in plot_gait(g, ctx.out / "figures",
-                                                      formats=("png", "pdf"))]
+    figs = ctx.out / "figures"
+    ctx.figures["gait_stick"] = save_figure(gait_stick_plot(g), figs / "gait_stick", FORMATS)
+    ctx.figures["gait_profiles"] = save_figure(gait_profiles_plot(g), figs / "gait_profiles",
+                                               FORMATS)
     ctx.log(f"   T = {s['T']:.4f} s, step {s['step_length']:.4f} m, cost {s['cost']:.2f}")
 
 
 def stage_singular(ctx: _Context):
-    from analysis import singular_m1_values
     D = np.array(ctx.model.D(ctx.gait.q(ctx.gait.T)))
     sv = singular_m1_values(ctx.model, ctx.gait)
     ctx.summary["singular"] = dict(D11_T=float(D[0, 0]), D12_T=D[0, 1:].tolist(),
@@ -92,12 +109,11 @@ def stage_singular(ctx: _Context):
 
 
 def stage_fig2(ctx: _Context):
-    from analysis.sweep import one_d_sweeps, plot_fig2
     vals = np.linspace(-10, 10, ctx.opts.line_points)
     r = one_d_sweeps(ctx.model, ctx.gait, vals, out_dir=ctx.out / "sweeps" / "fig2",
                      progress=ctx.opts.progress)
-    ctx.figures["fig2"] = [str(p) for p in plot_fig2(r, r.singular_values,
-                                                      ctx.out / "figures" / "fig2")]
+    ctx.figures["fig2"] = save_figure(one_d_sweeps_plot(r), ctx.out / "figures" / "fig2",
+                                      FORMATS)
     best = []
     for j, part in enumerate(r.results):
         b = part.best()
@@ -107,13 +123,12 @@ def stage_fig2(ctx: _Context):
 
 
 def stage_grid(ctx: _Context):
-    from analysis.sweep import grid_points, run_sweep
     n = ctx.opts.grid_n
     P = grid_points(n, -10.0, 10.0)
     r = run_sweep(ctx.model, ctx.gait, P, out_dir=ctx.out / "sweeps" / f"grid{n}",
                   progress=ctx.opts.progress)
     ctx.data["grid"] = r
-    st = r.status
+    st = r.point_status
     stable = np.flatnonzero(st == "stable")
     best = None
     if stable.size:
@@ -125,19 +140,15 @@ def stage_grid(ctx: _Context):
 
 
 def stage_fig3(ctx: _Context):
-    from analysis.figures import plot_fig3
-    from analysis.output_design import conjecture_figures, swing_height_at_Td
     r = ctx.data["grid"]
     zsw = swing_height_at_Td(ctx.model, ctx.gait, r.points, 1e-2)
-    c = conjecture_figures(zsw, r.max_abs, r.status)
+    c = conjecture_figures(zsw, r.max_abs, r.point_status)
     ctx.summary["conjecture"] = c
-    ctx.figures["fig3"] = plot_fig3(zsw, r.max_abs, r.status, ctx.out / "figures" / "fig3")
+    ctx.figures["fig3"] = save_figure(conjecture_plot(zsw, r.max_abs, r.point_status),
+                                      ctx.out / "figures" / "fig3", FORMATS)
 
 
 def stage_fig4(ctx: _Context):
-    from analysis.figures import plot_fig4
-    from analysis.output_design import domain_grid, taylor_ab
-    from analysis.sweep import run_sweep
     tay = taylor_ab(ctx.model, ctx.gait)
     lo, hi = ctx.opts.domain_range
     n = ctx.opts.domain_n
@@ -153,7 +164,7 @@ def stage_fig4(ctx: _Context):
                           progress=ctx.opts.progress)
             mx[real] = r.max_abs
             stable = np.zeros(len(P), bool)
-            stable[np.flatnonzero(real)] = r.status == "stable"
+            stable[np.flatnonzero(real)] = r.point_status == "stable"
         else:
             stable = np.zeros(len(P), bool)
         maps[k] = mx.reshape(n, n)
@@ -163,8 +174,8 @@ def stage_fig4(ctx: _Context):
                       best=None if i is None else dict(M1=P[i].tolist(), max_abs=float(mx[i])))
     ctx.data["domains"] = res
     best = {k: (np.array(v["best"]["M1"]) if v["best"] else None) for k, v in res.items()}
-    ctx.figures["fig4"] = plot_fig4(s.m2, s.m3, maps[1], maps[2], ctx.out / "figures" / "fig4",
-                                    best=best)
+    ctx.figures["fig4"] = save_figure(stable_domains_plot(s.m2, s.m3, maps[1], maps[2], best),
+                                      ctx.out / "figures" / "fig4", FORMATS)
     ctx.summary["taylor"] = dict(grad_zsw=tay.grad.tolist(), hess_zsw=tay.hess.tolist(),
                                  zsw_T=tay.z0)
     ctx.summary["domains"] = dict(grid=n, range=[lo, hi], groups=res)
@@ -173,8 +184,6 @@ def stage_fig4(ctx: _Context):
 
 
 def stage_m1(ctx: _Context):
-    from analysis import poincare_eigenvalues
-    from analysis.output_design import optimize_m1
     out = {}
     k = ctx.opts.nlp_starts
     for name, grp in (("group1", 1), ("group2", 2), ("free", None)):
@@ -195,8 +204,6 @@ def stage_m1(ctx: _Context):
 
 
 def stage_vc(ctx: _Context):
-    from analysis import poincare_eigenvalues
-    from analysis.virtual_constraints import vc_eigenvalue
     vc = vc_eigenvalue(ctx.model, ctx.gait)
     M1 = ctx.data.get("chosen_M1", np.zeros(4))
     tv = poincare_eigenvalues(ctx.model, ctx.gait, M1)
@@ -206,15 +213,6 @@ def stage_vc(ctx: _Context):
         tv_M1_zero=dict(max_abs=tv0.max_abs, status=tv0.status))
 
 
-def _steps_to_converge(res, tol=1e-3):
-    """1-based index of the step from which |dq_u error| stays below tol (None if never)."""
-    errs = [abs(s.dqu_error) for s in res.steps]
-    for k in range(len(errs)):
-        if all(e < tol for e in errs[k:]):
-            return k + 1
-    return None
-
-
 def stage_sim(ctx: _Context):
     """Paper §V-C: TV with the chosen M1 and VC from the same perturbed state.
 
@@ -222,9 +220,6 @@ def stage_sim(ctx: _Context):
     the M1 of the NLP, then the stable points of the 9^4 grid; when no time-varying run
     walks, the perturbation is scaled down until the chosen M1 walks, and Fig. 5/6 show
     that run (the report says which)."""
-    from biped_casadi.controllers import TimeVaryingController, VirtualConstraintController
-    from biped_casadi.simulate import (PAPER_PERTURBATION, SimulationOptions, animate,
-                                       perturbed_initial_state, plot_fig5, plot_fig6, simulate)
     g, m = ctx.gait, ctx.model
     M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(4)), float)
     opts = SimulationOptions(steps=ctx.opts.sim_steps, mu=0.6)
@@ -236,7 +231,7 @@ def stage_sim(ctx: _Context):
         return simulate(TimeVaryingController(m, g, M1), q0, dq0, opts), (q0, dq0)
 
     def brief(r):
-        return dict(r.summary(), steps_to_converge=_steps_to_converge(r))
+        return dict(r.to_dict(), steps_to_converge=r.steps_to_converge())
 
     out = dict(paper_perturbation=list(PAPER_PERTURBATION), mu=0.6, M1=M1.tolist())
     tv, x0 = run(M1, 1.0)
@@ -248,7 +243,7 @@ def stage_sim(ctx: _Context):
         grid = ctx.data.get("grid")
         tried, found = 0, None
         if grid is not None:
-            idx = np.flatnonzero(grid.status == "stable")
+            idx = np.flatnonzero(grid.point_status == "stable")
             for i in idx[np.argsort(grid.max_abs[idx])][:30]:
                 tried += 1
                 r, _ = run(grid.points[i], 1.0)
@@ -268,9 +263,9 @@ def stage_sim(ctx: _Context):
             walked = None
             half = max(1, (ctx.opts.sim_steps + 1) // 2)
             for scale in (0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005):
-                walked = [(_steps_to_converge(r), name, Mc, r) for name, Mc in cands.items()
+                walked = [(r.steps_to_converge(), name, Mc, r) for name, Mc in cands.items()
                           for r in [run(Mc, scale)[0]]
-                          if r.status == "ok" and (_steps_to_converge(r) or 10**9) <= half]
+                          if r.status == "ok" and (r.steps_to_converge() or 10**9) <= half]
                 if walked:
                     break
             if walked:
@@ -285,16 +280,15 @@ def stage_sim(ctx: _Context):
     ctx.log(f"   figures: perturbation x{scale:g}: TV {tv.status}, VC {vc.status}")
     note = "" if scale == 1.0 else f" (perturbation x{scale:g} of the paper's)"
     figs = ctx.out / "figures"
-    for ext in (".png", ".pdf"):
-        plot_fig5([tv, vc], figs / f"fig5_qu_error{ext}",
-                  title="Fig. 5: q_u error at the end of each step" + note)
-        plot_fig6([tv, vc], g, figs / f"fig6_swing_torques{ext}",
-                  title="Fig. 6: swing-leg torques" + note)
-    ctx.figures["fig5"] = [str(figs / f"fig5_qu_error{e}") for e in (".png", ".pdf")]
-    ctx.figures["fig6"] = [str(figs / f"fig6_swing_torques{e}") for e in (".png", ".pdf")]
+    ctx.figures["fig5"] = save_figure(
+        unactuated_error_plot([tv, vc], title="Fig. 5: q_u error at the end of each step" + note),
+        figs / "fig5_qu_error", FORMATS)
+    ctx.figures["fig6"] = save_figure(
+        swing_torques_plot([tv, vc], g, title="Fig. 6: swing-leg torques" + note),
+        figs / "fig6_swing_torques", FORMATS)
     if ctx.opts.animation_steps:
-        ctx.figures["animation"] = [str(animate(tv, m, figs / "walk_tv.gif",
-                                                max_steps=ctx.opts.animation_steps))]
+        ctx.figures["animation"] = [walking_animation(tv, m, figs / "walk_tv.gif",
+                                                      max_steps=ctx.opts.animation_steps)]
     ctx.summary["simulation"] = out
 
 
@@ -341,9 +335,7 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> dict:
     ctx.summary["paper"] = PAPER
     ctx.summary["options"] = dict(opts.__dict__)
     ctx.summary["total_time"] = time.perf_counter() - t_all
-    from biped_casadi.cli import json_safe
     (out / "summary.json").write_text(json.dumps(json_safe(ctx.summary), indent=1, allow_nan=False))
-    from .report import write_report
     write_report(out, json_safe(ctx.summary))
     ctx.log(f"report: {out / 'report.md'}  ({ctx.summary['total_time']:.0f} s)")
     return ctx.summary

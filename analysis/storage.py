@@ -184,7 +184,7 @@ class SweepStore:
         ev = np.asarray(eigenvalues, complex).reshape(n, 2)
         max_abs = np.asarray(max_abs, float)
         cols = {"index": index}
-        cols.update({f"M1_{j + 1}": M1[:, j] for j in range(4)})
+        cols.update({f"M1_{j + 1}": M1[:, j] for j in range(M1.shape[1])})
         cols["status"] = pa.array([STATUS_CODES[c] for c in code], pa.string())
         cols["max_abs"] = max_abs
         cols.update({f"A_{i + 1}{j + 1}": A[:, i, j] for i in range(2) for j in range(2)})
@@ -232,7 +232,8 @@ class SweepStore:
             col = {name: table.column(name).to_numpy(zero_copy_only=False)
                    for name in table.column_names}
             index = col["index"].astype(np.int64)
-            M1 = np.stack([col[f"M1_{j + 1}"] for j in range(4)], axis=1).astype(float)
+            M1 = np.stack([col[f"M1_{j + 1}"] for j in range(points.shape[1])],
+                          axis=1).astype(float)
             status = np.array(col["status"], dtype=object).astype(str)
             code = np.array([STATUS_CODES.index(s) for s in status], dtype=np.uint8)
             max_abs = col["max_abs"].astype(float)

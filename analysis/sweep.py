@@ -4,6 +4,7 @@ of SPEC §4 for many M1, in parallel, stored as they are computed, resumable.
     from analysis.sweep import grid_points, run_sweep
     r = run_sweep(model, gait, grid_points(9, -10, 10), out_dir="sweep9")
     r.counts          # {'stable': .., 'unstable': .., 'singular': .., 'no_impact': ..}
+    r.point_status    # the status of SPEC §4 of every point
 
 The points are cut into chunks of ``chunk_size`` rows; each chunk is evaluated by
 :meth:`analysis.poincare.PoincareMap.jacobian_batch` (the vectorised variational
@@ -25,21 +26,28 @@ machines than cores are at hand.
 """
 from __future__ import annotations
 
+import hashlib
+import importlib
+import json
 import math
 import os
 import sys
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .poincare import STATUSES, PoincareMap, singular_m1_values
-from .storage import (SweepStore, SweepStoreError, digest_json, digest_points)
+from biped_casadi import RobotParams, rabbit, require_same_robot
+from biped_casadi.caching import cached
+from biped_casadi.results import Result, internal
+from gait_opt import Gait, GaitOptions
+
+from .poincare import STATUSES, PoincareMap, poincare_map, singular_m1_values
+from .storage import META, SweepStore, digest_json, digest_points
 
 __all__ = ["run_sweep", "SweepResult", "SweepSettings", "grid_points", "line_points",
-           "one_d_sweeps", "OneDSweeps", "plot_fig2", "load_sweep", "evaluate_chunk",
+           "one_d_sweeps", "OneDSweeps", "load_sweep", "evaluate_chunk",
            "gait_to_dict", "gait_from_dict", "code_digest", "RESULTS_VERSION",
            "DEFAULT_CHUNK_SIZE"]
 
@@ -54,8 +62,9 @@ METHODS = ("variational", "ad")
 #: the modules whose code decides the numbers; their SHA-256 is part of a sweep's
 #: settings (a folder written by other code is refused) and is checked on every result
 #: coming back from a worker (a Dask worker running other code is an error, not a mix)
-NUMERIC_MODULES = ("analysis.poincare", "analysis.variational", "biped_casadi.correction",
-                   "biped_casadi.model", "gait_opt.gait", "gait_opt.reference")
+NUMERIC_MODULES = ("analysis.poincare", "analysis.variational", "biped_casadi.output_law",
+                   "biped_casadi.numerics", "biped_casadi.model", "gait_opt.gait",
+                   "gait_opt.parametrisation")
 _CODE_DIGEST = None
 
 
@@ -63,8 +72,6 @@ def code_digest() -> str:
     """SHA-256 of the source of :data:`NUMERIC_MODULES` (and RESULTS_VERSION)."""
     global _CODE_DIGEST
     if _CODE_DIGEST is None:
-        import hashlib
-        import importlib
         h = hashlib.sha256(f"results_version={RESULTS_VERSION}".encode())
         for name in NUMERIC_MODULES:
             h.update(name.encode())
@@ -109,26 +116,35 @@ class SweepSettings:
 
 
 @dataclass
-class SweepResult:
-    """Results of a sweep, row i for ``points[i]``.  ``status`` strings of SPEC §4;
+class SweepResult(Result):
+    """Results of a sweep, row i for ``points[i]``.
+
+    Per point (left out of ``to_dict()``): ``point_status`` strings of SPEC §4;
     ``max_abs`` inf where singular or no impact; ``eigenvalues`` (n, 2) complex, |.|
-    descending, NaN where undefined; ``A`` (n, 2, 2).  ``computed_chunks`` were evaluated
-    by this run, ``reused_chunks`` read back from ``out_dir``, ``corrupt_chunks`` (chunk ->
-    reason) found damaged and recomputed.  ``elapsed`` is this run's wall time, s."""
-    points: np.ndarray
-    status: np.ndarray
-    max_abs: np.ndarray
-    eigenvalues: np.ndarray
-    A: np.ndarray
+    descending, NaN where undefined; ``A`` (n, 2, 2).  ``counts`` per status.
+    ``computed_chunks`` were evaluated by this run, ``reused_chunks`` read back from
+    ``out_dir``, ``corrupt_chunks`` (chunk -> reason) found damaged and recomputed.
+    ``elapsed`` is this run's wall time, s.  ``status`` is 'complete' (every point has
+    its result; ``success``).
+    """
     counts: dict
     elapsed: float
     chunk_size: int
-    settings: dict
+    settings: dict = internal()
     out_dir: Path | None = None
     computed_chunks: list = field(default_factory=list)
     reused_chunks: list = field(default_factory=list)
     corrupt_chunks: dict = field(default_factory=dict)
     n_computed: int = 0
+    status: str = "complete"
+    message: str = ""
+    points: np.ndarray = internal(default=None)
+    point_status: np.ndarray = internal(default=None)
+    max_abs: np.ndarray = internal(default=None)
+    eigenvalues: np.ndarray = internal(default=None)
+    A: np.ndarray = internal(default=None)
+
+    SUCCESS = ("complete",)
 
     @property
     def n_points(self) -> int:
@@ -142,23 +158,26 @@ class SweepResult:
         i = int(np.flatnonzero(finite)[np.argmin(self.max_abs[finite])])
         return self.points[i].copy(), float(self.max_abs[i])
 
-    def summary(self) -> dict:
-        """The JSON summary printed by ``biped sweep --json``."""
+    def to_dict(self) -> dict:
+        """Counts, timing, storage and the best point (the JSON of ``biped sweep``)."""
         b = self.best()
-        return dict(counts=dict(self.counts), n_points=self.n_points,
-                    elapsed=round(self.elapsed, 4),
-                    out=str(self.out_dir) if self.out_dir is not None else None,
+        return dict(super().to_dict(), n_points=self.n_points,
                     best=None if b is None else dict(M1=b[0].tolist(), max_abs=b[1]),
                     computed_points=self.n_computed,
-                    reused_points=self.n_points - self.n_computed,
-                    corrupt_chunks=len(self.corrupt_chunks))
+                    reused_points=self.n_points - self.n_computed)
 
     def subset(self, rows) -> "SweepResult":
+        """The rows ``rows`` as a sweep result of their own."""
         rows = np.asarray(rows)
-        st = self.status[rows]
-        return SweepResult(self.points[rows], st, self.max_abs[rows],
-                           self.eigenvalues[rows], self.A[rows], _counts(st), self.elapsed,
-                           self.chunk_size, self.settings, self.out_dir)
+        st = self.point_status[rows]
+        return _result(self.points[rows], st, self.max_abs[rows], self.eigenvalues[rows],
+                       self.A[rows], elapsed=self.elapsed, chunk_size=self.chunk_size,
+                       settings=self.settings, out_dir=self.out_dir)
+
+
+def _result(P, st, max_abs, ev, A, **kw) -> SweepResult:
+    return SweepResult(counts=_counts(st), points=P, point_status=st, max_abs=max_abs,
+                       eigenvalues=ev, A=A, **kw)
 
 
 # ------------------------------------------------------------------ points
@@ -199,10 +218,10 @@ def _check_range(lo, hi):
     return lo, hi
 
 
-def _check_points(points) -> np.ndarray:
+def _check_points(points, m: int = 4) -> np.ndarray:
     P = np.asarray(points, dtype=float)
-    if P.ndim != 2 or P.shape[1] != 4 or P.shape[0] == 0:
-        raise ValueError(f"points must be a non-empty (n, 4) array of M1, got shape {P.shape}")
+    if P.ndim != 2 or P.shape[1] != m or P.shape[0] == 0:
+        raise ValueError(f"points must be a non-empty (n, {m}) array of M1, got shape {P.shape}")
     if not np.all(np.isfinite(P)):
         raise ValueError("points must be finite")
     return np.ascontiguousarray(P)
@@ -221,44 +240,44 @@ def gait_to_dict(gait) -> dict:
 
 
 def gait_from_dict(d: dict):
-    from biped_casadi import RobotParams, rabbit
-    from gait_opt import Gait, GaitOptions
+    """The :class:`gait_opt.Gait` of :func:`gait_to_dict`'s dictionary."""
     sol = d["solution"]
     return Gait(rabbit(RobotParams.from_dict(d["robot"])), GaitOptions.from_dict(d["options"]),
                 sol["alpha"], sol["x0"], sol["T"])
 
 
 # ------------------------------------------------------------ worker side
-_MAPS: dict = {}
-_MAPS_LOCK = threading.Lock()
+@dataclass(frozen=True)
+class SweepPayload:
+    """What a worker needs to evaluate chunks: the gait's dictionary, its digest and the
+    map settings (picklable, sent once to every process or Dask worker)."""
+    gait: dict
+    gait_sha256: str
+    map: dict
+
+    @property
+    def cache_key(self):
+        return (self.gait_sha256, digest_json(self.map))
 
 
-def _map_key(payload):
-    return payload["gait_sha256"], digest_json(payload["map"])
-
-
-def _poincare_for(payload) -> PoincareMap:
-    """The PoincareMap for a payload, built once per process (or taken from the caller)."""
-    key = _map_key(payload)
-    with _MAPS_LOCK:
-        pm = _MAPS.get(key)
-        if pm is None:
-            gait = gait_from_dict(payload["gait"])
-            opts = SweepSettings(**payload["map"]).map_options()
-            pm = _MAPS[key] = PoincareMap(gait.model, gait, **opts)
-        return pm
+@cached(maxsize=4)
+def _poincare_for(payload: SweepPayload) -> PoincareMap:
+    """The PoincareMap of a payload: built once per process (memoised by the gait's
+    digest and the options, the same key as the caller's own ``poincare_map``)."""
+    gait = gait_from_dict(payload.gait)
+    return poincare_map(gait.model, gait, **SweepSettings(**payload.map).map_options())
 
 
 def _init_worker(payload):
     _poincare_for(payload)
 
 
-def evaluate_chunk(payload: dict, points: np.ndarray) -> dict:
+def evaluate_chunk(payload: SweepPayload, points: np.ndarray) -> dict:
     """Evaluate one chunk of M1 (runs in worker processes and on Dask workers):
     dict of status (str), max_abs, eigenvalues (|.| descending), A."""
     pm = _poincare_for(payload)
     P = np.asarray(points, dtype=float)
-    if payload["map"]["method"] == "variational":
+    if payload.map["method"] == "variational":
         status, A, ev, max_abs = pm.jacobian_batch(P)
         status = np.asarray(status).astype("<U9")
         order = np.argsort(-np.abs(ev), axis=1, kind="stable")
@@ -275,79 +294,138 @@ def evaluate_chunk(payload: dict, points: np.ndarray) -> dict:
 
 
 # -------------------------------------------------------------- the sweep
+@dataclass
+class _Arrays:
+    """The sweep's result arrays, filled chunk by chunk."""
+    status: np.ndarray
+    max_abs: np.ndarray
+    ev: np.ndarray
+    A: np.ndarray
+
+    @classmethod
+    def empty(cls, n):
+        return cls(np.full(n, "", dtype="<U9"), np.full(n, np.nan),
+                   np.full((n, 2), np.nan + 0j), np.full((n, 2, 2), np.nan))
+
+    def fill(self, a, b, c):
+        self.status[a:b] = c["status"]
+        self.max_abs[a:b] = c["max_abs"]
+        self.ev[a:b] = c["eigenvalues"]
+        self.A[a:b] = c["A"]
+
+
+def _check_run_arguments(model, gait, executor, workers, chunk_size):
+    require_same_robot(model, gait)
+    if executor not in ("process", "thread"):
+        raise ValueError(f"executor must be 'process' or 'thread', got {executor!r}")
+    if workers is not None and (isinstance(workers, bool)
+                                or not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) \
+            or chunk_size < 1:
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+
+
+def _read_stored(store, bounds, P, arrays):
+    """Chunks already in the folder: (reused chunk numbers, corrupt chunk -> reason);
+    damaged or foreign files are removed."""
+    reused, corrupt = [], {}
+    files = store.chunk_files()
+    for k, a, b in bounds:
+        for path in files.pop(k, []):
+            if k in reused:             # a second copy of a chunk already read
+                store.discard(path)
+                continue
+            try:
+                c = store.read_chunk(path, k, a, P[a:b])
+            except ValueError as e:
+                corrupt[k] = str(e)
+                store.discard(path)
+                continue
+            arrays.fill(a, b, c)
+            reused.append(k)
+    for k, paths in files.items():      # numbers outside this sweep's chunks
+        corrupt[k] = "chunk number out of range"
+        for path in paths:
+            store.discard(path)
+    return reused, {k: v for k, v in corrupt.items() if k not in reused}
+
+
+def _dispatch(todo, payload, P, record, scheduler, workers, executor):
+    """Evaluate the chunks ``todo`` where the caller asked, calling ``record`` for each."""
+    if scheduler is not None:
+        _run_dask(scheduler, payload, P, todo, record)
+        return
+    if executor == "process" and workers > 1 and len(todo) > 1:
+        _run_processes(payload, P, todo, record, workers)
+        return
+    pm = _poincare_for(payload)             # shared by the threads of this process
+    if payload.map["method"] == "variational":
+        pm.variational                      # build the tables before any thread uses them
+    if workers == 1 or len(todo) == 1:
+        for k, a, b in todo:
+            record(k, a, b, evaluate_chunk(payload, P[a:b]))
+    else:
+        _run_threads(payload, P, todo, record, workers)
+
+
 def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
               workers: int | None = None, scheduler=None, progress: bool = True,
               settings: SweepSettings | dict | None = None,
               executor: str = "thread") -> SweepResult:
-    """max|lambda| and status for every M1 in ``points`` (n, 4).
+    """max|lambda| and status for every M1 in ``points``.
 
-    out_dir: folder for the results (written chunk by chunk, resumable); None keeps them
-        in memory only.
-    chunk_size: points per chunk (default 256; when resuming, the folder's own).
-    workers: local workers (default: all cores); 1 runs chunk after chunk in this
-        process (each chunk is still spread over the cores by CasADi's thread map).
-    scheduler: a Dask scheduler address ('tcp://host:port') or a
-        ``dask.distributed.Client``; the chunks then run on its workers.
-    settings: :class:`SweepSettings` (or a dict of its fields).
-    executor: 'thread' (default: workers are threads of this process sharing one
-        map) or 'process' (spawned processes, each rebuilding the map: ~1 s each to
-        start, worth it only for very large sweeps; see the module docstring).
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+    points : array_like
+        (n, nu) output matrices M1.
+    out_dir : str or Path, optional
+        Folder for the results, written chunk by chunk and resumable; None keeps them in
+        memory only.
+    chunk_size : int, optional
+        Points per chunk (default 256; when resuming, the folder's own).
+    workers : int, optional
+        Local workers (default: all cores); 1 runs chunk after chunk in this process
+        (each chunk is still spread over the cores by CasADi's thread map).
+    scheduler : str or dask.distributed.Client, optional
+        A Dask scheduler address ('tcp://host:port') or client; the chunks then run on
+        its workers.
+    progress : bool
+        A progress bar on stderr (when it is a terminal).
+    settings : SweepSettings or dict, optional
+    executor : {'thread', 'process'}
+        Threads of this process sharing one map (default), or spawned processes, each
+        rebuilding the map (~1 s each to start, worth it only for very large sweeps).
+
+    Returns
+    -------
+    SweepResult
     """
     t0 = time.perf_counter()
     settings = _settings(settings)
-    P = _check_points(points)
-    if gait.model.params != model.params:
-        raise ValueError("gait: made for other robot parameters than the model")
-    if executor not in ("process", "thread"):
-        raise ValueError(f"executor must be 'process' or 'thread', got {executor!r}")
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer))
-                                or workers < 1):
-        raise ValueError(f"workers must be a positive integer, got {workers!r}")
-    workers = int(workers) if workers else _cpu_count()
-
-    gdict = gait_to_dict(gait)
-    payload = dict(gait=gdict, gait_sha256=digest_json(gdict), map=settings.to_dict())
+    P = _check_points(points, model.nu)
     if chunk_size is None and out_dir is not None:
         chunk_size = _stored_chunk_size(out_dir)
     chunk_size = DEFAULT_CHUNK_SIZE if chunk_size is None else chunk_size
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
-        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    _check_run_arguments(model, gait, executor, workers, chunk_size)
+    workers = int(workers) if workers else _cpu_count()
     chunk_size = int(chunk_size)
+    gdict = gait_to_dict(gait)
+    payload = SweepPayload(gait=gdict, gait_sha256=digest_json(gdict), map=settings.to_dict())
     n = len(P)
     bounds = [(k, a, min(a + chunk_size, n)) for k, a in enumerate(range(0, n, chunk_size))]
     identity = dict(results_version=RESULTS_VERSION, code_sha256=code_digest(),
-                    gait_sha256=payload["gait_sha256"],
+                    gait_sha256=payload.gait_sha256,
                     robot=model.params.name, points_sha256=digest_points(P), n_points=n,
-                    chunk_size=chunk_size, map=settings.to_dict())
-
-    status = np.full(n, "", dtype="<U9")
-    max_abs = np.full(n, np.nan)
-    ev = np.full((n, 2), np.nan + 0j)
-    A = np.full((n, 2, 2), np.nan)
+                    m1_size=model.nu, chunk_size=chunk_size, map=settings.to_dict())
+    arrays = _Arrays.empty(n)
     reused, computed, corrupt = [], [], {}
-
     store = SweepStore(out_dir, identity).open() if out_dir is not None else None
     try:
         if store is not None:
-            files = store.chunk_files()
-            for k, a, b in bounds:
-                for path in files.pop(k, []):
-                    if k in reused:             # a second copy of a chunk already read
-                        store.discard(path)
-                        continue
-                    try:
-                        c = store.read_chunk(path, k, a, P[a:b])
-                    except ValueError as e:
-                        corrupt[k] = str(e)
-                        store.discard(path)
-                        continue
-                    _fill((status, max_abs, ev, A), a, b, c)
-                    reused.append(k)
-            for k, paths in files.items():      # numbers outside this sweep's chunks
-                corrupt[k] = "chunk number out of range"
-                for path in paths:
-                    store.discard(path)
-            corrupt = {k: v for k, v in corrupt.items() if k not in reused}
+            reused, corrupt = _read_stored(store, bounds, P, arrays)
         todo = [bd for bd in bounds if bd[0] not in set(reused)]
         if store is not None:
             store.log(dict(event="start", time=time.time(), pid=os.getpid(),
@@ -362,7 +440,7 @@ def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
                     "a worker runs other analysis code than this process (code_sha256 "
                     f"{str(c.get('code_sha256'))[:12]} vs {identity['code_sha256'][:12]}); "
                     "install the same version of the toolkit on every Dask worker")
-            _fill((status, max_abs, ev, A), a, b, c)
+            arrays.fill(a, b, c)
             if store is not None:
                 store.write_chunk(k, a, P[a:b], c["status"], c["max_abs"], c["A"],
                                   c["eigenvalues"])
@@ -371,17 +449,7 @@ def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
 
         try:
             if todo:
-                if scheduler is not None:
-                    _run_dask(scheduler, payload, P, todo, record)
-                elif workers == 1 or len(todo) == 1:
-                    _register_caller_map(payload, model, gait, settings)
-                    for k, a, b in todo:
-                        record(k, a, b, evaluate_chunk(payload, P[a:b]))
-                elif executor == "thread":
-                    _register_caller_map(payload, model, gait, settings)
-                    _run_threads(payload, P, todo, record, workers)
-                else:
-                    _run_processes(payload, P, todo, record, workers)
+                _dispatch(todo, payload, P, record, scheduler, workers, executor)
         finally:
             bar.close()
             if store is not None:
@@ -391,34 +459,37 @@ def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
     finally:
         if store is not None:
             store.close()
-
-    return SweepResult(P, status, max_abs, ev, A, _counts(status), time.perf_counter() - t0,
-                       chunk_size, identity, Path(out_dir) if out_dir is not None else None,
-                       computed_chunks=sorted(computed), reused_chunks=sorted(reused),
-                       corrupt_chunks=corrupt,
-                       n_computed=sum(b - a for k, a, b in bounds if k in set(computed)))
+    return _result(P, arrays.status, arrays.max_abs, arrays.ev, arrays.A,
+                   elapsed=time.perf_counter() - t0, chunk_size=chunk_size, settings=identity,
+                   out_dir=Path(out_dir) if out_dir is not None else None,
+                   computed_chunks=sorted(computed), reused_chunks=sorted(reused),
+                   corrupt_chunks=corrupt,
+                   n_computed=sum(b - a for k, a, b in bounds if k in set(computed)))
 
 
 def load_sweep(out_dir) -> SweepResult:
-    """Read a finished sweep folder back (without the gait): raises ValueError when it is
-    incomplete or damaged."""
-    import json
-    from .storage import META
+    """Read a finished sweep folder back (without the gait).
+
+    Raises
+    ------
+    ValueError
+        When the folder is not a sweep folder, or is incomplete or damaged.
+    """
+    import pyarrow.parquet as pq
     root = Path(out_dir)
     try:
         identity = json.loads((root / META).read_text())["settings"]
-    except (OSError, ValueError, KeyError) as e:
+        n, cs, nm = identity["n_points"], identity["chunk_size"], identity["m1_size"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
         raise ValueError(f"out_dir: {root} is not a readable sweep folder ({e})") from None
-    n, cs = identity["n_points"], identity["chunk_size"]
     store = SweepStore(root, identity)
     files = store.chunk_files()
     cols = []
-    import pyarrow.parquet as pq
     for k, a in enumerate(range(0, n, cs)):
         for path in files.get(k, []):
             try:
-                t = pq.read_table(path, columns=[f"M1_{j + 1}" for j in range(4)])
-                pts = np.stack([t.column(j).to_numpy() for j in range(4)], axis=1)
+                t = pq.read_table(path, columns=[f"M1_{j + 1}" for j in range(nm)])
+                pts = np.stack([t.column(j).to_numpy() for j in range(nm)], axis=1)
                 cols.append((pts, store.read_chunk(path, k, a, pts)))
                 break
             except Exception:       # noqa: BLE001 - damaged: try another copy, or fail
@@ -428,10 +499,10 @@ def load_sweep(out_dir) -> SweepResult:
                              f"damaged); rerun the sweep to finish it")
     P = np.concatenate([p for p, _ in cols])
     st = np.concatenate([c["status"] for _, c in cols]).astype("<U9")
-    return SweepResult(P, st, np.concatenate([c["max_abs"] for _, c in cols]),
-                       np.concatenate([c["eigenvalues"] for _, c in cols]),
-                       np.concatenate([c["A"] for _, c in cols]), _counts(st), 0.0, cs,
-                       identity, root, reused_chunks=list(range(len(cols))))
+    return _result(P, st, np.concatenate([c["max_abs"] for _, c in cols]),
+                   np.concatenate([c["eigenvalues"] for _, c in cols]),
+                   np.concatenate([c["A"] for _, c in cols]), elapsed=0.0, chunk_size=cs,
+                   settings=identity, out_dir=root, reused_chunks=list(range(len(cols))))
 
 
 def _settings(s) -> SweepSettings:
@@ -448,8 +519,6 @@ def _settings(s) -> SweepSettings:
 
 
 def _stored_chunk_size(out_dir):
-    import json
-    from .storage import META
     try:
         return int(json.loads((Path(out_dir) / META).read_text())["settings"]["chunk_size"])
     except (OSError, ValueError, KeyError, TypeError):
@@ -463,31 +532,11 @@ def _cpu_count() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _fill(arrays, a, b, c):
-    status, max_abs, ev, A = arrays
-    status[a:b] = c["status"]
-    max_abs[a:b] = c["max_abs"]
-    ev[a:b] = c["eigenvalues"]
-    A[a:b] = c["A"]
-
-
 def _progress_bar(progress, total, initial):
     from tqdm.auto import tqdm
     enabled = bool(progress) and sys.stderr.isatty()
     return tqdm(total=total, initial=initial, unit="M1", desc="sweep", disable=not enabled,
                 file=sys.stderr, dynamic_ncols=True)
-
-
-def _register_caller_map(payload, model, gait, settings):
-    """In-process runs use the caller's gait object directly (no rebuild from the dict)."""
-    key = _map_key(payload)
-    with _MAPS_LOCK:
-        if key not in _MAPS:
-            from .poincare import poincare_map
-            _MAPS[key] = poincare_map(model, gait, **settings.map_options())
-    pm = _MAPS[key]
-    if settings.method == "variational":
-        pm.variational      # build the tables before any thread uses them
 
 
 def _run_threads(payload, P, todo, record, workers):
@@ -545,7 +594,7 @@ def _run_dask(scheduler, payload, P, todo, record):
         futs = {}
         for k, a, b in todo:
             f = client.submit(evaluate_chunk, pf, P[a:b], pure=False,
-                              key=f"sweep-{payload['gait_sha256'][:8]}-{k}-{os.getpid()}-"
+                              key=f"sweep-{payload.gait_sha256[:8]}-{k}-{os.getpid()}-"
                                   f"{time.monotonic_ns()}")
             futs[f] = (k, a, b)
         try:
@@ -583,49 +632,3 @@ def one_d_sweeps(model, gait, values, out_dir=None, **kw) -> OneDSweeps:
     ends = np.cumsum([0] + [len(v) for v in vals])
     parts = [r.subset(np.arange(ends[j], ends[j + 1])) for j in range(4)]
     return OneDSweeps(vals, parts, singular_m1_values(model, gait), r)
-
-
-def plot_fig2(results, singular_values, path) -> list[Path]:
-    """Fig. 2: four panels of max|lambda| against M1(j), log scale, stable points red,
-    the singular values of eq. (24) as vertical dashed lines (where inside the range).
-    ``results``: :class:`OneDSweeps` or four :class:`SweepResult`.  Writes ``path`` with
-    suffix .png and .pdf; returns both paths."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    if isinstance(results, OneDSweeps):
-        results = results.results
-    if len(results) != 4:
-        raise ValueError(f"results must hold the four 1-D sweeps, got {len(results)}")
-    sv = np.asarray(singular_values, dtype=float).ravel()
-    base = Path(path)
-    base = base.with_suffix("") if base.suffix.lower() in (".png", ".pdf") else base
-    base.parent.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(2, 2, figsize=(9, 6.5), constrained_layout=True)
-    for j, (ax, r) in enumerate(zip(axes.ravel(), results)):
-        x = r.points[:, j]
-        fin = np.isfinite(r.max_abs)
-        st = r.status == "stable"
-        ax.semilogy(x[fin & ~st], r.max_abs[fin & ~st], ".", ms=3, color="0.25",
-                    label="unstable")
-        ax.semilogy(x[st], r.max_abs[st], ".", ms=5, color="red",
-                    label="stable, max|λ| < 1")
-        sing = r.status == "singular"
-        if sing.any():
-            ax.plot(x[sing], np.full(sing.sum(), 1.0), "|", color="tab:blue", ms=6,
-                    transform=ax.get_xaxis_transform(), clip_on=False,
-                    label="singular controller")
-        ax.axhline(1.0, color="0.5", lw=0.8, ls=":")
-        if x.min() <= sv[j] <= x.max():
-            ax.axvline(sv[j], color="tab:blue", lw=1, ls="--",
-                       label=f"eq. (24): {sv[j]:.4g}")
-        ax.set_xlabel(f"$M_1({j + 1})$")
-        ax.set_ylabel(r"max $|\lambda_{1,2}|$")
-        ax.legend(fontsize=7, loc="best")
-        ax.grid(True, which="major", alpha=0.3)
-    fig.suptitle("max|λ| of $A^z$ against one component of $M_1$, the others zero")
-    out = [base.with_suffix(".png"), base.with_suffix(".pdf")]
-    fig.savefig(out[0], dpi=150)
-    fig.savefig(out[1])
-    plt.close(fig)
-    return out

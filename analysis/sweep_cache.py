@@ -8,36 +8,39 @@ import shutil
 
 import numpy as np
 
+from biped_casadi.caching import cache_dir, cached
+
 from .storage import SweepStoreError, digest_json
-from .sweep import gait_to_dict, grid_points, run_sweep
+from .sweep import SweepResult, gait_to_dict, grid_points, run_sweep
 
-_MEMO: dict = {}
+__all__ = ["grid_results", "grid_best"]
 
 
+@cached(maxsize=4)
 def grid_results(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
-                 cache_dir=None, progress: bool = False):
-    """(points, status, max_abs) of the n^4 grid."""
-    key = (id(gait), n, lo, hi)
-    if key in _MEMO and _MEMO[key][0] is gait:
-        return _MEMO[key][1]
-    from gait_opt.cache import cache_dir as _cache_dir
-    folder = _cache_dir(cache_dir) / "sweeps" / f"{digest_json(gait_to_dict(gait))[:16]}_grid{n}_{lo:g}_{hi:g}"
+                 folder=None, progress: bool = False) -> SweepResult:
+    """The sweep of the n^4 grid on [lo, hi]^4 (memoised; stored under ``folder``, by
+    default the cache folder).
+
+    Returns
+    -------
+    SweepResult
+    """
+    folder = cache_dir(folder) / "sweeps" / (f"{digest_json(gait_to_dict(gait))[:16]}"
+                                             f"_grid{n}_{lo:g}_{hi:g}")
     P = grid_points(n, lo, hi)
     try:
-        r = run_sweep(model, gait, P, out_dir=folder, progress=progress)
+        return run_sweep(model, gait, P, out_dir=folder, progress=progress)
     except SweepStoreError:           # other settings or other code: recompute
         shutil.rmtree(folder, ignore_errors=True)
-        r = run_sweep(model, gait, P, out_dir=folder, progress=progress)
-    res = (r.points, r.status, r.max_abs)
-    _MEMO[key] = (gait, res)
-    return res
+        return run_sweep(model, gait, P, out_dir=folder, progress=progress)
 
 
 def grid_best(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0) -> dict:
     """The best stable point of the grid: {"M1": [...], "max_abs": x} (None if none)."""
-    P, st, mx = grid_results(model, gait, n, lo, hi)
-    stable = np.flatnonzero(st == "stable")
+    r = grid_results(model, gait, n, lo, hi)
+    stable = np.flatnonzero(r.point_status == "stable")
     if not stable.size:
         return dict(M1=None, max_abs=None)
-    i = stable[np.argmin(mx[stable])]
-    return dict(M1=P[i].tolist(), max_abs=float(mx[i]))
+    i = stable[np.argmin(r.max_abs[stable])]
+    return dict(M1=r.points[i].tolist(), max_abs=float(r.max_abs[i]))

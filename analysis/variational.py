@@ -25,9 +25,11 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from biped_casadi.correction import v_correction
+from biped_casadi.caching import cached
+from biped_casadi.numerics import rk4_step
+from biped_casadi.output_law import correction, decoupling_denominator, outputs
 
-__all__ = ["VariationalJacobian"]
+__all__ = ["VariationalJacobian", "variational_jacobian"]
 
 
 def _rk4_times(t0, t1, n):
@@ -37,11 +39,25 @@ def _rk4_times(t0, t1, n):
 
 
 class VariationalJacobian:
-    """Precomputes the M1-independent coefficient tables once per gait."""
+    """Precomputes the M1-independent coefficient tables once per gait.
 
-    def __init__(self, model, gait, tau_s: float, n_pre: int, n_post: int):
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+    tau_s : float
+        Section time (0.75 T).
+    n_pre, n_post : int
+        RK4 steps before and after the impact (as the full map).
+    rejoin : float
+        Rejoin time of v_c as a fraction of T.
+    """
+
+    def __init__(self, model, gait, tau_s: float, n_pre: int, n_post: int,
+                 rejoin: float = 0.5):
         self.model, self.gait = model, gait
         self.T = T = gait.T
+        self.t_c = rejoin * T
         self.n_pre, self.n_post = n_pre, n_post
         q, dq = model.q_sym, model.dq_sym
         D, H = model.D_expr, model.H_expr
@@ -55,7 +71,7 @@ class VariationalJacobian:
         self.post = self._table(self.t_post, with_vc=True)
 
         # impact: gradient of the guard, strike speed, linearised impact map at T
-        qT, dqT, ddqT = gait._eval(np.array([T]))
+        qT, dqT, ddqT = gait.evaluate(np.array([T]))
         qT, dqT, ddqT = qT[:, 0], dqT[:, 0], ddqT[:, 0]
         zsw = model.swing_foot(q)[1]
         self.grad_z = np.array(ca.Function("gz", [q], [ca.gradient(zsw, q)])(qT)).ravel()
@@ -69,18 +85,17 @@ class VariationalJacobian:
     def _table(self, times, with_vc=False):
         g = self.gait
         t = times.ravel()
-        q, dq, ddq = g._eval(t)
-        n = t.size
+        q, dq, ddq = g.evaluate(t)
+        n, nq = t.size, self.model.nq
         D11, D12, gD11, GD12, gH1q, gH1dq = (np.array(v) for v in self._coeffs.map(n)(q, dq))
         D11 = D11.ravel()
-        GD12 = GD12.reshape(4, 5, n, order="F")               # dD12_i/dq_j
+        GD12 = GD12.reshape(nq - 1, nq, n, order="F")        # dD12_i/dq_j
         ddr, ddqa = ddq[0], ddq[1:]
         w = -np.einsum("in,ijn->jn", ddqa, GD12) - gH1q - ddr * gD11      # 5 x n
         tab = dict(D11=D11, D12=D12, w0=w[0], wa=w[1:], h0=gH1dq[0], ha=gH1dq[1:])
         if with_vc:
-            T = self.T
-            a = v_correction(t, 1.0, 0.0, T)      # v_c = a y_i + b dy_i (per component)
-            b = v_correction(t, 0.0, 1.0, T)
+            a = correction(t, 1.0, 0.0, self.t_c)   # v_c = a y_i + b dy_i (per component)
+            b = correction(t, 0.0, 1.0, self.t_c)
             tab.update(a=np.stack(a), b=np.stack(b))
         return tab          # every entry (..., 3K): stage-major (t, mid, end) per step
 
@@ -89,12 +104,13 @@ class VariationalJacobian:
         over one segment; symbolic in M1 (SX)."""
         K = tab["D11"].size // 3
         D11 = ca.DM(tab["D11"].reshape(-1))                       # (3K,) stage-major
-        den = D11 - ca.mtimes(ca.DM(tab["D12"].reshape(4, -1)).T, M1)
-        Jq = (ca.DM(tab["w0"].reshape(-1)) - ca.mtimes(ca.DM(tab["wa"].reshape(4, -1)).T, M1)) / den
-        Jdq = (-ca.DM(tab["h0"].reshape(-1)) + ca.mtimes(ca.DM(tab["ha"].reshape(4, -1)).T, M1)) / den
+        nu = self.model.nu
+        den = decoupling_denominator(D11, ca.DM(tab["D12"].reshape(nu, -1)).T, M1)   # eq. (24)
+        Jq = (ca.DM(tab["w0"].reshape(-1)) - ca.mtimes(ca.DM(tab["wa"].reshape(nu, -1)).T, M1)) / den
+        Jdq = (-ca.DM(tab["h0"].reshape(-1)) + ca.mtimes(ca.DM(tab["ha"].reshape(nu, -1)).T, M1)) / den
         if forcing:
             # v_c = a(t) y_i + b(t) dy_i per component: forcing columns 2..5 (y_i), 6..9 (dy_i)
-            wa, ha, D12 = (tab[k].reshape(4, -1) for k in ("wa", "ha", "D12"))
+            wa, ha, D12 = (tab[k].reshape(nu, -1) for k in ("wa", "ha", "D12"))
             a, b = tab["a"].reshape(3, -1), tab["b"].reshape(3, -1)
             Fy = (wa * a[0] - ha * a[1] - D12 * a[2])              # 4 x 3K (numbers)
             Fdy = (wa * b[0] - ha * b[1] - D12 * b[2])
@@ -106,41 +122,55 @@ class VariationalJacobian:
                                      ca.DM(Fdy[:, i]).T) / den[i]
             return ca.vertcat(S[1, :], d1)
 
+        stage = {0.0: 0, 0.5: 1, 1.0: 2}          # table column of each RK4 stage
         for k in range(K):
-            i0, im, i1 = 3 * k, 3 * k + 1, 3 * k + 2
-            k1 = rhs(S, i0)
-            k2 = rhs(S + h / 2 * k1, im)
-            k3 = rhs(S + h / 2 * k2, im)
-            k4 = rhs(S + h * k3, i1)
-            S = S + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            S = rk4_step(lambda Sv, c: rhs(Sv, 3 * k + stage[c]), S, h)
         return S
 
     def _build(self):
-        M1 = ca.SX.sym("M1", 4)
+        M1 = ca.SX.sym("M1", self.model.nu)
         P = self._segment(self.pre, self.h_pre, M1, ca.SX.eye(2), forcing=False)
         MT = ca.vertcat(1, -M1)
         dtau = -ca.dot(MT, ca.DM(self.grad_z)) * P[0, :] / self.zdot            # 1 x 2
         dq_m = ca.mtimes(MT, P[0, :]) + ca.mtimes(ca.DM(self.dqT), dtau)       # 5 x 2
         ddq_m = ca.mtimes(MT, P[1, :]) + ca.mtimes(ca.DM(self.ddqT), dtau)
         plus = ca.mtimes(ca.DM(self.J_impact), ca.vertcat(dq_m, ddq_m))       # 10 x 2
-        dqp, ddqp = plus[:5, :], plus[5:, :]
-        dy = dqp[1:, :] + ca.mtimes(M1, dqp[0, :])
-        ddy = ddqp[1:, :] + ca.mtimes(M1, ddqp[0, :])
+        nq = self.model.nq
+        dqp, ddqp = plus[:nq, :], plus[nq:, :]
+        dy = outputs(M1, dqp)                     # eq. (5), both columns
+        ddy = outputs(M1, ddqp)
         W = ca.vertcat(dqp[0, :], ddqp[0, :], dy, ddy)                         # 10 x 2
-        S0 = ca.horzcat(ca.SX.eye(2), ca.SX.zeros(2, 8))
+        S0 = ca.horzcat(ca.SX.eye(2), ca.SX.zeros(2, 2 * self.model.nu))
         S = self._segment(self.post, self.h_post, M1, S0, forcing=True)
         A = ca.mtimes(S, W)
         self.A_fn = ca.Function("A_z", [M1], [A], ["M1"], ["A"])
         tr = A[0, 0] + A[1, 1]
         det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
         self.trace_det = ca.Function("trace_det", [M1], [tr, det], ["M1"], ["trace", "det"])
-        self._maps = {}
+
+    @property
+    def cache_key(self):
+        """What the tables depend on."""
+        return (self.gait.cache_key, self.n_pre, self.n_post, self.t_c)
+
+    def jacobian(self, M1) -> np.ndarray:
+        """A^z (2, 2) for one non-singular M1."""
+        return np.array(self.A_fn(np.asarray(M1, dtype=float)))
+
+    @cached(maxsize=8)
+    def _mapped(self, n: int, threads: int) -> ca.Function:
+        return self.A_fn.map(n, "thread", threads)
 
     def jacobians(self, M1s: np.ndarray, threads: int = 2) -> np.ndarray:
-        """A^z (n, 2, 2) for an (n, 4) array of non-singular M1."""
+        """A^z (n, 2, 2) for an (n, nu) array of non-singular M1."""
         M1s = np.asarray(M1s, dtype=float)
         n = len(M1s)
-        if n not in self._maps:
-            self._maps[n] = self.A_fn.map(n, "thread", threads)
-        A = np.array(self._maps[n](M1s.T))                  # 2 x 2n
+        A = np.array(self._mapped(n, threads)(M1s.T))            # 2 x 2n
         return A.reshape(2, n, 2).transpose(1, 0, 2)
+
+
+@cached(maxsize=8)
+def variational_jacobian(model, gait, tau_s: float, n_pre: int, n_post: int,
+                         rejoin: float = 0.5) -> VariationalJacobian:
+    """The :class:`VariationalJacobian` of a gait and discretisation (memoised)."""
+    return VariationalJacobian(model, gait, tau_s, n_pre, n_post, rejoin)

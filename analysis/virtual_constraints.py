@@ -33,15 +33,20 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from biped_casadi import require_same_robot
+from biped_casadi.caching import cached
 from biped_casadi.controllers import HIP_PHASE, VirtualConstraints, fit_virtual_constraints
+from biped_casadi.numerics import rk4_step
+from biped_casadi.output_law import SECTION
+from biped_casadi.results import Result
 
-__all__ = ["VCEigenResult", "VirtualConstraintMap", "vc_eigenvalue"]
+__all__ = ["VCEigenResult", "VirtualConstraintMap", "vc_eigenvalue", "vc_map"]
 
 
 @dataclass
-class VCEigenResult:
+class VCEigenResult(Result):
     """The HZD restricted Poincaré map of a virtual-constraint controller at its fixed
-    point.
+    point.  ``success`` means the eigenvalue was computed (stable or unstable).
 
     eigenvalue: dP/dw at the fixed point (AD); status 'stable' | 'unstable' |
     'singular' | 'no_impact'; w_star: dtheta at the section on the HZD orbit; x_star:
@@ -64,6 +69,8 @@ class VCEigenResult:
     constraints: dict = field(default_factory=dict)
     message: str = ""
 
+    SUCCESS = ("stable", "unstable")
+
     @property
     def max_abs(self) -> float:
         return abs(self.eigenvalue)
@@ -73,16 +80,9 @@ class VCEigenResult:
         return np.array([self.eigenvalue])
 
     def to_dict(self) -> dict:
-        return dict(controller="vc", eigenvalue=self.eigenvalue,
-                    eigenvalues=[[self.eigenvalue, 0.0]], max_abs=self.max_abs,
-                    status=self.status, theta_section=self.theta_section,
-                    theta_plus=self.theta_plus, theta_minus=self.theta_minus,
-                    w_star=self.w_star, x_star=self.x_star.tolist(),
-                    reference_x=self.reference_x.tolist(), orbit_mismatch=self.orbit_mismatch,
-                    fixed_point_residual=self.fixed_point_residual,
-                    delta_zero_squared=self.delta_zero_squared,
-                    min_denominator=self.min_denominator, constraints=self.constraints,
-                    message=self.message)
+        """The fields, plus controller 'vc', max_abs and eigenvalues as [re, im] pairs."""
+        return dict(super().to_dict(), controller="vc", max_abs=self.max_abs,
+                    eigenvalues=[[self.eigenvalue, 0.0]])
 
 
 class VirtualConstraintMap:
@@ -93,8 +93,7 @@ class VirtualConstraintMap:
     """
 
     def __init__(self, model, gait, constraints: VirtualConstraints, n_steps: int = 1000):
-        if gait.model.params != model.params:
-            raise ValueError("gait was made for other robot parameters than the model")
+        require_same_robot(model, gait)
         if not isinstance(constraints, VirtualConstraints):
             raise ValueError("constraints must be a VirtualConstraints")
         if not isinstance(n_steps, int) or n_steps < 20:
@@ -103,8 +102,8 @@ class VirtualConstraintMap:
         self.n_steps = n_steps
         self.T = gait.T
         c = constraints.c
-        self.theta_s = float(c @ gait.q(0.75 * self.T))
-        self.reference_x = gait.state_at(0.75 * self.T)
+        self.theta_s = float(c @ gait.q(SECTION * self.T))
+        self.reference_x = gait.state_at(SECTION * self.T)
         self._build_curve()
         self._find_impact()
         self._build_map()
@@ -130,11 +129,8 @@ class VirtualConstraintMap:
         self.foot = ca.Function("hzd_foot", [th], [xs, zs, dzs], ["theta"], ["x_sw", "z_sw", "dz_dtheta"])
         hs = ca.SX.sym("h")
         f = self.zero_dynamics
-        k1 = f(th, w)
-        k2 = f(th + hs / 2, w + hs / 2 * k1)
-        k3 = f(th + hs / 2, w + hs / 2 * k2)
-        k4 = f(th + hs, w + hs * k3)
-        self.rk4 = ca.Function("hzd_rk4", [w, th, hs], [w + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4), th + hs],
+        w_next = rk4_step(lambda wv, c: f(th + c * hs, wv), w, hs)
+        self.rk4 = ca.Function("hzd_rk4", [w, th, hs], [w_next, th + hs],
                                ["w", "theta", "h"], ["w_next", "theta_next"])
 
     def _find_impact(self):
@@ -192,8 +188,7 @@ class VirtualConstraintMap:
     def analyse(self) -> VCEigenResult:
         """Fixed point by Newton's method on P(w) - w, eigenvalue dP/dw there (AD)."""
         m, vc = self.model, self.vc
-        qs = self.gait.q(0.75 * self.T)
-        dqs = self.gait.dq(0.75 * self.T)
+        dqs = self.gait.dq(SECTION * self.T)
         w = float(vc.c @ dqs)
         status, message, min_den = self._checks()
         nan = math.nan
@@ -229,22 +224,37 @@ class VirtualConstraintMap:
                              **common)
 
 
-_MAPS: dict = {}
+@cached(maxsize=8)
+def vc_map(model, gait, phase=HIP_PHASE, H0=None, n_steps: int = 1000) -> VirtualConstraintMap:
+    """The :class:`VirtualConstraintMap` of constraints fitted to ``gait`` with phase
+    variable theta = ``phase`` q and outputs H0 q - h_d(theta), built once (memoised by
+    the gait's digest and the arguments)."""
+    constraints = fit_virtual_constraints(gait, c=phase, H0=H0)
+    return VirtualConstraintMap(model, gait, constraints, n_steps)
 
 
 def vc_eigenvalue(model, gait, constraints: VirtualConstraints | None = None,
                   phase=HIP_PHASE, H0=None, n_steps: int = 1000) -> VCEigenResult:
-    """Eigenvalue of the 1-D restricted Poincaré map of the virtual-constraint controller
-    fitted to ``gait`` (``constraints``, or fitted here with phase variable theta =
-    ``phase`` q and outputs H0 q - h_d(theta)).  Maps are cached per constraints."""
+    """Eigenvalue of the 1-D restricted Poincaré map of the virtual-constraint controller.
+
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+    constraints : VirtualConstraints, optional
+        Given constraints; otherwise fitted to ``gait`` with phase variable
+        theta = ``phase`` q and outputs H0 q - h_d(theta).
+    phase, H0 : array_like
+        See :func:`biped_casadi.fit_virtual_constraints`.
+    n_steps : int
+        RK4 steps in theta over one step.
+
+    Returns
+    -------
+    VCEigenResult
+    """
     if constraints is None:
-        key = (id(gait), tuple(np.asarray(phase, float).ravel()),
-               None if H0 is None else tuple(np.asarray(H0, float).ravel()), n_steps)
-        hit = _MAPS.get(key)
-        if hit is not None and hit[0] is gait:
-            return hit[1].analyse()
-        constraints = fit_virtual_constraints(gait, c=phase, H0=H0)
-        vmap = VirtualConstraintMap(model, gait, constraints, n_steps)
-        _MAPS[key] = (gait, vmap)
-        return vmap.analyse()
+        phase = tuple(np.asarray(phase, float).ravel())
+        H0 = None if H0 is None else tuple(map(tuple, np.asarray(H0, float)))
+        return vc_map(model, gait, phase, H0, n_steps).analyse()
     return VirtualConstraintMap(model, gait, constraints, n_steps).analyse()

@@ -144,7 +144,8 @@ def collocation_polynomial(opts, Xs, Xc, s):
 def transcriptions():
     from biped_casadi import rabbit
     from gait_opt import Gait, GaitOptions
-    from gait_opt.optimize import _polish, solve_collocation
+    from gait_opt.optimize import solve_collocation
+    from gait_opt.polish import polish
 
     m = rabbit()
     configs = [("legendre", 3, 30), ("legendre", 3, 20), ("legendre", 3, 15),
@@ -159,7 +160,7 @@ def transcriptions():
         s = np.linspace(0.0, 1.0, 4001)
         err = np.max(np.abs(collocation_polynomial(opts, r.Xs, r.Xc, s) - exact.q(s * r.T)[0]))
         t1 = time.perf_counter()
-        a, x0, T, _ = _polish(m, opts, r.alpha, r.Xs[:, 0], r.T)
+        a, x0, T, _ = polish(m, opts, r.alpha, r.Xs[:, 0], r.T)
         t_polish = time.perf_counter() - t1
         change = np.max(np.abs(np.r_[(a - r.alpha).ravel(), x0 - r.Xs[:, 0], T - r.T]))
         g = Gait(m, opts, a, x0, T)

@@ -19,18 +19,14 @@ import casadi as ca
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from biped_casadi.controllers import TimeVaryingController, VirtualConstraintController
-from biped_casadi.simulate import SimulationOptions, Simulator, perturbed_initial_state
+from analysis import PoincareMap
+from biped_casadi import (SimulationOptions, Simulator, TimeVaryingController,
+                          VirtualConstraintController, perturbed_initial_state)
+from gait_opt import Gait, default_gait
 
 
 def load_gait(path):
-    import gait_opt
-    if path:
-        return gait_opt.Gait.load(path)
-    if hasattr(gait_opt, "default_gait"):
-        return gait_opt.default_gait()
-    from biped_casadi import rabbit
-    return gait_opt.optimize_gait(rabbit())
+    return Gait.load(path) if path else default_gait()
 
 
 def scipy_baseline(ctrl, q0, dq0, steps):
@@ -69,7 +65,6 @@ def scipy_baseline(ctrl, q0, dq0, steps):
 
 
 def best_stable_m1(model, gait):
-    from analysis import PoincareMap
     v = np.linspace(-10, 10, 5)
     pts = np.array(np.meshgrid(v, v, v, v, indexing="ij")).reshape(4, -1).T
     status, _, _, mx = PoincareMap(model, gait).jacobian_batch(pts)

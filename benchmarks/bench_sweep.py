@@ -3,15 +3,16 @@ side on the same points (issue 4, part 6).
 
     python benchmarks/bench_sweep.py [--gait FILE] [--points 20] [--skip-grid]
 
-(a) time per M1 after the one-time build, for both paths of analysis.poincare:
-    ``PoincareMap.analyse`` (full AD through the discrete map, one M1 at a time) and
-    ``PoincareMap.jacobian_batch`` (variational equation, one SX Function mapped over
-    threads);
+(a) time per M1 after the one-time build, for the paths of analysis.poincare: the public
+    call ``poincare_eigenvalues(m, g, M1)`` (variational equation by default, one M1 at
+    a time; target >= 500x the SciPy baseline of (c)), ``method='ad'`` (full AD through
+    the discrete map) and ``PoincareMap.jacobian_batch`` (variational equation, one SX
+    Function mapped over threads);
 (b) the whole 9^4 grid through ``biped sweep`` in a fresh process (imports, gait load,
     map build, sweep, Parquet output: everything), with the local executors compared;
     target < 30 s on 2 cores;
 (c) the same N random non-singular M1 of the grid through the SciPy baseline
-    (benchmarks/scipy_poincare.py: solve_ivp DOP853 rtol = atol = 1e-12 with event
+    (tests/scipy_poincare.py, the finite-difference twin of the tests: solve_ivp DOP853 rtol = atol = 1e-12 with event
     location, central differences h = 1e-4) and through both our paths: time per point,
     ratio to the baseline (target >= 50x) and the eigenvalue error of each against two
     tight references: (R1) the AD map on a 4x finer RK4 grid (n_pre 320, n_post 960;
@@ -33,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT / "tests"))      # the SciPy twin of the Poincare map
 
 
 def machine_info() -> dict:
@@ -52,14 +53,8 @@ def machine_info() -> dict:
 
 
 def load_gait(path):
-    from gait_opt import Gait
-    if path:
-        return Gait.load(path)
-    import gait_opt
-    if hasattr(gait_opt, "default_gait"):
-        return gait_opt.default_gait()
-    from biped_casadi import rabbit
-    return gait_opt.optimize_gait(rabbit())
+    from gait_opt import Gait, default_gait
+    return Gait.load(path) if path else default_gait()
 
 
 def match_eigs(ev, ref):
@@ -100,7 +95,7 @@ def main(argv=None):
     print(f"machine: {info['cpu']}, nproc {info['nproc']} (affinity {info['affinity']}); "
           f"python {info['python']}, numpy {info['numpy']}, casadi {info['casadi']}; "
           f"load average at start {info['load'][0]:.2f}")
-    from analysis.poincare import PoincareMap
+    from analysis.poincare import PoincareMap, poincare_eigenvalues
     from analysis.sweep import grid_points
     from scipy_poincare import ScipyPoincare
 
@@ -120,8 +115,14 @@ def main(argv=None):
     ok = np.flatnonzero(status != "singular")
     pts = grid[rng.choice(ok, size=args.points, replace=False)]
 
-    pm.analyse(pts[0])                                       # warm
-    ad, t_ad = per_point(pm.analyse, pts)
+    pm.analyse(pts[0], method="ad")                          # warm
+    ad, t_ad = per_point(lambda m: pm.analyse(m, method="ad"), pts)
+    poincare_eigenvalues(model, gait, pts[0])                # one-time build of the public map
+    reps = 20
+    t = time.perf_counter()
+    for _ in range(reps):
+        pub = [poincare_eigenvalues(model, gait, m) for m in pts]
+    t_pub = (time.perf_counter() - t) / (reps * len(pts))
     reps = 5
     t = time.perf_counter()
     for _ in range(reps):
@@ -133,6 +134,7 @@ def main(argv=None):
     print("\n(a) one-time build and time per M1 after it")
     print(f"  PoincareMap build (AD map)             {t_build_ad:8.3f} s")
     print(f"  variational Function build (first use) {t_build_var:8.3f} s")
+    print(f"  poincare_eigenvalues (public, default) {t_pub * 1e3:10.4f} ms / M1")
     print(f"  analyse (full AD), one M1 at a time    {t_ad * 1e3:10.2f} ms / M1")
     print(f"  jacobian_batch, batch of {len(pts):3d}           {t_var_small * 1e3:10.4f} ms / M1")
     print(f"  jacobian_batch, whole 9^4 grid         {t_var_grid * 1e3:10.4f} ms / M1  "
@@ -151,7 +153,7 @@ def main(argv=None):
                  ("2 processes", ["--workers", "2", "--processes"])]
         for name, extra in modes:
             out = gait_path.parent / f"grid_{len(grid_rows)}"
-            cmd = [sys.executable, "-m", "biped_casadi", "sweep", "--gait", str(gait_path),
+            cmd = [sys.executable, "-m", "analysis.cli", "sweep", "--gait", str(gait_path),
                    "--grid", "9", "--range", "-10", "10", "--out", str(out), "--json",
                    "--no-progress"] + extra
             t = time.perf_counter()
@@ -182,7 +184,7 @@ def main(argv=None):
     t = time.perf_counter()
     fine = PoincareMap(model, gait, n_pre=320, n_post=960)
     t_fine_build = time.perf_counter() - t
-    fine_r = [fine.analyse(m) for m in pts]
+    fine_r = [fine.analyse(m, method="ad") for m in pts]
 
     R1 = [r.eigenvalues for r in fine_r]
     R1A = [r.A for r in fine_r]
@@ -192,6 +194,7 @@ def main(argv=None):
     t_adb = (time.perf_counter() - t) / len(pts)
     ours = {
         "SciPy baseline (FD h=1e-4)": (sp_A, t_sp),
+        "poincare_eigenvalues (public)": ([r.A for r in pub], t_pub),
         "analyse (full AD)": ([r.A for r in ad], t_ad),
         "analyse_batch (full AD, threads)": ([r.A for r in adb], t_adb),
         "jacobian_batch (variational)": ([vb[1][i] for i in range(len(pts))], t_var_small),
@@ -223,6 +226,10 @@ def main(argv=None):
     print(f"  variational sweep path vs baseline: {v['ratio']:.0f}x faster, eigenvalue error "
           f"{v['err_R1']:.1e} vs {b['err_R1']:.1e} (max vs R1); target >= 50x at equal or "
           f"better accuracy: {'met' if v['ratio'] >= 50 and v['err_R1'] <= b['err_R1'] else 'MISSED'}")
+    p = summary["poincare_eigenvalues (public)"]
+    print(f"  public call poincare_eigenvalues vs baseline: {p['ratio']:.0f}x faster, eigenvalue "
+          f"error {p['err_R1']:.1e} (max vs R1); target >= 500x: "
+          f"{'met' if p['ratio'] >= 500 else 'MISSED'}")
     for k in ("analyse (full AD)", "analyse_batch (full AD, threads)"):
         a = summary[k]
         print(f"  {k} vs baseline: {a['ratio']:.1f}x faster, eigenvalue error "

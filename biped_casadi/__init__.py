@@ -1,7 +1,28 @@
-"""Symbolic dynamics and controllers for underactuated planar bipeds (CasADi)."""
-from .params import RABBIT, RobotParams, load_params
-from .model import B_INPUT, E_RELABEL, BipedModel, rabbit
+"""The robot and its control: symbolic dynamics (CasADi), the time-varying output law of
+Wang & Chevallereau, the controllers and the full-order hybrid simulator.
 
-__all__ = ["rabbit", "BipedModel", "RobotParams", "RABBIT", "load_params",
-           "E_RELABEL", "B_INPUT"]
+This is the bottom layer of the toolkit: it imports nothing from :mod:`gait_opt` or
+:mod:`analysis`.  Controllers and the simulator are written against the reference
+interface :class:`~biped_casadi.reference.Reference`, which :class:`gait_opt.Gait`
+implements.
+"""
+from .caching import cache_dir, cached
+from .controllers import (HIP_PHASE, PAPER_REJOIN, TimeVaryingController,
+                          VirtualConstraintController, VirtualConstraints,
+                          fit_virtual_constraints)
+from .model import B_INPUT, E_RELABEL, BipedModel, rabbit
+from .output_law import SECTION, Gains, SingularityReport
+from .params import RABBIT, RobotParams, load_params
+from .reference import Reference, require_same_robot
+from .results import Result, json_safe
+from .simulate import (PAPER_PERTURBATION, SimulationOptions, SimulationResult, Simulator,
+                       perturbed_initial_state, simulate)
+
+__all__ = ["rabbit", "BipedModel", "RobotParams", "RABBIT", "load_params", "E_RELABEL",
+           "B_INPUT", "Reference", "require_same_robot", "Gains", "SingularityReport",
+           "SECTION", "TimeVaryingController", "VirtualConstraintController",
+           "VirtualConstraints", "fit_virtual_constraints", "HIP_PHASE", "PAPER_REJOIN",
+           "Simulator", "SimulationOptions", "SimulationResult", "simulate",
+           "perturbed_initial_state", "PAPER_PERTURBATION", "Result", "json_safe",
+           "cached", "cache_dir"]
 __version__ = "0.1.0"

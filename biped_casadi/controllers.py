@@ -1,69 +1,55 @@
 """Closed-loop controllers for walking: the time-varying output controller of the paper
 (§III, eq. 12-13, 17) and, for the comparison of §V-C, a virtual-constraint (hybrid zero
-dynamics) controller fitted to the same reference gait.
+dynamics) controller fitted to the same reference.
 
-Both controllers are CasADi Functions built once per controller object and share one
-interface used by :mod:`biped_casadi.simulate`:
+Both controllers are CasADi Functions built once per controller object, written against
+the reference interface of :mod:`biped_casadi.reference`, and share one interface used
+by :mod:`biped_casadi.simulate`:
 
 ``law(q, dq, tau, r, p) -> (u, y, dy, den, dr, in_range)``
-    torques u (4), outputs y and their rates dy (4), the decoupling denominator ``den``
-    (zero where the controller is singular), the time derivative ``dr`` of the
-    controller's reference state r, and ``in_range`` (1 while the reference is defined
-    at the current state).
+    torques u, outputs y and their rates dy, the decoupling denominator ``den`` (zero
+    where the controller is singular), the time derivative ``dr`` of the reference
+    state r, and ``in_range`` (1 while the reference is defined at the current state).
 ``step_start(q, dq) -> StepStart(r, p)``
     the reference state r and the per-step constants p at the start of a step (just
     after an impact, or at the initial state).
 
-Reference state r.  The time-varying controller needs q_u^d(tau), which the gait
-defines as the solution of the unactuated row of eq. (1) with q_a = q_a^d(tau) (SPEC
-§2).  ``r = (q_u^d, dq_u^d)`` is that ODE, integrated alongside the robot and reset to
-the gait's x0 at every tau = 0: it is a function of tau alone, so the hybrid closed loop
-is still the 11-dimensional system in (q, dq, tau) of eq. (9).  Past T it continues
-exactly as the gait's own continuation (the Bezier q_a^d evaluated past s = 1 and the
-same ODE for q_u^d), i.e. the reference is smooth (C-infinity) across T.
+Reference state r.  The time-varying controller needs q_u^d(tau); a gait defines it as
+the solution of the unactuated row of eq. (1) with q_a = q_a^d(tau) (SPEC §2), carried
+as the reference state r = (q_u^d, dq_u^d) and reset to its value at tau = 0 at every
+impact: a function of tau alone, so the hybrid closed loop is still the system in
+(q, dq, tau) of eq. (9).
 """
 from __future__ import annotations
 
 import abc
-
+import hashlib
 import math
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
-from .correction import v_correction
+from .numerics import as_number, as_vector
+from .output_law import (SECTION, Gains, SingularityReport, actuated_torque, check_M1,
+                         correction, decoupling_denominator, output_acceleration,
+                         output_matrix, outputs, singularity_report, unactuated_acceleration)
+from .reference import require_same_robot
 
 __all__ = ["Gains", "StepStart", "ControlOutput", "SingularityReport",
            "TimeVaryingController", "VirtualConstraints", "VirtualConstraintController",
-           "fit_virtual_constraints", "HIP_PHASE"]
+           "fit_virtual_constraints", "HIP_PHASE", "PAPER_REJOIN"]
 
 #: phase variable c of the virtual-constraint controller, theta = c q: the angle of the
 #: line stance foot -> hip from the vertical, exactly q1 + q2 / 2 when tibia and femur
 #: are equally long (RABBIT), a linear stand-in for it otherwise.
 HIP_PHASE = (1.0, 0.5, 0.0, 0.0, 0.0)
 
+#: the paper's rejoin time of the correction v_c, as a fraction of T (eq. 18)
+PAPER_REJOIN = 0.5
+
 
 # ----------------------------------------------------------------- small types
-@dataclass(frozen=True)
-class Gains:
-    """PD gains of the output dynamics, ddy = -Kd/eps dy - Kp/eps^2 y (eq. 13).
-
-    eps small = high gain: the closed loop approaches its zero dynamics."""
-    Kp: float = 1.0
-    Kd: float = 2.0
-    eps: float = 0.02
-
-    def __post_init__(self):
-        for name in ("Kp", "Kd", "eps"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-                raise ValueError(f"gain {name!r} must be a positive finite number, got {v!r}")
-
-    def to_dict(self) -> dict:
-        return dict(Kp=self.Kp, Kd=self.Kd, eps=self.eps)
-
-
 @dataclass
 class StepStart:
     """Controller state at the start of a step: reference state r and step constants p;
@@ -82,52 +68,6 @@ class ControlOutput:
     denominator: float     # zero where the controller is singular
 
 
-@dataclass
-class SingularityReport:
-    """The decoupling denominator along the reference step (eq. 23-24 for the
-    time-varying controller)."""
-    min_abs: float
-    min_value: float
-    max_value: float
-    changes_sign: bool
-
-    @property
-    def singular(self) -> bool:
-        return self.changes_sign or self.min_abs < 1e-9 * max(abs(self.min_value),
-                                                              abs(self.max_value))
-
-    def to_dict(self) -> dict:
-        return dict(min_abs=self.min_abs, min_value=self.min_value, max_value=self.max_value,
-                    changes_sign=self.changes_sign, singular=self.singular)
-
-
-# ----------------------------------------------------------------- helpers
-def _vector(x, n, name):
-    a = np.asarray(x, dtype=float)
-    if a.shape != (n,):
-        raise ValueError(f"{name} must have {n} components, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} must be finite, got {a.tolist()}")
-    return a
-
-
-def _check_gait(model, gait):
-    if gait.model.params != model.params:
-        raise ValueError("gait was made for other robot parameters than the model")
-
-
-def _reference_dynamics(gait):
-    from gait_opt.reference import reference_dynamics
-    return reference_dynamics(gait.model, gait.options.bezier_degree)
-
-
-def _denominator_report(values) -> SingularityReport:
-    d = np.asarray(values, dtype=float)
-    return SingularityReport(min_abs=float(np.min(np.abs(d))), min_value=float(d.min()),
-                             max_value=float(d.max()),
-                             changes_sign=bool(d.min() * d.max() <= 0))
-
-
 class _Controller(abc.ABC):
     """Shared numeric wrappers around ``law`` (built by the subclasses)."""
 
@@ -139,14 +79,23 @@ class _Controller(abc.ABC):
     def step_start(self, q, dq) -> StepStart:
         """The per-step parameters fixed at the start of a step (just after an impact)."""
 
+    @abc.abstractmethod
+    def describe(self) -> dict:
+        """What defines the controller, as a JSON-ready dict."""
+
+    @property
+    def gait(self):
+        """The reference the controller tracks (alias of ``reference``)."""
+        return self.reference
+
     def evaluate(self, q, dq, tau, r, p) -> ControlOutput:
         """The control law at one state (numeric), with an explicit reference state."""
-        q = _vector(q, 5, "q")
-        dq = _vector(dq, 5, "dq")
-        if not (isinstance(tau, (int, float, np.floating)) and math.isfinite(tau)):
-            raise ValueError(f"tau must be a finite number, got {tau!r}")
-        r = _vector(r, self.n_ref, "r")
-        p = _vector(p, self.n_par, "p")
+        nq = self.model.nq
+        q = as_vector(q, nq, "q")
+        dq = as_vector(dq, nq, "dq")
+        tau = as_number(tau, "tau")
+        r = as_vector(r, self.n_ref, "r")
+        p = as_vector(p, self.n_par, "p")
         u, y, dy, den, _, _ = (np.array(v).ravel() for v in self.law(q, dq, tau, r, p))
         return ControlOutput(u=u, y=y, dy=dy, denominator=float(den[0]))
 
@@ -156,98 +105,113 @@ class TimeVaryingController(_Controller):
     """Time-varying output control of paper §III-A with the stride-to-stride correction
     of §III-C (SPEC §3).
 
-    Outputs, eq. (17):  y_c = M q - v^d(tau) - v_c(tau),  M = [M1, I_4],
-    v^d = M q^d(tau), v_c the correction of eq. (18) (:func:`v_correction`) from
-    y_i = v - v^d and dy_i = dv - dv^d just after each impact.
-    Torque, eq. (12) with the output acceleration of eq. (13) applied to y_c:
+    Outputs, eq. (17):  y_c = M q - v^d(tau) - v_c(tau),  M = [M1, I],
+    v^d = M q^d(tau), v_c the correction of eq. (18) from y_i = v - v^d and
+    dy_i = dv - dv^d just after each impact, rejoining the reference at
+    tau = ``rejoin`` T (the paper: T/2).  Torque, eq. (12) with the output acceleration
+    of eq. (13) applied to y_c (:mod:`biped_casadi.output_law`); singular where
+    D11 - D12 M1 = 0 (eq. 24), which :meth:`singularity` checks along the reference.
 
-        ddv = ddv^d + ddv_c - Kd/eps dy_c - Kp/eps^2 y_c
-        ddq_u = (-D12 ddv - H1) / (D11 - D12 M1)                        (eq. 23)
-        u = (D21 - D22 M1) ddq_u + D22 ddv + H2                          (eq. 12)
+    Parameters
+    ----------
+    model : BipedModel
+    reference : Reference
+        The reference step (a :class:`gait_opt.Gait`), made for ``model``.
+    M1 : array_like
+        One number per actuated joint.
+    gains : Gains, optional
+        Output PD of eq. (13).
+    rejoin : float
+        Rejoin time of v_c as a fraction of T, in (0, SECTION] (default 1/2, the paper's).
 
-    singular where D11 - D12 M1 = 0 (eq. 24); :meth:`singularity` checks the reference.
-    ``law(q, dq, tau, r, p)``: r = (q_u^d, dq_u^d) (module docstring), p = (y_i, dy_i).
+    Notes
+    -----
+    ``law(q, dq, tau, r, p)``: r = the reference state, p = (y_i, dy_i).
     """
 
     name = "tv"
-    n_ref = 2
-    n_par = 8
 
-    def __init__(self, model, gait, M1=(0.0, 0.0, 0.0, 0.0), gains: Gains | None = None):
-        _check_gait(model, gait)
-        self.model, self.gait = model, gait
-        self.M1 = _vector(M1, 4, "M1")
+    def __init__(self, model, reference, M1=None, gains: Gains | None = None,
+                 rejoin: float = PAPER_REJOIN):
+        require_same_robot(model, reference)
+        self.model, self.reference = model, reference
+        nu = model.nu
+        self.M1 = check_M1(np.zeros(nu) if M1 is None else M1, nu)
         self.gains = gains if gains is not None else Gains()
         if not isinstance(self.gains, Gains):
             raise ValueError(f"gains must be a Gains, got {type(self.gains).__name__}")
-        self.T = gait.T
-        self.M = np.hstack([self.M1[:, None], np.eye(4)])
+        self.rejoin = as_number(rejoin, "rejoin", positive=True)
+        if self.rejoin > SECTION:
+            raise ValueError(f"rejoin must be in (0, {SECTION}] (v_c must vanish before the "
+                             f"Poincare section at {SECTION} T), got {rejoin!r}")
+        self.T = reference.T
+        self.t_c = self.rejoin * self.T
+        self.M = output_matrix(self.M1)
+        self.n_ref = reference.n_state
+        self.n_par = 2 * nu
         self._build()
 
+    @property
+    def cache_key(self):
+        """What the compiled law depends on."""
+        return ("tv", self.reference.cache_key, tuple(self.M1), self.gains, self.rejoin)
+
     def _build(self):
-        m, g, T, k = self.model, self.gait, self.T, self.gains
-        ref = _reference_dynamics(g)
-        alpha = ca.DM(g.alpha)
+        m, nq, nu = self.model, self.model.nq, self.model.nu
+        ref = self.reference.symbolic()
         M1 = ca.DM(self.M1)
-        Mm = ca.DM(self.M)
-        q = ca.SX.sym("q", 5)
-        dq = ca.SX.sym("dq", 5)
+        q, dq = ca.SX.sym("q", nq), ca.SX.sym("dq", nq)
         tau = ca.SX.sym("tau")
-        r = ca.SX.sym("r", 2)
-        p = ca.SX.sym("p", 8)
-        yi, dyi = p[:4], p[4:]
-        qa_d, dqa_d, ddqa_d = ref.qa(alpha, tau / T, T)
-        qd = ca.vertcat(r[0], qa_d)
-        dqd = ca.vertcat(r[1], dqa_d)
-        ddqu_d = ref.ddqu(qd, dqd, ddqa_d)
-        ddqd = ca.vertcat(ddqu_d, ddqa_d)
-        vc, dvc, ddvc = v_correction(tau, yi, dyi, T)
-        y = ca.mtimes(Mm, q) - ca.mtimes(Mm, qd) - vc
-        dy = ca.mtimes(Mm, dq) - ca.mtimes(Mm, dqd) - dvc
-        ddv = ca.mtimes(Mm, ddqd) + ddvc - k.Kd / k.eps * dy - k.Kp / k.eps**2 * y
-        D = m.D(q)
-        H = m.H(q, dq)
-        D11, D12 = D[0, 0], D[0, 1:]
-        den = D11 - ca.mtimes(D12, M1)
-        ddqu = (-ca.mtimes(D12, ddv) - H[0]) / den
-        u = ca.mtimes(D[1:, 0] - ca.mtimes(D[1:, 1:], M1), ddqu) + ca.mtimes(D[1:, 1:], ddv) + H[1:]
-        dr = ca.vertcat(r[1], ddqu_d)
+        r = ca.SX.sym("r", self.n_ref)
+        p = ca.SX.sym("p", self.n_par)
+        yi, dyi = p[:nu], p[nu:]
+        qd, dqd, ddqd, dr = ref(tau, r)
+        vc, dvc, ddvc = correction(tau, yi, dyi, self.t_c)
+        y = outputs(M1, q) - outputs(M1, qd) - vc                              # eq. (17)
+        dy = outputs(M1, dq) - outputs(M1, dqd) - dvc
+        ddv = output_acceleration(outputs(M1, ddqd) + ddvc, y, dy, self.gains)  # eq. (13)
+        D, H = m.D(q), m.H(q, dq)
+        den = decoupling_denominator(D[0, 0], D[0, 1:], M1)                     # eq. (24)
+        ddqu = unactuated_acceleration(D, H, M1, ddv)                           # eq. (23)
+        u = actuated_torque(D, H, M1, ddqu, ddv)                                # eq. (12)
         self.law = ca.Function("tv_law", [q, dq, tau, r, p], [u, y, dy, den, dr, ca.DM(1)],
                                ["q", "dq", "tau", "r", "p"],
                                ["u", "y", "dy", "den", "dr", "in_range"])
-        xd0 = np.asarray(g.x0, dtype=float)
-        qa0, dqa0, _ = (np.array(v).ravel() for v in ref.qa(alpha, 0.0, T))
-        self._vd0 = self.M @ np.r_[xd0[0], qa0]
-        self._dvd0 = self.M @ np.r_[xd0[1], dqa0]
-        self._r0 = xd0
+        q0, dq0, _ = self.reference.evaluate(0.0)
+        self._vd0 = outputs(self.M1, q0)
+        self._dvd0 = outputs(self.M1, dq0)
+        self._r0 = np.array(self.reference.r0, dtype=float)
 
     def step_start(self, q, dq) -> StepStart:
         """y_i = v - v^d(0), dy_i = dv - dv^d(0) at the start of a step (eq. 17)."""
-        q = _vector(q, 5, "q")
-        dq = _vector(dq, 5, "dq")
-        yi = self.M @ q - self._vd0
-        dyi = self.M @ dq - self._dvd0
+        nq = self.model.nq
+        q = as_vector(q, nq, "q")
+        dq = as_vector(dq, nq, "dq")
+        yi = outputs(self.M1, q) - self._vd0
+        dyi = outputs(self.M1, dq) - self._dvd0
         return StepStart(r=self._r0.copy(), p=np.r_[yi, dyi])
 
     def torque(self, q, dq, tau, y_i=None, dy_i=None) -> ControlOutput:
-        """The law at (q, dq, tau) with the reference q_u^d(tau) taken from the gait
-        (0 <= tau <= 2T) and corrections y_i, dy_i (default zero)."""
-        yi = np.zeros(4) if y_i is None else _vector(y_i, 4, "y_i")
-        dyi = np.zeros(4) if dy_i is None else _vector(dy_i, 4, "dy_i")
-        if not (isinstance(tau, (int, float, np.floating)) and math.isfinite(tau)):
-            raise ValueError(f"tau must be a finite number, got {tau!r}")
-        if not 0 <= tau <= self.gait.t_max:
-            raise ValueError(f"tau must lie in [0, {self.gait.t_max:.6g}], got {tau!r}")
-        return self.evaluate(q, dq, float(tau), self.gait.state_at(tau), np.r_[yi, dyi])
+        """The law at (q, dq, tau) with the reference state taken from the reference at
+        tau (within its range) and corrections y_i, dy_i (default zero)."""
+        nu = self.model.nu
+        yi = np.zeros(nu) if y_i is None else as_vector(y_i, nu, "y_i")
+        dyi = np.zeros(nu) if dy_i is None else as_vector(dy_i, nu, "dy_i")
+        tau = as_number(tau, "tau")
+        if not 0 <= tau <= self.reference.t_max:
+            raise ValueError(f"tau must lie in [0, {self.reference.t_max:.6g}], got {tau!r}")
+        return self.evaluate(q, dq, tau, self.reference.state(tau), np.r_[yi, dyi])
 
     def singularity(self, n: int = 1001) -> SingularityReport:
         """D11 - D12 M1 along the reference step on [0, T] (eq. 23-24)."""
         t = np.linspace(0.0, self.T, n)
-        D = np.array(self.model.D.map(n)(self.gait.q(t))).reshape(5, 5, n, order="F")
-        return _denominator_report(D[0, 0] - self.M1 @ D[0, 1:])
+        nq = self.model.nq
+        D = np.array(self.model.D.map(n)(self.reference.q(t))).reshape(nq, nq, n, order="F")
+        return singularity_report(decoupling_denominator(D[0, 0], D[0, 1:], self.M1))
 
     def describe(self) -> dict:
-        return dict(controller="tv", M1=self.M1.tolist(), gains=self.gains.to_dict())
+        return dict(controller="tv", M1=self.M1.tolist(), gains=self.gains.to_dict(),
+                    rejoin=self.rejoin)
 
 
 # ================================================= virtual constraints (HZD)
@@ -269,16 +233,24 @@ class VirtualConstraints:
     theta^+ exactly, so Delta(S cap Z) lies in Z: a state on the constraint surface at
     the impact lands on it again (``invariance_residual`` measures it).
     """
-    c: np.ndarray                  # phase variable theta = c q (5)
-    H0: np.ndarray                 # output matrix (4 x 5); [H0; c] invertible
+    c: np.ndarray                  # phase variable theta = c q (nq)
+    H0: np.ndarray                 # output matrix (nq - 1 x nq); [H0; c] invertible
     knots: np.ndarray              # theta_j, increasing
-    bezier: np.ndarray             # (n_segments, 6, 4) Bezier coefficients per segment
+    bezier: np.ndarray             # (n_segments, 6, nq - 1) Bezier coefficients per segment
     theta_plus: float              # theta at the start of the reference step
     theta_minus: float             # theta at its end (impact)
     fit_residual: float            # max |H0 q^d - h_d(c q^d)| at segment midpoints
     invariance_residual: float     # |y|, |dy| right after the impact of the orbit
     direction: int                 # +1 if theta increases along the step, -1 otherwise
     h: ca.Function = field(repr=False)   # theta -> (h, dh/dtheta, d2h/dtheta2)
+
+    @property
+    def cache_key(self):
+        """Content digest of the constraints (phase, outputs and every coefficient)."""
+        h = hashlib.sha256()
+        for a in (self.c, self.H0, self.knots, self.bezier):
+            h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+        return h.hexdigest()
 
     @property
     def theta_range(self) -> tuple:
@@ -297,65 +269,85 @@ class VirtualConstraints:
                     invariance_residual=self.invariance_residual)
 
 
-def _reference_samples(gait, t_back: float, t_fwd: float, stride: int):
-    """q^d, dq^d, ddq^d at t = k T / n (n = the gait's polish grid) for k from
-    -t_back n / T to t_fwd n / T in steps of ``stride``; before 0 the unactuated row is
-    integrated backwards from x0 with the same RK4 as the gait."""
-    ref = _reference_dynamics(gait)
-    n = gait.options.polish_steps
-    T = gait.T
-    k_back = int(round(t_back * n / T)) // stride * stride
-    k_fwd = int(round(t_fwd * n / T)) // stride * stride
-    k_fwd = min(k_fwd, int(math.floor(gait.t_max * n / T + 1e-9)) // stride * stride)
-    ks_fwd = np.arange(0, k_fwd + 1, stride)
-    t_f = ks_fwd * T / n
-    q_f, dq_f, ddq_f = gait.q(t_f), gait.dq(t_f), gait.ddq(t_f)
-    if k_back == 0:
-        return t_f, q_f, dq_f, ddq_f
-    X = np.array(ref.integrate(k_back)(gait.x0, 0.0, -1.0 / n, gait.alpha, T))
-    ks_b = np.arange(stride, k_back + 1, stride)           # k = -stride, -2 stride, ...
-    xb = X[:, ks_b - 1]
-    s_b = -ks_b / n
-    qa, dqa, ddqa = (np.array(v) for v in ref.qa.map(len(s_b))(gait.alpha, s_b[None, :], T))
-    q_b = np.vstack([xb[0], qa])
-    dq_b = np.vstack([xb[1], dqa])
-    ddqu = np.array(ref.ddqu.map(len(s_b))(q_b, dq_b, ddqa))
-    ddq_b = np.vstack([ddqu, ddqa])
-    order = np.argsort(s_b)
-    return (np.r_[(s_b * T)[order], t_f], np.hstack([q_b[:, order], q_f]),
-            np.hstack([dq_b[:, order], dq_f]), np.hstack([ddq_b[:, order], ddq_f]))
+def _reference_samples(reference, dt: float, t_back: float, t_fwd: float):
+    """Times t_j = j dt from about -t_back to t_fwd (within the reference's range) and
+    q^d, dq^d, ddq^d there."""
+    j_lo = -int(math.floor(min(t_back, -reference.t_min) / dt + 1e-9))
+    j_hi = int(math.floor(min(t_fwd, reference.t_max) / dt + 1e-9))
+    t = np.arange(j_lo, j_hi + 1) * dt
+    q, dq, ddq = reference.evaluate(t)
+    return t, q, dq, ddq
+
+
+def _bezier_spline(H0, q, dq, ddq, th, dth, ddth):
+    """h_d(theta) as a degree-5 B-spline with knots of multiplicity 5 at the samples
+    theta_j (increasing): on each segment the six Bezier coefficients match the values
+    and first two theta-derivatives of H0 q at both ends.  Returns (Function
+    theta -> (h, dh, ddh), Bezier coefficients (n_segments, 6, nu))."""
+    Y = H0 @ q
+    dY = H0 @ dq / dth
+    ddY = (H0 @ ddq - dY * ddth) / dth**2
+    w = np.diff(th)
+    y0, y1 = Y[:, :-1], Y[:, 1:]
+    d0, d1 = dY[:, :-1] * w, dY[:, 1:] * w
+    e0, e1 = ddY[:, :-1] * w**2, ddY[:, 1:] * w**2
+    B = np.stack([y0, y0 + d0 / 5, y0 + 2 * d0 / 5 + e0 / 20,
+                  y1 - 2 * d1 / 5 + e1 / 20, y1 - d1 / 5, y1], axis=0)   # 6 x nu x nseg
+    bez = np.transpose(B, (2, 0, 1))                                      # nseg x 6 x nu
+    coef = np.vstack([bez[0]] + [b[1:] for b in bez[1:]])               # (5 nseg + 1) x nu
+    knots = [th[0]] * 6 + [x for x in th[1:-1] for _ in range(5)] + [th[-1]] * 6
+    spline = ca.Function.bspline("h_d_bspline", [knots], coef.ravel().tolist(), [5], H0.shape[0], {})
+    x = ca.MX.sym("theta")
+    hx = spline(x)
+    dh = ca.jacobian(hx, x)
+    ddh = ca.jacobian(dh, x)
+    hfun = ca.Function("h_d", [x], [hx, dh, ddh], ["theta"], ["h", "dh", "ddh"],
+                       {"never_inline": True})
+    return hfun, bez
 
 
 def fit_virtual_constraints(gait, c=HIP_PHASE, H0=None, segments_per_step: int = 200,
                             margin_before: float = 0.25, margin_after: float = 0.25
                             ) -> VirtualConstraints:
-    """Fit impact-invariant virtual constraints H0 q = h_d(c q) to ``gait``.
+    """Fit impact-invariant virtual constraints H0 q = h_d(c q) to a reference.
 
-    c: phase variable theta = c q, strictly monotonic along the reference (checked);
-    H0: 4 x 5 output matrix (default [0, I_4]: q_a = h_d(theta)) with [H0; c] invertible;
-    segments_per_step: Bezier segments per reference step (knots every T / this);
-    margin_before / margin_after: extra range of theta before the step and after its
-    end, in units of T, so that perturbed states stay inside the fitted range.
+    Parameters
+    ----------
+    gait : Reference
+        The reference step (a :class:`gait_opt.Gait`).
+    c : array_like
+        Phase variable theta = c q, strictly monotonic along the reference (checked).
+    H0 : array_like, optional
+        (nq - 1) x nq output matrix (default [0, I]: q_a = h_d(theta)); [H0; c] must be
+        invertible.
+    segments_per_step : int
+        Bezier segments per reference step (knots every T / this).
+    margin_before, margin_after : float
+        Extra range of theta before the step and after its end, in units of T, so that
+        perturbed states stay inside the fitted range.
+
+    Returns
+    -------
+    VirtualConstraints
     """
-    c = _vector(c, 5, "c")
-    H0 = np.hstack([np.zeros((4, 1)), np.eye(4)]) if H0 is None else np.asarray(H0, dtype=float)
-    if H0.shape != (4, 5) or not np.all(np.isfinite(H0)):
-        raise ValueError(f"H0 must be a finite 4 x 5 matrix, got shape {H0.shape}")
+    nq = gait.model.nq
+    c = as_vector(c, nq, "c")
+    H0 = np.hstack([np.zeros((nq - 1, 1)), np.eye(nq - 1)]) if H0 is None \
+        else np.asarray(H0, dtype=float)
+    if H0.shape != (nq - 1, nq) or not np.all(np.isfinite(H0)):
+        raise ValueError(f"H0 must be a finite {nq - 1} x {nq} matrix, got shape {H0.shape}")
     P = np.vstack([H0, c])
     if np.linalg.cond(P) > 1e10:
         raise ValueError("[H0; c] must be invertible (outputs and phase variable determine q)")
-    if not isinstance(segments_per_step, int) or segments_per_step < 4:
+    if isinstance(segments_per_step, bool) or not isinstance(segments_per_step, int) \
+            or segments_per_step < 4:
         raise ValueError(f"segments_per_step must be an integer >= 4, got {segments_per_step!r}")
-    n = gait.options.polish_steps
-    if n % segments_per_step:
-        raise ValueError(f"segments_per_step must divide the gait's polish_steps ({n}), "
-                         f"got {segments_per_step}")
     for name, v in (("margin_before", margin_before), ("margin_after", margin_after)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= 1):
             raise ValueError(f"{name} must be in [0, 1], got {v!r}")
     T = gait.T
-    stride = n // segments_per_step
-    t, q, dq, ddq = _reference_samples(gait, margin_before * T, (1 + margin_after) * T, stride)
+    t, q, dq, ddq = _reference_samples(gait, T / segments_per_step, margin_before * T,
+                                       (1 + margin_after) * T)
     th = c @ q
     dth = c @ dq
     ddth = c @ ddq
@@ -377,25 +369,7 @@ def fit_virtual_constraints(gait, c=HIP_PHASE, H0=None, segments_per_step: int =
     t, q, dq, ddq, th, dth, ddth = t[sl], q[:, sl], dq[:, sl], ddq[:, sl], th[sl], dth[sl], ddth[sl]
     if sign < 0:                       # knots must increase
         t, q, dq, ddq, th, dth, ddth = (a[..., ::-1] for a in (t, q, dq, ddq, th, dth, ddth))
-    Y = H0 @ q
-    dY = H0 @ dq / dth
-    ddY = (H0 @ ddq - dY * ddth) / dth**2
-    w = np.diff(th)
-    y0, y1 = Y[:, :-1], Y[:, 1:]
-    d0, d1 = dY[:, :-1] * w, dY[:, 1:] * w
-    e0, e1 = ddY[:, :-1] * w**2, ddY[:, 1:] * w**2
-    B = np.stack([y0, y0 + d0 / 5, y0 + 2 * d0 / 5 + e0 / 20,
-                  y1 - 2 * d1 / 5 + e1 / 20, y1 - d1 / 5, y1], axis=0)   # 6 x 4 x nseg
-    bez = np.transpose(B, (2, 0, 1))                                      # nseg x 6 x 4
-    coef = np.vstack([bez[0]] + [b[1:] for b in bez[1:]])               # (5 nseg + 1) x 4
-    knots = [th[0]] * 6 + [x for x in th[1:-1] for _ in range(5)] + [th[-1]] * 6
-    spline = ca.Function.bspline("h_d_bspline", [knots], coef.ravel().tolist(), [5], 4, {})
-    x = ca.MX.sym("theta")
-    hx = spline(x)
-    dh = ca.jacobian(hx, x)
-    ddh = ca.jacobian(dh, x)
-    hfun = ca.Function("h_d", [x], [hx, dh, ddh], ["theta"], ["h", "dh", "ddh"],
-                       {"never_inline": True})
+    hfun, bez = _bezier_spline(H0, q, dq, ddq, th, dth, ddth)
     # fit residual at segment midpoints (times between knots, from the gait itself)
     tm = 0.5 * (t[:-1] + t[1:])
     tm = tm[(tm >= 0) & (tm <= gait.t_max)]
@@ -446,8 +420,8 @@ class VirtualConstraintController(_Controller):
 
     def __init__(self, model, gait, constraints: VirtualConstraints | None = None,
                  gains: Gains | None = None, correction: bool = True):
-        _check_gait(model, gait)
-        self.model, self.gait = model, gait
+        require_same_robot(model, gait)
+        self.model, self.reference = model, gait
         self.constraints = constraints if constraints is not None else fit_virtual_constraints(gait)
         if not isinstance(self.constraints, VirtualConstraints):
             raise ValueError("constraints must be a VirtualConstraints "
@@ -458,14 +432,20 @@ class VirtualConstraintController(_Controller):
         if not isinstance(correction, bool):
             raise ValueError(f"correction must be True or False, got {correction!r}")
         self.correction = correction
-        self.n_par = 9 if correction else 0
+        self.n_par = 1 + 2 * model.nu if correction else 0
         self.T = gait.T
         self._build()
 
+    @property
+    def cache_key(self):
+        """What the compiled law depends on."""
+        return ("vc", self.reference.cache_key, self.constraints.cache_key, self.gains,
+                self.correction)
+
     def _build(self):
         m, k, vc = self.model, self.gains, self.constraints
-        q = ca.SX.sym("q", 5)
-        dq = ca.SX.sym("dq", 5)
+        nq, nu = m.nq, m.nu
+        q, dq = ca.SX.sym("q", nq), ca.SX.sym("dq", nq)
         tau = ca.SX.sym("tau")
         r = ca.SX.sym("r", 0)
         p = ca.SX.sym("p", self.n_par)
@@ -477,7 +457,7 @@ class VirtualConstraintController(_Controller):
         if self.correction:
             sgn = float(vc.direction)
             span = abs(vc.theta_minus - vc.theta_plus)
-            hc, dhc, ddhc = v_correction(sgn * (th - p[0]), p[1:5], p[5:9], span)
+            hc, dhc, ddhc = correction(sgn * (th - p[0]), p[1:1 + nu], p[1 + nu:], span / 2)
             h, dh, ddh = h + hc, dh + sgn * dhc, ddh + ddhc
         y = ca.mtimes(H0, q) - h
         J = H0 - ca.mtimes(dh, c)
@@ -485,7 +465,7 @@ class VirtualConstraintController(_Controller):
         D = m.D(q)
         H = m.H(q, dq)
         A = ca.vertcat(D[0, :], J)
-        rhs = ca.vertcat(-H[0], -k.Kd / k.eps * dy - k.Kp / k.eps**2 * y + ddh * dth**2)
+        rhs = ca.vertcat(-H[0], output_acceleration(ddh * dth**2, y, dy, k))
         ddq = ca.solve(A, rhs)
         u = (ca.mtimes(D, ddq) + H)[1:]
         den = ca.det(A) / float(np.linalg.det(vc.P))
@@ -495,7 +475,7 @@ class VirtualConstraintController(_Controller):
                                ["q", "dq", "tau", "r", "p"],
                                ["u", "y", "dy", "den", "dr", "in_range"])
         self.phase = ca.Function("phase", [q], [th], ["q"], ["theta"])
-        qs, dqs = ca.SX.sym("q", 5), ca.SX.sym("dq", 5)
+        qs, dqs = ca.SX.sym("q", nq), ca.SX.sym("dq", nq)
         th0 = ca.mtimes(c, qs)
         h0, dh0, _ = vc.h(th0)
         J0 = H0 - ca.mtimes(dh0, c)
@@ -507,14 +487,15 @@ class VirtualConstraintController(_Controller):
     def step_start(self, q, dq) -> StepStart:
         """theta_i, y_i = H0 q - h_d(theta_i) and dy_i/ds = (J dq) / (dtheta along the
         walking direction) at the start of a step (correction only)."""
-        q = _vector(q, 5, "q")
-        dq = _vector(dq, 5, "dq")
+        nq = self.model.nq
+        q = as_vector(q, nq, "q")
+        dq = as_vector(dq, nq, "dq")
         if not self.correction:
             return StepStart(r=np.zeros(0), p=np.zeros(0))
         th, dth, y, dy = (np.array(v).ravel() for v in self._uncorrected(q, dq))
         ds = float(dth[0]) * self.constraints.direction
         if not ds > 0:
-            return StepStart(r=np.zeros(0), p=np.full(9, np.nan),
+            return StepStart(r=np.zeros(0), p=np.full(self.n_par, np.nan),
                              problem=f"the phase variable moves backwards at the start of the "
                                      f"step (dtheta = {float(dth[0]):.4g} rad/s)")
         return StepStart(r=np.zeros(0), p=np.r_[th, y, dy / ds])
@@ -523,20 +504,19 @@ class VirtualConstraintController(_Controller):
         """The law at (q, dq) (numeric), without correction (y_i = dy_i = 0)."""
         p = np.zeros(self.n_par)
         if self.correction:
-            p[0] = float(self.constraints.c @ np.asarray(q, dtype=float))
+            p[0] = float(self.constraints.c @ as_vector(q, self.model.nq, "q"))
         return self.evaluate(q, dq, 0.0, np.zeros(0), p)
 
     def singularity(self, n: int = 1001) -> SingularityReport:
         """det [D_1; J] / det [c; H0] along the reference step on [0, T]."""
         t = np.linspace(0.0, self.T, n)
-        q, dq = self.gait.q(t), self.gait.dq(t)
+        q, dq = self.reference.q(t), self.reference.dq(t)
         p = np.zeros((self.n_par, n))
         if self.correction:
             p[0] = self.constraints.c @ q
         out = self.law.map(n)(q, dq, np.zeros((1, n)), np.zeros((0, n)), p)
-        return _denominator_report(np.array(out[3]).ravel())
+        return singularity_report(np.array(out[3]).ravel())
 
     def describe(self) -> dict:
         return dict(controller="vc", gains=self.gains.to_dict(), correction=self.correction,
                     **self.constraints.to_dict())
-

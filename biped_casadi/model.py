@@ -8,11 +8,11 @@ q2..q5 relative knee/hip angles; stance foot at the origin.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 
+from .caching import cached
 from .params import RABBIT, RobotParams
 
 __all__ = ["BipedModel", "rabbit", "E_RELABEL", "B_INPUT", "absolute_angles"]
@@ -104,7 +104,8 @@ class BipedModel:
     ``impact_full(q, dq)`` -> (q+, dq+, F, dq_pre, v_old_stance): also the impulse on
     the new stance foot, the post-impact velocity before relabelling and the velocity
     of the old stance foot after impact;
-    ``forward_dynamics(q, dq, u)`` -> ddq; ``ground_reaction(q, dq, u)`` -> (Fx, Fz) on
+    ``forward_dynamics(q, dq, u)`` -> ddq; ``inverse_dynamics(q, dq, ddq)`` -> u (rows
+    2..5 of D ddq + H, eq. (1) with B = [0; I]); ``ground_reaction(q, dq, u)`` -> (Fx, Fz) on
     the stance foot (Newton's law for the centre of mass); ``ground_reaction_acc(q, dq,
     ddq)`` the same from the accelerations;
     ``energy(q, dq)`` -> (K, V, E); ``com(q)``; ``points(q)`` (2x6: stance foot, stance
@@ -150,6 +151,7 @@ class BipedModel:
         H = ca.jtimes(ca.mtimes(D, dq), q, dq) - ca.gradient(K_dq, q) + G
         Bm = ca.DM(B_INPUT)
         ddq = ca.solve(D, ca.mtimes(Bm, u) - H)
+        acc = ca.SX.sym("ddq", 5)
 
         self.D_expr, self.H_expr, self.G_expr = D, H, G
         foot = kin.points["foot_sw"]
@@ -159,7 +161,6 @@ class BipedModel:
         dcom = ca.jtimes(com, q, dq)
         ddcom = ca.jtimes(dcom, q, dq) + ca.jtimes(com, q, ddq)
         grf = M * (ddcom + ca.vertcat(0, p.g))
-        acc = ca.SX.sym("ddq", 5)
         grf_acc = M * (ca.jtimes(dcom, q, dq) + ca.jtimes(com, q, acc) + ca.vertcat(0, p.g))
 
         self.D = _fn("D", [q], [D], ["q"], ["D"])
@@ -171,6 +172,8 @@ class BipedModel:
                                        ["q", "dq"], ["dx", "dz"])
         self.forward_dynamics = _fn("forward_dynamics", [q, dq, u], [ddq],
                                     ["q", "dq", "u"], ["ddq"])
+        self.inverse_dynamics = _fn("inverse_dynamics", [q, dq, acc], [(ca.mtimes(D, acc) + H)[1:]],
+                                    ["q", "dq", "ddq"], ["u"])
         self.ground_reaction = _fn("ground_reaction", [q, dq, u], [grf[0], grf[1]],
                                    ["q", "dq", "u"], ["Fx", "Fz"])
         self.ground_reaction_acc = _fn("ground_reaction_acc", [q, dq, acc],
@@ -178,6 +181,7 @@ class BipedModel:
         self.energy = _fn("energy", [q, dq], [K, V, K + V], ["q", "dq"], ["K", "V", "E"])
         self.com = _fn("com", [q], [com], ["q"], ["com"])
         self.com_velocity = _fn("com_velocity", [q, dq], [dcom], ["q", "dq"], ["dcom"])
+        self.torso_angle = _fn("torso_angle", [q], [kin.phi[2]], ["q"], ["phi_torso"])
         pts = kin.points
         self.points = _fn("points", [q], [ca.horzcat(*[pts[k] for k in (
             "foot_st", "knee_st", "hip", "torso_top", "knee_sw", "foot_sw")])],
@@ -232,7 +236,13 @@ class BipedModel:
         self.angular_momentum = _fn("angular_momentum", [q, dq, pt], [L], ["q", "dq", "p"], ["L"])
 
     # ---------------------------------------------------------------- helpers
-    def summary(self, q=None) -> dict:
+    @property
+    def cache_key(self):
+        """What the model's Functions depend on: its parameters."""
+        return self.params
+
+    def describe(self, q=None) -> dict:
+        """Parameters, total mass, D(q) and H(q, 0) at ``q`` (default upright), as a dict."""
         q = np.zeros(5) if q is None else np.asarray(q, dtype=float)
         return dict(params=self.params.to_dict(), total_mass=self.params.total_mass,
                     q=q.tolist(), D=np.array(self.D(q)).tolist(),
@@ -242,11 +252,22 @@ class BipedModel:
         return f"BipedModel({self.params.name}, total mass {self.params.total_mass:g} kg)"
 
 
-@lru_cache(maxsize=8)
-def _cached_model(params: RobotParams) -> BipedModel:
+@cached(maxsize=8)
+def _model(params: RobotParams) -> BipedModel:
     return BipedModel(params)
 
 
 def rabbit(params: RobotParams | None = None) -> BipedModel:
-    """The RABBIT model of SPEC section 1 (or another parameter set); cached per parameters."""
-    return _cached_model(RABBIT if params is None else params)
+    """The RABBIT model of SPEC section 1, or another parameter set.
+
+    Parameters
+    ----------
+    params : RobotParams, optional
+        Default: :data:`~biped_casadi.params.RABBIT`.
+
+    Returns
+    -------
+    BipedModel
+        Built once per parameter set (memoised).
+    """
+    return _model(RABBIT if params is None else params)

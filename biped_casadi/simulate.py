@@ -32,19 +32,24 @@ with one of the statuses of :data:`STATUSES` (the logs end with that state):
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import casadi as ca
 import numpy as np
 
+from .caching import cached
+from .numerics import as_vector, rk4_step
+from .output_law import SECTION
+from .results import Result, internal, json_safe
+
 __all__ = ["SimulationOptions", "StepRecord", "SimulationResult", "Simulator", "simulate",
-           "perturbed_initial_state", "STATUSES", "SECTION", "PAPER_PERTURBATION",
-           "plot_fig5", "plot_fig6", "animate", "fig5_fig6"]
+           "simulator", "perturbed_initial_state", "STATUSES", "PAPER_PERTURBATION"]
 
 STATUSES = ("ok", "fell", "scuffed", "negative_normal_force", "slipped", "singular",
             "no_impact", "out_of_range", "diverged")
-#: Poincaré section tau = 0.75 T (SPEC §4)
-SECTION = 0.75
+
+#: the perturbation of paper §V-C: 0.01 rad on every joint, 0.1 rad/s on every velocity
+PAPER_PERTURBATION = (0.01, 0.1)
 
 # rows of the per-node diagnostics vector
 _U, _Y, _DY = slice(0, 4), slice(4, 8), slice(8, 12)
@@ -127,48 +132,56 @@ class StepRecord:
     step_length: float
 
     def to_dict(self) -> dict:
-        arr = lambda a: None if a is None else np.asarray(a).tolist()    # noqa: E731
-        return dict(index=self.index, t_start=self.t_start, t_impact=self.t_impact,
-                    duration=self.duration, qu_error=self.qu_error, dqu_error=self.dqu_error,
-                    section=arr(self.section), section_error=arr(self.section_error),
-                    step_length=self.step_length, q_minus=arr(self.q_minus),
-                    dq_minus=arr(self.dq_minus), q_plus=arr(self.q_plus),
-                    dq_plus=arr(self.dq_plus), impulse=arr(self.impulse))
+        """Every field in plain JSON types."""
+        return json_safe(asdict(self))
 
 
 @dataclass
-class SimulationResult:
-    """A closed-loop run: status, completed steps and logs at every RK4 node.
+class SimulationResult(Result):
+    """A closed-loop run: status, completed steps, validity margins and logs.
 
-    Logs (one row per node, in time order; an impact appears as its pre-impact node
-    followed by the post-impact node at the same t): t, tau, step (index of the step
-    the node belongs to), q, dq (N x 5), u, y, dy (N x 4), Fx, Fz (stance reaction),
-    denominator (controller singularity measure), stance_x (world x of the stance
-    foot).  Torques and reactions at the pre-impact node are the single-support values.
+    ``status`` is one of :data:`STATUSES`; ``success`` means "ok": every step was valid.
+    ``peak_torque`` (max |u_i|, N m), ``min_normal_force`` (N), ``max_friction_ratio``
+    (max |F_x|/F_z in single support) and ``max_impulse_ratio`` (max |F_x|/F_z of the
+    impact impulses) are taken over the whole run up to its end.
+
+    Logs (one row per RK4 node, in time order; an impact appears as its pre-impact node
+    followed by the post-impact node at the same t), left out of ``to_dict()``: t, tau,
+    step (index of the step the node belongs to), q, dq (N x nq), u, y, dy (N x nu), Fx,
+    Fz (stance reaction), denominator (controller singularity measure), stance_x (world
+    x of the stance foot).  Torques and reactions at the pre-impact node are the
+    single-support values.
     """
     status: str
     message: str
     controller: dict
     options: SimulationOptions
     steps: list
-    t: np.ndarray
-    tau: np.ndarray
-    step: np.ndarray
-    q: np.ndarray
-    dq: np.ndarray
-    u: np.ndarray
-    y: np.ndarray
-    dy: np.ndarray
-    Fx: np.ndarray
-    Fz: np.ndarray
-    denominator: np.ndarray
-    stance_x: np.ndarray
-    failure_time: float = math.nan
-    reference: dict = field(default_factory=dict)
+    peak_torque: float
+    min_normal_force: float
+    max_friction_ratio: float
+    max_impulse_ratio: float
+    failure_time: float
+    reference: dict
+    t: np.ndarray = internal()
+    tau: np.ndarray = internal()
+    step: np.ndarray = internal()
+    q: np.ndarray = internal()
+    dq: np.ndarray = internal()
+    u: np.ndarray = internal()
+    y: np.ndarray = internal()
+    dy: np.ndarray = internal()
+    Fx: np.ndarray = internal()
+    Fz: np.ndarray = internal()
+    denominator: np.ndarray = internal()
+    stance_x: np.ndarray = internal()
+
+    SUCCESS = ("ok",)
 
     @property
     def ok(self) -> bool:
-        return self.status == "ok"
+        """Same as ``success``."""
+        return self.success
 
     @property
     def impact_times(self) -> np.ndarray:
@@ -176,10 +189,12 @@ class SimulationResult:
 
     @property
     def qu_errors(self) -> np.ndarray:
+        """q_u - q_u^d(T) just before each impact."""
         return np.array([s.qu_error for s in self.steps])
 
     @property
     def dqu_errors(self) -> np.ndarray:
+        """dq_u - dq_u^d(T) just before each impact."""
         return np.array([s.dqu_error for s in self.steps])
 
     @property
@@ -188,34 +203,44 @@ class SimulationResult:
         return np.array([s.section_error if s.section_error is not None else [np.nan, np.nan]
                          for s in self.steps]).reshape(-1, 2)
 
-    def summary(self) -> dict:
-        """The JSON of ``biped simulate --json``."""
-        return dict(status=self.status, message=self.message, controller=self.controller,
-                    steps=[dict(t_impact=s.t_impact, qu_error=s.qu_error,
-                                dqu_error=s.dqu_error, duration=s.duration,
-                                step_length=s.step_length) for s in self.steps],
-                    peak_torque=float(np.max(np.abs(self.u))) if self.u.size else math.nan,
-                    min_normal_force=float(np.min(self.Fz)) if self.Fz.size else math.nan,
-                    max_friction_ratio=float(np.max(np.abs(self.Fx) / np.maximum(self.Fz, 1e-300)))
-                    if self.Fz.size else math.nan,
-                    failure_time=None if math.isnan(self.failure_time) else self.failure_time)
-
-    def to_dict(self) -> dict:
-        d = self.summary()
-        d["steps"] = [s.to_dict() for s in self.steps]
-        d["options"] = self.options.to_dict()
-        return d
+    def steps_to_converge(self, tol: float = 1e-3):
+        """1-based index of the first step from which max(|q_u err|, |dq_u err|) stays
+        below ``tol`` to the end of the run (None if never)."""
+        errs = [max(abs(s.qu_error), abs(s.dqu_error)) for s in self.steps]
+        for k in range(len(errs)):
+            if all(e < tol for e in errs[k:]):
+                return k + 1
+        return None
 
 
 def perturbed_initial_state(gait, q_error=0.0, dq_error=0.0):
-    """(q, dq) = (q^d(0) + q_error, dq^d(0) + dq_error); the errors are a number added to
-    every joint (paper §V-C: 0.01 rad and 0.1 rad/s) or 5-vectors."""
+    """(q, dq) = (q^d(0) + q_error, dq^d(0) + dq_error).
+
+    Parameters
+    ----------
+    gait : Reference
+    q_error, dq_error : float or array_like
+        A number added to every joint (paper §V-C: 0.01 rad and 0.1 rad/s) or one
+        number per joint.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+    """
+    nq = gait.model.nq
+
     def err(e, name):
-        a = np.broadcast_to(np.asarray(e, dtype=float), (5,)) if np.ndim(e) == 0 else np.asarray(e, float)
-        if a.shape != (5,) or not np.all(np.isfinite(a)):
-            raise ValueError(f"{name} must be a finite number or 5 finite numbers, got {e!r}")
-        return a
+        if np.ndim(e) == 0:
+            return np.full(nq, float(as_vector([e], 1, name)[0]))
+        return as_vector(e, nq, name)
     return gait.q(0.0) + err(q_error, "q_error"), gait.dq(0.0) + err(dq_error, "dq_error")
+
+
+# rows of the per-node diagnostics vector (nu = number of torques)
+def _rows(nu):
+    U, Y, DY = slice(0, nu), slice(nu, 2 * nu), slice(2 * nu, 3 * nu)
+    names = ("DEN", "FX", "FZ", "INR", "XSW", "ZSW", "DZSW", "HIP", "TORSO")
+    return U, Y, DY, dict(zip(names, range(3 * nu, 3 * nu + len(names)))), 3 * nu + len(names)
 
 
 class Simulator:
@@ -223,6 +248,11 @@ class Simulator:
 
     ``run(q0, dq0, steps)`` simulates from the initial state (taken as the start of a
     step, tau = 0: the time-varying controller's y_i, dy_i are computed from it).
+
+    Parameters
+    ----------
+    controller : TimeVaryingController or VirtualConstraintController
+    options : SimulationOptions, optional
     """
 
     def __init__(self, controller, options: SimulationOptions | None = None):
@@ -232,83 +262,80 @@ class Simulator:
                              f"{type(self.options).__name__}")
         self.controller = controller
         self.model = controller.model
-        self.gait = controller.gait
+        self.gait = controller.reference
         self.T = self.gait.T
         self.h = self.T / self.options.rk4_steps
         self.chunk = self.options.rk4_steps // 8
+        self._U, self._Y, self._DY, self._R, self._ndiag = _rows(self.model.nu)
         self._build()
         ref = self.controller.singularity()
         self._den_scale = max(abs(ref.min_value), abs(ref.max_value))
-        self._den_sign = 1.0          # sign of the denominator at the start of the step
         self._ref_T = self.gait.state_at(self.T)
         self._ref_s = self.gait.state_at(SECTION * self.T)
 
     # ------------------------------------------------------------------ build
     def _build(self):
         m, c = self.model, self.controller
-        nx = 10 + c.n_ref
+        nq = m.nq
+        nx = 2 * nq + c.n_ref
         X = ca.SX.sym("X", nx)
         tau = ca.SX.sym("tau")
         p = ca.SX.sym("p", c.n_par)
         h = ca.SX.sym("h")
 
-        def rhs(Xv, tv):
-            q, dq, r = Xv[:5], Xv[5:10], Xv[10:]
-            u, _, _, _, dr, _ = c.law(q, dq, tv, r, p)
+        def rhs(Xv, stage):
+            q, dq, r = Xv[:nq], Xv[nq:2 * nq], Xv[2 * nq:]
+            u, _, _, _, dr, _ = c.law(q, dq, tau + stage * h, r, p)
             ddq = m.forward_dynamics(q, dq, u)          # the plant, eq. (1)
             return ca.vertcat(dq, ddq, dr)
 
-        k1 = rhs(X, tau)
-        k2 = rhs(X + h / 2 * k1, tau + h / 2)
-        k3 = rhs(X + h / 2 * k2, tau + h / 2)
-        k4 = rhs(X + h * k3, tau + h)
-        Xn = ca.cse(X + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4))
+        Xn = ca.cse(rk4_step(rhs, X, h))
         jit = dict(jit=True, compiler="shell", jit_options=dict(flags=["-O1"])) \
             if self.options.jit else {}
         self.rk4 = ca.Function("closed_loop_rk4", [X, tau, h, p], [Xn, tau + h],
                                ["X", "tau", "h", "p"], ["X_next", "tau_next"], jit)
-        acc = self.rk4.mapaccum("closed_loop_chunk", self.chunk, [0, 1], [0, 1])
-        self.advance = acc
+        self.advance = self.rk4.mapaccum("closed_loop_chunk", self.chunk, [0, 1], [0, 1])
 
-        q, dq, r = X[:5], X[5:10], X[10:]
+        q, dq, r = X[:nq], X[nq:2 * nq], X[2 * nq:]
         u, y, dy, den, _, inr = c.law(q, dq, tau, r, p)
         Fx, Fz = m.ground_reaction(q, dq, u)
         xs, zs = m.swing_foot(q)
         _, dzs = m.swing_foot_velocity(q, dq)
         P = m.points(q)
-        phi3 = q[0] + q[1] + q[2]
-        diag = ca.cse(ca.vertcat(u, y, dy, den, Fx, Fz, inr, xs, zs, dzs, P[1, 2], phi3))
+        torso = m.torso_angle(q)
+        diag = ca.cse(ca.vertcat(u, y, dy, den, Fx, Fz, inr, xs, zs, dzs, P[1, 2], torso))
         self.diagnostics = ca.Function("closed_loop_diagnostics", [X, tau, p], [diag],
                                        ["X", "tau", "p"], ["diag"], jit)
         self.diagnostics_chunk = self.diagnostics.map(self.chunk)
         eta = ca.SX.sym("eta")
         Xe, _ = self.rk4(X, tau, eta, p)
-        ze = m.swing_foot(Xe[:5])[1]
+        ze = m.swing_foot(Xe[:nq])[1]
         self.event = ca.Function("impact_event", [X, tau, eta, p], [ze, ca.jacobian(ze, eta), Xe],
                                  ["X", "tau", "eta", "p"], ["z_sw", "dz_deta", "X_event"])
 
     # ---------------------------------------------------------------- checks
-    def _first_failure(self, D, X, z_prev=None):
+    def _first_failure(self, D, X, z_prev=None, den_sign=1.0):
         """Index and (status, message) of the first invalid node of a block, or None.
-        D: diagnostics (_NDIAG x n), X: states (nx x n), z_prev: swing-foot heights at
-        the previous nodes (a foot already below the ground cannot strike)."""
-        o = self.options
+        D: diagnostics (rows x n), X: states (nx x n), z_prev: swing-foot heights at the
+        previous nodes (a foot already below the ground cannot strike), den_sign: the
+        sign of the decoupling denominator at the start of the step."""
+        o, R = self.options, self._R
         n = D.shape[1]
         bad = {}
         finite = np.all(np.isfinite(D), 0) & np.all(np.isfinite(X), 0)
         bad["diverged"] = ~finite
         with np.errstate(invalid="ignore"):
-            bad["out_of_range"] = finite & (D[_INR] < 0.5)
-            den = D[_DEN] * self._den_sign
+            bad["out_of_range"] = finite & (D[R["INR"]] < 0.5)
+            den = D[R["DEN"]] * den_sign
             bad["singular"] = finite & (den <= o.singular_tolerance * self._den_scale)
-            bad["fell"] = finite & ((D[_HIP] < o.min_hip_height) |
-                                    (np.abs(D[_TORSO]) > o.max_torso_angle))
-            behind = D[_XSW] <= 0
+            bad["fell"] = finite & ((D[R["HIP"]] < o.min_hip_height) |
+                                    (np.abs(D[R["TORSO"]]) > o.max_torso_angle))
+            behind = D[R["XSW"]] <= 0
             if z_prev is not None:
                 behind = behind | (np.asarray(z_prev) < 0)
-            bad["scuffed"] = finite & (D[_ZSW] < -o.ground_tolerance) & behind
-            bad["negative_normal_force"] = finite & (D[_FZ] < o.min_normal_force)
-            bad["slipped"] = finite & (np.abs(D[_FX]) > o.mu * D[_FZ])
+            bad["scuffed"] = finite & (D[R["ZSW"]] < -o.ground_tolerance) & behind
+            bad["negative_normal_force"] = finite & (D[R["FZ"]] < o.min_normal_force)
+            bad["slipped"] = finite & (np.abs(D[R["FX"]]) > o.mu * D[R["FZ"]])
         first, which = n, None
         for k, mask in bad.items():          # dict order = priority at the same node
             if mask.any():
@@ -317,145 +344,166 @@ class Simulator:
                     first, which = i, k
         if which is None:
             return None
-        j = first
-        msg = {
+        return first, which, self._failure_message(which, D[:, first])
+
+    def _failure_message(self, which, d):
+        o, R = self.options, self._R
+        return {
             "diverged": "the state is not finite",
             "out_of_range": "the state left the range where the controller's reference is "
                             "defined",
-            "singular": f"controller singular: decoupling denominator {D[_DEN, j]:.4g} "
+            "singular": f"controller singular: decoupling denominator {d[R['DEN']]:.4g} "
                         f"(below {o.singular_tolerance:g} of {self._den_scale:.4g}, "
                         "eq. 23-24)",
-            "fell": f"fell: hip height {D[_HIP, j]:.4f} m, torso angle {D[_TORSO, j]:.4f} rad",
+            "fell": f"fell: hip height {d[R['HIP']]:.4f} m, torso angle {d[R['TORSO']]:.4f} rad",
             "scuffed": f"swing foot below the ground where it cannot strike (behind the "
-                       f"stance foot, or already under the ground): x_sw = {D[_XSW, j]:.4f} m, "
-                       f"z_sw = {D[_ZSW, j]:.3g} m",
-            "negative_normal_force": f"stance normal force F_z = {D[_FZ, j]:.4g} N",
+                       f"stance foot, or already under the ground): x_sw = {d[R['XSW']]:.4f} m, "
+                       f"z_sw = {d[R['ZSW']]:.3g} m",
+            "negative_normal_force": f"stance normal force F_z = {d[R['FZ']]:.4g} N",
             "slipped": f"stance foot slips: |F_x| / F_z = "
-                       f"{abs(D[_FX, j]) / max(D[_FZ, j], 1e-300):.4f} > mu = {o.mu}",
+                       f"{abs(d[R['FX']]) / max(d[R['FZ']], 1e-300):.4f} > mu = {o.mu}",
         }[which]
-        return j, which, msg
+
+    def _impact_failure(self, F, dq_plus, q_plus, v_old):
+        """Status and message when the impact itself is invalid, else None."""
+        o = self.options
+        if not np.all(np.isfinite(np.r_[q_plus, dq_plus, F])):
+            return "diverged", "the impact map is not finite"
+        if F[1] < o.min_normal_force:
+            return "negative_normal_force", f"impact impulse has normal component {F[1]:.4g} N s"
+        if abs(F[0]) > o.mu * F[1]:
+            return "slipped", (f"impact impulse outside the friction cone: |F_x| / F_z = "
+                               f"{abs(F[0]) / F[1]:.4f} > mu = {o.mu}")
+        if not v_old[1] > 0:
+            return "scuffed", (f"the old stance foot does not lift off after the impact "
+                               f"(vertical velocity {v_old[1]:.4g} m/s)")
+        return None
 
     # ------------------------------------------------------------------ run
     def run(self, q0, dq0, steps: int | None = None) -> SimulationResult:
-        """Simulate ``steps`` steps (default: options.steps) from (q0, dq0) at tau = 0."""
-        from .controllers import _vector
-        q = _vector(q0, 5, "q0")
-        dq = _vector(dq0, 5, "dq0")
-        if steps is None:
-            steps = self.options.steps
-        if not isinstance(steps, int) or steps < 1:
+        """Simulate ``steps`` steps (default: options.steps) from (q0, dq0) at tau = 0.
+
+        Parameters
+        ----------
+        q0, dq0 : array_like
+            Initial state (the start of a step).
+        steps : int, optional
+            Number of steps (impacts).
+
+        Returns
+        -------
+        SimulationResult
+        """
+        nq = self.model.nq
+        q = as_vector(q0, nq, "q0")
+        dq = as_vector(dq0, nq, "dq0")
+        steps = self.options.steps if steps is None else steps
+        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
-        o, c, m, T, h = self.options, self.controller, self.model, self.T, self.h
-        log = _Log()
+        log = _Log(self._ndiag)
         records: list[StepRecord] = []
-        status, message, t_fail = "ok", "", math.nan
-        t0 = 0.0
-        stance_x = 0.0
-        n_chunks = int(math.ceil(o.horizon * 8))
+        walk = dict(t0=0.0, stance_x=0.0)
+        failure = None
         for k in range(steps):
-            start = c.step_start(q, dq)
-            p = start.p
-            X = np.r_[q, dq, start.r]
-            if start.problem:
-                log.add(t0, np.zeros(1), k, X[:, None], np.full((_NDIAG, 1), np.nan), stance_x)
-                status, message, t_fail = "out_of_range", start.problem, t0
+            failure, event = self._single_support(k, q, dq, walk, log)
+            if failure is not None:
                 break
-            D0 = np.array(self.diagnostics(X, 0.0, p))
-            self._den_sign = 1.0 if D0[_DEN, 0] >= 0 else -1.0
-            fail = self._first_failure(D0, X[:, None])
-            if fail is None and D0[_ZSW, 0] < -o.ground_tolerance:
-                fail = (0, "scuffed", f"swing foot below the ground at the start of step {k} "
-                                      f"(z_sw = {D0[_ZSW, 0]:.3g} m)")
-            log.add(t0, np.zeros(1), k, X[:, None], D0, stance_x)
-            if fail is not None:
-                status, message, t_fail = fail[1], fail[2], t0
+            failure, rec = self._impact(k, event, walk, log)
+            if rec is not None:
+                records.append(rec)
+            if failure is not None:
                 break
-            section = None
-            event = None
-            z_prev = D0[_ZSW, 0]
-            for ci in range(n_chunks):
-                tau0 = ci * T / 8
-                Xs, taus = (np.array(v) for v in self.advance(X, tau0, h, p))
-                taus = taus.ravel()
-                Dg = np.array(self.diagnostics_chunk(Xs, taus[None, :], p))
-                if tau0 + T / 8 > o.horizon * T + 1e-12:      # last partial chunk
-                    keep = taus <= o.horizon * T + 1e-12
-                    Xs, taus, Dg = Xs[:, keep], taus[keep], Dg[:, keep]
-                zs = Dg[_ZSW]
-                zprev = np.r_[z_prev, zs[:-1]]
-                with np.errstate(invalid="ignore"):
-                    strike = (zs < 0) & (Dg[_XSW] > 0) & (zprev >= 0)
-                i_strike = int(np.argmax(strike)) if strike.any() else Xs.shape[1]
-                fail = self._first_failure(Dg[:, :i_strike], Xs[:, :i_strike], zprev[:i_strike])
-                if fail is not None:
-                    j = fail[0]
-                    log.add(t0, taus[:j + 1], k, Xs[:, :j + 1], Dg[:, :j + 1], stance_x)
-                    status, message, t_fail = fail[1], fail[2], t0 + taus[j]
-                    break
-                if i_strike < Xs.shape[1]:
-                    Xa = X if i_strike == 0 else Xs[:, i_strike - 1]
-                    ta = tau0 if i_strike == 0 else taus[i_strike - 1]
-                    za = z_prev if i_strike == 0 else zs[i_strike - 1]
-                    zb = zs[i_strike]
-                    log.add(t0, taus[:i_strike], k, Xs[:, :i_strike], Dg[:, :i_strike], stance_x)
-                    event = self._locate(Xa, ta, za, zb, p)
-                    break
-                log.add(t0, taus, k, Xs, Dg, stance_x)
-                if abs(tau0 + T / 8 - SECTION * T) < 1e-12 * T:
-                    section = np.array([Xs[0, -1], Xs[5, -1]])
-                X, z_prev = Xs[:, -1], zs[-1]
-            if status != "ok":
-                break
-            if event is None:
-                status = "no_impact"
-                message = (f"step {k}: no valid impact of the swing foot within "
-                           f"{o.horizon:g} T = {o.horizon * T:.4f} s")
-                t_fail = t0 + o.horizon * T
-                break
-            X_m, tau_m = event
-            Dm = np.array(self.diagnostics(X_m, tau_m, p))
-            log.add(t0, np.array([tau_m]), k, X_m[:, None], Dm, stance_x)
-            fail = self._first_failure(Dm, X_m[:, None])
-            if fail is None and not Dm[_DZSW, 0] < 0:
-                fail = (0, "scuffed", "the swing foot reaches the ground without moving down")
-            if fail is not None:
-                status, message, t_fail = fail[1], fail[2], t0 + tau_m
-                break
-            q_m, dq_m = X_m[:5], X_m[5:10]
-            q_p, dq_p, F, _, v_old = (np.array(v).ravel() for v in m.impact_full(q_m, dq_m))
-            x_step = float(Dm[_XSW, 0])
-            rec = StepRecord(index=k, t_start=t0, t_impact=t0 + tau_m, duration=tau_m,
-                             q_minus=q_m, dq_minus=dq_m, q_plus=q_p, dq_plus=dq_p, impulse=F,
-                             qu_error=float(q_m[0] - self._ref_T[0]),
-                             dqu_error=float(dq_m[0] - self._ref_T[1]),
-                             section=section,
-                             section_error=None if section is None else section - self._ref_s,
-                             step_length=x_step)
-            impact_fail = None
-            if not np.all(np.isfinite(np.r_[q_p, dq_p, F])):
-                impact_fail = ("diverged", "the impact map is not finite")
-            elif F[1] < o.min_normal_force:
-                impact_fail = ("negative_normal_force",
-                               f"impact impulse has normal component {F[1]:.4g} N s")
-            elif abs(F[0]) > o.mu * F[1]:
-                impact_fail = ("slipped", f"impact impulse outside the friction cone: "
-                                          f"|F_x| / F_z = {abs(F[0]) / F[1]:.4f} > mu = {o.mu}")
-            elif not v_old[1] > 0:
-                impact_fail = ("scuffed", f"the old stance foot does not lift off after the "
-                                          f"impact (vertical velocity {v_old[1]:.4g} m/s)")
-            records.append(rec)
-            if impact_fail is not None:
-                status, message = impact_fail
-                message = f"step {k}: {message}"
-                t_fail = t0 + tau_m
-                break
-            t0 += tau_m
-            stance_x += x_step
-            q, dq = q_p, dq_p
+            walk["t0"] += rec.duration
+            walk["stance_x"] += rec.step_length
+            q, dq = rec.q_plus, rec.dq_plus
+        status, message, t_fail = failure if failure is not None else ("ok", "", math.nan)
         if status != "ok" and not message.startswith("step"):
             message = f"step {len(records)}: {message}"
-        return log.result(status, message, c.describe(), o, records, t_fail,
-                          reference=dict(T=T, qu_T=self._ref_T[0], dqu_T=self._ref_T[1]))
+        return log.result(status, message, self.controller.describe(), self.options, records,
+                          t_fail, dict(T=self.T, qu_T=self._ref_T[0], dqu_T=self._ref_T[1]),
+                          self._U, self._R)
+
+    def _single_support(self, k, q, dq, walk, log):
+        """Integrate step ``k`` from its start to the swing foot's strike.  Returns
+        (failure, event): failure (status, message, time) or None; event (X-, tau-)."""
+        o, c, T, h, R = self.options, self.controller, self.T, self.h, self._R
+        t0, sx = walk["t0"], walk["stance_x"]
+        start = c.step_start(q, dq)
+        p = start.p
+        X = np.r_[q, dq, start.r]
+        if start.problem:
+            log.add(t0, np.zeros(1), k, X[:, None], np.full((self._ndiag, 1), np.nan), sx)
+            return ("out_of_range", start.problem, t0), None
+        D0 = np.array(self.diagnostics(X, 0.0, p))
+        walk["den_sign"] = sign = 1.0 if D0[R["DEN"], 0] >= 0 else -1.0
+        fail = self._first_failure(D0, X[:, None], den_sign=sign)
+        if fail is None and D0[R["ZSW"], 0] < -o.ground_tolerance:
+            fail = (0, "scuffed", f"swing foot below the ground at the start of step {k} "
+                                  f"(z_sw = {D0[R['ZSW'], 0]:.3g} m)")
+        log.add(t0, np.zeros(1), k, X[:, None], D0, sx)
+        if fail is not None:
+            return (fail[1], fail[2], t0), None
+        walk["p"], walk["section"] = p, None
+        z_prev = D0[R["ZSW"], 0]
+        for ci in range(int(math.ceil(o.horizon * 8))):
+            tau0 = ci * T / 8
+            Xs, taus = (np.array(v) for v in self.advance(X, tau0, h, p))
+            taus = taus.ravel()
+            Dg = np.array(self.diagnostics_chunk(Xs, taus[None, :], p))
+            if tau0 + T / 8 > o.horizon * T + 1e-12:      # last partial chunk
+                keep = taus <= o.horizon * T + 1e-12
+                Xs, taus, Dg = Xs[:, keep], taus[keep], Dg[:, keep]
+            zs = Dg[R["ZSW"]]
+            zprev = np.r_[z_prev, zs[:-1]]
+            with np.errstate(invalid="ignore"):
+                strike = (zs < 0) & (Dg[R["XSW"]] > 0) & (zprev >= 0)
+            i_strike = int(np.argmax(strike)) if strike.any() else Xs.shape[1]
+            fail = self._first_failure(Dg[:, :i_strike], Xs[:, :i_strike], zprev[:i_strike],
+                                       den_sign=sign)
+            if fail is not None:
+                j = fail[0]
+                log.add(t0, taus[:j + 1], k, Xs[:, :j + 1], Dg[:, :j + 1], sx)
+                return (fail[1], fail[2], t0 + taus[j]), None
+            if i_strike < Xs.shape[1]:
+                Xa = X if i_strike == 0 else Xs[:, i_strike - 1]
+                ta = tau0 if i_strike == 0 else taus[i_strike - 1]
+                za = z_prev if i_strike == 0 else zs[i_strike - 1]
+                log.add(t0, taus[:i_strike], k, Xs[:, :i_strike], Dg[:, :i_strike], sx)
+                return None, self._locate(Xa, ta, za, zs[i_strike], p)
+            log.add(t0, taus, k, Xs, Dg, sx)
+            if abs(tau0 + T / 8 - SECTION * T) < 1e-12 * T:
+                walk["section"] = np.array([Xs[0, -1], Xs[self.model.nq, -1]])
+            X, z_prev = Xs[:, -1], zs[-1]
+        return ("no_impact", f"step {k}: no valid impact of the swing foot within "
+                             f"{o.horizon:g} T = {o.horizon * T:.4f} s", t0 + o.horizon * T), None
+
+    def _impact(self, k, event, walk, log):
+        """Check the pre-impact state, apply the impact map (eq. 2-3) and check the
+        impulse.  Returns (failure or None, StepRecord or None)."""
+        m, R, nq = self.model, self._R, self.model.nq
+        t0, sx, p = walk["t0"], walk["stance_x"], walk["p"]
+        X_m, tau_m = event
+        Dm = np.array(self.diagnostics(X_m, tau_m, p))
+        log.add(t0, np.array([tau_m]), k, X_m[:, None], Dm, sx)
+        fail = self._first_failure(Dm, X_m[:, None], den_sign=walk["den_sign"])
+        if fail is None and not Dm[R["DZSW"], 0] < 0:
+            fail = (0, "scuffed", "the swing foot reaches the ground without moving down")
+        if fail is not None:
+            return (fail[1], fail[2], t0 + tau_m), None
+        q_m, dq_m = X_m[:nq], X_m[nq:2 * nq]
+        q_p, dq_p, F, _, v_old = (np.array(v).ravel() for v in m.impact_full(q_m, dq_m))
+        section = walk["section"]
+        rec = StepRecord(index=k, t_start=t0, t_impact=t0 + tau_m, duration=tau_m,
+                         q_minus=q_m, dq_minus=dq_m, q_plus=q_p, dq_plus=dq_p, impulse=F,
+                         qu_error=float(q_m[0] - self._ref_T[0]),
+                         dqu_error=float(dq_m[0] - self._ref_T[1]),
+                         section=section,
+                         section_error=None if section is None else section - self._ref_s,
+                         step_length=float(Dm[R["XSW"], 0]))
+        bad = self._impact_failure(F, dq_p, q_p, v_old)
+        if bad is not None:
+            return (bad[0], f"step {k}: {bad[1]}", t0 + tau_m), rec
+        return None, rec
 
     def _locate(self, Xa, ta, za, zb, p):
         """Pre-impact state: the RK4 step length eta in (0, h] with z_sw = 0 (Newton with
@@ -485,184 +533,74 @@ class Simulator:
 class _Log:
     """Accumulates per-node logs."""
 
-    def __init__(self):
+    def __init__(self, ndiag):
         self.parts = []
+        self.ndiag = ndiag
 
     def add(self, t0, taus, k, X, D, stance_x):
         taus = np.asarray(taus, dtype=float).ravel()
         if taus.size == 0:
             return
-        self.parts.append((t0 + taus, taus, np.full(taus.size, k), X[:10].T, D.T,
+        self.parts.append((t0 + taus, taus, np.full(taus.size, k), X.T, D.T,
                            np.full(taus.size, stance_x)))
 
-    def result(self, status, message, controller, options, records, t_fail, reference):
+    def result(self, status, message, controller, options, records, t_fail, reference, U, R):
+        nx = None
         if self.parts:
             t, tau, st, X, D, sx = (np.concatenate([p[i] for p in self.parts])
                                      for i in range(6))
         else:
             t = tau = sx = np.zeros(0)
             st = np.zeros(0, int)
-            X, D = np.zeros((0, 10)), np.zeros((0, _NDIAG))
-        return SimulationResult(status=status, message=message, controller=controller,
-                                options=options, steps=records, t=t, tau=tau,
-                                step=st.astype(int), q=X[:, :5], dq=X[:, 5:10], u=D[:, _U],
-                                y=D[:, _Y], dy=D[:, _DY], Fx=D[:, _FX], Fz=D[:, _FZ],
-                                denominator=D[:, _DEN], stance_x=sx, failure_time=t_fail,
-                                reference=reference)
+            X, D = np.zeros((0, 0)), np.zeros((0, self.ndiag))
+        nq = (U.stop - U.start) + 1
+        nx = 2 * nq
+        X = X[:, :nx] if X.size else np.zeros((0, nx))
+        u = D[:, U]
+        Fx, Fz = D[:, R["FX"]], D[:, R["FZ"]]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = np.abs(Fx) / np.maximum(Fz, 1e-300)
+        imp = [abs(r.impulse[0]) / r.impulse[1] if r.impulse[1] > 0 else math.inf
+               for r in records]
+        return SimulationResult(
+            status=status, message=message, controller=controller, options=options,
+            steps=records,
+            peak_torque=float(np.nanmax(np.abs(u))) if u.size else math.nan,
+            min_normal_force=float(np.nanmin(Fz)) if Fz.size else math.nan,
+            max_friction_ratio=float(np.nanmax(ratio)) if ratio.size else math.nan,
+            max_impulse_ratio=float(max(imp)) if imp else math.nan,
+            failure_time=t_fail, reference=reference,
+            t=t, tau=tau, step=st.astype(int), q=X[:, :nq], dq=X[:, nq:nx], u=u,
+            y=D[:, slice(U.stop, 2 * U.stop)], dy=D[:, slice(2 * U.stop, 3 * U.stop)],
+            Fx=Fx, Fz=Fz, denominator=D[:, R["DEN"]], stance_x=sx)
+
+
+@cached(maxsize=8)
+def simulator(controller, options: SimulationOptions | None = None) -> Simulator:
+    """The :class:`Simulator` of a controller and options, built once (memoised by
+    the controller's content and the options)."""
+    return Simulator(controller, options if options is not None else SimulationOptions())
 
 
 def simulate(controller, q0=None, dq0=None, options: SimulationOptions | None = None,
              steps: int | None = None) -> SimulationResult:
-    """Simulate the closed loop of ``controller`` from (q0, dq0) (default: the reference
-    state at tau = 0).  The :class:`Simulator` (its CasADi Functions) is cached per
-    controller object and options."""
-    options = options if options is not None else SimulationOptions()
-    cache = controller.__dict__.setdefault("_simulators", {})
-    sim = cache.get(options)
-    if sim is None:
-        sim = cache[options] = Simulator(controller, options)
-    g = controller.gait
+    """Simulate the closed loop of ``controller`` from (q0, dq0).
+
+    Parameters
+    ----------
+    controller : TimeVaryingController or VirtualConstraintController
+    q0, dq0 : array_like, optional
+        Initial state; default the reference at tau = 0.
+    options : SimulationOptions, optional
+    steps : int, optional
+        Overrides ``options.steps``.
+
+    Returns
+    -------
+    SimulationResult
+    """
+    sim = simulator(controller, options if options is not None else SimulationOptions())
+    g = controller.reference
     q0 = g.q(0.0) if q0 is None else q0
     dq0 = g.dq(0.0) if dq0 is None else dq0
     return sim.run(q0, dq0, steps)
-
-
-# ===================================================== figures and animation
-#: the perturbation of paper §V-C: 0.01 rad on every joint, 0.1 rad/s on every velocity
-PAPER_PERTURBATION = (0.01, 0.1)
-
-
-def _label(res: SimulationResult) -> str:
-    c = res.controller
-    if c.get("controller") == "tv":
-        return "time-varying, M1 = [" + ", ".join(f"{v:.4g}" for v in c["M1"]) + "]"
-    return "virtual constraints"
-
-
-def plot_fig5(results, path, title: str | None = None):
-    """Paper Fig. 5: q_u - q_u^d(T) (and dq_u - dq_u^d(T)) just before each impact, for
-    one or several runs; written to ``path`` (PNG)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    results = results if isinstance(results, (list, tuple)) else [results]
-    fig, ax = plt.subplots(2, 1, figsize=(6.4, 5.6), sharex=True)
-    for res, mk in zip(results, "os^dv"):
-        k = np.arange(1, len(res.steps) + 1)
-        lab = _label(res) + ("" if res.ok else f" ({res.status} at t = {res.failure_time:.3f} s)")
-        ax[0].plot(k, res.qu_errors, mk + "-", label=lab)
-        ax[1].plot(k, res.dqu_errors, mk + "-", label=lab)
-    ax[0].set_ylabel(r"$q_u - q_u^d(T)$ [rad]")
-    ax[1].set_ylabel(r"$\dot q_u - \dot q_u^d(T)$ [rad/s]")
-    ax[1].set_xlabel("step (error just before its impact)")
-    for a in ax:
-        a.axhline(0, color="0.6", lw=0.8)
-        a.grid(alpha=0.3)
-    ax[0].legend(fontsize=8)
-    fig.suptitle(title or "Fig. 5: error of the unactuated variable at the end of each step")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
-def plot_fig6(results, gait, path, title: str | None = None):
-    """Paper Fig. 6: swing-leg torques u3 (swing hip) and u4 (swing knee) against time,
-    with the reference torques u^d(tau) of each step dashed; written to ``path``."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    results = results if isinstance(results, (list, tuple)) else [results]
-    fig, ax = plt.subplots(2, 1, figsize=(7.2, 5.6), sharex=True)
-    for res in results:
-        for i, j in enumerate((2, 3)):
-            ax[i].plot(res.t, res.u[:, j], lw=1.0, label=_label(res))
-    # reference torques, restarted at each step of the first run
-    res = results[0]
-    for k in np.unique(res.step):
-        sel = res.step == k
-        tau = np.clip(res.tau[sel], 0, gait.t_max)
-        ud = gait.u(tau)
-        for i, j in enumerate((2, 3)):
-            ax[i].plot(res.t[sel], ud[j], "k--", lw=0.8, label="reference $u^d$" if k == 0 else None)
-    ax[0].set_ylabel("u3, swing hip [N m]")
-    ax[1].set_ylabel("u4, swing knee [N m]")
-    ax[1].set_xlabel("t [s]")
-    for a in ax:
-        a.grid(alpha=0.3)
-    ax[0].legend(fontsize=8)
-    fig.suptitle(title or "Fig. 6: torques of the swing leg")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
-def animate(res: SimulationResult, model, path, fps: int = 25, max_steps: int | None = None):
-    """Stick-figure animation of a run (GIF with matplotlib's PillowWriter): the ground,
-    the footprints of every stance foot, the stance leg (blue), the swing leg (red) and
-    the torso, in real time at ``fps`` frames per second."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.animation import FuncAnimation, PillowWriter
-    if not isinstance(fps, int) or fps < 1:
-        raise ValueError(f"fps must be a positive integer, got {fps!r}")
-    if res.t.size == 0:
-        raise ValueError("res: the run has no logged states to animate")
-    sel = np.ones(res.t.size, bool) if max_steps is None else res.step < max_steps
-    t, q, step, sx = res.t[sel], res.q[sel], res.step[sel], res.stance_x[sel]
-    frames = np.searchsorted(t, np.arange(t[0], t[-1] + 1e-12, 1.0 / fps))
-    frames = np.unique(np.clip(frames, 0, t.size - 1))
-    P = np.array(model.points.map(t.size)(q.T)).reshape(2, 6, t.size, order="F")
-    P[0] += sx[None, :]
-    landed = [s.step_length for s in res.steps if max_steps is None or s.index < max_steps]
-    prints = np.r_[0.0, np.cumsum(landed)]       # the first stance foot and every landing
-    fig, ax = plt.subplots(figsize=(7.5, 3.6))
-    x_lo, x_hi = P[0].min() - 0.3, P[0].max() + 0.3
-    ax.set_xlim(x_lo, x_hi)
-    ax.set_ylim(-0.08, 1.55)
-    ax.set_aspect("equal")
-    ax.axhline(0, color="0.3", lw=1.5)
-    ax.fill_between([x_lo, x_hi], -0.08, 0, color="0.85")
-    ax.plot(prints, np.zeros_like(prints), "k^", ms=6, label="footprints")
-    stance, = ax.plot([], [], "-o", color="tab:blue", lw=3, ms=4)
-    swing, = ax.plot([], [], "-o", color="tab:red", lw=3, ms=4)
-    torso, = ax.plot([], [], "-", color="0.2", lw=4)
-    text = ax.text(0.01, 0.95, "", transform=ax.transAxes, va="top", fontsize=9)
-    ax.set_title(f"{_label(res)}: {res.status}", fontsize=10)
-
-    def draw(i):
-        k = frames[i]
-        X, Z = P[0, :, k], P[1, :, k]
-        stance.set_data(X[[0, 1, 2]], Z[[0, 1, 2]])
-        swing.set_data(X[[2, 4, 5]], Z[[2, 4, 5]])
-        torso.set_data(X[[2, 3]], Z[[2, 3]])
-        text.set_text(f"t = {t[k]:.2f} s, step {step[k] + 1}")
-        return stance, swing, torso, text
-
-    anim = FuncAnimation(fig, draw, frames=len(frames), blit=True)
-    anim.save(str(path), writer=PillowWriter(fps=fps))
-    plt.close(fig)
-    return path
-
-
-def fig5_fig6(model, gait, M1, steps: int = 10, out=".", animate_steps: int | None = 4,
-              perturbation=PAPER_PERTURBATION, options: SimulationOptions | None = None) -> dict:
-    """Paper §V-C end to end: time-varying control with ``M1`` and virtual constraints
-    from the same perturbed initial state; Fig. 5, Fig. 6 and a stick-figure GIF of the
-    time-varying run into ``out``.  Returns {"summary": ..., "figures": {name: path}}."""
-    from pathlib import Path
-    from .controllers import TimeVaryingController, VirtualConstraintController
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    opts = options if options is not None else SimulationOptions(steps=steps)
-    q0, dq0 = perturbed_initial_state(gait, *perturbation)
-    tv = simulate(TimeVaryingController(model, gait, M1), q0, dq0, opts)
-    vc = simulate(VirtualConstraintController(model, gait), q0, dq0, opts)
-    figs = {"fig5": str(plot_fig5([tv, vc], out / "fig5_qu_error.png")),
-            "fig6": str(plot_fig6([tv, vc], gait, out / "fig6_swing_torques.png"))}
-    if animate_steps:
-        figs["animation"] = str(animate(tv, model, out / "walk_tv.gif", max_steps=animate_steps))
-    summary = dict(perturbation=list(perturbation), tv=tv.summary(), vc=vc.summary())
-    return {"summary": summary, "figures": figs}

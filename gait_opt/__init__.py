@@ -1,8 +1,14 @@
-"""Optimal cyclic reference gaits for planar five-link bipeds (direct collocation)."""
-from .options import GaitOptions
-from .gait import Gait, GaitFileError
-from .optimize import GaitOptimizationError, optimize_gait
-from .cache import default_gait
+"""Optimal cyclic reference gaits by direct collocation (CasADi + IPOPT).
 
-__all__ = ["optimize_gait", "default_gait", "Gait", "GaitOptions", "GaitOptimizationError",
-           "GaitFileError"]
+Imports only :mod:`biped_casadi`.  :func:`optimize_gait` returns a :class:`Gait`, which
+implements the reference interface :class:`biped_casadi.Reference` that the controllers,
+the simulator and the maps of :mod:`analysis` use.
+"""
+from .cache import default_gait
+from .errors import GaitOptimizationError
+from .gait import Gait, GaitFileError
+from .optimize import GaitSolveResult, optimize_gait, solve_gait
+from .options import GaitOptions
+
+__all__ = ["optimize_gait", "solve_gait", "GaitSolveResult", "default_gait", "Gait",
+           "GaitOptions", "GaitOptimizationError", "GaitFileError"]

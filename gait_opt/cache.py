@@ -11,30 +11,22 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from pathlib import Path
 
 from biped_casadi import rabbit
+from biped_casadi.caching import cache_dir
 
 from .gait import FORMAT_VERSION, Gait, GaitFileError
 from .optimize import optimize_gait
 from .options import GaitOptions
 
-__all__ = ["default_gait", "cache_dir", "cache_path", "CACHE_VERSION"]
+__all__ = ["default_gait", "cache_path", "cache_key", "CACHE_VERSION"]
 
 #: version of the optimiser's output for given options (part of the cache key)
 CACHE_VERSION = 1
 
 #: a cached gait must still close through the impact to this accuracy
 _PERIODICITY_TOL = 1e-8
-
-
-def cache_dir(path=None) -> Path:
-    """``path``, else $BIPED_CACHE_DIR, else ~/.cache/biped-casadi."""
-    if path is not None:
-        return Path(path)
-    env = os.environ.get("BIPED_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "biped-casadi"
 
 
 def cache_key(model, options: GaitOptions) -> str:
@@ -65,11 +57,28 @@ def _usable(path: Path, model, options: GaitOptions):
 
 
 def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
-                 **overrides) -> Gait:
-    """The optimal gait for ``options`` (default: SPEC section 2), from the cache when a
-    valid file exists, else optimised and stored.  ``overrides`` replace option fields.
+                 progress=None, **overrides) -> Gait:
+    """The optimal gait for ``options``, from the on-disk cache when a valid file exists,
+    else optimised and stored.
 
-    ``gait.solver_stats['cache']`` says 'hit' or why it was (re)computed."""
+    Parameters
+    ----------
+    model : BipedModel, optional
+        Default RABBIT.
+    options : GaitOptions, optional
+        Default: SPEC section 2.
+    cache_dir : str or Path, optional
+        Default: :func:`biped_casadi.cache_dir`.
+    progress : callable, optional
+        Called with one line of text before a gait is optimised (a few seconds).
+    **overrides
+        Replace option fields.
+
+    Returns
+    -------
+    Gait
+        ``gait.solver_stats['cache']`` says 'hit' or why it was (re)computed.
+    """
     model = model or rabbit()
     options = options or GaitOptions()
     if not isinstance(options, GaitOptions):
@@ -84,6 +93,9 @@ def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
             g.solver_stats["cache"] = "hit"
             g.solver_stats["cache_file"] = str(path)
             return g
+    if progress is not None:
+        progress(f"optimising the reference gait of {model.params.name} (once; stored in "
+                 f"{path.parent}) ...")
     g = optimize_gait(model, options)
     note = f"computed ({reason})"
     try:

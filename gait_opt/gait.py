@@ -9,17 +9,21 @@ from pathlib import Path
 
 import numpy as np
 
-from biped_casadi import RobotParams, rabbit
+import casadi as ca
+
+from biped_casadi import Reference, RobotParams, rabbit
+from biped_casadi.caching import cached
 
 from .options import GaitOptions
-from .reference import quintic_hermite, reference_dynamics
+from .parametrisation import quintic_hermite, reference_dynamics
 
 __all__ = ["Gait", "GaitFileError", "FORMAT", "FORMAT_VERSION"]
 
 FORMAT = "biped-casadi-gait"
 FORMAT_VERSION = 1
-#: the reference is tabulated (and so defined) on [0, EXTENT * T]
+#: the reference is tabulated (and so defined) on [-EXTENT_BEFORE * T, EXTENT * T]
 EXTENT = 2.0
+EXTENT_BEFORE = 0.5
 
 
 class GaitFileError(ValueError):
@@ -27,12 +31,15 @@ class GaitFileError(ValueError):
     or made for other robot parameters."""
 
 
-class Gait:
-    """A cyclic reference step of duration ``T`` (SPEC section 2).
+class Gait(Reference):
+    """A cyclic reference step of duration ``T`` (SPEC section 2), implementing the
+    reference interface :class:`biped_casadi.Reference`.
 
     ``q(t)``, ``dq(t)``, ``ddq(t)``, ``u(t)``: t a float or array in [0, 2 T] (past T the
     reference continues smoothly: the Bezier polynomials of q_a^d evaluated past s = 1
-    and q_u^d continued by the unactuated row); shapes (5,) / (4,) or (5, N) / (4, N).
+    and q_u^d continued by the unactuated row; before 0, down to -T/2, the same row
+    integrated backwards); shapes (5,) / (4,) or (5, N) / (4, N).  The reference state
+    of the interface is r = (q_u^d, dq_u^d).
     ``alpha`` (4 x (M+1)) Bezier coefficients of q_a^d in s = t / T; ``x0`` = (q_u^d(0),
     dq_u^d(0)).  ``step_length``, ``speed``, ``cost``; ``solver_stats``; ``check()``
     computes every physical and consistency figure on a dense grid.
@@ -50,42 +57,82 @@ class Gait:
             raise ValueError(f"gait: T must be positive, got {T!r}")
         self.solver_stats = dict(solver_stats or {})
         self._ref = reference_dynamics(model, options.bezier_degree)
+        self.n_state = 2
+        self.r0 = self.x0
+        self._key = None
         self._tabulate()
 
     # --------------------------------------------------------------- tabulation
-    def _tabulate(self):
-        n = self.options.polish_steps
-        n_ext = int(round(EXTENT * n))
-        F = self._ref.integrate(n_ext)
-        X = np.array(F(self.x0, 0.0, 1.0 / n, self.alpha, self.T))
+    def _integrate(self, n_steps, ds):
+        """RK4 states of the unactuated row from x0 in steps ds (in s = t / T), cut
+        where the passive continuation blows up: (s, X) including the start."""
+        X = np.array(self._ref.integrate(n_steps)(self.x0, 0.0, ds, self.alpha, self.T))
         X = np.hstack([self.x0[:, None], X])
-        s = np.arange(n_ext + 1) / n
+        s = np.arange(n_steps + 1) * ds
         finite = np.all(np.isfinite(X), axis=0)
-        if not finite.all():        # the passive continuation blew up: shorten the domain
+        if not finite.all():
             last = int(np.argmin(finite)) - 1
             X, s = X[:, :last + 1], s[:last + 1]
+        return s, X
+
+    def _tabulate(self):
+        n = self.options.polish_steps
+        s_f, X_f = self._integrate(int(round(EXTENT * n)), 1.0 / n)
+        s_b, X_b = self._integrate(int(round(EXTENT_BEFORE * n)), -1.0 / n)
+        s = np.r_[s_b[:0:-1], s_f]
+        X = np.hstack([X_b[:, :0:-1], X_f])
         self._s = s
         self._X = X
         qa, dqa, ddqa = self._qa(s)
         q = np.vstack([X[0], qa])
         dq = np.vstack([X[1], dqa])
         self._A = np.array(self._ref.ddqu.map(s.size)(q, dq, ddqa)).ravel()
+        self.t_min = float(s[0] * self.T)
         self.t_max = float(s[-1] * self.T)
+
+    @property
+    def cache_key(self) -> str:
+        """SHA-256 of what defines the gait: robot, options and solution."""
+        if self._key is None:
+            self._key = _digest(self.definition())
+        return self._key
+
+    def definition(self) -> dict:
+        """What defines the reference: format, robot, options, solution (no solver stats)."""
+        d = self.to_dict()
+        return {k: d[k] for k in ("format", "version", "robot", "options", "solution")}
+
+    @cached(maxsize=16)
+    def symbolic(self) -> ca.Function:
+        """``(tau, r) -> (qd, dqd, ddqd, dr)`` with r = (q_u^d, dq_u^d): q_a^d from the
+        Bezier polynomials, q_u^d from the reference state, ddq_u^d from the unactuated
+        row of eq. (1) (see :class:`biped_casadi.Reference`)."""
+        ref = self._ref
+        tau = ca.SX.sym("tau")
+        r = ca.SX.sym("r", 2)
+        qa, dqa, ddqa = ref.qa(ca.DM(self.alpha), tau / self.T, self.T)
+        qd = ca.vertcat(r[0], qa)
+        dqd = ca.vertcat(r[1], dqa)
+        ddqu = ref.ddqu(qd, dqd, ddqa)
+        return ca.Function("reference", [tau, r], [qd, dqd, ca.vertcat(ddqu, ddqa),
+                                                   ca.vertcat(r[1], ddqu)],
+                           ["tau", "r"], ["qd", "dqd", "ddqd", "dr"])
 
     def _qa(self, s):
         s = np.atleast_1d(s)
         out = self._ref.qa.map(s.size)(self.alpha, s[None, :], self.T)
         return tuple(np.array(o) for o in out)
 
-    def _eval(self, t):
+    def evaluate(self, t):
+        """q^d, dq^d, ddq^d at ``t`` in [t_min, t_max] (see :class:`biped_casadi.Reference`)."""
         t_arr = np.asarray(t, dtype=float)
         scalar = t_arr.ndim == 0
         t1 = np.atleast_1d(t_arr).ravel()
         if not np.all(np.isfinite(t1)):
             raise ValueError("gait: t must be finite")
-        if np.any(t1 < -1e-12) or np.any(t1 > self.t_max + 1e-12):
-            raise ValueError(f"gait: t must lie in [0, {self.t_max:.6g}] (2 T), got "
-                             f"[{t1.min():.6g}, {t1.max():.6g}]")
+        if np.any(t1 < self.t_min - 1e-12) or np.any(t1 > self.t_max + 1e-12):
+            raise ValueError(f"gait: t must lie in [{self.t_min:.6g}, {self.t_max:.6g}] "
+                             f"(-T/2 to 2 T), got [{t1.min():.6g}, {t1.max():.6g}]")
         tg = self._s * self.T
         qu, dqu, _ = quintic_hermite(tg, self._X[0], self._X[1], self._A, t1)
         qa, dqa, ddqa = self._qa(t1 / self.T)
@@ -96,27 +143,9 @@ class Gait:
         res = (q, dq, np.vstack([ddqu, ddqa]))
         return tuple(r[:, 0] for r in res) if scalar else res
 
-    def q(self, t):
-        """q^d(t): shape (5,) for a float t, (5, N) for an array."""
-        return self._eval(t)[0]
-
-    def dq(self, t):
-        return self._eval(t)[1]
-
-    def ddq(self, t):
-        return self._eval(t)[2]
-
-    def u(self, t):
-        """Reference torques u^d(t) = rows 2..5 of D ddq^d + H (B = [0; I])."""
-        q, dq, ddq = self._eval(t)
-        q2, dq2, ddq2 = (np.atleast_2d(v.T).T for v in (q, dq, ddq))
-        u = np.array(self._ref.torque.map(q2.shape[1])(q2, dq2, ddq2))
-        return u[:, 0] if np.ndim(t) == 0 else u
-
-    def state_at(self, t):
-        """(q_u^d(t), dq_u^d(t))."""
-        q, dq, _ = self._eval(float(t))
-        return np.array([q[0], dq[0]])
+    def state(self, t) -> np.ndarray:
+        """The reference state r(t) = (q_u^d(t), dq_u^d(t))."""
+        return self.state_at(t)
 
     # ---------------------------------------------------------------- figures
     @property
@@ -141,8 +170,8 @@ class Gait:
         """Physical validity and dynamic consistency on a dense grid of ``n`` points."""
         m = self.model
         t = np.linspace(0, self.T, n)
-        q, dq, ddq = self._eval(t)
-        u = np.array(self._ref.torque.map(n)(q, dq, ddq))
+        q, dq, ddq = self.evaluate(t)
+        u = np.array(self.model.inverse_dynamics.map(n)(q, dq, ddq))
         Fx, Fz = (np.array(v).ravel() for v in m.ground_reaction_acc.map(n)(q, dq, ddq))
         xs, zs = (np.array(v).ravel() for v in m.swing_foot.map(n)(q))
         qm, dqm = q[:, -1], dq[:, -1]
@@ -177,7 +206,6 @@ class Gait:
     def reintegration_error(self, n: int = 201) -> float:
         """Max |q_u(t) - q_u^d(t)| on [0, T] when the unactuated row is integrated
         independently (CVODES, tolerances 1e-13) from x0 with q_a = q_a^d(t) imposed."""
-        import casadi as ca
         x = ca.SX.sym("x", 2)
         t = ca.SX.sym("t")
         qa, dqa, ddqa = self._ref.qa(self.alpha, t / self.T, self.T)

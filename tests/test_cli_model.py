@@ -6,7 +6,7 @@ import numpy as np
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "biped_casadi", *args],
+    return subprocess.run([sys.executable, "-m", "analysis.cli", *args],
                           capture_output=True, text=True, timeout=120)
 
 

@@ -18,7 +18,7 @@ import pytest
 from analysis.virtual_constraints import VirtualConstraintMap, vc_eigenvalue
 from biped_casadi.controllers import (HIP_PHASE, Gains, TimeVaryingController,
                                       VirtualConstraintController, fit_virtual_constraints)
-from biped_casadi.correction import v_correction
+from biped_casadi.output_law import correction
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +61,7 @@ def test_tv_output_dynamics(model, gait, random_m1, rng):
         yi, dyi = rng.normal(0, 0.02, 4), rng.normal(0, 0.1, 4)
         out = ctrl.torque(q, dq, tau, yi, dyi)
         ddq = np.array(model.forward_dynamics(q, dq, out.u)).ravel()
-        _, _, ddvc = v_correction(tau, yi, dyi, gait.T)
+        _, _, ddvc = correction(tau, yi, dyi, gait.T / 2)
         ddy = M @ ddq - M @ gait.ddq(tau) - ddvc
         expected = -gains.Kd / gains.eps * out.dy - gains.Kp / gains.eps**2 * out.y
         np.testing.assert_allclose(ddy, expected, rtol=1e-7, atol=1e-7)

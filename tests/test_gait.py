@@ -20,7 +20,7 @@ from scipy.integrate import solve_ivp
 from biped_casadi import RobotParams, rabbit
 from gait_opt import (Gait, GaitFileError, GaitOptimizationError, GaitOptions, default_gait,
                       optimize_gait)
-from gait_opt.optimize import build_problem, initial_guess
+from gait_opt.transcription import build_problem, initial_guess
 
 N_DENSE = 2001
 
@@ -189,8 +189,15 @@ def test_shapes_and_past_T(gait):
     for f in (gait.q, gait.dq, gait.ddq):
         assert np.max(np.abs(f(T + eps) - f(T - eps))) < 1e-4
     assert np.all(np.isfinite(gait.q(np.linspace(T, 1.5 * T, 20))))
+    # and before 0, down to -T/2 (the unactuated row integrated backwards): the VC fit
+    # uses it; C^2 across 0
+    assert gait.t_min == pytest.approx(-0.5 * T)
+    for f in (gait.q, gait.dq, gait.ddq):
+        assert np.max(np.abs(f(eps) - f(-eps))) < 1e-4
     with pytest.raises(ValueError, match="t must lie"):
-        gait.q(-0.1)
+        gait.q(-0.6 * T)
+    with pytest.raises(ValueError, match="t must lie"):
+        gait.q(2.1 * T)
 
 
 def test_ddq_is_the_derivative_of_dq(gait):
@@ -354,7 +361,7 @@ def test_structured_derivatives_match_finite_differences(small_problem):
 
 # ------------------------------------------------------------- the CLI
 def run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "biped_casadi", *args], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "analysis.cli", *args], cwd=cwd,
                           capture_output=True, text=True, timeout=300)
 
 

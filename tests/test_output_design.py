@@ -49,7 +49,8 @@ def test_both_groups_satisfy_a_b_zero(model, gait, tay, rng):
 
 def test_conjecture_figures_are_computed(model, gait):
     from analysis.sweep_cache import grid_results
-    P, st, mx = grid_results(model, gait)
+    r = grid_results(model, gait)
+    P, st, mx = r.points, r.point_status, r.max_abs
     zsw = swing_height_at_Td(model, gait, P)
     c = conjecture_figures(zsw, mx, st)
     assert c["n_stable"] == int(np.sum(st == "stable")) > 0
@@ -66,7 +67,7 @@ def test_m1_nlp_group2(model, gait, tay, nlp2):
     assert r.group == 2
     assert abs(r.a) < 1e-9 and abs(r.b) < 1e-9
     # the reported max|lambda| is the full-AD map's at the returned M1
-    check = poincare_eigenvalues(model, gait, r.M1)
+    check = poincare_eigenvalues(model, gait, r.M1, method="ad")
     assert check.max_abs == pytest.approx(r.max_abs, rel=1e-9, abs=1e-12)
     assert r.status == "stable"
     # no worse than the best point of the 9^4 grid, nor than the group's coarse map

@@ -5,10 +5,13 @@ import json
 import subprocess
 import sys
 
+import pytest
 
+
+@pytest.mark.slow
 def test_reproduce_quick(tmp_path, gait):
     out = tmp_path / "rep"
-    r = subprocess.run([sys.executable, "-m", "biped_casadi", "reproduce", "--quick",
+    r = subprocess.run([sys.executable, "-m", "analysis.cli", "reproduce", "--quick",
                         "--out", str(out), "--json"], capture_output=True, text=True,
                        timeout=900)
     assert r.returncode == 0, r.stderr[-3000:]

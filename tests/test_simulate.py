@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from analysis.virtual_constraints import vc_eigenvalue
-from biped_casadi.cli import main as biped_main
+from analysis.cli import main as biped_main
 from biped_casadi.controllers import TimeVaryingController, VirtualConstraintController
 from biped_casadi.simulate import (PAPER_PERTURBATION, STATUSES, SimulationOptions, Simulator,
                                    perturbed_initial_state, simulate)

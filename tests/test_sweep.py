@@ -15,23 +15,16 @@ import numpy as np
 import pytest
 
 from analysis import poincare_map, singular_m1_values
+from analysis.cli import main as biped_main
+from analysis.plots import one_d_sweeps_plot, save_figure
 from analysis.sweep import (STATUSES, SweepSettings, grid_points, line_points, load_sweep,
-                            one_d_sweeps, plot_fig2, run_sweep)
-from biped_casadi.cli import main as biped_main
+                            one_d_sweeps, run_sweep)
 
 
 @pytest.fixture(scope="module")
-def sweep_gait(request, model):
-    """The session's reference gait (a conftest fixture ``gait``) when there is one, else
-    the cached default gait, else solved once here."""
-    try:
-        return request.getfixturevalue("gait")
-    except pytest.FixtureLookupError:
-        pass
-    import gait_opt
-    if hasattr(gait_opt, "default_gait"):
-        return gait_opt.default_gait()
-    return gait_opt.optimize_gait(model)
+def sweep_gait(gait):
+    """The session's reference gait."""
+    return gait
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +51,7 @@ def chunk_no(path: Path) -> int:
 
 def same_results(a, b):
     assert np.array_equal(a.points, b.points)
-    assert np.array_equal(a.status, b.status)
+    assert np.array_equal(a.point_status, b.point_status)
     for name in ("max_abs", "eigenvalues", "A"):
         x, y = getattr(a, name), getattr(b, name)
         assert x.dtype == y.dtype and x.shape == y.shape
@@ -89,7 +82,7 @@ def test_counts_match_direct_jacobian_batch(sweep_gait, reference, small_grid):
     assert set(r.counts) == set(STATUSES)
     pm = poincare_map(sweep_gait.model, sweep_gait)
     status, A, ev, max_abs = pm.jacobian_batch(small_grid)
-    assert np.array_equal(r.status, status)
+    assert np.array_equal(r.point_status, status)
     assert r.counts == {s: int(np.sum(status == s)) for s in STATUSES}
     assert r.counts["stable"] > 0 and r.counts["singular"] > 0 and r.counts["unstable"] > 0
     fin = np.isfinite(max_abs)
@@ -100,12 +93,12 @@ def test_counts_match_direct_jacobian_batch(sweep_gait, reference, small_grid):
     ok = np.flatnonzero(fin)
     np.testing.assert_allclose(np.abs(r.eigenvalues[ok, 0]), r.max_abs[ok], rtol=1e-14)
     assert np.all(np.abs(r.eigenvalues[ok, 0]) >= np.abs(r.eigenvalues[ok, 1]))
-    assert np.all((r.max_abs < 1) == (r.status == "stable"))
-    assert np.all(r.max_abs[r.status == "singular"] == np.inf)
+    assert np.all((r.max_abs < 1) == (r.point_status == "stable"))
+    assert np.all(r.max_abs[r.point_status == "singular"] == np.inf)
     # and a few points through the full AD map agree with the variational path
     for i in ok[:: max(1, len(ok) // 3)][:3]:
-        ad = pm.analyse(small_grid[i])
-        assert ad.status == r.status[i]
+        ad = pm.analyse(small_grid[i], method="ad")
+        assert ad.status == r.point_status[i]
         assert abs(ad.max_abs - r.max_abs[i]) <= 1e-6 * max(1.0, ad.max_abs)
 
 
@@ -125,7 +118,7 @@ def test_parallel_modes_give_identical_results(sweep_gait, reference, small_grid
 def test_resume_after_sigkill(sweep_gait, gait_file, reference, tmp_path):
     out = tmp_path / "killed"
     n_chunks = -(-reference.n_points // 4)
-    cmd = [sys.executable, "-m", "biped_casadi", "sweep", "--gait", str(gait_file),
+    cmd = [sys.executable, "-m", "analysis.cli", "sweep", "--gait", str(gait_file),
            "--grid", "5", "--range", "-10", "10", "--out", str(out), "--chunk-size", "4",
            "--workers", "1", "--no-progress", "--json"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -252,12 +245,13 @@ def test_one_d_sweeps_and_fig2(sweep_gait, tmp_path):
     # jumps there
     r1 = lines.results[0]
     assert sv[0] < 1.70 < sv[0] + 0.05
-    assert r1.status[values == 1.70] == "singular"
-    assert np.all(r1.status[np.abs(values - sv[0]) > 0.1] != "singular")
+    assert r1.point_status[values == 1.70] == "singular"
+    assert np.all(r1.point_status[np.abs(values - sv[0]) > 0.1] != "singular")
     fin = np.isfinite(r1.max_abs)
     peak = values[fin][np.argmax(r1.max_abs[fin])]
     assert abs(peak - sv[0]) < 0.3 and r1.max_abs[fin].max() > 5 * np.median(r1.max_abs[fin])
-    paths = plot_fig2(lines, sv, tmp_path / "fig2.png")
+    paths = [Path(p) for p in save_figure(one_d_sweeps_plot(lines), tmp_path / "fig2.png",
+                                          formats=("png", "pdf"))]
     assert [p.suffix for p in paths] == [".png", ".pdf"]
     assert paths[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and paths[0].stat().st_size > 20000
     assert paths[1].read_bytes()[:5] == b"%PDF-"
@@ -272,7 +266,7 @@ def test_cli_json(gait_file, tmp_path, capsys):
     body = json.loads(capsys.readouterr().out)
     assert set(body["counts"]) == set(STATUSES)
     assert sum(body["counts"].values()) == body["n_points"] == 81
-    assert body["out"] == str(out) and body["elapsed"] >= 0
+    assert body["out_dir"] == str(out) and body["elapsed"] >= 0 and body["success"]
     assert len(body["best"]["M1"]) == 4 and body["best"]["max_abs"] > 0
     assert body["computed_points"] == 81
     stored = load_sweep(out)

@@ -6,69 +6,28 @@ exits with code 2; ``--json`` prints exactly one JSON object on stdout.
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import sys
-from pathlib import Path
 
 import numpy as np
 
+from . import eig, gait, m1, reproduce, simulate, sweep
+from .common import UserError, load_model, print_json
 
-class UserError(Exception):
-    """An input problem the user can fix; reported as one line, exit code 2."""
-
-
-def _print_json(obj):
-    """One JSON object on stdout; non-finite numbers (inf, nan) become null."""
-    print(json.dumps(json_safe(obj), indent=None, default=_json_default, allow_nan=False))
-
-
-def json_safe(o):
-    """Plain JSON types for ``o``: numpy scalars and arrays unpacked, non-finite numbers
-    as None, paths as strings, dict keys as strings."""
-    if isinstance(o, dict):
-        return {str(k): json_safe(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [json_safe(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return json_safe(o.tolist())
-    if isinstance(o, (bool, np.bool_)):
-        return bool(o)
-    if isinstance(o, (float, np.floating)):
-        return float(o) if np.isfinite(o) else None
-    if isinstance(o, np.integer):
-        return int(o)
-    if isinstance(o, Path):
-        return str(o)
-    return o
-
-
-def _json_default(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, complex):
-        return [o.real, o.imag]
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-
-def _load_model(path):
-    from . import rabbit
-    from .params import load_params
-    return rabbit(load_params(path) if path else None)
+__all__ = ["main", "build_parser", "UserError"]
 
 
 # ----------------------------------------------------------------------- model
 def cmd_model(args):
-    model = _load_model(args.params)
+    model = load_model(args.params)
     q = np.zeros(5) if args.q is None else np.array(args.q, dtype=float)
     if q.shape != (5,):
         raise UserError(f"--q takes 5 numbers (q1..q5), got {q.size}")
     if not np.all(np.isfinite(q)):
         raise UserError("--q values must be finite")
-    s = model.summary(q)
+    s = model.describe(q)
     if args.json:
-        _print_json(s)
+        print_json(s)
         return
     p = s["params"]
     print(f"robot {p['name']}: total mass {s['total_mass']:.4g} kg")
@@ -101,22 +60,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_model)
 
-    for register in _EXTRA_COMMANDS:
-        register(sub)
+    for command in (gait, eig, sweep, m1, simulate, reproduce):
+        command.register(sub)
     return ap
 
 
-#: subcommand registrars contributed by other modules: f(subparsers) -> None
-_EXTRA_COMMANDS: list = []
-
-
-def _register_extras():
-    if not _EXTRA_COMMANDS:
-        from . import cli_commands  # noqa: F401  (registers the remaining subcommands)
-
-
 def main(argv=None) -> int:
-    _register_extras()
+    """Run ``biped`` with ``argv`` (default: the process's arguments); returns the exit
+    code: 0 done, 1 a stage or run failed, 2 a user error, 130 interrupted."""
     ap = build_parser()
     try:
         args = ap.parse_args(argv)
@@ -131,7 +82,6 @@ def main(argv=None) -> int:
         print(f"biped {args.command}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:        # output piped into `head` and the like
-        import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     return int(rc or 0)

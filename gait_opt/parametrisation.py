@@ -1,5 +1,4 @@
-"""Reference-gait parametrisation shared by the optimiser, the Gait object and the
-Poincaré analysis.
+"""The gait parametrisation shared by the optimiser and the Gait object.
 
 q_a^d(t): a Bezier polynomial of degree M in s = t / T (4 x (M+1) coefficients alpha).
 Being a polynomial, it and all its time derivatives exist everywhere and continue
@@ -16,11 +15,14 @@ reference is C^2 (indeed smooth) across T.
 """
 from __future__ import annotations
 
-from functools import lru_cache
 from math import comb
 
 import casadi as ca
 import numpy as np
+
+from biped_casadi.caching import cached
+from biped_casadi.numerics import rk4_step
+from biped_casadi.output_law import unactuated_acceleration
 
 __all__ = ["ReferenceDynamics", "reference_dynamics", "bernstein", "quintic_hermite"]
 
@@ -35,7 +37,7 @@ class ReferenceDynamics:
 
     ``qa(alpha, s, T)`` -> (qa, dqa, ddqa) with time derivatives;
     ``ddqu(q, dq, ddqa)`` the unactuated row of eq. (1) solved for ddq_u;
-    ``torque(q, dq, ddq)`` rows 2..5 of D ddq + H (B = [0; I]);
+    ``torque(q, dq, ddq)`` rows 2..5 of D ddq + H (the model's inverse dynamics);
     ``full(x, alpha, s, T)`` -> (q, dq, ddq) with x = (q_u, dq_u);
     ``rk4(x, s, ds, alpha, T)`` one RK4 step of the unactuated row in s = t / T;
     ``integrate(n)`` -> Function(x0, s0, ds, alpha, T) -> 2 x n states after each step.
@@ -62,11 +64,10 @@ class ReferenceDynamics:
         q, dq = model.q_sym, model.dq_sym
         D, H = model.D_expr, model.H_expr
         dd_a = ca.SX.sym("ddqa", 4)
-        ddqu = ca.cse(-(ca.mtimes(D[0, 1:], dd_a) + H[0]) / D[0, 0])
+        # the unactuated row of eq. (1) with q_a prescribed: eq. (23) with M1 = 0
+        ddqu = ca.cse(unactuated_acceleration(D, H, ca.DM.zeros(4), dd_a))
         self.ddqu = ca.Function("ddqu", [q, dq, dd_a], [ddqu], ["q", "dq", "ddqa"], ["ddqu"])
-        ddq = ca.SX.sym("ddq", 5)
-        self.torque = ca.Function("torque", [q, dq, ddq], [(ca.mtimes(D, ddq) + H)[1:]],
-                                  ["q", "dq", "ddq"], ["u"])
+        self.torque = model.inverse_dynamics          # rows 2..5 of eq. (1)
 
         x = ca.SX.sym("x", 2)
         qa_, dqa_, ddqa_ = self.qa(alpha, s, T)
@@ -78,35 +79,33 @@ class ReferenceDynamics:
         # unactuated row as a first-order ODE in s: dx/ds = T * (dq_u, ddq_u)
         f = ca.Function("f_s", [x, s, alpha, T], [T * ca.vertcat(x[1], a_u)])
         ds = ca.SX.sym("ds")
-        k1 = f(x, s, alpha, T)
-        k2 = f(x + ds / 2 * k1, s + ds / 2, alpha, T)
-        k3 = f(x + ds / 2 * k2, s + ds / 2, alpha, T)
-        k4 = f(x + ds * k3, s + ds, alpha, T)
-        xn = ca.cse(x + ds / 6 * (k1 + 2 * k2 + 2 * k3 + k4))   # common subexpressions
+        xn = ca.cse(rk4_step(lambda xv, c: f(xv, s + c * ds, alpha, T), x, ds))
         self.rk4 = ca.Function("rk4", [x, s, ds, alpha, T], [xn, s + ds],
                                ["x", "s", "ds", "alpha", "T"], ["x_next", "s_next"])
-        self._integrators = {}
 
+    @property
+    def cache_key(self):
+        """What the Functions depend on: the model and the Bezier degree."""
+        return (self.model.cache_key, self.degree)
+
+    @cached(maxsize=8)
     def integrate(self, n: int) -> ca.Function:
         """Function(x0, s0, ds, alpha, T) -> X (2 x n): RK4 states after each of n steps."""
-        if n not in self._integrators:
-            x0 = ca.MX.sym("x0", 2)
-            s0 = ca.MX.sym("s0")
-            ds = ca.MX.sym("ds")
-            alpha = ca.MX.sym("alpha", 4, self.degree + 1)
-            T = ca.MX.sym("T")
-            step = ca.Function("step", [x0, s0, ds, alpha, T],
-                               [*self.rk4(x0, s0, ds, alpha, T)])
-            acc = step.mapaccum("rk4_acc", n, [0, 1], [0, 1])
-            X, _ = acc(x0, s0, ds, alpha, T)
-            self._integrators[n] = ca.Function(f"unactuated_rk4_{n}", [x0, s0, ds, alpha, T],
-                                               [X], ["x0", "s0", "ds", "alpha", "T"], ["X"])
-        return self._integrators[n]
+        x0 = ca.MX.sym("x0", 2)
+        s0 = ca.MX.sym("s0")
+        ds = ca.MX.sym("ds")
+        alpha = ca.MX.sym("alpha", 4, self.degree + 1)
+        T = ca.MX.sym("T")
+        step = ca.Function("step", [x0, s0, ds, alpha, T], [*self.rk4(x0, s0, ds, alpha, T)])
+        acc = step.mapaccum("rk4_acc", n, [0, 1], [0, 1])
+        X, _ = acc(x0, s0, ds, alpha, T)
+        return ca.Function(f"unactuated_rk4_{n}", [x0, s0, ds, alpha, T], [X],
+                           ["x0", "s0", "ds", "alpha", "T"], ["X"])
 
 
-@lru_cache(maxsize=16)
+@cached(maxsize=16)
 def reference_dynamics(model, degree: int) -> ReferenceDynamics:
-    """Cached :class:`ReferenceDynamics` per (model, Bezier degree)."""
+    """The :class:`ReferenceDynamics` of a model and Bezier degree (memoised)."""
     return ReferenceDynamics(model, degree)
 
 

@@ -1,15 +1,16 @@
 """``biped reproduce``: the paper end to end (figures, summary.json, report.md)."""
 from __future__ import annotations
 
-from .cli import _print_json
+from analysis.reproduce import reproduce
+
+from .common import print_json
 
 
 def cmd_reproduce(args):
-    from analysis.reproduce import reproduce
     s = reproduce(args.out, quick=args.quick, progress=not args.no_progress)
     failed = [k for k, v in s["stages"].items() if v["status"] != "ok"]
     if args.json:
-        _print_json(dict(out=args.out, stages=s["stages"], total_time=s["total_time"]))
+        print_json(dict(out=args.out, stages=s["stages"], total_time=s["total_time"]))
     else:
         print(f"report: {args.out}/report.md   summary: {args.out}/summary.json")
         if failed:

@@ -7,15 +7,18 @@
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
-from .cli import UserError, _print_json
+from analysis.plots import one_d_sweeps_plot, save_figure
+from analysis.sweep import grid_points, line_points, one_d_sweeps, run_sweep
+from gait_opt import Gait
+
+from .common import UserError, print_json
 
 
 def cmd_sweep(args):
-    from analysis.sweep import (grid_points, line_points, one_d_sweeps, plot_fig2,
-                                run_sweep)
-    from gait_opt import Gait
 
     lo, hi = args.range
     if not (np.isfinite(lo) and np.isfinite(hi)) or not lo < hi:
@@ -43,9 +46,10 @@ def cmd_sweep(args):
         lines = one_d_sweeps(model, gait, values, **kw)
         r = lines.sweep
         if args.plot is not None:
-            from pathlib import Path
-            plots = [str(p) for p in plot_fig2(lines, lines.singular_values,
-                                               Path(args.plot) / "fig2_one_d_sweeps")]
+            folder = Path(args.plot)
+            folder.mkdir(parents=True, exist_ok=True)
+            plots = save_figure(one_d_sweeps_plot(lines), folder / "fig2_one_d_sweeps",
+                                formats=("png", "pdf"))
     else:
         n = 9 if args.grid is None else args.grid
         if n < 1:
@@ -53,13 +57,13 @@ def cmd_sweep(args):
         r = run_sweep(model, gait, grid_points(n, lo, hi), **kw)
 
     if args.json:
-        out = r.summary()
+        out = r.to_dict()
         if args.line is not None:
             out["singular_values"] = lines.singular_values.tolist()
             out["lines"] = [dict(component=j + 1, counts=p.counts)
                             for j, p in enumerate(lines.results)]
             out["plots"] = plots
-        _print_json(out)
+        print_json(out)
         return 0
 
     mode = (f"1-D sweeps, {args.line} values of each M1(j) in [{lo:g}, {hi:g}]"

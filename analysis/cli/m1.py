@@ -3,14 +3,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cli import _print_json
-from .cli_analysis import load_gait_arg
+from analysis.output_design import optimize_m1
+from analysis.sweep_cache import grid_best
+
+from .common import load_gait, print_json
 
 
 def cmd_m1(args):
-    from analysis.output_design import optimize_m1
-    from analysis.sweep_cache import grid_best
-    gait = load_gait_arg(args.gait)
+    gait = load_gait(args.gait, quiet=args.json)
     model = gait.model
     groups = [None] if args.free else ([args.group] if args.group else [1, 2])
     results = [optimize_m1(model, gait, group=g) for g in groups]
@@ -20,7 +20,7 @@ def cmd_m1(args):
     if len(results) > 1:
         out["groups"] = {str(r.group): r.to_dict() for r in results}
     if args.json:
-        _print_json(out)
+        print_json(out)
         return 0
     for r in results:
         label = "all four components free" if r.group is None and args.free else f"group {r.group}"

@@ -7,8 +7,10 @@ import math
 import sys
 from pathlib import Path
 
+from analysis.plots import gait_profiles_plot, gait_stick_plot, save_figure
+from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 
-from .cli import UserError, _load_model, _print_json
+from .common import UserError, load_model, print_json
 
 
 def register(sub):
@@ -39,8 +41,6 @@ def register(sub):
 
 
 def cmd_gait(args):
-    from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
-
     for name in ("speed", "mu", "torque_limit"):
         v = getattr(args, name)
         if not (math.isfinite(v) and v > 0):
@@ -52,7 +52,7 @@ def cmd_gait(args):
     out = Path(args.out)
     if not out.parent.is_dir():
         raise UserError(f"--out: directory {out.parent} does not exist")
-    model = _load_model(args.params)
+    model = load_model(args.params)
     options = GaitOptions(speed=args.speed, mu=args.mu, torque_limit=args.torque_limit,
                           n_intervals=args.intervals, scheme=args.scheme,
                           ipopt={} if args.max_iter is None else {"max_iter": args.max_iter})
@@ -67,11 +67,13 @@ def cmd_gait(args):
     s = gait.summary()
     s["file"] = str(out)
     if args.plot:
-        from gait_opt.plots import plot_gait
-        s["plots"] = [str(p) for p in plot_gait(gait, Path(args.plot))]
+        folder = Path(args.plot)
+        folder.mkdir(parents=True, exist_ok=True)
+        s["plots"] = (save_figure(gait_stick_plot(gait), folder / "gait_stick")
+                      + save_figure(gait_profiles_plot(gait), folder / "gait_profiles"))
 
     if args.json:
-        _print_json(s)
+        print_json(s)
         return 0
     print(f"reference gait of {model.params.name}, saved to {out}")
     print(f"  step time T          {s['T']:.6f} s")

@@ -7,42 +7,21 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import UserError, _print_json
+from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
+                          VirtualConstraintController, perturbed_initial_state, simulate)
+from analysis.plots import (save_figure, swing_torques_plot, unactuated_error_plot,
+                            walking_animation)
 
-
-def _load_gait(path):
-    """The gait of ``--gait FILE``, or the default gait (optimised once, then cached)."""
-    from gait_opt import Gait
-    if path:
-        return Gait.load(path)
-    import gait_opt
-    if hasattr(gait_opt, "default_gait"):
-        return gait_opt.default_gait()
-    return gait_opt.optimize_gait(_rabbit())
-
-
-def _rabbit():
-    from . import rabbit
-    return rabbit()
-
-
-def _positive(value, name):
-    if not (math.isfinite(value) and value > 0):
-        raise UserError(f"{name} must be a positive number, got {value!r}")
-    return value
+from .common import UserError, load_gait, positive, print_json
 
 
 def _controller(kind, model, gait, M1, gains):
-    from .controllers import TimeVaryingController, VirtualConstraintController
     if kind == "tv":
         return TimeVaryingController(model, gait, M1, gains)
     return VirtualConstraintController(model, gait, gains=gains)
 
 
 def cmd_simulate(args):
-    from .controllers import Gains
-    from .simulate import (SimulationOptions, animate, perturbed_initial_state, plot_fig5,
-                           plot_fig6, simulate)
     # ---- arguments
     M1 = np.zeros(4) if args.m1 is None else np.array(args.m1, dtype=float)
     if M1.shape != (4,):
@@ -57,12 +36,12 @@ def cmd_simulate(args):
     q_err, dq_err = args.perturb
     if not (math.isfinite(q_err) and math.isfinite(dq_err)):
         raise UserError("--perturb values must be finite")
-    _positive(args.mu, "--mu")
-    _positive(args.eps, "--eps")
+    positive(args.mu, "--mu")
+    positive(args.eps, "--eps")
     if args.animate and not args.animate.lower().endswith(".gif"):
         raise UserError(f"--animate writes a GIF: the file name must end in .gif, got "
                         f"{args.animate!r}")
-    gait = _load_gait(args.gait)
+    gait = load_gait(args.gait, quiet=args.json)
     model = gait.model
     gains = Gains(eps=args.eps)
     opts = SimulationOptions(steps=args.steps, mu=args.mu, jit=args.jit)
@@ -84,21 +63,22 @@ def cmd_simulate(args):
     if args.plot:
         out = Path(args.plot)
         out.mkdir(parents=True, exist_ok=True)
-        figures["fig5"] = str(plot_fig5(runs, out / "fig5_qu_error.png"))
-        figures["fig6"] = str(plot_fig6(runs, gait, out / "fig6_swing_torques.png"))
+        figures["fig5"] = save_figure(unactuated_error_plot(runs), out / "fig5_qu_error")[0]
+        figures["fig6"] = save_figure(swing_torques_plot(runs, gait),
+                                      out / "fig6_swing_torques")[0]
     if args.animate:
         Path(args.animate).parent.mkdir(parents=True, exist_ok=True)
-        figures["animation"] = str(animate(res, model, args.animate))
+        figures["animation"] = walking_animation(res, model, args.animate)
 
     # ---- report
     if args.json:
-        d = res.summary()
+        d = res.to_dict()
         d["perturbation"] = [q_err, dq_err]
         if args.compare:
-            d["compare"] = runs[1].summary()
+            d["compare"] = runs[1].to_dict()
         if figures:
             d["figures"] = figures
-        _print_json(d)
+        print_json(d)
         return 0
     for r in runs:
         print(f"{r.controller['controller']}: status {r.status}"
@@ -109,9 +89,8 @@ def cmd_simulate(args):
         for s in r.steps:
             print(f"  {s.index + 1:4d}   {s.t_impact:11.6f}  {s.duration / gait.T:10.6f}"
                   f"   {s.qu_error:+.6e}    {s.dqu_error:+.6e}")
-        sm = r.summary()
-        print(f"  peak |u| {sm['peak_torque']:.1f} N m, min F_z {sm['min_normal_force']:.1f} N,"
-              f" max |F_x|/F_z {sm['max_friction_ratio']:.3f}")
+        print(f"  peak |u| {r.peak_torque:.1f} N m, min F_z {r.min_normal_force:.1f} N, "
+              f"max |F_x|/F_z {r.max_friction_ratio:.3f}, at impact {r.max_impulse_ratio:.3f}")
     for k, v in figures.items():
         print(f"{k}: {v}")
     return 0

@@ -4,14 +4,31 @@
 It shares only the model's D, H, impact map and the gait's q^d(t) with the toolkit
 (the zero dynamics, the reference continuation, the event handling, v_c and the
 Jacobian are written out again here), so it serves as an independent check of
-analysis.poincare and as the speed baseline of benchmarks/bench_sweep.py.
+analysis.poincare (the finite-difference twin of its AD Jacobian) and as the speed
+baseline of benchmarks/bench_sweep.py.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from biped_casadi.correction import v_correction
+
+def v_correction(tau, yi, dyi, T):
+    """v_c of eq. (18), written independently: the quartic c0 + c1 s + ... + c4 s^4 on
+    [0, T/2] with v_c(0) = y_i, v_c'(0) = dy_i and v_c, v_c', v_c'' = 0 at T/2 (solved as
+    a linear system), zero afterwards; returns (v_c, dv_c, ddv_c)."""
+    h = T / 2
+    if tau >= h:
+        z = np.zeros_like(np.asarray(yi, float))
+        return z, z, z
+    A = np.array([[1, 0, 0, 0, 0], [0, 1, 0, 0, 0], [1, h, h**2, h**3, h**4],
+                  [0, 1, 2 * h, 3 * h**2, 4 * h**3], [0, 0, 2, 6 * h, 12 * h**2]])
+    rhs = np.vstack([np.asarray(yi, float), np.asarray(dyi, float), np.zeros((3, np.size(yi)))])
+    c = np.linalg.solve(A, rhs)
+    p = np.array([1, tau, tau**2, tau**3, tau**4])
+    dp = np.array([0, 1, 2 * tau, 3 * tau**2, 4 * tau**3])
+    ddp = np.array([0, 0, 2, 6 * tau, 12 * tau**2])
+    return p @ c, dp @ c, ddp @ c
 
 
 class ScipyPoincare:
@@ -25,7 +42,7 @@ class ScipyPoincare:
 
     def _rhs(self, tau, z, M1, yi, dyi):
         # z = (q_u, dq_u); the reference comes from the gait's tabulated q^d(t)
-        qd, dqd, ddqd = (a[:, 0] for a in self.g._eval(np.array([tau])))
+        qd, dqd, ddqd = (a[:, 0] for a in self.g.evaluate(np.array([tau])))
         vc, dvc, ddvc = v_correction(tau, yi, dyi, self.T)
         qa = qd[1:] + M1 * (qd[0] - z[0]) + vc
         dqa = dqd[1:] + M1 * (dqd[0] - z[1]) + dvc
@@ -38,7 +55,7 @@ class ScipyPoincare:
         return np.array([z[1], ddqu])
 
     def _q(self, tau, z, M1):
-        qd, dqd, _ = (a[:, 0] for a in self.g._eval(np.array([tau])))
+        qd, dqd, _ = (a[:, 0] for a in self.g.evaluate(np.array([tau])))
         return (np.r_[z[0], qd[1:] + M1 * (qd[0] - z[0])],
                 np.r_[z[1], dqd[1:] + M1 * (dqd[0] - z[1])])
 

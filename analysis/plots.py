@@ -1,0 +1,399 @@
+"""Every figure of the toolkit: compute a result elsewhere, draw it here.
+
+In the style of python-control: each ``*_plot`` function takes results computed by the
+other modules and returns a :class:`matplotlib.figure.Figure`; :func:`save_figure`
+writes it.  Figures are built with the object-oriented API on their own canvas: no
+pyplot state is touched and the user's backend is never changed (in a notebook, a
+returned figure displays itself).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+__all__ = ["save_figure", "gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot",
+           "conjecture_plot", "stable_domains_plot", "unactuated_error_plot",
+           "swing_torques_plot", "walking_animation", "run_label"]
+
+#: colours of the stance leg, the swing leg and the torso in every stick figure
+STANCE, SWING, TORSO = "tab:blue", "tab:red", "0.25"
+
+
+def _figure(**kw) -> Figure:
+    fig = Figure(**kw)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def save_figure(fig: Figure, path, formats=("png",), dpi: int = 150) -> list[str]:
+    """Write ``fig`` to ``path`` with each suffix of ``formats``.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    path : str or Path
+        File name; its suffix (if .png or .pdf) is replaced by each format.
+    formats : sequence of str
+        'png', 'pdf', ...
+    dpi : int
+
+    Returns
+    -------
+    list of str
+        The files written.
+    """
+    base = Path(path)
+    if base.suffix.lower() in (".png", ".pdf", ".svg"):
+        base = base.with_suffix("")
+    out = []
+    for ext in formats:
+        p = base.with_name(f"{base.name}.{ext}")
+        fig.savefig(p, dpi=dpi, bbox_inches="tight")
+        out.append(str(p))
+    return out
+
+
+# ------------------------------------------------------------------ the gait
+def _stick(ax, P, alpha=1.0, lw=2.0):
+    """One stick figure from the 2 x 6 points (st foot, st knee, hip, torso top, sw knee,
+    sw foot)."""
+    ax.plot(P[0, [0, 1, 2]], P[1, [0, 1, 2]], "-", color=STANCE, lw=lw, alpha=alpha)
+    ax.plot(P[0, [2, 3]], P[1, [2, 3]], "-", color=TORSO, lw=lw + 1, alpha=alpha)
+    ax.plot(P[0, [2, 4, 5]], P[1, [2, 4, 5]], "-", color=SWING, lw=lw, alpha=alpha)
+
+
+def _legs_legend(ax, extra=()):
+    handles = [Line2D([], [], color=STANCE, lw=2, label="stance leg"),
+               Line2D([], [], color=SWING, lw=2, label="swing leg"),
+               Line2D([], [], color=TORSO, lw=3, label="torso"), *extra]
+    ax.legend(handles=handles, loc="upper left", fontsize=8)
+
+
+def gait_stick_plot(gait, frames: int = 9) -> Figure:
+    """Stick diagram of one reference step over the ground, earlier poses fainter, with
+    the swing foot's path.
+
+    Parameters
+    ----------
+    gait : Reference
+    frames : int
+        Poses drawn, evenly spaced in time from 0 to T.
+
+    Returns
+    -------
+    Figure
+    """
+    T = gait.T
+    model = gait.model
+    fig = _figure(figsize=(8, 4.5))
+    ax = fig.add_subplot()
+    for k, tk in enumerate(np.linspace(0.0, T, frames)):
+        _stick(ax, np.array(model.points(gait.q(tk))), alpha=0.25 + 0.75 * k / (frames - 1))
+    t = np.linspace(0.0, T, 400)
+    feet = np.array(model.swing_foot.map(t.size)(gait.q(t))).reshape(2, -1)
+    path, = ax.plot(feet[0], feet[1], ":", color=SWING, lw=1, label="swing-foot path")
+    xs = [min(-0.4, feet[0].min() - 0.1), max(0.8, feet[0].max() + 0.1)]
+    ax.fill_between(xs, [-0.05, -0.05], [0, 0], color="0.85")
+    ax.axhline(0.0, color="k", lw=1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("z [m]")
+    ax.set_title(f"Reference step: T = {T:.3f} s, step length {gait.step_length:.3f} m, "
+                 f"{gait.speed:.2f} m/s ({frames} poses, later ones darker)", fontsize=10)
+    _legs_legend(ax, [path])
+    return fig
+
+
+def gait_profiles_plot(gait) -> Figure:
+    """Reference joint angles q^d(t) and torques u^d(t) over one step.
+
+    Parameters
+    ----------
+    gait : Reference
+
+    Returns
+    -------
+    Figure
+    """
+    t = np.linspace(0.0, gait.T, 400)
+    q, u = gait.q(t), gait.u(t)
+    fig = _figure(figsize=(8, 6))
+    a1, a2 = fig.subplots(2, 1, sharex=True)
+    for i in range(q.shape[0]):
+        a1.plot(t, q[i], label=f"q{i + 1}" + (" (unactuated)" if i == 0 else ""))
+    a1.set_ylabel(r"$q^d(t)$ [rad]")
+    a1.legend(ncol=q.shape[0], fontsize=8)
+    for i in range(u.shape[0]):
+        a2.plot(t, u[i], label=f"u{i + 1} (on q{i + 2})")
+    a2.set_ylabel(r"$u^d(t)$ [N m]")
+    a2.set_xlabel("t [s]")
+    a2.legend(ncol=u.shape[0], fontsize=8)
+    a1.set_title("Reference joint angles and torques over one step")
+    fig.tight_layout()
+    return fig
+
+
+# ------------------------------------------------------------ sweeps (Fig. 2-4)
+def one_d_sweeps_plot(lines) -> Figure:
+    """Paper Fig. 2: max|lambda| against each component M1(j), the others zero.
+
+    Parameters
+    ----------
+    lines : OneDSweeps
+        From :func:`analysis.sweep.one_d_sweeps`: one sweep per component and the
+        singular values of eq. (24), drawn as dashed lines where inside the range.
+
+    Returns
+    -------
+    Figure
+    """
+    results, sv = lines.results, np.asarray(lines.singular_values, float).ravel()
+    n = len(results)
+    cols = 2 if n > 1 else 1
+    rows = (n + cols - 1) // cols
+    fig = _figure(figsize=(4.5 * cols, 3.25 * rows), constrained_layout=True)
+    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
+    for j, (ax, r) in enumerate(zip(axes, results)):
+        x = r.points[:, j]
+        fin = np.isfinite(r.max_abs)
+        st = r.point_status == "stable"
+        ax.semilogy(x[fin & ~st], r.max_abs[fin & ~st], ".", ms=3, color="0.25",
+                    label="unstable")
+        ax.semilogy(x[st], r.max_abs[st], ".", ms=5, color="red", label="stable, max|λ| < 1")
+        sing = r.point_status == "singular"
+        if sing.any():
+            ax.plot(x[sing], np.full(sing.sum(), 1.0), "|", color="tab:blue", ms=6,
+                    transform=ax.get_xaxis_transform(), clip_on=False,
+                    label="singular controller")
+        ax.axhline(1.0, color="0.5", lw=0.8, ls=":")
+        if x.min() <= sv[j] <= x.max():
+            ax.axvline(sv[j], color="tab:blue", lw=1, ls="--", label=f"eq. (24): {sv[j]:.4g}")
+        ax.set_xlabel(f"$M_1({j + 1})$")
+        ax.set_ylabel(r"max $|\lambda_{1,2}|$")
+        ax.legend(fontsize=7, loc="best")
+        ax.grid(True, which="major", alpha=0.3)
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    fig.suptitle("Fig. 2: max|λ| of $A^z$ against one component of $M_1$, the others zero")
+    return fig
+
+
+def conjecture_plot(zsw, max_abs, status, limit: float = 50.0) -> Figure:
+    """Paper Fig. 3: Z_sw(T^d) against max|lambda| (cases with max|lambda| < ``limit``),
+    stable cases in red.
+
+    Parameters
+    ----------
+    zsw, max_abs, status : array_like
+        Per M1: the swing height of eq. (26), max|lambda|, the status.
+    limit : float
+
+    Returns
+    -------
+    Figure
+    """
+    zsw, max_abs, status = (np.asarray(a) for a in (zsw, max_abs, status))
+    sel = np.isfinite(max_abs) & (max_abs < limit)
+    st = sel & (status == "stable")
+    un = sel & (status != "stable")
+    fig = _figure(figsize=(6, 4))
+    ax = fig.add_subplot()
+    ax.scatter(max_abs[un], zsw[un], s=4, c="0.5", label=f"unstable ({un.sum()})")
+    ax.scatter(max_abs[st], zsw[st], s=10, c="red", label=f"stable ({st.sum()})")
+    ax.axvline(1.0, color="k", lw=0.8, ls="--")
+    ax.set_xlabel(r"max $|\lambda_{1,2}|$")
+    ax.set_ylabel(r"$Z_{sw}(T^d)$ [m]  ($\Delta q_u = 10^{-2}$ rad)")
+    ax.set_title(r"Fig. 3: swing-foot height at $T^d$ vs. max $|\lambda|$ (the M1 grid)")
+    ax.legend(loc="best", fontsize=8)
+    return fig
+
+
+def stable_domains_plot(m2, m3, max_abs_1, max_abs_2, best=None) -> Figure:
+    """Paper Fig. 4: stable domains of (M1(2), M1(3)) for both a = b = 0 groups, with
+    the contour max|lambda| = 1 over a log colour scale of max|lambda|.
+
+    Parameters
+    ----------
+    m2, m3 : array_like
+        The grid (meshgrid, 'ij').
+    max_abs_1, max_abs_2 : array_like
+        max|lambda| of each group on the grid (NaN where the roots are complex).
+    best : dict, optional
+        Group -> best M1, marked with a star.
+
+    Returns
+    -------
+    Figure
+    """
+    fig = _figure(figsize=(11, 4.6))
+    axes = fig.subplots(1, 2, sharey=True)
+    im = None
+    for k, (ax, mx) in enumerate(zip(axes, (max_abs_1, max_abs_2)), start=1):
+        mx = np.asarray(mx, float)
+        filled = np.where(np.isfinite(mx), mx, 1e3)
+        z = np.log10(np.clip(filled, 1e-4, 1e3))
+        im = ax.pcolormesh(m2, m3, z, shading="auto", cmap="viridis", vmin=-3, vmax=3)
+        if np.nanmin(mx) < 1 < np.nanmax(filled):
+            ax.contour(m2, m3, filled, levels=[1.0], colors="red", linewidths=1.5)
+        if best is not None and best.get(k) is not None:
+            b = best[k]
+            ax.plot(b[1], b[2], "w*", ms=12, mec="k", label="best point")
+            ax.legend(loc="lower right", fontsize=8)
+        ax.set_title(f"group {k}: contour max|λ| = 1 (red)")
+        ax.set_xlabel("M1(2)")
+    axes[0].set_ylabel("M1(3)")
+    fig.colorbar(im, ax=list(axes), label="log10 max|λ|")
+    fig.suptitle("Fig. 4: stable domains of the a = b = 0 groups")
+    return fig
+
+
+# ------------------------------------------------------- walking (Fig. 5, 6)
+def run_label(res) -> str:
+    """A legend label for a simulation result."""
+    c = res.controller
+    if c.get("controller") == "tv":
+        return "time-varying, M1 = [" + ", ".join(f"{v:.4g}" for v in c["M1"]) + "]"
+    return "virtual constraints"
+
+
+def unactuated_error_plot(results, title: str | None = None) -> Figure:
+    """Paper Fig. 5: q_u - q_u^d(T) and dq_u - dq_u^d(T) just before each impact.
+
+    Parameters
+    ----------
+    results : SimulationResult or list of them
+    title : str, optional
+
+    Returns
+    -------
+    Figure
+    """
+    results = results if isinstance(results, (list, tuple)) else [results]
+    fig = _figure(figsize=(6.4, 5.6))
+    ax = fig.subplots(2, 1, sharex=True)
+    for res, mk in zip(results, "os^dv"):
+        k = np.arange(1, len(res.steps) + 1)
+        lab = run_label(res) + ("" if res.success else
+                                f" ({res.status} at t = {res.failure_time:.3f} s)")
+        ax[0].plot(k, res.qu_errors, mk + "-", label=lab)
+        ax[1].plot(k, res.dqu_errors, mk + "-", label=lab)
+    ax[0].set_ylabel(r"$q_u - q_u^d(T)$ [rad]")
+    ax[1].set_ylabel(r"$\dot q_u - \dot q_u^d(T)$ [rad/s]")
+    ax[1].set_xlabel("step (error just before its impact)")
+    for a in ax:
+        a.axhline(0, color="0.6", lw=0.8)
+        a.grid(alpha=0.3)
+    ax[0].legend(fontsize=8)
+    fig.suptitle(title or "Fig. 5: error of the unactuated variable at the end of each step")
+    fig.tight_layout()
+    return fig
+
+
+def swing_torques_plot(results, gait, title: str | None = None) -> Figure:
+    """Paper Fig. 6: swing-leg torques u3 (swing hip) and u4 (swing knee) against time,
+    with the reference torques u^d(tau) of each step dashed.
+
+    Parameters
+    ----------
+    results : SimulationResult or list of them
+    gait : Reference
+    title : str, optional
+
+    Returns
+    -------
+    Figure
+    """
+    results = results if isinstance(results, (list, tuple)) else [results]
+    nu = gait.model.nu
+    joints = (nu - 2, nu - 1)                      # the swing leg's hip and knee
+    fig = _figure(figsize=(7.2, 5.6))
+    ax = fig.subplots(2, 1, sharex=True)
+    for res in results:
+        for i, j in enumerate(joints):
+            ax[i].plot(res.t, res.u[:, j], lw=1.0, label=run_label(res))
+    res = results[0]
+    for k in np.unique(res.step):
+        sel = res.step == k
+        tau = np.clip(res.tau[sel], 0, gait.t_max)
+        ud = gait.u(tau)
+        for i, j in enumerate(joints):
+            ax[i].plot(res.t[sel], ud[j], "k--", lw=0.8,
+                       label="reference $u^d$" if k == 0 else None)
+    ax[0].set_ylabel(f"u{joints[0] + 1}, swing hip [N m]")
+    ax[1].set_ylabel(f"u{joints[1] + 1}, swing knee [N m]")
+    ax[1].set_xlabel("t [s]")
+    for a in ax:
+        a.grid(alpha=0.3)
+    ax[0].legend(fontsize=8)
+    fig.suptitle(title or "Fig. 6: torques of the swing leg")
+    fig.tight_layout()
+    return fig
+
+
+def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = None) -> str:
+    """Stick-figure animation of a run, written as a GIF (Pillow): the ground, the
+    footprints of every stance foot, the stance leg, the swing leg and the torso, in real
+    time at ``fps`` frames per second.
+
+    Parameters
+    ----------
+    res : SimulationResult
+    model : BipedModel
+    path : str or Path
+        The .gif to write.
+    fps : int
+    max_steps : int, optional
+        Animate only the first steps.
+
+    Returns
+    -------
+    str
+        ``path``.
+    """
+    from matplotlib.animation import FuncAnimation, PillowWriter
+    if isinstance(fps, bool) or not isinstance(fps, int) or fps < 1:
+        raise ValueError(f"fps must be a positive integer, got {fps!r}")
+    if res.t.size == 0:
+        raise ValueError("res: the run has no logged states to animate")
+    sel = np.ones(res.t.size, bool) if max_steps is None else res.step < max_steps
+    t, q, step, sx = res.t[sel], res.q[sel], res.step[sel], res.stance_x[sel]
+    frames = np.searchsorted(t, np.arange(t[0], t[-1] + 1e-12, 1.0 / fps))
+    frames = np.unique(np.clip(frames, 0, t.size - 1))
+    npts = model.points.size2_out(0)
+    P = np.array(model.points.map(t.size)(q.T)).reshape(2, npts, t.size, order="F")
+    P[0] += sx[None, :]
+    landed = [s.step_length for s in res.steps if max_steps is None or s.index < max_steps]
+    prints = np.r_[0.0, np.cumsum(landed)]       # the first stance foot and every landing
+    fig = _figure(figsize=(7.5, 3.6))
+    ax = fig.add_subplot()
+    x_lo, x_hi = P[0].min() - 0.3, P[0].max() + 0.3
+    ax.set_xlim(x_lo, x_hi)
+    ax.set_ylim(-0.08, P[1].max() + 0.1)
+    ax.set_aspect("equal")
+    ax.axhline(0, color="0.3", lw=1.5)
+    ax.fill_between([x_lo, x_hi], -0.08, 0, color="0.85")
+    foot, = ax.plot(prints, np.zeros_like(prints), "k^", ms=6, label="footprints")
+    stance, = ax.plot([], [], "-o", color=STANCE, lw=3, ms=4)
+    swing, = ax.plot([], [], "-o", color=SWING, lw=3, ms=4)
+    torso, = ax.plot([], [], "-", color=TORSO, lw=4)
+    text = ax.text(0.01, 0.95, "", transform=ax.transAxes, va="top", fontsize=9)
+    ax.set_title(f"{run_label(res)}: {res.status}", fontsize=10)
+    ax.set_xlabel("x [m]")
+    _legs_legend(ax, [foot])
+
+    def draw(i):
+        k = frames[i]
+        X, Z = P[0, :, k], P[1, :, k]
+        stance.set_data(X[[0, 1, 2]], Z[[0, 1, 2]])
+        swing.set_data(X[[2, 4, 5]], Z[[2, 4, 5]])
+        torso.set_data(X[[2, 3]], Z[[2, 3]])
+        text.set_text(f"t = {t[k]:.2f} s, step {step[k] + 1}")
+        return stance, swing, torso, text
+
+    anim = FuncAnimation(fig, draw, frames=len(frames), blit=True)
+    anim.save(str(path), writer=PillowWriter(fps=fps))
+    return str(path)

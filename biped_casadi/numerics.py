@@ -1,0 +1,109 @@
+"""Shared numerics: the one classical Runge-Kutta step, and validation of user vectors.
+
+Every fixed-step integration of the toolkit (the reference's unactuated row, the
+full-order closed loop, the zero dynamics of the Poincaré map, its variational
+equation, the virtual-constraint zero dynamics) takes its steps with :func:`rk4_step`,
+so the schemes are the same by construction.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["rk4_step", "as_vector", "as_number"]
+
+
+def rk4_step(f, x, h):
+    """One classical fourth-order Runge-Kutta step of ``dx/dt = f(x, c)``.
+
+    ``f(x, c)`` is the right-hand side at the stage of fraction ``c`` of the step
+    (0, 1/2, 1/2 and 1), so the caller decides what a stage means: a time
+    ``t + c h``, or a row of a table of coefficients tabulated at the stage times.
+    Works on numbers, numpy arrays and CasADi symbols alike.
+
+    Parameters
+    ----------
+    f : callable
+        ``f(x, c)`` -> dx/dt, with ``c`` in {0, 0.5, 1}.
+    x : array or casadi.SX / casadi.MX
+        State at the start of the step.
+    h : float or casadi symbol
+        Step length.
+
+    Returns
+    -------
+    x_next : same type as ``x``
+        State after the step.
+    """
+    k1 = f(x, 0.0)
+    k2 = f(x + h / 2 * k1, 0.5)
+    k3 = f(x + h / 2 * k2, 0.5)
+    k4 = f(x + h * k3, 1.0)
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def as_vector(x, n: int, name: str) -> np.ndarray:
+    """``x`` as a finite float vector of ``n`` components.
+
+    Parameters
+    ----------
+    x : array_like
+        The value given by the user.
+    n : int
+        Required number of components.
+    name : str
+        The argument's name, used in the error message.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape ``(n,)``, dtype float.
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` when the shape is wrong or a value is not finite.
+    """
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {n} numbers, got {x!r}") from None
+    if a.shape != (n,):
+        raise ValueError(f"{name} must have {n} components, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be finite, got {a.tolist()}")
+    return a
+
+
+def as_number(x, name: str, *, positive: bool = False, nonnegative: bool = False) -> float:
+    """``x`` as a finite float (optionally > 0 or >= 0).
+
+    Parameters
+    ----------
+    x : object
+        The value given by the user.
+    name : str
+        The argument's name, used in the error message.
+    positive, nonnegative : bool
+        Require ``x > 0`` or ``x >= 0``.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` when ``x`` is not a finite number in the required range.
+    """
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a number, got {x!r}")
+    v = float(x)
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {x!r}")
+    if positive and not v > 0:
+        raise ValueError(f"{name} must be positive, got {x!r}")
+    if nonnegative and not v >= 0:
+        raise ValueError(f"{name} must be non-negative, got {x!r}")
+    return v

@@ -1,0 +1,112 @@
+"""The reference-trajectory interface the controllers, the simulator and the maps use.
+
+A reference is one step q^d(tau), tau in [0, T], restarted at every impact and
+continued smoothly past T (SPEC §2-3).  Its symbolic form is a CasADi Function of tau
+and of an internal reference state r that is integrated alongside the robot (for a
+gait of :mod:`gait_opt`, r = (q_u^d, dq_u^d): the unactuated row of eq. (1) is an ODE,
+so carrying it as a state keeps q_u^d exact in every discrete scheme).  A reference
+given in closed form has no state (``n_state = 0``).
+
+:class:`gait_opt.Gait` implements this interface; any other object that does can drive
+:class:`~biped_casadi.controllers.TimeVaryingController`, the simulator and the maps of
+:mod:`analysis`.
+"""
+from __future__ import annotations
+
+import abc
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["Reference", "require_same_robot"]
+
+
+def require_same_robot(model, reference) -> None:
+    """Raise ``ValueError`` unless ``reference`` was made for ``model``'s robot.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The model the caller will use.
+    reference : Reference
+        A reference (gait) built for some model.
+
+    Raises
+    ------
+    ValueError
+        When the robot parameters differ (the gait was made for another robot).
+    """
+    if reference.model.params != model.params:
+        raise ValueError("gait: made for other robot parameters than the model "
+                         f"({reference.model.params.name!r} vs {model.params.name!r})")
+
+
+class Reference(abc.ABC):
+    """A reference step q^d(tau) for a :class:`~biped_casadi.model.BipedModel`.
+
+    Subclasses set ``model``, ``T`` (step duration, s), ``t_min`` (<= 0) and ``t_max``
+    (>= T, the range where the numeric methods are defined), ``n_state`` and ``r0``,
+    and implement :meth:`symbolic`, :meth:`evaluate` and :meth:`state`.
+    """
+
+    model = None
+    T: float = float("nan")
+    t_min: float = 0.0
+    t_max: float = float("nan")
+    n_state: int = 0
+    r0: np.ndarray = np.zeros(0)
+
+    @abc.abstractmethod
+    def symbolic(self) -> ca.Function:
+        """The reference as a CasADi Function.
+
+        Returns
+        -------
+        casadi.Function
+            ``(tau, r) -> (qd, dqd, ddqd, dr)``: q^d, its first two time derivatives
+            at tau given the reference state r, and dr/dtau.
+        """
+
+    @abc.abstractmethod
+    def evaluate(self, t):
+        """q^d, dq^d, ddq^d at ``t`` (numeric).
+
+        Parameters
+        ----------
+        t : float or array_like
+            Times in [t_min, t_max].
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            Shapes (nq,) each for a float ``t``, (nq, N) for an array.
+        """
+
+    @abc.abstractmethod
+    def state(self, t) -> np.ndarray:
+        """The reference state r(t) (numeric), shape (n_state,)."""
+
+    # ------------------------------------------------------------ derived
+    def q(self, t):
+        """q^d(t): shape (nq,) for a float ``t``, (nq, N) for an array."""
+        return self.evaluate(t)[0]
+
+    def dq(self, t):
+        """dq^d/dt at ``t``."""
+        return self.evaluate(t)[1]
+
+    def ddq(self, t):
+        """d2q^d/dt2 at ``t``."""
+        return self.evaluate(t)[2]
+
+    def u(self, t):
+        """Reference torques u^d(t) (inverse dynamics of eq. (1)): (nu,) or (nu, N)."""
+        q, dq, ddq = self.evaluate(t)
+        q2, dq2, ddq2 = (np.atleast_2d(v.T).T for v in (q, dq, ddq))
+        u = np.array(self.model.inverse_dynamics.map(q2.shape[1])(q2, dq2, ddq2))
+        return u[:, 0] if np.ndim(t) == 0 else u
+
+    def state_at(self, t) -> np.ndarray:
+        """(q_u^d(t), dq_u^d(t)), the unactuated coordinate and its rate."""
+        q, dq, _ = self.evaluate(float(t))
+        return np.array([q[0], dq[0]])

@@ -1,0 +1,542 @@
+"""Transcription of the reference-gait problem (SPEC section 2) into an NLP for IPOPT,
+with structured exact derivatives.
+
+Transcription.  The actuated joints are Bezier polynomials of s = t / T (so q_a^d,
+dq_a^d, ddq_a^d are exact everywhere and continue past T); only the unactuated row of
+eq. (1) is an ODE, x = (q_u, dq_u), and it is transcribed by orthogonal collocation
+(Legendre by default: order 2d at interval ends, i.e. 6 for d = 3, with the same number
+of variables as Radau; Radau is available for comparison, see benchmarks/bench_gait.py).
+Path constraints (torques, contact force, friction cone, swing-foot clearance) are
+imposed at every interval boundary and collocation point; knee limits on the Bezier
+coefficients, which bounds the polynomial on the whole step (convex hull).
+
+Exact Hessian with structure.  The actuated joints are lifted at every point: variables
+QA_k = (q_a, dq_a/ds, d2q_a/ds2) at point k, tied to alpha by linear equalities.  Every
+nonlinear term of the NLP is then either a function of one point's
+z_k = (x_k, QA_k, T) (15 numbers) or of the boundary variables (T, alpha, x(0), x(1)) of
+the impact and periodicity conditions.  The constraints and the cost are *linear* in the
+point outputs (collocation right-hand side, torques, contact forces, swing height, cost
+density), so the Hessian of the Lagrangian is
+
+    sum_k P_k' [sum_j c_kj d2 out_kj / dz_k2] P_k + P_b' d2 (lam_b' g_b) P_b,
+
+with c_k the multipliers pulled back through that linear map.  The 15x15 point Hessian
+and the 33x33 boundary Hessian are exact SX Hessians by AD (built once), mapped over the
+points and scattered into the global upper-triangular sparsity; the constraint Jacobian
+and the cost gradient are assembled the same way from 10x15 point Jacobians.  IPOPT
+gets exact derivatives at a fraction of the cost of differentiating the MX graph
+(``derivatives='casadi'`` keeps that route as the baseline; benchmarks/bench_gait.py).
+
+Cost.  The default cost is (integral of u'u dt) / step length.  With the speed
+constraint x_end = v T, it equals (1/v) * integral_0^1 u'u ds (s = t / T): the two
+objectives agree on the whole feasible set, so the NLPs have the same solutions, and
+the second is a sum of per-point terms (no coupling through x_end), which is what makes
+the Hessian separable.  'torque_squared' is T * integral_0^1 u'u ds, also per point.
+Quadrature: the collocation (Gauss/Radau) weights.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from biped_casadi.caching import cached
+
+from .options import GaitOptions
+from .parametrisation import reference_dynamics
+
+__all__ = ["Problem", "build_problem", "initial_guess", "make_solver", "describe_violations",
+           "constraint_violations", "warm_start_vector", "MARGINS", "FIXED_BY", "UNITS"]
+
+#: rows of a point's output vector (see _point_functions)
+_OUT = dict(f=slice(0, 2), u=slice(2, 6), Fx=6, Fz=7, zsw=8, cost=9)
+_N_OUT = 10
+_N_Z = 15          # z_k = (q_u, dq_u, q_a, dq_a/ds, d2q_a/ds2, T)
+
+@dataclass
+class Problem:
+    """The transcribed NLP: ``nlp`` (x, f, g), bounds, the constraint families
+    ``groups`` (name, start, stop) in g, ``unpack`` w -> (T, alpha, Xs, Xc, QA), and the
+    structured exact derivatives in nlpsol's signatures: ``hess_lag`` (x, p, lam_f,
+    lam_g) -> triu(H), ``jac_g`` (x, p) -> (g, dg/dx), ``grad_f`` (x, p) -> (f, df/dx)."""
+
+    nlp: dict
+    lift: ca.Function
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
+    groups: list
+    unpack: ca.Function
+    cost_scale: float
+    hess_lag: ca.Function
+    jac_g: ca.Function
+    grad_f: ca.Function
+    s_all: np.ndarray
+
+
+def _collocation(opts):
+    tau = ca.collocation_points(opts.degree, opts.scheme)
+    C, Dend, Bq = ca.collocation_coeff(tau)
+    return np.array(tau), np.array(C), np.array(Dend).ravel(), np.array(Bq).ravel()
+
+
+def _grid(opts):
+    """s of every constrained point: interval starts (0..N), then collocation points."""
+    tau, *_ = _collocation(opts)
+    N = opts.n_intervals
+    s_start = np.arange(N + 1) / N
+    s_coll = (np.arange(N)[:, None] / N + tau[None, :] / N).ravel()
+    return s_start, s_coll
+
+
+@cached(maxsize=16)
+def _point_functions(model, bezier_degree: int, cost: str):
+    """Per-point outputs and their exact Hessian (SX, built once per model and cost).
+
+    ``point(z)`` -> out = (T dq_u, T ddq_u, u (4), Fx, Fz, z_sw, cost density), with
+    z = (q_u, dq_u, q_a, dq_a/ds, d2q_a/ds2, T): the first two outputs are the
+    unactuated row of eq. (1) as an ODE in s; the cost density is u'u (per-length cost,
+    times 1/v outside) or T u'u ('torque_squared').
+    ``point_jac(z)`` -> (out, d out / dz); ``point_cost(z)`` -> (cost density, gradient);
+    ``point_hess(z, c)`` -> upper triangle of d2(c' out)/dz2 (15x15).
+    """
+    ref = reference_dynamics(model, bezier_degree)
+    z = ca.SX.sym("z", _N_Z)
+    x, lifted, T = z[0:2], z[2:14], z[14]
+    q = ca.vertcat(x[0], lifted[:4])
+    dq = ca.vertcat(x[1], lifted[4:8] / T)
+    ddqa = lifted[8:12] / T**2
+    ddq = ca.vertcat(ref.ddqu(q, dq, ddqa), ddqa)
+    u = ref.torque(q, dq, ddq)
+    Fx, Fz = model.ground_reaction_acc(q, dq, ddq)
+    _, zsw = model.swing_foot(q)
+    density = ca.sumsqr(u) * (T if cost == "torque_squared" else 1)
+    # common subexpression elimination first: the model's expressions repeat a lot
+    # (3587 -> 1636 operations), which halves the size of the Hessian below
+    out = ca.cse(ca.vertcat(T * ca.vertcat(x[1], ddq[0]), u, Fx, Fz, zsw, density))
+    density = out[-1]
+    point = ca.Function("point", [z], [out], ["z"], ["out"])
+    point_jac = ca.Function("point_jac", [z], [out, ca.jacobian(out, z)], ["z"], ["out", "J"])
+    point_cost = ca.Function("point_cost", [z], [density, ca.gradient(density, z)], ["z"],
+                             ["density", "grad"])
+    c = ca.SX.sym("c", _N_OUT)
+    H = ca.triu(ca.hessian(ca.dot(c, out), z)[0])
+    point_hess = ca.Function("point_hess", [z, c], [H], ["z", "c"], ["H"])
+    return point, point_jac, point_cost, point_hess
+
+
+def _boundary_function(model, opts: GaitOptions):
+    """End of step, impact (paper eq. 2-3) and periodicity, as SX of
+    v_b = (T, vec(alpha), x(0), x(1)); returns (Function, [(name, rows, lo, hi)])."""
+    ref = reference_dynamics(model, opts.bezier_degree)
+    M = opts.bezier_degree
+    vb = ca.SX.sym("vb", 1 + 4 * (M + 1) + 4)
+    T = vb[0]
+    alpha = ca.reshape(vb[1:1 + 4 * (M + 1)], 4, M + 1)
+    x0, x1 = vb[-4:-2], vb[-2:]
+    qa0, dqa0, _ = ref.qa(alpha, 0, T)
+    qa1, dqa1, _ = ref.qa(alpha, 1, T)
+    q_minus = ca.vertcat(x1[0], qa1)
+    dq_minus = ca.vertcat(x1[1], dqa1)
+    q_plus, dq_plus, F_imp, _, v_old = model.impact_full(q_minus, dq_minus)
+    x_end, z_end = model.swing_foot(q_minus)
+    _, dz_end = model.swing_foot_velocity(q_minus, dq_minus)
+    mu, inf = opts.mu, np.inf
+    families = [
+        ("periodicity (q)", q_plus - ca.vertcat(x0[0], qa0), 0, 0),
+        ("periodicity (dq)", dq_plus - ca.vertcat(x0[1], dqa0), 0, 0),
+        ("swing foot on ground at T", z_end, 0, 0),
+        ("speed", x_end - opts.speed * T, 0, 0),
+        ("step length", x_end, *opts.step_length_bounds),
+        ("strike velocity", dz_end, -inf, -opts.min_strike_speed),
+        ("lift-off velocity", v_old[1], opts.min_liftoff_speed, inf),
+        ("impact impulse cone", ca.vertcat(F_imp[1], mu * F_imp[1] - F_imp[0],
+                                           mu * F_imp[1] + F_imp[0]), 0, inf),
+    ]
+    g = ca.cse(ca.vertcat(*[f[1] for f in families]))
+    lam = ca.SX.sym("lam", g.numel())
+    Hb = ca.triu(ca.hessian(ca.dot(lam, g), vb)[0])
+    bnd = ca.Function("boundary", [vb], [g, ca.jacobian(g, vb)], ["vb"], ["g", "J"])
+    bnd_hess = ca.Function("boundary_hess", [vb, lam], [Hb], ["vb", "lam"], ["H"])
+    return bnd, bnd_hess, families
+
+
+#: path-constraint families that between-node violations can be fixed for, by tightening
+#: the node constraints: family -> unit of the margin
+MARGINS = {"torque limit": "N m", "normal force": "N", "friction cone": "(ratio)",
+           "swing-foot clearance": "m"}
+#: dense-grid families (Gait.violations) fixed by another family's margin
+FIXED_BY = {"swing foot above ground": "swing-foot clearance"}
+
+
+@dataclass
+class _Layout:
+    """Where everything sits in the decision vector w = (T, alpha, Xs, Xc, QA)."""
+
+    N: int
+    d: int
+    M: int
+    s_all: np.ndarray
+    w: ca.MX
+    T: ca.MX
+    alpha: ca.MX
+    Xs: ca.MX
+    Xc: ca.MX
+    QA: ca.MX
+    off_a: int
+    off_Xs: int
+    off_Xc: int
+    off_QA: int
+
+    @property
+    def npts(self) -> int:
+        return self.s_all.size
+
+    @property
+    def nw(self) -> int:
+        return self.w.numel()
+
+    @property
+    def na(self) -> int:
+        return 4 * (self.M + 1)
+
+    def z_index(self) -> np.ndarray:
+        """(_N_Z, npts): positions in w of every point's z_k = (x_k, QA_k, T)."""
+        z = np.empty((_N_Z, self.npts), dtype=int)
+        for k in range(self.npts):
+            xk = self.off_Xs + 2 * k if k <= self.N else self.off_Xc + 2 * (k - self.N - 1)
+            z[:, k] = np.r_[xk, xk + 1, self.off_QA + 12 * k + np.arange(12), 0]
+        return z
+
+    def boundary_index(self) -> np.ndarray:
+        """Positions in w of the boundary variables (T, vec(alpha), x(0), x(1))."""
+        return np.r_[0, self.off_a + np.arange(self.na), self.off_Xs + np.arange(2),
+                     self.off_Xs + 2 * self.N + np.arange(2)]
+
+
+def _layout(opts: GaitOptions) -> _Layout:
+    M, N, d = opts.bezier_degree, opts.n_intervals, opts.degree
+    s_start, s_coll = _grid(opts)
+    s_all = np.r_[s_start, s_coll]
+    T = ca.MX.sym("T")
+    alpha = ca.MX.sym("alpha", 4, M + 1)
+    Xs = ca.MX.sym("Xs", 2, N + 1)
+    Xc = ca.MX.sym("Xc", 2, N * d)
+    QA = ca.MX.sym("QA", 12, s_all.size)          # (qa, dqa/ds, d2qa/ds2) at every point
+    na = 4 * (M + 1)
+    off_Xs = 1 + na
+    off_Xc = off_Xs + 2 * (N + 1)
+    return _Layout(N, d, M, s_all, ca.veccat(T, alpha, Xs, Xc, QA), T, alpha, Xs, Xc, QA,
+                   1, off_Xs, off_Xc, off_Xc + 2 * N * d)
+
+
+class _Constraints:
+    """Constraint families appended in order: g, bounds, and (name, start, stop)."""
+
+    def __init__(self):
+        self.g, self.lbg, self.ubg, self.groups = [], [], [], []
+
+    def add(self, name, expr, lo, hi):
+        expr = ca.vec(expr)
+        n = expr.numel()
+        start = sum(e.numel() for e in self.g)
+        self.g.append(expr)
+        self.lbg.append(np.broadcast_to(lo, (n,)).astype(float))
+        self.ubg.append(np.broadcast_to(hi, (n,)).astype(float))
+        self.groups.append((name, start, start + n))
+
+    @property
+    def size(self) -> int:
+        return sum(e.numel() for e in self.g)
+
+
+def _point_constraints(model, opts, lay: _Layout, margins, OUT):
+    """Bezier lifting, collocation of the unactuated row and the path constraints, all
+    linear in w and in the point outputs OUT: (constraints, QA as a function of alpha)."""
+    ref = reference_dynamics(model, opts.bezier_degree)
+    N, d = lay.N, lay.d
+    _, C, Dend, _ = _collocation(opts)
+    h = 1.0 / N
+    s_sym = ca.SX.sym("s")
+    a_sx = ca.SX.sym("alpha", 4, lay.M + 1)
+    qa_s, dqa_s, ddqa_s = ref.qa(a_sx, s_sym, 1.0)       # with T = 1: s-derivatives
+    basis = ca.Function("basis", [a_sx, s_sym], [ca.vertcat(qa_s, dqa_s, ddqa_s)])
+    QA_of_alpha = basis.map(lay.npts)(lay.alpha, ca.DM(lay.s_all).T)
+    con = _Constraints()
+    f_coll = OUT[_OUT["f"], N + 1:]
+    coll, cont = [], []
+    for k in range(N):
+        Z = ca.horzcat(lay.Xs[:, k], lay.Xc[:, k * d:(k + 1) * d])
+        coll.append(ca.mtimes(Z, C) - h * f_coll[:, k * d:(k + 1) * d])
+        cont.append(ca.mtimes(Z, Dend) - lay.Xs[:, k + 1])
+    con.add("actuated joints (Bezier)", lay.QA - QA_of_alpha, 0, 0)
+    con.add("dynamics (collocation)", ca.horzcat(*coll), 0, 0)
+    con.add("dynamics (continuity)", ca.horzcat(*cont), 0, 0)
+    umax = opts.torque_limit - margins.get("torque limit", 0.0)
+    mu = opts.mu - margins.get("friction cone", 0.0)
+    Fx_all, Fz_all = OUT[_OUT["Fx"], :], OUT[_OUT["Fz"], :]
+    con.add("torque limit", OUT[_OUT["u"], :], -umax, umax)
+    con.add("normal force", Fz_all, opts.min_normal_force + margins.get("normal force", 0.0),
+            np.inf)
+    con.add("friction cone", ca.vertcat(mu * Fz_all - Fx_all, mu * Fz_all + Fx_all), 0, np.inf)
+    s_all = lay.s_all
+    idx = np.flatnonzero((s_all > 1e-9) & (s_all < 1 - 1e-9))
+    clear = (opts.clearance * 4 * s_all[idx] * (1 - s_all[idx])
+             + margins.get("swing-foot clearance", 0.0))
+    con.add("swing-foot clearance", OUT[_OUT["zsw"], idx.tolist()] - ca.DM(clear).T, 0, np.inf)
+    return con, QA_of_alpha
+
+
+def _cost_of_outputs(opts, lay: _Layout, OUT):
+    """(1/v) int_0^1 u'u ds (= int u'u dt / step length when x_end = v T), or
+    T int_0^1 u'u ds, by the collocation quadrature; scaled by 1e-3 for IPOPT."""
+    _, _, _, Bq = _collocation(opts)
+    weights = np.r_[np.zeros(lay.N + 1), np.tile(Bq, lay.N) * (1.0 / lay.N)]
+    if opts.cost == "torque_squared_per_length":
+        weights = weights / opts.speed
+    cost_scale = 1e-3
+    return cost_scale * ca.mtimes(OUT[_OUT["cost"], :], ca.DM(weights)), cost_scale
+
+
+def _jacobian_and_gradient(point_jac, point_cost, lay, z_index, z_all, xw, pw, gfun,
+                           A_out, G_w, a_out, bnd, vb_w):
+    """Structured constraint Jacobian and objective gradient: d vec(OUT)/dw is block
+    sparse (one 10x15 block per point, columns z_index)."""
+    npts, nw = lay.npts, lay.nw
+    vb_index = lay.boundary_index()
+    sp_j = point_jac.sparsity_out(1)
+    rj, cj = (np.array(v) for v in sp_j.get_triplet())
+    ks = np.repeat(np.arange(npts), rj.size)
+    dout_sp = ca.Sparsity.triplet(_N_OUT * npts, nw, (ks * _N_OUT + np.tile(rj, npts)).tolist(),
+                                  z_index[np.tile(cj, npts), ks].tolist())
+    out_v, Jp = point_jac.map(npts)(z_all)
+    # the map's nonzeros are block after block, column-major within a block; the
+    # triplet sparsity orders them column-major globally: permute
+    order = np.lexsort(((ks * _N_OUT + np.tile(rj, npts)), z_index[np.tile(cj, npts), ks]))
+    dout = ca.MX(dout_sp, Jp.nz[order.tolist()])
+    _, Jb = bnd(vb_w)
+    select_b = ca.DM(ca.Sparsity.triplet(vb_index.size, nw, list(range(vb_index.size)),
+                                         vb_index.tolist()), 1.0)
+    g_w = ca.densify(gfun(xw, out_v))
+    jac_g = ca.vertcat(G_w + ca.mtimes(A_out, dout), ca.mtimes(Jb, select_b))
+    jac_g_fun = ca.Function("jac_g", [xw, pw], [g_w, jac_g], ["x", "p"], ["g", "jac_g_x"])
+    # objective: only the cost density of the collocation points (weights a_k)
+    wk = np.array(a_out).ravel()[_OUT["cost"]::_N_OUT]
+    cpts = np.flatnonzero(wk)
+    dens, dgrad = point_cost.map(cpts.size)(z_all[:, cpts.tolist()])
+    f_w = ca.mtimes(dens, ca.DM(wk[cpts]))
+    grad_w = ca.densify(ca.mtimes(ca.DM(ca.Sparsity.triplet(
+        nw, _N_Z * cpts.size, z_index[:, cpts].ravel(order="F").tolist(),
+        list(range(_N_Z * cpts.size))), 1.0), ca.vec(dgrad * ca.repmat(ca.DM(wk[cpts]).T, _N_Z, 1))))
+    grad_f_fun = ca.Function("grad_f", [xw, pw], [f_w, grad_w], ["x", "p"], ["f", "grad_f_x"])
+    return jac_g_fun, grad_f_fun
+
+
+def _hessian_of_lagrangian(point_hess, bnd_hess, lay, z_index, z_all, xw, pw, vb_w,
+                           A_out, a_out, n_linear, n_g):
+    """Exact Hessian of the Lagrangian: per-point 15x15 and boundary Hessians scattered
+    into the global upper-triangular sparsity (see the module docstring)."""
+    npts, nw = lay.npts, lay.nw
+    vb_index = lay.boundary_index()
+    sp_p = point_hess.sparsity_out(0)
+    sp_b = bnd_hess.sparsity_out(0)
+    rp, cp = (np.array(v) for v in sp_p.get_triplet())
+    rb, cb = (np.array(v) for v in sp_b.get_triplet())
+    # global (row, col) of every contribution, in the order of the nonzeros below
+    R = np.r_[z_index[rp, :].T.ravel(), vb_index[rb]]
+    Cc = np.r_[z_index[cp, :].T.ravel(), vb_index[cb]]
+    R, Cc = np.minimum(R, Cc), np.maximum(R, Cc)           # upper triangle
+    lin = Cc * nw + R                                      # column-major order
+    uniq, where = np.unique(lin, return_inverse=True)
+    H_sp = ca.Sparsity.triplet(nw, nw, (uniq % nw).tolist(), (uniq // nw).tolist())
+    scatter = ca.DM(ca.Sparsity.triplet(uniq.size, lin.size, where.tolist(),
+                                        list(range(lin.size))), 1.0)
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", n_g)
+    c_all = ca.reshape(ca.mtimes(A_out.T, lam_g[:n_linear]) + lam_f * a_out, _N_OUT, npts)
+    Hp = point_hess.map(npts)(z_all, c_all)
+    Hb = bnd_hess(vb_w, lam_g[n_linear:])
+    contrib = ca.vertcat(Hp.nz[:], Hb.nz[:])
+    H = ca.MX(H_sp, ca.mtimes(scatter, contrib))
+    return ca.Function("hess_lag", [xw, pw, lam_f, lam_g], [H],
+                       ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+
+
+def _variable_bounds(opts, lay: _Layout):
+    """T within its bounds, knee limits on the Bezier coefficients (so on the whole
+    polynomial), joint angles within +-pi."""
+    lbx = np.full(lay.nw, -np.inf)
+    ubx = np.full(lay.nw, np.inf)
+    lbx[0], ubx[0] = opts.step_time_bounds
+    a_lb = np.full((4, lay.M + 1), -np.pi)
+    a_ub = np.full((4, lay.M + 1), np.pi)
+    a_ub[0, :] = opts.stance_knee_max
+    a_lb[3, :] = opts.swing_knee_min
+    lbx[lay.off_a:lay.off_a + lay.na] = a_lb.ravel(order="F")
+    ubx[lay.off_a:lay.off_a + lay.na] = a_ub.ravel(order="F")
+    return lbx, ubx
+
+
+def build_problem(model, opts: GaitOptions, margins: dict | None = None) -> Problem:
+    """Transcribe the SPEC section 2 problem for ``opts`` (see the module docstring).
+
+    Parameters
+    ----------
+    model : BipedModel
+    opts : GaitOptions
+    margins : dict, optional
+        Family of :data:`MARGINS` -> amount: tightens the path constraints at the nodes,
+        so that they hold between the nodes too (see :func:`gait_opt.solve_gait`).
+
+    Returns
+    -------
+    Problem
+    """
+    margins = dict(margins or {})
+    unknown = set(margins) - set(MARGINS)
+    if unknown:
+        raise ValueError(f"margins: unknown constraint families {sorted(unknown)}")
+    lay = _layout(opts)
+    w, npts = lay.w, lay.npts
+    OUT = ca.MX.sym("OUT", _N_OUT, npts)
+    con, QA_of_alpha = _point_constraints(model, opts, lay, margins, OUT)
+    n_linear = con.size
+    bnd, bnd_hess, families = _boundary_function(model, opts)
+    g_b, _ = bnd(ca.vertcat(lay.T, ca.vec(lay.alpha), lay.Xs[:, 0], lay.Xs[:, lay.N]))
+    row = 0
+    for name, expr, lo, hi in families:
+        n = expr.numel()
+        con.add(name, g_b[row:row + n], lo, hi)
+        row += n
+    J_of_out, cost_scale = _cost_of_outputs(opts, lay, OUT)
+
+    g_of_out = ca.vertcat(*con.g)
+    # the point outputs enter g and f linearly, and the other terms of g are linear in w
+    # (or the boundary function): constant pull-back maps
+    jac = ca.Function("pullback", [w, OUT], [ca.jacobian(g_of_out[:n_linear], OUT),
+                                             ca.jacobian(g_of_out[:n_linear], w),
+                                             ca.vec(ca.gradient(J_of_out, OUT))])
+    A_out, G_w, a_out = jac(np.zeros(w.numel()), np.zeros(OUT.shape))
+    check = jac(np.linspace(-1, 1, w.numel()), np.ones(OUT.shape))
+    if any(float(ca.mmax(ca.fabs(a - b))) > 1e-12 for a, b in zip((A_out, G_w, a_out), check)):
+        raise AssertionError("internal: constraints must be linear in w and the point outputs")
+
+    point, point_jac, point_cost, point_hess = _point_functions(model, lay.M, opts.cost)
+    Z_all = ca.vertcat(ca.horzcat(lay.Xs, lay.Xc), lay.QA, ca.repmat(lay.T, 1, npts))
+    out_all = point.map(npts)(Z_all)
+    gfun = ca.Function("g_of_out", [w, OUT], [g_of_out])
+    ffun = ca.Function("f_of_out", [w, OUT], [J_of_out])
+    nlp = {"x": w, "f": ffun(w, out_all), "g": gfun(w, out_all)}
+
+    z_index = lay.z_index()
+    xw = ca.MX.sym("x", lay.nw)
+    pw = ca.MX.sym("p", 0, 1)
+    z_all = ca.reshape(xw[z_index.ravel(order="F").tolist()], _N_Z, npts)
+    vb_w = xw[lay.boundary_index().tolist()]
+    jac_g_fun, grad_f_fun = _jacobian_and_gradient(point_jac, point_cost, lay, z_index, z_all,
+                                                   xw, pw, gfun, A_out, G_w, a_out, bnd, vb_w)
+    hess_lag = _hessian_of_lagrangian(point_hess, bnd_hess, lay, z_index, z_all, xw, pw, vb_w,
+                                      A_out, a_out, n_linear, g_of_out.numel())
+    lbx, ubx = _variable_bounds(opts, lay)
+    unpack = ca.Function("unpack", [w], [lay.T, lay.alpha, lay.Xs, lay.Xc, QA_of_alpha])
+    lift = ca.Function("lift", [lay.alpha], [QA_of_alpha])
+    return Problem(nlp, lift, lbx, ubx, np.concatenate(con.lbg), np.concatenate(con.ubg),
+                   con.groups, unpack, cost_scale, hess_lag, jac_g_fun, grad_f_fun, lay.s_all)
+
+
+def initial_guess(model, opts: GaitOptions):
+    """Built-in guess: a symmetric double-support pose at impact with both knees bent,
+    joints interpolated linearly in s, a swing-knee bend mid-step for clearance."""
+    M = opts.bezier_degree
+    lo, hi = opts.step_length_bounds
+    L0 = float(np.clip(0.45 * np.sqrt(opts.speed / 0.75), lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)))
+    T0 = float(np.clip(L0 / opts.speed, *opts.step_time_bounds))
+    kappa, lean = 0.15, 0.05
+    p = model.params
+    # both legs bent by kappa, feet L0 apart: (L_t + L_f)(sin a + sin(a - kappa)) = L0,
+    # i.e. 2 (L_t + L_f) cos(kappa/2) sin(a - kappa/2) = L0
+    ratio = L0 / (2 * (p.L_tibia + p.L_femur) * np.cos(kappa / 2))
+    a = kappa / 2 + float(np.arcsin(np.clip(ratio, -0.95, 0.95)))
+    phi = np.array([a, a - kappa, lean, -a, kappa - a])  # femur_sw = -a, tibia_sw = kappa - a
+    qT = np.r_[phi[0], np.diff(phi)]
+    q0 = model.E @ qT
+    qa0, qaT = q0[1:], qT[1:]
+    k = np.arange(M + 1) / M
+    alpha = qa0[:, None] + k[None, :] * (qaT - qa0)[:, None]
+    alpha[3] += 0.8 * np.sin(np.pi * k)          # swing knee bends mid-step
+    alpha[0] = np.minimum(alpha[0], opts.stance_knee_max - 0.02)
+    alpha[3] = np.maximum(alpha[3], opts.swing_knee_min + 0.02)
+    s_start, s_coll = _grid(opts)
+    dqu = (qT[0] - q0[0]) / T0
+    Xs = np.vstack([q0[0] + s_start * (qT[0] - q0[0]), np.full(s_start.size, dqu)])
+    Xc = np.vstack([q0[0] + s_coll * (qT[0] - q0[0]), np.full(s_coll.size, dqu)])
+    return _stack(model, opts, T0, alpha, Xs, Xc)
+
+
+def _stack(model, opts, T, alpha, Xs, Xc):
+    """Decision vector from (T, alpha, Xs, Xc); the lifted actuated values follow alpha."""
+    ref = reference_dynamics(model, opts.bezier_degree)
+    s_all = np.concatenate(_grid(opts))
+    QA = np.vstack([np.array(v) for v in ref.qa.map(s_all.size)(alpha, s_all[None, :], 1.0)])
+    return np.concatenate([[T], np.asarray(alpha).ravel(order="F"), Xs.ravel(order="F"),
+                           Xc.ravel(order="F"), QA.ravel(order="F")])
+
+
+#: units of each constraint family's residual, for messages
+UNITS = {
+    "actuated joints (Bezier)": "rad", "dynamics (collocation)": "rad",
+    "dynamics (continuity)": "rad", "torque limit": "N m", "normal force": "N",
+    "friction cone": "N", "swing-foot clearance": "m", "periodicity (q)": "rad",
+    "periodicity (dq)": "rad/s", "swing foot on ground at T": "m", "speed": "m",
+    "step length": "m", "strike velocity": "m/s", "lift-off velocity": "m/s",
+    "impact impulse cone": "N s",
+}
+
+
+def constraint_violations(prob: Problem, gval: np.ndarray, tol: float = 1e-6):
+    """[(family, worst violation)] of the constraint families violated by more than
+    ``tol`` * max(1, |bound|) (IPOPT relaxes bounds by about that much), worst first."""
+    bad = []
+    for name, a, b in prob.groups:
+        lo, hi, gv = prob.lbg[a:b], prob.ubg[a:b], gval[a:b]
+        with np.errstate(invalid="ignore"):
+            v = np.maximum(lo - gv, gv - hi)
+            scale = np.maximum(1.0, np.where(lo - gv > gv - hi, np.abs(lo), np.abs(hi)))
+        v = np.where(np.isnan(gv), np.inf, v)
+        if v.size and np.any(v > tol * scale):
+            bad.append((name, float(np.max(v))))
+    return sorted(bad, key=lambda t: -t[1])
+
+
+def describe_violations(viol, limit: int = 4) -> str:
+    """'speed (off by 0.7 m); torque limit (off by 3 N m)' for the worst families."""
+    text = "; ".join(f"{n} (off by {v:.3g} {UNITS.get(n, '')})".replace(" )", ")")
+                     for n, v in viol[:limit])
+    if len(viol) > limit:
+        text += f"; and {len(viol) - limit} more"
+    return text or "none"
+
+
+def make_solver(prob: Problem, opts: GaitOptions, verbose: bool = False):
+    """IPOPT on ``prob`` with exact derivatives: the structured ``hess_lag``, ``jac_g``,
+    ``grad_f`` (default) or CasADi's AD of the whole MX graph
+    (``opts.derivatives == 'casadi'``, the baseline)."""
+    ipopt = {"print_level": 5 if verbose else 0, "tol": 1e-9, "max_iter": 500,
+             "mu_strategy": "adaptive", "linear_solver": "mumps", "sb": "yes"}
+    ipopt.update(opts.ipopt)
+    sopts = {"ipopt": ipopt, "print_time": False, "expand": opts.expand, "error_on_fail": False}
+    if opts.derivatives == "structured":
+        sopts.update(hess_lag=prob.hess_lag, jac_g=prob.jac_g, grad_f=prob.grad_f)
+    return ca.nlpsol("gait_nlp", "ipopt", prob.nlp, sopts)
+
+
+def warm_start_vector(model, opts, gait):
+    """The decision vector of a previous gait (same Bezier degree), to warm-start IPOPT."""
+    if gait.alpha.shape != (4, opts.bezier_degree + 1):
+        raise ValueError("warm_start gait has another bezier_degree")
+    s_start, s_coll = _grid(opts)
+    Xs = np.vstack([gait.q(s_start * gait.T)[0], gait.dq(s_start * gait.T)[0]])
+    Xc = np.vstack([gait.q(s_coll * gait.T)[0], gait.dq(s_coll * gait.T)[0]])
+    return _stack(model, opts, gait.T, gait.alpha, Xs, Xc)
