@@ -13,6 +13,7 @@ from .controllers import (HIP_PHASE, PAPER_REJOIN, TimeVaryingController,
 from .model import B_INPUT, E_RELABEL, BipedModel, rabbit
 from .output_law import SECTION, Gains, SingularityReport
 from .params import RABBIT, RobotParams, load_params
+from .perturbation import PAPER_SIZES, Perturbation, directions
 from .reference import Reference, require_same_robot
 from .results import Result, json_safe
 from .simulate import (PAPER_PERTURBATION, SimulationOptions, SimulationResult, Simulator,
@@ -24,5 +25,5 @@ __all__ = ["rabbit", "BipedModel", "RobotParams", "RABBIT", "load_params", "E_RE
            "VirtualConstraints", "fit_virtual_constraints", "HIP_PHASE", "PAPER_REJOIN",
            "Simulator", "SimulationOptions", "SimulationResult", "simulate",
            "perturbed_initial_state", "PAPER_PERTURBATION", "Result", "json_safe",
-           "cached", "cache_dir"]
+           "cached", "cache_dir", "Perturbation", "directions", "PAPER_SIZES"]
 __version__ = "0.1.0"
