@@ -6,9 +6,10 @@ the simulator and the maps of :mod:`analysis` use.
 """
 from .cache import default_gait
 from .errors import GaitOptimizationError
-from .gait import Gait, GaitFileError
+from .gait import ORBIT_TOL, Gait, GaitFileError, OpenOrbitWarning
 from .optimize import GaitSolveResult, optimize_gait, solve_gait
 from .options import GaitOptions
 
 __all__ = ["optimize_gait", "solve_gait", "GaitSolveResult", "default_gait", "Gait",
-           "GaitOptions", "GaitOptimizationError", "GaitFileError"]
+           "GaitOptions", "GaitOptimizationError", "GaitFileError", "OpenOrbitWarning",
+           "ORBIT_TOL"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -13,22 +13,43 @@ import casadi as ca
 
 from biped_casadi import Reference, RobotParams, rabbit
 from biped_casadi.caching import cached
+from biped_casadi.files import atomic_path
 
 from .options import GaitOptions
 from .parametrisation import quintic_hermite, reference_dynamics
 
-__all__ = ["Gait", "GaitFileError", "FORMAT", "FORMAT_VERSION"]
+__all__ = ["Gait", "GaitFileError", "OpenOrbitWarning", "FORMAT", "FORMAT_VERSION",
+           "ORBIT_TOL"]
 
 FORMAT = "biped-casadi-gait"
 FORMAT_VERSION = 1
 #: the reference is tabulated (and so defined) on [-EXTENT_BEFORE * T, EXTENT * T]
 EXTENT = 2.0
 EXTENT_BEFORE = 0.5
+#: a gait must be a periodic orbit of its own robot to this accuracy: the impact map
+#: applied to (q^d(T), dq^d(T)) returns (q^d(0), dq^d(0)) within ORBIT_TOL (rad, rad/s)
+#: and the swing foot is on the ground at T within ORBIT_TOL (m).  Optimised gaits close
+#: to ~1e-12; the optimiser's own polish accepts at most 1e-10.
+ORBIT_TOL = 1e-8
+#: a gait file larger than this is not one this toolkit wrote
+MAX_FILE_BYTES = 20_000_000
+#: RK4 steps per step (``polish_steps``) and Bezier degree a readable file may ask for
+MAX_POLISH_STEPS = 1_000_000
+MAX_BEZIER_DEGREE = 40
+#: the keys of a gait file (``solver_stats`` optional)
+_KEYS = ("format", "version", "robot", "options", "solution", "sha256")
 
 
 class GaitFileError(ValueError):
-    """A gait file that cannot be used: unreadable, corrupted, other format or version,
-    or made for other robot parameters."""
+    """A gait file that cannot be used: missing, not a file, unreadable, corrupted, other
+    format or version, malformed contents, made for other robot parameters, or not a
+    periodic orbit of its robot (:data:`ORBIT_TOL`)."""
+
+
+class OpenOrbitWarning(UserWarning):
+    """``Gait.load(..., allow_open_orbit=True)`` read a gait that is not a periodic orbit
+    of its robot: results computed from it (fixed points, eigenvalues) are not those of
+    a walking cycle."""
 
 
 class Gait(Reference):
@@ -275,22 +296,62 @@ class Gait(Reference):
         path = Path(path)
         body = self.to_dict()
         body["sha256"] = _digest(body)
-        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")     # atomic replace
-        tmp.write_text(json.dumps(body, indent=1))
-        tmp.replace(path)
+        text = json.dumps(body, indent=1)
+        with atomic_path(path) as tmp:       # complete or absent; no stray temp file
+            tmp.write_text(text)
         return path
 
+    def orbit_residual(self) -> dict:
+        """How far the gait is from a periodic orbit of its robot: ``q`` = max|q+ - q^d(0)|
+        (rad) and ``dq`` = max|dq+ - dq^d(0)| (rad/s), with (q+, dq+) the impact map and
+        relabelling applied to (q^d(T), dq^d(T)); ``z`` = |z_sw(T)| (m); ``worst`` the
+        largest (inf when the gait cannot be evaluated at T)."""
+        with np.errstate(all="ignore"):
+            try:
+                qT, dqT = self.q(self.T), self.dq(self.T)
+                q0, dq0 = self.q(0.0), self.dq(0.0)
+                qp, dqp = (np.array(v).ravel() for v in self.model.impact(qT, dqT))
+                z = abs(float(np.array(self.model.swing_foot(qT)).ravel()[1]))
+                out = dict(q=float(np.max(np.abs(qp - q0))), dq=float(np.max(np.abs(dqp - dq0))),
+                           z=z)
+            except ValueError:            # the reference does not reach T
+                out = dict(q=math.inf, dq=math.inf, z=math.inf)
+        vals = [v if math.isfinite(v) else math.inf for v in out.values()]
+        out["worst"] = max(vals)
+        return out
+
     @classmethod
-    def load(cls, path, model=None) -> "Gait":
-        """Read a gait file.  With ``model``, the file must have been made for the same
-        robot parameters.  Raises :class:`GaitFileError` with the reason."""
+    def load(cls, path, model=None, *, allow_open_orbit: bool = False,
+             orbit_tol: float = ORBIT_TOL) -> "Gait":
+        """Read and validate a gait file.
+
+        Parameters
+        ----------
+        path : str or Path
+        model : BipedModel, optional
+            The file must have been made for this model's robot (default: the file's own
+            robot).
+        allow_open_orbit : bool
+            A gait that is not a periodic orbit of its robot (see :meth:`orbit_residual`)
+            is refused; with True it is returned with an :class:`OpenOrbitWarning`.
+        orbit_tol : float
+            The accuracy the orbit must close to (default :data:`ORBIT_TOL`).
+
+        Returns
+        -------
+        Gait
+
+        Raises
+        ------
+        GaitFileError
+            For anything wrong, naming the file and the reason: missing, a folder,
+            unreadable, not JSON, another format or version, checksum mismatch, a missing
+            or unknown key, a wrong type, size or non-finite number, other robot
+            parameters, or not a periodic orbit.
+        """
         path = Path(path)
-        if not path.is_file():
-            raise GaitFileError(f"gait file not found: {path}")
-        try:
-            body = json.loads(path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise GaitFileError(f"gait file {path} is not valid JSON (corrupted?): {e}") from None
+        body = _read_json(path)
+        where = f"gait file {path}"
         if not isinstance(body, dict) or body.get("format") != FORMAT:
             raise GaitFileError(f"{path} is not a {FORMAT} file")
         if body.get("version") != FORMAT_VERSION:
@@ -298,25 +359,153 @@ class Gait(Reference):
                                 f"toolkit reads version {FORMAT_VERSION}")
         digest = body.pop("sha256", None)
         if digest != _digest(body):
-            raise GaitFileError(f"gait file {path} is corrupted (checksum mismatch)")
+            raise GaitFileError(f"{where} is corrupted (checksum mismatch)")
+        missing = [k for k in _KEYS if k != "sha256" and k not in body]
+        unknown = sorted(set(body) - set(_KEYS) - {"solver_stats"})
+        if missing or unknown:
+            raise GaitFileError(f"{where}: " + "; ".join(
+                ([f"missing key(s): {', '.join(missing)}"] if missing else [])
+                + ([f"unknown key(s): {', '.join(unknown)}"] if unknown else [])))
+        model = _robot_from_file(body["robot"], model, where)
+        opts = _options_from_file(body["options"], where)
+        alpha, x0, T = _solution_from_file(body["solution"], opts, where)
+        stats = body.get("solver_stats", {})
+        if not isinstance(stats, dict):
+            raise GaitFileError(f"{where}: 'solver_stats' must be an object, got "
+                                f"{type(stats).__name__}")
         try:
-            params = RobotParams.from_dict(body["robot"])
-            opts = GaitOptions.from_dict(body["options"])
-            sol = body["solution"]
-        except (KeyError, TypeError, ValueError) as e:
-            raise GaitFileError(f"gait file {path} has invalid contents: {e}") from None
-        if model is None:
-            model = rabbit(params)
-        elif model.params != params:
-            diff = [k for k, v in params.to_dict().items() if model.params.to_dict()[k] != v]
-            raise GaitFileError(f"gait file {path} was made for other robot parameters "
-                                f"(differ in: {', '.join(diff)})")
-        return cls(model, opts, sol["alpha"], sol["x0"], sol["T"],
-                   solver_stats=body.get("solver_stats"))
+            with np.errstate(all="ignore"):
+                gait = cls(model, opts, alpha, x0, T, solver_stats=stats)
+        except (ValueError, RuntimeError, FloatingPointError) as e:
+            raise GaitFileError(f"{where}: the solution cannot be evaluated ({e})") from None
+        r = gait.orbit_residual()
+        if not r["worst"] <= orbit_tol:
+            msg = (f"{where} is not a periodic orbit of its robot: " + (
+                f"the impact of the state at T misses the start by {r['q']:.2g} rad / "
+                f"{r['dq']:.2g} rad/s and the swing foot is {r['z']:.2g} m off the ground "
+                f"at T (tolerance {orbit_tol:g})" if math.isfinite(r["worst"]) else
+                f"its motion cannot be evaluated up to T = {T:.6g} s")
+                + "; was T or the solution edited?")
+            if not allow_open_orbit:
+                raise GaitFileError(msg)
+            warnings.warn(msg, OpenOrbitWarning, stacklevel=2)
+        return gait
 
     def __repr__(self):
         return (f"Gait(T={self.T:.4f} s, step={self.step_length:.4f} m, "
                 f"speed={self.speed:.4f} m/s, robot={self.model.params.name})")
+
+
+# ------------------------------------------------------------ reading a file
+def _read_json(path: Path):
+    """The parsed JSON of a gait file, or GaitFileError naming the file and the reason."""
+    if not path.exists():
+        raise GaitFileError(f"gait file not found: {path}")
+    if path.is_dir():
+        raise GaitFileError(f"gait file {path} is a folder, not a file")
+    if not path.is_file():
+        raise GaitFileError(f"gait file {path} is not a regular file")
+    try:
+        if path.stat().st_size > MAX_FILE_BYTES:
+            raise GaitFileError(f"gait file {path} is too large to be a gait file "
+                                f"({path.stat().st_size} bytes)")
+        text = path.read_bytes().decode("utf-8")
+    except OSError as e:
+        raise GaitFileError(f"gait file {path} cannot be read: {e.strerror or e}") from None
+    except UnicodeDecodeError:
+        raise GaitFileError(f"gait file {path} is not a text (JSON) file") from None
+    try:
+        return json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as e:
+        raise GaitFileError(f"gait file {path} is not valid JSON (truncated or "
+                            f"corrupted?): {e}") from None
+
+
+def _robot_from_file(robot, model, where: str):
+    """The model a gait file describes (its ``robot`` entry), checked against ``model``
+    when given.  The one place that reads the robot part of a gait file."""
+    try:
+        params = RobotParams.from_dict(robot)
+    except (TypeError, ValueError) as e:
+        raise GaitFileError(f"{where}: invalid 'robot': {e}") from None
+    if model is None:
+        return rabbit(params)
+    if model.params != params:
+        diff = [k for k, v in params.to_dict().items() if model.params.to_dict()[k] != v]
+        raise GaitFileError(f"{where} was made for other robot parameters "
+                            f"(differ in: {', '.join(diff)})")
+    return model
+
+
+def _options_from_file(options, where: str) -> GaitOptions:
+    if not isinstance(options, dict):
+        raise GaitFileError(f"{where}: 'options' must be an object, got "
+                            f"{type(options).__name__}")
+    try:
+        opts = GaitOptions.from_dict(options)
+    except (TypeError, ValueError) as e:
+        raise GaitFileError(f"{where}: invalid 'options': {e}") from None
+    if opts.polish_steps > MAX_POLISH_STEPS or opts.bezier_degree > MAX_BEZIER_DEGREE:
+        raise GaitFileError(f"{where}: 'options' asks for polish_steps "
+                            f"{opts.polish_steps} and bezier_degree {opts.bezier_degree} "
+                            f"(at most {MAX_POLISH_STEPS} and {MAX_BEZIER_DEGREE})")
+    return opts
+
+
+def _finite_number(v):
+    """``v`` as a finite float if it is a JSON number (not a boolean), else None."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    try:
+        f = float(v)
+    except OverflowError:           # an integer beyond the float range
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _numbers(value, shape: tuple, what: str, where: str) -> np.ndarray:
+    """``value`` (nested JSON lists) as a finite float array of ``shape``."""
+    def ok(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+    rows = value if len(shape) == 2 else [value]
+    n_rows, n_cols = (shape if len(shape) == 2 else (1, shape[0]))
+    expect = (f"{n_rows} rows of {n_cols} numbers" if len(shape) == 2
+              else f"a list of {n_cols} numbers")
+    if (not isinstance(value, list) or len(rows) != n_rows
+            or not all(isinstance(r, list) and len(r) == n_cols for r in rows)):
+        raise GaitFileError(f"{where}: solution.{what} must be {expect}")
+    if not all(ok(v) for r in rows for v in r):
+        raise GaitFileError(f"{where}: solution.{what} must hold only numbers")
+    try:
+        a = np.array(rows, dtype=float).reshape(shape)
+    except OverflowError:
+        a = np.full(shape, np.inf)
+    if not np.all(np.isfinite(a)):
+        raise GaitFileError(f"{where}: solution.{what} holds a non-finite number "
+                            f"(NaN or infinity)")
+    return a
+
+
+def _solution_from_file(sol, opts: GaitOptions, where: str):
+    """(alpha, x0, T) of the ``solution`` entry, every field checked."""
+    if not isinstance(sol, dict):
+        raise GaitFileError(f"{where}: 'solution' must be an object with T, alpha, x0, "
+                            f"got {type(sol).__name__}")
+    missing = [k for k in ("T", "alpha", "x0") if k not in sol]
+    unknown = sorted(set(sol) - {"T", "alpha", "x0"})
+    if missing or unknown:
+        raise GaitFileError(f"{where}: 'solution' " + "; ".join(
+            ([f"lacks {', '.join(missing)}"] if missing else [])
+            + ([f"has unknown key(s) {', '.join(unknown)}"] if unknown else [])))
+    T = _finite_number(sol["T"])
+    if T is None or T <= 0:
+        raise GaitFileError(f"{where}: solution.T must be a positive finite number, "
+                            f"got {sol['T']!r:.40}")
+    alpha = _numbers(sol["alpha"], (4, opts.bezier_degree + 1),
+                     f"alpha (Bezier degree {opts.bezier_degree})", where)
+    x0 = _numbers(sol["x0"], (2,), "x0", where)
+    return alpha, x0, float(T)
 
 
 def _digest(body: dict) -> str:

@@ -1,0 +1,61 @@
+"""Writing result files safely: through a temporary file in the same folder, moved into
+place only when complete, and removed on any failure (an exception, Ctrl-C), so a
+reader never sees half a file and a failed write never damages an earlier result or
+leaves a stray temporary file behind."""
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+
+__all__ = ["atomic_path", "write_text_atomic", "write_bytes_atomic"]
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """Context manager yielding a temporary path beside ``path``; on a normal exit the
+    temporary file replaces ``path`` (``os.replace``, atomic on POSIX), on any exception
+    it is removed and ``path`` is left as it was.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.  Its folder must exist; ``path`` must not be a folder.
+
+    Yields
+    ------
+    Path
+        Where to write (same folder and suffix as ``path``, so writers that choose a
+        format by suffix still work).
+
+    Raises
+    ------
+    IsADirectoryError
+        ``path`` is an existing folder (checked before anything is written).
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(21, "Is a directory", str(path))
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def write_bytes_atomic(path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through :func:`atomic_path`; returns ``path``."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+    return Path(path)
+
+
+def write_text_atomic(path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through :func:`atomic_path`; returns ``path``."""
+    return write_bytes_atomic(path, text.encode("utf-8"))
