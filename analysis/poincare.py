@@ -37,7 +37,8 @@ from biped_casadi import require_same_robot
 from biped_casadi.caching import cached
 from biped_casadi.controllers import PAPER_REJOIN
 from biped_casadi.numerics import as_number, as_vector, rk4_step
-from biped_casadi.output_law import (SECTION, check_M1, coordinates_from_outputs, correction,
+from biped_casadi.output_law import (SECTION, check_M1, check_M1_range,
+                                     coordinates_from_outputs, correction,
                                      decoupling_denominator, is_singular, outputs,
                                      unactuated_acceleration)
 from biped_casadi.results import Result
@@ -231,6 +232,7 @@ class PoincareMap:
             raise ValueError(f"M1s must be an (n, {self.nu}) array, got shape {M1s.shape}")
         if not np.all(np.isfinite(M1s)):
             raise ValueError("M1s must be finite")
+        check_M1_range(M1s, "M1s")
         den = decoupling_denominator(self.D11_table, self.D12_table, M1s.T)    # (n, 1001)
         return M1s, den, is_singular(den, axis=1)
 

@@ -40,6 +40,7 @@ import numpy as np
 
 from biped_casadi import RobotParams, rabbit, require_same_robot
 from biped_casadi.caching import cached
+from biped_casadi.output_law import check_M1_range
 from biped_casadi.results import Result, internal
 from gait_opt import Gait, GaitOptions
 
@@ -184,8 +185,9 @@ def _result(P, st, max_abs, ev, A, **kw) -> SweepResult:
 def grid_points(n: int, lo: float, hi: float) -> np.ndarray:
     """The n^4 grid, each component of M1 in ``linspace(lo, hi, n)``, component 1
     varying slowest: shape (n^4, 4).  The paper's grid is ``grid_points(9, -10, 10)``."""
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n (grid points per component) must be a positive integer, got {n!r}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
+        raise ValueError(f"n (grid points per component) must be an integer >= 2 (the grid "
+                         f"spans LO to HI), got {n!r}")
     if n ** 4 > 50_000_000:
         raise ValueError(f"n = {n} gives {n ** 4} points; at most 50 million (n <= 84)")
     lo, hi = _check_range(lo, hi)
@@ -215,6 +217,7 @@ def _check_range(lo, hi):
         raise ValueError(f"range must be finite, got {lo} {hi}")
     if not lo < hi:
         raise ValueError(f"range: LO must be less than HI, got {lo:g} {hi:g}")
+    check_M1_range([lo, hi], "range")
     return lo, hi
 
 
@@ -224,6 +227,7 @@ def _check_points(points, m: int = 4) -> np.ndarray:
         raise ValueError(f"points must be a non-empty (n, {m}) array of M1, got shape {P.shape}")
     if not np.all(np.isfinite(P)):
         raise ValueError("points must be finite")
+    check_M1_range(P, "points")
     return np.ascontiguousarray(P)
 
 

@@ -1,7 +1,8 @@
 """The paper's 9^4 grid (§V-A) for a gait, computed once and reused: stored with the
 resumable sweep machinery in the cache folder ($BIPED_CACHE_DIR or
 ~/.cache/biped-casadi), keyed by the gait; a stored sweep made with other settings or
-other code is replaced, never mixed."""
+other code is replaced, never mixed; a cache folder that cannot be written is not an
+error (the grid is then computed in memory)."""
 from __future__ import annotations
 
 import shutil
@@ -33,7 +34,9 @@ def grid_results(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
         return run_sweep(model, gait, P, out_dir=folder, progress=progress)
     except SweepStoreError:           # other settings or other code: recompute
         shutil.rmtree(folder, ignore_errors=True)
-        return run_sweep(model, gait, P, out_dir=folder, progress=progress)
+    except OSError:                   # a cache folder we cannot write: keep it in memory
+        return run_sweep(model, gait, P, out_dir=None, progress=progress)
+    return run_sweep(model, gait, P, out_dir=folder, progress=progress)
 
 
 def grid_best(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0) -> dict:

@@ -14,6 +14,8 @@ Constants: :data:`SECTION` (the Poincaré section, SPEC §4) and :data:`SINGULAR
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import casadi as ca
@@ -22,7 +24,7 @@ import numpy as np
 from .numerics import as_number, as_vector
 from .results import Result
 
-__all__ = ["SECTION", "SINGULAR_RTOL", "Gains", "SingularityReport", "check_M1",
+__all__ = ["SECTION", "SINGULAR_RTOL", "M1_LIMIT", "Gains", "SingularityReport", "check_M1",
            "output_matrix", "outputs", "coordinates_from_outputs", "correction",
            "decoupling_denominator", "unactuated_acceleration", "actuated_torque",
            "output_acceleration", "singularity_report", "is_singular"]
@@ -33,6 +35,13 @@ SECTION = 0.75
 #: the decoupling denominator D11 - D12 M1 (eq. 24) "vanishes" on a step where its
 #: smallest magnitude is below this fraction of its largest (or where it changes sign)
 SINGULAR_RTOL = 1e-9
+
+#: largest |M1(j)| the toolkit accepts.  In v = M1 q_u + q_a the actuated angles are lost
+#: in round-off as |M1| grows: on RABBIT the two independent ways to A^z (variational
+#: equation, AD through the map) agree to 5e-5 at |M1(j)| = 1e6, differ by 25 % at 1e8
+#: and are meaningless (or overflow) beyond, so larger values are outside the model's
+#: numerical validity and refused
+M1_LIMIT = 1e6
 
 
 def _symbolic(*args) -> bool:
@@ -61,6 +70,8 @@ class Gains:
         for name in ("Kp", "Kd", "eps"):
             object.__setattr__(self, name, as_number(getattr(self, name), f"gain {name!r}",
                                                      positive=True))
+        if not math.isfinite(self.Kp / max(self.eps**2, 1e-300)) or self.eps**2 == 0.0:
+            raise ValueError(f"gain 'eps' = {self.eps!r} is too small: Kp / eps^2 overflows")
 
     def to_dict(self) -> dict:
         """The three gains by name."""
@@ -81,8 +92,25 @@ def check_M1(M1, n: int = 4) -> np.ndarray:
     -------
     numpy.ndarray
         Shape (n,).
+
+    Raises
+    ------
+    ValueError
+        Wrong size, a non-finite component, or a component beyond :data:`M1_LIMIT`.
     """
-    return as_vector(M1, n, "M1")
+    M1 = as_vector(M1, n, "M1")
+    check_M1_range(M1)
+    return M1
+
+
+def check_M1_range(M1s, name: str = "M1"):
+    """ValueError naming ``name`` when a component of ``M1s`` (any shape) exceeds
+    :data:`M1_LIMIT` in magnitude."""
+    big = float(np.max(np.abs(M1s), initial=0.0))
+    if big > M1_LIMIT:
+        raise ValueError(f"{name}: components must lie within +-{M1_LIMIT:.0e}, got {big:g} "
+                         "(beyond it round-off swamps q_a in the outputs v = M1 q_u + q_a "
+                         "and A^z is meaningless)")
 
 
 # ------------------------------------------------------------------ eq. (5), (10)
@@ -260,7 +288,9 @@ def is_singular(values, axis: int = -1):
     """
     d = np.asarray(values, dtype=float)
     mag = np.abs(d)
-    return (d.min(axis) * d.max(axis) <= 0) | (mag.min(axis) < SINGULAR_RTOL * mag.max(axis))
+    # signs, not the product of the extremes (which overflows for huge values)
+    changes = np.sign(d.min(axis)) * np.sign(d.max(axis)) <= 0
+    return changes | (mag.min(axis) < SINGULAR_RTOL * mag.max(axis))
 
 
 @dataclass
@@ -298,7 +328,7 @@ def singularity_report(values) -> SingularityReport:
     """
     d = np.asarray(values, dtype=float).ravel()
     sing = bool(is_singular(d))
-    changes = bool(d.min() * d.max() <= 0)
+    changes = bool(np.sign(d.min()) * np.sign(d.max()) <= 0)
     msg = ("the decoupling denominator (eq. 24) vanishes or changes sign on the step"
            if sing else "")
     return SingularityReport(min_abs=float(np.min(np.abs(d))), min_value=float(d.min()),

@@ -102,9 +102,19 @@ def load_params(path: str | Path) -> RobotParams:
     A TOML file may hold the fields at top level or under a ``[robot]`` table.
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise ValueError(f"parameter file not found: {path}")
-    text = path.read_text()
+    if not path.is_file():
+        raise ValueError(f"parameter file {path} is " + ("a folder, not a file" if path.is_dir()
+                                                         else "not a regular file"))
+    try:
+        if path.stat().st_size > 1_000_000:
+            raise ValueError(f"parameter file {path} is too large to be a parameter file")
+        text = path.read_bytes().decode("utf-8")
+    except OSError as e:
+        raise ValueError(f"parameter file {path} cannot be read: {e.strerror or e}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"parameter file {path} is not a text (TOML or JSON) file") from None
     try:
         if path.suffix.lower() == ".toml":
             data = tomllib.loads(text)
@@ -112,8 +122,11 @@ def load_params(path: str | Path) -> RobotParams:
             data = json.loads(text)
         else:
             raise ValueError(f"parameter file must end in .toml or .json: {path}")
-    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as e:
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError, RecursionError) as e:
         raise ValueError(f"cannot parse parameter file {path}: {e}") from None
     if isinstance(data, dict) and "robot" in data and isinstance(data["robot"], dict):
         data = data["robot"]
-    return RobotParams.from_dict(data)
+    try:
+        return RobotParams.from_dict(data)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"parameter file {path}: {e}") from None
