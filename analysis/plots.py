@@ -8,19 +8,25 @@ returned figure displays itself).
 """
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
+from matplotlib.animation import FuncAnimation, PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-__all__ = ["save_figure", "gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot",
+from biped_casadi.files import atomic_path
+
+__all__ = ["COLOUR_NAMES", "STANCE", "SWING", "TORSO", "save_figure", "save_figures", "gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot",
            "conjecture_plot", "stable_domains_plot", "unactuated_error_plot",
            "swing_torques_plot", "walking_animation", "run_label"]
 
 #: colours of the stance leg, the swing leg and the torso in every stick figure
 STANCE, SWING, TORSO = "tab:blue", "tab:red", "0.25"
+#: how captions name them (one place, so a caption never names a colour not drawn)
+COLOUR_NAMES = {STANCE: "blue", SWING: "red", TORSO: "dark grey"}
 
 
 def _figure(**kw) -> Figure:
@@ -44,7 +50,8 @@ def save_figure(fig: Figure, path, formats=("png",), dpi: int = 150) -> list[str
     Returns
     -------
     list of str
-        The files written.
+        The files written.  Each is written through a temporary file: a failure leaves
+        no partial figure and does not damage an earlier one.
     """
     base = Path(path)
     if base.suffix.lower() in (".png", ".pdf", ".svg"):
@@ -52,9 +59,44 @@ def save_figure(fig: Figure, path, formats=("png",), dpi: int = 150) -> list[str
     out = []
     for ext in formats:
         p = base.with_name(f"{base.name}.{ext}")
-        fig.savefig(p, dpi=dpi, bbox_inches="tight")
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=ext)
         out.append(str(p))
     return out
+
+
+def save_figures(figures: dict, folder, formats=("png",), dpi: int = 150) -> list[str]:
+    """Write several figures into ``folder`` (created if needed), all or none.
+
+    Parameters
+    ----------
+    figures : dict
+        File name (without suffix) -> Figure.
+    folder : str or Path
+    formats, dpi
+        As :func:`save_figure`.
+
+    Returns
+    -------
+    list of str
+        The files written.  When one fails, those already written by this call are
+        removed (and the folder too, if this call created it) before the error propagates.
+    """
+    folder = Path(folder)
+    created = not folder.exists()
+    folder.mkdir(parents=True, exist_ok=True)
+    written: list[str] = []
+    try:
+        for name, fig in figures.items():
+            written += save_figure(fig, folder / name, formats, dpi)
+    except BaseException:
+        for f in written:
+            Path(f).unlink(missing_ok=True)
+        if created:
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+    return written
 
 
 # ------------------------------------------------------------------ the gait
@@ -352,9 +394,8 @@ def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = N
     Returns
     -------
     str
-        ``path``.
+        ``path`` (written through a temporary file: complete or absent).
     """
-    from matplotlib.animation import FuncAnimation, PillowWriter
     if isinstance(fps, bool) or not isinstance(fps, int) or fps < 1:
         raise ValueError(f"fps must be a positive integer, got {fps!r}")
     if res.t.size == 0:
@@ -395,5 +436,6 @@ def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = N
         return stance, swing, torso, text
 
     anim = FuncAnimation(fig, draw, frames=len(frames), blit=True)
-    anim.save(str(path), writer=PillowWriter(fps=fps))
+    with atomic_path(path) as tmp:
+        anim.save(str(tmp), writer=PillowWriter(fps=fps))
     return str(path)
