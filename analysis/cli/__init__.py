@@ -1,13 +1,18 @@
 """The ``biped`` command line.  Each subcommand reads top to bottom and calls the library.
 
-A user error (bad file, bad numbers, infeasible option) prints one line on stderr and
-exits with code 2; ``--json`` prints exactly one JSON object on stdout.
+A user error (bad option or number, missing, unreadable or malformed file, an output
+path that cannot be written, conflicting options, a request outside the model's
+validity) prints one line on stderr naming the argument or file and exits with code 2,
+without a traceback; output paths are checked before any long work.  ``--json`` prints
+exactly one JSON object on stdout.  Numerical warnings of numpy are not printed: a
+condition worth knowing is a status of the result, or one line on stderr.
 """
 from __future__ import annotations
 
 import argparse
 import os
 import sys
+import warnings
 
 import numpy as np
 
@@ -41,8 +46,20 @@ def cmd_model(args):
     print(np.array2string(np.array(s["H"]), precision=6, suppress_small=True))
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (``biped eig: error: ... (see --help)``)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {_one_line(message)} (see '{self.prog} "
+                     f"--help')\n")
+
+
+def _one_line(text) -> str:
+    return " ".join(str(text).split())
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = _Parser(
         prog="biped",
         description="Time-varying control of the planar five-link biped RABBIT: model, "
                     "reference gait, exact Poincare analysis, output selection "
@@ -74,17 +91,36 @@ def main(argv=None) -> int:
     except SystemExit as e:        # argparse already printed its one-line usage error
         return int(e.code or 0)
     try:
-        rc = args.func(args)
-    except (UserError, ValueError, FileNotFoundError) as e:
-        print(f"biped {args.command}: error: {e}", file=sys.stderr)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("default")
+            rc = args.func(args)
+        _note_warnings(args.command, caught)
+    except (UserError, ValueError) as e:           # GaitFileError, SweepStoreError, ...
+        print(f"biped {args.command}: error: {_one_line(e)}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:        # output piped into `head` and the like
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except OSError as e:                           # a file or folder we cannot use
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"biped {args.command}: error: {where}{_one_line(e.strerror or e)}",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"biped {args.command}: interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:        # output piped into `head` and the like
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
     return int(rc or 0)
+
+
+def _note_warnings(command: str, caught):
+    """Numerical warnings (numpy's RuntimeWarning) become at most one line; the result's
+    status already says whether the computation failed.  Others (deprecations of the
+    libraries underneath) are not the user's business and are dropped."""
+    numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+    if numeric:
+        print(f"biped {command}: note: {len(numeric)} numerical warning(s) during the "
+              f"computation (first: {_one_line(numeric[0].message)}); check the status "
+              "of the results", file=sys.stderr)
 
 
 if __name__ == "__main__":

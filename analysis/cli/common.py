@@ -1,16 +1,22 @@
-"""What every subcommand shares: the user-error type, JSON output, loading the model and
-the gait named on the command line."""
+"""What every subcommand shares: the user-error type, JSON output, progress lines,
+checks of output paths (made before any long work), loading the model and the gait
+named on the command line."""
 from __future__ import annotations
 
 import json
 import math
+import os
 import sys
+import tempfile
+import warnings
+from pathlib import Path
 
 from biped_casadi import load_params, rabbit
 from biped_casadi.results import json_safe
-from gait_opt import Gait, default_gait
+from gait_opt import Gait, OpenOrbitWarning, default_gait
 
-__all__ = ["UserError", "print_json", "load_model", "load_gait", "positive"]
+__all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "Progress",
+           "output_file", "output_dir", "add_gait_arguments"]
 
 
 class UserError(Exception):
@@ -22,24 +28,58 @@ def print_json(obj):
     print(json.dumps(json_safe(obj), allow_nan=False))
 
 
+# ------------------------------------------------------------------- progress
+class Progress:
+    """One line on stderr before each wait of more than a couple of seconds.
+
+    Shown only when stderr is a terminal and the output is for a person (not ``--json``);
+    a pipe, a log file or ``--json`` keeps stderr for errors only.
+    """
+
+    def __init__(self, command: str, quiet: bool = False):
+        self.command = command
+        self.enabled = not quiet and sys.stderr.isatty()
+
+    def __call__(self, message: str):
+        if self.enabled:
+            print(f"biped {self.command}: {message}", file=sys.stderr, flush=True)
+
+
+# --------------------------------------------------------------- model, gait
 def load_model(path):
     """The robot of ``--params FILE`` (default RABBIT)."""
     return rabbit(load_params(path) if path else None)
 
 
-def load_gait(path, quiet: bool = False):
-    """The gait of ``--gait FILE``, or the default gait (optimised once, then cached).
+def add_gait_arguments(p, required: bool = False):
+    """``--gait FILE`` and ``--allow-open-orbit`` on a subcommand's parser."""
+    p.add_argument("--gait", metavar="FILE", required=required,
+                   help="gait file from 'biped gait'" + ("" if required else
+                        " (default: the default RABBIT gait, optimised once and cached)"))
+    p.add_argument("--allow-open-orbit", action="store_true",
+                   help="analyse a gait file that is not a periodic orbit of its robot "
+                        "(refused by default; a warning line says by how much it misses)")
 
-    Without a file, a note goes to stderr when the default gait must be optimised
-    (about 3 s), unless ``quiet``."""
-    if path:
-        return Gait.load(path)
-    return default_gait(progress=None if quiet else _note)
 
+def load_gait(args, progress: Progress):
+    """The gait of ``args.gait``, or the default gait (optimised once, then cached).
 
-def _note(message: str):
-    if sys.stderr.isatty():
-        print(message, file=sys.stderr, flush=True)
+    Without a file, ``progress`` announces the optimisation of the default gait (a few
+    seconds) when it is not cached yet.  With ``args.allow_open_orbit``, a gait that is
+    not a periodic orbit is loaded and one warning line goes to stderr (always: it
+    qualifies every result that follows)."""
+    if not args.gait:
+        return default_gait(progress=progress)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", OpenOrbitWarning)
+        gait = Gait.load(args.gait, allow_open_orbit=getattr(args, "allow_open_orbit", False))
+    for w in caught:
+        if issubclass(w.category, OpenOrbitWarning):
+            print(f"biped {progress.command}: warning: {w.message}", file=sys.stderr,
+                  flush=True)
+        else:                                         # not ours: pass it on
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return gait
 
 
 def positive(value, name):
@@ -47,3 +87,81 @@ def positive(value, name):
     if not (math.isfinite(value) and value > 0):
         raise UserError(f"{name} must be a positive number, got {value!r}")
     return value
+
+
+# ---------------------------------------------------------------- output paths
+def _nearest_existing(path: Path) -> Path:
+    """The deepest existing ancestor of ``path`` (as the user wrote it, when possible)."""
+    for p in (path, *path.parents):
+        if p.exists():
+            return p
+    return Path.cwd()
+
+
+def _probe(folder: Path, option: str, shown: Path):
+    """UserError unless a file can be created in ``folder`` (tried, then removed: the
+    permission bits alone do not say it for root or a read-only file system)."""
+    try:
+        fd, name = tempfile.mkstemp(prefix=".biped-write-test-", dir=folder)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as e:
+        raise UserError(f"{option}: cannot write in {shown} ({e.strerror or e})") from None
+
+
+def output_dir(path, option: str) -> Path:
+    """Check, before any long work, that ``path`` is (or can be created as) a folder we
+    may write in.  Nothing is created here: the command creates the folder when it
+    writes its first file.
+
+    Raises
+    ------
+    UserError
+        Naming ``option`` when ``path`` is empty, is a file, lies under a file, or is
+        (or would be created in) a folder we cannot write in.
+    """
+    if path is None or str(path).strip() == "":
+        raise UserError(f"{option}: empty folder name")
+    p = Path(path)
+    if p.exists():
+        if not p.is_dir():
+            raise UserError(f"{option}: {p} is a file, not a folder")
+        _probe(p, option, p)
+        return p
+    anc = _nearest_existing(p)
+    if not anc.is_dir():
+        raise UserError(f"{option}: cannot create folder {p}: {anc} is a file")
+    _probe(anc, option, anc)
+    return p
+
+
+def output_file(path, option: str, suffixes: tuple = ()) -> Path:
+    """Check, before any long work, that a file can be written at ``path``: not a folder
+    or a device, its folder exists and is writable, and (if ``suffixes``) its suffix is
+    one of them.
+
+    Raises
+    ------
+    UserError
+        Naming ``option`` and the reason.
+    """
+    if path is None or str(path).strip() == "":
+        raise UserError(f"{option}: empty file name")
+    p = Path(path)
+    if suffixes and p.suffix.lower() not in suffixes:
+        raise UserError(f"{option}: the file name must end in {' or '.join(suffixes)}, "
+                        f"got {str(path)!r}")
+    if p.is_dir():
+        raise UserError(f"{option}: {p} is a folder; give a file name")
+    if p.exists() and not p.is_file():
+        raise UserError(f"{option}: {p} exists and is not a regular file")
+    folder = p.parent
+    if not folder.exists():
+        anc = _nearest_existing(folder)
+        if not anc.is_dir():
+            raise UserError(f"{option}: cannot write {p}: {anc} is a file, not a folder")
+        raise UserError(f"{option}: folder {folder} does not exist")
+    if not folder.is_dir():
+        raise UserError(f"{option}: cannot write {p}: {folder} is a file, not a folder")
+    _probe(folder, option, folder)
+    return p

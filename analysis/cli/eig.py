@@ -5,8 +5,9 @@ import numpy as np
 
 from analysis.poincare import METHODS, poincare_eigenvalues
 from analysis.virtual_constraints import vc_eigenvalue
+from biped_casadi.output_law import M1_LIMIT, check_M1_range
 
-from .common import UserError, load_gait, print_json
+from .common import Progress, UserError, add_gait_arguments, load_gait, print_json
 
 
 def cmd_eig(args):
@@ -14,7 +15,19 @@ def cmd_eig(args):
         raise UserError("--m1 applies to the time-varying controller (--controller tv)")
     if args.controller == "tv" and args.m1 is None:
         raise UserError("--m1 A B C D is required for the time-varying controller")
-    gait = load_gait(args.gait, quiet=args.json)
+    if args.controller == "vc" and args.method is not None:
+        raise UserError("--method applies to the time-varying controller (--controller tv)")
+    method = args.method or "variational"
+    if args.m1 is not None:
+        M1 = np.array(args.m1, dtype=float)
+        if not np.all(np.isfinite(M1)):
+            raise UserError("--m1 values must be finite")
+        try:
+            check_M1_range(M1, "--m1")
+        except ValueError as e:
+            raise UserError(str(e)) from None
+    say = Progress("eig", quiet=args.json)
+    gait = load_gait(args, say)
     model = gait.model
     if args.controller == "vc":
         res = vc_eigenvalue(model, gait)
@@ -25,17 +38,16 @@ def cmd_eig(args):
             for k, v in d.items():
                 print(f"{k:22s} {v}")
         return 0
-    M1 = np.array(args.m1, dtype=float)
     if M1.shape != (model.nu,):
         raise UserError(f"--m1 takes {model.nu} numbers, got {M1.size}")
-    if not np.all(np.isfinite(M1)):
-        raise UserError("--m1 values must be finite")
-    r = poincare_eigenvalues(model, gait, M1, method=args.method)
+    if method == "ad":
+        say("AD through the whole Poincare map (builds it once, a few seconds) ...")
+    r = poincare_eigenvalues(model, gait, M1, method=method)
     if args.json:
         print_json(r)
         return 0
     print(f"M1 = {M1.tolist()}   status: {r.status}")
-    if r.status == "singular":
+    if not r.success:                    # singular or no_impact: no A^z to show
         print(f"  {r.message}")
         return 0
     print("A^z =")
@@ -43,7 +55,7 @@ def cmd_eig(args):
     print("eigenvalues: " + ", ".join(f"{e.real:.8g}{e.imag:+.8g}j" for e in r.eigenvalues))
     print(f"max|lambda| = {r.max_abs:.8g}")
     print(f"x* = {r.x_star.tolist()}, impact at tau = {r.tau_impact:.10g} (T = {gait.T:.10g})")
-    if args.method == "ad":
+    if method == "ad":
         print(f"fixed-point residual |P(x*) - x*| = {r.fixed_point_residual:.2e}")
     return 0
 
@@ -57,12 +69,12 @@ def register(sub):
                     "--controller vc: the eigenvalue of the virtual-constraint (HZD) "
                     "controller's 1-D map. --json prints {A, eigenvalues (as [re, im] "
                     "pairs), max_abs, status, ...}.")
-    p.add_argument("--gait", metavar="FILE", help="gait file from 'biped gait' (default: the "
-                   "default RABBIT gait, optimised once and cached)")
-    p.add_argument("--m1", nargs="+", type=float, metavar="M1", help="the 4 components of M1")
+    add_gait_arguments(p)
+    p.add_argument("--m1", nargs="+", type=float, metavar="M1",
+                   help=f"the 4 components of M1 (each within +-{M1_LIMIT:.0e})")
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
                    help="tv: time-varying outputs (default); vc: virtual constraints")
-    p.add_argument("--method", choices=METHODS, default="variational",
+    p.add_argument("--method", choices=METHODS, default=None,
                    help="how A^z is differentiated: the variational equation along the orbit "
                         "(default, < 1 ms) or AD through the whole map (ad, ~0.3 s; also "
                         "prints the fixed-point residual)")

@@ -4,13 +4,14 @@ it, and optionally draw it.  Reads top to bottom; every computation is in ``gait
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
-from analysis.plots import gait_profiles_plot, gait_stick_plot, save_figure
+from analysis.plots import gait_profiles_plot, gait_stick_plot, save_figures
 from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 
-from .common import UserError, load_model, print_json
+from .common import Progress, UserError, load_model, output_dir, output_file, print_json
+
+#: --intervals beyond this make an NLP that takes minutes per iteration
+MAX_INTERVALS = 400
 
 
 def register(sub):
@@ -25,7 +26,7 @@ def register(sub):
     p.add_argument("--torque-limit", type=float, default=150.0, metavar="U",
                    help="|u| bound in N m (default 150)")
     p.add_argument("--intervals", type=int, default=30, metavar="N",
-                   help="collocation intervals (default 30)")
+                   help=f"collocation intervals, 4 to {MAX_INTERVALS} (default 30)")
     p.add_argument("--scheme", choices=("legendre", "radau"), default="legendre",
                    help="collocation points (default legendre)")
     p.add_argument("--max-iter", type=int, default=None, metavar="K",
@@ -45,32 +46,29 @@ def cmd_gait(args):
         v = getattr(args, name)
         if not (math.isfinite(v) and v > 0):
             raise UserError(f"--{name.replace('_', '-')} must be a positive number, got {v:g}")
-    if args.intervals < 4:
-        raise UserError(f"--intervals must be >= 4, got {args.intervals}")
+    if not 4 <= args.intervals <= MAX_INTERVALS:
+        raise UserError(f"--intervals must be between 4 and {MAX_INTERVALS}, got "
+                        f"{args.intervals}")
     if args.max_iter is not None and args.max_iter < 1:
         raise UserError(f"--max-iter must be >= 1, got {args.max_iter}")
-    out = Path(args.out)
-    if not out.parent.is_dir():
-        raise UserError(f"--out: directory {out.parent} does not exist")
+    out = output_file(args.out, "--out")               # before the solve, not after
+    folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.params)
     options = GaitOptions(speed=args.speed, mu=args.mu, torque_limit=args.torque_limit,
                           n_intervals=args.intervals, scheme=args.scheme,
                           ipopt={} if args.max_iter is None else {"max_iter": args.max_iter})
 
-    if not args.json and sys.stderr.isatty():
-        print(f"optimising the gait at {args.speed:g} m/s ...", file=sys.stderr, flush=True)
+    say = Progress("gait", quiet=args.json)
+    say(f"optimising the gait at {args.speed:g} m/s (about 3 s on 2 cores) ...")
     try:
         gait = optimize_gait(model, options)
     except GaitOptimizationError as e:
         raise UserError(str(e)) from None
-    gait.save(out)
     s = gait.summary()
-    s["file"] = str(out)
-    if args.plot:
-        folder = Path(args.plot)
-        folder.mkdir(parents=True, exist_ok=True)
-        s["plots"] = (save_figure(gait_stick_plot(gait), folder / "gait_stick")
-                      + save_figure(gait_profiles_plot(gait), folder / "gait_profiles"))
+    s["file"] = str(gait.save(out))
+    if folder is not None:
+        s["plots"] = save_figures({"gait_stick": gait_stick_plot(gait),
+                                   "gait_profiles": gait_profiles_plot(gait)}, folder)
 
     if args.json:
         print_json(s)

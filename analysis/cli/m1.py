@@ -6,15 +6,21 @@ import numpy as np
 from analysis.output_design import optimize_m1
 from analysis.sweep_cache import grid_best
 
-from .common import load_gait, print_json
+from .common import Progress, add_gait_arguments, load_gait, print_json
 
 
 def cmd_m1(args):
-    gait = load_gait(args.gait, quiet=args.json)
+    say = Progress("m1", quiet=args.json)
+    gait = load_gait(args, say)
     model = gait.model
     groups = [None] if args.free else ([args.group] if args.group else [1, 2])
-    results = [optimize_m1(model, gait, group=g) for g in groups]
+    results = []
+    for g in groups:
+        say(f"optimising M1 {'with all components free' if g is None else f'on group {g}'} "
+            "(about 10 s on 2 cores) ...")
+        results.append(optimize_m1(model, gait, group=g))
     best = min(results, key=lambda r: r.max_abs)
+    say("the 9^4 grid for comparison (once per gait, then cached) ...")
     gb = grid_best(model, gait)
     out = dict(best.to_dict(), grid_best=gb)
     if len(results) > 1:
@@ -27,7 +33,8 @@ def cmd_m1(args):
         print(f"{label}: M1 = {np.array2string(r.M1, precision=6)}  max|lambda| = "
               f"{r.max_abs:.3g} (+- {r.eigenvalue_uncertainty:.1g})  a = {r.a:.2g}, "
               f"b = {r.b:.2g}  [{r.solve_time:.1f} s, {r.starts} starts]")
-    print(f"best of the 9^4 grid: M1 = {gb['M1']}  max|lambda| = {gb['max_abs']:.4g}")
+    print("best of the 9^4 grid: " + ("no stable point" if gb["M1"] is None else
+                                      f"M1 = {gb['M1']}  max|lambda| = {gb['max_abs']:.4g}"))
     return 0
 
 
@@ -40,9 +47,10 @@ def register(sub):
                     "free (--free). Exact derivatives of A^z in M1 by AD; several starts; "
                     "the result is verified by the full-AD Poincare map and compared with "
                     "the best stable point of the 9^4 grid.")
-    p.add_argument("--gait", metavar="FILE", help="gait file (default: the cached default gait)")
-    p.add_argument("--free", action="store_true", help="all four components of M1 free")
-    p.add_argument("--group", type=int, choices=(1, 2),
+    add_gait_arguments(p)
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--free", action="store_true", help="all four components of M1 free")
+    where.add_argument("--group", type=int, choices=(1, 2),
                    help="only this a = b = 0 group (default: both, the better is reported)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_m1)

@@ -3,16 +3,25 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 
 from biped_casadi import (Gains, Perturbation, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, simulate)
-from analysis.plots import (save_figure, swing_torques_plot, unactuated_error_plot,
+from biped_casadi.output_law import M1_LIMIT, check_M1_range
+from analysis.plots import (save_figures, swing_torques_plot, unactuated_error_plot,
                             walking_animation)
 
-from .common import UserError, load_gait, positive, print_json
+from .common import (Progress, UserError, add_gait_arguments, load_gait, output_dir,
+                     output_file, positive, print_json)
+
+#: --steps beyond this fill the memory with the logged states (2000 RK4 steps a step)
+MAX_STEPS = 1000
+
+
+def _num(x, fmt) -> str:
+    """A figure of the run, or 'n/a' when the run never produced it (no impact)."""
+    return format(x, fmt) if math.isfinite(x) else "n/a"
 
 
 def _controller(kind, model, gait, M1, gains):
@@ -21,11 +30,21 @@ def _controller(kind, model, gait, M1, gains):
     return VirtualConstraintController(model, gait, gains=gains)
 
 
-def _perturbation(args, nq) -> Perturbation:
-    """--perturb Q DQ (every joint), or --perturb-q / --perturb-dq (per joint)."""
+def _check_perturbation(args):
+    """What can be checked of the perturbation before the gait is loaded."""
     per_joint = args.perturb_q is not None or args.perturb_dq is not None
     if per_joint and args.perturb is not None:
         raise UserError("--perturb excludes --perturb-q / --perturb-dq (give one form)")
+    for name, v in (("--perturb", args.perturb), ("--perturb-q", args.perturb_q),
+                    ("--perturb-dq", args.perturb_dq)):
+        if v is not None and not np.all(np.isfinite(v)):
+            raise UserError(f"{name} values must be finite")
+
+
+def _perturbation(args, nq) -> Perturbation:
+    """--perturb Q DQ (every joint), or --perturb-q / --perturb-dq (per joint)."""
+    _check_perturbation(args)
+    per_joint = args.perturb_q is not None or args.perturb_dq is not None
     if per_joint:
         q = np.zeros(nq) if args.perturb_q is None else np.array(args.perturb_q, float)
         dq = np.zeros(nq) if args.perturb_dq is None else np.array(args.perturb_dq, float)
@@ -48,19 +67,26 @@ def cmd_simulate(args):
         raise UserError(f"--m1 takes 4 numbers, got {M1.size}")
     if not np.all(np.isfinite(M1)):
         raise UserError("--m1 values must be finite")
+    try:
+        check_M1_range(M1, "--m1")
+    except ValueError as e:
+        raise UserError(str(e)) from None
     if args.controller == "vc" and args.m1 is not None and not args.compare:
         raise UserError("--m1 applies to the time-varying controller (--controller tv, "
                         "or --compare)")
-    if args.steps < 1:
-        raise UserError(f"--steps must be a positive integer, got {args.steps}")
+    if not 1 <= args.steps <= MAX_STEPS:
+        raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
     positive(args.mu, "--mu")
     positive(args.eps, "--eps")
-    if args.animate and not args.animate.lower().endswith(".gif"):
-        raise UserError(f"--animate writes a GIF: the file name must end in .gif, got "
-                        f"{args.animate!r}")
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
-    gait = load_gait(args.gait, quiet=args.json)
+    _check_perturbation(args)
+    if args.plot is not None:
+        output_dir(args.plot, "--plot")
+    if args.animate is not None:
+        output_file(args.animate, "--animate", suffixes=(".gif",))
+    say = Progress("simulate", quiet=args.json)
+    gait = load_gait(args, say)
     model = gait.model
     perturbation = _perturbation(args, model.nq)
     gains = Gains(eps=args.eps)
@@ -73,22 +99,29 @@ def cmd_simulate(args):
     if args.controller == "tv" and ctrl.singularity().singular:
         raise UserError(f"M1 = {M1.tolist()} makes the controller singular on the reference "
                         "step (D11 - D12 M1 vanishes, eq. 24)")
-    res = simulate(ctrl, q0, dq0, opts)
-    runs = [res]
-    if args.compare:
-        other = "vc" if args.controller == "tv" else "tv"
-        runs.append(simulate(_controller(other, model, gait, M1, gains), q0, dq0, opts))
+    say(f"simulating {args.steps} step(s)" + (" of each controller" if args.compare else "")
+        + (" (compiling the closed loop to C first)" if args.jit else "") + " ...")
+    try:
+        res = simulate(ctrl, q0, dq0, opts)
+        runs = [res]
+        if args.compare:
+            other = "vc" if args.controller == "tv" else "tv"
+            runs.append(simulate(_controller(other, model, gait, M1, gains), q0, dq0, opts))
+    except RuntimeError as e:
+        if not args.jit:
+            raise
+        raise UserError(f"--jit: compiling the closed loop failed (is a C compiler "
+                        f"installed?): {str(e).strip().splitlines()[0]}") from None
 
     # ---- figures
     figures = {}
     if args.plot:
-        out = Path(args.plot)
-        out.mkdir(parents=True, exist_ok=True)
-        figures["fig5"] = save_figure(unactuated_error_plot(runs), out / "fig5_qu_error")[0]
-        figures["fig6"] = save_figure(swing_torques_plot(runs, gait),
-                                      out / "fig6_swing_torques")[0]
+        fig5, fig6 = save_figures({"fig5_qu_error": unactuated_error_plot(runs),
+                                   "fig6_swing_torques": swing_torques_plot(runs, gait)},
+                                  args.plot)
+        figures.update(fig5=fig5, fig6=fig6)
     if args.animate:
-        Path(args.animate).parent.mkdir(parents=True, exist_ok=True)
+        say(f"writing the animation {args.animate} (about 1 s per simulated step) ...")
         figures["animation"] = walking_animation(res, model, args.animate)
 
     # ---- report
@@ -110,8 +143,9 @@ def cmd_simulate(args):
         for s in r.steps:
             print(f"  {s.index + 1:4d}   {s.t_impact:11.6f}  {s.duration / gait.T:10.6f}"
                   f"   {s.qu_error:+.6e}    {s.dqu_error:+.6e}")
-        print(f"  peak |u| {r.peak_torque:.1f} N m, min F_z {r.min_normal_force:.1f} N, "
-              f"max |F_x|/F_z {r.max_friction_ratio:.3f}, at impact {r.max_impulse_ratio:.3f}")
+        print(f"  peak |u| {_num(r.peak_torque, '.1f')} N m, min F_z "
+              f"{_num(r.min_normal_force, '.1f')} N, max |F_x|/F_z "
+              f"{_num(r.max_friction_ratio, '.3f')}, at impact {_num(r.max_impulse_ratio, '.3f')}")
     for k, v in figures.items():
         print(f"{k}: {v}")
     return 0
@@ -131,13 +165,14 @@ def register(sub):
                     "steps: [{t_impact, qu_error, dqu_error, ...}], peak_torque, "
                     "min_normal_force, max_friction_ratio, max_impulse_ratio, ...} with the "
                     "errors q_u - q_u^d(T), dq_u - dq_u^d(T) just before each impact.")
-    p.add_argument("--gait", metavar="FILE", help="gait file from 'biped gait' (default: the "
-                   "default RABBIT gait, optimised once and cached)")
+    add_gait_arguments(p)
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
                    help="tv: time-varying outputs [M1, I] q (default); vc: virtual constraints")
     p.add_argument("--m1", nargs="+", type=float, metavar="M1",
-                   help="the 4 components of M1 for --controller tv (default 0 0 0 0)")
-    p.add_argument("--steps", type=int, default=10, metavar="N", help="number of steps (10)")
+                   help=f"the 4 components of M1 for --controller tv, each within "
+                        f"+-{M1_LIMIT:.0e} (default 0 0 0 0)")
+    p.add_argument("--steps", type=int, default=10, metavar="N",
+                   help=f"number of steps, 1 to {MAX_STEPS} (10)")
     p.add_argument("--perturb", nargs=2, type=float, default=None,
                    metavar=("Q_ERR", "DQ_ERR"), help="initial error on every joint (rad) and "
                    "every velocity (rad/s) (default 0 0; the paper's: 0.01 0.1)")

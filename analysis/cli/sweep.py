@@ -7,53 +7,67 @@
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
-from analysis.plots import one_d_sweeps_plot, save_figure
-from analysis.sweep import grid_points, line_points, one_d_sweeps, run_sweep
-from gait_opt import Gait
+from analysis.plots import one_d_sweeps_plot, save_figures
+from analysis.sweep import grid_points, one_d_sweeps, run_sweep
+from biped_casadi.output_law import M1_LIMIT, check_M1_range
 
-from .common import UserError, print_json
+from .common import (Progress, UserError, add_gait_arguments, load_gait, output_dir,
+                     print_json)
+
+#: --grid N evaluates N^4 points; beyond this a local sweep takes days
+MAX_GRID = 84
+#: --line N evaluates 4 N points
+MAX_LINE = 1_000_000
+#: --workers beyond this only adds overhead (and threads)
+MAX_WORKERS = 256
 
 
 def cmd_sweep(args):
-
+    # ---- arguments, then the output folders: all before any work
     lo, hi = args.range
     if not (np.isfinite(lo) and np.isfinite(hi)) or not lo < hi:
         raise UserError(f"--range: LO must be less than HI (both finite), got {lo:g} {hi:g}")
-    if args.line is not None and args.grid is not None:
-        raise UserError("--grid and --line exclude each other")
+    try:
+        check_M1_range([lo, hi], "--range")
+    except ValueError as e:
+        raise UserError(str(e)) from None
     if args.plot is not None and args.line is None:
         raise UserError("--plot needs --line (the 1-D sweeps of Fig. 2)")
-    if args.workers is not None and args.workers < 1:
-        raise UserError(f"--workers must be at least 1, got {args.workers}")
+    if args.line is not None and not 2 <= args.line <= MAX_LINE:
+        raise UserError(f"--line takes 2 to {MAX_LINE} points per component, got {args.line}")
+    n = 9 if args.grid is None else args.grid
+    if args.line is None and not 2 <= n <= MAX_GRID:
+        raise UserError(f"--grid takes 2 to {MAX_GRID} points per component (the grid spans "
+                        f"LO to HI), got {n}")
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
+        raise UserError(f"--workers must be between 1 and {MAX_WORKERS}, got {args.workers}")
     if args.chunk_size is not None and args.chunk_size < 1:
         raise UserError(f"--chunk-size must be at least 1, got {args.chunk_size}")
-    gait = Gait.load(args.gait)                # GaitFileError (a ValueError): exit 2
+    if args.scheduler is not None and not args.scheduler.strip():
+        raise UserError("--scheduler: empty address")
+    if args.out is not None:
+        output_dir(args.out, "--out")
+    if args.plot is not None:
+        output_dir(args.plot, "--plot")
+    say = Progress("sweep", quiet=args.json or args.no_progress)
+    gait = load_gait(args, say)
     model = gait.model
     kw = dict(out_dir=args.out, chunk_size=args.chunk_size, workers=args.workers,
-              scheduler=args.scheduler, progress=not args.no_progress,
+              scheduler=args.scheduler, progress=not (args.no_progress or args.json),
               executor="process" if args.processes else "thread")
 
+    # ---- the sweep
     plots = []
     if args.line is not None:
-        if args.line < 2:
-            raise UserError(f"--line takes at least 2 points per component, got {args.line}")
         values = np.linspace(lo, hi, args.line)
-        line_points(0, values)
         lines = one_d_sweeps(model, gait, values, **kw)
         r = lines.sweep
         if args.plot is not None:
-            folder = Path(args.plot)
-            folder.mkdir(parents=True, exist_ok=True)
-            plots = save_figure(one_d_sweeps_plot(lines), folder / "fig2_one_d_sweeps",
-                                formats=("png", "pdf"))
+            plots = save_figures({"fig2_one_d_sweeps": one_d_sweeps_plot(lines)}, args.plot,
+                                 formats=("png", "pdf"))
     else:
-        n = 9 if args.grid is None else args.grid
-        if n < 1:
-            raise UserError(f"--grid takes a positive number of points per component, got {n}")
         r = run_sweep(model, gait, grid_points(n, lo, hi), **kw)
 
     if args.json:
@@ -102,15 +116,15 @@ def register(sub):
                     "all local cores, or on a Dask cluster with --scheduler. With --out the "
                     "results are stored chunk by chunk (Parquet); rerunning with the same "
                     "--out resumes and recomputes only what is missing.")
-    p.add_argument("--gait", required=True, metavar="FILE", help="reference gait file "
-                   "(from `biped gait --out FILE`)")
+    add_gait_arguments(p, required=True)
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--grid", type=int, metavar="N",
-                      help="N points per component: N^4 M1 (default 9)")
+                      help=f"N points per component, 2 to {MAX_GRID}: N^4 M1 (default 9)")
     mode.add_argument("--line", type=int, metavar="N",
                       help="Fig. 2 instead: N values of each component, the others zero")
     p.add_argument("--range", nargs=2, type=float, default=[-10.0, 10.0],
-                   metavar=("LO", "HI"), help="range of each component (default -10 10)")
+                   metavar=("LO", "HI"), help=f"range of each component, within "
+                   f"+-{M1_LIMIT:.0e} (default -10 10)")
     p.add_argument("--out", metavar="DIR", help="results folder (resumable); "
                    "default: keep results in memory only")
     p.add_argument("--plot", metavar="DIR", help="with --line: write Fig. 2 (PNG and PDF)")
