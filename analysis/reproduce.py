@@ -3,10 +3,22 @@ gait), with figures (PNG and PDF), ``summary.json`` and ``report.md``.
 
 Stages run in order; each shows its progress, a failed stage is reported (with its
 error) and the stages that do not need its results still run.
+
+Folders: a full run writes into ``OUT`` itself, a quick run into ``OUT/quick``, so the
+two modes never mix or overwrite each other's results whatever the order of the runs.
+In a run's folder: ``report.md``, ``summary.json``, ``gait.json``, ``figures/`` and
+``sweeps/`` (the resumable sweeps, one sub-folder per sweep and settings, reused by the
+next run).  A run writes its report, summary, gait and figures into a private staging
+folder first and moves them into place at the end: a run that fails or is interrupted
+leaves the previous run's results as they were, and a finished run replaces exactly
+the files of the previous run of the same mode (other files are never touched).
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import shutil
 import sys
 import time
 import traceback
@@ -18,7 +30,8 @@ import numpy as np
 from biped_casadi import (PAPER_PERTURBATION, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, perturbed_initial_state, rabbit,
                           simulate)
-from biped_casadi.results import json_safe
+from biped_casadi.files import write_text_atomic
+from biped_casadi.results import Result, json_safe
 from gait_opt import default_gait
 
 from .output_design import (conjecture_figures, domain_grid, optimize_m1,
@@ -31,7 +44,7 @@ from .report import write_report
 from .sweep import grid_points, one_d_sweeps, run_sweep
 from .virtual_constraints import vc_eigenvalue
 
-__all__ = ["reproduce", "ReproduceOptions", "PAPER"]
+__all__ = ["reproduce", "ReproduceOptions", "ReproduceResult", "PAPER", "run_folder"]
 
 #: the paper's published figures (Wang & Chevallereau), for the side-by-side table
 PAPER = dict(
@@ -69,9 +82,37 @@ class ReproduceOptions:
 
 
 @dataclass
+class ReproduceResult(Result):
+    """What a reproduction did.  ``status`` 'ok' (every stage ok) or 'failed' (some stage
+    failed or was skipped; the others still ran); ``success`` means 'ok'.  ``folder`` is
+    the run's folder (``OUT`` for a full run, ``OUT/quick`` for a quick one) with
+    ``report`` and ``summary_file``; ``stages`` maps each stage to its status and time;
+    ``summary`` (not in ``to_dict()``) is the content of summary.json."""
+
+    status: str
+    message: str
+    mode: str
+    folder: str
+    report: str
+    summary_file: str
+    stages: dict
+    total_time: float
+    summary: dict = field(default_factory=dict, metadata={"dict": False})
+
+    SUCCESS = ("ok",)
+
+
+def run_folder(out_dir, quick: bool) -> Path:
+    """The folder a run of the given mode writes into: ``out_dir`` for the full run,
+    ``out_dir/quick`` for the quick run."""
+    return Path(out_dir) / "quick" if quick else Path(out_dir)
+
+
+@dataclass
 class _Context:
-    out: Path
+    out: Path                     # where this run's figures and files are staged
     opts: ReproduceOptions
+    sweeps: Path = None           # persistent sweep folders of the run's mode
     summary: dict = field(default_factory=dict)
     figures: dict = field(default_factory=dict)
     data: dict = field(default_factory=dict)
@@ -82,6 +123,12 @@ class _Context:
         if self.opts.progress:
             print(msg, file=sys.stderr, flush=True)
 
+    def sweep_dir(self, name: str, *settings) -> Path:
+        """The sweep folder of ``name`` made with ``settings`` (part of the folder name,
+        so a run with other settings never meets a folder it would refuse)."""
+        return self.sweeps / "_".join([name, *(format(v, "g") if isinstance(v, float)
+                                               else str(v) for v in settings)])
+
 
 # ---------------------------------------------------------------- the stages
 FORMATS = ("png", "pdf")
@@ -89,7 +136,7 @@ FORMATS = ("png", "pdf")
 
 def stage_gait(ctx: _Context):
     ctx.model = rabbit()
-    ctx.gait = g = default_gait(ctx.model)
+    ctx.gait = g = default_gait(ctx.model, progress=ctx.log)
     s = g.summary()
     ctx.summary["gait"] = s
     g.save(ctx.out / "gait.json")
@@ -110,7 +157,8 @@ def stage_singular(ctx: _Context):
 
 def stage_fig2(ctx: _Context):
     vals = np.linspace(-10, 10, ctx.opts.line_points)
-    r = one_d_sweeps(ctx.model, ctx.gait, vals, out_dir=ctx.out / "sweeps" / "fig2",
+    r = one_d_sweeps(ctx.model, ctx.gait, vals,
+                     out_dir=ctx.sweep_dir("fig2", f"{len(vals)}pts", -10.0, 10.0),
                      progress=ctx.opts.progress)
     ctx.figures["fig2"] = save_figure(one_d_sweeps_plot(r), ctx.out / "figures" / "fig2",
                                       FORMATS)
@@ -125,7 +173,7 @@ def stage_fig2(ctx: _Context):
 def stage_grid(ctx: _Context):
     n = ctx.opts.grid_n
     P = grid_points(n, -10.0, 10.0)
-    r = run_sweep(ctx.model, ctx.gait, P, out_dir=ctx.out / "sweeps" / f"grid{n}",
+    r = run_sweep(ctx.model, ctx.gait, P, out_dir=ctx.sweep_dir(f"grid{n}", -10.0, 10.0),
                   progress=ctx.opts.progress)
     ctx.data["grid"] = r
     st = r.point_status
@@ -160,7 +208,8 @@ def stage_fig4(ctx: _Context):
         real = np.all(np.isfinite(P), axis=1)
         mx = np.full(len(P), np.nan)
         if real.any():
-            r = run_sweep(ctx.model, ctx.gait, P[real], out_dir=ctx.out / "sweeps" / f"group{k}",
+            r = run_sweep(ctx.model, ctx.gait, P[real],
+                          out_dir=ctx.sweep_dir(f"group{k}", f"{n}x{n}", float(lo), float(hi)),
                           progress=ctx.opts.progress)
             mx[real] = r.max_abs
             stable = np.zeros(len(P), bool)
@@ -305,12 +354,68 @@ STAGES = [
 ]
 
 
-def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> dict:
-    """Run every stage into ``out_dir``; returns the summary (also in summary.json)."""
+def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceResult:
+    """Run every stage; the results go to :func:`run_folder` (``out_dir`` for the full
+    run, ``out_dir/quick`` for ``quick``), see the module docstring.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Created if needed; must not be a file.
+    quick : bool
+        Coarser grids (:meth:`ReproduceOptions.make`).
+    **kw
+        Fields of :class:`ReproduceOptions`.
+
+    Returns
+    -------
+    ReproduceResult
+        Its ``summary`` is also in ``summary.json``.
+
+    Raises
+    ------
+    ValueError
+        ``out_dir`` (or the run's folder inside it) is a file.
+    """
     opts = ReproduceOptions.make(quick, **kw)
-    out = Path(out_dir)
-    (out / "figures").mkdir(parents=True, exist_ok=True)
-    ctx = _Context(out, opts)
+    folder = run_folder(out_dir, quick)
+    for p in (Path(out_dir), folder, folder / "figures", folder / "sweeps"):
+        if p.exists() and not p.is_dir():
+            raise ValueError(f"out_dir: {p} is a file, not a folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    staging = folder / f".staging-{os.getpid()}"
+    shutil.rmtree(staging, ignore_errors=True)
+    (staging / "figures").mkdir(parents=True)
+    ctx = _Context(staging, opts, sweeps=folder / "sweeps")
+    try:
+        status = _run_stages(ctx)
+        mode = "quick" if opts.quick else "full"
+        ctx.summary["mode"] = mode
+        ctx.summary["stages"] = status
+        ctx.summary["figures"] = {k: [_relative(f, staging) for f in
+                                      ([v] if isinstance(v, str) else v)]
+                                  for k, v in ctx.figures.items()}
+        ctx.summary["paper"] = PAPER
+        ctx.summary["options"] = dict(opts.__dict__)
+        ctx.summary["finished"] = time.strftime("%Y-%m-%d %H:%M:%S %z")
+        summary = json_safe(ctx.summary)
+        write_text_atomic(staging / "summary.json",
+                          json.dumps(summary, indent=1, allow_nan=False) + "\n")
+        write_report(staging, summary)
+        _publish(staging, folder)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    bad = [k for k, v in status.items() if v["status"] != "ok"]
+    ctx.log(f"report: {folder / 'report.md'}  ({ctx.summary['total_time']:.0f} s)")
+    return ReproduceResult(
+        status="failed" if bad else "ok",
+        message=(f"stages not ok: {', '.join(bad)}" if bad else "every stage ok"),
+        mode=mode, folder=str(folder), report=str(folder / "report.md"),
+        summary_file=str(folder / "summary.json"), stages=summary["stages"],
+        total_time=ctx.summary["total_time"], summary=summary)
+
+
+def _run_stages(ctx: _Context) -> dict:
     status = {}
     t_all = time.perf_counter()
     for k, (name, fn, needs) in enumerate(STAGES, start=1):
@@ -330,12 +435,39 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> dict:
                                 time=time.perf_counter() - t,
                                 traceback=traceback.format_exc(limit=6))
             ctx.log(f"[{k}/{len(STAGES)}] {name}: FAILED ({type(e).__name__}: {e})")
-    ctx.summary["stages"] = status
-    ctx.summary["figures"] = ctx.figures
-    ctx.summary["paper"] = PAPER
-    ctx.summary["options"] = dict(opts.__dict__)
     ctx.summary["total_time"] = time.perf_counter() - t_all
-    (out / "summary.json").write_text(json.dumps(json_safe(ctx.summary), indent=1, allow_nan=False))
-    write_report(out, json_safe(ctx.summary))
-    ctx.log(f"report: {out / 'report.md'}  ({ctx.summary['total_time']:.0f} s)")
-    return ctx.summary
+    return status
+
+
+def _relative(path, root: Path) -> str:
+    """``path`` relative to the run's folder (summary.json and report.md travel with it)."""
+    try:
+        return Path(path).resolve().relative_to(root.resolve()).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def _publish(staging: Path, folder: Path):
+    """Move a finished run from ``staging`` into ``folder``: every file replaced
+    atomically; the previous run's figures that this run did not make removed (they are
+    listed in the previous summary.json); nothing else touched."""
+    figures = folder / "figures"
+    old = set()
+    with contextlib.suppress(OSError, ValueError, TypeError, AttributeError):
+        prev = json.loads((folder / "summary.json").read_text())
+        for files in prev.get("figures", {}).values():
+            for f in ([files] if isinstance(files, str) else files):
+                # relative to the run's folder; older versions: to the working directory
+                p = folder / f if Path(f).parts[:1] == ("figures",) else Path(f)
+                old.add(p.resolve())
+    figures.mkdir(exist_ok=True)
+    new = set()
+    for f in sorted((staging / "figures").iterdir()):
+        os.replace(f, figures / f.name)
+        new.add((figures / f.name).resolve())
+    for p in sorted(old - new):
+        if p.parent == figures.resolve() and p.is_file():     # only files in figures/
+            p.unlink()
+    for name in ("gait.json", "summary.json", "report.md"):
+        if (staging / name).exists():
+            os.replace(staging / name, folder / name)
