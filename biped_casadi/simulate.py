@@ -585,14 +585,20 @@ class _Log:
         return SimulationResult(
             status=status, message=message, controller=controller, options=options,
             steps=records,
-            peak_torque=float(np.nanmax(np.abs(u))) if u.size else math.nan,
-            min_normal_force=float(np.nanmin(Fz)) if Fz.size else math.nan,
-            max_friction_ratio=float(np.nanmax(ratio)) if ratio.size else math.nan,
+            peak_torque=_nan_extreme(np.nanmax, np.abs(u)),
+            min_normal_force=_nan_extreme(np.nanmin, Fz),
+            max_friction_ratio=_nan_extreme(np.nanmax, ratio),
             max_impulse_ratio=float(max(imp)) if imp else math.nan,
             failure_time=t_fail, reference=reference,
             t=t, tau=tau, step=st.astype(int), q=X[:, :nq], dq=X[:, nq:nx], u=u,
             y=D[:, slice(U.stop, 2 * U.stop)], dy=D[:, slice(2 * U.stop, 3 * U.stop)],
             Fx=Fx, Fz=Fz, denominator=D[:, R["DEN"]], stance_x=sx)
+
+
+def _nan_extreme(fn, a) -> float:
+    """``fn`` (nanmax or nanmin) of ``a``; NaN when nothing finite was logged (a run that
+    diverged at once), without numpy's warning."""
+    return float(fn(a)) if np.any(~np.isnan(a)) else math.nan
 
 
 @cached(maxsize=8)

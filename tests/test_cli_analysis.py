@@ -72,3 +72,98 @@ def test_user_errors_are_one_line_exit_2(gait_file, tmp_path, capsys, args, mess
     lines = cap.err.strip().splitlines()
     assert rc == 2 and cap.out == ""
     assert len(lines) == 1 and message in lines[0] and lines[0].startswith(f"biped {args[0]}:")
+
+
+# ------------------------------------------------------- issue 12: a newcomer's path
+class _Terminal:
+    """stderr as a terminal (progress lines are shown only there)."""
+
+    def __init__(self):
+        self.text = ""
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+    def isatty(self):
+        return True
+
+
+def test_default_gait_optimisation_is_announced(gait, capsys, monkeypatch):
+    """Issue 12: without --gait the first command optimised the default gait for ~20 s
+    with no word on screen."""
+    import analysis.cli.common as common
+    called = []
+
+    def default_gait(progress=None):            # as if nothing were cached yet
+        called.append(progress)
+        progress("optimising the reference gait of RABBIT (once) ...")
+        return gait
+
+    monkeypatch.setattr(common, "default_gait", default_gait)
+    term = _Terminal()
+    monkeypatch.setattr("sys.stderr", term)
+    assert biped_main(["eig", "--m1", "0", "0", "0", "0"]) == 0
+    assert "biped eig: optimising the reference gait" in term.text
+    term.text = ""
+    assert biped_main(["eig", "--m1", "0", "0", "0", "0", "--json"]) == 0
+    assert term.text == ""                      # --json: silent
+    assert len(called) == 2
+
+
+def test_long_waits_show_progress_on_a_terminal_only(gait_file, tmp_path, monkeypatch, capsys):
+    term = _Terminal()
+    monkeypatch.setattr("sys.stderr", term)
+    args = ["simulate", "--gait", gait_file, "--steps", "1", "--animate",
+            str(tmp_path / "w.gif")]
+    assert biped_main(args) == 0
+    assert "simulating 1 step(s)" in term.text and "writing the animation" in term.text
+    monkeypatch.setattr("sys.stderr", _NotATerminal := type(
+        "NotATerminal", (_Terminal,), {"isatty": lambda self: False})())
+    assert biped_main(args) == 0
+    assert _NotATerminal.text == ""
+
+
+@pytest.mark.parametrize("args", [
+    ["eig", "--m1", "1e6", "0", "0", "0"],                # the largest valid M1
+    ["eig", "--m1", "1.6894", "0", "0", "0"],             # next to the singular value
+    ["eig", "--m1", "1e6", "-1e6", "1e6", "-1e6", "--method", "ad"],
+    ["sweep", "--grid", "2", "--range", "-1e6", "1e6"],
+    ["simulate", "--steps", "1", "--perturb", "0.5", "5"],   # falls at once
+])
+def test_no_numerical_warning_reaches_the_terminal(gait_file, capsys, args):
+    """Issue 12: `eig --m1 1e300 0 0 0` answered no_impact with numpy warnings on stderr
+    and an impact time printed.  Now 1e300 is refused (tests/test_cli_bad_inputs.py) and
+    the extremes that are valid print no warning."""
+    rc = biped_main([args[0], "--gait", gait_file, *args[1:]])
+    cap = capsys.readouterr()
+    assert rc == 0 and cap.err == "", cap.err
+    if args[0] == "eig" and "status: singular" in cap.out:
+        assert "impact at" not in cap.out and "A^z" not in cap.out
+
+
+def test_negative_numbers_in_any_notation_are_values(gait_file, capsys):
+    body = run_json(capsys, "eig", "--gait", gait_file, "--m1", "-1e-3", "-2.5E0", "-.5",
+                    "-0", "--json")
+    assert body["M1"] == [-1e-3, -2.5, -0.5, 0.0]
+
+
+def test_grid_spans_the_range():
+    """Issue 12: `sweep --grid 1` evaluated only the low corner of the range."""
+    from analysis.sweep import grid_points
+    with pytest.raises(ValueError, match="n .* must be an integer >= 2"):
+        grid_points(1, -10, 10)
+    P = grid_points(2, -10, 10)
+    assert P.min() == -10 and P.max() == 10 and len(P) == 16
+
+
+def test_m1_outside_the_valid_range_is_a_value_error(model, gait):
+    from biped_casadi.output_law import M1_LIMIT
+    with pytest.raises(ValueError, match=r"M1: components must lie within"):
+        poincare_eigenvalues(model, gait, [1e300, 0, 0, 0])
+    r = poincare_eigenvalues(model, gait, [M1_LIMIT, 0, 0, 0])
+    ad = poincare_eigenvalues(model, gait, [M1_LIMIT, 0, 0, 0], method="ad")
+    assert r.status == ad.status == "unstable"
+    assert r.max_abs == pytest.approx(ad.max_abs, rel=1e-4)     # still meaningful there

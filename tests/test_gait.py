@@ -7,6 +7,7 @@ The default gait comes from the session fixture ``gait`` (on-disk cache); the 0.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import subprocess
 import sys
@@ -18,8 +19,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from biped_casadi import RobotParams, rabbit
-from gait_opt import (Gait, GaitFileError, GaitOptimizationError, GaitOptions, default_gait,
-                      optimize_gait)
+from gait_opt import (ORBIT_TOL, Gait, GaitFileError, GaitOptimizationError, GaitOptions,
+                      OpenOrbitWarning, default_gait, optimize_gait)
 from gait_opt.transcription import build_problem, initial_guess
 
 N_DENSE = 2001
@@ -251,6 +252,109 @@ def test_other_robot_is_refused(gait, tmp_path):
     other = rabbit(RobotParams(m_torso=13.0))
     with pytest.raises(GaitFileError, match="other robot parameters.*m_torso"):
         Gait.load(path, model=other)
+
+
+def _resigned(path, edit):
+    """Edit a gait file's body and give it a valid checksum again (a file edited by a
+    program: only the schema and the orbit checks can catch it)."""
+    body = json.loads(path.read_text())
+    body.pop("sha256")
+    edit(body)
+    body["sha256"] = hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
+    path.write_text(json.dumps(body))
+    return path
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda b: b["solution"].pop("alpha"), "'solution' lacks alpha"),
+    (lambda b: b.update(solution=[0.69, [], []]), "'solution' must be an object"),
+    (lambda b: b.update(solution="0.69"), "'solution' must be an object"),
+    (lambda b: b.pop("options"), "missing key(s): options"),
+    (lambda b: b.update(robot="RABBIT"), "invalid 'robot'"),
+    (lambda b: b.update(options=[]), "'options' must be an object"),
+    (lambda b: b["options"].update(bezier_degree="6"), "bezier_degree"),
+    (lambda b: b["options"].update(polish_steps=10**9), "polish_steps"),
+    (lambda b: b["solution"].update(T=None), "solution.T"),
+    (lambda b: b["solution"].update(T=True), "solution.T"),
+    (lambda b: b["solution"].update(T=float("nan")), "solution.T"),
+    (lambda b: b["solution"].update(T=10**400), "solution.T"),
+    (lambda b: b["solution"].update(x0=[0.1]), "solution.x0"),
+    (lambda b: b["solution"].update(x0=[0.1, float("inf")]), "non-finite"),
+    (lambda b: b["solution"].update(x0=[[0.1], [0.2]]), "only numbers"),
+    (lambda b: b["solution"]["alpha"][3].append(0.0), "solution.alpha"),
+    (lambda b: b["solution"]["alpha"].pop(), "solution.alpha"),
+    (lambda b: b["solution"]["alpha"][0].__setitem__(2, float("nan")), "non-finite"),
+    (lambda b: b["solution"]["alpha"][1].__setitem__(2, None), "only numbers"),
+    (lambda b: b["solution"].update(alpha={"q2": []}), "solution.alpha"),
+    (lambda b: b.update(solver_stats=[]), "solver_stats"),
+    (lambda b: b.update(note="hand-edited"), "unknown key(s): note"),
+])
+def test_malformed_solution_is_a_gait_file_error(gait, tmp_path, edit, message):
+    """Issue 12: a valid checksum over a malformed body gave KeyError / TypeError
+    tracebacks or plain ValueErrors; every case is a GaitFileError naming the file."""
+    path = _resigned(gait.save(tmp_path / "g.json"), edit)
+    with pytest.raises(GaitFileError) as e:
+        Gait.load(path)
+    assert message in str(e.value) and str(path) in str(e.value)
+    assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("edit", [
+    lambda b: b["solution"].update(T=b["solution"]["T"] * 1.01),        # period edited
+    lambda b: b["solution"].update(T=b["solution"]["T"] * (1 + 1e-7)),
+    lambda b: b["solution"]["x0"].__setitem__(1, b["solution"]["x0"][1] + 1e-6),
+    lambda b: b["solution"]["alpha"][0].__setitem__(3, b["solution"]["alpha"][0][3] + 1e-3),
+    lambda b: b["solution"].update(T=1e3),                              # cannot even reach T
+])
+def test_a_gait_that_is_not_a_periodic_orbit_is_refused(gait, tmp_path, edit):
+    """Issue 12: with T edited, `biped eig` analysed a non-periodic gait with exit 0
+    (fixed-point residual 0.19 instead of 4e-10)."""
+    path = _resigned(gait.save(tmp_path / "g.json"), edit)
+    with pytest.raises(GaitFileError, match="not a periodic orbit of its robot"):
+        Gait.load(path)
+
+
+def test_open_orbit_can_be_loaded_with_a_warning(gait, tmp_path):
+    path = _resigned(gait.save(tmp_path / "g.json"),
+                     lambda b: b["solution"].update(T=b["solution"]["T"] * 1.01))
+    with pytest.warns(OpenOrbitWarning, match=r"misses the start by 0\.00\d+ rad"):
+        g = Gait.load(path, allow_open_orbit=True)
+    assert g.orbit_residual()["worst"] > 1e-3
+    assert gait.orbit_residual()["worst"] < ORBIT_TOL / 1000         # the real one closes
+    # the tolerance is stated and adjustable
+    with pytest.warns(OpenOrbitWarning):
+        Gait.load(gait.save(tmp_path / "g2.json"), orbit_tol=1e-20, allow_open_orbit=True)
+
+
+def test_not_a_file(gait, tmp_path):
+    with pytest.raises(GaitFileError, match="is a folder, not a file"):
+        Gait.load(tmp_path)
+    with pytest.raises(GaitFileError, match="not a regular file"):
+        Gait.load("/dev/null")
+    (tmp_path / "bin.json").write_bytes(bytes(range(256)))
+    with pytest.raises(GaitFileError, match="not a text"):
+        Gait.load(tmp_path / "bin.json")
+
+
+def test_save_leaves_nothing_behind_on_failure(gait, tmp_path, monkeypatch):
+    """Issue 12: `biped gait --out EXISTING_DIR` crashed after the solve and left a stray
+    *.tmp file.  A failed save leaves no temporary file and no damaged earlier file."""
+    (tmp_path / "adir").mkdir()
+    with pytest.raises(IsADirectoryError):
+        gait.save(tmp_path / "adir")
+    path = gait.save(tmp_path / "g.json")
+    before = path.read_bytes()
+
+    def disk_full(self, text, *a, **k):            # half a file, then the disk is full
+        with open(self, "w") as f:
+            f.write(text[: len(text) // 2])
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(type(path), "write_text", disk_full)
+    with pytest.raises(OSError, match="No space"):
+        gait.save(path)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adir", "g.json"]
 
 
 # ------------------------------------------------------------- the cache

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import warnings
 
@@ -47,7 +48,14 @@ def cmd_model(args):
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line usage errors (``biped eig: error: ... (see --help)``)."""
+    """argparse with one-line usage errors (``biped eig: error: ... (see --help)``), and
+    negative numbers in any notation taken as values (``--range -1e6 1e6``,
+    ``--perturb-q -1e-3 ...``, ``--m1 -inf ...``), not as unknown options."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(
+            r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {_one_line(message)} (see '{self.prog} "

@@ -1,0 +1,325 @@
+"""Every subcommand against the bad inputs a newcomer tries (issue 12): exit code 2, one
+line on stderr that names the offending argument or file, nothing on stdout, no
+traceback, nothing left behind, no earlier file changed.
+
+Read-only folders: the suite may run as root, for whom permission bits do not stop a
+write; those cases are skipped as root, and /sys (not writable even for root) stands in
+for a read-only place.
+"""
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from analysis.cli import main as biped_main
+from analysis.sweep import grid_points, run_sweep
+
+ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
+READ_ONLY_SYSTEM = "/sys"          # EACCES on create, also for root
+
+
+def _sign(body: dict) -> dict:
+    """A gait file body with a valid checksum (the format's: SHA-256 of the sorted JSON
+    of everything else), as someone editing a file by program would make it."""
+    body = dict(body)
+    body.pop("sha256", None)
+    body["sha256"] = hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
+    return body
+
+
+@pytest.fixture(scope="module")
+def files(model, gait, tmp_path_factory):
+    """Named paths (formatted into the arguments of each case)."""
+    d = tmp_path_factory.mktemp("bad_inputs")
+    good = gait.save(d / "gait.json")
+    body = json.loads(good.read_text())
+    out = dict(gait=str(good), dir=str(d / "a_folder"), file=str(d / "a_file.txt"),
+               missing=str(d / "missing.json"), sys=READ_ONLY_SYSTEM)
+    (d / "a_folder").mkdir()
+    (d / "a_file.txt").write_text("not a folder\n")
+    (d / "a_folder.gif").mkdir()
+    out["dir_gif"] = str(d / "a_folder.gif")
+
+    def write(name, text):
+        (d / name).write_bytes(text if isinstance(text, bytes) else text.encode())
+        out[name.split(".")[0]] = str(d / name)
+
+    def edited(name, edit, sign=True):
+        b = copy.deepcopy(body)
+        edit(b)
+        write(name, json.dumps(_sign(b) if sign else b))
+
+    write("empty.json", "")
+    write("garbage.json", bytes(range(256)) * 4)
+    write("truncated.json", good.read_text()[:500])
+    write("list.json", "[1, 2, 3]")
+    write("number.json", "42")
+    write("other_format.json", json.dumps({"format": "something-else", "version": 1}))
+    write("deep.json", "[" * 100000 + "]" * 100000)
+    write("summary.json", json.dumps({"stages": {}, "figures": {}}))
+    edited("version.json", lambda b: b.update(version=99))
+    edited("checksum.json", lambda b: b["solution"].update(T=0.7), sign=False)
+    edited("no_solution.json", lambda b: b.pop("solution"))
+    edited("no_x0.json", lambda b: b["solution"].pop("x0"))
+    edited("solution_list.json", lambda b: b.update(solution=[1, 2]))
+    edited("x0_nan.json", lambda b: b["solution"].update(x0=[float("nan"), 0.0]))
+    edited("ragged.json", lambda b: b["solution"]["alpha"][2].pop())
+    edited("alpha_size.json", lambda b: b["solution"].update(alpha=[[0.0] * 7] * 3))
+    edited("alpha_text.json", lambda b: b["solution"]["alpha"][0].__setitem__(0, "0.1"))
+    edited("T_text.json", lambda b: b["solution"].update(T="0.69"))
+    edited("T_negative.json", lambda b: b["solution"].update(T=-0.69))
+    edited("T_huge.json", lambda b: b["solution"].update(T=1e300))
+    edited("open_orbit.json", lambda b: b["solution"].update(T=b["solution"]["T"] * 1.01))
+    edited("robot_mass.json", lambda b: b["robot"].update(m_torso=-12.0))
+    edited("robot_list.json", lambda b: b.update(robot=[1, 2]))
+    edited("options_bad.json", lambda b: b["options"].update(speed="fast"))
+    edited("extra_key.json", lambda b: b.update(comment="edited by hand"))
+    write("params_garbage.toml", bytes(range(256)))
+    write("params_empty.toml", "")
+    write("params_bad.json", json.dumps(dict(model.params.to_dict(), m_torso=-12.0)))
+    write("params_unknown.json", json.dumps({"wings": 2}))
+    write("params.txt", "m_torso = 12\n")
+    unreadable = d / "unreadable.json"
+    unreadable.write_text(good.read_text())
+    unreadable.chmod(0)
+    out["unreadable"] = str(unreadable)
+    ro = d / "read_only"
+    ro.mkdir()
+    ro.chmod(0o500)
+    out["read_only"] = str(ro)
+    # a sweep folder made with other settings, and a folder that is not a sweep folder
+    run_sweep(model, gait, grid_points(2, -1.0, 1.0), out_dir=d / "sweep2", progress=False)
+    out["sweep2"] = str(d / "sweep2")
+    (d / "notes").mkdir()
+    (d / "notes" / "todo.txt").write_text("my notes\n")
+    out["notes"] = str(d / "notes")
+    out["root_dir"] = str(d)
+    yield out
+    unreadable.chmod(0o600)
+    ro.chmod(0o700)
+
+
+G = ["--gait", "{gait}"]
+M0 = ["--m1", "0", "0", "0", "0"]
+
+#: (arguments, a word the error line must contain[, "nonroot" when permissions matter])
+CASES = [
+    # ---- the command line itself
+    ([], "required"),
+    (["walk"], "invalid choice"),
+    (["eig", "--bogus"], "unrecognized arguments"),
+    # ---- model
+    (["model", "--q", "1", "2", "3"], "--q takes 5"),
+    (["model", "--q", "nan", "0", "0", "0", "0"], "finite"),
+    (["model", "--q", "inf", "0", "0", "0", "0"], "finite"),
+    (["model", "--q", "abc"], "invalid float"),
+    (["model", "--params", "{missing}"], "not found"),
+    (["model", "--params", "{dir}"], "is a folder"),
+    (["model", "--params", "/dev/null"], "not a regular file"),
+    (["model", "--params", "{params_garbage}"], "not a text"),
+    (["model", "--params", "{params_empty}"], "missing robot parameter"),
+    (["model", "--params", "{params_bad}"], "m_torso"),
+    (["model", "--params", "{params_unknown}"], "unknown robot parameter"),
+    (["model", "--params", "{params}"], ".toml or .json"),
+    (["model", "--params", "{unreadable}"], "cannot be read", "nonroot"),
+    # ---- gait: numbers, then output paths (checked before the 3 s solve)
+    (["gait", "--speed", "0"], "--speed"),
+    (["gait", "--speed", "-1"], "--speed"),
+    (["gait", "--speed", "nan"], "--speed"),
+    (["gait", "--speed", "inf"], "--speed"),
+    (["gait", "--mu", "0"], "--mu"),
+    (["gait", "--torque-limit", "-5"], "--torque-limit"),
+    (["gait", "--intervals", "2"], "--intervals"),
+    (["gait", "--intervals", "100000"], "--intervals"),
+    (["gait", "--intervals", "3.5"], "invalid int"),
+    (["gait", "--max-iter", "0"], "--max-iter"),
+    (["gait", "--scheme", "euler"], "invalid choice"),
+    (["gait", "--speed", "5", "--out", "{root_dir}/g5.json"], "no feasible gait"),
+    (["gait", "--out", "{dir}"], "--out"),
+    (["gait", "--out", "{root_dir}/no/such/gait.json"], "does not exist"),
+    (["gait", "--out", "{file}/gait.json"], "is a file"),
+    (["gait", "--out", ""], "--out"),
+    (["gait", "--out", "/dev/null"], "not a regular file"),
+    (["gait", "--out", "{sys}/gait.json"], "cannot write"),
+    (["gait", "--out", "{read_only}/gait.json"], "cannot write", "nonroot"),
+    (["gait", "--out", "{root_dir}/g.json", "--plot", "{file}"], "--plot"),
+    (["gait", "--out", "{root_dir}/g.json", "--plot", "{file}/figs"], "--plot"),
+    (["gait", "--out", "{root_dir}/g.json", "--params", "{params_garbage}"], "parameter file"),
+    # ---- eig: numbers and options
+    (["eig", *G, "--m1", "1", "2", "3"], "--m1 takes 4"),
+    (["eig", *G, "--m1", "1", "2", "3", "4", "5"], "--m1 takes 4"),
+    (["eig", *G, "--m1", "nan", "0", "0", "0"], "--m1"),
+    (["eig", *G, "--m1", "inf", "0", "0", "0"], "--m1"),
+    (["eig", *G, "--m1", "1e300", "0", "0", "0"], "--m1"),
+    (["eig", *G, "--m1", "1e7", "0", "0", "0"], "--m1"),
+    (["eig", *G, "--m1", "-1e300", "0", "0", "0"], "--m1"),
+    (["eig", *G, "--m1", "-inf", "0", "0", "0"], "--m1"),
+    (["eig", *G, "--m1", "one", "0", "0", "0"], "invalid float"),
+    (["eig", *G], "--m1"),
+    (["eig", *G, "--controller", "vc", *M0], "--m1"),
+    (["eig", *G, "--controller", "vc", "--method", "ad"], "--method"),
+    (["eig", *G, *M0, "--method", "fd"], "invalid choice"),
+    (["eig", *G, *M0, "--controller", "hzd"], "invalid choice"),
+    # ---- eig: gait files (the same loader serves every command)
+    (["eig", "--gait", "{missing}", *M0], "not found"),
+    (["eig", "--gait", "{dir}", *M0], "is a folder"),
+    (["eig", "--gait", "/dev/null", *M0], "not a regular file"),
+    (["eig", "--gait", "{empty}", *M0], "not valid JSON"),
+    (["eig", "--gait", "{garbage}", *M0], "not a text"),
+    (["eig", "--gait", "{truncated}", *M0], "not valid JSON"),
+    (["eig", "--gait", "{deep}", *M0], "not valid JSON"),
+    (["eig", "--gait", "{list}", *M0], "not a biped-casadi-gait file"),
+    (["eig", "--gait", "{number}", *M0], "not a biped-casadi-gait file"),
+    (["eig", "--gait", "{other_format}", *M0], "not a biped-casadi-gait file"),
+    (["eig", "--gait", "{summary}", *M0], "not a biped-casadi-gait file"),
+    (["eig", "--gait", "{version}", *M0], "format version 99"),
+    (["eig", "--gait", "{checksum}", *M0], "checksum"),
+    (["eig", "--gait", "{no_solution}", *M0], "missing key(s): solution"),
+    (["eig", "--gait", "{no_x0}", *M0], "x0"),
+    (["eig", "--gait", "{solution_list}", *M0], "'solution' must be an object"),
+    (["eig", "--gait", "{x0_nan}", *M0], "non-finite"),
+    (["eig", "--gait", "{ragged}", *M0], "solution.alpha"),
+    (["eig", "--gait", "{alpha_size}", *M0], "solution.alpha"),
+    (["eig", "--gait", "{alpha_text}", *M0], "only numbers"),
+    (["eig", "--gait", "{T_text}", *M0], "solution.T"),
+    (["eig", "--gait", "{T_negative}", *M0], "solution.T"),
+    (["eig", "--gait", "{T_huge}", *M0], "not a periodic orbit"),
+    (["eig", "--gait", "{open_orbit}", *M0], "not a periodic orbit"),
+    (["eig", "--gait", "{robot_mass}", *M0], "m_torso"),
+    (["eig", "--gait", "{robot_list}", *M0], "'robot'"),
+    (["eig", "--gait", "{options_bad}", *M0], "speed"),
+    (["eig", "--gait", "{extra_key}", *M0], "unknown key(s): comment"),
+    (["eig", "--gait", "{unreadable}", *M0], "cannot be read", "nonroot"),
+    # ---- sweep
+    (["sweep"], "--gait"),
+    (["sweep", *G, "--grid", "1"], "--grid"),
+    (["sweep", *G, "--grid", "0"], "--grid"),
+    (["sweep", *G, "--grid", "-3"], "--grid"),
+    (["sweep", *G, "--grid", "100"], "--grid"),
+    (["sweep", *G, "--grid", "3", "--line", "3"], "not allowed with"),
+    (["sweep", *G, "--line", "1"], "--line"),
+    (["sweep", *G, "--range", "10", "-10"], "--range"),
+    (["sweep", *G, "--range", "5", "5"], "--range"),
+    (["sweep", *G, "--range", "nan", "1"], "--range"),
+    (["sweep", *G, "--range", "-1e300", "1e300"], "--range"),
+    (["sweep", *G, "--range", "0"], "--range"),
+    (["sweep", *G, "--grid", "2", "--plot", "{dir}"], "--plot needs --line"),
+    (["sweep", *G, "--grid", "2", "--workers", "0"], "--workers"),
+    (["sweep", *G, "--grid", "2", "--workers", "100000"], "--workers"),
+    (["sweep", *G, "--grid", "2", "--chunk-size", "0"], "--chunk-size"),
+    (["sweep", *G, "--grid", "2", "--scheduler", "nonsense"], "scheduler"),
+    (["sweep", *G, "--grid", "2", "--out", "{file}"], "--out"),
+    (["sweep", *G, "--grid", "2", "--out", "{file}/sweep"], "--out"),
+    (["sweep", *G, "--grid", "2", "--out", "{sys}/sweep"], "--out"),
+    (["sweep", *G, "--grid", "2", "--out", "{read_only}/sweep"], "--out", "nonroot"),
+    (["sweep", *G, "--grid", "3", "--out", "{sweep2}"], "other settings"),
+    (["sweep", *G, "--grid", "2", "--out", "{notes}"], "not a sweep folder"),
+    (["sweep", *G, "--line", "3", "--plot", "{file}"], "--plot"),
+    (["sweep", "--gait", "{open_orbit}", "--grid", "2"], "not a periodic orbit"),
+    # ---- m1
+    (["m1", *G, "--free", "--group", "1"], "not allowed with"),
+    (["m1", *G, "--group", "3"], "invalid choice"),
+    (["m1", "--gait", "{missing}"], "not found"),
+    (["m1", "--gait", "{ragged}"], "solution.alpha"),
+    # ---- simulate
+    (["simulate", *G, "--m1", "1", "2", "3"], "--m1 takes 4"),
+    (["simulate", *G, "--m1", "nan", "0", "0", "0"], "--m1"),
+    (["simulate", *G, "--m1", "1e300", "0", "0", "0"], "--m1"),
+    (["simulate", *G, "--m1", "1.70", "0", "0", "0"], "singular"),
+    (["simulate", *G, "--controller", "vc", *M0], "--m1"),
+    (["simulate", *G, "--steps", "0"], "--steps"),
+    (["simulate", *G, "--steps", "-1"], "--steps"),
+    (["simulate", *G, "--steps", "100000000"], "--steps"),
+    (["simulate", *G, "--steps", "2.5"], "invalid int"),
+    (["simulate", *G, "--perturb", "0.1"], "expected 2"),
+    (["simulate", *G, "--perturb", "nan", "0"], "--perturb"),
+    (["simulate", *G, "--perturb", "0", "0", "--perturb-q", "0", "0", "0", "0", "0"],
+     "--perturb"),
+    (["simulate", *G, "--perturb-q", "1", "2"], "--perturb-q takes 5"),
+    (["simulate", *G, "--perturb-dq", "inf", "0", "0", "0", "0"], "--perturb-dq"),
+    (["simulate", *G, "--mu", "0"], "--mu"),
+    (["simulate", *G, "--mu", "-1"], "--mu"),
+    (["simulate", *G, "--eps", "0"], "--eps"),
+    (["simulate", *G, "--eps", "1e-300"], "eps"),
+    (["simulate", *G, "--eps", "1e-5"], "eps"),
+    (["simulate", *G, "--torque-limit", "0"], "--torque-limit"),
+    (["simulate", *G, "--animate", "{root_dir}/walk.mp4"], ".gif"),
+    (["simulate", *G, "--animate", "{dir_gif}"], "is a folder"),
+    (["simulate", *G, "--animate", "{root_dir}/no/such/walk.gif"], "does not exist"),
+    (["simulate", *G, "--animate", "{file}/walk.gif"], "is a file"),
+    (["simulate", *G, "--animate", "{sys}/walk.gif"], "cannot write"),
+    (["simulate", *G, "--plot", "{file}"], "--plot"),
+    (["simulate", *G, "--plot", "{sys}/figs"], "--plot"),
+    (["simulate", *G, "--plot", "{read_only}/figs"], "--plot", "nonroot"),
+    (["simulate", "--gait", "{garbage}"], "not a text"),
+    # ---- reproduce (checked before the first stage)
+    (["reproduce", "--out", "{file}"], "--out"),
+    (["reproduce", "--quick", "--out", "{file}"], "--out"),
+    (["reproduce", "--out", "{file}/rep"], "--out"),
+    (["reproduce", "--out", ""], "--out"),
+    (["reproduce", "--out", "{sys}/rep"], "--out"),
+    (["reproduce", "--out", "{read_only}/rep", "--quick"], "--out", "nonroot"),
+]
+
+
+def _snapshot(*folders) -> dict:
+    """Every file under ``folders`` with its size and modification time, and every
+    folder (whose own time changes when a write test creates and removes a file)."""
+    out = {}
+    for folder in folders:
+        for dirpath, dirnames, filenames in os.walk(folder):
+            for n in dirnames:
+                out[os.path.join(dirpath, n)] = "folder"
+            for n in filenames:
+                p = os.path.join(dirpath, n)
+                try:
+                    st = os.stat(p)
+                except OSError:
+                    continue
+                out[p] = (st.st_size, st.st_mtime_ns)
+    return out
+
+
+def _id(case) -> str:
+    return " ".join(case[0])[:60] or "(no arguments)"
+
+
+@pytest.mark.parametrize("case", CASES, ids=[_id(c) for c in CASES])
+def test_bad_input_is_one_line_and_exit_2(case, files, tmp_path, monkeypatch, capsys):
+    args, expect, *flags = case
+    if "nonroot" in flags and ROOT:
+        pytest.skip("running as root: permission bits do not stop root (see /sys cases)")
+    monkeypatch.chdir(tmp_path)
+    argv = [a.format(**files) for a in args]
+    before = _snapshot(files["root_dir"], tmp_path)
+    rc = biped_main(argv)
+    cap = capsys.readouterr()
+    lines = cap.err.strip().splitlines()
+    assert rc == 2, (argv, cap.err, cap.out[:500])
+    assert cap.out == "", cap.out[:500]
+    assert len(lines) == 1, cap.err
+    assert "Traceback" not in cap.err
+    assert lines[0].startswith("biped"), lines[0]
+    assert expect in lines[0], lines[0]
+    assert _snapshot(files["root_dir"], tmp_path) == before, "a file was written or changed"
+
+
+@pytest.mark.parametrize("args", [
+    ["gait", "--out", "{dir}"],
+    ["eig", "--gait", "{ragged}", "--m1", "0", "0", "0", "0"],
+    ["sweep", "--gait", "{gait}", "--grid", "2", "--out", "{file}/sweep"],
+])
+def test_bad_input_in_a_fresh_process(args, files, tmp_path):
+    """The installed entry point behaves the same: exit 2, one line, no traceback."""
+    r = subprocess.run([sys.executable, "-m", "analysis.cli", *[a.format(**files) for a in args]],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=300,
+                       env=dict(os.environ, MPLBACKEND="Agg"))
+    assert r.returncode == 2, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert r.stdout == "" and list(tmp_path.iterdir()) == []

@@ -1,0 +1,164 @@
+"""Figures and report.md (issue 12): figures written completely or not at all, titles
+and captions that name only the colours drawn, a report without duplicate headings,
+uncaptioned figures, repeated sentences or a "see the message" with no message."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import matplotlib.colors as mcolors
+import pytest
+from matplotlib.figure import Figure
+
+from analysis.plots import (COLOUR_NAMES, SWING, STANCE, TORSO, gait_stick_plot,
+                            save_figure, save_figures)
+from analysis.report import _figure_captions, write_report
+
+COLOUR_WORDS = ("blue", "red", "green", "black", "grey", "gray", "orange", "purple",
+                "yellow", "white")
+
+
+def _colour_words(text: str) -> set:
+    return {w for w in COLOUR_WORDS if re.search(rf"\b{w}\b", text.lower())}
+
+
+# ------------------------------------------------------------------ figures
+def test_save_figure_is_complete_or_absent(tmp_path, monkeypatch):
+    fig = Figure()
+    fig.add_subplot().plot([0, 1], [0, 1])
+    old = save_figure(fig, tmp_path / "f", ("png", "pdf"))
+    before = {p: Path(p).read_bytes() for p in old}
+
+    def broken(self, fname, *a, **k):             # half a file, then a failure
+        Path(fname).write_bytes(b"\x89PNG half")
+        raise RuntimeError("renderer failed")
+
+    monkeypatch.setattr(Figure, "savefig", broken)
+    with pytest.raises(RuntimeError):
+        save_figure(fig, tmp_path / "f", ("png",))
+    with pytest.raises(RuntimeError):
+        save_figures({"g": fig}, tmp_path / "new_folder")
+    assert {p: Path(p).read_bytes() for p in old} == before        # earlier figures intact
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.pdf", "f.png"]   # no temp, no folder
+
+
+def test_save_figures_is_all_or_none(tmp_path, monkeypatch):
+    ok, bad = Figure(), Figure()
+    ok.add_subplot()
+    real = Figure.savefig
+
+    def savefig(self, *a, **k):
+        if self is bad:
+            raise OSError(28, "No space left on device")
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    with pytest.raises(OSError):
+        save_figures({"a": ok, "b": bad}, tmp_path / "figs")
+    assert not (tmp_path / "figs").exists()
+    assert save_figures({"a": ok}, tmp_path / "figs") == [str(tmp_path / "figs" / "a.png")]
+
+
+def test_stick_figure_names_only_the_colours_it_draws(gait):
+    """Issue 12: the stick-figure title named colours the plot did not use."""
+    fig = gait_stick_plot(gait)
+    ax = fig.axes[0]
+    drawn = {mcolors.to_hex(line.get_color()) for line in ax.get_lines()}
+    assert {mcolors.to_hex(c) for c in (STANCE, SWING, TORSO)} <= drawn
+    named = {COLOUR_NAMES[c] for c in (STANCE, SWING, TORSO)}
+    texts = [ax.get_title()] + [t.get_text() for t in ax.get_legend().get_texts()]
+    for text in texts:
+        assert _colour_words(text) <= {w for n in named for w in n.split()}, text
+    # the names themselves describe the colours (blue is blue, red is red, grey is grey)
+    for c, name in COLOUR_NAMES.items():
+        r, g, b = mcolors.to_rgb(c)
+        word = name.split()[-1]
+        assert {"blue": b > max(r, g), "red": r > max(g, b),
+                "grey": abs(r - g) < 0.05 and abs(g - b) < 0.05}[word], (c, name)
+
+
+def test_captions_name_only_drawn_colours():
+    named = set(" ".join(COLOUR_NAMES.values()).split())
+    for key, (title, caption) in _figure_captions({}).items():
+        words = _colour_words(title + " " + caption)
+        # red marks stable points / the |lambda| = 1 contour in Fig. 2-4 (drawn in red)
+        assert words <= named | {"red"}, (key, words)
+
+
+# ------------------------------------------------------------------ report
+def _summary(tv_status="ok", tv_message=""):
+    figs = {k: [f"figures/{k}.png", f"figures/{k}.pdf"] for k in
+            ("gait_stick", "gait_profiles", "fig2", "fig3", "fig4")}
+    figs["fig5"] = ["figures/fig5_qu_error.png", "figures/fig5_qu_error.pdf"]
+    figs["fig6"] = ["figures/fig6_swing_torques.png", "figures/fig6_swing_torques.pdf"]
+    figs["animation"] = ["figures/walk_tv.gif"]
+    return {
+        "mode": "full", "total_time": 50.0, "finished": "today",
+        "options": dict(line_points=401, domain_n=81, nlp_starts=10, sim_steps=10,
+                        animation_steps=4),
+        "gait": dict(T=0.69, step_length=0.52, speed=0.75, cost=575.0, peak_torque=30.7,
+                     periodicity_dq=3e-13),
+        "singular": dict(D11_T=23.5, D12_T=[13.9, 4.75, 0.44, 0.10],
+                         singular_values=[1.69, 4.94, 53.4, 227.0]),
+        "fig2": dict(points_per_component=401),
+        "grid": dict(counts=dict(stable=84, unstable=6284, singular=193, no_impact=0),
+                     best_stable=dict(M1=[-2.5, 5, -2.5, 5], max_abs=0.51)),
+        "conjecture": dict(max_abs_zsw_stable=0.011, fraction_unstable_below=0.25),
+        "domains": dict(grid=81, range=[-10, 10], groups={
+            "1": dict(stable_area=16.3, best=dict(M1=[2.2, -4.5, 3.0, 1.8], max_abs=0.23)),
+            "2": dict(stable_area=25.4, best=dict(M1=[-0.6, 1.5, 2.0, -2.5], max_abs=0.52))}),
+        "m1_nlp": {k: dict(M1=[1.0, 2.0, 3.0, 4.0], max_abs=1e-5, eigenvalue_uncertainty=1e-4)
+                   for k in ("group1", "group2", "free")} | {
+            "paper_example_M1": dict(max_abs=22.2)},
+        "vc_comparison": dict(vc=dict(eigenvalue=0.54)),
+        "simulation": dict(paper=dict(tv=dict(status=tv_status, message=tv_message),
+                                      vc=dict(status="ok", steps=[], steps_to_converge=5)),
+                           figures_run=dict(M1=[1.0, 2.0, 3.0, 4.0], scale=0.05,
+                                            perturbation=[5e-4, 5e-3],
+                                            tv=dict(steps_to_converge=3),
+                                            vc=dict(steps_to_converge=4))),
+        "stages": {"gait": dict(status="ok", time=1.0)},
+        "figures": figs,
+        "paper": dict(D11_T=24.2445, D12_T=[13.4, 3.6, 0.54, 0.04],
+                      singular_values=[1.8, 6.7, 45.1, 592.8],
+                      grid_counts=dict(stable=19, unstable=5363, singular_or_no_impact=1179),
+                      example_M1=[1.9121, -4.0, -3.0, -1.4090], example_max_abs=0.2392,
+                      tv_convergence_steps=4),
+    }
+
+
+@pytest.mark.parametrize("tv_status, tv_message", [("ok", ""),
+                                                   ("slipped", "step 0: stance foot slips")])
+def test_report_reads_well(tmp_path, tv_status, tv_message):
+    """Issue 12: two figure headings both called 'gait', figures without captions, one
+    sentence repeated on five rows, 'see the message' with no message."""
+    text = write_report(tmp_path, _summary(tv_status, tv_message)).read_text()
+    headings = [line for line in text.splitlines() if line.startswith("#")]
+    assert len(headings) == len(set(headings)), headings
+    lines = text.splitlines()
+    for i, line in enumerate(lines):                  # every image has a caption after it
+        if line.startswith("!["):
+            caption = next(x for x in lines[i + 1:] if x.strip())
+            assert not caption.startswith(("#", "!")) and len(caption) > 40, caption
+    n_images = sum(line.startswith("![") for line in lines)
+    assert n_images == 8 and "figures/walk_tv.gif" in text
+    rows = [line.split(" | ") for line in lines if line.startswith("| ") and " | " in line]
+    why = [r[3].rstrip(" |") for r in rows if len(r) >= 4 and len(r[3]) > 25]
+    assert len(why) == len(set(why)), why            # no long reason repeated
+    assert "see the message" not in text
+    assert "Full run" in text and "every stage ok" in text
+    if tv_status == "ok":
+        assert "| ok |" in text and "friction cone" not in text
+    else:
+        assert f"slipped: {tv_message}" in text and "friction cone" in text
+
+
+def test_report_of_a_failed_stage_says_so(tmp_path):
+    s = _summary()
+    for key in ("domains", "m1_nlp", "simulation"):
+        s.pop(key)
+    s["stages"]["a, b and Fig. 4"] = dict(status="failed", error="ValueError: boom\nline 2",
+                                          time=0.1)
+    text = write_report(tmp_path, s).read_text()
+    assert "1 of 2 stages not ok" in text and "failed: ValueError: boom line 2" in text
+    assert "n/a at n/a" not in text and "not computed" in text
