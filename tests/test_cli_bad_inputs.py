@@ -2,16 +2,19 @@
 line on stderr that names the offending argument or file, nothing on stdout, no
 traceback, nothing left behind, no earlier file changed.
 
-Read-only folders: the suite may run as root, for whom permission bits do not stop a
-write; those cases are skipped as root, and /sys (not writable even for root) stands in
-for a read-only place.
+Read-only folders and unreadable files: the suite may run as root, for whom permission
+bits stop nothing; there the cases marked "nonroot" have the operating system's answer
+for those paths (EACCES from open) emulated, and /sys (not writable even for root) is a
+real read-only place.
 """
 from __future__ import annotations
 
 import copy
+import errno
 import hashlib
 import json
 import os
+import pathlib
 import subprocess
 import sys
 
@@ -286,6 +289,29 @@ def _snapshot(*folders) -> dict:
     return out
 
 
+def _deny_like_permissions(monkeypatch, read_only, unreadable):
+    """As root: answer EACCES, as the permission bits would for anyone else, when a file
+    is created under ``read_only`` or ``unreadable`` is opened."""
+    def denied(path, write):
+        p = os.path.abspath(os.fspath(path))
+        return p == unreadable or (write and p.startswith(read_only + os.sep))
+
+    real_os_open, real_path_open = os.open, pathlib.Path.open
+
+    def os_open(path, flags, *a, **k):
+        if denied(path, flags & (os.O_WRONLY | os.O_RDWR | os.O_CREAT)):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), os.fspath(path))
+        return real_os_open(path, flags, *a, **k)
+
+    def path_open(self, mode="r", *a, **k):
+        if denied(self, any(c in mode for c in "wax+")):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
+        return real_path_open(self, mode, *a, **k)
+
+    monkeypatch.setattr(os, "open", os_open)
+    monkeypatch.setattr(pathlib.Path, "open", path_open)
+
+
 def _id(case) -> str:
     return " ".join(case[0])[:60] or "(no arguments)"
 
@@ -294,7 +320,7 @@ def _id(case) -> str:
 def test_bad_input_is_one_line_and_exit_2(case, files, tmp_path, monkeypatch, capsys):
     args, expect, *flags = case
     if "nonroot" in flags and ROOT:
-        pytest.skip("running as root: permission bits do not stop root (see /sys cases)")
+        _deny_like_permissions(monkeypatch, files["read_only"], files["unreadable"])
     monkeypatch.chdir(tmp_path)
     argv = [a.format(**files) for a in args]
     before = _snapshot(files["root_dir"], tmp_path)
