@@ -27,7 +27,7 @@ IMPACT_CHECKS = ("diverged", "negative_normal_force", "slipped", "scuffed")
 
 
 def node_violations(rows: dict, options, torque_limit: float, den_scale, den_sign,
-                    z_prev=None) -> dict:
+                    z_prev=None, min_hip_height: float | None = None) -> dict:
     """Masks of the violated conditions at integration nodes.
 
     Parameters
@@ -49,6 +49,8 @@ def node_violations(rows: dict, options, torque_limit: float, den_scale, den_sig
     z_prev : array, optional
         Swing-foot height at the previous node (a foot already under the ground cannot
         strike: going further down is scuffing).
+    min_hip_height : float, optional
+        The hip height below which the robot has fallen (default ``options``').
 
     Returns
     -------
@@ -57,13 +59,14 @@ def node_violations(rows: dict, options, torque_limit: float, den_scale, den_sig
         :data:`NODE_CHECKS`.
     """
     o = options
+    hip_floor = o.min_hip_height if min_hip_height is None else min_hip_height
     finite = rows["finite"]
     bad = {"diverged": ~finite}
     with np.errstate(invalid="ignore"):
         if "in_range" in rows:
             bad["out_of_range"] = finite & (rows["in_range"] < 0.5)
         bad["singular"] = finite & (rows["den"] * den_sign <= o.singular_tolerance * den_scale)
-        bad["fell"] = finite & ((rows["hip"] < o.min_hip_height)
+        bad["fell"] = finite & ((rows["hip"] < hip_floor)
                                 | (np.abs(rows["torso"]) > o.max_torso_angle))
         behind = rows["xsw"] <= 0
         if z_prev is not None:
