@@ -6,6 +6,8 @@ This is the bottom layer of the toolkit: it imports nothing from :mod:`gait_opt`
 interface :class:`~biped_casadi.reference.Reference`, which :class:`gait_opt.Gait`
 implements.
 """
+from importlib import metadata as _metadata
+
 from .caching import cache_dir, cached
 from .controllers import (HIP_PHASE, PAPER_REJOIN, TimeVaryingController,
                           VirtualConstraintController, VirtualConstraints,
@@ -26,4 +28,7 @@ __all__ = ["rabbit", "BipedModel", "RobotParams", "RABBIT", "load_params", "E_RE
            "Simulator", "SimulationOptions", "SimulationResult", "simulate",
            "perturbed_initial_state", "PAPER_PERTURBATION", "Result", "json_safe",
            "cached", "cache_dir", "Perturbation", "directions", "PAPER_SIZES"]
-__version__ = "0.1.0"
+try:
+    __version__ = _metadata.version("biped-casadi")
+except _metadata.PackageNotFoundError:      # running from a source tree that is not installed
+    __version__ = "0+unknown"
