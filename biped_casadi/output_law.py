@@ -104,8 +104,20 @@ def check_M1(M1, n: int = 4) -> np.ndarray:
 
 
 def check_M1_range(M1s, name: str = "M1"):
-    """ValueError naming ``name`` when a component of ``M1s`` (any shape) exceeds
-    :data:`M1_LIMIT` in magnitude."""
+    """Refuse output matrices beyond the model's numerical validity (:data:`M1_LIMIT`).
+
+    Parameters
+    ----------
+    M1s : array_like
+        One M1, or many (any shape).
+    name : str
+        The argument's name, used in the error message.
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` when a component exceeds :data:`M1_LIMIT` in magnitude.
+    """
     big = float(np.max(np.abs(M1s), initial=0.0))
     if big > M1_LIMIT:
         raise ValueError(f"{name}: components must lie within +-{M1_LIMIT:.0e}, got {big:g} "

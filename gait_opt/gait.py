@@ -302,10 +302,16 @@ class Gait(Reference):
         return path
 
     def orbit_residual(self) -> dict:
-        """How far the gait is from a periodic orbit of its robot: ``q`` = max|q+ - q^d(0)|
-        (rad) and ``dq`` = max|dq+ - dq^d(0)| (rad/s), with (q+, dq+) the impact map and
-        relabelling applied to (q^d(T), dq^d(T)); ``z`` = |z_sw(T)| (m); ``worst`` the
-        largest (inf when the gait cannot be evaluated at T)."""
+        """How far the gait is from a periodic orbit of its robot.
+
+        Returns
+        -------
+        dict
+            ``q`` = max|q+ - q^d(0)| (rad) and ``dq`` = max|dq+ - dq^d(0)| (rad/s), with
+            (q+, dq+) the impact map and relabelling applied to (q^d(T), dq^d(T));
+            ``z`` = |z_sw(T)| (m); ``worst`` the largest (inf when the gait cannot be
+            evaluated at T).  :meth:`load` compares ``worst`` with :data:`ORBIT_TOL`.
+        """
         with np.errstate(all="ignore"):
             try:
                 qT, dqT = self.q(self.T), self.dq(self.T)

@@ -155,3 +155,19 @@ def test_cli_json_is_the_result(tmp_path, gait, light_stages, capsys):
     assert set(body) == {"status", "message", "mode", "folder", "report", "summary_file",
                          "stages", "total_time", "success"}
     assert np.isfinite(body["total_time"])
+
+
+def test_readme_and_help_state_the_same_times(capsys):
+    """Issue 12: the README's times disagreed with --help (and with the machine)."""
+    from pathlib import Path
+
+    from analysis.cli import main
+    from analysis.cli.reproduce import TIME_FULL, TIME_QUICK
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert f"| `biped reproduce` (the default gait not yet cached) | {TIME_FULL} |" in readme
+    assert f"| `biped reproduce --quick` | {TIME_QUICK} |" in readme
+    assert "2-core" in readme
+    assert main(["reproduce", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"A full run ({TIME_FULL} on a loaded 2-core VM)" in text
+    assert f"({TIME_QUICK})" in text

@@ -30,6 +30,7 @@ def cmd_eig(args):
     gait = load_gait(args, say)
     model = gait.model
     if args.controller == "vc":
+        say("fitting the virtual constraints to the gait (a few seconds) ...")
         res = vc_eigenvalue(model, gait)
         d = res.to_dict()
         if args.json:

@@ -59,7 +59,7 @@ def cmd_gait(args):
                           ipopt={} if args.max_iter is None else {"max_iter": args.max_iter})
 
     say = Progress("gait", quiet=args.json)
-    say(f"optimising the gait at {args.speed:g} m/s (about 3 s on 2 cores) ...")
+    say(f"optimising the gait at {args.speed:g} m/s (about 6 s on a loaded 2-core VM) ...")
     try:
         gait = optimize_gait(model, options)
     except GaitOptimizationError as e:

@@ -17,7 +17,7 @@ def cmd_m1(args):
     results = []
     for g in groups:
         say(f"optimising M1 {'with all components free' if g is None else f'on group {g}'} "
-            "(about 10 s on 2 cores) ...")
+            "(10-15 s on a loaded 2-core VM) ...")
         results.append(optimize_m1(model, gait, group=g))
     best = min(results, key=lambda r: r.max_abs)
     say("the 9^4 grid for comparison (once per gait, then cached) ...")

@@ -5,10 +5,11 @@ from analysis.reproduce import reproduce, run_folder
 
 from .common import output_dir, print_json
 
-#: measured on a 2-core VM (AMD EPYC, Python 3.11) with the default gait not yet cached;
-#: the README quotes the same figures
-TIME_FULL = "about 1 min"
-TIME_QUICK = "about 1 min"
+#: measured with the README's commands on the project's 2-core AMD EPYC VM (Python 3.11)
+#: while other jobs ran on it (load about 4; about half when idle), the default gait not
+#: yet cached; the README quotes the same figures (tests/test_reproduce.py checks it)
+TIME_FULL = "about 100 s"
+TIME_QUICK = "about 75 s"
 
 
 def cmd_reproduce(args):
@@ -32,8 +33,8 @@ def register(sub):
                     "and the swing-height conjecture, a = b = 0 and Fig. 4, the M1 NLP, "
                     "the virtual-constraint comparison, Fig. 5 and 6, and an animation. "
                     "Figures are written as PNG and PDF; report.md sets our numbers beside "
-                    f"the paper's. A full run ({TIME_FULL} on 2 cores) writes into DIR, a "
-                    f"quick run ({TIME_QUICK}) into DIR/quick, so re-runs of either mode "
+                    f"the paper's. A full run ({TIME_FULL} on a loaded 2-core VM) writes into "
+                    f"DIR, a quick run ({TIME_QUICK}) into DIR/quick, so re-runs of either mode "
                     "into the same DIR never mix; sweeps already computed are reused. Exit "
                     "code 1 if a stage failed (the others still run).")
     p.add_argument("--out", default="reproduce_out", metavar="DIR",

@@ -59,6 +59,8 @@ def cmd_sweep(args):
               executor="process" if args.processes else "thread")
 
     # ---- the sweep
+    if args.scheduler is not None:
+        say(f"connecting to the Dask scheduler at {args.scheduler} (up to 10 s) ...")
     plots = []
     if args.line is not None:
         values = np.linspace(lo, hi, args.line)
