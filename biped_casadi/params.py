@@ -102,12 +102,12 @@ def load_params(path: str | Path) -> RobotParams:
     A TOML file may hold the fields at top level or under a ``[robot]`` table.
     """
     path = Path(path)
-    if not path.exists():
-        raise ValueError(f"parameter file not found: {path}")
-    if not path.is_file():
-        raise ValueError(f"parameter file {path} is " + ("a folder, not a file" if path.is_dir()
-                                                         else "not a regular file"))
     try:
+        if not path.exists():
+            raise ValueError(f"parameter file not found: {path}")
+        if not path.is_file():
+            raise ValueError(f"parameter file {path} is " + (
+                "a folder, not a file" if path.is_dir() else "not a regular file"))
         if path.stat().st_size > 1_000_000:
             raise ValueError(f"parameter file {path} is too large to be a parameter file")
         text = path.read_bytes().decode("utf-8")

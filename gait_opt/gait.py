@@ -4,6 +4,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import warnings
 from pathlib import Path
 
@@ -355,6 +356,8 @@ class Gait(Reference):
             or unknown key, a wrong type, size or non-finite number, other robot
             parameters, or not a periodic orbit.
         """
+        if not isinstance(path, (str, os.PathLike)):
+            raise GaitFileError(f"path must be a file name, got {type(path).__name__}")
         path = Path(path)
         body = _read_json(path)
         where = f"gait file {path}"
@@ -405,13 +408,14 @@ class Gait(Reference):
 # ------------------------------------------------------------ reading a file
 def _read_json(path: Path):
     """The parsed JSON of a gait file, or GaitFileError naming the file and the reason."""
-    if not path.exists():
-        raise GaitFileError(f"gait file not found: {path}")
-    if path.is_dir():
-        raise GaitFileError(f"gait file {path} is a folder, not a file")
-    if not path.is_file():
-        raise GaitFileError(f"gait file {path} is not a regular file")
     try:
+        if not path.exists():
+            raise GaitFileError(f"gait file {path} is a broken link" if path.is_symlink()
+                                else f"gait file not found: {path}")
+        if path.is_dir():
+            raise GaitFileError(f"gait file {path} is a folder, not a file")
+        if not path.is_file():
+            raise GaitFileError(f"gait file {path} is not a regular file")
         if path.stat().st_size > MAX_FILE_BYTES:
             raise GaitFileError(f"gait file {path} is too large to be a gait file "
                                 f"({path.stat().st_size} bytes)")

@@ -102,6 +102,9 @@ def files(model, gait, tmp_path_factory):
     (d / "notes").mkdir()
     (d / "notes" / "todo.txt").write_text("my notes\n")
     out["notes"] = str(d / "notes")
+    (d / "broken_link.json").symlink_to(d / "gone.json")
+    out["broken_link"] = str(d / "broken_link.json")
+    out["long"] = "x" * 5000
     out["root_dir"] = str(d)
     yield out
     unreadable.chmod(0o600)
@@ -130,6 +133,7 @@ CASES = [
     (["model", "--params", "{params_bad}"], "m_torso"),
     (["model", "--params", "{params_unknown}"], "unknown robot parameter"),
     (["model", "--params", "{params}"], ".toml or .json"),
+    (["model", "--params", "{long}.toml"], "parameter file"),
     (["model", "--params", "{unreadable}"], "cannot be read", "nonroot"),
     # ---- gait: numbers, then output paths (checked before the 3 s solve)
     (["gait", "--speed", "0"], "--speed"),
@@ -149,6 +153,7 @@ CASES = [
     (["gait", "--out", "{file}/gait.json"], "is a file"),
     (["gait", "--out", ""], "--out"),
     (["gait", "--out", "/dev/null"], "not a regular file"),
+    (["gait", "--out", "{root_dir}/{long}.json"], "--out"),
     (["gait", "--out", "{sys}/gait.json"], "cannot write"),
     (["gait", "--out", "{read_only}/gait.json"], "cannot write", "nonroot"),
     (["gait", "--out", "{root_dir}/g.json", "--plot", "{file}"], "--plot"),
@@ -199,6 +204,8 @@ CASES = [
     (["eig", "--gait", "{options_bad}", *M0], "speed"),
     (["eig", "--gait", "{extra_key}", *M0], "unknown key(s): comment"),
     (["eig", "--gait", "{unreadable}", *M0], "cannot be read", "nonroot"),
+    (["eig", "--gait", "{broken_link}", *M0], "broken link"),
+    (["eig", "--gait", "{long}.json", *M0], "gait file"),
     # ---- sweep
     (["sweep"], "--gait"),
     (["sweep", *G, "--grid", "1"], "--grid"),

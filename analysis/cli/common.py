@@ -109,6 +109,25 @@ def _probe(folder: Path, option: str, shown: Path):
         raise UserError(f"{option}: cannot write in {shown} ({e.strerror or e})") from None
 
 
+def _checked(fn):
+    """An OS error while looking at a path (a name too long, a loop of links) is a user
+    error naming the option too."""
+    def wrapper(path, option, *args, **kwargs):
+        try:
+            return fn(path, option, *args, **kwargs)
+        except OSError as e:
+            raise UserError(f"{option}: {_short(path)}: {e.strerror or e}") from None
+    wrapper.__doc__, wrapper.__name__ = fn.__doc__, fn.__name__
+    return wrapper
+
+
+def _short(path) -> str:
+    """A path for a one-line message (very long ones abbreviated)."""
+    s = str(path)
+    return s if len(s) <= 160 else f"{s[:100]}...{s[-40:]}"
+
+
+@_checked
 def output_dir(path, option: str) -> Path:
     """Check, before any long work, that ``path`` is (or can be created as) a folder we
     may write in.  Nothing is created here: the command creates the folder when it
@@ -135,6 +154,7 @@ def output_dir(path, option: str) -> Path:
     return p
 
 
+@_checked
 def output_file(path, option: str, suffixes: tuple = ()) -> Path:
     """Check, before any long work, that a file can be written at ``path``: not a folder
     or a device, its folder exists and is writable, and (if ``suffixes``) its suffix is
