@@ -87,8 +87,8 @@ def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
             g.solver_stats["cache_file"] = str(path)
             return g
     if progress is not None:
-        progress(f"optimising the reference gait of {model.params.name} (once; stored in "
-                 f"{path.parent}) ...")
+        progress(f"optimising the reference gait of {model.params.name} (a few seconds, "
+                 f"once; stored in {path.parent}) ...")
     g = optimize_gait(model, options)
     note = f"computed ({reason})"
     try:
