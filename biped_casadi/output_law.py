@@ -120,7 +120,7 @@ def check_M1_range(M1s, name: str = "M1"):
     """
     big = float(np.max(np.abs(M1s), initial=0.0))
     if big > M1_LIMIT:
-        raise ValueError(f"{name}: components must lie within +-{M1_LIMIT:.0e}, got {big:g} "
+        raise ValueError(f"{name}: components must lie within +-{M1_LIMIT:.0e}, got {big:.3g} "
                          "(beyond it round-off swamps q_a in the outputs v = M1 q_u + q_a "
                          "and A^z is meaningless)")
 

@@ -429,6 +429,8 @@ def _read_json(path: Path):
         raise GaitFileError(f"gait file {path} cannot be read: {e.strerror or e}") from None
     except UnicodeDecodeError:
         raise GaitFileError(f"gait file {path} is not a text (JSON) file") from None
+    if not text.strip():
+        raise GaitFileError(f"gait file {path} is empty")
     try:
         return json.loads(text)
     except (json.JSONDecodeError, RecursionError) as e:

@@ -178,7 +178,7 @@ CASES = [
     (["eig", "--gait", "{missing}", *M0], "not found"),
     (["eig", "--gait", "{dir}", *M0], "is a folder"),
     (["eig", "--gait", "/dev/null", *M0], "not a regular file"),
-    (["eig", "--gait", "{empty}", *M0], "not valid JSON"),
+    (["eig", "--gait", "{empty}", *M0], "is empty"),
     (["eig", "--gait", "{garbage}", *M0], "not a text"),
     (["eig", "--gait", "{truncated}", *M0], "not valid JSON"),
     (["eig", "--gait", "{deep}", *M0], "not valid JSON"),
@@ -223,13 +223,14 @@ CASES = [
     (["sweep", *G, "--grid", "2", "--workers", "0"], "--workers"),
     (["sweep", *G, "--grid", "2", "--workers", "100000"], "--workers"),
     (["sweep", *G, "--grid", "2", "--chunk-size", "0"], "--chunk-size"),
-    (["sweep", *G, "--grid", "2", "--scheduler", "nonsense"], "scheduler"),
+    (["sweep", *G, "--grid", "2", "--scheduler", "nonsense"], "--scheduler"),
     (["sweep", *G, "--grid", "2", "--out", "{file}"], "--out"),
     (["sweep", *G, "--grid", "2", "--out", "{file}/sweep"], "--out"),
     (["sweep", *G, "--grid", "2", "--out", "{sys}/sweep"], "--out"),
     (["sweep", *G, "--grid", "2", "--out", "{read_only}/sweep"], "--out", "nonroot"),
-    (["sweep", *G, "--grid", "3", "--out", "{sweep2}"], "other settings"),
-    (["sweep", *G, "--grid", "2", "--out", "{notes}"], "not a sweep folder"),
+    (["sweep", *G, "--grid", "3", "--out", "{sweep2}"], "--out: {sweep2} holds a sweep made "
+     "with other settings"),
+    (["sweep", *G, "--grid", "2", "--out", "{notes}"], "--out: {notes} is not empty"),
     (["sweep", *G, "--line", "3", "--plot", "{file}"], "--plot"),
     (["sweep", "--gait", "{open_orbit}", "--grid", "2"], "not a periodic orbit"),
     # ---- m1
@@ -339,7 +340,7 @@ def test_bad_input_is_one_line_and_exit_2(case, files, tmp_path, monkeypatch, ca
     assert len(lines) == 1, cap.err
     assert "Traceback" not in cap.err
     assert lines[0].startswith("biped"), lines[0]
-    assert expect in lines[0], lines[0]
+    assert expect.format(**files) in lines[0], lines[0]
     assert _snapshot(files["root_dir"], tmp_path) == before, "a file was written or changed"
 
 

@@ -62,15 +62,18 @@ def cmd_sweep(args):
     if args.scheduler is not None:
         say(f"connecting to the Dask scheduler at {args.scheduler} (up to 10 s) ...")
     plots = []
-    if args.line is not None:
-        values = np.linspace(lo, hi, args.line)
-        lines = one_d_sweeps(model, gait, values, **kw)
-        r = lines.sweep
-        if args.plot is not None:
-            plots = save_figures({"fig2_one_d_sweeps": one_d_sweeps_plot(lines)}, args.plot,
-                                 formats=("png", "pdf"))
-    else:
-        r = run_sweep(model, gait, grid_points(n, lo, hi), **kw)
+    try:
+        if args.line is not None:
+            lines = one_d_sweeps(model, gait, np.linspace(lo, hi, args.line), **kw)
+            r = lines.sweep
+        else:
+            r = run_sweep(model, gait, grid_points(n, lo, hi), **kw)
+    except ValueError as e:       # the library names out / scheduler: say --out / --scheduler
+        msg = str(e)
+        raise UserError("--" + msg if msg.startswith(("out:", "scheduler:")) else msg) from None
+    if args.plot is not None:
+        plots = save_figures({"fig2_one_d_sweeps": one_d_sweeps_plot(lines)}, args.plot,
+                             formats=("png", "pdf"))
 
     if args.json:
         out = r.to_dict()
