@@ -1,7 +1,11 @@
-"""Physical parameters of a planar five-link biped (torso + two femur/tibia legs).
+"""Legacy flat parameters of a planar five-link biped (torso + two femur/tibia legs).
 
-RABBIT (SPEC section 1) is the default.  Parameters load from TOML or JSON and are
-validated field by field, so another planar five-link robot is one file away.
+Kept so that parameter files and gait files written before robot descriptions
+(:mod:`biped_casadi.description`) still load: :meth:`RobotParams.to_description` turns
+a parameter set into the equivalent :class:`~biped_casadi.description.RobotDescription`
+(torso, leg = (femur, tibia), torque limit 150 N m), which is what the model uses.
+``rabbit(params)`` and ``robot(FILE)`` accept these files and objects.  New robots are
+written as description files (any number of links per leg, point masses).
 """
 from __future__ import annotations
 
@@ -11,6 +15,8 @@ import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+
+from .description import Link, RobotDescription
 
 __all__ = ["RobotParams", "RABBIT", "load_params"]
 
@@ -69,6 +75,33 @@ class RobotParams:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+    def to_description(self, torque_limit: float = 150.0) -> RobotDescription:
+        """The equivalent robot description (the same numbers, so the same model).
+
+        Parameters
+        ----------
+        torque_limit : float
+            N m; flat parameter sets carried none (the gait's default was 150 N m).
+
+        Returns
+        -------
+        RobotDescription
+        """
+        return RobotDescription(
+            name=self.name,
+            torso=Link("torso", self.m_torso, self.L_torso, self.c_torso, self.I_torso),
+            leg=(Link("femur", self.m_femur, self.L_femur, self.c_femur, self.I_femur),
+                 Link("tibia", self.m_tibia, self.L_tibia, self.c_tibia, self.I_tibia)),
+            point_masses=(), rotor_inertia=self.rotor_inertia, gravity=self.g,
+            torque_limit=float(torque_limit))
+
+    @classmethod
+    def is_legacy_record(cls, data) -> bool:
+        """Whether a mapping is a flat parameter record (a gait file written before
+        robot descriptions, or a legacy parameter file)."""
+        return isinstance(data, dict) and "torso" not in data and "leg" not in data \
+            and any(k in data for k in cls.field_names() if k != "name")
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
