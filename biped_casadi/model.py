@@ -209,10 +209,16 @@ class BipedModel:
         -> hip from the vertical (exact for straight legs, and for two links of equal
         length): the default phase variable of the virtual-constraint controller.
     scuffing_ignored : bool
-        True for legs without knees (k = 1), which cannot lift the swing foot: the swing
-        foot may pass below the ground behind the stance foot mid-step (the idealisation
-        of Grizzle, Abba & Plestan, 2001); the gait, the simulator and the maps then
-        require only that it stays above the ground in front of the stance foot.
+        True for legs without knees (k = 1), which cannot lift the swing foot: as it
+        passes the stance leg mid-step it must touch the ground.  Like Grizzle, Abba &
+        Plestan (2001) the toolkit then ignores the swing foot being below the ground
+        during the step (the simulator does not call it a scuff); a strike (the end of
+        a step) is a downward crossing of the ground beyond ``scuff_zone`` in front of
+        the stance foot, and the reference gait keeps the foot above the ground beyond
+        that zone (``gait_opt`` clearance).
+    scuff_zone : float
+        m: 0.1 leg length when ``scuffing_ignored``, else 0 (a strike anywhere in front
+        of the stance foot, and no passing below the ground).
     """
 
     def __init__(self, params: RobotDescription | RobotParams = RABBIT):
@@ -230,6 +236,7 @@ class BipedModel:
         self.stance_knees = tuple(range(1, d.k))
         self.swing_knees = tuple(range(d.k + 2, d.nq))
         self.scuffing_ignored = d.k == 1
+        self.scuff_zone = 0.1 * d.leg_length if self.scuffing_ignored else 0.0
         w = [link.length / d.leg_length for link in reversed(d.leg)]   # foot upward
         self.hip_phase = np.array([sum(w[m:]) for m in range(d.k)] + [0.0] * (d.k + 1))
         self.joint_names = self._joint_names()

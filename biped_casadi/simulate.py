@@ -1,7 +1,7 @@
 """Full-order hybrid closed-loop simulation of walking (paper eq. 9; SPEC §1 impact, §4
 guard).
 
-State (q, dq, tau), 11 numbers, plus the controller's reference state r (a function of
+State (q, dq, tau), 2 nq + 1 numbers, plus the controller's reference state r (a function of
 tau alone, see :mod:`biped_casadi.controllers`).  In single support the robot follows
 eq. (1), D(q) ddq + H(q, dq) = B u, with the controller's torque u; the step ends when
 the swing foot reaches the ground in front of the stance foot while moving down
@@ -10,7 +10,8 @@ next step with tau = 0.
 
 Integration: classical RK4 with a fixed step h = T / ``rk4_steps`` (T the reference step
 duration), evaluated a quarter step at a time in one CasADi call (``mapaccum``); the
-impact is located inside its RK4 interval by Newton's method on the length of the last
+impact (a strike beyond ``model.scuff_zone``: anywhere in front of the stance foot for
+legs with knees) is located inside its RK4 interval by Newton's method on the length of the last
 RK4 step, z_sw(RK4(x_k, eta)) = 0, so the event is exact to round-off for the discrete
 scheme.  With the default 2000 steps per T the scheme is the gait's own (SPEC §2), and
 the unperturbed closed loop repeats the reference to ~1e-11.
@@ -20,7 +21,11 @@ with one of the statuses of :data:`STATUSES` (the logs end with that state):
 
 - ``fell``: hip lower than ``min_hip_height`` or torso past horizontal;
 - ``scuffed``: swing foot below the ground where it cannot strike (behind the stance
-  foot), or the old stance foot not lifting off after an impact;
+  foot), or the old stance foot not lifting off after an impact; for legs without knees
+  (``model.scuffing_ignored``) the swing foot may pass below the ground during the step
+  (scuffing ignored, as in Grizzle, Abba & Plestan 2001) and the step ends at its first
+  downward crossing of the ground beyond ``model.scuff_zone`` in front of the stance
+  foot;
 - ``negative_normal_force`` / ``slipped``: stance reaction F_z < ``min_normal_force``
   or |F_x| > mu F_z, in single support and for the impact impulse;
 - ``singular``: the controller's decoupling denominator vanishes or changes sign
@@ -50,12 +55,6 @@ STATUSES = ("ok", "fell", "scuffed", "negative_normal_force", "slipped", "singul
 
 #: the perturbation of paper §V-C: 0.01 rad on every joint, 0.1 rad/s on every velocity
 PAPER_PERTURBATION = (0.01, 0.1)
-
-# rows of the per-node diagnostics vector
-_U, _Y, _DY = slice(0, 4), slice(4, 8), slice(8, 12)
-_DEN, _FX, _FZ, _INR, _XSW, _ZSW, _DZSW, _HIP, _TORSO = range(12, 21)
-_NDIAG = 21
-
 
 @dataclass(frozen=True)
 class SimulationOptions:
@@ -303,7 +302,8 @@ class Simulator:
         _, dzs = m.swing_foot_velocity(q, dq)
         P = m.points(q)
         torso = m.torso_angle(q)
-        diag = ca.cse(ca.vertcat(u, y, dy, den, Fx, Fz, inr, xs, zs, dzs, P[1, 2], torso))
+        diag = ca.cse(ca.vertcat(u, y, dy, den, Fx, Fz, inr, xs, zs, dzs, P[1, m.hip_index],
+                                 torso))
         self.diagnostics = ca.Function("closed_loop_diagnostics", [X, tau, p], [diag],
                                        ["X", "tau", "p"], ["diag"], jit)
         self.diagnostics_chunk = self.diagnostics.map(self.chunk)
@@ -330,10 +330,14 @@ class Simulator:
             bad["singular"] = finite & (den <= o.singular_tolerance * self._den_scale)
             bad["fell"] = finite & ((D[R["HIP"]] < o.min_hip_height) |
                                     (np.abs(D[R["TORSO"]]) > o.max_torso_angle))
-            behind = D[R["XSW"]] <= 0
-            if z_prev is not None:
-                behind = behind | (np.asarray(z_prev) < 0)
-            bad["scuffed"] = finite & (D[R["ZSW"]] < -o.ground_tolerance) & behind
+            below = D[R["ZSW"]] < -o.ground_tolerance
+            under = np.zeros(n, bool) if z_prev is None else np.asarray(z_prev) < 0
+            if self.model.scuffing_ignored:
+                # legs without knees: the swing foot passing below the ground is the
+                # model's idealisation (scuffing ignored); only a strike counts
+                bad["scuffed"] = np.zeros(n, bool)
+            else:
+                bad["scuffed"] = finite & below & ((D[R["XSW"]] <= 0) | under)
             bad["negative_normal_force"] = finite & (D[R["FZ"]] < o.min_normal_force)
             bad["slipped"] = finite & (np.abs(D[R["FX"]]) > o.mu * D[R["FZ"]])
         first, which = n, None
@@ -456,7 +460,7 @@ class Simulator:
             zs = Dg[R["ZSW"]]
             zprev = np.r_[z_prev, zs[:-1]]
             with np.errstate(invalid="ignore"):
-                strike = (zs < 0) & (Dg[R["XSW"]] > 0) & (zprev >= 0)
+                strike = (zs < 0) & (Dg[R["XSW"]] > self.model.scuff_zone) & (zprev >= 0)
             i_strike = int(np.argmax(strike)) if strike.any() else Xs.shape[1]
             fail = self._first_failure(Dg[:, :i_strike], Xs[:, :i_strike], zprev[:i_strike],
                                        den_sign=sign)
