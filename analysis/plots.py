@@ -255,7 +255,7 @@ def stable_domains_plot(m2, m3, max_abs_1, max_abs_2, best=None) -> Figure:
     return fig
 
 
-def m1_plane_plot(m1, m2, max_abs, ab_points=(), best=None,
+def m1_plane_plot(m1, m2, max_abs, ab_points=(), ab_line=None, best=None,
                   title: str | None = None) -> Figure:
     """The stable domain in the (M1(1), M1(2)) plane of a robot with two torques (the
     three-link biped): max|lambda| on a grid with the contour max|lambda| = 1, the
@@ -269,6 +269,8 @@ def m1_plane_plot(m1, m2, max_abs, ab_points=(), best=None,
         max|lambda| on the grid (inf or NaN where singular or without impact).
     ab_points : array_like, optional
         (k, 2) isolated solutions of a = b = 0, marked with diamonds.
+    ab_line : array_like, optional
+        (k, 2) points of a line of solutions of a = b = 0, drawn dashed.
     best : array_like, optional
         An M1 to mark with a star (e.g. the M1 NLP's).
     title : str, optional
@@ -285,13 +287,16 @@ def m1_plane_plot(m1, m2, max_abs, ab_points=(), best=None,
                        cmap="viridis", vmin=-3, vmax=3)
     if np.nanmin(filled) < 1 < np.nanmax(filled):
         ax.contour(m1, m2, filled, levels=[1.0], colors="red", linewidths=1.5)
+    if ab_line is not None and len(ab_line):
+        L = np.asarray(ab_line, float)
+        ax.plot(L[:, 0], L[:, 1], "--", color="orange", lw=2, label="a = b = 0")
     pts = np.asarray(ab_points, float).reshape(-1, 2)
     for k, p in enumerate(pts, start=1):
         ax.plot(p[0], p[1], "D", color="orange", mec="k", ms=8,
                 label="a = b = 0" if k == 1 else None)
     if best is not None:
-        ax.plot(best[0], best[1], "w*", ms=13, mec="k", label="best (M1 NLP)")
-    if len(pts) or best is not None:
+        ax.plot(best[0], best[1], "w*", ms=13, mec="k", label="best point of the map")
+    if len(pts) or best is not None or ab_line is not None:
         ax.legend(loc="lower right", fontsize=8)
     ax.set_xlim(np.min(m1), np.max(m1))
     ax.set_ylim(np.min(m2), np.max(m2))

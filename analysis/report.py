@@ -1,4 +1,5 @@
-"""report.md for ``biped reproduce``: our numbers beside the paper's, figures embedded."""
+"""report.md for ``biped reproduce``: our numbers beside the paper's (RABBIT), or the
+same analysis's numbers for another robot, figures embedded."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -102,6 +103,74 @@ def _comparison_rows(s: dict) -> list:
     return rows
 
 
+def _robot_rows(s: dict) -> list:
+    """(quantity, ours, note) rows for a robot other than RABBIT (the paper's numbers are
+    RABBIT's, so there is nothing to set beside them)."""
+    rows = []
+    r = s.get("robot", {})
+    rows.append(("robot", f"{r.get('name')}: {r.get('nq')} joints, {r.get('nu')} torques, "
+                 f"{_f(r.get('total_mass'))} kg", ", ".join(r.get("joints", []))))
+    sg = s.get("singular", {})
+    rows.append(("D11, D12 at T^d", f"{_f(sg.get('D11_T'))}, {_f(sg.get('D12_T'))}", ""))
+    rows.append(("singular M1(j) = D11/D12(j) (eq. 24)", _f(sg.get("singular_values")),
+                 "one component non-zero"))
+    f2 = s.get("fig2", {})
+    rows.append(("1-D sweeps: stable points per component",
+                 _f(f2.get("stable_per_component")),
+                 f"{_f(f2.get('points_per_component'))} values of each M1(j) on [-10, 10]"))
+    for j, b in enumerate(f2.get("best_per_component") or [], start=1):
+        if b:
+            rows.append((f"1-D sweep of M1({j}): best", f"{_f(b.get('max_abs'))} at "
+                         f"{_f(b.get('M1'), '.4g')}", ""))
+    gr = s.get("grid", {})
+    gc = gr.get("counts") or {}
+    rows.append((f"M1 grid {_f(gr.get('n'))}^{_f(gr.get('dim'))} on [-10, 10]: stable / "
+                 "unstable / singular / no impact",
+                 " / ".join(_f(gc.get(k)) for k in ("stable", "unstable", "singular", "no_impact")),
+                 f"best stable {_f(_g(gr, 'best_stable', 'max_abs'))} at "
+                 f"{_f(_g(gr, 'best_stable', 'M1'), '.4g')}"))
+    dm = s.get("domains", {})
+    if dm.get("plane"):
+        rows.append(("stable domain in the (M1(1), M1(2)) plane: area", _f(dm.get("stable_area")),
+                     f"{_f(dm.get('stable_points'))} stable points of {_f(dm.get('grid'))}^2"))
+        ab = dm.get("ab_set") or {}
+        rows.append(("solutions of a = b = 0 (eq. 28)", ab.get("kind", "n/a"),
+                     ab.get("message", "")))
+        on = dm.get("ab_set_on_map") or {}
+        if on:
+            rows.append(("... of them inside [-10, 10]^2: stable", f"{_f(on.get('stable'))} of "
+                         f"{_f(on.get('points'))}",
+                         f"best {_f(_g(on, 'best', 'max_abs'))} at {_f(_g(on, 'best', 'M1'), '.4g')}"))
+    elif dm.get("skipped"):
+        rows.append(("stable domains of the a = b = 0 groups", "not drawn", dm["skipped"]))
+    c = s.get("conjecture", {})
+    rows.append(("conjecture: max |Z_sw(T^d)| over stable grid cases",
+                 _f(c.get("max_abs_zsw_stable")),
+                 f"median over unstable {_f(c.get('median_abs_zsw_unstable'))}; fraction of "
+                 f"unstable at most the stable max {_f(c.get('fraction_unstable_below'))}"))
+    for name, r in (s.get("m1_nlp") or {}).items():
+        if isinstance(r, dict) and "max_abs" in r:
+            rows.append((f"M1 NLP, {name.replace('_', ' ')}",
+                         f"{_f(r.get('max_abs'), '.3e')} ± {_f(r.get('eigenvalue_uncertainty'), '.1e')}",
+                         f"M1 = {_f(r.get('M1'), '.5g')}, status {r.get('status')}"))
+    vc = _g(s, "vc_comparison", "vc") or {}
+    tvc = _g(s, "vc_comparison", "tv_chosen") or {}
+    rows.append(("virtual constraints: eigenvalue of the 1-D map", _f(vc.get("eigenvalue")),
+                 f"phase = the stance-foot-to-hip angle; time-varying with the chosen M1: "
+                 f"max|λ| {_f(tvc.get('max_abs'), '.3e')}"))
+    rows.append(("time-varying, M1 = 0", _f(_g(s, "vc_comparison", "tv_M1_zero", "max_abs")),
+                 _g(s, "vc_comparison", "tv_M1_zero", "status") or ""))
+    sim = s.get("simulation", {})
+    fr = sim.get("figures_run") or {}
+    for ctrl in ("tv", "vc"):
+        rows.append((f"simulation (perturbation {_f(fr.get('perturbation'))}), "
+                     f"{'time-varying' if ctrl == 'tv' else 'virtual constraints'}",
+                     f"{_f(_g(fr, ctrl, 'status'))}, |dq_u error| < 1e-3 from step "
+                     f"{_f(_g(fr, ctrl, 'steps_to_converge'))}",
+                     _g(fr, ctrl, "message") or ""))
+    return rows
+
+
 def write_report(out: Path, s: dict) -> Path:
     """Write ``report.md`` into ``out`` from the summary ``s`` of :func:`reproduce`.
 
@@ -117,8 +186,11 @@ def write_report(out: Path, s: dict) -> Path:
     Path
         The report.
     """
-    rows = _comparison_rows(s)
-    lines = ["# Reproduction of Wang & Chevallereau, time-varying control of RABBIT", ""]
+    rabbit = "paper" in s
+    name = _g(s, "robot", "name", default="RABBIT")
+    title = ("# Reproduction of Wang & Chevallereau, time-varying control of RABBIT" if rabbit
+             else f"# Wang & Chevallereau's output analysis on {name}")
+    lines = [title, ""]
     g = s.get("gait", {})
     if g:
         lines += [f"Reference gait: T = {_f(g.get('T'))} s, step length "
@@ -126,10 +198,16 @@ def write_report(out: Path, s: dict) -> Path:
                   f"{_f(g.get('cost'))} (∫u'u dt / step length), peak torque "
                   f"{_f(g.get('peak_torque'))} N m; periodicity residual "
                   f"{_f(g.get('periodicity_dq'), '.1e')}.", ""]
-    lines += ["## Paper vs. ours", "", "| quantity | paper | ours | why they differ |",
-              "|---|---|---|---|"]
     esc = lambda t: str(t).replace("|", "\\|")          # noqa: E731
-    lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} | {esc(d)} |" for a, b, c, d in rows]
+    if rabbit:
+        lines += ["## Paper vs. ours", "", "| quantity | paper | ours | why they differ |",
+                  "|---|---|---|---|"]
+        lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} | {esc(d)} |"
+                  for a, b, c, d in _comparison_rows(s)]
+    else:
+        lines += ["The paper's numbers are RABBIT's; for this robot the same stages give:", "",
+                  "## Results", "", "| quantity | ours | note |", "|---|---|---|"]
+        lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} |" for a, b, c in _robot_rows(s)]
     lines += ["", "## Stages", "", "| stage | status | time (s) |", "|---|---|---|"]
     for name, st in s.get("stages", {}).items():
         extra = st.get("error") or st.get("reason") or ""
