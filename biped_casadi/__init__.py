@@ -6,6 +6,8 @@ This is the bottom layer of the toolkit: it imports nothing from :mod:`gait_opt`
 interface :class:`~biped_casadi.reference.Reference`, which :class:`gait_opt.Gait`
 implements.
 """
+from importlib import metadata as _metadata
+
 from .caching import cache_dir, cached
 from .controllers import (HIP_PHASE, PAPER_REJOIN, TimeVaryingController,
                           VirtualConstraintController, VirtualConstraints,
@@ -16,6 +18,7 @@ from .model import (B_INPUT, E_RELABEL, RABBIT_DESCRIPTION, BipedModel, rabbit,
                     resolve_robot, robot)
 from .output_law import SECTION, Gains, SingularityReport
 from .params import RABBIT, RobotParams, load_params
+from .perturbation import PAPER_SIZES, Perturbation, directions
 from .reference import Reference, require_same_robot
 from .results import Result, json_safe
 from .simulate import (PAPER_PERTURBATION, SimulationOptions, SimulationResult, Simulator,
@@ -29,5 +32,8 @@ __all__ = ["rabbit", "robot", "resolve_robot", "RobotDescription", "Link",
            "VirtualConstraints", "fit_virtual_constraints", "HIP_PHASE", "PAPER_REJOIN",
            "Simulator", "SimulationOptions", "SimulationResult", "simulate",
            "perturbed_initial_state", "PAPER_PERTURBATION", "Result", "json_safe",
-           "cached", "cache_dir"]
-__version__ = "0.1.0"
+           "cached", "cache_dir", "Perturbation", "directions", "PAPER_SIZES"]
+try:
+    __version__ = _metadata.version("biped-casadi")
+except _metadata.PackageNotFoundError:      # running from a source tree that is not installed
+    __version__ = "0+unknown"

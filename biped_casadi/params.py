@@ -27,6 +27,7 @@ class RobotParams:
 
     Centre-of-mass offsets are measured from the proximal joint of each link: the
     torso's above the hip, the femur's from the hip, the tibia's from the knee.
+    ``torque_limit`` (N m) bounds every actuator torque (gaits and closed-loop runs).
     ``rotor_inertia`` is the reflected rotor inertia added to the diagonal of D for
     each actuated joint q2..q5 (rotor inertia x gear ratio^2).
     """
@@ -46,10 +47,11 @@ class RobotParams:
     c_tibia: float = 0.24
     rotor_inertia: float = 3.32e-4 * 50.0**2
     g: float = 9.81
+    torque_limit: float = 150.0
 
     # fields that must be > 0 and those that may be 0 (rotors, offsets)
     _POSITIVE = ("m_torso", "m_femur", "m_tibia", "L_torso", "L_femur", "L_tibia",
-                 "I_torso", "I_femur", "I_tibia", "g")
+                 "I_torso", "I_femur", "I_tibia", "g", "torque_limit")
     _NONNEGATIVE = ("c_torso", "c_femur", "c_tibia", "rotor_inertia")
 
     def __post_init__(self):
@@ -76,13 +78,8 @@ class RobotParams:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
-    def to_description(self, torque_limit: float = 150.0) -> RobotDescription:
+    def to_description(self) -> RobotDescription:
         """The equivalent robot description (the same numbers, so the same model).
-
-        Parameters
-        ----------
-        torque_limit : float
-            N m; flat parameter sets carried none (the gait's default was 150 N m).
 
         Returns
         -------
@@ -94,7 +91,7 @@ class RobotParams:
             leg=(Link("femur", self.m_femur, self.L_femur, self.c_femur, self.I_femur),
                  Link("tibia", self.m_tibia, self.L_tibia, self.c_tibia, self.I_tibia)),
             point_masses=(), rotor_inertia=self.rotor_inertia, gravity=self.g,
-            torque_limit=float(torque_limit))
+            torque_limit=self.torque_limit)
 
     @classmethod
     def is_legacy_record(cls, data) -> bool:
@@ -109,14 +106,16 @@ class RobotParams:
 
     @classmethod
     def from_dict(cls, data: dict) -> "RobotParams":
-        """Build from a mapping that names every numeric field ('name' optional)."""
+        """Build from a mapping that names every numeric field ('name' and
+        'torque_limit' optional)."""
         if not isinstance(data, dict):
             raise ValueError("robot parameters must be a table/object of named fields")
         names = cls.field_names()
         unknown = sorted(set(data) - set(names))
         if unknown:
             raise ValueError(f"unknown robot parameter(s): {', '.join(unknown)}")
-        missing = [n for n in names if n != "name" and n not in data]
+        # 'name' and 'torque_limit' (added later, RABBIT's 150 N m) may be absent
+        missing = [n for n in names if n not in ("name", "torque_limit") and n not in data]
         if missing:
             raise ValueError(f"missing robot parameter(s): {', '.join(missing)}")
         return cls(**data)

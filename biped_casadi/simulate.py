@@ -50,8 +50,8 @@ from .results import Result, internal, json_safe
 __all__ = ["SimulationOptions", "StepRecord", "SimulationResult", "Simulator", "simulate",
            "simulator", "perturbed_initial_state", "STATUSES", "PAPER_PERTURBATION"]
 
-STATUSES = ("ok", "fell", "scuffed", "negative_normal_force", "slipped", "singular",
-            "no_impact", "out_of_range", "diverged")
+STATUSES = ("ok", "fell", "scuffed", "negative_normal_force", "slipped", "torque_limit",
+            "singular", "no_impact", "out_of_range", "diverged")
 
 #: the perturbation of paper §V-C: 0.01 rad on every joint, 0.1 rad/s on every velocity
 PAPER_PERTURBATION = (0.01, 0.1)
@@ -73,6 +73,10 @@ class SimulationOptions:
         denominator (D11 - D12 M1 for the time-varying controller, eq. 23-24) changes
         sign or falls below this fraction of its largest magnitude on the reference
         (the torques grow like its inverse).
+    torque_limit: the run stops ('torque_limit') where some |u_i| exceeds it, N m;
+        None (default): the robot's own limit (``model.params.torque_limit``).
+    min_liftoff_speed: the old stance foot must leave the ground after an impact with at
+        least this upward speed, m/s (default 0: any upward speed).
     jit: compile the closed loop to C (CasADi JIT, needs a C compiler; a few seconds
         once per controller, then about 5 times faster).
     """
@@ -85,6 +89,8 @@ class SimulationOptions:
     horizon: float = 2.0
     ground_tolerance: float = 1e-9
     singular_tolerance: float = 0.01
+    torque_limit: float | None = None
+    min_liftoff_speed: float = 0.0
     jit: bool = False
 
     def __post_init__(self):
@@ -96,7 +102,12 @@ class SimulationOptions:
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
-        for name in ("min_normal_force", "ground_tolerance", "singular_tolerance"):
+        if self.torque_limit is not None and not (
+                isinstance(self.torque_limit, (int, float)) and self.torque_limit > 0):
+            raise ValueError(f"torque_limit must be a positive number or None, "
+                             f"got {self.torque_limit!r}")
+        for name in ("min_normal_force", "ground_tolerance", "singular_tolerance",
+                     "min_liftoff_speed"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name} must be a non-negative number, got {v!r}")
@@ -266,6 +277,9 @@ class Simulator:
         self.h = self.T / self.options.rk4_steps
         self.chunk = self.options.rk4_steps // 8
         self._U, self._Y, self._DY, self._R, self._ndiag = _rows(self.model.nu)
+        o = self.options
+        self.torque_limit = float(o.torque_limit if o.torque_limit is not None
+                                  else self.model.params.torque_limit)
         self._build()
         ref = self.controller.singularity()
         self._den_scale = max(abs(ref.min_value), abs(ref.max_value))
@@ -338,8 +352,10 @@ class Simulator:
                 bad["scuffed"] = np.zeros(n, bool)
             else:
                 bad["scuffed"] = finite & below & ((D[R["XSW"]] <= 0) | under)
-            bad["negative_normal_force"] = finite & (D[R["FZ"]] < o.min_normal_force)
+            bad["negative_normal_force"] = finite & ~(D[R["FZ"]] > o.min_normal_force)
             bad["slipped"] = finite & (np.abs(D[R["FX"]]) > o.mu * D[R["FZ"]])
+            bad["torque_limit"] = finite & (np.max(np.abs(D[self._U]), axis=0)
+                                            > self.torque_limit)
         first, which = n, None
         for k, mask in bad.items():          # dict order = priority at the same node
             if mask.any():
@@ -366,6 +382,8 @@ class Simulator:
             "negative_normal_force": f"stance normal force F_z = {d[R['FZ']]:.4g} N",
             "slipped": f"stance foot slips: |F_x| / F_z = "
                        f"{abs(d[R['FX']]) / max(d[R['FZ']], 1e-300):.4f} > mu = {o.mu}",
+            "torque_limit": f"torque limit exceeded: |u| = {np.max(np.abs(d[self._U])):.4g} "
+                            f"N m > {self.torque_limit:g} N m",
         }[which]
 
     def _impact_failure(self, F, dq_plus, q_plus, v_old):
@@ -373,14 +391,15 @@ class Simulator:
         o = self.options
         if not np.all(np.isfinite(np.r_[q_plus, dq_plus, F])):
             return "diverged", "the impact map is not finite"
-        if F[1] < o.min_normal_force:
+        if not F[1] > 0:
             return "negative_normal_force", f"impact impulse has normal component {F[1]:.4g} N s"
         if abs(F[0]) > o.mu * F[1]:
             return "slipped", (f"impact impulse outside the friction cone: |F_x| / F_z = "
                                f"{abs(F[0]) / F[1]:.4f} > mu = {o.mu}")
-        if not v_old[1] > 0:
+        if not v_old[1] > o.min_liftoff_speed:
             return "scuffed", (f"the old stance foot does not lift off after the impact "
-                               f"(vertical velocity {v_old[1]:.4g} m/s)")
+                               f"(vertical velocity {v_old[1]:.4g} m/s, needs more than "
+                               f"{o.min_liftoff_speed:g})")
         return None
 
     # ------------------------------------------------------------------ run

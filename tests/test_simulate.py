@@ -21,6 +21,7 @@ import pytest
 from analysis.virtual_constraints import vc_eigenvalue
 from analysis.cli import main as biped_main
 from biped_casadi.controllers import TimeVaryingController, VirtualConstraintController
+from biped_casadi import Perturbation, directions
 from biped_casadi.simulate import (PAPER_PERTURBATION, STATUSES, SimulationOptions, Simulator,
                                    perturbed_initial_state, simulate)
 
@@ -242,6 +243,60 @@ def test_status_fell(gait, vc):
     assert abs(bent.failure_time - t[np.argmax(lean > level)]) <= gait.T / 2000 + 1e-4
 
 
+def test_status_torque_limit(gait, vc):
+    """A torque limit below the reference's peak |u^d| stops the run ('torque_limit') at
+    the first node where some |u_i| exceeds it; the robot's own limit (150 N m) lets it
+    walk."""
+    t = np.linspace(0, gait.T, 20001)
+    peak = np.abs(gait.u(t)).max(axis=0)
+    limit = float(0.8 * peak.max())
+    assert simulate(vc, options=SimulationOptions(steps=1)).status == "ok"
+    res = simulate(vc, options=SimulationOptions(steps=1, torque_limit=limit))
+    assert res.status == "torque_limit" and "torque limit" in res.message
+    assert np.abs(res.u[-1]).max() > limit and np.all(np.abs(res.u[:-1]) <= limit)
+    assert abs(res.failure_time - t[np.argmax(peak > limit)]) <= gait.T / 2000 + 1e-4
+    assert res.peak_torque > limit
+
+
+def test_status_impulse_outside_cone(gait, vc):
+    """mu between the reference's single-support friction demand and its impact-impulse
+    ratio: the step itself is valid, the impact is not ('slipped', impulse)."""
+    c = gait.check()
+    mu = 0.5 * (c["max_friction_ratio"] + c["impact_friction_ratio"])
+    res = simulate(vc, options=SimulationOptions(steps=2, mu=mu))
+    assert res.status == "slipped" and "impulse" in res.message
+    assert len(res.steps) == 1 and res.max_impulse_ratio > mu > res.max_friction_ratio
+    F = res.steps[0].impulse
+    assert abs(F[0]) > mu * F[1]
+
+
+def test_status_no_liftoff(gait, vc):
+    """The old stance foot must leave the ground after the impact: a lift-off speed floor
+    above the reference's stops the run at the first impact ('scuffed')."""
+    v = gait.check()["liftoff_velocity"]
+    assert simulate(vc, options=SimulationOptions(steps=1, min_liftoff_speed=0.5 * v)).status == "ok"
+    res = simulate(vc, options=SimulationOptions(steps=2, min_liftoff_speed=1.5 * v))
+    assert res.status == "scuffed" and "lift off" in res.message and len(res.steps) == 1
+
+
+def test_perturbation_type(gait):
+    p = Perturbation.paper()
+    q0, dq0 = p.initial_state(gait)
+    np.testing.assert_allclose(q0 - gait.q(0.0), 0.01)
+    np.testing.assert_allclose(dq0 - gait.dq(0.0), 0.1)
+    d = directions(16, 5, seed=3)
+    assert d.shape == (16, 10) and np.all(d[0] == 1)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), np.sqrt(10))
+    assert np.array_equal(d, directions(16, 5, seed=3))          # reproducible
+    half = Perturbation.from_direction(d[1], scale=0.5)
+    np.testing.assert_allclose(half.q, 0.005 * d[1, :5])
+    np.testing.assert_allclose(half.dq, 0.05 * d[1, 5:])
+    with pytest.raises(ValueError, match="dq"):
+        Perturbation((0.0,) * 5, (0.0,) * 4)
+    with pytest.raises(ValueError, match="joints"):
+        Perturbation.uniform(4, 0.1, 0.1).initial_state(gait)
+
+
 def test_status_no_impact_and_singular(model, gait, tv0):
     res = simulate(tv0, options=SimulationOptions(steps=1, horizon=0.9))
     assert res.status == "no_impact" and res.failure_time == pytest.approx(0.9 * gait.T)
@@ -301,6 +356,23 @@ def test_cli_simulate_figures(gait, tmp_path, capsys):
         assert im.n_frames >= 25 * 2 * gait.T - 1      # 25 frames per simulated second
 
 
+def test_cli_simulate_per_joint_perturbation(gait, tmp_path, capsys):
+    """--perturb-q/--perturb-dq give any per-joint error; JSON has the validity margins."""
+    path = gait.save(tmp_path / "gait.json")
+    rc = biped_main(["simulate", "--gait", str(path), "--controller", "vc", "--steps", "1",
+                     "--perturb-q", "0.002", "0", "0", "0", "0.001", "--perturb-dq", "0.05",
+                     "0", "0", "0", "0", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["status"] == "ok" and out["success"]
+    assert out["perturbation"]["q"] == [0.002, 0, 0, 0, 0.001]
+    for k in ("peak_torque", "min_normal_force", "max_friction_ratio", "max_impulse_ratio"):
+        assert out[k] > 0
+    rc = biped_main(["simulate", "--gait", str(path), "--controller", "vc", "--steps", "1",
+                     "--torque-limit", "20", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["status"] == "torque_limit" and not out["success"]
+
+
 def test_cli_simulate_bad_input(gait, tmp_path, capsys):
     path = gait.save(tmp_path / "gait.json")
     assert biped_main(["simulate", "--gait", str(path), "--m1", "1", "2", "3"]) == 2
@@ -308,3 +380,11 @@ def test_cli_simulate_bad_input(gait, tmp_path, capsys):
     assert biped_main(["simulate", "--gait", str(path), "--animate", "x.mp4"]) == 2
     assert ".gif" in capsys.readouterr().err
     assert biped_main(["simulate", "--gait", str(tmp_path / "missing.json")]) == 2
+    capsys.readouterr()
+    assert biped_main(["simulate", "--gait", str(path), "--perturb-q", "0.1", "0.1"]) == 2
+    assert "--perturb-q takes 5" in capsys.readouterr().err
+    assert biped_main(["simulate", "--gait", str(path), "--perturb", "0", "0",
+                       "--perturb-dq", "0", "0", "0", "0", "0"]) == 2
+    assert "excludes" in capsys.readouterr().err
+    assert biped_main(["simulate", "--gait", str(path), "--torque-limit", "-3"]) == 2
+    assert "--torque-limit" in capsys.readouterr().err

@@ -11,6 +11,8 @@ import sys
 
 import numpy as np
 
+import biped_casadi
+
 from . import eig, gait, m1, reproduce, simulate, sweep
 from .common import UserError, load_model, print_json
 
@@ -47,6 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Time-varying control of the planar five-link biped RABBIT: model, "
                     "reference gait, exact Poincare analysis, output selection "
                     "(Wang & Chevallereau).")
+    ap.add_argument("--version", action="version",
+                    version=f"biped-casadi {biped_casadi.__version__}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
-                          VirtualConstraintController, perturbed_initial_state, simulate)
+from biped_casadi import (Gains, Perturbation, SimulationOptions, TimeVaryingController,
+                          VirtualConstraintController, simulate)
 from analysis.plots import (save_figure, swing_torques_plot, unactuated_error_plot,
                             walking_animation)
 
@@ -19,6 +19,26 @@ def _controller(kind, model, gait, M1, gains):
     if kind == "tv":
         return TimeVaryingController(model, gait, M1, gains)
     return VirtualConstraintController(model, gait, gains=gains)
+
+
+def _perturbation(args, nq) -> Perturbation:
+    """--perturb Q DQ (every joint), or --perturb-q / --perturb-dq (per joint)."""
+    per_joint = args.perturb_q is not None or args.perturb_dq is not None
+    if per_joint and args.perturb is not None:
+        raise UserError("--perturb excludes --perturb-q / --perturb-dq (give one form)")
+    if per_joint:
+        q = np.zeros(nq) if args.perturb_q is None else np.array(args.perturb_q, float)
+        dq = np.zeros(nq) if args.perturb_dq is None else np.array(args.perturb_dq, float)
+        for name, v in (("--perturb-q", q), ("--perturb-dq", dq)):
+            if v.size != nq:
+                raise UserError(f"{name} takes {nq} numbers (one per joint), got {v.size}")
+            if not np.all(np.isfinite(v)):
+                raise UserError(f"{name} values must be finite")
+        return Perturbation(tuple(q), tuple(dq))
+    q_err, dq_err = args.perturb if args.perturb is not None else (0.0, 0.0)
+    if not (math.isfinite(q_err) and math.isfinite(dq_err)):
+        raise UserError("--perturb values must be finite")
+    return Perturbation.uniform(nq, q_err, dq_err)
 
 
 def cmd_simulate(args):
@@ -33,19 +53,20 @@ def cmd_simulate(args):
                         "or --compare)")
     if args.steps < 1:
         raise UserError(f"--steps must be a positive integer, got {args.steps}")
-    q_err, dq_err = args.perturb
-    if not (math.isfinite(q_err) and math.isfinite(dq_err)):
-        raise UserError("--perturb values must be finite")
     positive(args.mu, "--mu")
     positive(args.eps, "--eps")
     if args.animate and not args.animate.lower().endswith(".gif"):
         raise UserError(f"--animate writes a GIF: the file name must end in .gif, got "
                         f"{args.animate!r}")
+    if args.torque_limit is not None:
+        positive(args.torque_limit, "--torque-limit")
     gait = load_gait(args.gait, quiet=args.json)
     model = gait.model
+    perturbation = _perturbation(args, model.nq)
     gains = Gains(eps=args.eps)
-    opts = SimulationOptions(steps=args.steps, mu=args.mu, jit=args.jit)
-    q0, dq0 = perturbed_initial_state(gait, q_err, dq_err)
+    opts = SimulationOptions(steps=args.steps, mu=args.mu, jit=args.jit,
+                             torque_limit=args.torque_limit)
+    q0, dq0 = perturbation.initial_state(gait)
 
     # ---- simulate
     ctrl = _controller(args.controller, model, gait, M1, gains)
@@ -73,7 +94,7 @@ def cmd_simulate(args):
     # ---- report
     if args.json:
         d = res.to_dict()
-        d["perturbation"] = [q_err, dq_err]
+        d["perturbation"] = perturbation.to_dict()
         if args.compare:
             d["compare"] = runs[1].to_dict()
         if figures:
@@ -102,10 +123,14 @@ def register(sub):
         description="Simulate the full-order hybrid closed loop (state q, dq, tau) for N steps "
                     "from the reference state perturbed by Q_ERR rad on every joint and DQ_ERR "
                     "rad/s on every velocity (paper §V-C uses 0.01 0.1). The run stops at the "
-                    "first invalid state and says why (status fell, scuffed, slipped, "
-                    "negative_normal_force, singular, no_impact, ...). --json prints {status, "
-                    "steps: [{t_impact, qu_error, dqu_error, ...}], ...} with the errors "
-                    "q_u - q_u^d(T), dq_u - dq_u^d(T) just before each impact.")
+                    "first invalid state and says why: status fell, scuffed (swing foot in "
+                    "the ground, or the old stance foot not lifting off), slipped (|F_x| > "
+                    "mu F_z, in single support or for the impact impulse), "
+                    "negative_normal_force (F_z <= 0), torque_limit (|u_i| > U), singular, "
+                    "no_impact; 'ok' only when every step was valid. --json prints {status, "
+                    "steps: [{t_impact, qu_error, dqu_error, ...}], peak_torque, "
+                    "min_normal_force, max_friction_ratio, max_impulse_ratio, ...} with the "
+                    "errors q_u - q_u^d(T), dq_u - dq_u^d(T) just before each impact.")
     p.add_argument("--gait", metavar="FILE", help="gait file from 'biped gait' (default: the "
                    "default RABBIT gait, optimised once and cached)")
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
@@ -113,9 +138,16 @@ def register(sub):
     p.add_argument("--m1", nargs="+", type=float, metavar="M1",
                    help="the 4 components of M1 for --controller tv (default 0 0 0 0)")
     p.add_argument("--steps", type=int, default=10, metavar="N", help="number of steps (10)")
-    p.add_argument("--perturb", nargs=2, type=float, default=(0.0, 0.0),
+    p.add_argument("--perturb", nargs=2, type=float, default=None,
                    metavar=("Q_ERR", "DQ_ERR"), help="initial error on every joint (rad) and "
-                   "every velocity (rad/s) (default 0 0)")
+                   "every velocity (rad/s) (default 0 0; the paper's: 0.01 0.1)")
+    p.add_argument("--perturb-q", nargs="+", type=float, metavar="Q",
+                   help="initial error of each joint angle q1..qn, rad (instead of --perturb)")
+    p.add_argument("--perturb-dq", nargs="+", type=float, metavar="DQ",
+                   help="initial error of each joint velocity, rad/s (instead of --perturb)")
+    p.add_argument("--torque-limit", type=float, metavar="U",
+                   help="stop with status torque_limit where some |u_i| exceeds U, N m "
+                        "(default: the robot's limit, 150 for RABBIT)")
     p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (0.6)")
     p.add_argument("--eps", type=float, default=0.02,
                    help="epsilon of the output PD, eq. (13), with Kp = 1, Kd = 2 (0.02)")

@@ -1,0 +1,121 @@
+"""Initial errors as data: the paper's perturbation, per-joint errors, sign patterns and
+seeded random directions of the same per-joint size.
+
+A perturbation is added to the reference state at tau = 0 (the start of a step, just
+after an impact).  Robustness is measured along *directions*: a direction d has 2 nq
+components, and at scale s the initial error is (s q_size d[:nq], s dq_size d[nq:]),
+with the paper's sizes q_size = 0.01 rad and dq_size = 0.1 rad/s (§V-C, Fig. 5).  The
+paper's own perturbation is the all-positive direction d = (1, ..., 1) at s = 1.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .numerics import as_number, as_vector
+
+__all__ = ["Perturbation", "directions", "PAPER_SIZES"]
+
+#: the per-joint sizes of the paper's perturbation: 0.01 rad and 0.1 rad/s (§V-C)
+PAPER_SIZES = (0.01, 0.1)
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """An initial error (q, dq) added to the reference at tau = 0.
+
+    Parameters
+    ----------
+    q : tuple of float
+        Error of every joint angle, rad.
+    dq : tuple of float
+        Error of every joint velocity, rad/s (same length as ``q``).
+    """
+
+    q: tuple
+    dq: tuple
+
+    def __post_init__(self):
+        q = np.atleast_1d(np.asarray(self.q, dtype=float))
+        n = q.size
+        object.__setattr__(self, "q", tuple(as_vector(q, n, "q").tolist()))
+        object.__setattr__(self, "dq", tuple(as_vector(self.dq, n, "dq").tolist()))
+
+    @classmethod
+    def uniform(cls, nq: int, q_error: float, dq_error: float) -> "Perturbation":
+        """The same error on every joint (``--perturb Q DQ``)."""
+        q = as_number(q_error, "q_error")
+        dq = as_number(dq_error, "dq_error")
+        return cls((q,) * nq, (dq,) * nq)
+
+    @classmethod
+    def paper(cls, nq: int = 5) -> "Perturbation":
+        """The paper's Fig. 5 perturbation: +0.01 rad on every joint, +0.1 rad/s on every
+        velocity."""
+        return cls.uniform(nq, *PAPER_SIZES)
+
+    @classmethod
+    def from_direction(cls, d, scale: float = 1.0, sizes=PAPER_SIZES) -> "Perturbation":
+        """The error s (q_size d[:nq], dq_size d[nq:]) of direction ``d`` at scale s."""
+        d = np.asarray(d, dtype=float).ravel()
+        if d.size % 2 or d.size == 0:
+            raise ValueError(f"d must have 2 nq components, got {d.size}")
+        d = as_vector(d, d.size, "d")
+        s = as_number(scale, "scale", nonnegative=True)
+        nq = d.size // 2
+        return cls(tuple(s * sizes[0] * d[:nq]), tuple(s * sizes[1] * d[nq:]))
+
+    @property
+    def nq(self) -> int:
+        return len(self.q)
+
+    def scaled(self, s: float) -> "Perturbation":
+        """This perturbation times ``s``."""
+        s = as_number(s, "scale")
+        return Perturbation(tuple(s * v for v in self.q), tuple(s * v for v in self.dq))
+
+    def initial_state(self, reference):
+        """(q^d(0) + q, dq^d(0) + dq) for a reference made for a robot with ``nq`` joints."""
+        if reference.model.nq != self.nq:
+            raise ValueError(f"perturbation: {self.nq} joints, the robot has "
+                             f"{reference.model.nq}")
+        return reference.q(0.0) + np.array(self.q), reference.dq(0.0) + np.array(self.dq)
+
+    def to_dict(self) -> dict:
+        return dict(q=list(self.q), dq=list(self.dq))
+
+
+def directions(n: int, nq: int = 5, seed: int = 2024) -> np.ndarray:
+    """``n`` perturbation directions (rows of 2 nq numbers), reproducible from ``seed``.
+
+    Row 0 is the paper's all-positive direction; then, alternately, a random sign pattern
+    (every component +-1) and a Gaussian random direction scaled to the length of a sign
+    pattern (sqrt(2 nq)), so every direction has the paper's per-joint size on average.
+
+    Parameters
+    ----------
+    n : int
+        Number of directions (>= 1).
+    nq : int
+        Joints of the robot.
+    seed : int
+        Seed of the generator.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (n, 2 nq).
+    """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n (number of directions) must be a positive integer, got {n!r}")
+    rng = np.random.default_rng(seed)
+    out = [np.ones(2 * nq)]
+    while len(out) < n:
+        if len(out) % 2:
+            out.append(rng.choice([-1.0, 1.0], 2 * nq))
+        else:
+            v = rng.standard_normal(2 * nq)
+            out.append(v / np.linalg.norm(v) * math.sqrt(2 * nq))
+    return np.array(out)

@@ -1,0 +1,96 @@
+"""Sphinx configuration of the biped-casadi documentation.
+
+Build: ``sphinx-build -W -b html docs docs/_build/html`` (warnings are errors).  The
+notebooks of ``notebooks/`` are copied into ``docs/tutorials/`` and executed at build time
+with their small settings (BIPED_NOTEBOOK_QUICK=1, about a minute)."""
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from importlib.metadata import version as _version
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE / "_ext"))
+
+project = "biped-casadi"
+author = "the biped-casadi developers"
+copyright = "2026, the biped-casadi developers"
+release = _version("biped-casadi")
+version = release
+
+extensions = [
+    "sphinx.ext.autodoc",
+    "sphinx.ext.autosummary",
+    "sphinx.ext.mathjax",
+    "numpydoc",
+    "myst_nb",
+    "paper_equations",
+]
+source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
+exclude_patterns = ["_build", "**.ipynb_checkpoints", "public_api.txt"]
+templates_path = []
+html_theme = "pydata_sphinx_theme"
+html_title = f"biped-casadi {release}"
+html_static_path = ["_static"]
+html_theme_options = {"navigation_with_keys": False, "show_toc_level": 2}
+
+autosummary_generate = True
+autodoc_member_order = "bysource"
+autodoc_typehints = "none"
+numpydoc_show_class_members = False
+numpydoc_class_members_toctree = False
+numpydoc_validation_checks = set()
+myst_enable_extensions = ["dollarmath"]
+suppress_warnings = ["config.cache"]
+
+# ---- notebooks: copied from notebooks/, executed with small settings at build time
+nb_execution_mode = os.environ.get("BIPED_DOCS_EXECUTE", "force")
+nb_execution_timeout = 600
+nb_execution_raise_on_error = True
+os.environ.setdefault("BIPED_NOTEBOOK_QUICK", "1")
+os.environ.pop("MPLBACKEND", None)
+_tutorials = HERE / "tutorials"
+_tutorials.mkdir(exist_ok=True)
+for nb in sorted((ROOT / "notebooks").glob("*.ipynb")):
+    target = _tutorials / nb.name
+    if not target.exists() or target.read_bytes() != nb.read_bytes():
+        shutil.copyfile(nb, target)
+
+
+# ---- the API reference: every module of public_api.txt, each public name once
+def _write_api_page():
+    import importlib
+    import inspect
+
+    from paper_equations import public_modules
+    seen, sections = set(), []
+    for modname in public_modules():
+        mod = importlib.import_module(modname)
+        names = []
+        for name in getattr(mod, "__all__", []):
+            obj = getattr(mod, name)
+            key = id(obj) if (inspect.isclass(obj) or inspect.isfunction(obj)) else (modname, name)
+            if key in seen or not (inspect.isclass(obj) or inspect.isfunction(obj)):
+                continue
+            seen.add(key)
+            names.append(name)
+        if names:
+            doc = (inspect.getdoc(mod) or "").split("\n\n")[0].replace("\n", " ")
+            sections.append((modname, doc, names))
+    lines = ["API reference", "=============", "",
+             "The public surface: what the packages and the modules below export "
+             "(``__all__``).  Everything else is internal and may change.", ""]
+    for modname, doc, names in sections:
+        lines += [modname, "-" * len(modname), "", f".. currentmodule:: {modname}", "",
+                  doc, "", ".. autosummary::", "   :toctree: generated", "   :nosignatures:", ""]
+        lines += [f"   {n}" for n in names] + [""]
+    text = "\n".join(lines)
+    page = HERE / "api.rst"
+    if not page.exists() or page.read_text() != text:
+        page.write_text(text)
+
+
+_write_api_page()
