@@ -33,7 +33,8 @@ from .poincare import poincare_eigenvalues, poincare_map
 
 __all__ = ["swing_height_at_Td", "TaylorAB", "taylor_ab", "solve_ab", "ABSolution",
            "conjecture_figures", "optimize_m1", "M1Result", "domain_grid",
-           "isolated_ab_solutions", "ab_solution_set", "ABSet", "coarse_grid_size"]
+           "isolated_ab_solutions", "ab_solution_set", "ABSet", "ab_groups",
+           "coarse_grid_size"]
 
 
 # ------------------------------------------------------------------ eq. (25)-(26)
@@ -276,6 +277,29 @@ def isolated_ab_solutions(tay: TaylorAB) -> np.ndarray:
     """The isolated solutions of a = b = 0 when nu = 2: (k, 2), k = 0, 1 or 2 (empty
     when there are none, or when a whole line solves it: see :func:`ab_solution_set`)."""
     return ab_solution_set(tay).points
+
+
+def ab_groups(model, gait) -> tuple[list, str]:
+    """The solution groups of a = b = 0 that :func:`optimize_m1` accepts for a robot and
+    gait, and what they are in words.
+
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+
+    Returns
+    -------
+    tuple
+        (groups, explanation): [1, 2] when nu >= 3; for nu = 2, [1] when the solutions
+        form a line, [1] or [1, 2] for isolated points, [] when there is none.
+    """
+    if model.nu >= 3:
+        return [1, 2], "two groups (the roots of b = 0 on a = 0)"
+    ab = ab_solution_set(taylor_ab(model, gait))
+    if ab.kind == "line":
+        return [1], f"one line of solutions, group 1 ({ab.message})"
+    return list(range(1, len(ab.points) + 1)), ab.message
 
 
 def group_of(tay: TaylorAB, M1, tol: float = 1e-6):

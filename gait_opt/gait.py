@@ -327,8 +327,10 @@ class Gait(Reference):
             mine, theirs = _flat(model.params.to_dict()), _flat(params.to_dict())
             diff = [f"{k} ({theirs.get(k)!r} in the file, {mine.get(k)!r} in the model)"
                     for k in sorted(set(mine) | set(theirs)) if mine.get(k) != theirs.get(k)]
+            more = f", and {len(diff) - 3} more" if len(diff) > 3 else ""
             raise GaitFileError(f"gait file {path} was made for other robot parameters "
-                                f"(robot {params.name!r}; differ in: {', '.join(diff)})")
+                                f"(robot {params.name!r}, the model is {model.params.name!r}; "
+                                f"differ in: {', '.join(diff[:3])}{more})")
         return cls(model, opts, sol["alpha"], sol["x0"], sol["T"],
                    solver_stats=body.get("solver_stats"))
 

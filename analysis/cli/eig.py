@@ -6,15 +6,16 @@ import numpy as np
 from analysis.poincare import METHODS, poincare_eigenvalues
 from analysis.virtual_constraints import vc_eigenvalue
 
-from .common import UserError, load_gait, print_json
+from .common import UserError, add_robot, load_gait, parse_m1, print_json
 
 
 def cmd_eig(args):
     if args.controller == "vc" and args.m1 is not None:
         raise UserError("--m1 applies to the time-varying controller (--controller tv)")
     if args.controller == "tv" and args.m1 is None:
-        raise UserError("--m1 A B C D is required for the time-varying controller")
-    gait = load_gait(args.gait, quiet=args.json)
+        raise UserError("--m1 is required for the time-varying controller (one number per "
+                        "torque: 4 for RABBIT)")
+    gait = load_gait(args.gait, quiet=args.json, robot_arg=args.robot)
     model = gait.model
     if args.controller == "vc":
         res = vc_eigenvalue(model, gait)
@@ -25,11 +26,7 @@ def cmd_eig(args):
             for k, v in d.items():
                 print(f"{k:22s} {v}")
         return 0
-    M1 = np.array(args.m1, dtype=float)
-    if M1.shape != (model.nu,):
-        raise UserError(f"--m1 takes {model.nu} numbers, got {M1.size}")
-    if not np.all(np.isfinite(M1)):
-        raise UserError("--m1 values must be finite")
+    M1 = parse_m1(args.m1, model.nu)
     r = poincare_eigenvalues(model, gait, M1, method=args.method)
     if args.json:
         print_json(r)
@@ -58,8 +55,10 @@ def register(sub):
                     "controller's 1-D map. --json prints {A, eigenvalues (as [re, im] "
                     "pairs), max_abs, status, ...}.")
     p.add_argument("--gait", metavar="FILE", help="gait file from 'biped gait' (default: the "
-                   "default RABBIT gait, optimised once and cached)")
-    p.add_argument("--m1", nargs="+", type=float, metavar="M1", help="the 4 components of M1")
+                   "robot's default gait, optimised once and cached)")
+    add_robot(p)
+    p.add_argument("--m1", nargs="+", type=float, metavar="M1",
+                   help="the components of M1, one per torque (4 for RABBIT, 2 for three_link)")
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
                    help="tv: time-varying outputs (default); vc: virtual constraints")
     p.add_argument("--method", choices=METHODS, default="variational",

@@ -12,7 +12,7 @@ from biped_casadi import (Gains, Perturbation, SimulationOptions, TimeVaryingCon
 from analysis.plots import (save_figure, swing_torques_plot, unactuated_error_plot,
                             walking_animation)
 
-from .common import UserError, load_gait, positive, print_json
+from .common import UserError, add_robot, load_gait, parse_m1, positive, print_json
 
 
 def _controller(kind, model, gait, M1, gains):
@@ -43,10 +43,7 @@ def _perturbation(args, nq) -> Perturbation:
 
 def cmd_simulate(args):
     # ---- arguments
-    M1 = np.zeros(4) if args.m1 is None else np.array(args.m1, dtype=float)
-    if M1.shape != (4,):
-        raise UserError(f"--m1 takes 4 numbers, got {M1.size}")
-    if not np.all(np.isfinite(M1)):
+    if args.m1 is not None and not np.all(np.isfinite(np.array(args.m1, dtype=float))):
         raise UserError("--m1 values must be finite")
     if args.controller == "vc" and args.m1 is not None and not args.compare:
         raise UserError("--m1 applies to the time-varying controller (--controller tv, "
@@ -60,8 +57,9 @@ def cmd_simulate(args):
                         f"{args.animate!r}")
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
-    gait = load_gait(args.gait, quiet=args.json)
+    gait = load_gait(args.gait, quiet=args.json, robot_arg=args.robot)
     model = gait.model
+    M1 = parse_m1(args.m1, model.nu, default_zero=True)
     perturbation = _perturbation(args, model.nq)
     gains = Gains(eps=args.eps)
     opts = SimulationOptions(steps=args.steps, mu=args.mu, jit=args.jit,
@@ -132,11 +130,13 @@ def register(sub):
                     "min_normal_force, max_friction_ratio, max_impulse_ratio, ...} with the "
                     "errors q_u - q_u^d(T), dq_u - dq_u^d(T) just before each impact.")
     p.add_argument("--gait", metavar="FILE", help="gait file from 'biped gait' (default: the "
-                   "default RABBIT gait, optimised once and cached)")
+                   "robot's default gait, optimised once and cached)")
+    add_robot(p)
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
                    help="tv: time-varying outputs [M1, I] q (default); vc: virtual constraints")
     p.add_argument("--m1", nargs="+", type=float, metavar="M1",
-                   help="the 4 components of M1 for --controller tv (default 0 0 0 0)")
+                   help="the components of M1 for --controller tv, one per torque (default "
+                        "all zero)")
     p.add_argument("--steps", type=int, default=10, metavar="N", help="number of steps (10)")
     p.add_argument("--perturb", nargs=2, type=float, default=None,
                    metavar=("Q_ERR", "DQ_ERR"), help="initial error on every joint (rad) and "

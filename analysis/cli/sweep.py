@@ -13,9 +13,8 @@ import numpy as np
 
 from analysis.plots import one_d_sweeps_plot, save_figure
 from analysis.sweep import grid_points, line_points, one_d_sweeps, run_sweep
-from gait_opt import Gait
 
-from .common import UserError, print_json
+from .common import UserError, add_robot, load_gait, print_json
 
 
 def cmd_sweep(args):
@@ -31,7 +30,7 @@ def cmd_sweep(args):
         raise UserError(f"--workers must be at least 1, got {args.workers}")
     if args.chunk_size is not None and args.chunk_size < 1:
         raise UserError(f"--chunk-size must be at least 1, got {args.chunk_size}")
-    gait = Gait.load(args.gait)                # GaitFileError (a ValueError): exit 2
+    gait = load_gait(args.gait, robot_arg=args.robot)   # GaitFileError (ValueError): exit 2
     model = gait.model
     kw = dict(out_dir=args.out, chunk_size=args.chunk_size, workers=args.workers,
               scheduler=args.scheduler, progress=not args.no_progress,
@@ -42,7 +41,7 @@ def cmd_sweep(args):
         if args.line < 2:
             raise UserError(f"--line takes at least 2 points per component, got {args.line}")
         values = np.linspace(lo, hi, args.line)
-        line_points(0, values)
+        line_points(0, values, model.nu)
         lines = one_d_sweeps(model, gait, values, **kw)
         r = lines.sweep
         if args.plot is not None:
@@ -54,7 +53,7 @@ def cmd_sweep(args):
         n = 9 if args.grid is None else args.grid
         if n < 1:
             raise UserError(f"--grid takes a positive number of points per component, got {n}")
-        r = run_sweep(model, gait, grid_points(n, lo, hi), **kw)
+        r = run_sweep(model, gait, grid_points(n, lo, hi, model.nu), **kw)
 
     if args.json:
         out = r.to_dict()
@@ -68,7 +67,8 @@ def cmd_sweep(args):
 
     mode = (f"1-D sweeps, {args.line} values of each M1(j) in [{lo:g}, {hi:g}]"
             if args.line is not None else
-            f"grid {n}^4 = {r.n_points} M1, each component in linspace({lo:g}, {hi:g}, {n})")
+            f"grid {n}^{model.nu} = {r.n_points} M1, each component in linspace({lo:g}, "
+            f"{hi:g}, {n})")
     print(f"sweep: {mode}")
     print(f"  {'status':10s} {'count':>8s}")
     for k, v in r.counts.items():
@@ -97,16 +97,18 @@ def register(sub):
     p = sub.add_parser(
         "sweep", help="max|lambda| and stability status over a grid or lines of M1",
         description="Evaluate the restricted Poincare map's Jacobian A^z for many output "
-                    "matrices M1 (paper section V-A): the N^4 grid (--grid, the paper's is "
-                    "9 on [-10, 10]) or the four 1-D sweeps of Fig. 2 (--line). Runs on "
+                    "matrices M1 (paper section V-A): the N^nu grid (--grid; nu = 4 for "
+                    "RABBIT, the paper's is 9 on [-10, 10]) or the 1-D sweeps of Fig. 2, one "
+                    "per component (--line). Runs on "
                     "all local cores, or on a Dask cluster with --scheduler. With --out the "
                     "results are stored chunk by chunk (Parquet); rerunning with the same "
                     "--out resumes and recomputes only what is missing.")
     p.add_argument("--gait", required=True, metavar="FILE", help="reference gait file "
                    "(from `biped gait --out FILE`)")
+    add_robot(p)
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--grid", type=int, metavar="N",
-                      help="N points per component: N^4 M1 (default 9)")
+                      help="N points per component: N^nu M1 (default 9)")
     mode.add_argument("--line", type=int, metavar="N",
                       help="Fig. 2 instead: N values of each component, the others zero")
     p.add_argument("--range", nargs=2, type=float, default=[-10.0, 10.0],
