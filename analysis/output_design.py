@@ -204,6 +204,13 @@ class ABSet:
         return self.base[None, :] + t[:, None] * self.direction[None, :]
 
 
+def _line_text(g) -> str:
+    """'M1(1) + 1 M1(2) = 2': the line a = g0 - g1 M1(1) - g2 M1(2) = 0, normalised."""
+    if abs(g[1]) >= abs(g[2]):
+        return f"M1(1) {'+' if g[2] / g[1] >= 0 else '-'} {abs(g[2] / g[1]):.6g} M1(2) = {g[0] / g[1]:.6g}"
+    return f"{g[1] / g[2]:.6g} M1(1) + M1(2) = {g[0] / g[2]:.6g}"
+
+
 def ab_solution_set(tay: TaylorAB, tol: float = 1e-9) -> ABSet:
     """Every real solution of a = b = 0 when nu = 2 (the three-link biped).
 
@@ -248,8 +255,8 @@ def ab_solution_set(tay: TaylorAB, tol: float = 1e-9) -> ABSet:
     d_unit, coeffs = d / n, (c2 / n**2, c1 / n, c0)    # per unit length along the line
     if all(small):
         return ABSet("line", empty, base, d_unit, coeffs,
-                     f"b vanishes identically on the line a = 0, {g[1]:.6g} M1(1) + "
-                     f"{g[2]:.6g} M1(2) = {g[0]:.6g}: every M1 on it solves a = b = 0")
+                     f"b vanishes identically on the line a = 0, {_line_text(g)}: every "
+                     f"M1 on it solves a = b = 0")
     if small[0] and small[1]:
         return ABSet("none", empty, base, d_unit, coeffs,
                      f"b = {c0:.3g} is constant and non-zero on the line a = 0: "

@@ -256,6 +256,9 @@ def description_from_dict(data: dict, where: str = "robot description",
         One message naming ``where`` and the field, for the first problem found.
     """
     c = _Checker(where)
+    if isinstance(data, dict) and "leg" not in data:
+        c.fail("leg", "is missing: a leg needs at least one link (one [[leg]] table per "
+                      "link, k >= 1)")
     c.table(data, "", _TOP, ("name", "gravity", "actuators", "torso", "leg"))
     name = c.text(data["name"], "name")
     gravity = c.number(data["gravity"], "gravity", strict=True)
