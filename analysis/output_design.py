@@ -179,7 +179,20 @@ class ABSet:
                     message=self.message)
 
     def on_set(self, M1, tol: float = 1e-6) -> int | None:
-        """1 or 2 (which point, or 1 on the line) when M1 solves a = b = 0, else None."""
+        """Whether M1 solves a = b = 0.
+
+        Parameters
+        ----------
+        M1 : array_like
+            Two numbers.
+        tol : float
+            Relative tolerance.
+
+        Returns
+        -------
+        int or None
+            1 or 2 (which point, or 1 on the line), else None.
+        """
         M1 = np.asarray(M1, float)
         scale = tol * max(1.0, float(np.max(np.abs(M1))))
         if self.kind == "line":
@@ -192,8 +205,20 @@ class ABSet:
         return None
 
     def sample(self, n: int, lo: float = -10.0, hi: float = 10.0) -> np.ndarray:
-        """(n, 2) points of the line with M1(2) in [lo, hi] (the isolated points when the
-        set is not a line)."""
+        """Points of the solution set.
+
+        Parameters
+        ----------
+        n : int
+            Points along a line.
+        lo, hi : float
+            Range of M1(2) along the line.
+
+        Returns
+        -------
+        numpy.ndarray
+            (n, 2) points of the line, or the isolated points when the set is not a line.
+        """
         if self.kind != "line":
             return self.points.copy()
         m2 = np.linspace(lo, hi, n)
@@ -281,8 +306,18 @@ def ab_solution_set(tay: TaylorAB, tol: float = 1e-9) -> ABSet:
 
 
 def isolated_ab_solutions(tay: TaylorAB) -> np.ndarray:
-    """The isolated solutions of a = b = 0 when nu = 2: (k, 2), k = 0, 1 or 2 (empty
-    when there are none, or when a whole line solves it: see :func:`ab_solution_set`)."""
+    """The isolated solutions of a = b = 0 when nu = 2.
+
+    Parameters
+    ----------
+    tay : TaylorAB
+
+    Returns
+    -------
+    numpy.ndarray
+        (k, 2), k = 0, 1 or 2 (empty when there are none, or when a whole line solves
+        it: see :func:`ab_solution_set`).
+    """
     return ab_solution_set(tay).points
 
 
@@ -340,8 +375,23 @@ def conjecture_figures(zsw: np.ndarray, max_abs: np.ndarray, status: np.ndarray)
 
 
 def domain_grid(tay: TaylorAB, n: int = 81, lo: float = -10.0, hi: float = 10.0):
-    """The grid of the free components (RABBIT: the (M1(2), M1(3)) grid of Fig. 4; an
-    (n, ..., n) meshgrid of the nu - 2 middle components) and both groups' M1 on it."""
+    """The grid of the free components and both groups' M1 on it.
+
+    Parameters
+    ----------
+    tay : TaylorAB
+        Of a robot with nu >= 3.
+    n : int
+        Points per free component.
+    lo, hi : float
+        Range of each free component.
+
+    Returns
+    -------
+    ABSolution
+        On the (n, ..., n) meshgrid ('ij') of the nu - 2 middle components (RABBIT: the
+        (M1(2), M1(3)) grid of Fig. 4).
+    """
     if tay.grad.size < 4:
         raise ValueError("domain_grid needs nu >= 3 (a free component); for nu = 2 see "
                          "ab_solution_set")
@@ -351,8 +401,21 @@ def domain_grid(tay: TaylorAB, n: int = 81, lo: float = -10.0, hi: float = 10.0)
 
 
 def coarse_grid_size(nu: int, budget: int = 6561) -> int:
-    """Points per component of the coarse grid of a free M1: the largest n with
-    n^nu <= ``budget`` (9 for RABBIT, the paper's grid; 81 for nu = 2)."""
+    """Points per component of the coarse grid of a free M1.
+
+    Parameters
+    ----------
+    nu : int
+        Components of M1.
+    budget : int
+        Most grid points.
+
+    Returns
+    -------
+    int
+        The largest n with n^nu <= ``budget`` (9 for RABBIT, the paper's grid; 81 for
+        nu = 2), at least 2.
+    """
     n = max(2, int(round(budget ** (1.0 / nu))))
     while n ** nu > budget and n > 2:
         n -= 1

@@ -182,9 +182,22 @@ def _result(P, st, max_abs, ev, A, **kw) -> SweepResult:
 
 # ------------------------------------------------------------------ points
 def grid_points(n: int, lo: float, hi: float, dim: int = 4) -> np.ndarray:
-    """The n^dim grid, each component of M1 in ``linspace(lo, hi, n)``, component 1
-    varying slowest: shape (n^dim, dim), dim = the robot's nu (4 for RABBIT, 2 for the
-    three-link biped).  The paper's grid is ``grid_points(9, -10, 10)``."""
+    """The n^dim grid of M1, component 1 varying slowest.
+
+    Parameters
+    ----------
+    n : int
+        Points per component, each in ``linspace(lo, hi, n)``.
+    lo, hi : float
+        Range of every component.
+    dim : int
+        Components of M1: the robot's nu (4 for RABBIT, 2 for the three-link biped).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n^dim, dim).  The paper's grid is ``grid_points(9, -10, 10)``.
+    """
     if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or dim < 1:
         raise ValueError(f"dim (components of M1) must be a positive integer, got {dim!r}")
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
@@ -198,8 +211,22 @@ def grid_points(n: int, lo: float, hi: float, dim: int = 4) -> np.ndarray:
 
 
 def line_points(j: int, values, nu: int = 4) -> np.ndarray:
-    """M1 with component ``j`` (0-based: the paper's M1(j+1)) set to each of ``values``
-    and the other ``nu - 1`` zero: shape (len(values), nu)."""
+    """M1 with one component set to each of ``values`` and the others zero.
+
+    Parameters
+    ----------
+    j : int
+        The component, 0-based (the paper's M1(j+1)).
+    values : array_like
+        Its values.
+    nu : int
+        Components of M1 (4 for RABBIT).
+
+    Returns
+    -------
+    numpy.ndarray
+        (len(values), nu).
+    """
     if isinstance(j, bool) or not isinstance(j, (int, np.integer)) or not 0 <= j < nu:
         raise ValueError(f"j (component of M1, 0..{nu - 1}) must be one of "
                          f"{', '.join(map(str, range(nu)))}, got {j!r}")

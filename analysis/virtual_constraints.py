@@ -229,9 +229,24 @@ class VirtualConstraintMap:
 
 @cached(maxsize=8)
 def vc_map(model, gait, phase=None, H0=None, n_steps: int = 1000) -> VirtualConstraintMap:
-    """The :class:`VirtualConstraintMap` of constraints fitted to ``gait`` with phase
-    variable theta = ``phase`` q (default the model's ``hip_phase``) and outputs
-    H0 q - h_d(theta), built once (memoised by the gait's digest and the arguments)."""
+    """The :class:`VirtualConstraintMap` of constraints fitted to a gait, built once
+    (memoised by the gait's digest and the arguments).
+
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+    phase : array_like, optional
+        theta = ``phase`` q (default the model's ``hip_phase``).
+    H0 : array_like, optional
+        Outputs H0 q - h_d(theta) (default q_a).
+    n_steps : int
+        RK4 steps in theta over one step.
+
+    Returns
+    -------
+    VirtualConstraintMap
+    """
     constraints = fit_virtual_constraints(gait, c=phase, H0=H0)
     return VirtualConstraintMap(model, gait, constraints, n_steps)
 

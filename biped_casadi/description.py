@@ -175,7 +175,19 @@ class RobotDescription:
 
 
 def joint_names(k: int) -> tuple:
-    """Names a point mass may be attached to, for legs of ``k`` links."""
+    """Names a point mass may be attached to, for legs of ``k`` links.
+
+    Parameters
+    ----------
+    k : int
+        Links per leg.
+
+    Returns
+    -------
+    tuple of str
+        ``'hip'``, the joints between leg links (``'knee'`` when k = 2, else
+        ``'joint1'`` ...), ``'foot'``.
+    """
     inner = ("knee",) if k == 2 else tuple(f"joint{j}" for j in range(1, k))
     return ("hip",) + inner + ("foot",)
 
@@ -316,7 +328,17 @@ def load_description(path) -> RobotDescription:
 
 
 def builtin_path(name: str) -> Path:
-    """The packaged file of a built-in description (``rabbit``, ``three_link``)."""
+    """The packaged file of a built-in description.
+
+    Parameters
+    ----------
+    name : str
+        ``'rabbit'`` or ``'three_link'``.
+
+    Returns
+    -------
+    Path
+    """
     if name not in BUILTIN:
         raise ValueError(f"robot: no built-in robot {name!r} (built-in: {', '.join(BUILTIN)})")
     return Path(str(resources.files("biped_casadi") / "robots" / f"{name}.toml"))

@@ -44,7 +44,18 @@ RABBIT_DESCRIPTION = RABBIT.to_description()
 
 
 def absolute_angles(q):
-    """phi_1..phi_n from q (cumulative sums): phi_k = q1 + ... + qk."""
+    """phi_1..phi_n from q (cumulative sums): phi_k = q1 + ... + qk.
+
+    Parameters
+    ----------
+    q : sequence
+        Coordinates (numbers or CasADi symbols).
+
+    Returns
+    -------
+    list
+        The absolute angles, in the order of q.
+    """
     n = len(q)
     return [sum(q[i] for i in range(k + 1)) for k in range(n)]
 
@@ -56,6 +67,16 @@ def relabelling(nq: int) -> np.ndarray:
     leg's links are the old swing leg's, read from the foot up, the torso keeps its
     angle), so with S the difference matrix q = S phi, E = S J S^-1 with J the
     reversal.  E @ E = I.
+
+    Parameters
+    ----------
+    nq : int
+        Number of joints (odd: 2 k + 1).
+
+    Returns
+    -------
+    numpy.ndarray
+        (nq, nq), entries 0 and +-1; :data:`E_RELABEL` for RABBIT.
     """
     S = np.eye(nq) - np.eye(nq, k=-1)
     J = np.eye(nq)[::-1]

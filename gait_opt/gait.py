@@ -292,10 +292,25 @@ class Gait(Reference):
 
     @classmethod
     def load(cls, path, model=None) -> "Gait":
-        """Read a gait file.  With ``model``, the file must have been made for the same
-        robot (its description is recorded in the file; files written before robot
-        descriptions record RABBIT-type flat parameters and load too).  Raises
-        :class:`GaitFileError` with the reason."""
+        """Read a gait file.
+
+        Parameters
+        ----------
+        path : str or Path
+        model : BipedModel, optional
+            The file must have been made for this robot (its description is recorded
+            in the file; files written before robot descriptions record RABBIT-type
+            flat parameters and load too).  Default: the file's robot.
+
+        Returns
+        -------
+        Gait
+
+        Raises
+        ------
+        GaitFileError
+            With the reason (missing, corrupted, other format or version, other robot).
+        """
         path = Path(path)
         if not path.is_file():
             raise GaitFileError(f"gait file not found: {path}")
