@@ -399,7 +399,7 @@ class VirtualConstraintController(_Controller):
     ddy = J ddq - h''(theta) (c dq)^2, and the unactuated row of eq. (1),
 
         [D_1; J] ddq = [-H_1; -Kd/eps dy - Kp/eps^2 y + h'' (c dq)^2],
-        u = rows 2..5 of (D ddq + H).
+        u = rows 2..n of (D ddq + H).
 
     With ``correction`` (default) the constraints of each step are h = h_d + h_c with
     the stride-to-stride correction of eq. (18) written in the phase instead of time:

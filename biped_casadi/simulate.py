@@ -64,7 +64,8 @@ class SimulationOptions:
     rk4_steps: RK4 steps per reference step duration T (a multiple of 4).
     mu: friction coefficient for the stance foot and the impact impulse.
     min_normal_force: lowest admissible stance normal force, N.
-    min_hip_height: the robot has fallen when the hip is lower, m.
+    min_hip_height: the robot has fallen when the hip is lower, m; None (default):
+        0.5625 leg length (0.45 m for RABBIT).
     max_torso_angle: ... or when the torso leans more than this from the vertical, rad.
     horizon: a step without a valid impact within horizon * T ends the run (no_impact).
     ground_tolerance: how far below the ground (m) the swing foot may graze behind the
@@ -84,7 +85,7 @@ class SimulationOptions:
     rk4_steps: int = 2000
     mu: float = 0.6
     min_normal_force: float = 0.0
-    min_hip_height: float = 0.45
+    min_hip_height: float | None = None
     max_torso_angle: float = math.pi / 2
     horizon: float = 2.0
     ground_tolerance: float = 1e-9
@@ -98,7 +99,8 @@ class SimulationOptions:
             raise ValueError(f"steps must be a positive integer, got {self.steps!r}")
         if not isinstance(self.rk4_steps, int) or self.rk4_steps < 8 or self.rk4_steps % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {self.rk4_steps!r}")
-        for name in ("mu", "min_hip_height", "max_torso_angle", "horizon"):
+        for name in ("mu", "max_torso_angle", "horizon") + (
+                ("min_hip_height",) if self.min_hip_height is not None else ()):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
@@ -280,6 +282,8 @@ class Simulator:
         o = self.options
         self.torque_limit = float(o.torque_limit if o.torque_limit is not None
                                   else self.model.params.torque_limit)
+        self.min_hip_height = float(o.min_hip_height if o.min_hip_height is not None
+                                    else 0.5625 * self.model.description.leg_length)
         self._build()
         ref = self.controller.singularity()
         self._den_scale = max(abs(ref.min_value), abs(ref.max_value))
@@ -342,7 +346,7 @@ class Simulator:
             bad["out_of_range"] = finite & (D[R["INR"]] < 0.5)
             den = D[R["DEN"]] * den_sign
             bad["singular"] = finite & (den <= o.singular_tolerance * self._den_scale)
-            bad["fell"] = finite & ((D[R["HIP"]] < o.min_hip_height) |
+            bad["fell"] = finite & ((D[R["HIP"]] < self.min_hip_height) |
                                     (np.abs(D[R["TORSO"]]) > o.max_torso_angle))
             below = D[R["ZSW"]] < -o.ground_tolerance
             under = np.zeros(n, bool) if z_prev is None else np.asarray(z_prev) < 0
