@@ -151,6 +151,24 @@ def test_legacy_parameter_files_and_objects_still_load(tmp_path):
     assert float(robot(f).D(np.zeros(5))[0, 0]) != float(rabbit().D(np.zeros(5))[0, 0])
 
 
+def test_gait_files_written_before_descriptions_still_load(gait, tmp_path):
+    """A gait file whose robot record is the older flat parameter set (no torque limit,
+    RABBIT's fields) loads onto RABBIT's model, and is refused by another robot."""
+    from gait_opt.gait import _digest
+    body = gait.to_dict()
+    flat = RABBIT.to_dict()
+    flat.pop("torque_limit")
+    body["robot"] = flat
+    body["sha256"] = _digest(body)
+    path = tmp_path / "old_gait.json"
+    path.write_text(json.dumps(body))
+    old = Gait.load(path)
+    assert old.model is rabbit() and old.T == gait.T
+    np.testing.assert_array_equal(old.q(0.3 * gait.T), gait.q(0.3 * gait.T))
+    with pytest.raises(ValueError, match="other robot parameters"):
+        Gait.load(path, model=robot("three_link"))
+
+
 # ----------------------------------------------------------------- physics
 MODELS = ["three_link", "random_k1", "random_k3"]
 
