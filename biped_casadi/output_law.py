@@ -93,7 +93,10 @@ def output_matrix(M1) -> np.ndarray:
 
 
 def outputs(M1, q):
-    """Controlled outputs v = M q = M1 q_u + q_a, eq. (5) with M2 = I.
+    """Controlled outputs v = M q = M1 q_u + q_a (M2 = I).
+
+    Implements eqs. (5), (8), (21): applied to q^d, dq^d, ddq^d it gives the reference
+    outputs v^d and their derivatives.
 
     Parameters
     ----------
@@ -119,7 +122,25 @@ def outputs(M1, q):
 
 
 def coordinates_from_outputs(M1, q_u, v):
-    """q = (q_u, v - M1 q_u), eq. (10) with M2 = I (CasADi or numpy column)."""
+    """The configuration from the unactuated coordinate and the outputs.
+
+    Implements eqs. (10), (16): q = (q_u, v - M1 q_u) with M2 = I; with v = v^d (+ v_c)
+    it is the configuration on the zero-dynamics manifold.
+
+    Parameters
+    ----------
+    M1 : array_like or casadi
+        (n,) numbers or a CasADi column.
+    q_u : float or casadi
+        The unactuated coordinate (or its rate, with v the output rates).
+    v : array_like or casadi
+        The outputs.
+
+    Returns
+    -------
+    numpy.ndarray or casadi
+        q, n + 1 components.
+    """
     if _symbolic(M1, q_u, v):
         M1 = ca.DM(M1) if isinstance(M1, (np.ndarray, list, tuple)) else M1
         return ca.vertcat(q_u, v - M1 * q_u)
@@ -128,7 +149,9 @@ def coordinates_from_outputs(M1, q_u, v):
 
 # ------------------------------------------------------------------ eq. (17)-(18)
 def correction(tau, y_i, dy_i, t_c):
-    """The stride-to-stride correction v_c of eq. (17)-(18) and its two derivatives.
+    """The stride-to-stride correction v_c and its two derivatives.
+
+    Implements eqs. (17), (18).
 
     Per output component, v_c is the fourth-order polynomial on [0, t_c] with
     v_c(0) = y_i, dv_c(0) = dy_i and v_c = dv_c = ddv_c = 0 at t_c; v_c = 0 for
@@ -171,7 +194,9 @@ def correction(tau, y_i, dy_i, t_c):
 
 # ------------------------------------------------------------------ eq. (12), (13), (23), (24)
 def decoupling_denominator(D11, D12, M1):
-    """D11 - D12 M1, eq. (24): the controller is singular where it vanishes.
+    """D11 - D12 M1: the controller is singular where it vanishes.
+
+    Implements eq. (24).
 
     Parameters
     ----------
@@ -193,8 +218,11 @@ def decoupling_denominator(D11, D12, M1):
 
 
 def unactuated_acceleration(D, H, M1, ddv):
-    """ddq_u = (-D12 ddv - H1) / (D11 - D12 M1), eq. (23) (the first row of eq. (1)
-    written in the outputs; with ddv = ddv^d + ddv_c it is the zero dynamics, eq. 19).
+    """ddq_u = (-D12 ddv - H1) / (D11 - D12 M1): the first row of eq. (1) written in
+    the outputs.
+
+    Implements eqs. (11), (23), and the first line of eq. (12); with ddv = ddv^d the
+    zero dynamics of eq. (14), with ddv = ddv^d + ddv_c that of eq. (19).
 
     Parameters
     ----------
@@ -214,7 +242,9 @@ def unactuated_acceleration(D, H, M1, ddv):
 
 
 def actuated_torque(D, H, M1, ddq_u, ddv):
-    """u = (D21 - D22 M1) ddq_u + D22 ddv + H2, eq. (12) (rows 2.. of eq. (1), B = [0; I]).
+    """u = (D21 - D22 M1) ddq_u + D22 ddv + H2: rows 2.. of eq. (1) with B = [0; I].
+
+    Implements eq. (12) (second line).
 
     Parameters
     ----------
@@ -236,8 +266,24 @@ def actuated_torque(D, H, M1, ddq_u, ddv):
 
 
 def output_acceleration(ddv_target, y, dy, gains: Gains):
-    """ddv = ddv_target - Kd/eps dy - Kp/eps^2 y, eq. (13) (with ddv_target =
-    ddv^d + ddv_c and y, dy the outputs of eq. (17))."""
+    """ddv = ddv_target - Kd/eps dy - Kp/eps^2 y, with ddv_target = ddv^d + ddv_c and
+    y, dy the outputs of eq. (17).
+
+    Implements eq. (13).
+
+    Parameters
+    ----------
+    ddv_target : array or casadi
+        The outputs' reference acceleration.
+    y, dy : array or casadi
+        Output error and its rate.
+    gains : Gains
+
+    Returns
+    -------
+    array or casadi
+        The commanded output acceleration.
+    """
     return ddv_target - gains.Kd / gains.eps * dy - gains.Kp / gains.eps**2 * y
 
 

@@ -86,6 +86,10 @@ class Reference(abc.ABC):
     def state(self, t) -> np.ndarray:
         """The reference state r(t) (numeric), shape (n_state,)."""
 
+    def states(self, t) -> np.ndarray:
+        """The reference state at every time of the array ``t``, shape (n_state, N)."""
+        return np.array([self.state(float(tk)) for tk in np.ravel(t)]).reshape(-1, self.n_state).T
+
     # ------------------------------------------------------------ derived
     def q(self, t):
         """q^d(t): shape (nq,) for a float ``t``, (nq, N) for an array."""

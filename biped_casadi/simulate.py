@@ -46,6 +46,7 @@ from .caching import cached
 from .numerics import as_vector, rk4_step
 from .output_law import SECTION
 from .results import Result, internal, json_safe
+from .validity import first_violation, impact_violation, node_violations
 
 __all__ = ["SimulationOptions", "StepRecord", "SimulationResult", "Simulator", "simulate",
            "simulator", "perturbed_initial_state", "STATUSES", "PAPER_PERTURBATION"]
@@ -332,43 +333,27 @@ class Simulator:
                                  ["X", "tau", "eta", "p"], ["z_sw", "dz_deta", "X_event"])
 
     # ---------------------------------------------------------------- checks
+    def _rows(self, D, X):
+        """The named rows of a diagnostics block, for :mod:`biped_casadi.validity`."""
+        R = self._R
+        return dict(finite=np.all(np.isfinite(D), 0) & np.all(np.isfinite(X), 0),
+                    in_range=D[R["INR"]], den=D[R["DEN"]], Fx=D[R["FX"]], Fz=D[R["FZ"]],
+                    xsw=D[R["XSW"]], zsw=D[R["ZSW"]], hip=D[R["HIP"]], torso=D[R["TORSO"]],
+                    u=D[self._U])
+
     def _first_failure(self, D, X, z_prev=None, den_sign=1.0):
         """Index and (status, message) of the first invalid node of a block, or None.
         D: diagnostics (rows x n), X: states (nx x n), z_prev: swing-foot heights at the
         previous nodes (a foot already below the ground cannot strike), den_sign: the
         sign of the decoupling denominator at the start of the step."""
-        o, R = self.options, self._R
-        n = D.shape[1]
-        bad = {}
-        finite = np.all(np.isfinite(D), 0) & np.all(np.isfinite(X), 0)
-        bad["diverged"] = ~finite
-        with np.errstate(invalid="ignore"):
-            bad["out_of_range"] = finite & (D[R["INR"]] < 0.5)
-            den = D[R["DEN"]] * den_sign
-            bad["singular"] = finite & (den <= o.singular_tolerance * self._den_scale)
-            bad["fell"] = finite & ((D[R["HIP"]] < self.min_hip_height) |
-                                    (np.abs(D[R["TORSO"]]) > o.max_torso_angle))
-            below = D[R["ZSW"]] < -o.ground_tolerance
-            under = np.zeros(n, bool) if z_prev is None else np.asarray(z_prev) < 0
-            if self.model.scuffing_ignored:
-                # legs without knees: the swing foot passing below the ground is the
-                # model's idealisation (scuffing ignored); only a strike counts
-                bad["scuffed"] = np.zeros(n, bool)
-            else:
-                bad["scuffed"] = finite & below & ((D[R["XSW"]] <= 0) | under)
-            bad["negative_normal_force"] = finite & ~(D[R["FZ"]] > o.min_normal_force)
-            bad["slipped"] = finite & (np.abs(D[R["FX"]]) > o.mu * D[R["FZ"]])
-            bad["torque_limit"] = finite & (np.max(np.abs(D[self._U]), axis=0)
-                                            > self.torque_limit)
-        first, which = n, None
-        for k, mask in bad.items():          # dict order = priority at the same node
-            if mask.any():
-                i = int(np.argmax(mask))
-                if i < first:
-                    first, which = i, k
-        if which is None:
+        masks = node_violations(self._rows(D, X), self.options, self.torque_limit,
+                                self._den_scale, den_sign, z_prev,
+                                min_hip_height=self.min_hip_height,
+                                scuffing_ignored=self.model.scuffing_ignored)
+        first, which = first_violation(masks)
+        if which == "":
             return None
-        return first, which, self._failure_message(which, D[:, first])
+        return int(first), str(which), self._failure_message(str(which), D[:, int(first)])
 
     def _failure_message(self, which, d):
         o, R = self.options, self._R
@@ -393,18 +378,19 @@ class Simulator:
     def _impact_failure(self, F, dq_plus, q_plus, v_old):
         """Status and message when the impact itself is invalid, else None."""
         o = self.options
-        if not np.all(np.isfinite(np.r_[q_plus, dq_plus, F])):
-            return "diverged", "the impact map is not finite"
-        if not F[1] > 0:
-            return "negative_normal_force", f"impact impulse has normal component {F[1]:.4g} N s"
-        if abs(F[0]) > o.mu * F[1]:
-            return "slipped", (f"impact impulse outside the friction cone: |F_x| / F_z = "
-                               f"{abs(F[0]) / F[1]:.4f} > mu = {o.mu}")
-        if not v_old[1] > o.min_liftoff_speed:
-            return "scuffed", (f"the old stance foot does not lift off after the impact "
-                               f"(vertical velocity {v_old[1]:.4g} m/s, needs more than "
-                               f"{o.min_liftoff_speed:g})")
-        return None
+        finite = bool(np.all(np.isfinite(np.r_[q_plus, dq_plus, F])))
+        which = str(impact_violation(F, v_old[1], finite, o))
+        if not which:
+            return None
+        return which, {
+            "diverged": "the impact map is not finite",
+            "negative_normal_force": f"impact impulse has normal component {F[1]:.4g} N s",
+            "slipped": (f"impact impulse outside the friction cone: |F_x| / F_z = "
+                        f"{abs(F[0]) / F[1]:.4f} > mu = {o.mu}"),
+            "scuffed": (f"the old stance foot does not lift off after the impact "
+                        f"(vertical velocity {v_old[1]:.4g} m/s, needs more than "
+                        f"{o.min_liftoff_speed:g})"),
+        }[which]
 
     # ------------------------------------------------------------------ run
     def run(self, q0, dq0, steps: int | None = None) -> SimulationResult:

@@ -147,6 +147,11 @@ class Gait(Reference):
         """The reference state r(t) = (q_u^d(t), dq_u^d(t))."""
         return self.state_at(t)
 
+    def states(self, t) -> np.ndarray:
+        """r at every time of ``t``: (2, N)."""
+        q, dq, _ = self.evaluate(np.atleast_1d(np.asarray(t, dtype=float)))
+        return np.vstack([q[0], dq[0]])
+
     # ---------------------------------------------------------------- figures
     @property
     def step_length(self) -> float:
@@ -243,7 +248,7 @@ class Gait(Reference):
             "swing-foot clearance": -c["min_clearance_margin"],
             "strike velocity": c["strike_velocity"] + o.min_strike_speed,
             "lift-off velocity": o.min_liftoff_speed - c["liftoff_velocity"],
-            "impact impulse cone": max(-F[1], abs(F[0]) - o.mu * F[1]),
+            "impact impulse cone": max(-F[1], abs(F[0]) - o.impulse_mu * F[1]),
         }
         if self.model.has_knees:
             amounts["stance knee (hyperextension)"] = c["max_stance_knee"] - o.stance_knee_max

@@ -20,6 +20,9 @@ class GaitOptions:
     step_length_bounds: bounds on the step length chosen by the optimiser, m.
     step_time_bounds: bounds on the step duration T, s.
     mu: friction coefficient for the stance foot and the impact impulse.
+    impact_mu: a separate (design) bound on the impact impulse ratio |F_x| / F_z, or None
+        for ``mu``: a gait whose nominal impulse sits well inside the cone leaves room for
+        the impact to move under perturbations.
     torque_limit: |u_i| bound, N m; None (the default): the robot's own (its
         description's ``torque_limit``; RABBIT: 150 N m), filled in by :meth:`for_model`
         when a gait is solved.
@@ -53,6 +56,7 @@ class GaitOptions:
     step_length_bounds: tuple = (0.2, 0.8)
     step_time_bounds: tuple = (0.2, 1.5)
     mu: float = 0.6
+    impact_mu: float | None = None
     torque_limit: float | None = None
     min_normal_force: float = 0.0
     clearance: float = 0.03
@@ -85,6 +89,8 @@ class GaitOptions:
             pos(n)
         if self.torque_limit is not None:
             pos("torque_limit")
+        if self.impact_mu is not None:
+            pos("impact_mu")
         for n in ("min_normal_force", "clearance", "min_liftoff_speed", "min_strike_speed"):
             nonneg(n)
         for n in ("step_length_bounds", "step_time_bounds"):
@@ -109,6 +115,8 @@ class GaitOptions:
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
+        if d["impact_mu"] is None:        # unset: files and cache keys as before the option
+            del d["impact_mu"]
         d["step_length_bounds"] = list(self.step_length_bounds)
         d["step_time_bounds"] = list(self.step_time_bounds)
         return d
@@ -124,6 +132,11 @@ class GaitOptions:
             if n in d:
                 d[n] = tuple(d[n])
         return cls(**d)
+
+    @property
+    def impulse_mu(self) -> float:
+        """The bound on the impact impulse ratio: ``impact_mu``, else ``mu``."""
+        return self.mu if self.impact_mu is None else self.impact_mu
 
     def replace(self, **changes) -> "GaitOptions":
         return dataclasses.replace(self, **changes)

@@ -160,7 +160,7 @@ def _boundary_function(model, opts: GaitOptions):
     q_plus, dq_plus, F_imp, _, v_old = model.impact_full(q_minus, dq_minus)
     x_end, z_end = model.swing_foot(q_minus)
     _, dz_end = model.swing_foot_velocity(q_minus, dq_minus)
-    mu, inf = opts.mu, np.inf
+    mu, inf = opts.impulse_mu, np.inf          # the impulse's own bound (default mu)
     families = [
         ("periodicity (q)", q_plus - ca.vertcat(x0[0], qa0), 0, 0),
         ("periodicity (dq)", dq_plus - ca.vertcat(x0[1], dqa0), 0, 0),
