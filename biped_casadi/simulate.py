@@ -162,7 +162,8 @@ class SimulationResult(Result):
     followed by the post-impact node at the same t), left out of ``to_dict()``: t, tau,
     step (index of the step the node belongs to), q, dq (N x nq), u, y, dy (N x nu), Fx,
     Fz (stance reaction), denominator (controller singularity measure), stance_x (world
-    x of the stance foot).  Torques and reactions at the pre-impact node are the
+    x of the stance foot).  ``failed_step``: the index of the step where the run failed
+    (None when it did not).  Torques and reactions at the pre-impact node are the
     single-support values.
     """
     status: str
@@ -188,6 +189,7 @@ class SimulationResult(Result):
     Fz: np.ndarray = internal()
     denominator: np.ndarray = internal()
     stance_x: np.ndarray = internal()
+    failed_step: int | None = None
 
     SUCCESS = ("ok",)
 
@@ -432,9 +434,11 @@ class Simulator:
         status, message, t_fail = failure if failure is not None else ("ok", "", math.nan)
         if status != "ok" and not message.startswith("step"):
             message = f"step {len(records)}: {message}"
-        return log.result(status, message, self.controller.describe(), self.options, records,
-                          t_fail, dict(T=self.T, qu_T=self._ref_T[0], dqu_T=self._ref_T[1]),
-                          self._U, self._R)
+        res = log.result(status, message, self.controller.describe(), self.options, records,
+                         t_fail, dict(T=self.T, qu_T=self._ref_T[0], dqu_T=self._ref_T[1]),
+                         self._U, self._R)
+        res.failed_step = k if failure is not None else None
+        return res
 
     def _single_support(self, k, q, dq, walk, log):
         """Integrate step ``k`` from its start to the swing foot's strike.  Returns
