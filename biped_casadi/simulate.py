@@ -121,6 +121,22 @@ class SimulationOptions:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    def fall_height(self, model) -> float:
+        """The hip height below which ``model`` has fallen, m: ``min_hip_height``, or
+        0.5625 leg length when None (0.45 m for RABBIT).
+
+        Parameters
+        ----------
+        model : BipedModel
+
+        Returns
+        -------
+        float
+        """
+        if self.min_hip_height is not None:
+            return float(self.min_hip_height)
+        return float(0.5625 * model.description.leg_length)
+
 
 @dataclass
 class StepRecord:
@@ -285,8 +301,7 @@ class Simulator:
         o = self.options
         self.torque_limit = float(o.torque_limit if o.torque_limit is not None
                                   else self.model.params.torque_limit)
-        self.min_hip_height = float(o.min_hip_height if o.min_hip_height is not None
-                                    else 0.5625 * self.model.description.leg_length)
+        self.min_hip_height = o.fall_height(self.model)
         self._build()
         ref = self.controller.singularity()
         self._den_scale = max(abs(ref.min_value), abs(ref.max_value))
