@@ -12,12 +12,15 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
 __all__ = ["save_figure", "gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot",
            "conjecture_plot", "stable_domains_plot", "m1_plane_plot", "unactuated_error_plot",
-           "swing_torques_plot", "walking_animation", "run_label"]
+           "swing_torques_plot", "walking_animation", "run_label", "basin_plot",
+           "OUTCOME_COLOURS"]
 
 #: colours of the stance leg, the swing leg and the torso in every stick figure
 STANCE, SWING, TORSO = "tab:blue", "tab:red", "0.25"
@@ -456,3 +459,69 @@ def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = N
     anim = FuncAnimation(fig, draw, frames=len(frames), blit=True)
     anim.save(str(path), writer=PillowWriter(fps=fps))
     return str(path)
+
+
+# ------------------------------------------------------------------ basins
+#: colour of every outcome of a walk (basin pictures)
+OUTCOME_COLOURS = {
+    "converged": ("#2ca02c", "converged"),
+    "walked": ("#b8e6a0", "walked, not converged"),
+    "slipped": ("#d62728", "slipped (friction cone or impulse)"),
+    "negative_normal_force": ("#ff7f0e", "lost contact (F_z <= 0)"),
+    "scuffed": ("#8c564b", "scuffed / no lift-off"),
+    "torque_limit": ("#9467bd", "torque limit"),
+    "fell": ("#222222", "fell"),
+    "singular": ("#7f7f7f", "controller singular"),
+    "no_impact": ("#1f77b4", "no impact (stalled)"),
+    "out_of_range": ("#e377c2", "left the controller's range"),
+    "diverged": ("#e377c2", "diverged"),
+}
+
+
+def basin_plot(results, title: str | None = None) -> Figure:
+    """Basins of attraction on the section of the zero dynamics, side by side.
+
+    Parameters
+    ----------
+    results : BasinResult or list of them
+        From :func:`analysis.robustness.basin` (e.g. a time-varying design and virtual
+        constraints on the same gait and grid).
+    title : str, optional
+
+    Returns
+    -------
+    Figure
+        One panel per result: every cell coloured by its outcome after the result's
+        number of steps (converged, walked, or the first failure's cause); the fixed point
+        marked.
+    """
+    results = results if isinstance(results, (list, tuple)) else [results]
+    names = list(OUTCOME_COLOURS)
+    cmap = ListedColormap([OUTCOME_COLOURS[k][0] for k in names])
+    fig = _figure(figsize=(5.2 * len(results) + 2.2, 4.8))
+    axes = np.atleast_1d(fig.subplots(1, len(results), sharey=True))
+    present = set()
+    for ax, r in zip(axes, results):
+        codes = np.vectorize(lambda o: names.index(o) if o in names else names.index("diverged"))(
+            r.outcome.astype(str))
+        present |= set(np.unique(r.outcome.astype(str)))
+        da, db = np.diff(r.q_u[:2])[0] / 2, np.diff(r.dq_u[:2])[0] / 2
+        ax.imshow(codes, origin="lower", aspect="auto", cmap=cmap, vmin=-0.5,
+                  vmax=len(names) - 0.5, interpolation="nearest",
+                  extent=[r.dq_u[0] - db, r.dq_u[-1] + db, r.q_u[0] - da, r.q_u[-1] + da])
+        ax.plot(0, 0, "w*", ms=12, mec="k")
+        label = ("virtual constraints" if r.controller == "vc" else
+                 "time-varying, M1 = [" + ", ".join(f"{v:.3g}" for v in r.design["M1"])
+                 + f"], v_c rejoins at {r.design['rejoin']:g} T")
+        ax.set_title(f"{label}\n{100 * r.converged_fraction:.1f} % of cells converge in "
+                     f"{r.steps} steps", fontsize=9)
+        ax.set_xlabel(r"$\dot q_u - \dot q_u^*$ at the section [rad/s]")
+    axes[0].set_ylabel(r"$q_u - q_u^*$ at the section [rad]")
+    handles = [Patch(color=OUTCOME_COLOURS[k][0], label=OUTCOME_COLOURS[k][1])
+               for k in names if k in present]
+    handles.append(Line2D([], [], marker="*", color="w", mec="k", ms=10, ls="",
+                          label="fixed point x*"))
+    fig.legend(handles=handles, loc="center right", fontsize=8, frameon=False)
+    fig.suptitle(title or "Basins of attraction on the Poincaré section (tau = 0.75 T)")
+    fig.tight_layout(rect=(0, 0, 1 - 2.0 / (5.2 * len(results) + 2.2), 1))
+    return fig

@@ -123,6 +123,7 @@ class VirtualConstraintMap:
         den = ca.mtimes(D1, Q1)
         ddth = -(ca.mtimes(D1, Q2) * w**2 + H1) / den
         self.curve = ca.Function("hzd_curve", [th], [Q, Q1, den], ["theta"], ["q", "dq_dtheta", "den"])
+        self.curve_second = ca.Function("hzd_curve_second", [th], [Q2], ["theta"], ["d2q_dtheta2"])
         self.zero_dynamics = ca.Function("hzd_dw_dtheta", [th, w], [ddth / w], ["theta", "w"], ["dw"])
         xs, zs = m.swing_foot(Q)
         _, dzs = m.swing_foot_velocity(Q, Q1)

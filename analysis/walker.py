@@ -40,7 +40,10 @@ from biped_casadi.output_law import (SECTION, actuated_torque, check_M1,
 from biped_casadi.results import Result, internal
 from biped_casadi.validity import first_violation, impact_violation, node_violations
 
-__all__ = ["ZeroDynamicsWalker", "WalkBatch", "zero_dynamics_walker"]
+from .virtual_constraints import vc_map
+
+__all__ = ["ZeroDynamicsWalker", "VirtualConstraintWalker", "WalkBatch",
+           "zero_dynamics_walker", "virtual_constraint_walker"]
 
 # rows of the node diagnostics after the nu torques
 _ROWS = ("Fx", "Fz", "xsw", "zsw", "dzsw", "hip", "torso", "den")
@@ -516,3 +519,174 @@ def zero_dynamics_walker(model, gait, options: SimulationOptions | None = None,
                          rk4_steps: int = 400, jit: bool = False) -> ZeroDynamicsWalker:
     """The :class:`ZeroDynamicsWalker` of a gait and options, built once (memoised)."""
     return ZeroDynamicsWalker(model, gait, options, rk4_steps, jit)
+
+
+class VirtualConstraintWalker:
+    """Virtual constraints on their hybrid zero dynamics, batched, integrated in the phase.
+
+    On the constraint surface the configuration is a function of the phase theta alone,
+    q = Q(theta), and the state is (theta, w = dtheta/dt); the swing foot strikes at the
+    fixed phase theta^- (where z_sw(Q(theta)) = 0), so a step is an integration in theta
+    from the start phase to theta^- (RK4 on w and on the time, dt/dtheta = 1/w), with the
+    ground reaction and the torques of the exact zero dynamics checked at every node
+    (:mod:`biped_casadi.validity`), then the impact map.  Virtual constraints are impact
+    invariant: the state lands on the surface again, at theta^+ = c q^+.
+
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+    options : SimulationOptions, optional
+        Validity thresholds.
+    nodes : int
+        RK4 nodes from the start phase of a step to its impact.
+    jit : bool
+        Compile the step to C.
+    """
+
+    def __init__(self, model, gait, options: SimulationOptions | None = None, nodes: int = 200,
+                 jit: bool = False):
+        require_same_robot(model, gait)
+        self._jit = dict(jit=True, compiler="shell", jit_options=dict(flags=["-O2"])) if jit else {}
+        self.threads = max(1, min(os.cpu_count() or 1, 8))
+        self.options = options if options is not None else SimulationOptions()
+        self.model, self.gait = model, gait
+        self.nu = model.nu
+        self.vmap = vc_map(model, gait)
+        self.nodes = nodes
+        o = self.options
+        self.torque_limit = float(o.torque_limit if o.torque_limit is not None
+                                  else model.params.torque_limit)
+        self.min_hip_height = o.fall_height(model)
+        self.ref_T = gait.state_at(gait.T)
+        self._build()
+        ths = np.linspace(self.vmap.theta_plus, self.vmap.theta_minus, 801)
+        self.den_scale = float(np.max(np.abs(np.array(self.vmap.curve.map(ths.size)(
+            ths[None, :])[2]))))
+
+    def _build(self):
+        m, vm = self.model, self.vmap
+        th, w, t, hs = ca.SX.sym("theta"), ca.SX.sym("w"), ca.SX.sym("t"), ca.SX.sym("h")
+        z = ca.vertcat(w, t)
+
+        def rhs(zv, c):
+            return ca.vertcat(vm.zero_dynamics(th + c * hs, zv[0]), 1 / zv[0])
+
+        zn = rk4_step(rhs, z, hs)
+        thn = th + hs
+        q, Q1, den = vm.curve(thn)
+        Q2 = vm.curve_second(thn)
+        wn = zn[0]
+        ddth = wn * vm.zero_dynamics(thn, wn)
+        dq = Q1 * wn
+        ddq = Q1 * ddth + Q2 * wn**2
+        D, H = m.D(q), m.H(q, dq)
+        u = (ca.mtimes(D, ddq) + H)[1:]
+        Fx, Fz = m.ground_reaction_acc(q, dq, ddq)
+        xs, zs = m.swing_foot(q)
+        _, dzs = m.swing_foot_velocity(q, dq)
+        diag = ca.vertcat(u, Fx, Fz, xs, zs, dzs, m.points(q)[1, m.hip_index],
+                          m.torso_angle(q), den)
+        node = ca.Function("vc_node", [z, th, hs], [ca.cse(zn), thn, ca.cse(diag)], self._jit)
+        self.start_node = node                   # with h = 0: the diagnostics of a state
+        acc = node.mapaccum("vc_nodes", self.nodes, [0, 1], [0, 1])
+        zc, thc, hc = ca.MX.sym("z", 2), ca.MX.sym("theta"), ca.MX.sym("h")
+        self.chunk = ca.Function("vc_step", [zc, thc, hc], list(acc(zc, thc, hc)))
+        qm, Q1m, _ = vm.curve(vm.theta_minus)
+        wm = ca.SX.sym("w_minus")
+        q_p, dq_p, F, _, v_old = m.impact_full(qm, Q1m * wm)
+        self.impact = ca.Function("vc_impact", [wm], [ca.mtimes(ca.DM(vm.vc.c).T, dq_p), F,
+                                                     v_old[1], Q1m[0] * wm])
+
+    @cached(maxsize=16)
+    def _mapped(self, name: str, n: int) -> ca.Function:
+        f = getattr(self, name)
+        return f.map(n, "thread", self.threads) if n >= 4 * self.threads and self.threads > 1 \
+            else f.map(n)
+
+    def section_states(self, x):
+        """(theta, w) on the surface with the given (q_u, dq_u) (n, 2): the phase whose
+        configuration has that q_u (Newton on the curve), w = dq_u / (dq_u/dtheta)."""
+        x = np.atleast_2d(np.asarray(x, float))
+        vm = self.vmap
+        th = np.full(len(x), vm.theta_s)
+        curve = vm.curve.map(len(x))
+        for _ in range(50):
+            Q, Q1, _ = (np.array(v) for v in curve(th[None, :]))
+            step = (Q[0] - x[:, 0]) / Q1[0]
+            th = th - step
+            if np.max(np.abs(step)) < 1e-14:
+                break
+        Q, Q1, _ = (np.array(v) for v in curve(th[None, :]))
+        return th, x[:, 1] / Q1[0]
+
+    def walk_from_section(self, x, steps: int = 10) -> WalkBatch:
+        """Walk from zero-dynamics states with the given (q_u, dq_u) (n, 2) for ``steps``
+        impacts (see :meth:`ZeroDynamicsWalker.walk_from_section`)."""
+        th, w = self.section_states(x)
+        return self.walk(th, w, steps)
+
+    def walk(self, theta, w, steps: int = 10) -> WalkBatch:
+        """Walk from phases ``theta`` with rates ``w`` (n,) for ``steps`` impacts."""
+        vm, nu, o = self.vmap, self.nu, self.options
+        theta, w = np.array(theta, float), np.array(w, float)
+        n = theta.size
+        run = _Runs(n, steps)
+        alive = np.ones(n, bool)
+        direction = np.sign(vm.theta_minus - vm.theta_plus)
+        for k in range(steps):
+            idx = np.flatnonzero(alive)
+            if idx.size == 0:
+                break
+            run.scenario_steps += idx.size
+            m_ = idx.size
+            hs = (vm.theta_minus - theta[idx]) / self.nodes
+            stalled = ~(w[idx] * direction > 0) | ~(hs * direction > 0)
+            z0 = np.vstack([w[idx], np.zeros(m_)])
+            _, _, D0 = (np.array(v) for v in self._mapped("start_node", m_)(
+                z0, theta[idx][None, :], np.zeros((1, m_))))
+            Z, TH, Dg = (np.array(v) for v in self._mapped("chunk", m_)(
+                z0, theta[idx][None, :], hs[None, :]))
+            Z = np.concatenate([z0[:, :, None], Z.reshape(2, m_, self.nodes)], axis=2)
+            Dg = np.concatenate([D0[:, :, None], Dg.reshape(-1, m_, self.nodes)], axis=2)
+            ws = Z[0]
+            rows = {name: Dg[nu + i] for i, name in enumerate(_ROWS)}
+            rows["u"] = Dg[:nu]
+            rows["finite"] = np.all(np.isfinite(Dg), axis=0) & np.all(np.isfinite(Z), axis=0)
+            masks = node_violations(rows, o, self.torque_limit, self.den_scale,
+                                    np.sign(rows["den"][:, :1]),
+                                    min_hip_height=self.min_hip_height,
+                                    scuffing_ignored=self.model.scuffing_ignored)
+            masks["no_impact"] = rows["finite"] & ~(ws * direction > 0)   # stalls, falls back
+            first, which = first_violation(masks)
+            run.track(idx, Dg, nu, mask=np.arange(self.nodes + 1)[None, :]
+                      < np.minimum(first + 1, self.nodes + 1)[:, None])
+            which = np.where(stalled & (which == ""), "no_impact", which)
+            bad = which != ""
+            run.fail(idx[bad], which[bad], k, alive)
+            ok = np.flatnonzero(~bad)
+            if ok.size == 0:
+                continue
+            gi = idx[ok]
+            wm, tm = ws[ok, -1], Z[1, ok, -1]
+            dz_dt = rows["dzsw"][ok, -1]
+            wp, F, vl, dqu = (np.array(v) for v in self._mapped("impact", ok.size)(wm[None, :]))
+            F, vl, wp = F.T, vl.ravel(), wp.ravel()
+            err = np.c_[np.full(ok.size, float(np.array(vm.curve(vm.theta_minus)[0])[0, 0])),
+                        dqu.ravel()] - self.ref_T[None, :]
+            run.record_impact(gi, k, err, tm, F)
+            imp = impact_violation(F, vl, np.isfinite(wp) & np.all(np.isfinite(F), axis=1), o)
+            imp = np.where((imp == "") & ~(dz_dt < 0), "scuffed", imp)
+            badi = imp != ""
+            run.fail(gi[badi], imp[badi], k, alive)
+            go = gi[~badi]
+            theta[go] = vm.theta_plus
+            w[go] = wp[~badi]
+        return run.batch(steps)
+
+
+@cached(maxsize=4)
+def virtual_constraint_walker(model, gait, options: SimulationOptions | None = None,
+                              nodes: int = 200, jit: bool = False) -> VirtualConstraintWalker:
+    """The :class:`VirtualConstraintWalker` of a gait (memoised)."""
+    return VirtualConstraintWalker(model, gait, options, nodes, jit)
