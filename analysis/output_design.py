@@ -8,10 +8,13 @@ q(T^d) = q^d(T^d) + M_T dq_u with M_T = [1, -M1]', and
     Z_sw(q(T^d)) ~ Z_sw(q^d(T^d)) + a dq_u + b dq_u^2,
     a = grad Z_sw . M_T,   b = 1/2 M_T' Hess Z_sw M_T           (exact, by AD).
 
-a = 0 is linear in M1 and b = 0 quadratic: given M1(2), M1(3), eliminating M1(1) with
-a = 0 leaves a quadratic in M1(4) whose two roots are the two solution groups
-(group 1: the root with +sqrt of the discriminant, group 2: with -sqrt; real where the
-discriminant is >= 0).
+a = 0 is linear in M1 and b = 0 quadratic: given the middle components M1(2) ..
+M1(nu - 1) (RABBIT: M1(2), M1(3)), eliminating M1(1) with a = 0 leaves a quadratic in
+the last component M1(nu) whose two roots are the two solution groups (group 1: the root
+with +sqrt of the discriminant, group 2: with -sqrt; real where the discriminant is
+>= 0).  With nu = 2 (the three-link biped) nothing is left free: a = b = 0 is a line
+meeting a conic, :func:`ab_solution_set` finds every solution (isolated points, none,
+or, when b vanishes identically on a = 0, the whole line).
 """
 from __future__ import annotations
 
@@ -29,7 +32,9 @@ from biped_casadi.results import Result, internal
 from .poincare import poincare_eigenvalues, poincare_map
 
 __all__ = ["swing_height_at_Td", "TaylorAB", "taylor_ab", "solve_ab", "ABSolution",
-           "conjecture_figures", "optimize_m1", "M1Result", "domain_grid"]
+           "conjecture_figures", "optimize_m1", "M1Result", "domain_grid",
+           "isolated_ab_solutions", "ab_solution_set", "ABSet", "ab_groups",
+           "coarse_grid_size"]
 
 
 # ------------------------------------------------------------------ eq. (25)-(26)
@@ -47,8 +52,8 @@ def swing_height_at_Td(model, gait, M1s, dqu: float = 1e-2) -> np.ndarray:
 @dataclass
 class TaylorAB:
     """Gradient and Hessian of z_sw at q^d(T^d): a(M1), b(M1) of eq. (27)."""
-    grad: np.ndarray   # (5,)
-    hess: np.ndarray   # (5, 5)
+    grad: np.ndarray   # (nq,)
+    hess: np.ndarray   # (nq, nq)
     z0: float          # Z_sw(q^d(T^d)), ~0 for a consistent gait
 
     @property
@@ -83,30 +88,60 @@ def taylor_ab(model, gait) -> TaylorAB:
 
 @dataclass
 class ABSolution:
-    """Both solution groups of a = b = 0 for given M1(2), M1(3) (arrays broadcast)."""
-    m2: np.ndarray
-    m3: np.ndarray
+    """Both solution groups of a = b = 0 for given middle components M1(2) ..
+    M1(nu - 1) (``free``, arrays broadcast; empty for nu = 2)."""
+    free: tuple
     discriminant: np.ndarray
-    group1: np.ndarray      # (..., 4) M1, NaN where the roots are complex
+    group1: np.ndarray      # (..., nu) M1, NaN where the roots are complex
     group2: np.ndarray
 
+    @property
+    def m2(self) -> np.ndarray:
+        """M1(2) (RABBIT's first domain coordinate, Fig. 4)."""
+        return self.free[0]
 
-def solve_ab(tay: TaylorAB, m2, m3) -> ABSolution:
-    """Closed-form solutions of a = b = 0 for M1(1), M1(4) given M1(2) = m2, M1(3) = m3.
+    @property
+    def m3(self) -> np.ndarray:
+        """M1(3) (RABBIT's second domain coordinate, Fig. 4)."""
+        return self.free[1]
 
-    a = g0 - g1 M1(1) - g2 m2 - g3 m3 - g4 M1(4) = 0 gives M1(1) = c0 + c4 M1(4); then
-    M_T = p - M1(4) r with p = (1, -c0, -m2, -m3, 0), r = (0, c4, 0, 0, 1), and
-    b = 0 <=> (r'Hr) M1(4)^2 - 2 (r'Hp) M1(4) + p'Hp = 0.
+
+def solve_ab(tay: TaylorAB, *free) -> ABSolution:
+    """Closed-form solutions of a = b = 0 for M1(1) and M1(nu) given the middle
+    components M1(2) .. M1(nu - 1) = ``free`` (RABBIT: ``solve_ab(tay, m2, m3)``; for
+    nu = 2 see :func:`ab_solution_set`, which also handles the degenerate cases).
+
+    a = g0 - g1 M1(1) - sum_j g_j M1(j) - g_nu M1(nu) = 0 gives M1(1) = c0 + c_nu M1(nu);
+    then M_T = p - M1(nu) r with p = (1, -c0, -free, 0), r = (0, c_nu, 0, ..., 0, 1), and
+    b = 0 <=> (r'Hr) M1(nu)^2 - 2 (r'Hp) M1(nu) + p'Hp = 0.
+
+    Parameters
+    ----------
+    tay : TaylorAB
+    *free : array_like
+        nu - 2 arrays (broadcast together).
+
+    Returns
+    -------
+    ABSolution
     """
     g, H = tay.grad, tay.hess
+    nu = g.size - 1
+    if len(free) != nu - 2:
+        raise ValueError(f"free: a = b = 0 leaves {nu - 2} components of M1 free "
+                         f"(M1(2) .. M1({nu - 1})), got {len(free)} values")
     if abs(g[1]) < 1e-12:
         raise ValueError("dZ_sw/dq2 vanishes at q^d(T): M1(1) cannot be eliminated from a = 0")
-    m2, m3 = np.broadcast_arrays(np.asarray(m2, float), np.asarray(m3, float))
-    c0 = (g[0] - g[2] * m2 - g[3] * m3) / g[1]
-    c4 = -g[4] / g[1]
-    zeros, ones = np.zeros_like(m2), np.ones_like(m2)
-    p = np.stack([ones, -c0, -m2, -m3, zeros], axis=-1)
-    r = np.array([0.0, c4, 0.0, 0.0, 1.0])
+    free = np.broadcast_arrays(*(np.asarray(m, float) for m in free)) if free else []
+    num = g[0]
+    for j, m in enumerate(free):
+        num = num - g[j + 2] * m
+    c0 = np.asarray(num / g[1], float)
+    c_last = -g[nu] / g[1]
+    zeros, ones = np.zeros_like(c0), np.ones_like(c0)
+    p = np.stack([ones, -c0, *(-m for m in free), zeros], axis=-1)
+    r = np.zeros(nu + 1)
+    r[1], r[nu] = c_last, 1.0
     A2 = r @ H @ r
     A1 = -2 * (p @ H @ r)
     A0 = np.einsum("...i,ij,...j->...", p, H, p)
@@ -114,16 +149,208 @@ def solve_ab(tay: TaylorAB, m2, m3) -> ABSolution:
     sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
     out = []
     for sign in (+1, -1):
-        m4 = (-A1 + sign * sq) / (2 * A2)
-        m1 = c0 + c4 * m4
-        out.append(np.stack([m1, m2, m3, m4], axis=-1))
-    return ABSolution(m2, m3, disc, out[0], out[1])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            m_last = (-A1 + sign * sq) / (2 * A2)
+        m1 = c0 + c_last * m_last
+        out.append(np.stack([m1, *free, m_last], axis=-1))
+    return ABSolution(tuple(free), disc, out[0], out[1])
+
+
+@dataclass
+class ABSet:
+    """The solution set of a = b = 0 for a robot with nu = 2 (no component left free).
+
+    ``kind`` is 'points' (``points``: (k, 2), k = 1 or 2, group 1 first), 'line' (b
+    vanishes identically on the line a = 0: every M1 on it solves a = b = 0; the line is
+    M1 = ``base`` + t ``direction``) or 'none'.  ``message`` says which, in words.
+    """
+    kind: str
+    points: np.ndarray
+    base: np.ndarray
+    direction: np.ndarray
+    b_coefficients: tuple      # b along the line a = 0: (t^2, t, 1) coefficients
+    message: str = ""
+
+    def to_dict(self) -> dict:
+        """The fields in JSON types."""
+        return dict(kind=self.kind, points=self.points.tolist(), base=self.base.tolist(),
+                    direction=self.direction.tolist(),
+                    b_coefficients=[float(c) for c in self.b_coefficients],
+                    message=self.message)
+
+    def on_set(self, M1, tol: float = 1e-6) -> int | None:
+        """Whether M1 solves a = b = 0.
+
+        Parameters
+        ----------
+        M1 : array_like
+            Two numbers.
+        tol : float
+            Relative tolerance.
+
+        Returns
+        -------
+        int or None
+            1 or 2 (which point, or 1 on the line), else None.
+        """
+        M1 = np.asarray(M1, float)
+        scale = tol * max(1.0, float(np.max(np.abs(M1))))
+        if self.kind == "line":
+            r = M1 - self.base
+            off = r - (r @ self.direction) * self.direction
+            return 1 if np.max(np.abs(off)) <= scale else None
+        for k, p in enumerate(self.points, start=1):
+            if np.max(np.abs(p - M1)) <= scale:
+                return k
+        return None
+
+    def sample(self, n: int, lo: float = -10.0, hi: float = 10.0) -> np.ndarray:
+        """Points of the solution set.
+
+        Parameters
+        ----------
+        n : int
+            Points along a line.
+        lo, hi : float
+            Range of M1(2) along the line.
+
+        Returns
+        -------
+        numpy.ndarray
+            (n, 2) points of the line, or the isolated points when the set is not a line.
+        """
+        if self.kind != "line":
+            return self.points.copy()
+        m2 = np.linspace(lo, hi, n)
+        if abs(self.direction[1]) > 1e-12:
+            t = (m2 - self.base[1]) / self.direction[1]
+        else:
+            t = m2
+        return self.base[None, :] + t[:, None] * self.direction[None, :]
+
+
+def _line_text(g) -> str:
+    """'M1(1) + 1 M1(2) = 2': the line a = g0 - g1 M1(1) - g2 M1(2) = 0, normalised."""
+    if abs(g[1]) >= abs(g[2]):
+        return f"M1(1) {'+' if g[2] / g[1] >= 0 else '-'} {abs(g[2] / g[1]):.6g} M1(2) = {g[0] / g[1]:.6g}"
+    return f"{g[1] / g[2]:.6g} M1(1) + M1(2) = {g[0] / g[2]:.6g}"
+
+
+def ab_solution_set(tay: TaylorAB, tol: float = 1e-9) -> ABSet:
+    """Every real solution of a = b = 0 when nu = 2 (the three-link biped).
+
+    a = 0 is a line in the (M1(1), M1(2)) plane, M1 = base + t d, and along it b is a
+    quadratic in t; its real roots are the isolated solutions (two at most: group 1
+    with +sqrt of the discriminant, group 2 with -sqrt).  When the quadratic vanishes
+    identically (coefficients below ``tol`` of their scale) the whole line solves
+    a = b = 0.  That is the three-link biped's case: the swing foot's height does not
+    depend on the torso, and moving along the line keeps both legs symmetric, so Z_sw
+    stays 0 to every order.
+
+    Parameters
+    ----------
+    tay : TaylorAB
+        Of a robot with nu = 2.
+    tol : float
+        Relative tolerance of the degeneracy tests.
+
+    Returns
+    -------
+    ABSet
+    """
+    g, H = tay.grad, tay.hess
+    if g.size != 3:
+        raise ValueError(f"ab_solution_set is for nu = 2 (this robot has nu = {g.size - 1}; "
+                         f"use solve_ab with the free components)")
+    empty = np.zeros((0, 2))
+    # a = g0 - g1 M1(1) - g2 M1(2) = 0
+    if max(abs(g[1]), abs(g[2])) <= tol * max(1.0, abs(g[0])):
+        return ABSet("none", empty, np.zeros(2), np.zeros(2), (),
+                     "a does not depend on M1 (dZ_sw/dq2 = dZ_sw/dq3 = 0 at q^d(T)): "
+                     "a = b = 0 has no isolated solution")
+    if abs(g[1]) >= abs(g[2]):
+        base, d = np.array([g[0] / g[1], 0.0]), np.array([-g[2] / g[1], 1.0])
+    else:
+        base, d = np.array([0.0, g[0] / g[2]]), np.array([1.0, -g[1] / g[2]])
+    P, R = np.r_[1.0, -base], np.r_[0.0, -d]          # M_T(t) = P + t R
+    c2, c1, c0 = 0.5 * R @ H @ R, P @ H @ R, 0.5 * P @ H @ P
+    scale = max(float(np.max(np.abs(H))), 1e-300) * (P @ P + R @ R)
+    small = [abs(c) <= tol * scale for c in (c2, c1, c0)]
+    n = np.linalg.norm(d)
+    d_unit, coeffs = d / n, (c2 / n**2, c1 / n, c0)    # per unit length along the line
+    if all(small):
+        return ABSet("line", empty, base, d_unit, coeffs,
+                     f"b vanishes identically on the line a = 0, {_line_text(g)}: every "
+                     f"M1 on it solves a = b = 0")
+    if small[0] and small[1]:
+        return ABSet("none", empty, base, d_unit, coeffs,
+                     f"b = {c0:.3g} is constant and non-zero on the line a = 0: "
+                     "a = b = 0 has no solution")
+    if small[0]:
+        roots = [-c0 / c1]
+    else:
+        disc = c1**2 - 4 * c2 * c0
+        if disc < -tol * max(c1**2, abs(4 * c2 * c0)):
+            return ABSet("none", empty, base, d_unit, coeffs,
+                         f"b = 0 has no real root on the line a = 0 (discriminant "
+                         f"{disc:.3g}): a = b = 0 has no solution")
+        sq = math.sqrt(max(disc, 0.0))
+        roots = [(-c1 + sign * sq) / (2 * c2) for sign in (+1, -1)]
+        if sq == 0.0:
+            roots = roots[:1]
+    pts = np.array([base + t * d for t in roots])
+    return ABSet("points", pts, base, d_unit, coeffs,
+                 f"{len(pts)} isolated solution(s) of a = b = 0: "
+                 + "; ".join(f"group {k}: M1 = [{p[0]:.6g}, {p[1]:.6g}]"
+                             for k, p in enumerate(pts, start=1)))
+
+
+def isolated_ab_solutions(tay: TaylorAB) -> np.ndarray:
+    """The isolated solutions of a = b = 0 when nu = 2.
+
+    Parameters
+    ----------
+    tay : TaylorAB
+
+    Returns
+    -------
+    numpy.ndarray
+        (k, 2), k = 0, 1 or 2 (empty when there are none, or when a whole line solves
+        it: see :func:`ab_solution_set`).
+    """
+    return ab_solution_set(tay).points
+
+
+def ab_groups(model, gait) -> tuple[list, str]:
+    """The solution groups of a = b = 0 that :func:`optimize_m1` accepts for a robot and
+    gait, and what they are in words.
+
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+
+    Returns
+    -------
+    tuple
+        (groups, explanation): [1, 2] when nu >= 3; for nu = 2, [1] when the solutions
+        form a line, [1] or [1, 2] for isolated points, [] when there is none.
+    """
+    if model.nu >= 3:
+        return [1, 2], "two groups (the roots of b = 0 on a = 0)"
+    ab = ab_solution_set(taylor_ab(model, gait))
+    if ab.kind == "line":
+        return [1], f"one line of solutions, group 1 ({ab.message})"
+    return list(range(1, len(ab.points) + 1)), ab.message
 
 
 def group_of(tay: TaylorAB, M1, tol: float = 1e-6):
-    """1 or 2 when M1 satisfies a = b = 0 (which root), else None."""
+    """1 or 2 when M1 satisfies a = b = 0 (which root; 1 anywhere on the line when the
+    solutions of a robot with nu = 2 form a line), else None."""
     M1 = np.asarray(M1, float)
-    s = solve_ab(tay, M1[1], M1[2])
+    if M1.size == 2:
+        return ab_solution_set(tay).on_set(M1, tol)
+    s = solve_ab(tay, *M1[1:-1])
     for k, sol in ((1, s.group1), (2, s.group2)):
         if np.all(np.isfinite(sol)) and np.max(np.abs(sol - M1)) <= tol * max(1, np.max(np.abs(M1))):
             return k
@@ -148,10 +375,51 @@ def conjecture_figures(zsw: np.ndarray, max_abs: np.ndarray, status: np.ndarray)
 
 
 def domain_grid(tay: TaylorAB, n: int = 81, lo: float = -10.0, hi: float = 10.0):
-    """The (M1(2), M1(3)) grid of Fig. 4 and both groups' M1 on it."""
+    """The grid of the free components and both groups' M1 on it.
+
+    Parameters
+    ----------
+    tay : TaylorAB
+        Of a robot with nu >= 3.
+    n : int
+        Points per free component.
+    lo, hi : float
+        Range of each free component.
+
+    Returns
+    -------
+    ABSolution
+        On the (n, ..., n) meshgrid ('ij') of the nu - 2 middle components (RABBIT: the
+        (M1(2), M1(3)) grid of Fig. 4).
+    """
+    if tay.grad.size < 4:
+        raise ValueError("domain_grid needs nu >= 3 (a free component); for nu = 2 see "
+                         "ab_solution_set")
     v = np.linspace(lo, hi, n)
-    m2, m3 = np.meshgrid(v, v, indexing="ij")
-    return solve_ab(tay, m2, m3)
+    free = np.meshgrid(*([v] * (tay.grad.size - 3)), indexing="ij")
+    return solve_ab(tay, *free)
+
+
+def coarse_grid_size(nu: int, budget: int = 6561) -> int:
+    """Points per component of the coarse grid of a free M1.
+
+    Parameters
+    ----------
+    nu : int
+        Components of M1.
+    budget : int
+        Most grid points.
+
+    Returns
+    -------
+    int
+        The largest n with n^nu <= ``budget`` (9 for RABBIT, the paper's grid; 81 for
+        nu = 2), at least 2.
+    """
+    n = max(2, int(round(budget ** (1.0 / nu))))
+    while n ** nu > budget and n > 2:
+        n -= 1
+    return n
 
 
 # ------------------------------------------------------------------ the M1 NLP
@@ -182,23 +450,39 @@ class M1Result(Result):
     SUCCESS = ("stable",)
 
 
+#: which swing-height conditions constrain the M1 NLP
+_CONSTRAINTS = ("none", "ab", "a")
+
+
+def _conditions(tay, M1, constraints: str) -> list:
+    """a (and b) of eq. (27) as CasADi expressions of M1, for ``constraints``."""
+    if constraints == "none":
+        return []
+    MT = ca.vertcat(1, -M1)
+    a = ca.dot(ca.DM(tay.grad), MT)
+    if constraints == "a":
+        return [a]
+    return [a, 0.5 * ca.mtimes([MT.T, ca.DM(tay.hess), MT])]
+
+
 @cached(maxsize=8)
-def _epigraph_nlp(pm, tay, constrained: bool, den_margin: float):
+def _epigraph_nlp(pm, tay, constraints: str, den_margin: float):
     """min rho over (M1, rho) with the Jury conditions of a 2x2 A^z scaled by rho:
     rho^2 -+ det >= 0, rho^2 + det -+ rho tr >= 0 (all eigenvalues in |z| <= rho);
-    a = b = 0 when ``constrained``; D11 - D12 M1 >= margin along the step.
-    Built once per map, group kind and margin."""
+    a = b = 0 (``constraints`` 'ab') or a = 0 ('a', where b vanishes with a);
+    D11 - D12 M1 >= margin along the step.  Built once per map, constraints and margin.
+    The Hessian is exact for nu = 2 (cheap, and the limited-memory approximation strays
+    off the three-link biped's a = 0 line), limited-memory otherwise (RABBIT)."""
     var = pm.variational
     M1 = ca.SX.sym("M1", pm.nu)
     rho = ca.SX.sym("rho")
     tr, det = var.trace_det(M1)
     g = [rho**2 - det, rho**2 + det, rho**2 + det - rho * tr, rho**2 + det + rho * tr]
     lbg, ubg = [0.0] * 4, [np.inf] * 4
-    if constrained:
-        MT = ca.vertcat(1, -M1)
-        g += [ca.dot(ca.DM(tay.grad), MT), 0.5 * ca.mtimes([MT.T, ca.DM(tay.hess), MT])]
-        lbg += [0.0, 0.0]
-        ubg += [0.0, 0.0]
+    cond = _conditions(tay, M1, constraints)
+    g += cond
+    lbg += [0.0] * len(cond)
+    ubg += [0.0] * len(cond)
     den = decoupling_denominator(ca.DM(pm.D11_table[::10]),
                                  ca.DM(pm.D12_table[:, ::10]).T, M1)          # eq. (24)
     g.append(den)
@@ -208,28 +492,25 @@ def _epigraph_nlp(pm, tay, constrained: bool, den_margin: float):
     nlp = {"x": ca.vertcat(M1, rho), "f": rho, "g": ca.vertcat(*g)}
     solver = ca.nlpsol("m1_nlp", "ipopt", nlp, {
         "ipopt": {"print_level": 0, "sb": "yes", "max_iter": 300, "tol": 1e-10,
-                  "hessian_approximation": "limited-memory"},
+                  "hessian_approximation": "exact" if pm.nu <= 2 else "limited-memory"},
         "print_time": False, "error_on_fail": False})
     return solver, np.array(lbg), np.array(ubg)
 
 
 @cached(maxsize=8)
-def _deadbeat_residual(pm, tay, constrained: bool) -> ca.Function:
-    """(trace, det[, a, b]) of A^z and its Jacobian in M1, as one Function (built once
-    per map and group kind)."""
+def _deadbeat_residual(pm, tay, constraints: str) -> ca.Function:
+    """(trace, det[, a[, b]]) of A^z and its Jacobian in M1, as one Function (built once
+    per map and constraints)."""
     X = ca.SX.sym("M1", pm.nu)
     tr, det = pm.variational.trace_det(X)
-    res = [tr, det]
-    if constrained:
-        MT = ca.vertcat(1, -X)
-        res += [ca.dot(ca.DM(tay.grad), MT), 0.5 * ca.mtimes([MT.T, ca.DM(tay.hess), MT])]
-    r = ca.vertcat(*res)
+    r = ca.vertcat(tr, det, *_conditions(tay, X, constraints))
     return ca.Function("deadbeat", [X], [r, ca.jacobian(r, X)])
 
 
-def _deadbeat_newton(pm, tay, M1, constrained: bool, iters: int = 30):
-    """Newton on trace = det = 0 (and a = b = 0): the deadbeat point near M1."""
-    F = _deadbeat_residual(pm, tay, constrained)
+def _deadbeat_newton(pm, tay, M1, constraints: str, iters: int = 30):
+    """Newton on trace = det = 0 (and the swing-height conditions): the deadbeat point
+    near M1."""
+    F = _deadbeat_residual(pm, tay, constraints)
     x = np.array(M1, float)
     for _ in range(iters):
         rv, J = (np.array(v) for v in F(x))
@@ -254,16 +535,48 @@ def _deadbeat_newton(pm, tay, M1, constrained: bool, iters: int = 30):
     return x if np.max(np.abs(rv)) < 1e-10 and not pm.is_singular(x) else None
 
 
-def _coarse_best(pm, tay, group, k, n=81):
-    """The k best non-singular points of a coarse map: the (M1(2), M1(3)) grid of the
-    group, or the n_free^4 grid on [-10, 10] when all components are free."""
+def _feasible_set(tay, group, nu):
+    """(constraints, sampler, in_group) for a group: the NLP's conditions, a function
+    giving n candidate points of the set (numbers or a coarse sample), and the
+    membership test of a solution."""
     if group is None:
-        v = np.linspace(-10, 10, 9)
-        P = np.stack(np.meshgrid(v, v, v, v, indexing="ij"), -1).reshape(-1, 4)
-    else:
+        return "none", None, lambda M1: True
+    if nu >= 3:
+        def sample(rng, n):
+            s = solve_ab(tay, *rng.uniform(-10, 10, (nu - 2, n)))
+            return (s.group1 if group == 1 else s.group2).reshape(-1, nu)
+        return "ab", sample, lambda M1: group_of(tay, M1) == group
+    ab = ab_solution_set(tay)
+    if ab.kind == "line":
+        if group != 1:
+            raise ValueError(f"group: a = b = 0 is one line for this robot ({ab.message}); "
+                             "use group=1 (the line) or None")
+
+        def sample(rng, n):
+            return ab.sample(n) if rng is None else ab.sample(1, *(2 * [rng.uniform(-10, 10)]))
+        return "a", sample, lambda M1: ab.on_set(M1) == 1
+    if ab.kind == "none" or group > len(ab.points):
+        raise ValueError(f"group: no solution group {group} of a = b = 0 for this gait "
+                         f"({ab.message})")
+    point = ab.points[group - 1]
+    return "ab", (lambda rng, n: point[None, :].copy()), lambda M1: ab.on_set(M1) == group
+
+
+def _coarse_best(pm, tay, group, k, n=81):
+    """The k best non-singular points of a coarse map: the group's grid of the middle
+    components (RABBIT: (M1(2), M1(3)), n x n; nu = 2: n points of the line, or the
+    isolated point), or the n_free^nu grid on [-10, 10] when all components are free
+    (9^4 for RABBIT)."""
+    nu = pm.nu
+    if group is None:
+        v = np.linspace(-10, 10, coarse_grid_size(nu))
+        P = np.stack(np.meshgrid(*([v] * nu), indexing="ij"), -1).reshape(-1, nu)
+    elif nu >= 3:
         s = domain_grid(tay, n)
-        P = (s.group1 if group == 1 else s.group2).reshape(-1, 4)
-        P = P[np.all(np.isfinite(P), axis=1)]
+        P = (s.group1 if group == 1 else s.group2).reshape(-1, nu)
+    else:
+        P = _feasible_set(tay, group, nu)[1](None, n * n)
+    P = P[np.all(np.isfinite(P), axis=1)]
     st, _, _, mx = pm.jacobian_batch(P)
     order = np.argsort(np.where(st == "singular", np.inf, mx))
     return P[order[:k]]
@@ -274,22 +587,47 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
                 deadbeat: bool = True) -> M1Result:
     """Choose M1 minimising max|lambda| of A^z (exact derivatives of A^z in M1 by AD).
 
-    ``group`` 1 or 2: M1 restricted to that solution group of a = b = 0; ``None``: all
-    four components free.  Starts: ``starts`` (k, 4) if given, else the ``n_best`` best
-    points of a coarse map (81 x 81 on the group, or the 9^4 grid when free), plus
+    ``group`` 1 or 2: M1 restricted to that solution group of a = b = 0; for nu = 2
+    (the three-link biped) the groups are the isolated solutions of
+    :func:`ab_solution_set` (only evaluated), or, when the solutions form a line,
+    ``group=1`` is that line (a = 0, on which b vanishes); ``None``: all components
+    free.  Starts: ``starts`` (k, nu) if given, else the ``n_best`` best points of a
+    coarse map (for RABBIT 81 x 81 on the group, or the 9^4 grid when free), plus
     ``n_random`` random ones.  From every start Newton on trace = det = 0 (a deadbeat
     point, max|lambda| = 0, when one is near); from the first ``n_ipopt`` also IPOPT on
     the epigraph formulation, followed by the same Newton.
     The best result is verified by the full-AD map (:func:`poincare_eigenvalues`), and
     its eigenvalue uncertainty estimated from a map with twice the RK4 steps (near
     deadbeat eigenvalues move like the square root of an error in A^z).
+
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+    group : {1, 2, None}
+    starts : array_like, optional
+        (k, nu) starting points.
+    n_random, n_best, n_ipopt : int
+        Random starts, starts from the coarse map, starts also given to IPOPT.
+    seed : int
+        Of the random starts.
+    den_margin : float
+        D11 - D12 M1 must stay above this along the step (eq. 24).
+    deadbeat : bool
+        Try Newton on trace = det = 0.
+
+    Returns
+    -------
+    M1Result
     """
     if group not in (1, 2, None):
         raise ValueError(f"group must be 1, 2 or None, got {group!r}")
     t0 = time.perf_counter()
     pm = poincare_map(model, gait)
     tay = taylor_ab(model, gait)
+    nu = model.nu
     constrained = group is not None
+    constraints, sampler, in_group = _feasible_set(tay, group, nu)
     rng = np.random.default_rng(seed)
     cand = [] if starts is None else [np.asarray(s, float) for s in np.atleast_2d(starts)]
     if starts is None:            # the best points of a coarse map of the feasible set
@@ -297,33 +635,36 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
     tries, n0 = 0, len(cand)
     while len(cand) < n0 + n_random and tries < 50 * max(n_random, 1):
         tries += 1
-        if constrained:
-            s = solve_ab(tay, *rng.uniform(-10, 10, 2))
-            M1 = s.group1 if group == 1 else s.group2
-        else:
-            M1 = rng.uniform(-5, 5, 4)
+        M1 = sampler(rng, 1)[0] if constrained else rng.uniform(-5, 5, nu)
         if np.all(np.isfinite(M1)) and np.all(pm.denominator(M1) > den_margin):
             cand.append(np.asarray(M1, float))
     cand = [c for c in cand if np.all(np.isfinite(c)) and np.all(pm.denominator(c) > den_margin)]
     if not cand:
         raise ValueError(f"no non-singular start found on group {group}")
-    solver, lbg, ubg = _epigraph_nlp(pm, tay, constrained, den_margin)
+    fixed = nu - len(_conditions(tay, ca.SX.sym("M1", nu), constraints)) == 0
+    if not fixed:
+        solver, lbg, ubg = _epigraph_nlp(pm, tay, constraints, den_margin)
     history = []
     for i, M1 in enumerate(cand):
-        found = [(_deadbeat_newton(pm, tay, M1, constrained) if deadbeat else None, "newton")]
-        if i < n_ipopt:
+        if fixed:                 # an isolated solution: nothing to choose
+            found = [(M1, "isolated solution")]
+        else:                     # the start itself too: the result is never worse
+            found = [(M1, "start"),
+                     (_deadbeat_newton(pm, tay, M1, constraints) if deadbeat else None,
+                      "newton")]
+        if i < n_ipopt and not fixed:
             st, A, ev, mx = pm.jacobian_batch(M1[None])
             rho0 = float(mx[0]) * 1.01 + 1e-3 if np.isfinite(mx[0]) else 100.0
-            sol = solver(x0=np.r_[M1, rho0], lbg=lbg, ubg=ubg, lbx=np.r_[[-1e3] * 4, 0.0],
-                         ubx=np.r_[[1e3] * 4, 1e6])
-            x = np.array(sol["x"]).ravel()[:4]
+            sol = solver(x0=np.r_[M1, rho0], lbg=lbg, ubg=ubg, lbx=np.r_[[-1e3] * nu, 0.0],
+                         ubx=np.r_[[1e3] * nu, 1e6])
+            x = np.array(sol["x"]).ravel()[:nu]
             found += [(x, "ipopt"),
-                      (_deadbeat_newton(pm, tay, x, constrained) if deadbeat else None,
+                      (_deadbeat_newton(pm, tay, x, constraints) if deadbeat else None,
                        "ipopt+newton")]
         for Mx, how in found:
             if Mx is None or pm.is_singular(Mx):
                 continue
-            if constrained and group_of(tay, Mx) != group:
+            if constrained and not in_group(Mx):
                 continue                  # Newton may cross to the other group's root
             val = float(pm.jacobian_batch(Mx[None])[3][0])
             history.append(dict(start=M1.tolist(), M1=Mx.tolist(), max_abs=val, how=how))

@@ -21,8 +21,9 @@ from matplotlib.patches import Patch
 
 from biped_casadi.files import atomic_path
 
-__all__ = ["COLOUR_NAMES", "STANCE", "SWING", "TORSO", "save_figure", "save_figures", "gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot",
-           "conjecture_plot", "stable_domains_plot", "unactuated_error_plot",
+__all__ = ["COLOUR_NAMES", "STANCE", "SWING", "TORSO", "save_figure", "save_figures",
+           "gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot",
+           "conjecture_plot", "stable_domains_plot", "m1_plane_plot", "unactuated_error_plot",
            "swing_torques_plot", "walking_animation", "run_label", "basin_plot",
            "OUTCOME_COLOURS"]
 
@@ -103,12 +104,13 @@ def save_figures(figures: dict, folder, formats=("png",), dpi: int = 150) -> lis
 
 
 # ------------------------------------------------------------------ the gait
-def _stick(ax, P, alpha=1.0, lw=2.0):
-    """One stick figure from the 2 x 6 points (st foot, st knee, hip, torso top, sw knee,
-    sw foot)."""
-    ax.plot(P[0, [0, 1, 2]], P[1, [0, 1, 2]], "-", color=STANCE, lw=lw, alpha=alpha)
-    ax.plot(P[0, [2, 3]], P[1, [2, 3]], "-", color=TORSO, lw=lw + 1, alpha=alpha)
-    ax.plot(P[0, [2, 4, 5]], P[1, [2, 4, 5]], "-", color=SWING, lw=lw, alpha=alpha)
+def _stick(ax, model, P, alpha=1.0, lw=2.0):
+    """One stick figure from the model's points (``model.points``: stance foot, stance
+    joints, hip, torso top, swing joints, swing foot), drawn along its chains."""
+    st, to, sw = (list(c) for c in (model.stance_chain, model.torso_chain, model.swing_chain))
+    ax.plot(P[0, st], P[1, st], "-", color=STANCE, lw=lw, alpha=alpha)
+    ax.plot(P[0, to], P[1, to], "-", color=TORSO, lw=lw + 1, alpha=alpha)
+    ax.plot(P[0, sw], P[1, sw], "-", color=SWING, lw=lw, alpha=alpha)
 
 
 def _legs_legend(ax, extra=()):
@@ -137,7 +139,8 @@ def gait_stick_plot(gait, frames: int = 9) -> Figure:
     fig = _figure(figsize=(8, 4.5))
     ax = fig.add_subplot()
     for k, tk in enumerate(np.linspace(0.0, T, frames)):
-        _stick(ax, np.array(model.points(gait.q(tk))), alpha=0.25 + 0.75 * k / (frames - 1))
+        _stick(ax, model, np.array(model.points(gait.q(tk))),
+               alpha=0.25 + 0.75 * k / (frames - 1))
     t = np.linspace(0.0, T, 400)
     feet = np.array(model.swing_foot.map(t.size)(gait.q(t))).reshape(2, -1)
     path, = ax.plot(feet[0], feet[1], ":", color=SWING, lw=1, label="swing-foot path")
@@ -147,8 +150,9 @@ def gait_stick_plot(gait, frames: int = 9) -> Figure:
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("z [m]")
-    ax.set_title(f"Reference step: T = {T:.3f} s, step length {gait.step_length:.3f} m, "
-                 f"{gait.speed:.2f} m/s ({frames} poses, later ones darker)", fontsize=10)
+    ax.set_title(f"{model.params.name}, reference step: T = {T:.3f} s, step length "
+                 f"{gait.step_length:.3f} m, {gait.speed:.2f} m/s ({frames} poses, later "
+                 f"ones darker)", fontsize=10)
     _legs_legend(ax, [path])
     return fig
 
@@ -166,17 +170,18 @@ def gait_profiles_plot(gait) -> Figure:
     """
     t = np.linspace(0.0, gait.T, 400)
     q, u = gait.q(t), gait.u(t)
+    names = getattr(gait.model, "joint_names", None) or [""] * q.shape[0]
     fig = _figure(figsize=(8, 6))
     a1, a2 = fig.subplots(2, 1, sharex=True)
     for i in range(q.shape[0]):
-        a1.plot(t, q[i], label=f"q{i + 1}" + (" (unactuated)" if i == 0 else ""))
+        a1.plot(t, q[i], label=f"q{i + 1}: {names[i]}")
     a1.set_ylabel(r"$q^d(t)$ [rad]")
-    a1.legend(ncol=q.shape[0], fontsize=8)
+    a1.legend(ncol=min(q.shape[0], 3), fontsize=7)
     for i in range(u.shape[0]):
         a2.plot(t, u[i], label=f"u{i + 1} (on q{i + 2})")
     a2.set_ylabel(r"$u^d(t)$ [N m]")
     a2.set_xlabel("t [s]")
-    a2.legend(ncol=u.shape[0], fontsize=8)
+    a2.legend(ncol=min(u.shape[0], 4), fontsize=8)
     a1.set_title("Reference joint angles and torques over one step")
     fig.tight_layout()
     return fig
@@ -296,6 +301,58 @@ def stable_domains_plot(m2, m3, max_abs_1, max_abs_2, best=None) -> Figure:
     return fig
 
 
+def m1_plane_plot(m1, m2, max_abs, ab_points=(), ab_line=None, best=None,
+                  title: str | None = None) -> Figure:
+    """The stable domain in the (M1(1), M1(2)) plane of a robot with two torques (the
+    three-link biped): max|lambda| on a grid with the contour max|lambda| = 1, the
+    isolated solutions of a = b = 0 and the best point.
+
+    Parameters
+    ----------
+    m1, m2 : array_like
+        The grid (meshgrid, 'ij').
+    max_abs : array_like
+        max|lambda| on the grid (inf or NaN where singular or without impact).
+    ab_points : array_like, optional
+        (k, 2) isolated solutions of a = b = 0, marked with diamonds.
+    ab_line : array_like, optional
+        (k, 2) points of a line of solutions of a = b = 0, drawn dashed.
+    best : array_like, optional
+        An M1 to mark with a star (e.g. the M1 NLP's).
+    title : str, optional
+
+    Returns
+    -------
+    Figure
+    """
+    mx = np.asarray(max_abs, float)
+    filled = np.where(np.isfinite(mx), mx, 1e3)
+    fig = _figure(figsize=(6.4, 5.2))
+    ax = fig.add_subplot()
+    im = ax.pcolormesh(m1, m2, np.log10(np.clip(filled, 1e-4, 1e3)), shading="auto",
+                       cmap="viridis", vmin=-3, vmax=3)
+    if np.nanmin(filled) < 1 < np.nanmax(filled):
+        ax.contour(m1, m2, filled, levels=[1.0], colors="red", linewidths=1.5)
+    if ab_line is not None and len(ab_line):
+        L = np.asarray(ab_line, float)
+        ax.plot(L[:, 0], L[:, 1], "--", color="orange", lw=2, label="a = b = 0")
+    pts = np.asarray(ab_points, float).reshape(-1, 2)
+    for k, p in enumerate(pts, start=1):
+        ax.plot(p[0], p[1], "D", color="orange", mec="k", ms=8,
+                label="a = b = 0" if k == 1 else None)
+    if best is not None:
+        ax.plot(best[0], best[1], "w*", ms=13, mec="k", label="best point of the map")
+    if len(pts) or best is not None or ab_line is not None:
+        ax.legend(loc="lower right", fontsize=8)
+    ax.set_xlim(np.min(m1), np.max(m1))
+    ax.set_ylim(np.min(m2), np.max(m2))
+    ax.set_xlabel("M1(1)")
+    ax.set_ylabel("M1(2)")
+    fig.colorbar(im, ax=ax, label="log10 max|λ|")
+    ax.set_title(title or "Stable domain of M1: contour max|λ| = 1 (red)")
+    return fig
+
+
 # ------------------------------------------------------- walking (Fig. 5, 6)
 def run_label(res) -> str:
     """A legend label for a simulation result."""
@@ -339,8 +396,9 @@ def unactuated_error_plot(results, title: str | None = None) -> Figure:
 
 
 def swing_torques_plot(results, gait, title: str | None = None) -> Figure:
-    """Paper Fig. 6: swing-leg torques u3 (swing hip) and u4 (swing knee) against time,
-    with the reference torques u^d(tau) of each step dashed.
+    """Paper Fig. 6: the swing leg's torques against time (RABBIT: u3 swing hip and u4
+    swing knee; the three-link biped: u2 swing hip), with the reference torques
+    u^d(tau) of each step dashed.
 
     Parameters
     ----------
@@ -353,10 +411,10 @@ def swing_torques_plot(results, gait, title: str | None = None) -> Figure:
     Figure
     """
     results = results if isinstance(results, (list, tuple)) else [results]
-    nu = gait.model.nu
-    joints = (nu - 2, nu - 1)                      # the swing leg's hip and knee
-    fig = _figure(figsize=(7.2, 5.6))
-    ax = fig.subplots(2, 1, sharex=True)
+    model = gait.model
+    joints = tuple(range(model.k, model.nu))       # the swing leg's hip and knees
+    fig = _figure(figsize=(7.2, 2.0 + 1.8 * len(joints)))
+    ax = np.atleast_1d(fig.subplots(len(joints), 1, sharex=True))
     for res in results:
         for i, j in enumerate(joints):
             ax[i].plot(res.t, res.u[:, j], lw=1.0, label=run_label(res))
@@ -368,9 +426,9 @@ def swing_torques_plot(results, gait, title: str | None = None) -> Figure:
         for i, j in enumerate(joints):
             ax[i].plot(res.t[sel], ud[j], "k--", lw=0.8,
                        label="reference $u^d$" if k == 0 else None)
-    ax[0].set_ylabel(f"u{joints[0] + 1}, swing hip [N m]")
-    ax[1].set_ylabel(f"u{joints[1] + 1}, swing knee [N m]")
-    ax[1].set_xlabel("t [s]")
+    for i, j in enumerate(joints):
+        ax[i].set_ylabel(f"u{j + 1}, {model.joint_names[j + 1]} [N m]")
+    ax[-1].set_xlabel("t [s]")
     for a in ax:
         a.grid(alpha=0.3)
     ax[0].legend(fontsize=8)
@@ -429,12 +487,14 @@ def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = N
     ax.set_xlabel("x [m]")
     _legs_legend(ax, [foot])
 
+    st, to, sw = (list(c) for c in (model.stance_chain, model.torso_chain, model.swing_chain))
+
     def draw(i):
         k = frames[i]
         X, Z = P[0, :, k], P[1, :, k]
-        stance.set_data(X[[0, 1, 2]], Z[[0, 1, 2]])
-        swing.set_data(X[[2, 4, 5]], Z[[2, 4, 5]])
-        torso.set_data(X[[2, 3]], Z[[2, 3]])
+        stance.set_data(X[st], Z[st])
+        swing.set_data(X[sw], Z[sw])
+        torso.set_data(X[to], Z[to])
         text.set_text(f"t = {t[k]:.2f} s, step {step[k] + 1}")
         return stance, swing, torso, text
 

@@ -238,13 +238,14 @@ class PoincareMap:
 
     def find_impact(self, x, M1):
         """First valid impact after 0.75T within the horizon (z_sw crosses 0 downward with
-        x_sw > 0): (tau_a, tau_b, linear guess) on the scan grid, or None."""
+        x_sw > 0, or beyond ``model.scuff_zone`` for legs without knees): (tau_a, tau_b,
+        linear guess) on the scan grid, or None."""
         taus, gz, gx, gd = (np.array(v).ravel() for v in self.scan(x, M1))
         prev = np.r_[self.tau_s, taus[:-1]]
         gz0 = float(self.guard(ca.vertcat(x, self.ref_s), self.tau_s, M1)[0])
         prev_z = np.r_[gz0, gz[:-1]]
         ok = np.isfinite(gz) & np.isfinite(prev_z)
-        hit = ok & (prev_z > 0) & (gz <= 0) & (gx > 0)
+        hit = ok & (prev_z > 0) & (gz <= 0) & (gx > self.model.scuff_zone)
         if not hit.any():
             return None
         k = int(np.argmax(hit))

@@ -1,4 +1,5 @@
-"""report.md for ``biped reproduce``: our numbers beside the paper's, figures embedded."""
+"""report.md for ``biped reproduce``: our numbers beside the paper's (RABBIT), or the
+same analysis's numbers for another robot, figures embedded."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -151,6 +152,7 @@ def _figure_captions(s: dict) -> dict:
             f"(rad, rad/s on every joint" + ("" if scale in (None, 1, 1.0) else
                                             f"; x{_f(scale)} of the paper's") + ")")
     anim = _g(s, "options", "animation_steps")
+    grid = f"{_f(_g(s, 'grid', 'n', default=9))}^{_f(_g(s, 'grid', 'dim', default=4))}"
     return {
         "gait_stick": ("Reference gait: one step",
                        f"The optimised reference step (SPEC §2), poses evenly spaced from 0 "
@@ -165,12 +167,16 @@ def _figure_captions(s: dict) -> dict:
                  "of eq. (24), where the controller breaks down."),
         "fig3": ("Fig. 3: the swing-height conjecture",
                  "Swing-foot height Z_sw(T^d) after a perturbation Δq_u = 1e-2 rad against "
-                 "max|λ| over the 9^4 grid; red: stable cases, which should all have "
-                 "Z_sw(T^d) near 0."),
+                 f"max|λ| over the {grid} grid of M1; red: stable cases, which should all "
+                 "have Z_sw(T^d) near 0."),
         "fig4": ("Fig. 4: stable domains of the a = b = 0 groups",
                  f"For each solution group of a = b = 0, log10 max|λ| over (M1(2), M1(3)) "
                  f"({_f(dom.get('grid'))}^2 grid on {_f(dom.get('range'))}); red contour: "
                  "max|λ| = 1; star: the best point."),
+        "m1_plane": ("The stable domain of M1 (two torques)",
+                     f"log10 max|λ| over the (M1(1), M1(2)) plane ({_f(dom.get('grid'))}^2 "
+                     f"grid on {_f(dom.get('range'))}); red contour: max|λ| = 1; orange: "
+                     "the solutions of a = b = 0; star: the best point of the map."),
         "fig5": ("Fig. 5: error of the unactuated variable",
                  f"q_u - q_u^d(T) and its velocity just before each impact{pert}: the "
                  f"time-varying controller (M1 = {_f(fr.get('M1'), '.4f')}) and virtual "
@@ -182,6 +188,74 @@ def _figure_captions(s: dict) -> dict:
                       f"The time-varying run of Fig. 5 (first {_f(anim)} steps): stance "
                       f"leg {st}, swing leg {sw}, torso {to}, footprints as triangles."),
     }
+
+
+def _robot_rows(s: dict) -> list:
+    """(quantity, ours, note) rows for a robot other than RABBIT (the paper's numbers are
+    RABBIT's, so there is nothing to set beside them)."""
+    rows = []
+    r = s.get("robot", {})
+    rows.append(("robot", f"{r.get('name')}: {r.get('nq')} joints, {r.get('nu')} torques, "
+                 f"{_f(r.get('total_mass'))} kg", ", ".join(r.get("joints", []))))
+    sg = s.get("singular", {})
+    rows.append(("D11, D12 at T^d", f"{_f(sg.get('D11_T'))}, {_f(sg.get('D12_T'))}", ""))
+    rows.append(("singular M1(j) = D11/D12(j) (eq. 24)", _f(sg.get("singular_values")),
+                 "one component non-zero"))
+    f2 = s.get("fig2", {})
+    rows.append(("1-D sweeps: stable points per component",
+                 _f(f2.get("stable_per_component")),
+                 f"{_f(f2.get('points_per_component'))} values of each M1(j) on [-10, 10]"))
+    for j, b in enumerate(f2.get("best_per_component") or [], start=1):
+        if b:
+            rows.append((f"1-D sweep of M1({j}): best", f"{_f(b.get('max_abs'))} at "
+                         f"{_f(b.get('M1'), '.4g')}", ""))
+    gr = s.get("grid", {})
+    gc = gr.get("counts") or {}
+    rows.append((f"M1 grid {_f(gr.get('n'))}^{_f(gr.get('dim'))} on [-10, 10]: stable / "
+                 "unstable / singular / no impact",
+                 " / ".join(_f(gc.get(k)) for k in ("stable", "unstable", "singular", "no_impact")),
+                 f"best stable {_f(_g(gr, 'best_stable', 'max_abs'))} at "
+                 f"{_f(_g(gr, 'best_stable', 'M1'), '.4g')}"))
+    dm = s.get("domains", {})
+    if dm.get("plane"):
+        rows.append(("stable domain in the (M1(1), M1(2)) plane: area", _f(dm.get("stable_area")),
+                     f"{_f(dm.get('stable_points'))} stable points of {_f(dm.get('grid'))}^2"))
+        ab = dm.get("ab_set") or {}
+        rows.append(("solutions of a = b = 0 (eq. 28)", ab.get("kind", "n/a"),
+                     ab.get("message", "")))
+        on = dm.get("ab_set_on_map") or {}
+        if on:
+            rows.append(("... of them inside [-10, 10]^2: stable", f"{_f(on.get('stable'))} of "
+                         f"{_f(on.get('points'))}",
+                         f"best {_f(_g(on, 'best', 'max_abs'))} at {_f(_g(on, 'best', 'M1'), '.4g')}"))
+    elif dm.get("skipped"):
+        rows.append(("stable domains of the a = b = 0 groups", "not drawn", dm["skipped"]))
+    c = s.get("conjecture", {})
+    rows.append(("conjecture: max |Z_sw(T^d)| over stable grid cases",
+                 _f(c.get("max_abs_zsw_stable")),
+                 f"median over unstable {_f(c.get('median_abs_zsw_unstable'))}; fraction of "
+                 f"unstable at most the stable max {_f(c.get('fraction_unstable_below'))}"))
+    for name, r in (s.get("m1_nlp") or {}).items():
+        if isinstance(r, dict) and "max_abs" in r:
+            rows.append((f"M1 NLP, {name.replace('_', ' ')}",
+                         f"{_f(r.get('max_abs'), '.3e')} ± {_f(r.get('eigenvalue_uncertainty'), '.1e')}",
+                         f"M1 = {_f(r.get('M1'), '.5g')}, status {r.get('status')}"))
+    vc = _g(s, "vc_comparison", "vc") or {}
+    tvc = _g(s, "vc_comparison", "tv_chosen") or {}
+    rows.append(("virtual constraints: eigenvalue of the 1-D map", _f(vc.get("eigenvalue")),
+                 f"phase = the stance-foot-to-hip angle; time-varying with the chosen M1: "
+                 f"max|λ| {_f(tvc.get('max_abs'), '.3e')}"))
+    rows.append(("time-varying, M1 = 0", _f(_g(s, "vc_comparison", "tv_M1_zero", "max_abs")),
+                 _g(s, "vc_comparison", "tv_M1_zero", "status") or ""))
+    sim = s.get("simulation", {})
+    fr = sim.get("figures_run") or {}
+    for ctrl in ("tv", "vc"):
+        rows.append((f"simulation (perturbation {_f(fr.get('perturbation'))}), "
+                     f"{'time-varying' if ctrl == 'tv' else 'virtual constraints'}",
+                     f"{_f(_g(fr, ctrl, 'status'))}, |dq_u error| < 1e-3 from step "
+                     f"{_f(_g(fr, ctrl, 'steps_to_converge'))}",
+                     _g(fr, ctrl, "message") or ""))
+    return rows
 
 
 def write_report(out: Path, s: dict) -> Path:
@@ -204,14 +278,19 @@ def write_report(out: Path, s: dict) -> Path:
     bad = [k for k, v in stages.items() if v.get("status") != "ok"]
     o = s.get("options") or {}
     mode = s.get("mode", "full")
-    lines = ["# Reproduction of Wang & Chevallereau, time-varying control of RABBIT", ""]
+    rabbit = "paper" in s
+    name = _g(s, "robot", "name", default="RABBIT")
+    title = ("# Reproduction of Wang & Chevallereau, time-varying control of RABBIT" if rabbit
+             else f"# Wang & Chevallereau's output analysis on {name}")
+    lines = [title, ""]
     head = (f"**{'Quick' if mode == 'quick' else 'Full'} run**"
             + (" (coarser grids than the paper's; a full run goes to the parent folder)"
                if mode == "quick" else "")
             + f": {_f(o.get('line_points'))} points per component for Fig. 2, "
-            f"{_f(o.get('domain_n'))}^2 domain grids for Fig. 4, {_f(o.get('nlp_starts'))} "
-            f"starts for the M1 NLP, {_f(o.get('sim_steps'))} simulated steps; finished "
-            f"{s.get('finished', '')} in {_f(s.get('total_time'), '.0f')} s; "
+            + (f"{_f(o.get('domain_n'))}^2 domain grids for Fig. 4, " if rabbit else "")
+            + f"{_f(o.get('nlp_starts'))} starts for the M1 NLP, {_f(o.get('sim_steps'))} "
+            f"simulated steps; finished {s.get('finished', '')} in "
+            f"{_f(s.get('total_time'), '.0f')} s; "
             + ("every stage ok." if not bad else
                f"{len(bad)} of {len(stages)} stages not ok (see Stages)."))
     lines += [head, ""]
@@ -222,11 +301,16 @@ def write_report(out: Path, s: dict) -> Path:
                   f"{_f(g.get('cost'))} (∫u'u dt / step length), peak torque "
                   f"{_f(g.get('peak_torque'))} N m; periodicity residual "
                   f"{_f(g.get('periodicity_dq'), '.1e')} (gait.json).", ""]
-    lines += ["## Paper vs. ours", "", "| quantity | paper | ours | why they differ |",
-              "|---|---|---|---|"]
-    lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} | {esc(d)} |"
-              for a, b, c, d in _comparison_rows(s)]
-    lines += ["", f"¹ {GAIT_NOTE}", "", f"² {NLP_NOTE}"]
+    if rabbit:
+        lines += ["## Paper vs. ours", "", "| quantity | paper | ours | why they differ |",
+                  "|---|---|---|---|"]
+        lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} | {esc(d)} |"
+                  for a, b, c, d in _comparison_rows(s)]
+        lines += ["", f"¹ {GAIT_NOTE}", "", f"² {NLP_NOTE}"]
+    else:
+        lines += ["The paper's numbers are RABBIT's; for this robot the same stages give:", "",
+                  "## Results", "", "| quantity | ours | note |", "|---|---|---|"]
+        lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} |" for a, b, c in _robot_rows(s)]
     lines += ["", "## Stages", "", "| stage | status | time (s) |", "|---|---|---|"]
     for name, st in stages.items():
         extra = st.get("error") or st.get("reason") or ""

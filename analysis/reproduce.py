@@ -1,23 +1,32 @@
 """``biped reproduce``: the paper end to end on the embedded default (RABBIT, default
-gait), with figures (PNG and PDF), ``summary.json`` and ``report.md``.
+gait), or the same analysis on another robot (``robot='three_link'`` or a description
+file), with figures (PNG and PDF), ``summary.json`` and ``report.md``.
 
 Stages run in order; each shows its progress, a failed stage is reported (with its
-error) and the stages that do not need its results still run.
+error) and the stages that do not need its results still run.  What depends on the
+number of torques nu: the M1 grid is the paper's 9^4 for nu = 4, the whole
+(M1(1), M1(2)) plane for nu = 2 (the stable domain of M1 itself, with every solution of
+a = b = 0 on it); Fig. 4 (the stable domains of the a = b = 0 groups over the free
+components) exists for nu = 4 only; the paper's published numbers are RABBIT's and are
+compared for RABBIT only.
 
-Folders: a full run writes into ``OUT`` itself, a quick run into ``OUT/quick``, so the
-two modes never mix or overwrite each other's results whatever the order of the runs.
-In a run's folder: ``report.md``, ``summary.json``, ``gait.json``, ``figures/`` and
-``sweeps/`` (the resumable sweeps, one sub-folder per sweep and settings, reused by the
-next run).  A run writes its report, summary, gait and figures into a private staging
-folder first and moves them into place at the end: a run that fails or is interrupted
-leaves the previous run's results as they were, and a finished run replaces exactly
-the files of the previous run of the same mode (other files are never touched).
+Folders (:func:`run_folder`): a full run on RABBIT writes into ``OUT`` itself, a quick
+run into ``OUT/quick``; another robot into ``OUT/<robot name>`` (and ``.../quick``), so
+no two kinds of run ever mix or overwrite each other's results, whatever the order of
+the runs.  In a run's folder: ``report.md``, ``summary.json``, ``gait.json``,
+``figures/`` and ``sweeps/`` (the resumable sweeps, one sub-folder per sweep and
+settings, reused by the next run).  A run writes its report, summary, gait and figures
+into a private staging folder first and moves them into place at the end: a run that
+fails or is interrupted leaves the previous run's results as they were, and a finished
+run replaces exactly the files of the previous run of the same kind (other files are
+never touched).
 """
 from __future__ import annotations
 
 import contextlib
 import json
 import os
+import re
 import shutil
 import sys
 import time
@@ -27,17 +36,17 @@ from pathlib import Path
 
 import numpy as np
 
-from biped_casadi import (PAPER_PERTURBATION, SimulationOptions, TimeVaryingController,
-                          VirtualConstraintController, perturbed_initial_state, rabbit,
-                          simulate)
+from biped_casadi import (PAPER_PERTURBATION, RABBIT_DESCRIPTION, SimulationOptions,
+                          TimeVaryingController, VirtualConstraintController,
+                          perturbed_initial_state, robot, simulate)
 from biped_casadi.files import write_text_atomic
 from biped_casadi.results import Result, json_safe
 from gait_opt import default_gait
 
-from .output_design import (conjecture_figures, domain_grid, optimize_m1,
-                            swing_height_at_Td, taylor_ab)
-from .plots import (conjecture_plot, gait_profiles_plot, gait_stick_plot, one_d_sweeps_plot,
-                    save_figure, stable_domains_plot, swing_torques_plot,
+from .output_design import (ab_solution_set, coarse_grid_size, conjecture_figures,
+                            domain_grid, optimize_m1, swing_height_at_Td, taylor_ab)
+from .plots import (conjecture_plot, gait_profiles_plot, gait_stick_plot, m1_plane_plot,
+                    one_d_sweeps_plot, save_figure, stable_domains_plot, swing_torques_plot,
                     unactuated_error_plot, walking_animation)
 from .poincare import poincare_eigenvalues, singular_m1_values
 from .report import write_report
@@ -60,10 +69,13 @@ PAPER = dict(
 
 @dataclass
 class ReproduceOptions:
-    """Resolution of every stage; ``quick`` gives the coarse variant (<= 3 min)."""
+    """Resolution of every stage; ``quick`` gives the coarse variant (<= 3 min).
+    ``robot``: a built-in name or a description file (default RABBIT)."""
     quick: bool = False
+    robot: str = "rabbit"
     line_points: int = 401          # Fig. 2: points per component on [-10, 10]
     grid_n: int = 9                 # the paper's 9^4 grid
+    plane_n: int = 161              # nu = 2: the (M1(1), M1(2)) grid, points per side
     domain_n: int = 81              # Fig. 4: (M1(2), M1(3)) grid per group
     domain_range: tuple = (-10.0, 10.0)
     nlp_starts: int = 10
@@ -74,7 +86,7 @@ class ReproduceOptions:
     @classmethod
     def make(cls, quick: bool = False, **kw):
         if quick:
-            base = dict(quick=True, line_points=101, domain_n=41, nlp_starts=4,
+            base = dict(quick=True, line_points=101, domain_n=41, plane_n=81, nlp_starts=4,
                         sim_steps=6, animation_steps=2)
             base.update(kw)
             return cls(**base)
@@ -102,10 +114,29 @@ class ReproduceResult(Result):
     SUCCESS = ("ok",)
 
 
-def run_folder(out_dir, quick: bool) -> Path:
-    """The folder a run of the given mode writes into: ``out_dir`` for the full run,
-    ``out_dir/quick`` for the quick run."""
-    return Path(out_dir) / "quick" if quick else Path(out_dir)
+def run_folder(out_dir, quick: bool, robot_name="rabbit") -> Path:
+    """The folder a run writes into: ``out_dir`` for the full run on RABBIT,
+    ``out_dir/quick`` for the quick one; for another robot ``out_dir/<its name>`` and
+    ``out_dir/<its name>/quick``.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+    quick : bool
+    robot_name : str or Path
+        A built-in robot name or a description file (ValueError when unknown).
+
+    Returns
+    -------
+    Path
+    """
+    folder = Path(out_dir)
+    model = robot(robot_name or "rabbit")
+    if model.description != RABBIT_DESCRIPTION:
+        slug = re.sub(r"[^A-Za-z0-9_.-]+", "_", model.description.name).strip("._") or "robot"
+        folder = folder / (f"robot_{slug}" if slug in ("quick", "figures", "sweeps")
+                           else slug)
+    return folder / "quick" if quick else folder
 
 
 @dataclass
@@ -134,10 +165,19 @@ class _Context:
 FORMATS = ("png", "pdf")
 
 
+def _is_rabbit(ctx) -> bool:
+    """Whether the paper's published (RABBIT) numbers apply."""
+    return ctx.model.description == RABBIT_DESCRIPTION
+
+
 def stage_gait(ctx: _Context):
-    ctx.model = rabbit()
+    ctx.model = robot(ctx.opts.robot)
     ctx.gait = g = default_gait(ctx.model, progress=ctx.log)
     s = g.summary()
+    ctx.summary["robot"] = dict(ctx.model.description.to_dict(), nq=ctx.model.nq,
+                                nu=ctx.model.nu, joints=list(ctx.model.joint_names),
+                                total_mass=ctx.model.description.total_mass,
+                                scuffing_ignored=ctx.model.scuffing_ignored)
     ctx.summary["gait"] = s
     g.save(ctx.out / "gait.json")
     figs = ctx.out / "figures"
@@ -170,9 +210,16 @@ def stage_fig2(ctx: _Context):
                                stable_per_component=[int(p.counts["stable"]) for p in r.results])
 
 
+def _grid_n(ctx) -> int:
+    """Points per component of the M1 grid: the paper's 9 for nu = 4, the plane's for
+    nu = 2, a coarse grid of about 9^4 points otherwise."""
+    nu = ctx.model.nu
+    return ctx.opts.grid_n if nu == 4 else ctx.opts.plane_n if nu == 2 else coarse_grid_size(nu)
+
+
 def stage_grid(ctx: _Context):
-    n = ctx.opts.grid_n
-    P = grid_points(n, -10.0, 10.0)
+    n = _grid_n(ctx)
+    P = grid_points(n, -10.0, 10.0, ctx.model.nu)
     r = run_sweep(ctx.model, ctx.gait, P, out_dir=ctx.sweep_dir(f"grid{n}", -10.0, 10.0),
                   progress=ctx.opts.progress)
     ctx.data["grid"] = r
@@ -182,8 +229,8 @@ def stage_grid(ctx: _Context):
     if stable.size:
         i = stable[np.argmin(r.max_abs[stable])]
         best = dict(M1=r.points[i].tolist(), max_abs=float(r.max_abs[i]))
-    ctx.summary["grid"] = dict(n=n, n_points=len(P), counts=dict(r.counts), best_stable=best,
-                               elapsed=r.elapsed)
+    ctx.summary["grid"] = dict(n=n, dim=ctx.model.nu, n_points=len(P), counts=dict(r.counts),
+                               best_stable=best, elapsed=r.elapsed)
     ctx.log(f"   counts: {dict(r.counts)}")
 
 
@@ -198,6 +245,15 @@ def stage_fig3(ctx: _Context):
 
 def stage_fig4(ctx: _Context):
     tay = taylor_ab(ctx.model, ctx.gait)
+    ctx.summary["taylor"] = dict(grad_zsw=tay.grad.tolist(), hess_zsw=tay.hess.tolist(),
+                                 zsw_T=tay.z0)
+    nu = ctx.model.nu
+    if nu == 2:
+        return _plane_domain(ctx, tay)
+    if nu != 4:
+        ctx.summary["domains"] = dict(skipped=f"a = b = 0 leaves {nu - 2} components of M1 "
+                                              "free: no 2-D domain map is drawn")
+        return
     lo, hi = ctx.opts.domain_range
     n = ctx.opts.domain_n
     s = domain_grid(tay, n, lo, hi)
@@ -225,38 +281,94 @@ def stage_fig4(ctx: _Context):
     best = {k: (np.array(v["best"]["M1"]) if v["best"] else None) for k, v in res.items()}
     ctx.figures["fig4"] = save_figure(stable_domains_plot(s.m2, s.m3, maps[1], maps[2], best),
                                       ctx.out / "figures" / "fig4", FORMATS)
-    ctx.summary["taylor"] = dict(grad_zsw=tay.grad.tolist(), hess_zsw=tay.hess.tolist(),
-                                 zsw_T=tay.z0)
     ctx.summary["domains"] = dict(grid=n, range=[lo, hi], groups=res)
     ctx.log("   stable area: " + ", ".join(f"group {k}: {v['stable_area']:.2f}"
                                           for k, v in res.items()))
 
 
+def _plane_domain(ctx: _Context, tay):
+    """nu = 2: the stable domain in the (M1(1), M1(2)) plane (the grid stage's map) with
+    every solution of a = b = 0 on it."""
+    ab = ab_solution_set(tay)
+    ctx.data["ab_set"] = ab
+    grid = ctx.data.get("grid")
+    if grid is None:          # the grid stage failed: map the plane here
+        n = _grid_n(ctx)
+        grid = run_sweep(ctx.model, ctx.gait, grid_points(n, -10.0, 10.0, 2),
+                         progress=ctx.opts.progress)
+    n = int(round(np.sqrt(len(grid.points))))
+    m1 = grid.points[:, 0].reshape(n, n)
+    m2 = grid.points[:, 1].reshape(n, n)
+    mx = np.where(np.isfinite(grid.max_abs), grid.max_abs, np.nan).reshape(n, n)
+    stable = grid.point_status == "stable"
+    cell = (20.0 / (n - 1)) ** 2
+    on_set = ab.sample(401, -10, 10)
+    keep = np.all((on_set >= -10) & (on_set <= 10), axis=1)
+    ab_eval = None
+    if len(on_set[keep]):
+        from_map = run_sweep(ctx.model, ctx.gait, on_set[keep], progress=False)
+        ab_eval = dict(points=int(keep.sum()), stable=int(from_map.counts["stable"]),
+                       best=None if from_map.best() is None else
+                       dict(M1=from_map.best()[0].tolist(), max_abs=from_map.best()[1]))
+    best = grid.best()
+    ctx.figures["m1_plane"] = save_figure(
+        m1_plane_plot(m1, m2, mx, ab_points=ab.points,
+                      ab_line=on_set[keep] if ab.kind == "line" else None,
+                      best=None if best is None else best[0],
+                      title=f"{ctx.model.params.name}: stable domain of M1, contour "
+                            "max|λ| = 1 (red)"),
+        ctx.out / "figures" / "m1_plane", FORMATS)
+    ctx.summary["domains"] = dict(plane=True, grid=n, range=[-10.0, 10.0],
+                                  stable_points=int(stable.sum()),
+                                  stable_area=float(stable.sum() * cell),
+                                  ab_set=ab.to_dict(), ab_set_on_map=ab_eval,
+                                  best=None if best is None else
+                                  dict(M1=best[0].tolist(), max_abs=best[1]))
+    ctx.log(f"   stable area {stable.sum() * cell:.2f}; a = b = 0: {ab.message}")
+
+
+def _m1_groups(ctx) -> list:
+    """(name, group) of the M1 NLP runs for this robot."""
+    if ctx.model.nu != 2:
+        return [("group1", 1), ("group2", 2), ("free", None)]
+    ab = ctx.data.get("ab_set") or ab_solution_set(taylor_ab(ctx.model, ctx.gait))
+    if ab.kind == "line":
+        return [("ab_line", 1), ("free", None)]
+    return [(f"group{k}", k) for k in range(1, len(ab.points) + 1)] + [("free", None)]
+
+
 def stage_m1(ctx: _Context):
     out = {}
     k = ctx.opts.nlp_starts
-    for name, grp in (("group1", 1), ("group2", 2), ("free", None)):
+    groups = _m1_groups(ctx)
+    for name, grp in groups:
         t = time.perf_counter()
         r = optimize_m1(ctx.model, ctx.gait, group=grp, n_best=k, n_ipopt=min(4, k),
                         n_random=0 if ctx.opts.quick else 2)
         out[name] = r.to_dict()
         ctx.log(f"   {name}: max|lambda| = {r.max_abs:.3g} (+- {r.eigenvalue_uncertainty:.1g}) "
                 f"in {time.perf_counter() - t:.1f} s")
-    ex = poincare_eigenvalues(ctx.model, ctx.gait, PAPER["example_M1"])
-    out["paper_example_M1"] = dict(M1=PAPER["example_M1"], max_abs=ex.max_abs, status=ex.status)
-    best = min((v for kk, v in out.items() if kk in ("group1", "group2")),
-               key=lambda v: v["max_abs"])
+    if _is_rabbit(ctx):
+        ex = poincare_eigenvalues(ctx.model, ctx.gait, PAPER["example_M1"])
+        out["paper_example_M1"] = dict(M1=PAPER["example_M1"], max_abs=ex.max_abs,
+                                       status=ex.status)
+    names = [n for n, _ in groups]
+    constrained = [n for n, g in groups if g is not None]
+    # RABBIT: the best a = b = 0 group, as in the paper; otherwise the best of all runs
+    pool = constrained if ctx.model.nu != 2 else names
+    best = min((out[n] for n in pool), key=lambda v: v["max_abs"])
     ctx.data["chosen_M1"] = np.array(best["M1"])
-    ctx.data["nlp_M1"] = {k: np.array(out[k]["M1"]) for k in ("group1", "group2", "free")}
+    ctx.data["nlp_M1"] = {n: np.array(out[n]["M1"]) for n in names}
     out["chosen_for_simulation"] = best["M1"]
     ctx.summary["m1_nlp"] = out
 
 
 def stage_vc(ctx: _Context):
     vc = vc_eigenvalue(ctx.model, ctx.gait)
-    M1 = ctx.data.get("chosen_M1", np.zeros(4))
+    nu = ctx.model.nu
+    M1 = ctx.data.get("chosen_M1", np.zeros(nu))
     tv = poincare_eigenvalues(ctx.model, ctx.gait, M1)
-    tv0 = poincare_eigenvalues(ctx.model, ctx.gait, np.zeros(4))
+    tv0 = poincare_eigenvalues(ctx.model, ctx.gait, np.zeros(nu))
     ctx.summary["vc_comparison"] = dict(vc=vc.to_dict(), tv_chosen=dict(
         M1=M1.tolist(), max_abs=tv.max_abs, eigenvalues=[[e.real, e.imag] for e in tv.eigenvalues]),
         tv_M1_zero=dict(max_abs=tv0.max_abs, status=tv0.status))
@@ -270,7 +382,7 @@ def stage_sim(ctx: _Context):
     walks, the perturbation is scaled down until the chosen M1 walks, and Fig. 5/6 show
     that run (the report says which)."""
     g, m = ctx.gait, ctx.model
-    M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(4)), float)
+    M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(m.nu)), float)
     opts = SimulationOptions(steps=ctx.opts.sim_steps, mu=0.6)
     vcc = VirtualConstraintController(m, g)
 
@@ -345,8 +457,8 @@ STAGES = [
     ("gait", stage_gait, ()),
     ("singular outputs (eq. 24)", stage_singular, ("gait",)),
     ("Fig. 2: 1-D sweeps", stage_fig2, ("gait",)),
-    ("9^4 grid", stage_grid, ("gait",)),
-    ("Fig. 3 and the conjecture", stage_fig3, ("9^4 grid",)),
+    ("M1 grid", stage_grid, ("gait",)),
+    ("Fig. 3 and the conjecture", stage_fig3, ("M1 grid",)),
     ("a, b and Fig. 4", stage_fig4, ("gait",)),
     ("M1 NLP", stage_m1, ("gait",)),
     ("virtual constraints", stage_vc, ("gait",)),
@@ -356,16 +468,17 @@ STAGES = [
 
 def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceResult:
     """Run every stage; the results go to :func:`run_folder` (``out_dir`` for the full
-    run, ``out_dir/quick`` for ``quick``), see the module docstring.
+    run on RABBIT, ``out_dir/quick`` for ``quick``, ``out_dir/<robot>`` for another
+    robot), see the module docstring.
 
     Parameters
     ----------
     out_dir : str or Path
         Created if needed; must not be a file.
     quick : bool
-        Coarser grids (:meth:`ReproduceOptions.make`).
+        Coarser grids and fewer starts (:meth:`ReproduceOptions.make`).
     **kw
-        Fields of :class:`ReproduceOptions`.
+        Fields of :class:`ReproduceOptions` (``robot='three_link'``, ...).
 
     Returns
     -------
@@ -375,10 +488,10 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
     Raises
     ------
     ValueError
-        ``out_dir`` (or the run's folder inside it) is a file.
+        ``out_dir`` (or the run's folder inside it) is a file; an unknown robot.
     """
     opts = ReproduceOptions.make(quick, **kw)
-    folder = run_folder(out_dir, quick)
+    folder = run_folder(out_dir, quick, opts.robot)
     for p in (Path(out_dir), folder, folder / "figures", folder / "sweeps"):
         if p.exists() and not p.is_dir():
             raise ValueError(f"out_dir: {p} is a file, not a folder")
@@ -395,7 +508,8 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
         ctx.summary["figures"] = {k: [_relative(f, staging) for f in
                                       ([v] if isinstance(v, str) else v)]
                                   for k, v in ctx.figures.items()}
-        ctx.summary["paper"] = PAPER
+        if ctx.model is not None and _is_rabbit(ctx):
+            ctx.summary["paper"] = PAPER
         ctx.summary["options"] = dict(opts.__dict__)
         ctx.summary["finished"] = time.strftime("%Y-%m-%d %H:%M:%S %z")
         summary = json_safe(ctx.summary)

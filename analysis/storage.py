@@ -55,7 +55,7 @@ def digest_json(obj) -> str:
 
 
 def digest_points(points: np.ndarray) -> str:
-    """SHA-256 of an (n, 4) float64 array (little-endian, C order) and its shape."""
+    """SHA-256 of an (n, nu) float64 array (little-endian, C order) and its shape."""
     p = np.ascontiguousarray(points, dtype="<f8")
     h = hashlib.sha256(f"{p.shape}".encode())
     h.update(p.tobytes())

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from biped_casadi import RobotParams, rabbit, require_same_robot
+from biped_casadi import RobotParams, description_from_dict, require_same_robot, robot
 from biped_casadi.caching import cached
 from biped_casadi.output_law import check_M1_range
 from biped_casadi.results import Result, internal
@@ -182,28 +182,67 @@ def _result(P, st, max_abs, ev, A, **kw) -> SweepResult:
 
 
 # ------------------------------------------------------------------ points
-def grid_points(n: int, lo: float, hi: float) -> np.ndarray:
-    """The n^4 grid, each component of M1 in ``linspace(lo, hi, n)``, component 1
-    varying slowest: shape (n^4, 4).  The paper's grid is ``grid_points(9, -10, 10)``."""
+def grid_points(n: int, lo: float, hi: float, dim: int = 4) -> np.ndarray:
+    """The n^dim grid of M1, component 1 varying slowest.
+
+    Parameters
+    ----------
+    n : int
+        Points per component (at least 2: the grid spans LO to HI), each in
+        ``linspace(lo, hi, n)``.
+    lo, hi : float
+        Range of every component.
+    dim : int
+        Components of M1: the robot's nu (4 for RABBIT, 2 for the three-link biped).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n^dim, dim).  The paper's grid is ``grid_points(9, -10, 10)``.
+    """
+    if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or dim < 1:
+        raise ValueError(f"dim (components of M1) must be a positive integer, got {dim!r}")
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
         raise ValueError(f"n (grid points per component) must be an integer >= 2 (the grid "
                          f"spans LO to HI), got {n!r}")
-    if n ** 4 > 50_000_000:
-        raise ValueError(f"n = {n} gives {n ** 4} points; at most 50 million (n <= 84)")
+    if float(n) ** dim > 50_000_000:
+        raise ValueError(f"n = {n} gives {n ** dim} points; at most 50 million "
+                         f"(n <= {max_grid_n(dim)})")
     lo, hi = _check_range(lo, hi)
     v = np.linspace(lo, hi, int(n))
-    return np.stack(np.meshgrid(v, v, v, v, indexing="ij"), axis=-1).reshape(-1, 4)
+    return np.stack(np.meshgrid(*([v] * int(dim)), indexing="ij"), axis=-1).reshape(-1, int(dim))
 
 
-def line_points(j: int, values) -> np.ndarray:
-    """M1 with component ``j`` (0-based: the paper's M1(j+1)) set to each of ``values``
-    and the other three zero: shape (len(values), 4)."""
-    if isinstance(j, bool) or not isinstance(j, (int, np.integer)) or not 0 <= j <= 3:
-        raise ValueError(f"j (component of M1, 0..3) must be 0, 1, 2 or 3, got {j!r}")
+def max_grid_n(dim: int = 4) -> int:
+    """The most points per component of a grid of at most 50 million M1 in ``dim``
+    components (84 for RABBIT's 4)."""
+    return int(50_000_000 ** (1 / dim) + 1e-9)
+
+
+def line_points(j: int, values, nu: int = 4) -> np.ndarray:
+    """M1 with one component set to each of ``values`` and the others zero.
+
+    Parameters
+    ----------
+    j : int
+        The component, 0-based (the paper's M1(j+1)).
+    values : array_like
+        Its values.
+    nu : int
+        Components of M1 (4 for RABBIT).
+
+    Returns
+    -------
+    numpy.ndarray
+        (len(values), nu).
+    """
+    if isinstance(j, bool) or not isinstance(j, (int, np.integer)) or not 0 <= j < nu:
+        raise ValueError(f"j (component of M1, 0..{nu - 1}) must be one of "
+                         f"{', '.join(map(str, range(nu)))}, got {j!r}")
     v = np.asarray(values, dtype=float).ravel()
     if v.size == 0 or not np.all(np.isfinite(v)):
         raise ValueError("values must be a non-empty list of finite numbers")
-    P = np.zeros((v.size, 4))
+    P = np.zeros((v.size, nu))
     P[:, j] = v
     return P
 
@@ -246,8 +285,11 @@ def gait_to_dict(gait) -> dict:
 def gait_from_dict(d: dict):
     """The :class:`gait_opt.Gait` of :func:`gait_to_dict`'s dictionary."""
     sol = d["solution"]
-    return Gait(rabbit(RobotParams.from_dict(d["robot"])), GaitOptions.from_dict(d["options"]),
-                sol["alpha"], sol["x0"], sol["T"])
+    rec = d["robot"]
+    desc = (RobotParams.from_dict(rec).to_description() if RobotParams.is_legacy_record(rec)
+            else description_from_dict(rec))
+    return Gait(robot(desc), GaitOptions.from_dict(d["options"]), sol["alpha"], sol["x0"],
+                sol["T"])
 
 
 # ------------------------------------------------------------ worker side
@@ -384,7 +426,7 @@ def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
     model : BipedModel
     gait : Reference
     points : array_like
-        (n, nu) output matrices M1.
+        (n, nu) output matrices M1 (nu = ``model.nu``).
     out_dir : str or Path, optional
         Folder for the results, written chunk by chunk and resumable; None keeps them in
         memory only.
@@ -615,8 +657,9 @@ def _run_dask(scheduler, payload, P, todo, record):
 # ----------------------------------------------------- Fig. 2: 1-D sweeps
 @dataclass
 class OneDSweeps:
-    """The four 1-D sweeps of Fig. 2: ``results[j]`` over ``values[j]`` for component j
-    (others zero), ``singular_values[j]`` = D11/D12(j) at q^d(T) (eq. 24)."""
+    """The 1-D sweeps of Fig. 2 (one per component of M1: four for RABBIT):
+    ``results[j]`` over ``values[j]`` for component j (others zero),
+    ``singular_values[j]`` = D11/D12(j) at q^d(T) (eq. 24)."""
     values: list
     results: list
     singular_values: np.ndarray
@@ -624,15 +667,30 @@ class OneDSweeps:
 
 
 def one_d_sweeps(model, gait, values, out_dir=None, **kw) -> OneDSweeps:
-    """Fig. 2: max|lambda| against each component M1(j) with the other three zero.
-    ``values``: one array for all four components or a list of four arrays.  Runs as
-    one sweep (one pool, one folder); ``kw`` go to :func:`run_sweep`."""
-    if isinstance(values, (list, tuple)) and len(values) == 4 and np.ndim(values[0]) == 1:
+    """Fig. 2: max|lambda| against each component M1(j) with the others zero.
+
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+    values : array_like or list of array_like
+        One array for every component, or one array per component (nu of them).
+    out_dir : str or Path, optional
+        Runs as one sweep (one pool, one folder).
+    **kw
+        Passed to :func:`run_sweep`.
+
+    Returns
+    -------
+    OneDSweeps
+    """
+    nu = model.nu
+    if isinstance(values, (list, tuple)) and len(values) == nu and np.ndim(values[0]) == 1:
         vals = [np.asarray(v, dtype=float).ravel() for v in values]
     else:
-        vals = [np.asarray(values, dtype=float).ravel()] * 4
-    P = np.concatenate([line_points(j, v) for j, v in enumerate(vals)])
+        vals = [np.asarray(values, dtype=float).ravel()] * nu
+    P = np.concatenate([line_points(j, v, nu) for j, v in enumerate(vals)])
     r = run_sweep(model, gait, P, out_dir=out_dir, **kw)
     ends = np.cumsum([0] + [len(v) for v in vals])
-    parts = [r.subset(np.arange(ends[j], ends[j + 1])) for j in range(4)]
+    parts = [r.subset(np.arange(ends[j], ends[j + 1])) for j in range(nu)]
     return OneDSweeps(vals, parts, singular_m1_values(model, gait), r)

@@ -20,8 +20,8 @@ __all__ = ["grid_results", "grid_best"]
 @cached(maxsize=4)
 def grid_results(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
                  folder=None, progress: bool = False) -> SweepResult:
-    """The sweep of the n^4 grid on [lo, hi]^4 (memoised; stored under ``folder``, by
-    default the cache folder).
+    """The sweep of the n^nu grid on [lo, hi]^nu (memoised; stored under ``folder``, by
+    default the cache folder; nu = ``model.nu``, the paper's 9^4 for RABBIT).
 
     Returns
     -------
@@ -29,7 +29,7 @@ def grid_results(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
     """
     folder = cache_dir(folder) / "sweeps" / (f"{digest_json(gait_to_dict(gait))[:16]}"
                                              f"_grid{n}_{lo:g}_{hi:g}")
-    P = grid_points(n, lo, hi)
+    P = grid_points(n, lo, hi, model.nu)
     try:
         return run_sweep(model, gait, P, out_dir=folder, progress=progress)
     except SweepStoreError:           # other settings or other code: recompute

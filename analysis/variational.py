@@ -78,7 +78,7 @@ class VariationalJacobian:
         self.zdot = float(self.grad_z @ dqT)
         qp, dqp = model.impact(q, dq)
         JD = ca.Function("JD", [q, dq], [ca.jacobian(ca.vertcat(qp, dqp), ca.vertcat(q, dq))])
-        self.J_impact = np.array(JD(qT, dqT))                 # 10 x 10
+        self.J_impact = np.array(JD(qT, dqT))                 # 2 nq x 2 nq
         self.dqT, self.ddqT = dqT, ddqT
         self._build()
 
@@ -132,14 +132,14 @@ class VariationalJacobian:
         P = self._segment(self.pre, self.h_pre, M1, ca.SX.eye(2), forcing=False)
         MT = ca.vertcat(1, -M1)
         dtau = -ca.dot(MT, ca.DM(self.grad_z)) * P[0, :] / self.zdot            # 1 x 2
-        dq_m = ca.mtimes(MT, P[0, :]) + ca.mtimes(ca.DM(self.dqT), dtau)       # 5 x 2
+        dq_m = ca.mtimes(MT, P[0, :]) + ca.mtimes(ca.DM(self.dqT), dtau)       # nq x 2
         ddq_m = ca.mtimes(MT, P[1, :]) + ca.mtimes(ca.DM(self.ddqT), dtau)
-        plus = ca.mtimes(ca.DM(self.J_impact), ca.vertcat(dq_m, ddq_m))       # 10 x 2
+        plus = ca.mtimes(ca.DM(self.J_impact), ca.vertcat(dq_m, ddq_m))       # 2 nq x 2
         nq = self.model.nq
         dqp, ddqp = plus[:nq, :], plus[nq:, :]
         dy = outputs(M1, dqp)                     # eq. (5), both columns
         ddy = outputs(M1, ddqp)
-        W = ca.vertcat(dqp[0, :], ddqp[0, :], dy, ddy)                         # 10 x 2
+        W = ca.vertcat(dqp[0, :], ddqp[0, :], dy, ddy)                         # 2 nq x 2
         S0 = ca.horzcat(ca.SX.eye(2), ca.SX.zeros(2, 2 * self.model.nu))
         S = self._segment(self.post, self.h_post, M1, S0, forcing=True)
         A = ca.mtimes(S, W)

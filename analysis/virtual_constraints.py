@@ -35,7 +35,7 @@ import numpy as np
 
 from biped_casadi import require_same_robot
 from biped_casadi.caching import cached
-from biped_casadi.controllers import HIP_PHASE, VirtualConstraints, fit_virtual_constraints
+from biped_casadi.controllers import VirtualConstraints, fit_virtual_constraints
 from biped_casadi.numerics import rk4_step
 from biped_casadi.output_law import SECTION
 from biped_casadi.results import Result
@@ -180,7 +180,10 @@ class VirtualConstraintMap:
         if den.min() * den.max() <= 0:
             return "singular", "D_1 Q'(theta) vanishes on the step: the controller is singular", min_den
         xs, zs, dz = (np.array(v).ravel() for v in self.foot.map(n)(ths[None, :]))
-        if np.any(zs[1:-1] <= 0):
+        # legs without knees may graze the ground inside the step (scuffing ignored):
+        # only the ground beyond the scuff zone counts
+        counts = xs > self.model.scuff_zone if self.model.scuffing_ignored else np.ones(n, bool)
+        if np.any((zs[1:-1] <= 0) & counts[1:-1]):
             return "no_impact", "the swing foot touches the ground inside the step", min_den
         if not (xs[-1] > 0 and dz[-1] * np.sign(self.theta_minus - self.theta_plus) < 0):
             return "no_impact", "the impact of the HZD orbit is not valid (x_sw > 0, moving down)", min_den
@@ -226,16 +229,31 @@ class VirtualConstraintMap:
 
 
 @cached(maxsize=8)
-def vc_map(model, gait, phase=HIP_PHASE, H0=None, n_steps: int = 1000) -> VirtualConstraintMap:
-    """The :class:`VirtualConstraintMap` of constraints fitted to ``gait`` with phase
-    variable theta = ``phase`` q and outputs H0 q - h_d(theta), built once (memoised by
-    the gait's digest and the arguments)."""
+def vc_map(model, gait, phase=None, H0=None, n_steps: int = 1000) -> VirtualConstraintMap:
+    """The :class:`VirtualConstraintMap` of constraints fitted to a gait, built once
+    (memoised by the gait's digest and the arguments).
+
+    Parameters
+    ----------
+    model : BipedModel
+    gait : Reference
+    phase : array_like, optional
+        theta = ``phase`` q (default the model's ``hip_phase``).
+    H0 : array_like, optional
+        Outputs H0 q - h_d(theta) (default q_a).
+    n_steps : int
+        RK4 steps in theta over one step.
+
+    Returns
+    -------
+    VirtualConstraintMap
+    """
     constraints = fit_virtual_constraints(gait, c=phase, H0=H0)
     return VirtualConstraintMap(model, gait, constraints, n_steps)
 
 
 def vc_eigenvalue(model, gait, constraints: VirtualConstraints | None = None,
-                  phase=HIP_PHASE, H0=None, n_steps: int = 1000) -> VCEigenResult:
+                  phase=None, H0=None, n_steps: int = 1000) -> VCEigenResult:
     """Eigenvalue of the 1-D restricted Poincaré map of the virtual-constraint controller.
 
     Parameters
@@ -245,8 +263,10 @@ def vc_eigenvalue(model, gait, constraints: VirtualConstraints | None = None,
     constraints : VirtualConstraints, optional
         Given constraints; otherwise fitted to ``gait`` with phase variable
         theta = ``phase`` q and outputs H0 q - h_d(theta).
-    phase, H0 : array_like
-        See :func:`biped_casadi.fit_virtual_constraints`.
+    phase, H0 : array_like, optional
+        See :func:`biped_casadi.fit_virtual_constraints`; the default phase is the
+        model's ``hip_phase`` (the stance-foot-to-hip angle; RABBIT: q1 + q2 / 2, the
+        three-link biped: q1).
     n_steps : int
         RK4 steps in theta over one step.
 
@@ -255,7 +275,7 @@ def vc_eigenvalue(model, gait, constraints: VirtualConstraints | None = None,
     VCEigenResult
     """
     if constraints is None:
-        phase = tuple(np.asarray(phase, float).ravel())
+        phase = tuple(np.asarray(model.hip_phase if phase is None else phase, float).ravel())
         H0 = None if H0 is None else tuple(map(tuple, np.asarray(H0, float)))
         return vc_map(model, gait, phase, H0, n_steps).analyse()
     return VirtualConstraintMap(model, gait, constraints, n_steps).analyse()

@@ -138,6 +138,7 @@ class ZeroDynamicsWalker:
         o = self.options
         self.torque_limit = float(o.torque_limit if o.torque_limit is not None
                                   else model.params.torque_limit)
+        self.min_hip_height = o.fall_height(model)
         self.horizon = min(o.horizon, (gait.t_max - self.h) / self.T)
         self.n_chunks = int(math.ceil(self.horizon * 8))
         self.ref_T = gait.state_at(self.T)
@@ -188,7 +189,8 @@ class ZeroDynamicsWalker:
         xs, zs = m.swing_foot(q)
         _, dzs = m.swing_foot_velocity(q, dq)
         den = decoupling_denominator(D[0, 0], D[0, 1:], M1)                    # eq. (24)
-        return ca.vertcat(u, Fx, Fz, xs, zs, dzs, m.points(q)[1, 2], m.torso_angle(q), den)
+        return ca.vertcat(u, Fx, Fz, xs, zs, dzs, m.points(q)[1, m.hip_index], m.torso_angle(q),
+                          den)
 
     def _build(self):
         m, nq, nu = self.model, self.nq, self.nu
@@ -344,7 +346,8 @@ class ZeroDynamicsWalker:
         rows["u"] = Dg[:nu]
         rows["finite"] = np.all(np.isfinite(Dg), axis=0)
         masks = node_violations(rows, self.options, self.torque_limit, scale[:, None],
-                                sign[:, None], zprev)
+                                sign[:, None], zprev, min_hip_height=self.min_hip_height,
+                                scuffing_ignored=self.model.scuffing_ignored)
         return first_violation(masks)
 
     def _single_support(self, k, idx, x, P, scale, run, alive, tau0):
@@ -384,7 +387,7 @@ class ZeroDynamicsWalker:
             zs, xsw = Dg[nu + _ROWS.index("zsw")], Dg[nu + _ROWS.index("xsw")]
             zp = np.concatenate([zprev[li][:, None], zs[:, :-1]], axis=1)
             with np.errstate(invalid="ignore"):
-                strike = (zs < 0) & (xsw > 0) & (zp >= 0)
+                strike = (zs < 0) & (xsw > self.model.scuff_zone) & (zp >= 0)
             i_strike = np.where(strike.any(axis=1), np.argmax(strike, axis=1), Ts.shape[1])
             masks_first, which = self._check(Dg, sign[li], scale[idx[li]], zp)
             failed = (which != "") & (masks_first < i_strike)
@@ -554,6 +557,7 @@ class VirtualConstraintWalker:
         o = self.options
         self.torque_limit = float(o.torque_limit if o.torque_limit is not None
                                   else model.params.torque_limit)
+        self.min_hip_height = o.fall_height(model)
         self.ref_T = gait.state_at(gait.T)
         self._build()
         ths = np.linspace(self.vmap.theta_plus, self.vmap.theta_minus, 801)
@@ -581,7 +585,8 @@ class VirtualConstraintWalker:
         Fx, Fz = m.ground_reaction_acc(q, dq, ddq)
         xs, zs = m.swing_foot(q)
         _, dzs = m.swing_foot_velocity(q, dq)
-        diag = ca.vertcat(u, Fx, Fz, xs, zs, dzs, m.points(q)[1, 2], m.torso_angle(q), den)
+        diag = ca.vertcat(u, Fx, Fz, xs, zs, dzs, m.points(q)[1, m.hip_index],
+                          m.torso_angle(q), den)
         node = ca.Function("vc_node", [z, th, hs], [ca.cse(zn), thn, ca.cse(diag)], self._jit)
         self.start_node = node                   # with h = 0: the diagnostics of a state
         acc = node.mapaccum("vc_nodes", self.nodes, [0, 1], [0, 1])
@@ -649,7 +654,9 @@ class VirtualConstraintWalker:
             rows["u"] = Dg[:nu]
             rows["finite"] = np.all(np.isfinite(Dg), axis=0) & np.all(np.isfinite(Z), axis=0)
             masks = node_violations(rows, o, self.torque_limit, self.den_scale,
-                                    np.sign(rows["den"][:, :1]))
+                                    np.sign(rows["den"][:, :1]),
+                                    min_hip_height=self.min_hip_height,
+                                    scuffing_ignored=self.model.scuffing_ignored)
             masks["no_impact"] = rows["finite"] & ~(ws * direction > 0)   # stalls, falls back
             first, which = first_violation(masks)
             run.track(idx, Dg, nu, mask=np.arange(self.nodes + 1)[None, :]

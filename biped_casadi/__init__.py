@@ -12,7 +12,10 @@ from .caching import cache_dir, cached
 from .controllers import (HIP_PHASE, PAPER_REJOIN, TimeVaryingController,
                           VirtualConstraintController, VirtualConstraints,
                           fit_virtual_constraints)
-from .model import B_INPUT, E_RELABEL, BipedModel, rabbit
+from .description import (Link, RobotDescription, description_from_dict, find_description,
+                          load_description)
+from .model import (B_INPUT, E_RELABEL, RABBIT_DESCRIPTION, BipedModel, rabbit,
+                    resolve_robot, robot)
 from .output_law import SECTION, Gains, SingularityReport
 from .params import RABBIT, RobotParams, load_params
 from .perturbation import PAPER_SIZES, Perturbation, directions
@@ -21,7 +24,9 @@ from .results import Result, json_safe
 from .simulate import (PAPER_PERTURBATION, SimulationOptions, SimulationResult, Simulator,
                        perturbed_initial_state, simulate)
 
-__all__ = ["rabbit", "BipedModel", "RobotParams", "RABBIT", "load_params", "E_RELABEL",
+__all__ = ["rabbit", "robot", "resolve_robot", "RobotDescription", "Link",
+           "load_description", "find_description", "description_from_dict",
+           "RABBIT_DESCRIPTION", "BipedModel", "RobotParams", "RABBIT", "load_params", "E_RELABEL",
            "B_INPUT", "Reference", "require_same_robot", "Gains", "SingularityReport",
            "SECTION", "TimeVaryingController", "VirtualConstraintController",
            "VirtualConstraints", "fit_virtual_constraints", "HIP_PHASE", "PAPER_REJOIN",

@@ -40,9 +40,9 @@ __all__ = ["Gains", "StepStart", "ControlOutput", "SingularityReport",
            "TimeVaryingController", "VirtualConstraints", "VirtualConstraintController",
            "fit_virtual_constraints", "HIP_PHASE", "PAPER_REJOIN"]
 
-#: phase variable c of the virtual-constraint controller, theta = c q: the angle of the
-#: line stance foot -> hip from the vertical, exactly q1 + q2 / 2 when tibia and femur
-#: are equally long (RABBIT), a linear stand-in for it otherwise.
+#: RABBIT's phase variable c of the virtual-constraint controller, theta = c q: the angle
+#: of the line stance foot -> hip from the vertical, exactly q1 + q2 / 2 when tibia and
+#: femur are equally long.  Every model has its own (``model.hip_phase``, the default).
 HIP_PHASE = (1.0, 0.5, 0.0, 0.0, 0.0)
 
 #: the paper's rejoin time of the correction v_c, as a fraction of T (eq. 18)
@@ -62,9 +62,9 @@ class StepStart:
 @dataclass
 class ControlOutput:
     """One evaluation of a control law at a state."""
-    u: np.ndarray          # torques (4)
-    y: np.ndarray          # outputs (4)
-    dy: np.ndarray         # output rates (4)
+    u: np.ndarray          # torques (nu)
+    y: np.ndarray          # outputs (nu)
+    dy: np.ndarray         # output rates (nu)
     denominator: float     # zero where the controller is singular
 
 
@@ -306,7 +306,7 @@ def _bezier_spline(H0, q, dq, ddq, th, dth, ddth):
     return hfun, bez
 
 
-def fit_virtual_constraints(gait, c=HIP_PHASE, H0=None, segments_per_step: int = 200,
+def fit_virtual_constraints(gait, c=None, H0=None, segments_per_step: int = 200,
                             margin_before: float = 0.25, margin_after: float = 0.25
                             ) -> VirtualConstraints:
     """Fit impact-invariant virtual constraints H0 q = h_d(c q) to a reference.
@@ -315,8 +315,10 @@ def fit_virtual_constraints(gait, c=HIP_PHASE, H0=None, segments_per_step: int =
     ----------
     gait : Reference
         The reference step (a :class:`gait_opt.Gait`).
-    c : array_like
-        Phase variable theta = c q, strictly monotonic along the reference (checked).
+    c : array_like, optional
+        Phase variable theta = c q, strictly monotonic along the reference (checked);
+        default the model's ``hip_phase`` (the stance-foot-to-hip angle; for RABBIT
+        :data:`HIP_PHASE`).
     H0 : array_like, optional
         (nq - 1) x nq output matrix (default [0, I]: q_a = h_d(theta)); [H0; c] must be
         invertible.
@@ -331,7 +333,7 @@ def fit_virtual_constraints(gait, c=HIP_PHASE, H0=None, segments_per_step: int =
     VirtualConstraints
     """
     nq = gait.model.nq
-    c = as_vector(c, nq, "c")
+    c = as_vector(gait.model.hip_phase if c is None else c, nq, "c")
     H0 = np.hstack([np.zeros((nq - 1, 1)), np.eye(nq - 1)]) if H0 is None \
         else np.asarray(H0, dtype=float)
     if H0.shape != (nq - 1, nq) or not np.all(np.isfinite(H0)):
@@ -397,7 +399,7 @@ class VirtualConstraintController(_Controller):
     ddy = J ddq - h''(theta) (c dq)^2, and the unactuated row of eq. (1),
 
         [D_1; J] ddq = [-H_1; -Kd/eps dy - Kp/eps^2 y + h'' (c dq)^2],
-        u = rows 2..5 of (D ddq + H).
+        u = rows 2..n of (D ddq + H).
 
     With ``correction`` (default) the constraints of each step are h = h_d + h_c with
     the stride-to-stride correction of eq. (18) written in the phase instead of time:

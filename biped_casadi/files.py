@@ -1,14 +1,58 @@
-"""Writing result files safely: through a temporary file in the same folder, moved into
-place only when complete, and removed on any failure (an exception, Ctrl-C), so a
-reader never sees half a file and a failed write never damages an earlier result or
-leaves a stray temporary file behind."""
+"""Files a user names: reading an input file with one clear reason when it cannot be
+read, and writing result files safely: through a temporary file in the same folder,
+moved into place only when complete, and removed on any failure (an exception, Ctrl-C),
+so a reader never sees half a file and a failed write never damages an earlier result
+or leaves a stray temporary file behind."""
 from __future__ import annotations
 
 import contextlib
 import os
 from pathlib import Path
 
-__all__ = ["atomic_path", "write_text_atomic", "write_bytes_atomic"]
+__all__ = ["atomic_path", "write_text_atomic", "write_bytes_atomic", "read_text_file"]
+
+
+def read_text_file(path, what: str, max_bytes: int = 20_000_000) -> str:
+    """The UTF-8 text of an input file the user named.
+
+    Parameters
+    ----------
+    path : str or Path
+    what : str
+        What the file is, for the message ("robot description file", ...).
+    max_bytes : int
+        Larger files are refused (they are not what the caller reads).
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ValueError
+        One line naming ``what``, the path and the reason: not found, a broken link, a
+        folder, not a regular file (a device, a pipe), too large, unreadable (with the
+        system's reason, e.g. permission denied), or not UTF-8 text.
+    """
+    path = Path(path)
+    try:
+        if not path.exists():
+            raise ValueError(f"{what} {path} is a broken link" if path.is_symlink()
+                             else f"{what} not found: {path}")
+        if path.is_dir():
+            raise ValueError(f"{what} {path} is a folder, not a file")
+        if not path.is_file():
+            raise ValueError(f"{what} {path} is not a regular file")
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise ValueError(f"{what} {path} is too large ({size} bytes)")
+        data = path.read_bytes()
+    except OSError as e:
+        raise ValueError(f"{what} {path} cannot be read: {e.strerror or e}") from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ValueError(f"{what} {path} is not a text file") from None
 
 
 @contextlib.contextmanager

@@ -1,7 +1,11 @@
-"""Physical parameters of a planar five-link biped (torso + two femur/tibia legs).
+"""Legacy flat parameters of a planar five-link biped (torso + two femur/tibia legs).
 
-RABBIT (SPEC section 1) is the default.  Parameters load from TOML or JSON and are
-validated field by field, so another planar five-link robot is one file away.
+Kept so that parameter files and gait files written before robot descriptions
+(:mod:`biped_casadi.description`) still load: :meth:`RobotParams.to_description` turns
+a parameter set into the equivalent :class:`~biped_casadi.description.RobotDescription`
+(torso, leg = (femur, tibia), torque limit 150 N m), which is what the model uses.
+``rabbit(params)`` and ``robot(FILE)`` accept these files and objects.  New robots are
+written as description files (any number of links per leg, point masses).
 """
 from __future__ import annotations
 
@@ -11,6 +15,10 @@ import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+
+from .files import read_text_file
+
+from .description import Link, RobotDescription
 
 __all__ = ["RobotParams", "RABBIT", "load_params"]
 
@@ -72,6 +80,28 @@ class RobotParams:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
+    def to_description(self) -> RobotDescription:
+        """The equivalent robot description (the same numbers, so the same model).
+
+        Returns
+        -------
+        RobotDescription
+        """
+        return RobotDescription(
+            name=self.name,
+            torso=Link("torso", self.m_torso, self.L_torso, self.c_torso, self.I_torso),
+            leg=(Link("femur", self.m_femur, self.L_femur, self.c_femur, self.I_femur),
+                 Link("tibia", self.m_tibia, self.L_tibia, self.c_tibia, self.I_tibia)),
+            point_masses=(), rotor_inertia=self.rotor_inertia, gravity=self.g,
+            torque_limit=self.torque_limit)
+
+    @classmethod
+    def is_legacy_record(cls, data) -> bool:
+        """Whether a mapping is a flat parameter record (a gait file written before
+        robot descriptions, or a legacy parameter file)."""
+        return isinstance(data, dict) and "torso" not in data and "leg" not in data \
+            and any(k in data for k in cls.field_names() if k != "name")
+
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
         return tuple(f.name for f in dataclasses.fields(cls))
@@ -102,19 +132,7 @@ def load_params(path: str | Path) -> RobotParams:
     A TOML file may hold the fields at top level or under a ``[robot]`` table.
     """
     path = Path(path)
-    try:
-        if not path.exists():
-            raise ValueError(f"parameter file not found: {path}")
-        if not path.is_file():
-            raise ValueError(f"parameter file {path} is " + (
-                "a folder, not a file" if path.is_dir() else "not a regular file"))
-        if path.stat().st_size > 1_000_000:
-            raise ValueError(f"parameter file {path} is too large to be a parameter file")
-        text = path.read_bytes().decode("utf-8")
-    except OSError as e:
-        raise ValueError(f"parameter file {path} cannot be read: {e.strerror or e}") from None
-    except UnicodeDecodeError:
-        raise ValueError(f"parameter file {path} is not a text (TOML or JSON) file") from None
+    text = read_text_file(path, "parameter file", 1_000_000)
     try:
         if path.suffix.lower() == ".toml":
             data = tomllib.loads(text)

@@ -1,7 +1,7 @@
 """Full-order hybrid closed-loop simulation of walking (paper eq. 9; SPEC §1 impact, §4
 guard).
 
-State (q, dq, tau), 11 numbers, plus the controller's reference state r (a function of
+State (q, dq, tau), 2 nq + 1 numbers, plus the controller's reference state r (a function of
 tau alone, see :mod:`biped_casadi.controllers`).  In single support the robot follows
 eq. (1), D(q) ddq + H(q, dq) = B u, with the controller's torque u; the step ends when
 the swing foot reaches the ground in front of the stance foot while moving down
@@ -10,7 +10,8 @@ next step with tau = 0.
 
 Integration: classical RK4 with a fixed step h = T / ``rk4_steps`` (T the reference step
 duration), evaluated a quarter step at a time in one CasADi call (``mapaccum``); the
-impact is located inside its RK4 interval by Newton's method on the length of the last
+impact (a strike beyond ``model.scuff_zone``: anywhere in front of the stance foot for
+legs with knees) is located inside its RK4 interval by Newton's method on the length of the last
 RK4 step, z_sw(RK4(x_k, eta)) = 0, so the event is exact to round-off for the discrete
 scheme.  With the default 2000 steps per T the scheme is the gait's own (SPEC §2), and
 the unperturbed closed loop repeats the reference to ~1e-11.
@@ -20,7 +21,11 @@ with one of the statuses of :data:`STATUSES` (the logs end with that state):
 
 - ``fell``: hip lower than ``min_hip_height`` or torso past horizontal;
 - ``scuffed``: swing foot below the ground where it cannot strike (behind the stance
-  foot), or the old stance foot not lifting off after an impact;
+  foot), or the old stance foot not lifting off after an impact; for legs without knees
+  (``model.scuffing_ignored``) the swing foot may pass below the ground during the step
+  (scuffing ignored, as in Grizzle, Abba & Plestan 2001) and the step ends at its first
+  downward crossing of the ground beyond ``model.scuff_zone`` in front of the stance
+  foot;
 - ``negative_normal_force`` / ``slipped``: stance reaction F_z < ``min_normal_force``
   or |F_x| > mu F_z, in single support and for the impact impulse;
 - ``singular``: the controller's decoupling denominator vanishes or changes sign
@@ -52,7 +57,6 @@ STATUSES = ("ok", "fell", "scuffed", "negative_normal_force", "slipped", "torque
 #: the perturbation of paper §V-C: 0.01 rad on every joint, 0.1 rad/s on every velocity
 PAPER_PERTURBATION = (0.01, 0.1)
 
-# rows of the per-node diagnostics vector
 @dataclass(frozen=True)
 class SimulationOptions:
     """Options of :func:`simulate`; all have defaults.
@@ -61,7 +65,8 @@ class SimulationOptions:
     rk4_steps: RK4 steps per reference step duration T (a multiple of 4).
     mu: friction coefficient for the stance foot and the impact impulse.
     min_normal_force: lowest admissible stance normal force, N.
-    min_hip_height: the robot has fallen when the hip is lower, m.
+    min_hip_height: the robot has fallen when the hip is lower, m; None (default):
+        0.5625 leg length (0.45 m for RABBIT).
     max_torso_angle: ... or when the torso leans more than this from the vertical, rad.
     horizon: a step without a valid impact within horizon * T ends the run (no_impact).
     ground_tolerance: how far below the ground (m) the swing foot may graze behind the
@@ -81,7 +86,7 @@ class SimulationOptions:
     rk4_steps: int = 2000
     mu: float = 0.6
     min_normal_force: float = 0.0
-    min_hip_height: float = 0.45
+    min_hip_height: float | None = None
     max_torso_angle: float = math.pi / 2
     horizon: float = 2.0
     ground_tolerance: float = 1e-9
@@ -95,7 +100,8 @@ class SimulationOptions:
             raise ValueError(f"steps must be a positive integer, got {self.steps!r}")
         if not isinstance(self.rk4_steps, int) or self.rk4_steps < 8 or self.rk4_steps % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {self.rk4_steps!r}")
-        for name in ("mu", "min_hip_height", "max_torso_angle", "horizon"):
+        for name in ("mu", "max_torso_angle", "horizon") + (
+                ("min_hip_height",) if self.min_hip_height is not None else ()):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
@@ -114,6 +120,22 @@ class SimulationOptions:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    def fall_height(self, model) -> float:
+        """The hip height below which ``model`` has fallen, m: ``min_hip_height``, or
+        0.5625 leg length when None (0.45 m for RABBIT).
+
+        Parameters
+        ----------
+        model : BipedModel
+
+        Returns
+        -------
+        float
+        """
+        if self.min_hip_height is not None:
+            return float(self.min_hip_height)
+        return float(0.5625 * model.description.leg_length)
 
 
 @dataclass
@@ -285,6 +307,7 @@ class Simulator:
         o = self.options
         self.torque_limit = float(o.torque_limit if o.torque_limit is not None
                                   else self.model.params.torque_limit)
+        self.min_hip_height = o.fall_height(self.model)
         self._build()
         ref = self.controller.singularity()
         self._den_scale = max(abs(ref.min_value), abs(ref.max_value))
@@ -321,7 +344,8 @@ class Simulator:
         _, dzs = m.swing_foot_velocity(q, dq)
         P = m.points(q)
         torso = m.torso_angle(q)
-        diag = ca.cse(ca.vertcat(u, y, dy, den, Fx, Fz, inr, xs, zs, dzs, P[1, 2], torso))
+        diag = ca.cse(ca.vertcat(u, y, dy, den, Fx, Fz, inr, xs, zs, dzs, P[1, m.hip_index],
+                                 torso))
         self.diagnostics = ca.Function("closed_loop_diagnostics", [X, tau, p], [diag],
                                        ["X", "tau", "p"], ["diag"], jit)
         self.diagnostics_chunk = self.diagnostics.map(self.chunk)
@@ -346,7 +370,9 @@ class Simulator:
         previous nodes (a foot already below the ground cannot strike), den_sign: the
         sign of the decoupling denominator at the start of the step."""
         masks = node_violations(self._rows(D, X), self.options, self.torque_limit,
-                                self._den_scale, den_sign, z_prev)
+                                self._den_scale, den_sign, z_prev,
+                                min_hip_height=self.min_hip_height,
+                                scuffing_ignored=self.model.scuffing_ignored)
         first, which = first_violation(masks)
         if which == "":
             return None
@@ -468,7 +494,7 @@ class Simulator:
             zs = Dg[R["ZSW"]]
             zprev = np.r_[z_prev, zs[:-1]]
             with np.errstate(invalid="ignore"):
-                strike = (zs < 0) & (Dg[R["XSW"]] > 0) & (zprev >= 0)
+                strike = (zs < 0) & (Dg[R["XSW"]] > self.model.scuff_zone) & (zprev >= 0)
             i_strike = int(np.argmax(strike)) if strike.any() else Xs.shape[1]
             fail = self._first_failure(Dg[:, :i_strike], Xs[:, :i_strike], zprev[:i_strike],
                                        den_sign=sign)

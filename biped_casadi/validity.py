@@ -27,7 +27,8 @@ IMPACT_CHECKS = ("diverged", "negative_normal_force", "slipped", "scuffed")
 
 
 def node_violations(rows: dict, options, torque_limit: float, den_scale, den_sign,
-                    z_prev=None, min_hip_height: float | None = None) -> dict:
+                    z_prev=None, min_hip_height: float | None = None,
+                    scuffing_ignored: bool = False) -> dict:
     """Masks of the violated conditions at integration nodes.
 
     Parameters
@@ -51,6 +52,9 @@ def node_violations(rows: dict, options, torque_limit: float, den_scale, den_sig
         strike: going further down is scuffing).
     min_hip_height : float, optional
         The hip height below which the robot has fallen (default ``options``').
+    scuffing_ignored : bool
+        Legs without knees (``model.scuffing_ignored``): the swing foot passing below the
+        ground is the model's idealisation, never 'scuffed' (only a strike counts).
 
     Returns
     -------
@@ -72,6 +76,8 @@ def node_violations(rows: dict, options, torque_limit: float, den_scale, den_sig
         if z_prev is not None:
             behind = behind | (np.asarray(z_prev) < 0)
         bad["scuffed"] = finite & (rows["zsw"] < -o.ground_tolerance) & behind
+        if scuffing_ignored:
+            bad["scuffed"] = np.zeros_like(bad["scuffed"])
         bad["negative_normal_force"] = finite & ~(rows["Fz"] > o.min_normal_force)
         bad["slipped"] = finite & (np.abs(rows["Fx"]) > o.mu * rows["Fz"])
         bad["torque_limit"] = finite & (np.max(np.abs(rows["u"]), axis=0) > torque_limit)

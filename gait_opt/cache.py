@@ -34,7 +34,7 @@ def cache_key(model, options: GaitOptions) -> str:
 
 def cache_path(model=None, options: GaitOptions | None = None, cache_dir_=None) -> Path:
     model = model or rabbit()
-    options = options or GaitOptions()
+    options = (options or GaitOptions()).for_model(model)
     return cache_dir(cache_dir_) / f"gait-{cache_key(model, options)[:20]}.json"
 
 
@@ -57,7 +57,7 @@ def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
     Parameters
     ----------
     model : BipedModel, optional
-        Default RABBIT.
+        Default RABBIT; any robot's model (the cache is keyed by its description).
     options : GaitOptions, optional
         Default: SPEC section 2.
     cache_dir : str or Path, optional
@@ -78,6 +78,7 @@ def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
         raise ValueError(f"options must be GaitOptions, got {type(options).__name__}")
     if overrides:
         options = options.replace(**overrides)
+    options = options.for_model(model)
     path = cache_path(model, options, cache_dir)
     reason = "no cached file"
     if path.exists():

@@ -12,9 +12,9 @@ import numpy as np
 
 import casadi as ca
 
-from biped_casadi import Reference, RobotParams, rabbit
+from biped_casadi import Reference, RobotParams, description_from_dict, robot
 from biped_casadi.caching import cached
-from biped_casadi.files import atomic_path
+from biped_casadi.files import atomic_path, read_text_file
 
 from .options import GaitOptions
 from .parametrisation import quintic_hermite, reference_dynamics
@@ -60,17 +60,17 @@ class Gait(Reference):
     ``q(t)``, ``dq(t)``, ``ddq(t)``, ``u(t)``: t a float or array in [0, 2 T] (past T the
     reference continues smoothly: the Bezier polynomials of q_a^d evaluated past s = 1
     and q_u^d continued by the unactuated row; before 0, down to -T/2, the same row
-    integrated backwards); shapes (5,) / (4,) or (5, N) / (4, N).  The reference state
-    of the interface is r = (q_u^d, dq_u^d).
-    ``alpha`` (4 x (M+1)) Bezier coefficients of q_a^d in s = t / T; ``x0`` = (q_u^d(0),
+    integrated backwards); shapes (nq,) / (nu,) or (nq, N) / (nu, N) (RABBIT: 5 and 4).
+    The reference state of the interface is r = (q_u^d, dq_u^d).
+    ``alpha`` (nu x (M+1)) Bezier coefficients of q_a^d in s = t / T; ``x0`` = (q_u^d(0),
     dq_u^d(0)).  ``step_length``, ``speed``, ``cost``; ``solver_stats``; ``check()``
     computes every physical and consistency figure on a dense grid.
     """
 
     def __init__(self, model, options: GaitOptions, alpha, x0, T, solver_stats=None):
         self.model = model
-        self.options = options
-        self.alpha = np.array(alpha, dtype=float).reshape(4, options.bezier_degree + 1)
+        self.options = options.for_model(model)
+        self.alpha = np.array(alpha, dtype=float).reshape(model.nu, options.bezier_degree + 1)
         self.x0 = np.array(x0, dtype=float).ravel()
         self.T = float(T)
         if self.x0.shape != (2,) or not np.all(np.isfinite(self.x0)) or not np.all(np.isfinite(self.alpha)):
@@ -205,26 +205,35 @@ class Gait(Reference):
         qp, dqp, F, _, v_old = (np.array(v).ravel() for v in m.impact_full(qm, dqm))
         _, dz_end = m.swing_foot_velocity(qm, dqm)
         # unactuated row of eq. (1) with the reference accelerations
-        D = np.array(m.D.map(n)(q)).reshape(5, 5, n, order="F")
+        D = np.array(m.D.map(n)(q)).reshape(m.nq, m.nq, n, order="F")
         H = np.array(m.H.map(n)(q, dq))
         row1 = np.einsum("jn,jn->n", D[0], ddq) + H[0]
         inner = slice(1, n - 1)
         s = t / self.T
         profile = self.options.clearance * 4 * s * (1 - s)
+        if m.scuffing_ignored:
+            # legs without knees: the swing foot must be above the ground beyond the
+            # scuff zone in front of the stance foot (transcription.py); nearer, or
+            # behind, it may graze below
+            height = np.where(xs > m.scuff_zone, zs, np.inf)
+            margin = zs - profile * (xs - m.scuff_zone) / m.description.leg_length
+        else:
+            height, margin = zs, zs - profile
+        knees = (q[list(m.stance_knees)], q[list(m.swing_knees)])
         return dict(
             n_points=n,
             max_abs_torque=float(np.max(np.abs(u))),
             min_normal_force=float(np.min(Fz)),
             max_friction_ratio=float(np.max(np.abs(Fx) / np.maximum(Fz, 1e-300))),
-            min_swing_height_inside=float(np.min(zs[inner])),
-            min_clearance_margin=float(np.min(zs[inner] - profile[inner])),
+            min_swing_height_inside=float(np.min(height[inner])),
+            min_clearance_margin=float(np.min(margin[inner])),
             swing_height_at_T=float(zs[-1]),
             strike_velocity=float(dz_end),
             liftoff_velocity=float(v_old[1]),
             impact_impulse=F.tolist(),
             impact_friction_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else math.inf,
-            max_stance_knee=float(np.max(q[1])),
-            min_swing_knee=float(np.min(q[4])),
+            max_stance_knee=float(np.max(knees[0])) if m.has_knees else None,
+            min_swing_knee=float(np.min(knees[1])) if m.has_knees else None,
             periodicity_q=float(np.max(np.abs(qp - q[:, 0]))),
             periodicity_dq=float(np.max(np.abs(dqp - dq[:, 0]))),
             unactuated_row_residual=float(np.max(np.abs(row1))),
@@ -262,9 +271,10 @@ class Gait(Reference):
             "strike velocity": c["strike_velocity"] + o.min_strike_speed,
             "lift-off velocity": o.min_liftoff_speed - c["liftoff_velocity"],
             "impact impulse cone": max(-F[1], abs(F[0]) - o.impulse_mu * F[1]),
-            "stance knee (hyperextension)": c["max_stance_knee"] - o.stance_knee_max,
-            "swing knee (hyperextension)": o.swing_knee_min - c["min_swing_knee"],
         }
+        if self.model.has_knees:
+            amounts["stance knee (hyperextension)"] = c["max_stance_knee"] - o.stance_knee_max
+            amounts["swing knee (hyperextension)"] = o.swing_knee_min - c["min_swing_knee"]
         bad = [(k, float(v)) for k, v in amounts.items() if v > tol]
         return sorted(bad, key=lambda t: -t[1])
 
@@ -291,7 +301,7 @@ class Gait(Reference):
     # --------------------------------------------------------------- file I/O
     def to_dict(self) -> dict:
         body = dict(format=FORMAT, version=FORMAT_VERSION,
-                    robot=self.model.params.to_dict(), options=self.options.to_dict(),
+                    robot=self.model.description.to_dict(), options=self.options.to_dict(),
                     solution=dict(T=self.T, alpha=self.alpha.tolist(), x0=self.x0.tolist()),
                     solver_stats=_jsonable(self.solver_stats))
         return body
@@ -341,8 +351,9 @@ class Gait(Reference):
         ----------
         path : str or Path
         model : BipedModel, optional
-            The file must have been made for this model's robot (default: the file's own
-            robot).
+            The file must have been made for this robot (its description is recorded
+            in the file; files written before robot descriptions record RABBIT-type
+            flat parameters and load too).  Default: the file's robot.
         allow_open_orbit : bool
             A gait that is not a periodic orbit of its robot (see :meth:`orbit_residual`)
             is refused; with True it is returned with an :class:`OpenOrbitWarning`.
@@ -358,8 +369,8 @@ class Gait(Reference):
         GaitFileError
             For anything wrong, naming the file and the reason: missing, a folder,
             unreadable, not JSON, another format or version, checksum mismatch, a missing
-            or unknown key, a wrong type, size or non-finite number, other robot
-            parameters, or not a periodic orbit.
+            or unknown key, a wrong type, size or non-finite number, an invalid robot
+            description, another robot, or not a periodic orbit.
         """
         if not isinstance(path, (str, os.PathLike)):
             raise GaitFileError(f"path must be a file name, got {type(path).__name__}")
@@ -382,7 +393,7 @@ class Gait(Reference):
                 + ([f"unknown key(s): {', '.join(unknown)}"] if unknown else [])))
         model = _robot_from_file(body["robot"], model, where)
         opts = _options_from_file(body["options"], where)
-        alpha, x0, T = _solution_from_file(body["solution"], opts, where)
+        alpha, x0, T = _solution_from_file(body["solution"], opts, model.nu, where)
         stats = body.get("solver_stats", {})
         if not isinstance(stats, dict):
             raise GaitFileError(f"{where}: 'solver_stats' must be an object, got "
@@ -414,21 +425,10 @@ class Gait(Reference):
 def _read_json(path: Path):
     """The parsed JSON of a gait file, or GaitFileError naming the file and the reason."""
     try:
-        if not path.exists():
-            raise GaitFileError(f"gait file {path} is a broken link" if path.is_symlink()
-                                else f"gait file not found: {path}")
-        if path.is_dir():
-            raise GaitFileError(f"gait file {path} is a folder, not a file")
-        if not path.is_file():
-            raise GaitFileError(f"gait file {path} is not a regular file")
-        if path.stat().st_size > MAX_FILE_BYTES:
-            raise GaitFileError(f"gait file {path} is too large to be a gait file "
-                                f"({path.stat().st_size} bytes)")
-        text = path.read_bytes().decode("utf-8")
-    except OSError as e:
-        raise GaitFileError(f"gait file {path} cannot be read: {e.strerror or e}") from None
-    except UnicodeDecodeError:
-        raise GaitFileError(f"gait file {path} is not a text (JSON) file") from None
+        text = read_text_file(path, "gait file", MAX_FILE_BYTES)
+    except ValueError as e:
+        raise GaitFileError(str(e).replace("is not a text file", "is not a text (JSON) file")
+                            ) from None
     if not text.strip():
         raise GaitFileError(f"gait file {path} is empty")
     try:
@@ -438,20 +438,42 @@ def _read_json(path: Path):
                             f"corrupted?): {e}") from None
 
 
-def _robot_from_file(robot, model, where: str):
-    """The model a gait file describes (its ``robot`` entry), checked against ``model``
+def _robot_from_file(record, model, where: str):
+    """The model a gait file describes (its ``robot`` record: a robot description, or the
+    flat parameters of files written before descriptions), checked against ``model``
     when given.  The one place that reads the robot part of a gait file."""
     try:
-        params = RobotParams.from_dict(robot)
-    except (TypeError, ValueError) as e:
+        if RobotParams.is_legacy_record(record):
+            params = RobotParams.from_dict(record).to_description()
+        else:
+            params = description_from_dict(record, where=f"robot of {where}")
+    except (KeyError, TypeError, ValueError) as e:
         raise GaitFileError(f"{where}: invalid 'robot': {e}") from None
     if model is None:
-        return rabbit(params)
+        return robot(params)
     if model.params != params:
-        diff = [k for k, v in params.to_dict().items() if model.params.to_dict()[k] != v]
+        mine, theirs = _flat(model.params.to_dict()), _flat(params.to_dict())
+        diff = [f"{k} ({theirs.get(k)!r} in the file, {mine.get(k)!r} in the model)"
+                for k in sorted(set(mine) | set(theirs)) if mine.get(k) != theirs.get(k)]
+        more = f", and {len(diff) - 3} more" if len(diff) > 3 else ""
         raise GaitFileError(f"{where} was made for other robot parameters "
-                            f"(differ in: {', '.join(diff)})")
+                            f"(robot {params.name!r}, the model is {model.params.name!r}; "
+                            f"differ in: {', '.join(diff[:3])}{more})")
     return model
+
+
+def _flat(d, prefix: str = "") -> dict:
+    """{'torso.mass': 12.0, 'leg[1].length': 0.4, ...} from a nested record."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        elif isinstance(v, list) and all(isinstance(x, dict) for x in v):
+            for i, x in enumerate(v):
+                out.update(_flat(x, f"{prefix}{k}[{i + 1}]."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
 
 
 def _options_from_file(options, where: str) -> GaitOptions:
@@ -504,7 +526,7 @@ def _numbers(value, shape: tuple, what: str, where: str) -> np.ndarray:
     return a
 
 
-def _solution_from_file(sol, opts: GaitOptions, where: str):
+def _solution_from_file(sol, opts: GaitOptions, nu: int, where: str):
     """(alpha, x0, T) of the ``solution`` entry, every field checked."""
     if not isinstance(sol, dict):
         raise GaitFileError(f"{where}: 'solution' must be an object with T, alpha, x0, "
@@ -519,7 +541,7 @@ def _solution_from_file(sol, opts: GaitOptions, where: str):
     if T is None or T <= 0:
         raise GaitFileError(f"{where}: solution.T must be a positive finite number, "
                             f"got {sol['T']!r:.40}")
-    alpha = _numbers(sol["alpha"], (4, opts.bezier_degree + 1),
+    alpha = _numbers(sol["alpha"], (nu, opts.bezier_degree + 1),
                      f"alpha (Bezier degree {opts.bezier_degree})", where)
     x0 = _numbers(sol["x0"], (2,), "x0", where)
     return alpha, x0, float(T)

@@ -41,7 +41,7 @@ def _check_reachable(opts: GaitOptions):
 @dataclass
 class CollocationResult:
     """IPOPT's solution of the transcribed problem, before the polish: ``T``, ``alpha``
-    (4 x (M+1)), ``Xs`` (2 x (N+1), x at interval starts), ``Xc`` (2 x N d, x at the
+    (nu x (M+1)), ``Xs`` (2 x (N+1), x at interval starts), ``Xc`` (2 x N d, x at the
     collocation points), ``cost`` (the NLP objective, unscaled), IPOPT's ``status`` and
     ``iterations``, its ``timing`` (seconds per callback), ``build_time``, ``solve_time``."""
 
@@ -63,6 +63,7 @@ def solve_collocation(model, opts: GaitOptions, *, verbose: bool = False,
     built-in guess (or ``warm_start``, a Gait) and return the raw solution; raises
     :class:`GaitOptimizationError` when IPOPT fails or a constraint family is still
     violated."""
+    opts = opts.for_model(model)
     _check_reachable(opts)
     t0 = time.perf_counter()
     prob = build_problem(model, opts, margins)
@@ -119,11 +120,11 @@ class GaitSolveResult(Result):
         return self.status in self.SUCCESS and not self.violations and self.gait is not None
 
 
-def _options(options, overrides) -> GaitOptions:
+def _options(model, options, overrides) -> GaitOptions:
     opts = options or GaitOptions()
     if not isinstance(opts, GaitOptions):
         raise ValueError(f"options must be GaitOptions, got {type(opts).__name__}")
-    return opts.replace(**overrides) if overrides else opts
+    return (opts.replace(**overrides) if overrides else opts).for_model(model)
 
 
 def solve_gait(model, options: GaitOptions | None = None, *, verbose: bool = False,
@@ -155,7 +156,7 @@ def solve_gait(model, options: GaitOptions | None = None, *, verbose: bool = Fal
     GaitSolveResult
         With the gait, IPOPT's status and what remains violated.
     """
-    opts = _options(options, overrides)
+    opts = _options(model, options, overrides)
     t0 = time.perf_counter()
     margins, passes, best = {}, [], None
     for attempt in range(1 + max_refinements):

@@ -23,15 +23,21 @@ class GaitOptions:
     impact_mu: a separate (design) bound on the impact impulse ratio |F_x| / F_z, or None
         for ``mu``: a gait whose nominal impulse sits well inside the cone leaves room for
         the impact to move under perturbations.
-    torque_limit: |u_i| bound, N m.
+    torque_limit: |u_i| bound, N m; None (the default): the robot's own (its
+        description's ``torque_limit``; RABBIT: 150 N m), filled in by :meth:`for_model`
+        when a gait is solved.
     min_normal_force: lower bound of the stance normal force, N.
     clearance: swing-foot height bound inside the step, z_sw >= clearance * 4 s (1 - s)
-        with s = t / T (a parabola: 0 at both ends, `clearance` mid-step), m.
+        with s = t / T (a parabola: 0 at both ends, `clearance` mid-step), m.  Legs
+        without knees (``model.scuffing_ignored``): z_sw >= clearance * 4 s (1 - s) *
+        (x_sw - scuff_zone) / leg length, above the ground beyond the model's scuff zone
+        in front of the stance foot, grazing at most that deep nearer.
     min_liftoff_speed / min_strike_speed: the swing foot leaves the ground upward after
         impact and strikes it downward with at least these vertical speeds, m/s.
-    stance_knee_max / swing_knee_min: no hyperextension, q2 <= stance_knee_max and
-        q5 >= swing_knee_min over the whole step (enforced on the Bezier coefficients,
-        hence exactly, not only at nodes).
+    stance_knee_max / swing_knee_min: no hyperextension, every stance knee (RABBIT: q2)
+        <= stance_knee_max and every swing knee (RABBIT: q5) >= swing_knee_min over the
+        whole step (enforced on the Bezier coefficients, hence exactly, not only at
+        nodes); legs without knees have none.
     n_intervals, degree, scheme: direct collocation of the unactuated row
         (Legendre or Radau points).
     bezier_degree: degree of the actuated-joint polynomials.
@@ -51,7 +57,7 @@ class GaitOptions:
     step_time_bounds: tuple = (0.2, 1.5)
     mu: float = 0.6
     impact_mu: float | None = None
-    torque_limit: float = 150.0
+    torque_limit: float | None = None
     min_normal_force: float = 0.0
     clearance: float = 0.03
     min_liftoff_speed: float = 0.02
@@ -79,8 +85,10 @@ class GaitOptions:
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"gait option {name!r} must be a non-negative number, got {v!r}")
 
-        for n in ("speed", "mu", "torque_limit"):
+        for n in ("speed", "mu"):
             pos(n)
+        if self.torque_limit is not None:
+            pos("torque_limit")
         if self.impact_mu is not None:
             pos("impact_mu")
         for n in ("min_normal_force", "clearance", "min_liftoff_speed", "min_strike_speed"):
@@ -132,3 +140,19 @@ class GaitOptions:
 
     def replace(self, **changes) -> "GaitOptions":
         return dataclasses.replace(self, **changes)
+
+    def for_model(self, model) -> "GaitOptions":
+        """These options with the robot's torque limit filled in when none is given.
+
+        Parameters
+        ----------
+        model : BipedModel
+
+        Returns
+        -------
+        GaitOptions
+            ``torque_limit`` a number.
+        """
+        if self.torque_limit is None:
+            return self.replace(torque_limit=float(model.description.torque_limit))
+        return self

@@ -1,6 +1,7 @@
 """The gait parametrisation shared by the optimiser and the Gait object.
 
-q_a^d(t): a Bezier polynomial of degree M in s = t / T (4 x (M+1) coefficients alpha).
+q_a^d(t): a Bezier polynomial of degree M in s = t / T (nu x (M+1) coefficients alpha,
+nu = the model's number of torques: 4 for RABBIT).
 Being a polynomial, it and all its time derivatives exist everywhere and continue
 smoothly past T (SPEC section 3: the reference after T is the same polynomial
 evaluated for s > 1).
@@ -48,7 +49,8 @@ class ReferenceDynamics:
             raise ValueError(f"bezier_degree must be >= 3, got {degree}")
         self.model = model
         self.degree = M = degree
-        alpha = ca.SX.sym("alpha", 4, M + 1)
+        nu = model.nu
+        alpha = ca.SX.sym("alpha", nu, M + 1)
         s = ca.SX.sym("s")
         T = ca.SX.sym("T")
         b = bernstein(M, s)
@@ -63,11 +65,11 @@ class ReferenceDynamics:
 
         q, dq = model.q_sym, model.dq_sym
         D, H = model.D_expr, model.H_expr
-        dd_a = ca.SX.sym("ddqa", 4)
+        dd_a = ca.SX.sym("ddqa", nu)
         # the unactuated row of eq. (1) with q_a prescribed: eq. (23) with M1 = 0
-        ddqu = ca.cse(unactuated_acceleration(D, H, ca.DM.zeros(4), dd_a))
+        ddqu = ca.cse(unactuated_acceleration(D, H, ca.DM.zeros(nu), dd_a))
         self.ddqu = ca.Function("ddqu", [q, dq, dd_a], [ddqu], ["q", "dq", "ddqa"], ["ddqu"])
-        self.torque = model.inverse_dynamics          # rows 2..5 of eq. (1)
+        self.torque = model.inverse_dynamics          # rows 2..n of eq. (1)
 
         x = ca.SX.sym("x", 2)
         qa_, dqa_, ddqa_ = self.qa(alpha, s, T)
@@ -94,7 +96,7 @@ class ReferenceDynamics:
         x0 = ca.MX.sym("x0", 2)
         s0 = ca.MX.sym("s0")
         ds = ca.MX.sym("ds")
-        alpha = ca.MX.sym("alpha", 4, self.degree + 1)
+        alpha = ca.MX.sym("alpha", self.model.nu, self.degree + 1)
         T = ca.MX.sym("T")
         step = ca.Function("step", [x0, s0, ds, alpha, T], [*self.rk4(x0, s0, ds, alpha, T)])
         acc = step.mapaccum("rk4_acc", n, [0, 1], [0, 1])

@@ -28,12 +28,13 @@ def _polish_function(model, bezier_degree: int, n_steps: int):
     with forward sensitivities propagated step by step (exact Jacobian of the discrete
     integrator, by AD of one step)."""
     ref = reference_dynamics(model, bezier_degree)
-    na = 4 * (bezier_degree + 1)
+    nu = model.nu
+    na = nu * (bezier_degree + 1)
     x = ca.SX.sym("x", 2)
     S = ca.SX.sym("S", 2, na + 3)
     s = ca.SX.sym("s")
     ds = ca.SX.sym("ds")
-    a = ca.SX.sym("alpha", 4, bezier_degree + 1)
+    a = ca.SX.sym("alpha", nu, bezier_degree + 1)
     T = ca.SX.sym("T")
     xn, sn = ref.rk4(x, s, ds, a, T)
     J = ca.jacobian(xn, ca.vertcat(ca.vec(a), x, T))
@@ -41,7 +42,7 @@ def _polish_function(model, bezier_degree: int, n_steps: int):
     step = ca.Function("rk4_sens", [x, S, s, ds, a, T], [xn, Sn, sn])
     acc = step.mapaccum("rk4_sens_acc", n_steps, [0, 1, 2], [0, 1, 2])
     p = ca.MX.sym("p", na + 3)
-    am = ca.reshape(p[:na], 4, bezier_degree + 1)
+    am = ca.reshape(p[:na], nu, bezier_degree + 1)
     S0 = ca.horzcat(ca.MX.zeros(2, na), ca.MX.eye(2), ca.MX.zeros(2, 1))
     X, SS, _ = acc(p[na:na + 2], S0, 0, 1.0 / n_steps, am, p[na + 2])
     with_sens = ca.Function("unactuated_flow_sens", [p], [X[:, -1], SS[:, -(na + 3):]],
@@ -53,14 +54,15 @@ def _polish_function(model, bezier_degree: int, n_steps: int):
 
 @cached(maxsize=16)
 def _periodicity_residual(model, bezier_degree: int):
-    """(p, x(1), speed) -> residual (impact+relabel - start (10), z_sw(T), x_sw(T) - v T)
+    """(p, x(1), speed) -> residual (impact+relabel - start (2 nq), z_sw(T), x_sw(T) - v T)
     and its Jacobians in p and x(1)."""
     ref = reference_dynamics(model, bezier_degree)
-    na = 4 * (bezier_degree + 1)
+    nu = model.nu
+    na = nu * (bezier_degree + 1)
     p = ca.SX.sym("p", na + 3)
     x1 = ca.SX.sym("x1", 2)
     v = ca.SX.sym("v")
-    a = ca.reshape(p[:na], 4, bezier_degree + 1)
+    a = ca.reshape(p[:na], nu, bezier_degree + 1)
     xs0, Tm = p[na:na + 2], p[na + 2]
     qa0, dqa0, _ = ref.qa(a, 0, Tm)
     qa1, dqa1, _ = ref.qa(a, 1, Tm)
@@ -81,7 +83,7 @@ def polish(model, opts, alpha, x0, T, tol=1e-12, max_iter=20):
     the residual contracts by less than 10x (chord steps otherwise)."""
     plain, with_sens = _polish_function(model, opts.bezier_degree, opts.polish_steps)
     res = _periodicity_residual(model, opts.bezier_degree)
-    na = 4 * (opts.bezier_degree + 1)
+    na = model.nu * (opts.bezier_degree + 1)
     pv = np.r_[np.asarray(alpha, dtype=float).ravel(order="F"), np.ravel(x0), float(T)]
     hist, Jv = [], None
     for _ in range(max_iter):
@@ -106,6 +108,6 @@ def polish(model, opts, alpha, x0, T, tol=1e-12, max_iter=20):
             f"polish (Newton on the exact periodic orbit) did not converge: residual "
             f"{hist[-1]:.2e} after {len(hist)} iterations; try more n_intervals or "
             f"polish_steps", status="polish_failed")
-    a_new = pv[:na].reshape(4, -1, order="F")
+    a_new = pv[:na].reshape(model.nu, -1, order="F")
     return a_new, pv[na:na + 2], float(pv[na + 2]), hist
 

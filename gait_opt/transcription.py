@@ -10,11 +10,19 @@ Path constraints (torques, contact force, friction cone, swing-foot clearance) a
 imposed at every interval boundary and collocation point; knee limits on the Bezier
 coefficients, which bounds the polynomial on the whole step (convex hull).
 
+Robots.  Everything is sized by the model: n = nq joints, nu = n - 1 torques (RABBIT:
+5 and 4, the numbers quoted below).  Knee limits apply to the joints between leg links
+(none for legs of one link).  Legs without knees cannot lift the swing foot
+(``model.scuffing_ignored``): the clearance constraint is then z_sw >= clearance
+4 s (1 - s) (x_sw - model.scuff_zone) / leg length, which keeps the foot above the
+ground beyond the scuff zone in front of the stance foot and lets it graze at most that
+far below the ground nearer (as it must, passing the stance leg).
+
 Exact Hessian with structure.  The actuated joints are lifted at every point: variables
 QA_k = (q_a, dq_a/ds, d2q_a/ds2) at point k, tied to alpha by linear equalities.  Every
 nonlinear term of the NLP is then either a function of one point's
-z_k = (x_k, QA_k, T) (15 numbers) or of the boundary variables (T, alpha, x(0), x(1)) of
-the impact and periodicity conditions.  The constraints and the cost are *linear* in the
+z_k = (x_k, QA_k, T) (2 + 3 nu + 1 = 15 numbers) or of the boundary variables (T, alpha,
+x(0), x(1)) of the impact and periodicity conditions.  The constraints and the cost are *linear* in the
 point outputs (collocation right-hand side, torques, contact forces, swing height, cost
 density), so the Hessian of the Lagrangian is
 
@@ -49,10 +57,16 @@ from .parametrisation import reference_dynamics
 __all__ = ["Problem", "build_problem", "initial_guess", "make_solver", "describe_violations",
            "constraint_violations", "warm_start_vector", "MARGINS", "FIXED_BY", "UNITS"]
 
-#: rows of a point's output vector (see _point_functions)
-_OUT = dict(f=slice(0, 2), u=slice(2, 6), Fx=6, Fz=7, zsw=8, cost=9)
-_N_OUT = 10
-_N_Z = 15          # z_k = (q_u, dq_u, q_a, dq_a/ds, d2q_a/ds2, T)
+
+def _rows(model) -> tuple[dict, int, int]:
+    """Rows of a point's output vector (see _point_functions), their number, and the
+    size of z_k = (q_u, dq_u, q_a, dq_a/ds, d2q_a/ds2, T): 10 and 15 for RABBIT."""
+    nu = model.nu
+    rows = dict(f=slice(0, 2), u=slice(2, 2 + nu), Fx=2 + nu, Fz=3 + nu, zsw=4 + nu,
+                cost=5 + nu)
+    if model.scuffing_ignored:
+        rows["xsw"] = 6 + nu
+    return rows, 6 + nu + int(model.scuffing_ignored), 3 + 3 * nu
 
 @dataclass
 class Problem:
@@ -95,33 +109,36 @@ def _grid(opts):
 def _point_functions(model, bezier_degree: int, cost: str):
     """Per-point outputs and their exact Hessian (SX, built once per model and cost).
 
-    ``point(z)`` -> out = (T dq_u, T ddq_u, u (4), Fx, Fz, z_sw, cost density), with
-    z = (q_u, dq_u, q_a, dq_a/ds, d2q_a/ds2, T): the first two outputs are the
+    ``point(z)`` -> out = (T dq_u, T ddq_u, u (nu), Fx, Fz, z_sw, cost density[, x_sw]),
+    with z = (q_u, dq_u, q_a, dq_a/ds, d2q_a/ds2, T): the first two outputs are the
     unactuated row of eq. (1) as an ODE in s; the cost density is u'u (per-length cost,
-    times 1/v outside) or T u'u ('torque_squared').
+    times 1/v outside) or T u'u ('torque_squared'); x_sw only for legs without knees.
     ``point_jac(z)`` -> (out, d out / dz); ``point_cost(z)`` -> (cost density, gradient);
-    ``point_hess(z, c)`` -> upper triangle of d2(c' out)/dz2 (15x15).
+    ``point_hess(z, c)`` -> upper triangle of d2(c' out)/dz2 (15x15 for RABBIT).
     """
     ref = reference_dynamics(model, bezier_degree)
-    z = ca.SX.sym("z", _N_Z)
-    x, lifted, T = z[0:2], z[2:14], z[14]
-    q = ca.vertcat(x[0], lifted[:4])
-    dq = ca.vertcat(x[1], lifted[4:8] / T)
-    ddqa = lifted[8:12] / T**2
+    nu = model.nu
+    _, n_out, n_z = _rows(model)
+    z = ca.SX.sym("z", n_z)
+    x, lifted, T = z[0:2], z[2:2 + 3 * nu], z[2 + 3 * nu]
+    q = ca.vertcat(x[0], lifted[:nu])
+    dq = ca.vertcat(x[1], lifted[nu:2 * nu] / T)
+    ddqa = lifted[2 * nu:3 * nu] / T**2
     ddq = ca.vertcat(ref.ddqu(q, dq, ddqa), ddqa)
     u = ref.torque(q, dq, ddq)
     Fx, Fz = model.ground_reaction_acc(q, dq, ddq)
-    _, zsw = model.swing_foot(q)
+    xsw, zsw = model.swing_foot(q)
     density = ca.sumsqr(u) * (T if cost == "torque_squared" else 1)
     # common subexpression elimination first: the model's expressions repeat a lot
     # (3587 -> 1636 operations), which halves the size of the Hessian below
-    out = ca.cse(ca.vertcat(T * ca.vertcat(x[1], ddq[0]), u, Fx, Fz, zsw, density))
-    density = out[-1]
+    extra = [xsw] if model.scuffing_ignored else []
+    out = ca.cse(ca.vertcat(T * ca.vertcat(x[1], ddq[0]), u, Fx, Fz, zsw, density, *extra))
+    density = out[5 + nu]
     point = ca.Function("point", [z], [out], ["z"], ["out"])
     point_jac = ca.Function("point_jac", [z], [out, ca.jacobian(out, z)], ["z"], ["out", "J"])
     point_cost = ca.Function("point_cost", [z], [density, ca.gradient(density, z)], ["z"],
                              ["density", "grad"])
-    c = ca.SX.sym("c", _N_OUT)
+    c = ca.SX.sym("c", n_out)
     H = ca.triu(ca.hessian(ca.dot(c, out), z)[0])
     point_hess = ca.Function("point_hess", [z, c], [H], ["z", "c"], ["H"])
     return point, point_jac, point_cost, point_hess
@@ -131,10 +148,10 @@ def _boundary_function(model, opts: GaitOptions):
     """End of step, impact (paper eq. 2-3) and periodicity, as SX of
     v_b = (T, vec(alpha), x(0), x(1)); returns (Function, [(name, rows, lo, hi)])."""
     ref = reference_dynamics(model, opts.bezier_degree)
-    M = opts.bezier_degree
-    vb = ca.SX.sym("vb", 1 + 4 * (M + 1) + 4)
+    M, nu = opts.bezier_degree, model.nu
+    vb = ca.SX.sym("vb", 1 + nu * (M + 1) + 4)
     T = vb[0]
-    alpha = ca.reshape(vb[1:1 + 4 * (M + 1)], 4, M + 1)
+    alpha = ca.reshape(vb[1:1 + nu * (M + 1)], nu, M + 1)
     x0, x1 = vb[-4:-2], vb[-2:]
     qa0, dqa0, _ = ref.qa(alpha, 0, T)
     qa1, dqa1, _ = ref.qa(alpha, 1, T)
@@ -178,6 +195,7 @@ class _Layout:
     N: int
     d: int
     M: int
+    nu: int
     s_all: np.ndarray
     w: ca.MX
     T: ca.MX
@@ -200,14 +218,19 @@ class _Layout:
 
     @property
     def na(self) -> int:
-        return 4 * (self.M + 1)
+        return self.nu * (self.M + 1)
+
+    @property
+    def n_z(self) -> int:
+        return 3 + 3 * self.nu
 
     def z_index(self) -> np.ndarray:
-        """(_N_Z, npts): positions in w of every point's z_k = (x_k, QA_k, T)."""
-        z = np.empty((_N_Z, self.npts), dtype=int)
+        """(n_z, npts): positions in w of every point's z_k = (x_k, QA_k, T)."""
+        z = np.empty((self.n_z, self.npts), dtype=int)
+        nl = 3 * self.nu
         for k in range(self.npts):
             xk = self.off_Xs + 2 * k if k <= self.N else self.off_Xc + 2 * (k - self.N - 1)
-            z[:, k] = np.r_[xk, xk + 1, self.off_QA + 12 * k + np.arange(12), 0]
+            z[:, k] = np.r_[xk, xk + 1, self.off_QA + nl * k + np.arange(nl), 0]
         return z
 
     def boundary_index(self) -> np.ndarray:
@@ -216,20 +239,20 @@ class _Layout:
                      self.off_Xs + 2 * self.N + np.arange(2)]
 
 
-def _layout(opts: GaitOptions) -> _Layout:
+def _layout(opts: GaitOptions, nu: int) -> _Layout:
     M, N, d = opts.bezier_degree, opts.n_intervals, opts.degree
     s_start, s_coll = _grid(opts)
     s_all = np.r_[s_start, s_coll]
     T = ca.MX.sym("T")
-    alpha = ca.MX.sym("alpha", 4, M + 1)
+    alpha = ca.MX.sym("alpha", nu, M + 1)
     Xs = ca.MX.sym("Xs", 2, N + 1)
     Xc = ca.MX.sym("Xc", 2, N * d)
-    QA = ca.MX.sym("QA", 12, s_all.size)          # (qa, dqa/ds, d2qa/ds2) at every point
-    na = 4 * (M + 1)
+    QA = ca.MX.sym("QA", 3 * nu, s_all.size)     # (qa, dqa/ds, d2qa/ds2) at every point
+    na = nu * (M + 1)
     off_Xs = 1 + na
     off_Xc = off_Xs + 2 * (N + 1)
-    return _Layout(N, d, M, s_all, ca.veccat(T, alpha, Xs, Xc, QA), T, alpha, Xs, Xc, QA,
-                   1, off_Xs, off_Xc, off_Xc + 2 * N * d)
+    return _Layout(N, d, M, nu, s_all, ca.veccat(T, alpha, Xs, Xc, QA), T, alpha, Xs, Xc,
+                   QA, 1, off_Xs, off_Xc, off_Xc + 2 * N * d)
 
 
 class _Constraints:
@@ -256,16 +279,17 @@ def _point_constraints(model, opts, lay: _Layout, margins, OUT):
     """Bezier lifting, collocation of the unactuated row and the path constraints, all
     linear in w and in the point outputs OUT: (constraints, QA as a function of alpha)."""
     ref = reference_dynamics(model, opts.bezier_degree)
+    rows, _, _ = _rows(model)
     N, d = lay.N, lay.d
     _, C, Dend, _ = _collocation(opts)
     h = 1.0 / N
     s_sym = ca.SX.sym("s")
-    a_sx = ca.SX.sym("alpha", 4, lay.M + 1)
+    a_sx = ca.SX.sym("alpha", lay.nu, lay.M + 1)
     qa_s, dqa_s, ddqa_s = ref.qa(a_sx, s_sym, 1.0)       # with T = 1: s-derivatives
     basis = ca.Function("basis", [a_sx, s_sym], [ca.vertcat(qa_s, dqa_s, ddqa_s)])
     QA_of_alpha = basis.map(lay.npts)(lay.alpha, ca.DM(lay.s_all).T)
     con = _Constraints()
-    f_coll = OUT[_OUT["f"], N + 1:]
+    f_coll = OUT[rows["f"], N + 1:]
     coll, cont = [], []
     for k in range(N):
         Z = ca.horzcat(lay.Xs[:, k], lay.Xc[:, k * d:(k + 1) * d])
@@ -276,45 +300,53 @@ def _point_constraints(model, opts, lay: _Layout, margins, OUT):
     con.add("dynamics (continuity)", ca.horzcat(*cont), 0, 0)
     umax = opts.torque_limit - margins.get("torque limit", 0.0)
     mu = opts.mu - margins.get("friction cone", 0.0)
-    Fx_all, Fz_all = OUT[_OUT["Fx"], :], OUT[_OUT["Fz"], :]
-    con.add("torque limit", OUT[_OUT["u"], :], -umax, umax)
+    Fx_all, Fz_all = OUT[rows["Fx"], :], OUT[rows["Fz"], :]
+    con.add("torque limit", OUT[rows["u"], :], -umax, umax)
     con.add("normal force", Fz_all, opts.min_normal_force + margins.get("normal force", 0.0),
             np.inf)
     con.add("friction cone", ca.vertcat(mu * Fz_all - Fx_all, mu * Fz_all + Fx_all), 0, np.inf)
     s_all = lay.s_all
     idx = np.flatnonzero((s_all > 1e-9) & (s_all < 1 - 1e-9))
-    clear = (opts.clearance * 4 * s_all[idx] * (1 - s_all[idx])
-             + margins.get("swing-foot clearance", 0.0))
-    con.add("swing-foot clearance", OUT[_OUT["zsw"], idx.tolist()] - ca.DM(clear).T, 0, np.inf)
+    profile = opts.clearance * 4 * s_all[idx] * (1 - s_all[idx])
+    margin = margins.get("swing-foot clearance", 0.0)
+    zsw = OUT[rows["zsw"], idx.tolist()]
+    if model.scuffing_ignored:      # above the ground in front of the stance foot only
+        slope = profile / model.description.leg_length
+        con.add("swing-foot clearance", zsw - ca.DM(slope).T * OUT[rows["xsw"], idx.tolist()],
+                margin - slope * model.scuff_zone, np.inf)
+    else:
+        con.add("swing-foot clearance", zsw - ca.DM(profile + margin).T, 0, np.inf)
     return con, QA_of_alpha
 
 
-def _cost_of_outputs(opts, lay: _Layout, OUT):
+def _cost_of_outputs(model, opts, lay: _Layout, OUT):
     """(1/v) int_0^1 u'u ds (= int u'u dt / step length when x_end = v T), or
     T int_0^1 u'u ds, by the collocation quadrature; scaled by 1e-3 for IPOPT."""
+    rows, _, _ = _rows(model)
     _, _, _, Bq = _collocation(opts)
     weights = np.r_[np.zeros(lay.N + 1), np.tile(Bq, lay.N) * (1.0 / lay.N)]
     if opts.cost == "torque_squared_per_length":
         weights = weights / opts.speed
     cost_scale = 1e-3
-    return cost_scale * ca.mtimes(OUT[_OUT["cost"], :], ca.DM(weights)), cost_scale
+    return cost_scale * ca.mtimes(OUT[rows["cost"], :], ca.DM(weights)), cost_scale
 
 
-def _jacobian_and_gradient(point_jac, point_cost, lay, z_index, z_all, xw, pw, gfun,
+def _jacobian_and_gradient(model, point_jac, point_cost, lay, z_index, z_all, xw, pw, gfun,
                            A_out, G_w, a_out, bnd, vb_w):
     """Structured constraint Jacobian and objective gradient: d vec(OUT)/dw is block
-    sparse (one 10x15 block per point, columns z_index)."""
+    sparse (one 10x15 block per point for RABBIT, columns z_index)."""
     npts, nw = lay.npts, lay.nw
+    rows, n_out, n_z = _rows(model)
     vb_index = lay.boundary_index()
     sp_j = point_jac.sparsity_out(1)
     rj, cj = (np.array(v) for v in sp_j.get_triplet())
     ks = np.repeat(np.arange(npts), rj.size)
-    dout_sp = ca.Sparsity.triplet(_N_OUT * npts, nw, (ks * _N_OUT + np.tile(rj, npts)).tolist(),
+    dout_sp = ca.Sparsity.triplet(n_out * npts, nw, (ks * n_out + np.tile(rj, npts)).tolist(),
                                   z_index[np.tile(cj, npts), ks].tolist())
     out_v, Jp = point_jac.map(npts)(z_all)
     # the map's nonzeros are block after block, column-major within a block; the
     # triplet sparsity orders them column-major globally: permute
-    order = np.lexsort(((ks * _N_OUT + np.tile(rj, npts)), z_index[np.tile(cj, npts), ks]))
+    order = np.lexsort(((ks * n_out + np.tile(rj, npts)), z_index[np.tile(cj, npts), ks]))
     dout = ca.MX(dout_sp, Jp.nz[order.tolist()])
     _, Jb = bnd(vb_w)
     select_b = ca.DM(ca.Sparsity.triplet(vb_index.size, nw, list(range(vb_index.size)),
@@ -323,22 +355,23 @@ def _jacobian_and_gradient(point_jac, point_cost, lay, z_index, z_all, xw, pw, g
     jac_g = ca.vertcat(G_w + ca.mtimes(A_out, dout), ca.mtimes(Jb, select_b))
     jac_g_fun = ca.Function("jac_g", [xw, pw], [g_w, jac_g], ["x", "p"], ["g", "jac_g_x"])
     # objective: only the cost density of the collocation points (weights a_k)
-    wk = np.array(a_out).ravel()[_OUT["cost"]::_N_OUT]
+    wk = np.array(a_out).ravel()[rows["cost"]::n_out]
     cpts = np.flatnonzero(wk)
     dens, dgrad = point_cost.map(cpts.size)(z_all[:, cpts.tolist()])
     f_w = ca.mtimes(dens, ca.DM(wk[cpts]))
     grad_w = ca.densify(ca.mtimes(ca.DM(ca.Sparsity.triplet(
-        nw, _N_Z * cpts.size, z_index[:, cpts].ravel(order="F").tolist(),
-        list(range(_N_Z * cpts.size))), 1.0), ca.vec(dgrad * ca.repmat(ca.DM(wk[cpts]).T, _N_Z, 1))))
+        nw, n_z * cpts.size, z_index[:, cpts].ravel(order="F").tolist(),
+        list(range(n_z * cpts.size))), 1.0), ca.vec(dgrad * ca.repmat(ca.DM(wk[cpts]).T, n_z, 1))))
     grad_f_fun = ca.Function("grad_f", [xw, pw], [f_w, grad_w], ["x", "p"], ["f", "grad_f_x"])
     return jac_g_fun, grad_f_fun
 
 
-def _hessian_of_lagrangian(point_hess, bnd_hess, lay, z_index, z_all, xw, pw, vb_w,
+def _hessian_of_lagrangian(model, point_hess, bnd_hess, lay, z_index, z_all, xw, pw, vb_w,
                            A_out, a_out, n_linear, n_g):
     """Exact Hessian of the Lagrangian: per-point 15x15 and boundary Hessians scattered
     into the global upper-triangular sparsity (see the module docstring)."""
     npts, nw = lay.npts, lay.nw
+    _, n_out, _ = _rows(model)
     vb_index = lay.boundary_index()
     sp_p = point_hess.sparsity_out(0)
     sp_b = bnd_hess.sparsity_out(0)
@@ -355,7 +388,7 @@ def _hessian_of_lagrangian(point_hess, bnd_hess, lay, z_index, z_all, xw, pw, vb
                                         list(range(lin.size))), 1.0)
     lam_f = ca.MX.sym("lam_f")
     lam_g = ca.MX.sym("lam_g", n_g)
-    c_all = ca.reshape(ca.mtimes(A_out.T, lam_g[:n_linear]) + lam_f * a_out, _N_OUT, npts)
+    c_all = ca.reshape(ca.mtimes(A_out.T, lam_g[:n_linear]) + lam_f * a_out, n_out, npts)
     Hp = point_hess.map(npts)(z_all, c_all)
     Hb = bnd_hess(vb_w, lam_g[n_linear:])
     contrib = ca.vertcat(Hp.nz[:], Hb.nz[:])
@@ -364,16 +397,18 @@ def _hessian_of_lagrangian(point_hess, bnd_hess, lay, z_index, z_all, xw, pw, vb
                        ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
 
 
-def _variable_bounds(opts, lay: _Layout):
+def _variable_bounds(model, opts, lay: _Layout):
     """T within its bounds, knee limits on the Bezier coefficients (so on the whole
-    polynomial), joint angles within +-pi."""
+    polynomial; only where the legs have knees), joint angles within +-pi."""
     lbx = np.full(lay.nw, -np.inf)
     ubx = np.full(lay.nw, np.inf)
     lbx[0], ubx[0] = opts.step_time_bounds
-    a_lb = np.full((4, lay.M + 1), -np.pi)
-    a_ub = np.full((4, lay.M + 1), np.pi)
-    a_ub[0, :] = opts.stance_knee_max
-    a_lb[3, :] = opts.swing_knee_min
+    a_lb = np.full((lay.nu, lay.M + 1), -np.pi)
+    a_ub = np.full((lay.nu, lay.M + 1), np.pi)
+    for i in model.stance_knees:          # alpha row i - 1 is joint i
+        a_ub[i - 1, :] = opts.stance_knee_max
+    for i in model.swing_knees:
+        a_lb[i - 1, :] = opts.swing_knee_min
     lbx[lay.off_a:lay.off_a + lay.na] = a_lb.ravel(order="F")
     ubx[lay.off_a:lay.off_a + lay.na] = a_ub.ravel(order="F")
     return lbx, ubx
@@ -394,13 +429,15 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None) -> Prob
     -------
     Problem
     """
+    opts = opts.for_model(model)
     margins = dict(margins or {})
     unknown = set(margins) - set(MARGINS)
     if unknown:
         raise ValueError(f"margins: unknown constraint families {sorted(unknown)}")
-    lay = _layout(opts)
+    lay = _layout(opts, model.nu)
     w, npts = lay.w, lay.npts
-    OUT = ca.MX.sym("OUT", _N_OUT, npts)
+    _, n_out, n_z = _rows(model)
+    OUT = ca.MX.sym("OUT", n_out, npts)
     con, QA_of_alpha = _point_constraints(model, opts, lay, margins, OUT)
     n_linear = con.size
     bnd, bnd_hess, families = _boundary_function(model, opts)
@@ -410,7 +447,7 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None) -> Prob
         n = expr.numel()
         con.add(name, g_b[row:row + n], lo, hi)
         row += n
-    J_of_out, cost_scale = _cost_of_outputs(opts, lay, OUT)
+    J_of_out, cost_scale = _cost_of_outputs(model, opts, lay, OUT)
 
     g_of_out = ca.vertcat(*con.g)
     # the point outputs enter g and f linearly, and the other terms of g are linear in w
@@ -433,13 +470,14 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None) -> Prob
     z_index = lay.z_index()
     xw = ca.MX.sym("x", lay.nw)
     pw = ca.MX.sym("p", 0, 1)
-    z_all = ca.reshape(xw[z_index.ravel(order="F").tolist()], _N_Z, npts)
+    z_all = ca.reshape(xw[z_index.ravel(order="F").tolist()], n_z, npts)
     vb_w = xw[lay.boundary_index().tolist()]
-    jac_g_fun, grad_f_fun = _jacobian_and_gradient(point_jac, point_cost, lay, z_index, z_all,
-                                                   xw, pw, gfun, A_out, G_w, a_out, bnd, vb_w)
-    hess_lag = _hessian_of_lagrangian(point_hess, bnd_hess, lay, z_index, z_all, xw, pw, vb_w,
-                                      A_out, a_out, n_linear, g_of_out.numel())
-    lbx, ubx = _variable_bounds(opts, lay)
+    jac_g_fun, grad_f_fun = _jacobian_and_gradient(model, point_jac, point_cost, lay, z_index,
+                                                   z_all, xw, pw, gfun, A_out, G_w, a_out,
+                                                   bnd, vb_w)
+    hess_lag = _hessian_of_lagrangian(model, point_hess, bnd_hess, lay, z_index, z_all, xw,
+                                      pw, vb_w, A_out, a_out, n_linear, g_of_out.numel())
+    lbx, ubx = _variable_bounds(model, opts, lay)
     unpack = ca.Function("unpack", [w], [lay.T, lay.alpha, lay.Xs, lay.Xc, QA_of_alpha])
     lift = ca.Function("lift", [lay.alpha], [QA_of_alpha])
     return Problem(nlp, lift, lbx, ubx, np.concatenate(con.lbg), np.concatenate(con.ubg),
@@ -447,27 +485,36 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None) -> Prob
 
 
 def initial_guess(model, opts: GaitOptions):
-    """Built-in guess: a symmetric double-support pose at impact with both knees bent,
-    joints interpolated linearly in s, a swing-knee bend mid-step for clearance."""
+    """Built-in guess: a double-support pose at impact, feet ``L0`` apart, the stance leg
+    bent by kappa at its lowest knee and the swing leg's link angles the negatives of
+    the stance leg's (so both knees bend the human way), joints interpolated linearly in
+    s, the swing leg's knees bending mid-step for clearance (legs without knees: straight
+    legs, no bend)."""
     M = opts.bezier_degree
+    d = model.description
     lo, hi = opts.step_length_bounds
     L0 = float(np.clip(0.45 * np.sqrt(opts.speed / 0.75), lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)))
     T0 = float(np.clip(L0 / opts.speed, *opts.step_time_bounds))
     kappa, lean = 0.15, 0.05
-    p = model.params
-    # both legs bent by kappa, feet L0 apart: (L_t + L_f)(sin a + sin(a - kappa)) = L0,
-    # i.e. 2 (L_t + L_f) cos(kappa/2) sin(a - kappa/2) = L0
-    ratio = L0 / (2 * (p.L_tibia + p.L_femur) * np.cos(kappa / 2))
-    a = kappa / 2 + float(np.arcsin(np.clip(ratio, -0.95, 0.95)))
-    phi = np.array([a, a - kappa, lean, -a, kappa - a])  # femur_sw = -a, tibia_sw = kappa - a
+    # stance links from the foot up at angles a - b_j (b = 0, kappa, kappa, ...); the hip
+    # is at x = sum l_j sin(a - b_j) = R sin(a - delta); the swing foot lands at 2 x
+    lengths = np.array([link.length for link in reversed(d.leg)])
+    bends = np.r_[0.0, np.full(d.k - 1, kappa)]
+    P, Q = float(lengths @ np.cos(bends)), float(lengths @ np.sin(bends))
+    R, delta = float(np.hypot(P, Q)), float(np.arctan2(Q, P))
+    a = delta + float(np.arcsin(np.clip(L0 / (2 * R), -0.95, 0.95)))
+    stance = a - bends
+    phi = np.r_[stance, lean, -stance]      # swing leg from the hip down
     qT = np.r_[phi[0], np.diff(phi)]
     q0 = model.E @ qT
     qa0, qaT = q0[1:], qT[1:]
     k = np.arange(M + 1) / M
     alpha = qa0[:, None] + k[None, :] * (qaT - qa0)[:, None]
-    alpha[3] += 0.8 * np.sin(np.pi * k)          # swing knee bends mid-step
-    alpha[0] = np.minimum(alpha[0], opts.stance_knee_max - 0.02)
-    alpha[3] = np.maximum(alpha[3], opts.swing_knee_min + 0.02)
+    for i in model.swing_knees:                  # alpha row i - 1 is joint i
+        alpha[i - 1] += 0.8 * np.sin(np.pi * k)  # swing knees bend mid-step
+        alpha[i - 1] = np.maximum(alpha[i - 1], opts.swing_knee_min + 0.02)
+    for i in model.stance_knees:
+        alpha[i - 1] = np.minimum(alpha[i - 1], opts.stance_knee_max - 0.02)
     s_start, s_coll = _grid(opts)
     dqu = (qT[0] - q0[0]) / T0
     Xs = np.vstack([q0[0] + s_start * (qT[0] - q0[0]), np.full(s_start.size, dqu)])
@@ -534,7 +581,7 @@ def make_solver(prob: Problem, opts: GaitOptions, verbose: bool = False):
 
 def warm_start_vector(model, opts, gait):
     """The decision vector of a previous gait (same Bezier degree), to warm-start IPOPT."""
-    if gait.alpha.shape != (4, opts.bezier_degree + 1):
+    if gait.alpha.shape != (model.nu, opts.bezier_degree + 1):
         raise ValueError("warm_start gait has another bezier_degree")
     s_start, s_coll = _grid(opts)
     Xs = np.vstack([gait.q(s_start * gait.T)[0], gait.dq(s_start * gait.T)[0]])

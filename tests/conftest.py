@@ -24,3 +24,18 @@ def gait(model):
     ($BIPED_CACHE_DIR or ~/.cache/biped-casadi): solved at most once per machine."""
     from gait_opt import default_gait
     return default_gait(model)
+
+
+@pytest.fixture(scope="session")
+def model3():
+    """The three-link biped of Grizzle, Abba & Plestan (2001), a built-in description."""
+    from biped_casadi import robot
+    return robot("three_link")
+
+
+@pytest.fixture(scope="session")
+def gait3(model3):
+    """Its default reference gait (the same problem as RABBIT's, the robot's torque
+    limit), from the on-disk cache."""
+    from gait_opt import default_gait
+    return default_gait(model3)

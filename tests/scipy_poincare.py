@@ -61,7 +61,7 @@ class ScipyPoincare:
 
     def __call__(self, x, M1):
         M1 = np.asarray(M1, float)
-        zero = np.zeros(4)
+        zero = np.zeros(M1.size)
 
         def guard(tau, z, *args):
             q, _ = self._q(tau, z, M1)

@@ -97,7 +97,7 @@ def test_default_gait_optimisation_is_announced(gait, capsys, monkeypatch):
     import analysis.cli.common as common
     called = []
 
-    def default_gait(progress=None):            # as if nothing were cached yet
+    def default_gait(model=None, progress=None):   # as if nothing were cached yet
         called.append(progress)
         progress("optimising the reference gait of RABBIT (once) ...")
         return gait

@@ -21,6 +21,7 @@ import sys
 import pytest
 
 from analysis.cli import main as biped_main
+from biped_casadi import RobotParams
 from analysis.sweep import grid_points, run_sweep
 
 ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
@@ -85,7 +86,7 @@ def files(model, gait, tmp_path_factory):
     edited("extra_key.json", lambda b: b.update(comment="edited by hand"))
     write("params_garbage.toml", bytes(range(256)))
     write("params_empty.toml", "")
-    write("params_bad.json", json.dumps(dict(model.params.to_dict(), m_torso=-12.0)))
+    write("params_bad.json", json.dumps(dict(RobotParams().to_dict(), m_torso=-12.0)))
     write("params_unknown.json", json.dumps({"wings": 2}))
     write("params.txt", "m_torso = 12\n")
     unreadable = d / "unreadable.json"
@@ -129,11 +130,14 @@ CASES = [
     (["model", "--params", "{dir}"], "is a folder"),
     (["model", "--params", "/dev/null"], "not a regular file"),
     (["model", "--params", "{params_garbage}"], "not a text"),
-    (["model", "--params", "{params_empty}"], "missing robot parameter"),
+    (["model", "--params", "{params_empty}"], "leg is missing"),
     (["model", "--params", "{params_bad}"], "m_torso"),
     (["model", "--params", "{params_unknown}"], "unknown robot parameter"),
     (["model", "--params", "{params}"], ".toml or .json"),
-    (["model", "--params", "{long}.toml"], "parameter file"),
+    (["model", "--params", "{long}.toml"], "--robot"),
+    (["model", "--robot", "{dir}"], "is a folder"),
+    (["model", "--robot", "octopus"], "neither a built-in robot"),
+    (["eig", "--robot", "three_link", *G, *M0], "other robot"),
     (["model", "--params", "{unreadable}"], "cannot be read", "nonroot"),
     # ---- gait: numbers, then output paths (checked before the 3 s solve)
     (["gait", "--speed", "0"], "--speed"),
@@ -158,7 +162,7 @@ CASES = [
     (["gait", "--out", "{read_only}/gait.json"], "cannot write", "nonroot"),
     (["gait", "--out", "{root_dir}/g.json", "--plot", "{file}"], "--plot"),
     (["gait", "--out", "{root_dir}/g.json", "--plot", "{file}/figs"], "--plot"),
-    (["gait", "--out", "{root_dir}/g.json", "--params", "{params_garbage}"], "parameter file"),
+    (["gait", "--out", "{root_dir}/g.json", "--params", "{params_garbage}"], "not a text file"),
     # ---- eig: numbers and options
     (["eig", *G, "--m1", "1", "2", "3"], "--m1 takes 4"),
     (["eig", *G, "--m1", "1", "2", "3", "4", "5"], "--m1 takes 4"),

@@ -7,11 +7,12 @@ import re
 from pathlib import Path
 
 import matplotlib.colors as mcolors
+import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
 from analysis.plots import (COLOUR_NAMES, SWING, STANCE, TORSO, gait_stick_plot,
-                            save_figure, save_figures)
+                            m1_plane_plot, save_figure, save_figures)
 from analysis.report import _figure_captions, write_report
 
 COLOUR_WORDS = ("blue", "red", "green", "black", "grey", "gray", "orange", "purple",
@@ -79,10 +80,17 @@ def test_stick_figure_names_only_the_colours_it_draws(gait):
 
 def test_captions_name_only_drawn_colours():
     named = set(" ".join(COLOUR_NAMES.values()).split())
+    # besides the stick figures' colours: red marks stable points and the max|lambda| = 1
+    # contour (Fig. 2-4, the M1 plane), orange the solutions of a = b = 0 (the M1 plane)
+    drawn = {"fig2": {"red"}, "fig3": {"red"}, "fig4": {"red"}, "m1_plane": {"red", "orange"}}
     for key, (title, caption) in _figure_captions({}).items():
         words = _colour_words(title + " " + caption)
-        # red marks stable points / the |lambda| = 1 contour in Fig. 2-4 (drawn in red)
-        assert words <= named | {"red"}, (key, words)
+        assert words <= named | drawn.get(key, set()), (key, words)
+    g = np.linspace(-1, 1, 5)
+    m1, m2 = np.meshgrid(g, g, indexing="ij")
+    fig = m1_plane_plot(m1, m2, np.exp(m1 + m2), ab_points=[[0.0, 0.0]], best=[0.5, 0.5])
+    colours = {mcolors.to_hex(line.get_color()) for line in fig.axes[0].get_lines()}
+    assert mcolors.to_hex("orange") in colours
 
 
 # ------------------------------------------------------------------ report

@@ -20,28 +20,34 @@ import numpy as np
 import biped_casadi
 
 from . import eig, gait, m1, reproduce, simulate, sweep
-from .common import UserError, load_model, print_json
+from .common import UserError, add_robot, load_model, print_json
 
 __all__ = ["main", "build_parser", "UserError"]
 
 
 # ----------------------------------------------------------------------- model
 def cmd_model(args):
-    model = load_model(args.params)
-    q = np.zeros(5) if args.q is None else np.array(args.q, dtype=float)
-    if q.shape != (5,):
-        raise UserError(f"--q takes 5 numbers (q1..q5), got {q.size}")
+    model = load_model(args.robot)
+    nq = model.nq
+    q = np.zeros(nq) if args.q is None else np.array(args.q, dtype=float)
+    if q.shape != (nq,):
+        raise UserError(f"--q takes {nq} numbers (q1..q{nq}) for this robot, got {q.size}")
     if not np.all(np.isfinite(q)):
         raise UserError("--q values must be finite")
     s = model.describe(q)
     if args.json:
         print_json(s)
         return
-    p = s["params"]
-    print(f"robot {p['name']}: total mass {s['total_mass']:.4g} kg")
-    for k, v in p.items():
-        if k != "name":
-            print(f"  {k:14s} {v:g}")
+    d = model.description
+    print(f"robot {d.name}: total mass {s['total_mass']:.4g} kg, {d.k} link(s) per leg, "
+          f"{nq} joints, {model.nu} torques (limit {d.torque_limit:g} N m), g = {d.gravity:g}")
+    for link in (d.torso,) + d.leg:
+        print(f"  {link.name:8s} mass {link.mass:g} kg, length {link.length:g} m, "
+              f"com {link.com:g} m, inertia {link.inertia:g} kg m^2")
+    for joint, m in d.point_masses:
+        print(f"  point mass {m:g} kg at the {joint}" + ("" if joint == "hip" else " (each leg)"))
+    print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 on each actuated joint")
+    print("joints: " + ", ".join(f"q{i + 1} {n}" for i, n in enumerate(model.joint_names)))
     print(f"q = {np.array2string(q, precision=4)}")
     print("D(q) =")
     print(np.array2string(np.array(s["D"]), precision=6, suppress_small=True))
@@ -71,7 +77,8 @@ def _one_line(text) -> str:
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(
         prog="biped",
-        description="Time-varying control of the planar five-link biped RABBIT: model, "
+        description="Time-varying control of underactuated planar bipeds (RABBIT by default, "
+                    "any point-foot biped from a description file with --robot): model, "
                     "reference gait, exact Poincare analysis, output selection "
                     "(Wang & Chevallereau).")
     ap.add_argument("--version", action="version",
@@ -82,10 +89,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("model", help="print the robot parameters, D(q) and H(q, 0)",
                        description="Print the robot parameters, total mass, and the mass "
                                    "matrix D(q) and H(q, 0) = G(q) at a configuration.")
-    p.add_argument("--params", metavar="FILE", help="robot parameters (.toml or .json); "
-                   "default: RABBIT")
+    add_robot(p, with_gait=False, params_alias=True)
     p.add_argument("--q", nargs="+", type=float, metavar="Q",
-                   help="configuration q1..q5 in rad (default: upright, q = 0)")
+                   help="configuration q1..qn in rad (RABBIT: 5 numbers; default: upright, "
+                        "q = 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_model)
 

@@ -1,6 +1,6 @@
-"""What every subcommand shares: the user-error type, JSON output, progress lines,
-checks of output paths (made before any long work), loading the model and the gait
-named on the command line."""
+"""What every subcommand shares: the user-error type, JSON output, progress lines, the
+``--robot`` option, checks of output paths (made before any long work), loading the
+model and the gait named on the command line."""
 from __future__ import annotations
 
 import json
@@ -11,12 +11,19 @@ import tempfile
 import warnings
 from pathlib import Path
 
-from biped_casadi import load_params, rabbit
+import numpy as np
+
+from biped_casadi import robot
+from biped_casadi.output_law import check_M1_range
 from biped_casadi.results import json_safe
 from gait_opt import Gait, OpenOrbitWarning, default_gait
 
-__all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "Progress",
-           "output_file", "output_dir", "add_gait_arguments"]
+__all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "add_robot",
+           "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
+           "add_gait_arguments"]
+
+ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link) or a description file "
+              "(.toml, schema in biped_casadi.description)")
 
 
 class UserError(Exception):
@@ -45,34 +52,54 @@ class Progress:
             print(f"biped {self.command}: {message}", file=sys.stderr, flush=True)
 
 
-# --------------------------------------------------------------- model, gait
-def load_model(path):
-    """The robot of ``--params FILE`` (default RABBIT)."""
-    return rabbit(load_params(path) if path else None)
+# --------------------------------------------------------- robot, model, gait
+def add_robot(p, with_gait: bool = True, params_alias: bool = False):
+    """Add ``--robot NAME|FILE`` to a subcommand's parser (and the older ``--params
+    FILE`` as an alias where it existed)."""
+    default = ("default: the gait file's robot, else rabbit" if with_gait
+               else "default: rabbit")
+    p.add_argument("--robot", metavar="NAME|FILE", help=f"{ROBOT_HELP}; {default}")
+    if params_alias:
+        p.add_argument("--params", dest="robot", metavar="FILE", help="same as --robot FILE "
+                       "(also reads the older flat parameter files)")
 
 
 def add_gait_arguments(p, required: bool = False):
     """``--gait FILE`` and ``--allow-open-orbit`` on a subcommand's parser."""
     p.add_argument("--gait", metavar="FILE", required=required,
                    help="gait file from 'biped gait'" + ("" if required else
-                        " (default: the default RABBIT gait, optimised once and cached)"))
+                        " (default: the robot's default gait, optimised once and cached)"))
     p.add_argument("--allow-open-orbit", action="store_true",
                    help="analyse a gait file that is not a periodic orbit of its robot "
                         "(refused by default; a warning line says by how much it misses)")
 
 
-def load_gait(args, progress: Progress):
-    """The gait of ``args.gait``, or the default gait (optimised once, then cached).
+def load_model(name_or_path):
+    """The robot of ``--robot NAME|FILE`` (default RABBIT); ValueError (exit 2) when the
+    name is unknown or the file missing or invalid."""
+    try:
+        return robot(name_or_path or "rabbit")
+    except OSError as e:                  # a name too long, a loop of links, ...
+        raise UserError(f"--robot: {_short(name_or_path)}: {e.strerror or e}") from None
 
-    Without a file, ``progress`` announces the optimisation of the default gait (a few
-    seconds) when it is not cached yet.  With ``args.allow_open_orbit``, a gait that is
-    not a periodic orbit is loaded and one warning line goes to stderr (always: it
-    qualifies every result that follows)."""
+
+def load_gait(args, progress: Progress):
+    """The gait of ``args.gait``, or the robot's default gait (optimised once, then
+    cached).
+
+    With ``args.robot`` (``--robot``) and a file, the file must have been made for that
+    robot (GaitFileError, exit 2, otherwise).  Without a file, ``progress`` announces the
+    optimisation of the default gait (a few seconds) when it is not cached yet.  With
+    ``args.allow_open_orbit``, a gait that is not a periodic orbit is loaded and one
+    warning line goes to stderr (always: it qualifies every result that follows)."""
+    robot_arg = getattr(args, "robot", None)
     if not args.gait:
-        return default_gait(progress=progress)
+        return default_gait(load_model(robot_arg), progress=progress)
+    model = load_model(robot_arg) if robot_arg else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OpenOrbitWarning)
-        gait = Gait.load(args.gait, allow_open_orbit=getattr(args, "allow_open_orbit", False))
+        gait = Gait.load(args.gait, model=model,
+                         allow_open_orbit=getattr(args, "allow_open_orbit", False))
     for w in caught:
         if issubclass(w.category, OpenOrbitWarning):
             print(f"biped {progress.command}: warning: {w.message}", file=sys.stderr,
@@ -80,6 +107,34 @@ def load_gait(args, progress: Progress):
         else:                                         # not ours: pass it on
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return gait
+
+
+def check_m1_values(values):
+    """What can be checked of ``--m1`` before the robot is known: finite, and within the
+    model's numerical validity (UserError otherwise)."""
+    if values is None:
+        return
+    M1 = np.array(values, dtype=float)
+    if not np.all(np.isfinite(M1)):
+        raise UserError("--m1 values must be finite")
+    try:
+        check_M1_range(M1, "--m1")
+    except ValueError as e:
+        raise UserError(str(e)) from None
+
+
+def parse_m1(values, nu: int, default_zero: bool = False):
+    """``--m1`` as a vector of the robot's nu components (UserError otherwise)."""
+    if values is None:
+        if default_zero:
+            return np.zeros(nu)
+        raise UserError(f"--m1 takes {nu} numbers (one per torque)")
+    M1 = np.array(values, dtype=float)
+    if M1.shape != (nu,):
+        raise UserError(f"--m1 takes {nu} numbers for this robot (one per torque), "
+                        f"got {M1.size}")
+    check_m1_values(M1)
+    return M1
 
 
 def positive(value, name):

@@ -5,27 +5,22 @@ import numpy as np
 
 from analysis.poincare import METHODS, poincare_eigenvalues
 from analysis.virtual_constraints import vc_eigenvalue
-from biped_casadi.output_law import M1_LIMIT, check_M1_range
+from biped_casadi.output_law import M1_LIMIT
 
-from .common import Progress, UserError, add_gait_arguments, load_gait, print_json
+from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+                     load_gait, parse_m1, print_json)
 
 
 def cmd_eig(args):
     if args.controller == "vc" and args.m1 is not None:
         raise UserError("--m1 applies to the time-varying controller (--controller tv)")
     if args.controller == "tv" and args.m1 is None:
-        raise UserError("--m1 A B C D is required for the time-varying controller")
+        raise UserError("--m1 is required for the time-varying controller (one number per "
+                        "torque: 4 for RABBIT)")
     if args.controller == "vc" and args.method is not None:
         raise UserError("--method applies to the time-varying controller (--controller tv)")
     method = args.method or "variational"
-    if args.m1 is not None:
-        M1 = np.array(args.m1, dtype=float)
-        if not np.all(np.isfinite(M1)):
-            raise UserError("--m1 values must be finite")
-        try:
-            check_M1_range(M1, "--m1")
-        except ValueError as e:
-            raise UserError(str(e)) from None
+    check_m1_values(args.m1)                 # before the gait: finite, within the range
     say = Progress("eig", quiet=args.json)
     gait = load_gait(args, say)
     model = gait.model
@@ -39,8 +34,7 @@ def cmd_eig(args):
             for k, v in d.items():
                 print(f"{k:22s} {v}")
         return 0
-    if M1.shape != (model.nu,):
-        raise UserError(f"--m1 takes {model.nu} numbers, got {M1.size}")
+    M1 = parse_m1(args.m1, model.nu)
     if method == "ad":
         say("AD through the whole Poincare map (builds it once, a few seconds) ...")
     r = poincare_eigenvalues(model, gait, M1, method=method)
@@ -71,8 +65,10 @@ def register(sub):
                     "controller's 1-D map. --json prints {A, eigenvalues (as [re, im] "
                     "pairs), max_abs, status, ...}.")
     add_gait_arguments(p)
+    add_robot(p)
     p.add_argument("--m1", nargs="+", type=float, metavar="M1",
-                   help=f"the 4 components of M1 (each within +-{M1_LIMIT:.0e})")
+                   help=f"the components of M1, one per torque (4 for RABBIT, 2 for "
+                        f"three_link), each within +-{M1_LIMIT:.0e}")
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
                    help="tv: time-varying outputs (default); vc: virtual constraints")
     p.add_argument("--method", choices=METHODS, default=None,

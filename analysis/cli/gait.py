@@ -8,7 +8,8 @@ import math
 from analysis.plots import gait_profiles_plot, gait_stick_plot, save_figures
 from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 
-from .common import Progress, UserError, load_model, output_dir, output_file, print_json
+from .common import (Progress, UserError, add_robot, load_model, output_dir, output_file,
+                     print_json)
 
 #: --intervals beyond this make an NLP that takes minutes per iteration
 MAX_INTERVALS = 400
@@ -23,16 +24,15 @@ def register(sub):
     p.add_argument("--speed", type=float, default=0.75, metavar="V",
                    help="average speed in m/s (default 0.75)")
     p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
-    p.add_argument("--torque-limit", type=float, default=150.0, metavar="U",
-                   help="|u| bound in N m (default 150)")
+    p.add_argument("--torque-limit", type=float, default=None, metavar="U",
+                   help="|u| bound in N m (default: the robot's, 150 for RABBIT)")
     p.add_argument("--intervals", type=int, default=30, metavar="N",
                    help=f"collocation intervals, 4 to {MAX_INTERVALS} (default 30)")
     p.add_argument("--scheme", choices=("legendre", "radau"), default="legendre",
                    help="collocation points (default legendre)")
     p.add_argument("--max-iter", type=int, default=None, metavar="K",
                    help="IPOPT iteration limit (default 500)")
-    p.add_argument("--params", metavar="FILE", help="robot parameters (.toml or .json); "
-                   "default: RABBIT")
+    add_robot(p, with_gait=False, params_alias=True)
     p.add_argument("--out", metavar="FILE", default="gait.json",
                    help="where to save the gait (default gait.json)")
     p.add_argument("--plot", metavar="DIR",
@@ -44,7 +44,7 @@ def register(sub):
 def cmd_gait(args):
     for name in ("speed", "mu", "torque_limit"):
         v = getattr(args, name)
-        if not (math.isfinite(v) and v > 0):
+        if v is not None and not (math.isfinite(v) and v > 0):
             raise UserError(f"--{name.replace('_', '-')} must be a positive number, got {v:g}")
     if not 4 <= args.intervals <= MAX_INTERVALS:
         raise UserError(f"--intervals must be between 4 and {MAX_INTERVALS}, got "
@@ -53,7 +53,7 @@ def cmd_gait(args):
         raise UserError(f"--max-iter must be >= 1, got {args.max_iter}")
     out = output_file(args.out, "--out")               # before the solve, not after
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
-    model = load_model(args.params)
+    model = load_model(args.robot)
     options = GaitOptions(speed=args.speed, mu=args.mu, torque_limit=args.torque_limit,
                           n_intervals=args.intervals, scheme=args.scheme,
                           ipopt={} if args.max_iter is None else {"max_iter": args.max_iter})
@@ -78,7 +78,8 @@ def cmd_gait(args):
     print(f"  step length          {s['step_length']:.6f} m")
     print(f"  speed                {s['speed']:.6f} m/s")
     print(f"  cost                 {s['cost']:.6f} N^2 m s (int u'u dt / step length)")
-    print(f"  peak torque          {s['peak_torque']:.3f} N m   (limit {args.torque_limit:g})")
+    print(f"  peak torque          {s['peak_torque']:.3f} N m   (limit "
+          f"{gait.options.torque_limit:g})")
     print(f"  min normal force     {s['min_normal_force']:.3f} N")
     print(f"  max friction ratio   {s['max_friction_ratio']:.4f}   (mu {args.mu:g}); "
           f"at impact {s['impact_friction_ratio']:.4f}")

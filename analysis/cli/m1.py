@@ -3,24 +3,27 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.output_design import optimize_m1
+from analysis.output_design import ab_groups, optimize_m1
 from analysis.sweep_cache import grid_best
 
-from .common import Progress, add_gait_arguments, load_gait, print_json
+from .common import Progress, UserError, add_gait_arguments, add_robot, load_gait, print_json
 
 
 def cmd_m1(args):
     say = Progress("m1", quiet=args.json)
     gait = load_gait(args, say)
     model = gait.model
-    groups = [None] if args.free else ([args.group] if args.group else [1, 2])
+    valid, why = ab_groups(model, gait)
+    if args.group and args.group not in valid:
+        raise UserError(f"--group {args.group}: {why}")
+    groups = [None] if args.free else ([args.group] if args.group else (valid or [None]))
     results = []
     for g in groups:
         say(f"optimising M1 {'with all components free' if g is None else f'on group {g}'} "
             "(10-15 s on a loaded 2-core VM) ...")
         results.append(optimize_m1(model, gait, group=g))
     best = min(results, key=lambda r: r.max_abs)
-    say("the 9^4 grid for comparison (once per gait, then cached) ...")
+    say(f"the 9^{model.nu} grid for comparison (once per gait, then cached) ...")
     gb = grid_best(model, gait)
     out = dict(best.to_dict(), grid_best=gb)
     if len(results) > 1:
@@ -29,12 +32,16 @@ def cmd_m1(args):
         print_json(out)
         return 0
     for r in results:
-        label = "all four components free" if r.group is None and args.free else f"group {r.group}"
+        label = "all components free" if r.group is None and args.free or not valid \
+            else f"group {r.group}"
         print(f"{label}: M1 = {np.array2string(r.M1, precision=6)}  max|lambda| = "
               f"{r.max_abs:.3g} (+- {r.eigenvalue_uncertainty:.1g})  a = {r.a:.2g}, "
               f"b = {r.b:.2g}  [{r.solve_time:.1f} s, {r.starts} starts]")
-    print("best of the 9^4 grid: " + ("no stable point" if gb["M1"] is None else
-                                      f"M1 = {gb['M1']}  max|lambda| = {gb['max_abs']:.4g}"))
+    if not valid and not args.free:
+        print(f"a = b = 0: {why}; all components free instead")
+    print(f"best of the 9^{model.nu} grid: " + ("no stable point" if gb["M1"] is None else
+                                               f"M1 = {gb['M1']}  max|lambda| = "
+                                               f"{gb['max_abs']:.4g}"))
     return 0
 
 
@@ -43,14 +50,18 @@ def register(sub):
         "m1", help="choose M1 minimising max|lambda| (a = b = 0 groups, or free)",
         description="Second NLP of the toolkit: choose the output matrix M1 minimising the "
                     "spectral radius of A^z, on the solution groups of the swing-height "
-                    "conditions a = b = 0 (paper eq. 27-28), or with all four components "
-                    "free (--free). Exact derivatives of A^z in M1 by AD; several starts; "
-                    "the result is verified by the full-AD Poincare map and compared with "
-                    "the best stable point of the 9^4 grid.")
+                    "conditions a = b = 0 (paper eq. 27-28), or with all components free "
+                    "(--free). For a robot with two torques (three_link) the groups are the "
+                    "solutions of a = b = 0 themselves (isolated points, or a line: group 1). "
+                    "Exact derivatives of A^z in M1 by AD; several starts; the result is "
+                    "verified by the full-AD Poincare map and compared with the best stable "
+                    "point of the 9^nu grid.")
     add_gait_arguments(p)
+    add_robot(p)
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--free", action="store_true", help="all four components of M1 free")
+    where.add_argument("--free", action="store_true", help="all components of M1 free")
     where.add_argument("--group", type=int, choices=(1, 2),
-                   help="only this a = b = 0 group (default: both, the better is reported)")
+                       help="only this a = b = 0 group (default: every group, the best is "
+                            "reported)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_m1)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from analysis.reproduce import reproduce, run_folder
 
-from .common import output_dir, print_json
+from .common import add_robot, load_model, output_dir, print_json
 
 #: measured with the README's commands on the project's 2-core AMD EPYC VM (Python 3.11)
 #: while other jobs ran on it (load about 4; about half when idle), the default gait not
@@ -13,9 +13,11 @@ TIME_QUICK = "about 75 s"
 
 
 def cmd_reproduce(args):
+    load_model(args.robot)            # a bad --robot is a user error before any stage
     output_dir(args.out, "--out")                             # before any work
-    output_dir(run_folder(args.out, args.quick), "--out")
-    r = reproduce(args.out, quick=args.quick, progress=not (args.no_progress or args.json))
+    output_dir(run_folder(args.out, args.quick, args.robot), "--out")
+    r = reproduce(args.out, quick=args.quick, progress=not (args.no_progress or args.json),
+                  robot=args.robot or "rabbit")
     if args.json:
         print_json(r)
     else:
@@ -33,12 +35,16 @@ def register(sub):
                     "and the swing-height conjecture, a = b = 0 and Fig. 4, the M1 NLP, "
                     "the virtual-constraint comparison, Fig. 5 and 6, and an animation. "
                     "Figures are written as PNG and PDF; report.md sets our numbers beside "
-                    f"the paper's. A full run ({TIME_FULL} on a loaded 2-core VM) writes into "
-                    f"DIR, a quick run ({TIME_QUICK}) into DIR/quick, so re-runs of either mode "
-                    "into the same DIR never mix; sweeps already computed are reused. Exit "
-                    "code 1 if a stage failed (the others still run).")
+                    f"the paper's. With --robot, the same analysis for another robot (for "
+                    "two torques the stable domain in the (M1(1), M1(2)) plane replaces "
+                    f"Fig. 4). A full run ({TIME_FULL} on a loaded 2-core VM) writes into "
+                    f"DIR, a quick run ({TIME_QUICK}) into DIR/quick, another robot into "
+                    "DIR/<its name> (and DIR/<its name>/quick), so re-runs of any kind into "
+                    "the same DIR never mix; sweeps already computed are reused. Exit code 1 "
+                    "if a stage failed (the others still run).")
     p.add_argument("--out", default="reproduce_out", metavar="DIR",
                    help="output folder (default: reproduce_out; a quick run uses DIR/quick)")
+    add_robot(p, with_gait=False)
     p.add_argument("--quick", action="store_true",
                    help=f"coarser grids ({TIME_QUICK} on 2 cores), into DIR/quick")
     p.add_argument("--no-progress", action="store_true", help="no progress output")

@@ -8,12 +8,12 @@ import numpy as np
 
 from biped_casadi import (Gains, Perturbation, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, simulate)
-from biped_casadi.output_law import M1_LIMIT, check_M1_range
+from biped_casadi.output_law import M1_LIMIT
 from analysis.plots import (save_figures, swing_torques_plot, unactuated_error_plot,
                             walking_animation)
 
-from .common import (Progress, UserError, add_gait_arguments, load_gait, output_dir,
-                     output_file, positive, print_json)
+from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+                     load_gait, output_dir, output_file, parse_m1, positive, print_json)
 
 #: --steps beyond this fill the memory with the logged states (2000 RK4 steps a step)
 MAX_STEPS = 1000
@@ -62,15 +62,7 @@ def _perturbation(args, nq) -> Perturbation:
 
 def cmd_simulate(args):
     # ---- arguments
-    M1 = np.zeros(4) if args.m1 is None else np.array(args.m1, dtype=float)
-    if M1.shape != (4,):
-        raise UserError(f"--m1 takes 4 numbers, got {M1.size}")
-    if not np.all(np.isfinite(M1)):
-        raise UserError("--m1 values must be finite")
-    try:
-        check_M1_range(M1, "--m1")
-    except ValueError as e:
-        raise UserError(str(e)) from None
+    check_m1_values(args.m1)                 # before the gait: finite, within the range
     if args.controller == "vc" and args.m1 is not None and not args.compare:
         raise UserError("--m1 applies to the time-varying controller (--controller tv, "
                         "or --compare)")
@@ -88,6 +80,7 @@ def cmd_simulate(args):
     say = Progress("simulate", quiet=args.json)
     gait = load_gait(args, say)
     model = gait.model
+    M1 = parse_m1(args.m1, model.nu, default_zero=True)
     perturbation = _perturbation(args, model.nq)
     gains = Gains(eps=args.eps)
     opts = SimulationOptions(steps=args.steps, mu=args.mu, jit=args.jit,
@@ -166,11 +159,12 @@ def register(sub):
                     "min_normal_force, max_friction_ratio, max_impulse_ratio, ...} with the "
                     "errors q_u - q_u^d(T), dq_u - dq_u^d(T) just before each impact.")
     add_gait_arguments(p)
+    add_robot(p)
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
                    help="tv: time-varying outputs [M1, I] q (default); vc: virtual constraints")
     p.add_argument("--m1", nargs="+", type=float, metavar="M1",
-                   help=f"the 4 components of M1 for --controller tv, each within "
-                        f"+-{M1_LIMIT:.0e} (default 0 0 0 0)")
+                   help=f"the components of M1 for --controller tv, one per torque, each "
+                        f"within +-{M1_LIMIT:.0e} (default all zero)")
     p.add_argument("--steps", type=int, default=10, metavar="N",
                    help=f"number of steps, 1 to {MAX_STEPS} (10)")
     p.add_argument("--perturb", nargs=2, type=float, default=None,

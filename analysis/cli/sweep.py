@@ -10,15 +10,13 @@ from __future__ import annotations
 import numpy as np
 
 from analysis.plots import one_d_sweeps_plot, save_figures
-from analysis.sweep import grid_points, one_d_sweeps, run_sweep
+from analysis.sweep import grid_points, max_grid_n, one_d_sweeps, run_sweep
 from biped_casadi.output_law import M1_LIMIT, check_M1_range
 
-from .common import (Progress, UserError, add_gait_arguments, load_gait, output_dir,
-                     print_json)
+from .common import (Progress, UserError, add_gait_arguments, add_robot, load_gait,
+                     output_dir, print_json)
 
-#: --grid N evaluates N^4 points; beyond this a local sweep takes days
-MAX_GRID = 84
-#: --line N evaluates 4 N points
+#: --line N evaluates nu N points
 MAX_LINE = 1_000_000
 #: --workers beyond this only adds overhead (and threads)
 MAX_WORKERS = 256
@@ -38,9 +36,9 @@ def cmd_sweep(args):
     if args.line is not None and not 2 <= args.line <= MAX_LINE:
         raise UserError(f"--line takes 2 to {MAX_LINE} points per component, got {args.line}")
     n = 9 if args.grid is None else args.grid
-    if args.line is None and not 2 <= n <= MAX_GRID:
-        raise UserError(f"--grid takes 2 to {MAX_GRID} points per component (the grid spans "
-                        f"LO to HI), got {n}")
+    if args.line is None and not 2 <= n <= max_grid_n(2):
+        raise UserError(f"--grid takes 2 to {max_grid_n(4)} points per component (the grid "
+                        f"spans LO to HI; up to {max_grid_n(2)} for two torques), got {n}")
     if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
         raise UserError(f"--workers must be between 1 and {MAX_WORKERS}, got {args.workers}")
     if args.chunk_size is not None and args.chunk_size < 1:
@@ -54,6 +52,9 @@ def cmd_sweep(args):
     say = Progress("sweep", quiet=args.json or args.no_progress)
     gait = load_gait(args, say)
     model = gait.model
+    if args.line is None and n > max_grid_n(model.nu):
+        raise UserError(f"--grid takes 2 to {max_grid_n(model.nu)} points per component for "
+                        f"this robot ({model.nu} components of M1), got {n}")
     kw = dict(out_dir=args.out, chunk_size=args.chunk_size, workers=args.workers,
               scheduler=args.scheduler, progress=not (args.no_progress or args.json),
               executor="process" if args.processes else "thread")
@@ -67,7 +68,7 @@ def cmd_sweep(args):
             lines = one_d_sweeps(model, gait, np.linspace(lo, hi, args.line), **kw)
             r = lines.sweep
         else:
-            r = run_sweep(model, gait, grid_points(n, lo, hi), **kw)
+            r = run_sweep(model, gait, grid_points(n, lo, hi, model.nu), **kw)
     except ValueError as e:       # the library names out / scheduler: say --out / --scheduler
         msg = str(e)
         raise UserError("--" + msg if msg.startswith(("out:", "scheduler:")) else msg) from None
@@ -87,7 +88,8 @@ def cmd_sweep(args):
 
     mode = (f"1-D sweeps, {args.line} values of each M1(j) in [{lo:g}, {hi:g}]"
             if args.line is not None else
-            f"grid {n}^4 = {r.n_points} M1, each component in linspace({lo:g}, {hi:g}, {n})")
+            f"grid {n}^{model.nu} = {r.n_points} M1, each component in linspace({lo:g}, "
+            f"{hi:g}, {n})")
     print(f"sweep: {mode}")
     print(f"  {'status':10s} {'count':>8s}")
     for k, v in r.counts.items():
@@ -116,15 +118,18 @@ def register(sub):
     p = sub.add_parser(
         "sweep", help="max|lambda| and stability status over a grid or lines of M1",
         description="Evaluate the restricted Poincare map's Jacobian A^z for many output "
-                    "matrices M1 (paper section V-A): the N^4 grid (--grid, the paper's is "
-                    "9 on [-10, 10]) or the four 1-D sweeps of Fig. 2 (--line). Runs on "
+                    "matrices M1 (paper section V-A): the N^nu grid (--grid; nu = 4 for "
+                    "RABBIT, the paper's is 9 on [-10, 10]) or the 1-D sweeps of Fig. 2, one "
+                    "per component (--line). Runs on "
                     "all local cores, or on a Dask cluster with --scheduler. With --out the "
                     "results are stored chunk by chunk (Parquet); rerunning with the same "
                     "--out resumes and recomputes only what is missing.")
     add_gait_arguments(p, required=True)
+    add_robot(p)
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--grid", type=int, metavar="N",
-                      help=f"N points per component, 2 to {MAX_GRID}: N^4 M1 (default 9)")
+                      help=f"N points per component, at least 2: N^nu M1 (default 9; at most "
+                           f"{max_grid_n(4)} for RABBIT's nu = 4)")
     mode.add_argument("--line", type=int, metavar="N",
                       help="Fig. 2 instead: N values of each component, the others zero")
     p.add_argument("--range", nargs=2, type=float, default=[-10.0, 10.0],

@@ -1,0 +1,372 @@
+"""Robot descriptions: any planar point-foot biped with one degree of underactuation,
+from one TOML file.
+
+A description holds a torso and two identical legs of k links each (k = 1: the classic
+three-link biped; k = 2: RABBIT's femur and tibia), every joint between them actuated
+and the stance foot a passive point contact.  The schema (SI units throughout)::
+
+    name = "RABBIT"            # any non-empty string; recorded in gait files
+    gravity = 9.81             # m/s^2, > 0
+
+    [actuators]
+    torque_limit = 150.0       # N m, > 0: bound on every joint torque (the gait's default)
+    rotor_inertia = 3.32e-4    # kg m^2, >= 0: rotor inertia of each actuated joint ...
+    gear_ratio = 50.0          # optional (default 1), > 0: ... reflected through the gear
+                               # as rotor_inertia * gear_ratio^2 on the joint's diagonal
+                               # entry of D (joints q2..qn, not q1)
+
+    [torso]                    # the torso, from the hip up
+    mass = 12.0                # kg, > 0
+    length = 0.625             # m, > 0
+    com = 0.24                 # m, centre of mass above the hip, 0 <= com <= length
+    inertia = 1.33             # kg m^2 about the centre of mass, >= 0 (0: a point mass)
+
+    [[leg]]                    # the links of one leg, from the hip down to the foot
+    name = "femur"             # optional (default link1, link2, ...)
+    mass = 6.8                 # kg, > 0
+    length = 0.4               # m, > 0
+    com = 0.11                 # m, from the link's upper (proximal) joint, 0 <= com <= length
+    inertia = 0.47             # kg m^2 about the centre of mass, >= 0
+
+    [[leg]]
+    name = "tibia"
+    ...
+
+    [point_masses]             # optional: kg at joints, >= 0
+    hip = 15.0                 # "hip" (one mass), "foot" (one on each leg), and the
+                               # joints between leg links: "knee" when k = 2, or
+                               # "joint1" .. "joint{k-1}" counted from the hip (one on
+                               # each leg)
+
+Coordinates (SPEC section 1, generalised): q1 is the absolute angle of the stance
+leg's lowest link, then the relative angles up the stance leg, the torso relative to
+the stance leg's top link, the swing leg's top link relative to the torso, and the
+relative angles down the swing leg: n = 2 k + 1 joints, n - 1 torques.
+
+:func:`load_description` reads and validates a file, raising one ``ValueError`` that
+names the file and the field for each kind of problem (missing or unknown key, wrong
+type, negative mass, no leg link, ...).  The toolkit ships ``rabbit`` and
+``three_link`` (:data:`BUILTIN`); :func:`find_description` resolves a name or a path.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+from .files import read_text_file
+
+__all__ = ["Link", "RobotDescription", "load_description", "find_description",
+           "description_from_dict", "BUILTIN", "builtin_path"]
+
+#: descriptions shipped with the toolkit (package data, biped_casadi/robots/NAME.toml)
+BUILTIN = ("rabbit", "three_link")
+
+_TOP = ("name", "gravity", "actuators", "torso", "leg", "point_masses")
+_ACTUATORS = ("torque_limit", "rotor_inertia", "gear_ratio")
+_LINK = ("name", "mass", "length", "com", "inertia")
+
+
+@dataclass(frozen=True)
+class Link:
+    """One rigid link: mass (kg), length (m), centre of mass ``com`` (m from the link's
+    proximal joint: the hip for the torso and the top link of a leg) and ``inertia``
+    (kg m^2 about the centre of mass)."""
+
+    name: str
+    mass: float
+    length: float
+    com: float
+    inertia: float
+
+    def to_dict(self) -> dict:
+        """The fields by name."""
+        return dict(name=self.name, mass=self.mass, length=self.length, com=self.com,
+                    inertia=self.inertia)
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    """A planar point-foot biped: torso, two identical legs of ``k`` links, point masses.
+
+    Build one with :func:`load_description` (a TOML file) or
+    :func:`description_from_dict`; both validate every field.  Equal descriptions give
+    equal models (a gait records its description and refuses another robot).
+
+    Attributes
+    ----------
+    name : str
+    torso : Link
+    leg : tuple of Link
+        One leg's links from the hip down to the foot.
+    point_masses : tuple of (str, float)
+        Joint name and mass (kg), sorted by joint name.
+    rotor_inertia : float
+        Reflected rotor inertia (kg m^2) on the diagonal of D of every actuated joint.
+    gravity : float
+        m/s^2.
+    torque_limit : float
+        N m, the default bound of the reference gait's torques.
+    """
+
+    name: str
+    torso: Link
+    leg: tuple
+    point_masses: tuple = ()
+    rotor_inertia: float = 0.0
+    gravity: float = 9.81
+    torque_limit: float = 150.0
+    source: str = field(default="", compare=False, repr=False)
+
+    # --------------------------------------------------------------- sizes
+    @property
+    def k(self) -> int:
+        """Links per leg."""
+        return len(self.leg)
+
+    @property
+    def nq(self) -> int:
+        """Joints (generalised coordinates): 2 k + 1."""
+        return 2 * self.k + 1
+
+    @property
+    def nu(self) -> int:
+        """Torques: 2 k."""
+        return 2 * self.k
+
+    @property
+    def leg_length(self) -> float:
+        """Hip-to-foot length of a straight leg, m."""
+        return sum(link.length for link in self.leg)
+
+    @property
+    def joint_masses(self) -> dict:
+        """Point masses by joint name (kg)."""
+        return dict(self.point_masses)
+
+    @property
+    def total_mass(self) -> float:
+        """kg: torso, both legs and every point mass."""
+        M = self.torso.mass + 2 * sum(link.mass for link in self.leg)
+        for joint, m in self.point_masses:
+            M += m if joint == "hip" else 2 * m
+        return M
+
+    @property
+    def cache_key(self):
+        """What a model built from the description depends on (its fields)."""
+        return (self.name, self.torso, self.leg, self.point_masses, self.rotor_inertia,
+                self.gravity, self.torque_limit)
+
+    # --------------------------------------------------------------- dicts
+    def to_dict(self) -> dict:
+        """The description in the file's schema (with the reflected rotor inertia and
+        gear_ratio 1), as recorded in gait files; :func:`description_from_dict` reads
+        it back to an equal description."""
+        return dict(name=self.name, gravity=self.gravity,
+                    actuators=dict(torque_limit=self.torque_limit,
+                                   rotor_inertia=self.rotor_inertia, gear_ratio=1.0),
+                    torso=self.torso.to_dict(), leg=[link.to_dict() for link in self.leg],
+                    point_masses=dict(self.point_masses))
+
+    def __str__(self):
+        return (f"{self.name}: planar biped, {self.k} link(s) per leg, {self.nq} joints, "
+                f"total mass {self.total_mass:g} kg")
+
+
+def joint_names(k: int) -> tuple:
+    """Names a point mass may be attached to, for legs of ``k`` links.
+
+    Parameters
+    ----------
+    k : int
+        Links per leg.
+
+    Returns
+    -------
+    tuple of str
+        ``'hip'``, the joints between leg links (``'knee'`` when k = 2, else
+        ``'joint1'`` ...), ``'foot'``.
+    """
+    inner = ("knee",) if k == 2 else tuple(f"joint{j}" for j in range(1, k))
+    return ("hip",) + inner + ("foot",)
+
+
+# ------------------------------------------------------------------ validation
+class _Checker:
+    """Field-by-field validation with one clear message per problem."""
+
+    def __init__(self, where: str):
+        self.where = where
+
+    def fail(self, field_name: str, problem: str):
+        raise ValueError(f"{self.where}: {field_name} {problem}")
+
+    def table(self, data, name: str, keys: tuple, required: tuple) -> dict:
+        if not isinstance(data, dict):
+            self.fail(name, f"must be a table of fields, got {type(data).__name__}")
+        unknown = [k for k in data if k not in keys]
+        if unknown:
+            self.fail(f"{name}.{unknown[0]}" if name else unknown[0],
+                      f"is not a known key (known: {', '.join(keys)})")
+        for k in required:
+            if k not in data:
+                self.fail(f"{name}.{k}" if name else k, "is missing")
+        return data
+
+    def number(self, value, name: str, lo: float = 0.0, strict: bool = False,
+               hi: float | None = None, hi_name: str = "") -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(name, f"must be a number, got {value!r}")
+        v = float(value)
+        if not math.isfinite(v):
+            self.fail(name, f"must be finite, got {value!r}")
+        if strict and not v > lo:
+            self.fail(name, f"must be positive, got {value!r}")
+        if not strict and not v >= lo:
+            self.fail(name, f"must be non-negative, got {value!r}")
+        if hi is not None and v > hi:
+            self.fail(name, f"must not exceed {hi_name} ({hi:g}), got {value!r}")
+        return v
+
+    def text(self, value, name: str) -> str:
+        if not isinstance(value, str) or not value.strip():
+            self.fail(name, f"must be a non-empty string, got {value!r}")
+        return value
+
+    def link(self, data, name: str, default_name: str) -> Link:
+        self.table(data, name, _LINK, ("mass", "length", "com", "inertia"))
+        length = self.number(data["length"], f"{name}.length", strict=True)
+        return Link(name=self.text(data.get("name", default_name), f"{name}.name"),
+                    mass=self.number(data["mass"], f"{name}.mass", strict=True),
+                    length=length,
+                    com=self.number(data["com"], f"{name}.com", hi=length,
+                                    hi_name=f"{name}.length"),
+                    inertia=self.number(data["inertia"], f"{name}.inertia"))
+
+
+def description_from_dict(data: dict, where: str = "robot description",
+                          source: str = "") -> RobotDescription:
+    """Validate a description given as a mapping in the file's schema.
+
+    Parameters
+    ----------
+    data : dict
+        The parsed TOML (or a gait file's ``robot`` record).
+    where : str
+        Names the source in error messages (a file name).
+    source : str
+        Where the description came from (kept for messages, not compared).
+
+    Returns
+    -------
+    RobotDescription
+
+    Raises
+    ------
+    ValueError
+        One message naming ``where`` and the field, for the first problem found.
+    """
+    c = _Checker(where)
+    if isinstance(data, dict) and "leg" not in data:
+        c.fail("leg", "is missing: a leg needs at least one link (one [[leg]] table per "
+                      "link, k >= 1)")
+    c.table(data, "", _TOP, ("name", "gravity", "actuators", "torso", "leg"))
+    name = c.text(data["name"], "name")
+    gravity = c.number(data["gravity"], "gravity", strict=True)
+    act = c.table(data["actuators"], "actuators", _ACTUATORS, ("torque_limit", "rotor_inertia"))
+    torque_limit = c.number(act["torque_limit"], "actuators.torque_limit", strict=True)
+    rotor = c.number(act["rotor_inertia"], "actuators.rotor_inertia")
+    gear = c.number(act.get("gear_ratio", 1.0), "actuators.gear_ratio", strict=True)
+    torso = c.link(data["torso"], "torso", "torso")
+    legs = data["leg"]
+    if isinstance(legs, dict):
+        legs = [legs]
+    if not isinstance(legs, list):
+        c.fail("leg", f"must be an array of tables ([[leg]]), got {type(legs).__name__}")
+    if not legs:
+        c.fail("leg", "has no links: a leg needs at least one link (k >= 1)")
+    leg = tuple(c.link(d, f"leg[{i + 1}]", f"link{i + 1}") for i, d in enumerate(legs))
+    names = [link.name for link in leg]
+    if len(set(names)) != len(names):
+        c.fail("leg", f"link names must differ, got {names}")
+    pm = data.get("point_masses", {})
+    allowed = joint_names(len(leg))
+    c.table(pm, "point_masses", allowed, ())
+    masses = tuple(sorted((j, c.number(m, f"point_masses.{j}")) for j, m in pm.items()))
+    # rotor_inertia * gear_ratio ** 2: the same operations as RobotParams' default
+    return RobotDescription(name=name, torso=torso, leg=leg, point_masses=masses,
+                            rotor_inertia=rotor * gear**2,
+                            gravity=gravity, torque_limit=torque_limit, source=source)
+
+
+def load_description(path) -> RobotDescription:
+    """Read and validate a robot description file (TOML, schema in the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    RobotDescription
+
+    Raises
+    ------
+    ValueError
+        File missing or unparsable, or a field missing, unknown or out of range (the
+        message names the file and the field).
+    """
+    path = Path(path)
+    text = read_text_file(path, "robot description file", 1_000_000)
+    try:
+        data = tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"cannot parse robot description {path}: {e}") from None
+    return description_from_dict(data, where=str(path), source=str(path))
+
+
+def builtin_path(name: str) -> Path:
+    """The packaged file of a built-in description.
+
+    Parameters
+    ----------
+    name : str
+        ``'rabbit'`` or ``'three_link'``.
+
+    Returns
+    -------
+    Path
+    """
+    if name not in BUILTIN:
+        raise ValueError(f"robot: no built-in robot {name!r} (built-in: {', '.join(BUILTIN)})")
+    return Path(str(resources.files("biped_casadi") / "robots" / f"{name}.toml"))
+
+
+def find_description(name_or_path) -> RobotDescription:
+    """A built-in robot by name (case-insensitive) or a description file by path.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        ``'rabbit'``, ``'three_link'`` or the path of a ``.toml`` file.
+
+    Returns
+    -------
+    RobotDescription
+    """
+    if isinstance(name_or_path, RobotDescription):
+        return name_or_path
+    if not isinstance(name_or_path, (str, Path)) or not str(name_or_path).strip():
+        raise ValueError(f"robot must be a built-in name ({', '.join(BUILTIN)}) or a "
+                         f"description file, got {name_or_path!r}")
+    text = str(name_or_path)
+    key = text.strip().lower().replace("-", "_")
+    if key in BUILTIN and not Path(text).is_file():
+        return load_description(builtin_path(key))
+    if not text.lower().endswith(".toml") and not Path(text).is_file():
+        raise ValueError(f"robot: {text!r} is neither a built-in robot "
+                         f"({', '.join(BUILTIN)}) nor a description file (.toml)")
+    return load_description(text)
