@@ -11,9 +11,9 @@ components) exists for nu = 4 only; the paper's published numbers are RABBIT's a
 compared for RABBIT only.
 
 Folders (:func:`run_folder`): a full run on RABBIT writes into ``OUT`` itself, a quick
-run into ``OUT/quick``; another robot into ``OUT/<robot name>`` (and ``.../quick``), so
-no two kinds of run ever mix or overwrite each other's results, whatever the order of
-the runs.  In a run's folder: ``report.md``, ``summary.json``, ``gait.json``,
+run into ``OUT/quick``; another robot into ``OUT/<its name or file's stem>`` (and
+``.../quick``), so no two kinds of run ever mix or overwrite each other's results,
+whatever the order of the runs.  In a run's folder: ``report.md``, ``summary.json``, ``gait.json``,
 ``figures/`` and ``sweeps/`` (the resumable sweeps, one sub-folder per sweep and
 settings, reused by the next run).  A run writes its report, summary, gait and figures
 into a private staging folder first and moves them into place at the end: a run that
@@ -116,8 +116,9 @@ class ReproduceResult(Result):
 
 def run_folder(out_dir, quick: bool, robot_name="rabbit") -> Path:
     """The folder a run writes into: ``out_dir`` for the full run on RABBIT,
-    ``out_dir/quick`` for the quick one; for another robot ``out_dir/<its name>`` and
-    ``out_dir/<its name>/quick``.
+    ``out_dir/quick`` for the quick one; for another robot ``out_dir/<name>`` and
+    ``out_dir/<name>/quick``, the name being the built-in robot's or the description
+    file's (``--robot my_biped.toml``: ``my_biped``).
 
     Parameters
     ----------
@@ -131,9 +132,10 @@ def run_folder(out_dir, quick: bool, robot_name="rabbit") -> Path:
     Path
     """
     folder = Path(out_dir)
-    model = robot(robot_name or "rabbit")
-    if model.description != RABBIT_DESCRIPTION:
-        slug = re.sub(r"[^A-Za-z0-9_.-]+", "_", model.description.name).strip("._") or "robot"
+    if robot(robot_name or "rabbit").description != RABBIT_DESCRIPTION:
+        text = str(robot_name).strip()
+        stem = Path(text).stem if Path(text).suffix.lower() in (".toml", ".json") else text
+        slug = re.sub(r"[^A-Za-z0-9_.-]+", "_", stem).strip("._") or "robot"
         folder = folder / (f"robot_{slug}" if slug in ("quick", "figures", "sweeps")
                            else slug)
     return folder / "quick" if quick else folder

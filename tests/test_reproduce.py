@@ -138,6 +138,22 @@ def test_an_interrupted_run_leaves_the_previous_results(tmp_path, gait, light_st
     assert not list(out.glob(".staging-*"))
 
 
+def test_each_kind_of_run_has_its_folder(tmp_path):
+    from biped_casadi.description import builtin_path
+    mine = tmp_path / "my_biped.toml"
+    mine.write_text(builtin_path("three_link").read_text())
+    rabbit_copy = tmp_path / "rabbit_copy.toml"
+    rabbit_copy.write_text(builtin_path("rabbit").read_text())
+    out = tmp_path / "rep"
+    assert rp.run_folder(out, False) == out
+    assert rp.run_folder(out, True) == out / "quick"
+    assert rp.run_folder(out, False, "three_link") == out / "three_link"
+    assert rp.run_folder(out, True, str(mine)) == out / "my_biped" / "quick"
+    assert rp.run_folder(out, False, str(rabbit_copy)) == out       # the same robot
+    with pytest.raises(ValueError, match="neither a built-in robot"):
+        rp.run_folder(out, False, "octopus")
+
+
 def test_reproduce_refuses_a_file_as_folder(tmp_path):
     f = tmp_path / "rep"
     f.write_text("a file")

@@ -39,7 +39,7 @@ def register(sub):
                     "two torques the stable domain in the (M1(1), M1(2)) plane replaces "
                     f"Fig. 4). A full run ({TIME_FULL} on a loaded 2-core VM) writes into "
                     f"DIR, a quick run ({TIME_QUICK}) into DIR/quick, another robot into "
-                    "DIR/<its name> (and DIR/<its name>/quick), so re-runs of any kind into "
+                    "DIR/<its name or file stem> (and .../quick), so re-runs of any kind into "
                     "the same DIR never mix; sweeps already computed are reused. Exit code 1 "
                     "if a stage failed (the others still run).")
     p.add_argument("--out", default="reproduce_out", metavar="DIR",
