@@ -446,9 +446,11 @@ def _robot_from_file(record, model, where: str):
         if RobotParams.is_legacy_record(record):
             params = RobotParams.from_dict(record).to_description()
         else:
-            params = description_from_dict(record, where=f"robot of {where}")
+            params = description_from_dict(record, where=f"{where}: 'robot'")
     except (KeyError, TypeError, ValueError) as e:
-        raise GaitFileError(f"{where}: invalid 'robot': {e}") from None
+        msg = str(e)
+        raise GaitFileError(msg if msg.startswith(where) else
+                            f"{where}: invalid 'robot': {msg}") from None
     if model is None:
         return robot(params)
     if model.params != params:

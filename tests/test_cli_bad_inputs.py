@@ -80,7 +80,9 @@ def files(model, gait, tmp_path_factory):
     edited("T_negative.json", lambda b: b["solution"].update(T=-0.69))
     edited("T_huge.json", lambda b: b["solution"].update(T=1e300))
     edited("open_orbit.json", lambda b: b["solution"].update(T=b["solution"]["T"] * 1.01))
-    edited("robot_mass.json", lambda b: b["robot"].update(m_torso=-12.0))
+    edited("robot_mass.json", lambda b: b["robot"]["torso"].update(mass=-12.0))
+    edited("robot_flat.json", lambda b: b.update(robot=dict(RobotParams().to_dict(),
+                                                            m_torso=-12.0)))
     edited("robot_list.json", lambda b: b.update(robot=[1, 2]))
     edited("options_bad.json", lambda b: b["options"].update(speed="fast"))
     edited("extra_key.json", lambda b: b.update(comment="edited by hand"))
@@ -203,7 +205,8 @@ CASES = [
     (["eig", "--gait", "{T_negative}", *M0], "solution.T"),
     (["eig", "--gait", "{T_huge}", *M0], "not a periodic orbit"),
     (["eig", "--gait", "{open_orbit}", *M0], "not a periodic orbit"),
-    (["eig", "--gait", "{robot_mass}", *M0], "m_torso"),
+    (["eig", "--gait", "{robot_mass}", *M0], "'robot': torso.mass must be positive"),
+    (["eig", "--gait", "{robot_flat}", *M0], "m_torso"),
     (["eig", "--gait", "{robot_list}", *M0], "'robot'"),
     (["eig", "--gait", "{options_bad}", *M0], "speed"),
     (["eig", "--gait", "{extra_key}", *M0], "unknown key(s): comment"),

@@ -270,7 +270,7 @@ def _resigned(path, edit):
     (lambda b: b.update(solution=[0.69, [], []]), "'solution' must be an object"),
     (lambda b: b.update(solution="0.69"), "'solution' must be an object"),
     (lambda b: b.pop("options"), "missing key(s): options"),
-    (lambda b: b.update(robot="RABBIT"), "invalid 'robot'"),
+    (lambda b: b.update(robot="RABBIT"), "'robot'"),
     (lambda b: b.update(options=[]), "'options' must be an object"),
     (lambda b: b["options"].update(bezier_degree="6"), "bezier_degree"),
     (lambda b: b["options"].update(polish_steps=10**9), "polish_steps"),
