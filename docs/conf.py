@@ -31,7 +31,7 @@ extensions = [
 ]
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 exclude_patterns = ["_build", "**.ipynb_checkpoints", "public_api.txt"]
-templates_path = []
+templates_path = ["_templates"]
 html_theme = "pydata_sphinx_theme"
 html_title = f"biped-casadi {release}"
 html_static_path = ["_static"]
@@ -50,6 +50,9 @@ suppress_warnings = ["config.cache"]
 nb_execution_mode = os.environ.get("BIPED_DOCS_EXECUTE", "force")
 nb_execution_timeout = 600
 nb_execution_raise_on_error = True
+# run every page in a temporary folder: the how-to's sweep folder (and anything else a
+# page writes) never lands in the source tree, so a re-build starts from scratch
+nb_execution_in_temp = True
 os.environ.setdefault("BIPED_NOTEBOOK_QUICK", "1")
 os.environ.pop("MPLBACKEND", None)
 _tutorials = HERE / "tutorials"
@@ -65,27 +68,17 @@ def _write_api_page():
     import importlib
     import inspect
 
-    from paper_equations import public_modules
-    seen, sections = set(), []
-    for modname in public_modules():
-        mod = importlib.import_module(modname)
-        names = []
-        for name in getattr(mod, "__all__", []):
-            obj = getattr(mod, name)
-            key = id(obj) if (inspect.isclass(obj) or inspect.isfunction(obj)) else (modname, name)
-            if key in seen or not (inspect.isclass(obj) or inspect.isfunction(obj)):
-                continue
-            seen.add(key)
-            names.append(name)
-        if names:
-            doc = (inspect.getdoc(mod) or "").split("\n\n")[0].replace("\n", " ")
-            sections.append((modname, doc, names))
+    from paper_equations import api_sections
     lines = ["API reference", "=============", "",
              "The public surface: what the packages and the modules below export "
              "(``__all__``).  Everything else is internal and may change.", ""]
-    for modname, doc, names in sections:
+    for modname, names in api_sections():
+        if not names:
+            continue
+        doc = (inspect.getdoc(importlib.import_module(modname)) or "").split("\n\n")[0]
         lines += [modname, "-" * len(modname), "", f".. currentmodule:: {modname}", "",
-                  doc, "", ".. autosummary::", "   :toctree: generated", "   :nosignatures:", ""]
+                  doc.replace("\n", " "), "", ".. autosummary::", "   :toctree: generated",
+                  "   :nosignatures:", ""]
         lines += [f"   {n}" for n in names] + [""]
     text = "\n".join(lines)
     page = HERE / "api.rst"
