@@ -89,7 +89,26 @@ class _Controller(abc.ABC):
         return self.reference
 
     def evaluate(self, q, dq, tau, r, p) -> ControlOutput:
-        """The control law at one state (numeric), with an explicit reference state."""
+        """The control law at one state (numeric), with an explicit reference state.
+
+        Parameters
+        ----------
+        q, dq : array_like
+            Configuration (nq,), rad, and velocity, rad/s.
+        tau : float
+            Time since the start of the step, s.
+        r : array_like
+            Reference state (``n_ref`` numbers; the time-varying controller's
+            (q_u^d, dq_u^d), none for virtual constraints).
+        p : array_like
+            Step constants (``n_par`` numbers) from :meth:`step_start`.
+
+        Returns
+        -------
+        ControlOutput
+            Torques ``u`` (N m), outputs ``y`` and rates ``dy``, and the decoupling
+            ``denominator`` (zero where the controller is singular).
+        """
         nq = self.model.nq
         q = as_vector(q, nq, "q")
         dq = as_vector(dq, nq, "dq")
@@ -102,10 +121,13 @@ class _Controller(abc.ABC):
 
 # ===================================================== time-varying controller
 class TimeVaryingController(_Controller):
-    """Time-varying output control of paper §III-A with the stride-to-stride correction
-    of §III-C (SPEC §3).
+    """Time-varying output control of paper §III with the stride-to-stride correction.
 
-    Outputs, eq. (17):  y_c = M q - v^d(tau) - v_c(tau),  M = [M1, I],
+    Implements eqs. (6), (7), (17): the outputs y = v - v^d(tau) zeroed by the control,
+    with the reference restarted at every impact (tau = 0 at the start of each step,
+    :meth:`step_start`), and corrected to y_c of eq. (17) (SPEC §3):
+
+    Outputs:  y_c = M q - v^d(tau) - v_c(tau),  M = [M1, I],
     v^d = M q^d(tau), v_c the correction of eq. (18) from y_i = v - v^d and
     dy_i = dv - dv^d just after each impact, rejoining the reference at
     tau = ``rejoin`` T (the paper: T/2).  Torque, eq. (12) with the output acceleration
@@ -115,12 +137,13 @@ class TimeVaryingController(_Controller):
     Parameters
     ----------
     model : BipedModel
+        The robot.
     reference : Reference
         The reference step (a :class:`gait_opt.Gait`), made for ``model``.
-    M1 : array_like
-        One number per actuated joint.
+    M1 : array_like, optional
+        One number per actuated joint (default zeros: the outputs are q_a).
     gains : Gains, optional
-        Output PD of eq. (13).
+        Output PD of eq. (13) (default ``Gains()``).
     rejoin : float
         Rejoin time of v_c as a fraction of T, in (0, SECTION] (default 1/2, the paper's).
 
@@ -183,7 +206,18 @@ class TimeVaryingController(_Controller):
         self._r0 = np.array(self.reference.r0, dtype=float)
 
     def step_start(self, q, dq) -> StepStart:
-        """y_i = v - v^d(0), dy_i = dv - dv^d(0) at the start of a step (eq. 17)."""
+        """The step constants y_i = v - v^d(0), dy_i = dv - dv^d(0) of eq. (17).
+
+        Parameters
+        ----------
+        q, dq : array_like
+            The state at the start of the step (just after an impact), rad and rad/s.
+
+        Returns
+        -------
+        StepStart
+            ``r`` the reference state at tau = 0, ``p`` = (y_i, dy_i).
+        """
         nq = self.model.nq
         q = as_vector(q, nq, "q")
         dq = as_vector(dq, nq, "dq")
@@ -192,8 +226,24 @@ class TimeVaryingController(_Controller):
         return StepStart(r=self._r0.copy(), p=np.r_[yi, dyi])
 
     def torque(self, q, dq, tau, y_i=None, dy_i=None) -> ControlOutput:
-        """The law at (q, dq, tau) with the reference state taken from the reference at
-        tau (within its range) and corrections y_i, dy_i (default zero)."""
+        """The control law at (q, dq, tau), the reference state read from the reference.
+
+        Parameters
+        ----------
+        q, dq : array_like
+            Configuration (nq,), rad, and velocity, rad/s.
+        tau : float
+            Time since the start of the step, s, within the reference's range
+            [0, ``reference.t_max``].
+        y_i, dy_i : array_like, optional
+            The correction's initial output error and rate (nu each; default zero: no
+            correction).
+
+        Returns
+        -------
+        ControlOutput
+            Torques, outputs y_c and rates, decoupling denominator.
+        """
         nu = self.model.nu
         yi = np.zeros(nu) if y_i is None else as_vector(y_i, nu, "y_i")
         dyi = np.zeros(nu) if dy_i is None else as_vector(dy_i, nu, "dy_i")
@@ -203,13 +253,30 @@ class TimeVaryingController(_Controller):
         return self.evaluate(q, dq, tau, self.reference.state(tau), np.r_[yi, dyi])
 
     def singularity(self, n: int = 1001) -> SingularityReport:
-        """D11 - D12 M1 along the reference step on [0, T] (eq. 23-24)."""
+        """Whether D11 - D12 M1 vanishes or changes sign along the reference (eq. 23-24).
+
+        Parameters
+        ----------
+        n : int
+            Samples on [0, T].
+
+        Returns
+        -------
+        SingularityReport
+        """
         t = np.linspace(0.0, self.T, n)
         nq = self.model.nq
         D = np.array(self.model.D.map(n)(self.reference.q(t))).reshape(nq, nq, n, order="F")
         return singularity_report(decoupling_denominator(D[0, 0], D[0, 1:], self.M1))
 
     def describe(self) -> dict:
+        """What defines the controller, as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            ``controller`` ('tv'), ``M1``, ``gains``, ``rejoin``.
+        """
         return dict(controller="tv", M1=self.M1.tolist(), gains=self.gains.to_dict(),
                     rejoin=self.rejoin)
 
@@ -232,17 +299,40 @@ class VirtualConstraints:
     periodic through the impact, and h_d matches values and slopes at theta^- and
     theta^+ exactly, so Delta(S cap Z) lies in Z: a state on the constraint surface at
     the impact lands on it again (``invariance_residual`` measures it).
+
+    Build them with :func:`fit_virtual_constraints`.
+
+    Parameters
+    ----------
+    c : numpy.ndarray
+        Phase variable theta = c q, (nq,).
+    H0 : numpy.ndarray
+        Output matrix, (nq - 1, nq); [H0; c] is invertible.
+    knots : numpy.ndarray
+        theta_j, increasing, rad.
+    bezier : numpy.ndarray
+        Bezier coefficients per segment, (n_segments, 6, nq - 1).
+    theta_plus, theta_minus : float
+        theta at the start of the reference step and at its end (the impact), rad.
+    fit_residual : float
+        max ``|H0 q^d - h_d(c q^d)|`` at the segment midpoints, rad.
+    invariance_residual : float
+        Largest ``|y|``, ``|dy|`` right after the impact of the orbit.
+    direction : int
+        +1 if theta increases along the step, -1 otherwise.
+    h : casadi.Function
+        theta -> (h_d, dh_d/dtheta, d2h_d/dtheta2).
     """
-    c: np.ndarray                  # phase variable theta = c q (nq)
-    H0: np.ndarray                 # output matrix (nq - 1 x nq); [H0; c] invertible
-    knots: np.ndarray              # theta_j, increasing
-    bezier: np.ndarray             # (n_segments, 6, nq - 1) Bezier coefficients per segment
-    theta_plus: float              # theta at the start of the reference step
-    theta_minus: float             # theta at its end (impact)
-    fit_residual: float            # max |H0 q^d - h_d(c q^d)| at segment midpoints
-    invariance_residual: float     # |y|, |dy| right after the impact of the orbit
-    direction: int                 # +1 if theta increases along the step, -1 otherwise
-    h: ca.Function = field(repr=False)   # theta -> (h, dh/dtheta, d2h/dtheta2)
+    c: np.ndarray
+    H0: np.ndarray
+    knots: np.ndarray
+    bezier: np.ndarray
+    theta_plus: float
+    theta_minus: float
+    fit_residual: float
+    invariance_residual: float
+    direction: int
+    h: ca.Function = field(repr=False)
 
     @property
     def cache_key(self):
@@ -254,6 +344,7 @@ class VirtualConstraints:
 
     @property
     def theta_range(self) -> tuple:
+        """(first knot, last knot): the phase range where h_d is defined, rad."""
         return float(self.knots[0]), float(self.knots[-1])
 
     @property
@@ -262,6 +353,14 @@ class VirtualConstraints:
         return np.vstack([self.H0, self.c])
 
     def to_dict(self) -> dict:
+        """A JSON-ready summary (without the Bezier coefficients).
+
+        Returns
+        -------
+        dict
+            ``c``, ``H0``, ``n_segments``, ``theta_plus``, ``theta_minus``,
+            ``theta_range``, ``direction``, ``fit_residual``, ``invariance_residual``.
+        """
         return dict(c=self.c.tolist(), H0=self.H0.tolist(), n_segments=len(self.bezier),
                     theta_plus=self.theta_plus, theta_minus=self.theta_minus,
                     theta_range=list(self.theta_range), direction=self.direction,
@@ -331,6 +430,13 @@ def fit_virtual_constraints(gait, c=None, H0=None, segments_per_step: int = 200,
     Returns
     -------
     VirtualConstraints
+        With the fit and impact-invariance residuals.
+
+    Raises
+    ------
+    ValueError
+        When c q is not strictly monotonic along the step, [H0; c] is singular, or an
+        argument is out of range.
     """
     nq = gait.model.nq
     c = as_vector(gait.model.hip_phase if c is None else c, nq, "c")
@@ -391,10 +497,10 @@ def fit_virtual_constraints(gait, c=None, H0=None, segments_per_step: int = 200,
 
 
 class VirtualConstraintController(_Controller):
-    """Virtual-constraint (HZD) controller: outputs y = H0 q - h_d(theta), theta = c q,
-    with h_d fitted to the same reference gait (:func:`fit_virtual_constraints`).
+    """Virtual-constraint (HZD) controller, for the comparison of paper §V-C.
 
-    Input-output linearisation with the same output dynamics as eq. (13),
+    Outputs y = H0 q - h_d(theta), theta = c q, with h_d fitted to the same reference
+    gait (:func:`fit_virtual_constraints`).  Input-output linearisation with the same output dynamics as eq. (13),
     ddy = -Kd/eps dy - Kp/eps^2 y: with J = H0 - h'(theta) c,
     ddy = J ddq - h''(theta) (c dq)^2, and the unactuated row of eq. (1),
 
@@ -404,7 +510,7 @@ class VirtualConstraintController(_Controller):
     With ``correction`` (default) the constraints of each step are h = h_d + h_c with
     the stride-to-stride correction of eq. (18) written in the phase instead of time:
     h_c(theta) = v_c(s, y_i, dy_i/ds, S) with s = theta - theta_i (theta_i at the start
-    of the step, s counted along the walking direction) and S = |theta^- - theta^+|, so
+    of the step, s counted along the walking direction) and S = ``|theta^- - theta^+|``, so
     h_c carries the output error and its rate at the start of the step and vanishes
     from the middle of the step on.  On the hybrid zero dynamics y_i = dy_i = 0 (the
     constraints are impact invariant): the correction only changes how states off the
@@ -415,6 +521,19 @@ class VirtualConstraintController(_Controller):
     ``den`` = det [D_1; J] / det [c; H0]: zero where the controller is singular.
     ``in_range`` = 0 once theta leaves the fitted range.  No reference state; the step
     constants are p = (theta_i, y_i, dy_i/ds) with the correction, none without.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference step the constraints are fitted to, made for ``model``.
+    constraints : VirtualConstraints, optional
+        Default: :func:`fit_virtual_constraints` of ``gait`` with its defaults.
+    gains : Gains, optional
+        Output PD of eq. (13) (default ``Gains()``).
+    correction : bool
+        Add the phase-based stride-to-stride correction h_c (default True).
     """
 
     name = "vc"
@@ -487,8 +606,22 @@ class VirtualConstraintController(_Controller):
                                         ["q", "dq"], ["theta", "dtheta", "y", "dy"])
 
     def step_start(self, q, dq) -> StepStart:
-        """theta_i, y_i = H0 q - h_d(theta_i) and dy_i/ds = (J dq) / (dtheta along the
-        walking direction) at the start of a step (correction only)."""
+        """The step constants of the phase-based correction at the start of a step.
+
+        theta_i = c q, y_i = H0 q - h_d(theta_i) and dy_i/ds = (J dq) / (dtheta along
+        the walking direction); nothing without ``correction``.
+
+        Parameters
+        ----------
+        q, dq : array_like
+            The state at the start of the step (just after an impact), rad and rad/s.
+
+        Returns
+        -------
+        StepStart
+            ``p`` = (theta_i, y_i, dy_i/ds) (empty without correction); ``problem``
+            says why the step cannot start (the phase moving backwards).
+        """
         nq = self.model.nq
         q = as_vector(q, nq, "q")
         dq = as_vector(dq, nq, "dq")
@@ -503,14 +636,35 @@ class VirtualConstraintController(_Controller):
         return StepStart(r=np.zeros(0), p=np.r_[th, y, dy / ds])
 
     def torque(self, q, dq) -> ControlOutput:
-        """The law at (q, dq) (numeric), without correction (y_i = dy_i = 0)."""
+        """The control law at (q, dq) without correction (y_i = dy_i = 0).
+
+        Parameters
+        ----------
+        q, dq : array_like
+            Configuration (nq,), rad, and velocity, rad/s.
+
+        Returns
+        -------
+        ControlOutput
+            Torques, outputs and rates, decoupling denominator.
+        """
         p = np.zeros(self.n_par)
         if self.correction:
             p[0] = float(self.constraints.c @ as_vector(q, self.model.nq, "q"))
         return self.evaluate(q, dq, 0.0, np.zeros(0), p)
 
     def singularity(self, n: int = 1001) -> SingularityReport:
-        """det [D_1; J] / det [c; H0] along the reference step on [0, T]."""
+        """Whether det [D_1; J] / det [c; H0] vanishes or changes sign along the step.
+
+        Parameters
+        ----------
+        n : int
+            Samples on [0, T].
+
+        Returns
+        -------
+        SingularityReport
+        """
         t = np.linspace(0.0, self.T, n)
         q, dq = self.reference.q(t), self.reference.dq(t)
         p = np.zeros((self.n_par, n))
@@ -520,5 +674,13 @@ class VirtualConstraintController(_Controller):
         return singularity_report(np.array(out[3]).ravel())
 
     def describe(self) -> dict:
+        """What defines the controller, as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            ``controller`` ('vc'), ``gains``, ``correction`` and the constraints'
+            :meth:`VirtualConstraints.to_dict`.
+        """
         return dict(controller="vc", gains=self.gains.to_dict(), correction=self.correction,
                     **self.constraints.to_dict())

@@ -71,9 +71,23 @@ _LINK = ("name", "mass", "length", "com", "inertia")
 
 @dataclass(frozen=True)
 class Link:
-    """One rigid link: mass (kg), length (m), centre of mass ``com`` (m from the link's
-    proximal joint: the hip for the torso and the top link of a leg) and ``inertia``
-    (kg m^2 about the centre of mass)."""
+    """One rigid link of a robot description (the torso or one link of a leg).
+
+    Parameters
+    ----------
+    name : str
+        The link's name ('torso', 'femur', 'tibia', 'link1', ...).
+    mass : float
+        kg, > 0.
+    length : float
+        m, > 0: from the proximal joint to the distal end.
+    com : float
+        m, 0 <= com <= length: the centre of mass measured from the link's proximal
+        joint (the hip for the torso and for the top link of a leg, the joint above it
+        for the other leg links).
+    inertia : float
+        kg m^2 about the centre of mass, >= 0 (0: a point mass).
+    """
 
     name: str
     mass: float
@@ -82,7 +96,13 @@ class Link:
     inertia: float
 
     def to_dict(self) -> dict:
-        """The fields by name."""
+        """The fields by name, as in a description file's link table.
+
+        Returns
+        -------
+        dict
+            ``name``, ``mass``, ``length``, ``com``, ``inertia``.
+        """
         return dict(name=self.name, mass=self.mass, length=self.length, com=self.com,
                     inertia=self.inertia)
 
@@ -92,23 +112,31 @@ class RobotDescription:
     """A planar point-foot biped: torso, two identical legs of ``k`` links, point masses.
 
     Build one with :func:`load_description` (a TOML file) or
-    :func:`description_from_dict`; both validate every field.  Equal descriptions give
-    equal models (a gait records its description and refuses another robot).
+    :func:`description_from_dict`; both validate every field (the constructor itself
+    does not).  Equal descriptions give equal models (a gait records its description and
+    refuses another robot).
 
-    Attributes
+    Parameters
     ----------
     name : str
+        The robot's name, recorded in gait files.
     torso : Link
+        The torso, from the hip up.
     leg : tuple of Link
-        One leg's links from the hip down to the foot.
+        One leg's links from the hip down to the foot (k = ``len(leg)`` links).
     point_masses : tuple of (str, float)
-        Joint name and mass (kg), sorted by joint name.
+        Joint name ('hip', 'knee', 'joint1', ..., 'foot') and mass (kg), sorted by joint
+        name; every joint but the hip carries one on each leg.
     rotor_inertia : float
-        Reflected rotor inertia (kg m^2) on the diagonal of D of every actuated joint.
+        Reflected rotor inertia (kg m^2, already times the gear ratio squared) added to
+        the diagonal entry of D of every actuated joint (q2..qn).
     gravity : float
         m/s^2.
     torque_limit : float
-        N m, the default bound of the reference gait's torques.
+        N m, the default bound on every torque of the reference gait (and of closed-loop
+        runs).
+    source : str
+        Where the description was read from (a file name; for messages, not compared).
     """
 
     name: str
@@ -162,9 +190,16 @@ class RobotDescription:
 
     # --------------------------------------------------------------- dicts
     def to_dict(self) -> dict:
-        """The description in the file's schema (with the reflected rotor inertia and
-        gear_ratio 1), as recorded in gait files; :func:`description_from_dict` reads
-        it back to an equal description."""
+        """The description in the file's schema, as recorded in gait files.
+
+        Returns
+        -------
+        dict
+            ``name``, ``gravity``, ``actuators`` (the reflected rotor inertia with
+            gear_ratio 1), ``torso``, ``leg`` (a list of link tables) and
+            ``point_masses``; :func:`description_from_dict` reads it back to an equal
+            description.
+        """
         return dict(name=self.name, gravity=self.gravity,
                     actuators=dict(torque_limit=self.torque_limit,
                                    rotor_inertia=self.rotor_inertia, gear_ratio=1.0),
@@ -263,6 +298,8 @@ def description_from_dict(data: dict, where: str = "robot description",
     Returns
     -------
     RobotDescription
+        With the rotor inertia reflected through the gear (rotor_inertia *
+        gear_ratio^2).
 
     Raises
     ------
@@ -308,10 +345,12 @@ def load_description(path) -> RobotDescription:
     Parameters
     ----------
     path : str or Path
+        The ``.toml`` file.
 
     Returns
     -------
     RobotDescription
+        Validated; ``source`` is the file name.
 
     Raises
     ------
@@ -339,6 +378,12 @@ def builtin_path(name: str) -> Path:
     Returns
     -------
     Path
+        ``biped_casadi/robots/NAME.toml`` inside the installed package.
+
+    Raises
+    ------
+    ValueError
+        When ``name`` is not one of :data:`BUILTIN`.
     """
     if name not in BUILTIN:
         raise ValueError(f"robot: no built-in robot {name!r} (built-in: {', '.join(BUILTIN)})")
@@ -351,11 +396,18 @@ def find_description(name_or_path) -> RobotDescription:
     Parameters
     ----------
     name_or_path : str or Path
-        ``'rabbit'``, ``'three_link'`` or the path of a ``.toml`` file.
+        ``'rabbit'``, ``'three_link'`` or the path of a ``.toml`` file (a
+        :class:`RobotDescription` is returned as it is).
 
     Returns
     -------
     RobotDescription
+        Validated.
+
+    Raises
+    ------
+    ValueError
+        Neither a built-in name nor a readable, valid description file.
     """
     if isinstance(name_or_path, RobotDescription):
         return name_or_path

@@ -213,12 +213,29 @@ class BipedModel:
     joints downward, swing foot; :attr:`point_names`); ``angular_momentum(q, dq, p)``
     about a point p (links and point masses, rotors excluded).
 
+    Implements eqs. (1)-(4): the single-support dynamics D(q) ddq + H(q, dq) = B u of
+    eq. (1) (``D``, ``H``, ``B``; ``forward_dynamics`` is f(x) + g(x) u of eq. (4)), the
+    rigid impact dq+ = I(q-) dq- of eq. (2) solved in extended coordinates (q, x_st,
+    z_st) with the impulse at the swing foot, the relabelling q+ = E q- of eq. (3)
+    (``E``), so that ``impact`` is the map Delta of eq. (4), and the switching surface
+    S = {z_sw(q) = 0, x_sw(q) > 0} of eq. (4) through ``swing_foot``.
+
+    Parameters
+    ----------
+    params : RobotDescription or RobotParams
+        The robot (legacy parameters are converted with
+        :meth:`RobotParams.to_description`); default RABBIT.  Prefer :func:`robot` or
+        :func:`rabbit`, which build each model once.
+
     Attributes
     ----------
     description : RobotDescription
         What the model was built from; ``params`` is the same object (the name older
         code uses).
     nq, nu : int
+        Joints (2 k + 1) and torques (2 k).
+    q_sym, dq_sym, u_sym : casadi.SX
+        The symbols the Functions are built from (for symbolic work on the model).
     E, B : numpy.ndarray
         Relabelling (eq. 3) and input matrix (eq. 1).
     joint_names : tuple of str
@@ -407,7 +424,20 @@ class BipedModel:
         return self.k >= 2
 
     def describe(self, q=None) -> dict:
-        """Description, total mass, D(q) and H(q, 0) at ``q`` (default upright), as a dict."""
+        """The robot and its mass matrix at one configuration, as a JSON-ready dict.
+
+        Parameters
+        ----------
+        q : array_like, optional
+            Configuration (nq,), rad; default upright (zeros).
+
+        Returns
+        -------
+        dict
+            ``params`` (the description's ``to_dict()``), ``total_mass`` (kg),
+            ``joints`` (names), ``q``, ``D`` (nq x nq, D(q)) and ``H`` (H(q, 0): gravity
+            only).
+        """
         q = np.zeros(self.nq) if q is None else np.asarray(q, dtype=float)
         return dict(params=self.params.to_dict(), total_mass=self.params.total_mass,
                     joints=list(self.joint_names),
@@ -437,6 +467,7 @@ def resolve_robot(robot) -> RobotDescription:
     Returns
     -------
     RobotDescription
+        Validated.
 
     Raises
     ------

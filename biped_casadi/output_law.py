@@ -74,7 +74,13 @@ class Gains:
             raise ValueError(f"gain 'eps' = {self.eps!r} is too small: Kp / eps^2 overflows")
 
     def to_dict(self) -> dict:
-        """The three gains by name."""
+        """The three gains by name.
+
+        Returns
+        -------
+        dict
+            ``Kp``, ``Kd``, ``eps``.
+        """
         return dict(Kp=self.Kp, Kd=self.Kd, eps=self.eps)
 
 
@@ -127,7 +133,18 @@ def check_M1_range(M1s, name: str = "M1"):
 
 # ------------------------------------------------------------------ eq. (5), (10)
 def output_matrix(M1) -> np.ndarray:
-    """M = [M1, I] of eq. (5) (numeric), shape (n, n + 1)."""
+    """The output matrix M = [M1, I] of eq. (5) (numeric, M2 = I).
+
+    Parameters
+    ----------
+    M1 : array_like
+        (n,): one number per actuated joint.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (n, n + 1).
+    """
     M1 = np.asarray(M1, dtype=float).ravel()
     return np.hstack([M1[:, None], np.eye(M1.size)])
 
@@ -164,8 +181,10 @@ def outputs(M1, q):
 def coordinates_from_outputs(M1, q_u, v):
     """The configuration from the unactuated coordinate and the outputs.
 
-    Implements eqs. (10), (16): q = (q_u, v - M1 q_u) with M2 = I; with v = v^d (+ v_c)
-    it is the configuration on the zero-dynamics manifold.
+    Implements eqs. (10), (15), (16): q = (q_u, v - M1 q_u) with M2 = I; with
+    v = v^d = M1 q_u^d + q_a^d (eq. 15) it is q_a = q_a^d + M1 (q_u^d - q_u), the
+    configuration on the zero-dynamics manifold (first line of eq. 16), and with
+    v = v^d + v_c that of the hybrid zero dynamics.
 
     Parameters
     ----------
@@ -191,7 +210,7 @@ def coordinates_from_outputs(M1, q_u, v):
 def correction(tau, y_i, dy_i, t_c):
     """The stride-to-stride correction v_c and its two derivatives.
 
-    Implements eqs. (17), (18).
+    Implements eq. (18).
 
     Per output component, v_c is the fourth-order polynomial on [0, t_c] with
     v_c(0) = y_i, dv_c(0) = dy_i and v_c = dv_c = ddv_c = 0 at t_c; v_c = 0 for
@@ -208,7 +227,7 @@ def correction(tau, y_i, dy_i, t_c):
     tau : float, array or casadi
         Time since the start of the step.
     y_i, dy_i : array or casadi
-        Output error and its rate just after the impact (eq. 17).
+        Output error y_i = v - v^d and its rate just after the impact (eq. 17).
     t_c : float or casadi
         Rejoin time (> 0).
 
@@ -250,6 +269,7 @@ def decoupling_denominator(D11, D12, M1):
     Returns
     -------
     float, numpy.ndarray (N,) or casadi
+        D11 - D12 M1, in kg m^2 (the units of D).
     """
     if _symbolic(D11, D12, M1):
         return D11 - ca.mtimes(D12, M1)
@@ -258,71 +278,77 @@ def decoupling_denominator(D11, D12, M1):
 
 
 def unactuated_acceleration(D, H, M1, ddv):
-    """ddq_u = (-D12 ddv - H1) / (D11 - D12 M1): the first row of eq. (1) written in
-    the outputs.
+    """The unactuated acceleration ddq_u = (-D12 ddv - H1) / (D11 - D12 M1).
 
-    Implements eqs. (11), (23), and the first line of eq. (12); with ddv = ddv^d the
-    zero dynamics of eq. (14), with ddv = ddv^d + ddv_c that of eq. (19).
+    Implements eqs. (11), (14), (23): the first row of eq. (1), with D and H split as in
+    eq. (11), written in the outputs (the first line of eq. 12) and solved for ddq_u.
+    With ddv = ddv^d it is the swing-phase zero dynamics of eq. (14) (second line; the
+    same with q_a from eq. 16); with ddv = ddv^d + ddv_c it is the hybrid zero dynamics
+    that the restricted Poincaré map integrates (eq. 19).
 
     Parameters
     ----------
     D, H : casadi
-        Mass matrix and C dq + G at the current state.
+        Mass matrix (nq x nq) and C dq + G (nq x 1) at the current state.
     M1 : casadi column or numbers
+        The output matrix's first column (nu).
     ddv : casadi column
-        Output acceleration.
+        Output acceleration (nu), rad/s^2.
 
     Returns
     -------
     casadi
-        ddq_u.
+        ddq_u, rad/s^2 (infinite where D11 - D12 M1 = 0, eq. 24).
     """
     den = decoupling_denominator(D[0, 0], D[0, 1:], M1)
     return (-ca.mtimes(D[0, 1:], ddv) - H[0]) / den
 
 
 def actuated_torque(D, H, M1, ddq_u, ddv):
-    """u = (D21 - D22 M1) ddq_u + D22 ddv + H2: rows 2.. of eq. (1) with B = [0; I].
+    """The torques u = (D21 - D22 M1) ddq_u + D22 ddv + H2.
 
-    Implements eq. (12) (second line).
+    Implements eq. (12): its second line, rows 2.. of eq. (1) with B = [0; I], given
+    ddq_u from the first line (:func:`unactuated_acceleration`, eq. 23).
 
     Parameters
     ----------
     D, H : casadi
-        Mass matrix and C dq + G.
+        Mass matrix (nq x nq) and C dq + G (nq x 1) at the current state.
     M1 : casadi column or numbers
+        The output matrix's first column (nu).
     ddq_u : casadi
-        Unactuated acceleration (eq. 23).
+        Unactuated acceleration (eq. 23), rad/s^2.
     ddv : casadi column
-        Output acceleration.
+        Output acceleration (nu), rad/s^2.
 
     Returns
     -------
     casadi
-        Torques u.
+        Torques u (nu), N m.
     """
     D21, D22 = D[1:, 0], D[1:, 1:]
     return ca.mtimes(D21 - ca.mtimes(D22, M1), ddq_u) + ca.mtimes(D22, ddv) + H[1:]
 
 
 def output_acceleration(ddv_target, y, dy, gains: Gains):
-    """ddv = ddv_target - Kd/eps dy - Kp/eps^2 y, with ddv_target = ddv^d + ddv_c and
-    y, dy the outputs of eq. (17).
+    """The commanded output acceleration ddv = ddv_target - Kd/eps dy - Kp/eps^2 y.
 
-    Implements eq. (13).
+    Implements eq. (13), with ddv_target = ddv^d + ddv_c and y, dy the outputs y_c of
+    eq. (17) and their rates.
 
     Parameters
     ----------
     ddv_target : array or casadi
-        The outputs' reference acceleration.
+        The outputs' reference acceleration (nu), rad/s^2.
     y, dy : array or casadi
-        Output error and its rate.
+        Output error (rad) and its rate (rad/s).
     gains : Gains
+        Kp, Kd and eps.
 
     Returns
     -------
     array or casadi
-        The commanded output acceleration.
+        ddv (nu), rad/s^2.
     """
     return ddv_target - gains.Kd / gains.eps * dy - gains.Kp / gains.eps**2 * y
 
@@ -353,9 +379,25 @@ def is_singular(values, axis: int = -1):
 
 @dataclass
 class SingularityReport(Result):
-    """The decoupling denominator along the reference step (eq. 23-24 for the
-    time-varying controller).  ``status`` is 'regular' or 'singular'; ``success`` means
-    regular."""
+    """Whether a controller is singular along the reference step.
+
+    For the time-varying controller the sampled quantity is the decoupling denominator
+    D11 - D12 M1 (eq. 23-24); for virtual constraints its analogue.  ``success`` means
+    regular.
+
+    Parameters
+    ----------
+    min_abs : float
+        Smallest magnitude of the denominator on the step.
+    min_value, max_value : float
+        Its smallest and largest value.
+    changes_sign : bool
+        Whether it changes sign (or touches 0) on the step.
+    status : {'regular', 'singular'}
+        'singular' when :func:`is_singular` says so.
+    message : str
+        Why it is singular (empty when regular).
+    """
 
     min_abs: float
     min_value: float
@@ -383,6 +425,7 @@ def singularity_report(values) -> SingularityReport:
     Returns
     -------
     SingularityReport
+        Its extremes, whether it changes sign, and the status.
     """
     d = np.asarray(values, dtype=float).ravel()
     sing = bool(is_singular(d))

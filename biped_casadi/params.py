@@ -25,13 +25,32 @@ __all__ = ["RobotParams", "RABBIT", "load_params"]
 
 @dataclass(frozen=True)
 class RobotParams:
-    """Masses (kg), lengths (m), inertias about each link's own centre of mass (kg m^2).
+    """Legacy flat parameters of a five-link biped (RABBIT's layout); defaults: RABBIT.
 
     Centre-of-mass offsets are measured from the proximal joint of each link: the
     torso's above the hip, the femur's from the hip, the tibia's from the knee.
-    ``torque_limit`` (N m) bounds every actuator torque (gaits and closed-loop runs).
-    ``rotor_inertia`` is the reflected rotor inertia added to the diagonal of D for
-    each actuated joint q2..q5 (rotor inertia x gear ratio^2).
+    Inertias are about each link's own centre of mass.  Every numeric field is checked
+    (finite; masses, lengths, inertias, ``g`` and ``torque_limit`` positive).
+
+    Parameters
+    ----------
+    name : str
+        The robot's name.
+    m_torso, m_femur, m_tibia : float
+        Link masses, kg.
+    L_torso, L_femur, L_tibia : float
+        Link lengths, m.
+    I_torso, I_femur, I_tibia : float
+        Link inertias about their centres of mass, kg m^2.
+    c_torso, c_femur, c_tibia : float
+        Centre-of-mass offsets from the proximal joint, m (at most the link's length).
+    rotor_inertia : float
+        Reflected rotor inertia (rotor inertia x gear ratio^2, kg m^2) added to the
+        diagonal of D for each actuated joint q2..q5; RABBIT: 3.32e-4 x 50^2 = 0.83.
+    g : float
+        Gravity, m/s^2.
+    torque_limit : float
+        N m, bound on every actuator torque (gaits and closed-loop runs).
     """
 
     name: str = "RABBIT"
@@ -75,9 +94,17 @@ class RobotParams:
 
     @property
     def total_mass(self) -> float:
+        """kg: the torso and both legs."""
         return self.m_torso + 2 * (self.m_femur + self.m_tibia)
 
     def to_dict(self) -> dict:
+        """The fields by name (the flat record of older parameter and gait files).
+
+        Returns
+        -------
+        dict
+            Field name -> value.
+        """
         return dataclasses.asdict(self)
 
     def to_description(self) -> RobotDescription:
@@ -97,19 +124,54 @@ class RobotParams:
 
     @classmethod
     def is_legacy_record(cls, data) -> bool:
-        """Whether a mapping is a flat parameter record (a gait file written before
-        robot descriptions, or a legacy parameter file)."""
+        """Whether a mapping is a flat parameter record of this class.
+
+        Such records are written by gait files older than robot descriptions and by
+        legacy parameter files.
+
+        Parameters
+        ----------
+        data : object
+            A parsed record (anything; only dicts can qualify).
+
+        Returns
+        -------
+        bool
+            True for a dict without ``torso`` and ``leg`` that names at least one
+            numeric field of this class.
+        """
         return isinstance(data, dict) and "torso" not in data and "leg" not in data \
             and any(k in data for k in cls.field_names() if k != "name")
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
+        """The names of the fields, in order.
+
+        Returns
+        -------
+        tuple of str
+        """
         return tuple(f.name for f in dataclasses.fields(cls))
 
     @classmethod
     def from_dict(cls, data: dict) -> "RobotParams":
-        """Build from a mapping that names every numeric field ('name' and
-        'torque_limit' optional)."""
+        """Build parameters from a flat mapping that names every numeric field.
+
+        Parameters
+        ----------
+        data : dict
+            Field name -> value; 'name' and 'torque_limit' (default RABBIT's 150 N m)
+            may be absent, every other field must be present.
+
+        Returns
+        -------
+        RobotParams
+
+        Raises
+        ------
+        ValueError
+            Not a mapping, an unknown or missing field, or an invalid value.
+        """
         if not isinstance(data, dict):
             raise ValueError("robot parameters must be a table/object of named fields")
         names = cls.field_names()
@@ -127,9 +189,26 @@ RABBIT = RobotParams()
 
 
 def load_params(path: str | Path) -> RobotParams:
-    """Read parameters from a ``.toml`` or ``.json`` file (all numeric fields required).
+    """Read legacy flat parameters from a ``.toml`` or ``.json`` file.
 
-    A TOML file may hold the fields at top level or under a ``[robot]`` table.
+    A TOML file may hold the fields at top level or under a ``[robot]`` table; every
+    numeric field is required ('name' and 'torque_limit' optional, as
+    :meth:`RobotParams.from_dict`).
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.toml`` or ``.json`` file.
+
+    Returns
+    -------
+    RobotParams
+
+    Raises
+    ------
+    ValueError
+        Naming the file: missing, unreadable, another suffix, unparsable, or a field
+        missing, unknown or invalid.
     """
     path = Path(path)
     text = read_text_file(path, "parameter file", 1_000_000)

@@ -45,20 +45,58 @@ class Perturbation:
 
     @classmethod
     def uniform(cls, nq: int, q_error: float, dq_error: float) -> "Perturbation":
-        """The same error on every joint (``--perturb Q DQ``)."""
+        """The same error on every joint (``--perturb Q DQ``).
+
+        Parameters
+        ----------
+        nq : int
+            Joints of the robot.
+        q_error : float
+            Added to every joint angle, rad.
+        dq_error : float
+            Added to every joint velocity, rad/s.
+
+        Returns
+        -------
+        Perturbation
+        """
         q = as_number(q_error, "q_error")
         dq = as_number(dq_error, "dq_error")
         return cls((q,) * nq, (dq,) * nq)
 
     @classmethod
     def paper(cls, nq: int = 5) -> "Perturbation":
-        """The paper's Fig. 5 perturbation: +0.01 rad on every joint, +0.1 rad/s on every
-        velocity."""
+        """The paper's Fig. 5 perturbation: +0.01 rad on every joint, +0.1 rad/s on each rate.
+
+        Parameters
+        ----------
+        nq : int
+            Joints of the robot (5 for RABBIT).
+
+        Returns
+        -------
+        Perturbation
+        """
         return cls.uniform(nq, *PAPER_SIZES)
 
     @classmethod
     def from_direction(cls, d, scale: float = 1.0, sizes=PAPER_SIZES) -> "Perturbation":
-        """The error s (q_size d[:nq], dq_size d[nq:]) of direction ``d`` at scale s."""
+        """The error s (q_size d[:nq], dq_size d[nq:]) of direction ``d`` at scale s.
+
+        Parameters
+        ----------
+        d : array_like
+            A direction of 2 nq components (see :func:`directions`).
+        scale : float
+            s >= 0.
+        sizes : tuple of float
+            (q_size, dq_size), rad and rad/s per unit component (default the paper's
+            0.01 and 0.1).
+
+        Returns
+        -------
+        Perturbation
+        """
         d = np.asarray(d, dtype=float).ravel()
         if d.size % 2 or d.size == 0:
             raise ValueError(f"d must have 2 nq components, got {d.size}")
@@ -69,21 +107,50 @@ class Perturbation:
 
     @property
     def nq(self) -> int:
+        """Number of joints."""
         return len(self.q)
 
     def scaled(self, s: float) -> "Perturbation":
-        """This perturbation times ``s``."""
+        """This perturbation times ``s``.
+
+        Parameters
+        ----------
+        s : float
+            The factor.
+
+        Returns
+        -------
+        Perturbation
+        """
         s = as_number(s, "scale")
         return Perturbation(tuple(s * v for v in self.q), tuple(s * v for v in self.dq))
 
     def initial_state(self, reference):
-        """(q^d(0) + q, dq^d(0) + dq) for a reference made for a robot with ``nq`` joints."""
+        """The perturbed start (q^d(0) + q, dq^d(0) + dq) of a reference.
+
+        Parameters
+        ----------
+        reference : Reference
+            Made for a robot with ``nq`` joints.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            (q, dq), each (nq,).
+        """
         if reference.model.nq != self.nq:
             raise ValueError(f"perturbation: {self.nq} joints, the robot has "
                              f"{reference.model.nq}")
         return reference.q(0.0) + np.array(self.q), reference.dq(0.0) + np.array(self.dq)
 
     def to_dict(self) -> dict:
+        """The two error vectors as lists.
+
+        Returns
+        -------
+        dict
+            ``q`` (rad) and ``dq`` (rad/s).
+        """
         return dict(q=list(self.q), dq=list(self.dq))
 
 

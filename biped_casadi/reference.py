@@ -84,33 +84,110 @@ class Reference(abc.ABC):
 
     @abc.abstractmethod
     def state(self, t) -> np.ndarray:
-        """The reference state r(t) (numeric), shape (n_state,)."""
+        """The reference state r(t) (numeric).
+
+        Parameters
+        ----------
+        t : float
+            Time in [t_min, t_max], s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (n_state,).
+        """
 
     def states(self, t) -> np.ndarray:
-        """The reference state at every time of the array ``t``, shape (n_state, N)."""
+        """The reference state at every time of an array.
+
+        Parameters
+        ----------
+        t : array_like
+            N times in [t_min, t_max], s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (n_state, N).
+        """
         return np.array([self.state(float(tk)) for tk in np.ravel(t)]).reshape(-1, self.n_state).T
 
     # ------------------------------------------------------------ derived
     def q(self, t):
-        """q^d(t): shape (nq,) for a float ``t``, (nq, N) for an array."""
+        """The reference configuration q^d(t), rad.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s) in [t_min, t_max], s (tau: time since the start of the step).
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (nq,) for a float ``t``, (nq, N) for N times.
+        """
         return self.evaluate(t)[0]
 
     def dq(self, t):
-        """dq^d/dt at ``t``."""
+        """The reference velocity dq^d/dt, rad/s.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s) in [t_min, t_max], s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (nq,) for a float ``t``, (nq, N) for N times.
+        """
         return self.evaluate(t)[1]
 
     def ddq(self, t):
-        """d2q^d/dt2 at ``t``."""
+        """The reference acceleration d2q^d/dt2, rad/s^2.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s) in [t_min, t_max], s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (nq,) for a float ``t``, (nq, N) for N times.
+        """
         return self.evaluate(t)[2]
 
     def u(self, t):
-        """Reference torques u^d(t) (inverse dynamics of eq. (1)): (nu,) or (nu, N)."""
+        """The reference torques u^d(t), N m: the inverse dynamics of eq. (1).
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s) in [t_min, t_max], s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (nu,) for a float ``t``, (nu, N) for N times.
+        """
         q, dq, ddq = self.evaluate(t)
         q2, dq2, ddq2 = (np.atleast_2d(v.T).T for v in (q, dq, ddq))
         u = np.array(self.model.inverse_dynamics.map(q2.shape[1])(q2, dq2, ddq2))
         return u[:, 0] if np.ndim(t) == 0 else u
 
     def state_at(self, t) -> np.ndarray:
-        """(q_u^d(t), dq_u^d(t)), the unactuated coordinate and its rate."""
+        """The unactuated coordinate and its rate on the reference, (q_u^d(t), dq_u^d(t)).
+
+        Parameters
+        ----------
+        t : float
+            Time in [t_min, t_max], s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (2,): rad, rad/s.
+        """
         q, dq, _ = self.evaluate(float(t))
         return np.array([q[0], dq[0]])

@@ -70,7 +70,14 @@ class Result:
         return self.status in self.SUCCESS
 
     def to_dict(self) -> dict:
-        """Every field in plain JSON types (see :func:`json_safe`), plus ``success``."""
+        """The result in plain JSON types (what ``--json`` prints).
+
+        Returns
+        -------
+        dict
+            Every field not marked internal, through :func:`json_safe`, plus
+            ``success``.
+        """
         out = {}
         for f in dataclasses.fields(self):
             if f.metadata.get("dict", True):

@@ -59,27 +59,41 @@ PAPER_PERTURBATION = (0.01, 0.1)
 
 @dataclass(frozen=True)
 class SimulationOptions:
-    """Options of :func:`simulate`; all have defaults.
+    """Options of :func:`simulate` and :class:`Simulator`; all have defaults.
 
-    steps: number of steps (impacts) to simulate.
-    rk4_steps: RK4 steps per reference step duration T (a multiple of 4).
-    mu: friction coefficient for the stance foot and the impact impulse.
-    min_normal_force: lowest admissible stance normal force, N.
-    min_hip_height: the robot has fallen when the hip is lower, m; None (default):
-        0.5625 leg length (0.45 m for RABBIT).
-    max_torso_angle: ... or when the torso leans more than this from the vertical, rad.
-    horizon: a step without a valid impact within horizon * T ends the run (no_impact).
-    ground_tolerance: how far below the ground (m) the swing foot may graze behind the
-        stance foot before the run counts as scuffed (round-off at lift-off).
-    singular_tolerance: the run stops as singular where the controller's decoupling
-        denominator (D11 - D12 M1 for the time-varying controller, eq. 23-24) changes
-        sign or falls below this fraction of its largest magnitude on the reference
-        (the torques grow like its inverse).
-    torque_limit: the run stops ('torque_limit') where some |u_i| exceeds it, N m;
-        None (default): the robot's own limit (``model.params.torque_limit``).
-    min_liftoff_speed: the old stance foot must leave the ground after an impact with at
-        least this upward speed, m/s (default 0: any upward speed).
-    jit: compile the closed loop to C (CasADi JIT, needs a C compiler; a few seconds
+    Parameters
+    ----------
+    steps : int
+        Number of steps (impacts) to simulate.
+    rk4_steps : int
+        RK4 steps per reference step duration T (a positive multiple of 8).
+    mu : float
+        Friction coefficient for the stance foot and the impact impulse.
+    min_normal_force : float
+        Lowest admissible stance normal force, N.
+    min_hip_height : float or None
+        The robot has fallen when the hip is lower, m; None (default): 0.5625 leg length
+        (0.45 m for RABBIT), see :meth:`fall_height`.
+    max_torso_angle : float
+        ... or when the torso leans more than this from the vertical, rad.
+    horizon : float
+        A step without a valid impact within ``horizon`` T ends the run ('no_impact').
+    ground_tolerance : float
+        How far below the ground (m) the swing foot may graze behind the stance foot
+        before the run counts as scuffed (round-off at lift-off).
+    singular_tolerance : float
+        The run stops as singular where the controller's decoupling denominator
+        (D11 - D12 M1 for the time-varying controller, eq. 23-24) changes sign or falls
+        below this fraction of its largest magnitude on the reference (the torques grow
+        like its inverse).
+    torque_limit : float or None
+        The run stops ('torque_limit') where some ``|u_i|`` exceeds it, N m; None
+        (default): the robot's own limit (``model.params.torque_limit``).
+    min_liftoff_speed : float
+        The old stance foot must leave the ground after an impact with at least this
+        upward speed, m/s (default 0: any upward speed).
+    jit : bool
+        Compile the closed loop to C (CasADi JIT, needs a C compiler; a few seconds
         once per controller, then about 5 times faster).
     """
     steps: int = 10
@@ -119,19 +133,28 @@ class SimulationOptions:
                              f"got {self.horizon!r}")
 
     def to_dict(self) -> dict:
+        """The options by name.
+
+        Returns
+        -------
+        dict
+            Field name -> value.
+        """
         return asdict(self)
 
     def fall_height(self, model) -> float:
-        """The hip height below which ``model`` has fallen, m: ``min_hip_height``, or
-        0.5625 leg length when None (0.45 m for RABBIT).
+        """The hip height below which ``model`` has fallen, m.
 
         Parameters
         ----------
         model : BipedModel
+            The robot (its leg length sets the default).
 
         Returns
         -------
         float
+            ``min_hip_height``, or 0.5625 leg length when it is None (0.45 m for
+            RABBIT).
         """
         if self.min_hip_height is not None:
             return float(self.min_hip_height)
@@ -169,18 +192,54 @@ class StepRecord:
 class SimulationResult(Result):
     """A closed-loop run: status, completed steps, validity margins and logs.
 
-    ``status`` is one of :data:`STATUSES`; ``success`` means "ok": every step was valid.
-    ``peak_torque`` (max |u_i|, N m), ``min_normal_force`` (N), ``max_friction_ratio``
-    (max |F_x|/F_z in single support) and ``max_impulse_ratio`` (max |F_x|/F_z of the
-    impact impulses) are taken over the whole run up to its end.
+    ``success`` (and ``ok``) means status 'ok': every step was valid.  The extremes are
+    taken over the whole run up to its end.  The logs have one row per RK4 node, in time
+    order (an impact appears as its pre-impact node followed by the post-impact node at
+    the same t; torques and reactions at the pre-impact node are the single-support
+    values), and are left out of ``to_dict()``.
 
-    Logs (one row per RK4 node, in time order; an impact appears as its pre-impact node
-    followed by the post-impact node at the same t), left out of ``to_dict()``: t, tau,
-    step (index of the step the node belongs to), q, dq (N x nq), u, y, dy (N x nu), Fx,
-    Fz (stance reaction), denominator (controller singularity measure), stance_x (world
-    x of the stance foot).  ``failed_step``: the index of the step where the run failed
-    (None when it did not).  Torques and reactions at the pre-impact node are the
-    single-support values.
+    Parameters
+    ----------
+    status : str
+        One of :data:`STATUSES`.
+    message : str
+        What went wrong, naming the step (empty when 'ok').
+    controller : dict
+        The controller's ``describe()``.
+    options : SimulationOptions
+        The options of the run.
+    steps : list of StepRecord
+        One record per completed step (impact times, states before and after the
+        impact, the impulse, ``qu_error``/``dqu_error`` before the impact).
+    peak_torque : float
+        max ``|u_i|``, N m.
+    min_normal_force : float
+        Smallest stance normal force F_z, N.
+    max_friction_ratio : float
+        max ``|F_x|/F_z`` in single support.
+    max_impulse_ratio : float
+        max ``|F_x|/F_z`` of the impact impulses.
+    failure_time : float
+        Time of the first invalid state, s (NaN when 'ok').
+    reference : dict
+        ``T`` and the reference's (q_u^d, dq_u^d)(T) (``qu_T``, ``dqu_T``).
+    t, tau : numpy.ndarray
+        (N,) time since the start of the run and since the start of the step, s.
+    step : numpy.ndarray
+        (N,) index of the step each node belongs to.
+    q, dq : numpy.ndarray
+        (N, nq) configuration (rad) and velocity (rad/s).
+    u, y, dy : numpy.ndarray
+        (N, nu) torques (N m), outputs and their rates.
+    Fx, Fz : numpy.ndarray
+        (N,) stance reaction, N.
+    denominator : numpy.ndarray
+        (N,) the controller's singularity measure (D11 - D12 M1 for the time-varying
+        controller).
+    stance_x : numpy.ndarray
+        (N,) world x of the stance foot, m.
+    failed_step : int or None
+        Index of the step where the run failed (None when it did not).
     """
     status: str
     message: str
@@ -216,6 +275,7 @@ class SimulationResult(Result):
 
     @property
     def impact_times(self) -> np.ndarray:
+        """Time of every impact since the start of the run, s."""
         return np.array([s.t_impact for s in self.steps])
 
     @property
@@ -235,8 +295,19 @@ class SimulationResult(Result):
                          for s in self.steps]).reshape(-1, 2)
 
     def steps_to_converge(self, tol: float = 1e-3):
-        """1-based index of the first step from which max(|q_u err|, |dq_u err|) stays
-        below ``tol`` to the end of the run (None if never)."""
+        """The step from which the unactuated errors stay below ``tol`` to the end.
+
+        Parameters
+        ----------
+        tol : float
+            Bound on max(``|q_u err|``, ``|dq_u err|``) just before each impact (rad,
+            rad/s).
+
+        Returns
+        -------
+        int or None
+            1-based index of that step, None if the run never gets there.
+        """
         errs = [max(abs(s.qu_error), abs(s.dqu_error)) for s in self.steps]
         for k in range(len(errs)):
             if all(e < tol for e in errs[k:]):
@@ -245,11 +316,12 @@ class SimulationResult(Result):
 
 
 def perturbed_initial_state(gait, q_error=0.0, dq_error=0.0):
-    """(q, dq) = (q^d(0) + q_error, dq^d(0) + dq_error).
+    """A perturbed start (q, dq) = (q^d(0) + q_error, dq^d(0) + dq_error).
 
     Parameters
     ----------
     gait : Reference
+        The reference; its state at tau = 0 is perturbed.
     q_error, dq_error : float or array_like
         A number added to every joint (paper §V-C: 0.01 rad and 0.1 rad/s) or one
         number per joint.
@@ -257,6 +329,7 @@ def perturbed_initial_state(gait, q_error=0.0, dq_error=0.0):
     Returns
     -------
     tuple of numpy.ndarray
+        (q, dq), each (nq,).
     """
     nq = gait.model.nq
 
@@ -275,15 +348,21 @@ def _rows(nu):
 
 
 class Simulator:
-    """The closed loop of one controller, its CasADi Functions built once.
+    """The full-order hybrid closed loop of one controller, its CasADi Functions built once.
 
+    Implements eq. (9): the state X = (q, dq, tau) (with the controller's reference
+    state), X' = f_e(X) + g_e(X) u(X) in single support (eq. 1 with the controller's
+    torque, tau' = 1) and X+ = Delta_e(X-) on the switching surface (the impact map
+    and relabelling of eq. 2-3, tau+ = 0), every contact condition checked on the way.
     ``run(q0, dq0, steps)`` simulates from the initial state (taken as the start of a
     step, tau = 0: the time-varying controller's y_i, dy_i are computed from it).
 
     Parameters
     ----------
     controller : TimeVaryingController or VirtualConstraintController
+        The control law (and through it the model and the reference).
     options : SimulationOptions, optional
+        Default ``SimulationOptions()``.
     """
 
     def __init__(self, controller, options: SimulationOptions | None = None):
@@ -429,6 +508,7 @@ class Simulator:
         Returns
         -------
         SimulationResult
+            Status, step records and logs.
         """
         nq = self.model.nq
         q = as_vector(q0, nq, "q0")
@@ -633,15 +713,19 @@ def simulate(controller, q0=None, dq0=None, options: SimulationOptions | None = 
     Parameters
     ----------
     controller : TimeVaryingController or VirtualConstraintController
+        The control law.
     q0, dq0 : array_like, optional
-        Initial state; default the reference at tau = 0.
+        Initial state (the start of a step, tau = 0), rad and rad/s; default the
+        reference at tau = 0.
     options : SimulationOptions, optional
+        Default ``SimulationOptions()``.
     steps : int, optional
         Overrides ``options.steps``.
 
     Returns
     -------
     SimulationResult
+        Status, step records and logs.
     """
     sim = simulator(controller, options if options is not None else SimulationOptions())
     g = controller.reference
