@@ -51,8 +51,12 @@ def _usable(path: Path, model, options: GaitOptions):
 
 def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
                  progress=None, **overrides) -> Gait:
-    """The optimal gait for ``options``, from the on-disk cache when a valid file exists,
-    else optimised and stored.
+    """The optimal gait for ``options``, read from the on-disk cache or optimised once.
+
+    The cache file is ``<cache_dir>/gait-<key>.json``, ``key`` a SHA-256 of the robot,
+    the options and the optimiser's version.  It is used only if it loads cleanly
+    (:meth:`Gait.load`: checksum, schema, robot, a periodic orbit) and was made with the
+    same options; otherwise the gait is optimised with :func:`optimize_gait` and stored.
 
     Parameters
     ----------

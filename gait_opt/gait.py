@@ -42,22 +42,26 @@ _KEYS = ("format", "version", "robot", "options", "solution", "sha256")
 
 
 class GaitFileError(ValueError):
-    """A gait file that cannot be used: missing, not a file, unreadable, corrupted, other
-    format or version, malformed contents, made for other robot parameters, or not a
-    periodic orbit of its robot (:data:`ORBIT_TOL`)."""
+    """A gait file that cannot be used; the message names the file and the reason.
+
+    Missing, not a file, unreadable, corrupted, other format or version, malformed
+    contents, made for other robot parameters, or not a periodic orbit of its robot
+    (:data:`ORBIT_TOL`).  A ``ValueError``.
+    """
 
 
 class OpenOrbitWarning(UserWarning):
-    """``Gait.load(..., allow_open_orbit=True)`` read a gait that is not a periodic orbit
-    of its robot: results computed from it (fixed points, eigenvalues) are not those of
-    a walking cycle."""
+    """Warning: a gait read with ``allow_open_orbit=True`` is not a periodic orbit.
+
+    Issued by ``Gait.load(..., allow_open_orbit=True)``: results computed from such a
+    gait (fixed points, eigenvalues) are not those of a walking cycle.
+    """
 
 
 class Gait(Reference):
-    """A cyclic reference step of duration ``T`` (SPEC section 2), implementing the
-    reference interface :class:`biped_casadi.Reference`.
+    """A cyclic reference step of duration ``T`` (SPEC section 2).
 
-    ``q(t)``, ``dq(t)``, ``ddq(t)``, ``u(t)``: t a float or array in [0, 2 T] (past T the
+    It implements the reference interface :class:`biped_casadi.Reference`.  ``q(t)``, ``dq(t)``, ``ddq(t)``, ``u(t)``: t a float or array in [0, 2 T] (past T the
     reference continues smoothly: the Bezier polynomials of q_a^d evaluated past s = 1
     and q_u^d continued by the unactuated row; before 0, down to -T/2, the same row
     integrated backwards); shapes (nq,) / (nu,) or (nq, N) / (nu, N) (RABBIT: 5 and 4).
@@ -65,6 +69,25 @@ class Gait(Reference):
     ``alpha`` (nu x (M+1)) Bezier coefficients of q_a^d in s = t / T; ``x0`` = (q_u^d(0),
     dq_u^d(0)).  ``step_length``, ``speed``, ``cost``; ``solver_stats``; ``check()``
     computes every physical and consistency figure on a dense grid.
+
+    Gaits come from :func:`optimize_gait`, :func:`default_gait` or :meth:`load`; the
+    constructor tabulates q_u^d on [-T/2, 2 T] by RK4 (``options.polish_steps`` per T).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    options : GaitOptions
+        The problem the gait solves (its torque limit filled in from ``model``).
+    alpha : array_like
+        (nu, bezier_degree + 1) Bezier coefficients of q_a^d(s), s = t / T, rad.
+    x0 : array_like
+        (q_u^d(0), dq_u^d(0)), rad and rad/s.
+    T : float
+        Step duration, s.
+    solver_stats : dict, optional
+        IPOPT's status, timings and the like (kept in files, not part of the gait's
+        definition).
     """
 
     def __init__(self, model, options: GaitOptions, alpha, x0, T, solver_stats=None):
@@ -120,15 +143,30 @@ class Gait(Reference):
         return self._key
 
     def definition(self) -> dict:
-        """What defines the reference: format, robot, options, solution (no solver stats)."""
+        """What defines the reference (its digest is ``cache_key``).
+
+        Returns
+        -------
+        dict
+            ``format``, ``version``, ``robot``, ``options`` and ``solution`` of
+            :meth:`to_dict` (without the solver's statistics).
+        """
         d = self.to_dict()
         return {k: d[k] for k in ("format", "version", "robot", "options", "solution")}
 
     @cached(maxsize=16)
     def symbolic(self) -> ca.Function:
-        """``(tau, r) -> (qd, dqd, ddqd, dr)`` with r = (q_u^d, dq_u^d): q_a^d from the
-        Bezier polynomials, q_u^d from the reference state, ddq_u^d from the unactuated
-        row of eq. (1) (see :class:`biped_casadi.Reference`)."""
+        """The reference as a CasADi Function ``(tau, r) -> (qd, dqd, ddqd, dr)``.
+
+        r = (q_u^d, dq_u^d) is the reference state: q_a^d comes from the Bezier
+        polynomials, q_u^d from r, ddq_u^d from the unactuated row of eq. (1) (see
+        :class:`biped_casadi.Reference`).  Built once per gait.
+
+        Returns
+        -------
+        casadi.Function
+            Named inputs ``tau``, ``r`` and outputs ``qd``, ``dqd``, ``ddqd``, ``dr``.
+        """
         ref = self._ref
         tau = ca.SX.sym("tau")
         r = ca.SX.sym("r", 2)
@@ -146,7 +184,24 @@ class Gait(Reference):
         return tuple(np.array(o) for o in out)
 
     def evaluate(self, t):
-        """q^d, dq^d, ddq^d at ``t`` in [t_min, t_max] (see :class:`biped_casadi.Reference`)."""
+        """q^d, dq^d, ddq^d at ``t`` (numeric).
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s) in [t_min, t_max] = [-T/2, 2 T], s.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            (q, dq, ddq) in rad, rad/s, rad/s^2; shapes (nq,) each for a float ``t``,
+            (nq, N) for N times.
+
+        Raises
+        ------
+        ValueError
+            When a time is not finite or outside [t_min, t_max].
+        """
         t_arr = np.asarray(t, dtype=float)
         scalar = t_arr.ndim == 0
         t1 = np.atleast_1d(t_arr).ravel()
@@ -166,21 +221,45 @@ class Gait(Reference):
         return tuple(r[:, 0] for r in res) if scalar else res
 
     def state(self, t) -> np.ndarray:
-        """The reference state r(t) = (q_u^d(t), dq_u^d(t))."""
+        """The reference state r(t) = (q_u^d(t), dq_u^d(t)).
+
+        Parameters
+        ----------
+        t : float
+            Time in [t_min, t_max], s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (2,): rad, rad/s.
+        """
         return self.state_at(t)
 
     def states(self, t) -> np.ndarray:
-        """r at every time of ``t``: (2, N)."""
+        """The reference state r = (q_u^d, dq_u^d) at every time of an array.
+
+        Parameters
+        ----------
+        t : array_like
+            N times in [t_min, t_max], s.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (2, N).
+        """
         q, dq, _ = self.evaluate(np.atleast_1d(np.asarray(t, dtype=float)))
         return np.vstack([q[0], dq[0]])
 
     # ---------------------------------------------------------------- figures
     @property
     def step_length(self) -> float:
+        """x of the swing foot at T, m: the distance covered in one step."""
         return float(self.model.swing_foot(self.q(self.T))[0])
 
     @property
     def speed(self) -> float:
+        """Average forward speed, step length / T, m/s."""
         return self.step_length / self.T
 
     @property
@@ -194,7 +273,25 @@ class Gait(Reference):
                                  "torque_squared_per_length" else 1.0))
 
     def check(self, n: int = 2001) -> dict:
-        """Physical validity and dynamic consistency on a dense grid of ``n`` points."""
+        """Physical validity and dynamic consistency on a dense grid of [0, T].
+
+        Parameters
+        ----------
+        n : int
+            Grid points.
+
+        Returns
+        -------
+        dict
+            ``max_abs_torque`` (N m), ``min_normal_force`` (N), ``max_friction_ratio``,
+            ``min_swing_height_inside`` and ``min_clearance_margin`` (m, inside the
+            step), ``swing_height_at_T`` (m), ``strike_velocity`` and
+            ``liftoff_velocity`` (m/s), ``impact_impulse`` (N s) and
+            ``impact_friction_ratio``, ``max_stance_knee`` / ``min_swing_knee`` (rad;
+            None without knees), ``periodicity_q`` / ``periodicity_dq`` (the impact of
+            the state at T against the state at 0) and ``unactuated_row_residual``
+            (first row of eq. 1, N m), plus ``n_points``.
+        """
         m = self.model
         t = np.linspace(0, self.T, n)
         q, dq, ddq = self.evaluate(t)
@@ -240,8 +337,21 @@ class Gait(Reference):
         )
 
     def reintegration_error(self, n: int = 201) -> float:
-        """Max |q_u(t) - q_u^d(t)| on [0, T] when the unactuated row is integrated
-        independently (CVODES, tolerances 1e-13) from x0 with q_a = q_a^d(t) imposed."""
+        """How well q_u^d solves the unactuated row of eq. (1), checked independently.
+
+        The row is integrated by CVODES (tolerances 1e-13) from x0 with q_a = q_a^d(t)
+        imposed.
+
+        Parameters
+        ----------
+        n : int
+            Grid points on [0, T] where the two are compared.
+
+        Returns
+        -------
+        float
+            max ``|q_u(t) - q_u^d(t)|`` on the grid, rad.
+        """
         x = ca.SX.sym("x", 2)
         t = ca.SX.sym("t")
         qa, dqa, ddqa = self._ref.qa(self.alpha, t / self.T, self.T)
@@ -255,9 +365,21 @@ class Gait(Reference):
         return float(np.max(np.abs(X[0] - self.q(grid[1:])[0])))
 
     def violations(self, check: dict | None = None, tol: float = 1e-7) -> list:
-        """Constraints of ``options`` violated on the dense grid of :meth:`check` (not
-        only at the collocation nodes): [(family, worst amount)], worst first; empty
-        for a valid gait.  Amounts in N m, N, m, m/s, rad; friction as a ratio."""
+        """Constraints of ``options`` violated on a dense grid, not only at the nodes.
+
+        Parameters
+        ----------
+        check : dict, optional
+            A result of :meth:`check` (computed when not given).
+        tol : float
+            Amounts up to this count as satisfied.
+
+        Returns
+        -------
+        list of (str, float)
+            (constraint family, worst amount), worst first; empty for a valid gait.
+            Amounts in N m, N, m, m/s, rad; friction as a ratio.
+        """
         c = check or self.check()
         o = self.options
         F = c["impact_impulse"]
@@ -279,7 +401,15 @@ class Gait(Reference):
         return sorted(bad, key=lambda t: -t[1])
 
     def summary(self) -> dict:
-        """Every figure of the gait: physics on a dense grid and consistency."""
+        """Every figure of the gait: physics on a dense grid and consistency.
+
+        Returns
+        -------
+        dict
+            T, step length, speed, cost, the figures of :meth:`check`, the
+            :meth:`reintegration_error`, the dense-grid violations and the solver's
+            status, iterations and time (what ``biped gait --json`` prints).
+        """
         c = self.check()
         return dict(T=self.T, step_length=self.step_length, speed=self.speed, cost=self.cost,
                     peak_torque=c["max_abs_torque"], min_normal_force=c["min_normal_force"],
@@ -300,6 +430,14 @@ class Gait(Reference):
 
     # --------------------------------------------------------------- file I/O
     def to_dict(self) -> dict:
+        """The gait file's content (without the checksum).
+
+        Returns
+        -------
+        dict
+            ``format``, ``version``, ``robot`` (the description), ``options``,
+            ``solution`` (T, alpha, x0) and ``solver_stats``.
+        """
         body = dict(format=FORMAT, version=FORMAT_VERSION,
                     robot=self.model.description.to_dict(), options=self.options.to_dict(),
                     solution=dict(T=self.T, alpha=self.alpha.tolist(), x0=self.x0.tolist()),
@@ -307,8 +445,21 @@ class Gait(Reference):
         return body
 
     def save(self, path) -> Path:
-        """Write a self-describing JSON file (format, version, robot, options, solution,
-        and a SHA-256 checksum of the rest)."""
+        """Write the gait to a self-describing JSON file, atomically.
+
+        The file holds the format, version, robot, options, solution and solver
+        statistics, and a SHA-256 checksum of the rest; it is complete or absent.
+
+        Parameters
+        ----------
+        path : str or Path
+            The file to write (replaced if it exists).
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         path = Path(path)
         body = self.to_dict()
         body["sha256"] = _digest(body)
@@ -325,7 +476,7 @@ class Gait(Reference):
         dict
             ``q`` = max|q+ - q^d(0)| (rad) and ``dq`` = max|dq+ - dq^d(0)| (rad/s), with
             (q+, dq+) the impact map and relabelling applied to (q^d(T), dq^d(T));
-            ``z`` = |z_sw(T)| (m); ``worst`` the largest (inf when the gait cannot be
+            ``z`` = ``|z_sw(T)|`` (m); ``worst`` the largest (inf when the gait cannot be
             evaluated at T).  :meth:`load` compares ``worst`` with :data:`ORBIT_TOL`.
         """
         with np.errstate(all="ignore"):
@@ -350,6 +501,7 @@ class Gait(Reference):
         Parameters
         ----------
         path : str or Path
+            The gait file.
         model : BipedModel, optional
             The file must have been made for this robot (its description is recorded
             in the file; files written before robot descriptions record RABBIT-type
@@ -363,6 +515,7 @@ class Gait(Reference):
         Returns
         -------
         Gait
+            With the file's solver statistics.
 
         Raises
         ------

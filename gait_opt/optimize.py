@@ -98,11 +98,27 @@ def solve_collocation(model, opts: GaitOptions, *, verbose: bool = False,
 class GaitSolveResult(Result):
     """Outcome of :func:`solve_gait`.
 
-    ``gait`` is the polished :class:`Gait` (None when no gait was found); ``status`` is
-    IPOPT's return status (or 'not_run' when the request is out of reach before IPOPT,
-    'polish_failed' when the exact orbit could not be found); ``violations`` lists the
-    constraint families violated on the dense grid (empty for a valid gait), worst
-    first; ``success`` means IPOPT succeeded and nothing is violated.
+    ``success`` means IPOPT succeeded, a gait was found and nothing is violated.
+
+    Parameters
+    ----------
+    status : str
+        IPOPT's return status (or 'not_run' when the request is out of reach before
+        IPOPT, 'polish_failed' when the exact orbit could not be found).
+    message : str
+        What happened, in words.
+    iterations : int
+        IPOPT iterations over every pass.
+    total_time : float
+        Wall time, s.
+    violations : list
+        [family, amount] of the constraint families violated on the dense grid (empty
+        for a valid gait), worst first.
+    refinements : list
+        One dict per pass when node bounds were tightened and the problem re-solved
+        (empty when one pass sufficed).
+    gait : Gait or None
+        The polished gait (None when no gait was found); left out of ``to_dict()``.
     """
 
     status: str
@@ -117,6 +133,7 @@ class GaitSolveResult(Result):
 
     @property
     def success(self) -> bool:
+        """IPOPT succeeded, a gait was found and nothing is violated."""
         return self.status in self.SUCCESS and not self.violations and self.gait is not None
 
 
@@ -140,6 +157,7 @@ def solve_gait(model, options: GaitOptions | None = None, *, verbose: bool = Fal
     Parameters
     ----------
     model : BipedModel
+        The robot.
     options : GaitOptions, optional
         Default: SPEC section 2.
     verbose : bool
@@ -208,7 +226,20 @@ def optimize_gait(model, options: GaitOptions | None = None, *, verbose: bool = 
                   warm_start=None, max_refinements: int = 3, **overrides) -> Gait:
     """Solve the reference-gait problem of SPEC section 2 and return the :class:`Gait`.
 
-    Parameters are those of :func:`solve_gait`.
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    options : GaitOptions, optional
+        Default: SPEC section 2.
+    verbose : bool
+        Print IPOPT's iterations.
+    warm_start : Gait, optional
+        A previous gait of the same Bezier degree to start from.
+    max_refinements : int
+        Re-solves allowed for constraints exceeded between the nodes.
+    **overrides
+        Replace single option fields (``optimize_gait(m, speed=1.0)``).
 
     Returns
     -------

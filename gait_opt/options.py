@@ -14,42 +14,64 @@ DERIVATIVES = ("structured", "casadi")
 
 @dataclass(frozen=True)
 class GaitOptions:
-    """Everything that defines the reference-gait problem; all have defaults.
+    """Everything that defines the reference-gait problem (SPEC section 2); all have defaults.
 
-    speed: average forward speed (step length / T), m/s.
-    step_length_bounds: bounds on the step length chosen by the optimiser, m.
-    step_time_bounds: bounds on the step duration T, s.
-    mu: friction coefficient for the stance foot and the impact impulse.
-    impact_mu: a separate (design) bound on the impact impulse ratio |F_x| / F_z, or None
-        for ``mu``: a gait whose nominal impulse sits well inside the cone leaves room for
-        the impact to move under perturbations.
-    torque_limit: |u_i| bound, N m; None (the default): the robot's own (its
-        description's ``torque_limit``; RABBIT: 150 N m), filled in by :meth:`for_model`
-        when a gait is solved.
-    min_normal_force: lower bound of the stance normal force, N.
-    clearance: swing-foot height bound inside the step, z_sw >= clearance * 4 s (1 - s)
-        with s = t / T (a parabola: 0 at both ends, `clearance` mid-step), m.  Legs
+    Parameters
+    ----------
+    speed : float
+        Average forward speed (step length / T), m/s.
+    step_length_bounds : tuple of float
+        (low, high) bounds on the step length chosen by the optimiser, m.
+    step_time_bounds : tuple of float
+        (low, high) bounds on the step duration T, s.
+    mu : float
+        Friction coefficient for the stance foot and the impact impulse.
+    impact_mu : float or None
+        A separate (design) bound on the impact impulse ratio ``|F_x| / F_z``, or None
+        for ``mu``: a gait whose nominal impulse sits well inside the cone leaves room
+        for the impact to move under perturbations.
+    torque_limit : float or None
+        Bound on every ``|u_i|``, N m; None (the default): the robot's own (its
+        description's ``torque_limit``; RABBIT: 150 N m), filled in by
+        :meth:`for_model` when a gait is solved.
+    min_normal_force : float
+        Lower bound of the stance normal force, N.
+    clearance : float
+        Swing-foot height bound inside the step, m: z_sw >= clearance * 4 s (1 - s)
+        with s = t / T (a parabola: 0 at both ends, ``clearance`` mid-step).  Legs
         without knees (``model.scuffing_ignored``): z_sw >= clearance * 4 s (1 - s) *
-        (x_sw - scuff_zone) / leg length, above the ground beyond the model's scuff zone
-        in front of the stance foot, grazing at most that deep nearer.
-    min_liftoff_speed / min_strike_speed: the swing foot leaves the ground upward after
-        impact and strikes it downward with at least these vertical speeds, m/s.
-    stance_knee_max / swing_knee_min: no hyperextension, every stance knee (RABBIT: q2)
-        <= stance_knee_max and every swing knee (RABBIT: q5) >= swing_knee_min over the
-        whole step (enforced on the Bezier coefficients, hence exactly, not only at
-        nodes); legs without knees have none.
-    n_intervals, degree, scheme: direct collocation of the unactuated row
-        (Legendre or Radau points).
-    bezier_degree: degree of the actuated-joint polynomials.
-    cost: 'torque_squared_per_length' (integral of u'u over the step / step length) or
-        'torque_squared' (the integral alone).
-    polish_steps: RK4 steps per step for the exact unactuated trajectory.
-    ipopt: extra IPOPT options (name -> value), e.g. {'max_iter': 500}.
-    expand: expand the NLP to SX before solving (faster iterations, slower build).
-    derivatives: how IPOPT's exact derivatives (constraint Jacobian, objective gradient,
+        (x_sw - scuff_zone) / leg length, above the ground beyond the model's scuff
+        zone in front of the stance foot, grazing at most that deep nearer.
+    min_liftoff_speed, min_strike_speed : float
+        The swing foot leaves the ground upward after the impact and strikes it
+        downward with at least these vertical speeds, m/s.
+    stance_knee_max, swing_knee_min : float
+        No hyperextension, rad: every stance knee (RABBIT: q2) <= ``stance_knee_max``
+        and every swing knee (RABBIT: q5) >= ``swing_knee_min`` over the whole step
+        (enforced on the Bezier coefficients, hence exactly, not only at nodes); legs
+        without knees have none.
+    n_intervals, degree : int
+        Direct collocation of the unactuated row: intervals and collocation points per
+        interval.
+    scheme : {'legendre', 'radau'}
+        Collocation points.
+    bezier_degree : int
+        Degree of the actuated-joint polynomials q_a^d(s), s = t / T.
+    cost : {'torque_squared_per_length', 'torque_squared'}
+        The integral of u'u over the step divided by the step length, or the integral
+        alone.
+    polish_steps : int
+        RK4 steps per step for the exact unactuated trajectory.
+    ipopt : dict
+        Extra IPOPT options (name -> value), e.g. ``{'max_iter': 500}``.
+    expand : bool
+        Expand the NLP to SX before solving (faster iterations, slower build).
+    derivatives : {'structured', 'casadi'}
+        How IPOPT's exact derivatives (constraint Jacobian, objective gradient,
         Hessian of the Lagrangian, all by AD) are built: 'structured' (per-point and
-        boundary SX derivatives scattered into the global sparsity; see optimize.py) or
-        'casadi' (CasADi differentiates the whole MX graph: the slow baseline).
+        boundary SX derivatives scattered into the global sparsity; see
+        ``gait_opt/optimize.py``) or 'casadi' (CasADi differentiates the whole MX
+        graph: the slow baseline).
     """
 
     speed: float = 0.75
@@ -114,6 +136,14 @@ class GaitOptions:
             raise ValueError("gait option 'ipopt' must be a dict of IPOPT options")
 
     def to_dict(self) -> dict:
+        """The options by name, as recorded in gait files (and cache keys).
+
+        Returns
+        -------
+        dict
+            Field name -> value; bounds as lists, ``impact_mu`` left out when unset (so
+            files and cache keys are those written before the option existed).
+        """
         d = dataclasses.asdict(self)
         if d["impact_mu"] is None:        # unset: files and cache keys as before the option
             del d["impact_mu"]
@@ -123,6 +153,22 @@ class GaitOptions:
 
     @classmethod
     def from_dict(cls, d: dict) -> "GaitOptions":
+        """Options from a mapping such as :meth:`to_dict` wrote.
+
+        Parameters
+        ----------
+        d : dict
+            Field name -> value; absent fields keep their defaults.
+
+        Returns
+        -------
+        GaitOptions
+
+        Raises
+        ------
+        ValueError
+            An unknown field or an invalid value.
+        """
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = set(d) - names
         if unknown:
@@ -139,6 +185,17 @@ class GaitOptions:
         return self.mu if self.impact_mu is None else self.impact_mu
 
     def replace(self, **changes) -> "GaitOptions":
+        """A copy with some fields changed (validated like the constructor).
+
+        Parameters
+        ----------
+        **changes
+            Field name -> new value.
+
+        Returns
+        -------
+        GaitOptions
+        """
         return dataclasses.replace(self, **changes)
 
     def for_model(self, model) -> "GaitOptions":
@@ -147,6 +204,7 @@ class GaitOptions:
         Parameters
         ----------
         model : BipedModel
+            The robot the gait is solved for.
 
         Returns
         -------
