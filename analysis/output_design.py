@@ -39,7 +39,29 @@ __all__ = ["swing_height_at_Td", "TaylorAB", "taylor_ab", "solve_ab", "ABSolutio
 
 # ------------------------------------------------------------------ eq. (25)-(26)
 def swing_height_at_Td(model, gait, M1s, dqu: float = 1e-2) -> np.ndarray:
-    """Z_sw(q^d(T^d) + M_T dq_u) for each row of an (n, nu) array of M1 (eq. 26)."""
+    """The swing-foot height at the desired impact time with an error on q_u.
+
+    Implements eqs. (25), (26): with the outputs on their reference at T^d = T
+    (v(T^d) = v^d(T^d), eq. 25) and an error dq_u on the unactuated joint, the
+    configuration is q(T^d) = q^d(T^d) + M_T dq_u with M_T = [1, -M1]' (eq. 26);
+    this returns Z_sw of that configuration (paper Fig. 3).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference; T^d is its step duration T.
+    M1s : array_like
+        (n, nu) output matrices (or one M1).
+    dqu : float
+        The error dq_u, rad (the paper's 1e-2).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) Z_sw(q(T^d)), m.
+    """
     M1s = np.atleast_2d(np.asarray(M1s, dtype=float))
     if M1s.shape[1] != model.nu:
         raise ValueError(f"M1s must be (n, {model.nu}), got {M1s.shape}")
@@ -51,10 +73,24 @@ def swing_height_at_Td(model, gait, M1s, dqu: float = 1e-2) -> np.ndarray:
 # ------------------------------------------------------------------ eq. (27)-(28)
 @dataclass
 class TaylorAB:
-    """Gradient and Hessian of z_sw at q^d(T^d): a(M1), b(M1) of eq. (27)."""
-    grad: np.ndarray   # (nq,)
-    hess: np.ndarray   # (nq, nq)
-    z0: float          # Z_sw(q^d(T^d)), ~0 for a consistent gait
+    """The second-order Taylor expansion of the swing-foot height at q^d(T^d).
+
+    Implements eq. (27): Z_sw(q(T^d)) ~ Z_sw(q^d(T^d)) + a dq_u + b dq_u^2 with
+    a = grad Z_sw . M_T and b = 1/2 M_T' Hess Z_sw M_T, M_T = [1, -M1]'
+    (:meth:`a`, :meth:`b`).  Made by :func:`taylor_ab`.
+
+    Parameters
+    ----------
+    grad : numpy.ndarray
+        (nq,) gradient of Z_sw at q^d(T^d), m/rad.
+    hess : numpy.ndarray
+        (nq, nq) its Hessian, m/rad^2.
+    z0 : float
+        Z_sw(q^d(T^d)), m (~0 for a consistent gait).
+    """
+    grad: np.ndarray
+    hess: np.ndarray
+    z0: float
 
     @property
     def cache_key(self):
@@ -62,10 +98,34 @@ class TaylorAB:
         return (tuple(self.grad), tuple(self.hess.ravel()), self.z0)
 
     def a(self, M1s):
+        """The first-order coefficient a = grad Z_sw . M_T of eq. (27).
+
+        Parameters
+        ----------
+        M1s : array_like
+            (n, nu) output matrices (or one M1).
+
+        Returns
+        -------
+        numpy.ndarray
+            (n,) a, m/rad.
+        """
         MT = _MT(M1s)
         return MT @ self.grad
 
     def b(self, M1s):
+        """The second-order coefficient b = 1/2 M_T' Hess Z_sw M_T of eq. (27).
+
+        Parameters
+        ----------
+        M1s : array_like
+            (n, nu) output matrices (or one M1).
+
+        Returns
+        -------
+        numpy.ndarray
+            (n,) b, m/rad^2.
+        """
         MT = _MT(M1s)
         return 0.5 * np.einsum("ni,ij,nj->n", MT, self.hess, MT)
 
@@ -77,7 +137,19 @@ def _MT(M1s):
 
 
 def taylor_ab(model, gait) -> TaylorAB:
-    """Exact (AD) gradient and Hessian of Z_sw at q^d(T^d)."""
+    """The coefficients of eq. (27): exact (AD) gradient and Hessian of Z_sw at q^d(T^d).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference; T^d is its step duration T.
+
+    Returns
+    -------
+    TaylorAB
+    """
     q = model.q_sym
     z = model.swing_foot(q)[1]
     H, g = ca.hessian(z, q)
@@ -88,11 +160,22 @@ def taylor_ab(model, gait) -> TaylorAB:
 
 @dataclass
 class ABSolution:
-    """Both solution groups of a = b = 0 for given middle components M1(2) ..
-    M1(nu - 1) (``free``, arrays broadcast; empty for nu = 2)."""
+    """Both solution groups of a = b = 0 for given middle components of M1.
+
+    Parameters
+    ----------
+    free : tuple of numpy.ndarray
+        The middle components M1(2) .. M1(nu - 1), broadcast together (empty for
+        nu = 2).
+    discriminant : numpy.ndarray
+        Of the quadratic b = 0 in M1(nu) on a = 0; the groups are real where >= 0.
+    group1, group2 : numpy.ndarray
+        (..., nu) the M1 of group 1 (+sqrt of the discriminant) and group 2 (-sqrt);
+        NaN where the roots are complex.
+    """
     free: tuple
     discriminant: np.ndarray
-    group1: np.ndarray      # (..., nu) M1, NaN where the roots are complex
+    group1: np.ndarray
     group2: np.ndarray
 
     @property
@@ -107,9 +190,12 @@ class ABSolution:
 
 
 def solve_ab(tay: TaylorAB, *free) -> ABSolution:
-    """Closed-form solutions of a = b = 0 for M1(1) and M1(nu) given the middle
-    components M1(2) .. M1(nu - 1) = ``free`` (RABBIT: ``solve_ab(tay, m2, m3)``; for
-    nu = 2 see :func:`ab_solution_set`, which also handles the degenerate cases).
+    """Closed-form solutions of a = b = 0 for M1(1) and M1(nu), given the others.
+
+    Implements eq. (28) for nu >= 3: the middle components M1(2) .. M1(nu - 1) =
+    ``free`` are given (RABBIT: ``solve_ab(tay, m2, m3)``), and M1(1), M1(nu) follow in
+    closed form, two groups of solutions (for nu = 2 see :func:`ab_solution_set`, which
+    also handles the degenerate cases).
 
     a = g0 - g1 M1(1) - sum_j g_j M1(j) - g_nu M1(nu) = 0 gives M1(1) = c0 + c_nu M1(nu);
     then M_T = p - M1(nu) r with p = (1, -c0, -free, 0), r = (0, c_nu, 0, ..., 0, 1), and
@@ -118,12 +204,14 @@ def solve_ab(tay: TaylorAB, *free) -> ABSolution:
     Parameters
     ----------
     tay : TaylorAB
+        The coefficients of eq. (27).
     *free : array_like
-        nu - 2 arrays (broadcast together).
+        nu - 2 arrays (broadcast together): M1(2) .. M1(nu - 1).
 
     Returns
     -------
     ABSolution
+        Both groups on the broadcast shape of ``free``.
     """
     g, H = tay.grad, tay.hess
     nu = g.size - 1
@@ -160,19 +248,35 @@ def solve_ab(tay: TaylorAB, *free) -> ABSolution:
 class ABSet:
     """The solution set of a = b = 0 for a robot with nu = 2 (no component left free).
 
-    ``kind`` is 'points' (``points``: (k, 2), k = 1 or 2, group 1 first), 'line' (b
-    vanishes identically on the line a = 0: every M1 on it solves a = b = 0; the line is
-    M1 = ``base`` + t ``direction``) or 'none'.  ``message`` says which, in words.
+    Parameters
+    ----------
+    kind : {'points', 'line', 'none'}
+        Isolated solutions, a whole line (b vanishes identically on the line a = 0: every
+        M1 on it solves a = b = 0), or no solution.
+    points : numpy.ndarray
+        (k, 2), k = 1 or 2, group 1 first ((0, 2) unless ``kind`` is 'points').
+    base, direction : numpy.ndarray
+        The line a = 0 is M1 = ``base`` + t ``direction`` (``direction`` of unit length).
+    b_coefficients : tuple of float
+        b along that line per unit length: the (t^2, t, 1) coefficients.
+    message : str
+        Which case, in words.
     """
     kind: str
     points: np.ndarray
     base: np.ndarray
     direction: np.ndarray
-    b_coefficients: tuple      # b along the line a = 0: (t^2, t, 1) coefficients
+    b_coefficients: tuple
     message: str = ""
 
     def to_dict(self) -> dict:
-        """The fields in JSON types."""
+        """The fields in JSON types.
+
+        Returns
+        -------
+        dict
+            Field name -> value (arrays as lists).
+        """
         return dict(kind=self.kind, points=self.points.tolist(), base=self.base.tolist(),
                     direction=self.direction.tolist(),
                     b_coefficients=[float(c) for c in self.b_coefficients],
@@ -257,6 +361,7 @@ def ab_solution_set(tay: TaylorAB, tol: float = 1e-9) -> ABSet:
     Returns
     -------
     ABSet
+        Points, line or none, with a message.
     """
     g, H = tay.grad, tay.hess
     if g.size != 3:
@@ -311,6 +416,7 @@ def isolated_ab_solutions(tay: TaylorAB) -> np.ndarray:
     Parameters
     ----------
     tay : TaylorAB
+        Of a robot with nu = 2.
 
     Returns
     -------
@@ -322,13 +428,14 @@ def isolated_ab_solutions(tay: TaylorAB) -> np.ndarray:
 
 
 def ab_groups(model, gait) -> tuple[list, str]:
-    """The solution groups of a = b = 0 that :func:`optimize_m1` accepts for a robot and
-    gait, and what they are in words.
+    """The solution groups of a = b = 0 that :func:`optimize_m1` accepts, and what they are.
 
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
+        Its reference gait.
 
     Returns
     -------
@@ -359,7 +466,26 @@ def group_of(tay: TaylorAB, M1, tol: float = 1e-6):
 
 # ------------------------------------------------------------------ conjecture (Fig. 3)
 def conjecture_figures(zsw: np.ndarray, max_abs: np.ndarray, status: np.ndarray) -> dict:
-    """The paper's conjecture 'Z_sw(T^d) ~ 0 for every stable case', in numbers."""
+    """The paper's conjecture 'Z_sw(T^d) ~ 0 for every stable case', in numbers.
+
+    Parameters
+    ----------
+    zsw : numpy.ndarray
+        (n,) Z_sw(T^d) of each M1 (:func:`swing_height_at_Td`), m.
+    max_abs : numpy.ndarray
+        (n,) max ``|lambda|`` of each M1 (not used in the figures; kept for symmetry
+        with the plot).
+    status : numpy.ndarray
+        (n,) statuses of SPEC §4.
+
+    Returns
+    -------
+    dict
+        ``n_stable``, ``n_unstable`` and, when some M1 is stable,
+        ``max_abs_zsw_stable``, ``median_abs_zsw_stable``,
+        ``median_abs_zsw_unstable`` (m) and ``fraction_unstable_below`` (the share of
+        unstable M1 whose ``|Z_sw|`` is below the largest of the stable ones).
+    """
     stable = status == "stable"
     unstable = status == "unstable"
     res = dict(n_stable=int(stable.sum()), n_unstable=int(unstable.sum()))
@@ -425,22 +551,45 @@ def coarse_grid_size(nu: int, budget: int = 6561) -> int:
 # ------------------------------------------------------------------ the M1 NLP
 @dataclass
 class M1Result(Result):
-    """The M1 chosen by :func:`optimize_m1`.
+    """The M1 chosen by :func:`optimize_m1`; ``success`` means stable.
 
-    ``max_abs`` and ``eigenvalues`` are verified by the full-AD Poincaré map;
-    ``max_abs_nlp`` is the NLP's own value (variational A^z); ``status`` is the stability
-    status of the chosen M1 ('stable' or 'unstable'); ``success`` means stable.
-    ``history`` (left out of ``to_dict``) lists every local solution found.
+    Parameters
+    ----------
+    M1 : numpy.ndarray
+        (nu,) the chosen outputs.
+    max_abs : float
+        max ``|lambda|`` of A^z, verified by the full-AD Poincaré map.
+    eigenvalues : numpy.ndarray
+        The two eigenvalues (complex), from the same map.
+    group : int or None
+        The a = b = 0 group M1 lies on (1 or 2), None when on neither.
+    a, b : float
+        The coefficients of eq. (27) at M1.
+    status : {'stable', 'unstable'}
+        The stability status of the chosen M1.
+    max_abs_nlp : float
+        The NLP's own value (variational A^z).
+    eigenvalue_uncertainty : float
+        Estimated error of max ``|lambda|``, from a map with twice the RK4 steps.
+    starts : int
+        Starting points tried.
+    solve_time : float
+        Wall time, s.
+    message : str
+        The result in words.
+    history : list of dict
+        Every local solution found (start, M1, max_abs, how); left out of
+        ``to_dict()``.
     """
 
     M1: np.ndarray
-    max_abs: float               # verified by the full-AD Poincaré map
+    max_abs: float
     eigenvalues: np.ndarray
     group: int | None
     a: float
     b: float
     status: str
-    max_abs_nlp: float           # the NLP's own value (variational A^z)
+    max_abs_nlp: float
     eigenvalue_uncertainty: float
     starts: int
     solve_time: float
@@ -603,8 +752,11 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
+        Its reference gait.
     group : {1, 2, None}
+        The a = b = 0 group M1 is restricted to, or None (all components free).
     starts : array_like, optional
         (k, nu) starting points.
     n_random, n_best, n_ipopt : int
@@ -619,6 +771,7 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
     Returns
     -------
     M1Result
+        The best M1 found, verified.
     """
     if group not in (1, 2, None):
         raise ValueError(f"group must be 1, 2 or None, got {group!r}")

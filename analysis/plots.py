@@ -121,8 +121,9 @@ def _legs_legend(ax, extra=()):
 
 
 def gait_stick_plot(gait, frames: int = 9) -> Figure:
-    """Stick diagram of one reference step over the ground, earlier poses fainter, with
-    the swing foot's path.
+    """Stick diagram of one reference step over the ground, with the swing foot's path.
+
+    Earlier poses are drawn fainter.
 
     Parameters
     ----------
@@ -233,8 +234,9 @@ def one_d_sweeps_plot(lines) -> Figure:
 
 
 def conjecture_plot(zsw, max_abs, status, limit: float = 50.0) -> Figure:
-    """Paper Fig. 3: Z_sw(T^d) against max|lambda| (cases with max|lambda| < ``limit``),
-    stable cases in red.
+    """Paper Fig. 3: Z_sw(T^d) against max ``|lambda|``, stable cases in red.
+
+    Only cases with max ``|lambda|`` < ``limit`` are drawn.
 
     Parameters
     ----------
@@ -263,8 +265,10 @@ def conjecture_plot(zsw, max_abs, status, limit: float = 50.0) -> Figure:
 
 
 def stable_domains_plot(m2, m3, max_abs_1, max_abs_2, best=None) -> Figure:
-    """Paper Fig. 4: stable domains of (M1(2), M1(3)) for both a = b = 0 groups, with
-    the contour max|lambda| = 1 over a log colour scale of max|lambda|.
+    """Paper Fig. 4: stable domains of (M1(2), M1(3)) for both a = b = 0 groups.
+
+    The contour max ``|lambda|`` = 1 is drawn over a log colour scale of max
+    ``|lambda|``.
 
     Parameters
     ----------
@@ -303,9 +307,10 @@ def stable_domains_plot(m2, m3, max_abs_1, max_abs_2, best=None) -> Figure:
 
 def m1_plane_plot(m1, m2, max_abs, ab_points=(), ab_line=None, best=None,
                   title: str | None = None) -> Figure:
-    """The stable domain in the (M1(1), M1(2)) plane of a robot with two torques (the
-    three-link biped): max|lambda| on a grid with the contour max|lambda| = 1, the
-    isolated solutions of a = b = 0 and the best point.
+    """The stable domain in the (M1(1), M1(2)) plane of a robot with two torques.
+
+    For the three-link biped: max ``|lambda|`` on a grid with the contour
+    max ``|lambda|`` = 1, the solutions of a = b = 0 and the best point.
 
     Parameters
     ----------
@@ -355,7 +360,18 @@ def m1_plane_plot(m1, m2, max_abs, ab_points=(), ab_line=None, best=None,
 
 # ------------------------------------------------------- walking (Fig. 5, 6)
 def run_label(res) -> str:
-    """A legend label for a simulation result."""
+    """A legend label for a simulation result.
+
+    Parameters
+    ----------
+    res : SimulationResult
+        A closed-loop run.
+
+    Returns
+    -------
+    str
+        The controller (and M1 for the time-varying one).
+    """
     c = res.controller
     if c.get("controller") == "tv":
         return "time-varying, M1 = [" + ", ".join(f"{v:.4g}" for v in c["M1"]) + "]"
@@ -396,9 +412,10 @@ def unactuated_error_plot(results, title: str | None = None) -> Figure:
 
 
 def swing_torques_plot(results, gait, title: str | None = None) -> Figure:
-    """Paper Fig. 6: the swing leg's torques against time (RABBIT: u3 swing hip and u4
-    swing knee; the three-link biped: u2 swing hip), with the reference torques
-    u^d(tau) of each step dashed.
+    """Paper Fig. 6: the swing leg's torques against time, the reference torques dashed.
+
+    RABBIT: u3 (swing hip) and u4 (swing knee); the three-link biped: u2 (swing hip).
+    The reference torques u^d(tau) are restarted at every step.
 
     Parameters
     ----------
@@ -438,9 +455,10 @@ def swing_torques_plot(results, gait, title: str | None = None) -> Figure:
 
 
 def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = None) -> str:
-    """Stick-figure animation of a run, written as a GIF (Pillow): the ground, the
-    footprints of every stance foot, the stance leg, the swing leg and the torso, in real
-    time at ``fps`` frames per second.
+    """Stick-figure animation of a run, written as a GIF (Pillow).
+
+    It shows the ground, the footprints of every stance foot, the stance leg, the swing
+    leg and the torso, in real time at ``fps`` frames per second.
 
     Parameters
     ----------

@@ -58,18 +58,43 @@ METHODS = ("variational", "ad")
 class PoincareResult(Result):
     """Linearised restricted Poincaré map at the fixed point for one M1.
 
-    ``status`` is one of :data:`STATUSES`; ``success`` means A^z was computed (the
-    status is 'stable' or 'unstable').  ``fixed_point_residual`` is |P(x*) - x*|
-    (computed by ``method='ad'`` only, NaN otherwise); ``tau_impact`` the impact time of
-    the orbit; ``min_denominator`` the smallest |D11 - D12 M1| on the step (eq. 24).
+    ``success`` means A^z was computed (the status is 'stable' or 'unstable').
+
+    Parameters
+    ----------
+    M1 : numpy.ndarray
+        The outputs analysed, (nu,).
+    A : numpy.ndarray
+        The 2x2 Jacobian A^z of eq. (20), in the section coordinates (q_u, dq_u); NaN
+        when undefined.
+    eigenvalues : numpy.ndarray
+        Its two eigenvalues (complex), ``|.|`` descending.
+    max_abs : float
+        max ``|lambda|`` (inf when singular or without impact).
+    status : str
+        One of :data:`STATUSES`: 'stable' (max ``|lambda|`` < 1, eq. 22), 'unstable',
+        'singular' (D11 - D12 M1 vanishes or changes sign on the step, eq. 24) or
+        'no_impact'.
+    x_star : numpy.ndarray
+        The fixed point (q_u^d(0.75 T), dq_u^d(0.75 T)), rad and rad/s.
+    fixed_point_residual : float
+        ``|P(x*) - x*|`` (computed by ``method='ad'`` only, NaN otherwise).
+    tau_impact : float
+        Impact time of the orbit, s (T on the reference).
+    min_denominator : float
+        The smallest ``|D11 - D12 M1|`` on the step (eq. 24).
+    method : {'variational', 'ad'}
+        How A^z was computed.
+    message : str
+        Why A^z is undefined (empty otherwise).
     """
 
     M1: np.ndarray
-    A: np.ndarray               # 2x2 Jacobian A^z
-    eigenvalues: np.ndarray     # complex, |.| descending
+    A: np.ndarray
+    eigenvalues: np.ndarray
     max_abs: float
     status: str
-    x_star: np.ndarray          # (q_u^d(0.75T), dq_u^d(0.75T))
+    x_star: np.ndarray
     fixed_point_residual: float = math.nan
     tau_impact: float = math.nan
     min_denominator: float = math.nan
@@ -80,11 +105,19 @@ class PoincareResult(Result):
 
 
 class PoincareMap:
-    """P^z and A^z for one (model, gait) pair.  Build once, evaluate for many M1.
+    """The restricted Poincaré map P^z and its Jacobian A^z for one model and gait.
+
+    Implements eqs. (19), (20): one application of P^z integrates the hybrid zero
+    dynamics of eq. (19) (outputs v = v^d + v_c, q from eq. 10, ddq_u from eq. 23) from
+    the section tau = 0.75 T to the impact, applies the impact map and relabelling,
+    takes y_i, dy_i (eq. 17) and integrates back to the section; A^z of eq. (20) is its
+    exact Jacobian at the fixed point x* (the variational equation, or AD through the
+    whole discrete map and the impact time).  Build once, evaluate for many M1.
 
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
         The reference step, made for ``model``.
     n_pre, n_post : int
@@ -218,15 +251,53 @@ class PoincareMap:
                                     self.n_post, self.rejoin)
 
     def denominator(self, M1) -> np.ndarray:
-        """D11 - D12 M1 along the reference (1001 points on [0, T]), eq. (24)."""
+        """The decoupling denominator D11 - D12 M1 of eq. (24) along the reference.
+
+        Parameters
+        ----------
+        M1 : array_like
+            (nu,).
+
+        Returns
+        -------
+        numpy.ndarray
+            (1001,): at 1001 points of [0, T].
+        """
         return decoupling_denominator(self.D11_table, self.D12_table, check_M1(M1, self.nu))
 
     def is_singular(self, M1) -> bool:
-        """Eq. (23)-(24): D11 - D12 M1 vanishes or changes sign on the step."""
+        """Whether D11 - D12 M1 vanishes or changes sign on the step (eq. 23-24).
+
+        Parameters
+        ----------
+        M1 : array_like
+            (nu,).
+
+        Returns
+        -------
+        bool
+        """
         return bool(self.screen(check_M1(M1, self.nu)[None])[2][0])
 
     def screen(self, M1s):
-        """Validated (n, nu) M1 array, D11 - D12 M1 along the step (n, 1001), singular mask."""
+        """Validate many M1 and find the singular ones.
+
+        Parameters
+        ----------
+        M1s : array_like
+            (n, nu) output matrices.
+
+        Returns
+        -------
+        tuple
+            (M1s as a float array (n, nu), D11 - D12 M1 along the step (n, 1001),
+            singular mask (n,)).
+
+        Raises
+        ------
+        ValueError
+            Wrong shape, a non-finite value, or a component beyond ``M1_LIMIT``.
+        """
         M1s = np.asarray(M1s, dtype=float)
         if M1s.ndim != 2 or M1s.shape[1] != self.nu:
             raise ValueError(f"M1s must be an (n, {self.nu}) array, got shape {M1s.shape}")
@@ -237,9 +308,24 @@ class PoincareMap:
         return M1s, den, is_singular(den, axis=1)
 
     def find_impact(self, x, M1):
-        """First valid impact after 0.75T within the horizon (z_sw crosses 0 downward with
-        x_sw > 0, or beyond ``model.scuff_zone`` for legs without knees): (tau_a, tau_b,
-        linear guess) on the scan grid, or None."""
+        """The first valid impact after 0.75 T within the horizon, on the scan grid.
+
+        Valid: z_sw crosses 0 downward with x_sw > 0 (beyond ``model.scuff_zone`` for
+        legs without knees).
+
+        Parameters
+        ----------
+        x : array_like
+            Section state (q_u, dq_u) at tau = 0.75 T.
+        M1 : array_like
+            (nu,).
+
+        Returns
+        -------
+        tuple or None
+            (tau_a, tau_b, linear guess) bracketing the impact time, s; None when there
+            is no valid impact.
+        """
         taus, gz, gx, gd = (np.array(v).ravel() for v in self.scan(x, M1))
         prev = np.r_[self.tau_s, taus[:-1]]
         gz0 = float(self.guard(ca.vertcat(x, self.ref_s), self.tau_s, M1)[0])
@@ -254,6 +340,13 @@ class PoincareMap:
 
     def evaluate(self, x, M1):
         """P^z(x) for a section state x = (q_u, dq_u) and outputs M1.
+
+        Parameters
+        ----------
+        x : array_like
+            (q_u, dq_u) at tau = 0.75 T, rad and rad/s (any state, not only x*).
+        M1 : array_like
+            (nu,).
 
         Returns
         -------
@@ -283,8 +376,11 @@ class PoincareMap:
         Parameters
         ----------
         M1 : array_like
+            (nu,).
         method : {'variational', 'ad'}
-            See the module docstring.
+            'variational' (the variational equation along the orbit, well under a
+            millisecond) or 'ad' (AD through the whole discrete map, ~0.3 s; also gives
+            the fixed-point residual).
 
         Returns
         -------
@@ -326,8 +422,21 @@ class PoincareMap:
                               method=method)
 
     def jacobian_batch(self, M1s, chunk: int = 512):
-        """Statuses, A^z (n, 2, 2), eigenvalues and max|lambda| for an (n, nu) array of
-        M1 by the vectorised variational equation.  Singular M1 get NaN."""
+        """A^z and the status for many M1 at once, by the vectorised variational equation.
+
+        Parameters
+        ----------
+        M1s : array_like
+            (n, nu) output matrices.
+        chunk : int
+            M1 per call of the batched Function.
+
+        Returns
+        -------
+        tuple
+            (status (n,) strings, A (n, 2, 2), eigenvalues (n, 2) complex, max_abs
+            (n,)); NaN (and max_abs inf) where singular or without impact.
+        """
         M1s, den, sing = self.screen(M1s)
         A = np.full((len(M1s), 2, 2), np.nan)
         ok = np.flatnonzero(~sing)
@@ -345,10 +454,24 @@ class PoincareMap:
         return status, A, ev, max_abs
 
     def analyse_batch(self, M1s, chunk: int = 64) -> list[PoincareResult]:
-        """:meth:`analyse` with ``method='ad'`` for an (n, nu) array; singular cases are
-        screened first, the others evaluated with ``map(..., 'thread')`` starting Newton
-        at tau = T (the fixed point's impact time), which converges in one or two
-        iterations."""
+        """:meth:`analyse` with ``method='ad'`` for many M1, on threads.
+
+        Singular cases are screened first, the others evaluated with
+        ``map(..., 'thread')`` starting Newton at tau = T (the fixed point's impact
+        time), which converges in one or two iterations.
+
+        Parameters
+        ----------
+        M1s : array_like
+            (n, nu) output matrices.
+        chunk : int
+            M1 per threaded call.
+
+        Returns
+        -------
+        list of PoincareResult
+            One per row of ``M1s``.
+        """
         M1s, den, sing = self.screen(M1s)
         out: list = [None] * len(M1s)
         for i in np.flatnonzero(sing):
@@ -371,29 +494,75 @@ class PoincareMap:
 
     @cached(maxsize=4)
     def batch_function(self, n: int) -> ca.Function:
-        """``map_jac`` mapped over n M1 on threads."""
+        """The AD map and Jacobian ``map_jac`` mapped over ``n`` M1 on threads (memoised).
+
+        Parameters
+        ----------
+        n : int
+            Number of M1 per call.
+
+        Returns
+        -------
+        casadi.Function
+            (x (2, n), M1 (nu, n), tau guess (1, n)) -> (A (2, 2 n), x_next, tau_i).
+        """
         return self.map_jac.map(n, "thread", self.threads)
 
 
 def singular_m1_values(model, gait) -> np.ndarray:
-    """M1(j) = D11 / D12(j) at q^d(T), the single-component singular values (eq. 24)."""
+    """The single-component singular outputs M1(j) = D11 / D12(j) at q^d(T) (eq. 24).
+
+    With the other components zero, D11 - D12 M1 vanishes at the desired impact for
+    M1(j) = D11 / D12(j) (the paper's 1.8046, 6.6821, 45.1060, 592.7751 for RABBIT).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference; D is evaluated at q^d(T).
+
+    Returns
+    -------
+    numpy.ndarray
+        (nu,).
+    """
     D = np.array(model.D(gait.q(gait.T)))
     return D[0, 0] / D[0, 1:]
 
 
 @cached(maxsize=8)
 def poincare_map(model, gait, **options) -> PoincareMap:
-    """The :class:`PoincareMap` of a model, gait and options, built once (memoised by
-    content: the gait's digest and the options)."""
+    """The :class:`PoincareMap` of a model, gait and options, built once.
+
+    Memoised by content: the gait's digest and the options.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference, made for ``model``.
+    **options
+        Keyword arguments of :class:`PoincareMap` (``n_pre``, ``n_post``, ...).
+
+    Returns
+    -------
+    PoincareMap
+    """
     return PoincareMap(model, gait, **options)
 
 
 def poincare_eigenvalues(m, g, M1, method: str = "variational") -> PoincareResult:
-    """A^z, its eigenvalues and the status of SPEC §4 for outputs M1 (SPEC section 5).
+    """A^z, its eigenvalues and the stability status for outputs M1 (SPEC sections 4-5).
+
+    Implements eq. (22): the fixed point is locally exponentially stable, status
+    'stable', when max ``|lambda|`` of A^z is below 1.
 
     Parameters
     ----------
     m : BipedModel
+        The robot.
     g : Reference
         The gait, made for ``m``.
     M1 : array_like

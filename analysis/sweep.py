@@ -70,7 +70,14 @@ _CODE_DIGEST = None
 
 
 def code_digest() -> str:
-    """SHA-256 of the source of :data:`NUMERIC_MODULES` (and RESULTS_VERSION)."""
+    """A digest of the code that decides a sweep's numbers.
+
+    Returns
+    -------
+    str
+        SHA-256 (hex) of the source of :data:`NUMERIC_MODULES` and of
+        :data:`RESULTS_VERSION`; part of a sweep folder's settings.
+    """
     global _CODE_DIGEST
     if _CODE_DIGEST is None:
         h = hashlib.sha256(f"results_version={RESULTS_VERSION}".encode())
@@ -83,10 +90,19 @@ def code_digest() -> str:
 
 @dataclass(frozen=True)
 class SweepSettings:
-    """How each M1 is evaluated.  ``method``: 'variational' (batched variational
-    equation, the sweep path) or 'ad' (full AD through the discrete map, ~1000x slower);
-    ``n_pre``, ``n_post``, ``n_scan``, ``horizon``: options of
-    :class:`analysis.poincare.PoincareMap`."""
+    """How each M1 of a sweep is evaluated.
+
+    Parameters
+    ----------
+    method : {'variational', 'ad'}
+        'variational' (the batched variational equation, the sweep path) or 'ad' (full
+        AD through the discrete map, ~1000x slower).
+    n_pre, n_post, n_scan : int
+        RK4 steps from the section to the impact and back, and of the impact scan
+        (options of :class:`analysis.PoincareMap`).
+    horizon : float
+        The swing foot must strike before ``horizon`` T (> 1).
+    """
     method: str = "variational"
     n_pre: int = 80
     n_post: int = 240
@@ -108,10 +124,24 @@ class SweepSettings:
         object.__setattr__(self, "horizon", float(self.horizon))
 
     def to_dict(self) -> dict:
+        """The settings by name, as stored in a sweep folder.
+
+        Returns
+        -------
+        dict
+            ``method``, ``n_pre``, ``n_post``, ``n_scan``, ``horizon``.
+        """
         return dict(method=self.method, n_pre=self.n_pre, n_post=self.n_post,
                     n_scan=self.n_scan, horizon=self.horizon)
 
     def map_options(self) -> dict:
+        """The keyword arguments of :func:`analysis.poincare_map` these settings give.
+
+        Returns
+        -------
+        dict
+            ``n_pre``, ``n_post``, ``n_scan``, ``horizon``.
+        """
         return dict(n_pre=self.n_pre, n_post=self.n_post, n_scan=self.n_scan,
                     horizon=self.horizon)
 
@@ -120,13 +150,44 @@ class SweepSettings:
 class SweepResult(Result):
     """Results of a sweep, row i for ``points[i]``.
 
-    Per point (left out of ``to_dict()``): ``point_status`` strings of SPEC §4;
-    ``max_abs`` inf where singular or no impact; ``eigenvalues`` (n, 2) complex, |.|
-    descending, NaN where undefined; ``A`` (n, 2, 2).  ``counts`` per status.
-    ``computed_chunks`` were evaluated by this run, ``reused_chunks`` read back from
-    ``out_dir``, ``corrupt_chunks`` (chunk -> reason) found damaged and recomputed.
-    ``elapsed`` is this run's wall time, s.  ``status`` is 'complete' (every point has
-    its result; ``success``).
+    ``status`` is 'complete' (every point has its result; ``success``).  The per-point
+    arrays are left out of ``to_dict()``.
+
+    Parameters
+    ----------
+    counts : dict
+        Number of points per status of SPEC §4.
+    elapsed : float
+        This run's wall time, s.
+    chunk_size : int
+        Points per chunk.
+    settings : dict
+        Everything that identifies the sweep (code and gait digests, robot, points'
+        digest, map settings), as stored in its folder.
+    out_dir : Path or None
+        The results folder (None: in memory only).
+    computed_chunks : list of int
+        Chunks evaluated by this run.
+    reused_chunks : list of int
+        Chunks read back from ``out_dir``.
+    corrupt_chunks : dict
+        Chunk -> reason, for chunks found damaged and recomputed.
+    n_computed : int
+        Points evaluated by this run.
+    status : str
+        'complete'.
+    message : str
+        Empty for a complete sweep.
+    points : numpy.ndarray
+        (n, nu) the M1 of the sweep.
+    point_status : numpy.ndarray
+        (n,) strings of SPEC §4.
+    max_abs : numpy.ndarray
+        (n,) max ``|lambda|``, inf where singular or without impact.
+    eigenvalues : numpy.ndarray
+        (n, 2) complex, ``|.|`` descending, NaN where undefined.
+    A : numpy.ndarray
+        (n, 2, 2) the Jacobians A^z.
     """
     counts: dict
     elapsed: float
@@ -149,10 +210,17 @@ class SweepResult(Result):
 
     @property
     def n_points(self) -> int:
+        """Number of M1 in the sweep."""
         return len(self.points)
 
     def best(self):
-        """(M1, max_abs) of the smallest finite max|lambda|, or None."""
+        """The M1 of the sweep with the smallest finite max ``|lambda|``.
+
+        Returns
+        -------
+        tuple or None
+            (M1 (nu,), max_abs), or None when no point has a finite value.
+        """
         finite = np.isfinite(self.max_abs)
         if not finite.any():
             return None
@@ -160,7 +228,15 @@ class SweepResult(Result):
         return self.points[i].copy(), float(self.max_abs[i])
 
     def to_dict(self) -> dict:
-        """Counts, timing, storage and the best point (the JSON of ``biped sweep``)."""
+        """Counts, timing, storage and the best point (the JSON of ``biped sweep``).
+
+        Returns
+        -------
+        dict
+            The fields of :meth:`Result.to_dict` (without the per-point arrays), plus
+            ``n_points``, ``best`` (``M1`` and ``max_abs``, or None),
+            ``computed_points`` and ``reused_points``.
+        """
         b = self.best()
         return dict(super().to_dict(), n_points=self.n_points,
                     best=None if b is None else dict(M1=b[0].tolist(), max_abs=b[1]),
@@ -168,7 +244,18 @@ class SweepResult(Result):
                     reused_points=self.n_points - self.n_computed)
 
     def subset(self, rows) -> "SweepResult":
-        """The rows ``rows`` as a sweep result of their own."""
+        """Some rows as a sweep result of their own.
+
+        Parameters
+        ----------
+        rows : array_like
+            Row indices or a boolean mask over the points.
+
+        Returns
+        -------
+        SweepResult
+            With counts of those rows only.
+        """
         rows = np.asarray(rows)
         st = self.point_status[rows]
         return _result(self.points[rows], st, self.max_abs[rows], self.eigenvalues[rows],
@@ -276,14 +363,37 @@ def _counts(status) -> dict:
 
 # ------------------------------------------------------- gait <-> dictionary
 def gait_to_dict(gait) -> dict:
-    """What defines the reference: robot, options, solution (not the solver's stats)."""
+    """What defines a gait, as a plain dictionary (sent to sweep workers).
+
+    Parameters
+    ----------
+    gait : Gait
+        A gait of :mod:`gait_opt`.
+
+    Returns
+    -------
+    dict
+        ``format``, ``version``, ``robot``, ``options``, ``solution`` (not the solver's
+        statistics).
+    """
     d = gait.to_dict()
     return dict(format=d["format"], version=d["version"], robot=d["robot"],
                 options=d["options"], solution=d["solution"])
 
 
 def gait_from_dict(d: dict):
-    """The :class:`gait_opt.Gait` of :func:`gait_to_dict`'s dictionary."""
+    """The gait a dictionary of :func:`gait_to_dict` describes.
+
+    Parameters
+    ----------
+    d : dict
+        From :func:`gait_to_dict` (or a gait file's content).
+
+    Returns
+    -------
+    gait_opt.Gait
+        Rebuilt on the model of the recorded robot.
+    """
     sol = d["solution"]
     rec = d["robot"]
     desc = (RobotParams.from_dict(rec).to_description() if RobotParams.is_legacy_record(rec)
@@ -319,8 +429,23 @@ def _init_worker(payload):
 
 
 def evaluate_chunk(payload: SweepPayload, points: np.ndarray) -> dict:
-    """Evaluate one chunk of M1 (runs in worker processes and on Dask workers):
-    dict of status (str), max_abs, eigenvalues (|.| descending), A."""
+    """Evaluate one chunk of M1 (runs in worker processes and on Dask workers).
+
+    Parameters
+    ----------
+    payload : SweepPayload
+        The gait's dictionary, its digest and the map settings (the map is built once
+        per process from it).
+    points : numpy.ndarray
+        (n, nu) output matrices.
+
+    Returns
+    -------
+    dict
+        ``status`` (n,) strings, ``max_abs`` (n,), ``eigenvalues`` (n, 2) complex with
+        ``|.|`` descending, ``A`` (n, 2, 2), and ``code_sha256`` (:func:`code_digest`
+        of the worker's code).
+    """
     pm = _poincare_for(payload)
     P = np.asarray(points, dtype=float)
     if payload.map["method"] == "variational":
@@ -424,7 +549,9 @@ def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
+        A :class:`gait_opt.Gait` made for ``model``.
     points : array_like
         (n, nu) output matrices M1 (nu = ``model.nu``).
     out_dir : str or Path, optional
@@ -441,6 +568,7 @@ def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
     progress : bool
         A progress bar on stderr (when it is a terminal).
     settings : SweepSettings or dict, optional
+        How each M1 is evaluated (default ``SweepSettings()``).
     executor : {'thread', 'process'}
         Threads of this process sharing one map (default), or spawned processes, each
         rebuilding the map (~1 s each to start, worth it only for very large sweeps).
@@ -448,6 +576,7 @@ def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
     Returns
     -------
     SweepResult
+        Row i for ``points[i]``.
     """
     t0 = time.perf_counter()
     settings = _settings(settings)
@@ -515,6 +644,18 @@ def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
 
 def load_sweep(out_dir) -> SweepResult:
     """Read a finished sweep folder back (without the gait).
+
+    Every chunk is checked on the way (digests, settings, rows).
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        A folder written by :func:`run_sweep` (or ``biped sweep --out``).
+
+    Returns
+    -------
+    SweepResult
+        Row i for the i-th stored point; ``elapsed`` 0.
 
     Raises
     ------
@@ -657,9 +798,20 @@ def _run_dask(scheduler, payload, P, todo, record):
 # ----------------------------------------------------- Fig. 2: 1-D sweeps
 @dataclass
 class OneDSweeps:
-    """The 1-D sweeps of Fig. 2 (one per component of M1: four for RABBIT):
-    ``results[j]`` over ``values[j]`` for component j (others zero),
-    ``singular_values[j]`` = D11/D12(j) at q^d(T) (eq. 24)."""
+    """The 1-D sweeps of Fig. 2: one per component of M1 (four for RABBIT).
+
+    Parameters
+    ----------
+    values : list of numpy.ndarray
+        ``values[j]``: the values of component j.
+    results : list of SweepResult
+        ``results[j]``: the sweep over ``values[j]`` with the other components zero.
+    singular_values : numpy.ndarray
+        (nu,): D11/D12(j) at q^d(T), where component j alone makes the controller
+        singular (eq. 24).
+    sweep : SweepResult
+        All the points as one sweep.
+    """
     values: list
     results: list
     singular_values: np.ndarray
@@ -672,7 +824,9 @@ def one_d_sweeps(model, gait, values, out_dir=None, **kw) -> OneDSweeps:
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
+        A :class:`gait_opt.Gait` made for ``model``.
     values : array_like or list of array_like
         One array for every component, or one array per component (nu of them).
     out_dir : str or Path, optional
@@ -683,6 +837,7 @@ def one_d_sweeps(model, gait, values, out_dir=None, **kw) -> OneDSweeps:
     Returns
     -------
     OneDSweeps
+        One sweep per component and the singular values.
     """
     nu = model.nu
     if isinstance(values, (list, tuple)) and len(values) == nu and np.ndim(values[0]) == 1:

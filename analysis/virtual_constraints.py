@@ -45,15 +45,43 @@ __all__ = ["VCEigenResult", "VirtualConstraintMap", "vc_eigenvalue", "vc_map"]
 
 @dataclass
 class VCEigenResult(Result):
-    """The HZD restricted Poincaré map of a virtual-constraint controller at its fixed
-    point.  ``success`` means the eigenvalue was computed (stable or unstable).
+    """The restricted Poincaré map of a virtual-constraint controller at its fixed point.
 
-    eigenvalue: dP/dw at the fixed point (AD); status 'stable' | 'unstable' |
-    'singular' | 'no_impact'; w_star: dtheta at the section on the HZD orbit; x_star:
-    (q_u, dq_u) there; reference_x: the reference's (q_u^d, dq_u^d)(0.75 T);
-    orbit_mismatch: max |x_star - reference_x| (how exactly the constraints reproduce
-    the reference orbit); delta_zero_squared: the closed-form eigenvalue (module
-    docstring); fixed_point_residual: |P(w*) - w*|."""
+    The map is one-dimensional (the hybrid zero dynamics of virtual constraints has the
+    state dtheta on the section).  ``success`` means the eigenvalue was computed
+    (stable or unstable).
+
+    Parameters
+    ----------
+    eigenvalue : float
+        dP/dw at the fixed point (AD through the discrete map).
+    status : str
+        'stable' (``|eigenvalue|`` < 1), 'unstable', 'singular' or 'no_impact'.
+    theta_section : float
+        The section's phase, theta = c q^d(0.75 T), rad.
+    theta_plus, theta_minus : float
+        Phase just after and just before the impact of the HZD orbit, rad.
+    w_star : float
+        dtheta at the section on the HZD orbit (the fixed point), rad/s.
+    x_star : numpy.ndarray
+        (q_u, dq_u) there.
+    reference_x : numpy.ndarray
+        The reference's (q_u^d, dq_u^d)(0.75 T).
+    orbit_mismatch : float
+        max ``|x_star - reference_x|``: how exactly the constraints reproduce the
+        reference orbit.
+    fixed_point_residual : float
+        ``|P(w*) - w*|``.
+    delta_zero_squared : float
+        The closed-form eigenvalue from the angular momentum about the stance foot
+        (module docstring of :mod:`analysis.virtual_constraints`).
+    min_denominator : float
+        Smallest ``|D_1 Q'(theta)|`` on the step (zero: the controller is singular).
+    constraints : dict
+        The constraints' :meth:`~biped_casadi.VirtualConstraints.to_dict`.
+    message : str
+        What was found, or why the eigenvalue is undefined.
+    """
     eigenvalue: float
     status: str
     theta_section: float
@@ -73,23 +101,43 @@ class VCEigenResult(Result):
 
     @property
     def max_abs(self) -> float:
+        """``|eigenvalue|``, the counterpart of :attr:`PoincareResult.max_abs`."""
         return abs(self.eigenvalue)
 
     @property
     def eigenvalues(self) -> np.ndarray:
+        """The eigenvalue as a one-element array."""
         return np.array([self.eigenvalue])
 
     def to_dict(self) -> dict:
-        """The fields, plus controller 'vc', max_abs and eigenvalues as [re, im] pairs."""
+        """The result in JSON types (what ``biped eig --controller vc --json`` prints).
+
+        Returns
+        -------
+        dict
+            The fields, plus ``controller`` 'vc', ``max_abs`` and ``eigenvalues`` as
+            [re, im] pairs (as for the time-varying controller).
+        """
         return dict(super().to_dict(), controller="vc", max_abs=self.max_abs,
                     eigenvalues=[[self.eigenvalue, 0.0]])
 
 
 class VirtualConstraintMap:
-    """P(w) and dP/dw for one set of virtual constraints; CasADi Functions built once.
+    """The 1-D restricted Poincaré map P(w) of virtual constraints and its derivative.
 
-    ``evaluate(w)`` -> P(w); ``derivative(w)`` -> dP/dw; ``analyse()`` ->
-    :class:`VCEigenResult`.  ``n_steps``: RK4 steps in theta over one step.
+    The CasADi Functions are built once.  ``evaluate(w)`` -> P(w); ``derivative(w)`` ->
+    dP/dw; ``analyse()`` -> :class:`VCEigenResult`.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference the constraints were fitted to.
+    constraints : VirtualConstraints
+        From :func:`biped_casadi.fit_virtual_constraints`.
+    n_steps : int
+        RK4 steps in theta over one step (>= 20).
     """
 
     def __init__(self, model, gait, constraints: VirtualConstraints, n_steps: int = 1000):
@@ -165,9 +213,33 @@ class VirtualConstraintMap:
                                ["w"], ["w_next", "dP_dw", "w_minus", "w_plus"])
 
     def evaluate(self, w) -> float:
+        """One application of the map.
+
+        Parameters
+        ----------
+        w : float
+            dtheta at the section, rad/s.
+
+        Returns
+        -------
+        float
+            P(w): dtheta at the section one step later, rad/s.
+        """
         return float(self.map(w)[0])
 
     def derivative(self, w) -> float:
+        """The map's derivative, by AD through the discrete map.
+
+        Parameters
+        ----------
+        w : float
+            dtheta at the section, rad/s.
+
+        Returns
+        -------
+        float
+            dP/dw at ``w``.
+        """
         return float(self.map(w)[1])
 
     # -------------------------------------------------------------- analysis
@@ -190,7 +262,14 @@ class VirtualConstraintMap:
         return "", "", min_den
 
     def analyse(self) -> VCEigenResult:
-        """Fixed point by Newton's method on P(w) - w, eigenvalue dP/dw there (AD)."""
+        """The fixed point (Newton on P(w) - w) and the eigenvalue dP/dw there (AD).
+
+        Returns
+        -------
+        VCEigenResult
+            With the closed-form check ``delta_zero_squared``; status 'singular' or
+            'no_impact' (eigenvalue NaN) when the zero dynamics or its impact is invalid.
+        """
         m, vc = self.model, self.vc
         dqs = self.gait.dq(SECTION * self.T)
         w = float(vc.c @ dqs)
@@ -259,7 +338,9 @@ def vc_eigenvalue(model, gait, constraints: VirtualConstraints | None = None,
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
+        The reference step, made for ``model``.
     constraints : VirtualConstraints, optional
         Given constraints; otherwise fitted to ``gait`` with phase variable
         theta = ``phase`` q and outputs H0 q - h_d(theta).
@@ -273,6 +354,7 @@ def vc_eigenvalue(model, gait, constraints: VirtualConstraints | None = None,
     Returns
     -------
     VCEigenResult
+        The eigenvalue, its status and the fixed point.
     """
     if constraints is None:
         phase = tuple(np.asarray(model.hip_phase if phase is None else phase, float).ravel())
