@@ -41,6 +41,12 @@ class GaitOptions:
     n_intervals, degree, scheme: direct collocation of the unactuated row
         (Legendre or Radau points).
     bezier_degree: degree of the actuated-joint polynomials.
+    continuation: how the reference continues past T (an impact can come late):
+        None, the Bezier polynomials evaluated past s = 1 (their accelerations grow
+        fast: on the default gait the reference loses ground contact about 0.1 T after
+        T); a number c, the acceleration at T ramps linearly to zero over c T, then the
+        velocity stays constant (math.inf: constant acceleration).  C^2 at T either way:
+        it changes neither the optimisation nor A^z, only walking after a late impact.
     cost: 'torque_squared_per_length' (integral of u'u over the step / step length) or
         'torque_squared' (the integral alone).
     polish_steps: RK4 steps per step for the exact unactuated trajectory.
@@ -68,6 +74,7 @@ class GaitOptions:
     degree: int = 3
     scheme: str = "legendre"
     bezier_degree: int = 6
+    continuation: float | None = None
     cost: str = "torque_squared_per_length"
     polish_steps: int = 2000
     ipopt: dict = field(default_factory=dict)
@@ -91,6 +98,11 @@ class GaitOptions:
             pos("torque_limit")
         if self.impact_mu is not None:
             pos("impact_mu")
+        if self.continuation is not None and not (
+                isinstance(self.continuation, (int, float)) and not isinstance(
+                    self.continuation, bool) and self.continuation > 0):
+            raise ValueError(f"gait option 'continuation' must be None or a positive number "
+                             f"(inf allowed), got {self.continuation!r}")
         for n in ("min_normal_force", "clearance", "min_liftoff_speed", "min_strike_speed"):
             nonneg(n)
         for n in ("step_length_bounds", "step_time_bounds"):
@@ -115,8 +127,9 @@ class GaitOptions:
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
-        if d["impact_mu"] is None:        # unset: files and cache keys as before the option
-            del d["impact_mu"]
+        for name in ("impact_mu", "continuation"):   # unset: files and cache keys as before
+            if d[name] is None:
+                del d[name]
         d["step_length_bounds"] = list(self.step_length_bounds)
         d["step_time_bounds"] = list(self.step_time_bounds)
         return d
