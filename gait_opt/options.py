@@ -57,6 +57,13 @@ class GaitOptions:
         Collocation points.
     bezier_degree : int
         Degree of the actuated-joint polynomials q_a^d(s), s = t / T.
+    continuation : float or None
+        How the reference continues past T (an impact can come late): None, the
+        Bezier polynomials evaluated past s = 1 (their accelerations grow fast: on the
+        default gait the reference loses ground contact about 0.1 T after T); a number
+        c, the acceleration at T ramps linearly to zero over c T, then the velocity
+        stays constant (``math.inf``: constant acceleration).  C^2 at T either way: it
+        changes neither the optimisation nor A^z, only walking after a late impact.
     cost : {'torque_squared_per_length', 'torque_squared'}
         The integral of u'u over the step divided by the step length, or the integral
         alone.
@@ -90,6 +97,7 @@ class GaitOptions:
     degree: int = 3
     scheme: str = "legendre"
     bezier_degree: int = 6
+    continuation: float | None = None
     cost: str = "torque_squared_per_length"
     polish_steps: int = 2000
     ipopt: dict = field(default_factory=dict)
@@ -113,6 +121,11 @@ class GaitOptions:
             pos("torque_limit")
         if self.impact_mu is not None:
             pos("impact_mu")
+        if self.continuation is not None and not (
+                isinstance(self.continuation, (int, float)) and not isinstance(
+                    self.continuation, bool) and self.continuation > 0):
+            raise ValueError(f"gait option 'continuation' must be None or a positive number "
+                             f"(inf allowed), got {self.continuation!r}")
         for n in ("min_normal_force", "clearance", "min_liftoff_speed", "min_strike_speed"):
             nonneg(n)
         for n in ("step_length_bounds", "step_time_bounds"):
@@ -141,12 +154,14 @@ class GaitOptions:
         Returns
         -------
         dict
-            Field name -> value; bounds as lists, ``impact_mu`` left out when unset (so
-            files and cache keys are those written before the option existed).
+            Field name -> value; bounds as lists, ``impact_mu`` and ``continuation`` left
+            out when unset (so files and cache keys are those written before the options
+            existed).
         """
         d = dataclasses.asdict(self)
-        if d["impact_mu"] is None:        # unset: files and cache keys as before the option
-            del d["impact_mu"]
+        for name in ("impact_mu", "continuation"):   # unset: files and cache keys as before
+            if d[name] is None:
+                del d[name]
         d["step_length_bounds"] = list(self.step_length_bounds)
         d["step_time_bounds"] = list(self.step_time_bounds)
         return d

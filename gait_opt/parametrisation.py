@@ -16,6 +16,7 @@ reference is C^2 (indeed smooth) across T.
 """
 from __future__ import annotations
 
+import math
 from math import comb
 
 import casadi as ca
@@ -44,11 +45,12 @@ class ReferenceDynamics:
     ``integrate(n)`` -> Function(x0, s0, ds, alpha, T) -> 2 x n states after each step.
     """
 
-    def __init__(self, model, degree: int):
+    def __init__(self, model, degree: int, continuation: float | None = None):
         if degree < 3:
             raise ValueError(f"bezier_degree must be >= 3, got {degree}")
         self.model = model
         self.degree = M = degree
+        self.continuation = continuation
         nu = model.nu
         alpha = ca.SX.sym("alpha", nu, M + 1)
         s = ca.SX.sym("s")
@@ -60,6 +62,8 @@ class ReferenceDynamics:
         dqa = M * sum((alpha[:, k + 1] - alpha[:, k]) * b1[k] for k in range(M)) / T
         ddqa = M * (M - 1) * sum((alpha[:, k + 2] - 2 * alpha[:, k + 1] + alpha[:, k]) * b2[k]
                                  for k in range(M - 1)) / T**2
+        if continuation is not None:
+            qa, dqa, ddqa = _continued(qa, dqa, ddqa, s, T, continuation)
         self.qa = ca.Function("qa", [alpha, s, T], [qa, dqa, ddqa],
                               ["alpha", "s", "T"], ["qa", "dqa", "ddqa"])
 
@@ -87,8 +91,8 @@ class ReferenceDynamics:
 
     @property
     def cache_key(self):
-        """What the Functions depend on: the model and the Bezier degree."""
-        return (self.model.cache_key, self.degree)
+        """What the Functions depend on: the model, the Bezier degree, the continuation."""
+        return (self.model.cache_key, self.degree, self.continuation)
 
     @cached(maxsize=8)
     def integrate(self, n: int) -> ca.Function:
@@ -105,10 +109,30 @@ class ReferenceDynamics:
                            ["x0", "s0", "ds", "alpha", "T"], ["X"])
 
 
+def _continued(qa, dqa, ddqa, s, T, continuation):
+    """q_a^d past T (s > 1) without the Bezier polynomials' growth: the acceleration at
+    T ramps linearly to zero over c T (c = ``continuation``; inf: kept constant), then
+    the velocity stays constant.  C^2 at T, like the polynomial itself."""
+    q1, v1, a1 = (ca.substitute(e, s, ca.SX(1)) for e in (qa, dqa, ddqa))
+    sig = (s - 1) * T
+    if math.isinf(continuation):
+        qe, dqe, ddqe = q1 + v1 * sig + a1 * sig**2 / 2, v1 + a1 * sig, a1
+    else:
+        d = continuation * T
+        r = ca.fmin(sig, d)
+        qe = q1 + v1 * sig + a1 * (r**2 / 2 - r**3 / (6 * d)) + a1 * d / 2 * (sig - r)
+        dqe = v1 + a1 * (r - r**2 / (2 * d))
+        ddqe = a1 * (1 - r / d)
+    past = s > 1
+    return tuple(ca.if_else(past, e, b) for e, b in ((qe, qa), (dqe, dqa), (ddqe, ddqa)))
+
+
 @cached(maxsize=16)
-def reference_dynamics(model, degree: int) -> ReferenceDynamics:
-    """The :class:`ReferenceDynamics` of a model and Bezier degree (memoised)."""
-    return ReferenceDynamics(model, degree)
+def reference_dynamics(model, degree: int, continuation: float | None = None
+                       ) -> ReferenceDynamics:
+    """The :class:`ReferenceDynamics` of a model, Bezier degree and continuation past T
+    (see :class:`gait_opt.GaitOptions`), memoised."""
+    return ReferenceDynamics(model, degree, continuation)
 
 
 # quintic Hermite interpolation on a uniform grid --------------------------------
