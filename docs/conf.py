@@ -44,7 +44,6 @@ numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
 numpydoc_validation_checks = set()
 myst_enable_extensions = ["dollarmath"]
-suppress_warnings = ["config.cache"]
 
 # ---- notebooks: copied from notebooks/, executed with small settings at build time
 nb_execution_mode = os.environ.get("BIPED_DOCS_EXECUTE", "force")
