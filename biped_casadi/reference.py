@@ -49,11 +49,18 @@ class Reference(abc.ABC):
     and implement :meth:`symbolic`, :meth:`evaluate` and :meth:`state`.
     """
 
+    #: the :class:`~biped_casadi.BipedModel` the reference was made for (set by each
+    #: reference, like the attributes below; the values shown are the class defaults)
     model = None
+    #: step duration, s
     T: float = float("nan")
+    #: earliest time the numeric methods accept, s (<= 0)
     t_min: float = 0.0
+    #: latest time the numeric methods accept, s (>= T)
     t_max: float = float("nan")
+    #: number of components of the reference state r (a gait: 2)
     n_state: int = 0
+    #: the reference state at tau = 0 (``n_state`` numbers)
     r0: np.ndarray = np.zeros(0)
 
     @abc.abstractmethod
