@@ -123,9 +123,10 @@ class _Controller(abc.ABC):
 class TimeVaryingController(_Controller):
     """Time-varying output control of paper §III with the stride-to-stride correction.
 
-    Implements eqs. (6), (7), (17): the outputs y = v - v^d(tau) zeroed by the control,
-    with the reference restarted at every impact (tau = 0 at the start of each step,
-    :meth:`step_start`), and corrected to y_c of eq. (17) (SPEC §3):
+    Implements eqs. (6), (7), (17): the outputs y = v - v^d(tau) that the control
+    zeroes, with tau the time since the last impact (the caller restarts it at 0 at
+    every impact, as the simulator does, and calls :meth:`step_start`, which restarts
+    the reference state), corrected to y_c of eq. (17) (SPEC §3):
 
     Outputs:  y_c = M q - v^d(tau) - v_c(tau),  M = [M1, I],
     v^d = M q^d(tau), v_c the correction of eq. (18) from y_i = v - v^d and
