@@ -25,7 +25,7 @@ __all__ = ["COLOUR_NAMES", "STANCE", "SWING", "TORSO", "save_figure", "save_figu
            "gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot",
            "conjecture_plot", "stable_domains_plot", "m1_plane_plot", "unactuated_error_plot",
            "swing_torques_plot", "walking_animation", "run_label", "basin_plot",
-           "OUTCOME_COLOURS"]
+           "tradeoff_plot", "OUTCOME_COLOURS"]
 
 #: colours of the stance leg, the swing leg and the torso in every stick figure
 STANCE, SWING, TORSO = "tab:blue", "tab:red", "0.25"
@@ -378,13 +378,15 @@ def run_label(res) -> str:
     return "virtual constraints"
 
 
-def unactuated_error_plot(results, title: str | None = None) -> Figure:
+def unactuated_error_plot(results, title: str | None = None, labels=None) -> Figure:
     """Paper Fig. 5: q_u - q_u^d(T) and dq_u - dq_u^d(T) just before each impact.
 
     Parameters
     ----------
     results : SimulationResult or list of them
     title : str, optional
+    labels : list of str, optional
+        Legend labels of the runs (default: the controller and its M1).
 
     Returns
     -------
@@ -393,10 +395,10 @@ def unactuated_error_plot(results, title: str | None = None) -> Figure:
     results = results if isinstance(results, (list, tuple)) else [results]
     fig = _figure(figsize=(6.4, 5.6))
     ax = fig.subplots(2, 1, sharex=True)
-    for res, mk in zip(results, "os^dv"):
+    labels = labels or [run_label(r) for r in results]
+    for res, mk, name in zip(results, "os^dv", labels):
         k = np.arange(1, len(res.steps) + 1)
-        lab = run_label(res) + ("" if res.success else
-                                f" ({res.status} at t = {res.failure_time:.3f} s)")
+        lab = name + ("" if res.success else f" ({res.status} at t = {res.failure_time:.3f} s)")
         ax[0].plot(k, res.qu_errors, mk + "-", label=lab)
         ax[1].plot(k, res.dqu_errors, mk + "-", label=lab)
     ax[0].set_ylabel(r"$q_u - q_u^d(T)$ [rad]")
@@ -411,7 +413,7 @@ def unactuated_error_plot(results, title: str | None = None) -> Figure:
     return fig
 
 
-def swing_torques_plot(results, gait, title: str | None = None) -> Figure:
+def swing_torques_plot(results, gait, title: str | None = None, labels=None) -> Figure:
     """Paper Fig. 6: the swing leg's torques against time, the reference torques dashed.
 
     RABBIT: u3 (swing hip) and u4 (swing knee); the three-link biped: u2 (swing hip).
@@ -420,8 +422,11 @@ def swing_torques_plot(results, gait, title: str | None = None) -> Figure:
     Parameters
     ----------
     results : SimulationResult or list of them
+        Runs on ``gait`` (its reference torques are drawn for the first run's steps).
     gait : Reference
     title : str, optional
+    labels : list of str, optional
+        Legend labels of the runs.
 
     Returns
     -------
@@ -432,9 +437,10 @@ def swing_torques_plot(results, gait, title: str | None = None) -> Figure:
     joints = tuple(range(model.k, model.nu))       # the swing leg's hip and knees
     fig = _figure(figsize=(7.2, 2.0 + 1.8 * len(joints)))
     ax = np.atleast_1d(fig.subplots(len(joints), 1, sharex=True))
-    for res in results:
+    labels = labels or [run_label(r) for r in results]
+    for res, name in zip(results, labels):
         for i, j in enumerate(joints):
-            ax[i].plot(res.t, res.u[:, j], lw=1.0, label=run_label(res))
+            ax[i].plot(res.t, res.u[:, j], lw=1.0, label=name)
     res = results[0]
     for k in np.unique(res.step):
         sel = res.step == k
@@ -585,4 +591,51 @@ def basin_plot(results, title: str | None = None) -> Figure:
     fig.legend(handles=handles, loc="center right", fontsize=8, frameon=False)
     fig.suptitle(title or "Basins of attraction on the Poincaré section (tau = 0.75 T)")
     fig.tight_layout(rect=(0, 0, 1 - 2.0 / (5.2 * len(results) + 2.2), 1))
+    return fig
+
+
+def tradeoff_plot(front, others=None, bound=None, title: str | None = None) -> Figure:
+    """Robustness against stability: s* against max ``|lambda|``, named designs marked.
+
+    The front is the best robustness s* found at each eigenvalue bound.
+
+    Parameters
+    ----------
+    front : list of (max_abs, s_star)
+        The Pareto front of a search (:attr:`analysis.robust_design.RobustDesignResult.tradeoff`).
+    others : dict, optional
+        Label -> (max_abs, s_star) of designs to mark (e.g. virtual constraints, the
+        deadbeat designs, the robust design).
+    bound : float, optional
+        The eigenvalue bound of the search (a vertical line).
+    title : str, optional
+
+    Returns
+    -------
+    Figure
+    """
+    fig = _figure(figsize=(6.4, 4.4))
+    ax = fig.add_subplot()
+    if front:
+        f = np.array(front, float)
+        ax.step(f[:, 0], f[:, 1], where="post", color="0.3", lw=1.2,
+                label="best s* found at or below each max|λ| (search estimates)")
+        ax.plot(f[:, 0], f[:, 1], ".", color="0.3", ms=4)
+    for (label, (lam, s)), mk in zip((others or {}).items(), "o^sDvP*X"):
+        ax.plot([lam], [s], mk, ms=8, label=f"{label}: s* {s:.3g}, max|λ| {lam:.2g}")
+    if bound is not None:
+        ax.axvline(bound, color="tab:red", ls=":", lw=1, label=f"bound max|λ| = {bound:.3g}")
+    ax.axhline(1.0, color="tab:green", ls="--", lw=1, label="the paper's perturbation (s = 1)")
+    lams = [p[0] for p in front] + [v[0] for v in (others or {}).values()]
+    if lams and min(lams) < 0.02:                        # deadbeat designs: log scale
+        ax.set_xscale("symlog", linthresh=1e-3)
+        ax.set_xlabel("max |λ| of $A^z$ (symmetric log scale)")
+    else:
+        ax.set_xlabel("max |λ| of $A^z$")
+    ax.set_ylabel("s*: largest scale of the paper's perturbation survived")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title(title or "Robustness against the linear rate: s* vs max|λ|", fontsize=10)
+    fig.tight_layout()
     return fig

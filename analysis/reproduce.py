@@ -41,15 +41,18 @@ from biped_casadi import (PAPER_PERTURBATION, RABBIT_DESCRIPTION, SimulationOpti
                           perturbed_initial_state, robot, simulate)
 from biped_casadi.files import write_text_atomic
 from biped_casadi.results import Result, json_safe
-from gait_opt import default_gait
+from gait_opt import GaitOptions, default_gait
 
 from .output_design import (ab_solution_set, coarse_grid_size, conjecture_figures,
                             domain_grid, optimize_m1, swing_height_at_Td, taylor_ab)
-from .plots import (conjecture_plot, gait_profiles_plot, gait_stick_plot, m1_plane_plot,
-                    one_d_sweeps_plot, save_figure, stable_domains_plot, swing_torques_plot,
-                    unactuated_error_plot, walking_animation)
+from .plots import (basin_plot, conjecture_plot, gait_profiles_plot, gait_stick_plot,
+                    m1_plane_plot, one_d_sweeps_plot, save_figure, stable_domains_plot,
+                    swing_torques_plot, tradeoff_plot, unactuated_error_plot,
+                    walking_animation)
 from .poincare import poincare_eigenvalues, singular_m1_values
 from .report import write_report
+from .robust_design import RobustDesignSettings, robust_design
+from .robustness import Design, RobustnessSettings, basin, kept_directions, robustness
 from .sweep import grid_points, one_d_sweeps, run_sweep
 from .virtual_constraints import vc_eigenvalue
 
@@ -376,83 +379,162 @@ def stage_vc(ctx: _Context):
         tv_M1_zero=dict(max_abs=tv0.max_abs, status=tv0.status))
 
 
+def _brief(r) -> dict:
+    """A run's status, steps to converge and validity margins (for summary.json)."""
+    return dict(status=r.status, message=r.message, steps=len(r.steps),
+                steps_to_converge=r.steps_to_converge(),
+                qu_errors=r.qu_errors.tolist(), dqu_errors=r.dqu_errors.tolist(),
+                peak_torque=r.peak_torque, min_normal_force=r.min_normal_force,
+                max_friction_ratio=r.max_friction_ratio, max_impulse_ratio=r.max_impulse_ratio,
+                failure_time=r.failure_time)
+
+
+def _robust_settings(ctx) -> RobustDesignSettings:
+    return (RobustDesignSettings(samples=20000, starts=1, max_polls=10) if ctx.opts.quick
+            else RobustDesignSettings())
+
+
+def stage_robust_design(ctx: _Context):
+    """The robust time-varying design (:mod:`analysis.robust_design`; cached)."""
+    if not _is_rabbit(ctx):
+        ctx.summary["robust_design"] = dict(
+            skipped="the robust-design search is calibrated on RABBIT (its gait options); "
+                    "run 'biped m1 --robust --robot ...' for another robot")
+        return
+    r = robust_design(ctx.model, _robust_settings(ctx), progress=lambda m: ctx.log("   " + m))
+    ctx.data["robust"] = r
+    ctx.data["robust_gait"] = default_gait(ctx.model, GaitOptions(**r.settings["gait"]))
+    ctx.summary["robust_design"] = r.to_dict()
+    ctx.log(f"   {r.message}")
+
+
+def stage_robustness(ctx: _Context):
+    """s* of virtual constraints, the deadbeat designs of both a = b = 0 groups and the
+    paper's printed M1 on the default gait; of virtual constraints and the robust design
+    on the robust design's gait."""
+    m, g = ctx.model, ctx.gait
+    st = (RobustnessSettings(directions=8, rounds=6) if ctx.opts.quick
+          else RobustnessSettings())
+    rows = []
+    kept = kept_directions(m, g, st)
+    cands = [("virtual constraints", None)]
+    for name in ("group1", "group2"):
+        if name in ctx.data.get("nlp_M1", {}):
+            cands.append((f"deadbeat M1, {name.replace('group', 'group ')}",
+                          Design(tuple(ctx.data["nlp_M1"][name]))))
+    if _is_rabbit(ctx):
+        cands.append(("the paper's printed M1", Design(tuple(PAPER["example_M1"]))))
+    for label, design in cands:
+        r = robustness(m, g, design, st, kept=kept)
+        rows.append(dict(label=label, gait="default", **r.to_dict()))
+        ctx.log(f"   default gait, {label}: s* = {r.s_star:.4g}")
+    rb = ctx.data.get("robust")
+    if rb is not None:
+        g2 = ctx.data["robust_gait"]
+        kept2 = kept_directions(m, g2, st)
+        for label, design in (("virtual constraints", None),
+                              ("robust design", Design(tuple(rb.design["M1"]),
+                                                       rb.design["rejoin"]))):
+            r = robustness(m, g2, design, st, kept=kept2)
+            rows.append(dict(label=label, gait="robust", **r.to_dict()))
+            ctx.log(f"   robust gait, {label}: s* = {r.s_star:.4g}")
+    ctx.summary["robustness"] = dict(settings=st.__dict__.copy(), rows=rows)
+
+
 def stage_sim(ctx: _Context):
-    """Paper §V-C: TV with the chosen M1 and VC from the same perturbed state.
-
-    First the paper's perturbation (0.01 rad, 0.1 rad/s on every joint) at mu = 0.6 with
-    the M1 of the NLP, then the stable points of the 9^4 grid; when no time-varying run
-    walks, the perturbation is scaled down until the chosen M1 walks, and Fig. 5/6 show
-    that run (the report says which)."""
-    g, m = ctx.gait, ctx.model
-    M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(m.nu)), float)
+    """Paper §V-C at the paper's full perturbation (0.01 rad, 0.1 rad/s on every joint,
+    mu = 0.6, the robot's torque limit): virtual constraints and the deadbeat M1 of the
+    NLP on the default gait; virtual constraints and the robust design on the robust
+    design's gait.  Fig. 5, Fig. 6 and an animation of the robust design's run."""
+    m, g = ctx.model, ctx.gait
     opts = SimulationOptions(steps=ctx.opts.sim_steps, mu=0.6)
-    vcc = VirtualConstraintController(m, g)
-
-    def run(M1, scale):
-        q0, dq0 = perturbed_initial_state(g, PAPER_PERTURBATION[0] * scale,
-                                          PAPER_PERTURBATION[1] * scale)
-        return simulate(TimeVaryingController(m, g, M1), q0, dq0, opts), (q0, dq0)
-
-    def brief(r):
-        return dict(r.to_dict(), steps_to_converge=r.steps_to_converge())
-
-    out = dict(paper_perturbation=list(PAPER_PERTURBATION), mu=0.6, M1=M1.tolist())
-    tv, x0 = run(M1, 1.0)
-    vc_paper = simulate(vcc, *x0, opts)
-    out["paper"] = dict(tv=brief(tv), vc=brief(vc_paper))
-    ctx.log(f"   paper perturbation: TV {tv.status}, VC {vc_paper.status}")
-    chosen, scale = M1, 1.0
-    if tv.status != "ok":
-        grid = ctx.data.get("grid")
-        tried, found = 0, None
-        if grid is not None:
-            idx = np.flatnonzero(grid.point_status == "stable")
-            for i in idx[np.argsort(grid.max_abs[idx])][:30]:
-                tried += 1
-                r, _ = run(grid.points[i], 1.0)
-                if r.status == "ok":
-                    found = (grid.points[i], r)
-                    break
-        out["grid_search"] = dict(tried=tried, walking_M1=None if found is None else found[0].tolist())
-        ctx.log(f"   stable grid points tried at the paper's perturbation: {tried}, "
-                f"walking: {'none' if found is None else found[0].tolist()}")
-        if found is not None:
-            chosen, tv = found
-        else:
-            # the largest scaled perturbation under which one of the NLP's M1 walks and
-            # converges (|dq_u error| < 1e-3 within half the simulated steps); the
-            # fastest of those
-            cands = ctx.data.get("nlp_M1", {"chosen": M1})
-            walked = None
-            half = max(1, (ctx.opts.sim_steps + 1) // 2)
-            for scale in (0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005):
-                walked = [(r.steps_to_converge(), name, Mc, r) for name, Mc in cands.items()
-                          for r in [run(Mc, scale)[0]]
-                          if r.status == "ok" and (r.steps_to_converge() or 10**9) <= half]
-                if walked:
-                    break
-            if walked:
-                _, name, chosen, tv = min(walked, key=lambda w: w[0])
-                out["figures_candidate"] = name
-    q0, dq0 = perturbed_initial_state(g, PAPER_PERTURBATION[0] * scale, PAPER_PERTURBATION[1] * scale)
-    vc = simulate(vcc, q0, dq0, opts)
-    out["figures_run"] = dict(M1=np.asarray(chosen).tolist(), scale=scale,
-                              perturbation=[PAPER_PERTURBATION[0] * scale, PAPER_PERTURBATION[1] * scale],
-                              tv=brief(tv), vc=brief(vc))
-    out["tv"], out["vc"] = out["figures_run"]["tv"], out["figures_run"]["vc"]
-    ctx.log(f"   figures: perturbation x{scale:g}: TV {tv.status}, VC {vc.status}")
-    note = "" if scale == 1.0 else f" (perturbation x{scale:g} of the paper's)"
+    M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(m.nu)), float)
+    runs, labels = [], []
+    q0, dq0 = perturbed_initial_state(g, *PAPER_PERTURBATION)
+    out = dict(perturbation=list(PAPER_PERTURBATION), mu=0.6, runs={})
+    for key, label, ctrl in (
+            ("default_vc", "virtual constraints (default gait)",
+             VirtualConstraintController(m, g)),
+            ("default_deadbeat", f"deadbeat M1 = [{', '.join(f'{v:.3g}' for v in M1)}] "
+                                 "(default gait)", TimeVaryingController(m, g, M1))):
+        r = simulate(ctrl, q0, dq0, opts)
+        runs.append(r)
+        labels.append(label)
+        out["runs"][key] = dict(label=label, **_brief(r))
+        ctx.log(f"   {label}: {r.status}")
+    rb = ctx.data.get("robust")
+    robust_runs = []
+    if rb is not None:
+        g2 = ctx.data["robust_gait"]
+        q0, dq0 = perturbed_initial_state(g2, *PAPER_PERTURBATION)
+        M1r = np.array(rb.design["M1"])
+        for key, label, ctrl in (
+                ("robust_vc", "virtual constraints (robust gait)",
+                 VirtualConstraintController(m, g2)),
+                ("robust_design", "robust design (robust gait)",
+                 TimeVaryingController(m, g2, M1r, rejoin=rb.design["rejoin"]))):
+            r = simulate(ctrl, q0, dq0, opts)
+            runs.append(r)
+            labels.append(label)
+            robust_runs.append(r)
+            out["runs"][key] = dict(label=label, **_brief(r))
+            ctx.log(f"   {label}: {r.status}")
     figs = ctx.out / "figures"
     ctx.figures["fig5"] = save_figure(
-        unactuated_error_plot([tv, vc], title="Fig. 5: q_u error at the end of each step" + note),
+        unactuated_error_plot(runs, labels=labels,
+                              title="Fig. 5 at the paper's full perturbation: q_u error "
+                                    "just before each impact"),
         figs / "fig5_qu_error", FORMATS)
+    pair = (robust_runs, ctx.data["robust_gait"], labels[2:]) if robust_runs else \
+        (runs, g, labels)
     ctx.figures["fig6"] = save_figure(
-        swing_torques_plot([tv, vc], g, title="Fig. 6: swing-leg torques" + note),
+        swing_torques_plot(pair[0], pair[1], labels=pair[2],
+                           title="Fig. 6 at the paper's full perturbation: swing-leg torques"),
         figs / "fig6_swing_torques", FORMATS)
-    if ctx.opts.animation_steps:
-        ctx.figures["animation"] = [walking_animation(tv, m, figs / "walk_tv.gif",
+    shown = robust_runs[-1] if robust_runs else runs[-1]
+    if ctx.opts.animation_steps and shown.t.size:
+        ctx.figures["animation"] = [walking_animation(shown, m, figs / "walk_tv.gif",
                                                       max_steps=ctx.opts.animation_steps)]
     ctx.summary["simulation"] = out
+
+
+def stage_basins(ctx: _Context):
+    """Basins of attraction on the Poincaré section: the deadbeat M1 beside virtual
+    constraints on the default gait, the robust design beside virtual constraints on its
+    gait; and the trade-off between s* and max|lambda| found by the robust search."""
+    m, g = ctx.model, ctx.gait
+    n = 41 if ctx.opts.quick else 101
+    M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(m.nu)), float)
+    out = {}
+    b1 = [basin(m, g, Design(tuple(M1)), n=n), basin(m, g, None, n=n)]
+    out["default"] = [b.to_dict() for b in b1]
+    figs = ctx.out / "figures"
+    ctx.figures["basin_default"] = save_figure(
+        basin_plot(b1, title="Basins on the default gait: deadbeat M1 and virtual "
+                             "constraints"), figs / "basin_default", FORMATS)
+    rb = ctx.data.get("robust")
+    if rb is not None:
+        g2 = ctx.data["robust_gait"]
+        b2 = [basin(m, g2, Design(tuple(rb.design["M1"]), rb.design["rejoin"]), n=n),
+              basin(m, g2, None, n=n)]
+        out["robust"] = [b.to_dict() for b in b2]
+        ctx.figures["basin_robust"] = save_figure(
+            basin_plot(b2, title="Basins on the robust design's gait: the robust design "
+                                 "and virtual constraints"), figs / "basin_robust", FORMATS)
+        rows = (ctx.summary.get("robustness") or {}).get("rows", [])
+        vc_s = next((r["s_star"] for r in rows if r["gait"] == "robust"
+                     and r["controller"] == "vc"), None)
+        others = {"robust design": (rb.max_abs, rb.s_star)}
+        if vc_s is not None:
+            others["virtual constraints"] = (rb.vc_eigenvalue, vc_s)
+        ctx.figures["tradeoff"] = save_figure(
+            tradeoff_plot(rb.tradeoff, others, bound=rb.vc_eigenvalue,
+                          title="s* against max|λ| on the robust design's gait"),
+            figs / "tradeoff", FORMATS)
+    for k, v in out.items():
+        ctx.log(f"   {k}: " + ", ".join(f"{b['controller']} {100 * b['converged_fraction']:.1f} %"
+                                        for b in v))
+    ctx.summary["basins"] = out
 
 
 STAGES = [
@@ -464,7 +546,10 @@ STAGES = [
     ("a, b and Fig. 4", stage_fig4, ("gait",)),
     ("M1 NLP", stage_m1, ("gait",)),
     ("virtual constraints", stage_vc, ("gait",)),
-    ("Fig. 5, Fig. 6, animation", stage_sim, ("gait",)),
+    ("robust design", stage_robust_design, ("gait",)),
+    ("robustness (s*)", stage_robustness, ("M1 NLP",)),
+    ("Fig. 5, Fig. 6, animation", stage_sim, ("M1 NLP",)),
+    ("basins of attraction", stage_basins, ("M1 NLP",)),
 ]
 
 

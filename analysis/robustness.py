@@ -41,7 +41,7 @@ from .virtual_constraints import vc_eigenvalue
 from .walker import virtual_constraint_walker, zero_dynamics_walker
 
 __all__ = ["Design", "RobustnessSettings", "RobustnessResult", "kept_directions",
-           "robustness", "start_states", "BasinResult", "basin"]
+           "robustness", "start_states", "BasinResult", "basin", "BatchSStar", "s_star_batch"]
 
 
 @dataclass(frozen=True)
@@ -443,3 +443,103 @@ def basin(model, gait, design: Design | None = None, n: int = 101,
         elapsed=time.perf_counter() - t0,
         message=f"{100 * frac:.1f} % of {n}x{n} cells converge within {steps} steps",
         q_u=a, dq_u=b, outcome=outcome.reshape(n, n), final_error=err.reshape(n, n))
+
+
+# ------------------------------------------------------- many designs at once
+@dataclass
+class BatchSStar:
+    """s* of many time-varying designs (row i = design i): ``s_star``, ``s_fail`` and
+    the status of the first failure at s_fail (``cause``), the fraction of directions
+    that pass at s_fail (``pass_fraction``, a tie-breaker inside one bisection cell) and
+    the scenario-steps walked."""
+    s_star: np.ndarray
+    s_fail: np.ndarray
+    cause: list
+    pass_fraction: np.ndarray
+    scenario_steps: int
+
+
+def _verdicts(B, nd, nk, tol):
+    """Per design: all directions pass, the fraction that pass, the cause to report."""
+    err = B.final_error
+    st = np.where((B.run_status == "ok") & ~(err < tol), "not_converged", B.run_status)
+    st = st.reshape(nd, nk)
+    step = B.fail_step.reshape(nd, nk)
+    ok = st == "ok"
+    causes = []
+    for i in range(nd):
+        bad = np.flatnonzero(~ok[i])
+        if not bad.size:
+            causes.append("")
+            continue
+        j = bad[np.lexsort((step[i, bad], st[i, bad] == "not_converged"))[0]]
+        causes.append(f"{st[i, j]} in step {step[i, j]}" if st[i, j] != "not_converged"
+                      else "not_converged")
+    return ok.all(axis=1), ok.mean(axis=1), causes
+
+
+def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
+                 rounds: int | None = None, chunk: int = 64) -> BatchSStar:
+    """s* of many time-varying designs by one bisection run in batches: every round walks
+    (designs still bracketing) x (directions) scenarios together.
+
+    Parameters
+    ----------
+    walker : ZeroDynamicsWalker
+    gait : Reference
+    designs : list of Design
+    dirs : array
+        Kept directions (k, 2 nq).
+    settings : RobustnessSettings
+    rounds : int, optional
+        Bisection rounds (default ``settings.rounds``).
+    chunk : int
+        Designs per walker batch.
+
+    Returns
+    -------
+    BatchSStar
+    """
+    st = settings
+    rounds = st.rounds if rounds is None else rounds
+    nd, nk = len(designs), len(dirs)
+    M1 = np.array([d.M1 for d in designs], float)
+    rj = np.array([d.rejoin for d in designs], float)
+    lo, hi = np.zeros(nd), np.full(nd, st.s_max)
+    cause, frac = [""] * nd, np.ones(nd)
+    used = 0
+
+    def evaluate(idx, scales):
+        nonlocal used
+        ok_all, fr_all, c_all = np.zeros(idx.size, bool), np.zeros(idx.size), []
+        for a in range(0, idx.size, chunk):
+            part = idx[a:a + chunk]
+            D = np.tile(dirs, (part.size, 1))
+            s = np.repeat(scales[a:a + chunk], nk)
+            q0, dq0 = start_states(gait, D, s)
+            B = walker.walk(q0, dq0, np.repeat(M1[part], nk, axis=0), np.repeat(rj[part], nk),
+                            steps=st.steps)
+            used += B.scenario_steps
+            ok, fr, c = _verdicts(B, part.size, nk, st.tol)
+            ok_all[a:a + chunk], fr_all[a:a + chunk] = ok, fr
+            c_all += c
+        return ok_all, fr_all, c_all
+
+    idx = np.arange(nd)
+    ok, fr, c = evaluate(idx, hi)
+    lo[ok] = st.s_max
+    hi[ok] = math.inf
+    for i in np.flatnonzero(~ok):
+        cause[i], frac[i] = c[i], fr[i]
+    active = ~ok
+    for _ in range(rounds - 1):
+        idx = np.flatnonzero(active)
+        if not idx.size:
+            break
+        mid = 0.5 * (lo[idx] + hi[idx])
+        ok, fr, c = evaluate(idx, mid)
+        lo[idx[ok]] = mid[ok]
+        hi[idx[~ok]] = mid[~ok]
+        for k in np.flatnonzero(~ok):
+            cause[idx[k]], frac[idx[k]] = c[k], fr[k]
+    return BatchSStar(lo, hi, cause, frac, used)

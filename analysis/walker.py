@@ -489,7 +489,7 @@ class _Runs:
         if mask is None:
             mask = np.ones(Dg.shape[1:], bool)
         fx, fz = Dg[nu + _ROWS.index("Fx")], Dg[nu + _ROWS.index("Fz")]
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             pu = np.where(mask, np.max(np.abs(Dg[:nu]), axis=0), 0)
             ratio = np.where(mask, np.abs(fx) / np.maximum(fz, 1e-300), 0)
         self.peak_u[gi] = np.maximum(self.peak_u[gi], np.nanmax(pu, axis=1))

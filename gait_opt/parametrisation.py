@@ -123,7 +123,11 @@ def _continued(qa, dqa, ddqa, s, T, continuation):
         qe = q1 + v1 * sig + a1 * (r**2 / 2 - r**3 / (6 * d)) + a1 * d / 2 * (sig - r)
         dqe = v1 + a1 * (r - r**2 / (2 * d))
         ddqe = a1 * (1 - r / d)
-    past = s > 1
+    # the switch sits just past s = 1: an impact time that lands on T to round-off
+    # (the fixed point of the Poincare map) sees the polynomial on both sides, so the AD
+    # derivative of the discrete map is the one-sided one of the continuous map (the
+    # branches differ in jerk; within 1e-9 T they differ by ~jerk * (1e-9 T)^3)
+    past = s > 1 + 1e-9
     return tuple(ca.if_else(past, e, b) for e, b in ((qe, qa), (dqe, dqa), (ddqe, ddqa)))
 
 

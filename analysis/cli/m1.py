@@ -4,13 +4,48 @@ from __future__ import annotations
 import numpy as np
 
 from analysis.output_design import ab_groups, optimize_m1
+from analysis.robust_design import ROBUST_GAIT, RobustDesignSettings, robust_design
 from analysis.sweep_cache import grid_best
 
-from .common import Progress, UserError, add_gait_arguments, add_robot, load_gait, print_json
+from .common import (Progress, UserError, add_gait_arguments, add_robot, load_gait, load_model,
+                     positive, print_json)
+
+
+def cmd_robust_design(args, say):
+    """``biped m1 --robust``: the search of :mod:`analysis.robust_design`."""
+    if args.gait or args.free or args.group:
+        raise UserError("--robust chooses the gait and M1 itself: it excludes --gait, "
+                        "--free and --group")
+    if not 100 <= args.samples <= 10_000_000:
+        raise UserError(f"--samples must be between 100 and 10000000, got {args.samples}")
+    if not 1 <= args.starts <= 50:
+        raise UserError(f"--starts must be between 1 and 50, got {args.starts}")
+    positive(args.mu, "--mu")
+    model = load_model(args.robot)
+    st = RobustDesignSettings(samples=args.samples, starts=args.starts, seed=args.seed,
+                              mu=args.mu)
+    say(f"robust design: gait {ROBUST_GAIT}, v_c rejoining at {st.rejoin} T; about "
+        f"5-8 minutes on 2 cores the first time, then read from the cache")
+    r = robust_design(model, st, progress=say, use_cache=not args.no_cache)
+    if args.json:
+        print_json(r)
+        return 0
+    print(r.message + (" (from the cache)" if r.cached else ""))
+    print(f"  M1 = {r.design['M1']}, v_c rejoins at {r.design['rejoin']} T")
+    print(f"  gait: impact_mu {r.gait_options.get('impact_mu')}, continuation "
+          f"{r.gait_options.get('continuation')}, clearance {r.gait_options.get('clearance')} "
+          f"({r.gait_file})")
+    for k, v in r.verified.items():
+        print(f"  full-order check {k.replace('_', ' ')} (s = {v['scale']:.4g}): "
+              f"{v['passed']} of {len(v['outcomes'])} directions walk and converge")
+    print("  replay: biped simulate " + " ".join(r.simulate_args))
+    return 0
 
 
 def cmd_m1(args):
     say = Progress("m1", quiet=args.json)
+    if args.robust:
+        return cmd_robust_design(args, say)
     gait = load_gait(args, say)
     model = gait.model
     valid, why = ab_groups(model, gait)
@@ -63,5 +98,19 @@ def register(sub):
     where.add_argument("--group", type=int, choices=(1, 2),
                        help="only this a = b = 0 group (default: every group, the best is "
                             "reported)")
+    p.add_argument("--robust", action="store_true",
+                   help="instead: the time-varying design (gait, M1, v_c rejoin time) that "
+                        "survives the largest perturbation s* with max|lambda| at most the "
+                        "virtual constraints' (see 'biped robust'); 5-8 min the first time, "
+                        "cached afterwards")
+    p.add_argument("--samples", type=int, default=40000, metavar="N",
+                   help="with --robust: random M1 screened (40000)")
+    p.add_argument("--starts", type=int, default=3, metavar="K",
+                   help="with --robust: compass searches from the K best samples (3)")
+    p.add_argument("--seed", type=int, default=0, help="with --robust: seed of the samples (0)")
+    p.add_argument("--mu", type=float, default=0.6,
+                   help="with --robust: friction coefficient (0.6)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="with --robust: search again instead of reading a cached result")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_m1)

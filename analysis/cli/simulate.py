@@ -8,7 +8,7 @@ import numpy as np
 
 from biped_casadi import (Gains, Perturbation, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, simulate)
-from biped_casadi.output_law import M1_LIMIT
+from biped_casadi.output_law import M1_LIMIT, SECTION
 from analysis.plots import (save_figures, swing_torques_plot, unactuated_error_plot,
                             walking_animation)
 
@@ -24,9 +24,9 @@ def _num(x, fmt) -> str:
     return format(x, fmt) if math.isfinite(x) else "n/a"
 
 
-def _controller(kind, model, gait, M1, gains):
+def _controller(kind, model, gait, M1, gains, rejoin=0.5):
     if kind == "tv":
-        return TimeVaryingController(model, gait, M1, gains)
+        return TimeVaryingController(model, gait, M1, gains, rejoin=rejoin)
     return VirtualConstraintController(model, gait, gains=gains)
 
 
@@ -70,6 +70,9 @@ def cmd_simulate(args):
         raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
     positive(args.mu, "--mu")
     positive(args.eps, "--eps")
+    if not 0 < args.rejoin <= SECTION:
+        raise UserError(f"--rejoin must be in (0, {SECTION}] (v_c must vanish before the "
+                        f"Poincare section), got {args.rejoin:g}")
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
     _check_perturbation(args)
@@ -88,7 +91,7 @@ def cmd_simulate(args):
     q0, dq0 = perturbation.initial_state(gait)
 
     # ---- simulate
-    ctrl = _controller(args.controller, model, gait, M1, gains)
+    ctrl = _controller(args.controller, model, gait, M1, gains, args.rejoin)
     if args.controller == "tv" and ctrl.singularity().singular:
         raise UserError(f"M1 = {M1.tolist()} makes the controller singular on the reference "
                         "step (D11 - D12 M1 vanishes, eq. 24)")
@@ -99,7 +102,8 @@ def cmd_simulate(args):
         runs = [res]
         if args.compare:
             other = "vc" if args.controller == "tv" else "tv"
-            runs.append(simulate(_controller(other, model, gait, M1, gains), q0, dq0, opts))
+            runs.append(simulate(_controller(other, model, gait, M1, gains, args.rejoin),
+                                 q0, dq0, opts))
     except RuntimeError as e:
         if not args.jit:
             raise
@@ -177,6 +181,9 @@ def register(sub):
     p.add_argument("--torque-limit", type=float, metavar="U",
                    help="stop with status torque_limit where some |u_i| exceeds U, N m "
                         "(default: the robot's limit, 150 for RABBIT)")
+    p.add_argument("--rejoin", type=float, default=0.5, metavar="R",
+                   help=f"time at which the correction v_c rejoins the reference, as a fraction "
+                        f"of T, in (0, {SECTION}] (the paper's: 0.5)")
     p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (0.6)")
     p.add_argument("--eps", type=float, default=0.02,
                    help="epsilon of the output PD, eq. (13), with Kp = 1, Kd = 2 (0.02)")

@@ -1,0 +1,104 @@
+"""``biped robust``: how large a perturbation one design survives (s*), with every
+contact condition checked, and its basin of attraction beside virtual constraints'."""
+from __future__ import annotations
+
+import numpy as np
+
+from analysis.plots import basin_plot, save_figures
+from analysis.robustness import Design, RobustnessSettings, basin, kept_directions, robustness
+from biped_casadi.output_law import SECTION
+
+from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+                     load_gait, output_dir, parse_m1, positive, print_json)
+
+
+def cmd_robust(args):
+    check_m1_values(args.m1)
+    if args.controller == "vc" and (args.m1 is not None or args.rejoin is not None):
+        raise UserError("--m1 and --rejoin apply to the time-varying controller "
+                        "(--controller tv)")
+    positive(args.mu, "--mu")
+    if args.torque_limit is not None:
+        positive(args.torque_limit, "--torque-limit")
+    rejoin = 0.5 if args.rejoin is None else args.rejoin
+    if not 0 < rejoin <= SECTION:
+        raise UserError(f"--rejoin must be in (0, {SECTION}], got {rejoin:g}")
+    if not 1 <= args.directions <= 200:
+        raise UserError(f"--directions must be between 1 and 200, got {args.directions}")
+    if args.plot is not None:
+        output_dir(args.plot, "--plot")
+    say = Progress("robust", quiet=args.json)
+    gait = load_gait(args, say)
+    model = gait.model
+    design = None
+    if args.controller == "tv":
+        design = Design(tuple(parse_m1(args.m1, model.nu)), rejoin)
+    st = RobustnessSettings(directions=args.directions, mu=args.mu,
+                            torque_limit=args.torque_limit, seed=args.seed)
+    say(f"perturbation directions from which virtual constraints walk ({args.directions} "
+        f"wanted; about 0.3 s each)")
+    kept = kept_directions(model, gait, st)
+    say("s* by bisection (up to a minute)")
+    res = robustness(model, gait, design, st, kept=kept)
+    out = res.to_dict()
+    if args.plot is not None:
+        say("basins of attraction, time-varying beside virtual constraints (about a minute)")
+        runs = [basin(model, gait, design)] if design is not None else []
+        runs.append(basin(model, gait, None))
+        out["basins"] = [dict(controller=b.controller, converged_fraction=b.converged_fraction,
+                              counts=b.counts) for b in runs]
+        out["figures"] = save_figures({"basin": basin_plot(runs)}, args.plot)
+    if args.json:
+        print_json(out)
+        return 0
+    print(res.message)
+    print(f"  max|lambda| {res.max_abs:.4g}; directions kept {res.directions_kept} of "
+          f"{res.directions_tried} tried (rejected: "
+          + (", ".join(f"{k} {v}" for k, v in res.directions_rejected.items()) or "none") + ")")
+    if res.paper:
+        p = res.paper
+        conv = p.get("steps_to_converge")
+        print(f"  the paper's perturbation (s = 1): {p['status']}"
+              + (f", below {st.tol:g} from step {int(conv)}" if conv and np.isfinite(conv)
+                 else "") + f"; peak |u| {p['peak_torque']:.1f} N m, min F_z "
+              f"{p['min_normal_force']:.1f} N, max impulse ratio {p['max_impulse_ratio']:.3f}")
+    for b in out.get("basins", []):
+        print(f"  basin ({b['controller']}): {100 * b['converged_fraction']:.1f} % of the "
+              f"cells converge in 10 steps")
+    for f in out.get("figures", []):
+        print(f"figure: {f}")
+    return 0
+
+
+def register(sub):
+    p = sub.add_parser(
+        "robust", help="the largest perturbation a design survives (s*), and its basin",
+        description="Robustness of one design: the largest scale s* of the paper's "
+                    "perturbation (0.01 rad on every joint, 0.1 rad/s on every velocity) at "
+                    "which every kept direction (the paper's, then seeded sign patterns and "
+                    "random directions of the same size, kept only when virtual constraints "
+                    "walk from them) walks 10 valid steps (normal force, friction cone, "
+                    "impact impulse, lift-off, scuffing, torque limit) and ends with "
+                    "max(|q_u err|, |dq_u err|) < 1e-3; the first failure just above s* and "
+                    "its cause. Time-varying designs run on their hybrid zero dynamics "
+                    "(exact for every output gain), virtual constraints in the full-order "
+                    "simulator. With --plot: basins of attraction on the Poincare section, "
+                    "the design beside virtual constraints.")
+    add_gait_arguments(p)
+    add_robot(p)
+    p.add_argument("--controller", choices=("tv", "vc"), default="tv",
+                   help="tv: time-varying outputs (default, needs --m1); vc: virtual constraints")
+    p.add_argument("--m1", nargs="+", type=float, metavar="M1",
+                   help="the components of M1, one per torque")
+    p.add_argument("--rejoin", type=float, metavar="R",
+                   help=f"time at which v_c rejoins the reference, fraction of T in "
+                        f"(0, {SECTION}] (default 0.5, the paper's)")
+    p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (0.6)")
+    p.add_argument("--torque-limit", type=float, metavar="U",
+                   help="|u_i| bound, N m (default: the robot's, 150 for RABBIT)")
+    p.add_argument("--directions", type=int, default=16, metavar="N",
+                   help="perturbation directions kept (16)")
+    p.add_argument("--seed", type=int, default=2024, help="seed of the directions (2024)")
+    p.add_argument("--plot", metavar="DIR", help="write the basin picture into DIR")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_robust)

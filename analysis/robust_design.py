@@ -1,0 +1,400 @@
+"""A robust time-varying design: the largest s* (:mod:`analysis.robustness`) subject to
+max|lambda(A^z)| <= the virtual-constraint eigenvalue on the same gait (so the design
+also converges faster than virtual constraints, near the orbit).
+
+The levers, each measured (see the closing notes of the toolkit and
+``notebooks/05_robust_walking.ipynb``): the outputs M1; the time at which v_c rejoins
+the reference (the paper: T/2; later is better, up to the Poincaré section); the output
+gains (no effect: the closed loop is its zero dynamics); and the gait itself (a
+smaller design bound on the impact impulse ratio, the reference continued past T
+without the Bezier polynomials' growth).
+
+Search (sampling, then local refinement; a scenario NLP was not used: s* is a
+bisection over a discrete pass/fail verdict, and a smooth surrogate of it, tried first,
+led local optimisers into unstable designs):
+
+1. the gait of ``gait`` options (cached on disk), its virtual-constraint eigenvalue and
+   the kept perturbation directions (virtual constraints walk from them);
+2. ``samples`` random M1 in [-box, box]^nu, screened by max|lambda| (variational A^z,
+   well under a millisecond each) against the bound;
+3. the survivors walked from the paper's perturbation at ``screen_scale``, then from
+   every kept direction at that scale (zero-dynamics walker, batched);
+4. s* of the survivors by batched bisection;
+5. compass search on s* from the ``starts`` best: the 2 nu neighbours M1 +- step e_i of
+   a poll walked in one batch, the step halved when none improves;
+6. the best design re-measured (finer integration, more bisection rounds) and verified by
+   the full-order simulator at s* (every direction walks) and just above (one fails).
+
+The result is cached (the settings, the robot and the code define the key), so a
+re-run is instant.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from biped_casadi import SimulationOptions, TimeVaryingController, simulate
+from biped_casadi.caching import cache_dir
+from biped_casadi.files import write_text_atomic
+from biped_casadi.results import Result
+from gait_opt import GaitOptions, default_gait
+from gait_opt.cache import cache_path
+
+from .poincare import poincare_map
+from .robustness import (Design, RobustnessSettings, kept_directions, robustness, s_star_batch,
+                         start_states)
+from .virtual_constraints import vc_eigenvalue
+from .walker import zero_dynamics_walker
+
+__all__ = ["RobustDesignSettings", "RobustDesignResult", "robust_design", "ROBUST_GAIT"]
+
+#: the gait options of the robust design: the impact impulse kept to a ratio of 0.2
+#: (the path friction stays mu = 0.6), the reference continued past T by an
+#: acceleration ramp over 0.03 T, a 5 cm swing clearance
+ROBUST_GAIT = dict(impact_mu=0.2, continuation=0.03, clearance=0.05)
+
+#: bump when the search's results for the same settings change
+RESULTS_VERSION = 2
+
+
+@dataclass(frozen=True)
+class RobustDesignSettings:
+    """The search of :func:`robust_design` (module docstring); all have defaults.
+
+    Parameters
+    ----------
+    gait : dict
+        GaitOptions fields of the gait to design on (default :data:`ROBUST_GAIT`).
+    rejoin : float
+        Rejoin time of v_c, fraction of T.
+    samples : int
+        Random M1 drawn.
+    box : float
+        M1 components drawn in [-box, box].
+    seed : int
+        Seed of the samples.
+    eigen_bound : str or float
+        'vc': max|lambda| <= the virtual-constraint eigenvalue on the gait; a number:
+        that bound (enforced by the compass search and on the result).
+    screen_eigen : float
+        The samples kept as possible starts have max|lambda| below this (looser than the
+        bound: the compass search brings a start under the bound).
+    screen_scale : float
+        Scale of the screening walks.
+    starts : int
+        Compass searches, from the best bisected samples.
+    step, min_step : float
+        First and last step of the compass search.
+    max_polls : int
+        Polls per compass search.
+    search_rk4_steps : int
+        RK4 steps per T of the walker during the search (the final s* uses the
+        robustness settings' own).
+    mu, torque_limit, directions, steps, tol : as :class:`RobustnessSettings`
+    """
+
+    gait: dict = field(default_factory=lambda: dict(ROBUST_GAIT))
+    rejoin: float = 0.75
+    samples: int = 40000
+    box: float = 12.0
+    seed: int = 0
+    eigen_bound: str | float = "vc"
+    screen_eigen: float = 0.9
+    screen_scale: float = 0.5
+    starts: int = 3
+    step: float = 0.5
+    min_step: float = 0.0625
+    max_polls: int = 30
+    search_rk4_steps: int = 200
+    mu: float = 0.6
+    torque_limit: float | None = None
+    directions: int = 16
+    steps: int = 10
+    tol: float = 1e-3
+
+    def robustness_settings(self, rk4_steps: int = 400, rounds: int = 10) -> RobustnessSettings:
+        return RobustnessSettings(directions=self.directions, steps=self.steps, tol=self.tol,
+                                  mu=self.mu, torque_limit=self.torque_limit,
+                                  rk4_steps=rk4_steps, rounds=rounds)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class RobustDesignResult(Result):
+    """The robust design and how it was found.
+
+    ``design`` (M1, rejoin), ``gait_options`` and ``gait_file`` (the cached gait);
+    ``s_star`` / ``s_fail`` / ``failure`` as :class:`~analysis.robustness.RobustnessResult`
+    (bisection on the walker, 10 rounds); ``verified``: the full-order simulator's runs
+    at s* (all directions must walk) and at s_fail; ``max_abs`` (max|lambda| of A^z for
+    this rejoin time, full AD) and ``vc_eigenvalue`` on the gait;
+    ``steps_to_converge``: the paper's perturbation at s = 1, full order;
+    ``tradeoff``: the (max|lambda|, s*) Pareto front of every design bisected;
+    ``simulate_args``: the ``biped simulate`` arguments that replay the design from the
+    paper's perturbation; ``stages``: what each stage did and how long it took.
+    ``status`` 'target_met' (s* >= 1, max|lambda| <= the VC eigenvalue, converged by
+    step 4) or 'target_not_met' (``success`` means the first).
+    """
+
+    status: str
+    message: str
+    design: dict
+    gait_options: dict
+    gait_file: str
+    s_star: float
+    s_fail: float
+    failure: str
+    verified: dict
+    max_abs: float
+    vc_eigenvalue: float
+    steps_to_converge: float | None
+    paper_errors: list
+    directions_kept: int
+    directions_tried: int
+    tradeoff: list
+    simulate_args: list
+    stages: dict
+    elapsed: float
+    settings: dict
+    cached: bool = False
+
+    SUCCESS = ("target_met",)
+
+
+def _key(model, settings: RobustDesignSettings) -> str:
+    body = dict(robot=model.params.to_dict() if hasattr(model.params, "to_dict") else
+                str(model.params), settings=settings.to_dict(), version=RESULTS_VERSION)
+    return hashlib.sha256(json.dumps(body, sort_keys=True, default=str).encode()).hexdigest()[:20]
+
+
+def _pareto(lam, s):
+    """(max|lambda|, s*) pairs not dominated (lower eigenvalue and higher s* is better)."""
+    order = np.lexsort((-s, lam))
+    front, best = [], -np.inf
+    for i in order:
+        if s[i] > best:
+            front.append([float(lam[i]), float(s[i])])
+            best = s[i]
+    return front
+
+
+class _Search:
+    """The stages of the search, with the state they share."""
+
+    def __init__(self, model, st: RobustDesignSettings, progress):
+        self.model, self.st = model, st
+        self.say = progress or (lambda msg: None)
+        self.stages, self.t0 = {}, time.perf_counter()
+        self.seen_lam, self.seen_s = [], []
+
+    def stage(self, name, **info):
+        now = time.perf_counter()
+        self.stages[name] = dict(info, time=round(now - self._last, 2))
+        self._last = now
+
+    def setup(self):
+        st, m = self.st, self.model
+        self._last = time.perf_counter()
+        self.say(f"gait {st.gait} (optimised once, then cached)")
+        self.options = GaitOptions(**st.gait)
+        self.gait = default_gait(m, self.options)
+        self.lam_vc = vc_eigenvalue(m, self.gait).eigenvalue
+        self.bound = self.lam_vc if st.eigen_bound == "vc" else float(st.eigen_bound)
+        self.stage("gait", T=self.gait.T, vc_eigenvalue=self.lam_vc, bound=self.bound)
+        self.say("kept perturbation directions (virtual constraints walk from them)")
+        self.rs = st.robustness_settings(rk4_steps=st.search_rk4_steps, rounds=7)
+        self.kept = kept_directions(m, self.gait, self.rs)
+        self.dirs = self.kept[0]
+        self.stage("directions", kept=len(self.dirs), tried=self.kept[1])
+        self.walker = zero_dynamics_walker(m, self.gait, self.rs.simulation_options(),
+                                           st.search_rk4_steps, jit=True)
+        self.pm = poincare_map(m, self.gait, rejoin=st.rejoin)
+
+    def designs(self, M):
+        return [Design(tuple(x), self.st.rejoin) for x in np.atleast_2d(M)]
+
+    def sample(self):
+        st, nu = self.st, self.model.nu
+        rng = np.random.default_rng(st.seed)
+        M = rng.uniform(-st.box, st.box, (st.samples, nu))
+        self.say(f"{st.samples} random M1: max|lambda| of A^z (kept below {st.screen_eigen:g})")
+        status, _, _, lam = self.pm.jacobian_batch(M)
+        ok = (status == "stable") & (lam < st.screen_eigen)
+        M, lam = M[ok], lam[ok]
+        self.stage("eigenvalue screen", sampled=st.samples, kept=int(ok.sum()))
+        for name, dirs in (("paper direction", self.dirs[:1]), ("all directions", self.dirs)):
+            if not len(M):
+                break
+            self.say(f"screen: {len(M)} designs walked from the {name} at s = {st.screen_scale}")
+            keep = np.zeros(len(M), bool)
+            for a in range(0, len(M), 256 // len(dirs) or 1):
+                part = slice(a, a + (256 // len(dirs) or 1))
+                Mp = M[part]
+                q0, dq0 = start_states(self.gait, np.tile(dirs, (len(Mp), 1)),
+                                       np.full(len(Mp) * len(dirs), st.screen_scale))
+                B = self.walker.walk(q0, dq0, np.repeat(Mp, len(dirs), axis=0), st.rejoin,
+                                     steps=st.steps)
+                err = B.final_error.reshape(len(Mp), len(dirs))
+                good = (B.run_status == "ok").reshape(len(Mp), len(dirs)) & (err < st.tol)
+                keep[part] = good.all(axis=1)
+            M, lam = M[keep], lam[keep]
+            self.stage(f"screen ({name})", kept=len(M))
+        self.say(f"s* of the {len(M)} survivors (batched bisection)")
+        res = s_star_batch(self.walker, self.gait, self.designs(M), self.dirs, self.rs)
+        under = lam <= self.bound
+        self.seen_lam += list(lam[under])
+        self.seen_s += list(res.s_star[under])
+        self.stage("bisection", designs=len(M), best=float(res.s_star.max()) if len(M) else 0.0,
+                   scenario_steps=res.scenario_steps)
+        return M, res.s_star, res.pass_fraction
+
+    def score(self, M):
+        """s* (+ a tie-breaker) of designs; designs over the eigenvalue bound score below 0."""
+        M = np.atleast_2d(M)
+        status, _, _, lam = self.pm.jacobian_batch(M)
+        score = np.where(np.isfinite(lam), -lam, -1e3)
+        ok = (status == "stable") & (lam <= self.bound)
+        if ok.any():
+            r = s_star_batch(self.walker, self.gait, self.designs(M[ok]), self.dirs, self.rs,
+                             rounds=8)
+            score[ok] = r.s_star + 1e-3 * r.pass_fraction
+            self.seen_lam += list(lam[ok])
+            self.seen_s += list(r.s_star)
+        return score
+
+    def refine(self, starts):
+        st = self.st
+        best_x, best_f = None, -np.inf
+        for n, x in enumerate(starts, 1):
+            fx, step, polls = float(self.score(x)[0]), st.step, 0
+            while step >= st.min_step and polls < st.max_polls:
+                polls += 1
+                E = np.eye(len(x))
+                N = np.vstack([x + sgn * step * E[i] for i in range(len(x)) for sgn in (1, -1)])
+                f = self.score(N)
+                j = int(np.argmax(f))
+                if f[j] > fx + 1e-9:
+                    x, fx = N[j], float(f[j])
+                else:
+                    step /= 2
+                self.say(f"compass search {n}/{len(starts)}, poll {polls}: s* {max(fx, 0):.4f}, "
+                         f"step {step:g}")
+            if fx > best_f:
+                best_x, best_f = x, fx
+        self.stage("compass search", starts=len(starts), best=best_f)
+        return best_x
+
+    def verify(self, M1):
+        """The final numbers: s* (walker, finer), full-order runs at s* and s_fail, the
+        paper's perturbation at s = 1."""
+        st, m, g = self.st, self.model, self.gait
+        design = Design(tuple(M1), st.rejoin)
+        fine = st.robustness_settings()
+        self.say("final s* (finer integration) and full-order verification")
+        r = robustness(m, g, design, fine, kept=self.kept)
+        ctrl = TimeVaryingController(m, g, np.array(M1), rejoin=st.rejoin)
+        opts = SimulationOptions(steps=st.steps, mu=st.mu, torque_limit=st.torque_limit,
+                                 jit=True)
+        verified = {}
+        for label, s in (("at_s_star", r.s_star), ("at_s_fail", r.s_fail)):
+            if not math.isfinite(s):
+                continue
+            q0, dq0 = start_states(g, self.dirs, np.full(len(self.dirs), s))
+            runs = [simulate(ctrl, q0[i], dq0[i], opts) for i in range(len(self.dirs))]
+            out = []
+            for run in runs:
+                err = (max(abs(run.qu_errors[-1]), abs(run.dqu_errors[-1]))
+                       if run.success else math.inf)
+                out.append("ok" if run.success and err < st.tol else
+                           ("not_converged" if run.success else run.status))
+            verified[label] = dict(scale=s, outcomes=out,
+                                   passed=int(sum(o == "ok" for o in out)))
+        q0, dq0 = start_states(g, self.dirs[:1], [1.0])
+        paper = simulate(ctrl, q0[0], dq0[0], opts)
+        errs = [max(abs(a), abs(b)) for a, b in zip(paper.qu_errors, paper.dqu_errors)]
+        conv = paper.steps_to_converge(st.tol) if paper.success else None
+        max_abs = poincare_map(m, g, rejoin=st.rejoin).analyse(np.array(M1), method="ad").max_abs
+        self.stage("verification", s_star=r.s_star, full_order=verified)
+        return r, verified, conv, errs, paper, max_abs
+
+
+def robust_design(model, settings: RobustDesignSettings | None = None, progress=None,
+                  cache=None, use_cache: bool = True) -> RobustDesignResult:
+    """Find the robust time-varying design (module docstring).
+
+    Parameters
+    ----------
+    model : BipedModel
+    settings : RobustDesignSettings, optional
+    progress : callable, optional
+        Called with one line of text per stage.
+    cache : str or Path, optional
+        Folder of cached results (default :func:`biped_casadi.cache_dir`).
+    use_cache : bool
+        Read a cached result for the same settings (and write the new one).
+
+    Returns
+    -------
+    RobustDesignResult
+    """
+    st = settings or RobustDesignSettings()
+    path = cache_dir(cache) / "robust" / f"robust-{_key(model, st)}.json"
+    if use_cache and path.is_file():
+        try:
+            d = json.loads(path.read_text())
+            d["cached"] = True
+            d.pop("success", None)
+            return RobustDesignResult(**d)
+        except (ValueError, TypeError, OSError):
+            pass                                       # damaged: recompute
+    search = _Search(model, st, progress)
+    search.setup()
+    M, s, frac = search.sample()
+    if len(M) == 0:
+        raise ValueError("robust design: no sampled M1 passed the screens; try more samples, "
+                         "a larger box or another gait")
+    order = np.lexsort((-frac, -s))
+    best = search.refine(M[order[:st.starts]])
+    if best is None or not search.pm.analyse(best).max_abs <= search.bound:
+        raise ValueError("robust design: the compass search found no design within the "
+                         "eigenvalue bound; try more samples or starts")
+    r, verified, conv, errs, paper, max_abs = search.verify(best)
+    met = bool(r.s_star >= 1 and max_abs <= search.lam_vc and conv is not None and conv <= 4)
+    design = dict(M1=[float(v) for v in best], rejoin=st.rejoin)
+    gait_file = str(cache_path(model, search.options, cache))
+    args = (["--gait", gait_file, "--controller", "tv", "--m1"]
+            + [repr(float(v)) for v in best]
+            + ["--rejoin", repr(st.rejoin), "--perturb", "0.01", "0.1", "--mu", repr(st.mu),
+               "--steps", str(st.steps)]
+            + ([] if st.torque_limit is None else ["--torque-limit", repr(st.torque_limit)]))
+    fail = r.failure
+    msg = (f"robust design: s* = {r.s_star:.4g} with max|lambda| = {max_abs:.3g} "
+           f"(virtual constraints {search.lam_vc:.3g}); from the paper's perturbation "
+           + (f"below {st.tol:g} from step {conv}" if conv else f"{paper.status}")
+           + (f"; just above s*: {fail['status']} in step {fail['step']}" if fail else "")
+           + ("" if met else "; target (s* >= 1, converged by step 4) not met"))
+    result = RobustDesignResult(
+        status="target_met" if met else "target_not_met", message=msg, design=design,
+        gait_options=search.options.to_dict(), gait_file=gait_file, s_star=r.s_star,
+        s_fail=r.s_fail, failure=(f"{fail['status']} in step {fail['step']} (direction "
+                                  f"{fail['direction']})" if fail else ""),
+        verified=verified, max_abs=max_abs, vc_eigenvalue=search.lam_vc,
+        steps_to_converge=conv, paper_errors=errs, directions_kept=len(search.dirs),
+        directions_tried=search.kept[1],
+        tradeoff=_pareto(np.array(search.seen_lam), np.array(search.seen_s)),
+        simulate_args=args, stages=search.stages,
+        elapsed=time.perf_counter() - search.t0, settings=st.to_dict())
+    if use_cache:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_text_atomic(path, json.dumps(result.to_dict(), indent=1))
+        except OSError:
+            pass                                      # a read-only cache is not fatal
+    return result
