@@ -390,7 +390,7 @@ def _brief(r) -> dict:
 
 
 def _robust_settings(ctx) -> RobustDesignSettings:
-    return (RobustDesignSettings(samples=20000, starts=1, max_polls=10) if ctx.opts.quick
+    return (RobustDesignSettings(samples=20000, starts=1) if ctx.opts.quick
             else RobustDesignSettings())
 
 

@@ -188,8 +188,8 @@ def _pareto(lam, s):
 class _Search:
     """The stages of the search, with the state they share."""
 
-    def __init__(self, model, st: RobustDesignSettings, progress):
-        self.model, self.st = model, st
+    def __init__(self, model, st: RobustDesignSettings, progress, scheduler=None):
+        self.model, self.st, self.scheduler = model, st, scheduler
         self.say = progress or (lambda msg: None)
         self.stages, self.t0 = {}, time.perf_counter()
         self.seen_lam, self.seen_s = [], []
@@ -247,7 +247,8 @@ class _Search:
             M, lam = M[keep], lam[keep]
             self.stage(f"screen ({name})", kept=len(M))
         self.say(f"s* of the {len(M)} survivors (batched bisection)")
-        res = s_star_batch(self.walker, self.gait, self.designs(M), self.dirs, self.rs)
+        res = s_star_batch(self.walker, self.gait, self.designs(M), self.dirs, self.rs,
+                           scheduler=self.scheduler)
         under = lam <= self.bound
         self.seen_lam += list(lam[under])
         self.seen_s += list(res.s_star[under])
@@ -263,7 +264,7 @@ class _Search:
         ok = (status == "stable") & (lam <= self.bound)
         if ok.any():
             r = s_star_batch(self.walker, self.gait, self.designs(M[ok]), self.dirs, self.rs,
-                             rounds=8)
+                             rounds=8, scheduler=self.scheduler)
             score[ok] = r.s_star + 1e-3 * r.pass_fraction
             self.seen_lam += list(lam[ok])
             self.seen_s += list(r.s_star)
@@ -326,7 +327,7 @@ class _Search:
 
 
 def robust_design(model, settings: RobustDesignSettings | None = None, progress=None,
-                  cache=None, use_cache: bool = True) -> RobustDesignResult:
+                  cache=None, use_cache: bool = True, scheduler=None) -> RobustDesignResult:
     """Find the robust time-varying design (module docstring).
 
     Parameters
@@ -339,6 +340,8 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
         Folder of cached results (default :func:`biped_casadi.cache_dir`).
     use_cache : bool
         Read a cached result for the same settings (and write the new one).
+    scheduler : str or dask.distributed.Client, optional
+        Run the bisections on a Dask cluster's workers (the results are the same).
 
     Returns
     -------
@@ -354,7 +357,7 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
             return RobustDesignResult(**d)
         except (ValueError, TypeError, OSError):
             pass                                       # damaged: recompute
-    search = _Search(model, st, progress)
+    search = _Search(model, st, progress, scheduler)
     search.setup()
     M, s, frac = search.sample()
     if len(M) == 0:

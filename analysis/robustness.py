@@ -23,6 +23,7 @@ simulator.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import dataclass
@@ -36,7 +37,9 @@ from biped_casadi.output_law import SECTION, check_M1
 from biped_casadi.perturbation import PAPER_SIZES
 from biped_casadi.results import Result, internal
 
+from .cluster import dask_client
 from .poincare import poincare_map
+from .sweep import gait_from_dict, gait_to_dict
 from .virtual_constraints import vc_eigenvalue
 from .walker import virtual_constraint_walker, zero_dynamics_walker
 
@@ -478,8 +481,15 @@ def _verdicts(B, nd, nk, tol):
     return ok.all(axis=1), ok.mean(axis=1), causes
 
 
+def _walk_task(gait_dict, options, rk4_steps, q0, dq0, M1s, rejoin, steps):
+    """One batch walked on a Dask worker (the walker built once per worker process)."""
+    gait = gait_from_dict(gait_dict)
+    walker = zero_dynamics_walker(gait.model, gait, options, rk4_steps, jit=True)
+    return walker.walk(q0, dq0, M1s, rejoin, steps=steps)
+
+
 def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
-                 rounds: int | None = None, chunk: int = 64) -> BatchSStar:
+                 rounds: int | None = None, chunk: int = 64, scheduler=None) -> BatchSStar:
     """s* of many time-varying designs by one bisection run in batches: every round walks
     (designs still bracketing) x (directions) scenarios together.
 
@@ -495,6 +505,9 @@ def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
         Bisection rounds (default ``settings.rounds``).
     chunk : int
         Designs per walker batch.
+    scheduler : str or dask.distributed.Client, optional
+        Walk the batches of each round on a Dask cluster's workers (each builds the
+        walker once) instead of in this process.
 
     Returns
     -------
@@ -509,22 +522,45 @@ def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
     cause, frac = [""] * nd, np.ones(nd)
     used = 0
 
+    def batches(idx, scales):
+        for a in range(0, idx.size, chunk):
+            part = idx[a:a + chunk]
+            q0, dq0 = start_states(gait, np.tile(dirs, (part.size, 1)),
+                                   np.repeat(scales[a:a + chunk], nk))
+            yield part, (q0, dq0, np.repeat(M1[part], nk, axis=0), np.repeat(rj[part], nk))
+
+    def walked(idx, scales):
+        if client is None:
+            for part, args in batches(idx, scales):
+                yield part, walker.walk(*args, steps=st.steps)
+            return
+        futs = [(part, client.submit(_walk_task, gdict, walker.options, walker.rk4_steps,
+                                     *args, st.steps, pure=False))
+                for part, args in batches(idx, scales)]
+        for part, f in futs:
+            yield part, f.result()
+
     def evaluate(idx, scales):
         nonlocal used
         ok_all, fr_all, c_all = np.zeros(idx.size, bool), np.zeros(idx.size), []
-        for a in range(0, idx.size, chunk):
-            part = idx[a:a + chunk]
-            D = np.tile(dirs, (part.size, 1))
-            s = np.repeat(scales[a:a + chunk], nk)
-            q0, dq0 = start_states(gait, D, s)
-            B = walker.walk(q0, dq0, np.repeat(M1[part], nk, axis=0), np.repeat(rj[part], nk),
-                            steps=st.steps)
+        a = 0
+        for part, B in walked(idx, scales):
             used += B.scenario_steps
             ok, fr, c = _verdicts(B, part.size, nk, st.tol)
-            ok_all[a:a + chunk], fr_all[a:a + chunk] = ok, fr
+            ok_all[a:a + part.size], fr_all[a:a + part.size] = ok, fr
             c_all += c
+            a += part.size
         return ok_all, fr_all, c_all
 
+    gdict = gait_to_dict(gait) if scheduler is not None else None
+    with (dask_client(scheduler) if scheduler is not None else contextlib.nullcontext()) \
+            as client:
+        return _bisect_many(evaluate, nd, lo, hi, cause, frac, rounds, st,
+                            lambda: used)
+
+
+def _bisect_many(evaluate, nd, lo, hi, cause, frac, rounds, st, used):
+    """The rounds of :func:`s_star_batch`'s bisection."""
     idx = np.arange(nd)
     ok, fr, c = evaluate(idx, hi)
     lo[ok] = st.s_max
@@ -542,4 +578,4 @@ def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
         hi[idx[~ok]] = mid[~ok]
         for k in np.flatnonzero(~ok):
             cause[idx[k]], frac[idx[k]] = c[k], fr[k]
-    return BatchSStar(lo, hi, cause, frac, used)
+    return BatchSStar(lo, hi, cause, frac, used())

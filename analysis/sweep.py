@@ -44,6 +44,7 @@ from biped_casadi.output_law import check_M1_range
 from biped_casadi.results import Result, internal
 from gait_opt import Gait, GaitOptions
 
+from .cluster import DASK_CONNECT_TIMEOUT, dask_client
 from .poincare import STATUSES, PoincareMap, poincare_map, singular_m1_values
 from .storage import META, SweepStore, digest_json, digest_points
 
@@ -57,8 +58,6 @@ __all__ = ["run_sweep", "SweepResult", "SweepSettings", "grid_points", "line_poi
 RESULTS_VERSION = 1
 DEFAULT_CHUNK_SIZE = 256
 #: how long to wait for a Dask scheduler to answer, and for a first worker to join
-DASK_CONNECT_TIMEOUT = "10s"
-DASK_WORKER_TIMEOUT = 60
 METHODS = ("variational", "ad")
 #: the modules whose code decides the numbers; their SHA-256 is part of a sweep's
 #: settings (a folder written by other code is refused) and is checked on every result
@@ -757,26 +756,8 @@ def _run_processes(payload, P, todo, record, workers):
 
 
 def _run_dask(scheduler, payload, P, todo, record):
-    try:
-        from dask.distributed import Client, as_completed
-    except ImportError:
-        raise ValueError("scheduler: dask.distributed is not installed "
-                         "(pip install 'dask[distributed]')") from None
-    own = isinstance(scheduler, str)
-    if own:
-        try:
-            client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
-        except (OSError, TimeoutError, ValueError) as e:
-            raise ValueError(f"scheduler: cannot connect to the Dask scheduler at "
-                             f"{scheduler} ({type(e).__name__}: {e})") from None
-    else:
-        client = scheduler
-    try:
-        try:
-            client.wait_for_workers(1, timeout=DASK_WORKER_TIMEOUT)
-        except (TimeoutError, OSError) as e:
-            raise ValueError(f"scheduler: no Dask worker joined {scheduler} within "
-                             f"{DASK_WORKER_TIMEOUT} s ({e})") from None
+    from dask.distributed import as_completed
+    with dask_client(scheduler, DASK_CONNECT_TIMEOUT) as client:
         [pf] = client.scatter([payload], broadcast=True)
         futs = {}
         for k, a, b in todo:
@@ -790,9 +771,6 @@ def _run_dask(scheduler, payload, P, todo, record):
         except BaseException:
             client.cancel(list(futs))
             raise
-    finally:
-        if own:
-            client.close()
 
 
 # ----------------------------------------------------- Fig. 2: 1-D sweeps

@@ -21,7 +21,7 @@ from analysis.robust_design import ROBUST_GAIT
 from analysis.robustness import (Design, RobustnessSettings, basin, kept_directions,
                                  robustness, start_states)
 from analysis.walker import VirtualConstraintWalker, ZeroDynamicsWalker
-from biped_casadi import (SimulationOptions, TimeVaryingController,
+from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, directions, simulate)
 from gait_opt import GaitOptions, default_gait
 
@@ -64,6 +64,21 @@ def test_walker_is_the_full_order_closed_loop(model, robust_gait):
         assert abs(r.peak_torque - B.peak_torque[i]) < 1e-2
         if n:
             assert abs(r.max_impulse_ratio - B.max_impulse_ratio[i]) < 1e-6
+
+
+def test_output_gains_change_nothing(model, robust_gait):
+    """With the correction v_c the output starts every step at zero, so the closed loop
+    stays on its zero dynamics whatever the gains of eq. (13): two very different gain
+    sets walk the same steps (the lever 'gains' buys nothing)."""
+    g = robust_gait
+    q0, dq0 = start_states(g, directions(1, model.nq)[:1], [0.5])
+    runs = [simulate(TimeVaryingController(model, g, np.array([-5.79, 2.91, 0.545, 5.69]),
+                                           gains, rejoin=0.75), q0[0], dq0[0],
+                     SimulationOptions(steps=4))
+            for gains in (Gains(), Gains(Kp=4.0, Kd=4.0, eps=0.05))]
+    assert runs[0].status == runs[1].status == "ok"
+    assert np.max(np.abs(runs[0].dqu_errors - runs[1].dqu_errors)) < 1e-6
+    assert np.max(np.abs(runs[0].qu_errors - runs[1].qu_errors)) < 1e-7
 
 
 def test_walker_torque_limit_as_the_simulator(model, gait):
@@ -222,3 +237,22 @@ def test_m1_robust_replays(tmp_path, capsys):
     rc = biped_main(args)
     again = json.loads(capsys.readouterr().out)
     assert rc == 0 and again["cached"] and again["design"] == out["design"]
+
+
+def test_s_star_batch_on_a_dask_cluster(model, gait):
+    """The bisection of several designs on a real Dask LocalCluster (two worker
+    processes, each building the walker once) gives exactly the in-process results."""
+    distributed = pytest.importorskip("dask.distributed")
+    from analysis.robustness import s_star_batch
+    from analysis.walker import zero_dynamics_walker
+    st = RobustnessSettings(directions=2, rounds=4, rk4_steps=200)
+    dirs = kept_directions(model, gait, st)[0]
+    designs = [Design((-2.5, 5.0, -2.5, 5.0)), Design((-10.0, 7.5, 10.0, -5.0))]
+    walker = zero_dynamics_walker(model, gait, st.simulation_options(), 200, jit=True)
+    local = s_star_batch(walker, gait, designs, dirs, st, chunk=1)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, host="127.0.0.1") as cluster:
+        remote = s_star_batch(walker, gait, designs, dirs, st, chunk=1,
+                              scheduler=cluster.scheduler_address)
+    np.testing.assert_array_equal(local.s_star, remote.s_star)
+    assert local.cause == remote.cause and local.scenario_steps == remote.scenario_steps

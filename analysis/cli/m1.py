@@ -11,11 +11,18 @@ from .common import (Progress, UserError, add_gait_arguments, add_robot, load_ga
                      positive, print_json)
 
 
+ROBUST_ONLY = ("--samples", "--starts", "--seed", "--mu", "--scheduler", "--no-cache")
+
+
 def cmd_robust_design(args, say):
     """``biped m1 --robust``: the search of :mod:`analysis.robust_design`."""
     if args.gait or args.free or args.group:
         raise UserError("--robust chooses the gait and M1 itself: it excludes --gait, "
                         "--free and --group")
+    args.samples = 40000 if args.samples is None else args.samples
+    args.starts = 3 if args.starts is None else args.starts
+    args.seed = 0 if args.seed is None else args.seed
+    args.mu = 0.6 if args.mu is None else args.mu
     if not 100 <= args.samples <= 10_000_000:
         raise UserError(f"--samples must be between 100 and 10000000, got {args.samples}")
     if not 1 <= args.starts <= 50:
@@ -26,7 +33,8 @@ def cmd_robust_design(args, say):
                               mu=args.mu)
     say(f"robust design: gait {ROBUST_GAIT}, v_c rejoining at {st.rejoin} T; about "
         f"5-8 minutes on 2 cores the first time, then read from the cache")
-    r = robust_design(model, st, progress=say, use_cache=not args.no_cache)
+    r = robust_design(model, st, progress=say, use_cache=not args.no_cache,
+                      scheduler=args.scheduler)
     if args.json:
         print_json(r)
         return 0
@@ -46,6 +54,9 @@ def cmd_m1(args):
     say = Progress("m1", quiet=args.json)
     if args.robust:
         return cmd_robust_design(args, say)
+    for name in ROBUST_ONLY:
+        if getattr(args, name.lstrip("-").replace("-", "_")) not in (None, False):
+            raise UserError(f"{name} applies to --robust")
     gait = load_gait(args, say)
     model = gait.model
     valid, why = ab_groups(model, gait)
@@ -103,13 +114,16 @@ def register(sub):
                         "survives the largest perturbation s* with max|lambda| at most the "
                         "virtual constraints' (see 'biped robust'); 5-8 min the first time, "
                         "cached afterwards")
-    p.add_argument("--samples", type=int, default=40000, metavar="N",
+    p.add_argument("--samples", type=int, metavar="N",
                    help="with --robust: random M1 screened (40000)")
-    p.add_argument("--starts", type=int, default=3, metavar="K",
+    p.add_argument("--starts", type=int, metavar="K",
                    help="with --robust: compass searches from the K best samples (3)")
-    p.add_argument("--seed", type=int, default=0, help="with --robust: seed of the samples (0)")
-    p.add_argument("--mu", type=float, default=0.6,
+    p.add_argument("--seed", type=int, help="with --robust: seed of the samples (0)")
+    p.add_argument("--mu", type=float,
                    help="with --robust: friction coefficient (0.6)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="with --robust: run the bisections on a Dask cluster "
+                        "(tcp://host:port), each worker building the walker once")
     p.add_argument("--no-cache", action="store_true",
                    help="with --robust: search again instead of reading a cached result")
     p.add_argument("--json", action="store_true", help="print one JSON object")
