@@ -6,7 +6,7 @@ from pathlib import Path
 
 from biped_casadi.files import write_text_atomic
 
-from .plots import COLOUR_NAMES, STANCE, SWING, TORSO
+from .plots import COLOUR_NAMES, OUTCOME_COLOURS, STANCE, SWING, TORSO
 
 
 def _g(d, *keys, default=None):
@@ -326,6 +326,13 @@ def _robust_lines(s: dict) -> list:
                          f"| {_f(r.get('min_normal_force'), '.1f')} | "
                          f"{_f(r.get('max_friction_ratio'), '.3f')} | "
                          f"{_f(r.get('max_impulse_ratio'), '.3f')} |")
+        seen = sorted({r.get("status") for r in runs.values()} & set(OUTCOME_COLOURS))
+        if seen:
+            lines += ["", "Statuses: " + "; ".join(
+                f"{k} = {OUTCOME_COLOURS[k][1]}" for k in seen)
+                + (" (friction cone: |F_x| <= mu F_z, for the stance force and the impact "
+                   "impulse alike)" if "slipped" in seen else "")
+                + "; every run stops at its first invalid state."]
         lines.append("")
     return lines
 

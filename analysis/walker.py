@@ -33,7 +33,7 @@ import numpy as np
 
 from biped_casadi import SimulationOptions, require_same_robot
 from biped_casadi.caching import cached
-from biped_casadi.numerics import rk4_step
+from biped_casadi.numerics import jit_options, rk4_step
 from biped_casadi.output_law import (SECTION, actuated_torque, check_M1,
                                      coordinates_from_outputs, correction,
                                      decoupling_denominator, outputs, unactuated_acceleration)
@@ -205,8 +205,7 @@ class ZeroDynamicsWalker:
             return ca.vertcat(xv[1], ddqu)
 
         xn = rk4_step(rhs, x, h)
-        jit = dict(jit=True, compiler="shell", jit_options=dict(flags=["-O2"])) \
-            if self.jit else {}
+        jit = jit_options("-O2") if self.jit else {}
         node = ca.Function("zd_node", [x, tau, h, R3, P],
                            [ca.cse(xn), tau + h, ca.cse(self._diagnostics(xn, tau + h, stage[1.0], P))],
                            ["x", "tau", "h", "R3", "P"], ["x_next", "tau_next", "diag"], jit)
@@ -547,7 +546,7 @@ class VirtualConstraintWalker:
     def __init__(self, model, gait, options: SimulationOptions | None = None, nodes: int = 200,
                  jit: bool = False):
         require_same_robot(model, gait)
-        self._jit = dict(jit=True, compiler="shell", jit_options=dict(flags=["-O2"])) if jit else {}
+        self._jit = jit_options("-O2") if jit else {}
         self.threads = max(1, min(os.cpu_count() or 1, 8))
         self.options = options if options is not None else SimulationOptions()
         self.model, self.gait = model, gait

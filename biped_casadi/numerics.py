@@ -8,10 +8,34 @@ so the schemes are the same by construction.
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 
 import numpy as np
 
-__all__ = ["rk4_step", "as_vector", "as_number"]
+__all__ = ["rk4_step", "as_vector", "as_number", "jit_options"]
+
+
+def jit_options(optimisation: str = "-O2") -> dict:
+    """CasADi options that compile a Function to machine code on first use.
+
+    The C source and the shared object go to the system's temporary folder (and are
+    removed when the Function is freed), never to the working directory.
+
+    Parameters
+    ----------
+    optimisation : str
+        The C compiler's optimisation flag, e.g. ``"-O1"`` (faster to compile) or
+        ``"-O2"``.
+
+    Returns
+    -------
+    options : dict
+        Options to pass to ``casadi.Function``.
+    """
+    folder = tempfile.gettempdir() + os.sep
+    return dict(jit=True, compiler="shell", jit_cleanup=True,
+                jit_options=dict(flags=[optimisation], directory=folder, cleanup=True))
 
 
 def rk4_step(f, x, h):

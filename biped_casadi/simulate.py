@@ -43,7 +43,7 @@ import casadi as ca
 import numpy as np
 
 from .caching import cached
-from .numerics import as_vector, rk4_step
+from .numerics import as_vector, jit_options, rk4_step
 from .output_law import SECTION
 from .results import Result, internal, json_safe
 from .validity import first_violation, impact_violation, node_violations
@@ -411,8 +411,7 @@ class Simulator:
             return ca.vertcat(dq, ddq, dr)
 
         Xn = ca.cse(rk4_step(rhs, X, h))
-        jit = dict(jit=True, compiler="shell", jit_options=dict(flags=["-O1"])) \
-            if self.options.jit else {}
+        jit = jit_options("-O1") if self.options.jit else {}
         self.rk4 = ca.Function("closed_loop_rk4", [X, tau, h, p], [Xn, tau + h],
                                ["X", "tau", "h", "p"], ["X_next", "tau_next"], jit)
         self.advance = self.rk4.mapaccum("closed_loop_chunk", self.chunk, [0, 1], [0, 1])

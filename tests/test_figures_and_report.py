@@ -119,12 +119,12 @@ def _summary(tv_status="ok", tv_message=""):
                    for k in ("group1", "group2", "free")} | {
             "paper_example_M1": dict(max_abs=22.2)},
         "vc_comparison": dict(vc=dict(eigenvalue=0.54)),
-        "simulation": dict(paper=dict(tv=dict(status=tv_status, message=tv_message),
-                                      vc=dict(status="ok", steps=[], steps_to_converge=5)),
-                           figures_run=dict(M1=[1.0, 2.0, 3.0, 4.0], scale=0.05,
-                                            perturbation=[5e-4, 5e-3],
-                                            tv=dict(steps_to_converge=3),
-                                            vc=dict(steps_to_converge=4))),
+        "simulation": dict(perturbation=[0.01, 0.1], mu=0.6, runs=dict(
+            default_vc=dict(label="virtual constraints (default gait)", status="ok",
+                            steps=10, steps_to_converge=5),
+            default_deadbeat=dict(label="deadbeat M1 (default gait)", status=tv_status,
+                                  message=tv_message, steps=1 if tv_message else 10,
+                                  steps_to_converge=None if tv_message else 3))),
         "stages": {"gait": dict(status="ok", time=1.0)},
         "figures": figs,
         "paper": dict(D11_T=24.2445, D12_T=[13.4, 3.6, 0.54, 0.04],
