@@ -290,8 +290,9 @@ def _robust_lines(s: dict) -> list:
                f"below 1e-3 from step {_f(rd.get('steps_to_converge'))} (the paper: step 4)."),
             "",
             f"Robust design: M1 = {_f(_g(rd, 'design', 'M1'), '.5g')}, v_c rejoining at "
-            f"{_f(_g(rd, 'design', 'rejoin'))} T, gait options {rd.get('gait_options', {}).get('impact_mu')} "
-            f"(impact impulse bound), continuation {rd.get('gait_options', {}).get('continuation')}; "
+            f"{_f(_g(rd, 'design', 'rejoin'))} T; its gait bounds the impact impulse ratio "
+            f"|F_x|/F_z by {rd.get('gait_options', {}).get('impact_mu')} and continues the "
+            f"reference past T ({rd.get('gait_options', {}).get('continuation')}); "
             f"max|λ| {_f(rd.get('max_abs'), '.3g')} against the virtual constraints' "
             f"{_f(rd.get('vc_eigenvalue'), '.3g')} on that gait. Full-order check: "
             + "; ".join(f"{k.replace('_', ' ')} (s = {_f(v.get('scale'), '.4g')}) {v.get('passed')} "

@@ -2,7 +2,6 @@
 they never rot.  They share the on-disk gait cache with the rest of the suite."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import nbformat

@@ -18,7 +18,7 @@ from analysis import poincare_eigenvalues, poincare_map, vc_eigenvalue
 from analysis.cli import main as biped_main
 from analysis.output_design import (ab_solution_set, group_of, optimize_m1,
                                     swing_height_at_Td, taylor_ab, TaylorAB)
-from biped_casadi import (RABBIT, BipedModel, RobotParams, SimulationOptions,
+from biped_casadi import (RABBIT, BipedModel, SimulationOptions,
                           TimeVaryingController, VirtualConstraintController,
                           description_from_dict, load_description, rabbit, robot, simulate)
 from biped_casadi.description import builtin_path
