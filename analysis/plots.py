@@ -448,7 +448,8 @@ def swing_torques_plot(results, gait, title: str | None = None, labels=None) -> 
         ud = gait.u(tau)
         for i, j in enumerate(joints):
             ax[i].plot(res.t[sel], ud[j], "k--", lw=0.8,
-                       label="reference $u^d$" if k == 0 else None)
+                       label=(f"reference $u^d$ on the steps of {labels[0]}"
+                              if len(results) > 1 else "reference $u^d$") if k == 0 else None)
     for i, j in enumerate(joints):
         ax[i].set_ylabel(f"u{j + 1}, {model.joint_names[j + 1]} [N m]")
     ax[-1].set_xlabel("t [s]")

@@ -300,6 +300,10 @@ def _robust_lines(s: dict) -> list:
                         for k, v in (rd.get("verified") or {}).items())
             + f". Replay: `biped simulate {' '.join(rd.get('simulate_args', []))}`.", ""]
     if rob:
+        st = (s.get("robustness") or {}).get("settings") or {}
+        res_note = (f" s* by bisection to {_f(st['s_max'] / 2 ** (st['rounds'] - 1), '.3g')} "
+                    "(the robust search above refines its own s* further)."
+                    if "s_max" in st and "rounds" in st else "")
         lines += ["| design | gait | max\\|λ\\| | s* | first failure just above s* | "
                   "directions kept |", "|---|---|---|---|---|---|"]
         for r in rob:
@@ -315,7 +319,7 @@ def _robust_lines(s: dict) -> list:
                   "random directions of the same per-joint size, kept only when virtual "
                   "constraints walk from them at full scale (the others start with the "
                   "swing foot in the ground). Time-varying designs: exact zero-dynamics "
-                  "walker; virtual constraints: full-order simulator.", ""]
+                  "walker; virtual constraints: full-order simulator." + res_note, ""]
     if runs:
         lines += ["Runs from the paper's full perturbation (Fig. 5), with their validity "
                   "margins:", "", "| run | status | steps | converged (1e-3) from step | "
@@ -329,11 +333,12 @@ def _robust_lines(s: dict) -> list:
                          f"{_f(r.get('max_impulse_ratio'), '.3f')} |")
         seen = sorted({r.get("status") for r in runs.values()} & set(OUTCOME_COLOURS))
         if seen:
-            lines += ["", "Statuses: " + "; ".join(
-                f"{k} = {OUTCOME_COLOURS[k][1]}" for k in seen)
-                + (" (friction cone: |F_x| <= mu F_z, for the stance force and the impact "
-                   "impulse alike)" if "slipped" in seen else "")
-                + "; every run stops at its first invalid state."]
+            meaning = {k: OUTCOME_COLOURS[k][1] for k in seen}
+            if "slipped" in meaning:
+                meaning["slipped"] = ("the stance force or the impact impulse left the "
+                                      "friction cone |F_x| <= mu F_z")
+            lines += ["", "Statuses: " + "; ".join(f"{k}: {v}" for k, v in meaning.items())
+                      + "; every run stops at its first invalid state."]
         lines.append("")
     return lines
 

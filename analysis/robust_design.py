@@ -81,23 +81,25 @@ class RobustDesignSettings:
     seed : int
         Seed of the samples.
     eigen_bound : str or float
-        'vc': max|lambda| <= the virtual-constraint eigenvalue on the gait; a number:
-        that bound (enforced by the compass search and on the result).
+        'vc': max ``|lambda|`` <= the virtual-constraint eigenvalue on the gait; a
+        number: that bound (enforced by the compass search and on the result).
     screen_eigen : float
-        The samples kept as possible starts have max|lambda| below this (looser than the
-        bound: the compass search brings a start under the bound).
+        The samples kept as possible starts have max ``|lambda|`` below this (looser
+        than the bound: the compass search brings a start under the bound).
     screen_scale : float
         Scale of the screening walks.
     starts : int
         Compass searches, from the best bisected samples.
     step, min_step : float
-        First and last step of the compass search.
+        First and last step of the compass search (in units of M1).
     max_polls : int
         Polls per compass search.
     search_rk4_steps : int
         RK4 steps per T of the walker during the search (the final s* uses the
         robustness settings' own).
     mu, torque_limit, directions, steps, tol : as :class:`RobustnessSettings`
+        Friction coefficient, torque bound (N m, None: the robot's), kept directions,
+        steps walked and convergence threshold of every robustness run.
     """
 
     gait: dict = field(default_factory=lambda: dict(ROBUST_GAIT))
@@ -120,11 +122,33 @@ class RobustDesignSettings:
     tol: float = 1e-3
 
     def robustness_settings(self, rk4_steps: int = 400, rounds: int = 10) -> RobustnessSettings:
+        """The matching robustness settings, with the given integration and rounds.
+
+        Parameters
+        ----------
+        rk4_steps : int
+            RK4 steps per T of the zero-dynamics walker.
+        rounds : int
+            Bisection rounds.
+
+        Returns
+        -------
+        RobustnessSettings
+            With ``directions``, ``steps``, ``tol``, ``mu`` and ``torque_limit`` of these
+            settings, the other fields at their defaults.
+        """
         return RobustnessSettings(directions=self.directions, steps=self.steps, tol=self.tol,
                                   mu=self.mu, torque_limit=self.torque_limit,
                                   rk4_steps=rk4_steps, rounds=rounds)
 
     def to_dict(self) -> dict:
+        """The settings as a dictionary (the search's part of the cache key).
+
+        Returns
+        -------
+        dict
+            Field name -> value, ``gait`` as a copy of its dictionary.
+        """
         return asdict(self)
 
 
@@ -132,17 +156,58 @@ class RobustDesignSettings:
 class RobustDesignResult(Result):
     """The robust design and how it was found.
 
-    ``design`` (M1, rejoin), ``gait_options`` and ``gait_file`` (the cached gait);
-    ``s_star`` / ``s_fail`` / ``failure`` as :class:`~analysis.robustness.RobustnessResult`
-    (bisection on the walker, 10 rounds); ``verified``: the full-order simulator's runs
-    at s* (all directions must walk) and at s_fail; ``max_abs`` (max|lambda| of A^z for
-    this rejoin time, full AD) and ``vc_eigenvalue`` on the gait;
-    ``steps_to_converge``: the paper's perturbation at s = 1, full order;
-    ``tradeoff``: the (max|lambda|, s*) Pareto front of every design bisected;
-    ``simulate_args``: the ``biped simulate`` arguments that replay the design from the
-    paper's perturbation; ``stages``: what each stage did and how long it took.
-    ``status`` 'target_met' (s* >= 1, max|lambda| <= the VC eigenvalue, converged by
-    step 4) or 'target_not_met' (``success`` means the first).
+    ``success`` means ``status`` 'target_met'.
+
+    Parameters
+    ----------
+    status : str
+        'target_met' (s* >= 1, max ``|lambda|`` <= the VC eigenvalue, converged by step
+        4) or 'target_not_met'.
+    message : str
+        The result in words.
+    design : dict
+        ``M1`` (list of float) and ``rejoin`` (fraction of T).
+    gait_options : dict
+        The GaitOptions of the gait designed on.
+    gait_file : str
+        The cached gait's file.
+    s_star : float
+        As :class:`~analysis.robustness.RobustnessResult` (bisection on the walker, 10
+        rounds).
+    s_fail : float
+        As :class:`~analysis.robustness.RobustnessResult`.
+    failure : str
+        The failure at ``s_fail`` (status, step and direction) in words; '' when none.
+    verified : dict
+        The full-order simulator's runs at s* (all directions must walk) and at
+        s_fail: 'at_s_star' and 'at_s_fail' -> scale, outcome per direction and number
+        passed.
+    max_abs : float
+        max ``|lambda|`` of A^z for this rejoin time (full AD).
+    vc_eigenvalue : float
+        The virtual-constraint eigenvalue on the gait.
+    steps_to_converge : float or None
+        The paper's perturbation at s = 1, full order: the step from which the error
+        stays below ``tol``; None when that run failed or never converged.
+    paper_errors : list of float
+        ``max(|q_u err|, |dq_u err|)`` at every step of that run.
+    directions_kept : int
+        Perturbation directions used.
+    directions_tried : int
+        Candidate directions tried to keep them.
+    tradeoff : list
+        The (max ``|lambda|``, s*) Pareto front of every design bisected, as pairs.
+    simulate_args : list of str
+        The ``biped simulate`` arguments that replay the design from the paper's
+        perturbation.
+    stages : dict
+        What each stage did and how long it took (s).
+    elapsed : float
+        Wall time of the search, s.
+    settings : dict
+        :meth:`RobustDesignSettings.to_dict` of the search.
+    cached : bool
+        Whether the result was read from the cache.
     """
 
     status: str
@@ -335,7 +400,9 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
     Parameters
     ----------
     model : BipedModel
+        The robot.
     settings : RobustDesignSettings, optional
+        The search (default: all defaults).
     progress : callable, optional
         Called with one line of text per stage.
     cache : str or Path, optional
@@ -348,6 +415,7 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
     Returns
     -------
     RobustDesignResult
+        The best design, its s* and how it was found.
     """
     st = settings or RobustDesignSettings()
     path = cache_dir(cache) / "robust" / f"robust-{_key(model, st)}.json"

@@ -49,15 +49,17 @@ __all__ = ["Design", "RobustnessSettings", "RobustnessResult", "kept_directions"
 
 @dataclass(frozen=True)
 class Design:
-    """A time-varying controller design: the output matrix M1 and the time at which the
-    correction v_c rejoins the reference, as a fraction of T (the paper: 1/2; at most
-    the Poincaré section, 0.75).  The output gains do not matter for walking (the closed
-    loop is its zero dynamics) and are not part of a design.
+    """A time-varying controller design: the output matrix M1 and the rejoin time of v_c.
+
+    The rejoin time is when the correction v_c rejoins the reference, as a fraction of
+    T (the paper: 1/2; at most the Poincaré section, 0.75).  The output gains do not
+    matter for walking (the closed loop is its zero dynamics) and are not part of a
+    design.
 
     Parameters
     ----------
     M1 : tuple of float
-        One number per actuated joint.
+        One number per actuated joint (a sequence is converted to a tuple of floats).
     rejoin : float
         Rejoin time of v_c, fraction of T, in (0, 0.75].
     """
@@ -74,6 +76,14 @@ class Design:
         object.__setattr__(self, "rejoin", r)
 
     def to_dict(self) -> dict:
+        """The design in plain JSON types.
+
+        Returns
+        -------
+        dict
+            ``controller`` 'tv', ``M1`` as a list of float and ``rejoin`` (fraction
+            of T).
+        """
         return dict(controller="tv", M1=list(self.M1), rejoin=self.rejoin)
 
 
@@ -92,15 +102,16 @@ class RobustnessSettings:
     steps : int
         Steps every run must walk.
     tol : float
-        max(|q_u err|, |dq_u err|) at the last step must be below this.
+        ``max(|q_u err|, |dq_u err|)`` at the last step must be below this (rad and
+        rad/s).
     s_max : float
         The largest scale tried.
     rounds : int
-        Bisection rounds (resolution s_max / 2^(rounds - 1)).
+        Bisection rounds (resolution ``s_max / 2^(rounds - 1)``).
     mu : float
         Friction coefficient (stance foot and impact impulse).
     torque_limit : float, optional
-        |u_i| bound, N m (default the robot's).
+        Bound on ``|u_i|``, N m (default the robot's).
     rk4_steps : int
         RK4 steps per T of the zero-dynamics walker.
     """
@@ -117,6 +128,19 @@ class RobustnessSettings:
     rk4_steps: int = 400
 
     def simulation_options(self, jit: bool = False) -> SimulationOptions:
+        """The simulation options of the runs: ``steps``, ``mu`` and ``torque_limit``.
+
+        Parameters
+        ----------
+        jit : bool
+            Compile the simulator's functions to C.
+
+        Returns
+        -------
+        SimulationOptions
+            With the steps to walk, the friction coefficient and the torque limit of
+            these settings, the other options at their defaults.
+        """
         return SimulationOptions(steps=self.steps, mu=self.mu, torque_limit=self.torque_limit,
                                  jit=jit)
 
@@ -125,13 +149,51 @@ class RobustnessSettings:
 class RobustnessResult(Result):
     """Robustness of one design (see the module docstring).
 
-    ``s_star``: the largest scale at which every kept direction walks and converges;
-    ``s_fail``: the scale just above it (bisection) where ``failure`` happened
-    (direction index, status 'not_converged' or a validity status, step);
-    ``steps_to_converge``: at s*, the worst over the kept directions (steps until the
-    error stays below ``tol``); ``paper``: the run from the paper's perturbation
-    (direction 0 at s = 1): status, steps to converge, validity margins.
-    ``status`` 'done' (``success``).
+    ``status`` is always 'done' (``success``).  The kept directions are left out of
+    ``to_dict()``.
+
+    Parameters
+    ----------
+    controller : str
+        'tv' (time-varying design) or 'vc' (virtual constraints).
+    design : dict
+        :meth:`Design.to_dict` of the time-varying design, or ``{"controller": "vc"}``.
+    s_star : float
+        The largest scale at which every kept direction walks and converges (0 when no
+        scale tried passed; ``s_max`` when every direction passes there).
+    s_fail : float
+        The scale just above ``s_star`` (bisection) where ``failure`` happened; inf
+        when every direction passes at ``s_max``.
+    failure : dict
+        The failure at ``s_fail``: direction index, status ('not_converged' or a
+        validity status), step and final error; empty when there is none.
+    steps_to_converge : float
+        At s*, the worst over the kept directions of the steps until the error stays
+        below ``tol``; NaN when no scale passed.
+    paper : dict
+        The run from the paper's perturbation (direction 0 at s = 1): status, steps to
+        converge, validity margins; empty when direction 0 is not the paper's.
+    max_abs : float
+        max ``|lambda|`` of the linearised restricted Poincaré map of the design (for
+        virtual constraints: ``|eigenvalue|``).
+    directions_kept : int
+        Directions used (virtual constraints walk from them at full scale).
+    directions_tried : int
+        Candidate directions tried to keep them.
+    directions_rejected : dict
+        Status -> number of candidates rejected with it.
+    settings : dict
+        The :class:`RobustnessSettings` fields.
+    elapsed : float
+        Wall time, s.
+    runs : int
+        Runs (walks from one start state) made by the bisection and the paper's run.
+    status : str
+        'done'.
+    message : str
+        s* in words, with the failure just above it.
+    kept : numpy.ndarray
+        (k, 2 nq) the kept directions (left out of ``to_dict()``).
     """
 
     controller: str
@@ -156,7 +218,29 @@ class RobustnessResult(Result):
 
 
 def start_states(gait, dirs, scales, sizes=PAPER_SIZES):
-    """Start states (q0, dq0), each (n, nq), of directions (n, 2 nq) at scales (n,)."""
+    """Start states (q0, dq0) of perturbation directions at given scales.
+
+    The perturbation of a direction d at scale s adds ``sizes[0] * s * d[:nq]`` (rad) to
+    the reference configuration at the start of the step (tau = 0) and
+    ``sizes[1] * s * d[nq:]`` (rad/s) to its velocities.
+
+    Parameters
+    ----------
+    gait : Reference
+        The reference step.
+    dirs : array_like
+        (n, 2 nq) directions (one direction (2 nq,) is a batch of one).
+    scales : float or array_like
+        (n,) scales, broadcast along the directions.
+    sizes : tuple of float
+        Per-joint perturbation size at scale 1: rad for the angles, rad/s for the
+        velocities (default the paper's 0.01 rad and 0.1 rad/s).
+
+    Returns
+    -------
+    q0, dq0 : numpy.ndarray
+        (n, nq) start configurations (rad) and velocities (rad/s).
+    """
     dirs = np.atleast_2d(np.asarray(dirs, float))
     nq = gait.model.nq
     s = np.broadcast_to(np.asarray(scales, float), (len(dirs),))[:, None]
@@ -175,8 +259,11 @@ def kept_directions(model, gait, settings: RobustnessSettings | None = None, pro
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
+        The reference step, made for ``model``.
     settings : RobustnessSettings, optional
+        Candidates, seed, steps and validity thresholds (default: all defaults).
     progress : callable, optional
         Called with a line of text per candidate tried.
 
@@ -223,7 +310,7 @@ class _TVRunner:
         err = B.final_error
         out = []
         for i in range(len(dirs)):
-            status = B.run_status[i]
+            status = str(B.run_status[i])
             if status == "ok" and not err[i] < self.st.tol:
                 status = "not_converged"
             out.append(dict(status=status, step=int(B.fail_step[i]),
@@ -298,10 +385,13 @@ def robustness(model, gait, design: Design | None = None,
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
+        The reference step, made for ``model``.
     design : Design, optional
         The time-varying design; None measures virtual constraints fitted to the gait.
     settings : RobustnessSettings, optional
+        How robustness is measured (default: all defaults).
     kept : tuple, optional
         (directions, tried, rejected) from :func:`kept_directions`, to reuse.
     progress : callable, optional
@@ -355,10 +445,41 @@ class BasinResult(Result):
     """Outcome of every cell of a grid of zero-dynamics states on the Poincaré section.
 
     ``dq_u`` (columns) and ``q_u`` (rows) are the offsets of the cells from the fixed
-    point x* = (q_u^d, dq_u^d)(0.75 T); ``outcome[i, j]`` is 'converged' (every step
-    valid, final error below ``tol``), 'walked' (valid but not converged) or the status
-    of the first invalid state; ``final_error`` (inf where failed).  ``converged_fraction``
-    of the cells; ``status`` 'done'.
+    point x* = (q_u^d, dq_u^d)(0.75 T).  ``status`` is always 'done' (``success``).  The
+    grid arrays are left out of ``to_dict()``.
+
+    Parameters
+    ----------
+    controller : str
+        'tv' (time-varying design) or 'vc' (virtual constraints).
+    design : dict
+        :meth:`Design.to_dict` of the time-varying design, or ``{"controller": "vc"}``.
+    x_star : list of float
+        The fixed point (q_u^d, dq_u^d) at 0.75 T, rad and rad/s.
+    steps : int
+        Impacts walked from each cell.
+    tol : float
+        Convergence threshold on the final error.
+    converged_fraction : float
+        Fraction of the cells that converged.
+    counts : dict
+        Outcome -> number of cells.
+    elapsed : float
+        Wall time, s.
+    status : str
+        'done'.
+    message : str
+        The converged percentage in words.
+    q_u : numpy.ndarray
+        (n,) offsets of the rows from q_u*, rad.
+    dq_u : numpy.ndarray
+        (n,) offsets of the columns from dq_u*, rad/s.
+    outcome : numpy.ndarray
+        (n, n) ``outcome[i, j]`` is 'converged' (every step valid, final error below
+        ``tol``), 'walked' (valid but not converged) or the status of the first invalid
+        state.
+    final_error : numpy.ndarray
+        (n, n) ``max(|q_u err|, |dq_u err|)`` at the last step; inf where failed.
     """
 
     controller: str
@@ -394,7 +515,9 @@ def basin(model, gait, design: Design | None = None, n: int = 101,
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
+        The reference step, made for ``model``.
     design : Design, optional
         A time-varying design; None: virtual constraints fitted to the gait.
     n : int
@@ -404,7 +527,7 @@ def basin(model, gait, design: Design | None = None, n: int = 101,
     steps : int
         Impacts walked from each cell.
     tol : float
-        Convergence threshold on max(|q_u err|, |dq_u err|) at the last step.
+        Convergence threshold on ``max(|q_u err|, |dq_u err|)`` at the last step.
     options : SimulationOptions, optional
         Validity thresholds (default: mu 0.6, the robot's torque limit).
     rk4_steps, nodes : int
@@ -451,10 +574,23 @@ def basin(model, gait, design: Design | None = None, n: int = 101,
 # ------------------------------------------------------- many designs at once
 @dataclass
 class BatchSStar:
-    """s* of many time-varying designs (row i = design i): ``s_star``, ``s_fail`` and
-    the status of the first failure at s_fail (``cause``), the fraction of directions
-    that pass at s_fail (``pass_fraction``, a tie-breaker inside one bisection cell) and
-    the scenario-steps walked."""
+    """s* of many time-varying designs (row i = design i).
+
+    Parameters
+    ----------
+    s_star : numpy.ndarray
+        (n,) the largest scale passed by every direction.
+    s_fail : numpy.ndarray
+        (n,) the scale just above it where a direction failed; inf when all pass at
+        ``s_max``.
+    cause : list of str
+        The status of the first failure at ``s_fail`` (with its step), '' where none.
+    pass_fraction : numpy.ndarray
+        (n,) fraction of directions that pass at ``s_fail`` (a tie-breaker inside one
+        bisection cell).
+    scenario_steps : int
+        The scenario-steps walked.
+    """
     s_star: np.ndarray
     s_fail: np.ndarray
     cause: list
@@ -490,17 +626,22 @@ def _walk_task(gait_dict, options, rk4_steps, q0, dq0, M1s, rejoin, steps):
 
 def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
                  rounds: int | None = None, chunk: int = 64, scheduler=None) -> BatchSStar:
-    """s* of many time-varying designs by one bisection run in batches: every round walks
-    (designs still bracketing) x (directions) scenarios together.
+    """s* of many time-varying designs by one bisection run in batches.
+
+    Every round walks (designs still bracketing) x (directions) scenarios together.
 
     Parameters
     ----------
     walker : ZeroDynamicsWalker
+        The walker of ``gait`` (its options and RK4 steps are used on Dask workers).
     gait : Reference
+        The reference step.
     designs : list of Design
+        The time-varying designs.
     dirs : array
         Kept directions (k, 2 nq).
     settings : RobustnessSettings
+        Steps, tolerance, ``s_max`` and default bisection rounds.
     rounds : int, optional
         Bisection rounds (default ``settings.rounds``).
     chunk : int

@@ -53,13 +53,39 @@ _ROWS = ("Fx", "Fz", "xsw", "zsw", "dzsw", "hip", "torso", "den")
 class WalkBatch(Result):
     """The runs of a batch of scenarios (row i = scenario i).
 
-    ``run_status[i]`` is 'ok' when every step was valid, else the status of the first
-    invalid state (as :data:`biped_casadi.simulate.STATUSES`); ``fail_step[i]`` the
-    index of the step where it failed (``steps`` when ok).  Per step (NaN after a
-    failure): ``qu_error``, ``dqu_error`` = q_u - q_u^d(T), dq_u - dq_u^d(T) just before
-    the impact, ``duration`` (s).  Over each run up to its end: ``peak_torque`` (N m),
-    ``min_normal_force`` (N), ``max_friction_ratio``, ``max_impulse_ratio``.
-    ``status`` is 'complete' (``success``); ``scenario_steps`` counts the steps taken.
+    ``status`` is always 'complete' (``success``).  The per-scenario arrays are left out
+    of ``to_dict()``.  The per-step arrays are NaN after a failure; the per-run
+    quantities are taken over each run up to its end.
+
+    Parameters
+    ----------
+    status : str
+        'complete'.
+    message : str
+        How many runs were valid.
+    steps : int
+        Steps (impacts) each run was to walk.
+    scenario_steps : int
+        The steps taken, summed over the scenarios.
+    run_status : numpy.ndarray
+        (n,) 'ok' when every step was valid, else the status of the first invalid state
+        (as :data:`biped_casadi.simulate.STATUSES`).
+    fail_step : numpy.ndarray
+        (n,) the index of the step where the run failed (``steps`` when ok).
+    qu_error : numpy.ndarray
+        (n, steps) q_u - q_u^d(T) just before each impact, rad.
+    dqu_error : numpy.ndarray
+        (n, steps) dq_u - dq_u^d(T) just before each impact, rad/s.
+    duration : numpy.ndarray
+        (n, steps) the duration of each step (tau at its impact), s.
+    peak_torque : numpy.ndarray
+        (n,) the largest ``|u_i|``, N m.
+    min_normal_force : numpy.ndarray
+        (n,) the smallest normal ground reaction of the stance foot, N.
+    max_friction_ratio : numpy.ndarray
+        (n,) the largest ratio of tangential to normal ground reaction.
+    max_impulse_ratio : numpy.ndarray
+        (n,) the largest ratio of tangential to normal impact impulse.
     """
 
     status: str
@@ -85,13 +111,26 @@ class WalkBatch(Result):
 
     @property
     def final_error(self) -> np.ndarray:
-        """max(|q_u err|, |dq_u err|) at the last step; inf where the run failed."""
+        """``max(|q_u err|, |dq_u err|)`` at the last step; inf where the run failed."""
         e = np.maximum(np.abs(self.qu_error[:, -1]), np.abs(self.dqu_error[:, -1]))
         return np.where(self.ok & np.isfinite(e), e, np.inf)
 
     def steps_to_converge(self, tol: float = 1e-3) -> np.ndarray:
-        """1-based step from which max(|q_u err|, |dq_u err|) stays below ``tol`` to the
-        end of the run; NaN where the run failed or never got there."""
+        """The step of each run from which its error stays below ``tol`` to the end.
+
+        The error of a step is ``max(|q_u err|, |dq_u err|)`` just before its impact.
+
+        Parameters
+        ----------
+        tol : float
+            Convergence threshold on the error (rad and rad/s).
+
+        Returns
+        -------
+        numpy.ndarray
+            (n,) 1-based step from which the error stays below ``tol`` to the end of
+            the run; NaN where the run failed or never got there.
+        """
         e = np.maximum(np.abs(self.qu_error), np.abs(self.dqu_error))
         below = e < tol
         out = np.full(len(e), np.nan)
@@ -110,6 +149,7 @@ class ZeroDynamicsWalker:
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
         The reference step, made for ``model``.
     options : SimulationOptions, optional
@@ -150,6 +190,7 @@ class ZeroDynamicsWalker:
 
     @property
     def cache_key(self):
+        """What the walker depends on: the gait's key, the options, rk4_steps and jit."""
         return (self.gait.cache_key, self.options, self.rk4_steps, self.jit)
 
     # ---------------------------------------------------------------- build
@@ -266,9 +307,27 @@ class ZeroDynamicsWalker:
 
     # ----------------------------------------------------------- scenarios
     def scenarios(self, q0, dq0, M1s, rejoin):
-        """Initial (q_u, dq_u) (n, 2) and step constants P (n, 3 nu + 1) for full start
-        states q0, dq0 (n, nq) at tau = 0, designs M1s (n, nu) and rejoin fractions
-        (n,); arrays broadcast along n."""
+        """Initial (q_u, dq_u) and step constants P of scenarios from full start states.
+
+        The arrays broadcast along the n scenarios.
+
+        Parameters
+        ----------
+        q0, dq0 : array_like
+            (n, nq) start configurations (rad) and velocities (rad/s) at tau = 0.
+        M1s : array_like
+            (n, nu) output matrices, one per scenario (or one, broadcast).
+        rejoin : float or array_like
+            (n,) rejoin times of v_c, fraction of T.
+
+        Returns
+        -------
+        x0 : numpy.ndarray
+            (n, 2) initial (q_u, dq_u), rad and rad/s.
+        P : numpy.ndarray
+            (n, 3 nu + 1) step constants (M1, t_c, y_i, dy_i): the design, the rejoin
+            time in s and the output errors at the start of the step.
+        """
         q0, dq0, M1s = (np.atleast_2d(np.asarray(a, float)) for a in (q0, dq0, M1s))
         n = max(len(q0), len(dq0), len(M1s), np.size(rejoin))
         q0, dq0, M1s = (np.broadcast_to(a, (n, a.shape[1])) for a in (q0, dq0, M1s))
@@ -280,8 +339,20 @@ class ZeroDynamicsWalker:
         return np.c_[q0[:, 0], dq0[:, 0]], P
 
     def den_scale(self, M1s) -> np.ndarray:
-        """max |D11 - D12 M1| along the reference, per design (the singular threshold's
-        scale)."""
+        """Per design, the largest ``|D11 - D12 M1|`` along the reference.
+
+        It is the scale of the threshold below which the controller counts as singular.
+
+        Parameters
+        ----------
+        M1s : array_like
+            (n, nu) output matrices (or one (nu,)).
+
+        Returns
+        -------
+        numpy.ndarray
+            (n,) the maximum over the reference of ``|D11 - D12 M1|``.
+        """
         d = decoupling_denominator(self._D11, self._D12, np.atleast_2d(M1s).T)
         return np.max(np.abs(d), axis=1)
 
@@ -308,9 +379,27 @@ class ZeroDynamicsWalker:
         return self._walk(x0, P, steps, tau0=0.0)
 
     def walk_from_section(self, x, M1s, rejoin=0.5, steps: int = 10) -> WalkBatch:
-        """Walk from states (q_u, dq_u) (n, 2) on the zero-dynamics manifold at the
-        Poincaré section tau = 0.75 T (v_c = 0 there): ``steps`` applications of the
-        restricted Poincaré map, with every state checked on the way."""
+        """Walk from zero-dynamics states at the Poincaré section tau = 0.75 T.
+
+        The states lie on the zero-dynamics manifold at the section (v_c = 0 there); a
+        walk is ``steps`` applications of the restricted Poincaré map, with every state
+        checked on the way.
+
+        Parameters
+        ----------
+        x : array_like
+            (n, 2) states (q_u, dq_u) at the section, rad and rad/s.
+        M1s : array_like
+            (n, nu) output matrices (or one, broadcast).
+        rejoin : float or array_like
+            Rejoin time of v_c as a fraction of T, per scenario.
+        steps : int
+            Steps (impacts) to walk.
+
+        Returns
+        -------
+        WalkBatch
+        """
         x = np.atleast_2d(np.asarray(x, float))
         n = len(x)
         M1s = np.broadcast_to(np.atleast_2d(np.asarray(M1s, float)), (n, self.nu))
@@ -516,7 +605,26 @@ class _Runs:
 @cached(maxsize=4)
 def zero_dynamics_walker(model, gait, options: SimulationOptions | None = None,
                          rk4_steps: int = 400, jit: bool = False) -> ZeroDynamicsWalker:
-    """The :class:`ZeroDynamicsWalker` of a gait and options, built once (memoised)."""
+    """The :class:`ZeroDynamicsWalker` of a gait and options, built once (memoised).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference step, made for ``model``.
+    options : SimulationOptions, optional
+        Validity thresholds and horizon.
+    rk4_steps : int
+        RK4 steps per reference step duration T (a multiple of 8).
+    jit : bool
+        Compile the step to C.
+
+    Returns
+    -------
+    ZeroDynamicsWalker
+        The same object for the same arguments.
+    """
     return ZeroDynamicsWalker(model, gait, options, rk4_steps, jit)
 
 
@@ -534,7 +642,9 @@ class VirtualConstraintWalker:
     Parameters
     ----------
     model : BipedModel
+        The robot.
     gait : Reference
+        The reference step the virtual constraints are fitted to.
     options : SimulationOptions, optional
         Validity thresholds.
     nodes : int
@@ -604,8 +714,21 @@ class VirtualConstraintWalker:
             else f.map(n)
 
     def section_states(self, x):
-        """(theta, w) on the surface with the given (q_u, dq_u) (n, 2): the phase whose
-        configuration has that q_u (Newton on the curve), w = dq_u / (dq_u/dtheta)."""
+        """The states (theta, w) on the constraint surface with given (q_u, dq_u).
+
+        theta is the phase whose configuration has that q_u (Newton on the curve), and
+        w = dq_u / (dq_u/dtheta).
+
+        Parameters
+        ----------
+        x : array_like
+            (n, 2) states (q_u, dq_u), rad and rad/s.
+
+        Returns
+        -------
+        theta, w : numpy.ndarray
+            (n,) phases (rad) and phase rates (rad/s).
+        """
         x = np.atleast_2d(np.asarray(x, float))
         vm = self.vmap
         th = np.full(len(x), vm.theta_s)
@@ -620,13 +743,40 @@ class VirtualConstraintWalker:
         return th, x[:, 1] / Q1[0]
 
     def walk_from_section(self, x, steps: int = 10) -> WalkBatch:
-        """Walk from zero-dynamics states with the given (q_u, dq_u) (n, 2) for ``steps``
-        impacts (see :meth:`ZeroDynamicsWalker.walk_from_section`)."""
+        """Walk from zero-dynamics states with the given (q_u, dq_u) for ``steps`` impacts.
+
+        See :meth:`ZeroDynamicsWalker.walk_from_section`.
+
+        Parameters
+        ----------
+        x : array_like
+            (n, 2) states (q_u, dq_u) on the constraint surface, rad and rad/s.
+        steps : int
+            Steps (impacts) to walk.
+
+        Returns
+        -------
+        WalkBatch
+        """
         th, w = self.section_states(x)
         return self.walk(th, w, steps)
 
     def walk(self, theta, w, steps: int = 10) -> WalkBatch:
-        """Walk from phases ``theta`` with rates ``w`` (n,) for ``steps`` impacts."""
+        """Walk from phases ``theta`` with rates ``w`` for ``steps`` impacts.
+
+        Parameters
+        ----------
+        theta : array_like
+            (n,) start phases, rad.
+        w : array_like
+            (n,) start phase rates dtheta/dt, rad/s.
+        steps : int
+            Steps (impacts) to walk.
+
+        Returns
+        -------
+        WalkBatch
+        """
         vm, nu, o = self.vmap, self.nu, self.options
         theta, w = np.array(theta, float), np.array(w, float)
         n = theta.size
@@ -687,5 +837,24 @@ class VirtualConstraintWalker:
 @cached(maxsize=4)
 def virtual_constraint_walker(model, gait, options: SimulationOptions | None = None,
                               nodes: int = 200, jit: bool = False) -> VirtualConstraintWalker:
-    """The :class:`VirtualConstraintWalker` of a gait (memoised)."""
+    """The :class:`VirtualConstraintWalker` of a gait (memoised).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference step the virtual constraints are fitted to.
+    options : SimulationOptions, optional
+        Validity thresholds.
+    nodes : int
+        RK4 nodes from the start phase of a step to its impact.
+    jit : bool
+        Compile the step to C.
+
+    Returns
+    -------
+    VirtualConstraintWalker
+        The same object for the same arguments.
+    """
     return VirtualConstraintWalker(model, gait, options, nodes, jit)

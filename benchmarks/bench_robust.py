@@ -35,7 +35,7 @@ from biped_casadi import (SimulationOptions, TimeVaryingController,
 from gait_opt import GaitOptions, default_gait
 
 #: the robust design found by `biped m1 --robust` (README); any stable design would do
-DESIGN = Design((-5.7932, 2.9114, 0.5448, 5.6881), 0.75)
+DESIGN = Design((-8.2618, 2.5374, 0.0034, 8.5090), 0.75)
 
 
 def baseline_s_star(model, gait, design, dirs, st):

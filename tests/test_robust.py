@@ -49,7 +49,7 @@ def test_walker_is_the_full_order_closed_loop(model, robust_gait):
     """From perturbed starts, the zero-dynamics walker and the full-order simulator give
     the same status, the same impacts and the same margins."""
     g = robust_gait
-    M1 = np.array([-5.79, 2.91, 0.545, 5.69])
+    M1 = np.array([-8.26, 2.54, 0.0034, 8.51])
     d = directions(4, model.nq, seed=5)
     q0, dq0 = start_states(g, d, np.full(4, 0.5))
     B = ZeroDynamicsWalker(model, g, rk4_steps=400).walk(q0, dq0, M1, 0.75, steps=4)
@@ -72,7 +72,7 @@ def test_output_gains_change_nothing(model, robust_gait):
     sets walk the same steps (the lever 'gains' buys nothing)."""
     g = robust_gait
     q0, dq0 = start_states(g, directions(1, model.nq)[:1], [0.5])
-    runs = [simulate(TimeVaryingController(model, g, np.array([-5.79, 2.91, 0.545, 5.69]),
+    runs = [simulate(TimeVaryingController(model, g, np.array([-8.26, 2.54, 0.0034, 8.51]),
                                            gains, rejoin=0.75), q0[0], dq0[0],
                      SimulationOptions(steps=4))
             for gains in (Gains(), Gains(Kp=4.0, Kd=4.0, eps=0.05))]

@@ -32,6 +32,16 @@ def register(sub):
                    help="collocation points (default legendre)")
     p.add_argument("--max-iter", type=int, default=None, metavar="K",
                    help="IPOPT iteration limit (default 500)")
+    p.add_argument("--impact-mu", type=float, default=None, metavar="MU",
+                   help="bound on the impact impulse's |F_x|/F_z (default: --mu); the "
+                        "robust design's gait uses 0.15")
+    p.add_argument("--continuation", type=float, default=None, metavar="C",
+                   help="continue the reference past T by an acceleration ramp over C T "
+                        "(default: the Bezier polynomials themselves; the robust design's "
+                        "gait uses 0.03)")
+    p.add_argument("--clearance", type=float, default=None, metavar="H",
+                   help="mid-step swing-foot clearance, m (default 0.03; the robust "
+                        "design's gait uses 0.05)")
     add_robot(p, with_gait=False, params_alias=True)
     p.add_argument("--out", metavar="FILE", default="gait.json",
                    help="where to save the gait (default gait.json)")
@@ -42,7 +52,7 @@ def register(sub):
 
 
 def cmd_gait(args):
-    for name in ("speed", "mu", "torque_limit"):
+    for name in ("speed", "mu", "torque_limit", "impact_mu", "continuation", "clearance"):
         v = getattr(args, name)
         if v is not None and not (math.isfinite(v) and v > 0):
             raise UserError(f"--{name.replace('_', '-')} must be a positive number, got {v:g}")
@@ -56,7 +66,9 @@ def cmd_gait(args):
     model = load_model(args.robot)
     options = GaitOptions(speed=args.speed, mu=args.mu, torque_limit=args.torque_limit,
                           n_intervals=args.intervals, scheme=args.scheme,
-                          ipopt={} if args.max_iter is None else {"max_iter": args.max_iter})
+                          ipopt={} if args.max_iter is None else {"max_iter": args.max_iter},
+                          impact_mu=args.impact_mu, continuation=args.continuation,
+                          **({} if args.clearance is None else {"clearance": args.clearance}))
 
     say = Progress("gait", quiet=args.json)
     say(f"optimising the gait at {args.speed:g} m/s (about 6 s on a loaded 2-core VM) ...")

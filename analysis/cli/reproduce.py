@@ -5,11 +5,12 @@ from analysis.reproduce import reproduce, run_folder
 
 from .common import add_robot, load_model, output_dir, print_json
 
-#: measured with the README's commands on the project's 2-core AMD EPYC VM (Python 3.11)
-#: while other jobs ran on it (load about 4; about half when idle), the default gait not
-#: yet cached; the README quotes the same figures (tests/test_reproduce.py checks it)
-TIME_FULL = "about 100 s"
-TIME_QUICK = "about 75 s"
+#: measured with the README's commands on a fresh clone on the project's 2-core AMD EPYC
+#: VM (Python 3.11, load 1 to 3), nothing cached yet (full: 505 s, of which the robust
+#: search 179 s and the basins 240 s; quick: 162 s); the README quotes the same figures
+#: (tests/test_reproduce.py checks it)
+TIME_FULL = "about 8.5 min"
+TIME_QUICK = "about 3 min"
 
 
 def cmd_reproduce(args):
@@ -33,7 +34,11 @@ def register(sub):
         description="Run the whole paper on RABBIT with the default gait (optimised once, "
                     "then cached): singular outputs (eq. 24), Fig. 2, the 9^4 grid, Fig. 3 "
                     "and the swing-height conjecture, a = b = 0 and Fig. 4, the M1 NLP, "
-                    "the virtual-constraint comparison, Fig. 5 and 6, and an animation. "
+                    "the virtual-constraint comparison; then which designs walk: the robust "
+                    "design (cached once found), s* of the deadbeat outputs, virtual "
+                    "constraints and the robust design, Fig. 5 and 6 at the paper's full "
+                    "perturbation with validity margins, an animation, basins of "
+                    "attraction and the s*-against-max|lambda| trade-off. "
                     "Figures are written as PNG and PDF; report.md sets our numbers beside "
                     f"the paper's. With --robot, the same analysis for another robot (for "
                     "two torques the stable domain in the (M1(1), M1(2)) plane replaces "
