@@ -52,7 +52,10 @@ def register(sub):
 
 
 def cmd_gait(args):
-    for name in ("speed", "mu", "torque_limit", "impact_mu", "continuation", "clearance"):
+    if args.clearance is not None and not (math.isfinite(args.clearance)
+                                           and args.clearance >= 0):
+        raise UserError(f"--clearance must be a number >= 0 (m), got {args.clearance:g}")
+    for name in ("speed", "mu", "torque_limit", "impact_mu", "continuation"):
         v = getattr(args, name)
         if v is not None and not (math.isfinite(v) and v > 0):
             raise UserError(f"--{name.replace('_', '-')} must be a positive number, got {v:g}")
