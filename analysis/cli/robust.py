@@ -58,7 +58,16 @@ def cmd_robust(args):
     if res.paper:
         p = res.paper
         conv = p.get("steps_to_converge")
-        print(f"  the paper's perturbation (s = 1): {p['status']}"
+        status = p["status"]
+        if status == "not_converged":
+            err = p.get("error")
+            status = (f"walks {p.get('step')} valid steps, not yet below {st.tol:g}"
+                      + (f" (error {err:.2g} at the end)" if err is not None else ""))
+        elif status == "ok":
+            status = f"walks {p.get('step')} valid steps"
+        else:
+            status = f"{status} in step {p.get('step')}"
+        print(f"  the paper's perturbation (s = 1): {status}"
               + (f", below {st.tol:g} from step {int(conv)}" if conv and np.isfinite(conv)
                  else "") + f"; peak |u| {p['peak_torque']:.1f} N m, min F_z "
               f"{p['min_normal_force']:.1f} N, max impulse ratio {p['max_impulse_ratio']:.3f}")
