@@ -246,6 +246,10 @@ CASES = [
     # ---- m1
     (["m1", *G, "--free", "--group", "1"], "not allowed with"),
     (["m1", *G, "--group", "3"], "invalid choice"),
+    (["m1", *G, "--samples", "1000"], "--robust"),
+    (["m1", "--robust", "--gait", "{gait}"], "--robust"),
+    (["m1", "--robust", "--samples", "10"], "--samples"),
+    (["m1", "--robust", "--starts", "0"], "--starts"),
     (["m1", "--gait", "{missing}"], "not found"),
     (["m1", "--gait", "{ragged}"], "solution.alpha"),
     # ---- simulate
