@@ -32,7 +32,7 @@ def cmd_robust_design(args, say):
     st = RobustDesignSettings(samples=args.samples, starts=args.starts, seed=args.seed,
                               mu=args.mu)
     say(f"robust design: gait {ROBUST_GAIT}, v_c rejoining at {st.rejoin} T; about "
-        f"5-8 minutes on 2 cores the first time, then read from the cache")
+        f"3-5 minutes on 2 cores the first time, then read from the cache")
     r = robust_design(model, st, progress=say, use_cache=not args.no_cache,
                       scheduler=args.scheduler)
     if args.json:
@@ -112,7 +112,7 @@ def register(sub):
     p.add_argument("--robust", action="store_true",
                    help="instead: the time-varying design (gait, M1, v_c rejoin time) that "
                         "survives the largest perturbation s* with max|lambda| at most the "
-                        "virtual constraints' (see 'biped robust'); 5-8 min the first time, "
+                        "virtual constraints' (see 'biped robust'); 3-5 min the first time, "
                         "cached afterwards")
     p.add_argument("--samples", type=int, metavar="N",
                    help="with --robust: random M1 screened (40000)")
