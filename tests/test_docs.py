@@ -32,9 +32,6 @@ from paper_equations import (EQUATIONS, PACKAGES, claimed_equations,  # noqa: E4
 #: the paper's numbered equations (Wang & Chevallereau: 28) that the toolkit implements
 IMPLEMENTED = set(range(1, 29))
 
-#: objects that cannot carry a section, and why (documented name -> reason)
-EXEMPT: dict[str, str] = {}
-
 OBJECTS = list(public_objects(properties=True))
 CALLABLES = [(n, o) for n, o in OBJECTS if not isinstance(o, property)]
 PROPERTIES = [(n, o) for n, o in OBJECTS if isinstance(o, property)]
@@ -103,8 +100,6 @@ def _parse(name, obj):
 
 @pytest.mark.parametrize("name,obj", CALLABLES, ids=[n for n, _ in CALLABLES])
 def test_numpydoc_docstring(name, obj):
-    if name in EXEMPT:
-        pytest.skip(EXEMPT[name])
     assert inspect.getdoc(obj), f"{name}: no docstring"
     doc = _parse(name, obj)
     summary = doc["Summary"]
