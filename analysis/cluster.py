@@ -1,5 +1,5 @@
 """Work on a Dask distributed cluster: one way to connect, used by the sweeps
-(:mod:`analysis.sweep`) and the robustness searches (:mod:`analysis.robustness`)."""
+(:mod:`analysis.sweeps.sweep`) and the robustness searches (:mod:`analysis.robustness.s_star`)."""
 from __future__ import annotations
 
 import contextlib

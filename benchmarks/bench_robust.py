@@ -12,7 +12,7 @@
     said so; for the time-varying controller the cost of 10 full-order steps from the
     cell's configuration, the simulator starting its steps at tau = 0); target < 60 s.
 
-Both on the robust design's gait (analysis.robust_design.ROBUST_GAIT) with the robust
+Both on the robust design's gait (analysis.design.ROBUST_GAIT) with the robust
 design of this repository's reproduction.  Figures are wall times; the machine's load
 is printed at the start and the end.
 """
@@ -25,11 +25,11 @@ import time
 
 import numpy as np
 
-from analysis.robust_design import ROBUST_GAIT
-from analysis.poincare import poincare_map
+from analysis.design import ROBUST_GAIT
+from analysis.stability import poincare_map
 from analysis.robustness import (Design, RobustnessSettings, basin, kept_directions,
                                  robustness, start_states)
-from analysis.walker import virtual_constraint_walker
+from biped_casadi.simulation import virtual_constraint_walker
 from biped_casadi import (SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, rabbit, simulate)
 from gait_opt import GaitOptions, default_gait

@@ -3,7 +3,7 @@ side on the same points (issue 4, part 6).
 
     python benchmarks/bench_sweep.py [--gait FILE] [--points 20] [--skip-grid]
 
-(a) time per M1 after the one-time build, for the paths of analysis.poincare: the public
+(a) time per M1 after the one-time build, for the paths of analysis.stability: the public
     call ``poincare_eigenvalues(m, g, M1)`` (variational equation by default, one M1 at
     a time; target >= 500x the SciPy baseline of (c)), ``method='ad'`` (full AD through
     the discrete map) and ``PoincareMap.jacobian_batch`` (variational equation, one SX
@@ -95,8 +95,8 @@ def main(argv=None):
     print(f"machine: {info['cpu']}, nproc {info['nproc']} (affinity {info['affinity']}); "
           f"python {info['python']}, numpy {info['numpy']}, casadi {info['casadi']}; "
           f"load average at start {info['load'][0]:.2f}")
-    from analysis.poincare import PoincareMap, poincare_eigenvalues
-    from analysis.sweep import grid_points
+    from analysis.stability import PoincareMap, poincare_eigenvalues
+    from analysis.sweeps import grid_points
     from scipy_poincare import ScipyPoincare
 
     gait = load_gait(args.gait)

@@ -3,26 +3,22 @@ Wang & Chevallereau, the controllers and the full-order hybrid simulator.
 
 This is the bottom layer of the toolkit: it imports nothing from :mod:`gait_opt` or
 :mod:`analysis`.  Controllers and the simulator are written against the reference
-interface :class:`~biped_casadi.reference.Reference`, which :class:`gait_opt.Gait`
+interface :class:`~biped_casadi.control.reference.Reference`, which :class:`gait_opt.Gait`
 implements.
 """
 from importlib import metadata as _metadata
 
 from .caching import cache_dir, cached
-from .controllers import (HIP_PHASE, PAPER_REJOIN, TimeVaryingController,
-                          VirtualConstraintController, VirtualConstraints,
-                          fit_virtual_constraints)
-from .description import (Link, RobotDescription, description_from_dict, find_description,
-                          load_description)
-from .model import (B_INPUT, E_RELABEL, RABBIT_DESCRIPTION, BipedModel, rabbit,
-                    resolve_robot, robot)
-from .output_law import SECTION, Gains, SingularityReport
-from .params import RABBIT, RobotParams, load_params
-from .perturbation import PAPER_SIZES, Perturbation, directions
-from .reference import Reference, require_same_robot
+from .control import (HIP_PHASE, PAPER_REJOIN, SECTION, Gains, Reference, SingularityReport,
+                      TimeVaryingController, VirtualConstraintController, VirtualConstraints,
+                      fit_virtual_constraints, require_same_robot)
+from .model import (B_INPUT, E_RELABEL, RABBIT, RABBIT_DESCRIPTION, BipedModel, Link,
+                    RobotDescription, RobotParams, description_from_dict, find_description,
+                    load_description, load_params, rabbit, resolve_robot, robot)
 from .results import Result, json_safe
-from .simulate import (PAPER_PERTURBATION, SimulationOptions, SimulationResult, Simulator,
-                       perturbed_initial_state, simulate)
+from .simulation import (PAPER_PERTURBATION, PAPER_SIZES, Perturbation, SimulationOptions,
+                         SimulationResult, Simulator, directions, perturbed_initial_state,
+                         simulate)
 
 __all__ = ["rabbit", "robot", "resolve_robot", "RobotDescription", "Link",
            "load_description", "find_description", "description_from_dict",

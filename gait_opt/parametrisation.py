@@ -24,7 +24,7 @@ import numpy as np
 
 from biped_casadi.caching import cached
 from biped_casadi.numerics import rk4_step
-from biped_casadi.output_law import unactuated_acceleration
+from biped_casadi.control.output_law import unactuated_acceleration
 
 __all__ = ["ReferenceDynamics", "reference_dynamics", "bernstein", "quintic_hermite"]
 

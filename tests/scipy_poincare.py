@@ -4,7 +4,7 @@
 It shares only the model's D, H, impact map and the gait's q^d(t) with the toolkit
 (the zero dynamics, the reference continuation, the event handling, v_c and the
 Jacobian are written out again here), so it serves as an independent check of
-analysis.poincare (the finite-difference twin of its AD Jacobian) and as the speed
+analysis.stability (the finite-difference twin of its AD Jacobian) and as the speed
 baseline of benchmarks/bench_sweep.py.
 """
 from __future__ import annotations

@@ -152,7 +152,7 @@ def test_negative_numbers_in_any_notation_are_values(gait_file, capsys):
 
 def test_grid_spans_the_range():
     """Issue 12: `sweep --grid 1` evaluated only the low corner of the range."""
-    from analysis.sweep import grid_points
+    from analysis.sweeps import grid_points
     with pytest.raises(ValueError, match="n .* must be an integer >= 2"):
         grid_points(1, -10, 10)
     P = grid_points(2, -10, 10)
@@ -160,7 +160,7 @@ def test_grid_spans_the_range():
 
 
 def test_m1_outside_the_valid_range_is_a_value_error(model, gait):
-    from biped_casadi.output_law import M1_LIMIT
+    from biped_casadi.control.output_law import M1_LIMIT
     with pytest.raises(ValueError, match=r"M1: components must lie within"):
         poincare_eigenvalues(model, gait, [1e300, 0, 0, 0])
     r = poincare_eigenvalues(model, gait, [M1_LIMIT, 0, 0, 0])

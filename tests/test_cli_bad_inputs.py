@@ -22,7 +22,7 @@ import pytest
 
 from analysis.cli import main as biped_main
 from biped_casadi import RobotParams
-from analysis.sweep import grid_points, run_sweep
+from analysis.sweeps import grid_points, run_sweep
 
 ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
 READ_ONLY_SYSTEM = "/sys"          # EACCES on create, also for root

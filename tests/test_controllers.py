@@ -15,10 +15,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analysis.virtual_constraints import VirtualConstraintMap, vc_eigenvalue
-from biped_casadi.controllers import (HIP_PHASE, Gains, TimeVaryingController,
+from analysis.stability import VirtualConstraintMap, vc_eigenvalue
+from biped_casadi.control import (HIP_PHASE, Gains, TimeVaryingController,
                                       VirtualConstraintController, fit_virtual_constraints)
-from biped_casadi.output_law import correction
+from biped_casadi.control.output_law import correction
 
 
 @pytest.fixture(scope="module")

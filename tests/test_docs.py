@@ -41,7 +41,7 @@ def test_the_public_surface_is_found():
     names = [n for n, _ in CALLABLES]
     assert len(names) > 150, len(names)
     assert {"biped_casadi.rabbit", "gait_opt.Gait.load", "analysis.poincare_eigenvalues",
-            "biped_casadi.output_law.correction"} <= set(names)
+            "biped_casadi.control.output_law.correction"} <= set(names)
     assert public_modules()[0] == "biped_casadi"
 
 

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from analysis.plots import (COLOUR_NAMES, SWING, STANCE, TORSO, gait_stick_plot,
+from analysis.reporting.plots import (COLOUR_NAMES, SWING, STANCE, TORSO, gait_stick_plot,
                             m1_plane_plot, save_figure, save_figures)
-from analysis.report import _figure_captions, write_report
+from analysis.reporting.report import _figure_captions, write_report
 
 COLOUR_WORDS = ("blue", "red", "green", "black", "grey", "gray", "orange", "purple",
                 "yellow", "white")

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from analysis import poincare_eigenvalues
-from analysis.output_design import (conjecture_figures, domain_grid, group_of, optimize_m1,
+from analysis.design import (conjecture_figures, domain_grid, group_of, optimize_m1,
                                     solve_ab, swing_height_at_Td, taylor_ab)
-from analysis.sweep_cache import grid_best
+from analysis.sweeps import grid_best
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +48,7 @@ def test_both_groups_satisfy_a_b_zero(model, gait, tay, rng):
 
 
 def test_conjecture_figures_are_computed(model, gait):
-    from analysis.sweep_cache import grid_results
+    from analysis.sweeps import grid_results
     r = grid_results(model, gait)
     P, st, mx = r.points, r.point_status, r.max_abs
     zsw = swing_height_at_Td(model, gait, P)

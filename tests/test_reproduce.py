@@ -10,10 +10,10 @@ import sys
 import numpy as np
 import pytest
 
-from analysis import reproduce as rp
+from analysis.reporting import reproduce as rp
 from matplotlib.figure import Figure
 
-from analysis.plots import save_figure
+from analysis.reporting.plots import save_figure
 
 
 @pytest.mark.slow
@@ -139,7 +139,7 @@ def test_an_interrupted_run_leaves_the_previous_results(tmp_path, gait, light_st
 
 
 def test_each_kind_of_run_has_its_folder(tmp_path):
-    from biped_casadi.description import builtin_path
+    from biped_casadi.model.description import builtin_path
     mine = tmp_path / "my_biped.toml"
     mine.write_text(builtin_path("three_link").read_text())
     rabbit_copy = tmp_path / "rabbit_copy.toml"

@@ -16,12 +16,12 @@ from scipy_poincare import ScipyPoincare
 
 from analysis import poincare_eigenvalues, poincare_map, vc_eigenvalue
 from analysis.cli import main as biped_main
-from analysis.output_design import (ab_solution_set, group_of, optimize_m1,
+from analysis.design import (ab_solution_set, group_of, optimize_m1,
                                     swing_height_at_Td, taylor_ab, TaylorAB)
 from biped_casadi import (RABBIT, BipedModel, SimulationOptions,
                           TimeVaryingController, VirtualConstraintController,
                           description_from_dict, load_description, rabbit, robot, simulate)
-from biped_casadi.description import builtin_path
+from biped_casadi.model.description import builtin_path
 from gait_opt import Gait
 
 

@@ -16,11 +16,11 @@ import pytest
 
 from analysis import poincare_map
 from analysis.cli import main as biped_main
-from analysis.output_design import optimize_m1
-from analysis.robust_design import ROBUST_GAIT
+from analysis.design import optimize_m1
+from analysis.design import ROBUST_GAIT
 from analysis.robustness import (Design, RobustnessSettings, basin, kept_directions,
                                  robustness, start_states)
-from analysis.walker import VirtualConstraintWalker, ZeroDynamicsWalker
+from biped_casadi.simulation import VirtualConstraintWalker, ZeroDynamicsWalker
 from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, directions, simulate)
 from gait_opt import GaitOptions, default_gait
@@ -244,7 +244,7 @@ def test_s_star_batch_on_a_dask_cluster(model, gait):
     processes, each building the walker once) gives exactly the in-process results."""
     distributed = pytest.importorskip("dask.distributed")
     from analysis.robustness import s_star_batch
-    from analysis.walker import zero_dynamics_walker
+    from biped_casadi.simulation import zero_dynamics_walker
     st = RobustnessSettings(directions=2, rounds=4, rk4_steps=200)
     dirs = kept_directions(model, gait, st)[0]
     designs = [Design((-2.5, 5.0, -2.5, 5.0)), Design((-10.0, 7.5, 10.0, -5.0))]

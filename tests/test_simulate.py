@@ -18,11 +18,11 @@ import json
 import numpy as np
 import pytest
 
-from analysis.virtual_constraints import vc_eigenvalue
+from analysis.stability import vc_eigenvalue
 from analysis.cli import main as biped_main
-from biped_casadi.controllers import TimeVaryingController, VirtualConstraintController
+from biped_casadi.control import TimeVaryingController, VirtualConstraintController
 from biped_casadi import Perturbation, directions
-from biped_casadi.simulate import (PAPER_PERTURBATION, STATUSES, SimulationOptions, Simulator,
+from biped_casadi.simulation import (PAPER_PERTURBATION, STATUSES, SimulationOptions, Simulator,
                                    perturbed_initial_state, simulate)
 
 

@@ -16,8 +16,9 @@ import pytest
 
 from analysis import poincare_map, singular_m1_values
 from analysis.cli import main as biped_main
-from analysis.plots import one_d_sweeps_plot, save_figure
-from analysis.sweep import (STATUSES, SweepSettings, grid_points, line_points, load_sweep,
+from analysis.reporting.plots import one_d_sweeps_plot, save_figure
+from analysis.stability import STATUSES
+from analysis.sweeps import (SweepSettings, grid_points, line_points, load_sweep,
                             one_d_sweeps, run_sweep)
 
 
@@ -218,8 +219,8 @@ def test_dask_local_cluster_same_results(sweep_gait, reference, small_grid, tmp_
 
 
 def test_unreachable_scheduler_is_a_user_error(sweep_gait, small_grid, monkeypatch):
-    import analysis.sweep
-    monkeypatch.setattr(analysis.sweep, "DASK_CONNECT_TIMEOUT", "1s")
+    import analysis.sweeps.sweep
+    monkeypatch.setattr(analysis.sweeps.sweep, "DASK_CONNECT_TIMEOUT", "1s")
     import socket
     s = socket.socket()
     s.bind(("127.0.0.1", 0))

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_casadi import robot
-from biped_casadi.output_law import check_M1_range
+from biped_casadi.control.output_law import check_M1_range
 from biped_casadi.results import json_safe
 from gait_opt import Gait, OpenOrbitWarning, default_gait
 
@@ -23,7 +23,7 @@ __all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "ad
            "add_gait_arguments"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link) or a description file "
-              "(.toml, schema in biped_casadi.description)")
+              "(.toml, schema in biped_casadi.model.description)")
 
 
 class UserError(Exception):

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.poincare import METHODS, poincare_eigenvalues
-from analysis.virtual_constraints import vc_eigenvalue
-from biped_casadi.output_law import M1_LIMIT
+from analysis.stability import METHODS, poincare_eigenvalues
+from analysis.stability import vc_eigenvalue
+from biped_casadi.control.output_law import M1_LIMIT
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
                      load_gait, parse_m1, print_json)

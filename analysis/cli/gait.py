@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from analysis.plots import gait_profiles_plot, gait_stick_plot, save_figures
+from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_figures
 from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 
 from .common import (Progress, UserError, add_robot, load_model, output_dir, output_file,

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.output_design import ab_groups, optimize_m1
-from analysis.robust_design import ROBUST_GAIT, RobustDesignSettings, robust_design
-from analysis.sweep_cache import grid_best
+from analysis.design import ab_groups, optimize_m1
+from analysis.design import ROBUST_GAIT, RobustDesignSettings, robust_design
+from analysis.sweeps import grid_best
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, load_gait, load_model,
                      positive, print_json)
@@ -15,7 +15,7 @@ ROBUST_ONLY = ("--samples", "--starts", "--seed", "--mu", "--scheduler", "--no-c
 
 
 def cmd_robust_design(args, say):
-    """``biped m1 --robust``: the search of :mod:`analysis.robust_design`."""
+    """``biped m1 --robust``: the search of :mod:`analysis.design`."""
     if args.gait or args.free or args.group:
         raise UserError("--robust chooses the gait and M1 itself: it excludes --gait, "
                         "--free and --group")

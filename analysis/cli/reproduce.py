@@ -1,7 +1,7 @@
 """``biped reproduce``: the paper end to end (figures, summary.json, report.md)."""
 from __future__ import annotations
 
-from analysis.reproduce import reproduce, run_folder
+from analysis.reporting.reproduce import reproduce, run_folder
 
 from .common import add_robot, load_model, output_dir, print_json
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.plots import basin_plot, save_figures
+from analysis.reporting.plots import basin_plot, save_figures
 from analysis.robustness import Design, RobustnessSettings, basin, kept_directions, robustness
-from biped_casadi.output_law import SECTION
+from biped_casadi.control.output_law import SECTION
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
                      load_gait, output_dir, parse_m1, positive, print_json)

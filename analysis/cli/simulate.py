@@ -8,8 +8,8 @@ import numpy as np
 
 from biped_casadi import (Gains, Perturbation, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, simulate)
-from biped_casadi.output_law import M1_LIMIT, SECTION
-from analysis.plots import (save_figures, swing_torques_plot, unactuated_error_plot,
+from biped_casadi.control.output_law import M1_LIMIT, SECTION
+from analysis.reporting.plots import (save_figures, swing_torques_plot, unactuated_error_plot,
                             walking_animation)
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.plots import one_d_sweeps_plot, save_figures
-from analysis.sweep import grid_points, max_grid_n, one_d_sweeps, run_sweep
-from biped_casadi.output_law import M1_LIMIT, check_M1_range
+from analysis.reporting.plots import one_d_sweeps_plot, save_figures
+from analysis.sweeps import grid_points, max_grid_n, one_d_sweeps, run_sweep
+from biped_casadi.control.output_law import M1_LIMIT, check_M1_range
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, load_gait,
                      output_dir, print_json)

@@ -73,7 +73,7 @@ def api_sections() -> list[tuple[str, list[str]]]:
     """(module, names) for the API reference: every function and class of the toolkit
     in a public module's ``__all__``, documented once, under the first module of
     ``public_api.txt`` that exports it (``biped_casadi.Gains``, not
-    ``biped_casadi.output_law.Gains``)."""
+    ``biped_casadi.control.output_law.Gains``)."""
     seen, sections = set(), []
     for modname in public_modules():
         mod = importlib.import_module(modname)

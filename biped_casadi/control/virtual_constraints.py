@@ -1,28 +1,8 @@
-"""Closed-loop controllers for walking: the time-varying output controller of the paper
-(§III, eq. 12-13, 17) and, for the comparison of §V-C, a virtual-constraint (hybrid zero
-dynamics) controller fitted to the same reference.
-
-Both controllers are CasADi Functions built once per controller object, written against
-the reference interface of :mod:`biped_casadi.reference`, and share one interface used
-by :mod:`biped_casadi.simulate`:
-
-``law(q, dq, tau, r, p) -> (u, y, dy, den, dr, in_range)``
-    torques u, outputs y and their rates dy, the decoupling denominator ``den`` (zero
-    where the controller is singular), the time derivative ``dr`` of the reference
-    state r, and ``in_range`` (1 while the reference is defined at the current state).
-``step_start(q, dq) -> StepStart(r, p)``
-    the reference state r and the per-step constants p at the start of a step (just
-    after an impact, or at the initial state).
-
-Reference state r.  The time-varying controller needs q_u^d(tau); a gait defines it as
-the solution of the unactuated row of eq. (1) with q_a = q_a^d(tau) (SPEC §2), carried
-as the reference state r = (q_u^d, dq_u^d) and reset to its value at tau = 0 at every
-impact: a function of tau alone, so the hybrid closed loop is still the system in
-(q, dq, tau) of eq. (9).
+"""Virtual constraints (hybrid zero dynamics) fitted to a reference gait, their controller
+for the comparison of paper §V-C, and the constraint surface they define.
 """
 from __future__ import annotations
 
-import abc
 import hashlib
 import math
 from dataclasses import dataclass, field
@@ -30,256 +10,19 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from .numerics import as_number, as_vector
-from .output_law import (SECTION, Gains, SingularityReport, actuated_torque, check_M1,
-                         correction, decoupling_denominator, output_acceleration,
-                         output_matrix, outputs, singularity_report, unactuated_acceleration)
+from ..caching import cached
+from ..numerics import as_vector, rk4_step
+from .controller import ControlOutput, Controller, StepStart
+from .output_law import Gains, SingularityReport, correction, output_acceleration, singularity_report
 from .reference import require_same_robot
 
-__all__ = ["Gains", "StepStart", "ControlOutput", "SingularityReport",
-           "TimeVaryingController", "VirtualConstraints", "VirtualConstraintController",
-           "fit_virtual_constraints", "HIP_PHASE", "PAPER_REJOIN"]
+__all__ = ["VirtualConstraints", "VirtualConstraintController", "fit_virtual_constraints",
+           "ConstraintSurface", "constraint_surface", "HIP_PHASE"]
 
 #: RABBIT's phase variable c of the virtual-constraint controller, theta = c q: the angle
 #: of the line stance foot -> hip from the vertical, exactly q1 + q2 / 2 when tibia and
 #: femur are equally long.  Every model has its own (``model.hip_phase``, the default).
 HIP_PHASE = (1.0, 0.5, 0.0, 0.0, 0.0)
-
-#: the paper's rejoin time of the correction v_c, as a fraction of T (eq. 18)
-PAPER_REJOIN = 0.5
-
-
-# ----------------------------------------------------------------- small types
-@dataclass
-class StepStart:
-    """Controller state at the start of a step: reference state r and step constants p;
-    ``problem`` says why the step cannot be controlled (empty when it can)."""
-    r: np.ndarray
-    p: np.ndarray
-    problem: str = ""
-
-
-@dataclass
-class ControlOutput:
-    """One evaluation of a control law at a state."""
-    u: np.ndarray          # torques (nu)
-    y: np.ndarray          # outputs (nu)
-    dy: np.ndarray         # output rates (nu)
-    denominator: float     # zero where the controller is singular
-
-
-class _Controller(abc.ABC):
-    """Shared numeric wrappers around ``law`` (built by the subclasses)."""
-
-    name = "controller"
-    n_ref = 0
-    n_par = 0
-
-    @abc.abstractmethod
-    def step_start(self, q, dq) -> StepStart:
-        """The per-step parameters fixed at the start of a step (just after an impact)."""
-
-    @abc.abstractmethod
-    def describe(self) -> dict:
-        """What defines the controller, as a JSON-ready dict."""
-
-    @property
-    def gait(self):
-        """The reference the controller tracks (alias of ``reference``)."""
-        return self.reference
-
-    def evaluate(self, q, dq, tau, r, p) -> ControlOutput:
-        """The control law at one state (numeric), with an explicit reference state.
-
-        Parameters
-        ----------
-        q, dq : array_like
-            Configuration (nq,), rad, and velocity, rad/s.
-        tau : float
-            Time since the start of the step, s.
-        r : array_like
-            Reference state (``n_ref`` numbers; the time-varying controller's
-            (q_u^d, dq_u^d), none for virtual constraints).
-        p : array_like
-            Step constants (``n_par`` numbers) from :meth:`step_start`.
-
-        Returns
-        -------
-        ControlOutput
-            Torques ``u`` (N m), outputs ``y`` and rates ``dy``, and the decoupling
-            ``denominator`` (zero where the controller is singular).
-        """
-        nq = self.model.nq
-        q = as_vector(q, nq, "q")
-        dq = as_vector(dq, nq, "dq")
-        tau = as_number(tau, "tau")
-        r = as_vector(r, self.n_ref, "r")
-        p = as_vector(p, self.n_par, "p")
-        u, y, dy, den, _, _ = (np.array(v).ravel() for v in self.law(q, dq, tau, r, p))
-        return ControlOutput(u=u, y=y, dy=dy, denominator=float(den[0]))
-
-
-# ===================================================== time-varying controller
-class TimeVaryingController(_Controller):
-    """Time-varying output control of paper §III with the stride-to-stride correction.
-
-    Implements eqs. (6), (7), (17): the outputs y = v - v^d(tau) that the control
-    zeroes, with tau the time since the last impact (the caller restarts it at 0 at
-    every impact, as the simulator does, and calls :meth:`step_start`, which restarts
-    the reference state), corrected to y_c of eq. (17) (SPEC §3):
-
-    Outputs:  y_c = M q - v^d(tau) - v_c(tau),  M = [M1, I],
-    v^d = M q^d(tau), v_c the correction of eq. (18) from y_i = v - v^d and
-    dy_i = dv - dv^d just after each impact, rejoining the reference at
-    tau = ``rejoin`` T (the paper: T/2).  Torque, eq. (12) with the output acceleration
-    of eq. (13) applied to y_c (:mod:`biped_casadi.output_law`); singular where
-    D11 - D12 M1 = 0 (eq. 24), which :meth:`singularity` checks along the reference.
-
-    Parameters
-    ----------
-    model : BipedModel
-        The robot.
-    reference : Reference
-        The reference step (a :class:`gait_opt.Gait`), made for ``model``.
-    M1 : array_like, optional
-        One number per actuated joint (default zeros: the outputs are q_a).
-    gains : Gains, optional
-        Output PD of eq. (13) (default ``Gains()``).
-    rejoin : float
-        Rejoin time of v_c as a fraction of T, in (0, SECTION] (default 1/2, the paper's).
-
-    Notes
-    -----
-    ``law(q, dq, tau, r, p)``: r = the reference state, p = (y_i, dy_i).
-    """
-
-    name = "tv"
-
-    def __init__(self, model, reference, M1=None, gains: Gains | None = None,
-                 rejoin: float = PAPER_REJOIN):
-        require_same_robot(model, reference)
-        self.model, self.reference = model, reference
-        nu = model.nu
-        self.M1 = check_M1(np.zeros(nu) if M1 is None else M1, nu)
-        self.gains = gains if gains is not None else Gains()
-        if not isinstance(self.gains, Gains):
-            raise ValueError(f"gains must be a Gains, got {type(self.gains).__name__}")
-        self.rejoin = as_number(rejoin, "rejoin", positive=True)
-        if self.rejoin > SECTION:
-            raise ValueError(f"rejoin must be in (0, {SECTION}] (v_c must vanish before the "
-                             f"Poincare section at {SECTION} T), got {rejoin!r}")
-        self.T = reference.T
-        self.t_c = self.rejoin * self.T
-        self.M = output_matrix(self.M1)
-        self.n_ref = reference.n_state
-        self.n_par = 2 * nu
-        self._build()
-
-    @property
-    def cache_key(self):
-        """What the compiled law depends on."""
-        return ("tv", self.reference.cache_key, tuple(self.M1), self.gains, self.rejoin)
-
-    def _build(self):
-        m, nq, nu = self.model, self.model.nq, self.model.nu
-        ref = self.reference.symbolic()
-        M1 = ca.DM(self.M1)
-        q, dq = ca.SX.sym("q", nq), ca.SX.sym("dq", nq)
-        tau = ca.SX.sym("tau")
-        r = ca.SX.sym("r", self.n_ref)
-        p = ca.SX.sym("p", self.n_par)
-        yi, dyi = p[:nu], p[nu:]
-        qd, dqd, ddqd, dr = ref(tau, r)
-        vc, dvc, ddvc = correction(tau, yi, dyi, self.t_c)
-        y = outputs(M1, q) - outputs(M1, qd) - vc                              # eq. (17)
-        dy = outputs(M1, dq) - outputs(M1, dqd) - dvc
-        ddv = output_acceleration(outputs(M1, ddqd) + ddvc, y, dy, self.gains)  # eq. (13)
-        D, H = m.D(q), m.H(q, dq)
-        den = decoupling_denominator(D[0, 0], D[0, 1:], M1)                     # eq. (24)
-        ddqu = unactuated_acceleration(D, H, M1, ddv)                           # eq. (23)
-        u = actuated_torque(D, H, M1, ddqu, ddv)                                # eq. (12)
-        self.law = ca.Function("tv_law", [q, dq, tau, r, p], [u, y, dy, den, dr, ca.DM(1)],
-                               ["q", "dq", "tau", "r", "p"],
-                               ["u", "y", "dy", "den", "dr", "in_range"])
-        q0, dq0, _ = self.reference.evaluate(0.0)
-        self._vd0 = outputs(self.M1, q0)
-        self._dvd0 = outputs(self.M1, dq0)
-        self._r0 = np.array(self.reference.r0, dtype=float)
-
-    def step_start(self, q, dq) -> StepStart:
-        """The step constants y_i = v - v^d(0), dy_i = dv - dv^d(0) of eq. (17).
-
-        Parameters
-        ----------
-        q, dq : array_like
-            The state at the start of the step (just after an impact), rad and rad/s.
-
-        Returns
-        -------
-        StepStart
-            ``r`` the reference state at tau = 0, ``p`` = (y_i, dy_i).
-        """
-        nq = self.model.nq
-        q = as_vector(q, nq, "q")
-        dq = as_vector(dq, nq, "dq")
-        yi = outputs(self.M1, q) - self._vd0
-        dyi = outputs(self.M1, dq) - self._dvd0
-        return StepStart(r=self._r0.copy(), p=np.r_[yi, dyi])
-
-    def torque(self, q, dq, tau, y_i=None, dy_i=None) -> ControlOutput:
-        """The control law at (q, dq, tau), the reference state read from the reference.
-
-        Parameters
-        ----------
-        q, dq : array_like
-            Configuration (nq,), rad, and velocity, rad/s.
-        tau : float
-            Time since the start of the step, s, within the reference's range
-            [0, ``reference.t_max``].
-        y_i, dy_i : array_like, optional
-            The correction's initial output error and rate (nu each; default zero: no
-            correction).
-
-        Returns
-        -------
-        ControlOutput
-            Torques, outputs y_c and rates, decoupling denominator.
-        """
-        nu = self.model.nu
-        yi = np.zeros(nu) if y_i is None else as_vector(y_i, nu, "y_i")
-        dyi = np.zeros(nu) if dy_i is None else as_vector(dy_i, nu, "dy_i")
-        tau = as_number(tau, "tau")
-        if not 0 <= tau <= self.reference.t_max:
-            raise ValueError(f"tau must lie in [0, {self.reference.t_max:.6g}], got {tau!r}")
-        return self.evaluate(q, dq, tau, self.reference.state(tau), np.r_[yi, dyi])
-
-    def singularity(self, n: int = 1001) -> SingularityReport:
-        """Whether D11 - D12 M1 vanishes or changes sign along the reference (eq. 23-24).
-
-        Parameters
-        ----------
-        n : int
-            Samples on [0, T].
-
-        Returns
-        -------
-        SingularityReport
-        """
-        t = np.linspace(0.0, self.T, n)
-        nq = self.model.nq
-        D = np.array(self.model.D.map(n)(self.reference.q(t))).reshape(nq, nq, n, order="F")
-        return singularity_report(decoupling_denominator(D[0, 0], D[0, 1:], self.M1))
-
-    def describe(self) -> dict:
-        """What defines the controller, as a JSON-ready dict.
-
-        Returns
-        -------
-        dict
-            ``controller`` ('tv'), ``M1``, ``gains``, ``rejoin``.
-        """
-        return dict(controller="tv", M1=self.M1.tolist(), gains=self.gains.to_dict(),
-                    rejoin=self.rejoin)
 
 
 # ================================================= virtual constraints (HZD)
@@ -497,7 +240,7 @@ def fit_virtual_constraints(gait, c=None, H0=None, segments_per_step: int = 200,
     return vcs
 
 
-class VirtualConstraintController(_Controller):
+class VirtualConstraintController(Controller):
     """Virtual-constraint (HZD) controller, for the comparison of paper §V-C.
 
     Outputs y = H0 q - h_d(theta), theta = c q, with h_d fitted to the same reference
@@ -516,7 +259,7 @@ class VirtualConstraintController(_Controller):
     from the middle of the step on.  On the hybrid zero dynamics y_i = dy_i = 0 (the
     constraints are impact invariant): the correction only changes how states off the
     constraint surface join it, not the restricted Poincaré map
-    (:mod:`analysis.virtual_constraints`).  Without it the PD of the outputs alone
+    (:mod:`analysis.stability.vc_map`).  Without it the PD of the outputs alone
     brings the state to the surface.
 
     ``den`` = det [D_1; J] / det [c; H0]: zero where the controller is singular.
@@ -685,3 +428,130 @@ class VirtualConstraintController(_Controller):
         """
         return dict(controller="vc", gains=self.gains.to_dict(), correction=self.correction,
                     **self.constraints.to_dict())
+
+
+class ConstraintSurface:
+    """The constraint surface of virtual constraints and the motion on it.
+
+    On Z = {H0 q = h_d(theta)}, theta = c q, the configuration is a function of the phase
+    alone, q = Q(theta) = [H0; c]^-1 [h_d(theta); theta], and the zero dynamics is the
+    unactuated row of eq. (1) along that curve,
+
+        D_1(Q) (Q' ddtheta + Q'' dtheta^2) + H_1(Q, Q' dtheta) = 0,
+
+    with the phase as the independent variable: the state on Z is w = dtheta/dt and
+    dw/dtheta = ddtheta / w.  The swing foot strikes at the fixed phase theta^- where
+    z_sw(Q(theta^-)) = 0 (near the reference's impact), whatever the velocity; after the
+    impact and relabelling the state lands on Z again at theta^+ = c E Q(theta^-).  The
+    restricted Poincaré map (:mod:`analysis.stability.vc_map`) and the batched walker
+    (:mod:`biped_casadi.simulation.walkers`) are built on these Functions.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    constraints : VirtualConstraints
+        From :func:`fit_virtual_constraints`.
+
+    Notes
+    -----
+    CasADi Functions, built once: ``curve(theta) -> (Q, dQ/dtheta, D_1 Q')``,
+    ``curve_second(theta) -> d2Q/dtheta2``, ``zero_dynamics(theta, w) -> dw/dtheta``,
+    ``foot(theta) -> (x_sw, z_sw, dz_sw/dtheta)``, ``rk4(w, theta, h) -> (w, theta)``
+    (one RK4 step of length h in the phase).
+    """
+
+    def __init__(self, model, constraints: VirtualConstraints):
+        if not isinstance(constraints, VirtualConstraints):
+            raise ValueError("constraints must be a VirtualConstraints")
+        self.model, self.vc = model, constraints
+        self._build_curve()
+        self._find_impact()
+
+    @property
+    def cache_key(self):
+        """What the surface depends on: the model and the constraints."""
+        return (self.model.cache_key, self.vc.cache_key)
+
+    def _build_curve(self):
+        m, vc = self.model, self.vc
+        th = ca.SX.sym("theta")
+        w = ca.SX.sym("w")
+        Pinv = ca.DM(np.linalg.inv(vc.P))
+        h, dh, ddh = vc.h(th)
+        Q = ca.mtimes(Pinv, ca.vertcat(h, th))
+        Q1 = ca.mtimes(Pinv, ca.vertcat(dh, 1))
+        Q2 = ca.mtimes(Pinv, ca.vertcat(ddh, 0))
+        D1 = m.D(Q)[0, :]
+        H1 = m.H(Q, Q1 * w)[0]
+        den = ca.mtimes(D1, Q1)
+        ddth = -(ca.mtimes(D1, Q2) * w**2 + H1) / den
+        self.curve = ca.Function("hzd_curve", [th], [Q, Q1, den], ["theta"], ["q", "dq_dtheta", "den"])
+        self.curve_second = ca.Function("hzd_curve_second", [th], [Q2], ["theta"], ["d2q_dtheta2"])
+        self.zero_dynamics = ca.Function("hzd_dw_dtheta", [th, w], [ddth / w], ["theta", "w"], ["dw"])
+        xs, zs = m.swing_foot(Q)
+        _, dzs = m.swing_foot_velocity(Q, Q1)
+        self.foot = ca.Function("hzd_foot", [th], [xs, zs, dzs], ["theta"], ["x_sw", "z_sw", "dz_dtheta"])
+        hs = ca.SX.sym("h")
+        f = self.zero_dynamics
+        w_next = rk4_step(lambda wv, c: f(th + c * hs, wv), w, hs)
+        self.rk4 = ca.Function("hzd_rk4", [w, th, hs], [w_next, th + hs],
+                               ["w", "theta", "h"], ["w_next", "theta_next"])
+
+    def _find_impact(self):
+        """theta^- with z_sw(Q(theta^-)) = 0 near the reference's impact (rootfinder)."""
+        th = ca.MX.sym("theta")
+        _, z, _ = self.foot(th)
+        rf = ca.rootfinder("hzd_impact_phase", "newton", ca.Function("z_sw", [th], [z]),
+                           {"abstol": 1e-15, "max_iter": 50, "error_on_fail": False})
+        #: the phase of the strike on the surface, rad
+        self.theta_minus = float(rf(self.vc.theta_minus))
+        qm = np.array(self.curve(self.theta_minus)[0]).ravel()
+        qp = self.model.E @ qm
+        #: the phase just after the impact (the surface is impact invariant), rad
+        self.theta_plus = float(self.vc.c @ qp)
+
+    def phase(self, q) -> float:
+        """The phase theta = c q of a configuration.
+
+        Parameters
+        ----------
+        q : array_like
+            (nq,) configuration, rad.
+
+        Returns
+        -------
+        float
+            theta, rad.
+        """
+        return float(self.vc.c @ np.asarray(q, float))
+
+
+def constraint_surface(model, gait, phase=None, H0=None) -> ConstraintSurface:
+    """The :class:`ConstraintSurface` of virtual constraints fitted to a gait (memoised).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference the constraints are fitted to (:func:`fit_virtual_constraints`).
+    phase : tuple of float, optional
+        theta = ``phase`` q (default the model's ``hip_phase``).
+    H0 : tuple of tuples, optional
+        Outputs H0 q - h_d(theta) (default q_a).
+
+    Returns
+    -------
+    ConstraintSurface
+        The same object for the same robot, gait, phase and outputs (the defaults
+        spelled out or not).
+    """
+    phase = tuple(np.asarray(model.hip_phase if phase is None else phase, float).ravel())
+    H0 = None if H0 is None else tuple(map(tuple, np.asarray(H0, float)))
+    return _surface(model, gait, phase, H0)
+
+
+@cached(maxsize=8)
+def _surface(model, gait, phase, H0) -> ConstraintSurface:
+    return ConstraintSurface(model, fit_virtual_constraints(gait, c=phase, H0=H0))

@@ -35,9 +35,9 @@ import numpy as np
 
 from biped_casadi import require_same_robot
 from biped_casadi.caching import cached
-from biped_casadi.controllers import VirtualConstraints, fit_virtual_constraints
-from biped_casadi.numerics import rk4_step
-from biped_casadi.output_law import SECTION
+from biped_casadi.control.virtual_constraints import (ConstraintSurface, VirtualConstraints,
+                                                     constraint_surface)
+from biped_casadi.control.output_law import SECTION
 from biped_casadi.results import Result
 
 __all__ = ["VCEigenResult", "VirtualConstraintMap", "vc_eigenvalue", "vc_map"]
@@ -74,7 +74,7 @@ class VCEigenResult(Result):
         ``|P(w*) - w*|``.
     delta_zero_squared : float
         The closed-form eigenvalue from the angular momentum about the stance foot
-        (module docstring of :mod:`analysis.virtual_constraints`).
+        (module docstring of :mod:`analysis.stability.vc_map`).
     min_denominator : float
         Smallest ``|D_1 Q'(theta)|`` on the step (zero: the controller is singular).
     constraints : dict
@@ -138,9 +138,12 @@ class VirtualConstraintMap:
         From :func:`biped_casadi.fit_virtual_constraints`.
     n_steps : int
         RK4 steps in theta over one step (>= 20).
+    surface : ConstraintSurface, optional
+        The constraints' surface, when already built.
     """
 
-    def __init__(self, model, gait, constraints: VirtualConstraints, n_steps: int = 1000):
+    def __init__(self, model, gait, constraints: VirtualConstraints, n_steps: int = 1000,
+                 surface: ConstraintSurface | None = None):
         require_same_robot(model, gait)
         if not isinstance(constraints, VirtualConstraints):
             raise ValueError("constraints must be a VirtualConstraints")
@@ -149,49 +152,13 @@ class VirtualConstraintMap:
         self.model, self.gait, self.vc = model, gait, constraints
         self.n_steps = n_steps
         self.T = gait.T
-        c = constraints.c
-        self.theta_s = float(c @ gait.q(SECTION * self.T))
+        self.surface = ConstraintSurface(model, constraints) if surface is None else surface
+        s = self.surface
+        self.curve, self.foot, self.rk4 = s.curve, s.foot, s.rk4
+        self.theta_minus, self.theta_plus = s.theta_minus, s.theta_plus
+        self.theta_s = s.phase(gait.q(SECTION * self.T))
         self.reference_x = gait.state_at(SECTION * self.T)
-        self._build_curve()
-        self._find_impact()
         self._build_map()
-
-    # ---------------------------------------------------------------- curve
-    def _build_curve(self):
-        m, vc = self.model, self.vc
-        th = ca.SX.sym("theta")
-        w = ca.SX.sym("w")
-        Pinv = ca.DM(np.linalg.inv(vc.P))
-        h, dh, ddh = vc.h(th)
-        Q = ca.mtimes(Pinv, ca.vertcat(h, th))
-        Q1 = ca.mtimes(Pinv, ca.vertcat(dh, 1))
-        Q2 = ca.mtimes(Pinv, ca.vertcat(ddh, 0))
-        D1 = m.D(Q)[0, :]
-        H1 = m.H(Q, Q1 * w)[0]
-        den = ca.mtimes(D1, Q1)
-        ddth = -(ca.mtimes(D1, Q2) * w**2 + H1) / den
-        self.curve = ca.Function("hzd_curve", [th], [Q, Q1, den], ["theta"], ["q", "dq_dtheta", "den"])
-        self.curve_second = ca.Function("hzd_curve_second", [th], [Q2], ["theta"], ["d2q_dtheta2"])
-        self.zero_dynamics = ca.Function("hzd_dw_dtheta", [th, w], [ddth / w], ["theta", "w"], ["dw"])
-        xs, zs = m.swing_foot(Q)
-        _, dzs = m.swing_foot_velocity(Q, Q1)
-        self.foot = ca.Function("hzd_foot", [th], [xs, zs, dzs], ["theta"], ["x_sw", "z_sw", "dz_dtheta"])
-        hs = ca.SX.sym("h")
-        f = self.zero_dynamics
-        w_next = rk4_step(lambda wv, c: f(th + c * hs, wv), w, hs)
-        self.rk4 = ca.Function("hzd_rk4", [w, th, hs], [w_next, th + hs],
-                               ["w", "theta", "h"], ["w_next", "theta_next"])
-
-    def _find_impact(self):
-        """theta^- with z_sw(Q(theta^-)) = 0 near the reference's impact (rootfinder)."""
-        th = ca.MX.sym("theta")
-        _, z, _ = self.foot(th)
-        rf = ca.rootfinder("hzd_impact_phase", "newton", ca.Function("z_sw", [th], [z]),
-                           {"abstol": 1e-15, "max_iter": 50, "error_on_fail": False})
-        self.theta_minus = float(rf(self.vc.theta_minus))
-        qm = np.array(self.curve(self.theta_minus)[0]).ravel()
-        qp = self.model.E @ qm
-        self.theta_plus = float(self.vc.c @ qp)
 
     # ------------------------------------------------------------------ map
     def _build_map(self):
@@ -327,8 +294,8 @@ def vc_map(model, gait, phase=None, H0=None, n_steps: int = 1000) -> VirtualCons
     -------
     VirtualConstraintMap
     """
-    constraints = fit_virtual_constraints(gait, c=phase, H0=H0)
-    return VirtualConstraintMap(model, gait, constraints, n_steps)
+    surface = constraint_surface(model, gait, phase, H0)
+    return VirtualConstraintMap(model, gait, surface.vc, n_steps, surface=surface)
 
 
 def vc_eigenvalue(model, gait, constraints: VirtualConstraints | None = None,

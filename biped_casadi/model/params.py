@@ -1,8 +1,8 @@
 """Legacy flat parameters of a planar five-link biped (torso + two femur/tibia legs).
 
 Kept so that parameter files and gait files written before robot descriptions
-(:mod:`biped_casadi.description`) still load: :meth:`RobotParams.to_description` turns
-a parameter set into the equivalent :class:`~biped_casadi.description.RobotDescription`
+(:mod:`biped_casadi.model.description`) still load: :meth:`RobotParams.to_description` turns
+a parameter set into the equivalent :class:`~biped_casadi.model.description.RobotDescription`
 (torso, leg = (femur, tibia), torque limit 150 N m), which is what the model uses.
 ``rabbit(params)`` and ``robot(FILE)`` accept these files and objects.  New robots are
 written as description files (any number of links per leg, point masses).
@@ -16,7 +16,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from .files import read_text_file
+from ..files import read_text_file
 
 from .description import Link, RobotDescription
 

@@ -195,7 +195,7 @@ def one_d_sweeps_plot(lines) -> Figure:
     Parameters
     ----------
     lines : OneDSweeps
-        From :func:`analysis.sweep.one_d_sweeps`: one sweep per component and the
+        From :func:`analysis.sweeps.sweep.one_d_sweeps`: one sweep per component and the
         singular values of eq. (24), drawn as dashed lines where inside the range.
 
     Returns
@@ -552,7 +552,7 @@ def basin_plot(results, title: str | None = None) -> Figure:
     Parameters
     ----------
     results : BasinResult or list of them
-        From :func:`analysis.robustness.basin` (e.g. a time-varying design and virtual
+        From :func:`analysis.robustness.s_star.basin` (e.g. a time-varying design and virtual
         constraints on the same gait and grid).
     title : str, optional
 
@@ -603,7 +603,7 @@ def tradeoff_plot(front, others=None, bound=None, title: str | None = None) -> F
     Parameters
     ----------
     front : list of (max_abs, s_star)
-        The Pareto front of a search (:attr:`analysis.robust_design.RobustDesignResult.tradeoff`).
+        The Pareto front of a search (:attr:`analysis.design.robust_search.RobustDesignResult.tradeoff`).
     others : dict, optional
         Label -> (max_abs, s_star) of designs to mark (e.g. virtual constraints, the
         deadbeat designs, the robust design).

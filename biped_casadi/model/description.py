@@ -56,12 +56,12 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from .files import read_text_file
+from ..files import read_text_file
 
 __all__ = ["Link", "RobotDescription", "load_description", "find_description",
            "description_from_dict", "BUILTIN", "builtin_path"]
 
-#: descriptions shipped with the toolkit (package data, biped_casadi/robots/NAME.toml)
+#: descriptions shipped with the toolkit (package data, biped_casadi/model/robots/NAME.toml)
 BUILTIN = ("rabbit", "three_link")
 
 _TOP = ("name", "gravity", "actuators", "torso", "leg", "point_masses")
@@ -378,7 +378,7 @@ def builtin_path(name: str) -> Path:
     Returns
     -------
     Path
-        ``biped_casadi/robots/NAME.toml`` inside the installed package.
+        ``biped_casadi/model/robots/NAME.toml`` inside the installed package.
 
     Raises
     ------
@@ -387,7 +387,7 @@ def builtin_path(name: str) -> Path:
     """
     if name not in BUILTIN:
         raise ValueError(f"robot: no built-in robot {name!r} (built-in: {', '.join(BUILTIN)})")
-    return Path(str(resources.files("biped_casadi") / "robots" / f"{name}.toml"))
+    return Path(str(resources.files("biped_casadi.model") / "robots" / f"{name}.toml"))
 
 
 def find_description(name_or_path) -> RobotDescription:

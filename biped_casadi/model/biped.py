@@ -20,7 +20,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from .caching import cached
+from ..caching import cached
 from .description import BUILTIN, RobotDescription, builtin_path, load_description
 from .params import RABBIT, RobotParams, load_params
 
@@ -39,7 +39,7 @@ E_RELABEL = np.array([[1, 1, 1, 1, 1],
 B_INPUT = np.vstack([np.zeros((1, 4)), np.eye(4)])
 
 #: RABBIT's description (SPEC section 1, torque limit 150 N m): the same numbers as the
-#: packaged ``rabbit.toml`` and the legacy :data:`~biped_casadi.params.RABBIT`.
+#: packaged ``rabbit.toml`` and the legacy :data:`~biped_casadi.model.params.RABBIT`.
 RABBIT_DESCRIPTION = RABBIT.to_description()
 
 
@@ -192,8 +192,8 @@ def _fn(name, inputs, outputs, in_names, out_names):
 class BipedModel:
     """Symbolic model of one planar point-foot biped with numeric CasADi Functions.
 
-    Built from a :class:`~biped_casadi.description.RobotDescription` (or a legacy
-    :class:`~biped_casadi.params.RobotParams`); ``nq`` = 2 k + 1 joints, ``nu`` = 2 k
+    Built from a :class:`~biped_casadi.model.description.RobotDescription` (or a legacy
+    :class:`~biped_casadi.model.params.RobotParams`); ``nq`` = 2 k + 1 joints, ``nu`` = 2 k
     torques for legs of k links.  Every Function takes numpy arrays or lists and
     returns ``casadi.DM``:
 
@@ -518,7 +518,7 @@ def robot(name_or_path="rabbit") -> BipedModel:
     ----------
     name_or_path : str, Path or RobotDescription
         ``'rabbit'`` (default), ``'three_link'``, or a description file (see
-        :mod:`biped_casadi.description` for the schema; legacy flat parameter files
+        :mod:`biped_casadi.model.description` for the schema; legacy flat parameter files
         load too).
 
     Returns

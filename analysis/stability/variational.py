@@ -13,7 +13,7 @@ where G_D12 = dD12/dq, h_dq = dH1/d(dq), dq = M_T d(q_u) + (0, dv_c), M_T = (1, 
 d tau = -(grad z_sw . M_T d q_u) / (dz_sw/dt) (implicit-function theorem), the impact map
 is linearised by AD at (q^d(T), dq^d(T)), and v_c enters the post-impact segment as a
 forcing linear in (y_i, dy_i).  Both segments use RK4 on the same grids as
-:class:`analysis.poincare.PoincareMap`, whose full AD Jacobian this reproduces to
+:class:`analysis.stability.poincare.PoincareMap`, whose full AD Jacobian this reproduces to
 integration accuracy (tests/test_poincare.py).
 
 The result is one SX Function ``A_fn(M1) -> A^z`` (the tables are numbers inside it):
@@ -27,7 +27,7 @@ import numpy as np
 
 from biped_casadi.caching import cached
 from biped_casadi.numerics import rk4_step
-from biped_casadi.output_law import correction, decoupling_denominator, outputs
+from biped_casadi.control.output_law import correction, decoupling_denominator, outputs
 
 __all__ = ["VariationalJacobian", "variational_jacobian"]
 

@@ -7,7 +7,7 @@ start the full-order closed loop IS its hybrid zero dynamics (eq. 19 with v^d + 
 the state of a scenario is (q_u, dq_u) and tau, q_a follows from the outputs (eq. 10),
 the torques from eq. (12), the ground reaction from Newton's law for the centre of mass.
 The output gains (Kp, Kd, eps) do not enter: the walker is the closed loop of every
-gain, and agrees with the full-order :class:`~biped_casadi.simulate.Simulator` to its
+gain, and agrees with the full-order :class:`~biped_casadi.simulation.full_order.Simulator` to its
 integration accuracy (``tests/test_walker.py`` measures it).
 
 Why it is fast.  One compiled step serves every design and every perturbation: the
@@ -18,7 +18,7 @@ T/8 is one ``mapaccum`` of RK4 nodes mapped over the active scenarios; the impac
 located inside its RK4 interval by a batched, safeguarded Newton iteration on the
 length of the last step, as in the full-order simulator.
 
-Validity.  Every node and every impact is checked with :mod:`biped_casadi.validity`
+Validity.  Every node and every impact is checked with :mod:`biped_casadi.simulation.validity`
 (the same conditions as the full-order simulator, torque limit included); a scenario
 stops at its first invalid state.
 """
@@ -31,16 +31,17 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from biped_casadi import SimulationOptions, require_same_robot
-from biped_casadi.caching import cached
-from biped_casadi.numerics import jit_options, rk4_step
-from biped_casadi.output_law import (SECTION, actuated_torque, check_M1,
+from ..control.reference import require_same_robot
+from ..control.virtual_constraints import constraint_surface
+from .full_order import SimulationOptions
+from ..caching import cached
+from ..numerics import jit_options, rk4_step
+from ..control.output_law import (SECTION, actuated_torque, check_M1,
                                      coordinates_from_outputs, correction,
                                      decoupling_denominator, outputs, unactuated_acceleration)
-from biped_casadi.results import Result, internal
-from biped_casadi.validity import first_violation, impact_violation, node_violations
+from ..results import Result, internal
+from .validity import first_violation, impact_violation, node_violations
 
-from .virtual_constraints import vc_map
 
 __all__ = ["ZeroDynamicsWalker", "VirtualConstraintWalker", "WalkBatch",
            "zero_dynamics_walker", "virtual_constraint_walker"]
@@ -69,7 +70,7 @@ class WalkBatch(Result):
         The steps taken, summed over the scenarios.
     run_status : numpy.ndarray
         (n,) 'ok' when every step was valid, else the status of the first invalid state
-        (as :data:`biped_casadi.simulate.STATUSES`).
+        (as :data:`biped_casadi.simulation.full_order.STATUSES`).
     fail_step : numpy.ndarray
         (n,) the index of the step where the run failed (``steps`` when ok).
     qu_error : numpy.ndarray
@@ -636,7 +637,7 @@ class VirtualConstraintWalker:
     fixed phase theta^- (where z_sw(Q(theta)) = 0), so a step is an integration in theta
     from the start phase to theta^- (RK4 on w and on the time, dt/dtheta = 1/w), with the
     ground reaction and the torques of the exact zero dynamics checked at every node
-    (:mod:`biped_casadi.validity`), then the impact map.  Virtual constraints are impact
+    (:mod:`biped_casadi.simulation.validity`), then the impact map.  Virtual constraints are impact
     invariant: the state lands on the surface again, at theta^+ = c q^+.
 
     Parameters
@@ -661,7 +662,8 @@ class VirtualConstraintWalker:
         self.options = options if options is not None else SimulationOptions()
         self.model, self.gait = model, gait
         self.nu = model.nu
-        self.vmap = vc_map(model, gait)
+        self.vmap = constraint_surface(model, gait)
+        self.theta_s = self.vmap.phase(gait.q(SECTION * gait.T))
         self.nodes = nodes
         o = self.options
         self.torque_limit = float(o.torque_limit if o.torque_limit is not None
@@ -731,7 +733,7 @@ class VirtualConstraintWalker:
         """
         x = np.atleast_2d(np.asarray(x, float))
         vm = self.vmap
-        th = np.full(len(x), vm.theta_s)
+        th = np.full(len(x), self.theta_s)
         curve = vm.curve.map(len(x))
         for _ in range(50):
             Q, Q1, _ = (np.array(v) for v in curve(th[None, :]))

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .numerics import as_number, as_vector
+from ..numerics import as_number, as_vector
 
 __all__ = ["Perturbation", "directions", "PAPER_SIZES"]
 

@@ -1,4 +1,4 @@
-"""A robust time-varying design: the largest s* (:mod:`analysis.robustness`) subject to
+"""A robust time-varying design: the largest s* (:mod:`analysis.robustness.s_star`) subject to
 max|lambda(A^z)| <= the virtual-constraint eigenvalue on the same gait (so the design
 also converges faster than virtual constraints, near the orbit).
 
@@ -45,11 +45,11 @@ from biped_casadi.results import Result
 from gait_opt import GaitOptions, default_gait
 from gait_opt.cache import cache_path
 
-from .poincare import poincare_map
-from .robustness import (Design, RobustnessSettings, kept_directions, robustness, s_star_batch,
+from ..stability.poincare import poincare_map
+from ..robustness.s_star import (Design, RobustnessSettings, kept_directions, robustness, s_star_batch,
                          start_states)
-from .virtual_constraints import vc_eigenvalue
-from .walker import zero_dynamics_walker
+from ..stability.vc_map import vc_eigenvalue
+from biped_casadi.simulation.walkers import zero_dynamics_walker
 
 __all__ = ["RobustDesignSettings", "RobustDesignResult", "robust_design", "ROBUST_GAIT"]
 
@@ -172,10 +172,10 @@ class RobustDesignResult(Result):
     gait_file : str
         The cached gait's file.
     s_star : float
-        As :class:`~analysis.robustness.RobustnessResult` (bisection on the walker, 10
+        As :class:`~analysis.robustness.s_star.RobustnessResult` (bisection on the walker, 10
         rounds).
     s_fail : float
-        As :class:`~analysis.robustness.RobustnessResult`.
+        As :class:`~analysis.robustness.s_star.RobustnessResult`.
     failure : str
         The failure at ``s_fail`` (status, step and direction) in words; '' when none.
     verified : dict

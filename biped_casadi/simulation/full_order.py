@@ -2,7 +2,7 @@
 guard).
 
 State (q, dq, tau), 2 nq + 1 numbers, plus the controller's reference state r (a function of
-tau alone, see :mod:`biped_casadi.controllers`).  In single support the robot follows
+tau alone, see :mod:`biped_casadi.control`).  In single support the robot follows
 eq. (1), D(q) ddq + H(q, dq) = B u, with the controller's torque u; the step ends when
 the swing foot reaches the ground in front of the stance foot while moving down
 (z_sw = 0, x_sw > 0, dz_sw < 0); the impact map with relabelling (eq. 2-3) starts the
@@ -42,10 +42,10 @@ from dataclasses import asdict, dataclass
 import casadi as ca
 import numpy as np
 
-from .caching import cached
-from .numerics import as_vector, jit_options, rk4_step
-from .output_law import SECTION
-from .results import Result, internal, json_safe
+from ..caching import cached
+from ..numerics import as_vector, jit_options, rk4_step
+from ..control.output_law import SECTION
+from ..results import Result, internal, json_safe
 from .validity import first_violation, impact_violation, node_violations
 
 __all__ = ["SimulationOptions", "StepRecord", "SimulationResult", "Simulator", "simulate",
@@ -436,7 +436,7 @@ class Simulator:
 
     # ---------------------------------------------------------------- checks
     def _rows(self, D, X):
-        """The named rows of a diagnostics block, for :mod:`biped_casadi.validity`."""
+        """The named rows of a diagnostics block, for :mod:`biped_casadi.simulation.validity`."""
         R = self._R
         return dict(finite=np.all(np.isfinite(D), 0) & np.all(np.isfinite(X), 0),
                     in_range=D[R["INR"]], den=D[R["DEN"]], Fx=D[R["FX"]], Fz=D[R["FZ"]],

@@ -3,7 +3,7 @@ its exact Jacobian A^z.
 
 Zero dynamics (paper eq. 19 with M2 = I): the outputs follow v = v^d + v_c, so
 q_a = v - M1 q_u (eq. 10), and the first row of eq. (1) gives ddq_u (eq. 23 with
-ddv = ddv^d + ddv_c); both come from :mod:`biped_casadi.output_law`.  The reference
+ddv = ddv^d + ddv_c); both come from :mod:`biped_casadi.control.output_law`.  The reference
 state (q_u^d, dq_u^d) is integrated alongside in the same scheme, so that past T it
 continues exactly as the gait defines it and on the periodic orbit q_u == q_u^d holds to
 round-off in the discrete map.
@@ -17,7 +17,7 @@ dynamics with v_c from tau = 0 to 0.75 T.
 Two ways to A^z, which agree to integration accuracy (tests/test_poincare.py):
 
 - ``method="variational"`` (default): the variational equation along the orbit
-  (:mod:`analysis.variational`), one SX Function of M1, well under a millisecond per M1;
+  (:mod:`analysis.stability.variational`), one SX Function of M1, well under a millisecond per M1;
 - ``method="ad"``: AD through the whole discrete map (~0.3 s per M1), for verification
   and for the map away from the fixed point.
 
@@ -35,9 +35,9 @@ import numpy as np
 
 from biped_casadi import require_same_robot
 from biped_casadi.caching import cached
-from biped_casadi.controllers import PAPER_REJOIN
+from biped_casadi.control import PAPER_REJOIN
 from biped_casadi.numerics import as_number, as_vector, rk4_step
-from biped_casadi.output_law import (SECTION, check_M1, check_M1_range,
+from biped_casadi.control.output_law import (SECTION, check_M1, check_M1_range,
                                      coordinates_from_outputs, correction,
                                      decoupling_denominator, is_singular, outputs,
                                      unactuated_acceleration)
@@ -246,7 +246,7 @@ class PoincareMap:
     # ----------------------------------------------------------- evaluation
     @property
     def variational(self):
-        """The variational-equation Jacobian of this map (:mod:`analysis.variational`)."""
+        """The variational-equation Jacobian of this map (:mod:`analysis.stability.variational`)."""
         return variational_jacobian(self.model, self.gait, self.tau_s, self.n_pre,
                                     self.n_post, self.rejoin)
 

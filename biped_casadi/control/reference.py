@@ -8,7 +8,7 @@ so carrying it as a state keeps q_u^d exact in every discrete scheme).  A refere
 given in closed form has no state (``n_state = 0``).
 
 :class:`gait_opt.Gait` implements this interface; any other object that does can drive
-:class:`~biped_casadi.controllers.TimeVaryingController`, the simulator and the maps of
+:class:`~biped_casadi.control.TimeVaryingController`, the simulator and the maps of
 :mod:`analysis`.
 """
 from __future__ import annotations

@@ -43,18 +43,17 @@ from biped_casadi.files import write_text_atomic
 from biped_casadi.results import Result, json_safe
 from gait_opt import GaitOptions, default_gait
 
-from .output_design import (ab_solution_set, coarse_grid_size, conjecture_figures,
-                            domain_grid, optimize_m1, swing_height_at_Td, taylor_ab)
+from ..design import (RobustDesignSettings, ab_solution_set, coarse_grid_size,
+                      conjecture_figures, domain_grid, optimize_m1, robust_design,
+                      swing_height_at_Td, taylor_ab)
+from ..robustness import Design, RobustnessSettings, basin, kept_directions, robustness
+from ..stability import poincare_eigenvalues, singular_m1_values, vc_eigenvalue
+from ..sweeps import grid_points, one_d_sweeps, run_sweep
 from .plots import (basin_plot, conjecture_plot, gait_profiles_plot, gait_stick_plot,
                     m1_plane_plot, one_d_sweeps_plot, save_figure, stable_domains_plot,
                     swing_torques_plot, tradeoff_plot, unactuated_error_plot,
                     walking_animation)
-from .poincare import poincare_eigenvalues, singular_m1_values
 from .report import write_report
-from .robust_design import RobustDesignSettings, robust_design
-from .robustness import Design, RobustnessSettings, basin, kept_directions, robustness
-from .sweep import grid_points, one_d_sweeps, run_sweep
-from .virtual_constraints import vc_eigenvalue
 
 __all__ = ["reproduce", "ReproduceOptions", "ReproduceResult", "PAPER", "run_folder"]
 
@@ -395,7 +394,7 @@ def _robust_settings(ctx) -> RobustDesignSettings:
 
 
 def stage_robust_design(ctx: _Context):
-    """The robust time-varying design (:mod:`analysis.robust_design`; cached)."""
+    """The robust time-varying design (:mod:`analysis.design.robust_search`; cached)."""
     if not _is_rabbit(ctx):
         ctx.summary["robust_design"] = dict(
             skipped="the robust-design search is calibrated on RABBIT (its gait options); "

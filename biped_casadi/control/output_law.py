@@ -5,7 +5,7 @@ The controller zeroes y_c = v - v^d(tau) - v_c(tau) (eq. 17) with the output dyn
 eq. (13); the unactuated acceleration follows from the first row of eq. (1) (eq. 23), the
 torques from the others (eq. 12).  The zero dynamics (eq. 19) is the same pair of
 equations with y_c = 0.  Everything here works on numpy arrays and CasADi symbols alike
-unless said otherwise; the controllers (:mod:`biped_casadi.controllers`), the simulator
+unless said otherwise; the controllers (:mod:`biped_casadi.control`), the simulator
 and the Poincaré maps (:mod:`analysis`) call these functions and nothing else for these
 equations.
 
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .numerics import as_number, as_vector
-from .results import Result
+from ..numerics import as_number, as_vector
+from ..results import Result
 
 __all__ = ["SECTION", "SINGULAR_RTOL", "M1_LIMIT", "Gains", "SingularityReport", "check_M1",
            "output_matrix", "outputs", "coordinates_from_outputs", "correction",

@@ -134,7 +134,7 @@ def _comparison_rows(s: dict) -> list:
 
 def _figure_captions(s: dict) -> dict:
     """key -> (title, caption) of every figure a reproduction can make, in report order.
-    Colours are named from :data:`analysis.plots.COLOUR_NAMES`, the plots' own."""
+    Colours are named from :data:`analysis.reporting.plots.COLOUR_NAMES`, the plots' own."""
     st, sw, to = (COLOUR_NAMES[c] for c in (STANCE, SWING, TORSO))
     pts = _g(s, "fig2", "points_per_component")
     dom = s.get("domains") or {}

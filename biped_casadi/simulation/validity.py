@@ -8,8 +8,8 @@ ground (F_z > 0, or above a floor), the reaction is inside the friction cone
 (|F_x| <= mu F_z) and every torque is within the limit.  At every impact: the impulse is
 pressed on the ground and inside the friction cone, and the old stance foot lifts off.
 
-The full-order :class:`~biped_casadi.simulate.Simulator` and the batched zero-dynamics
-walker of :mod:`analysis.walker` both call these functions, vectorised over any number
+The full-order :class:`~biped_casadi.simulation.full_order.Simulator` and the batched zero-dynamics
+walker of :mod:`biped_casadi.simulation.walkers` both call these functions, vectorised over any number
 of nodes and scenarios.
 """
 from __future__ import annotations

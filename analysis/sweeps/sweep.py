@@ -1,17 +1,17 @@
 """Sweeps of the output matrix M1 (paper §V-A, Fig. 2): max|lambda| of A^z and the status
 of SPEC §4 for many M1, in parallel, stored as they are computed, resumable.
 
-    from analysis.sweep import grid_points, run_sweep
+    from analysis.sweeps.sweep import grid_points, run_sweep
     r = run_sweep(model, gait, grid_points(9, -10, 10), out_dir="sweep9")
     r.counts          # {'stable': .., 'unstable': .., 'singular': .., 'no_impact': ..}
     r.point_status    # the status of SPEC §4 of every point
 
 The points are cut into chunks of ``chunk_size`` rows; each chunk is evaluated by
-:meth:`analysis.poincare.PoincareMap.jacobian_batch` (the vectorised variational
+:meth:`analysis.stability.poincare.PoincareMap.jacobian_batch` (the vectorised variational
 equation; ``SweepSettings(method='ad')`` uses the full AD map instead) in a worker
 process that builds and caches the map once from the gait's dictionary, or on the
 workers of a Dask distributed cluster (``scheduler='tcp://host:port'``).  With
-``out_dir`` every finished chunk is written at once (``analysis.storage``: Parquet per
+``out_dir`` every finished chunk is written at once (``analysis.sweeps.storage``: Parquet per
 chunk, atomic); a rerun with the same folder and settings reads what is stored, checks it,
 recomputes only what is missing or corrupt, and returns exactly the same numbers as an
 uninterrupted run.  A folder made with other settings is refused.
@@ -40,12 +40,12 @@ import numpy as np
 
 from biped_casadi import RobotParams, description_from_dict, require_same_robot, robot
 from biped_casadi.caching import cached
-from biped_casadi.output_law import check_M1_range
+from biped_casadi.control.output_law import check_M1_range
 from biped_casadi.results import Result, internal
 from gait_opt import Gait, GaitOptions
 
-from .cluster import DASK_CONNECT_TIMEOUT, dask_client
-from .poincare import STATUSES, PoincareMap, poincare_map, singular_m1_values
+from ..cluster import DASK_CONNECT_TIMEOUT, dask_client
+from ..stability.poincare import STATUSES, PoincareMap, poincare_map, singular_m1_values
 from .storage import META, SweepStore, digest_json, digest_points
 
 __all__ = ["run_sweep", "SweepResult", "SweepSettings", "grid_points", "line_points",
@@ -62,7 +62,7 @@ METHODS = ("variational", "ad")
 #: the modules whose code decides the numbers; their SHA-256 is part of a sweep's
 #: settings (a folder written by other code is refused) and is checked on every result
 #: coming back from a worker (a Dask worker running other code is an error, not a mix)
-NUMERIC_MODULES = ("analysis.poincare", "analysis.variational", "biped_casadi.output_law",
+NUMERIC_MODULES = ("analysis.stability.poincare", "analysis.stability.variational", "biped_casadi.control.output_law",
                    "biped_casadi.numerics", "biped_casadi.model", "gait_opt.gait",
                    "gait_opt.parametrisation")
 _CODE_DIGEST = None

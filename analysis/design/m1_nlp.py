@@ -1,0 +1,324 @@
+"""The M1 NLP (paper §V-B): choose the outputs that minimise max|lambda| of A^z, on a group
+of a = b = 0 (:mod:`analysis.design.output_selection`) or with every component free.
+
+The spectral radius enters through the epigraph of the 2x2 Jury conditions on A^z (exact
+derivatives in M1 by AD of the variational Jacobian), then a Newton iteration on
+tr A^z = det A^z = 0 restricted to the group brings a near-deadbeat point to deadbeat.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from biped_casadi.caching import cached
+from biped_casadi.control.output_law import decoupling_denominator
+from biped_casadi.results import Result, internal
+
+from ..stability.poincare import poincare_eigenvalues, poincare_map
+from .output_selection import (ab_solution_set, coarse_grid_size, domain_grid, group_of,
+                               solve_ab, taylor_ab)
+
+__all__ = ["optimize_m1", "M1Result"]
+
+
+# ------------------------------------------------------------------ the M1 NLP
+@dataclass
+class M1Result(Result):
+    """The M1 chosen by :func:`optimize_m1`; ``success`` means stable.
+
+    Parameters
+    ----------
+    M1 : numpy.ndarray
+        (nu,) the chosen outputs.
+    max_abs : float
+        max ``|lambda|`` of A^z, verified by the full-AD Poincaré map.
+    eigenvalues : numpy.ndarray
+        The two eigenvalues (complex), from the same map.
+    group : int or None
+        The a = b = 0 group M1 lies on (1 or 2), None when on neither.
+    a, b : float
+        The coefficients of eq. (27) at M1.
+    status : {'stable', 'unstable'}
+        The stability status of the chosen M1.
+    max_abs_nlp : float
+        The NLP's own value (variational A^z).
+    eigenvalue_uncertainty : float
+        Estimated error of max ``|lambda|``, from a map with twice the RK4 steps.
+    starts : int
+        Starting points tried.
+    solve_time : float
+        Wall time, s.
+    message : str
+        The result in words.
+    history : list of dict
+        Every local solution found (start, M1, max_abs, how); left out of
+        ``to_dict()``.
+    """
+
+    M1: np.ndarray
+    max_abs: float
+    eigenvalues: np.ndarray
+    group: int | None
+    a: float
+    b: float
+    status: str
+    max_abs_nlp: float
+    eigenvalue_uncertainty: float
+    starts: int
+    solve_time: float
+    message: str = ""
+    history: list = internal(default_factory=list)
+
+    SUCCESS = ("stable",)
+
+
+#: which swing-height conditions constrain the M1 NLP
+_CONSTRAINTS = ("none", "ab", "a")
+
+
+def _conditions(tay, M1, constraints: str) -> list:
+    """a (and b) of eq. (27) as CasADi expressions of M1, for ``constraints``."""
+    if constraints == "none":
+        return []
+    MT = ca.vertcat(1, -M1)
+    a = ca.dot(ca.DM(tay.grad), MT)
+    if constraints == "a":
+        return [a]
+    return [a, 0.5 * ca.mtimes([MT.T, ca.DM(tay.hess), MT])]
+
+
+@cached(maxsize=8)
+def _epigraph_nlp(pm, tay, constraints: str, den_margin: float):
+    """min rho over (M1, rho) with the Jury conditions of a 2x2 A^z scaled by rho:
+    rho^2 -+ det >= 0, rho^2 + det -+ rho tr >= 0 (all eigenvalues in |z| <= rho);
+    a = b = 0 (``constraints`` 'ab') or a = 0 ('a', where b vanishes with a);
+    D11 - D12 M1 >= margin along the step.  Built once per map, constraints and margin.
+    The Hessian is exact for nu = 2 (cheap, and the limited-memory approximation strays
+    off the three-link biped's a = 0 line), limited-memory otherwise (RABBIT)."""
+    var = pm.variational
+    M1 = ca.SX.sym("M1", pm.nu)
+    rho = ca.SX.sym("rho")
+    tr, det = var.trace_det(M1)
+    g = [rho**2 - det, rho**2 + det, rho**2 + det - rho * tr, rho**2 + det + rho * tr]
+    lbg, ubg = [0.0] * 4, [np.inf] * 4
+    cond = _conditions(tay, M1, constraints)
+    g += cond
+    lbg += [0.0] * len(cond)
+    ubg += [0.0] * len(cond)
+    den = decoupling_denominator(ca.DM(pm.D11_table[::10]),
+                                 ca.DM(pm.D12_table[:, ::10]).T, M1)          # eq. (24)
+    g.append(den)
+    nd = den.numel()
+    lbg += [den_margin] * nd
+    ubg += [np.inf] * nd
+    nlp = {"x": ca.vertcat(M1, rho), "f": rho, "g": ca.vertcat(*g)}
+    solver = ca.nlpsol("m1_nlp", "ipopt", nlp, {
+        "ipopt": {"print_level": 0, "sb": "yes", "max_iter": 300, "tol": 1e-10,
+                  "hessian_approximation": "exact" if pm.nu <= 2 else "limited-memory"},
+        "print_time": False, "error_on_fail": False})
+    return solver, np.array(lbg), np.array(ubg)
+
+
+@cached(maxsize=8)
+def _deadbeat_residual(pm, tay, constraints: str) -> ca.Function:
+    """(trace, det[, a[, b]]) of A^z and its Jacobian in M1, as one Function (built once
+    per map and constraints)."""
+    X = ca.SX.sym("M1", pm.nu)
+    tr, det = pm.variational.trace_det(X)
+    r = ca.vertcat(tr, det, *_conditions(tay, X, constraints))
+    return ca.Function("deadbeat", [X], [r, ca.jacobian(r, X)])
+
+
+def _deadbeat_newton(pm, tay, M1, constraints: str, iters: int = 30):
+    """Newton on trace = det = 0 (and the swing-height conditions): the deadbeat point
+    near M1."""
+    F = _deadbeat_residual(pm, tay, constraints)
+    x = np.array(M1, float)
+    for _ in range(iters):
+        rv, J = (np.array(v) for v in F(x))
+        rv = rv.ravel()
+        norm = np.linalg.norm(rv)
+        if np.max(np.abs(rv)) < 1e-13:
+            break
+        step = np.linalg.lstsq(J, -rv, rcond=None)[0]
+        if not np.all(np.isfinite(step)):
+            return None
+        lam = 1.0                              # backtracking on the residual norm
+        while lam > 1e-3:
+            trial = x + lam * step
+            rt = np.array(F(trial)[0]).ravel()
+            if np.all(np.isfinite(rt)) and np.linalg.norm(rt) < norm and not pm.is_singular(trial):
+                break
+            lam /= 2
+        else:
+            return None
+        x = trial
+    rv = np.array(F(x)[0]).ravel()
+    return x if np.max(np.abs(rv)) < 1e-10 and not pm.is_singular(x) else None
+
+
+def _feasible_set(tay, group, nu):
+    """(constraints, sampler, in_group) for a group: the NLP's conditions, a function
+    giving n candidate points of the set (numbers or a coarse sample), and the
+    membership test of a solution."""
+    if group is None:
+        return "none", None, lambda M1: True
+    if nu >= 3:
+        def sample(rng, n):
+            s = solve_ab(tay, *rng.uniform(-10, 10, (nu - 2, n)))
+            return (s.group1 if group == 1 else s.group2).reshape(-1, nu)
+        return "ab", sample, lambda M1: group_of(tay, M1) == group
+    ab = ab_solution_set(tay)
+    if ab.kind == "line":
+        if group != 1:
+            raise ValueError(f"group: a = b = 0 is one line for this robot ({ab.message}); "
+                             "use group=1 (the line) or None")
+
+        def sample(rng, n):
+            return ab.sample(n) if rng is None else ab.sample(1, *(2 * [rng.uniform(-10, 10)]))
+        return "a", sample, lambda M1: ab.on_set(M1) == 1
+    if ab.kind == "none" or group > len(ab.points):
+        raise ValueError(f"group: no solution group {group} of a = b = 0 for this gait "
+                         f"({ab.message})")
+    point = ab.points[group - 1]
+    return "ab", (lambda rng, n: point[None, :].copy()), lambda M1: ab.on_set(M1) == group
+
+
+def _coarse_best(pm, tay, group, k, n=81):
+    """The k best non-singular points of a coarse map: the group's grid of the middle
+    components (RABBIT: (M1(2), M1(3)), n x n; nu = 2: n points of the line, or the
+    isolated point), or the n_free^nu grid on [-10, 10] when all components are free
+    (9^4 for RABBIT)."""
+    nu = pm.nu
+    if group is None:
+        v = np.linspace(-10, 10, coarse_grid_size(nu))
+        P = np.stack(np.meshgrid(*([v] * nu), indexing="ij"), -1).reshape(-1, nu)
+    elif nu >= 3:
+        s = domain_grid(tay, n)
+        P = (s.group1 if group == 1 else s.group2).reshape(-1, nu)
+    else:
+        P = _feasible_set(tay, group, nu)[1](None, n * n)
+    P = P[np.all(np.isfinite(P), axis=1)]
+    st, _, _, mx = pm.jacobian_batch(P)
+    order = np.argsort(np.where(st == "singular", np.inf, mx))
+    return P[order[:k]]
+
+
+def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int = 2,
+                n_best: int = 10, n_ipopt: int = 4, seed: int = 0, den_margin: float = 1.0,
+                deadbeat: bool = True) -> M1Result:
+    """Choose M1 minimising max|lambda| of A^z (exact derivatives of A^z in M1 by AD).
+
+    ``group`` 1 or 2: M1 restricted to that solution group of a = b = 0; for nu = 2
+    (the three-link biped) the groups are the isolated solutions of
+    :func:`ab_solution_set` (only evaluated), or, when the solutions form a line,
+    ``group=1`` is that line (a = 0, on which b vanishes); ``None``: all components
+    free.  Starts: ``starts`` (k, nu) if given, else the ``n_best`` best points of a
+    coarse map (for RABBIT 81 x 81 on the group, or the 9^4 grid when free), plus
+    ``n_random`` random ones.  From every start Newton on trace = det = 0 (a deadbeat
+    point, max|lambda| = 0, when one is near); from the first ``n_ipopt`` also IPOPT on
+    the epigraph formulation, followed by the same Newton.
+    The best result is verified by the full-AD map (:func:`poincare_eigenvalues`), and
+    its eigenvalue uncertainty estimated from a map with twice the RK4 steps (near
+    deadbeat eigenvalues move like the square root of an error in A^z).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        Its reference gait.
+    group : {1, 2, None}
+        The a = b = 0 group M1 is restricted to, or None (all components free).
+    starts : array_like, optional
+        (k, nu) starting points.
+    n_random, n_best, n_ipopt : int
+        Random starts, starts from the coarse map, starts also given to IPOPT.
+    seed : int
+        Of the random starts.
+    den_margin : float
+        D11 - D12 M1 must stay above this along the step (eq. 24).
+    deadbeat : bool
+        Try Newton on trace = det = 0.
+
+    Returns
+    -------
+    M1Result
+        The best M1 found, verified.
+    """
+    if group not in (1, 2, None):
+        raise ValueError(f"group must be 1, 2 or None, got {group!r}")
+    t0 = time.perf_counter()
+    pm = poincare_map(model, gait)
+    tay = taylor_ab(model, gait)
+    nu = model.nu
+    constrained = group is not None
+    constraints, sampler, in_group = _feasible_set(tay, group, nu)
+    rng = np.random.default_rng(seed)
+    cand = [] if starts is None else [np.asarray(s, float) for s in np.atleast_2d(starts)]
+    if starts is None:            # the best points of a coarse map of the feasible set
+        cand += list(_coarse_best(pm, tay, group, n_best))
+    tries, n0 = 0, len(cand)
+    while len(cand) < n0 + n_random and tries < 50 * max(n_random, 1):
+        tries += 1
+        M1 = sampler(rng, 1)[0] if constrained else rng.uniform(-5, 5, nu)
+        if np.all(np.isfinite(M1)) and np.all(pm.denominator(M1) > den_margin):
+            cand.append(np.asarray(M1, float))
+    cand = [c for c in cand if np.all(np.isfinite(c)) and np.all(pm.denominator(c) > den_margin)]
+    if not cand:
+        raise ValueError(f"no non-singular start found on group {group}")
+    fixed = nu - len(_conditions(tay, ca.SX.sym("M1", nu), constraints)) == 0
+    if not fixed:
+        solver, lbg, ubg = _epigraph_nlp(pm, tay, constraints, den_margin)
+    history = []
+    for i, M1 in enumerate(cand):
+        if fixed:                 # an isolated solution: nothing to choose
+            found = [(M1, "isolated solution")]
+        else:                     # the start itself too: the result is never worse
+            found = [(M1, "start"),
+                     (_deadbeat_newton(pm, tay, M1, constraints) if deadbeat else None,
+                      "newton")]
+        if i < n_ipopt and not fixed:
+            st, A, ev, mx = pm.jacobian_batch(M1[None])
+            rho0 = float(mx[0]) * 1.01 + 1e-3 if np.isfinite(mx[0]) else 100.0
+            sol = solver(x0=np.r_[M1, rho0], lbg=lbg, ubg=ubg, lbx=np.r_[[-1e3] * nu, 0.0],
+                         ubx=np.r_[[1e3] * nu, 1e6])
+            x = np.array(sol["x"]).ravel()[:nu]
+            found += [(x, "ipopt"),
+                      (_deadbeat_newton(pm, tay, x, constraints) if deadbeat else None,
+                       "ipopt+newton")]
+        for Mx, how in found:
+            if Mx is None or pm.is_singular(Mx):
+                continue
+            if constrained and not in_group(Mx):
+                continue                  # Newton may cross to the other group's root
+            val = float(pm.jacobian_batch(Mx[None])[3][0])
+            history.append(dict(start=M1.tolist(), M1=Mx.tolist(), max_abs=val, how=how))
+    if not history:
+        raise RuntimeError("the M1 NLP found no non-singular local optimum (IPOPT); try more starts")
+    # verify the best few by the full-AD map and keep the best verified one
+    ranked = sorted(history, key=lambda h: h["max_abs"])
+    verified = []
+    for h in ranked[:3]:
+        r = poincare_eigenvalues(model, gait, h["M1"], method="ad")
+        verified.append((r.max_abs, np.array(h["M1"]), h["max_abs"]))
+    _, M1, val = min(verified, key=lambda v: v[0])
+    r = poincare_eigenvalues(model, gait, M1, method="ad")
+    # integration-error estimate of A^z: a map with twice the RK4 steps
+    fine = poincare_map(model, gait, n_pre=2 * pm.n_pre, n_post=2 * pm.n_post).analyse(
+        M1, method="ad")
+    dA = float(np.max(np.abs(fine.A - r.A)))
+    unc = float(max(abs(fine.max_abs - r.max_abs), math.sqrt(dA * np.max(np.abs(r.A)))))
+    label = f"group {group}" if constrained else "all components free"
+    return M1Result(M1=M1, max_abs=r.max_abs, eigenvalues=r.eigenvalues,
+                    group=group_of(tay, M1) if constrained else group_of(tay, M1, 1e-9),
+                    a=float(tay.a(M1)[0]), b=float(tay.b(M1)[0]), status=r.status,
+                    max_abs_nlp=val, eigenvalue_uncertainty=unc, starts=len(cand),
+                    solve_time=time.perf_counter() - t0,
+                    message=f"{label}: max|lambda| = {r.max_abs:.3g} (verified by the "
+                            f"full-AD map) from {len(cand)} starts",
+                    history=history)

@@ -1,0 +1,9 @@
+"""Robustness: which controllers walk.  s*, the largest scale of the paper's perturbation
+every kept direction survives with every step valid, for one design or many at once, and
+basins of attraction on the Poincaré section."""
+from .basin import BasinResult, basin
+from .s_star import (BatchSStar, Design, RobustnessResult, RobustnessSettings, kept_directions,
+                     robustness, s_star_batch, start_states)
+
+__all__ = ["Design", "RobustnessSettings", "RobustnessResult", "kept_directions", "robustness",
+           "start_states", "BatchSStar", "s_star_batch", "BasinResult", "basin"]

@@ -1,0 +1,157 @@
+"""Basins of attraction on the Poincaré section: which zero-dynamics states of a
+controller walk and converge.
+
+Every cell of a grid around the fixed point x* = (q_u^d, dq_u^d)(0.75 T) is a state on
+the controller's zero-dynamics manifold at the section, walked for a number of impacts
+with every validity condition checked (the batched walkers of
+:mod:`biped_casadi.simulation.walkers`).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from biped_casadi import SimulationOptions, require_same_robot
+from biped_casadi.control.output_law import SECTION
+from biped_casadi.numerics import as_number
+from biped_casadi.results import Result, internal
+from biped_casadi.simulation.walkers import virtual_constraint_walker, zero_dynamics_walker
+
+from .s_star import Design
+
+__all__ = ["BasinResult", "basin"]
+
+
+@dataclass
+class BasinResult(Result):
+    """Outcome of every cell of a grid of zero-dynamics states on the Poincaré section.
+
+    ``dq_u`` (columns) and ``q_u`` (rows) are the offsets of the cells from the fixed
+    point x* = (q_u^d, dq_u^d)(0.75 T).  ``status`` is always 'done' (``success``).  The
+    grid arrays are left out of ``to_dict()``.
+
+    Parameters
+    ----------
+    controller : str
+        'tv' (time-varying design) or 'vc' (virtual constraints).
+    design : dict
+        :meth:`Design.to_dict` of the time-varying design, or ``{"controller": "vc"}``.
+    x_star : list of float
+        The fixed point (q_u^d, dq_u^d) at 0.75 T, rad and rad/s.
+    steps : int
+        Impacts walked from each cell.
+    tol : float
+        Convergence threshold on the final error.
+    converged_fraction : float
+        Fraction of the cells that converged.
+    counts : dict
+        Outcome -> number of cells.
+    elapsed : float
+        Wall time, s.
+    status : str
+        'done'.
+    message : str
+        The converged percentage in words.
+    q_u : numpy.ndarray
+        (n,) offsets of the rows from q_u*, rad.
+    dq_u : numpy.ndarray
+        (n,) offsets of the columns from dq_u*, rad/s.
+    outcome : numpy.ndarray
+        (n, n) ``outcome[i, j]`` is 'converged' (every step valid, final error below
+        ``tol``), 'walked' (valid but not converged) or the status of the first invalid
+        state.
+    final_error : numpy.ndarray
+        (n, n) ``max(|q_u err|, |dq_u err|)`` at the last step; inf where failed.
+    """
+
+    controller: str
+    design: dict
+    x_star: list
+    steps: int
+    tol: float
+    converged_fraction: float
+    counts: dict
+    elapsed: float
+    status: str = "done"
+    message: str = ""
+    q_u: np.ndarray = internal(default=None)
+    dq_u: np.ndarray = internal(default=None)
+    outcome: np.ndarray = internal(default=None)
+    final_error: np.ndarray = internal(default=None)
+
+    SUCCESS = ("done",)
+
+
+def basin(model, gait, design: Design | None = None, n: int = 101,
+          q_span: float = 0.05, dq_span: float = 0.5, steps: int = 10, tol: float = 1e-3,
+          options: SimulationOptions | None = None, rk4_steps: int = 128,
+          nodes: int = 100) -> BasinResult:
+    """The basin of attraction on the 2-D section of the zero dynamics.
+
+    Every cell (q_u* + a, dq_u* + b), a in [-q_span, q_span], b in [-dq_span, dq_span],
+    is a state on the controller's zero-dynamics manifold at the section (for the
+    time-varying controller tau = 0.75 T with v_c = 0; for virtual constraints the point
+    of the constraint surface with that q_u and dq_u), walked for ``steps`` impacts with
+    every validity condition checked.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference step, made for ``model``.
+    design : Design, optional
+        A time-varying design; None: virtual constraints fitted to the gait.
+    n : int
+        Cells per axis.
+    q_span, dq_span : float
+        Half-widths of the grid, rad and rad/s.
+    steps : int
+        Impacts walked from each cell.
+    tol : float
+        Convergence threshold on ``max(|q_u err|, |dq_u err|)`` at the last step.
+    options : SimulationOptions, optional
+        Validity thresholds (default: mu 0.6, the robot's torque limit).
+    rk4_steps, nodes : int
+        Integration of the time-varying walker (RK4 steps per T) and of the virtual
+        constraints (nodes per step).
+
+    Returns
+    -------
+    BasinResult
+    """
+    require_same_robot(model, gait)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 2:
+        raise ValueError(f"n (cells per axis) must be an integer >= 2, got {n!r}")
+    q_span = as_number(q_span, "q_span", positive=True)
+    dq_span = as_number(dq_span, "dq_span", positive=True)
+    t0 = time.perf_counter()
+    xs = gait.state_at(SECTION * gait.T)
+    a, b = np.linspace(-q_span, q_span, n), np.linspace(-dq_span, dq_span, n)
+    A, Bg = np.meshgrid(a, b, indexing="ij")
+    X = np.c_[xs[0] + A.ravel(), xs[1] + Bg.ravel()]
+    opts = options or SimulationOptions()
+    if design is None:
+        batch = virtual_constraint_walker(model, gait, opts, nodes, jit=True).walk_from_section(
+            X, steps)
+        design_dict = dict(controller="vc")
+    else:
+        W = zero_dynamics_walker(model, gait, opts, rk4_steps, jit=True)
+        batch = W.walk_from_section(X, np.array(design.M1), design.rejoin, steps)
+        design_dict = design.to_dict()
+    err = batch.final_error
+    outcome = np.where(batch.ok, np.where(err < tol, "converged", "walked"),
+                       batch.run_status).astype(object)
+    names, counts = np.unique(outcome.astype(str), return_counts=True)
+    frac = float(np.mean(outcome == "converged"))
+    return BasinResult(
+        controller="tv" if design is not None else "vc", design=design_dict,
+        x_star=xs.tolist(), steps=steps, tol=tol, converged_fraction=frac,
+        counts={str(k): int(v) for k, v in zip(names, counts)},
+        elapsed=time.perf_counter() - t0,
+        message=f"{100 * frac:.1f} % of {n}x{n} cells converge within {steps} steps",
+        q_u=a, dq_u=b, outcome=outcome.reshape(n, n), final_error=err.reshape(n, n))
+
+

@@ -1,0 +1,16 @@
+"""Control: the time-varying output law of the paper (each equation written once), the
+reference interface, the hybrid zero dynamics of the time-varying controller, the two
+closed-loop controllers and the surface of virtual constraints."""
+from .controller import ControlOutput, Controller, StepStart
+from .output_law import (M1_LIMIT, SECTION, SINGULAR_RTOL, Gains, SingularityReport, check_M1)
+from .reference import Reference, require_same_robot
+from .time_varying import PAPER_REJOIN, TimeVaryingController
+from .virtual_constraints import (HIP_PHASE, ConstraintSurface, VirtualConstraintController,
+                                  VirtualConstraints, constraint_surface,
+                                  fit_virtual_constraints)
+
+__all__ = ["Controller", "StepStart", "ControlOutput", "SECTION", "SINGULAR_RTOL", "M1_LIMIT",
+           "Gains", "SingularityReport", "check_M1", "Reference", "require_same_robot",
+           "TimeVaryingController", "PAPER_REJOIN", "VirtualConstraints",
+           "VirtualConstraintController", "fit_virtual_constraints", "ConstraintSurface",
+           "constraint_surface", "HIP_PHASE"]
