@@ -27,8 +27,9 @@ import numpy as np
 
 from analysis.design import ROBUST_GAIT
 from analysis.stability import poincare_map
-from analysis.robustness import (Design, RobustnessSettings, basin, kept_directions,
-                                 robustness, start_states)
+from analysis.robustness import (Design, KeptDirections, RobustnessSettings, basin,
+                                 kept_directions, robustness)
+from biped_casadi.simulation import start_states
 from biped_casadi.simulation import virtual_constraint_walker
 from biped_casadi import (SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, rabbit, simulate)
@@ -47,7 +48,7 @@ def baseline_s_star(model, gait, design, dirs, st):
         for d in dirs:
             q0, dq0 = start_states(gait, d[None], s)
             r = simulate(ctrl, q0[0], dq0[0], opts)
-            if not (r.success and max(abs(r.qu_errors[-1]), abs(r.dqu_errors[-1])) < st.tol):
+            if r.verdict(st.tol) != "ok":
                 return False
         return True
 
@@ -71,9 +72,9 @@ def main(argv=None):
     g = default_gait(m, GaitOptions(**ROBUST_GAIT))
     st = RobustnessSettings(rounds=8)
     kept = kept_directions(m, g, st)
-    dirs = kept[0]
+    dirs = kept.directions
     # warm both paths (JIT compilation, maps) so the figures compare evaluation
-    robustness(m, g, DESIGN, RobustnessSettings(directions=1, rounds=1), kept=(dirs[:1], 1, {}))
+    robustness(m, g, DESIGN, RobustnessSettings(directions=1, rounds=1), kept=KeptDirections(dirs[:1], 1, {}))
     ctrl = TimeVaryingController(m, g, np.array(DESIGN.M1), rejoin=DESIGN.rejoin)
     simulate(ctrl, g.q(0.0), g.dq(0.0), SimulationOptions(steps=1, jit=True))
 

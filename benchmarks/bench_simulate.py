@@ -67,7 +67,8 @@ def scipy_baseline(ctrl, q0, dq0, steps):
 def best_stable_m1(model, gait):
     v = np.linspace(-10, 10, 5)
     pts = np.array(np.meshgrid(v, v, v, v, indexing="ij")).reshape(4, -1).T
-    status, _, _, mx = PoincareMap(model, gait).jacobian_batch(pts)
+    jb = PoincareMap(model, gait).jacobian_batch(pts)
+    status, mx = jb.status, jb.max_abs
     return pts[int(np.argmin(np.where(status == "stable", mx, np.inf)))]
 
 

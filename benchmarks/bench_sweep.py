@@ -111,7 +111,8 @@ def main(argv=None):
     t = time.perf_counter()
     pm.variational
     t_build_var = time.perf_counter() - t
-    status, _, _, _ = pm.jacobian_batch(grid)
+    jb = pm.jacobian_batch(grid)
+    status, _ = jb.status, jb.max_abs
     ok = np.flatnonzero(status != "singular")
     pts = grid[rng.choice(ok, size=args.points, replace=False)]
 
@@ -197,7 +198,7 @@ def main(argv=None):
         "poincare_eigenvalues (public)": ([r.A for r in pub], t_pub),
         "analyse (full AD)": ([r.A for r in ad], t_ad),
         "analyse_batch (full AD, threads)": ([r.A for r in adb], t_adb),
-        "jacobian_batch (variational)": ([vb[1][i] for i in range(len(pts))], t_var_small),
+        "jacobian_batch (variational)": ([vb.A[i] for i in range(len(pts))], t_var_small),
     }
     print(f"  (fine AD reference R1 built in {t_fine_build:.2f} s; errors are relative: "
           f"eigenvalues |d lambda| / max(1, max|lambda|), A max|dA| / max|A|)")

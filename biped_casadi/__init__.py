@@ -16,7 +16,7 @@ from .model import (B_INPUT, E_RELABEL, RABBIT, RABBIT_DESCRIPTION, BipedModel, 
                     RobotDescription, RobotParams, description_from_dict, find_description,
                     load_description, load_params, rabbit, resolve_robot, robot)
 from .results import Result, json_safe
-from .simulation import (PAPER_PERTURBATION, PAPER_SIZES, Perturbation, SimulationOptions,
+from .simulation import (PAPER_SIZES, Perturbation, SimulationOptions,
                          SimulationResult, Simulator, directions, perturbed_initial_state,
                          simulate)
 
@@ -27,7 +27,7 @@ __all__ = ["rabbit", "robot", "resolve_robot", "RobotDescription", "Link",
            "SECTION", "TimeVaryingController", "VirtualConstraintController",
            "VirtualConstraints", "fit_virtual_constraints", "HIP_PHASE", "PAPER_REJOIN",
            "Simulator", "SimulationOptions", "SimulationResult", "simulate",
-           "perturbed_initial_state", "PAPER_PERTURBATION", "Result", "json_safe",
+           "perturbed_initial_state", "Result", "json_safe",
            "cached", "cache_dir", "Perturbation", "directions", "PAPER_SIZES"]
 try:
     __version__ = _metadata.version("biped-casadi")

@@ -9,18 +9,22 @@ its gait and options), otherwise the argument itself (numbers, strings, tuples, 
 dataclasses).  Two content-equal objects therefore share one entry, and an entry never
 outlives the bound.
 
-Files: :func:`cache_dir` is the folder for results kept between sessions (optimised
-gaits, the stored 9^4 sweep).
+Files: :func:`cache_dir` is the folder for results kept between sessions; every kind of
+result kept there (optimised gaits, the stored 9^4 sweeps, robust designs) is one
+:class:`DiskCache`, whose entries are named by the :func:`digest` of what they depend
+on and of the kind's version.
 """
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
 import os
 import threading
 from collections import OrderedDict
 from pathlib import Path
 
-__all__ = ["cached", "cache_key", "cache_dir"]
+__all__ = ["cached", "cache_key", "cache_dir", "digest", "DiskCache"]
 
 
 def cache_key(obj):
@@ -114,3 +118,76 @@ def cache_dir(path=None) -> Path:
         return Path(path)
     env = os.environ.get("BIPED_CACHE_DIR")
     return Path(env) if env else Path.home() / ".cache" / "biped-casadi"
+
+
+def digest(obj) -> str:
+    """SHA-256 (hex) of an object's canonical JSON (sorted keys; str() for other types).
+
+    The one content digest of the toolkit: gait files' checksums, cache entries, sweep
+    settings.
+
+    Parameters
+    ----------
+    obj : object
+        Anything JSON can hold (numbers, strings, lists, dicts).
+
+    Returns
+    -------
+    str
+        64 hex digits.
+    """
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+class DiskCache:
+    """One kind of result kept between sessions in :func:`cache_dir`.
+
+    An entry is the file (or folder) ``<cache_dir>/<kind>/<kind>-<key>[suffix]``, ``key``
+    the first 20 hex digits of the :func:`digest` of what the result depends on and of
+    ``version`` (bump it when the code's result for the same inputs changes).  Writing
+    is the caller's (atomically); an entry that cannot be used is recomputed, never
+    trusted.
+
+    Parameters
+    ----------
+    kind : str
+        The kind of result (a folder name: 'gaits', 'robust', 'sweeps', ...).
+    version : int
+        The version of the results of this kind.
+    """
+
+    def __init__(self, kind: str, version: int):
+        self.kind, self.version = kind, int(version)
+
+    def key(self, body) -> str:
+        """The entry's key for what a result depends on.
+
+        Parameters
+        ----------
+        body : object
+            JSON-able description of the inputs.
+
+        Returns
+        -------
+        str
+            20 hex digits.
+        """
+        return digest(dict(kind=self.kind, version=self.version, body=body))[:20]
+
+    def path(self, body, folder=None, suffix: str = ".json") -> Path:
+        """The entry of a result.
+
+        Parameters
+        ----------
+        body : object
+            JSON-able description of the inputs.
+        folder : str or Path, optional
+            The cache folder (default :func:`cache_dir`).
+        suffix : str
+            '.json' for a file; '' for a folder.
+
+        Returns
+        -------
+        Path
+        """
+        return cache_dir(folder) / self.kind / f"{self.kind}-{self.key(body)}{suffix}"

@@ -1,41 +1,51 @@
 """On-disk cache of optimised gaits, so the default gait is solved once per machine.
 
-A cached gait lives in ``<cache_dir>/gait-<key>.json`` (the ordinary gait file format),
-``key`` a SHA-256 of the robot parameters, the gait options and :data:`CACHE_VERSION`
-(bumped whenever the optimiser's result for the same options changes).  A cached file
+A cached gait is an entry of :data:`GAITS` (a :class:`biped_casadi.caching.DiskCache`):
+``<cache_dir>/gaits/gaits-<key>.json`` in the ordinary gait file format, ``key`` from the
+robot parameters, the gait options, the file format and the optimiser's version (bumped
+whenever its result for the same options changes).  A cached file
 is used only if it loads cleanly (:meth:`Gait.load`: checksum, format version, schema,
 robot parameters, a periodic orbit to :data:`gait_opt.gait.ORBIT_TOL`) and was made with
 the same options; anything else is recomputed and overwritten, never trusted.
 """
 from __future__ import annotations
 
-import hashlib
-import json
 from pathlib import Path
 
 from biped_casadi import rabbit
-from biped_casadi.caching import cache_dir
+from biped_casadi.caching import DiskCache
 
 from .gait import FORMAT_VERSION, Gait, GaitFileError
 from .optimize import optimize_gait
 from .options import GaitOptions
 
-__all__ = ["default_gait", "cache_path", "cache_key", "CACHE_VERSION"]
+__all__ = ["default_gait", "cache_path", "GAITS"]
 
-#: version of the optimiser's output for given options (part of the cache key)
-CACHE_VERSION = 1
-
-
-def cache_key(model, options: GaitOptions) -> str:
-    body = dict(robot=model.params.to_dict(), options=options.to_dict(),
-                cache_version=CACHE_VERSION, format_version=FORMAT_VERSION)
-    return hashlib.sha256(json.dumps(body, sort_keys=True, default=str).encode()).hexdigest()
+#: the optimised gaits kept between sessions (version: the optimiser's output for given
+#: options)
+GAITS = DiskCache("gaits", version=1)
 
 
 def cache_path(model=None, options: GaitOptions | None = None, cache_dir_=None) -> Path:
+    """The cache file of the gait of a robot and options.
+
+    Parameters
+    ----------
+    model : BipedModel, optional
+        Default RABBIT.
+    options : GaitOptions, optional
+        Default: SPEC section 2 (the robot's torque limit filled in).
+    cache_dir_ : str or Path, optional
+        The cache folder (default :func:`biped_casadi.cache_dir`).
+
+    Returns
+    -------
+    Path
+    """
     model = model or rabbit()
     options = (options or GaitOptions()).for_model(model)
-    return cache_dir(cache_dir_) / f"gait-{cache_key(model, options)[:20]}.json"
+    return GAITS.path(dict(robot=model.params.to_dict(), options=options.to_dict(),
+                           format_version=FORMAT_VERSION), cache_dir_)
 
 
 def _usable(path: Path, model, options: GaitOptions):
@@ -53,8 +63,8 @@ def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
                  progress=None, **overrides) -> Gait:
     """The optimal gait for ``options``, read from the on-disk cache or optimised once.
 
-    The cache file is ``<cache_dir>/gait-<key>.json``, ``key`` a SHA-256 of the robot,
-    the options and the optimiser's version.  It is used only if it loads cleanly
+    The cache file is :func:`cache_path` (keyed by the robot, the options and the
+    optimiser's version).  It is used only if it loads cleanly
     (:meth:`Gait.load`: checksum, schema, robot, a periodic orbit) and was made with the
     same options; otherwise the gait is optimised with :func:`optimize_gait` and stored.
 

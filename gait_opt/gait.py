@@ -1,7 +1,6 @@
 """The reference gait q^d(t): evaluation, physical checks, and a self-describing file."""
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -12,18 +11,18 @@ import numpy as np
 
 import casadi as ca
 
-from biped_casadi import Reference, RobotParams, description_from_dict, robot
-from biped_casadi.caching import cached
-from biped_casadi.files import atomic_path, read_text_file
+from biped_casadi import Reference
+from biped_casadi.caching import cached, digest
+from biped_casadi.files import atomic_path
 
+from .files import (FORMAT, FORMAT_VERSION, GaitFileError, OpenOrbitWarning, gait_parts,
+                    read_gait_file)
 from .options import GaitOptions
 from .parametrisation import quintic_hermite, reference_dynamics
 
 __all__ = ["Gait", "GaitFileError", "OpenOrbitWarning", "FORMAT", "FORMAT_VERSION",
            "ORBIT_TOL"]
 
-FORMAT = "biped-casadi-gait"
-FORMAT_VERSION = 1
 #: the reference is tabulated (and so defined) on [-EXTENT_BEFORE * T, EXTENT * T]
 EXTENT = 2.0
 EXTENT_BEFORE = 0.5
@@ -32,30 +31,6 @@ EXTENT_BEFORE = 0.5
 #: and the swing foot is on the ground at T within ORBIT_TOL (m).  Optimised gaits close
 #: to ~1e-12; the optimiser's own polish accepts at most 1e-10.
 ORBIT_TOL = 1e-8
-#: a gait file larger than this is not one this toolkit wrote
-MAX_FILE_BYTES = 20_000_000
-#: RK4 steps per step (``polish_steps``) and Bezier degree a readable file may ask for
-MAX_POLISH_STEPS = 1_000_000
-MAX_BEZIER_DEGREE = 40
-#: the keys of a gait file (``solver_stats`` optional)
-_KEYS = ("format", "version", "robot", "options", "solution", "sha256")
-
-
-class GaitFileError(ValueError):
-    """A gait file that cannot be used; the message names the file and the reason.
-
-    Missing, not a file, unreadable, corrupted, other format or version, malformed
-    contents, made for other robot parameters, or not a periodic orbit of its robot
-    (:data:`ORBIT_TOL`).  A ``ValueError``.
-    """
-
-
-class OpenOrbitWarning(UserWarning):
-    """Warning: a gait read with ``allow_open_orbit=True`` is not a periodic orbit.
-
-    Issued by ``Gait.load(..., allow_open_orbit=True)``: results computed from such a
-    gait (fixed points, eigenvalues) are not those of a walking cycle.
-    """
 
 
 class Gait(Reference):
@@ -139,7 +114,7 @@ class Gait(Reference):
     def cache_key(self) -> str:
         """SHA-256 of what defines the gait: robot, options and solution."""
         if self._key is None:
-            self._key = _digest(self.definition())
+            self._key = digest(self.definition())
         return self._key
 
     def definition(self) -> dict:
@@ -462,7 +437,7 @@ class Gait(Reference):
         """
         path = Path(path)
         body = self.to_dict()
-        body["sha256"] = _digest(body)
+        body["sha256"] = digest(body)
         text = json.dumps(body, indent=1)
         with atomic_path(path) as tmp:       # complete or absent; no stray temp file
             tmp.write_text(text)
@@ -492,6 +467,39 @@ class Gait(Reference):
         vals = [v if math.isfinite(v) else math.inf for v in out.values()]
         out["worst"] = max(vals)
         return out
+
+    @classmethod
+    def from_dict(cls, d: dict, model=None, *, where: str = "gait") -> "Gait":
+        """The gait a dictionary describes: :meth:`definition`'s, or a gait file's body.
+
+        The robot, options and solution are validated as in a file (:meth:`load`); the
+        orbit is not checked here.
+
+        Parameters
+        ----------
+        d : dict
+            ``robot``, ``options`` and ``solution`` (T, alpha, x0), optionally
+            ``solver_stats``.
+        model : BipedModel, optional
+            The dictionary must describe this robot (default: its own robot).
+        where : str
+            What the dictionary is, for the messages.
+
+        Returns
+        -------
+        Gait
+
+        Raises
+        ------
+        GaitFileError
+            Naming ``where`` and what is wrong.
+        """
+        model, opts, (alpha, x0, T), stats = gait_parts(d, model, where)
+        try:
+            with np.errstate(all="ignore"):
+                return cls(model, opts, alpha, x0, T, solver_stats=stats)
+        except (ValueError, RuntimeError, FloatingPointError) as e:
+            raise GaitFileError(f"{where}: the solution cannot be evaluated ({e})") from None
 
     @classmethod
     def load(cls, path, model=None, *, allow_open_orbit: bool = False,
@@ -528,34 +536,10 @@ class Gait(Reference):
         if not isinstance(path, (str, os.PathLike)):
             raise GaitFileError(f"path must be a file name, got {type(path).__name__}")
         path = Path(path)
-        body = _read_json(path)
         where = f"gait file {path}"
-        if not isinstance(body, dict) or body.get("format") != FORMAT:
-            raise GaitFileError(f"{path} is not a {FORMAT} file")
-        if body.get("version") != FORMAT_VERSION:
-            raise GaitFileError(f"{path} has format version {body.get('version')!r}; this "
-                                f"toolkit reads version {FORMAT_VERSION}")
-        digest = body.pop("sha256", None)
-        if digest != _digest(body):
-            raise GaitFileError(f"{where} is corrupted (checksum mismatch)")
-        missing = [k for k in _KEYS if k != "sha256" and k not in body]
-        unknown = sorted(set(body) - set(_KEYS) - {"solver_stats"})
-        if missing or unknown:
-            raise GaitFileError(f"{where}: " + "; ".join(
-                ([f"missing key(s): {', '.join(missing)}"] if missing else [])
-                + ([f"unknown key(s): {', '.join(unknown)}"] if unknown else [])))
-        model = _robot_from_file(body["robot"], model, where)
-        opts = _options_from_file(body["options"], where)
-        alpha, x0, T = _solution_from_file(body["solution"], opts, model.nu, where)
-        stats = body.get("solver_stats", {})
-        if not isinstance(stats, dict):
-            raise GaitFileError(f"{where}: 'solver_stats' must be an object, got "
-                                f"{type(stats).__name__}")
-        try:
-            with np.errstate(all="ignore"):
-                gait = cls(model, opts, alpha, x0, T, solver_stats=stats)
-        except (ValueError, RuntimeError, FloatingPointError) as e:
-            raise GaitFileError(f"{where}: the solution cannot be evaluated ({e})") from None
+        body = read_gait_file(path)
+        gait = cls.from_dict(body, model, where=where)
+        T = gait.T
         r = gait.orbit_residual()
         if not r["worst"] <= orbit_tol:
             msg = (f"{where} is not a periodic orbit of its robot: " + (
@@ -572,138 +556,6 @@ class Gait(Reference):
     def __repr__(self):
         return (f"Gait(T={self.T:.4f} s, step={self.step_length:.4f} m, "
                 f"speed={self.speed:.4f} m/s, robot={self.model.params.name})")
-
-
-# ------------------------------------------------------------ reading a file
-def _read_json(path: Path):
-    """The parsed JSON of a gait file, or GaitFileError naming the file and the reason."""
-    try:
-        text = read_text_file(path, "gait file", MAX_FILE_BYTES)
-    except ValueError as e:
-        raise GaitFileError(str(e).replace("is not a text file", "is not a text (JSON) file")
-                            ) from None
-    if not text.strip():
-        raise GaitFileError(f"gait file {path} is empty")
-    try:
-        return json.loads(text)
-    except (json.JSONDecodeError, RecursionError) as e:
-        raise GaitFileError(f"gait file {path} is not valid JSON (truncated or "
-                            f"corrupted?): {e}") from None
-
-
-def _robot_from_file(record, model, where: str):
-    """The model a gait file describes (its ``robot`` record: a robot description, or the
-    flat parameters of files written before descriptions), checked against ``model``
-    when given.  The one place that reads the robot part of a gait file."""
-    try:
-        if RobotParams.is_legacy_record(record):
-            params = RobotParams.from_dict(record).to_description()
-        else:
-            params = description_from_dict(record, where=f"{where}: 'robot'")
-    except (KeyError, TypeError, ValueError) as e:
-        msg = str(e)
-        raise GaitFileError(msg if msg.startswith(where) else
-                            f"{where}: invalid 'robot': {msg}") from None
-    if model is None:
-        return robot(params)
-    if model.params != params:
-        mine, theirs = _flat(model.params.to_dict()), _flat(params.to_dict())
-        diff = [f"{k} ({theirs.get(k)!r} in the file, {mine.get(k)!r} in the model)"
-                for k in sorted(set(mine) | set(theirs)) if mine.get(k) != theirs.get(k)]
-        more = f", and {len(diff) - 3} more" if len(diff) > 3 else ""
-        raise GaitFileError(f"{where} was made for other robot parameters "
-                            f"(robot {params.name!r}, the model is {model.params.name!r}; "
-                            f"differ in: {', '.join(diff[:3])}{more})")
-    return model
-
-
-def _flat(d, prefix: str = "") -> dict:
-    """{'torso.mass': 12.0, 'leg[1].length': 0.4, ...} from a nested record."""
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}."))
-        elif isinstance(v, list) and all(isinstance(x, dict) for x in v):
-            for i, x in enumerate(v):
-                out.update(_flat(x, f"{prefix}{k}[{i + 1}]."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
-def _options_from_file(options, where: str) -> GaitOptions:
-    if not isinstance(options, dict):
-        raise GaitFileError(f"{where}: 'options' must be an object, got "
-                            f"{type(options).__name__}")
-    try:
-        opts = GaitOptions.from_dict(options)
-    except (TypeError, ValueError) as e:
-        raise GaitFileError(f"{where}: invalid 'options': {e}") from None
-    if opts.polish_steps > MAX_POLISH_STEPS or opts.bezier_degree > MAX_BEZIER_DEGREE:
-        raise GaitFileError(f"{where}: 'options' asks for polish_steps "
-                            f"{opts.polish_steps} and bezier_degree {opts.bezier_degree} "
-                            f"(at most {MAX_POLISH_STEPS} and {MAX_BEZIER_DEGREE})")
-    return opts
-
-
-def _finite_number(v):
-    """``v`` as a finite float if it is a JSON number (not a boolean), else None."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return None
-    try:
-        f = float(v)
-    except OverflowError:           # an integer beyond the float range
-        return None
-    return f if math.isfinite(f) else None
-
-
-def _numbers(value, shape: tuple, what: str, where: str) -> np.ndarray:
-    """``value`` (nested JSON lists) as a finite float array of ``shape``."""
-    def ok(v):
-        return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-    rows = value if len(shape) == 2 else [value]
-    n_rows, n_cols = (shape if len(shape) == 2 else (1, shape[0]))
-    expect = (f"{n_rows} rows of {n_cols} numbers" if len(shape) == 2
-              else f"a list of {n_cols} numbers")
-    if (not isinstance(value, list) or len(rows) != n_rows
-            or not all(isinstance(r, list) and len(r) == n_cols for r in rows)):
-        raise GaitFileError(f"{where}: solution.{what} must be {expect}")
-    if not all(ok(v) for r in rows for v in r):
-        raise GaitFileError(f"{where}: solution.{what} must hold only numbers")
-    try:
-        a = np.array(rows, dtype=float).reshape(shape)
-    except OverflowError:
-        a = np.full(shape, np.inf)
-    if not np.all(np.isfinite(a)):
-        raise GaitFileError(f"{where}: solution.{what} holds a non-finite number "
-                            f"(NaN or infinity)")
-    return a
-
-
-def _solution_from_file(sol, opts: GaitOptions, nu: int, where: str):
-    """(alpha, x0, T) of the ``solution`` entry, every field checked."""
-    if not isinstance(sol, dict):
-        raise GaitFileError(f"{where}: 'solution' must be an object with T, alpha, x0, "
-                            f"got {type(sol).__name__}")
-    missing = [k for k in ("T", "alpha", "x0") if k not in sol]
-    unknown = sorted(set(sol) - {"T", "alpha", "x0"})
-    if missing or unknown:
-        raise GaitFileError(f"{where}: 'solution' " + "; ".join(
-            ([f"lacks {', '.join(missing)}"] if missing else [])
-            + ([f"has unknown key(s) {', '.join(unknown)}"] if unknown else [])))
-    T = _finite_number(sol["T"])
-    if T is None or T <= 0:
-        raise GaitFileError(f"{where}: solution.T must be a positive finite number, "
-                            f"got {sol['T']!r:.40}")
-    alpha = _numbers(sol["alpha"], (nu, opts.bezier_degree + 1),
-                     f"alpha (Bezier degree {opts.bezier_degree})", where)
-    x0 = _numbers(sol["x0"], (2,), "x0", where)
-    return alpha, x0, float(T)
-
-
-def _digest(body: dict) -> str:
-    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
 
 
 def _jsonable(d):

@@ -369,7 +369,7 @@ def test_cache_reuses_and_recomputes(model, gait, tmp_path, monkeypatch):
     monkeypatch.setattr(cache, "optimize_gait", fake_optimize)
     g1 = default_gait(model, cache_dir=tmp_path)
     assert len(calls) == 1 and g1.solver_stats["cache"].startswith("computed")
-    files = list(tmp_path.glob("gait-*.json"))
+    files = list(tmp_path.glob("gaits/gaits-*.json"))
     assert len(files) == 1
     g2 = default_gait(model, cache_dir=tmp_path)
     assert len(calls) == 1 and g2.solver_stats["cache"] == "hit" and g2.T == gait.T

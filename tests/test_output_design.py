@@ -77,6 +77,7 @@ def test_m1_nlp_group2(model, gait, tay, nlp2):
     from analysis import poincare_map
     P = s.group2.reshape(-1, 4)
     P = P[np.all(np.isfinite(P), axis=1)]
-    st, _, _, mx = poincare_map(model, gait).jacobian_batch(P)
+    jb = poincare_map(model, gait).jacobian_batch(P)
+    st, mx = jb.status, jb.max_abs
     assert r.max_abs <= np.min(mx[st != "singular"]) + 1e-12
     assert r.eigenvalue_uncertainty < 1e-2

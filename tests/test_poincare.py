@@ -47,7 +47,8 @@ def test_ad_jacobian_matches_scipy_finite_differences(model, gait, pm, rng):
 
 def test_fixed_point_for_random_M1(pm, rng):
     for M1 in random_nonsingular(pm, rng, 4):
-        x1, tau_i = pm.evaluate(pm.x_star, M1)
+        step = pm.evaluate(pm.x_star, M1)
+        x1, tau_i = step.x_next, step.tau_impact
         assert np.max(np.abs(x1 - pm.x_star)) <= 1e-8
         assert tau_i == pytest.approx(pm.T, abs=1e-8)
 
@@ -58,7 +59,7 @@ def test_map_moves_off_the_fixed_point(pm):
     A = pm.analyse(M1, method="ad").A
     for d in (1e-3, 5e-4):
         dx = np.array([d, -2 * d])
-        x1, _ = pm.evaluate(pm.x_star + dx, M1)
+        x1 = pm.evaluate(pm.x_star + dx, M1).x_next
         err = np.linalg.norm(x1 - pm.x_star - A @ dx)
         assert err < 50 * np.linalg.norm(dx) ** 2
         assert np.linalg.norm(x1 - pm.x_star) > 0.1 * np.linalg.norm(dx)
@@ -66,7 +67,8 @@ def test_map_moves_off_the_fixed_point(pm):
 
 def test_variational_batch_matches_full_ad(pm, rng):
     M1s = np.vstack([np.zeros(4), random_nonsingular(pm, rng, 3)])
-    status, A, ev, max_abs = pm.jacobian_batch(M1s)
+    jb = pm.jacobian_batch(M1s)
+    status, A, max_abs = jb.status, jb.A, jb.max_abs
     for i, M1 in enumerate(M1s):
         r = pm.analyse(M1, method="ad")
         assert status[i] == r.status
@@ -94,7 +96,8 @@ def test_singular_values_eq24(model, gait, pm):
         vals = sv[j] * np.array([0.5, 0.99, 0.9999])
         M1s = np.zeros((3, 4))
         M1s[:, j] = vals
-        status, _, _, mx = pm.jacobian_batch(M1s)
+        jb = pm.jacobian_batch(M1s)
+        status, mx = jb.status, jb.max_abs
         assert list(status) == ["unstable"] * 3 or "stable" in status[:1]
         assert mx[2] > 1e3 * mx[0]
         assert mx[2] > mx[1] > mx[0] or mx[0] < 1

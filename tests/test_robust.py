@@ -19,7 +19,8 @@ from analysis.cli import main as biped_main
 from analysis.design import optimize_m1
 from analysis.design import ROBUST_GAIT
 from analysis.robustness import (Design, RobustnessSettings, basin, kept_directions,
-                                 robustness, start_states)
+                                 robustness)
+from biped_casadi.simulation import start_states
 from biped_casadi.simulation import VirtualConstraintWalker, ZeroDynamicsWalker
 from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, directions, simulate)
@@ -56,10 +57,10 @@ def test_walker_is_the_full_order_closed_loop(model, robust_gait):
     ctrl = TimeVaryingController(model, g, M1, rejoin=0.75)
     for i in range(4):
         r = simulate(ctrl, q0[i], dq0[i], SimulationOptions(steps=4))
-        assert r.status == B.run_status[i]
+        assert r.status == B.status[i]
         n = len(r.steps)
-        assert np.max(np.abs(r.dqu_errors - B.dqu_error[i, :n]), initial=0) < 1e-6
-        assert np.max(np.abs(r.qu_errors - B.qu_error[i, :n]), initial=0) < 1e-7
+        assert np.max(np.abs(r.dqu_error - B.dqu_error[i, :n]), initial=0) < 1e-6
+        assert np.max(np.abs(r.qu_error - B.qu_error[i, :n]), initial=0) < 1e-7
         assert abs(r.min_normal_force - B.min_normal_force[i]) < 1e-3
         assert abs(r.peak_torque - B.peak_torque[i]) < 1e-2
         if n:
@@ -77,8 +78,8 @@ def test_output_gains_change_nothing(model, robust_gait):
                      SimulationOptions(steps=4))
             for gains in (Gains(), Gains(Kp=4.0, Kd=4.0, eps=0.05))]
     assert runs[0].status == runs[1].status == "ok"
-    assert np.max(np.abs(runs[0].dqu_errors - runs[1].dqu_errors)) < 1e-6
-    assert np.max(np.abs(runs[0].qu_errors - runs[1].qu_errors)) < 1e-7
+    assert np.max(np.abs(runs[0].dqu_error - runs[1].dqu_error)) < 1e-6
+    assert np.max(np.abs(runs[0].qu_error - runs[1].qu_error)) < 1e-7
 
 
 def test_walker_torque_limit_as_the_simulator(model, gait):
@@ -88,7 +89,7 @@ def test_walker_torque_limit_as_the_simulator(model, gait):
     B = ZeroDynamicsWalker(model, gait, opts).walk(gait.q(0.0)[None], gait.dq(0.0)[None],
                                                    np.zeros(4), 0.5, steps=1)
     r = simulate(TimeVaryingController(model, gait, np.zeros(4)), options=opts)
-    assert r.status == B.run_status[0] == "torque_limit"
+    assert r.status == B.status[0] == "torque_limit"
 
 
 def test_vc_walker_is_the_full_order_closed_loop(model, gait):
@@ -103,8 +104,8 @@ def test_vc_walker_is_the_full_order_closed_loop(model, gait):
         q, Q1, _ = (np.array(v).ravel() for v in V.vmap.curve(th[i]))
         r = simulate(VirtualConstraintController(model, gait), q, Q1 * w[i],
                      SimulationOptions(steps=3))
-        assert r.status == B.run_status[i] == "ok"
-        assert np.max(np.abs(r.dqu_errors - B.dqu_error[i])) < 1e-8
+        assert r.status == B.status[i] == "ok"
+        assert np.max(np.abs(r.dqu_error - B.dqu_error[i])) < 1e-8
         assert abs(r.peak_torque - B.peak_torque[i]) < 1e-2
 
 
@@ -118,12 +119,12 @@ def test_s_star_replayed_at_and_above(model, gait, deadbeat1):
     design = Design(tuple(deadbeat1))
     r = robustness(model, gait, design, st, kept=kept)
     assert 0 < r.s_star < r.s_fail < 2 and r.failure
-    for d in kept[0]:
+    for d in kept.directions:
         run = _full_order(model, gait, design, d, r.s_star)
-        assert run.success and max(abs(run.qu_errors[-1]), abs(run.dqu_errors[-1])) < 1e-3
+        assert run.verdict(1e-3) == "ok"
     f = r.failure
-    run = _full_order(model, gait, design, kept[0][f["direction"]], r.s_fail)
-    assert run.status == f["status"] and run.failed_step == f["step"]
+    run = _full_order(model, gait, design, kept.directions[f["direction"]], r.s_fail)
+    assert run.status == f["status"] and run.fail_step == f["step"]
     # the paper's deadbeat recommendation does not survive the paper's perturbation
     assert r.s_star < 1 and r.paper["status"] != "ok"
 
@@ -134,13 +135,14 @@ def test_virtual_constraints_walk_every_kept_direction(model, gait):
     at their eigenvalue's rate (0.54 on the default gait: 1.2e-3 left after 10 steps, so
     their convergence-based s* is below 1: see the report)."""
     st = RobustnessSettings(directions=4)
-    dirs, tried, rejected = kept_directions(model, gait, st)
+    kept = kept_directions(model, gait, st)
+    dirs, tried, rejected = kept.directions, kept.tried, kept.rejected
     assert np.all(dirs[0] == 1) and tried == len(dirs) + sum(rejected.values())
     assert set(rejected) <= {"scuffed"}           # rejected: the swing foot starts in the ground
     runs = [simulate(VirtualConstraintController(model, gait), *(a[0] for a in
                      start_states(gait, d[None], 1.0))) for d in dirs]
-    assert all(r.success and len(r.steps) == 10 for r in runs)
-    errs = [max(abs(r.qu_errors[-1]), abs(r.dqu_errors[-1])) for r in runs]
+    assert all(r.ok and len(r.steps) == 10 for r in runs)
+    errs = [max(abs(r.qu_error[-1]), abs(r.dqu_error[-1])) for r in runs]
     assert max(errs) < 2e-3
 
 
@@ -246,7 +248,7 @@ def test_s_star_batch_on_a_dask_cluster(model, gait):
     from analysis.robustness import s_star_batch
     from biped_casadi.simulation import zero_dynamics_walker
     st = RobustnessSettings(directions=2, rounds=4, rk4_steps=200)
-    dirs = kept_directions(model, gait, st)[0]
+    dirs = kept_directions(model, gait, st).directions
     designs = [Design((-2.5, 5.0, -2.5, 5.0)), Design((-10.0, 7.5, 10.0, -5.0))]
     walker = zero_dynamics_walker(model, gait, st.simulation_options(), 200, jit=True)
     local = s_star_batch(walker, gait, designs, dirs, st, chunk=1)

@@ -82,7 +82,8 @@ def test_counts_match_direct_jacobian_batch(sweep_gait, reference, small_grid):
     assert sum(r.counts.values()) == r.n_points == len(small_grid)
     assert set(r.counts) == set(STATUSES)
     pm = poincare_map(sweep_gait.model, sweep_gait)
-    status, A, ev, max_abs = pm.jacobian_batch(small_grid)
+    jb = pm.jacobian_batch(small_grid)
+    status, A, max_abs = jb.status, jb.A, jb.max_abs
     assert np.array_equal(r.point_status, status)
     assert r.counts == {s: int(np.sum(status == s)) for s in STATUSES}
     assert r.counts["stable"] > 0 and r.counts["singular"] > 0 and r.counts["unstable"] > 0
@@ -219,8 +220,8 @@ def test_dask_local_cluster_same_results(sweep_gait, reference, small_grid, tmp_
 
 
 def test_unreachable_scheduler_is_a_user_error(sweep_gait, small_grid, monkeypatch):
-    import analysis.sweeps.sweep
-    monkeypatch.setattr(analysis.sweeps.sweep, "DASK_CONNECT_TIMEOUT", "1s")
+    import analysis.sweeps.workers
+    monkeypatch.setattr(analysis.sweeps.workers, "DASK_CONNECT_TIMEOUT", "1s")
     import socket
     s = socket.socket()
     s.bind(("127.0.0.1", 0))

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_casadi import robot
-from biped_casadi.control.output_law import check_M1_range
+from biped_casadi.control.output_law import check_M1_range, check_rejoin
 from biped_casadi.results import json_safe
 from gait_opt import Gait, OpenOrbitWarning, default_gait
 
@@ -142,6 +142,15 @@ def positive(value, name):
     if not (math.isfinite(value) and value > 0):
         raise UserError(f"{name} must be a positive number, got {value!r}")
     return value
+
+
+def rejoin_fraction(value) -> float:
+    """``--rejoin`` checked (:func:`biped_casadi.control.output_law.check_rejoin`), else a
+    UserError."""
+    try:
+        return check_rejoin(value, "--rejoin")
+    except ValueError as e:
+        raise UserError(str(e)) from None
 
 
 # ---------------------------------------------------------------- output paths

@@ -59,7 +59,8 @@ def cmd_m1(args):
             raise UserError(f"{name} applies to --robust")
     gait = load_gait(args, say)
     model = gait.model
-    valid, why = ab_groups(model, gait)
+    ab = ab_groups(model, gait)
+    valid, why = ab.groups, ab.explanation
     if args.group and args.group not in valid:
         raise UserError(f"--group {args.group}: {why}")
     groups = [None] if args.free else ([args.group] if args.group else (valid or [None]))

@@ -6,10 +6,10 @@ import numpy as np
 
 from analysis.reporting.plots import basin_plot, save_figures
 from analysis.robustness import Design, RobustnessSettings, basin, kept_directions, robustness
-from biped_casadi.control.output_law import SECTION
+from biped_casadi.control import PAPER_REJOIN, SECTION
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
-                     load_gait, output_dir, parse_m1, positive, print_json)
+                     load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
 
 
 def cmd_robust(args):
@@ -20,9 +20,7 @@ def cmd_robust(args):
     positive(args.mu, "--mu")
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
-    rejoin = 0.5 if args.rejoin is None else args.rejoin
-    if not 0 < rejoin <= SECTION:
-        raise UserError(f"--rejoin must be in (0, {SECTION}], got {rejoin:g}")
+    rejoin = rejoin_fraction(PAPER_REJOIN if args.rejoin is None else args.rejoin)
     if not 1 <= args.directions <= 200:
         raise UserError(f"--directions must be between 1 and 200, got {args.directions}")
     if args.plot is not None:

@@ -13,7 +13,8 @@ from analysis.reporting.plots import (save_figures, swing_torques_plot, unactuat
                             walking_animation)
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
-                     load_gait, output_dir, output_file, parse_m1, positive, print_json)
+                     load_gait, output_dir, output_file, parse_m1, positive, print_json,
+                     rejoin_fraction)
 
 #: --steps beyond this fill the memory with the logged states (2000 RK4 steps a step)
 MAX_STEPS = 1000
@@ -70,9 +71,7 @@ def cmd_simulate(args):
         raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
     positive(args.mu, "--mu")
     positive(args.eps, "--eps")
-    if not 0 < args.rejoin <= SECTION:
-        raise UserError(f"--rejoin must be in (0, {SECTION}] (v_c must vanish before the "
-                        f"Poincare section), got {args.rejoin:g}")
+    rejoin_fraction(args.rejoin)
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
     _check_perturbation(args)

@@ -28,7 +28,10 @@ __all__ = ["optimize_m1", "M1Result"]
 # ------------------------------------------------------------------ the M1 NLP
 @dataclass
 class M1Result(Result):
-    """The M1 chosen by :func:`optimize_m1`; ``success`` means stable.
+    """The M1 chosen by :func:`optimize_m1`.
+
+    ``success`` means an M1 was chosen (and verified); whether it is stable is
+    ``status``.
 
     Parameters
     ----------
@@ -73,7 +76,7 @@ class M1Result(Result):
     message: str = ""
     history: list = internal(default_factory=list)
 
-    SUCCESS = ("stable",)
+    SUCCESS = ("stable", "unstable")
 
 
 #: which swing-height conditions constrain the M1 NLP
@@ -203,7 +206,8 @@ def _coarse_best(pm, tay, group, k, n=81):
     else:
         P = _feasible_set(tay, group, nu)[1](None, n * n)
     P = P[np.all(np.isfinite(P), axis=1)]
-    st, _, _, mx = pm.jacobian_batch(P)
+    jb = pm.jacobian_batch(P)
+    st, mx = jb.status, jb.max_abs
     order = np.argsort(np.where(st == "singular", np.inf, mx))
     return P[order[:k]]
 
@@ -283,7 +287,8 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
                      (_deadbeat_newton(pm, tay, M1, constraints) if deadbeat else None,
                       "newton")]
         if i < n_ipopt and not fixed:
-            st, A, ev, mx = pm.jacobian_batch(M1[None])
+            jb = pm.jacobian_batch(M1[None])
+            mx = jb.max_abs
             rho0 = float(mx[0]) * 1.01 + 1e-3 if np.isfinite(mx[0]) else 100.0
             sol = solver(x0=np.r_[M1, rho0], lbg=lbg, ubg=ubg, lbx=np.r_[[-1e3] * nu, 0.0],
                          ubx=np.r_[[1e3] * nu, 1e6])
@@ -296,7 +301,7 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
                 continue
             if constrained and not in_group(Mx):
                 continue                  # Newton may cross to the other group's root
-            val = float(pm.jacobian_batch(Mx[None])[3][0])
+            val = float(pm.jacobian_batch(Mx[None]).max_abs[0])
             history.append(dict(start=M1.tolist(), M1=Mx.tolist(), max_abs=val, how=how))
     if not history:
         raise RuntimeError("the M1 NLP found no non-singular local optimum (IPOPT); try more starts")

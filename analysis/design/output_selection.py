@@ -28,7 +28,7 @@ import numpy as np
 
 __all__ = ["swing_height_at_Td", "TaylorAB", "taylor_ab", "solve_ab", "ABSolution",
            "conjecture_figures", "domain_grid",
-           "isolated_ab_solutions", "ab_solution_set", "ABSet", "ab_groups", "group_of",
+           "isolated_ab_solutions", "ab_solution_set", "ABSet", "ABGroups", "ab_groups", "group_of",
            "coarse_grid_size"]
 
 
@@ -422,7 +422,24 @@ def isolated_ab_solutions(tay: TaylorAB) -> np.ndarray:
     return ab_solution_set(tay).points
 
 
-def ab_groups(model, gait) -> tuple[list, str]:
+@dataclass
+class ABGroups:
+    """The solution groups of a = b = 0 of a robot and gait, and what they are.
+
+    Parameters
+    ----------
+    groups : list of int
+        [1, 2] when nu >= 3; for nu = 2, [1] when the solutions form a line, [1] or
+        [1, 2] for isolated points, [] when there is none.
+    explanation : str
+        What the groups are, in words.
+    """
+
+    groups: list
+    explanation: str
+
+
+def ab_groups(model, gait) -> ABGroups:
     """The solution groups of a = b = 0 that :func:`optimize_m1` accepts, and what they are.
 
     Parameters
@@ -434,16 +451,14 @@ def ab_groups(model, gait) -> tuple[list, str]:
 
     Returns
     -------
-    tuple
-        (groups, explanation): [1, 2] when nu >= 3; for nu = 2, [1] when the solutions
-        form a line, [1] or [1, 2] for isolated points, [] when there is none.
+    ABGroups
     """
     if model.nu >= 3:
-        return [1, 2], "two groups (the roots of b = 0 on a = 0)"
+        return ABGroups([1, 2], "two groups (the roots of b = 0 on a = 0)")
     ab = ab_solution_set(taylor_ab(model, gait))
     if ab.kind == "line":
-        return [1], f"one line of solutions, group 1 ({ab.message})"
-    return list(range(1, len(ab.points) + 1)), ab.message
+        return ABGroups([1], f"one line of solutions, group 1 ({ab.message})")
+    return ABGroups(list(range(1, len(ab.points) + 1)), ab.message)
 
 
 def group_of(tay: TaylorAB, M1, tol: float = 1e-6):

@@ -30,7 +30,6 @@ re-run is instant.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import time
@@ -39,17 +38,19 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from biped_casadi import SimulationOptions, TimeVaryingController, simulate
-from biped_casadi.caching import cache_dir
+from biped_casadi.caching import DiskCache
 from biped_casadi.files import write_text_atomic
 from biped_casadi.results import Result
 from gait_opt import GaitOptions, default_gait
 from gait_opt.cache import cache_path
 
 from ..stability.poincare import poincare_map
-from ..robustness.s_star import (Design, RobustnessSettings, kept_directions, robustness, s_star_batch,
-                         start_states)
+from biped_casadi.simulation import WalkBatch, start_states
+
+from ..robustness.s_star import (Design, RobustnessSettings, kept_directions, robustness,
+                                 s_star_batch)
 from ..stability.vc_map import vc_eigenvalue
-from biped_casadi.simulation.walkers import zero_dynamics_walker
+from biped_casadi.simulation import zero_dynamics_walker
 
 __all__ = ["RobustDesignSettings", "RobustDesignResult", "robust_design", "ROBUST_GAIT"]
 
@@ -60,8 +61,9 @@ __all__ = ["RobustDesignSettings", "RobustDesignResult", "robust_design", "ROBUS
 #: clearance 0.1 m -> 0.926 (0.945 with impact_mu 0.15)
 ROBUST_GAIT = dict(impact_mu=0.15, continuation=0.03, clearance=0.05)
 
-#: bump when the search's results for the same settings change
-RESULTS_VERSION = 3
+#: the robust designs kept between sessions (bump the version when the search's results
+#: for the same settings change)
+DESIGNS = DiskCache("robust", version=3)
 
 
 @dataclass(frozen=True)
@@ -156,7 +158,7 @@ class RobustDesignSettings:
 class RobustDesignResult(Result):
     """The robust design and how it was found.
 
-    ``success`` means ``status`` 'target_met'.
+    ``success`` means the search finished; whether the targets are met is ``status``.
 
     Parameters
     ----------
@@ -232,13 +234,7 @@ class RobustDesignResult(Result):
     settings: dict
     cached: bool = False
 
-    SUCCESS = ("target_met",)
-
-
-def _key(model, settings: RobustDesignSettings) -> str:
-    body = dict(robot=model.params.to_dict() if hasattr(model.params, "to_dict") else
-                str(model.params), settings=settings.to_dict(), version=RESULTS_VERSION)
-    return hashlib.sha256(json.dumps(body, sort_keys=True, default=str).encode()).hexdigest()[:20]
+    SUCCESS = ("target_met", "target_not_met")
 
 
 def _pareto(lam, s):
@@ -278,8 +274,8 @@ class _Search:
         self.say("kept perturbation directions (virtual constraints walk from them)")
         self.rs = st.robustness_settings(rk4_steps=st.search_rk4_steps, rounds=7)
         self.kept = kept_directions(m, self.gait, self.rs)
-        self.dirs = self.kept[0]
-        self.stage("directions", kept=len(self.dirs), tried=self.kept[1])
+        self.dirs = self.kept.directions
+        self.stage("directions", kept=len(self.dirs), tried=self.kept.tried)
         self.walker = zero_dynamics_walker(m, self.gait, self.rs.simulation_options(),
                                            st.search_rk4_steps, jit=True)
         self.pm = poincare_map(m, self.gait, rejoin=st.rejoin)
@@ -292,7 +288,8 @@ class _Search:
         rng = np.random.default_rng(st.seed)
         M = rng.uniform(-st.box, st.box, (st.samples, nu))
         self.say(f"{st.samples} random M1: max|lambda| of A^z (kept below {st.screen_eigen:g})")
-        status, _, _, lam = self.pm.jacobian_batch(M)
+        jb = self.pm.jacobian_batch(M)
+        status, lam = jb.status, jb.max_abs
         ok = (status == "stable") & (lam < st.screen_eigen)
         M, lam = M[ok], lam[ok]
         self.stage("eigenvalue screen", sampled=st.samples, kept=int(ok.sum()))
@@ -309,7 +306,7 @@ class _Search:
                 B = self.walker.walk(q0, dq0, np.repeat(Mp, len(dirs), axis=0), st.rejoin,
                                      steps=st.steps)
                 err = B.final_error.reshape(len(Mp), len(dirs))
-                good = (B.run_status == "ok").reshape(len(Mp), len(dirs)) & (err < st.tol)
+                good = (B.status == "ok").reshape(len(Mp), len(dirs)) & (err < st.tol)
                 keep[part] = good.all(axis=1)
             M, lam = M[keep], lam[keep]
             self.stage(f"screen ({name})", kept=len(M))
@@ -326,7 +323,8 @@ class _Search:
     def score(self, M):
         """s* (+ a tie-breaker) of designs; designs over the eigenvalue bound score below 0."""
         M = np.atleast_2d(M)
-        status, _, _, lam = self.pm.jacobian_batch(M)
+        jb = self.pm.jacobian_batch(M)
+        status, lam = jb.status, jb.max_abs
         score = np.where(np.isfinite(lam), -lam, -1e3)
         ok = (status == "stable") & (lam <= self.bound)
         if ok.any():
@@ -375,19 +373,16 @@ class _Search:
             if not math.isfinite(s):
                 continue
             q0, dq0 = start_states(g, self.dirs, np.full(len(self.dirs), s))
-            runs = [simulate(ctrl, q0[i], dq0[i], opts) for i in range(len(self.dirs))]
-            out = []
-            for run in runs:
-                err = (max(abs(run.qu_errors[-1]), abs(run.dqu_errors[-1]))
-                       if run.success else math.inf)
-                out.append("ok" if run.success and err < st.tol else
-                           ("not_converged" if run.success else run.status))
+            runs = WalkBatch.concat([simulate(ctrl, q0[i], dq0[i], opts)
+                                     for i in range(len(self.dirs))])
+            out = [str(v) for v in runs.verdict(st.tol)]
             verified[label] = dict(scale=s, outcomes=out,
                                    passed=int(sum(o == "ok" for o in out)))
         q0, dq0 = start_states(g, self.dirs[:1], [1.0])
         paper = simulate(ctrl, q0[0], dq0[0], opts)
-        errs = [max(abs(a), abs(b)) for a, b in zip(paper.qu_errors, paper.dqu_errors)]
-        conv = paper.steps_to_converge(st.tol) if paper.success else None
+        errs = paper.unactuated_errors().tolist()
+        conv = paper.steps_to_converge(st.tol)
+        conv = int(conv) if math.isfinite(conv) else None
         max_abs = poincare_map(m, g, rejoin=st.rejoin).analyse(np.array(M1), method="ad").max_abs
         self.stage("verification", s_star=r.s_star, full_order=verified)
         return r, verified, conv, errs, paper, max_abs
@@ -418,7 +413,7 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
         The best design, its s* and how it was found.
     """
     st = settings or RobustDesignSettings()
-    path = cache_dir(cache) / "robust" / f"robust-{_key(model, st)}.json"
+    path = DESIGNS.path(dict(robot=model.params.to_dict(), settings=st.to_dict()), cache)
     if use_cache and path.is_file():
         try:
             d = json.loads(path.read_text())
@@ -460,7 +455,7 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
                                   f"{fail['direction']})" if fail else ""),
         verified=verified, max_abs=max_abs, vc_eigenvalue=search.lam_vc,
         steps_to_converge=conv, paper_errors=errs, directions_kept=len(search.dirs),
-        directions_tried=search.kept[1],
+        directions_tried=search.kept.tried,
         tradeoff=_pareto(np.array(search.seen_lam), np.array(search.seen_s)),
         simulate_args=args, stages=search.stages,
         elapsed=time.perf_counter() - search.t0, settings=st.to_dict())

@@ -398,9 +398,9 @@ def unactuated_error_plot(results, title: str | None = None, labels=None) -> Fig
     labels = labels or [run_label(r) for r in results]
     for res, mk, name in zip(results, "os^dv", labels):
         k = np.arange(1, len(res.steps) + 1)
-        lab = name + ("" if res.success else f" ({res.status} at t = {res.failure_time:.3f} s)")
-        ax[0].plot(k, res.qu_errors, mk + "-", label=lab)
-        ax[1].plot(k, res.dqu_errors, mk + "-", label=lab)
+        lab = name + ("" if res.ok else f" ({res.status} at t = {res.failure_time:.3f} s)")
+        ax[0].plot(k, res.qu_error[:k.size], mk + "-", label=lab)
+        ax[1].plot(k, res.dqu_error[:k.size], mk + "-", label=lab)
     ax[0].set_ylabel(r"$q_u - q_u^d(T)$ [rad]")
     ax[1].set_ylabel(r"$\dot q_u - \dot q_u^d(T)$ [rad/s]")
     ax[1].set_xlabel("step (error just before its impact)")

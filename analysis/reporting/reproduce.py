@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from biped_casadi import (PAPER_PERTURBATION, RABBIT_DESCRIPTION, SimulationOptions,
+from biped_casadi import (PAPER_SIZES, RABBIT_DESCRIPTION, SimulationOptions,
                           TimeVaryingController, VirtualConstraintController,
                           perturbed_initial_state, robot, simulate)
 from biped_casadi.files import write_text_atomic
@@ -209,7 +209,7 @@ def stage_fig2(ctx: _Context):
     best = []
     for j, part in enumerate(r.results):
         b = part.best()
-        best.append(None if b is None else dict(M1=b[0].tolist(), max_abs=b[1]))
+        best.append(None if b is None else dict(M1=b.M1.tolist(), max_abs=b.max_abs))
     ctx.summary["fig2"] = dict(points_per_component=len(vals), best_per_component=best,
                                stable_per_component=[int(p.counts["stable"]) for p in r.results])
 
@@ -313,12 +313,12 @@ def _plane_domain(ctx: _Context, tay):
         from_map = run_sweep(ctx.model, ctx.gait, on_set[keep], progress=False)
         ab_eval = dict(points=int(keep.sum()), stable=int(from_map.counts["stable"]),
                        best=None if from_map.best() is None else
-                       dict(M1=from_map.best()[0].tolist(), max_abs=from_map.best()[1]))
+                       dict(M1=from_map.best().M1.tolist(), max_abs=from_map.best().max_abs))
     best = grid.best()
     ctx.figures["m1_plane"] = save_figure(
         m1_plane_plot(m1, m2, mx, ab_points=ab.points,
                       ab_line=on_set[keep] if ab.kind == "line" else None,
-                      best=None if best is None else best[0],
+                      best=None if best is None else best.M1,
                       title=f"{ctx.model.params.name}: stable domain of M1, contour "
                             "max|λ| = 1 (red)"),
         ctx.out / "figures" / "m1_plane", FORMATS)
@@ -327,7 +327,7 @@ def _plane_domain(ctx: _Context, tay):
                                   stable_area=float(stable.sum() * cell),
                                   ab_set=ab.to_dict(), ab_set_on_map=ab_eval,
                                   best=None if best is None else
-                                  dict(M1=best[0].tolist(), max_abs=best[1]))
+                                  dict(M1=best.M1.tolist(), max_abs=best.max_abs))
     ctx.log(f"   stable area {stable.sum() * cell:.2f}; a = b = 0: {ab.message}")
 
 
@@ -382,7 +382,8 @@ def _brief(r) -> dict:
     """A run's status, steps to converge and validity margins (for summary.json)."""
     return dict(status=r.status, message=r.message, steps=len(r.steps),
                 steps_to_converge=r.steps_to_converge(),
-                qu_errors=r.qu_errors.tolist(), dqu_errors=r.dqu_errors.tolist(),
+                qu_errors=r.qu_error[:len(r.steps)].tolist(),
+                dqu_errors=r.dqu_error[:len(r.steps)].tolist(),
                 peak_torque=r.peak_torque, min_normal_force=r.min_normal_force,
                 max_friction_ratio=r.max_friction_ratio, max_impulse_ratio=r.max_impulse_ratio,
                 failure_time=r.failure_time)
@@ -449,8 +450,8 @@ def stage_sim(ctx: _Context):
     opts = SimulationOptions(steps=ctx.opts.sim_steps, mu=0.6)
     M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(m.nu)), float)
     runs, labels = [], []
-    q0, dq0 = perturbed_initial_state(g, *PAPER_PERTURBATION)
-    out = dict(perturbation=list(PAPER_PERTURBATION), mu=0.6, runs={})
+    q0, dq0 = perturbed_initial_state(g, *PAPER_SIZES)
+    out = dict(perturbation=list(PAPER_SIZES), mu=0.6, runs={})
     for key, label, ctrl in (
             ("default_vc", "virtual constraints (default gait)",
              VirtualConstraintController(m, g)),
@@ -465,7 +466,7 @@ def stage_sim(ctx: _Context):
     robust_runs = []
     if rb is not None:
         g2 = ctx.data["robust_gait"]
-        q0, dq0 = perturbed_initial_state(g2, *PAPER_PERTURBATION)
+        q0, dq0 = perturbed_initial_state(g2, *PAPER_SIZES)
         M1r = np.array(rb.design["M1"])
         for key, label, ctrl in (
                 ("robust_vc", "virtual constraints (robust gait)",

@@ -4,7 +4,7 @@ controller walk and converge.
 Every cell of a grid around the fixed point x* = (q_u^d, dq_u^d)(0.75 T) is a state on
 the controller's zero-dynamics manifold at the section, walked for a number of impacts
 with every validity condition checked (the batched walkers of
-:mod:`biped_casadi.simulation.walkers`).
+:mod:`biped_casadi.simulation`).
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from biped_casadi import SimulationOptions, require_same_robot
 from biped_casadi.control.output_law import SECTION
 from biped_casadi.numerics import as_number
 from biped_casadi.results import Result, internal
-from biped_casadi.simulation.walkers import virtual_constraint_walker, zero_dynamics_walker
+from biped_casadi.simulation import virtual_constraint_walker, zero_dynamics_walker
 
 from .s_star import Design
 
@@ -143,7 +143,7 @@ def basin(model, gait, design: Design | None = None, n: int = 101,
         design_dict = design.to_dict()
     err = batch.final_error
     outcome = np.where(batch.ok, np.where(err < tol, "converged", "walked"),
-                       batch.run_status).astype(object)
+                       batch.status).astype(object)
     names, counts = np.unique(outcome.astype(str), return_counts=True)
     frac = float(np.mean(outcome == "converged"))
     return BasinResult(

@@ -17,7 +17,7 @@ converge?".  For one controller design on one gait:
   and ends with max(|q_u err|, |dq_u err|) < ``tol``; with the first failure just above
   it and its cause.
 
-Time-varying designs run on their hybrid zero dynamics (:mod:`biped_casadi.simulation.walkers`, exact
+Time-varying designs run on their hybrid zero dynamics (:mod:`biped_casadi.simulation.tv_walker`, exact
 for every output gain, batched over directions); virtual constraints in the full-order
 simulator.
 """
@@ -32,19 +32,18 @@ import numpy as np
 
 from biped_casadi import (PAPER_REJOIN, SimulationOptions, VirtualConstraintController,
                           directions, require_same_robot, simulate)
-from biped_casadi.numerics import as_number
-from biped_casadi.control.output_law import SECTION, check_M1
-from biped_casadi.simulation.perturbation import PAPER_SIZES
+from biped_casadi.control.output_law import check_M1, check_rejoin
 from biped_casadi.results import Result, internal
+from biped_casadi.simulation import WalkBatch, start_states, zero_dynamics_walker
+from biped_casadi.simulation.outcome import NOT_CONVERGED
+from gait_opt import Gait
 
 from ..cluster import dask_client
 from ..stability.poincare import poincare_map
-from ..sweeps.sweep import gait_from_dict, gait_to_dict
 from ..stability.vc_map import vc_eigenvalue
-from biped_casadi.simulation.walkers import zero_dynamics_walker
 
-__all__ = ["Design", "RobustnessSettings", "RobustnessResult", "kept_directions",
-           "robustness", "start_states", "BatchSStar", "s_star_batch"]
+__all__ = ["Design", "RobustnessSettings", "RobustnessResult", "KeptDirections",
+           "kept_directions", "robustness", "BatchSStar", "s_star_batch", "bisect_scale"]
 
 
 @dataclass(frozen=True)
@@ -70,10 +69,7 @@ class Design:
     def __post_init__(self):
         M1 = np.atleast_1d(np.asarray(self.M1, dtype=float))
         object.__setattr__(self, "M1", tuple(check_M1(M1, M1.size).tolist()))
-        r = as_number(self.rejoin, "rejoin", positive=True)
-        if r > SECTION:
-            raise ValueError(f"rejoin must be in (0, {SECTION}], got {self.rejoin!r}")
-        object.__setattr__(self, "rejoin", r)
+        object.__setattr__(self, "rejoin", check_rejoin(self.rejoin))
 
     def to_dict(self) -> dict:
         """The design in plain JSON types.
@@ -149,8 +145,8 @@ class RobustnessSettings:
 class RobustnessResult(Result):
     """Robustness of one design (see the module docstring).
 
-    ``status`` is always 'done' (``success``).  The kept directions are left out of
-    ``to_dict()``.
+    ``success`` means s* was measured; ``status`` is 'done'.  The kept directions are left
+    out of ``to_dict()``.
 
     Parameters
     ----------
@@ -217,43 +213,47 @@ class RobustnessResult(Result):
     SUCCESS = ("done",)
 
 
-def start_states(gait, dirs, scales, sizes=PAPER_SIZES):
-    """Start states (q0, dq0) of perturbation directions at given scales.
+@dataclass
+class KeptDirections(Result):
+    """The perturbation directions from which virtual constraints walk at full scale.
 
-    The perturbation of a direction d at scale s adds ``sizes[0] * s * d[:nq]`` (rad) to
-    the reference configuration at the start of the step (tau = 0) and
-    ``sizes[1] * s * d[nq:]`` (rad/s) to its velocities.
+    ``success`` means the candidates were tried; ``status`` is 'done'.
 
     Parameters
     ----------
-    gait : Reference
-        The reference step.
-    dirs : array_like
-        (n, 2 nq) directions (one direction (2 nq,) is a batch of one).
-    scales : float or array_like
-        (n,) scales, broadcast along the directions.
-    sizes : tuple of float
-        Per-joint perturbation size at scale 1: rad for the angles, rad/s for the
-        velocities (default the paper's 0.01 rad and 0.1 rad/s).
-
-    Returns
-    -------
-    q0, dq0 : numpy.ndarray
-        (n, nq) start configurations (rad) and velocities (rad/s).
+    directions : numpy.ndarray
+        (k, 2 nq) the kept directions (the paper's first when it is kept).
+    tried : int
+        Candidates tried to keep them.
+    rejected : dict
+        Status -> number of candidates rejected with it.
+    status : str
+        'done'.
+    message : str
+        How many were kept of how many tried.
     """
-    dirs = np.atleast_2d(np.asarray(dirs, float))
-    nq = gait.model.nq
-    s = np.broadcast_to(np.asarray(scales, float), (len(dirs),))[:, None]
-    return (gait.q(0.0)[None, :] + sizes[0] * s * dirs[:, :nq],
-            gait.dq(0.0)[None, :] + sizes[1] * s * dirs[:, nq:])
+
+    directions: np.ndarray
+    tried: int
+    rejected: dict
+    status: str = "done"
+    message: str = ""
+
+    SUCCESS = ("done",)
+
+    def __len__(self) -> int:
+        return len(self.directions)
 
 
-def _vc_run(model, gait, options, d, s):
-    q0, dq0 = start_states(gait, d[None], s)
-    return simulate(VirtualConstraintController(model, gait), q0[0], dq0[0], options)
+def _vc_runs(model, gait, options, dirs, scale) -> WalkBatch:
+    """Full-order runs of virtual constraints fitted to the gait, one per direction."""
+    q0, dq0 = start_states(gait, dirs, scale)
+    ctrl = VirtualConstraintController(model, gait)
+    return WalkBatch.concat([simulate(ctrl, q0[i], dq0[i], options) for i in range(len(q0))])
 
 
-def kept_directions(model, gait, settings: RobustnessSettings | None = None, progress=None):
+def kept_directions(model, gait, settings: RobustnessSettings | None = None,
+                    progress=None) -> KeptDirections:
     """The directions from which virtual constraints walk at full scale.
 
     Parameters
@@ -269,8 +269,7 @@ def kept_directions(model, gait, settings: RobustnessSettings | None = None, pro
 
     Returns
     -------
-    tuple
-        (kept directions (k, 2 nq), candidates tried, {status: count} of the rejected).
+    KeptDirections
     """
     st = settings or RobustnessSettings()
     opts = st.simulation_options(jit=True)
@@ -279,102 +278,98 @@ def kept_directions(model, gait, settings: RobustnessSettings | None = None, pro
     tried = 0
     for d in cand:
         tried += 1
-        r = _vc_run(model, gait, opts, d, 1.0)
-        if r.success:
+        status = str(_vc_runs(model, gait, opts, d[None], 1.0).status[0])
+        if status == "ok":
             kept.append(d)
         else:
-            rejected[r.status] = rejected.get(r.status, 0) + 1
+            rejected[status] = rejected.get(status, 0) + 1
         if progress is not None:
-            progress(f"direction {tried}: virtual constraints {r.status} "
+            progress(f"direction {tried}: virtual constraints {status} "
                      f"({len(kept)} kept of {st.directions})")
         if len(kept) == st.directions:
             break
-    return np.array(kept).reshape(-1, 2 * model.nq), tried, rejected
+    return KeptDirections(np.array(kept).reshape(-1, 2 * model.nq), tried, rejected,
+                          message=f"{len(kept)} of {tried} candidate directions kept")
 
 
-# ------------------------------------------------------------------ runners
-class _TVRunner:
-    """Batches of runs of one time-varying design on the zero-dynamics walker."""
-
-    def __init__(self, model, gait, design: Design, st: RobustnessSettings):
-        self.walker = zero_dynamics_walker(model, gait, st.simulation_options(),
-                                           st.rk4_steps, jit=True)
-        self.gait, self.design, self.st = gait, design, st
-        self.runs = 0
-
-    def run(self, dirs, s):
-        q0, dq0 = start_states(self.gait, dirs, s)
-        B = self.walker.walk(q0, dq0, np.array(self.design.M1), self.design.rejoin,
-                             steps=self.st.steps)
-        self.runs += len(dirs)
-        err = B.final_error
-        out = []
-        for i in range(len(dirs)):
-            status = str(B.run_status[i])
-            if status == "ok" and not err[i] < self.st.tol:
-                status = "not_converged"
-            out.append(dict(status=status, step=int(B.fail_step[i]),
-                            error=float(err[i]) if np.isfinite(err[i]) else None,
-                            steps_to_converge=float(B.steps_to_converge(self.st.tol)[i]),
-                            peak_torque=float(B.peak_torque[i]),
-                            min_normal_force=float(B.min_normal_force[i]),
-                            max_friction_ratio=float(B.max_friction_ratio[i]),
-                            max_impulse_ratio=float(B.max_impulse_ratio[i])))
-        return out
+# ---------------------------------------------------------------- verdicts
+def _failure(batch: WalkBatch, tol: float):
+    """The failing run to report of a design's runs (one per direction), or None: a
+    validity failure before non-convergence, then the earliest step, then the first."""
+    v = batch.verdict(tol)
+    bad = np.flatnonzero(v != "ok")
+    if not bad.size:
+        return None
+    return int(bad[np.lexsort((batch.fail_step[bad], v[bad] == NOT_CONVERGED))[0]])
 
 
-class _VCRunner:
-    """Full-order runs of virtual constraints fitted to the gait."""
-
-    def __init__(self, model, gait, st: RobustnessSettings):
-        self.model, self.gait, self.st = model, gait, st
-        self.options = st.simulation_options(jit=True)
-        self.runs = 0
-
-    def run(self, dirs, s):
-        out = []
-        for d in dirs:
-            r = _vc_run(self.model, self.gait, self.options, d, s)
-            self.runs += 1
-            err = (max(abs(r.qu_errors[-1]), abs(r.dqu_errors[-1]))
-                   if r.success and r.steps else math.inf)
-            status = r.status if not (r.success and not err < self.st.tol) else "not_converged"
-            out.append(dict(status=status,
-                            step=r.failed_step if r.failed_step is not None else len(r.steps),
-                            error=err if math.isfinite(err) else None,
-                            steps_to_converge=float(r.steps_to_converge(self.st.tol) or np.nan),
-                            peak_torque=r.peak_torque, min_normal_force=r.min_normal_force,
-                            max_friction_ratio=r.max_friction_ratio,
-                            max_impulse_ratio=r.max_impulse_ratio))
-        return out
+def _run_summary(batch: WalkBatch, i: int, tol: float) -> dict:
+    """Run i of a batch as the robustness result reports it."""
+    err = float(batch.final_error[i])
+    return dict(status=str(batch.verdict(tol)[i]), step=int(batch.fail_step[i]),
+                error=err if np.isfinite(err) else None,
+                steps_to_converge=float(batch.steps_to_converge(tol)[i]),
+                peak_torque=float(batch.peak_torque[i]),
+                min_normal_force=float(batch.min_normal_force[i]),
+                max_friction_ratio=float(batch.max_friction_ratio[i]),
+                max_impulse_ratio=float(batch.max_impulse_ratio[i]))
 
 
-def _all_pass(outcomes) -> bool:
-    return all(o["status"] == "ok" for o in outcomes)
+def bisect_scale(evaluate, n: int, s_max: float, rounds: int):
+    """The largest scale in [0, s_max] that each of n designs passes, by bisection.
+
+    Round 1 tries ``s_max``; every further round halves the bracket of the designs still
+    open, all of them in one call.
+
+    Parameters
+    ----------
+    evaluate : callable
+        ``evaluate(idx, scales) -> (passed, info)``: for the designs ``idx`` at their
+        ``scales``, a boolean array and one object per design (kept for the result).
+    n : int
+        Designs.
+    s_max : float
+        The largest scale.
+    rounds : int
+        Calls of ``evaluate`` at most (resolution ``s_max / 2^(rounds - 1)``).
+
+    Returns
+    -------
+    tuple
+        (s_star (n,), s_fail (n,), info at s_star, info at s_fail): s_star 0 when no
+        scale passed; s_fail inf when ``s_max`` passed; infos None where none.
+    """
+    lo, hi = np.zeros(n), np.full(n, float(s_max))
+    at_lo, at_hi = [None] * n, [None] * n
+    idx, scales = np.arange(n), hi.copy()
+    for r in range(rounds):
+        if not idx.size:
+            break
+        ok, info = evaluate(idx, scales)
+        for j, i in enumerate(idx):
+            if ok[j]:
+                lo[i], at_lo[i] = scales[j], info[j]
+                if r == 0:
+                    hi[i] = math.inf
+            else:
+                hi[i], at_hi[i] = scales[j], info[j]
+        idx = idx[~np.asarray(ok, bool)] if r == 0 else np.flatnonzero(np.isfinite(hi))
+        scales = 0.5 * (lo[idx] + hi[idx])
+    return lo, hi, at_lo, at_hi
 
 
-def _first_failure(outcomes) -> dict:
-    """The failing direction to report: a validity failure before non-convergence,
-    then the earliest step."""
-    bad = [(i, o) for i, o in enumerate(outcomes) if o["status"] != "ok"]
-    i, o = min(bad, key=lambda io: (io[1]["status"] == "not_converged", io[1]["step"]))
-    return dict(direction=i, status=o["status"], step=o["step"], error=o["error"])
+# ------------------------------------------------------------------ one design
+def _runner(model, gait, design, st: RobustnessSettings):
+    """``run(dirs, s) -> WalkBatch``: the design's (or virtual constraints') runs."""
+    if design is None:
+        opts = st.simulation_options(jit=True)
+        return lambda dirs, s: _vc_runs(model, gait, opts, dirs, s)
+    walker = zero_dynamics_walker(model, gait, st.simulation_options(), st.rk4_steps, jit=True)
 
-
-def _bisect(runner, dirs, st: RobustnessSettings):
-    """(s*, s_fail, failure at s_fail, outcomes at s*)."""
-    hi_out = runner.run(dirs, st.s_max)
-    if _all_pass(hi_out):
-        return st.s_max, math.inf, {}, hi_out
-    lo, hi, fail, lo_out = 0.0, st.s_max, _first_failure(hi_out), None
-    for _ in range(st.rounds - 1):
-        mid = 0.5 * (lo + hi)
-        out = runner.run(dirs, mid)
-        if _all_pass(out):
-            lo, lo_out = mid, out
-        else:
-            hi, fail = mid, _first_failure(out)
-    return lo, hi, fail, lo_out
+    def run(dirs, s):
+        q0, dq0 = start_states(gait, dirs, s)
+        return walker.walk(q0, dq0, np.array(design.M1), design.rejoin, steps=st.steps)
+    return run
 
 
 def robustness(model, gait, design: Design | None = None,
@@ -392,8 +387,8 @@ def robustness(model, gait, design: Design | None = None,
         The time-varying design; None measures virtual constraints fitted to the gait.
     settings : RobustnessSettings, optional
         How robustness is measured (default: all defaults).
-    kept : tuple, optional
-        (directions, tried, rejected) from :func:`kept_directions`, to reuse.
+    kept : KeptDirections, optional
+        From :func:`kept_directions`, to reuse.
     progress : callable, optional
         Called with one line of text per stage.
 
@@ -406,26 +401,44 @@ def robustness(model, gait, design: Design | None = None,
     t0 = time.perf_counter()
     if kept is None:
         kept = kept_directions(model, gait, st, progress)
-    dirs, tried, rejected = kept
+    dirs = kept.directions
     if len(dirs) == 0:
         raise ValueError("no perturbation direction is walkable by virtual constraints on "
                          "this gait at full scale: robustness is undefined (try more "
                          "candidates or another gait)")
     if design is None:
-        runner, name = _VCRunner(model, gait, st), "virtual constraints"
-        ev = vc_eigenvalue(model, gait)
-        max_abs, design_dict = abs(ev.eigenvalue), dict(controller="vc")
+        name = "virtual constraints"
+        max_abs, design_dict = abs(vc_eigenvalue(model, gait).eigenvalue), dict(controller="vc")
     else:
         if len(design.M1) != model.nu:
             raise ValueError(f"design: M1 must have {model.nu} components, got {len(design.M1)}")
-        runner, name = _TVRunner(model, gait, design, st), f"M1 = {list(design.M1)}"
+        name = f"M1 = {list(design.M1)}"
         pm = poincare_map(model, gait, rejoin=design.rejoin)
         max_abs, design_dict = pm.analyse(np.array(design.M1)).max_abs, design.to_dict()
+    run = _runner(model, gait, design, st)
+    runs = 0
     if progress is not None:
         progress(f"s* of {name}: bisection on [0, {st.s_max:g}] over {len(dirs)} directions")
-    s_star, s_fail, failure, at_star = _bisect(runner, dirs, st)
-    paper = runner.run(dirs[:1], 1.0)[0] if np.all(dirs[0] == 1) else {}
-    worst = (max(o["steps_to_converge"] for o in at_star) if at_star else math.nan)
+
+    def evaluate(idx, scales):
+        nonlocal runs
+        b = run(dirs, scales[0])
+        runs += len(dirs)
+        return np.array([_failure(b, st.tol) is None]), [b]
+
+    lo, hi, at_lo, at_hi = bisect_scale(evaluate, 1, st.s_max, st.rounds)
+    s_star, s_fail = float(lo[0]), float(hi[0])
+    failure = {}
+    if at_hi[0] is not None:
+        j = _failure(at_hi[0], st.tol)
+        s = _run_summary(at_hi[0], j, st.tol)
+        failure = dict(direction=j, status=s["status"], step=s["step"], error=s["error"])
+    paper = {}
+    if np.all(dirs[0] == 1):
+        paper = _run_summary(run(dirs[:1], 1.0), 0, st.tol)
+        runs += 1
+    worst = (float(np.max(at_lo[0].steps_to_converge(st.tol))) if at_lo[0] is not None
+             else math.nan)
     msg = (f"{name}: s* = {s_star:.4g} " + (
         f"(all {len(dirs)} directions walk {st.steps} valid steps and converge below "
         f"{st.tol:g})" if s_star > 0 else "(no scale tried passed)") + (
@@ -434,15 +447,17 @@ def robustness(model, gait, design: Design | None = None,
     return RobustnessResult(
         controller="tv" if design is not None else "vc", design=design_dict,
         s_star=s_star, s_fail=s_fail, failure=failure, steps_to_converge=worst,
-        paper=paper, max_abs=max_abs, directions_kept=len(dirs), directions_tried=tried,
-        directions_rejected=dict(rejected), settings=st.__dict__.copy(),
-        elapsed=time.perf_counter() - t0, runs=runner.runs, message=msg, kept=dirs)
+        paper=paper, max_abs=max_abs, directions_kept=len(dirs), directions_tried=kept.tried,
+        directions_rejected=dict(kept.rejected), settings=st.__dict__.copy(),
+        elapsed=time.perf_counter() - t0, runs=runs, message=msg, kept=dirs)
 
 
 # ------------------------------------------------------- many designs at once
 @dataclass
-class BatchSStar:
+class BatchSStar(Result):
     """s* of many time-varying designs (row i = design i).
+
+    ``success`` means every design was measured; ``status`` is 'done'.
 
     Parameters
     ----------
@@ -458,36 +473,33 @@ class BatchSStar:
         bisection cell).
     scenario_steps : int
         The scenario-steps walked.
+    status : str
+        'done'.
+    message : str
+        The best s* in words.
     """
     s_star: np.ndarray
     s_fail: np.ndarray
     cause: list
     pass_fraction: np.ndarray
     scenario_steps: int
+    status: str = "done"
+    message: str = ""
+
+    SUCCESS = ("done",)
 
 
-def _verdicts(B, nd, nk, tol):
-    """Per design: all directions pass, the fraction that pass, the cause to report."""
-    err = B.final_error
-    st = np.where((B.run_status == "ok") & ~(err < tol), "not_converged", B.run_status)
-    st = st.reshape(nd, nk)
-    step = B.fail_step.reshape(nd, nk)
-    ok = st == "ok"
-    causes = []
-    for i in range(nd):
-        bad = np.flatnonzero(~ok[i])
-        if not bad.size:
-            causes.append("")
-            continue
-        j = bad[np.lexsort((step[i, bad], st[i, bad] == "not_converged"))[0]]
-        causes.append(f"{st[i, j]} in step {step[i, j]}" if st[i, j] != "not_converged"
-                      else "not_converged")
-    return ok.all(axis=1), ok.mean(axis=1), causes
+def _cause(batch: WalkBatch, tol: float) -> str:
+    j = _failure(batch, tol)
+    if j is None:
+        return ""
+    v = str(batch.verdict(tol)[j])
+    return v if v == NOT_CONVERGED else f"{v} in step {int(batch.fail_step[j])}"
 
 
 def _walk_task(gait_dict, options, rk4_steps, q0, dq0, M1s, rejoin, steps):
     """One batch walked on a Dask worker (the walker built once per worker process)."""
-    gait = gait_from_dict(gait_dict)
+    gait = Gait.from_dict(gait_dict)
     walker = zero_dynamics_walker(gait.model, gait, options, rk4_steps, jit=True)
     return walker.walk(q0, dq0, M1s, rejoin, steps=steps)
 
@@ -523,12 +535,9 @@ def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
     BatchSStar
     """
     st = settings
-    rounds = st.rounds if rounds is None else rounds
     nd, nk = len(designs), len(dirs)
     M1 = np.array([d.M1 for d in designs], float)
     rj = np.array([d.rejoin for d in designs], float)
-    lo, hi = np.zeros(nd), np.full(nd, st.s_max)
-    cause, frac = [""] * nd, np.ones(nd)
     used = 0
 
     def batches(idx, scales):
@@ -538,53 +547,35 @@ def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
                                    np.repeat(scales[a:a + chunk], nk))
             yield part, (q0, dq0, np.repeat(M1[part], nk, axis=0), np.repeat(rj[part], nk))
 
-    def walked(idx, scales):
+    def walked(client, idx, scales):
         if client is None:
             for part, args in batches(idx, scales):
                 yield part, walker.walk(*args, steps=st.steps)
             return
+        gdict = gait.definition()
         futs = [(part, client.submit(_walk_task, gdict, walker.options, walker.rk4_steps,
                                      *args, st.steps, pure=False))
                 for part, args in batches(idx, scales)]
         for part, f in futs:
             yield part, f.result()
 
-    def evaluate(idx, scales):
-        nonlocal used
-        ok_all, fr_all, c_all = np.zeros(idx.size, bool), np.zeros(idx.size), []
-        a = 0
-        for part, B in walked(idx, scales):
-            used += B.scenario_steps
-            ok, fr, c = _verdicts(B, part.size, nk, st.tol)
-            ok_all[a:a + part.size], fr_all[a:a + part.size] = ok, fr
-            c_all += c
-            a += part.size
-        return ok_all, fr_all, c_all
-
-    gdict = gait_to_dict(gait) if scheduler is not None else None
     with (dask_client(scheduler) if scheduler is not None else contextlib.nullcontext()) \
             as client:
-        return _bisect_many(evaluate, nd, lo, hi, cause, frac, rounds, st,
-                            lambda: used)
+        def evaluate(idx, scales):
+            nonlocal used
+            ok, info = [], []
+            for part, B in walked(client, idx, scales):
+                used += B.scenario_steps
+                for j in range(part.size):
+                    b = B.take(slice(j * nk, (j + 1) * nk))
+                    ok.append(_failure(b, st.tol) is None)
+                    info.append((_cause(b, st.tol), float(np.mean(b.verdict(st.tol) == "ok"))))
+            return np.array(ok), info
 
-
-def _bisect_many(evaluate, nd, lo, hi, cause, frac, rounds, st, used):
-    """The rounds of :func:`s_star_batch`'s bisection."""
-    idx = np.arange(nd)
-    ok, fr, c = evaluate(idx, hi)
-    lo[ok] = st.s_max
-    hi[ok] = math.inf
-    for i in np.flatnonzero(~ok):
-        cause[i], frac[i] = c[i], fr[i]
-    active = ~ok
-    for _ in range(rounds - 1):
-        idx = np.flatnonzero(active)
-        if not idx.size:
-            break
-        mid = 0.5 * (lo[idx] + hi[idx])
-        ok, fr, c = evaluate(idx, mid)
-        lo[idx[ok]] = mid[ok]
-        hi[idx[~ok]] = mid[~ok]
-        for k in np.flatnonzero(~ok):
-            cause[idx[k]], frac[idx[k]] = c[k], fr[k]
-    return BatchSStar(lo, hi, cause, frac, used())
+        lo, hi, _, at_hi = bisect_scale(evaluate, nd, st.s_max,
+                                        st.rounds if rounds is None else rounds)
+    cause = [c[0] if c is not None else "" for c in at_hi]
+    frac = np.array([c[1] if c is not None else 1.0 for c in at_hi])
+    best = float(lo.max()) if nd else 0.0
+    return BatchSStar(lo, hi, cause, frac, used,
+                      message=f"best s* {best:.4g} of {nd} designs over {nk} directions")

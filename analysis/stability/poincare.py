@@ -36,17 +36,18 @@ import numpy as np
 from biped_casadi import require_same_robot
 from biped_casadi.caching import cached
 from biped_casadi.control import PAPER_REJOIN
-from biped_casadi.numerics import as_number, as_vector, rk4_step
-from biped_casadi.control.output_law import (SECTION, check_M1, check_M1_range,
-                                     coordinates_from_outputs, correction,
-                                     decoupling_denominator, is_singular, outputs,
-                                     unactuated_acceleration)
+from biped_casadi.control.zero_dynamics import denominator_samples, zero_dynamics
+from biped_casadi.numerics import as_vector, rk4_step
+from biped_casadi.simulation.kernel import strike
+from biped_casadi.control.output_law import (SECTION, check_M1, check_M1_range, check_rejoin,
+                                     decoupling_denominator, is_singular)
 from biped_casadi.results import Result
 
 from .variational import variational_jacobian
 
-__all__ = ["PoincareMap", "PoincareResult", "poincare_eigenvalues", "singular_m1_values",
-           "STATUSES", "METHODS", "poincare_map"]
+__all__ = ["PoincareMap", "PoincareResult", "JacobianBatch", "Screen", "ImpactBracket",
+           "MapStep", "poincare_eigenvalues", "singular_m1_values", "STATUSES", "METHODS",
+           "poincare_map"]
 
 #: status of an analysed M1 (SPEC section 4)
 STATUSES = ("stable", "unstable", "singular", "no_impact")
@@ -104,6 +105,87 @@ class PoincareResult(Result):
     SUCCESS = ("stable", "unstable")
 
 
+@dataclass
+class JacobianBatch:
+    """A^z and the status of many M1 at once (row i = M1 i).
+
+    ``success`` means the batch was analysed; each M1's verdict is in ``status``.
+
+    Parameters
+    ----------
+    M1 : numpy.ndarray
+        (n, nu) the outputs analysed.
+    status : numpy.ndarray
+        (n,) one of :data:`STATUSES` per M1.
+    A : numpy.ndarray
+        (n, 2, 2) A^z; NaN where singular or without impact.
+    eigenvalues : numpy.ndarray
+        (n, 2) complex; NaN where undefined.
+    max_abs : numpy.ndarray
+        (n,) max ``|lambda|``; inf where undefined.
+    """
+
+    M1: np.ndarray
+    status: np.ndarray
+    A: np.ndarray
+    eigenvalues: np.ndarray
+    max_abs: np.ndarray
+
+    success = True
+
+
+@dataclass
+class Screen:
+    """Many M1 validated and screened for the singularity of eq. (24).
+
+    Parameters
+    ----------
+    M1 : numpy.ndarray
+        (n, nu) the outputs as floats.
+    denominator : numpy.ndarray
+        (n, 1001) D11 - D12 M1 along the step.
+    singular : numpy.ndarray
+        (n,) True where it vanishes or changes sign.
+    """
+
+    M1: np.ndarray
+    denominator: np.ndarray
+    singular: np.ndarray
+
+
+@dataclass
+class ImpactBracket:
+    """The scan-grid interval that holds the first valid impact after the section.
+
+    Parameters
+    ----------
+    tau_a, tau_b : float
+        The nodes before and at the strike, s.
+    guess : float
+        The linear interpolation of the strike between them, s (Newton's start).
+    """
+
+    tau_a: float
+    tau_b: float
+    guess: float
+
+
+@dataclass
+class MapStep:
+    """One application of the restricted Poincaré map.
+
+    Parameters
+    ----------
+    x_next : numpy.ndarray
+        (q_u, dq_u) at the next section, rad and rad/s.
+    tau_impact : float
+        The impact time, s.
+    """
+
+    x_next: np.ndarray
+    tau_impact: float
+
+
 class PoincareMap:
     """The restricted Poincaré map P^z and its Jacobian A^z for one model and gait.
 
@@ -146,20 +228,15 @@ class PoincareMap:
         self.T = T = gait.T
         self.n_pre, self.n_post, self.n_scan = n_pre, n_post, n_scan
         self.horizon = horizon
-        self.rejoin = as_number(rejoin, "rejoin", positive=True)
-        if self.rejoin > SECTION:
-            raise ValueError(f"rejoin must be in (0, {SECTION}], got {rejoin!r}")
+        self.rejoin = check_rejoin(rejoin)
         self.tau_s = SECTION * T
         self.x_star = gait.state_at(self.tau_s)
         self.ref_s = gait.state(self.tau_s)           # reference state at the section
         self.ref_0 = np.asarray(gait.r0, dtype=float)
         self.threads = threads or max(1, min(os.cpu_count() or 1, 8))
         self._build()
-        t = np.linspace(0, T, 1001)
-        D = np.array(model.D.map(t.size)(gait.q(t))).reshape(model.nq, model.nq, t.size,
-                                                              order="F")
         #: D11 and D12 along the reference on [0, T] (1001 points), for eq. (23)-(24)
-        self.D11_table, self.D12_table = D[0, 0], D[0, 1:]
+        self.D11_table, self.D12_table = denominator_samples(model, gait)
 
     @property
     def cache_key(self):
@@ -168,37 +245,19 @@ class PoincareMap:
                 self.rejoin)
 
     # ---------------------------------------------------------------- build
-    def _zero_dynamics(self):
-        """The zero dynamics of eq. (19) as a Function of (z, tau, M1, y_i, dy_i), with
-        z = (q_u, dq_u, reference state)."""
-        m, nu = self.model, self.nu
-        ref = self.gait.symbolic()
-        nr = self.gait.n_state
-        M1 = ca.SX.sym("M1", nu)
-        yi, dyi = ca.SX.sym("yi", nu), ca.SX.sym("dyi", nu)
-        z = ca.SX.sym("z", 2 + nr)
-        tau = ca.SX.sym("tau")
-        qd, dqd, ddqd, dr = ref(tau, z[2:])
-        vc, dvc, ddvc = correction(tau, yi, dyi, self.rejoin * self.T)
-        q = coordinates_from_outputs(M1, z[0], outputs(M1, qd) + vc)        # eq. (10)
-        dq = coordinates_from_outputs(M1, z[1], outputs(M1, dqd) + dvc)
-        ddv = outputs(M1, ddqd) + ddvc
-        ddqu = unactuated_acceleration(m.D(q), m.H(q, dq), M1, ddv)         # eq. (19)
-        f = ca.Function("zero_dynamics", [z, tau, M1, yi, dyi], [ca.vertcat(z[1], ddqu, dr)],
-                        ["z", "tau", "M1", "yi", "dyi"], ["dz"])
-        conf = ca.Function("zd_configuration", [z, tau, M1, yi, dyi], [q, dq],
-                           ["z", "tau", "M1", "yi", "dyi"], ["q", "dq"])
-        return f, conf
-
     def _build(self):
         m, T, nu = self.model, self.T, self.nu
-        f, self.configuration = self._zero_dynamics()
-        self.zero_dynamics = f
-        nz = f.size1_in(0)
-        z, tau, h = ca.SX.sym("z", nz), ca.SX.sym("tau"), ca.SX.sym("h")
+        zd = zero_dynamics(m)
+        fz = zd.along(self.gait)                       # eq. (19), reference alongside
+        t_c = self.rejoin * T
+        z, tau, h = ca.SX.sym("z", fz.size1_in(0)), ca.SX.sym("tau"), ca.SX.sym("h")
         M1, yi, dyi = ca.SX.sym("M1", nu), ca.SX.sym("yi", nu), ca.SX.sym("dyi", nu)
-        z_next = rk4_step(lambda zz, c: f(zz, tau + c * h, M1, yi, dyi), z, h)
+        P = zd.params(M1, t_c, yi, dyi)
+        z_next = rk4_step(lambda zz, c: fz(zz, tau + c * h, P)[0], z, h)
         step = ca.Function("zd_rk4", [z, tau, h, M1, yi, dyi], [z_next, tau + h])
+        _, q_z, dq_z = fz(z, tau, P)
+        self.configuration = ca.Function("zd_configuration", [z, tau, M1, yi, dyi], [q_z, dq_z],
+                                         ["z", "tau", "M1", "yi", "dyi"], ["q", "dq"])
 
         zero = ca.DM.zeros(nu)
         q0, dq0 = self.configuration(z, tau, M1, zero, zero)        # v_c = 0 after rejoin
@@ -223,9 +282,8 @@ class PoincareMap:
         tau_i = rf(t_guess, x, M1m)
         q_m, dq_m = self.configuration(self.pre(x, M1m, tau_i), tau_i, M1m, zero, zero)
         q_p, dq_p = m.impact(q_m, dq_m)
-        q_d0, dq_d0, _ = self.gait.evaluate(0.0)
-        y_i = outputs(M1m, q_p) - outputs(M1m, ca.DM(q_d0))                # eq. (17)
-        dy_i = outputs(M1m, dq_p) - outputs(M1m, ca.DM(dq_d0))
+        R0 = np.concatenate(self.gait.evaluate(0.0))
+        _, y_i, dy_i = zd.step_start(q_p, dq_p, R0, M1m)                    # eq. (17)
         z_p = ca.vertcat(q_p[0], dq_p[0], ca.DM(self.ref_0))
         Zpost, _ = step.mapaccum("post_acc", self.n_post, [0, 1], [0, 1])(
             z_p, 0.0, self.tau_s / self.n_post, M1m, y_i, dy_i)
@@ -277,7 +335,7 @@ class PoincareMap:
         -------
         bool
         """
-        return bool(self.screen(check_M1(M1, self.nu)[None])[2][0])
+        return bool(self.screen(check_M1(M1, self.nu)[None]).singular[0])
 
     def screen(self, M1s):
         """Validate many M1 and find the singular ones.
@@ -289,9 +347,8 @@ class PoincareMap:
 
         Returns
         -------
-        tuple
-            (M1s as a float array (n, nu), D11 - D12 M1 along the step (n, 1001),
-            singular mask (n,)).
+        Screen
+            The M1 as floats, D11 - D12 M1 along the step and the singular ones.
 
         Raises
         ------
@@ -305,7 +362,7 @@ class PoincareMap:
             raise ValueError("M1s must be finite")
         check_M1_range(M1s, "M1s")
         den = decoupling_denominator(self.D11_table, self.D12_table, M1s.T)    # (n, 1001)
-        return M1s, den, is_singular(den, axis=1)
+        return Screen(M1s, den, is_singular(den, axis=1))
 
     def find_impact(self, x, M1):
         """The first valid impact after 0.75 T within the horizon, on the scan grid.
@@ -322,21 +379,20 @@ class PoincareMap:
 
         Returns
         -------
-        tuple or None
-            (tau_a, tau_b, linear guess) bracketing the impact time, s; None when there
-            is no valid impact.
+        ImpactBracket or None
+            The interval that holds the impact; None when there is no valid impact.
         """
         taus, gz, gx, gd = (np.array(v).ravel() for v in self.scan(x, M1))
         prev = np.r_[self.tau_s, taus[:-1]]
         gz0 = float(self.guard(ca.vertcat(x, self.ref_s), self.tau_s, M1)[0])
         prev_z = np.r_[gz0, gz[:-1]]
         ok = np.isfinite(gz) & np.isfinite(prev_z)
-        hit = ok & (prev_z > 0) & (gz <= 0) & (gx > self.model.scuff_zone)
+        hit = ok & strike(gz, prev_z, gx, self.model.scuff_zone)
         if not hit.any():
             return None
         k = int(np.argmax(hit))
         t_lin = prev[k] + (taus[k] - prev[k]) * prev_z[k] / (prev_z[k] - gz[k])
-        return prev[k], taus[k], t_lin
+        return ImpactBracket(float(prev[k]), float(taus[k]), float(t_lin))
 
     def evaluate(self, x, M1):
         """P^z(x) for a section state x = (q_u, dq_u) and outputs M1.
@@ -350,8 +406,8 @@ class PoincareMap:
 
         Returns
         -------
-        tuple
-            (x_next, tau_impact).
+        MapStep
+            The next section state and the impact time.
 
         Raises
         ------
@@ -364,11 +420,11 @@ class PoincareMap:
         if br is None:
             raise ValueError(f"no valid impact of the swing foot within the horizon "
                              f"({self.horizon:g} T)")
-        xn, ti = self.map(x, M1, br[2])
+        xn, ti = self.map(x, M1, br.guess)
         ti = float(ti)
-        if not (br[0] - 1e-9 <= ti <= br[1] + 1e-9):
+        if not (br.tau_a - 1e-9 <= ti <= br.tau_b + 1e-9):
             raise ValueError("impact-time Newton left the bracket of the first impact")
-        return np.array(xn).ravel(), ti
+        return MapStep(np.array(xn).ravel(), ti)
 
     def analyse(self, M1, method: str = "variational") -> PoincareResult:
         """A^z, eigenvalues and status (SPEC section 4) at the fixed point for one M1.
@@ -400,7 +456,7 @@ class PoincareMap:
         if br is None:
             return self._undefined(M1, "no_impact", min_den, method,
                                    f"no valid swing-foot impact within {self.horizon:g} T")
-        A, xn, ti = (np.array(v) for v in self.map_jac(self.x_star, M1, br[2]))
+        A, xn, ti = (np.array(v) for v in self.map_jac(self.x_star, M1, br.guess))
         return self._result(M1, A, xn.ravel(), ti.item(), min_den, method)
 
     def _undefined(self, M1, status, min_den, method, message, tau=math.nan, A=None):
@@ -433,11 +489,12 @@ class PoincareMap:
 
         Returns
         -------
-        tuple
-            (status (n,) strings, A (n, 2, 2), eigenvalues (n, 2) complex, max_abs
-            (n,)); NaN (and max_abs inf) where singular or without impact.
+        JacobianBatch
+            Status, A^z, eigenvalues and max ``|lambda|`` per M1; NaN (and max_abs inf)
+            where singular or without impact.
         """
-        M1s, den, sing = self.screen(M1s)
+        sc = self.screen(M1s)
+        M1s, sing = sc.M1, sc.singular
         A = np.full((len(M1s), 2, 2), np.nan)
         ok = np.flatnonzero(~sing)
         for a in range(0, len(ok), chunk):
@@ -451,7 +508,7 @@ class PoincareMap:
         status = np.where(sing, "singular", np.where(bad, "no_impact",
                           np.where(max_abs < 1, "stable", "unstable")))
         ev[sing | bad] = np.nan
-        return status, A, ev, max_abs
+        return JacobianBatch(M1s, status, A, ev, max_abs)
 
     def analyse_batch(self, M1s, chunk: int = 64) -> list[PoincareResult]:
         """:meth:`analyse` with ``method='ad'`` for many M1, on threads.
@@ -472,7 +529,8 @@ class PoincareMap:
         list of PoincareResult
             One per row of ``M1s``.
         """
-        M1s, den, sing = self.screen(M1s)
+        sc = self.screen(M1s)
+        M1s, den, sing = sc.M1, sc.denominator, sc.singular
         out: list = [None] * len(M1s)
         for i in np.flatnonzero(sing):
             out[i] = self._undefined(M1s[i], "singular", float(np.abs(den[i]).min()), "ad",

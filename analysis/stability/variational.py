@@ -27,7 +27,8 @@ import numpy as np
 
 from biped_casadi.caching import cached
 from biped_casadi.numerics import rk4_step
-from biped_casadi.control.output_law import correction, decoupling_denominator, outputs
+from biped_casadi.control.output_law import outputs
+from biped_casadi.control.zero_dynamics import zero_dynamics
 
 __all__ = ["VariationalJacobian", "variational_jacobian"]
 
@@ -59,12 +60,8 @@ class VariationalJacobian:
         self.T = T = gait.T
         self.t_c = rejoin * T
         self.n_pre, self.n_post = n_pre, n_post
+        self._zd = zero_dynamics(model)
         q, dq = model.q_sym, model.dq_sym
-        D, H = model.D_expr, model.H_expr
-        coeffs = ca.Function("zd_coefficients", [q, dq], [
-            D[0, 0], D[0, 1:].T, ca.jacobian(D[0, 0], q).T, ca.jacobian(D[0, 1:].T, q),
-            ca.jacobian(H[0], q).T, ca.jacobian(H[0], dq).T])
-        self._coeffs = coeffs
         self.h_pre, self.t_pre = _rk4_times(tau_s, T, n_pre)
         self.h_post, self.t_post = _rk4_times(0.0, tau_s, n_post)
         self.pre = self._table(self.t_pre)
@@ -83,37 +80,23 @@ class VariationalJacobian:
         self._build()
 
     def _table(self, times, with_vc=False):
-        g = self.gait
+        """The linearisation's factors at every RK4 stage time (stage-major: t, mid, end
+        per step) and, after the impact, the correction's basis there."""
         t = times.ravel()
-        q, dq, ddq = g.evaluate(t)
-        n, nq = t.size, self.model.nq
-        D11, D12, gD11, GD12, gH1q, gH1dq = (np.array(v) for v in self._coeffs.map(n)(q, dq))
-        D11 = D11.ravel()
-        GD12 = GD12.reshape(nq - 1, nq, n, order="F")        # dD12_i/dq_j
-        ddr, ddqa = ddq[0], ddq[1:]
-        w = -np.einsum("in,ijn->jn", ddqa, GD12) - gH1q - ddr * gD11      # 5 x n
-        tab = dict(D11=D11, D12=D12, w0=w[0], wa=w[1:], h0=gH1dq[0], ha=gH1dq[1:])
-        if with_vc:
-            a = correction(t, 1.0, 0.0, self.t_c)   # v_c = a y_i + b dy_i (per component)
-            b = correction(t, 0.0, 1.0, self.t_c)
-            tab.update(a=np.stack(a), b=np.stack(b))
-        return tab          # every entry (..., 3K): stage-major (t, mid, end) per step
+        lin = self._zd.linearisation(*self.gait.evaluate(t))
+        basis = self._zd.correction_basis(t, self.t_c) if with_vc else None
+        return lin, basis
 
     def _segment(self, tab, h, M1, S, forcing: bool):
         """RK4 on the variational equation dS/dt = [[0, 1], [Jq, Jdq]] S (+ [0; F])
         over one segment; symbolic in M1 (SX)."""
-        K = tab["D11"].size // 3
-        D11 = ca.DM(tab["D11"].reshape(-1))                       # (3K,) stage-major
-        nu = self.model.nu
-        den = decoupling_denominator(D11, ca.DM(tab["D12"].reshape(nu, -1)).T, M1)   # eq. (24)
-        Jq = (ca.DM(tab["w0"].reshape(-1)) - ca.mtimes(ca.DM(tab["wa"].reshape(nu, -1)).T, M1)) / den
-        Jdq = (-ca.DM(tab["h0"].reshape(-1)) + ca.mtimes(ca.DM(tab["ha"].reshape(nu, -1)).T, M1)) / den
+        lin, basis = tab
+        K = lin.D11.size // 3
+        Jq, Jdq, den = lin.coefficients(M1)
         if forcing:
             # v_c = a(t) y_i + b(t) dy_i per component: forcing columns 2..5 (y_i), 6..9 (dy_i)
-            wa, ha, D12 = (tab[k].reshape(nu, -1) for k in ("wa", "ha", "D12"))
-            a, b = tab["a"].reshape(3, -1), tab["b"].reshape(3, -1)
-            Fy = (wa * a[0] - ha * a[1] - D12 * a[2])              # 4 x 3K (numbers)
-            Fdy = (wa * b[0] - ha * b[1] - D12 * b[2])
+            a, b = basis
+            Fy, Fdy = lin.forcing(*a), lin.forcing(*b)             # nu x 3K (numbers)
 
         def rhs(S, i):
             d1 = Jq[i] * S[0, :] + Jdq[i] * S[1, :]

@@ -9,10 +9,14 @@ import shutil
 
 import numpy as np
 
-from biped_casadi.caching import cache_dir, cached
+from biped_casadi.caching import DiskCache, cached
 
-from .storage import SweepStoreError, digest_json
-from .sweep import SweepResult, gait_to_dict, grid_points, run_sweep
+from .storage import SweepStoreError
+from .sweep import RESULTS_VERSION, SweepResult, grid_points, run_sweep
+
+#: the stored grids of gaits (one sweep folder each); the sweep's own settings and code
+#: digest guard the folder's content
+GRIDS = DiskCache("grids", version=RESULTS_VERSION)
 
 __all__ = ["grid_results", "grid_best"]
 
@@ -27,8 +31,7 @@ def grid_results(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
     -------
     SweepResult
     """
-    folder = cache_dir(folder) / "sweeps" / (f"{digest_json(gait_to_dict(gait))[:16]}"
-                                             f"_grid{n}_{lo:g}_{hi:g}")
+    folder = GRIDS.path(dict(gait=gait.cache_key, n=n, lo=lo, hi=hi), folder, suffix="")
     P = grid_points(n, lo, hi, model.nu)
     try:
         return run_sweep(model, gait, P, out_dir=folder, progress=progress)

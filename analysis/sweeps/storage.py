@@ -31,8 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
+from biped_casadi.caching import digest
+
 __all__ = ["SweepStore", "SweepStoreError", "FORMAT", "FORMAT_VERSION", "STATUS_CODES",
-           "digest_json", "digest_points"]
+           "digest_points"]
 
 FORMAT = "biped-casadi-sweep"
 FORMAT_VERSION = 1
@@ -47,11 +49,6 @@ _KV_KEY = b"biped_sweep"
 class SweepStoreError(ValueError):
     """An output folder that cannot be used for this sweep (other settings, not a sweep
     folder, unreadable metadata, in use by another run)."""
-
-
-def digest_json(obj) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, separators=(",", ":"))
-                          .encode()).hexdigest()
 
 
 def digest_points(points: np.ndarray) -> str:
@@ -86,7 +83,7 @@ class SweepStore:
     def __init__(self, root, settings: dict):
         self.root = Path(root)
         self.settings = settings
-        self.digest = digest_json(settings)
+        self.digest = digest(settings)
         self.chunk_dir = self.root / CHUNKS
         self._lock_fd = None
 
@@ -129,7 +126,7 @@ class SweepStore:
             raise SweepStoreError(f"out: {self.root} was written in sweep format version "
                                   f"{ver!r}; this toolkit writes version {FORMAT_VERSION} "
                                   f"(choose another folder)")
-        if digest_json(stored) != self.digest:
+        if digest(stored) != self.digest:
             diff = sorted(k for k in set(stored) | set(self.settings)
                           if stored.get(k) != self.settings.get(k))
             hint = (" (the analysis code changed since it was written)"

@@ -25,7 +25,8 @@ from ..numerics import as_number, as_vector
 from ..results import Result
 
 __all__ = ["SECTION", "SINGULAR_RTOL", "M1_LIMIT", "Gains", "SingularityReport", "check_M1",
-           "output_matrix", "outputs", "coordinates_from_outputs", "correction",
+           "check_rejoin", "output_matrix", "outputs", "coordinates_from_outputs",
+           "initial_output_errors", "correction",
            "decoupling_denominator", "unactuated_acceleration", "actuated_torque",
            "output_acceleration", "singularity_report", "is_singular"]
 
@@ -131,6 +132,34 @@ def check_M1_range(M1s, name: str = "M1"):
                          "and A^z is meaningless)")
 
 
+def check_rejoin(rejoin, name: str = "rejoin") -> float:
+    """The rejoin time of v_c as a fraction of T, checked: a number in (0, SECTION].
+
+    v_c (eq. 18) must vanish before the Poincaré section at SECTION T.
+
+    Parameters
+    ----------
+    rejoin : float
+        The time at which v_c rejoins the reference, as a fraction of T (the paper: 1/2).
+    name : str
+        The argument's name, used in the error message.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` when it is not a number in (0, SECTION].
+    """
+    r = as_number(rejoin, name, positive=True)
+    if r > SECTION:
+        raise ValueError(f"{name} must be in (0, {SECTION}] (v_c must vanish before the "
+                         f"Poincare section at {SECTION} T), got {rejoin!r}")
+    return r
+
+
 # ------------------------------------------------------------------ eq. (5), (10)
 def output_matrix(M1) -> np.ndarray:
     """The output matrix M = [M1, I] of eq. (5) (numeric, M2 = I).
@@ -207,6 +236,29 @@ def coordinates_from_outputs(M1, q_u, v):
 
 
 # ------------------------------------------------------------------ eq. (17)-(18)
+def initial_output_errors(M1, q, dq, q_d0, dq_d0):
+    """The output error and its rate at the start of a step, where v_c starts (eq. 17).
+
+    y_i = M q - v^d(0) and dy_i = M dq - dv^d(0), with M = [M1, I] and the reference at
+    tau = 0.
+
+    Parameters
+    ----------
+    M1 : array_like or casadi
+        (nu,) outputs.
+    q, dq : array_like or casadi
+        The state just after the impact (or at the initial state), rad and rad/s.
+    q_d0, dq_d0 : array_like or casadi
+        The reference q^d(0) and dq^d(0).
+
+    Returns
+    -------
+    tuple
+        (y_i, dy_i), nu each.
+    """
+    return outputs(M1, q) - outputs(M1, q_d0), outputs(M1, dq) - outputs(M1, dq_d0)
+
+
 def correction(tau, y_i, dy_i, t_c):
     """The stride-to-stride correction v_c and its two derivatives.
 
@@ -383,7 +435,7 @@ class SingularityReport(Result):
 
     For the time-varying controller the sampled quantity is the decoupling denominator
     D11 - D12 M1 (eq. 23-24); for virtual constraints its analogue.  ``success`` means
-    regular.
+    the denominator was sampled; the verdict is ``status`` (``singular``).
 
     Parameters
     ----------
@@ -406,7 +458,7 @@ class SingularityReport(Result):
     status: str = "regular"
     message: str = ""
 
-    SUCCESS = ("regular",)
+    SUCCESS = ("regular", "singular")
 
     @property
     def singular(self) -> bool:

@@ -27,10 +27,12 @@ import casadi as ca
 
 from ..numerics import as_number, as_vector
 from .controller import ControlOutput, Controller, StepStart
-from .output_law import (SECTION, Gains, SingularityReport, actuated_torque, check_M1,
-                         correction, decoupling_denominator, output_acceleration,
-                         output_matrix, outputs, singularity_report, unactuated_acceleration)
+from .output_law import (Gains, SingularityReport, actuated_torque, check_M1, check_rejoin,
+                         correction, decoupling_denominator, initial_output_errors,
+                         output_acceleration, output_matrix, outputs, singularity_report,
+                         unactuated_acceleration)
 from .reference import require_same_robot
+from .zero_dynamics import denominator_samples
 
 __all__ = ["TimeVaryingController", "PAPER_REJOIN"]
 
@@ -83,10 +85,7 @@ class TimeVaryingController(Controller):
         self.gains = gains if gains is not None else Gains()
         if not isinstance(self.gains, Gains):
             raise ValueError(f"gains must be a Gains, got {type(self.gains).__name__}")
-        self.rejoin = as_number(rejoin, "rejoin", positive=True)
-        if self.rejoin > SECTION:
-            raise ValueError(f"rejoin must be in (0, {SECTION}] (v_c must vanish before the "
-                             f"Poincare section at {SECTION} T), got {rejoin!r}")
+        self.rejoin = check_rejoin(rejoin)
         self.T = reference.T
         self.t_c = self.rejoin * self.T
         self.M = output_matrix(self.M1)
@@ -120,9 +119,7 @@ class TimeVaryingController(Controller):
         self.law = ca.Function("tv_law", [q, dq, tau, r, p], [u, y, dy, den, dr, ca.DM(1)],
                                ["q", "dq", "tau", "r", "p"],
                                ["u", "y", "dy", "den", "dr", "in_range"])
-        q0, dq0, _ = self.reference.evaluate(0.0)
-        self._vd0 = outputs(self.M1, q0)
-        self._dvd0 = outputs(self.M1, dq0)
+        self._ref0 = self.reference.evaluate(0.0)[:2]
         self._r0 = np.array(self.reference.r0, dtype=float)
 
     def step_start(self, q, dq) -> StepStart:
@@ -141,8 +138,7 @@ class TimeVaryingController(Controller):
         nq = self.model.nq
         q = as_vector(q, nq, "q")
         dq = as_vector(dq, nq, "dq")
-        yi = outputs(self.M1, q) - self._vd0
-        dyi = outputs(self.M1, dq) - self._dvd0
+        yi, dyi = initial_output_errors(self.M1, q, dq, *self._ref0)          # eq. (17)
         return StepStart(r=self._r0.copy(), p=np.r_[yi, dyi])
 
     def torque(self, q, dq, tau, y_i=None, dy_i=None) -> ControlOutput:
@@ -184,10 +180,8 @@ class TimeVaryingController(Controller):
         -------
         SingularityReport
         """
-        t = np.linspace(0.0, self.T, n)
-        nq = self.model.nq
-        D = np.array(self.model.D.map(n)(self.reference.q(t))).reshape(nq, nq, n, order="F")
-        return singularity_report(decoupling_denominator(D[0, 0], D[0, 1:], self.M1))
+        D11, D12 = denominator_samples(self.model, self.reference, n)
+        return singularity_report(decoupling_denominator(D11, D12, self.M1))
 
     def describe(self) -> dict:
         """What defines the controller, as a JSON-ready dict.

@@ -444,7 +444,7 @@ class ConstraintSurface:
     z_sw(Q(theta^-)) = 0 (near the reference's impact), whatever the velocity; after the
     impact and relabelling the state lands on Z again at theta^+ = c E Q(theta^-).  The
     restricted Poincaré map (:mod:`analysis.stability.vc_map`) and the batched walker
-    (:mod:`biped_casadi.simulation.walkers`) are built on these Functions.
+    (:mod:`biped_casadi.simulation.vc_walker`) are built on these Functions.
 
     Parameters
     ----------

@@ -1,13 +1,20 @@
 """Simulation: the full-order hybrid closed loop, the batched walkers on the hybrid zero
-dynamics, the validity conditions every simulator checks, and perturbations."""
-from .full_order import (PAPER_PERTURBATION, STATUSES, SimulationOptions, SimulationResult,
-                         Simulator, StepRecord, perturbed_initial_state, simulate, simulator)
-from .perturbation import PAPER_SIZES, Perturbation, directions
-from .walkers import (VirtualConstraintWalker, WalkBatch, ZeroDynamicsWalker,
-                      virtual_constraint_walker, zero_dynamics_walker)
+dynamics, the stepping kernel and the validity conditions they share, one outcome type
+for every run, and perturbations."""
+from .full_order import (SimulationResult, Simulator, StepRecord, perturbed_initial_state,
+                         simulate, simulator)
+from .kernel import Diagnostics, locate_strike, strike
+from .options import SimulationOptions
+from .outcome import NOT_CONVERGED, STATUSES, WalkBatch, WalkOutcome, verdict
+from .perturbation import (PAPER_SIZES, Perturbation, direction_errors, directions,
+                           start_states)
+from .tv_walker import ZeroDynamicsWalker, zero_dynamics_walker
+from .validity import Limits
+from .vc_walker import VirtualConstraintWalker, virtual_constraint_walker
 
 __all__ = ["SimulationOptions", "SimulationResult", "StepRecord", "Simulator", "simulate",
-           "simulator", "perturbed_initial_state", "STATUSES", "PAPER_PERTURBATION",
-           "Perturbation", "directions", "PAPER_SIZES", "ZeroDynamicsWalker",
-           "VirtualConstraintWalker", "WalkBatch", "zero_dynamics_walker",
-           "virtual_constraint_walker"]
+           "simulator", "perturbed_initial_state", "STATUSES", "NOT_CONVERGED", "WalkOutcome",
+           "WalkBatch", "verdict", "Perturbation", "directions", "direction_errors",
+           "start_states", "PAPER_SIZES", "ZeroDynamicsWalker", "VirtualConstraintWalker",
+           "zero_dynamics_walker", "virtual_constraint_walker", "Diagnostics", "strike",
+           "locate_strike", "Limits"]

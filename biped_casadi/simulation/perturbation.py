@@ -16,7 +16,7 @@ import numpy as np
 
 from ..numerics import as_number, as_vector
 
-__all__ = ["Perturbation", "directions", "PAPER_SIZES"]
+__all__ = ["Perturbation", "directions", "direction_errors", "start_states", "PAPER_SIZES"]
 
 #: the per-joint sizes of the paper's perturbation: 0.01 rad and 0.1 rad/s (§V-C)
 PAPER_SIZES = (0.01, 0.1)
@@ -102,8 +102,8 @@ class Perturbation:
             raise ValueError(f"d must have 2 nq components, got {d.size}")
         d = as_vector(d, d.size, "d")
         s = as_number(scale, "scale", nonnegative=True)
-        nq = d.size // 2
-        return cls(tuple(s * sizes[0] * d[:nq]), tuple(s * sizes[1] * d[nq:]))
+        q, dq = direction_errors(d[None, :], s, sizes)
+        return cls(tuple(q[0]), tuple(dq[0]))
 
     @property
     def nq(self) -> int:
@@ -141,7 +141,8 @@ class Perturbation:
         if reference.model.nq != self.nq:
             raise ValueError(f"perturbation: {self.nq} joints, the robot has "
                              f"{reference.model.nq}")
-        return reference.q(0.0) + np.array(self.q), reference.dq(0.0) + np.array(self.dq)
+        q0, dq0 = _add_to_start(reference, np.array(self.q)[None, :], np.array(self.dq)[None, :])
+        return q0[0], dq0[0]
 
     def to_dict(self) -> dict:
         """The two error vectors as lists.
@@ -186,3 +187,57 @@ def directions(n: int, nq: int = 5, seed: int = 2024) -> np.ndarray:
             v = rng.standard_normal(2 * nq)
             out.append(v / np.linalg.norm(v) * math.sqrt(2 * nq))
     return np.array(out)
+
+
+def direction_errors(dirs, scales, sizes=PAPER_SIZES):
+    """The initial errors of directions at scales: (s q_size d[:nq], s dq_size d[nq:]).
+
+    Parameters
+    ----------
+    dirs : array_like
+        (n, 2 nq) directions (:func:`directions`).
+    scales : float or array_like
+        (n,) scales s, broadcast along the directions.
+    sizes : tuple of float
+        (q_size, dq_size): rad and rad/s per unit component (default the paper's 0.01
+        and 0.1).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        (q errors, dq errors), each (n, nq).
+    """
+    dirs = np.atleast_2d(np.asarray(dirs, float))
+    nq = dirs.shape[1] // 2
+    s = np.broadcast_to(np.asarray(scales, float), (len(dirs),))[:, None]
+    return s * sizes[0] * dirs[:, :nq], s * sizes[1] * dirs[:, nq:]
+
+
+def _add_to_start(reference, q_err, dq_err):
+    return reference.q(0.0)[None, :] + q_err, reference.dq(0.0)[None, :] + dq_err
+
+
+def start_states(reference, dirs, scales, sizes=PAPER_SIZES):
+    """Start states (q0, dq0) of perturbation directions at given scales.
+
+    The perturbation of a direction d at scale s (:func:`direction_errors`) is added to
+    the reference at the start of the step (tau = 0).
+
+    Parameters
+    ----------
+    reference : Reference
+        The reference step.
+    dirs : array_like
+        (n, 2 nq) directions (one direction (2 nq,) is a batch of one).
+    scales : float or array_like
+        (n,) scales, broadcast along the directions.
+    sizes : tuple of float
+        Per-joint perturbation size at scale 1: rad for the angles, rad/s for the
+        velocities (default the paper's 0.01 rad and 0.1 rad/s).
+
+    Returns
+    -------
+    q0, dq0 : numpy.ndarray
+        (n, nq) start configurations (rad) and velocities (rad/s).
+    """
+    return _add_to_start(reference, *direction_errors(dirs, scales, sizes))

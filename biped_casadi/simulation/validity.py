@@ -5,30 +5,100 @@ integration node of single support: the state is finite, the controller's refere
 defined, the controller is not singular, the robot has not fallen, the swing foot is not
 in the ground where it cannot strike (scuffing), the stance foot is pressed on the
 ground (F_z > 0, or above a floor), the reaction is inside the friction cone
-(|F_x| <= mu F_z) and every torque is within the limit.  At every impact: the impulse is
-pressed on the ground and inside the friction cone, and the old stance foot lifts off.
+(|F_x| <= mu F_z) and every torque is within the limit.  At the start of a step the
+swing foot is not below the ground.  At every impact: the swing foot strikes moving
+down, the impulse is pressed on the ground and inside the friction cone, and the old
+stance foot lifts off.
 
-The full-order :class:`~biped_casadi.simulation.full_order.Simulator` and the batched zero-dynamics
-walker of :mod:`biped_casadi.simulation.walkers` both call these functions, vectorised over any number
-of nodes and scenarios.
+The full-order :class:`~biped_casadi.simulation.full_order.Simulator` and the batched
+walkers (:mod:`~biped_casadi.simulation.tv_walker`, :mod:`~biped_casadi.simulation.vc_walker`) call these functions, vectorised over
+any number of nodes and scenarios, with the thresholds of :class:`Limits`.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-__all__ = ["NODE_CHECKS", "IMPACT_CHECKS", "node_violations", "first_violation",
-           "impact_violation"]
+__all__ = ["NODE_CHECKS", "IMPACT_CHECKS", "Limits", "node_violations", "first_violation",
+           "start_violation", "strike_violation", "impact_violation", "node_message",
+           "impact_message", "STRIKE_MESSAGE"]
+
+#: why a strike is invalid when the swing foot does not move down
+STRIKE_MESSAGE = "the swing foot reaches the ground without moving down"
 
 #: single-support statuses in the order of priority at the same node
 NODE_CHECKS = ("diverged", "out_of_range", "singular", "fell", "scuffed",
                "negative_normal_force", "slipped", "torque_limit")
-#: impact statuses, in the order they are checked
+#: impact statuses, in the order they are checked (after :func:`strike_violation`)
 IMPACT_CHECKS = ("diverged", "negative_normal_force", "slipped", "scuffed")
 
 
-def node_violations(rows: dict, options, torque_limit: float, den_scale, den_sign,
-                    z_prev=None, min_hip_height: float | None = None,
-                    scuffing_ignored: bool = False) -> dict:
+@dataclass(frozen=True)
+class Limits:
+    """The thresholds of the validity conditions for one robot.
+
+    Parameters
+    ----------
+    mu : float
+        Friction coefficient (stance foot and impact impulse).
+    min_normal_force : float
+        Lowest admissible stance normal force, N.
+    hip_floor : float
+        The robot has fallen when the hip is lower, m.
+    max_torso_angle : float
+        ... or when the torso leans more than this from the vertical, rad.
+    ground_tolerance : float
+        How far below the ground the swing foot may graze where it cannot strike, m.
+    singular_tolerance : float
+        Fraction of the denominator's scale below which the controller is singular.
+    torque_limit : float
+        Bound on every ``|u_i|``, N m.
+    min_liftoff_speed : float
+        Upward speed the old stance foot needs after an impact, m/s.
+    scuffing_ignored : bool
+        Legs without knees: the swing foot may pass below the ground (only a strike
+        counts).
+    """
+
+    mu: float
+    min_normal_force: float
+    hip_floor: float
+    max_torso_angle: float
+    ground_tolerance: float
+    singular_tolerance: float
+    torque_limit: float
+    min_liftoff_speed: float
+    scuffing_ignored: bool = False
+
+    @classmethod
+    def of(cls, options, model) -> "Limits":
+        """The limits of simulation options for a robot (its own torque limit and fall
+        height where the options leave them unset).
+
+        Parameters
+        ----------
+        options : SimulationOptions
+            The thresholds.
+        model : BipedModel
+            The robot.
+
+        Returns
+        -------
+        Limits
+        """
+        tl = options.torque_limit if options.torque_limit is not None \
+            else model.params.torque_limit
+        return cls(mu=float(options.mu), min_normal_force=float(options.min_normal_force),
+                   hip_floor=options.fall_height(model),
+                   max_torso_angle=float(options.max_torso_angle),
+                   ground_tolerance=float(options.ground_tolerance),
+                   singular_tolerance=float(options.singular_tolerance),
+                   torque_limit=float(tl), min_liftoff_speed=float(options.min_liftoff_speed),
+                   scuffing_ignored=bool(model.scuffing_ignored))
+
+
+def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None) -> dict:
     """Masks of the violated conditions at integration nodes.
 
     Parameters
@@ -39,22 +109,14 @@ def node_violations(rows: dict, options, torque_limit: float, den_scale, den_sig
         'Fx', 'Fz' (stance reaction), 'xsw', 'zsw' (swing foot), 'hip' (hip height),
         'torso' (torso angle from the vertical); 'u' with shape (nu, *S); optionally
         'in_range' (0 where the controller's reference is undefined).
-    options : SimulationOptions
-        The thresholds (mu, min_normal_force, min_hip_height, max_torso_angle,
-        ground_tolerance, singular_tolerance).
-    torque_limit : float
-        |u_i| bound, N m.
+    limits : Limits
+        The thresholds.
     den_scale, den_sign : float or array broadcastable to S
         The denominator's largest magnitude on the reference and its sign at the start
         of the step.
     z_prev : array, optional
         Swing-foot height at the previous node (a foot already under the ground cannot
         strike: going further down is scuffing).
-    min_hip_height : float, optional
-        The hip height below which the robot has fallen (default ``options``').
-    scuffing_ignored : bool
-        Legs without knees (``model.scuffing_ignored``): the swing foot passing below the
-        ground is the model's idealisation, never 'scuffed' (only a strike counts).
 
     Returns
     -------
@@ -62,25 +124,24 @@ def node_violations(rows: dict, options, torque_limit: float, den_scale, den_sig
         Status name -> boolean mask of shape S, in the priority order of
         :data:`NODE_CHECKS`.
     """
-    o = options
-    hip_floor = o.min_hip_height if min_hip_height is None else min_hip_height
+    lim = limits
     finite = rows["finite"]
     bad = {"diverged": ~finite}
     with np.errstate(invalid="ignore"):
         if "in_range" in rows:
             bad["out_of_range"] = finite & (rows["in_range"] < 0.5)
-        bad["singular"] = finite & (rows["den"] * den_sign <= o.singular_tolerance * den_scale)
-        bad["fell"] = finite & ((rows["hip"] < hip_floor)
-                                | (np.abs(rows["torso"]) > o.max_torso_angle))
+        bad["singular"] = finite & (rows["den"] * den_sign <= lim.singular_tolerance * den_scale)
+        bad["fell"] = finite & ((rows["hip"] < lim.hip_floor)
+                                | (np.abs(rows["torso"]) > lim.max_torso_angle))
         behind = rows["xsw"] <= 0
         if z_prev is not None:
             behind = behind | (np.asarray(z_prev) < 0)
-        bad["scuffed"] = finite & (rows["zsw"] < -o.ground_tolerance) & behind
-        if scuffing_ignored:
+        bad["scuffed"] = finite & (rows["zsw"] < -lim.ground_tolerance) & behind
+        if lim.scuffing_ignored:
             bad["scuffed"] = np.zeros_like(bad["scuffed"])
-        bad["negative_normal_force"] = finite & ~(rows["Fz"] > o.min_normal_force)
-        bad["slipped"] = finite & (np.abs(rows["Fx"]) > o.mu * rows["Fz"])
-        bad["torque_limit"] = finite & (np.max(np.abs(rows["u"]), axis=0) > torque_limit)
+        bad["negative_normal_force"] = finite & ~(rows["Fz"] > lim.min_normal_force)
+        bad["slipped"] = finite & (np.abs(rows["Fx"]) > lim.mu * rows["Fz"])
+        bad["torque_limit"] = finite & (np.max(np.abs(rows["u"]), axis=0) > lim.torque_limit)
     return bad
 
 
@@ -119,7 +180,41 @@ def first_violation(masks: dict, stop=None):
     return first, which
 
 
-def impact_violation(F, v_lift, finite, options):
+def start_violation(z_sw, limits: Limits):
+    """'scuffed' where a step starts with the swing foot below the ground, else ''.
+
+    Parameters
+    ----------
+    z_sw : array_like
+        Swing-foot height at the start of the steps, m.
+    limits : Limits
+        The thresholds (``ground_tolerance``).
+
+    Returns
+    -------
+    numpy.ndarray of str
+    """
+    with np.errstate(invalid="ignore"):
+        return np.where(np.asarray(z_sw) < -limits.ground_tolerance, "scuffed", "").astype(object)
+
+
+def strike_violation(dz_sw):
+    """'scuffed' where the swing foot reaches the ground without moving down, else ''.
+
+    Parameters
+    ----------
+    dz_sw : array_like
+        Vertical velocity of the swing foot at the strikes, m/s.
+
+    Returns
+    -------
+    numpy.ndarray of str
+    """
+    with np.errstate(invalid="ignore"):
+        return np.where(np.asarray(dz_sw) < 0, "", "scuffed").astype(object)
+
+
+def impact_violation(F, v_lift, finite, limits: Limits):
     """The status of impacts, '' where valid (vectorised over impacts).
 
     Parameters
@@ -130,7 +225,7 @@ def impact_violation(F, v_lift, finite, options):
         Vertical velocity of the old stance foot just after the impact, m/s.
     finite : array of bool
         Whether the post-impact state is finite.
-    options : SimulationOptions
+    limits : Limits
         mu and min_liftoff_speed.
 
     Returns
@@ -145,8 +240,74 @@ def impact_violation(F, v_lift, finite, options):
     out = np.full(np.shape(Fz), "", dtype=object)
     with np.errstate(invalid="ignore"):
         conds = (("diverged", ~np.asarray(finite)), ("negative_normal_force", ~(Fz > 0)),
-                 ("slipped", np.abs(Fx) > options.mu * Fz),
-                 ("scuffed", ~(np.asarray(v_lift) > options.min_liftoff_speed)))
+                 ("slipped", np.abs(Fx) > limits.mu * Fz),
+                 ("scuffed", ~(np.asarray(v_lift) > limits.min_liftoff_speed)))
     for name, mask in conds:
         out = np.where((out == "") & mask, name, out)
     return out
+
+
+def node_message(which: str, node: dict, limits: Limits, den_scale: float) -> str:
+    """A node failure in words, with the values that broke the condition.
+
+    Parameters
+    ----------
+    which : str
+        The status (:data:`NODE_CHECKS`).
+    node : dict
+        The rows at the failing node (as given to :func:`node_violations`, scalars).
+    limits : Limits
+        The thresholds.
+    den_scale : float
+        The denominator's largest magnitude on the reference.
+
+    Returns
+    -------
+    str
+    """
+    d = node
+    return {
+        "diverged": "the state is not finite",
+        "out_of_range": "the state left the range where the controller's reference is "
+                        "defined",
+        "singular": f"controller singular: decoupling denominator {d['den']:.4g} "
+                    f"(below {limits.singular_tolerance:g} of {den_scale:.4g}, eq. 23-24)",
+        "fell": f"fell: hip height {d['hip']:.4f} m, torso angle {d['torso']:.4f} rad",
+        "scuffed": f"swing foot below the ground where it cannot strike (behind the "
+                   f"stance foot, or already under the ground): x_sw = {d['xsw']:.4f} m, "
+                   f"z_sw = {d['zsw']:.3g} m",
+        "negative_normal_force": f"stance normal force F_z = {d['Fz']:.4g} N",
+        "slipped": f"stance foot slips: |F_x| / F_z = "
+                   f"{abs(d['Fx']) / max(d['Fz'], 1e-300):.4f} > mu = {limits.mu}",
+        "torque_limit": f"torque limit exceeded: |u| = {np.max(np.abs(d['u'])):.4g} "
+                        f"N m > {limits.torque_limit:g} N m",
+    }[which]
+
+
+def impact_message(which: str, F, v_lift: float, limits: Limits) -> str:
+    """An impact failure in words.
+
+    Parameters
+    ----------
+    which : str
+        The status from :func:`impact_violation`.
+    F : array_like
+        The impulse (F_x, F_z), N s.
+    v_lift : float
+        The old stance foot's vertical velocity after the impact, m/s.
+    limits : Limits
+        The thresholds.
+
+    Returns
+    -------
+    str
+    """
+    return {
+        "diverged": "the impact map is not finite",
+        "negative_normal_force": f"impact impulse has normal component {F[1]:.4g} N s",
+        "slipped": (f"impact impulse outside the friction cone: |F_x| / F_z = "
+                    f"{abs(F[0]) / F[1]:.4f} > mu = {limits.mu}"),
+        "scuffed": (f"the old stance foot does not lift off after the impact "
+                    f"(vertical velocity {v_lift:.4g} m/s, needs more than "
+                    f"{limits.min_liftoff_speed:g})"),
+    }[which]

@@ -1,0 +1,206 @@
+"""The stepping kernel every simulator shares: one diagnostics schema, one strike test,
+one refinement of the impact time.
+
+Diagnostics.  At every integration node a simulator logs one column of named rows
+(:class:`Diagnostics`): the torques u, optionally the outputs y and their rates dy, the
+controller's decoupling denominator ``den`` (eq. 24 for the time-varying controller),
+the stance reaction ``Fx``, ``Fz``, ``in_range`` (0 where the controller's reference is
+undefined), the swing foot ``xsw``, ``zsw``, ``dzsw``, the hip height ``hip`` and the torso
+angle ``torso``.  :mod:`biped_casadi.simulation.validity` checks them by name.
+
+Strike.  The swing foot strikes between two nodes when it crosses the ground going down
+in front of the stance foot (beyond ``model.scuff_zone``): z_sw(previous) >= 0 > z_sw
+(:func:`strike`).  The impact time inside that RK4 interval is the length eta of the last
+RK4 step with z_sw(RK4(x_k, eta)) = 0, found by a safeguarded Newton iteration
+(:func:`locate_strike`), vectorised over scenarios: the event is exact to round-off for
+the discrete scheme.
+"""
+from __future__ import annotations
+
+import os
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["Diagnostics", "strike", "locate_strike", "mapped", "threads", "NEWTON_ITERATIONS"]
+
+#: most Newton iterations of :func:`locate_strike` (it stops at |z_sw| < 1e-15 m, usually
+#: after 3 to 5)
+NEWTON_ITERATIONS = 60
+
+
+class Diagnostics:
+    """The per-node diagnostics rows of a simulator, by name.
+
+    Parameters
+    ----------
+    nu : int
+        Number of torques.
+    outputs : bool
+        Whether the rows carry the outputs y and their rates dy (the full-order
+        simulator's; on a zero dynamics they vanish and are left out).
+    """
+
+    SCALARS = ("den", "Fx", "Fz", "in_range", "xsw", "zsw", "dzsw", "hip", "torso")
+
+    def __init__(self, nu: int, outputs: bool = True):
+        self.nu, self.outputs = nu, outputs
+        blocks = [("u", nu)] + ([("y", nu), ("dy", nu)] if outputs else [])
+        self.index, row = {}, 0
+        for name, n in blocks:
+            self.index[name] = slice(row, row + n)
+            row += n
+        for name in self.SCALARS:
+            self.index[name] = row
+            row += 1
+        #: number of rows
+        self.size = row
+
+    def vector(self, model, q, dq, u, Fx, Fz, den, y=None, dy=None, in_range=1):
+        """The diagnostics column at a state (CasADi).
+
+        Parameters
+        ----------
+        model : BipedModel
+            The robot (kinematics of the swing foot, hip and torso).
+        q, dq : casadi
+            Configuration and velocity.
+        u : casadi
+            Torques (nu).
+        Fx, Fz : casadi
+            Stance reaction, N.
+        den : casadi
+            The controller's decoupling denominator.
+        y, dy : casadi, optional
+            Outputs and rates (with ``outputs``).
+        in_range : casadi or int
+            1 while the controller's reference is defined.
+
+        Returns
+        -------
+        casadi.SX
+            (size,) column in the order of :attr:`index`.
+        """
+        xs, zs = model.swing_foot(q)
+        _, dzs = model.swing_foot_velocity(q, dq)
+        parts = [u] + ([y, dy] if self.outputs else [])
+        return ca.vertcat(*parts, den, Fx, Fz, in_range, xs, zs, dzs,
+                          model.points(q)[1, model.hip_index], model.torso_angle(q))
+
+    def row(self, D, name):
+        """Row(s) ``name`` of diagnostics ``D`` (rows along the first axis)."""
+        return D[self.index[name]]
+
+    def rows(self, D, finite=None) -> dict:
+        """The named rows of diagnostics, as :func:`validity.node_violations` reads them.
+
+        Parameters
+        ----------
+        D : numpy.ndarray
+            (size, ...) diagnostics.
+        finite : numpy.ndarray, optional
+            Whether the states are finite (default: the diagnostics are).
+
+        Returns
+        -------
+        dict
+            'finite', 'u' and every scalar row by name.
+        """
+        out = {name: D[self.index[name]] for name in self.SCALARS}
+        out["u"] = D[self.index["u"]]
+        fin = np.all(np.isfinite(D), axis=0)
+        out["finite"] = fin if finite is None else fin & finite
+        return out
+
+
+def strike(z, z_prev, x_sw, scuff_zone: float):
+    """Where the swing foot strikes the ground between a node and the one before.
+
+    It crosses the ground going down (z_sw at the previous node >= 0 > z_sw) in front of
+    the stance foot, beyond ``scuff_zone`` (SPEC §4).
+
+    Parameters
+    ----------
+    z, z_prev : array_like
+        Swing-foot height at the nodes and at the nodes before, m.
+    x_sw : array_like
+        Swing-foot position ahead of the stance foot at the nodes, m.
+    scuff_zone : float
+        ``model.scuff_zone``: a strike nearer the stance foot does not count, m.
+
+    Returns
+    -------
+    numpy.ndarray of bool
+        True at the nodes where the foot strikes.
+    """
+    with np.errstate(invalid="ignore"):
+        return (np.asarray(z) < 0) & (np.asarray(x_sw) > scuff_zone) & (np.asarray(z_prev) >= 0)
+
+
+def locate_strike(event, h: float, z_a, z_b):
+    """The length eta in (0, h] of the last RK4 step that ends on the ground, z_sw = 0.
+
+    Safeguarded Newton, vectorised over scenarios: a bracket [lo, hi] around the root
+    (z_sw > 0 at lo), the Newton step where it stays inside, bisection otherwise; a
+    scenario stops when |z_sw| < 1e-15 m or its step is below 1e-17 s.
+
+    Parameters
+    ----------
+    event : callable
+        ``event(eta) -> (z_sw, dz_sw/deta)``, arrays (n,) for the n scenarios' last steps
+        of lengths eta (n,).
+    h : float
+        The RK4 step, s.
+    z_a, z_b : array_like
+        (n,) z_sw at the node before the strike and at the strike's node, m.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) eta, s.
+    """
+    z_a, z_b = np.atleast_1d(np.asarray(z_a, float)), np.atleast_1d(np.asarray(z_b, float))
+    n = z_a.size
+    lo, hi = np.zeros(n), np.full(n, h)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        eta = np.where(z_a > z_b, h * z_a / (z_a - z_b), h)
+    active = np.ones(n, bool)
+    for _ in range(NEWTON_ITERATIONS):
+        z, dz = (np.asarray(v, float).ravel() for v in event(eta))
+        lo = np.where(active & (z > 0), eta, lo)
+        hi = np.where(active & ~(z > 0), eta, hi)
+        found = active & (np.abs(z) < 1e-15)
+        active &= ~found
+        with np.errstate(invalid="ignore", divide="ignore"):
+            new = np.where(dz != 0, eta - z / dz, 0.5 * (lo + hi))
+        new = np.where((lo < new) & (new < hi), new, 0.5 * (lo + hi))
+        small = active & (np.abs(new - eta) < 1e-17)
+        eta = np.where(active, new, eta)
+        active &= ~small
+        if not active.any():
+            break
+    return eta
+
+
+def threads() -> int:
+    """Threads a batched simulator maps its scenarios over: the cores, at most 8."""
+    return max(1, min(os.cpu_count() or 1, 8))
+
+
+def mapped(f: ca.Function, n: int) -> ca.Function:
+    """``f`` mapped over n scenarios, on the machine's cores when n is large.
+
+    Parameters
+    ----------
+    f : casadi.Function
+        A Function of one scenario.
+    n : int
+        Scenarios.
+
+    Returns
+    -------
+    casadi.Function
+        ``f.map(n)``, threaded when n >= 4 threads.
+    """
+    k = threads()
+    return f.map(n, "thread", k) if n >= 4 * k and k > 1 else f.map(n)

@@ -1,0 +1,115 @@
+"""Options of every closed-loop simulation: how many steps, the integration, and the
+thresholds of the validity conditions (:mod:`biped_casadi.simulation.validity`)."""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+from ..control.output_law import SECTION
+
+__all__ = ["SimulationOptions"]
+
+
+@dataclass(frozen=True)
+class SimulationOptions:
+    """Options of :func:`simulate` and :class:`Simulator`; all have defaults.
+
+    Parameters
+    ----------
+    steps : int
+        Number of steps (impacts) to simulate.
+    rk4_steps : int
+        RK4 steps per reference step duration T (a positive multiple of 8).
+    mu : float
+        Friction coefficient for the stance foot and the impact impulse.
+    min_normal_force : float
+        Lowest admissible stance normal force, N.
+    min_hip_height : float or None
+        The robot has fallen when the hip is lower, m; None (default): 0.5625 leg length
+        (0.45 m for RABBIT), see :meth:`fall_height`.
+    max_torso_angle : float
+        The robot has also fallen when the torso leans more than this from the
+        vertical, rad.
+    horizon : float
+        A step without a valid impact within ``horizon`` T ends the run ('no_impact').
+    ground_tolerance : float
+        How far below the ground (m) the swing foot may graze behind the stance foot
+        before the run counts as scuffed (round-off at lift-off).
+    singular_tolerance : float
+        The run stops as singular where the controller's decoupling denominator
+        (D11 - D12 M1 for the time-varying controller, eq. 23-24) changes sign or falls
+        below this fraction of its largest magnitude on the reference (the torques grow
+        like its inverse).
+    torque_limit : float or None
+        The run stops ('torque_limit') where some ``|u_i|`` exceeds it, N m; None
+        (default): the robot's own limit (``model.params.torque_limit``).
+    min_liftoff_speed : float
+        The old stance foot must leave the ground after an impact with at least this
+        upward speed, m/s (default 0: any upward speed).
+    jit : bool
+        Compile the closed loop to C (CasADi JIT, needs a C compiler; a few seconds
+        once per controller, then about 5 times faster).
+    """
+    steps: int = 10
+    rk4_steps: int = 2000
+    mu: float = 0.6
+    min_normal_force: float = 0.0
+    min_hip_height: float | None = None
+    max_torso_angle: float = math.pi / 2
+    horizon: float = 2.0
+    ground_tolerance: float = 1e-9
+    singular_tolerance: float = 0.01
+    torque_limit: float | None = None
+    min_liftoff_speed: float = 0.0
+    jit: bool = False
+
+    def __post_init__(self):
+        if not isinstance(self.steps, int) or self.steps < 1:
+            raise ValueError(f"steps must be a positive integer, got {self.steps!r}")
+        if not isinstance(self.rk4_steps, int) or self.rk4_steps < 8 or self.rk4_steps % 8:
+            raise ValueError(f"rk4_steps must be a positive multiple of 8, got {self.rk4_steps!r}")
+        for name in ("mu", "max_torso_angle", "horizon") + (
+                ("min_hip_height",) if self.min_hip_height is not None else ()):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if self.torque_limit is not None and not (
+                isinstance(self.torque_limit, (int, float)) and self.torque_limit > 0):
+            raise ValueError(f"torque_limit must be a positive number or None, "
+                             f"got {self.torque_limit!r}")
+        for name in ("min_normal_force", "ground_tolerance", "singular_tolerance",
+                     "min_liftoff_speed"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                raise ValueError(f"{name} must be a non-negative number, got {v!r}")
+        if self.horizon <= SECTION:
+            raise ValueError(f"horizon must exceed {SECTION} (the Poincaré section), "
+                             f"got {self.horizon!r}")
+
+    def to_dict(self) -> dict:
+        """The options by name.
+
+        Returns
+        -------
+        dict
+            Field name -> value.
+        """
+        return asdict(self)
+
+    def fall_height(self, model) -> float:
+        """The hip height below which ``model`` has fallen, m.
+
+        Parameters
+        ----------
+        model : BipedModel
+            The robot (its leg length sets the default).
+
+        Returns
+        -------
+        float
+            ``min_hip_height``, or 0.5625 leg length when it is None (0.45 m for
+            RABBIT).
+        """
+        if self.min_hip_height is not None:
+            return float(self.min_hip_height)
+        return float(0.5625 * model.description.leg_length)

@@ -1,0 +1,415 @@
+"""Batched closed-loop walking of the time-varying controller on its hybrid zero dynamics.
+
+Why it is exact.  From every step start the full-order closed loop of the time-varying
+controller IS its hybrid zero dynamics (:mod:`biped_casadi.control.zero_dynamics`): the
+state of a scenario is (q_u, dq_u) and tau, q_a follows from the outputs (eq. 10), the
+torques from eq. (12), the ground reaction from Newton's law for the centre of mass.
+The output gains (Kp, Kd, eps) do not enter: the walker is the closed loop of every
+gain, and agrees with the full-order :class:`~biped_casadi.simulation.full_order.Simulator`
+to its integration accuracy (``tests/test_robust.py`` measures it).
+
+Why it is fast.  One compiled step serves every design and every perturbation: the
+output matrix M1 and the rejoin time t_c of v_c are runtime inputs, like the step's
+(y_i, dy_i).  The reference q^d(tau) is the same for every scenario at the same tau, so
+it is tabulated once per chunk of the step and shared by the whole batch.  A chunk of
+T/8 is one ``mapaccum`` of RK4 nodes mapped over the active scenarios; the strike and
+the impact time come from the stepping kernel (:mod:`biped_casadi.simulation.kernel`),
+as in the full-order simulator.
+
+Validity.  Every node and every impact is checked with
+:mod:`biped_casadi.simulation.validity` (the same conditions as the full-order simulator,
+torque limit included); a scenario stops at its first invalid state.
+"""
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+from ..caching import cached
+from ..control.output_law import SECTION, check_M1, decoupling_denominator
+from ..control.reference import require_same_robot
+from ..control.zero_dynamics import denominator_samples, zero_dynamics
+from ..numerics import jit_options, rk4_step
+from .kernel import Diagnostics, locate_strike, mapped, strike
+from .options import SimulationOptions
+from .outcome import OutcomeRecorder, WalkBatch
+from .validity import (Limits, first_violation, impact_violation, node_violations,
+                       start_violation, strike_violation)
+
+__all__ = ["ZeroDynamicsWalker", "zero_dynamics_walker"]
+
+
+class ZeroDynamicsWalker:
+    """The hybrid zero dynamics of the time-varying controller as a batched simulator.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference step, made for ``model``.
+    options : SimulationOptions, optional
+        Validity thresholds (mu, torque limit, ...) and ``horizon``, as the full-order
+        simulator's; ``rk4_steps`` and ``jit`` below replace its integration settings.
+    rk4_steps : int
+        RK4 steps per reference step duration T (a multiple of 8).
+    jit : bool
+        Compile the step to C (needs a C compiler; a few seconds once, then faster).
+    """
+
+    def __init__(self, model, gait, options: SimulationOptions | None = None,
+                 rk4_steps: int = 400, jit: bool = False):
+        require_same_robot(model, gait)
+        if isinstance(rk4_steps, bool) or not isinstance(rk4_steps, int) or rk4_steps < 8 \
+                or rk4_steps % 8:
+            raise ValueError(f"rk4_steps must be a positive multiple of 8, got {rk4_steps!r}")
+        self.options = options if options is not None else SimulationOptions()
+        self.model, self.gait = model, gait
+        self.nq, self.nu = model.nq, model.nu
+        self.T = gait.T
+        self.rk4_steps, self.jit = rk4_steps, jit
+        self.h = self.T / rk4_steps
+        self.K = rk4_steps // 8
+        self.limits = Limits.of(self.options, model)
+        self.schema = Diagnostics(self.nu, outputs=False)
+        self.zd = zero_dynamics(model)
+        self.horizon = min(self.options.horizon, (gait.t_max - self.h) / self.T)
+        self.n_chunks = int(math.ceil(self.horizon * 8))
+        self.ref_T = gait.state_at(self.T)
+        self._R0 = np.concatenate(gait.evaluate(0.0))
+        self._table()
+        self._build()
+
+    @property
+    def cache_key(self):
+        """What the walker depends on: the gait's key, the options, rk4_steps and jit."""
+        return (self.gait.cache_key, self.options, self.rk4_steps, self.jit)
+
+    # ---------------------------------------------------------------- build
+    def _table(self):
+        """The reference (q^d, dq^d, ddq^d) at the three RK4 stage times of every node,
+        one (9 nq x K) block per chunk of T/8."""
+        nq = self.nq
+        j = np.arange(self.n_chunks * self.K)
+        tt = np.minimum(np.stack([j * self.h, (j + 0.5) * self.h, (j + 1) * self.h]),
+                        self.gait.t_max)
+        qd, dqd, ddqd = self.gait.evaluate(tt.ravel())
+        R = np.vstack([qd, dqd, ddqd]).reshape(3 * nq, 3, -1).transpose(1, 0, 2)
+        R = R.reshape(9 * nq, -1)                            # (stage 0; 1/2; 1) x nodes
+        self._rtab = [R[:, c * self.K:(c + 1) * self.K] for c in range(self.n_chunks)]
+
+    def _diagnostics(self, x, tau, R, P):
+        q, dq, _, u, Fx, Fz, den = self.zd.point(x, tau, R, P)
+        return self.schema.vector(self.model, q, dq, u, Fx, Fz, den)
+
+    def _build(self):
+        m, zd, nq = self.model, self.zd, self.nq
+        x, tau, h = ca.SX.sym("x", 2), ca.SX.sym("tau"), ca.SX.sym("h")
+        P = ca.SX.sym("P", zd.n_par)
+        R3 = ca.SX.sym("R3", 9 * nq)
+        stage = {0.0: R3[:3 * nq], 0.5: R3[3 * nq:6 * nq], 1.0: R3[6 * nq:]}
+        xn = rk4_step(lambda xv, c: zd.rhs(xv, tau + c * h, stage[c], P), x, h)
+        jit = jit_options("-O2") if self.jit else {}
+        node = ca.Function("zd_node", [x, tau, h, R3, P],
+                           [ca.cse(xn), tau + h,
+                            ca.cse(self._diagnostics(xn, tau + h, stage[1.0], P))],
+                           ["x", "tau", "h", "R3", "P"], ["x_next", "tau_next", "diag"], jit)
+        acc = node.mapaccum("zd_chunk", self.K, [0, 1], [0, 1])
+        xc, tc0 = ca.MX.sym("x", 2), ca.MX.sym("tau")
+        Pc, Rt = ca.MX.sym("P", zd.n_par), ca.MX.sym("R", 9 * nq, self.K)
+        X, TAU, DG = acc(xc, tc0, self.h, Rt, Pc)
+        self.chunk = ca.Function("zd_chunk_fn", [xc, tc0, Pc, Rt], [X, TAU, DG])
+        # diagnostics at a state with the reference given explicitly (step start, impact)
+        R1 = ca.SX.sym("R", 3 * nq)
+        self.diag = ca.Function("zd_diag", [x, tau, R1, P],
+                                [ca.cse(self._diagnostics(x, tau, R1, P))], jit)
+        # the last RK4 step, of length eta, with the reference state integrated
+        # alongside from the node: one call per Newton iterate
+        along = zd.along(self.gait)
+        z = ca.SX.sym("z", along.size1_in(0))
+        eta = ca.SX.sym("eta")
+        ze = rk4_step(lambda zv, c: along(zv, tau + c * eta, P)[0], z, eta)
+        z_e = m.swing_foot(along(ze, tau + eta, P)[1])[1]
+        self.event = ca.Function("zd_event", [z, tau, eta, P],
+                                 [z_e, ca.jacobian(z_e, eta), ze[:2]])
+        # impact (eq. 2-3) and the next step's start (eq. 17)
+        q, dq, _ = zd.state(x, tau, R1, P)
+        q_p, dq_p, F, _, v_old = m.impact_full(q, dq)
+        x_p, y_n, dy_n = zd.step_start(q_p, dq_p, self._R0, P[:self.nu])
+        self.impact = ca.Function("zd_impact", [x, tau, R1, P], [x_p, y_n, dy_n, F, v_old[1]])
+        qs, dqs, M1s = ca.SX.sym("q", nq), ca.SX.sym("dq", nq), ca.SX.sym("M1", self.nu)
+        self.start = ca.Function("zd_start", [qs, dqs, M1s],
+                                 list(zd.step_start(qs, dqs, self._R0, M1s)))
+
+    @cached(maxsize=64)
+    def _mapped(self, name: str, n: int) -> ca.Function:
+        """``name`` mapped over n scenarios (:func:`~biped_casadi.simulation.kernel.mapped`)."""
+        return mapped(getattr(self, name), n)
+
+    def _reference(self, tau):
+        """(q^d, dq^d, ddq^d) stacked, (3 nq, n) for the taus."""
+        qd, dqd, ddqd = self.gait.evaluate(np.minimum(np.atleast_1d(tau), self.gait.t_max))
+        return np.vstack([qd, dqd, ddqd])
+
+    # ----------------------------------------------------------- scenarios
+    def scenarios(self, q0, dq0, M1s, rejoin):
+        """Initial (q_u, dq_u) and step parameters P of scenarios from full start states.
+
+        The arrays broadcast along the n scenarios.
+
+        Parameters
+        ----------
+        q0, dq0 : array_like
+            (n, nq) start configurations (rad) and velocities (rad/s) at tau = 0.
+        M1s : array_like
+            (n, nu) output matrices, one per scenario (or one, broadcast).
+        rejoin : float or array_like
+            (n,) rejoin times of v_c, fraction of T.
+
+        Returns
+        -------
+        x0 : numpy.ndarray
+            (n, 2) initial (q_u, dq_u), rad and rad/s.
+        P : numpy.ndarray
+            (n, 3 nu + 1) step parameters (M1, t_c, y_i, dy_i) of
+            :meth:`ZeroDynamics.params`.
+        """
+        q0, dq0, M1s = (np.atleast_2d(np.asarray(a, float)) for a in (q0, dq0, M1s))
+        n = max(len(q0), len(dq0), len(M1s), np.size(rejoin))
+        q0, dq0, M1s = (np.broadcast_to(a, (n, a.shape[1])) for a in (q0, dq0, M1s))
+        for i in range(min(n, len(M1s))):
+            check_M1(M1s[i], self.nu)
+        tc = np.broadcast_to(np.asarray(rejoin, float), (n,)) * self.T
+        x0, y, dy = (np.array(v) for v in self._mapped("start", n)(q0.T, dq0.T, M1s.T))
+        return x0.T, self.zd.params(M1s, tc, y.T, dy.T).reshape(n, -1)
+
+    def den_scale(self, M1s) -> np.ndarray:
+        """Per design, the largest ``|D11 - D12 M1|`` along the reference.
+
+        It is the scale of the threshold below which the controller counts as singular.
+
+        Parameters
+        ----------
+        M1s : array_like
+            (n, nu) output matrices (or one (nu,)).
+
+        Returns
+        -------
+        numpy.ndarray
+            (n,) the maximum over the reference of ``|D11 - D12 M1|``.
+        """
+        D11, D12 = denominator_samples(self.model, self.gait)
+        d = decoupling_denominator(D11, D12, np.atleast_2d(M1s).T)
+        return np.max(np.abs(d), axis=1)
+
+    # ------------------------------------------------------------------ walk
+    def walk(self, q0, dq0, M1s, rejoin=0.5, steps: int = 10) -> WalkBatch:
+        """Walk every scenario from its full start state at tau = 0.
+
+        Parameters
+        ----------
+        q0, dq0 : array_like
+            (n, nq) start states (the start of a step).
+        M1s : array_like
+            (n, nu) output matrices (or one, broadcast).
+        rejoin : float or array_like
+            Rejoin time of v_c as a fraction of T, per scenario.
+        steps : int
+            Steps (impacts) to walk.
+
+        Returns
+        -------
+        WalkBatch
+        """
+        x0, P = self.scenarios(q0, dq0, M1s, rejoin)
+        return self._walk(x0, P, steps, tau0=0.0)
+
+    def walk_from_section(self, x, M1s, rejoin=0.5, steps: int = 10) -> WalkBatch:
+        """Walk from zero-dynamics states at the Poincaré section tau = 0.75 T.
+
+        The states lie on the zero-dynamics manifold at the section (v_c = 0 there); a
+        walk is ``steps`` applications of the restricted Poincaré map, with every state
+        checked on the way.
+
+        Parameters
+        ----------
+        x : array_like
+            (n, 2) states (q_u, dq_u) at the section, rad and rad/s.
+        M1s : array_like
+            (n, nu) output matrices (or one, broadcast).
+        rejoin : float or array_like
+            Rejoin time of v_c as a fraction of T, per scenario.
+        steps : int
+            Steps (impacts) to walk.
+
+        Returns
+        -------
+        WalkBatch
+        """
+        x = np.atleast_2d(np.asarray(x, float))
+        n, nu = len(x), self.nu
+        M1s = np.broadcast_to(np.atleast_2d(np.asarray(M1s, float)), (n, nu))
+        tc = np.broadcast_to(np.asarray(rejoin, float), (n,)) * self.T
+        P = self.zd.params(M1s, tc, np.zeros((n, nu)), np.zeros((n, nu))).reshape(n, -1)
+        return self._walk(x.copy(), P, steps, tau0=SECTION * self.T)
+
+    def _walk(self, x, P, steps, tau0):
+        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+            raise ValueError(f"steps must be a positive integer, got {steps!r}")
+        n = len(x)
+        P = np.array(P, float)
+        run = OutcomeRecorder(n, steps)
+        scale = self.den_scale(P[:, :self.nu])
+        alive = np.ones(n, bool)
+        for k in range(steps):
+            idx = np.flatnonzero(alive)
+            if idx.size == 0:
+                break
+            run.scenario_steps += idx.size
+            start = tau0 if k == 0 else 0.0
+            struck = self._single_support(k, idx, x, P, scale, run, alive, start)
+            if struck is not None:
+                self._impact(k, struck, x, P, scale, run, alive)
+        return run.batch()
+
+    def _check(self, Dg, sign, scale, zprev=None):
+        """First failing node (index along the last axis, status) of diagnostics
+        (rows, m, K) of m scenarios."""
+        masks = node_violations(self.schema.rows(Dg), self.limits, scale[:, None],
+                                sign[:, None], zprev)
+        return first_violation(masks)
+
+    def _track(self, run, idx, Dg, mask=None):
+        S = self.schema
+        run.track(idx, S.row(Dg, "u"), S.row(Dg, "Fx"), S.row(Dg, "Fz"), mask)
+
+    def _single_support(self, k, idx, x, P, scale, run, alive, tau0):
+        """Integrate step k of the scenarios ``idx`` from ``tau0`` to the strike; records
+        failures; returns the struck scenarios' (indices, state and tau of the node
+        before the strike, z_sw there and after, the denominator's sign) or None."""
+        S, m = self.schema, idx.size
+        Pk = P[idx]
+        R0 = np.repeat(self._reference(tau0), m, axis=1)
+        D0 = np.array(self._mapped("diag", m)(x[idx].T, np.full((1, m), tau0), R0, Pk.T))
+        sign = np.where(S.row(D0, "den") >= 0, 1.0, -1.0)
+        zsw0 = S.row(D0, "zsw")
+        _, which = self._check(D0[:, :, None], sign, scale[idx])
+        if tau0 == 0:
+            which = np.where(which == "", start_violation(zsw0, self.limits), which)
+        self._track(run, idx, D0[:, :, None])
+        bad = which != ""
+        run.fail(idx[bad], which[bad], k)
+        alive[idx[bad]] = False
+        live = ~bad
+        xcur, taucur, zprev = x[idx].copy(), np.full(m, tau0), zsw0.copy()
+        before = np.full((m, 2), np.nan)
+        t_before, z_a, z_b = np.zeros(m), np.zeros(m), np.zeros(m)
+        struck = np.zeros(m, bool)
+        c0 = int(round(tau0 / (self.T / 8)))
+        for ci in range(c0, self.n_chunks):
+            li = np.flatnonzero(live)
+            if li.size == 0:
+                break
+            Xs, Ts, Dg = (np.array(v) for v in self._mapped("chunk", li.size)(
+                xcur[li].T, taucur[li][None, :], Pk[li].T, self._rtab[ci]))
+            Xs = Xs.reshape(2, li.size, self.K)
+            Ts = Ts.reshape(li.size, self.K)
+            Dg = Dg.reshape(-1, li.size, self.K)
+            if (ci + 1) / 8 > self.horizon + 1e-12:                 # last partial chunk
+                keep = Ts[0] <= self.horizon * self.T + 1e-12
+                Xs, Ts, Dg = Xs[:, :, keep], Ts[:, keep], Dg[:, :, keep]
+            zs = S.row(Dg, "zsw")
+            zp = np.concatenate([zprev[li][:, None], zs[:, :-1]], axis=1)
+            hits = strike(zs, zp, S.row(Dg, "xsw"), self.model.scuff_zone)
+            i_strike = np.where(hits.any(axis=1), np.argmax(hits, axis=1), Ts.shape[1])
+            first, which = self._check(Dg, sign[li], scale[idx[li]], zp)
+            failed = (which != "") & (first < i_strike)
+            upto = np.where(failed, first + 1, i_strike)
+            self._track(run, idx[li], Dg, np.arange(Ts.shape[1])[None, :] < upto[:, None])
+            run.fail(idx[li[failed]], which[failed], k)
+            alive[idx[li[failed]]] = False
+            hit = ~failed & (i_strike < Ts.shape[1])
+            for j in np.flatnonzero(hit):
+                s_, g_ = i_strike[j], li[j]
+                before[g_] = xcur[g_] if s_ == 0 else Xs[:, j, s_ - 1]
+                t_before[g_] = taucur[g_] if s_ == 0 else Ts[j, s_ - 1]
+                z_a[g_] = zprev[g_] if s_ == 0 else zs[j, s_ - 1]
+                z_b[g_] = zs[j, s_]
+                struck[g_] = True
+            cont = ~failed & ~hit
+            live[li[~cont]] = False
+            xcur[li[cont]] = Xs[:, cont, -1].T
+            taucur[li[cont]] = Ts[cont, -1]
+            zprev[li[cont]] = zs[cont, -1]
+        missing = alive[idx] & ~struck
+        run.fail(idx[missing], "no_impact", k)
+        alive[idx[missing]] = False
+        si = np.flatnonzero(struck & alive[idx])
+        if si.size == 0:
+            return None
+        return idx[si], before[si], t_before[si], z_a[si], z_b[si], sign[si]
+
+    def _impact(self, k, struck, x, P, scale, run, alive):
+        """Locate the impact of the struck scenarios, check the pre-impact state and
+        the impulse, apply the impact map and the next step's start."""
+        gi, xa, ta, za, zb, sign = struck
+        S, nu, m = self.schema, self.nu, gi.size
+        Ps = P[gi]
+        ev = self._mapped("event", m)
+        za_r = np.vstack([xa.T, self.gait.states(ta)])
+
+        def event(eta):
+            z, dz, _ = ev(za_r, ta[None, :], eta[None, :], Ps.T)
+            return np.array(z).ravel(), np.array(dz).ravel()
+
+        eta = locate_strike(event, self.h, za, zb)
+        xe = np.array(ev(za_r, ta[None, :], eta[None, :], Ps.T)[2]).T
+        tm = ta + eta
+        Rm = self._reference(tm)
+        Dm = np.array(self._mapped("diag", m)(xe.T, tm[None, :], Rm, Ps.T))
+        _, which = self._check(Dm[:, :, None], sign, scale[gi])
+        self._track(run, gi, Dm[:, :, None])
+        which = np.where(which == "", strike_violation(S.row(Dm, "dzsw")), which)
+        xn, yn, dyn, F, vl = (np.array(v) for v in self._mapped("impact", m)(
+            xe.T, tm[None, :], Rm, Ps.T))
+        F, vl = F.T, vl.ravel()
+        rec = np.flatnonzero(which == "")          # a valid strike: the step is complete
+        err = xe - self.ref_T[None, :]
+        run.impact(gi[rec], k, err[rec, 0], err[rec, 1], tm[rec], F[rec])
+        finite = np.all(np.isfinite(np.c_[xn.T, yn.T, dyn.T, F]), axis=1)
+        which = np.where(which == "", impact_violation(F, vl, finite, self.limits), which)
+        bad = which != ""
+        run.fail(gi[bad], which[bad], k)
+        alive[gi[bad]] = False
+        go = ~bad
+        x[gi[go]] = xn.T[go]
+        P[gi[go], nu + 1:2 * nu + 1] = yn.T[go]
+        P[gi[go], 2 * nu + 1:] = dyn.T[go]
+
+
+@cached(maxsize=4)
+def zero_dynamics_walker(model, gait, options: SimulationOptions | None = None,
+                         rk4_steps: int = 400, jit: bool = False) -> ZeroDynamicsWalker:
+    """The :class:`ZeroDynamicsWalker` of a gait and options, built once (memoised).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference step, made for ``model``.
+    options : SimulationOptions, optional
+        Validity thresholds and horizon.
+    rk4_steps : int
+        RK4 steps per reference step duration T (a multiple of 8).
+    jit : bool
+        Compile the step to C.
+
+    Returns
+    -------
+    ZeroDynamicsWalker
+        The same object for the same arguments.
+    """
+    return ZeroDynamicsWalker(model, gait, options, rk4_steps, jit)
