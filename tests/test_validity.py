@@ -1,0 +1,140 @@
+"""Unit tests of the validity conditions (one per condition, on synthetic nodes and
+impacts) and of the one outcome type and its verdict."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from biped_casadi.simulation import SimulationOptions, WalkBatch, WalkOutcome, verdict
+from biped_casadi.simulation.outcome import NOT_CONVERGED, OutcomeRecorder
+from biped_casadi.simulation.validity import (NODE_CHECKS, Limits, first_violation,
+                                              impact_violation, node_message, node_violations,
+                                              start_violation, strike_violation)
+
+LIM = Limits(mu=0.6, min_normal_force=0.0, hip_floor=0.45, max_torso_angle=math.pi / 2,
+             ground_tolerance=1e-9, singular_tolerance=0.01, torque_limit=150.0,
+             min_liftoff_speed=0.0)
+
+
+def _node(**over):
+    """One valid node (standing, pressed on the ground, swing foot in the air)."""
+    row = dict(finite=np.array([True]), den=np.array([5.0]), Fx=np.array([10.0]),
+               Fz=np.array([300.0]), in_range=np.array([1.0]), xsw=np.array([0.2]),
+               zsw=np.array([0.05]), hip=np.array([0.78]), torso=np.array([0.1]),
+               u=np.array([[10.0], [-20.0], [5.0], [1.0]]))
+    row.update({k: np.atleast_1d(np.asarray(v, float)) if k != "u" else np.asarray(v, float)
+                for k, v in over.items()})
+    return row
+
+
+@pytest.mark.parametrize("change,status", [
+    (dict(finite=[False]), "diverged"),
+    (dict(in_range=[0.0]), "out_of_range"),
+    (dict(den=[0.01]), "singular"),           # below 1 % of the scale 5.0
+    (dict(den=[-1.0]), "singular"),           # the sign changed
+    (dict(hip=[0.3]), "fell"),
+    (dict(torso=[1.7]), "fell"),
+    (dict(xsw=[-0.1], zsw=[-0.01]), "scuffed"),
+    (dict(Fz=[-1.0]), "negative_normal_force"),
+    (dict(Fx=[200.0]), "slipped"),             # |F_x| > 0.6 F_z
+    (dict(u=[[151.0], [0.0], [0.0], [0.0]]), "torque_limit"),
+])
+def test_each_node_condition(change, status):
+    rows = _node(**change)
+    if status == "diverged":
+        rows["finite"] = np.array([False])
+    masks = node_violations(rows, LIM, 5.0, 1.0)
+    assert list(masks) == [c for c in NODE_CHECKS if c in masks]
+    _, which = first_violation({k: v[None, :] for k, v in masks.items()})
+    assert which[0] == status
+    # and the same node without the change is valid
+    ok = node_violations(_node(), LIM, 5.0, 1.0)
+    assert not any(m.any() for m in ok.values())
+    if status != "diverged":
+        node = {k: (v[..., 0] if k != "u" else v[:, 0]) for k, v in rows.items()}
+        assert node_message(status, node, LIM, 5.0)
+
+
+def test_swing_foot_under_the_ground_in_front_is_a_strike_not_a_scuff():
+    rows = _node(zsw=[-0.01])                  # in front of the stance foot: a strike
+    assert not node_violations(rows, LIM, 5.0, 1.0)["scuffed"].any()
+    # but a foot already under the ground that goes further down scuffs
+    assert node_violations(rows, LIM, 5.0, 1.0, z_prev=np.array([-0.005]))["scuffed"].all()
+    # legs without knees may graze (the model's idealisation)
+    graze = Limits(**{**LIM.__dict__, "scuffing_ignored": True})
+    assert not node_violations(_node(xsw=[-0.1], zsw=[-0.01]), graze, 5.0, 1.0)["scuffed"].any()
+
+
+def test_priority_and_first_node():
+    """At one node the order of NODE_CHECKS decides; along the nodes the first counts."""
+    rows = _node(Fz=[-1.0], u=[[151.0], [0.0], [0.0], [0.0]])
+    _, which = first_violation({k: v[None, :] for k, v in
+                                node_violations(rows, LIM, 5.0, 1.0).items()})
+    assert which[0] == "negative_normal_force"
+    masks = {"slipped": np.array([[False, False, True]]),
+             "torque_limit": np.array([[False, True, True]])}
+    first, which = first_violation(masks)
+    assert first[0] == 1 and which[0] == "torque_limit"
+    first, which = first_violation(masks, stop=np.array([1]))
+    assert first[0] == 3 and which[0] == ""
+
+
+def test_start_strike_and_impact_conditions():
+    assert start_violation([-1e-3, 0.0], LIM).tolist() == ["scuffed", ""]
+    assert strike_violation([-0.3, 0.0, 0.1]).tolist() == ["", "scuffed", "scuffed"]
+    F = np.array([[1.0, 10.0], [1.0, -1.0], [7.0, 10.0], [1.0, 10.0], [1.0, 10.0]])
+    v_lift = np.array([0.5, 0.5, 0.5, -0.1, 0.5])
+    finite = np.array([True, True, True, True, False])
+    assert impact_violation(F, v_lift, finite, LIM).tolist() == [
+        "", "negative_normal_force", "slipped", "scuffed", "diverged"]
+
+
+def test_limits_of_options(model):
+    lim = Limits.of(SimulationOptions(mu=0.5, torque_limit=None), model)
+    assert lim.torque_limit == model.params.torque_limit and lim.mu == 0.5
+    assert lim.hip_floor == pytest.approx(0.5625 * model.description.leg_length)
+
+
+# ------------------------------------------------------------------ outcomes
+def _recorded():
+    rec = OutcomeRecorder(3, 4)
+    rec.track([0, 1, 2], np.ones((4, 3, 2)) * np.array([10.0, 20.0, 30.0])[None, :, None],
+              np.zeros((3, 2)), np.full((3, 2), 100.0))
+    for k in range(4):
+        err = np.array([1e-2, 5e-4, 3e-2]) * 0.1 ** k
+        rec.impact([0, 1, 2], k, err, -err, np.full(3, 0.7), np.tile([1.0, 10.0], (3, 1)))
+    rec.fail([2], ["slipped"], 3, ["step 3: slipped"])
+    return rec.batch()
+
+
+def test_batch_is_an_array_of_outcomes():
+    B = _recorded()
+    assert isinstance(B[0], WalkOutcome) and len(B) == 3
+    for i in range(3):
+        o = B[i]
+        assert o.status == B.status[i] and o.fail_step == B.fail_step[i]
+        assert o.final_error == B.final_error[i] or (math.isinf(o.final_error)
+                                                     and math.isinf(B.final_error[i]))
+        np.testing.assert_array_equal(o.qu_error, B.qu_error[i])
+        assert type(o.peak_torque) is float and type(o.fail_step) is int
+        assert o.success                        # the run was simulated
+    assert B.ok.tolist() == [True, True, False]
+    assert B.peak_torque.tolist() == [10.0, 20.0, 30.0]
+    again = WalkBatch.concat([B[0], B[1], B[2]])
+    np.testing.assert_array_equal(again.qu_error, B.qu_error)
+    assert again.status.tolist() == B.status.tolist()
+
+
+def test_convergence_and_verdict():
+    B = _recorded()
+    # run 0: errors 1e-2, 1e-3, 1e-4, 1e-5 -> below 1e-3 from step 3 (1e-3 is not below)
+    assert B.steps_to_converge(1e-3).tolist()[:2] == [3.0, 1.0]
+    assert math.isnan(B.steps_to_converge(1e-3)[2])          # failed
+    assert B.verdict(1e-3).tolist() == ["ok", "ok", "slipped"]
+    assert B.verdict(1e-7).tolist() == [NOT_CONVERGED, NOT_CONVERGED, "slipped"]
+    assert verdict("ok", 2e-3, 1e-3) == NOT_CONVERGED and verdict("fell", np.inf, 1) == "fell"
+    assert B[0].completed_steps == 4 and B[0].unactuated_errors().shape == (4,)
+    d = B.to_dict()
+    assert d["status"] == ["ok", "ok", "slipped"] and len(d["qu_error"][0]) == 4
