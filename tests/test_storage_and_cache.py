@@ -1,0 +1,130 @@
+"""Unit tests of the toolkit's caches (the memoising decorator, the one digest, the disk
+cache) and of the Parquet sweep store (round trip bit for bit, every kind of damage
+detected, other settings refused, one writer at a time)."""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from analysis.sweeps.storage import SweepStore, SweepStoreError
+from biped_casadi.caching import DiskCache, cache_key, cached, digest
+
+
+# ------------------------------------------------------------------ caching
+def test_cached_is_keyed_by_content_and_bounded():
+    calls = []
+
+    @dataclass(frozen=True)
+    class Thing:
+        name: str
+
+        @property
+        def cache_key(self):
+            return self.name
+
+    @cached(maxsize=2)
+    def build(x, n=1):
+        calls.append((x, n))
+        return object()
+
+    a = build(Thing("a"))
+    assert build(Thing("a")) is a and len(calls) == 1        # content-equal: one entry
+    build(Thing("b")), build(Thing("a"), n=2)
+    assert build.cache_len() == 2                             # bounded: the oldest dropped
+    assert build(Thing("a")) is not a and len(calls) == 4
+    build.cache_clear()
+    assert build.cache_len() == 0
+    assert cache_key([1, {"k": (2, 3)}]) == (1, (("k", (2, 3)),))
+
+
+def test_digest_is_canonical():
+    assert digest({"b": 1, "a": [1, 2]}) == digest({"a": [1, 2], "b": 1})
+    assert digest({"a": 1}) != digest({"a": 1.5})
+    assert len(digest("x")) == 64
+
+
+def test_disk_cache_paths(tmp_path):
+    c = DiskCache("things", version=1)
+    p = c.path({"x": 1}, tmp_path)
+    assert p.parent == tmp_path / "things" and p.name.startswith("things-")
+    assert p.suffix == ".json" and c.path({"x": 1}, tmp_path) == p
+    assert c.path({"x": 2}, tmp_path) != p                    # other inputs
+    assert DiskCache("things", version=2).path({"x": 1}, tmp_path) != p   # other version
+    assert c.path({"x": 1}, tmp_path, suffix="").suffix == ""
+
+
+# ------------------------------------------------------------------ storage
+def _chunk(n=5, seed=0):
+    rng = np.random.default_rng(seed)
+    M1 = rng.uniform(-10, 10, (n, 4))
+    status = np.array(["stable", "unstable", "singular", "no_impact", "stable"][:n])
+    A = rng.standard_normal((n, 2, 2))
+    ev = np.linalg.eigvals(A).astype(complex)
+    max_abs = np.abs(ev).max(axis=1)
+    A[2], ev[2], max_abs[2] = np.nan, np.nan, np.inf          # the singular row
+    ev[0, 1] = complex(-0.0, 0.0)                             # a signed zero survives
+    return M1, status, max_abs, A, ev
+
+
+def test_store_round_trip_is_exact(tmp_path):
+    M1, status, max_abs, A, ev = _chunk()
+    with SweepStore(tmp_path / "s", {"grid": 9}) as store:
+        path = store.write_chunk(0, 10, M1, status, max_abs, A, ev)
+        back = store.read_chunk(path, 0, 10, M1)
+    assert back["status"].tolist() == status.tolist()
+    np.testing.assert_array_equal(back["max_abs"], max_abs)
+    np.testing.assert_array_equal(back["A"], A)
+    assert np.array_equal(back["eigenvalues"].view(float), ev.view(float), equal_nan=True)
+    assert np.signbit(back["eigenvalues"][0, 1].real)
+    assert list(store.chunk_files()) == [0]
+    meta = json.loads((tmp_path / "s" / "sweep.json").read_text())
+    assert meta["settings"] == {"grid": 9} and meta["settings_sha256"] == digest({"grid": 9})
+
+
+def test_store_detects_every_kind_of_damage(tmp_path):
+    M1, status, max_abs, A, ev = _chunk()
+    with SweepStore(tmp_path / "s", {"grid": 9}) as store:
+        path = store.write_chunk(0, 0, M1, status, max_abs, A, ev)
+        data = path.read_bytes()
+        # a flipped byte: the name's digest no longer matches
+        bad = bytearray(data)
+        bad[len(bad) // 2] ^= 0xFF
+        path.write_bytes(bytes(bad))
+        with pytest.raises(ValueError, match="digest"):
+            store.read_chunk(path, 0, 0, M1)
+        path.write_bytes(data)
+        # the file asked for as another chunk, other rows, or other points
+        with pytest.raises(ValueError):
+            store.read_chunk(path, 1, 0, M1)
+        with pytest.raises(ValueError, match="other rows"):
+            store.read_chunk(path, 0, 5, M1)
+        with pytest.raises(ValueError, match="expected points"):
+            store.read_chunk(path, 0, 0, M1 + 1e-12)
+    # written for other settings
+    with SweepStore(tmp_path / "t", {"grid": 10}) as other:
+        with pytest.raises(ValueError, match="other settings"):
+            other.read_chunk(path, 0, 0, M1)
+
+
+def test_store_refuses_other_settings_foreign_folders_and_a_second_writer(tmp_path):
+    with SweepStore(tmp_path / "s", {"grid": 9}):
+        with pytest.raises(SweepStoreError, match="in use"):
+            SweepStore(tmp_path / "s", {"grid": 9}).open()
+    with pytest.raises(SweepStoreError, match="other settings"):
+        SweepStore(tmp_path / "s", {"grid": 11}).open()
+    (tmp_path / "foreign").mkdir()
+    (tmp_path / "foreign" / "notes.txt").write_text("mine")
+    with pytest.raises(SweepStoreError, match="not a sweep folder"):
+        SweepStore(tmp_path / "foreign", {"grid": 9}).open()
+    assert (tmp_path / "foreign" / "notes.txt").read_text() == "mine"   # untouched
+
+
+def test_store_log_skips_a_cut_line(tmp_path):
+    with SweepStore(tmp_path / "s", {"grid": 9}) as store:
+        store.log({"chunk": 0})
+        with open(tmp_path / "s" / "log.jsonl", "a") as f:
+            f.write('{"chunk": 1')                               # cut by a kill
+        assert store.read_log() == [{"chunk": 0}]
