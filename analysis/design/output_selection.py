@@ -462,8 +462,23 @@ def ab_groups(model, gait) -> ABGroups:
 
 
 def group_of(tay: TaylorAB, M1, tol: float = 1e-6):
-    """1 or 2 when M1 satisfies a = b = 0 (which root; 1 anywhere on the line when the
-    solutions of a robot with nu = 2 form a line), else None."""
+    """The a = b = 0 group M1 lies on.
+
+    Parameters
+    ----------
+    tay : TaylorAB
+        The Taylor coefficients of the gait.
+    M1 : array_like
+        (nu,) outputs.
+    tol : float
+        Relative distance that counts as on the group.
+
+    Returns
+    -------
+    int or None
+        1 or 2 (which root; 1 anywhere on the line when the solutions of a robot with
+        nu = 2 form a line), None when on neither.
+    """
     M1 = np.asarray(M1, float)
     if M1.size == 2:
         return ab_solution_set(tay).on_set(M1, tol)

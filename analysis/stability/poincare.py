@@ -189,7 +189,7 @@ class MapStep:
 class PoincareMap:
     """The restricted Poincaré map P^z and its Jacobian A^z for one model and gait.
 
-    Implements eqs. (19), (20): one application of P^z integrates the hybrid zero
+    Implements eq. (20): one application of P^z integrates the hybrid zero
     dynamics of eq. (19) (outputs v = v^d + v_c, q from eq. 10, ddq_u from eq. 23) from
     the section tau = 0.75 T to the impact, applies the impact map and relabelling,
     takes y_i, dy_i (eq. 17) and integrates back to the section; A^z of eq. (20) is its

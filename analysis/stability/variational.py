@@ -137,7 +137,18 @@ class VariationalJacobian:
         return (self.gait.cache_key, self.n_pre, self.n_post, self.t_c)
 
     def jacobian(self, M1) -> np.ndarray:
-        """A^z (2, 2) for one non-singular M1."""
+        """A^z for one non-singular M1.
+
+        Parameters
+        ----------
+        M1 : array_like
+            (nu,).
+
+        Returns
+        -------
+        numpy.ndarray
+            (2, 2).
+        """
         return np.array(self.A_fn(np.asarray(M1, dtype=float)))
 
     @cached(maxsize=8)
@@ -145,7 +156,20 @@ class VariationalJacobian:
         return self.A_fn.map(n, "thread", threads)
 
     def jacobians(self, M1s: np.ndarray, threads: int = 2) -> np.ndarray:
-        """A^z (n, 2, 2) for an (n, nu) array of non-singular M1."""
+        """A^z for many non-singular M1, on threads.
+
+        Parameters
+        ----------
+        M1s : numpy.ndarray
+            (n, nu).
+        threads : int
+            Threads of the mapped Function.
+
+        Returns
+        -------
+        numpy.ndarray
+            (n, 2, 2).
+        """
         M1s = np.asarray(M1s, dtype=float)
         n = len(M1s)
         A = np.array(self._mapped(n, threads)(M1s.T))            # 2 x 2n
@@ -155,5 +179,23 @@ class VariationalJacobian:
 @cached(maxsize=8)
 def variational_jacobian(model, gait, tau_s: float, n_pre: int, n_post: int,
                          rejoin: float = 0.5) -> VariationalJacobian:
-    """The :class:`VariationalJacobian` of a gait and discretisation (memoised)."""
+    """The :class:`VariationalJacobian` of a gait and discretisation (memoised).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference step.
+    tau_s : float
+        Section time, s.
+    n_pre, n_post : int
+        RK4 steps before and after the impact.
+    rejoin : float
+        Rejoin time of v_c, fraction of T.
+
+    Returns
+    -------
+    VariationalJacobian
+    """
     return VariationalJacobian(model, gait, tau_s, n_pre, n_post, rejoin)

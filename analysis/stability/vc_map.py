@@ -276,8 +276,9 @@ class VirtualConstraintMap:
 
 @cached(maxsize=8)
 def vc_map(model, gait, phase=None, H0=None, n_steps: int = 1000) -> VirtualConstraintMap:
-    """The :class:`VirtualConstraintMap` of constraints fitted to a gait, built once
-    (memoised by the gait's digest and the arguments).
+    """The :class:`VirtualConstraintMap` of constraints fitted to a gait, built once.
+
+    Memoised by the gait's digest and the arguments.
 
     Parameters
     ----------

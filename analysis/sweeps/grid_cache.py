@@ -24,8 +24,25 @@ __all__ = ["grid_results", "grid_best"]
 @cached(maxsize=4)
 def grid_results(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
                  folder=None, progress: bool = False) -> SweepResult:
-    """The sweep of the n^nu grid on [lo, hi]^nu (memoised; stored under ``folder``, by
-    default the cache folder; nu = ``model.nu``, the paper's 9^4 for RABBIT).
+    """The sweep of the n^nu grid on [lo, hi]^nu, computed once and kept.
+
+    Memoised, and stored as a resumable sweep in the cache folder (:data:`GRIDS`);
+    nu = ``model.nu``: the paper's 9^4 for RABBIT.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference step.
+    n : int
+        Points per component.
+    lo, hi : float
+        The range of every component.
+    folder : str or Path, optional
+        The cache folder (default :func:`biped_casadi.cache_dir`).
+    progress : bool
+        Show a progress bar.
 
     Returns
     -------
@@ -43,7 +60,24 @@ def grid_results(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
 
 
 def grid_best(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0) -> dict:
-    """The best stable point of the grid: {"M1": [...], "max_abs": x} (None if none)."""
+    """The best stable point of the grid.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Reference
+        The reference step.
+    n : int
+        Points per component.
+    lo, hi : float
+        The range of every component.
+
+    Returns
+    -------
+    dict
+        ``M1`` (list) and ``max_abs``; both None when no point is stable.
+    """
     r = grid_results(model, gait, n, lo, hi)
     stable = np.flatnonzero(r.point_status == "stable")
     if not stable.size:

@@ -43,8 +43,18 @@ def grid_points(n: int, lo: float, hi: float, dim: int = 4) -> np.ndarray:
 
 
 def max_grid_n(dim: int = 4) -> int:
-    """The most points per component of a grid of at most 50 million M1 in ``dim``
-    components (84 for RABBIT's 4)."""
+    """The most points per component of a grid of at most 50 million M1.
+
+    Parameters
+    ----------
+    dim : int
+        Components of M1.
+
+    Returns
+    -------
+    int
+        84 for RABBIT's 4.
+    """
     return int(50_000_000 ** (1 / dim) + 1e-9)
 
 

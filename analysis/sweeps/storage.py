@@ -47,8 +47,11 @@ _KV_KEY = b"biped_sweep"
 
 
 class SweepStoreError(ValueError):
-    """An output folder that cannot be used for this sweep (other settings, not a sweep
-    folder, unreadable metadata, in use by another run)."""
+    """An output folder that cannot be used for this sweep.
+
+    Other settings, not a sweep folder, unreadable metadata, or in use by another run;
+    a ``ValueError``.
+    """
 
 
 def digest_points(points: np.ndarray) -> str:

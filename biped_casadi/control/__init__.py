@@ -5,6 +5,7 @@ from .controller import ControlOutput, Controller, StepStart
 from .output_law import (M1_LIMIT, SECTION, SINGULAR_RTOL, Gains, SingularityReport, check_M1)
 from .reference import Reference, require_same_robot
 from .time_varying import PAPER_REJOIN, TimeVaryingController
+from .zero_dynamics import Linearisation, ZeroDynamics, zero_dynamics
 from .virtual_constraints import (HIP_PHASE, ConstraintSurface, VirtualConstraintController,
                                   VirtualConstraints, constraint_surface,
                                   fit_virtual_constraints)
@@ -13,4 +14,4 @@ __all__ = ["Controller", "StepStart", "ControlOutput", "SECTION", "SINGULAR_RTOL
            "Gains", "SingularityReport", "check_M1", "Reference", "require_same_robot",
            "TimeVaryingController", "PAPER_REJOIN", "VirtualConstraints",
            "VirtualConstraintController", "fit_virtual_constraints", "ConstraintSurface",
-           "constraint_surface", "HIP_PHASE"]
+           "constraint_surface", "HIP_PHASE", "ZeroDynamics", "zero_dynamics", "Linearisation"]

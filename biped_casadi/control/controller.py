@@ -27,8 +27,18 @@ __all__ = ["StepStart", "ControlOutput", "Controller"]
 
 @dataclass
 class StepStart:
-    """Controller state at the start of a step: reference state r and step constants p;
-    ``problem`` says why the step cannot be controlled (empty when it can)."""
+    """Controller state at the start of a step.
+
+    Parameters
+    ----------
+    r : numpy.ndarray
+        The reference state at tau = 0 (``n_ref`` numbers).
+    p : numpy.ndarray
+        The step constants (``n_par`` numbers; the time-varying controller's
+        (y_i, dy_i) of eq. 17).
+    problem : str
+        Why the step cannot be controlled (empty when it can).
+    """
     r: np.ndarray
     p: np.ndarray
     problem: str = ""
@@ -36,7 +46,17 @@ class StepStart:
 
 @dataclass
 class ControlOutput:
-    """One evaluation of a control law at a state."""
+    """One evaluation of a control law at a state.
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        Torques (nu), N m.
+    y, dy : numpy.ndarray
+        Outputs (nu) and their rates.
+    denominator : float
+        The decoupling denominator: zero where the controller is singular.
+    """
     u: np.ndarray          # torques (nu)
     y: np.ndarray          # outputs (nu)
     dy: np.ndarray         # output rates (nu)
@@ -44,7 +64,11 @@ class ControlOutput:
 
 
 class Controller(abc.ABC):
-    """Shared numeric wrappers around ``law`` (built by the subclasses)."""
+    """A closed-loop controller: the law as one CasADi Function and its step constants.
+
+    Subclasses build ``law`` (module docstring) and set ``model``, ``reference``,
+    ``n_ref`` and ``n_par``; this class gives the numeric wrappers.
+    """
 
     name = "controller"
     n_ref = 0
@@ -52,11 +76,26 @@ class Controller(abc.ABC):
 
     @abc.abstractmethod
     def step_start(self, q, dq) -> StepStart:
-        """The per-step parameters fixed at the start of a step (just after an impact)."""
+        """The per-step parameters fixed at the start of a step (just after an impact).
+
+        Parameters
+        ----------
+        q, dq : array_like
+            The state at the start of the step, rad and rad/s.
+
+        Returns
+        -------
+        StepStart
+        """
 
     @abc.abstractmethod
     def describe(self) -> dict:
-        """What defines the controller, as a JSON-ready dict."""
+        """What defines the controller, as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+        """
 
     @property
     def gait(self):

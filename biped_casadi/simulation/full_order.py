@@ -496,8 +496,21 @@ class _Log:
 
 @cached(maxsize=8)
 def simulator(controller, options: SimulationOptions | None = None) -> Simulator:
-    """The :class:`Simulator` of a controller and options, built once (memoised by
-    the controller's content and the options)."""
+    """The :class:`Simulator` of a controller and options, built once.
+
+    Memoised by the controller's content and the options.
+
+    Parameters
+    ----------
+    controller : TimeVaryingController or VirtualConstraintController
+        The control law.
+    options : SimulationOptions, optional
+        Default ``SimulationOptions()``.
+
+    Returns
+    -------
+    Simulator
+    """
     return Simulator(controller, options if options is not None else SimulationOptions())
 
 

@@ -88,7 +88,19 @@ class Diagnostics:
                           model.points(q)[1, model.hip_index], model.torso_angle(q))
 
     def row(self, D, name):
-        """Row(s) ``name`` of diagnostics ``D`` (rows along the first axis)."""
+        """Row(s) ``name`` of diagnostics ``D`` (rows along the first axis).
+
+        Parameters
+        ----------
+        D : numpy.ndarray
+            (size, ...) diagnostics.
+        name : str
+            A row's name (:attr:`index`).
+
+        Returns
+        -------
+        numpy.ndarray
+        """
         return D[self.index[name]]
 
     def rows(self, D, finite=None) -> dict:

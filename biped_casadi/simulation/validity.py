@@ -73,8 +73,10 @@ class Limits:
 
     @classmethod
     def of(cls, options, model) -> "Limits":
-        """The limits of simulation options for a robot (its own torque limit and fall
-        height where the options leave them unset).
+        """The limits of simulation options for a robot.
+
+        The robot's own torque limit and fall height are used where the options leave
+        them unset.
 
         Parameters
         ----------
