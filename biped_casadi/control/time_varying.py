@@ -1,24 +1,12 @@
-"""Closed-loop controllers for walking: the time-varying output controller of the paper
-(§III, eq. 12-13, 17) and, for the comparison of §V-C, a virtual-constraint (hybrid zero
-dynamics) controller fitted to the same reference.
+"""The time-varying output controller of the paper (§III, eq. 12-13, 17), with the
+stride-to-stride correction v_c, as a :class:`~biped_casadi.control.controller.Controller`.
 
-Both controllers are CasADi Functions built once per controller object, written against
-the reference interface of :mod:`biped_casadi.control.reference`, and share one interface used
-by :mod:`biped_casadi.simulation.full_order`:
-
-``law(q, dq, tau, r, p) -> (u, y, dy, den, dr, in_range)``
-    torques u, outputs y and their rates dy, the decoupling denominator ``den`` (zero
-    where the controller is singular), the time derivative ``dr`` of the reference
-    state r, and ``in_range`` (1 while the reference is defined at the current state).
-``step_start(q, dq) -> StepStart(r, p)``
-    the reference state r and the per-step constants p at the start of a step (just
-    after an impact, or at the initial state).
-
-Reference state r.  The time-varying controller needs q_u^d(tau); a gait defines it as
-the solution of the unactuated row of eq. (1) with q_a = q_a^d(tau) (SPEC §2), carried
-as the reference state r = (q_u^d, dq_u^d) and reset to its value at tau = 0 at every
-impact: a function of tau alone, so the hybrid closed loop is still the system in
-(q, dq, tau) of eq. (9).
+Reference state r.  The controller needs q_u^d(tau); a gait defines it as the solution of
+the unactuated row of eq. (1) with q_a = q_a^d(tau) (SPEC §2), carried as the reference
+state r = (q_u^d, dq_u^d) and reset to its value at tau = 0 at every impact: a function of
+tau alone, so the hybrid closed loop is still the system in (q, dq, tau) of eq. (9).
+From every step start the closed loop is its hybrid zero dynamics
+(:mod:`biped_casadi.control.zero_dynamics`), whatever the output gains.
 """
 from __future__ import annotations
 
