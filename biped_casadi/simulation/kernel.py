@@ -24,7 +24,7 @@ import numpy as np
 
 __all__ = ["Diagnostics", "strike", "locate_strike", "mapped", "threads", "NEWTON_ITERATIONS"]
 
-#: most Newton iterations of :func:`locate_strike` (it stops at |z_sw| < 1e-15 m, usually
+#: most Newton iterations of :func:`locate_strike` (it stops at ``|z_sw| < 1e-15`` m, usually
 #: after 3 to 5)
 NEWTON_ITERATIONS = 60
 
@@ -154,7 +154,7 @@ def locate_strike(event, h: float, z_a, z_b):
 
     Safeguarded Newton, vectorised over scenarios: a bracket [lo, hi] around the root
     (z_sw > 0 at lo), the Newton step where it stays inside, bisection otherwise; a
-    scenario stops when |z_sw| < 1e-15 m or its step is below 1e-17 s.
+    scenario stops when ``|z_sw| < 1e-15`` m or its step is below 1e-17 s.
 
     Parameters
     ----------
