@@ -307,12 +307,10 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
         raise RuntimeError("the M1 NLP found no non-singular local optimum (IPOPT); try more starts")
     # verify the best few by the full-AD map and keep the best verified one
     ranked = sorted(history, key=lambda h: h["max_abs"])
-    verified = []
-    for h in ranked[:3]:
-        r = poincare_eigenvalues(model, gait, h["M1"], method="ad")
-        verified.append((r.max_abs, np.array(h["M1"]), h["max_abs"]))
-    _, M1, val = min(verified, key=lambda v: v[0])
-    r = poincare_eigenvalues(model, gait, M1, method="ad")
+    verified = [(poincare_eigenvalues(model, gait, h["M1"], method="ad"), h["max_abs"])
+                for h in ranked[:3]]
+    r, val = min(verified, key=lambda v: v[0].max_abs)
+    M1 = r.M1
     # integration-error estimate of A^z: a map with twice the RK4 steps
     fine = poincare_map(model, gait, n_pre=2 * pm.n_pre, n_post=2 * pm.n_post).analyse(
         M1, method="ad")

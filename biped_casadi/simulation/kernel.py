@@ -37,11 +37,12 @@ class Diagnostics:
     nu : int
         Number of torques.
     outputs : bool
-        Whether the rows carry the outputs y and their rates dy (the full-order
-        simulator's; on a zero dynamics they vanish and are left out).
+        Whether the rows carry the controller's outputs y, their rates dy and
+        ``in_range`` (the full-order simulator's; on a zero dynamics the outputs vanish
+        and the reference is defined everywhere, so they are left out).
     """
 
-    SCALARS = ("den", "Fx", "Fz", "in_range", "xsw", "zsw", "dzsw", "hip", "torso")
+    SCALARS = ("den", "Fx", "Fz", "xsw", "zsw", "dzsw", "hip", "torso")
 
     def __init__(self, nu: int, outputs: bool = True):
         self.nu, self.outputs = nu, outputs
@@ -50,7 +51,8 @@ class Diagnostics:
         for name, n in blocks:
             self.index[name] = slice(row, row + n)
             row += n
-        for name in self.SCALARS:
+        self.scalars = self.SCALARS + (("in_range",) if outputs else ())
+        for name in self.scalars:
             self.index[name] = row
             row += 1
         #: number of rows
@@ -84,8 +86,8 @@ class Diagnostics:
         xs, zs = model.swing_foot(q)
         _, dzs = model.swing_foot_velocity(q, dq)
         parts = [u] + ([y, dy] if self.outputs else [])
-        return ca.vertcat(*parts, den, Fx, Fz, in_range, xs, zs, dzs,
-                          model.points(q)[1, model.hip_index], model.torso_angle(q))
+        return ca.vertcat(*parts, den, Fx, Fz, xs, zs, dzs, model.points(q)[1, model.hip_index],
+                          model.torso_angle(q), *([in_range] if self.outputs else []))
 
     def row(self, D, name):
         """Row(s) ``name`` of diagnostics ``D`` (rows along the first axis).
@@ -118,7 +120,7 @@ class Diagnostics:
         dict
             'finite', 'u' and every scalar row by name.
         """
-        out = {name: D[self.index[name]] for name in self.SCALARS}
+        out = {name: D[self.index[name]] for name in self.scalars}
         out["u"] = D[self.index["u"]]
         fin = np.all(np.isfinite(D), axis=0)
         out["finite"] = fin if finite is None else fin & finite
