@@ -31,13 +31,11 @@ re-run is instant.
 from __future__ import annotations
 
 import json
-import math
 import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from biped_casadi import SimulationOptions, TimeVaryingController, simulate
 from biped_casadi.caching import DiskCache
 from biped_casadi.files import write_text_atomic
 from biped_casadi.results import Result
@@ -45,12 +43,12 @@ from gait_opt import GaitOptions, default_gait
 from gait_opt.cache import cache_path
 
 from ..stability.poincare import poincare_map
-from biped_casadi.simulation import WalkBatch, start_states
+from biped_casadi.simulation import start_states
 
-from ..robustness.s_star import (Design, RobustnessSettings, kept_directions, robustness,
-                                 s_star_batch)
+from ..robustness.s_star import Design, RobustnessSettings, kept_directions, s_star_batch
 from ..stability.vc_map import vc_eigenvalue
 from biped_casadi.simulation import zero_dynamics_walker
+from .verification import verify_design
 
 __all__ = ["RobustDesignSettings", "RobustDesignResult", "robust_design", "ROBUST_GAIT"]
 
@@ -358,34 +356,14 @@ class _Search:
         return best_x
 
     def verify(self, M1):
-        """The final numbers: s* (walker, finer), full-order runs at s* and s_fail, the
-        paper's perturbation at s = 1."""
-        st, m, g = self.st, self.model, self.gait
-        design = Design(tuple(M1), st.rejoin)
-        fine = st.robustness_settings()
-        self.say("final s* (finer integration) and full-order verification")
-        r = robustness(m, g, design, fine, kept=self.kept)
-        ctrl = TimeVaryingController(m, g, np.array(M1), rejoin=st.rejoin)
-        opts = SimulationOptions(steps=st.steps, mu=st.mu, torque_limit=st.torque_limit,
-                                 jit=True)
-        verified = {}
-        for label, s in (("at_s_star", r.s_star), ("at_s_fail", r.s_fail)):
-            if not math.isfinite(s):
-                continue
-            q0, dq0 = start_states(g, self.dirs, np.full(len(self.dirs), s))
-            runs = WalkBatch.concat([simulate(ctrl, q0[i], dq0[i], opts)
-                                     for i in range(len(self.dirs))])
-            out = [str(v) for v in runs.verdict(st.tol)]
-            verified[label] = dict(scale=s, outcomes=out,
-                                   passed=int(sum(o == "ok" for o in out)))
-        q0, dq0 = start_states(g, self.dirs[:1], [1.0])
-        paper = simulate(ctrl, q0[0], dq0[0], opts)
-        errs = paper.unactuated_errors().tolist()
-        conv = paper.steps_to_converge(st.tol)
-        conv = int(conv) if math.isfinite(conv) else None
-        max_abs = poincare_map(m, g, rejoin=st.rejoin).analyse(np.array(M1), method="ad").max_abs
-        self.stage("verification", s_star=r.s_star, full_order=verified)
-        return r, verified, conv, errs, paper, max_abs
+        """The final numbers, by the one verification protocol
+        (:func:`analysis.design.verification.verify_design`): s* (walker, finer),
+        full-order runs at s* and s_fail, the paper's perturbation at s = 1."""
+        st = self.st
+        check = verify_design(self.model, self.gait, Design(tuple(M1), st.rejoin), self.kept,
+                              st.robustness_settings(), progress=self.say)
+        self.stage("verification", s_star=check.s_star, full_order=check.verified)
+        return check
 
 
 def robust_design(model, settings: RobustDesignSettings | None = None, progress=None,
@@ -433,7 +411,9 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
     if best is None or not search.pm.analyse(best).max_abs <= search.bound:
         raise ValueError("robust design: the compass search found no design within the "
                          "eigenvalue bound; try more samples or starts")
-    r, verified, conv, errs, paper, max_abs = search.verify(best)
+    check = search.verify(best)
+    r, verified, conv, errs, max_abs = (check.robustness, check.verified, check.steps_to_converge,
+                                        check.paper_errors, check.max_abs)
     met = bool(r.s_star >= 1 and max_abs <= search.lam_vc and conv is not None and conv <= 4)
     design = dict(M1=[float(v) for v in best], rejoin=st.rejoin)
     gait_file = str(cache_path(model, search.options, cache))
@@ -445,7 +425,7 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
     fail = r.failure
     msg = (f"robust design: s* = {r.s_star:.4g} with max|lambda| = {max_abs:.3g} "
            f"(virtual constraints {search.lam_vc:.3g}); from the paper's perturbation "
-           + (f"below {st.tol:g} from step {conv}" if conv else f"{paper.status}")
+           + (f"below {st.tol:g} from step {conv}" if conv else f"{check.paper_status}")
            + (f"; just above s*: {fail['status']} in step {fail['step']}" if fail else "")
            + ("" if met else "; target (s* >= 1, converged by step 4) not met"))
     result = RobustDesignResult(
