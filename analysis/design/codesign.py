@@ -59,7 +59,8 @@ from ..robustness.basin import basin
 from ..robustness.s_star import Design, RobustnessSettings, kept_directions, robustness
 from ..stability.poincare import poincare_map
 from ..stability.vc_map import vc_eigenvalue
-from .codesign_nlp import FAMILIES, Reduced, Transcription, TranscriptionSettings, solve_nlp
+from .codesign_nlp import (FAMILIES, Reduced, Transcription, TranscriptionSettings,
+                           _node_functions, solve_nlp)
 from .robust_search import ROBUST_GAIT
 from .verification import hidden_sign_patterns, verify_design
 
@@ -106,15 +107,15 @@ class CodesignSettings:
         Trust region of a gait step: rad on every Bezier coefficient, s on T, and
         rad, rad/s on the unactuated start.
     starts : tuple
-        Starting M1s besides the sampled ones (default: today's search design).
+        Starting M1s besides the sampled ones (:data:`FULL` adds today's search design;
+        from it the NLP ends in the region of large M1, s* 0.4-0.9, measured).
     samples : int
         Random M1 drawn in [-box, box]^nu for the sampled starts (0: none).
     box : float
         Their box.
     sampled_starts : int
-        The best sampled M1 kept as starts: max ``|lambda|`` within the bound, walking
-        from the paper's perturbation at scale 1, then ranked by the kept directions
-        they walk at ``s_start`` (fewest failures, smallest final error).
+        Sampled M1 kept as starts: the first drawn with max ``|lambda|`` within the bound
+        from which the walker walks the paper's perturbation at scale 1.
     seed : int
         Seed of the samples.
     s_start : float
@@ -124,8 +125,9 @@ class CodesignSettings:
         eigenvalue in the NLP.
     max_iter : int
         IPOPT iterations per solve.
-    screen_iter : int
-        IPOPT iterations of the first solve from each start (the best continues).
+    screen_iter, screen_time : int, float
+        IPOPT iterations and wall time (s) of the first solve from each start; the start
+        whose solve reaches the largest s continues.
     paper_steps : int
         Continuation solves that bring the paper's error bound down from the start's.
     max_solve_time : float
@@ -146,7 +148,7 @@ class CodesignSettings:
     free_gait: bool = True
     rejoin: float = 0.75
     steps: int = 4
-    paper_tol: float = 5e-4
+    paper_tol: float = 8e-4
     scenario_tol: float = 0.5
     initial_active: int = 2
     max_active: int = 8
@@ -155,15 +157,16 @@ class CodesignSettings:
     trust_alpha: float = 0.05
     trust_T: float = 0.025
     trust_x0: float = 0.25
-    starts: tuple = (TODAY_DESIGN,)
+    starts: tuple = ()
     samples: int = 2000
     box: float = 1.0
-    sampled_starts: int = 3
+    sampled_starts: int = 5
     seed: int = 0
     s_start: float = 0.9
     eigen_margin: float = 0.98
     max_iter: int = 100
-    screen_iter: int = 60
+    screen_iter: int = 40
+    screen_time: float = 8.0
     paper_steps: int = 3
     max_solve_time: float = 40.0
     transcription: dict = field(default_factory=dict)
@@ -206,8 +209,9 @@ class CodesignSettings:
 #: the settings of a quick reproduction (about 15 s warm): the gait fixed, two
 #: exchange rounds, no hidden patterns
 QUICK = CodesignSettings(free_gait=False, exchange_rounds=2, hidden=False)
-#: the settings of a full reproduction: the gait free, the default rounds, the basin
-FULL = CodesignSettings(basin=True)
+#: the settings of a full reproduction: the gait free, today's design and three sampled
+#: starts, three gait steps, the basin
+FULL = CodesignSettings(starts=(TODAY_DESIGN,), sampled_starts=8, gait_rounds=3, basin=True)
 
 
 @dataclass
@@ -391,10 +395,6 @@ class _Codesign:
         conv = r.paper.get("steps_to_converge", math.inf) if r.paper else math.inf
         return (bool(conv <= 4), float(r.s_star))
 
-    def paper_tol(self, rnd):
-        """The paper direction's bound in exchange round rnd (None: at scale s)."""
-        return None if rnd == 0 else self.st.paper_tol
-
     def lam_vc(self, gait):
         return abs(vc_eigenvalue(self.model, gait).eigenvalue)
 
@@ -412,9 +412,11 @@ class _Codesign:
         return jury
 
     def denominator(self, tr, gait, M1):
+        """The eq. 24 denominator's sign for M1 and a fixed scale: D11's largest value
+        on the reference (so the margin does not move with the start)."""
         D11, D12 = denominator_samples(self.model, gait)
         den = decoupling_denominator(D11, D12, np.asarray(M1, float))
-        tr.den_scale = float(np.max(np.abs(den)))
+        tr.den_scale = float(np.max(np.abs(D11)))
         tr.den_sign = 1.0 if den[0] >= 0 else -1.0
 
     def continued(self, tr, red, d0, lb, ub, label, max_iter=None):
@@ -441,9 +443,9 @@ class _Codesign:
                 break
         return res
 
-    def solve(self, tr, red, d0, lb, ub, label, max_iter=None):
+    def solve(self, tr, red, d0, lb, ub, label, max_iter=None, max_time=None):
         res = solve_nlp(red, d0, lb, ub, {"max_iter": max_iter or self.st.max_iter,
-                                          "max_wall_time": self.st.max_solve_time})
+                                          "max_wall_time": max_time or self.st.max_solve_time})
         self.solves.append(dict(label=label, status=res.status, iterations=res.iterations,
                                 time=round(res.time, 2), evaluations=res.evaluations,
                                 scenarios=tr.K))
@@ -452,6 +454,13 @@ class _Codesign:
     # -------------------------------------------------------------- phases
     def setup(self):
         st = self.st
+        # the compiled node functions build while the gait and the directions are made
+        from concurrent.futures import ThreadPoolExecutor
+        pool = ThreadPoolExecutor(2)
+        nG = self.model.nu * (GaitOptions(**st.gait).bezier_degree + 1) + 3
+        self._compiling = [pool.submit(_node_functions, self.model, n)
+                           for n in ([0, nG] if self.free else [0])]
+        pool.shutdown(wait=False)
         if self.fixed_gait is not None:
             self.gait0 = self.fixed_gait
             self.say("gait given: M1 only (the gait is fixed)")
@@ -459,13 +468,17 @@ class _Codesign:
             self.say(f"start gait {st.gait} (optimised once, then cached)")
             self.gait0 = default_gait(self.model, GaitOptions(**st.gait))
         self.kept0 = self.kept(self.gait0)
+        for f in self._compiling:
+            f.result()
         if len(self.kept0) == 0:
             raise CodesignError("codesign: virtual constraints walk from no perturbation "
                                 "direction on this gait at full scale; try another gait")
         self.stage("setup", T=self.gait0.T, kept=len(self.kept0), tried=self.kept0.tried)
 
     def sampled(self):
-        """The best sampled starts (see :class:`CodesignSettings`)."""
+        """Sampled starts (see :class:`CodesignSettings`): random M1 with max ``|lambda|``
+        within the bound from which the walker walks the paper's perturbation at scale 1,
+        in the order drawn."""
         st, m = self.st, self.model
         if st.samples <= 0 or st.sampled_starts <= 0:
             return []
@@ -474,32 +487,21 @@ class _Codesign:
         M = rng.uniform(-st.box, st.box, (st.samples, m.nu))
         jb = poincare_map(m, g, rejoin=st.rejoin).jacobian_batch(M)
         ok = (jb.status == "stable") & (jb.max_abs <= st.eigen_margin * self.lam_vc(g))
-        M = M[ok][:256]
-        w = zero_dynamics_walker(m, g, rs.simulation_options(), rs.rk4_steps, jit=True)
+        M = M[ok][:8 * st.sampled_starts]
         if len(M):
+            w = zero_dynamics_walker(m, g, rs.simulation_options(), 200, jit=True)
             q0, dq0 = start_states(g, np.repeat(kept.directions[:1], len(M), 0), 1.0)
             B = w.walk(q0, dq0, M, st.rejoin, steps=rs.steps)
-            M = M[B.verdict(rs.tol) == "ok"][:32]
-        if not len(M):
-            return []
-        nk = len(kept.directions)
-        q0, dq0 = start_states(g, np.tile(kept.directions, (len(M), 1)), st.s_start)
-        B = w.walk(q0, dq0, np.repeat(M, nk, axis=0), st.rejoin, steps=rs.steps)
-        v = (B.verdict(rs.tol) == "ok").reshape(len(M), nk)
-        err = np.where(v, np.nan_to_num(B.final_error, nan=0.0).reshape(len(M), nk), 0.0)
-        score = v.sum(axis=1) - 1e-3 * err.max(axis=1, initial=0.0) / rs.tol
-        order = np.argsort(-score)[:st.sampled_starts]
-        self.stage("sampled starts", drawn=st.samples, stable=int(ok.sum()), kept=len(order))
-        return [M[i] for i in order]
+            M = M[B.verdict(rs.tol) == "ok"][:st.sampled_starts]
+        self.stage("sampled starts", drawn=st.samples, stable=int(ok.sum()), kept=len(M))
+        return list(M)
 
     def solve_round(self, gait, kept, M1, active, rnd, s0, max_iter=None, label=""):
         """One NLP solve with the gait fixed (exchange round ``rnd``) and the walker's
         verification of its design: the round's record and the candidate."""
         st = self.st
         dirs = kept.directions[[0] + list(active)]
-        # homotopy: the first solve walks the paper's direction at scale s like the others
-        # (a start may violate the paper's bound); later ones at scale 1 with paper_tol
-        tr, red = self.nlp(gait, dirs, free=False, paper_tol=self.paper_tol(rnd))
+        tr, red = self.nlp(gait, dirs, free=False, paper_tol=st.paper_tol)
         self.denominator(tr, gait, M1)
         d0 = np.zeros(red.nd)
         d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, st.rejoin, s0
@@ -507,9 +509,13 @@ class _Codesign:
         lb[tr.i_rejoin] = ub[tr.i_rejoin] = st.rejoin
         self.say(f"NLP, gait fixed: {tr.K} scenarios x {tr.S} steps ({label})")
         res = self.continued(tr, red, d0, lb, ub, label, max_iter)
-        M1n, s_nlp = res.d[tr.i_M1], float(res.d[tr.i_s])
         if not np.all(np.isfinite(res.d)):
             return None
+        return self.candidate(gait, kept, tr, red, res, active, label)
+
+    def candidate(self, gait, kept, tr, red, res, active, label):
+        """A solve's design verified by the walker: its record and the candidate."""
+        M1n, s_nlp = res.d[tr.i_M1], float(res.d[tr.i_s])
         r, lam = self.measure(gait, kept, M1n)
         self.rounds.append(dict(phase="gait fixed", label=label, nlp_status=res.status,
                                 nlp_s=s_nlp, s_star=r.s_star, failure=r.failure, max_abs=lam,
@@ -524,19 +530,40 @@ class _Codesign:
                     ok=ok, failure=r.failure)
 
     def fixed_phase(self, starts):
-        """Every start screened by a short first solve; scenario exchange from the best."""
+        """Every start screened by a short first solve (ranked by the NLP's own s); the
+        best is verified and continues with scenario exchange."""
         st, gait, kept = self.st, self.gait0, self.kept0
-        cands = []
+        screened = []
         for i, M1 in enumerate(starts):
             active = self.hardest(gait, kept, M1, st.s_start, st.initial_active)
-            c = self.solve_round(gait, kept, M1, active, 0, st.s_start, st.screen_iter,
-                                 f"start {i + 1} of {len(starts)}")
-            if c is not None:
-                cands.append(c)
-        good = [c for c in cands if c["ok"]]
-        if not good:
+            tr, red = self.nlp(gait, kept.directions[[0] + active], free=False,
+                               paper_tol=st.paper_tol)
+            self.denominator(tr, gait, M1)
+            d0 = np.zeros(red.nd)
+            d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, st.rejoin, st.s_start
+            lb, ub = red.bounds()
+            lb[tr.i_rejoin] = ub[tr.i_rejoin] = st.rejoin
+            label = f"start {i + 1} of {len(starts)}"
+            self.say(f"NLP, gait fixed: {tr.K} scenarios x {tr.S} steps ({label})")
+            res = self.solve(tr, red, d0, lb, ub, label, st.screen_iter, st.screen_time)
+            s_nlp = float(res.d[tr.i_s]) if np.all(np.isfinite(res.d)) else -np.inf
+            self.say(f"  IPOPT {res.status} ({res.iterations} it, {res.time:.1f} s): NLP s "
+                     f"{s_nlp:.4g}")
+            self.rounds.append(dict(phase="start", label=label, M1_start=np.asarray(M1).tolist(),
+                                    nlp_status=res.status, nlp_s=s_nlp,
+                                    M1=res.d[tr.i_M1].tolist()))
+            screened.append((res.success, s_nlp, tr, red, res, active))
+        screened.sort(key=lambda t: (not t[0], -t[1]))       # converged solves first
+        best = None
+        for _, s_nlp, tr, red, res, active in screened[:2]:
+            if np.isfinite(s_nlp):
+                c = self.candidate(gait, kept, tr, red, res, active, "best start")
+                if c["ok"]:
+                    best = c
+                    break
+        if best is None:
             return None
-        best = cur = max(good, key=lambda c: c["score"])
+        cur = best
         for rnd in range(1, st.exchange_rounds):
             active = list(cur["active"])
             fdir = cur["failure"].get("direction") if cur["failure"] else None

@@ -114,6 +114,8 @@ class TranscriptionSettings:
         Nodes per aggregated constraint.
     ks_rho : float
         Sharpness of the Kreisselmeier-Steinhauser aggregation (normalised units).
+    threads : int
+        Threads the scenarios of one step are walked on.
     """
 
     nodes_per_T: int = 100
@@ -131,6 +133,7 @@ class TranscriptionSettings:
     clearance_mid: float = 0.001
     chunk: int = 10
     ks_rho: float = 300.0
+    threads: int = 2
 
 
 # ------------------------------------------------------------------ compiled functions
@@ -330,6 +333,13 @@ def _accumulated(node: ca.Function, n: int) -> ca.Function:
     return node.mapaccum(f"{node.name()}_acc{n}", n, [0, 1], [0, 1])
 
 
+@cached(maxsize=64)
+def _chunked(node: ca.Function, n: int, m: int, threads: int) -> ca.Function:
+    """n nodes accumulated, mapped over m scenarios (on threads)."""
+    acc = _accumulated(node, n)
+    return acc.map(m, "thread", threads) if threads > 1 and m > 1 else acc.map(m)
+
+
 # ------------------------------------------------------------------ the transcription
 @dataclass
 class _Rows:
@@ -388,6 +398,9 @@ class Transcription:
         Rule and margins.
     """
 
+    #: nodes per compiled call
+    CHUNK = 8
+
     def __init__(self, model, gait, directions, steps: int, free_gait: bool,
                  settings: TranscriptionSettings | None = None):
         self.model, self.gait = model, gait
@@ -405,6 +418,7 @@ class Transcription:
         self.nl = 2 + 2 * nu                          # step start variables
         self.N = st.nodes_per_T
         self.n_max = int(math.ceil(st.horizon * self.N))
+        self.threads = int(st.threads)
         self.node = _node_functions(model, self.nG)
         self.start_fn, self.diag0_fn, self.last_fn, self.last_value, self.rows = \
             _step_functions(model, self.degree, self.cont, self.shape, self.free)
@@ -444,7 +458,7 @@ class Transcription:
         dR/dG (15, nG, n), the reference state r (2, n) and dr/dG (2, nG, n), and the
         nominal diagnostics for the gait's own constraints (free gait)."""
         alpha, T, r0, *_ = self.unpack(w)
-        n = 2 * self.n_max + 3
+        n = 2 * (self.n_max + self.CHUNK) + 3
         s = np.arange(n) / (2 * self.N)
         if not self.free:
             key = ("fixed",)
@@ -502,47 +516,77 @@ class Transcription:
         return dP
 
     def nodes(self, tab, L, n, M1, rejoin, T):
-        """Integrate a scenario-step from its start variables L over n full nodes.
+        """Integrate scenario-steps from their start variables over n full nodes.
+
+        The scenarios (rows of L) are walked together, ``CHUNK`` nodes per call, mapped
+        over ``threads`` threads.
+
+        Parameters
+        ----------
+        tab : dict
+            The reference table (:meth:`table`).
+        L : numpy.ndarray
+            (m, nl) step starts (q_u, dq_u, y_i, dy_i).
+        n : int
+            Full nodes.
+        M1 : numpy.ndarray
+            (nu,) outputs.
+        rejoin, T : float
+            Rejoin fraction and step duration.
 
         Returns
         -------
         tuple
-            (X (2, n+1), SS (2, nc, n+1), diag (9, n+1), ddiag (9, nc+1, n+1), P, dP):
-            the states, their sensitivities in the step's columns, the diagnostics at the
-            nodes (node 0 at tau = 0) with their sensitivities (the last column, eta,
-            zero), the step parameters and their sensitivities.
+            (X (m, 2, n+1), SS (m, 2, nc, n+1), diag (m, 9, n+1), ddiag (m, 9, nc+1, n+1),
+            P (m, n_par), dP): the states, their sensitivities in the step's columns, the
+            diagnostics at the nodes (node 0 at tau = 0) with their sensitivities (the last
+            column, eta, zero), the step parameters and their sensitivities.
         """
-        nu, nc, h = self.nu, self.nc, T / self.N
-        x0, y, dy = L[:2], L[2:2 + nu], L[2 + nu:]
-        P = np.r_[M1, rejoin * T, y, dy]
+        nu, nc, nq, h = self.nu, self.nc, self.nq, T / self.N
+        L = np.atleast_2d(L)
+        m = len(L)
+        P = np.hstack([np.broadcast_to(M1, (m, nu)), np.full((m, 1), rejoin * T), L[:, 2:]])
         dP = self._dP(T, rejoin)
         S0 = np.zeros((2, nc))
         S0[:, :2] = np.eye(2)
-        d0, J0 = self.diag0_fn(np.r_[x0, tab["R"][:, 0], P], 0.0)
-        d0, J0 = np.array(d0).ravel(), np.array(J0)
-        dd0 = np.zeros((d0.size, nc + 1))
-        dd0[:, :nc] = J0[:, :2] @ S0 + J0[:, 2 + 3 * self.nq:] @ dP
+        d0, J0 = self.diag0_fn.map(m)(np.vstack([L[:, :2].T, np.repeat(tab["R"][:, :1], m, 1),
+                                                  P.T]), 0.0)
+        d0 = np.array(d0).T                                           # (m, 9)
+        J0 = np.array(J0).reshape(9, m, -1).transpose(1, 0, 2)        # (m, 9, 2 + 15 + 13)
+        dd0 = np.zeros((m, 9, nc + 1))
+        dd0[:, :, :nc] = J0[:, :, :2] @ S0 + J0[:, :, 2 + 3 * nq:] @ dP
         if self.free:
-            dd0[:, nc - self.nG:nc] += J0[:, 2:2 + 3 * self.nq] @ tab["dR"][:, :, 0]
-        X, SS, diag, ddiag = [x0[:, None]], [S0[:, :, None]], [d0[:, None]], [dd0[:, :, None]]
-        if n > 0:
-            R3, dR3 = self.R3(tab, 0, n)
-            k = np.arange(n)
-            dth = np.zeros((2, nc * n))
+            dd0[:, :, nc - self.nG:nc] += J0[:, :, 2:2 + 3 * nq] @ tab["dR"][:, :, 0]
+        X = np.zeros((m, 2, n + 1))
+        SS = np.zeros((m, 2, nc, n + 1))
+        diag = np.zeros((m, 9, n + 1))
+        ddiag = np.zeros((m, 9, nc + 1, n + 1))
+        X[:, :, 0], SS[:, :, :, 0], diag[:, :, 0], ddiag[:, :, :, 0] = L[:, :2], S0, d0, dd0
+        x, S = L[:, :2].T.copy(), np.tile(S0, m)
+        C = self.CHUNK
+        fn = _chunked(self.node, C, m, self.threads)
+        Pm = np.repeat(P.T, C, axis=1) if m == 1 else np.hstack(
+            [np.repeat(P[i][:, None], C, 1) for i in range(m)])
+        for k0 in range(0, n, C):
+            k = k0 + np.arange(C)
+            R3, dR3 = self.R3(tab, k0, C)
+            dth = np.zeros((2, nc * C))
             if self.free:
                 iT = nc - self.nG + self.na
-                dth[0, k * nc + iT] = k / self.N
-                dth[1, k * nc + iT] = 1.0 / self.N
-            args = [x0, S0, (k * h)[None, :], np.full((1, n), h), R3] + (
-                [dR3] if self.free else []) + [np.repeat(P[:, None], n, 1), np.tile(dP, n), dth]
-            Xn, Sn, Dg, DD = (np.array(v) for v in _accumulated(self.node, n)(*args))
-            X.append(Xn)
-            SS.append(Sn.reshape(2, n, nc).transpose(0, 2, 1))
-            diag.append(Dg)
-            DD = DD.reshape(9, n, nc).transpose(0, 2, 1)
-            ddiag.append(np.concatenate([DD, np.zeros((9, 1, n))], axis=1))
-        return (np.hstack(X), np.concatenate(SS, axis=2), np.hstack(diag),
-                np.concatenate(ddiag, axis=2), P, dP)
+                dth[0, np.arange(C) * nc + iT] = k / self.N
+                dth[1, np.arange(C) * nc + iT] = 1.0 / self.N
+            args = [x, S, (k * h)[None, :], np.full((1, C), h), R3] + (
+                [dR3] if self.free else []) + [Pm, np.tile(dP, C), dth]
+            Xn, Sn, Dg, DD = (np.array(v) for v in fn(*args))
+            cnt = min(C, n - k0)
+            sl = slice(k0 + 1, k0 + 1 + cnt)
+            X[:, :, sl] = Xn.reshape(2, m, C).transpose(1, 0, 2)[:, :, :cnt]
+            SS[:, :, :, sl] = Sn.reshape(2, m, C, nc).transpose(1, 0, 3, 2)[..., :cnt]
+            diag[:, :, sl] = Dg.reshape(9, m, C).transpose(1, 0, 2)[:, :, :cnt]
+            ddiag[:, :, :nc, sl] = DD.reshape(9, m, C, nc).transpose(1, 0, 3, 2)[..., :cnt]
+            x = Xn.reshape(2, m, C)[:, :, -1]
+            S = Sn.reshape(2, m, C, nc)[:, :, -1, :].transpose(0, 1, 2).reshape(2, m * nc)
+        return X, SS, diag, ddiag, P, dP
 
     def _last_input(self, tab, x, n, eta, P, T, alpha):
         return np.r_[x, tab["r"][:, 2 * n], n * T / self.N, eta * T / self.N, P,
@@ -570,13 +614,6 @@ class Transcription:
             Din[o + self.na, g0 + self.na] = 1.0
             Din[o + self.na + 1:, g0:nc] = tab["dR"][:, :, 0]
         return out, J @ Din
-
-    def step(self, tab, L, eta, n, M1, rejoin, T, alpha):
-        """One scenario-step with a given bracket n and eta: (diag (9, n+2), ddiag
-        (9, nc+1, n+2), last outputs, their Jacobian (m, nc+1), eta last)."""
-        X, SS, diag, ddiag, P, dP = self.nodes(tab, L, n, M1, rejoin, T)
-        out, Jl = self.finish(tab, X[:, -1], SS[:, :, -1], n, eta, P, dP, T, alpha)
-        return self._with_last(diag, ddiag, out, Jl)
 
     def _with_last(self, diag, ddiag, out, Jl):
         r = self.rows
@@ -794,29 +831,38 @@ class Reduced:
         n_chunks = int(math.ceil((tr.n_max + 2) / st.chunk))
         t_nodes = np.arange(tr.n_max + 2) / tr.N
         info = []
+        Ls, TLs = [], []
         for k in range(tr.K):
             sk = s if not np.isfinite(self.scales[k]) else float(self.scales[k])
             so, sJ = tr.start_fn(np.r_[sk, M1, tab["R"][:, 0]], tr.dirs[k])
             so, sJ = np.array(so).ravel(), np.array(sJ)
-            L = so[:nl]
             TL = np.zeros((nl, nd))
             if not np.isfinite(self.scales[k]):
                 TL[:, tr.i_s] = sJ[:nl, 0]
             TL[:, tr.i_M1] = sJ[:nl, 1:1 + nu]
             TL += sJ[:nl, 1 + nu:] @ dR0
-            for j in range(int(self.steps[k])):
+            Ls.append(so[:nl])
+            TLs.append(TL)
+        for j in range(int(self.steps.max())):
+            act = [k for k in range(tr.K) if self.steps[k] > j]
+            n_try = min(max(int(self.bracket_guess[k, j]) for k in act) + self.PAD,
+                        tr.n_max - 1)
+            while True:
+                XA, SSA, diagA, ddiagA, PA, dP = tr.nodes(tab, np.array([Ls[k] for k in act]),
+                                                          n_try, M1, rejoin, T)
+                hits = [tr.strike_in(tab, XA[i], diagA[i], n_try, PA[i], T, alpha)
+                        for i in range(len(act))]
+                if all(h is not None for h in hits) or n_try >= tr.n_max - 1:
+                    break
+                n_try = min(n_try + 32, tr.n_max - 1)
+            for i, k in enumerate(act):
                 tag = f"k{k} j{j}"
-                n_try = min(int(self.bracket_guess[k, j]) + self.PAD, tr.n_max - 1)
-                while True:
-                    X, SS, diag, ddiag, P, dP = tr.nodes(tab, L, n_try, M1, rejoin, T)
-                    hit = tr.strike_in(tab, X, diag, n_try, P, T, alpha)
-                    if hit is not None or n_try >= tr.n_max - 1:
-                        break
-                    n_try = min(n_try + 32, tr.n_max - 1)
-                if hit is None:
+                if hits[i] is None:
                     self.failures.append((k, j, "no strike"))
                     raise _NoStrike(tag)
-                n, eta = hit
+                X, SS, diag, ddiag, P = XA[i], SSA[i], diagA[i], ddiagA[i], PA[i]
+                TL = TLs[k]
+                n, eta = hits[i]
                 self.bracket_guess[k, j] = n
                 out, Jl = tr.finish(tab, X[:, n], SS[:, :, n], n, eta, P, dP, T, alpha)
                 diag, ddiag, out, Jl = tr._with_last(diag[:, :n + 1], ddiag[:, :, :n + 1],
@@ -880,8 +926,8 @@ class Reduced:
                         rows.add(err, derr, -tol, tol, f"final_error {tag}")
                 info.append(dict(k=k, j=j, err=err.copy(), te=(n + eta) * T / tr.N,
                                  peak_u=float(np.abs(u).max()), impulse=F.tolist()))
-                L = out[r["next"]]
-                TL = D(Jl[r["next"]])
+                Ls[k] = out[r["next"]]
+                TLs[k] = D(Jl[r["next"]])
         if self.jury is not None:
             fn, lam = self.jury
             (trA, dtr), (det, ddet) = fn(M1)
