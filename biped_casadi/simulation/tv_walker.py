@@ -19,6 +19,10 @@ as in the full-order simulator.
 Validity.  Every node and every impact is checked with
 :mod:`biped_casadi.simulation.validity` (the same conditions as the full-order simulator,
 torque limit included); a scenario stops at its first invalid state.
+
+Terrain.  ``walk(..., terrain=...)`` gives every scenario its ground heights, one per step
+(:mod:`biped_casadi.simulation.terrain`): step k strikes at z_sw = h_k, and v_c still
+starts from the outputs at each step start, so the walker stays exact on uneven ground.
 """
 from __future__ import annotations
 
@@ -35,6 +39,7 @@ from ..numerics import jit_options, rk4_step
 from .kernel import Diagnostics, locate_strike, mapped, strike
 from .options import SimulationOptions
 from .outcome import OutcomeRecorder, WalkBatch
+from .terrain import ground_levels, step_heights
 from .validity import (Limits, first_violation, impact_violation, node_violations,
                        start_violation, strike_violation)
 
@@ -66,6 +71,9 @@ class ZeroDynamicsWalker:
                 or rk4_steps % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {rk4_steps!r}")
         self.options = options if options is not None else SimulationOptions()
+        if self.options.saturate:
+            raise ValueError("options: saturate needs the full-order simulator (the walker is "
+                             "the zero dynamics, exact only with the law's own torques)")
         self.model, self.gait = model, gait
         self.nq, self.nu = model.nq, model.nu
         self.T = gait.T
@@ -205,7 +213,7 @@ class ZeroDynamicsWalker:
         return np.max(np.abs(d), axis=1)
 
     # ------------------------------------------------------------------ walk
-    def walk(self, q0, dq0, M1s, rejoin=0.5, steps: int = 10) -> WalkBatch:
+    def walk(self, q0, dq0, M1s, rejoin=0.5, steps: int = 10, terrain=None) -> WalkBatch:
         """Walk every scenario from its full start state at tau = 0.
 
         Parameters
@@ -218,15 +226,19 @@ class ZeroDynamicsWalker:
             Rejoin time of v_c as a fraction of T, per scenario.
         steps : int
             Steps (impacts) to walk.
+        terrain : Terrain or array_like, optional
+            Ground heights: one :class:`~biped_casadi.simulation.terrain.Terrain` for
+            every scenario, or an (n, steps) array; default flat.
 
         Returns
         -------
         WalkBatch
         """
         x0, P = self.scenarios(q0, dq0, M1s, rejoin)
-        return self._walk(x0, P, steps, tau0=0.0)
+        return self._walk(x0, P, steps, tau0=0.0, terrain=terrain)
 
-    def walk_from_section(self, x, M1s, rejoin=0.5, steps: int = 10) -> WalkBatch:
+    def walk_from_section(self, x, M1s, rejoin=0.5, steps: int = 10,
+                          terrain=None) -> WalkBatch:
         """Walk from zero-dynamics states at the Poincaré section tau = 0.75 T.
 
         The states lie on the zero-dynamics manifold at the section (v_c = 0 there); a
@@ -243,6 +255,8 @@ class ZeroDynamicsWalker:
             Rejoin time of v_c as a fraction of T, per scenario.
         steps : int
             Steps (impacts) to walk.
+        terrain : Terrain or array_like, optional
+            Ground heights (see :meth:`walk`); default flat.
 
         Returns
         -------
@@ -253,12 +267,13 @@ class ZeroDynamicsWalker:
         M1s = np.broadcast_to(np.atleast_2d(np.asarray(M1s, float)), (n, nu))
         tc = np.broadcast_to(np.asarray(rejoin, float), (n,)) * self.T
         P = self.zd.params(M1s, tc, np.zeros((n, nu)), np.zeros((n, nu))).reshape(n, -1)
-        return self._walk(x.copy(), P, steps, tau0=SECTION * self.T)
+        return self._walk(x.copy(), P, steps, tau0=SECTION * self.T, terrain=terrain)
 
-    def _walk(self, x, P, steps, tau0):
+    def _walk(self, x, P, steps, tau0, terrain=None):
         if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         n = len(x)
+        heights = step_heights(terrain, n, steps)
         P = np.array(P, float)
         run = OutcomeRecorder(n, steps)
         scale = self.den_scale(P[:, :self.nu])
@@ -269,35 +284,40 @@ class ZeroDynamicsWalker:
                 break
             run.scenario_steps += idx.size
             start = tau0 if k == 0 else 0.0
-            struck = self._single_support(k, idx, x, P, scale, run, alive, start)
+            ahead, behind = ground_levels(heights, k)
+            ground = (ahead[idx], behind[idx])
+            struck = self._single_support(k, idx, x, P, scale, run, alive, start, ground)
             if struck is not None:
-                self._impact(k, struck, x, P, scale, run, alive)
+                self._impact(k, struck, x, P, scale, run, alive, ahead)
         return run.batch()
 
-    def _check(self, Dg, sign, scale, zprev=None):
+    def _check(self, Dg, sign, scale, zprev=None, ground=None):
         """First failing node (index along the last axis, status) of diagnostics
-        (rows, m, K) of m scenarios."""
+        (rows, m, K) of m scenarios, on the ground (ahead, behind) of each (m,)."""
+        if ground is not None:
+            ground = (ground[0][:, None], ground[1][:, None])
         masks = node_violations(self.schema.rows(Dg), self.limits, scale[:, None],
-                                sign[:, None], zprev)
+                                sign[:, None], zprev, ground)
         return first_violation(masks)
 
     def _track(self, run, idx, Dg, mask=None):
         S = self.schema
         run.track(idx, S.row(Dg, "u"), S.row(Dg, "Fx"), S.row(Dg, "Fz"), mask)
 
-    def _single_support(self, k, idx, x, P, scale, run, alive, tau0):
-        """Integrate step k of the scenarios ``idx`` from ``tau0`` to the strike; records
-        failures; returns the struck scenarios' (indices, state and tau of the node
-        before the strike, z_sw there and after, the denominator's sign) or None."""
+    def _single_support(self, k, idx, x, P, scale, run, alive, tau0, ground):
+        """Integrate step k of the scenarios ``idx`` from ``tau0`` to the strike on the
+        ground (ahead, behind) of each; records failures; returns the struck scenarios'
+        (indices, state and tau of the node before the strike, z_sw there and after, the
+        denominator's sign) or None."""
         S, m = self.schema, idx.size
         Pk = P[idx]
         R0 = np.repeat(self._reference(tau0), m, axis=1)
         D0 = np.array(self._mapped("diag", m)(x[idx].T, np.full((1, m), tau0), R0, Pk.T))
         sign = np.where(S.row(D0, "den") >= 0, 1.0, -1.0)
         zsw0 = S.row(D0, "zsw")
-        _, which = self._check(D0[:, :, None], sign, scale[idx])
+        _, which = self._check(D0[:, :, None], sign, scale[idx], ground=ground)
         if tau0 == 0:
-            which = np.where(which == "", start_violation(zsw0, self.limits), which)
+            which = np.where(which == "", start_violation(zsw0, self.limits, ground[1]), which)
         self._track(run, idx, D0[:, :, None])
         bad = which != ""
         run.fail(idx[bad], which[bad], k)
@@ -322,9 +342,11 @@ class ZeroDynamicsWalker:
                 Xs, Ts, Dg = Xs[:, :, keep], Ts[:, keep], Dg[:, :, keep]
             zs = S.row(Dg, "zsw")
             zp = np.concatenate([zprev[li][:, None], zs[:, :-1]], axis=1)
-            hits = strike(zs, zp, S.row(Dg, "xsw"), self.model.scuff_zone)
+            gl = (ground[0][li], ground[1][li])
+            hits = strike(zs, zp, S.row(Dg, "xsw"), self.model.scuff_zone,
+                          (gl[0][:, None], gl[1][:, None]))
             i_strike = np.where(hits.any(axis=1), np.argmax(hits, axis=1), Ts.shape[1])
-            first, which = self._check(Dg, sign[li], scale[idx[li]], zp)
+            first, which = self._check(Dg, sign[li], scale[idx[li]], zp, gl)
             failed = (which != "") & (first < i_strike)
             upto = np.where(failed, first + 1, i_strike)
             self._track(run, idx[li], Dg, np.arange(Ts.shape[1])[None, :] < upto[:, None])
@@ -351,25 +373,28 @@ class ZeroDynamicsWalker:
             return None
         return idx[si], before[si], t_before[si], z_a[si], z_b[si], sign[si]
 
-    def _impact(self, k, struck, x, P, scale, run, alive):
-        """Locate the impact of the struck scenarios, check the pre-impact state and
-        the impulse, apply the impact map and the next step's start."""
+    def _impact(self, k, struck, x, P, scale, run, alive, ahead):
+        """Locate the impact of the struck scenarios (z_sw = their h_k, ``ahead``), check
+        the pre-impact state and the impulse, apply the impact map and the next step's
+        start."""
         gi, xa, ta, za, zb, sign = struck
         S, nu, m = self.schema, self.nu, gi.size
         Ps = P[gi]
+        hk = ahead[gi]
         ev = self._mapped("event", m)
         za_r = np.vstack([xa.T, self.gait.states(ta)])
 
         def event(eta):
             z, dz, _ = ev(za_r, ta[None, :], eta[None, :], Ps.T)
-            return np.array(z).ravel(), np.array(dz).ravel()
+            return np.array(z).ravel() - hk, np.array(dz).ravel()
 
-        eta = locate_strike(event, self.h, za, zb)
+        eta = locate_strike(event, self.h, za - hk, zb - hk)
         xe = np.array(ev(za_r, ta[None, :], eta[None, :], Ps.T)[2]).T
         tm = ta + eta
         Rm = self._reference(tm)
         Dm = np.array(self._mapped("diag", m)(xe.T, tm[None, :], Rm, Ps.T))
-        _, which = self._check(Dm[:, :, None], sign, scale[gi])
+        _, which = self._check(Dm[:, :, None], sign, scale[gi],
+                               ground=(hk, np.zeros(m)))
         self._track(run, gi, Dm[:, :, None])
         which = np.where(which == "", strike_violation(S.row(Dm, "dzsw")), which)
         xn, yn, dyn, F, vl = (np.array(v) for v in self._mapped("impact", m)(
