@@ -296,7 +296,9 @@ class VirtualConstraintController(Controller):
 
     ``den`` = det [D_1; J] / det [c; H0]: zero where the controller is singular.
     ``in_range`` = 0 once theta leaves the fitted range.  No reference state; the step
-    constants are p = (theta_i, y_i, dy_i/ds) with the correction, none without.
+    constants are p = (theta_i, y_i, dy_i/ds) with the correction, none without
+    (``start(q, dq) -> (r, p)``: :meth:`step_start` as a CasADi Function, without its
+    check of the phase's direction).
 
     Parameters
     ----------
@@ -375,6 +377,11 @@ class VirtualConstraintController(Controller):
                                         [th0, ca.mtimes(c, dqs), ca.mtimes(H0, qs) - h0,
                                          ca.mtimes(J0, dqs)],
                                         ["q", "dq"], ["theta", "dtheta", "y", "dy"])
+        ds = ca.mtimes(c, dqs) * float(vc.direction)
+        p0 = ca.vertcat(th0, ca.mtimes(H0, qs) - h0, ca.mtimes(J0, dqs) / ds) \
+            if self.correction else ca.SX(0, 1)
+        self.start = ca.Function("vc_step_start", [qs, dqs], [ca.SX(0, 1), p0],
+                                 ["q", "dq"], ["r", "p"])
 
     def step_start(self, q, dq) -> StepStart:
         """The step constants of the phase-based correction at the start of a step.
