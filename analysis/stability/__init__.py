@@ -6,7 +6,9 @@ from .poincare import (METHODS, STATUSES, PoincareMap, PoincareResult, poincare_
 from .variational import VariationalJacobian, variational_jacobian
 from .vc_map import VCEigenResult, VirtualConstraintMap, vc_eigenvalue, vc_map
 
+from .step_map import StepLinearisation, StepMap, StepValue, step_map
+
 __all__ = ["PoincareMap", "PoincareResult", "poincare_eigenvalues", "poincare_map",
            "singular_m1_values", "STATUSES", "METHODS", "VariationalJacobian",
            "variational_jacobian", "VCEigenResult", "VirtualConstraintMap", "vc_eigenvalue",
-           "vc_map"]
+           "vc_map", "StepMap", "StepLinearisation", "StepValue", "step_map"]

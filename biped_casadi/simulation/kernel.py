@@ -234,7 +234,12 @@ def locate_strike(event, h: float, z_a, z_b):
 
 
 def threads() -> int:
-    """Threads a batched simulator maps its scenarios over: the cores, at most 8."""
+    """Threads a batched simulator maps its scenarios over: the cores, at most 8, or
+    the environment variable ``BIPED_THREADS`` when set (1 in each process of a Dask
+    cluster that already runs one task per core)."""
+    env = os.environ.get("BIPED_THREADS", "").strip()
+    if env.isdigit() and int(env) > 0:
+        return min(int(env), 64)
     return max(1, min(os.cpu_count() or 1, 8))
 
 
