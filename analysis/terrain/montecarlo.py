@@ -48,7 +48,7 @@ from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
 from biped_casadi.caching import cached, digest
 from biped_casadi.model.description import description_from_dict
 from biped_casadi.results import Result, internal
-from biped_casadi.simulation import (WalkBatch, random_heights, simulator,
+from biped_casadi.simulation import (Terrain, WalkBatch, random_heights, simulator,
                                      virtual_constraint_walker, zero_dynamics_walker)
 from biped_casadi.simulation.outcome import STATUSES
 from gait_opt import Gait
@@ -200,6 +200,9 @@ class MonteCarloSettings:
         RK4 steps per T of the full-order simulator.
     transient : int
         Steps left out at the start of every run for the step-time RMS.
+    profile : tuple of float
+        A measured terrain instead of random heights (sigma then 0): run i walks the
+        profile from its i-th height on, cyclically, m.
     """
 
     sigma: float = 0.005
@@ -213,6 +216,7 @@ class MonteCarloSettings:
     vc_nodes: int = 96
     full_rk4_steps: int = 400
     transient: int = 5
+    profile: tuple = ()
 
     def __post_init__(self):
         s = self.sigma
@@ -236,6 +240,27 @@ class MonteCarloSettings:
                 or self.transient < 0:
             raise ValueError(f"transient must be a non-negative integer, got "
                              f"{self.transient!r}")
+        object.__setattr__(self, "profile", Terrain(tuple(self.profile)).heights)
+        if self.profile and self.sigma:
+            raise ValueError("sigma and profile exclude each other (a profile is the terrain)")
+
+    def heights(self, runs) -> np.ndarray:
+        """The ground heights of runs (module docstring), (len(runs), max_steps), m.
+
+        Parameters
+        ----------
+        runs : array_like of int
+            Run indices.
+
+        Returns
+        -------
+        numpy.ndarray
+        """
+        runs = np.atleast_1d(np.asarray(runs, np.int64))
+        if self.profile:
+            P = np.asarray(self.profile, float)
+            return P[(runs[:, None] + np.arange(self.max_steps)[None, :]) % P.size]
+        return random_heights(self.sigma, self.max_steps, self.seed, runs)
 
     def options(self, spec: WalkerSpec) -> SimulationOptions:
         """The simulation options of the runs.
@@ -322,7 +347,7 @@ def evaluate_chunk(payload, start: int, stop: int) -> dict:
     spec, st = payload.spec, payload.settings
     runs = np.arange(start, stop)
     n, K = runs.size, st.max_steps
-    H = random_heights(st.sigma, K, st.seed, runs)
+    H = st.heights(runs)
     q0, dq0 = np.tile(gait.q(0.0), (n, 1)), np.tile(gait.dq(0.0), (n, 1))
     if spec.engine == "zero_dynamics":
         b = eng.walk(q0, dq0, np.array(spec.M1), spec.rejoin, steps=K, terrain=H)
@@ -679,10 +704,14 @@ def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = No
     if out_dir is not None:
         store = MonteCarloStore(out_dir, dict(gait_sha256=gait.cache_key, spec=spec.to_dict(),
                                               settings=st.to_dict(), code_sha256=code_digest()))
-        store.open()
     reused = 0
+    stack = contextlib.ExitStack()
+    client = None
+    if scheduler not in (None, "local", "inline"):
+        client = stack.enter_context(_client(scheduler, workers))   # before anything is written
     try:
         if store is not None:
+            store.open()
             files = store.chunk_files()
             for k, a, b in todo:
                 for path in files.get(k, []):
@@ -716,19 +745,20 @@ def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = No
                 for k, a, b in todo:
                     record(k, a, b, evaluate_chunk(payload, a, b))
             elif todo:
-                with _client(scheduler, workers) as client:
-                    from dask.distributed import as_completed
-                    [pf] = client.scatter([payload], broadcast=True)
-                    futs = {client.submit(evaluate_chunk, pf, a, b, pure=False,
-                                          key=f"mc-{gait.cache_key[:8]}-{k}-{os.getpid()}-"
-                                              f"{time.monotonic_ns()}"): (k, a, b)
-                            for k, a, b in todo}
-                    try:
-                        for f in as_completed(list(futs)):
-                            record(*futs[f], f.result())
-                    except BaseException:
-                        client.cancel(list(futs))
-                        raise
+                if client is None:
+                    client = stack.enter_context(_client(scheduler, workers))
+                from dask.distributed import as_completed
+                [pf] = client.scatter([payload], broadcast=True)
+                futs = {client.submit(evaluate_chunk, pf, a, b, pure=False,
+                                      key=f"mc-{gait.cache_key[:8]}-{k}-{os.getpid()}-"
+                                          f"{time.monotonic_ns()}"): (k, a, b)
+                        for k, a, b in todo}
+                try:
+                    for f in as_completed(list(futs)):
+                        record(*futs[f], f.result())
+                except BaseException:
+                    client.cancel(list(futs))
+                    raise
         finally:
             bar.close()
         if store is not None:
@@ -737,6 +767,7 @@ def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = No
     finally:
         if store is not None:
             store.close()
+        stack.close()
     parts = [results[k] for k in sorted(results)]
     status = np.concatenate([p["status"] for p in parts])
     fail_step = np.concatenate([p["fail_step"] for p in parts])
