@@ -24,7 +24,9 @@ perfect model it does, at tau = T), the discrete map has a kink there (a non-smo
 reference continuation past T, or a knot of the virtual constraints at the impact
 phase, is met by one RK4 stage or the next); the linearisation is taken on the side of
 a step up of ``GROUND_OFFSET`` m, where the whole step lies before the strike, the side
-whose derivatives converge to the continuous-time map's.
+whose derivatives converge to the continuous-time map's.  The offset moves the norms by
+about 1e-4 relative (the eigenvalues of A by 1e-4 per 10 µm); it keeps central
+differences of the simulator with steps up to 1e-6 on one side of the kink.
 """
 from __future__ import annotations
 
@@ -40,7 +42,7 @@ from ..stability.step_map import DISTURBANCES, INDICATORS, StepLinearisation, st
 __all__ = ["GaitSensitivity", "gait_sensitivity", "gsn_of", "predicted_rms", "GROUND_OFFSET"]
 
 #: the ground height at which the periodic walk is linearised, m (module docstring)
-GROUND_OFFSET = 1e-7
+GROUND_OFFSET = 1e-5
 
 
 @dataclass

@@ -339,11 +339,13 @@ def evaluate_chunk(payload, start: int, stop: int) -> dict:
     -------
     dict
         ``status`` (n,), ``fail_step`` (n,), ``duration`` (n, K) s, ``peak_torque``,
-        ``saturated_time`` (n,), ``scenario_steps``, ``elapsed`` (s) and
-        ``code_sha256``.
+        ``saturated_time`` (n,), ``scenario_steps``, ``elapsed`` (s, walking),
+        ``build`` (s, building the walker or simulator when this process had not yet)
+        and ``code_sha256``.
     """
     t0 = time.perf_counter()
-    gait, eng = _engine(payload)
+    gait, eng = _engine(payload)                 # built (and compiled) once per process
+    built = time.perf_counter()
     spec, st = payload.spec, payload.settings
     runs = np.arange(start, stop)
     n, K = runs.size, st.max_steps
@@ -358,8 +360,8 @@ def evaluate_chunk(payload, start: int, stop: int) -> dict:
     return dict(status=np.asarray(b.status).astype(str), fail_step=np.asarray(b.fail_step),
                 duration=np.asarray(b.duration, float), peak_torque=np.asarray(b.peak_torque),
                 saturated_time=np.asarray(b.saturated_time, float),
-                scenario_steps=int(b.scenario_steps), elapsed=time.perf_counter() - t0,
-                code_sha256=code_digest())
+                scenario_steps=int(b.scenario_steps), elapsed=time.perf_counter() - built,
+                build=built - t0, code_sha256=code_digest())
 
 
 # -------------------------------------------------------------------- storage
@@ -582,7 +584,10 @@ class MonteCarloResult(Result):
     elapsed : float
         Wall time, s.
     compute_time : float
-        Time the chunks took where they were walked, summed, s.
+        Time the chunks took walking where they were walked (builds excluded), summed
+        over the processes, s.
+    steps_computed : int
+        Steps walked by the chunks this call computed.
     chunks_computed, chunks_reused : int
         Chunks walked by this call, and read back from the output folder.
     folder : str
@@ -603,6 +608,7 @@ class MonteCarloResult(Result):
     scenario_steps: int
     elapsed: float
     compute_time: float
+    steps_computed: int
     chunks_computed: int
     chunks_reused: int
     folder: str = ""
@@ -621,8 +627,13 @@ class MonteCarloResult(Result):
 
     @property
     def steps_per_second(self) -> float:
-        """Steps walked per second of wall time."""
+        """Steps walked per second of wall time (start-up, builds and storage included)."""
         return self.scenario_steps / self.elapsed if self.elapsed > 0 else math.nan
+
+    @property
+    def steps_per_process_second(self) -> float:
+        """Steps walked per second of one process's walking (builds excluded)."""
+        return self.steps_computed / self.compute_time if self.compute_time > 0 else math.nan
 
 
 # ------------------------------------------------------------------- dispatch
@@ -785,7 +796,8 @@ def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = No
     return MonteCarloResult(
         spec=spec.to_dict(), settings=st.to_dict(), estimate=est, status_counts=counts,
         step_time=T, step_time_rms=rms, step_time_samples=int(dev.size), scenario_steps=scen,
-        elapsed=el, compute_time=compute_time, chunks_computed=computed, chunks_reused=reused,
+        elapsed=el, compute_time=compute_time, steps_computed=steps_done,
+        chunks_computed=computed, chunks_reused=reused,
         folder=str(out_dir) if out_dir is not None else "",
         message=f"sigma = {st.sigma:g} m, {N} runs of up to {K} steps ({spec.engine}): "
                 + est.message,

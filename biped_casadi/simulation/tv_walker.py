@@ -139,14 +139,16 @@ class ZeroDynamicsWalker:
         z = ca.SX.sym("z", along.size1_in(0))
         eta = ca.SX.sym("eta")
         ze = rk4_step(lambda zv, c: along(zv, tau + c * eta, P)[0], z, eta)
-        z_e = m.swing_foot(along(ze, tau + eta, P)[1])[1]
+        _, q_e, dq_e = along(ze, tau + eta, P)
+        z_e = m.swing_foot(q_e)[1]
         self.event = ca.Function("zd_event", [z, tau, eta, P],
-                                 [z_e, ca.jacobian(z_e, eta), ze[:2]])
-        # impact (eq. 2-3) and the next step's start (eq. 17)
-        q, dq, _ = zd.state(x, tau, R1, P)
-        q_p, dq_p, F, _, v_old = m.impact_full(q, dq)
+                                 [z_e, ca.jacobian(z_e, eta), ze[:2], q_e, dq_e])
+        # impact (eq. 2-3) at the event's state (its reference integrated alongside, so
+        # that the foot is exactly at the strike height) and the next step's start (eq. 17)
+        qi, dqi = ca.SX.sym("q", nq), ca.SX.sym("dq", nq)
+        q_p, dq_p, F, _, v_old = m.impact_full(qi, dqi)
         x_p, y_n, dy_n = zd.step_start(q_p, dq_p, self._R0, P[:self.nu])
-        self.impact = ca.Function("zd_impact", [x, tau, R1, P], [x_p, y_n, dy_n, F, v_old[1]])
+        self.impact = ca.Function("zd_impact", [qi, dqi, P], [x_p, y_n, dy_n, F, v_old[1]])
         qs, dqs, M1s = ca.SX.sym("q", nq), ca.SX.sym("dq", nq), ca.SX.sym("M1", self.nu)
         self.start = ca.Function("zd_start", [qs, dqs, M1s],
                                  list(zd.step_start(qs, dqs, self._R0, M1s)))
@@ -385,11 +387,12 @@ class ZeroDynamicsWalker:
         za_r = np.vstack([xa.T, self.gait.states(ta)])
 
         def event(eta):
-            z, dz, _ = ev(za_r, ta[None, :], eta[None, :], Ps.T)
+            z, dz, *_ = ev(za_r, ta[None, :], eta[None, :], Ps.T)
             return np.array(z).ravel() - hk, np.array(dz).ravel()
 
         eta = locate_strike(event, self.h, za - hk, zb - hk)
-        xe = np.array(ev(za_r, ta[None, :], eta[None, :], Ps.T)[2]).T
+        _, _, xe, qe, dqe = (np.array(v) for v in ev(za_r, ta[None, :], eta[None, :], Ps.T))
+        xe = xe.T
         tm = ta + eta
         Rm = self._reference(tm)
         Dm = np.array(self._mapped("diag", m)(xe.T, tm[None, :], Rm, Ps.T))
@@ -397,8 +400,7 @@ class ZeroDynamicsWalker:
                                ground=(hk, np.zeros(m)))
         self._track(run, gi, Dm[:, :, None])
         which = np.where(which == "", strike_violation(S.row(Dm, "dzsw")), which)
-        xn, yn, dyn, F, vl = (np.array(v) for v in self._mapped("impact", m)(
-            xe.T, tm[None, :], Rm, Ps.T))
+        xn, yn, dyn, F, vl = (np.array(v) for v in self._mapped("impact", m)(qe, dqe, Ps.T))
         F, vl = F.T, vl.ravel()
         rec = np.flatnonzero(which == "")          # a valid strike: the step is complete
         err = xe - self.ref_T[None, :]
