@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from analysis.cluster import dask_client
 from analysis.reporting.plots import save_figures, survival_plot
 from analysis.terrain import (MAX_RUNS, MAX_STEPS, MonteCarloSettings, WalkerSpec,
                               gait_sensitivity, monte_carlo)
@@ -18,6 +19,8 @@ from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m
                      load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
 
 SCALES = ("mass", "inertia", "length", "torso_mass")
+#: how long to wait for a Dask scheduler to answer
+CONNECT = "5s"
 
 
 def _finite_nonnegative(v, name):
@@ -103,6 +106,13 @@ def cmd_terrain(args):
     if args.plot is not None:
         output_dir(args.plot, "--plot")
     say = Progress("terrain", quiet=args.json)
+    if args.scheduler not in (None, "inline", "local"):
+        say(f"connecting to the Dask scheduler at {args.scheduler} (up to {CONNECT}) ...")
+        try:
+            with dask_client(args.scheduler, CONNECT):
+                pass
+        except ValueError as e:
+            raise UserError(f"--{e}") from None
     gait = load_gait(args, say)
     model = gait.model
     M1 = parse_m1(args.m1, model.nu) if args.controller == "tv" else None
