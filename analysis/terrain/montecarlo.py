@@ -213,7 +213,7 @@ class MonteCarloSettings:
     mu: float = 0.6
     torque_limit: float | None = None
     rk4_steps: int = 128
-    vc_nodes: int = 96
+    vc_nodes: int = 100
     full_rk4_steps: int = 400
     transient: int = 5
     profile: tuple = ()
@@ -232,10 +232,12 @@ class MonteCarloSettings:
             raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
         SimulationOptions(mu=self.mu, torque_limit=self.torque_limit,
                           rk4_steps=self.full_rk4_steps)          # checked there
-        for name in ("rk4_steps", "vc_nodes"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 8 or v % 8:
-                raise ValueError(f"{name} must be a positive multiple of 8, got {v!r}")
+        v = self.rk4_steps
+        if isinstance(v, bool) or not isinstance(v, int) or v < 8 or v % 8:
+            raise ValueError(f"rk4_steps must be a positive multiple of 8, got {v!r}")
+        v = self.vc_nodes
+        if isinstance(v, bool) or not isinstance(v, int) or v < 8:
+            raise ValueError(f"vc_nodes must be an integer >= 8, got {v!r}")
         if isinstance(self.transient, bool) or not isinstance(self.transient, int) \
                 or self.transient < 0:
             raise ValueError(f"transient must be a non-negative integer, got "
@@ -314,14 +316,13 @@ def _engine(payload: _Payload):
     spec, st = payload.spec, payload.settings
     opts = st.options(spec)
     model = gait.model
+    # the walkers' options hold only validity thresholds: those of the basins and of
+    # robustness runs with the same thresholds, so a process shares one compiled walker
+    wopts = SimulationOptions(mu=st.mu, torque_limit=st.torque_limit)
     if spec.engine == "zero_dynamics":
-        return gait, zero_dynamics_walker(model, gait, opts.__class__(
-            steps=opts.steps, mu=opts.mu, torque_limit=opts.torque_limit), st.rk4_steps,
-            jit=True)
+        return gait, zero_dynamics_walker(model, gait, wopts, st.rk4_steps, jit=True)
     if spec.engine == "virtual_constraints":
-        return gait, virtual_constraint_walker(model, gait, opts.__class__(
-            steps=opts.steps, mu=opts.mu, torque_limit=opts.torque_limit), st.vc_nodes,
-            jit=True)
+        return gait, virtual_constraint_walker(model, gait, wopts, st.vc_nodes, jit=True)
     return gait, simulator(spec.controller_for(gait), opts, spec.plant_model())
 
 
@@ -642,7 +643,7 @@ def _local_cluster(workers: int | None):
     n = workers or max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                        else (os.cpu_count() or 1))
     return LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                        dashboard_address=None, env={"BIPED_THREADS": "1"})
+                        dashboard_address=":0", env={"BIPED_THREADS": "1"})
 
 
 @contextlib.contextmanager
