@@ -564,7 +564,7 @@ def stage_terrain(ctx: _Context):
         cands.append(("deadbeat M1 (default gait)", g,
                       WalkerSpec("tv", tuple(ctx.data["nlp_M1"]["group1"]))))
     sigmas = (0.004, 0.008) if quick else (0.002, 0.004, 0.008, 0.012)
-    runs, steps = (24, 16) if quick else (48, 25)
+    runs, steps = (16, 12) if quick else (32, 20)
     curves, rows, survival = {}, [], []
     for label, gg, spec in cands:
         pts = []
@@ -601,7 +601,7 @@ def stage_terrain(ctx: _Context):
     label, gg, spec = cands[1] if rb is not None else cands[0]
     plant = m.description.scaled(torso_mass=1.2).to_dict()
     sig = sigmas[-1]
-    st = MonteCarloSettings(sigma=sig, runs=8 if quick else 24, max_steps=steps, chunk=8)
+    st = MonteCarloSettings(sigma=sig, runs=6 if quick else 12, max_steps=steps, chunk=12)
     for gains in TERRAIN_GAINS:
         for pl in (None, plant):
             sp = WalkerSpec(spec.controller, spec.M1, spec.rejoin, gains, pl)

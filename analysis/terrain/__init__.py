@@ -7,6 +7,6 @@ from .montecarlo import (MAX_RUNS, MAX_STEPS, MFPTEstimate, MonteCarloResult,
                          mfpt_estimate, monte_carlo)
 
 __all__ = ["GaitSensitivity", "gait_sensitivity", "gsn_of", "predicted_rms", "GROUND_OFFSET",
-           "WalkerSpec", "MonteCarloSettings", "MonteCarloResult", "MonteCarloStore",
+           "WalkerSpec", "MonteCarloSettings", "MonteCarloResult",
            "MFPTEstimate", "monte_carlo", "mfpt_estimate", "evaluate_chunk", "MAX_RUNS",
            "MAX_STEPS"]

@@ -121,8 +121,10 @@ def gsn_of(lin: StepLinearisation) -> dict:
 
 def predicted_rms(lin: StepLinearisation, sigma: float, steps: int, transient: int = 0,
                   disturbance: str = "ground_height", indicator: str = "step_time") -> float:
-    """The RMS deviation of an indicator over steps ``transient..steps-1`` of walks that
-    start on the periodic walk, disturbances of standard deviation ``sigma``.
+    """The predicted RMS deviation of an indicator on walks from the periodic walk.
+
+    Over steps ``transient..steps-1``, with disturbances of standard deviation
+    ``sigma``.
 
     The covariance of the state follows X_(k+1) = A X_k A' + sigma^2 b b' from X_0 = 0;
     step k's indicator has variance c X_k c' + sigma^2 d^2.

@@ -139,6 +139,8 @@ class SimulationResult(WalkOutcome):
         How the run ended, and the per-step errors and durations.
     peak_torque, min_normal_force, max_friction_ratio, max_impulse_ratio : see WalkOutcome
         The validity margins over the run.
+    saturated_time : float
+        Time the torques spent clipped at the limit, s (see WalkOutcome).
     controller : dict
         The controller's ``describe()``.
     options : SimulationOptions

@@ -105,8 +105,10 @@ class Terrain:
 
     @classmethod
     def load(cls, path) -> "Terrain":
-        """A profile file: a JSON list of heights (or ``{"heights": [...]}``), or text
-        with one or more numbers per line (commas or spaces; ``#`` starts a comment).
+        """A terrain from a profile file.
+
+        The file is a JSON list of heights (or ``{"heights": [...]}``), or text with one
+        or more numbers per line (commas or spaces; ``#`` starts a comment).
 
         Parameters
         ----------
