@@ -182,7 +182,9 @@ def cmd_terrain(args):
         return 0
     print(mc.message)
     print(f"  how the runs ended: " + ", ".join(f"{k} {v}" for k, v in mc.status_counts.items()))
-    print(f"  step time RMS deviation {mc.step_time_rms:.3g} s (from step {st.transient + 1})")
+    if math.isfinite(mc.step_time_rms):
+        print(f"  step time RMS deviation {mc.step_time_rms:.3g} s (from step "
+              f"{st.transient + 1})")
     print("  " + out["gsn_message"])
     if gsn is not None and st.sigma > 0:
         print(f"  predicted step time RMS at sigma = {st.sigma:g} m: "

@@ -800,6 +800,7 @@ def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = No
         elapsed=el, compute_time=compute_time, steps_computed=steps_done,
         chunks_computed=computed, chunks_reused=reused,
         folder=str(out_dir) if out_dir is not None else "",
-        message=f"sigma = {st.sigma:g} m, {N} runs of up to {K} steps ({spec.engine}): "
+        message=(f"a profile of {len(st.profile)} heights" if st.profile else
+                 f"sigma = {st.sigma:g} m") + f", {N} runs of up to {K} steps ({spec.engine}): "
                 + est.message,
         walked=walked, failed=failed, duration=duration)
