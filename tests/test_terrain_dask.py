@@ -88,3 +88,45 @@ def test_real_scheduler_and_two_workers_give_the_same_numbers(robust_gait, inlin
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 p.kill()
+
+
+@pytest.mark.slow
+def test_resume_after_sigkill(robust_gait, tmp_path):
+    """``biped terrain --out`` killed (SIGKILL) part-way: the rerun keeps every stored
+    chunk, computes only the missing ones and gives the uninterrupted run's numbers."""
+    import json
+    import signal
+    out = tmp_path / "killed"
+    gfile = robust_gait.save(tmp_path / "robust_gait.json")
+    args = ["terrain", "--gait", str(gfile), "--m1", *map(str, M1R), "--rejoin", str(REJOIN), "--sigma", "0.008",
+            "--runs", "40", "--max-steps", "20", "--chunk", "2", "--seed", "3",
+            "--scheduler", "inline", "--out", str(out), "--json"]
+    proc = subprocess.Popen([sys.executable, "-m", "analysis.cli", *args],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    chunks = out / "chunks"
+    deadline = time.monotonic() + 180
+    try:
+        while time.monotonic() < deadline and proc.poll() is None:
+            if chunks.is_dir() and len(list(chunks.glob("part-*.parquet"))) >= 3:
+                break
+            time.sleep(0.005)
+        assert proc.poll() is None, proc.stderr.read().decode()[-500:]
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+        proc.stderr.close()
+    stored = {p.name: p.stat().st_mtime_ns for p in chunks.glob("part-*.parquet")}
+    assert 3 <= len(stored) < 20, "the kill must land part-way"
+    spec = WalkerSpec("tv", M1R, REJOIN)
+    st = MonteCarloSettings(sigma=0.008, runs=40, max_steps=20, chunk=2, seed=3)
+    r = monte_carlo(robust_gait, spec, st, out_dir=out, scheduler="inline")
+    assert r.chunks_reused == len(stored) and r.chunks_computed == 20 - len(stored)
+    for p in chunks.glob("part-*.parquet"):
+        if p.name in stored:
+            assert p.stat().st_mtime_ns == stored[p.name]        # kept as they were
+    fresh = monte_carlo(robust_gait, spec, st, scheduler="inline")
+    _same(r, fresh)
+    assert json.loads((out / "montecarlo.json").read_text())["format"] == \
+        "biped-casadi-montecarlo"
