@@ -45,11 +45,12 @@ from biped_casadi.files import write_bytes_atomic, write_text_atomic
 from biped_casadi.results import Result, json_safe
 from gait_opt import GaitOptions, default_gait
 
+from ..design.m1_nlp import coarse_map_points
 from ..design import (RobustDesignSettings, ab_solution_set, coarse_grid_size,
                       conjecture_figures, domain_grid, optimize_m1, robust_design,
                       swing_height_at_Td, taylor_ab)
 from ..robustness import Design, RobustnessSettings, basin, kept_directions, robustness
-from ..stability import poincare_eigenvalues, singular_m1_values, vc_eigenvalue
+from ..stability import JacobianBatch, poincare_eigenvalues, singular_m1_values, vc_eigenvalue
 from ..sweeps import grid_points, one_d_sweeps, run_sweep
 from .plots import (basin_plot, conjecture_plot, gait_profiles_plot, gait_stick_plot,
                     m1_plane_plot, one_d_sweeps_plot, save_figure, stable_domains_plot,
@@ -258,6 +259,7 @@ def stage_grid(ctx: _Context):
     r = run_sweep(ctx.model, ctx.gait, P, out_dir=ctx.sweep_dir(f"grid{n}", -10.0, 10.0),
                   progress=ctx.opts.progress)
     ctx.data["grid"] = r
+    ctx.data.setdefault("maps", []).append(_as_batch(r))
     st = r.point_status
     stable = np.flatnonzero(st == "stable")
     best = None
@@ -303,6 +305,7 @@ def stage_fig4(ctx: _Context):
                           out_dir=ctx.sweep_dir(f"group{k}", f"{n}x{n}", float(lo), float(hi)),
                           progress=ctx.opts.progress)
             mx[real] = r.max_abs
+            ctx.data.setdefault("maps", []).append(_as_batch(r))
             stable = np.zeros(len(P), bool)
             stable[np.flatnonzero(real)] = r.point_status == "stable"
         else:
@@ -372,6 +375,20 @@ def _m1_groups(ctx) -> list:
     return [(f"group{k}", k) for k in range(1, len(ab.points) + 1)] + [("free", None)]
 
 
+def _as_batch(r) -> JacobianBatch:
+    """A sweep's points and values as the batch the M1 NLP starts from."""
+    return JacobianBatch(r.points, r.point_status, r.A, r.eigenvalues, r.max_abs)
+
+
+def _coarse_map(ctx, group):
+    """The coarse map of the M1 NLP when an earlier stage evaluated exactly its points."""
+    if ctx.model.nu < 3 and group is not None:
+        return None
+    P = coarse_map_points(taylor_ab(ctx.model, ctx.gait), group, ctx.model.nu)
+    return next((b for b in ctx.data.get("maps", [])
+                 if b.M1.shape == P.shape and np.array_equal(b.M1, P)), None)
+
+
 def stage_m1(ctx: _Context):
     out = {}
     k = ctx.opts.nlp_starts
@@ -380,7 +397,8 @@ def stage_m1(ctx: _Context):
         t = time.perf_counter()
         kw = dict(group=grp, n_best=k, n_ipopt=min(4, k), n_random=0 if ctx.opts.quick else 2)
         r = ctx.memo("optimize_m1", dict(gait=ctx.gait.cache_key, **kw),
-                     lambda: optimize_m1(ctx.model, ctx.gait, **kw))
+                     lambda: optimize_m1(ctx.model, ctx.gait, coarse=_coarse_map(ctx, grp),
+                                         **kw))
         out[name] = r.to_dict()
         ctx.log(f"   {name}: max|lambda| = {r.max_abs:.3g} (+- {r.eigenvalue_uncertainty:.1g}) "
                 f"in {time.perf_counter() - t:.1f} s")
