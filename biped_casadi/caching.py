@@ -24,7 +24,7 @@ import threading
 from collections import OrderedDict
 from pathlib import Path
 
-__all__ = ["cached", "cache_key", "cache_dir", "digest", "DiskCache"]
+__all__ = ["cached", "cache_key", "cache_dir", "digest", "source_digest", "DiskCache"]
 
 
 def cache_key(obj):
@@ -137,6 +137,40 @@ def digest(obj) -> str:
         64 hex digits.
     """
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+_SOURCES: dict = {}
+
+
+def source_digest(packages=("biped_casadi", "gait_opt", "analysis")) -> str:
+    """SHA-256 of the Python source of packages: a result kept under it is one of this code.
+
+    The packages are located without importing them; computed once per process.
+
+    Parameters
+    ----------
+    packages : tuple of str
+        Top-level package names.
+
+    Returns
+    -------
+    str
+        64 hex digits.
+    """
+    key = tuple(packages)
+    if key not in _SOURCES:
+        import importlib.util
+        h = hashlib.sha256()
+        for name in key:
+            spec = importlib.util.find_spec(name)
+            root = Path(spec.origin).parent if spec and spec.origin else None
+            if root is None:
+                continue
+            for f in sorted(root.rglob("*.py")):
+                h.update(f.relative_to(root.parent).as_posix().encode())
+                h.update(f.read_bytes())
+        _SOURCES[key] = h.hexdigest()
+    return _SOURCES[key]
 
 
 class DiskCache:

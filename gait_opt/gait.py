@@ -76,7 +76,8 @@ class Gait(Reference):
         if not (math.isfinite(self.T) and self.T > 0):
             raise ValueError(f"gait: T must be positive, got {T!r}")
         self.solver_stats = dict(solver_stats or {})
-        self._ref = reference_dynamics(model, options.bezier_degree, options.continuation)
+        self._ref = reference_dynamics(model, options.bezier_degree, options.continuation,
+                                       options.continuation_shape)
         self.n_state = 2
         self.r0 = self.x0
         self._key = None

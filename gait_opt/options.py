@@ -10,6 +10,7 @@ __all__ = ["GaitOptions"]
 COSTS = ("torque_squared_per_length", "torque_squared")
 SCHEMES = ("legendre", "radau")
 DERIVATIVES = ("structured", "casadi")
+CONTINUATIONS = ("ramp", "smooth")
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,12 @@ class GaitOptions:
         c, the acceleration at T ramps linearly to zero over c T, then the velocity
         stays constant (``math.inf``: constant acceleration).  C^2 at T either way: it
         changes neither the optimisation nor A^z, only walking after a late impact.
+    continuation_shape : {'ramp', 'smooth'}
+        With a number ``continuation`` = c: 'ramp' (default) as above, C^2 at T with
+        jerk jumps at T and (1 + c) T; 'smooth', the acceleration decays as
+        (a_T + k sigma) exp(-sigma / (c T)), sigma = t - T, with k matching the jerk at
+        T: C^3 at T and smooth after it (no kink where late impacts land, which an NLP
+        over the impact time needs), the velocity tending to a constant.
     cost : {'torque_squared_per_length', 'torque_squared'}
         The integral of u'u over the step divided by the step length, or the integral
         alone.
@@ -98,6 +105,7 @@ class GaitOptions:
     scheme: str = "legendre"
     bezier_degree: int = 6
     continuation: float | None = None
+    continuation_shape: str = "ramp"
     cost: str = "torque_squared_per_length"
     polish_steps: int = 2000
     ipopt: dict = field(default_factory=dict)
@@ -126,6 +134,13 @@ class GaitOptions:
                     self.continuation, bool) and self.continuation > 0):
             raise ValueError(f"gait option 'continuation' must be None or a positive number "
                              f"(inf allowed), got {self.continuation!r}")
+        if self.continuation_shape not in CONTINUATIONS:
+            raise ValueError(f"gait option 'continuation_shape' must be one of "
+                             f"{CONTINUATIONS}, got {self.continuation_shape!r}")
+        if self.continuation_shape == "smooth" and (self.continuation is None
+                                                    or math.isinf(self.continuation)):
+            raise ValueError("gait option 'continuation_shape' 'smooth' needs a finite "
+                             "'continuation' (its decay time, a fraction of T)")
         for n in ("min_normal_force", "clearance", "min_liftoff_speed", "min_strike_speed"):
             nonneg(n)
         for n in ("step_length_bounds", "step_time_bounds"):
@@ -162,6 +177,8 @@ class GaitOptions:
         for name in ("impact_mu", "continuation"):   # unset: files and cache keys as before
             if d[name] is None:
                 del d[name]
+        if d["continuation_shape"] == "ramp":
+            del d["continuation_shape"]
         d["step_length_bounds"] = list(self.step_length_bounds)
         d["step_time_bounds"] = list(self.step_time_bounds)
         return d

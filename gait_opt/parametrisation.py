@@ -45,12 +45,13 @@ class ReferenceDynamics:
     ``integrate(n)`` -> Function(x0, s0, ds, alpha, T) -> 2 x n states after each step.
     """
 
-    def __init__(self, model, degree: int, continuation: float | None = None):
+    def __init__(self, model, degree: int, continuation: float | None = None,
+                 shape: str = "ramp"):
         if degree < 3:
             raise ValueError(f"bezier_degree must be >= 3, got {degree}")
         self.model = model
         self.degree = M = degree
-        self.continuation = continuation
+        self.continuation, self.shape = continuation, shape
         nu = model.nu
         alpha = ca.SX.sym("alpha", nu, M + 1)
         s = ca.SX.sym("s")
@@ -63,7 +64,7 @@ class ReferenceDynamics:
         ddqa = M * (M - 1) * sum((alpha[:, k + 2] - 2 * alpha[:, k + 1] + alpha[:, k]) * b2[k]
                                  for k in range(M - 1)) / T**2
         if continuation is not None:
-            qa, dqa, ddqa = _continued(qa, dqa, ddqa, s, T, continuation)
+            qa, dqa, ddqa = _continued(qa, dqa, ddqa, s, T, continuation, shape)
         self.qa = ca.Function("qa", [alpha, s, T], [qa, dqa, ddqa],
                               ["alpha", "s", "T"], ["qa", "dqa", "ddqa"])
 
@@ -92,7 +93,7 @@ class ReferenceDynamics:
     @property
     def cache_key(self):
         """What the Functions depend on: the model, the Bezier degree, the continuation."""
-        return (self.model.cache_key, self.degree, self.continuation)
+        return (self.model.cache_key, self.degree, self.continuation, self.shape)
 
     @cached(maxsize=8)
     def integrate(self, n: int) -> ca.Function:
@@ -109,13 +110,26 @@ class ReferenceDynamics:
                            ["x0", "s0", "ds", "alpha", "T"], ["X"])
 
 
-def _continued(qa, dqa, ddqa, s, T, continuation):
-    """q_a^d past T (s > 1) without the Bezier polynomials' growth: the acceleration at
-    T ramps linearly to zero over c T (c = ``continuation``; inf: kept constant), then
-    the velocity stays constant.  C^2 at T, like the polynomial itself."""
+def _continued(qa, dqa, ddqa, s, T, continuation, shape="ramp"):
+    """q_a^d past T (s > 1) without the Bezier polynomials' growth.
+
+    'ramp': the acceleration at T ramps linearly to zero over c T (c = ``continuation``;
+    inf: kept constant), then the velocity stays constant; C^2 at T, like the polynomial
+    itself.  'smooth': the acceleration decays as (a_T + k sigma) exp(-sigma / tau),
+    tau = c T, sigma = t - T, with k = j_T + a_T / tau so that the jerk is continuous
+    too (C^3 at T, smooth after)."""
     q1, v1, a1 = (ca.substitute(e, s, ca.SX(1)) for e in (qa, dqa, ddqa))
     sig = (s - 1) * T
-    if math.isinf(continuation):
+    if shape == "smooth":
+        tau = continuation * T
+        j1 = ca.substitute(ca.jacobian(ddqa, s), s, ca.SX(1)) / T
+        k = j1 + a1 / tau
+        e = ca.exp(-sig / tau)
+        ddqe = (a1 + k * sig) * e
+        dqe = v1 + a1 * tau * (1 - e) + k * (tau**2 - (tau**2 + tau * sig) * e)
+        qe = (q1 + v1 * sig + a1 * tau * sig - a1 * tau**2 * (1 - e)
+              + k * (tau**2 * sig - 2 * tau**3 + (2 * tau**3 + tau**2 * sig) * e))
+    elif math.isinf(continuation):
         qe, dqe, ddqe = q1 + v1 * sig + a1 * sig**2 / 2, v1 + a1 * sig, a1
     else:
         d = continuation * T
@@ -132,11 +146,11 @@ def _continued(qa, dqa, ddqa, s, T, continuation):
 
 
 @cached(maxsize=16)
-def reference_dynamics(model, degree: int, continuation: float | None = None
-                       ) -> ReferenceDynamics:
+def reference_dynamics(model, degree: int, continuation: float | None = None,
+                       shape: str = "ramp") -> ReferenceDynamics:
     """The :class:`ReferenceDynamics` of a model, Bezier degree and continuation past T
     (see :class:`gait_opt.GaitOptions`), memoised."""
-    return ReferenceDynamics(model, degree, continuation)
+    return ReferenceDynamics(model, degree, continuation, shape)
 
 
 # quintic Hermite interpolation on a uniform grid --------------------------------

@@ -157,6 +157,7 @@ CASES = [
     (["gait", "--torque-limit", "-5"], "--torque-limit"),
     (["gait", "--impact-mu", "-0.1"], "--impact-mu"),
     (["gait", "--continuation", "nan"], "--continuation"),
+    (["gait", "--continuation-shape", "smooth"], "--continuation"),
     (["gait", "--clearance", "-0.01"], "--clearance"),
     (["gait", "--intervals", "2"], "--intervals"),
     (["gait", "--intervals", "100000"], "--intervals"),

@@ -167,6 +167,30 @@ def test_continuation_keeps_contact_past_T(model, gait, robust_gait):
     assert fz(robust_gait, np.linspace(1.0, 1.2, 9)).min() > 0
 
 
+def test_smooth_continuation_is_C3_at_T_and_changes_nothing_before(model, robust_gait):
+    """The 'smooth' continuation matches the reference up to its jerk at T (the ramp's
+    jerk jumps there), is the same gait on [0, T], and the actuated joints' acceleration
+    decays (their velocity tends to a constant)."""
+    from gait_opt import Gait
+    g = robust_gait
+    gs = Gait(model, g.options.replace(continuation_shape="smooth"), g.alpha, g.x0, g.T)
+    T = g.T
+    t = np.linspace(0, T, 7)
+    for a, b in zip(g.evaluate(t), gs.evaluate(t)):
+        assert np.max(np.abs(a - b)) < 1e-12
+    assert gs.orbit_residual()["worst"] < 1e-8
+
+    def jerk_jump(gait, h):
+        dd = gait.ddq
+        return np.max(np.abs((dd(T + h) - dd(T)) / h - (dd(T) - dd(T - h)) / h))
+    # the jump shrinks with h for the smooth one (finite differences of a C^3 join), not
+    # for the ramp (a jerk discontinuity)
+    assert jerk_jump(gs, 1e-5) < 0.02 * jerk_jump(g, 1e-5)
+    assert jerk_jump(gs, 1e-6) < 0.2 * jerk_jump(gs, 1e-5)
+    late = gs.ddq(np.array([1.6 * T, 1.9 * T]))[1:]          # the actuated joints
+    assert np.max(np.abs(late)) < 1e-3 * np.max(np.abs(gs.ddq(T)[1:]))
+
+
 def test_basin_outcomes(model, gait):
     b = basin(model, gait, None, n=5, q_span=0.01, dq_span=0.1, steps=3)
     assert b.outcome.shape == (5, 5) and b.outcome[2, 2] in ("converged", "walked")

@@ -39,6 +39,10 @@ def register(sub):
                    help="continue the reference past T by an acceleration ramp over C T "
                         "(default: the Bezier polynomials themselves; the robust design's "
                         "gait uses 0.03)")
+    p.add_argument("--continuation-shape", choices=("ramp", "smooth"), default="ramp",
+                   help="with --continuation: 'ramp' (default), or 'smooth': the "
+                        "acceleration decays exponentially over C T, matching the jerk at "
+                        "T (no kink where late impacts land)")
     p.add_argument("--clearance", type=float, default=None, metavar="H",
                    help="mid-step swing-foot clearance, m (default 0.03; the robust "
                         "design's gait uses 0.05)")
@@ -59,6 +63,9 @@ def cmd_gait(args):
         v = getattr(args, name)
         if v is not None and not (math.isfinite(v) and v > 0):
             raise UserError(f"--{name.replace('_', '-')} must be a positive number, got {v:g}")
+    if args.continuation_shape == "smooth" and args.continuation is None:
+        raise UserError("--continuation-shape smooth needs --continuation C (the decay "
+                        "time, a fraction of T)")
     if not 4 <= args.intervals <= MAX_INTERVALS:
         raise UserError(f"--intervals must be between 4 and {MAX_INTERVALS}, got "
                         f"{args.intervals}")
@@ -71,6 +78,7 @@ def cmd_gait(args):
                           n_intervals=args.intervals, scheme=args.scheme,
                           ipopt={} if args.max_iter is None else {"max_iter": args.max_iter},
                           impact_mu=args.impact_mu, continuation=args.continuation,
+                          continuation_shape=args.continuation_shape,
                           **({} if args.clearance is None else {"clearance": args.clearance}))
 
     say = Progress("gait", quiet=args.json)

@@ -456,13 +456,19 @@ def write_report(out: Path, s: dict) -> Path:
                   "## Results", "", "| quantity | ours | note |", "|---|---|---|"]
         lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} |" for a, b, c in _robot_rows(s)]
     lines += [""] + _robust_lines(s) + _terrain_lines(s)
-    lines += ["## Stages", "", "| stage | status | time (s) |", "|---|---|---|"]
+    reused = s.get("reused", {})
+    lines += ["## Stages", "", "Reused: results an earlier run computed with the same inputs "
+              "and the same code, read from the cache folder.", "",
+              "| stage | status | time (s) | reused |", "|---|---|---|---|"]
     for name, st in stages.items():
         extra = st.get("error") or st.get("reason") or ""
         extra = " ".join(str(extra).split())[:300]
+        kept = reused.get(name, [])
         lines.append(f"| {esc(name)} | {esc(st.get('status'))}"
                      + (f": {esc(extra)}" if extra else "")
-                     + f" | {_f(st.get('time'), '.1f')} |")
+                     + f" | {_f(st.get('time'), '.1f')} | "
+                     + (esc(", ".join(f"{k} x{kept.count(k)}" for k in dict.fromkeys(kept)))
+                        if kept else "") + " |")
     lines += ["", "## Figures", ""]
     figures = s.get("figures", {})
     captions = _figure_captions(s)

@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import pickle
 import re
 import shutil
 import sys
@@ -39,15 +40,17 @@ import numpy as np
 from biped_casadi import (PAPER_SIZES, RABBIT_DESCRIPTION, SimulationOptions,
                           TimeVaryingController, VirtualConstraintController,
                           perturbed_initial_state, robot, simulate)
-from biped_casadi.files import write_text_atomic
+from biped_casadi.caching import DiskCache, source_digest
+from biped_casadi.files import write_bytes_atomic, write_text_atomic
 from biped_casadi.results import Result, json_safe
 from gait_opt import GaitOptions, default_gait
 
+from ..design.m1_nlp import coarse_map_points
 from ..design import (RobustDesignSettings, ab_solution_set, coarse_grid_size,
                       conjecture_figures, domain_grid, optimize_m1, robust_design,
                       swing_height_at_Td, taylor_ab)
 from ..robustness import Design, RobustnessSettings, basin, kept_directions, robustness
-from ..stability import poincare_eigenvalues, singular_m1_values, vc_eigenvalue
+from ..stability import JacobianBatch, poincare_eigenvalues, singular_m1_values, vc_eigenvalue
 from ..sweeps import grid_points, one_d_sweeps, run_sweep
 from .plots import (basin_plot, conjecture_plot, gait_profiles_plot, gait_stick_plot,
                     m1_plane_plot, one_d_sweeps_plot, save_figure, stable_domains_plot,
@@ -143,6 +146,13 @@ def run_folder(out_dir, quick: bool, robot_name="rabbit") -> Path:
     return folder / "quick" if quick else folder
 
 
+#: the reproduction's long computations kept between runs (M1 NLP, s*, basins,
+#: simulations): pickles in the cache folder, named by the digest of their inputs and of
+#: the toolkit's source, so a run by other code recomputes them; any run of any mode
+#: reuses what another computed with the same inputs
+RESULTS = DiskCache("reproduce", version=1)
+
+
 @dataclass
 class _Context:
     out: Path                     # where this run's figures and files are staged
@@ -153,10 +163,32 @@ class _Context:
     data: dict = field(default_factory=dict)
     model: object = None
     gait: object = None
+    stage: str = ""               # the stage running now
+    reused: dict = field(default_factory=dict)
 
     def log(self, msg):
         if self.opts.progress:
             print(msg, file=sys.stderr, flush=True)
+
+    def memo(self, name: str, inputs: dict, compute):
+        """``compute()``, or its result kept by an earlier run with the same inputs and
+        the same code (:data:`RESULTS`); what was reused is listed per stage in
+        summary.json (``reused``)."""
+        body = dict(name=name, inputs=inputs, code=source_digest(),
+                    robot=self.model.params.to_dict() if self.model is not None else None)
+        path = RESULTS.path(body, suffix=".pkl")
+        if path.is_file():
+            try:
+                value = pickle.loads(path.read_bytes())
+                self.reused.setdefault(self.stage, []).append(name)
+                return value
+            except Exception:            # noqa: BLE001 - a damaged entry is recomputed
+                pass
+        value = compute()
+        with contextlib.suppress(OSError):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_bytes_atomic(path, pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL))
+        return value
 
     def sweep_dir(self, name: str, *settings) -> Path:
         """The sweep folder of ``name`` made with ``settings`` (part of the folder name,
@@ -227,6 +259,7 @@ def stage_grid(ctx: _Context):
     r = run_sweep(ctx.model, ctx.gait, P, out_dir=ctx.sweep_dir(f"grid{n}", -10.0, 10.0),
                   progress=ctx.opts.progress)
     ctx.data["grid"] = r
+    ctx.data.setdefault("maps", []).append(_as_batch(r))
     st = r.point_status
     stable = np.flatnonzero(st == "stable")
     best = None
@@ -272,6 +305,7 @@ def stage_fig4(ctx: _Context):
                           out_dir=ctx.sweep_dir(f"group{k}", f"{n}x{n}", float(lo), float(hi)),
                           progress=ctx.opts.progress)
             mx[real] = r.max_abs
+            ctx.data.setdefault("maps", []).append(_as_batch(r))
             stable = np.zeros(len(P), bool)
             stable[np.flatnonzero(real)] = r.point_status == "stable"
         else:
@@ -341,14 +375,30 @@ def _m1_groups(ctx) -> list:
     return [(f"group{k}", k) for k in range(1, len(ab.points) + 1)] + [("free", None)]
 
 
+def _as_batch(r) -> JacobianBatch:
+    """A sweep's points and values as the batch the M1 NLP starts from."""
+    return JacobianBatch(r.points, r.point_status, r.A, r.eigenvalues, r.max_abs)
+
+
+def _coarse_map(ctx, group):
+    """The coarse map of the M1 NLP when an earlier stage evaluated exactly its points."""
+    if ctx.model.nu < 3 and group is not None:
+        return None
+    P = coarse_map_points(taylor_ab(ctx.model, ctx.gait), group, ctx.model.nu)
+    return next((b for b in ctx.data.get("maps", [])
+                 if b.M1.shape == P.shape and np.array_equal(b.M1, P)), None)
+
+
 def stage_m1(ctx: _Context):
     out = {}
     k = ctx.opts.nlp_starts
     groups = _m1_groups(ctx)
     for name, grp in groups:
         t = time.perf_counter()
-        r = optimize_m1(ctx.model, ctx.gait, group=grp, n_best=k, n_ipopt=min(4, k),
-                        n_random=0 if ctx.opts.quick else 2)
+        kw = dict(group=grp, n_best=k, n_ipopt=min(4, k), n_random=0 if ctx.opts.quick else 2)
+        r = ctx.memo("optimize_m1", dict(gait=ctx.gait.cache_key, **kw),
+                     lambda: optimize_m1(ctx.model, ctx.gait, coarse=_coarse_map(ctx, grp),
+                                         **kw))
         out[name] = r.to_dict()
         ctx.log(f"   {name}: max|lambda| = {r.max_abs:.3g} (+- {r.eigenvalue_uncertainty:.1g}) "
                 f"in {time.perf_counter() - t:.1f} s")
@@ -416,7 +466,17 @@ def stage_robustness(ctx: _Context):
     st = (RobustnessSettings(directions=8, rounds=6) if ctx.opts.quick
           else RobustnessSettings())
     rows = []
-    kept = kept_directions(m, g, st)
+
+    def kept_of(gait):
+        return ctx.memo("kept_directions", dict(gait=gait.cache_key, settings=st.__dict__),
+                        lambda: kept_directions(m, gait, st))
+
+    def s_star(gait, design, kept):
+        return ctx.memo("robustness", dict(gait=gait.cache_key, settings=st.__dict__,
+                                           design=None if design is None else design.to_dict(),
+                                           kept=kept.directions.tolist()),
+                        lambda: robustness(m, gait, design, st, kept=kept))
+    kept = kept_of(g)
     cands = [("virtual constraints", None)]
     for name in ("group1", "group2"):
         if name in ctx.data.get("nlp_M1", {}):
@@ -425,17 +485,17 @@ def stage_robustness(ctx: _Context):
     if _is_rabbit(ctx):
         cands.append(("the paper's printed M1", Design(tuple(PAPER["example_M1"]))))
     for label, design in cands:
-        r = robustness(m, g, design, st, kept=kept)
+        r = s_star(g, design, kept)
         rows.append(dict(label=label, gait="default", **r.to_dict()))
         ctx.log(f"   default gait, {label}: s* = {r.s_star:.4g}")
     rb = ctx.data.get("robust")
     if rb is not None:
         g2 = ctx.data["robust_gait"]
-        kept2 = kept_directions(m, g2, st)
+        kept2 = kept_of(g2)
         for label, design in (("virtual constraints", None),
                               ("robust design", Design(tuple(rb.design["M1"]),
                                                        rb.design["rejoin"]))):
-            r = robustness(m, g2, design, st, kept=kept2)
+            r = s_star(g2, design, kept2)
             rows.append(dict(label=label, gait="robust", **r.to_dict()))
             ctx.log(f"   robust gait, {label}: s* = {r.s_star:.4g}")
     ctx.summary["robustness"] = dict(settings=st.__dict__.copy(), rows=rows)
@@ -457,7 +517,7 @@ def stage_sim(ctx: _Context):
              VirtualConstraintController(m, g)),
             ("default_deadbeat", f"deadbeat M1 = [{', '.join(f'{v:.3g}' for v in M1)}] "
                                  "(default gait)", TimeVaryingController(m, g, M1))):
-        r = simulate(ctrl, q0, dq0, opts)
+        r = _simulated(ctx, g, ctrl, q0, dq0, opts)
         runs.append(r)
         labels.append(label)
         out["runs"][key] = dict(label=label, **_brief(r))
@@ -473,7 +533,7 @@ def stage_sim(ctx: _Context):
                  VirtualConstraintController(m, g2)),
                 ("robust_design", "robust design (robust gait)",
                  TimeVaryingController(m, g2, M1r, rejoin=rb.design["rejoin"]))):
-            r = simulate(ctrl, q0, dq0, opts)
+            r = _simulated(ctx, g2, ctrl, q0, dq0, opts)
             runs.append(r)
             labels.append(label)
             robust_runs.append(r)
@@ -498,6 +558,21 @@ def stage_sim(ctx: _Context):
     ctx.summary["simulation"] = out
 
 
+def _simulated(ctx, gait, ctrl, q0, dq0, opts):
+    """A full-order run, kept between reproductions (:meth:`_Context.memo`)."""
+    return ctx.memo("simulate", dict(gait=gait.cache_key, controller=ctrl.describe(),
+                                     q0=np.asarray(q0).tolist(), dq0=np.asarray(dq0).tolist(),
+                                     options=opts.to_dict()),
+                    lambda: simulate(ctrl, q0, dq0, opts))
+
+
+def _basin(ctx, gait, design, n):
+    """A basin of attraction, kept between reproductions (:meth:`_Context.memo`)."""
+    return ctx.memo("basin", dict(gait=gait.cache_key, n=n,
+                                  design=None if design is None else design.to_dict()),
+                    lambda: basin(ctx.model, gait, design, n=n))
+
+
 def stage_basins(ctx: _Context):
     """Basins of attraction on the Poincaré section: the deadbeat M1 beside virtual
     constraints on the default gait, the robust design beside virtual constraints on its
@@ -506,7 +581,7 @@ def stage_basins(ctx: _Context):
     n = 41 if ctx.opts.quick else 101
     M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(m.nu)), float)
     out = {}
-    b1 = [basin(m, g, Design(tuple(M1)), n=n), basin(m, g, None, n=n)]
+    b1 = [_basin(ctx, g, Design(tuple(M1)), n), _basin(ctx, g, None, n)]
     out["default"] = [b.to_dict() for b in b1]
     figs = ctx.out / "figures"
     ctx.figures["basin_default"] = save_figure(
@@ -515,8 +590,8 @@ def stage_basins(ctx: _Context):
     rb = ctx.data.get("robust")
     if rb is not None:
         g2 = ctx.data["robust_gait"]
-        b2 = [basin(m, g2, Design(tuple(rb.design["M1"]), rb.design["rejoin"]), n=n),
-              basin(m, g2, None, n=n)]
+        b2 = [_basin(ctx, g2, Design(tuple(rb.design["M1"]), rb.design["rejoin"]), n),
+              _basin(ctx, g2, None, n)]
         out["robust"] = [b.to_dict() for b in b2]
         ctx.figures["basin_robust"] = save_figure(
             basin_plot(b2, title="Basins on the robust design's gait: the robust design "
@@ -680,6 +755,7 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
         mode = "quick" if opts.quick else "full"
         ctx.summary["mode"] = mode
         ctx.summary["stages"] = status
+        ctx.summary["reused"] = ctx.reused
         ctx.summary["figures"] = {k: [_relative(f, staging) for f in
                                       ([v] if isinstance(v, str) else v)]
                                   for k, v in ctx.figures.items()}
@@ -714,11 +790,14 @@ def _run_stages(ctx: _Context) -> dict:
             ctx.log(f"[{k}/{len(STAGES)}] {name}: skipped (needs {', '.join(missing)})")
             continue
         ctx.log(f"[{k}/{len(STAGES)}] {name} ...")
+        ctx.stage = name
         t = time.perf_counter()
         try:
             fn(ctx)
             status[name] = dict(status="ok", time=time.perf_counter() - t)
-            ctx.log(f"[{k}/{len(STAGES)}] {name}: done in {time.perf_counter() - t:.1f} s")
+            kept = ctx.reused.get(name)
+            ctx.log(f"[{k}/{len(STAGES)}] {name}: done in {time.perf_counter() - t:.1f} s"
+                    + (f" (reused {len(kept)} kept result(s))" if kept else ""))
         except Exception as e:          # a failed stage is reported, the others go on
             status[name] = dict(status="failed", error=f"{type(e).__name__}: {e}",
                                 time=time.perf_counter() - t,

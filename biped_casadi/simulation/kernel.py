@@ -6,7 +6,9 @@ Diagnostics.  At every integration node a simulator logs one column of named row
 controller's decoupling denominator ``den`` (eq. 24 for the time-varying controller),
 the stance reaction ``Fx``, ``Fz``, ``in_range`` (0 where the controller's reference is
 undefined), the swing foot ``xsw``, ``zsw``, ``dzsw``, the hip height ``hip`` and the torso
-angle ``torso``.  :mod:`biped_casadi.simulation.validity` checks them by name.
+angle ``torso``, and (full order) ``saturated``: 1 where the commanded torque was clipped at
+the limit (``SimulationOptions.saturate``).  :mod:`biped_casadi.simulation.validity` checks
+them by name.
 
 Strike.  The swing foot strikes between two nodes when it crosses the ground going down
 in front of the stance foot (beyond ``model.scuff_zone``): z_sw(previous) >= 0 > z_sw
@@ -44,11 +46,13 @@ class Diagnostics:
     nu : int
         Number of torques.
     outputs : bool
-        Whether the rows carry the outputs y and their rates dy (the full-order
-        simulator's; on a zero dynamics they vanish and are left out).
+        Whether the rows carry the controller's outputs y, their rates dy, ``in_range``
+        and ``saturated`` (the full-order simulator's; on a zero dynamics the outputs
+        vanish, the reference is defined everywhere and the torques are the law's, so
+        they are left out).
     """
 
-    SCALARS = ("den", "Fx", "Fz", "in_range", "xsw", "zsw", "dzsw", "hip", "torso", "saturated")
+    SCALARS = ("den", "Fx", "Fz", "xsw", "zsw", "dzsw", "hip", "torso")
 
     def __init__(self, nu: int, outputs: bool = True):
         self.nu, self.outputs = nu, outputs
@@ -57,7 +61,8 @@ class Diagnostics:
         for name, n in blocks:
             self.index[name] = slice(row, row + n)
             row += n
-        for name in self.SCALARS:
+        self.scalars = self.SCALARS + (("in_range", "saturated") if outputs else ())
+        for name in self.scalars:
             self.index[name] = row
             row += 1
         #: number of rows
@@ -93,8 +98,9 @@ class Diagnostics:
         xs, zs = model.swing_foot(q)
         _, dzs = model.swing_foot_velocity(q, dq)
         parts = [u] + ([y, dy] if self.outputs else [])
-        return ca.vertcat(*parts, den, Fx, Fz, in_range, xs, zs, dzs,
-                          model.points(q)[1, model.hip_index], model.torso_angle(q), saturated)
+        return ca.vertcat(*parts, den, Fx, Fz, xs, zs, dzs, model.points(q)[1, model.hip_index],
+                          model.torso_angle(q),
+                          *([in_range, saturated] if self.outputs else []))
 
     def row(self, D, name):
         """Row(s) ``name`` of diagnostics ``D`` (rows along the first axis).
@@ -127,7 +133,7 @@ class Diagnostics:
         dict
             'finite', 'u' and every scalar row by name.
         """
-        out = {name: D[self.index[name]] for name in self.SCALARS}
+        out = {name: D[self.index[name]] for name in self.scalars}
         out["u"] = D[self.index["u"]]
         fin = np.all(np.isfinite(D), axis=0)
         out["finite"] = fin if finite is None else fin & finite

@@ -103,9 +103,7 @@ class VirtualConstraintWalker:
         D, H = m.D(q), m.H(q, dq)
         u = (ca.mtimes(D, ddq) + H)[1:]
         Fx, Fz = m.ground_reaction_acc(q, dq, ddq)
-        lo, hi = vm.vc.theta_range
-        inr = ca.logic_and(thn >= lo, thn <= hi)
-        diag = self.schema.vector(m, q, dq, u, Fx, Fz, den, in_range=inr)
+        diag = self.schema.vector(m, q, dq, u, Fx, Fz, den)
         node = ca.Function("vc_node", [z, th, hs, p], [ca.cse(zn), thn, ca.cse(diag)],
                            self._jit)
         self.start_node = node                   # with h = 0: the diagnostics of a state
