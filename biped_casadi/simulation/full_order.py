@@ -54,7 +54,7 @@ from ..caching import cached
 from ..control.output_law import SECTION
 from ..numerics import as_vector, jit_options, rk4_step
 from ..results import internal, json_safe
-from .kernel import Diagnostics, locate_strike, strike
+from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, strike
 from .options import SimulationOptions
 from .outcome import STATUSES, OutcomeRecorder, WalkOutcome
 from .perturbation import Perturbation
@@ -267,7 +267,7 @@ class Simulator:
                              f"h = T / rk4_steps = {self.h:.3g} s: the output dynamics would "
                              f"be integrated unstably (use eps >= {2 * self.h:.2g} or more "
                              "rk4_steps)")
-        self.chunk = self.options.rk4_steps // 8
+        self.chunk = self.options.rk4_steps // CHUNKS_PER_STEP
         self.schema = Diagnostics(self.model.nu, outputs=True)
         self.limits = Limits.of(self.options, self.plant)
         self._build()
@@ -424,12 +424,13 @@ class Simulator:
             return (fail[1], fail[2], t0), None
         walk["p"], walk["section"] = p, None
         z_prev = z0
-        for ci in range(int(math.ceil(o.horizon * 8))):
-            tau0 = ci * T / 8
+        n = CHUNKS_PER_STEP
+        for ci in range(int(math.ceil(o.horizon * n))):
+            tau0 = ci * T / n
             Xs, taus = (np.array(v) for v in self.advance(X, tau0, h, p))
             taus = taus.ravel()
             Dg = np.array(self.diagnostics_chunk(Xs, taus[None, :], p))
-            if tau0 + T / 8 > o.horizon * T + 1e-12:      # last partial chunk
+            if tau0 + T / n > o.horizon * T + 1e-12:      # last partial chunk
                 keep = taus <= o.horizon * T + 1e-12
                 Xs, taus, Dg = Xs[:, keep], taus[keep], Dg[:, keep]
             zs = S.row(Dg, "zsw")
@@ -450,7 +451,7 @@ class Simulator:
                         walk["rec"], S)
                 return None, self._locate(Xa, ta, za - hk, zs[i_strike] - hk, p, hk)
             log.add(t0, taus, k, Xs, Dg, sx, walk["rec"], S)
-            if abs(tau0 + T / 8 - SECTION * T) < 1e-12 * T:
+            if abs(tau0 + T / n - SECTION * T) < 1e-12 * T:
                 walk["section"] = np.array([Xs[0, -1], Xs[self.model.nq, -1]])
             X, z_prev = Xs[:, -1], zs[-1]
         return ("no_impact", f"step {k}: no valid impact of the swing foot within "

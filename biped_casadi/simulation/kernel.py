@@ -31,7 +31,12 @@ import casadi as ca
 import numpy as np
 
 __all__ = ["Diagnostics", "strike", "locate_strike", "mapped", "threads", "NEWTON_ITERATIONS",
-           "ground_height"]
+           "ground_height", "CHUNKS_PER_STEP"]
+
+#: CasADi calls per reference step duration T of the simulators' integration: each call
+#: integrates a quarter of T (the Poincaré section 0.75 T falls on a boundary); RK4 steps
+#: per T are a multiple of 8
+CHUNKS_PER_STEP = 4
 
 #: most Newton iterations of :func:`locate_strike` (it stops at ``|z_sw| < 1e-15`` m, usually
 #: after 3 to 5)

@@ -12,7 +12,7 @@ Why it is fast.  One compiled step serves every design and every perturbation: t
 output matrix M1 and the rejoin time t_c of v_c are runtime inputs, like the step's
 (y_i, dy_i).  The reference q^d(tau) is the same for every scenario at the same tau, so
 it is tabulated once per chunk of the step and shared by the whole batch.  A chunk of
-T/8 is one ``mapaccum`` of RK4 nodes mapped over the active scenarios; the strike and
+T/4 is one ``mapaccum`` of RK4 nodes mapped over the active scenarios; the strike and
 the impact time come from the stepping kernel (:mod:`biped_casadi.simulation.kernel`),
 as in the full-order simulator.
 
@@ -36,7 +36,7 @@ from ..control.output_law import SECTION, check_M1, decoupling_denominator
 from ..control.reference import require_same_robot
 from ..control.zero_dynamics import denominator_samples, zero_dynamics
 from ..numerics import jit_options, rk4_step
-from .kernel import Diagnostics, locate_strike, mapped, strike
+from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, mapped, strike
 from .options import SimulationOptions
 from .outcome import OutcomeRecorder, WalkBatch
 from .terrain import ground_levels, step_heights
@@ -79,12 +79,12 @@ class ZeroDynamicsWalker:
         self.T = gait.T
         self.rk4_steps, self.jit = rk4_steps, jit
         self.h = self.T / rk4_steps
-        self.K = rk4_steps // 8
+        self.K = rk4_steps // CHUNKS_PER_STEP
         self.limits = Limits.of(self.options, model)
         self.schema = Diagnostics(self.nu, outputs=False)
         self.zd = zero_dynamics(model)
         self.horizon = min(self.options.horizon, (gait.t_max - self.h) / self.T)
-        self.n_chunks = int(math.ceil(self.horizon * 8))
+        self.n_chunks = int(math.ceil(self.horizon * CHUNKS_PER_STEP))
         self.ref_T = gait.state_at(self.T)
         self._R0 = np.concatenate(gait.evaluate(0.0))
         self._table()
@@ -98,7 +98,7 @@ class ZeroDynamicsWalker:
     # ---------------------------------------------------------------- build
     def _table(self):
         """The reference (q^d, dq^d, ddq^d) at the three RK4 stage times of every node,
-        one (9 nq x K) block per chunk of T/8."""
+        one (9 nq x K) block per chunk of T/4."""
         nq = self.nq
         j = np.arange(self.n_chunks * self.K)
         tt = np.minimum(np.stack([j * self.h, (j + 0.5) * self.h, (j + 1) * self.h]),
@@ -329,7 +329,7 @@ class ZeroDynamicsWalker:
         before = np.full((m, 2), np.nan)
         t_before, z_a, z_b = np.zeros(m), np.zeros(m), np.zeros(m)
         struck = np.zeros(m, bool)
-        c0 = int(round(tau0 / (self.T / 8)))
+        c0 = int(round(tau0 / (self.T / CHUNKS_PER_STEP)))
         for ci in range(c0, self.n_chunks):
             li = np.flatnonzero(live)
             if li.size == 0:
@@ -339,7 +339,7 @@ class ZeroDynamicsWalker:
             Xs = Xs.reshape(2, li.size, self.K)
             Ts = Ts.reshape(li.size, self.K)
             Dg = Dg.reshape(-1, li.size, self.K)
-            if (ci + 1) / 8 > self.horizon + 1e-12:                 # last partial chunk
+            if (ci + 1) / CHUNKS_PER_STEP > self.horizon + 1e-12:  # last partial chunk
                 keep = Ts[0] <= self.horizon * self.T + 1e-12
                 Xs, Ts, Dg = Xs[:, :, keep], Ts[:, keep], Dg[:, :, keep]
             zs = S.row(Dg, "zsw")
