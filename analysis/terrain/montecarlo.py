@@ -197,7 +197,9 @@ class MonteCarloSettings:
     vc_nodes : int
         RK4 nodes per step of the virtual-constraint walker.
     full_rk4_steps : int
-        RK4 steps per T of the full-order simulator.
+        RK4 steps per T of the full-order simulator, at least (raised where the output
+        gains' eps needs a finer step, eps >= 2 h); 200 gives the verdicts of 2000 on every
+        run compared (``benchmarks/bench_terrain.py``, README).
     transient : int
         Steps left out at the start of every run for the step-time RMS.
     profile : tuple of float
@@ -214,7 +216,7 @@ class MonteCarloSettings:
     torque_limit: float | None = None
     rk4_steps: int = 128
     vc_nodes: int = 100
-    full_rk4_steps: int = 400
+    full_rk4_steps: int = 200
     transient: int = 5
     profile: tuple = ()
 
@@ -264,21 +266,28 @@ class MonteCarloSettings:
             return P[(runs[:, None] + np.arange(self.max_steps)[None, :]) % P.size]
         return random_heights(self.sigma, self.max_steps, self.seed, runs)
 
-    def options(self, spec: WalkerSpec) -> SimulationOptions:
+    def options(self, spec: WalkerSpec, T: float = None) -> SimulationOptions:
         """The simulation options of the runs.
 
         Parameters
         ----------
         spec : WalkerSpec
-            What walks (its saturation).
+            What walks (its saturation and its gains).
+        T : float, optional
+            The reference's step duration, s: the RK4 steps per T are raised to keep
+            eps >= 2 T / rk4_steps.
 
         Returns
         -------
         SimulationOptions
         """
+        rk = self.full_rk4_steps
+        if T is not None:
+            need = 2.0 * T / spec.gains[2]
+            rk = max(rk, 8 * int(math.ceil(need / 8 - 1e-9)))
         return SimulationOptions(steps=self.max_steps, mu=self.mu,
                                  torque_limit=self.torque_limit, saturate=spec.saturate,
-                                 rk4_steps=self.full_rk4_steps, jit=True)
+                                 rk4_steps=rk, jit=True)
 
     def to_dict(self) -> dict:
         """The fields by name.
@@ -314,7 +323,7 @@ def _engine(payload: _Payload):
     """The walker or simulator of a payload (built once per process)."""
     gait = _gait_for(payload.gait_sha256, payload.gait)
     spec, st = payload.spec, payload.settings
-    opts = st.options(spec)
+    opts = st.options(spec, gait.T)
     model = gait.model
     # the walkers' options hold only validity thresholds: those of the basins and of
     # robustness runs with the same thresholds, so a process shares one compiled walker
