@@ -612,6 +612,94 @@ def stage_basins(ctx: _Context):
     ctx.summary["basins"] = out
 
 
+#: the two gain sets of the model-error table (Kp, Kd, eps of eq. 13)
+TERRAIN_GAINS = ((1.0, 2.0, 0.02), (1.0, 2.0, 0.2))
+
+
+def stage_terrain(ctx: _Context):
+    """Beyond the initial push (issue 22), small: the mean first-passage time on
+    stochastic terrain against sigma for virtual constraints and the robust design (on
+    its gait) and the deadbeat M1 (default gait); the exact gait sensitivity norm and
+    its check against the Monte Carlo's step-time RMS at small sigma; the MFPT with the
+    torso 20 % heavier than the controller's model for two gain sets."""
+    from ..terrain import MonteCarloSettings, WalkerSpec, gait_sensitivity, monte_carlo
+    from ..terrain import predicted_rms
+    from .plots import mfpt_sigma_plot, survival_plot
+    m, g = ctx.model, ctx.gait
+    quick = ctx.opts.quick
+    rb, g2 = ctx.data.get("robust"), ctx.data.get("robust_gait")
+    cands = []
+    if rb is not None:
+        cands += [("virtual constraints (robust gait)", g2, WalkerSpec("vc")),
+                  ("robust design", g2, WalkerSpec("tv", tuple(rb.design["M1"]),
+                                                   rb.design["rejoin"]))]
+    else:
+        cands.append(("virtual constraints (default gait)", g, WalkerSpec("vc")))
+    if "group1" in ctx.data.get("nlp_M1", {}):
+        cands.append(("deadbeat M1 (default gait)", g,
+                      WalkerSpec("tv", tuple(ctx.data["nlp_M1"]["group1"]))))
+    sigmas = (0.004, 0.008) if quick else (0.002, 0.004, 0.008, 0.012)
+    runs, steps = (16, 12) if quick else (32, 20)
+    curves, rows, survival = {}, [], []
+    for label, gg, spec in cands:
+        pts = []
+        for sig in sigmas:
+            st = MonteCarloSettings(sigma=sig, runs=runs, max_steps=steps, chunk=runs)
+            r = monte_carlo(gg, spec, st, scheduler="inline")
+            e = r.estimate
+            pts.append((sig, e.mfpt, *e.mfpt_ci))
+            rows.append(dict(label=label, sigma=sig, mfpt=e.mfpt, mfpt_ci=e.mfpt_ci,
+                             failure_probability=e.failure_probability,
+                             failures=e.failures, runs=runs, max_steps=steps,
+                             status_counts=r.status_counts))
+            if sig == sigmas[-1]:
+                survival.append((r, label))
+        curves[label] = pts
+        ctx.log(f"   {label}: MFPT " + ", ".join(
+            f"{p[1]:.3g}" if np.isfinite(p[1]) else f">{p[2]:.3g}" for p in pts)
+            + f" steps at sigma = {', '.join(f'{1000 * v:g}' for v in sigmas)} mm")
+    # the exact GSN, and the Monte Carlo's step-time RMS it predicts at sigma = 0.5 mm
+    gsn = []
+    tv = [c for c in cands if c[2].controller == "tv"]       # (the README has the VC's)
+    for label, gg, spec in tv[-1:] if quick else tv:
+        gs = gait_sensitivity(spec.controller_for(gg), SimulationOptions(rk4_steps=400))
+        st = MonteCarloSettings(sigma=5e-4, runs=runs, max_steps=steps, chunk=runs)
+        mc = monte_carlo(gg, spec, st, scheduler="inline")
+        pred = predicted_rms(gs.linearisation, st.sigma, steps, st.transient)
+        gsn.append(dict(label=label, gsn=gs.gsn, spectral_radius=gs.spectral_radius,
+                        sigma=st.sigma, predicted_rms=pred, monte_carlo_rms=mc.step_time_rms,
+                        relative_difference=abs(mc.step_time_rms - pred) / pred))
+        ctx.log(f"   {label}: GSN (ground, step time) {gs.gsn['ground_height']['step_time']:.4g}"
+                f" s/m; step-time RMS at 0.5 mm: predicted {pred:.3g} s, Monte Carlo "
+                f"{mc.step_time_rms:.3g} s")
+    # a 20 % torso-mass error, two gain sets (the full-order simulator)
+    err = []
+    label, gg, spec = cands[1] if rb is not None else cands[0]
+    plant = m.description.scaled(torso_mass=1.2).to_dict()
+    sig = sigmas[-1]
+    st = MonteCarloSettings(sigma=sig, runs=6 if quick else 12, max_steps=steps, chunk=12)
+    for gains in TERRAIN_GAINS:
+        for pl in (None, plant):
+            sp = WalkerSpec(spec.controller, spec.M1, spec.rejoin, gains, pl)
+            r = monte_carlo(gg, sp, st, scheduler="inline")
+            e = r.estimate
+            err.append(dict(design=label, gains=list(gains), torso_mass_error=0.2 if pl else 0.0,
+                            sigma=sig, mfpt=e.mfpt, mfpt_ci=e.mfpt_ci, failures=e.failures,
+                            runs=st.runs, max_steps=steps, engine=sp.engine,
+                            status_counts=r.status_counts))
+    ctx.log("   torso +20 %: " + "; ".join(
+        f"gains {r['gains']}: MFPT {r['mfpt']:.3g}" for r in err if r["torso_mass_error"]))
+    figs = ctx.out / "figures"
+    ctx.figures["terrain_mfpt"] = save_figure(mfpt_sigma_plot(curves), figs / "terrain_mfpt",
+                                              FORMATS)
+    ctx.figures["terrain_survival"] = save_figure(
+        survival_plot([r for r, _ in survival], labels=[lab for _, lab in survival],
+                      title=f"Survival at sigma = {1000 * sigmas[-1]:g} mm"),
+        figs / "terrain_survival", FORMATS)
+    ctx.summary["terrain"] = dict(sigmas=list(sigmas), runs=runs, max_steps=steps,
+                                  mfpt=rows, gsn=gsn, model_error=err)
+
+
 STAGES = [
     ("gait", stage_gait, ()),
     ("singular outputs (eq. 24)", stage_singular, ("gait",)),
@@ -625,6 +713,7 @@ STAGES = [
     ("robustness (s*)", stage_robustness, ("M1 NLP",)),
     ("Fig. 5, Fig. 6, animation", stage_sim, ("M1 NLP",)),
     ("basins of attraction", stage_basins, ("M1 NLP",)),
+    ("uneven ground (MFPT, GSN)", stage_terrain, ("gait",)),
 ]
 
 
