@@ -1,10 +1,14 @@
-"""Work on a Dask distributed cluster: one way to connect, used by the sweeps
-(:mod:`analysis.sweeps.sweep`) and the robustness searches (:mod:`analysis.robustness.s_star`)."""
+"""Long work on many cores: one way to connect to a Dask distributed cluster (a
+scheduler's address, a client, or a ``LocalCluster`` of this machine), used by the sweeps,
+the robustness searches and the Monte Carlo, and one progress bar."""
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
 
-__all__ = ["dask_client", "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
+__all__ = ["dask_client", "cluster_client", "progress_bar", "DASK_CONNECT_TIMEOUT",
+           "DASK_WORKER_TIMEOUT"]
 
 #: how long to wait for a Dask scheduler to answer, and for a first worker to join
 DASK_CONNECT_TIMEOUT = "10s"
@@ -57,3 +61,70 @@ def dask_client(scheduler, connect_timeout=None):
     finally:
         if own:
             client.close()
+
+
+def _local_cluster(workers: int | None):
+    from dask.distributed import LocalCluster
+    n = workers or max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                       else (os.cpu_count() or 1))
+    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                        dashboard_address=":0", env={"BIPED_THREADS": "1"})
+
+
+@contextlib.contextmanager
+def cluster_client(scheduler=None, workers: int | None = None):
+    """A Dask client: the given one, a scheduler's address, or a ``LocalCluster``'s.
+
+    Parameters
+    ----------
+    scheduler : None, 'local', str or dask.distributed.Client
+        None or 'local': a ``LocalCluster`` of ``workers`` processes on this machine
+        (closed afterwards); otherwise as :func:`dask_client`.
+    workers : int, optional
+        Processes of the ``LocalCluster`` (default: this machine's cores).
+
+    Yields
+    ------
+    dask.distributed.Client
+
+    Raises
+    ------
+    ValueError
+        Naming 'scheduler' (see :func:`dask_client`).
+    """
+    if scheduler is None or scheduler == "local":
+        try:
+            import dask.distributed as _dd                    # noqa: F401
+        except ImportError:
+            raise ValueError("scheduler: dask.distributed is not installed") from None
+        cluster = _local_cluster(workers)
+        try:
+            with dask_client(cluster.scheduler_address, DASK_CONNECT_TIMEOUT) as client:
+                yield client
+        finally:
+            cluster.close()
+        return
+    with dask_client(scheduler, DASK_CONNECT_TIMEOUT) as client:
+        yield client
+
+
+def progress_bar(progress: bool, total: int, initial: int, unit: str, desc: str):
+    """A tqdm bar on stderr, shown only when ``progress`` and stderr is a terminal.
+
+    Parameters
+    ----------
+    progress : bool
+        Whether progress is wanted.
+    total, initial : int
+        Units of work in all, and already done (resumed).
+    unit, desc : str
+        What a unit is, and what the work is.
+
+    Returns
+    -------
+    tqdm.tqdm
+    """
+    from tqdm.auto import tqdm
+    return tqdm(total=total, initial=initial, unit=unit, desc=desc,
+                disable=not (bool(progress) and sys.stderr.isatty()), file=sys.stderr,
+                dynamic_ncols=True)

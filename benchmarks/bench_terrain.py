@@ -29,7 +29,7 @@ import numpy as np
 
 from analysis.design import ROBUST_GAIT
 from analysis.terrain import MonteCarloSettings, WalkerSpec, monte_carlo
-from biped_casadi import SimulationOptions, rabbit, robot, simulate
+from biped_casadi import SimulationOptions, rabbit, simulate
 from biped_casadi.simulation import WalkBatch
 from gait_opt import GaitOptions, default_gait
 

@@ -181,7 +181,7 @@ def cmd_terrain(args):
         print_json(out)
         return 0
     print(mc.message)
-    print(f"  how the runs ended: " + ", ".join(f"{k} {v}" for k, v in mc.status_counts.items()))
+    print("  how the runs ended: " + ", ".join(f"{k} {v}" for k, v in mc.status_counts.items()))
     if math.isfinite(mc.step_time_rms):
         print(f"  step time RMS deviation {mc.step_time_rms:.3g} s (from step "
               f"{st.transient + 1})")

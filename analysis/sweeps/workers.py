@@ -5,7 +5,6 @@ the code that computed them."""
 from __future__ import annotations
 
 import os
-import sys
 import time
 from dataclasses import dataclass
 
@@ -14,7 +13,7 @@ import numpy as np
 from biped_casadi.caching import cached, digest
 from gait_opt import Gait
 
-from ..cluster import DASK_CONNECT_TIMEOUT, dask_client
+from ..cluster import DASK_CONNECT_TIMEOUT, dask_client, progress_bar
 from ..stability.poincare import PoincareMap, poincare_map
 
 from .results import SweepSettings, code_digest
@@ -93,10 +92,7 @@ def _cpu_count() -> int:
 
 
 def _progress_bar(progress, total, initial):
-    from tqdm.auto import tqdm
-    enabled = bool(progress) and sys.stderr.isatty()
-    return tqdm(total=total, initial=initial, unit="M1", desc="sweep", disable=not enabled,
-                file=sys.stderr, dynamic_ncols=True)
+    return progress_bar(progress, total, initial, "M1", "sweep")
 
 
 def _run_threads(payload, P, todo, record, workers):

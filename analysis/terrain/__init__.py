@@ -2,9 +2,10 @@
 first-passage time by Monte Carlo on stochastic terrain (chunked, resumable, on Dask),
 and the exact gait sensitivity norm of the step-to-step map."""
 from .gsn import GROUND_OFFSET, GaitSensitivity, gait_sensitivity, gsn_of, predicted_rms
-from .montecarlo import (MAX_RUNS, MAX_STEPS, MFPTEstimate, MonteCarloResult,
-                         MonteCarloSettings, MonteCarloStore, WalkerSpec, evaluate_chunk,
-                         mfpt_estimate, monte_carlo)
+from .chunks import evaluate_chunk
+from .estimates import MFPTEstimate, mfpt_estimate
+from .montecarlo import MonteCarloResult, monte_carlo
+from .spec import MAX_RUNS, MAX_STEPS, MonteCarloSettings, WalkerSpec
 
 __all__ = ["GaitSensitivity", "gait_sensitivity", "gsn_of", "predicted_rms", "GROUND_OFFSET",
            "WalkerSpec", "MonteCarloSettings", "MonteCarloResult",
