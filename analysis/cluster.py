@@ -6,9 +6,10 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import time
 
-__all__ = ["dask_client", "cluster_client", "progress_bar", "DASK_CONNECT_TIMEOUT",
-           "DASK_WORKER_TIMEOUT"]
+__all__ = ["dask_client", "cluster_client", "progress_bar", "submit_chunks",
+           "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
 
 #: how long to wait for a Dask scheduler to answer, and for a first worker to join
 DASK_CONNECT_TIMEOUT = "10s"
@@ -128,3 +129,41 @@ def progress_bar(progress: bool, total: int, initial: int, unit: str, desc: str)
     return tqdm(total=total, initial=initial, unit=unit, desc=desc,
                 disable=not (bool(progress) and sys.stderr.isatty()), file=sys.stderr,
                 dynamic_ncols=True)
+
+
+def submit_chunks(client, fn, payload, todo, record, name: str, args_of=None):
+    """Evaluate chunks on a Dask cluster, recording each as it completes.
+
+    The payload is scattered to every worker once; chunk ``task = (k, ...)`` runs
+    ``fn(payload, *args_of(task))`` under a unique key; on any error (or an interruption)
+    the chunks not yet done are cancelled and the error is raised.
+
+    Parameters
+    ----------
+    client : dask.distributed.Client
+        The cluster.
+    fn : callable
+        ``fn(payload, *args) -> result`` (importable by the workers).
+    payload : object
+        What every chunk needs (sent once).
+    todo : list of tuple
+        One task ``(k, ...)`` per chunk, k its number.
+    record : callable
+        ``record(*task, result)`` for each finished chunk, in completion order.
+    name : str
+        Prefix of the task keys.
+    args_of : callable, optional
+        The arguments of ``fn`` after the payload for a task (default: ``task[1:]``).
+    """
+    from dask.distributed import as_completed
+    [pf] = client.scatter([payload], broadcast=True)
+    args_of = args_of or (lambda task: task[1:])
+    futs = {client.submit(fn, pf, *args_of(task), pure=False,
+                          key=f"{name}-{task[0]}-{os.getpid()}-{time.monotonic_ns()}"): task
+            for task in todo}
+    try:
+        for f in as_completed(list(futs)):
+            record(*futs[f], f.result())
+    except BaseException:
+        client.cancel(list(futs))
+        raise

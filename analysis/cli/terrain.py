@@ -10,12 +10,12 @@ from analysis.reporting.plots import save_figures, survival_plot
 from analysis.terrain import (MAX_RUNS, MAX_STEPS, MonteCarloSettings, WalkerSpec,
                               gait_sensitivity, monte_carlo)
 from biped_casadi import SimulationOptions, robot
-from biped_casadi.control import PAPER_REJOIN, SECTION
+from biped_casadi.control import PAPER_REJOIN
 from biped_casadi.model.biped import resolve_robot
 from biped_casadi.simulation import Terrain, TerrainFileError
 from biped_casadi.simulation.terrain import MAX_HEIGHT
 
-from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+from .common import (add_design_arguments, Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
                      load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
 
 SCALES = ("mass", "inertia", "length", "torso_mass")
@@ -215,13 +215,7 @@ def register(sub):
                     "and a rerun resumes, with the same numbers for the same seed.")
     add_gait_arguments(p)
     add_robot(p)
-    p.add_argument("--controller", choices=("tv", "vc"), default="tv",
-                   help="tv: time-varying outputs (default, needs --m1); vc: virtual constraints")
-    p.add_argument("--m1", nargs="+", type=float, metavar="M1",
-                   help="the components of M1, one per torque")
-    p.add_argument("--rejoin", type=float, metavar="R",
-                   help=f"time at which v_c rejoins the reference, fraction of T in "
-                        f"(0, {SECTION}] (default 0.5, the paper's)")
+    add_design_arguments(p)
     p.add_argument("--sigma", type=float, default=None, metavar="S",
                    help="standard deviation of the ground height per step, m (0.005)")
     p.add_argument("--terrain", metavar="FILE",

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import time
 from dataclasses import dataclass
 
@@ -42,7 +41,7 @@ import numpy as np
 from biped_casadi.results import Result, internal
 
 
-from ..cluster import cluster_client, progress_bar
+from ..cluster import cluster_client, progress_bar, submit_chunks
 from .chunks import MonteCarloStore, evaluate_chunk, _Payload
 from .estimates import MFPTEstimate, mfpt_estimate
 from .spec import MonteCarloSettings, WalkerSpec, code_digest
@@ -218,18 +217,8 @@ def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = No
             elif todo:
                 if client is None:
                     client = stack.enter_context(cluster_client(scheduler, workers))
-                from dask.distributed import as_completed
-                [pf] = client.scatter([payload], broadcast=True)
-                futs = {client.submit(evaluate_chunk, pf, a, b, pure=False,
-                                      key=f"mc-{gait.cache_key[:8]}-{k}-{os.getpid()}-"
-                                          f"{time.monotonic_ns()}"): (k, a, b)
-                        for k, a, b in todo}
-                try:
-                    for f in as_completed(list(futs)):
-                        record(*futs[f], f.result())
-                except BaseException:
-                    client.cancel(list(futs))
-                    raise
+                submit_chunks(client, evaluate_chunk, payload, todo, record,
+                              f"mc-{gait.cache_key[:8]}")
         finally:
             bar.close()
         if store is not None:
