@@ -1,10 +1,15 @@
-"""Work on a Dask distributed cluster: one way to connect, used by the sweeps
-(:mod:`analysis.sweeps.sweep`) and the robustness searches (:mod:`analysis.robustness.s_star`)."""
+"""Long work on many cores: one way to connect to a Dask distributed cluster (a
+scheduler's address, a client, or a ``LocalCluster`` of this machine), used by the sweeps,
+the robustness searches and the Monte Carlo, and one progress bar."""
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
+import time
 
-__all__ = ["dask_client", "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
+__all__ = ["dask_client", "cluster_client", "progress_bar", "submit_chunks",
+           "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
 
 #: how long to wait for a Dask scheduler to answer, and for a first worker to join
 DASK_CONNECT_TIMEOUT = "10s"
@@ -57,3 +62,108 @@ def dask_client(scheduler, connect_timeout=None):
     finally:
         if own:
             client.close()
+
+
+def _local_cluster(workers: int | None):
+    from dask.distributed import LocalCluster
+    n = workers or max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                       else (os.cpu_count() or 1))
+    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                        dashboard_address=":0", env={"BIPED_THREADS": "1"})
+
+
+@contextlib.contextmanager
+def cluster_client(scheduler=None, workers: int | None = None):
+    """A Dask client: the given one, a scheduler's address, or a ``LocalCluster``'s.
+
+    Parameters
+    ----------
+    scheduler : None, 'local', str or dask.distributed.Client
+        None or 'local': a ``LocalCluster`` of ``workers`` processes on this machine
+        (closed afterwards); otherwise as :func:`dask_client`.
+    workers : int, optional
+        Processes of the ``LocalCluster`` (default: this machine's cores).
+
+    Yields
+    ------
+    dask.distributed.Client
+
+    Raises
+    ------
+    ValueError
+        Naming 'scheduler' (see :func:`dask_client`).
+    """
+    if scheduler is None or scheduler == "local":
+        try:
+            import dask.distributed as _dd                    # noqa: F401
+        except ImportError:
+            raise ValueError("scheduler: dask.distributed is not installed") from None
+        cluster = _local_cluster(workers)
+        try:
+            with dask_client(cluster.scheduler_address, DASK_CONNECT_TIMEOUT) as client:
+                yield client
+        finally:
+            cluster.close()
+        return
+    with dask_client(scheduler, DASK_CONNECT_TIMEOUT) as client:
+        yield client
+
+
+def progress_bar(progress: bool, total: int, initial: int, unit: str, desc: str):
+    """A tqdm bar on stderr, shown only when ``progress`` and stderr is a terminal.
+
+    Parameters
+    ----------
+    progress : bool
+        Whether progress is wanted.
+    total, initial : int
+        Units of work in all, and already done (resumed).
+    unit, desc : str
+        What a unit is, and what the work is.
+
+    Returns
+    -------
+    tqdm.tqdm
+    """
+    from tqdm.auto import tqdm
+    return tqdm(total=total, initial=initial, unit=unit, desc=desc,
+                disable=not (bool(progress) and sys.stderr.isatty()), file=sys.stderr,
+                dynamic_ncols=True)
+
+
+def submit_chunks(client, fn, payload, todo, record, name: str, args_of=None):
+    """Evaluate chunks on a Dask cluster, recording each as it completes.
+
+    The payload is scattered to every worker once; chunk ``task = (k, ...)`` runs
+    ``fn(payload, *args_of(task))`` under a unique key; on any error (or an interruption)
+    the chunks not yet done are cancelled and the error is raised.
+
+    Parameters
+    ----------
+    client : dask.distributed.Client
+        The cluster.
+    fn : callable
+        ``fn(payload, *args) -> result`` (importable by the workers).
+    payload : object
+        What every chunk needs (sent once).
+    todo : list of tuple
+        One task ``(k, ...)`` per chunk, k its number.
+    record : callable
+        ``record(*task, result)`` for each finished chunk, in completion order.
+    name : str
+        Prefix of the task keys.
+    args_of : callable, optional
+        The arguments of ``fn`` after the payload for a task (default: ``task[1:]``).
+    """
+    from dask.distributed import as_completed
+    [pf] = client.scatter([payload], broadcast=True)
+    args_of = args_of or (lambda task: task[1:])
+    futs = {client.submit(fn, pf, *args_of(task), pure=False,
+                          key=f"{name}-{task[0]}-{os.getpid()}-{time.monotonic_ns()}"): task
+            for task in todo}
+    try:
+        for f in as_completed(list(futs)):
+            record(*futs[f], f.result())
+    except BaseException:
+        client.cancel(list(futs))
+        raise

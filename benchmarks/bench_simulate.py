@@ -1,7 +1,7 @@
 """Full-order closed-loop simulation: simulated steps per second of wall time.
 
 Ours: :func:`biped_casadi.simulation.simulate` (fixed-step RK4, 2000 steps per T, a
-chunk of 250 steps per CasADi call, impact located by Newton), interpreted and
+chunk of 500 steps per CasADi call, impact located by Newton), interpreted and
 JIT-compiled.  Baseline, in the same run: ``scipy.integrate.solve_ivp`` (DOP853,
 rtol 1e-10, atol 1e-12, the guard as a terminal event) on the same closed-loop
 right-hand side, a CasADi Function called once per evaluation: the usual way to

@@ -24,7 +24,8 @@ import threading
 from collections import OrderedDict
 from pathlib import Path
 
-__all__ = ["cached", "cache_key", "cache_dir", "digest", "source_digest", "DiskCache"]
+__all__ = ["cached", "cache_key", "cache_dir", "digest", "source_digest", "modules_digest",
+           "DiskCache"]
 
 
 def cache_key(obj):
@@ -169,6 +170,35 @@ def source_digest(packages=("biped_casadi", "gait_opt", "analysis")) -> str:
             for f in sorted(root.rglob("*.py")):
                 h.update(f.relative_to(root.parent).as_posix().encode())
                 h.update(f.read_bytes())
+        _SOURCES[key] = h.hexdigest()
+    return _SOURCES[key]
+
+
+def modules_digest(modules, salt: str = "") -> str:
+    """SHA-256 of the source of some modules: the code that decides a kind of result.
+
+    Stored results carry it, so a result of other code is refused or recomputed, and a
+    worker running other code is detected.  Computed once per process per argument.
+
+    Parameters
+    ----------
+    modules : tuple of str
+        Module names (imported to find their files).
+    salt : str
+        Mixed in first (e.g. a results version).
+
+    Returns
+    -------
+    str
+        64 hex digits.
+    """
+    key = (tuple(modules), salt)
+    if key not in _SOURCES:
+        import importlib
+        h = hashlib.sha256(salt.encode())
+        for name in key[0]:
+            h.update(name.encode())
+            h.update(Path(importlib.import_module(name).__file__).read_bytes())
         _SOURCES[key] = h.hexdigest()
     return _SOURCES[key]
 

@@ -107,6 +107,11 @@ def files(model, gait, tmp_path_factory):
     out["notes"] = str(d / "notes")
     (d / "broken_link.json").symlink_to(d / "gone.json")
     out["broken_link"] = str(d / "broken_link.json")
+    write("plant_bad.toml", (pathlib.Path(__file__).parent.parent / "biped_casadi" / "model"
+                             / "robots" / "rabbit.toml").read_text().replace("mass = 12.0",
+                                                                             "mass = -12.0"))
+    write("terrain_text.txt", "0.01 0.02 zero\n")
+    write("terrain_high.json", "[0.01, 0.5]")
     out["long"] = "x" * 5000
     out["root_dir"] = str(d)
     yield out
@@ -116,6 +121,8 @@ def files(model, gait, tmp_path_factory):
 
 G = ["--gait", "{gait}"]
 M0 = ["--m1", "0", "0", "0", "0"]
+TV = ["--m1", "-10", "7.5", "10", "-5", "--runs", "2", "--max-steps", "2",
+      "--scheduler", "inline"]
 
 #: (arguments, a word the error line must contain[, "nonroot" when permissions matter])
 CASES = [
@@ -288,6 +295,47 @@ CASES = [
     (["reproduce", "--out", "{file}"], "--out"),
     (["reproduce", "--quick", "--out", "{file}"], "--out"),
     (["reproduce", "--out", "{file}/rep"], "--out"),
+    # ---- terrain (issue 22)
+    (["terrain", *TV, "--sigma", "-0.01"], "--sigma"),
+    (["terrain", *TV, "--sigma", "nan"], "--sigma"),
+    (["terrain", *TV, "--sigma", "inf"], "--sigma"),
+    (["terrain", *TV, "--sigma", "1"], "--sigma"),
+    (["terrain", *TV, "--runs", "0"], "--runs"),
+    (["terrain", *TV, "--runs", "1000000000"], "--runs"),
+    (["terrain", *TV, "--max-steps", "0"], "--max-steps"),
+    (["terrain", *TV, "--max-steps", "1000000000"], "--max-steps"),
+    (["terrain", *TV, "--chunk", "0"], "--chunk"),
+    (["terrain", *TV, "--seed", "-1"], "--seed"),
+    (["terrain", *TV, "--terrain", "{missing}"], "--terrain"),
+    (["terrain", *TV, "--terrain", "{dir}"], "--terrain"),
+    (["terrain", *TV, "--terrain", "{garbage}"], "--terrain"),
+    (["terrain", *TV, "--terrain", "{empty}"], "no height"),
+    (["terrain", *TV, "--terrain", "{terrain_text}"], "not a number"),
+    (["terrain", *TV, "--terrain", "{terrain_high}"], "at most"),
+    (["terrain", *TV, "--terrain", "{truncated}"], "malformed"),
+    (["terrain", *TV, "--terrain", "{unreadable}"], "--terrain", "nonroot"),
+    (["terrain", *TV, "--terrain", "{list}", "--sigma", "0.01"], "excludes"),
+    (["terrain", *TV, "--plant", "{missing}"], "--plant"),
+    (["terrain", *TV, "--plant", "{dir}"], "--plant"),
+    (["terrain", *TV, "--plant", "{params_garbage}"], "--plant"),
+    (["terrain", *TV, "--plant", "{plant_bad}"], "--plant"),
+    (["terrain", *TV, "--plant", "three_link"], "not a plant of this robot"),
+    (["terrain", *TV, "--plant", "octopus"], "--plant"),
+    (["terrain", *TV, "--mass-scale", "0"], "--mass-scale"),
+    (["terrain", *TV, "--inertia-scale", "-1"], "--inertia-scale"),
+    (["terrain", *TV, "--length-scale", "nan"], "--length-scale"),
+    (["terrain", *TV, "--torso-mass-scale", "inf"], "--torso-mass-scale"),
+    (["terrain", *TV, "--plant", "rabbit", "--mass-scale", "1.1"], "excludes"),
+    (["terrain", *TV, "--gains", "1", "2", "0"], "--gains"),
+    (["terrain", "--m1", "1", "2"], "--m1 takes 4"),
+    (["terrain", "--controller", "vc", "--m1", "1", "2", "3", "4"], "--m1"),
+    (["terrain", *TV, "--scheduler", "nonsense"], "--scheduler"),
+    (["terrain", *TV, "--scheduler", "tcp://127.0.0.1:1", "--out", "{root_dir}/mc"],
+     "--scheduler"),
+    (["terrain", *TV, "--out", "{file}"], "--out"),
+    (["terrain", *TV, "--plot", "{file}/figs"], "--plot"),
+    (["simulate", "--terrain", "nan"], "--terrain"),
+    (["simulate", "--terrain", "0.01", "1.0"], "--terrain"),
     (["reproduce", "--out", ""], "--out"),
     (["reproduce", "--out", "{sys}/rep"], "--out"),
     (["reproduce", "--out", "{read_only}/rep", "--quick"], "--out", "nonroot"),

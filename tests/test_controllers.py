@@ -89,7 +89,11 @@ def test_tv_step_start_makes_output_zero(model, gait, random_m1, rng):
     dq = gait.dq(0.0) + rng.normal(0, 0.1, 5)
     st = ctrl.step_start(q, dq)
     out = ctrl.evaluate(q, dq, 0.0, st.r, st.p)
-    assert np.max(np.abs(out.y)) < 1e-14 and np.max(np.abs(out.dy)) < 1e-13
+    # zero up to rounding of the terms that cancel: |M| |dq| (M = [M1, I]) sets their size
+    # (CI's processor rounds differently from a workstation's: 1e-12 seen, 1e-13 here)
+    scale = (1.0 + np.sum(np.abs(random_m1))) * np.max(np.abs(dq))
+    assert np.max(np.abs(out.y)) < 1e-14
+    assert np.max(np.abs(out.dy)) < 1e3 * np.finfo(float).eps * scale
     np.testing.assert_allclose(st.r, gait.x0)
 
 

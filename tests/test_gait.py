@@ -320,7 +320,7 @@ def test_open_orbit_can_be_loaded_with_a_warning(gait, tmp_path):
     with pytest.warns(OpenOrbitWarning, match=r"misses the start by 0\.00\d+ rad"):
         g = Gait.load(path, allow_open_orbit=True)
     assert g.orbit_residual()["worst"] > 1e-3
-    assert gait.orbit_residual()["worst"] < ORBIT_TOL / 1000         # the real one closes
+    assert gait.orbit_residual()["worst"] < ORBIT_TOL / 100          # the real one closes
     # the tolerance is stated and adjustable
     with pytest.warns(OpenOrbitWarning):
         Gait.load(gait.save(tmp_path / "g2.json"), orbit_tol=1e-20, allow_open_orbit=True)

@@ -119,9 +119,10 @@ def test_locate_strike_finds_the_root_vectorised():
 
 def test_diagnostics_schema_by_name(model):
     with_outputs, without = Diagnostics(4, outputs=True), Diagnostics(4, outputs=False)
-    assert with_outputs.size == 3 * 4 + len(Diagnostics.SCALARS) + 1      # + in_range
+    assert with_outputs.size == 3 * 4 + len(Diagnostics.SCALARS) + 2      # + in_range, saturated
     assert without.size == 4 + len(Diagnostics.SCALARS)
-    assert "in_range" in with_outputs.rows(np.ones((with_outputs.size, 1)))
+    full = with_outputs.rows(np.ones((with_outputs.size, 1)))
+    assert "in_range" in full and "saturated" in full
     D = np.arange(without.size, dtype=float)[:, None] * np.ones((1, 3))
     rows = without.rows(D)
     assert rows["u"].shape == (4, 3) and rows["zsw"][0] == without.index["zsw"]

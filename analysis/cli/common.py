@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_casadi import robot
-from biped_casadi.control.output_law import check_M1_range, check_rejoin
+from biped_casadi.control.output_law import SECTION, check_M1_range, check_rejoin
 from biped_casadi.results import json_safe
 from gait_opt import Gait, OpenOrbitWarning, default_gait
 
@@ -142,6 +142,17 @@ def positive(value, name):
     if not (math.isfinite(value) and value > 0):
         raise UserError(f"{name} must be a positive number, got {value!r}")
     return value
+
+
+def add_design_arguments(p):
+    """--controller, --m1 and --rejoin: which controller, and a time-varying design."""
+    p.add_argument("--controller", choices=("tv", "vc"), default="tv",
+                   help="tv: time-varying outputs (default, needs --m1); vc: virtual constraints")
+    p.add_argument("--m1", nargs="+", type=float, metavar="M1",
+                   help="the components of M1, one per torque")
+    p.add_argument("--rejoin", type=float, metavar="R",
+                   help=f"time at which v_c rejoins the reference, fraction of T in "
+                        f"(0, {SECTION}] (default 0.5, the paper's)")
 
 
 def rejoin_fraction(value) -> float:

@@ -6,9 +6,9 @@ import numpy as np
 
 from analysis.reporting.plots import basin_plot, save_figures
 from analysis.robustness import Design, RobustnessSettings, basin, kept_directions, robustness
-from biped_casadi.control import PAPER_REJOIN, SECTION
+from biped_casadi.control import PAPER_REJOIN
 
-from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+from .common import (add_design_arguments, Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
                      load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
 
 
@@ -93,13 +93,7 @@ def register(sub):
                     "the design beside virtual constraints.")
     add_gait_arguments(p)
     add_robot(p)
-    p.add_argument("--controller", choices=("tv", "vc"), default="tv",
-                   help="tv: time-varying outputs (default, needs --m1); vc: virtual constraints")
-    p.add_argument("--m1", nargs="+", type=float, metavar="M1",
-                   help="the components of M1, one per torque")
-    p.add_argument("--rejoin", type=float, metavar="R",
-                   help=f"time at which v_c rejoins the reference, fraction of T in "
-                        f"(0, {SECTION}] (default 0.5, the paper's)")
+    add_design_arguments(p)
     p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (0.6)")
     p.add_argument("--torque-limit", type=float, metavar="U",
                    help="|u_i| bound, N m (default: the robot's, 150 for RABBIT)")

@@ -9,6 +9,8 @@ import numpy as np
 from biped_casadi import (Gains, Perturbation, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, simulate)
 from biped_casadi.control.output_law import M1_LIMIT, SECTION
+from biped_casadi.simulation import Terrain
+from biped_casadi.simulation.terrain import MAX_HEIGHT
 from analysis.reporting.plots import (save_figures, swing_torques_plot, unactuated_error_plot,
                             walking_animation)
 
@@ -75,6 +77,12 @@ def cmd_simulate(args):
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
     _check_perturbation(args)
+    terrain = None
+    if args.terrain is not None:
+        h = np.array(args.terrain, float)
+        if not np.all(np.isfinite(h)) or np.any(np.abs(h) > MAX_HEIGHT):
+            raise UserError(f"--terrain heights must be finite numbers within +-{MAX_HEIGHT} m")
+        terrain = Terrain(tuple(h))
     if args.plot is not None:
         output_dir(args.plot, "--plot")
     if args.animate is not None:
@@ -97,12 +105,12 @@ def cmd_simulate(args):
     say(f"simulating {args.steps} step(s)" + (" of each controller" if args.compare else "")
         + (" (compiling the closed loop to C first)" if args.jit else "") + " ...")
     try:
-        res = simulate(ctrl, q0, dq0, opts)
+        res = simulate(ctrl, q0, dq0, opts, terrain=terrain)
         runs = [res]
         if args.compare:
             other = "vc" if args.controller == "tv" else "tv"
             runs.append(simulate(_controller(other, model, gait, M1, gains, args.rejoin),
-                                 q0, dq0, opts))
+                                 q0, dq0, opts, terrain=terrain))
     except RuntimeError as e:
         if not args.jit:
             raise
@@ -124,6 +132,8 @@ def cmd_simulate(args):
     if args.json:
         d = res.to_dict()
         d["perturbation"] = perturbation.to_dict()
+        if terrain is not None:
+            d["terrain"] = terrain.to_dict()
         if args.compare:
             d["compare"] = runs[1].to_dict()
         if figures:
@@ -135,10 +145,12 @@ def cmd_simulate(args):
               + (f" - {r.message}" if r.message else ""))
         if r.controller["controller"] == "tv":
             print(f"  M1 = {r.controller['M1']}")
-        print("  step   t_impact [s]  duration/T   q_u - q_u^d(T)   dq_u - dq_u^d(T)")
+        print("  step   t_impact [s]  duration/T   q_u - q_u^d(T)   dq_u - dq_u^d(T)"
+              + ("   ground [m]" if terrain is not None else ""))
         for s in r.steps:
             print(f"  {s.index + 1:4d}   {s.t_impact:11.6f}  {s.duration / gait.T:10.6f}"
-                  f"   {s.qu_error:+.6e}    {s.dqu_error:+.6e}")
+                  f"   {s.qu_error:+.6e}    {s.dqu_error:+.6e}"
+                  + (f"   {s.ground_height:+.4f}" if terrain is not None else ""))
         print(f"  peak |u| {_num(r.peak_torque, '.1f')} N m, min F_z "
               f"{_num(r.min_normal_force, '.1f')} N, max |F_x|/F_z "
               f"{_num(r.max_friction_ratio, '.3f')}, at impact {_num(r.max_impulse_ratio, '.3f')}")
@@ -183,6 +195,9 @@ def register(sub):
     p.add_argument("--rejoin", type=float, default=0.5, metavar="R",
                    help=f"time at which the correction v_c rejoins the reference, as a fraction "
                         f"of T, in (0, {SECTION}] (the paper's: 0.5)")
+    p.add_argument("--terrain", nargs="+", type=float, metavar="H",
+                   help="ground heights h1 h2 ... of the steps' footholds above the stance "
+                        "foot, m (a step up > 0; flat after the last)")
     p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (0.6)")
     p.add_argument("--eps", type=float, default=0.02,
                    help="epsilon of the output PD, eq. (13), with Kp = 1, Kd = 2 (0.02)")

@@ -22,7 +22,10 @@ from ..stability.poincare import poincare_eigenvalues, poincare_map
 from .output_selection import (ab_solution_set, coarse_grid_size, domain_grid, group_of,
                                solve_ab, taylor_ab)
 
-__all__ = ["optimize_m1", "M1Result"]
+__all__ = ["optimize_m1", "M1Result", "coarse_map_points", "COARSE_N"]
+
+#: points per free component of a group's coarse map (the full run's Fig. 4 grid)
+COARSE_N = 81
 
 
 # ------------------------------------------------------------------ the M1 NLP
@@ -191,12 +194,29 @@ def _feasible_set(tay, group, nu):
     return "ab", (lambda rng, n: point[None, :].copy()), lambda M1: ab.on_set(M1) == group
 
 
-def _coarse_best(pm, tay, group, k, n=81):
-    """The k best non-singular points of a coarse map: the group's grid of the middle
-    components (RABBIT: (M1(2), M1(3)), n x n; nu = 2: n points of the line, or the
-    isolated point), or the n_free^nu grid on [-10, 10] when all components are free
-    (9^4 for RABBIT)."""
-    nu = pm.nu
+def coarse_map_points(tay, group, nu, n=COARSE_N):
+    """The points of the coarse map that :func:`optimize_m1` starts from.
+
+    Parameters
+    ----------
+    tay : TaylorAB
+        The gait's Taylor coefficients (eq. 27).
+    group : {1, 2, None}
+        The a = b = 0 group, or None (all components free).
+    nu : int
+        Components of M1.
+    n : int
+        Points per free component of a group's grid.
+
+    Returns
+    -------
+    numpy.ndarray
+        (m, nu): the group's grid of the middle components (RABBIT: (M1(2), M1(3)), n x n,
+        the grid of Fig. 4; nu = 2: n^2 points of the line, or the isolated point), or
+        the grid of :func:`~analysis.design.output_selection.coarse_grid_size` points per
+        component on [-10, 10] when all are free (the paper's 9^4 for RABBIT); the rows
+        with a real solution only.
+    """
     if group is None:
         v = np.linspace(-10, 10, coarse_grid_size(nu))
         P = np.stack(np.meshgrid(*([v] * nu), indexing="ij"), -1).reshape(-1, nu)
@@ -205,16 +225,20 @@ def _coarse_best(pm, tay, group, k, n=81):
         P = (s.group1 if group == 1 else s.group2).reshape(-1, nu)
     else:
         P = _feasible_set(tay, group, nu)[1](None, n * n)
-    P = P[np.all(np.isfinite(P), axis=1)]
-    jb = pm.jacobian_batch(P)
-    st, mx = jb.status, jb.max_abs
-    order = np.argsort(np.where(st == "singular", np.inf, mx))
-    return P[order[:k]]
+    return P[np.all(np.isfinite(P), axis=1)]
+
+
+def _coarse_best(pm, tay, group, k, coarse=None):
+    """The k best non-singular points of the coarse map (:func:`coarse_map_points`),
+    evaluated here or given (``coarse``: its :class:`JacobianBatch`)."""
+    jb = coarse if coarse is not None else pm.jacobian_batch(coarse_map_points(tay, group, pm.nu))
+    order = np.argsort(np.where(jb.status == "singular", np.inf, jb.max_abs))
+    return np.asarray(jb.M1, float)[order[:k]]
 
 
 def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int = 2,
                 n_best: int = 10, n_ipopt: int = 4, seed: int = 0, den_margin: float = 1.0,
-                deadbeat: bool = True) -> M1Result:
+                deadbeat: bool = True, coarse=None) -> M1Result:
     """Choose M1 minimising max|lambda| of A^z (exact derivatives of A^z in M1 by AD).
 
     ``group`` 1 or 2: M1 restricted to that solution group of a = b = 0; for nu = 2
@@ -248,6 +272,9 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
         D11 - D12 M1 must stay above this along the step (eq. 24).
     deadbeat : bool
         Try Newton on trace = det = 0.
+    coarse : JacobianBatch, optional
+        The coarse map already evaluated (at :func:`coarse_map_points`, e.g. by the sweep
+        of Fig. 4 or the 9^4 grid), instead of evaluating it here.
 
     Returns
     -------
@@ -265,7 +292,7 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
     rng = np.random.default_rng(seed)
     cand = [] if starts is None else [np.asarray(s, float) for s in np.atleast_2d(starts)]
     if starts is None:            # the best points of a coarse map of the feasible set
-        cand += list(_coarse_best(pm, tay, group, n_best))
+        cand += list(_coarse_best(pm, tay, group, n_best, coarse))
     tries, n0 = 0, len(cand)
     while len(cand) < n0 + n_random and tries < 50 * max(n_random, 1):
         tries += 1

@@ -25,7 +25,7 @@ __all__ = ["COLOUR_NAMES", "STANCE", "SWING", "TORSO", "save_figure", "save_figu
            "gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot",
            "conjecture_plot", "stable_domains_plot", "m1_plane_plot", "unactuated_error_plot",
            "swing_torques_plot", "walking_animation", "run_label", "basin_plot",
-           "tradeoff_plot", "OUTCOME_COLOURS"]
+           "tradeoff_plot", "OUTCOME_COLOURS", "survival_plot", "mfpt_sigma_plot"]
 
 #: colours of the stance leg, the swing leg and the torso in every stick figure
 STANCE, SWING, TORSO = "tab:blue", "tab:red", "0.25"
@@ -638,5 +638,79 @@ def tradeoff_plot(front, others=None, bound=None, title: str | None = None) -> F
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="best")
     ax.set_title(title or "Robustness against the linear rate: s* vs max|λ|", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def survival_plot(results, labels=None, title: str | None = None) -> Figure:
+    """Survival curves of Monte Carlo runs on stochastic terrain.
+
+    Parameters
+    ----------
+    results : sequence of MonteCarloResult
+        From :func:`analysis.terrain.monte_carlo`.
+    labels : sequence of str, optional
+        One per result (default its controller and sigma).
+    title : str, optional
+
+    Returns
+    -------
+    Figure
+        S(k), the fraction of runs that walked at least k steps, against k.
+    """
+    fig = _figure(figsize=(6.4, 4.2))
+    ax = fig.add_subplot()
+    for i, r in enumerate(results):
+        S = np.asarray(r.estimate.survival, float)
+        lab = labels[i] if labels is not None else (
+            f"{r.spec['controller']}, sigma = {r.settings['sigma']:g} m")
+        mf = r.estimate.mfpt
+        lab += f" (MFPT {mf:.3g})" if np.isfinite(mf) else \
+            f" (MFPT > {r.estimate.mfpt_ci[0]:.3g})"
+        ax.step(np.arange(S.size), S, where="post", lw=1.4, label=lab)
+    ax.set_xlabel("steps k")
+    ax.set_ylabel("fraction of runs that walked at least k steps")
+    ax.set_ylim(-0.02, 1.02)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title(title or "Survival on stochastic terrain", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def mfpt_sigma_plot(curves, title: str | None = None) -> Figure:
+    """The mean first-passage time against the terrain's sigma, log axis, with intervals.
+
+    Parameters
+    ----------
+    curves : dict
+        Label -> sequence of (sigma, mfpt, mfpt_lo, mfpt_hi), sigma in m, MFPT in steps
+        (mfpt inf when no run failed: drawn at its lower bound with an arrow).
+    title : str, optional
+
+    Returns
+    -------
+    Figure
+    """
+    fig = _figure(figsize=(6.4, 4.4))
+    ax = fig.add_subplot()
+    for (label, rows), mk in zip(curves.items(), "osD^vP*X"):
+        r = np.array(rows, float).reshape(-1, 4)
+        sig = 1000 * r[:, 0]
+        finite = np.isfinite(r[:, 1])
+        y = np.where(finite, r[:, 1], r[:, 2])
+        lo = np.maximum(y - r[:, 2], 0)
+        hi = np.where(np.isfinite(r[:, 3]), r[:, 3] - y, 0)
+        line = ax.errorbar(sig[finite], y[finite], yerr=[lo[finite], hi[finite]], fmt=mk + "-",
+                           capsize=3, ms=5, lw=1.2, label=label)
+        if (~finite).any():
+            ax.plot(sig[~finite], y[~finite], "^", ms=8, mfc="none",
+                    color=line[0].get_color(), label=f"{label}: no failure (lower bound)")
+    ax.set_yscale("log")
+    ax.set_xlabel("sigma of the ground height per step, mm")
+    ax.set_ylabel("mean first-passage time, steps (log)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title(title or "MFPT against terrain roughness (95 % intervals)", fontsize=10)
     fig.tight_layout()
     return fig

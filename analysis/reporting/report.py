@@ -190,6 +190,15 @@ def _figure_captions(s: dict) -> dict:
                      "below each max|λ|) with the robust design and virtual constraints "
                      "marked; dotted: the eigenvalue bound (the virtual constraints' "
                      "eigenvalue); dashed: the paper's perturbation."),
+        "terrain_mfpt": ("Mean first-passage time on stochastic terrain",
+                         "The mean number of steps walked before the first failure (every "
+                         "step checked: contact, friction incl. the impact impulse, scuffing, "
+                         "torque limit) against the standard deviation of the ground height "
+                         "per step, with 95 % intervals from the censored per-step failure "
+                         "probability; triangles: no run failed (the lower bound)."),
+        "terrain_survival": ("Survival on stochastic terrain",
+                             "The fraction of runs that walked at least k steps, at the "
+                             "largest sigma of the figure above."),
         "animation": ("Animation of the robust design's run",
                       f"The robust design's run of Fig. 5 (first {_f(anim)} steps): stance "
                       f"leg {st}, swing leg {sw}, torso {to}, footprints as triangles."),
@@ -259,6 +268,56 @@ def _robot_rows(s: dict) -> list:
                      f"{r.get('status')}" + (f", below 1e-3 from step {conv}" if conv else ""),
                      r.get("message") or ""))
     return rows
+
+
+def _terrain_lines(s: dict) -> list:
+    """The section on uneven ground and model error (issue 22)."""
+    t = s.get("terrain") or {}
+    if not t:
+        return []
+    esc = lambda v: str(v).replace("|", "\\|")                              # noqa: E731
+
+    def mf(r):
+        lo, hi = r.get("mfpt_ci") or (None, None)
+        v = r.get("mfpt")
+        head = _f(v, ".3g") if v is not None else f"> {_f(lo, '.3g')}"
+        return f"{head} [{_f(lo, '.3g')}, {_f(hi, '.3g') if hi is not None else 'inf'}]"
+
+    lines = ["## Uneven ground and model error", "",
+             f"Mean first-passage time (MFPT, steps walked before the first failure, 95 % "
+             f"interval; {t.get('runs')} runs of up to {t.get('max_steps')} steps each, ground "
+             f"heights i.i.d. N(0, sigma^2) per step):", "",
+             "| controller | " + " | ".join(f"sigma {1000 * v:g} mm" for v in t["sigmas"]) + " |",
+             "|---|" + "---|" * len(t["sigmas"])]
+    by = {}
+    for r in t.get("mfpt", []):
+        by.setdefault(r["label"], {})[r["sigma"]] = r
+    for label, d in by.items():
+        lines.append(f"| {esc(label)} | " + " | ".join(mf(d[v]) if v in d else "" for v in
+                                                       t["sigmas"]) + " |")
+    if t.get("gsn"):
+        lines += ["", "Exact gait sensitivity norm (AD of the full-order step map) and the "
+                      "step-time RMS it predicts against the Monte Carlo's:", "",
+                  "| controller | GSN ground height: step time (s/m), step length (m/m) | "
+                  "GSN torso push (per N s) | RMS at 0.5 mm: predicted, Monte Carlo |",
+                  "|---|---|---|---|"]
+        for r in t["gsn"]:
+            gh, tp = r["gsn"]["ground_height"], r["gsn"]["torso_push"]
+            lines.append(f"| {esc(r['label'])} | {_f(gh['step_time'], '.4g')}, "
+                         f"{_f(gh['step_length'], '.4g')} | {_f(tp['total'], '.4g')} | "
+                         f"{_f(r['predicted_rms'], '.3g')} s, {_f(r['monte_carlo_rms'], '.3g')} "
+                         f"s ({_f(100 * r['relative_difference'], '.2g')} %) |")
+    if t.get("model_error"):
+        lines += ["", "MFPT with the torso 20 % heavier than the controller's model (the "
+                      "full-order simulator; without the error the closed loop is its zero "
+                      "dynamics and the gains change nothing):", "",
+                  "| design | gains (Kp, Kd, eps) | torso error | MFPT | failures / runs |",
+                  "|---|---|---|---|---|"]
+        for r in t["model_error"]:
+            lines.append(f"| {esc(r['design'])} | {r['gains']} | "
+                         f"{100 * r['torso_mass_error']:g} % | {mf(r)} | "
+                         f"{r['failures']} / {r['runs']} |")
+    return lines + [""]
 
 
 def _robust_lines(s: dict) -> list:
@@ -396,7 +455,7 @@ def write_report(out: Path, s: dict) -> Path:
         lines += ["The paper's numbers are RABBIT's; for this robot the same stages give:", "",
                   "## Results", "", "| quantity | ours | note |", "|---|---|---|"]
         lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} |" for a, b, c in _robot_rows(s)]
-    lines += [""] + _robust_lines(s)
+    lines += [""] + _robust_lines(s) + _terrain_lines(s)
     reused = s.get("reused", {})
     lines += ["## Stages", "", "Reused: results an earlier run computed with the same inputs "
               "and the same code, read from the cache folder.", "",

@@ -1,12 +1,16 @@
 """Stability: the restricted Poincaré map of the hybrid zero dynamics and its exact
 Jacobian A^z (AD through the map, or the variational equation along the orbit), and the
-one-dimensional map of virtual constraints."""
-from .poincare import (METHODS, STATUSES, PoincareMap, PoincareResult, poincare_eigenvalues,
-                       poincare_map, singular_m1_values)
+one-dimensional map of virtual constraints; the step-to-step map of the full-order closed
+loop with its exact Jacobians."""
+from .poincare import (METHODS, STATUSES, ImpactBracket, JacobianBatch, MapStep, PoincareMap,
+                       PoincareResult, Screen, poincare_eigenvalues, poincare_map,
+                       singular_m1_values)
 from .variational import VariationalJacobian, variational_jacobian
+from .step_map import StepLinearisation, StepMap, StepValue, step_map
 from .vc_map import VCEigenResult, VirtualConstraintMap, vc_eigenvalue, vc_map
 
-__all__ = ["PoincareMap", "PoincareResult", "poincare_eigenvalues", "poincare_map",
+__all__ = ["PoincareMap", "PoincareResult", "JacobianBatch", "Screen", "ImpactBracket",
+           "MapStep", "poincare_eigenvalues", "poincare_map",
            "singular_m1_values", "STATUSES", "METHODS", "VariationalJacobian",
            "variational_jacobian", "VCEigenResult", "VirtualConstraintMap", "vc_eigenvalue",
-           "vc_map"]
+           "vc_map", "StepMap", "StepLinearisation", "StepValue", "step_map"]

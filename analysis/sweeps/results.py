@@ -3,14 +3,13 @@
 decides the numbers (part of a stored sweep's identity)."""
 from __future__ import annotations
 
-import hashlib
-import importlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from biped_casadi.caching import modules_digest
 from biped_casadi.results import Result, internal
 
 from ..stability.poincare import STATUSES
@@ -32,7 +31,6 @@ NUMERIC_MODULES = ("analysis.stability.poincare", "analysis.stability.variationa
                    "biped_casadi.control.output_law", "biped_casadi.control.zero_dynamics",
                    "biped_casadi.simulation.kernel", "biped_casadi.numerics",
                    "biped_casadi.model.biped", "gait_opt.gait", "gait_opt.parametrisation")
-_CODE_DIGEST = None
 
 
 
@@ -43,16 +41,10 @@ def code_digest() -> str:
     -------
     str
         SHA-256 (hex) of the source of :data:`NUMERIC_MODULES` and of
-        :data:`RESULTS_VERSION`; part of a sweep folder's settings.
+        :data:`RESULTS_VERSION` (:func:`biped_casadi.caching.modules_digest`); part of a
+        sweep folder's settings.
     """
-    global _CODE_DIGEST
-    if _CODE_DIGEST is None:
-        h = hashlib.sha256(f"results_version={RESULTS_VERSION}".encode())
-        for name in NUMERIC_MODULES:
-            h.update(name.encode())
-            h.update(Path(importlib.import_module(name).__file__).read_bytes())
-        _CODE_DIGEST = h.hexdigest()
-    return _CODE_DIGEST
+    return modules_digest(NUMERIC_MODULES, f"results_version={RESULTS_VERSION}")
 
 
 @dataclass(frozen=True)

@@ -83,6 +83,10 @@ class SweepStore:
     and takes the lock; ``valid_chunks`` reads back what is stored; ``write_chunk`` adds
     one chunk atomically."""
 
+    #: the folder's kind, format version, metadata file and Parquet key-value key (a
+    #: subclass stores other results in the same layout)
+    FORMAT, FORMAT_VERSION, META, KV_KEY, KIND = FORMAT, FORMAT_VERSION, META, _KV_KEY, "sweep"
+
     def __init__(self, root, settings: dict):
         self.root = Path(root)
         self.settings = settings
@@ -96,18 +100,18 @@ class SweepStore:
         if root.exists() and not root.is_dir():
             raise SweepStoreError(f"out: {root} exists and is not a folder")
         root.mkdir(parents=True, exist_ok=True)
-        meta_path = root / META
+        meta_path = root / self.META
         if meta_path.exists():
             self._check_meta(meta_path)
         else:
             stray = [p.name for p in root.iterdir() if p.name not in (LOCK, CHUNKS)]
             if stray or (self.chunk_dir.exists() and any(self.chunk_dir.iterdir())):
                 raise SweepStoreError(
-                    f"out: {root} is not empty and holds no {META}; it is not a sweep "
-                    f"folder (choose an empty or new folder)")
+                    f"out: {root} is not empty and holds no {self.META}; it is not a "
+                    f"{self.KIND} folder (choose an empty or new folder)")
         self._lock()
         if not meta_path.exists():
-            body = dict(format=FORMAT, version=FORMAT_VERSION, settings=self.settings,
+            body = dict(format=self.FORMAT, version=self.FORMAT_VERSION, settings=self.settings,
                         settings_sha256=self.digest,
                         created=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
             _write_atomic(meta_path, (json.dumps(body, indent=1) + "\n").encode())
@@ -123,11 +127,11 @@ class SweepStore:
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise SweepStoreError(f"out: {meta_path} is unreadable ({e}); not resuming into "
                                   f"it (choose another folder)") from None
-        if fmt != FORMAT:
-            raise SweepStoreError(f"out: {meta_path} is not a {FORMAT} file")
-        if ver != FORMAT_VERSION:
-            raise SweepStoreError(f"out: {self.root} was written in sweep format version "
-                                  f"{ver!r}; this toolkit writes version {FORMAT_VERSION} "
+        if fmt != self.FORMAT:
+            raise SweepStoreError(f"out: {meta_path} is not a {self.FORMAT} file")
+        if ver != self.FORMAT_VERSION:
+            raise SweepStoreError(f"out: {self.root} was written in {self.KIND} format version "
+                                  f"{ver!r}; this toolkit writes version {self.FORMAT_VERSION} "
                                   f"(choose another folder)")
         if digest(stored) != self.digest:
             diff = sorted(k for k in set(stored) | set(self.settings)
@@ -135,7 +139,7 @@ class SweepStore:
             hint = (" (the analysis code changed since it was written)"
                     if "code_sha256" in diff else "")
             raise SweepStoreError(
-                f"out: {self.root} holds a sweep made with other settings (differ in: "
+                f"out: {self.root} holds a {self.KIND} made with other settings (differ in: "
                 f"{', '.join(diff)}){hint}; refusing to mix results: use another folder")
 
     def _lock(self):
@@ -146,7 +150,7 @@ class SweepStore:
             os.close(fd)
             if e.errno in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
                 raise SweepStoreError(f"out: {self.root} is in use by another running "
-                                      f"sweep") from None
+                                      f"{self.KIND}") from None
             raise
         self._lock_fd = fd
 
@@ -176,7 +180,6 @@ class SweepStore:
 
     def write_chunk(self, k: int, start: int, M1, status, max_abs, A, eigenvalues):
         import pyarrow as pa
-        import pyarrow.parquet as pq
         n = len(M1)
         index = np.arange(start, start + n, dtype=np.int64)
         code = np.array([STATUS_CODES.index(s) for s in status], dtype=np.uint8)
@@ -191,9 +194,18 @@ class SweepStore:
         for i in range(2):
             cols[f"lambda{i + 1}_re"] = ev[:, i].real.copy()
             cols[f"lambda{i + 1}_im"] = ev[:, i].imag.copy()
-        info = dict(settings_sha256=self.digest, chunk=k, start=start, stop=start + n,
-                    content_sha256=_content_digest(index, M1, code, max_abs, A, ev))
-        table = pa.table(cols).replace_schema_metadata({_KV_KEY: json.dumps(info).encode()})
+        return self.write_table(k, start, start + n, cols,
+                                _content_digest(index, M1, code, max_abs, A, ev))
+
+    def write_table(self, k: int, start: int, stop: int, cols: dict, content_sha256: str):
+        """Write chunk ``k`` (rows ``start:stop``) of columns ``cols`` atomically, with
+        the settings digest, the row range and ``content_sha256`` in its metadata and
+        the SHA-256 of its bytes in its name; returns the path."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+        info = dict(settings_sha256=self.digest, chunk=k, start=start, stop=stop,
+                    content_sha256=content_sha256)
+        table = pa.table(cols).replace_schema_metadata({self.KV_KEY: json.dumps(info).encode()})
         buf = pa.BufferOutputStream()
         pq.write_table(table, buf, compression="zstd", write_page_checksum=True)
         data = buf.getvalue().to_pybytes()
@@ -202,9 +214,10 @@ class SweepStore:
         _write_atomic(path, data)
         return path
 
-    def read_chunk(self, path: Path, k: int, start: int, points: np.ndarray) -> dict:
-        """Read and check the file ``path`` of chunk ``k`` (rows
-        ``start:start+len(points)``); raises ValueError saying what is wrong."""
+    def read_table(self, path: Path, k: int, start: int, n: int):
+        """Read chunk ``k``'s file ``path`` and check its bytes, its Parquet checksums,
+        its settings and its rows ``start:start+n``; returns (table, metadata) or
+        raises ValueError saying what is wrong."""
         import pyarrow as pa
         import pyarrow.parquet as pq
         path = Path(path)
@@ -218,16 +231,22 @@ class SweepStore:
         except Exception as e:          # noqa: BLE001 - any read failure means corrupt
             raise ValueError(f"unreadable Parquet ({type(e).__name__}: {e})") from None
         try:
-            info = json.loads((table.schema.metadata or {})[_KV_KEY])
+            info = json.loads((table.schema.metadata or {})[self.KV_KEY])
         except (KeyError, ValueError):
-            raise ValueError("no sweep metadata in the file") from None
-        n = len(points)
+            raise ValueError(f"no {self.KIND} metadata in the file") from None
         if info.get("settings_sha256") != self.digest:
             raise ValueError("written for other settings")
         if (info.get("chunk"), info.get("start"), info.get("stop")) != (k, start, start + n):
             raise ValueError("holds other rows than expected")
         if table.num_rows != n:
             raise ValueError(f"has {table.num_rows} rows, expected {n}")
+        return table, info
+
+    def read_chunk(self, path: Path, k: int, start: int, points: np.ndarray) -> dict:
+        """Read and check the file ``path`` of chunk ``k`` (rows
+        ``start:start+len(points)``); raises ValueError saying what is wrong."""
+        n = len(points)
+        table, info = self.read_table(path, k, start, n)
         try:
             col = {name: table.column(name).to_numpy(zero_copy_only=False)
                    for name in table.column_names}

@@ -5,8 +5,6 @@ the code that computed them."""
 from __future__ import annotations
 
 import os
-import sys
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,7 +12,7 @@ import numpy as np
 from biped_casadi.caching import cached, digest
 from gait_opt import Gait
 
-from ..cluster import DASK_CONNECT_TIMEOUT, dask_client
+from ..cluster import DASK_CONNECT_TIMEOUT, dask_client, progress_bar, submit_chunks
 from ..stability.poincare import PoincareMap, poincare_map
 
 from .results import SweepSettings, code_digest
@@ -93,10 +91,7 @@ def _cpu_count() -> int:
 
 
 def _progress_bar(progress, total, initial):
-    from tqdm.auto import tqdm
-    enabled = bool(progress) and sys.stderr.isatty()
-    return tqdm(total=total, initial=initial, unit="M1", desc="sweep", disable=not enabled,
-                file=sys.stderr, dynamic_ncols=True)
+    return progress_bar(progress, total, initial, "M1", "sweep")
 
 
 def _run_threads(payload, P, todo, record, workers):
@@ -130,22 +125,9 @@ def _run_processes(payload, P, todo, record, workers):
 
 
 def _run_dask(scheduler, payload, P, todo, record):
-    from dask.distributed import as_completed
     with dask_client(scheduler, DASK_CONNECT_TIMEOUT) as client:
-        [pf] = client.scatter([payload], broadcast=True)
-        futs = {}
-        for k, a, b in todo:
-            f = client.submit(evaluate_chunk, pf, P[a:b], pure=False,
-                              key=f"sweep-{payload.gait_sha256[:8]}-{k}-{os.getpid()}-"
-                                  f"{time.monotonic_ns()}")
-            futs[f] = (k, a, b)
-        try:
-            for f in as_completed(list(futs)):
-                record(*futs[f], f.result())
-        except BaseException:
-            client.cancel(list(futs))
-            raise
-
+        submit_chunks(client, evaluate_chunk, payload, todo, record,
+                      f"sweep-{payload.gait_sha256[:8]}", args_of=lambda t: (P[t[1]:t[2]],))
 
 
 def dispatch(todo, payload, P, record, scheduler, workers, executor):

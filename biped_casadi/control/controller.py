@@ -8,6 +8,8 @@ Function and the per-step constants fixed at the start of a step.
 ``step_start(q, dq) -> StepStart(r, p)``
     the reference state r and the per-step constants p at the start of a step (just
     after an impact, or at the initial state).
+``start(q, dq) -> (r, p)``
+    the same as a CasADi Function (for derivatives through a step).
 
 The time-varying controller (:mod:`biped_casadi.control.time_varying`) and the
 virtual-constraint controller (:mod:`biped_casadi.control.virtual_constraints`)

@@ -59,7 +59,8 @@ class TimeVaryingController(Controller):
 
     Notes
     -----
-    ``law(q, dq, tau, r, p)``: r = the reference state, p = (y_i, dy_i).
+    ``law(q, dq, tau, r, p)``: r = the reference state, p = (y_i, dy_i);
+    ``start(q, dq) -> (r, p)``: :meth:`step_start` as a CasADi Function.
     """
 
     name = "tv"
@@ -109,6 +110,12 @@ class TimeVaryingController(Controller):
                                ["u", "y", "dy", "den", "dr", "in_range"])
         self._ref0 = self.reference.evaluate(0.0)[:2]
         self._r0 = np.array(self.reference.r0, dtype=float)
+        qs, dqs = ca.SX.sym("q", nq), ca.SX.sym("dq", nq)
+        yi0, dyi0 = initial_output_errors(M1, qs, dqs, ca.DM(self._ref0[0]),
+                                          ca.DM(self._ref0[1]))                  # eq. (17)
+        self.start = ca.Function("tv_step_start", [qs, dqs],
+                                 [ca.DM(self._r0), ca.vertcat(yi0, dyi0)],
+                                 ["q", "dq"], ["r", "p"])
 
     def step_start(self, q, dq) -> StepStart:
         """The step constants y_i = v - v^d(0), dy_i = dv - dv^d(0) of eq. (17).

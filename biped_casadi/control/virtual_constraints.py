@@ -17,7 +17,7 @@ from .output_law import Gains, SingularityReport, correction, output_acceleratio
 from .reference import require_same_robot
 
 __all__ = ["VirtualConstraints", "VirtualConstraintController", "fit_virtual_constraints",
-           "ConstraintSurface", "constraint_surface", "HIP_PHASE"]
+           "ConstraintSurface", "constraint_surface", "HIP_PHASE", "phase_correction"]
 
 #: RABBIT's phase variable c of the virtual-constraint controller, theta = c q: the angle
 #: of the line stance foot -> hip from the vertical, exactly q1 + q2 / 2 when tibia and
@@ -149,6 +149,38 @@ def _bezier_spline(H0, q, dq, ddq, th, dth, ddth):
     return hfun, bez
 
 
+def phase_correction(vc: VirtualConstraints, theta, p, nu: int):
+    """The constraints of a step with the phase-based correction: h_d + h_c and two
+    theta-derivatives.
+
+    h_c(theta) = v_c(s, y_i, dy_i/ds, S/2) (eq. 18 written in the phase), s = theta -
+    theta_i counted along the walking direction, S = ``|theta^- - theta^+|``; the step
+    constants are p = (theta_i, y_i, dy_i/ds).  Shared by the controller and the
+    corrected constraint surface (:class:`ConstraintSurface`).
+
+    Parameters
+    ----------
+    vc : VirtualConstraints
+        The constraints.
+    theta : casadi
+        The phase, rad.
+    p : casadi
+        (1 + 2 nu,) step constants.
+    nu : int
+        Outputs.
+
+    Returns
+    -------
+    tuple
+        (h, dh/dtheta, d2h/dtheta2), each (nu,).
+    """
+    h, dh, ddh = vc.h(theta)
+    sgn = float(vc.direction)
+    span = abs(vc.theta_minus - vc.theta_plus)
+    hc, dhc, ddhc = correction(sgn * (theta - p[0]), p[1:1 + nu], p[1 + nu:], span / 2)
+    return h + hc, dh + sgn * dhc, ddh + ddhc
+
+
 def fit_virtual_constraints(gait, c=None, H0=None, segments_per_step: int = 200,
                             margin_before: float = 0.25, margin_after: float = 0.25
                             ) -> VirtualConstraints:
@@ -264,7 +296,9 @@ class VirtualConstraintController(Controller):
 
     ``den`` = det [D_1; J] / det [c; H0]: zero where the controller is singular.
     ``in_range`` = 0 once theta leaves the fitted range.  No reference state; the step
-    constants are p = (theta_i, y_i, dy_i/ds) with the correction, none without.
+    constants are p = (theta_i, y_i, dy_i/ds) with the correction, none without
+    (``start(q, dq) -> (r, p)``: :meth:`step_start` as a CasADi Function, without its
+    check of the phase's direction).
 
     Parameters
     ----------
@@ -318,12 +352,7 @@ class VirtualConstraintController(Controller):
         H0 = ca.DM(vc.H0)
         th = ca.mtimes(c, q)
         dth = ca.mtimes(c, dq)
-        h, dh, ddh = vc.h(th)
-        if self.correction:
-            sgn = float(vc.direction)
-            span = abs(vc.theta_minus - vc.theta_plus)
-            hc, dhc, ddhc = correction(sgn * (th - p[0]), p[1:1 + nu], p[1 + nu:], span / 2)
-            h, dh, ddh = h + hc, dh + sgn * dhc, ddh + ddhc
+        h, dh, ddh = phase_correction(vc, th, p, nu) if self.correction else vc.h(th)
         y = ca.mtimes(H0, q) - h
         J = H0 - ca.mtimes(dh, c)
         dy = ca.mtimes(J, dq)
@@ -348,6 +377,11 @@ class VirtualConstraintController(Controller):
                                         [th0, ca.mtimes(c, dqs), ca.mtimes(H0, qs) - h0,
                                          ca.mtimes(J0, dqs)],
                                         ["q", "dq"], ["theta", "dtheta", "y", "dy"])
+        ds = ca.mtimes(c, dqs) * float(vc.direction)
+        p0 = ca.vertcat(th0, ca.mtimes(H0, qs) - h0, ca.mtimes(J0, dqs) / ds) \
+            if self.correction else ca.SX(0, 1)
+        self.start = ca.Function("vc_step_start", [qs, dqs], [ca.SX(0, 1), p0],
+                                 ["q", "dq"], ["r", "p"])
 
     def step_start(self, q, dq) -> StepStart:
         """The step constants of the phase-based correction at the start of a step.
@@ -459,6 +493,13 @@ class ConstraintSurface:
     ``curve_second(theta) -> d2Q/dtheta2``, ``zero_dynamics(theta, w) -> dw/dtheta``,
     ``foot(theta) -> (x_sw, z_sw, dz_sw/dtheta)``, ``rk4(w, theta, h) -> (w, theta)``
     (one RK4 step of length h in the phase).
+
+    The corrected surface of one step, with the controller's phase-based correction
+    h_c (:func:`phase_correction`, step constants p = (theta_i, y_i, dy_i/ds)), is the
+    same motion from any state at the start of a step: ``corrected(theta, w, p) ->
+    (Q, Q', Q'', dw/dtheta, D_1 Q')``, ``corrected_foot(theta, p) -> (x_sw, z_sw,
+    dz_sw/dtheta)``, and ``step_start(q, dq) -> (theta_i, w_i, p)`` (p as the
+    controller's ``step_start``).  With y_i = dy_i = 0 it is the surface itself.
     """
 
     def __init__(self, model, constraints: VirtualConstraints):
@@ -497,6 +538,33 @@ class ConstraintSurface:
         w_next = rk4_step(lambda wv, c: f(th + c * hs, wv), w, hs)
         self.rk4 = ca.Function("hzd_rk4", [w, th, hs], [w_next, th + hs],
                                ["w", "theta", "h"], ["w_next", "theta_next"])
+        # the corrected surface of a step (the controller's h_c)
+        nu = m.nu
+        p = ca.SX.sym("p", 1 + 2 * nu)
+        hp, dhp, ddhp = phase_correction(vc, th, p, nu)
+        Qp = ca.mtimes(Pinv, ca.vertcat(hp, th))
+        Q1p = ca.mtimes(Pinv, ca.vertcat(dhp, 1))
+        Q2p = ca.mtimes(Pinv, ca.vertcat(ddhp, 0))
+        D1p = m.D(Qp)[0, :]
+        denp = ca.mtimes(D1p, Q1p)
+        ddthp = -(ca.mtimes(D1p, Q2p) * w**2 + m.H(Qp, Q1p * w)[0]) / denp
+        self.corrected = ca.Function("hzd_corrected", [th, w, p], [Qp, Q1p, Q2p, ddthp / w, denp],
+                                     ["theta", "w", "p"], ["q", "dq_dtheta", "d2q_dtheta2",
+                                                           "dw", "den"])
+        xsp, zsp = m.swing_foot(Qp)
+        _, dzsp = m.swing_foot_velocity(Qp, Q1p)
+        self.corrected_foot = ca.Function("hzd_corrected_foot", [th, p], [xsp, zsp, dzsp],
+                                          ["theta", "p"], ["x_sw", "z_sw", "dz_dtheta"])
+        q, dq = ca.SX.sym("q", m.nq), ca.SX.sym("dq", m.nq)
+        c = ca.DM(vc.c).T
+        th0, dth0 = ca.mtimes(c, q), ca.mtimes(c, dq)
+        h0, dh0, _ = vc.h(th0)
+        H0 = ca.DM(vc.H0)
+        y0, dy0 = ca.mtimes(H0, q) - h0, ca.mtimes(H0 - ca.mtimes(dh0, c), dq)
+        ds = dth0 * float(vc.direction)
+        self.step_start = ca.Function("hzd_step_start", [q, dq],
+                                      [th0, dth0, ca.vertcat(th0, y0, dy0 / ds)],
+                                      ["q", "dq"], ["theta", "w", "p"])
 
     def _find_impact(self):
         """theta^- with z_sw(Q(theta^-)) = 0 near the reference's impact (rootfinder)."""

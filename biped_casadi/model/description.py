@@ -210,6 +210,54 @@ class RobotDescription:
         return (f"{self.name}: planar biped, {self.k} link(s) per leg, {self.nq} joints, "
                 f"total mass {self.total_mass:g} kg")
 
+    def scaled(self, mass: float = 1.0, inertia: float = 1.0, length: float = 1.0,
+               torso_mass: float = 1.0) -> "RobotDescription":
+        """The same robot with its parameters scaled (a plant with a model error).
+
+        Parameters
+        ----------
+        mass : float
+            Factor on every link's mass and every point mass.
+        inertia : float
+            Factor on every link's inertia.
+        length : float
+            Factor on every link's length and centre-of-mass position.
+        torso_mass : float
+            Further factor on the torso's mass.
+
+        Returns
+        -------
+        RobotDescription
+            Validated; its name says the factors.
+
+        Raises
+        ------
+        ValueError
+            A factor that is not a positive finite number (named).
+        """
+        f = dict(mass=mass, inertia=inertia, length=length, torso_mass=torso_mass)
+        for name, v in f.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or v <= 0:
+                raise ValueError(f"{name} scale must be a positive number, got {v!r}")
+        d = self.to_dict()
+
+        def link(t, m=1.0):
+            t = dict(t)
+            t["mass"] *= mass * m
+            t["inertia"] *= inertia
+            t["length"] *= length
+            t["com"] *= length
+            return t
+
+        d["torso"] = link(d["torso"], torso_mass)
+        d["leg"] = [link(t) for t in d["leg"]]
+        d["point_masses"] = {k: v * mass for k, v in d["point_masses"].items()}
+        tag = ", ".join(f"{k} x{v:g}" for k, v in f.items() if v != 1.0)
+        if tag:
+            d["name"] = f"{self.name} ({tag})"
+        return description_from_dict(d, where="scaled robot")
+
 
 def joint_names(k: int) -> tuple:
     """Names a point mass may be attached to, for legs of ``k`` links.

@@ -1,13 +1,14 @@
 """Simulation: the full-order hybrid closed loop, the batched walkers on the hybrid zero
 dynamics, the stepping kernel and the validity conditions they share, one outcome type
-for every run, and perturbations."""
+for every run, perturbations and pushes, and uneven ground."""
 from .full_order import (SimulationResult, Simulator, StepRecord, perturbed_initial_state,
                          simulate, simulator)
 from .kernel import Diagnostics, locate_strike, strike
 from .options import SimulationOptions
 from .outcome import NOT_CONVERGED, STATUSES, WalkBatch, WalkOutcome, verdict
 from .perturbation import (PAPER_SIZES, Perturbation, direction_errors, directions,
-                           start_states)
+                           start_states, torso_push)
+from .terrain import Terrain, TerrainFileError, random_heights, step_heights
 from .tv_walker import ZeroDynamicsWalker, zero_dynamics_walker
 from .validity import Limits
 from .vc_walker import VirtualConstraintWalker, virtual_constraint_walker
@@ -17,4 +18,5 @@ __all__ = ["SimulationOptions", "SimulationResult", "StepRecord", "Simulator", "
            "WalkBatch", "verdict", "Perturbation", "directions", "direction_errors",
            "start_states", "PAPER_SIZES", "ZeroDynamicsWalker", "VirtualConstraintWalker",
            "zero_dynamics_walker", "virtual_constraint_walker", "Diagnostics", "strike",
-           "locate_strike", "Limits"]
+           "locate_strike", "Limits", "torso_push", "Terrain", "TerrainFileError",
+           "random_heights", "step_heights"]

@@ -33,6 +33,14 @@ with one of the statuses of :data:`STATUSES` (the logs end with that state):
 - ``no_impact``: no valid impact within ``horizon`` T; ``out_of_range``: the state left
   the range where the controller's reference is defined (or a step cannot start, e.g.
   the phase variable moving backwards); ``diverged``: not finite.
+
+Uneven ground (``run(..., terrain=...)``, :mod:`biped_casadi.simulation.terrain`): step k
+ends where the swing foot strikes z_sw = h_k, and every condition above is measured from
+the ground under the foot.  Model error (``plant``): the controller computes its torques
+with its own model while the robot moves, strikes and meets the ground as the plant
+does (its D, H, kinematics, ground reaction and impact map).  With
+``SimulationOptions.saturate`` the torques the plant receives are clipped at the limit
+and the run reports the time spent saturated instead of stopping at 'torque_limit'.
 """
 from __future__ import annotations
 
@@ -46,10 +54,11 @@ from ..caching import cached
 from ..control.output_law import SECTION
 from ..numerics import as_vector, jit_options, rk4_step
 from ..results import internal, json_safe
-from .kernel import Diagnostics, locate_strike, strike
+from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, strike
 from .options import SimulationOptions
 from .outcome import STATUSES, OutcomeRecorder, WalkOutcome
 from .perturbation import Perturbation
+from .terrain import ground_levels, step_heights
 from .validity import (STRIKE_MESSAGE, Limits, first_violation, impact_message,
                        impact_violation, node_message, node_violations, start_violation,
                        strike_violation)
@@ -84,6 +93,8 @@ class StepRecord:
         Its difference from the reference's (q_u^d, dq_u^d)(0.75 T).
     step_length : float
         x of the swing foot at the impact, m.
+    ground_height : float
+        The height h_k of the foothold the step struck, above its stance foot, m.
     """
     index: int
     t_start: float
@@ -99,6 +110,7 @@ class StepRecord:
     section: np.ndarray | None
     section_error: np.ndarray | None
     step_length: float
+    ground_height: float = 0.0
 
     def to_dict(self) -> dict:
         """Every field in plain JSON types.
@@ -127,6 +139,8 @@ class SimulationResult(WalkOutcome):
         How the run ended, and the per-step errors and durations.
     peak_torque, min_normal_force, max_friction_ratio, max_impulse_ratio : see WalkOutcome
         The validity margins over the run.
+    saturated_time : float
+        Time the torques spent clipped at the limit, s (see WalkOutcome).
     controller : dict
         The controller's ``describe()``.
     options : SimulationOptions
@@ -226,15 +240,24 @@ class Simulator:
         The control law (and through it the model and the reference).
     options : SimulationOptions, optional
         Default ``SimulationOptions()``.
+    plant : BipedModel, optional
+        The robot that moves (default: the controller's model).  The controller keeps
+        computing its torques with its own model: a plant with other masses, inertias or
+        lengths is a model error.  Same joints and torques as the controller's model.
     """
 
-    def __init__(self, controller, options: SimulationOptions | None = None):
+    def __init__(self, controller, options: SimulationOptions | None = None, plant=None):
         self.options = options if options is not None else SimulationOptions()
         if not isinstance(self.options, SimulationOptions):
             raise ValueError(f"options must be a SimulationOptions, got "
                              f"{type(self.options).__name__}")
         self.controller = controller
         self.model = controller.model
+        self.plant = self.model if plant is None else plant
+        if getattr(self.plant, "nq", None) != self.model.nq or \
+                getattr(self.plant, "nu", None) != self.model.nu:
+            raise ValueError(f"plant must be a robot model with the controller's "
+                             f"{self.model.nq} joints and {self.model.nu} torques")
         self.gait = controller.reference
         self.T = self.gait.T
         self.h = self.T / self.options.rk4_steps
@@ -244,9 +267,9 @@ class Simulator:
                              f"h = T / rk4_steps = {self.h:.3g} s: the output dynamics would "
                              f"be integrated unstably (use eps >= {2 * self.h:.2g} or more "
                              "rk4_steps)")
-        self.chunk = self.options.rk4_steps // 8
+        self.chunk = self.options.rk4_steps // CHUNKS_PER_STEP
         self.schema = Diagnostics(self.model.nu, outputs=True)
-        self.limits = Limits.of(self.options, self.model)
+        self.limits = Limits.of(self.options, self.plant)
         self._build()
         ref = self.controller.singularity()
         self._den_scale = max(abs(ref.min_value), abs(ref.max_value))
@@ -258,9 +281,21 @@ class Simulator:
         """The bound on every ``|u_i|`` of the runs, N m."""
         return self.limits.torque_limit
 
+    @property
+    def cache_key(self):
+        """What the simulator depends on: controller, options and plant."""
+        return (self.controller.cache_key, self.options, self.plant.cache_key)
+
     # ------------------------------------------------------------------ build
+    def _applied(self, u):
+        """The torques the plant receives, and whether they were clipped (CasADi)."""
+        if not self.options.saturate:
+            return u, 0
+        U = self.limits.torque_limit
+        return ca.fmin(ca.fmax(u, -U), U), ca.mmax(ca.fabs(u)) > U
+
     def _build(self):
-        m, c = self.model, self.controller
+        m, c = self.plant, self.controller
         nq = m.nq
         nx = 2 * nq + c.n_ref
         X = ca.SX.sym("X", nx)
@@ -271,7 +306,7 @@ class Simulator:
         def rhs(Xv, stage):
             q, dq, r = Xv[:nq], Xv[nq:2 * nq], Xv[2 * nq:]
             u, _, _, _, dr, _ = c.law(q, dq, tau + stage * h, r, p)
-            ddq = m.forward_dynamics(q, dq, u)          # the plant, eq. (1)
+            ddq = m.forward_dynamics(q, dq, self._applied(u)[0])     # the plant, eq. (1)
             return ca.vertcat(dq, ddq, dr)
 
         Xn = ca.cse(rk4_step(rhs, X, h))
@@ -282,8 +317,9 @@ class Simulator:
 
         q, dq, r = X[:nq], X[nq:2 * nq], X[2 * nq:]
         u, y, dy, den, _, inr = c.law(q, dq, tau, r, p)
-        Fx, Fz = m.ground_reaction(q, dq, u)
-        diag = ca.cse(self.schema.vector(m, q, dq, u, Fx, Fz, den, y, dy, inr))
+        ua, sat = self._applied(u)
+        Fx, Fz = m.ground_reaction(q, dq, ua)
+        diag = ca.cse(self.schema.vector(m, q, dq, ua, Fx, Fz, den, y, dy, inr, sat))
         self.diagnostics = ca.Function("closed_loop_diagnostics", [X, tau, p], [diag],
                                        ["X", "tau", "p"], ["diag"], jit)
         self.diagnostics_chunk = self.diagnostics.map(self.chunk)
@@ -294,13 +330,14 @@ class Simulator:
                                  ["X", "tau", "eta", "p"], ["z_sw", "dz_deta", "X_event"])
 
     # ---------------------------------------------------------------- checks
-    def _first_failure(self, D, X, z_prev=None, den_sign=1.0):
+    def _first_failure(self, D, X, z_prev=None, den_sign=1.0, ground=None):
         """Index, status and message of the first invalid node of a block, or None.
         D: diagnostics (rows x n), X: states (nx x n), z_prev: swing-foot heights at the
         previous nodes (a foot already below the ground cannot strike), den_sign: the
-        sign of the decoupling denominator at the start of the step."""
+        sign of the decoupling denominator at the start of the step, ground: (ahead,
+        behind) ground heights."""
         rows = self.schema.rows(D, np.all(np.isfinite(X), 0))
-        masks = node_violations(rows, self.limits, self._den_scale, den_sign, z_prev)
+        masks = node_violations(rows, self.limits, self._den_scale, den_sign, z_prev, ground)
         first, which = first_violation(masks)
         if which == "":
             return None
@@ -309,7 +346,7 @@ class Simulator:
         return j, str(which), node_message(str(which), node, self.limits, self._den_scale)
 
     # ------------------------------------------------------------------ run
-    def run(self, q0, dq0, steps: int | None = None) -> SimulationResult:
+    def run(self, q0, dq0, steps: int | None = None, terrain=None) -> SimulationResult:
         """Simulate ``steps`` steps (default: options.steps) from (q0, dq0) at tau = 0.
 
         Parameters
@@ -318,6 +355,9 @@ class Simulator:
             Initial state (the start of a step).
         steps : int, optional
             Number of steps (impacts).
+        terrain : Terrain or array_like, optional
+            Ground heights h_k, one per step (:mod:`biped_casadi.simulation.terrain`);
+            default flat.
 
         Returns
         -------
@@ -330,10 +370,11 @@ class Simulator:
         steps = self.options.steps if steps is None else steps
         if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
-        log = _Log(self.schema.size)
+        heights = step_heights(terrain, 1, steps)[0]
+        log = _Log(self.schema.size, self.h)
         rec = OutcomeRecorder(1, steps)
         records: list[StepRecord] = []
-        walk = dict(t0=0.0, stance_x=0.0, rec=rec)
+        walk = dict(t0=0.0, stance_x=0.0, rec=rec, heights=heights)
         failure = None
         for k in range(steps):
             rec.scenario_steps += 1
@@ -363,6 +404,8 @@ class Simulator:
         (failure, event): failure (status, message, time) or None; event (X-, tau-)."""
         o, c, T, h, S = self.options, self.controller, self.T, self.h, self.schema
         t0, sx = walk["t0"], walk["stance_x"]
+        hk, behind = (float(v) for v in ground_levels(walk["heights"], k))
+        ground = walk["ground"] = (hk, behind)
         start = c.step_start(q, dq)
         p = start.p
         X = np.r_[q, dq, start.r]
@@ -371,30 +414,31 @@ class Simulator:
             return ("out_of_range", start.problem, t0), None
         D0 = np.array(self.diagnostics(X, 0.0, p))
         walk["den_sign"] = sign = 1.0 if S.row(D0, "den")[0] >= 0 else -1.0
-        fail = self._first_failure(D0, X[:, None], den_sign=sign)
+        fail = self._first_failure(D0, X[:, None], den_sign=sign, ground=ground)
         z0 = S.row(D0, "zsw")[0]
-        if fail is None and start_violation(z0, self.limits) != "":
+        if fail is None and start_violation(z0, self.limits, behind) != "":
             fail = (0, "scuffed", f"swing foot below the ground at the start of step {k} "
-                                  f"(z_sw = {z0:.3g} m)")
+                                  f"(z_sw = {z0:.3g} m, ground {behind:.3g} m)")
         log.add(t0, np.zeros(1), k, X[:, None], D0, sx, walk["rec"], S)
         if fail is not None:
             return (fail[1], fail[2], t0), None
         walk["p"], walk["section"] = p, None
         z_prev = z0
-        for ci in range(int(math.ceil(o.horizon * 8))):
-            tau0 = ci * T / 8
+        n = CHUNKS_PER_STEP
+        for ci in range(int(math.ceil(o.horizon * n))):
+            tau0 = ci * T / n
             Xs, taus = (np.array(v) for v in self.advance(X, tau0, h, p))
             taus = taus.ravel()
             Dg = np.array(self.diagnostics_chunk(Xs, taus[None, :], p))
-            if tau0 + T / 8 > o.horizon * T + 1e-12:      # last partial chunk
+            if tau0 + T / n > o.horizon * T + 1e-12:      # last partial chunk
                 keep = taus <= o.horizon * T + 1e-12
                 Xs, taus, Dg = Xs[:, keep], taus[keep], Dg[:, keep]
             zs = S.row(Dg, "zsw")
             zprev = np.r_[z_prev, zs[:-1]]
-            hits = strike(zs, zprev, S.row(Dg, "xsw"), self.model.scuff_zone)
+            hits = strike(zs, zprev, S.row(Dg, "xsw"), self.plant.scuff_zone, ground)
             i_strike = int(np.argmax(hits)) if hits.any() else Xs.shape[1]
             fail = self._first_failure(Dg[:, :i_strike], Xs[:, :i_strike], zprev[:i_strike],
-                                       den_sign=sign)
+                                       den_sign=sign, ground=ground)
             if fail is not None:
                 j = fail[0]
                 log.add(t0, taus[:j + 1], k, Xs[:, :j + 1], Dg[:, :j + 1], sx, walk["rec"], S)
@@ -405,9 +449,9 @@ class Simulator:
                 za = z_prev if i_strike == 0 else zs[i_strike - 1]
                 log.add(t0, taus[:i_strike], k, Xs[:, :i_strike], Dg[:, :i_strike], sx,
                         walk["rec"], S)
-                return None, self._locate(Xa, ta, za, zs[i_strike], p)
+                return None, self._locate(Xa, ta, za - hk, zs[i_strike] - hk, p, hk)
             log.add(t0, taus, k, Xs, Dg, sx, walk["rec"], S)
-            if abs(tau0 + T / 8 - SECTION * T) < 1e-12 * T:
+            if abs(tau0 + T / n - SECTION * T) < 1e-12 * T:
                 walk["section"] = np.array([Xs[0, -1], Xs[self.model.nq, -1]])
             X, z_prev = Xs[:, -1], zs[-1]
         return ("no_impact", f"step {k}: no valid impact of the swing foot within "
@@ -416,12 +460,13 @@ class Simulator:
     def _impact(self, k, event, walk, log):
         """Check the pre-impact state, apply the impact map (eq. 2-3) and check the
         impulse.  Returns (failure or None, StepRecord or None)."""
-        m, S, nq = self.model, self.schema, self.model.nq
+        m, S, nq = self.plant, self.schema, self.model.nq
         t0, sx, p = walk["t0"], walk["stance_x"], walk["p"]
         X_m, tau_m = event
         Dm = np.array(self.diagnostics(X_m, tau_m, p))
         log.add(t0, np.array([tau_m]), k, X_m[:, None], Dm, sx, walk["rec"], S)
-        fail = self._first_failure(Dm, X_m[:, None], den_sign=walk["den_sign"])
+        fail = self._first_failure(Dm, X_m[:, None], den_sign=walk["den_sign"],
+                                   ground=walk["ground"])
         if fail is not None:
             return (fail[1], fail[2], t0 + tau_m), None
         q_m, dq_m = X_m[:nq], X_m[nq:2 * nq]
@@ -436,7 +481,8 @@ class Simulator:
                             dqu_error=float(dq_m[0] - self._ref_T[1]),
                             section=section,
                             section_error=None if section is None else section - self._ref_s,
-                            step_length=float(S.row(Dm, "xsw")[0]))
+                            step_length=float(S.row(Dm, "xsw")[0]),
+                            ground_height=float(walk["ground"][0]))
         walk["rec"].impact([0], k, record.qu_error, record.dqu_error, tau_m, F[None, :])
         finite = bool(np.all(np.isfinite(np.r_[q_p, dq_p, F])))
         which = str(impact_violation(F, v_old[1], finite, self.limits))
@@ -445,12 +491,13 @@ class Simulator:
             return (which, f"step {k}: {msg}", t0 + tau_m), record
         return None, record
 
-    def _locate(self, Xa, ta, za, zb, p):
-        """Pre-impact state: the RK4 step length eta in (0, h] with z_sw = 0
-        (:func:`~biped_casadi.simulation.kernel.locate_strike`)."""
+    def _locate(self, Xa, ta, za, zb, p, height=0.0):
+        """Pre-impact state: the RK4 step length eta in (0, h] with z_sw = ``height``
+        (:func:`~biped_casadi.simulation.kernel.locate_strike`; za, zb measured from
+        there)."""
         def event(eta):
             z, dz, _ = self.event(Xa, ta, float(eta[0]), p)
-            return np.array([float(z)]), np.array([float(dz)])
+            return np.array([float(z) - height]), np.array([float(dz)])
 
         eta = float(locate_strike(event, self.h, za, zb)[0])
         _, _, Xe = self.event(Xa, ta, eta, p)
@@ -460,9 +507,10 @@ class Simulator:
 class _Log:
     """Accumulates per-node logs (and folds each block into the run's outcome)."""
 
-    def __init__(self, ndiag):
+    def __init__(self, ndiag, h=0.0):
         self.parts = []
         self.ndiag = ndiag
+        self.h = h
 
     def add(self, t0, taus, k, X, D, stance_x, rec=None, schema=None):
         taus = np.asarray(taus, dtype=float).ravel()
@@ -472,7 +520,8 @@ class _Log:
                            np.full(taus.size, stance_x)))
         if rec is not None:
             rec.track([0], schema.row(D, "u")[:, None, :], schema.row(D, "Fx")[None, :],
-                      schema.row(D, "Fz")[None, :])
+                      schema.row(D, "Fz")[None, :], saturated=schema.row(D, "saturated")[None, :],
+                      dt=self.h)
 
     def result(self, rec, controller, options, records, t_fail, reference, S):
         if self.parts:
@@ -495,10 +544,10 @@ class _Log:
 
 
 @cached(maxsize=8)
-def simulator(controller, options: SimulationOptions | None = None) -> Simulator:
-    """The :class:`Simulator` of a controller and options, built once.
+def simulator(controller, options: SimulationOptions | None = None, plant=None) -> Simulator:
+    """The :class:`Simulator` of a controller, options and plant, built once.
 
-    Memoised by the controller's content and the options.
+    Memoised by the controller's content, the options and the plant.
 
     Parameters
     ----------
@@ -506,16 +555,19 @@ def simulator(controller, options: SimulationOptions | None = None) -> Simulator
         The control law.
     options : SimulationOptions, optional
         Default ``SimulationOptions()``.
+    plant : BipedModel, optional
+        The robot that moves (default: the controller's model).
 
     Returns
     -------
     Simulator
     """
-    return Simulator(controller, options if options is not None else SimulationOptions())
+    return Simulator(controller, options if options is not None else SimulationOptions(),
+                     plant)
 
 
 def simulate(controller, q0=None, dq0=None, options: SimulationOptions | None = None,
-             steps: int | None = None) -> SimulationResult:
+             steps: int | None = None, terrain=None, plant=None) -> SimulationResult:
     """Simulate the closed loop of ``controller`` from (q0, dq0).
 
     Parameters
@@ -529,14 +581,18 @@ def simulate(controller, q0=None, dq0=None, options: SimulationOptions | None = 
         Default ``SimulationOptions()``.
     steps : int, optional
         Overrides ``options.steps``.
+    terrain : Terrain or array_like, optional
+        Ground heights, one per step (default flat).
+    plant : BipedModel, optional
+        The robot that moves, when it differs from the controller's model.
 
     Returns
     -------
     SimulationResult
         Status, step records and logs.
     """
-    sim = simulator(controller, options if options is not None else SimulationOptions())
+    sim = simulator(controller, options if options is not None else SimulationOptions(), plant)
     g = controller.reference
     q0 = g.q(0.0) if q0 is None else q0
     dq0 = g.dq(0.0) if dq0 is None else dq0
-    return sim.run(q0, dq0, steps)
+    return sim.run(q0, dq0, steps, terrain)

@@ -6,7 +6,9 @@ Diagnostics.  At every integration node a simulator logs one column of named row
 controller's decoupling denominator ``den`` (eq. 24 for the time-varying controller),
 the stance reaction ``Fx``, ``Fz``, ``in_range`` (0 where the controller's reference is
 undefined), the swing foot ``xsw``, ``zsw``, ``dzsw``, the hip height ``hip`` and the torso
-angle ``torso``.  :mod:`biped_casadi.simulation.validity` checks them by name.
+angle ``torso``, and (full order) ``saturated``: 1 where the commanded torque was clipped at
+the limit (``SimulationOptions.saturate``).  :mod:`biped_casadi.simulation.validity` checks
+them by name.
 
 Strike.  The swing foot strikes between two nodes when it crosses the ground going down
 in front of the stance foot (beyond ``model.scuff_zone``): z_sw(previous) >= 0 > z_sw
@@ -14,6 +16,12 @@ in front of the stance foot (beyond ``model.scuff_zone``): z_sw(previous) >= 0 >
 RK4 step with z_sw(RK4(x_k, eta)) = 0, found by a safeguarded Newton iteration
 (:func:`locate_strike`), vectorised over scenarios: the event is exact to round-off for
 the discrete scheme.
+
+Terrain.  On uneven ground (:mod:`biped_casadi.simulation.terrain`) the one parameter
+``ground = (ahead, behind)`` says where the ground is under the swing foot: at ``ahead``
+in front of the stance foot (the height of this step's foothold) and at ``behind``
+behind it; :func:`strike` and the validity conditions measure z_sw from there
+(:func:`ground_height`), and the impact time solves z_sw = ``ahead``.
 """
 from __future__ import annotations
 
@@ -22,7 +30,13 @@ import os
 import casadi as ca
 import numpy as np
 
-__all__ = ["Diagnostics", "strike", "locate_strike", "mapped", "threads", "NEWTON_ITERATIONS"]
+__all__ = ["Diagnostics", "strike", "locate_strike", "mapped", "threads", "NEWTON_ITERATIONS",
+           "ground_height", "CHUNKS_PER_STEP"]
+
+#: CasADi calls per reference step duration T of the simulators' integration: each call
+#: integrates a quarter of T (the Poincaré section 0.75 T falls on a boundary); RK4 steps
+#: per T are a multiple of 8
+CHUNKS_PER_STEP = 4
 
 #: most Newton iterations of :func:`locate_strike` (it stops at ``|z_sw| < 1e-15`` m, usually
 #: after 3 to 5)
@@ -37,9 +51,10 @@ class Diagnostics:
     nu : int
         Number of torques.
     outputs : bool
-        Whether the rows carry the controller's outputs y, their rates dy and
-        ``in_range`` (the full-order simulator's; on a zero dynamics the outputs vanish
-        and the reference is defined everywhere, so they are left out).
+        Whether the rows carry the controller's outputs y, their rates dy, ``in_range``
+        and ``saturated`` (the full-order simulator's; on a zero dynamics the outputs
+        vanish, the reference is defined everywhere and the torques are the law's, so
+        they are left out).
     """
 
     SCALARS = ("den", "Fx", "Fz", "xsw", "zsw", "dzsw", "hip", "torso")
@@ -51,14 +66,14 @@ class Diagnostics:
         for name, n in blocks:
             self.index[name] = slice(row, row + n)
             row += n
-        self.scalars = self.SCALARS + (("in_range",) if outputs else ())
+        self.scalars = self.SCALARS + (("in_range", "saturated") if outputs else ())
         for name in self.scalars:
             self.index[name] = row
             row += 1
         #: number of rows
         self.size = row
 
-    def vector(self, model, q, dq, u, Fx, Fz, den, y=None, dy=None, in_range=1):
+    def vector(self, model, q, dq, u, Fx, Fz, den, y=None, dy=None, in_range=1, saturated=0):
         """The diagnostics column at a state (CasADi).
 
         Parameters
@@ -77,6 +92,8 @@ class Diagnostics:
             Outputs and rates (with ``outputs``).
         in_range : casadi or int
             1 while the controller's reference is defined.
+        saturated : casadi or int
+            1 where the commanded torque was clipped at the limit.
 
         Returns
         -------
@@ -87,7 +104,8 @@ class Diagnostics:
         _, dzs = model.swing_foot_velocity(q, dq)
         parts = [u] + ([y, dy] if self.outputs else [])
         return ca.vertcat(*parts, den, Fx, Fz, xs, zs, dzs, model.points(q)[1, model.hip_index],
-                          model.torso_angle(q), *([in_range] if self.outputs else []))
+                          model.torso_angle(q),
+                          *([in_range, saturated] if self.outputs else []))
 
     def row(self, D, name):
         """Row(s) ``name`` of diagnostics ``D`` (rows along the first axis).
@@ -127,26 +145,56 @@ class Diagnostics:
         return out
 
 
-def strike(z, z_prev, x_sw, scuff_zone: float):
+def ground_height(x_sw, ground=None):
+    """The height of the ground under the swing foot, above the stance foot.
+
+    Parameters
+    ----------
+    x_sw : array_like
+        Swing-foot position ahead of the stance foot, m.
+    ground : tuple, optional
+        (ahead, behind): the ground in front of the stance foot (x_sw > 0) and behind
+        it, m, each broadcastable against ``x_sw``; None: flat (0).
+
+    Returns
+    -------
+    numpy.ndarray or float
+        0 for flat ground.
+    """
+    if ground is None:
+        return 0.0
+    ahead, behind = ground
+    with np.errstate(invalid="ignore"):
+        return np.where(np.asarray(x_sw) > 0, ahead, behind)
+
+
+def strike(z, z_prev, x_sw, scuff_zone: float, ground=None):
     """Where the swing foot strikes the ground between a node and the one before.
 
-    It crosses the ground going down (z_sw at the previous node >= 0 > z_sw) in front of
-    the stance foot, beyond ``scuff_zone`` (SPEC §4).
+    It crosses the ground going down (z_sw at the previous node >= 0 > z_sw, both
+    measured from the ground under the foot at the node) in front of the stance foot,
+    beyond ``scuff_zone`` (SPEC §4).
 
     Parameters
     ----------
     z, z_prev : array_like
-        Swing-foot height at the nodes and at the nodes before, m.
+        Swing-foot height at the nodes and at the nodes before, m (above the stance
+        foot).
     x_sw : array_like
         Swing-foot position ahead of the stance foot at the nodes, m.
     scuff_zone : float
         ``model.scuff_zone``: a strike nearer the stance foot does not count, m.
+    ground : tuple, optional
+        (ahead, behind) ground heights (:func:`ground_height`); None: flat.
 
     Returns
     -------
     numpy.ndarray of bool
         True at the nodes where the foot strikes.
     """
+    if ground is not None:
+        g = ground_height(x_sw, ground)
+        z, z_prev = np.asarray(z) - g, np.asarray(z_prev) - g
     with np.errstate(invalid="ignore"):
         return (np.asarray(z) < 0) & (np.asarray(x_sw) > scuff_zone) & (np.asarray(z_prev) >= 0)
 
@@ -197,7 +245,12 @@ def locate_strike(event, h: float, z_a, z_b):
 
 
 def threads() -> int:
-    """Threads a batched simulator maps its scenarios over: the cores, at most 8."""
+    """Threads a batched simulator maps its scenarios over: the cores, at most 8, or
+    the environment variable ``BIPED_THREADS`` when set (1 in each process of a Dask
+    cluster that already runs one task per core)."""
+    env = os.environ.get("BIPED_THREADS", "").strip()
+    if env.isdigit() and int(env) > 0:
+        return min(int(env), 64)
     return max(1, min(os.cpu_count() or 1, 8))
 
 

@@ -49,6 +49,11 @@ class SimulationOptions:
     jit : bool
         Compile the closed loop to C (CasADi JIT, needs a C compiler; a few seconds
         once per controller, then about 5 times faster).
+    saturate : bool
+        Clip every torque at the torque limit and keep walking (real actuators
+        saturate), instead of stopping the run with 'torque_limit'; the run reports the
+        time it spent saturated.  Full-order simulator only (the walkers are the zero
+        dynamics, exact only while the torques are those of the law).
     """
     steps: int = 10
     rk4_steps: int = 2000
@@ -62,6 +67,7 @@ class SimulationOptions:
     torque_limit: float | None = None
     min_liftoff_speed: float = 0.0
     jit: bool = False
+    saturate: bool = False
 
     def __post_init__(self):
         if not isinstance(self.steps, int) or self.steps < 1:
@@ -82,6 +88,9 @@ class SimulationOptions:
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name} must be a non-negative number, got {v!r}")
+        for name in ("jit", "saturate"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.horizon <= SECTION:
             raise ValueError(f"horizon must exceed {SECTION} (the Poincaré section), "
                              f"got {self.horizon!r}")

@@ -172,6 +172,9 @@ class WalkOutcome(_Verdicts, Result):
         The largest ``|F_x|/F_z`` in single support.
     max_impulse_ratio : float
         The largest ``|F_x|/F_z`` of the impact impulses.
+    saturated_time : float
+        Time the commanded torques spent beyond the limit, clipped there, s (0 unless
+        the simulation saturates torques, ``SimulationOptions.saturate``).
     """
 
     status: str
@@ -185,6 +188,7 @@ class WalkOutcome(_Verdicts, Result):
     min_normal_force: float
     max_friction_ratio: float
     max_impulse_ratio: float
+    saturated_time: float
 
     SUCCESS = STATUSES
 
@@ -215,6 +219,8 @@ class WalkBatch(_Verdicts):
         (n, n_steps) as :class:`WalkOutcome`'s.
     peak_torque, min_normal_force, max_friction_ratio, max_impulse_ratio : numpy.ndarray
         (n,) as :class:`WalkOutcome`'s.
+    saturated_time : numpy.ndarray
+        (n,) as :class:`WalkOutcome`'s.
     scenario_steps : int
         The steps walked, summed over the runs.
     """
@@ -230,6 +236,7 @@ class WalkBatch(_Verdicts):
     min_normal_force: np.ndarray
     max_friction_ratio: np.ndarray
     max_impulse_ratio: np.ndarray
+    saturated_time: np.ndarray
     scenario_steps: int = 0
 
     success = True
@@ -332,6 +339,7 @@ class OutcomeRecorder:
         self.qu, self.dqu, self.dur = (np.full((n, k), np.nan) for _ in range(3))
         self.peak_u, self.min_fz, self.max_fr, self.max_ir = (np.full(n, np.nan)
                                                               for _ in range(4))
+        self.sat_time = np.zeros(n)
         self.scenario_steps = 0
 
     def fail(self, runs, status, step, message=None):
@@ -356,7 +364,7 @@ class OutcomeRecorder:
         if message is not None:
             self.message[r] = np.broadcast_to(np.asarray(message, dtype=object), runs.shape)[first]
 
-    def track(self, runs, u, Fx, Fz, mask=None):
+    def track(self, runs, u, Fx, Fz, mask=None, saturated=None, dt=0.0):
         """Fold the nodes' torques and reactions into the runs' extremes.
 
         Parameters
@@ -369,10 +377,17 @@ class OutcomeRecorder:
             (m, K) stance reaction.
         mask : numpy.ndarray, optional
             (m, K) the nodes that count (the run's nodes up to its end).
+        saturated : numpy.ndarray, optional
+            (m, K) 1 at the nodes where the torques were clipped at the limit.
+        dt : float
+            The time a node stands for (the integration step), s.
         """
         runs = np.atleast_1d(np.asarray(runs, int))
         if mask is None:
             mask = np.ones(Fz.shape, bool)
+        if saturated is not None and dt:
+            with np.errstate(invalid="ignore"):
+                self.sat_time[runs] += dt * np.sum(mask & (saturated > 0.5), axis=1)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             pu = np.where(mask, np.max(np.abs(u), axis=0), np.nan)
             ratio = np.where(mask, np.abs(Fx) / np.maximum(Fz, 1e-300), np.nan)
@@ -416,6 +431,7 @@ class OutcomeRecorder:
                          qu_error=self.qu, dqu_error=self.dqu, duration=self.dur,
                          peak_torque=self.peak_u, min_normal_force=self.min_fz,
                          max_friction_ratio=self.max_fr, max_impulse_ratio=self.max_ir,
+                         saturated_time=self.sat_time.copy(),
                          scenario_steps=self.scenario_steps)
 
     def outcome(self, i: int = 0) -> dict:

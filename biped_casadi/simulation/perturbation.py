@@ -1,6 +1,10 @@
 """Initial errors as data: the paper's perturbation, per-joint errors, sign patterns and
 seeded random directions of the same per-joint size.
 
+A push is an impulse on the robot: :func:`torso_push` is a horizontal impulse at the
+torso's centre of mass, taken like an impact (instantaneous, the stance foot pinned,
+the actuators producing no impulse).
+
 A perturbation is added to the reference state at tau = 0 (the start of a step, just
 after an impact).  Robustness is measured along *directions*: a direction d has 2 nq
 components, and at scale s the initial error is (s q_size d[:nq], s dq_size d[nq:]),
@@ -12,11 +16,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import casadi as ca
 import numpy as np
 
+from ..caching import cached
 from ..numerics import as_number, as_vector
 
-__all__ = ["Perturbation", "directions", "direction_errors", "start_states", "PAPER_SIZES"]
+__all__ = ["Perturbation", "directions", "direction_errors", "start_states", "PAPER_SIZES",
+           "torso_push"]
 
 #: the per-joint sizes of the paper's perturbation: 0.01 rad and 0.1 rad/s (§V-C)
 PAPER_SIZES = (0.01, 0.1)
@@ -241,3 +248,31 @@ def start_states(reference, dirs, scales, sizes=PAPER_SIZES):
         (n, nq) start configurations (rad) and velocities (rad/s).
     """
     return _add_to_start(reference, *direction_errors(dirs, scales, sizes))
+
+
+@cached(maxsize=8)
+def torso_push(model) -> ca.Function:
+    """The velocity jump of a horizontal push on the torso.
+
+    An impulse (P, 0) (N s, positive forward) at the torso's centre of mass, with the
+    stance foot pinned and the actuators producing no impulse (like the impact of SPEC
+    §1): D(q) (dq+ - dq) = J_torso(q)' (P, 0).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+
+    Returns
+    -------
+    casadi.Function
+        ``torso_push(q, dq, P) -> dq_plus``.
+    """
+    q, dq, P = ca.SX.sym("q", model.nq), ca.SX.sym("dq", model.nq), ca.SX.sym("P")
+    pts = model.points(q)
+    hip, top = pts[:, model.hip_index], pts[:, model.hip_index + 1]
+    t = model.description.torso
+    com = hip + (t.com / t.length) * (top - hip)
+    J = ca.jacobian(com, q)
+    dq_plus = dq + ca.solve(model.D(q), ca.mtimes(J.T, ca.vertcat(P, 0)))
+    return ca.Function("torso_push", [q, dq, P], [dq_plus], ["q", "dq", "P"], ["dq_plus"])

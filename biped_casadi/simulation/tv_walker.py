@@ -12,13 +12,17 @@ Why it is fast.  One compiled step serves every design and every perturbation: t
 output matrix M1 and the rejoin time t_c of v_c are runtime inputs, like the step's
 (y_i, dy_i).  The reference q^d(tau) is the same for every scenario at the same tau, so
 it is tabulated once per chunk of the step and shared by the whole batch.  A chunk of
-T/8 is one ``mapaccum`` of RK4 nodes mapped over the active scenarios; the strike and
+T/4 is one ``mapaccum`` of RK4 nodes mapped over the active scenarios; the strike and
 the impact time come from the stepping kernel (:mod:`biped_casadi.simulation.kernel`),
 as in the full-order simulator.
 
 Validity.  Every node and every impact is checked with
 :mod:`biped_casadi.simulation.validity` (the same conditions as the full-order simulator,
 torque limit included); a scenario stops at its first invalid state.
+
+Terrain.  ``walk(..., terrain=...)`` gives every scenario its ground heights, one per step
+(:mod:`biped_casadi.simulation.terrain`): step k strikes at z_sw = h_k, and v_c still
+starts from the outputs at each step start, so the walker stays exact on uneven ground.
 """
 from __future__ import annotations
 
@@ -32,9 +36,10 @@ from ..control.output_law import SECTION, check_M1, decoupling_denominator
 from ..control.reference import require_same_robot
 from ..control.zero_dynamics import denominator_samples, zero_dynamics
 from ..numerics import jit_options, rk4_step
-from .kernel import Diagnostics, locate_strike, mapped, strike
+from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, mapped, strike
 from .options import SimulationOptions
 from .outcome import OutcomeRecorder, WalkBatch
+from .terrain import ground_levels, step_heights
 from .validity import (Limits, first_violation, impact_violation, node_violations,
                        start_violation, strike_violation)
 
@@ -66,17 +71,20 @@ class ZeroDynamicsWalker:
                 or rk4_steps % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {rk4_steps!r}")
         self.options = options if options is not None else SimulationOptions()
+        if self.options.saturate:
+            raise ValueError("options: saturate needs the full-order simulator (the walker is "
+                             "the zero dynamics, exact only with the law's own torques)")
         self.model, self.gait = model, gait
         self.nq, self.nu = model.nq, model.nu
         self.T = gait.T
         self.rk4_steps, self.jit = rk4_steps, jit
         self.h = self.T / rk4_steps
-        self.K = rk4_steps // 8
+        self.K = rk4_steps // CHUNKS_PER_STEP
         self.limits = Limits.of(self.options, model)
         self.schema = Diagnostics(self.nu, outputs=False)
         self.zd = zero_dynamics(model)
         self.horizon = min(self.options.horizon, (gait.t_max - self.h) / self.T)
-        self.n_chunks = int(math.ceil(self.horizon * 8))
+        self.n_chunks = int(math.ceil(self.horizon * CHUNKS_PER_STEP))
         self.ref_T = gait.state_at(self.T)
         self._R0 = np.concatenate(gait.evaluate(0.0))
         self._table()
@@ -90,7 +98,7 @@ class ZeroDynamicsWalker:
     # ---------------------------------------------------------------- build
     def _table(self):
         """The reference (q^d, dq^d, ddq^d) at the three RK4 stage times of every node,
-        one (9 nq x K) block per chunk of T/8."""
+        one (9 nq x K) block per chunk of T/4."""
         nq = self.nq
         j = np.arange(self.n_chunks * self.K)
         tt = np.minimum(np.stack([j * self.h, (j + 0.5) * self.h, (j + 1) * self.h]),
@@ -131,14 +139,16 @@ class ZeroDynamicsWalker:
         z = ca.SX.sym("z", along.size1_in(0))
         eta = ca.SX.sym("eta")
         ze = rk4_step(lambda zv, c: along(zv, tau + c * eta, P)[0], z, eta)
-        z_e = m.swing_foot(along(ze, tau + eta, P)[1])[1]
+        _, q_e, dq_e = along(ze, tau + eta, P)
+        z_e = m.swing_foot(q_e)[1]
         self.event = ca.Function("zd_event", [z, tau, eta, P],
-                                 [z_e, ca.jacobian(z_e, eta), ze[:2]])
-        # impact (eq. 2-3) and the next step's start (eq. 17)
-        q, dq, _ = zd.state(x, tau, R1, P)
-        q_p, dq_p, F, _, v_old = m.impact_full(q, dq)
+                                 [z_e, ca.jacobian(z_e, eta), ze[:2], q_e, dq_e])
+        # impact (eq. 2-3) at the event's state (its reference integrated alongside, so
+        # that the foot is exactly at the strike height) and the next step's start (eq. 17)
+        qi, dqi = ca.SX.sym("q", nq), ca.SX.sym("dq", nq)
+        q_p, dq_p, F, _, v_old = m.impact_full(qi, dqi)
         x_p, y_n, dy_n = zd.step_start(q_p, dq_p, self._R0, P[:self.nu])
-        self.impact = ca.Function("zd_impact", [x, tau, R1, P], [x_p, y_n, dy_n, F, v_old[1]])
+        self.impact = ca.Function("zd_impact", [qi, dqi, P], [x_p, y_n, dy_n, F, v_old[1]])
         qs, dqs, M1s = ca.SX.sym("q", nq), ca.SX.sym("dq", nq), ca.SX.sym("M1", self.nu)
         self.start = ca.Function("zd_start", [qs, dqs, M1s],
                                  list(zd.step_start(qs, dqs, self._R0, M1s)))
@@ -205,7 +215,7 @@ class ZeroDynamicsWalker:
         return np.max(np.abs(d), axis=1)
 
     # ------------------------------------------------------------------ walk
-    def walk(self, q0, dq0, M1s, rejoin=0.5, steps: int = 10) -> WalkBatch:
+    def walk(self, q0, dq0, M1s, rejoin=0.5, steps: int = 10, terrain=None) -> WalkBatch:
         """Walk every scenario from its full start state at tau = 0.
 
         Parameters
@@ -218,15 +228,19 @@ class ZeroDynamicsWalker:
             Rejoin time of v_c as a fraction of T, per scenario.
         steps : int
             Steps (impacts) to walk.
+        terrain : Terrain or array_like, optional
+            Ground heights: one :class:`~biped_casadi.simulation.terrain.Terrain` for
+            every scenario, or an (n, steps) array; default flat.
 
         Returns
         -------
         WalkBatch
         """
         x0, P = self.scenarios(q0, dq0, M1s, rejoin)
-        return self._walk(x0, P, steps, tau0=0.0)
+        return self._walk(x0, P, steps, tau0=0.0, terrain=terrain)
 
-    def walk_from_section(self, x, M1s, rejoin=0.5, steps: int = 10) -> WalkBatch:
+    def walk_from_section(self, x, M1s, rejoin=0.5, steps: int = 10,
+                          terrain=None) -> WalkBatch:
         """Walk from zero-dynamics states at the Poincaré section tau = 0.75 T.
 
         The states lie on the zero-dynamics manifold at the section (v_c = 0 there); a
@@ -243,6 +257,8 @@ class ZeroDynamicsWalker:
             Rejoin time of v_c as a fraction of T, per scenario.
         steps : int
             Steps (impacts) to walk.
+        terrain : Terrain or array_like, optional
+            Ground heights (see :meth:`walk`); default flat.
 
         Returns
         -------
@@ -253,12 +269,13 @@ class ZeroDynamicsWalker:
         M1s = np.broadcast_to(np.atleast_2d(np.asarray(M1s, float)), (n, nu))
         tc = np.broadcast_to(np.asarray(rejoin, float), (n,)) * self.T
         P = self.zd.params(M1s, tc, np.zeros((n, nu)), np.zeros((n, nu))).reshape(n, -1)
-        return self._walk(x.copy(), P, steps, tau0=SECTION * self.T)
+        return self._walk(x.copy(), P, steps, tau0=SECTION * self.T, terrain=terrain)
 
-    def _walk(self, x, P, steps, tau0):
+    def _walk(self, x, P, steps, tau0, terrain=None):
         if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         n = len(x)
+        heights = step_heights(terrain, n, steps)
         P = np.array(P, float)
         run = OutcomeRecorder(n, steps)
         scale = self.den_scale(P[:, :self.nu])
@@ -269,35 +286,40 @@ class ZeroDynamicsWalker:
                 break
             run.scenario_steps += idx.size
             start = tau0 if k == 0 else 0.0
-            struck = self._single_support(k, idx, x, P, scale, run, alive, start)
+            ahead, behind = ground_levels(heights, k)
+            ground = (ahead[idx], behind[idx])
+            struck = self._single_support(k, idx, x, P, scale, run, alive, start, ground)
             if struck is not None:
-                self._impact(k, struck, x, P, scale, run, alive)
+                self._impact(k, struck, x, P, scale, run, alive, ahead)
         return run.batch()
 
-    def _check(self, Dg, sign, scale, zprev=None):
+    def _check(self, Dg, sign, scale, zprev=None, ground=None):
         """First failing node (index along the last axis, status) of diagnostics
-        (rows, m, K) of m scenarios."""
+        (rows, m, K) of m scenarios, on the ground (ahead, behind) of each (m,)."""
+        if ground is not None:
+            ground = (ground[0][:, None], ground[1][:, None])
         masks = node_violations(self.schema.rows(Dg), self.limits, scale[:, None],
-                                sign[:, None], zprev)
+                                sign[:, None], zprev, ground)
         return first_violation(masks)
 
     def _track(self, run, idx, Dg, mask=None):
         S = self.schema
         run.track(idx, S.row(Dg, "u"), S.row(Dg, "Fx"), S.row(Dg, "Fz"), mask)
 
-    def _single_support(self, k, idx, x, P, scale, run, alive, tau0):
-        """Integrate step k of the scenarios ``idx`` from ``tau0`` to the strike; records
-        failures; returns the struck scenarios' (indices, state and tau of the node
-        before the strike, z_sw there and after, the denominator's sign) or None."""
+    def _single_support(self, k, idx, x, P, scale, run, alive, tau0, ground):
+        """Integrate step k of the scenarios ``idx`` from ``tau0`` to the strike on the
+        ground (ahead, behind) of each; records failures; returns the struck scenarios'
+        (indices, state and tau of the node before the strike, z_sw there and after, the
+        denominator's sign) or None."""
         S, m = self.schema, idx.size
         Pk = P[idx]
         R0 = np.repeat(self._reference(tau0), m, axis=1)
         D0 = np.array(self._mapped("diag", m)(x[idx].T, np.full((1, m), tau0), R0, Pk.T))
         sign = np.where(S.row(D0, "den") >= 0, 1.0, -1.0)
         zsw0 = S.row(D0, "zsw")
-        _, which = self._check(D0[:, :, None], sign, scale[idx])
+        _, which = self._check(D0[:, :, None], sign, scale[idx], ground=ground)
         if tau0 == 0:
-            which = np.where(which == "", start_violation(zsw0, self.limits), which)
+            which = np.where(which == "", start_violation(zsw0, self.limits, ground[1]), which)
         self._track(run, idx, D0[:, :, None])
         bad = which != ""
         run.fail(idx[bad], which[bad], k)
@@ -307,7 +329,7 @@ class ZeroDynamicsWalker:
         before = np.full((m, 2), np.nan)
         t_before, z_a, z_b = np.zeros(m), np.zeros(m), np.zeros(m)
         struck = np.zeros(m, bool)
-        c0 = int(round(tau0 / (self.T / 8)))
+        c0 = int(round(tau0 / (self.T / CHUNKS_PER_STEP)))
         for ci in range(c0, self.n_chunks):
             li = np.flatnonzero(live)
             if li.size == 0:
@@ -317,14 +339,16 @@ class ZeroDynamicsWalker:
             Xs = Xs.reshape(2, li.size, self.K)
             Ts = Ts.reshape(li.size, self.K)
             Dg = Dg.reshape(-1, li.size, self.K)
-            if (ci + 1) / 8 > self.horizon + 1e-12:                 # last partial chunk
+            if (ci + 1) / CHUNKS_PER_STEP > self.horizon + 1e-12:  # last partial chunk
                 keep = Ts[0] <= self.horizon * self.T + 1e-12
                 Xs, Ts, Dg = Xs[:, :, keep], Ts[:, keep], Dg[:, :, keep]
             zs = S.row(Dg, "zsw")
             zp = np.concatenate([zprev[li][:, None], zs[:, :-1]], axis=1)
-            hits = strike(zs, zp, S.row(Dg, "xsw"), self.model.scuff_zone)
+            gl = (ground[0][li], ground[1][li])
+            hits = strike(zs, zp, S.row(Dg, "xsw"), self.model.scuff_zone,
+                          (gl[0][:, None], gl[1][:, None]))
             i_strike = np.where(hits.any(axis=1), np.argmax(hits, axis=1), Ts.shape[1])
-            first, which = self._check(Dg, sign[li], scale[idx[li]], zp)
+            first, which = self._check(Dg, sign[li], scale[idx[li]], zp, gl)
             failed = (which != "") & (first < i_strike)
             upto = np.where(failed, first + 1, i_strike)
             self._track(run, idx[li], Dg, np.arange(Ts.shape[1])[None, :] < upto[:, None])
@@ -351,29 +375,32 @@ class ZeroDynamicsWalker:
             return None
         return idx[si], before[si], t_before[si], z_a[si], z_b[si], sign[si]
 
-    def _impact(self, k, struck, x, P, scale, run, alive):
-        """Locate the impact of the struck scenarios, check the pre-impact state and
-        the impulse, apply the impact map and the next step's start."""
+    def _impact(self, k, struck, x, P, scale, run, alive, ahead):
+        """Locate the impact of the struck scenarios (z_sw = their h_k, ``ahead``), check
+        the pre-impact state and the impulse, apply the impact map and the next step's
+        start."""
         gi, xa, ta, za, zb, sign = struck
         S, nu, m = self.schema, self.nu, gi.size
         Ps = P[gi]
+        hk = ahead[gi]
         ev = self._mapped("event", m)
         za_r = np.vstack([xa.T, self.gait.states(ta)])
 
         def event(eta):
-            z, dz, _ = ev(za_r, ta[None, :], eta[None, :], Ps.T)
-            return np.array(z).ravel(), np.array(dz).ravel()
+            z, dz, *_ = ev(za_r, ta[None, :], eta[None, :], Ps.T)
+            return np.array(z).ravel() - hk, np.array(dz).ravel()
 
-        eta = locate_strike(event, self.h, za, zb)
-        xe = np.array(ev(za_r, ta[None, :], eta[None, :], Ps.T)[2]).T
+        eta = locate_strike(event, self.h, za - hk, zb - hk)
+        _, _, xe, qe, dqe = (np.array(v) for v in ev(za_r, ta[None, :], eta[None, :], Ps.T))
+        xe = xe.T
         tm = ta + eta
         Rm = self._reference(tm)
         Dm = np.array(self._mapped("diag", m)(xe.T, tm[None, :], Rm, Ps.T))
-        _, which = self._check(Dm[:, :, None], sign, scale[gi])
+        _, which = self._check(Dm[:, :, None], sign, scale[gi],
+                               ground=(hk, np.zeros(m)))
         self._track(run, gi, Dm[:, :, None])
         which = np.where(which == "", strike_violation(S.row(Dm, "dzsw")), which)
-        xn, yn, dyn, F, vl = (np.array(v) for v in self._mapped("impact", m)(
-            xe.T, tm[None, :], Rm, Ps.T))
+        xn, yn, dyn, F, vl = (np.array(v) for v in self._mapped("impact", m)(qe, dqe, Ps.T))
         F, vl = F.T, vl.ravel()
         rec = np.flatnonzero(which == "")          # a valid strike: the step is complete
         err = xe - self.ref_T[None, :]

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernel import ground_height
+
 __all__ = ["NODE_CHECKS", "IMPACT_CHECKS", "Limits", "node_violations", "first_violation",
            "start_violation", "strike_violation", "impact_violation", "node_message",
            "impact_message", "STRIKE_MESSAGE"]
@@ -59,6 +61,9 @@ class Limits:
     scuffing_ignored : bool
         Legs without knees: the swing foot may pass below the ground (only a strike
         counts).
+    saturate : bool
+        Torques are clipped at ``torque_limit`` and the run goes on (the torque limit
+        is then not a failure).
     """
 
     mu: float
@@ -70,6 +75,7 @@ class Limits:
     torque_limit: float
     min_liftoff_speed: float
     scuffing_ignored: bool = False
+    saturate: bool = False
 
     @classmethod
     def of(cls, options, model) -> "Limits":
@@ -97,10 +103,12 @@ class Limits:
                    ground_tolerance=float(options.ground_tolerance),
                    singular_tolerance=float(options.singular_tolerance),
                    torque_limit=float(tl), min_liftoff_speed=float(options.min_liftoff_speed),
-                   scuffing_ignored=bool(model.scuffing_ignored))
+                   scuffing_ignored=bool(model.scuffing_ignored),
+                   saturate=bool(getattr(options, "saturate", False)))
 
 
-def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None) -> dict:
+def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None,
+                    ground=None) -> dict:
     """Masks of the violated conditions at integration nodes.
 
     Parameters
@@ -119,6 +127,10 @@ def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None
     z_prev : array, optional
         Swing-foot height at the previous node (a foot already under the ground cannot
         strike: going further down is scuffing).
+    ground : tuple, optional
+        (ahead, behind) ground heights under the swing foot on uneven ground
+        (:func:`biped_casadi.simulation.kernel.ground_height`); heights are measured from
+        there.  None: flat.
 
     Returns
     -------
@@ -127,6 +139,12 @@ def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None
         :data:`NODE_CHECKS`.
     """
     lim = limits
+    zsw = rows["zsw"]
+    if ground is not None:
+        g = ground_height(rows["xsw"], ground)
+        zsw = zsw - g
+        if z_prev is not None:
+            z_prev = np.asarray(z_prev) - g
     finite = rows["finite"]
     bad = {"diverged": ~finite}
     with np.errstate(invalid="ignore"):
@@ -138,12 +156,14 @@ def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None
         behind = rows["xsw"] <= 0
         if z_prev is not None:
             behind = behind | (np.asarray(z_prev) < 0)
-        bad["scuffed"] = finite & (rows["zsw"] < -lim.ground_tolerance) & behind
+        bad["scuffed"] = finite & (zsw < -lim.ground_tolerance) & behind
         if lim.scuffing_ignored:
             bad["scuffed"] = np.zeros_like(bad["scuffed"])
         bad["negative_normal_force"] = finite & ~(rows["Fz"] > lim.min_normal_force)
         bad["slipped"] = finite & (np.abs(rows["Fx"]) > lim.mu * rows["Fz"])
         bad["torque_limit"] = finite & (np.max(np.abs(rows["u"]), axis=0) > lim.torque_limit)
+        if lim.saturate:
+            bad["torque_limit"] = np.zeros_like(bad["torque_limit"])
     return bad
 
 
@@ -182,7 +202,7 @@ def first_violation(masks: dict, stop=None):
     return first, which
 
 
-def start_violation(z_sw, limits: Limits):
+def start_violation(z_sw, limits: Limits, behind=0.0):
     """'scuffed' where a step starts with the swing foot below the ground, else ''.
 
     Parameters
@@ -191,11 +211,14 @@ def start_violation(z_sw, limits: Limits):
         Swing-foot height at the start of the steps, m.
     limits : Limits
         The thresholds (``ground_tolerance``).
+    behind : float or array_like
+        The ground the foot starts from, m (the previous foothold on uneven ground).
 
     Returns
     -------
     numpy.ndarray of str
     """
+    z_sw = np.asarray(z_sw) - behind
     with np.errstate(invalid="ignore"):
         return np.where(np.asarray(z_sw) < -limits.ground_tolerance, "scuffed", "").astype(object)
 

@@ -2,10 +2,17 @@
 
 On the constraint surface (:class:`~biped_casadi.control.ConstraintSurface`) the
 configuration is a function of the phase alone and the state is (theta, w = dtheta/dt);
-the swing foot strikes at the fixed phase theta^-, so a step is an integration in theta
-from the start phase to theta^-, with every node checked
+the swing foot strikes at the phase theta^- where it reaches the ground, so a step is an
+integration in theta from the start phase to theta^-, with every node checked
 (:mod:`biped_casadi.simulation.validity`), then the impact map.  Its outcomes are those
 of every simulator (:class:`~biped_casadi.simulation.outcome.WalkBatch`).
+
+From any state at the start of a step the controller's phase-based correction h_c makes
+the outputs and their rates zero (:func:`~biped_casadi.control.phase_correction`), so the
+closed loop is exactly the motion on the step's corrected surface: the walker starts
+from full states (:meth:`VirtualConstraintWalker.walk_from_states`), and on uneven ground
+(``terrain``), where an impact at another height lands off the surface, the next step
+starts from the post-impact state in the same way.
 """
 from __future__ import annotations
 
@@ -20,8 +27,9 @@ from ..numerics import jit_options, rk4_step
 from .kernel import Diagnostics, mapped
 from .options import SimulationOptions
 from .outcome import OutcomeRecorder, WalkBatch
+from .terrain import ground_levels, step_heights
 from .validity import (Limits, first_violation, impact_violation, node_violations,
-                       strike_violation)
+                       start_violation, strike_violation)
 
 __all__ = ["VirtualConstraintWalker", "virtual_constraint_walker"]
 
@@ -29,13 +37,15 @@ __all__ = ["VirtualConstraintWalker", "virtual_constraint_walker"]
 class VirtualConstraintWalker:
     """Virtual constraints on their hybrid zero dynamics, batched, integrated in the phase.
 
-    On the constraint surface the configuration is a function of the phase theta alone,
-    q = Q(theta), and the state is (theta, w = dtheta/dt); the swing foot strikes at the
-    fixed phase theta^- (where z_sw(Q(theta)) = 0), so a step is an integration in theta
-    from the start phase to theta^- (RK4 on w and on the time, dt/dtheta = 1/w), with the
-    ground reaction and the torques of the exact zero dynamics checked at every node
-    (:mod:`biped_casadi.simulation.validity`), then the impact map.  Virtual constraints are impact
-    invariant: the state lands on the surface again, at theta^+ = c q^+.
+    On the (corrected) constraint surface the configuration is a function of the phase
+    theta alone, q = Q(theta; p), and the state is (theta, w = dtheta/dt); the swing foot
+    strikes at the phase theta^- where z_sw(Q(theta^-)) is the ground height (near the
+    reference's impact), so a step is an integration in theta from the start phase to
+    theta^- (RK4 on w and on the time, dt/dtheta = 1/w), with the ground reaction and
+    the torques of the exact zero dynamics checked at every node
+    (:mod:`biped_casadi.simulation.validity`), then the impact map.  On flat ground
+    virtual constraints are impact invariant (the state lands on the surface again, at
+    theta^+ = c q^+); elsewhere the next step starts on its corrected surface.
 
     Parameters
     ----------
@@ -56,14 +66,19 @@ class VirtualConstraintWalker:
         require_same_robot(model, gait)
         self._jit = jit_options("-O2") if jit else {}
         self.options = options if options is not None else SimulationOptions()
+        if self.options.saturate:
+            raise ValueError("options: saturate needs the full-order simulator (the walker is "
+                             "the zero dynamics, exact only with the law's own torques)")
         self.model, self.gait = model, gait
         self.nu = model.nu
+        self.n_par = 1 + 2 * self.nu
         self.vmap = constraint_surface(model, gait)
         self.theta_s = self.vmap.phase(gait.q(SECTION * gait.T))
         self.nodes = nodes
         self.limits = Limits.of(self.options, model)
         self.schema = Diagnostics(self.nu, outputs=False)
         self.ref_T = gait.state_at(gait.T)
+        self.direction = float(np.sign(self.vmap.theta_minus - self.vmap.theta_plus))
         self._build()
         ths = np.linspace(self.vmap.theta_plus, self.vmap.theta_minus, 801)
         self.den_scale = float(np.max(np.abs(np.array(self.vmap.curve.map(ths.size)(
@@ -72,33 +87,38 @@ class VirtualConstraintWalker:
     def _build(self):
         m, vm = self.model, self.vmap
         th, w, t, hs = ca.SX.sym("theta"), ca.SX.sym("w"), ca.SX.sym("t"), ca.SX.sym("h")
+        p = ca.SX.sym("p", self.n_par)
         z = ca.vertcat(w, t)
 
         def rhs(zv, c):
-            return ca.vertcat(vm.zero_dynamics(th + c * hs, zv[0]), 1 / zv[0])
+            return ca.vertcat(vm.corrected(th + c * hs, zv[0], p)[3], 1 / zv[0])
 
         zn = rk4_step(rhs, z, hs)
         thn = th + hs
-        q, Q1, den = vm.curve(thn)
-        Q2 = vm.curve_second(thn)
         wn = zn[0]
-        ddth = wn * vm.zero_dynamics(thn, wn)
+        q, Q1, Q2, dw, den = vm.corrected(thn, wn, p)
+        ddth = wn * dw
         dq = Q1 * wn
         ddq = Q1 * ddth + Q2 * wn**2
         D, H = m.D(q), m.H(q, dq)
         u = (ca.mtimes(D, ddq) + H)[1:]
         Fx, Fz = m.ground_reaction_acc(q, dq, ddq)
         diag = self.schema.vector(m, q, dq, u, Fx, Fz, den)
-        node = ca.Function("vc_node", [z, th, hs], [ca.cse(zn), thn, ca.cse(diag)], self._jit)
+        node = ca.Function("vc_node", [z, th, hs, p], [ca.cse(zn), thn, ca.cse(diag)],
+                           self._jit)
         self.start_node = node                   # with h = 0: the diagnostics of a state
         acc = node.mapaccum("vc_nodes", self.nodes, [0, 1], [0, 1])
         zc, thc, hc = ca.MX.sym("z", 2), ca.MX.sym("theta"), ca.MX.sym("h")
-        self.chunk = ca.Function("vc_step", [zc, thc, hc], list(acc(zc, thc, hc)))
-        qm, Q1m, _ = vm.curve(vm.theta_minus)
+        pc = ca.MX.sym("p", self.n_par)
+        self.chunk = ca.Function("vc_step", [zc, thc, hc, pc], list(acc(zc, thc, hc, pc)))
+        self.foot = vm.corrected_foot
         wm = ca.SX.sym("w_minus")
+        qm, Q1m, _, _, _ = vm.corrected(th, wm, p)
         q_p, dq_p, F, _, v_old = m.impact_full(qm, Q1m * wm)
-        self.impact = ca.Function("vc_impact", [wm], [ca.mtimes(ca.DM(vm.vc.c).T, dq_p), F,
-                                                     v_old[1], Q1m[0] * wm])
+        th_p, w_p, p_p = vm.step_start(q_p, dq_p)
+        self.impact = ca.Function("vc_impact", [th, wm, p],
+                                  [th_p, w_p, p_p, F, v_old[1], qm[0], Q1m[0] * wm])
+        self.start = vm.step_start
 
     @cached(maxsize=16)
     def _mapped(self, name: str, n: int) -> ca.Function:
@@ -133,7 +153,7 @@ class VirtualConstraintWalker:
         Q, Q1, _ = (np.array(v) for v in curve(th[None, :]))
         return th, x[:, 1] / Q1[0]
 
-    def walk_from_section(self, x, steps: int = 10) -> WalkBatch:
+    def walk_from_section(self, x, steps: int = 10, terrain=None) -> WalkBatch:
         """Walk from zero-dynamics states with the given (q_u, dq_u) for ``steps`` impacts.
 
         See :meth:`ZeroDynamicsWalker.walk_from_section`.
@@ -144,15 +164,60 @@ class VirtualConstraintWalker:
             (n, 2) states (q_u, dq_u) on the constraint surface, rad and rad/s.
         steps : int
             Steps (impacts) to walk.
+        terrain : Terrain or array_like, optional
+            Ground heights, one per step (:mod:`biped_casadi.simulation.terrain`).
 
         Returns
         -------
         WalkBatch
         """
         th, w = self.section_states(x)
-        return self.walk(th, w, steps)
+        return self.walk(th, w, steps, terrain)
 
-    def walk(self, theta, w, steps: int = 10) -> WalkBatch:
+    def walk_from_states(self, q0, dq0, steps: int = 10, terrain=None) -> WalkBatch:
+        """Walk from full states at the start of a step (the controller's step start).
+
+        Exact for the virtual-constraint controller with its correction (the default):
+        from the start of every step the closed loop moves on the step's corrected
+        surface.
+
+        Parameters
+        ----------
+        q0, dq0 : array_like
+            (n, nq) start states, rad and rad/s.
+        steps : int
+            Steps (impacts) to walk.
+        terrain : Terrain or array_like, optional
+            Ground heights, one per step.
+
+        Returns
+        -------
+        WalkBatch
+        """
+        q0, dq0 = (np.atleast_2d(np.asarray(a, float)) for a in (q0, dq0))
+        n = len(q0)
+        th, w, p = (np.array(v) for v in self._mapped("start", n)(q0.T, dq0.T))
+        return self.walk(th.ravel(), w.ravel(), steps, terrain, p=p.T, step_start=True)
+
+    def _strike_phase(self, height, p):
+        """Per scenario, the phase near theta^- where the swing foot is at ``height`` on
+        the step's corrected surface (Newton), NaN where it does not converge."""
+        n = len(height)
+        th = np.full(n, self.vmap.theta_minus)
+        foot = self._mapped("foot", n)
+        for _ in range(40):
+            _, z, dz = (np.array(v).ravel() for v in foot(th[None, :], p.T))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                step = (z - height) / dz
+            th = th - step
+            if not np.any(np.abs(step) > 1e-14):
+                break
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.abs(step) <= 1e-10)
+        return np.where(bad, np.nan, th)
+
+    def walk(self, theta, w, steps: int = 10, terrain=None, p=None,
+             step_start: bool = False) -> WalkBatch:
         """Walk from phases ``theta`` with rates ``w`` for ``steps`` impacts.
 
         Parameters
@@ -163,43 +228,73 @@ class VirtualConstraintWalker:
             (n,) start phase rates dtheta/dt, rad/s.
         steps : int
             Steps (impacts) to walk.
+        terrain : Terrain or array_like, optional
+            Ground heights, one per step (default flat).
+        p : array_like, optional
+            (n, 1 + 2 nu) the first step's correction constants (default none: the
+            states are on the constraint surface).
+        step_start : bool
+            Whether the first step starts at its beginning (the swing foot is checked
+            to be above the ground there); else it starts inside the step.
 
         Returns
         -------
         WalkBatch
         """
         vm, S = self.vmap, self.schema
-        theta, w = np.array(theta, float), np.array(w, float)
+        theta, w = np.array(theta, float).ravel(), np.array(w, float).ravel()
         n = theta.size
+        if p is None:
+            p = np.zeros((n, self.n_par))
+            p[:, 0] = theta
+        p = np.array(p, float).reshape(n, self.n_par)
+        heights = step_heights(terrain, n, steps)
         run = OutcomeRecorder(n, steps)
         alive = np.ones(n, bool)
-        direction = np.sign(vm.theta_minus - vm.theta_plus)
-        q_u_minus = float(np.array(vm.curve(vm.theta_minus)[0])[0, 0])
+        direction = self.direction
+        lo, hi = vm.vc.theta_range
         for k in range(steps):
             idx = np.flatnonzero(alive)
             if idx.size == 0:
                 break
             run.scenario_steps += idx.size
             m_ = idx.size
-            hs = (vm.theta_minus - theta[idx]) / self.nodes
-            stalled = ~(w[idx] * direction > 0) | ~(hs * direction > 0)
+            ahead, behind = (g[idx] for g in ground_levels(heights, k))
+            thm = self._strike_phase(ahead, p[idx])
+            hs = (thm - theta[idx]) / self.nodes
+            with np.errstate(invalid="ignore"):
+                backwards = ~(w[idx] * direction > 0)
+                stalled = backwards | ~(hs * direction > 0)
+                outside = ~((thm >= lo) & (thm <= hi)) & np.isfinite(thm)
+            hs = np.where(stalled | outside, 0.0, hs)
             z0 = np.vstack([w[idx], np.zeros(m_)])
             _, _, D0 = (np.array(v) for v in self._mapped("start_node", m_)(
-                z0, theta[idx][None, :], np.zeros((1, m_))))
+                z0, theta[idx][None, :], np.zeros((1, m_)), p[idx].T))
             Z, TH, Dg = (np.array(v) for v in self._mapped("chunk", m_)(
-                z0, theta[idx][None, :], hs[None, :]))
+                z0, theta[idx][None, :], hs[None, :], p[idx].T))
             Z = np.concatenate([z0[:, :, None], Z.reshape(2, m_, self.nodes)], axis=2)
             Dg = np.concatenate([D0[:, :, None], Dg.reshape(-1, m_, self.nodes)], axis=2)
             ws = Z[0]
             rows = S.rows(Dg, np.all(np.isfinite(Z), axis=0))
+            zs = rows["zsw"]
+            zprev = np.concatenate([zs[:, :1], zs[:, :-1]], axis=1)
             masks = node_violations(rows, self.limits, self.den_scale,
-                                    np.sign(rows["den"][:, :1]))
+                                    np.sign(rows["den"][:, :1]), zprev,
+                                    (ahead[:, None], behind[:, None]))
             masks["no_impact"] = rows["finite"] & ~(ws * direction > 0)   # stalls, falls back
             first, which = first_violation(masks)
             run.track(idx, S.row(Dg, "u"), S.row(Dg, "Fx"), S.row(Dg, "Fz"),
                       np.arange(self.nodes + 1)[None, :]
                       < np.minimum(first + 1, self.nodes + 1)[:, None])
+            if k == 0 and step_start:
+                which = np.where(which == "", start_violation(zs[:, 0], self.limits, behind),
+                                 which)
+                which = np.where(backwards & (which == ""), "out_of_range", which)
+            which = np.where(outside & (which == ""), "out_of_range", which)
             which = np.where(stalled & (which == ""), "no_impact", which)
+            which = np.where(~np.isfinite(thm) & (which == ""), "no_impact", which)
+            which = np.where((which == "") & ~(rows["xsw"][:, -1] > self.model.scuff_zone),
+                             "no_impact", which)
             which = np.where(which == "", strike_violation(rows["dzsw"][:, -1]), which)
             bad = which != ""
             run.fail(idx[bad], which[bad], k)
@@ -209,18 +304,23 @@ class VirtualConstraintWalker:
                 continue
             gi = idx[ok]
             wm, tm = ws[ok, -1], Z[1, ok, -1]
-            wp, F, vl, dqu = (np.array(v) for v in self._mapped("impact", ok.size)(wm[None, :]))
-            F, vl, wp = F.T, vl.ravel(), wp.ravel()
-            err = np.c_[np.full(ok.size, q_u_minus), dqu.ravel()] - self.ref_T[None, :]
+            th_p, w_p, p_p, F, vl, qu_m, dqu_m = (np.array(v) for v in self._mapped(
+                "impact", ok.size)(thm[ok][None, :], wm[None, :], p[gi].T))
+            F, vl, th_p, w_p = F.T, vl.ravel(), th_p.ravel(), w_p.ravel()
+            err = np.c_[qu_m.ravel(), dqu_m.ravel()] - self.ref_T[None, :]
             run.impact(gi, k, err[:, 0], err[:, 1], tm, F)
-            imp = impact_violation(F, vl, np.isfinite(wp) & np.all(np.isfinite(F), axis=1),
-                                   self.limits)
+            imp = impact_violation(F, vl, np.isfinite(w_p) & np.all(np.isfinite(F), axis=1)
+                                   & np.all(np.isfinite(p_p), axis=0), self.limits)
             badi = imp != ""
             run.fail(gi[badi], imp[badi], k)
             alive[gi[badi]] = False
-            go = gi[~badi]
-            theta[go] = vm.theta_plus
-            w[go] = wp[~badi]
+            nxt = alive[gi] & ~(w_p * direction > 0) & (k + 1 < steps)
+            run.fail(gi[nxt], "out_of_range", k + 1)
+            alive[gi[nxt]] = False
+            go = ~badi & ~nxt
+            theta[gi[go]] = th_p[go]
+            w[gi[go]] = w_p[go]
+            p[gi[go]] = p_p.T[go]
         return run.batch()
 
 

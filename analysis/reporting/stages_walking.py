@@ -1,0 +1,294 @@
+"""The stages of ``biped reproduce`` that ask which controllers walk: the robust design, s*
+of every design, Fig. 5 and 6 at the paper's full perturbation, basins of attraction,
+uneven ground and a wrong model."""
+from __future__ import annotations
+
+
+import numpy as np
+
+from biped_casadi import (PAPER_SIZES, SimulationOptions,
+                          TimeVaryingController, VirtualConstraintController,
+                          perturbed_initial_state, simulate)
+from gait_opt import GaitOptions, default_gait
+
+from ..design import (RobustDesignSettings, robust_design)
+from ..robustness import Design, RobustnessSettings, basin, kept_directions, robustness
+from .plots import (basin_plot, save_figure, swing_torques_plot, tradeoff_plot, unactuated_error_plot,
+                    walking_animation)
+
+from .context import FORMATS, Context, is_rabbit
+from .constants import PAPER
+
+
+def _brief(r) -> dict:
+    """A run's status, steps to converge and validity margins (for summary.json)."""
+    return dict(status=r.status, message=r.message, steps=len(r.steps),
+                steps_to_converge=r.steps_to_converge(),
+                qu_errors=r.qu_error[:len(r.steps)].tolist(),
+                dqu_errors=r.dqu_error[:len(r.steps)].tolist(),
+                peak_torque=r.peak_torque, min_normal_force=r.min_normal_force,
+                max_friction_ratio=r.max_friction_ratio, max_impulse_ratio=r.max_impulse_ratio,
+                failure_time=r.failure_time)
+
+
+def _robust_settings(ctx) -> RobustDesignSettings:
+    return (RobustDesignSettings(samples=20000, starts=1) if ctx.opts.quick
+            else RobustDesignSettings())
+
+
+def stage_robust_design(ctx: Context):
+    """The robust time-varying design (:mod:`analysis.design.robust_search`; cached)."""
+    if not is_rabbit(ctx):
+        ctx.summary["robust_design"] = dict(
+            skipped="the robust-design search is calibrated on RABBIT (its gait options); "
+                    "run 'biped m1 --robust --robot ...' for another robot")
+        return
+    r = robust_design(ctx.model, _robust_settings(ctx), progress=lambda m: ctx.log("   " + m))
+    ctx.data["robust"] = r
+    ctx.data["robust_gait"] = default_gait(ctx.model, GaitOptions(**r.settings["gait"]))
+    ctx.summary["robust_design"] = r.to_dict()
+    ctx.log(f"   {r.message}")
+
+
+def stage_robustness(ctx: Context):
+    """s* of virtual constraints, the deadbeat designs of both a = b = 0 groups and the
+    paper's printed M1 on the default gait; of virtual constraints and the robust design
+    on the robust design's gait."""
+    m, g = ctx.model, ctx.gait
+    st = (RobustnessSettings(directions=8, rounds=6) if ctx.opts.quick
+          else RobustnessSettings())
+    rows = []
+
+    def kept_of(gait):
+        return ctx.memo("kept_directions", dict(gait=gait.cache_key, settings=st.__dict__),
+                        lambda: kept_directions(m, gait, st))
+
+    def s_star(gait, design, kept):
+        return ctx.memo("robustness", dict(gait=gait.cache_key, settings=st.__dict__,
+                                           design=None if design is None else design.to_dict(),
+                                           kept=kept.directions.tolist()),
+                        lambda: robustness(m, gait, design, st, kept=kept))
+    kept = kept_of(g)
+    cands = [("virtual constraints", None)]
+    for name in ("group1", "group2"):
+        if name in ctx.data.get("nlp_M1", {}):
+            cands.append((f"deadbeat M1, {name.replace('group', 'group ')}",
+                          Design(tuple(ctx.data["nlp_M1"][name]))))
+    if is_rabbit(ctx):
+        cands.append(("the paper's printed M1", Design(tuple(PAPER["example_M1"]))))
+    for label, design in cands:
+        r = s_star(g, design, kept)
+        rows.append(dict(label=label, gait="default", **r.to_dict()))
+        ctx.log(f"   default gait, {label}: s* = {r.s_star:.4g}")
+    rb = ctx.data.get("robust")
+    if rb is not None:
+        g2 = ctx.data["robust_gait"]
+        kept2 = kept_of(g2)
+        for label, design in (("virtual constraints", None),
+                              ("robust design", Design(tuple(rb.design["M1"]),
+                                                       rb.design["rejoin"]))):
+            r = s_star(g2, design, kept2)
+            rows.append(dict(label=label, gait="robust", **r.to_dict()))
+            ctx.log(f"   robust gait, {label}: s* = {r.s_star:.4g}")
+    ctx.summary["robustness"] = dict(settings=st.__dict__.copy(), rows=rows)
+
+
+def stage_sim(ctx: Context):
+    """Paper §V-C at the paper's full perturbation (0.01 rad, 0.1 rad/s on every joint,
+    mu = 0.6, the robot's torque limit): virtual constraints and the deadbeat M1 of the
+    NLP on the default gait; virtual constraints and the robust design on the robust
+    design's gait.  Fig. 5, Fig. 6 and an animation of the robust design's run."""
+    m, g = ctx.model, ctx.gait
+    opts = SimulationOptions(steps=ctx.opts.sim_steps, mu=0.6)
+    M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(m.nu)), float)
+    runs, labels = [], []
+    q0, dq0 = perturbed_initial_state(g, *PAPER_SIZES)
+    out = dict(perturbation=list(PAPER_SIZES), mu=0.6, runs={})
+    for key, label, ctrl in (
+            ("default_vc", "virtual constraints (default gait)",
+             VirtualConstraintController(m, g)),
+            ("default_deadbeat", f"deadbeat M1 = [{', '.join(f'{v:.3g}' for v in M1)}] "
+                                 "(default gait)", TimeVaryingController(m, g, M1))):
+        r = _simulated(ctx, g, ctrl, q0, dq0, opts)
+        runs.append(r)
+        labels.append(label)
+        out["runs"][key] = dict(label=label, **_brief(r))
+        ctx.log(f"   {label}: {r.status}")
+    rb = ctx.data.get("robust")
+    robust_runs = []
+    if rb is not None:
+        g2 = ctx.data["robust_gait"]
+        q0, dq0 = perturbed_initial_state(g2, *PAPER_SIZES)
+        M1r = np.array(rb.design["M1"])
+        for key, label, ctrl in (
+                ("robust_vc", "virtual constraints (robust gait)",
+                 VirtualConstraintController(m, g2)),
+                ("robust_design", "robust design (robust gait)",
+                 TimeVaryingController(m, g2, M1r, rejoin=rb.design["rejoin"]))):
+            r = _simulated(ctx, g2, ctrl, q0, dq0, opts)
+            runs.append(r)
+            labels.append(label)
+            robust_runs.append(r)
+            out["runs"][key] = dict(label=label, **_brief(r))
+            ctx.log(f"   {label}: {r.status}")
+    figs = ctx.out / "figures"
+    ctx.figures["fig5"] = save_figure(
+        unactuated_error_plot(runs, labels=labels,
+                              title="Fig. 5 at the paper's full perturbation: q_u error "
+                                    "just before each impact"),
+        figs / "fig5_qu_error", FORMATS)
+    pair = (robust_runs, ctx.data["robust_gait"], labels[2:]) if robust_runs else \
+        (runs, g, labels)
+    ctx.figures["fig6"] = save_figure(
+        swing_torques_plot(pair[0], pair[1], labels=pair[2],
+                           title="Fig. 6 at the paper's full perturbation: swing-leg torques"),
+        figs / "fig6_swing_torques", FORMATS)
+    shown = robust_runs[-1] if robust_runs else runs[-1]
+    if ctx.opts.animation_steps and shown.t.size:
+        ctx.figures["animation"] = [walking_animation(shown, m, figs / "walk_tv.gif",
+                                                      max_steps=ctx.opts.animation_steps)]
+    ctx.summary["simulation"] = out
+
+
+def _simulated(ctx, gait, ctrl, q0, dq0, opts):
+    """A full-order run, kept between reproductions (:meth:`Context.memo`)."""
+    return ctx.memo("simulate", dict(gait=gait.cache_key, controller=ctrl.describe(),
+                                     q0=np.asarray(q0).tolist(), dq0=np.asarray(dq0).tolist(),
+                                     options=opts.to_dict()),
+                    lambda: simulate(ctrl, q0, dq0, opts))
+
+
+def _basin(ctx, gait, design, n):
+    """A basin of attraction, kept between reproductions (:meth:`Context.memo`)."""
+    return ctx.memo("basin", dict(gait=gait.cache_key, n=n,
+                                  design=None if design is None else design.to_dict()),
+                    lambda: basin(ctx.model, gait, design, n=n))
+
+
+def stage_basins(ctx: Context):
+    """Basins of attraction on the Poincaré section: the deadbeat M1 beside virtual
+    constraints on the default gait, the robust design beside virtual constraints on its
+    gait; and the trade-off between s* and max|lambda| found by the robust search."""
+    m, g = ctx.model, ctx.gait
+    n = 41 if ctx.opts.quick else 101
+    M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(m.nu)), float)
+    out = {}
+    b1 = [_basin(ctx, g, Design(tuple(M1)), n), _basin(ctx, g, None, n)]
+    out["default"] = [b.to_dict() for b in b1]
+    figs = ctx.out / "figures"
+    ctx.figures["basin_default"] = save_figure(
+        basin_plot(b1, title="Basins on the default gait: deadbeat M1 and virtual "
+                             "constraints"), figs / "basin_default", FORMATS)
+    rb = ctx.data.get("robust")
+    if rb is not None:
+        g2 = ctx.data["robust_gait"]
+        b2 = [_basin(ctx, g2, Design(tuple(rb.design["M1"]), rb.design["rejoin"]), n),
+              _basin(ctx, g2, None, n)]
+        out["robust"] = [b.to_dict() for b in b2]
+        ctx.figures["basin_robust"] = save_figure(
+            basin_plot(b2, title="Basins on the robust design's gait: the robust design "
+                                 "and virtual constraints"), figs / "basin_robust", FORMATS)
+        rows = (ctx.summary.get("robustness") or {}).get("rows", [])
+        vc_s = next((r["s_star"] for r in rows if r["gait"] == "robust"
+                     and r["controller"] == "vc"), None)
+        others = {"robust design": (rb.max_abs, rb.s_star)}
+        if vc_s is not None:
+            others["virtual constraints"] = (rb.vc_eigenvalue, vc_s)
+        ctx.figures["tradeoff"] = save_figure(
+            tradeoff_plot(rb.tradeoff, others, bound=rb.vc_eigenvalue,
+                          title="s* against max|λ| on the robust design's gait"),
+            figs / "tradeoff", FORMATS)
+    for k, v in out.items():
+        ctx.log(f"   {k}: " + ", ".join(f"{b['controller']} {100 * b['converged_fraction']:.1f} %"
+                                        for b in v))
+    ctx.summary["basins"] = out
+
+
+#: the two gain sets of the model-error table (Kp, Kd, eps of eq. 13)
+TERRAIN_GAINS = ((1.0, 2.0, 0.02), (1.0, 2.0, 0.2))
+
+
+def stage_terrain(ctx: Context):
+    """Beyond the initial push (issue 22), small: the mean first-passage time on
+    stochastic terrain against sigma for virtual constraints and the robust design (on
+    its gait) and the deadbeat M1 (default gait); the exact gait sensitivity norm and
+    its check against the Monte Carlo's step-time RMS at small sigma; the MFPT with the
+    torso 20 % heavier than the controller's model for two gain sets."""
+    from ..terrain import MonteCarloSettings, WalkerSpec, gait_sensitivity, monte_carlo
+    from ..terrain import predicted_rms
+    from .plots import mfpt_sigma_plot, survival_plot
+    m, g = ctx.model, ctx.gait
+    quick = ctx.opts.quick
+    rb, g2 = ctx.data.get("robust"), ctx.data.get("robust_gait")
+    cands = []
+    if rb is not None:
+        cands += [("virtual constraints (robust gait)", g2, WalkerSpec("vc")),
+                  ("robust design", g2, WalkerSpec("tv", tuple(rb.design["M1"]),
+                                                   rb.design["rejoin"]))]
+    else:
+        cands.append(("virtual constraints (default gait)", g, WalkerSpec("vc")))
+    if "group1" in ctx.data.get("nlp_M1", {}):
+        cands.append(("deadbeat M1 (default gait)", g,
+                      WalkerSpec("tv", tuple(ctx.data["nlp_M1"]["group1"]))))
+    sigmas = (0.004, 0.008) if quick else (0.002, 0.004, 0.008, 0.012)
+    runs, steps = (16, 12) if quick else (32, 20)
+    curves, rows, survival = {}, [], []
+    for label, gg, spec in cands:
+        pts = []
+        for sig in sigmas:
+            st = MonteCarloSettings(sigma=sig, runs=runs, max_steps=steps, chunk=runs)
+            r = monte_carlo(gg, spec, st, scheduler="inline")
+            e = r.estimate
+            pts.append((sig, e.mfpt, *e.mfpt_ci))
+            rows.append(dict(label=label, sigma=sig, mfpt=e.mfpt, mfpt_ci=e.mfpt_ci,
+                             failure_probability=e.failure_probability,
+                             failures=e.failures, runs=runs, max_steps=steps,
+                             status_counts=r.status_counts))
+            if sig == sigmas[-1]:
+                survival.append((r, label))
+        curves[label] = pts
+        ctx.log(f"   {label}: MFPT " + ", ".join(
+            f"{p[1]:.3g}" if np.isfinite(p[1]) else f">{p[2]:.3g}" for p in pts)
+            + f" steps at sigma = {', '.join(f'{1000 * v:g}' for v in sigmas)} mm")
+    # the exact GSN, and the Monte Carlo's step-time RMS it predicts at sigma = 0.5 mm
+    gsn = []
+    tv = [c for c in cands if c[2].controller == "tv"]       # (the README has the VC's)
+    for label, gg, spec in tv[-1:] if quick else tv:
+        gs = gait_sensitivity(spec.controller_for(gg), SimulationOptions(rk4_steps=400))
+        st = MonteCarloSettings(sigma=5e-4, runs=runs, max_steps=steps, chunk=runs)
+        mc = monte_carlo(gg, spec, st, scheduler="inline")
+        pred = predicted_rms(gs.linearisation, st.sigma, steps, st.transient)
+        gsn.append(dict(label=label, gsn=gs.gsn, spectral_radius=gs.spectral_radius,
+                        sigma=st.sigma, predicted_rms=pred, monte_carlo_rms=mc.step_time_rms,
+                        relative_difference=abs(mc.step_time_rms - pred) / pred))
+        ctx.log(f"   {label}: GSN (ground, step time) {gs.gsn['ground_height']['step_time']:.4g}"
+                f" s/m; step-time RMS at 0.5 mm: predicted {pred:.3g} s, Monte Carlo "
+                f"{mc.step_time_rms:.3g} s")
+    # a 20 % torso-mass error, two gain sets (the full-order simulator)
+    err = []
+    label, gg, spec = cands[1] if rb is not None else cands[0]
+    plant = m.description.scaled(torso_mass=1.2).to_dict()
+    sig = sigmas[-1]
+    st = MonteCarloSettings(sigma=sig, runs=6 if quick else 12, max_steps=steps, chunk=12)
+    for gains in TERRAIN_GAINS:
+        for pl in (None, plant):
+            sp = WalkerSpec(spec.controller, spec.M1, spec.rejoin, gains, pl)
+            r = monte_carlo(gg, sp, st, scheduler="inline")
+            e = r.estimate
+            err.append(dict(design=label, gains=list(gains), torso_mass_error=0.2 if pl else 0.0,
+                            sigma=sig, mfpt=e.mfpt, mfpt_ci=e.mfpt_ci, failures=e.failures,
+                            runs=st.runs, max_steps=steps, engine=sp.engine,
+                            status_counts=r.status_counts))
+    ctx.log("   torso +20 %: " + "; ".join(
+        f"gains {r['gains']}: MFPT {r['mfpt']:.3g}" for r in err if r["torso_mass_error"]))
+    figs = ctx.out / "figures"
+    ctx.figures["terrain_mfpt"] = save_figure(mfpt_sigma_plot(curves), figs / "terrain_mfpt",
+                                              FORMATS)
+    ctx.figures["terrain_survival"] = save_figure(
+        survival_plot([r for r, _ in survival], labels=[lab for _, lab in survival],
+                      title=f"Survival at sigma = {1000 * sigmas[-1]:g} mm"),
+        figs / "terrain_survival", FORMATS)
+    ctx.summary["terrain"] = dict(sigmas=list(sigmas), runs=runs, max_steps=steps,
+                                  mfpt=rows, gsn=gsn, model_error=err)
+
+

@@ -1,0 +1,191 @@
+"""The gait sensitivity norm (Hobbelen & Wisse, T-RO 2007), exactly.
+
+The step-to-step map of the full-order closed loop, linearised at the periodic walk on
+flat ground (:mod:`analysis.stability.step_map`, exact Jacobians by AD),
+
+    ds_(k+1) = A ds_k + B e_k,      dg_k = C ds_k + D e_k,
+
+with e_k a disturbance of step k (the ground height h_k, m, or a horizontal push P_k on
+the torso at the step's start, N s) and g_k the step's indicators (step time, s, and
+step length, m).  For disturbances i.i.d. with unit variance the indicators' stationary
+covariance is C X C' + D D' with X = A X A' + B B' (a discrete Lyapunov equation); the
+gait sensitivity norm of a disturbance is the 2-norm of that response,
+
+    GSN = sqrt(trace(C X C' + D D')),
+
+and each indicator's own part is the square root of its diagonal entry: on ground of
+standard deviation sigma, ``sigma * gsn[ground_height][step_time]`` is the RMS deviation
+of the step time (:func:`predicted_rms` also gives the transient from the periodic
+walk).  Hobbelen & Wisse take the same norm by finite differences of a simulator; here
+every Jacobian is exact.
+
+Where the periodic walk strikes exactly on a node of the RK4 grid (on flat ground with a
+perfect model it does, at tau = T), the discrete map has a kink there (a non-smooth
+reference continuation past T, or a knot of the virtual constraints at the impact
+phase, is met by one RK4 stage or the next); the linearisation is taken on the side of
+a step up of ``GROUND_OFFSET`` m, where the whole step lies before the strike, the side
+whose derivatives converge to the continuous-time map's.  The offset moves the norms by
+about 1e-4 relative (the eigenvalues of A by 1e-4 per 10 µm); it keeps central
+differences of the simulator with steps up to 1e-6 on one side of the kink.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from biped_casadi.results import Result, internal
+
+from ..stability.step_map import DISTURBANCES, INDICATORS, StepLinearisation, step_map
+
+__all__ = ["GaitSensitivity", "gait_sensitivity", "gsn_of", "predicted_rms", "GROUND_OFFSET"]
+
+#: the ground height at which the periodic walk is linearised, m (module docstring)
+GROUND_OFFSET = 1e-5
+
+
+@dataclass
+class GaitSensitivity(Result):
+    """The gait sensitivity norm of a controller (module docstring).
+
+    ``success`` means it was computed; ``status`` is 'stable', or 'unstable' (spectral
+    radius >= 1: the norm is infinite).
+
+    Parameters
+    ----------
+    gsn : dict
+        Disturbance ('ground_height' per m, 'torso_push' per N s) -> {'step_time': s per
+        unit, 'step_length': m per unit, 'total': the norm}.
+    spectral_radius : float
+        max ``|eigenvalue|`` of A.
+    eigenvalues : list
+        The largest eigenvalues of A ([re, im] pairs, by decreasing magnitude).
+    step_time, step_length : float
+        The periodic walk's, s and m.
+    fixed_point_residual : float
+        ``max |S(s*) - s*|``.
+    status : str
+        'stable' or 'unstable'.
+    message : str
+        In words.
+    linearisation : StepLinearisation
+        A, B, C, D (left out of ``to_dict()``).
+    """
+
+    gsn: dict
+    spectral_radius: float
+    eigenvalues: list
+    step_time: float
+    step_length: float
+    fixed_point_residual: float
+    status: str
+    message: str = ""
+    linearisation: StepLinearisation = internal(default=None)
+
+    SUCCESS = ("stable", "unstable")
+
+
+def _stationary(A, BB):
+    from scipy.linalg import solve_discrete_lyapunov
+    return solve_discrete_lyapunov(A, BB)
+
+
+def gsn_of(lin: StepLinearisation) -> dict:
+    """The gait sensitivity norms of a linearised step map.
+
+    Parameters
+    ----------
+    lin : StepLinearisation
+        A, B, C, D.
+
+    Returns
+    -------
+    dict
+        Disturbance -> {indicator: RMS response per unit disturbance, 'total': the
+        norm}; inf everywhere when A is not stable.
+    """
+    out = {}
+    stable = lin.spectral_radius < 1
+    for j, name in enumerate(lin.disturbances):
+        if not stable:
+            out[name] = {**{i: math.inf for i in lin.indicators}, "total": math.inf}
+            continue
+        b, d = lin.B[:, j:j + 1], lin.D[:, j:j + 1]
+        X = _stationary(lin.A, b @ b.T)
+        cov = lin.C @ X @ lin.C.T + d @ d.T
+        out[name] = {i: float(np.sqrt(max(cov[k, k], 0.0))) for k, i in enumerate(lin.indicators)}
+        out[name]["total"] = float(np.sqrt(max(np.trace(cov), 0.0)))
+    return out
+
+
+def predicted_rms(lin: StepLinearisation, sigma: float, steps: int, transient: int = 0,
+                  disturbance: str = "ground_height", indicator: str = "step_time") -> float:
+    """The predicted RMS deviation of an indicator on walks from the periodic walk.
+
+    Over steps ``transient..steps-1``, with disturbances of standard deviation
+    ``sigma``.
+
+    The covariance of the state follows X_(k+1) = A X_k A' + sigma^2 b b' from X_0 = 0;
+    step k's indicator has variance c X_k c' + sigma^2 d^2.
+
+    Parameters
+    ----------
+    lin : StepLinearisation
+        The linearised map.
+    sigma : float
+        Standard deviation of the disturbance.
+    steps : int
+        Steps walked.
+    transient : int
+        First step counted.
+    disturbance, indicator : str
+        Which column and row.
+
+    Returns
+    -------
+    float
+        The predicted RMS.
+    """
+    j, i = lin.disturbances.index(disturbance), lin.indicators.index(indicator)
+    b, d, c = lin.B[:, j:j + 1], float(lin.D[i, j]), lin.C[i:i + 1]
+    X = np.zeros_like(lin.A)
+    var = []
+    for k in range(steps):
+        if k >= transient:
+            var.append((c @ X @ c.T).item() + d * d)
+        X = lin.A @ X @ lin.A.T + b @ b.T
+    return float(sigma * np.sqrt(np.mean(var))) if var else math.nan
+
+
+def gait_sensitivity(controller, options=None, plant=None) -> GaitSensitivity:
+    """The exact gait sensitivity norm of a controller's full-order closed loop.
+
+    Parameters
+    ----------
+    controller : TimeVaryingController or VirtualConstraintController
+        The control law (any controller of the law interface).
+    options : SimulationOptions, optional
+        The simulator's (its ``rk4_steps`` fix the discrete map).
+    plant : BipedModel, optional
+        The robot that moves (model error; default the controller's model).
+
+    Returns
+    -------
+    GaitSensitivity
+    """
+    sm = step_map(controller, options, plant)
+    fp = sm.fixed_point()
+    lin = sm.linearise(fp.state, h=GROUND_OFFSET)
+    norms = gsn_of(lin)
+    rho = lin.spectral_radius
+    status = "stable" if rho < 1 else "unstable"
+    ev = [[float(e.real), float(e.imag)] for e in lin.eigenvalues[:3]]
+    g = norms[DISTURBANCES[0]]
+    msg = (f"GSN (ground height): step time {g[INDICATORS[0]]:.4g} s/m, step length "
+           f"{g[INDICATORS[1]]:.4g} m/m; (torso push): "
+           f"{norms[DISTURBANCES[1]]['total']:.4g} per N s; spectral radius {rho:.4g}")
+    return GaitSensitivity(gsn=norms, spectral_radius=rho, eigenvalues=ev,
+                           step_time=fp.step_time, step_length=fp.step_length,
+                           fixed_point_residual=fp.residual, status=status, message=msg,
+                           linearisation=lin)

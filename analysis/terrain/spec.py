@@ -1,0 +1,250 @@
+"""What a Monte Carlo walks (the controller, its design or gains, the plant, the engine)
+and how (runs, steps, terrain, thresholds), and the digest of the code behind its
+numbers."""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
+                          VirtualConstraintController, robot)
+from biped_casadi.caching import modules_digest
+from biped_casadi.model.description import description_from_dict
+from biped_casadi.simulation import (Terrain, random_heights)
+
+
+__all__ = ["WalkerSpec", "MonteCarloSettings", "code_digest", "MAX_RUNS", "MAX_STEPS",
+           "NUMERIC_MODULES"]
+
+#: the largest number of runs and of steps per run a Monte Carlo accepts
+MAX_RUNS = 1_000_000
+MAX_STEPS = 100_000
+
+#: the modules whose code decides the numbers of a Monte Carlo (part of its settings)
+NUMERIC_MODULES = ("biped_casadi.model.biped", "biped_casadi.control.output_law",
+                   "biped_casadi.control.zero_dynamics", "biped_casadi.control.time_varying",
+                   "biped_casadi.control.virtual_constraints", "biped_casadi.simulation.kernel",
+                   "biped_casadi.simulation.validity", "biped_casadi.simulation.outcome",
+                   "biped_casadi.simulation.full_order", "biped_casadi.simulation.tv_walker",
+                   "biped_casadi.simulation.vc_walker", "biped_casadi.simulation.terrain",
+                   "analysis.terrain.montecarlo")
+
+
+def code_digest() -> str:
+    """SHA-256 of the source of :data:`NUMERIC_MODULES` (part of a Monte Carlo's identity)."""
+    return modules_digest(NUMERIC_MODULES)
+
+
+@dataclass(frozen=True)
+class WalkerSpec:
+    """What walks: the controller, its design and gains, and the plant (picklable).
+
+    Parameters
+    ----------
+    controller : {'tv', 'vc'}
+        Time-varying outputs or virtual constraints.
+    M1 : tuple of float
+        The time-varying outputs (ignored for 'vc').
+    rejoin : float
+        Rejoin time of v_c, fraction of T ('tv').
+    gains : tuple of float
+        (Kp, Kd, eps) of eq. (13); they matter only with a model error or saturation.
+    plant : dict, optional
+        The plant's robot description (``RobotDescription.to_dict()``) when it differs
+        from the controller's model.
+    saturate : bool
+        Clip torques at the limit and keep walking (full-order simulator).
+    """
+
+    controller: str = "tv"
+    M1: tuple = ()
+    rejoin: float = 0.5
+    gains: tuple = (1.0, 2.0, 0.02)
+    plant: dict | None = None
+    saturate: bool = False
+
+    def __post_init__(self):
+        if self.controller not in ("tv", "vc"):
+            raise ValueError(f"controller must be 'tv' or 'vc', got {self.controller!r}")
+        object.__setattr__(self, "M1", tuple(float(v) for v in self.M1))
+        object.__setattr__(self, "gains", tuple(float(v) for v in self.gains))
+        Gains(*self.gains)                             # checked
+        if self.controller == "tv" and not self.M1:
+            raise ValueError("M1: the time-varying controller needs its outputs")
+
+    @property
+    def engine(self) -> str:
+        """'zero_dynamics', 'virtual_constraints' (the batched walkers) or 'full_order'."""
+        if self.plant is not None or self.saturate:
+            return "full_order"
+        return "zero_dynamics" if self.controller == "tv" else "virtual_constraints"
+
+    def controller_for(self, gait):
+        """The controller on a gait.
+
+        Parameters
+        ----------
+        gait : Gait
+            The reference.
+
+        Returns
+        -------
+        TimeVaryingController or VirtualConstraintController
+        """
+        g = Gains(*self.gains)
+        if self.controller == "tv":
+            return TimeVaryingController(gait.model, gait, np.array(self.M1), g, self.rejoin)
+        return VirtualConstraintController(gait.model, gait, gains=g)
+
+    def plant_model(self):
+        """The plant's model (None: the controller's).
+
+        Returns
+        -------
+        BipedModel or None
+        """
+        return None if self.plant is None else robot(description_from_dict(
+            self.plant, where="plant"))
+
+    def to_dict(self) -> dict:
+        """The fields in JSON types.
+
+        Returns
+        -------
+        dict
+        """
+        d = asdict(self)
+        d["M1"], d["gains"] = list(self.M1), list(self.gains)
+        d["engine"] = self.engine
+        return d
+
+
+@dataclass(frozen=True)
+class MonteCarloSettings:
+    """How the Monte Carlo runs (module docstring); all have defaults.
+
+    Parameters
+    ----------
+    sigma : float
+        Standard deviation of the ground heights, m (>= 0).
+    runs : int
+        N runs.
+    max_steps : int
+        K steps at most per run.
+    seed : int
+        Seed of the terrain.
+    chunk : int
+        Runs per chunk (one task, one file).
+    mu : float
+        Friction coefficient.
+    torque_limit : float, optional
+        Bound on ``|u_i|``, N m (default the robot's).
+    rk4_steps : int
+        RK4 steps per T of the zero-dynamics walker.
+    vc_nodes : int
+        RK4 nodes per step of the virtual-constraint walker.
+    full_rk4_steps : int
+        RK4 steps per T of the full-order simulator, at least (raised where the output
+        gains' eps needs a finer step, eps >= 2 h); 200 gives the verdicts of 2000 on every
+        run compared (``benchmarks/bench_terrain.py``, README).
+    transient : int
+        Steps left out at the start of every run for the step-time RMS.
+    profile : tuple of float
+        A measured terrain instead of random heights (sigma then 0): run i walks the
+        profile from its i-th height on, cyclically, m.
+    """
+
+    sigma: float = 0.005
+    runs: int = 200
+    max_steps: int = 50
+    seed: int = 0
+    chunk: int = 50
+    mu: float = 0.6
+    torque_limit: float | None = None
+    rk4_steps: int = 128
+    vc_nodes: int = 100
+    full_rk4_steps: int = 200
+    transient: int = 5
+    profile: tuple = ()
+
+    def __post_init__(self):
+        s = self.sigma
+        if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) \
+                or s < 0:
+            raise ValueError(f"sigma must be a finite number >= 0 (m), got {s!r}")
+        for name, hi in (("runs", MAX_RUNS), ("max_steps", MAX_STEPS), ("chunk", MAX_RUNS)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= hi:
+                raise ValueError(f"{name} must be an integer between 1 and {hi}, got {v!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) \
+                or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+        SimulationOptions(mu=self.mu, torque_limit=self.torque_limit,
+                          rk4_steps=self.full_rk4_steps)          # checked there
+        v = self.rk4_steps
+        if isinstance(v, bool) or not isinstance(v, int) or v < 8 or v % 8:
+            raise ValueError(f"rk4_steps must be a positive multiple of 8, got {v!r}")
+        v = self.vc_nodes
+        if isinstance(v, bool) or not isinstance(v, int) or v < 8:
+            raise ValueError(f"vc_nodes must be an integer >= 8, got {v!r}")
+        if isinstance(self.transient, bool) or not isinstance(self.transient, int) \
+                or self.transient < 0:
+            raise ValueError(f"transient must be a non-negative integer, got "
+                             f"{self.transient!r}")
+        object.__setattr__(self, "profile", Terrain(tuple(self.profile)).heights)
+        if self.profile and self.sigma:
+            raise ValueError("sigma and profile exclude each other (a profile is the terrain)")
+
+    def heights(self, runs) -> np.ndarray:
+        """The ground heights of runs (module docstring), (len(runs), max_steps), m.
+
+        Parameters
+        ----------
+        runs : array_like of int
+            Run indices.
+
+        Returns
+        -------
+        numpy.ndarray
+        """
+        runs = np.atleast_1d(np.asarray(runs, np.int64))
+        if self.profile:
+            P = np.asarray(self.profile, float)
+            return P[(runs[:, None] + np.arange(self.max_steps)[None, :]) % P.size]
+        return random_heights(self.sigma, self.max_steps, self.seed, runs)
+
+    def options(self, spec: WalkerSpec, T: float = None) -> SimulationOptions:
+        """The simulation options of the runs.
+
+        Parameters
+        ----------
+        spec : WalkerSpec
+            What walks (its saturation and its gains).
+        T : float, optional
+            The reference's step duration, s: the RK4 steps per T are raised to keep
+            eps >= 2 T / rk4_steps.
+
+        Returns
+        -------
+        SimulationOptions
+        """
+        rk = self.full_rk4_steps
+        if T is not None:
+            need = 2.0 * T / spec.gains[2]
+            rk = max(rk, 8 * int(math.ceil(need / 8 - 1e-9)))
+        return SimulationOptions(steps=self.max_steps, mu=self.mu,
+                                 torque_limit=self.torque_limit, saturate=spec.saturate,
+                                 rk4_steps=rk, jit=True)
+
+    def to_dict(self) -> dict:
+        """The fields by name.
+
+        Returns
+        -------
+        dict
+        """
+        return asdict(self)
+
+
