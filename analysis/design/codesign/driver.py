@@ -1,327 +1,33 @@
-"""Robust co-design (issue 20): one NLP chooses M1 and, by default, the gait itself, against
-perturbation scenarios walked by the walker's own rule.
-
-The NLP (:mod:`analysis.design.codesign_nlp`).  Decision variables: the outputs M1, the
-perturbation scale s (maximised) and, with the gait free, the gait's Bezier
-coefficients alpha, its duration T and its unactuated start (q_u^d(0), dq_u^d(0)), under
-the constraints of :mod:`gait_opt.transcription` on the gait's own nominal step.  Each
-scenario starts at the gait's start plus the perturbation of its direction at scale s
-(the full 10-state perturbation, as in the paper) -- the paper's own direction at the
-fixed scale 1 -- and walks ``steps`` steps of the closed-loop hybrid zero dynamics with
-the walker's fixed-grid RK4 and its strike; every node, strike and impact keeps the
-walker's validity conditions with margins.  At the last step the paper's direction is
-below ``paper_tol`` (the paper's claim: converged from step 4) and the other scenarios
-below ``scenario_tol``.  With the gait fixed, max|lambda(A^z)| is bounded by the 2x2 Jury
-conditions on A^z (exact in M1 by AD of the variational equation) at ``eigen_margin``
-times the virtual constraints' eigenvalue; with the gait free it is verified after each
-gait step.  The rejoin time of v_c is fixed per solve (``rejoin``): v_c's third
-derivative jumps at t_c, which makes the walker's discrete rule kinked in t_c each time
-it crosses an RK4 stage.
-
-The method.  "Every kept direction walks" is a semi-infinite constraint; it is met by
-scenario exchange (a cutting-plane method): the NLP is solved on the paper's direction
-and the few directions that fail first; the design is verified on every kept direction
-with the walker's bisection (:func:`analysis.robustness.robustness`); the direction that
-fails just above the verified s* joins the scenarios, and the NLP is solved again from
-its last design.  With the gait free, each gait step is taken inside a trust region
-around the current gait, made exactly periodic (:func:`gait_opt.polish.polish`), its
-kept directions re-derived (the protocol's rule: virtual constraints walk from them at
-scale 1), and accepted only when the verified s* improves with max|lambda| at most the
-virtual constraints' eigenvalue on the new gait.
-
-The result is verified by the one protocol (:func:`analysis.design.verification.verify_design`):
-s* (walker bisection, full-order simulator at s* and just above), the paper's perturbation
-in full order, max|lambda| against virtual constraints, and sign patterns never seen
-(:func:`analysis.design.verification.hidden_sign_patterns`).  Results are cached.
-"""
+"""The co-design's method: starts, scenario exchange, gait steps, verification
+(the package docstring of :mod:`analysis.design.codesign`)."""
 from __future__ import annotations
 
 import json
 import math
 import time
-from dataclasses import asdict, dataclass, field
 
 import casadi as ca
 import numpy as np
 
-from biped_casadi.caching import DiskCache, source_digest
+from biped_casadi.caching import source_digest
 from biped_casadi.control.output_law import decoupling_denominator
 from biped_casadi.control.zero_dynamics import denominator_samples
 from biped_casadi.files import write_text_atomic
-from biped_casadi.results import Result, internal
 from biped_casadi.simulation import start_states, zero_dynamics_walker
 from gait_opt import Gait, GaitOptions, default_gait
 from gait_opt.cache import cache_path
 from gait_opt.errors import GaitOptimizationError
 from gait_opt.polish import polish
 
-from ..robustness.basin import basin
-from ..robustness.s_star import Design, RobustnessSettings, kept_directions, robustness
-from ..stability.poincare import poincare_map
-from ..stability.vc_map import vc_eigenvalue
-from .codesign_nlp import (FAMILIES, Reduced, Transcription, TranscriptionSettings,
-                           _node_functions, solve_nlp)
-from .robust_search import ROBUST_GAIT
-from .verification import hidden_sign_patterns, verify_design
-
-__all__ = ["CodesignSettings", "CodesignResult", "codesign", "TODAY_DESIGN", "CODESIGNS",
-           "QUICK", "FULL"]
-
-#: the sampling search's shipped design on :data:`ROBUST_GAIT` (M1; v_c rejoining at
-#: 0.75 T): s* 0.969, the co-design's first warm start
-TODAY_DESIGN = (-8.2618, 2.5374, 0.0034, 8.5090)
-
-#: the co-designs kept between sessions
-CODESIGNS = DiskCache("codesign", version=1)
-
-
-@dataclass(frozen=True)
-class CodesignSettings:
-    """The co-design of :func:`codesign` (module docstring); all have defaults.
-
-    Parameters
-    ----------
-    gait : dict
-        GaitOptions fields of the gait to start from (and whose constraints the free
-        gait keeps); default :data:`ROBUST_GAIT`.
-    free_gait : bool
-        Co-design the gait (else only M1 moves, on the given or start gait).
-    rejoin : float
-        Rejoin time of v_c, fraction of T.
-    steps : int
-        Steps per NLP scenario.
-    paper_tol : float
-        Error bound at the last NLP step of the paper's direction at scale 1.
-    scenario_tol : float
-        Error bound at the last NLP step of the other scenarios (at scale s).
-    initial_active : int
-        Kept directions in the first NLP besides the paper's: those that fail first for
-        the starting design.
-    max_active : int
-        Largest number of kept directions in the NLP.
-    exchange_rounds : int
-        NLP solves with the gait fixed (each followed by the walker's verification).
-    gait_rounds : int
-        Gait steps (free gait only).
-    trust_alpha, trust_T, trust_x0 : float
-        Trust region of a gait step: rad on every Bezier coefficient, s on T, and
-        rad, rad/s on the unactuated start.
-    starts : tuple
-        Starting M1s besides the sampled ones (:data:`FULL` adds today's search design;
-        from it the NLP ends in the region of large M1, s* 0.4-0.9, measured).
-    samples : int
-        Random M1 drawn in [-box, box]^nu for the sampled starts (0: none).
-    box : float
-        Their box.
-    sampled_starts : int
-        Sampled M1 kept as starts: the first drawn with max ``|lambda|`` within the bound
-        from which the walker walks the paper's perturbation at scale 1.
-    seed : int
-        Seed of the samples.
-    s_start : float
-        Scale of the first NLP's starting point.
-    eigen_margin : float
-        max ``|lambda|`` is kept at most this fraction of the virtual constraints'
-        eigenvalue in the NLP.
-    max_iter : int
-        IPOPT iterations per solve.
-    screen_iter, screen_time : int, float
-        IPOPT iterations and wall time (s) of the first solve from each start; the start
-        whose solve reaches the largest s continues.
-    paper_steps : int
-        Continuation solves that bring the paper's error bound down from the start's.
-    max_solve_time : float
-        Wall time per IPOPT solve, s.
-    transcription : dict
-        :class:`~analysis.design.codesign_nlp.TranscriptionSettings` fields (rule and
-        margins).
-    mu, torque_limit, directions, walk_steps, tol : as :class:`RobustnessSettings`
-        Friction coefficient, torque bound (N m, None: the robot's), kept directions,
-        steps walked and convergence threshold of every verification.
-    hidden : bool
-        Check the design on hidden sign patterns (at 1 and 1.25).
-    basin : bool
-        Compute the 101 x 101 basin of the result.
-    """
-
-    gait: dict = field(default_factory=lambda: dict(ROBUST_GAIT))
-    free_gait: bool = True
-    rejoin: float = 0.75
-    steps: int = 4
-    paper_tol: float = 8e-4
-    scenario_tol: float = 0.5
-    initial_active: int = 2
-    max_active: int = 8
-    exchange_rounds: int = 4
-    gait_rounds: int = 2
-    trust_alpha: float = 0.05
-    trust_T: float = 0.025
-    trust_x0: float = 0.25
-    starts: tuple = ()
-    samples: int = 2000
-    box: float = 1.0
-    sampled_starts: int = 5
-    seed: int = 0
-    s_start: float = 0.9
-    eigen_margin: float = 0.98
-    max_iter: int = 100
-    screen_iter: int = 40
-    screen_time: float = 8.0
-    paper_steps: int = 3
-    max_solve_time: float = 40.0
-    transcription: dict = field(default_factory=dict)
-    mu: float = 0.6
-    torque_limit: float | None = None
-    directions: int = 16
-    walk_steps: int = 10
-    tol: float = 1e-3
-    hidden: bool = True
-    basin: bool = False
-
-    def robustness_settings(self, rounds: int = 8) -> RobustnessSettings:
-        """The protocol's settings (400 RK4 steps per T, ``rounds`` bisection rounds).
-
-        Parameters
-        ----------
-        rounds : int
-            Bisection rounds.
-
-        Returns
-        -------
-        RobustnessSettings
-        """
-        return RobustnessSettings(directions=self.directions, steps=self.walk_steps,
-                                  tol=self.tol, mu=self.mu, torque_limit=self.torque_limit,
-                                  rounds=rounds)
-
-    def to_dict(self) -> dict:
-        """The settings as a dictionary (part of the cache key).
-
-        Returns
-        -------
-        dict
-        """
-        d = asdict(self)
-        d["starts"] = [list(map(float, s)) for s in self.starts]
-        return d
-
-
-#: the settings of a quick reproduction (about 15 s warm): the gait fixed, two
-#: exchange rounds, no hidden patterns
-QUICK = CodesignSettings(free_gait=False, exchange_rounds=2, hidden=False)
-#: the settings of a full reproduction: the gait free, today's design and three sampled
-#: starts, three gait steps, the basin
-FULL = CodesignSettings(starts=(TODAY_DESIGN,), sampled_starts=8, gait_rounds=3, basin=True)
-
-
-@dataclass
-class CodesignResult(Result):
-    """The co-designed controller (and gait), verified.
-
-    ``success`` means the co-design ran to its verification; whether the targets are met
-    is ``status``.
-
-    Parameters
-    ----------
-    status : str
-        'target_met' (s* >= 1, max ``|lambda|`` <= the virtual constraints' eigenvalue,
-        the paper's perturbation converged by step 4) or 'target_not_met'.
-    message : str
-        The result in words.
-    design : dict
-        ``M1`` (list) and ``rejoin`` (fraction of T).
-    gait_file : str
-        The gait the design runs on.
-    gait_options : dict
-        Its GaitOptions.
-    gait_free : bool
-        Whether the gait was co-designed.
-    gait_change : dict
-        T before and after, the largest change of a Bezier coefficient (rad).
-    s_star, s_fail : float
-        The protocol's s* and the scale just above where a kept direction fails.
-    failure : str
-        That failure in words.
-    verified : dict
-        Full-order runs at s* and s_fail (:class:`~analysis.design.verification.DesignCheck`).
-    max_abs : float
-        max ``|lambda|`` of A^z (full AD).
-    vc_eigenvalue : float
-        Virtual constraints' ``|eigenvalue|`` on the same gait.
-    steps_to_converge : int or None
-        The paper's perturbation, full order: the step from which the error stays below
-        ``tol``.
-    paper_errors : list of float
-        The error at every step of that run.
-    peak_torque : float
-        Its largest ``|u|``, N m.
-    hidden : dict
-        The hidden sign patterns (:class:`~analysis.design.verification.HiddenPatterns`), or {}.
-    basin : dict
-        The basin's fractions, or {}.
-    nlp_s : float
-        The best NLP's own s (over its scenarios).
-    active_constraints : list of dict
-        The constraints with the largest multipliers at the last solve, in words.
-    ipopt : dict
-        The solves: status, iterations and time of each, and their totals.
-    rounds : list of dict
-        Every solve and verification (s of the NLP, verified s*, scenarios).
-    directions_kept : int
-        Kept directions on the final gait.
-    directions_tried : int
-        Candidates tried to keep them.
-    simulate_args : list of str
-        ``biped simulate`` arguments that replay the design from the paper's perturbation.
-    stages : dict
-        Time per stage, s.
-    elapsed : float
-        Wall time, s.
-    settings : dict
-        :meth:`CodesignSettings.to_dict`.
-    cached : bool
-        Read from the cache.
-    gait : Gait
-        The gait (left out of ``to_dict()``).
-    """
-
-    status: str
-    message: str
-    design: dict
-    gait_file: str
-    gait_options: dict
-    gait_free: bool
-    gait_change: dict
-    s_star: float
-    s_fail: float
-    failure: str
-    verified: dict
-    max_abs: float
-    vc_eigenvalue: float
-    steps_to_converge: int | None
-    paper_errors: list
-    peak_torque: float
-    hidden: dict
-    basin: dict
-    nlp_s: float
-    active_constraints: list
-    ipopt: dict
-    rounds: list
-    directions_kept: int
-    directions_tried: int
-    simulate_args: list
-    stages: dict
-    elapsed: float
-    settings: dict
-    cached: bool = False
-    gait: object = internal(default=None)
-
-    SUCCESS = ("target_met", "target_not_met")
-
-
-class CodesignError(ValueError):
-    """IPOPT failed on the co-design NLP, or the request is infeasible (the message says
-    which solver, its status and what to try)."""
+from ...robustness.basin import basin
+from ...robustness.s_star import Design, kept_directions, robustness
+from ...stability.poincare import poincare_map
+from ...stability.vc_map import vc_eigenvalue
+from ..verification import hidden_sign_patterns, verify_design
+from .functions import FAMILIES, TranscriptionSettings, _node_functions
+from .reduced import NLPSolve, NoStrikeAtStart, Reduced, solve_nlp
+from .settings import CODESIGNS, CodesignError, CodesignResult, CodesignSettings
+from .transcription import Transcription
 
 
 # ------------------------------------------------------------------ the method
@@ -443,9 +149,26 @@ class _Codesign:
                 break
         return res
 
-    def solve(self, tr, red, d0, lb, ub, label, max_iter=None, max_time=None):
-        res = solve_nlp(red, d0, lb, ub, {"max_iter": max_iter or self.st.max_iter,
-                                          "max_wall_time": max_time or self.st.max_solve_time})
+    def solve(self, tr, red, d0, lb, ub, label, max_iter=None, max_time=None,
+              max_evaluations=None):
+        """One IPOPT solve from d0.  When a scenario cannot strike from d0 (a direction
+        just added fails early at the start's scale), the start's s is lowered (x 0.8,
+        at most 8 times) until every scenario strikes."""
+        d0 = np.array(d0, float)
+        for _ in range(8):
+            try:
+                res = solve_nlp(red, d0, lb, ub, {
+                    "max_iter": max_iter or self.st.max_iter,
+                    "max_wall_time": max_time or self.st.max_solve_time},
+                    max_evaluations=max_evaluations or self.st.max_evaluations)
+                break
+            except NoStrikeAtStart:
+                d0[tr.i_s] *= 0.8
+                red._last = None
+        else:
+            res = NLPSolve(d=np.full(red.nd, np.nan), lam_g=np.zeros(0),
+                           status="no_strike_from_start", success=False, iterations=0,
+                           time=0.0, evaluations=0)
         self.solves.append(dict(label=label, status=res.status, iterations=res.iterations,
                                 time=round(res.time, 2), evaluations=res.evaluations,
                                 scenarios=tr.K))
@@ -545,7 +268,8 @@ class _Codesign:
             lb[tr.i_rejoin] = ub[tr.i_rejoin] = st.rejoin
             label = f"start {i + 1} of {len(starts)}"
             self.say(f"NLP, gait fixed: {tr.K} scenarios x {tr.S} steps ({label})")
-            res = self.solve(tr, red, d0, lb, ub, label, st.screen_iter, st.screen_time)
+            res = self.solve(tr, red, d0, lb, ub, label, st.screen_iter, st.screen_time,
+                             st.screen_evaluations)
             s_nlp = float(res.d[tr.i_s]) if np.all(np.isfinite(res.d)) else -np.inf
             self.say(f"  IPOPT {res.status} ({res.iterations} it, {res.time:.1f} s): NLP s "
                      f"{s_nlp:.4g}")
@@ -594,6 +318,10 @@ class _Codesign:
         trust = 1.0
         for rnd in range(st.gait_rounds):
             tr, red = self.nlp(gait, np.array(dirs), free=True, paper_tol=st.paper_tol)
+            # max|lambda| is not exact in the free-gait NLP: the Jury bound on the current
+            # gait's A^z(M1), tighter, keeps M1 from raising it while the gait moves a
+            # trust region
+            red.jury = (self._jury(gait), st.gait_eigen_margin * self.lam_vc(gait))
             self.denominator(tr, gait, M1)
             d0 = np.zeros(red.nd)
             d0[tr.i_G] = tr.gait_vector(gait)
@@ -610,7 +338,14 @@ class _Codesign:
             ub[na + 1:na + 3] = d0[na + 1:na + 3] + trust * st.trust_x0
             self.say(f"NLP, gait free: {tr.K} scenarios x {tr.S} steps, trust region "
                      f"{trust * st.trust_alpha:g} rad (round {rnd + 1})")
-            res = self.solve(tr, red, d0, lb, ub, f"gait free, round {rnd + 1}")
+            res = self.solve(tr, red, d0, lb, ub, f"gait free, round {rnd + 1}",
+                             max_iter=st.gait_iter, max_time=st.gait_solve_time,
+                             max_evaluations=st.gait_evaluations)
+            if not np.all(np.isfinite(res.d)):
+                self.rounds.append(dict(phase="gait free", round=rnd + 1,
+                                        nlp_status=res.status, rejected="no solve"))
+                trust /= 2
+                continue
             alpha, T, r0, M1n, _, s_nlp = tr.unpack(res.d)
             try:
                 opts = gait.options
@@ -636,15 +371,33 @@ class _Codesign:
                      f"{s_nlp:.4g}; new gait T {T2:.4g} s, verified s* {r.s_star:.4g} over "
                      f"{len(kept_new)} kept directions, max|lambda| {lam:.3g} (VC {lvc:.3g})")
             score = self.score(r)
-            if score > best["score"] and lam <= lvc and len(kept_new) == st.directions:
+            full = len(kept_new) == st.directions
+            if score > best["score"] and lam <= lvc and full:
                 best = dict(best, gait=g_new, kept=kept_new, M1=M1n, s_star=r.s_star,
                             nlp_s=s_nlp, red=red, tr=tr, res=res, lam=lam, score=score)
                 gait, kept, M1 = g_new, kept_new, M1n
                 rec.update(accepted=True)
+                self.rounds.append(rec)
+            elif score > best["score"] and full and st.repair:
+                # the gait step gained s* but max|lambda| (not in the free-gait NLP) grew
+                # past the virtual constraints': M1 alone, on the new gait, under the Jury
+                # bound, from the step's M1
+                rec.update(accepted=False, repaired="M1 re-solved on the new gait")
+                self.rounds.append(rec)
+                active = self.hardest(g_new, kept_new, M1n, r.s_star, st.initial_active)
+                c = self.solve_round(g_new, kept_new, M1n, active, 1,
+                                     max(r.s_star - 0.02, 0.1), label=f"gait round "
+                                     f"{rnd + 1}: M1 on the new gait")
+                if c is not None and c["ok"] and c["score"] > best["score"]:
+                    best = c
+                    gait, kept, M1 = g_new, kept_new, c["M1"]
+                    self.rounds[-1].update(accepted=True)
+                else:
+                    trust /= 2
             else:
                 trust /= 2
                 rec.update(accepted=False)
-            self.rounds.append(rec)
+                self.rounds.append(rec)
             if r.failure:
                 d_fail = kept_new.directions[r.failure["direction"]]
                 if not any(np.array_equal(d_fail, x) for x in dirs) \
@@ -654,17 +407,25 @@ class _Codesign:
 
 
 def _active(best, limit: int = 8):
-    """The constraints with the largest multipliers at the best solve, in words."""
+    """The inequality constraints with the largest multipliers at the best solve, in
+    words."""
     red, res = best["red"], best["res"]
     if res is None:
         return []
-    red.evaluate(res.d)
-    lam = np.asarray(res.lam_g)
+    _, _, _, _, lo, hi = red.evaluate(res.d)
+    # equalities (the gait's periodicity, its swing foot on the ground at T, ...) hold
+    # with any multiplier: the inequalities with the largest multipliers are what binds
+    lam = np.where(np.asarray(lo) == np.asarray(hi), 0.0, np.asarray(res.lam_g))
     order = np.argsort(-np.abs(lam))
-    out = []
-    for i in order[:limit]:
-        if abs(lam[i]) < 1e-8:
+    out, seen = [], set()
+    top = float(np.max(np.abs(lam), initial=0.0))
+    for i in order:
+        # a row's two sides, or multipliers below 1e-4 of the largest, bind nothing
+        if len(out) == limit or abs(lam[i]) < max(1e-8, 1e-4 * top):
             break
+        if red.names[i] in seen:
+            continue
+        seen.add(red.names[i])
         out.append(dict(constraint=_words(red.names[i], best.get("labels")),
                         multiplier=float(lam[i]), row=red.names[i]))
     return out
@@ -811,3 +572,59 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
         except OSError:
             pass
     return result
+
+
+def codesign_tradeoff(model, result: CodesignResult, fractions=(0.25, 0.5, 0.75, 1.0),
+                      progress=None) -> list:
+    """The (max|lambda|, s*) trade-off traced by the NLP on the co-design's gait.
+
+    For each bound rho = fraction x the virtual constraints' eigenvalue, the fixed-gait
+    NLP (the Jury conditions at rho) is solved from the co-design's M1 with the
+    scenarios of its last solve, and its design is verified by the walker's bisection
+    over the kept directions: each point is a verified s* and its exact max|lambda|.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    result : CodesignResult
+        A co-design (its gait, M1, settings).
+    fractions : tuple of float
+        The bounds, as fractions of the virtual constraints' eigenvalue.
+    progress : callable, optional
+        One line per point.
+
+    Returns
+    -------
+    list of dict
+        Per bound: ``bound``, the NLP's status and s, the verified ``s_star`` and
+        ``max_abs``, and ``M1``.
+    """
+    st = CodesignSettings(**{k: v for k, v in result.settings.items() if k != "starts"})
+    run = _Codesign(model, st, result.gait, progress)
+    gait, M1 = result.gait, np.asarray(result.design["M1"], float)
+    kept = run.kept(gait)
+    lvc = run.lam_vc(gait)
+    active = run.hardest(gait, kept, M1, max(result.s_star, 0.1), st.initial_active)
+    out = []
+    for f in fractions:
+        tr, red = run.nlp(gait, kept.directions[[0] + active], free=False,
+                          paper_tol=st.paper_tol)
+        red.jury = (run._jury(gait), float(f) * lvc)
+        run.denominator(tr, gait, M1)
+        d0 = np.zeros(red.nd)
+        d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, st.rejoin, max(result.s_star - 0.1,
+                                                                         0.1)
+        lb, ub = red.bounds()
+        lb[tr.i_rejoin] = ub[tr.i_rejoin] = st.rejoin
+        res = run.solve(tr, red, d0, lb, ub, f"trade-off at {f:g} x VC")
+        if not np.all(np.isfinite(res.d)):
+            out.append(dict(bound=f * lvc, nlp_status=res.status, s_star=None, max_abs=None))
+            continue
+        r, lam = run.measure(gait, kept, res.d[tr.i_M1])
+        out.append(dict(bound=float(f * lvc), nlp_status=res.status,
+                        nlp_s=float(res.d[tr.i_s]), s_star=float(r.s_star),
+                        max_abs=float(lam), M1=res.d[tr.i_M1].tolist()))
+        run.say(f"trade-off: bound {f * lvc:.3g}: IPOPT {res.status}, verified s* "
+                f"{r.s_star:.4g} at max|lambda| {lam:.3g}")
+    return out

@@ -1,0 +1,446 @@
+"""The co-design NLP in the design variables alone (every scenario walked from the design
+at each evaluation, the exact Jacobian condensed from the steps' sensitivities), and its
+IPOPT solve through CasADi callbacks."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from .functions import _ks
+from .transcription import Transcription, _Rows
+
+
+class _Dense:
+    """Constraint rows with a dense Jacobian in the design (the reduced NLP)."""
+
+    def __init__(self, nd):
+        self.nd, self.g, self.J, self.lo, self.hi, self.names = nd, [], [], [], [], []
+
+    def add(self, value, jac, lo, hi, name):
+        value = np.atleast_1d(np.asarray(value, float))
+        m = value.size
+        self.g.append(value)
+        self.J.append(np.asarray(jac, float).reshape(m, self.nd))
+        self.lo.append(np.broadcast_to(lo, (m,)).astype(float))
+        self.hi.append(np.broadcast_to(hi, (m,)).astype(float))
+        self.names += [name] * m if isinstance(name, str) else list(name)
+
+    def ks(self, v, dv, rho, name):
+        """One row bounding max(v) <= 0 (KS); v (m, p), dv (m, nd, p)."""
+        flat = np.asarray(v).reshape(-1)
+        dflat = np.moveaxis(dv, 1, -1).reshape(-1, self.nd)
+        val, wts = _ks(flat[:, None], rho)
+        self.add(val[0], wts[:, 0] @ dflat, -np.inf, 0.0, name)
+
+    def stack(self):
+        return (np.concatenate(self.g), np.vstack(self.J), np.concatenate(self.lo),
+                np.concatenate(self.hi))
+
+
+class Reduced:
+    """The co-design NLP in the design variables only (single shooting per scenario).
+
+    Every evaluation walks every scenario with the walker's rule from the design (the
+    strike of every step found as the walker finds it), so each iterate is a closed-loop
+    trajectory and the strike times are implicit functions of the design; the exact
+    Jacobian is condensed from the per-step sensitivities of :class:`Transcription`
+    (implicit-function theorem for the strike time).  Decision vector d = (G, M1,
+    rejoin, s), G = (alpha, T, r0) when the gait is free.
+
+    Parameters
+    ----------
+    tr : Transcription
+        The scenarios and their rule (its brackets are not used).
+    """
+
+    #: pad of a step's tabulated nodes past the previous bracket
+    PAD = 6
+
+    def __init__(self, tr: Transcription):
+        self.tr = tr
+        self.nd = tr.n_design
+        self.bracket_guess = np.full((tr.K, tr.S), int(1.05 * tr.N))
+        self._last = None
+        self.s_weight = 1.0
+        self.weights = np.zeros(tr.S)
+        #: per scenario: its fixed scale (NaN: the variable s), its steps (at most tr.S),
+        #: its error bound (inf: none) and the first step it applies to (0-based; the
+        #: bound holds from there to the scenario's last step; default: the last step)
+        self.scales = np.full(tr.K, np.nan)
+        self.steps = np.full(tr.K, tr.S)
+        self.tols = np.full(tr.K, np.inf)
+        self.tol_from = np.full(tr.K, tr.S - 1)
+        #: (callable M1 -> ((tr A^z, its gradient), (det A^z, its gradient)), bound) or None
+        self.jury = None
+        self.failures = []
+        self.evaluations = 0
+
+    def columns(self, TL):
+        """(nc, nd): a scenario-step's columns as functions of the design."""
+        tr = self.tr
+        C = np.zeros((tr.nc, self.nd))
+        C[:tr.nl] = TL
+        C[tr.nl:tr.nl + tr.nu, tr.i_M1] = np.eye(tr.nu)
+        C[tr.nl + tr.nu, tr.i_rejoin] = 1.0
+        if tr.free:
+            C[tr.nc - tr.nG:, tr.i_G] = np.eye(tr.nG)
+        return C
+
+    def evaluate(self, d):
+        """(f, grad f, g, dg/dd, lo, hi) at the design d (cached for the last d)."""
+        d = np.asarray(d, float)
+        if self._last is not None and np.array_equal(self._last[0], d):
+            return self._last[1]
+        self.evaluations += 1
+        try:
+            res = self._evaluate(d)
+        except _NoStrike:
+            res = None
+        if res is None:
+            ng = self._ng if hasattr(self, "_ng") else 1
+            nan = np.full(ng, np.nan)
+            res = (np.nan, np.full(self.nd, np.nan), nan, np.full((ng, self.nd), np.nan),
+                   self._lo if hasattr(self, "_lo") else nan,
+                   self._hi if hasattr(self, "_hi") else nan)
+        self._last = (d.copy(), res)
+        return res
+
+    def _evaluate(self, d):
+        tr, st = self.tr, self.tr.st
+        nu, nc, nd, nl = tr.nu, tr.nc, self.nd, tr.nl
+        alpha, T, r0, M1, rejoin, s = tr.unpack(d)
+        tab = tr.table(d)
+        rows = _Dense(nd)
+        f, grad = -self.s_weight * s, np.zeros(nd)
+        grad[tr.i_s] = -self.s_weight
+        U = st.torque_limit - st.torque_margin
+        mu, mg, rho = st.mu - st.mu_margin, tr.mg, st.ks_rho
+        rT = tab["r"][:, 2 * tr.N]
+        drT = np.zeros((2, nd))
+        if tr.free:
+            drT[:, tr.i_G] = tab["dr"][:, :, 2 * tr.N]
+        dR0 = np.zeros((3 * tr.nq, nd))
+        if tr.free:
+            dR0[:, tr.i_G] = tab["dR"][:, :, 0]
+        n_chunks = int(math.ceil((tr.n_max + 2) / st.chunk))
+        t_nodes = np.arange(tr.n_max + 2) / tr.N
+        info = []
+        Ls, TLs = [], []
+        for k in range(tr.K):
+            sk = s if not np.isfinite(self.scales[k]) else float(self.scales[k])
+            so, sJ = tr.start_fn(np.r_[sk, M1, tab["R"][:, 0]], tr.dirs[k])
+            so, sJ = np.array(so).ravel(), np.array(sJ)
+            TL = np.zeros((nl, nd))
+            if not np.isfinite(self.scales[k]):
+                TL[:, tr.i_s] = sJ[:nl, 0]
+            TL[:, tr.i_M1] = sJ[:nl, 1:1 + nu]
+            TL += sJ[:nl, 1 + nu:] @ dR0
+            Ls.append(so[:nl])
+            TLs.append(TL)
+        for j in range(int(self.steps.max())):
+            act = [k for k in range(tr.K) if self.steps[k] > j]
+            n_try = min(max(int(self.bracket_guess[k, j]) for k in act) + self.PAD,
+                        tr.n_max - 1)
+            while True:
+                XA, SSA, diagA, ddiagA, PA, dP = tr.nodes(tab, np.array([Ls[k] for k in act]),
+                                                          n_try, M1, rejoin, T)
+                hits = [tr.strike_in(tab, XA[i], diagA[i], n_try, PA[i], T, alpha)
+                        for i in range(len(act))]
+                if all(h is not None for h in hits) or n_try >= tr.n_max - 1:
+                    break
+                n_try = min(n_try + 32, tr.n_max - 1)
+            for i, k in enumerate(act):
+                tag = f"k{k} j{j}"
+                if hits[i] is None:
+                    self.failures.append((k, j, "no strike"))
+                    raise _NoStrike(tag)
+                X, SS, diag, ddiag, P = XA[i], SSA[i], diagA[i], ddiagA[i], PA[i]
+                TL = TLs[k]
+                n, eta = hits[i]
+                self.bracket_guess[k, j] = n
+                out, Jl = tr.finish(tab, X[:, n], SS[:, :, n], n, eta, P, dP, T, alpha)
+                diag, ddiag, out, Jl = tr._with_last(diag[:, :n + 1], ddiag[:, :, :n + 1],
+                                                     out, Jl)
+                C = self.columns(TL)
+                r = tr.rows
+                dz = Jl[r["zsw"]]
+                deta = -(dz[:nc] @ C) / dz[nc]                     # implicit function
+                Ctot = np.vstack([C, deta[None]])                  # (nc + 1, nd)
+                D = lambda J_: J_ @ Ctot                           # noqa: E731
+                dd = np.einsum("mcp,cd->mdp", ddiag, Ctot)         # (9, nd, p)
+                u, Fx, Fz, zsw, den = diag[:nu], diag[nu], diag[nu + 1], diag[nu + 3], diag[nu + 4]
+                du, dFx, dFz, dzsw, dden = (dd[:nu], dd[nu], dd[nu + 1], dd[nu + 3], dd[nu + 4])
+                npts = diag.shape[1]
+                for c in range(n_chunks):
+                    sl = slice(min(c * st.chunk, npts - 1), min((c + 1) * st.chunk, npts))
+                    if c * st.chunk >= npts:
+                        sl = slice(npts - 1, npts)          # past the strike: the last point
+                    where = f"{tag} chunk {c}"
+                    v = np.vstack([u[:, sl] / U - 1, -u[:, sl] / U - 1])
+                    dv = np.concatenate([du[:, :, sl] / U, -du[:, :, sl] / U])
+                    rows.ks(v, dv, rho, "torque " + where)
+                    rows.ks(((st.normal_force_min * mg - Fz[sl]) / mg)[None],
+                            (-dFz[:, sl] / mg)[None], rho, "normal " + where)
+                    v = np.vstack([Fx[sl] - mu * Fz[sl], -Fx[sl] - mu * Fz[sl]]) / mg
+                    dv = np.stack([dFx[:, sl] - mu * dFz[:, sl],
+                                   -dFx[:, sl] - mu * dFz[:, sl]]) / mg
+                    rows.ks(v, dv, rho, "friction " + where)
+                    sc = tr.den_sign / tr.den_scale
+                    rows.ks((st.den_margin - sc * den[sl])[None], (-sc * dden[:, sl])[None],
+                            rho, "denominator " + where)
+                # the swing foot lifts at the start and stays clear mid-step
+                tn = t_nodes[:n + 1]
+                lift = np.flatnonzero((tn > 0) & (tn < 0.1))
+                mid = np.flatnonzero((tn >= 0.1) & (tn <= 0.9))
+                vref = 0.3 * tn[lift]          # m per unit of s: a lift-off speed scale
+                rows.ks((-zsw[lift] / vref)[None], (-dzsw[:, lift] / vref)[None], rho,
+                        f"clearance {tag} lift-off")
+                rows.ks(((st.clearance_mid - zsw[mid]) / 0.05)[None],
+                        (-dzsw[:, mid] / 0.05)[None], rho, f"clearance {tag} mid-step")
+                rows.add(out[r["dzsw"]], D(Jl[r["dzsw"]]), -np.inf, -st.strike_speed_min,
+                         f"strike_speed {tag}")
+                rows.add(out[r["xsw"]], D(Jl[r["xsw"]]), st.strike_front_min, np.inf,
+                         f"strike_front {tag}")
+                F, dF = out[r["F"]], D(Jl[r["F"]])
+                rows.add(F[1], dF[1], st.impulse_min, np.inf, f"impulse_normal {tag}")
+                rows.add(np.r_[mu * F[1] - F[0], mu * F[1] + F[0]],
+                         np.vstack([mu * dF[1] - dF[0], mu * dF[1] + dF[0]]), 0.0, np.inf,
+                         f"impulse_cone {tag}")
+                rows.add(out[r["vold"]], D(Jl[r["vold"]]), st.liftoff_min, np.inf,
+                         f"liftoff {tag}")
+                err = out[r["x"]] - rT
+                derr = D(Jl[r["x"]]) - drT
+                wj = self.weights[j]
+                if wj:
+                    f += wj * float(err @ err)
+                    grad += 2 * wj * err @ derr
+                if j >= min(self.tol_from[k], self.steps[k] - 1):
+                    tol = self.tols[k]
+                    if np.isfinite(tol):
+                        rows.add(err, derr, -tol, tol, f"final_error {tag}")
+                info.append(dict(k=k, j=j, err=err.copy(), te=(n + eta) * T / tr.N,
+                                 peak_u=float(np.abs(u).max()), impulse=F.tolist()))
+                Ls[k] = out[r["next"]]
+                TLs[k] = D(Jl[r["next"]])
+        if self.jury is not None:
+            fn, lam = self.jury
+            (trA, dtr), (det, ddet) = fn(M1)
+            rows.add(np.r_[det - lam**2, -det - lam**2],
+                     np.vstack([_on(nd, tr.i_M1, ddet), _on(nd, tr.i_M1, -ddet)]),
+                     -np.inf, 0.0, "jury det")
+            rows.add(np.r_[trA - lam - det / lam, -trA - lam - det / lam],
+                     np.vstack([_on(nd, tr.i_M1, dtr - ddet / lam),
+                                _on(nd, tr.i_M1, -dtr - ddet / lam)]),
+                     -np.inf, 0.0, "jury trace")
+        if tr.free:
+            w_rows = _Rows()
+            tr._gait_rows(w_rows, d, tab)
+            gv, lo, hi, ri, ci, vals = w_rows.stack()
+            Jg = np.zeros((gv.size, nd))
+            np.add.at(Jg, (ri, ci), vals)
+            rows.add(gv, Jg, lo, hi, w_rows.names)
+        self.info = info
+        g, J, lo, hi = rows.stack()
+        self.names = rows.names
+        self._ng, self._lo, self._hi = g.size, lo, hi
+        return f, grad, g, J, lo, hi
+
+    def bounds(self, M1_box: float = 40.0):
+        """Bounds of the design vector (those of :meth:`Transcription.bounds`)."""
+        return self.tr.bounds(M1_box)
+
+
+class NoStrikeAtStart(ValueError):
+    """A scenario of the NLP does not strike from the starting design (lower its s)."""
+
+
+class _NoStrike(Exception):
+    """A scenario's step found no strike within the horizon."""
+
+
+def _on(nd, idx, v):
+    out = np.zeros(nd)
+    out[idx] = np.asarray(v, float).ravel()
+    return out
+
+
+# ------------------------------------------------------------------ IPOPT
+class _Oracle(ca.Callback):
+    """f, g (with their Jacobians on request) or (f, grad f) / (g, dg) of a
+    :class:`Reduced`, for IPOPT through CasADi."""
+
+    def __init__(self, name, nlp, kind, sp, opts=None):
+        ca.Callback.__init__(self)
+        self.nlp, self.kind, self.sp = nlp, kind, sp
+        self.nd, self.ng = nlp.nd, sp.size1()
+        self.construct(name, opts or {})
+
+    def get_n_in(self):
+        return 1 if self.kind in ("f", "g") else 2
+
+    def get_n_out(self):
+        return 1 if self.kind in ("f", "g", "df", "dg") else 2
+
+    def get_sparsity_in(self, i):
+        if i == 0:
+            return ca.Sparsity.dense(self.nd, 1)
+        if self.kind in ("df", "dg"):
+            return ca.Sparsity.dense(1, 1) if self.kind == "df" else ca.Sparsity.dense(self.ng, 1)
+        return ca.Sparsity(0, 1)
+
+    def get_sparsity_out(self, i):
+        k = self.kind
+        if k == "f" or (k == "grad_f" and i == 0):
+            return ca.Sparsity.dense(1, 1)
+        if k in ("grad_f", "df"):
+            return ca.Sparsity.dense(1, self.nd)
+        if k == "g" or (k == "jac_g" and i == 0):
+            return ca.Sparsity.dense(self.ng, 1)
+        return self.sp
+
+    def has_jacobian(self):
+        return self.kind in ("f", "g")
+
+    def get_jacobian(self, name, inames, onames, opts):
+        self._jac = _Oracle(name, self.nlp, "df" if self.kind == "f" else "dg", self.sp, opts)
+        return self._jac
+
+    def eval(self, arg):
+        f, grad, g, J, _, _ = self.nlp.evaluate(np.array(arg[0]).ravel())
+        k = self.kind
+        if k == "f":
+            return [f]
+        if k == "g":
+            return [g]
+        if k == "df":
+            return [grad[None, :]]
+        if k == "grad_f":
+            return [f, grad[None, :]]
+        Jd = ca.DM(J)
+        return [Jd] if k == "dg" else [g, Jd]
+
+
+class _Budget(ca.Callback):
+    """IPOPT's iteration callback: stop once the NLP has been evaluated ``cap`` times
+    since the solve began (a budget that, unlike wall time, does not depend on the
+    machine's load; an iteration's line search may evaluate many trial points)."""
+
+    def __init__(self, nlp, ng, cap):
+        ca.Callback.__init__(self)
+        self.nlp, self.nd, self.ng, self.cap = nlp, nlp.nd, ng, cap
+        self.n0 = nlp.evaluations
+        self.construct("codesign_budget", {})
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "stop"
+
+    def get_sparsity_in(self, i):
+        n = ca.nlpsol_out(i)
+        if n == "f":
+            return ca.Sparsity.dense(1)
+        if n in ("x", "lam_x"):
+            return ca.Sparsity.dense(self.nd)
+        if n in ("g", "lam_g"):
+            return ca.Sparsity.dense(self.ng)
+        return ca.Sparsity(0, 0)
+
+    def eval(self, arg):
+        return [1 if self.nlp.evaluations - self.n0 >= self.cap else 0]
+
+
+@dataclass
+class NLPSolve:
+    """One IPOPT solve of the reduced co-design NLP.
+
+    Parameters
+    ----------
+    d : numpy.ndarray
+        The design at IPOPT's last iterate.
+    lam_g : numpy.ndarray
+        The constraints' multipliers there.
+    status : str
+        IPOPT's return status.
+    success : bool
+        IPOPT's own success flag.
+    iterations : int
+        IPOPT iterations.
+    time : float
+        Wall time, s.
+    evaluations : int
+        Walks of every scenario (evaluations of the constraints).
+    """
+
+    d: np.ndarray
+    lam_g: np.ndarray
+    status: str
+    success: bool
+    iterations: int
+    time: float
+    evaluations: int
+
+
+def solve_nlp(nlp: "Reduced", d0, lb, ub, ipopt: dict | None = None,
+              max_evaluations: int | None = None) -> NLPSolve:
+    """IPOPT (L-BFGS Hessian, exact constraint Jacobian) on the reduced NLP from d0.
+
+    Parameters
+    ----------
+    nlp : Reduced
+        The NLP functions.
+    d0 : array_like
+        Starting design.
+    lb, ub : array_like
+        Bounds of the design.
+    ipopt : dict, optional
+        Extra IPOPT options.
+    max_evaluations : int, optional
+        Stop after this many evaluations of the NLP (status 'User_Requested_Stop').
+
+    Returns
+    -------
+    NLPSolve
+    """
+    d0 = np.asarray(d0, float)
+    _, _, g0, _, lo, hi = nlp.evaluate(d0)
+    if not np.all(np.isfinite(g0)):
+        raise NoStrikeAtStart("codesign: a scenario does not strike from the starting "
+                              "design")
+    sp = ca.Sparsity.dense(g0.size, nlp.nd)
+    cbs = [_Oracle("codesign_f", nlp, "f", sp), _Oracle("codesign_g", nlp, "g", sp),
+           _Oracle("codesign_grad_f", nlp, "grad_f", sp), _Oracle("codesign_jac_g", nlp, "jac_g", sp)]
+    x = ca.MX.sym("x", nlp.nd)
+    opts = {"print_level": 0, "hessian_approximation": "limited-memory", "max_iter": 100,
+            "tol": 1e-6, "acceptable_tol": 1e-4, "acceptable_iter": 5,
+            "mu_strategy": "adaptive", "bound_push": 1e-8, "bound_frac": 1e-8,
+            "linear_solver": "mumps", "sb": "yes"}
+    opts.update(ipopt or {})
+    solver = ca.nlpsol("codesign", "ipopt", {"x": x, "f": cbs[0](x), "g": cbs[1](x)},
+                       {"ipopt": opts, "grad_f": cbs[2], "jac_g": cbs[3], "print_time": False,
+                        "error_on_fail": False,
+                        # a trial point where a scenario cannot strike is NaN by design
+                        # (IPOPT steps back); CasADi's warning per such point is noise
+                        "show_eval_warnings": False,
+                        **({} if max_evaluations is None else
+                           {"iteration_callback": _Budget(nlp, g0.size, max_evaluations)})})
+    n0 = nlp.evaluations
+    t0 = time.perf_counter()
+    sol = solver(x0=d0, lbx=lb, ubx=ub, lbg=lo, ubg=hi)
+    st = solver.stats()
+    return NLPSolve(d=np.array(sol["x"]).ravel(), lam_g=np.array(sol["lam_g"]).ravel(),
+                    status=str(st.get("return_status", "unknown")),
+                    success=bool(st.get("success", False)),
+                    iterations=int(st.get("iter_count", -1)),
+                    time=time.perf_counter() - t0, evaluations=nlp.evaluations - n0)
