@@ -11,7 +11,8 @@ from biped_casadi import (PAPER_SIZES, SimulationOptions,
                           perturbed_initial_state, simulate)
 from gait_opt import GaitOptions, default_gait
 
-from ..design import (RobustDesignSettings, robust_design)
+from ..design import ROBUST_GAIT
+from ..design.codesign import FULL, QUICK, TODAY_DESIGN, codesign, codesign_tradeoff
 from ..robustness import Design, RobustnessSettings, basin, kept_directions, robustness
 from .plots import (basin_plot, save_figure, swing_torques_plot, tradeoff_plot, unactuated_error_plot,
                     walking_animation)
@@ -31,22 +32,36 @@ def _brief(r) -> dict:
                 failure_time=r.failure_time)
 
 
-def _robust_settings(ctx) -> RobustDesignSettings:
-    return (RobustDesignSettings(samples=20000, starts=1) if ctx.opts.quick
-            else RobustDesignSettings())
-
-
 def stage_robust_design(ctx: Context):
-    """The robust time-varying design (:mod:`analysis.design.robust_search`; cached)."""
+    """The robust time-varying design by the co-design NLP (:mod:`analysis.design.codesign`;
+    cached): in the full run the gait is co-designed (the settings of ``biped m1
+    --robust``, one cache for both), in the quick run it is fixed.  Beside it, the
+    sampling search's design (``biped m1 --robust --method search``), as it ships: its
+    M1 on its gait, evaluated by the same stages, not searched again.  The full run also
+    traces the (max|lambda|, s*) trade-off with the NLP."""
     if not is_rabbit(ctx):
         ctx.summary["robust_design"] = dict(
-            skipped="the robust-design search is calibrated on RABBIT (its gait options); "
+            skipped="the robust co-design starts from gait options calibrated on RABBIT; "
                     "run 'biped m1 --robust --robot ...' for another robot")
         return
-    r = robust_design(ctx.model, _robust_settings(ctx), progress=lambda m: ctx.log("   " + m))
+    st = QUICK if ctx.opts.quick else FULL
+    r = codesign(ctx.model, st, progress=lambda m: ctx.log("   " + m))
     ctx.data["robust"] = r
-    ctx.data["robust_gait"] = default_gait(ctx.model, GaitOptions(**r.settings["gait"]))
-    ctx.summary["robust_design"] = r.to_dict()
+    ctx.data["robust_gait"] = r.gait
+    ctx.data["search_gait"] = default_gait(ctx.model, GaitOptions(**ROBUST_GAIT))
+    ctx.data["search_design"] = Design(tuple(TODAY_DESIGN), 0.75)
+    out = dict(r.to_dict(), method="co-design NLP (biped m1 --robust)")
+    if not ctx.opts.quick:
+        out["tradeoff"] = ctx.memo(
+            "codesign_tradeoff", dict(design=r.design, gait=r.gait.cache_key,
+                                      settings=r.settings),
+            lambda: codesign_tradeoff(ctx.model, r, progress=lambda m: ctx.log("   " + m)))
+        ctx.data["tradeoff"] = out["tradeoff"]
+    ctx.summary["robust_design"] = out
+    ctx.summary["search_design"] = dict(
+        M1=list(TODAY_DESIGN), rejoin=0.75, gait_options=dict(ROBUST_GAIT),
+        note="the sampling search's shipped design (biped m1 --robust --method search), "
+             "evaluated here by the same stages, not searched again")
     ctx.log(f"   {r.message}")
 
 
@@ -80,17 +95,30 @@ def stage_robustness(ctx: Context):
         r = s_star(g, design, kept)
         rows.append(dict(label=label, gait="default", **r.to_dict()))
         ctx.log(f"   default gait, {label}: s* = {r.s_star:.4g}")
-    rb = ctx.data.get("robust")
-    if rb is not None:
-        g2 = ctx.data["robust_gait"]
+    for gait_name, g2, cands2 in _robust_groups(ctx):
         kept2 = kept_of(g2)
-        for label, design in (("virtual constraints", None),
-                              ("robust design", Design(tuple(rb.design["M1"]),
-                                                       rb.design["rejoin"]))):
+        for label, design in cands2:
             r = s_star(g2, design, kept2)
-            rows.append(dict(label=label, gait="robust", **r.to_dict()))
-            ctx.log(f"   robust gait, {label}: s* = {r.s_star:.4g}")
+            rows.append(dict(label=label, gait=gait_name, **r.to_dict()))
+            ctx.log(f"   {gait_name} gait, {label}: s* = {r.s_star:.4g}")
     ctx.summary["robustness"] = dict(settings=st.__dict__.copy(), rows=rows)
+
+
+def _robust_groups(ctx):
+    """(gait name, gait, [(label, design)]) of the robust designs: the co-design and
+    virtual constraints on the co-design's gait ('robust'); the sampling search's design
+    on its own gait ('search', with virtual constraints) or, when the gaits are one, on
+    the same."""
+    rb = ctx.data.get("robust")
+    if rb is None:
+        return []
+    g2, g3 = ctx.data["robust_gait"], ctx.data["search_gait"]
+    mine = ("robust design (co-design NLP)", Design(tuple(rb.design["M1"]), rb.design["rejoin"]))
+    search = ("the sampling search's design", ctx.data["search_design"])
+    if g3.cache_key == g2.cache_key:
+        return [("robust", g2, [("virtual constraints", None), mine, search])]
+    return [("robust", g2, [("virtual constraints", None), mine]),
+            ("search", g3, [("virtual constraints", None), search])]
 
 
 def stage_sim(ctx: Context):
@@ -121,9 +149,9 @@ def stage_sim(ctx: Context):
         q0, dq0 = perturbed_initial_state(g2, *PAPER_SIZES)
         M1r = np.array(rb.design["M1"])
         for key, label, ctrl in (
-                ("robust_vc", "virtual constraints (robust gait)",
+                ("robust_vc", "virtual constraints (the co-design's gait)",
                  VirtualConstraintController(m, g2)),
-                ("robust_design", "robust design (robust gait)",
+                ("robust_design", "robust design, co-design NLP (its gait)",
                  TimeVaryingController(m, g2, M1r, rejoin=rb.design["rejoin"]))):
             r = _simulated(ctx, g2, ctrl, q0, dq0, opts)
             runs.append(r)
@@ -131,6 +159,13 @@ def stage_sim(ctx: Context):
             robust_runs.append(r)
             out["runs"][key] = dict(label=label, **_brief(r))
             ctx.log(f"   {label}: {r.status}")
+        g3, ds = ctx.data["search_gait"], ctx.data["search_design"]
+        q0, dq0 = perturbed_initial_state(g3, *PAPER_SIZES)
+        label = "the sampling search's design (its gait)"
+        r = _simulated(ctx, g3, TimeVaryingController(m, g3, np.array(ds.M1),
+                                                      rejoin=ds.rejoin), q0, dq0, opts)
+        out["runs"]["search_design"] = dict(label=label, **_brief(r))
+        ctx.log(f"   {label}: {r.status}")
     figs = ctx.out / "figures"
     ctx.figures["fig5"] = save_figure(
         unactuated_error_plot(runs, labels=labels,
@@ -181,24 +216,38 @@ def stage_basins(ctx: Context):
                              "constraints"), figs / "basin_default", FORMATS)
     rb = ctx.data.get("robust")
     if rb is not None:
-        g2 = ctx.data["robust_gait"]
+        g2, g3 = ctx.data["robust_gait"], ctx.data["search_gait"]
         b2 = [_basin(ctx, g2, Design(tuple(rb.design["M1"]), rb.design["rejoin"]), n),
-              _basin(ctx, g2, None, n)]
+              _basin(ctx, g3, ctx.data["search_design"], n), _basin(ctx, g2, None, n)]
         out["robust"] = [b.to_dict() for b in b2]
+        out["robust_labels"] = ["robust design (co-design NLP)",
+                                "the sampling search's design", "virtual constraints"]
+        same = g3.cache_key == g2.cache_key
         ctx.figures["basin_robust"] = save_figure(
-            basin_plot(b2, title="Basins on the robust design's gait: the robust design "
-                                 "and virtual constraints"), figs / "basin_robust", FORMATS)
+            basin_plot(b2, title="Basins: the co-design, the sampling search's design"
+                                 + (" and virtual constraints on one gait" if same else
+                                    " (on its gait) and virtual constraints (the "
+                                    "co-design's gait)")), figs / "basin_robust", FORMATS)
         rows = (ctx.summary.get("robustness") or {}).get("rows", [])
         vc_s = next((r["s_star"] for r in rows if r["gait"] == "robust"
                      and r["controller"] == "vc"), None)
-        others = {"robust design": (rb.max_abs, rb.s_star)}
+        ss = next((r for r in rows if r["label"] == "the sampling search's design"), None)
+        others = {"co-design NLP": (rb.max_abs, rb.s_star)}
+        if ss is not None:
+            others["sampling search's design"] = (ss["max_abs"], ss["s_star"])
         if vc_s is not None:
             others["virtual constraints"] = (rb.vc_eigenvalue, vc_s)
+        pts = sorted((p["max_abs"], p["s_star"]) for p in ctx.data.get("tradeoff") or []
+                     if p.get("s_star") is not None)
         ctx.figures["tradeoff"] = save_figure(
-            tradeoff_plot(rb.tradeoff, others, bound=rb.vc_eigenvalue,
-                          title="s* against max|λ| on the robust design's gait"),
+            tradeoff_plot(pts, others, bound=rb.vc_eigenvalue,
+                          front_label="the NLP at max|λ| bounds of 1/4 to 1 x virtual "
+                                      "constraints' (verified s*)",
+                          title="s* against max|λ| on the co-design's gait"),
             figs / "tradeoff", FORMATS)
     for k, v in out.items():
+        if k.endswith("_labels"):
+            continue
         ctx.log(f"   {k}: " + ", ".join(f"{b['controller']} {100 * b['converged_fraction']:.1f} %"
                                         for b in v))
     ctx.summary["basins"] = out

@@ -427,14 +427,15 @@ def solve_nlp(nlp: "Reduced", d0, lb, ub, ipopt: dict | None = None,
             "mu_strategy": "adaptive", "bound_push": 1e-8, "bound_frac": 1e-8,
             "linear_solver": "mumps", "sb": "yes"}
     opts.update(ipopt or {})
+    # CasADi keeps only a weak reference to a Python callback: this name keeps it alive
+    budget = None if max_evaluations is None else _Budget(nlp, g0.size, max_evaluations)
     solver = ca.nlpsol("codesign", "ipopt", {"x": x, "f": cbs[0](x), "g": cbs[1](x)},
                        {"ipopt": opts, "grad_f": cbs[2], "jac_g": cbs[3], "print_time": False,
                         "error_on_fail": False,
                         # a trial point where a scenario cannot strike is NaN by design
                         # (IPOPT steps back); CasADi's warning per such point is noise
                         "show_eval_warnings": False,
-                        **({} if max_evaluations is None else
-                           {"iteration_callback": _Budget(nlp, g0.size, max_evaluations)})})
+                        **({} if budget is None else {"iteration_callback": budget})})
     n0 = nlp.evaluations
     t0 = time.perf_counter()
     sol = solver(x0=d0, lbx=lb, ubx=ub, lbg=lo, ubg=hi)

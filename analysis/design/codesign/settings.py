@@ -108,7 +108,7 @@ class CodesignSettings:
     initial_active: int = 2
     max_active: int = 8
     exchange_rounds: int = 1
-    gait_rounds: int = 1
+    gait_rounds: int = 2
     repair: bool = True
     trust_alpha: float = 0.05
     trust_T: float = 0.025

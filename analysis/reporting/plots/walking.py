@@ -152,7 +152,9 @@ def basin_plot(results, title: str | None = None) -> Figure:
     return fig
 
 
-def tradeoff_plot(front, others=None, bound=None, title: str | None = None) -> Figure:
+def tradeoff_plot(front, others=None, bound=None, title: str | None = None,
+                  front_label: str = "best s* found at or below each max|λ| "
+                                     "(search estimates)") -> Figure:
     """Robustness against stability: s* against max ``|lambda|``, named designs marked.
 
     The front is the best robustness s* found at each eigenvalue bound.
@@ -167,6 +169,8 @@ def tradeoff_plot(front, others=None, bound=None, title: str | None = None) -> F
     bound : float, optional
         The eigenvalue bound of the search (a vertical line).
     title : str, optional
+    front_label : str, optional
+        The front's legend entry.
 
     Returns
     -------
@@ -176,8 +180,7 @@ def tradeoff_plot(front, others=None, bound=None, title: str | None = None) -> F
     ax = fig.add_subplot()
     if front:
         f = np.array(front, float)
-        ax.step(f[:, 0], f[:, 1], where="post", color="0.3", lw=1.2,
-                label="best s* found at or below each max|λ| (search estimates)")
+        ax.step(f[:, 0], f[:, 1], where="post", color="0.3", lw=1.2, label=front_label)
         ax.plot(f[:, 0], f[:, 1], ".", color="0.3", ms=4)
     for (label, (lam, s)), mk in zip((others or {}).items(), "o^sDvP*X"):
         ax.plot([lam], [s], mk, ms=8, label=f"{label}: s* {s:.3g}, max|λ| {lam:.2g}")
