@@ -120,5 +120,12 @@ def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     assert r["max_abs"] <= r["vc_eigenvalue"]
     assert r["active_constraints"] and r["ipopt"]["iterations"] > 0
     assert main(["simulate", *r["simulate_args"], "--json"]) == 0
-    sim = json.loads(capsys.readouterr().out)
-    assert sim["status"] in ("converged", "walked"), sim.get("message")
+    run = json.loads(capsys.readouterr().out)
+    assert run["status"] == "ok", run.get("message")
+    errs = [max(abs(s["qu_error"]), abs(s["dqu_error"])) for s in run["steps"]]
+    np.testing.assert_allclose(errs, r["paper_errors"], rtol=1e-6, atol=1e-9)
+    assert max(errs[3:]) < 1e-3                       # below 1e-3 from step 4 on
+    # hidden sign patterns: every valid one walks at scale 1 and ends below 1e-3
+    hp = r["hidden"]
+    assert hp["patterns"] > 0 and hp["by_scale"]["1.0"]["passed"] == hp["patterns"], hp
+    assert hp["full_order"]["passed"] == hp["patterns"], hp

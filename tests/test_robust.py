@@ -246,9 +246,11 @@ def test_cli_simulate_rejoin(gait, tmp_path, capsys):
 
 @pytest.mark.slow
 def test_m1_robust_replays(tmp_path, capsys):
-    """`biped m1 --robust` (a small search): its simulate_args replay the design from the
-    paper's perturbation as reported, and a second call is read from the cache."""
-    args = ["m1", "--robust", "--samples", "20000", "--starts", "1", "--json"]
+    """`biped m1 --robust --method search` (a small search): its simulate_args replay the
+    design from the paper's perturbation as reported, and a second call is read from the
+    cache."""
+    args = ["m1", "--robust", "--method", "search", "--samples", "20000", "--starts", "1",
+            "--json"]
     rc = biped_main(args)
     out = json.loads(capsys.readouterr().out)
     assert rc == 0 and out["s_star"] > 0.5 and out["max_abs"] <= out["vc_eigenvalue"]

@@ -349,8 +349,11 @@ def _comparison_lines(s: dict) -> list:
                    f"{_f(sim.get('peak_torque'), '.1f')} |")
     if len(out) == 2:
         return []
-    return ["The designs compared (s* by the walker's bisection over the kept directions; "
-            "the paper's perturbation in full order; basin over the section slice):", ""] \
+    st = (s.get("robustness") or {}).get("settings") or {}
+    return ["The designs compared (s* as in the s* table below: the walker's bisection "
+            f"over its {st.get('directions', '')} kept directions, {st.get('rounds', '')} "
+            "rounds; the paper's perturbation in full order; basin over the section "
+            "slice):", ""] \
         + out + [""]
 
 
@@ -412,7 +415,7 @@ def _robust_lines(s: dict) -> list:
     if rob:
         st = (s.get("robustness") or {}).get("settings") or {}
         res_note = (f" s* by bisection to {_f(st['s_max'] / 2 ** (st['rounds'] - 1), '.3g')} "
-                    "(the robust search above refines its own s* further)."
+                    "(the co-design's own verification above: 16 directions, 10 rounds)."
                     if "s_max" in st and "rounds" in st else "")
         lines += ["| design | gait | max\\|λ\\| | s* | first failure just above s* | "
                   "directions kept |", "|---|---|---|---|---|---|"]

@@ -232,7 +232,9 @@ def stage_basins(ctx: Context):
         vc_s = next((r["s_star"] for r in rows if r["gait"] == "robust"
                      and r["controller"] == "vc"), None)
         ss = next((r for r in rows if r["label"] == "the sampling search's design"), None)
-        others = {"co-design NLP": (rb.max_abs, rb.s_star)}
+        mine = next((r for r in rows if r["label"] == "robust design (co-design NLP)"), None)
+        # every marker's s* from the s* table (one protocol for all three)
+        others = {"co-design NLP": (rb.max_abs, mine["s_star"] if mine else rb.s_star)}
         if ss is not None:
             others["sampling search's design"] = (ss["max_abs"], ss["s_star"])
         if vc_s is not None:
