@@ -204,6 +204,23 @@ def test_basin_outcomes(model, gait):
         basin(model, gait, None, n=1)
 
 
+def test_basin_adaptive_grid_draws_the_full_grid(model, gait):
+    """The adaptive grid (every 4th row and column, then the boundary cell by cell) walks
+    fewer cells and gives the full grid's outcome on all but a few of them; where it
+    walked a cell, the outcome and the final error are the full grid's exactly."""
+    d = Design((-2.5, 5.0, -2.5, 5.0))
+    full = basin(model, gait, d, n=21, steps=4)
+    ad = basin(model, gait, d, n=21, steps=4, refine=4)
+    assert full.walked_cells == 21 * 21 and ad.walked_cells < 21 * 21
+    differ = np.sum(full.outcome != ad.outcome)
+    assert differ <= 0.02 * 21 * 21, differ
+    w = np.isfinite(ad.final_error) | (ad.final_error == np.inf)
+    np.testing.assert_array_equal(ad.final_error[w], full.final_error[w])
+    assert set(np.unique(full.outcome[w] == ad.outcome[w])) == {True}
+    with pytest.raises(ValueError, match="refine"):
+        basin(model, gait, d, n=21, refine=3)
+
+
 # ------------------------------------------------------------------------ CLI
 def test_cli_robust(gait, tmp_path, capsys):
     path = str(gait.save(tmp_path / "gait.json"))

@@ -44,8 +44,9 @@ from .constants import PAPER
 from .context import FORMATS, Context, is_rabbit
 from .stages_paper import (stage_fig2, stage_fig3, stage_fig4, stage_gait, stage_grid, stage_m1,
                            stage_singular, stage_vc)
-from .stages_walking import (stage_basins, stage_robust_design, stage_robustness, stage_sim,
-                             stage_terrain)
+from .stages_walking import (stage_basins, stage_basins_robust, stage_robust_design,
+                             stage_robustness, stage_robustness_robust, stage_sim,
+                             stage_sim_robust, stage_terrain)
 
 __all__ = ["reproduce", "ReproduceOptions", "ReproduceResult", "PAPER", "run_folder", "STAGES",
            "FORMATS"]
@@ -66,6 +67,7 @@ class ReproduceOptions:
     sim_steps: int = 10
     animation_steps: int = 4
     progress: bool = True
+    helper: bool = True             # the robust half on the second core (see _Helper)
 
     @classmethod
     def make(cls, quick: bool = False, **kw):
@@ -134,12 +136,22 @@ STAGES = [
     ("a, b and Fig. 4", stage_fig4, ("gait",)),
     ("M1 NLP", stage_m1, ("gait",)),
     ("virtual constraints", stage_vc, ("gait",)),
+    ("robustness (s*), default gait", stage_robustness, ("M1 NLP",)),
+    ("Fig. 5 runs, default gait", stage_sim, ("M1 NLP",)),
+    ("basins of attraction, default gait", stage_basins, ("M1 NLP",)),
     ("robust design", stage_robust_design, ("gait",)),
-    ("robustness (s*)", stage_robustness, ("M1 NLP",)),
-    ("Fig. 5, Fig. 6, animation", stage_sim, ("M1 NLP",)),
-    ("basins of attraction", stage_basins, ("M1 NLP",)),
+    ("basins of the robust designs", stage_basins_robust, ("robust design",)),
+    ("s* of the robust designs", stage_robustness_robust, ("robust design",)),
+    ("Fig. 5, Fig. 6, animation", stage_sim_robust, ("Fig. 5 runs, default gait",)),
     ("uneven ground (MFPT, GSN)", stage_terrain, ("gait",)),
 ]
+
+#: what the helper process computes ahead, in its order, while this process runs the
+#: paper's stages: the robust design and then the robust designs' s* (this process takes
+#: their basins first, so the two meet in the middle)
+HELPER_STAGES = (stage_robust_design, stage_robustness_robust, stage_basins_robust)
+
+
 
 
 def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceResult:
@@ -206,7 +218,68 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
         total_time=ctx.summary["total_time"], summary=summary)
 
 
+def _helper_main(opts: dict, out: str):
+    """The helper process: :data:`HELPER_STAGES` on a private staging folder, every
+    long result kept in the cache (:meth:`Context.memo`, the co-design's own cache) for
+    the main process to read; its figures and summary are thrown away."""
+    import sys as _sys
+    from gait_opt import default_gait
+    _sys.stdout = _sys.stderr = open(os.devnull, "w")
+    ctx = Context(Path(out), ReproduceOptions(**dict(opts, progress=False, helper=False)))
+    (ctx.out / "figures").mkdir(parents=True, exist_ok=True)
+    ctx.model = robot(ctx.opts.robot)
+    ctx.gait = default_gait(ctx.model)
+    ctx.data["helper"] = True
+    for fn in HELPER_STAGES:
+        ctx.stage = fn.__name__
+        try:
+            fn(ctx)
+        except Exception:              # noqa: BLE001 - the main process computes it again
+            return
+
+
+class _Helper:
+    """The second core: once the gait is known, a process computes the robust design and
+    what hangs on it (:data:`HELPER_STAGES`) while this one runs the paper's stages.
+    Both go through the same cache: a result one of them is computing is claimed
+    (:func:`analysis.reporting.context.claimed`), and the other waits for it instead of
+    computing it twice.  The main process never depends on the helper: it computes
+    whatever the helper has not, and stops the helper when it is done."""
+
+    def __init__(self):
+        self.proc = None
+
+    def start(self, ctx: Context):
+        import multiprocessing
+        if self.proc is not None or not ctx.opts.helper or (os.cpu_count() or 1) < 2:
+            return
+        if not is_rabbit(ctx):       # the robust design runs on RABBIT only
+            return
+        import tempfile
+        self.out = out = tempfile.mkdtemp(prefix="biped-reproduce-helper-")
+        self.proc = multiprocessing.get_context("spawn").Process(
+            target=_helper_main, args=(dict(ctx.opts.__dict__), str(out)), daemon=True)
+        self.proc.start()
+        ctx.log("   (a helper process computes the robust design on the second core)")
+
+    def stop(self):
+        if self.proc is not None and self.proc.is_alive():
+            self.proc.terminate()
+            self.proc.join(5)
+        if self.proc is not None:
+            shutil.rmtree(self.out, ignore_errors=True)
+        self.proc = None
+
+
 def _run_stages(ctx: Context) -> dict:
+    helper = _Helper()
+    try:
+        return _stages(ctx, helper)
+    finally:
+        helper.stop()
+
+
+def _stages(ctx: Context, helper: _Helper) -> dict:
     status = {}
     t_all = time.perf_counter()
     for k, (name, fn, needs) in enumerate(STAGES, start=1):
@@ -221,6 +294,8 @@ def _run_stages(ctx: Context) -> dict:
         try:
             fn(ctx)
             status[name] = dict(status="ok", time=time.perf_counter() - t)
+            if fn is stage_gait:
+                helper.start(ctx)
             kept = ctx.reused.get(name)
             ctx.log(f"[{k}/{len(STAGES)}] {name}: done in {time.perf_counter() - t:.1f} s"
                     + (f" (reused {len(kept)} kept result(s))" if kept else ""))

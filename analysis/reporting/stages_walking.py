@@ -12,12 +12,13 @@ from biped_casadi import (PAPER_SIZES, SimulationOptions,
 from gait_opt import GaitOptions, default_gait
 
 from ..design import ROBUST_GAIT
-from ..design.codesign import FULL, QUICK, TODAY_DESIGN, codesign, codesign_tradeoff
+from ..design.codesign import (FULL, QUICK, TODAY_DESIGN, codesign, codesign_path,
+                               codesign_tradeoff)
 from ..robustness import Design, RobustnessSettings, basin, kept_directions, robustness
 from .plots import (basin_plot, save_figure, swing_torques_plot, tradeoff_plot, unactuated_error_plot,
                     walking_animation)
 
-from .context import FORMATS, Context, is_rabbit
+from .context import FORMATS, Context, claimed, is_rabbit
 from .constants import PAPER
 
 
@@ -45,7 +46,8 @@ def stage_robust_design(ctx: Context):
                     "run 'biped m1 --robust --robot ...' for another robot")
         return
     st = QUICK if ctx.opts.quick else FULL
-    r = codesign(ctx.model, st, progress=lambda m: ctx.log("   " + m))
+    with claimed(codesign_path(ctx.model, st)):        # the helper may be computing it
+        r = codesign(ctx.model, st, progress=lambda m: ctx.log("   " + m))
     ctx.data["robust"] = r
     ctx.data["robust_gait"] = r.gait
     ctx.data["search_gait"] = default_gait(ctx.model, GaitOptions(**ROBUST_GAIT))
@@ -65,25 +67,35 @@ def stage_robust_design(ctx: Context):
     ctx.log(f"   {r.message}")
 
 
+def _robustness_settings(ctx) -> RobustnessSettings:
+    return (RobustnessSettings(directions=8, rounds=6) if ctx.opts.quick
+            else RobustnessSettings())
+
+
+def _s_star_rows(ctx, groups) -> list:
+    """s* of every (label, design) of every (gait name, gait, candidates) group, each
+    kept between reproductions (:meth:`Context.memo`)."""
+    m, st = ctx.model, _robustness_settings(ctx)
+    rows = []
+    for gait_name, gait, cands in groups:
+        kept = ctx.memo("kept_directions", dict(gait=gait.cache_key, settings=st.__dict__),
+                        lambda gait=gait: kept_directions(m, gait, st))
+        for label, design in cands:
+            r = ctx.memo("robustness", dict(gait=gait.cache_key, settings=st.__dict__,
+                                            design=None if design is None
+                                            else design.to_dict(),
+                                            kept=kept.directions.tolist()),
+                         lambda gait=gait, design=design, kept=kept:
+                         robustness(m, gait, design, st, kept=kept))
+            rows.append(dict(label=label, gait=gait_name, **r.to_dict()))
+            ctx.log(f"   {gait_name} gait, {label}: s* = {r.s_star:.4g}")
+    return rows
+
+
 def stage_robustness(ctx: Context):
     """s* of virtual constraints, the deadbeat designs of both a = b = 0 groups and the
-    paper's printed M1 on the default gait; of virtual constraints and the robust design
-    on the robust design's gait."""
-    m, g = ctx.model, ctx.gait
-    st = (RobustnessSettings(directions=8, rounds=6) if ctx.opts.quick
-          else RobustnessSettings())
-    rows = []
-
-    def kept_of(gait):
-        return ctx.memo("kept_directions", dict(gait=gait.cache_key, settings=st.__dict__),
-                        lambda: kept_directions(m, gait, st))
-
-    def s_star(gait, design, kept):
-        return ctx.memo("robustness", dict(gait=gait.cache_key, settings=st.__dict__,
-                                           design=None if design is None else design.to_dict(),
-                                           kept=kept.directions.tolist()),
-                        lambda: robustness(m, gait, design, st, kept=kept))
-    kept = kept_of(g)
+    paper's printed M1 on the default gait (the robust designs' rows follow in
+    :func:`stage_robustness_robust`)."""
     cands = [("virtual constraints", None)]
     for name in ("group1", "group2"):
         if name in ctx.data.get("nlp_M1", {}):
@@ -91,17 +103,38 @@ def stage_robustness(ctx: Context):
                           Design(tuple(ctx.data["nlp_M1"][name]))))
     if is_rabbit(ctx):
         cands.append(("the paper's printed M1", Design(tuple(PAPER["example_M1"]))))
-    for label, design in cands:
-        r = s_star(g, design, kept)
-        rows.append(dict(label=label, gait="default", **r.to_dict()))
-        ctx.log(f"   default gait, {label}: s* = {r.s_star:.4g}")
-    for gait_name, g2, cands2 in _robust_groups(ctx):
-        kept2 = kept_of(g2)
-        for label, design in cands2:
-            r = s_star(g2, design, kept2)
-            rows.append(dict(label=label, gait=gait_name, **r.to_dict()))
-            ctx.log(f"   {gait_name} gait, {label}: s* = {r.s_star:.4g}")
-    ctx.summary["robustness"] = dict(settings=st.__dict__.copy(), rows=rows)
+    ctx.summary["robustness"] = dict(settings=_robustness_settings(ctx).__dict__.copy(),
+                                     rows=_s_star_rows(ctx, [("default", ctx.gait, cands)]))
+
+
+def stage_robustness_robust(ctx: Context):
+    """s* of the robust designs and of virtual constraints on their gaits, and the
+    trade-off figure (s* against max|lambda|)."""
+    rows = _s_star_rows(ctx, _robust_groups(ctx))
+    summ = ctx.summary.setdefault("robustness", dict(
+        settings=_robustness_settings(ctx).__dict__.copy(), rows=[]))
+    summ["rows"] = summ["rows"] + rows
+    rb = ctx.data.get("robust")
+    if rb is None:
+        return
+    vc_s = next((r["s_star"] for r in rows if r["gait"] == "robust"
+                 and r["controller"] == "vc"), None)
+    ss = next((r for r in rows if r["label"] == "the sampling search's design"), None)
+    mine = next((r for r in rows if r["label"] == "robust design (co-design NLP)"), None)
+    # every marker's s* from the s* table (one protocol for all three)
+    others = {"co-design NLP": (rb.max_abs, mine["s_star"] if mine else rb.s_star)}
+    if ss is not None:
+        others["sampling search's design"] = (ss["max_abs"], ss["s_star"])
+    if vc_s is not None:
+        others["virtual constraints"] = (rb.vc_eigenvalue, vc_s)
+    pts = sorted((p["max_abs"], p["s_star"]) for p in ctx.data.get("tradeoff") or []
+                 if p.get("s_star") is not None)
+    ctx.figures["tradeoff"] = save_figure(
+        tradeoff_plot(pts, others, bound=rb.vc_eigenvalue,
+                      front_label="the NLP at max|λ| bounds of 1/4 to 1 x virtual "
+                                  "constraints' (verified s*)",
+                      title="s* against max|λ| on the co-design's gait"),
+        ctx.out / "figures" / "tradeoff", FORMATS)
 
 
 def _robust_groups(ctx):
@@ -121,27 +154,41 @@ def _robust_groups(ctx):
             ("search", g3, [("virtual constraints", None), search])]
 
 
+def _sim_options(ctx) -> SimulationOptions:
+    return SimulationOptions(steps=ctx.opts.sim_steps, mu=0.6)
+
+
 def stage_sim(ctx: Context):
     """Paper §V-C at the paper's full perturbation (0.01 rad, 0.1 rad/s on every joint,
     mu = 0.6, the robot's torque limit): virtual constraints and the deadbeat M1 of the
-    NLP on the default gait; virtual constraints and the robust design on the robust
-    design's gait.  Fig. 5, Fig. 6 and an animation of the robust design's run."""
+    NLP on the default gait (the robust designs' runs and the figures follow in
+    :func:`stage_sim_robust`)."""
     m, g = ctx.model, ctx.gait
-    opts = SimulationOptions(steps=ctx.opts.sim_steps, mu=0.6)
     M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(m.nu)), float)
-    runs, labels = [], []
     q0, dq0 = perturbed_initial_state(g, *PAPER_SIZES)
     out = dict(perturbation=list(PAPER_SIZES), mu=0.6, runs={})
+    ctx.data["sim_runs"] = []
     for key, label, ctrl in (
             ("default_vc", "virtual constraints (default gait)",
              VirtualConstraintController(m, g)),
             ("default_deadbeat", f"deadbeat M1 = [{', '.join(f'{v:.3g}' for v in M1)}] "
                                  "(default gait)", TimeVaryingController(m, g, M1))):
-        r = _simulated(ctx, g, ctrl, q0, dq0, opts)
-        runs.append(r)
-        labels.append(label)
+        r = _simulated(ctx, g, ctrl, q0, dq0, _sim_options(ctx))
+        ctx.data["sim_runs"].append((r, label))
         out["runs"][key] = dict(label=label, **_brief(r))
         ctx.log(f"   {label}: {r.status}")
+    ctx.summary["simulation"] = out
+
+
+def stage_sim_robust(ctx: Context):
+    """The same runs for virtual constraints and the robust design on the co-design's
+    gait and for the sampling search's design on its gait; Fig. 5, Fig. 6 and an
+    animation of the robust design's run."""
+    m, g = ctx.model, ctx.gait
+    opts = _sim_options(ctx)
+    runs = list(ctx.data.get("sim_runs", []))
+    out = ctx.summary.setdefault("simulation", dict(perturbation=list(PAPER_SIZES), mu=0.6,
+                                                    runs={}))
     rb = ctx.data.get("robust")
     robust_runs = []
     if rb is not None:
@@ -154,9 +201,8 @@ def stage_sim(ctx: Context):
                 ("robust_design", "robust design, co-design NLP (its gait)",
                  TimeVaryingController(m, g2, M1r, rejoin=rb.design["rejoin"]))):
             r = _simulated(ctx, g2, ctrl, q0, dq0, opts)
-            runs.append(r)
-            labels.append(label)
-            robust_runs.append(r)
+            runs.append((r, label))
+            robust_runs.append((r, label))
             out["runs"][key] = dict(label=label, **_brief(r))
             ctx.log(f"   {label}: {r.status}")
         g3, ds = ctx.data["search_gait"], ctx.data["search_design"]
@@ -166,23 +212,23 @@ def stage_sim(ctx: Context):
                                                       rejoin=ds.rejoin), q0, dq0, opts)
         out["runs"]["search_design"] = dict(label=label, **_brief(r))
         ctx.log(f"   {label}: {r.status}")
+    if not runs:
+        return
     figs = ctx.out / "figures"
     ctx.figures["fig5"] = save_figure(
-        unactuated_error_plot(runs, labels=labels,
+        unactuated_error_plot([r for r, _ in runs], labels=[lab for _, lab in runs],
                               title="Fig. 5 at the paper's full perturbation: q_u error "
                                     "just before each impact"),
         figs / "fig5_qu_error", FORMATS)
-    pair = (robust_runs, ctx.data["robust_gait"], labels[2:]) if robust_runs else \
-        (runs, g, labels)
+    pair, gg = (robust_runs, ctx.data["robust_gait"]) if robust_runs else (runs, g)
     ctx.figures["fig6"] = save_figure(
-        swing_torques_plot(pair[0], pair[1], labels=pair[2],
+        swing_torques_plot([r for r, _ in pair], gg, labels=[lab for _, lab in pair],
                            title="Fig. 6 at the paper's full perturbation: swing-leg torques"),
         figs / "fig6_swing_torques", FORMATS)
-    shown = robust_runs[-1] if robust_runs else runs[-1]
+    shown = pair[-1][0]
     if ctx.opts.animation_steps and shown.t.size:
         ctx.figures["animation"] = [walking_animation(shown, m, figs / "walk_tv.gif",
                                                       max_steps=ctx.opts.animation_steps)]
-    ctx.summary["simulation"] = out
 
 
 def _simulated(ctx, gait, ctrl, q0, dq0, opts):
@@ -193,66 +239,69 @@ def _simulated(ctx, gait, ctrl, q0, dq0, opts):
                     lambda: simulate(ctrl, q0, dq0, opts))
 
 
+#: basins on the adaptive grid (:func:`analysis.robustness.basin`, ``refine``): every
+#: 4th row and column first, the boundary cell by cell (benchmarks/bench_basin.py
+#: measures the cells that differ from the full grid)
+BASIN_REFINE = 4
+
+
 def _basin(ctx, gait, design, n):
     """A basin of attraction, kept between reproductions (:meth:`Context.memo`)."""
-    return ctx.memo("basin", dict(gait=gait.cache_key, n=n,
+    return ctx.memo("basin", dict(gait=gait.cache_key, n=n, refine=BASIN_REFINE,
                                   design=None if design is None else design.to_dict()),
-                    lambda: basin(ctx.model, gait, design, n=n))
+                    lambda: basin(ctx.model, gait, design, n=n, refine=BASIN_REFINE))
+
+
+def _basin_n(ctx) -> int:
+    return 41 if ctx.opts.quick else 101
+
+
+def _log_basins(ctx, name, bs):
+    ctx.log(f"   {name}: " + ", ".join(f"{b['controller']} {100 * b['converged_fraction']:.1f} %"
+                                       for b in bs))
 
 
 def stage_basins(ctx: Context):
     """Basins of attraction on the Poincaré section: the deadbeat M1 beside virtual
-    constraints on the default gait, the robust design beside virtual constraints on its
-    gait; and the trade-off between s* and max|lambda| found by the robust search."""
-    m, g = ctx.model, ctx.gait
-    n = 41 if ctx.opts.quick else 101
+    constraints on the default gait (the robust designs' follow in
+    :func:`stage_basins_robust`)."""
+    m, g, n = ctx.model, ctx.gait, _basin_n(ctx)
     M1 = np.asarray(ctx.data.get("chosen_M1", np.zeros(m.nu)), float)
-    out = {}
     b1 = [_basin(ctx, g, Design(tuple(M1)), n), _basin(ctx, g, None, n)]
+    out = ctx.summary.setdefault("basins", {})
     out["default"] = [b.to_dict() for b in b1]
-    figs = ctx.out / "figures"
     ctx.figures["basin_default"] = save_figure(
         basin_plot(b1, title="Basins on the default gait: deadbeat M1 and virtual "
-                             "constraints"), figs / "basin_default", FORMATS)
+                             "constraints"), ctx.out / "figures" / "basin_default", FORMATS)
+    _log_basins(ctx, "default", out["default"])
+
+
+def stage_basins_robust(ctx: Context):
+    """The basins of the co-design, the sampling search's design and virtual
+    constraints."""
     rb = ctx.data.get("robust")
-    if rb is not None:
-        g2, g3 = ctx.data["robust_gait"], ctx.data["search_gait"]
-        b2 = [_basin(ctx, g2, Design(tuple(rb.design["M1"]), rb.design["rejoin"]), n),
-              _basin(ctx, g3, ctx.data["search_design"], n), _basin(ctx, g2, None, n)]
-        out["robust"] = [b.to_dict() for b in b2]
-        out["robust_labels"] = ["robust design (co-design NLP)",
-                                "the sampling search's design", "virtual constraints"]
-        same = g3.cache_key == g2.cache_key
-        ctx.figures["basin_robust"] = save_figure(
-            basin_plot(b2, title="Basins: the co-design, the sampling search's design"
-                                 + (" and virtual constraints on one gait" if same else
-                                    " (on its gait) and virtual constraints (the "
-                                    "co-design's gait)")), figs / "basin_robust", FORMATS)
-        rows = (ctx.summary.get("robustness") or {}).get("rows", [])
-        vc_s = next((r["s_star"] for r in rows if r["gait"] == "robust"
-                     and r["controller"] == "vc"), None)
-        ss = next((r for r in rows if r["label"] == "the sampling search's design"), None)
-        mine = next((r for r in rows if r["label"] == "robust design (co-design NLP)"), None)
-        # every marker's s* from the s* table (one protocol for all three)
-        others = {"co-design NLP": (rb.max_abs, mine["s_star"] if mine else rb.s_star)}
-        if ss is not None:
-            others["sampling search's design"] = (ss["max_abs"], ss["s_star"])
-        if vc_s is not None:
-            others["virtual constraints"] = (rb.vc_eigenvalue, vc_s)
-        pts = sorted((p["max_abs"], p["s_star"]) for p in ctx.data.get("tradeoff") or []
-                     if p.get("s_star") is not None)
-        ctx.figures["tradeoff"] = save_figure(
-            tradeoff_plot(pts, others, bound=rb.vc_eigenvalue,
-                          front_label="the NLP at max|λ| bounds of 1/4 to 1 x virtual "
-                                      "constraints' (verified s*)",
-                          title="s* against max|λ| on the co-design's gait"),
-            figs / "tradeoff", FORMATS)
-    for k, v in out.items():
-        if k.endswith("_labels"):
-            continue
-        ctx.log(f"   {k}: " + ", ".join(f"{b['controller']} {100 * b['converged_fraction']:.1f} %"
-                                        for b in v))
-    ctx.summary["basins"] = out
+    if rb is None:
+        return
+    n = _basin_n(ctx)
+    g2, g3 = ctx.data["robust_gait"], ctx.data["search_gait"]
+    todo = [(g2, Design(tuple(rb.design["M1"]), rb.design["rejoin"])),
+            (g3, ctx.data["search_design"]), (g2, None)]
+    # the reproduction's helper process takes them from the other end (the two meet)
+    order = range(len(todo))[::-1] if ctx.data.get("helper") else range(len(todo))
+    done = {i: _basin(ctx, todo[i][0], todo[i][1], n) for i in order}
+    b2 = [done[i] for i in range(len(todo))]
+    out = ctx.summary.setdefault("basins", {})
+    out["robust"] = [b.to_dict() for b in b2]
+    out["robust_labels"] = ["robust design (co-design NLP)",
+                            "the sampling search's design", "virtual constraints"]
+    same = g3.cache_key == g2.cache_key
+    ctx.figures["basin_robust"] = save_figure(
+        basin_plot(b2, title="Basins: the co-design, the sampling search's design"
+                             + (" and virtual constraints on one gait" if same else
+                                " (on its gait) and virtual constraints (the "
+                                "co-design's gait)")),
+        ctx.out / "figures" / "basin_robust", FORMATS)
+    _log_basins(ctx, "robust", out["robust"])
 
 
 #: the two gain sets of the model-error table (Kp, Kd, eps of eq. 13)

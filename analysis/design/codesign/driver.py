@@ -451,6 +451,27 @@ def _words(name, labels=None):
     return f"{words} {rest}".strip()
 
 
+def _key(model, st, gait):
+    return dict(robot=model.params.to_dict(), settings=st.to_dict(),
+                gait=None if gait is None else gait.cache_key, code=source_digest())
+
+
+def codesign_path(model, settings: CodesignSettings | None = None, gait=None,
+                  cache=None):
+    """The file :func:`codesign` keeps its result in for these inputs.
+
+    Parameters
+    ----------
+    model, settings, gait, cache :
+        As :func:`codesign`.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    return CODESIGNS.path(_key(model, settings or CodesignSettings(), gait), cache)
+
+
 def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_file=None,
              progress=None, cache=None, use_cache: bool = True) -> CodesignResult:
     """Co-design the robust time-varying controller (and the gait) by the NLP.
@@ -485,8 +506,7 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
     st = settings or CodesignSettings()
     if gait is not None and gait.model.params != model.params:
         raise ValueError("gait: made for other robot parameters than the model")
-    key = dict(robot=model.params.to_dict(), settings=st.to_dict(),
-               gait=None if gait is None else gait.cache_key, code=source_digest())
+    key = _key(model, st, gait)
     path = CODESIGNS.path(key, cache)
     if use_cache and path.is_file():
         try:

@@ -280,6 +280,8 @@ class CodesignResult(Result):
 
 
 class CodesignError(ValueError):
-    """IPOPT failed on the co-design NLP, or the request is infeasible (the message says
-    which solver, its status and what to try)."""
+    """IPOPT failed on the co-design NLP, or the request is infeasible.
+
+    The message says which solver, its status and what to try.
+    """
 
