@@ -45,8 +45,9 @@ from .context import FORMATS, Context, is_rabbit
 from .stages_paper import (stage_fig2, stage_fig3, stage_fig4, stage_gait, stage_grid, stage_m1,
                            stage_singular, stage_vc)
 from .stages_walking import (stage_basins, stage_basins_robust, stage_robust_design,
-                             stage_robustness, stage_robustness_robust, stage_sim,
-                             stage_sim_robust, stage_terrain)
+                             stage_robustness, stage_robustness_robust, stage_search_design,
+                             stage_sim, stage_sim_robust, stage_terrain, stage_tradeoff,
+                             warm_robust_runs)
 
 __all__ = ["reproduce", "ReproduceOptions", "ReproduceResult", "PAPER", "run_folder", "STAGES",
            "FORMATS"]
@@ -139,17 +140,22 @@ STAGES = [
     ("robustness (s*), default gait", stage_robustness, ("M1 NLP",)),
     ("Fig. 5 runs, default gait", stage_sim, ("M1 NLP",)),
     ("basins of attraction, default gait", stage_basins, ("M1 NLP",)),
+    ("the sampling search's design", stage_search_design, ("gait",)),
     ("robust design", stage_robust_design, ("gait",)),
     ("basins of the robust designs", stage_basins_robust, ("robust design",)),
+    ("the NLP's trade-off curve", stage_tradeoff, ("robust design",)),
     ("s* of the robust designs", stage_robustness_robust, ("robust design",)),
     ("Fig. 5, Fig. 6, animation", stage_sim_robust, ("Fig. 5 runs, default gait",)),
     ("uneven ground (MFPT, GSN)", stage_terrain, ("gait",)),
 ]
 
 #: what the helper process computes ahead, in its order, while this process runs the
-#: paper's stages: the robust design and then the robust designs' s* (this process takes
-#: their basins first, so the two meet in the middle)
-HELPER_STAGES = (stage_robust_design, stage_robustness_robust, stage_basins_robust)
+#: paper's stages and the sampling search's design: the co-design, then the robust
+#: designs' s*, full-order runs and basins (this process takes their basins and the
+#: trade-off first, so the two meet in the middle), then the Monte Carlo runs of the
+#: terrain stage
+HELPER_STAGES = (stage_robust_design, stage_robustness_robust, warm_robust_runs,
+                 stage_basins_robust, stage_terrain)
 
 
 

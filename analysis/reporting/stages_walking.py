@@ -50,21 +50,49 @@ def stage_robust_design(ctx: Context):
         r = codesign(ctx.model, st, progress=lambda m: ctx.log("   " + m))
     ctx.data["robust"] = r
     ctx.data["robust_gait"] = r.gait
-    ctx.data["search_gait"] = default_gait(ctx.model, GaitOptions(**ROBUST_GAIT))
-    ctx.data["search_design"] = Design(tuple(TODAY_DESIGN), 0.75)
-    out = dict(r.to_dict(), method="co-design NLP (biped m1 --robust)")
-    if not ctx.opts.quick:
-        out["tradeoff"] = ctx.memo(
-            "codesign_tradeoff", dict(design=r.design, gait=r.gait.cache_key,
-                                      settings=r.settings),
-            lambda: codesign_tradeoff(ctx.model, r, progress=lambda m: ctx.log("   " + m)))
-        ctx.data["tradeoff"] = out["tradeoff"]
-    ctx.summary["robust_design"] = out
+    _search(ctx)
+    ctx.summary["robust_design"] = dict(r.to_dict(),
+                                        method="co-design NLP (biped m1 --robust)")
+    ctx.log(f"   {r.message}")
+
+
+def _search(ctx):
+    """The sampling search's shipped design and its gait (``biped m1 --robust --method
+    search``; not searched again)."""
+    if "search_gait" not in ctx.data:
+        ctx.data["search_gait"] = default_gait(ctx.model, GaitOptions(**ROBUST_GAIT))
+        ctx.data["search_design"] = Design(tuple(TODAY_DESIGN), 0.75)
+    return ctx.data["search_gait"], ctx.data["search_design"]
+
+
+def stage_search_design(ctx: Context):
+    """The sampling search's shipped design beside the co-design: its gait, s* of it and
+    of virtual constraints on that gait, and its basin (computed while the co-design runs
+    on the other core; the robust stages below read them back)."""
+    if not is_rabbit(ctx):
+        return
+    g3, ds = _search(ctx)
     ctx.summary["search_design"] = dict(
-        M1=list(TODAY_DESIGN), rejoin=0.75, gait_options=dict(ROBUST_GAIT),
+        M1=list(ds.M1), rejoin=ds.rejoin, gait_options=dict(ROBUST_GAIT),
         note="the sampling search's shipped design (biped m1 --robust --method search), "
              "evaluated here by the same stages, not searched again")
-    ctx.log(f"   {r.message}")
+    _s_star_rows(ctx, [("search", g3, [("virtual constraints", None),
+                                       ("the sampling search's design", ds)])])
+    _basin(ctx, g3, ds, _basin_n(ctx))
+
+
+def stage_tradeoff(ctx: Context):
+    """The (max|lambda|, s*) trade-off traced by the NLP on the co-design's gait (full
+    run; :func:`analysis.design.codesign.codesign_tradeoff`)."""
+    r = ctx.data.get("robust")
+    if r is None or ctx.opts.quick:
+        return
+    pts = ctx.memo("codesign_tradeoff", dict(design=r.design, gait=r.gait.cache_key,
+                                             settings=r.settings),
+                   lambda: codesign_tradeoff(ctx.model, r,
+                                             progress=lambda m: ctx.log("   " + m)))
+    ctx.data["tradeoff"] = pts
+    ctx.summary["robust_design"]["tradeoff"] = pts
 
 
 def _robustness_settings(ctx) -> RobustnessSettings:
@@ -127,12 +155,12 @@ def stage_robustness_robust(ctx: Context):
         others["sampling search's design"] = (ss["max_abs"], ss["s_star"])
     if vc_s is not None:
         others["virtual constraints"] = (rb.vc_eigenvalue, vc_s)
-    pts = sorted((p["max_abs"], p["s_star"]) for p in ctx.data.get("tradeoff") or []
-                 if p.get("s_star") is not None)
+    pts = [(p["max_abs"], p["s_star"]) for p in ctx.data.get("tradeoff") or []
+           if p.get("s_star") is not None]
     ctx.figures["tradeoff"] = save_figure(
-        tradeoff_plot(pts, others, bound=rb.vc_eigenvalue,
-                      front_label="the NLP at max|λ| bounds of 1/4 to 1 x virtual "
-                                  "constraints' (verified s*)",
+        tradeoff_plot(pts, others, bound=rb.vc_eigenvalue, front_style="points",
+                      front_label="the NLP, gait fixed, max|λ| <= 1/4, 1/2, 3/4, 1 x "
+                                  "virtual constraints' (s* verified)",
                       title="s* against max|λ| on the co-design's gait"),
         ctx.out / "figures" / "tradeoff", FORMATS)
 
@@ -185,33 +213,11 @@ def stage_sim_robust(ctx: Context):
     gait and for the sampling search's design on its gait; Fig. 5, Fig. 6 and an
     animation of the robust design's run."""
     m, g = ctx.model, ctx.gait
-    opts = _sim_options(ctx)
     runs = list(ctx.data.get("sim_runs", []))
     out = ctx.summary.setdefault("simulation", dict(perturbation=list(PAPER_SIZES), mu=0.6,
                                                     runs={}))
-    rb = ctx.data.get("robust")
-    robust_runs = []
-    if rb is not None:
-        g2 = ctx.data["robust_gait"]
-        q0, dq0 = perturbed_initial_state(g2, *PAPER_SIZES)
-        M1r = np.array(rb.design["M1"])
-        for key, label, ctrl in (
-                ("robust_vc", "virtual constraints (the co-design's gait)",
-                 VirtualConstraintController(m, g2)),
-                ("robust_design", "robust design, co-design NLP (its gait)",
-                 TimeVaryingController(m, g2, M1r, rejoin=rb.design["rejoin"]))):
-            r = _simulated(ctx, g2, ctrl, q0, dq0, opts)
-            runs.append((r, label))
-            robust_runs.append((r, label))
-            out["runs"][key] = dict(label=label, **_brief(r))
-            ctx.log(f"   {label}: {r.status}")
-        g3, ds = ctx.data["search_gait"], ctx.data["search_design"]
-        q0, dq0 = perturbed_initial_state(g3, *PAPER_SIZES)
-        label = "the sampling search's design (its gait)"
-        r = _simulated(ctx, g3, TimeVaryingController(m, g3, np.array(ds.M1),
-                                                      rejoin=ds.rejoin), q0, dq0, opts)
-        out["runs"]["search_design"] = dict(label=label, **_brief(r))
-        ctx.log(f"   {label}: {r.status}")
+    robust_runs = _robust_runs(ctx, out["runs"])
+    runs += robust_runs
     if not runs:
         return
     figs = ctx.out / "figures"
@@ -229,6 +235,44 @@ def stage_sim_robust(ctx: Context):
     if ctx.opts.animation_steps and shown.t.size:
         ctx.figures["animation"] = [walking_animation(shown, m, figs / "walk_tv.gif",
                                                       max_steps=ctx.opts.animation_steps)]
+
+
+def _robust_runs(ctx, runs: dict) -> list:
+    """The full-order runs of virtual constraints and the co-design on the co-design's
+    gait and of the sampling search's design on its gait, from the paper's perturbation
+    (each kept between reproductions); their briefs go into ``runs``.  Returns the
+    (result, label) of the first two (Fig. 6)."""
+    rb = ctx.data.get("robust")
+    if rb is None:
+        return []
+    m, opts = ctx.model, _sim_options(ctx)
+    g2 = ctx.data["robust_gait"]
+    q0, dq0 = perturbed_initial_state(g2, *PAPER_SIZES)
+    out = []
+    for key, label, ctrl in (
+            ("robust_vc", "virtual constraints (the co-design's gait)",
+             VirtualConstraintController(m, g2)),
+            ("robust_design", "robust design, co-design NLP (its gait)",
+             TimeVaryingController(m, g2, np.array(rb.design["M1"]),
+                                   rejoin=rb.design["rejoin"]))):
+        r = _simulated(ctx, g2, ctrl, q0, dq0, opts)
+        out.append((r, label))
+        runs[key] = dict(label=label, **_brief(r))
+        ctx.log(f"   {label}: {r.status}")
+    g3, ds = _search(ctx)
+    q0, dq0 = perturbed_initial_state(g3, *PAPER_SIZES)
+    label = "the sampling search's design (its gait)"
+    r = _simulated(ctx, g3, TimeVaryingController(m, g3, np.array(ds.M1), rejoin=ds.rejoin),
+                   q0, dq0, opts)
+    runs["search_design"] = dict(label=label, **_brief(r))
+    ctx.log(f"   {label}: {r.status}")
+    return out
+
+
+def warm_robust_runs(ctx: Context):
+    """The robust designs' full-order runs alone, into the cache (the reproduction's
+    helper process computes them ahead of :func:`stage_sim_robust`)."""
+    _robust_runs(ctx, {})
 
 
 def _simulated(ctx, gait, ctrl, q0, dq0, opts):
@@ -304,6 +348,15 @@ def stage_basins_robust(ctx: Context):
     _log_basins(ctx, "robust", out["robust"])
 
 
+def _mc(ctx, gait, spec, st):
+    """A Monte Carlo run of the terrain stage (in this process), kept between
+    reproductions (:meth:`Context.memo`)."""
+    from ..terrain import monte_carlo
+    return ctx.memo("monte_carlo", dict(gait=gait.cache_key, spec=repr(spec),
+                                        settings=repr(st)),
+                    lambda: monte_carlo(gait, spec, st, scheduler="inline"))
+
+
 #: the two gain sets of the model-error table (Kp, Kd, eps of eq. 13)
 TERRAIN_GAINS = ((1.0, 2.0, 0.02), (1.0, 2.0, 0.2))
 
@@ -314,7 +367,7 @@ def stage_terrain(ctx: Context):
     its gait) and the deadbeat M1 (default gait); the exact gait sensitivity norm and
     its check against the Monte Carlo's step-time RMS at small sigma; the MFPT with the
     torso 20 % heavier than the controller's model for two gain sets."""
-    from ..terrain import MonteCarloSettings, WalkerSpec, gait_sensitivity, monte_carlo
+    from ..terrain import MonteCarloSettings, WalkerSpec, gait_sensitivity
     from ..terrain import predicted_rms
     from .plots import mfpt_sigma_plot, survival_plot
     m, g = ctx.model, ctx.gait
@@ -337,7 +390,7 @@ def stage_terrain(ctx: Context):
         pts = []
         for sig in sigmas:
             st = MonteCarloSettings(sigma=sig, runs=runs, max_steps=steps, chunk=runs)
-            r = monte_carlo(gg, spec, st, scheduler="inline")
+            r = _mc(ctx, gg, spec, st)
             e = r.estimate
             pts.append((sig, e.mfpt, *e.mfpt_ci))
             rows.append(dict(label=label, sigma=sig, mfpt=e.mfpt, mfpt_ci=e.mfpt_ci,
@@ -354,9 +407,11 @@ def stage_terrain(ctx: Context):
     gsn = []
     tv = [c for c in cands if c[2].controller == "tv"]       # (the README has the VC's)
     for label, gg, spec in tv[-1:] if quick else tv:
-        gs = gait_sensitivity(spec.controller_for(gg), SimulationOptions(rk4_steps=400))
+        gs = ctx.memo("gait_sensitivity", dict(gait=gg.cache_key, spec=repr(spec)),
+                      lambda gg=gg, spec=spec: gait_sensitivity(
+                          spec.controller_for(gg), SimulationOptions(rk4_steps=400)))
         st = MonteCarloSettings(sigma=5e-4, runs=runs, max_steps=steps, chunk=runs)
-        mc = monte_carlo(gg, spec, st, scheduler="inline")
+        mc = _mc(ctx, gg, spec, st)
         pred = predicted_rms(gs.linearisation, st.sigma, steps, st.transient)
         gsn.append(dict(label=label, gsn=gs.gsn, spectral_radius=gs.spectral_radius,
                         sigma=st.sigma, predicted_rms=pred, monte_carlo_rms=mc.step_time_rms,
@@ -373,7 +428,7 @@ def stage_terrain(ctx: Context):
     for gains in TERRAIN_GAINS:
         for pl in (None, plant):
             sp = WalkerSpec(spec.controller, spec.M1, spec.rejoin, gains, pl)
-            r = monte_carlo(gg, sp, st, scheduler="inline")
+            r = _mc(ctx, gg, sp, st)
             e = r.estimate
             err.append(dict(design=label, gains=list(gains), torso_mass_error=0.2 if pl else 0.0,
                             sigma=sig, mfpt=e.mfpt, mfpt_ci=e.mfpt_ci, failures=e.failures,

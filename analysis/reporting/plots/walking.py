@@ -154,7 +154,8 @@ def basin_plot(results, title: str | None = None) -> Figure:
 
 def tradeoff_plot(front, others=None, bound=None, title: str | None = None,
                   front_label: str = "best s* found at or below each max|λ| "
-                                     "(search estimates)") -> Figure:
+                                     "(search estimates)",
+                  front_style: str = "step") -> Figure:
     """Robustness against stability: s* against max ``|lambda|``, named designs marked.
 
     The front is the best robustness s* found at each eigenvalue bound.
@@ -171,6 +172,9 @@ def tradeoff_plot(front, others=None, bound=None, title: str | None = None,
     title : str, optional
     front_label : str, optional
         The front's legend entry.
+    front_style : str, optional
+        'step' (a front: the best s* at or below each max ``|lambda|``) or 'points'
+        (designs in the order given, joined by a dashed line).
 
     Returns
     -------
@@ -180,8 +184,11 @@ def tradeoff_plot(front, others=None, bound=None, title: str | None = None,
     ax = fig.add_subplot()
     if front:
         f = np.array(front, float)
-        ax.step(f[:, 0], f[:, 1], where="post", color="0.3", lw=1.2, label=front_label)
-        ax.plot(f[:, 0], f[:, 1], ".", color="0.3", ms=4)
+        if front_style == "points":
+            ax.plot(f[:, 0], f[:, 1], "o--", color="0.3", lw=1, ms=5, label=front_label)
+        else:
+            ax.step(f[:, 0], f[:, 1], where="post", color="0.3", lw=1.2, label=front_label)
+            ax.plot(f[:, 0], f[:, 1], ".", color="0.3", ms=4)
     for (label, (lam, s)), mk in zip((others or {}).items(), "o^sDvP*X"):
         ax.plot([lam], [s], mk, ms=8, label=f"{label}: s* {s:.3g}, max|λ| {lam:.2g}")
     if bound is not None:
