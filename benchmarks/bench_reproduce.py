@@ -51,7 +51,8 @@ def run(out: Path, cache: Path, quick: bool) -> dict:
         if (folder / "summary.json").is_file() else {}
     return dict(rc=p.returncode, wall=wall, load_before=load0, load_after=os.getloadavg()[0],
                 stages=summary.get("stages", {}), total=summary.get("total_time"),
-                reused=summary.get("reused", {}), stderr=p.stderr[-2000:])
+                reused=summary.get("reused", {}), helped=summary.get("helped", {}),
+                stderr=p.stderr[-2000:])
 
 
 def show(label: str, r: dict):
@@ -59,9 +60,10 @@ def show(label: str, r: dict):
           f"exit {r['rc']}, load {r['load_before']:.2f} -> {r['load_after']:.2f}")
     for name, s in r["stages"].items():
         t = s.get("time")
-        reuse = r["reused"].get(name)
-        print(f"  {name:32s} {s['status']:8s} {t if t is not None else float('nan'):7.1f} s"
-              + (f"   reused: {reuse}" if reuse else ""))
+        reuse, helped = r["reused"].get(name), r["helped"].get(name)
+        print(f"  {name:36s} {s['status']:8s} {t if t is not None else float('nan'):7.1f} s"
+              + (f"   reused: {len(reuse)}" if reuse else "")
+              + (f"   from the helper process: {len(helped)}" if helped else ""))
     if r["rc"] != 0:
         print("  stderr: " + r["stderr"].replace("\n", "\n    "))
 

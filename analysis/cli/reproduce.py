@@ -5,12 +5,12 @@ from analysis.reporting.reproduce import reproduce, run_folder
 
 from .common import add_robot, load_model, output_dir, print_json
 
-#: measured with the README's commands on a fresh clone on the project's 2-core AMD EPYC
-#: VM (Python 3.11, load 1 to 3), nothing cached yet (full: 505 s, of which the robust
-#: search 179 s and the basins 240 s; quick: 162 s); the README quotes the same figures
+#: measured by benchmarks/bench_reproduce.py on a fresh clone on the project's 2-core AMD
+#: EPYC VM (Python 3.11, load 1.8 to 2.4 from other jobs), nothing cached (full: 152 s,
+#: quick: 56 s; a warm re-run of the full run: 11 s); the README quotes the same figures
 #: (tests/test_reproduce.py checks it)
-TIME_FULL = "about 8.5 min"
-TIME_QUICK = "about 3 min"
+TIME_FULL = "about 2.5 min"
+TIME_QUICK = "about 1 min"
 
 
 def cmd_reproduce(args):
@@ -18,7 +18,7 @@ def cmd_reproduce(args):
     output_dir(args.out, "--out")                             # before any work
     output_dir(run_folder(args.out, args.quick, args.robot), "--out")
     r = reproduce(args.out, quick=args.quick, progress=not (args.no_progress or args.json),
-                  robot=args.robot or "rabbit")
+                  robot=args.robot or "rabbit", helper=not args.one_core)
     if args.json:
         print_json(r)
     else:
@@ -35,10 +35,13 @@ def register(sub):
                     "then cached): singular outputs (eq. 24), Fig. 2, the 9^4 grid, Fig. 3 "
                     "and the swing-height conjecture, a = b = 0 and Fig. 4, the M1 NLP, "
                     "the virtual-constraint comparison; then which designs walk: the robust "
-                    "design (cached once found), s* of the deadbeat outputs, virtual "
-                    "constraints and the robust design, Fig. 5 and 6 at the paper's full "
+                    "co-design NLP (the gait fixed in --quick; cached once found) beside "
+                    "the sampling search's design, s* of the deadbeat outputs, virtual "
+                    "constraints and the robust designs, Fig. 5 and 6 at the paper's full "
                     "perturbation with validity margins, an animation, basins of "
-                    "attraction and the s*-against-max|lambda| trade-off. "
+                    "attraction, the s*-against-max|lambda| trade-off, and uneven ground. "
+                    "On two or more cores a helper process computes the robust design and "
+                    "what depends on it while the paper's stages run (--one-core: not). "
                     "Figures are written as PNG and PDF; report.md sets our numbers beside "
                     f"the paper's. With --robot, the same analysis for another robot (for "
                     "two torques the stable domain in the (M1(1), M1(2)) plane replaces "
@@ -52,6 +55,8 @@ def register(sub):
     add_robot(p, with_gait=False)
     p.add_argument("--quick", action="store_true",
                    help=f"coarser grids ({TIME_QUICK} on 2 cores), into DIR/quick")
+    p.add_argument("--one-core", action="store_true",
+                   help="every stage in this process (no helper process on a second core)")
     p.add_argument("--no-progress", action="store_true", help="no progress output")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_reproduce)

@@ -39,6 +39,8 @@ class Context:
     gait: object = None
     stage: str = ""               # the stage running now
     reused: dict = field(default_factory=dict)
+    helped: dict = field(default_factory=dict)     # results the helper process computed
+    started: float = field(default_factory=time.time)
 
     def log(self, msg):
         if self.opts.progress:
@@ -47,7 +49,8 @@ class Context:
     def memo(self, name: str, inputs: dict, compute):
         """``compute()``, or its result kept by an earlier run with the same inputs and
         the same code (:data:`RESULTS`); what was reused is listed per stage in
-        summary.json (``reused``)."""
+        summary.json (``reused``; ``helped``: what the helper process computed for this
+        run)."""
         body = dict(name=name, inputs=inputs, code=source_digest(),
                     robot=self.model.params.to_dict() if self.model is not None else None)
         path = RESULTS.path(body, suffix=".pkl")
@@ -55,7 +58,10 @@ class Context:
             if path.is_file():
                 try:
                     value = pickle.loads(path.read_bytes())
-                    self.reused.setdefault(self.stage, []).append(name)
+                    # written since this run began: the helper process's, else reused
+                    mine = path.stat().st_mtime >= self.started
+                    (self.helped if mine else self.reused).setdefault(
+                        self.stage, []).append(name)
                     return value
                 except Exception:        # noqa: BLE001 - a damaged entry is recomputed
                     pass

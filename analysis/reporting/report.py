@@ -510,10 +510,12 @@ def write_report(out: Path, s: dict) -> Path:
                   "## Results", "", "| quantity | ours | note |", "|---|---|---|"]
         lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} |" for a, b, c in _robot_rows(s)]
     lines += [""] + _robust_lines(s) + _terrain_lines(s)
-    reused = s.get("reused", {})
+    reused, helped = s.get("reused", {}), s.get("helped", {})
     lines += ["## Stages", "", "Reused: results an earlier run computed with the same inputs "
-              "and the same code, read from the cache folder.", "",
-              "| stage | status | time (s) | reused |", "|---|---|---|---|"]
+              "and the same code, read from the cache folder.  Helper: results the helper "
+              "process computed for this run on the second core (the stage's time is then "
+              "what it waited, if anything).", "",
+              "| stage | status | time (s) | reused | helper |", "|---|---|---|---|---|"]
     for name, st in stages.items():
         extra = st.get("error") or st.get("reason") or ""
         extra = " ".join(str(extra).split())[:300]
@@ -522,7 +524,9 @@ def write_report(out: Path, s: dict) -> Path:
                      + (f": {esc(extra)}" if extra else "")
                      + f" | {_f(st.get('time'), '.1f')} | "
                      + (esc(", ".join(f"{k} x{kept.count(k)}" for k in dict.fromkeys(kept)))
-                        if kept else "") + " |")
+                        if kept else "") + " | "
+                     + (esc(", ".join(f"{k} x{hp.count(k)}" for k in dict.fromkeys(hp)))
+                        if (hp := helped.get(name, [])) else "") + " |")
     lines += ["", "## Figures", ""]
     figures = s.get("figures", {})
     captions = _figure_captions(s)

@@ -200,6 +200,7 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
         ctx.summary["mode"] = mode
         ctx.summary["stages"] = status
         ctx.summary["reused"] = ctx.reused
+        ctx.summary["helped"] = ctx.helped
         ctx.summary["figures"] = {k: [_relative(f, staging) for f in
                                       ([v] if isinstance(v, str) else v)]
                                   for k, v in ctx.figures.items()}
@@ -302,9 +303,11 @@ def _stages(ctx: Context, helper: _Helper) -> dict:
             status[name] = dict(status="ok", time=time.perf_counter() - t)
             if fn is stage_gait:
                 helper.start(ctx)
-            kept = ctx.reused.get(name)
+            kept, helped = ctx.reused.get(name), ctx.helped.get(name)
             ctx.log(f"[{k}/{len(STAGES)}] {name}: done in {time.perf_counter() - t:.1f} s"
-                    + (f" (reused {len(kept)} kept result(s))" if kept else ""))
+                    + (f" (reused {len(kept)} kept result(s))" if kept else "")
+                    + (f" ({len(helped)} result(s) from the helper process)" if helped
+                       else ""))
         except Exception as e:          # a failed stage is reported, the others go on
             status[name] = dict(status="failed", error=f"{type(e).__name__}: {e}",
                                 time=time.perf_counter() - t,
