@@ -27,6 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_reproduce import machine  # noqa: E402
 
 
+def _f(v, spec=".4g"):
+    return "n/a" if v is None else format(v, spec)
+
+
 def run(args: list[str], cache: Path) -> dict:
     """One ``biped m1 --robust ...`` in a fresh process with its own cache."""
     env = dict(os.environ, BIPED_CACHE_DIR=str(cache), MPLBACKEND="Agg")
@@ -54,6 +58,7 @@ def run(args: list[str], cache: Path) -> dict:
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--skip-search", action="store_true", help="the NLP runs only")
+    ap.add_argument("--search-only", action="store_true", help="the sampling search only")
     ap.add_argument("--json", metavar="FILE", help="write the results here")
     a = ap.parse_args()
     print(f"machine: {machine()}; load {os.getloadavg()[0]:.2f}")
@@ -69,7 +74,8 @@ def main():
                         ".save(sys.argv[1])", str(gait_file)],
                        env=dict(os.environ, BIPED_CACHE_DIR=str(tmp / "gait_cache")),
                        check=True)
-        runs = [("nlp, gait free", []), ("nlp, gait fixed", ["--gait", str(gait_file)])]
+        runs = [] if a.search_only else [("nlp, gait free", []),
+                                          ("nlp, gait fixed", ["--gait", str(gait_file)])]
         if not a.skip_search:
             runs.append(("search", ["--method", "search"]))
         results = {}
@@ -82,16 +88,16 @@ def main():
                 print(f"  exit {r['rc']}: {r.get('stderr', '')}")
                 continue
             print(f"  {r['wall']:.1f} s wall (load {r['load_before']:.2f} -> "
-                  f"{r['load_after']:.2f}); {r['status']}: s* {r['s_star']:.4g}, below 1e-3 "
-                  f"from step {r['steps_to_converge']}, max|lambda| {r['max_abs']:.3g} "
-                  f"(virtual constraints {r['vc_eigenvalue']:.3g}), peak torque "
-                  f"{r['peak_torque']:.1f} N m")
+                  f"{r['load_after']:.2f}); {r['status']}: s* {_f(r['s_star'])}, below 1e-3 "
+                  f"from step {r['steps_to_converge']}, max|lambda| {_f(r['max_abs'])} "
+                  f"(virtual constraints {_f(r['vc_eigenvalue'])}), peak torque "
+                  f"{_f(r['peak_torque'])} N m", flush=True)
         s = results.get("search")
         if s and not s["rc"]:
             print()
             for label in ("nlp, gait free", "nlp, gait fixed"):
-                r = results[label]
-                if not r["rc"]:
+                r = results.get(label)
+                if r and not r["rc"]:
                     print(f"{label}: {s['wall'] / r['wall']:.2f}x faster than the search "
                           f"({r['wall']:.0f} s vs {s['wall']:.0f} s)")
     if a.json:

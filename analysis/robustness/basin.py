@@ -127,9 +127,10 @@ def basin(model, gait, design: Design | None = None, n: int = 101,
         other block is walked cell by cell, and so is every block next to a walked cell
         whose outcome differs from its filled neighbour, until none is left.  ``n - 1``
         must be a multiple of ``refine``.  It draws the boundary cell by cell; an island
-        smaller than a block with one outcome at its four corners is missed (the
-        benchmark ``bench_reproduce.py`` measures the cells that differ from the full
-        grid).  None: every cell is walked.
+        smaller than a block with one outcome at its four corners is missed
+        (``benchmarks/bench_basin.py``, the five basins of the report at n = 101 and
+        refine = 4: 8.5x faster, 47 of 51,005 cells differ, converged fractions equal to
+        0.04 points).  None: every cell is walked.
 
     Returns
     -------
