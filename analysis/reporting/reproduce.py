@@ -262,6 +262,8 @@ class _Helper:
             return
         if not is_rabbit(ctx):       # the robust design runs on RABBIT only
             return
+        if not any(fn is stage_robust_design for _, fn, _ in STAGES):
+            return                   # nothing for it to do in this run
         import tempfile
         self.out = out = tempfile.mkdtemp(prefix="biped-reproduce-helper-")
         self.proc = multiprocessing.get_context("spawn").Process(
