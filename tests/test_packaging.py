@@ -19,3 +19,27 @@ def test_every_package_is_in_the_wheel():
         "package-data"]
     for pkg in data:
         assert (ROOT / pkg.replace(".", "/")).is_dir(), pkg
+
+
+def test_every_third_party_import_is_a_dependency():
+    """`pip install .` alone must run every stage: a module the packages import (at the
+    top or inside a function) is the standard library's, the toolkit's own, or one of
+    pyproject.toml's dependencies (a new user's `biped reproduce` once failed its terrain
+    stage on a missing scipy, which only the test extra installed)."""
+    import ast
+    import re
+    import sys
+    deps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
+    names = {re.split(r"[\[<>=!~ ]", d, maxsplit=1)[0].lower() for d in deps}
+    imported = set()
+    for top in ("biped_casadi", "gait_opt", "analysis"):
+        for f in (ROOT / top).rglob("*.py"):
+            for n in ast.walk(ast.parse(f.read_text())):
+                if isinstance(n, ast.Import):
+                    imported |= {a.name.split(".")[0] for a in n.names}
+                elif isinstance(n, ast.ImportFrom) and n.level == 0 and n.module:
+                    imported.add(n.module.split(".")[0])
+    third = {m for m in imported if m not in sys.stdlib_module_names
+             and m not in ("biped_casadi", "gait_opt", "analysis")}
+    missing = {m for m in third if m.lower() not in names}
+    assert not missing, f"imported but not in pyproject.toml's dependencies: {sorted(missing)}"

@@ -37,6 +37,8 @@ class _Codesign:
     def __init__(self, model, st: CodesignSettings, gait, progress):
         self.model, self.st = model, st
         self.say = progress or (lambda msg: None)
+        #: the rejoin fraction of the solves now (st.rejoin, then each of st.rejoin_choices)
+        self.rejoin = float(st.rejoin)
         self.fixed_gait = gait
         self.free = st.free_gait and gait is None
         self.tst = TranscriptionSettings(mu=st.mu, torque_limit=float(
@@ -58,8 +60,8 @@ class _Codesign:
 
     def measure(self, gait, kept, M1):
         """Walker s* over the kept directions and max|lambda| (AD) of a design."""
-        r = robustness(self.model, gait, Design(tuple(M1), self.st.rejoin), self.rs, kept=kept)
-        lam = poincare_map(self.model, gait, rejoin=self.st.rejoin).analyse(
+        r = robustness(self.model, gait, Design(tuple(M1), self.rejoin), self.rs, kept=kept)
+        lam = poincare_map(self.model, gait, rejoin=self.rejoin).analyse(
             np.array(M1), method="ad").max_abs
         return r, float(lam)
 
@@ -69,7 +71,7 @@ class _Codesign:
         w = zero_dynamics_walker(self.model, gait, rs.simulation_options(), rs.rk4_steps, jit=True)
         dirs = kept.directions
         q0, dq0 = start_states(gait, dirs, s)
-        B = w.walk(q0, dq0, np.array(M1), self.st.rejoin, steps=rs.steps)
+        B = w.walk(q0, dq0, np.array(M1), self.rejoin, steps=rs.steps)
         err = np.where(B.status == "ok", np.nan_to_num(B.final_error, nan=1e3), 1e6
                        - B.fail_step.astype(float))
         order = [int(i) for i in np.argsort(-err) if i != 0]
@@ -105,7 +107,7 @@ class _Codesign:
         return abs(vc_eigenvalue(self.model, gait).eigenvalue)
 
     def _jury(self, gait):
-        A_fn = poincare_map(self.model, gait, rejoin=self.st.rejoin).variational.A_fn
+        A_fn = poincare_map(self.model, gait, rejoin=self.rejoin).variational.A_fn
         M = ca.SX.sym("M1", self.model.nu)
         A = A_fn(M)
         tr = A[0, 0] + A[1, 1]
@@ -208,13 +210,13 @@ class _Codesign:
         g, kept, rs = self.gait0, self.kept0, self.rs
         rng = np.random.default_rng(st.seed)
         M = rng.uniform(-st.box, st.box, (st.samples, m.nu))
-        jb = poincare_map(m, g, rejoin=st.rejoin).jacobian_batch(M)
+        jb = poincare_map(m, g, rejoin=self.rejoin).jacobian_batch(M)
         ok = (jb.status == "stable") & (jb.max_abs <= st.eigen_margin * self.lam_vc(g))
         M = M[ok][:8 * st.sampled_starts]
         if len(M):
             w = zero_dynamics_walker(m, g, rs.simulation_options(), 200, jit=True)
             q0, dq0 = start_states(g, np.repeat(kept.directions[:1], len(M), 0), 1.0)
-            B = w.walk(q0, dq0, M, st.rejoin, steps=rs.steps)
+            B = w.walk(q0, dq0, M, self.rejoin, steps=rs.steps)
             M = M[B.verdict(rs.tol) == "ok"][:st.sampled_starts]
         self.stage("sampled starts", drawn=st.samples, stable=int(ok.sum()), kept=len(M))
         return list(M)
@@ -227,9 +229,9 @@ class _Codesign:
         tr, red = self.nlp(gait, dirs, free=False, paper_tol=st.paper_tol)
         self.denominator(tr, gait, M1)
         d0 = np.zeros(red.nd)
-        d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, st.rejoin, s0
+        d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, self.rejoin, s0
         lb, ub = red.bounds()
-        lb[tr.i_rejoin] = ub[tr.i_rejoin] = st.rejoin
+        lb[tr.i_rejoin] = ub[tr.i_rejoin] = self.rejoin
         self.say(f"NLP, gait fixed: {tr.K} scenarios x {tr.S} steps ({label})")
         res = self.continued(tr, red, d0, lb, ub, label, max_iter)
         if not np.all(np.isfinite(res.d)):
@@ -250,7 +252,7 @@ class _Codesign:
         ok = lam <= self.lam_vc(gait) and r.s_star > 0
         return dict(gait=gait, kept=kept, M1=M1n, s_star=r.s_star, nlp_s=s_nlp, red=red,
                     tr=tr, res=res, lam=lam, active=list(active), score=self.score(r),
-                    ok=ok, failure=r.failure)
+                    ok=ok, failure=r.failure, rejoin=self.rejoin)
 
     def fixed_phase(self, starts):
         """Every start screened by a short first solve (ranked by the NLP's own s); the
@@ -263,9 +265,9 @@ class _Codesign:
                                paper_tol=st.paper_tol)
             self.denominator(tr, gait, M1)
             d0 = np.zeros(red.nd)
-            d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, st.rejoin, st.s_start
+            d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, self.rejoin, st.s_start
             lb, ub = red.bounds()
-            lb[tr.i_rejoin] = ub[tr.i_rejoin] = st.rejoin
+            lb[tr.i_rejoin] = ub[tr.i_rejoin] = self.rejoin
             label = f"start {i + 1} of {len(starts)}"
             self.say(f"NLP, gait fixed: {tr.K} scenarios x {tr.S} steps ({label})")
             res = self.solve(tr, red, d0, lb, ub, label, st.screen_iter, st.screen_time,
@@ -307,6 +309,24 @@ class _Codesign:
                     best = c
         return best
 
+    def rejoin_phase(self, best):
+        """The rejoin time of v_c as a decision: the gait-fixed NLP solved at each of
+        ``rejoin_choices`` from the best design (v_c's third derivative jumps at t_c,
+        which makes the walker's rule kinked in t_c: a discrete choice, not a smooth
+        variable); the best verified design wins."""
+        st = self.st
+        for r in st.rejoin_choices:
+            if abs(r - best["rejoin"]) < 1e-12:
+                continue
+            self.rejoin = float(r)
+            c = self.solve_round(best["gait"], best["kept"], best["M1"], best["active"], 1,
+                                 max(min(best["s_star"], best["nlp_s"]) - 0.1, 0.1),
+                                 label=f"rejoin {r:g} T")
+            if c is not None and c["ok"] and c["score"] > best["score"]:
+                best = c
+        self.rejoin = float(best["rejoin"])
+        return best
+
     def gait_phase(self, best):
         """Gait steps in a trust region around the current gait."""
         st, model = self.st, self.model
@@ -325,10 +345,10 @@ class _Codesign:
             self.denominator(tr, gait, M1)
             d0 = np.zeros(red.nd)
             d0[tr.i_G] = tr.gait_vector(gait)
-            d0[tr.i_M1], d0[tr.i_rejoin] = M1, st.rejoin
+            d0[tr.i_M1], d0[tr.i_rejoin] = M1, self.rejoin
             d0[tr.i_s] = max(best["s_star"] - 0.02, 0.1)
             lb, ub = red.bounds()
-            lb[tr.i_rejoin] = ub[tr.i_rejoin] = st.rejoin
+            lb[tr.i_rejoin] = ub[tr.i_rejoin] = self.rejoin
             na = tr.na
             lb[:na] = np.maximum(lb[:na], d0[:na] - trust * st.trust_alpha)
             ub[:na] = np.minimum(ub[:na], d0[:na] + trust * st.trust_alpha)
@@ -529,11 +549,15 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
             f"codesign: IPOPT ({last.get('status', 'not run')}) found no verified design "
             f"from {len(starts)} start(s); try other starts, more samples, a smaller "
             f"s_start or more iterations")
+    if st.rejoin_choices:
+        best = run.rejoin_phase(best)
+        run.stage("rejoin", rejoin=run.rejoin, solves=len(run.solves))
     if run.free:
         best = run.gait_phase(best)
         run.stage("gait free", solves=len(run.solves))
     g = best["gait"]
-    design = Design(tuple(float(v) for v in best["M1"]), st.rejoin)
+    run.rejoin = float(best["rejoin"])
+    design = Design(tuple(float(v) for v in best["M1"]), run.rejoin)
     run.say("verification (protocol of the robust designs)")
     check = verify_design(model, g, design, best["kept"], st.robustness_settings(rounds=10),
                           progress=run.say)
@@ -560,7 +584,7 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
                and check.steps_to_converge is not None and check.steps_to_converge <= 4)
     args = (["--gait", str(gpath), "--controller", "tv", "--m1"]
             + [repr(float(v)) for v in design.M1]
-            + ["--rejoin", repr(st.rejoin), "--perturb", "0.01", "0.1", "--mu", repr(st.mu),
+            + ["--rejoin", repr(run.rejoin), "--perturb", "0.01", "0.1", "--mu", repr(st.mu),
                "--steps", str(st.walk_steps)]
             + ([] if st.torque_limit is None else ["--torque-limit", repr(st.torque_limit)]))
     tot_it = sum(s["iterations"] for s in run.solves)
@@ -573,7 +597,7 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
                   max_alpha_change=float(np.max(np.abs(g.alpha - run.gait0.alpha))))
     result = CodesignResult(
         status="target_met" if met else "target_not_met", message=msg,
-        design=dict(M1=list(design.M1), rejoin=st.rejoin), gait_file=str(gpath),
+        design=dict(M1=list(design.M1), rejoin=run.rejoin), gait_file=str(gpath),
         gait_options=g.options.to_dict(), gait_free=run.free, gait_change=change,
         s_star=check.s_star, s_fail=check.s_fail, failure=check.failure,
         verified=check.verified, max_abs=check.max_abs, vc_eigenvalue=check.vc_eigenvalue,
@@ -622,6 +646,7 @@ def codesign_tradeoff(model, result: CodesignResult, fractions=(0.25, 0.5, 0.75,
     """
     st = CodesignSettings(**{k: v for k, v in result.settings.items() if k != "starts"})
     run = _Codesign(model, st, result.gait, progress)
+    run.rejoin = float(result.design["rejoin"])
     gait, M1 = result.gait, np.asarray(result.design["M1"], float)
     kept = run.kept(gait)
     lvc = run.lam_vc(gait)
@@ -633,10 +658,10 @@ def codesign_tradeoff(model, result: CodesignResult, fractions=(0.25, 0.5, 0.75,
         red.jury = (run._jury(gait), float(f) * lvc)
         run.denominator(tr, gait, M1)
         d0 = np.zeros(red.nd)
-        d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, st.rejoin, max(result.s_star - 0.1,
+        d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, run.rejoin, max(result.s_star - 0.1,
                                                                          0.1)
         lb, ub = red.bounds()
-        lb[tr.i_rejoin] = ub[tr.i_rejoin] = st.rejoin
+        lb[tr.i_rejoin] = ub[tr.i_rejoin] = run.rejoin
         res = run.solve(tr, red, d0, lb, ub, f"trade-off at {f:g} x VC")
         if not np.all(np.isfinite(res.d)):
             out.append(dict(bound=f * lvc, nlp_status=res.status, s_star=None, max_abs=None))

@@ -29,7 +29,11 @@ class CodesignSettings:
     free_gait : bool
         Co-design the gait (else only M1 moves, on the given or start gait).
     rejoin : float
-        Rejoin time of v_c, fraction of T.
+        Rejoin time of v_c of the first solves, fraction of T.
+    rejoin_choices : tuple
+        Rejoin times (fractions of T, in [1/2, 3/4]) the gait-fixed NLP is solved at from
+        the best design; the best verified one is kept (a discrete decision: the walker's
+        rule is kinked in the rejoin time).  Empty: ``rejoin`` only.
     steps : int
         Steps per NLP scenario.
     paper_tol : float
@@ -102,6 +106,7 @@ class CodesignSettings:
     gait: dict = field(default_factory=lambda: dict(ROBUST_GAIT))
     free_gait: bool = True
     rejoin: float = 0.75
+    rejoin_choices: tuple = (0.5, 0.625, 0.75)
     steps: int = 4
     paper_tol: float = 8e-4
     scenario_tol: float = 0.5
@@ -168,8 +173,9 @@ class CodesignSettings:
         return d
 
 
-#: the settings of a quick reproduction: the gait fixed, no hidden patterns
-QUICK = CodesignSettings(free_gait=False, hidden=False)
+#: the settings of a quick reproduction: the gait fixed, v_c rejoining at 0.75 T, no hidden
+#: patterns
+QUICK = CodesignSettings(free_gait=False, hidden=False, rejoin_choices=())
 #: the settings of a full reproduction: those of ``biped m1 --robust`` (one cache for both)
 FULL = CodesignSettings()
 
