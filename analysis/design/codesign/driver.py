@@ -221,9 +221,11 @@ class _Codesign:
         self.stage("sampled starts", drawn=st.samples, stable=int(ok.sum()), kept=len(M))
         return list(M)
 
-    def solve_round(self, gait, kept, M1, active, rnd, s0, max_iter=None, label=""):
+    def solve_round(self, gait, kept, M1, active, rnd, s0, max_iter=None, label="",
+                    screen=False):
         """One NLP solve with the gait fixed (exchange round ``rnd``) and the walker's
-        verification of its design: the round's record and the candidate."""
+        verification of its design: the round's record and the candidate.  ``screen``:
+        one solve on the screening budget (no continuation of the paper's bound)."""
         st = self.st
         dirs = kept.directions[[0] + list(active)]
         tr, red = self.nlp(gait, dirs, free=False, paper_tol=st.paper_tol)
@@ -233,7 +235,11 @@ class _Codesign:
         lb, ub = red.bounds()
         lb[tr.i_rejoin] = ub[tr.i_rejoin] = self.rejoin
         self.say(f"NLP, gait fixed: {tr.K} scenarios x {tr.S} steps ({label})")
-        res = self.continued(tr, red, d0, lb, ub, label, max_iter)
+        if screen:
+            res = self.solve(tr, red, d0, lb, ub, label, st.screen_iter, st.screen_time,
+                             st.screen_evaluations)
+        else:
+            res = self.continued(tr, red, d0, lb, ub, label, max_iter)
         if not np.all(np.isfinite(res.d)):
             return None
         return self.candidate(gait, kept, tr, red, res, active, label)
@@ -321,7 +327,7 @@ class _Codesign:
             self.rejoin = float(r)
             c = self.solve_round(best["gait"], best["kept"], best["M1"], best["active"], 1,
                                  max(min(best["s_star"], best["nlp_s"]) - 0.1, 0.1),
-                                 label=f"rejoin {r:g} T")
+                                 label=f"rejoin {r:g} T", screen=True)
             if c is not None and c["ok"] and c["score"] > best["score"]:
                 best = c
         self.rejoin = float(best["rejoin"])
