@@ -150,12 +150,13 @@ STAGES = [
 ]
 
 #: what the helper process computes ahead, in its order, while this process runs the
-#: paper's stages and the sampling search's design: the co-design, then the robust
+#: paper's stages: the co-design, the sampling search's design (from the other end of the
+#: stage, meeting this process in the middle), then the robust
 #: designs' s*, full-order runs and basins (this process takes their basins and the
 #: trade-off first, so the two meet in the middle), then the Monte Carlo runs of the
 #: terrain stage
-HELPER_STAGES = (stage_robust_design, stage_robustness_robust, warm_robust_runs,
-                 stage_basins_robust, stage_terrain)
+HELPER_STAGES = (stage_robust_design, stage_search_design, stage_robustness_robust,
+                 warm_robust_runs, stage_basins_robust, stage_terrain)
 
 
 

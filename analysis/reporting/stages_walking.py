@@ -76,8 +76,12 @@ def stage_search_design(ctx: Context):
         M1=list(ds.M1), rejoin=ds.rejoin, gait_options=dict(ROBUST_GAIT),
         note="the sampling search's shipped design (biped m1 --robust --method search), "
              "evaluated here by the same stages, not searched again")
-    _s_star_rows(ctx, [("search", g3, [("virtual constraints", None),
-                                       ("the sampling search's design", ds)])])
+    cands = [("virtual constraints", None), ("the sampling search's design", ds)]
+    if ctx.data.get("helper"):      # the helper process takes them from the other end
+        _basin(ctx, g3, ds, _basin_n(ctx))
+        _s_star_rows(ctx, [("search", g3, cands[::-1])])
+        return
+    _s_star_rows(ctx, [("search", g3, cands)])
     _basin(ctx, g3, ds, _basin_n(ctx))
 
 
