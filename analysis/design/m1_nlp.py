@@ -157,7 +157,9 @@ def _deadbeat_newton(pm, tay, M1, constraints: str, iters: int = 30):
         while lam > 1e-3:
             trial = x + lam * step
             rt = np.array(F(trial)[0]).ravel()
-            if np.all(np.isfinite(rt)) and np.linalg.norm(rt) < norm and not pm.is_singular(trial):
+            with np.errstate(over="ignore"):   # a far trial point: its norm is inf, rejected
+                worse = not np.linalg.norm(rt) < norm
+            if np.all(np.isfinite(rt)) and not worse and not pm.is_singular(trial):
                 break
             lam /= 2
         else:
