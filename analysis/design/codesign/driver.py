@@ -39,6 +39,7 @@ class _Codesign:
         self.say = progress or (lambda msg: None)
         #: the rejoin fraction of the solves now (st.rejoin, then each of st.rejoin_choices)
         self.rejoin = float(st.rejoin)
+        self._juries = {}
         self.fixed_gait = gait
         self.free = st.free_gait and gait is None
         self.tst = TranscriptionSettings(mu=st.mu, torque_limit=float(
@@ -107,6 +108,14 @@ class _Codesign:
         return abs(vc_eigenvalue(self.model, gait).eigenvalue)
 
     def _jury(self, gait):
+        """trace and det of A^z(M1) with their gradients (one Function per gait and
+        rejoin, built once)."""
+        key = (gait.cache_key, self.rejoin)
+        if key not in self._juries:
+            self._juries[key] = self._build_jury(gait)
+        return self._juries[key]
+
+    def _build_jury(self, gait):
         A_fn = poincare_map(self.model, gait, rejoin=self.rejoin).variational.A_fn
         M = ca.SX.sym("M1", self.model.nu)
         A = A_fn(M)
@@ -221,19 +230,26 @@ class _Codesign:
         self.stage("sampled starts", drawn=st.samples, stable=int(ok.sum()), kept=len(M))
         return list(M)
 
+    def fixed_problem(self, gait, kept, M1, active, s0):
+        """The gait-fixed NLP on the paper's direction and the ``active`` kept directions,
+        its start (M1, the current rejoin, s0) and its bounds (the rejoin fixed):
+        (tr, red, d0, lb, ub)."""
+        tr, red = self.nlp(gait, kept.directions[[0] + list(active)], free=False,
+                           paper_tol=self.st.paper_tol)
+        self.denominator(tr, gait, M1)
+        d0 = np.zeros(red.nd)
+        d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, self.rejoin, s0
+        lb, ub = red.bounds()
+        lb[tr.i_rejoin] = ub[tr.i_rejoin] = self.rejoin
+        return tr, red, d0, lb, ub
+
     def solve_round(self, gait, kept, M1, active, rnd, s0, max_iter=None, label="",
                     screen=False):
         """One NLP solve with the gait fixed (exchange round ``rnd``) and the walker's
         verification of its design: the round's record and the candidate.  ``screen``:
         one solve on the screening budget (no continuation of the paper's bound)."""
         st = self.st
-        dirs = kept.directions[[0] + list(active)]
-        tr, red = self.nlp(gait, dirs, free=False, paper_tol=st.paper_tol)
-        self.denominator(tr, gait, M1)
-        d0 = np.zeros(red.nd)
-        d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, self.rejoin, s0
-        lb, ub = red.bounds()
-        lb[tr.i_rejoin] = ub[tr.i_rejoin] = self.rejoin
+        tr, red, d0, lb, ub = self.fixed_problem(gait, kept, M1, active, s0)
         self.say(f"NLP, gait fixed: {tr.K} scenarios x {tr.S} steps ({label})")
         if screen:
             res = self.solve(tr, red, d0, lb, ub, label, st.screen_iter, st.screen_time,
@@ -267,13 +283,7 @@ class _Codesign:
         screened = []
         for i, M1 in enumerate(starts):
             active = self.hardest(gait, kept, M1, st.s_start, st.initial_active)
-            tr, red = self.nlp(gait, kept.directions[[0] + active], free=False,
-                               paper_tol=st.paper_tol)
-            self.denominator(tr, gait, M1)
-            d0 = np.zeros(red.nd)
-            d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, self.rejoin, st.s_start
-            lb, ub = red.bounds()
-            lb[tr.i_rejoin] = ub[tr.i_rejoin] = self.rejoin
+            tr, red, d0, lb, ub = self.fixed_problem(gait, kept, M1, active, st.s_start)
             label = f"start {i + 1} of {len(starts)}"
             self.say(f"NLP, gait fixed: {tr.K} scenarios x {tr.S} steps ({label})")
             res = self.solve(tr, red, d0, lb, ub, label, st.screen_iter, st.screen_time,
@@ -659,15 +669,9 @@ def codesign_tradeoff(model, result: CodesignResult, fractions=(0.25, 0.5, 0.75,
     active = run.hardest(gait, kept, M1, max(result.s_star, 0.1), st.initial_active)
     out = []
     for f in fractions:
-        tr, red = run.nlp(gait, kept.directions[[0] + active], free=False,
-                          paper_tol=st.paper_tol)
+        tr, red, d0, lb, ub = run.fixed_problem(gait, kept, M1, active,
+                                                max(result.s_star - 0.1, 0.1))
         red.jury = (run._jury(gait), float(f) * lvc)
-        run.denominator(tr, gait, M1)
-        d0 = np.zeros(red.nd)
-        d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, run.rejoin, max(result.s_star - 0.1,
-                                                                         0.1)
-        lb, ub = red.bounds()
-        lb[tr.i_rejoin] = ub[tr.i_rejoin] = run.rejoin
         res = run.solve(tr, red, d0, lb, ub, f"trade-off at {f:g} x VC")
         if not np.all(np.isfinite(res.d)):
             out.append(dict(bound=f * lvc, nlp_status=res.status, s_star=None, max_abs=None))
