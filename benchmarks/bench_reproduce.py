@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import shutil
 import subprocess
 import sys
@@ -24,17 +23,14 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
 
 def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    """The processor, cores and Python, in one line (:func:`bench_sweep.machine_info`)."""
+    from bench_sweep import machine_info
+    m = machine_info()
+    return f"{m['cpu']}, {m['nproc']} cores, Python {m['python']}"
 
 
 def run(out: Path, cache: Path, quick: bool) -> dict:
