@@ -16,16 +16,18 @@ on and of the kind's version.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
 import os
 import threading
+import time
 from collections import OrderedDict
 from pathlib import Path
 
 __all__ = ["cached", "cache_key", "cache_dir", "digest", "source_digest", "modules_digest",
-           "DiskCache"]
+           "DiskCache", "claimed", "shared_result"]
 
 
 def cache_key(obj):
@@ -255,3 +257,98 @@ class DiskCache:
         Path
         """
         return cache_dir(folder) / self.kind / f"{self.kind}-{self.key(body)}{suffix}"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def claimed(path: Path, poll: float = 0.2):
+    """Hold the right to compute ``path`` among processes sharing the cache folder.
+
+    While another live process holds it (e.g. the reproduction's helper on the second
+    core, :mod:`analysis.reporting.reproduce`), wait; then hold it (a ``.lock`` file
+    beside ``path`` naming this process) until the block ends.  A lock left by a process
+    that died is taken over; where the folder cannot be written, the block runs
+    unguarded.
+
+    Parameters
+    ----------
+    path : Path
+        The result to compute.
+    poll : float
+        Seconds between looks at another process's lock.
+    """
+    lock = Path(str(path) + ".lock")
+    try:
+        lock.parent.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        yield
+        return
+    while True:
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                pid = int(lock.read_text() or 0)
+            except (OSError, ValueError):
+                pid = 0
+            if pid and pid != os.getpid() and _alive(pid):
+                time.sleep(poll)
+                continue
+            with contextlib.suppress(OSError):
+                lock.unlink()                       # its holder died: take it over
+            continue
+        except OSError:
+            yield
+            return
+        with os.fdopen(fd, "w") as f:
+            f.write(str(os.getpid()))
+        break
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            lock.unlink()
+
+
+def shared_result(path, compute):
+    """``compute()`` once among the processes sharing a cache folder.
+
+    Under :func:`claimed`: the pickle at ``path`` if a process wrote it, else
+    ``compute()``, written there (atomically) for the others.
+
+    Parameters
+    ----------
+    path : Path
+        Where the result is kept (a pickle).
+    compute : callable
+        Computes the result.
+
+    Returns
+    -------
+    tuple
+        (the result, whether this process read it (True) or computed it (False)).
+    """
+    import pickle
+
+    from .files import write_bytes_atomic
+    path = Path(path)
+    with claimed(path):
+        if path.is_file():
+            try:
+                return pickle.loads(path.read_bytes()), True
+            except Exception:        # noqa: BLE001 - a damaged entry is recomputed
+                pass
+        value = compute()
+        with contextlib.suppress(OSError):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_bytes_atomic(path, pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL))
+        return value, False

@@ -7,13 +7,15 @@ so the schemes are the same by construction.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import os
+import subprocess
 import tempfile
 
 import numpy as np
 
-__all__ = ["rk4_step", "as_vector", "as_number", "jit_options"]
+__all__ = ["rk4_step", "as_vector", "as_number", "jit_options", "compiled"]
 
 
 def jit_options(optimisation: str = "-O2") -> dict:
@@ -36,6 +38,51 @@ def jit_options(optimisation: str = "-O2") -> dict:
     folder = tempfile.gettempdir() + os.sep
     return dict(jit=True, compiler="shell", jit_cleanup=True,
                 jit_options=dict(flags=[optimisation], directory=folder, cleanup=True))
+
+
+def compiled(f, flags: str = "-O2"):
+    """``f`` compiled to machine code, the shared library kept in the cache folder.
+
+    The library is named by the digest of the Function's serialisation, the flags and
+    the CasADi version, so every process and every later run with an equal Function loads
+    it instead of compiling again (two processes compiling the same one: the second waits
+    for the first, :func:`biped_casadi.caching.claimed`).  The C source is generated in a
+    temporary folder.
+
+    Parameters
+    ----------
+    f : casadi.Function
+        An SX Function.
+    flags : str
+        The C compiler's optimisation flag.
+
+    Returns
+    -------
+    casadi.Function
+        The compiled Function (``casadi.external``), or ``f`` itself when no C compiler
+        is available or the cache folder cannot be written.
+    """
+    import casadi as ca
+
+    from .caching import cache_dir, claimed
+    root = cache_dir() / "compiled"
+    key = hashlib.sha256((f.serialize() + flags + ca.__version__).encode()).hexdigest()[:16]
+    so = root / f"{f.name()}_{key}.so"
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        with claimed(so):
+            if not so.is_file():
+                with tempfile.TemporaryDirectory() as tmp:
+                    cg = ca.CodeGenerator(f"{f.name()}.c", {"with_header": False})
+                    cg.add(f)
+                    c = cg.generate(tmp + os.sep)
+                    out = str(so) + f".tmp{os.getpid()}"
+                    subprocess.run(["gcc", flags, "-fPIC", "-shared", c, "-o", out, "-lm"],
+                                   check=True, capture_output=True)
+                    os.replace(out, so)
+    except (OSError, subprocess.CalledProcessError):
+        return f
+    return ca.external(f.name(), str(so))
 
 
 def rk4_step(f, x, h):

@@ -109,6 +109,28 @@ def test_vc_walker_is_the_full_order_closed_loop(model, gait):
         assert abs(r.peak_torque - B.peak_torque[i]) < 1e-2
 
 
+
+@pytest.mark.parametrize("scale, index", [(0.9, 32), (1.5, 25), (1.5, 50), (1.0, 0),
+                                          (1.0, 3), (0.5, 32)])
+def test_vc_walker_verdicts_from_perturbed_starts(model, gait, scale, index):
+    """From perturbed step starts (the s* protocol's), the phase walker passes exactly the
+    runs the full-order simulator passes, with the same unactuated errors: among them a
+    step that stalls (the phase rate turns back before the strike: the simulator rolls
+    back and scuffs) and steps slower than the horizon (2 T: no impact in time), which the
+    walker once passed."""
+    d = directions(60, model.nq, seed=RobustnessSettings().seed)[index]
+    q0, dq0 = start_states(gait, d[None], scale)
+    opts = SimulationOptions(steps=10, mu=0.6)
+    B = VirtualConstraintWalker(model, gait, opts).walk_from_states(q0, dq0, steps=10)
+    r = simulate(VirtualConstraintController(model, gait), q0[0], dq0[0], opts)
+    assert (B.verdict(1e-3)[0] == "ok") == (r.verdict(1e-3) == "ok")
+    assert B.fail_step[0] == r.fail_step
+    if r.status == "ok":
+        assert np.max(np.abs(r.qu_error - B.qu_error[0])) < 1e-8
+        assert abs(r.min_normal_force - B.min_normal_force[0]) < 1e-3
+    else:       # the same cause, or no impact where the step stalls or runs late
+        assert B.status[0] in (r.status, "no_impact")
+
 # ------------------------------------------------------------------------ s*
 def test_s_star_replayed_at_and_above(model, gait, deadbeat1):
     """A design replayed in the full-order simulator at its reported s*: every kept

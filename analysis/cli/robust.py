@@ -87,9 +87,9 @@ def register(sub):
                     "walk from them) walks 10 valid steps (normal force, friction cone, "
                     "impact impulse, lift-off, scuffing, torque limit) and ends with "
                     "max(|q_u err|, |dq_u err|) < 1e-3; the first failure just above s* and "
-                    "its cause. Time-varying designs run on their hybrid zero dynamics "
-                    "(exact for every output gain), virtual constraints in the full-order "
-                    "simulator. With --plot: basins of attraction on the Poincare section, "
+                    "its cause. Both controllers run on their hybrid zero dynamics, batched "
+                    "(time-varying designs: exact for every output gain; virtual "
+                    "constraints: exact with their phase-based correction). With --plot: basins of attraction on the Poincare section, "
                     "the design beside virtual constraints.")
     add_gait_arguments(p)
     add_robot(p)

@@ -93,7 +93,7 @@ class DesignCheck(Result):
 
 
 def verify_design(model, gait, design: Design, kept, settings: RobustnessSettings,
-                  progress=None) -> DesignCheck:
+                  progress=None, unit=None, order=None) -> DesignCheck:
     """Measure a design by the verification protocol (module docstring).
 
     Parameters
@@ -110,27 +110,45 @@ def verify_design(model, gait, design: Design, kept, settings: RobustnessSetting
         Steps, tolerance, mu, torque limit, RK4 steps and bisection rounds.
     progress : callable, optional
         Called with one line of text per stage.
+    unit, order : callable, optional
+        How the three sets of full-order runs (at s*, at s_fail, the paper's
+        perturbation) are done: ``unit(name, inputs, compute)`` returns ``compute()``
+        (default) or a result another process computed, ``order(units)`` the order they
+        are taken in (default as listed); the co-design shares them between two
+        processes (:meth:`analysis.design.codesign.driver._Codesign.unit`).
 
     Returns
     -------
     DesignCheck
     """
     say = progress or (lambda msg: None)
+    unit = unit or (lambda name, inputs, compute: compute())
+    order = order or list
     st, dirs = settings, kept.directions
     say("s* of the design (walker bisection) and full-order verification")
     r = robustness(model, gait, design, st, kept=kept)
     ctrl = TimeVaryingController(model, gait, np.array(design.M1), rejoin=design.rejoin)
     opts = SimulationOptions(steps=st.steps, mu=st.mu, torque_limit=st.torque_limit, jit=True)
-    verified = {}
-    for label, s in (("at_s_star", r.s_star), ("at_s_fail", r.s_fail)):
-        if not math.isfinite(s):
-            continue
+
+    def runs_at(s):
         q0, dq0 = start_states(gait, dirs, np.full(len(dirs), s))
         runs = WalkBatch.concat([simulate(ctrl, q0[i], dq0[i], opts) for i in range(len(dirs))])
         out = [str(v) for v in runs.verdict(st.tol)]
-        verified[label] = dict(scale=s, outcomes=out, passed=int(sum(o == "ok" for o in out)))
-    q0, dq0 = start_states(gait, dirs[:1], [1.0])
-    paper = simulate(ctrl, q0[0], dq0[0], opts)
+        return dict(scale=s, outcomes=out, passed=int(sum(o == "ok" for o in out)))
+
+    def paper_run():
+        q0, dq0 = start_states(gait, dirs[:1], [1.0])
+        return simulate(ctrl, q0[0], dq0[0], opts)
+
+    todo = [(label, s, lambda s=s: runs_at(s))
+            for label, s in (("at_s_star", r.s_star), ("at_s_fail", r.s_fail))
+            if math.isfinite(s)] + [("paper", 1.0, paper_run)]
+    inputs = dict(gait=gait.cache_key, design=design.to_dict(), kept=dirs.tolist(),
+                  settings=dict(st.__dict__))
+    done = {label: unit("full order", dict(inputs, label=label, scale=s), compute)
+            for label, s, compute in order(todo)}
+    verified = {label: done[label] for label, _, _ in todo if label != "paper"}
+    paper = done["paper"]
     errs = paper.unactuated_errors().tolist()
     conv = paper.steps_to_converge(st.tol)
     conv = int(conv) if math.isfinite(conv) else None

@@ -4,16 +4,13 @@ computations (:meth:`Context.memo`)."""
 from __future__ import annotations
 
 import contextlib
-import os
-import pickle
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from biped_casadi import RABBIT_DESCRIPTION
-from biped_casadi.caching import DiskCache, source_digest
-from biped_casadi.files import write_bytes_atomic
+from biped_casadi.caching import DiskCache, claimed, shared_result, source_digest
 
 __all__ = ["Context", "RESULTS", "FORMATS", "is_rabbit", "claimed"]
 
@@ -54,23 +51,13 @@ class Context:
         body = dict(name=name, inputs=inputs, code=source_digest(),
                     robot=self.model.params.to_dict() if self.model is not None else None)
         path = RESULTS.path(body, suffix=".pkl")
-        with claimed(path):
-            if path.is_file():
-                try:
-                    value = pickle.loads(path.read_bytes())
-                    # written since this run began: the helper process's, else reused
-                    mine = path.stat().st_mtime >= self.started
-                    (self.helped if mine else self.reused).setdefault(
-                        self.stage, []).append(name)
-                    return value
-                except Exception:        # noqa: BLE001 - a damaged entry is recomputed
-                    pass
-            value = compute()
+        value, read = shared_result(path, compute)
+        if read:
+            # written since this run began: the helper process's, else reused
             with contextlib.suppress(OSError):
-                path.parent.mkdir(parents=True, exist_ok=True)
-                write_bytes_atomic(path, pickle.dumps(value,
-                                                      protocol=pickle.HIGHEST_PROTOCOL))
-            return value
+                mine = path.stat().st_mtime >= self.started
+                (self.helped if mine else self.reused).setdefault(self.stage, []).append(name)
+        return value
 
     def sweep_dir(self, name: str, *settings) -> Path:
         """The sweep folder of ``name`` made with ``settings`` (part of the folder name,
@@ -79,56 +66,6 @@ class Context:
                                                else str(v) for v in settings)])
 
 
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-@contextlib.contextmanager
-def claimed(path: Path, poll: float = 0.2):
-    """Hold the right to compute ``path``: while another live process holds it (the
-    reproduction's helper on the second core, :mod:`analysis.reporting.reproduce`), wait;
-    then hold it (a ``.lock`` file beside ``path`` naming this process) until the block
-    ends.  A lock left by a process that died is taken over; where the folder cannot be
-    written, the block runs unguarded."""
-    lock = Path(str(path) + ".lock")
-    try:
-        lock.parent.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        yield
-        return
-    while True:
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-        except FileExistsError:
-            try:
-                pid = int(lock.read_text() or 0)
-            except (OSError, ValueError):
-                pid = 0
-            if pid and pid != os.getpid() and _alive(pid):
-                time.sleep(poll)
-                continue
-            with contextlib.suppress(OSError):
-                lock.unlink()                       # its holder died: take it over
-            continue
-        except OSError:
-            yield
-            return
-        with os.fdopen(fd, "w") as f:
-            f.write(str(os.getpid()))
-        break
-    try:
-        yield
-    finally:
-        with contextlib.suppress(OSError):
-            lock.unlink()
 
 
 def is_rabbit(ctx) -> bool:

@@ -236,12 +236,13 @@ def _helper_main(opts: dict, out: str):
     ctx = Context(Path(out), ReproduceOptions(**dict(opts, progress=False, helper=False)))
     (ctx.out / "figures").mkdir(parents=True, exist_ok=True)
     ctx.model = robot(ctx.opts.robot)
-    ctx.gait = default_gait(ctx.model)
     ctx.data["helper"] = True
     for fn in HELPER_STAGES:
         ctx.stage = fn.__name__
         try:
             fn(ctx)
+            if ctx.gait is None:       # after the robust design: the main process made it
+                ctx.gait = default_gait(ctx.model)
         except Exception:              # noqa: BLE001 - the main process computes it again
             return
 
@@ -261,7 +262,10 @@ class _Helper:
         import multiprocessing
         if self.proc is not None or not ctx.opts.helper or (os.cpu_count() or 1) < 2:
             return
-        if not is_rabbit(ctx):       # the robust design runs on RABBIT only
+        try:
+            if robot(ctx.opts.robot).description != RABBIT_DESCRIPTION:
+                return               # the robust design runs on RABBIT only
+        except ValueError:           # an unknown robot: the gait stage says so
             return
         if not any(fn is stage_robust_design for _, fn, _ in STAGES):
             return                   # nothing for it to do in this run
@@ -298,14 +302,14 @@ def _stages(ctx: Context, helper: _Helper) -> dict:
             status[name] = dict(status="skipped", reason=f"needs: {', '.join(missing)}")
             ctx.log(f"[{k}/{len(STAGES)}] {name}: skipped (needs {', '.join(missing)})")
             continue
+        if k == 1:
+            helper.start(ctx)          # the robust design needs no stage of this process
         ctx.log(f"[{k}/{len(STAGES)}] {name} ...")
         ctx.stage = name
         t = time.perf_counter()
         try:
             fn(ctx)
             status[name] = dict(status="ok", time=time.perf_counter() - t)
-            if fn is stage_gait:
-                helper.start(ctx)
             kept, helped = ctx.reused.get(name), ctx.helped.get(name)
             ctx.log(f"[{k}/{len(STAGES)}] {name}: done in {time.perf_counter() - t:.1f} s"
                     + (f" (reused {len(kept)} kept result(s))" if kept else "")

@@ -12,13 +12,12 @@ from biped_casadi import (PAPER_SIZES, SimulationOptions,
 from gait_opt import GaitOptions, default_gait
 
 from ..design import ROBUST_GAIT
-from ..design.codesign import (FULL, QUICK, TODAY_DESIGN, codesign, codesign_path,
-                               codesign_tradeoff)
+from ..design.codesign import (FULL, QUICK, TODAY_DESIGN, codesign, codesign_tradeoff)
 from ..robustness import Design, RobustnessSettings, basin, kept_directions, robustness
 from .plots import (basin_plot, save_figure, swing_torques_plot, tradeoff_plot, unactuated_error_plot,
                     walking_animation)
 
-from .context import FORMATS, Context, claimed, is_rabbit
+from .context import FORMATS, Context, is_rabbit
 from .constants import PAPER
 
 
@@ -46,8 +45,10 @@ def stage_robust_design(ctx: Context):
                     "run 'biped m1 --robust --robot ...' for another robot")
         return
     st = QUICK if ctx.opts.quick else FULL
-    with claimed(codesign_path(ctx.model, st)):        # the helper may be computing it
-        r = codesign(ctx.model, st, progress=lambda m: ctx.log("   " + m))
+    # the helper process runs the same co-design: the two split its independent units
+    # (starts, verification runs), taking them from opposite ends
+    r = codesign(ctx.model, st, progress=lambda m: ctx.log("   " + m),
+                 share="forward" if ctx.data.get("helper") else "backward")
     ctx.data["robust"] = r
     ctx.data["robust_gait"] = r.gait
     _search(ctx)

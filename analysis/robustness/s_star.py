@@ -9,7 +9,7 @@ converge?".  For one controller design on one gait:
   size (:func:`biped_casadi.directions`).  The step starts with the swing foot on the
   ground, so many directions put it below the ground at full scale: a start the robot
   cannot be in is not a test of the controller.  A direction is *kept* only if virtual
-  constraints walk 10 valid steps from it at full scale (full-order simulation), and the
+  constraints walk 10 valid steps from it at full scale, and the
   result says how many were kept of how many tried.
 - *s\\**: the largest scale s of the perturbation (found by bisection on [0, s_max]) at
   which every kept direction walks ``steps`` valid steps (:mod:`biped_casadi.simulation.validity`:
@@ -17,9 +17,11 @@ converge?".  For one controller design on one gait:
   and ends with max(|q_u err|, |dq_u err|) < ``tol``; with the first failure just above
   it and its cause.
 
-Time-varying designs run on their hybrid zero dynamics (:mod:`biped_casadi.simulation.tv_walker`, exact
-for every output gain, batched over directions); virtual constraints in the full-order
-simulator.
+Both controllers run on their hybrid zero dynamics, batched over directions: time-varying
+designs on :mod:`biped_casadi.simulation.tv_walker` (exact for every output gain),
+virtual constraints on :mod:`biped_casadi.simulation.vc_walker` (exact with their
+phase-based correction).  Both walkers check every validity condition of the full-order
+simulator at their nodes; ``tests/test_robust.py`` compares their verdicts with it.
 """
 from __future__ import annotations
 
@@ -30,11 +32,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from biped_casadi import (PAPER_REJOIN, SimulationOptions, VirtualConstraintController,
-                          directions, require_same_robot, simulate)
+from biped_casadi import PAPER_REJOIN, SimulationOptions, directions, require_same_robot
 from biped_casadi.control.output_law import check_M1, check_rejoin
 from biped_casadi.results import Result, internal
-from biped_casadi.simulation import WalkBatch, start_states, zero_dynamics_walker
+from biped_casadi.simulation import (WalkBatch, start_states, virtual_constraint_walker,
+                                     zero_dynamics_walker)
 from biped_casadi.simulation.outcome import NOT_CONVERGED
 from gait_opt import Gait
 
@@ -245,11 +247,21 @@ class KeptDirections(Result):
         return len(self.directions)
 
 
+#: RK4 nodes per step of the virtual constraints' walker in the s* protocol
+VC_NODES = 200
+
+
 def _vc_runs(model, gait, options, dirs, scale) -> WalkBatch:
-    """Full-order runs of virtual constraints fitted to the gait, one per direction."""
+    """Runs of virtual constraints fitted to the gait, one per direction, batched on their
+    hybrid zero dynamics (:meth:`~biped_casadi.simulation.VirtualConstraintWalker.walk_from_states`:
+    exact for the controller with its phase-based correction, which puts the closed
+    loop on the step's corrected surface from any start)."""
     q0, dq0 = start_states(gait, dirs, scale)
-    ctrl = VirtualConstraintController(model, gait)
-    return WalkBatch.concat([simulate(ctrl, q0[i], dq0[i], options) for i in range(len(q0))])
+    walker = virtual_constraint_walker(model, gait, options, VC_NODES, jit=True)
+    return walker.walk_from_states(q0, dq0, steps=options.steps)
+
+
+_KEEP_BATCH = 32          # candidate directions walked at once
 
 
 def kept_directions(model, gait, settings: RobustnessSettings | None = None,
@@ -272,20 +284,24 @@ def kept_directions(model, gait, settings: RobustnessSettings | None = None,
     KeptDirections
     """
     st = settings or RobustnessSettings()
-    opts = st.simulation_options(jit=True)
+    opts = st.simulation_options()
     cand = directions(st.max_candidates, model.nq, st.seed)
     kept, rejected = [], {}
     tried = 0
-    for d in cand:
-        tried += 1
-        status = str(_vc_runs(model, gait, opts, d[None], 1.0).status[0])
-        if status == "ok":
-            kept.append(d)
-        else:
-            rejected[status] = rejected.get(status, 0) + 1
-        if progress is not None:
-            progress(f"direction {tried}: virtual constraints {status} "
-                     f"({len(kept)} kept of {st.directions})")
+    for start in range(0, len(cand), _KEEP_BATCH):      # in order, a batch at a time
+        status = _vc_runs(model, gait, opts, cand[start:start + _KEEP_BATCH], 1.0).status
+        for d, s in zip(cand[start:start + _KEEP_BATCH], status):
+            tried += 1
+            s = str(s)
+            if s == "ok":
+                kept.append(d)
+            else:
+                rejected[s] = rejected.get(s, 0) + 1
+            if progress is not None:
+                progress(f"direction {tried}: virtual constraints {s} "
+                         f"({len(kept)} kept of {st.directions})")
+            if len(kept) == st.directions:
+                break
         if len(kept) == st.directions:
             break
     return KeptDirections(np.array(kept).reshape(-1, 2 * model.nq), tried, rejected,
@@ -362,7 +378,7 @@ def bisect_scale(evaluate, n: int, s_max: float, rounds: int):
 def _runner(model, gait, design, st: RobustnessSettings):
     """``run(dirs, s) -> WalkBatch``: the design's (or virtual constraints') runs."""
     if design is None:
-        opts = st.simulation_options(jit=True)
+        opts = st.simulation_options()
         return lambda dirs, s: _vc_runs(model, gait, opts, dirs, s)
     walker = zero_dynamics_walker(model, gait, st.simulation_options(), st.rk4_steps, jit=True)
 

@@ -497,7 +497,7 @@ class ConstraintSurface:
     The corrected surface of one step, with the controller's phase-based correction
     h_c (:func:`phase_correction`, step constants p = (theta_i, y_i, dy_i/ds)), is the
     same motion from any state at the start of a step: ``corrected(theta, w, p) ->
-    (Q, Q', Q'', dw/dtheta, D_1 Q')``, ``corrected_foot(theta, p) -> (x_sw, z_sw,
+    (Q, Q', Q'', dw/dtheta, D_1 Q', d2theta/dt2)``, ``corrected_foot(theta, p) -> (x_sw, z_sw,
     dz_sw/dtheta)``, and ``step_start(q, dq) -> (theta_i, w_i, p)`` (p as the
     controller's ``step_start``).  With y_i = dy_i = 0 it is the surface itself.
     """
@@ -548,9 +548,10 @@ class ConstraintSurface:
         D1p = m.D(Qp)[0, :]
         denp = ca.mtimes(D1p, Q1p)
         ddthp = -(ca.mtimes(D1p, Q2p) * w**2 + m.H(Qp, Q1p * w)[0]) / denp
-        self.corrected = ca.Function("hzd_corrected", [th, w, p], [Qp, Q1p, Q2p, ddthp / w, denp],
+        self.corrected = ca.Function("hzd_corrected", [th, w, p],
+                                     [Qp, Q1p, Q2p, ddthp / w, denp, ddthp],
                                      ["theta", "w", "p"], ["q", "dq_dtheta", "d2q_dtheta2",
-                                                           "dw", "den"])
+                                                           "dw", "den", "ddtheta"])
         xsp, zsp = m.swing_foot(Qp)
         _, dzsp = m.swing_foot_velocity(Qp, Q1p)
         self.corrected_foot = ca.Function("hzd_corrected_foot", [th, p], [xsp, zsp, dzsp],

@@ -52,7 +52,7 @@ import numpy as np
 
 from ..caching import cached
 from ..control.output_law import SECTION
-from ..numerics import as_vector, jit_options, rk4_step
+from ..numerics import as_vector, compiled, rk4_step
 from ..results import internal, json_safe
 from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, strike
 from .options import SimulationOptions
@@ -310,9 +310,12 @@ class Simulator:
             return ca.vertcat(dq, ddq, dr)
 
         Xn = ca.cse(rk4_step(rhs, X, h))
-        jit = jit_options("-O1") if self.options.jit else {}
-        self.rk4 = ca.Function("closed_loop_rk4", [X, tau, h, p], [Xn, tau + h],
-                               ["X", "tau", "h", "p"], ["X_next", "tau_next"], jit)
+
+        def jit(f):          # compiled once per content, kept in the cache folder
+            return compiled(f, "-O1") if self.options.jit else f
+        rk4 = ca.Function("closed_loop_rk4", [X, tau, h, p], [Xn, tau + h],
+                          ["X", "tau", "h", "p"], ["X_next", "tau_next"])
+        self.rk4 = jit(rk4)
         self.advance = self.rk4.mapaccum("closed_loop_chunk", self.chunk, [0, 1], [0, 1])
 
         q, dq, r = X[:nq], X[nq:2 * nq], X[2 * nq:]
@@ -320,11 +323,11 @@ class Simulator:
         ua, sat = self._applied(u)
         Fx, Fz = m.ground_reaction(q, dq, ua)
         diag = ca.cse(self.schema.vector(m, q, dq, ua, Fx, Fz, den, y, dy, inr, sat))
-        self.diagnostics = ca.Function("closed_loop_diagnostics", [X, tau, p], [diag],
-                                       ["X", "tau", "p"], ["diag"], jit)
+        self.diagnostics = jit(ca.Function("closed_loop_diagnostics", [X, tau, p], [diag],
+                                           ["X", "tau", "p"], ["diag"]))
         self.diagnostics_chunk = self.diagnostics.map(self.chunk)
         eta = ca.SX.sym("eta")
-        Xe, _ = self.rk4(X, tau, eta, p)
+        Xe, _ = rk4(X, tau, eta, p)
         ze = m.swing_foot(Xe[:nq])[1]
         self.event = ca.Function("impact_event", [X, tau, eta, p], [ze, ca.jacobian(ze, eta), Xe],
                                  ["X", "tau", "eta", "p"], ["z_sw", "dz_deta", "X_event"])

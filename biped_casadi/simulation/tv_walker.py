@@ -35,7 +35,7 @@ from ..caching import cached
 from ..control.output_law import SECTION, check_M1, decoupling_denominator
 from ..control.reference import require_same_robot
 from ..control.zero_dynamics import denominator_samples, zero_dynamics
-from ..numerics import jit_options, rk4_step
+from ..numerics import compiled, rk4_step
 from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, mapped, strike
 from .options import SimulationOptions
 from .outcome import OutcomeRecorder, WalkBatch
@@ -119,11 +119,12 @@ class ZeroDynamicsWalker:
         R3 = ca.SX.sym("R3", 9 * nq)
         stage = {0.0: R3[:3 * nq], 0.5: R3[3 * nq:6 * nq], 1.0: R3[6 * nq:]}
         xn = rk4_step(lambda xv, c: zd.rhs(xv, tau + c * h, stage[c], P), x, h)
-        jit = jit_options("-O2") if self.jit else {}
-        node = ca.Function("zd_node", [x, tau, h, R3, P],
-                           [ca.cse(xn), tau + h,
-                            ca.cse(self._diagnostics(xn, tau + h, stage[1.0], P))],
-                           ["x", "tau", "h", "R3", "P"], ["x_next", "tau_next", "diag"], jit)
+        def jit(f):          # compiled once per content, kept in the cache folder
+            return compiled(f, "-O2") if self.jit else f
+        node = jit(ca.Function("zd_node", [x, tau, h, R3, P],
+                               [ca.cse(xn), tau + h,
+                                ca.cse(self._diagnostics(xn, tau + h, stage[1.0], P))],
+                               ["x", "tau", "h", "R3", "P"], ["x_next", "tau_next", "diag"]))
         acc = node.mapaccum("zd_chunk", self.K, [0, 1], [0, 1])
         xc, tc0 = ca.MX.sym("x", 2), ca.MX.sym("tau")
         Pc, Rt = ca.MX.sym("P", zd.n_par), ca.MX.sym("R", 9 * nq, self.K)
@@ -131,8 +132,8 @@ class ZeroDynamicsWalker:
         self.chunk = ca.Function("zd_chunk_fn", [xc, tc0, Pc, Rt], [X, TAU, DG])
         # diagnostics at a state with the reference given explicitly (step start, impact)
         R1 = ca.SX.sym("R", 3 * nq)
-        self.diag = ca.Function("zd_diag", [x, tau, R1, P],
-                                [ca.cse(self._diagnostics(x, tau, R1, P))], jit)
+        self.diag = jit(ca.Function("zd_diag", [x, tau, R1, P],
+                                    [ca.cse(self._diagnostics(x, tau, R1, P))]))
         # the last RK4 step, of length eta, with the reference state integrated
         # alongside from the node: one call per Newton iterate
         along = zd.along(self.gait)

@@ -23,7 +23,7 @@ from ..caching import cached
 from ..control.output_law import SECTION
 from ..control.reference import require_same_robot
 from ..control.virtual_constraints import constraint_surface
-from ..numerics import jit_options, rk4_step
+from ..numerics import compiled, rk4_step
 from .kernel import Diagnostics, mapped
 from .options import SimulationOptions
 from .outcome import OutcomeRecorder, WalkBatch
@@ -64,7 +64,7 @@ class VirtualConstraintWalker:
     def __init__(self, model, gait, options: SimulationOptions | None = None, nodes: int = 200,
                  jit: bool = False):
         require_same_robot(model, gait)
-        self._jit = jit_options("-O2") if jit else {}
+        self._jit = jit
         self.options = options if options is not None else SimulationOptions()
         if self.options.saturate:
             raise ValueError("options: saturate needs the full-order simulator (the walker is "
@@ -89,14 +89,21 @@ class VirtualConstraintWalker:
         th, w, t, hs = ca.SX.sym("theta"), ca.SX.sym("w"), ca.SX.sym("t"), ca.SX.sym("h")
         p = ca.SX.sym("p", self.n_par)
         z = ca.vertcat(w, t)
+        sgn = self.direction
 
+        # RK4 on (xi, t) with xi = w^2: d xi/d theta = 2 d2theta/dt2 is regular where the
+        # phase rate w stalls (dw/dtheta = d2theta/dt2 / w is not, and RK4 on w can step
+        # over a turning point); a stage past the turn has xi < 0, so w and t are NaN.
         def rhs(zv, c):
-            return ca.vertcat(vm.corrected(th + c * hs, zv[0], p)[3], 1 / zv[0])
+            wv = sgn * ca.sqrt(zv[0])
+            return ca.vertcat(2 * vm.corrected(th + c * hs, wv, p)[5], 1 / wv)
 
-        zn = rk4_step(rhs, z, hs)
+        zx = rk4_step(rhs, ca.vertcat(w**2, t), hs)
+        with_nan = ca.if_else(zx[0] >= 0, sgn * ca.sqrt(zx[0]), np.nan)
+        zn = ca.vertcat(with_nan, zx[1])
         thn = th + hs
         wn = zn[0]
-        q, Q1, Q2, dw, den = vm.corrected(thn, wn, p)
+        q, Q1, Q2, dw, den, _ = vm.corrected(thn, wn, p)
         ddth = wn * dw
         dq = Q1 * wn
         ddq = Q1 * ddth + Q2 * wn**2
@@ -104,8 +111,9 @@ class VirtualConstraintWalker:
         u = (ca.mtimes(D, ddq) + H)[1:]
         Fx, Fz = m.ground_reaction_acc(q, dq, ddq)
         diag = self.schema.vector(m, q, dq, u, Fx, Fz, den)
-        node = ca.Function("vc_node", [z, th, hs, p], [ca.cse(zn), thn, ca.cse(diag)],
-                           self._jit)
+        node = ca.Function("vc_node", [z, th, hs, p], [ca.cse(zn), thn, ca.cse(diag)])
+        if self._jit:        # compiled once per content, kept in the cache folder
+            node = compiled(node, "-O2")
         self.start_node = node                   # with h = 0: the diagnostics of a state
         acc = node.mapaccum("vc_nodes", self.nodes, [0, 1], [0, 1])
         zc, thc, hc = ca.MX.sym("z", 2), ca.MX.sym("theta"), ca.MX.sym("h")
@@ -113,7 +121,7 @@ class VirtualConstraintWalker:
         self.chunk = ca.Function("vc_step", [zc, thc, hc, pc], list(acc(zc, thc, hc, pc)))
         self.foot = vm.corrected_foot
         wm = ca.SX.sym("w_minus")
-        qm, Q1m, _, _, _ = vm.corrected(th, wm, p)
+        qm, Q1m, _, _, _, _ = vm.corrected(th, wm, p)
         q_p, dq_p, F, _, v_old = m.impact_full(qm, Q1m * wm)
         th_p, w_p, p_p = vm.step_start(q_p, dq_p)
         self.impact = ca.Function("vc_impact", [th, wm, p],
@@ -283,6 +291,9 @@ class VirtualConstraintWalker:
                                     (ahead[:, None], behind[:, None]))
             masks["no_impact"] = rows["finite"] & ~(ws * direction > 0)   # stalls, falls back
             first, which = first_violation(masks)
+            # a NaN phase rate is a stall (xi = w^2 < 0 past the turn): no impact
+            stall = ~np.isfinite(ws[np.arange(m_), np.minimum(first, self.nodes)])
+            which = np.where((which == "diverged") & stall, "no_impact", which)
             run.track(idx, S.row(Dg, "u"), S.row(Dg, "Fx"), S.row(Dg, "Fz"),
                       np.arange(self.nodes + 1)[None, :]
                       < np.minimum(first + 1, self.nodes + 1)[:, None])
@@ -296,6 +307,9 @@ class VirtualConstraintWalker:
             which = np.where((which == "") & ~(rows["xsw"][:, -1] > self.model.scuff_zone),
                              "no_impact", which)
             which = np.where(which == "", strike_violation(rows["dzsw"][:, -1]), which)
+            with np.errstate(invalid="ignore"):     # as the simulator: no impact in time
+                late = ~(Z[1, :, -1] <= self.options.horizon * self.gait.T)
+            which = np.where((which == "") & late, "no_impact", which)
             bad = which != ""
             run.fail(idx[bad], which[bad], k)
             alive[idx[bad]] = False

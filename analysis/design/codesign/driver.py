@@ -9,7 +9,7 @@ import time
 import casadi as ca
 import numpy as np
 
-from biped_casadi.caching import source_digest
+from biped_casadi.caching import shared_result, source_digest
 from biped_casadi.control.output_law import decoupling_denominator
 from biped_casadi.control.zero_dynamics import denominator_samples
 from biped_casadi.files import write_text_atomic
@@ -34,8 +34,10 @@ from .transcription import Transcription
 class _Codesign:
     """The stages of :func:`codesign`, with the state they share."""
 
-    def __init__(self, model, st: CodesignSettings, gait, progress):
+    def __init__(self, model, st: CodesignSettings, gait, progress, share=None, cache=None):
         self.model, self.st = model, st
+        self.share, self.cache = share, cache
+        self.unit_key = dict(_key(model, st, gait), code=source_digest())
         self.say = progress or (lambda msg: None)
         #: the rejoin fraction of the solves now (st.rejoin, then each of st.rejoin_choices)
         self.rejoin = float(st.rejoin)
@@ -56,6 +58,22 @@ class _Codesign:
         self._last = now
 
     # -------------------------------------------------------------- helpers
+    def unit(self, name, inputs, compute):
+        """``compute()``: an independent unit of work.  With ``share`` set it is done once
+        among the processes running this co-design on one cache folder
+        (:func:`biped_casadi.caching.shared_result`), each taking the units in its own
+        order (:meth:`order`), so two processes split them."""
+        if self.share is None:
+            return compute()
+        body = dict(self.unit_key, unit=name, inputs=inputs)
+        return shared_result(CODESIGNS.path(body, self.cache, suffix=".unit.pkl"), compute)[0]
+
+    def order(self, items) -> list:
+        """Independent units in this process's order: as given, or last first for
+        ``share='backward'``."""
+        items = list(items)
+        return items[::-1] if self.share == "backward" else items
+
     def kept(self, gait):
         return kept_directions(self.model, gait, self.rs)
 
@@ -280,25 +298,38 @@ class _Codesign:
         """Every start screened by a short first solve (ranked by the NLP's own s); the
         best is verified and continues with scenario exchange."""
         st, gait, kept = self.st, self.gait0, self.kept0
-        screened = []
-        for i, M1 in enumerate(starts):
+
+        def screen(i, M1, label):
             active = self.hardest(gait, kept, M1, st.s_start, st.initial_active)
             tr, red, d0, lb, ub = self.fixed_problem(gait, kept, M1, active, st.s_start)
-            label = f"start {i + 1} of {len(starts)}"
             self.say(f"NLP, gait fixed: {tr.K} scenarios x {tr.S} steps ({label})")
             res = self.solve(tr, red, d0, lb, ub, label, st.screen_iter, st.screen_time,
                              st.screen_evaluations)
-            s_nlp = float(res.d[tr.i_s]) if np.all(np.isfinite(res.d)) else -np.inf
-            self.say(f"  IPOPT {res.status} ({res.iterations} it, {res.time:.1f} s): NLP s "
-                     f"{s_nlp:.4g}")
+            return dict(active=active, res=res, record=self.solves.pop(), i_s=tr.i_s,
+                        i_M1=tr.i_M1)
+
+        done = {}
+        for i in self.order(range(len(starts))):            # the starts are independent
+            label = f"start {i + 1} of {len(starts)}"
+            done[i] = self.unit("screen", dict(M1=np.asarray(starts[i]).tolist()),
+                                lambda i=i, label=label: screen(i, starts[i], label))
+        screened = []
+        for i, M1 in enumerate(starts):
+            u, label = done[i], f"start {i + 1} of {len(starts)}"
+            res = u["res"]
+            self.solves.append(u["record"])
+            s_nlp = float(res.d[u["i_s"]]) if np.all(np.isfinite(res.d)) else -np.inf
+            self.say(f"  {label}: IPOPT {res.status} ({res.iterations} it, {res.time:.1f} s): "
+                     f"NLP s {s_nlp:.4g}")
             self.rounds.append(dict(phase="start", label=label, M1_start=np.asarray(M1).tolist(),
                                     nlp_status=res.status, nlp_s=s_nlp,
-                                    M1=res.d[tr.i_M1].tolist()))
-            screened.append((res.success, s_nlp, tr, red, res, active))
+                                    M1=res.d[u["i_M1"]].tolist()))
+            screened.append((res.success, s_nlp, M1, res, u["active"]))
         screened.sort(key=lambda t: (not t[0], -t[1]))       # converged solves first
         best = None
-        for _, s_nlp, tr, red, res, active in screened[:2]:
+        for _, s_nlp, M1, res, active in screened[:2]:
             if np.isfinite(s_nlp):
+                tr, red, *_ = self.fixed_problem(gait, kept, M1, active, st.s_start)
                 c = self.candidate(gait, kept, tr, red, res, active, "best start")
                 if c["ok"]:
                     best = c
@@ -509,7 +540,8 @@ def codesign_path(model, settings: CodesignSettings | None = None, gait=None,
 
 
 def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_file=None,
-             progress=None, cache=None, use_cache: bool = True) -> CodesignResult:
+             progress=None, cache=None, use_cache: bool = True,
+             share: str | None = None) -> CodesignResult:
     """Co-design the robust time-varying controller (and the gait) by the NLP.
 
     Parameters
@@ -528,6 +560,12 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
         Folder of cached results (default :func:`biped_casadi.cache_dir`).
     use_cache : bool
         Read a cached result for the same inputs (and write the new one).
+    share : {None, 'forward', 'backward'}
+        Split the independent units of work (the screening solves of the starts, the
+        verification's sets of full-order runs) with another process running the same
+        co-design on the same cache folder, the two taking them from opposite ends
+        ('forward' and 'backward'): each unit is computed once (a lock file claims it)
+        and read by the other.  Both return the same result.  None: no sharing.
 
     Returns
     -------
@@ -553,7 +591,9 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
             return CodesignResult(**d, gait=g)
         except (ValueError, TypeError, OSError, KeyError):
             pass                                     # damaged or gait gone: recompute
-    run = _Codesign(model, st, gait, progress)
+    if share not in (None, "forward", "backward"):
+        raise ValueError(f"share must be None, 'forward' or 'backward', got {share!r}")
+    run = _Codesign(model, st, gait, progress, share=share, cache=cache)
     run.setup()
     starts = [np.asarray(M1, float) for M1 in run.sampled()] + [
         np.asarray(M1, float) for M1 in st.starts]
@@ -576,7 +616,7 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
     design = Design(tuple(float(v) for v in best["M1"]), run.rejoin)
     run.say("verification (protocol of the robust designs)")
     check = verify_design(model, g, design, best["kept"], st.robustness_settings(rounds=10),
-                          progress=run.say)
+                          progress=run.say, unit=run.unit, order=run.order)
     hidden = (hidden_sign_patterns(model, g, design, best["kept"], st.robustness_settings())
               .to_dict() if st.hidden else {})
     bas = {}

@@ -3,17 +3,14 @@ dynamics with its sensitivities, the step's start, partial step and impact, the 
 reference (the module docstring of :mod:`analysis.design.codesign.transcription`)."""
 from __future__ import annotations
 
-import hashlib
-import os
-import subprocess
-import tempfile
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
-from biped_casadi.caching import cache_dir, cached
+from biped_casadi.caching import cached
 from biped_casadi.control.zero_dynamics import zero_dynamics
+from biped_casadi.numerics import compiled as _compiled
 from biped_casadi.numerics import rk4_step
 from biped_casadi.simulation.perturbation import PAPER_SIZES
 from gait_opt.parametrisation import reference_dynamics
@@ -99,38 +96,23 @@ class TranscriptionSettings:
 
 # ------------------------------------------------------------------ compiled functions
 def compiled(f: ca.Function, flags: str = "-O1") -> ca.Function:
-    """``f`` compiled to a shared library kept in the cache folder, keyed by its content.
+    """``f`` compiled and kept in the cache folder, by default at -O1.
+
+    See :func:`biped_casadi.numerics.compiled`; the node is large, and -O2 compiles it
+    much longer for little.
 
     Parameters
     ----------
     f : casadi.Function
         An SX Function.
     flags : str
-        Optimisation flag of the C compiler.
+        The C compiler's optimisation flag.
 
     Returns
     -------
     casadi.Function
-        The compiled Function (``casadi.external``), or ``f`` itself when no C compiler
-        is available.
     """
-    root = cache_dir() / "codesign_so"
-    key = hashlib.sha256((f.serialize() + flags + ca.__version__).encode()).hexdigest()[:16]
-    so = root / f"{f.name()}_{key}.so"
-    if not so.is_file():
-        try:
-            root.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory() as tmp:
-                c = os.path.join(tmp, f"{f.name()}.c")
-                f.generate(f"{f.name()}.c", {"with_header": False})
-                os.replace(f"{f.name()}.c", c)
-                out = str(so) + f".tmp{os.getpid()}"
-                subprocess.run(["gcc", flags, "-fPIC", "-shared", c, "-o", out, "-lm"],
-                               check=True, capture_output=True)
-                os.replace(out, so)
-        except (OSError, subprocess.CalledProcessError):
-            return f
-    return ca.external(f.name(), str(so))
+    return _compiled(f, flags)
 
 
 def _ks(v, rho):

@@ -36,6 +36,32 @@ class _Dense:
         val, wts = _ks(flat[:, None], rho)
         self.add(val[0], wts[:, 0] @ dflat, -np.inf, 0.0, name)
 
+    def chunked_ks(self, kinds, names, chunk, n_chunks, rho, tag):
+        """For every chunk of ``chunk`` nodes (``n_chunks`` of them; a chunk past the last
+        node is the last node), one KS row per kind, in the order (chunk, kind).
+
+        ``kinds``: per kind (v (r, p), dv (r, nd, p)) over the p nodes."""
+        p = kinds[0][0].shape[-1]
+        c = np.arange(n_chunks)
+        lo = np.minimum(c * chunk, p - 1)
+        hi = np.where(c * chunk >= p, p, np.minimum((c + 1) * chunk, p))
+        idx = lo[:, None] + np.arange(chunk)[None, :]            # (n_chunks, chunk)
+        valid = idx < hi[:, None]
+        idx = np.minimum(idx, p - 1)
+        vals, grads = [], []
+        for v, dv in kinds:
+            r = v.shape[0]
+            g = np.where(valid[None], v[:, idx], -np.inf)         # (r, n_chunks, chunk)
+            flat = g.transpose(0, 2, 1).reshape(r * chunk, n_chunks)
+            val, w = _ks(flat, rho)                               # (n_chunks,), (r chunk, n_chunks)
+            w = w.reshape(r, chunk, n_chunks)
+            grads.append(np.einsum("rlc,rdcl->cd", w, dv[:, :, idx]))
+            vals.append(val)
+        value = np.stack(vals, axis=1).reshape(-1)                # (n_chunks kinds,)
+        jac = np.stack(grads, axis=1).reshape(-1, self.nd)
+        self.add(value, jac, -np.inf, 0.0,
+                 [f"{k} {tag} chunk {ci}" for ci in range(n_chunks) for k in names])
+
     def stack(self):
         return (np.concatenate(self.g), np.vstack(self.J), np.concatenate(self.lo),
                 np.concatenate(self.hi))
@@ -174,24 +200,17 @@ class Reduced:
                 dd = np.einsum("mcp,cd->mdp", ddiag, Ctot)         # (9, nd, p)
                 u, Fx, Fz, zsw, den = diag[:nu], diag[nu], diag[nu + 1], diag[nu + 3], diag[nu + 4]
                 du, dFx, dFz, dzsw, dden = (dd[:nu], dd[nu], dd[nu + 1], dd[nu + 3], dd[nu + 4])
-                npts = diag.shape[1]
-                for c in range(n_chunks):
-                    sl = slice(min(c * st.chunk, npts - 1), min((c + 1) * st.chunk, npts))
-                    if c * st.chunk >= npts:
-                        sl = slice(npts - 1, npts)          # past the strike: the last point
-                    where = f"{tag} chunk {c}"
-                    v = np.vstack([u[:, sl] / U - 1, -u[:, sl] / U - 1])
-                    dv = np.concatenate([du[:, :, sl] / U, -du[:, :, sl] / U])
-                    rows.ks(v, dv, rho, "torque " + where)
-                    rows.ks(((st.normal_force_min * mg - Fz[sl]) / mg)[None],
-                            (-dFz[:, sl] / mg)[None], rho, "normal " + where)
-                    v = np.vstack([Fx[sl] - mu * Fz[sl], -Fx[sl] - mu * Fz[sl]]) / mg
-                    dv = np.stack([dFx[:, sl] - mu * dFz[:, sl],
-                                   -dFx[:, sl] - mu * dFz[:, sl]]) / mg
-                    rows.ks(v, dv, rho, "friction " + where)
-                    sc = tr.den_sign / tr.den_scale
-                    rows.ks((st.den_margin - sc * den[sl])[None], (-sc * dden[:, sl])[None],
-                            rho, "denominator " + where)
+                # per chunk of nodes (past the strike: the last point), one KS row each
+                # of torque, normal force, friction and the denominator
+                sc = tr.den_sign / tr.den_scale
+                rows.chunked_ks(
+                    [(np.vstack([u / U - 1, -u / U - 1]), np.concatenate([du / U, -du / U])),
+                     (((st.normal_force_min * mg - Fz) / mg)[None], (-dFz / mg)[None]),
+                     (np.vstack([Fx - mu * Fz, -Fx - mu * Fz]) / mg,
+                      np.stack([dFx - mu * dFz, -dFx - mu * dFz]) / mg),
+                     ((st.den_margin - sc * den)[None], (-sc * dden)[None])],
+                    ("torque", "normal", "friction", "denominator"), st.chunk, n_chunks, rho,
+                    tag)
                 # the swing foot lifts at the start and stays clear mid-step
                 tn = t_nodes[:n + 1]
                 lift = np.flatnonzero((tn > 0) & (tn < 0.1))
