@@ -129,3 +129,35 @@ def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     hp = r["hidden"]
     assert hp["patterns"] > 0 and hp["by_scale"]["1.0"]["passed"] == hp["patterns"], hp
     assert hp["full_order"]["passed"] == hp["patterns"], hp
+
+
+@pytest.mark.slow
+def test_codesign_shared_by_two_processes_is_the_same(tmp_path):
+    """Two processes running the quick co-design on one cache folder, taking its units
+    from opposite ends, split them (each solves some starts) and return the design of a
+    run alone."""
+    import subprocess
+    import sys
+    from analysis.design.codesign import QUICK, codesign
+    from biped_casadi import RABBIT, BipedModel
+    model = BipedModel(RABBIT)
+    alone = codesign(model, QUICK, cache=tmp_path / "alone")
+    shared = tmp_path / "shared"
+    script = ("import json, sys; sys.path[:0] = %r\n"
+              "from analysis.design.codesign import QUICK, codesign\n"
+              "from biped_casadi import RABBIT, BipedModel\n"
+              "lines = []\n"
+              "r = codesign(BipedModel(RABBIT), QUICK, cache=%r, share=sys.argv[1],\n"
+              "             progress=lines.append)\n"
+              "print(json.dumps(dict(M1=r.design['M1'], s_star=r.s_star, verified=r.verified,\n"
+              "                      solved=[s for s in lines if s.startswith('NLP')])))"
+              ) % (sys.path, str(shared))
+    procs = [subprocess.Popen([sys.executable, "-c", script, side], stdout=subprocess.PIPE,
+                              text=True) for side in ("forward", "backward")]
+    outs = [json.loads(p.communicate(timeout=600)[0]) for p in procs]
+    for o in outs:
+        assert o["M1"] == alone.design["M1"] and o["s_star"] == alone.s_star
+        assert o["verified"] == alone.verified
+        assert o["solved"], "each process solves at least one start"
+    assert len(outs[0]["solved"]) + len(outs[1]["solved"]) == len(
+        [r for r in alone.rounds if r["phase"] == "start"])

@@ -52,3 +52,47 @@ def test_an_unwritable_folder_runs_unguarded(tmp_path):
     with claimed(target / "sub" / "result.pkl"):           # a file where a folder should be
         ran.append(True)
     assert ran == [True]
+
+
+def test_shared_result_is_computed_once(tmp_path):
+    """Two processes asking for one result: the first computes it, the second waits and
+    reads it (and says so)."""
+    from biped_casadi.caching import shared_result
+    path = tmp_path / "unit.pkl"
+    child = subprocess.Popen([sys.executable, "-c", (
+        "import sys, time; sys.path[:0] = %r\n"
+        "from biped_casadi.caching import shared_result\n"
+        "print(shared_result(%r, lambda: (time.sleep(1.0), 'child')[1])[1])") % (
+        sys.path, str(path))], stdout=subprocess.PIPE, text=True)
+    try:
+        while not (tmp_path / "unit.pkl.lock").exists():     # the child holds the claim
+            time.sleep(0.02)
+        value, read = shared_result(path, lambda: "parent")
+        assert (value, read) == ("child", True)
+        assert child.communicate(timeout=30)[0].strip() == "False"  # it computed
+        assert shared_result(path, lambda: "again") == ("child", True)
+    finally:
+        child.kill()
+        child.wait()
+
+
+def test_compiled_functions_are_kept_by_content(tmp_path, monkeypatch):
+    """A compiled Function evaluates as the SX one, its library is kept in the cache
+    folder, and an equal Function built again loads it instead of compiling."""
+    import casadi as ca
+    import numpy as np
+    from biped_casadi.numerics import compiled
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path))
+    x = ca.SX.sym("x", 3)
+
+    def build():
+        return ca.Function("f_test", [x], [ca.vertcat(ca.sin(x[0]) * x[1], x[2] ** 3)])
+    f = build()
+    g = compiled(f)
+    libs = list((tmp_path / "compiled").glob("f_test_*.so"))
+    assert len(libs) == 1
+    v = np.array([0.3, -1.2, 2.0])
+    np.testing.assert_array_equal(np.array(g(v)), np.array(f(v)))
+    t = libs[0].stat().st_mtime_ns
+    compiled(build())
+    assert [p.stat().st_mtime_ns for p in (tmp_path / "compiled").glob("f_test_*.so")] == [t]

@@ -174,8 +174,11 @@ class CodesignSettings:
 
 
 #: the settings of a quick reproduction: the gait fixed, v_c rejoining at 0.75 T, no hidden
-#: patterns
-QUICK = CodesignSettings(free_gait=False, hidden=False, rejoin_choices=())
+#: patterns, each start screened on 25 NLP evaluations (20 iterations) instead of 40 (30):
+#: on RABBIT the same start wins and the design is the same to the last digit, in 2/3 of
+#: the time (measured)
+QUICK = CodesignSettings(free_gait=False, hidden=False, rejoin_choices=(),
+                         screen_evaluations=25, screen_iter=20)
 #: the settings of a full reproduction: those of ``biped m1 --robust`` (one cache for both)
 FULL = CodesignSettings()
 
