@@ -319,7 +319,7 @@ def claimed(path: Path, poll: float = 0.2):
             lock.unlink()
 
 
-def shared_result(path, compute):
+def shared_result(path, compute, claim: bool = True):
     """``compute()`` once among the processes sharing a cache folder.
 
     Under :func:`claimed`: the pickle at ``path`` if a process wrote it, else
@@ -331,6 +331,10 @@ def shared_result(path, compute):
         Where the result is kept (a pickle).
     compute : callable
         Computes the result.
+    claim : bool
+        Hold the claim while computing (False: read the result if it is there, else
+        compute it without keeping another process waiting, e.g. when its parts are
+        shared results of their own).
 
     Returns
     -------
@@ -341,7 +345,7 @@ def shared_result(path, compute):
 
     from .files import write_bytes_atomic
     path = Path(path)
-    with claimed(path):
+    with claimed(path) if claim else contextlib.nullcontext():
         if path.is_file():
             try:
                 return pickle.loads(path.read_bytes()), True

@@ -43,15 +43,16 @@ class Context:
         if self.opts.progress:
             print(msg, file=sys.stderr, flush=True)
 
-    def memo(self, name: str, inputs: dict, compute):
+    def memo(self, name: str, inputs: dict, compute, claim: bool = True):
         """``compute()``, or its result kept by an earlier run with the same inputs and
         the same code (:data:`RESULTS`); what was reused is listed per stage in
         summary.json (``reused``; ``helped``: what the helper process computed for this
-        run)."""
+        run).  ``claim=False``: no claim on the whole result (its parts are shared
+        between the processes on their own)."""
         body = dict(name=name, inputs=inputs, code=source_digest(),
                     robot=self.model.params.to_dict() if self.model is not None else None)
         path = RESULTS.path(body, suffix=".pkl")
-        value, read = shared_result(path, compute)
+        value, read = shared_result(path, compute, claim)
         if read:
             # written since this run began: the helper process's, else reused
             with contextlib.suppress(OSError):

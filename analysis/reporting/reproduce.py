@@ -150,13 +150,13 @@ STAGES = [
 ]
 
 #: what the helper process computes ahead, in its order, while this process runs the
-#: paper's stages: the co-design, the sampling search's design (from the other end of the
-#: stage, meeting this process in the middle), then the robust
-#: designs' s*, full-order runs and basins (this process takes their basins and the
-#: trade-off first, so the two meet in the middle), then the Monte Carlo runs of the
-#: terrain stage
-HELPER_STAGES = (stage_robust_design, stage_search_design, stage_robustness_robust,
-                 warm_robust_runs, stage_basins_robust, stage_terrain)
+#: paper's stages: the co-design (the gait-fixed one of --quick split with this process,
+#: unit by unit), the trade-off's points (split the same way), the sampling search's
+#: design (from the other end of the stage, meeting this process in the middle), then the
+#: robust designs' s*, full-order runs and basins (this process takes their basins first,
+#: so the two meet in the middle), then the Monte Carlo runs of the terrain stage
+HELPER_STAGES = (stage_robust_design, stage_tradeoff, stage_search_design,
+                 stage_robustness_robust, warm_robust_runs, stage_basins_robust, stage_terrain)
 
 
 

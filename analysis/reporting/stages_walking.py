@@ -12,12 +12,13 @@ from biped_casadi import (PAPER_SIZES, SimulationOptions,
 from gait_opt import GaitOptions, default_gait
 
 from ..design import ROBUST_GAIT
-from ..design.codesign import (FULL, QUICK, TODAY_DESIGN, codesign, codesign_tradeoff)
+from ..design.codesign import (FULL, QUICK, TODAY_DESIGN, codesign, codesign_path,
+                               codesign_tradeoff)
 from ..robustness import Design, RobustnessSettings, basin, kept_directions, robustness
 from .plots import (basin_plot, save_figure, swing_torques_plot, tradeoff_plot, unactuated_error_plot,
                     walking_animation)
 
-from .context import FORMATS, Context, is_rabbit
+from .context import FORMATS, Context, claimed, is_rabbit
 from .constants import PAPER
 
 
@@ -45,10 +46,17 @@ def stage_robust_design(ctx: Context):
                     "run 'biped m1 --robust --robot ...' for another robot")
         return
     st = QUICK if ctx.opts.quick else FULL
-    # the helper process runs the same co-design: the two split its independent units
-    # (starts, verification runs), taking them from opposite ends
-    r = codesign(ctx.model, st, progress=lambda m: ctx.log("   " + m),
-                 share="forward" if ctx.data.get("helper") else "backward")
+    say = lambda m: ctx.log("   " + m)                 # noqa: E731
+    if st.free_gait or st.rejoin_choices:
+        # the rejoin and gait phases are sequential: one process computes the whole
+        # co-design (the helper, usually), the other waits for it
+        with claimed(codesign_path(ctx.model, st)):
+            r = codesign(ctx.model, st, progress=say)
+    else:
+        # gait fixed: the starts and the verification's run sets are most of the work;
+        # the two processes split them, taking them from opposite ends
+        r = codesign(ctx.model, st, progress=say,
+                     share="forward" if ctx.data.get("helper") else "backward")
     ctx.data["robust"] = r
     ctx.data["robust_gait"] = r.gait
     _search(ctx)
@@ -92,10 +100,13 @@ def stage_tradeoff(ctx: Context):
     r = ctx.data.get("robust")
     if r is None or ctx.opts.quick:
         return
+    # the helper process traces it too: the two split the points from opposite ends
     pts = ctx.memo("codesign_tradeoff", dict(design=r.design, gait=r.gait.cache_key,
                                              settings=r.settings),
-                   lambda: codesign_tradeoff(ctx.model, r,
-                                             progress=lambda m: ctx.log("   " + m)))
+                   lambda: codesign_tradeoff(
+                       ctx.model, r, progress=lambda m: ctx.log("   " + m),
+                       share="forward" if ctx.data.get("helper") else "backward"),
+                   claim=False)
     ctx.data["tradeoff"] = pts
     ctx.summary["robust_design"]["tradeoff"] = pts
 
@@ -217,7 +228,7 @@ def stage_sim_robust(ctx: Context):
     """The same runs for virtual constraints and the robust design on the co-design's
     gait and for the sampling search's design on its gait; Fig. 5, Fig. 6 and an
     animation of the robust design's run."""
-    m, g = ctx.model, ctx.gait
+    g = ctx.gait
     runs = list(ctx.data.get("sim_runs", []))
     out = ctx.summary.setdefault("simulation", dict(perturbation=list(PAPER_SIZES), mu=0.6,
                                                     runs={}))
@@ -238,8 +249,27 @@ def stage_sim_robust(ctx: Context):
         figs / "fig6_swing_torques", FORMATS)
     shown = pair[-1][0]
     if ctx.opts.animation_steps and shown.t.size:
-        ctx.figures["animation"] = [walking_animation(shown, m, figs / "walk_tv.gif",
-                                                      max_steps=ctx.opts.animation_steps)]
+        ctx.figures["animation"] = [_animation(ctx, shown, figs / "walk_tv.gif")]
+
+
+def _animation(ctx, run, path) -> str:
+    """The run's animation (:func:`walking_animation`), its GIF kept between reproductions
+    by the content of the run (rendering it is most of a warm re-run's time)."""
+    import hashlib
+
+    from biped_casadi.files import write_bytes_atomic
+    h = hashlib.sha256()
+    for a in (run.t, run.q, run.step, run.stance_x):
+        h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+
+    def render():
+        walking_animation(run, ctx.model, path, max_steps=ctx.opts.animation_steps)
+        return path.read_bytes()
+    data = ctx.memo("animation", dict(run=h.hexdigest(), steps=ctx.opts.animation_steps),
+                    render)
+    if not path.is_file():
+        write_bytes_atomic(path, data)
+    return str(path)
 
 
 def _robust_runs(ctx, runs: dict) -> list:

@@ -675,7 +675,7 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
 
 
 def codesign_tradeoff(model, result: CodesignResult, fractions=(0.25, 0.5, 0.75, 1.0),
-                      progress=None) -> list:
+                      progress=None, cache=None, share: str | None = None) -> list:
     """The (max|lambda|, s*) trade-off traced by the NLP on the co-design's gait.
 
     For each bound rho = fraction x the virtual constraints' eigenvalue, the fixed-gait
@@ -693,6 +693,11 @@ def codesign_tradeoff(model, result: CodesignResult, fractions=(0.25, 0.5, 0.75,
         The bounds, as fractions of the virtual constraints' eigenvalue.
     progress : callable, optional
         One line per point.
+    cache : str or Path, optional
+        Cache folder of the shared points (default :func:`biped_casadi.cache_dir`).
+    share : {None, 'forward', 'backward'}
+        Split the points with another process tracing the same trade-off on the same
+        cache folder (as :func:`codesign`).
 
     Returns
     -------
@@ -701,25 +706,30 @@ def codesign_tradeoff(model, result: CodesignResult, fractions=(0.25, 0.5, 0.75,
         ``max_abs``, and ``M1``.
     """
     st = CodesignSettings(**{k: v for k, v in result.settings.items() if k != "starts"})
-    run = _Codesign(model, st, result.gait, progress)
+    if share not in (None, "forward", "backward"):
+        raise ValueError(f"share must be None, 'forward' or 'backward', got {share!r}")
+    run = _Codesign(model, st, result.gait, progress, share=share, cache=cache)
     run.rejoin = float(result.design["rejoin"])
     gait, M1 = result.gait, np.asarray(result.design["M1"], float)
     kept = run.kept(gait)
     lvc = run.lam_vc(gait)
     active = run.hardest(gait, kept, M1, max(result.s_star, 0.1), st.initial_active)
-    out = []
-    for f in fractions:
+
+    def point(f):
         tr, red, d0, lb, ub = run.fixed_problem(gait, kept, M1, active,
                                                 max(result.s_star - 0.1, 0.1))
         red.jury = (run._jury(gait), float(f) * lvc)
         res = run.solve(tr, red, d0, lb, ub, f"trade-off at {f:g} x VC")
         if not np.all(np.isfinite(res.d)):
-            out.append(dict(bound=f * lvc, nlp_status=res.status, s_star=None, max_abs=None))
-            continue
+            return dict(bound=f * lvc, nlp_status=res.status, s_star=None, max_abs=None)
         r, lam = run.measure(gait, kept, res.d[tr.i_M1])
-        out.append(dict(bound=float(f * lvc), nlp_status=res.status,
-                        nlp_s=float(res.d[tr.i_s]), s_star=float(r.s_star),
-                        max_abs=float(lam), M1=res.d[tr.i_M1].tolist()))
         run.say(f"trade-off: bound {f * lvc:.3g}: IPOPT {res.status}, verified s* "
                 f"{r.s_star:.4g} at max|lambda| {lam:.3g}")
-    return out
+        return dict(bound=float(f * lvc), nlp_status=res.status,
+                    nlp_s=float(res.d[tr.i_s]), s_star=float(r.s_star),
+                    max_abs=float(lam), M1=res.d[tr.i_M1].tolist())
+
+    inputs = dict(design=result.design, gait=gait.cache_key, s_star=result.s_star)
+    done = {f: run.unit("trade-off", dict(inputs, fraction=float(f)), lambda f=f: point(f))
+            for f in run.order(fractions)}
+    return [done[f] for f in fractions]
