@@ -306,11 +306,8 @@ def _robust_runs(ctx, runs: dict) -> list:
 
 def warm_robust_runs(ctx: Context):
     """The robust designs' full-order runs alone, into the cache (the reproduction's
-    helper process computes them ahead of :func:`stage_sim_robust`), and the animation of
-    the one it shows."""
-    pair = _robust_runs(ctx, {})
-    if pair and ctx.opts.animation_steps and pair[-1][0].t.size:
-        _animation(ctx, pair[-1][0], ctx.out / "figures" / "walk_tv.gif")
+    helper process computes them ahead of :func:`stage_sim_robust`)."""
+    _robust_runs(ctx, {})
 
 
 def _simulated(ctx, gait, ctrl, q0, dq0, opts):
