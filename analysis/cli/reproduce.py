@@ -6,8 +6,8 @@ from analysis.reporting.reproduce import reproduce, run_folder
 from .common import add_robot, load_model, output_dir, print_json
 
 #: measured by benchmarks/bench_reproduce.py (fresh processes, empty caches) on the 2-core AMD
-#: EPYC VM (Python 3.11, load 0.1 to 2.3), nothing cached (full: 140 and 160 s; quick: 55
-#: to 68 s in seven runs; warm re-runs 8 to 10 s); the README quotes the same
+#: EPYC VM (Python 3.11, load 0.1 to 2.3), nothing cached (full: 140 to 160 s in three
+#: runs; quick: 47 to 62 s in four; warm re-runs 7 to 10 s); the README quotes the same
 #: figures (tests/test_reproduce.py checks it)
 TIME_FULL = "about 2.5 min"
 TIME_QUICK = "about 1 min"
