@@ -47,16 +47,14 @@ def stage_robust_design(ctx: Context):
         return
     st = QUICK if ctx.opts.quick else FULL
     say = lambda m: ctx.log("   " + m)                 # noqa: E731
-    if st.free_gait or st.rejoin_choices:
-        # the rejoin and gait phases are sequential: one process computes the whole
-        # co-design (the helper, usually), the other waits for it
-        with claimed(codesign_path(ctx.model, st)):
-            r = codesign(ctx.model, st, progress=say)
-    else:
-        # gait fixed: the starts and the verification's run sets are most of the work;
-        # the two processes split them, taking them from opposite ends
+    if st.splittable:
+        # the two processes split its units, taking them from opposite ends
         r = codesign(ctx.model, st, progress=say,
                      share="forward" if ctx.data.get("helper") else "backward")
+    else:
+        # one process computes the whole co-design (the helper, usually), the other waits
+        with claimed(codesign_path(ctx.model, st)):
+            r = codesign(ctx.model, st, progress=say)
     ctx.data["robust"] = r
     ctx.data["robust_gait"] = r.gait
     _search(ctx)

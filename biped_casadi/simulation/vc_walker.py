@@ -99,8 +99,7 @@ class VirtualConstraintWalker:
             return ca.vertcat(2 * vm.corrected(th + c * hs, wv, p)[5], 1 / wv)
 
         zx = rk4_step(rhs, ca.vertcat(w**2, t), hs)
-        with_nan = ca.if_else(zx[0] >= 0, sgn * ca.sqrt(zx[0]), np.nan)
-        zn = ca.vertcat(with_nan, zx[1])
+        zn = ca.vertcat(sgn * ca.sqrt(zx[0]), zx[1])
         thn = th + hs
         wn = zn[0]
         q, Q1, Q2, dw, den, _ = vm.corrected(thn, wn, p)

@@ -35,9 +35,11 @@ class _Codesign:
     """The stages of :func:`codesign`, with the state they share."""
 
     def __init__(self, model, st: CodesignSettings, gait, progress, share=None, cache=None):
+        if share not in (None, "forward", "backward"):
+            raise ValueError(f"share must be None, 'forward' or 'backward', got {share!r}")
         self.model, self.st = model, st
         self.share, self.cache = share, cache
-        self.unit_key = dict(_key(model, st, gait), code=source_digest())
+        self.unit_key = _key(model, st, gait)
         self.say = progress or (lambda msg: None)
         #: the rejoin fraction of the solves now (st.rejoin, then each of st.rejoin_choices)
         self.rejoin = float(st.rejoin)
@@ -591,8 +593,6 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
             return CodesignResult(**d, gait=g)
         except (ValueError, TypeError, OSError, KeyError):
             pass                                     # damaged or gait gone: recompute
-    if share not in (None, "forward", "backward"):
-        raise ValueError(f"share must be None, 'forward' or 'backward', got {share!r}")
     run = _Codesign(model, st, gait, progress, share=share, cache=cache)
     run.setup()
     starts = [np.asarray(M1, float) for M1 in run.sampled()] + [
@@ -706,8 +706,6 @@ def codesign_tradeoff(model, result: CodesignResult, fractions=(0.25, 0.5, 0.75,
         ``max_abs``, and ``M1``.
     """
     st = CodesignSettings(**{k: v for k, v in result.settings.items() if k != "starts"})
-    if share not in (None, "forward", "backward"):
-        raise ValueError(f"share must be None, 'forward' or 'backward', got {share!r}")
     run = _Codesign(model, st, result.gait, progress, share=share, cache=cache)
     run.rejoin = float(result.design["rejoin"])
     gait, M1 = result.gait, np.asarray(result.design["M1"], float)

@@ -98,15 +98,12 @@ class TranscriptionSettings:
 def compiled(f: ca.Function, flags: str = "-O1") -> ca.Function:
     """``f`` compiled and kept in the cache folder, by default at -O1.
 
-    See :func:`biped_casadi.numerics.compiled`; the node is large, and -O2 compiles it
-    much longer for little.
+    The node is large, and -O2 compiles it much longer for little.
 
     Parameters
     ----------
-    f : casadi.Function
-        An SX Function.
-    flags : str
-        The C compiler's optimisation flag.
+    f, flags
+        As :func:`biped_casadi.numerics.compiled`.
 
     Returns
     -------
