@@ -159,6 +159,13 @@ class Gait(Reference):
         out = self._ref.qa.map(s.size)(self.alpha, s[None, :], self.T)
         return tuple(np.array(o) for o in out)
 
+    def _check_times(self, t1):
+        if not np.all(np.isfinite(t1)):
+            raise ValueError("gait: t must be finite")
+        if np.any(t1 < self.t_min - 1e-12) or np.any(t1 > self.t_max + 1e-12):
+            raise ValueError(f"gait: t must lie in [{self.t_min:.6g}, {self.t_max:.6g}] "
+                             f"(-T/2 to 2 T), got [{t1.min():.6g}, {t1.max():.6g}]")
+
     def evaluate(self, t):
         """q^d, dq^d, ddq^d at ``t`` (numeric).
 
@@ -181,11 +188,7 @@ class Gait(Reference):
         t_arr = np.asarray(t, dtype=float)
         scalar = t_arr.ndim == 0
         t1 = np.atleast_1d(t_arr).ravel()
-        if not np.all(np.isfinite(t1)):
-            raise ValueError("gait: t must be finite")
-        if np.any(t1 < self.t_min - 1e-12) or np.any(t1 > self.t_max + 1e-12):
-            raise ValueError(f"gait: t must lie in [{self.t_min:.6g}, {self.t_max:.6g}] "
-                             f"(-T/2 to 2 T), got [{t1.min():.6g}, {t1.max():.6g}]")
+        self._check_times(t1)
         tg = self._s * self.T
         qu, dqu, _ = quintic_hermite(tg, self._X[0], self._X[1], self._A, t1)
         qa, dqa, ddqa = self._qa(t1 / self.T)
@@ -224,8 +227,10 @@ class Gait(Reference):
         numpy.ndarray
             Shape (2, N).
         """
-        q, dq, _ = self.evaluate(np.atleast_1d(np.asarray(t, dtype=float)))
-        return np.vstack([q[0], dq[0]])
+        t1 = np.atleast_1d(np.asarray(t, dtype=float)).ravel()
+        self._check_times(t1)
+        qu, dqu, _ = quintic_hermite(self._s * self.T, self._X[0], self._X[1], self._A, t1)
+        return np.vstack([qu, dqu])
 
     # ---------------------------------------------------------------- figures
     @property

@@ -271,3 +271,28 @@ def mapped(f: ca.Function, n: int) -> ca.Function:
     """
     k = threads()
     return f.map(n, "thread", k) if n >= 4 * k and k > 1 else f.map(n)
+
+
+def call_batched(simd_kernels, mapped_of, name: str, *args) -> list:
+    """A walker's Function ``name`` over scenarios (the columns of ``args``).
+
+    Parameters
+    ----------
+    simd_kernels : dict or None
+        The walker's SIMD kernels (:func:`biped_casadi.simd.kernels`), used when given.
+    mapped_of : callable
+        ``mapped_of(name, n)``: the CasADi Function mapped over n scenarios, else.
+    name : str
+        Which Function.
+    *args : array_like
+        Its inputs: (n_i, n) per scenario, or one column for all.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        Its outputs, (n_out, n) each.
+    """
+    if simd_kernels is not None:
+        return [o[:, :, 0] for o in simd_kernels[name](*args, threads=threads())]
+    n = max(np.shape(a)[1] if np.ndim(a) == 2 else 1 for a in args)
+    return [np.array(v) for v in mapped_of(name, n).call(list(args))]

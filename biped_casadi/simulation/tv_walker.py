@@ -27,6 +27,7 @@ starts from the outputs at each step start, so the walker stays exact on uneven 
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import casadi as ca
 import numpy as np
@@ -36,7 +37,9 @@ from ..control.output_law import SECTION, check_M1, decoupling_denominator
 from ..control.reference import require_same_robot
 from ..control.zero_dynamics import denominator_samples, zero_dynamics
 from ..numerics import compiled, rk4_step
-from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, mapped, strike
+from ..simd import kernels
+from .kernel import (CHUNKS_PER_STEP, Diagnostics, call_batched, locate_strike, mapped,
+                     strike, threads)
 from .options import SimulationOptions
 from .outcome import OutcomeRecorder, WalkBatch
 from .terrain import ground_levels, step_heights
@@ -115,25 +118,27 @@ class ZeroDynamicsWalker:
     def _build(self):
         m, zd, nq = self.model, self.zd, self.nq
         x, tau, h = ca.SX.sym("x", 2), ca.SX.sym("tau"), ca.SX.sym("h")
+        k1 = ca.SX.sym("k1", 2)
         P = ca.SX.sym("P", zd.n_par)
         R3 = ca.SX.sym("R3", 9 * nq)
         stage = {0.0: R3[:3 * nq], 0.5: R3[3 * nq:6 * nq], 1.0: R3[6 * nq:]}
-        xn = rk4_step(lambda xv, c: zd.rhs(xv, tau + c * h, stage[c], P), x, h)
+        # RK4 with the first stage given: it is the rhs at the previous node's end, where
+        # the diagnostics are evaluated too, so the two share their subexpressions
+        xn = rk4_step(lambda xv, c: k1 if c == 0.0 else zd.rhs(xv, tau + c * h, stage[c], P),
+                      x, h)
+        out = ca.cse(ca.vertcat(xn, zd.rhs(xn, tau + h, stage[1.0], P),
+                                self._diagnostics(xn, tau + h, stage[1.0], P)))
         def jit(f):          # compiled once per content, kept in the cache folder
             return compiled(f, "-O2") if self.jit else f
-        node = jit(ca.Function("zd_node", [x, tau, h, R3, P],
-                               [ca.cse(xn), tau + h,
-                                ca.cse(self._diagnostics(xn, tau + h, stage[1.0], P))],
-                               ["x", "tau", "h", "R3", "P"], ["x_next", "tau_next", "diag"]))
-        acc = node.mapaccum("zd_chunk", self.K, [0, 1], [0, 1])
-        xc, tc0 = ca.MX.sym("x", 2), ca.MX.sym("tau")
-        Pc, Rt = ca.MX.sym("P", zd.n_par), ca.MX.sym("R", 9 * nq, self.K)
-        X, TAU, DG = acc(xc, tc0, self.h, Rt, Pc)
-        self.chunk = ca.Function("zd_chunk_fn", [xc, tc0, Pc, Rt], [X, TAU, DG])
-        # diagnostics at a state with the reference given explicitly (step start, impact)
+        self.node = ca.Function("zd_node", [x, tau, k1, h, R3, P],
+                                [out[:2], tau + h, out[2:4], out[4:]],
+                                ["x", "tau", "k1", "h", "R3", "P"],
+                                ["x_next", "tau_next", "k1_next", "diag"])
+        # diagnostics and the rhs at a state with the reference given explicitly (step
+        # start, impact)
         R1 = ca.SX.sym("R", 3 * nq)
-        self.diag = jit(ca.Function("zd_diag", [x, tau, R1, P],
-                                    [ca.cse(self._diagnostics(x, tau, R1, P))]))
+        both = ca.cse(ca.vertcat(self._diagnostics(x, tau, R1, P), zd.rhs(x, tau, R1, P)))
+        self.diag = ca.Function("zd_diag", [x, tau, R1, P], [both[:-2], both[-2:]])
         # the last RK4 step, of length eta, with the reference state integrated
         # alongside from the node: one call per Newton iterate
         along = zd.along(self.gait)
@@ -146,22 +151,72 @@ class ZeroDynamicsWalker:
                                  [z_e, ca.jacobian(z_e, eta), ze[:2], q_e, dq_e])
         # impact (eq. 2-3) at the event's state (its reference integrated alongside, so
         # that the foot is exactly at the strike height) and the next step's start (eq. 17)
-        qi, dqi = ca.SX.sym("q", nq), ca.SX.sym("dq", nq)
+        # (the reference at tau = 0 is an input: these Functions are the robot's alone)
+        qi, dqi, R0 = ca.SX.sym("q", nq), ca.SX.sym("dq", nq), ca.SX.sym("R0", 3 * nq)
         q_p, dq_p, F, _, v_old = m.impact_full(qi, dqi)
-        x_p, y_n, dy_n = zd.step_start(q_p, dq_p, self._R0, P[:self.nu])
-        self.impact = ca.Function("zd_impact", [qi, dqi, P], [x_p, y_n, dy_n, F, v_old[1]])
+        x_p, y_n, dy_n = zd.step_start(q_p, dq_p, R0, P[:self.nu])
+        self.impact = ca.Function("zd_impact", [qi, dqi, P, R0],
+                                  [x_p, y_n, dy_n, F, v_old[1]])
         qs, dqs, M1s = ca.SX.sym("q", nq), ca.SX.sym("dq", nq), ca.SX.sym("M1", self.nu)
-        self.start = ca.Function("zd_start", [qs, dqs, M1s],
-                                 list(zd.step_start(qs, dqs, self._R0, M1s)))
+        self.start = ca.Function("zd_start", [qs, dqs, M1s, R0],
+                                 list(zd.step_start(qs, dqs, R0, M1s)))
+        # four scenarios per SIMD vector where the machine allows (biped_casadi.simd);
+        # else CasADi's compiled (jit) or interpreted Functions, mapped
+        # in two libraries: the robot's (every gait uses it) and the gait's (-O1: its
+        # kernels run once per step, not per node, and compile in half the time)
+        self._simd = None
+        if self.jit:                          # the two compile side by side when cold
+            with ThreadPoolExecutor(2) as pool:
+                robot = pool.submit(kernels, {
+                    "chunk": (self.node, 3, ["const", "node", "sample"]),
+                    "diag": (self.diag, 0, ["sample"] * 4),
+                    "impact": (self.impact, 0, ["sample"] * 3 + ["const"]),
+                    "start": (self.start, 0, ["sample"] * 3 + ["const"])}, "zd_walker_robot")
+                gait = pool.submit(kernels, {
+                    "event": (self.event, 0, ["sample"] * 4),
+                    "reference": (self.gait.symbolic(), 0, ["sample"] * 2)},
+                    "zd_walker_gait", "-O1")
+                robot, gait = robot.result(), gait.result()
+            self._simd = None if robot is None or gait is None else {**robot, **gait}
+        node = self.node
+        if self.jit and self._simd is None:
+            node, self.diag = jit(self.node), jit(self.diag)
+        acc = node.mapaccum("zd_chunk", self.K, [0, 1, 2], [0, 1, 2])
+        xc, tc0, kc = ca.MX.sym("x", 2), ca.MX.sym("tau"), ca.MX.sym("k1", 2)
+        Pc, Rt = ca.MX.sym("P", zd.n_par), ca.MX.sym("R", 9 * nq, self.K)
+        X, TAU, K1, DG = acc(xc, tc0, kc, self.h, Rt, Pc)
+        self.chunk = ca.Function("zd_chunk_fn", [xc, tc0, kc, Pc, Rt], [X, TAU, K1, DG])
+
+    def _batch(self, name: str, *args) -> list:
+        """``name`` over the scenarios (:func:`~biped_casadi.simulation.kernel.call_batched`)."""
+        return call_batched(self._simd, self._mapped, name, *args)
 
     @cached(maxsize=64)
     def _mapped(self, name: str, n: int) -> ca.Function:
         """``name`` mapped over n scenarios (:func:`~biped_casadi.simulation.kernel.mapped`)."""
         return mapped(getattr(self, name), n)
 
+    def _chunk(self, x, tau, k1, P, R):
+        """K RK4 nodes of m scenarios from (x, tau), the rhs there k1, with parameters P,
+        reference table R: the states (2, m, K), times (m, K), rhs (2, m, K) and
+        diagnostics (rows, m, K) after each."""
+        m = len(x)
+        if self._simd is not None:
+            X, T, K1, D = self._simd["chunk"](x.T, tau[None, :], k1.T, [self.h], R, P.T,
+                                              K=self.K, threads=threads())
+            return X, T[0], K1, D
+        X, T, K1, D = (np.array(v) for v in self._mapped("chunk", m)(
+            x.T, tau[None, :], k1.T, P.T, R))
+        return (X.reshape(2, m, self.K), T.reshape(m, self.K), K1.reshape(2, m, self.K),
+                D.reshape(-1, m, self.K))
+
     def _reference(self, tau):
         """(q^d, dq^d, ddq^d) stacked, (3 nq, n) for the taus."""
-        qd, dqd, ddqd = self.gait.evaluate(np.minimum(np.atleast_1d(tau), self.gait.t_max))
+        tau = np.minimum(np.atleast_1d(np.asarray(tau, float)), self.gait.t_max)
+        if self._simd is not None and tau.size > 1:
+            qd, dqd, ddqd, _ = self._batch("reference", tau[None, :], self.gait.states(tau))
+        else:
+            qd, dqd, ddqd = self.gait.evaluate(tau)
         return np.vstack([qd, dqd, ddqd])
 
     # ----------------------------------------------------------- scenarios
@@ -193,7 +248,7 @@ class ZeroDynamicsWalker:
         for i in range(min(n, len(M1s))):
             check_M1(M1s[i], self.nu)
         tc = np.broadcast_to(np.asarray(rejoin, float), (n,)) * self.T
-        x0, y, dy = (np.array(v) for v in self._mapped("start", n)(q0.T, dq0.T, M1s.T))
+        x0, y, dy = self._batch("start", q0.T, dq0.T, M1s.T, self._R0)
         return x0.T, self.zd.params(M1s, tc, y.T, dy.T).reshape(n, -1)
 
     def den_scale(self, M1s) -> np.ndarray:
@@ -315,7 +370,8 @@ class ZeroDynamicsWalker:
         S, m = self.schema, idx.size
         Pk = P[idx]
         R0 = np.repeat(self._reference(tau0), m, axis=1)
-        D0 = np.array(self._mapped("diag", m)(x[idx].T, np.full((1, m), tau0), R0, Pk.T))
+        D0, k1 = self._batch("diag", x[idx].T, np.full((1, m), tau0), R0, Pk.T)
+        k1 = k1.T.copy()
         sign = np.where(S.row(D0, "den") >= 0, 1.0, -1.0)
         zsw0 = S.row(D0, "zsw")
         _, which = self._check(D0[:, :, None], sign, scale[idx], ground=ground)
@@ -335,14 +391,11 @@ class ZeroDynamicsWalker:
             li = np.flatnonzero(live)
             if li.size == 0:
                 break
-            Xs, Ts, Dg = (np.array(v) for v in self._mapped("chunk", li.size)(
-                xcur[li].T, taucur[li][None, :], Pk[li].T, self._rtab[ci]))
-            Xs = Xs.reshape(2, li.size, self.K)
-            Ts = Ts.reshape(li.size, self.K)
-            Dg = Dg.reshape(-1, li.size, self.K)
+            Xs, Ts, K1, Dg = self._chunk(xcur[li], taucur[li], k1[li], Pk[li],
+                                         self._rtab[ci])
             if (ci + 1) / CHUNKS_PER_STEP > self.horizon + 1e-12:  # last partial chunk
                 keep = Ts[0] <= self.horizon * self.T + 1e-12
-                Xs, Ts, Dg = Xs[:, :, keep], Ts[:, keep], Dg[:, :, keep]
+                Xs, Ts, K1, Dg = Xs[:, :, keep], Ts[:, keep], K1[:, :, keep], Dg[:, :, keep]
             zs = S.row(Dg, "zsw")
             zp = np.concatenate([zprev[li][:, None], zs[:, :-1]], axis=1)
             gl = (ground[0][li], ground[1][li])
@@ -367,6 +420,7 @@ class ZeroDynamicsWalker:
             live[li[~cont]] = False
             xcur[li[cont]] = Xs[:, cont, -1].T
             taucur[li[cont]] = Ts[cont, -1]
+            k1[li[cont]] = K1[:, cont, -1].T
             zprev[li[cont]] = zs[cont, -1]
         missing = alive[idx] & ~struck
         run.fail(idx[missing], "no_impact", k)
@@ -384,24 +438,23 @@ class ZeroDynamicsWalker:
         S, nu, m = self.schema, self.nu, gi.size
         Ps = P[gi]
         hk = ahead[gi]
-        ev = self._mapped("event", m)
         za_r = np.vstack([xa.T, self.gait.states(ta)])
 
         def event(eta):
-            z, dz, *_ = ev(za_r, ta[None, :], eta[None, :], Ps.T)
-            return np.array(z).ravel() - hk, np.array(dz).ravel()
+            z, dz, *_ = self._batch("event", za_r, ta[None, :], eta[None, :], Ps.T)
+            return z.ravel() - hk, dz.ravel()
 
         eta = locate_strike(event, self.h, za - hk, zb - hk)
-        _, _, xe, qe, dqe = (np.array(v) for v in ev(za_r, ta[None, :], eta[None, :], Ps.T))
+        _, _, xe, qe, dqe = self._batch("event", za_r, ta[None, :], eta[None, :], Ps.T)
         xe = xe.T
         tm = ta + eta
         Rm = self._reference(tm)
-        Dm = np.array(self._mapped("diag", m)(xe.T, tm[None, :], Rm, Ps.T))
+        Dm, _ = self._batch("diag", xe.T, tm[None, :], Rm, Ps.T)
         _, which = self._check(Dm[:, :, None], sign, scale[gi],
                                ground=(hk, np.zeros(m)))
         self._track(run, gi, Dm[:, :, None])
         which = np.where(which == "", strike_violation(S.row(Dm, "dzsw")), which)
-        xn, yn, dyn, F, vl = (np.array(v) for v in self._mapped("impact", m)(qe, dqe, Ps.T))
+        xn, yn, dyn, F, vl = self._batch("impact", qe, dqe, Ps.T, self._R0)
         F, vl = F.T, vl.ravel()
         rec = np.flatnonzero(which == "")          # a valid strike: the step is complete
         err = xe - self.ref_T[None, :]

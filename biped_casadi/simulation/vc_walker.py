@@ -24,7 +24,8 @@ from ..control.output_law import SECTION
 from ..control.reference import require_same_robot
 from ..control.virtual_constraints import constraint_surface
 from ..numerics import compiled, rk4_step
-from .kernel import Diagnostics, mapped
+from ..simd import kernels
+from .kernel import Diagnostics, call_batched, mapped, threads
 from .options import SimulationOptions
 from .outcome import OutcomeRecorder, WalkBatch
 from .terrain import ground_levels, step_heights
@@ -111,13 +112,24 @@ class VirtualConstraintWalker:
         Fx, Fz = m.ground_reaction_acc(q, dq, ddq)
         diag = self.schema.vector(m, q, dq, u, Fx, Fz, den)
         node = ca.Function("vc_node", [z, th, hs, p], [ca.cse(zn), thn, ca.cse(diag)])
-        if self._jit:        # compiled once per content, kept in the cache folder
+        self.node = node
+        self._build_steps(th, p)
+        # four scenarios per SIMD vector where the machine allows (biped_casadi.simd)
+        self._simd = kernels({"chunk": (node, 2, ["sample", "sample"]),
+                              **{k: (getattr(self, k), 0, ["sample"] * getattr(self, k).n_in())
+                                 for k in ("impact", "foot", "start")}},
+                             "vc_walker") if self._jit else None
+        if self._jit and self._simd is None:   # compiled once per content, kept on disk
             node = compiled(node, "-O2")
         self.start_node = node                   # with h = 0: the diagnostics of a state
         acc = node.mapaccum("vc_nodes", self.nodes, [0, 1], [0, 1])
         zc, thc, hc = ca.MX.sym("z", 2), ca.MX.sym("theta"), ca.MX.sym("h")
         pc = ca.MX.sym("p", self.n_par)
         self.chunk = ca.Function("vc_step", [zc, thc, hc, pc], list(acc(zc, thc, hc, pc)))
+
+    def _build_steps(self, th, p):
+        """The Functions of a step's ends: the foot on the surface, the impact, the start."""
+        m, vm = self.model, self.vmap
         self.foot = vm.corrected_foot
         wm = ca.SX.sym("w_minus")
         qm, Q1m, _, _, _, _ = vm.corrected(th, wm, p)
@@ -130,6 +142,22 @@ class VirtualConstraintWalker:
     @cached(maxsize=16)
     def _mapped(self, name: str, n: int) -> ca.Function:
         return mapped(getattr(self, name), n)
+
+    def _batch(self, name: str, *args) -> list:
+        """``name`` over the scenarios (:func:`~biped_casadi.simulation.kernel.call_batched`)."""
+        return call_batched(self._simd, self._mapped, name, *args)
+
+    def _nodes(self, z0, theta, hs, p, K):
+        """K nodes from (w, t) = z0 at phases theta, steps hs: z (2, m, K), theta (m, K),
+        diagnostics (rows, m, K) after each."""
+        m_ = z0.shape[1]
+        if self._simd is not None:
+            Z, TH, Dg = self._simd["chunk"](z0, theta[None, :], hs[None, :], p.T, K=K,
+                                            threads=threads())
+            return Z, TH[0], Dg
+        f = self._mapped("chunk" if K == self.nodes else "start_node", m_)
+        Z, TH, Dg = (np.array(v) for v in f(z0, theta[None, :], hs[None, :], p.T))
+        return Z.reshape(2, m_, K), TH.reshape(m_, K), Dg.reshape(-1, m_, K)
 
     def section_states(self, x):
         """The states (theta, w) on the constraint surface with given (q_u, dq_u).
@@ -202,8 +230,7 @@ class VirtualConstraintWalker:
         WalkBatch
         """
         q0, dq0 = (np.atleast_2d(np.asarray(a, float)) for a in (q0, dq0))
-        n = len(q0)
-        th, w, p = (np.array(v) for v in self._mapped("start", n)(q0.T, dq0.T))
+        th, w, p = self._batch("start", q0.T, dq0.T)
         return self.walk(th.ravel(), w.ravel(), steps, terrain, p=p.T, step_start=True)
 
     def _strike_phase(self, height, p):
@@ -211,9 +238,8 @@ class VirtualConstraintWalker:
         the step's corrected surface (Newton), NaN where it does not converge."""
         n = len(height)
         th = np.full(n, self.vmap.theta_minus)
-        foot = self._mapped("foot", n)
         for _ in range(40):
-            _, z, dz = (np.array(v).ravel() for v in foot(th[None, :], p.T))
+            _, z, dz = (v.ravel() for v in self._batch("foot", th[None, :], p.T))
             with np.errstate(invalid="ignore", divide="ignore"):
                 step = (z - height) / dz
             th = th - step
@@ -275,12 +301,10 @@ class VirtualConstraintWalker:
                 outside = ~((thm >= lo) & (thm <= hi)) & np.isfinite(thm)
             hs = np.where(stalled | outside, 0.0, hs)
             z0 = np.vstack([w[idx], np.zeros(m_)])
-            _, _, D0 = (np.array(v) for v in self._mapped("start_node", m_)(
-                z0, theta[idx][None, :], np.zeros((1, m_)), p[idx].T))
-            Z, TH, Dg = (np.array(v) for v in self._mapped("chunk", m_)(
-                z0, theta[idx][None, :], hs[None, :], p[idx].T))
-            Z = np.concatenate([z0[:, :, None], Z.reshape(2, m_, self.nodes)], axis=2)
-            Dg = np.concatenate([D0[:, :, None], Dg.reshape(-1, m_, self.nodes)], axis=2)
+            _, _, D0 = self._nodes(z0, theta[idx], np.zeros(m_), p[idx], 1)
+            Z, TH, Dg = self._nodes(z0, theta[idx], hs, p[idx], self.nodes)
+            Z = np.concatenate([z0[:, :, None], Z], axis=2)
+            Dg = np.concatenate([D0, Dg], axis=2)
             ws = Z[0]
             rows = S.rows(Dg, np.all(np.isfinite(Z), axis=0))
             zs = rows["zsw"]
@@ -317,8 +341,8 @@ class VirtualConstraintWalker:
                 continue
             gi = idx[ok]
             wm, tm = ws[ok, -1], Z[1, ok, -1]
-            th_p, w_p, p_p, F, vl, qu_m, dqu_m = (np.array(v) for v in self._mapped(
-                "impact", ok.size)(thm[ok][None, :], wm[None, :], p[gi].T))
+            th_p, w_p, p_p, F, vl, qu_m, dqu_m = self._batch(
+                "impact", thm[ok][None, :], wm[None, :], p[gi].T)
             F, vl, th_p, w_p = F.T, vl.ravel(), th_p.ravel(), w_p.ravel()
             err = np.c_[qu_m.ravel(), dqu_m.ravel()] - self.ref_T[None, :]
             run.impact(gi, k, err[:, 0], err[:, 1], tm, F)

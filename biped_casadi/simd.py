@@ -1,0 +1,464 @@
+"""Batch kernels: an SX Function run over many scenarios, four at a time in SIMD lanes.
+
+CasADi's generated C evaluates one scenario per call, in scalar double precision, so a
+batch of scenarios uses one of the four double lanes of an AVX2 register.  This module
+translates an SX Function's instruction list (its work vector, after CasADi's register
+allocation) into C on a four-lane vector type (GCC's vector extensions): each
+instruction becomes one vector operation, sines and cosines call glibc's vector math
+library (``libmvec``), so four scenarios cost about what one did.
+
+:class:`AccumulatedMap` is the batched form of ``f.mapaccum(K)`` mapped over scenarios,
+the pattern of a fixed-step integration: the first inputs of ``f`` are its state, fed
+from its first outputs node after node; the other inputs are per scenario (constant
+along the nodes), per node (shared by every scenario) or one value for all.  The whole
+K-node run of a block of four scenarios happens in C; the scenarios are split over
+threads (ctypes releases the GIL).
+
+IEEE semantics are kept (no ``-ffast-math``: NaN and infinities propagate as in the
+scalar code, which the simulators rely on).  The results differ from CasADi's scalar
+evaluation only by rounding: fused multiply-adds and libmvec's sine and cosine (within
+4 ulp); ``tests/test_simd.py`` measures the difference.
+
+Without a C compiler, on a CPU without AVX2 or for an instruction this translator does
+not know, the builder :func:`kernels` returns None and the caller keeps CasADi's map.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import subprocess
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["AccumulatedMap", "kernels", "available"]
+
+LANES = 4
+_SINCOS = True       # a sine and a cosine of one value share a range reduction
+
+_HEADER = r"""
+#include <math.h>
+typedef double V __attribute__((vector_size(32)));
+typedef long long L __attribute__((vector_size(32)));
+V _ZGVdN4v_exp(V);
+V _ZGVdN4v_log(V);
+static const V ZERO = {0.0, 0.0, 0.0, 0.0};
+static const V ONE = {1.0, 1.0, 1.0, 1.0};
+#define S(c) ((V){c, c, c, c})
+#define B(m) ((V)((m) & (L)ONE))
+#define SEL(m, a, b) ((V)(((L)(a) & (m)) | ((L)(b) & ~(m))))
+/* sine and cosine of four lanes at once, inline (a call would spill every vector
+   register): x = q pi/2 + r, |r| <= pi/4, with pi/2 in three parts (exact products for
+   |q| < 2^20), then the minimax polynomials of fdlibm's kernels on r, the quadrant by
+   swapping and negating.  Lanes beyond 1e5 rad (or infinite) take libm's scalar path. */
+static inline __attribute__((always_inline)) void vsincos(V x, V* sn, V* cs) {
+    const V big = S(1e5);
+    V ax = (V)((L)x & (L)S(0x1.fffffffffffffp+1023));
+    L out = ax > big;
+    V q = __builtin_ia32_roundpd256(x * S(6.36619772367581382433e-01), 8);
+    V r = x - q * S(1.57079632673412561417e+00);
+    r = r - q * S(6.07710050630396597660e-11);
+    r = r - q * S(2.02226624871116645580e-21);
+    V z = r * r, v = z * r;
+    V ps = S(8.33333333332248946124e-03) + z * (S(-1.98412698298579493134e-04) + z * (
+        S(2.75573137070700676789e-06) + z * (S(-2.50507602534068634195e-08)
+        + z * S(1.58969099521155010221e-10))));
+    V si = r + v * (S(-1.66666666666666324348e-01) + z * ps);
+    V pc = z * (S(4.16666666666666019037e-02) + z * (S(-1.38888888888741095749e-03) + z * (
+        S(2.48015872894767294178e-05) + z * (S(-2.75573143513906633035e-07) + z * (
+        S(2.08757232129817482790e-09) + z * S(-1.13596475577881948265e-11))))));
+    V hz = S(0.5) * z, w = ONE - hz;
+    V co = w + (((ONE - w) - hz) + z * pc);
+    L n = __builtin_convertvector(q, L);
+    L swap = (n & 1) != 0;
+    L sgn = (L)S(-0.0);
+    V s1 = SEL(swap, co, si), c1 = SEL(swap, si, co);
+    *sn = (V)((L)s1 ^ (((n & 2) != 0) & sgn));
+    *cs = (V)((L)c1 ^ ((((n + 1) & 2) != 0) & sgn));
+    if (__builtin_expect(out[0] | out[1] | out[2] | out[3], 0))
+        for (int l = 0; l < 4; l++) if (out[l]) { (*sn)[l] = sin(x[l]); (*cs)[l] = cos(x[l]); }
+}
+static inline V vsin(V a) { V s, c; vsincos(a, &s, &c); return s; }
+static inline V vcos(V a) { V s, c; vsincos(a, &s, &c); return c; }
+static inline V vexp(V a) { return _ZGVdN4v_exp(a); }
+static inline V vlog(V a) { return _ZGVdN4v_log(a); }
+static inline V vsqrt(V a) { return __builtin_ia32_sqrtpd256(a); }
+static inline V vif0(V c, V y) { return (V)((c != ZERO) & (L)y); }
+#define LANE1(name, fn) static inline V name(V a) { V r; \
+    for (int l = 0; l < 4; l++) r[l] = fn(a[l]); return r; }
+#define LANE2(name, fn) static inline V name(V a, V b) { V r; \
+    for (int l = 0; l < 4; l++) r[l] = fn(a[l], b[l]); return r; }
+static inline double sign_(double x) { return x > 0 ? 1.0 : (x < 0 ? -1.0 : x); }
+LANE1(vabs, fabs) LANE1(vtan, tan) LANE1(vasin, asin) LANE1(vacos, acos)
+LANE1(vatan, atan) LANE1(vfloor, floor) LANE1(vceil, ceil) LANE1(vsign, sign_)
+LANE1(vtanh, tanh) LANE2(vmin, fmin) LANE2(vmax, fmax) LANE2(vatan2, atan2)
+LANE2(vpow, pow)
+"""
+_OPS = {
+    ca.OP_ASSIGN: "{0}", ca.OP_ADD: "{0} + {1}", ca.OP_SUB: "{0} - {1}",
+    ca.OP_MUL: "{0} * {1}", ca.OP_DIV: "{0} / {1}", ca.OP_NEG: "-{0}",
+    ca.OP_SQ: "{0} * {0}", ca.OP_TWICE: "{0} + {0}", ca.OP_INV: "ONE / {0}",
+    ca.OP_SIN: "vsin({0})", ca.OP_COS: "vcos({0})", ca.OP_EXP: "vexp({0})",
+    ca.OP_LOG: "vlog({0})", ca.OP_SQRT: "vsqrt({0})", ca.OP_FABS: "vabs({0})",
+    ca.OP_TAN: "vtan({0})", ca.OP_ASIN: "vasin({0})", ca.OP_ACOS: "vacos({0})",
+    ca.OP_ATAN: "vatan({0})", ca.OP_TANH: "vtanh({0})", ca.OP_FLOOR: "vfloor({0})",
+    ca.OP_CEIL: "vceil({0})", ca.OP_SIGN: "vsign({0})", ca.OP_FMIN: "vmin({0}, {1})",
+    ca.OP_FMAX: "vmax({0}, {1})", ca.OP_ATAN2: "vatan2({0}, {1})",
+    ca.OP_POW: "vpow({0}, {1})", ca.OP_CONSTPOW: "vpow({0}, {1})",
+    ca.OP_IF_ELSE_ZERO: "vif0({0}, {1})", ca.OP_LT: "B({0} < {1})",
+    ca.OP_LE: "B({0} <= {1})", ca.OP_EQ: "B({0} == {1})", ca.OP_NE: "B({0} != {1})",
+    ca.OP_NOT: "B({0} == ZERO)", ca.OP_AND: "B(({0} != ZERO) & ({1} != ZERO))",
+    ca.OP_OR: "B(({0} != ZERO) | ({1} != ZERO))",
+}
+
+
+def _trig_plan(f: ca.Function):
+    """Which sines and cosines ``f`` needs and how to get them.
+
+    Values are named by the instruction that produces them.  Returns the arguments of
+    ``f``'s sines and cosines, split into ``derived`` ({value: (op, children)}: a sum,
+    difference, negation or double of arguments whose sine and cosine are known, by the
+    addition formulas) and the rest (one ``vsincos`` each)."""
+    writer, ins, op_of = {}, {}, {}
+    for k in range(f.n_instructions()):
+        op, a = f.instruction_id(k), f.instruction_input(k)
+        if op not in _OPS and op not in (ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST):
+            raise NotImplementedError(f"{f.name()}: operation {op} has no vector form "
+                                      "(a call of another Function, for one)")
+        op_of[k] = op
+        if op not in (ca.OP_INPUT, ca.OP_CONST):
+            ins[k] = [writer[i] for i in a] if op != ca.OP_OUTPUT else []
+        if op != ca.OP_OUTPUT:
+            writer[f.instruction_output(k)[0]] = k
+    args = {ins[k][0] for k in op_of if op_of[k] in (ca.OP_SIN, ca.OP_COS)}
+    derived = {}
+    if not _SINCOS:
+        return args, derived, ins
+    def known(v, depth):
+        """Can the sine and cosine of v come from those of arguments, through at most
+        ``depth`` sums and differences of values that are not arguments?"""
+        if v in args:
+            return True
+        op, ch = op_of[v], ins.get(v, [])
+        return depth > 0 and op in (ca.OP_ADD, ca.OP_SUB) and all(
+            known(c, depth - 1) for c in ch)
+
+    def derive(v):
+        op, ch = op_of[v], ins.get(v, [])
+        if op in (ca.OP_ADD, ca.OP_SUB) and all(known(c, 2) for c in ch):
+            derived[v] = (op, ch)
+            for c in ch:
+                if c not in args:
+                    derive(c)
+        elif op in (ca.OP_NEG, ca.OP_TWICE) and ch[0] in args:
+            derived[v] = (op, ch)
+
+    # a value that is not an argument but a summand of two or more (a coordinate whose
+    # own sine is not needed) is worth one vsincos: the sums then come from it
+    count = {}
+    for v in args:
+        ch = ins.get(v, [])
+        if op_of[v] in (ca.OP_ADD, ca.OP_SUB):
+            out = [c for c in ch if c not in args]
+            if len(out) == 1:
+                count[out[0]] = count.get(out[0], 0) + 1
+    args = args | {c for c, n in count.items() if n >= 2}
+    for v in sorted(args):                          # children come before parents
+        derive(v)
+    return args | set(derived), derived, ins
+
+
+_COMBINE = {
+    ca.OP_ADD: ("ts{b} * tc{c} + tc{b} * ts{c}", "tc{b} * tc{c} - ts{b} * ts{c}"),
+    ca.OP_SUB: ("ts{b} * tc{c} - tc{b} * ts{c}", "tc{b} * tc{c} + ts{b} * ts{c}"),
+    ca.OP_NEG: ("-ts{b}", "tc{b}"),
+    ca.OP_TWICE: ("S(2.0) * ts{b} * tc{b}", "tc{b} * tc{b} - ts{b} * ts{b}"),
+}
+
+
+def _body(f: ca.Function) -> str:
+    """The C statements of ``f`` on vector work variables ``w<i>``: inputs from
+    ``in<i>[nz]``, outputs to ``out<i>[nz]`` (arrays of V).
+
+    Sines and cosines are the costly instructions on four lanes, so they are planned
+    (:func:`_trig_plan`): the sine and the cosine of one value share one ``vsincos``, and
+    the sine and cosine of a sum of such values (the model's angles are sums of
+    coordinates) come from the addition formulas."""
+    if not f.is_a("SXFunction"):
+        raise NotImplementedError(f"{f.name()}: only SX Functions translate")
+    args, derived, ins = _trig_plan(f)
+    base = sorted(args - set(derived))
+    done = set()
+    lines = [f"V {', '.join(f'w{i}' for i in range(f.sz_w()))};"] if f.sz_w() else []
+    if args:
+        lines.append(f"V {', '.join(f'ts{v}, tc{v}' for v in sorted(args))};")
+    if base:
+        lines.append(f"V {', '.join(f'a{v}' for v in base)};")
+    base = set(base)
+
+    def ensure(v):
+        if v in done:
+            return
+        if v in derived:
+            op, ch = derived[v]
+            for c in ch:
+                ensure(c)
+            sn, cs = _COMBINE[op]
+            fmt = dict(b=ch[0], c=ch[-1])
+            lines.append(f"ts{v} = {sn.format(**fmt)}; tc{v} = {cs.format(**fmt)};")
+        else:
+            lines.append(f"vsincos(a{v}, &ts{v}, &tc{v});")
+        done.add(v)
+
+    for k in range(f.n_instructions()):
+        op = f.instruction_id(k)
+        a, r = f.instruction_input(k), f.instruction_output(k)
+        if op == ca.OP_INPUT:
+            lines.append(f"w{r[0]} = in{a[0]}[{a[1]}];")
+        elif op == ca.OP_OUTPUT:
+            lines.append(f"out{r[0]}[{r[1]}] = w{a[0]};")
+        elif op == ca.OP_CONST:
+            lines.append(f"w{r[0]} = S({float(f.instruction_constant(k))!r});")
+        elif op in (ca.OP_SIN, ca.OP_COS):
+            v = ins[k][0]
+            ensure(v)
+            lines.append(f"w{r[0]} = {'ts' if op == ca.OP_SIN else 'tc'}{v};")
+        elif op in _OPS:
+            lines.append(f"w{r[0]} = " + _OPS[op].format(*(f"w{i}" for i in a)) + ";")
+        else:
+            raise NotImplementedError(f"{f.name()}: operation {op} has no vector form")
+        if k in base:                        # keep the argument: its register is reused
+            lines.append(f"a{k} = w{r[0]};")
+    return "\n    ".join(lines).replace("S(nan)", "S(NAN)").replace("S(inf)", "S(INFINITY)") \
+        .replace("S(-inf)", "S(-INFINITY)")
+
+
+def _cpu() -> str:
+    """The CPU's model and flags (``-march=native`` code is for this CPU only)."""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            lines = fh.read().splitlines()
+    except OSError:
+        return ""
+    return "".join(x for x in lines if x.startswith(("model name", "flags")))[:4096]
+
+
+def available() -> bool:
+    """True where the kernels can run: x86-64 with AVX2 and FMA, and gcc on the path."""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            flags = fh.read()
+    except OSError:
+        return False
+    return " avx2" in flags and " fma" in flags and _gcc()
+
+
+def _gcc() -> bool:
+    try:
+        subprocess.run(["gcc", "--version"], check=True, capture_output=True)
+        return True
+    except (OSError, subprocess.CalledProcessError):
+        return False
+
+
+_FLAGS = ["-march=native", "-mfma", "-fno-math-errno", "-fno-trapping-math", "-fPIC",
+          "-shared"]
+
+
+def _library(name: str, source: str, optimisation: str = "-O2") -> ctypes.CDLL:
+    """Compile ``source`` once per content into the cache folder and load it."""
+    from .caching import cache_dir, claimed
+    root = cache_dir() / "compiled"
+    flags = [optimisation, *_FLAGS]
+    key = hashlib.sha256((source + " ".join(flags) + _cpu()).encode()).hexdigest()[:16]
+    so = root / f"{name}_simd_{key}.so"
+    root.mkdir(parents=True, exist_ok=True)
+    with claimed(so):
+        if not so.is_file():
+            with tempfile.TemporaryDirectory() as tmp:
+                c = os.path.join(tmp, f"{name}.c")
+                with open(c, "w") as fh:
+                    fh.write(source)
+                out = str(so) + f".tmp{os.getpid()}"
+                subprocess.run(["gcc", *flags, c, "-o", out, "-lmvec", "-lm"], check=True,
+                               capture_output=True)
+                os.replace(out, so)
+    return ctypes.CDLL(str(so))
+
+
+class AccumulatedMap:
+    """``f.mapaccum(K)`` over a batch of scenarios, compiled to four-lane C.
+
+    Built by :func:`kernels` (one shared library for several Functions).
+
+    Parameters
+    ----------
+    f : casadi.Function
+        An SX Function of one scenario and one node; its first ``n_acc`` inputs are
+        the state, replaced after every node by its first ``n_acc`` outputs (same sizes).
+    n_acc : int
+        How many leading inputs are accumulated (0: a plain map, called with K = 1).
+    kinds : sequence of str
+        For each input after the accumulated ones: ``"sample"`` (one column per
+        scenario, constant along the nodes), ``"node"`` (one column per node, the same
+        for every scenario) or ``"const"`` (one column for all).
+
+    Calling it with the accumulated inputs' start values and the other inputs (each an
+    (n_i, N) array for ``"sample"`` and the accumulated ones, (n_i, K) for ``"node"``,
+    (n_i,) for ``"const"``) returns every output at every node, (n_out, N, K) arrays.
+    """
+
+    def __init__(self, f: ca.Function, n_acc: int, kinds):
+        kinds = tuple(kinds)
+        if len(kinds) + n_acc != f.n_in():
+            raise ValueError(f"{f.name()}: {f.n_in()} inputs, {n_acc} accumulated + "
+                             f"{len(kinds)} kinds given")
+        for i in range(n_acc):
+            if f.nnz_in(i) != f.nnz_out(i):
+                raise ValueError(f"{f.name()}: accumulated input {i} and output {i} differ "
+                                 "in size")
+        for i in range(f.n_in()):
+            if not f.sparsity_in(i).is_dense():
+                raise NotImplementedError(f"{f.name()}: input {i} is sparse")
+        self.f, self.n_acc, self.kinds = f, n_acc, ("acc",) * n_acc + kinds
+        self.n_in = [f.nnz_in(i) for i in range(f.n_in())]
+        self.n_out = [f.nnz_out(i) for i in range(f.n_out())]
+        self.name = f.name()
+        self._run = None
+
+    def _bind(self, lib: ctypes.CDLL):
+        self._run = getattr(lib, f"run_{self.name}")
+        self._run.restype = None
+        self._run.argtypes = [ctypes.c_int] * 4 + [ctypes.POINTER(ctypes.c_double)] * (
+            len(self.n_in) + len(self.n_out))
+
+    def source(self) -> str:
+        """The C of this kernel: ``node_<name>`` on four lanes and ``run_<name>``."""
+        ni, no, nm = self.n_in, self.n_out, self.name
+        args = ", ".join(f"const V* in{i}" for i in range(len(ni)))
+        outs = ", ".join(f"V* out{i}" for i in range(len(no)))
+        ptrs = ", ".join([f"const double* I{i}" for i in range(len(ni))]
+                         + [f"double* O{i}" for i in range(len(no))])
+        decl = [f"V in{i}[{ni[i]}];" for i in range(len(ni))] + \
+               [f"V out{i}[{no[i]}];" for i in range(len(no))]
+        load, per_node, step = [], [], []
+        for i, kind in enumerate(self.kinds):
+            if kind in ("acc", "sample"):      # (n_i, N): lanes from columns s..s+3
+                load.append(f"for (int j = 0; j < {ni[i]}; j++) for (int l = 0; l < 4; l++)"
+                            f" in{i}[j][l] = I{i}[(long)j * N + col[l]];")
+            elif kind == "const":
+                load.append(f"for (int j = 0; j < {ni[i]}; j++) in{i}[j] = S(I{i}[j]);")
+            else:                              # (n_i, K): node k's column, every lane
+                per_node.append(f"for (int j = 0; j < {ni[i]}; j++) in{i}[j] = "
+                                f"S(I{i}[(long)j * K + k]);")
+        for i in range(self.n_acc):
+            step.append(f"for (int j = 0; j < {ni[i]}; j++) in{i}[j] = out{i}[j];")
+        store = [f"for (int j = 0; j < {no[i]}; j++) for (int l = 0; l < nl; l++) "
+                 f"O{i}[((long)j * N + s + l) * K + k] = out{i}[j][l];"
+                 for i in range(len(no))]
+        nl = "\n        "
+        return f"""
+static inline void node_{nm}({args}, {outs}) {{
+    {_body(self.f)}
+}}
+
+void run_{nm}(int N, int K, int s0, int s1, {ptrs}) {{
+    {' '.join(decl)}
+    for (int s = s0; s < s1; s += 4) {{
+        int nl = s1 - s < 4 ? s1 - s : 4, col[4];
+        for (int l = 0; l < 4; l++) col[l] = s + (l < nl ? l : nl - 1);
+        {nl.join(load)}
+        for (int k = 0; k < K; k++) {{
+            {nl.join(per_node)}
+            node_{nm}({', '.join(f'in{i}' for i in range(len(ni)))},
+                 {', '.join(f'out{i}' for i in range(len(no)))});
+            {nl.join(store)}
+            {nl.join(step)}
+        }}
+    }}
+}}
+"""
+
+    def __call__(self, *inputs, K: int = 1, threads: int = 1):
+        """Run K nodes from the given inputs on ``threads`` threads; returns the outputs,
+        (n_out, N, K) each."""
+        if len(inputs) != len(self.kinds):
+            raise ValueError(f"{self.name}: {len(self.kinds)} inputs, got {len(inputs)}")
+        N = None
+        arrs = []
+        for i, (x, kind) in enumerate(zip(inputs, self.kinds)):
+            a = np.asarray(x, dtype=float)
+            if kind in ("acc", "sample"):
+                a = a.reshape(self.n_in[i], -1)
+                if N is None:
+                    N = a.shape[1]
+                elif a.shape[1] != N:
+                    raise ValueError(f"{self.name}: input {i} has {a.shape[1]} scenarios, "
+                                     f"expected {N}")
+            elif kind == "node":
+                a = a.reshape(self.n_in[i], K)
+            else:
+                a = a.reshape(self.n_in[i])
+            arrs.append(np.ascontiguousarray(a))
+        if N is None:
+            raise ValueError(f"{self.name}: no per-scenario input")
+        outs = [np.empty((n, N, K)) for n in self.n_out]
+        if N == 0:
+            return outs
+        P = ctypes.POINTER(ctypes.c_double)
+        ptrs = [a.ctypes.data_as(P) for a in arrs] + [o.ctypes.data_as(P) for o in outs]
+        parts = max(1, min(int(threads), N // (2 * LANES)))
+        edges = [LANES * ((N // LANES) * p // parts) for p in range(parts)] + [N]
+        if parts == 1:
+            self._run(N, K, 0, N, *ptrs)
+        else:
+            list(_pool(parts).map(lambda p: self._run(N, K, edges[p], edges[p + 1], *ptrs),
+                                  range(parts)))
+        return outs
+
+
+def kernels(specs, name: str = "kernels", optimisation: str = "-O2") -> dict | None:
+    """Several :class:`AccumulatedMap` compiled into one shared library (one compiler run,
+    kept in the cache folder by content and CPU).
+
+    Parameters
+    ----------
+    specs : dict
+        ``{key: (f, n_acc, kinds)}``; the Functions' names must differ.
+    name : str
+        The library's name in the cache folder.
+    optimisation : str
+        The compiler's optimisation flag (``"-O1"`` compiles about twice as fast).
+
+    Returns
+    -------
+    dict or None
+        ``{key: AccumulatedMap}``, or None where the kernels cannot be built here (no
+        AVX2, no C compiler, an instruction without a vector form, a failing compile).
+    """
+    if not available():
+        return None
+    try:
+        maps = {k: AccumulatedMap(*v) for k, v in specs.items()}
+        if len({m.name for m in maps.values()}) != len(maps):
+            raise ValueError("kernels: the Functions' names must differ")
+        lib = _library(name, _HEADER + "".join(m.source() for m in maps.values()),
+                       optimisation)
+    except (NotImplementedError, OSError, subprocess.CalledProcessError):
+        return None
+    for m in maps.values():
+        m._bind(lib)
+    return maps
+
+
+_POOLS: dict = {}
+
+
+def _pool(n: int) -> ThreadPoolExecutor:
+    """One thread pool per size, kept for the process."""
+    if n not in _POOLS:
+        _POOLS[n] = ThreadPoolExecutor(n, thread_name_prefix="simd")
+    return _POOLS[n]
