@@ -115,39 +115,66 @@ _OPS = {
 }
 
 
+_SLOT = 64           # value ids: 64 k + i for output i of instruction k
+
+
+def _callee(f: ca.Function, k: int) -> ca.Function:
+    """The Function that instruction k of ``f`` (an OP_CALL) calls: the one called
+    Function with as many input and output nonzeros as the call."""
+    n_in, n_out = len(f.instruction_input(k)), len(f.instruction_output(k))
+    found = {g.name(): g for g in f.find_functions(1)
+             if sum(g.nnz_in(i) for i in range(g.n_in())) == n_in
+             and sum(g.nnz_out(i) for i in range(g.n_out())) == n_out}
+    if len(found) != 1 or n_out >= _SLOT:
+        raise NotImplementedError(f"{f.name()}: instruction {k} calls a Function this "
+                                  "translator cannot identify")
+    return next(iter(found.values()))
+
+
 def _trig_plan(f: ca.Function):
     """Which sines and cosines ``f`` needs and how to get them.
 
-    Values are named by the instruction that produces them.  Returns the arguments of
-    ``f``'s sines and cosines, split into ``derived`` ({value: (op, children)}: a sum,
-    difference, negation or double of arguments whose sine and cosine are known, by the
-    addition formulas) and the rest (one ``vsincos`` each)."""
+    A value is named by the instruction that produces it (64 k + i, i the output of a
+    call).  Returns the arguments of ``f``'s sines and cosines (with the values their
+    sums need), ``derived`` ({value: (op, children)}: a sum, difference, negation or
+    double of values whose sine and cosine are known, by the addition formulas; the
+    others take one ``vsincos`` each) and each instruction's input values."""
     writer, ins, op_of = {}, {}, {}
     for k in range(f.n_instructions()):
         op, a = f.instruction_id(k), f.instruction_input(k)
-        if op not in _OPS and op not in (ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST):
-            raise NotImplementedError(f"{f.name()}: operation {op} has no vector form "
-                                      "(a call of another Function, for one)")
+        if op not in _OPS and op not in (ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_CALL):
+            raise NotImplementedError(f"{f.name()}: operation {op} has no vector form")
         op_of[k] = op
         if op not in (ca.OP_INPUT, ca.OP_CONST):
             ins[k] = [writer[i] for i in a] if op != ca.OP_OUTPUT else []
-        if op != ca.OP_OUTPUT:
-            writer[f.instruction_output(k)[0]] = k
+        if op == ca.OP_CALL:
+            for i, r in enumerate(f.instruction_output(k)):
+                if r >= 0:
+                    writer[r] = _SLOT * k + i
+        elif op != ca.OP_OUTPUT:
+            writer[f.instruction_output(k)[0]] = _SLOT * k
+
+    def op_at(v):
+        return op_of[v // _SLOT] if v % _SLOT == 0 else ca.OP_CALL
+
+    def ins_at(v):
+        return ins.get(v // _SLOT, []) if v % _SLOT == 0 else []
+
     args = {ins[k][0] for k in op_of if op_of[k] in (ca.OP_SIN, ca.OP_COS)}
     derived = {}
     if not _SINCOS:
         return args, derived, ins
+
     def known(v, depth):
         """Can the sine and cosine of v come from those of arguments, through at most
         ``depth`` sums and differences of values that are not arguments?"""
         if v in args:
             return True
-        op, ch = op_of[v], ins.get(v, [])
-        return depth > 0 and op in (ca.OP_ADD, ca.OP_SUB) and all(
-            known(c, depth - 1) for c in ch)
+        return depth > 0 and op_at(v) in (ca.OP_ADD, ca.OP_SUB) and all(
+            known(c, depth - 1) for c in ins_at(v))
 
     def derive(v):
-        op, ch = op_of[v], ins.get(v, [])
+        op, ch = op_at(v), ins_at(v)
         if op in (ca.OP_ADD, ca.OP_SUB) and all(known(c, 2) for c in ch):
             derived[v] = (op, ch)
             for c in ch:
@@ -160,9 +187,8 @@ def _trig_plan(f: ca.Function):
     # own sine is not needed) is worth one vsincos: the sums then come from it
     count = {}
     for v in args:
-        ch = ins.get(v, [])
-        if op_of[v] in (ca.OP_ADD, ca.OP_SUB):
-            out = [c for c in ch if c not in args]
+        if op_at(v) in (ca.OP_ADD, ca.OP_SUB):
+            out = [c for c in ins_at(v) if c not in args]
             if len(out) == 1:
                 count[out[0]] = count.get(out[0], 0) + 1
     args = args | {c for c, n in count.items() if n >= 2}
@@ -179,19 +205,20 @@ _COMBINE = {
 }
 
 
-def _body(f: ca.Function) -> str:
+def _body(f: ca.Function):
     """The C statements of ``f`` on vector work variables ``w<i>``: inputs from
-    ``in<i>[nz]``, outputs to ``out<i>[nz]`` (arrays of V).
+    ``in<i>[nz]``, outputs to ``out<i>[nz]`` (arrays of V); and the Functions it calls.
 
     Sines and cosines are the costly instructions on four lanes, so they are planned
     (:func:`_trig_plan`): the sine and the cosine of one value share one ``vsincos``, and
     the sine and cosine of a sum of such values (the model's angles are sums of
-    coordinates) come from the addition formulas."""
+    coordinates) come from the addition formulas.  A call of another Function (a
+    B-spline, say) runs CasADi's generated C for it lane by lane."""
     if not f.is_a("SXFunction"):
         raise NotImplementedError(f"{f.name()}: only SX Functions translate")
     args, derived, ins = _trig_plan(f)
     base = sorted(args - set(derived))
-    done = set()
+    done, callees = set(), {}
     lines = [f"V {', '.join(f'w{i}' for i in range(f.sz_w()))};"] if f.sz_w() else []
     if args:
         lines.append(f"V {', '.join(f'ts{v}, tc{v}' for v in sorted(args))};")
@@ -222,18 +249,45 @@ def _body(f: ca.Function) -> str:
             lines.append(f"out{r[0]}[{r[1]}] = w{a[0]};")
         elif op == ca.OP_CONST:
             lines.append(f"w{r[0]} = S({float(f.instruction_constant(k))!r});")
+        elif op == ca.OP_CALL:
+            g = _callee(f, k)
+            callees[g.name()] = g
+            lines.append(_call(g, a, r))
         elif op in (ca.OP_SIN, ca.OP_COS):
             v = ins[k][0]
             ensure(v)
             lines.append(f"w{r[0]} = {'ts' if op == ca.OP_SIN else 'tc'}{v};")
-        elif op in _OPS:
-            lines.append(f"w{r[0]} = " + _OPS[op].format(*(f"w{i}" for i in a)) + ";")
         else:
-            raise NotImplementedError(f"{f.name()}: operation {op} has no vector form")
-        if k in base:                        # keep the argument: its register is reused
-            lines.append(f"a{k} = w{r[0]};")
-    return "\n    ".join(lines).replace("S(nan)", "S(NAN)").replace("S(inf)", "S(INFINITY)") \
+            lines.append(f"w{r[0]} = " + _OPS[op].format(*(f"w{i}" for i in a)) + ";")
+        for i, w in enumerate(r if op == ca.OP_CALL else r[:1]):
+            if _SLOT * k + i in base:        # keep the argument: its register is reused
+                lines.append(f"a{_SLOT * k + i} = w{w};")
+    code = "\n    ".join(lines).replace("S(nan)", "S(NAN)").replace("S(inf)", "S(INFINITY)") \
         .replace("S(-inf)", "S(-INFINITY)")
+    return code, callees
+
+
+def _call(g: ca.Function, a, r) -> str:
+    """C that calls CasADi's code of ``g`` once per lane: inputs from the work variables
+    ``a`` (g's input nonzeros in order), outputs to ``r`` (-1: unused)."""
+    offs_in = np.cumsum([0] + [g.nnz_in(i) for i in range(g.n_in())])
+    offs_out = np.cumsum([0] + [g.nnz_out(i) for i in range(g.n_out())])
+    ar = ", ".join(f"ci + {o}" for o in offs_in[:-1])
+    rs = ", ".join(f"co + {o}" for o in offs_out[:-1])
+    load = " ".join(f"ci[{j}] = w{w}[l];" for j, w in enumerate(a))
+    store = " ".join(f"w{w}[l] = co[{j}];" for j, w in enumerate(r) if w >= 0)
+    return (f"{{ double ci[{max(1, len(a))}], co[{max(1, len(r))}]; "
+            f"long long iw_[{g.sz_iw() + 1}]; double w_[{g.sz_w() + 1}]; "
+            f"const double* ar[{g.sz_arg() + 1}] = {{{ar}}}; "
+            f"double* rs[{g.sz_res() + 1}] = {{{rs}}}; "
+            f"for (int l = 0; l < 4; l++) {{ {load} {g.name()}(ar, rs, iw_, w_, 0); {store} }} }}")
+
+
+def _callee_source(g: ca.Function, n: int) -> str:
+    """CasADi's C of ``g``, its internal symbols prefixed (one translation unit each)."""
+    cg = ca.CodeGenerator(f"{g.name()}.c", {"with_header": False})
+    cg.add(g)
+    return f"#define CASADI_CODEGEN_PREFIX\n#define CODEGEN_PREFIX cg{n}_\n" + cg.dump()
 
 
 def _cpu() -> str:
@@ -268,23 +322,27 @@ _FLAGS = ["-march=native", "-mfma", "-fno-math-errno", "-fno-trapping-math", "-f
           "-shared"]
 
 
-def _library(name: str, source: str, optimisation: str = "-O2") -> ctypes.CDLL:
-    """Compile ``source`` once per content into the cache folder and load it."""
+def _library(name: str, sources, optimisation: str = "-O2") -> ctypes.CDLL:
+    """Compile the C ``sources`` (one translation unit each) once per content into the
+    cache folder and load the library."""
     from .caching import cache_dir, claimed
     root = cache_dir() / "compiled"
     flags = [optimisation, *_FLAGS]
-    key = hashlib.sha256((source + " ".join(flags) + _cpu()).encode()).hexdigest()[:16]
+    key = hashlib.sha256(("\0".join(sources) + " ".join(flags) + _cpu()).encode()
+                         ).hexdigest()[:16]
     so = root / f"{name}_simd_{key}.so"
     root.mkdir(parents=True, exist_ok=True)
     with claimed(so):
         if not so.is_file():
             with tempfile.TemporaryDirectory() as tmp:
-                c = os.path.join(tmp, f"{name}.c")
-                with open(c, "w") as fh:
-                    fh.write(source)
+                files = []
+                for i, src in enumerate(sources):
+                    files.append(os.path.join(tmp, f"{name}_{i}.c"))
+                    with open(files[-1], "w") as fh:
+                        fh.write(src)
                 out = str(so) + f".tmp{os.getpid()}"
-                subprocess.run(["gcc", *flags, c, "-o", out, "-lmvec", "-lm"], check=True,
-                               capture_output=True)
+                subprocess.run(["gcc", *flags, *files, "-o", out, "-lmvec", "-lm"],
+                               check=True, capture_output=True)
                 os.replace(out, so)
     return ctypes.CDLL(str(so))
 
@@ -335,9 +393,11 @@ class AccumulatedMap:
         self._run.argtypes = [ctypes.c_int] * 4 + [ctypes.POINTER(ctypes.c_double)] * (
             len(self.n_in) + len(self.n_out))
 
-    def source(self) -> str:
-        """The C of this kernel: ``node_<name>`` on four lanes and ``run_<name>``."""
+    def source(self):
+        """The C of this kernel (``node_<name>`` on four lanes and ``run_<name>``) and
+        the Functions it calls ({name: Function})."""
         ni, no, nm = self.n_in, self.n_out, self.name
+        body, callees = _body(self.f)
         args = ", ".join(f"const V* in{i}" for i in range(len(ni)))
         outs = ", ".join(f"V* out{i}" for i in range(len(no)))
         ptrs = ", ".join([f"const double* I{i}" for i in range(len(ni))]
@@ -360,9 +420,9 @@ class AccumulatedMap:
                  f"O{i}[((long)j * N + s + l) * K + k] = out{i}[j][l];"
                  for i in range(len(no))]
         nl = "\n        "
-        return f"""
+        code = f"""
 static inline void node_{nm}({args}, {outs}) {{
-    {_body(self.f)}
+    {body}
 }}
 
 void run_{nm}(int N, int K, int s0, int s1, {ptrs}) {{
@@ -381,6 +441,7 @@ void run_{nm}(int N, int K, int s0, int s1, {ptrs}) {{
     }}
 }}
 """
+        return code, callees
 
     def __call__(self, *inputs, K: int = 1, threads: int = 1):
         """Run K nodes from the given inputs on ``threads`` threads; returns the outputs,
@@ -445,8 +506,15 @@ def kernels(specs, name: str = "kernels", optimisation: str = "-O2") -> dict | N
         maps = {k: AccumulatedMap(*v) for k, v in specs.items()}
         if len({m.name for m in maps.values()}) != len(maps):
             raise ValueError("kernels: the Functions' names must differ")
-        lib = _library(name, _HEADER + "".join(m.source() for m in maps.values()),
-                       optimisation)
+        parts = [m.source() for m in maps.values()]
+        callees = {}
+        for _, c in parts:
+            callees.update(c)
+        decl = "".join(f"int {g}(const double**, double**, long long*, double*, int);\n"
+                       for g in callees)
+        sources = [_HEADER + decl + "".join(code for code, _ in parts)]
+        sources += [_callee_source(g, n) for n, g in enumerate(callees.values())]
+        lib = _library(name, sources, optimisation)
     except (NotImplementedError, OSError, subprocess.CalledProcessError):
         return None
     for m in maps.values():

@@ -87,12 +87,27 @@ def test_accumulated_map_is_mapaccum():
             np.testing.assert_allclose(g_[:, j, :], w_, rtol=1e-13, atol=1e-13)
 
 
-def test_calls_and_unknown_operations_fall_back():
-    x = ca.MX.sym("x")
-    inner = ca.Function("inner", [x], [x**2], {"never_inline": True})
+def test_calls_run_casadis_code_lane_by_lane():
+    """A call of another Function (here a B-spline and its derivative, as the virtual
+    constraints' surface has) inside an SX Function."""
+    t = ca.MX.sym("t")
+    knots = [0.0] * 4 + [0.3, 0.5, 0.8] + [1.0] * 4
+    spline = ca.Function.bspline("sp", [knots], list(np.linspace(-1, 2, 7) ** 2), [3], 1, {})
+    inner = ca.Function("inner", [t], [spline(t), ca.jacobian(spline(t), t)],
+                        {"never_inline": True})
+    y = ca.SX.sym("y", 2)
+    h, dh = inner(y[0])
+    f = ca.Function("outer", [y], [ca.vertcat(h * y[1] + ca.sin(h), dh, ca.cos(h + y[1]))])
+    X = np.vstack([np.linspace(0, 1, 41), np.linspace(-2, 2, 41)])
+    k = simd.kernels({"f": (f, 0, ["sample"])}, "test_call")["f"]
+    np.testing.assert_allclose(k(X)[0][:, :, 0], _casadi_columns(f, [X])[0], rtol=1e-14,
+                               atol=1e-14)
+
+
+def test_unknown_operations_fall_back():
     y = ca.SX.sym("y")
-    f = ca.Function("outer", [y], [inner(y) + 1])
-    assert simd.kernels({"f": (f, 0, ["sample"])}, "test_call") is None
+    assert simd.kernels({"f": (ca.Function("g", [y], [ca.erf(y)]), 0, ["sample"])},
+                        "test_erf") is None
     with pytest.raises(ValueError, match="inputs"):
         simd.kernels({"f": (ca.Function("g", [y], [y]), 0, ["sample", "sample"])}, "t")
 
