@@ -4,6 +4,7 @@ the robustness searches and the Monte Carlo, and one progress bar."""
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
 import sys
 import time
@@ -131,6 +132,38 @@ def progress_bar(progress: bool, total: int, initial: int, unit: str, desc: str)
                 dynamic_ncols=True)
 
 
+_ALLOCATOR_TUNED = False
+
+
+def tune_allocator():
+    """Let this process's allocator keep freed memory (once per process; Linux/glibc).
+
+    Dask's nanny starts workers with ``MALLOC_TRIM_THRESHOLD_=65536``, which also fixes
+    glibc's mmap threshold at 128 kB: every array above it (a walker's chunk of nodes
+    is megabytes) is then mapped and unmapped afresh, its pages faulted in on every
+    call, which halves the walkers' throughput in a worker
+    (``benchmarks/bench_terrain.py``).  Raising both thresholds here undoes that.
+    """
+    global _ALLOCATOR_TUNED
+    if _ALLOCATOR_TUNED:
+        return
+    _ALLOCATOR_TUNED = True
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt(-3, 1 << 26)         # M_MMAP_THRESHOLD: 64 MB
+        libc.mallopt(-1, 1 << 27)         # M_TRIM_THRESHOLD: 128 MB
+    except (OSError, AttributeError):
+        pass
+
+
+def _in_worker(fn, payload, *args):
+    """Run one chunk on a worker, its allocator tuned (:func:`tune_allocator`)."""
+    tune_allocator()
+    return fn(payload, *args)
+
+
 def submit_chunks(client, fn, payload, todo, record, name: str, args_of=None):
     """Evaluate chunks on a Dask cluster, recording each as it completes.
 
@@ -158,7 +191,7 @@ def submit_chunks(client, fn, payload, todo, record, name: str, args_of=None):
     from dask.distributed import as_completed
     [pf] = client.scatter([payload], broadcast=True)
     args_of = args_of or (lambda task: task[1:])
-    futs = {client.submit(fn, pf, *args_of(task), pure=False,
+    futs = {client.submit(_in_worker, fn, pf, *args_of(task), pure=False,
                           key=f"{name}-{task[0]}-{os.getpid()}-{time.monotonic_ns()}"): task
             for task in todo}
     try:

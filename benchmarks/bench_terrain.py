@@ -60,7 +60,8 @@ def mc_verdicts(r):
     return verdicts(np.where(r.failed, "fail", "ok"), r.walked)
 
 
-def main(runs=400, steps=40, sigma=0.01, baseline_runs=8, workers=None):
+def main(runs=400, steps=40, sigma=0.01, baseline_runs=8, workers=None, chunk=None,
+         parts="ab"):
     print(f"{platform.node()}: {os.cpu_count()} cores, load {os.getloadavg()}")
     model = rabbit()
     gait = default_gait(model, GaitOptions(**ROBUST_GAIT))
@@ -68,11 +69,12 @@ def main(runs=400, steps=40, sigma=0.01, baseline_runs=8, workers=None):
     rows = {}
     nw = workers or len(os.sched_getaffinity(0))
 
-    print(f"(a) zero dynamics: {runs} runs of up to {steps} steps, sigma = {sigma} m")
+    print(f"(a) zero dynamics: {runs} runs of up to {steps} steps, sigma = {sigma} m, "
+          f"chunks of {chunk or max(1, runs // (2 * nw))} runs")
     ref = None
     for rk in (400, 128, 64, 48):
         st = MonteCarloSettings(sigma=sigma, runs=runs, max_steps=steps, rk4_steps=rk,
-                                chunk=max(1, runs // 8))
+                                chunk=chunk or max(1, runs // (2 * nw)))
         monte_carlo(gait, spec, MonteCarloSettings(sigma=sigma, runs=4, max_steps=2,
                                                    rk4_steps=rk), scheduler="inline")
         r1 = monte_carlo(gait, spec, st, scheduler="inline")          # one process
@@ -99,6 +101,9 @@ def main(runs=400, steps=40, sigma=0.01, baseline_runs=8, workers=None):
         print(f"  ratio {k}: LocalCluster wall / per-run = {dask / base:.0f}x (walking "
               f"{walking / base:.0f}x), one process / per-run = {one / base:.0f}x")
 
+    if "b" not in parts:
+        print(f"load at the end {os.getloadavg()}")
+        return rows
     print(f"(b) full order, torso 20 % heavier: {runs // 4} runs of up to {steps} steps")
     plant = model.description.scaled(torso_mass=1.2)
     spec_e = WalkerSpec("tv", M1, REJOIN, plant=plant.to_dict())
@@ -129,5 +134,7 @@ if __name__ == "__main__":
     ap.add_argument("--sigma", type=float, default=0.01)
     ap.add_argument("--baseline-runs", type=int, default=8)
     ap.add_argument("--workers", type=int)
+    ap.add_argument("--chunk", type=int, help="runs per chunk (default: runs / (2 workers))")
+    ap.add_argument("--parts", default="ab", help="a: zero dynamics, b: full order")
     a = ap.parse_args()
-    main(a.runs, a.steps, a.sigma, a.baseline_runs, a.workers)
+    main(a.runs, a.steps, a.sigma, a.baseline_runs, a.workers, a.chunk, a.parts)

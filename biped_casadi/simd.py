@@ -1,26 +1,34 @@
 """Batch kernels: an SX Function run over many scenarios, four at a time in SIMD lanes.
 
-CasADi's generated C evaluates one scenario per call, in scalar double precision, so a
-batch of scenarios uses one of the four double lanes of an AVX2 register.  This module
-translates an SX Function's instruction list (its work vector, after CasADi's register
-allocation) into C on a four-lane vector type (GCC's vector extensions): each
-instruction becomes one vector operation, sines and cosines call glibc's vector math
-library (``libmvec``), so four scenarios cost about what one did.
+CasADi's generated C evaluates one scenario per call in scalar double precision, one of
+the four double lanes of an AVX2 register.  This module translates an SX Function's
+instruction list (its work vector, after CasADi's register allocation) into C on a
+four-lane vector type (GCC's vector extensions), each instruction one vector operation,
+so four scenarios cost about what one did:
+
+- sines and cosines, the costly instructions, are planned: the sine and the cosine of
+  one value share one inline range reduction and polynomial pair (``vsincos``: the
+  fdlibm kernels' minimax coefficients, within 1 ulp of libm on the tested range), and
+  those of a sum or difference of values whose sines and cosines are known (the model's
+  link angles are sums of joint coordinates) come from the addition formulas;
+- a call of another Function (a B-spline) runs CasADi's generated C for it lane by lane.
 
 :class:`AccumulatedMap` is the batched form of ``f.mapaccum(K)`` mapped over scenarios,
 the pattern of a fixed-step integration: the first inputs of ``f`` are its state, fed
 from its first outputs node after node; the other inputs are per scenario (constant
 along the nodes), per node (shared by every scenario) or one value for all.  The whole
 K-node run of a block of four scenarios happens in C; the scenarios are split over
-threads (ctypes releases the GIL).
+threads (ctypes releases the GIL).  :func:`kernels` compiles several into one library,
+kept in the cache folder by content and CPU (``-march=native``).
 
 IEEE semantics are kept (no ``-ffast-math``: NaN and infinities propagate as in the
-scalar code, which the simulators rely on).  The results differ from CasADi's scalar
-evaluation only by rounding: fused multiply-adds and libmvec's sine and cosine (within
-4 ulp); ``tests/test_simd.py`` measures the difference.
+scalar code, which the simulators rely on).  Results differ from CasADi's scalar
+evaluation by rounding only (fused multiply-adds, the sine and cosine, the addition
+formulas): ``tests/test_simd.py`` measures it (1e-13 relative on every operation, the
+walkers' verdicts unchanged).
 
-Without a C compiler, on a CPU without AVX2 or for an instruction this translator does
-not know, the builder :func:`kernels` returns None and the caller keeps CasADi's map.
+Without a C compiler, on a CPU without AVX2 and FMA, or for an instruction this
+translator does not know, :func:`kernels` returns None and the caller keeps CasADi's map.
 """
 from __future__ import annotations
 
@@ -301,7 +309,13 @@ def _cpu() -> str:
 
 
 def available() -> bool:
-    """True where the kernels can run: x86-64 with AVX2 and FMA, and gcc on the path."""
+    """Whether the kernels can run here.
+
+    Returns
+    -------
+    bool
+        True on an x86-64 CPU with AVX2 and FMA, with gcc on the path.
+    """
     try:
         with open("/proc/cpuinfo") as fh:
             flags = fh.read()
@@ -364,6 +378,8 @@ class AccumulatedMap:
         scenario, constant along the nodes), ``"node"`` (one column per node, the same
         for every scenario) or ``"const"`` (one column for all).
 
+    Notes
+    -----
     Calling it with the accumulated inputs' start values and the other inputs (each an
     (n_i, N) array for ``"sample"`` and the accumulated ones, (n_i, K) for ``"node"``,
     (n_i,) for ``"const"``) returns every output at every node, (n_out, N, K) arrays.
@@ -390,12 +406,20 @@ class AccumulatedMap:
     def _bind(self, lib: ctypes.CDLL):
         self._run = getattr(lib, f"run_{self.name}")
         self._run.restype = None
-        self._run.argtypes = [ctypes.c_int] * 4 + [ctypes.POINTER(ctypes.c_double)] * (
+        self._run.argtypes = [ctypes.c_int] * 4 + [ctypes.c_void_p] * (
             len(self.n_in) + len(self.n_out))
 
-    def source(self):
-        """The C of this kernel (``node_<name>`` on four lanes and ``run_<name>``) and
-        the Functions it calls ({name: Function})."""
+    def _source(self):
+        """The C of this kernel and the Functions it calls.
+
+        Returns
+        -------
+        code : str
+            ``node_<name>`` (one node on four lanes) and ``run_<name>`` (the nodes of
+            scenarios s0..s1).
+        callees : dict
+            {name: casadi.Function} called from the node (their C is CasADi's).
+        """
         ni, no, nm = self.n_in, self.n_out, self.name
         body, callees = _body(self.f)
         args = ", ".join(f"const V* in{i}" for i in range(len(ni)))
@@ -444,8 +468,22 @@ void run_{nm}(int N, int K, int s0, int s1, {ptrs}) {{
         return code, callees
 
     def __call__(self, *inputs, K: int = 1, threads: int = 1):
-        """Run K nodes from the given inputs on ``threads`` threads; returns the outputs,
-        (n_out, N, K) each."""
+        """Run K nodes of every scenario.
+
+        Parameters
+        ----------
+        *inputs : array_like
+            One per input of ``f``, shaped by its kind (see Notes of the class).
+        K : int
+            Nodes (1 for a plain map).
+        threads : int
+            Threads the scenarios are split over.
+
+        Returns
+        -------
+        list of numpy.ndarray
+            Every output after every node, (n_out, N, K) each.
+        """
         if len(inputs) != len(self.kinds):
             raise ValueError(f"{self.name}: {len(self.kinds)} inputs, got {len(inputs)}")
         N = None
@@ -469,8 +507,7 @@ void run_{nm}(int N, int K, int s0, int s1, {ptrs}) {{
         outs = [np.empty((n, N, K)) for n in self.n_out]
         if N == 0:
             return outs
-        P = ctypes.POINTER(ctypes.c_double)
-        ptrs = [a.ctypes.data_as(P) for a in arrs] + [o.ctypes.data_as(P) for o in outs]
+        ptrs = [a.ctypes.data for a in arrs] + [o.ctypes.data for o in outs]
         parts = max(1, min(int(threads), N // (2 * LANES)))
         edges = [LANES * ((N // LANES) * p // parts) for p in range(parts)] + [N]
         if parts == 1:
@@ -482,8 +519,9 @@ void run_{nm}(int N, int K, int s0, int s1, {ptrs}) {{
 
 
 def kernels(specs, name: str = "kernels", optimisation: str = "-O2") -> dict | None:
-    """Several :class:`AccumulatedMap` compiled into one shared library (one compiler run,
-    kept in the cache folder by content and CPU).
+    """Several :class:`AccumulatedMap` compiled into one shared library.
+
+    One compiler run, the library kept in the cache folder by content and CPU.
 
     Parameters
     ----------
@@ -506,7 +544,7 @@ def kernels(specs, name: str = "kernels", optimisation: str = "-O2") -> dict | N
         maps = {k: AccumulatedMap(*v) for k, v in specs.items()}
         if len({m.name for m in maps.values()}) != len(maps):
             raise ValueError("kernels: the Functions' names must differ")
-        parts = [m.source() for m in maps.values()]
+        parts = [m._source() for m in maps.values()]
         callees = {}
         for _, c in parts:
             callees.update(c)

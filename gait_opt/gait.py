@@ -143,16 +143,36 @@ class Gait(Reference):
         casadi.Function
             Named inputs ``tau``, ``r`` and outputs ``qd``, ``dqd``, ``ddqd``, ``dr``.
         """
-        ref = self._ref
         tau = ca.SX.sym("tau")
         r = ca.SX.sym("r", 2)
-        qa, dqa, ddqa = ref.qa(ca.DM(self.alpha), tau / self.T, self.T)
+        return ca.Function("reference", [tau, r], self._expressions(
+            tau, r, ca.DM(self.alpha), self.T), ["tau", "r"], ["qd", "dqd", "ddqd", "dr"])
+
+    def _expressions(self, tau, r, alpha, T):
+        ref = self._ref
+        qa, dqa, ddqa = ref.qa(alpha, tau / T, T)
         qd = ca.vertcat(r[0], qa)
         dqd = ca.vertcat(r[1], dqa)
         ddqu = ref.ddqu(qd, dqd, ddqa)
-        return ca.Function("reference", [tau, r], [qd, dqd, ca.vertcat(ddqu, ddqa),
-                                                   ca.vertcat(r[1], ddqu)],
-                           ["tau", "r"], ["qd", "dqd", "ddqd", "dr"])
+        return [qd, dqd, ca.vertcat(ddqu, ddqa), ca.vertcat(r[1], ddqu)]
+
+    def symbolic_parametric(self):
+        """The reference as a Function of its parameters too: the same Function for every
+        gait with these options (the Bezier coefficients and T are an input).
+
+        Returns
+        -------
+        f : casadi.Function
+            ``(tau, r, theta) -> (qd, dqd, ddqd, dr)``, as :meth:`symbolic`.
+        theta : numpy.ndarray
+            This gait's parameters: the Bezier coefficients (column by column) and T.
+        """
+        nu, m1 = self.alpha.shape
+        tau, r, th = ca.SX.sym("tau"), ca.SX.sym("r", 2), ca.SX.sym("theta", nu * m1 + 1)
+        f = ca.Function("reference_parametric", [tau, r, th], self._expressions(
+            tau, r, ca.reshape(th[:-1], nu, m1), th[-1]), ["tau", "r", "theta"],
+            ["qd", "dqd", "ddqd", "dr"])
+        return f, np.r_[self.alpha.ravel(order="F"), self.T]
 
     def _qa(self, s):
         s = np.atleast_1d(s)

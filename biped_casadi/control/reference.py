@@ -74,6 +74,23 @@ class Reference(abc.ABC):
             at tau given the reference state r, and dr/dtau.
         """
 
+    def symbolic_parametric(self):
+        """The reference as a Function of parameters theta too, shared by references of
+        one kind (compiled code of it serves them all); by default theta is empty.
+
+        Returns
+        -------
+        f : casadi.Function
+            ``(tau, r, theta) -> (qd, dqd, ddqd, dr)``, as :meth:`symbolic`.
+        theta : numpy.ndarray
+            This reference's parameters.
+        """
+        f = self.symbolic()
+        tau = ca.SX.sym("tau")
+        r, th = ca.SX.sym("r", self.n_state), ca.SX.sym("theta", 0)
+        return (ca.Function("reference_parametric", [tau, r, th], list(f(tau, r))),
+                np.zeros(0))
+
     @abc.abstractmethod
     def evaluate(self, t):
         """q^d, dq^d, ddq^d at ``t`` (numeric).

@@ -238,7 +238,7 @@ class ZeroDynamics:
         return q, dq, ddq, ddv, D, H, ddqu, M1
 
     @cached(maxsize=16)
-    def along(self, reference) -> ca.Function:
+    def along(self, reference, parametric: bool = False) -> ca.Function:
         """The zero dynamics with a reference integrated alongside.
 
         The state is z = (q_u, dq_u, r), r the reference state of
@@ -249,22 +249,32 @@ class ZeroDynamics:
         ----------
         reference : Reference
             The reference step.
+        parametric : bool
+            Take the reference's parameters as a last input ``theta``
+            (:meth:`Reference.symbolic_parametric`): one Function for references of one
+            kind.
 
         Returns
         -------
         casadi.Function
-            ``(z, tau, P) -> (dz, q, dq)``: the time derivative of z, and the configuration
-            and velocity on the zero dynamics.
+            ``(z, tau, P) -> (dz, q, dq)`` (``(z, tau, P, theta)`` when parametric): the
+            time derivative of z, and the configuration and velocity on the zero
+            dynamics.
         """
-        ref = reference.symbolic()
         nr = reference.n_state
         z, tau, P = ca.SX.sym("z", 2 + nr), ca.SX.sym("tau"), ca.SX.sym("P", self.n_par)
-        qd, dqd, ddqd, dr = ref(tau, z[2:])
+        if parametric:
+            ref, theta = reference.symbolic_parametric()
+            th = ca.SX.sym("theta", theta.size)
+            qd, dqd, ddqd, dr = ref(tau, z[2:], th)
+        else:
+            qd, dqd, ddqd, dr = reference.symbolic()(tau, z[2:])
         R = ca.vertcat(qd, dqd, ddqd)
         q, dq, _ = self.state(z[:2], tau, R, P)
-        return ca.Function("zd_along_reference", [z, tau, P],
+        return ca.Function("zd_along_reference", [z, tau, P] + ([th] if parametric else []),
                            [ca.vertcat(self.rhs(z[:2], tau, R, P), dr), q, dq],
-                           ["z", "tau", "P"], ["dz", "q", "dq"])
+                           ["z", "tau", "P"] + (["theta"] if parametric else []),
+                           ["dz", "q", "dq"])
 
     # ---------------------------------------------------- linearisation (eq. 20)
     @cached(maxsize=2)

@@ -279,7 +279,8 @@ def call_batched(simd_kernels, mapped_of, name: str, *args) -> list:
     Parameters
     ----------
     simd_kernels : dict or None
-        The walker's SIMD kernels (:func:`biped_casadi.simd.kernels`), used when given.
+        The walker's SIMD kernels (:func:`biped_casadi.simd.kernels`), used when one is
+        given for ``name``.
     mapped_of : callable
         ``mapped_of(name, n)``: the CasADi Function mapped over n scenarios, else.
     name : str
@@ -292,7 +293,7 @@ def call_batched(simd_kernels, mapped_of, name: str, *args) -> list:
     list of numpy.ndarray
         Its outputs, (n_out, n) each.
     """
-    if simd_kernels is not None:
+    if simd_kernels is not None and name in simd_kernels:
         return [o[:, :, 0] for o in simd_kernels[name](*args, threads=threads())]
     n = max(np.shape(a)[1] if np.ndim(a) == 2 else 1 for a in args)
     return [np.array(v) for v in mapped_of(name, n).call(list(args))]

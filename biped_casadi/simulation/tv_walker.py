@@ -90,6 +90,7 @@ class ZeroDynamicsWalker:
         self.n_chunks = int(math.ceil(self.horizon * CHUNKS_PER_STEP))
         self.ref_T = gait.state_at(self.T)
         self._R0 = np.concatenate(gait.evaluate(0.0))
+        self._start_refs = {}
         self._table()
         self._build()
 
@@ -141,13 +142,16 @@ class ZeroDynamicsWalker:
         self.diag = ca.Function("zd_diag", [x, tau, R1, P], [both[:-2], both[-2:]])
         # the last RK4 step, of length eta, with the reference state integrated
         # alongside from the node: one call per Newton iterate
-        along = zd.along(self.gait)
+        # (the reference's parameters theta are an input: one Function for every gait)
+        along = zd.along(self.gait, parametric=True)
+        self._reference_fn, self._theta = self.gait.symbolic_parametric()
         z = ca.SX.sym("z", along.size1_in(0))
+        th = ca.SX.sym("theta", along.size1_in(3))
         eta = ca.SX.sym("eta")
-        ze = rk4_step(lambda zv, c: along(zv, tau + c * eta, P)[0], z, eta)
-        _, q_e, dq_e = along(ze, tau + eta, P)
+        ze = rk4_step(lambda zv, c: along(zv, tau + c * eta, P, th)[0], z, eta)
+        _, q_e, dq_e = along(ze, tau + eta, P, th)
         z_e = m.swing_foot(q_e)[1]
-        self.event = ca.Function("zd_event", [z, tau, eta, P],
+        self.event = ca.Function("zd_event", [z, tau, eta, P, th],
                                  [z_e, ca.jacobian(z_e, eta), ze[:2], q_e, dq_e])
         # impact (eq. 2-3) at the event's state (its reference integrated alongside, so
         # that the foot is exactly at the strike height) and the next step's start (eq. 17)
@@ -162,22 +166,23 @@ class ZeroDynamicsWalker:
                                  list(zd.step_start(qs, dqs, R0, M1s)))
         # four scenarios per SIMD vector where the machine allows (biped_casadi.simd);
         # else CasADi's compiled (jit) or interpreted Functions, mapped
-        # in two libraries: the robot's (every gait uses it) and the gait's (-O1: its
-        # kernels run once per step, not per node, and compile in half the time)
+        # the robot's kernels: the reference and its parameters enter as inputs, so every
+        # gait of the robot (with the same Bezier degree) shares them, compiled once; in
+        # two libraries compiled side by side, the step ends' at -O1 (they run once a step)
         self._simd = None
-        if self.jit:                          # the two compile side by side when cold
+        if self.jit:
             with ThreadPoolExecutor(2) as pool:
-                robot = pool.submit(kernels, {
+                nodes = pool.submit(kernels, {
                     "chunk": (self.node, 3, ["const", "node", "sample"]),
-                    "diag": (self.diag, 0, ["sample"] * 4),
+                    "diag": (self.diag, 0, ["sample"] * 4)}, "zd_walker_nodes")
+                ends = pool.submit(kernels, {
+                    "event": (self.event, 0, ["sample"] * 4 + ["const"]),
+                    "reference": (self._reference_fn, 0, ["sample"] * 2 + ["const"]),
                     "impact": (self.impact, 0, ["sample"] * 3 + ["const"]),
-                    "start": (self.start, 0, ["sample"] * 3 + ["const"])}, "zd_walker_robot")
-                gait = pool.submit(kernels, {
-                    "event": (self.event, 0, ["sample"] * 4),
-                    "reference": (self.gait.symbolic(), 0, ["sample"] * 2)},
-                    "zd_walker_gait", "-O1")
-                robot, gait = robot.result(), gait.result()
-            self._simd = None if robot is None or gait is None else {**robot, **gait}
+                    "start": (self.start, 0, ["sample"] * 3 + ["const"])},
+                    "zd_walker_ends", "-O1")
+                nodes, ends = nodes.result(), ends.result()
+            self._simd = None if nodes is None or ends is None else {**nodes, **ends}
         node = self.node
         if self.jit and self._simd is None:
             node, self.diag = jit(self.node), jit(self.diag)
@@ -214,7 +219,8 @@ class ZeroDynamicsWalker:
         """(q^d, dq^d, ddq^d) stacked, (3 nq, n) for the taus."""
         tau = np.minimum(np.atleast_1d(np.asarray(tau, float)), self.gait.t_max)
         if self._simd is not None and tau.size > 1:
-            qd, dqd, ddqd, _ = self._batch("reference", tau[None, :], self.gait.states(tau))
+            qd, dqd, ddqd, _ = self._batch("reference", tau[None, :], self.gait.states(tau),
+                                           self._theta)
         else:
             qd, dqd, ddqd = self.gait.evaluate(tau)
         return np.vstack([qd, dqd, ddqd])
@@ -369,7 +375,9 @@ class ZeroDynamicsWalker:
         denominator's sign) or None."""
         S, m = self.schema, idx.size
         Pk = P[idx]
-        R0 = np.repeat(self._reference(tau0), m, axis=1)
+        if tau0 not in self._start_refs:            # 0 or the section: two values
+            self._start_refs[tau0] = self._reference(tau0)
+        R0 = np.repeat(self._start_refs[tau0], m, axis=1)
         D0, k1 = self._batch("diag", x[idx].T, np.full((1, m), tau0), R0, Pk.T)
         k1 = k1.T.copy()
         sign = np.where(S.row(D0, "den") >= 0, 1.0, -1.0)
@@ -441,11 +449,13 @@ class ZeroDynamicsWalker:
         za_r = np.vstack([xa.T, self.gait.states(ta)])
 
         def event(eta):
-            z, dz, *_ = self._batch("event", za_r, ta[None, :], eta[None, :], Ps.T)
+            z, dz, *_ = self._batch("event", za_r, ta[None, :], eta[None, :], Ps.T,
+                                    self._theta)
             return z.ravel() - hk, dz.ravel()
 
         eta = locate_strike(event, self.h, za - hk, zb - hk)
-        _, _, xe, qe, dqe = self._batch("event", za_r, ta[None, :], eta[None, :], Ps.T)
+        _, _, xe, qe, dqe = self._batch("event", za_r, ta[None, :], eta[None, :], Ps.T,
+                                        self._theta)
         xe = xe.T
         tm = ta + eta
         Rm = self._reference(tm)

@@ -114,10 +114,9 @@ class VirtualConstraintWalker:
         node = ca.Function("vc_node", [z, th, hs, p], [ca.cse(zn), thn, ca.cse(diag)])
         self.node = node
         self._build_steps(th, p)
-        # four scenarios per SIMD vector where the machine allows (biped_casadi.simd)
-        self._simd = kernels({"chunk": (node, 2, ["sample", "sample"]),
-                              **{k: (getattr(self, k), 0, ["sample"] * getattr(self, k).n_in())
-                                 for k in ("impact", "foot", "start")}},
+        # four scenarios per SIMD vector where the machine allows (biped_casadi.simd):
+        # the nodes (the step's ends run once per step, on CasADi's Functions)
+        self._simd = kernels({"chunk": (node, 2, ["sample", "sample"])},
                              "vc_walker") if self._jit else None
         if self._jit and self._simd is None:   # compiled once per content, kept on disk
             node = compiled(node, "-O2")
