@@ -157,8 +157,10 @@ class Gait(Reference):
         return [qd, dqd, ca.vertcat(ddqu, ddqa), ca.vertcat(r[1], ddqu)]
 
     def symbolic_parametric(self):
-        """The reference as a Function of its parameters too: the same Function for every
-        gait with these options (the Bezier coefficients and T are an input).
+        """The reference as a Function of its parameters too.
+
+        The same Function for every gait with these options: the Bezier coefficients and
+        T are an input.
 
         Returns
         -------

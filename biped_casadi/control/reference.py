@@ -75,8 +75,10 @@ class Reference(abc.ABC):
         """
 
     def symbolic_parametric(self):
-        """The reference as a Function of parameters theta too, shared by references of
-        one kind (compiled code of it serves them all); by default theta is empty.
+        """The reference as a Function of parameters theta too.
+
+        References of one kind share it (compiled code of it serves them all); by default
+        theta is empty.
 
         Returns
         -------
