@@ -6,11 +6,12 @@ from analysis.reporting.reproduce import reproduce, run_folder
 from .common import add_robot, load_model, output_dir, print_json
 
 #: measured by benchmarks/bench_reproduce.py (fresh processes, empty caches) on the 2-core AMD
-#: EPYC VM (Python 3.11, load 0.1 to 2.3), nothing cached (full: 140 to 160 s in three
-#: runs; quick: 47 to 62 s in four; warm re-runs 7 to 10 s); the README quotes the same
-#: figures (tests/test_reproduce.py checks it)
-TIME_FULL = "about 2.5 min"
-TIME_QUICK = "about 1 min"
+#: EPYC VM (Python 3.11), nothing cached, on two days: full 140 to 160 s and quick 47 to
+#: 62 s on the first; full 298 s and quick 104 to 110 s on the second, when the VM ran the
+#: same code 2 to 2.5 times slower (the previous version's quick run: 126.5 s); warm
+#: re-runs 7 to 21 s; the README quotes the same figures (tests/test_reproduce.py checks it)
+TIME_FULL = "2.5 to 5 min"
+TIME_QUICK = "1 to 2 min"
 
 
 def cmd_reproduce(args):
