@@ -15,7 +15,8 @@ import tempfile
 
 import numpy as np
 
-__all__ = ["rk4_step", "as_vector", "as_number", "jit_options", "compiled"]
+__all__ = ["rk4_step", "as_vector", "as_number", "jit_options", "compiled",
+           "cached_library"]
 
 
 def jit_options(optimisation: str = "-O2") -> dict:
@@ -63,26 +64,57 @@ def compiled(f, flags: str = "-O2"):
         is available or the cache folder cannot be written.
     """
     import casadi as ca
-
-    from .caching import cache_dir, claimed
-    root = cache_dir() / "compiled"
     key = hashlib.sha256((f.serialize() + flags + ca.__version__).encode()).hexdigest()[:16]
-    so = root / f"{f.name()}_{key}.so"
+
+    def build(tmp, out):
+        cg = ca.CodeGenerator(f"{f.name()}.c", {"with_header": False})
+        cg.add(f)
+        c = cg.generate(tmp + os.sep)
+        subprocess.run(["gcc", flags, "-fPIC", "-shared", c, "-o", out, "-lm"], check=True,
+                       capture_output=True)
+
     try:
-        root.mkdir(parents=True, exist_ok=True)
-        with claimed(so):
-            if not so.is_file():
-                with tempfile.TemporaryDirectory() as tmp:
-                    cg = ca.CodeGenerator(f"{f.name()}.c", {"with_header": False})
-                    cg.add(f)
-                    c = cg.generate(tmp + os.sep)
-                    out = str(so) + f".tmp{os.getpid()}"
-                    subprocess.run(["gcc", flags, "-fPIC", "-shared", c, "-o", out, "-lm"],
-                                   check=True, capture_output=True)
-                    os.replace(out, so)
+        so = cached_library(f"{f.name()}_{key}.so", build)
     except (OSError, subprocess.CalledProcessError):
         return f
     return ca.external(f.name(), str(so))
+
+
+def cached_library(filename: str, build):
+    """A shared library in the cache folder's ``compiled/``, built once per name.
+
+    Two processes asking for the same one: the second waits for the first
+    (:func:`biped_casadi.caching.claimed`); the library appears atomically.
+
+    Parameters
+    ----------
+    filename : str
+        Its file name (a digest of what it is built from names the content).
+    build : callable
+        ``build(tmp, out)``: write the library to the path ``out``, a temporary folder
+        ``tmp`` for the sources.
+
+    Returns
+    -------
+    pathlib.Path
+        The library.
+
+    Raises
+    ------
+    OSError, subprocess.CalledProcessError
+        When the folder cannot be written or the build fails.
+    """
+    from .caching import cache_dir, claimed
+    root = cache_dir() / "compiled"
+    so = root / filename
+    root.mkdir(parents=True, exist_ok=True)
+    with claimed(so):
+        if not so.is_file():
+            with tempfile.TemporaryDirectory() as tmp:
+                out = str(so) + f".tmp{os.getpid()}"
+                build(tmp, out)
+                os.replace(out, so)
+    return so
 
 
 def rk4_step(f, x, h):

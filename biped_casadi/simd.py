@@ -33,19 +33,25 @@ translator does not know, :func:`kernels` returns None and the caller keeps CasA
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import os
 import subprocess
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
 
 import casadi as ca
 import numpy as np
 
+from .numerics import cached_library
+
 __all__ = ["AccumulatedMap", "kernels", "available"]
 
 LANES = 4
-_SINCOS = True       # a sine and a cosine of one value share a range reduction
+
+
+class _Untranslatable(Exception):
+    """A Function this translator has no vector form for (the caller falls back to
+    CasADi's own evaluation)."""
 
 _HEADER = r"""
 #include <math.h>
@@ -134,7 +140,7 @@ def _callee(f: ca.Function, k: int) -> ca.Function:
              if sum(g.nnz_in(i) for i in range(g.n_in())) == n_in
              and sum(g.nnz_out(i) for i in range(g.n_out())) == n_out}
     if len(found) != 1 or n_out >= _SLOT:
-        raise NotImplementedError(f"{f.name()}: instruction {k} calls a Function this "
+        raise _Untranslatable(f"{f.name()}: instruction {k} calls a Function this "
                                   "translator cannot identify")
     return next(iter(found.values()))
 
@@ -151,7 +157,7 @@ def _trig_plan(f: ca.Function):
     for k in range(f.n_instructions()):
         op, a = f.instruction_id(k), f.instruction_input(k)
         if op not in _OPS and op not in (ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_CALL):
-            raise NotImplementedError(f"{f.name()}: operation {op} has no vector form")
+            raise _Untranslatable(f"{f.name()}: operation {op} has no vector form")
         op_of[k] = op
         if op not in (ca.OP_INPUT, ca.OP_CONST):
             ins[k] = [writer[i] for i in a] if op != ca.OP_OUTPUT else []
@@ -170,8 +176,6 @@ def _trig_plan(f: ca.Function):
 
     args = {ins[k][0] for k in op_of if op_of[k] in (ca.OP_SIN, ca.OP_COS)}
     derived = {}
-    if not _SINCOS:
-        return args, derived, ins
 
     def known(v, depth):
         """Can the sine and cosine of v come from those of arguments, through at most
@@ -223,7 +227,7 @@ def _body(f: ca.Function):
     coordinates) come from the addition formulas.  A call of another Function (a
     B-spline, say) runs CasADi's generated C for it lane by lane."""
     if not f.is_a("SXFunction"):
-        raise NotImplementedError(f"{f.name()}: only SX Functions translate")
+        raise _Untranslatable(f"{f.name()}: only SX Functions translate")
     args, derived, ins = _trig_plan(f)
     base = sorted(args - set(derived))
     done, callees = set(), {}
@@ -298,6 +302,7 @@ def _callee_source(g: ca.Function, n: int) -> str:
     return f"#define CASADI_CODEGEN_PREFIX\n#define CODEGEN_PREFIX cg{n}_\n" + cg.dump()
 
 
+@functools.lru_cache(maxsize=1)
 def _cpu() -> str:
     """The CPU's model and flags (``-march=native`` code is for this CPU only)."""
     try:
@@ -305,26 +310,21 @@ def _cpu() -> str:
             lines = fh.read().splitlines()
     except OSError:
         return ""
-    return "".join(x for x in lines if x.startswith(("model name", "flags")))[:4096]
+    return "".join(x + "\n" for x in lines if x.startswith(("model name", "flags")))
 
 
+@functools.lru_cache(maxsize=1)
 def available() -> bool:
-    """Whether the kernels can run here.
+    """Whether the kernels can run here (checked once per process).
 
     Returns
     -------
     bool
         True on an x86-64 CPU with AVX2 and FMA, with gcc on the path.
     """
-    try:
-        with open("/proc/cpuinfo") as fh:
-            flags = fh.read()
-    except OSError:
+    flags = _cpu().split()
+    if "avx2" not in flags or "fma" not in flags:
         return False
-    return " avx2" in flags and " fma" in flags and _gcc()
-
-
-def _gcc() -> bool:
     try:
         subprocess.run(["gcc", "--version"], check=True, capture_output=True)
         return True
@@ -332,33 +332,26 @@ def _gcc() -> bool:
         return False
 
 
-_FLAGS = ["-march=native", "-mfma", "-fno-math-errno", "-fno-trapping-math", "-fPIC",
-          "-shared"]
+_FLAGS = ["-march=native", "-fno-math-errno", "-fno-trapping-math", "-fPIC", "-shared"]
 
 
 def _library(name: str, sources, optimisation: str = "-O2") -> ctypes.CDLL:
     """Compile the C ``sources`` (one translation unit each) once per content into the
-    cache folder and load the library."""
-    from .caching import cache_dir, claimed
-    root = cache_dir() / "compiled"
+    cache folder (:func:`~biped_casadi.numerics.cached_library`) and load the library."""
     flags = [optimisation, *_FLAGS]
     key = hashlib.sha256(("\0".join(sources) + " ".join(flags) + _cpu()).encode()
                          ).hexdigest()[:16]
-    so = root / f"{name}_simd_{key}.so"
-    root.mkdir(parents=True, exist_ok=True)
-    with claimed(so):
-        if not so.is_file():
-            with tempfile.TemporaryDirectory() as tmp:
-                files = []
-                for i, src in enumerate(sources):
-                    files.append(os.path.join(tmp, f"{name}_{i}.c"))
-                    with open(files[-1], "w") as fh:
-                        fh.write(src)
-                out = str(so) + f".tmp{os.getpid()}"
-                subprocess.run(["gcc", *flags, *files, "-o", out, "-lmvec", "-lm"],
-                               check=True, capture_output=True)
-                os.replace(out, so)
-    return ctypes.CDLL(str(so))
+
+    def build(tmp, out):
+        files = []
+        for i, src in enumerate(sources):
+            files.append(os.path.join(tmp, f"{name}_{i}.c"))
+            with open(files[-1], "w") as fh:
+                fh.write(src)
+        subprocess.run(["gcc", *flags, *files, "-o", out, "-lmvec", "-lm"], check=True,
+                       capture_output=True)
+
+    return ctypes.CDLL(str(cached_library(f"{name}_simd_{key}.so", build)))
 
 
 class AccumulatedMap:
@@ -396,7 +389,7 @@ class AccumulatedMap:
                                  "in size")
         for i in range(f.n_in()):
             if not f.sparsity_in(i).is_dense():
-                raise NotImplementedError(f"{f.name()}: input {i} is sparse")
+                raise _Untranslatable(f"{f.name()}: input {i} is sparse")
         self.f, self.n_acc, self.kinds = f, n_acc, ("acc",) * n_acc + kinds
         self.n_in = [f.nnz_in(i) for i in range(f.n_in())]
         self.n_out = [f.nnz_out(i) for i in range(f.n_out())]
@@ -553,7 +546,7 @@ def kernels(specs, name: str = "kernels", optimisation: str = "-O2") -> dict | N
         sources = [_HEADER + decl + "".join(code for code, _ in parts)]
         sources += [_callee_source(g, n) for n, g in enumerate(callees.values())]
         lib = _library(name, sources, optimisation)
-    except (NotImplementedError, OSError, subprocess.CalledProcessError):
+    except (_Untranslatable, OSError, subprocess.CalledProcessError):
         return None
     for m in maps.values():
         m._bind(lib)
