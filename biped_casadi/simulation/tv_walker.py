@@ -90,7 +90,9 @@ class ZeroDynamicsWalker:
         self.n_chunks = int(math.ceil(self.horizon * CHUNKS_PER_STEP))
         self.ref_T = gait.state_at(self.T)
         self._R0 = np.concatenate(gait.evaluate(0.0))
-        self._start_refs = {}
+        # the reference where a walk's first step starts: tau = 0 or the section
+        self._R_start = {0.0: self._R0[:, None],
+                         SECTION * self.T: np.concatenate(gait.evaluate(SECTION * self.T))[:, None]}
         self._table()
         self._build()
 
@@ -164,11 +166,11 @@ class ZeroDynamicsWalker:
         qs, dqs, M1s = ca.SX.sym("q", nq), ca.SX.sym("dq", nq), ca.SX.sym("M1", self.nu)
         self.start = ca.Function("zd_start", [qs, dqs, M1s, R0],
                                  list(zd.step_start(qs, dqs, R0, M1s)))
-        # four scenarios per SIMD vector where the machine allows (biped_casadi.simd);
-        # else CasADi's compiled (jit) or interpreted Functions, mapped
-        # the robot's kernels: the reference and its parameters enter as inputs, so every
-        # gait of the robot (with the same Bezier degree) shares them, compiled once; in
-        # two libraries compiled side by side, the step ends' at -O1 (they run once a step)
+        # four scenarios per SIMD vector where the machine allows (biped_casadi.simd), else
+        # CasADi's compiled (jit) or interpreted Functions, mapped.  The reference and its
+        # parameters enter as inputs, so every gait of the robot (with the same Bezier
+        # degree) shares the kernels, compiled once; in two libraries compiled side by
+        # side, the step ends' at -O1 (they run once a step)
         self._simd = None
         if self.jit:
             with ThreadPoolExecutor(2) as pool:
@@ -375,9 +377,7 @@ class ZeroDynamicsWalker:
         denominator's sign) or None."""
         S, m = self.schema, idx.size
         Pk = P[idx]
-        if tau0 not in self._start_refs:            # 0 or the section: two values
-            self._start_refs[tau0] = self._reference(tau0)
-        R0 = np.repeat(self._start_refs[tau0], m, axis=1)
+        R0 = np.repeat(self._R_start[tau0], m, axis=1)
         D0, k1 = self._batch("diag", x[idx].T, np.full((1, m), tau0), R0, Pk.T)
         k1 = k1.T.copy()
         sign = np.where(S.row(D0, "den") >= 0, 1.0, -1.0)
