@@ -220,7 +220,7 @@ class StepMap:
 
         def event(eta_):
             zz, dz, _ = sim.event(X, tau, float(eta_[0]), p)
-            return np.array([float(zz) - h]), np.array([float(dz)])
+            return np.array([zz.item() - h]), np.array([dz.item()])
 
         eta = float(locate_strike(event, self.h, z_prev - h, zs - h)[0])
         Xe, Je, Xeta, zX = (np.array(v) for v in self.last(X, J, tau, eta, p, Jp))

@@ -9,7 +9,8 @@ the swing foot reaches the ground in front of the stance foot while moving down
 next step with tau = 0.
 
 Integration: classical RK4 with a fixed step h = T / ``rk4_steps`` (T the reference step
-duration), evaluated a quarter step at a time in one CasADi call (``mapaccum``); the
+duration), evaluated in blocks of nodes, T first and then quarters of T, each block one
+CasADi call (``mapaccum``, the nodes' diagnostics included); the
 impact (a strike beyond ``model.scuff_zone``: anywhere in front of the stance foot for
 legs with knees) is located inside its RK4 interval by Newton's method on the length of the last
 RK4 step, z_sw(RK4(x_k, eta)) = 0, so the event is exact to round-off for the discrete
@@ -52,7 +53,7 @@ import numpy as np
 
 from ..caching import cached
 from ..control.output_law import SECTION
-from ..numerics import as_vector, compiled, rk4_step
+from ..numerics import FastCall, as_vector, compiled, rk4_step
 from ..results import internal, json_safe
 from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, strike
 from .options import SimulationOptions
@@ -310,27 +311,37 @@ class Simulator:
             return ca.vertcat(dq, ddq, dr)
 
         Xn = ca.cse(rk4_step(rhs, X, h))
-
-        def jit(f):          # compiled once per content, kept in the cache folder
-            return compiled(f, "-O1") if self.options.jit else f
-        rk4 = ca.Function("closed_loop_rk4", [X, tau, h, p], [Xn, tau + h],
-                          ["X", "tau", "h", "p"], ["X_next", "tau_next"])
-        self.rk4 = jit(rk4)
-        self.advance = self.rk4.mapaccum("closed_loop_chunk", self.chunk, [0, 1], [0, 1])
-
+        #: one RK4 step of the closed loop (SX: also called symbolically, by the step map)
+        self.rk4 = ca.Function("closed_loop_rk4", [X, tau, h, p], [Xn, tau + h],
+                               ["X", "tau", "h", "p"], ["X_next", "tau_next"])
         q, dq, r = X[:nq], X[nq:2 * nq], X[2 * nq:]
         u, y, dy, den, _, inr = c.law(q, dq, tau, r, p)
         ua, sat = self._applied(u)
         Fx, Fz = m.ground_reaction(q, dq, ua)
         diag = ca.cse(self.schema.vector(m, q, dq, ua, Fx, Fz, den, y, dy, inr, sat))
-        self.diagnostics = jit(ca.Function("closed_loop_diagnostics", [X, tau, p], [diag],
-                                           ["X", "tau", "p"], ["diag"]))
-        self.diagnostics_chunk = self.diagnostics.map(self.chunk)
+        diagnostics = ca.Function("closed_loop_diagnostics", [X, tau, p], [diag],
+                                  ["X", "tau", "p"], ["diag"])
         eta = ca.SX.sym("eta")
-        Xe, _ = rk4(X, tau, eta, p)
+        Xe, _ = self.rk4(X, tau, eta, p)
         ze = m.swing_foot(Xe[:nq])[1]
-        self.event = ca.Function("impact_event", [X, tau, eta, p], [ze, ca.jacobian(ze, eta), Xe],
-                                 ["X", "tau", "eta", "p"], ["z_sw", "dz_deta", "X_event"])
+        event = ca.Function("impact_event", [X, tau, eta, p], [ze, ca.jacobian(ze, eta), Xe],
+                            ["X", "tau", "eta", "p"], ["z_sw", "dz_deta", "X_event"])
+        # a block of n RK4 nodes and their diagnostics in one call: the first block of a
+        # step spans T (where most steps end), then quarters of T
+        blocks = []
+        for n in (CHUNKS_PER_STEP * self.chunk, self.chunk):
+            Xm, tm, hm = ca.MX.sym("X", nx), ca.MX.sym("tau"), ca.MX.sym("h")
+            pm = ca.MX.sym("p", p.numel())
+            Xs, ts = self.rk4.mapaccum(f"closed_loop_{n}", n, [0, 1], [0, 1])(Xm, tm, hm, pm)
+            Dg = diagnostics.map(n)(Xs, ts, pm)
+            blocks.append(ca.Function(f"closed_loop_block_{n}", [Xm, tm, hm, pm], [Xs, ts, Dg],
+                                      ["X", "tau", "h", "p"], ["X_nodes", "tau_nodes", "diag"]))
+        fs = blocks + [diagnostics, event, m.impact_full]
+        if self.options.jit:      # compiled once per content (one library), kept in the cache
+            fs = compiled(fs, "-O1")
+        # called through their buffers: a plain call's conversions cost more than a block
+        self.step_block, self.quarter_block, self.diagnostics, self.event, self._impact_map = \
+            (FastCall(f) for f in fs)
 
     # ---------------------------------------------------------------- checks
     def _first_failure(self, D, X, z_prev=None, den_sign=1.0, ground=None):
@@ -415,7 +426,7 @@ class Simulator:
         if start.problem:
             log.add(t0, np.zeros(1), k, X[:, None], np.full((S.size, 1), np.nan), sx)
             return ("out_of_range", start.problem, t0), None
-        D0 = np.array(self.diagnostics(X, 0.0, p))
+        D0 = self.diagnostics(X, 0.0, p)[0]
         walk["den_sign"] = sign = 1.0 if S.row(D0, "den")[0] >= 0 else -1.0
         fail = self._first_failure(D0, X[:, None], den_sign=sign, ground=ground)
         z0 = S.row(D0, "zsw")[0]
@@ -428,13 +439,17 @@ class Simulator:
         walk["p"], walk["section"] = p, None
         z_prev = z0
         n = CHUNKS_PER_STEP
-        for ci in range(int(math.ceil(o.horizon * n))):
-            tau0 = ci * T / n
-            Xs, taus = (np.array(v) for v in self.advance(X, tau0, h, p))
+        i_section = int(round(SECTION * n)) * self.chunk - 1   # node at 0.75 T, 1st block
+        end = o.horizon * T + 1e-12
+        ci = 0                                           # quarters of T done
+        while ci < int(math.ceil(o.horizon * n)):
+            tau0, first = ci * T / n, ci == 0
+            block = self.step_block if first else self.quarter_block
+            Xs, taus, Dg = block(X, tau0, h, p)
             taus = taus.ravel()
-            Dg = np.array(self.diagnostics_chunk(Xs, taus[None, :], p))
-            if tau0 + T / n > o.horizon * T + 1e-12:      # last partial chunk
-                keep = taus <= o.horizon * T + 1e-12
+            span = T if first else T / n
+            if tau0 + span > end:                          # last partial block
+                keep = taus <= end
                 Xs, taus, Dg = Xs[:, keep], taus[keep], Dg[:, keep]
             zs = S.row(Dg, "zsw")
             zprev = np.r_[z_prev, zs[:-1]]
@@ -446,6 +461,8 @@ class Simulator:
                 j = fail[0]
                 log.add(t0, taus[:j + 1], k, Xs[:, :j + 1], Dg[:, :j + 1], sx, walk["rec"], S)
                 return (fail[1], fail[2], t0 + taus[j]), None
+            if first and i_strike > i_section:   # the step passed the section, tau = 0.75 T
+                walk["section"] = np.array([Xs[0, i_section], Xs[self.model.nq, i_section]])
             if i_strike < Xs.shape[1]:
                 Xa = X if i_strike == 0 else Xs[:, i_strike - 1]
                 ta = tau0 if i_strike == 0 else taus[i_strike - 1]
@@ -454,19 +471,18 @@ class Simulator:
                         walk["rec"], S)
                 return None, self._locate(Xa, ta, za - hk, zs[i_strike] - hk, p, hk)
             log.add(t0, taus, k, Xs, Dg, sx, walk["rec"], S)
-            if abs(tau0 + T / n - SECTION * T) < 1e-12 * T:
-                walk["section"] = np.array([Xs[0, -1], Xs[self.model.nq, -1]])
             X, z_prev = Xs[:, -1], zs[-1]
+            ci += n if first else 1
         return ("no_impact", f"step {k}: no valid impact of the swing foot within "
                              f"{o.horizon:g} T = {o.horizon * T:.4f} s", t0 + o.horizon * T), None
 
     def _impact(self, k, event, walk, log):
         """Check the pre-impact state, apply the impact map (eq. 2-3) and check the
         impulse.  Returns (failure or None, StepRecord or None)."""
-        m, S, nq = self.plant, self.schema, self.model.nq
+        S, nq = self.schema, self.model.nq
         t0, sx, p = walk["t0"], walk["stance_x"], walk["p"]
         X_m, tau_m = event
-        Dm = np.array(self.diagnostics(X_m, tau_m, p))
+        Dm = self.diagnostics(X_m, tau_m, p)[0]
         log.add(t0, np.array([tau_m]), k, X_m[:, None], Dm, sx, walk["rec"], S)
         fail = self._first_failure(Dm, X_m[:, None], den_sign=walk["den_sign"],
                                    ground=walk["ground"])
@@ -474,7 +490,7 @@ class Simulator:
             return (fail[1], fail[2], t0 + tau_m), None
         q_m, dq_m = X_m[:nq], X_m[nq:2 * nq]
         dz = S.row(Dm, "dzsw")[0]
-        q_p, dq_p, F, _, v_old = (np.array(v).ravel() for v in m.impact_full(q_m, dq_m))
+        q_p, dq_p, F, _, v_old = (v.ravel() for v in self._impact_map(q_m, dq_m))
         if strike_violation(dz) != "":
             return ("scuffed", STRIKE_MESSAGE, t0 + tau_m), None
         section = walk["section"]
@@ -499,12 +515,12 @@ class Simulator:
         (:func:`~biped_casadi.simulation.kernel.locate_strike`; za, zb measured from
         there)."""
         def event(eta):
-            z, dz, _ = self.event(Xa, ta, float(eta[0]), p)
-            return np.array([float(z) - height]), np.array([float(dz)])
+            z, dz, _ = self.event(Xa, ta, eta[0], p)
+            return z.ravel() - height, dz.ravel()
 
         eta = float(locate_strike(event, self.h, za, zb)[0])
         _, _, Xe = self.event(Xa, ta, eta, p)
-        return np.array(Xe).ravel(), ta + eta
+        return Xe.ravel(), ta + eta
 
 
 class _Log:

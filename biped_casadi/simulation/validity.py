@@ -190,6 +190,8 @@ def first_violation(masks: dict, stop=None):
     if n == 0:
         return first, which
     for name, mask in masks.items():
+        if not mask.any():                        # the common case: nothing violated
+            continue
         has = mask.any(axis=-1)
         idx = np.where(has, np.argmax(mask, axis=-1), n)
         better = idx < first
