@@ -370,6 +370,8 @@ class AccumulatedMap:
         For each input after the accumulated ones: ``"sample"`` (one column per
         scenario, constant along the nodes), ``"node"`` (one column per node, the same
         for every scenario) or ``"const"`` (one column for all).
+    last : bool
+        Keep the outputs of the last node only (K = 1 in the returned arrays).
 
     Notes
     -----
@@ -378,7 +380,7 @@ class AccumulatedMap:
     (n_i,) for ``"const"``) returns every output at every node, (n_out, N, K) arrays.
     """
 
-    def __init__(self, f: ca.Function, n_acc: int, kinds):
+    def __init__(self, f: ca.Function, n_acc: int, kinds, last: bool = False):
         kinds = tuple(kinds)
         if len(kinds) + n_acc != f.n_in():
             raise ValueError(f"{f.name()}: {f.n_in()} inputs, {n_acc} accumulated + "
@@ -394,6 +396,7 @@ class AccumulatedMap:
         self.n_in = [f.nnz_in(i) for i in range(f.n_in())]
         self.n_out = [f.nnz_out(i) for i in range(f.n_out())]
         self.name = f.name()
+        self.last = bool(last)
         self._run = None
 
     def _bind(self, lib: ctypes.CDLL):
@@ -433,8 +436,10 @@ class AccumulatedMap:
                                 f"S(I{i}[(long)j * K + k]);")
         for i in range(self.n_acc):
             step.append(f"for (int j = 0; j < {ni[i]}; j++) in{i}[j] = out{i}[j];")
-        store = [f"for (int j = 0; j < {no[i]}; j++) for (int l = 0; l < nl; l++) "
-                 f"O{i}[((long)j * N + s + l) * K + k] = out{i}[j][l];"
+        where = "(long)j * N + s + l" if self.last else "((long)j * N + s + l) * K + k"
+        store = [("if (k == K - 1) " if self.last else "")
+                 + f"for (int j = 0; j < {no[i]}; j++) for (int l = 0; l < nl; l++) "
+                 f"O{i}[{where}] = out{i}[j][l];"
                  for i in range(len(no))]
         nl = "\n        "
         code = f"""
@@ -475,7 +480,8 @@ void run_{nm}(int N, int K, int s0, int s1, {ptrs}) {{
         Returns
         -------
         list of numpy.ndarray
-            Every output after every node, (n_out, N, K) each.
+            Every output after every node, (n_out, N, K) each ((n_out, N, 1): after the
+            last node, for a map built with ``last``).
         """
         if len(inputs) != len(self.kinds):
             raise ValueError(f"{self.name}: {len(self.kinds)} inputs, got {len(inputs)}")
@@ -497,7 +503,7 @@ void run_{nm}(int N, int K, int s0, int s1, {ptrs}) {{
             arrs.append(np.ascontiguousarray(a))
         if N is None:
             raise ValueError(f"{self.name}: no per-scenario input")
-        outs = [np.empty((n, N, K)) for n in self.n_out]
+        outs = [np.empty((n, N, 1 if self.last else K)) for n in self.n_out]
         if N == 0:
             return outs
         ptrs = [a.ctypes.data for a in arrs] + [o.ctypes.data for o in outs]
@@ -519,7 +525,8 @@ def kernels(specs, name: str = "kernels", optimisation: str = "-O2") -> dict | N
     Parameters
     ----------
     specs : dict
-        ``{key: (f, n_acc, kinds)}``; the Functions' names must differ.
+        ``{key: (f, n_acc, kinds)}`` or ``{key: (f, n_acc, kinds, last)}`` (the
+        arguments of :class:`AccumulatedMap`); the Functions' names must differ.
     name : str
         The library's name in the cache folder.
     optimisation : str

@@ -76,6 +76,22 @@ def test_variational_batch_matches_full_ad(pm, rng):
         assert max_abs[i] == pytest.approx(r.max_abs, rel=1e-6)
 
 
+def test_variational_kernels_match_the_symbolic_jacobian(pm, rng):
+    """The batch's compiled RK4 kernels (both segments) and numpy impact give A_fn's A^z
+    to round-off, for points not a multiple of the four lanes; the fallback (A_fn mapped)
+    is what the batch returns without kernels."""
+    from analysis.stability import variational as va
+    var = pm.variational
+    M1s = random_nonsingular(pm, rng, 13)
+    want = np.array([var.jacobian(M) for M in M1s])
+    got = var.jacobians(M1s, threads=2)
+    scale = np.max(np.abs(want), axis=(1, 2))[:, None, None]
+    assert np.max(np.abs(got - want) / scale) < 1e-11
+    if va._step_kernels(pm.nu) is not None:
+        A = np.array(var._mapped(len(M1s), 1)(M1s.T)).reshape(2, len(M1s), 2).transpose(1, 0, 2)
+        assert np.max(np.abs(A - want) / scale) < 1e-14
+
+
 def test_eigenvalues_depend_on_M1(pm):
     a = pm.analyse(np.zeros(4)).max_abs
     b = pm.analyse(np.array([1.1 * singular_m1_values(pm.model, pm.gait)[0], 0, 0, 0])).max_abs

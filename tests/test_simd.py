@@ -85,6 +85,14 @@ def test_accumulated_map_is_mapaccum():
         want = [np.array(v) for v in acc(X0[:, j], 0.01, R, P[:, j])]
         for g_, w_ in zip(got, want):
             np.testing.assert_allclose(g_[:, j, :], w_, rtol=1e-13, atol=1e-13)
+    # built with last=True: only the last node's outputs, the same numbers
+    f2 = ca.Function("pendulum_last", [x, h, tab, p], [xn, ca.cos(xn[0])])
+    k_last = simd.kernels({"f": (f2, 1, ["const", "node", "sample"], True)},
+                          "test_pendulum_last")["f"]
+    last = k_last(X0, [0.01], R, P, K=K, threads=2)
+    for g_, l_ in zip(got, last):
+        assert l_.shape == (g_.shape[0], n, 1)
+        np.testing.assert_array_equal(l_[:, :, 0], g_[:, :, -1])
 
 
 def test_calls_run_casadis_code_lane_by_lane():

@@ -4,6 +4,14 @@ of a = b = 0 (:mod:`analysis.design.output_selection`) or with every component f
 The spectral radius enters through the epigraph of the 2x2 Jury conditions on A^z (exact
 derivatives in M1 by AD of the variational Jacobian), then a Newton iteration on
 tr A^z = det A^z = 0 restricted to the group brings a near-deadbeat point to deadbeat.
+
+Where the least max|lambda| is zero (a deadbeat point) the epigraph is degenerate: at
+rho = 0 its four conditions reduce to det = 0 and no longer see the trace, and max|lambda|
+grows like the square root of a perturbation of a nilpotent A^z.  IPOPT then converges
+slowly: on RABBIT's default gait it stopped at its 300-iteration cap from every start of
+the coarse map (2.5 s each), ending above its start, while Newton from the same starts
+reached deadbeat.  So IPOPT runs from a start only while no deadbeat point has been found
+(nothing is below zero); ``M1Result.ipopt_runs`` says how often it ran.
 """
 from __future__ import annotations
 
@@ -56,6 +64,8 @@ class M1Result(Result):
         Estimated error of max ``|lambda|``, from a map with twice the RK4 steps.
     starts : int
         Starting points tried.
+    ipopt_runs : int
+        Starts IPOPT ran from (it is not run once a deadbeat point is found).
     solve_time : float
         Wall time, s.
     message : str
@@ -77,6 +87,7 @@ class M1Result(Result):
     starts: int
     solve_time: float
     message: str = ""
+    ipopt_runs: int = 0
     history: list = internal(default_factory=list)
 
     SUCCESS = ("stable", "unstable")
@@ -251,7 +262,8 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
     coarse map (for RABBIT 81 x 81 on the group, or the 9^4 grid when free), plus
     ``n_random`` random ones.  From every start Newton on trace = det = 0 (a deadbeat
     point, max|lambda| = 0, when one is near); from the first ``n_ipopt`` also IPOPT on
-    the epigraph formulation, followed by the same Newton.
+    the epigraph formulation, followed by the same Newton, as long as no deadbeat point
+    has been found (see the module's note).
     The best result is verified by the full-AD map (:func:`poincare_eigenvalues`), and
     its eigenvalue uncertainty estimated from a map with twice the RK4 steps (near
     deadbeat eigenvalues move like the square root of an error in A^z).
@@ -305,33 +317,46 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
     if not cand:
         raise ValueError(f"no non-singular start found on group {group}")
     fixed = nu - len(_conditions(tay, ca.SX.sym("M1", nu), constraints)) == 0
-    if not fixed:
-        solver, lbg, ubg = _epigraph_nlp(pm, tay, constraints, den_margin)
     history = []
-    for i, M1 in enumerate(cand):
-        if fixed:                 # an isolated solution: nothing to choose
-            found = [(M1, "isolated solution")]
-        else:                     # the start itself too: the result is never worse
-            found = [(M1, "start"),
-                     (_deadbeat_newton(pm, tay, M1, constraints) if deadbeat else None,
-                      "newton")]
-        if i < n_ipopt and not fixed:
-            jb = pm.jacobian_batch(M1[None])
-            mx = jb.max_abs
-            rho0 = float(mx[0]) * 1.01 + 1e-3 if np.isfinite(mx[0]) else 100.0
-            sol = solver(x0=np.r_[M1, rho0], lbg=lbg, ubg=ubg, lbx=np.r_[[-1e3] * nu, 0.0],
-                         ubx=np.r_[[1e3] * nu, 1e6])
-            x = np.array(sol["x"]).ravel()[:nu]
-            found += [(x, "ipopt"),
-                      (_deadbeat_newton(pm, tay, x, constraints) if deadbeat else None,
-                       "ipopt+newton")]
+    ipopt_runs = ipopt_skipped = 0
+
+    def keep(found, start):
+        """Add the valid points of ``found`` to the history; whether one is deadbeat."""
+        zero = False
         for Mx, how in found:
             if Mx is None or pm.is_singular(Mx):
                 continue
             if constrained and not in_group(Mx):
                 continue                  # Newton may cross to the other group's root
             val = float(pm.jacobian_batch(Mx[None]).max_abs[0])
-            history.append(dict(start=M1.tolist(), M1=Mx.tolist(), max_abs=val, how=how))
+            history.append(dict(start=start.tolist(), M1=Mx.tolist(), max_abs=val, how=how))
+            zero |= how.endswith("newton")     # Newton converged: trace = det = 0
+        return zero
+
+    reached_zero = False          # a deadbeat point found: rho = 0, the NLP's minimum
+    for i, M1 in enumerate(cand):
+        if fixed:                 # an isolated solution: nothing to choose
+            keep([(M1, "isolated solution")], M1)
+            continue
+        # the start itself too: the result is never worse
+        reached_zero |= keep([(M1, "start"),
+                              (_deadbeat_newton(pm, tay, M1, constraints) if deadbeat
+                               else None, "newton")], M1)
+        if i >= n_ipopt:
+            continue
+        if reached_zero:
+            ipopt_skipped += 1    # nothing beats max|lambda| = 0 (see the module's note)
+            continue
+        ipopt_runs += 1
+        solver, lbg, ubg = _epigraph_nlp(pm, tay, constraints, den_margin)
+        mx = pm.jacobian_batch(M1[None]).max_abs
+        rho0 = float(mx[0]) * 1.01 + 1e-3 if np.isfinite(mx[0]) else 100.0
+        sol = solver(x0=np.r_[M1, rho0], lbg=lbg, ubg=ubg, lbx=np.r_[[-1e3] * nu, 0.0],
+                     ubx=np.r_[[1e3] * nu, 1e6])
+        x = np.array(sol["x"]).ravel()[:nu]
+        reached_zero |= keep([(x, "ipopt"),
+                              (_deadbeat_newton(pm, tay, x, constraints) if deadbeat
+                               else None, "ipopt+newton")], M1)
     if not history:
         raise RuntimeError("the M1 NLP found no non-singular local optimum (IPOPT); try more starts")
     # verify the best few by the full-AD map and keep the best verified one
@@ -352,5 +377,8 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
                     max_abs_nlp=val, eigenvalue_uncertainty=unc, starts=len(cand),
                     solve_time=time.perf_counter() - t0,
                     message=f"{label}: max|lambda| = {r.max_abs:.3g} (verified by the "
-                            f"full-AD map) from {len(cand)} starts",
-                    history=history)
+                            f"full-AD map) from {len(cand)} starts"
+                            + (f", IPOPT from {ipopt_runs}" if ipopt_runs else "")
+                            + (f" (skipped from {ipopt_skipped}: a deadbeat point was "
+                               "already found)" if ipopt_skipped else ""),
+                    ipopt_runs=ipopt_runs, history=history)

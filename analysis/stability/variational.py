@@ -151,6 +151,44 @@ class VariationalJacobian:
         """
         return np.array(self.A_fn(np.asarray(M1, dtype=float)))
 
+    @staticmethod
+    def _node_table(tab, forcing: bool) -> np.ndarray:
+        """Per RK4 step, the coefficient factors at its three stage times (and the
+        forcing's numerators after the impact): the node input of :func:`_step_kernels`."""
+        lin, basis = tab
+        K = lin.D11.size // 3
+        parts = [lin.D11[None, :], lin.D12, lin.w0[None, :], lin.wa, lin.h0[None, :], lin.ha]
+        if forcing:
+            a, b = basis
+            parts += [lin.forcing(*a), lin.forcing(*b)]
+        rows = np.concatenate(parts)                                   # (m, 3K)
+        return rows.reshape(len(rows), K, 3).transpose(2, 0, 1).reshape(-1, K)
+
+    def _jacobians_kernel(self, M1s, kern, threads: int) -> np.ndarray:
+        """A^z for many M1: both segments on the compiled kernels, the impact in numpy."""
+        n, nq = len(M1s), self.model.nq
+        if not hasattr(self, "_tables"):
+            self._tables = (self._node_table(self.pre, False), self._node_table(self.post, True))
+        pre, post = self._tables
+        S = np.broadcast_to(np.eye(2).reshape(-1, 1, order="F"), (4, n))
+        P = kern["pre"](S, M1s.T, pre, [self.h_pre], K=pre.shape[1], threads=threads)[0]
+        P = P[:, :, 0].T.reshape(n, 2, 2, order="F")                       # (n, 2, 2)
+        MT = np.concatenate([np.ones((n, 1)), -M1s], axis=1)                  # (n, nq)
+        dtau = -(MT @ self.grad_z)[:, None] * P[:, 0, :] / self.zdot          # (n, 2)
+        dq_m = MT[:, :, None] * P[:, 0, None, :] + self.dqT[None, :, None] * dtau[:, None, :]
+        ddq_m = MT[:, :, None] * P[:, 1, None, :] + self.ddqT[None, :, None] * dtau[:, None, :]
+        plus = self.J_impact[None] @ np.concatenate([dq_m, ddq_m], axis=1)   # (n, 2 nq, 2)
+        dqp, ddqp = plus[:, :nq], plus[:, nq:]
+        dy = M1s[:, :, None] * dqp[:, :1] + dqp[:, 1:]                        # eq. (5)
+        ddy = M1s[:, :, None] * ddqp[:, :1] + ddqp[:, 1:]
+        W = np.concatenate([dqp[:, :1], ddqp[:, :1], dy, ddy], axis=1)        # (n, 2 nq, 2)
+        S0 = np.zeros((2, 2 * nq))
+        S0[0, 0] = S0[1, 1] = 1.0
+        S0 = np.broadcast_to(S0.reshape(-1, 1, order="F"), (4 * nq, n))
+        S = kern["post"](S0, M1s.T, post, [self.h_post], K=post.shape[1], threads=threads)[0]
+        S = S[:, :, 0].T.reshape(n, 2, 2 * nq, order="F")
+        return S @ W
+
     @cached(maxsize=8)
     def _mapped(self, n: int, threads: int) -> ca.Function:
         return self.A_fn.map(n, "thread", threads)
@@ -158,22 +196,65 @@ class VariationalJacobian:
     def jacobians(self, M1s: np.ndarray, threads: int = 2) -> np.ndarray:
         """A^z for many non-singular M1, on threads.
 
+        The RK4 steps of both segments run on compiled four-lane kernels
+        (:func:`_step_kernels`: the same stages and tables as :attr:`A_fn`, equal to it
+        to round-off), the impact's algebra in numpy; where the kernels cannot be built,
+        :attr:`A_fn` mapped over the points.
+
         Parameters
         ----------
         M1s : numpy.ndarray
             (n, nu).
         threads : int
-            Threads of the mapped Function.
+            Threads.
 
         Returns
         -------
         numpy.ndarray
             (n, 2, 2).
         """
-        M1s = np.asarray(M1s, dtype=float)
+        M1s = np.atleast_2d(np.asarray(M1s, dtype=float))
         n = len(M1s)
+        if n == 0:
+            return np.zeros((0, 2, 2))
+        kern = _step_kernels(self.model.nu)
+        if kern is not None:
+            return self._jacobians_kernel(M1s, kern, threads)
         A = np.array(self._mapped(n, threads)(M1s.T))            # 2 x 2n
         return A.reshape(2, n, 2).transpose(1, 0, 2)
+
+
+@cached(maxsize=4)
+def _step_kernels(nu: int):
+    """One RK4 step of the variational equation as four-lane kernels (M1 per lane, the
+    coefficient factors per step): 'pre' (S 2 x 2) and 'post' (S 2 x (2 + 2 nu), with the
+    correction's forcing); None where :mod:`biped_casadi.simd` cannot build them.  They
+    depend on nu only: one library per number of torques, kept in the cache."""
+    from biped_casadi import simd
+    M1, h = ca.SX.sym("M1", nu), ca.SX.sym("h")
+    specs = {}
+    for key, c, forcing in (("pre", 2, False), ("post", 2 + 2 * nu, True)):
+        m = 3 + 3 * nu + (2 * nu if forcing else 0)           # factors per stage
+        S = ca.SX.sym("S", 2, c)
+        tab = ca.SX.sym("tab", 3 * m)
+        coef = []
+        for j in range(3):
+            r = tab[j * m:(j + 1) * m]
+            D11, D12 = r[0], r[1:1 + nu]
+            w0, wa = r[1 + nu], r[2 + nu:2 + 2 * nu]
+            h0, ha = r[2 + 2 * nu], r[3 + 2 * nu:3 + 3 * nu]
+            den = D11 - ca.dot(D12, M1)                       # eq. (24)
+            F = ca.vertcat(0, 0, r[3 + 3 * nu:]).T / den if forcing else 0
+            coef.append(((w0 - ca.dot(wa, M1)) / den, (-h0 + ca.dot(ha, M1)) / den, F))
+
+        def rhs(Sv, cc, coef=coef):
+            Jq, Jdq, F = coef[{0.0: 0, 0.5: 1, 1.0: 2}[cc]]
+            return ca.vertcat(Sv[1, :], Jq * Sv[0, :] + Jdq * Sv[1, :] + F)
+
+        Sn = rk4_step(rhs, S, h)
+        f = ca.Function(f"variational_{key}_nu{nu}", [ca.vec(S), M1, tab, h], [ca.vec(Sn)])
+        specs[key] = (f, 1, ("sample", "node", "const"), True)
+    return simd.kernels(specs, f"variational_nu{nu}", "-O2")
 
 
 @cached(maxsize=8)
