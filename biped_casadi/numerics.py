@@ -87,6 +87,11 @@ def compiled(f, flags: str = "-O2"):
     return out if isinstance(f, (list, tuple)) else out[0]
 
 
+#: threads of one process building the same library wait for each other (the cache's
+#: claim tells processes apart, not threads)
+_LIBRARY_LOCKS: dict = {}
+
+
 def cached_library(filename: str, build):
     """A shared library in the cache folder's ``compiled/``, built once per name.
 
@@ -115,7 +120,7 @@ def cached_library(filename: str, build):
     root = cache_dir() / "compiled"
     so = root / filename
     root.mkdir(parents=True, exist_ok=True)
-    with claimed(so):
+    with _LIBRARY_LOCKS.setdefault(filename, threading.Lock()), claimed(so):
         if not so.is_file():
             with tempfile.TemporaryDirectory() as tmp:
                 out = str(so) + f".tmp{os.getpid()}"
