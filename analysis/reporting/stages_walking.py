@@ -418,11 +418,39 @@ def stage_terrain(ctx: Context):
                       WalkerSpec("tv", tuple(ctx.data["nlp_M1"]["group1"]))))
     sigmas = (0.004, 0.008) if quick else (0.002, 0.004, 0.008, 0.012)
     runs, steps = (16, 12) if quick else (32, 20)
+    mfpt_st = {sig: MonteCarloSettings(sigma=sig, runs=runs, max_steps=steps, chunk=runs)
+               for sig in sigmas}
+    tv = [c for c in cands if c[2].controller == "tv"]       # (the README has the VC's)
+    gsn_cands = tv[-1:] if quick else tv
+    gsn_st = MonteCarloSettings(sigma=5e-4, runs=runs, max_steps=steps, chunk=runs)
+
+    def sensitivity(gg, spec):
+        return ctx.memo("gait_sensitivity", dict(gait=gg.cache_key, spec=repr(spec)),
+                        lambda: gait_sensitivity(spec.controller_for(gg),
+                                                 SimulationOptions(rk4_steps=400)))
+    # a 20 % torso-mass error, two gain sets (the full-order simulator); a few short runs:
+    # CasADi's virtual machine is faster than compiling the simulator
+    err_label, err_gait, err_spec = cands[1] if rb is not None else cands[0]
+    plant = m.description.scaled(torso_mass=1.2).to_dict()
+    err_st = MonteCarloSettings(sigma=sigmas[-1], runs=6 if quick else 12, max_steps=steps,
+                                chunk=12, compiled=False)
+    err_specs = [(gains, pl, WalkerSpec(err_spec.controller, err_spec.M1, err_spec.rejoin,
+                                        gains, pl))
+                 for gains in TERRAIN_GAINS for pl in (None, plant)]
+    # every Monte Carlo first, the helper process from the first and this one from the
+    # last (each is kept, and one being computed is waited for): the two meet in between
+    jobs = [lambda gg=gg, spec=spec, st=st: _mc(ctx, gg, spec, st)
+            for _, gg, spec in cands for st in mfpt_st.values()]
+    for _, gg, spec in gsn_cands:
+        jobs += [lambda gg=gg, spec=spec: sensitivity(gg, spec),
+                 lambda gg=gg, spec=spec: _mc(ctx, gg, spec, gsn_st)]
+    jobs += [lambda sp=sp: _mc(ctx, err_gait, sp, err_st) for _, _, sp in err_specs]
+    for job in (jobs if ctx.data.get("helper") else jobs[::-1]):
+        job()
     curves, rows, survival = {}, [], []
     for label, gg, spec in cands:
         pts = []
-        for sig in sigmas:
-            st = MonteCarloSettings(sigma=sig, runs=runs, max_steps=steps, chunk=runs)
+        for sig, st in mfpt_st.items():
             r = _mc(ctx, gg, spec, st)
             e = r.estimate
             pts.append((sig, e.mfpt, *e.mfpt_ci))
@@ -438,12 +466,9 @@ def stage_terrain(ctx: Context):
             + f" steps at sigma = {', '.join(f'{1000 * v:g}' for v in sigmas)} mm")
     # the exact GSN, and the Monte Carlo's step-time RMS it predicts at sigma = 0.5 mm
     gsn = []
-    tv = [c for c in cands if c[2].controller == "tv"]       # (the README has the VC's)
-    for label, gg, spec in tv[-1:] if quick else tv:
-        gs = ctx.memo("gait_sensitivity", dict(gait=gg.cache_key, spec=repr(spec)),
-                      lambda gg=gg, spec=spec: gait_sensitivity(
-                          spec.controller_for(gg), SimulationOptions(rk4_steps=400)))
-        st = MonteCarloSettings(sigma=5e-4, runs=runs, max_steps=steps, chunk=runs)
+    for label, gg, spec in gsn_cands:
+        gs = sensitivity(gg, spec)
+        st = gsn_st
         mc = _mc(ctx, gg, spec, st)
         pred = predicted_rms(gs.linearisation, st.sigma, steps, st.transient)
         gsn.append(dict(label=label, gsn=gs.gsn, spectral_radius=gs.spectral_radius,
@@ -452,21 +477,15 @@ def stage_terrain(ctx: Context):
         ctx.log(f"   {label}: GSN (ground, step time) {gs.gsn['ground_height']['step_time']:.4g}"
                 f" s/m; step-time RMS at 0.5 mm: predicted {pred:.3g} s, Monte Carlo "
                 f"{mc.step_time_rms:.3g} s")
-    # a 20 % torso-mass error, two gain sets (the full-order simulator)
     err = []
-    label, gg, spec = cands[1] if rb is not None else cands[0]
-    plant = m.description.scaled(torso_mass=1.2).to_dict()
-    sig = sigmas[-1]
-    st = MonteCarloSettings(sigma=sig, runs=6 if quick else 12, max_steps=steps, chunk=12)
-    for gains in TERRAIN_GAINS:
-        for pl in (None, plant):
-            sp = WalkerSpec(spec.controller, spec.M1, spec.rejoin, gains, pl)
-            r = _mc(ctx, gg, sp, st)
-            e = r.estimate
-            err.append(dict(design=label, gains=list(gains), torso_mass_error=0.2 if pl else 0.0,
-                            sigma=sig, mfpt=e.mfpt, mfpt_ci=e.mfpt_ci, failures=e.failures,
-                            runs=st.runs, max_steps=steps, engine=sp.engine,
-                            status_counts=r.status_counts))
+    for gains, pl, sp in err_specs:
+        r = _mc(ctx, err_gait, sp, err_st)
+        e = r.estimate
+        err.append(dict(design=err_label, gains=list(gains),
+                        torso_mass_error=0.2 if pl else 0.0,
+                        sigma=err_st.sigma, mfpt=e.mfpt, mfpt_ci=e.mfpt_ci, failures=e.failures,
+                        runs=err_st.runs, max_steps=steps, engine=sp.engine,
+                        status_counts=r.status_counts))
     ctx.log("   torso +20 %: " + "; ".join(
         f"gains {r['gains']}: MFPT {r['mfpt']:.3g}" for r in err if r["torso_mass_error"]))
     figs = ctx.out / "figures"

@@ -33,7 +33,8 @@ class _Payload:
 
     @property
     def cache_key(self):
-        return (self.gait_sha256, digest(self.spec.to_dict()), digest(self.settings.to_dict()))
+        return (self.gait_sha256, digest(self.spec.to_dict()), digest(self.settings.to_dict()),
+                self.settings.compiled)
 
 
 @cached(maxsize=4)
