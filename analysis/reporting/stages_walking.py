@@ -114,21 +114,31 @@ def _robustness_settings(ctx) -> RobustnessSettings:
             else RobustnessSettings())
 
 
-def _s_star_rows(ctx, groups) -> list:
+def _s_star_rows(ctx, groups, reverse: bool = False) -> list:
     """s* of every (label, design) of every (gait name, gait, candidates) group, each
-    kept between reproductions (:meth:`Context.memo`)."""
+    kept between reproductions (:meth:`Context.memo`); ``reverse``: computed from the
+    last (the reproduction's helper process takes them from the first)."""
     m, st = ctx.model, _robustness_settings(ctx)
+
+    def kept_of(gait):
+        return ctx.memo("kept_directions", dict(gait=gait.cache_key, settings=st.__dict__),
+                        lambda: kept_directions(m, gait, st))
+
+    def s_star(gait, design):
+        kept = kept_of(gait)
+        return ctx.memo("robustness", dict(gait=gait.cache_key, settings=st.__dict__,
+                                           design=None if design is None
+                                           else design.to_dict(),
+                                           kept=kept.directions.tolist()),
+                        lambda: robustness(m, gait, design, st, kept=kept))
+    if reverse:                   # computed last first (another process takes them in order)
+        for _, gait, cands in groups[::-1]:
+            for _, design in cands[::-1]:
+                s_star(gait, design)
     rows = []
     for gait_name, gait, cands in groups:
-        kept = ctx.memo("kept_directions", dict(gait=gait.cache_key, settings=st.__dict__),
-                        lambda gait=gait: kept_directions(m, gait, st))
         for label, design in cands:
-            r = ctx.memo("robustness", dict(gait=gait.cache_key, settings=st.__dict__,
-                                            design=None if design is None
-                                            else design.to_dict(),
-                                            kept=kept.directions.tolist()),
-                         lambda gait=gait, design=design, kept=kept:
-                         robustness(m, gait, design, st, kept=kept))
+            r = s_star(gait, design)
             rows.append(dict(label=label, gait=gait_name, **r.to_dict()))
             ctx.log(f"   {gait_name} gait, {label}: s* = {r.s_star:.4g}")
     return rows
@@ -152,7 +162,7 @@ def stage_robustness(ctx: Context):
 def stage_robustness_robust(ctx: Context):
     """s* of the robust designs and of virtual constraints on their gaits, and the
     trade-off figure (s* against max|lambda|)."""
-    rows = _s_star_rows(ctx, _robust_groups(ctx))
+    rows = _s_star_rows(ctx, _robust_groups(ctx), reverse=not ctx.data.get("helper"))
     summ = ctx.summary.setdefault("robustness", dict(
         settings=_robustness_settings(ctx).__dict__.copy(), rows=[]))
     summ["rows"] = summ["rows"] + rows
@@ -280,7 +290,12 @@ def _robust_runs(ctx, runs: dict) -> list:
         return []
     m, opts = ctx.model, _sim_options(ctx)
     g2 = ctx.data["robust_gait"]
+    g3, ds = _search(ctx)
     q0, dq0 = perturbed_initial_state(g2, *PAPER_SIZES)
+    q3, dq3 = perturbed_initial_state(g3, *PAPER_SIZES)
+    search = TimeVaryingController(m, g3, np.array(ds.M1), rejoin=ds.rejoin)
+    if not ctx.data.get("helper"):    # last first: the helper process takes them in order
+        _simulated(ctx, g3, search, q3, dq3, opts)
     out = []
     for key, label, ctrl in (
             ("robust_vc", "virtual constraints (the co-design's gait)",
@@ -292,11 +307,8 @@ def _robust_runs(ctx, runs: dict) -> list:
         out.append((r, label))
         runs[key] = dict(label=label, **_brief(r))
         ctx.log(f"   {label}: {r.status}")
-    g3, ds = _search(ctx)
-    q0, dq0 = perturbed_initial_state(g3, *PAPER_SIZES)
     label = "the sampling search's design (its gait)"
-    r = _simulated(ctx, g3, TimeVaryingController(m, g3, np.array(ds.M1), rejoin=ds.rejoin),
-                   q0, dq0, opts)
+    r = _simulated(ctx, g3, search, q3, dq3, opts)
     runs["search_design"] = dict(label=label, **_brief(r))
     ctx.log(f"   {label}: {r.status}")
     return out
