@@ -8,8 +8,9 @@ from .common import add_robot, load_model, output_dir, print_json
 #: measured by benchmarks/bench_reproduce.py (fresh processes, empty caches) on the 2-core AMD
 #: EPYC VM (Python 3.11), nothing cached, on two days: full 140 to 160 s and quick 47 to
 #: 62 s on the first; full 298 s and quick 104 to 110 s on the second, when the VM ran the
-#: same code 2 to 2.5 times slower (the previous version's quick run: 126.5 s); warm
-#: re-runs 7 to 21 s; the README quotes the same figures (tests/test_reproduce.py checks it)
+#: same code 2 to 2.5 times slower (the previous version's quick run: 126.5 s); on a third
+#: day as slow, this version: full 245.6 s, quick 69.7 to 76.9 s; warm re-runs 7 to 23 s;
+#: the README quotes the same figures (tests/test_reproduce.py checks it)
 TIME_FULL = "2.5 to 5 min"
 TIME_QUICK = "1 to 2 min"
 
