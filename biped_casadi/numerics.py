@@ -176,7 +176,7 @@ class FastCall:
         """The Function's outputs at ``args`` (numbers or arrays of the inputs' shapes,
         read column by column), as 2-D numpy arrays."""
         if not self.dense:
-            return [np.array(v) for v in self.f(*args)]
+            return [np.array(v) for v in self.f.call([np.asarray(a, float) for a in args])]
         buf, ev, ins = self._buffer()
         for a, x, (r, c) in zip(ins, args, self._in):
             x = np.asarray(x, float)

@@ -81,3 +81,17 @@ def test_m1_nlp_group2(model, gait, tay, nlp2):
     st, mx = jb.status, jb.max_abs
     assert r.max_abs <= np.min(mx[st != "singular"]) + 1e-12
     assert r.eigenvalue_uncertainty < 1e-2
+
+
+def test_m1_nlp_runs_ipopt_only_until_a_deadbeat_point(model, gait, nlp2):
+    """Newton reached deadbeat from the first start: IPOPT (whose epigraph is degenerate
+    at rho = 0) is not run; without the Newton step it runs from every start it is
+    given (its points kept only where valid and on the group), and the chosen M1 is
+    still verified and on the group, never better than deadbeat."""
+    assert nlp2.history[1]["how"] == "newton" and nlp2.ipopt_runs == 0
+    assert not any(h["how"].startswith("ipopt") for h in nlp2.history)
+    r = optimize_m1(model, gait, group=2, n_best=2, n_ipopt=2, n_random=0, deadbeat=False)
+    assert r.ipopt_runs == 2
+    assert {h["how"] for h in r.history} <= {"start", "ipopt"}
+    assert r.group == 2 and abs(r.a) < 1e-9 and abs(r.b) < 1e-9
+    assert r.max_abs >= nlp2.max_abs - nlp2.eigenvalue_uncertainty

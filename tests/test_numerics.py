@@ -1,0 +1,64 @@
+"""biped_casadi.numerics: the buffer calls of CasADi Functions, and several Functions
+compiled into one library."""
+from __future__ import annotations
+
+import threading
+
+import casadi as ca
+import numpy as np
+
+from biped_casadi.numerics import FastCall, compiled
+
+
+def _function():
+    x, p, m = ca.SX.sym("x", 3), ca.SX.sym("p"), ca.SX.sym("m", 2, 3)
+    e = ca.SX.sym("e", 0)
+    return ca.Function("f", [x, p, m, e], [ca.sin(x) * p, ca.mtimes(m, x), ca.sumsqr(m)])
+
+
+def test_fast_call_equals_the_plain_call():
+    f = _function()
+    g = FastCall(f)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        x, p, m = rng.normal(size=3), rng.normal(), rng.normal(size=(2, 3))
+        got = g(x, p, m, np.zeros(0))
+        want = [np.array(v) for v in f(x, p, m, np.zeros(0))]
+        for a, b in zip(got, want):
+            assert a.shape == b.shape
+            np.testing.assert_array_equal(a, b)
+    # results are fresh arrays: a later call does not overwrite an earlier result
+    first = g(np.ones(3), 1.0, np.ones((2, 3)), np.zeros(0))[0].copy()
+    keep = g(np.ones(3), 1.0, np.ones((2, 3)), np.zeros(0))[0]
+    g(np.zeros(3), 2.0, np.ones((2, 3)), np.zeros(0))
+    np.testing.assert_array_equal(keep, first)
+
+
+def test_fast_call_threads_and_sparse_outputs():
+    f = _function()
+    g = FastCall(f)
+    out = {}
+
+    def work(k):
+        out[k] = [g(np.full(3, k), float(k), np.eye(2, 3), np.zeros(0))[1] for _ in range(200)]
+    ts = [threading.Thread(target=work, args=(k,)) for k in range(4)]
+    for t in ts:
+        t.start()
+    for t in ts:
+        t.join()
+    for k, rs in out.items():
+        for r in rs:
+            np.testing.assert_array_equal(r, np.eye(2, 3) @ np.full((3, 1), k))
+    x = ca.SX.sym("x", 2)
+    sparse = ca.Function("s", [x], [ca.diag(x)])            # a sparse output: plain call
+    h = FastCall(sparse)
+    assert not h.dense
+    np.testing.assert_array_equal(h([1.0, 2.0])[0], np.diag([1.0, 2.0]))
+
+
+def test_several_functions_in_one_library():
+    x = ca.SX.sym("x", 2)
+    fs = [ca.Function("lib_a", [x], [x * 2]), ca.Function("lib_b", [x], [ca.dot(x, x)])]
+    a, b = compiled(fs, "-O1")
+    assert float(b([3.0, 4.0])) == 25.0
+    np.testing.assert_array_equal(np.array(a([1.0, 2.0])).ravel(), [2.0, 4.0])
