@@ -48,6 +48,7 @@ def run(out: Path, cache: Path, quick: bool) -> dict:
     return dict(rc=p.returncode, wall=wall, load_before=load0, load_after=os.getloadavg()[0],
                 stages=summary.get("stages", {}), total=summary.get("total_time"),
                 reused=summary.get("reused", {}), helped=summary.get("helped", {}),
+                codesign_help=summary.get("codesign_help"),
                 stderr=p.stderr[-2000:])
 
 
@@ -60,6 +61,10 @@ def show(label: str, r: dict):
         print(f"  {name:36s} {s['status']:8s} {t if t is not None else float('nan'):7.1f} s"
               + (f"   reused: {len(reuse)}" if reuse else "")
               + (f"   from the helper process: {len(helped)}" if helped else ""))
+    h = r.get("codesign_help")
+    if h and h.get("computed"):
+        print(f"  (between the stages above: {h['computed']} of the co-design's units taken "
+              f"from the helper, {h['time']:.1f} s in {h['calls']} looks)")
     if r["rc"] != 0:
         print("  stderr: " + r["stderr"].replace("\n", "\n    "))
 

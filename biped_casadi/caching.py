@@ -27,7 +27,7 @@ from collections import OrderedDict
 from pathlib import Path
 
 __all__ = ["cached", "cache_key", "cache_dir", "digest", "source_digest", "modules_digest",
-           "DiskCache", "claimed", "shared_result"]
+           "DiskCache", "Claimed", "claimed", "shared_result"]
 
 
 def cache_key(obj):
@@ -269,8 +269,12 @@ def _alive(pid: int) -> bool:
     return True
 
 
+class Claimed(RuntimeError):
+    """Another live process holds the claim (:func:`claimed` with ``wait=False``)."""
+
+
 @contextlib.contextmanager
-def claimed(path: Path, poll: float = 0.2):
+def claimed(path: Path, poll: float = 0.2, wait: bool = True):
     """Hold the right to compute ``path`` among processes sharing the cache folder.
 
     While another live process holds it (e.g. the reproduction's helper on the second
@@ -285,6 +289,8 @@ def claimed(path: Path, poll: float = 0.2):
         The result to compute.
     poll : float
         Seconds between looks at another process's lock.
+    wait : bool
+        False: raise :class:`Claimed` instead of waiting.
     """
     lock = Path(str(path) + ".lock")
     try:
@@ -301,6 +307,8 @@ def claimed(path: Path, poll: float = 0.2):
             except (OSError, ValueError):
                 pid = 0
             if pid and pid != os.getpid() and _alive(pid):
+                if not wait:
+                    raise Claimed(f"{path} is being computed by process {pid}")
                 time.sleep(poll)
                 continue
             with contextlib.suppress(OSError):
@@ -319,7 +327,7 @@ def claimed(path: Path, poll: float = 0.2):
             lock.unlink()
 
 
-def shared_result(path, compute, claim: bool = True):
+def shared_result(path, compute, claim: bool = True, wait: bool = True):
     """``compute()`` once among the processes sharing a cache folder.
 
     Under :func:`claimed`: the pickle at ``path`` if a process wrote it, else
@@ -335,6 +343,9 @@ def shared_result(path, compute, claim: bool = True):
         Hold the claim while computing (False: read the result if it is there, else
         compute it without keeping another process waiting, e.g. when its parts are
         shared results of their own).
+    wait : bool
+        False: raise :class:`Claimed` when another process is computing it (and has
+        not written it yet) instead of waiting.
 
     Returns
     -------
@@ -345,7 +356,10 @@ def shared_result(path, compute, claim: bool = True):
 
     from .files import write_bytes_atomic
     path = Path(path)
-    with claimed(path) if claim else contextlib.nullcontext():
+    if not wait and path.is_file():
+        with contextlib.suppress(Exception):     # noqa: BLE001 - read again under the claim
+            return pickle.loads(path.read_bytes()), True
+    with claimed(path, wait=wait) if claim else contextlib.nullcontext():
         if path.is_file():
             try:
                 return pickle.loads(path.read_bytes()), True

@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from biped_casadi import rabbit
-from biped_casadi.caching import DiskCache
+from biped_casadi.caching import DiskCache, claimed
 
 from .gait import FORMAT_VERSION, Gait, GaitFileError
 from .optimize import optimize_gait
@@ -94,17 +94,33 @@ def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
         options = options.replace(**overrides)
     options = options.for_model(model)
     path = cache_path(model, options, cache_dir)
-    reason = "no cached file"
-    if path.exists():
-        g, reason = _usable(path, model, options)
+    g, reason = _cached(path, model, options)
+    if g is not None:
+        return g
+    # one process optimises it; another asking for it meanwhile waits and reads it
+    with claimed(path):
+        g, reason = _cached(path, model, options)
         if g is not None:
-            g.solver_stats["cache"] = "hit"
-            g.solver_stats["cache_file"] = str(path)
             return g
-    if progress is not None:
-        progress(f"optimising the reference gait of {model.params.name} (a few seconds, "
-                 f"once; stored in {path.parent}) ...")
-    g = optimize_gait(model, options)
+        if progress is not None:
+            progress(f"optimising the reference gait of {model.params.name} (a few "
+                     f"seconds, once; stored in {path.parent}) ...")
+        g = optimize_gait(model, options)
+        return _store(g, path, reason)
+
+
+def _cached(path, model, options):
+    """(the kept gait at ``path`` or None, why not)."""
+    if not path.exists():
+        return None, "no cached file"
+    g, reason = _usable(path, model, options)
+    if g is not None:
+        g.solver_stats["cache"] = "hit"
+        g.solver_stats["cache_file"] = str(path)
+    return g, reason
+
+
+def _store(g, path, reason):
     note = f"computed ({reason})"
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

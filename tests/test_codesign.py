@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 
 from analysis.cli import main
-from analysis.design.codesign import (CodesignError, CodesignSettings, Reduced, Transcription,
+from analysis.design.codesign import (CodesignError, Reduced, Transcription,
                                       TranscriptionSettings)
-from analysis.design.codesign.driver import _Codesign
 
 #: a design of the good region (small M1) found by the co-design; any stable M1 would do
 M1 = np.array([0.0385, 0.6158, 0.4359, -0.6560])
@@ -131,18 +130,19 @@ def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     assert hp["full_order"]["passed"] == hp["patterns"], hp
 
 
-@pytest.mark.slow
-def test_codesign_shared_by_two_processes_is_the_same(tmp_path):
-    """Two processes running the quick co-design on one cache folder, taking its units
-    from opposite ends, split them (each solves some starts) and return the design of a
-    run alone."""
-    import subprocess
-    import sys
+@pytest.fixture(scope="module")
+def quick_alone(tmp_path_factory):
+    """The quick co-design run by one process alone (its own cache folder)."""
     from analysis.design.codesign import QUICK, codesign
     from biped_casadi import RABBIT, BipedModel
-    model = BipedModel(RABBIT)
-    alone = codesign(model, QUICK, cache=tmp_path / "alone")
-    shared = tmp_path / "shared"
+    return codesign(BipedModel(RABBIT), QUICK, cache=tmp_path_factory.mktemp("alone"))
+
+
+def _codesign_child(cache, side):
+    """A process running the quick co-design on ``cache`` from its ``side``; it prints its
+    design and the NLP solves it ran as JSON."""
+    import subprocess
+    import sys
     script = ("import json, sys; sys.path[:0] = %r\n"
               "from analysis.design.codesign import QUICK, codesign\n"
               "from biped_casadi import RABBIT, BipedModel\n"
@@ -151,9 +151,18 @@ def test_codesign_shared_by_two_processes_is_the_same(tmp_path):
               "             progress=lines.append)\n"
               "print(json.dumps(dict(M1=r.design['M1'], s_star=r.s_star, verified=r.verified,\n"
               "                      solved=[s for s in lines if s.startswith('NLP')])))"
-              ) % (sys.path, str(shared))
-    procs = [subprocess.Popen([sys.executable, "-c", script, side], stdout=subprocess.PIPE,
-                              text=True) for side in ("forward", "backward")]
+              ) % (sys.path, str(cache))
+    return subprocess.Popen([sys.executable, "-c", script, side], stdout=subprocess.PIPE,
+                            text=True)
+
+
+@pytest.mark.slow
+def test_codesign_shared_by_two_processes_is_the_same(tmp_path, quick_alone):
+    """Two processes running the quick co-design on one cache folder, taking its units
+    from opposite ends, split them (each solves some starts) and return the design of a
+    run alone."""
+    alone = quick_alone
+    procs = [_codesign_child(tmp_path / "shared", side) for side in ("forward", "backward")]
     outs = [json.loads(p.communicate(timeout=600)[0]) for p in procs]
     for o in outs:
         assert o["M1"] == alone.design["M1"] and o["s_star"] == alone.s_star
@@ -161,3 +170,44 @@ def test_codesign_shared_by_two_processes_is_the_same(tmp_path):
         assert o["solved"], "each process solves at least one start"
     assert len(outs[0]["solved"]) + len(outs[1]["solved"]) == len(
         [r for r in alone.rounds if r["phase"] == "start"])
+
+
+@pytest.mark.slow
+def test_codesign_prefetch_between_other_work_gives_the_same_design(tmp_path, quick_alone):
+    """The reproduction's main process takes part in the helper's co-design between its
+    own stages (codesign_prefetch, never waiting) and later runs it itself: nothing is
+    tried before the other process's setup is done, some starts are taken, and both
+    processes return the design of a run alone."""
+    import time
+    from analysis.design.codesign import QUICK, codesign, codesign_prefetch
+    from biped_casadi import RABBIT, BipedModel
+    model, shared = BipedModel(RABBIT), tmp_path / "shared"
+    t = time.perf_counter()
+    p = codesign_prefetch(model, QUICK, cache=shared, wait=False)
+    assert not p["ready"] and p["computed"] == 0 and not p["finished"]
+    assert time.perf_counter() - t < 5.0                  # it did not optimise the gait
+    with pytest.raises(ValueError, match="share"):
+        codesign_prefetch(model, QUICK, cache=shared, share="sideways")
+    child = _codesign_child(shared, "forward")
+    taken, looks = 0, 0
+    try:
+        while child.poll() is None and looks < 3000:
+            p = codesign_prefetch(model, QUICK, cache=shared, wait=False)
+            taken, looks = taken + p["computed"], looks + 1
+            if p["finished"]:
+                break
+            time.sleep(0.1)
+        r = codesign(model, QUICK, cache=shared, share="backward")
+        out = json.loads(child.communicate(timeout=600)[0])
+    finally:
+        child.kill()
+        child.wait()
+    assert taken >= 1, "the prefetching process took none of the units"
+    alone = quick_alone
+    assert r.design["M1"] == alone.design["M1"] and r.s_star == alone.s_star
+    assert out["M1"] == alone.design["M1"] and out["s_star"] == alone.s_star
+    n_starts = len([x for x in alone.rounds if x["phase"] == "start"])
+    child_starts = [x for x in out["solved"] if "(start " in x]
+    assert len(child_starts) + taken >= n_starts       # every start screened by someone
+    assert len(child_starts) < n_starts                # the helper did not screen them all
+    assert codesign_prefetch(model, QUICK, cache=shared)["cached"]

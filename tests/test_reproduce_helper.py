@@ -7,6 +7,8 @@ import sys
 import threading
 import time
 
+import pytest
+
 from analysis.reporting.context import claimed
 
 
@@ -96,3 +98,30 @@ def test_compiled_functions_are_kept_by_content(tmp_path, monkeypatch):
     t = libs[0].stat().st_mtime_ns
     compiled(build())
     assert [p.stat().st_mtime_ns for p in (tmp_path / "compiled").glob("f_test_*.so")] == [t]
+
+
+def test_a_claim_that_does_not_wait(tmp_path):
+    """``wait=False``: a live claim raises Claimed at once; a result already written is
+    read without looking at the claim; a free claim is taken as usual."""
+    from biped_casadi.caching import Claimed, shared_result
+    path = tmp_path / "unit.pkl"
+    lock = tmp_path / "unit.pkl.lock"
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        lock.write_text(str(holder.pid))
+        t = time.perf_counter()
+        with pytest.raises(Claimed, match=str(holder.pid)):
+            with claimed(path, poll=0.05, wait=False):
+                pass
+        with pytest.raises(Claimed):
+            shared_result(path, lambda: "mine", wait=False)
+        assert time.perf_counter() - t < 1.0
+        assert lock.read_text() == str(holder.pid)        # the holder's claim is untouched
+        shared_result(tmp_path / "other.pkl", lambda: "other")
+        (tmp_path / "other.pkl").rename(path)             # the holder's result appears
+        assert shared_result(path, lambda: "mine", wait=False) == ("other", True)
+    finally:
+        holder.kill()
+        holder.wait()
+    assert shared_result(tmp_path / "free.pkl", lambda: "free", wait=False) == ("free", False)
+    assert not (tmp_path / "free.pkl.lock").exists()

@@ -111,8 +111,8 @@ def verify_design(model, gait, design: Design, kept, settings: RobustnessSetting
     progress : callable, optional
         Called with one line of text per stage.
     unit, order : callable, optional
-        How the three sets of full-order runs (at s*, at s_fail, the paper's
-        perturbation) are done: ``unit(name, inputs, compute)`` returns ``compute()``
+        How the walker's bisection and the three sets of full-order runs (at s*, at
+        s_fail, the paper's perturbation) are done: ``unit(name, inputs, compute)`` returns ``compute()``
         (default) or a result another process computed, ``order(units)`` the order they
         are taken in (default as listed); the co-design shares them between two
         processes (:meth:`analysis.design.codesign.driver._Codesign.unit`).
@@ -126,7 +126,9 @@ def verify_design(model, gait, design: Design, kept, settings: RobustnessSetting
     order = order or list
     st, dirs = settings, kept.directions
     say("s* of the design (walker bisection) and full-order verification")
-    r = robustness(model, gait, design, st, kept=kept)
+    inputs = dict(gait=gait.cache_key, design=design.to_dict(), kept=dirs.tolist(),
+                  settings=dict(st.__dict__))
+    r = unit("s* bisection", inputs, lambda: robustness(model, gait, design, st, kept=kept))
     ctrl = TimeVaryingController(model, gait, np.array(design.M1), rejoin=design.rejoin)
     opts = SimulationOptions(steps=st.steps, mu=st.mu, torque_limit=st.torque_limit, jit=True)
 
@@ -143,8 +145,6 @@ def verify_design(model, gait, design: Design, kept, settings: RobustnessSetting
     todo = [(label, s, lambda s=s: runs_at(s))
             for label, s in (("at_s_star", r.s_star), ("at_s_fail", r.s_fail))
             if math.isfinite(s)] + [("paper", 1.0, paper_run)]
-    inputs = dict(gait=gait.cache_key, design=design.to_dict(), kept=dirs.tolist(),
-                  settings=dict(st.__dict__))
     done = {label: unit("full order", dict(inputs, label=label, scale=s), compute)
             for label, s, compute in order(todo)}
     verified = {label: done[label] for label, _, _ in todo if label != "paper"}

@@ -44,7 +44,8 @@ from .constants import PAPER
 from .context import FORMATS, Context, is_rabbit
 from .stages_paper import (stage_fig2, stage_fig3, stage_fig4, stage_gait, stage_grid, stage_m1,
                            stage_singular, stage_vc)
-from .stages_walking import (stage_basins, stage_basins_robust, stage_robust_design,
+from .stages_walking import (help_codesign, stage_basins, stage_basins_robust,
+                             stage_robust_design,
                              stage_robustness, stage_robustness_robust, stage_search_design,
                              stage_sim, stage_sim_robust, stage_terrain, stage_tradeoff,
                              warm_robust_runs)
@@ -148,6 +149,19 @@ STAGES = [
     ("Fig. 5, Fig. 6, animation", stage_sim_robust, ("Fig. 5 runs, default gait",)),
     ("uneven ground (MFPT, GSN)", stage_terrain, ("gait",)),
 ]
+
+#: the stages before which this process takes any of the co-design's independent units
+#: that are free (its start screens and rejoin choices, from the last; never waiting), so
+#: that the helper reaches the sequential gait steps sooner (:func:`help_codesign`)
+PAPER_STAGES = (stage_fig2, stage_grid, stage_fig3, stage_fig4, stage_m1, stage_vc,
+                stage_robustness, stage_sim, stage_basins, stage_search_design,
+                stage_robust_design)
+
+#: the stage before which the full run joins the co-design's independent units and waits
+#: for the helper's share of them (measured, bench_reproduce.py: waiting here, while the
+#: helper has both cores, beats taking units only when they are free, which leaves both
+#: processes' threads on two cores; the quick run, whose co-design is short, never waits)
+JOIN_STAGE = stage_m1
 
 #: what the helper process computes ahead, in its order, while this process runs the
 #: paper's stages: the co-design (the gait-fixed one of --quick split with this process,
@@ -274,6 +288,7 @@ class _Helper:
         self.proc = multiprocessing.get_context("spawn").Process(
             target=_helper_main, args=(dict(ctx.opts.__dict__), str(out)), daemon=True)
         self.proc.start()
+        ctx.data["helper_running"] = True
         ctx.log("   (a helper process computes the robust design on the second core)")
 
     def stop(self):
@@ -304,6 +319,9 @@ def _stages(ctx: Context, helper: _Helper) -> dict:
             continue
         if k == 1:
             helper.start(ctx)          # the robust design needs no stage of this process
+        elif fn in PAPER_STAGES:
+            # the co-design's free independent units, if any (the full run waits once)
+            help_codesign(ctx, wait=fn is JOIN_STAGE and not ctx.opts.quick)
         ctx.log(f"[{k}/{len(STAGES)}] {name} ...")
         ctx.stage = name
         t = time.perf_counter()

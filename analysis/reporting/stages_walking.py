@@ -12,13 +12,13 @@ from biped_casadi import (PAPER_SIZES, SimulationOptions,
 from gait_opt import GaitOptions, default_gait
 
 from ..design import ROBUST_GAIT
-from ..design.codesign import (FULL, QUICK, TODAY_DESIGN, codesign, codesign_path,
+from ..design.codesign import (FULL, QUICK, TODAY_DESIGN, codesign, codesign_prefetch,
                                codesign_tradeoff)
 from ..robustness import Design, RobustnessSettings, basin, kept_directions, robustness
 from .plots import (basin_plot, save_figure, swing_torques_plot, tradeoff_plot, unactuated_error_plot,
                     walking_animation)
 
-from .context import FORMATS, Context, claimed, is_rabbit
+from .context import FORMATS, Context, is_rabbit
 from .constants import PAPER
 
 
@@ -47,20 +47,40 @@ def stage_robust_design(ctx: Context):
         return
     st = QUICK if ctx.opts.quick else FULL
     say = lambda m: ctx.log("   " + m)                 # noqa: E731
-    if st.splittable:
-        # the two processes split its units, taking them from opposite ends
-        r = codesign(ctx.model, st, progress=say,
-                     share="forward" if ctx.data.get("helper") else "backward")
-    else:
-        # one process computes the whole co-design (the helper, usually), the other waits
-        with claimed(codesign_path(ctx.model, st)):
-            r = codesign(ctx.model, st, progress=say)
+    # the two processes split its units, taking the independent ones from opposite ends
+    # (this one took part in them already between its stages, help_codesign)
+    r = codesign(ctx.model, st, progress=say,
+                 share="forward" if ctx.data.get("helper") else "backward")
     ctx.data["robust"] = r
     ctx.data["robust_gait"] = r.gait
     _search(ctx)
     ctx.summary["robust_design"] = dict(r.to_dict(),
                                         method="co-design NLP (biped m1 --robust)")
     ctx.log(f"   {r.message}")
+
+
+def help_codesign(ctx: Context, wait: bool = False):
+    """Between two stages of the main process: the robust co-design's independent units
+    that nobody has taken yet (its start screens and rejoin choices, from the last; the
+    helper process takes them from the first), so that the helper reaches the sequential
+    gait steps sooner (:func:`analysis.design.codesign.codesign_prefetch`).  ``wait``
+    False: never wait for the helper (return at its first unit in progress); True: wait
+    for its setup and its units in progress until every independent unit is done.  The
+    time and the units go to ``summary['codesign_help']``.  Nothing without the helper,
+    once every independent unit is done, or when the co-design is kept."""
+    if not is_rabbit(ctx) or not ctx.data.get("helper_running") \
+            or ctx.data.get("codesign_helped"):
+        return
+    st = QUICK if ctx.opts.quick else FULL
+    p = codesign_prefetch(ctx.model, st, share="backward", wait=wait)
+    h = ctx.summary.setdefault("codesign_help", dict(calls=0, time=0.0, computed=0))
+    h["calls"] += 1
+    h["time"] += p["time"]
+    h["computed"] += p["computed"]
+    if p["computed"]:
+        ctx.log(f"   (took {p['computed']} of the co-design's units in {p['time']:.1f} s)")
+    if p["finished"]:
+        ctx.data["codesign_helped"] = True
 
 
 def _search(ctx):

@@ -41,7 +41,7 @@ in full order, max|lambda| against virtual constraints, and sign patterns never 
 (:func:`analysis.design.verification.hidden_sign_patterns`).  Results are cached.
 """
 
-from .driver import codesign, codesign_path, codesign_tradeoff
+from .driver import codesign, codesign_path, codesign_prefetch, codesign_tradeoff
 from .functions import FAMILIES, TranscriptionSettings, compiled
 from .reduced import NLPSolve, Reduced, solve_nlp
 from .settings import (CODESIGNS, FULL, QUICK, TODAY_DESIGN, CodesignError, CodesignResult,
@@ -50,6 +50,6 @@ from .transcription import Transcription
 
 # the documented surface (Transcription and Reduced stay importable: the NLP's
 # internals, for tests and studies)
-__all__ = ["codesign", "codesign_path", "codesign_tradeoff", "CodesignSettings",
+__all__ = ["codesign", "codesign_path", "codesign_prefetch", "codesign_tradeoff", "CodesignSettings",
            "CodesignResult", "CodesignError", "QUICK", "FULL", "TODAY_DESIGN", "CODESIGNS",
            "TranscriptionSettings", "solve_nlp", "NLPSolve", "FAMILIES", "compiled"]

@@ -9,7 +9,7 @@ import time
 import casadi as ca
 import numpy as np
 
-from biped_casadi.caching import shared_result, source_digest
+from biped_casadi.caching import Claimed, shared_result, source_digest
 from biped_casadi.control.output_law import decoupling_denominator
 from biped_casadi.control.zero_dynamics import denominator_samples
 from biped_casadi.files import write_text_atomic
@@ -31,14 +31,26 @@ from .transcription import Transcription
 
 
 # ------------------------------------------------------------------ the method
+class _Barrier(Exception):
+    """Where a prefetching run (:func:`codesign_prefetch`) stops: 'end', the end of the
+    co-design's independent units, before its sequential gait steps; 'busy', a unit the
+    other process is computing (when it does not wait)."""
+
+
 class _Codesign:
     """The stages of :func:`codesign`, with the state they share."""
 
-    def __init__(self, model, st: CodesignSettings, gait, progress, share=None, cache=None):
+    def __init__(self, model, st: CodesignSettings, gait, progress, share=None, cache=None,
+                 prefetch: bool = False, wait: bool = True):
         if share not in (None, "forward", "backward"):
             raise ValueError(f"share must be None, 'forward' or 'backward', got {share!r}")
         self.model, self.st = model, st
         self.share, self.cache = share, cache
+        self.prefetch = bool(prefetch)
+        #: False (prefetching only): stop at a unit another process is computing
+        self.wait = bool(wait)
+        #: units this process computed and units it read (another process's, or kept)
+        self.computed, self.read = 0, 0
         self.unit_key = _key(model, st, gait)
         self.say = progress or (lambda msg: None)
         #: the rejoin fraction of the solves now (st.rejoin, then each of st.rejoin_choices)
@@ -61,14 +73,29 @@ class _Codesign:
 
     # -------------------------------------------------------------- helpers
     def unit(self, name, inputs, compute):
-        """``compute()``: an independent unit of work.  With ``share`` set it is done once
-        among the processes running this co-design on one cache folder
-        (:func:`biped_casadi.caching.shared_result`), each taking the units in its own
-        order (:meth:`order`), so two processes split them."""
+        """``compute()``: a unit of work.  With ``share`` set it is done once among the
+        processes running this co-design on one cache folder
+        (:func:`biped_casadi.caching.shared_result`: one computing it, the others waiting
+        for its result), each taking the independent units in its own order
+        (:meth:`order`), so two processes split them.  Every IPOPT solve is a unit (its
+        wall-time limit makes it the one result that could differ between processes),
+        so both follow the same path and return the same design."""
         if self.share is None:
             return compute()
-        body = dict(self.unit_key, unit=name, inputs=inputs)
-        return shared_result(CODESIGNS.path(body, self.cache, suffix=".unit.pkl"), compute)[0]
+        try:
+            value, read = shared_result(self.unit_path(name, inputs), compute,
+                                        wait=self.wait)
+        except Claimed:
+            raise _Barrier("busy") from None     # (wait=False) the other process has it
+        if read:
+            self.read += 1
+        else:
+            self.computed += 1
+        return value
+
+    def unit_path(self, name, inputs):
+        return CODESIGNS.path(dict(self.unit_key, unit=name, inputs=inputs), self.cache,
+                              suffix=".unit.pkl")
 
     def order(self, items) -> list:
         """Independent units in this process's order: as given, or last first for
@@ -77,14 +104,22 @@ class _Codesign:
         return items[::-1] if self.share == "backward" else items
 
     def kept(self, gait):
-        return kept_directions(self.model, gait, self.rs)
+        return self.unit("kept directions", dict(gait=gait.cache_key),
+                         lambda: kept_directions(self.model, gait, self.rs))
 
     def measure(self, gait, kept, M1):
         """Walker s* over the kept directions and max|lambda| (AD) of a design."""
-        r = robustness(self.model, gait, Design(tuple(M1), self.rejoin), self.rs, kept=kept)
-        lam = poincare_map(self.model, gait, rejoin=self.rejoin).analyse(
-            np.array(M1), method="ad").max_abs
-        return r, float(lam)
+        M1 = np.asarray(M1, float)
+
+        def compute():
+            r = robustness(self.model, gait, Design(tuple(M1), self.rejoin), self.rs,
+                           kept=kept)
+            lam = poincare_map(self.model, gait, rejoin=self.rejoin).analyse(
+                M1, method="ad").max_abs
+            return r, float(lam)
+        return self.unit("measure", dict(gait=gait.cache_key, M1=M1.tolist(),
+                                         rejoin=self.rejoin,
+                                         kept=np.asarray(kept.directions).tolist()), compute)
 
     def hardest(self, gait, kept, M1, s, n):
         """The n kept directions (not the paper's) that fail first or end worst at scale s."""
@@ -182,24 +217,32 @@ class _Codesign:
 
     def solve(self, tr, red, d0, lb, ub, label, max_iter=None, max_time=None,
               max_evaluations=None):
-        """One IPOPT solve from d0.  When a scenario cannot strike from d0 (a direction
-        just added fails early at the start's scale), the start's s is lowered (x 0.8,
-        at most 8 times) until every scenario strikes."""
+        """One IPOPT solve from d0 (a unit, :meth:`unit`).  When a scenario cannot strike
+        from d0 (a direction just added fails early at the start's scale), the start's s
+        is lowered (x 0.8, at most 8 times) until every scenario strikes."""
+        limits = dict(max_iter=max_iter or self.st.max_iter,
+                      max_wall_time=max_time or self.st.max_solve_time,
+                      max_evaluations=max_evaluations or self.st.max_evaluations)
         d0 = np.array(d0, float)
-        for _ in range(8):
-            try:
-                res = solve_nlp(red, d0, lb, ub, {
-                    "max_iter": max_iter or self.st.max_iter,
-                    "max_wall_time": max_time or self.st.max_solve_time},
-                    max_evaluations=max_evaluations or self.st.max_evaluations)
-                break
-            except NoStrikeAtStart:
-                d0[tr.i_s] *= 0.8
-                red._last = None
-        else:
-            res = NLPSolve(d=np.full(red.nd, np.nan), lam_g=np.zeros(0),
-                           status="no_strike_from_start", success=False, iterations=0,
-                           time=0.0, evaluations=0)
+
+        def compute():
+            d = d0.copy()
+            for _ in range(8):
+                try:
+                    return solve_nlp(red, d, lb, ub, {
+                        "max_iter": limits["max_iter"],
+                        "max_wall_time": limits["max_wall_time"]},
+                        max_evaluations=limits["max_evaluations"])
+                except NoStrikeAtStart:
+                    d[tr.i_s] *= 0.8
+                    red._last = None
+            return NLPSolve(d=np.full(red.nd, np.nan), lam_g=np.zeros(0),
+                            status="no_strike_from_start", success=False, iterations=0,
+                            time=0.0, evaluations=0)
+        res = self.unit("solve", dict(label=label, d0=d0.tolist(),
+                                      lb=np.asarray(lb, float).tolist(),
+                                      ub=np.asarray(ub, float).tolist(),
+                                      problem=_problem(tr, red), limits=limits), compute)
         self.solves.append(dict(label=label, status=res.status, iterations=res.iterations,
                                 time=round(res.time, 2), evaluations=res.evaluations,
                                 scenarios=tr.K))
@@ -237,17 +280,22 @@ class _Codesign:
         if st.samples <= 0 or st.sampled_starts <= 0:
             return []
         g, kept, rs = self.gait0, self.kept0, self.rs
-        rng = np.random.default_rng(st.seed)
-        M = rng.uniform(-st.box, st.box, (st.samples, m.nu))
-        jb = poincare_map(m, g, rejoin=self.rejoin).jacobian_batch(M)
-        ok = (jb.status == "stable") & (jb.max_abs <= st.eigen_margin * self.lam_vc(g))
-        M = M[ok][:8 * st.sampled_starts]
-        if len(M):
-            w = zero_dynamics_walker(m, g, rs.simulation_options(), 200, jit=True)
-            q0, dq0 = start_states(g, np.repeat(kept.directions[:1], len(M), 0), 1.0)
-            B = w.walk(q0, dq0, M, self.rejoin, steps=rs.steps)
-            M = M[B.verdict(rs.tol) == "ok"][:st.sampled_starts]
-        self.stage("sampled starts", drawn=st.samples, stable=int(ok.sum()), kept=len(M))
+
+        def compute():
+            rng = np.random.default_rng(st.seed)
+            M = rng.uniform(-st.box, st.box, (st.samples, m.nu))
+            jb = poincare_map(m, g, rejoin=self.rejoin).jacobian_batch(M)
+            ok = (jb.status == "stable") & (jb.max_abs <= st.eigen_margin * self.lam_vc(g))
+            M = M[ok][:8 * st.sampled_starts]
+            if len(M):
+                w = zero_dynamics_walker(m, g, rs.simulation_options(), 200, jit=True)
+                q0, dq0 = start_states(g, np.repeat(kept.directions[:1], len(M), 0), 1.0)
+                B = w.walk(q0, dq0, M, self.rejoin, steps=rs.steps)
+                M = M[B.verdict(rs.tol) == "ok"][:st.sampled_starts]
+            return M, int(ok.sum())
+        M, stable = self.unit("sampled starts", dict(gait=g.cache_key, rejoin=self.rejoin),
+                              compute)
+        self.stage("sampled starts", drawn=st.samples, stable=stable, kept=len(M))
         return list(M)
 
     def fixed_problem(self, gait, kept, M1, active, s0):
@@ -362,15 +410,19 @@ class _Codesign:
         """The rejoin time of v_c as a decision: the gait-fixed NLP solved at each of
         ``rejoin_choices`` from the best design (v_c's third derivative jumps at t_c,
         which makes the walker's rule kinked in t_c: a discrete choice, not a smooth
-        variable); the best verified design wins."""
-        st = self.st
-        for r in st.rejoin_choices:
-            if abs(r - best["rejoin"]) < 1e-12:
-                continue
-            self.rejoin = float(r)
-            c = self.solve_round(best["gait"], best["kept"], best["M1"], best["active"], 1,
-                                 max(min(best["s_star"], best["nlp_s"]) - 0.1, 0.1),
-                                 label=f"rejoin {r:g} T", screen=True)
+        variable); the best verified design wins.  Each choice is solved from the
+        gait-fixed phase's design (they are independent: two processes split them)."""
+        st, start = self.st, best
+        choices = [float(r) for r in st.rejoin_choices if abs(r - best["rejoin"]) >= 1e-12]
+        done = {}
+        for r in self.order(choices):          # independent: each from the same design
+            self.rejoin = r
+            done[r] = self.solve_round(start["gait"], start["kept"], start["M1"],
+                                       start["active"], 1,
+                                       max(min(start["s_star"], start["nlp_s"]) - 0.1, 0.1),
+                                       label=f"rejoin {r:g} T", screen=True)
+        for r in choices:
+            c = done[r]
             if c is not None and c["ok"] and c["score"] > best["score"]:
                 best = c
         self.rejoin = float(best["rejoin"])
@@ -563,11 +615,14 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
     use_cache : bool
         Read a cached result for the same inputs (and write the new one).
     share : {None, 'forward', 'backward'}
-        Split the independent units of work (the screening solves of the starts, the
-        verification's sets of full-order runs) with another process running the same
-        co-design on the same cache folder, the two taking them from opposite ends
-        ('forward' and 'backward'): each unit is computed once (a lock file claims it)
-        and read by the other.  Both return the same result.  None: no sharing.
+        Split the units of work with another process running the same co-design on
+        the same cache folder: the independent ones (the screening solves of the
+        starts, the rejoin choices, the verification's sets of full-order runs) taken
+        from opposite ends ('forward' and 'backward'), the sequential ones (the gait
+        steps) computed by whichever gets there first while the other waits.  Each unit
+        is computed once (a lock file claims it) and read by the other, every IPOPT solve
+        among them, so both return the same result.  None: no sharing.  See also
+        :func:`codesign_prefetch`.
 
     Returns
     -------
@@ -594,20 +649,7 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
         except (ValueError, TypeError, OSError, KeyError):
             pass                                     # damaged or gait gone: recompute
     run = _Codesign(model, st, gait, progress, share=share, cache=cache)
-    run.setup()
-    starts = [np.asarray(M1, float) for M1 in run.sampled()] + [
-        np.asarray(M1, float) for M1 in st.starts]
-    best = run.fixed_phase(starts)
-    run.stage("gait fixed", solves=len(run.solves))
-    if best is None:
-        last = run.solves[-1] if run.solves else {}
-        raise CodesignError(
-            f"codesign: IPOPT ({last.get('status', 'not run')}) found no verified design "
-            f"from {len(starts)} start(s); try other starts, more samples, a smaller "
-            f"s_start or more iterations")
-    if st.rejoin_choices:
-        best = run.rejoin_phase(best)
-        run.stage("rejoin", rejoin=run.rejoin, solves=len(run.solves))
+    best = _independent_phases(run)
     if run.free:
         best = run.gait_phase(best)
         run.stage("gait free", solves=len(run.solves))
@@ -617,8 +659,10 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
     run.say("verification (protocol of the robust designs)")
     check = verify_design(model, g, design, best["kept"], st.robustness_settings(rounds=10),
                           progress=run.say, unit=run.unit, order=run.order)
-    hidden = (hidden_sign_patterns(model, g, design, best["kept"], st.robustness_settings())
-              .to_dict() if st.hidden else {})
+    hidden = run.unit("hidden sign patterns", dict(gait=g.cache_key, design=design.to_dict()),
+                      lambda: hidden_sign_patterns(model, g, design, best["kept"],
+                                                   st.robustness_settings()).to_dict()) \
+        if st.hidden else {}
     bas = {}
     if st.basin:
         b = basin(model, g, design)
@@ -672,6 +716,95 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
         except OSError:
             pass
     return result
+
+
+def _independent_phases(run: _Codesign) -> dict:
+    """Setup, the starts and the rejoin choices: the phases whose units two processes
+    split (a prefetching run stops after them, :class:`_Barrier`)."""
+    st = run.st
+    run.setup()
+    starts = [np.asarray(M1, float) for M1 in run.sampled()] + [
+        np.asarray(M1, float) for M1 in st.starts]
+    best = run.fixed_phase(starts)
+    run.stage("gait fixed", solves=len(run.solves))
+    if best is None:
+        last = run.solves[-1] if run.solves else {}
+        raise CodesignError(
+            f"codesign: IPOPT ({last.get('status', 'not run')}) found no verified design "
+            f"from {len(starts)} start(s); try other starts, more samples, a smaller "
+            f"s_start or more iterations")
+    if st.rejoin_choices:
+        best = run.rejoin_phase(best)
+        run.stage("rejoin", rejoin=run.rejoin, solves=len(run.solves))
+    if run.prefetch:
+        raise _Barrier("end")  # the rest is sequential (gait steps) or needs the design
+    return best
+
+
+def codesign_prefetch(model, settings: CodesignSettings | None = None, progress=None,
+                      cache=None, share: str = "backward", wait: bool = True) -> dict:
+    """Take part in a co-design another process runs (``codesign(share=...)`` on the same
+    cache folder) as far as its independent units go, then return.
+
+    This process takes the start screens and the rejoin choices from its end (with
+    ``share``, as :func:`codesign`), waiting for the few results the other is computing
+    (the start gait, the kept directions), and stops before the gait steps, which are
+    sequential: the other process carries on alone while this one does other work, and a
+    later ``codesign(share=...)`` here reads every unit and splits the verification.
+
+    Parameters
+    ----------
+    model, settings, progress, cache :
+        As :func:`codesign` (the gait free or fixed by ``settings``; no given gait).
+    share : {'forward', 'backward'}
+        This process's end of the units.
+    wait : bool
+        False: never wait for the other process: return at once while its setup is not
+        done, and at the first unit it is computing (call again later to take more).
+
+    Returns
+    -------
+    dict
+        ``computed`` and ``read`` (units), ``time`` (s), ``cached`` (the co-design's
+        result was already kept: nothing to do), ``ready`` (False: the other process's
+        setup is not done, nothing was tried) and ``finished`` (every independent unit
+        is done: nothing left to take).
+
+    Raises
+    ------
+    ValueError
+        ``share`` is not 'forward' or 'backward'.
+    CodesignError
+        As :func:`codesign` (no start gave a verified design).
+    """
+    if share not in ("forward", "backward"):
+        raise ValueError(f"share must be 'forward' or 'backward', got {share!r}")
+    st = settings or CodesignSettings()
+    t0 = time.perf_counter()
+    out = dict(computed=0, read=0, time=0.0, cached=False, ready=True, finished=False)
+    if codesign_path(model, st, None, cache).is_file():
+        return dict(out, cached=True, finished=True)
+    run = _Codesign(model, st, None, progress, share=share, cache=cache, prefetch=True,
+                    wait=wait)
+    if not wait and not _started(run):
+        return dict(out, ready=False)
+    try:
+        _independent_phases(run)
+        finished = True
+    except _Barrier as e:
+        finished = e.args == ("end",)
+    return dict(out, computed=run.computed, read=run.read, time=time.perf_counter() - t0,
+                finished=finished)
+
+
+def _started(run: _Codesign) -> bool:
+    """Whether the co-design's setup is done (its start gait kept, its sampled starts a
+    unit on disk), so that taking part costs no waiting."""
+    opts = GaitOptions(**run.st.gait).for_model(run.model)
+    if not cache_path(run.model, opts).is_file():       # where setup() keeps it
+        return False
+    g = default_gait(run.model, opts)
+    return run.unit_path("sampled starts", dict(gait=g.cache_key, rejoin=run.rejoin)).is_file()
 
 
 def codesign_tradeoff(model, result: CodesignResult, fractions=(0.25, 0.5, 0.75, 1.0),
@@ -731,3 +864,13 @@ def codesign_tradeoff(model, result: CodesignResult, fractions=(0.25, 0.5, 0.75,
     done = {f: run.unit("trade-off", dict(inputs, fraction=float(f)), lambda f=f: point(f))
             for f in run.order(fractions)}
     return [done[f] for f in fractions]
+
+
+def _problem(tr, red) -> dict:
+    """What defines a reduced NLP beyond its start and bounds (the key of a solve unit)."""
+    f = lambda v: [float(x) for x in np.ravel(v)]            # noqa: E731
+    return dict(gait=tr.gait.cache_key, directions=f(tr.dirs), steps=tr.S, free=tr.free,
+                den=[float(tr.den_sign), float(tr.den_scale)], scales=f(red.scales),
+                scenario_steps=f(red.steps), tols=f(red.tols), tol_from=f(red.tol_from),
+                weights=f(red.weights), s_weight=float(red.s_weight),
+                jury=None if red.jury is None else float(red.jury[1]))

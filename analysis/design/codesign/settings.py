@@ -145,14 +145,6 @@ class CodesignSettings:
     hidden: bool = True
     basin: bool = False
 
-    @property
-    def splittable(self) -> bool:
-        """Whether two processes can split this co-design (``codesign(share=...)``).
-
-        True with the gait fixed and no rejoin choice: then it is independent units
-        (starts, verification runs); the rejoin and gait phases are sequential."""
-        return not (self.free_gait or self.rejoin_choices)
-
     def robustness_settings(self, rounds: int = 8) -> RobustnessSettings:
         """The protocol's settings (400 RK4 steps per T, ``rounds`` bisection rounds).
 
