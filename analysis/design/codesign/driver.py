@@ -414,13 +414,18 @@ class _Codesign:
         gait-fixed phase's design (they are independent: two processes split them)."""
         st, start = self.st, best
         choices = [float(r) for r in st.rejoin_choices if abs(r - best["rejoin"]) >= 1e-12]
-        done = {}
+        done, n_rounds, n_solves = {}, len(self.rounds), len(self.solves)
         for r in self.order(choices):          # independent: each from the same design
             self.rejoin = r
             done[r] = self.solve_round(start["gait"], start["kept"], start["M1"],
                                        start["active"], 1,
                                        max(min(start["s_star"], start["nlp_s"]) - 0.1, 0.1),
                                        label=f"rejoin {r:g} T", screen=True)
+        # the records in the choices' order, whichever end this process took them from
+        rank = {f"rejoin {r:g} T": i for i, r in enumerate(choices)}
+        for rec in (self.rounds, self.solves):
+            k = n_rounds if rec is self.rounds else n_solves
+            rec[k:] = sorted(rec[k:], key=lambda x: rank.get(x.get("label"), len(rank)))
         for r in choices:
             c = done[r]
             if c is not None and c["ok"] and c["score"] > best["score"]:
