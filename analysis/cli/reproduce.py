@@ -6,13 +6,13 @@ from analysis.reporting.reproduce import reproduce, run_folder
 from .common import add_robot, load_model, output_dir, print_json
 
 #: measured by benchmarks/bench_reproduce.py (fresh processes, empty caches) on the 2-core AMD
-#: EPYC VM (Python 3.11), nothing cached, on two days: full 140 to 160 s and quick 47 to
-#: 62 s on the first; full 298 s and quick 104 to 110 s on the second, when the VM ran the
-#: same code 2 to 2.5 times slower (the previous version's quick run: 126.5 s); on a third
-#: day as slow, this version: full 245.6 s, quick 69.7 to 76.9 s; warm re-runs 7 to 23 s;
-#: the README quotes the same figures (tests/test_reproduce.py checks it)
-TIME_FULL = "2.5 to 5 min"
-TIME_QUICK = "1 to 2 min"
+#: EPYC VM (Python 3.11), nothing cached, on four days, the VM's speed changing by up to 2.5
+#: times: full 140 to 160 s and quick 47 to 62 s on the first; 298 s and 104 to 110 s on the
+#: second; 245.6 s and 69.7 to 76.9 s on the third (the previous version); on the fourth,
+#: this version: full 123.3 to 134.6 s, quick 42.0 to 47.1 s; warm re-runs 7 to 23 s; the
+#: README quotes the same figures (tests/test_reproduce.py checks it)
+TIME_FULL = "2 to 5 min"
+TIME_QUICK = "40 s to 2 min"
 
 
 def cmd_reproduce(args):

@@ -748,9 +748,11 @@ def _independent_phases(run: _Codesign) -> dict:
 
 def codesign_prefetch(model, settings: CodesignSettings | None = None, progress=None,
                       cache=None, share: str = "backward", wait: bool = True) -> dict:
-    """Take part in a co-design another process runs (``codesign(share=...)`` on the same
-    cache folder) as far as its independent units go, then return.
+    """Take part in another process's co-design as far as its independent units go.
 
+    The other process runs ``codesign(share=...)`` on the same cache folder; this call
+    returns once the independent units are done (or, ``wait=False``, at the first it
+    would wait for).
     This process takes the start screens and the rejoin choices from its end (with
     ``share``, as :func:`codesign`), waiting for the few results the other is computing
     (the start gait, the kept directions), and stops before the gait steps, which are
