@@ -753,6 +753,7 @@ def codesign_prefetch(model, settings: CodesignSettings | None = None, progress=
     The other process runs ``codesign(share=...)`` on the same cache folder; this call
     returns once the independent units are done (or, ``wait=False``, at the first it
     would wait for).
+
     This process takes the start screens and the rejoin choices from its end (with
     ``share``, as :func:`codesign`), waiting for the few results the other is computing
     (the start gait, the kept directions), and stops before the gait steps, which are
