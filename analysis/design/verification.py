@@ -112,9 +112,9 @@ def verify_design(model, gait, design: Design, kept, settings: RobustnessSetting
         Called with one line of text per stage.
     unit, order : callable, optional
         How the walker's bisection and the three sets of full-order runs (at s*, at
-        s_fail, the paper's perturbation) are done: ``unit(name, inputs, compute)`` returns ``compute()``
-        (default) or a result another process computed, ``order(units)`` the order they
-        are taken in (default as listed); the co-design shares them between two
+        s_fail, the paper's perturbation) are done: ``unit(name, inputs, compute)``
+        returns ``compute()`` (default) or a result another process computed,
+        ``order(units)`` the order they are taken in (default as listed); the co-design shares them between two
         processes (:meth:`analysis.design.codesign.driver._Codesign.unit`).
 
     Returns

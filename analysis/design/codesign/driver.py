@@ -412,8 +412,9 @@ class _Codesign:
         which makes the walker's rule kinked in t_c: a discrete choice, not a smooth
         variable); the best verified design wins.  Each choice is solved from the
         gait-fixed phase's design (they are independent: two processes split them)."""
-        st, start = self.st, best
-        choices = [float(r) for r in st.rejoin_choices if abs(r - best["rejoin"]) >= 1e-12]
+        start = best                           # every choice starts from this design
+        choices = [float(r) for r in self.st.rejoin_choices
+                   if abs(r - start["rejoin"]) >= 1e-12]
         done, n_rounds, n_solves = {}, len(self.rounds), len(self.solves)
         for r in self.order(choices):          # independent: each from the same design
             self.rejoin = r
@@ -423,8 +424,7 @@ class _Codesign:
                                        label=f"rejoin {r:g} T", screen=True)
         # the records in the choices' order, whichever end this process took them from
         rank = {f"rejoin {r:g} T": i for i, r in enumerate(choices)}
-        for rec in (self.rounds, self.solves):
-            k = n_rounds if rec is self.rounds else n_solves
+        for rec, k in ((self.rounds, n_rounds), (self.solves, n_solves)):
             rec[k:] = sorted(rec[k:], key=lambda x: rank.get(x.get("label"), len(rank)))
         for r in choices:
             c = done[r]
