@@ -111,6 +111,11 @@ class Gait(Reference):
         self.t_min = float(s[0] * self.T)
         self.t_max = float(s[-1] * self.T)
 
+    def __reduce__(self):
+        # pickled as its definition (the CasADi Functions are rebuilt, once per process)
+        return (_rebuilt, (self.model, self.options, self.alpha, self.x0, self.T,
+                           self.solver_stats))
+
     @property
     def cache_key(self) -> str:
         """SHA-256 of what defines the gait: robot, options and solution."""
@@ -584,6 +589,23 @@ class Gait(Reference):
     def __repr__(self):
         return (f"Gait(T={self.T:.4f} s, step={self.step_length:.4f} m, "
                 f"speed={self.speed:.4f} m/s, robot={self.model.params.name})")
+
+
+_REBUILT: dict = {}
+
+
+def _rebuilt(model, options, alpha, x0, T, solver_stats):
+    """A gait from its parts, tabulated once per process for one definition."""
+    key = digest(dict(robot=model.cache_key, options=options.to_dict(),
+                      alpha=np.asarray(alpha, float).tolist(), x0=np.asarray(x0, float).tolist(),
+                      T=float(T)))
+    g = _REBUILT.get(key)
+    if g is None:
+        g = Gait(model, options, alpha, x0, T, solver_stats)
+        if len(_REBUILT) >= 64:
+            _REBUILT.pop(next(iter(_REBUILT)))
+        _REBUILT[key] = g
+    return g
 
 
 def _jsonable(d):

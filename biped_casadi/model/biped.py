@@ -448,6 +448,10 @@ class BipedModel:
         self.angular_momentum = _fn("angular_momentum", [q, dq, pt], [L], ["q", "dq", "p"], ["L"])
 
     # ---------------------------------------------------------------- helpers
+    def __reduce__(self):
+        # pickled as its description: unpickling builds the model once per process
+        return (_model, (self.description,))
+
     @property
     def cache_key(self):
         """What the model's Functions depend on: its description."""

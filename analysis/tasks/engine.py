@@ -1,0 +1,633 @@
+"""Long work as a graph of pure, cached tasks run by Dask.
+
+A *task* is a pure, deterministic function of typed arguments (numbers, arrays,
+dataclasses, models, gaits) marked with :func:`task`.  ``engine.submit(fn, *args)``
+returns a :class:`Ref` to its result at once; passing a ``Ref`` as an argument of
+another task makes the edge of the graph.  Every result is kept on disk under the key
+of its task, version, code version and arguments (:mod:`analysis.tasks.keys`), so a
+re-run reads what it computed before and a run that was killed resumes where it
+stopped, with the same numbers: nothing depends on which process computed a result or
+when.
+
+Where it runs is one choice, the ``scheduler`` (:func:`resolve_scheduler`):
+'synchronous' (this process, one task after the other, in the order submitted), a Dask
+``LocalCluster`` of one single-threaded worker process per core (the default), a
+scheduler's address ('tcp://host:8786') or a ``dask.distributed.Client``.
+
+Decisions that need a result (an exchange round that depends on the last solve) are
+*flows*: plain functions ``flow(engine, ...)`` started with :meth:`Engine.spawn`, which
+run in a thread of this process, submit tasks and wait for them; their own result is
+kept like a task's.
+"""
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import functools
+import os
+import sys
+import threading
+import time
+import traceback
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+from ..cluster import DASK_CONNECT_TIMEOUT, DASK_WORKER_TIMEOUT, tune_allocator
+from .keys import task_key
+from .store import MISSING, ResultStore
+
+__all__ = ["task", "TaskInfo", "Engine", "Ref", "TaskError", "resolve_scheduler",
+           "SCHEDULER_ENV", "in_task", "TaskRecord"]
+
+#: the environment variable that sets the default scheduler ('synchronous', an address)
+SCHEDULER_ENV = "BIPED_SCHEDULER"
+
+_LOCAL = threading.local()
+
+
+# ------------------------------------------------------------------------ tasks
+@dataclass(frozen=True)
+class TaskInfo:
+    """What identifies a task: its name, its own version (bump it when its result for the
+    same arguments changes without any change of code, e.g. after a data fix) and the
+    kind of code it runs (:data:`analysis.tasks.keys.CODE_SETS`)."""
+
+    name: str
+    version: int = 1
+    code: str = "numerical"
+
+
+def task(fn=None, *, version: int = 1, code: str = "numerical", name: str | None = None):
+    """Mark a pure function as a task (its results are kept by key).
+
+    The function is returned unchanged (calling it runs it); it gains ``task_info``.
+
+    Parameters
+    ----------
+    fn : callable
+        A module-level function of typed arguments.
+    version : int
+        The task's own version.
+    code : str
+        'numerical' or 'figures' (:func:`analysis.tasks.keys.code_version`).
+    name : str, optional
+        Default ``module.qualname``.
+
+    Returns
+    -------
+    callable
+    """
+    def mark(f):
+        f.task_info = TaskInfo(name or f"{f.__module__}.{f.__qualname__}", version, code)
+        return f
+    return mark(fn) if fn is not None else mark
+
+
+def _info(fn) -> TaskInfo:
+    info = getattr(fn, "task_info", None)
+    if info is None:
+        raise TypeError(f"{getattr(fn, '__qualname__', fn)!r} is not a task (decorate it "
+                        "with analysis.tasks.task)")
+    return info
+
+
+class TaskError(RuntimeError):
+    """A task failed.
+
+    Parameters
+    ----------
+    origin : str
+        The task that raised (the first failure of a chain).
+    message : str
+        Its error, ``Type: text``.
+    detail : str
+        Its traceback.
+    """
+
+    def __init__(self, origin: str, message: str, detail: str = ""):
+        super().__init__(origin, message, detail)
+        self.origin, self.message, self.detail = origin, message, detail
+
+    def __str__(self):
+        return f"{self.origin.rsplit('.', 1)[-1]}: {self.message}"
+
+
+def in_task() -> bool:
+    """Whether this thread is running a task (library calls inside run synchronously)."""
+    if getattr(_LOCAL, "task", False):
+        return True
+    try:
+        from distributed import get_worker
+        get_worker()
+        return True
+    except (ImportError, ValueError):
+        return False
+
+
+def _execute(fn, args, kwargs):
+    """Run a task (in this process or on a worker): (value, seconds); any error becomes a
+    :class:`TaskError` naming the task."""
+    tune_allocator()
+    was = getattr(_LOCAL, "task", False)
+    _LOCAL.task = True
+    t = time.perf_counter()
+    try:
+        value = fn(*_unpack(args), **_unpack(kwargs))
+    except TaskError:
+        raise
+    except Exception as e:          # noqa: BLE001 - reported with the task's name
+        raise TaskError(_info(fn).name, f"{type(e).__name__}: {e}",
+                        traceback.format_exc(limit=8)) from None
+    finally:
+        _LOCAL.task = was
+    return value, time.perf_counter() - t
+
+
+# ------------------------------------------------------------ packed arguments
+# Dask resolves futures inside lists, tuples and dicts only: a dataclass holding results
+# of other tasks travels as a marked dict of its fields, and a result as a marked dict
+# around the (value, seconds) pair its task returns.
+_DATACLASS, _RESULT = "__task_dataclass__", "__task_result__"
+
+
+def _unpack(obj):
+    if isinstance(obj, dict):
+        if _RESULT in obj and len(obj) == 1:
+            return obj[_RESULT][0]
+        if _DATACLASS in obj and len(obj) == 2:
+            return obj[_DATACLASS](**{k: _unpack(v) for k, v in obj["fields"].items()})
+        return {k: _unpack(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_unpack(v) for v in obj]
+    if isinstance(obj, tuple):
+        return tuple(_unpack(v) for v in obj)
+    return obj
+
+
+def _has_ref(obj) -> bool:
+    if isinstance(obj, Ref):
+        return True
+    if isinstance(obj, (list, tuple)):
+        return any(_has_ref(v) for v in obj)
+    if isinstance(obj, dict):
+        return any(_has_ref(v) for v in obj.values())
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return any(_has_ref(getattr(obj, f.name)) for f in dataclasses.fields(obj))
+    return False
+
+
+def _pack(obj, leaf):
+    """``obj`` with every Ref replaced by ``leaf(ref)`` (dataclasses holding one become
+    marked dicts of their fields)."""
+    if isinstance(obj, Ref):
+        return leaf(obj)
+    if isinstance(obj, list):
+        return [_pack(v, leaf) for v in obj]
+    if isinstance(obj, tuple):
+        return tuple(_pack(v, leaf) for v in obj)
+    if isinstance(obj, dict):
+        return {k: _pack(v, leaf) for k, v in obj.items()}
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type) and _has_ref(obj):
+        return {_DATACLASS: type(obj), "fields": {f.name: _pack(getattr(obj, f.name), leaf)
+                                                 for f in dataclasses.fields(obj) if f.init}}
+    return obj
+
+
+def _refs_in(obj) -> list:
+    out = []
+    _pack(obj, lambda r: out.append(r) or r)
+    return out
+
+
+# ------------------------------------------------------------------------- refs
+@dataclass
+class TaskRecord:
+    """One task of a run: its name, stage, key, state ('computed', 'reused' or
+    'failed') and the seconds it took (when computed: in this run; reused: when it was
+    computed)."""
+
+    name: str
+    stage: str
+    key: str
+    state: str
+    seconds: float
+    error: str = ""
+
+
+class Ref:
+    """The result of a submitted task or flow, available later.
+
+    Attributes
+    ----------
+    key : str
+        The task's key.
+    name : str
+        The task's name.
+    stage : str
+        The stage it was submitted in.
+    state : str
+        'pending', 'computed', 'reused' or 'failed'.
+    """
+
+    def __init__(self, engine, key: str, name: str, stage: str):
+        self.engine, self.key, self.name, self.stage = engine, key, name, stage
+        self.state = "pending"
+        self.seconds = 0.0
+        self._value = None
+        self._error = None
+        self._event = threading.Event()
+        self._future = None            # a Dask future while on the cluster
+        self._scattered = None
+
+    def _finish(self, state, value=None, error=None, seconds=0.0):
+        self.state, self._value, self._error, self.seconds = state, value, error, seconds
+        self._event.set()
+
+    def done(self) -> bool:
+        """Whether the result (or the failure) is known."""
+        return self._event.is_set()
+
+    def result(self):
+        """The task's value; waits for it.
+
+        Returns
+        -------
+        object
+
+        Raises
+        ------
+        TaskError
+            The task, or one it depends on, failed.
+        """
+        while not self._event.wait(0.5):
+            if self.engine.closed:
+                raise TaskError(self.name, "interrupted: the engine was closed")
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+    def __repr__(self):
+        return f"Ref({self.name.rsplit('.', 1)[-1]}, {self.state}, {self.key[:8]})"
+
+
+# ---------------------------------------------------------------------- engine
+def resolve_scheduler(scheduler=None, workers: int | None = None):
+    """What ``scheduler`` means, the same for every function that takes it.
+
+    Parameters
+    ----------
+    scheduler : None, str or dask.distributed.Client
+        None: ``$BIPED_SCHEDULER`` if set; inside a task 'synchronous'; otherwise
+        'local'.  'synchronous' (or 'inline'): this process, one task after another.
+        'local': a Dask ``LocalCluster`` of ``workers`` single-threaded processes.  Any
+        other string: a Dask scheduler's address.  A ``Client``: used as it is.
+    workers : int, optional
+        Processes of the ``LocalCluster`` (default: this machine's cores); 1 means
+        'synchronous' unless a scheduler is named.
+
+    Returns
+    -------
+    str or Client
+        'synchronous', 'local', an address or the client.
+
+    Raises
+    ------
+    ValueError
+        Naming 'workers' (not a positive integer) or 'scheduler' (not a string or
+        client).
+    """
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 1):
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    if scheduler is None:
+        if in_task():
+            return "synchronous"
+        scheduler = os.environ.get(SCHEDULER_ENV) or None
+    if scheduler is None:
+        return "synchronous" if workers == 1 else "local"
+    if isinstance(scheduler, str):
+        s = scheduler.strip()
+        if not s:
+            raise ValueError("scheduler must not be empty")
+        if s.lower() in ("synchronous", "inline", "sync"):
+            return "synchronous"
+        if s.lower() == "local":
+            return "synchronous" if workers == 1 else "local"
+        return s
+    if type(scheduler).__name__ == "Client":
+        return scheduler
+    raise ValueError(f"scheduler must be None, 'synchronous', 'local', an address or a "
+                     f"dask.distributed.Client, got {type(scheduler).__name__}")
+
+
+def _cores() -> int:
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
+class Engine:
+    """Runs tasks and flows, keeps their results, counts what was computed or reused.
+
+    Use it as a context manager (``with Engine(...) as eng:``); the cluster it started,
+    if any, is closed at the end.  The cluster starts only when a task must be computed:
+    a run whose results are all kept starts none.
+
+    Parameters
+    ----------
+    scheduler : None, str or dask.distributed.Client
+        Where tasks run (:func:`resolve_scheduler`).
+    workers : int, optional
+        Processes of a local cluster.
+    cache : str or Path, optional
+        The cache folder (default :func:`biped_casadi.cache_dir`).
+    use_cache : bool
+        Read kept results (False: compute every task again; results are still written).
+    progress : bool
+        One bar of finished tasks on stderr (when it is a terminal).
+    on_record : callable, optional
+        Called with each :class:`TaskRecord` as a task finishes.
+    """
+
+    def __init__(self, scheduler=None, workers: int | None = None, cache=None,
+                 use_cache: bool = True, progress: bool = False, on_record=None):
+        self.scheduler = resolve_scheduler(scheduler, workers)
+        self.workers = workers
+        self.store = ResultStore(cache)
+        self.use_cache = bool(use_cache)
+        self.records: list[TaskRecord] = []
+        self.on_record = on_record
+        self.closed = False
+        self._refs: dict[str, Ref] = {}
+        self._lock = threading.RLock()
+        self._client = None
+        self._cluster = None
+        self._pool = None
+        self._bar = None
+        self._progress = bool(progress)
+        self._known = 0
+
+    @property
+    def synchronous(self) -> bool:
+        """Whether tasks run in this process, one after another."""
+        return self.scheduler == "synchronous"
+
+    # ---------------------------------------------------------------- lifetime
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self):
+        """Stop: pending flows are told, the cluster this engine started is closed."""
+        self.closed = True
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+        if self._client is not None and self._cluster is not None:
+            with contextlib.suppress(Exception):
+                self._client.close()
+            with contextlib.suppress(Exception):
+                self._cluster.close()
+        elif self._client is not None and isinstance(self.scheduler, str):
+            with contextlib.suppress(Exception):
+                self._client.close()
+        if self._bar is not None:
+            self._bar.close()
+
+    def client(self):
+        """The Dask client (started on first use; None when synchronous)."""
+        if self.synchronous:
+            return None
+        with self._lock:
+            if self._client is None:
+                self._client, self._cluster = _connect(self.scheduler, self.workers)
+            return self._client
+
+    # ---------------------------------------------------------------- stages
+    @contextlib.contextmanager
+    def stage(self, name: str, priority: int = 0):
+        """Tasks submitted in this block (by this thread and the flows it spawns) belong
+        to stage ``name`` and run with Dask priority ``priority`` (higher first)."""
+        old = getattr(_LOCAL, "stage", ("", 0))
+        _LOCAL.stage = (name, int(priority))
+        try:
+            yield
+        finally:
+            _LOCAL.stage = old
+
+    @staticmethod
+    def current_stage():
+        """(stage name, priority) of this thread."""
+        return getattr(_LOCAL, "stage", ("", 0))
+
+    # ---------------------------------------------------------------- submit
+    def key(self, fn, *args, **kwargs) -> str:
+        """The key a call of task ``fn`` has (nothing is run)."""
+        info = _info(fn)
+        return task_key(info.name, info.version, info.code, args, kwargs,
+                        ref_key=lambda o: o.key if isinstance(o, Ref) else None)
+
+    def submit(self, fn, *args, **kwargs) -> Ref:
+        """Run task ``fn(*args, **kwargs)`` (or read its kept result).
+
+        Parameters
+        ----------
+        fn : callable
+            A :func:`task`.
+        *args, **kwargs
+            Its arguments; :class:`Ref` s anywhere in them (lists, tuples, dicts,
+            dataclass fields) are replaced by their results.
+
+        Returns
+        -------
+        Ref
+        """
+        info = _info(fn)
+        key = self.key(fn, *args, **kwargs)
+        stage, priority = self.current_stage()
+        with self._lock:
+            if key in self._refs:
+                return self._refs[key]
+            ref = Ref(self, key, info.name, stage)
+            self._refs[key] = ref
+        if self._reuse(ref):
+            return ref
+        self._count_new()
+        failed = next((r for r in _refs_in((args, kwargs)) if r.done() and r.state == "failed"),
+                      None)
+        if failed is not None:
+            self._done(ref, "failed", error=failed._error)
+            return ref
+        if self.synchronous:
+            self._run_here(ref, fn, args, kwargs)
+        else:
+            self._run_on_cluster(ref, fn, args, kwargs, priority)
+        return ref
+
+    def map(self, fn, items, *args, **kwargs) -> list:
+        """``[submit(fn, item, *args, **kwargs) for item in items]``."""
+        return [self.submit(fn, item, *args, **kwargs) for item in items]
+
+    def spawn(self, flow, *args, **kwargs) -> Ref:
+        """Run ``flow(self, *args, **kwargs)`` in a thread of this process (at once when
+        synchronous); ``flow`` is a :func:`task` whose result is kept like a task's.
+
+        Parameters
+        ----------
+        flow : callable
+            A task taking the engine first: it submits tasks and waits for them.
+        *args, **kwargs
+            Its other arguments (``Ref`` s are passed as they are: the flow waits for
+            them with ``.result()``).
+
+        Returns
+        -------
+        Ref
+        """
+        info = _info(flow)
+        key = self.key(flow, *args, **kwargs)
+        stage, priority = self.current_stage()
+        with self._lock:
+            if key in self._refs:
+                return self._refs[key]
+            ref = Ref(self, key, info.name, stage)
+            self._refs[key] = ref
+        if self._reuse(ref):
+            return ref
+
+        def run():
+            _LOCAL.stage = (stage, priority)
+            t = time.perf_counter()
+            try:
+                value = flow(self, *args, **kwargs)
+            except TaskError as e:
+                self._done(ref, "failed", error=e)
+                return
+            except Exception as e:          # noqa: BLE001 - reported with the flow's name
+                self._done(ref, "failed", error=TaskError(
+                    info.name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8)))
+                return
+            self._done(ref, "computed", value=value, seconds=time.perf_counter() - t,
+                       keep=True)
+
+        if self.synchronous:
+            run()
+        else:
+            with self._lock:
+                if self._pool is None:
+                    self._pool = ThreadPoolExecutor(32, thread_name_prefix="biped-flow")
+            self._pool.submit(run)
+        return ref
+
+    # ---------------------------------------------------------------- internals
+    def _reuse(self, ref: Ref) -> bool:
+        if not self.use_cache:
+            return False
+        rec = self.store.read(ref.key)
+        if rec is MISSING:
+            return False
+        self._done(ref, "reused", value=rec["value"], seconds=rec.get("seconds", 0.0))
+        return True
+
+    def _count_new(self):
+        with self._lock:
+            self._known += 1
+            if self._progress and self._bar is None and sys.stderr.isatty():
+                from tqdm.auto import tqdm
+                self._bar = tqdm(total=0, unit="task", desc="tasks", file=sys.stderr,
+                                 dynamic_ncols=True)
+            if self._bar is not None:
+                self._bar.total = self._known
+                self._bar.refresh()
+
+    def _done(self, ref: Ref, state: str, value=None, error=None, seconds=0.0,
+              keep: bool = False):
+        if keep and state == "computed":
+            self.store.write(ref.key, ref.name, value, seconds)
+        ref._finish(state, value, error, seconds)
+        rec = TaskRecord(ref.name, ref.stage, ref.key, state, float(seconds),
+                         "" if error is None else str(error))
+        with self._lock:
+            self.records.append(rec)
+            if self._bar is not None and state != "reused":
+                self._bar.update(1)
+        if self.on_record is not None:
+            with contextlib.suppress(Exception):
+                self.on_record(rec)
+
+    def _run_here(self, ref, fn, args, kwargs):
+        try:
+            a = _pack(args, lambda r: r.result())
+            k = _pack(kwargs, lambda r: r.result())
+            value, seconds = _execute(fn, a, k)
+        except TaskError as e:
+            self._done(ref, "failed", error=e)
+            return
+        self._done(ref, "computed", value=value, seconds=seconds, keep=True)
+
+    def _leaf(self, client, r: Ref):
+        """What a Ref becomes in a Dask call: its future, or its value scattered once."""
+        if r._future is not None and r.state != "failed":
+            return {_RESULT: r._future}
+        if r.state == "pending":              # a flow's result: wait for it here
+            r.result()
+        if r.state == "failed":
+            raise r._error
+        with self._lock:
+            if r._scattered is None:
+                r._scattered = client.scatter((r._value, 0.0), hash=False)
+            return {_RESULT: r._scattered}
+
+    def _run_on_cluster(self, ref, fn, args, kwargs, priority):
+        client = self.client()
+        try:
+            a = _pack(args, lambda r: self._leaf(client, r))
+            k = _pack(kwargs, lambda r: self._leaf(client, r))
+        except TaskError as e:
+            self._done(ref, "failed", error=e)
+            return
+        short = ref.name.rsplit(".", 1)[-1]
+        fut = client.submit(_execute, fn, a, k, key=f"{short}-{ref.key}", pure=False,
+                            priority=priority)
+        ref._future = fut
+        fut.add_done_callback(functools.partial(self._collect, ref))
+
+    def _collect(self, ref: Ref, fut):
+        try:
+            value, seconds = fut.result()
+        except TaskError as e:
+            self._done(ref, "failed", error=e)
+            return
+        except BaseException as e:             # noqa: BLE001 - cancelled, lost worker
+            self._done(ref, "failed", error=TaskError(ref.name, f"{type(e).__name__}: {e}"))
+            return
+        self._done(ref, "computed", value=value, seconds=seconds, keep=True)
+
+
+def _connect(scheduler, workers):
+    """(client, cluster or None) for a resolved scheduler."""
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise ValueError("scheduler: dask.distributed is not installed "
+                         "(pip install 'dask[distributed]')") from None
+    if scheduler == "local":
+        cluster = LocalCluster(n_workers=workers or _cores(), threads_per_worker=1,
+                               processes=True, dashboard_address=None,
+                               env={"BIPED_THREADS": "1"})
+        return Client(cluster), cluster
+    if not isinstance(scheduler, str):
+        return scheduler, None
+    try:
+        client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as e:
+        raise ValueError(f"scheduler: cannot connect to the Dask scheduler at {scheduler} "
+                         f"({type(e).__name__}: {e})") from None
+    try:
+        client.wait_for_workers(1, timeout=DASK_WORKER_TIMEOUT)
+    except (TimeoutError, OSError) as e:
+        client.close()
+        raise ValueError(f"scheduler: no Dask worker joined {scheduler} within "
+                         f"{DASK_WORKER_TIMEOUT} s ({e})") from None
+    return client, None

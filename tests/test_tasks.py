@@ -1,0 +1,103 @@
+"""The task engine: keys that ignore docstrings but not code, results kept and reused,
+failures that mark their dependants, and the same numbers in one process and on a Dask
+cluster of worker processes."""
+from __future__ import annotations
+
+import ast
+
+import numpy as np
+import pytest
+
+from analysis.tasks import Engine, NotKeyable, TaskError, argument_key, resolve_scheduler
+from analysis.tasks.keys import _strip_docstrings
+from task_examples import Pair, add, chain, fails, pair_sum, pid, square, total
+
+
+def _tree(src):
+    return ast.dump(_strip_docstrings(ast.parse(src)), include_attributes=False)
+
+
+def test_code_version_ignores_docstrings_and_comments_not_code():
+    a = 'def f(x):\n    """Square."""\n    return x * 2  # twice\n'
+    b = 'def f(x):\n    """Twice x, the new words."""\n    # a comment\n    return x * 2\n'
+    c = 'def f(x):\n    """Square."""\n    return x * 3\n'
+    assert _tree(a) == _tree(b)
+    assert _tree(a) != _tree(c)
+
+
+def test_argument_keys_follow_content():
+    assert argument_key(np.arange(3.0)) == argument_key(np.arange(3.0))
+    assert argument_key(np.arange(3.0)) != argument_key(np.arange(3.0) + 1e-15)
+    assert argument_key(Pair(1.0)) != argument_key(Pair(1.0, 2.0))
+    assert argument_key([1.0, {"b": 2, "a": 1}]) == argument_key([1.0, {"a": 1, "b": 2}])
+    with pytest.raises(NotKeyable):
+        argument_key(lambda: 0)
+
+
+def test_scheduler_spellings():
+    assert resolve_scheduler("inline") == "synchronous"
+    assert resolve_scheduler(None, workers=1) == "synchronous"
+    assert resolve_scheduler("local", workers=1) == "synchronous"
+    assert resolve_scheduler("tcp://h:1") == "tcp://h:1"
+    with pytest.raises(ValueError, match="workers"):
+        resolve_scheduler(None, workers=0)
+    with pytest.raises(ValueError, match="scheduler"):
+        resolve_scheduler(3.0)
+
+
+def test_synchronous_results_are_kept_and_reused(tmp_path):
+    with Engine("synchronous", cache=tmp_path) as eng:
+        r = eng.submit(add, eng.submit(square, 3), eng.submit(square, 4))
+        p = eng.submit(pair_sum, Pair(eng.submit(square, 2), 0.5))
+        assert r.result() == 25.0 and p.result() == 4.5
+        assert {rec.state for rec in eng.records} == {"computed"}
+        assert len(eng.records) == 5
+    with Engine("synchronous", cache=tmp_path) as eng:
+        r = eng.submit(add, eng.submit(square, 3), eng.submit(square, 4))
+        assert r.result() == 25.0 and r.state == "reused"
+        # the top task is kept: its inputs are never computed, nor read
+        assert [rec.state for rec in eng.records] == ["reused"] * 3
+
+
+def test_a_failure_marks_its_dependants(tmp_path):
+    with Engine("synchronous", cache=tmp_path) as eng:
+        bad = eng.submit(fails, 1)
+        dep = eng.submit(add, bad, 1.0)
+        ok = eng.submit(square, 5)
+        assert ok.result() == 25.0
+        for r in (bad, dep):
+            with pytest.raises(TaskError) as e:
+                r.result()
+            assert e.value.origin.endswith("fails") and "no good: 1" in e.value.message
+        assert dep.state == "failed"
+    # a failure is not kept: the next run tries again
+    with Engine("synchronous", cache=tmp_path) as eng:
+        assert eng.submit(fails, 1).state == "failed"
+        assert [r.state for r in eng.records] == ["failed"]
+
+
+def test_flows_wait_for_their_tasks(tmp_path):
+    with Engine("synchronous", cache=tmp_path) as eng:
+        v = eng.spawn(chain, 3).result()
+    x = 1.0
+    for _ in range(3):
+        x = x + x * x
+    assert v == x
+
+
+@pytest.mark.slow
+def test_local_cluster_gives_the_synchronous_numbers(tmp_path):
+    """Two worker processes compute what one process computes, task for task."""
+    values = np.linspace(0, 1, 7)
+    with Engine("synchronous", cache=tmp_path / "a") as eng:
+        want = eng.submit(total, [eng.submit(square, v) for v in values]).result()
+        flow = eng.spawn(chain, 4).result()
+    with Engine("local", workers=2, cache=tmp_path / "b") as eng:
+        got = eng.submit(total, [eng.submit(square, v) for v in values])
+        f = eng.spawn(chain, 4)
+        pids = {eng.submit(pid, i).result() for i in range(8)}
+        bad = eng.submit(add, eng.submit(fails, 2), 1.0)
+        assert got.result() == want and f.result() == flow
+        with pytest.raises(TaskError, match="no good: 2"):
+            bad.result()
+    assert len(pids) >= 1
