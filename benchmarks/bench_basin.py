@@ -36,7 +36,7 @@ def main():
     from gait_opt import GaitOptions, default_gait
     m = BipedModel(RABBIT)
     g, gr = default_gait(m), default_gait(m, GaitOptions(**ROBUST_GAIT))
-    M1 = optimize_m1(m, g, group=1).M1
+    M1 = optimize_m1(g, group=1).M1
     cases = [("deadbeat M1 (default gait)", g, Design(tuple(M1))),
              ("virtual constraints (default gait)", g, None),
              ("co-design M1 (robust gait)", gr, Design((0.0999, 0.5312, 0.4220, -0.6522), 0.75)),
@@ -47,12 +47,12 @@ def main():
     tot_f = tot_a = 0.0
     diff_all = 0
     for label, gg, d in cases:
-        basin(m, gg, d, n=3)                       # build and compile the walker first
+        basin(gg, d, n=3)                       # build and compile the walker first
         t = time.perf_counter()
-        full = basin(m, gg, d, n=a.n)
+        full = basin(gg, d, n=a.n)
         tf = time.perf_counter() - t
         t = time.perf_counter()
-        ad = basin(m, gg, d, n=a.n, refine=a.refine)
+        ad = basin(gg, d, n=a.n, refine=a.refine)
         ta = time.perf_counter() - t
         diff = int(np.sum(full.outcome != ad.outcome))
         tot_f, tot_a, diff_all = tot_f + tf, tot_a + ta, diff_all + diff

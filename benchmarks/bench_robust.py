@@ -41,7 +41,7 @@ DESIGN = Design((-8.2618, 2.5374, 0.0034, 8.5090), 0.75)
 
 def baseline_s_star(model, gait, design, dirs, st):
     """The same bisection as analysis.robustness, one full-order run at a time."""
-    ctrl = TimeVaryingController(model, gait, np.array(design.M1), rejoin=design.rejoin)
+    ctrl = TimeVaryingController(gait, np.array(design.M1), rejoin=design.rejoin)
     opts = SimulationOptions(steps=st.steps, mu=st.mu, jit=True)
 
     def passes(s):
@@ -71,16 +71,16 @@ def main(argv=None):
     m = rabbit()
     g = default_gait(m, GaitOptions(**ROBUST_GAIT))
     st = RobustnessSettings(rounds=8)
-    kept = kept_directions(m, g, st)
+    kept = kept_directions(g, st)
     dirs = kept.directions
     # warm both paths (JIT compilation, maps) so the figures compare evaluation
-    robustness(m, g, DESIGN, RobustnessSettings(directions=1, rounds=1), kept=KeptDirections(dirs[:1], 1, {}))
-    ctrl = TimeVaryingController(m, g, np.array(DESIGN.M1), rejoin=DESIGN.rejoin)
+    robustness(g, DESIGN, RobustnessSettings(directions=1, rounds=1), kept=KeptDirections(dirs[:1], 1, {}))
+    ctrl = TimeVaryingController(g, np.array(DESIGN.M1), rejoin=DESIGN.rejoin)
     simulate(ctrl, g.q(0.0), g.dq(0.0), SimulationOptions(steps=1, jit=True))
 
     print(f"\n(a) s* of one design, {len(dirs)} directions, {st.rounds} bisection rounds")
     t = time.perf_counter()
-    r = robustness(m, g, DESIGN, st, kept=kept)
+    r = robustness(g, DESIGN, st, kept=kept)
     t_ours = time.perf_counter() - t
     t = time.perf_counter()
     s_base = baseline_s_star(m, g, DESIGN, dirs, st)
@@ -93,9 +93,9 @@ def main(argv=None):
     print(f"\n(b) basin {n} x {n} on the section, 10 steps per cell")
     rows = []
     for label, design in (("time-varying (robust design)", DESIGN), ("virtual constraints", None)):
-        basin(m, g, design, n=3, steps=1)                   # build and compile once
+        basin(g, design, n=3, steps=1)                   # build and compile once
         t = time.perf_counter()
-        b = basin(m, g, design, n=n)
+        b = basin(g, design, n=n)
         t_ours = time.perf_counter() - t
         # the per-run path on a sample of the same cells
         rng = np.random.default_rng(0)
@@ -107,10 +107,10 @@ def main(argv=None):
         for c in cells:
             x = np.array([xs[0] + A.ravel()[c], xs[1] + B.ravel()[c]])
             if design is None:
-                V = virtual_constraint_walker(m, g, SimulationOptions(), 100, jit=True)
+                V = virtual_constraint_walker(g, SimulationOptions(), 100, jit=True)
                 th, w = V.section_states(x[None])
                 q, Q1, _ = (np.array(v).ravel() for v in V.vmap.curve(th[0]))
-                simulate(VirtualConstraintController(m, g), q, Q1 * w[0], opts)
+                simulate(VirtualConstraintController(g), q, Q1 * w[0], opts)
             else:
                 # the full-order simulator starts a step at tau = 0, not at the section:
                 # the per-run path's cost of a cell is that of 10 full-order steps from
@@ -129,7 +129,7 @@ def main(argv=None):
 
 def ZD_CONFIG(model, gait, design, x):
     """(q, dq) of the zero-dynamics state (q_u, dq_u) = x at the section (v_c = 0)."""
-    pm = poincare_map(model, gait, rejoin=design.rejoin)
+    pm = poincare_map(gait, rejoin=design.rejoin)
     z = np.r_[x, gait.state(0.75 * gait.T)]
     return pm.configuration(z, 0.75 * gait.T, np.array(design.M1), np.zeros(model.nu),
                             np.zeros(model.nu))

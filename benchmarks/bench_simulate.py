@@ -79,8 +79,8 @@ def main(steps=10, gait_path=None):
     M1 = best_stable_m1(model, gait)
     rows = []
     for name, ctrl in (("time-varying, M1 = " + np.array2string(M1, precision=2),
-                        TimeVaryingController(model, gait, M1)),
-                       ("virtual constraints", VirtualConstraintController(model, gait))):
+                        TimeVaryingController(gait, M1)),
+                       ("virtual constraints", VirtualConstraintController(gait))):
         print(name)
         t = time.perf_counter()
         base = scipy_baseline(ctrl, q0, dq0, steps)

@@ -4,7 +4,7 @@ side on the same points (issue 4, part 6).
     python benchmarks/bench_sweep.py [--gait FILE] [--points 20] [--skip-grid]
 
 (a) time per M1 after the one-time build, for the paths of analysis.stability: the public
-    call ``poincare_eigenvalues(m, g, M1)`` (variational equation by default, one M1 at
+    call ``poincare_eigenvalues(g, M1)`` (variational equation by default, one M1 at
     a time; target >= 500x the SciPy baseline of (c)), ``method='ad'`` (full AD through
     the discrete map) and ``PoincareMap.jacobian_batch`` (variational equation, one SX
     Function mapped over threads);
@@ -118,11 +118,11 @@ def main(argv=None):
 
     pm.analyse(pts[0], method="ad")                          # warm
     ad, t_ad = per_point(lambda m: pm.analyse(m, method="ad"), pts)
-    poincare_eigenvalues(model, gait, pts[0])                # one-time build of the public map
+    poincare_eigenvalues(gait, pts[0])                # one-time build of the public map
     reps = 20
     t = time.perf_counter()
     for _ in range(reps):
-        pub = [poincare_eigenvalues(model, gait, m) for m in pts]
+        pub = [poincare_eigenvalues(gait, m) for m in pts]
     t_pub = (time.perf_counter() - t) / (reps * len(pts))
     reps = 5
     t = time.perf_counter()

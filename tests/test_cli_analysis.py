@@ -26,7 +26,7 @@ def run_json(capsys, *args):
 def test_eig_json_is_the_library_result(model, gait, gait_file, capsys):
     M1 = [-2.5, 5.0, -2.5, 5.0]
     body = run_json(capsys, "eig", "--gait", gait_file, "--m1", *map(str, M1), "--json")
-    ref = poincare_eigenvalues(model, gait, M1)
+    ref = poincare_eigenvalues(gait, M1)
     assert np.array(body["A"]).shape == (2, 2)
     np.testing.assert_allclose(body["A"], ref.A, rtol=1e-12)
     assert body["max_abs"] == pytest.approx(ref.max_abs, rel=1e-12)
@@ -46,7 +46,7 @@ def test_eig_singular_and_vc(model, gait, gait_file, capsys):
     body = run_json(capsys, "eig", "--gait", gait_file, "--m1", "1.70", "0", "0", "0", "--json")
     assert body["status"] == "singular" and body["success"] is False and body["max_abs"] is None
     body = run_json(capsys, "eig", "--gait", gait_file, "--controller", "vc", "--json")
-    assert body["eigenvalue"] == pytest.approx(vc_eigenvalue(model, gait).eigenvalue, rel=1e-12)
+    assert body["eigenvalue"] == pytest.approx(vc_eigenvalue(gait).eigenvalue, rel=1e-12)
     assert body["status"] == "stable"
 
 
@@ -162,8 +162,8 @@ def test_grid_spans_the_range():
 def test_m1_outside_the_valid_range_is_a_value_error(model, gait):
     from biped_casadi.control.output_law import M1_LIMIT
     with pytest.raises(ValueError, match=r"M1: components must lie within"):
-        poincare_eigenvalues(model, gait, [1e300, 0, 0, 0])
-    r = poincare_eigenvalues(model, gait, [M1_LIMIT, 0, 0, 0])
-    ad = poincare_eigenvalues(model, gait, [M1_LIMIT, 0, 0, 0], method="ad")
+        poincare_eigenvalues(gait, [1e300, 0, 0, 0])
+    r = poincare_eigenvalues(gait, [M1_LIMIT, 0, 0, 0])
+    ad = poincare_eigenvalues(gait, [M1_LIMIT, 0, 0, 0], method="ad")
     assert r.status == ad.status == "unstable"
     assert r.max_abs == pytest.approx(ad.max_abs, rel=1e-4)     # still meaningful there

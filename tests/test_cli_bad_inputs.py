@@ -100,7 +100,7 @@ def files(model, gait, tmp_path_factory):
     ro.chmod(0o500)
     out["read_only"] = str(ro)
     # a sweep folder made with other settings, and a folder that is not a sweep folder
-    run_sweep(model, gait, grid_points(2, -1.0, 1.0), out_dir=d / "sweep2", progress=False)
+    run_sweep(gait, grid_points(2, -1.0, 1.0), out_dir=d / "sweep2", progress=False)
     out["sweep2"] = str(d / "sweep2")
     (d / "notes").mkdir()
     (d / "notes" / "todo.txt").write_text("my notes\n")

@@ -63,7 +63,7 @@ def test_codesign_rule_is_the_walkers(model, gait, reduced):
     from biped_casadi.simulation.options import SimulationOptions
     tr, red = reduced
     red.evaluate(_design(tr))
-    w = zero_dynamics_walker(model, gait, SimulationOptions(), 400, jit=False)
+    w = zero_dynamics_walker(gait, SimulationOptions(), 400, jit=False)
     q0, dq0 = start_states(gait, tr.dirs, 0.5)
     B = w.walk(q0, dq0, np.repeat(M1[None], len(q0), 0), 0.75, steps=2)
     assert len(red.info) == 4

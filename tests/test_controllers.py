@@ -27,14 +27,14 @@ def random_m1(gait, model):
     rng = np.random.default_rng(2024)
     for _ in range(100):
         M1 = rng.uniform(-3, 3, 4)
-        if not TimeVaryingController(model, gait, M1).singularity().singular:
+        if not TimeVaryingController(gait, M1).singularity().singular:
             return M1
     raise AssertionError("no non-singular random M1 found")
 
 
 @pytest.fixture(scope="module")
 def vc_ctrl(model, gait):
-    return VirtualConstraintController(model, gait)
+    return VirtualConstraintController(gait)
 
 
 # ----------------------------------------------------------- time-varying
@@ -42,7 +42,7 @@ def vc_ctrl(model, gait):
 def test_tv_reference_torque(model, gait, random_m1, which):
     """On the reference (y_i = dy_i = 0) the torque of eq. (12) is u^d(t), for any M1."""
     M1 = np.zeros(4) if which == "zero" else random_m1
-    ctrl = TimeVaryingController(model, gait, M1)
+    ctrl = TimeVaryingController(gait, M1)
     for t in np.linspace(0, gait.T, 7):
         out = ctrl.torque(gait.q(t), gait.dq(t), t)
         np.testing.assert_allclose(out.u, gait.u(t), rtol=1e-9, atol=1e-8)
@@ -53,7 +53,7 @@ def test_tv_output_dynamics(model, gait, random_m1, rng):
     """Off the reference, the plant under the torque of eq. (12) has
     ddy_c = -Kd/eps dy_c - Kp/eps^2 y_c (eq. 13 with the output of eq. 17)."""
     gains = Gains(Kp=1.3, Kd=2.1, eps=0.05)
-    ctrl = TimeVaryingController(model, gait, random_m1, gains)
+    ctrl = TimeVaryingController(gait, random_m1, gains)
     M = ctrl.M
     for tau in (0.1 * gait.T, 0.4 * gait.T, 0.8 * gait.T):
         q = gait.q(tau) + rng.normal(0, 0.02, 5)
@@ -74,17 +74,17 @@ def test_tv_singularity_eq24(model, gait):
     t = 0.5 * gait.T
     D = np.array(model.D(gait.q(t)))
     m = D[0, 0] / D[0, 1]
-    sing = TimeVaryingController(model, gait, [m, 0, 0, 0])
+    sing = TimeVaryingController(gait, [m, 0, 0, 0])
     rep = sing.singularity()
     assert rep.singular and rep.min_abs < 0.05 * abs(D[0, 0])
-    assert not TimeVaryingController(model, gait, np.zeros(4)).singularity().singular
+    assert not TimeVaryingController(gait, np.zeros(4)).singularity().singular
     out = sing.torque(gait.q(t), gait.dq(t), t)
     assert abs(out.denominator - (D[0, 0] - D[0, 1] * m)) < 1e-9
 
 
 def test_tv_step_start_makes_output_zero(model, gait, random_m1, rng):
     """With y_i, dy_i of the step start, y_c = dy_c = 0 at tau = 0 (eq. 17-18)."""
-    ctrl = TimeVaryingController(model, gait, random_m1)
+    ctrl = TimeVaryingController(gait, random_m1)
     q = gait.q(0.0) + rng.normal(0, 0.01, 5)
     dq = gait.dq(0.0) + rng.normal(0, 0.1, 5)
     st = ctrl.step_start(q, dq)
@@ -99,12 +99,12 @@ def test_tv_step_start_makes_output_zero(model, gait, random_m1, rng):
 
 def test_tv_bad_input(model, gait):
     with pytest.raises(ValueError, match="M1"):
-        TimeVaryingController(model, gait, [0, 0, 0])
+        TimeVaryingController(gait, [0, 0, 0])
     with pytest.raises(ValueError, match="M1"):
-        TimeVaryingController(model, gait, [0, np.nan, 0, 0])
+        TimeVaryingController(gait, [0, np.nan, 0, 0])
     with pytest.raises(ValueError, match="eps"):
         Gains(eps=0.0)
-    ctrl = TimeVaryingController(model, gait)
+    ctrl = TimeVaryingController(gait)
     with pytest.raises(ValueError, match="q"):
         ctrl.torque(np.zeros(4), np.zeros(5), 0.1)
     with pytest.raises(ValueError, match="tau"):
@@ -182,8 +182,8 @@ def test_vc_eigenvalue_independent_of_outputs(model, gait):
     another phase variable (stance tibia angle) and mixed outputs.  Both fitted to the
     same gait: same eigenvalue to 1e-8, equal to delta_zero^2 of the orbit's impact."""
     H0 = np.hstack([np.array([[0.5], [-1.0], [0.3], [0.2]]), np.eye(4)])
-    a = vc_eigenvalue(model, gait, phase=HIP_PHASE)
-    b = vc_eigenvalue(model, gait, phase=(1.0, 0, 0, 0, 0), H0=H0)
+    a = vc_eigenvalue(gait, phase=HIP_PHASE)
+    b = vc_eigenvalue(gait, phase=(1.0, 0, 0, 0, 0), H0=H0)
     assert a.status == b.status == "stable"
     assert abs(a.eigenvalue - b.eigenvalue) < 1e-8
     assert abs(a.eigenvalue - a.delta_zero_squared) < 1e-8
@@ -206,8 +206,8 @@ def test_vc_eigenvalue_matches_finite_difference(model, gait):
 def test_tv_eigenvalues_depend_on_m1(model, gait, random_m1):
     """Unlike VC, the time-varying controller's A^z changes with the outputs M1."""
     from analysis import poincare_eigenvalues
-    r0 = poincare_eigenvalues(model, gait, np.zeros(4))
-    r1 = poincare_eigenvalues(model, gait, random_m1)
+    r0 = poincare_eigenvalues(gait, np.zeros(4))
+    r1 = poincare_eigenvalues(gait, random_m1)
     assert r0.status in ("stable", "unstable") and r1.status in ("stable", "unstable")
     assert abs(r0.max_abs - r1.max_abs) > 1e-3 * max(r0.max_abs, r1.max_abs)
     assert np.max(np.abs(r0.A - r1.A)) > 1e-3

@@ -12,7 +12,7 @@ from analysis.sweeps import grid_best
 
 @pytest.fixture(scope="module")
 def tay(model, gait):
-    return taylor_ab(model, gait)
+    return taylor_ab(gait)
 
 
 def test_taylor_coefficients_against_finite_differences(model, gait, tay):
@@ -21,7 +21,7 @@ def test_taylor_coefficients_against_finite_differences(model, gait, tay):
     M1 = np.array([0.5, -1.0, 2.0, 0.3])
     rem = []
     for d in (2e-2, 1e-2, 5e-3):
-        z = swing_height_at_Td(model, gait, M1[None], d)[0]
+        z = swing_height_at_Td(gait, M1[None], d)[0]
         rem.append(z - (tay.a(M1)[0] * d + tay.b(M1)[0] * d**2))
     ratios = [rem[0] / rem[1], rem[1] / rem[2]]
     np.testing.assert_allclose(ratios, 8.0, rtol=0.05)
@@ -43,15 +43,15 @@ def test_both_groups_satisfy_a_b_zero(model, gait, tay, rng):
     assert group_of(tay, s.group1[i]) == 1 and group_of(tay, s.group2[i]) == 2
     # and on a group z_sw stays ~0 to third order for an error on q_u
     for d in (1e-2, 5e-3):
-        z = swing_height_at_Td(model, gait, s.group1[i][None], d)[0]
+        z = swing_height_at_Td(gait, s.group1[i][None], d)[0]
         assert abs(z) < 50 * d**3
 
 
 def test_conjecture_figures_are_computed(model, gait):
     from analysis.sweeps import grid_results
-    r = grid_results(model, gait)
+    r = grid_results(gait)
     P, st, mx = r.points, r.point_status, r.max_abs
-    zsw = swing_height_at_Td(model, gait, P)
+    zsw = swing_height_at_Td(gait, P)
     c = conjecture_figures(zsw, mx, st)
     assert c["n_stable"] == int(np.sum(st == "stable")) > 0
     assert c["max_abs_zsw_stable"] >= 0 and 0 <= c["fraction_unstable_below"] <= 1
@@ -59,7 +59,7 @@ def test_conjecture_figures_are_computed(model, gait):
 
 @pytest.fixture(scope="module")
 def nlp2(model, gait):
-    return optimize_m1(model, gait, group=2, n_best=6, n_ipopt=1, n_random=0)
+    return optimize_m1(gait, group=2, n_best=6, n_ipopt=1, n_random=0)
 
 
 def test_m1_nlp_group2(model, gait, tay, nlp2):
@@ -67,17 +67,17 @@ def test_m1_nlp_group2(model, gait, tay, nlp2):
     assert r.group == 2
     assert abs(r.a) < 1e-9 and abs(r.b) < 1e-9
     # the reported max|lambda| is the full-AD map's at the returned M1
-    check = poincare_eigenvalues(model, gait, r.M1, method="ad")
+    check = poincare_eigenvalues(gait, r.M1, method="ad")
     assert check.max_abs == pytest.approx(r.max_abs, rel=1e-9, abs=1e-12)
     assert r.status == "stable"
     # no worse than the best point of the 9^4 grid, nor than the group's coarse map
-    gb = grid_best(model, gait)
+    gb = grid_best(gait)
     assert r.max_abs <= gb["max_abs"]
     s = domain_grid(tay, 41)
     from analysis import poincare_map
     P = s.group2.reshape(-1, 4)
     P = P[np.all(np.isfinite(P), axis=1)]
-    jb = poincare_map(model, gait).jacobian_batch(P)
+    jb = poincare_map(gait).jacobian_batch(P)
     st, mx = jb.status, jb.max_abs
     assert r.max_abs <= np.min(mx[st != "singular"]) + 1e-12
     assert r.eigenvalue_uncertainty < 1e-2
@@ -90,7 +90,7 @@ def test_m1_nlp_runs_ipopt_only_until_a_deadbeat_point(model, gait, nlp2):
     still verified and on the group, never better than deadbeat."""
     assert nlp2.history[1]["how"] == "newton" and nlp2.ipopt_runs == 0
     assert not any(h["how"].startswith("ipopt") for h in nlp2.history)
-    r = optimize_m1(model, gait, group=2, n_best=2, n_ipopt=2, n_random=0, deadbeat=False)
+    r = optimize_m1(gait, group=2, n_best=2, n_ipopt=2, n_random=0, deadbeat=False)
     assert r.ipopt_runs == 2
     assert {h["how"] for h in r.history} <= {"start", "ipopt"}
     assert r.group == 2 and abs(r.a) < 1e-9 and abs(r.b) < 1e-9

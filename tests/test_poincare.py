@@ -12,7 +12,7 @@ from analysis import poincare_eigenvalues, poincare_map, singular_m1_values
 
 @pytest.fixture(scope="module")
 def pm(model, gait):
-    return poincare_map(model, gait)
+    return poincare_map(gait)
 
 
 def random_nonsingular(pm, rng, n):
@@ -25,15 +25,15 @@ def random_nonsingular(pm, rng, n):
 
 
 def test_spec_surface(model, gait):
-    r = poincare_eigenvalues(model, gait, [0.0, 0.0, 0.0, 0.0])
+    r = poincare_eigenvalues(gait, [0.0, 0.0, 0.0, 0.0])
     assert r.A.shape == (2, 2)
     assert r.eigenvalues.shape == (2,)
     assert r.max_abs == pytest.approx(np.max(np.abs(np.linalg.eigvals(r.A))), rel=1e-12)
     assert r.status in ("stable", "unstable")
     with pytest.raises(ValueError, match="M1"):
-        poincare_eigenvalues(model, gait, [1.0, 2.0])
+        poincare_eigenvalues(gait, [1.0, 2.0])
     with pytest.raises(ValueError, match="finite"):
-        poincare_eigenvalues(model, gait, [np.nan, 0, 0, 0])
+        poincare_eigenvalues(gait, [np.nan, 0, 0, 0])
 
 
 def test_ad_jacobian_matches_scipy_finite_differences(model, gait, pm, rng):
@@ -94,12 +94,12 @@ def test_variational_kernels_match_the_symbolic_jacobian(pm, rng):
 
 def test_eigenvalues_depend_on_M1(pm):
     a = pm.analyse(np.zeros(4)).max_abs
-    b = pm.analyse(np.array([1.1 * singular_m1_values(pm.model, pm.gait)[0], 0, 0, 0])).max_abs
+    b = pm.analyse(np.array([1.1 * singular_m1_values(pm.gait)[0], 0, 0, 0])).max_abs
     assert max(a, b) > 2 * min(a, b)
 
 
 def test_singular_values_eq24(model, gait, pm):
-    sv = singular_m1_values(model, gait)
+    sv = singular_m1_values(gait)
     D = np.array(model.D(gait.q(gait.T)))
     np.testing.assert_allclose(sv * D[0, 1:], D[0, 0], rtol=1e-12)
     for j in range(4):
@@ -127,3 +127,20 @@ def test_other_robot_refused(gait):
     other = BipedModel(dataclasses.replace(RABBIT, m_torso=13.0))
     with pytest.raises(ValueError, match="robot parameters"):
         PoincareMap(other, gait)
+
+
+def test_the_older_model_gait_form_still_works(model, gait):
+    """poincare_eigenvalues(model, gait, M1) (the stable surface) equals the gait-first
+    form, with a deprecation warning; a model that is not the gait's is refused."""
+    from analysis import poincare_eigenvalues
+    from biped_casadi import Design, robot
+    M1 = np.array([-10.0, 7.5, 10.0, -5.0])
+    new = poincare_eigenvalues(gait, M1)
+    with pytest.warns(DeprecationWarning, match="gait carries its model"):
+        old = poincare_eigenvalues(model, gait, M1)
+    np.testing.assert_array_equal(old.A, new.A)
+    d = poincare_eigenvalues(gait, Design.tv(gait, M1, rejoin=0.75))
+    np.testing.assert_array_equal(d.A, poincare_eigenvalues(gait, M1, rejoin=0.75).A)
+    assert np.max(np.abs(d.A - new.A)) > 1e-6          # the rejoin time matters
+    with pytest.raises(ValueError, match="other robot"):
+        poincare_eigenvalues(robot("three_link"), gait, M1)

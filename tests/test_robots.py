@@ -268,7 +268,7 @@ def test_three_link_gait_file_round_trip_and_other_robot(gait3, tmp_path):
 def test_three_link_poincare_ad_matches_finite_differences(model3, gait3):
     """A^z by AD through the discrete map against central differences of the SciPy
     twin (solve_ivp with events), and the variational path against the full AD."""
-    pm = poincare_map(model3, gait3)
+    pm = poincare_map(gait3)
     sp = ScipyPoincare(model3, gait3)
     for M1 in (np.zeros(2), np.array([0.3, 1.7]), np.array([-2.0, 3.0])):
         r = pm.analyse(M1, method="ad")
@@ -283,16 +283,16 @@ def test_three_link_ab_is_a_line(model3, gait3):
     """a = b = 0 for the three-link biped: the swing foot's height ignores the torso,
     so a and b depend on M1(1) + M1(2) only; on the line a = 0 both legs stay symmetric
     at the impact and Z_sw(q^d(T) + M_T dq_u) vanishes to every order."""
-    tay = taylor_ab(model3, gait3)
+    tay = taylor_ab(gait3)
     ab = ab_solution_set(tay)
     assert ab.kind == "line" and len(ab.points) == 0
     P = ab.sample(7, -10, 10)
     np.testing.assert_allclose(tay.a(P), 0, atol=1e-12)
     np.testing.assert_allclose(tay.b(P), 0, atol=1e-12)
     for dq in (1e-1, 1e-2):
-        assert np.max(np.abs(swing_height_at_Td(model3, gait3, P, dq))) < 1e-12
+        assert np.max(np.abs(swing_height_at_Td(gait3, P, dq))) < 1e-12
     off = P[0] + np.array([0.5, 0.0])
-    assert abs(swing_height_at_Td(model3, gait3, off[None], 1e-2)[0]) > 1e-4
+    assert abs(swing_height_at_Td(gait3, off[None], 1e-2)[0]) > 1e-4
     assert group_of(tay, P[3]) == 1 and group_of(tay, off) is None
 
 
@@ -313,18 +313,18 @@ def test_three_link_m1_nlp_and_vc(model3, gait3):
     """The M1 NLP with both components free reaches max|lambda| far below the best point
     of the (M1(1), M1(2)) grid (verified by the full AD map), and the virtual-constraint
     eigenvalue equals delta_zero^2 of the orbit's impact."""
-    r = optimize_m1(model3, gait3, group=None, n_best=4, n_ipopt=2, n_random=0)
-    check = poincare_eigenvalues(model3, gait3, r.M1, method="ad")
+    r = optimize_m1(gait3, group=None, n_best=4, n_ipopt=2, n_random=0)
+    check = poincare_eigenvalues(gait3, r.M1, method="ad")
     assert check.max_abs == pytest.approx(r.max_abs, rel=1e-9, abs=1e-12)
-    pm = poincare_map(model3, gait3)
+    pm = poincare_map(gait3)
     v = np.linspace(-10, 10, 41)
     grid = np.stack(np.meshgrid(v, v, indexing="ij"), -1).reshape(-1, 2)
     jb = pm.jacobian_batch(grid)
     st, mx = jb.status, jb.max_abs
     assert r.status == "stable" and r.max_abs <= np.min(mx[st == "stable"])
-    line = optimize_m1(model3, gait3, group=1, n_best=4, n_ipopt=2, n_random=0)
+    line = optimize_m1(gait3, group=1, n_best=4, n_ipopt=2, n_random=0)
     assert line.group == 1 and abs(line.a) < 1e-9 and abs(line.b) < 1e-9
-    vc = vc_eigenvalue(model3, gait3)
+    vc = vc_eigenvalue(gait3)
     assert vc.status == "stable" and abs(vc.eigenvalue - vc.delta_zero_squared) < 1e-8
     assert vc.orbit_mismatch < 1e-8
 
@@ -332,13 +332,13 @@ def test_three_link_m1_nlp_and_vc(model3, gait3):
 def test_three_link_simulation(model3, gait3):
     """Unperturbed, both controllers repeat the reference; perturbed, the time-varying
     controller's section errors follow A^z step to step."""
-    tv = TimeVaryingController(model3, gait3, [0.3, 1.7])
-    for ctrl in (tv, VirtualConstraintController(model3, gait3)):
+    tv = TimeVaryingController(gait3, [0.3, 1.7])
+    for ctrl in (tv, VirtualConstraintController(gait3)):
         res = simulate(ctrl, options=SimulationOptions(steps=2))
         assert res.status == "ok", res.message
         assert max(abs(s.duration - gait3.T) for s in res.steps) < 1e-8
         assert np.max(np.abs(res.qu_error)) < 1e-8
-    A = poincare_eigenvalues(model3, gait3, tv.M1).A
+    A = poincare_eigenvalues(gait3, tv.M1).A
     q0, dq0 = gait3.q(0.0), gait3.dq(0.0)
     q0[0] += 1e-6
     res = simulate(tv, q0, dq0, SimulationOptions(steps=4))
@@ -360,7 +360,7 @@ def test_cli_three_link(gait3, tmp_path, capsys):
     rc, out = run(capsys, "eig", "--gait", g3, "--m1", "0.3", "1.7", "--json")
     assert rc == 0, out.err
     body = json.loads(out.out)
-    ref = poincare_eigenvalues(gait3.model, gait3, [0.3, 1.7])
+    ref = poincare_eigenvalues(gait3, [0.3, 1.7])
     np.testing.assert_allclose(body["A"], ref.A, rtol=1e-12)
     rc, out = run(capsys, "eig", "--gait", g3, "--controller", "vc", "--json")
     assert rc == 0 and json.loads(out.out)["status"] == "stable"

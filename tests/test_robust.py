@@ -35,12 +35,12 @@ def robust_gait(model):
 @pytest.fixture(scope="module")
 def deadbeat1(model, gait):
     """The group-1 deadbeat M1 of the NLP (paper §V-B) on the default gait."""
-    return optimize_m1(model, gait, group=1, n_best=4, n_ipopt=1, n_random=0).M1
+    return optimize_m1(gait, group=1, n_best=4, n_ipopt=1, n_random=0).M1
 
 
 def _full_order(model, gait, design, d, s, steps=10, torque_limit=None):
     q0, dq0 = start_states(gait, d[None], s)
-    ctrl = TimeVaryingController(model, gait, np.array(design.M1), rejoin=design.rejoin)
+    ctrl = TimeVaryingController(gait, np.array(design.M1), rejoin=design.rejoin)
     return simulate(ctrl, q0[0], dq0[0], SimulationOptions(steps=steps,
                                                            torque_limit=torque_limit))
 
@@ -54,7 +54,7 @@ def test_walker_is_the_full_order_closed_loop(model, robust_gait):
     d = directions(4, model.nq, seed=5)
     q0, dq0 = start_states(g, d, np.full(4, 0.5))
     B = ZeroDynamicsWalker(model, g, rk4_steps=400).walk(q0, dq0, M1, 0.75, steps=4)
-    ctrl = TimeVaryingController(model, g, M1, rejoin=0.75)
+    ctrl = TimeVaryingController(g, M1, rejoin=0.75)
     for i in range(4):
         r = simulate(ctrl, q0[i], dq0[i], SimulationOptions(steps=4))
         assert r.status == B.status[i]
@@ -73,7 +73,7 @@ def test_output_gains_change_nothing(model, robust_gait):
     sets walk the same steps (the lever 'gains' buys nothing)."""
     g = robust_gait
     q0, dq0 = start_states(g, directions(1, model.nq)[:1], [0.5])
-    runs = [simulate(TimeVaryingController(model, g, np.array([-8.26, 2.54, 0.0034, 8.51]),
+    runs = [simulate(TimeVaryingController(g, np.array([-8.26, 2.54, 0.0034, 8.51]),
                                            gains, rejoin=0.75), q0[0], dq0[0],
                      SimulationOptions(steps=4))
             for gains in (Gains(), Gains(Kp=4.0, Kd=4.0, eps=0.05))]
@@ -88,7 +88,7 @@ def test_walker_torque_limit_as_the_simulator(model, gait):
     opts = SimulationOptions(steps=1, torque_limit=20.0)
     B = ZeroDynamicsWalker(model, gait, opts).walk(gait.q(0.0)[None], gait.dq(0.0)[None],
                                                    np.zeros(4), 0.5, steps=1)
-    r = simulate(TimeVaryingController(model, gait, np.zeros(4)), options=opts)
+    r = simulate(TimeVaryingController(gait, np.zeros(4)), options=opts)
     assert r.status == B.status[0] == "torque_limit"
 
 
@@ -102,7 +102,7 @@ def test_vc_walker_is_the_full_order_closed_loop(model, gait):
     th, w = V.section_states(X)
     for i in range(len(X)):
         q, Q1, _ = (np.array(v).ravel() for v in V.vmap.curve(th[i]))
-        r = simulate(VirtualConstraintController(model, gait), q, Q1 * w[i],
+        r = simulate(VirtualConstraintController(gait), q, Q1 * w[i],
                      SimulationOptions(steps=3))
         assert r.status == B.status[i] == "ok"
         assert np.max(np.abs(r.dqu_error - B.dqu_error[i])) < 1e-8
@@ -122,7 +122,7 @@ def test_vc_walker_verdicts_from_perturbed_starts(model, gait, scale, index):
     q0, dq0 = start_states(gait, d[None], scale)
     opts = SimulationOptions(steps=10, mu=0.6)
     B = VirtualConstraintWalker(model, gait, opts).walk_from_states(q0, dq0, steps=10)
-    r = simulate(VirtualConstraintController(model, gait), q0[0], dq0[0], opts)
+    r = simulate(VirtualConstraintController(gait), q0[0], dq0[0], opts)
     assert (B.verdict(1e-3)[0] == "ok") == (r.verdict(1e-3) == "ok")
     assert B.fail_step[0] == r.fail_step
     if r.status == "ok":
@@ -137,9 +137,9 @@ def test_s_star_replayed_at_and_above(model, gait, deadbeat1):
     direction walks and converges; just above: the reported direction fails, for the
     reported cause."""
     st = RobustnessSettings(directions=4, rounds=7)
-    kept = kept_directions(model, gait, st)
+    kept = kept_directions(gait, st)
     design = Design(tuple(deadbeat1))
-    r = robustness(model, gait, design, st, kept=kept)
+    r = robustness(gait, design, st, kept=kept)
     assert 0 < r.s_star < r.s_fail < 2 and r.failure
     for d in kept.directions:
         run = _full_order(model, gait, design, d, r.s_star)
@@ -157,11 +157,11 @@ def test_virtual_constraints_walk_every_kept_direction(model, gait):
     at their eigenvalue's rate (0.54 on the default gait: 1.2e-3 left after 10 steps, so
     their convergence-based s* is below 1: see the report)."""
     st = RobustnessSettings(directions=4)
-    kept = kept_directions(model, gait, st)
+    kept = kept_directions(gait, st)
     dirs, tried, rejected = kept.directions, kept.tried, kept.rejected
     assert np.all(dirs[0] == 1) and tried == len(dirs) + sum(rejected.values())
     assert set(rejected) <= {"scuffed"}           # rejected: the swing foot starts in the ground
-    runs = [simulate(VirtualConstraintController(model, gait), *(a[0] for a in
+    runs = [simulate(VirtualConstraintController(gait), *(a[0] for a in
                      start_states(gait, d[None], 1.0))) for d in dirs]
     assert all(r.ok and len(r.steps) == 10 for r in runs)
     errs = [max(abs(r.qu_error[-1]), abs(r.dqu_error[-1])) for r in runs]
@@ -172,7 +172,7 @@ def test_ad_and_variational_agree_on_a_continued_reference(model, robust_gait):
     """With the reference continued past T by an acceleration ramp, the full-AD map and
     the variational equation give the same A^z (the impact time lands on T to round-off:
     both sides see the polynomial)."""
-    pm = poincare_map(model, robust_gait, rejoin=0.75)
+    pm = poincare_map(robust_gait, rejoin=0.75)
     for M1 in ([-5.79, 2.91, 0.545, 5.69], [0.3, -0.2, 0.1, 0.4]):
         a = pm.analyse(np.array(M1))
         b = pm.analyse(np.array(M1), method="ad")
@@ -214,16 +214,16 @@ def test_smooth_continuation_is_C3_at_T_and_changes_nothing_before(model, robust
 
 
 def test_basin_outcomes(model, gait):
-    b = basin(model, gait, None, n=5, q_span=0.01, dq_span=0.1, steps=3)
+    b = basin(gait, None, n=5, q_span=0.01, dq_span=0.1, steps=3)
     assert b.outcome.shape == (5, 5) and b.outcome[2, 2] in ("converged", "walked")
     assert set(b.counts) <= {"converged", "walked", "slipped", "scuffed", "no_impact",
                              "negative_normal_force", "torque_limit", "fell"}
-    t = basin(model, gait, Design((-2.5, 5.0, -2.5, 5.0)), n=5, q_span=0.01, dq_span=0.1,
+    t = basin(gait, Design((-2.5, 5.0, -2.5, 5.0)), n=5, q_span=0.01, dq_span=0.1,
               steps=3)
     assert t.outcome[2, 2] in ("converged", "walked")       # the fixed point walks
     assert 0 < t.converged_fraction + np.mean(t.outcome == "walked") <= 1
     with pytest.raises(ValueError, match="n"):
-        basin(model, gait, None, n=1)
+        basin(gait, None, n=1)
 
 
 def test_basin_adaptive_grid_draws_the_full_grid(model, gait):
@@ -231,8 +231,8 @@ def test_basin_adaptive_grid_draws_the_full_grid(model, gait):
     fewer cells and gives the full grid's outcome on all but a few of them; where it
     walked a cell, the outcome and the final error are the full grid's exactly."""
     d = Design((-2.5, 5.0, -2.5, 5.0))
-    full = basin(model, gait, d, n=21, steps=4)
-    ad = basin(model, gait, d, n=21, steps=4, refine=4)
+    full = basin(gait, d, n=21, steps=4)
+    ad = basin(gait, d, n=21, steps=4, refine=4)
     assert full.walked_cells == 21 * 21 and ad.walked_cells < 21 * 21
     differ = np.sum(full.outcome != ad.outcome)
     assert differ <= 0.02 * 21 * 21, differ
@@ -240,7 +240,7 @@ def test_basin_adaptive_grid_draws_the_full_grid(model, gait):
     np.testing.assert_array_equal(ad.final_error[w], full.final_error[w])
     assert set(np.unique(full.outcome[w] == ad.outcome[w])) == {True}
     with pytest.raises(ValueError, match="refine"):
-        basin(model, gait, d, n=21, refine=3)
+        basin(gait, d, n=21, refine=3)
 
 
 # ------------------------------------------------------------------------ CLI
@@ -313,9 +313,9 @@ def test_s_star_batch_on_a_dask_cluster(model, gait):
     from analysis.robustness import s_star_batch
     from biped_casadi.simulation import zero_dynamics_walker
     st = RobustnessSettings(directions=2, rounds=4, rk4_steps=200)
-    dirs = kept_directions(model, gait, st).directions
+    dirs = kept_directions(gait, st).directions
     designs = [Design((-2.5, 5.0, -2.5, 5.0)), Design((-10.0, 7.5, 10.0, -5.0))]
-    walker = zero_dynamics_walker(model, gait, st.simulation_options(), 200, jit=True)
+    walker = zero_dynamics_walker(gait, st.simulation_options(), 200, jit=True)
     local = s_star_batch(walker, gait, designs, dirs, st, chunk=1)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None, host="127.0.0.1") as cluster:

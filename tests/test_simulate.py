@@ -35,26 +35,26 @@ def random_m1(gait, model):
     rng = np.random.default_rng(7)
     for _ in range(100):
         M1 = rng.uniform(-3, 3, 4)
-        if TimeVaryingController(model, gait, M1).singularity().singular:
+        if TimeVaryingController(gait, M1).singularity().singular:
             continue
-        if poincare_eigenvalues(model, gait, M1).max_abs < 30:
+        if poincare_eigenvalues(gait, M1).max_abs < 30:
             return M1
     raise AssertionError("no suitable random M1 found")
 
 
 @pytest.fixture(scope="module")
 def tv0(model, gait):
-    return TimeVaryingController(model, gait, np.zeros(4))
+    return TimeVaryingController(gait, np.zeros(4))
 
 
 @pytest.fixture(scope="module")
 def tvr(model, gait, random_m1):
-    return TimeVaryingController(model, gait, random_m1)
+    return TimeVaryingController(gait, random_m1)
 
 
 @pytest.fixture(scope="module")
 def vc(model, gait):
-    return VirtualConstraintController(model, gait)
+    return VirtualConstraintController(gait)
 
 
 @pytest.fixture(scope="module")
@@ -115,9 +115,9 @@ def test_tv_section_errors_follow_Az(model, gait, tv0, stable_m1, which):
     step as delta x_{k+1} = A^z delta x_k, A^z the exact Jacobian of the restricted
     Poincaré map (analysis.poincare_eigenvalues); for a stable M1 it contracts."""
     from analysis import poincare_eigenvalues
-    ctrl = tv0 if which == "zero" else TimeVaryingController(model, gait, stable_m1)
+    ctrl = tv0 if which == "zero" else TimeVaryingController(gait, stable_m1)
     M1 = ctrl.M1
-    A = poincare_eigenvalues(model, gait, M1).A
+    A = poincare_eigenvalues(gait, M1).A
     q0, dq0 = gait.q(0.0), gait.dq(0.0)
     q0[0] += 1e-6
     dq0[0] -= 2e-6
@@ -138,7 +138,7 @@ def test_tv_section_errors_follow_Az(model, gait, tv0, stable_m1, which):
 def test_vc_error_ratio_converges_to_eigenvalue(model, gait, vc):
     """Virtual constraints: the configuration at impact is the reference one and the
     step-to-step ratio of dq_u errors before impact tends to the 1-D map's eigenvalue."""
-    lam = vc_eigenvalue(model, gait).eigenvalue
+    lam = vc_eigenvalue(gait).eigenvalue
     q0, dq0 = perturbed_initial_state(gait, 0.0, 1e-4)
     res = simulate(vc, q0, dq0, SimulationOptions(steps=5))
     assert res.status == "ok"
@@ -151,7 +151,7 @@ def test_paper_fig5_perturbation_vc(model, gait, vc):
     """Paper §V-C: from 0.01 rad on each joint and 0.1 rad/s on each velocity the
     virtual-constraint controller walks on, with the desired configuration at every
     impact and the velocity error shrinking by about its eigenvalue per step."""
-    lam = vc_eigenvalue(model, gait).eigenvalue
+    lam = vc_eigenvalue(gait).eigenvalue
     res = simulate(vc, *perturbed_initial_state(gait, *PAPER_SIZES),
                    options=SimulationOptions(steps=8))
     assert res.status == "ok", res.message
@@ -165,7 +165,7 @@ def test_paper_fig5_perturbation_tv_reports_status(model, gait, stable_m1):
     """The same perturbation with time-varying control ends in a definite status; when
     the run stops, the last logged state (or impact) is the invalid one and every
     earlier state satisfies all the checks: nothing continues silently."""
-    ctrl = TimeVaryingController(model, gait, stable_m1)
+    ctrl = TimeVaryingController(gait, stable_m1)
     opts = SimulationOptions(steps=6)
     res = simulate(ctrl, *perturbed_initial_state(gait, *PAPER_SIZES), options=opts)
     assert res.status in STATUSES
@@ -303,7 +303,7 @@ def test_status_no_impact_and_singular(model, gait, tv0):
     assert res.status == "no_impact" and res.failure_time == pytest.approx(0.9 * gait.T)
     # eq. (24): D11 - D12 M1 crosses zero during the step
     D = np.array(model.D(gait.q(0.5 * gait.T)))
-    sing = TimeVaryingController(model, gait, [D[0, 0] / D[0, 1], 0, 0, 0])
+    sing = TimeVaryingController(gait, [D[0, 0] / D[0, 1], 0, 0, 0])
     res = simulate(sing, options=SimulationOptions(steps=1))
     assert res.status == "singular"
     rep = sing.singularity()

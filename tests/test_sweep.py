@@ -42,7 +42,7 @@ def small_grid():
 def reference(sweep_gait, small_grid, tmp_path_factory):
     """An uninterrupted run of the 5^4 grid in chunks of 4 (the layout of the kill test)."""
     out = tmp_path_factory.mktemp("sweep") / "reference"
-    return run_sweep(sweep_gait.model, sweep_gait, small_grid, out_dir=out, chunk_size=4,
+    return run_sweep(sweep_gait, small_grid, out_dir=out, chunk_size=4,
                      progress=False)
 
 
@@ -81,7 +81,7 @@ def test_counts_match_direct_jacobian_batch(sweep_gait, reference, small_grid):
     r = reference
     assert sum(r.counts.values()) == r.n_points == len(small_grid)
     assert set(r.counts) == set(STATUSES)
-    pm = poincare_map(sweep_gait.model, sweep_gait)
+    pm = poincare_map(sweep_gait)
     jb = pm.jacobian_batch(small_grid)
     status, A, max_abs = jb.status, jb.A, jb.max_abs
     assert np.array_equal(r.point_status, status)
@@ -105,13 +105,13 @@ def test_counts_match_direct_jacobian_batch(sweep_gait, reference, small_grid):
 
 
 def test_parallel_modes_give_identical_results(sweep_gait, reference, small_grid):
-    threads = run_sweep(sweep_gait.model, sweep_gait, small_grid, chunk_size=4, workers=2,
+    threads = run_sweep(sweep_gait, small_grid, chunk_size=4, workers=2,
                         executor="thread", progress=False)
     same_results(threads, reference)
-    serial = run_sweep(sweep_gait.model, sweep_gait, small_grid[:64], chunk_size=4, workers=1,
+    serial = run_sweep(sweep_gait, small_grid[:64], chunk_size=4, workers=1,
                        progress=False)
     same_results(serial, reference.subset(np.arange(64)))
-    procs = run_sweep(sweep_gait.model, sweep_gait, small_grid[:64], chunk_size=4, workers=2,
+    procs = run_sweep(sweep_gait, small_grid[:64], chunk_size=4, workers=2,
                       executor="process", progress=False)
     same_results(procs, reference.subset(np.arange(64)))
 
@@ -143,7 +143,7 @@ def test_resume_after_sigkill(sweep_gait, gait_file, reference, tmp_path):
     stored = {chunk_no(p): (p, p.stat()) for p in chunks.glob("part-*.parquet")}
     assert 8 <= len(stored) < n_chunks, "kill must land part-way"
 
-    r = run_sweep(sweep_gait.model, sweep_gait, grid_points(5, -10, 10), out_dir=out, progress=False)
+    r = run_sweep(sweep_gait, grid_points(5, -10, 10), out_dir=out, progress=False)
     assert r.chunk_size == 4                       # taken from the folder
     assert r.reused_chunks == sorted(stored)       # everything stored was kept ...
     assert r.computed_chunks == sorted(set(range(n_chunks)) - set(stored))   # ... not redone
@@ -158,7 +158,7 @@ def test_resume_after_sigkill(sweep_gait, gait_file, reference, tmp_path):
     assert len(start) == 2 and start[-1]["to_compute"] == r.computed_chunks
     same_results(r, reference)                     # exactly the uninterrupted results
     same_results(load_sweep(out), reference)
-    again = run_sweep(sweep_gait.model, sweep_gait, grid_points(5, -10, 10), out_dir=out, progress=False)
+    again = run_sweep(sweep_gait, grid_points(5, -10, 10), out_dir=out, progress=False)
     assert again.computed_chunks == [] and again.n_computed == 0
     same_results(again, reference)
 
@@ -176,7 +176,7 @@ def test_damaged_chunks_are_detected_and_recomputed(sweep_gait, reference, small
     p9.write_bytes(b"")                                                # empty
     (c / ".part-000011.parquet.123.tmp").write_bytes(b"half a chunk")  # left by a kill
     p4.unlink()                                                        # missing
-    r = run_sweep(sweep_gait.model, sweep_gait, small_grid, out_dir=out, progress=False)
+    r = run_sweep(sweep_gait, small_grid, out_dir=out, progress=False)
     assert set(r.corrupt_chunks) == {3, 7, 9}
     assert r.computed_chunks == [3, 4, 7, 9]
     assert not list(c.glob(".*.tmp"))
@@ -193,14 +193,14 @@ def test_other_settings_are_refused(sweep_gait, reference, small_grid, tmp_path)
              dict(points=small_grid, settings={"method": "ad"})]
     for case in cases:
         with pytest.raises(ValueError, match="other settings"):
-            run_sweep(sweep_gait.model, sweep_gait, out_dir=out, progress=False, **case)
+            run_sweep(sweep_gait, out_dir=out, progress=False, **case)
     after = sorted((p.name, p.stat().st_mtime_ns) for p in (out / "chunks").iterdir())
     assert before == after                      # nothing written, nothing removed
     other = tmp_path / "not_a_sweep"
     other.mkdir()
     (other / "notes.txt").write_text("mine")
     with pytest.raises(ValueError, match="not a sweep folder"):
-        run_sweep(sweep_gait.model, sweep_gait, small_grid[:8], out_dir=other, progress=False)
+        run_sweep(sweep_gait, small_grid[:8], out_dir=other, progress=False)
     assert [p.name for p in other.iterdir()] == ["notes.txt"]
 
 
@@ -209,7 +209,7 @@ def test_dask_local_cluster_same_results(sweep_gait, reference, small_grid, tmp_
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None, host="127.0.0.1") as cluster:
-        r = run_sweep(sweep_gait.model, sweep_gait, small_grid[:64], out_dir=tmp_path / "dask",
+        r = run_sweep(sweep_gait, small_grid[:64], out_dir=tmp_path / "dask",
                       chunk_size=4, scheduler=cluster.scheduler_address, progress=False)
         with distributed.Client(cluster.scheduler_address) as client:
             pids = client.run(os.getpid)
@@ -228,15 +228,15 @@ def test_unreachable_scheduler_is_a_user_error(sweep_gait, small_grid, monkeypat
     port = s.getsockname()[1]
     s.close()                                   # nothing listens there
     with pytest.raises(ValueError, match="scheduler"):
-        run_sweep(sweep_gait.model, sweep_gait, small_grid[:8], scheduler=f"tcp://127.0.0.1:{port}",
+        run_sweep(sweep_gait, small_grid[:8], scheduler=f"tcp://127.0.0.1:{port}",
                   progress=False)
 
 
 # ------------------------------------------------------------------- Fig. 2
 def test_one_d_sweeps_and_fig2(sweep_gait, tmp_path):
     values = np.sort(np.r_[np.linspace(-3, 3, 61), 1.70])
-    lines = one_d_sweeps(sweep_gait.model, sweep_gait, values, progress=False)
-    sv = singular_m1_values(sweep_gait.model, sweep_gait)
+    lines = one_d_sweeps(sweep_gait, values, progress=False)
+    sv = singular_m1_values(sweep_gait)
     np.testing.assert_allclose(lines.singular_values, sv)
     for j, r in enumerate(lines.results):
         assert np.array_equal(r.points[:, j], values)

@@ -42,7 +42,7 @@ def robust_gait(model):
 
 @pytest.fixture(scope="module")
 def tv(model, robust_gait):
-    return TimeVaryingController(model, robust_gait, M1R, rejoin=REJOIN)
+    return TimeVaryingController(robust_gait, M1R, rejoin=REJOIN)
 
 
 # ------------------------------------------------------------------ terrain
@@ -101,7 +101,7 @@ def test_walkers_are_the_closed_loop_on_uneven_ground(model, robust_gait, tv):
     q0 = np.tile(g.q(0.0), (3, 1))          # the swing foot on the ground, the rates off
     B = ZeroDynamicsWalker(model, g, rk4_steps=400).walk(q0, dq0, M1R, REJOIN, steps=5,
                                                           terrain=H)
-    vc = VirtualConstraintController(model, g)
+    vc = VirtualConstraintController(g)
     V = VirtualConstraintWalker(model, g, nodes=800).walk_from_states(q0, dq0, steps=5,
                                                                       terrain=H)
     o = SimulationOptions(steps=5, jit=True)
@@ -133,7 +133,7 @@ def test_model_error_makes_the_gains_matter(model, robust_gait, tv):
     runs = {}
     for eps in (0.02, 0.08):
         for p in (None, plant):
-            c = TimeVaryingController(model, robust_gait, M1R, Gains(eps=eps), rejoin=REJOIN)
+            c = TimeVaryingController(robust_gait, M1R, Gains(eps=eps), rejoin=REJOIN)
             runs[eps, p is None] = simulate(c, options=o, plant=p)
     perfect = np.max(np.abs(runs[0.02, True].dqu_error - runs[0.08, True].dqu_error))
     wrong = np.max(np.abs(runs[0.02, False].dqu_error - runs[0.08, False].dqu_error))
@@ -172,8 +172,8 @@ def _fd_jacobian(sm, s, h, d, push=0.0):
 def test_step_map_jacobians_against_central_differences(model, gait, kind):
     """A, B, C, D by AD against central differences of the map, and the map against
     the simulator it is made of (default gait, away from the flat orbit's RK4 node)."""
-    c = TimeVaryingController(model, gait, np.array([-10, 7.5, 10, -5.0])) if kind == "tv" \
-        else VirtualConstraintController(model, gait)
+    c = TimeVaryingController(gait, np.array([-10, 7.5, 10, -5.0])) if kind == "tv" \
+        else VirtualConstraintController(gait)
     o = SimulationOptions(steps=1, rk4_steps=400, ground_tolerance=1e-4)
     sm = StepMap(c, o)
     s = np.r_[gait.q(0.0), gait.dq(0.0)] + 1e-4 * directions(1, model.nq, seed=3)[0]
@@ -192,7 +192,7 @@ def test_step_map_eigenvalues_are_the_poincare_maps(model, robust_gait, tv):
     """The full state's step map has rank 2 for the time-varying controller; its non-zero
     eigenvalues are those of A^z (eq. 20)."""
     lin = StepMap(tv, SimulationOptions(rk4_steps=2000)).linearise(h=1e-7)
-    Az = poincare_map(tv.model, robust_gait, rejoin=REJOIN).analyse(M1R)
+    Az = poincare_map(robust_gait, rejoin=REJOIN).analyse(M1R)
     ev = np.sort(np.abs(lin.eigenvalues))[::-1]
     assert np.allclose(ev[:2], np.sort(np.abs(Az.eigenvalues))[::-1], rtol=1e-4)
     assert np.all(ev[2:] < 1e-6)
@@ -203,8 +203,8 @@ def test_gsn_matches_central_differences_of_the_simulator(model, gait, kind):
     """The GSN from the exact Jacobians and from central differences of the simulator at
     the same point (the periodic walk, GROUND_OFFSET) agree to 1e-5 relative, for the
     time-varying controller and for virtual constraints."""
-    c = TimeVaryingController(model, gait, np.array([-10, 7.5, 10, -5.0])) if kind == "tv" \
-        else VirtualConstraintController(model, gait)
+    c = TimeVaryingController(gait, np.array([-10, 7.5, 10, -5.0])) if kind == "tv" \
+        else VirtualConstraintController(gait)
     o = SimulationOptions(rk4_steps=800, ground_tolerance=1e-4)
     g = gait_sensitivity(c, o)
     sm = StepMap(c, o)

@@ -67,7 +67,7 @@ def test_linearisation_matches_ad_of_the_zero_dynamics(model, gait, zd):
 def test_dAz_dM1_matches_finite_differences(model, gait):
     """The derivative of A^z in M1 (AD of the variational Jacobian, what the M1 NLP's
     exact derivatives are) against central differences of A^z itself."""
-    var = poincare_map(model, gait).variational
+    var = poincare_map(gait).variational
     M1 = ca.SX.sym("M1", 4)
     dA = ca.Function("dA", [M1], [ca.jacobian(ca.vec(var.A_fn(M1)), M1)])
     rng = np.random.default_rng(11)
@@ -83,10 +83,10 @@ def test_dAz_dM1_matches_finite_differences(model, gait):
 
 
 def test_denominator_samples_are_shared(model, gait):
-    D11, D12 = denominator_samples(model, gait)
-    assert denominator_samples(model, gait)[0] is D11
+    D11, D12 = denominator_samples(gait)
+    assert denominator_samples(gait)[0] is D11
     assert D11.shape == (1001,) and D12.shape == (4, 1001)
-    pm = poincare_map(model, gait)
+    pm = poincare_map(gait)
     assert pm.D11_table is D11
 
 

@@ -26,7 +26,7 @@ def cmd_eig(args):
     model = gait.model
     if args.controller == "vc":
         say("fitting the virtual constraints to the gait (a few seconds) ...")
-        res = vc_eigenvalue(model, gait)
+        res = vc_eigenvalue(gait)
         d = res.to_dict()
         if args.json:
             print_json(res)
@@ -37,7 +37,7 @@ def cmd_eig(args):
     M1 = parse_m1(args.m1, model.nu)
     if method == "ad":
         say("AD through the whole Poincare map (builds it once, a few seconds) ...")
-    r = poincare_eigenvalues(model, gait, M1, method=method)
+    r = poincare_eigenvalues(gait, M1, method=method)
     if args.json:
         print_json(r)
         return 0

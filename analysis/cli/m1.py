@@ -133,7 +133,7 @@ def cmd_m1(args):
             raise UserError(f"{name} applies to --robust")
     gait = load_gait(args, say)
     model = gait.model
-    ab = ab_groups(model, gait)
+    ab = ab_groups(gait)
     valid, why = ab.groups, ab.explanation
     if args.group and args.group not in valid:
         raise UserError(f"--group {args.group}: {why}")
@@ -142,10 +142,10 @@ def cmd_m1(args):
     for g in groups:
         say(f"optimising M1 {'with all components free' if g is None else f'on group {g}'} "
             "(10-15 s on a loaded 2-core VM) ...")
-        results.append(optimize_m1(model, gait, group=g))
+        results.append(optimize_m1(gait, group=g))
     best = min(results, key=lambda r: r.max_abs)
     say(f"the 9^{model.nu} grid for comparison (once per gait, then cached) ...")
-    gb = grid_best(model, gait)
+    gb = grid_best(gait)
     out = dict(best.to_dict(), grid_best=gb)
     if len(results) > 1:
         out["groups"] = {str(r.group): r.to_dict() for r in results}

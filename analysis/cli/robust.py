@@ -35,14 +35,14 @@ def cmd_robust(args):
                             torque_limit=args.torque_limit, seed=args.seed)
     say(f"perturbation directions from which virtual constraints walk ({args.directions} "
         f"wanted; about 0.3 s each)")
-    kept = kept_directions(model, gait, st)
+    kept = kept_directions(gait, st)
     say("s* by bisection (up to a minute)")
-    res = robustness(model, gait, design, st, kept=kept)
+    res = robustness(gait, design, st, kept=kept)
     out = res.to_dict()
     if args.plot is not None:
         say("basins of attraction, time-varying beside virtual constraints (about a minute)")
-        runs = [basin(model, gait, design)] if design is not None else []
-        runs.append(basin(model, gait, None))
+        runs = [basin(gait, design)] if design is not None else []
+        runs.append(basin(gait, None))
         out["basins"] = [dict(controller=b.controller, converged_fraction=b.converged_fraction,
                               counts=b.counts) for b in runs]
         out["figures"] = save_figures({"basin": basin_plot(runs)}, args.plot)

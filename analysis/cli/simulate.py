@@ -29,8 +29,8 @@ def _num(x, fmt) -> str:
 
 def _controller(kind, model, gait, M1, gains, rejoin=0.5):
     if kind == "tv":
-        return TimeVaryingController(model, gait, M1, gains, rejoin=rejoin)
-    return VirtualConstraintController(model, gait, gains=gains)
+        return TimeVaryingController(gait, M1, gains, rejoin=rejoin)
+    return VirtualConstraintController(gait, gains=gains)
 
 
 def _check_perturbation(args):

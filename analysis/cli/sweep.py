@@ -65,10 +65,10 @@ def cmd_sweep(args):
     plots = []
     try:
         if args.line is not None:
-            lines = one_d_sweeps(model, gait, np.linspace(lo, hi, args.line), **kw)
+            lines = one_d_sweeps(gait, np.linspace(lo, hi, args.line), **kw)
             r = lines.sweep
         else:
-            r = run_sweep(model, gait, grid_points(n, lo, hi, model.nu), **kw)
+            r = run_sweep(gait, grid_points(n, lo, hi, model.nu), **kw)
     except ValueError as e:       # the library names out / scheduler: say --out / --scheduler
         msg = str(e)
         raise UserError("--" + msg if msg.startswith(("out:", "scheduler:")) else msg) from None

@@ -25,6 +25,7 @@ import numpy as np
 from biped_casadi.caching import cached
 from biped_casadi.control.output_law import decoupling_denominator
 from biped_casadi.results import Result, internal
+from biped_casadi.control.reference import gait_first
 
 from ..stability.poincare import poincare_eigenvalues, poincare_map
 from .output_selection import (ab_solution_set, coarse_grid_size, domain_grid, group_of,
@@ -249,7 +250,8 @@ def _coarse_best(pm, tay, group, k, coarse=None):
     return np.asarray(jb.M1, float)[order[:k]]
 
 
-def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int = 2,
+@gait_first
+def optimize_m1(gait, group: int | None = 1, starts=None, n_random: int = 2,
                 n_best: int = 10, n_ipopt: int = 4, seed: int = 0, den_margin: float = 1.0,
                 deadbeat: bool = True, coarse=None) -> M1Result:
     """Choose M1 minimising max|lambda| of A^z (exact derivatives of A^z in M1 by AD).
@@ -270,8 +272,6 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         Its reference gait.
     group : {1, 2, None}
@@ -295,11 +295,12 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
     M1Result
         The best M1 found, verified.
     """
+    model = gait.model
     if group not in (1, 2, None):
         raise ValueError(f"group must be 1, 2 or None, got {group!r}")
     t0 = time.perf_counter()
-    pm = poincare_map(model, gait)
-    tay = taylor_ab(model, gait)
+    pm = poincare_map(gait)
+    tay = taylor_ab(gait)
     nu = model.nu
     constrained = group is not None
     constraints, sampler, in_group = _feasible_set(tay, group, nu)
@@ -361,12 +362,12 @@ def optimize_m1(model, gait, group: int | None = 1, starts=None, n_random: int =
         raise RuntimeError("the M1 NLP found no non-singular local optimum (IPOPT); try more starts")
     # verify the best few by the full-AD map and keep the best verified one
     ranked = sorted(history, key=lambda h: h["max_abs"])
-    verified = [(poincare_eigenvalues(model, gait, h["M1"], method="ad"), h["max_abs"])
+    verified = [(poincare_eigenvalues(gait, h["M1"], method="ad"), h["max_abs"])
                 for h in ranked[:3]]
     r, val = min(verified, key=lambda v: v[0].max_abs)
     M1 = r.M1
     # integration-error estimate of A^z: a map with twice the RK4 steps
-    fine = poincare_map(model, gait, n_pre=2 * pm.n_pre, n_post=2 * pm.n_post).analyse(
+    fine = poincare_map(gait, n_pre=2 * pm.n_pre, n_post=2 * pm.n_post).analyse(
         M1, method="ad")
     dA = float(np.max(np.abs(fine.A - r.A)))
     unc = float(max(abs(fine.max_abs - r.max_abs), math.sqrt(dA * np.max(np.abs(r.A)))))

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from biped_casadi.control.reference import gait_first
 
 import casadi as ca
 import numpy as np
@@ -33,7 +34,8 @@ __all__ = ["swing_height_at_Td", "TaylorAB", "taylor_ab", "solve_ab", "ABSolutio
 
 
 # ------------------------------------------------------------------ eq. (25)-(26)
-def swing_height_at_Td(model, gait, M1s, dqu: float = 1e-2) -> np.ndarray:
+@gait_first
+def swing_height_at_Td(gait, M1s, dqu: float = 1e-2) -> np.ndarray:
     """The swing-foot height at the desired impact time with an error on q_u.
 
     Implements eqs. (25), (26): with the outputs on their reference at T^d = T
@@ -43,8 +45,6 @@ def swing_height_at_Td(model, gait, M1s, dqu: float = 1e-2) -> np.ndarray:
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference; T^d is its step duration T.
     M1s : array_like
@@ -57,6 +57,7 @@ def swing_height_at_Td(model, gait, M1s, dqu: float = 1e-2) -> np.ndarray:
     numpy.ndarray
         (n,) Z_sw(q(T^d)), m.
     """
+    model = gait.model
     M1s = np.atleast_2d(np.asarray(M1s, dtype=float))
     if M1s.shape[1] != model.nu:
         raise ValueError(f"M1s must be (n, {model.nu}), got {M1s.shape}")
@@ -131,13 +132,12 @@ def _MT(M1s):
     return np.hstack([np.ones((len(M1s), 1)), -M1s])
 
 
-def taylor_ab(model, gait) -> TaylorAB:
+@gait_first
+def taylor_ab(gait) -> TaylorAB:
     """The coefficients of eq. (27): exact (AD) gradient and Hessian of Z_sw at q^d(T^d).
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference; T^d is its step duration T.
 
@@ -145,6 +145,7 @@ def taylor_ab(model, gait) -> TaylorAB:
     -------
     TaylorAB
     """
+    model = gait.model
     q = model.q_sym
     z = model.swing_foot(q)[1]
     H, g = ca.hessian(z, q)
@@ -439,13 +440,12 @@ class ABGroups:
     explanation: str
 
 
-def ab_groups(model, gait) -> ABGroups:
+@gait_first
+def ab_groups(gait) -> ABGroups:
     """The solution groups of a = b = 0 that :func:`optimize_m1` accepts, and what they are.
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         Its reference gait.
 
@@ -453,9 +453,10 @@ def ab_groups(model, gait) -> ABGroups:
     -------
     ABGroups
     """
+    model = gait.model
     if model.nu >= 3:
         return ABGroups([1, 2], "two groups (the roots of b = 0 on a = 0)")
-    ab = ab_solution_set(taylor_ab(model, gait))
+    ab = ab_solution_set(taylor_ab(gait))
     if ab.kind == "line":
         return ABGroups([1], f"one line of solutions, group 1 ({ab.message})")
     return ABGroups(list(range(1, len(ab.points) + 1)), ab.message)

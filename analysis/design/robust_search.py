@@ -266,17 +266,17 @@ class _Search:
         self.say(f"gait {st.gait} (optimised once, then cached)")
         self.options = GaitOptions(**st.gait)
         self.gait = default_gait(m, self.options)
-        self.lam_vc = vc_eigenvalue(m, self.gait).eigenvalue
+        self.lam_vc = vc_eigenvalue(self.gait).eigenvalue
         self.bound = self.lam_vc if st.eigen_bound == "vc" else float(st.eigen_bound)
         self.stage("gait", T=self.gait.T, vc_eigenvalue=self.lam_vc, bound=self.bound)
         self.say("kept perturbation directions (virtual constraints walk from them)")
         self.rs = st.robustness_settings(rk4_steps=st.search_rk4_steps, rounds=7)
-        self.kept = kept_directions(m, self.gait, self.rs)
+        self.kept = kept_directions(self.gait, self.rs)
         self.dirs = self.kept.directions
         self.stage("directions", kept=len(self.dirs), tried=self.kept.tried)
-        self.walker = zero_dynamics_walker(m, self.gait, self.rs.simulation_options(),
+        self.walker = zero_dynamics_walker(self.gait, self.rs.simulation_options(),
                                            st.search_rk4_steps, jit=True)
-        self.pm = poincare_map(m, self.gait, rejoin=st.rejoin)
+        self.pm = poincare_map(self.gait, rejoin=st.rejoin)
 
     def designs(self, M):
         return [Design(tuple(x), self.st.rejoin) for x in np.atleast_2d(M)]
@@ -360,7 +360,7 @@ class _Search:
         (:func:`analysis.design.verification.verify_design`): s* (walker, finer),
         full-order runs at s* and s_fail, the paper's perturbation at s = 1."""
         st = self.st
-        check = verify_design(self.model, self.gait, Design(tuple(M1), st.rejoin), self.kept,
+        check = verify_design(self.gait, Design(tuple(M1), st.rejoin), self.kept,
                               st.robustness_settings(), progress=self.say)
         self.stage("verification", s_star=check.s_star, full_order=check.verified)
         return check

@@ -27,6 +27,7 @@ from biped_casadi import (SimulationOptions, TimeVaryingController, VirtualConst
                           directions, simulate)
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import WalkBatch, start_states, zero_dynamics_walker
+from biped_casadi.control.reference import gait_first
 
 from ..robustness.s_star import Design, RobustnessSettings, robustness
 from ..stability.poincare import poincare_map
@@ -92,14 +93,13 @@ class DesignCheck(Result):
     SUCCESS = ("done",)
 
 
-def verify_design(model, gait, design: Design, kept, settings: RobustnessSettings,
+@gait_first
+def verify_design(gait, design: Design, kept, settings: RobustnessSettings,
                   progress=None, unit=None, order=None) -> DesignCheck:
     """Measure a design by the verification protocol (module docstring).
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The gait the design runs on.
     design : Design
@@ -121,6 +121,7 @@ def verify_design(model, gait, design: Design, kept, settings: RobustnessSetting
     -------
     DesignCheck
     """
+    model = gait.model
     say = progress or (lambda msg: None)
     unit = unit or (lambda name, inputs, compute: compute())
     order = order or list
@@ -128,8 +129,8 @@ def verify_design(model, gait, design: Design, kept, settings: RobustnessSetting
     say("s* of the design (walker bisection) and full-order verification")
     inputs = dict(gait=gait.cache_key, design=design.to_dict(), kept=dirs.tolist(),
                   settings=dict(st.__dict__))
-    r = unit("s* bisection", inputs, lambda: robustness(model, gait, design, st, kept=kept))
-    ctrl = TimeVaryingController(model, gait, np.array(design.M1), rejoin=design.rejoin)
+    r = unit("s* bisection", inputs, lambda: robustness(gait, design, st, kept=kept))
+    ctrl = TimeVaryingController(gait, np.array(design.M1), rejoin=design.rejoin)
     opts = SimulationOptions(steps=st.steps, mu=st.mu, torque_limit=st.torque_limit, jit=True)
 
     def runs_at(s):
@@ -152,9 +153,9 @@ def verify_design(model, gait, design: Design, kept, settings: RobustnessSetting
     errs = paper.unactuated_errors().tolist()
     conv = paper.steps_to_converge(st.tol)
     conv = int(conv) if math.isfinite(conv) else None
-    max_abs = poincare_map(model, gait, rejoin=design.rejoin).analyse(
+    max_abs = poincare_map(gait, rejoin=design.rejoin).analyse(
         np.array(design.M1), method="ad").max_abs
-    lam_vc = abs(vc_eigenvalue(model, gait).eigenvalue)
+    lam_vc = abs(vc_eigenvalue(gait).eigenvalue)
     fail = r.failure
     failure = (f"{fail['status']} in step {fail['step']} (direction {fail['direction']})"
                if fail else "")
@@ -204,14 +205,13 @@ class HiddenPatterns(Result):
     SUCCESS = ("done",)
 
 
-def hidden_sign_patterns(model, gait, design: Design, kept, settings: RobustnessSettings,
+@gait_first
+def hidden_sign_patterns(gait, design: Design, kept, settings: RobustnessSettings,
                          scales=(1.0, 1.25), n: int = 12, seeds=(7, 11, 13)) -> HiddenPatterns:
     """Walk the design from sign patterns never used to choose it (module docstring).
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The gait.
     design : Design
@@ -231,9 +231,10 @@ def hidden_sign_patterns(model, gait, design: Design, kept, settings: Robustness
     -------
     HiddenPatterns
     """
+    model = gait.model
     st = settings
     opts = SimulationOptions(steps=st.steps, mu=st.mu, torque_limit=st.torque_limit, jit=True)
-    vc = VirtualConstraintController(model, gait)
+    vc = VirtualConstraintController(gait)
     found, tried = [], 0
     for seed in seeds:
         for d in directions(60, model.nq, seed)[1:]:
@@ -249,14 +250,14 @@ def hidden_sign_patterns(model, gait, design: Design, kept, settings: Robustness
             if str(simulate(vc, q0[0], dq0[0], opts).status) == "ok":
                 found.append(d)
     hidden = np.array(found).reshape(-1, 2 * model.nq)
-    walker = zero_dynamics_walker(model, gait, st.simulation_options(), st.rk4_steps, jit=True)
+    walker = zero_dynamics_walker(gait, st.simulation_options(), st.rk4_steps, jit=True)
     by_scale = {}
     for s in scales:
         q0, dq0 = start_states(gait, hidden, s)
         B = walker.walk(q0, dq0, np.array(design.M1), design.rejoin, steps=st.steps)
         v = [str(x) for x in B.verdict(st.tol)]
         by_scale[repr(float(s))] = dict(passed=int(sum(x == "ok" for x in v)), outcomes=v)
-    ctrl = TimeVaryingController(model, gait, np.array(design.M1), rejoin=design.rejoin)
+    ctrl = TimeVaryingController(gait, np.array(design.M1), rejoin=design.rejoin)
     q0, dq0 = start_states(gait, hidden, 1.0)
     runs = WalkBatch.concat([simulate(ctrl, q0[i], dq0[i], opts) for i in range(len(hidden))]) \
         if len(hidden) else None

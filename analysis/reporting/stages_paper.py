@@ -41,7 +41,7 @@ def stage_gait(ctx: Context):
 
 def stage_singular(ctx: Context):
     D = np.array(ctx.model.D(ctx.gait.q(ctx.gait.T)))
-    sv = singular_m1_values(ctx.model, ctx.gait)
+    sv = singular_m1_values(ctx.gait)
     ctx.summary["singular"] = dict(D11_T=float(D[0, 0]), D12_T=D[0, 1:].tolist(),
                                    singular_values=sv.tolist())
     ctx.data["singular_values"] = sv
@@ -49,7 +49,7 @@ def stage_singular(ctx: Context):
 
 def stage_fig2(ctx: Context):
     vals = np.linspace(-10, 10, ctx.opts.line_points)
-    r = one_d_sweeps(ctx.model, ctx.gait, vals,
+    r = one_d_sweeps(ctx.gait, vals,
                      out_dir=ctx.sweep_dir("fig2", f"{len(vals)}pts", -10.0, 10.0),
                      progress=ctx.opts.progress)
     ctx.figures["fig2"] = save_figure(one_d_sweeps_plot(r), ctx.out / "figures" / "fig2",
@@ -72,7 +72,7 @@ def _grid_n(ctx) -> int:
 def stage_grid(ctx: Context):
     n = _grid_n(ctx)
     P = grid_points(n, -10.0, 10.0, ctx.model.nu)
-    r = run_sweep(ctx.model, ctx.gait, P, out_dir=ctx.sweep_dir(f"grid{n}", -10.0, 10.0),
+    r = run_sweep(ctx.gait, P, out_dir=ctx.sweep_dir(f"grid{n}", -10.0, 10.0),
                   progress=ctx.opts.progress)
     ctx.data["grid"] = r
     ctx.data.setdefault("maps", []).append(_as_batch(r))
@@ -89,7 +89,7 @@ def stage_grid(ctx: Context):
 
 def stage_fig3(ctx: Context):
     r = ctx.data["grid"]
-    zsw = swing_height_at_Td(ctx.model, ctx.gait, r.points, 1e-2)
+    zsw = swing_height_at_Td(ctx.gait, r.points, 1e-2)
     c = conjecture_figures(zsw, r.max_abs, r.point_status)
     ctx.summary["conjecture"] = c
     ctx.figures["fig3"] = save_figure(conjecture_plot(zsw, r.max_abs, r.point_status),
@@ -97,7 +97,7 @@ def stage_fig3(ctx: Context):
 
 
 def stage_fig4(ctx: Context):
-    tay = taylor_ab(ctx.model, ctx.gait)
+    tay = taylor_ab(ctx.gait)
     ctx.summary["taylor"] = dict(grad_zsw=tay.grad.tolist(), hess_zsw=tay.hess.tolist(),
                                  zsw_T=tay.z0)
     nu = ctx.model.nu
@@ -117,7 +117,7 @@ def stage_fig4(ctx: Context):
         real = np.all(np.isfinite(P), axis=1)
         mx = np.full(len(P), np.nan)
         if real.any():
-            r = run_sweep(ctx.model, ctx.gait, P[real],
+            r = run_sweep(ctx.gait, P[real],
                           out_dir=ctx.sweep_dir(f"group{k}", f"{n}x{n}", float(lo), float(hi)),
                           progress=ctx.opts.progress)
             mx[real] = r.max_abs
@@ -148,7 +148,7 @@ def _plane_domain(ctx: Context, tay):
     grid = ctx.data.get("grid")
     if grid is None:          # the grid stage failed: map the plane here
         n = _grid_n(ctx)
-        grid = run_sweep(ctx.model, ctx.gait, grid_points(n, -10.0, 10.0, 2),
+        grid = run_sweep(ctx.gait, grid_points(n, -10.0, 10.0, 2),
                          progress=ctx.opts.progress)
     n = int(round(np.sqrt(len(grid.points))))
     m1 = grid.points[:, 0].reshape(n, n)
@@ -160,7 +160,7 @@ def _plane_domain(ctx: Context, tay):
     keep = np.all((on_set >= -10) & (on_set <= 10), axis=1)
     ab_eval = None
     if len(on_set[keep]):
-        from_map = run_sweep(ctx.model, ctx.gait, on_set[keep], progress=False)
+        from_map = run_sweep(ctx.gait, on_set[keep], progress=False)
         ab_eval = dict(points=int(keep.sum()), stable=int(from_map.counts["stable"]),
                        best=None if from_map.best() is None else
                        dict(M1=from_map.best().M1.tolist(), max_abs=from_map.best().max_abs))
@@ -185,7 +185,7 @@ def _m1_groups(ctx) -> list:
     """(name, group) of the M1 NLP runs for this robot."""
     if ctx.model.nu != 2:
         return [("group1", 1), ("group2", 2), ("free", None)]
-    ab = ctx.data.get("ab_set") or ab_solution_set(taylor_ab(ctx.model, ctx.gait))
+    ab = ctx.data.get("ab_set") or ab_solution_set(taylor_ab(ctx.gait))
     if ab.kind == "line":
         return [("ab_line", 1), ("free", None)]
     return [(f"group{k}", k) for k in range(1, len(ab.points) + 1)] + [("free", None)]
@@ -200,7 +200,7 @@ def _coarse_map(ctx, group):
     """The coarse map of the M1 NLP when an earlier stage evaluated exactly its points."""
     if ctx.model.nu < 3 and group is not None:
         return None
-    P = coarse_map_points(taylor_ab(ctx.model, ctx.gait), group, ctx.model.nu)
+    P = coarse_map_points(taylor_ab(ctx.gait), group, ctx.model.nu)
     return next((b for b in ctx.data.get("maps", [])
                  if b.M1.shape == P.shape and np.array_equal(b.M1, P)), None)
 
@@ -213,13 +213,13 @@ def stage_m1(ctx: Context):
         t = time.perf_counter()
         kw = dict(group=grp, n_best=k, n_ipopt=min(4, k), n_random=0 if ctx.opts.quick else 2)
         r = ctx.memo("optimize_m1", dict(gait=ctx.gait.cache_key, **kw),
-                     lambda: optimize_m1(ctx.model, ctx.gait, coarse=_coarse_map(ctx, grp),
+                     lambda: optimize_m1(ctx.gait, coarse=_coarse_map(ctx, grp),
                                          **kw))
         out[name] = r.to_dict()
         ctx.log(f"   {name}: max|lambda| = {r.max_abs:.3g} (+- {r.eigenvalue_uncertainty:.1g}) "
                 f"in {time.perf_counter() - t:.1f} s")
     if is_rabbit(ctx):
-        ex = poincare_eigenvalues(ctx.model, ctx.gait, PAPER["example_M1"])
+        ex = poincare_eigenvalues(ctx.gait, PAPER["example_M1"])
         out["paper_example_M1"] = dict(M1=PAPER["example_M1"], max_abs=ex.max_abs,
                                        status=ex.status)
     names = [n for n, _ in groups]
@@ -234,11 +234,11 @@ def stage_m1(ctx: Context):
 
 
 def stage_vc(ctx: Context):
-    vc = vc_eigenvalue(ctx.model, ctx.gait)
+    vc = vc_eigenvalue(ctx.gait)
     nu = ctx.model.nu
     M1 = ctx.data.get("chosen_M1", np.zeros(nu))
-    tv = poincare_eigenvalues(ctx.model, ctx.gait, M1)
-    tv0 = poincare_eigenvalues(ctx.model, ctx.gait, np.zeros(nu))
+    tv = poincare_eigenvalues(ctx.gait, M1)
+    tv0 = poincare_eigenvalues(ctx.gait, np.zeros(nu))
     ctx.summary["vc_comparison"] = dict(vc=vc.to_dict(), tv_chosen=dict(
         M1=M1.tolist(), max_abs=tv.max_abs, eigenvalues=[[e.real, e.imag] for e in tv.eigenvalues]),
         tv_M1_zero=dict(max_abs=tv0.max_abs, status=tv0.status))

@@ -142,7 +142,7 @@ def _s_star_rows(ctx, groups, reverse: bool = False) -> list:
 
     def kept_of(gait):
         return ctx.memo("kept_directions", dict(gait=gait.cache_key, settings=st.__dict__),
-                        lambda: kept_directions(m, gait, st))
+                        lambda: kept_directions(gait, st))
 
     def s_star(gait, design):
         kept = kept_of(gait)
@@ -150,7 +150,7 @@ def _s_star_rows(ctx, groups, reverse: bool = False) -> list:
                                            design=None if design is None
                                            else design.to_dict(),
                                            kept=kept.directions.tolist()),
-                        lambda: robustness(m, gait, design, st, kept=kept))
+                        lambda: robustness(gait, design, st, kept=kept))
     if reverse:                   # computed last first (another process takes them in order)
         for _, gait, cands in groups[::-1]:
             for _, design in cands[::-1]:
@@ -242,9 +242,9 @@ def stage_sim(ctx: Context):
     ctx.data["sim_runs"] = []
     for key, label, ctrl in (
             ("default_vc", "virtual constraints (default gait)",
-             VirtualConstraintController(m, g)),
+             VirtualConstraintController(g)),
             ("default_deadbeat", f"deadbeat M1 = [{', '.join(f'{v:.3g}' for v in M1)}] "
-                                 "(default gait)", TimeVaryingController(m, g, M1))):
+                                 "(default gait)", TimeVaryingController(g, M1))):
         r = _simulated(ctx, g, ctrl, q0, dq0, _sim_options(ctx))
         ctx.data["sim_runs"].append((r, label))
         out["runs"][key] = dict(label=label, **_brief(r))
@@ -313,15 +313,15 @@ def _robust_runs(ctx, runs: dict) -> list:
     g3, ds = _search(ctx)
     q0, dq0 = perturbed_initial_state(g2, *PAPER_SIZES)
     q3, dq3 = perturbed_initial_state(g3, *PAPER_SIZES)
-    search = TimeVaryingController(m, g3, np.array(ds.M1), rejoin=ds.rejoin)
+    search = TimeVaryingController(g3, np.array(ds.M1), rejoin=ds.rejoin)
     if not ctx.data.get("helper"):    # last first: the helper process takes them in order
         _simulated(ctx, g3, search, q3, dq3, opts)
     out = []
     for key, label, ctrl in (
             ("robust_vc", "virtual constraints (the co-design's gait)",
-             VirtualConstraintController(m, g2)),
+             VirtualConstraintController(g2)),
             ("robust_design", "robust design, co-design NLP (its gait)",
-             TimeVaryingController(m, g2, np.array(rb.design["M1"]),
+             TimeVaryingController(g2, np.array(rb.design["M1"]),
                                    rejoin=rb.design["rejoin"]))):
         r = _simulated(ctx, g2, ctrl, q0, dq0, opts)
         out.append((r, label))
@@ -358,7 +358,7 @@ def _basin(ctx, gait, design, n):
     """A basin of attraction, kept between reproductions (:meth:`Context.memo`)."""
     return ctx.memo("basin", dict(gait=gait.cache_key, n=n, refine=BASIN_REFINE,
                                   design=None if design is None else design.to_dict()),
-                    lambda: basin(ctx.model, gait, design, n=n, refine=BASIN_REFINE))
+                    lambda: basin(gait, design, n=n, refine=BASIN_REFINE))
 
 
 def _basin_n(ctx) -> int:

@@ -18,6 +18,7 @@ from biped_casadi.control.output_law import SECTION
 from biped_casadi.numerics import as_number
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import virtual_constraint_walker, zero_dynamics_walker
+from biped_casadi.control.reference import gait_first
 
 from .s_star import Design
 
@@ -88,7 +89,8 @@ class BasinResult(Result):
     SUCCESS = ("done",)
 
 
-def basin(model, gait, design: Design | None = None, n: int = 101,
+@gait_first
+def basin(gait, design: Design | None = None, n: int = 101,
           q_span: float = 0.05, dq_span: float = 0.5, steps: int = 10, tol: float = 1e-3,
           options: SimulationOptions | None = None, rk4_steps: int = 128,
           nodes: int = 100, refine: int | None = None) -> BasinResult:
@@ -102,8 +104,6 @@ def basin(model, gait, design: Design | None = None, n: int = 101,
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference step, made for ``model``.
     design : Design, optional
@@ -136,6 +136,7 @@ def basin(model, gait, design: Design | None = None, n: int = 101,
     -------
     BasinResult
     """
+    model = gait.model
     require_same_robot(model, gait)
     if isinstance(n, bool) or not isinstance(n, int) or n < 2:
         raise ValueError(f"n (cells per axis) must be an integer >= 2, got {n!r}")
@@ -148,13 +149,13 @@ def basin(model, gait, design: Design | None = None, n: int = 101,
     X = np.c_[xs[0] + A.ravel(), xs[1] + Bg.ravel()]
     opts = options or SimulationOptions()
     if design is None:
-        W = virtual_constraint_walker(model, gait, opts, nodes, jit=True)
+        W = virtual_constraint_walker(gait, opts, nodes, jit=True)
 
         def walk(Xs):
             return W.walk_from_section(Xs, steps)
         design_dict = dict(controller="vc")
     else:
-        W = zero_dynamics_walker(model, gait, opts, rk4_steps, jit=True)
+        W = zero_dynamics_walker(gait, opts, rk4_steps, jit=True)
 
         def walk(Xs):
             return W.walk_from_section(Xs, np.array(design.M1), design.rejoin, steps)

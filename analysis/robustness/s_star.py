@@ -38,6 +38,7 @@ from biped_casadi.results import Result, internal
 from biped_casadi.simulation import (WalkBatch, start_states, virtual_constraint_walker,
                                      zero_dynamics_walker)
 from biped_casadi.simulation.outcome import NOT_CONVERGED
+from biped_casadi.control.reference import gait_first
 from gait_opt import Gait
 
 from ..cluster import dask_client
@@ -251,27 +252,28 @@ class KeptDirections(Result):
 VC_NODES = 200
 
 
-def _vc_runs(model, gait, options, dirs, scale) -> WalkBatch:
+@gait_first
+def _vc_runs(gait, options, dirs, scale) -> WalkBatch:
     """Runs of virtual constraints fitted to the gait, one per direction, batched on their
     hybrid zero dynamics (:meth:`~biped_casadi.simulation.VirtualConstraintWalker.walk_from_states`:
     exact for the controller with its phase-based correction, which puts the closed
     loop on the step's corrected surface from any start)."""
+    model = gait.model
     q0, dq0 = start_states(gait, dirs, scale)
-    walker = virtual_constraint_walker(model, gait, options, VC_NODES, jit=True)
+    walker = virtual_constraint_walker(gait, options, VC_NODES, jit=True)
     return walker.walk_from_states(q0, dq0, steps=options.steps)
 
 
 _KEEP_BATCH = 32          # candidate directions walked at once
 
 
-def kept_directions(model, gait, settings: RobustnessSettings | None = None,
+@gait_first
+def kept_directions(gait, settings: RobustnessSettings | None = None,
                     progress=None) -> KeptDirections:
     """The directions from which virtual constraints walk at full scale.
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference step, made for ``model``.
     settings : RobustnessSettings, optional
@@ -283,13 +285,14 @@ def kept_directions(model, gait, settings: RobustnessSettings | None = None,
     -------
     KeptDirections
     """
+    model = gait.model
     st = settings or RobustnessSettings()
     opts = st.simulation_options()
     cand = directions(st.max_candidates, model.nq, st.seed)
     kept, rejected = [], {}
     tried = 0
     for start in range(0, len(cand), _KEEP_BATCH):      # in order, a batch at a time
-        status = _vc_runs(model, gait, opts, cand[start:start + _KEEP_BATCH], 1.0).status
+        status = _vc_runs(gait, opts, cand[start:start + _KEEP_BATCH], 1.0).status
         for d, s in zip(cand[start:start + _KEEP_BATCH], status):
             tried += 1
             s = str(s)
@@ -375,12 +378,14 @@ def bisect_scale(evaluate, n: int, s_max: float, rounds: int):
 
 
 # ------------------------------------------------------------------ one design
-def _runner(model, gait, design, st: RobustnessSettings):
+@gait_first
+def _runner(gait, design, st: RobustnessSettings):
     """``run(dirs, s) -> WalkBatch``: the design's (or virtual constraints') runs."""
+    model = gait.model
     if design is None:
         opts = st.simulation_options()
-        return lambda dirs, s: _vc_runs(model, gait, opts, dirs, s)
-    walker = zero_dynamics_walker(model, gait, st.simulation_options(), st.rk4_steps, jit=True)
+        return lambda dirs, s: _vc_runs(gait, opts, dirs, s)
+    walker = zero_dynamics_walker(gait, st.simulation_options(), st.rk4_steps, jit=True)
 
     def run(dirs, s):
         q0, dq0 = start_states(gait, dirs, s)
@@ -388,15 +393,14 @@ def _runner(model, gait, design, st: RobustnessSettings):
     return run
 
 
-def robustness(model, gait, design: Design | None = None,
+@gait_first
+def robustness(gait, design: Design | None = None,
                settings: RobustnessSettings | None = None, kept=None,
                progress=None) -> RobustnessResult:
     """s* of a time-varying design (``design``) or of virtual constraints (``None``).
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference step, made for ``model``.
     design : Design, optional
@@ -412,11 +416,12 @@ def robustness(model, gait, design: Design | None = None,
     -------
     RobustnessResult
     """
+    model = gait.model
     require_same_robot(model, gait)
     st = settings or RobustnessSettings()
     t0 = time.perf_counter()
     if kept is None:
-        kept = kept_directions(model, gait, st, progress)
+        kept = kept_directions(gait, st, progress)
     dirs = kept.directions
     if len(dirs) == 0:
         raise ValueError("no perturbation direction is walkable by virtual constraints on "
@@ -424,14 +429,14 @@ def robustness(model, gait, design: Design | None = None,
                          "candidates or another gait)")
     if design is None:
         name = "virtual constraints"
-        max_abs, design_dict = abs(vc_eigenvalue(model, gait).eigenvalue), dict(controller="vc")
+        max_abs, design_dict = abs(vc_eigenvalue(gait).eigenvalue), dict(controller="vc")
     else:
         if len(design.M1) != model.nu:
             raise ValueError(f"design: M1 must have {model.nu} components, got {len(design.M1)}")
         name = f"M1 = {list(design.M1)}"
-        pm = poincare_map(model, gait, rejoin=design.rejoin)
+        pm = poincare_map(gait, rejoin=design.rejoin)
         max_abs, design_dict = pm.analyse(np.array(design.M1)).max_abs, design.to_dict()
-    run = _runner(model, gait, design, st)
+    run = _runner(gait, design, st)
     runs = 0
     if progress is not None:
         progress(f"s* of {name}: bisection on [0, {st.s_max:g}] over {len(dirs)} directions")
@@ -516,7 +521,7 @@ def _cause(batch: WalkBatch, tol: float) -> str:
 def _walk_task(gait_dict, options, rk4_steps, q0, dq0, M1s, rejoin, steps):
     """One batch walked on a Dask worker (the walker built once per worker process)."""
     gait = Gait.from_dict(gait_dict)
-    walker = zero_dynamics_walker(gait.model, gait, options, rk4_steps, jit=True)
+    walker = zero_dynamics_walker(gait, options, rk4_steps, jit=True)
     return walker.walk(q0, dq0, M1s, rejoin, steps=steps)
 
 

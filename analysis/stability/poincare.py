@@ -35,13 +35,14 @@ import numpy as np
 
 from biped_casadi import require_same_robot
 from biped_casadi.caching import cached
-from biped_casadi.control import PAPER_REJOIN
+from biped_casadi.control import PAPER_REJOIN, Design
 from biped_casadi.control.zero_dynamics import denominator_samples, zero_dynamics
 from biped_casadi.numerics import as_vector, rk4_step
 from biped_casadi.simulation.kernel import strike
 from biped_casadi.control.output_law import (SECTION, check_M1, check_M1_range, check_rejoin,
                                      decoupling_denominator, is_singular)
 from biped_casadi.results import Result
+from biped_casadi.control.reference import gait_first
 
 from .variational import variational_jacobian
 
@@ -236,7 +237,7 @@ class PoincareMap:
         self.threads = threads or max(1, min(os.cpu_count() or 1, 8))
         self._build()
         #: D11 and D12 along the reference on [0, T] (1001 points), for eq. (23)-(24)
-        self.D11_table, self.D12_table = denominator_samples(model, gait)
+        self.D11_table, self.D12_table = denominator_samples(gait)
 
     @property
     def cache_key(self):
@@ -305,7 +306,7 @@ class PoincareMap:
     @property
     def variational(self):
         """The variational-equation Jacobian of this map (:mod:`analysis.stability.variational`)."""
-        return variational_jacobian(self.model, self.gait, self.tau_s, self.n_pre,
+        return variational_jacobian(self.gait, self.tau_s, self.n_pre,
                                     self.n_post, self.rejoin)
 
     def denominator(self, M1) -> np.ndarray:
@@ -567,7 +568,8 @@ class PoincareMap:
         return self.map_jac.map(n, "thread", self.threads)
 
 
-def singular_m1_values(model, gait) -> np.ndarray:
+@gait_first
+def singular_m1_values(gait) -> np.ndarray:
     """The single-component singular outputs M1(j) = D11 / D12(j) at q^d(T) (eq. 24).
 
     With the other components zero, D11 - D12 M1 vanishes at the desired impact for
@@ -575,8 +577,6 @@ def singular_m1_values(model, gait) -> np.ndarray:
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference; D is evaluated at q^d(T).
 
@@ -585,20 +585,20 @@ def singular_m1_values(model, gait) -> np.ndarray:
     numpy.ndarray
         (nu,).
     """
+    model = gait.model
     D = np.array(model.D(gait.q(gait.T)))
     return D[0, 0] / D[0, 1:]
 
 
+@gait_first
 @cached(maxsize=8)
-def poincare_map(model, gait, **options) -> PoincareMap:
+def poincare_map(gait, **options) -> PoincareMap:
     """The :class:`PoincareMap` of a model, gait and options, built once.
 
     Memoised by content: the gait's digest and the options.
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference, made for ``model``.
     **options
@@ -608,31 +608,42 @@ def poincare_map(model, gait, **options) -> PoincareMap:
     -------
     PoincareMap
     """
+    model = gait.model
     return PoincareMap(model, gait, **options)
 
 
-def poincare_eigenvalues(m, g, M1, method: str = "variational") -> PoincareResult:
-    """A^z, its eigenvalues and the stability status for outputs M1 (SPEC sections 4-5).
+@gait_first
+def poincare_eigenvalues(gait, M1=None, method: str = "variational", *,
+                         rejoin: float = PAPER_REJOIN) -> PoincareResult:
+    """A^z, its eigenvalues and the stability status for outputs M1 (docs: theory, §4).
 
     Implements eq. (22): the fixed point is locally exponentially stable, status
-    'stable', when max ``|lambda|`` of A^z is below 1.
+    'stable', when max ``|lambda|`` of A^z is below 1.  ``poincare_eigenvalues(gait, M1)`` (the older form) still works, with a deprecation warning.
 
     Parameters
     ----------
-    m : BipedModel
-        The robot.
-    g : Reference
-        The gait, made for ``m``.
-    M1 : array_like
-        One number per actuated joint.
+    gait : Reference
+        The gait (it carries its model).
+    M1 : array_like or Design
+        One number per actuated joint, or a time-varying :class:`~biped_casadi.Design`
+        (its M1 and rejoin time; its gait must be ``gait``).
     method : {'variational', 'ad'}
         'variational' (default, well under a millisecond per call once the map is built)
         or 'ad' (automatic differentiation through the whole discrete map, ~0.3 s; also
         gives the fixed-point residual).
+    rejoin : float
+        When v_c rejoins the reference, fraction of T (default 1/2, the paper's).
 
     Returns
     -------
     PoincareResult
         ``r.A`` (2x2 A^z), ``r.eigenvalues``, ``r.max_abs``, ``r.status``.
     """
-    return poincare_map(m, g).analyse(M1, method=method)
+    if isinstance(M1, Design):
+        d = Design.of(M1, gait)
+        if d.M1 is None:
+            raise ValueError("M1: virtual constraints have no A^z (use vc_eigenvalue)")
+        M1, rejoin = d.M1, d.rejoin
+    if M1 is None:
+        raise ValueError("M1: give the outputs (one number per torque) or a Design")
+    return poincare_map(gait, rejoin=float(rejoin)).analyse(M1, method=method)

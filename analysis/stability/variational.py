@@ -29,6 +29,7 @@ from biped_casadi.caching import cached
 from biped_casadi.numerics import rk4_step
 from biped_casadi.control.output_law import outputs
 from biped_casadi.control.zero_dynamics import zero_dynamics
+from biped_casadi.control.reference import gait_first
 
 __all__ = ["VariationalJacobian", "variational_jacobian"]
 
@@ -257,15 +258,14 @@ def _step_kernels(nu: int):
     return simd.kernels(specs, f"variational_nu{nu}", "-O2")
 
 
+@gait_first
 @cached(maxsize=8)
-def variational_jacobian(model, gait, tau_s: float, n_pre: int, n_post: int,
+def variational_jacobian(gait, tau_s: float, n_pre: int, n_post: int,
                          rejoin: float = 0.5) -> VariationalJacobian:
     """The :class:`VariationalJacobian` of a gait and discretisation (memoised).
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference step.
     tau_s : float
@@ -279,4 +279,5 @@ def variational_jacobian(model, gait, tau_s: float, n_pre: int, n_post: int,
     -------
     VariationalJacobian
     """
+    model = gait.model
     return VariationalJacobian(model, gait, tau_s, n_pre, n_post, rejoin)

@@ -39,6 +39,7 @@ from biped_casadi.control.virtual_constraints import (ConstraintSurface, Virtual
                                                      constraint_surface)
 from biped_casadi.control.output_law import SECTION
 from biped_casadi.results import Result
+from biped_casadi.control.reference import gait_first
 
 __all__ = ["VCEigenResult", "VirtualConstraintMap", "vc_eigenvalue", "vc_map"]
 
@@ -274,15 +275,15 @@ class VirtualConstraintMap:
                              **common)
 
 
+@gait_first
 @cached(maxsize=8)
-def vc_map(model, gait, phase=None, H0=None, n_steps: int = 1000) -> VirtualConstraintMap:
+def vc_map(gait, phase=None, H0=None, n_steps: int = 1000) -> VirtualConstraintMap:
     """The :class:`VirtualConstraintMap` of constraints fitted to a gait, built once.
 
     Memoised by the gait's digest and the arguments.
 
     Parameters
     ----------
-    model : BipedModel
     gait : Reference
     phase : array_like, optional
         theta = ``phase`` q (default the model's ``hip_phase``).
@@ -295,18 +296,18 @@ def vc_map(model, gait, phase=None, H0=None, n_steps: int = 1000) -> VirtualCons
     -------
     VirtualConstraintMap
     """
-    surface = constraint_surface(model, gait, phase, H0)
+    model = gait.model
+    surface = constraint_surface(gait, phase, H0)
     return VirtualConstraintMap(model, gait, surface.vc, n_steps, surface=surface)
 
 
-def vc_eigenvalue(model, gait, constraints: VirtualConstraints | None = None,
+@gait_first
+def vc_eigenvalue(gait, constraints: VirtualConstraints | None = None,
                   phase=None, H0=None, n_steps: int = 1000) -> VCEigenResult:
     """Eigenvalue of the 1-D restricted Poincaré map of the virtual-constraint controller.
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference step, made for ``model``.
     constraints : VirtualConstraints, optional
@@ -324,8 +325,9 @@ def vc_eigenvalue(model, gait, constraints: VirtualConstraints | None = None,
     VCEigenResult
         The eigenvalue, its status and the fixed point.
     """
+    model = gait.model
     if constraints is None:
         phase = tuple(np.asarray(model.hip_phase if phase is None else phase, float).ravel())
         H0 = None if H0 is None else tuple(map(tuple, np.asarray(H0, float)))
-        return vc_map(model, gait, phase, H0, n_steps).analyse()
+        return vc_map(gait, phase, H0, n_steps).analyse()
     return VirtualConstraintMap(model, gait, constraints, n_steps).analyse()

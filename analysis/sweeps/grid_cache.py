@@ -10,6 +10,7 @@ import shutil
 import numpy as np
 
 from biped_casadi.caching import DiskCache, cached
+from biped_casadi.control.reference import gait_first
 
 from .storage import SweepStoreError
 from .sweep import RESULTS_VERSION, SweepResult, grid_points, run_sweep
@@ -21,8 +22,9 @@ GRIDS = DiskCache("grids", version=RESULTS_VERSION)
 __all__ = ["grid_results", "grid_best"]
 
 
+@gait_first
 @cached(maxsize=4)
-def grid_results(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
+def grid_results(gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
                  folder=None, progress: bool = False) -> SweepResult:
     """The sweep of the n^nu grid on [lo, hi]^nu, computed once and kept.
 
@@ -31,8 +33,6 @@ def grid_results(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference step.
     n : int
@@ -48,24 +48,24 @@ def grid_results(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
     -------
     SweepResult
     """
+    model = gait.model
     folder = GRIDS.path(dict(gait=gait.cache_key, n=n, lo=lo, hi=hi), folder, suffix="")
     P = grid_points(n, lo, hi, model.nu)
     try:
-        return run_sweep(model, gait, P, out_dir=folder, progress=progress)
+        return run_sweep(gait, P, out_dir=folder, progress=progress)
     except SweepStoreError:           # other settings or other code: recompute
         shutil.rmtree(folder, ignore_errors=True)
     except OSError:                   # a cache folder we cannot write: keep it in memory
-        return run_sweep(model, gait, P, out_dir=None, progress=progress)
-    return run_sweep(model, gait, P, out_dir=folder, progress=progress)
+        return run_sweep(gait, P, out_dir=None, progress=progress)
+    return run_sweep(gait, P, out_dir=folder, progress=progress)
 
 
-def grid_best(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0) -> dict:
+@gait_first
+def grid_best(gait, n: int = 9, lo: float = -10.0, hi: float = 10.0) -> dict:
     """The best stable point of the grid.
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference step.
     n : int
@@ -78,7 +78,8 @@ def grid_best(model, gait, n: int = 9, lo: float = -10.0, hi: float = 10.0) -> d
     dict
         ``M1`` (list) and ``max_abs``; both None when no point is stable.
     """
-    r = grid_results(model, gait, n, lo, hi)
+    model = gait.model
+    r = grid_results(gait, n, lo, hi)
     stable = np.flatnonzero(r.point_status == "stable")
     if not stable.size:
         return dict(M1=None, max_abs=None)

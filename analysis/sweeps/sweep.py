@@ -2,7 +2,7 @@
 of SPEC §4 for many M1, in parallel, stored as they are computed, resumable.
 
     from analysis.sweeps.sweep import grid_points, run_sweep
-    r = run_sweep(model, gait, grid_points(9, -10, 10), out_dir="sweep9")
+    r = run_sweep(gait, grid_points(9, -10, 10), out_dir="sweep9")
     r.counts          # {'stable': .., 'unstable': .., 'singular': .., 'no_impact': ..}
     r.point_status    # the status of SPEC §4 of every point
 
@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_casadi import require_same_robot
+from biped_casadi.control.reference import gait_first
 
 from ..stability.poincare import singular_m1_values
 from .storage import META, SweepStore, digest_points
@@ -71,7 +72,9 @@ class _Arrays:
         self.A[a:b] = c["A"]
 
 
-def _check_run_arguments(model, gait, executor, workers, chunk_size):
+@gait_first
+def _check_run_arguments(gait, executor, workers, chunk_size):
+    model = gait.model
     require_same_robot(model, gait)
     if executor not in ("process", "thread"):
         raise ValueError(f"executor must be 'process' or 'thread', got {executor!r}")
@@ -108,7 +111,8 @@ def _read_stored(store, bounds, P, arrays):
     return reused, {k: v for k, v in corrupt.items() if k not in reused}
 
 
-def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
+@gait_first
+def run_sweep(gait, points, out_dir=None, chunk_size: int | None = None,
               workers: int | None = None, scheduler=None, progress: bool = True,
               settings: SweepSettings | dict | None = None,
               executor: str = "thread") -> SweepResult:
@@ -116,8 +120,6 @@ def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         A :class:`gait_opt.Gait` made for ``model``.
     points : array_like
@@ -146,13 +148,14 @@ def run_sweep(model, gait, points, out_dir=None, chunk_size: int | None = None,
     SweepResult
         Row i for ``points[i]``.
     """
+    model = gait.model
     t0 = time.perf_counter()
     settings = _settings(settings)
     P = _check_points(points, model.nu)
     if chunk_size is None and out_dir is not None:
         chunk_size = _stored_chunk_size(out_dir)
     chunk_size = DEFAULT_CHUNK_SIZE if chunk_size is None else chunk_size
-    _check_run_arguments(model, gait, executor, workers, chunk_size)
+    _check_run_arguments(gait, executor, workers, chunk_size)
     workers = int(workers) if workers else _cpu_count()
     chunk_size = int(chunk_size)
     gdict = gait.definition()
@@ -304,13 +307,12 @@ class OneDSweeps:
     sweep: SweepResult
 
 
-def one_d_sweeps(model, gait, values, out_dir=None, **kw) -> OneDSweeps:
+@gait_first
+def one_d_sweeps(gait, values, out_dir=None, **kw) -> OneDSweeps:
     """Fig. 2: max|lambda| against each component M1(j) with the others zero.
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         A :class:`gait_opt.Gait` made for ``model``.
     values : array_like or list of array_like
@@ -325,13 +327,14 @@ def one_d_sweeps(model, gait, values, out_dir=None, **kw) -> OneDSweeps:
     OneDSweeps
         One sweep per component and the singular values.
     """
+    model = gait.model
     nu = model.nu
     if isinstance(values, (list, tuple)) and len(values) == nu and np.ndim(values[0]) == 1:
         vals = [np.asarray(v, dtype=float).ravel() for v in values]
     else:
         vals = [np.asarray(values, dtype=float).ravel()] * nu
     P = np.concatenate([line_points(j, v, nu) for j, v in enumerate(vals)])
-    r = run_sweep(model, gait, P, out_dir=out_dir, **kw)
+    r = run_sweep(gait, P, out_dir=out_dir, **kw)
     ends = np.cumsum([0] + [len(v) for v in vals])
     parts = [r.subset(np.arange(ends[j], ends[j + 1])) for j in range(nu)]
-    return OneDSweeps(vals, parts, singular_m1_values(model, gait), r)
+    return OneDSweeps(vals, parts, singular_m1_values(gait), r)

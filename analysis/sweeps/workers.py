@@ -38,7 +38,7 @@ def _poincare_for(payload: SweepPayload) -> PoincareMap:
     """The PoincareMap of a payload: built once per process (memoised by the gait's
     digest and the options, the same key as the caller's own ``poincare_map``)."""
     gait = Gait.from_dict(payload.gait)
-    return poincare_map(gait.model, gait, **SweepSettings(**payload.map).map_options())
+    return poincare_map(gait, **SweepSettings(**payload.map).map_options())
 
 
 def _init_worker(payload):

@@ -117,7 +117,7 @@ def in_task() -> bool:
     if getattr(_LOCAL, "task", False):
         return True
     try:
-        from distributed import get_worker
+        from dask.distributed import get_worker
         get_worker()
         return True
     except (ImportError, ValueError):

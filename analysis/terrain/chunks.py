@@ -53,9 +53,9 @@ def _engine(payload: _Payload):
     # robustness runs with the same thresholds, so a process shares one compiled walker
     wopts = SimulationOptions(mu=st.mu, torque_limit=st.torque_limit)
     if spec.engine == "zero_dynamics":
-        return gait, zero_dynamics_walker(model, gait, wopts, st.rk4_steps, jit=True)
+        return gait, zero_dynamics_walker(gait, wopts, st.rk4_steps, jit=True)
     if spec.engine == "virtual_constraints":
-        return gait, virtual_constraint_walker(model, gait, wopts, st.vc_nodes, jit=True)
+        return gait, virtual_constraint_walker(gait, wopts, st.vc_nodes, jit=True)
     return gait, simulator(spec.controller_for(gait), opts, spec.plant_model())
 
 

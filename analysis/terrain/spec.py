@@ -95,8 +95,8 @@ class WalkerSpec:
         """
         g = Gains(*self.gains)
         if self.controller == "tv":
-            return TimeVaryingController(gait.model, gait, np.array(self.M1), g, self.rejoin)
-        return VirtualConstraintController(gait.model, gait, gains=g)
+            return TimeVaryingController(gait, np.array(self.M1), g, self.rejoin)
+        return VirtualConstraintController(gait, gains=g)
 
     def plant_model(self):
         """The plant's model (None: the controller's).

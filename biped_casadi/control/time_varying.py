@@ -19,7 +19,7 @@ from .output_law import (Gains, SingularityReport, actuated_torque, check_M1, ch
                          correction, decoupling_denominator, initial_output_errors,
                          output_acceleration, output_matrix, outputs, singularity_report,
                          unactuated_acceleration)
-from .reference import require_same_robot
+from .reference import gait_first, require_same_robot
 from .zero_dynamics import denominator_samples
 
 __all__ = ["TimeVaryingController", "PAPER_REJOIN"]
@@ -46,10 +46,8 @@ class TimeVaryingController(Controller):
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     reference : Reference
-        The reference step (a :class:`gait_opt.Gait`), made for ``model``.
+        The reference step (a :class:`gait_opt.Gait`) (it carries its model).
     M1 : array_like, optional
         One number per actuated joint (default zeros: the outputs are q_a).
     gains : Gains, optional
@@ -65,8 +63,10 @@ class TimeVaryingController(Controller):
 
     name = "tv"
 
-    def __init__(self, model, reference, M1=None, gains: Gains | None = None,
+    @gait_first
+    def __init__(self, reference, M1=None, gains: Gains | None = None,
                  rejoin: float = PAPER_REJOIN):
+        model = reference.model
         require_same_robot(model, reference)
         self.model, self.reference = model, reference
         nu = model.nu
@@ -175,7 +175,7 @@ class TimeVaryingController(Controller):
         -------
         SingularityReport
         """
-        D11, D12 = denominator_samples(self.model, self.reference, n)
+        D11, D12 = denominator_samples(self.reference, n)
         return singularity_report(decoupling_denominator(D11, D12, self.M1))
 
     def describe(self) -> dict:

@@ -14,7 +14,7 @@ from ..caching import cached
 from ..numerics import as_vector, rk4_step
 from .controller import ControlOutput, Controller, StepStart
 from .output_law import Gains, SingularityReport, correction, output_acceleration, singularity_report
-from .reference import require_same_robot
+from .reference import gait_first, require_same_robot
 
 __all__ = ["VirtualConstraints", "VirtualConstraintController", "fit_virtual_constraints",
            "ConstraintSurface", "constraint_surface", "HIP_PHASE", "phase_correction"]
@@ -302,10 +302,8 @@ class VirtualConstraintController(Controller):
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
-        The reference step the constraints are fitted to, made for ``model``.
+        The reference step the constraints are fitted to (it carries its model).
     constraints : VirtualConstraints, optional
         Default: :func:`fit_virtual_constraints` of ``gait`` with its defaults.
     gains : Gains, optional
@@ -317,8 +315,10 @@ class VirtualConstraintController(Controller):
     name = "vc"
     n_ref = 0
 
-    def __init__(self, model, gait, constraints: VirtualConstraints | None = None,
+    @gait_first
+    def __init__(self, gait, constraints: VirtualConstraints | None = None,
                  gains: Gains | None = None, correction: bool = True):
+        model = gait.model
         require_same_robot(model, gait)
         self.model, self.reference = model, gait
         self.constraints = constraints if constraints is not None else fit_virtual_constraints(gait)
@@ -596,13 +596,12 @@ class ConstraintSurface:
         return float(self.vc.c @ np.asarray(q, float))
 
 
-def constraint_surface(model, gait, phase=None, H0=None) -> ConstraintSurface:
+@gait_first
+def constraint_surface(gait, phase=None, H0=None) -> ConstraintSurface:
     """The :class:`ConstraintSurface` of virtual constraints fitted to a gait (memoised).
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference the constraints are fitted to (:func:`fit_virtual_constraints`).
     phase : tuple of float, optional
@@ -616,6 +615,7 @@ def constraint_surface(model, gait, phase=None, H0=None) -> ConstraintSurface:
         The same object for the same robot, gait, phase and outputs (the defaults
         spelled out or not).
     """
+    model = gait.model
     phase = tuple(np.asarray(model.hip_phase if phase is None else phase, float).ravel())
     H0 = None if H0 is None else tuple(map(tuple, np.asarray(H0, float)))
     return _surface(model, gait, phase, H0)

@@ -28,6 +28,7 @@ import casadi as ca
 import numpy as np
 
 from ..caching import cached
+from .reference import gait_first
 from .output_law import (actuated_torque, coordinates_from_outputs, correction,
                          decoupling_denominator, initial_output_errors, outputs,
                          unactuated_acceleration)
@@ -343,14 +344,13 @@ def zero_dynamics(model) -> ZeroDynamics:
     return ZeroDynamics(model)
 
 
+@gait_first
 @cached(maxsize=16)
-def denominator_samples(model, reference, n: int = 1001):
+def denominator_samples(reference, n: int = 1001):
     """D11 and D12 along a reference step: the samples of the eq. (24) denominator.
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     reference : Reference
         The reference step, [0, T].
     n : int
@@ -362,6 +362,7 @@ def denominator_samples(model, reference, n: int = 1001):
         (D11 (n,), D12 (nu, n)); D11 - D12 M1 is the denominator of eq. (23) for outputs
         M1 (``output_law.decoupling_denominator``).
     """
+    model = reference.model
     t = np.linspace(0.0, reference.T, n)
     nq = model.nq
     D = np.array(model.D.map(n)(reference.q(t))).reshape(nq, nq, n, order="F")

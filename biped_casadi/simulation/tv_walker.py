@@ -34,7 +34,7 @@ import numpy as np
 
 from ..caching import cached
 from ..control.output_law import SECTION, check_M1, decoupling_denominator
-from ..control.reference import require_same_robot
+from ..control.reference import gait_first, require_same_robot
 from ..control.zero_dynamics import denominator_samples, zero_dynamics
 from ..numerics import compiled, rk4_step
 from ..simd import kernels
@@ -274,7 +274,7 @@ class ZeroDynamicsWalker:
         numpy.ndarray
             (n,) the maximum over the reference of ``|D11 - D12 M1|``.
         """
-        D11, D12 = denominator_samples(self.model, self.gait)
+        D11, D12 = denominator_samples(self.gait)
         d = decoupling_denominator(D11, D12, np.atleast_2d(M1s).T)
         return np.max(np.abs(d), axis=1)
 
@@ -480,15 +480,14 @@ class ZeroDynamicsWalker:
         P[gi[go], 2 * nu + 1:] = dyn.T[go]
 
 
+@gait_first
 @cached(maxsize=4)
-def zero_dynamics_walker(model, gait, options: SimulationOptions | None = None,
+def zero_dynamics_walker(gait, options: SimulationOptions | None = None,
                          rk4_steps: int = 400, jit: bool = False) -> ZeroDynamicsWalker:
     """The :class:`ZeroDynamicsWalker` of a gait and options, built once (memoised).
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference step, made for ``model``.
     options : SimulationOptions, optional
@@ -503,4 +502,5 @@ def zero_dynamics_walker(model, gait, options: SimulationOptions | None = None,
     ZeroDynamicsWalker
         The same object for the same arguments.
     """
+    model = gait.model
     return ZeroDynamicsWalker(model, gait, options, rk4_steps, jit)

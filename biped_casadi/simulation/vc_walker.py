@@ -21,7 +21,7 @@ import numpy as np
 
 from ..caching import cached
 from ..control.output_law import SECTION
-from ..control.reference import require_same_robot
+from ..control.reference import gait_first, require_same_robot
 from ..control.virtual_constraints import constraint_surface
 from ..numerics import compiled, rk4_step
 from ..simd import kernels
@@ -73,7 +73,7 @@ class VirtualConstraintWalker:
         self.model, self.gait = model, gait
         self.nu = model.nu
         self.n_par = 1 + 2 * self.nu
-        self.vmap = constraint_surface(model, gait)
+        self.vmap = constraint_surface(gait)
         self.theta_s = self.vmap.phase(gait.q(SECTION * gait.T))
         self.nodes = nodes
         self.limits = Limits.of(self.options, model)
@@ -360,15 +360,14 @@ class VirtualConstraintWalker:
         return run.batch()
 
 
+@gait_first
 @cached(maxsize=4)
-def virtual_constraint_walker(model, gait, options: SimulationOptions | None = None,
+def virtual_constraint_walker(gait, options: SimulationOptions | None = None,
                               nodes: int = 200, jit: bool = False) -> VirtualConstraintWalker:
     """The :class:`VirtualConstraintWalker` of a gait (memoised).
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
     gait : Reference
         The reference step the virtual constraints are fitted to.
     options : SimulationOptions, optional
@@ -383,4 +382,5 @@ def virtual_constraint_walker(model, gait, options: SimulationOptions | None = N
     VirtualConstraintWalker
         The same object for the same arguments.
     """
+    model = gait.model
     return VirtualConstraintWalker(model, gait, options, nodes, jit)

@@ -105,16 +105,16 @@ class _Codesign:
 
     def kept(self, gait):
         return self.unit("kept directions", dict(gait=gait.cache_key),
-                         lambda: kept_directions(self.model, gait, self.rs))
+                         lambda: kept_directions(gait, self.rs))
 
     def measure(self, gait, kept, M1):
         """Walker s* over the kept directions and max|lambda| (AD) of a design."""
         M1 = np.asarray(M1, float)
 
         def compute():
-            r = robustness(self.model, gait, Design(tuple(M1), self.rejoin), self.rs,
+            r = robustness(gait, Design(tuple(M1), self.rejoin), self.rs,
                            kept=kept)
-            lam = poincare_map(self.model, gait, rejoin=self.rejoin).analyse(
+            lam = poincare_map(gait, rejoin=self.rejoin).analyse(
                 M1, method="ad").max_abs
             return r, float(lam)
         return self.unit("measure", dict(gait=gait.cache_key, M1=M1.tolist(),
@@ -124,7 +124,7 @@ class _Codesign:
     def hardest(self, gait, kept, M1, s, n):
         """The n kept directions (not the paper's) that fail first or end worst at scale s."""
         rs = self.rs
-        w = zero_dynamics_walker(self.model, gait, rs.simulation_options(), rs.rk4_steps, jit=True)
+        w = zero_dynamics_walker(gait, rs.simulation_options(), rs.rk4_steps, jit=True)
         dirs = kept.directions
         q0, dq0 = start_states(gait, dirs, s)
         B = w.walk(q0, dq0, np.array(M1), self.rejoin, steps=rs.steps)
@@ -160,7 +160,7 @@ class _Codesign:
         return (bool(conv <= 4), float(r.s_star))
 
     def lam_vc(self, gait):
-        return abs(vc_eigenvalue(self.model, gait).eigenvalue)
+        return abs(vc_eigenvalue(gait).eigenvalue)
 
     def _jury(self, gait):
         """trace and det of A^z(M1) with their gradients (one Function per gait and
@@ -171,7 +171,7 @@ class _Codesign:
         return self._juries[key]
 
     def _build_jury(self, gait):
-        A_fn = poincare_map(self.model, gait, rejoin=self.rejoin).variational.A_fn
+        A_fn = poincare_map(gait, rejoin=self.rejoin).variational.A_fn
         M = ca.SX.sym("M1", self.model.nu)
         A = A_fn(M)
         tr = A[0, 0] + A[1, 1]
@@ -186,7 +186,7 @@ class _Codesign:
     def denominator(self, tr, gait, M1):
         """The eq. 24 denominator's sign for M1 and a fixed scale: D11's largest value
         on the reference (so the margin does not move with the start)."""
-        D11, D12 = denominator_samples(self.model, gait)
+        D11, D12 = denominator_samples(gait)
         den = decoupling_denominator(D11, D12, np.asarray(M1, float))
         tr.den_scale = float(np.max(np.abs(D11)))
         tr.den_sign = 1.0 if den[0] >= 0 else -1.0
@@ -284,11 +284,11 @@ class _Codesign:
         def compute():
             rng = np.random.default_rng(st.seed)
             M = rng.uniform(-st.box, st.box, (st.samples, m.nu))
-            jb = poincare_map(m, g, rejoin=self.rejoin).jacobian_batch(M)
+            jb = poincare_map(g, rejoin=self.rejoin).jacobian_batch(M)
             ok = (jb.status == "stable") & (jb.max_abs <= st.eigen_margin * self.lam_vc(g))
             M = M[ok][:8 * st.sampled_starts]
             if len(M):
-                w = zero_dynamics_walker(m, g, rs.simulation_options(), 200, jit=True)
+                w = zero_dynamics_walker(g, rs.simulation_options(), 200, jit=True)
                 q0, dq0 = start_states(g, np.repeat(kept.directions[:1], len(M), 0), 1.0)
                 B = w.walk(q0, dq0, M, self.rejoin, steps=rs.steps)
                 M = M[B.verdict(rs.tol) == "ok"][:st.sampled_starts]
@@ -662,15 +662,15 @@ def codesign(model, settings: CodesignSettings | None = None, gait=None, gait_fi
     run.rejoin = float(best["rejoin"])
     design = Design(tuple(float(v) for v in best["M1"]), run.rejoin)
     run.say("verification (protocol of the robust designs)")
-    check = verify_design(model, g, design, best["kept"], st.robustness_settings(rounds=10),
+    check = verify_design(g, design, best["kept"], st.robustness_settings(rounds=10),
                           progress=run.say, unit=run.unit, order=run.order)
     hidden = run.unit("hidden sign patterns", dict(gait=g.cache_key, design=design.to_dict()),
-                      lambda: hidden_sign_patterns(model, g, design, best["kept"],
+                      lambda: hidden_sign_patterns(g, design, best["kept"],
                                                    st.robustness_settings()).to_dict()) \
         if st.hidden else {}
     bas = {}
     if st.basin:
-        b = basin(model, g, design)
+        b = basin(g, design)
         bas = dict(converged_fraction=float(b.converged_fraction), message=b.message)
     run.stage("verification", s_star=check.s_star)
     if run.free and g is not run.gait0:
