@@ -33,9 +33,9 @@ def main():
     from analysis.design.codesign import TODAY_DESIGN
     from analysis.robustness import Design, basin
     from biped_casadi import RABBIT, BipedModel
-    from gait_opt import GaitOptions, default_gait
+    from gait_opt import GaitOptions, optimize_gait
     m = BipedModel(RABBIT)
-    g, gr = default_gait(m), default_gait(m, GaitOptions(**ROBUST_GAIT))
+    g, gr = optimize_gait(m, cache=True), optimize_gait(m, GaitOptions(**ROBUST_GAIT), cache=True)
     M1 = optimize_m1(g, group=1).M1
     cases = [("deadbeat M1 (default gait)", g, Design(tuple(M1))),
              ("virtual constraints (default gait)", g, None),

@@ -69,8 +69,8 @@ def main():
         subprocess.run([sys.executable, "-c",
                         "import sys; from analysis.design import ROBUST_GAIT; "
                         "from biped_casadi import RABBIT, BipedModel; "
-                        "from gait_opt import GaitOptions, default_gait; "
-                        "default_gait(BipedModel(RABBIT), GaitOptions(**ROBUST_GAIT))"
+                        "from gait_opt import GaitOptions, optimize_gait; "
+                        "optimize_gait(BipedModel(RABBIT), GaitOptions(**ROBUST_GAIT), cache=True)"
                         ".save(sys.argv[1])", str(gait_file)],
                        env=dict(os.environ, BIPED_CACHE_DIR=str(tmp / "gait_cache")),
                        check=True)

@@ -33,7 +33,7 @@ from biped_casadi.simulation import start_states
 from biped_casadi.simulation import virtual_constraint_walker
 from biped_casadi import (SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, rabbit, simulate)
-from gait_opt import GaitOptions, default_gait
+from gait_opt import GaitOptions, optimize_gait
 
 #: the robust design found by `biped m1 --robust` (README); any stable design would do
 DESIGN = Design((-8.2618, 2.5374, 0.0034, 8.5090), 0.75)
@@ -69,7 +69,7 @@ def main(argv=None):
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"load {os.getloadavg()[0]:.2f}")
     m = rabbit()
-    g = default_gait(m, GaitOptions(**ROBUST_GAIT))
+    g = optimize_gait(m, GaitOptions(**ROBUST_GAIT), cache=True)
     st = RobustnessSettings(rounds=8)
     kept = kept_directions(g, st)
     dirs = kept.directions

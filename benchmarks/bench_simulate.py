@@ -22,11 +22,11 @@ from scipy.integrate import solve_ivp
 from analysis import PoincareMap
 from biped_casadi import (SimulationOptions, Simulator, TimeVaryingController,
                           VirtualConstraintController, perturbed_initial_state)
-from gait_opt import Gait, default_gait
+from gait_opt import Gait, optimize_gait
 
 
 def load_gait(path):
-    return Gait.load(path) if path else default_gait()
+    return Gait.load(path) if path else optimize_gait(cache=True)
 
 
 def scipy_baseline(ctrl, q0, dq0, steps):

@@ -53,8 +53,8 @@ def machine_info() -> dict:
 
 
 def load_gait(path):
-    from gait_opt import Gait, default_gait
-    return Gait.load(path) if path else default_gait()
+    from gait_opt import Gait, optimize_gait
+    return Gait.load(path) if path else optimize_gait(cache=True)
 
 
 def match_eigs(ev, ref):

@@ -31,7 +31,7 @@ from analysis.design import ROBUST_GAIT
 from analysis.terrain import MonteCarloSettings, WalkerSpec, monte_carlo
 from biped_casadi import SimulationOptions, rabbit, simulate
 from biped_casadi.simulation import WalkBatch
-from gait_opt import GaitOptions, default_gait
+from gait_opt import GaitOptions, optimize_gait
 
 #: the robust design of this repository's reproduction (README)
 M1, REJOIN = (-8.2618, 2.5374, 0.0034, 8.5090), 0.75
@@ -64,7 +64,7 @@ def main(runs=400, steps=40, sigma=0.01, baseline_runs=8, workers=None, chunk=No
          parts="ab"):
     print(f"{platform.node()}: {os.cpu_count()} cores, load {os.getloadavg()}")
     model = rabbit()
-    gait = default_gait(model, GaitOptions(**ROBUST_GAIT))
+    gait = optimize_gait(model, GaitOptions(**ROBUST_GAIT), cache=True)
     spec = WalkerSpec("tv", M1, REJOIN)
     rows = {}
     nw = workers or len(os.sched_getaffinity(0))

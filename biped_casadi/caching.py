@@ -16,9 +16,12 @@ on and of the kind's version.
 """
 from __future__ import annotations
 
+import ast
 import contextlib
+import dataclasses
 import functools
 import hashlib
+import importlib
 import json
 import os
 import threading
@@ -26,8 +29,59 @@ import time
 from collections import OrderedDict
 from pathlib import Path
 
-__all__ = ["cached", "cache_key", "cache_dir", "digest", "source_digest", "modules_digest",
-           "DiskCache", "Claimed", "claimed", "shared_result"]
+__all__ = ["cached", "cache_key", "cache_dir", "digest", "modules_digest", "code_of", "DiskCache",
+           "file_lock", "task", "TaskInfo"]
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskInfo:
+    """What identifies a task.
+
+    Parameters
+    ----------
+    name : str
+        Module and function.
+    version : int
+        Its own version (bump it when its result for the same arguments changes without
+        any change of code).
+    code : str
+        The kind of code it runs ('numerical' or 'figures':
+        :func:`analysis.tasks.code_version`).
+    """
+
+    name: str
+    version: int = 1
+    code: str = "numerical"
+
+
+def task(fn=None, *, version: int = 1, code: str = "numerical", name: str | None = None):
+    """Mark a pure function as a task, whose results are kept by key.
+
+    :class:`analysis.tasks.Engine` keeps its results on disk by the key of its arguments
+    and of the code that computes them.
+    The function is returned unchanged (calling it runs it); it gains ``task_info``.  A
+    task is a module-level function of typed arguments (numbers, arrays, dataclasses,
+    models, gaits, designs) that always returns the same result for the same arguments.
+
+    Parameters
+    ----------
+    fn : callable
+        The function.
+    version : int
+        The task's own version.
+    code : str
+        'numerical' or 'figures'.
+    name : str, optional
+        Default ``module.qualname``.
+
+    Returns
+    -------
+    callable
+    """
+    def mark(f):
+        f.task_info = TaskInfo(name or f"{f.__module__}.{f.__qualname__}", version, code)
+        return f
+    return mark(fn) if fn is not None else mark
 
 
 def cache_key(obj):
@@ -145,42 +199,44 @@ def digest(obj) -> str:
 _SOURCES: dict = {}
 
 
-def source_digest(packages=("biped_casadi", "gait_opt", "analysis")) -> str:
-    """SHA-256 of the Python source of packages: a result kept under it is one of this code.
+def _strip_docstrings(tree):
+    """The syntax tree without its docstrings (module, class and function)."""
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(
+                    getattr(body[0], "value", None), ast.Constant) \
+                    and isinstance(body[0].value.value, str):
+                node.body = body[1:] or [ast.Pass()]
+    return tree
 
-    The packages are located without importing them; computed once per process.
+
+def code_of(path) -> str:
+    """What of a Python file decides what it computes (its syntax tree, ``ast.dump``).
+
+    Docstrings, comments and layout are left out.
 
     Parameters
     ----------
-    packages : tuple of str
-        Top-level package names.
+    path : str or Path
+        A Python source file.
 
     Returns
     -------
     str
-        64 hex digits.
     """
-    key = tuple(packages)
-    if key not in _SOURCES:
-        import importlib.util
-        h = hashlib.sha256()
-        for name in key:
-            spec = importlib.util.find_spec(name)
-            root = Path(spec.origin).parent if spec and spec.origin else None
-            if root is None:
-                continue
-            for f in sorted(root.rglob("*.py")):
-                h.update(f.relative_to(root.parent).as_posix().encode())
-                h.update(f.read_bytes())
-        _SOURCES[key] = h.hexdigest()
-    return _SOURCES[key]
+    p = Path(path)
+    return ast.dump(_strip_docstrings(ast.parse(p.read_bytes(), filename=str(p))),
+                    include_attributes=False)
 
 
 def modules_digest(modules, salt: str = "") -> str:
-    """SHA-256 of the source of some modules: the code that decides a kind of result.
+    """SHA-256 of the code of some modules: the code that decides a kind of result.
 
+    The code of a module is :func:`code_of` (docstrings, comments and layout left out).
     Stored results carry it, so a result of other code is refused or recomputed, and a
-    worker running other code is detected.  Computed once per process per argument.
+    worker running other code is detected; an edit of a docstring keeps them.  Computed
+    once per process per argument.
 
     Parameters
     ----------
@@ -196,11 +252,10 @@ def modules_digest(modules, salt: str = "") -> str:
     """
     key = (tuple(modules), salt)
     if key not in _SOURCES:
-        import importlib
         h = hashlib.sha256(salt.encode())
         for name in key[0]:
             h.update(name.encode())
-            h.update(Path(importlib.import_module(name).__file__).read_bytes())
+            h.update(code_of(importlib.import_module(name).__file__).encode())
         _SOURCES[key] = h.hexdigest()
     return _SOURCES[key]
 
@@ -269,28 +324,20 @@ def _alive(pid: int) -> bool:
     return True
 
 
-class Claimed(RuntimeError):
-    """Another live process holds the claim (:func:`claimed` with ``wait=False``)."""
-
-
 @contextlib.contextmanager
-def claimed(path: Path, poll: float = 0.2, wait: bool = True):
-    """Hold the right to compute ``path`` among processes sharing the cache folder.
+def file_lock(path: Path, poll: float = 0.2):
+    """Hold a lock file beside ``path`` among processes sharing a folder.
 
-    While another live process holds it (e.g. the reproduction's helper on the second
-    core, :mod:`analysis.reporting.reproduce`), wait; then hold it (a ``.lock`` file
-    beside ``path`` naming this process) until the block ends.  A lock left by a process
-    that died is taken over; where the folder cannot be written, the block runs
-    unguarded.
+    While another live process holds it, wait: two processes then never build the same
+    file (a compiled library) at once.  A lock left by a process that died is taken
+    over; where the folder cannot be written, the block runs unguarded.
 
     Parameters
     ----------
     path : Path
-        The result to compute.
+        The file to build.
     poll : float
         Seconds between looks at another process's lock.
-    wait : bool
-        False: raise :class:`Claimed` instead of waiting.
     """
     lock = Path(str(path) + ".lock")
     try:
@@ -307,8 +354,6 @@ def claimed(path: Path, poll: float = 0.2, wait: bool = True):
             except (OSError, ValueError):
                 pid = 0
             if pid and pid != os.getpid() and _alive(pid):
-                if not wait:
-                    raise Claimed(f"{path} is being computed by process {pid}")
                 time.sleep(poll)
                 continue
             with contextlib.suppress(OSError):
@@ -325,48 +370,3 @@ def claimed(path: Path, poll: float = 0.2, wait: bool = True):
     finally:
         with contextlib.suppress(OSError):
             lock.unlink()
-
-
-def shared_result(path, compute, claim: bool = True, wait: bool = True):
-    """``compute()`` once among the processes sharing a cache folder.
-
-    Under :func:`claimed`: the pickle at ``path`` if a process wrote it, else
-    ``compute()``, written there (atomically) for the others.
-
-    Parameters
-    ----------
-    path : Path
-        Where the result is kept (a pickle).
-    compute : callable
-        Computes the result.
-    claim : bool
-        Hold the claim while computing (False: read the result if it is there, else
-        compute it without keeping another process waiting, e.g. when its parts are
-        shared results of their own).
-    wait : bool
-        False: raise :class:`Claimed` when another process is computing it (and has
-        not written it yet) instead of waiting.
-
-    Returns
-    -------
-    tuple
-        (the result, whether this process read it (True) or computed it (False)).
-    """
-    import pickle
-
-    from .files import write_bytes_atomic
-    path = Path(path)
-    if not wait and path.is_file():
-        with contextlib.suppress(Exception):     # noqa: BLE001 - read again under the claim
-            return pickle.loads(path.read_bytes()), True
-    with claimed(path, wait=wait) if claim else contextlib.nullcontext():
-        if path.is_file():
-            try:
-                return pickle.loads(path.read_bytes()), True
-            except Exception:        # noqa: BLE001 - a damaged entry is recomputed
-                pass
-        value = compute()
-        with contextlib.suppress(OSError):
-            path.parent.mkdir(parents=True, exist_ok=True)
-            write_bytes_atomic(path, pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL))
-        return value, False

@@ -16,6 +16,8 @@ import threading
 
 import numpy as np
 
+from .caching import cache_dir, file_lock
+
 __all__ = ["rk4_step", "as_vector", "as_number", "jit_options", "compiled",
            "cached_library", "FastCall"]
 
@@ -48,7 +50,7 @@ def compiled(f, flags: str = "-O2"):
     The library is named by the digest of the Function's serialisation, the flags and
     the CasADi version, so every process and every later run with an equal Function loads
     it instead of compiling again (two processes compiling the same one: the second waits
-    for the first, :func:`biped_casadi.caching.claimed`).  The C source is generated in a
+    for the first, :func:`biped_casadi.caching.file_lock`).  The C source is generated in a
     temporary folder.
 
     Parameters
@@ -96,7 +98,7 @@ def cached_library(filename: str, build):
     """A shared library in the cache folder's ``compiled/``, built once per name.
 
     Two processes asking for the same one: the second waits for the first
-    (:func:`biped_casadi.caching.claimed`); the library appears atomically.
+    (:func:`biped_casadi.caching.file_lock`); the library appears atomically.
 
     Parameters
     ----------
@@ -116,11 +118,10 @@ def cached_library(filename: str, build):
     OSError, subprocess.CalledProcessError
         When the folder cannot be written or the build fails.
     """
-    from .caching import cache_dir, claimed
     root = cache_dir() / "compiled"
     so = root / filename
     root.mkdir(parents=True, exist_ok=True)
-    with _LIBRARY_LOCKS.setdefault(filename, threading.Lock()), claimed(so):
+    with _LIBRARY_LOCKS.setdefault(filename, threading.Lock()), file_lock(so):
         if not so.is_file():
             with tempfile.TemporaryDirectory() as tmp:
                 out = str(so) + f".tmp{os.getpid()}"

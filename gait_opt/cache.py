@@ -13,13 +13,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from biped_casadi import rabbit
-from biped_casadi.caching import DiskCache, claimed
+from biped_casadi.caching import DiskCache
 
 from .gait import FORMAT_VERSION, Gait, GaitFileError
-from .optimize import optimize_gait
 from .options import GaitOptions
 
-__all__ = ["default_gait", "cache_path", "GAITS"]
+__all__ = ["cached_gait", "cache_path", "GAITS"]
 
 #: the optimised gaits kept between sessions (version: the optimiser's output for given
 #: options)
@@ -59,54 +58,40 @@ def _usable(path: Path, model, options: GaitOptions):
     return g, ""
 
 
-def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
-                 progress=None, **overrides) -> Gait:
-    """The optimal gait for ``options``, read from the on-disk cache or optimised once.
+def cached_gait(model, options: GaitOptions, cache_dir, progress, compute) -> Gait:
+    """The gait of ``options`` from the on-disk cache, or ``compute()`` stored there.
 
-    The cache file is :func:`cache_path` (keyed by the robot, the options and the
-    optimiser's version).  It is used only if it loads cleanly
+    The cache file is :func:`cache_path`; it is used only if it loads cleanly
     (:meth:`Gait.load`: checksum, schema, robot, a periodic orbit) and was made with the
-    same options; otherwise the gait is optimised with :func:`optimize_gait` and stored.
+    same options, otherwise the gait is computed again and the file replaced.
 
     Parameters
     ----------
-    model : BipedModel, optional
-        Default RABBIT; any robot's model (the cache is keyed by its description).
-    options : GaitOptions, optional
-        Default: SPEC section 2.
+    model : BipedModel
+        The robot.
+    options : GaitOptions
+        The problem (complete: :meth:`GaitOptions.for_model` applied).
     cache_dir : str or Path, optional
-        Default: :func:`biped_casadi.cache_dir`.
+        Default :func:`biped_casadi.cache_dir`.
     progress : callable, optional
-        Called with one line of text before a gait is optimised (a few seconds).
-    **overrides
-        Replace option fields.
+        Called with one line before a solve.
+    compute : callable
+        Solves the gait.
 
     Returns
     -------
     Gait
-        ``gait.solver_stats['cache']`` says 'hit' or why it was (re)computed.
+        ``gait.solver_stats['cache']`` says 'hit' or why it was computed.
     """
-    model = model or rabbit()
-    options = options or GaitOptions()
-    if not isinstance(options, GaitOptions):
-        raise ValueError(f"options must be GaitOptions, got {type(options).__name__}")
-    if overrides:
-        options = options.replace(**overrides)
-    options = options.for_model(model)
     path = cache_path(model, options, cache_dir)
     g, reason = _cached(path, model, options)
     if g is not None:
         return g
-    # one process optimises it; another asking for it meanwhile waits and reads it
-    with claimed(path):
-        g, reason = _cached(path, model, options)
-        if g is not None:
-            return g
-        if progress is not None:
-            progress(f"optimising the reference gait of {model.params.name} (a few "
-                     f"seconds, once; stored in {path.parent}) ...")
-        g = optimize_gait(model, options)
-        return _store(g, path, reason)
+    if progress is not None:
+        progress(f"optimising the reference gait of {model.params.name} (a few seconds, "
+                 f"once; stored in {path.parent}) ...")
+    # two processes solving it at once compute the same gait; each file is written whole
+    return _store(compute(), path, reason)
 
 
 def _cached(path, model, options):

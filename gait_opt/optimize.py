@@ -6,12 +6,16 @@ the problem re-solved where a constraint is exceeded between the nodes.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from biped_casadi import rabbit
+from biped_casadi.caching import task
 from biped_casadi.results import Result, internal
 
+from .cache import cached_gait
 from .errors import GaitOptimizationError
 from .gait import Gait
 from .options import GaitOptions
@@ -20,7 +24,7 @@ from .transcription import (FIXED_BY, MARGINS, build_problem, constraint_violati
                             describe_violations, initial_guess, make_solver,
                             warm_start_vector)
 
-__all__ = ["optimize_gait", "solve_gait", "GaitSolveResult", "GaitOptimizationError",
+__all__ = ["optimize_gait", "default_gait", "solve_gait", "GaitSolveResult", "GaitOptimizationError",
            "solve_collocation", "CollocationResult"]
 
 
@@ -96,7 +100,7 @@ def solve_collocation(model, opts: GaitOptions, *, verbose: bool = False,
 
 @dataclass
 class GaitSolveResult(Result):
-    """Outcome of :func:`solve_gait`.
+    """Outcome of one solve (what :func:`optimize_gait` returns as a gait or raises).
 
     ``success`` means IPOPT succeeded, a gait was found and nothing is violated.
 
@@ -144,9 +148,9 @@ def _options(model, options, overrides) -> GaitOptions:
     return (opts.replace(**overrides) if overrides else opts).for_model(model)
 
 
-def solve_gait(model, options: GaitOptions | None = None, *, verbose: bool = False,
-               warm_start=None, max_refinements: int = 3, **overrides) -> GaitSolveResult:
-    """Solve the reference-gait problem of SPEC section 2.
+def _solve(model, options: GaitOptions | None = None, *, verbose: bool = False,
+           warm_start=None, max_refinements: int = 3, **overrides) -> GaitSolveResult:
+    """Solve the reference-gait problem (docs: theory, the reference gait).
 
     The path constraints are imposed at the nodes; the polished gait is then checked on
     a dense grid (``Gait.violations``).  Where an active constraint is exceeded between
@@ -222,16 +226,29 @@ def solve_gait(model, options: GaitOptions | None = None, *, verbose: bool = Fal
                            refinements=passes if len(passes) > 1 else [], gait=gait)
 
 
-def optimize_gait(model, options: GaitOptions | None = None, *, verbose: bool = False,
-                  warm_start=None, max_refinements: int = 3, **overrides) -> Gait:
-    """Solve the reference-gait problem of SPEC section 2 and return the :class:`Gait`.
+@task
+def optimize_gait(model=None, options: GaitOptions | None = None, *, cache: bool = False,
+                  cache_dir=None, progress=None, verbose: bool = False, warm_start=None,
+                  max_refinements: int = 3, **overrides) -> Gait:
+    """The optimal cyclic reference gait of a robot and options: the one gait solve.
+
+    Direct collocation with IPOPT, the exact periodic orbit (the polish), and a check of
+    every path constraint on a dense grid, with node bounds tightened and the problem
+    re-solved where a constraint is exceeded between the nodes.
 
     Parameters
     ----------
-    model : BipedModel
-        The robot.
+    model : BipedModel, optional
+        The robot (default RABBIT).
     options : GaitOptions, optional
-        Default: SPEC section 2.
+        The problem (default: the default problem, docs: theory).
+    cache : bool
+        Read the gait from the on-disk cache of solved gaits when it is there (and keep
+        a new one there): solved once per machine (:mod:`gait_opt.cache`).
+    cache_dir : str or Path, optional
+        That cache's folder (default :func:`biped_casadi.cache_dir`).
+    progress : callable, optional
+        Called with one line of text before a solve that is not cached.
     verbose : bool
         Print IPOPT's iterations.
     warm_start : Gait, optional
@@ -244,18 +261,77 @@ def optimize_gait(model, options: GaitOptions | None = None, *, verbose: bool = 
     Returns
     -------
     Gait
-        The polished gait; ``gait.solver_stats`` holds IPOPT's status and timings and
-        ``solver_stats['dense_grid_violations']`` what remains violated between the
-        nodes (empty for a valid gait).
+        The polished gait; ``gait.solver_stats`` holds IPOPT's status, iterations and
+        timings, ``solver_stats['dense_grid_violations']`` what remains violated between
+        the nodes (empty for a valid gait) and, with ``cache``, ``solver_stats['cache']``
+        ('hit' or why it was computed).
 
     Raises
     ------
     GaitOptimizationError
         With IPOPT's status and the violated constraint families when no gait is found.
     """
-    res = solve_gait(model, options, verbose=verbose, warm_start=warm_start,
-                     max_refinements=max_refinements, **overrides)
+    model = model or rabbit()
+    opts = _options(model, options, overrides)
+    if cache:
+        return cached_gait(model, opts, cache_dir, progress,
+                           lambda: optimize_gait(model, opts, verbose=verbose,
+                                                 warm_start=warm_start,
+                                                 max_refinements=max_refinements))
+    if progress is not None:
+        progress(f"optimising the reference gait of {model.params.name} (a few seconds) ...")
+    res = _solve(model, opts, verbose=verbose, warm_start=warm_start,
+                 max_refinements=max_refinements)
     if res.gait is None:
         raise GaitOptimizationError(res.message, status=res.status,
                                     violations=[tuple(v) for v in res.violations])
     return res.gait
+
+
+def solve_gait(model, options: GaitOptions | None = None, **kw) -> GaitSolveResult:
+    """Deprecated: :func:`optimize_gait` (which raises on failure) is the gait solve.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    options : GaitOptions, optional
+        The problem.
+    **kw
+        As :func:`optimize_gait` (``verbose``, ``warm_start``, ``max_refinements``,
+        option fields).
+
+    Returns
+    -------
+    GaitSolveResult
+    """
+    warnings.warn("solve_gait is deprecated: call optimize_gait (a Gait; "
+                  "GaitOptimizationError on failure)", DeprecationWarning, stacklevel=2)
+    return _solve(model, options, **kw)
+
+
+def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
+                 progress=None, **overrides) -> Gait:
+    """Deprecated: ``optimize_gait(model, options, cache=True)``.
+
+    Parameters
+    ----------
+    model : BipedModel, optional
+        The robot.
+    options : GaitOptions, optional
+        The problem.
+    cache_dir : str or Path, optional
+        The cache folder.
+    progress : callable, optional
+        One line before a solve.
+    **overrides
+        Option fields.
+
+    Returns
+    -------
+    Gait
+    """
+    warnings.warn("default_gait is deprecated: call optimize_gait(model, options, "
+                  "cache=True)", DeprecationWarning, stacklevel=2)
+    return optimize_gait(model, options, cache=True, cache_dir=cache_dir, progress=progress,
+                         **overrides)

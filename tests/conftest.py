@@ -2,10 +2,16 @@
 per session and cached on disk between sessions (keyed by robot and options)."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
 from biped_casadi import rabbit
+
+# tasks run in the test process unless a test asks for a cluster (analysis.tasks: the
+# scheduler's default); the tests of the cluster paths start their own
+os.environ.setdefault("BIPED_SCHEDULER", "synchronous")
 
 
 @pytest.fixture(scope="session")
@@ -22,8 +28,8 @@ def rng():
 def gait(model):
     """The default reference gait (SPEC section 2), from the on-disk cache
     ($BIPED_CACHE_DIR or ~/.cache/biped-casadi): solved at most once per machine."""
-    from gait_opt import default_gait
-    return default_gait(model)
+    from gait_opt import optimize_gait
+    return optimize_gait(model, cache=True)
 
 
 @pytest.fixture(scope="session")
@@ -37,5 +43,5 @@ def model3():
 def gait3(model3):
     """Its default reference gait (the same problem as RABBIT's, the robot's torque
     limit), from the on-disk cache."""
-    from gait_opt import default_gait
-    return default_gait(model3)
+    from gait_opt import optimize_gait
+    return optimize_gait(model3, cache=True)

@@ -57,3 +57,38 @@ def chain(engine, n):
 @task
 def echo(x):
     return x
+
+
+# ------------------------------------------------- stages for the reproduction's tests
+from matplotlib.figure import Figure                    # noqa: E402
+
+from analysis.pipeline.figures import figure_files      # noqa: E402
+from analysis.pipeline.paper import StageResult         # noqa: E402
+
+
+@task
+def marker_stage(engine, res):
+    """A cheap stage whose summary says which resolution made it."""
+    return StageResult(dict(marker=dict(line_points=res.line_points)))
+
+
+@task(code="figures")
+def marker_figure(stage):
+    fig = Figure()
+    fig.add_subplot().set_title(f"line_points {stage.summary['marker']['line_points']}")
+    return dict(marker=figure_files(fig))
+
+
+@task
+def failing_stage(engine, res):
+    raise RuntimeError("this stage fails on purpose")
+
+
+@task
+def after_marker(engine, marker, res):
+    return StageResult(dict(after=dict(seen=marker.result().summary["marker"])))
+
+
+@task
+def interrupted_stage(engine, res):
+    raise KeyboardInterrupt

@@ -97,12 +97,12 @@ def test_default_gait_optimisation_is_announced(gait, capsys, monkeypatch):
     import analysis.cli.common as common
     called = []
 
-    def default_gait(model=None, progress=None):   # as if nothing were cached yet
+    def optimize_gait(model=None, progress=None, cache=True):   # as if nothing were cached yet
         called.append(progress)
         progress("optimising the reference gait of RABBIT (once) ...")
         return gait
 
-    monkeypatch.setattr(common, "default_gait", default_gait)
+    monkeypatch.setattr(common, "optimize_gait", optimize_gait)
     term = _Terminal()
     monkeypatch.setattr("sys.stderr", term)
     assert biped_main(["eig", "--m1", "0", "0", "0", "0"]) == 0

@@ -56,6 +56,50 @@ def test_codesign_jacobian_matches_central_differences(reduced):
         assert abs((fp - fm) / (2 * h) - grad[c]) <= 1e-6 * max(abs(grad[c]), 1.0)
 
 
+@pytest.fixture(scope="module")
+def reduced_free(model):
+    """The paper's direction and one sign pattern, two steps each, the gait free (its
+    Bezier coefficients, T and unactuated start are variables), on the robust gait."""
+    from analysis.design import ROBUST_GAIT
+    from gait_opt import GaitOptions, optimize_gait
+    g = optimize_gait(model, GaitOptions(**ROBUST_GAIT), cache=True)
+    dirs = np.array([np.ones(10), np.where(np.arange(10) % 3 == 0, -1.0, 1.0)])
+    tr = Transcription(model, g, dirs, steps=2, free_gait=True,
+                       settings=TranscriptionSettings())
+    red = Reduced(tr)
+    red.tols[:] = 10.0
+    red.steps[:] = 2
+    return tr, red, g
+
+
+def test_codesign_free_gait_columns_match_central_differences(reduced_free):
+    """The condensed Jacobian's gait columns (Bezier coefficients, T, the unactuated
+    start), through the strike times and the gait's own rows, against central
+    differences of the walked scenarios: every column to 1e-5 relative."""
+    tr, red, g = reduced_free
+    d0 = np.zeros(tr.n_design)
+    d0[tr.i_G] = tr.gait_vector(g)
+    d0[tr.i_M1], d0[tr.i_rejoin], d0[tr.i_s] = M1, 0.75, 0.5
+    f, grad, g0, J, lo, hi = red.evaluate(d0)
+    assert np.all(np.isfinite(g0)) and J.shape == (g0.size, tr.n_design)
+    # every Bezier coefficient of one joint, T, and both components of the start
+    cols = [int(c) for c in tr.i_G[:tr.degree + 1]] + [int(c) for c in tr.i_G[tr.na:]]
+    worst = 0.0
+    for c in cols:
+        h = 1e-6 * max(1.0, abs(d0[c]))
+        dp, dm = d0.copy(), d0.copy()
+        dp[c] += h
+        dm[c] -= h
+        gp = red.evaluate(dp)[2]
+        gm = red.evaluate(dm)[2]
+        fd = (gp - gm) / (2 * h)
+        scale = max(np.max(np.abs(J[:, c])), 1.0)
+        err = np.max(np.abs(fd - J[:, c])) / scale
+        worst = max(worst, err)
+        assert err <= 1e-5, (c, err)
+    assert np.max(np.abs(J[:, cols])) > 1e-3            # the columns are not empty
+
+
 def test_codesign_rule_is_the_walkers(model, gait, reduced):
     """Each step's end error and duration in the NLP (100 RK4 nodes per T) equal the
     walker's at 400 per T to 1e-6: the same closed loop, the same strike."""
@@ -76,7 +120,7 @@ def test_codesign_rule_is_the_walkers(model, gait, reduced):
 
 @pytest.mark.parametrize("argv, msg", [
     (["m1", "--robust", "--method", "search", "--gait", "g.json"], "--gait with --robust"),
-    (["m1", "--robust", "--scheduler", "tcp://127.0.0.1:1"], "--scheduler applies"),
+    (["m1", "--robust", "--scheduler", "tcp://127.0.0.1:1", "--workers", "2"], "--workers"),
     (["m1", "--method", "nlp"], "--method applies to --robust"),
     (["m1", "--robust", "--free"], "excludes --free"),
     (["m1", "--robust", "--samples", "5"], "--samples must be"),
@@ -109,8 +153,8 @@ def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     4, max|lambda| at most the virtual constraints', and the replay arguments walk."""
     from analysis.design import ROBUST_GAIT
     from biped_casadi import RABBIT, BipedModel
-    from gait_opt import GaitOptions, default_gait
-    g = default_gait(BipedModel(RABBIT), GaitOptions(**ROBUST_GAIT))
+    from gait_opt import GaitOptions, optimize_gait
+    g = optimize_gait(BipedModel(RABBIT), GaitOptions(**ROBUST_GAIT), cache=True)
     path = g.save(tmp_path / "robust.json")
     assert main(["m1", "--robust", "--gait", str(path), "--json"]) == 0
     r = json.loads(capsys.readouterr().out)
@@ -130,84 +174,3 @@ def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     assert hp["full_order"]["passed"] == hp["patterns"], hp
 
 
-@pytest.fixture(scope="module")
-def quick_alone(tmp_path_factory):
-    """The quick co-design run by one process alone (its own cache folder)."""
-    from analysis.design.codesign import QUICK, codesign
-    from biped_casadi import RABBIT, BipedModel
-    return codesign(BipedModel(RABBIT), QUICK, cache=tmp_path_factory.mktemp("alone"))
-
-
-def _codesign_child(cache, side):
-    """A process running the quick co-design on ``cache`` from its ``side``; it prints its
-    design and the NLP solves it ran as JSON."""
-    import subprocess
-    import sys
-    script = ("import json, sys; sys.path[:0] = %r\n"
-              "from analysis.design.codesign import QUICK, codesign\n"
-              "from biped_casadi import RABBIT, BipedModel\n"
-              "lines = []\n"
-              "r = codesign(BipedModel(RABBIT), QUICK, cache=%r, share=sys.argv[1],\n"
-              "             progress=lines.append)\n"
-              "print(json.dumps(dict(M1=r.design['M1'], s_star=r.s_star, verified=r.verified,\n"
-              "                      solved=[s for s in lines if s.startswith('NLP')])))"
-              ) % (sys.path, str(cache))
-    return subprocess.Popen([sys.executable, "-c", script, side], stdout=subprocess.PIPE,
-                            text=True)
-
-
-@pytest.mark.slow
-def test_codesign_shared_by_two_processes_is_the_same(tmp_path, quick_alone):
-    """Two processes running the quick co-design on one cache folder, taking its units
-    from opposite ends, split them (each solves some starts) and return the design of a
-    run alone."""
-    alone = quick_alone
-    procs = [_codesign_child(tmp_path / "shared", side) for side in ("forward", "backward")]
-    outs = [json.loads(p.communicate(timeout=600)[0]) for p in procs]
-    for o in outs:
-        assert o["M1"] == alone.design["M1"] and o["s_star"] == alone.s_star
-        assert o["verified"] == alone.verified
-        assert o["solved"], "each process solves at least one start"
-    assert len(outs[0]["solved"]) + len(outs[1]["solved"]) == len(
-        [r for r in alone.rounds if r["phase"] == "start"])
-
-
-@pytest.mark.slow
-def test_codesign_prefetch_between_other_work_gives_the_same_design(tmp_path, quick_alone):
-    """The reproduction's main process takes part in the helper's co-design between its
-    own stages (codesign_prefetch, never waiting) and later runs it itself: nothing is
-    tried before the other process's setup is done, some starts are taken, and both
-    processes return the design of a run alone."""
-    import time
-    from analysis.design.codesign import QUICK, codesign, codesign_prefetch
-    from biped_casadi import RABBIT, BipedModel
-    model, shared = BipedModel(RABBIT), tmp_path / "shared"
-    t = time.perf_counter()
-    p = codesign_prefetch(model, QUICK, cache=shared, wait=False)
-    assert not p["ready"] and p["computed"] == 0 and not p["finished"]
-    assert time.perf_counter() - t < 5.0                  # it did not optimise the gait
-    with pytest.raises(ValueError, match="share"):
-        codesign_prefetch(model, QUICK, cache=shared, share="sideways")
-    child = _codesign_child(shared, "forward")
-    taken, looks = 0, 0
-    try:
-        while child.poll() is None and looks < 3000:
-            p = codesign_prefetch(model, QUICK, cache=shared, wait=False)
-            taken, looks = taken + p["computed"], looks + 1
-            if p["finished"]:
-                break
-            time.sleep(0.1)
-        r = codesign(model, QUICK, cache=shared, share="backward")
-        out = json.loads(child.communicate(timeout=600)[0])
-    finally:
-        child.kill()
-        child.wait()
-    assert taken >= 1, "the prefetching process took none of the units"
-    alone = quick_alone
-    assert r.design["M1"] == alone.design["M1"] and r.s_star == alone.s_star
-    assert out["M1"] == alone.design["M1"] and out["s_star"] == alone.s_star
-    n_starts = len([x for x in alone.rounds if x["phase"] == "start"])
-    child_starts = [x for x in out["solved"] if "(start " in x]
-    assert len(child_starts) + taken >= n_starts       # every start screened by someone
-    assert len(child_starts) < n_starts                # the helper did not screen them all
-    assert codesign_prefetch(model, QUICK, cache=shared)["cached"]

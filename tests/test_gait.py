@@ -20,7 +20,7 @@ from scipy.integrate import solve_ivp
 
 from biped_casadi import RobotParams, rabbit
 from gait_opt import (ORBIT_TOL, Gait, GaitFileError, GaitOptimizationError, GaitOptions,
-                      OpenOrbitWarning, default_gait, optimize_gait)
+                      GaitSolveResult, OpenOrbitWarning, optimize_gait)
 from gait_opt.transcription import build_problem, initial_guess
 
 N_DENSE = 2001
@@ -361,22 +361,24 @@ def test_save_leaves_nothing_behind_on_failure(gait, tmp_path, monkeypatch):
 def test_cache_reuses_and_recomputes(model, gait, tmp_path, monkeypatch):
     calls = []
 
-    def fake_optimize(m, options):
+    def fake_solve(m, options, **kw):
         calls.append(options)
-        return Gait(m, options, gait.alpha, gait.x0, gait.T)
+        return GaitSolveResult("Solve_Succeeded", "", 0, 0.0,
+                               gait=Gait(m, options, gait.alpha, gait.x0, gait.T))
 
     import gait_opt.cache as cache
-    monkeypatch.setattr(cache, "optimize_gait", fake_optimize)
-    g1 = default_gait(model, cache_dir=tmp_path)
+    import gait_opt.optimize as optimize
+    monkeypatch.setattr(optimize, "_solve", fake_solve)
+    g1 = optimize_gait(model, cache_dir=tmp_path, cache=True)
     assert len(calls) == 1 and g1.solver_stats["cache"].startswith("computed")
     files = list(tmp_path.glob("gaits/gaits-*.json"))
     assert len(files) == 1
-    g2 = default_gait(model, cache_dir=tmp_path)
+    g2 = optimize_gait(model, cache_dir=tmp_path, cache=True)
     assert len(calls) == 1 and g2.solver_stats["cache"] == "hit" and g2.T == gait.T
     # a corrupted cache file is recomputed, not trusted
     text = files[0].read_text()
     files[0].write_text(text.replace('"T": 0.69', '"T": 0.68', 1))
-    g3 = default_gait(model, cache_dir=tmp_path)
+    g3 = optimize_gait(model, cache_dir=tmp_path, cache=True)
     assert len(calls) == 2 and "corrupted" in g3.solver_stats["cache"]
     assert Gait.load(files[0]).T == gait.T            # and the file is repaired
     # other options or another robot: another key

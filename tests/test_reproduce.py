@@ -1,42 +1,55 @@
-"""`biped reproduce`: end to end into a temporary folder (--quick), and re-runs of any mix
-of modes into the same folder (issue 12: a quick run after a full one failed two stages
-on the full run's sweeps and overwrote its report)."""
+"""`biped reproduce`: end to end into a temporary folder (--quick, on the default local
+cluster), re-runs of any mix of modes into the same folder, a failed stage that skips
+its dependants (and only them), an interrupted run that leaves the previous results, a
+warm re-run that computes nothing, and the graph's keys that a docstring does not move."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-from analysis.reporting import reproduce as rp
-from matplotlib.figure import Figure
+from analysis.pipeline import graph, run_folder
+from analysis.pipeline.graph import Figures, Stage, reproduce
+from analysis.pipeline.paper import stage_fig2, stage_gait
+from analysis.pipeline import figures as F
+from task_examples import (after_marker, failing_stage, interrupted_stage, marker_figure,
+                           marker_stage)
 
-from analysis.reporting.plots import save_figure
+
+def _cluster_env(tmp_path):
+    """The environment of a run on the default local cluster, with a fresh cache."""
+    env = dict(os.environ, BIPED_CACHE_DIR=str(tmp_path / "cache"), MPLBACKEND="Agg")
+    env.pop("BIPED_SCHEDULER", None)
+    return env
 
 
 @pytest.mark.slow
-def test_reproduce_quick(tmp_path, gait):
+def test_reproduce_quick(tmp_path):
     out = tmp_path / "rep"
     r = subprocess.run([sys.executable, "-m", "analysis.cli", "reproduce", "--quick",
                         "--out", str(out), "--json"], capture_output=True, text=True,
-                       timeout=900)
+                       timeout=900, env=_cluster_env(tmp_path))
     assert r.returncode == 0, r.stderr[-3000:]
     head = json.loads(r.stdout)
     assert head["status"] == "ok" and head["mode"] == "quick", head
     assert all(v["status"] == "ok" for v in head["stages"].values()), head["stages"]
+    assert all(v["computed"] > 0 for v in head["stages"].values())
     run = out / "quick"                         # a quick run has its own folder
     assert head["folder"] == str(run) and head["report"] == str(run / "report.md")
     s = json.loads((run / "summary.json").read_text())
     for key in ("gait", "singular", "fig2", "grid", "conjecture", "taylor", "domains",
-                "m1_nlp", "vc_comparison", "simulation", "stages", "figures", "paper",
-                "total_time", "mode"):
+                "m1_nlp", "vc_comparison", "simulation", "robust_design", "terrain", "stages",
+                "figures", "paper", "total_time", "mode", "critical_path"):
         assert key in s, key
     assert sum(s["grid"]["counts"].values()) == 9**4
     assert s["m1_nlp"]["group1"]["group"] == 1 and s["m1_nlp"]["group2"]["group"] == 2
+    assert 0 < s["critical_path"]["seconds"] < s["total_time"]
     for name in ("gait_stick", "gait_profiles", "fig2", "fig3", "fig4", "fig5_qu_error",
-                 "fig6_swing_torques"):
+                 "fig6_swing_torques", "basin_default", "basin_robust", "terrain_mfpt"):
         for ext in (".png", ".pdf"):
             f = run / "figures" / f"{name}{ext}"
             assert f.is_file() and f.stat().st_size > 1000, f
@@ -47,39 +60,39 @@ def test_reproduce_quick(tmp_path, gait):
     assert (run / "gait.json").is_file()
     assert not (out / "report.md").exists()     # nothing of a full run made up
     assert [p.name for p in out.iterdir()] == ["quick"]
+    # a warm re-run computes nothing and gives the same numbers
+    r2 = subprocess.run([sys.executable, "-m", "analysis.cli", "reproduce", "--quick",
+                         "--out", str(out), "--json"], capture_output=True, text=True,
+                        timeout=300, env=_cluster_env(tmp_path))
+    assert r2.returncode == 0, r2.stderr[-3000:]
+    warm = json.loads(r2.stdout)
+    assert all(v["computed"] == 0 for v in warm["stages"].values()), warm["stages"]
+    s2 = json.loads((run / "summary.json").read_text())
+    assert s2["robust_design"]["design"] == s["robust_design"]["design"]
+    assert s2["terrain"]["mfpt"] == s["terrain"]["mfpt"]
 
 
 # ------------------------------------------------- re-runs into the same folder
-def _stage_marker(ctx):
-    """A cheap stage whose figure says which options made it."""
-    fig = Figure()
-    fig.add_subplot().set_title(f"line_points {ctx.opts.line_points}")
-    ctx.figures["marker"] = save_figure(fig, ctx.out / "figures" / "marker", rp.FORMATS)
-    ctx.summary["marker"] = dict(line_points=ctx.opts.line_points)
-
-
-def _stage_fails(ctx):
-    raise RuntimeError("this stage fails on purpose")
-
-
-def _stage_interrupted(ctx):
-    raise KeyboardInterrupt
+LIGHT = (Stage("gait", stage_gait, (), model=True, resolution=False,
+               figures=(Figures(F.gait_figures, ("gait",)),)),
+         Stage("Fig. 2: 1-D sweeps", stage_fig2, ("gait",),
+               figures=(Figures(F.fig2, ("Fig. 2: 1-D sweeps",)),)),
+         Stage("marker", marker_stage, (), figures=(Figures(marker_figure, ("marker",)),)))
 
 
 @pytest.fixture
-def light_stages(monkeypatch):
-    """The real gait and Fig. 2 stages (their sweeps are what collided), plus a marker."""
-    stages = [("gait", rp.stage_gait, ()), ("Fig. 2: 1-D sweeps", rp.stage_fig2, ("gait",)),
-              ("marker", _stage_marker, ())]
-    monkeypatch.setattr(rp, "STAGES", stages)
-    return stages
+def light_stages(monkeypatch, tmp_path):
+    """The real gait and Fig. 2 stages, plus a marker stage with a figure; a fresh
+    cache."""
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(graph, "STAGES", LIGHT)
+    return LIGHT
 
 
-def _files(folder, sweeps=True):
-    """Every file under ``folder`` (without ``sweeps/`` unless ``sweeps``): size, mtime."""
+def _files(folder):
+    """Every file under ``folder``: size, mtime."""
     return {p.relative_to(folder).as_posix(): (p.stat().st_size, p.stat().st_mtime_ns)
-            for p in folder.rglob("*")
-            if p.is_file() and (sweeps or "sweeps" not in p.relative_to(folder).parts)}
+            for p in folder.rglob("*") if p.is_file()}
 
 
 def test_full_and_quick_runs_share_a_folder_without_mixing(tmp_path, gait, light_stages):
@@ -87,10 +100,10 @@ def test_full_and_quick_runs_share_a_folder_without_mixing(tmp_path, gait, light
     out.mkdir()
     (out / "notes.txt").write_text("mine\n")
     small = dict(progress=False, animation_steps=0)
-    full = rp.reproduce(out, quick=False, line_points=5, **small)
+    full = reproduce(out, quick=False, line_points=5, **small)
     assert full.success and full.folder == str(out), full.message
     full_files = {k: v for k, v in _files(out).items() if not k.startswith("quick/")}
-    quick = rp.reproduce(out, quick=True, line_points=7, **small)
+    quick = reproduce(out, quick=True, line_points=7, **small)
     assert quick.success and quick.folder == str(out / "quick"), quick.message
     # the quick run did not touch the full run's results (nor the user's notes) ...
     assert {k: v for k, v in _files(out).items() if not k.startswith("quick/")} == full_files
@@ -99,42 +112,58 @@ def test_full_and_quick_runs_share_a_folder_without_mixing(tmp_path, gait, light
     assert json.loads((out / "quick" / "summary.json").read_text())["mode"] == "quick"
     assert "**Full run**" in (out / "report.md").read_text()
     assert "**Quick run**" in (out / "quick" / "report.md").read_text()
-    # any mix of runs, also with other settings in the same mode: never a refused sweep
-    again = rp.reproduce(out, quick=False, line_points=9, **small)
+    again = reproduce(out, quick=False, line_points=9, **small)
     assert again.success, again.message
-    assert sorted(p.name for p in (out / "sweeps").iterdir()) == [
-        "fig2_5pts_-10_10", "fig2_9pts_-10_10"]
+    assert json.loads((out / "summary.json").read_text())["marker"]["line_points"] == 9
     assert (out / "notes.txt").read_text() == "mine\n"
     assert not list(out.glob(".staging-*")) and not list(out.rglob("*.tmp*"))
 
 
-def test_a_rerun_replaces_exactly_the_previous_runs_figures(tmp_path, gait, light_stages,
-                                                            monkeypatch):
+def test_a_second_run_reads_every_result(tmp_path, gait, light_stages):
     out = tmp_path / "rep"
-    r = rp.reproduce(out, line_points=5, progress=False, animation_steps=0)
+    first = reproduce(out, line_points=5, progress=False)
+    assert all(v["computed"] > 0 for v in first.stages.values()), first.stages
+    second = reproduce(out, line_points=5, progress=False)
+    assert all(v["computed"] == 0 and v["reused"] > 0 for v in second.stages.values()), \
+        second.stages
+    assert second.summary["fig2"] == first.summary["fig2"]
+
+
+def test_a_failed_stage_skips_its_dependants_only(tmp_path, gait, light_stages, monkeypatch):
+    out = tmp_path / "rep"
+    r = reproduce(out, line_points=5, progress=False)
     assert r.success and (out / "figures" / "marker.png").is_file()
     (out / "figures" / "my_sketch.png").write_bytes(b"mine")
-    # the marker stage now fails: its old figure must not stay beside the new report
-    monkeypatch.setattr(rp, "STAGES", [*light_stages[:2], ("marker", _stage_fails, ())])
-    r = rp.reproduce(out, line_points=5, progress=False, animation_steps=0)
+    # the marker stage now fails: its dependant is skipped (no fallback), the others run,
+    # and its old figure does not stay beside the new report
+    monkeypatch.setattr(graph, "STAGES", (*light_stages[:2],
+                                          Stage("marker", failing_stage, ()),
+                                          Stage("after", after_marker, ("marker",))))
+    r = reproduce(out, line_points=5, progress=False)
     assert not r.success and r.status == "failed" and "marker" in r.message
+    st = r.stages
+    assert st["marker"]["status"] == "failed" and "on purpose" in st["marker"]["error"]
+    assert st["after"]["status"] == "skipped" and "'marker'" in st["after"]["reason"]
+    assert st["gait"]["status"] == "ok" and st["Fig. 2: 1-D sweeps"]["status"] == "ok"
     assert not (out / "figures" / "marker.png").exists()
     assert (out / "figures" / "fig2.png").is_file()
     assert (out / "figures" / "my_sketch.png").read_bytes() == b"mine"
     report = (out / "report.md").read_text()
-    assert "failed: RuntimeError: this stage fails on purpose" in report
-    assert "1 of 3 stages not ok" in report
+    assert "failed: marker_stage" not in report and "this stage fails on purpose" in report
+    assert "skipped: needs 'marker'" in report
+    assert "2 of 4 stages not ok" in report
 
 
 def test_an_interrupted_run_leaves_the_previous_results(tmp_path, gait, light_stages,
                                                         monkeypatch):
     out = tmp_path / "rep"
-    rp.reproduce(out, line_points=5, progress=False, animation_steps=0)
-    before = _files(out, sweeps=False)       # (a sweep logs every run that reuses it)
-    monkeypatch.setattr(rp, "STAGES", [*light_stages, ("stop", _stage_interrupted, ())])
+    reproduce(out, line_points=5, progress=False)
+    before = _files(out)
+    monkeypatch.setattr(graph, "STAGES", (*light_stages,
+                                          Stage("stop", interrupted_stage, ())))
     with pytest.raises(KeyboardInterrupt):
-        rp.reproduce(out, line_points=5, progress=False, animation_steps=0)
-    assert _files(out, sweeps=False) == before
+        reproduce(out, line_points=5, progress=False)
+    assert _files(out) == before
     assert not list(out.glob(".staging-*"))
 
 
@@ -145,13 +174,13 @@ def test_each_kind_of_run_has_its_folder(tmp_path):
     rabbit_copy = tmp_path / "rabbit_copy.toml"
     rabbit_copy.write_text(builtin_path("rabbit").read_text())
     out = tmp_path / "rep"
-    assert rp.run_folder(out, False) == out
-    assert rp.run_folder(out, True) == out / "quick"
-    assert rp.run_folder(out, False, "three_link") == out / "three_link"
-    assert rp.run_folder(out, True, str(mine)) == out / "my_biped" / "quick"
-    assert rp.run_folder(out, False, str(rabbit_copy)) == out       # the same robot
+    assert run_folder(out, False) == out
+    assert run_folder(out, True) == out / "quick"
+    assert run_folder(out, False, "three_link") == out / "three_link"
+    assert run_folder(out, True, str(mine)) == out / "my_biped" / "quick"
+    assert run_folder(out, False, str(rabbit_copy)) == out       # the same robot
     with pytest.raises(ValueError, match="neither a built-in robot"):
-        rp.run_folder(out, False, "octopus")
+        run_folder(out, False, "octopus")
 
 
 def test_reproduce_refuses_a_file_as_folder(tmp_path):
@@ -159,34 +188,22 @@ def test_reproduce_refuses_a_file_as_folder(tmp_path):
     f.write_text("a file")
     for quick in (False, True):
         with pytest.raises(ValueError, match="is a file"):
-            rp.reproduce(f, quick=quick, progress=False)
+            reproduce(f, quick=quick, progress=False)
     assert f.read_text() == "a file" and sorted(tmp_path.iterdir()) == [f]
 
 
 def test_cli_json_is_the_result(tmp_path, gait, light_stages, capsys):
     from analysis.cli import main
-    assert main(["reproduce", "--out", str(tmp_path / "r"), "--quick", "--json"]) == 0
+    assert main(["reproduce", "--out", str(tmp_path / "r"), "--quick", "--json",
+                 "--workers", "1"]) == 0
     body = json.loads(capsys.readouterr().out)
     assert body["status"] == "ok" and body["success"] is True and body["mode"] == "quick"
     assert set(body) == {"status", "message", "mode", "folder", "report", "summary_file",
-                         "stages", "total_time", "success"}
+                         "stages", "total_time", "critical_path", "success"}
     assert np.isfinite(body["total_time"])
-
-
-def test_readme_and_help_state_the_same_times(capsys):
-    """Issue 12: the README's times disagreed with --help (and with the machine)."""
-    from pathlib import Path
-
-    from analysis.cli import main
-    from analysis.cli.reproduce import TIME_FULL, TIME_QUICK
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    assert f"| `biped reproduce` (the default gait not yet cached) | {TIME_FULL} |" in readme
-    assert f"| `biped reproduce --quick` | {TIME_QUICK} |" in readme
-    assert "2-core" in readme
-    assert main(["reproduce", "--help"]) == 0
-    text = " ".join(capsys.readouterr().out.split())
-    assert f"A full run ({TIME_FULL} on a loaded 2-core VM)" in text
-    assert f"({TIME_QUICK})" in text
+    assert main(["reproduce", "--out", str(tmp_path / "r"), "--workers", "2",
+                 "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    assert "--workers" in capsys.readouterr().err
 
 
 @pytest.mark.slow

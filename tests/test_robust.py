@@ -24,12 +24,12 @@ from biped_casadi.simulation import start_states
 from biped_casadi.simulation import VirtualConstraintWalker, ZeroDynamicsWalker
 from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, directions, simulate)
-from gait_opt import GaitOptions, default_gait
+from gait_opt import GaitOptions, optimize_gait
 
 
 @pytest.fixture(scope="module")
 def robust_gait(model):
-    return default_gait(model, GaitOptions(**ROBUST_GAIT))
+    return optimize_gait(model, GaitOptions(**ROBUST_GAIT), cache=True)
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ import pytest
 from biped_casadi import simd
 from biped_casadi.simulation import SimulationOptions
 from biped_casadi.simulation.tv_walker import ZeroDynamicsWalker
-from gait_opt import GaitOptions, default_gait
+from gait_opt import GaitOptions, optimize_gait
 
 pytestmark = pytest.mark.skipif(not simd.available(), reason="needs AVX2, FMA and gcc")
 
@@ -124,7 +124,7 @@ def test_walker_kernels_keep_the_verdicts(model):
     """The walker on the SIMD kernels and on CasADi's compiled Functions: the same status
     and failing step for every run, states to round-off."""
     from analysis.design import ROBUST_GAIT
-    gait = default_gait(model, GaitOptions(**ROBUST_GAIT))        # on-disk cache
+    gait = optimize_gait(model, GaitOptions(**ROBUST_GAIT), cache=True)        # on-disk cache
     M1 = [-8.2618, 2.5374, 0.0034, 8.5090]                         # its robust design
     rng = np.random.default_rng(2)
     n = 150

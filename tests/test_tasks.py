@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from analysis.tasks import Engine, NotKeyable, TaskError, argument_key, resolve_scheduler
-from analysis.tasks.keys import _strip_docstrings
+from biped_casadi.caching import _strip_docstrings
 from task_examples import Pair, add, chain, fails, pair_sum, pid, square, total
 
 

@@ -29,7 +29,7 @@ from biped_casadi.simulation import (Terrain, TerrainFileError, VirtualConstrain
                                      ZeroDynamicsWalker, directions, random_heights,
                                      start_states, step_heights, torso_push)
 from biped_casadi.simulation.terrain import ground_levels
-from gait_opt import GaitOptions, default_gait
+from gait_opt import GaitOptions, optimize_gait
 
 #: the robust design of the reproduction (README); any design that walks would do
 M1R, REJOIN = np.array([-8.2618, 2.5374, 0.0034, 8.5090]), 0.75
@@ -37,7 +37,7 @@ M1R, REJOIN = np.array([-8.2618, 2.5374, 0.0034, 8.5090]), 0.75
 
 @pytest.fixture(scope="module")
 def robust_gait(model):
-    return default_gait(model, GaitOptions(**ROBUST_GAIT))
+    return optimize_gait(model, GaitOptions(**ROBUST_GAIT), cache=True)
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ import pytest
 
 from analysis.design import ROBUST_GAIT
 from analysis.terrain import MonteCarloSettings, WalkerSpec, monte_carlo
-from gait_opt import GaitOptions, default_gait
+from gait_opt import GaitOptions, optimize_gait
 
 M1R, REJOIN = (-8.2618, 2.5374, 0.0034, 8.5090), 0.75
 SETTINGS = MonteCarloSettings(sigma=0.008, runs=12, max_steps=12, chunk=4)
@@ -23,7 +23,7 @@ SETTINGS = MonteCarloSettings(sigma=0.008, runs=12, max_steps=12, chunk=4)
 
 @pytest.fixture(scope="module")
 def robust_gait(model):
-    return default_gait(model, GaitOptions(**ROBUST_GAIT))
+    return optimize_gait(model, GaitOptions(**ROBUST_GAIT), cache=True)
 
 
 @pytest.fixture(scope="module")

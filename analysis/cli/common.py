@@ -3,6 +3,7 @@
 model and the gait named on the command line."""
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -16,11 +17,11 @@ import numpy as np
 from biped_casadi import robot
 from biped_casadi.control.output_law import SECTION, check_M1_range, check_rejoin
 from biped_casadi.results import json_safe
-from gait_opt import Gait, OpenOrbitWarning, default_gait
+from gait_opt import Gait, OpenOrbitWarning, optimize_gait
 
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
-           "add_gait_arguments"]
+           "add_gait_arguments", "add_scheduler"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link) or a description file "
               "(.toml, schema in biped_casadi.model.description)")
@@ -94,7 +95,7 @@ def load_gait(args, progress: Progress):
     warning line goes to stderr (always: it qualifies every result that follows)."""
     robot_arg = getattr(args, "robot", None)
     if not args.gait:
-        return default_gait(load_model(robot_arg), progress=progress)
+        return optimize_gait(load_model(robot_arg), progress=progress, cache=True)
     model = load_model(robot_arg) if robot_arg else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OpenOrbitWarning)
@@ -260,3 +261,25 @@ def output_file(path, option: str, suffixes: tuple = ()) -> Path:
         raise UserError(f"{option}: cannot write {p}: {folder} is a file, not a folder")
     _probe(folder, option, folder)
     return p
+
+
+def _workers(text) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {n}")
+    return n
+
+
+def add_scheduler(p):
+    """``--scheduler ADDRESS`` and ``--workers N``: where the tasks run, the same meaning
+    for every command (:func:`analysis.tasks.resolve_scheduler`)."""
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the tasks on an existing Dask cluster (tcp://host:8786; start "
+                        "one with 'dask scheduler' and 'dask worker tcp://host:8786'); "
+                        "default: a local cluster of one worker process per core")
+    p.add_argument("--workers", type=_workers, metavar="N",
+                   help="worker processes of the local cluster (default: the cores; 1: "
+                        "everything in this process)")

@@ -18,14 +18,15 @@ from .common import (
     UserError,
     add_gait_arguments,
     add_robot,
+    add_scheduler,
     load_gait,
     load_model,
     positive,
     print_json,
 )
 
-ROBUST_ONLY = ("--samples", "--starts", "--seed", "--mu", "--scheduler", "--no-cache",
-               "--method")
+ROBUST_ONLY = ("--samples", "--starts", "--seed", "--mu", "--scheduler", "--workers",
+               "--no-cache", "--method")
 
 
 def _robust_defaults(args):
@@ -36,9 +37,9 @@ def _robust_defaults(args):
     if not nlp and args.gait:
         raise UserError("--gait with --robust fixes the gait of the NLP co-design; the "
                         "sampling search (--method search) uses its own gait")
-    if nlp and args.scheduler:
-        raise UserError("--scheduler applies to --method search (the NLP runs on this "
-                        "machine)")
+    if args.scheduler is not None and args.workers is not None:
+        raise UserError("--workers sets the local cluster's processes; it excludes "
+                        "--scheduler (an existing cluster has its own workers)")
     args.samples = (2000 if nlp else 40000) if args.samples is None else args.samples
     args.starts = (5 if nlp else 3) if args.starts is None else args.starts
     args.seed = 0 if args.seed is None else args.seed
@@ -60,29 +61,34 @@ def cmd_robust_design(args, say):
     if args.gait:
         gait = load_gait(args, say)
         model = gait.model
-    st = CodesignSettings(samples=args.samples, sampled_starts=args.starts, seed=args.seed,
-                          mu=args.mu, free_gait=gait is None)
+    st = CodesignSettings().replace(
+        free_gait=gait is None, **{k: v for k, v in (("samples", args.samples),
+                                                       ("kept", args.starts),
+                                                       ("seed", args.seed), ("mu", args.mu))
+                                   if v is not None})
     say("robust co-design NLP: " + ("M1 on the given gait" if gait is not None else
                                     f"gait and M1 from the gait {ROBUST_GAIT}")
         + f", v_c rejoining at {st.rejoin} T; about {'1' if gait is not None else '2'} "
         "minutes on 2 cores the first time, then read from the cache")
     try:
-        r = codesign(model, st, gait=gait, gait_file=args.gait, progress=say,
-                     use_cache=not args.no_cache)
+        r = codesign(gait if gait is not None else model, st, gait_file=args.gait,
+                     progress=say, use_cache=not args.no_cache, scheduler=args.scheduler,
+                     workers=args.workers)
     except CodesignError as e:
         raise UserError(str(e)) from None
     if args.json:
         print_json(r)
         return 0
     print(r.message + (" (from the cache)" if r.cached else ""))
-    print(f"  M1 = {r.design['M1']}, v_c rejoins at {r.design['rejoin']} T")
+    print(f"  M1 = {list(r.design.M1)}, v_c rejoins at {r.design.rejoin} T")
     ch = r.gait_change
     print(f"  gait ({'co-designed' if r.gait_free else 'fixed'}): T {ch['T_start']:.4g} -> "
           f"{ch['T']:.4g} s, largest Bezier change {ch['max_alpha_change']:.3g} rad "
           f"({r.gait_file})")
     print(f"  s* = {r.s_star:.4g} over {r.directions_kept} kept directions; max|lambda| "
           f"{r.max_abs:.3g} (virtual constraints {r.vc_eigenvalue:.3g}); paper's "
-          f"perturbation below {st.tol:g} from step {r.steps_to_converge}; peak torque "
+          f"perturbation below {st.verification.tol:g} from step {r.steps_to_converge}; "
+          f"peak torque "
           f"{r.peak_torque:.1f} N m")
     for k, v in r.verified.items():
         print(f"  full-order check {k.replace('_', ' ')} (s = {v['scale']:.4g}): "
@@ -92,8 +98,8 @@ def cmd_robust_design(args, say):
     for a in r.active_constraints[:4]:
         print(f"  binds: {a['constraint']} (multiplier {a['multiplier']:.3g})")
     print(f"  IPOPT: {len(r.ipopt['solves'])} solves, {r.ipopt['iterations']} iterations, "
-          f"{r.ipopt['time']:.1f} s; last status {r.ipopt['status']}; total "
-          f"{r.elapsed:.0f} s")
+          f"{r.ipopt['evaluations']} evaluations; last status {r.ipopt['status']}; "
+          f"computed in {r.elapsed:.0f} s")
     print("  replay: biped simulate " + " ".join(r.simulate_args))
     return 0
 
@@ -204,9 +210,7 @@ def register(sub):
     p.add_argument("--seed", type=int, help="with --robust: seed of the samples (0)")
     p.add_argument("--mu", type=float,
                    help="with --robust: friction coefficient (0.6)")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="with --robust: run the bisections on a Dask cluster "
-                        "(tcp://host:port), each worker building the walker once")
+    add_scheduler(p)
     p.add_argument("--no-cache", action="store_true",
                    help="with --robust: search again instead of reading a cached result")
     p.add_argument("--json", action="store_true", help="print one JSON object")

@@ -39,7 +39,7 @@ import numpy as np
 from biped_casadi.caching import DiskCache
 from biped_casadi.files import write_text_atomic
 from biped_casadi.results import Result
-from gait_opt import GaitOptions, default_gait
+from gait_opt import GaitOptions, optimize_gait
 from gait_opt.cache import cache_path
 
 from ..stability.poincare import poincare_map
@@ -265,7 +265,7 @@ class _Search:
         self._last = time.perf_counter()
         self.say(f"gait {st.gait} (optimised once, then cached)")
         self.options = GaitOptions(**st.gait)
-        self.gait = default_gait(m, self.options)
+        self.gait = optimize_gait(m, self.options, cache=True)
         self.lam_vc = vc_eigenvalue(self.gait).eigenvalue
         self.bound = self.lam_vc if st.eigen_bound == "vc" else float(st.eigen_bound)
         self.stage("gait", T=self.gait.T, vc_eigenvalue=self.lam_vc, bound=self.bound)

@@ -23,17 +23,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from biped_casadi import (SimulationOptions, TimeVaryingController, VirtualConstraintController,
-                          directions, simulate)
+from biped_casadi import (Design, SimulationOptions, TimeVaryingController,
+                          VirtualConstraintController, design_first, directions, simulate)
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import WalkBatch, start_states, zero_dynamics_walker
-from biped_casadi.control.reference import gait_first
 
-from ..robustness.s_star import Design, RobustnessSettings, robustness
+from ..robustness.s_star import RobustnessSettings, robustness
 from ..stability.poincare import poincare_map
 from ..stability.vc_map import vc_eigenvalue
+from ..tasks import Engine, task
 
-__all__ = ["DesignCheck", "verify_design", "HiddenPatterns", "hidden_sign_patterns"]
+__all__ = ["DesignCheck", "verify_design", "HiddenPatterns", "hidden_sign_patterns",
+           "verify_flow", "submit_check", "finish_check", "design_check", "s_star_bisection",
+           "full_order_runs", "paper_run", "eigenvalue_check"]
 
 
 @dataclass
@@ -93,69 +95,127 @@ class DesignCheck(Result):
     SUCCESS = ("done",)
 
 
-@gait_first
-def verify_design(gait, design: Design, kept, settings: RobustnessSettings,
-                  progress=None, unit=None, order=None) -> DesignCheck:
-    """Measure a design by the verification protocol (module docstring).
+@task
+def s_star_bisection(design: Design, kept, settings: RobustnessSettings):
+    """Step 1 of the protocol: s* by the walker's bisection (a task).
 
     Parameters
     ----------
-    gait : Reference
-        The gait the design runs on.
     design : Design
-        M1 and the rejoin time.
+        The design on its gait.
     kept : KeptDirections
-        The kept directions of this gait (:func:`analysis.robustness.kept_directions`).
+        The gait's kept directions.
     settings : RobustnessSettings
-        Steps, tolerance, mu, torque limit, RK4 steps and bisection rounds.
-    progress : callable, optional
-        Called with one line of text per stage.
-    unit, order : callable, optional
-        How the walker's bisection and the three sets of full-order runs (at s*, at
-        s_fail, the paper's perturbation) are done: ``unit(name, inputs, compute)``
-        returns ``compute()`` (default) or a result another process computed,
-        ``order(units)`` the order they are taken in (default as listed); the co-design shares them between two
-        processes (:meth:`analysis.design.codesign.driver._Codesign.unit`).
+        The protocol's settings.
+
+    Returns
+    -------
+    RobustnessResult
+    """
+    return robustness(design, settings, kept=kept)
+
+
+def _options(st: RobustnessSettings) -> SimulationOptions:
+    return SimulationOptions(steps=st.steps, mu=st.mu, torque_limit=st.torque_limit, jit=True)
+
+
+@task
+def full_order_runs(design: Design, kept, settings: RobustnessSettings, scale: float) -> dict:
+    """Step 2: the full-order simulator from every kept direction at one scale (a task).
+
+    Parameters
+    ----------
+    design : Design
+        The design on its gait.
+    kept : KeptDirections
+        The kept directions.
+    settings : RobustnessSettings
+        Steps, tolerance, mu, torque limit.
+    scale : float
+        The perturbation's scale.
+
+    Returns
+    -------
+    dict
+        ``scale``, ``outcomes`` (one verdict per direction) and ``passed``.
+    """
+    gait, dirs, st = design.gait, kept.directions, settings
+    ctrl = design.controller_for()
+    q0, dq0 = start_states(gait, dirs, np.full(len(dirs), scale))
+    runs = WalkBatch.concat([simulate(ctrl, q0[i], dq0[i], _options(st))
+                             for i in range(len(dirs))])
+    out = [str(v) for v in runs.verdict(st.tol)]
+    return dict(scale=float(scale), outcomes=out, passed=int(sum(o == "ok" for o in out)))
+
+
+@task
+def paper_run(design: Design, kept, settings: RobustnessSettings):
+    """Step 3: the full-order run from the paper's perturbation (direction 0 at scale 1).
+
+    Parameters
+    ----------
+    design : Design
+        The design on its gait.
+    kept : KeptDirections
+        The kept directions (the paper's first).
+    settings : RobustnessSettings
+        Steps, mu, torque limit.
+
+    Returns
+    -------
+    SimulationResult
+    """
+    q0, dq0 = start_states(design.gait, kept.directions[:1], [1.0])
+    return simulate(design.controller_for(), q0[0], dq0[0], _options(settings))
+
+
+@task
+def eigenvalue_check(design: Design) -> tuple:
+    """Step 4: max ``|lambda|`` of A^z by full AD, and the virtual constraints' on the same
+    gait (a task).
+
+    Parameters
+    ----------
+    design : Design
+        A time-varying design on its gait.
+
+    Returns
+    -------
+    tuple of float
+        (max ``|lambda|``, ``|eigenvalue|`` of virtual constraints).
+    """
+    g = design.gait
+    max_abs = poincare_map(g, rejoin=design.rejoin).analyse(np.array(design.M1),
+                                                            method="ad").max_abs
+    return float(max_abs), float(abs(vc_eigenvalue(g).eigenvalue))
+
+
+def design_check(r, verified: dict, paper, eigen: tuple, settings: RobustnessSettings
+                 ) -> DesignCheck:
+    """The protocol's measurements as one :class:`DesignCheck`.
+
+    Parameters
+    ----------
+    r : RobustnessResult
+        The bisection (:func:`s_star_bisection`).
+    verified : dict
+        Label -> :func:`full_order_runs` at s* ('at_s_star') and s_fail ('at_s_fail').
+    paper : SimulationResult
+        :func:`paper_run`.
+    eigen : tuple
+        :func:`eigenvalue_check`.
+    settings : RobustnessSettings
+        The protocol's settings.
 
     Returns
     -------
     DesignCheck
     """
-    model = gait.model
-    say = progress or (lambda msg: None)
-    unit = unit or (lambda name, inputs, compute: compute())
-    order = order or list
-    st, dirs = settings, kept.directions
-    say("s* of the design (walker bisection) and full-order verification")
-    inputs = dict(gait=gait.cache_key, design=design.to_dict(), kept=dirs.tolist(),
-                  settings=dict(st.__dict__))
-    r = unit("s* bisection", inputs, lambda: robustness(gait, design, st, kept=kept))
-    ctrl = TimeVaryingController(gait, np.array(design.M1), rejoin=design.rejoin)
-    opts = SimulationOptions(steps=st.steps, mu=st.mu, torque_limit=st.torque_limit, jit=True)
-
-    def runs_at(s):
-        q0, dq0 = start_states(gait, dirs, np.full(len(dirs), s))
-        runs = WalkBatch.concat([simulate(ctrl, q0[i], dq0[i], opts) for i in range(len(dirs))])
-        out = [str(v) for v in runs.verdict(st.tol)]
-        return dict(scale=s, outcomes=out, passed=int(sum(o == "ok" for o in out)))
-
-    def paper_run():
-        q0, dq0 = start_states(gait, dirs[:1], [1.0])
-        return simulate(ctrl, q0[0], dq0[0], opts)
-
-    todo = [(label, s, lambda s=s: runs_at(s))
-            for label, s in (("at_s_star", r.s_star), ("at_s_fail", r.s_fail))
-            if math.isfinite(s)] + [("paper", 1.0, paper_run)]
-    done = {label: unit("full order", dict(inputs, label=label, scale=s), compute)
-            for label, s, compute in order(todo)}
-    verified = {label: done[label] for label, _, _ in todo if label != "paper"}
-    paper = done["paper"]
+    st = settings
     errs = paper.unactuated_errors().tolist()
     conv = paper.steps_to_converge(st.tol)
     conv = int(conv) if math.isfinite(conv) else None
-    max_abs = poincare_map(gait, rejoin=design.rejoin).analyse(
-        np.array(design.M1), method="ad").max_abs
-    lam_vc = abs(vc_eigenvalue(gait).eigenvalue)
+    max_abs, lam_vc = eigen
     fail = r.failure
     failure = (f"{fail['status']} in step {fail['step']} (direction {fail['direction']})"
                if fail else "")
@@ -167,6 +227,105 @@ def verify_design(gait, design: Design, kept, settings: RobustnessSettings,
                        steps_to_converge=conv, paper_errors=errs, paper_status=str(paper.status),
                        peak_torque=float(paper.peak_torque), message=msg, robustness=r,
                        paper_run=paper)
+
+
+def submit_check(engine, design: Design, kept, settings: RobustnessSettings):
+    """Submit the protocol's tasks: (the bisection, the paper's run, the eigenvalues)
+    as :class:`~analysis.tasks.Ref` s; :func:`finish_check` waits for them and adds the
+    full-order runs at s* and just above.
+
+    Parameters
+    ----------
+    engine : Engine
+        Where the tasks run.
+    design, kept, settings :
+        As :func:`verify_design`.
+
+    Returns
+    -------
+    tuple of Ref
+    """
+    return (engine.submit(s_star_bisection, design, kept, settings),
+            engine.submit(paper_run, design, kept, settings),
+            engine.submit(eigenvalue_check, design))
+
+
+def finish_check(engine, design: Design, kept, settings: RobustnessSettings, refs) -> DesignCheck:
+    """The check from the refs of :func:`submit_check`, after the full-order runs at s*
+    and at s_fail (run side by side).
+
+    Parameters
+    ----------
+    engine : Engine
+        Where the tasks run.
+    design, kept, settings :
+        As :func:`verify_design`.
+    refs : tuple of Ref
+        From :func:`submit_check`.
+
+    Returns
+    -------
+    DesignCheck
+    """
+    bis, paper, eigen = refs
+    r = bis.result()
+    runs = {label: engine.submit(full_order_runs, design, kept, settings, s)
+            for label, s in (("at_s_star", r.s_star), ("at_s_fail", r.s_fail))
+            if math.isfinite(s)}
+    return design_check(r, {k: v.result() for k, v in runs.items()}, paper.result(),
+                        eigen.result(), settings)
+
+
+@task
+def verify_flow(engine, design: Design, kept, settings: RobustnessSettings) -> DesignCheck:
+    """:func:`verify_design` as a flow of tasks (the bisection, the paper's run and the
+    eigenvalues side by side, then the full-order runs at s* and just above).
+
+    Parameters
+    ----------
+    engine : Engine
+        Where the tasks run.
+    design, kept, settings :
+        As :func:`verify_design`.
+
+    Returns
+    -------
+    DesignCheck
+    """
+    return finish_check(engine, design, kept, settings,
+                        submit_check(engine, design, kept, settings))
+
+
+@design_first
+def verify_design(design: Design, kept, settings: RobustnessSettings, progress=None,
+                  scheduler="synchronous") -> DesignCheck:
+    """Measure a design by the verification protocol (module docstring).
+
+    Parameters
+    ----------
+    design : Design
+        A time-varying design on its gait (``verify_design(gait, Design(M1, rejoin),
+        ...)`` also works).
+    kept : KeptDirections
+        The kept directions of this gait (:func:`analysis.robustness.kept_directions`).
+    settings : RobustnessSettings
+        Steps, tolerance, mu, torque limit, RK4 steps and bisection rounds.
+    progress : callable, optional
+        Called with one line of text before the work starts.
+    scheduler : str or Client, optional
+        Where its tasks run (:func:`analysis.tasks.resolve_scheduler`; default: this
+        process).
+
+    Returns
+    -------
+    DesignCheck
+    """
+    if design.M1 is None:
+        raise ValueError("design: the protocol measures a time-varying design")
+    if progress is not None:
+        progress("s* of the design (walker bisection) and full-order verification")
+    with Engine(scheduler, cache=False) as eng:
+        return eng.spawn(verify_flow, design, kept, settings).result()
 
 
 @dataclass
@@ -205,17 +364,16 @@ class HiddenPatterns(Result):
     SUCCESS = ("done",)
 
 
-@gait_first
-def hidden_sign_patterns(gait, design: Design, kept, settings: RobustnessSettings,
+@task
+@design_first
+def hidden_sign_patterns(design: Design, kept, settings: RobustnessSettings,
                          scales=(1.0, 1.25), n: int = 12, seeds=(7, 11, 13)) -> HiddenPatterns:
     """Walk the design from sign patterns never used to choose it (module docstring).
 
     Parameters
     ----------
-    gait : Reference
-        The gait.
     design : Design
-        The design.
+        The design on its gait.
     kept : KeptDirections
         The kept directions (excluded from the patterns).
     settings : RobustnessSettings
@@ -231,6 +389,7 @@ def hidden_sign_patterns(gait, design: Design, kept, settings: RobustnessSetting
     -------
     HiddenPatterns
     """
+    gait = design.gait
     model = gait.model
     st = settings
     opts = SimulationOptions(steps=st.steps, mu=st.mu, torque_limit=st.torque_limit, jit=True)

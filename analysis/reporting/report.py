@@ -512,23 +512,21 @@ def write_report(out: Path, s: dict) -> Path:
                   "## Results", "", "| quantity | ours | note |", "|---|---|---|"]
         lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} |" for a, b, c in _robot_rows(s)]
     lines += [""] + _robust_lines(s) + _terrain_lines(s)
-    reused, helped = s.get("reused", {}), s.get("helped", {})
-    lines += ["## Stages", "", "Reused: results an earlier run computed with the same inputs "
-              "and the same code, read from the cache folder.  Helper: results the helper "
-              "process computed for this run on the second core (the stage's time is then "
-              "what it waited, if anything).", "",
-              "| stage | status | time (s) | reused | helper |", "|---|---|---|---|---|"]
+    cp = s.get("critical_path") or {}
+    lines += ["## Stages", "", "Each stage is a flow of tasks; every result is kept in the "
+              "cache folder by its inputs and the version of the numerical code.  Computed: "
+              "tasks run by this run; reused: read from the cache; work: the computed "
+              "tasks' seconds (several run at once)."
+              + (f"  The longest chain of computed tasks took {_f(cp.get('seconds'), '.1f')} "
+                 "s: the run's bound on any number of workers." if cp.get("tasks") else ""),
+              "", "| stage | status | computed | reused | work (s) |", "|---|---|---|---|---|"]
     for name, st in stages.items():
         extra = st.get("error") or st.get("reason") or ""
         extra = " ".join(str(extra).split())[:300]
-        kept = reused.get(name, [])
         lines.append(f"| {esc(name)} | {esc(st.get('status'))}"
                      + (f": {esc(extra)}" if extra else "")
-                     + f" | {_f(st.get('time'), '.1f')} | "
-                     + (esc(", ".join(f"{k} x{kept.count(k)}" for k in dict.fromkeys(kept)))
-                        if kept else "") + " | "
-                     + (esc(", ".join(f"{k} x{hp.count(k)}" for k in dict.fromkeys(hp)))
-                        if (hp := helped.get(name, [])) else "") + " |")
+                     + f" | {_f(st.get('computed'), 'd')} | {_f(st.get('reused'), 'd')} | "
+                     f"{_f(st.get('time'), '.1f')} |")
     lines += ["", "## Figures", ""]
     figures = s.get("figures", {})
     captions = _figure_captions(s)

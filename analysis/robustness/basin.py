@@ -13,14 +13,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from biped_casadi import SimulationOptions, require_same_robot
+from biped_casadi import Design, SimulationOptions, design_first
 from biped_casadi.control.output_law import SECTION
 from biped_casadi.numerics import as_number
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import virtual_constraint_walker, zero_dynamics_walker
-from biped_casadi.control.reference import gait_first
 
-from .s_star import Design
+from ..tasks import task
 
 __all__ = ["BasinResult", "basin"]
 
@@ -89,8 +88,9 @@ class BasinResult(Result):
     SUCCESS = ("done",)
 
 
-@gait_first
-def basin(gait, design: Design | None = None, n: int = 101,
+@task
+@design_first
+def basin(design: Design, n: int = 101,
           q_span: float = 0.05, dq_span: float = 0.5, steps: int = 10, tol: float = 1e-3,
           options: SimulationOptions | None = None, rk4_steps: int = 128,
           nodes: int = 100, refine: int | None = None) -> BasinResult:
@@ -102,12 +102,13 @@ def basin(gait, design: Design | None = None, n: int = 101,
     of the constraint surface with that q_u and dq_u), walked for ``steps`` impacts with
     every validity condition checked.
 
+    ``basin(gait)`` is the basin of virtual constraints on the gait, ``basin(gait,
+    Design(M1, rejoin))`` a time-varying design's.
+
     Parameters
     ----------
-    gait : Reference
-        The reference step, made for ``model``.
-    design : Design, optional
-        A time-varying design; None: virtual constraints fitted to the gait.
+    design : Design
+        The design and its gait (time-varying, or virtual constraints).
     n : int
         Cells per axis.
     q_span, dq_span : float
@@ -136,8 +137,7 @@ def basin(gait, design: Design | None = None, n: int = 101,
     -------
     BasinResult
     """
-    model = gait.model
-    require_same_robot(model, gait)
+    gait = design.gait
     if isinstance(n, bool) or not isinstance(n, int) or n < 2:
         raise ValueError(f"n (cells per axis) must be an integer >= 2, got {n!r}")
     q_span = as_number(q_span, "q_span", positive=True)
@@ -148,7 +148,7 @@ def basin(gait, design: Design | None = None, n: int = 101,
     A, Bg = np.meshgrid(a, b, indexing="ij")
     X = np.c_[xs[0] + A.ravel(), xs[1] + Bg.ravel()]
     opts = options or SimulationOptions()
-    if design is None:
+    if design.M1 is None:
         W = virtual_constraint_walker(gait, opts, nodes, jit=True)
 
         def walk(Xs):
@@ -159,7 +159,7 @@ def basin(gait, design: Design | None = None, n: int = 101,
 
         def walk(Xs):
             return W.walk_from_section(Xs, np.array(design.M1), design.rejoin, steps)
-        design_dict = design.to_dict()
+        design_dict = dict(controller="tv", M1=list(design.M1), rejoin=design.rejoin)
 
     def cells(idx):
         """Walk the cells of flat indices idx: (outcome, final error)."""
@@ -176,7 +176,7 @@ def basin(gait, design: Design | None = None, n: int = 101,
     names, counts = np.unique(outcome.astype(str), return_counts=True)
     frac = float(np.mean(outcome == "converged"))
     return BasinResult(
-        controller="tv" if design is not None else "vc", design=design_dict,
+        controller=design.controller, design=design_dict,
         x_star=xs.tolist(), steps=steps, tol=tol, converged_fraction=frac,
         counts={str(k): int(v) for k, v in zip(names, counts)},
         elapsed=time.perf_counter() - t0,

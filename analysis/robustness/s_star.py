@@ -32,8 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from biped_casadi import PAPER_REJOIN, SimulationOptions, directions, require_same_robot
-from biped_casadi.control.output_law import check_M1, check_rejoin
+from biped_casadi import Design, SimulationOptions, design_first, directions, require_same_robot
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import (WalkBatch, start_states, virtual_constraint_walker,
                                      zero_dynamics_walker)
@@ -42,48 +41,12 @@ from biped_casadi.control.reference import gait_first
 from gait_opt import Gait
 
 from ..cluster import dask_client
+from ..tasks import task
 from ..stability.poincare import poincare_map
 from ..stability.vc_map import vc_eigenvalue
 
 __all__ = ["Design", "RobustnessSettings", "RobustnessResult", "KeptDirections",
            "kept_directions", "robustness", "BatchSStar", "s_star_batch", "bisect_scale"]
-
-
-@dataclass(frozen=True)
-class Design:
-    """A time-varying controller design: the output matrix M1 and the rejoin time of v_c.
-
-    The rejoin time is when the correction v_c rejoins the reference, as a fraction of
-    T (the paper: 1/2; at most the Poincaré section, 0.75).  The output gains do not
-    matter for walking (the closed loop is its zero dynamics) and are not part of a
-    design.
-
-    Parameters
-    ----------
-    M1 : tuple of float
-        One number per actuated joint (a sequence is converted to a tuple of floats).
-    rejoin : float
-        Rejoin time of v_c, fraction of T, in (0, 0.75].
-    """
-
-    M1: tuple
-    rejoin: float = PAPER_REJOIN
-
-    def __post_init__(self):
-        M1 = np.atleast_1d(np.asarray(self.M1, dtype=float))
-        object.__setattr__(self, "M1", tuple(check_M1(M1, M1.size).tolist()))
-        object.__setattr__(self, "rejoin", check_rejoin(self.rejoin))
-
-    def to_dict(self) -> dict:
-        """The design in plain JSON types.
-
-        Returns
-        -------
-        dict
-            ``controller`` 'tv', ``M1`` as a list of float and ``rejoin`` (fraction
-            of T).
-        """
-        return dict(controller="tv", M1=list(self.M1), rejoin=self.rejoin)
 
 
 @dataclass(frozen=True)
@@ -252,7 +215,6 @@ class KeptDirections(Result):
 VC_NODES = 200
 
 
-@gait_first
 def _vc_runs(gait, options, dirs, scale) -> WalkBatch:
     """Runs of virtual constraints fitted to the gait, one per direction, batched on their
     hybrid zero dynamics (:meth:`~biped_casadi.simulation.VirtualConstraintWalker.walk_from_states`:
@@ -267,6 +229,7 @@ def _vc_runs(gait, options, dirs, scale) -> WalkBatch:
 _KEEP_BATCH = 32          # candidate directions walked at once
 
 
+@task
 @gait_first
 def kept_directions(gait, settings: RobustnessSettings | None = None,
                     progress=None) -> KeptDirections:
@@ -378,7 +341,6 @@ def bisect_scale(evaluate, n: int, s_max: float, rounds: int):
 
 
 # ------------------------------------------------------------------ one design
-@gait_first
 def _runner(gait, design, st: RobustnessSettings):
     """``run(dirs, s) -> WalkBatch``: the design's (or virtual constraints') runs."""
     model = gait.model
@@ -393,18 +355,19 @@ def _runner(gait, design, st: RobustnessSettings):
     return run
 
 
-@gait_first
-def robustness(gait, design: Design | None = None,
-               settings: RobustnessSettings | None = None, kept=None,
+@task
+@design_first
+def robustness(design: Design, settings: RobustnessSettings | None = None, kept=None,
                progress=None) -> RobustnessResult:
-    """s* of a time-varying design (``design``) or of virtual constraints (``None``).
+    """s* of a design: a time-varying one, or virtual constraints.
+
+    ``robustness(gait)`` measures virtual constraints on the gait, ``robustness(gait,
+    Design(M1, rejoin))`` a time-varying design on it.
 
     Parameters
     ----------
-    gait : Reference
-        The reference step, made for ``model``.
-    design : Design, optional
-        The time-varying design; None measures virtual constraints fitted to the gait.
+    design : Design
+        The design and its gait (:class:`biped_casadi.Design`).
     settings : RobustnessSettings, optional
         How robustness is measured (default: all defaults).
     kept : KeptDirections, optional
@@ -416,6 +379,7 @@ def robustness(gait, design: Design | None = None,
     -------
     RobustnessResult
     """
+    gait = design.gait
     model = gait.model
     require_same_robot(model, gait)
     st = settings or RobustnessSettings()
@@ -427,7 +391,7 @@ def robustness(gait, design: Design | None = None,
         raise ValueError("no perturbation direction is walkable by virtual constraints on "
                          "this gait at full scale: robustness is undefined (try more "
                          "candidates or another gait)")
-    if design is None:
+    if design.M1 is None:
         name = "virtual constraints"
         max_abs, design_dict = abs(vc_eigenvalue(gait).eigenvalue), dict(controller="vc")
     else:
@@ -435,8 +399,9 @@ def robustness(gait, design: Design | None = None,
             raise ValueError(f"design: M1 must have {model.nu} components, got {len(design.M1)}")
         name = f"M1 = {list(design.M1)}"
         pm = poincare_map(gait, rejoin=design.rejoin)
-        max_abs, design_dict = pm.analyse(np.array(design.M1)).max_abs, design.to_dict()
-    run = _runner(gait, design, st)
+        max_abs = pm.analyse(np.array(design.M1)).max_abs
+        design_dict = dict(controller="tv", M1=list(design.M1), rejoin=design.rejoin)
+    run = _runner(gait, None if design.M1 is None else design, st)
     runs = 0
     if progress is not None:
         progress(f"s* of {name}: bisection on [0, {st.s_max:g}] over {len(dirs)} directions")
@@ -466,7 +431,7 @@ def robustness(gait, design: Design | None = None,
                f"; at s = {s_fail:.4g} direction {failure['direction']} fails: "
                f"{failure['status']} in step {failure['step']}" if failure else ""))
     return RobustnessResult(
-        controller="tv" if design is not None else "vc", design=design_dict,
+        controller=design.controller, design=design_dict,
         s_star=s_star, s_fail=s_fail, failure=failure, steps_to_converge=worst,
         paper=paper, max_abs=max_abs, directions_kept=len(dirs), directions_tried=kept.tried,
         directions_rejected=dict(kept.rejected), settings=st.__dict__.copy(),

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import functools
 import os
 import sys
@@ -31,6 +32,8 @@ import time
 import traceback
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+
+from biped_casadi.caching import TaskInfo, task
 
 from ..cluster import DASK_CONNECT_TIMEOUT, DASK_WORKER_TIMEOUT, tune_allocator
 from .keys import task_key
@@ -46,43 +49,6 @@ _LOCAL = threading.local()
 
 
 # ------------------------------------------------------------------------ tasks
-@dataclass(frozen=True)
-class TaskInfo:
-    """What identifies a task: its name, its own version (bump it when its result for the
-    same arguments changes without any change of code, e.g. after a data fix) and the
-    kind of code it runs (:data:`analysis.tasks.keys.CODE_SETS`)."""
-
-    name: str
-    version: int = 1
-    code: str = "numerical"
-
-
-def task(fn=None, *, version: int = 1, code: str = "numerical", name: str | None = None):
-    """Mark a pure function as a task (its results are kept by key).
-
-    The function is returned unchanged (calling it runs it); it gains ``task_info``.
-
-    Parameters
-    ----------
-    fn : callable
-        A module-level function of typed arguments.
-    version : int
-        The task's own version.
-    code : str
-        'numerical' or 'figures' (:func:`analysis.tasks.keys.code_version`).
-    name : str, optional
-        Default ``module.qualname``.
-
-    Returns
-    -------
-    callable
-    """
-    def mark(f):
-        f.task_info = TaskInfo(name or f"{f.__module__}.{f.__qualname__}", version, code)
-        return f
-    return mark(fn) if fn is not None else mark
-
-
 def _info(fn) -> TaskInfo:
     info = getattr(fn, "task_info", None)
     if info is None:
@@ -102,11 +68,13 @@ class TaskError(RuntimeError):
         Its error, ``Type: text``.
     detail : str
         Its traceback.
+    key : str
+        The key of the task that raised.
     """
 
-    def __init__(self, origin: str, message: str, detail: str = ""):
-        super().__init__(origin, message, detail)
-        self.origin, self.message, self.detail = origin, message, detail
+    def __init__(self, origin: str, message: str, detail: str = "", key: str = ""):
+        super().__init__(origin, message, detail, key)
+        self.origin, self.message, self.detail, self.key = origin, message, detail, key
 
     def __str__(self):
         return f"{self.origin.rsplit('.', 1)[-1]}: {self.message}"
@@ -124,7 +92,7 @@ def in_task() -> bool:
         return False
 
 
-def _execute(fn, args, kwargs):
+def _execute(fn, key, args, kwargs):
     """Run a task (in this process or on a worker): (value, seconds); any error becomes a
     :class:`TaskError` naming the task."""
     tune_allocator()
@@ -137,7 +105,7 @@ def _execute(fn, args, kwargs):
         raise
     except Exception as e:          # noqa: BLE001 - reported with the task's name
         raise TaskError(_info(fn).name, f"{type(e).__name__}: {e}",
-                        traceback.format_exc(limit=8)) from None
+                        traceback.format_exc(limit=8), key) from None
     finally:
         _LOCAL.task = was
     return value, time.perf_counter() - t
@@ -203,8 +171,8 @@ def _refs_in(obj) -> list:
 @dataclass
 class TaskRecord:
     """One task of a run: its name, stage, key, state ('computed', 'reused' or
-    'failed') and the seconds it took (when computed: in this run; reused: when it was
-    computed)."""
+    'failed'), the seconds it took (when computed: in this run; reused: when it was
+    computed) and whether it is a flow (whose seconds are mostly waiting)."""
 
     name: str
     stage: str
@@ -212,6 +180,7 @@ class TaskRecord:
     state: str
     seconds: float
     error: str = ""
+    flow: bool = False
 
 
 class Ref:
@@ -238,10 +207,26 @@ class Ref:
         self._event = threading.Event()
         self._future = None            # a Dask future while on the cluster
         self._scattered = None
+        self._callbacks = []
+        self._lock = threading.Lock()
+        self.deps = ()                 # the refs it waited for (the graph's edges)
+        self.flow = False
 
     def _finish(self, state, value=None, error=None, seconds=0.0):
-        self.state, self._value, self._error, self.seconds = state, value, error, seconds
-        self._event.set()
+        with self._lock:
+            self.state, self._value, self._error, self.seconds = state, value, error, seconds
+            self._event.set()
+            callbacks, self._callbacks = self._callbacks, []
+        for cb in callbacks:
+            cb(self)
+
+    def _when_done(self, callback):
+        """Call ``callback(self)`` once the result is known (at once if it is)."""
+        with self._lock:
+            if not self._event.is_set():
+                self._callbacks.append(callback)
+                return
+        callback(self)
 
     def done(self) -> bool:
         """Whether the result (or the failure) is known."""
@@ -259,9 +244,12 @@ class Ref:
         TaskError
             The task, or one it depends on, failed.
         """
+        awaited = getattr(_LOCAL, "awaited", None)
+        if awaited is not None:
+            awaited.append(self)
         while not self._event.wait(0.5):
             if self.engine.closed:
-                raise TaskError(self.name, "interrupted: the engine was closed")
+                raise TaskError(self.name, "interrupted: the engine was closed", key=self.key)
         if self._error is not None:
             raise self._error
         return self._value
@@ -339,24 +327,27 @@ class Engine:
         Where tasks run (:func:`resolve_scheduler`).
     workers : int, optional
         Processes of a local cluster.
-    cache : str or Path, optional
-        The cache folder (default :func:`biped_casadi.cache_dir`).
+    cache : str, Path or False, optional
+        The cache folder (default :func:`biped_casadi.cache_dir`); False: keep nothing.
     use_cache : bool
         Read kept results (False: compute every task again; results are still written).
     progress : bool
         One bar of finished tasks on stderr (when it is a terminal).
     on_record : callable, optional
         Called with each :class:`TaskRecord` as a task finishes.
+    log : callable, optional
+        Called with the lines flows report (:meth:`say`).
     """
 
     def __init__(self, scheduler=None, workers: int | None = None, cache=None,
-                 use_cache: bool = True, progress: bool = False, on_record=None):
+                 use_cache: bool = True, progress: bool = False, on_record=None, log=None):
         self.scheduler = resolve_scheduler(scheduler, workers)
         self.workers = workers
         self.store = ResultStore(cache)
         self.use_cache = bool(use_cache)
         self.records: list[TaskRecord] = []
         self.on_record = on_record
+        self._log = log
         self.closed = False
         self._refs: dict[str, Ref] = {}
         self._lock = threading.RLock()
@@ -384,14 +375,21 @@ class Engine:
         self.closed = True
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
-        if self._client is not None and self._cluster is not None:
-            with contextlib.suppress(Exception):
-                self._client.close()
-            with contextlib.suppress(Exception):
-                self._cluster.close()
-        elif self._client is not None and isinstance(self.scheduler, str):
-            with contextlib.suppress(Exception):
-                self._client.close()
+        # the cluster's processes report its shutdown (lost heartbeats, closed streams):
+        # nothing for the user
+        quiet = logging.getLogger("distributed")
+        level = quiet.level
+        quiet.setLevel(logging.CRITICAL)
+        try:
+            if self._client is not None and (self._cluster is not None
+                                             or isinstance(self.scheduler, str)):
+                with contextlib.suppress(Exception):
+                    self._client.close()
+            if self._cluster is not None:
+                with contextlib.suppress(Exception):
+                    self._cluster.close()
+        finally:
+            quiet.setLevel(level)
         if self._bar is not None:
             self._bar.close()
 
@@ -403,6 +401,18 @@ class Engine:
             if self._client is None:
                 self._client, self._cluster = _connect(self.scheduler, self.workers)
             return self._client
+
+    def say(self, message: str):
+        """Report one line of a flow's progress (to the ``log`` callable, if any).
+
+        Parameters
+        ----------
+        message : str
+            The line.
+        """
+        if self._log is not None:
+            with contextlib.suppress(Exception):
+                self._log(message)
 
     # ---------------------------------------------------------------- stages
     @contextlib.contextmanager
@@ -450,6 +460,7 @@ class Engine:
             if key in self._refs:
                 return self._refs[key]
             ref = Ref(self, key, info.name, stage)
+            ref.deps = self._deps((args, kwargs))
             self._refs[key] = ref
         if self._reuse(ref):
             return ref
@@ -461,8 +472,23 @@ class Engine:
             return ref
         if self.synchronous:
             self._run_here(ref, fn, args, kwargs)
-        else:
+            return ref
+        # results of flows still running: submit when they are known, without waiting
+        waiting = [r for r in _refs_in((args, kwargs)) if not r.done() and r._future is None]
+        if not waiting:
             self._run_on_cluster(ref, fn, args, kwargs, priority)
+            return ref
+        left = [len(waiting)]
+        lock = threading.Lock()
+
+        def ready(_):
+            with lock:
+                left[0] -= 1
+                go = left[0] == 0
+            if go:
+                self._run_on_cluster(ref, fn, args, kwargs, priority)
+        for r in waiting:
+            r._when_done(ready)
         return ref
 
     def map(self, fn, items, *args, **kwargs) -> list:
@@ -492,12 +518,14 @@ class Engine:
             if key in self._refs:
                 return self._refs[key]
             ref = Ref(self, key, info.name, stage)
+            ref.deps, ref.flow = self._deps((args, kwargs)), True
             self._refs[key] = ref
         if self._reuse(ref):
             return ref
 
         def run():
             _LOCAL.stage = (stage, priority)
+            _LOCAL.awaited, _LOCAL.flow_deps = [], ref.deps
             t = time.perf_counter()
             try:
                 value = flow(self, *args, **kwargs)
@@ -506,19 +534,68 @@ class Engine:
                 return
             except Exception as e:          # noqa: BLE001 - reported with the flow's name
                 self._done(ref, "failed", error=TaskError(
-                    info.name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8)))
+                    info.name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8),
+                    ref.key))
                 return
             self._done(ref, "computed", value=value, seconds=time.perf_counter() - t,
                        keep=True)
 
+        def run_flow():
+            try:
+                run()
+            finally:
+                _LOCAL.awaited, _LOCAL.flow_deps = None, ()
+
         if self.synchronous:
-            run()
+            saved = getattr(_LOCAL, "awaited", None), getattr(_LOCAL, "flow_deps", ())
+            try:
+                run()
+            finally:
+                _LOCAL.awaited, _LOCAL.flow_deps = saved
         else:
             with self._lock:
                 if self._pool is None:
                     self._pool = ThreadPoolExecutor(32, thread_name_prefix="biped-flow")
-            self._pool.submit(run)
+            self._pool.submit(run_flow)
         return ref
+
+    @staticmethod
+    def _deps(args) -> tuple:
+        """The refs a new task or flow comes after: those in its arguments, and, inside a
+        flow, everything the flow has waited for so far (and the flow's own)."""
+        deps = list(_refs_in(args)) + list(getattr(_LOCAL, "awaited", None) or ()) \
+            + list(getattr(_LOCAL, "flow_deps", ()) or ())
+        return tuple({id(r): r for r in deps}.values())
+
+    def critical_path(self) -> dict:
+        """The longest chain of computed tasks of this run (flows weigh nothing: their
+        work is in their tasks): the wall time's bound on any number of workers.
+
+        Returns
+        -------
+        dict
+            ``seconds`` and ``tasks`` (the chain's names, first to last).
+        """
+        memo: dict = {}
+
+        def longest(r):
+            if id(r) in memo:
+                return memo[id(r)]
+            memo[id(r)] = (0.0, [])                      # (a cycle cannot happen)
+            w = r.seconds if (r.state == "computed" and not r.flow) else 0.0
+            best = max((longest(d) for d in r.deps), key=lambda x: x[0], default=(0.0, []))
+            memo[id(r)] = (w + best[0], best[1] + ([r.name.rsplit(".", 1)[-1]] if w else []))
+            return memo[id(r)]
+        with self._lock:
+            refs = list(self._refs.values())
+        top = max((longest(r) for r in refs), key=lambda x: x[0], default=(0.0, []))
+        return dict(seconds=round(top[0], 2), tasks=top[1])
+
+    def origin_stage(self, error: TaskError) -> str:
+        """The stage of the task where a failure began (its own stage, or the one of the
+        task it depends on that failed first)."""
+        r = self._refs.get(getattr(error, "key", ""))
+        return r.stage if r is not None else ""
 
     # ---------------------------------------------------------------- internals
     def _reuse(self, ref: Ref) -> bool:
@@ -547,7 +624,7 @@ class Engine:
             self.store.write(ref.key, ref.name, value, seconds)
         ref._finish(state, value, error, seconds)
         rec = TaskRecord(ref.name, ref.stage, ref.key, state, float(seconds),
-                         "" if error is None else str(error))
+                         "" if error is None else str(error), ref.flow)
         with self._lock:
             self.records.append(rec)
             if self._bar is not None and state != "reused":
@@ -560,7 +637,7 @@ class Engine:
         try:
             a = _pack(args, lambda r: r.result())
             k = _pack(kwargs, lambda r: r.result())
-            value, seconds = _execute(fn, a, k)
+            value, seconds = _execute(fn, ref.key, a, k)
         except TaskError as e:
             self._done(ref, "failed", error=e)
             return
@@ -588,7 +665,7 @@ class Engine:
             self._done(ref, "failed", error=e)
             return
         short = ref.name.rsplit(".", 1)[-1]
-        fut = client.submit(_execute, fn, a, k, key=f"{short}-{ref.key}", pure=False,
+        fut = client.submit(_execute, fn, ref.key, a, k, key=f"{short}-{ref.key}", pure=False,
                             priority=priority)
         ref._future = fut
         fut.add_done_callback(functools.partial(self._collect, ref))
@@ -600,7 +677,8 @@ class Engine:
             self._done(ref, "failed", error=e)
             return
         except BaseException as e:             # noqa: BLE001 - cancelled, lost worker
-            self._done(ref, "failed", error=TaskError(ref.name, f"{type(e).__name__}: {e}"))
+            self._done(ref, "failed", error=TaskError(ref.name, f"{type(e).__name__}: {e}",
+                                                      key=ref.key))
             return
         self._done(ref, "computed", value=value, seconds=seconds, keep=True)
 
@@ -615,7 +693,7 @@ def _connect(scheduler, workers):
     if scheduler == "local":
         cluster = LocalCluster(n_workers=workers or _cores(), threads_per_worker=1,
                                processes=True, dashboard_address=None,
-                               env={"BIPED_THREADS": "1"})
+                               silence_logs=logging.ERROR, env={"BIPED_THREADS": "1"})
         return Client(cluster), cluster
     if not isinstance(scheduler, str):
         return scheduler, None

@@ -13,7 +13,6 @@ disk, unused).
 """
 from __future__ import annotations
 
-import ast
 import dataclasses
 import hashlib
 import importlib.util
@@ -22,6 +21,8 @@ import math
 from pathlib import Path
 
 import numpy as np
+
+from biped_casadi.caching import code_of
 
 __all__ = ["code_version", "argument_key", "task_key", "CODE_SETS", "NotKeyable"]
 
@@ -38,17 +39,6 @@ _VERSIONS: dict = {}
 
 class NotKeyable(TypeError):
     """An argument of a task whose content cannot be keyed (not a typed value)."""
-
-
-def _strip_docstrings(tree: ast.AST) -> ast.AST:
-    for node in ast.walk(tree):
-        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
-            body = node.body
-            if body and isinstance(body[0], ast.Expr) and isinstance(
-                    getattr(body[0], "value", None), ast.Constant) \
-                    and isinstance(body[0].value.value, str):
-                node.body = body[1:] or [ast.Pass()]
-    return tree
 
 
 def _package_root(name: str) -> Path | None:
@@ -85,9 +75,8 @@ def code_version(kind: str = "numerical") -> str:
                 rel = f.relative_to(root.parent).as_posix()
                 if any(rel == p or rel.startswith(p + "/") for p in left_out):
                     continue
-                tree = _strip_docstrings(ast.parse(f.read_bytes(), filename=str(f)))
                 h.update(rel.encode())
-                h.update(ast.dump(tree, include_attributes=False).encode())
+                h.update(code_of(f).encode())
         _VERSIONS[kind] = h.hexdigest()
     return _VERSIONS[kind]
 
@@ -136,7 +125,7 @@ def argument_key(obj, ref_key=None):
         return ["array", str(a.dtype), list(a.shape), hashlib.sha256(a.tobytes()).hexdigest()]
     key = getattr(obj, "cache_key", None)
     if key is not None and not callable(key):
-        return [type(obj).__name__, key]
+        return [type(obj).__name__, argument_key(key, ref_key)]
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return [f"{type(obj).__module__}.{type(obj).__qualname__}",
                 {f.name: argument_key(getattr(obj, f.name), ref_key)

@@ -23,12 +23,13 @@ class ResultStore:
 
     Parameters
     ----------
-    folder : str or Path, optional
-        The cache folder (default :func:`biped_casadi.cache_dir`).
+    folder : str, Path or False, optional
+        The cache folder (default :func:`biped_casadi.cache_dir`); False keeps nothing.
     """
 
     def __init__(self, folder=None):
-        self.root = cache_dir(folder) / "tasks"
+        self.enabled = folder is not False
+        self.root = cache_dir(None if folder is False else folder) / "tasks"
 
     def path(self, key: str) -> Path:
         """The file of one key.
@@ -58,7 +59,7 @@ class ResultStore:
             ``name``, ``value``, ``seconds``.
         """
         p = self.path(key)
-        if not p.is_file():
+        if not self.enabled or not p.is_file():
             return MISSING
         try:
             rec = pickle.loads(p.read_bytes())
@@ -83,6 +84,8 @@ class ResultStore:
         bool
             Whether it was written.
         """
+        if not self.enabled:
+            return False
         data = pickle.dumps(dict(name=name, value=value, seconds=float(seconds)),
                             protocol=pickle.HIGHEST_PROTOCOL)
         with contextlib.suppress(OSError):

@@ -9,11 +9,11 @@ from .zero_dynamics import Linearisation, ZeroDynamics, zero_dynamics
 from .virtual_constraints import (HIP_PHASE, ConstraintSurface, VirtualConstraintController,
                                   VirtualConstraints, constraint_surface,
                                   fit_virtual_constraints)
-from .design import Design
+from .design import Design, design_first
 
 __all__ = ["Controller", "StepStart", "ControlOutput", "SECTION", "SINGULAR_RTOL", "M1_LIMIT",
            "Gains", "SingularityReport", "check_M1", "Reference", "require_same_robot", "gait_first",
-           "Design",
+           "Design", "design_first",
            "TimeVaryingController", "PAPER_REJOIN", "VirtualConstraints",
            "VirtualConstraintController", "fit_virtual_constraints", "ConstraintSurface",
            "constraint_surface", "HIP_PHASE", "ZeroDynamics", "zero_dynamics", "Linearisation"]

@@ -5,7 +5,9 @@ Where each part lives: :mod:`.settings` (the settings, the result and the error)
 :mod:`.functions` (the compiled node, step and reference functions),
 :mod:`.transcription` (one scenario-step: the walker's RK4 rule, its strike and impact,
 with exact sensitivities), :mod:`.reduced` (the NLP in the design alone and its IPOPT
-solve) and :mod:`.driver` (the method below, :func:`codesign`).
+solve), :mod:`.problem` (one NLP as a typed value and its solve, a task), :mod:`.units`
+(the other units of work), :mod:`.method` (the method below, phase by phase) and
+:mod:`.api` (:func:`codesign` and :func:`codesign_tradeoff`).
 
 The NLP.  Decision variables: the outputs M1, the
 perturbation scale s (maximised) and, with the gait free, the gait's Bezier
@@ -41,15 +43,18 @@ in full order, max|lambda| against virtual constraints, and sign patterns never 
 (:func:`analysis.design.verification.hidden_sign_patterns`).  Results are cached.
 """
 
-from .driver import codesign, codesign_path, codesign_prefetch, codesign_tradeoff
+from .api import codesign, codesign_flow, codesign_tradeoff, replay_args, tradeoff_flow
 from .functions import FAMILIES, TranscriptionSettings, compiled
+from .method import Candidate, Method
+from .problem import Problem, Solve, build, solve, solve_continued
 from .reduced import NLPSolve, Reduced, solve_nlp
 from .settings import (CODESIGNS, FULL, QUICK, TODAY_DESIGN, CodesignError, CodesignResult,
-                       CodesignSettings)
+                       CodesignSettings, IpoptLimits, StartSampling, TrustRegion, Verification)
 from .transcription import Transcription
 
-# the documented surface (Transcription and Reduced stay importable: the NLP's
-# internals, for tests and studies)
-__all__ = ["codesign", "codesign_path", "codesign_prefetch", "codesign_tradeoff", "CodesignSettings",
+# the documented surface (Transcription, Reduced, Problem and the method's parts stay
+# importable: the NLP's internals, for tests and studies)
+__all__ = ["codesign", "codesign_tradeoff", "codesign_flow", "tradeoff_flow", "replay_args",
+           "CodesignSettings", "IpoptLimits", "StartSampling", "TrustRegion", "Verification",
            "CodesignResult", "CodesignError", "QUICK", "FULL", "TODAY_DESIGN", "CODESIGNS",
            "TranscriptionSettings", "solve_nlp", "NLPSolve", "FAMILIES", "compiled"]

@@ -1,6 +1,7 @@
 """The co-design's settings, result and error (:func:`analysis.design.codesign.codesign`)."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import asdict, dataclass, field
 
 from biped_casadi.caching import DiskCache
@@ -15,6 +16,105 @@ TODAY_DESIGN = (-8.2618, 2.5374, 0.0034, 8.5090)
 
 #: the co-designs kept between sessions
 CODESIGNS = DiskCache("codesign", version=1)
+
+
+@dataclass(frozen=True)
+class IpoptLimits:
+    """When one IPOPT solve of the co-design stops.
+
+    An iteration count and a count of NLP evaluations (each walks every scenario, so its
+    cost is nearly constant), never a wall time: a solve's result depends on its inputs
+    alone.
+
+    Parameters
+    ----------
+    max_iter : int
+        IPOPT iterations.
+    max_evaluations : int
+        Evaluations of the NLP (constraints and their Jacobian).
+    """
+
+    max_iter: int = 100
+    max_evaluations: int = 150
+
+
+@dataclass(frozen=True)
+class StartSampling:
+    """The starting M1 of the co-design.
+
+    Parameters
+    ----------
+    samples : int
+        Random M1 drawn in [-box, box]^nu (0: none).
+    box : float
+        Their box.
+    kept : int
+        Sampled M1 kept as starts: the first drawn with max ``|lambda|`` within the
+        eigenvalue bound from which the walker walks the paper's perturbation at scale 1.
+    seed : int
+        Seed of the samples.
+    extra : tuple
+        Starting M1s besides the sampled ones.
+    s_start : float
+        Perturbation scale of the first solves' starting point.
+    """
+
+    samples: int = 2000
+    box: float = 1.0
+    kept: int = 5
+    seed: int = 0
+    extra: tuple = ()
+    s_start: float = 0.9
+
+
+@dataclass(frozen=True)
+class TrustRegion:
+    """The trust region of a gait step (halved after a rejected step).
+
+    Parameters
+    ----------
+    alpha : float
+        Bezier coefficients, rad.
+    T : float
+        Step time, s.
+    x0 : float
+        The unactuated start, rad and rad/s.
+    """
+
+    alpha: float = 0.05
+    T: float = 0.025
+    x0: float = 0.25
+
+
+@dataclass(frozen=True)
+class Verification:
+    """How every candidate and the result are measured (the robust designs' protocol).
+
+    Parameters
+    ----------
+    mu : float
+        Friction coefficient.
+    torque_limit : float, optional
+        Torque bound, N m (None: the robot's).
+    directions : int
+        Kept perturbation directions.
+    walk_steps : int
+        Steps every run must walk.
+    tol : float
+        Convergence threshold at the last step.
+    hidden : bool
+        Check the result on hidden sign patterns (at scales 1 and 1.25).
+    basin : bool
+        Compute the 101 x 101 basin of the result.
+    """
+
+    mu: float = 0.6
+    torque_limit: float | None = None
+    directions: int = 16
+    walk_steps: int = 10
+    tol: float = 1e-3
+    hidden: bool = True
+    basin: bool = False
 
 
 @dataclass(frozen=True)
@@ -37,7 +137,7 @@ class CodesignSettings:
     steps : int
         Steps per NLP scenario.
     paper_tol : float
-        Error bound at the last NLP step of the paper's direction at scale 1.
+        Error bound at the last NLP steps of the paper's direction at scale 1.
     scenario_tol : float
         Error bound at the last NLP step of the other scenarios (at scale s).
     initial_active : int
@@ -53,54 +153,27 @@ class CodesignSettings:
         After a gait step that raises s* but leaves max ``|lambda|`` above the virtual
         constraints' (the free-gait NLP does not bound it), solve for M1 alone on the new
         gait under the Jury bound.
-    trust_alpha, trust_T, trust_x0 : float
-        Trust region of a gait step: rad on every Bezier coefficient, s on T, and
-        rad, rad/s on the unactuated start.
-    starts : tuple
-        Starting M1s besides the sampled ones (:data:`FULL` adds today's search design;
-        from it the NLP ends in the region of large M1, s* 0.4-0.9, measured).
-    samples : int
-        Random M1 drawn in [-box, box]^nu for the sampled starts (0: none).
-    box : float
-        Their box.
-    sampled_starts : int
-        Sampled M1 kept as starts: the first drawn with max ``|lambda|`` within the bound
-        from which the walker walks the paper's perturbation at scale 1.
-    seed : int
-        Seed of the samples.
-    s_start : float
-        Scale of the first NLP's starting point.
     eigen_margin : float
         max ``|lambda|`` is kept at most this fraction of the virtual constraints'
-        eigenvalue in the NLP.
-    max_iter : int
-        IPOPT iterations per solve.
-    screen_iter, screen_time, screen_evaluations : int, float, int
-        IPOPT iterations, wall time (s) and NLP evaluations of the first solve from each
-        start; the start whose solve reaches the largest s continues.  The evaluation
-        budget binds (an evaluation walks every scenario: its cost is nearly constant,
-        an iteration's is not), so that a result does not depend on the machine's
-        load; the wall times are a safety net.
-    paper_steps : int
-        Continuation solves that bring the paper's error bound down from the start's.
-    max_solve_time, max_evaluations : float, int
-        Wall time (s) and NLP evaluations of every other solve.
-    gait_iter, gait_solve_time, gait_evaluations : int, float, int
-        The same for a gait step's solve (a free-gait evaluation costs about four
-        times a fixed-gait one).
+        eigenvalue in the gait-fixed NLP.
     gait_eigen_margin : float
         In a gait step, max ``|lambda|`` of the current gait's A^z(M1) is kept at most this
         fraction of the virtual constraints' eigenvalue (the new gait's is verified).
+    paper_steps : int
+        Continuation solves that bring the paper's error bound down from the start's.
+    starts : StartSampling
+        The starting M1.
+    trust : TrustRegion
+        The gait steps' trust region.
+    solve, screen, gait_step : IpoptLimits
+        IPOPT's limits for the exchange and rejoin solves, the first solve from each
+        start (the start whose solve reaches the largest s continues), and a gait step
+        (a free-gait evaluation costs about four times a fixed-gait one).
     transcription : dict
         :class:`~analysis.design.codesign.functions.TranscriptionSettings` fields (rule and
         margins).
-    mu, torque_limit, directions, walk_steps, tol : as :class:`RobustnessSettings`
-        Friction coefficient, torque bound (N m, None: the robot's), kept directions,
-        steps walked and convergence threshold of every verification.
-    hidden : bool
-        Check the design on hidden sign patterns (at 1 and 1.25).
-    basin : bool
-        Compute the 101 x 101 basin of the result.
+    verification : Verification
+        How candidates and the result are measured.
     """
 
     gait: dict = field(default_factory=lambda: dict(ROBUST_GAIT))
@@ -115,35 +188,16 @@ class CodesignSettings:
     exchange_rounds: int = 1
     gait_rounds: int = 2
     repair: bool = True
-    trust_alpha: float = 0.05
-    trust_T: float = 0.025
-    trust_x0: float = 0.25
-    starts: tuple = ()
-    samples: int = 2000
-    box: float = 1.0
-    sampled_starts: int = 5
-    seed: int = 0
-    s_start: float = 0.9
     eigen_margin: float = 0.98
-    max_iter: int = 100
-    screen_iter: int = 30
-    screen_time: float = 60.0
-    screen_evaluations: int = 40
-    paper_steps: int = 3
-    max_solve_time: float = 60.0
-    max_evaluations: int = 150
-    gait_solve_time: float = 60.0
-    gait_iter: int = 40
-    gait_evaluations: int = 45
     gait_eigen_margin: float = 0.9
+    paper_steps: int = 3
+    starts: StartSampling = field(default_factory=StartSampling)
+    trust: TrustRegion = field(default_factory=TrustRegion)
+    solve: IpoptLimits = field(default_factory=IpoptLimits)
+    screen: IpoptLimits = field(default_factory=lambda: IpoptLimits(30, 40))
+    gait_step: IpoptLimits = field(default_factory=lambda: IpoptLimits(40, 45))
     transcription: dict = field(default_factory=dict)
-    mu: float = 0.6
-    torque_limit: float | None = None
-    directions: int = 16
-    walk_steps: int = 10
-    tol: float = 1e-3
-    hidden: bool = True
-    basin: bool = False
+    verification: Verification = field(default_factory=Verification)
 
     def robustness_settings(self, rounds: int = 8) -> RobustnessSettings:
         """The protocol's settings (400 RK4 steps per T, ``rounds`` bisection rounds).
@@ -157,19 +211,49 @@ class CodesignSettings:
         -------
         RobustnessSettings
         """
-        return RobustnessSettings(directions=self.directions, steps=self.walk_steps,
-                                  tol=self.tol, mu=self.mu, torque_limit=self.torque_limit,
-                                  rounds=rounds)
+        v = self.verification
+        return RobustnessSettings(directions=v.directions, steps=v.walk_steps, tol=v.tol,
+                                  mu=v.mu, torque_limit=v.torque_limit, rounds=rounds)
+
+    def replace(self, **changes) -> "CodesignSettings":
+        """A copy with some fields changed, the groups' fields given directly.
+
+        ``samples=``, ``seed=``, ``mu=`` and the other fields of the start sampling and
+        of the verification may be given as they are.
+
+        Parameters
+        ----------
+        **changes
+            Fields of this class or of :class:`StartSampling` (``samples``, ``box``,
+            ``seed``, ``kept``) and :class:`Verification` (``mu``, ``torque_limit``,
+            ``hidden``, ``basin``, ...).
+
+        Returns
+        -------
+        CodesignSettings
+        """
+        top = {k: v for k, v in changes.items() if k in self.__dataclass_fields__}
+        for group in ("starts", "verification"):
+            cur = getattr(self, group)
+            sub = {k: v for k, v in changes.items() if k in cur.__dataclass_fields__
+                   and k not in self.__dataclass_fields__}
+            if sub:
+                top[group] = dataclasses.replace(top.get(group, cur), **sub)
+        unknown = set(changes) - set(top) - {k for g in ("starts", "verification")
+                                             for k in getattr(self, g).__dataclass_fields__}
+        if unknown:
+            raise ValueError(f"CodesignSettings has no field {sorted(unknown)[0]!r}")
+        return dataclasses.replace(self, **top)
 
     def to_dict(self) -> dict:
-        """The settings as a dictionary (part of the cache key).
+        """The settings as a dictionary.
 
         Returns
         -------
         dict
         """
         d = asdict(self)
-        d["starts"] = [list(map(float, s)) for s in self.starts]
+        d["starts"]["extra"] = [list(map(float, s)) for s in self.starts.extra]
         return d
 
 
@@ -177,18 +261,20 @@ class CodesignSettings:
 #: patterns, each start screened on 25 NLP evaluations (20 iterations) instead of 40 (30):
 #: on RABBIT the same start wins and the design is the same to the last digit, in 2/3 of
 #: the time (measured)
-QUICK = CodesignSettings(free_gait=False, hidden=False, rejoin_choices=(),
-                         screen_evaluations=25, screen_iter=20)
+QUICK = CodesignSettings(free_gait=False, rejoin_choices=(), screen=IpoptLimits(20, 25),
+                         verification=Verification(hidden=False))
 #: the settings of a full reproduction: those of ``biped m1 --robust`` (one cache for both)
 FULL = CodesignSettings()
 
 
 @dataclass
 class CodesignResult(Result):
-    """The co-designed controller (and gait), verified.
+    """The co-designed controller (and gait) and its check by the verification protocol.
 
     ``success`` means the co-design ran to its verification; whether the targets are met
-    is ``status``.
+    is ``status``.  The check's figures (``s_star``, ``max_abs``, ``vc_eigenvalue``,
+    ``steps_to_converge``, ``paper_errors``, ``peak_torque``, ...) are also attributes of
+    the result and keys of ``to_dict()``.
 
     Parameters
     ----------
@@ -197,33 +283,14 @@ class CodesignResult(Result):
         the paper's perturbation converged by step 4) or 'target_not_met'.
     message : str
         The result in words.
-    design : dict
-        ``M1`` (list) and ``rejoin`` (fraction of T).
-    gait_file : str
-        The gait the design runs on.
-    gait_options : dict
-        Its GaitOptions.
+    design : Design
+        M1, the rejoin time and the gait (``design.gait``).
+    check : DesignCheck
+        The design measured by :func:`~analysis.design.verification.verify_design`.
     gait_free : bool
         Whether the gait was co-designed.
     gait_change : dict
         T before and after, the largest change of a Bezier coefficient (rad).
-    s_star, s_fail : float
-        The protocol's s* and the scale just above where a kept direction fails.
-    failure : str
-        That failure in words.
-    verified : dict
-        Full-order runs at s* and s_fail (:class:`~analysis.design.verification.DesignCheck`).
-    max_abs : float
-        max ``|lambda|`` of A^z (full AD).
-    vc_eigenvalue : float
-        Virtual constraints' ``|eigenvalue|`` on the same gait.
-    steps_to_converge : int or None
-        The paper's perturbation, full order: the step from which the error stays below
-        ``tol``.
-    paper_errors : list of float
-        The error at every step of that run.
-    peak_torque : float
-        Its largest ``|u|``, N m.
     hidden : dict
         The hidden sign patterns (:class:`~analysis.design.verification.HiddenPatterns`), or {}.
     basin : dict
@@ -231,45 +298,34 @@ class CodesignResult(Result):
     nlp_s : float
         The best NLP's own s (over its scenarios).
     active_constraints : list of dict
-        The constraints with the largest multipliers at the last solve, in words.
+        The constraints with the largest multipliers at the best solve, in words.
     ipopt : dict
-        The solves: status, iterations and time of each, and their totals.
+        The solves: status, iterations and evaluations of each, and their totals.
     rounds : list of dict
         Every solve and verification (s of the NLP, verified s*, scenarios).
     directions_kept : int
         Kept directions on the final gait.
     directions_tried : int
         Candidates tried to keep them.
-    simulate_args : list of str
-        ``biped simulate`` arguments that replay the design from the paper's perturbation.
-    stages : dict
-        Time per stage, s.
-    elapsed : float
-        Wall time, s.
     settings : dict
         :meth:`CodesignSettings.to_dict`.
+    gait_file : str
+        Where the gait is saved ('' until :func:`codesign` saves it).
+    simulate_args : list of str
+        ``biped simulate`` arguments that replay the design from the paper's
+        perturbation (empty until the gait is saved).
+    elapsed : float
+        Wall time of the computation, s (0 when every part was kept).
     cached : bool
         Read from the cache.
-    gait : Gait
-        The gait (left out of ``to_dict()``).
     """
 
     status: str
     message: str
-    design: dict
-    gait_file: str
-    gait_options: dict
+    design: object
+    check: object
     gait_free: bool
     gait_change: dict
-    s_star: float
-    s_fail: float
-    failure: str
-    verified: dict
-    max_abs: float
-    vc_eigenvalue: float
-    steps_to_converge: int | None
-    paper_errors: list
-    peak_torque: float
     hidden: dict
     basin: dict
     nlp_s: float
@@ -278,14 +334,43 @@ class CodesignResult(Result):
     rounds: list
     directions_kept: int
     directions_tried: int
-    simulate_args: list
-    stages: dict
-    elapsed: float
     settings: dict
+    gait_file: str = ""
+    simulate_args: list = field(default_factory=list)
+    elapsed: float = 0.0
     cached: bool = False
-    gait: object = internal(default=None)
 
     SUCCESS = ("target_met", "target_not_met")
+
+    #: the check's figures, read through the result
+    CHECK = ("s_star", "s_fail", "failure", "verified", "max_abs", "vc_eigenvalue",
+             "steps_to_converge", "paper_errors", "peak_torque")
+
+    def __getattr__(self, name):
+        if name in CodesignResult.CHECK:
+            return getattr(self.__dict__["check"], name)
+        raise AttributeError(name)
+
+    @property
+    def gait(self):
+        """The gait the design runs on."""
+        return self.design.gait
+
+    def to_dict(self) -> dict:
+        """The result in plain JSON types (what ``biped m1 --robust --json`` prints).
+
+        Returns
+        -------
+        dict
+            Every field, the check's figures at the top level, ``gait_options`` and
+            ``success``.
+        """
+        out = super().to_dict()
+        chk = out.pop("check")
+        for k in self.CHECK:
+            out[k] = chk.get(k)
+        out["gait_options"] = self.gait.options.to_dict()
+        return out
 
 
 class CodesignError(ValueError):
