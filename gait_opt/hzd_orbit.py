@@ -53,8 +53,7 @@ class BezierConstraints:
     H0: np.ndarray | None = None
 
     def to_dict(self) -> dict:
-        """The record of a gait file's ``virtual_constraints`` (see
-        :func:`constraints_from_dict`).
+        """The record of a ``virtual_constraints`` file (:func:`constraints_from_dict`).
 
         Returns
         -------

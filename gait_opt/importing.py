@@ -244,7 +244,7 @@ def _diagnostics(model, nodes: Nodes, gait: Gait) -> dict:
 
 def _cause(d: dict, fit_q: float, angles: str) -> str:
     """The likely reason a trajectory is not an orbit of the robot."""
-    other = "another coordinate convention (angles='absolute'?)" if angles == "relative" \
+    other = "another coordinate convention (absolute link angles? --angles absolute)" if angles == "relative" \
         else "another coordinate convention"
     if fit_q > 1e-2:
         return (f"the Bezier fit misses the nodes by {fit_q:.2g} rad (more nodes, or a "

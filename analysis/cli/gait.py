@@ -10,6 +10,7 @@ from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 
 from .common import (Progress, UserError, add_robot, load_model, output_dir, output_file,
                      print_json)
+from .gait_import import add_import_arguments, cmd_import
 
 #: --intervals beyond this make an NLP that takes minutes per iteration
 MAX_INTERVALS = 400
@@ -52,10 +53,13 @@ def register(sub):
     p.add_argument("--plot", metavar="DIR",
                    help="write gait_stick.png and gait_profiles.png into DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_import_arguments(p)
     p.set_defaults(func=cmd_gait)
 
 
 def cmd_gait(args):
+    if args.import_file is not None:
+        return cmd_import(args)
     if args.clearance is not None and not (math.isfinite(args.clearance)
                                            and args.clearance >= 0):
         raise UserError(f"--clearance must be a number >= 0 (m), got {args.clearance:g}")

@@ -587,8 +587,9 @@ def load_urdf(path, foot=None) -> RobotDescription:
 
 
 def description_toml(d: RobotDescription, header: str = "") -> str:
-    """A description file (the schema of :mod:`biped_casadi.model.description`) that
-    loads back to a description equal to ``d``.
+    """A description file (TOML) that loads back to a description equal to ``d``.
+
+    The schema is that of :mod:`biped_casadi.model.description`.
 
     Parameters
     ----------
