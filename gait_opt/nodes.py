@@ -217,6 +217,20 @@ def read_nodes(path, nq: int | None = None):
     ValueError
         Naming the file: missing, another suffix, unparsable, or nodes that are not
         valid (:func:`nodes_from_arrays`).
+
+    Notes
+    -----
+    One step, from just after an impact to just before the next; s, rad, rad/s,
+    rad/s^2; at least :data:`MIN_NODES` nodes, times strictly increasing, not
+    necessarily uniform:
+
+    - CSV: header ``t,q1,...,qn,dq1,...,dqn`` (optionally ``,ddq1,...,ddqn``), one row
+      per node;
+    - NPZ or JSON: arrays ``t`` (N,), ``q``, ``dq`` (N, n) and optionally ``ddq``;
+    - JSON ``{"virtual_constraints": {"bezier": [[...], ...], "theta_plus": ...,
+      "theta_minus": ..., "phase": [...], "outputs": [[...], ...]}}``: Bezier
+      coefficients of h_d (one row per output) over s = (theta - theta^+) / (theta^- -
+      theta^+), theta = phase . q, outputs H0 (optional, default the actuated joints).
     """
     path = Path(path)
     where = f"gait file {path}"

@@ -197,3 +197,14 @@ def test_bad_import_arguments(gait, tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1
         assert not out.exists()
+
+
+def test_the_how_to_example_runs(capsys):
+    """The floating-base example of docs/howto/bring-your-robot.md, as written."""
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "docs" / "howto" /
+            "bring-your-robot.md").read_text()
+    block = text.split("<!-- the block below runs in tests/test_gait_import.py -->")[1]
+    code = block.split("```python\n", 1)[1].split("```", 1)[0]
+    exec(compile(code, "bring-your-robot.md", "exec"), {})
+    assert "orbit residual" in capsys.readouterr().out

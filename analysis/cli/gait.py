@@ -58,8 +58,6 @@ def register(sub):
 
 
 def cmd_gait(args):
-    if args.import_file is not None:
-        return cmd_import(args)
     if args.clearance is not None and not (math.isfinite(args.clearance)
                                            and args.clearance >= 0):
         raise UserError(f"--clearance must be a number >= 0 (m), got {args.clearance:g}")
@@ -75,6 +73,8 @@ def cmd_gait(args):
                         f"{args.intervals}")
     if args.max_iter is not None and args.max_iter < 1:
         raise UserError(f"--max-iter must be >= 1, got {args.max_iter}")
+    if args.import_file is not None:
+        return cmd_import(args)
     out = output_file(args.out, "--out")               # before the solve, not after
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_figures
-from gait_opt import IMPORT_TOL, import_gait
+from gait_opt import IMPORT_TOL, GaitOptions, import_gait
 
 from .common import UserError, load_model, output_dir, output_file, print_json
 
@@ -26,7 +26,10 @@ def add_import_arguments(p):
                         f"more than TOL (rad, rad/s, m; default {IMPORT_TOL:g})")
     p.add_argument("--bezier-degree", type=int, default=None, metavar="M",
                    help="with --import: degree of the fitted Bezier polynomials (4 to 20; "
-                        "default: chosen by the fit)")
+                        "default: chosen by the fit). With --import, --continuation and "
+                        "--continuation-shape say how the reference continues past T, and "
+                        "--mu, --impact-mu, --torque-limit, --clearance the constraints "
+                        "the imported gait is checked against (reported, not enforced)")
 
 
 def cmd_import(args):
@@ -37,8 +40,14 @@ def cmd_import(args):
     out = output_file(args.out, "--out", (".json",))
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot)
+    # recorded with the gait: how it continues past T (a late impact), and the
+    # constraints its figures are compared with (reported, not enforced)
+    options = GaitOptions(mu=args.mu, torque_limit=args.torque_limit, impact_mu=args.impact_mu,
+                          continuation=args.continuation,
+                          continuation_shape=args.continuation_shape,
+                          **({} if args.clearance is None else {"clearance": args.clearance}))
     r = import_gait(model, args.import_file, angles=args.angles,
-                    bezier_degree=args.bezier_degree, tol=args.import_tol)
+                    bezier_degree=args.bezier_degree, tol=args.import_tol, options=options)
     s = r.to_dict()
     s["file"] = str(r.gait.save(out))
     if folder is not None:
