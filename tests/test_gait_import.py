@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -201,7 +202,6 @@ def test_bad_import_arguments(gait, tmp_path, capsys):
 
 def test_the_how_to_example_runs(capsys):
     """The floating-base example of docs/howto/bring-your-robot.md, as written."""
-    from pathlib import Path
     text = (Path(__file__).resolve().parents[1] / "docs" / "howto" /
             "bring-your-robot.md").read_text()
     block = text.split("<!-- the block below runs in tests/test_gait_import.py -->")[1]

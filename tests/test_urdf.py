@@ -154,3 +154,15 @@ def test_cli_import_bad_arguments(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert text in err and len(err.splitlines()) == 1
         assert not out.exists()
+
+
+def test_floating_base_and_unknown_tags_are_fine(tmp_path):
+    text = (ROBOTS / "rabbit.urdf").read_text().replace(
+        '<robot name="RABBIT">',
+        '<robot name="RABBIT"><link name="world"/><joint name="base" type="floating">'
+        '<parent link="world"/><child link="torso"/></joint><gazebo><plugin/></gazebo>')
+    p = tmp_path / "floating.urdf"
+    p.write_text(text)
+    imp = import_urdf(p)
+    assert imp.description == robot("rabbit").description
+    assert any("floating joint 'base'" in n for n in imp.notes)
