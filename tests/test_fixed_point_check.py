@@ -5,10 +5,13 @@ virtual-constraint map say 'open_orbit' with the residual; on the gait itself th
 not."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from analysis import poincare_eigenvalues, vc_eigenvalue
+from analysis.cli import main
 from analysis.stability import poincare_map
 from analysis.stability.poincare import FIXED_POINT_TOL
 from gait_opt import Gait
@@ -41,3 +44,13 @@ def test_open_orbit_batch_and_vc(model, gait, open_gait):
     vc = vc_eigenvalue(model, open_gait)
     assert vc.status == "open_orbit" and vc.orbit_mismatch > 1e-2
     assert vc_eigenvalue(model, gait).status == "stable"
+
+
+def test_cli_eig_reports_the_open_orbit(open_gait, tmp_path, capsys):
+    path = open_gait.save(tmp_path / "open.json")
+    assert main(["eig", "--gait", str(path), "--m1", *map(str, M1), "--json"]) == 2
+    assert "not a periodic orbit" in capsys.readouterr().err       # refused by default
+    assert main(["eig", "--gait", str(path), "--allow-open-orbit", "--m1", *map(str, M1),
+                 "--json"]) == 0
+    body = json.loads(capsys.readouterr().out)
+    assert body["status"] == "open_orbit" and body["fixed_point_residual"] > 1e-2
