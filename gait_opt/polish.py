@@ -11,15 +11,20 @@ benchmarks/bench_gait.py), far below the inequality margins.
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass, field
+
 import casadi as ca
 import numpy as np
 
 from biped_casadi.caching import cached
+from biped_casadi.results import Result
 
 from .errors import GaitOptimizationError
+from .gait import Gait
 from .parametrisation import reference_dynamics
 
-__all__ = ["polish"]
+__all__ = ["polish", "close_orbit", "ClosedOrbit"]
 
 
 @cached(maxsize=16)
@@ -111,3 +116,86 @@ def polish(model, opts, alpha, x0, T, tol=1e-12, max_iter=20):
     a_new = pv[:na].reshape(model.nu, -1, order="F")
     return a_new, pv[na:na + 2], float(pv[na + 2]), hist
 
+
+
+@dataclass
+class ClosedOrbit(Result):
+    """A gait made an exact periodic orbit of its robot by :func:`close_orbit`.
+
+    ``success`` means the Newton iteration converged.
+
+    Parameters
+    ----------
+    gait : Gait
+        The closed gait (the input gait when it did not converge).
+    status : str
+        'closed' or 'not_converged'.
+    residual_before, residual_after : float
+        The orbit residual of the gait's parametrisation (the periodicity through the
+        impact and relabelling, z_sw(T) and the speed, max abs: rad, rad/s, m) before
+        and after.
+    parameter_change : float
+        max ``|p_after - p_before|`` over the Bezier coefficients (rad), x0 (rad, rad/s)
+        and T (s).
+    T_change : float
+        s.
+    iterations : int
+        Newton iterations.
+    history : list of float
+        The residual at each iteration.
+    message : str
+        What happened.
+    """
+
+    gait: object = field(repr=False, metadata={"dict": False})
+    status: str = "closed"
+    residual_before: float = math.nan
+    residual_after: float = math.nan
+    parameter_change: float = math.nan
+    T_change: float = math.nan
+    iterations: int = 0
+    history: list = field(default_factory=list)
+    message: str = ""
+
+    SUCCESS = ("closed",)
+
+
+def close_orbit(gait, speed: float | None = None, tol: float = 1e-12,
+                max_iter: int = 20) -> ClosedOrbit:
+    """Make an almost periodic gait an exact periodic orbit of its robot.
+
+    The minimum-norm Newton iteration of :func:`polish` on the gait's own parameters
+    (the Bezier coefficients of q_a^d, x0 = (q_u^d(0), dq_u^d(0)) and T) with the exact
+    Jacobian (forward sensitivities of every RK4 step of the unactuated row of eq. (1),
+    docs/theory.md): periodic through the impact and the relabelling (eq. 2-3), the
+    swing foot on the ground at T, and the step length ``speed`` x T.
+
+    Parameters
+    ----------
+    gait : Gait
+        The gait to close (its options give the Bezier degree and the RK4 steps).
+    speed : float, optional
+        m/s; default the gait's ``options.speed``.
+    tol : float
+        Residual to reach.
+    max_iter : int
+        Newton iterations at most.
+
+    Returns
+    -------
+    ClosedOrbit
+        The closed gait (options with ``speed``) and what moved.
+    """
+    opts = gait.options if speed is None else gait.options.replace(speed=float(speed))
+    p0 = np.r_[gait.alpha.ravel(order="F"), gait.x0, gait.T]
+    try:
+        alpha, x0, T, hist = polish(gait.model, opts, gait.alpha, gait.x0, gait.T, tol, max_iter)
+    except GaitOptimizationError as e:
+        return ClosedOrbit(gait, status="not_converged", message=str(e))
+    new = Gait(gait.model, opts, alpha, x0, T, solver_stats=dict(gait.solver_stats))
+    p1 = np.r_[alpha.ravel(order="F"), x0, T]
+    return ClosedOrbit(new, residual_before=hist[0], residual_after=hist[-1],
+                       parameter_change=float(np.max(np.abs(p1 - p0))), T_change=T - gait.T,
+                       iterations=len(hist) - 1, history=hist,
+                       message=f"closed in {len(hist) - 1} Newton iteration(s): residual "
+                               f"{hist[0]:.2e} -> {hist[-1]:.2e}")

@@ -41,6 +41,6 @@ def test_every_third_party_import_is_a_dependency():
                     imported.add(n.module.split(".")[0])
     third = {m for m in imported if m not in sys.stdlib_module_names
              and m not in ("biped_casadi", "gait_opt", "analysis")}
-    distribution = {"PIL": "pillow"}          # import names that differ from the package's
+    distribution = {"PIL": "pillow", "urdf_parser_py": "urdf-parser-py"}   # import names that differ
     missing = {m for m in third if distribution.get(m, m).lower() not in names}
     assert not missing, f"imported but not in pyproject.toml's dependencies: {sorted(missing)}"

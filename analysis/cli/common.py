@@ -23,8 +23,8 @@ __all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "ad
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
            "add_gait_arguments", "add_scheduler"]
 
-ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link) or a description file "
-              "(.toml, schema in biped_casadi.model.description)")
+ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
+              "(.toml, schema in biped_casadi.model.description) or a URDF file (.urdf)")
 
 
 class UserError(Exception):

@@ -10,6 +10,7 @@ from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 
 from .common import (Progress, UserError, add_robot, load_model, output_dir, output_file,
                      print_json)
+from .gait_import import add_import_arguments, cmd_import
 
 #: --intervals beyond this make an NLP that takes minutes per iteration
 MAX_INTERVALS = 400
@@ -52,6 +53,7 @@ def register(sub):
     p.add_argument("--plot", metavar="DIR",
                    help="write gait_stick.png and gait_profiles.png into DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_import_arguments(p)
     p.set_defaults(func=cmd_gait)
 
 
@@ -71,6 +73,8 @@ def cmd_gait(args):
                         f"{args.intervals}")
     if args.max_iter is not None and args.max_iter < 1:
         raise UserError(f"--max-iter must be >= 1, got {args.max_iter}")
+    if args.import_file is not None:
+        return cmd_import(args)
     out = output_file(args.out, "--out")               # before the solve, not after
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot)

@@ -48,10 +48,14 @@ from .variational import variational_jacobian
 
 __all__ = ["PoincareMap", "PoincareResult", "JacobianBatch", "Screen", "ImpactBracket",
            "MapStep", "poincare_eigenvalues", "singular_m1_values", "STATUSES", "METHODS",
-           "poincare_map"]
+           "poincare_map", "FIXED_POINT_TOL"]
 
-#: status of an analysed M1 (SPEC section 4)
-STATUSES = ("stable", "unstable", "singular", "no_impact")
+#: status of an analysed M1 (SPEC section 4), and 'open_orbit': x* is not a fixed point
+#: (the gait is not a periodic orbit of the model), so A^z at x* says nothing of stability
+STATUSES = ("stable", "unstable", "singular", "no_impact", "open_orbit")
+#: |P(x*) - x*| beyond this is an open orbit (the discrete map closes the default gait
+#: to ~5e-10; SPEC section 2 asks 1e-8 of the gait itself)
+FIXED_POINT_TOL = 1e-6
 #: how A^z is computed
 METHODS = ("variational", "ad")
 
@@ -75,12 +79,14 @@ class PoincareResult(Result):
         max ``|lambda|`` (inf when singular or without impact).
     status : str
         One of :data:`STATUSES`: 'stable' (max ``|lambda|`` < 1, eq. 22), 'unstable',
-        'singular' (D11 - D12 M1 vanishes or changes sign on the step, eq. 24) or
-        'no_impact'.
+        'singular' (D11 - D12 M1 vanishes or changes sign on the step, eq. 24),
+        'no_impact', or 'open_orbit': ``fixed_point_residual`` exceeds
+        :data:`FIXED_POINT_TOL`, the gait is not a periodic orbit of the model (A^z and
+        its eigenvalues are then those of the map at a point that is not a fixed point).
     x_star : numpy.ndarray
         The fixed point (q_u^d(0.75 T), dq_u^d(0.75 T)), rad and rad/s.
     fixed_point_residual : float
-        ``|P(x*) - x*|`` (computed by ``method='ad'`` only, NaN otherwise).
+        max ``|P(x*) - x*|`` of the discrete map (every method checks it).
     tau_impact : float
         Impact time of the orbit, s (T on the reference).
     min_denominator : float
@@ -235,6 +241,7 @@ class PoincareMap:
         self.ref_s = gait.state(self.tau_s)           # reference state at the section
         self.ref_0 = np.asarray(gait.r0, dtype=float)
         self.threads = threads or max(1, min(os.cpu_count() or 1, 8))
+        self._open = None
         self._build()
         #: D11 and D12 along the reference on [0, T] (1001 points), for eq. (23)-(24)
         self.D11_table, self.D12_table = denominator_samples(gait)
@@ -303,6 +310,20 @@ class PoincareMap:
                                 ["x", "M1"], ["tau", "z_sw", "x_sw", "dz_sw"])
 
     # ----------------------------------------------------------- evaluation
+    @property
+    def open_orbit(self) -> bool:
+        """Whether x* fails to be a fixed point with M1 = 0 (never singular: D11 > 0).
+
+        On a periodic gait x* is the fixed point for every M1; this one evaluation
+        qualifies the batches of :meth:`jacobian_batch`."""
+        if self._open is None:
+            zero = np.zeros(self.nu)
+            br = self.find_impact(self.x_star, zero)
+            res = math.inf if br is None else float(np.max(np.abs(
+                np.array(self.map(self.x_star, zero, br.guess)[0]).ravel() - self.x_star)))
+            self._open = not res <= FIXED_POINT_TOL
+        return self._open
+
     @property
     def variational(self):
         """The variational-equation Jacobian of this map (:mod:`analysis.stability.variational`)."""
@@ -435,9 +456,10 @@ class PoincareMap:
         M1 : array_like
             (nu,).
         method : {'variational', 'ad'}
-            'variational' (the variational equation along the orbit, well under a
-            millisecond) or 'ad' (AD through the whole discrete map, ~0.3 s; also gives
-            the fixed-point residual).
+            'variational' (the variational equation along the orbit, about a
+            millisecond) or 'ad' (AD through the whole discrete map, ~0.3 s).  Either
+            way one evaluation of the map at x* (~20 ms) checks the fixed point
+            (status 'open_orbit' when it is not one).
 
         Returns
         -------
@@ -450,10 +472,14 @@ class PoincareMap:
         if self.is_singular(M1):
             return self._undefined(M1, "singular", min_den, method,
                                    "D11 - D12 M1 vanishes or changes sign on the step (eq. 24)")
-        if method == "variational":
-            A = self.variational.jacobian(M1)
-            return self._result(M1, A, None, self.T, min_den, method)
         br = self.find_impact(self.x_star, M1)
+        if method == "variational":
+            if br is None:
+                return self._undefined(M1, "no_impact", min_den, method,
+                                       f"no valid swing-foot impact within {self.horizon:g} T")
+            A = self.variational.jacobian(M1)
+            xn, ti = (np.array(v) for v in self.map(self.x_star, M1, br.guess))   # the check
+            return self._result(M1, A, xn.ravel(), ti.item(), min_den, method)
         if br is None:
             return self._undefined(M1, "no_impact", min_den, method,
                                    f"no valid swing-foot impact within {self.horizon:g} T")
@@ -473,10 +499,16 @@ class PoincareMap:
         ev = np.linalg.eigvals(A).astype(complex)       # [re, im] pairs in to_dict()
         ev = ev[np.argsort(-np.abs(ev))]
         mx = float(np.max(np.abs(ev)))
-        res = math.nan if xn is None else float(np.max(np.abs(xn - self.x_star)))
-        return PoincareResult(M1, A, ev, mx, "stable" if mx < 1 else "unstable", self.x_star,
-                              fixed_point_residual=res, tau_impact=ti, min_denominator=min_den,
-                              method=method)
+        res = float(np.max(np.abs(xn - self.x_star)))
+        status, message = ("stable" if mx < 1 else "unstable"), ""
+        if not res <= FIXED_POINT_TOL:
+            status = "open_orbit"
+            message = (f"x* is not a fixed point of the map: |P(x*) - x*| = {res:.2e} (> "
+                       f"{FIXED_POINT_TOL:g}); the gait is not a periodic orbit of this model "
+                       f"and the eigenvalues at x* say nothing of its stability")
+        return PoincareResult(M1, A, ev, mx, status, self.x_star, fixed_point_residual=res,
+                              tau_impact=ti, min_denominator=min_den, method=method,
+                              message=message)
 
     def jacobian_batch(self, M1s, chunk: int = 512):
         """A^z and the status for many M1 at once, by the vectorised variational equation.
@@ -506,8 +538,8 @@ class PoincareMap:
         max_abs = np.where(sing, np.inf, np.abs(ev).max(axis=1))
         bad = ~sing & ~np.all(np.isfinite(A), axis=(1, 2))
         max_abs[bad] = np.inf
-        status = np.where(sing, "singular", np.where(bad, "no_impact",
-                          np.where(max_abs < 1, "stable", "unstable")))
+        status = np.where(sing, "singular", np.where(bad, "no_impact", np.where(
+            self.open_orbit, "open_orbit", np.where(max_abs < 1, "stable", "unstable"))))
         ev[sing | bad] = np.nan
         return JacobianBatch(M1s, status, A, ev, max_abs)
 

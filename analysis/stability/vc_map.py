@@ -41,6 +41,8 @@ from biped_casadi.control.output_law import SECTION
 from biped_casadi.results import Result
 from biped_casadi.control.reference import gait_first
 
+from .poincare import FIXED_POINT_TOL
+
 __all__ = ["VCEigenResult", "VirtualConstraintMap", "vc_eigenvalue", "vc_map"]
 
 
@@ -57,7 +59,11 @@ class VCEigenResult(Result):
     eigenvalue : float
         dP/dw at the fixed point (AD through the discrete map).
     status : str
-        'stable' (``|eigenvalue|`` < 1), 'unstable', 'singular' or 'no_impact'.
+        'stable' (``|eigenvalue|`` < 1), 'unstable', 'singular', 'no_impact' or
+        'open_orbit': the HZD orbit found is not the reference's (``orbit_mismatch``),
+        the constraints are not impact invariant on it, or Newton did not close it
+        (``fixed_point_residual``), beyond ``FIXED_POINT_TOL``; the gait is then not a
+        periodic orbit of the model and the eigenvalue is that of another orbit.
     theta_section : float
         The section's phase, theta = c q^d(0.75 T), rad.
     theta_plus, theta_minus : float
@@ -266,13 +272,21 @@ class VirtualConstraintMap:
         sigma_m = float(np.array(m.D(q_m))[0] @ Q1_m)
         sigma_p = float(np.array(m.D(q_p))[0] @ dq_p)
         delta2 = (sigma_p / sigma_m) ** 2
-        return VCEigenResult(eigenvalue=dP, status="stable" if abs(dP) < 1 else "unstable",
+        mismatch = float(np.max(np.abs(x_star - self.reference_x)))
+        worst = max(abs(wn - w), mismatch, vc.invariance_residual)
+        status = "stable" if abs(dP) < 1 else "unstable"
+        if not worst <= FIXED_POINT_TOL:
+            status = "open_orbit"
+            message = (f"the HZD orbit is not the reference's: |P(w*) - w*| = {abs(wn - w):.2e}, "
+                       f"orbit mismatch {mismatch:.2e}, impact invariance {vc.invariance_residual:.2e} "
+                       f"(> {FIXED_POINT_TOL:g}); the gait is not a periodic orbit of this model")
+        else:
+            message = (f"HZD orbit: dtheta at the section {w:.12g} rad/s "
+                       f"(reference {float(vc.c @ dqs):.12g})")
+        return VCEigenResult(eigenvalue=dP, status=status,
                              w_star=w, x_star=x_star,
-                             orbit_mismatch=float(np.max(np.abs(x_star - self.reference_x))),
-                             fixed_point_residual=abs(wn - w), delta_zero_squared=delta2,
-                             message=f"HZD orbit: dtheta at the section {w:.12g} rad/s "
-                                     f"(reference {float(vc.c @ dqs):.12g})",
-                             **common)
+                             orbit_mismatch=mismatch, fixed_point_residual=abs(wn - w),
+                             delta_zero_squared=delta2, message=message, **common)
 
 
 @gait_first

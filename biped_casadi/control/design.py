@@ -183,8 +183,8 @@ class Design:
         """
         g = self._gait(gait)
         if self.M1 is None:
-            return VirtualConstraintController(g.model, g, gains=self.gains)
-        return TimeVaryingController(g.model, g, np.array(self.M1), self.gains, self.rejoin)
+            return VirtualConstraintController(g, gains=self.gains)
+        return TimeVaryingController(g, np.array(self.M1), self.gains, self.rejoin)
 
     def check_model(self, model):
         """Raise ``ValueError`` unless the design's gait is made for ``model``.

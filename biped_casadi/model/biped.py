@@ -23,6 +23,7 @@ import numpy as np
 from ..caching import cached
 from .description import BUILTIN, RobotDescription, builtin_path, load_description
 from .params import RABBIT, RobotParams, load_params
+from .urdf import load_urdf
 
 __all__ = ["BipedModel", "rabbit", "robot", "resolve_robot", "E_RELABEL", "B_INPUT",
            "absolute_angles", "relabelling", "RABBIT_DESCRIPTION"]
@@ -493,15 +494,18 @@ def _model(description: RobotDescription) -> BipedModel:
     return BipedModel(description)
 
 
-def resolve_robot(robot) -> RobotDescription:
+def resolve_robot(robot, foot=None) -> RobotDescription:
     """The description named by ``robot``.
 
     Parameters
     ----------
     robot : str, Path, RobotDescription or RobotParams
         A built-in name (``'rabbit'``, ``'three_link'``, case-insensitive), a
-        description file (``.toml``), a legacy flat parameter file (``.toml`` or
-        ``.json`` with the fields of :class:`RobotParams`), or an object.
+        description file (``.toml``), a URDF file (``.urdf``, read by
+        :func:`biped_casadi.model.urdf.import_urdf`), a legacy flat parameter file
+        (``.toml`` or ``.json`` with the fields of :class:`RobotParams`), or an object.
+    foot : sequence of 3 floats, optional
+        For a URDF file only: the foot point in the last leg link's frame, m.
 
     Returns
     -------
@@ -514,6 +518,13 @@ def resolve_robot(robot) -> RobotDescription:
         Unknown name, missing file or an invalid description (the message names the
         field).
     """
+    is_urdf = isinstance(robot, (str, Path)) and str(robot).lower().endswith(".urdf")
+    if foot is not None and not is_urdf:
+        raise ValueError(f"foot: applies to a URDF file (.urdf) only, not to {robot!r}")
+    if is_urdf:
+        if not Path(robot).is_file():
+            raise ValueError(f"robot URDF file not found: {robot}")
+        return load_urdf(robot, foot)
     if isinstance(robot, RobotDescription):
         return robot
     if isinstance(robot, RobotParams):
@@ -550,22 +561,25 @@ def _legacy_file(path: Path) -> bool:
     return RobotParams.is_legacy_record(data)
 
 
-def robot(name_or_path="rabbit") -> BipedModel:
-    """The model of a built-in robot or of a description file.
+def robot(name_or_path="rabbit", foot=None) -> BipedModel:
+    """The model of a built-in robot, of a description file or of a URDF file.
 
     Parameters
     ----------
     name_or_path : str, Path or RobotDescription
-        ``'rabbit'`` (default), ``'three_link'``, or a description file (see
+        ``'rabbit'`` (default), ``'three_link'``, a description file (see
         :mod:`biped_casadi.model.description` for the schema; legacy flat parameter files
-        load too).
+        load too) or a URDF file (``.urdf``: :mod:`biped_casadi.model.urdf`).
+    foot : sequence of 3 floats, optional
+        For a URDF file whose last leg link has no foot link or frame: the foot point
+        in that link's frame, m.
 
     Returns
     -------
     BipedModel
         Built once per description (memoised); the same methods as :func:`rabbit`.
     """
-    return _model(resolve_robot(name_or_path))
+    return _model(resolve_robot(name_or_path, foot))
 
 
 def rabbit(params: RobotParams | RobotDescription | None = None) -> BipedModel:

@@ -1,0 +1,76 @@
+"""``biped gait --import FILE``: a gait from another tool (nodes or published virtual
+constraints), fitted, closed into an exact orbit of the robot and saved.  Reads top to
+bottom; the import is :func:`gait_opt.import_gait`."""
+from __future__ import annotations
+
+import math
+
+from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_figures
+from gait_opt import IMPORT_TOL, GaitOptions, import_gait
+
+from .common import UserError, load_model, output_dir, output_file, print_json
+
+
+def add_import_arguments(p):
+    """--import, --angles, --import-tol and --bezier-degree on ``biped gait``."""
+    p.add_argument("--import", dest="import_file", metavar="FILE",
+                   help="import one step from another tool instead of optimising: a CSV "
+                        "with header t,q1..qn,dq1..dqn[,ddq1..ddqn], an NPZ or JSON with "
+                        "arrays t, q, dq[, ddq], or a JSON with virtual_constraints "
+                        "(bezier, theta_plus, theta_minus, phase)")
+    p.add_argument("--angles", choices=("relative", "absolute"), default="relative",
+                   help="with --import: the nodes' coordinates, the toolkit's relative "
+                        "joint angles (default) or absolute link angles phi")
+    p.add_argument("--import-tol", type=float, default=IMPORT_TOL, metavar="TOL",
+                   help=f"with --import: refuse a trajectory whose fitted orbit misses by "
+                        f"more than TOL (rad, rad/s, m; default {IMPORT_TOL:g})")
+    p.add_argument("--bezier-degree", type=int, default=None, metavar="M",
+                   help="with --import: degree of the fitted Bezier polynomials (4 to 20; "
+                        "default: chosen by the fit). With --import, --continuation and "
+                        "--continuation-shape say how the reference continues past T, and "
+                        "--mu, --impact-mu, --torque-limit, --clearance the constraints "
+                        "the imported gait is checked against (reported, not enforced)")
+
+
+def cmd_import(args):
+    if not (math.isfinite(args.import_tol) and args.import_tol > 0):
+        raise UserError(f"--import-tol must be a positive number, got {args.import_tol:g}")
+    if args.bezier_degree is not None and not 4 <= args.bezier_degree <= 20:
+        raise UserError(f"--bezier-degree must be from 4 to 20, got {args.bezier_degree}")
+    out = output_file(args.out, "--out", (".json",))
+    folder = output_dir(args.plot, "--plot") if args.plot is not None else None
+    model = load_model(args.robot)
+    # recorded with the gait: how it continues past T (a late impact), and the
+    # constraints its figures are compared with (reported, not enforced)
+    options = GaitOptions(mu=args.mu, torque_limit=args.torque_limit, impact_mu=args.impact_mu,
+                          continuation=args.continuation,
+                          continuation_shape=args.continuation_shape,
+                          **({} if args.clearance is None else {"clearance": args.clearance}))
+    r = import_gait(model, args.import_file, angles=args.angles,
+                    bezier_degree=args.bezier_degree, tol=args.import_tol, options=options)
+    s = r.to_dict()
+    s["file"] = str(r.gait.save(out))
+    if folder is not None:
+        s["plots"] = save_figures({"gait_stick": gait_stick_plot(r.gait),
+                                   "gait_profiles": gait_profiles_plot(r.gait)}, folder)
+    if args.json:
+        print_json(s)
+        return 0
+    print(f"imported gait of {model.params.name} from {args.import_file} ({r.kind}), saved "
+          f"to {out}")
+    print(f"  nodes fitted         {r.n_nodes}, Bezier degree {r.bezier_degree}")
+    print(f"  fit error            {r.fit_error_q:.2e} rad, {r.fit_error_dq:.2e} rad/s")
+    print(f"  data through impact  {r.data_impact_residual:.2e}   unactuated drift "
+          f"{r.unactuated_drift:.2e} rad")
+    print(f"  orbit residual       {r.orbit_residual_before:.2e} -> {r.orbit_residual_after:.2e}"
+          f" (parameters moved by at most {r.parameter_change:.2e})")
+    print(f"  step time T          {r.T:.6f} s, length {r.step_length:.6f} m, speed "
+          f"{r.speed:.6f} m/s")
+    print(f"  peak torque          {r.peak_torque:.3f} N m")
+    print(f"  friction ratio       {r.max_friction_ratio:.4f} (impact {r.impact_friction_ratio:.4f})")
+    print(f"  swing-foot clearance {r.min_swing_height:.3e} m (lowest inside the step)")
+    for name, v in r.violations:
+        print(f"  note: violates the default gait constraint '{name}' by {v:.3g}")
+    for p in s.get("plots", []):
+        print(f"  plot                 {p}")
+    return 0

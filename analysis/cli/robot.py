@@ -1,0 +1,76 @@
+"""``biped robot import``: a URDF file turned into the equivalent robot description
+(TOML).  Reads top to bottom; the import itself is :func:`biped_casadi.model.urdf.import_urdf`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from biped_casadi.files import write_text_atomic
+from biped_casadi.model.description import load_description
+from biped_casadi.model.urdf import description_toml, import_urdf
+
+from .common import UserError, output_file, print_json
+
+
+def cmd_import(args):
+    src = Path(args.file)
+    if src.suffix.lower() != ".urdf":
+        raise UserError(f"FILE: a URDF file (.urdf) is expected, got {str(args.file)!r}")
+    if not src.is_file():
+        raise UserError(f"FILE: URDF file not found: {src}")
+    out = output_file(args.out, "--out", (".toml",))
+    foot = None
+    if args.foot is not None:
+        foot = np.array(args.foot, dtype=float)
+        if not np.all(np.isfinite(foot)):
+            raise UserError("--foot takes 3 finite numbers (x y z in m)")
+    imp = import_urdf(src, foot)
+    text = description_toml(imp.description, f"made by 'biped robot import' from {src.name}")
+    write_text_atomic(out, text)
+    back = load_description(out)                 # the file reads back to the same robot
+    if back != imp.description:
+        raise RuntimeError(f"{out} does not read back to the imported robot")
+    d = imp.description
+    summary = dict(file=str(out), source=str(src), robot=d.to_dict(), torso=imp.torso,
+                   legs=[list(leg) for leg in imp.legs], foot=imp.foot, notes=imp.notes,
+                   total_mass=d.total_mass)
+    if args.json:
+        print_json(summary)
+        return 0
+    print(f"{d}; written to {out}")
+    print(f"  torso {imp.torso!r}; legs {', '.join(' -> '.join(leg) for leg in imp.legs)}; "
+          f"foot from {imp.foot}")
+    for link in (d.torso,) + d.leg:
+        print(f"  {link.name:8s} mass {link.mass:g} kg, length {link.length:g} m, "
+              f"com {link.com:g} m, inertia {link.inertia:g} kg m^2")
+    for joint, m in d.point_masses:
+        print(f"  point mass {m:g} kg at the {joint}")
+    print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 (reflected), torque limit "
+          f"{d.torque_limit:g} N m")
+    for note in imp.notes:
+        print(f"  note: {note}")
+    return 0
+
+
+def register(sub):
+    p = sub.add_parser("robot", help="robot files: import a URDF as a description",
+                       description="Robot files. 'biped robot import FILE.urdf --out "
+                                   "robot.toml' reads a planar point-foot biped from a URDF "
+                                   "and writes the equivalent description file.")
+    acts = p.add_subparsers(dest="action", metavar="ACTION")
+    acts.required = True
+    q = acts.add_parser("import", help="a URDF file as a robot description (TOML)",
+                        description="Read a planar biped from a URDF (a torso and two "
+                                    "identical legs of revolute joints about one axis; "
+                                    "inertials, joint origins, transmissions, effort "
+                                    "limits) and write the equivalent description file.")
+    q.add_argument("file", metavar="FILE.urdf", help="the URDF file")
+    q.add_argument("--foot", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="the foot point in the last leg link's frame, m (when the file has "
+                        "no foot link or frame)")
+    q.add_argument("--out", metavar="FILE.toml", required=True,
+                   help="the description file to write")
+    q.add_argument("--json", action="store_true", help="print one JSON object")
+    q.set_defaults(func=cmd_import)

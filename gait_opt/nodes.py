@@ -1,0 +1,268 @@
+"""Sampled gaits from other tools: one step as nodes (t, q, dq[, ddq]) read from CSV,
+NPZ or JSON, validated, and converted from absolute link angles when asked.
+
+Formats (one step, from just after an impact to just before the next; times in s,
+angles in rad, nodes not necessarily uniform, at least :data:`MIN_NODES`):
+
+- CSV: a header ``t,q1,...,qn,dq1,...,dqn`` (optionally ``,ddq1,...,ddqn``), then one
+  row per node;
+- NPZ or JSON: arrays ``t`` (N,), ``q`` and ``dq`` (N, n; (n, N) is accepted too) and
+  optionally ``ddq``.
+
+Coordinates: the toolkit's (relative joint angles, docs/theory.md), or with
+``angles='absolute'`` the absolute link angles phi_1..phi_n (phi_1 the stance leg's
+lowest link, ..., the swing leg's lowest link last), converted by q_1 = phi_1,
+q_i = phi_i - phi_{i-1}.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from biped_casadi.files import read_text_file
+
+__all__ = ["Nodes", "nodes_from_arrays", "read_nodes", "relative_angles", "MIN_NODES",
+           "ANGLES"]
+
+#: fewer nodes than this cannot define a step
+MIN_NODES = 5
+#: the coordinate conventions a sampled gait may be given in
+ANGLES = ("relative", "absolute")
+
+
+@dataclass
+class Nodes:
+    """One step as samples: times and the state (and accelerations) at each.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        (N,) strictly increasing times, s.
+    q, dq : numpy.ndarray
+        (nq, N) rad and rad/s.
+    ddq : numpy.ndarray or None
+        (nq, N) rad/s^2 when given.
+    source : str
+        Where they came from (for messages).
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray | None = None
+    source: str = "nodes"
+
+    @property
+    def n(self) -> int:
+        """The number of nodes."""
+        return self.t.size
+
+    @property
+    def nq(self) -> int:
+        """The number of coordinates."""
+        return self.q.shape[0]
+
+    def every(self, k: int) -> "Nodes":
+        """Every ``k``-th node, the last one kept.
+
+        Parameters
+        ----------
+        k : int
+            Stride.
+
+        Returns
+        -------
+        Nodes
+        """
+        idx = np.unique(np.r_[np.arange(0, self.n, k), self.n - 1])
+        return Nodes(self.t[idx], self.q[:, idx], self.dq[:, idx],
+                     None if self.ddq is None else self.ddq[:, idx], self.source)
+
+
+def _array(value, name: str, where: str) -> np.ndarray:
+    try:
+        a = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: {name} must be an array of numbers") from None
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{where}: {name} has a NaN or infinite value")
+    return a
+
+
+def nodes_from_arrays(t, q, dq, ddq=None, nq: int | None = None,
+                      where: str = "nodes") -> Nodes:
+    """Validated nodes from arrays.
+
+    Parameters
+    ----------
+    t : array_like
+        (N,) times, s, strictly increasing.
+    q, dq : array_like
+        (N, nq) or (nq, N).
+    ddq : array_like, optional
+        Same shape as q.
+    nq : int, optional
+        The robot's number of coordinates (checked when given).
+    where : str
+        Names the source in messages.
+
+    Returns
+    -------
+    Nodes
+        Arrays (nq, N).
+
+    Raises
+    ------
+    ValueError
+        Naming ``where`` and the array: not numbers, NaN, wrong shapes, times not
+        strictly increasing, fewer than :data:`MIN_NODES` nodes.
+    """
+    t = _array(t, "t", where).ravel()
+    if t.size < MIN_NODES:
+        raise ValueError(f"{where}: {t.size} node(s); a step needs at least {MIN_NODES}")
+    if not np.all(np.diff(t) > 0):
+        i = int(np.argmax(~(np.diff(t) > 0)))
+        raise ValueError(f"{where}: t must increase strictly (node {i + 2}: {t[i + 1]:g} "
+                         f"after {t[i]:g})")
+    out = []
+    for name, a in (("q", q), ("dq", dq), ("ddq", ddq)):
+        if a is None:
+            out.append(None)
+            continue
+        a = _array(a, name, where)
+        if a.ndim != 2 or t.size not in a.shape:
+            raise ValueError(f"{where}: {name} must be an (N, n) array with N = {t.size} "
+                             f"nodes, got shape {a.shape}")
+        a = a.T if a.shape[0] == t.size and a.shape[1] != t.size else a
+        if nq is not None and a.shape[0] != nq:
+            raise ValueError(f"{where}: {name} has {a.shape[0]} coordinates per node, the "
+                             f"robot {nq}")
+        out.append(a)
+    if out[1].shape != out[0].shape or (out[2] is not None and out[2].shape != out[0].shape):
+        raise ValueError(f"{where}: q, dq (and ddq) must have the same shape")
+    return Nodes(t, out[0], out[1], out[2], where)
+
+
+def relative_angles(nodes: Nodes) -> Nodes:
+    """Nodes in absolute link angles phi converted to relative joint angles q.
+
+    q_1 = phi_1, q_i = phi_i - phi_{i-1} (and the same for the rates); the inverse of
+    the cumulative sums of docs/theory.md.
+
+    Parameters
+    ----------
+    nodes : Nodes
+        phi, dphi, ddphi.
+
+    Returns
+    -------
+    Nodes
+    """
+    def rel(a):
+        return None if a is None else np.vstack([a[:1], np.diff(a, axis=0)])
+    return Nodes(nodes.t, rel(nodes.q), rel(nodes.dq), rel(nodes.ddq), nodes.source)
+
+
+def _read_csv(text: str, where: str, nq: int | None) -> Nodes:
+    rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
+    if not rows:
+        raise ValueError(f"{where} is empty")
+    head = [c.strip().lower() for c in rows[0]]
+    h = len(head) - 1
+    with_acc = h % 3 == 0 and head[-1].startswith("ddq")
+    n = h // 3 if with_acc else h // 2
+    want = ["t"] + [f"q{i}" for i in range(1, n + 1)] + [f"dq{i}" for i in range(1, n + 1)]
+    if with_acc:
+        want += [f"ddq{i}" for i in range(1, n + 1)]
+    if n < 1 or head != want:
+        raise ValueError(f"{where}: the header must be t,q1..qn,dq1..dqn[,ddq1..ddqn], got "
+                         f"{','.join(rows[0])[:120]!r}")
+    data = []
+    for i, r in enumerate(rows[1:], start=2):
+        if len(r) != len(head):
+            raise ValueError(f"{where}: line {i} has {len(r)} values, the header {len(head)}")
+        try:
+            data.append([float(c) for c in r])
+        except ValueError:
+            raise ValueError(f"{where}: line {i} has a value that is not a number") from None
+    a = np.array(data).reshape(-1, len(head))
+    return nodes_from_arrays(a[:, 0], a[:, 1:1 + n], a[:, 1 + n:1 + 2 * n],
+                             a[:, 1 + 2 * n:] if with_acc else None, nq, where)
+
+
+def read_nodes(path, nq: int | None = None):
+    """The nodes (or the virtual-constraint record) of a file.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.csv``, ``.npz`` or ``.json`` (module docstring).
+    nq : int, optional
+        The robot's number of coordinates (checked when given).
+
+    Returns
+    -------
+    Nodes or dict
+        The nodes; for a JSON file holding ``virtual_constraints`` that record (read by
+        :func:`gait_opt.import_gait`).
+
+    Raises
+    ------
+    ValueError
+        Naming the file: missing, another suffix, unparsable, or nodes that are not
+        valid (:func:`nodes_from_arrays`).
+
+    Notes
+    -----
+    One step, from just after an impact to just before the next; s, rad, rad/s,
+    rad/s^2; at least :data:`MIN_NODES` nodes, times strictly increasing, not
+    necessarily uniform:
+
+    - CSV: header ``t,q1,...,qn,dq1,...,dqn`` (optionally ``,ddq1,...,ddqn``), one row
+      per node;
+    - NPZ or JSON: arrays ``t`` (N,), ``q``, ``dq`` (N, n) and optionally ``ddq``;
+    - JSON ``{"virtual_constraints": {"bezier": [[...], ...], "theta_plus": ...,
+      "theta_minus": ..., "phase": [...], "outputs": [[...], ...]}}``: Bezier
+      coefficients of h_d (one row per output) over s = (theta - theta^+) / (theta^- -
+      theta^+), theta = phase . q, outputs H0 (optional, default the actuated joints).
+    """
+    path = Path(path)
+    where = f"gait file {path}"
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".npz", ".json"):
+        raise ValueError(f"{where}: must end in .csv, .npz or .json")
+    if suffix == ".npz":
+        if not path.is_file():
+            raise ValueError(f"{where}: not found (or not a file)")
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
+            raise ValueError(f"{where}: cannot read the NPZ file ({e})") from None
+        return _from_mapping(arrays, where, nq)
+    text = read_text_file(path, "gait file", 50_000_000)
+    if suffix == ".csv":
+        return _read_csv(text, where, nq)
+    try:
+        data = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as e:
+        raise ValueError(f"{where}: not valid JSON ({e})") from None
+    if isinstance(data, dict) and "virtual_constraints" in data:
+        return data["virtual_constraints"]
+    return _from_mapping(data, where, nq)
+
+
+def _from_mapping(data, where: str, nq):
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: must hold arrays t, q, dq (and optionally ddq)")
+    missing = [k for k in ("t", "q", "dq") if k not in data]
+    if missing:
+        raise ValueError(f"{where}: missing array(s) {', '.join(missing)} (t, q, dq and "
+                         f"optionally ddq)")
+    return nodes_from_arrays(data["t"], data["q"], data["dq"], data.get("ddq"), nq, where)

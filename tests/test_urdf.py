@@ -1,0 +1,168 @@
+"""Robots from URDF files: the packaged RABBIT and three-link URDFs give the models of
+their TOML descriptions (D, H, the impact map, the swing foot to 1e-12), random bipeds
+written as URDF (frames turned, point masses, the foot given as an argument) read back
+to their own models, ``biped robot import`` round-trips, and every kind of file that is
+not a planar biped is refused with one message naming what is wrong."""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from robot_factory import random_description, urdf_text
+
+from analysis.cli import main
+from biped_casadi import BipedModel, robot
+from biped_casadi.model.description import builtin_path, load_description
+from biped_casadi.model.urdf import import_urdf
+
+ROBOTS = Path(builtin_path("rabbit")).parent
+
+
+def functions_agree(a: BipedModel, b: BipedModel, seed=0, n=15):
+    """max relative difference of D, H, the impact map and the swing foot at random states."""
+    rng = np.random.default_rng(seed)
+    worst = 0.0
+    for _ in range(n):
+        q, dq = rng.uniform(-1, 1, a.nq), rng.uniform(-2, 2, a.nq)
+        pairs = [(a.D(q), b.D(q)), (a.H(q, dq), b.H(q, dq)),
+                 (a.swing_foot(q)[0], b.swing_foot(q)[0]), (a.swing_foot(q)[1], b.swing_foot(q)[1])]
+        pairs += list(zip(a.impact(q, dq), b.impact(q, dq)))
+        for x, y in pairs:
+            x, y = np.array(x), np.array(y)
+            worst = max(worst, float(np.max(np.abs(x - y)) / max(1.0, np.max(np.abs(y)))))
+    return worst
+
+
+@pytest.mark.parametrize("name", ["rabbit", "three_link"])
+def test_packaged_urdf_is_the_toml_robot(name):
+    imp = import_urdf(ROBOTS / f"{name}.urdf")
+    toml = load_description(builtin_path(name))
+    assert imp.description == toml                    # every field, names included
+    # the models built independently agree (not the memoised object twice)
+    assert functions_agree(BipedModel(imp.description), BipedModel(toml)) <= 1e-12
+    assert robot(ROBOTS / f"{name}.urdf") is robot(name)
+
+
+def test_rabbit_urdf_reads_the_transmissions():
+    d = import_urdf(ROBOTS / "rabbit.urdf").description
+    assert d.rotor_inertia == 3.32e-4 * 50.0 ** 2          # motorInertia x reduction^2
+    assert d.torque_limit == 150.0
+
+
+@pytest.mark.parametrize("k, flipped, foot_arg", [(1, False, False), (2, True, True),
+                                                  (3, True, False), (2, False, True)])
+def test_random_biped_through_urdf(tmp_path, k, flipped, foot_arg):
+    d = random_description(np.random.default_rng(40 + k), k, name=f"random{k}")
+    path = tmp_path / "r.urdf"
+    path.write_text(urdf_text(d, flipped=flipped, foot_link=not foot_arg))
+    foot = (0.0, 0.0, (1 if flipped else -1) * d.leg[-1].length) if foot_arg else None
+    if foot_arg and "foot" in dict(d.point_masses):
+        foot = None                                  # the foot mass's link marks it
+    got = import_urdf(path, foot=foot).description
+    assert dict(got.point_masses).keys() == dict(d.point_masses).keys()
+    assert functions_agree(BipedModel(got), BipedModel(d), seed=k) <= 1e-12
+
+
+def test_foot_argument_when_no_foot_link(tmp_path):
+    d = robot("rabbit").description
+    path = tmp_path / "shin_only.urdf"
+    path.write_text(urdf_text(d, foot_link=False))
+    with pytest.raises(ValueError, match=r"no foot: the last leg link 'tibia_left'.*--foot"):
+        import_urdf(path)
+    m = robot(path, foot=(0.0, 0.0, -0.4))
+    assert functions_agree(m, robot("rabbit")) <= 1e-12
+    with pytest.raises(ValueError, match="foot: applies to a URDF file"):
+        robot("rabbit", foot=(0, 0, -0.4))
+
+
+def _broken(tmp_path, edit):
+    text = (ROBOTS / "rabbit.urdf").read_text()
+    new = edit(text)
+    assert new != text
+    p = tmp_path / "bad.urdf"
+    p.write_text(new)
+    return p
+
+
+BAD = {
+    "non-planar joint": (lambda s: s.replace('<axis xyz="0 1 0"/>', '<axis xyz="1 0 0"/>', 1),
+                         r"joint 'hip_left' turns about .* not a planar robot"),
+    "prismatic joint": (lambda s: s.replace('name="knee_right" type="revolute"',
+                                            'name="knee_right" type="prismatic"'),
+                        r"joint 'knee_right' is prismatic"),
+    "legs differ": (lambda s: s.replace('<mass value="3.2"/>', '<mass value="3.3"/>', 1),
+                    r"legs differ: link 'tibia_left' has mass 3.3"),
+    "unactuated joint": (lambda s: re.sub(r'<transmission name="knee_left_transmission">.*?'
+                                          r'</transmission>', "", s, flags=re.S),
+                         r"joint 'knee_left' has no actuator .* more than one unactuated joint"),
+    "missing inertial": (lambda s: re.sub(r'(<link name="femur_right">\s*)<inertial>.*?</inertial>',
+                                          r"\1", s, flags=re.S),
+                         r"link 'femur_right' has no <inertial>"),
+    "off-axis centre of mass": (lambda s: s.replace('<origin xyz="0 0 -0.11"',
+                                                    '<origin xyz="0.02 0 -0.11"', 1),
+                                r"link 'femur_left': its centre of mass is 0.02 m off"),
+    "no foot": (lambda s: re.sub(r'<joint name="foot_left_fixed".*?<link name="foot_left"/>',
+                                 "", s, flags=re.S), r"no foot: the last leg link 'tibia_left'"),
+    "one leg": (lambda s: re.sub(r'<joint name="hip_right".*(?=</robot>)', "", s, flags=re.S),
+                r"the torso 'torso' has 1 jointed children \('hip_left'\); a biped has two legs"),
+    "bent at zero": (lambda s: s.replace('<origin xyz="0 0 -0.4" rpy="0 0 0"/>\n    <axis',
+                                         '<origin xyz="0.05 0 -0.4" rpy="0 0 0"/>\n    <axis', 1),
+                     r"not straight below the hip"),
+    "not XML": (lambda s: s[:200], r"cannot parse the URDF"),
+    "rotors differ": (lambda s: s.replace("<motorInertia>3.32e-4</motorInertia>",
+                                          "<motorInertia>1e-4</motorInertia>", 1),
+                      r"reflected rotor inertias differ"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_not_a_planar_biped_is_refused(tmp_path, case):
+    edit, message = BAD[case]
+    p = _broken(tmp_path, edit)
+    with pytest.raises(ValueError, match=message) as e:
+        robot(p)
+    assert str(p) in str(e.value) and "\n" not in str(e.value)
+    out = tmp_path / "robot.toml"
+    assert main(["robot", "import", str(p), "--out", str(out)]) == 2
+    assert not out.exists()
+
+
+def test_cli_import_round_trip(tmp_path, capsys):
+    out = tmp_path / "rabbit.toml"
+    assert main(["robot", "import", str(ROBOTS / "rabbit.urdf"), "--out", str(out),
+                 "--json"]) == 0
+    body = json.loads(capsys.readouterr().out)
+    assert body["legs"] == [["hip_left", "knee_left"], ["hip_right", "knee_right"]]
+    assert load_description(out) == robot("rabbit").description
+    # every command's --robot takes the URDF too
+    assert main(["model", "--robot", str(ROBOTS / "three_link.urdf"), "--json"]) == 0
+    D_urdf = json.loads(capsys.readouterr().out)["D"]
+    assert main(["model", "--robot", "three_link", "--json"]) == 0
+    assert D_urdf == json.loads(capsys.readouterr().out)["D"]
+
+
+def test_cli_import_bad_arguments(tmp_path, capsys):
+    out = tmp_path / "r.toml"
+    for argv, text in [([str(tmp_path / "missing.urdf")], "URDF file not found"),
+                       ([str(ROBOTS / "rabbit.toml")], "a URDF file (.urdf) is expected"),
+                       ([str(ROBOTS / "rabbit.urdf"), "--foot", "0", "0", "nan"],
+                        "--foot takes 3 finite numbers")]:
+        assert main(["robot", "import", *argv, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert text in err and len(err.splitlines()) == 1
+        assert not out.exists()
+
+
+def test_floating_base_and_unknown_tags_are_fine(tmp_path):
+    text = (ROBOTS / "rabbit.urdf").read_text().replace(
+        '<robot name="RABBIT">',
+        '<robot name="RABBIT"><link name="world"/><joint name="base" type="floating">'
+        '<parent link="world"/><child link="torso"/></joint><gazebo><plugin/></gazebo>')
+    p = tmp_path / "floating.urdf"
+    p.write_text(text)
+    imp = import_urdf(p)
+    assert imp.description == robot("rabbit").description
+    assert any("floating joint 'base'" in n for n in imp.notes)
