@@ -311,17 +311,26 @@ class PoincareMap:
 
     # ----------------------------------------------------------- evaluation
     @property
-    def open_orbit(self) -> bool:
-        """Whether x* fails to be a fixed point with M1 = 0 (never singular: D11 > 0).
+    def fixed_point_residual(self) -> float:
+        """|P(x*) - x*| with M1 = 0 (never singular: D11 > 0), computed once per map.
 
-        On a periodic gait x* is the fixed point for every M1; this one evaluation
-        qualifies the batches of :meth:`jacobian_batch`."""
+        On a periodic gait x* is the fixed point for every M1 (the reference itself is
+        the trajectory from x* with the outputs on it), so this one evaluation of the map
+        qualifies :meth:`analyse` with the variational method and the batches of
+        :meth:`jacobian_batch`."""
         if self._open is None:
             zero = np.zeros(self.nu)
             br = self.find_impact(self.x_star, zero)
             res = math.inf if br is None else float(np.max(np.abs(
                 np.array(self.map(self.x_star, zero, br.guess)[0]).ravel() - self.x_star)))
-            self._open = not res <= FIXED_POINT_TOL
+            self._residual, self._open = res, not res <= FIXED_POINT_TOL
+        return self._residual
+
+    @property
+    def open_orbit(self) -> bool:
+        """Whether x* fails to be a fixed point of the map (:attr:`fixed_point_residual`
+        above :data:`FIXED_POINT_TOL`): the gait is not a periodic orbit of the model."""
+        self.fixed_point_residual
         return self._open
 
     @property
@@ -458,8 +467,9 @@ class PoincareMap:
         method : {'variational', 'ad'}
             'variational' (the variational equation along the orbit, about a
             millisecond) or 'ad' (AD through the whole discrete map, ~0.3 s).  Either
-            way one evaluation of the map at x* (~20 ms) checks the fixed point
-            (status 'open_orbit' when it is not one).
+            way the fixed point is checked (status 'open_orbit' when x* is not one): by
+            the map at x* with this M1 ('ad'), or once per map ('variational':
+            :attr:`fixed_point_residual`, the same for every M1 on a periodic gait).
 
         Returns
         -------
@@ -472,14 +482,11 @@ class PoincareMap:
         if self.is_singular(M1):
             return self._undefined(M1, "singular", min_den, method,
                                    "D11 - D12 M1 vanishes or changes sign on the step (eq. 24)")
-        br = self.find_impact(self.x_star, M1)
         if method == "variational":
-            if br is None:
-                return self._undefined(M1, "no_impact", min_den, method,
-                                       f"no valid swing-foot impact within {self.horizon:g} T")
             A = self.variational.jacobian(M1)
-            xn, ti = (np.array(v) for v in self.map(self.x_star, M1, br.guess))   # the check
-            return self._result(M1, A, xn.ravel(), ti.item(), min_den, method)
+            return self._result(M1, A, None, self.T, min_den, method,
+                                residual=self.fixed_point_residual)
+        br = self.find_impact(self.x_star, M1)
         if br is None:
             return self._undefined(M1, "no_impact", min_den, method,
                                    f"no valid swing-foot impact within {self.horizon:g} T")
@@ -492,14 +499,14 @@ class PoincareMap:
                               self.x_star, tau_impact=tau, min_denominator=min_den,
                               method=method, message=message)
 
-    def _result(self, M1, A, xn, ti, min_den, method):
+    def _result(self, M1, A, xn, ti, min_den, method, residual=None):
         if not np.all(np.isfinite(A)):
             return self._undefined(M1, "no_impact", min_den, method,
                                    "integration of the zero dynamics broke down", ti, A)
         ev = np.linalg.eigvals(A).astype(complex)       # [re, im] pairs in to_dict()
         ev = ev[np.argsort(-np.abs(ev))]
         mx = float(np.max(np.abs(ev)))
-        res = float(np.max(np.abs(xn - self.x_star)))
+        res = float(residual if residual is not None else np.max(np.abs(xn - self.x_star)))
         status, message = ("stable" if mx < 1 else "unstable"), ""
         if not res <= FIXED_POINT_TOL:
             status = "open_orbit"
