@@ -40,8 +40,8 @@ from biped_casadi.simulation.outcome import NOT_CONVERGED
 from biped_casadi.control.reference import gait_first
 from gait_opt import Gait
 
-from ..cluster import dask_client
-from ..tasks import task
+from ..cluster import cluster_client
+from ..tasks import resolve_scheduler, task
 from ..stability.poincare import poincare_map
 from ..stability.vc_map import vc_eigenvalue
 
@@ -513,8 +513,10 @@ def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
     chunk : int
         Designs per walker batch.
     scheduler : str or dask.distributed.Client, optional
-        Walk the batches of each round on a Dask cluster's workers (each builds the
-        walker once) instead of in this process.
+        Where the batches of each round are walked (:func:`analysis.tasks.resolve_scheduler`):
+        None or 'synchronous', this process (the batches are vectorised); 'local', a
+        LocalCluster; an address or a client, that cluster's workers (each builds the
+        walker once).
 
     Returns
     -------
@@ -545,7 +547,8 @@ def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
         for part, f in futs:
             yield part, f.result()
 
-    with (dask_client(scheduler) if scheduler is not None else contextlib.nullcontext()) \
+    where = "synchronous" if scheduler is None else resolve_scheduler(scheduler)
+    with (cluster_client(where) if where != "synchronous" else contextlib.nullcontext()) \
             as client:
         def evaluate(idx, scales):
             nonlocal used

@@ -130,11 +130,13 @@ def run_sweep(gait, points, out_dir=None, chunk_size: int | None = None,
     chunk_size : int, optional
         Points per chunk (default 256; when resuming, the folder's own).
     workers : int, optional
-        Local workers (default: all cores); 1 runs chunk after chunk in this process
-        (each chunk is still spread over the cores by CasADi's thread map).
-    scheduler : str or dask.distributed.Client, optional
-        A Dask scheduler address ('tcp://host:port') or client; the chunks then run on
-        its workers.
+        Local workers (default: all cores); 1 runs chunk after chunk in this process.
+    scheduler : None, str or dask.distributed.Client, optional
+        Where the chunks run (:func:`analysis.tasks.resolve_scheduler`, the same meaning
+        for every function): 'synchronous', chunk after chunk in this process; 'local'
+        (the default outside a task), this machine's cores (threads of this process
+        sharing one map); a Dask scheduler's address ('tcp://host:port') or client: its
+        workers.
     progress : bool
         A progress bar on stderr (when it is a terminal).
     settings : SweepSettings or dict, optional
@@ -156,7 +158,6 @@ def run_sweep(gait, points, out_dir=None, chunk_size: int | None = None,
         chunk_size = _stored_chunk_size(out_dir)
     chunk_size = DEFAULT_CHUNK_SIZE if chunk_size is None else chunk_size
     _check_run_arguments(gait, executor, workers, chunk_size)
-    workers = int(workers) if workers else _cpu_count()
     chunk_size = int(chunk_size)
     gdict = gait.definition()
     payload = SweepPayload(gait=gdict, gait_sha256=gait.cache_key, map=settings.to_dict())

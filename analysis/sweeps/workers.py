@@ -14,6 +14,7 @@ from gait_opt import Gait
 
 from ..cluster import DASK_CONNECT_TIMEOUT, dask_client, progress_bar, submit_chunks
 from ..stability.poincare import PoincareMap, poincare_map
+from ..tasks import resolve_scheduler
 
 from .results import SweepSettings, code_digest
 
@@ -131,10 +132,16 @@ def _run_dask(scheduler, payload, P, todo, record):
 
 
 def dispatch(todo, payload, P, record, scheduler, workers, executor):
-    """Evaluate the chunks ``todo`` where the caller asked, calling ``record`` for each."""
-    if scheduler is not None:
-        _run_dask(scheduler, payload, P, todo, record)
+    """Evaluate the chunks ``todo`` where the caller asked, calling ``record`` for each:
+    ``scheduler`` resolved by :func:`analysis.tasks.resolve_scheduler` ('synchronous':
+    chunk after chunk in this process; 'local': this machine's cores, threads of this
+    process sharing one map (or processes, ``executor='process'``); a cluster: its
+    workers)."""
+    where = resolve_scheduler(scheduler, int(workers) if workers else None)
+    if where not in ("synchronous", "local"):
+        _run_dask(where, payload, P, todo, record)
         return
+    workers = 1 if where == "synchronous" else (workers or _cpu_count())
     if executor == "process" and workers > 1 and len(todo) > 1:
         _run_processes(payload, P, todo, record, workers)
         return

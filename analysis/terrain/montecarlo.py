@@ -42,6 +42,7 @@ from biped_casadi.results import Result, internal
 
 
 from ..cluster import cluster_client, progress_bar, submit_chunks
+from ..tasks import resolve_scheduler
 from .chunks import MonteCarloStore, evaluate_chunk, _Payload
 from .estimates import MFPTEstimate, mfpt_estimate
 from .spec import MonteCarloSettings, WalkerSpec, code_digest
@@ -145,10 +146,11 @@ def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = No
     out_dir : str or Path, optional
         Write the chunks there as they arrive and resume from what is there (a folder
         made with other settings is refused); default: nothing is written.
-    scheduler : None, 'local', 'inline', str or dask.distributed.Client
-        None or 'local': a Dask LocalCluster of ``workers`` processes (default the
-        cores); 'inline': this process, no Dask; an address ('tcp://host:port') or a
-        client: that cluster.
+    scheduler : None, str or dask.distributed.Client
+        Where the chunks run (:func:`analysis.tasks.resolve_scheduler`, the same meaning
+        for every function): 'synchronous' (or 'inline'), this process; 'local' (the
+        default outside a task), a Dask LocalCluster of ``workers`` processes (default
+        the cores); an address ('tcp://host:port') or a client: that cluster.
     workers : int, optional
         Processes of the LocalCluster.
     progress : bool
@@ -176,8 +178,9 @@ def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = No
     reused = 0
     stack = contextlib.ExitStack()
     client = None
-    if scheduler not in (None, "local", "inline"):
-        client = stack.enter_context(cluster_client(scheduler, workers))   # before anything is written
+    where = resolve_scheduler(scheduler, workers)
+    if where not in ("synchronous", "local"):
+        client = stack.enter_context(cluster_client(where, workers))   # before anything is written
     try:
         if store is not None:
             store.open()
@@ -211,12 +214,12 @@ def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = No
             bar.update(b - a)
 
         try:
-            if todo and scheduler == "inline":
+            if todo and where == "synchronous":
                 for k, a, b in todo:
                     record(k, a, b, evaluate_chunk(payload, a, b))
             elif todo:
                 if client is None:
-                    client = stack.enter_context(cluster_client(scheduler, workers))
+                    client = stack.enter_context(cluster_client("local", workers))
                 submit_chunks(client, evaluate_chunk, payload, todo, record,
                               f"mc-{gait.cache_key[:8]}")
         finally:
