@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
 
 from biped_casadi import (PAPER_SIZES, RABBIT_DESCRIPTION, Design, SimulationOptions,
                           perturbed_initial_state, simulate)

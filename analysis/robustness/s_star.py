@@ -220,7 +220,6 @@ def _vc_runs(gait, options, dirs, scale) -> WalkBatch:
     hybrid zero dynamics (:meth:`~biped_casadi.simulation.VirtualConstraintWalker.walk_from_states`:
     exact for the controller with its phase-based correction, which puts the closed
     loop on the step's corrected surface from any start)."""
-    model = gait.model
     q0, dq0 = start_states(gait, dirs, scale)
     walker = virtual_constraint_walker(gait, options, VC_NODES, jit=True)
     return walker.walk_from_states(q0, dq0, steps=options.steps)
@@ -343,7 +342,6 @@ def bisect_scale(evaluate, n: int, s_max: float, rounds: int):
 # ------------------------------------------------------------------ one design
 def _runner(gait, design, st: RobustnessSettings):
     """``run(dirs, s) -> WalkBatch``: the design's (or virtual constraints') runs."""
-    model = gait.model
     if design is None:
         opts = st.simulation_options()
         return lambda dirs, s: _vc_runs(gait, opts, dirs, s)

@@ -78,7 +78,6 @@ def grid_best(gait, n: int = 9, lo: float = -10.0, hi: float = 10.0) -> dict:
     dict
         ``M1`` (list) and ``max_abs``; both None when no point is stable.
     """
-    model = gait.model
     r = grid_results(gait, n, lo, hi)
     stable = np.flatnonzero(r.point_status == "stable")
     if not stable.size:

@@ -43,7 +43,7 @@ from .storage import META, SweepStore, digest_points
 from .points import _check_points, grid_points, line_points, max_grid_n
 from .results import (RESULTS_VERSION, BestPoint, SweepResult, SweepSettings, _result,
                       code_digest)
-from .workers import SweepPayload, _cpu_count, _progress_bar, dispatch, evaluate_chunk
+from .workers import SweepPayload, _progress_bar, dispatch, evaluate_chunk
 
 __all__ = ["run_sweep", "SweepResult", "BestPoint", "SweepSettings", "grid_points", "line_points",
            "max_grid_n", "one_d_sweeps", "OneDSweeps", "load_sweep", "evaluate_chunk",

@@ -48,7 +48,6 @@ def _engine(payload: _Payload):
     gait = _gait_for(payload.gait_sha256, payload.gait)
     spec, st = payload.spec, payload.settings
     opts = st.options(spec, gait.T)
-    model = gait.model
     # the walkers' options hold only validity thresholds: those of the basins and of
     # robustness runs with the same thresholds, so a process shares one compiled walker
     wopts = SimulationOptions(mu=st.mu, torque_limit=st.torque_limit)

@@ -5,7 +5,7 @@ import dataclasses
 from dataclasses import asdict, dataclass, field
 
 from biped_casadi.caching import DiskCache
-from biped_casadi.results import Result, internal
+from biped_casadi.results import Result
 
 from ...robustness.s_star import RobustnessSettings
 from ..robust_search import ROBUST_GAIT
