@@ -86,3 +86,9 @@ def _write_api_page():
 
 
 _write_api_page()
+
+
+# ---- the benchmarks page, made from the results the benchmark scripts saved
+from benchmarks_page import benchmarks_page  # noqa: E402
+
+benchmarks_page(ROOT / "benchmarks" / "results", HERE / "benchmarks.md")

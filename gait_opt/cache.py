@@ -33,7 +33,7 @@ def cache_path(model=None, options: GaitOptions | None = None, cache_dir_=None) 
     model : BipedModel, optional
         Default RABBIT.
     options : GaitOptions, optional
-        Default: SPEC section 2 (the robot's torque limit filled in).
+        Default: docs: theory §2 (the robot's torque limit filled in).
     cache_dir_ : str or Path, optional
         The cache folder (default :func:`biped_casadi.cache_dir`).
 

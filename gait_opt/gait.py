@@ -34,7 +34,7 @@ ORBIT_TOL = 1e-8
 
 
 class Gait(Reference):
-    """A cyclic reference step of duration ``T`` (SPEC section 2).
+    """A cyclic reference step of duration ``T`` (docs: theory §2).
 
     It implements the reference interface :class:`biped_casadi.Reference`.  ``q(t)``, ``dq(t)``, ``ddq(t)``, ``u(t)``: t a float or array in [0, 2 T] (past T the
     reference continues smoothly: the Bezier polynomials of q_a^d evaluated past s = 1

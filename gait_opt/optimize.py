@@ -1,4 +1,4 @@
-"""Optimal cyclic reference gait (SPEC section 2): IPOPT on the transcribed problem
+"""Optimal cyclic reference gait (docs: theory §2): IPOPT on the transcribed problem
 (:mod:`gait_opt.transcription`), the exact periodic orbit (:mod:`gait_opt.polish`), and
 a check of every path constraint on a dense grid, with the node bounds tightened and
 the problem re-solved where a constraint is exceeded between the nodes.
@@ -163,7 +163,7 @@ def _solve(model, options: GaitOptions | None = None, *, verbose: bool = False,
     model : BipedModel
         The robot.
     options : GaitOptions, optional
-        Default: SPEC section 2.
+        Default: docs: theory §2.
     verbose : bool
         Print IPOPT's iterations.
     warm_start : Gait, optional

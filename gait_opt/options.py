@@ -1,4 +1,4 @@
-"""Options of the reference-gait problem (SPEC section 2 defaults)."""
+"""Options of the reference-gait problem (docs: theory §2 defaults)."""
 from __future__ import annotations
 
 import dataclasses
@@ -15,7 +15,7 @@ CONTINUATIONS = ("ramp", "smooth")
 
 @dataclass(frozen=True)
 class GaitOptions:
-    """Everything that defines the reference-gait problem (SPEC section 2); all have defaults.
+    """Everything that defines the reference-gait problem (docs: theory §2); all have defaults.
 
     Parameters
     ----------

@@ -3,7 +3,7 @@
 q_a^d(t): a Bezier polynomial of degree M in s = t / T (nu x (M+1) coefficients alpha,
 nu = the model's number of torques: 4 for RABBIT).
 Being a polynomial, it and all its time derivatives exist everywhere and continue
-smoothly past T (SPEC section 3: the reference after T is the same polynomial
+smoothly past T (docs: theory §3: the reference after T is the same polynomial
 evaluated for s > 1).
 
 q_u^d(t): the solution of the unactuated row of eq. (1),

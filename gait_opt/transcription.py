@@ -1,4 +1,4 @@
-"""Transcription of the reference-gait problem (SPEC section 2) into an NLP for IPOPT,
+"""Transcription of the reference-gait problem (docs: theory §2) into an NLP for IPOPT,
 with structured exact derivatives.
 
 Transcription.  The actuated joints are Bezier polynomials of s = t / T (so q_a^d,
@@ -415,7 +415,7 @@ def _variable_bounds(model, opts, lay: _Layout):
 
 
 def build_problem(model, opts: GaitOptions, margins: dict | None = None) -> Problem:
-    """Transcribe the SPEC section 2 problem for ``opts`` (see the module docstring).
+    """Transcribe the docs: theory §2 problem for ``opts`` (see the module docstring).
 
     Parameters
     ----------

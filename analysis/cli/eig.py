@@ -59,7 +59,7 @@ def register(sub):
         "eig", help="eigenvalues of the restricted Poincare map for an output matrix M1",
         description="Exact Jacobian A^z (by algorithmic differentiation) of the restricted "
                     "Poincare map at tau = 0.75 T for outputs v = [M1, I] q, its eigenvalues "
-                    "and the SPEC status (stable, unstable, singular, no_impact). With "
+                    "and the status (stable, unstable, singular, no_impact). With "
                     "--controller vc: the eigenvalue of the virtual-constraint (HZD) "
                     "controller's 1-D map. --json prints {A, eigenvalues (as [re, im] "
                     "pairs), max_abs, status, ...}.")

@@ -1,4 +1,4 @@
-"""``biped gait``: optimise the reference gait (SPEC section 2), print its figures, save
+"""``biped gait``: optimise the reference gait (docs: theory §2), print its figures, save
 it, and optionally draw it.  Reads top to bottom; every computation is in ``gait_opt``.
 """
 from __future__ import annotations

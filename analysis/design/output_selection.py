@@ -502,7 +502,7 @@ def conjecture_figures(zsw: np.ndarray, max_abs: np.ndarray, status: np.ndarray)
         (n,) max ``|lambda|`` of each M1 (not used in the figures; kept for symmetry
         with the plot).
     status : numpy.ndarray
-        (n,) statuses of SPEC §4.
+        (n,) statuses of docs: theory §4.
 
     Returns
     -------

@@ -1,4 +1,4 @@
-"""The restricted Poincaré map P^z of the hybrid zero dynamics (paper §IV, SPEC §4) and
+"""The restricted Poincaré map P^z of the hybrid zero dynamics (paper §IV, docs: theory §4) and
 its exact Jacobian A^z.
 
 Zero dynamics (paper eq. 19 with M2 = I): the outputs follow v = v^d + v_c, so
@@ -50,11 +50,11 @@ __all__ = ["PoincareMap", "PoincareResult", "JacobianBatch", "Screen", "ImpactBr
            "MapStep", "poincare_eigenvalues", "singular_m1_values", "STATUSES", "METHODS",
            "poincare_map", "FIXED_POINT_TOL"]
 
-#: status of an analysed M1 (SPEC section 4), and 'open_orbit': x* is not a fixed point
+#: status of an analysed M1 (docs: theory §4), and 'open_orbit': x* is not a fixed point
 #: (the gait is not a periodic orbit of the model), so A^z at x* says nothing of stability
 STATUSES = ("stable", "unstable", "singular", "no_impact", "open_orbit")
 #: |P(x*) - x*| beyond this is an open orbit (the discrete map closes the default gait
-#: to ~5e-10; SPEC section 2 asks 1e-8 of the gait itself)
+#: to ~5e-10; docs: theory §2 asks 1e-8 of the gait itself)
 FIXED_POINT_TOL = 1e-6
 #: how A^z is computed
 METHODS = ("variational", "ad")
@@ -328,8 +328,9 @@ class PoincareMap:
 
     @property
     def open_orbit(self) -> bool:
-        """Whether x* fails to be a fixed point of the map (:attr:`fixed_point_residual`
-        above :data:`FIXED_POINT_TOL`): the gait is not a periodic orbit of the model."""
+        """Whether x* fails to be a fixed point of the map (the gait is not an orbit).
+
+        That is, :attr:`fixed_point_residual` is above :data:`FIXED_POINT_TOL`."""
         self.fixed_point_residual
         return self._open
 
@@ -458,7 +459,7 @@ class PoincareMap:
         return MapStep(np.array(xn).ravel(), ti)
 
     def analyse(self, M1, method: str = "variational") -> PoincareResult:
-        """A^z, eigenvalues and status (SPEC section 4) at the fixed point for one M1.
+        """A^z, eigenvalues and status (docs: theory §4) at the fixed point for one M1.
 
         Parameters
         ----------

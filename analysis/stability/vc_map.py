@@ -11,7 +11,7 @@ theta being strictly monotonic, it is used as the independent variable: the stat
 is w = dtheta, with dw/dtheta = ddtheta / w.  The impact on Z happens at the fixed phase
 theta^- where z_sw(Q(theta)) = 0 (found with ``casadi.rootfinder``), whatever the
 velocity: so the hybrid zero dynamics has a one-dimensional restricted Poincaré map.
-Section: theta_s = c q^d(0.75 T) (the time-varying controller's section, SPEC §4, seen
+Section: theta_s = c q^d(0.75 T) (the time-varying controller's section, docs: theory §4, seen
 on the same orbit).  One application: integrate w from theta_s to theta^- (RK4 in
 theta), apply the impact map and relabelling, theta^+ = c q^+, w^+ = c dq^+, integrate
 from theta^+ back to theta_s.  Its derivative at the fixed point, by AD through the

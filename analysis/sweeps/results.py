@@ -134,7 +134,7 @@ class SweepResult(Result):
     Parameters
     ----------
     counts : dict
-        Number of points per status of SPEC §4.
+        Number of points per status of docs: theory §4.
     elapsed : float
         This run's wall time, s.
     chunk_size : int
@@ -159,7 +159,7 @@ class SweepResult(Result):
     points : numpy.ndarray
         (n, nu) the M1 of the sweep.
     point_status : numpy.ndarray
-        (n,) strings of SPEC §4.
+        (n,) strings of docs: theory §4.
     max_abs : numpy.ndarray
         (n,) max ``|lambda|``, inf where singular or without impact.
     eigenvalues : numpy.ndarray

@@ -1,10 +1,10 @@
 """Sweeps of the output matrix M1 (paper §V-A, Fig. 2): max|lambda| of A^z and the status
-of SPEC §4 for many M1, in parallel, stored as they are computed, resumable.
+of docs: theory §4 for many M1, in parallel, stored as they are computed, resumable.
 
     from analysis.sweeps.sweep import grid_points, run_sweep
     r = run_sweep(gait, grid_points(9, -10, 10), out_dir="sweep9")
     r.counts          # {'stable': .., 'unstable': .., 'singular': .., 'no_impact': ..}
-    r.point_status    # the status of SPEC §4 of every point
+    r.point_status    # the status of docs: theory §4 of every point
 
 The points are cut into chunks of ``chunk_size`` rows; each chunk is evaluated by
 :meth:`analysis.stability.poincare.PoincareMap.jacobian_batch` (the vectorised variational

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from biped_casadi import Design
 from biped_casadi.results import Result, internal
 
 
@@ -130,17 +131,22 @@ class MonteCarloResult(Result):
 
 
 # ------------------------------------------------------------------- dispatch
-def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = None,
+def monte_carlo(design, spec=None, settings: MonteCarloSettings | None = None,
                 out_dir=None, scheduler=None, workers: int | None = None,
-                progress: bool = False) -> MonteCarloResult:
-    """The Monte Carlo of ``spec`` walking on ``gait`` (module docstring).
+                progress: bool = False, *, plant=None, saturate: bool = False
+                ) -> MonteCarloResult:
+    """The Monte Carlo of a design walking on stochastic terrain (module docstring).
+
+    ``monte_carlo(design, settings)`` with a :class:`~biped_casadi.Design` on its gait,
+    or ``monte_carlo(gait, spec, settings)`` with a :class:`WalkerSpec`.
 
     Parameters
     ----------
-    gait : Gait
-        The reference (and, through it, the controller's robot).
-    spec : WalkerSpec
-        What walks.
+    design : Design or Gait
+        What walks and on which gait (a gait: ``spec`` says what walks).
+    spec : WalkerSpec or MonteCarloSettings, optional
+        What walks, with a gait as first argument; with a design, the settings may be
+        given here.
     settings : MonteCarloSettings, optional
         Default: all defaults.
     out_dir : str or Path, optional
@@ -155,12 +161,25 @@ def monte_carlo(gait, spec: WalkerSpec, settings: MonteCarloSettings | None = No
         Processes of the LocalCluster.
     progress : bool
         A progress bar on a terminal.
+    plant : dict, optional
+        With a design: the plant's robot description when it differs from the model.
+    saturate : bool
+        With a design: clip torques at the limit and keep walking.
 
     Returns
     -------
     MonteCarloResult
     """
     t0 = time.perf_counter()
+    if isinstance(design, Design):
+        if isinstance(spec, MonteCarloSettings) and settings is None:
+            spec, settings = None, spec
+        if spec is not None:
+            raise ValueError("spec: with a design, give the settings (what walks is the "
+                             "design)")
+        gait, spec = design.gait, WalkerSpec.of(design, plant=plant, saturate=saturate)
+    else:
+        gait = design
     st = settings or MonteCarloSettings()
     if not isinstance(spec, WalkerSpec):
         raise ValueError("spec must be a WalkerSpec")

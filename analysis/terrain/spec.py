@@ -74,6 +74,27 @@ class WalkerSpec:
         if self.controller == "tv" and not self.M1:
             raise ValueError("M1: the time-varying controller needs its outputs")
 
+    @classmethod
+    def of(cls, design, plant=None, saturate: bool = False) -> "WalkerSpec":
+        """What walks, from a :class:`~biped_casadi.Design`.
+
+        Parameters
+        ----------
+        design : Design
+            The controller (its gait is not part of the spec).
+        plant : dict, optional
+            The plant's robot description when it differs from the model.
+        saturate : bool
+            Clip torques at the limit.
+
+        Returns
+        -------
+        WalkerSpec
+        """
+        g = design.gains
+        return cls(design.controller, () if design.M1 is None else tuple(design.M1),
+                   design.rejoin, (g.Kp, g.Kd, g.eps), plant, saturate)
+
     @property
     def engine(self) -> str:
         """'zero_dynamics', 'virtual_constraints' (the batched walkers) or 'full_order'."""

@@ -9,7 +9,7 @@ unless said otherwise; the controllers (:mod:`biped_casadi.control`), the simula
 and the Poincaré maps (:mod:`analysis`) call these functions and nothing else for these
 equations.
 
-Constants: :data:`SECTION` (the Poincaré section, SPEC §4) and :data:`SINGULAR_RTOL`
+Constants: :data:`SECTION` (the Poincaré section, docs: theory §4) and :data:`SINGULAR_RTOL`
 (when the decoupling denominator of eq. (24) counts as vanishing).
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ __all__ = ["SECTION", "SINGULAR_RTOL", "M1_LIMIT", "Gains", "SingularityReport",
            "decoupling_denominator", "unactuated_acceleration", "actuated_torque",
            "output_acceleration", "singularity_report", "is_singular"]
 
-#: Poincaré section tau = SECTION * T (SPEC §4, paper §IV)
+#: Poincaré section tau = SECTION * T (docs: theory §4, paper §IV)
 SECTION = 0.75
 
 #: the decoupling denominator D11 - D12 M1 (eq. 24) "vanishes" on a step where its

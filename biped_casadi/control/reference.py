@@ -1,7 +1,7 @@
 """The reference-trajectory interface the controllers, the simulator and the maps use.
 
 A reference is one step q^d(tau), tau in [0, T], restarted at every impact and
-continued smoothly past T (SPEC §2-3).  Its symbolic form is a CasADi Function of tau
+continued smoothly past T (docs: theory §2-3).  Its symbolic form is a CasADi Function of tau
 and of an internal reference state r that is integrated alongside the robot (for a
 gait of :mod:`gait_opt`, r = (q_u^d, dq_u^d): the unactuated row of eq. (1) is an ODE,
 so carrying it as a state keeps q_u^d exact in every discrete scheme).  A reference

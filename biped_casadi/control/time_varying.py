@@ -2,7 +2,7 @@
 stride-to-stride correction v_c, as a :class:`~biped_casadi.control.controller.Controller`.
 
 Reference state r.  The controller needs q_u^d(tau); a gait defines it as the solution of
-the unactuated row of eq. (1) with q_a = q_a^d(tau) (SPEC §2), carried as the reference
+the unactuated row of eq. (1) with q_a = q_a^d(tau) (docs: theory §2), carried as the reference
 state r = (q_u^d, dq_u^d) and reset to its value at tau = 0 at every impact: a function of
 tau alone, so the hybrid closed loop is still the system in (q, dq, tau) of eq. (9).
 From every step start the closed loop is its hybrid zero dynamics
@@ -35,7 +35,7 @@ class TimeVaryingController(Controller):
     Implements eqs. (6), (7), (17): the outputs y = v - v^d(tau) that the control
     zeroes, with tau the time since the last impact (the caller restarts it at 0 at
     every impact, as the simulator does, and calls :meth:`step_start`, which restarts
-    the reference state), corrected to y_c of eq. (17) (SPEC §3):
+    the reference state), corrected to y_c of eq. (17) (docs: theory §3):
 
     Outputs:  y_c = M q - v^d(tau) - v_c(tau),  M = [M1, I],
     v^d = M q^d(tau), v_c the correction of eq. (18) from y_i = v - v^d and

@@ -2,7 +2,7 @@
 underactuation): kinematics, Lagrangian dynamics and impact map as CasADi SX
 expressions, exposed as named ``casadi.Function`` objects.
 
-Coordinates follow SPEC section 1, generalised to k links per leg: absolute link angles
+Coordinates follow docs: theory §1, generalised to k links per leg: absolute link angles
 phi_i measured from the vertical (positive leaning to +x), the stance leg's links
 pointing up from the stance foot, the torso up from the hip, the swing leg's links
 pointing from the swing foot toward the hip; q1 = phi1 (the unactuated angle of the
@@ -28,7 +28,7 @@ from .urdf import load_urdf
 __all__ = ["BipedModel", "rabbit", "robot", "resolve_robot", "E_RELABEL", "B_INPUT",
            "absolute_angles", "relabelling", "RABBIT_DESCRIPTION"]
 
-#: Relabelling of the legs at impact, q+ = E q- (SPEC section 1), for RABBIT; E @ E = I.
+#: Relabelling of the legs at impact, q+ = E q- (docs: theory §1), for RABBIT; E @ E = I.
 #: Every model has its own (:func:`relabelling`, ``model.E``).
 E_RELABEL = np.array([[1, 1, 1, 1, 1],
                       [0, 0, 0, 0, -1],
@@ -39,7 +39,7 @@ E_RELABEL = np.array([[1, 1, 1, 1, 1],
 #: Input matrix of eq. (1) for RABBIT: torques act on q2..q5 (``model.B`` in general).
 B_INPUT = np.vstack([np.zeros((1, 4)), np.eye(4)])
 
-#: RABBIT's description (SPEC section 1, torque limit 150 N m): the same numbers as the
+#: RABBIT's description (docs: theory §1, torque limit 150 N m): the same numbers as the
 #: packaged ``rabbit.toml`` and the legacy :data:`~biped_casadi.model.params.RABBIT`.
 RABBIT_DESCRIPTION = RABBIT.to_description()
 
@@ -234,7 +234,7 @@ class BipedModel:
     ``D(q)`` mass matrix (nq x nq); ``H(q, dq)`` = C(q, dq) dq + G(q) (nq x 1);
     ``C(q, dq)`` Coriolis matrix with dD/dt - 2C skew; ``G(q)``;
     ``swing_foot(q)`` -> (x, z); ``swing_foot_velocity(q, dq)``;
-    ``impact(q, dq)`` -> (q+, dq+) after impact and relabelling (SPEC section 1);
+    ``impact(q, dq)`` -> (q+, dq+) after impact and relabelling (docs: theory §1);
     ``impact_full(q, dq)`` -> (q+, dq+, F, dq_pre, v_old_stance): also the impulse on
     the new stance foot, the post-impact velocity before relabelling and the velocity
     of the old stance foot after impact;
@@ -583,12 +583,12 @@ def robot(name_or_path="rabbit", foot=None) -> BipedModel:
 
 
 def rabbit(params: RobotParams | RobotDescription | None = None) -> BipedModel:
-    """The RABBIT model of SPEC section 1, or another parameter set.
+    """The RABBIT model of docs: theory §1, or another parameter set.
 
     Parameters
     ----------
     params : RobotParams or RobotDescription, optional
-        Default: RABBIT (:data:`RABBIT_DESCRIPTION`, the numbers of SPEC section 1 and
+        Default: RABBIT (:data:`RABBIT_DESCRIPTION`, the numbers of docs: theory §1 and
         of the packaged ``rabbit.toml``).
 
     Returns

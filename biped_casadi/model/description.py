@@ -38,7 +38,7 @@ and the stance foot a passive point contact.  The schema (SI units throughout)::
                                # "joint1" .. "joint{k-1}" counted from the hip (one on
                                # each leg)
 
-Coordinates (SPEC section 1, generalised): q1 is the absolute angle of the stance
+Coordinates (docs: theory §1, generalised): q1 is the absolute angle of the stance
 leg's lowest link, then the relative angles up the stance leg, the torso relative to
 the stance leg's top link, the swing leg's top link relative to the torso, and the
 relative angles down the swing leg: n = 2 k + 1 joints, n - 1 torques.

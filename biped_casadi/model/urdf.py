@@ -6,7 +6,7 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
 - the structure: a torso link (the tree's root, or the child of a massless root joined
   by a ``floating`` or ``planar`` joint) with two chains of ``revolute`` (or
   ``continuous``) joints, the legs, whose axes are all parallel: the normal of the
-  plane of motion.  At zero joint angles the robot must stand straight (SPEC section 1:
+  plane of motion.  At zero joint angles the robot must stand straight (docs: theory §1:
   q = 0 is upright): each leg's joints and foot on one line below the hip;
 - per link, from ``<inertial>``: the mass, the centre of mass (its distance from the
   link's proximal joint along the link; off the link's axis in the plane of motion it

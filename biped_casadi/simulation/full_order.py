@@ -1,4 +1,4 @@
-"""Full-order hybrid closed-loop simulation of walking (paper eq. 9; SPEC §1 impact, §4
+"""Full-order hybrid closed-loop simulation of walking (paper eq. 9; docs: theory §1 impact, §4
 guard).
 
 State (q, dq, tau), 2 nq + 1 numbers, plus the controller's reference state r (a function of
@@ -14,7 +14,7 @@ CasADi call (``mapaccum``, the nodes' diagnostics included); the
 impact (a strike beyond ``model.scuff_zone``: anywhere in front of the stance foot for
 legs with knees) is located inside its RK4 interval by Newton's method on the length of the last
 RK4 step, z_sw(RK4(x_k, eta)) = 0, so the event is exact to round-off for the discrete
-scheme.  With the default 2000 steps per T the scheme is the gait's own (SPEC §2), and
+scheme.  With the default 2000 steps per T the scheme is the gait's own (docs: theory §2), and
 the unperturbed closed loop repeats the reference to ~1e-11.
 
 Every node is checked, in time order, and the run stops at the first invalid state
@@ -52,6 +52,7 @@ import casadi as ca
 import numpy as np
 
 from ..caching import cached
+from ..control.design import Design
 from ..control.output_law import SECTION
 from ..numerics import FastCall, as_vector, compiled, rk4_step
 from ..results import internal, json_safe
@@ -591,8 +592,9 @@ def simulate(controller, q0=None, dq0=None, options: SimulationOptions | None = 
 
     Parameters
     ----------
-    controller : TimeVaryingController or VirtualConstraintController
-        The control law.
+    controller : Design, TimeVaryingController or VirtualConstraintController
+        The control law (a :class:`~biped_casadi.Design` on its gait, or its
+        controller).
     q0, dq0 : array_like, optional
         Initial state (the start of a step, tau = 0), rad and rad/s; default the
         reference at tau = 0.
@@ -610,6 +612,8 @@ def simulate(controller, q0=None, dq0=None, options: SimulationOptions | None = 
     SimulationResult
         Status, step records and logs.
     """
+    if isinstance(controller, Design):
+        controller = controller.controller_for()
     sim = simulator(controller, options if options is not None else SimulationOptions(), plant)
     g = controller.reference
     q0 = g.q(0.0) if q0 is None else q0

@@ -173,7 +173,7 @@ def strike(z, z_prev, x_sw, scuff_zone: float, ground=None):
 
     It crosses the ground going down (z_sw at the previous node >= 0 > z_sw, both
     measured from the ground under the foot at the node) in front of the stance foot,
-    beyond ``scuff_zone`` (SPEC §4).
+    beyond ``scuff_zone`` (docs: theory §4).
 
     Parameters
     ----------

@@ -255,7 +255,7 @@ def torso_push(model) -> ca.Function:
     """The velocity jump of a horizontal push on the torso.
 
     An impulse (P, 0) (N s, positive forward) at the torso's centre of mass, with the
-    stance foot pinned and the actuators producing no impulse (like the impact of SPEC
+    stance foot pinned and the actuators producing no impulse (like the impact of the theory
     §1): D(q) (dq+ - dq) = J_torso(q)' (P, 0).
 
     Parameters
