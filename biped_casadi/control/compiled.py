@@ -1,0 +1,265 @@
+"""An exported controller compiled and loaded as a controller: the C compiler, the build
+of the library, and :class:`CompiledController`, the library called through ctypes with
+the interface the simulator uses.
+
+The library is the one ``gcc -O2 -shared -fPIC -o libbiped_controller.so DIR/*.c -lm``
+builds from an export (:mod:`biped_casadi.control.export`); the controller's torques
+come from its ``biped_torque`` alone, while the model, the reference and the gains of the
+exported controller say what the simulator needs around it (the plant, T, the
+reference's errors).
+"""
+from __future__ import annotations
+
+import ctypes
+import os
+import shlex
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from ..numerics import as_number, as_vector
+from .controller import StepStart
+from .export import LIBRARY, RETURN_CODES, file_digest
+from .output_law import singularity_report
+
+__all__ = ["find_c_compiler", "build_library", "CompiledController", "CompilerError"]
+
+
+class CompilerError(RuntimeError):
+    """The C compiler is missing or failed (the message says which and why)."""
+
+
+def find_c_compiler() -> list | None:
+    """The C compiler to use: ``$CC`` when set (and only it), else gcc, else cc.
+
+    Returns
+    -------
+    list of str or None
+        The command (``$CC`` may carry flags), or None when none is found.
+    """
+    env = os.environ.get("CC", "").strip()
+    if env:
+        cmd = shlex.split(env)
+        return cmd if shutil.which(cmd[0]) else None
+    for name in ("gcc", "cc"):
+        if shutil.which(name):
+            return [name]
+    return None
+
+
+def build_library(folder, out=None, compiler: list | None = None,
+                  flags: tuple = ("-O2",)) -> Path:
+    """Compile an export's C files into a shared library, as its README says.
+
+    Runs ``CC -O2 -shared -fPIC -o OUT FOLDER/*.c -lm``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The export (its ``*.c`` files: the wrapper and the generated law).
+    out : str or Path, optional
+        The library (default ``folder/libbiped_controller.so``).
+    compiler : list of str, optional
+        Default :func:`find_c_compiler`.
+    flags : tuple of str
+        Optimisation flags.
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    CompilerError
+        No compiler, or the compilation failed (with its first error line).
+    """
+    folder = Path(folder)
+    cc = compiler if compiler is not None else find_c_compiler()
+    if not cc:
+        raise CompilerError("no C compiler found (set CC, or install gcc)")
+    out = Path(out) if out is not None else folder / LIBRARY
+    sources = sorted(str(p) for p in folder.glob("*.c"))
+    cmd = [*cc, *flags, "-shared", "-fPIC", "-o", str(out), *sources, "-lm"]
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True)
+    except OSError as e:
+        raise CompilerError(f"{cc[0]}: {e.strerror or e}") from None
+    if r.returncode != 0:
+        first = next((ln for ln in r.stderr.splitlines() if "error" in ln),
+                     r.stderr.strip().splitlines()[0] if r.stderr.strip() else "")
+        raise CompilerError(f"{cc[0]} failed (exit {r.returncode}): {first}")
+    return out
+
+
+_D = ctypes.POINTER(ctypes.c_double)
+
+
+class CompiledController:
+    """An exported controller's compiled library as a controller.
+
+    ``step_start`` calls ``biped_step_start``, :meth:`torque` ``biped_torque`` and
+    :meth:`outputs` ``biped_outputs``; :class:`~biped_casadi.simulation.Simulator`
+    drives its closed loop with these calls (the attribute ``compiled`` tells it that the
+    law is numeric only).  One controller at a time per library: the C code's work
+    arrays are static.
+
+    Parameters
+    ----------
+    library : str or Path
+        The shared library built from the export (:func:`build_library`).
+    exported : TimeVaryingController or VirtualConstraintController
+        The controller that was exported: its model, reference and gains.
+
+    Raises
+    ------
+    ValueError
+        Naming ``library`` when it cannot be loaded or its sizes differ from the
+        controller's.
+    """
+
+    name = "compiled"
+    compiled = True
+    n_ref = 0
+
+    def __init__(self, library, exported):
+        self.library = Path(library)
+        try:
+            self._lib = lib = ctypes.CDLL(str(self.library.absolute()))
+        except OSError as e:
+            raise ValueError(f"library: cannot load {self.library} ({e})") from None
+        for fn, args in (("biped_sizes", [ctypes.c_void_p] * 3),
+                         ("biped_step_start", [ctypes.c_void_p] * 3),
+                         ("biped_torque", [ctypes.c_double] + [ctypes.c_void_p] * 4),
+                         ("biped_outputs", [ctypes.c_double] + [ctypes.c_void_p] * 6)):
+            f = getattr(lib, fn)
+            f.argtypes, f.restype = args, ctypes.c_int
+        sizes = [ctypes.c_int() for _ in range(3)]
+        lib.biped_sizes(*(ctypes.byref(s) for s in sizes))
+        self.nq, self.nu, self.n_par = (s.value for s in sizes)
+        self.exported = exported
+        self.model, self.reference = exported.model, exported.reference
+        self.gains, self.T = exported.gains, exported.reference.T
+        if (self.nq, self.nu, self.n_par) != (self.model.nq, self.model.nu, exported.n_par):
+            raise ValueError(f"library: {self.library} has sizes (nq, nu, nstate) = "
+                             f"{(self.nq, self.nu, self.n_par)}, the controller "
+                             f"{(self.model.nq, self.model.nu, exported.n_par)}")
+        self._digest = file_digest(self.library)
+        # buffers the C functions read and write in place
+        self._q, self._dq = np.zeros(self.nq), np.zeros(self.nq)
+        self._p, self._u = np.zeros(max(self.n_par, 1)), np.zeros(self.nu)
+        self._y, self._dy, self._den = np.zeros(self.nu), np.zeros(self.nu), np.zeros(1)
+        ptr = lambda a: a.ctypes.data  # noqa: E731
+        self._ptr = {k: ptr(getattr(self, f"_{k}")) for k in ("q", "dq", "p", "u", "y", "dy",
+                                                              "den")}
+
+    @property
+    def cache_key(self):
+        """What the simulator of this controller depends on: the library's bytes and the
+        exported controller."""
+        return ("compiled", self._digest, self.exported.cache_key)
+
+    def _set(self, q, dq, p=None):
+        self._q[:] = q
+        self._dq[:] = dq
+        if p is not None and self.n_par:
+            self._p[:self.n_par] = p
+
+    def step_start(self, q, dq) -> StepStart:
+        """``biped_step_start`` at the start of a step.
+
+        Parameters
+        ----------
+        q, dq : array_like
+            The state just after an impact (relabelled), rad and rad/s.
+
+        Returns
+        -------
+        StepStart
+            ``p`` the controller state; ``problem`` says why the step cannot start (a
+            non-zero return code).
+        """
+        self._set(as_vector(q, self.nq, "q"), as_vector(dq, self.nq, "dq"))
+        rc = self._lib.biped_step_start(self._ptr["q"], self._ptr["dq"], self._ptr["p"])
+        p = self._p[:self.n_par].copy()
+        problem = "" if rc == 0 else (f"the compiled controller cannot start the step "
+                                      f"(biped_step_start returned {rc}: "
+                                      f"{RETURN_CODES.get(rc, 'unknown')})")
+        return StepStart(r=np.zeros(0), p=p, problem=problem)
+
+    def torque(self, tau, q, dq, p) -> tuple:
+        """``biped_torque`` at one state.
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq : numpy.ndarray
+            (nq,) each, rad and rad/s (float arrays; not copied or checked, for speed).
+        p : numpy.ndarray
+            (nstate,) the controller state.
+
+        Returns
+        -------
+        tuple
+            (return code, torques u (nu,), N m).
+        """
+        self._set(q, dq, p)
+        rc = self._lib.biped_torque(tau, self._ptr["q"], self._ptr["dq"], self._ptr["p"],
+                                    self._ptr["u"])
+        return rc, self._u.copy()
+
+    def outputs(self, tau, q, dq, p) -> tuple:
+        """``biped_outputs`` at one state.
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq, p : numpy.ndarray
+            As :meth:`torque`.
+
+        Returns
+        -------
+        tuple
+            (return code, y (nu,), dy (nu,), den).
+        """
+        self._set(q, dq, p)
+        rc = self._lib.biped_outputs(tau, self._ptr["q"], self._ptr["dq"], self._ptr["p"],
+                                     self._ptr["y"], self._ptr["dy"], self._ptr["den"])
+        return rc, self._y.copy(), self._dy.copy(), float(self._den[0])
+
+    def singularity(self, n: int = 1001):
+        """The compiled denominator sampled along the reference step.
+
+        Parameters
+        ----------
+        n : int
+            Samples on [0, T].
+
+        Returns
+        -------
+        SingularityReport
+        """
+        n = int(as_number(n, "n", positive=True))
+        ref = self.reference
+        t = np.linspace(0.0, self.T, n)
+        q, dq = ref.q(t), ref.dq(t)
+        p = self.step_start(q[:, 0], dq[:, 0]).p
+        return singularity_report([self.outputs(float(tk), q[:, k], dq[:, k], p)[3]
+                                   for k, tk in enumerate(t)])
+
+    def describe(self) -> dict:
+        """What defines the controller, as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            ``controller`` ('compiled'), ``library``, its ``sha256``, and ``exported``
+            (the exported controller's ``describe()``).
+        """
+        return dict(controller="compiled", library=str(self.library), sha256=self._digest,
+                    exported=self.exported.describe())
+
