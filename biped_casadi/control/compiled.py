@@ -15,6 +15,7 @@ import os
 import shlex
 import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -94,7 +95,16 @@ def build_library(folder, out=None, compiler: list | None = None,
     return out
 
 
-_D = ctypes.POINTER(ctypes.c_double)
+def _load_copy(library: Path):
+    """The library loaded from a private copy: a library rebuilt at the same path later
+    loads afresh (the dynamic loader keeps one handle per path)."""
+    fd, name = tempfile.mkstemp(prefix="biped_controller_", suffix=".so")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(library.read_bytes())
+        return ctypes.CDLL(name)
+    finally:
+        os.unlink(name)
 
 
 class CompiledController:
@@ -127,7 +137,8 @@ class CompiledController:
     def __init__(self, library, exported):
         self.library = Path(library)
         try:
-            self._lib = lib = ctypes.CDLL(str(self.library.absolute()))
+            self._digest = file_digest(self.library)
+            self._lib = lib = _load_copy(self.library)
         except OSError as e:
             raise ValueError(f"library: cannot load {self.library} ({e})") from None
         for fn, args in (("biped_sizes", [ctypes.c_void_p] * 3),
@@ -146,7 +157,6 @@ class CompiledController:
             raise ValueError(f"library: {self.library} has sizes (nq, nu, nstate) = "
                              f"{(self.nq, self.nu, self.n_par)}, the controller "
                              f"{(self.model.nq, self.model.nu, exported.n_par)}")
-        self._digest = file_digest(self.library)
         # buffers the C functions read and write in place
         self._q, self._dq = np.zeros(self.nq), np.zeros(self.nq)
         self._p, self._u = np.zeros(max(self.n_par, 1)), np.zeros(self.nu)

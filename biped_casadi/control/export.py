@@ -31,6 +31,7 @@ atomically.  See docs/theory.md (the controller) and docs/howto/export.md.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
@@ -47,7 +48,7 @@ from .time_varying import TimeVaryingController
 from .virtual_constraints import VirtualConstraintController
 
 __all__ = ["ExportedLaw", "exported_law", "c_sources", "write_export", "hermite_state",
-           "check_destination", "file_digest", "HEADER", "WRAPPER", "GENERATED",
+           "check_destination", "staged_export", "Stage", "file_digest", "HEADER", "WRAPPER", "GENERATED",
            "LIBRARY", "RETURN_CODES", "MARKER", "SINGULAR_FRACTION"]
 
 #: the files of an export (the header, the wrapper, CasADi's generated law)
@@ -462,6 +463,7 @@ def _example(law: ExportedLaw) -> str:
 
 #define K {rows.shape[0]}
 #define NQ {nq}
+#define NU {law.nu}
 #define NSTATE {max(ns, 1)}
 /* rows: tau, q[{nq}], dq[{nq}], state[{ns}] */
 {_array("states", rows)}
@@ -476,10 +478,10 @@ int main(int argc, char **argv)
 {{
     long n = argc > 1 ? atol(argv[1]) : 1000000L, i;
     int nq, nu, nstate, rc = 0, bad = 0;
-    double u[16], sum = 0.0, t0, t1, state[NSTATE];
+    double u[NU], sum = 0.0, t0, t1, state[NSTATE];
     const int w = 1 + 2 * NQ + {ns};
     biped_sizes(&nq, &nu, &nstate);
-    if (nq != NQ || nu > 16 || nstate != {ns}) return 1;
+    if (nq != NQ || nu != NU || nstate != {ns}) return 1;
     t0 = now();
     for (i = 0; i < n; ++i) {{
         const double *s = states + (i % K) * w;
@@ -608,11 +610,32 @@ def check_destination(out) -> Path:
     return p
 
 
-def write_export(files: dict, out, extra: dict | None = None) -> Path:
-    """Write an export's files into the folder ``out``, all or nothing.
+class Stage:
+    """The temporary folder of an export being written (:func:`staged_export`).
 
-    The files are written into a temporary folder beside ``out`` and moved into place in
-    one rename (an earlier export there is replaced); on any error nothing is left.
+    Parameters
+    ----------
+    path : Path
+        The folder; its files move to the destination when the block ends.
+    """
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.keep = True
+
+    def discard(self):
+        """Leave the destination untouched: the staged files are removed at the end."""
+        self.keep = False
+
+
+@contextlib.contextmanager
+def staged_export(files: dict, out, extra: dict | None = None):
+    """Write an export's files into a temporary folder beside ``out``; move it into place
+    when the block ends, all or nothing.
+
+    The block may work on the staged files (compile, verify, rewrite one); an earlier
+    export at ``out`` is replaced in one rename when the block ends normally.  On an
+    exception, or after :meth:`Stage.discard`, nothing is left and ``out`` is untouched.
 
     Parameters
     ----------
@@ -623,36 +646,63 @@ def write_export(files: dict, out, extra: dict | None = None) -> Path:
     extra : dict, optional
         Name -> bytes, written too (e.g. a copy of the gait file).
 
-    Returns
-    -------
-    Path
-        ``out``.
+    Yields
+    ------
+    Stage
+        With ``path``, the temporary folder.
     """
     out = check_destination(out)
     parent = out.absolute().parent
     parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.export-", dir=parent))
-    old = None
+    stage = Stage(Path(tempfile.mkdtemp(prefix=f".{out.name}.export-", dir=parent)))
+    tmp, old = stage.path, None
     try:
         for name, text in files.items():
             (tmp / name).parent.mkdir(parents=True, exist_ok=True)
             (tmp / name).write_text(text, encoding="utf-8")
         for name, data in (extra or {}).items():
             (tmp / name).write_bytes(data)
+        yield stage
+        if not stage.keep:
+            return
         os.chmod(tmp, 0o755)
         if out.exists():
+            check_destination(out)
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=parent))
             os.rmdir(old)
             os.replace(out, old)
         os.replace(tmp, out)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
         if old is not None and old.exists() and not out.exists():
             os.replace(old, out)
         raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-    return out
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def write_export(files: dict, out, extra: dict | None = None) -> Path:
+    """Write an export's files into the folder ``out``, all or nothing
+    (:func:`staged_export` with nothing done in between).
+
+    Parameters
+    ----------
+    files : dict
+        Name -> text, e.g. :func:`c_sources`.
+    out : str or Path
+        The folder (absent, empty or an earlier export).
+    extra : dict, optional
+        Name -> bytes.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
+    with staged_export(files, out, extra):
+        pass
+    return Path(out)
 
 
 def file_digest(path) -> str:
