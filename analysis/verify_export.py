@@ -8,12 +8,15 @@ Three comparisons (docs/howto/export.md):
   relative difference max|u_C - u_Python| / max|u_Python| over the states; the
   outputs, their rates and the denominator (``biped_outputs``) too;
 - simulation: a full-order run driven by the compiled library
-  (:class:`~biped_casadi.control.compiled.CompiledController`) against the same run
-  driven by the Python controller, impact times and states (q, dq before and after
-  every impact).  The two differ by discretisation only: in the Python run the
-  time-varying law's reference state r = (q_u^d, dq_u^d) is integrated with the robot
-  in every RK4 stage, the compiled law reads it from the gait's interpolant (as a robot
-  does), a difference of order h^4 (it falls 16 times when the RK4 step is halved);
+  (:class:`~biped_casadi.control.compiled.CompiledController`) against two runs driven by
+  the Python law, impact times and states (q, dq before and after every impact): the
+  Python law called as the library is (:class:`~biped_casadi.control.compiled.PythonTwin`,
+  the same closed loop of numeric calls: the runs agree to round-off), and ``biped
+  simulate``'s run.  The latter differs by discretisation: in ``biped simulate`` the
+  time-varying law's reference state r = (q_u^d, dq_u^d) is integrated with the robot in
+  every RK4 stage, while the compiled law reads it from the gait's interpolant (as on a
+  robot), a difference of order h^4 (16 times smaller at half the RK4 step) that grows
+  with |M1|;
 - timing: the C law in the example's loop (C alone), through ctypes, and the Python law
   called one state at a time.
 """
@@ -31,8 +34,8 @@ import numpy as np
 
 from biped_casadi import SimulationOptions, simulate
 from biped_casadi.control.export import LIBRARY
-from biped_casadi.control.compiled import (CompiledController, CompilerError, build_library,
-                                           find_c_compiler)
+from biped_casadi.control.compiled import (CompiledController, CompilerError, PythonTwin,
+                                           build_library, find_c_compiler)
 from biped_casadi.results import Result
 
 __all__ = ["StateComparison", "SimulationComparison", "ExportVerification",
@@ -87,40 +90,52 @@ class StateComparison(Result):
 
 @dataclass
 class SimulationComparison(Result):
-    """A full-order run driven by the compiled law against the Python-driven run.
+    """A full-order run driven by the compiled law against the Python-driven runs.
+
+    Two Python runs: ``biped simulate``'s (the Python controller in the simulator, its
+    reference state integrated with the robot) and the twin's (the Python law called as
+    the library is, :class:`~biped_casadi.control.compiled.PythonTwin`, in the same
+    numeric loop).
 
     Parameters
     ----------
-    status : {'equal', 'different'}
-        'equal' when both runs end alike, with as many steps, and impact times and
-        states agree to :data:`SIMULATION_TOL`.
+    status : {'equal', 'discretisation', 'different'}
+        'equal' when both Python runs end as the compiled one, with as many steps, and
+        impact times and states agree to :data:`SIMULATION_TOL`; 'discretisation' when
+        the twin's do but ``biped simulate``'s differ by more (the reference state's
+        discretisation, O(h^4): see the module docstring); 'different' otherwise.
     message : str
         A summary line.
-    python_status, compiled_status : str
+    python_status, twin_status, compiled_status : str
         How each run ended (the simulator's statuses).
     steps : int
         Impacts compared.
-    max_impact_time : float
-        Largest difference of the impact times, s.
-    max_state : float
-        Largest difference of q, dq just before and just after the impacts.
+    max_impact_time, max_state : float
+        Largest difference from ``biped simulate``'s run of the impact times (s) and of
+        q, dq just before and just after the impacts.
+    twin_max_impact_time, twin_max_state : float
+        The same from the twin's run.
     per_step : list
-        (impact time difference, state difference) of each step.
-    python_seconds, compiled_seconds : float
+        (impact time difference, state difference) from ``biped simulate``'s run, per step.
+    python_seconds, twin_seconds, compiled_seconds : float
         Wall time of each run.
     """
     status: str
     message: str
     python_status: str
+    twin_status: str
     compiled_status: str
     steps: int
     max_impact_time: float
     max_state: float
+    twin_max_impact_time: float
+    twin_max_state: float
     per_step: list
     python_seconds: float
+    twin_seconds: float
     compiled_seconds: float
 
-    SUCCESS = ("equal",)
+    SUCCESS = ("equal", "discretisation")
 
 
 @dataclass
@@ -239,9 +254,24 @@ def _step_differences(a, b) -> list:
     return out
 
 
+def _timed(ctrl, q0, dq0, options):
+    t0 = time.perf_counter()
+    r = simulate(ctrl, q0, dq0, options)
+    return r, time.perf_counter() - t0
+
+
+def _agree(a, b):
+    """(alike, largest impact-time difference, largest state difference, per step)."""
+    diffs = _step_differences(a, b)
+    dt = max((d[0] for d in diffs), default=0.0)
+    ds = max((d[1] for d in diffs), default=0.0)
+    alike = a.status == b.status and len(a.steps) == len(b.steps)
+    return alike and dt <= SIMULATION_TOL and ds <= SIMULATION_TOL, dt, ds, diffs
+
+
 def compare_simulations(compiled: CompiledController, ctrl, q0, dq0,
                         options: SimulationOptions | None = None) -> SimulationComparison:
-    """A full-order run driven by the compiled law against the Python-driven run.
+    """A full-order run driven by the compiled law against the Python-driven runs.
 
     Parameters
     ----------
@@ -259,24 +289,26 @@ def compare_simulations(compiled: CompiledController, ctrl, q0, dq0,
     SimulationComparison
     """
     options = options if options is not None else SimulationOptions()
-    t0 = time.perf_counter()
-    a = simulate(ctrl, q0, dq0, options)
-    t1 = time.perf_counter()
-    b = simulate(compiled, q0, dq0, options)
-    t2 = time.perf_counter()
-    diffs = _step_differences(a, b)
-    dt = max((d[0] for d in diffs), default=0.0)
-    ds = max((d[1] for d in diffs), default=0.0)
-    alike = a.status == b.status and len(a.steps) == len(b.steps)
-    ok = alike and dt <= SIMULATION_TOL and ds <= SIMULATION_TOL
-    msg = (f"{len(diffs)} impact(s): times differ by at most {dt:.3g} s, states by "
-           f"{ds:.3g}; Python run {a.status}, compiled run {b.status}")
-    if not alike:
-        msg += " (the runs end differently)"
+    a, ta = _timed(ctrl, q0, dq0, options)
+    tw, tt = _timed(PythonTwin(ctrl), q0, dq0, options)
+    b, tb = _timed(compiled, q0, dq0, options)
+    ok, dt, ds, diffs = _agree(a, b)
+    ok_twin, dt_twin, ds_twin, _ = _agree(tw, b)
+    status = "equal" if ok and ok_twin else ("discretisation" if ok_twin else "different")
+    msg = (f"{len(diffs)} impact(s): times differ from biped simulate's run by at most "
+           f"{dt:.3g} s, states by {ds:.3g}; from the Python law's in the same loop by "
+           f"{dt_twin:.3g} s and {ds_twin:.3g}; runs {a.status} (biped simulate), "
+           f"{tw.status} (Python law), {b.status} (compiled)")
+    if status == "discretisation":
+        msg += (f" (the difference from biped simulate's run, above {SIMULATION_TOL:g}, is "
+                "its integration of the reference state, O(h^4): 16 times smaller at half the "
+                "RK4 step)")
     return SimulationComparison(
-        status="equal" if ok else "different", message=msg, python_status=a.status,
+        status=status, message=msg, python_status=a.status, twin_status=tw.status,
         compiled_status=b.status, steps=len(diffs), max_impact_time=dt, max_state=ds,
-        per_step=[list(d) for d in diffs], python_seconds=t1 - t0, compiled_seconds=t2 - t1)
+        twin_max_impact_time=dt_twin, twin_max_state=ds_twin,
+        per_step=[list(d) for d in diffs], python_seconds=ta, twin_seconds=tt,
+        compiled_seconds=tb)
 
 
 # ====================================================================== timing

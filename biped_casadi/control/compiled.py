@@ -20,12 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..numerics import as_number, as_vector
+from ..numerics import FastCall, as_number, as_vector
 from .controller import StepStart
-from .export import LIBRARY, RETURN_CODES, file_digest
+from .export import LIBRARY, RETURN_CODES, TAU_SLACK, exported_law, file_digest
 from .output_law import singularity_report
 
-__all__ = ["find_c_compiler", "build_library", "CompiledController", "CompilerError"]
+__all__ = ["find_c_compiler", "build_library", "NumericLaw", "CompiledController",
+           "PythonTwin", "CompilerError"]
 
 
 class CompilerError(RuntimeError):
@@ -107,14 +108,75 @@ def _load_copy(library: Path):
         os.unlink(name)
 
 
-class CompiledController:
+class NumericLaw:
+    """What the simulator needs of a law that is numeric only: the exported controller's
+    model, reference and gains, ``step_start``, :meth:`torque` and :meth:`outputs` with the
+    library's return codes (:data:`~biped_casadi.control.export.RETURN_CODES`).
+
+    :class:`~biped_casadi.simulation.Simulator` drives such a law through numeric calls
+    (the attribute ``numeric_law``; :mod:`biped_casadi.simulation.compiled_loop`).
+
+    Parameters
+    ----------
+    exported : TimeVaryingController or VirtualConstraintController
+        The exported controller.
+    """
+
+    numeric_law = True
+    n_ref = 0
+
+    def __init__(self, exported):
+        self.exported = exported
+        self.model, self.reference = exported.model, exported.reference
+        self.gains, self.T = exported.gains, exported.reference.T
+        self.nq, self.nu, self.n_par = self.model.nq, self.model.nu, exported.n_par
+
+    def step_start(self, q, dq) -> StepStart:
+        """The controller state at the start of a step.
+
+        Parameters
+        ----------
+        q, dq : array_like
+            The state just after an impact (relabelled), rad and rad/s.
+
+        Returns
+        -------
+        StepStart
+            ``p`` the controller state; ``problem`` says why the step cannot start (a
+            non-zero return code).
+        """
+        rc, p = self._start(as_vector(q, self.nq, "q"), as_vector(dq, self.nq, "dq"))
+        problem = "" if rc == 0 else (f"the {self.name} law cannot start the step "
+                                      f"(return code {rc}: {RETURN_CODES.get(rc, 'unknown')})")
+        return StepStart(r=np.zeros(0), p=p, problem=problem)
+
+    def singularity(self, n: int = 1001):
+        """The law's denominator sampled along the reference step.
+
+        Parameters
+        ----------
+        n : int
+            Samples on [0, T].
+
+        Returns
+        -------
+        SingularityReport
+        """
+        n = int(as_number(n, "n", positive=True))
+        ref = self.reference
+        t = np.linspace(0.0, self.T, n)
+        q, dq = ref.q(t), ref.dq(t)
+        p = self.step_start(q[:, 0], dq[:, 0]).p
+        return singularity_report([self.outputs(float(tk), q[:, k], dq[:, k], p)[3]
+                                   for k, tk in enumerate(t)])
+
+
+class CompiledController(NumericLaw):
     """An exported controller's compiled library as a controller.
 
     ``step_start`` calls ``biped_step_start``, :meth:`torque` ``biped_torque`` and
-    :meth:`outputs` ``biped_outputs``; :class:`~biped_casadi.simulation.Simulator`
-    drives its closed loop with these calls (the attribute ``compiled`` tells it that the
-    law is numeric only).  One controller at a time per library: the C code's work
-    arrays are static.
+    :meth:`outputs` ``biped_outputs``; the simulator drives its closed loop with these
+    calls.  One controller at a time per library: the C code's work arrays are static.
 
     Parameters
     ----------
@@ -131,10 +193,9 @@ class CompiledController:
     """
 
     name = "compiled"
-    compiled = True
-    n_ref = 0
 
     def __init__(self, library, exported):
+        super().__init__(exported)
         self.library = Path(library)
         try:
             self._digest = file_digest(self.library)
@@ -149,21 +210,16 @@ class CompiledController:
             f.argtypes, f.restype = args, ctypes.c_int
         sizes = [ctypes.c_int() for _ in range(3)]
         lib.biped_sizes(*(ctypes.byref(s) for s in sizes))
-        self.nq, self.nu, self.n_par = (s.value for s in sizes)
-        self.exported = exported
-        self.model, self.reference = exported.model, exported.reference
-        self.gains, self.T = exported.gains, exported.reference.T
-        if (self.nq, self.nu, self.n_par) != (self.model.nq, self.model.nu, exported.n_par):
-            raise ValueError(f"library: {self.library} has sizes (nq, nu, nstate) = "
-                             f"{(self.nq, self.nu, self.n_par)}, the controller "
-                             f"{(self.model.nq, self.model.nu, exported.n_par)}")
+        sizes = tuple(s.value for s in sizes)
+        if sizes != (self.nq, self.nu, self.n_par):
+            raise ValueError(f"library: {self.library} has sizes (nq, nu, nstate) = {sizes}, "
+                             f"the controller {(self.nq, self.nu, self.n_par)}")
         # buffers the C functions read and write in place
         self._q, self._dq = np.zeros(self.nq), np.zeros(self.nq)
         self._p, self._u = np.zeros(max(self.n_par, 1)), np.zeros(self.nu)
         self._y, self._dy, self._den = np.zeros(self.nu), np.zeros(self.nu), np.zeros(1)
-        ptr = lambda a: a.ctypes.data  # noqa: E731
-        self._ptr = {k: ptr(getattr(self, f"_{k}")) for k in ("q", "dq", "p", "u", "y", "dy",
-                                                              "den")}
+        self._ptr = {k: getattr(self, f"_{k}").ctypes.data
+                     for k in ("q", "dq", "p", "u", "y", "dy", "den")}
 
     @property
     def cache_key(self):
@@ -177,27 +233,10 @@ class CompiledController:
         if p is not None and self.n_par:
             self._p[:self.n_par] = p
 
-    def step_start(self, q, dq) -> StepStart:
-        """``biped_step_start`` at the start of a step.
-
-        Parameters
-        ----------
-        q, dq : array_like
-            The state just after an impact (relabelled), rad and rad/s.
-
-        Returns
-        -------
-        StepStart
-            ``p`` the controller state; ``problem`` says why the step cannot start (a
-            non-zero return code).
-        """
-        self._set(as_vector(q, self.nq, "q"), as_vector(dq, self.nq, "dq"))
+    def _start(self, q, dq):
+        self._set(q, dq)
         rc = self._lib.biped_step_start(self._ptr["q"], self._ptr["dq"], self._ptr["p"])
-        p = self._p[:self.n_par].copy()
-        problem = "" if rc == 0 else (f"the compiled controller cannot start the step "
-                                      f"(biped_step_start returned {rc}: "
-                                      f"{RETURN_CODES.get(rc, 'unknown')})")
-        return StepStart(r=np.zeros(0), p=p, problem=problem)
+        return rc, self._p[:self.n_par].copy()
 
     def torque(self, tau, q, dq, p) -> tuple:
         """``biped_torque`` at one state.
@@ -241,26 +280,6 @@ class CompiledController:
                                      self._ptr["y"], self._ptr["dy"], self._ptr["den"])
         return rc, self._y.copy(), self._dy.copy(), float(self._den[0])
 
-    def singularity(self, n: int = 1001):
-        """The compiled denominator sampled along the reference step.
-
-        Parameters
-        ----------
-        n : int
-            Samples on [0, T].
-
-        Returns
-        -------
-        SingularityReport
-        """
-        n = int(as_number(n, "n", positive=True))
-        ref = self.reference
-        t = np.linspace(0.0, self.T, n)
-        q, dq = ref.q(t), ref.dq(t)
-        p = self.step_start(q[:, 0], dq[:, 0]).p
-        return singularity_report([self.outputs(float(tk), q[:, k], dq[:, k], p)[3]
-                                   for k, tk in enumerate(t)])
-
     def describe(self) -> dict:
         """What defines the controller, as a JSON-ready dict.
 
@@ -273,3 +292,117 @@ class CompiledController:
         return dict(controller="compiled", library=str(self.library), sha256=self._digest,
                     exported=self.exported.describe())
 
+
+class PythonTwin(NumericLaw):
+    """The Python law called as the compiled library is: one state at a time, the
+    reference state read from the reference at tau, the library's return codes.
+
+    The law is the controller's own CasADi Function with r = ``reference.state(tau)``
+    (for the time-varying law exactly :meth:`TimeVaryingController.torque`); driven by
+    the simulator's numeric loop it is the run the compiled library's must repeat to
+    round-off.
+
+    Parameters
+    ----------
+    exported : TimeVaryingController or VirtualConstraintController
+        The exported controller.
+    law : ExportedLaw, optional
+        Its export (the range of tau and the singularity limit); default
+        :func:`~biped_casadi.control.export.exported_law` of it.
+    """
+
+    name = "python"
+
+    def __init__(self, exported, law=None):
+        super().__init__(exported)
+        self.law_info = law if law is not None else exported_law(exported)
+        self._law = FastCall(exported.law)
+        self._start_fn = FastCall(self.law_info.start)
+        self._recent: dict = {}
+
+    @property
+    def cache_key(self):
+        """What the simulator of this law depends on: the exported controller."""
+        return ("python-twin", self.exported.cache_key)
+
+    def _start(self, q, dq):
+        p, go = self._start_fn(q, dq)
+        p = p.ravel()
+        if not (np.all(np.isfinite(p))):
+            return 3, p
+        return (0 if go[0, 0] > 0 else 2), p
+
+    def _state(self, tau):
+        """reference.state(tau), the last few kept (a RK4 step asks twice for each)."""
+        if not self.exported.n_ref:
+            return np.zeros(0)
+        r = self._recent.get(tau)
+        if r is None:
+            if len(self._recent) >= 4:
+                self._recent.pop(next(iter(self._recent)))
+            r = self._recent[tau] = self.reference.states([tau])[:, 0]
+        return r
+
+    def _evaluate(self, tau, q, dq, p):
+        li = self.law_info
+        if not (0.0 <= tau <= li.tau_max + TAU_SLACK):
+            return 2, None
+        r = self._state(tau)
+        u, y, dy, den, _, inr = self._law(q, dq, tau, r, p)
+        den = float(den[0, 0])
+        if not inr[0, 0] > 0:
+            rc = 2
+        elif not (np.isfinite(den) and np.all(np.isfinite(u))):
+            rc = 3
+        else:
+            rc = 0 if den * li.den_sign > li.singular_fraction * li.den_scale else 1
+        return rc, (u.ravel(), y.ravel(), dy.ravel(), den)
+
+    def torque(self, tau, q, dq, p) -> tuple:
+        """The Python law's torques at one state.
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq, p : numpy.ndarray
+            Configuration, velocity, controller state.
+
+        Returns
+        -------
+        tuple
+            (return code, torques u (nu,), N m; NaN out of range).
+        """
+        rc, out = self._evaluate(tau, q, dq, p)
+        return rc, (np.full(self.nu, np.nan) if out is None else out[0])
+
+    def outputs(self, tau, q, dq, p) -> tuple:
+        """The Python law's outputs at one state.
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq, p : numpy.ndarray
+            Configuration, velocity, controller state.
+
+        Returns
+        -------
+        tuple
+            (return code, y (nu,), dy (nu,), den).
+        """
+        rc, out = self._evaluate(tau, q, dq, p)
+        if out is None:
+            nan = np.full(self.nu, np.nan)
+            return rc, nan, nan, np.nan
+        return (rc,) + out[1:]
+
+    def describe(self) -> dict:
+        """What defines the law, as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            ``controller`` ('python'), ``exported`` (the controller's ``describe()``).
+        """
+        return dict(controller="python", exported=self.exported.describe())

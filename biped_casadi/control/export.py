@@ -49,7 +49,7 @@ from .virtual_constraints import VirtualConstraintController
 
 __all__ = ["ExportedLaw", "exported_law", "c_sources", "write_export", "hermite_state",
            "check_destination", "staged_export", "Stage", "file_digest", "HEADER", "WRAPPER", "GENERATED",
-           "LIBRARY", "RETURN_CODES", "MARKER", "SINGULAR_FRACTION"]
+           "LIBRARY", "RETURN_CODES", "MARKER", "SINGULAR_FRACTION", "TAU_SLACK"]
 
 #: the files of an export (the header, the wrapper, CasADi's generated law)
 HEADER, WRAPPER, GENERATED = "biped_controller.h", "biped_controller.c", "biped_law.c"
@@ -57,6 +57,8 @@ HEADER, WRAPPER, GENERATED = "biped_controller.h", "biped_controller.c", "biped_
 LIBRARY = "libbiped_controller.so"
 #: what the functions return
 RETURN_CODES = {0: "ok", 1: "singular", 2: "out_of_range", 3: "not_finite"}
+#: tau may exceed the reference's last time by this much (s): the gait's own slack
+TAU_SLACK = 1e-12
 #: first line of every exported header: marks a folder as an export (may be replaced)
 MARKER = "/* biped-casadi controller export"
 #: the law counts as singular where the decoupling denominator, times its sign along the
@@ -371,7 +373,7 @@ def _wrapper(law: ExportedLaw) -> str:
 #define NQ {nq}
 #define NU {nu}
 #define NSTATE {ns}
-#define TAU_MAX {_num(law.tau_max)}
+#define TAU_MAX {_num(law.tau_max + TAU_SLACK)}
 #define DEN_SIGN {_num(law.den_sign)}
 #define DEN_LIMIT {_num(law.singular_fraction * law.den_scale)}  /* {_num(law.singular_fraction)} of the largest |den| on the reference */
 

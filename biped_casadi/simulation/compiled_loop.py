@@ -1,7 +1,9 @@
 """The full-order closed loop driven by a compiled controller library.
 
 A :class:`~biped_casadi.control.compiled.CompiledController` is numeric only (its law is
-C code behind ctypes), so the simulator cannot compose it with the plant symbolically.
+C code behind ctypes), so the simulator cannot compose it with the plant symbolically
+(nor its Python twin :class:`~biped_casadi.control.compiled.PythonTwin`, the same calls
+answered by CasADi).
 Here the same closed loop is built from numeric calls: every RK4 stage asks the library
 for the torques (``biped_torque``) and the plant for the accelerations (eq. 1), the
 stages are combined by :func:`~biped_casadi.numerics.rk4_step`, and the diagnostics of
@@ -38,12 +40,12 @@ def _diagnostics_function(plant, schema, n):
 
 
 def compiled_closed_loop(controller, plant, schema, limits, saturate, block_sizes):
-    """The simulator's closed-loop callables for a compiled controller.
+    """The simulator's closed-loop callables for a numeric law.
 
     Parameters
     ----------
-    controller : CompiledController
-        The library (``torque``, ``outputs``, ``n_par``).
+    controller : NumericLaw
+        A compiled library or its Python twin (``torque``, ``outputs``, ``n_par``).
     plant : BipedModel
         The robot that moves.
     schema : Diagnostics

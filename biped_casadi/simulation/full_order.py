@@ -301,7 +301,7 @@ class Simulator:
 
     def _build(self):
         m, c = self.plant, self.controller
-        if getattr(c, "compiled", False):       # a compiled library: numeric calls only
+        if getattr(c, "numeric_law", False):    # a compiled library: numeric calls only
             self.rk4 = None
             (self.step_block, self.quarter_block, self.diagnostics, self.event,
              self._impact_map) = compiled_closed_loop(
