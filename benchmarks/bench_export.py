@@ -39,7 +39,8 @@ from analysis.cli import main as biped_main
 from analysis.verify_export import time_example
 from biped_casadi import TimeVaryingController, VirtualConstraintController, robot
 from biped_casadi.control.compiled import CompiledController, build_library, find_c_compiler
-from biped_casadi.control.export import c_sources, exported_law, write_export
+from biped_casadi.control.export import c_sources, exported_law
+from biped_casadi.control.export_folder import write_export
 from biped_casadi.files import write_text_atomic
 from biped_casadi.numerics import FastCall
 from biped_casadi.results import json_safe

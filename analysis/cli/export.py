@@ -9,8 +9,8 @@ from pathlib import Path
 
 from biped_casadi import Gains, SimulationOptions, TimeVaryingController, VirtualConstraintController
 from biped_casadi.control.compiled import CompilerError, find_c_compiler
-from biped_casadi.control.export import (HEADER, c_sources, check_destination, exported_law,
-                                         staged_export)
+from biped_casadi.control.export import HEADER, c_sources, exported_law
+from biped_casadi.control.export_folder import check_destination, staged_export
 from biped_casadi.control.output_law import M1_LIMIT, SECTION
 from gait_opt.cache import cache_path
 from analysis.verify_export import SIMULATION_TOL, TORQUE_RTOL, verify_export

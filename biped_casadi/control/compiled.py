@@ -22,7 +22,8 @@ import numpy as np
 
 from ..numerics import FastCall, as_number, as_vector
 from .controller import StepStart
-from .export import LIBRARY, RETURN_CODES, TAU_SLACK, exported_law, file_digest
+from .export import LIBRARY, RETURN_CODES, TAU_SLACK, exported_law
+from .export_folder import file_digest
 from .output_law import singularity_report
 
 __all__ = ["find_c_compiler", "build_library", "NumericLaw", "CompiledController",
@@ -109,9 +110,11 @@ def _load_copy(library: Path):
 
 
 class NumericLaw:
-    """What the simulator needs of a law that is numeric only: the exported controller's
-    model, reference and gains, ``step_start``, :meth:`torque` and :meth:`outputs` with the
-    library's return codes (:data:`~biped_casadi.control.export.RETURN_CODES`).
+    """A control law that is numeric only, with what the simulator needs of it.
+
+    The exported controller's model, reference and gains, ``step_start``, :meth:`torque`
+    and :meth:`outputs` with the library's return codes
+    (:data:`~biped_casadi.control.export.RETURN_CODES`).
 
     :class:`~biped_casadi.simulation.Simulator` drives such a law through numeric calls
     (the attribute ``numeric_law``; :mod:`biped_casadi.simulation.compiled_loop`).
@@ -223,8 +226,7 @@ class CompiledController(NumericLaw):
 
     @property
     def cache_key(self):
-        """What the simulator of this controller depends on: the library's bytes and the
-        exported controller."""
+        """What the simulator depends on: the library's bytes and the exported controller."""
         return ("compiled", self._digest, self.exported.cache_key)
 
     def _set(self, q, dq, p=None):
@@ -294,8 +296,10 @@ class CompiledController(NumericLaw):
 
 
 class PythonTwin(NumericLaw):
-    """The Python law called as the compiled library is: one state at a time, the
-    reference state read from the reference at tau, the library's return codes.
+    """The Python law called as the compiled library is.
+
+    One state at a time, the reference state read from the reference at tau, the
+    library's return codes.
 
     The law is the controller's own CasADi Function with r = ``reference.state(tau)``
     (for the time-varying law exactly :meth:`TimeVaryingController.torque`); driven by

@@ -26,19 +26,13 @@ interpolant, so the compiled law is the Python law :meth:`TimeVaryingController.
 Work arrays are static: no allocation anywhere, one caller at a time.
 
 :func:`exported_law` builds the Functions and constants from a controller,
-:func:`c_sources` the files' text, :func:`write_export` writes them into a folder
-atomically.  See docs/theory.md (the controller) and docs/howto/export.md.
+:func:`c_sources` the files' text; :mod:`biped_casadi.control.export_folder` writes them
+into a folder, all or nothing.  See docs/theory.md (the controller) and docs/howto/export.md.
 """
 from __future__ import annotations
 
-import contextlib
-import hashlib
 import math
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -47,9 +41,8 @@ from ..numerics import quintic_hermite_interval
 from .time_varying import TimeVaryingController
 from .virtual_constraints import VirtualConstraintController
 
-__all__ = ["ExportedLaw", "exported_law", "c_sources", "write_export", "hermite_state",
-           "check_destination", "staged_export", "Stage", "file_digest", "HEADER", "WRAPPER", "GENERATED",
-           "LIBRARY", "RETURN_CODES", "MARKER", "SINGULAR_FRACTION", "TAU_SLACK"]
+__all__ = ["ExportedLaw", "exported_law", "c_sources", "hermite_state", "HEADER", "WRAPPER",
+           "GENERATED", "LIBRARY", "RETURN_CODES", "MARKER", "SINGULAR_FRACTION", "TAU_SLACK"]
 
 #: the files of an export (the header, the wrapper, CasADi's generated law)
 HEADER, WRAPPER, GENERATED = "biped_controller.h", "biped_controller.c", "biped_law.c"
@@ -123,8 +116,9 @@ class ExportedLaw:
 
 
 def hermite_state(tau, node):
-    """The reference state r = (y, dy/dt) at tau from the interval's quintic Hermite
-    nodes (CasADi), the interpolant of :meth:`gait_opt.Gait.state`
+    """The reference state r = (y, dy/dt) at tau from an interval's Hermite nodes (CasADi).
+
+    The interpolant of :meth:`gait_opt.Gait.state`
     (:func:`~biped_casadi.numerics.quintic_hermite_interval`).
 
     Parameters
@@ -336,7 +330,7 @@ def _table_text(law: ExportedLaw) -> str:
 _NODE_CODE = """    double node[8];
     double k;
     long i;
-    if (!(tau >= 0.0 && tau <= TAU_MAX)) return 2;
+    if (!(tau >= 0.0 && tau <= TAU_MAX)) return not_defined(u, y, dy, den);
     k = floor_div(tau - ref_t0, ref_h) - (double)ref_offset;
     i = k < 0.0 ? 0L : (k > (double)(REF_N - 2) ? (long)(REF_N - 2) : (long)k);
     node[0] = ref_t[i]; node[1] = ref_h;
@@ -354,6 +348,30 @@ static double floor_div(double a, double b)
     fl = floor(div);
     if (div - fl > 0.5) fl += 1.0;
     return fl;
+}
+
+"""
+
+
+_HELPERS = """static int all_finite(const double *x, int n)
+{
+    int j;
+    for (j = 0; j < n; ++j)
+        if (!(x[j] - x[j] == 0.0)) return 0;
+    return 1;
+}
+
+/* tau outside the reference's range: every output NaN, return code 2 */
+static int not_defined(double *u, double *y, double *dy, double *den)
+{
+    int j;
+    for (j = 0; j < NU; ++j) {
+        if (u) u[j] = NAN;
+        if (y) y[j] = NAN;
+        if (dy) dy[j] = NAN;
+    }
+    if (den) *den = NAN;
+    return 2;
 }
 
 """
@@ -387,15 +405,7 @@ static int work_iw[{n_iw}];
 static double work_w[{n_w}];
 
 {_table_text(law)}
-{_FLOOR_DIV if tv else ""}static int all_finite(const double *x, int n)
-{{
-    int j;
-    for (j = 0; j < n; ++j)
-        if (!(x[j] - x[j] == 0.0)) return 0;
-    return 1;
-}}
-
-int biped_sizes(int *nq, int *nu, int *nstate)
+{_FLOOR_DIV if tv else ""}{_HELPERS}int biped_sizes(int *nq, int *nu, int *nstate)
 {{
     if (nq) *nq = NQ;
     if (nu) *nu = NU;
@@ -408,8 +418,8 @@ int biped_step_start(const double *q, const double *dq, double *state)
     double go = 0.0;
     work_arg[0] = q; work_arg[1] = dq;
     work_res[0] = state; work_res[1] = &go;
-    if (!all_finite(q, NQ) || !all_finite(dq, NQ)) return 3;
     if (biped_start(work_arg, work_res, work_iw, work_w, 0)) return 3;
+    if (!all_finite(q, NQ) || !all_finite(dq, NQ)) return 3;
     if (!(go > 0.0)) return 2;
     return all_finite(state, NSTATE) ? 0 : 3;
 }}
@@ -418,7 +428,7 @@ static int evaluate(double tau, const double *q, const double *dq, const double 
                     double *u, double *y, double *dy, double *den)
 {{
     double in_range = 0.0;
-{_NODE_CODE if tv else "    if (!(tau >= 0.0 && tau <= TAU_MAX)) return 2;" + chr(10) + "    work_arg[4] = NULL;" + chr(10)}    work_arg[0] = q; work_arg[1] = dq; work_arg[2] = &tau; work_arg[3] = state;
+{_NODE_CODE if tv else "    if (!(tau >= 0.0 && tau <= TAU_MAX)) return not_defined(u, y, dy, den);" + chr(10) + "    work_arg[4] = NULL;" + chr(10)}    work_arg[0] = q; work_arg[1] = dq; work_arg[2] = &tau; work_arg[3] = state;
     work_res[0] = u; work_res[1] = y; work_res[2] = dy; work_res[3] = den;
     work_res[4] = &in_range;
     if (biped_law(work_arg, work_res, work_iw, work_w, 0)) return 3;
@@ -574,149 +584,3 @@ def c_sources(law: ExportedLaw, provenance: dict | None = None, timing: str = ""
     return {HEADER: _header(law, provenance), WRAPPER: _wrapper(law),
             GENERATED: _generated(law), "README.md": _readme(law, provenance, timing),
             "example/main.c": _example(law)}
-
-
-def _is_export(folder: Path) -> bool:
-    try:
-        with open(folder / HEADER, encoding="utf-8") as f:
-            return f.read(len(MARKER)) == MARKER
-    except OSError:
-        return False
-
-
-def check_destination(out) -> Path:
-    """``out`` as a folder an export may be written to: absent, empty, or an earlier
-    export (which the new one replaces).
-
-    Parameters
-    ----------
-    out : str or Path
-        The folder.
-
-    Returns
-    -------
-    Path
-
-    Raises
-    ------
-    ValueError
-        Naming ``out`` when it is a file or a folder holding something else.
-    """
-    p = Path(out)
-    if p.exists() or p.is_symlink():
-        if not p.is_dir():
-            raise ValueError(f"out: {p} exists and is not a folder")
-        if any(p.iterdir()) and not _is_export(p):
-            raise ValueError(f"out: {p} is a folder that holds files other than an export "
-                             "(give a new or empty folder)")
-    return p
-
-
-class Stage:
-    """The temporary folder of an export being written (:func:`staged_export`).
-
-    Parameters
-    ----------
-    path : Path
-        The folder; its files move to the destination when the block ends.
-    """
-
-    def __init__(self, path: Path):
-        self.path = path
-        self.keep = True
-
-    def discard(self):
-        """Leave the destination untouched: the staged files are removed at the end."""
-        self.keep = False
-
-
-@contextlib.contextmanager
-def staged_export(files: dict, out, extra: dict | None = None):
-    """Write an export's files into a temporary folder beside ``out``; move it into place
-    when the block ends, all or nothing.
-
-    The block may work on the staged files (compile, verify, rewrite one); an earlier
-    export at ``out`` is replaced in one rename when the block ends normally.  On an
-    exception, or after :meth:`Stage.discard`, nothing is left and ``out`` is untouched.
-
-    Parameters
-    ----------
-    files : dict
-        Name (relative, '/'-separated) -> text, e.g. :func:`c_sources`.
-    out : str or Path
-        The folder (absent, empty or an earlier export: :func:`check_destination`).
-    extra : dict, optional
-        Name -> bytes, written too (e.g. a copy of the gait file).
-
-    Yields
-    ------
-    Stage
-        With ``path``, the temporary folder.
-    """
-    out = check_destination(out)
-    parent = out.absolute().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    stage = Stage(Path(tempfile.mkdtemp(prefix=f".{out.name}.export-", dir=parent)))
-    tmp, old = stage.path, None
-    try:
-        for name, text in files.items():
-            (tmp / name).parent.mkdir(parents=True, exist_ok=True)
-            (tmp / name).write_text(text, encoding="utf-8")
-        for name, data in (extra or {}).items():
-            (tmp / name).write_bytes(data)
-        yield stage
-        if not stage.keep:
-            return
-        os.chmod(tmp, 0o755)
-        if out.exists():
-            check_destination(out)
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=parent))
-            os.rmdir(old)
-            os.replace(out, old)
-        os.replace(tmp, out)
-    except BaseException:
-        if old is not None and old.exists() and not out.exists():
-            os.replace(old, out)
-        raise
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-
-
-def write_export(files: dict, out, extra: dict | None = None) -> Path:
-    """Write an export's files into the folder ``out``, all or nothing
-    (:func:`staged_export` with nothing done in between).
-
-    Parameters
-    ----------
-    files : dict
-        Name -> text, e.g. :func:`c_sources`.
-    out : str or Path
-        The folder (absent, empty or an earlier export).
-    extra : dict, optional
-        Name -> bytes.
-
-    Returns
-    -------
-    Path
-        ``out``.
-    """
-    with staged_export(files, out, extra):
-        pass
-    return Path(out)
-
-
-def file_digest(path) -> str:
-    """SHA-256 of a file's bytes (hex).
-
-    Parameters
-    ----------
-    path : str or Path
-        The file.
-
-    Returns
-    -------
-    str
-    """
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()

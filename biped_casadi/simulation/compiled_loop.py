@@ -39,6 +39,80 @@ def _diagnostics_function(plant, schema, n):
     return FastCall(f.map(n) if n > 1 else f)
 
 
+class _NumericLoop:
+    """The closed loop of a numeric law: RK4 steps, node diagnostics, the strike event."""
+
+    def __init__(self, controller, plant, schema, limits, saturate, block_sizes):
+        self.c, self.nq, self.nu = controller, plant.nq, plant.nu
+        self.saturate, self.limit = saturate, limits.torque_limit
+        self.fd = FastCall(plant.forward_dynamics)
+        self.foot = FastCall(_foot(plant))
+        self.diag = {n: _diagnostics_function(plant, schema, n) for n in set(block_sizes) | {1}}
+
+    def applied(self, u):
+        """The torques the plant receives, and whether they were clipped."""
+        if not self.saturate:
+            return u, 0.0
+        return np.clip(u, -self.limit, self.limit), float(np.max(np.abs(u)) > self.limit)
+
+    def step(self, X, tau, h, p, u0=None):
+        """One RK4 step; u0: the torques at (X, tau) when already known."""
+        nq = self.nq
+
+        def rhs(Xv, c):
+            q, dq = Xv[:nq], Xv[nq:2 * nq]
+            u = u0 if (c == 0.0 and u0 is not None) else self.c.torque(tau + c * h, q, dq, p)[1]
+            return np.r_[dq, self.fd(q, dq, self.applied(u)[0])[0].ravel()]
+        return rk4_step(rhs, X, h)
+
+    def node(self, X, tau, p):
+        """The law's torques and outputs at a node."""
+        q, dq = X[:self.nq], X[self.nq:2 * self.nq]
+        rc, u = self.c.torque(tau, q, dq, p)          # NaN where tau is out of range
+        _, y, dy, den = self.c.outputs(tau, q, dq, p)
+        return u, y, dy, den, 0.0 if rc == 2 else 1.0
+
+    def columns(self, Xs, taus, p):
+        """Diagnostics of the nodes (the columns of Xs)."""
+        n, nq, nu = Xs.shape[1], self.nq, self.nu
+        law = [self.node(Xs[:, k], taus[k], p) for k in range(n)]
+        ua = [self.applied(v[0]) for v in law]
+        Ua = np.array([a[0] for a in ua]).T.reshape(nu, n)
+        sat = np.array([[a[1] for a in ua]])
+        den, Y, dY, inr = (np.array([v[k] for v in law], dtype=float).T.reshape(-1, n)
+                           for k in (3, 1, 2, 4))
+        return self.diag[n](Xs[:nq], Xs[nq:2 * nq], Ua, den, Y, dY, inr, sat)[0]
+
+    def block(self, n):
+        """``block(X, tau, h, p) -> (X_nodes, tau_nodes, diag)`` of n RK4 steps."""
+        nq = self.nq
+
+        def run(X, tau0, h, p):
+            X = np.asarray(X, float).ravel().copy()
+            tau, h, p = float(tau0), float(h), np.asarray(p, float).ravel()
+            Xs, taus = np.empty((X.size, n)), np.empty(n)
+            u0 = None
+            for k in range(n):
+                X = self.step(X, tau, h, p, u0)
+                tau = tau + h
+                Xs[:, k], taus[k] = X, tau
+                u0 = self.c.torque(tau, X[:nq], X[nq:2 * nq], p)[1]
+            return Xs, taus[None, :], self.columns(Xs, taus, p)
+        return run
+
+    def diagnostics(self, X, tau, p):
+        """``[diag]`` at one state."""
+        X = np.asarray(X, float).ravel()
+        return [self.columns(X[:, None], np.array([float(tau)]), np.asarray(p, float).ravel())]
+
+    def event(self, X, tau, eta, p):
+        """(z_sw, dz_sw/dt, X) at the end of a last RK4 step of length eta."""
+        X = np.asarray(X, float).ravel()
+        Xe = self.step(X, float(tau), float(eta), np.asarray(p, float).ravel())
+        z, dz = self.foot(Xe[:self.nq], Xe[self.nq:2 * self.nq])
+        return z, dz, Xe[:, None]
+
+
 def compiled_closed_loop(controller, plant, schema, limits, saturate, block_sizes):
     """The simulator's closed-loop callables for a numeric law.
 
@@ -65,79 +139,9 @@ def compiled_closed_loop(controller, plant, schema, limits, saturate, block_size
         ``diagnostics(X, tau, p) -> [diag]``, ``event(X, tau, eta, p) -> (z_sw, slope,
         X_event)``, ``impact(q, dq) -> impact_full``.
     """
-    nq, nu = plant.nq, plant.nu
-    fd = FastCall(plant.forward_dynamics)
-    foot = FastCall(_foot(plant))
-    limit = limits.torque_limit
-    diag = {n: _diagnostics_function(plant, schema, n) for n in set(block_sizes) | {1}}
-
-    def applied(u):
-        if not saturate:
-            return u, 0.0
-        return np.clip(u, -limit, limit), float(np.max(np.abs(u)) > limit)
-
-    def accel(X, tau, p, u=None):
-        q, dq = X[:nq], X[nq:2 * nq]
-        if u is None:
-            u = controller.torque(tau, q, dq, p)[1]
-        return np.r_[dq, fd(q, dq, applied(u)[0])[0].ravel()]
-
-    def step(X, tau, h, p, u0=None):
-        """One RK4 step; u0: the torques at (X, tau) when already known."""
-        def rhs(Xv, c):
-            return accel(Xv, tau + c * h, p, u0 if c == 0.0 else None)
-        return rk4_step(rhs, X, h)
-
-    def node(X, tau, p):
-        """The law's torques and outputs at a node."""
-        q, dq = X[:nq], X[nq:2 * nq]
-        rc, u = controller.torque(tau, q, dq, p)
-        rco, y, dy, den = controller.outputs(tau, q, dq, p)
-        if rc == 2:               # tau or the phase outside the reference: no torques
-            u = np.full(nu, np.nan)
-        return u, y, dy, den, 0.0 if rc == 2 or rco == 2 else 1.0
-
-    def columns(Xs, taus, p):
-        """Diagnostics of the nodes (columns of Xs) and the torques there."""
-        n = Xs.shape[1]
-        law = [node(Xs[:, k], taus[k], p) for k in range(n)]
-        U = np.array([v[0] for v in law]).T.reshape(nu, n)
-        ua = [applied(U[:, k]) for k in range(n)]
-        Ua = np.array([a[0] for a in ua]).T.reshape(nu, n)
-        sat = np.array([[a[1] for a in ua]])
-        cols = [np.array([v[k] for v in law], dtype=float).T.reshape(-1, n) for k in (3, 1, 2, 4)]
-        den, Y, dY, inr = cols
-        D = diag[n](Xs[:nq], Xs[nq:2 * nq], Ua, den, Y, dY, inr, sat)[0]
-        return D, U
-
-    def block_of(n):
-        def block(X, tau0, h, p):
-            X = np.asarray(X, float).ravel().copy()
-            tau, h, p = float(tau0), float(h), np.asarray(p, float).ravel()
-            Xs, taus = np.empty((X.size, n)), np.empty(n)
-            u0 = None
-            for k in range(n):
-                X = step(X, tau, h, p, u0)
-                tau = tau + h
-                Xs[:, k], taus[k] = X, tau
-                u0 = controller.torque(tau, X[:nq], X[nq:2 * nq], p)[1]
-            D, _ = columns(Xs, taus, p)
-            return Xs, taus[None, :], D
-        return block
-
-    def diagnostics(X, tau, p):
-        X = np.asarray(X, float).ravel()
-        return [columns(X[:, None], np.array([float(tau)]), np.asarray(p, float).ravel())[0]]
-
-    def event(X, tau, eta, p):
-        X = np.asarray(X, float).ravel()
-        Xe = step(X, float(tau), float(eta), np.asarray(p, float).ravel())
-        z, dz = foot(Xe[:nq], Xe[nq:2 * nq])
-        return z, dz, Xe[:, None]
-
-    impact = FastCall(plant.impact_full)
-    first, quarter = (block_of(n) for n in block_sizes)
-    return first, quarter, diagnostics, event, impact
+    loop = _NumericLoop(controller, plant, schema, limits, saturate, block_sizes)
+    first, quarter = (loop.block(n) for n in block_sizes)
+    return first, quarter, loop.diagnostics, loop.event, FastCall(plant.impact_full)
 
 
 def _foot(plant):
