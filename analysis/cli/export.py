@@ -3,6 +3,7 @@ example), optionally compiled and compared with the Python law (``--verify``).""
 from __future__ import annotations
 
 import hashlib
+import os
 import platform
 import tempfile
 from pathlib import Path
@@ -65,8 +66,10 @@ def _check_arguments(args):
         return None
     cc = find_c_compiler()
     if cc is None:
-        raise UserError("--verify: no C compiler found (CC names a program that does not "
-                        "exist, or neither gcc nor cc is installed); nothing written")
+        env = os.environ.get("CC", "").strip()
+        why = (f"CC={env} is not a program found on PATH" if env
+               else "neither gcc nor cc is installed, and CC is not set")
+        raise UserError(f"--verify: no C compiler ({why}); nothing written")
     return cc
 
 
@@ -204,11 +207,14 @@ def register(sub):
                     "DIR/*.c build with 'gcc -O2 -shared -fPIC -o libbiped_controller.so "
                     "DIR/*.c -lm', DIR/README.md says how to call it and "
                     "DIR/example/main.c times it. --verify compiles it, compares it with "
-                    "the Python law on random states near the orbit and on a full-order "
-                    "simulation driven by the compiled law, and prints the largest "
-                    "differences and the time per call; a difference above the limits "
-                    "(1e-12 relative on torques, 1e-9 on impact times and states) exits "
-                    "with 1 and writes nothing. The folder appears complete or not at all.")
+                    "the Python law on random states near the orbit (torques to 1e-12 "
+                    "relative) and on a full-order simulation driven by the compiled law "
+                    "(impact times and states to 1e-9 against the Python law driven the "
+                    "same way; biped simulate's run, which integrates the time-varying "
+                    "law's reference state with the robot, is compared too and differs by "
+                    "that discretisation), and prints the largest differences and the time "
+                    "per call; a difference beyond the limits exits with 1 and writes "
+                    "nothing. The folder appears complete or not at all.")
     add_gait_arguments(p)
     add_robot(p)
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
