@@ -259,6 +259,19 @@ class Gait(Reference):
         qu, dqu, _ = quintic_hermite(self._s * self.T, self._X[0], self._X[1], self._A, t1)
         return np.vstack([qu, dqu])
 
+    def state_nodes(self) -> tuple:
+        """The nodes of the quintic Hermite interpolant that defines r(t) between them.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+            (t, q_u, dq_u, ddq_u), each (N,): the uniform grid on [t_min, t_max] (s) and
+            the RK4 states of the unactuated row with its acceleration there; ``state(t)``
+            is (y(t), y'(t)) of the quintic through (q_u, dq_u, ddq_u) at the two nodes
+            around t.
+        """
+        return (self._s * self.T, self._X[0].copy(), self._X[1].copy(), self._A.copy())
+
     # ---------------------------------------------------------------- figures
     @property
     def step_length(self) -> float:

@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from biped_casadi.caching import cached
-from biped_casadi.numerics import rk4_step
+from biped_casadi.numerics import quintic_hermite_interval, rk4_step
 from biped_casadi.control.output_law import unactuated_acceleration
 
 __all__ = ["ReferenceDynamics", "reference_dynamics", "bernstein", "quintic_hermite"]
@@ -154,28 +154,14 @@ def reference_dynamics(model, degree: int, continuation: float | None = None,
 
 
 # quintic Hermite interpolation on a uniform grid --------------------------------
-# p(th) = sum c_i th^i on th in [0, 1]; conditions p, p', p'' at both ends.
-_HERMITE_A = np.array([
-    [1, 0, 0, 0, 0, 0],
-    [0, 1, 0, 0, 0, 0],
-    [0, 0, 2, 0, 0, 0],
-    [1, 1, 1, 1, 1, 1],
-    [0, 1, 2, 3, 4, 5],
-    [0, 0, 2, 6, 12, 20],
-], dtype=float)
-_HERMITE_AINV = np.linalg.inv(_HERMITE_A)
-
-
 def quintic_hermite(t_grid, y, dy, ddy, t):
     """Value and first two derivatives at ``t`` of the quintic Hermite interpolant of
-    (y, dy, ddy) given on the uniform grid ``t_grid``.  Vectorised over ``t``."""
+    (y, dy, ddy) given on the uniform grid ``t_grid``
+    (:func:`biped_casadi.numerics.quintic_hermite_interval` on the interval around each
+    t).  Vectorised over ``t``."""
     t = np.asarray(t, dtype=float)
     h = t_grid[1] - t_grid[0]
     i = np.clip(((t - t_grid[0]) // h).astype(int), 0, len(t_grid) - 2)
     th = (t - t_grid[i]) / h
-    rhs = np.stack([y[i], h * dy[i], h**2 * ddy[i], y[i + 1], h * dy[i + 1], h**2 * ddy[i + 1]])
-    c = _HERMITE_AINV @ rhs                      # 6 x N polynomial coefficients
-    powers = np.stack([th**k for k in range(6)])
-    d1 = np.stack([k * th**(k - 1) if k else 0 * th for k in range(6)])
-    d2 = np.stack([k * (k - 1) * th**(k - 2) if k > 1 else 0 * th for k in range(6)])
-    return (np.sum(c * powers, 0), np.sum(c * d1, 0) / h, np.sum(c * d2, 0) / h**2)
+    return quintic_hermite_interval(th, h, y[i], dy[i], ddy[i], y[i + 1], dy[i + 1],
+                                    ddy[i + 1])

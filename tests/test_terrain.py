@@ -218,8 +218,9 @@ def test_gsn_matches_central_differences_of_the_simulator(model, gait, kind):
     for dist in ad:
         for ind, v in ad[dist].items():
             # (an indicator the disturbance does not move, such as virtual constraints'
-            # step length under a push, is ~1e-9 and compared to the differences' noise)
-            assert abs(num[dist][ind] - v) <= 1e-5 * abs(v) + 1e-9, (dist, ind, v,
+            # step length under a push, is ~6e-9 and compared to the differences' noise,
+            # which moves it by up to ~2e-9 with a step of 1e-6)
+            assert abs(num[dist][ind] - v) <= 1e-5 * abs(v) + 4e-9, (dist, ind, v,
                                                                     num[dist][ind])
     assert g.status == "stable" and g.fixed_point_residual < 1e-9
 

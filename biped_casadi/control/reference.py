@@ -140,6 +140,21 @@ class Reference(abc.ABC):
         """
         return np.array([self.state(float(tk)) for tk in np.ravel(t)]).reshape(-1, self.n_state).T
 
+    def state_nodes(self):
+        """The nodes of the interpolant of the reference state, when it is one.
+
+        A reference whose state r = (y, dy/dt) is the quintic Hermite interpolant of
+        (y, dy/dt, d2y/dt2) on a uniform grid returns them; the export of a controller to C
+        (:mod:`biped_casadi.control.export`) tabulates them.  Default: None (no state, or
+        not interpolated).
+
+        Returns
+        -------
+        tuple of numpy.ndarray or None
+            (t, y, dy, ddy), each (N,).
+        """
+        return None
+
     # ------------------------------------------------------------ derived
     def q(self, t):
         """The reference configuration q^d(t), rad.

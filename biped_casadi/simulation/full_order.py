@@ -56,6 +56,7 @@ from ..control.design import Design
 from ..control.output_law import SECTION
 from ..numerics import FastCall, as_vector, compiled, rk4_step
 from ..results import internal, json_safe
+from .compiled_loop import compiled_closed_loop
 from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, strike
 from .options import SimulationOptions
 from .outcome import STATUSES, OutcomeRecorder, WalkOutcome
@@ -239,7 +240,10 @@ class Simulator:
     Parameters
     ----------
     controller : TimeVaryingController or VirtualConstraintController
-        The control law (and through it the model and the reference).
+        The control law (and through it the model and the reference); or a
+        :class:`~biped_casadi.control.compiled.CompiledController`, an exported law's
+        compiled library, whose closed loop is made of numeric calls
+        (:mod:`biped_casadi.simulation.compiled_loop`).
     options : SimulationOptions, optional
         Default ``SimulationOptions()``.
     plant : BipedModel, optional
@@ -298,6 +302,13 @@ class Simulator:
 
     def _build(self):
         m, c = self.plant, self.controller
+        if getattr(c, "numeric_law", False):    # a compiled library: numeric calls only
+            self.rk4 = None
+            (self.step_block, self.quarter_block, self.diagnostics, self.event,
+             self._impact_map) = compiled_closed_loop(
+                c, m, self.schema, self.limits, self.options.saturate,
+                (CHUNKS_PER_STEP * self.chunk, self.chunk))
+            return
         nq = m.nq
         nx = 2 * nq + c.n_ref
         X = ca.SX.sym("X", nx)

@@ -1,0 +1,252 @@
+"""``biped export``: a controller as self-contained C99 code (header, law, README,
+example), optionally compiled and compared with the Python law (``--verify``)."""
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+import tempfile
+from pathlib import Path
+
+from biped_casadi import Gains, SimulationOptions, TimeVaryingController, VirtualConstraintController
+from biped_casadi.control.compiled import CompilerError, find_c_compiler
+from biped_casadi.control.export import HEADER, c_sources, exported_law
+from biped_casadi.control.export_folder import check_destination, staged_export
+from biped_casadi.control.output_law import M1_LIMIT, SECTION
+from gait_opt.cache import cache_path
+from analysis.verify_export import SIMULATION_TOL, TORQUE_RTOL, verify_export
+
+from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+                     load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
+from .simulate import MAX_STEPS, _check_perturbation, _perturbation
+
+#: random states the check compares by default
+STATES = 10_000
+#: the paper's perturbation (§V-C), rad and rad/s: --verify's default start
+PAPER_PERTURBATION = (0.01, 0.1)
+
+
+def _gains(args) -> Gains:
+    """--gains KP KD EPS, or --eps (the output PD of eq. 13)."""
+    if args.gains is not None and args.eps is not None:
+        raise UserError("--gains excludes --eps (give the three gains with --gains)")
+    if args.gains is not None:
+        for name, v in zip(("KP", "KD", "EPS"), args.gains):
+            positive(v, f"--gains {name}")
+        return Gains(*args.gains)
+    return Gains(eps=positive(args.eps, "--eps") if args.eps is not None else 0.02)
+
+
+def _check_arguments(args):
+    """Everything that can be checked before the gait is loaded; the C compiler of
+    --verify (None without)."""
+    check_m1_values(args.m1)
+    if args.controller == "vc" and (args.m1 is not None or args.rejoin is not None):
+        raise UserError("--m1 and --rejoin apply to the time-varying controller "
+                        "(--controller tv)")
+    if args.rejoin is not None:
+        rejoin_fraction(args.rejoin)
+    _gains(args)
+    if not 1 <= args.steps <= MAX_STEPS:
+        raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
+    positive(args.mu, "--mu")
+    if args.torque_limit is not None:
+        positive(args.torque_limit, "--torque-limit")
+    if not 1 <= args.states <= 1_000_000:
+        raise UserError(f"--states must be between 1 and 1000000, got {args.states}")
+    _check_perturbation(args)
+    if args.perturb is None and args.perturb_q is None and args.perturb_dq is None:
+        args.perturb = list(PAPER_PERTURBATION)
+    output_dir(args.out, "--out")
+    try:
+        check_destination(args.out)
+    except ValueError as e:
+        raise UserError(f"--{e}") from None
+    if not args.verify:
+        return None
+    cc = find_c_compiler()
+    if cc is None:
+        env = os.environ.get("CC", "").strip()
+        why = (f"CC={env} is not a program found on PATH" if env
+               else "neither gcc nor cc is installed, and CC is not set")
+        raise UserError(f"--verify: no C compiler ({why}); nothing written")
+    return cc
+
+
+def _controller(args, gait):
+    model = gait.model
+    gains = _gains(args)
+    if args.controller == "vc":
+        return VirtualConstraintController(gait, gains=gains)
+    M1 = parse_m1(args.m1, model.nu, default_zero=True)
+    return TimeVaryingController(gait, M1, gains,
+                                 rejoin=0.5 if args.rejoin is None else args.rejoin)
+
+
+def _gait_file(args, gait) -> tuple:
+    """(the gait file's name for the header, its bytes): the file given, or the default
+    gait's cache file (saved afresh when the cache holds none)."""
+    if args.gait:
+        return str(args.gait), Path(args.gait).read_bytes()
+    path = cache_path(gait.model, gait.options)
+    if path.is_file():
+        return f"{path} (the default gait of {gait.model.params.name})", path.read_bytes()
+    with tempfile.TemporaryDirectory() as tmp:
+        gait.save(Path(tmp) / "gait.json")
+        return (f"the default gait of {gait.model.params.name}",
+                (Path(tmp) / "gait.json").read_bytes())
+
+
+def _machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return cpu
+
+
+def cmd_export(args):
+    # ---- arguments (the output folder and the compiler before any work)
+    cc = _check_arguments(args)
+    say = Progress("export", quiet=args.json)
+    gait = load_gait(args, say)
+    ctrl = _controller(args, gait)
+    try:
+        law = exported_law(ctrl)
+    except ValueError as e:
+        what = "--m1" if args.controller == "tv" else "--controller vc"
+        raise UserError(f"{what}: {str(e).split(': ', 1)[1]}; nothing written") from None
+    name, data = _gait_file(args, gait)
+    provenance = {"gait file": name, "gait file sha256": hashlib.sha256(data).hexdigest(),
+                  "copy of the gait file": "gait.json"}
+
+    # ---- write (staged), verify, move into place
+    say(f"generating C for the {'time-varying' if law.kind == 'tv' else 'virtual-constraint'}"
+        " controller ...")
+    files = c_sources(law, provenance)
+    result = dict(status="written", out=str(args.out), files=sorted(files) + ["gait.json"],
+                  controller=ctrl.describe(), robot=law.robot, gait_file=name,
+                  gait_sha256=provenance["gait file sha256"], nq=law.nq, nu=law.nu,
+                  nstate=law.nstate)
+    with staged_export(files, args.out, {"gait.json": data}) as stage:
+        if cc is not None:
+            say(f"compiling with {' '.join(cc)} and comparing with the Python law "
+                f"({args.states} states, a {args.steps}-step simulation) ...")
+            model = gait.model
+            q0, dq0 = _perturbation(args, model.nq).initial_state(gait)
+            opts = SimulationOptions(steps=args.steps, mu=args.mu,
+                                     torque_limit=args.torque_limit)
+            try:
+                ver = verify_export(stage.path, ctrl, q0, dq0, opts, cc, args.states)
+            except CompilerError as e:
+                raise UserError(f"--verify: {e}; nothing written") from None
+            result["verification"] = ver.to_dict()
+            result["status"] = ver.status
+            if ver.success:
+                timing = (f"\nMeasured by `biped export --verify` ({_machine()}): "
+                          f"{ver.c_us:.3f} us per `biped_torque` call in the example's loop "
+                          f"({ver.c_calls} calls).\n")
+                (stage.path / "README.md").write_text(
+                    c_sources(law, provenance, timing)["README.md"], encoding="utf-8")
+            else:
+                stage.discard()
+    _report(args, result)
+    return 0 if result["status"] in ("written", "verified") else 1
+
+
+
+def _report(args, r):
+    if args.json:
+        print_json(r)
+        return
+    c = r["controller"]
+    if r["status"] != "different":
+        print(f"wrote {r['out']}: " + ", ".join(r["files"]))
+    desc = (f"time-varying controller, M1 = {c['M1']}, rejoin {c['rejoin']:g} T"
+            if c["controller"] == "tv" else "virtual-constraint controller fitted to the gait")
+    g = c["gains"]
+    print(f"  {desc}, gains Kp {g['Kp']:g} Kd {g['Kd']:g} eps {g['eps']:g} s; robot "
+          f"{r['robot']} (nq {r['nq']}, nu {r['nu']}, nstate {r['nstate']})")
+    print(f"  gait {r['gait_file']}, sha256 {r['gait_sha256']}")
+    print(f"  build: gcc -O2 -shared -fPIC -o libbiped_controller.so {r['out']}/*.c -lm")
+    v = r.get("verification")
+    if v is None:
+        return
+    s, m = v["states"], v["simulation"]
+    print(f"verification: {v['status']}" + ("" if v["success"] else
+                                             " (nothing written: the export is not in place)"))
+    print(f"  {s['n']} random states near the orbit: torques differ by at most "
+          f"{s['max_torque_rel']:.3g} relative ({s['max_torque_abs']:.3g} N m; limit "
+          f"{TORQUE_RTOL:g}); outputs by {s['max_output_abs']:.3g}, denominator by "
+          f"{s['max_den_rel']:.3g} relative; return codes {s['return_codes']}")
+    print(f"  {m['steps']}-impact simulation driven by the library ({m['compiled_status']}) "
+          f"against biped simulate's ({m['python_status']}): impact times differ by at most "
+          f"{m['max_impact_time']:.3g} s, states by {m['max_state']:.3g} (limit "
+          f"{SIMULATION_TOL:g})")
+    print(f"  against the Python law driven the same way ({m['twin_status']}): "
+          f"{m['twin_max_impact_time']:.3g} s, {m['twin_max_state']:.3g}"
+          + ("" if m["status"] != "discretisation" else
+             "; the larger difference from biped simulate is its integration of the "
+             "reference state (O(h^4), 16 times smaller at half the RK4 step)"))
+    print(f"  time per call: {v['c_us']:.3f} us in C (the example's loop, {v['c_calls']} "
+          f"calls), {s['ctypes_us']:.2f} us through ctypes, {s['python_us']:.1f} us for the "
+          f"Python law one state at a time (C {s['python_us'] / v['c_us']:.0f} times faster)")
+
+
+def register(sub):
+    p = sub.add_parser(
+        "export", help="write a controller as self-contained C99 code (and check it)",
+        description="Write the controller that 'biped simulate' runs (the same options; "
+                    "'biped m1 --robust' prints them as simulate_args) as C99 code that "
+                    f"needs only the C library and libm: DIR/{HEADER} declares "
+                    "biped_sizes, biped_step_start and biped_torque (and biped_outputs), "
+                    "DIR/*.c build with 'gcc -O2 -shared -fPIC -o libbiped_controller.so "
+                    "DIR/*.c -lm', DIR/README.md says how to call it and "
+                    "DIR/example/main.c times it. --verify compiles it, compares it with "
+                    "the Python law on random states near the orbit (torques to 1e-12 "
+                    "relative) and on a full-order simulation driven by the compiled law "
+                    "(impact times and states to 1e-9 against the Python law driven the "
+                    "same way; biped simulate's run, which integrates the time-varying "
+                    "law's reference state with the robot, is compared too and differs by "
+                    "that discretisation), and prints the largest differences and the time "
+                    "per call; a difference beyond the limits exits with 1 and writes "
+                    "nothing. The folder appears complete or not at all.")
+    add_gait_arguments(p)
+    add_robot(p)
+    p.add_argument("--controller", choices=("tv", "vc"), default="tv",
+                   help="tv: time-varying outputs [M1, I] q (default); vc: virtual constraints")
+    p.add_argument("--m1", nargs="+", type=float, metavar="M1",
+                   help=f"the components of M1 for --controller tv, one per torque, each "
+                        f"within +-{M1_LIMIT:.0e} (default all zero)")
+    p.add_argument("--rejoin", type=float, metavar="R",
+                   help=f"time at which v_c rejoins the reference, fraction of T in "
+                        f"(0, {SECTION}] (default 0.5, the paper's)")
+    p.add_argument("--gains", nargs=3, type=float, metavar=("KP", "KD", "EPS"),
+                   help="output PD of eq. (13) (default 1 2 0.02)")
+    p.add_argument("--eps", type=float, help="epsilon of eq. (13) with Kp = 1, Kd = 2 "
+                                             "(as 'biped simulate'; excludes --gains)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="the folder to write (new, empty, or an earlier export, replaced)")
+    p.add_argument("--verify", action="store_true",
+                   help="compile with $CC (or gcc, cc), compare with the Python law, time it")
+    p.add_argument("--states", type=int, default=STATES, metavar="N",
+                   help=f"random states --verify compares ({STATES})")
+    p.add_argument("--steps", type=int, default=10, metavar="N",
+                   help="steps of --verify's simulation (10)")
+    p.add_argument("--perturb", nargs=2, type=float, default=None, metavar=("Q_ERR", "DQ_ERR"),
+                   help="initial error of --verify's simulation on every joint (rad) and "
+                        "velocity (rad/s) (default the paper's: 0.01 0.1)")
+    p.add_argument("--perturb-q", nargs="+", type=float, metavar="Q",
+                   help="initial error of each joint angle, rad (instead of --perturb)")
+    p.add_argument("--perturb-dq", nargs="+", type=float, metavar="DQ",
+                   help="initial error of each joint velocity, rad/s (instead of --perturb)")
+    p.add_argument("--mu", type=float, default=0.6,
+                   help="friction coefficient of --verify's simulation (0.6)")
+    p.add_argument("--torque-limit", type=float, metavar="U",
+                   help="torque limit of --verify's simulation, N m (default the robot's)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_export)

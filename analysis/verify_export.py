@@ -1,0 +1,407 @@
+"""The check of an exported controller: its compiled library against the Python law.
+
+Three comparisons (docs/howto/export.md):
+
+- states: the torques of ``biped_torque`` against the Python law at random states near
+  the orbit (tau in [0, 1.1 T], q and dq the reference's plus Gaussian errors of the
+  paper's perturbation size, step constants from perturbed starts), as the largest
+  relative difference max|u_C - u_Python| / max|u_Python| over the states; the
+  outputs, their rates and the denominator (``biped_outputs``) too;
+- simulation: a full-order run driven by the compiled library
+  (:class:`~biped_casadi.control.compiled.CompiledController`) against two runs driven by
+  the Python law, impact times and states (q, dq before and after every impact): the
+  Python law called as the library is (:class:`~biped_casadi.control.compiled.PythonTwin`,
+  the same closed loop of numeric calls: the runs agree to round-off), and ``biped
+  simulate``'s run.  The latter differs by discretisation: in ``biped simulate`` the
+  time-varying law's reference state r = (q_u^d, dq_u^d) is integrated with the robot in
+  every RK4 stage, while the compiled law reads it from the gait's interpolant (as on a
+  robot), a difference of order h^4 (16 times smaller at half the RK4 step) that grows
+  with |M1|;
+- timing: the C law in the example's loop (C alone), through ctypes, and the Python law
+  called one state at a time.
+"""
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from biped_casadi import SimulationOptions, simulate
+from biped_casadi.control.export import LIBRARY
+from biped_casadi.control.compiled import (CompiledController, CompilerError, PythonTwin,
+                                           build_library, find_c_compiler)
+from biped_casadi.results import Result
+
+__all__ = ["StateComparison", "SimulationComparison", "ExportVerification",
+           "compare_states", "compare_simulations", "time_example", "verify_export",
+           "TORQUE_RTOL", "SIMULATION_TOL"]
+
+#: compiled torques must equal the Python law's to this relative difference
+TORQUE_RTOL = 1e-12
+#: impact times (s) and states (rad, rad/s) of the two runs must agree to this
+SIMULATION_TOL = 1e-9
+
+
+@dataclass
+class StateComparison(Result):
+    """The compiled law against the Python law at random states.
+
+    Parameters
+    ----------
+    status : {'equal', 'different'}
+        'equal' when ``max_torque_rel`` <= :data:`TORQUE_RTOL`.
+    message : str
+        A summary line.
+    n : int
+        States compared.
+    max_torque_rel : float
+        Largest max|u_C - u_Python| / max|u_Python| over the states.
+    max_torque_abs : float
+        Largest max|u_C - u_Python|, N m.
+    max_output_abs : float
+        Largest difference of the outputs y and their rates dy.
+    max_den_rel : float
+        Largest relative difference of the decoupling denominator.
+    return_codes : dict
+        How many calls returned each code (``biped_torque``).
+    python_us, ctypes_us : float
+        Time per call of the Python law (one state at a time) and of the library through
+        ctypes, microseconds.
+    """
+    status: str
+    message: str
+    n: int
+    max_torque_rel: float
+    max_torque_abs: float
+    max_output_abs: float
+    max_den_rel: float
+    return_codes: dict
+    python_us: float
+    ctypes_us: float
+
+    SUCCESS = ("equal",)
+
+
+@dataclass
+class SimulationComparison(Result):
+    """A full-order run driven by the compiled law against the Python-driven runs.
+
+    Two Python runs: ``biped simulate``'s (the Python controller in the simulator, its
+    reference state integrated with the robot) and the twin's (the Python law called as
+    the library is, :class:`~biped_casadi.control.compiled.PythonTwin`, in the same
+    numeric loop).
+
+    Parameters
+    ----------
+    status : {'equal', 'discretisation', 'different'}
+        'equal' when both Python runs end as the compiled one, with as many steps, and
+        impact times and states agree to :data:`SIMULATION_TOL`; 'discretisation' when
+        the twin's do but ``biped simulate``'s differ by more (the reference state's
+        discretisation, O(h^4): see the module docstring); 'different' otherwise.
+    message : str
+        A summary line.
+    python_status, twin_status, compiled_status : str
+        How each run ended (the simulator's statuses).
+    steps : int
+        Impacts compared.
+    max_impact_time, max_state : float
+        Largest difference from ``biped simulate``'s run of the impact times (s) and of
+        q, dq just before and just after the impacts.
+    twin_max_impact_time, twin_max_state : float
+        The same from the twin's run.
+    per_step : list
+        (impact time difference, state difference) from ``biped simulate``'s run, per step.
+    python_seconds, twin_seconds, compiled_seconds : float
+        Wall time of each run.
+    """
+    status: str
+    message: str
+    python_status: str
+    twin_status: str
+    compiled_status: str
+    steps: int
+    max_impact_time: float
+    max_state: float
+    twin_max_impact_time: float
+    twin_max_state: float
+    per_step: list
+    python_seconds: float
+    twin_seconds: float
+    compiled_seconds: float
+
+    SUCCESS = ("equal", "discretisation")
+
+
+@dataclass
+class ExportVerification(Result):
+    """An exported controller's library built and compared with the Python law.
+
+    Parameters
+    ----------
+    status : {'verified', 'different'}
+        'verified' when the states and the simulation agree.
+    message : str
+        A summary line.
+    states : StateComparison
+    simulation : SimulationComparison
+    c_us : float
+        Time per ``biped_torque`` call in the example's C loop, microseconds (NaN when
+        the example could not run).
+    c_calls : int
+        Calls in that loop.
+    """
+    status: str
+    message: str
+    states: StateComparison
+    simulation: SimulationComparison
+    c_us: float
+    c_calls: int
+
+    SUCCESS = ("verified",)
+
+
+# ====================================================================== states
+def _random_states(ctrl, n, rng, q_err=0.01, dq_err=0.1):
+    """(tau, q, dq, p) of n states near the orbit and the Python law's step constants."""
+    ref, nq = ctrl.reference, ctrl.model.nq
+    tau = rng.uniform(0.0, 1.1 * ref.T, n)
+    q = ref.q(tau) + rng.normal(0.0, q_err, (nq, n))
+    dq = ref.dq(tau) + rng.normal(0.0, dq_err, (nq, n))
+    q0 = ref.q(0.0)[:, None] + rng.normal(0.0, q_err, (nq, n))
+    dq0 = ref.dq(0.0)[:, None] + rng.normal(0.0, dq_err, (nq, n))
+    return tau, q, dq, q0, dq0
+
+
+def _python_law(ctrl):
+    """The Python law at one state: (u, y, dy, den), timed by the caller."""
+    nu = ctrl.model.nu
+    if ctrl.n_ref:
+        def law(tau, q, dq, p):
+            return ctrl.torque(q, dq, tau, p[:nu], p[nu:])
+    else:
+        def law(tau, q, dq, p):
+            return ctrl.evaluate(q, dq, tau, np.zeros(0), p)
+    return law
+
+
+def compare_states(compiled: CompiledController, ctrl, n: int = 10_000,
+                   seed: int = 0) -> StateComparison:
+    """The compiled law against the Python law at ``n`` random states near the orbit.
+
+    Parameters
+    ----------
+    compiled : CompiledController
+        The library.
+    ctrl : TimeVaryingController or VirtualConstraintController
+        The exported controller.
+    n : int
+        States.
+    seed : int
+        Seed of the random states.
+
+    Returns
+    -------
+    StateComparison
+    """
+    rng = np.random.default_rng(seed)
+    tau, q, dq, q0, dq0 = _random_states(ctrl, n, rng)
+    law = _python_law(ctrl)
+    rel = np.zeros(n)
+    absu, outs, dens = np.zeros(n), np.zeros(n), np.zeros(n)
+    codes: dict = {}
+    t_py = t_c = 0.0
+    for k in range(n):
+        p = ctrl.step_start(q0[:, k], dq0[:, k]).p
+        pc = compiled.step_start(q0[:, k], dq0[:, k]).p
+        qk, dqk, tk = q[:, k], dq[:, k], float(tau[k])
+        t0 = time.perf_counter()
+        out = law(tk, qk, dqk, p)
+        t1 = time.perf_counter()
+        rc, u = compiled.torque(tk, qk, dqk, pc)
+        t2 = time.perf_counter()
+        t_py, t_c = t_py + t1 - t0, t_c + t2 - t1
+        codes[rc] = codes.get(rc, 0) + 1
+        _, y, dy, den = compiled.outputs(tk, qk, dqk, pc)
+        absu[k] = np.max(np.abs(u - out.u))
+        rel[k] = absu[k] / max(np.max(np.abs(out.u)), 1e-300)
+        outs[k] = max(np.max(np.abs(y - out.y)), np.max(np.abs(dy - out.dy)))
+        dens[k] = abs(den - out.denominator) / abs(out.denominator)
+    worst = float(rel.max())
+    ok = worst <= TORQUE_RTOL
+    return StateComparison(
+        status="equal" if ok else "different",
+        message=(f"{n} random states: torques differ by at most {worst:.3g} relative "
+                 f"({absu.max():.3g} N m)" + ("" if ok else f", above {TORQUE_RTOL:g}")),
+        n=n, max_torque_rel=worst, max_torque_abs=float(absu.max()),
+        max_output_abs=float(outs.max()), max_den_rel=float(dens.max()),
+        return_codes={str(k): v for k, v in sorted(codes.items())},
+        python_us=1e6 * t_py / n, ctypes_us=1e6 * t_c / n)
+
+
+# ================================================================== simulation
+def _step_differences(a, b) -> list:
+    out = []
+    for sa, sb in zip(a.steps, b.steps):
+        ds = max(float(np.max(np.abs(getattr(sa, f) - getattr(sb, f))))
+                 for f in ("q_minus", "dq_minus", "q_plus", "dq_plus"))
+        out.append((abs(sa.t_impact - sb.t_impact), ds))
+    return out
+
+
+def _timed(ctrl, q0, dq0, options):
+    t0 = time.perf_counter()
+    r = simulate(ctrl, q0, dq0, options)
+    return r, time.perf_counter() - t0
+
+
+def _agree(a, b):
+    """(alike, largest impact-time difference, largest state difference, per step)."""
+    diffs = _step_differences(a, b)
+    dt = max((d[0] for d in diffs), default=0.0)
+    ds = max((d[1] for d in diffs), default=0.0)
+    alike = a.status == b.status and len(a.steps) == len(b.steps)
+    return alike and dt <= SIMULATION_TOL and ds <= SIMULATION_TOL, dt, ds, diffs
+
+
+def compare_simulations(compiled: CompiledController, ctrl, q0, dq0,
+                        options: SimulationOptions | None = None) -> SimulationComparison:
+    """A full-order run driven by the compiled law against the Python-driven runs.
+
+    Parameters
+    ----------
+    compiled : CompiledController
+        The library.
+    ctrl : TimeVaryingController or VirtualConstraintController
+        The exported controller.
+    q0, dq0 : array_like
+        The initial state (the start of a step).
+    options : SimulationOptions, optional
+        The runs' options (default ``SimulationOptions()``: 10 steps).
+
+    Returns
+    -------
+    SimulationComparison
+    """
+    options = options if options is not None else SimulationOptions()
+    a, ta = _timed(ctrl, q0, dq0, options)
+    tw, tt = _timed(PythonTwin(ctrl), q0, dq0, options)
+    b, tb = _timed(compiled, q0, dq0, options)
+    ok, dt, ds, diffs = _agree(a, b)
+    ok_twin, dt_twin, ds_twin, _ = _agree(tw, b)
+    status = "equal" if ok and ok_twin else ("discretisation" if ok_twin else "different")
+    msg = (f"{len(diffs)} impact(s): times differ from biped simulate's run by at most "
+           f"{dt:.3g} s, states by {ds:.3g}; from the Python law's in the same loop by "
+           f"{dt_twin:.3g} s and {ds_twin:.3g}; runs {a.status} (biped simulate), "
+           f"{tw.status} (Python law), {b.status} (compiled)")
+    if status == "discretisation":
+        msg += (f" (the difference from biped simulate's run, above {SIMULATION_TOL:g}, is "
+                "its integration of the reference state, O(h^4): 16 times smaller at half the "
+                "RK4 step)")
+    return SimulationComparison(
+        status=status, message=msg, python_status=a.status, twin_status=tw.status,
+        compiled_status=b.status, steps=len(diffs), max_impact_time=dt, max_state=ds,
+        twin_max_impact_time=dt_twin, twin_max_state=ds_twin,
+        per_step=[list(d) for d in diffs], python_seconds=ta, twin_seconds=tt,
+        compiled_seconds=tb)
+
+
+# ====================================================================== timing
+def time_example(folder, compiler: list, calls: int = 1_000_000, work=None) -> tuple:
+    """Build and run the export's example (``example/main.c``): the C time per call.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The export.
+    compiler : list of str
+        The C compiler command.
+    calls : int
+        Calls of ``biped_torque`` in the loop.
+    work : str or Path, optional
+        Where the executable goes (default the system's temporary folder); it is removed
+        after the run.
+
+    Returns
+    -------
+    tuple
+        (microseconds per call, the example's output line).
+
+    Raises
+    ------
+    CompilerError
+        When the example does not build or run.
+    """
+    folder = Path(folder)
+    exe = Path(work if work is not None else tempfile.gettempdir()) / \
+        f"biped_export_example_{os.getpid()}"
+    cmd = [*compiler, "-O2", "-o", str(exe), str(folder / "example" / "main.c"),
+           *sorted(str(p) for p in folder.glob("*.c")), "-lm"]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise CompilerError(f"{compiler[0]} failed on the example: "
+                            f"{(r.stderr.strip().splitlines() or [''])[0]}")
+    try:
+        run = subprocess.run([str(exe), str(int(calls))], capture_output=True, text=True,
+                             timeout=600)
+    finally:
+        exe.unlink(missing_ok=True)
+    m = re.search(r"biped_torque: ([0-9.eE+-]+) us per call", run.stdout)
+    if run.returncode != 0 or m is None:
+        raise CompilerError(f"the example failed (exit {run.returncode}): "
+                            f"{(run.stdout + run.stderr).strip()[:200]}")
+    return float(m.group(1)), run.stdout.strip()
+
+
+def verify_export(folder, ctrl, q0, dq0, options: SimulationOptions | None = None,
+                  compiler: list | None = None, n_states: int = 10_000,
+                  seed: int = 0, calls: int = 1_000_000) -> ExportVerification:
+    """Build an export's library, compare it with the Python law, time it.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The export (:func:`biped_casadi.control.export.write_export` or a folder with
+        the same files).
+    ctrl : TimeVaryingController or VirtualConstraintController
+        The exported controller.
+    q0, dq0 : array_like
+        Initial state of the simulations (the paper's perturbation of the reference).
+    options : SimulationOptions, optional
+        The simulations' options (default 10 steps).
+    compiler : list of str, optional
+        The C compiler (default :func:`~biped_casadi.control.compiled.find_c_compiler`).
+    n_states : int
+        Random states compared.
+    seed : int
+        Their seed.
+    calls : int
+        Calls in the example's timing loop.
+
+    Returns
+    -------
+    ExportVerification
+
+    Raises
+    ------
+    CompilerError
+        No compiler, or the library or the example does not build.
+    """
+    cc = compiler if compiler is not None else find_c_compiler()
+    with tempfile.TemporaryDirectory(prefix="biped-export-") as work:
+        lib = build_library(folder, Path(work) / LIBRARY, compiler=cc)
+        compiled = CompiledController(lib, ctrl)     # loaded: the file may go
+        c_us, _ = time_example(folder, cc, calls, work)
+    states = compare_states(compiled, ctrl, n_states, seed)
+    sim = compare_simulations(compiled, ctrl, q0, dq0, options)
+    ok = states.success and sim.success
+    return ExportVerification(
+        status="verified" if ok else "different",
+        message=f"{states.message}; {sim.message}; {c_us:.3g} us per biped_torque call in C",
+        states=states, simulation=sim, c_us=c_us, c_calls=int(calls))
+

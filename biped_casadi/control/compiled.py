@@ -1,0 +1,412 @@
+"""An exported controller compiled and loaded as a controller: the C compiler, the build
+of the library, and :class:`CompiledController`, the library called through ctypes with
+the interface the simulator uses.
+
+The library is the one ``gcc -O2 -shared -fPIC -o libbiped_controller.so DIR/*.c -lm``
+builds from an export (:mod:`biped_casadi.control.export`); the controller's torques
+come from its ``biped_torque`` alone, while the model, the reference and the gains of the
+exported controller say what the simulator needs around it (the plant, T, the
+reference's errors).
+"""
+from __future__ import annotations
+
+import ctypes
+import os
+import shlex
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..numerics import FastCall, as_number, as_vector
+from .controller import StepStart
+from .export import LIBRARY, RETURN_CODES, TAU_SLACK, exported_law
+from .export_folder import file_digest
+from .output_law import singularity_report
+
+__all__ = ["find_c_compiler", "build_library", "NumericLaw", "CompiledController",
+           "PythonTwin", "CompilerError"]
+
+
+class CompilerError(RuntimeError):
+    """The C compiler is missing or failed (the message says which and why)."""
+
+
+def find_c_compiler() -> list | None:
+    """The C compiler to use: ``$CC`` when set (and only it), else gcc, else cc.
+
+    Returns
+    -------
+    list of str or None
+        The command (``$CC`` may carry flags), or None when none is found.
+    """
+    env = os.environ.get("CC", "").strip()
+    if env:
+        cmd = shlex.split(env)
+        return cmd if shutil.which(cmd[0]) else None
+    for name in ("gcc", "cc"):
+        if shutil.which(name):
+            return [name]
+    return None
+
+
+def build_library(folder, out=None, compiler: list | None = None,
+                  flags: tuple = ("-O2",)) -> Path:
+    """Compile an export's C files into a shared library, as its README says.
+
+    Runs ``CC -O2 -shared -fPIC -o OUT FOLDER/*.c -lm``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The export (its ``*.c`` files: the wrapper and the generated law).
+    out : str or Path, optional
+        The library (default ``folder/libbiped_controller.so``).
+    compiler : list of str, optional
+        Default :func:`find_c_compiler`.
+    flags : tuple of str
+        Optimisation flags.
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    CompilerError
+        No compiler, or the compilation failed (with its first error line).
+    """
+    folder = Path(folder)
+    cc = compiler if compiler is not None else find_c_compiler()
+    if not cc:
+        raise CompilerError("no C compiler found (set CC, or install gcc)")
+    out = Path(out) if out is not None else folder / LIBRARY
+    sources = sorted(str(p) for p in folder.glob("*.c"))
+    cmd = [*cc, *flags, "-shared", "-fPIC", "-o", str(out), *sources, "-lm"]
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True)
+    except OSError as e:
+        raise CompilerError(f"{cc[0]}: {e.strerror or e}") from None
+    if r.returncode != 0:
+        first = next((ln for ln in r.stderr.splitlines() if "error" in ln),
+                     r.stderr.strip().splitlines()[0] if r.stderr.strip() else "")
+        raise CompilerError(f"{cc[0]} failed (exit {r.returncode}): {first}")
+    return out
+
+
+def _load_copy(library: Path):
+    """The library loaded from a private copy: a library rebuilt at the same path later
+    loads afresh (the dynamic loader keeps one handle per path)."""
+    fd, name = tempfile.mkstemp(prefix="biped_controller_", suffix=".so")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(library.read_bytes())
+        return ctypes.CDLL(name)
+    finally:
+        os.unlink(name)
+
+
+class NumericLaw:
+    """A control law that is numeric only, with what the simulator needs of it.
+
+    The exported controller's model, reference and gains, ``step_start``, :meth:`torque`
+    and :meth:`outputs` with the library's return codes
+    (:data:`~biped_casadi.control.export.RETURN_CODES`).
+
+    :class:`~biped_casadi.simulation.Simulator` drives such a law through numeric calls
+    (the attribute ``numeric_law``; :mod:`biped_casadi.simulation.compiled_loop`).
+
+    Parameters
+    ----------
+    exported : TimeVaryingController or VirtualConstraintController
+        The exported controller.
+    """
+
+    numeric_law = True
+    n_ref = 0
+
+    def __init__(self, exported):
+        self.exported = exported
+        self.model, self.reference = exported.model, exported.reference
+        self.gains, self.T = exported.gains, exported.reference.T
+        self.nq, self.nu, self.n_par = self.model.nq, self.model.nu, exported.n_par
+
+    def step_start(self, q, dq) -> StepStart:
+        """The controller state at the start of a step.
+
+        Parameters
+        ----------
+        q, dq : array_like
+            The state just after an impact (relabelled), rad and rad/s.
+
+        Returns
+        -------
+        StepStart
+            ``p`` the controller state; ``problem`` says why the step cannot start (a
+            non-zero return code).
+        """
+        rc, p = self._start(as_vector(q, self.nq, "q"), as_vector(dq, self.nq, "dq"))
+        problem = "" if rc == 0 else (f"the {self.name} law cannot start the step "
+                                      f"(return code {rc}: {RETURN_CODES.get(rc, 'unknown')})")
+        return StepStart(r=np.zeros(0), p=p, problem=problem)
+
+    def singularity(self, n: int = 1001):
+        """The law's denominator sampled along the reference step.
+
+        Parameters
+        ----------
+        n : int
+            Samples on [0, T].
+
+        Returns
+        -------
+        SingularityReport
+        """
+        n = int(as_number(n, "n", positive=True))
+        ref = self.reference
+        t = np.linspace(0.0, self.T, n)
+        q, dq = ref.q(t), ref.dq(t)
+        p = self.step_start(q[:, 0], dq[:, 0]).p
+        return singularity_report([self.outputs(float(tk), q[:, k], dq[:, k], p)[3]
+                                   for k, tk in enumerate(t)])
+
+
+class CompiledController(NumericLaw):
+    """An exported controller's compiled library as a controller.
+
+    ``step_start`` calls ``biped_step_start``, :meth:`torque` ``biped_torque`` and
+    :meth:`outputs` ``biped_outputs``; the simulator drives its closed loop with these
+    calls.  One controller at a time per library: the C code's work arrays are static.
+
+    Parameters
+    ----------
+    library : str or Path
+        The shared library built from the export (:func:`build_library`).
+    exported : TimeVaryingController or VirtualConstraintController
+        The controller that was exported: its model, reference and gains.
+
+    Raises
+    ------
+    ValueError
+        Naming ``library`` when it cannot be loaded or its sizes differ from the
+        controller's.
+    """
+
+    name = "compiled"
+
+    def __init__(self, library, exported):
+        super().__init__(exported)
+        self.library = Path(library)
+        try:
+            self._digest = file_digest(self.library)
+            self._lib = lib = _load_copy(self.library)
+        except OSError as e:
+            raise ValueError(f"library: cannot load {self.library} ({e})") from None
+        for fn, args in (("biped_sizes", [ctypes.c_void_p] * 3),
+                         ("biped_step_start", [ctypes.c_void_p] * 3),
+                         ("biped_torque", [ctypes.c_double] + [ctypes.c_void_p] * 4),
+                         ("biped_outputs", [ctypes.c_double] + [ctypes.c_void_p] * 6)):
+            f = getattr(lib, fn)
+            f.argtypes, f.restype = args, ctypes.c_int
+        sizes = [ctypes.c_int() for _ in range(3)]
+        lib.biped_sizes(*(ctypes.byref(s) for s in sizes))
+        sizes = tuple(s.value for s in sizes)
+        if sizes != (self.nq, self.nu, self.n_par):
+            raise ValueError(f"library: {self.library} has sizes (nq, nu, nstate) = {sizes}, "
+                             f"the controller {(self.nq, self.nu, self.n_par)}")
+        # buffers the C functions read and write in place
+        self._q, self._dq = np.zeros(self.nq), np.zeros(self.nq)
+        self._p, self._u = np.zeros(max(self.n_par, 1)), np.zeros(self.nu)
+        self._y, self._dy, self._den = np.zeros(self.nu), np.zeros(self.nu), np.zeros(1)
+        self._ptr = {k: getattr(self, f"_{k}").ctypes.data
+                     for k in ("q", "dq", "p", "u", "y", "dy", "den")}
+
+    @property
+    def cache_key(self):
+        """What the simulator depends on: the library's bytes and the exported controller."""
+        return ("compiled", self._digest, self.exported.cache_key)
+
+    def _set(self, q, dq, p=None):
+        self._q[:] = q
+        self._dq[:] = dq
+        if p is not None and self.n_par:
+            self._p[:self.n_par] = p
+
+    def _start(self, q, dq):
+        self._set(q, dq)
+        rc = self._lib.biped_step_start(self._ptr["q"], self._ptr["dq"], self._ptr["p"])
+        return rc, self._p[:self.n_par].copy()
+
+    def torque(self, tau, q, dq, p) -> tuple:
+        """``biped_torque`` at one state.
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq : numpy.ndarray
+            (nq,) each, rad and rad/s (float arrays; not copied or checked, for speed).
+        p : numpy.ndarray
+            (nstate,) the controller state.
+
+        Returns
+        -------
+        tuple
+            (return code, torques u (nu,), N m).
+        """
+        self._set(q, dq, p)
+        rc = self._lib.biped_torque(tau, self._ptr["q"], self._ptr["dq"], self._ptr["p"],
+                                    self._ptr["u"])
+        return rc, self._u.copy()
+
+    def outputs(self, tau, q, dq, p) -> tuple:
+        """``biped_outputs`` at one state.
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq, p : numpy.ndarray
+            As :meth:`torque`.
+
+        Returns
+        -------
+        tuple
+            (return code, y (nu,), dy (nu,), den).
+        """
+        self._set(q, dq, p)
+        rc = self._lib.biped_outputs(tau, self._ptr["q"], self._ptr["dq"], self._ptr["p"],
+                                     self._ptr["y"], self._ptr["dy"], self._ptr["den"])
+        return rc, self._y.copy(), self._dy.copy(), float(self._den[0])
+
+    def describe(self) -> dict:
+        """What defines the controller, as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            ``controller`` ('compiled'), ``library``, its ``sha256``, and ``exported``
+            (the exported controller's ``describe()``).
+        """
+        return dict(controller="compiled", library=str(self.library), sha256=self._digest,
+                    exported=self.exported.describe())
+
+
+class PythonTwin(NumericLaw):
+    """The Python law called as the compiled library is.
+
+    One state at a time, the reference state read from the reference at tau, the
+    library's return codes.
+
+    The law is the controller's own CasADi Function with r = ``reference.state(tau)``
+    (for the time-varying law exactly :meth:`TimeVaryingController.torque`); driven by
+    the simulator's numeric loop it is the run the compiled library's must repeat to
+    round-off.
+
+    Parameters
+    ----------
+    exported : TimeVaryingController or VirtualConstraintController
+        The exported controller.
+    law : ExportedLaw, optional
+        Its export (the range of tau and the singularity limit); default
+        :func:`~biped_casadi.control.export.exported_law` of it.
+    """
+
+    name = "python"
+
+    def __init__(self, exported, law=None):
+        super().__init__(exported)
+        self.law_info = law if law is not None else exported_law(exported)
+        self._law = FastCall(exported.law)
+        self._start_fn = FastCall(self.law_info.start)
+        self._recent: dict = {}
+
+    @property
+    def cache_key(self):
+        """What the simulator of this law depends on: the exported controller."""
+        return ("python-twin", self.exported.cache_key)
+
+    def _start(self, q, dq):
+        p, go = self._start_fn(q, dq)
+        p = p.ravel()
+        if not (np.all(np.isfinite(p))):
+            return 3, p
+        return (0 if go[0, 0] > 0 else 2), p
+
+    def _state(self, tau):
+        """reference.state(tau), the last few kept (a RK4 step asks twice for each)."""
+        if not self.exported.n_ref:
+            return np.zeros(0)
+        r = self._recent.get(tau)
+        if r is None:
+            if len(self._recent) >= 4:
+                self._recent.pop(next(iter(self._recent)))
+            r = self._recent[tau] = self.reference.states([tau])[:, 0]
+        return r
+
+    def _evaluate(self, tau, q, dq, p):
+        li = self.law_info
+        if not (0.0 <= tau <= li.tau_max + TAU_SLACK):
+            return 2, None
+        r = self._state(tau)
+        u, y, dy, den, _, inr = self._law(q, dq, tau, r, p)
+        den = float(den[0, 0])
+        if not inr[0, 0] > 0:
+            rc = 2
+        elif not (np.isfinite(den) and np.all(np.isfinite(u))):
+            rc = 3
+        else:
+            rc = 0 if den * li.den_sign > li.singular_fraction * li.den_scale else 1
+        return rc, (u.ravel(), y.ravel(), dy.ravel(), den)
+
+    def torque(self, tau, q, dq, p) -> tuple:
+        """The Python law's torques at one state.
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq, p : numpy.ndarray
+            Configuration, velocity, controller state.
+
+        Returns
+        -------
+        tuple
+            (return code, torques u (nu,), N m; NaN out of range).
+        """
+        rc, out = self._evaluate(tau, q, dq, p)
+        return rc, (np.full(self.nu, np.nan) if out is None else out[0])
+
+    def outputs(self, tau, q, dq, p) -> tuple:
+        """The Python law's outputs at one state.
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq, p : numpy.ndarray
+            Configuration, velocity, controller state.
+
+        Returns
+        -------
+        tuple
+            (return code, y (nu,), dy (nu,), den).
+        """
+        rc, out = self._evaluate(tau, q, dq, p)
+        if out is None:
+            nan = np.full(self.nu, np.nan)
+            return rc, nan, nan, np.nan
+        return (rc,) + out[1:]
+
+    def describe(self) -> dict:
+        """What defines the law, as a JSON-ready dict.
+
+        Returns
+        -------
+        dict
+            ``controller`` ('python'), ``exported`` (the controller's ``describe()``).
+        """
+        return dict(controller="python", exported=self.exported.describe())
