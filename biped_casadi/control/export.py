@@ -38,6 +38,7 @@ import casadi as ca
 import numpy as np
 
 from ..numerics import quintic_hermite_interval
+from .design import Design
 from .time_varying import TimeVaryingController
 from .virtual_constraints import VirtualConstraintController
 
@@ -178,8 +179,9 @@ def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION) -> Ex
 
     Parameters
     ----------
-    controller : TimeVaryingController or VirtualConstraintController
-        The controller to export.
+    controller : Design, TimeVaryingController or VirtualConstraintController
+        The controller to export (a :class:`~biped_casadi.Design` on its gait, or its
+        controller).
     singular_fraction : float
         The compiled law reports 'singular' where its decoupling denominator (eq. 24 for
         the time-varying law) falls to this fraction of its largest magnitude on the
@@ -195,6 +197,8 @@ def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION) -> Ex
         Naming ``controller`` for another kind of controller or a design that is
         singular along its own gait (eq. 24), ``singular_fraction`` outside (0, 1).
     """
+    if isinstance(controller, Design):
+        controller = controller.controller_for()
     if not isinstance(controller, (TimeVaryingController, VirtualConstraintController)):
         raise ValueError("controller: export takes a TimeVaryingController or a "
                          f"VirtualConstraintController, got {type(controller).__name__}")
