@@ -92,3 +92,8 @@ _write_api_page()
 from benchmarks_page import benchmarks_page  # noqa: E402
 
 benchmarks_page(ROOT / "benchmarks" / "results", HERE / "benchmarks.md")
+
+# ---- the findings page, made from the summary of a full run kept with the docs
+from findings_page import findings_page  # noqa: E402
+
+findings_page(HERE / "results" / "summary_full.json", HERE / "findings.md")

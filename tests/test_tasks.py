@@ -101,3 +101,52 @@ def test_local_cluster_gives_the_synchronous_numbers(tmp_path):
         with pytest.raises(TaskError, match="no good: 2"):
             bad.result()
     assert len(pids) >= 1
+
+
+def _code_version_of(tree, tmp_path, name):
+    """code_version('numerical') of a copy of the packages (in a fresh process)."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    dest = tmp_path / name
+    for top in ("biped_casadi", "gait_opt", "analysis"):
+        shutil.copytree(root / top, dest / top, ignore=shutil.ignore_patterns("__pycache__"))
+    tree(dest)
+    out = subprocess.run([sys.executable, "-c", "from analysis.tasks import code_version; "
+                          "print(code_version('numerical'), code_version('figures'))"],
+                         cwd=dest, capture_output=True, text=True, check=True,
+                         env={"PYTHONPATH": str(dest), "PATH": "/usr/bin:/bin"})
+    return out.stdout.split()
+
+
+def test_a_docstring_or_report_edit_keeps_every_result_a_code_edit_does_not(tmp_path):
+    """The keys of every kept result: the same after an edit of a docstring in analysis/
+    or of the report (so a re-run is warm), new after an edit of a number."""
+    from pathlib import Path
+
+    def nothing(root):
+        pass
+
+    def docstring(root):
+        p = root / "analysis" / "robustness" / "basin.py"
+        s = p.read_text()
+        p.write_text(s.replace('"""The basin of attraction', '"""Edited: the basin of '
+                                                            'attraction', 1))
+
+    def report(root):
+        p = Path(root) / "analysis" / "reporting" / "report.py"
+        p.write_text(p.read_text() + "\n\ndef _extra():\n    return 1\n")
+
+    def number(root):
+        p = root / "analysis" / "robustness" / "basin.py"
+        s = p.read_text()
+        p.write_text(s.replace("q_span: float = 0.05", "q_span: float = 0.06", 1))
+
+    base = _code_version_of(nothing, tmp_path, "a")
+    assert _code_version_of(docstring, tmp_path, "b") == base
+    num, fig = _code_version_of(report, tmp_path, "c")
+    assert num == base[0] and fig == base[1]          # the report is neither
+    changed = _code_version_of(number, tmp_path, "d")
+    assert changed[0] != base[0] and changed[1] != base[1]

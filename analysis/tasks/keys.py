@@ -26,12 +26,14 @@ from biped_casadi.caching import code_of
 
 __all__ = ["code_version", "argument_key", "task_key", "CODE_SETS", "NotKeyable"]
 
-#: the code each kind of task depends on: (packages, folders left out), as paths relative
-#: to the packages' parent folder
+#: the code each kind of task depends on: (packages, folders or files left out, and kept
+#: inside those), as paths relative to the packages' parent folder; the report, the
+#: command line and (for numbers) the figures are not part of any numerical result
 CODE_SETS = {
     "numerical": (("biped_casadi", "gait_opt", "analysis"),
-                  ("analysis/reporting", "analysis/cli")),
-    "figures": (("biped_casadi", "gait_opt", "analysis"), ("analysis/cli",)),
+                  ("analysis/reporting", "analysis/cli", "analysis/pipeline/figures.py"), ()),
+    "figures": (("biped_casadi", "gait_opt", "analysis"),
+                ("analysis/reporting", "analysis/cli"), ("analysis/reporting/plots",)),
 }
 
 _VERSIONS: dict = {}
@@ -65,7 +67,7 @@ def code_version(kind: str = "numerical") -> str:
         raise ValueError(f"kind must be one of {sorted(CODE_SETS)}, got {kind!r}")
     if kind not in _VERSIONS:
         import casadi
-        packages, left_out = CODE_SETS[kind]
+        packages, left_out, kept = CODE_SETS[kind]
         h = hashlib.sha256(f"casadi {casadi.__version__} numpy {np.__version__}".encode())
         for name in packages:
             root = _package_root(name)
@@ -73,7 +75,8 @@ def code_version(kind: str = "numerical") -> str:
                 continue
             for f in sorted(root.rglob("*.py")):
                 rel = f.relative_to(root.parent).as_posix()
-                if any(rel == p or rel.startswith(p + "/") for p in left_out):
+                inside = lambda ps: any(rel == p or rel.startswith(p + "/") for p in ps)  # noqa
+                if inside(left_out) and not inside(kept):
                     continue
                 h.update(rel.encode())
                 h.update(code_of(f).encode())
