@@ -7,9 +7,9 @@ a range of speeds by continuation (a :class:`GaitFamily`, with gaits between its
 by :meth:`GaitFamily.gait_at`).
 """
 from .cache import default_gait
-from .continuation import gait_family
 from .errors import GaitOptimizationError
 from .family import FamilyGait, GaitFamily, MemberRecord, parse_speed_range, speed_range
+from .family_solve import gait_family
 from .gait import ORBIT_TOL, Gait, GaitFileError, OpenOrbitWarning
 from .optimize import GaitSolveResult, optimize_gait, solve_gait
 from .options import GaitOptions

@@ -1,6 +1,5 @@
-"""Natural-parameter continuation of the reference-gait NLP in the speed, and
-:func:`gait_family`, the family of gaits over a grid of speeds it builds
-(:class:`gait_opt.family.GaitFamily`).
+"""Natural-parameter continuation of the reference-gait NLP in the speed (what
+:func:`gait_opt.gait_family` builds a family of gaits with).
 
 One NLP serves every speed: the transcription with the speed as its parameter
 (:func:`gait_opt.transcription.build_problem` with ``speed_parameter=True``), built once
@@ -23,25 +22,19 @@ See docs/theory.md, "Gait families".
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from .errors import GaitOptimizationError
-from .family import SPEED_TOL, GaitFamily, MemberRecord, check_speeds
-from .family_file import options_record
-from .gait import Gait
 from .options import GaitOptions
-from .polish import polish
-from .transcription import (FIXED_BY, MARGINS, build_problem, constraint_violations,
-                            describe_violations, initial_guess, make_solver,
-                            warm_start_vector)
+from .transcription import (build_problem, constraint_violations, describe_violations,
+                            initial_guess, make_solver)
 
-__all__ = ["gait_family", "SpeedNLP", "NLPPoint", "Advance", "advance", "active_families",
+__all__ = ["SpeedNLP", "NLPPoint", "Advance", "advance", "active_families",
            "describe_failure", "fold_suspected", "WARM_MAX_ITER", "MIN_STEP_FRACTION",
-           "FIRST_STEP_FRACTION"]
+           "FIRST_STEP_FRACTION", "JUMP_RATIO", "FOLD_BRACKET"]
 
 #: a warm solve taking more IPOPT iterations than this counts as a failed step (halved)
 WARM_MAX_ITER = 60
@@ -49,6 +42,11 @@ WARM_MAX_ITER = 60
 MIN_STEP_FRACTION = 1 / 64
 #: without a secant yet, the first step is this fraction of the requested one
 FIRST_STEP_FRACTION = 1 / 8
+#: a step whose |d theta / d v| exceeds the previous step's by this factor is checked for
+#: a jump to another branch
+JUMP_RATIO = 3.0
+#: a fold is located to within this fraction of the requested step
+FOLD_BRACKET = 1 / 4
 #: IPOPT options of the warm solver
 WARM_IPOPT = dict(warm_start_init_point="yes", warm_start_bound_push=1e-9,
                   warm_start_bound_frac=1e-9, warm_start_slack_bound_push=1e-9,
@@ -197,23 +195,50 @@ def _predict(points: list, speed: float) -> NLPPoint:
 
 def _rate(a: NLPPoint, b: NLPPoint, n_theta: int) -> float:
     """|d theta / d v| between two solutions (theta = T and the Bezier coefficients)."""
-    return float(np.max(np.abs(b.w[:n_theta] - a.w[:n_theta])) / abs(b.speed - a.speed))
+    return _distance(a, b, n_theta) / abs(b.speed - a.speed)
+
+
+def _distance(a: NLPPoint, b: NLPPoint, n_theta: int) -> float:
+    """max |theta_b - theta_a| (T in s, Bezier coefficients in rad)."""
+    return float(np.max(np.abs(b.w[:n_theta] - a.w[:n_theta])))
 
 
 @dataclass
 class Advance:
-    """The outcome of :func:`advance`: the solution at the target speed (or None),
-    the ``substeps`` taken, the warm solves that ``failed`` (halved), the IPOPT
-    ``iterations`` over all of them, the last failed solve (``failure``), the rates
-    |d theta / d v| of the accepted substeps (``rates``) and the wall ``time``."""
+    """The outcome of :func:`advance`.
+
+    Parameters
+    ----------
+    point : NLPPoint or None
+        The solution at the target speed (None when it was not reached).
+    substeps : int
+        Accepted solves.
+    failed : int
+        Warm solves that failed (the step halved).
+    iterations : int
+        IPOPT iterations over all solves.
+    failure : NLPPoint or None
+        The last failed solve.
+    rates : list of float
+        |d theta / d v| of the accepted substeps.
+    time : float
+        Wall time, s.
+    jump : dict or None
+        When the branch followed ends in a fold and the solution jumps to another
+        branch: ``speed_low`` (the last speed on the branch), ``speed_high`` (the first
+        on the other), ``jump`` (max |Delta theta| there), ``cost_low``, ``cost_high``,
+        ``rate`` (the branch's |d theta / d v| before it); ``point`` then lies on the
+        new branch (``across_folds``) or is None.
+    """
 
     point: NLPPoint | None
-    substeps: int
-    failed: int
-    iterations: int
-    failure: NLPPoint | None
+    substeps: int = 0
+    failed: int = 0
+    iterations: int = 0
+    failure: NLPPoint | None = None
     rates: list = field(default_factory=list)
     time: float = 0.0
+    jump: dict | None = None
 
     @property
     def reached(self) -> bool:
@@ -221,10 +246,45 @@ class Advance:
         return self.point is not None
 
 
-def advance(nlp: SpeedNLP, points: list, target: float, step: float) -> Advance:
+def _bisect(nlp, points, bad: NLPPoint, h_min, n_theta, out: Advance):
+    """Is the change from the last point to ``bad`` continuous, or a jump to another
+    branch?  Bisection of [last speed, bad speed]: a midpoint whose change from the last
+    good point is below 0.7 of the change to ``bad`` lies on the branch (it is appended
+    to ``points``), else on the other side.  Continuous as soon as the rate from the
+    last good point to ``bad`` is within :data:`JUMP_RATIO` of the branch's last rate;
+    a jump when the bracket is narrower than ``2 h_min``.  Returns (True, bad) or
+    (False, the point beyond the jump and the bracket's upper speed)."""
+    bad_speed = bad.speed
+    while True:
+        good = points[-1]
+        ref = _rate(points[-2], good, n_theta) if len(points) > 1 else math.inf
+        if bad.speed == bad_speed and _rate(good, bad, n_theta) <= JUMP_RATIO * ref:
+            return True, (bad, bad_speed)
+        if abs(bad_speed - good.speed) <= h_min * (1 + 1e-9):
+            return False, (bad, bad_speed)
+        mid = (good.speed + bad_speed) / 2
+        q = nlp.solve_warm(mid, _predict(points, mid))
+        out.iterations += q.iterations
+        if not q.ok:
+            out.failed += 1
+            bad_speed = mid
+        elif _distance(good, q, n_theta) < 0.7 * _distance(good, bad, n_theta):
+            out.rates.append(_rate(good, q, n_theta))
+            points.append(q)
+            out.substeps += 1
+        else:
+            bad, bad_speed = q, mid
+
+
+def advance(nlp: SpeedNLP, points: list, target: float, step: float,
+            across_folds: bool = True) -> Advance:
     """Continue from the last of ``points`` to ``target`` (module docstring).
 
-    Accepted intermediate solutions are appended to ``points`` (they feed the secant).
+    Accepted solutions are appended to ``points`` (they feed the secant).  A step whose
+    |d theta / d v| exceeds :data:`JUMP_RATIO` times the previous step's is checked by
+    bisection (:func:`_bisect`): a change that does not shrink with the step, down to
+    ``FOLD_BRACKET`` of ``step``, is a jump to another branch, the branch followed
+    ending in a fold (``Advance.jump``).
 
     Parameters
     ----------
@@ -235,6 +295,9 @@ def advance(nlp: SpeedNLP, points: list, target: float, step: float) -> Advance:
         The speed to reach, m/s.
     step : float
         The requested step (the grid's); halving stops at ``MIN_STEP_FRACTION`` of it.
+    across_folds : bool
+        At a jump, continue on the other branch (``points`` restarts there); False:
+        stop before it.
 
     Returns
     -------
@@ -243,33 +306,45 @@ def advance(nlp: SpeedNLP, points: list, target: float, step: float) -> Advance:
     t0 = time.perf_counter()
     n_theta = 1 + nlp.model.nu * (nlp.options.bezier_degree + 1)
     h_min = abs(step) * MIN_STEP_FRACTION * (1 - 1e-9)
+    h_fold = abs(step) * FOLD_BRACKET
     h = (target - points[-1].speed) * (FIRST_STEP_FRACTION if len(points) < 2 else 1.0)
-    substeps = failed = iterations = 0
-    failure, rates = None, []
-    while True:
+    out = Advance(None)
+    while abs(target - points[-1].speed) > 1e-12:
         here = points[-1].speed
-        remaining = target - here
-        if abs(remaining) <= 1e-12:
-            break
-        h = remaining if abs(h) >= abs(remaining) else h
-        trial = here + h
-        p = nlp.solve_warm(trial, _predict(points, trial))
-        iterations += p.iterations
-        if p.ok:
-            rates.append(_rate(points[-1], p, n_theta))
-            first = len(points) == 1          # the secant exists from now on
-            points.append(p)
-            substeps += 1
-            h = target - trial if first else 2 * h
+        h = target - here if abs(h) >= abs(target - here) else h
+        p = nlp.solve_warm(here + h, _predict(points, here + h))
+        out.iterations += p.iterations
+        if not p.ok:
+            out.failed, out.failure, h = out.failed + 1, p, h / 2
+            if abs(h) < h_min:
+                break
             continue
-        failed += 1
-        failure = p
-        h = h / 2
-        if abs(h) < h_min:
-            return Advance(None, substeps, failed, iterations, failure, rates,
-                           time.perf_counter() - t0)
-    return Advance(points[-1], substeps, failed, iterations, failure, rates,
-                   time.perf_counter() - t0)
+        ref = _rate(points[-2], points[-1], n_theta) if len(points) > 1 else None
+        if ref is not None and _rate(points[-1], p, n_theta) > JUMP_RATIO * ref:
+            same, (q, q_speed) = _bisect(nlp, points, p, h_fold, n_theta, out)
+            if not same:
+                out.jump = dict(speed_low=points[-1].speed, speed_high=q_speed,
+                                jump=_distance(points[-1], q, n_theta),
+                                cost_low=points[-1].cost, cost_high=q.cost,
+                                rate=_rate(points[-2], points[-1], n_theta)
+                                if len(points) > 1 else None)
+                if not across_folds:
+                    break
+                points[:] = [q]                       # a new branch: a new secant
+                out.substeps += 1
+                h = (target - q.speed) * FIRST_STEP_FRACTION
+                continue
+            p = q
+            h = p.speed - points[-1].speed
+        out.rates.append(_rate(points[-1], p, n_theta))
+        first = len(points) == 1               # the secant exists from now on
+        points.append(p)
+        out.substeps += 1
+        h = target - p.speed if first else 2 * h
+    if abs(target - points[-1].speed) <= 1e-12:
+        out.point = points[-1]
+    out.time = time.perf_counter() - t0
+    return out
 
 
 def active_families(nlp: SpeedNLP, point: NLPPoint, tol: float = 1e-6) -> list:
@@ -348,253 +423,3 @@ def fold_suspected(rates: list) -> bool:
     if len(rates) < 4:
         return False
     return rates[-1] > 3 * float(np.median(rates[:-1]))
-
-
-# ------------------------------------------------------------------ the family
-def _member(model, opts, points, adv, state, max_refinements):
-    """Polish the solution at the target speed, check it on the dense grid, and tighten
-    the node margins where an active constraint is exceeded between the nodes (as
-    :func:`gait_opt.solve_gait`; the margins stay for the rest of the family).  Returns
-    (gait, record); raises GaitOptimizationError when the polish fails."""
-    t0 = time.perf_counter()
-    v = points[-1].speed
-    opts_v = opts.replace(speed=v)
-    iterations = adv.iterations
-    for attempt in range(1 + max_refinements):
-        point = points[-1]
-        T, alpha, x0 = state["nlp"].unpack(point)
-        alpha_p, x0_p, T_p, hist = polish(model, opts_v, alpha, x0, T)
-        gait = Gait(model, opts_v, alpha_p, x0_p, T_p)
-        viol = gait.violations()
-        fixable = [(FIXED_BY.get(n, n), a) for n, a in viol if FIXED_BY.get(n, n) in MARGINS]
-        if not fixable or len(fixable) < len(viol) or attempt == max_refinements:
-            break
-        margins = dict(state["nlp"].margins)
-        for n, a in fixable:
-            margins[n] = margins.get(n, 0.0) + 2 * a + 1e-9
-        new = SpeedNLP(model, opts, margins)
-        state["build_time"] += new.build_time
-        again = new.solve_warm(v, point)
-        iterations += again.iterations
-        if not again.ok:
-            break                       # keep this gait and report its violations
-        state["nlp"], points[-1] = new, again
-    change = float(np.max(np.abs(np.r_[(alpha_p - alpha).ravel(), x0_p - x0, T_p - T])))
-    margins = dict(state["nlp"].margins)
-    gait.solver_stats = dict(
-        status=point.status, iterations=iterations, polish_residuals=hist,
-        polish_change=change, dense_grid_violations=[list(x) for x in viol],
-        family=dict(substeps=adv.substeps, failed_steps=adv.failed, margins=margins))
-    record = MemberRecord(
-        speed=float(v), status="ok" if not viol else "violates", iterations=iterations,
-        substeps=adv.substeps, failed_steps=adv.failed,
-        time=adv.time + time.perf_counter() - t0, T=gait.T, step_length=gait.step_length,
-        cost=gait.cost, orbit_residual=gait.orbit_residual()["worst"],
-        polish_residual=hist[-1], polish_change=change,
-        active=active_families(state["nlp"], points[-1]), margins=margins,
-        violations=[list(x) for x in viol])
-    return gait, record
-
-
-def _events(prev: MemberRecord | None, rec: MemberRecord) -> list:
-    """Changes of the active set from one member to the next."""
-    if prev is None:
-        return []
-    return ([dict(speed=rec.speed, constraint=c, change="active")
-             for c in rec.active if c not in prev.active]
-            + [dict(speed=rec.speed, constraint=c, change="inactive")
-               for c in prev.active if c not in rec.active])
-
-
-def _ended(adv: Advance, target: float, last: float, rates: list) -> dict:
-    """The family's end: where, why, in words."""
-    p = adv.failure
-    fold = fold_suspected(rates)
-    detail = describe_failure(adv) + (
-        f" at steps down to {MIN_STEP_FRACTION:g} of the grid's; the rate |d theta / d v| "
-        f"grew to {rates[-1]:.3g} from a median of {float(np.median(rates[:-1])):.3g} "
-        f"before (a fold: the family turns back)" if fold else
-        f" at steps down to {MIN_STEP_FRACTION:g} of the grid's")
-    return dict(speed=float(target), last=float(last), reason="fold" if fold else "infeasible",
-                detail=detail, ipopt_status=p.status if p is not None else None,
-                violations=[list(x) for x in (p.violations if p is not None else [])])
-
-
-def _reachable(opts, v):
-    """ValueError when the step-length and step-time bounds exclude speed ``v``."""
-    (l_lo, l_hi), (t_lo, t_hi) = opts.step_length_bounds, opts.step_time_bounds
-    if not l_lo / t_hi <= v <= l_hi / t_lo:
-        raise ValueError(
-            f"speeds: {v:g} m/s is out of reach of step_length_bounds ({l_lo:g}, {l_hi:g}) "
-            f"m and step_time_bounds ({t_lo:g}, {t_hi:g}) s, which allow "
-            f"{l_lo / t_hi:.3g} to {l_hi / t_lo:.3g} m/s")
-
-
-def _resumable(path, model, opts, speeds):
-    """The family saved at ``path`` for the same robot, options and speeds, or None when
-    there is no file; ValueError when the file holds another request."""
-    if not Path(path).exists():
-        return None
-    fam = GaitFamily.load(path, model)
-    same = (options_record(fam.options) == options_record(opts)
-            and len(fam.speeds) == len(speeds)
-            and np.allclose(fam.speeds, speeds, rtol=0, atol=SPEED_TOL))
-    if not same:
-        raise ValueError(f"path: {path} holds a gait family of other options or speeds "
-                         f"({len(fam.speeds)} speeds from {fam.speeds[0]:g} to "
-                         f"{fam.speeds[-1]:g} m/s); remove it, choose another file, or "
-                         f"start afresh (resume=False)")
-    return fam
-
-
-def gait_family(model, speeds, options: GaitOptions | None = None, *, path=None,
-                resume: bool = True, progress=None, verbose: bool = False,
-                max_refinements: int = 3) -> GaitFamily:
-    """Reference gaits at every speed of a grid, by continuation (module docstring).
-
-    Parameters
-    ----------
-    model : BipedModel
-        The robot.
-    speeds : sequence of float
-        At least two strictly increasing speeds, m/s (:func:`gait_opt.speed_range`).
-    options : GaitOptions, optional
-        The problem (default SPEC section 2); its ``speed`` is replaced by each speed.
-    path : str or Path, optional
-        Save the family there after every member (atomically); with ``resume``,
-        continue a partial family found there made for the same robot, options and
-        speeds (a finished one is returned as it is).
-    resume : bool
-        Continue from ``path`` when it holds such a family (False: start afresh and
-        replace it).
-    progress : callable, optional
-        Called with one line of text per member.
-    verbose : bool
-        Print IPOPT's iterations.
-    max_refinements : int
-        Node-margin refinements per member (as :func:`gait_opt.solve_gait`).
-
-    Returns
-    -------
-    GaitFamily
-
-    Raises
-    ------
-    ValueError
-        Bad ``speeds`` or ``options``; a speed out of reach of the step-length and
-        step-time bounds; ``path`` holding a family of another request.
-    GaitOptimizationError
-        No gait at the first speed.
-    """
-    speeds = check_speeds(speeds)
-    if options is not None and not isinstance(options, GaitOptions):
-        raise ValueError(f"options must be GaitOptions, got {type(options).__name__}")
-    opts = (options or GaitOptions()).for_model(model)
-    for v in speeds:
-        _reachable(opts, v)
-    family = _resumable(path, model, opts, speeds) if (path is not None and resume) else None
-    if family is not None and family.status != "partial":
-        return family
-    if family is None:
-        family = GaitFamily(status="partial", message="started", robot=model.params.name,
-                            speeds=speeds.tolist(), records=[], options=opts)
-    return _run(model, opts, speeds, family, path, progress, verbose, max_refinements)
-
-
-def _start(model, opts, state, family, speed):
-    """(points, Advance or None): the solution to continue from.  A new family: a cold
-    solve at its first speed (the Advance says whether it succeeded).  A resumed one:
-    the last member re-solved from its own gait (a primal start) to recover the duals."""
-    nlp = state["nlp"]
-    if not family.gaits:
-        p = nlp.solve_cold(speed)
-        return ([p] if p.ok else []), Advance(p if p.ok else None, int(p.ok), int(not p.ok),
-                                              p.iterations, None if p.ok else p, [], p.time)
-    last = family.records[-1].speed
-    p = nlp.solve_cold(last, warm_start_vector(model, opts, family.gaits[-1]))
-    if not p.ok:
-        raise GaitOptimizationError(f"resuming the family: the last member ({last:g} m/s) "
-                                    f"could not be re-solved: {p.status}", status=p.status)
-    return [p], None
-
-
-def _run(model, opts, speeds, family, path, progress, verbose, max_refinements):
-    """Continue ``family`` over the speeds it lacks, saving after each member."""
-    t_start = time.perf_counter()
-    nlp = SpeedNLP(model, opts, family.records[-1].margins if family.records else {}, verbose)
-    state = dict(nlp=nlp, build_time=nlp.build_time)
-    points, rates = [], []
-    for i in range(len(family.gaits), len(speeds)):
-        v = float(speeds[i])
-        adv = None
-        if not points:
-            points, adv = _start(model, opts, state, family, v)
-        if adv is None:
-            adv = advance(state["nlp"], points, v, v - float(speeds[i - 1]))
-            rates += adv.rates
-        if not adv.reached:
-            if not family.gaits:
-                raise GaitOptimizationError(
-                    f"no gait at the first speed {v:g} m/s: {describe_failure(adv)}",
-                    status=adv.failure.status, violations=adv.failure.violations)
-            family.end = _ended(adv, v, family.records[-1].speed, rates)
-            break
-        try:
-            gait, rec = _member(model, opts, points, adv, state, max_refinements)
-        except GaitOptimizationError as e:
-            if not family.gaits:
-                raise
-            family.end = dict(speed=v, last=family.records[-1].speed, reason="polish_failed",
-                              detail=str(e), ipopt_status=None, violations=[])
-            break
-        family.events += _events(family.records[-1] if family.records else None, rec)
-        family.records.append(rec)
-        family.gaits.append(gait)
-        t_start = _progress(family, speeds, t_start, state, path, progress, rec)
-    _finish(family, speeds, t_start, state)
-    if path is not None:
-        family.save(path)
-    return family
-
-
-def _progress(family, speeds, t_start, state, path, progress, rec):
-    """Book-keeping after a member: times, status, the saved file, the progress line."""
-    t_start = _finish(family, speeds, t_start, state)
-    if path is not None:
-        family.save(path)
-    if progress is not None:
-        progress(f"{len(family.gaits)}/{len(speeds)} {rec.speed:g} m/s: T {rec.T:.4f} s, "
-                 f"step {rec.step_length:.4f} m, {rec.iterations} IPOPT iterations, orbit "
-                 f"residual {rec.orbit_residual:.1e}" + (
-                     f", VIOLATES {describe_violations(rec.violations)}"
-                     if rec.violations else ""))
-    return t_start
-
-
-def _finish(family, speeds, t_start, state) -> float:
-    """Status, message and times of the family so far; returns the new time origin."""
-    now = time.perf_counter()
-    family.total_time += now - t_start
-    family.build_time += state["build_time"]
-    state["build_time"] = 0.0
-    v = family.member_speeds
-    bad = [r.speed for r in family.records if r.violations]
-    span = f"{v[0]:g} to {v[-1]:g} m/s" if v.size else "no speed"
-    if family.end is not None:
-        e = family.end
-        family.status = "ended"
-        family.message = (f"the family covers {span} and ends before {e['speed']:g} m/s "
-                          f"({e['reason']}: {e['detail']})")
-    elif len(v) < len(speeds):
-        family.status = "partial"
-        family.message = f"{len(v)} of {len(speeds)} speeds done ({span})"
-    elif bad:
-        family.status = "violates"
-        family.message = (f"the family covers {span}; constraints exceeded between the "
-                          f"nodes at {', '.join(f'{s:g}' for s in bad)} m/s")
-    else:
-        family.status = "complete"
-        worst = max(r.orbit_residual for r in family.records)
-        family.message = (f"the family covers {span} ({len(v)} gaits, every one a "
-                          f"periodic orbit to {worst:.1e})")
-    return now

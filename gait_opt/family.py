@@ -168,8 +168,11 @@ class MemberRecord:
         Warm solves that failed and were halved.
     time : float
         Wall time for this member (solves, polish, checks), s.
-    T, step_length, cost : float
-        s, m, and the objective (integral of u'u dt / step length, N^2 m s).
+    T, step_length : float
+        s, m.
+    cost : float
+        The NLP's objective at its solution (integral of u'u dt / step length by the
+        collocation quadrature, N^2 m s; ``Gait.cost`` recomputes it on a dense grid).
     orbit_residual : float
         The member's :meth:`Gait.orbit_residual` ``worst`` (rad, rad/s, m).
     polish_residual : float
@@ -182,6 +185,9 @@ class MemberRecord:
         The node margins in force (:data:`gait_opt.transcription.MARGINS`).
     violations : list
         [family, amount] exceeded on the dense grid (empty for a valid gait).
+    branch : int
+        Which branch of solutions the member lies on: 0 from the first speed, one more
+        after each fold the family crossed (see ``GaitFamily.events``).
     """
 
     speed: float
@@ -199,6 +205,7 @@ class MemberRecord:
     active: list
     margins: dict
     violations: list
+    branch: int = 0
 
     def to_dict(self) -> dict:
         """The record as plain JSON types.
@@ -232,8 +239,11 @@ class GaitFamily(Result):
     records : list of MemberRecord
         One per member, in order of speed.
     events : list of dict
-        ``speed``, ``constraint``, ``change`` ('active' or 'inactive'): where the set
-        of active inequality families changes (a kink of the family).
+        ``speed``, ``change``, ``constraint``, ``detail``: where the set of active
+        inequality families changes (``change`` 'active' or 'inactive': a kink of the
+        family), and where the branch followed ends in a fold and the family continues
+        on another (``change`` 'branch', ``detail`` in words, ``speed_low`` and
+        ``speed_high`` the speeds between which the fold was located).
     end : dict or None
         Where and why the family ends: ``speed`` (the first speed not reached),
         ``last`` (the last reached), ``reason`` ('infeasible', 'fold', 'polish_failed'),
@@ -456,6 +466,24 @@ def _theta(gait: Gait) -> np.ndarray:
 
 
 # -------------------------------------------------------------- gaits between
+def _interpolant(family: GaitFamily, v: float):
+    """(theta, neighbours) at speed ``v``: the cubic spline (not-a-knot; linear with two
+    members) through the parameters of the members on the branch of both neighbours;
+    theta None when the neighbours lie on different branches."""
+    vs = family.member_speeds
+    k = min(max(int(np.searchsorted(vs, v)), 1), len(vs) - 1)
+    near = [float(vs[k - 1]), float(vs[k])]
+    branch = [r.branch for r in family.records]
+    if branch[k - 1] != branch[k]:
+        return None, near
+    on = [i for i, b in enumerate(branch) if b == branch[k]]
+    x = vs[on]
+    thetas = np.array([_theta(family.gaits[i]) for i in on])
+    if len(on) > 2:
+        return CubicSpline(x, thetas, axis=0)(v), near
+    return np.array([np.interp(v, x, thetas[:, j]) for j in range(thetas.shape[1])]), near
+
+
 def _gait_at(family: GaitFamily, speed, resolve: bool) -> FamilyGait:
     """:meth:`GaitFamily.gait_at`."""
     try:
@@ -477,48 +505,65 @@ def _gait_at(family: GaitFamily, speed, resolve: bool) -> FamilyGait:
                           orbit_residual=r, violations=family.records[i].violations,
                           gait=g)
     model, opts_v = family.model, family.options.replace(speed=v)
-    thetas = np.array([_theta(g) for g in family.gaits])
-    theta = CubicSpline(vs, thetas, axis=0)(v) if len(vs) > 2 else \
-        np.array([np.interp(v, vs, thetas[:, j]) for j in range(thetas.shape[1])])
+    theta, near = _interpolant(family, v)
+    if theta is None:
+        return _between_branches(family, v, near)
     na = model.nu * (opts_v.bezier_degree + 1)
     alpha = theta[:na].reshape(model.nu, -1, order="F")
     x0, T = theta[na:na + 2], float(theta[na + 2])
-    k = int(np.searchsorted(vs, v))
-    near = [float(vs[max(k - 1, 0)]), float(vs[min(k, len(vs) - 1)])]
     before = Gait(model, opts_v, alpha, x0, T).orbit_residual()["worst"]
+    fields = dict(speed=v, neighbours=near, interpolant_orbit_residual=before)
     try:
         a_p, x0_p, T_p, hist = polish(model, opts_v, alpha, x0, T)
     except GaitOptimizationError as e:
-        return FamilyGait(status="failed", message=f"the polish failed: {e}", speed=v,
-                          neighbours=near, interpolant_residual=math.inf,
-                          interpolant_orbit_residual=before, parameter_change=math.nan,
-                          T_change=math.nan, orbit_residual=math.inf, violations=[])
+        return FamilyGait(status="failed", message=f"the polish failed: {e}",
+                          interpolant_residual=math.inf, parameter_change=math.nan,
+                          T_change=math.nan, orbit_residual=math.inf, violations=[], **fields)
     change = float(np.max(np.abs(np.r_[(a_p - alpha).ravel(), x0_p - x0, T_p - T])))
+    fields.update(interpolant_residual=hist[0], parameter_change=change, T_change=T_p - T)
     gait = Gait(model, opts_v, a_p, x0_p, T_p, solver_stats=dict(
         family_interpolation=dict(neighbours=near, interpolant_residual=hist[0],
                                   polish_residuals=hist, parameter_change=change)))
+    what = "interpolated between the members and polished"
     iterations = 0
     if resolve:
         res = solve_gait(model, opts_v, warm_start=gait)
         if res.gait is None:
             return FamilyGait(status="failed", message=f"the re-solve failed: {res.message}",
-                              speed=v, neighbours=near, interpolant_residual=hist[0],
-                              interpolant_orbit_residual=before, parameter_change=change,
-                              T_change=T_p - T, orbit_residual=gait.orbit_residual()["worst"],
-                              violations=[], gait=gait)
+                              orbit_residual=gait.orbit_residual()["worst"], violations=[],
+                              gait=gait, **fields)
         gait, iterations = res.gait, res.iterations
+        what = "the optimal gait, solved from the polished interpolant"
+    return _checked(gait, what + f": the interpolant missed the orbit by {hist[0]:.2e}, the "
+                    f"polish changed the parameters by at most {change:.2e}", resolve,
+                    iterations, fields)
+
+
+def _checked(gait, what, resolved, iterations, fields) -> FamilyGait:
+    """The result for a gait: 'ok' when an exact orbit with nothing violated."""
     viol = [list(x) for x in gait.violations()]
     orbit = gait.orbit_residual()["worst"]
     ok = not viol and orbit <= ORBIT_TOL
-    what = "optimal gait re-solved from the interpolant" if resolve else \
-        "interpolated between the members and polished"
     return FamilyGait(
-        status="ok" if ok else "violates",
-        message=(f"{what}: the interpolant missed the orbit by {hist[0]:.2e}, the polish "
-                 f"changed the parameters by at most {change:.2e}" + (
-                     "" if ok else f"; exceeded on the dense grid: "
-                     f"{describe_violations([tuple(x) for x in viol])}")),
-        speed=v, neighbours=near, interpolant_residual=hist[0],
-        interpolant_orbit_residual=before, parameter_change=change, T_change=T_p - T,
-        orbit_residual=orbit, violations=viol, resolved=resolve, iterations=iterations,
-        gait=gait)
+        status="ok" if ok else "violates", message=what + ("" if ok else (
+            "; exceeded on the dense grid: " + describe_violations([tuple(x) for x in viol]))),
+        orbit_residual=orbit, violations=viol, resolved=resolved, iterations=iterations,
+        gait=gait, **fields)
+
+
+def _between_branches(family, v, near) -> FamilyGait:
+    """A speed between members of two branches (a fold between them): no interpolant;
+    the gait problem solved at ``v`` from the nearer member."""
+    src = near[0] if abs(v - near[0]) <= abs(v - near[1]) else near[1]
+    start = family.gait(src)
+    fields = dict(speed=v, neighbours=near, interpolant_residual=math.nan,
+                  interpolant_orbit_residual=math.nan, parameter_change=math.nan,
+                  T_change=math.nan)
+    res = solve_gait(family.model, family.options.replace(speed=v), warm_start=start)
+    if res.gait is None:
+        return FamilyGait(status="failed", message=f"between two branches of the family; "
+                          f"the solve from the member at {src:g} m/s failed: {res.message}",
+                          orbit_residual=math.inf, violations=[], resolved=True, **fields)
+    return _checked(res.gait, f"between two branches of the family (a fold between "
+                    f"{near[0]:g} and {near[1]:g} m/s): no interpolant; the optimal gait "
+                    f"solved from the member at {src:g} m/s", True, res.iterations, fields)

@@ -34,7 +34,7 @@ MAX_FAMILY_BYTES = 500_000_000
 #: the fields of a member's record (:class:`gait_opt.family.MemberRecord`)
 RECORD_FIELDS = ("speed", "status", "iterations", "substeps", "failed_steps", "time", "T",
                  "step_length", "cost", "orbit_residual", "polish_residual",
-                 "polish_change", "active", "margins", "violations")
+                 "polish_change", "active", "margins", "violations", "branch")
 STATUSES = ("complete", "ended", "violates", "partial")
 _KEYS = ("format", "version", "robot", "options", "speeds", "status", "message", "events",
          "end", "total_time", "build_time", "records", "members", "sha256")
