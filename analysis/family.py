@@ -17,12 +17,36 @@ from biped_casadi.results import Result
 
 from .stability import vc_eigenvalue
 
-__all__ = ["FamilyFigures", "family_figures", "cost_of_transport"]
+__all__ = ["FamilyFigures", "family_figures", "cost_of_transport", "actuator_work"]
+
+
+def actuator_work(gait, n: int = 4001, absolute: bool = True) -> float:
+    """Work of the actuators over one step, J.
+
+    Parameters
+    ----------
+    gait : Gait
+        The reference step.
+    n : int
+        Trapezoid points on [0, T].
+    absolute : bool
+        The integral of sum_i |u_i dq_{a,i}| (what the actuators spend when negative
+        work costs too), else of sum_i u_i dq_{a,i} (the signed work, which equals the
+        change of the mechanical energy along the step).
+
+    Returns
+    -------
+    float
+    """
+    t = np.linspace(0.0, gait.T, n)
+    _, dq, _ = gait.evaluate(t)
+    power = gait.u(t) * dq[1:]
+    power = np.sum(np.abs(power) if absolute else power, axis=0)
+    return float(np.sum((power[1:] + power[:-1]) / 2) * (t[1] - t[0]))
 
 
 def cost_of_transport(gait, n: int = 4001) -> float:
-    """Mechanical cost of transport of a gait: the actuators' absolute work per weight
-    and distance.
+    """Mechanical cost of transport of a gait: absolute actuator work per weight and distance.
 
     COT = (integral over the step of sum_i |u_i dq_{a,i}| dt) / (m g L), with u the
     reference torques, q_a the actuated joints, m the robot's mass, g gravity and L the
@@ -41,12 +65,9 @@ def cost_of_transport(gait, n: int = 4001) -> float:
     -------
     float
     """
-    t = np.linspace(0.0, gait.T, n)
-    _, dq, _ = gait.evaluate(t)
-    power = np.sum(np.abs(gait.u(t) * dq[1:]), axis=0)
-    work = float(np.sum((power[1:] + power[:-1]) / 2) * (t[1] - t[0]))
     d = gait.model.description
-    return work / (gait.model.params.total_mass * d.gravity * gait.step_length)
+    return actuator_work(gait, n) / (gait.model.params.total_mass * d.gravity
+                                     * gait.step_length)
 
 
 @dataclass

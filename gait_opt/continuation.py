@@ -39,7 +39,7 @@ __all__ = ["SpeedNLP", "NLPPoint", "Advance", "advance", "active_families",
 #: a warm solve taking more IPOPT iterations than this counts as a failed step (halved)
 WARM_MAX_ITER = 60
 #: the smallest step tried, a fraction of the requested one, before the family ends
-MIN_STEP_FRACTION = 1 / 64
+MIN_STEP_FRACTION = 1 / 16
 #: without a secant yet, the first step is this fraction of the requested one
 FIRST_STEP_FRACTION = 1 / 8
 #: a step whose |d theta / d v| exceeds the previous step's by this factor is checked for

@@ -123,7 +123,11 @@ def _resumable(path, model, opts, speeds):
     there is no file; ValueError when the file holds another request."""
     if not Path(path).exists():
         return None
-    fam = GaitFamily.load(path, model)
+    try:
+        fam = GaitFamily.load(path, model)
+    except ValueError as e:
+        raise ValueError(f"path: {e}; remove it, choose another file, or pass "
+                         f"resume=False to replace it") from None
     same = (options_record(fam.options) == options_record(opts)
             and len(fam.speeds) == len(speeds)
             and np.allclose(fam.speeds, speeds, rtol=0, atol=SPEED_TOL))
@@ -131,7 +135,7 @@ def _resumable(path, model, opts, speeds):
         raise ValueError(f"path: {path} holds a gait family of other options or speeds "
                          f"({len(fam.speeds)} speeds from {fam.speeds[0]:g} to "
                          f"{fam.speeds[-1]:g} m/s); remove it, choose another file, or "
-                         f"start afresh (resume=False)")
+                         f"pass resume=False to replace it")
     return fam
 
 
@@ -277,7 +281,8 @@ def _finish(family, speeds, t_start, state) -> float:
     state["build_time"] = 0.0
     v = family.member_speeds
     bad = [r.speed for r in family.records if r.violations]
-    span = f"{v[0]:g} to {v[-1]:g} m/s" if v.size else "no speed"
+    span = (f"{v[0]:g} to {v[-1]:g} m/s" if v.size > 1 else
+            f"only {v[0]:g} m/s" if v.size else "no speed")
     if family.end is not None:
         e = family.end
         family.status = "ended"

@@ -570,8 +570,11 @@ class Gait(Reference):
     @classmethod
     def from_record(cls, body: dict, model=None, *, where: str = "gait",
                     allow_open_orbit: bool = False, orbit_tol: float = ORBIT_TOL) -> "Gait":
-        """The gait of a gait file's body (envelope already checked), validated as
-        :meth:`load` does: robot, options, solution, and a periodic orbit.
+        """The gait of a gait file's body, validated as :meth:`load` does.
+
+        The envelope (format, version, checksum) is checked already
+        (:func:`gait_opt.files.gait_body`); here the robot, options, solution, and that
+        the gait is a periodic orbit.
 
         Parameters
         ----------
