@@ -10,8 +10,9 @@ construction of the cached CasADi Functions), the same speeds are solved
   from the built-in guess; the same polish and dense-grid check),
 
 in the order continuation, cold, continuation, cold, ... (``--repeats`` rounds), so that
-a drift of the machine's load affects both.  Reported: the wall times, their ratio
-(cold / continuation, the median over the rounds), IPOPT iterations, the orbit
+a drift of the machine's load affects both.  Reported: the wall and CPU times (the
+process's, less sensitive to other work on a shared machine), their ratios (cold /
+continuation, the median over the rounds), IPOPT iterations, the orbit
 residuals, and how the two sets of gaits compare (T, cost: the continuation can follow
 a branch that a cold solve misses).  The results go to ``--out`` as JSON
 (default ``benchmarks/results/family.json``) with the machine, ``os.getloadavg()``
@@ -41,10 +42,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def continuation(model, speeds) -> dict:
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     fam = gait_family(model, speeds)
-    wall = time.perf_counter() - t0
-    return dict(wall=wall, status=fam.status, build_time=fam.build_time,
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return dict(wall=wall, cpu=cpu, status=fam.status, build_time=fam.build_time,
                 covered=[r.speed for r in fam.records],
                 iterations=[r.iterations for r in fam.records],
                 orbit_residual=[r.orbit_residual for r in fam.records],
@@ -54,7 +55,7 @@ def continuation(model, speeds) -> dict:
 
 def cold(model, speeds) -> dict:
     rows = []
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for v in speeds:
         t = time.perf_counter()
         r = solve_gait(model, GaitOptions(speed=float(v)))
@@ -64,7 +65,7 @@ def cold(model, speeds) -> dict:
                          orbit_residual=g.orbit_residual()["worst"] if g else None,
                          T=g.T if g else None,
                          cost=g.solver_stats["ipopt_cost"] if g else None))
-    return dict(wall=time.perf_counter() - t0, rows=rows)
+    return dict(wall=time.perf_counter() - t0, cpu=time.process_time() - c0, rows=rows)
 
 
 def compare(c: dict, k: dict) -> dict:
@@ -98,12 +99,14 @@ def main(argv=None):
     for i in range(args.repeats):
         c = continuation(model, speeds)
         k = cold(model, speeds)
-        rounds.append(dict(continuation=c, cold=k, ratio=k["wall"] / c["wall"]))
-        print(f"round {i + 1}: continuation {c['wall']:.2f} s ({sum(c['iterations'])} IPOPT "
-              f"iterations, {len(c['covered'])} gaits), cold {k['wall']:.2f} s "
+        rounds.append(dict(continuation=c, cold=k, ratio=k["wall"] / c["wall"],
+                           cpu_ratio=k["cpu"] / c["cpu"]))
+        print(f"round {i + 1}: continuation {c['wall']:.2f} s wall, {c['cpu']:.2f} s CPU "
+              f"({sum(c['iterations'])} IPOPT iterations, {len(c['covered'])} gaits), cold "
+              f"{k['wall']:.2f} s wall, {k['cpu']:.2f} s CPU "
               f"({sum(r['iterations'] for r in k['rows'])} iterations, "
-              f"{sum(r['success'] for r in k['rows'])} gaits): ratio {rounds[-1]['ratio']:.2f}",
-              flush=True)
+              f"{sum(r['success'] for r in k['rows'])} gaits): ratio {rounds[-1]['ratio']:.2f} "
+              f"wall, {rounds[-1]['cpu_ratio']:.2f} CPU", flush=True)
     last = rounds[-1]
     c, k = last["continuation"], last["cold"]
     result = dict(
@@ -116,8 +119,12 @@ def main(argv=None):
         robot=args.robot, speeds=args.speeds, n_speeds=len(speeds),
         ratio_median=statistics.median(r["ratio"] for r in rounds),
         ratios=[r["ratio"] for r in rounds],
+        cpu_ratio_median=statistics.median(r["cpu_ratio"] for r in rounds),
+        cpu_ratios=[r["cpu_ratio"] for r in rounds],
         continuation_wall=[r["continuation"]["wall"] for r in rounds],
         cold_wall=[r["cold"]["wall"] for r in rounds],
+        continuation_cpu=[r["continuation"]["cpu"] for r in rounds],
+        cold_cpu=[r["cold"]["cpu"] for r in rounds],
         continuation=dict(status=c["status"], covered=[c["covered"][0], c["covered"][-1]],
                           n_gaits=len(c["covered"]), iterations=sum(c["iterations"]),
                           iterations_per_speed=c["iterations"], build_time=c["build_time"],
@@ -133,9 +140,9 @@ def main(argv=None):
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(out, json.dumps(result, indent=1))
-    print(f"median ratio cold / continuation {result['ratio_median']:.2f} over "
-          f"{args.repeats} rounds; load {load_before[0]:.2f} -> {os.getloadavg()[0]:.2f}; "
-          f"written {out}")
+    print(f"median ratio cold / continuation {result['ratio_median']:.2f} wall, "
+          f"{result['cpu_ratio_median']:.2f} CPU over {args.repeats} rounds; load "
+          f"{load_before[0]:.2f} -> {os.getloadavg()[0]:.2f}; written {out}")
     return result
 
 

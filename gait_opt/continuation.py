@@ -22,6 +22,7 @@ See docs/theory.md, "Gait families".
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -60,7 +61,8 @@ class NLPPoint:
     """One IPOPT solution of the parametric NLP: the speed, the primal ``w`` and dual
     ``lam_g``, ``lam_x`` values, the constraint values ``g``, IPOPT's ``status`` and
     ``iterations``, the constraint families still ``violations`` ([(name, amount)]),
-    the objective ``cost`` (unscaled) and the wall ``time`` of the solve."""
+    the objective ``cost`` (unscaled), the wall ``time`` of the solve and the node
+    ``margins`` it was solved with."""
 
     speed: float
     w: np.ndarray
@@ -72,6 +74,7 @@ class NLPPoint:
     violations: list
     cost: float
     time: float
+    margins: dict = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -82,36 +85,66 @@ class NLPPoint:
 class SpeedNLP:
     """The gait NLP with the speed as its parameter, with a cold and a warm IPOPT.
 
+    The node margins of the torque limit, the normal force and the swing-foot clearance
+    (:func:`gait_opt.solve_gait`) shift only constraint bounds, so every solve takes its
+    own; the friction cone's margin is part of the constraint and of the NLP.
+
     Parameters
     ----------
     model : BipedModel
         The robot.
     options : GaitOptions
         The problem (its ``speed`` is not used: each solve gives its own).
-    margins : dict, optional
-        Node margins of the path constraints (see :func:`gait_opt.solve_gait`).
+    friction_margin : float
+        The friction cone's node margin (mu - margin at the nodes).
     verbose : bool
         Print IPOPT's iterations.
     """
 
-    def __init__(self, model, options: GaitOptions, margins: dict | None = None,
+    def __init__(self, model, options: GaitOptions, friction_margin: float = 0.0,
                  verbose: bool = False):
         t0 = time.perf_counter()
         self.model = model
         self.options = options.for_model(model)
-        self.margins = dict(margins or {})
-        self.prob = build_problem(model, self.options, self.margins, speed_parameter=True)
+        self.friction_margin = float(friction_margin)
+        built = {"friction cone": self.friction_margin} if self.friction_margin else {}
+        self.prob = build_problem(model, self.options, built, speed_parameter=True)
         self.cold = make_solver(self.prob, self.options, verbose)
         cap = min(WARM_MAX_ITER, int(self.options.ipopt.get("max_iter", WARM_MAX_ITER)))
         warm = {**self.options.ipopt, **WARM_IPOPT, "max_iter": cap}
         self.warm = make_solver(self.prob, self.options.replace(ipopt=warm), verbose)
         self.build_time = time.perf_counter() - t0
 
-    def _bounds(self):
-        p = self.prob
-        return dict(lbx=p.lbx, ubx=p.ubx, lbg=p.lbg, ubg=p.ubg)
+    def problem(self, margins: dict | None = None):
+        """The transcribed problem with the bounds of these node margins.
 
-    def _point(self, solver, speed, sol, t0) -> NLPPoint:
+        Parameters
+        ----------
+        margins : dict, optional
+            Family of :data:`gait_opt.transcription.MARGINS` -> amount; the friction
+            cone's must be this NLP's ``friction_margin``.
+
+        Returns
+        -------
+        Problem
+            ``lbg``, ``ubg`` shifted (a copy; the NLP's own when no margin is given).
+        """
+        margins = {k: v for k, v in (margins or {}).items() if v}
+        if margins.get("friction cone", 0.0) != self.friction_margin:
+            raise ValueError(f"margins: this NLP has the friction margin "
+                             f"{self.friction_margin:g}, not {margins.get('friction cone')}")
+        shifts = {k: v for k, v in margins.items() if k != "friction cone"}
+        if not shifts:
+            return self.prob
+        lbg, ubg = self.prob.lbg.copy(), self.prob.ubg.copy()
+        for name, a, b in self.prob.groups:
+            if name in shifts:
+                lbg[a:b] += shifts[name]          # -inf stays -inf
+                if name == "torque limit":
+                    ubg[a:b] -= shifts[name]
+        return dataclasses.replace(self.prob, lbg=lbg, ubg=ubg)
+
+    def _point(self, solver, speed, sol, t0, prob, margins) -> NLPPoint:
         stats = solver.stats()
         g = np.array(sol["g"]).ravel()
         return NLPPoint(
@@ -119,10 +152,11 @@ class SpeedNLP:
             lam_g=np.array(sol["lam_g"]).ravel(), lam_x=np.array(sol["lam_x"]).ravel(),
             g=g, status=stats.get("return_status", "unknown"),
             iterations=int(stats.get("iter_count", -1)),
-            violations=constraint_violations(self.prob, g),
-            cost=float(sol["f"]) / self.prob.cost_scale, time=time.perf_counter() - t0)
+            violations=constraint_violations(prob, g),
+            cost=float(sol["f"]) / self.prob.cost_scale, time=time.perf_counter() - t0,
+            margins=dict(margins or {}))
 
-    def solve_cold(self, speed: float, w0=None) -> NLPPoint:
+    def solve_cold(self, speed: float, w0=None, margins: dict | None = None) -> NLPPoint:
         """Solve at ``speed`` from the built-in guess (or a primal start ``w0``).
 
         Parameters
@@ -131,6 +165,8 @@ class SpeedNLP:
             m/s.
         w0 : array_like, optional
             A decision vector to start from (IPOPT's default start otherwise).
+        margins : dict, optional
+            Node margins (:meth:`problem`).
 
         Returns
         -------
@@ -139,10 +175,13 @@ class SpeedNLP:
         t0 = time.perf_counter()
         if w0 is None:
             w0 = initial_guess(self.model, self.options.replace(speed=float(speed)))
-        sol = self.cold(x0=w0, p=float(speed), **self._bounds())
-        return self._point(self.cold, speed, sol, t0)
+        prob = self.problem(margins)
+        sol = self.cold(x0=w0, p=float(speed), lbx=prob.lbx, ubx=prob.ubx, lbg=prob.lbg,
+                        ubg=prob.ubg)
+        return self._point(self.cold, speed, sol, t0, prob, margins)
 
-    def solve_warm(self, speed: float, start: NLPPoint) -> NLPPoint:
+    def solve_warm(self, speed: float, start: NLPPoint,
+                   margins: dict | None = None) -> NLPPoint:
         """Solve at ``speed`` from a primal-dual start (IPOPT's warm start).
 
         Parameters
@@ -152,16 +191,19 @@ class SpeedNLP:
         start : NLPPoint
             The start: ``w``, ``lam_g``, ``lam_x`` (a predictor; its ``speed`` is not
             used).
+        margins : dict, optional
+            Node margins (:meth:`problem`).
 
         Returns
         -------
         NLPPoint
         """
         t0 = time.perf_counter()
-        w0 = np.clip(start.w, self.prob.lbx, self.prob.ubx)
+        prob = self.problem(margins)
+        w0 = np.clip(start.w, prob.lbx, prob.ubx)
         sol = self.warm(x0=w0, lam_g0=start.lam_g, lam_x0=start.lam_x, p=float(speed),
-                        **self._bounds())
-        return self._point(self.warm, speed, sol, t0)
+                        lbx=prob.lbx, ubx=prob.ubx, lbg=prob.lbg, ubg=prob.ubg)
+        return self._point(self.warm, speed, sol, t0, prob, margins)
 
     def unpack(self, point: NLPPoint):
         """(T, alpha, x0) of a solution: step time, Bezier coefficients, (q_u, dq_u)(0).
@@ -249,31 +291,33 @@ class Advance:
 def _bisect(nlp, points, bad: NLPPoint, h_min, n_theta, out: Advance):
     """Is the change from the last point to ``bad`` continuous, or a jump to another
     branch?  Bisection of [last speed, bad speed]: a midpoint whose change from the last
-    good point is below 0.7 of the change to ``bad`` lies on the branch (it is appended
-    to ``points``), else on the other side.  Continuous as soon as the rate from the
-    last good point to ``bad`` is within :data:`JUMP_RATIO` of the branch's last rate;
-    a jump when the bracket is narrower than ``2 h_min``.  Returns (True, bad) or
-    (False, the point beyond the jump and the bracket's upper speed)."""
-    bad_speed = bad.speed
+    good point is below 0.7 of the change to the nearest point beyond is on the branch
+    (appended to ``points``), else beyond.  Continuous as soon as the rate from the last
+    good point to the nearest point beyond is within :data:`JUMP_RATIO` of the branch's
+    last rate; a jump when the bracket is ``h_min`` wide or less.  Returns (True, [the
+    point reached]) or (False, [the solutions beyond the jump, in order of speed away
+    from the branch]) and the bracket's far end."""
+    beyond, bad_speed = [bad], bad.speed
     while True:
-        good = points[-1]
+        good, near = points[-1], beyond[-1]
         ref = _rate(points[-2], good, n_theta) if len(points) > 1 else math.inf
-        if bad.speed == bad_speed and _rate(good, bad, n_theta) <= JUMP_RATIO * ref:
-            return True, (bad, bad_speed)
+        if near.speed == bad_speed and _rate(good, near, n_theta) <= JUMP_RATIO * ref:
+            return True, [near], bad_speed
         if abs(bad_speed - good.speed) <= h_min * (1 + 1e-9):
-            return False, (bad, bad_speed)
+            return False, beyond[::-1], bad_speed
         mid = (good.speed + bad_speed) / 2
         q = nlp.solve_warm(mid, _predict(points, mid))
         out.iterations += q.iterations
         if not q.ok:
             out.failed += 1
             bad_speed = mid
-        elif _distance(good, q, n_theta) < 0.7 * _distance(good, bad, n_theta):
+        elif _distance(good, q, n_theta) < 0.7 * _distance(good, near, n_theta):
             out.rates.append(_rate(good, q, n_theta))
             points.append(q)
             out.substeps += 1
         else:
-            bad, bad_speed = q, mid
+            beyond.append(q)
+            bad_speed = mid
 
 
 def advance(nlp: SpeedNLP, points: list, target: float, step: float,
@@ -321,20 +365,22 @@ def advance(nlp: SpeedNLP, points: list, target: float, step: float,
             continue
         ref = _rate(points[-2], points[-1], n_theta) if len(points) > 1 else None
         if ref is not None and _rate(points[-1], p, n_theta) > JUMP_RATIO * ref:
-            same, (q, q_speed) = _bisect(nlp, points, p, h_fold, n_theta, out)
+            same, found, far = _bisect(nlp, points, p, h_fold, n_theta, out)
             if not same:
-                out.jump = dict(speed_low=points[-1].speed, speed_high=q_speed,
-                                jump=_distance(points[-1], q, n_theta),
-                                cost_low=points[-1].cost, cost_high=q.cost,
-                                rate=_rate(points[-2], points[-1], n_theta)
+                last = points[-1]
+                out.jump = dict(speed_low=last.speed, speed_high=far,
+                                jump=_distance(last, found[0], n_theta),
+                                cost_low=last.cost, cost_high=found[0].cost,
+                                rate=_rate(points[-2], last, n_theta)
                                 if len(points) > 1 else None)
                 if not across_folds:
                     break
-                points[:] = [q]                       # a new branch: a new secant
+                # a new branch: the solutions found on it are its start and secant
+                points[:] = found[-2:]
                 out.substeps += 1
-                h = (target - q.speed) * FIRST_STEP_FRACTION
+                h = target - points[-1].speed
                 continue
-            p = q
+            p = found[0]
             h = p.speed - points[-1].speed
         out.rates.append(_rate(points[-1], p, n_theta))
         first = len(points) == 1               # the secant exists from now on
@@ -363,7 +409,7 @@ def active_families(nlp: SpeedNLP, point: NLPPoint, tol: float = 1e-6) -> list:
         Family names (those of the transcription, plus 'step time bounds' and 'knee
         limits' for the variable bounds), in the transcription's order.
     """
-    prob = nlp.prob
+    prob = nlp.problem(point.margins)
     names = []
     for name, a, b in prob.groups:
         lo, hi, g = prob.lbg[a:b], prob.ubg[a:b], point.g[a:b]

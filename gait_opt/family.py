@@ -7,8 +7,8 @@ every other warm-started from its neighbours (:mod:`gait_opt.continuation`: one 
 the speed as its parameter, IPOPT's primal-dual warm start from the secant predictor,
 steps halved where a solve fails).  Every member is made an exact periodic orbit by the
 same polish as :func:`optimize_gait` (:mod:`gait_opt.polish`) and checked on the same
-dense grid; where an active constraint is exceeded between the nodes, the node margins
-are tightened as :func:`solve_gait` does and kept for the rest of the family.  Where the
+dense grid; where an active constraint is exceeded between the nodes, its node margin
+is tightened and the speed solved again, as :func:`solve_gait` does.  Where the
 family ends (no solution at the smallest step, a fold, the polish failing) the result
 says where and why; where a constraint becomes active or inactive it records the event.
 
@@ -182,7 +182,8 @@ class MemberRecord:
     active : list of str
         Inequality families active at the NLP solution.
     margins : dict
-        The node margins in force (:data:`gait_opt.transcription.MARGINS`).
+        The node margins the member needed (:data:`gait_opt.transcription.MARGINS`;
+        found from none at each speed, as :func:`gait_opt.solve_gait` does).
     violations : list
         [family, amount] exceeded on the dense grid (empty for a valid gait).
     branch : int

@@ -22,36 +22,49 @@ from .transcription import FIXED_BY, MARGINS, describe_violations, warm_start_ve
 __all__ = ["gait_family"]
 
 
+def _nlp_for(model, opts, state, margins):
+    """The NLP of these margins: the family's, or one with their friction margin (built
+    once per value)."""
+    m = float(margins.get("friction cone", 0.0))
+    if m == state["nlp"].friction_margin:
+        return state["nlp"]
+    if m not in state["friction_nlps"]:
+        new = SpeedNLP(model, opts, friction_margin=m)
+        state["build_time"] += new.build_time
+        state["friction_nlps"][m] = new
+    return state["friction_nlps"][m]
+
+
 def _member(model, opts, points, adv, state, max_refinements):
-    """Polish the solution at the target speed, check it on the dense grid, and tighten
-    the node margins where an active constraint is exceeded between the nodes (as
-    :func:`gait_opt.solve_gait`; the margins stay for the rest of the family).  Returns
+    """Polish the solution at the target speed, check it on the dense grid, and where an
+    active constraint is exceeded between the nodes tighten its node margin by twice the
+    excess and solve again, from no margin at each speed, as :func:`gait_opt.solve_gait`
+    does (so that each member solves the same problem as a cold solve).  Returns
     (gait, record); raises GaitOptimizationError when the polish fails."""
     t0 = time.perf_counter()
     v = points[-1].speed
     opts_v = opts.replace(speed=v)
-    iterations = adv.iterations
+    iterations, nlp = adv.iterations, state["nlp"]
     for attempt in range(1 + max_refinements):
         point = points[-1]
-        T, alpha, x0 = state["nlp"].unpack(point)
+        T, alpha, x0 = nlp.unpack(point)
         alpha_p, x0_p, T_p, hist = polish(model, opts_v, alpha, x0, T)
         gait = Gait(model, opts_v, alpha_p, x0_p, T_p)
         viol = gait.violations()
         fixable = [(FIXED_BY.get(n, n), a) for n, a in viol if FIXED_BY.get(n, n) in MARGINS]
         if not fixable or len(fixable) < len(viol) or attempt == max_refinements:
             break
-        margins = dict(state["nlp"].margins)
+        margins = dict(point.margins)
         for n, a in fixable:
             margins[n] = margins.get(n, 0.0) + 2 * a + 1e-9
-        new = SpeedNLP(model, opts, margins)
-        state["build_time"] += new.build_time
-        again = new.solve_warm(v, point)
+        nlp = _nlp_for(model, opts, state, margins)
+        again = nlp.solve_warm(v, point, margins)
         iterations += again.iterations
         if not again.ok:
             break                       # keep this gait and report its violations
-        state["nlp"], points[-1] = new, again
+        points[-1] = again
     change = float(np.max(np.abs(np.r_[(alpha_p - alpha).ravel(), x0_p - x0, T_p - T])))
-    margins = dict(state["nlp"].margins)
+    margins = dict(point.margins)
     gait.solver_stats = dict(
         status=point.status, iterations=iterations, polish_residuals=hist,
         polish_change=change, dense_grid_violations=[list(x) for x in viol],
@@ -61,9 +74,9 @@ def _member(model, opts, points, adv, state, max_refinements):
         speed=float(v), status="ok" if not viol else "violates", iterations=iterations,
         substeps=adv.substeps, failed_steps=adv.failed,
         time=adv.time + time.perf_counter() - t0, T=gait.T, step_length=gait.step_length,
-        cost=points[-1].cost, orbit_residual=gait.orbit_residual()["worst"],
+        cost=point.cost, orbit_residual=gait.orbit_residual()["worst"],
         polish_residual=hist[-1], polish_change=change,
-        active=active_families(state["nlp"], points[-1]), margins=margins,
+        active=active_families(nlp, point), margins=margins,
         violations=[list(x) for x in viol], branch=state["branch"])
     return gait, record
 
@@ -221,8 +234,9 @@ def _run(model, opts, speeds, family, path, progress, verbose, max_refinements,
     """Continue ``family`` over the speeds it lacks, saving after each member."""
     t_start = time.perf_counter()
     last = family.records[-1] if family.records else None
-    nlp = SpeedNLP(model, opts, last.margins if last else {}, verbose)
-    state = dict(nlp=nlp, build_time=nlp.build_time, branch=last.branch if last else 0)
+    nlp = SpeedNLP(model, opts, verbose=verbose)
+    state = dict(nlp=nlp, build_time=nlp.build_time, branch=last.branch if last else 0,
+                 friction_nlps={})
     points, rates = [], []
     for i in range(len(family.gaits), len(speeds)):
         v = float(speeds[i])
