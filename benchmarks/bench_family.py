@@ -10,7 +10,10 @@ construction of the cached CasADi Functions), the same speeds are solved
   from the built-in guess; the same polish and dense-grid check),
 
 in the order continuation, cold, continuation, cold, ... (``--repeats`` rounds), so that
-a drift of the machine's load affects both.  Reported: the wall and CPU times (the
+a drift of the machine's load affects both.  Then (unless ``--no-interpolation``) the
+gaits between the members: at every midpoint of the grid, ``GaitFamily.gait_at`` (the
+interpolant's residual, the polish's change, the violations) against
+``optimize_gait`` at that speed (T and cost).  Reported: the wall and CPU times (the
 process's, less sensitive to other work on a shared machine), their ratios (cold /
 continuation, the median over the rounds), IPOPT iterations, the orbit
 residuals, and how the two sets of gaits compare (T, cost: the continuation can follow
@@ -36,7 +39,9 @@ import casadi
 
 from biped_casadi import robot
 from biped_casadi.files import write_text_atomic
-from gait_opt import GaitOptions, gait_family, parse_speed_range, solve_gait
+import numpy as np
+
+from gait_opt import GaitOptions, gait_family, optimize_gait, parse_speed_range, solve_gait
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -68,6 +73,25 @@ def cold(model, speeds) -> dict:
     return dict(wall=time.perf_counter() - t0, cpu=time.process_time() - c0, rows=rows)
 
 
+def interpolation(model, speeds) -> list:
+    """gait_at at the grid's midpoints against the optimum solved there."""
+    fam = gait_family(model, speeds)
+    rows = []
+    for v in (speeds[:-1] + speeds[1:]) / 2:
+        r = fam.gait_at(float(v))
+        best = optimize_gait(model, speed=float(v))
+        rows.append(dict(speed=float(v), status=r.status, resolved=r.resolved,
+                         interpolant_residual=r.interpolant_residual,
+                         parameter_change=r.parameter_change, orbit_residual=r.orbit_residual,
+                         T_minus_optimum=r.gait.T - best.T,
+                         cost_relative_to_optimum=(r.gait.cost - best.cost) / best.cost,
+                         violations=r.violations))
+        print(f"  {v:.4f} m/s: {r.status}, interpolant residual {r.interpolant_residual:.1e}, "
+              f"polish change {r.parameter_change:.1e}, T - T* {rows[-1]['T_minus_optimum']:+.1e}"
+              f" s, cost {rows[-1]['cost_relative_to_optimum']:+.1e} relative", flush=True)
+    return rows
+
+
 def compare(c: dict, k: dict) -> dict:
     """Where the two sets of gaits agree (same local optimum) and where not."""
     by_speed = {r["speed"]: r for r in k["rows"]}
@@ -90,6 +114,7 @@ def main(argv=None):
     ap.add_argument("--speeds", default="0.4:1.2:0.05")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "family.json"))
+    ap.add_argument("--no-interpolation", action="store_true")
     args = ap.parse_args(argv)
     model = robot(args.robot)
     speeds = parse_speed_range(args.speeds)
@@ -137,6 +162,9 @@ def main(argv=None):
                                           if r["orbit_residual"] is not None), default=None),
                   failed=[r["speed"] for r in k["rows"] if not r["success"]]),
         agreement=compare(c, k))
+    if not args.no_interpolation:
+        print("gaits between the members:")
+        result["interpolation"] = interpolation(model, np.asarray(speeds))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(out, json.dumps(result, indent=1))

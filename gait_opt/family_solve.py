@@ -57,12 +57,12 @@ def _member(model, opts, points, adv, state, max_refinements):
         margins = dict(point.margins)
         for n, a in fixable:
             margins[n] = margins.get(n, 0.0) + 2 * a + 1e-9
-        nlp = _nlp_for(model, opts, state, margins)
-        again = nlp.solve_warm(v, point, margins)
+        tighter = _nlp_for(model, opts, state, margins)
+        again = tighter.solve_warm(v, point, margins)
         iterations += again.iterations
         if not again.ok:
             break                       # keep this gait and report its violations
-        points[-1] = again
+        points[-1], nlp = again, tighter
     change = float(np.max(np.abs(np.r_[(alpha_p - alpha).ravel(), x0_p - x0, T_p - T])))
     margins = dict(point.margins)
     gait.solver_stats = dict(
