@@ -89,7 +89,7 @@ def cmd_gait(args):
                           **({} if args.clearance is None else {"clearance": args.clearance}))
     if args.speeds is not None:
         return cmd_family(args, options)
-    out = output_file(args.out or "gait.json", "--out")    # before the solve, not after
+    out = output_file("gait.json" if args.out is None else args.out, "--out")  # before the solve
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot)
 
