@@ -39,6 +39,7 @@ import casadi
 
 from biped_casadi import robot
 from biped_casadi.files import write_text_atomic
+from biped_casadi.results import json_safe
 import numpy as np
 
 from gait_opt import GaitOptions, gait_family, optimize_gait, parse_speed_range, solve_gait
@@ -167,7 +168,7 @@ def main(argv=None):
         result["interpolation"] = interpolation(model, np.asarray(speeds))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out, json.dumps(result, indent=1))
+    write_text_atomic(out, json.dumps(json_safe(result), indent=1, allow_nan=False))
     print(f"median ratio cold / continuation {result['ratio_median']:.2f} wall, "
           f"{result['cpu_ratio_median']:.2f} CPU over {args.repeats} rounds; load "
           f"{load_before[0]:.2f} -> {os.getloadavg()[0]:.2f}; written {out}")
