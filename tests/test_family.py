@@ -258,9 +258,10 @@ def test_cli_family_and_gait_between(capsys, tmp_path, monkeypatch):
     assert all(m["orbit_residual"] <= ORBIT_TOL for m in d["members"])
     assert (tmp_path / "figs" / "gait_family.png").exists()
     rc, out, _ = _run(capsys, "--family", "f.json", "--speed", "0.76", "--out", "g.json",
-                      "--json")
+                      "--json", "--plot", "one")
     d = json.loads(out)
     assert rc == 0 and d["status"] == "ok" and d["interpolant_residual"] > 0
+    assert (tmp_path / "one" / "gait_stick.png").exists()
     g = Gait.load(tmp_path / "g.json")
     assert g.speed == pytest.approx(0.76, abs=1e-9)
 

@@ -9,7 +9,8 @@ import math
 import sys
 
 from analysis.family import family_figures
-from analysis.reporting.plots import gait_family_plot, save_figures
+from analysis.reporting.plots import (gait_family_plot, gait_profiles_plot, gait_stick_plot,
+                                      save_figures)
 from gait_opt import GaitFamily, GaitOptimizationError, gait_family, parse_speed_range
 
 from .common import Progress, UserError, load_model, output_dir, output_file, print_json
@@ -135,6 +136,7 @@ def cmd_gait_at(args) -> int:
     if not math.isfinite(args.speed):
         raise UserError(f"--speed must be a finite number, got {args.speed:g}")
     out = output_file("gait.json" if args.out is None else args.out, "--out")
+    folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot) if args.robot else None
     fam = GaitFamily.load(args.family, model)
     lo, hi = fam.member_speeds[0], fam.member_speeds[-1]
@@ -148,6 +150,9 @@ def cmd_gait_at(args) -> int:
     s = r.to_dict()
     s["file"] = str(r.gait.save(out))
     s["T"], s["step_length"] = r.gait.T, r.gait.step_length
+    if folder is not None:
+        s["plots"] = save_figures({"gait_stick": gait_stick_plot(r.gait),
+                                   "gait_profiles": gait_profiles_plot(r.gait)}, folder)
     if args.json:
         print_json(s)
         return 0
@@ -162,4 +167,6 @@ def cmd_gait_at(args) -> int:
     if r.violations:
         print(f"  VIOLATED on the dense grid: {r.violations} (--resolve gives the optimal "
               f"gait at this speed)")
+    for path in s.get("plots", []):
+        print(f"  plot                 {path}")
     return 0
