@@ -149,6 +149,9 @@ def read_family_file(path, model=None) -> dict:
         raise GaitFileError(f"{where}: invalid 'options': {e}") from None
     speeds = _speeds(body["speeds"], where)
     records = _records(body["records"], where)
+    got = [float(r["speed"]) for r in records]
+    if len(got) > len(speeds) or any(abs(a - b) > 1e-9 for a, b in zip(got, speeds)):
+        raise GaitFileError(f"{where}: the records' speeds are not the first of 'speeds'")
     members = body["members"]
     if not isinstance(members, list) or len(members) != len(records):
         raise GaitFileError(f"{where}: 'members' must be a list of one gait per record "
