@@ -136,6 +136,11 @@ def test_family_file_tampering(family_path, tmp_path):
     with pytest.raises(GaitFileError, match="member 2 is not a periodic orbit"):
         GaitFamily.load(tmp_path / "b.json")
     bad = copy.deepcopy(body)
+    bad["records"][1]["speed"] = 0.76
+    (tmp_path / "d.json").write_text(json.dumps(_resign(bad)))
+    with pytest.raises(GaitFileError, match="records' speeds"):
+        GaitFamily.load(tmp_path / "d.json")
+    bad = copy.deepcopy(body)
     bad["members"] = bad["members"][:2]
     (tmp_path / "c.json").write_text(json.dumps(_resign(bad)))
     with pytest.raises(GaitFileError, match="one gait per record"):
@@ -285,7 +290,7 @@ def test_cli_family_and_gait_between(capsys, tmp_path, monkeypatch):
 def test_cli_bad_input(argv, words, capsys, tmp_path, monkeypatch, family_path):
     monkeypatch.chdir(tmp_path)
     body = json.loads(family_path.read_text())
-    body["speeds"] = [0.7, 0.75]          # another request than --speeds 0.7:0.8:0.05
+    body["speeds"] = [0.7, 0.75, 0.8, 0.85]     # another request than --speeds 0.7:0.8:0.05
     (tmp_path / "f.json").write_text(json.dumps(_resign(body)))
     before = sorted(p.name for p in tmp_path.iterdir())
     rc, out, err = _run(capsys, *argv, *([] if "--out" in argv else ["--out", "o.json"]))
