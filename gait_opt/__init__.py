@@ -2,9 +2,13 @@
 
 Imports only :mod:`biped_casadi`.  :func:`optimize_gait` returns a :class:`Gait`, which
 implements the reference interface :class:`biped_casadi.Reference` that the controllers,
-the simulator and the maps of :mod:`analysis` use.
+the simulator and the maps of :mod:`analysis` use.  :func:`gait_family` gives gaits over
+a range of speeds by continuation (a :class:`GaitFamily`, with gaits between its members
+by :meth:`GaitFamily.gait_at`).
 """
 from .errors import GaitOptimizationError
+from .family import FamilyGait, GaitFamily, MemberRecord, parse_speed_range, speed_range
+from .family_solve import gait_family
 from .gait import ORBIT_TOL, Gait, GaitFileError, OpenOrbitWarning
 from .hzd_orbit import BezierConstraints, fit_bezier_constraints
 from .importing import IMPORT_TOL, GaitImport, GaitImportError, import_gait
@@ -17,4 +21,5 @@ __all__ = ["optimize_gait", "solve_gait", "GaitSolveResult", "default_gait", "Ga
            "GaitOptions", "GaitOptimizationError", "GaitFileError", "OpenOrbitWarning",
            "ORBIT_TOL", "import_gait", "GaitImport", "GaitImportError", "IMPORT_TOL", "Nodes",
            "read_nodes", "BezierConstraints", "fit_bezier_constraints", "close_orbit",
-           "ClosedOrbit"]
+           "ClosedOrbit", "gait_family", "GaitFamily", "MemberRecord",
+           "FamilyGait", "speed_range", "parse_speed_range"]

@@ -25,7 +25,7 @@ from biped_casadi.files import read_text_file
 from .options import GaitOptions
 
 __all__ = ["GaitFileError", "OpenOrbitWarning", "FORMAT", "FORMAT_VERSION", "read_gait_file",
-           "gait_parts"]
+           "gait_body", "gait_parts"]
 
 FORMAT = "biped-casadi-gait"
 FORMAT_VERSION = 1
@@ -73,13 +73,38 @@ def read_gait_file(path: Path) -> dict:
     GaitFileError
         Naming the file and what is wrong.
     """
-    body = _read_json(path)
-    where = f"gait file {path}"
+    return gait_body(_read_json(path), f"gait file {path}", str(path))
+
+
+def gait_body(body, where: str, name: str | None = None) -> dict:
+    """A gait file's parsed JSON, its envelope checked: format, version, checksum, keys.
+
+    Parameters
+    ----------
+    body : object
+        The parsed JSON (a gait file's, or a member of a gait family file).
+    where : str
+        What it is, for the messages ('gait file PATH').
+    name : str, optional
+        How the messages about the format name it (default ``where``).
+
+    Returns
+    -------
+    dict
+        A copy of the body without the checksum.
+
+    Raises
+    ------
+    GaitFileError
+        Naming ``where`` and what is wrong.
+    """
+    name = where if name is None else name
     if not isinstance(body, dict) or body.get("format") != FORMAT:
-        raise GaitFileError(f"{path} is not a {FORMAT} file")
+        raise GaitFileError(f"{name} is not a {FORMAT} file")
     if body.get("version") != FORMAT_VERSION:
-        raise GaitFileError(f"{path} has format version {body.get('version')!r}; this "
+        raise GaitFileError(f"{name} has format version {body.get('version')!r}; this "
                             f"toolkit reads version {FORMAT_VERSION}")
+    body = dict(body)
     checksum = body.pop("sha256", None)
     if checksum != digest(body):
         raise GaitFileError(f"{where} is corrupted (checksum mismatch)")

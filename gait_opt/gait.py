@@ -582,8 +582,39 @@ class Gait(Reference):
         if not isinstance(path, (str, os.PathLike)):
             raise GaitFileError(f"path must be a file name, got {type(path).__name__}")
         path = Path(path)
-        where = f"gait file {path}"
-        body = read_gait_file(path)
+        return cls.from_record(read_gait_file(path), model, where=f"gait file {path}",
+                               allow_open_orbit=allow_open_orbit, orbit_tol=orbit_tol)
+
+    @classmethod
+    def from_record(cls, body: dict, model=None, *, where: str = "gait",
+                    allow_open_orbit: bool = False, orbit_tol: float = ORBIT_TOL) -> "Gait":
+        """The gait of a gait file's body, validated as :meth:`load` does.
+
+        The envelope (format, version, checksum) is checked already
+        (:func:`gait_opt.files.gait_body`); here the robot, options, solution, and that
+        the gait is a periodic orbit.
+
+        Parameters
+        ----------
+        body : dict
+            A gait file's content without its checksum
+            (:func:`gait_opt.files.gait_body`).
+        model : BipedModel, optional
+            The robot the record must describe (default: its own).
+        where : str
+            What the record is, for the messages.
+        allow_open_orbit, orbit_tol
+            As :meth:`load`.
+
+        Returns
+        -------
+        Gait
+
+        Raises
+        ------
+        GaitFileError
+            Naming ``where`` and what is wrong.
+        """
         gait = cls.from_dict(body, model, where=where)
         T = gait.T
         r = gait.orbit_residual()

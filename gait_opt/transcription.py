@@ -41,6 +41,12 @@ objectives agree on the whole feasible set, so the NLPs have the same solutions,
 the second is a sum of per-point terms (no coupling through x_end), which is what makes
 the Hessian separable.  'torque_squared' is T * integral_0^1 u'u ds, also per point.
 Quadrature: the collocation (Gauss/Radau) weights.
+
+Speed as a parameter.  ``build_problem(..., speed_parameter=True)`` makes the speed the
+NLP's parameter p instead of a constant: it enters only the speed constraint
+x_end - p T (whose Hessian does not involve p) and the factor 1/p of the per-length
+cost, so one NLP and one solver serve every speed of a family
+(:mod:`gait_opt.family`), the derivatives unchanged in structure.
 """
 from __future__ import annotations
 
@@ -73,7 +79,8 @@ class Problem:
     """The transcribed NLP: ``nlp`` (x, f, g), bounds, the constraint families
     ``groups`` (name, start, stop) in g, ``unpack`` w -> (T, alpha, Xs, Xc, QA), and the
     structured exact derivatives in nlpsol's signatures: ``hess_lag`` (x, p, lam_f,
-    lam_g) -> triu(H), ``jac_g`` (x, p) -> (g, dg/dx), ``grad_f`` (x, p) -> (f, df/dx)."""
+    lam_g) -> triu(H), ``jac_g`` (x, p) -> (g, dg/dx), ``grad_f`` (x, p) -> (f, df/dx);
+    ``speed_parameter``: p is the speed (1 number; else p is empty)."""
 
     nlp: dict
     lift: ca.Function
@@ -88,6 +95,7 @@ class Problem:
     jac_g: ca.Function
     grad_f: ca.Function
     s_all: np.ndarray
+    speed_parameter: bool = False
 
 
 def _collocation(opts):
@@ -146,10 +154,12 @@ def _point_functions(model, bezier_degree: int, cost: str):
 
 def _boundary_function(model, opts: GaitOptions):
     """End of step, impact (paper eq. 2-3) and periodicity, as SX of
-    v_b = (T, vec(alpha), x(0), x(1)); returns (Function, [(name, rows, lo, hi)])."""
+    v_b = (T, vec(alpha), x(0), x(1)) and the speed v; returns (Function (vb, v),
+    Hessian Function (vb, lam), [(name, rows, lo, hi)])."""
     ref = reference_dynamics(model, opts.bezier_degree)
     M, nu = opts.bezier_degree, model.nu
     vb = ca.SX.sym("vb", 1 + nu * (M + 1) + 4)
+    v = ca.SX.sym("v")
     T = vb[0]
     alpha = ca.reshape(vb[1:1 + nu * (M + 1)], nu, M + 1)
     x0, x1 = vb[-4:-2], vb[-2:]
@@ -165,7 +175,7 @@ def _boundary_function(model, opts: GaitOptions):
         ("periodicity (q)", q_plus - ca.vertcat(x0[0], qa0), 0, 0),
         ("periodicity (dq)", dq_plus - ca.vertcat(x0[1], dqa0), 0, 0),
         ("swing foot on ground at T", z_end, 0, 0),
-        ("speed", x_end - opts.speed * T, 0, 0),
+        ("speed", x_end - v * T, 0, 0),
         ("step length", x_end, *opts.step_length_bounds),
         ("strike velocity", dz_end, -inf, -opts.min_strike_speed),
         ("lift-off velocity", v_old[1], opts.min_liftoff_speed, inf),
@@ -174,8 +184,8 @@ def _boundary_function(model, opts: GaitOptions):
     ]
     g = ca.cse(ca.vertcat(*[f[1] for f in families]))
     lam = ca.SX.sym("lam", g.numel())
-    Hb = ca.triu(ca.hessian(ca.dot(lam, g), vb)[0])
-    bnd = ca.Function("boundary", [vb], [g, ca.jacobian(g, vb)], ["vb"], ["g", "J"])
+    Hb = ca.triu(ca.hessian(ca.dot(lam, g), vb)[0])     # free of v: v T is linear in T
+    bnd = ca.Function("boundary", [vb, v], [g, ca.jacobian(g, vb)], ["vb", "v"], ["g", "J"])
     bnd_hess = ca.Function("boundary_hess", [vb, lam], [Hb], ["vb", "lam"], ["H"])
     return bnd, bnd_hess, families
 
@@ -319,22 +329,24 @@ def _point_constraints(model, opts, lay: _Layout, margins, OUT):
     return con, QA_of_alpha
 
 
-def _cost_of_outputs(model, opts, lay: _Layout, OUT):
+def _cost_of_outputs(model, opts, lay: _Layout, OUT, per_speed: bool = True):
     """(1/v) int_0^1 u'u ds (= int u'u dt / step length when x_end = v T), or
-    T int_0^1 u'u ds, by the collocation quadrature; scaled by 1e-3 for IPOPT."""
+    T int_0^1 u'u ds, by the collocation quadrature; scaled by 1e-3 for IPOPT.
+    ``per_speed`` False: without the factor 1/v (applied outside, v a parameter)."""
     rows, _, _ = _rows(model)
     _, _, _, Bq = _collocation(opts)
     weights = np.r_[np.zeros(lay.N + 1), np.tile(Bq, lay.N) * (1.0 / lay.N)]
-    if opts.cost == "torque_squared_per_length":
+    if opts.cost == "torque_squared_per_length" and per_speed:
         weights = weights / opts.speed
     cost_scale = 1e-3
     return cost_scale * ca.mtimes(OUT[rows["cost"], :], ca.DM(weights)), cost_scale
 
 
 def _jacobian_and_gradient(model, point_jac, point_cost, lay, z_index, z_all, xw, pw, gfun,
-                           A_out, G_w, a_out, bnd, vb_w):
+                           A_out, G_w, a_out, bnd, vb_w, speed, factor):
     """Structured constraint Jacobian and objective gradient: d vec(OUT)/dw is block
-    sparse (one 10x15 block per point for RABBIT, columns z_index)."""
+    sparse (one 10x15 block per point for RABBIT, columns z_index); ``speed`` a number
+    or the parameter, ``factor`` (1 or 1/speed) multiplies the objective."""
     npts, nw = lay.npts, lay.nw
     rows, n_out, n_z = _rows(model)
     vb_index = lay.boundary_index()
@@ -348,10 +360,10 @@ def _jacobian_and_gradient(model, point_jac, point_cost, lay, z_index, z_all, xw
     # triplet sparsity orders them column-major globally: permute
     order = np.lexsort(((ks * n_out + np.tile(rj, npts)), z_index[np.tile(cj, npts), ks]))
     dout = ca.MX(dout_sp, Jp.nz[order.tolist()])
-    _, Jb = bnd(vb_w)
+    _, Jb = bnd(vb_w, speed)
     select_b = ca.DM(ca.Sparsity.triplet(vb_index.size, nw, list(range(vb_index.size)),
                                          vb_index.tolist()), 1.0)
-    g_w = ca.densify(gfun(xw, out_v))
+    g_w = ca.densify(gfun(xw, out_v, pw))
     jac_g = ca.vertcat(G_w + ca.mtimes(A_out, dout), ca.mtimes(Jb, select_b))
     jac_g_fun = ca.Function("jac_g", [xw, pw], [g_w, jac_g], ["x", "p"], ["g", "jac_g_x"])
     # objective: only the cost density of the collocation points (weights a_k)
@@ -362,14 +374,17 @@ def _jacobian_and_gradient(model, point_jac, point_cost, lay, z_index, z_all, xw
     grad_w = ca.densify(ca.mtimes(ca.DM(ca.Sparsity.triplet(
         nw, n_z * cpts.size, z_index[:, cpts].ravel(order="F").tolist(),
         list(range(n_z * cpts.size))), 1.0), ca.vec(dgrad * ca.repmat(ca.DM(wk[cpts]).T, n_z, 1))))
+    if factor is not None:
+        f_w, grad_w = factor * f_w, factor * grad_w
     grad_f_fun = ca.Function("grad_f", [xw, pw], [f_w, grad_w], ["x", "p"], ["f", "grad_f_x"])
     return jac_g_fun, grad_f_fun
 
 
 def _hessian_of_lagrangian(model, point_hess, bnd_hess, lay, z_index, z_all, xw, pw, vb_w,
-                           A_out, a_out, n_linear, n_g):
+                           A_out, a_out, n_linear, n_g, factor):
     """Exact Hessian of the Lagrangian: per-point 15x15 and boundary Hessians scattered
-    into the global upper-triangular sparsity (see the module docstring)."""
+    into the global upper-triangular sparsity (see the module docstring); ``factor``
+    (None or 1/speed) multiplies the objective."""
     npts, nw = lay.npts, lay.nw
     _, n_out, _ = _rows(model)
     vb_index = lay.boundary_index()
@@ -388,7 +403,8 @@ def _hessian_of_lagrangian(model, point_hess, bnd_hess, lay, z_index, z_all, xw,
                                         list(range(lin.size))), 1.0)
     lam_f = ca.MX.sym("lam_f")
     lam_g = ca.MX.sym("lam_g", n_g)
-    c_all = ca.reshape(ca.mtimes(A_out.T, lam_g[:n_linear]) + lam_f * a_out, n_out, npts)
+    sigma = lam_f if factor is None else lam_f * factor
+    c_all = ca.reshape(ca.mtimes(A_out.T, lam_g[:n_linear]) + sigma * a_out, n_out, npts)
     Hp = point_hess.map(npts)(z_all, c_all)
     Hb = bnd_hess(vb_w, lam_g[n_linear:])
     contrib = ca.vertcat(Hp.nz[:], Hb.nz[:])
@@ -414,8 +430,9 @@ def _variable_bounds(model, opts, lay: _Layout):
     return lbx, ubx
 
 
-def build_problem(model, opts: GaitOptions, margins: dict | None = None) -> Problem:
-    """Transcribe the docs: theory §2 problem for ``opts`` (see the module docstring).
+def build_problem(model, opts: GaitOptions, margins: dict | None = None, *,
+                  speed_parameter: bool = False) -> Problem:
+    """Transcribe the default problem (docs: theory §2) for ``opts`` (see the module docstring).
 
     Parameters
     ----------
@@ -424,6 +441,9 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None) -> Prob
     margins : dict, optional
         Family of :data:`MARGINS` -> amount: tightens the path constraints at the nodes,
         so that they hold between the nodes too (see :func:`gait_opt.solve_gait`).
+    speed_parameter : bool
+        The speed is the NLP's parameter p (given to the solver at each call;
+        ``opts.speed`` unused) instead of a constant.
 
     Returns
     -------
@@ -440,20 +460,29 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None) -> Prob
     OUT = ca.MX.sym("OUT", n_out, npts)
     con, QA_of_alpha = _point_constraints(model, opts, lay, margins, OUT)
     n_linear = con.size
+    g_linear = ca.vertcat(*con.g)          # the rows before the boundary (free of p)
     bnd, bnd_hess, families = _boundary_function(model, opts)
-    g_b, _ = bnd(ca.vertcat(lay.T, ca.vec(lay.alpha), lay.Xs[:, 0], lay.Xs[:, lay.N]))
+    p_nlp = ca.MX.sym("p", int(speed_parameter))
+    pw = ca.MX.sym("p", int(speed_parameter))
+    speed_nlp, speed_w = (p_nlp, pw) if speed_parameter else (opts.speed, opts.speed)
+    per_length = opts.cost == "torque_squared_per_length"
+    factor_nlp, factor_w = ((1 / p_nlp, 1 / pw) if speed_parameter and per_length
+                            else (None, None))
+    g_b, _ = bnd(ca.vertcat(lay.T, ca.vec(lay.alpha), lay.Xs[:, 0], lay.Xs[:, lay.N]),
+                 speed_nlp)
     row = 0
     for name, expr, lo, hi in families:
         n = expr.numel()
         con.add(name, g_b[row:row + n], lo, hi)
         row += n
-    J_of_out, cost_scale = _cost_of_outputs(model, opts, lay, OUT)
+    J_of_out, cost_scale = _cost_of_outputs(model, opts, lay, OUT,
+                                            per_speed=not speed_parameter)
 
     g_of_out = ca.vertcat(*con.g)
     # the point outputs enter g and f linearly, and the other terms of g are linear in w
     # (or the boundary function): constant pull-back maps
-    jac = ca.Function("pullback", [w, OUT], [ca.jacobian(g_of_out[:n_linear], OUT),
-                                             ca.jacobian(g_of_out[:n_linear], w),
+    jac = ca.Function("pullback", [w, OUT], [ca.jacobian(g_linear, OUT),
+                                             ca.jacobian(g_linear, w),
                                              ca.vec(ca.gradient(J_of_out, OUT))])
     A_out, G_w, a_out = jac(np.zeros(w.numel()), np.zeros(OUT.shape))
     check = jac(np.linspace(-1, 1, w.numel()), np.ones(OUT.shape))
@@ -463,25 +492,29 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None) -> Prob
     point, point_jac, point_cost, point_hess = _point_functions(model, lay.M, opts.cost)
     Z_all = ca.vertcat(ca.horzcat(lay.Xs, lay.Xc), lay.QA, ca.repmat(lay.T, 1, npts))
     out_all = point.map(npts)(Z_all)
-    gfun = ca.Function("g_of_out", [w, OUT], [g_of_out])
+    gfun = ca.Function("g_of_out", [w, OUT, p_nlp], [g_of_out])
     ffun = ca.Function("f_of_out", [w, OUT], [J_of_out])
-    nlp = {"x": w, "f": ffun(w, out_all), "g": gfun(w, out_all)}
+    f_nlp = ffun(w, out_all) if factor_nlp is None else factor_nlp * ffun(w, out_all)
+    nlp = {"x": w, "f": f_nlp, "g": gfun(w, out_all, p_nlp)}
+    if speed_parameter:
+        nlp["p"] = p_nlp
 
     z_index = lay.z_index()
     xw = ca.MX.sym("x", lay.nw)
-    pw = ca.MX.sym("p", 0, 1)
     z_all = ca.reshape(xw[z_index.ravel(order="F").tolist()], n_z, npts)
     vb_w = xw[lay.boundary_index().tolist()]
     jac_g_fun, grad_f_fun = _jacobian_and_gradient(model, point_jac, point_cost, lay, z_index,
                                                    z_all, xw, pw, gfun, A_out, G_w, a_out,
-                                                   bnd, vb_w)
+                                                   bnd, vb_w, speed_w, factor_w)
     hess_lag = _hessian_of_lagrangian(model, point_hess, bnd_hess, lay, z_index, z_all, xw,
-                                      pw, vb_w, A_out, a_out, n_linear, g_of_out.numel())
+                                      pw, vb_w, A_out, a_out, n_linear, g_of_out.numel(),
+                                      factor_w)
     lbx, ubx = _variable_bounds(model, opts, lay)
     unpack = ca.Function("unpack", [w], [lay.T, lay.alpha, lay.Xs, lay.Xc, QA_of_alpha])
     lift = ca.Function("lift", [lay.alpha], [QA_of_alpha])
     return Problem(nlp, lift, lbx, ubx, np.concatenate(con.lbg), np.concatenate(con.ubg),
-                   con.groups, unpack, cost_scale, hess_lag, jac_g_fun, grad_f_fun, lay.s_all)
+                   con.groups, unpack, cost_scale, hess_lag, jac_g_fun, grad_f_fun, lay.s_all,
+                   speed_parameter)
 
 
 def initial_guess(model, opts: GaitOptions):

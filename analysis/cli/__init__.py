@@ -58,12 +58,14 @@ def cmd_model(args):
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line usage errors (``biped eig: error: ... (see --help)``), and
     negative numbers in any notation taken as values (``--range -1e6 1e6``,
-    ``--perturb-q -1e-3 ...``, ``--m1 -inf ...``), not as unknown options."""
+    ``--perturb-q -1e-3 ...``, ``--m1 -inf ...``, ``--speeds -1:1:0.5``), not as unknown
+    options."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(
-            r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
+            r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$"
+            r"|^-[\d.]+[eE0-9+-]*:[^ ]*$", re.IGNORECASE)     # and -A:B:STEP ranges
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {_one_line(message)} (see '{self.prog} "

@@ -10,6 +10,7 @@ from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 
 from .common import (Progress, UserError, add_robot, load_model, output_dir, output_file,
                      print_json)
+from .gait_family import add_family_arguments, check_family_arguments, cmd_family, cmd_gait_at
 from .gait_import import add_import_arguments, cmd_import
 
 #: --intervals beyond this make an NLP that takes minutes per iteration
@@ -21,8 +22,10 @@ def register(sub):
         "gait", help="optimise, check and save the cyclic reference gait",
         description="Optimise the cyclic reference step (direct collocation + IPOPT, then "
                     "the exact periodic orbit), check it on a dense grid, print its "
-                    "figures and save it to a self-describing JSON file.")
-    p.add_argument("--speed", type=float, default=0.75, metavar="V",
+                    "figures and save it to a self-describing JSON file.  With --speeds: "
+                    "a family of gaits over a range of speeds, by continuation; with "
+                    "--family and --speed: a gait between a family's members.")
+    p.add_argument("--speed", type=float, default=None, metavar="V",
                    help="average speed in m/s (default 0.75)")
     p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
     p.add_argument("--torque-limit", type=float, default=None, metavar="U",
@@ -48,10 +51,13 @@ def register(sub):
                    help="mid-step swing-foot clearance, m (default 0.03; the robust "
                         "design's gait uses 0.05)")
     add_robot(p, with_gait=False, params_alias=True)
-    p.add_argument("--out", metavar="FILE", default="gait.json",
-                   help="where to save the gait (default gait.json)")
+    add_family_arguments(p)
+    p.add_argument("--out", metavar="FILE", default=None,
+                   help="where to save the gait (default gait.json; with --speeds, the "
+                        "family: default family.json)")
     p.add_argument("--plot", metavar="DIR",
-                   help="write gait_stick.png and gait_profiles.png into DIR")
+                   help="write gait_stick.png and gait_profiles.png into DIR (with "
+                        "--speeds: gait_family.png, the figures against speed)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_import_arguments(p)
     p.set_defaults(func=cmd_gait)
@@ -61,6 +67,7 @@ def cmd_gait(args):
     if args.clearance is not None and not (math.isfinite(args.clearance)
                                            and args.clearance >= 0):
         raise UserError(f"--clearance must be a number >= 0 (m), got {args.clearance:g}")
+    check_family_arguments(args)
     for name in ("speed", "mu", "torque_limit", "impact_mu", "continuation"):
         v = getattr(args, name)
         if v is not None and not (math.isfinite(v) and v > 0):
@@ -74,19 +81,27 @@ def cmd_gait(args):
     if args.max_iter is not None and args.max_iter < 1:
         raise UserError(f"--max-iter must be >= 1, got {args.max_iter}")
     if args.import_file is not None:
+        if args.speeds is not None or args.family is not None:
+            raise UserError("--import brings in one gait: it excludes --speeds and --family")
+        args.out = "gait.json" if args.out is None else args.out
         return cmd_import(args)
-    out = output_file(args.out, "--out")               # before the solve, not after
-    folder = output_dir(args.plot, "--plot") if args.plot is not None else None
-    model = load_model(args.robot)
-    options = GaitOptions(speed=args.speed, mu=args.mu, torque_limit=args.torque_limit,
+    if args.family is not None:
+        return cmd_gait_at(args)
+    speed = 0.75 if args.speed is None else args.speed
+    options = GaitOptions(speed=speed, mu=args.mu, torque_limit=args.torque_limit,
                           n_intervals=args.intervals, scheme=args.scheme,
                           ipopt={} if args.max_iter is None else {"max_iter": args.max_iter},
                           impact_mu=args.impact_mu, continuation=args.continuation,
                           continuation_shape=args.continuation_shape,
                           **({} if args.clearance is None else {"clearance": args.clearance}))
+    if args.speeds is not None:
+        return cmd_family(args, options)
+    out = output_file("gait.json" if args.out is None else args.out, "--out")  # before the solve
+    folder = output_dir(args.plot, "--plot") if args.plot is not None else None
+    model = load_model(args.robot)
 
     say = Progress("gait", quiet=args.json)
-    say(f"optimising the gait at {args.speed:g} m/s (about 6 s on a loaded 2-core VM) ...")
+    say(f"optimising the gait at {speed:g} m/s (about 6 s on a loaded 2-core VM) ...")
     try:
         gait = optimize_gait(model, options)
     except GaitOptimizationError as e:

@@ -1,0 +1,105 @@
+"""A gait family against speed: cost of transport, step length, period, peak torque,
+impact impulse ratio and the virtual constraints' eigenvalue (computed by
+:func:`analysis.family.family_figures`)."""
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from .common import _figure
+
+__all__ = ["gait_family_plot"]
+
+#: (field, axis label, reference line field or value, its label)
+_PANELS = (
+    ("cost_of_transport", "mechanical cost of transport", None, None),
+    ("step_length", "step length, m", None, None),
+    ("period", "step period T, s", None, None),
+    ("peak_torque", "peak |u|, N m", "torque_limit", "torque limit"),
+    ("impact_impulse_ratio", "friction ratio |F_x| / F_z", "impact_mu", "impulse bound"),
+    ("vc_eigenvalue", "virtual constraints' eigenvalue", 1.0, "stability limit"),
+)
+_MARKERS = "osD^vP*X"
+_COLOURS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
+
+
+def gait_family_plot(figures, title: str | None = None) -> Figure:
+    """Six panels against speed, one per figure of a gait family.
+
+    Members on different branches (a fold crossed) get different colours and markers and
+    are not joined; a grey band marks the speeds between which each fold was located;
+    dotted lines mark where an inequality constraint becomes active (in the panel it
+    bounds: torque limit, friction and impulse cones).  The impulse panel also shows the
+    largest friction ratio along the step (dashed).
+
+    Parameters
+    ----------
+    figures : FamilyFigures
+        From :func:`analysis.family.family_figures`.
+    title : str, optional
+
+    Returns
+    -------
+    Figure
+    """
+    fig = _figure(figsize=(11, 6.4))
+    axes = fig.subplots(2, 3, sharex=True).ravel()
+    v = np.asarray(figures.speed, float)
+    branch = np.asarray(figures.branch, int)
+    folds = [e for e in figures.events if e["change"] == "branch"]
+    for k, (ax, (name, label, ref, ref_label)) in enumerate(zip(axes, _PANELS)):
+        y = np.asarray(getattr(figures, name), float)
+        for b in np.unique(branch):
+            on = branch == b
+            ax.plot(v[on], y[on], _MARKERS[b % len(_MARKERS)] + "-", ms=4, lw=1.2,
+                    color=_COLOURS[b % len(_COLOURS)],
+                    label=_line_label(name, b, bool(folds), k))
+        if name == "impact_impulse_ratio":
+            ax.plot(v, figures.friction_ratio, "--", color="0.5", lw=1,
+                    label="max |F_x| / F_z along the step")
+            if figures.mu != figures.impact_mu:
+                ax.axhline(figures.mu, color="tab:red", lw=1, ls=":", label="mu")
+        level = getattr(figures, ref) if isinstance(ref, str) else ref
+        if level is not None and np.isfinite(level) and (
+                ref != "torque_limit" or np.nanmax(y) > 0.5 * level):
+            ax.axhline(level, color="tab:red", lw=1, ls="--", label=ref_label)
+        for e in folds:
+            ax.axvspan(e.get("speed_low", e["speed"]), e.get("speed_high", e["speed"]),
+                       color="0.6", alpha=0.35, lw=0,
+                       label="fold located here" if k == 0 else None)
+        _mark_activations(ax, name, figures.events)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7, loc="best")
+    for ax in axes[3:]:
+        ax.set_xlabel("speed, m/s")
+    n_folds = f", {len(folds)} fold(s) crossed (grey)" if folds else ""
+    fig.suptitle(title or f"Gait family of {figures.robot}: {len(v)} gaits from {v.min():g} "
+                 f"to {v.max():g} m/s{n_folds}", fontsize=11)
+    fig.tight_layout()
+    return fig
+
+
+def _line_label(panel, branch, folds, k):
+    """The legend label of a branch's line: branches in the first panel, and what the
+    friction panel's solid line is."""
+    if panel == "impact_impulse_ratio":
+        return "impact impulse" + (f" (branch {branch + 1})" if folds else "")
+    return f"branch {branch + 1}" if folds and k == 0 else None
+
+
+#: the panel where each constraint family's activation is marked
+_BOUNDS = {"torque limit": "peak_torque", "friction cone": "impact_impulse_ratio",
+           "impact impulse cone": "impact_impulse_ratio", "step length": "step_length",
+           "step time bounds": "period"}
+
+
+def _mark_activations(ax, panel, events):
+    """Dotted vertical lines where a constraint bounding this panel becomes active."""
+    for e in events:
+        if e["change"] == "active" and _BOUNDS.get(e["constraint"]) == panel:
+            ax.axvline(e["speed"], color="tab:orange", lw=1, ls=":")
+            ax.annotate(f"{e['constraint']} active", (e["speed"], 0.02),
+                        xycoords=("data", "axes fraction"), rotation=90, fontsize=6,
+                        color="tab:orange", ha="right", va="bottom")

@@ -1,0 +1,227 @@
+"""The gait family file: one JSON file holding a family's members and records.
+
+A file holds ``format`` ('biped-casadi-gait-family'), ``version``, ``robot`` (the robot
+description), ``options`` (the :class:`~gait_opt.GaitOptions` of the problem without
+its speed), ``speeds`` (the requested grid), the family's ``status``, ``message``,
+``events``, ``end``, ``total_time``, ``build_time``, one ``records`` entry per member,
+``members`` (each a complete gait file body, its own ``sha256`` included: a member
+written out alone is a gait file) and ``sha256``, the
+:func:`biped_casadi.caching.digest` of the rest.  Reading checks all of it and every
+member as :meth:`Gait.load <gait_opt.Gait.load>` checks a gait file (checksum, robot,
+options, solution, a periodic orbit); every problem is a :class:`GaitFileError` naming
+the file and the reason.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from biped_casadi.caching import digest
+from biped_casadi.files import read_text_file, write_text_atomic
+
+from .files import GaitFileError, gait_body
+from .gait import Gait
+from .options import GaitOptions
+
+__all__ = ["FAMILY_FORMAT", "FAMILY_VERSION", "family_body", "write_family",
+           "read_family_file", "options_record", "RECORD_FIELDS"]
+
+FAMILY_FORMAT = "biped-casadi-gait-family"
+FAMILY_VERSION = 1
+#: a family file larger than this is not one this toolkit wrote
+MAX_FAMILY_BYTES = 500_000_000
+#: the fields of a member's record (:class:`gait_opt.family.MemberRecord`)
+RECORD_FIELDS = ("speed", "status", "iterations", "substeps", "failed_steps", "time", "T",
+                 "step_length", "cost", "orbit_residual", "polish_residual",
+                 "polish_change", "active", "margins", "violations", "branch")
+STATUSES = ("complete", "ended", "violates", "partial")
+_KEYS = ("format", "version", "robot", "options", "speeds", "status", "message", "events",
+         "end", "total_time", "build_time", "records", "members", "sha256")
+
+
+def options_record(options: GaitOptions) -> dict:
+    """The options as a family file records them: without the speed."""
+    d = options.to_dict()
+    d.pop("speed", None)
+    return d
+
+
+def family_body(robot: dict, options: GaitOptions, speeds, meta: dict, records: list,
+                gaits: list) -> dict:
+    """The content of a family file, its checksum included.
+
+    Parameters
+    ----------
+    robot : dict
+        The robot description's record.
+    options : GaitOptions
+        The problem (its speed left out).
+    speeds : sequence of float
+        The requested speeds.
+    meta : dict
+        ``status``, ``message``, ``events``, ``end``, ``total_time``, ``build_time``.
+    records : list of dict
+        One per member (:data:`RECORD_FIELDS`).
+    gaits : list of Gait
+        The members.
+
+    Returns
+    -------
+    dict
+    """
+    members = []
+    for g in gaits:
+        m = g.to_dict()
+        m["sha256"] = digest(m)
+        members.append(m)
+    body = dict(format=FAMILY_FORMAT, version=FAMILY_VERSION, robot=robot,
+                options=options_record(options), speeds=[float(v) for v in speeds],
+                **{k: meta[k] for k in ("status", "message", "events", "end", "total_time",
+                                        "build_time")},
+                records=records, members=members)
+    body = json.loads(json.dumps(body, default=_plain))
+    body["sha256"] = digest(body)
+    return body
+
+
+def _plain(o):
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    raise TypeError(f"not JSON: {type(o).__name__}")
+
+
+def write_family(path, body: dict) -> Path:
+    """Write a family file's content atomically (complete or absent).
+
+    Parameters
+    ----------
+    path : str or Path
+    body : dict
+        From :func:`family_body`.
+
+    Returns
+    -------
+    Path
+    """
+    return write_text_atomic(Path(path), json.dumps(body, indent=1, allow_nan=False))
+
+
+def read_family_file(path, model=None) -> dict:
+    """Read and validate a family file.
+
+    Parameters
+    ----------
+    path : str or Path
+    model : BipedModel, optional
+        The robot the members must be of (default: the file's).
+
+    Returns
+    -------
+    dict
+        ``options`` (GaitOptions, speed of the first member), ``speeds``, ``status``,
+        ``message``, ``events``, ``end``, ``total_time``, ``build_time``, ``records``
+        (list of dict) and ``gaits`` (list of Gait).
+
+    Raises
+    ------
+    GaitFileError
+        Naming the file and what is wrong.
+    """
+    path = Path(path)
+    where = f"gait family file {path}"
+    try:
+        text = read_text_file(path, "gait family file", MAX_FAMILY_BYTES)
+        body = json.loads(text) if text.strip() else None
+    except (json.JSONDecodeError, RecursionError) as e:
+        raise GaitFileError(f"{where} is not valid JSON (truncated or corrupted?): {e}") \
+            from None
+    except ValueError as e:
+        raise GaitFileError(str(e)) from None
+    if body is None:
+        raise GaitFileError(f"{where} is empty")
+    _envelope(body, where, path)
+    if not isinstance(body["options"], dict):
+        raise GaitFileError(f"{where}: 'options' must be an object")
+    try:
+        opts = GaitOptions.from_dict(body["options"])
+    except (TypeError, ValueError) as e:
+        raise GaitFileError(f"{where}: invalid 'options': {e}") from None
+    speeds = _speeds(body["speeds"], where)
+    records = _records(body["records"], where)
+    got = [float(r["speed"]) for r in records]
+    if len(got) > len(speeds) or any(abs(a - b) > 1e-9 for a, b in zip(got, speeds)):
+        raise GaitFileError(f"{where}: the records' speeds are not the first of 'speeds'")
+    members = body["members"]
+    if not isinstance(members, list) or len(members) != len(records):
+        raise GaitFileError(f"{where}: 'members' must be a list of one gait per record "
+                            f"({len(records)})")
+    gaits = [_member(m, i, r, model, opts, body["robot"], where)
+             for i, (m, r) in enumerate(zip(members, records))]
+    if gaits:
+        opts = gaits[0].options
+    if not isinstance(body["events"], list):
+        raise GaitFileError(f"{where}: 'events' must be a list")
+    if body["end"] is not None and not isinstance(body["end"], dict):
+        raise GaitFileError(f"{where}: 'end' must be an object or null")
+    if body["status"] not in STATUSES:
+        raise GaitFileError(f"{where}: unknown status {body['status']!r}")
+    return dict(options=opts, speeds=speeds, records=records, gaits=gaits,
+                **{k: body[k] for k in ("status", "message", "events", "end", "total_time",
+                                        "build_time")})
+
+
+def _envelope(body, where, path):
+    """Format, version, checksum and keys of a family file."""
+    if not isinstance(body, dict) or body.get("format") != FAMILY_FORMAT:
+        raise GaitFileError(f"{path} is not a {FAMILY_FORMAT} file")
+    if body.get("version") != FAMILY_VERSION:
+        raise GaitFileError(f"{path} has format version {body.get('version')!r}; this "
+                            f"toolkit reads version {FAMILY_VERSION}")
+    rest = {k: v for k, v in body.items() if k != "sha256"}
+    if body.get("sha256") != digest(rest):
+        raise GaitFileError(f"{where} is corrupted (checksum mismatch)")
+    missing = [k for k in _KEYS if k not in body]
+    unknown = sorted(set(body) - set(_KEYS))
+    if missing or unknown:
+        raise GaitFileError(f"{where}: " + "; ".join(
+            ([f"missing key(s): {', '.join(missing)}"] if missing else [])
+            + ([f"unknown key(s): {', '.join(unknown)}"] if unknown else [])))
+
+
+def _speeds(speeds, where):
+    ok = (isinstance(speeds, list) and len(speeds) >= 2 and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+        for v in speeds) and all(b > a for a, b in zip(speeds, speeds[1:])))
+    if not ok:
+        raise GaitFileError(f"{where}: 'speeds' must be at least two increasing positive "
+                            f"numbers")
+    return [float(v) for v in speeds]
+
+
+def _records(records, where):
+    if not isinstance(records, list):
+        raise GaitFileError(f"{where}: 'records' must be a list")
+    for i, r in enumerate(records):
+        if not isinstance(r, dict) or set(r) != set(RECORD_FIELDS):
+            raise GaitFileError(f"{where}: record {i + 1} must have the fields "
+                                f"{', '.join(RECORD_FIELDS)}")
+        if not isinstance(r["speed"], (int, float)) or not math.isfinite(r["speed"]):
+            raise GaitFileError(f"{where}: record {i + 1}: 'speed' must be a number")
+    return records
+
+
+def _member(body, i, record, model, opts, robot, where):
+    """Member ``i``: a gait file body, checked as a gait file, of the family's robot,
+    options and the record's speed."""
+    here = f"{where}: member {i + 1}"
+    inner = gait_body(body, here)
+    if inner.get("robot") != robot:
+        raise GaitFileError(f"{here} is of another robot than the family")
+    gait = Gait.from_record(inner, model, where=here)
+    if options_record(gait.options) != options_record(opts.for_model(gait.model)):
+        raise GaitFileError(f"{here} was made with other options than the family's")
+    if abs(gait.options.speed - float(record["speed"])) > 1e-12:
+        raise GaitFileError(f"{here} is at {gait.options.speed:g} m/s, its record at "
+                            f"{record['speed']:g} m/s")
+    return gait
