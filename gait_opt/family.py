@@ -8,7 +8,7 @@ the speed as its parameter, IPOPT's primal-dual warm start from the secant predi
 steps halved where a solve fails).  Every member is made an exact periodic orbit by the
 same polish as :func:`optimize_gait` (:mod:`gait_opt.polish`) and checked on the same
 dense grid; where an active constraint is exceeded between the nodes, its node margin
-is tightened and the speed solved again, as :func:`solve_gait` does.  Where the
+is tightened and the speed solved again, as :func:`optimize_gait` does.  Where the
 family ends (no solution at the smallest step, a fold, the polish failing) the result
 says where and why; where a constraint becomes active or inactive it records the event.
 
@@ -30,7 +30,7 @@ from biped_casadi.results import Result, internal
 from .errors import GaitOptimizationError
 from .family_file import family_body, read_family_file, write_family
 from .gait import ORBIT_TOL, Gait
-from .optimize import solve_gait
+from .optimize import _solve as solve_once
 from .options import GaitOptions
 from .polish import polish
 from .transcription import describe_violations
@@ -183,7 +183,7 @@ class MemberRecord:
         Inequality families active at the NLP solution.
     margins : dict
         The node margins the member needed (:data:`gait_opt.transcription.MARGINS`;
-        found from none at each speed, as :func:`gait_opt.solve_gait` does).
+        found from none at each speed, as :func:`gait_opt.optimize_gait` does).
     violations : list
         [family, amount] exceeded on the dense grid (empty for a valid gait).
     branch : int
@@ -528,7 +528,7 @@ def _gait_at(family: GaitFamily, speed, resolve: bool) -> FamilyGait:
     what = "interpolated between the members and polished"
     iterations = 0
     if resolve:
-        res = solve_gait(model, opts_v, warm_start=gait)
+        res = solve_once(model, opts_v, warm_start=gait)
         if res.gait is None:
             return FamilyGait(status="failed", message=f"the re-solve failed: {res.message}",
                               orbit_residual=gait.orbit_residual()["worst"], violations=[],
@@ -560,7 +560,7 @@ def _between_branches(family, v, near) -> FamilyGait:
     fields = dict(speed=v, neighbours=near, interpolant_residual=math.nan,
                   interpolant_orbit_residual=math.nan, parameter_change=math.nan,
                   T_change=math.nan)
-    res = solve_gait(family.model, family.options.replace(speed=v), warm_start=start)
+    res = solve_once(family.model, family.options.replace(speed=v), warm_start=start)
     if res.gait is None:
         return FamilyGait(status="failed", message=f"between two branches of the family; "
                           f"the solve from the member at {src:g} m/s failed: {res.message}",

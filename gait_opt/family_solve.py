@@ -38,7 +38,7 @@ def _nlp_for(model, opts, state, margins):
 def _member(model, opts, points, adv, state, max_refinements):
     """Polish the solution at the target speed, check it on the dense grid, and where an
     active constraint is exceeded between the nodes tighten its node margin by twice the
-    excess and solve again, from no margin at each speed, as :func:`gait_opt.solve_gait`
+    excess and solve again, from no margin at each speed, as :func:`gait_opt.optimize_gait`
     does (so that each member solves the same problem as a cold solve).  Returns
     (gait, record); raises GaitOptimizationError when the polish fails."""
     t0 = time.perf_counter()
@@ -182,7 +182,7 @@ def gait_family(model, speeds, options: GaitOptions | None = None, *, path=None,
     verbose : bool
         Print IPOPT's iterations.
     max_refinements : int
-        Node-margin refinements per member (as :func:`gait_opt.solve_gait`).
+        Node-margin refinements per member (as :func:`gait_opt.optimize_gait`).
 
     Returns
     -------
