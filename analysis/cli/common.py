@@ -21,7 +21,7 @@ from gait_opt import Gait, OpenOrbitWarning, optimize_gait
 
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
-           "add_gait_arguments", "add_scheduler"]
+           "add_gait_arguments", "add_scheduler", "is_family_file"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
               "(.toml, schema in biped_casadi.model.description) or a URDF file (.urdf)")
@@ -108,6 +108,17 @@ def load_gait(args, progress: Progress):
         else:                                         # not ours: pass it on
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return gait
+
+
+def is_family_file(path) -> bool:
+    """Whether ``path`` looks like a gait family file (its format field), without
+    validating it (the loader does, with its own errors)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4096).decode("utf-8", "ignore")
+    except OSError:
+        return False
+    return '"biped-casadi-gait-family"' in head
 
 
 def check_m1_values(values):

@@ -10,7 +10,10 @@ from analysis.design import (
     optimize_m1,
     robust_design,
 )
-from analysis.design.codesign import CodesignError, CodesignSettings, codesign
+from analysis.design.codesign import QUICK, CodesignError, CodesignSettings, codesign
+from analysis.design.family import family_designs
+from analysis.reporting.plots import family_designs_plot, save_figures
+from gait_opt import GaitFamily
 from analysis.sweeps import grid_best
 
 from .common import (
@@ -19,13 +22,17 @@ from .common import (
     add_gait_arguments,
     add_robot,
     add_scheduler,
+    is_family_file,
+    output_dir,
+    output_file,
     load_gait,
     load_model,
     positive,
     print_json,
 )
 
-ROBUST_ONLY = ("--samples", "--starts", "--seed", "--mu", "--scheduler", "--workers",
+ROBUST_ONLY = ("--samples", "--starts", "--seed", "--mu", "--scheduler", "--workers", "--out",
+               "--plot",
                "--no-cache", "--method")
 
 
@@ -56,6 +63,11 @@ def cmd_robust_design(args, say):
     _robust_defaults(args)
     if args.method == "search":
         return _search(args, say)
+    if args.gait and is_family_file(args.gait):
+        return _family(args, say)
+    if args.out is not None or args.plot is not None:
+        raise UserError("--out and --plot apply to --robust with a gait family (--gait "
+                        "FAMILY.json)")
     model = load_model(args.robot) if not args.gait else None
     gait = None
     if args.gait:
@@ -101,6 +113,44 @@ def cmd_robust_design(args, say):
           f"{r.ipopt['evaluations']} evaluations; last status {r.ipopt['status']}; "
           f"computed in {r.elapsed:.0f} s")
     print("  replay: biped simulate " + " ".join(r.simulate_args))
+    return 0
+
+
+def _family(args, say):
+    """``biped m1 --robust --gait FAMILY.json``: the designs over a gait family."""
+    out = output_file(args.out, "--out") if args.out is not None else None
+    folder = output_dir(args.plot, "--plot") if args.plot is not None else None
+    fam = GaitFamily.load(args.gait, load_model(args.robot) if args.robot else None)
+    say(f"designs over the family: the gait-fixed co-design at each of its {len(fam)} "
+        "speeds (side by side), an M1 schedule over speed, one M1 for all; each measured "
+        "at every speed (about a minute per speed on 2 cores the first time)")
+    st = QUICK.replace(**{k: v for k, v in (("samples", args.samples), ("kept", args.starts),
+                                           ("seed", args.seed), ("mu", args.mu))
+                          if v is not None})
+    try:
+        r = family_designs(fam, st, progress=say, scheduler=args.scheduler,
+                           workers=args.workers)
+    except CodesignError as e:
+        raise UserError(str(e)) from None
+    d = r.to_dict()
+    if out is not None:
+        d["schedule_file"] = str(r.schedule.save(out))
+    if folder is not None:
+        d["plots"] = save_figures({"family_designs": family_designs_plot(r)}, folder)
+    if args.json:
+        print_json(d)
+        return 0
+    print(r.message)
+    for rec in r.records:
+        print(f"  {rec['speed']:.3g} m/s: " + "; ".join(
+            f"{lab} s* {v['s_star']:.3g}, max|lambda| {v['max_abs']:.3g}"
+            for lab, v in rec["designs"].items()))
+    print(f"  schedule: degree {r.schedule.degree} in speed, rejoin {r.schedule.rejoin} T"
+          + (f" ({d['schedule_file']})" if out is not None else ""))
+    print(f"  one M1 for all speeds: {np.round(r.single['M1'], 4).tolist()} (the co-design "
+          f"at {r.single['from_speed']:g} m/s)")
+    for f in d.get("plots", []):
+        print(f"  plot {f}")
     return 0
 
 
@@ -211,6 +261,12 @@ def register(sub):
     p.add_argument("--mu", type=float,
                    help="with --robust: friction coefficient (0.6)")
     add_scheduler(p)
+    p.add_argument("--out", metavar="FILE",
+                   help="with --robust and a gait family (--gait FAMILY.json): write the M1 "
+                        "schedule over speed there (JSON; biped simulate --schedule reads it)")
+    p.add_argument("--plot", metavar="DIR",
+                   help="with --robust and a gait family: family_designs.png into DIR "
+                        "(max|lambda|, s* and the basin against speed)")
     p.add_argument("--no-cache", action="store_true",
                    help="with --robust: search again instead of reading a cached result")
     p.add_argument("--json", action="store_true", help="print one JSON object")

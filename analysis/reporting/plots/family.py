@@ -8,7 +8,7 @@ from matplotlib.figure import Figure
 
 from .common import _figure
 
-__all__ = ["gait_family_plot"]
+__all__ = ["gait_family_plot", "family_designs_plot"]
 
 #: (field, axis label, reference line field or value, its label)
 _PANELS = (
@@ -103,3 +103,54 @@ def _mark_activations(ax, panel, events):
             ax.annotate(f"{e['constraint']} active", (e["speed"], 0.02),
                         xycoords=("data", "axes fraction"), rotation=90, fontsize=6,
                         color="tab:orange", ha="right", va="bottom")
+
+
+_DESIGN_STYLE = {"co-design at each speed": ("tab:blue", "o", "-"),
+                 "M1 scheduled over speed": ("tab:orange", "s", "--"),
+                 "one M1 for all speeds": ("tab:purple", "^", ":"),
+                 "virtual constraints": ("tab:green", "D", "-")}
+
+
+def family_designs_plot(designs, title: str | None = None) -> Figure:
+    """max|λ|, s* and the basin against speed for the designs over a gait family.
+
+    Parameters
+    ----------
+    designs : FamilyDesigns
+        From :func:`analysis.design.family.family_designs`.
+    title : str, optional
+        The figure's title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    rec = designs.records
+    v = np.array([r["speed"] for r in rec])
+    basins = all("basin_area" in d for r in rec for d in r["designs"].values())
+    panels = [("max_abs", "max |λ| of A^z (VC: |eigenvalue|)"),
+              ("s_star", "s*: largest scale of the paper's\nperturbation survived")]
+    if basins:
+        panels.append(("basin_area", "basin: converged area\n(rad x rad/s)"))
+    fig = _figure(figsize=(7.0, 2.4 * len(panels) + 0.6))
+    axes = fig.subplots(len(panels), 1, sharex=True)
+    for ax, (key, label) in zip(np.atleast_1d(axes), panels):
+        for name, (c, m, ls) in _DESIGN_STYLE.items():
+            y = [r["designs"][name].get(key, np.nan) for r in rec]
+            ax.plot(v, y, color=c, marker=m, ls=ls, ms=4, label=name)
+        if key == "max_abs":
+            # deadbeat points are below the map's accuracy (about 1e-4): drawn at 1e-4
+            ax.plot(v, [max(r["deadbeat"]["max_abs"], 1e-4) for r in rec], color="grey",
+                    marker="x", ls="", label="deadbeat M1 NLP, group 1 (< 1e-4)")
+            ax.axhline(1.0, color="red", lw=0.8, ls=":", label="stability limit")
+            ax.set_yscale("log")
+        if key == "s_star":
+            ax.axhline(1.0, color="grey", lw=0.8, ls="--", label="the paper's perturbation")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    np.atleast_1d(axes)[0].legend(fontsize=7, loc="best")
+    np.atleast_1d(axes)[-1].set_xlabel("speed, m/s")
+    fig.suptitle(title or "Designs over the gait family: max|λ|, s* and basin against "
+                          "speed", fontsize=10)
+    fig.tight_layout()
+    return fig

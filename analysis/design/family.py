@@ -1,0 +1,310 @@
+"""Designs over a gait family: the gait-fixed co-design and the deadbeat M1 NLP at every
+speed, one M1 scheduled smoothly over speed (a polynomial fitted to the co-designs) and
+one M1 for all speeds, each measured at every speed (max|lambda|, s*, and the basin's
+converged fraction and area) beside virtual constraints.
+
+The co-designs of the speeds are independent: they run side by side as flows of the task
+engine (:func:`family_designs_flow`), every unit of each kept by its inputs.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from biped_casadi import Design
+from biped_casadi.files import write_text_atomic
+from biped_casadi.results import Result, internal
+
+from ..robustness.basin import basin
+from ..robustness.s_star import RobustnessSettings, kept_directions, robustness
+from ..tasks import Engine, task
+from .codesign import QUICK, CodesignSettings, codesign_flow
+from .m1_nlp import optimize_m1
+
+__all__ = ["FamilyDesigns", "M1Schedule", "family_designs", "family_designs_flow",
+           "deadbeat_m1", "SCHEDULE_FORMAT", "LABELS"]
+
+#: the file format of a schedule of M1 over speed
+SCHEDULE_FORMAT = "biped-casadi-m1-schedule"
+
+#: the designs measured at every speed, in the order of the figure
+LABELS = ("co-design at each speed", "M1 scheduled over speed", "one M1 for all speeds",
+          "virtual constraints")
+
+
+@dataclass
+class M1Schedule:
+    """M1 as a smooth function of speed: a polynomial per component, least squares over
+    the co-designs of the family's speeds.
+
+    Parameters
+    ----------
+    speeds : list of float
+        The speeds it was fitted on, m/s.
+    coefficients : list of list of float
+        Per component of M1, the polynomial's coefficients, highest power first
+        (``numpy.polyval``).
+    rejoin : float
+        The rejoin time of v_c of every design.
+    degree : int
+        The polynomial's degree.
+    """
+
+    speeds: list
+    coefficients: list
+    rejoin: float
+    degree: int
+
+    @classmethod
+    def fit(cls, speeds, M1s, rejoin: float, degree: int = 2) -> "M1Schedule":
+        """The least-squares polynomials through the co-designs' M1.
+
+        Parameters
+        ----------
+        speeds : array_like
+            (n,) m/s.
+        M1s : array_like
+            (n, nu).
+        rejoin : float
+            Rejoin time of v_c.
+        degree : int
+            At most this degree (at most n - 1).
+
+        Returns
+        -------
+        M1Schedule
+        """
+        v = np.asarray(speeds, float)
+        M = np.atleast_2d(np.asarray(M1s, float))
+        d = int(min(degree, len(v) - 1))
+        coef = [np.polyfit(v, M[:, j], d).tolist() for j in range(M.shape[1])]
+        return cls([float(x) for x in v], coef, float(rejoin), d)
+
+    def M1(self, speed: float) -> np.ndarray:
+        """M1 at ``speed`` (within the fitted range).
+
+        Parameters
+        ----------
+        speed : float
+            m/s.
+
+        Returns
+        -------
+        numpy.ndarray
+        """
+        lo, hi = min(self.speeds), max(self.speeds)
+        if not lo - 1e-9 <= float(speed) <= hi + 1e-9:
+            raise ValueError(f"speed {speed:g} m/s is outside the schedule's range "
+                             f"[{lo:g}, {hi:g}] m/s")
+        return np.array([np.polyval(c, float(speed)) for c in self.coefficients])
+
+    def to_dict(self) -> dict:
+        """The schedule as a file's content: also M1 at each fitted speed (for a linear
+        interpolation by a consumer that does not evaluate the polynomials).
+
+        Returns
+        -------
+        dict
+        """
+        return dict(format=SCHEDULE_FORMAT, speeds=self.speeds, rejoin=self.rejoin,
+                    degree=self.degree, coefficients=self.coefficients,
+                    M1=[self.M1(v).tolist() for v in self.speeds])
+
+    def save(self, path) -> Path:
+        """Write the schedule as JSON (atomically).
+
+        Parameters
+        ----------
+        path : str or Path
+            The file.
+
+        Returns
+        -------
+        Path
+        """
+        path = Path(path)
+        write_text_atomic(path, json.dumps(self.to_dict(), indent=1) + "\n")
+        return path
+
+
+@dataclass
+class FamilyDesigns(Result):
+    """The designs over a family, measured at every speed (module docstring).
+
+    Parameters
+    ----------
+    status : str
+        'done'.
+    message : str
+        In words.
+    speeds : list of float
+        The family's speeds, m/s.
+    records : list of dict
+        Per speed: ``speed``, the co-design (``M1``, ``rejoin``, its own ``s_star``,
+        ``status``), the deadbeat M1 NLP's ``M1`` and ``max_abs``, and per design of
+        :data:`LABELS` its ``max_abs``, ``s_star`` and (with basins) ``basin_fraction``
+        and ``basin_area`` (rad x rad/s).
+    schedule : M1Schedule
+        M1 over speed.
+    single : dict
+        The one M1 for all speeds (the co-design of the speed nearest ``single_speed``).
+    settings : dict
+        The s* protocol's settings.
+    gaits : list
+        The family's gaits (left out of ``to_dict()``).
+    """
+
+    status: str
+    message: str
+    speeds: list
+    records: list
+    schedule: M1Schedule
+    single: dict
+    settings: dict
+    gaits: list = internal(default_factory=list)
+
+    SUCCESS = ("done",)
+
+
+@task
+def deadbeat_m1(gait, group):
+    """The deadbeat M1 NLP on one a = b = 0 group (a task).
+
+    Parameters
+    ----------
+    gait : Gait
+        The gait.
+    group : int or None
+        The group (None: all components free).
+
+    Returns
+    -------
+    M1Result
+    """
+    return optimize_m1(gait, group=group, n_random=0)
+
+
+def _measure(engine, designs: dict, rs: RobustnessSettings, basin_n) -> dict:
+    """Submit s* (and basins) of every (label -> design) of one gait."""
+    g = next(iter(designs.values())).gait
+    kept = engine.submit(kept_directions, g, rs)
+    out = {}
+    for label, d in designs.items():
+        out[label] = (engine.submit(robustness, d, rs, kept),
+                      engine.submit(basin, d, basin_n, refine=4) if basin_n else None)
+    return out
+
+
+def _row(refs) -> dict:
+    r, b = refs[0].result(), (refs[1].result() if refs[1] is not None else None)
+    row = dict(max_abs=float(r.max_abs), s_star=float(r.s_star))
+    if b is not None:
+        cell = (b.q_u[1] - b.q_u[0]) * (b.dq_u[1] - b.dq_u[0])
+        row.update(basin_fraction=float(b.converged_fraction),
+                   basin_area=float(np.sum(b.outcome == "converged") * cell))
+    return row
+
+
+@task
+def family_designs_flow(engine, gaits: list, settings: CodesignSettings,
+                        rs: RobustnessSettings, basin_n, single_speed: float = 0.75
+                        ) -> FamilyDesigns:
+    """:func:`family_designs` as a flow: every speed's co-design side by side, then every
+    design measured at every speed side by side.
+
+    Parameters
+    ----------
+    engine : Engine
+        Where the units run.
+    gaits : list of Gait
+        The family's gaits, in order of speed.
+    settings : CodesignSettings
+        The co-design at each speed (its gait fixed).
+    rs : RobustnessSettings
+        The s* protocol.
+    basin_n : int or None
+        Cells per axis of the basins (None: no basins).
+    single_speed : float
+        The one M1 for all speeds is the co-design of the speed nearest this, m/s.
+
+    Returns
+    -------
+    FamilyDesigns
+    """
+    speeds = [round(float(g.speed), 12) for g in gaits]
+    cds = [engine.spawn(codesign_flow, g.model, settings, g) for g in gaits]
+    dead = [engine.submit(deadbeat_m1, g, 1 if g.model.nu == 4 else None) for g in gaits]
+    cd = [c.result() for c in cds]
+    rejoin = float(cd[0].design.rejoin)
+    schedule = M1Schedule.fit(speeds, [c.design.M1 for c in cd], rejoin)
+    k = int(np.argmin(np.abs(np.asarray(speeds) - single_speed)))
+    single = dict(M1=list(cd[k].design.M1), rejoin=rejoin, from_speed=speeds[k])
+    measured = [_measure(engine, {
+        LABELS[0]: c.design, LABELS[1]: Design.tv(g, schedule.M1(v), rejoin),
+        LABELS[2]: Design.tv(g, single["M1"], rejoin), LABELS[3]: Design.vc(g)},
+        rs, basin_n) for g, v, c in zip(gaits, speeds, cd)]
+    records = []
+    for v, c, d, m in zip(speeds, cd, dead, measured):
+        dr = d.result()
+        records.append(dict(speed=v, codesign=dict(M1=list(c.design.M1), rejoin=rejoin,
+                                                   s_star=float(c.s_star), status=c.status),
+                            deadbeat=dict(M1=np.asarray(dr.M1).tolist(),
+                                          max_abs=float(dr.max_abs)),
+                            designs={label: _row(refs) for label, refs in m.items()}))
+        engine.say(f"{v:g} m/s: " + ", ".join(
+            f"{lab}: s* {r['s_star']:.3g}" for lab, r in records[-1]["designs"].items()))
+    return FamilyDesigns(status="done", message=_message(records), speeds=speeds,
+                         records=records, schedule=schedule, single=single,
+                         settings=dict(rs.__dict__), gaits=list(gaits))
+
+
+def _message(records) -> str:
+    walk = {lab: sum(r["designs"][lab]["s_star"] >= 1 for r in records) for lab in LABELS}
+    return (f"{len(records)} speeds; s* >= 1 at " + ", ".join(
+        f"{n} for {lab}" for lab, n in walk.items()))
+
+
+def family_designs(family, settings: CodesignSettings | None = None,
+                   rs: RobustnessSettings | None = None, basin_n: int | None = 41,
+                   single_speed: float = 0.75, progress=None, scheduler=None,
+                   workers: int | None = None, cache=None) -> FamilyDesigns:
+    """The co-design and the deadbeat M1 at every speed of a family, an M1 schedule over
+    speed and one M1 for all, measured at every speed beside virtual constraints.
+
+    Parameters
+    ----------
+    family : GaitFamily or list of Gait
+        The gaits (made with the robust design's gait options for the co-design to walk:
+        :data:`analysis.design.ROBUST_GAIT`).
+    settings : CodesignSettings, optional
+        The co-design at each speed (default :data:`~analysis.design.codesign.QUICK`:
+        the gait fixed, v_c rejoining at 0.75 T).
+    rs : RobustnessSettings, optional
+        The s* protocol (default: all defaults).
+    basin_n : int or None
+        Cells per axis of each basin (None: no basins).
+    single_speed : float
+        The one M1 for all speeds is the co-design nearest this speed, m/s.
+    progress : callable, optional
+        One line per speed.
+    scheduler : str or Client, optional
+        Where the units run (:func:`analysis.tasks.resolve_scheduler`).
+    workers : int, optional
+        Processes of a local cluster.
+    cache : str or Path, optional
+        The cache folder.
+
+    Returns
+    -------
+    FamilyDesigns
+    """
+    gaits = list(getattr(family, "gaits", family))
+    if len(gaits) < 2:
+        raise ValueError("family: at least two gaits")
+    with Engine(scheduler, workers, cache=cache, log=progress) as eng:
+        return eng.spawn(family_designs_flow, gaits, settings or QUICK,
+                         rs or RobustnessSettings(), basin_n, float(single_speed)).result()
+
