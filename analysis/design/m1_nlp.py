@@ -250,6 +250,7 @@ def _coarse_best(pm, tay, group, k, coarse=None):
     return np.asarray(jb.M1, float)[order[:k]]
 
 
+@gait_first
 def optimize_m1(gait, group: int | None = 1, starts=None, n_random: int = 2,
                 n_best: int = 10, n_ipopt: int = 4, seed: int = 0, den_margin: float = 1.0,
                 deadbeat: bool = True, coarse=None) -> M1Result:
