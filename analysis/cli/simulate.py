@@ -64,7 +64,45 @@ def _perturbation(args, nq) -> Perturbation:
 
 
 def cmd_simulate(args):
+    """``biped simulate``: check the arguments, build the start and the controller,
+    simulate, draw, then report (JSON or a table per controller)."""
     # ---- arguments
+    terrain = _check_arguments(args)
+    say = Progress("simulate", quiet=args.json)
+    gait = load_gait(args, say)
+    model = gait.model
+    M1 = parse_m1(args.m1, model.nu, default_zero=True)
+    perturbation = _perturbation(args, model.nq)
+    gains = Gains(eps=args.eps)
+    opts = SimulationOptions(steps=args.steps, mu=args.mu, jit=args.jit,
+                             torque_limit=args.torque_limit)
+    q0, dq0 = perturbation.initial_state(gait)
+
+    # ---- simulate
+    runs = _run(args, model, gait, M1, gains, q0, dq0, opts, terrain, say)
+    res = runs[0]
+
+    # ---- figures
+    figures = _figures(args, runs, model, gait, say)
+
+    # ---- report
+    if args.json:
+        d = res.to_dict()
+        d["perturbation"] = perturbation.to_dict()
+        if terrain is not None:
+            d["terrain"] = terrain.to_dict()
+        if args.compare:
+            d["compare"] = runs[1].to_dict()
+        if figures:
+            d["figures"] = figures
+        print_json(d)
+        return 0
+    _print_report(runs, gait, terrain, figures)
+    return 0
+
+
+def _check_arguments(args):
+    """Everything that can be checked before the gait is loaded: the terrain (or None)."""
     check_m1_values(args.m1)                 # before the gait: finite, within the range
     if args.controller == "vc" and args.m1 is not None and not args.compare:
         raise UserError("--m1 applies to the time-varying controller (--controller tv, "
@@ -87,17 +125,12 @@ def cmd_simulate(args):
         output_dir(args.plot, "--plot")
     if args.animate is not None:
         output_file(args.animate, "--animate", suffixes=(".gif",))
-    say = Progress("simulate", quiet=args.json)
-    gait = load_gait(args, say)
-    model = gait.model
-    M1 = parse_m1(args.m1, model.nu, default_zero=True)
-    perturbation = _perturbation(args, model.nq)
-    gains = Gains(eps=args.eps)
-    opts = SimulationOptions(steps=args.steps, mu=args.mu, jit=args.jit,
-                             torque_limit=args.torque_limit)
-    q0, dq0 = perturbation.initial_state(gait)
+    return terrain
 
-    # ---- simulate
+
+def _run(args, model, gait, M1, gains, q0, dq0, opts, terrain, say):
+    """The closed loop of the chosen controller (and of the other one with --compare)
+    simulated from (q0, dq0): the runs, the chosen controller's first."""
     ctrl = _controller(args.controller, model, gait, M1, gains, args.rejoin)
     if args.controller == "tv" and ctrl.singularity().singular:
         raise UserError(f"M1 = {M1.tolist()} makes the controller singular on the reference "
@@ -116,8 +149,11 @@ def cmd_simulate(args):
             raise
         raise UserError(f"--jit: compiling the closed loop failed (is a C compiler "
                         f"installed?): {str(e).strip().splitlines()[0]}") from None
+    return runs
 
-    # ---- figures
+
+def _figures(args, runs, model, gait, say):
+    """Figures 5 and 6 (--plot) and the animation of the first run (--animate)."""
     figures = {}
     if args.plot:
         fig5, fig6 = save_figures({"fig5_qu_error": unactuated_error_plot(runs),
@@ -126,20 +162,12 @@ def cmd_simulate(args):
         figures.update(fig5=fig5, fig6=fig6)
     if args.animate:
         say(f"writing the animation {args.animate} (about 1 s per simulated step) ...")
-        figures["animation"] = walking_animation(res, model, args.animate)
+        figures["animation"] = walking_animation(runs[0], model, args.animate)
+    return figures
 
-    # ---- report
-    if args.json:
-        d = res.to_dict()
-        d["perturbation"] = perturbation.to_dict()
-        if terrain is not None:
-            d["terrain"] = terrain.to_dict()
-        if args.compare:
-            d["compare"] = runs[1].to_dict()
-        if figures:
-            d["figures"] = figures
-        print_json(d)
-        return 0
+
+def _print_report(runs, gait, terrain, figures):
+    """The text report: per run its status and a table of its steps, then the files."""
     for r in runs:
         print(f"{r.controller['controller']}: status {r.status}"
               + (f" - {r.message}" if r.message else ""))
@@ -156,7 +184,6 @@ def cmd_simulate(args):
               f"{_num(r.max_friction_ratio, '.3f')}, at impact {_num(r.max_impulse_ratio, '.3f')}")
     for k, v in figures.items():
         print(f"{k}: {v}")
-    return 0
 
 
 def register(sub):

@@ -23,7 +23,39 @@ MAX_WORKERS = 256
 
 
 def cmd_sweep(args):
+    """``biped sweep``: check the arguments and output folders, run the grid or the 1-D
+    sweeps, draw Fig. 2 (--plot), then report (JSON or a table of the counts)."""
     # ---- arguments, then the output folders: all before any work
+    lo, hi, n = _check_arguments(args)
+    say = Progress("sweep", quiet=args.json or args.no_progress)
+    gait = load_gait(args, say)
+    model = gait.model
+    if args.line is None and n > max_grid_n(model.nu):
+        raise UserError(f"--grid takes 2 to {max_grid_n(model.nu)} points per component for "
+                        f"this robot ({model.nu} components of M1), got {n}")
+
+    # ---- the sweep
+    r, lines = _run(args, gait, lo, hi, n, say)
+    plots = []
+    if args.plot is not None:
+        plots = save_figures({"fig2_one_d_sweeps": one_d_sweeps_plot(lines)}, args.plot,
+                             formats=("png", "pdf"))
+
+    if args.json:
+        out = r.to_dict()
+        if args.line is not None:
+            out["singular_values"] = lines.singular_values.tolist()
+            out["lines"] = [dict(component=j + 1, counts=p.counts)
+                            for j, p in enumerate(lines.results)]
+            out["plots"] = plots
+        print_json(out)
+        return 0
+    _print_report(args, r, lines, plots, lo, hi, n, model.nu)
+    return 0
+
+
+def _check_arguments(args):
+    """The range, the grid and the run's options, and the output folders: (lo, hi, n)."""
     lo, hi = args.range
     if not (np.isfinite(lo) and np.isfinite(hi)) or not lo < hi:
         raise UserError(f"--range: LO must be less than HI (both finite), got {lo:g} {hi:g}")
@@ -49,20 +81,18 @@ def cmd_sweep(args):
         output_dir(args.out, "--out")
     if args.plot is not None:
         output_dir(args.plot, "--plot")
-    say = Progress("sweep", quiet=args.json or args.no_progress)
-    gait = load_gait(args, say)
+    return lo, hi, n
+
+
+def _run(args, gait, lo, hi, n, say):
+    """The 1-D sweeps (--line) or the grid: (the sweep, the 1-D sweeps or None)."""
     model = gait.model
-    if args.line is None and n > max_grid_n(model.nu):
-        raise UserError(f"--grid takes 2 to {max_grid_n(model.nu)} points per component for "
-                        f"this robot ({model.nu} components of M1), got {n}")
     kw = dict(out_dir=args.out, chunk_size=args.chunk_size, workers=args.workers,
               scheduler=args.scheduler, progress=not (args.no_progress or args.json),
               executor="process" if args.processes else "thread")
-
-    # ---- the sweep
     if args.scheduler is not None:
         say(f"connecting to the Dask scheduler at {args.scheduler} (up to 10 s) ...")
-    plots = []
+    lines = None
     try:
         if args.line is not None:
             lines = one_d_sweeps(gait, np.linspace(lo, hi, args.line), **kw)
@@ -72,23 +102,14 @@ def cmd_sweep(args):
     except ValueError as e:       # the library names out / scheduler: say --out / --scheduler
         msg = str(e)
         raise UserError("--" + msg if msg.startswith(("out:", "scheduler:")) else msg) from None
-    if args.plot is not None:
-        plots = save_figures({"fig2_one_d_sweeps": one_d_sweeps_plot(lines)}, args.plot,
-                             formats=("png", "pdf"))
+    return r, lines
 
-    if args.json:
-        out = r.to_dict()
-        if args.line is not None:
-            out["singular_values"] = lines.singular_values.tolist()
-            out["lines"] = [dict(component=j + 1, counts=p.counts)
-                            for j, p in enumerate(lines.results)]
-            out["plots"] = plots
-        print_json(out)
-        return 0
 
+def _print_report(args, r, lines, plots, lo, hi, n, nu):
+    """The text report: the counts per status, the best M1, the lines, the chunks."""
     mode = (f"1-D sweeps, {args.line} values of each M1(j) in [{lo:g}, {hi:g}]"
             if args.line is not None else
-            f"grid {n}^{model.nu} = {r.n_points} M1, each component in linspace({lo:g}, "
+            f"grid {n}^{nu} = {r.n_points} M1, each component in linspace({lo:g}, "
             f"{hi:g}, {n})")
     print(f"sweep: {mode}")
     print(f"  {'status':10s} {'count':>8s}")
@@ -111,7 +132,6 @@ def cmd_sweep(args):
         print(f"results: {r.out_dir}")
     for p in plots:
         print(f"figure: {p}")
-    return 0
 
 
 def register(sub):

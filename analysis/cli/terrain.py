@@ -69,7 +69,32 @@ def _check_scales(args):
 
 
 def cmd_terrain(args):
-    # ---- arguments (everything that can be checked before any work)
+    """``biped terrain``: check the arguments, build the walker, compute the gait
+    sensitivity norm, run the Monte Carlo, then report (JSON or text) and draw."""
+    gains, rejoin, profile = _check_arguments(args)
+    say = Progress("terrain", quiet=args.json)
+    _check_scheduler(args, say)
+    gait, spec, st = _build(args, say, gains, rejoin, profile)
+
+    # ---- the exact gait sensitivity norm, then the Monte Carlo
+    gsn, gsn_error = _sensitivity(args, gait, spec, say)
+    mc = _run_monte_carlo(args, gait, spec, st, say)
+
+    out = _summary(mc, st, gsn, gsn_error)
+    if args.plot is not None:
+        label = (f"{spec.controller} sigma = {st.sigma:g} m" if not profile
+                 else f"{spec.controller} on {Path(args.terrain).name}")
+        out["figures"] = save_figures({"survival": survival_plot([mc], labels=[label])},
+                                      args.plot)
+    if args.json:
+        print_json(out)
+        return 0
+    _print_report(mc, st, gsn, out)
+    return 0
+
+
+def _check_arguments(args):
+    """Everything that can be checked before any work: (gains, rejoin, terrain profile)."""
     check_m1_values(args.m1)
     if args.controller == "vc" and (args.m1 is not None or args.rejoin is not None):
         raise UserError("--m1 and --rejoin apply to the time-varying controller "
@@ -105,7 +130,11 @@ def cmd_terrain(args):
         output_dir(args.out, "--out")
     if args.plot is not None:
         output_dir(args.plot, "--plot")
-    say = Progress("terrain", quiet=args.json)
+    return gains, rejoin, profile
+
+
+def _check_scheduler(args, say):
+    """A Dask scheduler given by address answers (within CONNECT), or a UserError."""
     if args.scheduler not in (None, "inline", "local"):
         say(f"connecting to the Dask scheduler at {args.scheduler} (up to {CONNECT}) ...")
         try:
@@ -113,6 +142,10 @@ def cmd_terrain(args):
                 pass
         except ValueError as e:
             raise UserError(f"--{e}") from None
+
+
+def _build(args, say, gains, rejoin, profile):
+    """The gait, the walker's spec (controller, plant) and the Monte Carlo settings."""
     gait = load_gait(args, say)
     model = gait.model
     M1 = parse_m1(args.m1, model.nu) if args.controller == "tv" else None
@@ -129,28 +162,37 @@ def cmd_terrain(args):
                                 mu=args.mu, torque_limit=args.torque_limit, profile=profile)
     except ValueError as e:
         raise UserError(str(e)) from None
+    return gait, spec, st
 
-    # ---- the exact gait sensitivity norm, then the Monte Carlo
+
+def _sensitivity(args, gait, spec, say):
+    """The exact gait sensitivity norm, or (None, why there is none)."""
     say("gait sensitivity norm (exact, from the linearised step map; a few seconds)")
     opts = SimulationOptions(mu=args.mu, torque_limit=args.torque_limit,
                              saturate=args.saturate)
     controller = spec.controller_for(gait)
     try:
-        gsn = gait_sensitivity(controller, opts, spec.plant_model())
+        return gait_sensitivity(controller, opts, spec.plant_model()), None
     except ValueError as e:
-        gsn = None
-        gsn_error = str(e)
+        return None, str(e)
+
+
+def _run_monte_carlo(args, gait, spec, st, say):
+    """The Monte Carlo on the scheduler the arguments name."""
     where = ("this process" if args.scheduler == "inline" else
              f"the Dask scheduler at {args.scheduler}" if args.scheduler else
              "a Dask LocalCluster of this machine's cores")
     say(f"Monte Carlo: {st.runs} runs of up to {st.max_steps} steps ({spec.engine}) on {where}")
     try:
-        mc = monte_carlo(gait, spec, st, out_dir=args.out, scheduler=args.scheduler,
-                         workers=args.workers, progress=not args.json)
+        return monte_carlo(gait, spec, st, out_dir=args.out, scheduler=args.scheduler,
+                           workers=args.workers, progress=not args.json)
     except ValueError as e:
         msg = str(e)
         raise UserError("--" + msg if msg.startswith(("out:", "scheduler:")) else msg) from None
 
+
+def _summary(mc, st, gsn, gsn_error):
+    """The JSON object: the estimate, the run's record and the gait sensitivity norm."""
     est = mc.estimate
     out = dict(status=mc.status, message=mc.message, mfpt=est.mfpt, mfpt_ci=est.mfpt_ci,
                mfpt_lower_bound=est.mfpt_ci[0],
@@ -172,14 +214,11 @@ def cmd_terrain(args):
     else:
         out["gsn"] = None
         out["gsn_message"] = f"no gait sensitivity norm: {gsn_error}"
-    if args.plot is not None:
-        label = (f"{spec.controller} sigma = {st.sigma:g} m" if not profile
-                 else f"{spec.controller} on {Path(args.terrain).name}")
-        out["figures"] = save_figures({"survival": survival_plot([mc], labels=[label])},
-                                      args.plot)
-    if args.json:
-        print_json(out)
-        return 0
+    return out
+
+
+def _print_report(mc, st, gsn, out):
+    """The text report."""
     print(mc.message)
     print("  how the runs ended: " + ", ".join(f"{k} {v}" for k, v in mc.status_counts.items()))
     if math.isfinite(mc.step_time_rms):
@@ -192,7 +231,6 @@ def cmd_terrain(args):
     print(f"  {mc.scenario_steps} steps in {mc.elapsed:.1f} s ({mc.steps_per_second:.0f} steps/s)")
     for f in out.get("figures", []):
         print(f"figure: {f}")
-    return 0
 
 
 def register(sub):

@@ -304,6 +304,35 @@ def optimize_m1(gait, group: int | None = 1, starts=None, n_random: int = 2,
     nu = model.nu
     constrained = group is not None
     constraints, sampler, in_group = _feasible_set(tay, group, nu)
+    cand = _m1_starts(pm, tay, group, nu, sampler, starts, n_random, n_best, seed,
+                      den_margin, coarse)
+    fixed = nu - len(_conditions(tay, ca.SX.sym("M1", nu), constraints)) == 0
+    history, ipopt_runs, ipopt_skipped = _search(pm, tay, nu, cand, fixed, constrained,
+                                                 constraints, in_group, deadbeat, n_ipopt,
+                                                 den_margin)
+    if not history:
+        raise RuntimeError("the M1 NLP found no non-singular local optimum (IPOPT); try more starts")
+    r, val, unc = _verified_best(gait, pm, history)
+    M1 = r.M1
+    label = f"group {group}" if constrained else "all components free"
+    return M1Result(M1=M1, max_abs=r.max_abs, eigenvalues=r.eigenvalues,
+                    group=group_of(tay, M1) if constrained else group_of(tay, M1, 1e-9),
+                    a=float(tay.a(M1)[0]), b=float(tay.b(M1)[0]), status=r.status,
+                    max_abs_nlp=val, eigenvalue_uncertainty=unc, starts=len(cand),
+                    solve_time=time.perf_counter() - t0,
+                    message=f"{label}: max|lambda| = {r.max_abs:.3g} (verified by the "
+                            f"full-AD map) from {len(cand)} starts"
+                            + (f", IPOPT from {ipopt_runs}" if ipopt_runs else "")
+                            + (f" (skipped from {ipopt_skipped}: a deadbeat point was "
+                               "already found)" if ipopt_skipped else ""),
+                    ipopt_runs=ipopt_runs, history=history)
+
+
+def _m1_starts(pm, tay, group, nu, sampler, starts, n_random, n_best, seed, den_margin,
+               coarse):
+    """The starts: ``starts`` or the best points of the coarse map, plus ``n_random``
+    random ones (on the group, or uniform in [-5, 5]), all non-singular."""
+    constrained = group is not None
     rng = np.random.default_rng(seed)
     cand = [] if starts is None else [np.asarray(s, float) for s in np.atleast_2d(starts)]
     if starts is None:            # the best points of a coarse map of the feasible set
@@ -317,7 +346,14 @@ def optimize_m1(gait, group: int | None = 1, starts=None, n_random: int = 2,
     cand = [c for c in cand if np.all(np.isfinite(c)) and np.all(pm.denominator(c) > den_margin)]
     if not cand:
         raise ValueError(f"no non-singular start found on group {group}")
-    fixed = nu - len(_conditions(tay, ca.SX.sym("M1", nu), constraints)) == 0
+    return cand
+
+
+def _search(pm, tay, nu, cand, fixed, constrained, constraints, in_group, deadbeat, n_ipopt,
+            den_margin):
+    """From every start Newton on trace = det = 0, from the first ``n_ipopt`` also IPOPT
+    then Newton until a deadbeat point is found: (history of the valid points found,
+    IPOPT runs, IPOPT runs skipped)."""
     history = []
     ipopt_runs = ipopt_skipped = 0
 
@@ -349,17 +385,27 @@ def optimize_m1(gait, group: int | None = 1, starts=None, n_random: int = 2,
             ipopt_skipped += 1    # nothing beats max|lambda| = 0 (see the module's note)
             continue
         ipopt_runs += 1
-        solver, lbg, ubg = _epigraph_nlp(pm, tay, constraints, den_margin)
-        mx = pm.jacobian_batch(M1[None]).max_abs
-        rho0 = float(mx[0]) * 1.01 + 1e-3 if np.isfinite(mx[0]) else 100.0
-        sol = solver(x0=np.r_[M1, rho0], lbg=lbg, ubg=ubg, lbx=np.r_[[-1e3] * nu, 0.0],
-                     ubx=np.r_[[1e3] * nu, 1e6])
-        x = np.array(sol["x"]).ravel()[:nu]
+        x = _ipopt_from(pm, tay, nu, M1, constraints, den_margin)
         reached_zero |= keep([(x, "ipopt"),
                               (_deadbeat_newton(pm, tay, x, constraints) if deadbeat
                                else None, "ipopt+newton")], M1)
-    if not history:
-        raise RuntimeError("the M1 NLP found no non-singular local optimum (IPOPT); try more starts")
+    return history, ipopt_runs, ipopt_skipped
+
+
+def _ipopt_from(pm, tay, nu, M1, constraints, den_margin):
+    """IPOPT on the epigraph formulation from M1 (rho from its max|lambda|): its M1."""
+    solver, lbg, ubg = _epigraph_nlp(pm, tay, constraints, den_margin)
+    mx = pm.jacobian_batch(M1[None]).max_abs
+    rho0 = float(mx[0]) * 1.01 + 1e-3 if np.isfinite(mx[0]) else 100.0
+    sol = solver(x0=np.r_[M1, rho0], lbg=lbg, ubg=ubg, lbx=np.r_[[-1e3] * nu, 0.0],
+                 ubx=np.r_[[1e3] * nu, 1e6])
+    return np.array(sol["x"]).ravel()[:nu]
+
+
+def _verified_best(gait, pm, history):
+    """The best of the three best points verified by the full-AD map: (its analysis, its
+    max|lambda| in the NLP, the eigenvalue uncertainty from a map with twice the RK4
+    steps)."""
     # verify the best few by the full-AD map and keep the best verified one
     ranked = sorted(history, key=lambda h: h["max_abs"])
     verified = [(poincare_eigenvalues(gait, h["M1"], method="ad"), h["max_abs"])
@@ -371,15 +417,4 @@ def optimize_m1(gait, group: int | None = 1, starts=None, n_random: int = 2,
         M1, method="ad")
     dA = float(np.max(np.abs(fine.A - r.A)))
     unc = float(max(abs(fine.max_abs - r.max_abs), math.sqrt(dA * np.max(np.abs(r.A)))))
-    label = f"group {group}" if constrained else "all components free"
-    return M1Result(M1=M1, max_abs=r.max_abs, eigenvalues=r.eigenvalues,
-                    group=group_of(tay, M1) if constrained else group_of(tay, M1, 1e-9),
-                    a=float(tay.a(M1)[0]), b=float(tay.b(M1)[0]), status=r.status,
-                    max_abs_nlp=val, eigenvalue_uncertainty=unc, starts=len(cand),
-                    solve_time=time.perf_counter() - t0,
-                    message=f"{label}: max|lambda| = {r.max_abs:.3g} (verified by the "
-                            f"full-AD map) from {len(cand)} starts"
-                            + (f", IPOPT from {ipopt_runs}" if ipopt_runs else "")
-                            + (f" (skipped from {ipopt_skipped}: a deadbeat point was "
-                               "already found)" if ipopt_skipped else ""),
-                    ipopt_runs=ipopt_runs, history=history)
+    return r, val, unc

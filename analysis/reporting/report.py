@@ -50,6 +50,15 @@ def _comparison_rows(s: dict) -> list:
     """(quantity, paper, ours, why they differ) rows of the paper-vs-ours table; each
     explanation is given once (repeated reasons are the notes ¹ and ² under the table)."""
     P = s.get("paper", {})
+    rows = _linear_analysis_rows(s, P)
+    rows += _domain_rows(s)
+    rows += _design_rows(s, P)
+    rows += _run_rows(s)
+    return rows
+
+
+def _linear_analysis_rows(s: dict, P: dict) -> list:
+    """Rows of D at T^d, the singular M1, the 9^4 grid's counts and the conjecture."""
     rows = []
     sing = s.get("singular") or {}
     rows.append(("D11 at T^d", _f(P.get("D11_T")), _f(sing.get("D11_T", NOT_COMPUTED)), "¹"))
@@ -73,6 +82,11 @@ def _comparison_rows(s: dict) -> list:
     rows.append(("... fraction of unstable cases with |Z_sw| at most that", "not given",
                  _f(c.get("fraction_unstable_below", NOT_COMPUTED)),
                  "a necessary condition, not sufficient: a low fraction supports it"))
+    return rows
+
+
+def _domain_rows(s: dict) -> list:
+    """Rows of the a = b = 0 groups' stable domains: their areas and best points."""
     dom = s.get("domains") or {}
     groups = dom.get("groups") or {}
     if groups:
@@ -83,10 +97,17 @@ def _comparison_rows(s: dict) -> list:
     else:
         area = best = NOT_COMPUTED
         grid = ""
-    rows.append(("stable domains of the a = b = 0 groups (area in (M1(2), M1(3)))",
-                 "large (Fig. 4)", area, f"¹ ({grid})" if grid else "¹"))
-    rows.append(("best points of the two domain maps", "not given", best,
-                 "the M1 NLP starts from the best points of such maps"))
+    return [("stable domains of the a = b = 0 groups (area in (M1(2), M1(3)))",
+             "large (Fig. 4)", area, f"¹ ({grid})" if grid else "¹"),
+            ("best points of the two domain maps", "not given", best,
+             "the M1 NLP starts from the best points of such maps")]
+
+
+def _design_rows(s: dict, P: dict) -> list:
+    """Rows of the paper's example M1, the M1 NLP's bests, the grid's best stable point
+    and the virtual constraints' eigenvalue."""
+    rows = []
+    gc = _g(s, "grid", "counts") or {}
     m = s.get("m1_nlp") or {}
     rows.append(("paper's example M1 " + _f(P.get("example_M1")) + ": max|λ|",
                  _f(P.get("example_max_abs")),
@@ -105,6 +126,13 @@ def _comparison_rows(s: dict) -> list:
     vc = _g(s, "vc_comparison", "vc") or {}
     rows.append(("virtual constraints: eigenvalue of the 1-D map", "not given (slower, Fig. 5)",
                  _f(vc.get("eigenvalue", NOT_COMPUTED)), "¹"))
+    return rows
+
+
+def _run_rows(s: dict) -> list:
+    """Rows of the runs from the paper's perturbation: deadbeat, robust and virtual
+    constraints."""
+    vc = _g(s, "vc_comparison", "vc") or {}
     runs = _g(s, "simulation", "runs") or {}
     rd = s.get("robust_design") or {}
 
@@ -115,6 +143,7 @@ def _comparison_rows(s: dict) -> list:
         return (f"{r.get('status')}" + (f", converged (1e-3) from step {conv}" if conv else "")
                 + (f": {r['message']}" if r.get("message") else ""))
 
+    rows = []
     db = runs.get("default_deadbeat")
     rows.append(("paper's perturbation (0.01 rad, 0.1 rad/s on every joint), mu = 0.6: "
                  "time-varying run, the NLP's deadbeat M1", "walks, converges in ~4 steps",
@@ -385,97 +414,120 @@ def _robust_lines(s: dict) -> list:
     runs = (s.get("simulation") or {}).get("runs", {})
     if not (rd or rob or runs):
         return []
-    esc = lambda t: str(t).replace("|", "\\|").replace("\n", " ")        # noqa: E731
     lines = ["## Robust walking: which time-varying designs walk", ""]
     if rd.get("skipped"):
         lines += [f"Robust design: not run ({rd['skipped']}).", ""]
     elif rd:
-        met = rd.get("status") == "target_met"
-        lines += [
-            "The paper's linear analysis recommends deadbeat outputs (max|λ| -> 0). From the "
-            "paper's own perturbation (0.01 rad on every joint, 0.1 rad/s on every velocity, "
-            "mu = 0.6, |u| <= the torque limit) they do not walk on our gait: the table below "
-            "gives s*, the largest scale of that perturbation every kept direction survives "
-            "(10 valid steps, error below 1e-3 at the end). The robust design comes from "
-            "one NLP (CasADi + IPOPT, exact first derivatives): perturbation scenarios of "
-            "the paper's per-joint sizes walk several steps of the closed-loop hybrid zero "
-            "dynamics by the walker's own RK4 rule, every contact, friction, impulse, torque "
-            "and clearance condition a smooth inequality, with their common scale s "
-            "maximised and max|λ| <= the virtual constraints' eigenvalue; "
-            + ("the gait's own Bezier coefficients and T move with M1 (trust-region steps, "
-               "each gait made exactly periodic). " if rd.get("gait_free") else
-               "the gait is fixed (quick run; the full run co-designs it). ")
-            + ("It meets the target." if met else
-               f"It does not reach the paper's claim: best s* = {_f(rd.get('s_star'), '.4g')} "
-               f"(the paper's perturbation is s = 1); just above s* the binding failure is "
-               f"'{rd.get('failure')}'; from the paper's perturbation it walks and converges "
-               f"below 1e-3 from step {_f(rd.get('steps_to_converge'))} (the paper: step 4)."),
-            "",
-            f"Robust design: M1 = {_f(_g(rd, 'design', 'M1'), '.5g')}, v_c rejoining at "
-            f"{_f(_g(rd, 'design', 'rejoin'))} T; its gait (T = "
-            f"{_f(_g(rd, 'gait_change', 'T'), '.4g')} s, from "
-            f"{_f(_g(rd, 'gait_change', 'T_start'), '.4g')} s) bounds the impact impulse ratio "
-            f"|F_x|/F_z by {rd.get('gait_options', {}).get('impact_mu')} and continues the "
-            f"reference past T ({rd.get('gait_options', {}).get('continuation')}); "
-            f"max|λ| {_f(rd.get('max_abs'), '.3g')} against the virtual constraints' "
-            f"{_f(rd.get('vc_eigenvalue'), '.3g')} on that gait. Full-order check: "
-            + "; ".join(f"{k.replace('_', ' ')} (s = {_f(v.get('scale'), '.4g')}) {v.get('passed')} "
-                        f"of {len(v.get('outcomes', []))} directions walk and converge"
-                        for k, v in (rd.get("verified") or {}).items())
-            + f". Replay: `biped simulate {' '.join(rd.get('simulate_args', []))}`.", ""]
-        act = rd.get("active_constraints") or []
-        if act:
-            lines += ["What binds at the optimum (the inequalities with the largest "
-                      "multipliers): " + "; ".join(
-                          f"{a['constraint']} ({_f(a['multiplier'], '.3g')})"
-                          for a in act[:4]) + ". IPOPT: "
-                      f"{len(_g(rd, 'ipopt', 'solves') or [])} solves, "
-                      f"{_g(rd, 'ipopt', 'iterations')} iterations, "
-                      f"{_f(_g(rd, 'ipopt', 'time'), '.1f')} s.", ""]
+        lines += _robust_design_lines(rd)
         lines += _comparison_lines(s)
     if rob:
-        st = (s.get("robustness") or {}).get("settings") or {}
-        res_note = (f" s* by bisection to {_f(st['s_max'] / 2 ** (st['rounds'] - 1), '.3g')} "
-                    "(the co-design's own verification above: 16 directions, 10 rounds)."
-                    if "s_max" in st and "rounds" in st else "")
-        lines += ["| design | gait | max\\|λ\\| | s* | first failure just above s* | "
-                  "directions kept |", "|---|---|---|---|---|---|"]
-        for r in rob:
-            f = r.get("failure") or {}
-            fail = (f"{f.get('status')} in step {f.get('step')} (direction "
-                    f"{f.get('direction')}) at s = {_f(r.get('s_fail'), '.4g')}" if f else
-                    "none up to the largest scale tried")
-            lines.append(f"| {esc(r.get('label'))} | {r.get('gait')} | "
-                         f"{_f(r.get('max_abs'), '.3g')} | {_f(r.get('s_star'), '.4g')} | "
-                         f"{esc(fail)} | {r.get('directions_kept')} of "
-                         f"{r.get('directions_tried')} |")
-        lines += ["", "Directions: the paper's (all positive) and seeded sign patterns / "
-                  "random directions of the same per-joint size, kept only when virtual "
-                  "constraints walk from them at full scale (the others start with the "
-                  "swing foot in the ground). Both controllers run on their exact hybrid zero "
-                  "dynamics, batched (time-varying designs: the zero-dynamics walker; virtual "
-                  "constraints: the phase walker, whose pass/fail verdicts equal the "
-                  "full-order simulator's on the tested directions)." + res_note, ""]
+        lines += _robustness_table(s, rob)
     if runs:
-        lines += ["Runs from the paper's full perturbation (Fig. 5), with their validity "
-                  "margins:", "", "| run | status | steps | converged (1e-3) from step | "
-                  "peak \\|u\\| (N m) | min F_z (N) | max \\|F_x\\|/F_z | max impulse ratio |",
-                  "|---|---|---|---|---|---|---|---|"]
-        for r in runs.values():
-            lines.append(f"| {esc(r.get('label'))} | {esc(r.get('status'))} | {r.get('steps')} "
-                         f"| {_f(r.get('steps_to_converge'))} | {_f(r.get('peak_torque'), '.1f')} "
-                         f"| {_f(r.get('min_normal_force'), '.1f')} | "
-                         f"{_f(r.get('max_friction_ratio'), '.3f')} | "
-                         f"{_f(r.get('max_impulse_ratio'), '.3f')} |")
-        seen = sorted({r.get("status") for r in runs.values()} & set(OUTCOME_COLOURS))
-        if seen:
-            meaning = {k: OUTCOME_COLOURS[k][1] for k in seen}
-            if "slipped" in meaning:
-                meaning["slipped"] = ("the stance force or the impact impulse left the "
-                                      "friction cone |F_x| <= mu F_z")
-            lines += ["", "Statuses: " + "; ".join(f"{k}: {v}" for k, v in meaning.items())
-                      + "; every run stops at its first invalid state."]
-        lines.append("")
+        lines += _runs_table(runs)
+    return lines
+
+
+def _esc(t) -> str:
+    """A table cell: its pipes escaped, on one line."""
+    return str(t).replace("|", "\\|").replace("\n", " ")
+
+
+def _robust_design_lines(rd: dict) -> list:
+    """The robust design's finding, the design and its full-order check, what binds."""
+    met = rd.get("status") == "target_met"
+    lines = [
+        "The paper's linear analysis recommends deadbeat outputs (max|λ| -> 0). From the "
+        "paper's own perturbation (0.01 rad on every joint, 0.1 rad/s on every velocity, "
+        "mu = 0.6, |u| <= the torque limit) they do not walk on our gait: the table below "
+        "gives s*, the largest scale of that perturbation every kept direction survives "
+        "(10 valid steps, error below 1e-3 at the end). The robust design comes from "
+        "one NLP (CasADi + IPOPT, exact first derivatives): perturbation scenarios of "
+        "the paper's per-joint sizes walk several steps of the closed-loop hybrid zero "
+        "dynamics by the walker's own RK4 rule, every contact, friction, impulse, torque "
+        "and clearance condition a smooth inequality, with their common scale s "
+        "maximised and max|λ| <= the virtual constraints' eigenvalue; "
+        + ("the gait's own Bezier coefficients and T move with M1 (trust-region steps, "
+           "each gait made exactly periodic). " if rd.get("gait_free") else
+           "the gait is fixed (quick run; the full run co-designs it). ")
+        + ("It meets the target." if met else
+           f"It does not reach the paper's claim: best s* = {_f(rd.get('s_star'), '.4g')} "
+           f"(the paper's perturbation is s = 1); just above s* the binding failure is "
+           f"'{rd.get('failure')}'; from the paper's perturbation it walks and converges "
+           f"below 1e-3 from step {_f(rd.get('steps_to_converge'))} (the paper: step 4)."),
+        "",
+        f"Robust design: M1 = {_f(_g(rd, 'design', 'M1'), '.5g')}, v_c rejoining at "
+        f"{_f(_g(rd, 'design', 'rejoin'))} T; its gait (T = "
+        f"{_f(_g(rd, 'gait_change', 'T'), '.4g')} s, from "
+        f"{_f(_g(rd, 'gait_change', 'T_start'), '.4g')} s) bounds the impact impulse ratio "
+        f"|F_x|/F_z by {rd.get('gait_options', {}).get('impact_mu')} and continues the "
+        f"reference past T ({rd.get('gait_options', {}).get('continuation')}); "
+        f"max|λ| {_f(rd.get('max_abs'), '.3g')} against the virtual constraints' "
+        f"{_f(rd.get('vc_eigenvalue'), '.3g')} on that gait. Full-order check: "
+        + "; ".join(f"{k.replace('_', ' ')} (s = {_f(v.get('scale'), '.4g')}) {v.get('passed')} "
+                    f"of {len(v.get('outcomes', []))} directions walk and converge"
+                    for k, v in (rd.get("verified") or {}).items())
+        + f". Replay: `biped simulate {' '.join(rd.get('simulate_args', []))}`.", ""]
+    act = rd.get("active_constraints") or []
+    if act:
+        lines += ["What binds at the optimum (the inequalities with the largest "
+                  "multipliers): " + "; ".join(
+                      f"{a['constraint']} ({_f(a['multiplier'], '.3g')})"
+                      for a in act[:4]) + ". IPOPT: "
+                  f"{len(_g(rd, 'ipopt', 'solves') or [])} solves, "
+                  f"{_g(rd, 'ipopt', 'iterations')} iterations, "
+                  f"{_f(_g(rd, 'ipopt', 'time'), '.1f')} s.", ""]
+    return lines
+
+
+def _robustness_table(s: dict, rob: list) -> list:
+    """The s* table of the designs, and how its directions were chosen."""
+    st = (s.get("robustness") or {}).get("settings") or {}
+    res_note = (f" s* by bisection to {_f(st['s_max'] / 2 ** (st['rounds'] - 1), '.3g')} "
+                "(the co-design's own verification above: 16 directions, 10 rounds)."
+                if "s_max" in st and "rounds" in st else "")
+    lines = ["| design | gait | max\\|λ\\| | s* | first failure just above s* | "
+             "directions kept |", "|---|---|---|---|---|---|"]
+    for r in rob:
+        f = r.get("failure") or {}
+        fail = (f"{f.get('status')} in step {f.get('step')} (direction "
+                f"{f.get('direction')}) at s = {_f(r.get('s_fail'), '.4g')}" if f else
+                "none up to the largest scale tried")
+        lines.append(f"| {_esc(r.get('label'))} | {r.get('gait')} | "
+                     f"{_f(r.get('max_abs'), '.3g')} | {_f(r.get('s_star'), '.4g')} | "
+                     f"{_esc(fail)} | {r.get('directions_kept')} of "
+                     f"{r.get('directions_tried')} |")
+    lines += ["", "Directions: the paper's (all positive) and seeded sign patterns / "
+              "random directions of the same per-joint size, kept only when virtual "
+              "constraints walk from them at full scale (the others start with the "
+              "swing foot in the ground). Both controllers run on their exact hybrid zero "
+              "dynamics, batched (time-varying designs: the zero-dynamics walker; virtual "
+              "constraints: the phase walker, whose pass/fail verdicts equal the "
+              "full-order simulator's on the tested directions)." + res_note, ""]
+    return lines
+
+
+def _runs_table(runs: dict) -> list:
+    """The runs from the paper's full perturbation with their validity margins, and what
+    their statuses mean."""
+    lines = ["Runs from the paper's full perturbation (Fig. 5), with their validity "
+             "margins:", "", "| run | status | steps | converged (1e-3) from step | "
+             "peak \\|u\\| (N m) | min F_z (N) | max \\|F_x\\|/F_z | max impulse ratio |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in runs.values():
+        lines.append(f"| {_esc(r.get('label'))} | {_esc(r.get('status'))} | {r.get('steps')} "
+                     f"| {_f(r.get('steps_to_converge'))} | {_f(r.get('peak_torque'), '.1f')} "
+                     f"| {_f(r.get('min_normal_force'), '.1f')} | "
+                     f"{_f(r.get('max_friction_ratio'), '.3f')} | "
+                     f"{_f(r.get('max_impulse_ratio'), '.3f')} |")
+    seen = sorted({r.get("status") for r in runs.values()} & set(OUTCOME_COLOURS))
+    if seen:
+        meaning = {k: OUTCOME_COLOURS[k][1] for k in seen}
+        if "slipped" in meaning:
+            meaning["slipped"] = ("the stance force or the impact impulse left the "
+                                  "friction cone |F_x| <= mu F_z")
+        lines += ["", "Statuses: " + "; ".join(f"{k}: {v}" for k, v in meaning.items())
+                  + "; every run stops at its first invalid state."]
+    lines.append("")
     return lines
 
 

@@ -203,44 +203,16 @@ def monte_carlo(design, spec=None, settings: MonteCarloSettings | None = None,
     try:
         if store is not None:
             store.open()
-            files = store.chunk_files()
-            for k, a, b in todo:
-                for path in files.get(k, []):
-                    try:
-                        results[k] = store.read_runs(path, k, a, b - a, K)
-                        break
-                    except (OSError, ValueError) as e:
-                        store.log(dict(chunk=k, discarded=path.name, why=str(e)))
-                        store.discard(path)
+            _reuse_chunks(store, todo, results, K)
             reused = len(results)
             todo = [t for t in todo if t[0] not in results]
         bar = progress_bar(progress, N, sum(b - a for k, a, b in
                                             [(k, k * C, min(k * C + C, N)) for k in results]),
                            "run", "monte carlo")
-        computed, compute_time, steps_done = 0, 0.0, 0
-
-        def record(k, a, b, out):
-            nonlocal computed, compute_time, steps_done
-            if out["code_sha256"] != code_digest():
-                raise ValueError("scheduler: a worker runs other code than this process "
-                                 "(install the same version of the toolkit on every worker)")
-            if store is not None:
-                store.write_runs(k, a, out)
-            results[k] = out
-            computed += 1
-            compute_time += out["elapsed"]
-            steps_done += out["scenario_steps"]
-            bar.update(b - a)
-
         try:
-            if todo and where == "synchronous":
-                for k, a, b in todo:
-                    record(k, a, b, evaluate_chunk(payload, a, b))
-            elif todo:
-                if client is None:
-                    client = stack.enter_context(cluster_client("local", workers))
-                submit_chunks(client, evaluate_chunk, payload, todo, record,
-                              f"mc-{gait.cache_key[:8]}")
+            computed, compute_time, steps_done = _compute_chunks(
+                payload, todo, results, store, bar, where, client, stack, workers,
+                f"mc-{gait.cache_key[:8]}")
         finally:
             bar.close()
         if store is not None:
@@ -250,6 +222,58 @@ def monte_carlo(design, spec=None, settings: MonteCarloSettings | None = None,
         if store is not None:
             store.close()
         stack.close()
+    return _result(gait, spec, st, results, out_dir, t0, compute_time, steps_done,
+                   computed, reused)
+
+
+def _reuse_chunks(store, todo, results, K):
+    """Read into ``results`` the chunks of ``todo`` the folder holds (a damaged file is
+    logged and discarded)."""
+    files = store.chunk_files()
+    for k, a, b in todo:
+        for path in files.get(k, []):
+            try:
+                results[k] = store.read_runs(path, k, a, b - a, K)
+                break
+            except (OSError, ValueError) as e:
+                store.log(dict(chunk=k, discarded=path.name, why=str(e)))
+                store.discard(path)
+
+
+def _compute_chunks(payload, todo, results, store, bar, where, client, stack, workers, name):
+    """Compute the chunks of ``todo`` (in this process, or on the client, a LocalCluster
+    started on ``stack`` when there is none), each recorded in ``results`` (and the
+    folder) as it arrives: (chunks computed, their compute time, their steps)."""
+    computed, compute_time, steps_done = 0, 0.0, 0
+
+    def record(k, a, b, out):
+        nonlocal computed, compute_time, steps_done
+        if out["code_sha256"] != code_digest():
+            raise ValueError("scheduler: a worker runs other code than this process "
+                             "(install the same version of the toolkit on every worker)")
+        if store is not None:
+            store.write_runs(k, a, out)
+        results[k] = out
+        computed += 1
+        compute_time += out["elapsed"]
+        steps_done += out["scenario_steps"]
+        bar.update(b - a)
+
+    if todo and where == "synchronous":
+        for k, a, b in todo:
+            record(k, a, b, evaluate_chunk(payload, a, b))
+    elif todo:
+        if client is None:
+            client = stack.enter_context(cluster_client("local", workers))
+        submit_chunks(client, evaluate_chunk, payload, todo, record, name)
+    return computed, compute_time, steps_done
+
+
+def _result(gait, spec, st, results, out_dir, t0, compute_time, steps_done, computed,
+            reused):
+    """The chunks' runs put together: the MFPT estimate, the step time's RMS deviation,
+    the counts and the run's record."""
+    N, K = st.runs, st.max_steps
     parts = [results[k] for k in sorted(results)]
     status = np.concatenate([p["status"] for p in parts])
     fail_step = np.concatenate([p["fail_step"] for p in parts])

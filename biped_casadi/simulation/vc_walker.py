@@ -273,7 +273,6 @@ class VirtualConstraintWalker:
         -------
         WalkBatch
         """
-        vm, S = self.vmap, self.schema
         theta, w = np.array(theta, float).ravel(), np.array(w, float).ravel()
         n = theta.size
         if p is None:
@@ -283,81 +282,106 @@ class VirtualConstraintWalker:
         heights = step_heights(terrain, n, steps)
         run = OutcomeRecorder(n, steps)
         alive = np.ones(n, bool)
-        direction = self.direction
-        lo, hi = vm.vc.theta_range
         for k in range(steps):
             idx = np.flatnonzero(alive)
             if idx.size == 0:
                 break
             run.scenario_steps += idx.size
-            m_ = idx.size
             ahead, behind = (g[idx] for g in ground_levels(heights, k))
-            thm = self._strike_phase(ahead, p[idx])
-            hs = (thm - theta[idx]) / self.nodes
-            with np.errstate(invalid="ignore"):
-                backwards = ~(w[idx] * direction > 0)
-                stalled = backwards | ~(hs * direction > 0)
-                outside = ~((thm >= lo) & (thm <= hi)) & np.isfinite(thm)
-            hs = np.where(stalled | outside, 0.0, hs)
-            z0 = np.vstack([w[idx], np.zeros(m_)])
-            _, _, D0 = self._nodes(z0, theta[idx], np.zeros(m_), p[idx], 1)
-            Z, TH, Dg = self._nodes(z0, theta[idx], hs, p[idx], self.nodes)
-            Z = np.concatenate([z0[:, :, None], Z], axis=2)
-            Dg = np.concatenate([D0, Dg], axis=2)
-            ws = Z[0]
-            rows = S.rows(Dg, np.all(np.isfinite(Z), axis=0))
-            zs = rows["zsw"]
-            zprev = np.concatenate([zs[:, :1], zs[:, :-1]], axis=1)
-            masks = node_violations(rows, self.limits, self.den_scale,
-                                    np.sign(rows["den"][:, :1]), zprev,
-                                    (ahead[:, None], behind[:, None]))
-            masks["no_impact"] = rows["finite"] & ~(ws * direction > 0)   # stalls, falls back
-            first, which = first_violation(masks)
-            # a NaN phase rate is a stall (xi = w^2 < 0 past the turn): no impact
-            stall = ~np.isfinite(ws[np.arange(m_), np.minimum(first, self.nodes)])
-            which = np.where((which == "diverged") & stall, "no_impact", which)
-            run.track(idx, S.row(Dg, "u"), S.row(Dg, "Fx"), S.row(Dg, "Fz"),
-                      np.arange(self.nodes + 1)[None, :]
-                      < np.minimum(first + 1, self.nodes + 1)[:, None])
-            if k == 0 and step_start:
-                which = np.where(which == "", start_violation(zs[:, 0], self.limits, behind),
-                                 which)
-                which = np.where(backwards & (which == ""), "out_of_range", which)
-            which = np.where(outside & (which == ""), "out_of_range", which)
-            which = np.where(stalled & (which == ""), "no_impact", which)
-            which = np.where(~np.isfinite(thm) & (which == ""), "no_impact", which)
-            which = np.where((which == "") & ~(rows["xsw"][:, -1] > self.model.scuff_zone),
-                             "no_impact", which)
-            which = np.where(which == "", strike_violation(rows["dzsw"][:, -1]), which)
-            with np.errstate(invalid="ignore"):     # as the simulator: no impact in time
-                late = ~(Z[1, :, -1] <= self.options.horizon * self.gait.T)
-            which = np.where((which == "") & late, "no_impact", which)
+            thm, backwards, stalled, outside, Z, Dg = self._integrate_step(
+                theta[idx], w[idx], p[idx], ahead)
+            which = self._step_verdicts(run, idx, thm, backwards, stalled, outside, Z, Dg,
+                                        ahead, behind, k == 0 and step_start)
             bad = which != ""
             run.fail(idx[bad], which[bad], k)
             alive[idx[bad]] = False
             ok = np.flatnonzero(~bad)
             if ok.size == 0:
                 continue
-            gi = idx[ok]
-            wm, tm = ws[ok, -1], Z[1, ok, -1]
-            th_p, w_p, p_p, F, vl, qu_m, dqu_m = self._batch(
-                "impact", thm[ok][None, :], wm[None, :], p[gi].T)
-            F, vl, th_p, w_p = F.T, vl.ravel(), th_p.ravel(), w_p.ravel()
-            err = np.c_[qu_m.ravel(), dqu_m.ravel()] - self.ref_T[None, :]
-            run.impact(gi, k, err[:, 0], err[:, 1], tm, F)
-            imp = impact_violation(F, vl, np.isfinite(w_p) & np.all(np.isfinite(F), axis=1)
-                                   & np.all(np.isfinite(p_p), axis=0), self.limits)
-            badi = imp != ""
-            run.fail(gi[badi], imp[badi], k)
-            alive[gi[badi]] = False
-            nxt = alive[gi] & ~(w_p * direction > 0) & (k + 1 < steps)
-            run.fail(gi[nxt], "out_of_range", k + 1)
-            alive[gi[nxt]] = False
-            go = ~badi & ~nxt
-            theta[gi[go]] = th_p[go]
-            w[gi[go]] = w_p[go]
-            p[gi[go]] = p_p.T[go]
+            self._impact(run, idx[ok], k, steps, thm[ok], Z[0][ok, -1], Z[1, ok, -1],
+                         alive, theta, w, p)
         return run.batch()
+
+    def _integrate_step(self, theta, w, p, ahead):
+        """One step of m scenarios from phases theta with rates w: the strike phase thm,
+        whether each goes backwards, stalls or strikes outside the phase range, and the
+        nodes (w, t) Z (2, m, nodes + 1) with their diagnostics from the start on."""
+        direction = self.direction
+        lo, hi = self.vmap.vc.theta_range
+        m_ = theta.size
+        thm = self._strike_phase(ahead, p)
+        hs = (thm - theta) / self.nodes
+        with np.errstate(invalid="ignore"):
+            backwards = ~(w * direction > 0)
+            stalled = backwards | ~(hs * direction > 0)
+            outside = ~((thm >= lo) & (thm <= hi)) & np.isfinite(thm)
+        hs = np.where(stalled | outside, 0.0, hs)
+        z0 = np.vstack([w, np.zeros(m_)])
+        _, _, D0 = self._nodes(z0, theta, np.zeros(m_), p, 1)
+        Z, TH, Dg = self._nodes(z0, theta, hs, p, self.nodes)
+        Z = np.concatenate([z0[:, :, None], Z], axis=2)
+        Dg = np.concatenate([D0, Dg], axis=2)
+        return thm, backwards, stalled, outside, Z, Dg
+
+    def _step_verdicts(self, run, idx, thm, backwards, stalled, outside, Z, Dg, ahead,
+                       behind, first_step):
+        """Every node checked (the margins tracked in ``run``), then the step's start
+        (``first_step``), its phase and its strike: per scenario the first failure
+        ('' none)."""
+        S, direction = self.schema, self.direction
+        m_ = idx.size
+        ws = Z[0]
+        rows = S.rows(Dg, np.all(np.isfinite(Z), axis=0))
+        zs = rows["zsw"]
+        zprev = np.concatenate([zs[:, :1], zs[:, :-1]], axis=1)
+        masks = node_violations(rows, self.limits, self.den_scale,
+                                np.sign(rows["den"][:, :1]), zprev,
+                                (ahead[:, None], behind[:, None]))
+        masks["no_impact"] = rows["finite"] & ~(ws * direction > 0)   # stalls, falls back
+        first, which = first_violation(masks)
+        # a NaN phase rate is a stall (xi = w^2 < 0 past the turn): no impact
+        stall = ~np.isfinite(ws[np.arange(m_), np.minimum(first, self.nodes)])
+        which = np.where((which == "diverged") & stall, "no_impact", which)
+        run.track(idx, S.row(Dg, "u"), S.row(Dg, "Fx"), S.row(Dg, "Fz"),
+                  np.arange(self.nodes + 1)[None, :]
+                  < np.minimum(first + 1, self.nodes + 1)[:, None])
+        if first_step:
+            which = np.where(which == "", start_violation(zs[:, 0], self.limits, behind),
+                             which)
+            which = np.where(backwards & (which == ""), "out_of_range", which)
+        which = np.where(outside & (which == ""), "out_of_range", which)
+        which = np.where(stalled & (which == ""), "no_impact", which)
+        which = np.where(~np.isfinite(thm) & (which == ""), "no_impact", which)
+        which = np.where((which == "") & ~(rows["xsw"][:, -1] > self.model.scuff_zone),
+                         "no_impact", which)
+        which = np.where(which == "", strike_violation(rows["dzsw"][:, -1]), which)
+        with np.errstate(invalid="ignore"):     # as the simulator: no impact in time
+            late = ~(Z[1, :, -1] <= self.options.horizon * self.gait.T)
+        which = np.where((which == "") & late, "no_impact", which)
+        return which
+
+    def _impact(self, run, gi, k, steps, thm, wm, tm, alive, theta, w, p):
+        """The impacts of the scenarios gi at phases thm, rates wm, times tm: recorded
+        and checked in ``run``; those that go on start the next step (``alive``,
+        ``theta``, ``w`` and ``p`` updated in place)."""
+        direction = self.direction
+        th_p, w_p, p_p, F, vl, qu_m, dqu_m = self._batch(
+            "impact", thm[None, :], wm[None, :], p[gi].T)
+        F, vl, th_p, w_p = F.T, vl.ravel(), th_p.ravel(), w_p.ravel()
+        err = np.c_[qu_m.ravel(), dqu_m.ravel()] - self.ref_T[None, :]
+        run.impact(gi, k, err[:, 0], err[:, 1], tm, F)
+        imp = impact_violation(F, vl, np.isfinite(w_p) & np.all(np.isfinite(F), axis=1)
+                               & np.all(np.isfinite(p_p), axis=0), self.limits)
+        badi = imp != ""
+        run.fail(gi[badi], imp[badi], k)
+        alive[gi[badi]] = False
+        nxt = alive[gi] & ~(w_p * direction > 0) & (k + 1 < steps)
+        run.fail(gi[nxt], "out_of_range", k + 1)
+        alive[gi[nxt]] = False
+        go = ~badi & ~nxt
+        theta[gi[go]] = th_p[go]
+        w[gi[go]] = w_p[go]
+        p[gi[go]] = p_p.T[go]
 
 
 @gait_first

@@ -136,25 +136,61 @@ class Reduced:
         return res
 
     def _evaluate(self, d):
-        tr, st = self.tr, self.tr.st
-        nu, nc, nd, nl = tr.nu, tr.nc, self.nd, tr.nl
+        """Walk every scenario from the design d step by step, each step's rows and end
+        error in the NLP, then the Jury and the gait's rows: (f, grad f, g, dg/dd, lo, hi)."""
+        tr = self.tr
         alpha, T, r0, M1, rejoin, s = tr.unpack(d)
         tab = tr.table(d)
-        rows = _Dense(nd)
-        f, grad = -self.s_weight * s, np.zeros(nd)
+        rows = _Dense(self.nd)
+        f, grad = -self.s_weight * s, np.zeros(self.nd)
         grad[tr.i_s] = -self.s_weight
+        c = self._constants(tab)
+        Ls, TLs = self._starts(s, M1, tab)
+        info = []
+        for j in range(int(self.steps.max())):
+            act = [k for k in range(tr.K) if self.steps[k] > j]
+            XA, SSA, diagA, ddiagA, PA, dP, hits = self._walk_steps(tab, Ls, act, j, M1,
+                                                                    rejoin, T, alpha)
+            for i, k in enumerate(act):
+                tag = f"k{k} j{j}"
+                if hits[i] is None:
+                    self.failures.append((k, j, "no strike"))
+                    raise _NoStrike(tag)
+                nodes = (XA[i], SSA[i], diagA[i], ddiagA[i], PA[i], dP)
+                f, step_info, Ls[k], TLs[k] = self._step(rows, tab, nodes, hits[i], TLs[k],
+                                                         k, j, T, alpha, c, f, grad)
+                info.append(step_info)
+        if self.jury is not None:
+            self._jury_rows(rows, M1)
+        if tr.free:
+            self._free_gait_rows(rows, d, tab)
+        self.info = info
+        g, J, lo, hi = rows.stack()
+        self.names = rows.names
+        self._ng, self._lo, self._hi = g.size, lo, hi
+        return f, grad, g, J, lo, hi
+
+    def _constants(self, tab):
+        """What every step uses: the margined limits, the end target rT and its columns,
+        the number of KS chunks and the nodes' times."""
+        tr, st, nd = self.tr, self.tr.st, self.nd
         U = st.torque_limit - st.torque_margin
         mu, mg, rho = st.mu - st.mu_margin, tr.mg, st.ks_rho
         rT = tab["r"][:, 2 * tr.N]
         drT = np.zeros((2, nd))
         if tr.free:
             drT[:, tr.i_G] = tab["dr"][:, :, 2 * tr.N]
+        n_chunks = int(math.ceil((tr.n_max + 2) / st.chunk))
+        t_nodes = np.arange(tr.n_max + 2) / tr.N
+        return dict(U=U, mu=mu, mg=mg, rho=rho, rT=rT, drT=drT, n_chunks=n_chunks,
+                    t_nodes=t_nodes)
+
+    def _starts(self, s, M1, tab):
+        """Every scenario's first start variables L and their columns TL in the design."""
+        tr, nu, nd, nl = self.tr, self.tr.nu, self.nd, self.tr.nl
         dR0 = np.zeros((3 * tr.nq, nd))
         if tr.free:
             dR0[:, tr.i_G] = tab["dR"][:, :, 0]
-        n_chunks = int(math.ceil((tr.n_max + 2) / st.chunk))
-        t_nodes = np.arange(tr.n_max + 2) / tr.N
-        info = []
         Ls, TLs = [], []
         for k in range(tr.K):
             sk = s if not np.isfinite(self.scales[k]) else float(self.scales[k])
@@ -167,106 +203,127 @@ class Reduced:
             TL += sJ[:nl, 1 + nu:] @ dR0
             Ls.append(so[:nl])
             TLs.append(TL)
-        for j in range(int(self.steps.max())):
-            act = [k for k in range(tr.K) if self.steps[k] > j]
-            n_try = min(max(int(self.bracket_guess[k, j]) for k in act) + self.PAD,
-                        tr.n_max - 1)
-            while True:
-                XA, SSA, diagA, ddiagA, PA, dP = tr.nodes(tab, np.array([Ls[k] for k in act]),
-                                                          n_try, M1, rejoin, T)
-                hits = [tr.strike_in(tab, XA[i], diagA[i], n_try, PA[i], T, alpha)
-                        for i in range(len(act))]
-                if all(h is not None for h in hits) or n_try >= tr.n_max - 1:
-                    break
-                n_try = min(n_try + 32, tr.n_max - 1)
-            for i, k in enumerate(act):
-                tag = f"k{k} j{j}"
-                if hits[i] is None:
-                    self.failures.append((k, j, "no strike"))
-                    raise _NoStrike(tag)
-                X, SS, diag, ddiag, P = XA[i], SSA[i], diagA[i], ddiagA[i], PA[i]
-                TL = TLs[k]
-                n, eta = hits[i]
-                self.bracket_guess[k, j] = n
-                out, Jl = tr.finish(tab, X[:, n], SS[:, :, n], n, eta, P, dP, T, alpha)
-                diag, ddiag, out, Jl = tr._with_last(diag[:, :n + 1], ddiag[:, :, :n + 1],
-                                                     out, Jl)
-                C = self.columns(TL)
-                r = tr.rows
-                dz = Jl[r["zsw"]]
-                deta = -(dz[:nc] @ C) / dz[nc]                     # implicit function
-                Ctot = np.vstack([C, deta[None]])                  # (nc + 1, nd)
-                D = lambda J_: J_ @ Ctot                           # noqa: E731
-                dd = np.einsum("mcp,cd->mdp", ddiag, Ctot)         # (9, nd, p)
-                u, Fx, Fz, zsw, den = diag[:nu], diag[nu], diag[nu + 1], diag[nu + 3], diag[nu + 4]
-                du, dFx, dFz, dzsw, dden = (dd[:nu], dd[nu], dd[nu + 1], dd[nu + 3], dd[nu + 4])
-                # per chunk of nodes (past the strike: the last point), one KS row each
-                # of torque, normal force, friction and the denominator
-                sc = tr.den_sign / tr.den_scale
-                rows.chunked_ks(
-                    [(np.vstack([u / U - 1, -u / U - 1]), np.concatenate([du / U, -du / U])),
-                     (((st.normal_force_min * mg - Fz) / mg)[None], (-dFz / mg)[None]),
-                     (np.vstack([Fx - mu * Fz, -Fx - mu * Fz]) / mg,
-                      np.stack([dFx - mu * dFz, -dFx - mu * dFz]) / mg),
-                     ((st.den_margin - sc * den)[None], (-sc * dden)[None])],
-                    ("torque", "normal", "friction", "denominator"), st.chunk, n_chunks, rho,
-                    tag)
-                # the swing foot lifts at the start and stays clear mid-step
-                tn = t_nodes[:n + 1]
-                lift = np.flatnonzero((tn > 0) & (tn < 0.1))
-                mid = np.flatnonzero((tn >= 0.1) & (tn <= 0.9))
-                vref = 0.3 * tn[lift]          # m per unit of s: a lift-off speed scale
-                rows.ks((-zsw[lift] / vref)[None], (-dzsw[:, lift] / vref)[None], rho,
-                        f"clearance {tag} lift-off")
-                rows.ks(((st.clearance_mid - zsw[mid]) / 0.05)[None],
-                        (-dzsw[:, mid] / 0.05)[None], rho, f"clearance {tag} mid-step")
-                rows.add(out[r["dzsw"]], D(Jl[r["dzsw"]]), -np.inf, -st.strike_speed_min,
-                         f"strike_speed {tag}")
-                rows.add(out[r["xsw"]], D(Jl[r["xsw"]]), st.strike_front_min, np.inf,
-                         f"strike_front {tag}")
-                F, dF = out[r["F"]], D(Jl[r["F"]])
-                rows.add(F[1], dF[1], st.impulse_min, np.inf, f"impulse_normal {tag}")
-                rows.add(np.r_[mu * F[1] - F[0], mu * F[1] + F[0]],
-                         np.vstack([mu * dF[1] - dF[0], mu * dF[1] + dF[0]]), 0.0, np.inf,
-                         f"impulse_cone {tag}")
-                rows.add(out[r["vold"]], D(Jl[r["vold"]]), st.liftoff_min, np.inf,
-                         f"liftoff {tag}")
-                err = out[r["x"]] - rT
-                derr = D(Jl[r["x"]]) - drT
-                wj = self.weights[j]
-                if wj:
-                    f += wj * float(err @ err)
-                    grad += 2 * wj * err @ derr
-                if j >= min(self.tol_from[k], self.steps[k] - 1):
-                    tol = self.tols[k]
-                    if np.isfinite(tol):
-                        rows.add(err, derr, -tol, tol, f"final_error {tag}")
-                info.append(dict(k=k, j=j, err=err.copy(), te=(n + eta) * T / tr.N,
-                                 peak_u=float(np.abs(u).max()), impulse=F.tolist()))
-                Ls[k] = out[r["next"]]
-                TLs[k] = D(Jl[r["next"]])
-        if self.jury is not None:
-            fn, lam = self.jury
-            (trA, dtr), (det, ddet) = fn(M1)
-            rows.add(np.r_[det - lam**2, -det - lam**2],
-                     np.vstack([_on(nd, tr.i_M1, ddet), _on(nd, tr.i_M1, -ddet)]),
-                     -np.inf, 0.0, "jury det")
-            rows.add(np.r_[trA - lam - det / lam, -trA - lam - det / lam],
-                     np.vstack([_on(nd, tr.i_M1, dtr - ddet / lam),
-                                _on(nd, tr.i_M1, -dtr - ddet / lam)]),
-                     -np.inf, 0.0, "jury trace")
-        if tr.free:
-            w_rows = _Rows()
-            tr._gait_rows(w_rows, d, tab)
-            gv, lo, hi, ri, ci, vals = w_rows.stack()
-            Jg = np.zeros((gv.size, nd))
-            np.add.at(Jg, (ri, ci), vals)
-            rows.add(gv, Jg, lo, hi, w_rows.names)
-        self.info = info
-        g, J, lo, hi = rows.stack()
-        self.names = rows.names
-        self._ng, self._lo, self._hi = g.size, lo, hi
-        return f, grad, g, J, lo, hi
+        return Ls, TLs
+
+    def _walk_steps(self, tab, Ls, act, j, M1, rejoin, T, alpha):
+        """Step j of the active scenarios over enough nodes (from the bracket guess, 32
+        more at a time) for each to strike: their nodes and strikes (None: no strike)."""
+        tr = self.tr
+        n_try = min(max(int(self.bracket_guess[k, j]) for k in act) + self.PAD,
+                    tr.n_max - 1)
+        while True:
+            XA, SSA, diagA, ddiagA, PA, dP = tr.nodes(tab, np.array([Ls[k] for k in act]),
+                                                      n_try, M1, rejoin, T)
+            hits = [tr.strike_in(tab, XA[i], diagA[i], n_try, PA[i], T, alpha)
+                    for i in range(len(act))]
+            if all(h is not None for h in hits) or n_try >= tr.n_max - 1:
+                break
+            n_try = min(n_try + 32, tr.n_max - 1)
+        return XA, SSA, diagA, ddiagA, PA, dP, hits
+
+    def _step(self, rows, tab, nodes, hit, TL, k, j, T, alpha, c, f, grad):
+        """Scenario k's step j from its nodes and strike: the strike and its columns in the
+        design (the strike time an implicit function), the step's rows, its end error in
+        the objective (grad updated in place); returns (f, its info, next L, next TL)."""
+        tr, nu, nc = self.tr, self.tr.nu, self.tr.nc
+        tag = f"k{k} j{j}"
+        X, SS, diag, ddiag, P, dP = nodes
+        n, eta = hit
+        self.bracket_guess[k, j] = n
+        out, Jl = tr.finish(tab, X[:, n], SS[:, :, n], n, eta, P, dP, T, alpha)
+        diag, ddiag, out, Jl = tr._with_last(diag[:, :n + 1], ddiag[:, :, :n + 1],
+                                             out, Jl)
+        C = self.columns(TL)
+        r = tr.rows
+        dz = Jl[r["zsw"]]
+        deta = -(dz[:nc] @ C) / dz[nc]                     # implicit function
+        Ctot = np.vstack([C, deta[None]])                  # (nc + 1, nd)
+        D = lambda J_: J_ @ Ctot                           # noqa: E731
+        dd = np.einsum("mcp,cd->mdp", ddiag, Ctot)         # (9, nd, p)
+        u = diag[:nu]
+        self._path_rows(rows, diag, dd, n, tag, c)
+        F = self._strike_rows(rows, out, Jl, D, tag, c)
+        err = out[r["x"]] - c["rT"]
+        derr = D(Jl[r["x"]]) - c["drT"]
+        wj = self.weights[j]
+        if wj:
+            f += wj * float(err @ err)
+            grad += 2 * wj * err @ derr
+        if j >= min(self.tol_from[k], self.steps[k] - 1):
+            tol = self.tols[k]
+            if np.isfinite(tol):
+                rows.add(err, derr, -tol, tol, f"final_error {tag}")
+        step_info = dict(k=k, j=j, err=err.copy(), te=(n + eta) * T / tr.N,
+                         peak_u=float(np.abs(u).max()), impulse=F.tolist())
+        return f, step_info, out[r["next"]], D(Jl[r["next"]])
+
+    def _path_rows(self, rows, diag, dd, n, tag, c):
+        """A step's path rows: per chunk of nodes one KS row each of torque, normal force,
+        friction and the denominator, and the swing foot's clearance."""
+        tr, st, nu = self.tr, self.tr.st, self.tr.nu
+        U, mu, mg, rho = c["U"], c["mu"], c["mg"], c["rho"]
+        u, Fx, Fz, zsw, den = diag[:nu], diag[nu], diag[nu + 1], diag[nu + 3], diag[nu + 4]
+        du, dFx, dFz, dzsw, dden = (dd[:nu], dd[nu], dd[nu + 1], dd[nu + 3], dd[nu + 4])
+        # per chunk of nodes (past the strike: the last point), one KS row each
+        # of torque, normal force, friction and the denominator
+        sc = tr.den_sign / tr.den_scale
+        rows.chunked_ks(
+            [(np.vstack([u / U - 1, -u / U - 1]), np.concatenate([du / U, -du / U])),
+             (((st.normal_force_min * mg - Fz) / mg)[None], (-dFz / mg)[None]),
+             (np.vstack([Fx - mu * Fz, -Fx - mu * Fz]) / mg,
+              np.stack([dFx - mu * dFz, -dFx - mu * dFz]) / mg),
+             ((st.den_margin - sc * den)[None], (-sc * dden)[None])],
+            ("torque", "normal", "friction", "denominator"), st.chunk, c["n_chunks"], rho,
+            tag)
+        # the swing foot lifts at the start and stays clear mid-step
+        tn = c["t_nodes"][:n + 1]
+        lift = np.flatnonzero((tn > 0) & (tn < 0.1))
+        mid = np.flatnonzero((tn >= 0.1) & (tn <= 0.9))
+        vref = 0.3 * tn[lift]          # m per unit of s: a lift-off speed scale
+        rows.ks((-zsw[lift] / vref)[None], (-dzsw[:, lift] / vref)[None], rho,
+                f"clearance {tag} lift-off")
+        rows.ks(((st.clearance_mid - zsw[mid]) / 0.05)[None],
+                (-dzsw[:, mid] / 0.05)[None], rho, f"clearance {tag} mid-step")
+
+    def _strike_rows(self, rows, out, Jl, D, tag, c):
+        """A step's strike rows (swing foot speed and position, the impulse in its cone,
+        the old stance foot lifting off); returns the impulse F."""
+        st, r, mu = self.tr.st, self.tr.rows, c["mu"]
+        rows.add(out[r["dzsw"]], D(Jl[r["dzsw"]]), -np.inf, -st.strike_speed_min,
+                 f"strike_speed {tag}")
+        rows.add(out[r["xsw"]], D(Jl[r["xsw"]]), st.strike_front_min, np.inf,
+                 f"strike_front {tag}")
+        F, dF = out[r["F"]], D(Jl[r["F"]])
+        rows.add(F[1], dF[1], st.impulse_min, np.inf, f"impulse_normal {tag}")
+        rows.add(np.r_[mu * F[1] - F[0], mu * F[1] + F[0]],
+                 np.vstack([mu * dF[1] - dF[0], mu * dF[1] + dF[0]]), 0.0, np.inf,
+                 f"impulse_cone {tag}")
+        rows.add(out[r["vold"]], D(Jl[r["vold"]]), st.liftoff_min, np.inf,
+                 f"liftoff {tag}")
+        return F
+
+    def _jury_rows(self, rows, M1):
+        """Jury's conditions on A^z's trace and determinant, the eigenvalues within lam."""
+        nd, i_M1 = self.nd, self.tr.i_M1
+        fn, lam = self.jury
+        (trA, dtr), (det, ddet) = fn(M1)
+        rows.add(np.r_[det - lam**2, -det - lam**2],
+                 np.vstack([_on(nd, i_M1, ddet), _on(nd, i_M1, -ddet)]),
+                 -np.inf, 0.0, "jury det")
+        rows.add(np.r_[trA - lam - det / lam, -trA - lam - det / lam],
+                 np.vstack([_on(nd, i_M1, dtr - ddet / lam),
+                            _on(nd, i_M1, -dtr - ddet / lam)]),
+                 -np.inf, 0.0, "jury trace")
+
+    def _free_gait_rows(self, rows, d, tab):
+        """The gait's own rows (free gait), their sparse Jacobian made dense."""
+        tr, nd = self.tr, self.nd
+        w_rows = _Rows()
+        tr._gait_rows(w_rows, d, tab)
+        gv, lo, hi, ri, ci, vals = w_rows.stack()
+        Jg = np.zeros((gv.size, nd))
+        np.add.at(Jg, (ri, ci), vals)
+        rows.add(gv, Jg, lo, hi, w_rows.names)
 
     def bounds(self, M1_box: float = 40.0):
         """Bounds of the design vector (those of :meth:`Transcription.bounds`)."""
