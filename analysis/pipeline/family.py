@@ -19,11 +19,12 @@ __all__ = ["FamilyStage", "family_of", "stage_family", "family_speeds"]
 
 @dataclass
 class FamilyStage(StageResult):
-    """The family's gaits and the designs measured on them."""
+    """The family's gaits and the designs measured on them (``records`` as
+    :class:`analysis.design.family.FamilyDesigns`' for its figure)."""
 
     speeds: list = field(default_factory=list)
     gaits: list = field(default_factory=list)
-    rows: list = field(default_factory=list)
+    records: list = field(default_factory=list)
 
 
 def family_speeds(res: Resolution) -> tuple:
@@ -66,16 +67,19 @@ def stage_family(engine, model, robust_stage, res: Resolution) -> FamilyStage:
         refs.append((float(v), [(label, engine.submit(robustness, d, rs, kept)) for label, d in
                                 (("the co-design's M1", Design.tv(g, d0.M1, d0.rejoin)),
                                  ("virtual constraints", Design.vc(g)))]))
-    rows = []
+    records = []
     for v, rr in refs:
+        designs = {}
         for label, ref in rr:
             r = ref.result()
-            rows.append(dict(speed=v, label=label, s_star=float(r.s_star),
-                             max_abs=float(r.max_abs), failure=r.failure))
-        engine.say(f"{v:g} m/s: " + ", ".join(f"{r['label']} s* {r['s_star']:.3g}"
-                                             for r in rows if r["speed"] == v))
+            designs[label] = dict(s_star=float(r.s_star), max_abs=float(r.max_abs),
+                                  failure=r.failure)
+        records.append(dict(speed=v, designs=designs))
+        engine.say(f"{v:g} m/s: " + ", ".join(f"{k} s* {x['s_star']:.3g}"
+                                             for k, x in designs.items()))
     summary = dict(family=dict(speeds=[float(x) for x in fam.member_speeds],
                                message=fam.message, status=fam.status,
-                               records=[r.to_dict() for r in fam.records], rows=rows,
+                               members=[r.to_dict() for r in fam.records], records=records,
                                M1=list(d0.M1), rejoin=d0.rejoin))
-    return FamilyStage(summary, [float(x) for x in fam.member_speeds], list(fam.gaits), rows)
+    return FamilyStage(summary, [float(x) for x in fam.member_speeds], list(fam.gaits),
+                       records)

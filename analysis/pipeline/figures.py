@@ -7,14 +7,14 @@ import io
 import tempfile
 from pathlib import Path
 
-from ..reporting.plots import (basin_plot, conjecture_plot, gait_profiles_plot, gait_stick_plot,
+from ..reporting.plots import (basin_plot, conjecture_plot, family_designs_plot, gait_profiles_plot, gait_stick_plot,
                                m1_plane_plot, mfpt_sigma_plot, one_d_sweeps_plot,
                                stable_domains_plot, survival_plot, swing_torques_plot,
                                tradeoff_plot, unactuated_error_plot, walking_animation)
 from ..tasks import task
 
 __all__ = ["FORMATS", "figure_files", "gait_figures", "fig2", "fig3", "fig4",
-           "basins_default", "basins_robust",
+           "basins_default", "basins_robust", "family_figure",
            "tradeoff", "fig5_fig6", "animation", "terrain_figures"]
 
 #: every figure is written in these formats
@@ -166,3 +166,11 @@ def terrain_figures(terrain_stage) -> dict:
                 terrain_survival=figure_files(survival_plot(
                     [r for r, _ in t.survival], labels=[lab for _, lab in t.survival],
                     title=f"Survival at sigma = {1000 * t.sigma:g} mm")))
+
+
+@task(code="figures")
+def family_figure(family_stage) -> dict:
+    """s* and max|lambda| against speed on the reproduction's gait family."""
+    return dict(family=figure_files(family_designs_plot(
+        family_stage, title="The co-design's M1 and virtual constraints over the gait "
+                            "family: max|λ| and s* against speed")))

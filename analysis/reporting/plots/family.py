@@ -117,7 +117,9 @@ def family_designs_plot(designs, title: str | None = None) -> Figure:
     Parameters
     ----------
     designs : FamilyDesigns
-        From :func:`analysis.design.family.family_designs`.
+        From :func:`analysis.design.family.family_designs` (or any object with
+        ``records``: per speed ``speed`` and ``designs``, label -> ``max_abs``,
+        ``s_star`` and optionally ``basin_area``; ``deadbeat`` optional).
     title : str, optional
         The figure's title.
 
@@ -134,14 +136,18 @@ def family_designs_plot(designs, title: str | None = None) -> Figure:
         panels.append(("basin_area", "basin: converged area\n(rad x rad/s)"))
     fig = _figure(figsize=(7.0, 2.4 * len(panels) + 0.6))
     axes = fig.subplots(len(panels), 1, sharex=True)
+    names = list(dict.fromkeys(n for r in rec for n in r["designs"]))
     for ax, (key, label) in zip(np.atleast_1d(axes), panels):
-        for name, (c, m, ls) in _DESIGN_STYLE.items():
-            y = [r["designs"][name].get(key, np.nan) for r in rec]
+        for i, name in enumerate(names):
+            c, m, ls = _DESIGN_STYLE.get(name, (_COLOURS[i % len(_COLOURS)],
+                                                _MARKERS[i % len(_MARKERS)], "-"))
+            y = [r["designs"].get(name, {}).get(key, np.nan) for r in rec]
             ax.plot(v, y, color=c, marker=m, ls=ls, ms=4, label=name)
-        if key == "max_abs":
+        if key == "max_abs" and all("deadbeat" in r for r in rec):
             # deadbeat points are below the map's accuracy (about 1e-4): drawn at 1e-4
             ax.plot(v, [max(r["deadbeat"]["max_abs"], 1e-4) for r in rec], color="grey",
                     marker="x", ls="", label="deadbeat M1 NLP, group 1 (< 1e-4)")
+        if key == "max_abs":
             ax.axhline(1.0, color="red", lw=0.8, ls=":", label="stability limit")
             ax.set_yscale("log")
         if key == "s_star":
