@@ -37,8 +37,10 @@ LABELS = ("co-design at each speed", "M1 scheduled over speed", "one M1 for all 
 
 @dataclass
 class M1Schedule:
-    """M1 as a smooth function of speed: a polynomial per component, least squares over
-    the co-designs of the family's speeds.
+    """M1 as a smooth function of speed.
+
+    A polynomial per component, least squares over the co-designs of the family's
+    speeds.
 
     Parameters
     ----------
@@ -102,8 +104,9 @@ class M1Schedule:
         return np.array([np.polyval(c, float(speed)) for c in self.coefficients])
 
     def to_dict(self) -> dict:
-        """The schedule as a file's content: also M1 at each fitted speed (for a linear
-        interpolation by a consumer that does not evaluate the polynomials).
+        """The schedule as a file's content.
+
+        It has M1 at each fitted speed too, for a consumer that interpolates linearly.
 
         Returns
         -------
@@ -212,8 +215,10 @@ def _row(refs) -> dict:
 def family_designs_flow(engine, gaits: list, settings: CodesignSettings,
                         rs: RobustnessSettings, basin_n, single_speed: float = 0.75
                         ) -> FamilyDesigns:
-    """:func:`family_designs` as a flow: every speed's co-design side by side, then every
-    design measured at every speed side by side.
+    """:func:`family_designs` as a flow of tasks.
+
+    Every speed's co-design side by side, then every design measured at every speed
+    side by side.
 
     Parameters
     ----------
@@ -271,8 +276,10 @@ def family_designs(family, settings: CodesignSettings | None = None,
                    rs: RobustnessSettings | None = None, basin_n: int | None = 41,
                    single_speed: float = 0.75, progress=None, scheduler=None,
                    workers: int | None = None, cache=None) -> FamilyDesigns:
-    """The co-design and the deadbeat M1 at every speed of a family, an M1 schedule over
-    speed and one M1 for all, measured at every speed beside virtual constraints.
+    """Designs over a gait family, measured at every speed.
+
+    The co-design and the deadbeat M1 at every speed, an M1 schedule over speed and one
+    M1 for all, each measured at every speed beside virtual constraints.
 
     Parameters
     ----------

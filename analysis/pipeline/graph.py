@@ -48,10 +48,21 @@ __all__ = ["reproduce", "ReproduceResult", "STAGES", "Stage"]
 
 @dataclass(frozen=True)
 class Figures:
-    """Figures drawn from stage results: the figure task, the stages whose results are
-    its arguments (a name starting with '?' is passed as None when that stage is not in
-    the graph) and a stage whose presence makes these figures unnecessary (another
-    declaration draws them)."""
+    """Figures drawn from stage results.
+
+    Parameters
+    ----------
+    task : callable
+        The figure task.
+    needs : tuple of str
+        The stages whose results are its arguments (a name starting with '?' is passed
+        as None when that stage is not in the graph).
+    unless : str
+        A stage whose presence makes these figures unnecessary (another declaration
+        draws them).
+    resolution : bool
+        Whether it takes the run's resolution last.
+    """
 
     task: object
     needs: tuple
@@ -61,10 +72,27 @@ class Figures:
 
 @dataclass(frozen=True)
 class Stage:
-    """One stage of the graph: its name, its flow, the stages whose results are its
-    arguments, whether it takes the model or the resolution, its Dask priority, where it
-    applies (``paper``: every robot; ``robust``: RABBIT; ``full``: full runs) and the
-    figures it draws."""
+    """One stage of the graph.
+
+    Parameters
+    ----------
+    name : str
+        Its name in the report.
+    flow : callable
+        Its flow (a task taking the engine first).
+    needs : tuple of str
+        The stages whose results are its arguments.
+    model : bool
+        Whether it takes the robot's model first.
+    resolution : bool
+        Whether it takes the run's resolution last.
+    priority : int
+        Dask's priority of its tasks.
+    only : str
+        Where it applies: 'paper' (every robot), 'robust' (RABBIT), 'full' (full runs).
+    figures : tuple of Figures
+        The figures it draws.
+    """
 
     name: str
     flow: object

@@ -120,13 +120,20 @@ class ReproduceOptions:
         return cls(quick=quick, **mine)
 
     def resolution_of(self) -> Resolution:
-        """The run's :class:`Resolution`."""
+        """The run's resolution.
+
+        Returns
+        -------
+        Resolution
+        """
         return Resolution.make(self.quick, **(self.resolution or {}))
 
 
 def run_folder(out_dir, quick: bool, robot_name="rabbit") -> Path:
-    """The folder a run writes into: ``out_dir`` for the full run on RABBIT,
-    ``out_dir/quick`` for the quick one; for another robot ``out_dir/<name>`` and
+    """The folder a run writes into.
+
+    ``out_dir`` for the full run on RABBIT, ``out_dir/quick`` for the quick one; for
+    another robot ``out_dir/<name>`` and
     ``out_dir/<name>/quick``, the name being the built-in robot's or the description
     file's (``--robot my_biped.toml``: ``my_biped``).
 

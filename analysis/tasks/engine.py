@@ -182,7 +182,13 @@ class Engine:
             self._bar.close()
 
     def client(self):
-        """The Dask client (started on first use; None when synchronous)."""
+        """The Dask client, started on first use.
+
+        Returns
+        -------
+        dask.distributed.Client or None
+            None when synchronous.
+        """
         if self.synchronous:
             return None
         with self._lock:
@@ -205,8 +211,18 @@ class Engine:
     # ---------------------------------------------------------------- stages
     @contextlib.contextmanager
     def stage(self, name: str, priority: int = 0):
-        """Tasks submitted in this block (by this thread and the flows it spawns) belong
-        to stage ``name`` and run with Dask priority ``priority`` (higher first)."""
+        """Put what this block submits into a stage, with a Dask priority.
+
+        Tasks submitted in the block (by this thread and the flows it spawns) belong to
+        stage ``name`` and run with priority ``priority`` (higher first).
+
+        Parameters
+        ----------
+        name : str
+            The stage.
+        priority : int
+            Dask's priority of its tasks.
+        """
         old = getattr(_LOCAL, "stage", ("", 0))
         _LOCAL.stage = (name, int(priority))
         try:
@@ -216,12 +232,30 @@ class Engine:
 
     @staticmethod
     def current_stage():
-        """(stage name, priority) of this thread."""
+        """The stage of this thread.
+
+        Returns
+        -------
+        tuple
+            (stage name, priority).
+        """
         return getattr(_LOCAL, "stage", ("", 0))
 
     # ---------------------------------------------------------------- submit
     def key(self, fn, *args, **kwargs) -> str:
-        """The key a call of task ``fn`` has (nothing is run)."""
+        """The key a call of a task has (nothing is run).
+
+        Parameters
+        ----------
+        fn : callable
+            A task.
+        *args, **kwargs
+            Its arguments.
+
+        Returns
+        -------
+        str
+        """
         info = _info(fn)
         return task_key(info.name, info.version, info.code, args, kwargs,
                         ref_key=lambda o: o.key if isinstance(o, Ref) else None)
@@ -280,12 +314,28 @@ class Engine:
         return ref
 
     def map(self, fn, items, *args, **kwargs) -> list:
-        """``[submit(fn, item, *args, **kwargs) for item in items]``."""
+        """Submit a task once per item: ``[submit(fn, item, *args, **kwargs) ...]``.
+
+        Parameters
+        ----------
+        fn : callable
+            A task.
+        items : iterable
+            Its first arguments.
+        *args, **kwargs
+            Its other arguments.
+
+        Returns
+        -------
+        list of Ref
+        """
         return [self.submit(fn, item, *args, **kwargs) for item in items]
 
     def spawn(self, flow, *args, **kwargs) -> Ref:
-        """Run ``flow(self, *args, **kwargs)`` in a thread of this process (at once when
-        synchronous); ``flow`` is a :func:`task` whose result is kept like a task's.
+        """Run a flow, ``flow(self, *args, **kwargs)``, in a thread of this process.
+
+        At once when synchronous; ``flow`` is a :func:`task` whose result is kept like a
+        task's.
 
         Parameters
         ----------
@@ -356,8 +406,10 @@ class Engine:
         return tuple({id(r): r for r in deps}.values())
 
     def critical_path(self) -> dict:
-        """The longest chain of computed tasks of this run (flows weigh nothing: their
-        work is in their tasks): the wall time's bound on any number of workers.
+        """The longest chain of computed tasks of this run: the wall time's bound.
+
+        Flows weigh nothing (their work is in their tasks); on any number of workers the
+        run takes at least this long.
 
         Returns
         -------
@@ -380,8 +432,17 @@ class Engine:
         return dict(seconds=round(top[0], 2), tasks=top[1])
 
     def origin_stage(self, error: TaskError) -> str:
-        """The stage of the task where a failure began (its own stage, or the one of the
-        task it depends on that failed first)."""
+        """The stage of the task where a failure began.
+
+        Parameters
+        ----------
+        error : TaskError
+            The failure (its own task's, or of one it depends on).
+
+        Returns
+        -------
+        str
+        """
         r = self._refs.get(getattr(error, "key", ""))
         return r.stage if r is not None else ""
 

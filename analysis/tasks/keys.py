@@ -49,8 +49,10 @@ def _package_root(name: str) -> Path | None:
 
 
 def code_version(kind: str = "numerical") -> str:
-    """The version of the code a kind of task runs: SHA-256 of its modules' syntax trees
-    without docstrings, and of the CasADi and NumPy versions.
+    """The version of the code a kind of task runs.
+
+    The SHA-256 of its modules' syntax trees without docstrings, and of the CasADi and
+    NumPy versions.
 
     Parameters
     ----------

@@ -54,7 +54,12 @@ class TaskError(RuntimeError):
 
 
 def in_task() -> bool:
-    """Whether this thread is running a task (library calls inside run synchronously)."""
+    """Whether this thread is running a task (library calls inside run synchronously).
+
+    Returns
+    -------
+    bool
+    """
     if getattr(_LOCAL, "task", False):
         return True
     try:
@@ -143,9 +148,21 @@ def _refs_in(obj) -> list:
 # ------------------------------------------------------------------------- refs
 @dataclass
 class TaskRecord:
-    """One task of a run: its name, stage, key, state ('computed', 'reused' or
-    'failed'), the seconds it took (when computed: in this run; reused: when it was
-    computed) and whether it is a flow (whose seconds are mostly waiting)."""
+    """One task of a run.
+
+    Parameters
+    ----------
+    name, stage, key : str
+        The task, its stage and its key.
+    state : str
+        'computed', 'reused' or 'failed'.
+    seconds : float
+        What it took (computed: in this run; reused: when it was computed).
+    error : str
+        The failure, if any.
+    flow : bool
+        Whether it is a flow (whose seconds are mostly waiting).
+    """
 
     name: str
     stage: str
@@ -158,6 +175,17 @@ class TaskRecord:
 
 class Ref:
     """The result of a submitted task or flow, available later.
+
+    Parameters
+    ----------
+    engine : Engine
+        The engine that runs it.
+    key : str
+        The task's key.
+    name : str
+        The task's name.
+    stage : str
+        The stage it was submitted in.
 
     Attributes
     ----------
@@ -202,7 +230,12 @@ class Ref:
         callback(self)
 
     def done(self) -> bool:
-        """Whether the result (or the failure) is known."""
+        """Whether the result (or the failure) is known.
+
+        Returns
+        -------
+        bool
+        """
         return self._event.is_set()
 
     def result(self):
