@@ -2,7 +2,7 @@
 
 :func:`family_figures` computes, for every member of a :class:`gait_opt.GaitFamily`:
 the mechanical cost of transport, the step length, the period T, the peak torque, the
-impact impulse ratio |F_x| / F_z, the largest friction ratio along the step, the
+impact impulse ratio ``|F_x| / F_z``, the largest friction ratio along the step, the
 objective and the eigenvalue of the virtual constraints' restricted Poincaré map
 (:func:`analysis.vc_eigenvalue`).  The figures are drawn by
 :func:`analysis.reporting.plots.gait_family_plot`.
@@ -30,7 +30,7 @@ def actuator_work(gait, n: int = 4001, absolute: bool = True) -> float:
     n : int
         Trapezoid points on [0, T].
     absolute : bool
-        The integral of sum_i |u_i dq_{a,i}| (what the actuators spend when negative
+        The integral of sum_i ``|u_i dq_{a,i}|`` (what the actuators spend when negative
         work costs too), else of sum_i u_i dq_{a,i} (the signed work, which equals the
         change of the mechanical energy along the step).
 
@@ -48,7 +48,7 @@ def actuator_work(gait, n: int = 4001, absolute: bool = True) -> float:
 def cost_of_transport(gait, n: int = 4001) -> float:
     """Mechanical cost of transport of a gait: absolute actuator work per weight and distance.
 
-    COT = (integral over the step of sum_i |u_i dq_{a,i}| dt) / (m g L), with u the
+    COT = (integral over the step of sum_i ``|u_i dq_{a,i}|`` dt) / (m g L), with u the
     reference torques, q_a the actuated joints, m the robot's mass, g gravity and L the
     step length (dimensionless; no regeneration: negative work costs too).
 
@@ -90,11 +90,11 @@ class FamilyFigures(Result):
     step_length, period : list of float
         m, s.
     peak_torque : list of float
-        max |u_i| over the step, N m.
+        max ``|u_i|`` over the step, N m.
     impact_impulse_ratio : list of float
-        |F_x| / F_z of the impact impulse.
+        ``|F_x| / F_z`` of the impact impulse.
     friction_ratio : list of float
-        max |F_x| / F_z along the step.
+        max ``|F_x| / F_z`` along the step.
     cost : list of float
         The objective, integral of u'u dt / step length (N^2 m s).
     vc_eigenvalue : list of float

@@ -312,7 +312,7 @@ class PoincareMap:
     # ----------------------------------------------------------- evaluation
     @property
     def fixed_point_residual(self) -> float:
-        """|P(x*) - x*| with M1 = 0 (never singular: D11 > 0), computed once per map.
+        """``|P(x*) - x*|`` with M1 = 0 (never singular: D11 > 0), computed once per map.
 
         On a periodic gait x* is the fixed point for every M1 (the reference itself is
         the trajectory from x* with the outputs on it), so this one evaluation of the map
