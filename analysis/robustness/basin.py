@@ -9,7 +9,7 @@ with every validity condition checked (the batched walkers of
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -51,9 +51,12 @@ class BasinResult(Result):
     elapsed : float
         Wall time, s.
     status : str
-        'done'.
+        'done' (a fixed window); from :func:`analysis.robustness.basin_to_boundary`
+        'contained' (no cell on the window's edges converges: the basin's boundary is
+        inside the window) or 'capped' (the window reached its cap with converged cells
+        on an edge: the area is a lower bound).
     message : str
-        The converged percentage in words.
+        The converged percentage and the area in words.
     q_u : numpy.ndarray
         (n,) offsets of the rows from q_u*, rad.
     dq_u : numpy.ndarray
@@ -67,6 +70,21 @@ class BasinResult(Result):
         where an adaptive grid filled the cell without walking it.
     walked_cells : int
         Cells walked (n^2 on the full grid; fewer with ``refine``).
+    q_span, dq_span : float
+        Half-widths of the window, rad and rad/s.
+    cell_area : float
+        Area of one cell, (2 q_span / (n - 1)) (2 dq_span / (n - 1)), rad x rad/s.
+    area : float
+        The basin's area on the section: converged cells times ``cell_area``, rad x
+        rad/s (docs/theory.md, "Basins of attraction").
+    window_area : float
+        The area of the n x n cells (``area / converged_fraction``), rad x rad/s.
+    windows : list of dict
+        The windows walked by :func:`analysis.robustness.basin_to_boundary`, in order
+        (empty for a fixed window).
+    cap : dict or None
+        The largest window :func:`analysis.robustness.basin_to_boundary` may reach and
+        why (None for a fixed window).
     """
 
     controller: str
@@ -80,12 +98,19 @@ class BasinResult(Result):
     status: str = "done"
     message: str = ""
     walked_cells: int = 0
+    q_span: float = 0.0
+    dq_span: float = 0.0
+    cell_area: float = 0.0
+    area: float = 0.0
+    window_area: float = 0.0
+    windows: list = field(default_factory=list)
+    cap: dict | None = None
     q_u: np.ndarray = internal(default=None)
     dq_u: np.ndarray = internal(default=None)
     outcome: np.ndarray = internal(default=None)
     final_error: np.ndarray = internal(default=None)
 
-    SUCCESS = ("done",)
+    SUCCESS = ("done", "contained")
 
 
 @task
@@ -175,17 +200,19 @@ def basin(design: Design, n: int = 101,
         outcome, err, walked = _adaptive(cells, n, refine)
     names, counts = np.unique(outcome.astype(str), return_counts=True)
     frac = float(np.mean(outcome == "converged"))
+    cell = (2 * q_span / (n - 1)) * (2 * dq_span / (n - 1))
+    area = int(np.sum(outcome == "converged")) * cell
     return BasinResult(
         controller=design.controller, design=design_dict,
         x_star=xs.tolist(), steps=steps, tol=tol, converged_fraction=frac,
         counts={str(k): int(v) for k, v in zip(names, counts)},
         elapsed=time.perf_counter() - t0,
-        message=f"{100 * frac:.1f} % of {n}x{n} cells converge within {steps} steps"
+        message=f"{100 * frac:.1f} % of {n}x{n} cells converge within {steps} steps "
+                f"(area {area:.4g} rad x rad/s)"
                 + ("" if refine is None else f" (adaptive grid: {walked} cells walked)"),
-        walked_cells=int(walked),
+        walked_cells=int(walked), q_span=q_span, dq_span=dq_span, cell_area=cell,
+        area=area, window_area=n * n * cell,
         q_u=a, dq_u=b, outcome=outcome.reshape(n, n), final_error=err.reshape(n, n))
-
-
 
 
 def _adaptive(cells, n: int, k: int):

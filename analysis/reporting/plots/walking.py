@@ -13,8 +13,8 @@ from biped_casadi.files import atomic_path
 
 from .common import STANCE, SWING, TORSO, _figure, _legs_legend, run_label
 
-__all__ = ["walking_animation", "OUTCOME_COLOURS", "basin_plot", "tradeoff_plot",
-           "survival_plot", "mfpt_sigma_plot"]
+__all__ = ["walking_animation", "OUTCOME_COLOURS", "FIXED_WINDOW", "basin_plot",
+           "tradeoff_plot", "survival_plot", "mfpt_sigma_plot"]
 
 
 # ------------------------------------------------------------------ animation
@@ -118,53 +118,90 @@ OUTCOME_COLOURS = {
 }
 
 
-def basin_plot(results, title: str | None = None) -> Figure:
+#: the window of the report's basins before they grew to their boundary (rad, rad/s)
+FIXED_WINDOW = (0.05, 0.5)
+
+
+def basin_plot(results, title: str | None = None, labels=None,
+               reference_window=FIXED_WINDOW) -> Figure:
     """Basins of attraction on the section of the zero dynamics, side by side.
 
     Parameters
     ----------
     results : BasinResult or list of them
-        From :func:`analysis.robustness.s_star.basin` (e.g. a time-varying design and virtual
-        constraints on the same gait and grid).
+        From :func:`analysis.robustness.basin` or
+        :func:`analysis.robustness.basin_to_boundary` (each on its own window).
     title : str, optional
+    labels : list of str, optional
+        One panel title per result (default: the design).
+    reference_window : (float, float) or None
+        Half-widths (rad, rad/s) of a window drawn dashed on panels whose own window is
+        larger (default the fixed window of the report's basins); None: not drawn.
 
     Returns
     -------
     Figure
-        One panel per result: every cell coloured by its outcome after the result's
-        number of steps (converged, walked, or the first failure's cause); the fixed point
-        marked.
+        One panel per result on its own window, axes the offsets from the fixed point in
+        rad and rad/s: every cell coloured by its outcome after the result's number of
+        steps (converged, walked, or the first failure's cause), the basin's boundary (a
+        black line between converged cells and the rest), the fixed point marked; the
+        title gives the converged fraction, the basin's area in rad x rad/s and the
+        window.  One legend of outcomes for all panels.
     """
     results = results if isinstance(results, (list, tuple)) else [results]
+    labels = labels or [None] * len(results)
     names = list(OUTCOME_COLOURS)
     cmap = ListedColormap([OUTCOME_COLOURS[k][0] for k in names])
-    fig = _figure(figsize=(5.2 * len(results) + 2.2, 4.8))
-    axes = np.atleast_1d(fig.subplots(1, len(results), sharey=True))
-    present = set()
-    for ax, r in zip(axes, results):
-        codes = np.vectorize(lambda o: names.index(o) if o in names else names.index("diverged"))(
-            r.outcome.astype(str))
+    width = 5.2 * len(results) + 2.6
+    fig = _figure(figsize=(width, 5.0))
+    axes = np.atleast_1d(fig.subplots(1, len(results)))
+    present, extra = set(), {}
+    for ax, r, label in zip(axes, results, labels):
         present |= set(np.unique(r.outcome.astype(str)))
-        da, db = np.diff(r.q_u[:2])[0] / 2, np.diff(r.dq_u[:2])[0] / 2
-        ax.imshow(codes, origin="lower", aspect="auto", cmap=cmap, vmin=-0.5,
-                  vmax=len(names) - 0.5, interpolation="nearest",
-                  extent=[r.dq_u[0] - db, r.dq_u[-1] + db, r.q_u[0] - da, r.q_u[-1] + da])
-        ax.plot(0, 0, "w*", ms=12, mec="k")
-        label = ("virtual constraints" if r.controller == "vc" else
-                 "time-varying, M1 = [" + ", ".join(f"{v:.3g}" for v in r.design["M1"])
-                 + f"], v_c rejoins at {r.design['rejoin']:g} T")
-        ax.set_title(f"{label}\n{100 * r.converged_fraction:.1f} % of cells converge in "
-                     f"{r.steps} steps", fontsize=9)
-        ax.set_xlabel(r"$\dot q_u - \dot q_u^*$ at the section [rad/s]")
+        extra.update(_basin_panel(ax, r, label, names, cmap, reference_window))
     axes[0].set_ylabel(r"$q_u - q_u^*$ at the section [rad]")
     handles = [Patch(color=OUTCOME_COLOURS[k][0], label=OUTCOME_COLOURS[k][1])
                for k in names if k in present]
     handles.append(Line2D([], [], marker="*", color="w", mec="k", ms=10, ls="",
                           label="fixed point x*"))
+    handles += list(extra.values())
     fig.legend(handles=handles, loc="center right", fontsize=8, frameon=False)
     fig.suptitle(title or "Basins of attraction on the Poincaré section (tau = 0.75 T)")
-    fig.tight_layout(rect=(0, 0, 1 - 2.0 / (5.2 * len(results) + 2.2), 1))
+    fig.tight_layout(rect=(0, 0, 1 - 2.4 / width, 1))
     return fig
+
+
+def _basin_panel(ax, r, label, names, cmap, reference_window) -> dict:
+    """Draw one basin on ``ax``; the legend entries it adds beyond the outcomes."""
+    codes = np.vectorize(lambda o: names.index(o) if o in names else names.index("diverged"))(
+        r.outcome.astype(str))
+    da, db = np.diff(r.q_u[:2])[0] / 2, np.diff(r.dq_u[:2])[0] / 2
+    ax.imshow(codes, origin="lower", aspect="auto", cmap=cmap, vmin=-0.5,
+              vmax=len(names) - 0.5, interpolation="nearest",
+              extent=[r.dq_u[0] - db, r.dq_u[-1] + db, r.q_u[0] - da, r.q_u[-1] + da])
+    extra = {}
+    conv = (r.outcome == "converged").astype(float)
+    if 0 < conv.sum() < conv.size:
+        ax.contour(r.dq_u, r.q_u, conv, levels=[0.5], colors="k", linewidths=0.9)
+        extra["boundary"] = Line2D([], [], color="k", lw=0.9, label="basin boundary")
+    if reference_window is not None:
+        qw, dw = reference_window
+        if r.q_u[-1] > qw * (1 + 1e-9) or r.dq_u[-1] > dw * (1 + 1e-9):
+            ax.plot([-dw, dw, dw, -dw, -dw], [-qw, -qw, qw, qw, -qw], "w--", lw=1.0)
+            extra["window"] = Line2D([], [], color="0.5", ls="--", lw=1.0,
+                                     label=f"fixed window ±{qw:g} rad x ±{dw:g} rad/s")
+    ax.plot(0, 0, "w*", ms=12, mec="k")
+    if label is None:
+        label = ("virtual constraints" if r.controller == "vc" else
+                 "time-varying, M1 = [" + ", ".join(f"{v:.3g}" for v in r.design["M1"])
+                 + f"], v_c rejoins at {r.design['rejoin']:g} T")
+    area = getattr(r, "area", 0.0)
+    capped = " (capped: boundary not all inside)" if r.status == "capped" else ""
+    ax.set_title(f"{label}\n{100 * r.converged_fraction:.1f} % of the window converges in "
+                 f"{r.steps} steps{capped}\narea {area:.3g} rad x rad/s; window "
+                 f"±{r.q_u[-1]:.3g} rad x ±{r.dq_u[-1]:.3g} rad/s", fontsize=9)
+    ax.set_xlabel(r"$\dot q_u - \dot q_u^*$ at the section [rad/s]")
+    return extra
 
 
 def tradeoff_plot(front, others=None, bound=None, title: str | None = None,

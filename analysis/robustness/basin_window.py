@@ -1,0 +1,271 @@
+"""Basins whose window contains their boundary.
+
+A fixed window around the fixed point can lie inside the basin (the robust designs
+converge from almost every cell of ±0.05 rad x ±0.5 rad/s), and then a picture of it
+shows no boundary and its converged fraction does not compare designs.
+:func:`basin_to_boundary` widens the window, axis by axis, until no cell on its edges
+converges, up to a cap beyond which the section holds no state of a walking robot
+(:func:`section_cap`), and gives the basin's area in rad x rad/s (docs/theory.md,
+"Basins of attraction").
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from biped_casadi import Design, SimulationOptions, design_first
+from biped_casadi.control.output_law import SECTION
+from biped_casadi.numerics import as_number
+from biped_casadi.simulation import virtual_constraint_walker
+
+from ..tasks import task
+from .basin import BasinResult, basin
+
+__all__ = ["basin_to_boundary", "section_cap", "edge_cells"]
+
+#: resolution of the scan of the section's configurations (rad of q_u)
+CAP_SCAN_STEP = 1e-3
+
+
+@design_first
+def section_cap(design: Design, nodes: int = 100) -> dict:
+    """The largest window of the section that holds states of a walking robot.
+
+    The window is centred on the fixed point x* = (q_u*, dq_u*) (docs/theory.md,
+    "Basins of attraction"); beyond these half-widths both of its sides hold only
+    states the robot cannot be in:
+
+    - ``q_span``: the configuration at the section (on the design's zero-dynamics
+      manifold: q_a = q_a^d(0.75 T) - M1 (q_u - q_u*) for a time-varying design, the
+      point of the constraint curve with that q_u for virtual constraints) has its swing
+      foot under the ground (or, for virtual constraints, no point of the curve has
+      that q_u).  The cap is the farther of the two offsets where this starts, scanned
+      every 1 mrad (``CAP_SCAN_STEP``) out to a horizontal stance leg, |q_u| = pi/2; so
+      it is exact to 1 mrad, rounded outward.
+    - ``dq_span``: max(dq_u*, sqrt(g / r) - dq_u*), r the distance from the stance foot
+      to the centre of mass at x*.  Below dq_u = 0 the stance leg turns backward (no
+      forward step); above sqrt(g / r), the inverted pendulum's Froude limit
+      r dq_u^2 = g, the stance foot's normal force is negative (the robot is in
+      flight).  The limit treats the robot as a point mass turning at dq_u: an
+      estimate of where flight starts, not its exact value.
+
+    Parameters
+    ----------
+    design : Design
+        The design on its gait.
+    nodes : int
+        Nodes per step of the virtual constraints' walker (its constraint curve).
+
+    Returns
+    -------
+    dict
+        ``q_span`` (rad), ``dq_span`` (rad/s), ``q_offsets`` (the two offsets where the
+        swing foot reaches the ground, rad), ``dq_lift`` (sqrt(g / r), rad/s) and
+        ``reason`` (one line).
+    """
+    gait = design.gait
+    model = gait.model
+    xs = gait.state_at(SECTION * gait.T)
+    reach = math.pi / 2 - abs(float(xs[0]))
+    d = np.arange(-reach, reach + CAP_SCAN_STEP / 2, CAP_SCAN_STEP)
+    Q, ok = _section_configurations(design, xs, d, nodes)
+    z = np.array(model.swing_foot.map(d.size)(Q)[1]).ravel()
+    ok &= np.isfinite(z) & (z > 0)
+    i0 = int(np.argmin(np.abs(d)))
+    lo, hi = _interval(ok, i0)
+    q_lo = float(-d[lo - 1]) if lo > 0 else reach
+    q_hi = float(d[hi + 1]) if hi < d.size - 1 else reach
+    r = float(np.linalg.norm(np.array(model.com(gait.q(SECTION * gait.T))).ravel()))
+    lift = math.sqrt(model.description.gravity / r)
+    dq_span = max(float(xs[1]), lift - float(xs[1]))
+    return dict(q_span=max(q_lo, q_hi), dq_span=dq_span, q_offsets=[-q_lo, q_hi],
+                dq_lift=lift,
+                reason=f"q_u: the swing foot is under the ground at the section beyond "
+                       f"{-q_lo:+.3f} and {q_hi:+.3f} rad; dq_u: from 0 (the stance leg "
+                       f"at rest) to the Froude limit sqrt(g/r) = {lift:.3f} rad/s "
+                       f"(r = {r:.3f} m)")
+
+
+def _section_configurations(design, xs, d, nodes):
+    """Configurations (nq, m) at the section for q_u = q_u* + d, and where they exist."""
+    gait = design.gait
+    if design.M1 is None:
+        W = virtual_constraint_walker(gait, None, nodes, jit=True)
+        x = np.c_[xs[0] + d, np.full(d.size, xs[1])]
+        th, _ = W.section_states(x)
+        Q = np.array(W.vmap.curve.map(d.size)(th[None, :])[0])
+        lo, hi = sorted((W.vmap.theta_plus, W.vmap.theta_minus))
+        with np.errstate(invalid="ignore"):
+            ok = (np.abs(Q[0] - x[:, 0]) < 1e-9) & (th >= lo) & (th <= hi)
+        return Q, ok
+    q = np.asarray(gait.q(SECTION * gait.T), float).ravel()
+    Q = q[:, None] + np.vstack([d, -np.outer(np.asarray(design.M1), d)])
+    return Q, np.ones(d.size, bool)
+
+
+def _interval(ok, i0):
+    """The run of True around index i0 of ``ok``: (first, last)."""
+    lo = hi = i0
+    while lo > 0 and ok[lo - 1]:
+        lo -= 1
+    while hi < ok.size - 1 and ok[hi + 1]:
+        hi += 1
+    return lo, hi
+
+
+def edge_cells(result: BasinResult) -> dict:
+    """Converged cells on each edge of a basin's window.
+
+    Parameters
+    ----------
+    result : BasinResult
+        A basin.
+
+    Returns
+    -------
+    dict
+        ``q_low``, ``q_high`` (the first and last rows, q_u* -/+ q_span), ``dq_low``,
+        ``dq_high`` (the first and last columns): the number of converged cells on each.
+    """
+    c = np.asarray(result.outcome == "converged")
+    return dict(q_low=int(c[0].sum()), q_high=int(c[-1].sum()),
+                dq_low=int(c[:, 0].sum()), dq_high=int(c[:, -1].sum()))
+
+
+def _window_row(b: BasinResult, edges: dict) -> dict:
+    return dict(q_span=b.q_span, dq_span=b.dq_span, converged_fraction=b.converged_fraction,
+                area=b.area, walked_cells=b.walked_cells, edges=edges,
+                elapsed=round(b.elapsed, 3))
+
+
+@task
+@design_first
+def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
+                      dq_span: float = 0.5, steps: int = 10, tol: float = 1e-3,
+                      options: SimulationOptions | None = None, rk4_steps: int = 128,
+                      nodes: int = 100, refine: int | None = 4, factor: float = 2.0,
+                      zoom: int = 2, max_q_span: float | None = None,
+                      max_dq_span: float | None = None) -> BasinResult:
+    """The basin on a window that contains its boundary (docs/theory.md, "Basins of
+    attraction").
+
+    Starting from ±``q_span`` x ±``dq_span`` around x*, the basin (:func:`basin`) is
+    walked; while converged cells lie on the first or last row, ``q_span`` grows by
+    ``factor``, and while they lie on the first or last column, ``dq_span`` does, each
+    up to its cap (:func:`section_cap`, or ``max_q_span`` / ``max_dq_span``).  Then, up
+    to ``zoom`` times, an axis that did not grow and whose converged cells all lie
+    inside the middle 1/``factor`` of the window shrinks by ``factor`` (a finer grid of
+    the same basin); a zoomed window with converged cells on an edge is dropped.  The
+    basin's area (converged cells times the cell area, rad x rad/s) then compares
+    designs on any windows.
+
+    Parameters
+    ----------
+    design : Design
+        The design and its gait (time-varying, or virtual constraints).
+    n : int
+        Cells per axis of every window.
+    q_span, dq_span : float
+        Half-widths of the first window, rad and rad/s.
+    steps, tol, options, rk4_steps, nodes
+        As :func:`basin`.
+    refine : int, optional
+        The adaptive grid of :func:`basin` (``n - 1`` a multiple of it); None: every cell
+        walked.
+    factor : float
+        Growth (and zoom) factor of a half-width, > 1.
+    zoom : int
+        Most zoom steps (0: the window only grows).
+    max_q_span, max_dq_span : float, optional
+        Caps of the half-widths (default :func:`section_cap`'s).
+
+    Returns
+    -------
+    BasinResult
+        The last window's basin; ``status`` 'contained' (no converged cell on an edge)
+        or 'capped' (converged cells on an edge of a window at its cap: the boundary is
+        not all inside and ``area`` is a lower bound); ``windows`` lists every window
+        walked (half-widths, fraction, area, converged cells per edge, time), ``cap``
+        the caps and why; ``elapsed`` the time of all windows.
+
+    Raises
+    ------
+    ValueError
+        Naming ``factor``, ``zoom``, ``max_q_span`` or ``max_dq_span`` (and the
+        arguments :func:`basin` checks).
+    """
+    factor = as_number(factor, "factor", positive=True)
+    if factor <= 1:
+        raise ValueError(f"factor must be > 1, got {factor!r}")
+    if isinstance(zoom, bool) or not isinstance(zoom, int) or zoom < 0:
+        raise ValueError(f"zoom must be an integer >= 0, got {zoom!r}")
+    spans = [as_number(q_span, "q_span", positive=True),
+             as_number(dq_span, "dq_span", positive=True)]
+    t0 = time.perf_counter()
+    cap = section_cap(design, nodes)
+    for k, (name, given) in enumerate((("max_q_span", max_q_span),
+                                       ("max_dq_span", max_dq_span))):
+        key = ("q_span", "dq_span")[k]
+        if given is not None:
+            cap[key] = as_number(given, name, positive=True)
+            cap["reason"] += f"; {key} capped at {cap[key]:g} by {name}"
+    caps = [max(spans[0], cap["q_span"]), max(spans[1], cap["dq_span"])]
+    kw = dict(n=n, steps=steps, tol=tol, options=options, rk4_steps=rk4_steps, nodes=nodes,
+              refine=refine)
+    rows, grew = [], [False, False]
+
+    def walk(s):
+        b = basin(design, q_span=s[0], dq_span=s[1], **kw)
+        e = edge_cells(b)
+        rows.append(_window_row(b, e))
+        return b, (e["q_low"] + e["q_high"] > 0, e["dq_low"] + e["dq_high"] > 0)
+
+    b, touch = walk(spans)
+    while any(touch):
+        grown = [min(s * factor, c) if t else s for s, c, t in zip(spans, caps, touch)]
+        if grown == spans:
+            break
+        grew = [g or t for g, t in zip(grew, touch)]
+        spans = grown
+        b, touch = walk(spans)
+    status = "capped" if any(touch) else "contained"
+    for _ in range(zoom if status == "contained" else 0):
+        inner = _zoomable(b, factor, grew)
+        if not any(inner):
+            break
+        trial = [s / factor if z else s for s, z in zip(spans, inner)]
+        bz, tz = walk(trial)
+        if any(tz):
+            rows[-1]["dropped"] = True
+            break
+        b, spans = bz, trial
+    return _finish(b, status, rows, cap, time.perf_counter() - t0)
+
+
+def _zoomable(b: BasinResult, factor: float, grew) -> list:
+    """Per axis (q_u, dq_u): whether every converged cell lies strictly inside the
+    middle 1/factor of the window, and the axis did not grow."""
+    c = np.asarray(b.outcome == "converged")
+    if not c.any():
+        return [False, False]
+    ii, jj = np.nonzero(c)
+    return [not grew[0] and np.max(np.abs(b.q_u[ii])) < b.q_span / factor,
+            not grew[1] and np.max(np.abs(b.dq_u[jj])) < b.dq_span / factor]
+
+
+def _finish(b: BasinResult, status: str, rows: list, cap: dict, elapsed: float):
+    e = rows[-1]["edges"] if not rows[-1].get("dropped") else edge_cells(b)
+    where = ", ".join(k for k, v in e.items() if v)
+    windows = " -> ".join(f"±{r['q_span']:.3g} rad x ±{r['dq_span']:.3g} rad/s"
+                          + (" (dropped)" if r.get("dropped") else "") for r in rows)
+    n = b.outcome.shape[0]
+    say = (f"the window contains the basin's boundary: {100 * b.converged_fraction:.1f} % "
+           f"of {n}x{n} cells, area {b.area:.4g} rad x rad/s"
+           if status == "contained" else
+           f"capped: converged cells on the {where} edge(s) of the largest window, so the "
+           f"area {b.area:.4g} rad x rad/s is a lower bound ({cap['reason']})")
+    return dataclasses.replace(b, status=status, elapsed=elapsed, windows=rows, cap=cap,
+                               message=f"{say}; windows {windows}")
