@@ -24,10 +24,13 @@ from biped_casadi.simulation import virtual_constraint_walker
 from ..tasks import task
 from .basin import BasinResult, basin
 
-__all__ = ["basin_to_boundary", "section_cap", "edge_cells"]
+__all__ = ["basin_to_boundary", "section_cap", "edge_cells", "NO_STATE"]
 
 #: resolution of the scan of the section's configurations (rad of q_u)
 CAP_SCAN_STEP = 1e-3
+#: the outcome of a cell where the section holds no state of the robot (a point of it
+#: under the ground, or no point of the constraint curve with that q_u)
+NO_STATE = "no_state"
 
 
 @design_first
@@ -40,11 +43,12 @@ def section_cap(design: Design, nodes: int = 100) -> dict:
 
     - ``q_span``: the configuration at the section (on the design's zero-dynamics
       manifold: q_a = q_a^d(0.75 T) - M1 (q_u - q_u*) for a time-varying design, the
-      point of the constraint curve with that q_u for virtual constraints) has its swing
-      foot under the ground (or, for virtual constraints, no point of the curve has
-      that q_u).  The cap is the farther of the two offsets where this starts, scanned
-      every 1 mrad (``CAP_SCAN_STEP``) out to a horizontal stance leg, |q_u| = pi/2; so
-      it is exact to 1 mrad, rounded outward.
+      point of the constraint curve with that q_u for virtual constraints) has a point
+      of the robot (the swing foot, a knee, the hip, the torso's top) at or under the
+      ground (or, for virtual constraints, no point of the curve has that q_u).  The
+      cap is the farther of the two offsets where this starts, scanned every 1 mrad
+      (``CAP_SCAN_STEP``) out to a horizontal stance leg, |q_u| = pi/2; so it is exact
+      to 1 mrad, rounded outward.
     - ``dq_span``: max(dq_u*, sqrt(g / r) - dq_u*), r the distance from the stance foot
       to the centre of mass at x*.  Below dq_u = 0 the stance leg turns backward (no
       forward step); above sqrt(g / r), the inverted pendulum's Froude limit
@@ -62,9 +66,10 @@ def section_cap(design: Design, nodes: int = 100) -> dict:
     Returns
     -------
     dict
-        ``q_span`` (rad), ``dq_span`` (rad/s), ``q_offsets`` (the two offsets where the
-        swing foot reaches the ground, rad), ``dq_lift`` (sqrt(g / r), rad/s) and
-        ``reason`` (one line).
+        ``q_span`` (rad), ``dq_span`` (rad/s), ``q_offsets`` (the two offsets, below
+        and above x*, from which on the section holds no state of the robot, rad; just
+        past the scan on a side where it always does), ``dq_lift`` (sqrt(g / r),
+        rad/s) and ``reason`` (one line).
     """
     gait = design.gait
     model = gait.model
@@ -72,21 +77,24 @@ def section_cap(design: Design, nodes: int = 100) -> dict:
     reach = math.pi / 2 - abs(float(xs[0]))
     d = np.arange(-reach, reach + CAP_SCAN_STEP / 2, CAP_SCAN_STEP)
     Q, ok = _section_configurations(design, xs, d, nodes)
-    z = np.array(model.swing_foot.map(d.size)(Q)[1]).ravel()
-    ok &= np.isfinite(z) & (z > 0)
+    P = np.array(model.points.map(d.size)(Q))          # (2, m * points), per configuration
+    z = P[1].reshape(d.size, -1)[:, 1:]                 # every point but the stance foot
+    with np.errstate(invalid="ignore"):
+        ok &= np.all(np.isfinite(z) & (z > 0), axis=1)
     i0 = int(np.argmin(np.abs(d)))
     lo, hi = _interval(ok, i0)
-    q_lo = float(-d[lo - 1]) if lo > 0 else reach
-    q_hi = float(d[hi + 1]) if hi < d.size - 1 else reach
+    # the first offsets without a state of the robot (past the scan where there is none)
+    q_lo = float(-d[lo - 1]) if lo > 0 else reach + CAP_SCAN_STEP
+    q_hi = float(d[hi + 1]) if hi < d.size - 1 else reach + CAP_SCAN_STEP
     r = float(np.linalg.norm(np.array(model.com(gait.q(SECTION * gait.T))).ravel()))
     lift = math.sqrt(model.description.gravity / r)
     dq_span = max(float(xs[1]), lift - float(xs[1]))
-    return dict(q_span=max(q_lo, q_hi), dq_span=dq_span, q_offsets=[-q_lo, q_hi],
-                dq_lift=lift,
-                reason=f"q_u: the swing foot is under the ground at the section beyond "
-                       f"{-q_lo:+.3f} and {q_hi:+.3f} rad; dq_u: from 0 (the stance leg "
-                       f"at rest) to the Froude limit sqrt(g/r) = {lift:.3f} rad/s "
-                       f"(r = {r:.3f} m)")
+    return dict(q_span=min(max(q_lo, q_hi), reach), dq_span=dq_span,
+                q_offsets=[-q_lo, q_hi], dq_lift=lift,
+                reason=f"q_u: no state of the robot at the section from {-q_lo:+.3f} and "
+                       f"{q_hi:+.3f} rad on (a point of it under the ground); dq_u: from 0 "
+                       f"(the stance leg at rest) to the Froude limit sqrt(g/r) = "
+                       f"{lift:.3f} rad/s (r = {r:.3f} m)")
 
 
 def _section_configurations(design, xs, d, nodes):
@@ -155,7 +163,11 @@ def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
     Starting from ±``q_span`` x ±``dq_span`` around x*, the basin (:func:`basin`) is
     walked; while converged cells lie on the first or last row, ``q_span`` grows by
     ``factor``, and while they lie on the first or last column, ``dq_span`` does, each
-    up to its cap (:func:`section_cap`, or ``max_q_span`` / ``max_dq_span``).  Then, up
+    up to its cap (:func:`section_cap`, or ``max_q_span`` / ``max_dq_span``); rows
+    where the section holds no state of the robot (beyond :func:`section_cap`'s
+    ``q_offsets``: a point of it under the ground, or no point of the constraint curve)
+    are marked :data:`NO_STATE` instead of the walk's outcome (it would start from a
+    state the robot cannot be in), and are not in the basin.  Then, up
     to ``zoom`` times, an axis that did not grow and whose converged cells all lie
     inside the middle 1/``factor`` of the window shrinks by ``factor`` (a finer grid of
     the same basin); a zoomed window with converged cells on an edge is dropped.  The
@@ -218,7 +230,7 @@ def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
     rows, grew = [], [False, False]
 
     def walk(s):
-        b = basin(design, q_span=s[0], dq_span=s[1], **kw)
+        b = _mask(basin(design, q_span=s[0], dq_span=s[1], **kw), cap["q_offsets"])
         e = edge_cells(b)
         rows.append(_window_row(b, e))
         return b, (e["q_low"] + e["q_high"] > 0, e["dq_low"] + e["dq_high"] > 0)
@@ -243,6 +255,22 @@ def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
             break
         b, spans = bz, trial
     return _finish(b, status, rows, cap, time.perf_counter() - t0)
+
+
+def _mask(b: BasinResult, offsets) -> BasinResult:
+    """The basin with the rows beyond ``offsets`` (no state of the robot there:
+    :func:`section_cap`) marked :data:`NO_STATE` instead of walked."""
+    rows = (b.q_u <= offsets[0]) | (b.q_u >= offsets[1])
+    if not rows.any():
+        return b
+    outcome, err = b.outcome.copy(), b.final_error.copy()
+    outcome[rows, :], err[rows, :] = NO_STATE, np.inf
+    names, counts = np.unique(outcome.astype(str), return_counts=True)
+    conv = int(np.sum(outcome == "converged"))
+    return dataclasses.replace(b, outcome=outcome, final_error=err,
+                               counts={str(k): int(v) for k, v in zip(names, counts)},
+                               converged_fraction=conv / outcome.size,
+                               area=conv * b.cell_area)
 
 
 def _zoomable(b: BasinResult, factor: float, grew) -> list:

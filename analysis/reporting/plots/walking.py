@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from PIL import Image
+from matplotlib import patheffects
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -115,11 +116,13 @@ OUTCOME_COLOURS = {
     "no_impact": ("#1f77b4", "no impact (stalled)"),
     "out_of_range": ("#e377c2", "left the controller's range"),
     "diverged": ("#e377c2", "diverged"),
+    "no_state": ("#e0e0e0", "no state (a point of the\nrobot under the ground)"),
 }
 
 
 #: the window of the report's basins before they grew to their boundary (rad, rad/s)
 FIXED_WINDOW = (0.05, 0.5)
+_OUTLINE = [patheffects.withStroke(linewidth=2.4, foreground="k")]
 
 
 def basin_plot(results, title: str | None = None, labels=None,
@@ -152,7 +155,7 @@ def basin_plot(results, title: str | None = None, labels=None,
     labels = labels or [None] * len(results)
     names = list(OUTCOME_COLOURS)
     cmap = ListedColormap([OUTCOME_COLOURS[k][0] for k in names])
-    width = 5.2 * len(results) + 2.6
+    width = 5.2 * len(results) + 3.0
     fig = _figure(figsize=(width, 5.0))
     axes = np.atleast_1d(fig.subplots(1, len(results)))
     present, extra = set(), {}
@@ -167,7 +170,7 @@ def basin_plot(results, title: str | None = None, labels=None,
     handles += list(extra.values())
     fig.legend(handles=handles, loc="center right", fontsize=8, frameon=False)
     fig.suptitle(title or "Basins of attraction on the Poincaré section (tau = 0.75 T)")
-    fig.tight_layout(rect=(0, 0, 1 - 2.4 / width, 1))
+    fig.tight_layout(rect=(0, 0, 1 - 2.9 / width, 1))
     return fig
 
 
@@ -187,8 +190,9 @@ def _basin_panel(ax, r, label, names, cmap, reference_window) -> dict:
     if reference_window is not None:
         qw, dw = reference_window
         if r.q_u[-1] > qw * (1 + 1e-9) or r.dq_u[-1] > dw * (1 + 1e-9):
-            ax.plot([-dw, dw, dw, -dw, -dw], [-qw, -qw, qw, qw, -qw], "w--", lw=1.0)
-            extra["window"] = Line2D([], [], color="0.5", ls="--", lw=1.0,
+            ax.plot([-dw, dw, dw, -dw, -dw], [-qw, -qw, qw, qw, -qw], "w--", lw=1.2,
+                    path_effects=_OUTLINE)
+            extra["window"] = Line2D([], [], color="w", ls="--", lw=1.2, path_effects=_OUTLINE,
                                      label=f"fixed window ±{qw:g} rad x ±{dw:g} rad/s")
     ax.plot(0, 0, "w*", ms=12, mec="k")
     if label is None:

@@ -1,0 +1,91 @@
+"""Basins on windows that contain their boundary (``basin_to_boundary``) beside the fixed
+window of ±0.05 rad x ±0.5 rad/s: the co-design of ``biped m1 --robust`` and virtual
+constraints on its gait, the sampling search's design on the robust gait, and the
+default gait's deadbeat design and virtual constraints.
+
+Prints, per design, the fixed window's converged fraction and area, the windows the
+boundary search walked, its final fraction, area (rad x rad/s) and status, and the time
+of each; with ``--resolution`` the areas again on a twice finer grid (n = 2 (n - 1) + 1),
+their difference being the grid's error on the area.  Saves
+``benchmarks/results/basin_window.json``.
+
+    python benchmarks/bench_basin_window.py              # n = 101, refine = 4
+    python benchmarks/bench_basin_window.py --resolution
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _results import Run  # noqa: E402
+
+
+def cases():
+    """(label, design) of the five basins."""
+    from analysis.design import ROBUST_GAIT, optimize_m1
+    from analysis.design.codesign import FULL, TODAY_DESIGN, codesign
+    from biped_casadi import Design, rabbit
+    from gait_opt import GaitOptions, optimize_gait
+    m = rabbit()
+    r = codesign(m, FULL, workers=1)
+    gr = optimize_gait(m, GaitOptions(**ROBUST_GAIT), cache=True)
+    g = optimize_gait(m, cache=True)
+    return [("co-design (biped m1 --robust)", r.design),
+            ("virtual constraints (co-design's gait)", Design.vc(r.design.gait)),
+            ("sampling search's design (robust gait)", Design.tv(gr, TODAY_DESIGN, 0.75)),
+            ("deadbeat M1 (default gait)", Design.tv(g, optimize_m1(g, group=1).M1)),
+            ("virtual constraints (default gait)", Design.vc(g))]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", type=int, default=101, help="cells per axis (101)")
+    ap.add_argument("--refine", type=int, default=4, help="the adaptive grid's stride (4)")
+    ap.add_argument("--resolution", action="store_true",
+                    help="also the areas on a twice finer grid")
+    ap.add_argument("--no-save", action="store_true", help="do not write the results file")
+    a = ap.parse_args()
+    from analysis.robustness import basin, basin_to_boundary
+    with Run("basin_window", "basins on windows that contain their boundary, beside the "
+             "fixed window", save=not a.no_save) as run:
+        print(f"n = {a.n}, refine = {a.refine}; load {os.getloadavg()[0]:.2f}")
+        for label, d in cases():
+            basin(d, n=5)                       # build and compile the walker first
+            t = time.perf_counter()
+            fixed = basin(d, n=a.n, refine=a.refine)
+            tf = time.perf_counter() - t
+            t = time.perf_counter()
+            auto = basin_to_boundary(d, n=a.n, refine=a.refine)
+            ta = time.perf_counter() - t
+            row = dict(design=label, controller=d.to_dict(), fixed=dict(
+                converged_fraction=fixed.converged_fraction, area=fixed.area, seconds=tf),
+                auto=dict(status=auto.status, q_span=auto.q_span, dq_span=auto.dq_span,
+                          converged_fraction=auto.converged_fraction, area=auto.area,
+                          seconds=ta, windows=auto.windows, cap=auto.cap))
+            print(f"{label}\n  fixed ±0.05 x ±0.5: {100 * fixed.converged_fraction:5.1f} %, "
+                  f"area {fixed.area:.4g} rad x rad/s, {tf:.1f} s\n  to its boundary "
+                  f"({auto.status}): ±{auto.q_span:.3g} rad x ±{auto.dq_span:.3g} rad/s, "
+                  f"{100 * auto.converged_fraction:5.1f} %, area {auto.area:.4g} rad x "
+                  f"rad/s, {ta:.1f} s, {len(auto.windows)} windows")
+            for w in auto.windows:
+                print(f"    ±{w['q_span']:.3g} x ±{w['dq_span']:.3g}: "
+                      f"{100 * w['converged_fraction']:5.1f} %, area {w['area']:.4g}, "
+                      f"edges {w['edges']}, {w['elapsed']:.1f} s"
+                      + (" (dropped)" if w.get("dropped") else ""))
+            if a.resolution:
+                fine = basin(d, n=2 * (a.n - 1) + 1, q_span=auto.q_span,
+                             dq_span=auto.dq_span, refine=a.refine)
+                row["auto"]["area_fine"] = fine.area
+                print(f"  the same window at n = {2 * (a.n - 1) + 1}: area {fine.area:.4g} "
+                      f"({100 * (auto.area - fine.area) / fine.area:+.1f} %)")
+            run.row(f"{label}: time to the boundary", ta, tf, target="the fixed window's")
+            run.data.setdefault("basins", []).append(row)
+        print(f"load {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
