@@ -10,7 +10,7 @@ their difference being the grid's error on the area.  Saves
 ``benchmarks/results/basin_window.json``.
 
     python benchmarks/bench_basin_window.py              # n = 101, refine = 4
-    python benchmarks/bench_basin_window.py --resolution
+    python benchmarks/bench_basin_window.py --resolution --figures docs/_static
 """
 from __future__ import annotations
 
@@ -48,11 +48,15 @@ def main():
     ap.add_argument("--resolution", action="store_true",
                     help="also the areas on a twice finer grid")
     ap.add_argument("--no-save", action="store_true", help="do not write the results file")
+    ap.add_argument("--figures", metavar="DIR",
+                    help="write the basins to their boundary as DIR/basin_boundary_robust.png "
+                         "(the first three) and DIR/basin_boundary_default.png")
     a = ap.parse_args()
     from analysis.robustness import basin, basin_to_boundary
     with Run("basin_window", "basins on windows that contain their boundary, beside the "
              "fixed window", save=not a.no_save) as run:
         print(f"n = {a.n}, refine = {a.refine}; load {os.getloadavg()[0]:.2f}")
+        autos = []
         for label, d in cases():
             basin(d, n=5)                       # build and compile the walker first
             t = time.perf_counter()
@@ -84,7 +88,19 @@ def main():
                       f"({100 * (auto.area - fine.area) / fine.area:+.1f} %)")
             run.row(f"{label}: time to the boundary", ta, tf, target="the fixed window's")
             run.data.setdefault("basins", []).append(row)
+            autos.append((label, auto))
         print(f"load {os.getloadavg()[0]:.2f}")
+    if a.figures:
+        from analysis.reporting.plots import basin_plot, save_figures
+        figs = {"basin_boundary_robust": basin_plot(
+                    [b for _, b in autos[:3]], labels=[lab for lab, _ in autos[:3]],
+                    title="Basins of the robust designs on windows that contain their "
+                          "boundary"),
+                "basin_boundary_default": basin_plot(
+                    [b for _, b in autos[3:]], labels=[lab for lab, _ in autos[3:]],
+                    title="Basins on the default gait on windows that contain their "
+                          "boundary")}
+        print(save_figures(figs, a.figures, formats=("png",)))
 
 
 if __name__ == "__main__":

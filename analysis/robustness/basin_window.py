@@ -157,10 +157,9 @@ def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
                       nodes: int = 100, refine: int | None = 4, factor: float = 2.0,
                       zoom: int = 2, max_q_span: float | None = None,
                       max_dq_span: float | None = None) -> BasinResult:
-    """The basin on a window that contains its boundary (docs/theory.md, "Basins of
-    attraction").
+    """The basin of attraction on a window that contains its boundary.
 
-    Starting from ±``q_span`` x ±``dq_span`` around x*, the basin (:func:`basin`) is
+    The definitions are those of docs/theory.md, "Basins of attraction".  Starting from ±``q_span`` x ±``dq_span`` around x*, the basin (:func:`basin`) is
     walked; while converged cells lie on the first or last row, ``q_span`` grows by
     ``factor``, and while they lie on the first or last column, ``dq_span`` does, each
     up to its cap (:func:`section_cap`, or ``max_q_span`` / ``max_dq_span``); rows
