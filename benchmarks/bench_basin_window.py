@@ -5,8 +5,8 @@ default gait's deadbeat design and virtual constraints.
 
 Prints, per design, the fixed window's converged fraction and area, the windows the
 boundary search walked, its final fraction, area (rad x rad/s) and status, and the time
-of each; with ``--resolution`` the areas again on a twice finer grid (n = 2 (n - 1) + 1),
-their difference being the grid's error on the area.  Saves
+of each; with ``--resolution`` the areas again on a twice finer grid (n = 2 (n - 1) + 1,
+starting from the window reached), their difference being the grid's error on the area.  Saves
 ``benchmarks/results/basin_window.json``.
 
     python benchmarks/bench_basin_window.py              # n = 101, refine = 4
@@ -81,12 +81,20 @@ def main():
                       f"edges {w['edges']}, {w['elapsed']:.1f} s"
                       + (" (dropped)" if w.get("dropped") else ""))
             if a.resolution:
-                fine = basin(d, n=2 * (a.n - 1) + 1, q_span=auto.q_span,
-                             dq_span=auto.dq_span, refine=a.refine)
+                fine = basin_to_boundary(d, n=2 * (a.n - 1) + 1, q_span=auto.q_span,
+                                         dq_span=auto.dq_span, refine=a.refine, zoom=0)
                 row["auto"]["area_fine"] = fine.area
-                print(f"  the same window at n = {2 * (a.n - 1) + 1}: area {fine.area:.4g} "
+                print(f"  from the same window at n = {2 * (a.n - 1) + 1}: ±{fine.q_span:.3g} x "
+                      f"±{fine.dq_span:.3g}, area {fine.area:.4g} "
                       f"({100 * (auto.area - fine.area) / fine.area:+.1f} %)")
-            run.row(f"{label}: time to the boundary", ta, tf, target="the fixed window's")
+            run.row(f"{label}: time to the boundary (baseline: the fixed window)", ta, tf)
+            run.note(f"{label}: fixed window {100 * fixed.converged_fraction:.1f} %, area "
+                     f"{fixed.area:.4g} rad x rad/s; to the boundary ({auto.status}) "
+                     f"±{auto.q_span:.3g} rad x ±{auto.dq_span:.3g} rad/s, "
+                     f"{100 * auto.converged_fraction:.1f} %, area {auto.area:.4g} rad x "
+                     f"rad/s, {len(auto.windows)} windows"
+                     + (f"; n = {2 * (a.n - 1) + 1}: area {row['auto']['area_fine']:.4g}"
+                        if a.resolution else ""))
             run.data.setdefault("basins", []).append(row)
             autos.append((label, auto))
         print(f"load {os.getloadavg()[0]:.2f}")

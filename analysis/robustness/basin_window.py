@@ -289,8 +289,12 @@ def _finish(b: BasinResult, status: str, rows: list, cap: dict, elapsed: float):
     windows = " -> ".join(f"±{r['q_span']:.3g} rad x ±{r['dq_span']:.3g} rad/s"
                           + (" (dropped)" if r.get("dropped") else "") for r in rows)
     n = b.outcome.shape[0]
+    at_cap = [name for name, span, c in (("q_u", b.q_span, cap["q_span"]),
+                                         ("dq_u", b.dq_span, cap["dq_span"])) if span >= c]
     say = (f"the window contains the basin's boundary: {100 * b.converged_fraction:.1f} % "
            f"of {n}x{n} cells, area {b.area:.4g} rad x rad/s"
+           + (f" (the {' and '.join(at_cap)} window at its cap: {cap['reason']})"
+              if at_cap else "")
            if status == "contained" else
            f"capped: converged cells on the {where} edge(s) of the largest window, so the "
            f"area {b.area:.4g} rad x rad/s is a lower bound ({cap['reason']})")

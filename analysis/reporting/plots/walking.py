@@ -116,7 +116,7 @@ OUTCOME_COLOURS = {
     "no_impact": ("#1f77b4", "no impact (stalled)"),
     "out_of_range": ("#e377c2", "left the controller's range"),
     "diverged": ("#e377c2", "diverged"),
-    "no_state": ("#e0e0e0", "no state (a point of the\nrobot under the ground)"),
+    "no_state": ("#e0e0e0", "no state of the robot (a point\nunder the ground, off the curve)"),
 }
 
 
