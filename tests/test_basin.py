@@ -185,3 +185,20 @@ def test_the_figure_draws_each_basin_on_its_window(auto_vc, auto_tv):
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
     assert "converged" in labels and "basin boundary" in labels
     assert any(t.startswith("fixed window") for t in labels)
+
+
+@pytest.mark.slow
+def test_the_robust_designs_compare_on_windows_that_contain_their_boundary():
+    """The co-design of `biped m1 --robust` and virtual constraints on its gait converge
+    from (almost) all of the fixed window, which shows no boundary; to their boundaries
+    both are contained and their areas are larger than the fixed window's."""
+    from analysis.design.codesign import FULL, codesign
+    from biped_casadi import rabbit
+    r = codesign(rabbit(), FULL, workers=1)
+    for d in (r.design, Design.vc(r.design.gait)):
+        fixed = basin(d, n=41, refine=4)
+        auto = basin_to_boundary(d, n=41)
+        assert fixed.converged_fraction > 0.95 and _converged_on_edges(fixed) > 0
+        assert auto.status == "contained", auto.message
+        assert _converged_on_edges(auto) == 0
+        assert auto.area > fixed.area and auto.converged_fraction < 0.5
