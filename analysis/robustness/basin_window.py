@@ -47,7 +47,7 @@ def section_cap(design: Design, nodes: int = 100) -> dict:
       of the robot (the swing foot, a knee, the hip, the torso's top) at or under the
       ground (or, for virtual constraints, no point of the curve has that q_u).  The
       cap is the farther of the two offsets where this starts, scanned every 1 mrad
-      (``CAP_SCAN_STEP``) out to a horizontal stance leg, |q_u| = pi/2; so it is exact
+      (``CAP_SCAN_STEP``) out to a horizontal stance leg, ``|q_u| = pi/2``; so it is exact
       to 1 mrad, rounded outward.
     - ``dq_span``: max(dq_u*, sqrt(g / r) - dq_u*), r the distance from the stance foot
       to the centre of mass at x*.  Below dq_u = 0 the stance leg turns backward (no
