@@ -14,7 +14,7 @@ from gait_opt import GaitOptions, optimize_gait
 from ..design import ROBUST_GAIT
 from ..design.codesign import FULL, QUICK, TODAY_DESIGN, codesign_flow, tradeoff_flow
 from ..reporting.constants import PAPER
-from ..robustness import RobustnessSettings, basin, kept_directions, robustness
+from ..robustness import RobustnessSettings, basin_to_boundary, kept_directions, robustness
 from ..tasks import task
 from .options import Resolution
 from .paper import StageResult
@@ -24,8 +24,9 @@ __all__ = ["SimStage", "BasinStage", "SearchStage", "RobustStage", "simulate_des
            "stage_robust_design", "stage_tradeoff", "stage_robustness_robust",
            "stage_sim_robust", "stage_basins_robust", "BASIN_REFINE", "codesign_settings"]
 
-#: basins on the adaptive grid (:func:`analysis.robustness.basin`, ``refine``): every 4th
-#: row and column first, the boundary cell by cell
+#: basins on the adaptive grid (``refine``): every 4th row and column first, the boundary
+#: cell by cell, each on a window grown until it holds the basin's boundary
+#: (:func:`analysis.robustness.basin_to_boundary`)
 BASIN_REFINE = 4
 
 
@@ -173,7 +174,7 @@ def stage_sim(engine, gait_stage, m1_stage, res: Resolution) -> SimStage:
 
 
 def _basins(engine, todo, n: int) -> list:
-    refs = [engine.submit(basin, d, n, refine=BASIN_REFINE) for d in todo]
+    refs = [engine.submit(basin_to_boundary, d, n, refine=BASIN_REFINE) for d in todo]
     return [r.result() for r in refs]
 
 
@@ -201,7 +202,7 @@ def stage_search(engine, model, res: Resolution) -> SearchStage:
     constraints on that gait, and its basin."""
     g3 = engine.submit(optimize_gait, model, GaitOptions(**ROBUST_GAIT).for_model(model)).result()
     ds = Design.tv(g3, TODAY_DESIGN, 0.75)
-    b = engine.submit(basin, ds, _basin_n(res), refine=BASIN_REFINE)
+    b = engine.submit(basin_to_boundary, ds, _basin_n(res), refine=BASIN_REFINE)
     rows = s_star_rows(engine, "search", g3, [("virtual constraints", None),
                                               ("the sampling search's design", ds)],
                        _robustness_settings(res))

@@ -208,7 +208,9 @@ def _figure_captions(s: dict) -> dict:
                           "(offsets from the fixed point), walked for 10 steps with every "
                           "validity condition checked; coloured by outcome: converged "
                           "(below 1e-3), walked but not converged, or the first failure's "
-                          "cause. Left: the deadbeat M1; right: virtual constraints."),
+                          "cause; each on a window grown until it holds the basin's "
+                          "boundary (dashed: the fixed window of earlier versions). Left: "
+                          "the deadbeat M1; right: virtual constraints."),
         "basin_robust": ("Basins of attraction of the robust designs",
                          "As above, for the co-design NLP (left), the sampling search's "
                          "design (middle, on its gait) and virtual constraints (right, on "
@@ -408,13 +410,12 @@ def _comparison_lines(s: dict) -> list:
     rob = (s.get("robustness") or {}).get("rows", [])
     runs = (s.get("simulation") or {}).get("runs", {})
     bas = s.get("basins") or {}
-    fr = dict(zip(bas.get("robust_labels", []),
-                  (b.get("converged_fraction") for b in bas.get("robust", []))))
+    fr = dict(zip(bas.get("robust_labels", []), bas.get("robust", [])))
     rows = [("robust design (co-design NLP)", "robust", "robust_design"),
             ("the sampling search's design", None, "search_design"),
             ("virtual constraints", "robust", "robust_vc")]
     out = ["| design | gait | s* | paper's perturbation: below 1e-3 from step | "
-           "max\\|λ\\| | basin (converged) | peak \\|u\\| (N m) |",
+           "max\\|λ\\| | basin area (rad x rad/s) | peak \\|u\\| (N m) |",
            "|---|---|---|---|---|---|---|"]
     for label, gait, run in rows:
         r = next((x for x in rob if x.get("label") == label
@@ -422,18 +423,19 @@ def _comparison_lines(s: dict) -> list:
         if r is None:
             continue
         sim = runs.get(run) or {}
-        f = fr.get(label)
+        b = fr.get(label) or {}
+        area = "" if b.get("area") is None else _f(b.get("area"), ".3g")
         out.append(f"| {label} | {r.get('gait')} | {_f(r.get('s_star'), '.4g')} | "
                    f"{_f(sim.get('steps_to_converge'))} | {_f(r.get('max_abs'), '.3g')} | "
-                   f"{'' if f is None else f'{100 * f:.1f} %'} | "
-                   f"{_f(sim.get('peak_torque'), '.1f')} |")
+                   f"{area} | {_f(sim.get('peak_torque'), '.1f')} |")
     if len(out) == 2:
         return []
     st = (s.get("robustness") or {}).get("settings") or {}
     return ["The designs compared (s* as in the s* table below: the walker's bisection "
             f"over its {st.get('directions', '')} kept directions, {st.get('rounds', '')} "
-            "rounds; the paper's perturbation in full order; basin over the section "
-            "slice):", ""] \
+            "rounds; the paper's perturbation in full order; the basin's converged area on "
+            "the Poincaré section, on a window grown until it holds the basin's "
+            "boundary):", ""] \
         + out + [""]
 
 
