@@ -13,8 +13,11 @@
    the same q_a^d|, on a dense grid), size of the polish correction, and the cost of the
    polished gait against the default transcription.
 
-Run: ``python benchmarks/bench_gait.py [--quick]`` (--quick: no expand baseline, one
-repeat).
+Run: ``python benchmarks/bench_gait.py [--quick] [--no-save]`` (--quick: no expand
+baseline, one repeat).  The results go to ``benchmarks/results/gait.json`` (the docs'
+benchmarks page): each baseline beside the default in the same run, the ratio baseline /
+default (above 1: the default is faster), and each transcription's time beside the
+default transcription's.
 """
 from __future__ import annotations
 
@@ -30,6 +33,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _results import Run  # noqa: E402
 
 FRESH = r"""
 import json, sys, time
@@ -180,15 +186,54 @@ def transcriptions():
     return rows
 
 
+def record_wall_times(bench: Run, rows, quick: bool):
+    """Rows: the default gait's fresh-process time beside each baseline's."""
+    name, ours, first = rows[0]
+    reps = 1 if quick else 3
+    for i, (bname, m, r) in enumerate(rows[1:]):
+        bench.row(f"`optimize_gait(rabbit())` in a fresh process (median of {reps}), "
+                  f"{bname}", round(ours["process"], 2), round(m["process"], 2),
+                  ratio=round(m["process"] / ours["process"], 2),
+                  target="< 10 s (ours)" if i == 0 else "")
+        bench.data.setdefault("wall", {})[bname] = dict(median=m, iterations=r["iterations"],
+                                                        T=r["T"], cost=r["cost"])
+    bench.data.setdefault("wall", {})[name] = dict(median=ours, iterations=first["iterations"],
+                                                   T=first["T"], cost=first["cost"])
+    bench.note("fresh process: interpreter start-up, imports, model, NLP build, IPOPT, "
+               "polish and the Gait all included; the baselines are one run each")
+
+
+def record_transcriptions(bench: Run, rows):
+    """Rows: each transcription's time beside the default's (Legendre d = 3, N = 30)."""
+    ref = rows[0]
+    for r in rows[1:]:
+        bench.row(f"{r['scheme'].capitalize()} d = {r['d']}, N = {r['N']}: build + IPOPT + "
+                  f"polish, in process (baseline: Legendre d = 3, N = 30, the default)",
+                  round(r["time"], 2), round(ref["time"], 2),
+                  ratio=round(ref["time"] / r["time"], 2))
+    for r in rows:
+        bench.note(f"{r['scheme']} d = {r['d']}, N = {r['N']}: {r['iters']} IPOPT iterations, "
+                   f"|q_u collocation - exact| {r['err']:.1e} rad before the polish, polish "
+                   f"change {r['change']:.1e}, cost / default - 1 = "
+                   f"{r['cost'] / ref['cost'] - 1:.1e}, valid {r['valid']}")
+    bench.data["transcriptions"] = rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="one repeat, no expand baseline")
+    ap.add_argument("--no-save", action="store_true", help="do not write results/")
     args = ap.parse_args(argv)
     import casadi
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
-          f"{platform.python_version()}, CasADi {casadi.__version__}")
-    wall_times(args.quick)
-    transcriptions()
+          f"{platform.python_version()}, CasADi {casadi.__version__}; load "
+          f"{os.getloadavg()[0]:.2f}")
+    with Run("gait", "the default gait's optimisation in a fresh process against earlier "
+             "derivative strategies; transcriptions against the default one",
+             save=not args.no_save) as bench:
+        record_wall_times(bench, wall_times(args.quick), args.quick)
+        record_transcriptions(bench, transcriptions())
+    print(f"load at the end {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":
