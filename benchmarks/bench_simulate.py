@@ -106,7 +106,7 @@ def measure(steps, gait_path):
     q0, dq0 = perturbed_initial_state(gait, 1e-3, 1e-2)
     M1 = best_stable_m1(model, gait)
     rows = []
-    for name, ctrl in (("time-varying, M1 = " + np.array2string(M1, precision=2),
+    for name, ctrl in (("time-varying, M1 = [" + ", ".join(f"{v:.3g}" for v in M1) + "]",
                         TimeVaryingController(gait, M1)),
                        ("virtual constraints", VirtualConstraintController(gait))):
         print(name)
