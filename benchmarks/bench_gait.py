@@ -3,18 +3,22 @@
 1. Wall time of ``optimize_gait(rabbit())`` at the default options, each run in a fresh
    process (imports, model, NLP build, IPOPT, polish, Gait all included), against
    baselines measured side by side in the same run: the first implementation of
-   ``gait_opt`` (commit 99d60a0, read from git: cost coupled through the step length,
-   CasADi's MX Hessian, no common-subexpression elimination), the current NLP with
-   CasADi deriving the exact Jacobian and Hessian from the whole MX graph
-   (``derivatives='casadi'``), and that with ``expand=True``.  Target: < 10 s on 2 cores.
+   ``gait_opt`` (commit 99d60a0 with its own ``biped_casadi``, read from git: cost
+   coupled through the step length, CasADi's MX Hessian, no common-subexpression
+   elimination), the current NLP with CasADi deriving the exact Jacobian and Hessian
+   from the whole MX graph (``derivatives='casadi'``), and that with ``expand=True``.
+   Target: < 10 s on 2 cores.
 2. Transcriptions (Legendre / Radau, a few n_intervals): solve time, IPOPT iterations,
    accuracy of the dynamics between the nodes before the polish (max |q_u collocation
    polynomial - exact solution of the unactuated row from the same initial state, with
    the same q_a^d|, on a dense grid), size of the polish correction, and the cost of the
    polished gait against the default transcription.
 
-Run: ``python benchmarks/bench_gait.py [--quick]`` (--quick: no expand baseline, one
-repeat).
+Run: ``python benchmarks/bench_gait.py [--quick] [--no-save]`` (--quick: no expand
+baseline, one repeat).  The results go to ``benchmarks/results/gait.json`` (the docs'
+benchmarks page): each baseline beside the default in the same run, the ratio baseline /
+default (above 1: the default is faster), and each transcription's time beside the
+default transcription's.
 """
 from __future__ import annotations
 
@@ -30,6 +34,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _results import Run  # noqa: E402
 
 FRESH = r"""
 import json, sys, time
@@ -54,30 +61,29 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def original_package(tmp: Path):
-    """The first gait_opt (ORIGINAL_COMMIT) as package ``gait_opt_v0`` in ``tmp``; None
-    when git or the commit is unavailable."""
-    pkg = tmp / "gait_opt_v0"
-    pkg.mkdir()
+    """The first implementation (ORIGINAL_COMMIT: its ``biped_casadi`` and ``gait_opt``,
+    which the first gait_opt needs) unpacked in ``tmp``; None when git or the commit is
+    unavailable."""
     try:
-        for name in ("__init__", "options", "reference", "optimize", "gait"):
-            src = subprocess.run(["git", "show", f"{ORIGINAL_COMMIT}:gait_opt/{name}.py"],
-                                 cwd=ROOT, capture_output=True, text=True, check=True).stdout
-            (pkg / f"{name}.py").write_text(src)
+        tar = subprocess.run(["git", "archive", ORIGINAL_COMMIT, "biped_casadi", "gait_opt"],
+                             cwd=ROOT, capture_output=True, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(tmp)], input=tar, check=True)
     except (OSError, subprocess.CalledProcessError):
         return None
     return tmp
 
 
-def fresh_run(overrides: dict, package: str = "gait_opt", path: Path | None = None) -> dict:
+def fresh_run(overrides: dict, path: Path | None = None) -> dict:
+    """optimize_gait(rabbit()) in a fresh process; with ``path``, the first implementation
+    found there first on the import path."""
     t0 = time.perf_counter()
-    code = FRESH.replace("from gait_opt import", f"from {package} import")
-    if package != "gait_opt":          # the original reported no callback/polish timings
-        code = code.replace('s["ipopt_timing"].get', "{}.get").replace('s["polish_time"]', "None")
+    code = FRESH
     env = dict(os.environ)
-    if path is not None:
+    if path is not None:               # the original reported no callback/polish timings
+        code = code.replace('s["ipopt_timing"].get', "{}.get").replace('s["polish_time"]', "None")
         env["PYTHONPATH"] = f"{path}{os.pathsep}{env.get('PYTHONPATH', '')}"
     out = subprocess.run([sys.executable, "-c", code, json.dumps(overrides)],
-                         capture_output=True, text=True, check=True, env=env)
+                         capture_output=True, text=True, check=True, env=env, cwd=path)
     r = json.loads(out.stdout.strip().splitlines()[-1])
     r["process"] = time.perf_counter() - t0      # interpreter start-up included
     return r
@@ -89,18 +95,18 @@ def wall_times(quick: bool):
 
 
 def _wall_times(quick: bool, orig):
-    cases = [("structured derivatives (default)", {}, 1 if quick else 3, "gait_opt"),
-             ("baseline: CasADi AD of the MX graph", {"derivatives": "casadi"}, 1, "gait_opt")]
+    cases = [("structured derivatives (default)", {}, 1 if quick else 3, None),
+             ("baseline: CasADi AD of the MX graph", {"derivatives": "casadi"}, 1, None)]
     if not quick:
         cases.append(("baseline: CasADi AD, expand=True", {"derivatives": "casadi",
-                                                           "expand": True}, 1, "gait_opt"))
+                                                           "expand": True}, 1, None))
     if orig is not None:
-        cases.append(("baseline: first implementation", {}, 1, "gait_opt_v0"))
+        cases.append(("baseline: first implementation", {}, 1, orig))
     else:
         print("(git or commit 99d60a0 unavailable: no first-implementation baseline)")
     rows = []
-    for name, ov, reps, package in cases:
-        runs = [fresh_run(ov, package, orig) for _ in range(reps)]
+    for name, ov, reps, path in cases:
+        runs = [fresh_run(ov, path) for _ in range(reps)]
         med = {k: statistics.median(np.nan if r[k] is None else r[k] for r in runs) for k in
                ("process", "total", "optimize", "build", "solve", "polish", "hess", "jac")}
         rows.append((name, med, runs[0]))
@@ -180,15 +186,54 @@ def transcriptions():
     return rows
 
 
+def record_wall_times(bench: Run, rows, quick: bool):
+    """Rows: the default gait's fresh-process time beside each baseline's."""
+    name, ours, first = rows[0]
+    reps = 1 if quick else 3
+    for i, (bname, m, r) in enumerate(rows[1:]):
+        bench.row(f"`optimize_gait(rabbit())` in a fresh process (median of {reps}), "
+                  f"{bname}", round(ours["process"], 2), round(m["process"], 2),
+                  ratio=round(m["process"] / ours["process"], 2),
+                  target="< 10 s (ours)" if i == 0 else "")
+        bench.data.setdefault("wall", {})[bname] = dict(median=m, iterations=r["iterations"],
+                                                        T=r["T"], cost=r["cost"])
+    bench.data.setdefault("wall", {})[name] = dict(median=ours, iterations=first["iterations"],
+                                                   T=first["T"], cost=first["cost"])
+    bench.note("fresh process: interpreter start-up, imports, model, NLP build, IPOPT, "
+               "polish and the Gait all included; the baselines are one run each")
+
+
+def record_transcriptions(bench: Run, rows):
+    """Rows: each transcription's time beside the default's (Legendre d = 3, N = 30)."""
+    ref = rows[0]
+    for r in rows[1:]:
+        bench.row(f"{r['scheme'].capitalize()} d = {r['d']}, N = {r['N']}: build + IPOPT + "
+                  f"polish, in process (baseline: Legendre d = 3, N = 30, the default)",
+                  round(r["time"], 2), round(ref["time"], 2),
+                  ratio=round(ref["time"] / r["time"], 2))
+    for r in rows:
+        bench.note(f"{r['scheme']} d = {r['d']}, N = {r['N']}: {r['iters']} IPOPT iterations, "
+                   f"|q_u collocation - exact| {r['err']:.1e} rad before the polish, polish "
+                   f"change {r['change']:.1e}, cost / default - 1 = "
+                   f"{r['cost'] / ref['cost'] - 1:.1e}, valid {r['valid']}")
+    bench.data["transcriptions"] = rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="one repeat, no expand baseline")
+    ap.add_argument("--no-save", action="store_true", help="do not write results/")
     args = ap.parse_args(argv)
     import casadi
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
-          f"{platform.python_version()}, CasADi {casadi.__version__}")
-    wall_times(args.quick)
-    transcriptions()
+          f"{platform.python_version()}, CasADi {casadi.__version__}; load "
+          f"{os.getloadavg()[0]:.2f}")
+    with Run("gait", "the default gait's optimisation in a fresh process against earlier "
+             "derivative strategies; transcriptions against the default one",
+             save=not args.no_save) as bench:
+        record_wall_times(bench, wall_times(args.quick), args.quick)
+        record_transcriptions(bench, transcriptions())
+    print(f"load at the end {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -8,12 +8,19 @@ right-hand side, a CasADi Function called once per evaluation: the usual way to
 simulate a CasADi model from Python.  Both from the same perturbed state; the
 printed difference of impact times shows they simulate the same motion.
 
-    python benchmarks/bench_simulate.py [--steps N] [--gait FILE]
+    python benchmarks/bench_simulate.py [--steps N] [--gait FILE] [--no-save]
+
+The results go to ``benchmarks/results/simulate.json`` (the docs' benchmarks page): our
+steps per second beside the baseline's, the ratio ours / baseline in steps per second
+(= the baseline's wall time per step over ours: above 1, ours is faster).
 """
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 import time
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -23,6 +30,9 @@ from analysis import PoincareMap
 from biped_casadi import (SimulationOptions, Simulator, TimeVaryingController,
                           VirtualConstraintController, perturbed_initial_state)
 from gait_opt import Gait, optimize_gait
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _results import Run  # noqa: E402
 
 
 def load_gait(path):
@@ -72,13 +82,31 @@ def best_stable_m1(model, gait):
     return pts[int(np.argmin(np.where(status == "stable", mx, np.inf)))]
 
 
-def main(steps=10, gait_path=None):
+def main(steps=10, gait_path=None, save=True):
+    print(f"load {os.getloadavg()[0]:.2f}")
+    with Run("simulate", "full-order closed-loop simulation, simulated steps per second, "
+             "against SciPy solve_ivp on the same closed loop", save=save) as bench:
+        rows = measure(steps, gait_path)
+        for name, jit, ours, base, t_build, diff, status in rows:
+            bench.row(f"{name}: RK4 ({'JIT-compiled' if jit else 'CasADi VM'}), {steps} "
+                      f"steps (baseline: solve_ivp DOP853 rtol 1e-10)", round(ours, 2),
+                      round(base, 2), unit="steps/s", ratio=round(ours / base, 1))
+            bench.note(f"{name}, {'JIT' if jit else 'VM'}: build {t_build:.1f} s (not in the "
+                       f"rate); {status}; max |impact time - baseline's| {diff:.1e} s")
+        bench.data["rows"] = [dict(controller=r[0], jit=r[1], steps_per_s=r[2],
+                                   baseline_steps_per_s=r[3], build_s=r[4],
+                                   impact_time_diff_s=r[5], status=r[6]) for r in rows]
+    print(f"load at the end {os.getloadavg()[0]:.2f}")
+    return rows
+
+
+def measure(steps, gait_path):
     gait = load_gait(gait_path)
     model = gait.model
     q0, dq0 = perturbed_initial_state(gait, 1e-3, 1e-2)
     M1 = best_stable_m1(model, gait)
     rows = []
-    for name, ctrl in (("time-varying, M1 = " + np.array2string(M1, precision=2),
+    for name, ctrl in (("time-varying, M1 = [" + ", ".join(f"{v:.3g}" for v in M1) + "]",
                         TimeVaryingController(gait, M1)),
                        ("virtual constraints", VirtualConstraintController(gait))):
         print(name)
@@ -99,7 +127,8 @@ def main(steps=10, gait_path=None):
             print(f"  ours {label}          {n / el:8.2f} steps/s  x{(n / el) / (len(base) / t_base):6.1f}"
                   f" of baseline  (build {t_build:.1f} s; {res.status}; "
                   f"max |impact time - baseline| {diff:.1e} s)")
-            rows.append((name, jit, n / el, len(base) / t_base))
+            rows.append((name, jit, n / el, len(base) / t_base, t_build, float(diff),
+                         res.status))
     return rows
 
 
@@ -107,5 +136,6 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--gait", metavar="FILE")
+    ap.add_argument("--no-save", action="store_true", help="do not write results/")
     a = ap.parse_args()
-    main(a.steps, a.gait)
+    main(a.steps, a.gait, not a.no_save)

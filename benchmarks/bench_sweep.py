@@ -18,6 +18,11 @@ side on the same points (issue 4, part 6).
     tight references: (R1) the AD map on a 4x finer RK4 grid (n_pre 320, n_post 960;
     RK4 error / 256), (R2) Richardson-extrapolated SciPy differences
     (4 A(h/2) - A(h)) / 3 with h = 1e-4.  R1 vs R2 says how good the references are.
+
+The results go to ``benchmarks/results/sweep.json`` (the docs' benchmarks page; ``--no-save``:
+not written): time per M1 of each path beside the SciPy baseline (ratio baseline / ours),
+the eigenvalue errors beside the baseline's (ratio baseline error / ours: above 1, ours
+is more accurate), the grid's wall time per executor.
 """
 from __future__ import annotations
 
@@ -35,6 +40,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))      # the SciPy twin of the Poincare map
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _results import Run  # noqa: E402
 
 
 def machine_info() -> dict:
@@ -84,13 +91,8 @@ def _run(cmd) -> str:
     return res.stdout
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--gait", help="gait file (default: the default gait)")
-    ap.add_argument("--points", type=int, default=20, help="points for part (c)")
-    ap.add_argument("--skip-grid", action="store_true", help="skip part (b)")
-    args = ap.parse_args(argv)
-
+def measure(args) -> dict:
+    """Parts (a), (b) and (c), printed; the figures."""
     info = machine_info()
     print(f"machine: {info['cpu']}, nproc {info['nproc']} (affinity {info['affinity']}); "
           f"python {info['python']}, numpy {info['numpy']}, casadi {info['casadi']}; "
@@ -160,10 +162,10 @@ def main(argv=None):
             t = time.perf_counter()
             body = json.loads(_run(cmd))
             wall = time.perf_counter() - t
-            grid_rows.append((name, wall, body))
             t = time.perf_counter()
             again = json.loads(_run(cmd))
             wall_resume = time.perf_counter() - t
+            grid_rows.append((name, wall, body, wall_resume))
             assert again["computed_points"] == 0 and again["counts"] == body["counts"]
             print(f"  {name:30s} wall {wall:6.2f} s (run_sweep {body['elapsed']:.2f} s); "
                   f"rerun on the finished folder {wall_resume:.2f} s")
@@ -237,7 +239,73 @@ def main(argv=None):
               f"{a['err_R1']:.1e} (max vs R1){'' if a['ratio'] >= 50 else ': below the 50x target'}")
     print(f"\nload average at end {os.getloadavg()[0]:.2f} (2 shared cores: a load above 2 "
           f"means other work slowed these figures)")
-    return dict(machine=info, summary=summary, grid=[(n, w, bd) for n, w, bd in grid_rows])
+    return dict(machine=info, summary=summary, n_points=len(pts), n_grid=len(grid),
+                t_build_ad=t_build_ad, t_build_var=t_build_var, t_var_grid=t_var_grid,
+                e12=e12, grid=[dict(mode=n, wall=w, elapsed=bd["elapsed"],
+                                    rerun=wr, counts=bd["counts"], best=bd["best"])
+                               for n, w, bd, wr in grid_rows])
+
+
+TARGETS = {"poincare_eigenvalues (public)": ">= 500x",
+           "jacobian_batch (variational)": ">= 50x at equal or better accuracy"}
+
+
+def record(bench: Run, res: dict):
+    """The rows of the benchmarks page."""
+    S = res["summary"]
+    base = S["SciPy baseline (FD h=1e-4)"]
+    for name, v in S.items():
+        if name.startswith("SciPy"):
+            continue
+        bench.row(f"{name}: time per M1 ({res['n_points']} points; baseline: SciPy "
+                  f"solve_ivp + central FD)", round(v["ms"], 4), round(base["ms"], 2),
+                  unit="ms", ratio=round(v["ratio"], 1), target=TARGETS.get(name, ""))
+    for name, v in S.items():
+        if name.startswith("SciPy"):
+            continue
+        bench.row(f"{name}: max eigenvalue error against the fine AD map (ratio: the "
+                  f"baseline's error / ours, above 1 ours more accurate)",
+                  float(f"{v['err_R1']:.2g}"), float(f"{base['err_R1']:.2g}"), unit="",
+                  ratio=float(f"{base['err_R1'] / v['err_R1']:.3g}") if v["err_R1"] else None,
+                  target="<= the baseline's" if name in TARGETS else "")
+    grid = res["grid"]
+    if grid:
+        ours = grid[0]
+        t_sp = base["ms"] * 1e-3 * res["n_grid"]
+        bench.row(f"9^4 grid end to end, `biped sweep` in a fresh process, {ours['mode']} "
+                  f"(baseline: SciPy per-point time x {res['n_grid']}, extrapolated)",
+                  round(ours["wall"], 2), round(t_sp, 0), ratio=round(t_sp / ours["wall"], 0),
+                  target="< 30 s on 2 cores")
+        for g in grid[1:]:
+            bench.row(f"9^4 grid end to end, default threads against {g['mode']} (the "
+                      f"baseline here)", round(ours["wall"], 2), round(g["wall"], 2),
+                      ratio=round(g["wall"] / ours["wall"], 2))
+        bench.row("9^4 grid: re-run on the finished folder (nothing computed)",
+                  round(ours["rerun"], 2))
+        bench.note(f"grid counts {ours['counts']}; best M1 {ours['best']['M1']} with "
+                   f"max|lambda| {ours['best']['max_abs']:.6g}")
+    bench.note(f"references: the fine AD map (R1) against Richardson-extrapolated SciPy "
+               f"differences (R2): median {np.median(res['e12']):.1e}, max "
+               f"{max(res['e12']):.1e} (the FD truncation error of this expanding map)")
+    bench.note(f"one-time builds: PoincareMap (AD map) {res['t_build_ad']:.2f} s, the "
+               f"variational Function {res['t_build_var']:.2f} s; jacobian_batch over the "
+               f"whole grid {res['t_var_grid'] * 1e3:.4f} ms per M1")
+    bench.data.update(summary=S, grid=grid)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--gait", help="gait file (default: the default gait)")
+    ap.add_argument("--points", type=int, default=20, help="points for part (c)")
+    ap.add_argument("--skip-grid", action="store_true", help="skip part (b)")
+    ap.add_argument("--no-save", action="store_true", help="do not write results/")
+    args = ap.parse_args(argv)
+    with Run("sweep", "time per M1 of the Poincare-map paths against a SciPy baseline on "
+             "the same points, their accuracy, and the 9^4 grid end to end",
+             save=not args.no_save) as bench:
+        res = measure(args)
+        record(bench, res)
+    return res
 
 
 if __name__ == "__main__":
