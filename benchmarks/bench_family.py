@@ -6,7 +6,7 @@ construction of the cached CasADi Functions), the same speeds are solved
 * by continuation: ``gait_family(model, speeds)`` (one NLP with the speed as parameter,
   IPOPT warm-started from the secant predictor; every member polished to an exact orbit
   and checked on the dense grid), and
-* cold: ``solve_gait(model, GaitOptions(speed=v))`` for each speed (a new NLP, IPOPT
+* cold: the one gait solve (``optimize_gait(model, GaitOptions(speed=v))``) for each speed (a new NLP, IPOPT
   from the built-in guess; the same polish and dense-grid check),
 
 in the order continuation, cold, continuation, cold, ... (``--repeats`` rounds), so that
@@ -42,7 +42,8 @@ from biped_casadi.files import write_text_atomic
 from biped_casadi.results import json_safe
 import numpy as np
 
-from gait_opt import GaitOptions, gait_family, optimize_gait, parse_speed_range, solve_gait
+from gait_opt import GaitOptions, gait_family, optimize_gait, parse_speed_range
+from gait_opt.optimize import _solve as solve_once     # the one gait solve, its result
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -64,7 +65,7 @@ def cold(model, speeds) -> dict:
     t0, c0 = time.perf_counter(), time.process_time()
     for v in speeds:
         t = time.perf_counter()
-        r = solve_gait(model, GaitOptions(speed=float(v)))
+        r = solve_once(model, GaitOptions(speed=float(v)))
         g = r.gait
         rows.append(dict(speed=float(v), time=time.perf_counter() - t, status=r.status,
                          success=r.success, iterations=r.iterations,
@@ -120,7 +121,7 @@ def main(argv=None):
     model = robot(args.robot)
     speeds = parse_speed_range(args.speeds)
     load_before = os.getloadavg()
-    solve_gait(model, GaitOptions(speed=float(speeds[0])))        # warm-up
+    solve_once(model, GaitOptions(speed=float(speeds[0])))        # warm-up
     rounds = []
     for i in range(args.repeats):
         c = continuation(model, speeds)

@@ -22,8 +22,10 @@ def load_results(folder: Path) -> list:
             out.append(json.loads(f.read_text()))
         except (OSError, ValueError):
             continue
+    out = [_adapted(r) for r in out]
     rank = {n: i for i, n in enumerate(ORDER)}
-    return sorted(out, key=lambda r: (rank.get(r.get("name"), len(rank)), r.get("name", "")))
+    return sorted(out, key=lambda r: (rank.get(str(r.get("name")).split(" ")[0], len(rank)),
+                                      str(r.get("name", ""))))
 
 
 def _fmt(v, unit=""):
@@ -38,12 +40,49 @@ def _fmt(v, unit=""):
     return f"{text} {unit}".strip()
 
 
+def _median(xs):
+    xs = sorted(float(x) for x in xs)
+    n = len(xs)
+    return math.nan if not n else (xs[n // 2] if n % 2 else 0.5 * (xs[n // 2 - 1] + xs[n // 2]))
+
+
+def _adapted(r: dict) -> dict:
+    """The standard form (``name``, ``title``, ``rows``) of results saved in the two
+    other forms (bench_export.py and bench_family.py write their own)."""
+    if r.get("rows") is not None:
+        return r
+    if r.get("benchmark") == "export":
+        rows = [dict(what=f"one `biped_torque` call in C: {x['name']}", ours=x["c_us_median"],
+                     baseline=x["python_us"], unit="us", ratio=x["ratio_python_to_c"],
+                     target=f"<= {r.get('target_us', 5):g} us in C")
+                for x in r.get("results", [])]
+        return dict(r, name="export", title="the exported C controller against the "
+                    "Python/CasADi law called one state at a time", rows=rows,
+                    commit=r.get("commit", "?"))
+    if r.get("benchmark") == "bench_family":
+        rows = [dict(what=f"{r.get('robot')} family {r.get('speeds')} ({r.get('n_speeds')} "
+                          "gaits): continuation against cold solves, wall (median of rounds)",
+                     ours=round(_median(r.get("continuation_wall", [])), 2),
+                     baseline=round(_median(r.get("cold_wall", [])), 2), unit="s",
+                     ratio=r.get("ratio_median"), target=">= 3x"),
+                dict(what="the same, CPU time", ours=round(_median(r.get("continuation_cpu", [])), 2),
+                     baseline=round(_median(r.get("cold_cpu", [])), 2), unit="s",
+                     ratio=r.get("cpu_ratio_median"), target="")]
+        load = dict(before=r.get("loadavg_before"), after=r.get("loadavg_after"))
+        return dict(r, name=f"family ({r.get('robot')})", title="a gait family by continuation "
+                    "against a cold solve at every speed", rows=rows, load=load,
+                    commit=r.get("commit", "?"))
+    return r
+
+
 def _section(r: dict) -> list:
+    r = _adapted(r)
     m = r.get("machine", {})
     load = r.get("load", {})
     lines = [f"## {r.get('name')}: {r.get('title', '')}", "",
              f"Measured {r.get('date', '?')} at commit `{r.get('commit', '?')}` on "
-             f"{m.get('cpu', '?')} ({m.get('affinity', '?')} of {m.get('cores', '?')} cores), "
+             f"{m.get('cpu', m.get('machine', '?'))} ({m.get('affinity', m.get('nproc', m.get('cores', '?')))} "
+             f"of {m.get('cores', m.get('nproc', '?'))} cores), "
              f"Python {m.get('python', '?')}, CasADi {m.get('casadi', '?')}; load average "
              f"{_fmt((load.get('before') or [None])[0])} before, "
              f"{_fmt((load.get('after') or [None])[0])} after.", ""]
