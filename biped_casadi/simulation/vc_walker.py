@@ -136,6 +136,7 @@ class VirtualConstraintWalker:
         th_p, w_p, p_p = vm.step_start(q_p, dq_p)
         self.impact = ca.Function("vc_impact", [th, wm, p],
                                   [th_p, w_p, p_p, F, v_old[1], qm[0], Q1m[0] * wm])
+        self.pre_impact = ca.Function("vc_pre_impact", [th, wm, p], [qm, Q1m * wm])
         self.start = vm.step_start
 
     @cached(maxsize=16)
@@ -232,6 +233,34 @@ class VirtualConstraintWalker:
         th, w, p = self._batch("start", q0.T, dq0.T)
         return self.walk(th.ravel(), w.ravel(), steps, terrain, p=p.T, step_start=True)
 
+    def walk_step(self, q0, dq0):
+        """One step from full start states, and the states just before its impact.
+
+        For chaining walkers of different gaits (a speed profile,
+        :func:`~biped_casadi.simulation.speed_profile.walk_profile`).
+
+        Parameters
+        ----------
+        q0, dq0 : array_like
+            (n, nq) start states, rad and rad/s.
+
+        Returns
+        -------
+        batch : WalkBatch
+            The step's outcome (one step).
+        q_minus, dq_minus : numpy.ndarray
+            (n, nq) the state before the impact of the scenarios whose step was valid
+            (NaN for the others).
+        """
+        q0, dq0 = (np.atleast_2d(np.asarray(a, float)) for a in (q0, dq0))
+        n = max(len(q0), len(dq0))
+        q0, dq0 = (np.broadcast_to(a, (n, a.shape[1])) for a in (q0, dq0))
+        th, w, p = self._batch("start", q0.T, dq0.T)
+        nq = self.model.nq
+        ends = np.full((n, 2 * nq), np.nan)
+        batch = self.walk(th.ravel(), w.ravel(), 1, p=p.T, step_start=True, ends=ends)
+        return batch, ends[:, :nq], ends[:, nq:]
+
     def _strike_phase(self, height, p):
         """Per scenario, the phase near theta^- where the swing foot is at ``height`` on
         the step's corrected surface (Newton), NaN where it does not converge."""
@@ -249,7 +278,7 @@ class VirtualConstraintWalker:
         return np.where(bad, np.nan, th)
 
     def walk(self, theta, w, steps: int = 10, terrain=None, p=None,
-             step_start: bool = False) -> WalkBatch:
+             step_start: bool = False, ends=None) -> WalkBatch:
         """Walk from phases ``theta`` with rates ``w`` for ``steps`` impacts.
 
         Parameters
@@ -268,6 +297,9 @@ class VirtualConstraintWalker:
         step_start : bool
             Whether the first step starts at its beginning (the swing foot is checked
             to be above the ground there); else it starts inside the step.
+        ends : numpy.ndarray, optional
+            (n, 2 nq): filled with the pre-impact states (q, dq) of the scenarios whose
+            impact was valid (the last one walked).
 
         Returns
         -------
@@ -348,6 +380,9 @@ class VirtualConstraintWalker:
             imp = impact_violation(F, vl, np.isfinite(w_p) & np.all(np.isfinite(F), axis=1)
                                    & np.all(np.isfinite(p_p), axis=0), self.limits)
             badi = imp != ""
+            if ends is not None and np.any(~badi):
+                qm_, dqm_ = self._batch("pre_impact", thm[ok][None, :], wm[None, :], p[gi].T)
+                ends[gi[~badi]] = np.c_[qm_.T, dqm_.T][~badi]
             run.fail(gi[badi], imp[badi], k)
             alive[gi[badi]] = False
             nxt = alive[gi] & ~(w_p * direction > 0) & (k + 1 < steps)
