@@ -227,7 +227,8 @@ class M1Schedule:
             raise ValueError("schedule: speeds must be positive finite numbers (m/s)")
         if np.any(np.diff(v) <= SPEED_TOL):
             raise ValueError("schedule: speeds must be strictly increasing (each once)")
-        M = np.asarray(self.M1, float)
+        rows = [np.atleast_1d(np.asarray(r, float)) for r in self.M1]
+        M = np.asarray(rows) if len({r.shape for r in rows}) == 1 else np.zeros(0)
         if M.ndim != 2 or len(M) != v.size:
             raise ValueError(f"schedule: one M1 per speed ({v.size}), each a list of "
                              "numbers of one length")
@@ -287,7 +288,7 @@ class M1Schedule:
         v = np.asarray(self.speeds)
         s = float(speed)
         if not (math.isfinite(s) and v[0] - SPEED_TOL <= s <= v[-1] + SPEED_TOL):
-            raise ValueError(f"speed: {speed!r} m/s is outside the schedule ({v[0]:g} to "
+            raise ValueError(f"speed: {s:.6g} m/s is outside the schedule ({v[0]:g} to "
                              f"{v[-1]:g} m/s)")
         s = min(max(s, v[0]), v[-1])
         return (np.array([np.interp(s, v, M[:, j]) for j in range(M.shape[1])]),
