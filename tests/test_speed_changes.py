@@ -257,6 +257,7 @@ def test_speed_jumps_bracket_the_largest_change(family):
     if j.up_failed[0] is not None:
         assert not survived[round(j.up_failed[0], 9)]
     assert j.largest()[0] == max(j.up[0], -j.down[0])
+    assert j.valid[0][0] >= j.up[0] and j.valid[0][1] <= j.down[0]   # survived => valid
 
 
 def test_schedule_eigenvalues(family):

@@ -64,33 +64,29 @@ def _perturbation(args, nq) -> Perturbation:
     return Perturbation.uniform(nq, q_err, dq_err)
 
 
-def cmd_simulate(args):
-    # ---- arguments
-    check_m1_values(args.m1)                 # before the gait: finite, within the range
-    check_profile_arguments(args)
-    if args.speeds is not None or args.ramp is not None:     # a speed profile on a family
-        if args.controller == "vc" and args.m1 is not None and not args.compare:
-            raise UserError("--m1 applies to the time-varying controller (--controller tv, "
-                            "or --compare)")
-        positive(args.mu, "--mu")
-        positive(args.eps, "--eps")
-        rejoin_fraction(args.rejoin)
-        if args.torque_limit is not None:
-            positive(args.torque_limit, "--torque-limit")
-        _check_perturbation(args)
-        return cmd_profile(args, Progress("simulate", quiet=args.json), _perturbation)
-    args.steps = 10 if args.steps is None else args.steps
+def _check_numbers(args):
+    """The controller's and the limits' numbers, and the perturbation (UserError)."""
     if args.controller == "vc" and args.m1 is not None and not args.compare:
         raise UserError("--m1 applies to the time-varying controller (--controller tv, "
                         "or --compare)")
-    if not 1 <= args.steps <= MAX_STEPS:
-        raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
     positive(args.mu, "--mu")
     positive(args.eps, "--eps")
     rejoin_fraction(args.rejoin)
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
     _check_perturbation(args)
+
+
+def cmd_simulate(args):
+    # ---- arguments
+    check_m1_values(args.m1)                 # before the gait: finite, within the range
+    check_profile_arguments(args)
+    _check_numbers(args)
+    if args.speeds is not None or args.ramp is not None:     # a speed profile on a family
+        return cmd_profile(args, Progress("simulate", quiet=args.json), _perturbation)
+    args.steps = 10 if args.steps is None else args.steps
+    if not 1 <= args.steps <= MAX_STEPS:
+        raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
     terrain = None
     if args.terrain is not None:
         h = np.array(args.terrain, float)

@@ -232,6 +232,11 @@ class SpeedJumps(Result):
     beyond : list of list of float
         Per v1, member changes beyond the first failure that survived again (the
         boundary is not a single threshold there).
+    valid : list of list of float
+        Per v1, [up, down]: the largest change with every step valid (converged or
+        not) such that every change walked nearer v1 was valid too; on the changes
+        walked (the members and the bisection points), so it is known to the members'
+        spacing only where the bisection did not pass.
     changes : list of list of SpeedChange
         Per v1, every change walked (members and bisection points).
     settle, after : int
@@ -248,6 +253,7 @@ class SpeedJumps(Result):
     resolution: list
     failures: list
     beyond: list
+    valid: list
     changes: list
     settle: int = 1
     after: int = 10
@@ -255,7 +261,13 @@ class SpeedJumps(Result):
     SUCCESS = ("done",)
 
     def largest(self) -> np.ndarray:
-        """(n,) the largest ``|dv|`` survived from each v1 (up or down), m/s."""
+        """The largest ``|dv|`` survived from each v1, up or down.
+
+        Returns
+        -------
+        numpy.ndarray
+            (n,) m/s.
+        """
         return np.maximum(np.asarray(self.up, float), -np.asarray(self.down, float))
 
 
@@ -300,6 +312,16 @@ def _direction(family, d1, targets, controller, schedule, gains, options, made, 
     return float(lo), float(hi), [float(hi), first.status], beyond, walked
 
 
+def _valid_limit(changes) -> float:
+    """The largest |dv| (signed) of the changes, nearest v1 first, that were all valid."""
+    best = 0.0
+    for c in sorted(changes, key=lambda c: abs(c.dv)):
+        if not c.valid:
+            break
+        best = float(c.dv)
+    return best
+
+
 def speed_jumps(family, controller: str, schedule: M1Schedule | None,
                 options: SimulationOptions, v1s=None, refine: int = 3, settle: int = 1,
                 after: int = 10, gains=None) -> SpeedJumps:
@@ -340,7 +362,7 @@ def speed_jumps(family, controller: str, schedule: M1Schedule | None,
     v1s = members if v1s is None else np.asarray(v1s, float).ravel()
     made = {}
     out = dict(v1=[], up=[], down=[], up_failed=[], down_failed=[], resolution=[],
-               failures=[], beyond=[], changes=[])
+               failures=[], beyond=[], valid=[], changes=[])
     for v1 in v1s:
         d1 = _design_at(family, v1, controller, schedule, gains, made)
         sides = []
@@ -357,6 +379,7 @@ def speed_jumps(family, controller: str, schedule: M1Schedule | None,
                                      abs(dn_f - dn) if dn_f is not None else 0.0))
         out["failures"].append([fail_u, fail_d])
         out["beyond"].append(bey_u + bey_d)
+        out["valid"].append([_valid_limit(w_u), _valid_limit(w_d)])
         out["changes"].append(w_u + w_d)
     label = "virtual constraints" if controller == "vc" else (
         Design.tv(family.gaits[0], *schedule.at(schedule.speeds[0])).label()

@@ -226,7 +226,13 @@ class ProfileResult(WalkOutcome):
     runs: list = internal(default_factory=list)
 
     def errors(self) -> np.ndarray:
-        """(n_steps,) max(``|q_u err|``, ``|dq_u err|``) per step, NaN from the failure on."""
+        """Per step, max(``|q_u err|``, ``|dq_u err|``) against the step's own gait.
+
+        Returns
+        -------
+        numpy.ndarray
+            (n_steps,), NaN from the failed step on (where it has no impact).
+        """
         return np.maximum(np.abs(self.qu_error), np.abs(self.dqu_error))
 
 

@@ -249,8 +249,8 @@ class VirtualConstraintWalker:
         batch : WalkBatch
             The step's outcome (one step).
         q_minus, dq_minus : numpy.ndarray
-            (n, nq) the state before the impact of the scenarios whose step was valid
-            (NaN for the others).
+            (n, nq) the state before the impact of the scenarios that struck (NaN for
+            the others; use those whose step was valid).
         """
         q0, dq0 = (np.atleast_2d(np.asarray(a, float)) for a in (q0, dq0))
         n = max(len(q0), len(dq0))
@@ -277,6 +277,14 @@ class VirtualConstraintWalker:
             bad = ~(np.abs(step) <= 1e-10)
         return np.where(bad, np.nan, th)
 
+    def _strike(self, thm, wm, p, rows, ends=None):
+        """The impact map at the strike phases ``thm`` with rates ``wm`` of scenarios
+        ``rows`` (step constants ``p``, (m, 1 + 2 nu)); their pre-impact states (q, dq)
+        into ``ends[rows]`` when given."""
+        if ends is not None:
+            ends[rows] = np.vstack(self._batch("pre_impact", thm[None, :], wm[None, :], p.T)).T
+        return self._batch("impact", thm[None, :], wm[None, :], p.T)
+
     def walk(self, theta, w, steps: int = 10, terrain=None, p=None,
              step_start: bool = False, ends=None) -> WalkBatch:
         """Walk from phases ``theta`` with rates ``w`` for ``steps`` impacts.
@@ -298,8 +306,8 @@ class VirtualConstraintWalker:
             Whether the first step starts at its beginning (the swing foot is checked
             to be above the ground there); else it starts inside the step.
         ends : numpy.ndarray, optional
-            (n, 2 nq): filled with the pre-impact states (q, dq) of the scenarios whose
-            impact was valid (the last one walked).
+            (n, 2 nq): filled with the pre-impact states (q, dq) of the scenarios that
+            struck (at their last step walked).
 
         Returns
         -------
@@ -372,17 +380,13 @@ class VirtualConstraintWalker:
                 continue
             gi = idx[ok]
             wm, tm = ws[ok, -1], Z[1, ok, -1]
-            th_p, w_p, p_p, F, vl, qu_m, dqu_m = self._batch(
-                "impact", thm[ok][None, :], wm[None, :], p[gi].T)
+            th_p, w_p, p_p, F, vl, qu_m, dqu_m = self._strike(thm[ok], wm, p[gi], gi, ends)
             F, vl, th_p, w_p = F.T, vl.ravel(), th_p.ravel(), w_p.ravel()
             err = np.c_[qu_m.ravel(), dqu_m.ravel()] - self.ref_T[None, :]
             run.impact(gi, k, err[:, 0], err[:, 1], tm, F)
             imp = impact_violation(F, vl, np.isfinite(w_p) & np.all(np.isfinite(F), axis=1)
                                    & np.all(np.isfinite(p_p), axis=0), self.limits)
             badi = imp != ""
-            if ends is not None and np.any(~badi):
-                qm_, dqm_ = self._batch("pre_impact", thm[ok][None, :], wm[None, :], p[gi].T)
-                ends[gi[~badi]] = np.c_[qm_.T, dqm_.T][~badi]
             run.fail(gi[badi], imp[badi], k)
             alive[gi[badi]] = False
             nxt = alive[gi] & ~(w_p * direction > 0) & (k + 1 < steps)

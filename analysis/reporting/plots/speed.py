@@ -81,7 +81,8 @@ def speed_jumps_plot(jumps: dict, family_range=None, title: str | None = None) -
     -------
     Figure
         Left: the signed changes up (faster) and down (slower); right: the largest
-        ``|dv|``.  Open markers are censored (every member that way survived).
+        ``|dv|``.  Open markers are censored (every member that way survived).  Dotted
+        lines: the largest changes with every step valid, whether converged or not.
     """
     fig = _figure(figsize=(11, 4.6))
     ax_s, ax_m = fig.subplots(1, 2)
@@ -105,11 +106,15 @@ def speed_jumps_plot(jumps: dict, family_range=None, title: str | None = None) -
             ax_s.plot(x[cens], y[cens], m, color=c, ms=5, mfc="none")
         ax_s.plot([], [], m + "-", color=c, label=label)
         big = j.largest()
-        cens = np.array([(u >= -d and fu is None) or (-d >= u and fd is None)
-                         for u, d, fu, fd in zip(j.up, j.down, j.up_failed, j.down_failed)])
+        cens = np.array([_censored(u, d, fu, fd) for u, d, fu, fd in
+                         zip(j.up, j.down, j.up_failed, j.down_failed)])
+        valid = np.asarray(j.valid, float)
+        ax_s.plot(x, valid[:, 0], ":", color=c, lw=1)
+        ax_s.plot(x, valid[:, 1], ":", color=c, lw=1)
         ax_m.plot(x, big, "-", color=c, lw=1)
         ax_m.plot(x[~cens], big[~cens], m, color=c, ms=5, label=label)
         ax_m.plot(x[cens], big[cens], m, color=c, ms=5, mfc="none")
+    ax_s.plot([], [], ":", color="0.4", label="dotted: every step valid, not converged")
     ax_s.axhline(0, color="0.3", lw=0.8)
     ax_s.set_ylabel("largest single-step change survived, dv = v2 - v1, m/s")
     ax_m.set_ylabel("largest |dv| survived, m/s")
@@ -122,3 +127,10 @@ def speed_jumps_plot(jumps: dict, family_range=None, title: str | None = None) -
                           f"{first.after} steps at v2, converged below 1e-3)", fontsize=11)
     fig.tight_layout()
     return fig
+
+
+def _censored(up, down, up_failed, down_failed) -> bool:
+    """Whether the larger of the two limits is censored (a tie: only if both are)."""
+    sides = [(up, up_failed), (-down, down_failed)]
+    top = max(v for v, _ in sides)
+    return all(f is None for v, f in sides if v == top)
