@@ -131,6 +131,9 @@ def main(argv=None):
         print("ramp 0.5 -> 1.0 -> 0.5 by 0.05 per step, then 10 steps at 0.5:")
         for k, r in ramps.items():
             _show(k, r)
+            bench.row(f"ramp, {k}: valid steps of 31 ({r.status}); peak torque "
+                      f"{r.peak_torque:.1f} N m", sum(s.status == "ok" for s in r.steps),
+                      unit="steps", target="31")
         _show("one M1, ramp 0.6 -> 1.0 -> 0.6", one_high)
         stairs = {k: speed_ramp(fam, c, s, OPTS, 0.5, 1.0, 0.05, hold=0, each=args.each)
                   for k, c, s in (("virtual constraints", "vc", None),
@@ -166,6 +169,11 @@ def main(argv=None):
                       + (f", survived again beyond: {[round(b, 4) for b in bey]}" if bey
                          else ""))
         save_figure(speed_jumps_plot(jumps, (0.45, 1.05)), figs / "speed_jumps.png")
+        for k, j in jumps.items():
+            big = j.largest()
+            bench.row(f"largest single-step change survived, {k}: smallest over v1 (at "
+                      f"{j.v1[int(np.argmin(big))]:g} m/s) / largest", round(float(big.min()), 4),
+                      unit="m/s", target=f"{float(big.max()):.4f}")
         bench.data.update(json_safe(dict(
             family=dict(message=fam.message, speeds=list(fam.member_speeds)),
             one_m1=dict(M1=list(CODESIGN_M1), rejoin=0.75, eigenvalues=eig_one),

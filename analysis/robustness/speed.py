@@ -292,11 +292,11 @@ def _direction(family, d1, targets, controller, schedule, gains, options, made, 
                          options, settle, after)
         walked.append(c)
         if bad is None and c.success:
-            ok_dv = float(v2 - v1)
+            ok_dv = float(c.dv)
         elif bad is None:
             bad = c
         elif c.success:
-            beyond.append(float(v2 - v1))
+            beyond.append(float(c.dv))
     if bad is None:
         return ok_dv, None, None, beyond, walked
     lo, hi, first = ok_dv, bad.dv, bad
@@ -306,9 +306,9 @@ def _direction(family, d1, targets, controller, schedule, gains, options, made, 
                          options, settle, after)
         walked.append(c)
         if c.success:
-            lo = mid
+            lo = float(c.dv)
         else:
-            hi, first = mid, c
+            hi, first = float(c.dv), c
     return float(lo), float(hi), [float(hi), first.status], beyond, walked
 
 
