@@ -8,24 +8,23 @@ import numpy as np
 import pytest
 
 from analysis.cli import main
-from analysis.design.family import SCHEDULE_FORMAT, M1Schedule
+from analysis.design.family import smooth_schedule
+from analysis.design.schedule import M1Schedule
 
 
-def test_schedule_fits_and_evaluates_its_polynomials(tmp_path):
+def test_the_smooth_schedule_samples_its_polynomials(tmp_path):
     v = np.array([0.5, 0.6, 0.7, 0.8, 0.9])
-    M = np.c_[1 + v, 2 - v ** 2, 0 * v + 3, v ** 3]        # two exact in degree 2
-    s = M1Schedule.fit(v, M, rejoin=0.75, degree=2)
-    assert s.degree == 2 and len(s.coefficients) == 4
-    np.testing.assert_allclose(s.M1(0.65)[:3], [1.65, 2 - 0.65 ** 2, 3.0], atol=1e-12)
+    M = np.c_[1 + v, 2 - v ** 2, 0 * v + 3, v ** 3]        # three exact in degree 2
+    s, coef, degree = smooth_schedule(v, M, rejoin=0.75, degree=2)
+    assert degree == 2 and len(coef) == 4
+    np.testing.assert_allclose(np.asarray(s.M1)[:, :3], M[:, :3], atol=1e-12)
     # the cubic component is the least-squares quadratic: close, not exact
-    assert 0 < abs(s.M1(0.65)[3] - 0.65 ** 3) < 1e-2
-    with pytest.raises(ValueError, match="outside the schedule"):
-        s.M1(1.2)
-    body = json.loads(s.save(tmp_path / "s.json").read_text())
-    assert body["format"] == SCHEDULE_FORMAT and body["rejoin"] == 0.75
-    np.testing.assert_allclose(body["M1"], [s.M1(x) for x in v])
-    two = M1Schedule.fit(v[:2], M[:2], rejoin=0.5)           # degree at most n - 1
-    assert two.degree == 1
+    err = np.abs(np.asarray(s.M1)[:, 3] - M[:, 3])
+    assert 0 < err.max() < 1e-2
+    assert s.at(0.65)[1] == 0.75 and s.rejoin == (0.75,) * 5
+    back = M1Schedule.load(s.save(tmp_path / "s.json"))
+    np.testing.assert_allclose(back.at(0.65)[0], s.at(0.65)[0])
+    assert smooth_schedule(v[:2], M[:2], rejoin=0.5)[2] == 1    # degree at most n - 1
 
 
 def test_family_options_are_refused_elsewhere(capsys, tmp_path, gait):
@@ -58,7 +57,7 @@ def test_designs_over_a_family(model, tmp_path, capsys):
                           "one M1 for all speeds", "virtual constraints"}
         assert d["M1 scheduled over speed"]["s_star"] == d["co-design at each speed"]["s_star"]
         assert all(0 <= x["basin_fraction"] <= 1 and x["basin_area"] >= 0 for x in d.values())
-    sched = json.loads(out.read_text())
-    np.testing.assert_allclose(sched["M1"], [rec["codesign"]["M1"] for rec in r["records"]],
-                               rtol=1e-9)
+    sched = M1Schedule.load(out)
+    np.testing.assert_allclose([sched.at(rec["speed"])[0] for rec in r["records"]],
+                               [rec["codesign"]["M1"] for rec in r["records"]], rtol=1e-9)
     assert (figs / "family_designs.png").stat().st_size > 10_000

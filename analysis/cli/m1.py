@@ -145,7 +145,8 @@ def _family(args, say):
         print(f"  {rec['speed']:.3g} m/s: " + "; ".join(
             f"{lab} s* {v['s_star']:.3g}, max|lambda| {v['max_abs']:.3g}"
             for lab, v in rec["designs"].items()))
-    print(f"  schedule: degree {r.schedule.degree} in speed, rejoin {r.schedule.rejoin} T"
+    print(f"  schedule: polynomials of degree {r.fit['degree']} in speed, sampled at the "
+          f"family's speeds, v_c rejoining at {r.schedule.rejoin[0]} T"
           + (f" ({d['schedule_file']})" if out is not None else ""))
     print(f"  one M1 for all speeds: {np.round(r.single['M1'], 4).tolist()} (the co-design "
           f"at {r.single['from_speed']:g} m/s)")

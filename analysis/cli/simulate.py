@@ -17,6 +17,7 @@ from analysis.reporting.plots import (save_figures, swing_torques_plot, unactuat
 from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
                      load_gait, output_dir, output_file, parse_m1, positive, print_json,
                      rejoin_fraction)
+from .simulate_profile import add_profile_arguments, check_profile_arguments, cmd_profile
 
 #: --steps beyond this fill the memory with the logged states (2000 RK4 steps a step)
 MAX_STEPS = 1000
@@ -65,8 +66,15 @@ def _perturbation(args, nq) -> Perturbation:
 
 def cmd_simulate(args):
     """``biped simulate``: check the arguments, build the start and the controller,
-    simulate, draw, then report (JSON or a table per controller)."""
+    simulate, draw, then report (JSON or a table per controller); with a speed profile
+    on a gait family, :func:`~analysis.cli.simulate_profile.cmd_profile`."""
     # ---- arguments
+    check_m1_values(args.m1)                 # before the gait: finite, within the range
+    check_profile_arguments(args)
+    _check_numbers(args)
+    if args.speeds is not None or args.ramp is not None:     # a speed profile on a family
+        return cmd_profile(args, Progress("simulate", quiet=args.json), _perturbation)
+    args.steps = 10 if args.steps is None else args.steps
     terrain = _check_arguments(args)
     say = Progress("simulate", quiet=args.json)
     gait = load_gait(args, say)
@@ -101,20 +109,23 @@ def cmd_simulate(args):
     return 0
 
 
-def _check_arguments(args):
-    """Everything that can be checked before the gait is loaded: the terrain (or None)."""
-    check_m1_values(args.m1)                 # before the gait: finite, within the range
+def _check_numbers(args):
+    """The controller's and the limits' numbers, and the perturbation (UserError)."""
     if args.controller == "vc" and args.m1 is not None and not args.compare:
         raise UserError("--m1 applies to the time-varying controller (--controller tv, "
                         "or --compare)")
-    if not 1 <= args.steps <= MAX_STEPS:
-        raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
     positive(args.mu, "--mu")
     positive(args.eps, "--eps")
     rejoin_fraction(args.rejoin)
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
     _check_perturbation(args)
+
+
+def _check_arguments(args):
+    """What else can be checked before the gait is loaded: the terrain (or None)."""
+    if not 1 <= args.steps <= MAX_STEPS:
+        raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
     terrain = None
     if args.terrain is not None:
         h = np.array(args.terrain, float)
@@ -196,7 +207,10 @@ def register(sub):
                     "the ground, or the old stance foot not lifting off), slipped (|F_x| > "
                     "mu F_z, in single support or for the impact impulse), "
                     "negative_normal_force (F_z <= 0), torque_limit (|u_i| > U), singular, "
-                    "no_impact; 'ok' only when every step was valid. --json prints {status, "
+                    "no_impact; 'ok' only when every step was valid. With --gait FAMILY.json "
+                    "and --speeds V1 V2 ... (or --ramp V1 V2 DV) step k walks the family's "
+                    "gait at Vk, the reference switching gait at each impact. --json prints "
+                    "{status, "
                     "steps: [{t_impact, qu_error, dqu_error, ...}], peak_torque, "
                     "min_normal_force, max_friction_ratio, max_impulse_ratio, ...} with the "
                     "errors q_u - q_u^d(T), dq_u - dq_u^d(T) just before each impact.")
@@ -207,7 +221,7 @@ def register(sub):
     p.add_argument("--m1", nargs="+", type=float, metavar="M1",
                    help=f"the components of M1 for --controller tv, one per torque, each "
                         f"within +-{M1_LIMIT:.0e} (default all zero)")
-    p.add_argument("--steps", type=int, default=10, metavar="N",
+    p.add_argument("--steps", type=int, default=None, metavar="N",
                    help=f"number of steps, 1 to {MAX_STEPS} (10)")
     p.add_argument("--perturb", nargs=2, type=float, default=None,
                    metavar=("Q_ERR", "DQ_ERR"), help="initial error on every joint (rad) and "
@@ -233,6 +247,8 @@ def register(sub):
     p.add_argument("--jit", action="store_true",
                    help="compile the closed loop to C first (needs a C compiler; faster)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--plot", metavar="DIR", help="write Fig. 5 and Fig. 6 (PNG) into DIR")
+    p.add_argument("--plot", metavar="DIR", help="write Fig. 5 and Fig. 6 (PNG) into DIR; "
+                   "with a speed profile, speed_profile.png (speed and errors per step)")
+    add_profile_arguments(p)
     p.add_argument("--animate", metavar="FILE.gif", help="write a stick-figure GIF")
     p.set_defaults(func=cmd_simulate)

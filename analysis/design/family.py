@@ -8,14 +8,11 @@ engine (:func:`family_designs_flow`), every unit of each kept by its inputs.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from biped_casadi import Design
-from biped_casadi.files import write_text_atomic
 from biped_casadi.results import Result, internal
 
 from ..robustness.basin import basin
@@ -23,114 +20,45 @@ from ..robustness.s_star import RobustnessSettings, kept_directions, robustness
 from ..tasks import Engine, task
 from .codesign import QUICK, CodesignSettings, codesign_flow
 from .m1_nlp import optimize_m1
+from .schedule import M1Schedule
 
-__all__ = ["FamilyDesigns", "M1Schedule", "family_designs", "family_designs_flow",
-           "deadbeat_m1", "SCHEDULE_FORMAT", "LABELS"]
-
-#: the file format of a schedule of M1 over speed
-SCHEDULE_FORMAT = "biped-casadi-m1-schedule"
+__all__ = ["FamilyDesigns", "family_designs", "family_designs_flow", "deadbeat_m1",
+           "smooth_schedule", "LABELS"]
 
 #: the designs measured at every speed, in the order of the figure
 LABELS = ("co-design at each speed", "M1 scheduled over speed", "one M1 for all speeds",
           "virtual constraints")
 
 
-@dataclass
-class M1Schedule:
-    """M1 as a smooth function of speed.
-
-    A polynomial per component, least squares over the co-designs of the family's
-    speeds.
+def smooth_schedule(speeds, M1s, rejoin: float, degree: int = 2) -> tuple:
+    """M1 scheduled smoothly over speed: a least-squares polynomial per component of M1
+    through the co-designs, sampled at their speeds as a :class:`M1Schedule` (linear
+    between the samples).
 
     Parameters
     ----------
-    speeds : list of float
-        The speeds it was fitted on, m/s.
-    coefficients : list of list of float
-        Per component of M1, the polynomial's coefficients, highest power first
-        (``numpy.polyval``).
+    speeds : array_like
+        (n,) m/s.
+    M1s : array_like
+        (n, nu) the co-designs' outputs.
     rejoin : float
-        The rejoin time of v_c of every design.
+        Rejoin time of v_c of every design.
     degree : int
-        The polynomial's degree.
+        At most this degree (at most n - 1).
+
+    Returns
+    -------
+    tuple
+        (M1Schedule, the polynomials' coefficients per component, highest power first,
+        the degree used).
     """
-
-    speeds: list
-    coefficients: list
-    rejoin: float
-    degree: int
-
-    @classmethod
-    def fit(cls, speeds, M1s, rejoin: float, degree: int = 2) -> "M1Schedule":
-        """The least-squares polynomials through the co-designs' M1.
-
-        Parameters
-        ----------
-        speeds : array_like
-            (n,) m/s.
-        M1s : array_like
-            (n, nu).
-        rejoin : float
-            Rejoin time of v_c.
-        degree : int
-            At most this degree (at most n - 1).
-
-        Returns
-        -------
-        M1Schedule
-        """
-        v = np.asarray(speeds, float)
-        M = np.atleast_2d(np.asarray(M1s, float))
-        d = int(min(degree, len(v) - 1))
-        coef = [np.polyfit(v, M[:, j], d).tolist() for j in range(M.shape[1])]
-        return cls([float(x) for x in v], coef, float(rejoin), d)
-
-    def M1(self, speed: float) -> np.ndarray:
-        """M1 at ``speed`` (within the fitted range).
-
-        Parameters
-        ----------
-        speed : float
-            m/s.
-
-        Returns
-        -------
-        numpy.ndarray
-        """
-        lo, hi = min(self.speeds), max(self.speeds)
-        if not lo - 1e-9 <= float(speed) <= hi + 1e-9:
-            raise ValueError(f"speed {speed:g} m/s is outside the schedule's range "
-                             f"[{lo:g}, {hi:g}] m/s")
-        return np.array([np.polyval(c, float(speed)) for c in self.coefficients])
-
-    def to_dict(self) -> dict:
-        """The schedule as a file's content.
-
-        It has M1 at each fitted speed too, for a consumer that interpolates linearly.
-
-        Returns
-        -------
-        dict
-        """
-        return dict(format=SCHEDULE_FORMAT, speeds=self.speeds, rejoin=self.rejoin,
-                    degree=self.degree, coefficients=self.coefficients,
-                    M1=[self.M1(v).tolist() for v in self.speeds])
-
-    def save(self, path) -> Path:
-        """Write the schedule as JSON (atomically).
-
-        Parameters
-        ----------
-        path : str or Path
-            The file.
-
-        Returns
-        -------
-        Path
-        """
-        path = Path(path)
-        write_text_atomic(path, json.dumps(self.to_dict(), indent=1) + "\n")
-        return path
+    v = np.asarray(speeds, float)
+    M = np.atleast_2d(np.asarray(M1s, float))
+    d = int(min(degree, len(v) - 1))
+    coef = [np.polyfit(v, M[:, j], d) for j in range(M.shape[1])]
+    values = np.array([[np.polyval(c, x) for c in coef] for x in v])
+    return (M1Schedule(tuple(v), tuple(map(tuple, values)), (float(rejoin),) * len(v)),
+            [c.tolist() for c in coef], d)
 
 
 @dataclass
@@ -151,7 +79,9 @@ class FamilyDesigns(Result):
         :data:`LABELS` its ``max_abs``, ``s_star`` and (with basins) ``basin_fraction``
         and ``basin_area`` (rad x rad/s).
     schedule : M1Schedule
-        M1 over speed.
+        M1 over speed (the polynomials sampled at the family's speeds).
+    fit : dict
+        The polynomials: ``degree`` and ``coefficients`` per component of M1.
     single : dict
         The one M1 for all speeds (the co-design of the speed nearest ``single_speed``).
     settings : dict
@@ -165,6 +95,7 @@ class FamilyDesigns(Result):
     speeds: list
     records: list
     schedule: M1Schedule
+    fit: dict
     single: dict
     settings: dict
     gaits: list = internal(default_factory=list)
@@ -244,11 +175,11 @@ def family_designs_flow(engine, gaits: list, settings: CodesignSettings,
     dead = [engine.submit(deadbeat_m1, g, 1 if g.model.nu == 4 else None) for g in gaits]
     cd = [c.result() for c in cds]
     rejoin = float(cd[0].design.rejoin)
-    schedule = M1Schedule.fit(speeds, [c.design.M1 for c in cd], rejoin)
+    schedule, coef, degree = smooth_schedule(speeds, [c.design.M1 for c in cd], rejoin)
     k = int(np.argmin(np.abs(np.asarray(speeds) - single_speed)))
     single = dict(M1=list(cd[k].design.M1), rejoin=rejoin, from_speed=speeds[k])
     measured = [_measure(engine, {
-        LABELS[0]: c.design, LABELS[1]: Design.tv(g, schedule.M1(v), rejoin),
+        LABELS[0]: c.design, LABELS[1]: Design.tv(g, schedule.at(v)[0], rejoin),
         LABELS[2]: Design.tv(g, single["M1"], rejoin), LABELS[3]: Design.vc(g)},
         rs, basin_n) for g, v, c in zip(gaits, speeds, cd)]
     records = []
@@ -262,7 +193,8 @@ def family_designs_flow(engine, gaits: list, settings: CodesignSettings,
         engine.say(f"{v:g} m/s: " + ", ".join(
             f"{lab}: s* {r['s_star']:.3g}" for lab, r in records[-1]["designs"].items()))
     return FamilyDesigns(status="done", message=_message(records), speeds=speeds,
-                         records=records, schedule=schedule, single=single,
+                         records=records, schedule=schedule,
+                         fit=dict(degree=degree, coefficients=coef), single=single,
                          settings=dict(rs.__dict__), gaits=list(gaits))
 
 

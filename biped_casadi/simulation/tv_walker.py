@@ -335,7 +335,35 @@ class ZeroDynamicsWalker:
         P = self.zd.params(M1s, tc, np.zeros((n, nu)), np.zeros((n, nu))).reshape(n, -1)
         return self._walk(x.copy(), P, steps, tau0=SECTION * self.T, terrain=terrain)
 
-    def _walk(self, x, P, steps, tau0, terrain=None):
+    def walk_step(self, q0, dq0, M1s, rejoin=0.5):
+        """One step from full start states, and the states just before its impact.
+
+        For chaining walkers of different gaits (a speed profile,
+        :func:`~biped_casadi.simulation.speed_profile.walk_profile`).
+
+        Parameters
+        ----------
+        q0, dq0 : array_like
+            (n, nq) start states (the start of a step).
+        M1s : array_like
+            (n, nu) output matrices (or one, broadcast).
+        rejoin : float or array_like
+            Rejoin time of v_c as a fraction of T, per scenario.
+
+        Returns
+        -------
+        batch : WalkBatch
+            The step's outcome (one step).
+        q_minus, dq_minus : numpy.ndarray
+            (n, nq) the state before the impact of the scenarios whose step was valid
+            (NaN for the others).
+        """
+        x0, P = self.scenarios(q0, dq0, M1s, rejoin)
+        ends = np.full((len(x0), 2 * self.nq), np.nan)
+        batch = self._walk(x0, P, 1, tau0=0.0, ends=ends)
+        return batch, ends[:, :self.nq], ends[:, self.nq:]
+
+    def _walk(self, x, P, steps, tau0, terrain=None, ends=None):
         if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         n = len(x)
@@ -354,7 +382,7 @@ class ZeroDynamicsWalker:
             ground = (ahead[idx], behind[idx])
             struck = self._single_support(k, idx, x, P, scale, run, alive, start, ground)
             if struck is not None:
-                self._impact(k, struck, x, P, scale, run, alive, ahead)
+                self._impact(k, struck, x, P, scale, run, alive, ahead, ends)
         return run.batch()
 
     def _check(self, Dg, sign, scale, zprev=None, ground=None):
@@ -438,10 +466,10 @@ class ZeroDynamicsWalker:
             return None
         return idx[si], before[si], t_before[si], z_a[si], z_b[si], sign[si]
 
-    def _impact(self, k, struck, x, P, scale, run, alive, ahead):
+    def _impact(self, k, struck, x, P, scale, run, alive, ahead, ends=None):
         """Locate the impact of the struck scenarios (z_sw = their h_k, ``ahead``), check
         the pre-impact state and the impulse, apply the impact map and the next step's
-        start."""
+        start; the valid ones' pre-impact states (q, dq) into the rows of ``ends``."""
         gi, xa, ta, za, zb, sign = struck
         S, nu, m = self.schema, self.nu, gi.size
         Ps = P[gi]
@@ -475,6 +503,8 @@ class ZeroDynamicsWalker:
         run.fail(gi[bad], which[bad], k)
         alive[gi[bad]] = False
         go = ~bad
+        if ends is not None:
+            ends[gi[go]] = np.c_[qe.T, dqe.T][go]
         x[gi[go]] = xn.T[go]
         P[gi[go], nu + 1:2 * nu + 1] = yn.T[go]
         P[gi[go], 2 * nu + 1:] = dyn.T[go]

@@ -136,6 +136,7 @@ class VirtualConstraintWalker:
         th_p, w_p, p_p = vm.step_start(q_p, dq_p)
         self.impact = ca.Function("vc_impact", [th, wm, p],
                                   [th_p, w_p, p_p, F, v_old[1], qm[0], Q1m[0] * wm])
+        self.pre_impact = ca.Function("vc_pre_impact", [th, wm, p], [qm, Q1m * wm])
         self.start = vm.step_start
 
     @cached(maxsize=16)
@@ -248,8 +249,44 @@ class VirtualConstraintWalker:
             bad = ~(np.abs(step) <= 1e-10)
         return np.where(bad, np.nan, th)
 
+    def walk_step(self, q0, dq0):
+        """One step from full start states, and the states just before its impact.
+
+        For chaining walkers of different gaits (a speed profile,
+        :func:`~biped_casadi.simulation.speed_profile.walk_profile`).
+
+        Parameters
+        ----------
+        q0, dq0 : array_like
+            (n, nq) start states, rad and rad/s.
+
+        Returns
+        -------
+        batch : WalkBatch
+            The step's outcome (one step).
+        q_minus, dq_minus : numpy.ndarray
+            (n, nq) the state before the impact of the scenarios that struck (NaN for
+            the others; use those whose step was valid).
+        """
+        q0, dq0 = (np.atleast_2d(np.asarray(a, float)) for a in (q0, dq0))
+        n = max(len(q0), len(dq0))
+        q0, dq0 = (np.broadcast_to(a, (n, a.shape[1])) for a in (q0, dq0))
+        th, w, p = self._batch("start", q0.T, dq0.T)
+        nq = self.model.nq
+        ends = np.full((n, 2 * nq), np.nan)
+        batch = self.walk(th.ravel(), w.ravel(), 1, p=p.T, step_start=True, ends=ends)
+        return batch, ends[:, :nq], ends[:, nq:]
+
+    def _strike(self, thm, wm, p, rows, ends=None):
+        """The impact map at the strike phases ``thm`` with rates ``wm`` of scenarios
+        ``rows`` (step constants ``p``, (m, 1 + 2 nu)); their pre-impact states (q, dq)
+        into ``ends[rows]`` when given."""
+        if ends is not None:
+            ends[rows] = np.vstack(self._batch("pre_impact", thm[None, :], wm[None, :], p.T)).T
+        return self._batch("impact", thm[None, :], wm[None, :], p.T)
+
     def walk(self, theta, w, steps: int = 10, terrain=None, p=None,
-             step_start: bool = False) -> WalkBatch:
+             step_start: bool = False, ends=None) -> WalkBatch:
         """Walk from phases ``theta`` with rates ``w`` for ``steps`` impacts.
 
         Parameters
@@ -268,6 +305,9 @@ class VirtualConstraintWalker:
         step_start : bool
             Whether the first step starts at its beginning (the swing foot is checked
             to be above the ground there); else it starts inside the step.
+        ends : numpy.ndarray, optional
+            (n, 2 nq): filled with the pre-impact states (q, dq) of the scenarios that
+            struck (at their last step walked).
 
         Returns
         -------
@@ -299,7 +339,7 @@ class VirtualConstraintWalker:
             if ok.size == 0:
                 continue
             self._impact(run, idx[ok], k, steps, thm[ok], Z[0][ok, -1], Z[1, ok, -1],
-                         alive, theta, w, p)
+                         alive, theta, w, p, ends)
         return run.batch()
 
     def _integrate_step(self, theta, w, p, ahead):
@@ -360,13 +400,12 @@ class VirtualConstraintWalker:
         which = np.where((which == "") & late, "no_impact", which)
         return which
 
-    def _impact(self, run, gi, k, steps, thm, wm, tm, alive, theta, w, p):
+    def _impact(self, run, gi, k, steps, thm, wm, tm, alive, theta, w, p, ends=None):
         """The impacts of the scenarios gi at phases thm, rates wm, times tm: recorded
         and checked in ``run``; those that go on start the next step (``alive``,
         ``theta``, ``w`` and ``p`` updated in place)."""
         direction = self.direction
-        th_p, w_p, p_p, F, vl, qu_m, dqu_m = self._batch(
-            "impact", thm[None, :], wm[None, :], p[gi].T)
+        th_p, w_p, p_p, F, vl, qu_m, dqu_m = self._strike(thm, wm, p[gi], gi, ends)
         F, vl, th_p, w_p = F.T, vl.ravel(), th_p.ravel(), w_p.ravel()
         err = np.c_[qu_m.ravel(), dqu_m.ravel()] - self.ref_T[None, :]
         run.impact(gi, k, err[:, 0], err[:, 1], tm, F)
