@@ -31,9 +31,10 @@ LABELS = ("co-design at each speed", "M1 scheduled over speed", "one M1 for all 
 
 
 def smooth_schedule(speeds, M1s, rejoin: float, degree: int = 2) -> tuple:
-    """M1 scheduled smoothly over speed: a least-squares polynomial per component of M1
-    through the co-designs, sampled at their speeds as a :class:`M1Schedule` (linear
-    between the samples).
+    """M1 scheduled smoothly over speed, fitted through the co-designs.
+
+    A least-squares polynomial per component of M1, sampled at the co-designs' speeds as
+    a :class:`M1Schedule` (linear between the samples).
 
     Parameters
     ----------

@@ -97,13 +97,18 @@ def stage_gait(engine, model) -> GaitStage:
 
 
 @task
+def singular_outputs(gait) -> dict:
+    """D11, D12 at the desired impact and the singular values of M1 of eq. (24) (a task)."""
+    D = np.array(gait.model.D(gait.q(gait.T)))
+    sv = singular_m1_values(gait)
+    return dict(D11_T=float(D[0, 0]), D12_T=D[0, 1:].tolist(), singular_values=sv.tolist())
+
+
+@task
 def stage_singular(engine, gait_stage) -> StageResult:
     """The singular outputs of eq. (24) at the desired impact."""
     g = gait_stage.result().gait
-    D = np.array(g.model.D(g.q(g.T)))
-    sv = singular_m1_values(g)
-    return StageResult(dict(singular=dict(D11_T=float(D[0, 0]), D12_T=D[0, 1:].tolist(),
-                                          singular_values=sv.tolist())))
+    return StageResult(dict(singular=engine.submit(singular_outputs, g).result()))
 
 
 @task

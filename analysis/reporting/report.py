@@ -359,7 +359,7 @@ def _family_lines(s: dict) -> list:
              "that speed's gait.  The co-design at each speed, an M1 scheduled over "
              "speed, and speed changes: `biped m1 --robust --gait FAMILY.json` and `biped "
              "simulate --gait FAMILY.json --speeds ...`.", "",
-             "| speed (m/s) | " + " | ".join(f"{k}: s*, max\|λ\|" for k in labels) + " |",
+             "| speed (m/s) | " + " | ".join(f"{k}: s*, max\\|λ\\|" for k in labels) + " |",
              "|---|" + "---|" * len(labels)]
     for r in recs:
         lines.append(f"| {_f(r['speed'], '.3g')} | " + " | ".join(
