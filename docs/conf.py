@@ -44,6 +44,7 @@ numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
 numpydoc_validation_checks = set()
 myst_enable_extensions = ["dollarmath"]
+myst_heading_anchors = 2
 
 # ---- notebooks: copied from notebooks/, executed with small settings at build time
 nb_execution_mode = os.environ.get("BIPED_DOCS_EXECUTE", "force")

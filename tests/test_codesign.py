@@ -118,6 +118,30 @@ def test_codesign_rule_is_the_walkers(model, gait, reduced):
         assert abs(i["te"] - B.duration[k, j]) < 1e-6
 
 
+def test_codesign_path_rows_of_an_early_strike(reduced):
+    """A step that strikes before 0.1 T (no node in the lift-off or mid-step windows)
+    still gives the same rows as any step (the NLP's row count is fixed), finite, and
+    its mid-step clearance row violated: the swing foot is at the ground."""
+    from analysis.design.codesign.reduced import _Dense
+    tr, red = reduced
+    red.evaluate(_design(tr))
+    c = red._constants(tr.table(_design(tr)))
+    counts = {}
+    for n in (0, 3, 60):
+        p = n + 2
+        diag = np.zeros((tr.nu + 5, p))
+        diag[tr.nu + 1] = 300.0                       # normal force
+        diag[tr.nu + 4] = tr.den_sign * tr.den_scale  # a denominator far from zero
+        rows = _Dense(red.nd)
+        red._path_rows(rows, diag, np.zeros((tr.nu + 5, red.nd, p)), n, "k0 j0", c)
+        g = np.concatenate(rows.g)
+        assert np.all(np.isfinite(g)) and np.all(np.isfinite(np.vstack(rows.J)))
+        counts[n] = g.size
+        mid = [v for v, name in zip(g, rows.names) if name.endswith("mid-step")]
+        assert len(mid) == 1 and mid[0] > 0           # zsw = 0 < the clearance asked
+    assert len(set(counts.values())) == 1, counts
+
+
 @pytest.mark.parametrize("argv, msg", [
     (["m1", "--robust", "--method", "search", "--gait", "g.json"], "--gait with --robust"),
     (["m1", "--robust", "--scheduler", "tcp://127.0.0.1:1", "--workers", "2"], "--workers"),

@@ -279,9 +279,15 @@ class Reduced:
         tn = c["t_nodes"][:n + 1]
         lift = np.flatnonzero((tn > 0) & (tn < 0.1))
         mid = np.flatnonzero((tn >= 0.1) & (tn <= 0.9))
-        vref = 0.3 * tn[lift]          # m per unit of s: a lift-off speed scale
-        rows.ks((-zsw[lift] / vref)[None], (-dzsw[:, lift] / vref)[None], rho,
-                f"clearance {tag} lift-off")
+        if lift.size:
+            vref = 0.3 * tn[lift]          # m per unit of s: a lift-off speed scale
+            rows.ks((-zsw[lift] / vref)[None], (-dzsw[:, lift] / vref)[None], rho,
+                    f"clearance {tag} lift-off")
+        else:                              # no node inside (0, 0.1 T): nothing to bound
+            rows.add(-1.0, np.zeros(rows.nd), -np.inf, 0.0, f"clearance {tag} lift-off")
+        # a step that strikes before 0.1 T has no mid-step nodes: its last node (at the
+        # ground) must then be clear, which the step cannot be, so the row stays violated
+        mid = mid if mid.size else np.array([len(tn) - 1])
         rows.ks(((st.clearance_mid - zsw[mid]) / 0.05)[None],
                 (-dzsw[:, mid] / 0.05)[None], rho, f"clearance {tag} mid-step")
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from .common import _figure
 
@@ -57,6 +58,7 @@ def speed_profile_plot(runs: dict, tol: float = 1e-3, title: str | None = None) 
     ax_e.set_ylabel("max(|q_u err|, |dq_u err|) before impact\n(rad, rad/s; vs the step's gait)",
                     fontsize=8)
     ax_e.set_xlabel("step")
+    ax_e.xaxis.set_major_locator(MaxNLocator(integer=True))
     for ax in (ax_v, ax_e):
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="best")
