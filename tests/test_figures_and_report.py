@@ -97,9 +97,9 @@ def test_captions_name_only_drawn_colours():
 def _summary(tv_status="ok", tv_message=""):
     figs = {k: [f"figures/{k}.png", f"figures/{k}.pdf"] for k in
             ("gait_stick", "gait_profiles", "fig2", "fig3", "fig4")}
-    figs["fig5"] = ["figures/fig5_qu_error.png", "figures/fig5_qu_error.pdf"]
-    figs["fig6"] = ["figures/fig6_swing_torques.png", "figures/fig6_swing_torques.pdf"]
-    figs["animation"] = ["figures/walk_tv.gif"]
+    figs["fig5_qu_error"] = ["figures/fig5_qu_error.png", "figures/fig5_qu_error.pdf"]
+    figs["fig6_swing_torques"] = ["figures/fig6_swing_torques.png", "figures/fig6_swing_torques.pdf"]
+    figs["walk_tv"] = ["figures/walk_tv.gif"]
     return {
         "mode": "full", "total_time": 50.0, "finished": "today",
         "options": dict(line_points=401, domain_n=81, nlp_starts=10, sim_steps=10,

@@ -49,7 +49,8 @@ def test_reproduce_quick(tmp_path):
     assert s["m1_nlp"]["group1"]["group"] == 1 and s["m1_nlp"]["group2"]["group"] == 2
     assert 0 < s["critical_path"]["seconds"] < s["total_time"]
     for name in ("gait_stick", "gait_profiles", "fig2", "fig3", "fig4", "fig5_qu_error",
-                 "fig6_swing_torques", "basin_default", "basin_robust", "terrain_mfpt"):
+                 "fig6_swing_torques", "basin_default", "basin_robust", "terrain_mfpt",
+                 "family", "speed_ramp"):
         for ext in (".png", ".pdf"):
             f = run / "figures" / f"{name}{ext}"
             assert f.is_file() and f.stat().st_size > 1000, f
@@ -57,6 +58,9 @@ def test_reproduce_quick(tmp_path):
     report = (run / "report.md").read_text()
     assert "| quantity | paper | ours |" in report and "figures/fig4.png" in report
     assert "**Quick run**" in report
+    untitled = [x for x in report.splitlines() if x.startswith("### ") and "_" in x]
+    assert not untitled, untitled                # every figure has its title and caption
+    assert s["family"]["ramp"]["runs"]["virtual constraints"]["steps"] > 0
     assert (run / "gait.json").is_file()
     assert not (out / "report.md").exists()     # nothing of a full run made up
     assert [p.name for p in out.iterdir()] == ["quick"]

@@ -3,18 +3,29 @@ design's gait options), the co-design's M1 and virtual constraints measured at e
 speed (max|lambda|, s*), and one speed change walked in full order by both."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
-from biped_casadi import Design
+import numpy as np
+
+from biped_casadi import Design, SimulationOptions
 from gait_opt import GaitOptions, gait_family
 
 from ..design import ROBUST_GAIT
+from ..design.schedule import M1Schedule
 from ..robustness import RobustnessSettings, kept_directions, robustness
+from ..robustness.speed import speed_ramp
 from ..tasks import task
 from .options import Resolution
 from .paper import StageResult
 
-__all__ = ["FamilyStage", "family_of", "stage_family", "family_speeds"]
+__all__ = ["FamilyStage", "family_of", "ramp_walk", "stage_family", "family_speeds",
+           "RAMP"]
+
+#: the reproduction's speed change: up from the family's first speed to its last and back
+#: by 0.05 m/s per step (gaits between the members polished from the interpolant), then
+#: 8 steps at the first; mu = 0.6, |u| <= 150 N m
+RAMP = dict(dv=0.05, hold=8, options=SimulationOptions(mu=0.6, torque_limit=150.0))
 
 
 @dataclass
@@ -25,6 +36,7 @@ class FamilyStage(StageResult):
     speeds: list = field(default_factory=list)
     gaits: list = field(default_factory=list)
     records: list = field(default_factory=list)
+    ramps: dict = field(default_factory=dict)
 
 
 def family_speeds(res: Resolution) -> tuple:
@@ -53,13 +65,62 @@ def family_of(model, speeds: tuple, options: GaitOptions):
 
 
 @task
+def ramp_walk(family, controller: str, M1, rejoin: float, v1: float, v2: float, dv: float,
+              hold: int, options: SimulationOptions):
+    """A speed ramp v1 -> v2 -> v1 on a family walked in full order (a task).
+
+    Parameters
+    ----------
+    family : GaitFamily
+        The gaits.
+    controller : str
+        'tv' (one M1 at every speed) or 'vc'.
+    M1 : tuple of float or None
+        The time-varying design's M1 (``controller`` 'tv').
+    rejoin : float
+        Its v_c rejoin time, fraction of T.
+    v1, v2, dv : float
+        The ramp, m/s.
+    hold : int
+        Steps at v1 after it.
+    options : SimulationOptions
+        Validity thresholds.
+
+    Returns
+    -------
+    ProfileResult
+        Without the per-step logs.
+    """
+    schedule = M1Schedule.constant(M1, rejoin) if controller == "tv" else None
+    r = speed_ramp(family, controller, schedule, options, v1, v2, dv, hold=hold)
+    return dataclasses.replace(r, runs=[])
+
+
+def _ramp_record(r) -> dict:
+    """What the report says of a ramp."""
+    e = r.errors()
+    return dict(status=r.status, message=r.message, steps=len(r.steps),
+                planned=len(r.speeds), fail_step=int(r.fail_step),
+                largest_error=float(np.nanmax(e)) if np.isfinite(e).any() else None,
+                last_error=float(e[-1]) if r.ok else None,
+                steps_to_converge=float(r.segments[-1].steps_to_converge) if r.ok else None,
+                peak_torque=float(r.peak_torque), friction_margin=float(r.friction_margin))
+
+
+@task
 def stage_family(engine, model, robust_stage, res: Resolution) -> FamilyStage:
     """The family at a few speeds with the robust gait's options; at each speed s* and
     max|lambda| of the co-design's M1 (one M1 for all speeds) and of virtual
     constraints."""
     d0 = robust_stage.result().result.design
-    fam = engine.submit(family_of, model, family_speeds(res),
-                        GaitOptions(**ROBUST_GAIT).for_model(model)).result()
+    speeds = family_speeds(res)
+    fam_ref = engine.submit(family_of, model, speeds,
+                            GaitOptions(**ROBUST_GAIT).for_model(model))
+    ramp_refs = {label: engine.submit(ramp_walk, fam_ref, c, m1, d0.rejoin, speeds[0],
+                                      speeds[-1], RAMP["dv"], RAMP["hold"], RAMP["options"])
+                 for label, c, m1 in (("virtual constraints", "vc", None),
+                                      ("the co-design's M1", "tv", tuple(d0.M1)))}
+    fam = fam_ref.result()
     rs = RobustnessSettings(directions=8, rounds=6) if res.quick else RobustnessSettings()
     refs = []
     for v, g in zip(fam.member_speeds, fam.gaits):
@@ -77,9 +138,17 @@ def stage_family(engine, model, robust_stage, res: Resolution) -> FamilyStage:
         records.append(dict(speed=v, designs=designs))
         engine.say(f"{v:g} m/s: " + ", ".join(f"{k} s* {x['s_star']:.3g}"
                                              for k, x in designs.items()))
+    ramps = {label: ref.result() for label, ref in ramp_refs.items()}
+    for label, r in ramps.items():
+        engine.say(f"ramp {speeds[0]:g} -> {speeds[-1]:g} -> {speeds[0]:g} m/s, {label}: "
+                   f"{r.status}")
     summary = dict(family=dict(speeds=[float(x) for x in fam.member_speeds],
                                message=fam.message, status=fam.status,
                                members=[r.to_dict() for r in fam.records], records=records,
-                               M1=list(d0.M1), rejoin=d0.rejoin))
+                               M1=list(d0.M1), rejoin=d0.rejoin,
+                               ramp=dict(v1=speeds[0], v2=speeds[-1], dv=RAMP["dv"],
+                                         hold=RAMP["hold"], mu=RAMP["options"].mu,
+                                         torque_limit=RAMP["options"].torque_limit,
+                                         runs={k: _ramp_record(r) for k, r in ramps.items()})))
     return FamilyStage(summary, [float(x) for x in fam.member_speeds], list(fam.gaits),
-                       records)
+                       records, ramps)

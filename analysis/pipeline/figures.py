@@ -7,7 +7,8 @@ import io
 import tempfile
 from pathlib import Path
 
-from ..reporting.plots import (basin_plot, conjecture_plot, family_designs_plot, gait_profiles_plot, gait_stick_plot,
+from ..reporting.plots import (basin_plot, conjecture_plot, family_designs_plot,
+                               gait_profiles_plot, gait_stick_plot, speed_profile_plot,
                                m1_plane_plot, mfpt_sigma_plot, one_d_sweeps_plot,
                                stable_domains_plot, survival_plot, swing_torques_plot,
                                tradeoff_plot, unactuated_error_plot, walking_animation)
@@ -171,6 +172,12 @@ def terrain_figures(terrain_stage) -> dict:
 @task(code="figures")
 def family_figure(family_stage) -> dict:
     """s* and max|lambda| against speed on the reproduction's gait family."""
-    return dict(family=figure_files(family_designs_plot(
+    out = dict(family=figure_files(family_designs_plot(
         family_stage, title="The co-design's M1 and virtual constraints over the gait "
                             "family: max|λ| and s* against speed")))
+    if family_stage.ramps:
+        v = family_stage.speeds
+        out["speed_ramp"] = figure_files(speed_profile_plot(
+            family_stage.ramps, title=f"Speed ramp {v[0]:g} -> {v[-1]:g} -> {v[0]:g} m/s by "
+                                      "0.05 per step in full order"))
+    return out

@@ -193,14 +193,14 @@ def _figure_captions(s: dict) -> dict:
                      f"log10 max|λ| over the (M1(1), M1(2)) plane ({_f(dom.get('grid'))}^2 "
                      f"grid on {_f(dom.get('range'))}); red contour: max|λ| = 1; orange: "
                      "the solutions of a = b = 0; star: the best point of the map."),
-        "fig5": ("Fig. 5 at the paper's full perturbation",
+        "fig5_qu_error": ("Fig. 5 at the paper's full perturbation",
                  "q_u - q_u^d(T) and its velocity just before each impact, from the paper's "
                  "perturbation (0.01 rad on every joint, 0.1 rad/s on every velocity) with "
                  "mu = 0.6 and the robot's torque limit: virtual constraints and the deadbeat "
                  "M1 of the NLP on the default gait, virtual constraints and the robust "
                  "design on the robust design's gait; a run that fails ends at its failure "
                  "(legend: status and time). Errors are each run's own reference's."),
-        "fig6": ("Fig. 6: swing-leg torques at the paper's full perturbation",
+        "fig6_swing_torques": ("Fig. 6: swing-leg torques at the paper's full perturbation",
                  "The swing leg's torques of the robust design and of virtual constraints on "
                  "the robust design's gait; dashed: the reference torques u^d of each step."),
         "basin_default": ("Basins of attraction on the default gait",
@@ -232,10 +232,24 @@ def _figure_captions(s: dict) -> dict:
         "terrain_survival": ("Survival on stochastic terrain",
                              "The fraction of runs that walked at least k steps, at the "
                              "largest sigma of the figure above."),
-        "animation": ("Animation of the robust design's run",
+        "walk_tv": ("Animation of the robust design's run",
                       f"The robust design's run of Fig. 5 (first {_f(anim)} steps): stance "
                       f"leg {st}, swing leg {sw}, torso {to}, footprints as triangles."),
-    }
+    } | _SPEED_CAPTIONS
+
+
+#: the captions of the study of speed
+_SPEED_CAPTIONS = {
+    "family": ("The co-design's M1 and virtual constraints over a gait family",
+               "max|λ| of the restricted Poincaré map (virtual constraints: the eigenvalue's "
+               "modulus) and s* against speed, on the family's members (the robust gait's "
+               "options); one M1 at every speed."),
+    "speed_ramp": ("A speed ramp in full order",
+                   "Top: the speed of each step's gait (the reference switches gait at each "
+                   "impact; gaits between the members are the family's interpolant polished "
+                   "to an exact orbit).  Bottom: each step's error against its own gait "
+                   "before impact; a cross marks a failed step."),
+}
 
 
 def _robot_rows(s: dict) -> list:
@@ -365,6 +379,18 @@ def _family_lines(s: dict) -> list:
         lines.append(f"| {_f(r['speed'], '.3g')} | " + " | ".join(
             f"{_f(r['designs'][k]['s_star'], '.3g')}, {_f(r['designs'][k]['max_abs'], '.3g')}"
             if k in r["designs"] else "" for k in labels) + " |")
+    rp = f.get("ramp") or {}
+    if rp.get("runs"):
+        lines += ["", f"A ramp {_f(rp['v1'], 'g')} -> {_f(rp['v2'], 'g')} -> "
+                      f"{_f(rp['v1'], 'g')} m/s by {_f(rp['dv'], 'g')} m/s per step, then "
+                      f"{_f(rp['hold'], 'd')} steps at {_f(rp['v1'], 'g')} m/s, in full order "
+                      f"(mu = {_f(rp['mu'], 'g')}, |u| <= {_f(rp['torque_limit'], 'g')} N m):",
+                  "", "| controller | status | steps walked | largest error | error at the end "
+                      "| peak torque (N m) | friction margin |", "|---|---|---|---|---|---|---|"]
+        for k, r in rp["runs"].items():
+            lines.append(f"| {k} | {r['status']} | {r['steps']} of {r['planned']} | "
+                         f"{_f(r['largest_error'], '.3g')} | {_f(r['last_error'], '.2g')} | "
+                         f"{_f(r['peak_torque'], '.1f')} | {_f(r['friction_margin'], '.3f')} |")
     return lines + [""]
 
 
