@@ -36,6 +36,7 @@ def run(python: str, out: Path, cache: Path, quick: bool, workers=None) -> dict:
     cmd = [python, "-m", "analysis.cli", "reproduce", "--out", str(out), "--no-progress"] \
         + (["--quick"] if quick else []) + ([] if workers is None else
                                             ["--workers", str(workers)])
+    out.parent.mkdir(parents=True, exist_ok=True)   # the run's folder, outside any checkout
     load0 = os.getloadavg()[0]
     t = time.perf_counter()
     p = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=out.parent)
