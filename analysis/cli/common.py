@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_casadi import robot
-from biped_casadi.control.output_law import SECTION, check_M1_range, check_rejoin
+from biped_casadi.control.output_law import M1_LIMIT, SECTION, check_M1_range, check_rejoin
 from biped_casadi.results import json_safe
 from gait_opt import Gait, OpenOrbitWarning, optimize_gait
 
@@ -156,13 +156,19 @@ def positive(value, name):
     return value
 
 
-def add_design_arguments(p):
-    """--controller, --m1 and --rejoin: which controller, and a time-varying design."""
+def add_design_arguments(p, m1_zero: bool = False, rejoin_default=None):
+    """--controller, --m1 and --rejoin: which controller, and a time-varying design.
+
+    ``m1_zero``: --m1 defaults to all zero (else --controller tv needs it);
+    ``rejoin_default``: the parsed default of --rejoin (None: the command's own, 0.5)."""
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
-                   help="tv: time-varying outputs (default, needs --m1); vc: virtual constraints")
+                   help="tv: time-varying outputs [M1, I] q (default" +
+                        ("" if m1_zero else ", needs --m1") + "); vc: virtual constraints")
     p.add_argument("--m1", nargs="+", type=float, metavar="M1",
-                   help="the components of M1, one per torque")
-    p.add_argument("--rejoin", type=float, metavar="R",
+                   help="the components of M1 for --controller tv, one per torque" +
+                        (f", each within +-{M1_LIMIT:.0e} (default all zero)" if m1_zero
+                         else ""))
+    p.add_argument("--rejoin", type=float, metavar="R", default=rejoin_default,
                    help=f"time at which v_c rejoins the reference, fraction of T in "
                         f"(0, {SECTION}] (default 0.5, the paper's)")
 

@@ -12,11 +12,11 @@ from biped_casadi import Gains, SimulationOptions, TimeVaryingController, Virtua
 from biped_casadi.control.compiled import CompilerError, find_c_compiler
 from biped_casadi.control.export import HEADER, c_sources, exported_law
 from biped_casadi.control.export_folder import check_destination, staged_export
-from biped_casadi.control.output_law import M1_LIMIT, SECTION
 from gait_opt.cache import cache_path
 from analysis.verify_export import SIMULATION_TOL, TORQUE_RTOL, verify_export
 
-from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
+                     check_m1_values,
                      load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
@@ -217,14 +217,7 @@ def register(sub):
                     "nothing. The folder appears complete or not at all.")
     add_gait_arguments(p)
     add_robot(p)
-    p.add_argument("--controller", choices=("tv", "vc"), default="tv",
-                   help="tv: time-varying outputs [M1, I] q (default); vc: virtual constraints")
-    p.add_argument("--m1", nargs="+", type=float, metavar="M1",
-                   help=f"the components of M1 for --controller tv, one per torque, each "
-                        f"within +-{M1_LIMIT:.0e} (default all zero)")
-    p.add_argument("--rejoin", type=float, metavar="R",
-                   help=f"time at which v_c rejoins the reference, fraction of T in "
-                        f"(0, {SECTION}] (default 0.5, the paper's)")
+    add_design_arguments(p, m1_zero=True)
     p.add_argument("--gains", nargs=3, type=float, metavar=("KP", "KD", "EPS"),
                    help="output PD of eq. (13) (default 1 2 0.02)")
     p.add_argument("--eps", type=float, help="epsilon of eq. (13) with Kp = 1, Kd = 2 "

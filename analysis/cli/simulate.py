@@ -8,13 +8,13 @@ import numpy as np
 
 from biped_casadi import (Gains, Perturbation, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, simulate)
-from biped_casadi.control.output_law import M1_LIMIT, SECTION
 from biped_casadi.simulation import Terrain
 from biped_casadi.simulation.terrain import MAX_HEIGHT
 from analysis.reporting.plots import (save_figures, swing_torques_plot, unactuated_error_plot,
                             walking_animation)
 
-from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
+                     check_m1_values,
                      load_gait, output_dir, output_file, parse_m1, positive, print_json,
                      rejoin_fraction)
 from .simulate_profile import add_profile_arguments, check_profile_arguments, cmd_profile
@@ -216,11 +216,7 @@ def register(sub):
                     "errors q_u - q_u^d(T), dq_u - dq_u^d(T) just before each impact.")
     add_gait_arguments(p)
     add_robot(p)
-    p.add_argument("--controller", choices=("tv", "vc"), default="tv",
-                   help="tv: time-varying outputs [M1, I] q (default); vc: virtual constraints")
-    p.add_argument("--m1", nargs="+", type=float, metavar="M1",
-                   help=f"the components of M1 for --controller tv, one per torque, each "
-                        f"within +-{M1_LIMIT:.0e} (default all zero)")
+    add_design_arguments(p, m1_zero=True, rejoin_default=0.5)
     p.add_argument("--steps", type=int, default=None, metavar="N",
                    help=f"number of steps, 1 to {MAX_STEPS} (10)")
     p.add_argument("--perturb", nargs=2, type=float, default=None,
@@ -233,9 +229,6 @@ def register(sub):
     p.add_argument("--torque-limit", type=float, metavar="U",
                    help="stop with status torque_limit where some |u_i| exceeds U, N m "
                         "(default: the robot's limit, 150 for RABBIT)")
-    p.add_argument("--rejoin", type=float, default=0.5, metavar="R",
-                   help=f"time at which the correction v_c rejoins the reference, as a fraction "
-                        f"of T, in (0, {SECTION}] (the paper's: 0.5)")
     p.add_argument("--terrain", nargs="+", type=float, metavar="H",
                    help="ground heights h1 h2 ... of the steps' footholds above the stance "
                         "foot, m (a step up > 0; flat after the last)")
