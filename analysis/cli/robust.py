@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from analysis.reporting.plots import basin_plot, save_figures
-from analysis.robustness import Design, RobustnessSettings, basin, kept_directions, robustness
+from analysis.robustness import (Design, RobustnessSettings, basin_to_boundary, kept_directions,
+                                 robustness)
 from biped_casadi.control import PAPER_REJOIN
 
 from .common import (add_design_arguments, Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
@@ -40,11 +41,13 @@ def cmd_robust(args):
     res = robustness(gait, design, st, kept=kept)
     out = res.to_dict()
     if args.plot is not None:
-        say("basins of attraction, time-varying beside virtual constraints (about a minute)")
-        runs = [basin(gait, design)] if design is not None else []
-        runs.append(basin(gait, None))
+        say("basins of attraction on windows grown until their boundary is inside, "
+            "time-varying beside virtual constraints (about a minute)")
+        runs = [basin_to_boundary(gait, design)] if design is not None else []
+        runs.append(basin_to_boundary(gait, None))
         out["basins"] = [dict(controller=b.controller, converged_fraction=b.converged_fraction,
-                              counts=b.counts) for b in runs]
+                              area=b.area, q_span=b.q_span, dq_span=b.dq_span,
+                              status=b.status, counts=b.counts) for b in runs]
         out["figures"] = save_figures({"basin": basin_plot(runs)}, args.plot)
     if args.json:
         print_json(out)
@@ -70,8 +73,9 @@ def cmd_robust(args):
                  else "") + f"; peak |u| {p['peak_torque']:.1f} N m, min F_z "
               f"{p['min_normal_force']:.1f} N, max impulse ratio {p['max_impulse_ratio']:.3f}")
     for b in out.get("basins", []):
-        print(f"  basin ({b['controller']}): {100 * b['converged_fraction']:.1f} % of the "
-              f"cells converge in 10 steps")
+        print(f"  basin ({b['controller']}): area {b['area']:.3g} rad x rad/s, "
+              f"{100 * b['converged_fraction']:.1f} % of the window +-{b['q_span']:.3g} rad x "
+              f"+-{b['dq_span']:.3g} rad/s converges in 10 steps ({b['status']})")
     for f in out.get("figures", []):
         print(f"figure: {f}")
     return 0
@@ -89,8 +93,10 @@ def register(sub):
                     "max(|q_u err|, |dq_u err|) < 1e-3; the first failure just above s* and "
                     "its cause. Both controllers run on their hybrid zero dynamics, batched "
                     "(time-varying designs: exact for every output gain; virtual "
-                    "constraints: exact with their phase-based correction). With --plot: basins of attraction on the Poincare section, "
-                    "the design beside virtual constraints.")
+                    "constraints: exact with their phase-based correction). With --plot: "
+                    "basins of attraction on the Poincare section, each on a window grown "
+                    "until the basin's boundary lies inside it, with their areas (rad x "
+                    "rad/s), the design beside virtual constraints.")
     add_gait_arguments(p)
     add_robot(p)
     add_design_arguments(p)
