@@ -14,9 +14,8 @@ from analysis.reporting.plots import (save_figures, swing_torques_plot, unactuat
                             walking_animation)
 
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
-                     check_m1_values,
-                     load_gait, output_dir, output_file, parse_m1, positive, print_json,
-                     rejoin_fraction)
+                     check_m1_values, load_gait, output_dir, output_file, parse_m1, positive,
+                     print_json, rejoin_fraction)
 from .simulate_profile import add_profile_arguments, check_profile_arguments, cmd_profile
 
 #: --steps beyond this fill the memory with the logged states (2000 RK4 steps a step)

@@ -176,8 +176,9 @@ def family_figure(family_stage) -> dict:
         family_stage, title="The co-design's M1 and virtual constraints over the gait "
                             "family: max|λ| and s* against speed")))
     if family_stage.ramps:
-        v = family_stage.speeds
+        rp = family_stage.summary["family"]["ramp"]
         out["speed_ramp"] = figure_files(speed_profile_plot(
-            family_stage.ramps, title=f"Speed ramp {v[0]:g} -> {v[-1]:g} -> {v[0]:g} m/s by "
-                                      "0.05 per step in full order"))
+            family_stage.ramps, title=f"Speed ramp {rp['v1']:g} -> {rp['v2']:g} -> "
+                                      f"{rp['v1']:g} m/s by {rp['dv']:g} per step in full "
+                                      "order"))
     return out
