@@ -100,6 +100,40 @@ def test_codesign_free_gait_columns_match_central_differences(reduced_free):
     assert np.max(np.abs(J[:, cols])) > 1e-3            # the columns are not empty
 
 
+@pytest.mark.parametrize("which", ["reduced", "reduced_free"])
+def test_codesign_node_kernel_equals_the_scalar_node(which, request):
+    """The nodes walked by the four-lane kernel (one call per step) equal the compiled
+    scalar node's (CHUNK nodes per call) to rounding: states, sensitivities, diagnostics
+    and their sensitivities, for three scenarios over a whole step."""
+    from analysis.design.codesign.functions import NodeFunctions, _node_functions, compiled
+    from biped_casadi.simd import available
+    if not available():
+        pytest.skip("no four-lane kernels on this machine")
+    tr = request.getfixturevalue(which)[0]
+    w = np.zeros(tr.n_design)
+    if tr.free:
+        w[tr.i_G] = tr.gait_vector(tr.gait)
+    tab = tr.table(w)
+    rng = np.random.default_rng(3)
+    L = np.c_[tr.gait.x0 + 0.01 * rng.standard_normal((3, 2)),
+              0.01 * rng.standard_normal((3, 2 * tr.nu))]
+    args = (tab, L, int(tr.N * 1.2), M1, 0.75, tr.gait.T)
+    assert tr.node.kernel is not None
+    fast = tr.nodes(*args)
+    kernel = tr.node
+    f = kernel.kernel.f
+    try:
+        tr.node = NodeFunctions(None, compiled(f))
+        slow = tr.nodes(*args)
+    finally:
+        tr.node = kernel
+    assert _node_functions(tr.model, tr.nG) is kernel
+    for a, b in zip(fast, slow):
+        assert a.shape == b.shape
+        assert np.all(np.isfinite(a))
+        assert np.max(np.abs(a - b)) <= 1e-11 * max(1.0, np.max(np.abs(b)))
+
+
 def test_codesign_rule_is_the_walkers(model, gait, reduced):
     """Each step's end error and duration in the NLP (100 RK4 nodes per T) equal the
     walker's at 400 per T to 1e-6: the same closed loop, the same strike."""

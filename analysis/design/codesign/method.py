@@ -22,8 +22,8 @@ from ..verification import finish_check, hidden_sign_patterns, submit_check
 from .functions import TranscriptionSettings
 from .problem import Problem, Solve, solve, solve_continued
 from .settings import CodesignError, CodesignResult, CodesignSettings
-from .units import (fixed_problem, gait_step, hardest, measure, sampled_starts, screen,
-                    vc_radius)
+from .units import (fixed_problem, gait_step, hardest, measure, node_kernel, sampled_starts,
+                    screen, vc_radius)
 
 __all__ = ["Candidate", "Method"]
 
@@ -176,13 +176,18 @@ class Method:
     def setup(self):
         """The start gait, its kept directions and the starting M1."""
         st = self.st
+        # the compiled nodes of the solves, built beside the setup (not waited for here)
+        self.engine.submit(node_kernel, self.model, 0)
         if self.fixed_gait is not None:
             self.gait0 = self.fixed_gait
             self.say("gait given: M1 only (the gait is fixed)")
         else:
             self.say(f"start gait {st.gait}")
-            self.gait0 = self.run(optimize_gait, self.model,
-                                  GaitOptions(**st.gait).for_model(self.model))
+            opts = GaitOptions(**st.gait).for_model(self.model)
+            if self.free:
+                self.engine.submit(node_kernel, self.model,
+                                   self.model.nu * (opts.bezier_degree + 1) + 3)
+            self.gait0 = self.run(optimize_gait, self.model, opts)
         self.kept0 = self.run(kept_directions, self.gait0, self.rs)
         if len(self.kept0) == 0:
             raise CodesignError("codesign: virtual constraints walk from no perturbation "

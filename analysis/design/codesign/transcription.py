@@ -274,19 +274,55 @@ class Transcription:
         diag = np.zeros((m, 9, n + 1))
         ddiag = np.zeros((m, 9, nc + 1, n + 1))
         X[:, :, 0], SS[:, :, :, 0], diag[:, :, 0], ddiag[:, :, :, 0] = L[:, :2], S0, d0, dd0
-        x, S = L[:, :2].T.copy(), np.tile(S0, m)
-        C = self.CHUNK
-        fn = _chunked(self.node, C, m, self.threads)
+        if n > 0:
+            if self.node.kernel is not None:
+                self._walk_kernel(tab, X, SS, diag, ddiag, n, h, P, dP, S0)
+            else:
+                self._walk_chunks(tab, X, SS, diag, ddiag, n, h, P, dP, S0)
+        return X, SS, diag, ddiag, P, dP
+
+    def _dth(self, k):
+        """d(tau, h)/d(columns) of nodes k: (2, nc, len(k)) (the gait's T column only)."""
+        dth = np.zeros((2, self.nc, len(k)))
+        if self.free:
+            iT = self.nc - self.nG + self.na
+            dth[0, iT], dth[1, iT] = k / self.N, 1.0 / self.N
+        return dth
+
+    def _walk_kernel(self, tab, X, SS, diag, ddiag, n, h, P, dP, S0):
+        """Nodes 1..n of every scenario in one call of the node's four-lane kernel."""
+        m, nc, nq = len(P), self.nc, self.nq
+        k = np.arange(n)
+        idx = 2 * k
+        R = tab["R"]
+        R3 = np.vstack([R[:, idx], R[:, idx + 1], R[:, idx + 2]])
+        per_node = [R3]
+        if self.free:
+            dR = tab["dR"]
+            dR3 = np.concatenate([dR[:, :, idx], dR[:, :, idx + 1], dR[:, :, idx + 2]], 0)
+            per_node.append(dR3.transpose(1, 0, 2).reshape(9 * nq * self.nG, n))
+        x = X[:, :, 0].T
+        S = np.repeat(S0.T.reshape(-1, 1), m, 1)            # column-major (2, nc) each
+        Xn, Sn, Dg, DD = self.node.kernel(
+            x, S, (k * h)[None, :], np.array([h]), *per_node, P.T, dP.T.ravel(),
+            self._dth(k).transpose(1, 0, 2).reshape(2 * nc, n), K=n, threads=self.threads)
+        X[:, :, 1:] = Xn.transpose(1, 0, 2)
+        SS[:, :, :, 1:] = Sn.reshape(nc, 2, m, n).transpose(2, 1, 0, 3)
+        diag[:, :, 1:] = Dg.transpose(1, 0, 2)
+        ddiag[:, :, :nc, 1:] = DD.reshape(nc, 9, m, n).transpose(2, 1, 0, 3)
+
+    def _walk_chunks(self, tab, X, SS, diag, ddiag, n, h, P, dP, S0):
+        """Nodes 1..n of every scenario, ``CHUNK`` nodes per call of the scalar node
+        mapped over the scenarios (where no kernel could be built)."""
+        m, nc, C = len(P), self.nc, self.CHUNK
+        x, S = X[:, :, 0].T.copy(), np.tile(S0, m)
+        fn = _chunked(self.node.scalar, C, m, self.threads)
         Pm = np.repeat(P.T, C, axis=1) if m == 1 else np.hstack(
             [np.repeat(P[i][:, None], C, 1) for i in range(m)])
         for k0 in range(0, n, C):
             k = k0 + np.arange(C)
             R3, dR3 = self.R3(tab, k0, C)
-            dth = np.zeros((2, nc * C))
-            if self.free:
-                iT = nc - self.nG + self.na
-                dth[0, np.arange(C) * nc + iT] = k / self.N
-                dth[1, np.arange(C) * nc + iT] = 1.0 / self.N
+            dth = self._dth(k).transpose(0, 2, 1).reshape(2, nc * C)
             args = [x, S, (k * h)[None, :], np.full((1, C), h), R3] + (
                 [dR3] if self.free else []) + [Pm, np.tile(dP, C), dth]
             Xn, Sn, Dg, DD = (np.array(v) for v in fn(*args))
@@ -298,7 +334,6 @@ class Transcription:
             ddiag[:, :, :nc, sl] = DD.reshape(9, m, C, nc).transpose(1, 0, 3, 2)[..., :cnt]
             x = Xn.reshape(2, m, C)[:, :, -1]
             S = Sn.reshape(2, m, C, nc)[:, :, -1, :].transpose(0, 1, 2).reshape(2, m * nc)
-        return X, SS, diag, ddiag, P, dP
 
     def _last_input(self, tab, x, n, eta, P, T, alpha):
         return np.r_[x, tab["r"][:, 2 * n], n * T / self.N, eta * T / self.N, P,

@@ -17,7 +17,7 @@ from ...robustness.s_star import RobustnessResult, robustness
 from ...stability.poincare import poincare_map
 from ...stability.vc_map import vc_eigenvalue
 from ...tasks import task
-from .functions import TranscriptionSettings
+from .functions import TranscriptionSettings, _node_functions
 from .problem import Problem, Solve, solve
 from .settings import IpoptLimits, StartSampling
 
@@ -75,6 +75,29 @@ class GaitStep:
 
     gait: object
     rejected: str = ""
+
+
+@task
+def node_kernel(model, nG: int) -> bool:
+    """Build (or load) the compiled RK4 node of the co-design's transcription for a robot
+    and a number of gait columns (:func:`~.functions._node_functions`).
+
+    The co-design submits it ahead of the solves that need the node, so one worker
+    compiles it while the others work instead of waiting for it inside their solves.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    nG : int
+        Gait columns (0: the gait fixed).
+
+    Returns
+    -------
+    bool
+        Whether the node runs on the four-lane kernel (else on the scalar Function).
+    """
+    return _node_functions(model, int(nG)).kernel is not None
 
 
 @task
