@@ -226,8 +226,16 @@ def code_of(path) -> str:
     str
     """
     p = Path(path)
-    return ast.dump(_strip_docstrings(ast.parse(p.read_bytes(), filename=str(p))),
-                    include_attributes=False)
+    data = p.read_bytes()
+    key = (str(p), hashlib.sha256(data).digest())
+    if key not in _CODE_OF:      # several code sets share files: each is parsed once
+        _CODE_OF[key] = ast.dump(_strip_docstrings(ast.parse(data, filename=str(p))),
+                                 include_attributes=False)
+    return _CODE_OF[key]
+
+
+#: code_of's results in this process, by file and content
+_CODE_OF: dict = {}
 
 
 def modules_digest(modules, salt: str = "") -> str:

@@ -112,19 +112,20 @@ def stage_family(engine, model, robust_stage, res: Resolution) -> FamilyStage:
     """The family at a few speeds with the robust gait's options; at each speed s* and
     max|lambda| of the co-design's M1 (one M1 for all speeds) and of virtual
     constraints."""
-    d0 = robust_stage.result().result.design
+    # the family and its kept directions do not depend on the co-design: submitted first
     speeds = family_speeds(res)
     fam_ref = engine.submit(family_of, model, speeds,
                             GaitOptions(**ROBUST_GAIT).for_model(model))
+    fam = fam_ref.result()
+    rs = RobustnessSettings(directions=8, rounds=6) if res.quick else RobustnessSettings()
+    kept_refs = [engine.submit(kept_directions, g, rs) for g in fam.gaits]
+    d0 = robust_stage.result().result.design
     ramp_refs = {label: engine.submit(ramp_walk, fam_ref, c, m1, d0.rejoin, speeds[0],
                                       speeds[-1], RAMP["dv"], RAMP["hold"], RAMP["options"])
                  for label, c, m1 in (("virtual constraints", "vc", None),
                                       ("the co-design's M1", "tv", tuple(d0.M1)))}
-    fam = fam_ref.result()
-    rs = RobustnessSettings(directions=8, rounds=6) if res.quick else RobustnessSettings()
     refs = []
-    for v, g in zip(fam.member_speeds, fam.gaits):
-        kept = engine.submit(kept_directions, g, rs)
+    for v, g, kept in zip(fam.member_speeds, fam.gaits, kept_refs):
         refs.append((float(v), [(label, engine.submit(robustness, d, rs, kept)) for label, d in
                                 (("the co-design's M1", Design.tv(g, d0.M1, d0.rejoin)),
                                  ("virtual constraints", Design.vc(g)))]))

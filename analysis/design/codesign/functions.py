@@ -121,12 +121,11 @@ def _ks(v, rho):
     return m + np.log(s) / rho, e / s
 
 
-#: the C optimisation of the node's four-lane kernel by its number of gait columns: the
-#: gait-fixed node compiles in about 4 s at -O1 and then runs about 12 times faster than
-#: the scalar node; the free-gait node (31 gait columns) would take about 40 s at -O1
-#: (register allocation of one long function), so it is built at -O0 (2 s, about 5 times
-#: faster than the scalar node)
-NODE_OPTIMISATION = {0: "-O1"}
+#: the C optimisation of the node's four-lane kernel: at -O0 the gait-fixed node compiles
+#: in about 1 s and runs about 3 times faster than the scalar node (at -O1: 4 s, 12
+#: times); the free-gait node (31 gait columns) in 2 s, 5 times faster (at -O1: 40 s, the
+#: register allocation of one long function, 20 times).  In a run the compile dominates.
+NODE_OPTIMISATION = "-O0"
 
 
 @dataclass(frozen=True)
@@ -178,8 +177,7 @@ def _node_functions(model, nG: int) -> NodeFunctions:
     D = ca.cse(D)
     f = ca.Function(f"codesign_node_{nG}", ins, [out[:2], D[:2, :], out[2:], D[2:, :]],
                     names, ["x_next", "S_next", "diag", "ddiag"])
-    ks = kernels({"node": (f, 2, _node_kinds(nG))}, f"codesign_node_{nG}",
-                 NODE_OPTIMISATION.get(nG, "-O0"))
+    ks = kernels({"node": (f, 2, _node_kinds(nG))}, f"codesign_node_{nG}", NODE_OPTIMISATION)
     if ks is not None:
         return NodeFunctions(ks["node"], None)
     return NodeFunctions(None, compiled(f))
