@@ -76,8 +76,9 @@ def main():
                   f"{100 * auto.converged_fraction:5.1f} %, area {auto.area:.4g} rad x "
                   f"rad/s, {ta:.1f} s, {len(auto.windows)} windows")
             for w in auto.windows:
-                print(f"    ±{w['q_span']:.3g} x ±{w['dq_span']:.3g}: "
-                      f"{100 * w['converged_fraction']:5.1f} %, area {w['area']:.4g}, "
+                what = ("edges only" if w.get("probe") else
+                        f"{100 * w['converged_fraction']:5.1f} %, area {w['area']:.4g}")
+                print(f"    ±{w['q_span']:.3g} x ±{w['dq_span']:.3g}: {what}, "
                       f"edges {w['edges']}, {w['elapsed']:.1f} s"
                       + (" (dropped)" if w.get("dropped") else ""))
             if a.resolution:

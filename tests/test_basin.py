@@ -52,12 +52,29 @@ def test_the_window_contains_the_boundary(which, request):
     assert "contains the basin's boundary" in b.message
 
 
-def test_virtual_constraints_needed_a_larger_window(auto_vc):
+def test_virtual_constraints_needed_a_larger_window(gait, auto_vc):
     # on the fixed window the basin reaches its edges; the window grew until it did not
     first = auto_vc.windows[0]
-    assert sum(first["edges"].values()) > 0
+    fixed = basin(Design.vc(gait), n=N, refine=4)
+    assert sum(first["edges"].values()) > 0 and sum(edge_cells(fixed).values()) > 0
+    assert first["probe"] and first["area"] is None     # its edges alone were walked
     assert auto_vc.q_span > 0.05 and auto_vc.dq_span > 0.5
-    assert auto_vc.area > first["area"]
+    assert auto_vc.area > fixed.area
+
+
+def test_the_edges_walked_alone_are_the_whole_basins(gait, auto_vc):
+    """A window whose edges decide its growth walks only them (at most 4 (n - 1) cells):
+    the converged cells on each edge are those of the whole basin walked cell by cell
+    on that window (refine=None), with the rows that hold no state of the robot out."""
+    from analysis.robustness.basin_window import _mask
+    d = Design.vc(gait)
+    offsets = section_cap(d)["q_offsets"]
+    probes = [w for w in auto_vc.windows if w.get("probe")]
+    assert probes
+    for w in probes:
+        full = _mask(basin(d, n=N, q_span=w["q_span"], dq_span=w["dq_span"]), offsets)
+        assert w["edges"] == edge_cells(full)
+        assert 0 < w["walked_cells"] <= 4 * (N - 1)
 
 
 def test_area_is_the_cell_count_times_the_cell_area(gait, auto_vc, auto_tv):
@@ -99,11 +116,16 @@ def test_fixed_window_is_the_walkers_outcome(gait):
         assert r.status == "done" and r.windows == [] and r.cap is None
 
 
-def test_the_first_window_is_the_fixed_basin(gait, auto_tv):
-    fixed = basin(Design.tv(gait, M1, 0.5), n=N, refine=4)
-    w = auto_tv.windows[0]
-    assert w["converged_fraction"] == fixed.converged_fraction
-    assert w["area"] == fixed.area and w["walked_cells"] == fixed.walked_cells
+def test_the_last_window_is_the_fixed_basin_on_it(gait, auto_tv):
+    """The kept window's basin is :func:`basin` on that window (its row also counts the
+    edge cells walked before it)."""
+    fixed = basin(Design.tv(gait, M1, 0.5), n=N, refine=4, q_span=auto_tv.q_span,
+                  dq_span=auto_tv.dq_span)
+    w = auto_tv.windows[-1]
+    assert w["converged_fraction"] == fixed.converged_fraction == auto_tv.converged_fraction
+    assert w["area"] == fixed.area == auto_tv.area
+    np.testing.assert_array_equal(auto_tv.outcome, fixed.outcome)
+    assert fixed.walked_cells <= w["walked_cells"] <= fixed.walked_cells + 4 * (N - 1)
 
 
 def test_a_capped_window_says_so(gait):

@@ -21,7 +21,7 @@ from biped_casadi.simulation import virtual_constraint_walker, zero_dynamics_wal
 
 from ..tasks import task
 
-__all__ = ["BasinResult", "basin"]
+__all__ = ["BasinResult", "basin", "grid_cells"]
 
 
 @dataclass
@@ -162,12 +162,49 @@ def basin(design: Design, n: int = 101,
     -------
     BasinResult
     """
-    gait = design.gait
     if isinstance(n, bool) or not isinstance(n, int) or n < 2:
         raise ValueError(f"n (cells per axis) must be an integer >= 2, got {n!r}")
     q_span = as_number(q_span, "q_span", positive=True)
     dq_span = as_number(dq_span, "dq_span", positive=True)
     t0 = time.perf_counter()
+    xs, a, b, cells, design_dict = grid_cells(design, n, q_span, dq_span, steps, tol,
+                                              options, rk4_steps, nodes)
+    if refine is None:
+        outcome, err = cells(np.arange(n * n))
+        walked = n * n
+    else:
+        outcome, err, walked = _adaptive(cells, n, refine)
+    names, counts = np.unique(outcome.astype(str), return_counts=True)
+    frac = float(np.mean(outcome == "converged"))
+    cell = (2 * q_span / (n - 1)) * (2 * dq_span / (n - 1))
+    area = int(np.sum(outcome == "converged")) * cell
+    return BasinResult(
+        controller=design.controller, design=design_dict,
+        x_star=xs.tolist(), steps=steps, tol=tol, converged_fraction=frac,
+        counts={str(k): int(v) for k, v in zip(names, counts)},
+        elapsed=time.perf_counter() - t0,
+        message=f"{100 * frac:.1f} % of {n}x{n} cells converge within {steps} steps "
+                f"(area {area:.4g} rad x rad/s)"
+                + ("" if refine is None else f" (adaptive grid: {walked} cells walked)"),
+        walked_cells=int(walked), q_span=q_span, dq_span=dq_span, cell_area=cell,
+        area=area, window_area=n * n * cell,
+        q_u=a, dq_u=b, outcome=outcome.reshape(n, n), final_error=err.reshape(n, n))
+
+
+def grid_cells(design: Design, n: int, q_span: float, dq_span: float, steps: int,
+               tol: float, options, rk4_steps: int, nodes: int) -> tuple:
+    """A basin's grid on the section and the walk of its cells (the arguments of
+    :func:`basin`).
+
+    Returns
+    -------
+    tuple
+        (x*, the q_u offsets (n,), the dq_u offsets (n,), ``cells``, the design as a dict);
+        ``cells(idx)`` walks the cells of flat indices ``idx`` (row-major, q_u by row)
+        and returns their outcomes ('converged', 'walked' or the walker's failure) and
+        final errors.
+    """
+    gait = design.gait
     xs = gait.state_at(SECTION * gait.T)
     a, b = np.linspace(-q_span, q_span, n), np.linspace(-dq_span, dq_span, n)
     A, Bg = np.meshgrid(a, b, indexing="ij")
@@ -193,26 +230,7 @@ def basin(design: Design, n: int = 101,
         return (np.where(batch.ok, np.where(e < tol, "converged", "walked"),
                          batch.status).astype(object), e)
 
-    if refine is None:
-        outcome, err = cells(np.arange(n * n))
-        walked = n * n
-    else:
-        outcome, err, walked = _adaptive(cells, n, refine)
-    names, counts = np.unique(outcome.astype(str), return_counts=True)
-    frac = float(np.mean(outcome == "converged"))
-    cell = (2 * q_span / (n - 1)) * (2 * dq_span / (n - 1))
-    area = int(np.sum(outcome == "converged")) * cell
-    return BasinResult(
-        controller=design.controller, design=design_dict,
-        x_star=xs.tolist(), steps=steps, tol=tol, converged_fraction=frac,
-        counts={str(k): int(v) for k, v in zip(names, counts)},
-        elapsed=time.perf_counter() - t0,
-        message=f"{100 * frac:.1f} % of {n}x{n} cells converge within {steps} steps "
-                f"(area {area:.4g} rad x rad/s)"
-                + ("" if refine is None else f" (adaptive grid: {walked} cells walked)"),
-        walked_cells=int(walked), q_span=q_span, dq_span=dq_span, cell_area=cell,
-        area=area, window_area=n * n * cell,
-        q_u=a, dq_u=b, outcome=outcome.reshape(n, n), final_error=err.reshape(n, n))
+    return xs, a, b, cells, design_dict
 
 
 def _adaptive(cells, n: int, k: int):

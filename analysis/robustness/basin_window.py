@@ -22,7 +22,7 @@ from biped_casadi.numerics import as_number
 from biped_casadi.simulation import virtual_constraint_walker
 
 from ..tasks import task
-from .basin import BasinResult, basin
+from .basin import BasinResult, basin, grid_cells
 
 __all__ = ["basin_to_boundary", "section_cap", "edge_cells", "NO_STATE"]
 
@@ -143,6 +143,33 @@ def edge_cells(result: BasinResult) -> dict:
                 dq_low=int(c[:, 0].sum()), dq_high=int(c[:, -1].sum()))
 
 
+def _touches(e: dict) -> tuple:
+    """(converged cells on a q_u edge, on a dq_u edge)."""
+    return e["q_low"] + e["q_high"] > 0, e["dq_low"] + e["dq_high"] > 0
+
+
+def _probe(design: Design, spans, offsets, kw: dict) -> dict:
+    """A window's row from its edges alone: the cells of its first and last rows and
+    columns, each walked (those beyond ``offsets``, where the section holds no state of
+    the robot, are not)."""
+    t0 = time.perf_counter()
+    n = kw["n"]
+    _, a, _, cells, _ = grid_cells(design, n, spans[0], spans[1], kw["steps"], kw["tol"],
+                                   kw["options"], kw["rk4_steps"], kw["nodes"])
+    flat = np.arange(n * n).reshape(n, n)
+    edge = np.unique(np.r_[flat[0], flat[-1], flat[:, 0], flat[:, -1]])
+    idx = edge[((a > offsets[0]) & (a < offsets[1]))[edge // n]]
+    conv = np.zeros(n * n, bool)
+    if idx.size:
+        conv[idx] = cells(idx)[0] == "converged"
+    c = conv.reshape(n, n)
+    edges = dict(q_low=int(c[0].sum()), q_high=int(c[-1].sum()),
+                 dq_low=int(c[:, 0].sum()), dq_high=int(c[:, -1].sum()))
+    return dict(q_span=float(spans[0]), dq_span=float(spans[1]), converged_fraction=None,
+                area=None, walked_cells=int(idx.size), edges=edges,
+                elapsed=round(time.perf_counter() - t0, 3), probe=True)
+
+
 def _window_row(b: BasinResult, edges: dict) -> dict:
     return dict(q_span=b.q_span, dq_span=b.dq_span, converged_fraction=b.converged_fraction,
                 area=b.area, walked_cells=b.walked_cells, edges=edges,
@@ -159,10 +186,14 @@ def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
                       max_dq_span: float | None = None) -> BasinResult:
     """The basin of attraction on a window that contains its boundary.
 
-    The definitions are those of docs/theory.md, "Basins of attraction".  Starting from ±``q_span`` x ±``dq_span`` around x*, the basin (:func:`basin`) is
-    walked; while converged cells lie on the first or last row, ``q_span`` grows by
-    ``factor``, and while they lie on the first or last column, ``dq_span`` does, each
-    up to its cap (:func:`section_cap`, or ``max_q_span`` / ``max_dq_span``); rows
+    The definitions are those of docs/theory.md, "Basins of attraction".  Starting from
+    ±``q_span`` x ±``dq_span`` around x*, the window's edges (every cell of its first
+    and last rows and columns) are walked; while converged cells lie on the first or
+    last row, ``q_span`` grows by ``factor``, and while they lie on the first or last
+    column, ``dq_span`` does, each up to its cap (:func:`section_cap`, or
+    ``max_q_span`` / ``max_dq_span``).  On the first window whose edges hold no
+    converged cell (or at the caps) the whole basin (:func:`basin`) is walked; should
+    its adaptive grid still put converged cells on an edge, the window grows again.  Rows
     where the section holds no state of the robot (beyond :func:`section_cap`'s
     ``q_offsets``: a point of it under the ground, or no point of the constraint curve)
     are marked :data:`NO_STATE` instead of the walk's outcome (it would start from a
@@ -199,7 +230,9 @@ def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
         The last window's basin; ``status`` 'contained' (no converged cell on an edge)
         or 'capped' (converged cells on an edge of a window at its cap: the boundary is
         not all inside and ``area`` is a lower bound); ``windows`` lists every window
-        walked (half-widths, fraction, area, converged cells per edge, time), ``cap``
+        walked (half-widths, converged cells per edge, cells walked, time, and the
+        fraction and area of a whole basin; ``probe`` True and no area for a window of
+        which the edges alone were walked), ``cap``
         the caps and why; ``elapsed`` the time of all windows.
 
     Raises
@@ -231,17 +264,38 @@ def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
     def walk(s):
         b = _mask(basin(design, q_span=s[0], dq_span=s[1], **kw), cap["q_offsets"])
         e = edge_cells(b)
-        rows.append(_window_row(b, e))
-        return b, (e["q_low"] + e["q_high"] > 0, e["dq_low"] + e["dq_high"] > 0)
+        row = _window_row(b, e)
+        if rows and rows[-1].get("probe") and [rows[-1]["q_span"], rows[-1]["dq_span"]] == s:
+            edges_walk = rows.pop()         # this window's edges, walked first: one row
+            row["walked_cells"] += edges_walk["walked_cells"]
+            row["elapsed"] = round(row["elapsed"] + edges_walk["elapsed"], 3)
+        rows.append(row)
+        return b, _touches(e)
 
-    b, touch = walk(spans)
-    while any(touch):
+    def probe(s):
+        rows.append(_probe(design, s, cap["q_offsets"], kw))
+        return _touches(rows[-1]["edges"])
+
+    def grow(touch):
+        nonlocal spans
         grown = [min(s * factor, c) if t else s for s, c, t in zip(spans, caps, touch)]
         if grown == spans:
-            break
-        grew = [g or t for g, t in zip(grew, touch)]
+            return False
+        grew[:] = [g or t for g, t in zip(grew, touch)]
         spans = grown
+        return True
+
+    # the edges decide the growth; the whole basin is walked once they hold no converged
+    # cell (or at the caps), and again on a larger window if its adaptive grid put
+    # converged cells on an edge that the walk of the edges did not
+    touch = probe(spans)
+    while True:
+        while any(touch) and grow(touch):
+            touch = probe(spans)
         b, touch = walk(spans)
+        if not (any(touch) and grow(touch)):
+            break
+        touch = probe(spans)
     status = "capped" if any(touch) else "contained"
     for _ in range(zoom if status == "contained" else 0):
         inner = _zoomable(b, factor, grew)
@@ -287,6 +341,7 @@ def _finish(b: BasinResult, status: str, rows: list, cap: dict, elapsed: float):
     e = rows[-1]["edges"] if not rows[-1].get("dropped") else edge_cells(b)
     where = ", ".join(k for k, v in e.items() if v)
     windows = " -> ".join(f"±{r['q_span']:.3g} rad x ±{r['dq_span']:.3g} rad/s"
+                          + (" (edges)" if r.get("probe") else "")
                           + (" (dropped)" if r.get("dropped") else "") for r in rows)
     n = b.outcome.shape[0]
     at_cap = [name for name, span, c in (("q_u", b.q_span, cap["q_span"]),
