@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import heapq
+import itertools
 import logging
 import os
 import sys
@@ -145,6 +147,13 @@ class Engine:
         self._bar = None
         self._progress = bool(progress)
         self._known = 0
+        # tasks whose inputs are known, waiting for a free worker thread, highest
+        # priority first (then in submission order): the cluster is given no more tasks
+        # than it has threads, so a task never waits behind one sent ahead
+        self._queue: list = []
+        self._order = itertools.count()
+        self._running = 0
+        self._slots = None
 
     @property
     def synchronous(self) -> bool:
@@ -295,10 +304,10 @@ class Engine:
         if self.synchronous:
             self._run_here(ref, fn, args, kwargs)
             return ref
-        # results of flows still running: submit when they are known, without waiting
-        waiting = [r for r in _refs_in((args, kwargs)) if not r.done() and r._future is None]
+        # inputs still being computed: queued once they are known, without waiting here
+        waiting = [r for r in _refs_in((args, kwargs)) if not r.done()]
         if not waiting:
-            self._run_on_cluster(ref, fn, args, kwargs, priority)
+            self._enqueue(ref, fn, args, kwargs, priority)
             return ref
         left = [len(waiting)]
         lock = threading.Lock()
@@ -308,7 +317,7 @@ class Engine:
                 left[0] -= 1
                 go = left[0] == 0
             if go:
-                self._run_on_cluster(ref, fn, args, kwargs, priority)
+                self._enqueue(ref, fn, args, kwargs, priority)
         for r in waiting:
             r._when_done(ready)
         return ref
@@ -505,6 +514,37 @@ class Engine:
                 r._scattered = client.scatter((r._value, 0.0), hash=False)
             return {_RESULT: r._scattered}
 
+    def _enqueue(self, ref, fn, args, kwargs, priority):
+        with self._lock:
+            heapq.heappush(self._queue, (-int(priority), next(self._order),
+                                         (ref, fn, args, kwargs, priority)))
+        self._pump()
+
+    def _threads(self, client) -> int:
+        if self._slots is None or self._cluster is None:      # an outside cluster can grow
+            try:
+                self._slots = max(1, sum(client.nthreads().values()))
+            except Exception:                                   # noqa: BLE001
+                self._slots = self._slots or 1
+        return self._slots
+
+    def _pump(self):
+        """Send queued tasks to the cluster while it has free threads."""
+        client = self.client()
+        while True:
+            with self._lock:
+                if not self._queue or self._running >= self._threads(client):
+                    return
+                job = heapq.heappop(self._queue)[2]
+                self._running += 1
+            self._run_on_cluster(*job)
+
+    def _release(self):
+        with self._lock:
+            self._running -= 1
+        if not self.closed:
+            self._pump()
+
     def _run_on_cluster(self, ref, fn, args, kwargs, priority):
         client = self.client()
         try:
@@ -512,6 +552,7 @@ class Engine:
             k = _pack(kwargs, lambda r: self._leaf(client, r))
         except TaskError as e:
             self._done(ref, "failed", error=e)
+            self._release()
             return
         short = ref.name.rsplit(".", 1)[-1]
         fut = client.submit(_execute, fn, ref.key, a, k, key=f"{short}-{ref.key}", pure=False,
@@ -523,12 +564,15 @@ class Engine:
         try:
             value, seconds = fut.result()
         except TaskError as e:
+            self._release()
             self._done(ref, "failed", error=e)
             return
         except BaseException as e:             # noqa: BLE001 - cancelled, lost worker
+            self._release()
             self._done(ref, "failed", error=TaskError(ref.name, f"{type(e).__name__}: {e}",
                                                       key=ref.key))
             return
+        self._release()
         self._done(ref, "computed", value=value, seconds=seconds, keep=True)
 
 
