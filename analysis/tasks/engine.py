@@ -584,13 +584,9 @@ def _connect(scheduler, workers):
         raise ValueError("scheduler: dask.distributed is not installed "
                          "(pip install 'dask[distributed]')") from None
     if scheduler == "local":
-        import dask
-        # one task per worker at a time: a task waits on the scheduler, where the stages'
-        # priorities order it, not behind another one sent ahead to a busy worker
-        with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
-            cluster = LocalCluster(n_workers=workers or _cores(), threads_per_worker=1,
-                                   processes=True, dashboard_address=None,
-                                   silence_logs=logging.ERROR, env={"BIPED_THREADS": "1"})
+        cluster = LocalCluster(n_workers=workers or _cores(), threads_per_worker=1,
+                               processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR, env={"BIPED_THREADS": "1"})
         return Client(cluster), cluster
     if not isinstance(scheduler, str):
         return scheduler, None
