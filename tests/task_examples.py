@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,6 +58,14 @@ def chain(engine, n):
 @task
 def echo(x):
     return x
+
+
+@task
+def started_at(x, wait: float = 0.0):
+    """When it started (then it sleeps ``wait`` s)."""
+    t = time.time()
+    time.sleep(wait)
+    return t
 
 
 # ------------------------------------------------- stages for the reproduction's tests

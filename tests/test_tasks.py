@@ -10,7 +10,7 @@ import pytest
 
 from analysis.tasks import Engine, NotKeyable, TaskError, argument_key, resolve_scheduler
 from biped_casadi.caching import _strip_docstrings
-from task_examples import Pair, add, chain, fails, pair_sum, pid, square, total
+from task_examples import Pair, add, chain, fails, pair_sum, pid, square, started_at, total
 
 
 def _tree(src):
@@ -101,6 +101,29 @@ def test_local_cluster_gives_the_synchronous_numbers(tmp_path):
         with pytest.raises(TaskError, match="no good: 2"):
             bad.result()
     assert len(pids) >= 1
+
+
+def test_the_cluster_takes_the_highest_priority_first_and_close_fails_the_queue(tmp_path):
+    """Two worker threads, both busy: the other tasks wait in the engine's queue, and a
+    later one of higher priority starts before earlier ones of lower priority; closing the
+    engine fails what never started instead of leaving it pending."""
+    with Engine("local", workers=2, cache=tmp_path) as eng:
+        assert not eng.synchronous
+        eng.map(started_at, ["warm 1", "warm 2"])[-1].result()
+        busy = [eng.submit(started_at, f"busy {i}", 0.5) for i in range(2)]
+        low = [eng.submit(started_at, f"low {i}") for i in range(3)]
+        with eng.stage("urgent", priority=10):
+            high = eng.submit(started_at, "high")
+        assert high.result() < min(r.result() for r in low)
+        assert max(r.result() for r in busy) < high.result()
+    eng = Engine("local", workers=2, cache=tmp_path / "closed")
+    eng.map(started_at, ["warm 1", "warm 2"])[-1].result()
+    eng.map(started_at, ["busy 1", "busy 2"], 1.0)
+    never = eng.submit(started_at, "never")
+    eng.close()
+    assert never.done()
+    with pytest.raises(TaskError, match="not run: the engine was closed"):
+        never.result()
 
 
 def _code_version_of(tree, tmp_path, name):

@@ -170,6 +170,10 @@ class Engine:
     def close(self):
         """Stop: pending flows are told, the cluster this engine started is closed."""
         self.closed = True
+        with self._lock:
+            queued, self._queue = self._queue, []
+        for *_, job in queued:                  # never sent: their waiters are told
+            self._done(job[0], "failed", error=_not_run(job[0]))
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
         # the cluster's processes report its shutdown (lost heartbeats, closed streams):
@@ -515,6 +519,9 @@ class Engine:
             return {_RESULT: r._scattered}
 
     def _enqueue(self, ref, fn, args, kwargs, priority):
+        if self.closed:
+            self._done(ref, "failed", error=_not_run(ref))
+            return
         with self._lock:
             heapq.heappush(self._queue, (-int(priority), next(self._order),
                                          (ref, fn, args, kwargs, priority)))
@@ -551,8 +558,9 @@ class Engine:
             a = _pack(args, lambda r: self._leaf(client, r))
             k = _pack(kwargs, lambda r: self._leaf(client, r))
         except TaskError as e:
+            with self._lock:                  # the slot goes back to the pump's loop
+                self._running -= 1
             self._done(ref, "failed", error=e)
-            self._release()
             return
         short = ref.name.rsplit(".", 1)[-1]
         fut = client.submit(_execute, fn, ref.key, a, k, key=f"{short}-{ref.key}", pure=False,
@@ -574,6 +582,10 @@ class Engine:
             return
         self._release()
         self._done(ref, "computed", value=value, seconds=seconds, keep=True)
+
+
+def _not_run(ref: Ref) -> TaskError:
+    return TaskError(ref.name, "not run: the engine was closed first", key=ref.key)
 
 
 def _connect(scheduler, workers):
