@@ -109,7 +109,7 @@ def test_the_cluster_takes_the_highest_priority_first_and_close_fails_the_queue(
     engine fails what never started instead of leaving it pending."""
     with Engine("local", workers=2, cache=tmp_path) as eng:
         assert not eng.synchronous
-        eng.map(started_at, ["warm 1", "warm 2"])[-1].result()
+        [r.result() for r in eng.map(started_at, ["warm 1", "warm 2"])]
         busy = [eng.submit(started_at, f"busy {i}", 0.5) for i in range(2)]
         low = [eng.submit(started_at, f"low {i}") for i in range(3)]
         with eng.stage("urgent", priority=10):
@@ -117,7 +117,7 @@ def test_the_cluster_takes_the_highest_priority_first_and_close_fails_the_queue(
         assert high.result() < min(r.result() for r in low)
         assert max(r.result() for r in busy) < high.result()
     eng = Engine("local", workers=2, cache=tmp_path / "closed")
-    eng.map(started_at, ["warm 1", "warm 2"])[-1].result()
+    [r.result() for r in eng.map(started_at, ["warm 1", "warm 2"])]
     eng.map(started_at, ["busy 1", "busy 2"], 1.0)
     never = eng.submit(started_at, "never")
     eng.close()
