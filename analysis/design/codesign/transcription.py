@@ -205,15 +205,15 @@ class Transcription:
         return self._table
 
     def R3(self, tab, k0, n):
-        """(R3 (45, n), dR3 (45, nG n)) of nodes k0..k0+n-1."""
+        """(R3 (45, n), dR3 (45, nG, n) or None) of nodes k0..k0+n-1: the reference at
+        each node's three RK4 stages and its sensitivity in the gait (free gait)."""
         idx = 2 * (k0 + np.arange(n))
         R = tab["R"]
         R3 = np.vstack([R[:, idx], R[:, idx + 1], R[:, idx + 2]])
         if not self.free:
             return R3, None
         dR = tab["dR"]
-        dR3 = np.concatenate([dR[:, :, idx], dR[:, :, idx + 1], dR[:, :, idx + 2]], axis=0)
-        return R3, dR3.transpose(0, 2, 1).reshape(9 * self.nq, -1)   # 45 x (n nG), node-major
+        return R3, np.concatenate([dR[:, :, idx], dR[:, :, idx + 1], dR[:, :, idx + 2]], axis=0)
 
     # ----------------------------------------------------------------- one scenario-step
     def _dP(self, T, rejoin):
@@ -293,14 +293,9 @@ class Transcription:
         """Nodes 1..n of every scenario in one call of the node's four-lane kernel."""
         m, nc, nq = len(P), self.nc, self.nq
         k = np.arange(n)
-        idx = 2 * k
-        R = tab["R"]
-        R3 = np.vstack([R[:, idx], R[:, idx + 1], R[:, idx + 2]])
-        per_node = [R3]
-        if self.free:
-            dR = tab["dR"]
-            dR3 = np.concatenate([dR[:, :, idx], dR[:, :, idx + 1], dR[:, :, idx + 2]], 0)
-            per_node.append(dR3.transpose(1, 0, 2).reshape(9 * nq * self.nG, n))
+        R3, dR3 = self.R3(tab, 0, n)
+        per_node = [R3] if dR3 is None else [   # dR3: column-major (45, nG) per node
+            R3, dR3.transpose(1, 0, 2).reshape(9 * nq * self.nG, n)]
         x = X[:, :, 0].T
         S = np.repeat(S0.T.reshape(-1, 1), m, 1)            # column-major (2, nc) each
         Xn, Sn, Dg, DD = self.node.kernel(
@@ -322,6 +317,8 @@ class Transcription:
         for k0 in range(0, n, C):
             k = k0 + np.arange(C)
             R3, dR3 = self.R3(tab, k0, C)
+            if dR3 is not None:                 # 45 x (C nG), node-major
+                dR3 = dR3.transpose(0, 2, 1).reshape(9 * self.nq, -1)
             dth = self._dth(k).transpose(0, 2, 1).reshape(2, nc * C)
             args = [x, S, (k * h)[None, :], np.full((1, C), h), R3] + (
                 [dR3] if self.free else []) + [Pm, np.tile(dP, C), dth]
