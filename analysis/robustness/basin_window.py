@@ -138,7 +138,11 @@ def edge_cells(result: BasinResult) -> dict:
         ``q_low``, ``q_high`` (the first and last rows, q_u* -/+ q_span), ``dq_low``,
         ``dq_high`` (the first and last columns): the number of converged cells on each.
     """
-    c = np.asarray(result.outcome == "converged")
+    return _edge_counts(np.asarray(result.outcome == "converged"))
+
+
+def _edge_counts(c) -> dict:
+    """:func:`edge_cells` of an (n, n) boolean array of converged cells."""
     return dict(q_low=int(c[0].sum()), q_high=int(c[-1].sum()),
                 dq_low=int(c[:, 0].sum()), dq_high=int(c[:, -1].sum()))
 
@@ -162,11 +166,8 @@ def _probe(design: Design, spans, offsets, kw: dict) -> dict:
     conv = np.zeros(n * n, bool)
     if idx.size:
         conv[idx] = cells(idx)[0] == "converged"
-    c = conv.reshape(n, n)
-    edges = dict(q_low=int(c[0].sum()), q_high=int(c[-1].sum()),
-                 dq_low=int(c[:, 0].sum()), dq_high=int(c[:, -1].sum()))
     return dict(q_span=float(spans[0]), dq_span=float(spans[1]), converged_fraction=None,
-                area=None, walked_cells=int(idx.size), edges=edges,
+                area=None, walked_cells=int(idx.size), edges=_edge_counts(conv.reshape(n, n)),
                 elapsed=round(time.perf_counter() - t0, 3), probe=True)
 
 
