@@ -332,24 +332,39 @@ def available() -> bool:
         return False
 
 
-_FLAGS = ["-march=native", "-fno-math-errno", "-fno-trapping-math", "-fPIC", "-shared"]
+_FLAGS = ["-march=native", "-fno-math-errno", "-fno-trapping-math", "-fPIC"]
+
+
+def _digest(*parts: str) -> str:
+    return hashlib.sha256("\0".join(parts).encode()).hexdigest()[:16]
+
+
+def _object(name: str, source: str, flags) -> str:
+    """One translation unit compiled once per content, flags and CPU into the cache
+    folder: the path of its object file."""
+    key = _digest(source, " ".join(flags), _cpu())
+
+    def build(tmp, out):
+        c = os.path.join(tmp, f"{name}.c")
+        with open(c, "w") as fh:
+            fh.write(source)
+        subprocess.run(["gcc", *flags, "-c", c, "-o", out], check=True, capture_output=True)
+
+    return str(cached_library(f"{name}_{key}.o", build))
 
 
 def _library(name: str, sources, optimisation: str = "-O2") -> ctypes.CDLL:
-    """Compile the C ``sources`` (one translation unit each) once per content into the
-    cache folder (:func:`~biped_casadi.numerics.cached_library`) and load the library."""
+    """Compile the C ``sources`` (one translation unit each, each kept as an object file
+    by its content: a unit shared by several libraries, such as a walker's node for
+    every gait of a robot, is compiled once) and link them once per set into the cache
+    folder (:func:`~biped_casadi.numerics.cached_library`); load the library."""
     flags = [optimisation, *_FLAGS]
-    key = hashlib.sha256(("\0".join(sources) + " ".join(flags) + _cpu()).encode()
-                         ).hexdigest()[:16]
+    objects = [_object(name, src, flags) for src in sources]
+    key = _digest(*(os.path.basename(o) for o in objects))
 
     def build(tmp, out):
-        files = []
-        for i, src in enumerate(sources):
-            files.append(os.path.join(tmp, f"{name}_{i}.c"))
-            with open(files[-1], "w") as fh:
-                fh.write(src)
-        subprocess.run(["gcc", *flags, *files, "-o", out, "-lmvec", "-lm"], check=True,
-                       capture_output=True)
+        subprocess.run(["gcc", "-shared", *objects, "-o", out, "-lmvec", "-lm"],
+                       check=True, capture_output=True)
 
     return ctypes.CDLL(str(cached_library(f"{name}_simd_{key}.so", build)))
 
@@ -550,7 +565,8 @@ def kernels(specs, name: str = "kernels", optimisation: str = "-O2") -> dict | N
             callees.update(c)
         decl = "".join(f"int {g}(const double**, double**, long long*, double*, int);\n"
                        for g in callees)
-        sources = [_HEADER + decl + "".join(code for code, _ in parts)]
+        # one unit per kernel and per callee: each is compiled once wherever it recurs
+        sources = [_HEADER + decl + code for code, _ in parts]
         sources += [_callee_source(g, n) for n, g in enumerate(callees.values())]
         lib = _library(name, sources, optimisation)
     except (_Untranslatable, OSError, subprocess.CalledProcessError):

@@ -143,3 +143,34 @@ def test_walker_kernels_keep_the_verdicts(model):
     ok = np.isfinite(b.qu_error)
     np.testing.assert_allclose(a.qu_error[ok], b.qu_error[ok], atol=1e-10)
     np.testing.assert_allclose(a.duration[ok], b.duration[ok], atol=1e-10)
+
+
+def test_vc_walker_kernel_is_shared_by_gaits_and_keeps_the_verdicts(model, gait):
+    """The virtual-constraint walker's node holds no number of its gait (one machine code
+    for every gait of a robot), and on the kernels it walks as on CasADi's Functions."""
+    from analysis.design import ROBUST_GAIT
+    from biped_casadi.simulation import virtual_constraint_walker
+    other = optimize_gait(model, GaitOptions(**ROBUST_GAIT), cache=True)     # on-disk cache
+    assert abs(other.T - gait.T) > 1e-3
+    walkers = [virtual_constraint_walker(g, None, 200, jit=True) for g in (gait, other)]
+    assert all(w._simd is not None for w in walkers)
+    sources = [w._simd["chunk"]._source() for w in walkers]
+    assert sources[0][0] == sources[1][0]                       # the node's C: the same
+    assert set(sources[0][1]) == set(sources[1][1]) == {"h_d"}  # the gait: its spline only
+    for g, fast in zip((gait, other), walkers):
+        ref = virtual_constraint_walker(g, None, 200, jit=True)
+        assert ref is fast                                       # memoised: copy the kernels
+        simd_kernels, fast._simd = fast._simd, None              # CasADi's Functions
+        q0, dq0 = g.evaluate(0.75 * g.T)[:2]                   # on the section
+        x = np.array([[q0[0], dq0[0]]]) * (1 + np.linspace(-1, 1, 60)[:, None] * [0.0, 2.0])
+        try:
+            b = fast.walk_from_section(x, steps=5)
+        finally:
+            fast._simd = simd_kernels
+        a = fast.walk_from_section(x, steps=5)
+        assert np.array_equal(a.status, b.status) and np.array_equal(a.fail_step, b.fail_step)
+        assert len(set(a.status)) >= 3                 # walks and failures of several kinds
+        ok = np.isfinite(b.qu_error)
+        assert ok.any()
+        np.testing.assert_allclose(a.qu_error[ok], b.qu_error[ok], atol=1e-10)
+        np.testing.assert_allclose(a.duration[ok], b.duration[ok], atol=1e-10)

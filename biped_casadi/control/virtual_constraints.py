@@ -17,7 +17,8 @@ from .output_law import Gains, SingularityReport, correction, output_acceleratio
 from .reference import gait_first, require_same_robot
 
 __all__ = ["VirtualConstraints", "VirtualConstraintController", "fit_virtual_constraints",
-           "ConstraintSurface", "constraint_surface", "HIP_PHASE", "phase_correction"]
+           "ConstraintSurface", "constraint_surface", "HIP_PHASE", "phase_correction",
+           "rejoin_phase"]
 
 #: RABBIT's phase variable c of the virtual-constraint controller, theta = c q: the angle
 #: of the line stance foot -> hip from the vertical, exactly q1 + q2 / 2 when tibia and
@@ -149,7 +150,7 @@ def _bezier_spline(H0, q, dq, ddq, th, dth, ddth):
     return hfun, bez
 
 
-def phase_correction(vc: VirtualConstraints, theta, p, nu: int):
+def phase_correction(vc: VirtualConstraints, theta, p, nu: int, t_c=None):
     """The constraints of a step with the phase-based correction: h_d + h_c and two
     theta-derivatives.
 
@@ -168,6 +169,9 @@ def phase_correction(vc: VirtualConstraints, theta, p, nu: int):
         (1 + 2 nu,) step constants.
     nu : int
         Outputs.
+    t_c : float or casadi, optional
+        The rejoin phase S/2 (default); a symbol keeps compiled code free of the gait's
+        numbers (:class:`~biped_casadi.simulation.vc_walker.VirtualConstraintWalker`).
 
     Returns
     -------
@@ -176,9 +180,25 @@ def phase_correction(vc: VirtualConstraints, theta, p, nu: int):
     """
     h, dh, ddh = vc.h(theta)
     sgn = float(vc.direction)
-    span = abs(vc.theta_minus - vc.theta_plus)
-    hc, dhc, ddhc = correction(sgn * (theta - p[0]), p[1:1 + nu], p[1 + nu:], span / 2)
+    if t_c is None:
+        t_c = rejoin_phase(vc)
+    hc, dhc, ddhc = correction(sgn * (theta - p[0]), p[1:1 + nu], p[1 + nu:], t_c)
     return h + hc, dh + sgn * dhc, ddh + ddhc
+
+
+def rejoin_phase(vc: VirtualConstraints) -> float:
+    """Where the phase-based correction has died out: S/2 past the step's start, rad.
+
+    Parameters
+    ----------
+    vc : VirtualConstraints
+        The constraints (S = ``|theta^- - theta^+|``).
+
+    Returns
+    -------
+    float
+    """
+    return abs(vc.theta_minus - vc.theta_plus) / 2
 
 
 def fit_virtual_constraints(gait, c=None, H0=None, segments_per_step: int = 200,
@@ -541,15 +561,9 @@ class ConstraintSurface:
         # the corrected surface of a step (the controller's h_c)
         nu = m.nu
         p = ca.SX.sym("p", 1 + 2 * nu)
-        hp, dhp, ddhp = phase_correction(vc, th, p, nu)
-        Qp = ca.mtimes(Pinv, ca.vertcat(hp, th))
-        Q1p = ca.mtimes(Pinv, ca.vertcat(dhp, 1))
-        Q2p = ca.mtimes(Pinv, ca.vertcat(ddhp, 0))
-        D1p = m.D(Qp)[0, :]
-        denp = ca.mtimes(D1p, Q1p)
-        ddthp = -(ca.mtimes(D1p, Q2p) * w**2 + m.H(Qp, Q1p * w)[0]) / denp
-        self.corrected = ca.Function("hzd_corrected", [th, w, p],
-                                     [Qp, Q1p, Q2p, ddthp / w, denp, ddthp],
+        out = self.corrected_expressions(th, w, p)
+        Qp, Q1p = out[0], out[1]
+        self.corrected = ca.Function("hzd_corrected", [th, w, p], list(out),
                                      ["theta", "w", "p"], ["q", "dq_dtheta", "d2q_dtheta2",
                                                            "dw", "den", "ddtheta"])
         xsp, zsp = m.swing_foot(Qp)
@@ -566,6 +580,34 @@ class ConstraintSurface:
         self.step_start = ca.Function("hzd_step_start", [q, dq],
                                       [th0, dth0, ca.vertcat(th0, y0, dy0 / ds)],
                                       ["q", "dq"], ["theta", "w", "p"])
+
+    def corrected_expressions(self, th, w, p, t_c=None) -> tuple:
+        """The outputs of ``corrected`` as expressions in the given symbols.
+
+        Parameters
+        ----------
+        th, w : casadi.SX
+            The phase and its rate.
+        p : casadi.SX
+            (1 + 2 nu,) step constants.
+        t_c : casadi.SX, optional
+            The rejoin phase (default the constraints' S/2, a number).
+
+        Returns
+        -------
+        tuple
+            (Q, Q', Q'', dw/dtheta, D_1 Q', d2theta/dt2).
+        """
+        m, vc = self.model, self.vc
+        Pinv = ca.DM(np.linalg.inv(vc.P))
+        hp, dhp, ddhp = phase_correction(vc, th, p, m.nu, t_c)
+        Qp = ca.mtimes(Pinv, ca.vertcat(hp, th))
+        Q1p = ca.mtimes(Pinv, ca.vertcat(dhp, 1))
+        Q2p = ca.mtimes(Pinv, ca.vertcat(ddhp, 0))
+        D1p = m.D(Qp)[0, :]
+        denp = ca.mtimes(D1p, Q1p)
+        ddthp = -(ca.mtimes(D1p, Q2p) * w**2 + m.H(Qp, Q1p * w)[0]) / denp
+        return Qp, Q1p, Q2p, ddthp / w, denp, ddthp
 
     def _find_impact(self):
         """theta^- with z_sw(Q(theta^-)) = 0 near the reference's impact (rootfinder)."""

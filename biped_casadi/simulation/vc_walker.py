@@ -22,7 +22,7 @@ import numpy as np
 from ..caching import cached
 from ..control.output_law import SECTION
 from ..control.reference import gait_first, require_same_robot
-from ..control.virtual_constraints import constraint_surface
+from ..control.virtual_constraints import constraint_surface, rejoin_phase
 from ..numerics import compiled, rk4_step
 from ..simd import kernels
 from .kernel import Diagnostics, call_batched, mapped, threads
@@ -89,21 +89,29 @@ class VirtualConstraintWalker:
         m, vm = self.model, self.vmap
         th, w, t, hs = ca.SX.sym("theta"), ca.SX.sym("w"), ca.SX.sym("t"), ca.SX.sym("h")
         p = ca.SX.sym("p", self.n_par)
+        # the rejoin phase is an input: the compiled nodes hold no number of the gait
+        # but its constraints' spline (CasADi's code, compiled apart), so the gaits of a
+        # robot share their node's machine code (biped_casadi.simd)
+        tc = ca.SX.sym("t_c")
+        self.t_c = rejoin_phase(vm.vc)
         z = ca.vertcat(w, t)
         sgn = self.direction
+
+        def corrected(thv, wv):
+            return vm.corrected_expressions(thv, wv, p, tc)
 
         # RK4 on (xi, t) with xi = w^2: d xi/d theta = 2 d2theta/dt2 is regular where the
         # phase rate w stalls (dw/dtheta = d2theta/dt2 / w is not, and RK4 on w can step
         # over a turning point); a stage past the turn has xi < 0, so w and t are NaN.
         def rhs(zv, c):
             wv = sgn * ca.sqrt(zv[0])
-            return ca.vertcat(2 * vm.corrected(th + c * hs, wv, p)[5], 1 / wv)
+            return ca.vertcat(2 * corrected(th + c * hs, wv)[5], 1 / wv)
 
         zx = rk4_step(rhs, ca.vertcat(w**2, t), hs)
         zn = ca.vertcat(sgn * ca.sqrt(zx[0]), zx[1])
         thn = th + hs
         wn = zn[0]
-        q, Q1, Q2, dw, den, _ = vm.corrected(thn, wn, p)
+        q, Q1, Q2, dw, den, _ = corrected(thn, wn)
         ddth = wn * dw
         dq = Q1 * wn
         ddq = Q1 * ddth + Q2 * wn**2
@@ -111,12 +119,13 @@ class VirtualConstraintWalker:
         u = (ca.mtimes(D, ddq) + H)[1:]
         Fx, Fz = m.ground_reaction_acc(q, dq, ddq)
         diag = self.schema.vector(m, q, dq, u, Fx, Fz, den)
-        node = ca.Function("vc_node", [z, th, hs, p], [ca.cse(zn), thn, ca.cse(diag)])
+        node_tc = ca.Function("vc_node", [z, th, hs, p, tc], [ca.cse(zn), thn, ca.cse(diag)])
+        node = ca.Function("vc_node_gait", [z, th, hs, p], node_tc(z, th, hs, p, self.t_c))
         self.node = node
         self._build_steps(th, p)
         # four scenarios per SIMD vector where the machine allows (biped_casadi.simd):
         # the nodes (the step's ends run once per step, on CasADi's Functions)
-        self._simd = kernels({"chunk": (node, 2, ["sample", "sample"])},
+        self._simd = kernels({"chunk": (node_tc, 2, ["sample", "sample", "const"])},
                              "vc_walker") if self._jit else None
         if self._jit and self._simd is None:   # compiled once per content, kept on disk
             node = compiled(node, "-O2")
@@ -152,8 +161,8 @@ class VirtualConstraintWalker:
         diagnostics (rows, m, K) after each."""
         m_ = z0.shape[1]
         if self._simd is not None:
-            Z, TH, Dg = self._simd["chunk"](z0, theta[None, :], hs[None, :], p.T, K=K,
-                                            threads=threads())
+            Z, TH, Dg = self._simd["chunk"](z0, theta[None, :], hs[None, :], p.T, [self.t_c],
+                                            K=K, threads=threads())
             return Z, TH[0], Dg
         f = self._mapped("chunk" if K == self.nodes else "start_node", m_)
         Z, TH, Dg = (np.array(v) for v in f(z0, theta[None, :], hs[None, :], p.T))
