@@ -103,6 +103,28 @@ def test_local_cluster_gives_the_synchronous_numbers(tmp_path):
     assert len(pids) >= 1
 
 
+def _imported(name):
+    import sys
+    return name in sys.modules
+
+
+@pytest.mark.slow
+def test_the_cluster_starts_with_the_first_flow_to_compute_and_never_for_kept_results(
+        tmp_path):
+    """A flow whose result is not kept starts the cluster in the background before it
+    submits anything, its processes importing the preloaded modules; a re-run whose
+    flows are all kept starts none."""
+    with Engine("local", workers=2, cache=tmp_path, preload=("task_examples",)) as eng:
+        assert eng._starting is None and eng._client is None
+        f = eng.spawn(chain, 3)
+        assert eng._starting is not None
+        v = f.result()
+        assert all(eng.client().run(_imported, "task_examples").values())
+    with Engine("local", workers=2, cache=tmp_path) as eng:
+        assert eng.spawn(chain, 3).result() == v
+        assert eng._starting is None and eng._client is None
+
+
 def test_the_cluster_takes_the_highest_priority_first_and_close_fails_the_queue(tmp_path):
     """Two worker threads, both busy: the other tasks wait in the engine's queue, and a
     later one of higher priority starts before earlier ones of lower priority; closing the

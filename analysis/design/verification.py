@@ -26,7 +26,7 @@ import numpy as np
 from biped_casadi import (Design, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, design_first, directions, simulate)
 from biped_casadi.results import Result, internal
-from biped_casadi.simulation import WalkBatch, start_states, zero_dynamics_walker
+from biped_casadi.simulation import WalkBatch, simulator, start_states, zero_dynamics_walker
 
 from ..robustness.s_star import RobustnessSettings, robustness
 from ..stability.poincare import poincare_map
@@ -35,7 +35,7 @@ from ..tasks import Engine, task
 
 __all__ = ["DesignCheck", "verify_design", "HiddenPatterns", "hidden_sign_patterns",
            "verify_flow", "submit_check", "finish_check", "design_check", "s_star_bisection",
-           "full_order_runs", "paper_run", "eigenvalue_check"]
+           "full_order_runs", "paper_run", "eigenvalue_check", "closed_loop_library"]
 
 
 @dataclass
@@ -120,7 +120,31 @@ def _options(st: RobustnessSettings) -> SimulationOptions:
 
 
 @task
-def full_order_runs(design: Design, kept, settings: RobustnessSettings, scale: float) -> dict:
+def closed_loop_library(design: Design, settings: RobustnessSettings) -> str:
+    """Step 0: compile the design's full-order closed loop, which the runs of steps 2 and 3
+    share (a task).  Submitted before them, it compiles in one process while the others
+    work, instead of the runs that start together waiting on one another's compile.
+
+    Parameters
+    ----------
+    design : Design
+        The design on its gait.
+    settings : RobustnessSettings
+        Steps, mu, torque limit.
+
+    Returns
+    -------
+    str
+        What the simulator was built for (the compiled library is kept by content in the
+        cache folder).
+    """
+    sim = simulator(design.controller_for(), _options(settings))
+    return f"{sim.controller.name} closed loop, {sim.options.rk4_steps} RK4 steps per T"
+
+
+@task
+def full_order_runs(design: Design, kept, settings: RobustnessSettings, scale: float,
+                    library: str = "") -> dict:
     """Step 2: the full-order simulator from every kept direction at one scale (a task).
 
     Parameters
@@ -133,6 +157,8 @@ def full_order_runs(design: Design, kept, settings: RobustnessSettings, scale: f
         Steps, tolerance, mu, torque limit.
     scale : float
         The perturbation's scale.
+    library : str
+        :func:`closed_loop_library`'s result (its ref makes this task come after it).
 
     Returns
     -------
@@ -149,7 +175,7 @@ def full_order_runs(design: Design, kept, settings: RobustnessSettings, scale: f
 
 
 @task
-def paper_run(design: Design, kept, settings: RobustnessSettings):
+def paper_run(design: Design, kept, settings: RobustnessSettings, library: str = ""):
     """Step 3: the full-order run from the paper's perturbation (direction 0 at scale 1).
 
     Parameters
@@ -160,6 +186,8 @@ def paper_run(design: Design, kept, settings: RobustnessSettings):
         The kept directions (the paper's first).
     settings : RobustnessSettings
         Steps, mu, torque limit.
+    library : str
+        :func:`closed_loop_library`'s result (its ref makes this task come after it).
 
     Returns
     -------
@@ -230,9 +258,10 @@ def design_check(r, verified: dict, paper, eigen: tuple, settings: RobustnessSet
 
 
 def submit_check(engine, design: Design, kept, settings: RobustnessSettings):
-    """Submit the protocol's tasks: (the bisection, the paper's run, the eigenvalues)
-    as :class:`~analysis.tasks.Ref` s; :func:`finish_check` waits for them and adds the
-    full-order runs at s* and just above.
+    """Submit the protocol's tasks: (the bisection, the paper's run, the eigenvalues,
+    the compiled closed loop the full-order runs share) as :class:`~analysis.tasks.Ref`
+    s; :func:`finish_check` waits for them and adds the full-order runs at s* and just
+    above.
 
     Parameters
     ----------
@@ -245,9 +274,10 @@ def submit_check(engine, design: Design, kept, settings: RobustnessSettings):
     -------
     tuple of Ref
     """
+    library = engine.submit(closed_loop_library, design, settings)
     return (engine.submit(s_star_bisection, design, kept, settings),
-            engine.submit(paper_run, design, kept, settings),
-            engine.submit(eigenvalue_check, design))
+            engine.submit(paper_run, design, kept, settings, library),
+            engine.submit(eigenvalue_check, design), library)
 
 
 def finish_check(engine, design: Design, kept, settings: RobustnessSettings, refs) -> DesignCheck:
@@ -267,9 +297,9 @@ def finish_check(engine, design: Design, kept, settings: RobustnessSettings, ref
     -------
     DesignCheck
     """
-    bis, paper, eigen = refs
+    bis, paper, eigen, library = refs
     r = bis.result()
-    runs = {label: engine.submit(full_order_runs, design, kept, settings, s)
+    runs = {label: engine.submit(full_order_runs, design, kept, settings, s, library)
             for label, s in (("at_s_star", r.s_star), ("at_s_fail", r.s_fail))
             if math.isfinite(s)}
     return design_check(r, {k: v.result() for k, v in runs.items()}, paper.result(),

@@ -266,7 +266,8 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
     log = Log(opts.progress)
     t0 = time.perf_counter()
     try:
-        with Engine(opts.scheduler, opts.workers, progress=opts.progress, log=log) as eng:
+        with Engine(opts.scheduler, opts.workers, progress=opts.progress, log=log,
+                    preload=(__name__,)) as eng:
             S, jobs = build(eng, model, res, quick)
             log.expect(S)
             stages, summary, files = _collect(eng, S, jobs, staging, log)

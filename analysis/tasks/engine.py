@@ -108,8 +108,10 @@ class Engine:
     """Runs tasks and flows, keeps their results, counts what was computed or reused.
 
     Use it as a context manager (``with Engine(...) as eng:``); the cluster it started,
-    if any, is closed at the end.  The cluster starts only when a task must be computed:
-    a run whose results are all kept starts none.
+    if any, is closed at the end.  The cluster starts only when something must be
+    computed: a run whose results are all kept starts none.  It starts in the background
+    as soon as a flow is spawned whose result is not kept, so that its processes start
+    (and import ``preload``) while the flows compute their tasks' keys.
 
     Parameters
     ----------
@@ -127,10 +129,14 @@ class Engine:
         Called with each :class:`TaskRecord` as a task finishes.
     log : callable, optional
         Called with the lines flows report (:meth:`say`).
+    preload : tuple of str
+        Modules the processes of a local cluster import as they start (those of the
+        tasks to come).
     """
 
     def __init__(self, scheduler=None, workers: int | None = None, cache=None,
-                 use_cache: bool = True, progress: bool = False, on_record=None, log=None):
+                 use_cache: bool = True, progress: bool = False, on_record=None, log=None,
+                 preload: tuple = ()):
         self.scheduler = resolve_scheduler(scheduler, workers)
         self.workers = workers
         self.store = ResultStore(cache)
@@ -143,6 +149,9 @@ class Engine:
         self._lock = threading.RLock()
         self._client = None
         self._cluster = None
+        self.preload = tuple(preload)
+        self._starting = None          # the thread connecting in the background
+        self._start_error = None
         self._pool = None
         self._bar = None
         self._progress = bool(progress)
@@ -174,6 +183,8 @@ class Engine:
             queued, self._queue = self._queue, []
         for *_, job in queued:                  # never sent: their waiters are told
             self._done(job[0], "failed", error=_not_run(job[0]))
+        if self._starting is not None:          # a cluster starting is closed once up
+            self._starting.join()
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
         # the cluster's processes report its shutdown (lost heartbeats, closed streams):
@@ -204,10 +215,36 @@ class Engine:
         """
         if self.synchronous:
             return None
+        starting = self._starting
+        if starting is not None:
+            starting.join()
         with self._lock:
+            if self._start_error is not None:
+                raise self._start_error
             if self._client is None:
-                self._client, self._cluster = _connect(self.scheduler, self.workers)
+                self._client, self._cluster = _connect(self.scheduler, self.workers,
+                                                       self.preload)
             return self._client
+
+    def _start_early(self):
+        """Start connecting in a background thread (once), unless synchronous or
+        connected; :meth:`client` waits for it."""
+        with self._lock:
+            if self.synchronous or self.closed or self._client is not None \
+                    or self._starting is not None:
+                return
+
+            def connect():
+                try:
+                    client, cluster = _connect(self.scheduler, self.workers, self.preload)
+                except Exception as e:          # noqa: BLE001 - raised by client()
+                    self._start_error = e
+                    return
+                with self._lock:
+                    self._client, self._cluster = client, cluster
+            self._starting = threading.Thread(target=connect, name="biped-connect",
+                                              daemon=True)
+            self._starting.start()
 
     def say(self, message: str):
         """Report one line of a flow's progress (to the ``log`` callable, if any).
@@ -373,6 +410,7 @@ class Engine:
             self._refs[key] = ref
         if self._reuse(ref):
             return ref
+        self._start_early()
 
         def run():
             _LOCAL.stage = (stage, priority)
@@ -588,8 +626,9 @@ def _not_run(ref: Ref) -> TaskError:
     return TaskError(ref.name, "not run: the engine was closed first", key=ref.key)
 
 
-def _connect(scheduler, workers):
-    """(client, cluster or None) for a resolved scheduler."""
+def _connect(scheduler, workers, preload=()):
+    """(client, cluster or None) for a resolved scheduler (``preload``: the modules a
+    local cluster's processes import as they start)."""
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError:
@@ -598,7 +637,8 @@ def _connect(scheduler, workers):
     if scheduler == "local":
         cluster = LocalCluster(n_workers=workers or _cores(), threads_per_worker=1,
                                processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR, env={"BIPED_THREADS": "1"})
+                               silence_logs=logging.ERROR, env={"BIPED_THREADS": "1"},
+                               preload=list(preload))
         return Client(cluster), cluster
     if not isinstance(scheduler, str):
         return scheduler, None
