@@ -10,7 +10,7 @@ import sys
 import time
 
 __all__ = ["dask_client", "cluster_client", "progress_bar", "submit_chunks",
-           "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
+           "check_not_bootstrapping", "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
 
 #: how long to wait for a Dask scheduler to answer, and for a first worker to join
 DASK_CONNECT_TIMEOUT = "10s"
@@ -65,8 +65,29 @@ def dask_client(scheduler, connect_timeout=None):
             client.close()
 
 
+def check_not_bootstrapping():
+    """Refuse to start a cluster while this process is a new worker process re-running
+    the parent's main module (a script without ``if __name__ == "__main__":``).
+
+    Without this check the worker would start a cluster of its own and the parent would
+    wait for it forever.
+
+    Raises
+    ------
+    RuntimeError
+        In a process that ``multiprocessing`` is still bootstrapping.
+    """
+    import multiprocessing
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise RuntimeError(
+            "a Dask worker process is re-running this script's main module and would "
+            "start a cluster of its own: put the script's work under "
+            "`if __name__ == \"__main__\":` (or pass scheduler=\"synchronous\")")
+
+
 def _local_cluster(workers: int | None):
     from dask.distributed import LocalCluster
+    check_not_bootstrapping()
     n = workers or max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                        else (os.cpu_count() or 1))
     return LocalCluster(n_workers=n, threads_per_worker=1, processes=True,

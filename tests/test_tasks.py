@@ -148,6 +148,35 @@ def test_the_cluster_takes_the_highest_priority_first_and_close_fails_the_queue(
         never.result()
 
 
+def test_a_script_without_a_main_guard_fails_fast_with_the_reason(tmp_path):
+    """A script that starts a local cluster at module level, without
+    ``if __name__ == "__main__":``: every worker process re-runs it as it starts.  The
+    run stops within seconds, its tasks failed, saying what to change, instead of
+    waiting forever for a cluster that cannot start."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    tests = Path(__file__).resolve().parent
+    script = tmp_path / "unguarded.py"
+    script.write_text(
+        "from analysis.tasks import Engine, TaskError\n"
+        "from task_examples import square\n"
+        f"eng = Engine('local', workers=2, cache={str(tmp_path / 'c')!r})\n"
+        "ref = eng.submit(square, 3.0)\n"
+        "try:\n"
+        "    ref.result()\n"
+        "except TaskError as e:\n"
+        "    print('FAILED:', e)\n"
+        "eng.check_started()\n")
+    out = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=120,
+                         env={**__import__("os").environ, "PYTHONPATH": str(tests)})
+    assert out.returncode == 1
+    assert "FAILED:" in out.stdout and "the Dask cluster did not start" in out.stdout
+    assert 'if __name__ == "__main__":' in out.stderr
+    assert "ValueError: scheduler: the Dask cluster did not start" in out.stderr
+
+
 def _code_version_of(tree, tmp_path, name):
     """code_version('numerical') of a copy of the packages (in a fresh process)."""
     import shutil

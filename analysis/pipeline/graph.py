@@ -271,6 +271,7 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
             S, jobs = build(eng, model, res, quick)
             log.expect(S)
             stages, summary, files = _collect(eng, S, jobs, staging, log)
+            eng.check_started()
             total = time.perf_counter() - t0
             crit = eng.critical_path()
         summary = _finish(summary, stages, files, staging, opts, res, model, quick, total,

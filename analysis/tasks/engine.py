@@ -35,7 +35,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 from biped_casadi.caching import TaskInfo, task
 
-from ..cluster import DASK_CONNECT_TIMEOUT, DASK_WORKER_TIMEOUT
+from ..cluster import DASK_CONNECT_TIMEOUT, DASK_WORKER_TIMEOUT, check_not_bootstrapping
 from .keys import task_key
 from .refs import (_LOCAL, Ref, TaskError, TaskRecord, _execute, _info, _pack, _refs_in,
                    _RESULT, in_task)
@@ -138,6 +138,8 @@ class Engine:
                  use_cache: bool = True, progress: bool = False, on_record=None, log=None,
                  preload: tuple = ()):
         self.scheduler = resolve_scheduler(scheduler, workers)
+        if self.scheduler == "local":
+            check_not_bootstrapping()
         self.workers = workers
         self.store = ResultStore(cache)
         self.use_cache = bool(use_cache)
@@ -245,6 +247,20 @@ class Engine:
             self._starting = threading.Thread(target=connect, name="biped-connect",
                                               daemon=True)
             self._starting.start()
+
+    def check_started(self):
+        """Raise the reason the cluster could not start, if it could not.
+
+        Raises
+        ------
+        ValueError
+            ``scheduler: the Dask cluster did not start (...)``.
+        """
+        e = self._start_error
+        if e is not None:
+            raise ValueError(e.args[0] if isinstance(e, ValueError) and e.args
+                             else f"scheduler: the Dask cluster did not start ({_one(e)})") \
+                from e
 
     def say(self, message: str):
         """Report one line of a flow's progress (to the ``log`` callable, if any).
@@ -574,8 +590,21 @@ class Engine:
         return self._slots
 
     def _pump(self):
-        """Send queued tasks to the cluster while it has free threads."""
-        client = self.client()
+        """Send queued tasks to the cluster while it has free threads (or, when the
+        cluster could not start, fail them with the reason: nothing waits forever)."""
+        try:
+            client = self.client()
+        except Exception as e:                 # noqa: BLE001 - kept in start_error
+            with self._lock:
+                if self._start_error is None:
+                    self._start_error = e
+                jobs = [j[2] for j in self._queue]
+                self._queue.clear()
+            for ref, *_ in jobs:
+                self._done(ref, "failed", error=TaskError(
+                    ref.name, f"not run: the Dask cluster did not start ({_one(e)})",
+                    key=ref.key))
+            return
         while True:
             with self._lock:
                 if not self._queue or self._running >= self._threads(client):
@@ -622,6 +651,12 @@ class Engine:
         self._done(ref, "computed", value=value, seconds=seconds, keep=True)
 
 
+def _one(e: BaseException) -> str:
+    """An exception as one line."""
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[-1] if text else ''}".rstrip(": ")
+
+
 def _not_run(ref: Ref) -> TaskError:
     return TaskError(ref.name, "not run: the engine was closed first", key=ref.key)
 
@@ -635,6 +670,7 @@ def _connect(scheduler, workers, preload=()):
         raise ValueError("scheduler: dask.distributed is not installed "
                          "(pip install 'dask[distributed]')") from None
     if scheduler == "local":
+        check_not_bootstrapping()
         cluster = LocalCluster(n_workers=workers or _cores(), threads_per_worker=1,
                                processes=True, dashboard_address=None,
                                silence_logs=logging.ERROR, env={"BIPED_THREADS": "1"},
