@@ -45,8 +45,8 @@ class Gait(Reference):
     dq_u^d(0)).  ``step_length``, ``speed``, ``cost``; ``solver_stats``; ``check()``
     computes every physical and consistency figure on a dense grid.
 
-    Gaits come from :func:`optimize_gait`, :func:`default_gait` or :meth:`load`; the
-    constructor tabulates q_u^d on [-T/2, 2 T] by RK4 (``options.polish_steps`` per T).
+    Gaits come from :func:`optimize_gait`, :func:`default_gait` or :meth:`load`; q_u^d
+    is tabulated on [-T/2, 2 T] by RK4 (``options.polish_steps`` per T) at its first use.
 
     Parameters
     ----------
@@ -81,7 +81,7 @@ class Gait(Reference):
         self.n_state = 2
         self.r0 = self.x0
         self._key = None
-        self._tabulate()
+        self._table = None                  # (s, X, A): tabulated at first use
 
     # --------------------------------------------------------------- tabulation
     def _integrate(self, n_steps, ds):
@@ -96,20 +96,33 @@ class Gait(Reference):
             X, s = X[:, :last + 1], s[:last + 1]
         return s, X
 
-    def _tabulate(self):
-        n = self.options.polish_steps
-        s_f, X_f = self._integrate(int(round(EXTENT * n)), 1.0 / n)
-        s_b, X_b = self._integrate(int(round(EXTENT_BEFORE * n)), -1.0 / n)
-        s = np.r_[s_b[:0:-1], s_f]
-        X = np.hstack([X_b[:, :0:-1], X_f])
-        self._s = s
-        self._X = X
-        qa, dqa, ddqa = self._qa(s)
-        q = np.vstack([X[0], qa])
-        dq = np.vstack([X[1], dqa])
-        self._A = np.array(self._ref.ddqu.map(s.size)(q, dq, ddqa)).ravel()
-        self.t_min = float(s[0] * self.T)
-        self.t_max = float(s[-1] * self.T)
+    def _nodes(self) -> tuple:
+        """(s, X, A): the grid in s = t / T, the RK4 states of the unactuated row there and
+        its acceleration, tabulated at the first call (a gait only passed along, as in
+        a process that schedules tasks, never integrates)."""
+        if self._table is None:
+            n = self.options.polish_steps
+            s_f, X_f = self._integrate(int(round(EXTENT * n)), 1.0 / n)
+            s_b, X_b = self._integrate(int(round(EXTENT_BEFORE * n)), -1.0 / n)
+            s = np.r_[s_b[:0:-1], s_f]
+            X = np.hstack([X_b[:, :0:-1], X_f])
+            qa, dqa, ddqa = self._qa(s)
+            q = np.vstack([X[0], qa])
+            dq = np.vstack([X[1], dqa])
+            A = np.array(self._ref.ddqu.map(s.size)(q, dq, ddqa)).ravel()
+            self._table = (s, X, A)
+        return self._table
+
+    @property
+    def t_min(self) -> float:
+        """The earliest time of the reference, s (about -T/2)."""
+        return float(self._nodes()[0][0] * self.T)
+
+    @property
+    def t_max(self) -> float:
+        """The latest time of the reference, s (about 2 T, or where the unactuated row's
+        continuation stops being finite)."""
+        return float(self._nodes()[0][-1] * self.T)
 
     def __reduce__(self):
         # pickled as its definition (the CasADi Functions are rebuilt, once per process)
@@ -216,8 +229,8 @@ class Gait(Reference):
         scalar = t_arr.ndim == 0
         t1 = np.atleast_1d(t_arr).ravel()
         self._check_times(t1)
-        tg = self._s * self.T
-        qu, dqu, _ = quintic_hermite(tg, self._X[0], self._X[1], self._A, t1)
+        sg, X, A = self._nodes()
+        qu, dqu, _ = quintic_hermite(sg * self.T, X[0], X[1], A, t1)
         qa, dqa, ddqa = self._qa(t1 / self.T)
         q, dq = np.vstack([qu, qa]), np.vstack([dqu, dqa])
         # ddq_u from the unactuated row itself (the interpolant's second derivative would
@@ -256,7 +269,8 @@ class Gait(Reference):
         """
         t1 = np.atleast_1d(np.asarray(t, dtype=float)).ravel()
         self._check_times(t1)
-        qu, dqu, _ = quintic_hermite(self._s * self.T, self._X[0], self._X[1], self._A, t1)
+        sg, X, A = self._nodes()
+        qu, dqu, _ = quintic_hermite(sg * self.T, X[0], X[1], A, t1)
         return np.vstack([qu, dqu])
 
     def state_nodes(self) -> tuple:
@@ -270,7 +284,8 @@ class Gait(Reference):
             is (y(t), y'(t)) of the quintic through (q_u, dq_u, ddq_u) at the two nodes
             around t.
         """
-        return (self._s * self.T, self._X[0].copy(), self._X[1].copy(), self._A.copy())
+        sg, X, A = self._nodes()
+        return (sg * self.T, X[0].copy(), X[1].copy(), A.copy())
 
     # ---------------------------------------------------------------- figures
     @property

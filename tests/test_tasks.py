@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from analysis.tasks import Engine, NotKeyable, TaskError, argument_key, resolve_scheduler
+from analysis.tasks import engine as engine_module
 from biped_casadi.caching import _strip_docstrings
 from task_examples import Pair, add, chain, fails, pair_sum, pid, square, started_at, total
 
@@ -126,24 +127,28 @@ def test_the_cluster_starts_with_the_first_flow_to_compute_and_never_for_kept_re
 
 
 def test_the_cluster_takes_the_highest_priority_first_and_close_fails_the_queue(tmp_path):
-    """Two worker threads, both busy: the other tasks wait in the engine's queue, and a
-    later one of higher priority starts before earlier ones of lower priority; closing the
-    engine fails what never started instead of leaving it pending."""
+    """Two worker threads, both busy, and AHEAD more tasks sent to the cluster: the other
+    tasks wait in the engine's queue, and a later one of higher priority starts before
+    the earlier ones of lower priority still queued; closing the engine fails what never
+    started instead of leaving it pending."""
+    ahead = engine_module.AHEAD
     with Engine("local", workers=2, cache=tmp_path) as eng:
         assert not eng.synchronous
         [r.result() for r in eng.map(started_at, ["warm 1", "warm 2"])]
         busy = [eng.submit(started_at, f"busy {i}", 0.5) for i in range(2)]
-        low = [eng.submit(started_at, f"low {i}") for i in range(3)]
+        low = [eng.submit(started_at, f"low {i}") for i in range(ahead + 2)]
         with eng.stage("urgent", priority=10):
             high = eng.submit(started_at, "high")
-        assert high.result() < min(r.result() for r in low)
+        queued = sorted(r.result() for r in low)[ahead:]
+        assert high.result() < min(queued)
         assert max(r.result() for r in busy) < high.result()
     eng = Engine("local", workers=2, cache=tmp_path / "closed")
     [r.result() for r in eng.map(started_at, ["warm 1", "warm 2"])]
     eng.map(started_at, ["busy 1", "busy 2"], 1.0)
+    sent = [eng.submit(started_at, f"sent {i}") for i in range(ahead)]
     never = eng.submit(started_at, "never")
     eng.close()
-    assert never.done()
+    assert never.done() and all(r.done() for r in sent)
     with pytest.raises(TaskError, match="not run: the engine was closed"):
         never.result()
 

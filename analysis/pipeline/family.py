@@ -12,14 +12,14 @@ from biped_casadi import Design, SimulationOptions
 from gait_opt import GaitOptions, gait_family
 
 from ..design import ROBUST_GAIT
-from ..design.schedule import M1Schedule
+from ..design.schedule import M1Schedule, profile_designs, profile_gaits
 from ..robustness import RobustnessSettings, kept_directions, robustness
-from ..robustness.speed import speed_ramp
+from ..robustness.speed import profile_run, ramp_profile
 from ..tasks import task
 from .options import Resolution
 from .paper import StageResult
 
-__all__ = ["FamilyStage", "family_of", "ramp_walk", "stage_family", "family_speeds",
+__all__ = ["FamilyStage", "family_of", "ramp_gaits", "ramp_walk", "stage_family", "family_speeds",
            "RAMP"]
 
 #: the reproduction's speed change: up from the family's first speed to its last and back
@@ -65,24 +65,44 @@ def family_of(model, speeds: tuple, options: GaitOptions):
 
 
 @task
-def ramp_walk(family, controller: str, M1, rejoin: float, v1: float, v2: float, dv: float,
-              hold: int, options: SimulationOptions):
-    """A speed ramp v1 -> v2 -> v1 on a family walked in full order (a task).
+def ramp_gaits(family, v1: float, v2: float, dv: float, hold: int) -> tuple:
+    """The gait of every step of the ramp v1 -> v2 -> v1, then ``hold`` steps at v1
+    (a task: polished once for every controller that walks it).
 
     Parameters
     ----------
     family : GaitFamily
         The gaits.
+    v1, v2, dv : float
+        The ramp, m/s (:func:`analysis.robustness.speed.ramp_profile`).
+    hold : int
+        Steps at v1 after it.
+
+    Returns
+    -------
+    tuple
+        (speeds, gaits): a tuple of floats, m/s, and one gait per step.
+    """
+    speeds = ramp_profile(v1, v2, dv, hold)
+    gaits, _ = profile_gaits(family, speeds)
+    return tuple(float(v) for v in speeds), tuple(gaits)
+
+
+@task
+def ramp_walk(ramp: tuple, controller: str, M1, rejoin: float, options: SimulationOptions):
+    """A speed ramp walked in full order (a task): what
+    :func:`analysis.robustness.speed.speed_ramp` walks, on gaits polished beforehand.
+
+    Parameters
+    ----------
+    ramp : tuple
+        (speeds, gaits) of every step (:func:`ramp_gaits`).
     controller : str
         'tv' (one M1 at every speed) or 'vc'.
     M1 : tuple of float or None
         The time-varying design's M1 (``controller`` 'tv').
     rejoin : float
         Its v_c rejoin time, fraction of T.
-    v1, v2, dv : float
-        The ramp, m/s.
-    hold : int
-        Steps at v1 after it.
     options : SimulationOptions
         Validity thresholds.
 
@@ -91,8 +111,10 @@ def ramp_walk(family, controller: str, M1, rejoin: float, v1: float, v2: float, 
     ProfileResult
         Without the per-step logs.
     """
+    speeds, gaits = ramp
     schedule = M1Schedule.constant(M1, rejoin) if controller == "tv" else None
-    r = speed_ramp(family, controller, schedule, options, v1, v2, dv, hold=hold)
+    designs = profile_designs(list(gaits), controller, schedule, speeds=np.asarray(speeds))
+    r = profile_run(tuple(designs), options)
     return dataclasses.replace(r, runs=[])
 
 
@@ -119,9 +141,9 @@ def stage_family(engine, model, robust_stage, res: Resolution) -> FamilyStage:
     fam = fam_ref.result()
     rs = RobustnessSettings(directions=8, rounds=6) if res.quick else RobustnessSettings()
     kept_refs = [engine.submit(kept_directions, g, rs) for g in fam.gaits]
+    ramp = engine.submit(ramp_gaits, fam_ref, speeds[0], speeds[-1], RAMP["dv"], RAMP["hold"])
     d0 = robust_stage.result().result.design
-    ramp_refs = {label: engine.submit(ramp_walk, fam_ref, c, m1, d0.rejoin, speeds[0],
-                                      speeds[-1], RAMP["dv"], RAMP["hold"], RAMP["options"])
+    ramp_refs = {label: engine.submit(ramp_walk, ramp, c, m1, d0.rejoin, RAMP["options"])
                  for label, c, m1 in (("virtual constraints", "vc", None),
                                       ("the co-design's M1", "tv", tuple(d0.M1)))}
     refs = []

@@ -21,8 +21,8 @@ from ..tasks import task
 from .options import Resolution
 
 __all__ = ["StageResult", "GaitStage", "SweepStage", "GridStage", "ConjectureStage",
-           "DomainStage", "M1Stage", "stage_gait", "stage_singular", "stage_fig2",
-           "stage_grid", "stage_fig3", "stage_fig4", "stage_m1", "stage_vc"]
+           "DomainStage", "M1Stage", "eigenvalues_of", "vc_eigen", "stage_gait",
+           "stage_singular", "stage_fig2", "stage_grid", "stage_fig3", "stage_fig4", "stage_m1", "stage_vc"]
 
 
 @dataclass
@@ -282,6 +282,32 @@ def m1_nlp(gait, group, kw: dict, maps: list):
 
 
 @task
+def eigenvalues_of(gait, M1s: tuple, rejoin: float = 0.5) -> list:
+    """:func:`analysis.stability.poincare_eigenvalues` of each M1 on a gait (a task).
+
+    Parameters
+    ----------
+    gait : Gait
+        The reference.
+    M1s : tuple of tuple of float
+        The gains.
+    rejoin : float
+        The correction's rejoin time, fraction of T.
+
+    Returns
+    -------
+    list of PoincareResult
+    """
+    return [poincare_eigenvalues(gait, list(M1), rejoin=rejoin) for M1 in M1s]
+
+
+@task
+def vc_eigen(gait):
+    """:func:`analysis.stability.vc_eigenvalue` of a gait (a task)."""
+    return vc_eigenvalue(gait)
+
+
+@task
 def stage_m1(engine, gait_stage, grid_stage, domain_stage, res: Resolution) -> M1Stage:
     """The M1 NLP on every a = b = 0 group and with all components free; the best group
     (RABBIT: of the a = b = 0 groups, as in the paper) is the M1 the walking stages use."""
@@ -290,6 +316,8 @@ def stage_m1(engine, gait_stage, grid_stage, domain_stage, res: Resolution) -> M
     maps = [_batch(grid_stage.result().sweep)] + list(dom.maps)
     groups = _groups(g.model, dom.ab_set)
     k = res.nlp_starts
+    example = engine.submit(eigenvalues_of, g, (tuple(PAPER["example_M1"]),)) \
+        if _is_rabbit(g.model) else None
     refs = {}
     for name, grp in groups:
         kw = dict(n_best=k, n_ipopt=min(4, k), n_random=0 if res.quick else 2)
@@ -300,8 +328,8 @@ def stage_m1(engine, gait_stage, grid_stage, domain_stage, res: Resolution) -> M
         out[name] = r.to_dict()
         engine.say(f"   {name}: max|lambda| = {r.max_abs:.3g} "
                    f"(+- {r.eigenvalue_uncertainty:.1g})")
-    if _is_rabbit(g.model):
-        ex = poincare_eigenvalues(g, PAPER["example_M1"])
+    if example is not None:
+        ex = example.result()[0]
         out["paper_example_M1"] = dict(M1=PAPER["example_M1"], max_abs=ex.max_abs,
                                        status=ex.status)
     names = [n for n, _ in groups]
@@ -319,9 +347,10 @@ def stage_vc(engine, gait_stage, m1_stage) -> StageResult:
     and M1 = 0)."""
     g = gait_stage.result().gait
     M1 = m1_stage.result().chosen
-    vc = vc_eigenvalue(g)
-    tv = poincare_eigenvalues(g, M1)
-    tv0 = poincare_eigenvalues(g, np.zeros(g.model.nu))
+    vc_ref = engine.submit(vc_eigen, g)
+    tv, tv0 = engine.submit(eigenvalues_of, g, (tuple(float(x) for x in M1),
+                                                (0.0,) * g.model.nu)).result()
+    vc = vc_ref.result()
     return StageResult(dict(vc_comparison=dict(
         vc=vc.to_dict(), tv_chosen=dict(M1=M1.tolist(), max_abs=tv.max_abs,
                                         eigenvalues=[[e.real, e.imag] for e in tv.eigenvalues]),

@@ -36,7 +36,7 @@ from ..design.schedule import M1Schedule, profile_designs, profile_gaits, ramp_s
 from ..stability import poincare_eigenvalues, vc_eigenvalue
 
 __all__ = ["SpeedChange", "SpeedJumps", "profile_run", "speed_change", "speed_jumps",
-           "speed_ramp", "schedule_eigenvalues"]
+           "ramp_profile", "speed_ramp", "schedule_eigenvalues"]
 
 
 # ---------------------------------------------------------------------- one profile
@@ -59,6 +59,22 @@ def profile_run(designs: tuple, options: SimulationOptions, tol: float = CONVERG
     ProfileResult
     """
     return simulate_profile(list(designs), options=options, tol=tol)
+
+
+def ramp_profile(v1: float, v2: float, dv: float, hold: int = 10, each: int = 1
+                 ) -> np.ndarray:
+    """The speed of every step of a ramp v1 -> v2 -> v1 by dv per step (each speed
+    ``each`` steps), then ``hold`` steps at v1 (:func:`speed_ramp`).
+
+    Returns
+    -------
+    numpy.ndarray
+        m/s, one per step.
+    """
+    if isinstance(each, bool) or not isinstance(each, (int, np.integer)) or each < 1:
+        raise ValueError(f"each must be a positive integer, got {each!r}")
+    speeds = np.repeat(ramp_speeds(v1, v2, dv), each)
+    return np.r_[speeds, np.full(int(hold), speeds[-1])]
 
 
 def speed_ramp(family, controller: str, schedule: M1Schedule | None, options: SimulationOptions,
@@ -90,10 +106,7 @@ def speed_ramp(family, controller: str, schedule: M1Schedule | None, options: Si
     -------
     ProfileResult
     """
-    if isinstance(each, bool) or not isinstance(each, (int, np.integer)) or each < 1:
-        raise ValueError(f"each must be a positive integer, got {each!r}")
-    speeds = np.repeat(ramp_speeds(v1, v2, dv), each)
-    speeds = np.r_[speeds, np.full(int(hold), speeds[-1])]
+    speeds = ramp_profile(v1, v2, dv, hold, each)
     gaits, _ = profile_gaits(family, speeds)
     designs = profile_designs(gaits, controller, schedule, gains, speeds=speeds)
     return profile_run(tuple(designs), options)

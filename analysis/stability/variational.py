@@ -78,7 +78,22 @@ class VariationalJacobian:
         JD = ca.Function("JD", [q, dq], [ca.jacobian(ca.vertcat(qp, dqp), ca.vertcat(q, dq))])
         self.J_impact = np.array(JD(qT, dqT))                 # 2 nq x 2 nq
         self.dqT, self.ddqT = dqT, ddqT
-        self._build()
+        self._fns = None
+
+    @property
+    def A_fn(self) -> ca.Function:
+        """A^z as one SX Function of M1 (built at first use: the NLPs differentiate it;
+        numbers alone come from the compiled kernels, :meth:`jacobians`)."""
+        if self._fns is None:
+            self._build()
+        return self._fns[0]
+
+    @property
+    def trace_det(self) -> ca.Function:
+        """(trace, det) of A^z as one SX Function of M1 (built at first use)."""
+        if self._fns is None:
+            self._build()
+        return self._fns[1]
 
     def _table(self, times, with_vc=False):
         """The linearisation's factors at every RK4 stage time (stage-major: t, mid, end
@@ -127,10 +142,10 @@ class VariationalJacobian:
         S0 = ca.horzcat(ca.SX.eye(2), ca.SX.zeros(2, 2 * self.model.nu))
         S = self._segment(self.post, self.h_post, M1, S0, forcing=True)
         A = ca.mtimes(S, W)
-        self.A_fn = ca.Function("A_z", [M1], [A], ["M1"], ["A"])
         tr = A[0, 0] + A[1, 1]
         det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
-        self.trace_det = ca.Function("trace_det", [M1], [tr, det], ["M1"], ["trace", "det"])
+        self._fns = (ca.Function("A_z", [M1], [A], ["M1"], ["A"]),
+                     ca.Function("trace_det", [M1], [tr, det], ["M1"], ["trace", "det"]))
 
     @property
     def cache_key(self):
@@ -138,7 +153,8 @@ class VariationalJacobian:
         return (self.gait.cache_key, self.n_pre, self.n_post, self.t_c)
 
     def jacobian(self, M1) -> np.ndarray:
-        """A^z for one non-singular M1.
+        """A^z for one non-singular M1 (as :meth:`jacobians`: the compiled kernels where
+        they build, else :attr:`A_fn`).
 
         Parameters
         ----------
@@ -150,7 +166,7 @@ class VariationalJacobian:
         numpy.ndarray
             (2, 2).
         """
-        return np.array(self.A_fn(np.asarray(M1, dtype=float)))
+        return self.jacobians(np.asarray(M1, dtype=float).reshape(1, -1), threads=1)[0]
 
     @staticmethod
     def _node_table(tab, forcing: bool) -> np.ndarray:

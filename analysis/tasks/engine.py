@@ -47,6 +47,10 @@ __all__ = ["task", "TaskInfo", "Engine", "Ref", "TaskError", "resolve_scheduler"
 #: the environment variable that sets the default scheduler ('synchronous', an address)
 SCHEDULER_ENV = "BIPED_SCHEDULER"
 
+#: tasks sent to the cluster beyond its threads, so that a worker finishing a task
+#: starts the next one at once instead of waiting for the round trip through this process
+AHEAD = int(os.environ.get("BIPED_AHEAD", "1"))
+
 
 # ---------------------------------------------------------------------- engine
 def resolve_scheduler(scheduler=None, workers: int | None = None):
@@ -204,6 +208,10 @@ class Engine:
                     self._cluster.close()
         finally:
             quiet.setLevel(level)
+        with self._lock:                        # sent, and lost with the cluster
+            lost = [r for r in self._refs.values() if r._future is not None and not r.done()]
+        for r in lost:
+            self._done(r, "failed", error=_not_run(r))
         if self._bar is not None:
             self._bar.close()
 
@@ -607,7 +615,7 @@ class Engine:
             return
         while True:
             with self._lock:
-                if not self._queue or self._running >= self._threads(client):
+                if not self._queue or self._running >= self._threads(client) + AHEAD:
                     return
                 job = heapq.heappop(self._queue)[2]
                 self._running += 1

@@ -215,6 +215,8 @@ class Ref:
 
     def _finish(self, state, value=None, error=None, seconds=0.0):
         with self._lock:
+            if self._event.is_set():            # the first outcome stands
+                return
             self.state, self._value, self._error, self.seconds = state, value, error, seconds
             self._event.set()
             callbacks, self._callbacks = self._callbacks, []
