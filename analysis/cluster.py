@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import logging
 import os
 import sys
 import time
 
 __all__ = ["dask_client", "cluster_client", "progress_bar", "submit_chunks",
-           "check_not_bootstrapping", "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
+           "check_not_bootstrapping", "connect", "cores", "LOCAL_CLUSTER_CONFIG",
+           "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
 
 #: how long to wait for a Dask scheduler to answer, and for a first worker to join
 DASK_CONNECT_TIMEOUT = "10s"
@@ -85,13 +87,67 @@ def check_not_bootstrapping():
             "`if __name__ == \"__main__\":` (or pass scheduler=\"synchronous\")")
 
 
-def _local_cluster(workers: int | None):
+#: a local cluster without its statistical profiler and disk and GIL monitors (they
+#: sample every few milliseconds, for a dashboard nobody reads during a run)
+LOCAL_CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False,
+                        "distributed.admin.system-monitor.disk": False,
+                        "distributed.admin.system-monitor.gil.enabled": False}
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
+def _local_cluster(workers: int | None, preload=(), quiet: bool = False):
+    """A ``LocalCluster`` of ``workers`` single-threaded processes (default: the cores),
+    which import ``preload`` as they start; ``quiet``: its logs only from errors."""
+    import dask
     from dask.distributed import LocalCluster
     check_not_bootstrapping()
-    n = workers or max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                       else (os.cpu_count() or 1))
-    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                        dashboard_address=":0", env={"BIPED_THREADS": "1"})
+    kw = dict(dashboard_address=None, silence_logs=logging.ERROR) if quiet else \
+        dict(dashboard_address=":0")
+    with dask.config.set(LOCAL_CLUSTER_CONFIG):   # the workers get it from their nanny
+        return LocalCluster(n_workers=workers or cores(), threads_per_worker=1,
+                            processes=True, env={"BIPED_THREADS": "1"},
+                            preload=list(preload), **kw)
+
+
+def connect(scheduler, workers, preload=()):
+    """(client, cluster or None) for a resolved scheduler: 'local' (a quiet
+    ``LocalCluster`` whose processes import ``preload`` as they start), an address (its
+    first worker waited for) or a client.
+
+    Raises
+    ------
+    ValueError
+        Naming 'scheduler': dask.distributed missing, no scheduler at the address, or
+        no worker joined it.
+    """
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise ValueError("scheduler: dask.distributed is not installed "
+                         "(pip install 'dask[distributed]')") from None
+    if scheduler == "local":
+        cluster = _local_cluster(workers, preload, quiet=True)
+        return Client(cluster), cluster
+    if not isinstance(scheduler, str):
+        return scheduler, None
+    try:
+        client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as e:
+        raise ValueError(f"scheduler: cannot connect to the Dask scheduler at {scheduler} "
+                         f"({type(e).__name__}: {e})") from None
+    try:
+        client.wait_for_workers(1, timeout=DASK_WORKER_TIMEOUT)
+    except (TimeoutError, OSError) as e:
+        client.close()
+        raise ValueError(f"scheduler: no Dask worker joined {scheduler} within "
+                         f"{DASK_WORKER_TIMEOUT} s ({e})") from None
+    return client, None
 
 
 @contextlib.contextmanager

@@ -199,15 +199,28 @@ def digest(obj) -> str:
 _SOURCES: dict = {}
 
 
+#: the fields of a node that hold statements (where definitions, hence docstrings, are)
+_STATEMENT_FIELDS = ("body", "orelse", "finalbody", "handlers", "cases")
+
+
 def _strip_docstrings(tree):
-    """The syntax tree without its docstrings (module, class and function)."""
-    for node in ast.walk(tree):
+    """The syntax tree without its docstrings (module, class and function).
+
+    Only statements are visited (a definition is a statement; expressions hold none but
+    lambdas, which have no docstring)."""
+    stack = [tree]
+    while stack:
+        node = stack.pop()
         if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
             body = node.body
             if body and isinstance(body[0], ast.Expr) and isinstance(
                     getattr(body[0], "value", None), ast.Constant) \
                     and isinstance(body[0].value.value, str):
                 node.body = body[1:] or [ast.Pass()]
+        for name in _STATEMENT_FIELDS:
+            children = getattr(node, name, None)
+            if isinstance(children, list):
+                stack.extend(c for c in children if isinstance(c, ast.AST))
     return tree
 
 

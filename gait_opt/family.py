@@ -23,7 +23,6 @@ import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from biped_casadi.results import Result, internal
 
@@ -481,6 +480,7 @@ def _interpolant(family: GaitFamily, v: float):
     x = vs[on]
     thetas = np.array([_theta(family.gaits[i]) for i in on])
     if len(on) > 2:
+        from scipy.interpolate import CubicSpline     # (its import costs 0.2 s)
         return CubicSpline(x, thetas, axis=0)(v), near
     return np.array([np.interp(v, x, thetas[:, j]) for j in range(thetas.shape[1])]), near
 

@@ -35,7 +35,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 from biped_casadi.caching import TaskInfo, task
 
-from ..cluster import DASK_CONNECT_TIMEOUT, DASK_WORKER_TIMEOUT, check_not_bootstrapping
+from ..cluster import check_not_bootstrapping, connect as _connect
 from .keys import task_key
 from .refs import (_LOCAL, Ref, TaskError, TaskRecord, _execute, _info, _pack, _refs_in,
                    _RESULT, in_task)
@@ -100,12 +100,6 @@ def resolve_scheduler(scheduler=None, workers: int | None = None):
         return scheduler
     raise ValueError(f"scheduler must be None, 'synchronous', 'local', an address or a "
                      f"dask.distributed.Client, got {type(scheduler).__name__}")
-
-
-def _cores() -> int:
-    if hasattr(os, "sched_getaffinity"):
-        return max(1, len(os.sched_getaffinity(0)))
-    return max(1, os.cpu_count() or 1)
 
 
 class Engine:
@@ -667,34 +661,3 @@ def _one(e: BaseException) -> str:
 
 def _not_run(ref: Ref) -> TaskError:
     return TaskError(ref.name, "not run: the engine was closed first", key=ref.key)
-
-
-def _connect(scheduler, workers, preload=()):
-    """(client, cluster or None) for a resolved scheduler (``preload``: the modules a
-    local cluster's processes import as they start)."""
-    try:
-        from dask.distributed import Client, LocalCluster
-    except ImportError:
-        raise ValueError("scheduler: dask.distributed is not installed "
-                         "(pip install 'dask[distributed]')") from None
-    if scheduler == "local":
-        check_not_bootstrapping()
-        cluster = LocalCluster(n_workers=workers or _cores(), threads_per_worker=1,
-                               processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR, env={"BIPED_THREADS": "1"},
-                               preload=list(preload))
-        return Client(cluster), cluster
-    if not isinstance(scheduler, str):
-        return scheduler, None
-    try:
-        client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
-    except (OSError, TimeoutError, ValueError) as e:
-        raise ValueError(f"scheduler: cannot connect to the Dask scheduler at {scheduler} "
-                         f"({type(e).__name__}: {e})") from None
-    try:
-        client.wait_for_workers(1, timeout=DASK_WORKER_TIMEOUT)
-    except (TimeoutError, OSError) as e:
-        client.close()
-        raise ValueError(f"scheduler: no Dask worker joined {scheduler} within "
-                         f"{DASK_WORKER_TIMEOUT} s ({e})") from None
-    return client, None
