@@ -127,11 +127,11 @@ def test_the_cluster_starts_with_the_first_flow_to_compute_and_never_for_kept_re
 
 
 def test_the_cluster_takes_the_highest_priority_first_and_close_fails_the_queue(tmp_path):
-    """Two worker threads, both busy, and AHEAD more tasks sent to the cluster: the other
+    """Two worker threads, both busy, and AHEAD more tasks sent to each worker: the other
     tasks wait in the engine's queue, and a later one of higher priority starts before
     the earlier ones of lower priority still queued; closing the engine fails what never
     started instead of leaving it pending."""
-    ahead = engine_module.AHEAD
+    ahead = 2 * engine_module.AHEAD
     with Engine("local", workers=2, cache=tmp_path) as eng:
         assert not eng.synchronous
         [r.result() for r in eng.map(started_at, ["warm 1", "warm 2"])]
@@ -229,3 +229,42 @@ def test_a_docstring_or_report_edit_keeps_every_result_a_code_edit_does_not(tmp_
     assert num == base[0] and fig == base[1]          # the report is neither
     changed = _code_version_of(number, tmp_path, "d")
     assert changed[0] != base[0] and changed[1] != base[1]
+
+
+def test_placement_prefers_a_kind_the_worker_has_run_and_never_holds_work_back():
+    """A free worker takes, among the first queued tasks, one of a kind it has run, then
+    one no worker has run, then the first; a worker gets its threads' tasks and AHEAD
+    more, the least loaded first."""
+    import heapq
+    from analysis.tasks.placement import Placement
+
+    class Job(tuple):
+        pass
+
+    def queue(*names):
+        q = []
+        for i, n in enumerate(names):
+            ref = type("R", (), {"name": n})()
+            heapq.heappush(q, (0, i, Job((ref,))))
+        return q
+
+    p = Placement(ahead=1, window=4)
+    p.update({"a": 1, "b": 1})
+    assert p.free_worker() == "a"
+    p.sent("a", "screen")
+    assert p.free_worker() == "b"               # the least loaded
+    p.sent("b", "basin")
+    q = queue("screen", "basin", "figure")
+    assert p.take(q, "b")[0].name == "basin"     # its own kind before the first
+    assert p.take(q, "b")[0].name == "figure"    # then a kind nobody ran
+    assert p.take(q, "b")[0].name == "screen"    # then the first: never idle
+    assert q == []
+    p.sent("a", "screen")
+    assert p.free_worker() == "b"
+    p.sent("b", "x")
+    assert p.free_worker() is None               # one thread and one ahead each
+    p.finished("a")
+    assert p.free_worker() == "a"
+    p.update({"a": 1})                            # a worker left: its tasks are not counted
+    p.finished("b")
+    assert p.free_worker() == "a"

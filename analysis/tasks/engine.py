@@ -37,6 +37,7 @@ from biped_casadi.caching import TaskInfo, task
 
 from ..cluster import check_not_bootstrapping, connect as _connect
 from .keys import task_key
+from .placement import Placement
 from .refs import (_LOCAL, Ref, TaskError, TaskRecord, _execute, _info, _pack, _refs_in,
                    _RESULT, in_task)
 from .store import MISSING, ResultStore
@@ -49,7 +50,7 @@ SCHEDULER_ENV = "BIPED_SCHEDULER"
 
 #: tasks sent to the cluster beyond its threads, so that a worker finishing a task
 #: starts the next one at once instead of waiting for the round trip through this process
-AHEAD = int(os.environ.get("BIPED_AHEAD", "1"))
+AHEAD = 1
 
 
 # ---------------------------------------------------------------------- engine
@@ -157,12 +158,11 @@ class Engine:
         self._progress = bool(progress)
         self._known = 0
         # tasks whose inputs are known, waiting for a free worker thread, highest
-        # priority first (then in submission order): the cluster is given no more tasks
-        # than it has threads, so a task never waits behind one sent ahead
+        # priority first (then in submission order); each worker is given its threads'
+        # tasks and AHEAD more, chosen by Placement (kinds it has run first)
         self._queue: list = []
         self._order = itertools.count()
-        self._running = 0
-        self._slots = None
+        self._place = Placement(AHEAD)
 
     @property
     def synchronous(self) -> bool:
@@ -583,13 +583,13 @@ class Engine:
                                          (ref, fn, args, kwargs, priority)))
         self._pump()
 
-    def _threads(self, client) -> int:
-        if self._slots is None or self._cluster is None:      # an outside cluster can grow
+    def _workers(self, client):
+        if not self._place.threads or self._cluster is None:  # an outside cluster can grow
             try:
-                self._slots = max(1, sum(client.nthreads().values()))
+                self._place.update(client.nthreads() or {None: 1})
             except Exception:                                   # noqa: BLE001
-                self._slots = self._slots or 1
-        return self._slots
+                if not self._place.threads:
+                    self._place.update({None: 1})
 
     def _pump(self):
         """Send queued tasks to the cluster while it has free threads (or, when the
@@ -609,47 +609,52 @@ class Engine:
             return
         while True:
             with self._lock:
-                if not self._queue or self._running >= self._threads(client) + AHEAD:
+                if not self._queue:
                     return
-                job = heapq.heappop(self._queue)[2]
-                self._running += 1
-            self._run_on_cluster(*job)
+                self._workers(client)
+                worker = self._place.free_worker()
+                if worker is None:
+                    return
+                job = self._place.take(self._queue, worker)
+                self._place.sent(worker, job[0].name)
+            self._run_on_cluster(*job, worker=worker)
 
-    def _release(self):
+    def _release(self, worker):
         with self._lock:
-            self._running -= 1
+            self._place.finished(worker)
         if not self.closed:
             self._pump()
 
-    def _run_on_cluster(self, ref, fn, args, kwargs, priority):
+    def _run_on_cluster(self, ref, fn, args, kwargs, priority, worker=None):
         client = self.client()
         try:
             a = _pack(args, lambda r: self._leaf(client, r))
             k = _pack(kwargs, lambda r: self._leaf(client, r))
         except TaskError as e:
             with self._lock:                  # the slot goes back to the pump's loop
-                self._running -= 1
+                self._place.finished(worker)
             self._done(ref, "failed", error=e)
             return
         short = ref.name.rsplit(".", 1)[-1]
+        where = {} if worker is None else dict(workers=[worker], allow_other_workers=True)
         fut = client.submit(_execute, fn, ref.key, a, k, key=f"{short}-{ref.key}", pure=False,
-                            priority=priority)
+                            priority=priority, **where)
         ref._future = fut
-        fut.add_done_callback(functools.partial(self._collect, ref))
+        fut.add_done_callback(functools.partial(self._collect, ref, worker))
 
-    def _collect(self, ref: Ref, fut):
+    def _collect(self, ref: Ref, worker, fut):
         try:
             value, seconds = fut.result()
         except TaskError as e:
-            self._release()
+            self._release(worker)
             self._done(ref, "failed", error=e)
             return
         except BaseException as e:             # noqa: BLE001 - cancelled, lost worker
-            self._release()
+            self._release(worker)
             self._done(ref, "failed", error=TaskError(ref.name, f"{type(e).__name__}: {e}",
                                                       key=ref.key))
             return
-        self._release()
+        self._release(worker)
         self._done(ref, "computed", value=value, seconds=seconds, keep=True)
 
 
