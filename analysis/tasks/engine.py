@@ -109,8 +109,9 @@ class Engine:
     Use it as a context manager (``with Engine(...) as eng:``); the cluster it started,
     if any, is closed at the end.  The cluster starts only when something must be
     computed: a run whose results are all kept starts none.  It starts in the background
-    as soon as a flow is spawned whose result is not kept, so that its processes start
-    (and import ``preload``) while the flows compute their tasks' keys.
+    as soon as a flow is spawned whose result is not kept (at once when the cache holds
+    nothing), so that its processes start (and import ``preload``) while the flows
+    compute their tasks' keys.
 
     Parameters
     ----------
@@ -163,6 +164,8 @@ class Engine:
         self._queue: list = []
         self._order = itertools.count()
         self._place = Placement(AHEAD)
+        if not self.use_cache or self.store.empty():     # every task will run
+            self._start_early()
 
     @property
     def synchronous(self) -> bool:

@@ -45,6 +45,20 @@ class ResultStore:
         """
         return self.root / key[:2] / f"{key}.pkl"
 
+    def empty(self) -> bool:
+        """Whether nothing is kept (or nothing can be): every task will be computed.
+
+        Returns
+        -------
+        bool
+        """
+        if not self.enabled:
+            return True
+        try:
+            return not any(self.root.iterdir())
+        except OSError:
+            return True
+
     def read(self, key: str):
         """The kept record of a key.
 
