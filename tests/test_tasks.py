@@ -112,9 +112,14 @@ def _imported(name):
 @pytest.mark.slow
 def test_the_cluster_starts_with_the_first_flow_to_compute_and_never_for_kept_results(
         tmp_path):
-    """A flow whose result is not kept starts the cluster in the background before it
-    submits anything, its processes importing the preloaded modules; a re-run whose
-    flows are all kept starts none."""
+    """With nothing kept the cluster starts as the engine is made; otherwise a flow whose
+    result is not kept starts it in the background before it submits anything, its
+    processes importing the preloaded modules; a re-run whose flows are all kept starts
+    none."""
+    with Engine("local", workers=2, cache=tmp_path / "empty") as eng:
+        assert eng._starting is not None
+    with Engine("synchronous", cache=tmp_path) as eng:
+        assert eng.submit(square, 2.0).result() == 4.0        # the cache holds something
     with Engine("local", workers=2, cache=tmp_path, preload=("task_examples",)) as eng:
         assert eng._starting is None and eng._client is None
         f = eng.spawn(chain, 3)
