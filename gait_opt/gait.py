@@ -120,8 +120,10 @@ class Gait(Reference):
 
     @property
     def t_max(self) -> float:
-        """The latest time of the reference, s (about 2 T, or where the unactuated row's
-        continuation stops being finite)."""
+        """The latest time of the reference, s.
+
+        About 2 T, or where the unactuated row's continuation stops being finite.
+        """
         return float(self._nodes()[0][-1] * self.T)
 
     def __reduce__(self):

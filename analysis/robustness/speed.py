@@ -63,13 +63,29 @@ def profile_run(designs: tuple, options: SimulationOptions, tol: float = CONVERG
 
 def ramp_profile(v1: float, v2: float, dv: float, hold: int = 10, each: int = 1
                  ) -> np.ndarray:
-    """The speed of every step of a ramp v1 -> v2 -> v1 by dv per step (each speed
-    ``each`` steps), then ``hold`` steps at v1 (:func:`speed_ramp`).
+    """The speed of every step of a ramp v1 -> v2 -> v1, then ``hold`` steps at v1.
+
+    By ``dv`` per step, each speed ``each`` steps (:func:`speed_ramp`).
+
+    Parameters
+    ----------
+    v1, v2, dv : float
+        The ramp, m/s.
+    hold : int
+        Steps at v1 after it.
+    each : int
+        Steps at every speed of the ramp.
 
     Returns
     -------
     numpy.ndarray
         m/s, one per step.
+
+    Raises
+    ------
+    ValueError
+        Naming ``each`` when it is not a positive integer (and the arguments
+        :func:`analysis.design.schedule.ramp_speeds` checks).
     """
     if isinstance(each, bool) or not isinstance(each, (int, np.integer)) or each < 1:
         raise ValueError(f"each must be a positive integer, got {each!r}")

@@ -82,8 +82,11 @@ class VariationalJacobian:
 
     @property
     def A_fn(self) -> ca.Function:
-        """A^z as one SX Function of M1 (built at first use: the NLPs differentiate it;
-        numbers alone come from the compiled kernels, :meth:`jacobians`)."""
+        """A^z as one SX Function of M1, built at first use.
+
+        The NLPs differentiate it; numbers alone come from the compiled kernels
+        (:meth:`jacobians`).
+        """
         if self._fns is None:
             self._build()
         return self._fns[0]
@@ -153,8 +156,10 @@ class VariationalJacobian:
         return (self.gait.cache_key, self.n_pre, self.n_post, self.t_c)
 
     def jacobian(self, M1) -> np.ndarray:
-        """A^z for one non-singular M1 (as :meth:`jacobians`: the compiled kernels where
-        they build, else :attr:`A_fn`).
+        """A^z for one non-singular M1.
+
+        As :meth:`jacobians`: on the compiled kernels where they build, else
+        :attr:`A_fn`.
 
         Parameters
         ----------
