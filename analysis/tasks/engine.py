@@ -620,7 +620,12 @@ class Engine:
                     return
                 job = self._place.take(self._queue, worker)
                 self._place.sent(worker, job[0].name)
-            self._run_on_cluster(*job, worker=worker)
+            try:
+                self._run_on_cluster(*job, worker=worker)
+            except Exception as e:            # noqa: BLE001 - the task fails, the run goes on
+                self._release(worker)
+                self._done(job[0], "failed", error=TaskError(
+                    job[0].name, f"not sent to the cluster ({_one(e)})", key=job[0].key))
 
     def _release(self, worker):
         with self._lock:
