@@ -12,15 +12,15 @@ from biped_casadi import Design, SimulationOptions
 from gait_opt import GaitOptions, gait_family
 
 from ..design import ROBUST_GAIT
-from ..design.schedule import M1Schedule, profile_designs, profile_gaits
+from ..design.schedule import M1Schedule, profile_gaits
 from ..robustness import RobustnessSettings, kept_directions, robustness
-from ..robustness.speed import profile_run, ramp_profile
+from ..robustness.speed import ramp_profile, walk_gaits
 from ..tasks import task
 from .options import Resolution
 from .paper import StageResult
 
-__all__ = ["FamilyStage", "family_of", "ramp_gaits", "ramp_walk", "stage_family", "family_speeds",
-           "RAMP"]
+__all__ = ["FamilyStage", "family_of", "ramp_gaits", "ramp_walk", "stage_family",
+           "family_speeds", "RAMP"]
 
 #: the reproduction's speed change: up from the family's first speed to its last and back
 #: by 0.05 m/s per step (gaits between the members polished from the interpolant), then
@@ -113,8 +113,7 @@ def ramp_walk(ramp: tuple, controller: str, M1, rejoin: float, options: Simulati
     """
     speeds, gaits = ramp
     schedule = M1Schedule.constant(M1, rejoin) if controller == "tv" else None
-    designs = profile_designs(list(gaits), controller, schedule, speeds=np.asarray(speeds))
-    r = profile_run(tuple(designs), options)
+    r = walk_gaits(gaits, speeds, controller, schedule, options)
     return dataclasses.replace(r, runs=[])
 
 

@@ -22,7 +22,8 @@ from .options import Resolution
 
 __all__ = ["StageResult", "GaitStage", "SweepStage", "GridStage", "ConjectureStage",
            "DomainStage", "M1Stage", "eigenvalues_of", "vc_eigen", "stage_gait",
-           "stage_singular", "stage_fig2", "stage_grid", "stage_fig3", "stage_fig4", "stage_m1", "stage_vc"]
+           "stage_singular", "stage_fig2", "stage_grid", "stage_fig3", "stage_fig4",
+           "stage_m1", "stage_vc"]
 
 
 @dataclass

@@ -36,7 +36,7 @@ from ..design.schedule import M1Schedule, profile_designs, profile_gaits, ramp_s
 from ..stability import poincare_eigenvalues, vc_eigenvalue
 
 __all__ = ["SpeedChange", "SpeedJumps", "profile_run", "speed_change", "speed_jumps",
-           "ramp_profile", "speed_ramp", "schedule_eigenvalues"]
+           "ramp_profile", "speed_ramp", "walk_gaits", "schedule_eigenvalues"]
 
 
 # ---------------------------------------------------------------------- one profile
@@ -124,7 +124,34 @@ def speed_ramp(family, controller: str, schedule: M1Schedule | None, options: Si
     """
     speeds = ramp_profile(v1, v2, dv, hold, each)
     gaits, _ = profile_gaits(family, speeds)
-    designs = profile_designs(gaits, controller, schedule, gains, speeds=speeds)
+    return walk_gaits(gaits, speeds, controller, schedule, options, gains)
+
+
+def walk_gaits(gaits, speeds, controller: str, schedule: M1Schedule | None,
+               options: SimulationOptions, gains=None) -> ProfileResult:
+    """A profile of given gaits walked in full order, one design per step.
+
+    Parameters
+    ----------
+    gaits : sequence of Gait
+        One per step (:func:`analysis.design.schedule.profile_gaits`).
+    speeds : array_like
+        Their speeds, m/s (what ``schedule`` is read at).
+    controller : str
+        'tv' (with ``schedule``) or 'vc'.
+    schedule : M1Schedule or None
+        The time-varying design over speed.
+    options : SimulationOptions
+        Validity thresholds.
+    gains : Gains, optional
+        Output gains.
+
+    Returns
+    -------
+    ProfileResult
+    """
+    designs = profile_designs(list(gaits), controller, schedule, gains,
+                              speeds=np.asarray(speeds, dtype=float))
     return profile_run(tuple(designs), options)
 
 
