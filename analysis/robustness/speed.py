@@ -137,14 +137,8 @@ def walk_gaits(gaits, speeds, controller: str, schedule: M1Schedule | None,
         One per step (:func:`analysis.design.schedule.profile_gaits`).
     speeds : array_like
         Their speeds, m/s (what ``schedule`` is read at).
-    controller : str
-        'tv' (with ``schedule``) or 'vc'.
-    schedule : M1Schedule or None
-        The time-varying design over speed.
-    options : SimulationOptions
-        Validity thresholds.
-    gains : Gains, optional
-        Output gains.
+    controller, schedule, options, gains
+        As :func:`speed_ramp`.
 
     Returns
     -------
