@@ -21,6 +21,7 @@ import biped_casadi
 
 from . import eig, export, gait, m1, reproduce, robot, robust, simulate, sweep, terrain
 from .common import UserError, add_robot, load_model, print_json
+from .failures import failure_line
 
 __all__ = ["main", "build_parser", "UserError"]
 
@@ -105,7 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Run ``biped`` with ``argv`` (default: the process's arguments); returns the exit
-    code: 0 done, 1 a stage or run failed, 2 a user error, 130 interrupted."""
+    code: 0 done, 1 a stage or run failed, 2 a user error or a failed computation (one
+    line, :mod:`analysis.cli.failures`), 130 interrupted."""
     ap = build_parser()
     try:
         args = ap.parse_args(argv)
@@ -130,6 +132,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"biped {args.command}: interrupted", file=sys.stderr)
         return 130
+    except Exception as e:           # a failed task or solver (analysis.cli.failures)
+        line = failure_line(e)
+        if line is None:
+            raise
+        print(f"biped {args.command}: error: {line}", file=sys.stderr)
+        return 2
     return int(rc or 0)
 
 

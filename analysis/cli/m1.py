@@ -1,6 +1,8 @@
 """``biped m1``: choose the output matrix M1 minimising max|lambda| (paper §V-B)."""
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from analysis.design import (
@@ -10,7 +12,8 @@ from analysis.design import (
     optimize_m1,
     robust_design,
 )
-from analysis.design.codesign import QUICK, CodesignError, CodesignSettings, codesign
+from analysis.design.codesign import (FIT, QUICK, CodesignError, CodesignSettings, NoDesign,
+                                      codesign)
 from analysis.design.family import family_designs
 from analysis.reporting.plots import family_designs_plot, save_figures
 from gait_opt import GaitFamily
@@ -32,8 +35,7 @@ from .common import (
 )
 
 ROBUST_ONLY = ("--samples", "--starts", "--seed", "--mu", "--scheduler", "--workers", "--out",
-               "--plot",
-               "--no-cache", "--method")
+               "--plot", "--no-cache", "--method", "--fixed-gait", "--free-gait")
 
 
 def _robust_defaults(args):
@@ -47,6 +49,12 @@ def _robust_defaults(args):
     if args.scheduler is not None and args.workers is not None:
         raise UserError("--workers sets the local cluster's processes; it excludes "
                         "--scheduler (an existing cluster has its own workers)")
+    if (args.fixed_gait or args.free_gait) and not (nlp and args.gait):
+        raise UserError(f"{'--fixed-gait' if args.fixed_gait else '--free-gait'} says what "
+                        "the co-design NLP does with --gait FILE: give one")
+    # what the user set (the method's own defaults otherwise)
+    args.given = {k: v for k, v in (("samples", args.samples), ("kept", args.starts),
+                                    ("seed", args.seed), ("mu", args.mu)) if v is not None}
     args.samples = (2000 if nlp else 40000) if args.samples is None else args.samples
     args.starts = (5 if nlp else 3) if args.starts is None else args.starts
     args.seed = 0 if args.seed is None else args.seed
@@ -73,35 +81,93 @@ def cmd_robust_design(args, say):
     if args.gait:
         gait = load_gait(args, say)
         model = gait.model
-    st = CodesignSettings().replace(
-        free_gait=gait is None, **{k: v for k, v in (("samples", args.samples),
-                                                       ("kept", args.starts),
-                                                       ("seed", args.seed), ("mu", args.mu))
-                                   if v is not None})
-    say("robust co-design NLP: " + ("M1 on the given gait" if gait is not None else
-                                    f"gait and M1 from the gait {ROBUST_GAIT}")
-        + f", v_c rejoining at {st.rejoin} T; about {'1' if gait is not None else '2'} "
-        "minutes on 2 cores the first time, then read from the cache")
+    if gait is None:
+        st = CodesignSettings().replace(free_gait=True, **args.given)
+        say(f"robust co-design NLP: gait and M1 from the gait {ROBUST_GAIT}, v_c rejoining "
+            f"at {st.rejoin} T; about 2 minutes on 2 cores the first time, then read from "
+            "the cache")
+    else:
+        mode = "fixed" if args.fixed_gait else "free" if args.free_gait else "auto"
+        st = FIT.replace(given_gait=mode, **args.given)
+        say("robust co-design NLP on the given gait: " + dict(
+            fixed="M1 only (the gait fixed)",
+            free=f"the gait moved to the robust gait constraints {ROBUST_GAIT} near it, "
+                 "then gait and M1 co-designed",
+            auto="M1 on the gait as given, the gait moved from it when that misses the "
+                 "target")[mode] + "; about a minute on 2 cores the first time")
     try:
         r = codesign(gait if gait is not None else model, st, gait_file=args.gait,
                      progress=say, use_cache=not args.no_cache, scheduler=args.scheduler,
                      workers=args.workers)
+    except NoDesign as e:
+        return _no_design(args, e.to_dict(), str(e))
     except CodesignError as e:
         raise UserError(str(e)) from None
+    if gait is not None:
+        why = no_design_reason(r)
+        if why is not None:
+            return _no_design(args, dict(r.to_dict(), status="no_design", success=False,
+                                         message=why, design_status=r.status), why)
     if args.json:
         print_json(r)
         return 0
+    _print_design(r, st)
+    return 0
+
+
+def no_design_reason(r) -> str | None:
+    """Why a design on a given gait is not one, in one line (None when it is: it meets
+    the target, or its s* is above virtual constraints' on its gait with max|lambda| at
+    most theirs)."""
+    if r.status == "target_met":
+        return None
+    if r.max_abs <= r.vc_eigenvalue and r.s_star > r.vc_s_star:
+        return None
+    b = r.binds or {}
+    stop = (f"{b.get('binds')} (in step {b.get('step')})" if b else
+            r.check.failure or "nothing within the scales tried")
+    lam = ("" if r.max_abs <= r.vc_eigenvalue else
+           f", max|lambda| {r.max_abs:.3g} above virtual constraints' {r.vc_eigenvalue:.3g}")
+    return (f"no design beats virtual constraints on this gait: the best, M1 "
+            f"{np.round(r.design.M1, 3).tolist()} (gait {'moved' if r.gait_free else 'fixed'}"
+            f"), reaches s* {r.s_star:.3g}, stopped just above by {stop}{lam}; virtual "
+            f"constraints reach s* {r.vc_s_star:.3g}")
+
+
+def _no_design(args, body: dict, line: str) -> int:
+    """No design: with --json the reasons as one JSON object on stdout; one line on
+    stderr; exit 2."""
+    if args.json:
+        print_json(body)
+    print(f"biped m1: error: {' '.join(line.split())}", file=sys.stderr)
+    return 2
+
+
+def _print_design(r, st):
+    """The human output of a co-design."""
     print(r.message + (" (from the cache)" if r.cached else ""))
     print(f"  M1 = {list(r.design.M1)}, v_c rejoins at {r.design.rejoin} T")
     ch = r.gait_change
     print(f"  gait ({'co-designed' if r.gait_free else 'fixed'}): T {ch['T_start']:.4g} -> "
           f"{ch['T']:.4g} s, largest Bezier change {ch['max_alpha_change']:.3g} rad "
           f"({r.gait_file})")
-    print(f"  s* = {r.s_star:.4g} over {r.directions_kept} kept directions; max|lambda| "
+    if "from_given" in ch:
+        c = ch["from_given"]
+        print(f"  moved from the given gait: speed {c['speed'][0]:.4g} -> {c['speed'][1]:.4g} "
+              f"m/s, step length {c['step_length'][0]:.4g} -> {c['step_length'][1]:.4g} m, "
+              f"period {c['T'][0]:.4g} -> {c['T'][1]:.4g} s, joints by at most "
+              f"{c['max_joint_change']:.3g} rad")
+    if r.gait_move:
+        print(f"  {r.gait_move['message']}")
+    print(f"  s* = {r.s_star:.4g} over {r.directions_kept} kept directions"
+          + (f" (virtual constraints {r.vc_s_star:.4g})" if r.vc_s_star == r.vc_s_star
+             else "") + f"; max|lambda| "
           f"{r.max_abs:.3g} (virtual constraints {r.vc_eigenvalue:.3g}); paper's "
           f"perturbation below {st.verification.tol:g} from step {r.steps_to_converge}; "
           f"peak torque "
           f"{r.peak_torque:.1f} N m")
+    if r.alternative:
+        print(f"  also tried: {r.alternative.get('message', '')}")
     for k, v in r.verified.items():
         print(f"  full-order check {k.replace('_', ' ')} (s = {v['scale']:.4g}): "
               f"{v['passed']} of {len(v['outcomes'])} directions walk and converge")
@@ -113,7 +179,6 @@ def cmd_robust_design(args, say):
           f"{r.ipopt['evaluations']} evaluations; last status {r.ipopt['status']}; "
           f"computed in {r.elapsed:.0f} s")
     print("  replay: biped simulate " + " ".join(r.simulate_args))
-    return 0
 
 
 def _family(args, say):
@@ -245,16 +310,31 @@ def register(sub):
                    help="instead: the robust time-varying design. By default one NLP "
                         "(CasADi + IPOPT, exact derivatives) co-designs the gait and M1 so "
                         "that perturbation scenarios walk, maximising their scale s, with "
-                        "max|lambda| at most the virtual constraints'; with --gait FILE the "
-                        "gait is fixed and only M1 moves. Verified by the protocol of "
+                        "max|lambda| at most the virtual constraints'; with --gait FILE, on "
+                        "that gait: M1 alone first, then (when that misses the target: s* >= "
+                        "1, max|lambda| at most the virtual constraints', the paper's "
+                        "perturbation below 1e-3 by step 4) the gait moved from it to the "
+                        "robust gait constraints and co-designed (--fixed-gait, "
+                        "--free-gait: one of them only). Ends in a design or in one line "
+                        "naming what binds (exit 2). Verified by the protocol of "
                         "'biped robust' (s*, full order, hidden sign patterns). About 2 min "
                         "the first time, cached afterwards")
     p.add_argument("--method", choices=("nlp", "search"), default=None,
                    help="with --robust: 'nlp' (default) the co-design NLP; 'search' the "
                         "sampling search over M1 on a hand-set gait (the baseline, 3-8 min)")
+    given = p.add_mutually_exclusive_group()
+    given.add_argument("--fixed-gait", action="store_true",
+                       help="with --robust --gait FILE: only M1 moves; a design whose s* "
+                            "is above the virtual constraints' on the gait, or one line "
+                            "naming what binds")
+    given.add_argument("--free-gait", action="store_true",
+                       help="with --robust --gait FILE: move the gait to the robust gait "
+                            "constraints near it and co-design gait and M1 from there "
+                            "(the output says how far the gait moved)")
     p.add_argument("--samples", type=int, metavar="N",
                    help="with --robust: random M1 drawn (nlp: 2000 in [-1, 1]^4 for the "
-                        "starts; search: 40000 screened)")
+                        "starts, with --gait 20000 in the gait's units; search: 40000 "
+                        "screened)")
     p.add_argument("--starts", type=int, metavar="K",
                    help="with --robust: NLP starts from the sampled M1 (nlp: 5) or compass "
                         "searches from the K best samples (search: 3)")

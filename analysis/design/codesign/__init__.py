@@ -43,18 +43,25 @@ in full order, max|lambda| against virtual constraints, and sign patterns never 
 (:func:`analysis.design.verification.hidden_sign_patterns`).  Results are cached.
 """
 
-from .api import codesign, codesign_flow, codesign_tradeoff, replay_args, tradeoff_flow
+from .api import (NoDesignFound, codesign, codesign_flow, codesign_tradeoff, given_gait_flow,
+                  replay_args, tradeoff_flow)
 from .functions import FAMILIES, TranscriptionSettings, compiled
 from .method import Candidate, Method
 from .problem import Problem, Solve, build, solve, solve_continued
 from .reduced import NLPSolve, Reduced, solve_nlp
-from .settings import (CODESIGNS, FULL, QUICK, TODAY_DESIGN, CodesignError, CodesignResult,
-                       CodesignSettings, IpoptLimits, StartSampling, TrustRegion, Verification)
+from .gait_move import GaitMove, gait_change, move_gait
+from .settings import (CODESIGNS, FIT, FULL, QUICK, TODAY_DESIGN, CodesignError, CodesignResult,
+                       CodesignSettings, IpoptLimits, MoveSettings, NoDesign, StartSampling,
+                       TrustRegion, Verification)
+from .starts import StartScreen, fitted_starts
 from .transcription import Transcription
 
 # the documented surface (Transcription, Reduced, Problem and the method's parts stay
 # importable: the NLP's internals, for tests and studies)
-__all__ = ["codesign", "codesign_tradeoff", "codesign_flow", "tradeoff_flow", "replay_args",
+__all__ = ["codesign", "codesign_tradeoff", "codesign_flow", "given_gait_flow", "NoDesignFound",
+           "tradeoff_flow", "replay_args",
            "CodesignSettings", "IpoptLimits", "StartSampling", "TrustRegion", "Verification",
-           "CodesignResult", "CodesignError", "QUICK", "FULL", "TODAY_DESIGN", "CODESIGNS",
+           "MoveSettings", "CodesignResult", "CodesignError", "NoDesign", "QUICK", "FULL", "FIT",
+           "TODAY_DESIGN", "CODESIGNS", "GaitMove", "move_gait", "gait_change", "StartScreen",
+           "fitted_starts",
            "TranscriptionSettings", "solve_nlp", "NLPSolve", "FAMILIES", "compiled"]

@@ -2,7 +2,9 @@
 its inputs) and :func:`codesign_tradeoff` (the (max|lambda|, s*) trade-off on its gait)."""
 from __future__ import annotations
 
+import re
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -10,48 +12,29 @@ from biped_casadi.caching import cache_dir
 from gait_opt import Gait
 
 from ...robustness.s_star import kept_directions
-from ...tasks import Engine, task
+from biped_casadi.results import Result
+
+from ...tasks import Engine, TaskError, task
 from .method import Method
 from .problem import solve
-from .settings import CodesignError, CodesignResult, CodesignSettings
+from .settings import CodesignError, CodesignResult, CodesignSettings, NoDesign
 from .units import fixed_problem, hardest, measure, vc_radius
 
-__all__ = ["codesign", "codesign_flow", "codesign_tradeoff", "tradeoff_flow", "replay_args"]
+__all__ = ["codesign", "codesign_flow", "given_gait_flow", "NoDesignFound", "codesign_tradeoff",
+           "tradeoff_flow", "replay_args"]
+
+#: an error carried as text by a failed task: ``Type: text``
+_TYPED = re.compile(r"^(\w+): ")
 
 
-@task
-def codesign_flow(engine, model, settings: CodesignSettings, gait=None) -> CodesignResult:
-    """The co-design as a flow of tasks, phase by phase.
-
-    Starts -> scenario exchange -> rejoin choice -> gait steps -> verification
-    (:class:`~analysis.design.codesign.method.Method`).
-
-    Parameters
-    ----------
-    engine : Engine
-        Where its units run.
-    model : BipedModel
-        The robot.
-    settings : CodesignSettings
-        The co-design.
-    gait : Gait, optional
-        Fix the gait to this one.
-
-    Returns
-    -------
-    CodesignResult
-        Without a gait file (:func:`codesign` saves the gait).
-
-    Raises
-    ------
-    CodesignError
-        When no start gives a verified design.
-    """
-    t0 = time.perf_counter()
-    m = Method(engine, model, settings, gait)
+def _designed(m: Method, settings: CodesignSettings) -> CodesignResult:
+    """One co-design by a :class:`Method`: starts -> scenario exchange -> rejoin choice
+    -> gait steps -> verification."""
     starts = m.setup()
     best = m.screen_starts(starts)
     if best is None:
+        if m.screen is not None:
+            raise NoDesign(m.no_design_line(), m.no_design_details())
         last = m.solves[-1] if m.solves else {}
         raise CodesignError(
             f"codesign: IPOPT ({last.get('status', 'not run')}) found no verified design "
@@ -62,9 +45,151 @@ def codesign_flow(engine, model, settings: CodesignSettings, gait=None) -> Codes
         best = m.choose_rejoin(best)
     if m.free:
         best = m.gait_steps(best)
-    result = m.verify(best)
+    return m.verify(best)
+
+
+def _summary(r) -> dict:
+    """A design (or a NoDesign) in a few figures, for the record of 'auto'."""
+    if isinstance(r, NoDesign):
+        return dict(status="no_design", message=str(r))
+    return dict(status=r.status, message=r.message, s_star=float(r.s_star),
+                max_abs=float(r.max_abs), vc_s_star=float(r.vc_s_star),
+                steps_to_converge=r.steps_to_converge, M1=list(map(float, r.design.M1)))
+
+
+def _better(a: CodesignResult, b: CodesignResult) -> bool:
+    """Whether design a is better than b: the target met, then s* (max|lambda| within
+    virtual constraints' is part of the target)."""
+    def key(r):
+        return (r.status == "target_met", bool(r.max_abs <= r.vc_eigenvalue), float(r.s_star))
+    return key(a) > key(b)
+
+
+@task
+def codesign_flow(engine, model, settings: CodesignSettings, gait=None) -> CodesignResult:
+    """The co-design as a flow of tasks, phase by phase.
+
+    Starts -> scenario exchange -> rejoin choice -> gait steps -> verification
+    (:class:`~analysis.design.codesign.method.Method`).  With a gait given,
+    ``settings.given_gait`` says what happens to it: 'fixed' (only M1 moves), 'free'
+    (moved to the robust gait constraints near it, then co-designed from there), 'auto'
+    (fixed; free when the fixed gait's design misses the target, or its start screen
+    already shows it will; the better design is the result).
+
+    Parameters
+    ----------
+    engine : Engine
+        Where its units run.
+    model : BipedModel
+        The robot.
+    settings : CodesignSettings
+        The co-design.
+    gait : Gait, optional
+        The given gait.
+
+    Returns
+    -------
+    CodesignResult
+        Without a gait file (:func:`codesign` saves the gait).
+
+    Raises
+    ------
+    NoDesign
+        (a CodesignError) With starts that fit the gait, when nothing walks: one line
+        naming the start screen's best scale and what stops it.
+    CodesignError
+        When no start gives a verified design.
+    """
+    return _codesign(engine, model, settings, gait)
+
+
+@task
+def given_gait_flow(engine, model, settings: CodesignSettings, gait):
+    """:func:`codesign_flow` on a given gait, with "no design" as a value.
+
+    Parameters
+    ----------
+    engine : Engine
+        Where its units run.
+    model : BipedModel
+        The robot.
+    settings : CodesignSettings
+        The co-design (``given_gait`` says what happens to the gait).
+    gait : Gait
+        The given gait.
+
+    Returns
+    -------
+    CodesignResult or NoDesignFound
+        The design, or why there is none (kept like a design: asking again is instant).
+    """
+    try:
+        return _codesign(engine, model, settings, gait)
+    except NoDesign as e:
+        return NoDesignFound(message=str(e), details=e.details)
+
+
+@dataclass
+class NoDesignFound(Result):
+    """No design on a given gait (:func:`given_gait_flow`): :class:`NoDesign` as a value.
+
+    Parameters
+    ----------
+    message : str
+        Why, in one line.
+    details : dict
+        What the line says, as values.
+    status : str
+        'no_design'.
+    """
+
+    message: str
+    details: dict
+    status: str = "no_design"
+
+    SUCCESS = ("no_design",)
+
+
+def _codesign(engine, model, settings: CodesignSettings, gait=None) -> CodesignResult:
+    """The body of :func:`codesign_flow`."""
+    t0 = time.perf_counter()
+    mode = settings.given_gait if gait is not None else "fixed"
+    if mode == "fixed":
+        result = _designed(Method(engine, model, settings, gait), settings)
+    elif mode == "free":
+        result = _designed(Method(engine, model, settings, start_gait=gait), settings)
+    else:
+        result = _auto(engine, model, settings, gait)
     result.elapsed = time.perf_counter() - t0
     return result
+
+
+def _auto(engine, model, settings: CodesignSettings, gait) -> CodesignResult:
+    """'auto': the gait fixed first (given up after the start screen when its best s*
+    is below 1: the target is out of reach), then free from it when the target is
+    missed; the better design, with the other's summary in ``result.alternative``."""
+    try:
+        fixed = _designed(Method(engine, model, settings, gait, stop_below=1.0), settings)
+    except NoDesign as e:
+        fixed = e
+    if isinstance(fixed, CodesignResult) and fixed.status == "target_met":
+        return fixed
+    engine.say("the fixed gait misses the target: the gait moves from it")
+    try:
+        free = _designed(Method(engine, model, settings, start_gait=gait), settings)
+    except NoDesign as e:
+        if isinstance(fixed, CodesignResult):
+            return fixed
+        # the fixed gait's screen gave up early: its design after all, if it has one
+        try:
+            return _designed(Method(engine, model, settings, gait), settings)
+        except NoDesign as e_fixed:
+            raise NoDesign(f"{e_fixed}; {e}", dict(e_fixed.details, free=e.details)) from None
+    if isinstance(fixed, CodesignResult) and not _better(free, fixed):
+        fixed.alternative = _summary(free)
+        return fixed
+    free.alternative = _summary(fixed)
+    return free
 
 
 def replay_args(result: CodesignResult, gait_file) -> list:
@@ -126,6 +251,9 @@ def codesign(robot_or_gait, settings: CodesignSettings | None = None, *, gait_fi
 
     Raises
     ------
+    NoDesign
+        (a CodesignError) With a gait given and starts that fit it, when there is no
+        design: one line naming the start screen's best scale and what stops it.
     CodesignError
         When IPOPT fails on every start or no design verifies (the message names the
         solver, its status and what to try).
@@ -137,9 +265,20 @@ def codesign(robot_or_gait, settings: CodesignSettings | None = None, *, gait_fi
         model = robot_or_gait
     if gait is not None and gait.model.params != model.params:
         raise ValueError("gait: made for other robot parameters than the model")
+    # a gait given: its own flow, where "no design" is a value (the default co-design keeps
+    # the flow it shares with `biped reproduce`)
+    flow = codesign_flow if gait is None else given_gait_flow
     with Engine(scheduler, workers, cache=cache, use_cache=use_cache, log=progress) as eng:
-        ref = eng.spawn(codesign_flow, model, st, gait)
-        result = ref.result()
+        ref = eng.spawn(flow, model, st, gait)
+        try:
+            result = ref.result()
+        except TaskError as e:          # the method's own errors reach the caller as such
+            m = _TYPED.match(str(e.message))
+            if m and m.group(1) in ("CodesignError", "NoDesign"):
+                raise CodesignError(str(e.message)[m.end():]) from None
+            raise
+        if isinstance(result, NoDesignFound):
+            raise NoDesign(result.message, result.details)
         result.cached = ref.state == "reused"
     return _with_gait_file(result, gait, gait_file, cache, ref.key)
 

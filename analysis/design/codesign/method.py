@@ -8,6 +8,7 @@ the parts of the verification) run side by side.  Candidates are :class:`Candida
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -17,13 +18,18 @@ from biped_casadi import Design
 from gait_opt import GaitOptions, optimize_gait
 
 from ...robustness.basin import basin
-from ...robustness.s_star import kept_directions
+from ...robustness.s_star import kept_directions, robustness
 from ..verification import finish_check, hidden_sign_patterns, submit_check
 from .functions import TranscriptionSettings
+from .gait_move import gait_change, move_gait
 from .problem import Problem, Solve, solve, solve_continued
-from .settings import CodesignError, CodesignResult, CodesignSettings
-from .units import (fixed_problem, gait_step, hardest, measure, node_kernel, sampled_starts,
-                    screen, vc_radius)
+from .settings import CodesignError, CodesignResult, CodesignSettings, NoDesign
+from .starts import deadbeat_starts, failure_binds, fitted_starts
+from .units import (fixed_problem, gait_step, hardest, measure, node_kernel, paper_first,
+                    sampled_starts, screen, vc_radius)
+
+#: the gait options a given gait is moved to (the others stay the given gait's)
+MOVED = ("impact_mu", "clearance", "continuation", "continuation_shape")
 
 __all__ = ["Candidate", "Method"]
 
@@ -74,9 +80,9 @@ class Candidate:
     solve: Solve
 
 
-def _score(r) -> tuple:
+def _score(r, by: int = 4) -> tuple:
     conv = r.paper.get("steps_to_converge", math.inf) if r.paper else math.inf
-    return (bool(conv <= 4), float(r.s_star))
+    return (bool(conv <= by), float(r.s_star))
 
 
 @dataclass
@@ -94,18 +100,27 @@ class Method:
         The settings.
     fixed_gait : Gait, optional
         The gait, when it is not co-designed.
+    start_gait : Gait, optional
+        A given gait to move to the robust gait constraints and co-design from (gait
+        free).
+    stop_below : float, optional
+        With starts that fit the gait: end with :class:`NoDesign` when the start
+        screen's best s* is below this (the gait is not worth the solves).
     """
 
     engine: object
     model: object
     st: CodesignSettings
     fixed_gait: object = None
+    start_gait: object = None
+    stop_below: float | None = None
     rounds: list = field(default_factory=list)
     solves: list = field(default_factory=list)
 
     def __post_init__(self):
         st = self.st
         self.free = st.free_gait and self.fixed_gait is None
+        self.screen, self.moved, self.vc_ref = None, None, None
         self.rs = st.robustness_settings()
         tl = st.verification.torque_limit
         self.tst = TranscriptionSettings(
@@ -150,7 +165,8 @@ class Method:
         ok = m.max_abs <= self.run(vc_radius, gait) and r.s_star > 0
         return Candidate(gait=gait, kept=kept, M1=res.M1, rejoin=float(rejoin),
                          s_star=r.s_star, nlp_s=res.s, max_abs=m.max_abs, active=list(active),
-                         score=_score(r), ok=bool(ok), failure=r.failure, solve=res)
+                         score=_score(r, self.st.converge_by), ok=bool(ok), failure=r.failure,
+                         solve=res)
 
     def solve_round(self, gait, kept, M1, active, s0: float, label: str, rejoin: float,
                     screen_budget: bool = False):
@@ -172,31 +188,142 @@ class Method:
             return None
         return self.candidate(p.gait, kept, res, active, label, p.rejoin)
 
+    def meets_target(self, c: Candidate) -> bool:
+        """Whether a candidate meets the target by the walker's measures (s* >= 1, the
+        paper's perturbation converged by ``converge_by``, max|lambda| within virtual
+        constraints')."""
+        return bool(c.ok and c.score[0] and c.s_star >= 1.0)
+
     # ----------------------------------------------------------- phases
     def setup(self):
-        """The start gait, its kept directions and the starting M1."""
+        """The start gait, its kept directions and the starting M1 (with starts that fit
+        the gait: (M1, its screened s*) pairs).
+
+        A given gait to move (``start_gait``) is moved with each effort weight of
+        ``settings.move.efforts`` in turn (the first is nearest the given gait) until
+        the start screen on the moved gait finds a start that meets the target; the
+        moved gait whose screen is best is kept."""
         st = self.st
         # the compiled nodes of the solves, built beside the setup (not waited for here)
         self.engine.submit(node_kernel, self.model, 0)
         if self.fixed_gait is not None:
             self.gait0 = self.fixed_gait
             self.say("gait given: M1 only (the gait is fixed)")
-        else:
+            return self._starts()
+        if self.start_gait is None:
             self.say(f"start gait {st.gait}")
             opts = GaitOptions(**st.gait).for_model(self.model)
             if self.free:
                 self.engine.submit(node_kernel, self.model,
                                    self.model.nu * (opts.bezier_degree + 1) + 3)
             self.gait0 = self.run(optimize_gait, self.model, opts)
+            return self._starts()
+        g = self.start_gait
+        if self.free and st.gait_rounds:
+            self.engine.submit(node_kernel, self.model,
+                               self.model.nu * (g.options.bezier_degree + 1) + 3)
+        targets = {k: v for k, v in st.gait.items() if k in MOVED}
+        self.say(f"gait given: moved to the robust gait constraints {targets} near it, "
+                 "then co-designed from there")
+        tried, last_error = [], None
+        for effort in st.move.efforts:
+            self.moved = self.run(move_gait, g, targets,
+                                  dataclasses.replace(st.move, effort=float(effort)), self.tst)
+            self.say(f"  effort weight {effort:g}: " + self.moved.message)
+            self.gait0 = self.moved.gait
+            try:
+                starts = self._starts(raise_below=False)
+            except NoDesign as e:
+                last_error = e
+                continue
+            state = (self.gait0, self.moved, self.kept0, self.vc_ref, self.screen, starts)
+            b = self.screen.best
+            rank = (self.screen.status == "walks" and b.get("s_star", 0.0) >= 1.0
+                    and (b.get("paper_converged_from") or np.inf) <= st.converge_by,
+                    float(b.get("s_star", 0.0)))
+            tried.append((rank, state))
+            if rank[0]:
+                break
+        if not tried:
+            raise last_error
+        rank, state = max(tried, key=lambda t: t[0])
+        self.gait0, self.moved, self.kept0, self.vc_ref, self.screen, starts = state
+        if len(tried) > 1:
+            self.say(f"  kept the gait moved with effort weight "
+                     f"{self.moved.steps[-1].get('effort', 0):g} (its start screen is best)")
+        if self.screen.status == "none":
+            raise NoDesign(self.no_design_line(), self.no_design_details())
+        return starts
+
+    def _starts(self, raise_below: bool = True):
+        """The kept directions of ``gait0`` and the starting M1 on it."""
+        st = self.st
+        fit = st.starts.fit_gait
+        dead = (self.engine.submit(deadbeat_starts, self.gait0)
+                if fit and st.starts.deadbeat else None)
         self.kept0 = self.run(kept_directions, self.gait0, self.rs)
         if len(self.kept0) == 0:
-            raise CodesignError("codesign: virtual constraints walk from no perturbation "
-                                "direction on this gait at full scale; try another gait")
+            raise NoDesign("codesign: virtual constraints walk from no perturbation "
+                           "direction on this gait at full scale (every candidate fails: "
+                           + ", ".join(f"{k} {v}" for k, v in self.kept0.rejected.items())
+                           + "); the protocol's s* is undefined there: try another gait",
+                           dict(directions_rejected=dict(self.kept0.rejected)))
         bound = st.eigen_margin * self.run(vc_radius, self.gait0)
-        M, _ = self.run(sampled_starts, self.gait0, self.kept0, self.rejoin, st.starts, bound,
-                        self.rs)
-        return [np.asarray(m, float) for m in M] + [np.asarray(m, float)
-                                                    for m in st.starts.extra]
+        if not fit:
+            M, _ = self.run(sampled_starts, self.gait0, self.kept0, self.rejoin, st.starts,
+                            bound, self.rs)
+            return [np.asarray(m, float) for m in M] + [np.asarray(m, float)
+                                                        for m in st.starts.extra]
+        self.vc_ref = self.engine.submit(robustness, Design.vc(self.gait0), self.rs,
+                                         self.kept0)
+        extra = np.vstack([dead.result().reshape(-1, self.model.nu) if dead is not None
+                           else np.zeros((0, self.model.nu))]
+                          + [np.asarray(m, float).reshape(1, -1) for m in st.starts.extra])
+        self.screen = fitted_starts(self.engine, self.gait0, self.kept0, self.rejoin,
+                                    st.starts, bound, self.rs, extra,
+                                    converge_by=st.converge_by)
+        self.say(f"start screen: {self.screen.stable} of {self.screen.candidates} starts "
+                 f"stable within max|lambda| {bound:.3g}; {self.screen.message}")
+        if raise_below and (self.screen.status == "none" or (
+                self.stop_below is not None
+                and float(self.screen.best.get("s_star", 0.0)) < self.stop_below)):
+            raise NoDesign(self.no_design_line(), self.no_design_details())
+        return list(zip(self.screen.starts, self.screen.s_star))
+
+    # ------------------------------------------------------------ no design
+    def no_design_details(self) -> dict:
+        """What :meth:`no_design_line` says, as values."""
+        out = dict(given_gait="fixed" if self.fixed_gait is not None else "free")
+        if self.screen is not None:
+            out["start_screen"] = self.screen.to_dict()
+        if self.vc_ref is not None:
+            out["vc_s_star"] = float(self.vc_ref.result().s_star)
+        if self.moved is not None:
+            out["gait_move"] = self.moved.to_dict()
+        return out
+
+    def no_design_line(self, best=None) -> str:
+        """Why there is no design, in one line: the start screen's best scale and the
+        constraint that stops it, beside virtual constraints' s*."""
+        where = ("on the gait as given" if self.fixed_gait is not None else
+                 f"on the gait moved toward the robust gait constraints "
+                 f"({self.moved.status}: joints moved by at most "
+                 f"{self.moved.change.get('max_joint_change', 0.0):.3g} rad)"
+                 if self.moved is not None else "on the start gait")
+        sc = self.screen
+        if sc is None:
+            return f"no design {where}: no start gave a verified design"
+        b = sc.best
+        if sc.status == "none" and "M1" not in b:
+            text = f"no design {where}: {b.get('binds')} ({sc.candidates} starts tried)"
+        else:
+            s_best = b["s_star"] if best is None else max(best, b["s_star"])
+            text = (f"no design {where}: the start screen's best scale is s* {s_best:.3g} "
+                    f"({b.get('source')} M1 {np.round(b['M1'], 3).tolist()}), stopped by "
+                    f"{b.get('binds')}" + (f" in step {b['step']}" if "step" in b else ""))
+        if self.vc_ref is not None:
+            text += f"; virtual constraints reach s* {self.vc_ref.result().s_star:.3g}"
+        return text
 
     def screen_starts(self, starts) -> Candidate | None:
         """Every start screened by a short solve (side by side); the two best by the
@@ -204,7 +331,23 @@ class Method:
         st, g, kept = self.st, self.gait0, self.kept0
         ps = dict(self.problem_settings(self.rejoin, g), s_start=st.starts.s_start,
                   initial_active=st.initial_active)
-        refs = [self.engine.submit(screen, g, kept, M1, ps, st.screen, self.rs) for M1 in starts]
+        fit = st.starts.fit_gait
+        first = None
+        if fit:            # (M1, screened s*): each solved from its own scale
+            # the screen's best start, measured as every candidate: when it meets the
+            # target already, the solves are not needed
+            M1, s0 = np.asarray(starts[0][0], float), float(starts[0][1])
+            plain = Solve(d=np.r_[M1, self.rejoin, s0], lam_g=np.zeros(0), status="screened",
+                          success=True, M1=M1, s=s0, gait_vector=None)
+            first = self.candidate(g, kept, plain, [], "screened start", self.rejoin)
+            if self.meets_target(first):
+                return first
+            pss = [dict(ps, s_start=float(max(s0, 0.1))) for _, s0 in starts]
+            starts = [M1 for M1, _ in starts]
+        else:
+            pss = [ps] * len(starts)
+        refs = [self.engine.submit(screen, g, kept, M1, p, st.screen, self.rs)
+                for M1, p in zip(starts, pss)]
         screened = []
         for i, ref in enumerate(refs):
             u, label = ref.result(), f"start {i + 1} of {len(starts)}"
@@ -219,6 +362,13 @@ class Method:
         top = [(s, u) for _, s, u in screened[:2] if np.isfinite(s)]
         ms = [self.engine.submit(measure, g, kept, u.solve.M1, self.rejoin, self.rs)
               for _, u in top]
+        if fit:
+            best = first if first.ok else None
+            for (_, u), m in zip(top, ms):
+                c = self.candidate(g, kept, u.solve, u.active, "best start", self.rejoin, m)
+                if c.ok and (best is None or c.score > best.score):
+                    best = c
+            return best
         for (_, u), m in zip(top, ms):
             c = self.candidate(g, kept, u.solve, u.active, "best start", self.rejoin, m)
             if c.ok:
@@ -274,13 +424,18 @@ class Method:
         periodic orbit and accepted only when the verified s* improves with max
         ``|lambda|`` at most the virtual constraints' on the new gait."""
         st = self.st
+        if not st.steps_after_target and self.meets_target(best):
+            self.say("the design meets the target: the gait stays where it is")
+            return best
         gait, kept, M1 = best.gait, best.kept, best.M1
-        dirs = [kept.directions[i] for i in [0] + list(best.active)]
+        dirs = list(paper_first(kept, best.active))
         if len(dirs) == 1:
             dirs += [kept.directions[i] for i in self.run(
                 hardest, gait, kept, M1, self.rejoin, best.s_star, st.initial_active, self.rs)]
         trust = 1.0
         for rnd in range(st.gait_rounds):
+            if rnd and not st.steps_after_target and self.meets_target(best):
+                break
             res, p = self._gait_solve(gait, dirs, M1, best.s_star, trust, rnd)
             if not res.finite:
                 self.rounds.append(dict(phase="gait free", round=rnd + 1,
@@ -332,7 +487,7 @@ class Method:
         self.say(f"  IPOPT {res.status} ({res.iterations} it): NLP s {res.s:.4g}; new gait T "
                  f"{g_new.T:.4g} s, verified s* {r.s_star:.4g} over {len(kept_new)} kept "
                  f"directions, max|lambda| {lam:.3g} (VC {lvc:.3g})")
-        score, full = _score(r), len(kept_new) == st.verification.directions
+        score, full = _score(r, st.converge_by), len(kept_new) == st.verification.directions
         if score > best.score and lam <= lvc and full:
             best = Candidate(gait=g_new, kept=kept_new, M1=res.M1, rejoin=self.rejoin,
                              s_star=r.s_star, nlp_s=res.s, max_abs=lam, active=best.active,
@@ -374,21 +529,34 @@ class Method:
         refs = submit_check(eng, design, best.kept, rs10)
         hidden = (eng.submit(hidden_sign_patterns, design, best.kept, self.rs)
                   if st.verification.hidden else None)
+        vc_ref = (self.vc_ref if self.vc_ref is not None and best.gait is self.gait0 else
+                  eng.submit(robustness, Design.vc(best.gait), self.rs, best.kept)
+                  if st.starts.fit_gait else None)
         bas = eng.submit(basin, design) if st.verification.basin else None
         check = finish_check(eng, design, best.kept, rs10, refs)
+        by = st.converge_by
         met = bool(check.s_star >= 1 and check.max_abs <= check.vc_eigenvalue
-                   and check.steps_to_converge is not None and check.steps_to_converge <= 4)
+                   and check.steps_to_converge is not None and check.steps_to_converge <= by)
         msg = (f"co-design ({'gait free' if self.free else 'gait fixed'}): " + check.message
                + ("" if met else "; target (s* >= 1, max|lambda| <= virtual constraints, "
-                  "converged by step 4) not met"))
+                  f"converged by step {by}) not met"))
         g = best.gait
+        g0 = self.start_gait if self.start_gait is not None else self.gait0
+        change = dict(T_start=g0.T, T=g.T, max_alpha_change=float(
+            np.max(np.abs(g.alpha - g0.alpha))))
+        if self.start_gait is not None:
+            change.update(from_given=gait_change(g0, g))
         last = self.solves[-1] if self.solves else dict(status="not run")
         b = bas.result() if bas is not None else None
+        vc_s = float(vc_ref.result().s_star) if vc_ref is not None else float("nan")
+        fail = getattr(check.robustness, "failure", None) or {}
+        stop = (failure_binds(design, best.kept.directions[fail["direction"]], check.s_fail,
+                              rs10) if fail and st.starts.fit_gait else {})
+        if vc_ref is not None:
+            msg += f"; virtual constraints' s* {vc_s:.4g}"
         return CodesignResult(
             status="target_met" if met else "target_not_met", message=msg, design=design,
-            check=check, gait_free=self.free,
-            gait_change=dict(T_start=self.gait0.T, T=g.T, max_alpha_change=float(
-                np.max(np.abs(g.alpha - self.gait0.alpha)))),
+            check=check, gait_free=self.free, gait_change=change,
             hidden=hidden.result().to_dict() if hidden is not None else {},
             basin={} if b is None else dict(converged_fraction=float(b.converged_fraction),
                                             message=b.message),
@@ -398,5 +566,10 @@ class Method:
                        evaluations=int(sum(s["evaluations"] for s in self.solves)),
                        solves=self.solves),
             rounds=self.rounds, directions_kept=len(best.kept),
-            directions_tried=best.kept.tried, settings=st.to_dict())
+            directions_tried=best.kept.tried, settings=st.to_dict(), vc_s_star=vc_s,
+            given_gait=("fixed" if self.fixed_gait is not None else
+                        "free" if self.start_gait is not None else ""),
+            start_screen=self.screen.to_dict() if self.screen is not None else {},
+            binds=stop,
+            gait_move=self.moved.to_dict() if self.moved is not None else {})
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import asdict, dataclass, field
 
 from biped_casadi.caching import DiskCache
@@ -16,6 +17,9 @@ TODAY_DESIGN = (-8.2618, 2.5374, 0.0034, 8.5090)
 
 #: the co-designs kept between sessions
 CODESIGNS = DiskCache("codesign", version=1)
+
+#: what the co-design does with a gait it is given (:class:`CodesignSettings`)
+GIVEN_GAIT = ("fixed", "free", "auto")
 
 
 @dataclass(frozen=True)
@@ -57,6 +61,21 @@ class StartSampling:
         Starting M1s besides the sampled ones.
     s_start : float
         Perturbation scale of the first solves' starting point.
+    fit_gait : bool
+        Starts that fit the gait (:mod:`analysis.design.codesign.starts`): the box in
+        units of the gait's joint ranges per radian of q_u, the deadbeat NLP's and the
+        virtual constraints' designs besides the samples, every start screened by the
+        walker's s* (the best kept, each solved from its own s*) instead of the paper's
+        perturbation at scale 1.
+    screened : int
+        With ``fit_gait``: starts bisected at most.
+    screen_rounds : int
+        With ``fit_gait``: bisection rounds of the screen (resolution 2^(1 - rounds)
+        x 2).
+    screen_rk4 : int
+        With ``fit_gait``: RK4 steps per T of the screen's walker.
+    deadbeat : bool
+        With ``fit_gait``: the deadbeat M1 NLP's design among the starts.
     """
 
     samples: int = 2000
@@ -65,6 +84,11 @@ class StartSampling:
     seed: int = 0
     extra: tuple = ()
     s_start: float = 0.9
+    fit_gait: bool = False
+    screened: int = 150
+    screen_rounds: int = 6
+    screen_rk4: int = 200
+    deadbeat: bool = True
 
 
 @dataclass(frozen=True)
@@ -115,6 +139,51 @@ class Verification:
     tol: float = 1e-3
     hidden: bool = True
     basin: bool = False
+
+
+@dataclass(frozen=True)
+class MoveSettings:
+    """How the user's gait is moved to the robust gait constraints (module docstring).
+
+    Parameters
+    ----------
+    steps : int
+        Continuation steps from the gait's own values to the targets (1: straight to
+        them; a step that fails is halved, so the targets are reached by continuation
+        when they must be).
+    halvings : int
+        Times a failed step is halved before the move ends.
+    scale : tuple of float
+        (alpha rad, T s, r0) the units of the distance to the user's gait.
+    impulse_margin : float
+        The impulse ratio is solved this much below each step's bound (between the
+        nodes the polished gait may exceed the nodes' values).
+    clearance_margin : float
+        m: the clearance likewise, above.
+    friction_margin : float
+        The path's friction ratio likewise, below mu.
+    torque_margin : float
+        N m: the torques likewise, below the limit.
+    max_iter : int
+        IPOPT iterations per step.
+    effort : float
+        Weight of the nominal step's effort int u'u ds, relative to the user's gait's,
+        beside the distance (0: the nearest gait).
+    efforts : tuple of float
+        The effort weights the co-design tries in turn (:meth:`.method.Method.setup`):
+        the gait nearest the given one first, then one smoother and farther.
+    """
+
+    steps: int = 1
+    halvings: int = 4
+    scale: tuple = (0.05, 0.025, 0.25)
+    impulse_margin: float = 0.005
+    clearance_margin: float = 0.002
+    friction_margin: float = 1e-4
+    torque_margin: float = 0.5
+    max_iter: int = 200
+    effort: float = 300.0
+    efforts: tuple = (0.0, 300.0)
 
 
 @dataclass(frozen=True)
@@ -174,6 +243,19 @@ class CodesignSettings:
         margins).
     verification : Verification
         How candidates and the result are measured.
+    steps_after_target : bool
+        Take the gait steps even when the design meets the target already (else the
+        gait stays as near the start gait as the target allows).
+    converge_by : int
+        The target's step by which the paper's perturbation is below the tolerance for
+        good (the paper: 4).
+    given_gait : {'fixed', 'free', 'auto'}
+        With a gait given: 'fixed' (only M1 moves), 'free' (the gait is moved to the
+        robust gait constraints of ``gait``, :mod:`analysis.design.codesign.gait_move`,
+        then co-designed from there), 'auto' (fixed, then free when the fixed gait's
+        design misses the target).
+    move : MoveSettings
+        How a given gait is moved.
     """
 
     gait: dict = field(default_factory=lambda: dict(ROBUST_GAIT))
@@ -198,6 +280,15 @@ class CodesignSettings:
     gait_step: IpoptLimits = field(default_factory=lambda: IpoptLimits(40, 45))
     transcription: dict = field(default_factory=dict)
     verification: Verification = field(default_factory=Verification)
+    steps_after_target: bool = True
+    converge_by: int = 4
+    given_gait: str = "fixed"
+    move: MoveSettings = field(default_factory=MoveSettings)
+
+    def __post_init__(self):
+        if self.given_gait not in GIVEN_GAIT:
+            raise ValueError(f"given_gait must be one of {GIVEN_GAIT}, got "
+                             f"{self.given_gait!r}")
 
     def robustness_settings(self, rounds: int = 8) -> RobustnessSettings:
         """The protocol's settings (400 RK4 steps per T, ``rounds`` bisection rounds).
@@ -265,6 +356,15 @@ QUICK = CodesignSettings(free_gait=False, rejoin_choices=(), screen=IpoptLimits(
                          verification=Verification(hidden=False))
 #: the settings of a full reproduction: those of ``biped m1 --robust`` (one cache for both)
 FULL = CodesignSettings()
+#: the settings of ``biped m1 --robust --gait FILE``: starts that fit the gait (20000
+#: samples in the gait's units, the deadbeat NLP's and the virtual constraints' designs,
+#: screened by the walker's s*; the best three solved when the best alone misses the
+#: target), v_c rejoining at 0.75 T only, the gait fixed first and moved from when that
+#: misses the target (s* >= 1, max|lambda| within virtual constraints', the paper's
+#: perturbation below 1e-3 by step 5), the gait steps only while the target is missed
+FIT = CodesignSettings(starts=StartSampling(samples=20000, kept=3, fit_gait=True),
+                       rejoin_choices=(), given_gait="auto", converge_by=5,
+                       steps_after_target=False)
 
 
 @dataclass
@@ -280,7 +380,8 @@ class CodesignResult(Result):
     ----------
     status : str
         'target_met' (s* >= 1, max ``|lambda|`` <= the virtual constraints' eigenvalue,
-        the paper's perturbation converged by step 4) or 'target_not_met'.
+        the paper's perturbation converged by step ``converge_by`` of the settings, 4
+        by default) or 'target_not_met'.
     message : str
         The result in words.
     design : Design
@@ -318,6 +419,23 @@ class CodesignResult(Result):
         Wall time of the computation, s (0 when every part was kept).
     cached : bool
         Read from the cache.
+    vc_s_star : float
+        Virtual constraints' s* on the design's gait (the same protocol), NaN when not
+        measured.
+    given_gait : str
+        What was done with a given gait ('fixed', 'free'; '' when none was given).
+    start_screen : dict
+        The starts screened by the walker's s* (:class:`~.starts.StartScreen`), when
+        the starts fit the gait.
+    gait_move : dict
+        How the given gait was moved (:class:`~.gait_move.GaitMove`), with the gait
+        free from a given gait.
+    binds : dict
+        With starts that fit the gait: what stops the design just above its s* (the
+        failing run's ``status``, ``step`` and ``binds``, the constraint in words).
+    alternative : dict
+        With ``given_gait`` 'auto': the other design tried (on the gait as given, or
+        moved from it) in a few figures, or why there was none.
     """
 
     status: str
@@ -339,6 +457,12 @@ class CodesignResult(Result):
     simulate_args: list = field(default_factory=list)
     elapsed: float = 0.0
     cached: bool = False
+    vc_s_star: float = math.nan
+    given_gait: str = ""
+    start_screen: dict = field(default_factory=dict)
+    gait_move: dict = field(default_factory=dict)
+    binds: dict = field(default_factory=dict)
+    alternative: dict = field(default_factory=dict)
 
     SUCCESS = ("target_met", "target_not_met")
 
@@ -378,4 +502,31 @@ class CodesignError(ValueError):
 
     The message says which solver, its status and what to try.
     """
+
+
+class NoDesign(CodesignError):
+    """No design on the gait: the message says why in one line, naming what binds.
+
+    Parameters
+    ----------
+    message : str
+        The line.
+    details : dict
+        What the line says, as values (the start screen's best scale and what stops
+        it, virtual constraints' s*, the gait's move).
+    """
+
+    def __init__(self, message: str, details: dict | None = None):
+        super().__init__(message)
+        self.details = dict(details or {})
+
+    def to_dict(self) -> dict:
+        """The failure as one JSON object (what ``biped m1 --robust --json`` prints).
+
+        Returns
+        -------
+        dict
+            ``status`` 'no_design', ``success`` False, ``message`` and the details.
+        """
+        return dict(status="no_design", success=False, message=str(self), **self.details)
 

@@ -87,11 +87,12 @@ class _Rows:
                 cat(self.vals))
 
 
-class Transcription:
-    """Scenarios of the hybrid zero dynamics as NLP functions (module docstring).
-
-    Decision vector w = (G, M1, rejoin, s, then per scenario and step (q_u, dq_u, y_i,
-    dy_i, eta)); G = (alpha, T, r0) only when the gait is free.
+class GaitTable:
+    """A gait's reference tabulated on the half-grid of the walker's rule, with its
+    sensitivities in the gait's variables G = (alpha, T, r0) when the gait is free, and
+    the gait's own constraints (those of :mod:`gait_opt.transcription`) on its nominal
+    step: what :class:`Transcription` and the gait move
+    (:mod:`analysis.design.codesign.gait_move`) share.
 
     Parameters
     ----------
@@ -99,77 +100,66 @@ class Transcription:
         The robot.
     gait : Gait
         The gait (fixed) or the gait to start from (free); its options give the Bezier
-        degree, the continuation past T and, when free, the gait's own constraints.
-    directions : numpy.ndarray
-        (K, 2 nq) perturbation directions of the scenarios.
-    steps : int
-        Steps per scenario.
-    free_gait : bool
-        Whether alpha, T and r0 are decision variables.
+        degree, the continuation past T and the gait's own constraints.
     settings : TranscriptionSettings, optional
-        Rule and margins.
+        The rule (nodes per T, horizon) and the torque limit.
+    free_gait : bool
+        Whether G is variable (the first ``nG`` entries of the decision vector).
     """
 
     #: nodes per compiled call
     CHUNK = 8
 
-    def __init__(self, model, gait, directions, steps: int, free_gait: bool,
-                 settings: TranscriptionSettings | None = None):
+    def __init__(self, model, gait, settings: TranscriptionSettings | None = None,
+                 free_gait: bool = True):
         self.model, self.gait = model, gait
         self.st = st = settings or TranscriptionSettings()
-        self.dirs = np.atleast_2d(np.asarray(directions, float))
-        self.K, self.S = len(self.dirs), int(steps)
         self.free = bool(free_gait)
         o = gait.options
         self.degree, self.cont, self.shape = o.bezier_degree, o.continuation, o.continuation_shape
-        nu, nq = model.nu, model.nq
-        self.nu, self.nq = nu, nq
-        self.na = nu * (self.degree + 1)
+        self.nu, self.nq = model.nu, model.nq
+        self.na = self.nu * (self.degree + 1)
         self.nG = self.na + 3 if self.free else 0
-        self.nc = 2 + 3 * nu + 1 + self.nG          # columns of a scenario-step
-        self.nl = 2 + 2 * nu                          # step start variables
         self.N = st.nodes_per_T
         self.n_max = int(math.ceil(st.horizon * self.N))
-        self.threads = int(st.threads)
-        self.node = _node_functions(model, self.nG)
-        self.start_fn, self.diag0_fn, self.last_fn, self.last_value, self.rows = \
-            _step_functions(model, self.degree, self.cont, self.shape, self.free)
         if self.free:
             self.ref_step, self.ref_point, self.boundary = _reference_functions(
                 model, self.degree, self.cont, self.shape)
-        # layout of w
         self.i_G = np.arange(self.nG)
-        self.i_M1 = self.nG + np.arange(nu)
-        self.i_rejoin = self.nG + nu
-        self.i_s = self.nG + nu + 1
-        self.n_design = self.nG + nu + 2
-        #: the decision-dependent sign and scale of the eq. 24 denominator (set per solve
-        #: from the starting design, as the walker sets them per design)
-        self.den_sign, self.den_scale = 1.0, 1.0
-        self.mg = float(model.description.total_mass * model.description.gravity)
 
-    # ----------------------------------------------------------------- layout helpers
     def gait_vector(self, gait):
         """G = (vec alpha, T, r0) of a gait (column-major alpha, as CasADi reshapes)."""
         return np.r_[gait.alpha.ravel(order="F"), gait.T, gait.x0]
 
-    def unpack(self, w):
-        """(alpha (nu, M+1), T, r0, M1, rejoin, s) of w (the fixed gait's where fixed)."""
-        w = np.asarray(w, float)
-        if self.free:
-            G = w[self.i_G]
-            alpha = G[:self.na].reshape(self.nu, self.degree + 1, order="F")
-            T, r0 = float(G[self.na]), G[self.na + 1:]
-        else:
-            alpha, T, r0 = self.gait.alpha, self.gait.T, self.gait.x0
-        return alpha, T, r0, w[self.i_M1], float(w[self.i_rejoin]), float(w[self.i_s])
+    def gait_of(self, w):
+        """(alpha (nu, M+1), T, r0) of the decision vector w (the fixed gait's if fixed)."""
+        if not self.free:
+            return self.gait.alpha, self.gait.T, self.gait.x0
+        G = np.asarray(w, float)[self.i_G]
+        alpha = G[:self.na].reshape(self.nu, self.degree + 1, order="F")
+        return alpha, float(G[self.na]), G[self.na + 1:]
+
+    def gait_bounds(self):
+        """(lb, ub) of G: the Bezier coefficients within +-pi and the knee limits, T within
+        the step-time bounds, r0 free."""
+        o = self.gait.options
+        lb, ub = np.full(self.nG, -np.inf), np.full(self.nG, np.inf)
+        a_lb = np.full((self.nu, self.degree + 1), -np.pi)
+        a_ub = np.full((self.nu, self.degree + 1), np.pi)
+        for i in self.model.stance_knees:
+            a_ub[i - 1, :] = o.stance_knee_max
+        for i in self.model.swing_knees:
+            a_lb[i - 1, :] = o.swing_knee_min
+        lb[:self.na], ub[:self.na] = a_lb.ravel(order="F"), a_ub.ravel(order="F")
+        lb[self.na], ub[self.na] = o.step_time_bounds
+        return lb, ub
 
     # ----------------------------------------------------------------- reference table
     def table(self, w):
         """The reference at the half-grid s_i = i / (2N), i = 0..2 n_max + 2: R (15, n),
         dR/dG (15, nG, n), the reference state r (2, n) and dr/dG (2, nG, n), and the
         nominal diagnostics for the gait's own constraints (free gait)."""
-        alpha, T, r0, *_ = self.unpack(w)
+        alpha, T, r0 = self.gait_of(w)
         n = 2 * (self.n_max + self.CHUNK) + 3
         s = np.arange(n) / (2 * self.N)
         if not self.free:
@@ -203,6 +193,105 @@ class Transcription:
                            nominal=out[3 * nq:], dnominal=dout[3 * nq:])
         self._table_key = key
         return self._table
+
+    def _gait_rows(self, rows, w, tab):
+        """The gait's own constraints (gait_opt.transcription), on its nominal step."""
+        o = self.gait.options
+        nq, nu, na = self.nq, self.nu, self.na
+        alpha, T, r0 = self.gait_of(w)
+        n1 = 2 * self.N
+        r1, dr1 = tab["r"][:, n1], tab["dr"][:, :, n1]
+        out, J = self.boundary(np.r_[r1, w[self.i_G][:na], T, r0])
+        out, J = np.array(out).ravel(), np.array(J)
+        dG = J[:, :2] @ dr1
+        dG[:, :na + 1] += J[:, 2:3 + na]
+        dG[:, na + 1:] += J[:, 3 + na:]
+        G = self.i_G
+        rows.add(out[:2 * nq], dG[:2 * nq], G, 0.0, 0.0, "gait periodicity")
+        rows.add(out[2 * nq], dG[2 * nq], G, 0.0, 0.0, "gait swing foot on the ground at T")
+        xe, dxe = out[2 * nq + 1], dG[2 * nq + 1]
+        dT = np.zeros(self.nG)
+        dT[na] = 1.0
+        rows.add(xe - o.speed * T, dxe - o.speed * dT, G, 0.0, 0.0, "gait speed")
+        rows.add(xe, dxe, G, *o.step_length_bounds, "gait step length")
+        rows.add(out[2 * nq + 2], dG[2 * nq + 2], G, -np.inf, -o.min_strike_speed,
+                 "gait strike velocity")
+        rows.add(out[2 * nq + 3], dG[2 * nq + 3], G, o.min_liftoff_speed, np.inf,
+                 "gait lift-off velocity")
+        F, dF = out[2 * nq + 4:], dG[2 * nq + 4:]
+        mu_i = o.impulse_mu
+        rows.add(np.r_[F[1], mu_i * F[1] - F[0], mu_i * F[1] + F[0]],
+                 np.vstack([dF[1], mu_i * dF[1] - dF[0], mu_i * dF[1] + dF[0]]), G, 0.0, np.inf,
+                 "gait impact impulse cone")
+        # path on the nominal step, at the grid nodes inside (0, T)
+        idx = 2 * np.arange(1, self.N)
+        nom, dnom = tab["nominal"][:, idx], tab["dnominal"][:, :, idx]
+        s = idx / (2 * self.N)
+        U = o.torque_limit or self.st.torque_limit
+        u, du = nom[:nu], dnom[:nu]
+        rows.add(u.T.ravel(), du.transpose(2, 0, 1).reshape(-1, self.nG), G, -U, U,
+                 "gait torque limit")
+        Fx, Fz, dFx, dFz = nom[nu], nom[nu + 1], dnom[nu], dnom[nu + 1]
+        rows.add(Fz, dFz.T, G, o.min_normal_force, np.inf, "gait normal force")
+        rows.add(np.r_[o.mu * Fz - Fx, o.mu * Fz + Fx], np.vstack([(o.mu * dFz - dFx).T,
+                                                                  (o.mu * dFz + dFx).T]),
+                 G, 0.0, np.inf, "gait friction cone")
+        zsw, dzsw = nom[nu + 3], dnom[nu + 3]
+        rows.add(zsw - o.clearance * 4 * s * (1 - s), dzsw.T, G, 0.0, np.inf,
+                 "gait swing-foot clearance")
+
+
+class Transcription(GaitTable):
+    """Scenarios of the hybrid zero dynamics as NLP functions (module docstring).
+
+    Decision vector w = (G, M1, rejoin, s, then per scenario and step (q_u, dq_u, y_i,
+    dy_i, eta)); G = (alpha, T, r0) only when the gait is free.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : Gait
+        The gait (fixed) or the gait to start from (free); its options give the Bezier
+        degree, the continuation past T and, when free, the gait's own constraints.
+    directions : numpy.ndarray
+        (K, 2 nq) perturbation directions of the scenarios.
+    steps : int
+        Steps per scenario.
+    free_gait : bool
+        Whether alpha, T and r0 are decision variables.
+    settings : TranscriptionSettings, optional
+        Rule and margins.
+    """
+
+    def __init__(self, model, gait, directions, steps: int, free_gait: bool,
+                 settings: TranscriptionSettings | None = None):
+        super().__init__(model, gait, settings, free_gait)
+        st, nu = self.st, self.nu
+        self.dirs = np.atleast_2d(np.asarray(directions, float))
+        self.K, self.S = len(self.dirs), int(steps)
+        self.nc = 2 + 3 * nu + 1 + self.nG          # columns of a scenario-step
+        self.nl = 2 + 2 * nu                          # step start variables
+        self.threads = int(st.threads)
+        self.node = _node_functions(model, self.nG)
+        self.start_fn, self.diag0_fn, self.last_fn, self.last_value, self.rows = \
+            _step_functions(model, self.degree, self.cont, self.shape, self.free)
+        # layout of w
+        self.i_M1 = self.nG + np.arange(nu)
+        self.i_rejoin = self.nG + nu
+        self.i_s = self.nG + nu + 1
+        self.n_design = self.nG + nu + 2
+        #: the decision-dependent sign and scale of the eq. 24 denominator (set per solve
+        #: from the starting design, as the walker sets them per design)
+        self.den_sign, self.den_scale = 1.0, 1.0
+        self.mg = float(model.description.total_mass * model.description.gravity)
+
+    # ----------------------------------------------------------------- layout helpers
+    def unpack(self, w):
+        """(alpha (nu, M+1), T, r0, M1, rejoin, s) of w (the fixed gait's where fixed)."""
+        w = np.asarray(w, float)
+        alpha, T, r0 = self.gait_of(w)
+        return alpha, T, r0, w[self.i_M1], float(w[self.i_rejoin]), float(w[self.i_s])
 
     def R3(self, tab, k0, n):
         """(R3 (45, n), dR3 (45, nG, n) or None) of nodes k0..k0+n-1: the reference at
@@ -394,66 +483,12 @@ class Transcription:
             eta = eta_n
         return n, eta
 
-    def _gait_rows(self, rows, w, tab):
-        """The gait's own constraints (gait_opt.transcription), on its nominal step."""
-        o = self.gait.options
-        nq, nu, na = self.nq, self.nu, self.na
-        alpha, T, r0, *_ = self.unpack(w)
-        n1 = 2 * self.N
-        r1, dr1 = tab["r"][:, n1], tab["dr"][:, :, n1]
-        out, J = self.boundary(np.r_[r1, w[self.i_G][:na], T, r0])
-        out, J = np.array(out).ravel(), np.array(J)
-        dG = J[:, :2] @ dr1
-        dG[:, :na + 1] += J[:, 2:3 + na]
-        dG[:, na + 1:] += J[:, 3 + na:]
-        G = self.i_G
-        rows.add(out[:2 * nq], dG[:2 * nq], G, 0.0, 0.0, "gait periodicity")
-        rows.add(out[2 * nq], dG[2 * nq], G, 0.0, 0.0, "gait swing foot on the ground at T")
-        xe, dxe = out[2 * nq + 1], dG[2 * nq + 1]
-        dT = np.zeros(self.nG)
-        dT[na] = 1.0
-        rows.add(xe - o.speed * T, dxe - o.speed * dT, G, 0.0, 0.0, "gait speed")
-        rows.add(xe, dxe, G, *o.step_length_bounds, "gait step length")
-        rows.add(out[2 * nq + 2], dG[2 * nq + 2], G, -np.inf, -o.min_strike_speed,
-                 "gait strike velocity")
-        rows.add(out[2 * nq + 3], dG[2 * nq + 3], G, o.min_liftoff_speed, np.inf,
-                 "gait lift-off velocity")
-        F, dF = out[2 * nq + 4:], dG[2 * nq + 4:]
-        mu_i = o.impulse_mu
-        rows.add(np.r_[F[1], mu_i * F[1] - F[0], mu_i * F[1] + F[0]],
-                 np.vstack([dF[1], mu_i * dF[1] - dF[0], mu_i * dF[1] + dF[0]]), G, 0.0, np.inf,
-                 "gait impact impulse cone")
-        # path on the nominal step, at the grid nodes inside (0, T)
-        idx = 2 * np.arange(1, self.N)
-        nom, dnom = tab["nominal"][:, idx], tab["dnominal"][:, :, idx]
-        s = idx / (2 * self.N)
-        U = o.torque_limit or self.st.torque_limit
-        u, du = nom[:nu], dnom[:nu]
-        rows.add(u.T.ravel(), du.transpose(2, 0, 1).reshape(-1, self.nG), G, -U, U,
-                 "gait torque limit")
-        Fx, Fz, dFx, dFz = nom[nu], nom[nu + 1], dnom[nu], dnom[nu + 1]
-        rows.add(Fz, dFz.T, G, o.min_normal_force, np.inf, "gait normal force")
-        rows.add(np.r_[o.mu * Fz - Fx, o.mu * Fz + Fx], np.vstack([(o.mu * dFz - dFx).T,
-                                                                  (o.mu * dFz + dFx).T]),
-                 G, 0.0, np.inf, "gait friction cone")
-        zsw, dzsw = nom[nu + 3], dnom[nu + 3]
-        rows.add(zsw - o.clearance * 4 * s * (1 - s), dzsw.T, G, 0.0, np.inf,
-                 "gait swing-foot clearance")
-
     # ----------------------------------------------------------------- bounds, start
     def bounds(self, M1_box: float = 40.0):
         """Bounds of the design: the gait's (T, knee limits), M1 box, rejoin, s."""
         lb, ub = np.full(self.n_design, -np.inf), np.full(self.n_design, np.inf)
         if self.free:
-            o = self.gait.options
-            a_lb = np.full((self.nu, self.degree + 1), -np.pi)
-            a_ub = np.full((self.nu, self.degree + 1), np.pi)
-            for i in self.model.stance_knees:
-                a_ub[i - 1, :] = o.stance_knee_max
-            for i in self.model.swing_knees:
-                a_lb[i - 1, :] = o.swing_knee_min
-            lb[:self.na], ub[:self.na] = a_lb.ravel(order="F"), a_ub.ravel(order="F")
-            lb[self.na], ub[self.na] = o.step_time_bounds
+            lb[self.i_G], ub[self.i_G] = self.gait_bounds()
         lb[self.i_M1], ub[self.i_M1] = -M1_box, M1_box
         lb[self.i_rejoin], ub[self.i_rejoin] = 0.5, 0.75
         lb[self.i_s], ub[self.i_s] = 0.0, 3.0

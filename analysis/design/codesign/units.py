@@ -13,7 +13,7 @@ from biped_casadi.simulation import start_states, zero_dynamics_walker
 from gait_opt import Gait, GaitOptimizationError
 from gait_opt.polish import polish
 
-from ...robustness.s_star import RobustnessResult, robustness
+from ...robustness.s_star import RobustnessResult, _run_summary, robustness
 from ...stability.poincare import poincare_map
 from ...stability.vc_map import vc_eigenvalue
 from ...tasks import task
@@ -22,7 +22,7 @@ from .problem import Problem, Solve, solve
 from .settings import IpoptLimits, StartSampling
 
 __all__ = ["Measured", "Screened", "GaitStep", "vc_radius", "measure", "hardest",
-           "sampled_starts", "screen", "gait_step", "fixed_problem"]
+           "sampled_starts", "screen", "gait_step", "fixed_problem", "paper_first"]
 
 
 @dataclass
@@ -140,6 +140,14 @@ def measure(gait, kept, M1, rejoin: float, settings) -> Measured:
     """
     M1 = np.asarray(M1, float)
     r = robustness(Design.tv(gait, M1, rejoin), settings, kept=kept)
+    if not r.paper:
+        # the paper's direction is not among the kept ones (virtual constraints do not
+        # walk from it at full scale): its run is measured all the same (the target)
+        w = zero_dynamics_walker(gait, settings.simulation_options(), settings.rk4_steps,
+                                 jit=True)
+        q0, dq0 = start_states(gait, np.ones((1, 2 * gait.model.nq)), 1.0)
+        r.paper = _run_summary(w.walk(q0, dq0, M1[None], rejoin, steps=settings.steps), 0,
+                               settings.tol)
     lam = poincare_map(gait, rejoin=rejoin).analyse(M1, method="ad").max_abs
     return Measured(r, float(lam))
 
@@ -222,6 +230,26 @@ def sampled_starts(gait, kept, rejoin: float, sampling: StartSampling, eigen_bou
     return M, int(ok.sum())
 
 
+def paper_first(kept, active) -> np.ndarray:
+    """The NLP's directions: the paper's perturbation first (at scale 1: the kept first
+    one when it is the paper's, else the paper's itself), then the ``active`` kept ones.
+
+    Parameters
+    ----------
+    kept : KeptDirections
+        The gait's kept directions.
+    active : list of int
+        Kept directions besides the first.
+
+    Returns
+    -------
+    numpy.ndarray
+    """
+    d = kept.directions
+    first = d[:1] if np.all(d[0] == 1) else np.ones((1, d.shape[1]))
+    return np.vstack([first, d[list(active)]]) if len(active) else first
+
+
 def fixed_problem(gait, kept, M1, active, s0: float, *, steps: int, tst: TranscriptionSettings,
                   scenario_tol: float, paper_tol: float, rejoin: float,
                   jury_bound: float) -> Problem:
@@ -254,7 +282,7 @@ def fixed_problem(gait, kept, M1, active, s0: float, *, steps: int, tst: Transcr
     -------
     Problem
     """
-    return Problem(gait=gait, directions=kept.directions[[0] + list(active)], steps=steps,
+    return Problem(gait=gait, directions=paper_first(kept, active), steps=steps,
                    free=False, transcription=tst, scenario_tol=scenario_tol,
                    paper_tol=paper_tol, rejoin=float(rejoin),
                    M1=tuple(float(v) for v in np.asarray(M1, float)), s0=float(s0),

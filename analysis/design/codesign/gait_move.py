@@ -1,0 +1,380 @@
+"""The user's gait moved to the robust gait constraints, staying near it.
+
+A gait made for another purpose (the toolkit's default options, another tool) usually
+keeps the impact impulse near the friction cone's edge and the swing foot just above
+the ground: a perturbation then makes the foot slip at the impact or scuff, whatever the
+outputs.  The robust co-design's gait constraints (:data:`analysis.design.ROBUST_GAIT`:
+impulse ratio at most 0.15, swing clearance 5 cm mid-step, the reference continued past
+T) leave room for that.  They are reached here by continuation from the gait's own
+values, each step the gait nearest the user's (weighted least squares in its
+parameters) under the constraints of that step:
+
+1. the gait's own values of the continued constraints: its impulse ratio |F_x| / F_z
+   and the largest clearance c with z_sw(s) >= c 4 s (1 - s) over the step; where the
+   gait already meets a target, the target;
+2. the gait's parameters G = (alpha, T, r0) that minimise sum ((G - G_user) / scale)^2
+   + effort x E(G) / E(G_user), E = int u'u ds the nominal step's effort (the distance
+   alone makes gaits near the user's but with jerky torques, which perturbations
+   punish), under the gait's constraints
+   (:class:`~analysis.design.codesign.transcription.GaitTable`: periodic through the
+   impact, the speed and step length, torque, friction, impulse cone, clearance, strike
+   and lift-off speeds, knees) at the targets, with exact Jacobians, from the user's
+   gait;
+3. when that solve fails: the continuation, ``steps`` steps from the gait's own values
+   to the targets (linear), each solved from the last on the distance alone, a step
+   that fails halved (at most ``halvings`` times; the move ends where it cannot go on
+   and the result says how far it got); then the effort term from there;
+4. every solution made an exact periodic orbit (:func:`gait_opt.polish.polish`) and
+   checked on the dense grid (:meth:`gait_opt.Gait.violations`).
+
+Constraints the user's gait itself violates (an imported gait is not held to the
+default options) are relaxed to its own values, so the move starts feasible.  The speed
+stays the user's.  :func:`gait_change` says how far a gait moved.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from biped_casadi.results import Result, internal
+from gait_opt import Gait
+
+from ...tasks import task
+from .functions import TranscriptionSettings
+from .reduced import NoStrikeAtStart, solve_nlp
+from .settings import MoveSettings
+from .transcription import GaitTable, _Rows
+from .units import gait_step
+
+__all__ = ["MoveSettings", "GaitMove", "GaitProjection", "move_gait", "gait_change",
+           "own_values"]
+
+
+@dataclass
+class GaitMove(Result):
+    """The user's gait moved to the robust gait constraints (:func:`move_gait`).
+
+    ``success`` means the move ran; ``status`` says how far it got.
+
+    Parameters
+    ----------
+    status : str
+        'moved' (the targets reached), 'partly' (the last step that succeeded), 'kept'
+        (the gait already meets them, or no step succeeded: the user's gait).
+    message : str
+        In words.
+    start : dict
+        The user's gait's own values (``impact_mu``, ``clearance``).
+    targets : dict
+        The targets.
+    reached : dict
+        The values of the moved gait's constraints.
+    steps : list of dict
+        Every continuation step: its bounds, IPOPT's status and iterations, the
+        distance to the user's gait.
+    change : dict
+        :func:`gait_change` from the user's gait.
+    gait : Gait
+        The moved gait (left out of ``to_dict()``).
+    """
+
+    status: str
+    message: str
+    start: dict
+    targets: dict
+    reached: dict
+    steps: list = field(default_factory=list)
+    change: dict = field(default_factory=dict)
+    gait: object = internal(default=None)
+
+    SUCCESS = ("moved", "partly", "kept")
+
+
+def own_values(gait) -> dict:
+    """The gait's own values of the continued constraints.
+
+    Parameters
+    ----------
+    gait : Gait
+        The gait.
+
+    Returns
+    -------
+    dict
+        ``impact_mu``: its impulse ratio ``|F_x| / F_z``; ``clearance``: the largest c
+        with z_sw >= c 4 s (1 - s) inside the step, m.
+    """
+    c = gait.check()
+    t = np.linspace(0.0, gait.T, 2001)[1:-1]
+    q, _, _ = gait.evaluate(t)
+    z = np.array(gait.model.swing_foot.map(t.size)(q)[1]).ravel()
+    s = t / gait.T
+    return dict(impact_mu=float(c["impact_friction_ratio"]),
+                clearance=float(np.min(z / (4 * s * (1 - s)))))
+
+
+def gait_change(g_from, g_to) -> dict:
+    """How far a gait moved from another (of the same robot).
+
+    Parameters
+    ----------
+    g_from, g_to : Gait
+        The two gaits.
+
+    Returns
+    -------
+    dict
+        ``speed``, ``step_length`` (m), ``T`` (s): each [from, to]; ``max_joint_change``:
+        max over the joints and the normalised time s = t / T of ``|q_to(s) -
+        q_from(s)|``, rad; ``max_velocity_change`` likewise for dq, rad/s.
+    """
+    s = np.linspace(0.0, 1.0, 201)
+    q0, dq0, _ = g_from.evaluate(s * g_from.T)
+    q1, dq1, _ = g_to.evaluate(s * g_to.T)
+    return dict(speed=[float(g_from.speed), float(g_to.speed)],
+                step_length=[float(g_from.step_length), float(g_to.step_length)],
+                T=[float(g_from.T), float(g_to.T)],
+                max_joint_change=float(np.max(np.abs(q1 - q0))),
+                max_velocity_change=float(np.max(np.abs(dq1 - dq0))))
+
+
+class GaitProjection(GaitTable):
+    """The gait nearest a reference gait under the constraints of ``gait.options``.
+
+    The NLP in G = (alpha, T, r0): minimise sum ((G - G_ref) / scale)^2 under the gait's
+    own rows (:meth:`GaitTable._gait_rows`); the interface of
+    :class:`~analysis.design.codesign.reduced.Reduced` that
+    :func:`~analysis.design.codesign.reduced.solve_nlp` solves.
+
+    Parameters
+    ----------
+    gait : Gait
+        A gait whose options are the constraints (its parameters are not used).
+    reference : numpy.ndarray
+        G_ref.
+    scale : array_like
+        (alpha, T, r0) units of the distance.
+    settings : TranscriptionSettings, optional
+        The grid of the rows.
+    """
+
+    def __init__(self, gait, reference, scale, settings: TranscriptionSettings | None = None,
+                 effort: float = 0.0):
+        super().__init__(gait.model, gait, settings, True)
+        self.n_max = self.N            # the rows need the table on [0, T] only
+        self.nd = self.nG
+        self.ref = np.asarray(reference, float)
+        self.effort = float(effort)
+        # Simpson's weights on the half-grid s_i = i / 2N of [0, 1]
+        n = 2 * self.N
+        sw = np.ones(n + 1)
+        sw[1:-1:2], sw[2:-1:2] = 4.0, 2.0
+        self.simpson = sw / (3 * n)
+        self.effort0 = None
+        if self.effort:
+            self.effort0 = self._effort(self.table(self.ref))[0]
+        w = np.empty(self.nG)
+        w[:self.na], w[self.na], w[self.na + 1:] = scale[0], scale[1], scale[2]
+        self.weight = 1.0 / w**2
+        self.evaluations = 0
+        self._last = None
+
+    def evaluate(self, d):
+        """(f, grad f, g, dg/dd, lo, hi) at G = d (kept for the last d)."""
+        d = np.asarray(d, float)
+        if self._last is not None and np.array_equal(self._last[0], d):
+            return self._last[1]
+        self.evaluations += 1
+        e = d - self.ref
+        f, grad = float(np.sum(self.weight * e**2)), 2 * self.weight * e
+        rows = _Rows()
+        try:
+            tab = self.table(d)
+            if self.effort:
+                E, dE = self._effort(tab)
+                f += self.effort * E / self.effort0
+                grad = grad + self.effort * dE / self.effort0
+            self._gait_rows(rows, d, tab)
+            self._end_rows(rows, tab)
+            g, lo, hi, ri, ci, vals = rows.stack()
+            J = np.zeros((g.size, self.nd))
+            np.add.at(J, (ri, ci), vals)
+            self._shape = (g.size, lo, hi)
+        except (RuntimeError, ValueError, FloatingPointError):
+            n, lo, hi = self._shape
+            g, J = np.full(n, np.nan), np.full((n, self.nd), np.nan)
+        res = (f, grad, g, J, lo, hi)
+        self._last = (d.copy(), res)
+        return res
+
+    def _effort(self, tab):
+        """int_0^1 u'u ds of the nominal step (Simpson) and its gradient in G."""
+        n = 2 * self.N + 1
+        u, du = tab["nominal"][:self.nu, :n], tab["dnominal"][:self.nu, :, :n]
+        E = float(np.sum(self.simpson * np.sum(u**2, axis=0)))
+        dE = 2 * np.einsum("in,ign,n->g", u, du, self.simpson)
+        return E, dE
+
+    def _end_rows(self, rows, tab):
+        """Torque, normal force and friction at both ends of the step too (the gait's
+        rows hold them inside; the dense-grid check includes the ends)."""
+        o, nu, G = self.gait.options, self.nu, self.i_G
+        idx = np.array([0, 2 * self.N])
+        nom, dnom = tab["nominal"][:, idx], tab["dnominal"][:, :, idx]
+        U = o.torque_limit or self.st.torque_limit
+        rows.add(nom[:nu].T.ravel(), dnom[:nu].transpose(2, 0, 1).reshape(-1, self.nG), G,
+                 -U, U, "gait torque limit")
+        Fx, Fz, dFx, dFz = nom[nu], nom[nu + 1], dnom[nu], dnom[nu + 1]
+        rows.add(Fz, dFz.T, G, o.min_normal_force, np.inf, "gait normal force")
+        rows.add(np.r_[o.mu * Fz - Fx, o.mu * Fz + Fx], np.vstack([(o.mu * dFz - dFx).T,
+                                                                  (o.mu * dFz + dFx).T]),
+                 G, 0.0, np.inf, "gait friction cone")
+
+    def distance(self, d) -> float:
+        """The weighted distance of G = d to the reference."""
+        return float(np.sqrt(np.sum(self.weight * (np.asarray(d) - self.ref) ** 2)))
+
+
+def _relaxed(gait) -> dict:
+    """Option changes that make the gait meet its own options where it does not (an
+    imported gait is not held to them)."""
+    o, c, m = gait.options, gait.check(), gait.model
+    out = {}
+    if c["max_abs_torque"] > o.torque_limit:
+        out["torque_limit"] = float(c["max_abs_torque"]) + 1e-6
+    if c["max_friction_ratio"] > o.mu:
+        out["mu"] = float(c["max_friction_ratio"]) + 1e-6
+    if c["min_normal_force"] < o.min_normal_force:
+        out["min_normal_force"] = max(float(c["min_normal_force"]) - 1e-6, 0.0)
+    if c["liftoff_velocity"] < o.min_liftoff_speed:
+        out["min_liftoff_speed"] = max(float(c["liftoff_velocity"]) - 1e-6, 0.0)
+    if -c["strike_velocity"] < o.min_strike_speed:
+        out["min_strike_speed"] = max(-float(c["strike_velocity"]) - 1e-6, 0.0)
+    if m.has_knees:
+        if c["max_stance_knee"] > o.stance_knee_max:
+            out["stance_knee_max"] = float(np.max(gait.alpha[[i - 1 for i in m.stance_knees]]))
+        if c["min_swing_knee"] < o.swing_knee_min:
+            out["swing_knee_min"] = float(np.min(gait.alpha[[i - 1 for i in m.swing_knees]]))
+    lo, hi = o.step_length_bounds
+    if not lo <= gait.step_length <= hi:
+        out["step_length_bounds"] = (min(lo, gait.step_length * 0.99),
+                                     max(hi, gait.step_length * 1.01))
+    lo, hi = o.step_time_bounds
+    if not lo <= gait.T <= hi:
+        out["step_time_bounds"] = (min(lo, gait.T * 0.99), max(hi, gait.T * 1.01))
+    return out
+
+
+@task
+def move_gait(gait, targets: dict, settings: MoveSettings,
+              transcription: TranscriptionSettings) -> GaitMove:
+    """The gait nearest ``gait`` that meets the robust gait constraints (module docstring).
+
+    Parameters
+    ----------
+    gait : Gait
+        The user's gait.
+    targets : dict
+        GaitOptions fields: ``impact_mu`` and ``clearance`` are reached by continuation,
+        the others (``continuation``, ...) are set at once.
+    settings : MoveSettings
+        The continuation.
+    transcription : TranscriptionSettings
+        The grid of the gait's rows (and the torque limit).
+
+    Returns
+    -------
+    GaitMove
+    """
+    if gait.model.scuffing_ignored:
+        return GaitMove("kept", "the gait is kept: its swing foot may pass below the ground "
+                        "(legs without knees), which the gait rows of the move do not "
+                        "model", {}, dict(targets), {}, gait=gait)
+    own = own_values(gait)
+    base = gait.options.replace(**_relaxed(gait), **{k: v for k, v in targets.items()
+                                                     if k not in ("impact_mu", "clearance")})
+    tgt = dict(impact_mu=float(targets.get("impact_mu", base.impulse_mu)),
+               clearance=float(targets.get("clearance", base.clearance)))
+    start = dict(impact_mu=max(own["impact_mu"], tgt["impact_mu"]),
+                 clearance=min(max(own["clearance"], 0.0), tgt["clearance"]))
+
+    def bounds_at(f):
+        return {k: start[k] + f * (tgt[k] - start[k]) for k in tgt}
+
+    if all(abs(start[k] - tgt[k]) < 1e-12 for k in tgt):
+        moved = Gait(gait.model, base.replace(**tgt), gait.alpha, gait.x0, gait.T,
+                     solver_stats=dict(gait.solver_stats))
+        return GaitMove("kept", "the gait meets the robust gait constraints already",
+                        own, tgt, own_values(moved), change=gait_change(gait, moved),
+                        gait=moved)
+    ms = settings
+    G_user = GaitTable(gait.model, gait, transcription).gait_vector(gait)
+    records = []
+
+    def attempt(f, d_from, effort, max_iter):
+        """One solve at the bounds of fraction f from d_from: (G, gait) or None."""
+        b = bounds_at(f)
+        solve_opts = base.replace(impact_mu=max(b["impact_mu"] - ms.impulse_margin, 1e-3),
+                                  clearance=b["clearance"] + ms.clearance_margin,
+                                  mu=base.mu - ms.friction_margin,
+                                  torque_limit=base.torque_limit - ms.torque_margin)
+        g_solve = Gait(gait.model, solve_opts, gait.alpha, gait.x0, gait.T)
+        nlp = GaitProjection(g_solve, G_user, ms.scale, transcription, effort)
+        lb, ub = nlp.gait_bounds()
+        try:
+            res = solve_nlp(nlp, np.clip(d_from, lb, ub), lb, ub,
+                            {"max_iter": max_iter, "tol": 1e-8})
+            ok = res.success and np.all(np.isfinite(res.d))
+        except NoStrikeAtStart:
+            res, ok = None, False
+        rec = dict(fraction=f, effort=effort, **b,
+                   nlp_status=res.status if res else "not_evaluable",
+                   iterations=res.iterations if res else 0)
+        records.append(rec)
+        if not ok:
+            return None
+        rec["distance"] = nlp.distance(res.d)
+        step_gait = gait_step(Gait(gait.model, base.replace(**b), gait.alpha, gait.x0,
+                                   gait.T), res.d, res.status)
+        if step_gait.gait is None:
+            rec["rejected"] = step_gait.rejected
+            return None
+        return res.d, step_gait.gait
+
+    # 1. straight to the targets with the effort term (one solve when it goes)
+    got = attempt(1.0, G_user, ms.effort, ms.max_iter) if ms.effort else None
+    f_done, last_gait = (1.0, got[1]) if got else (0.0, None)
+    if got is None:
+        # 2. the nearest gait, by continuation from the gait's own values (a failed step
+        # halved), then the effort term from there
+        d, step, halvings = G_user.copy(), 1.0 / ms.steps, 0
+        while f_done < 1.0 - 1e-12:
+            f = min(1.0, f_done + step)
+            got = attempt(f, d, 0.0, ms.max_iter)
+            if got is not None:
+                (d, last_gait), f_done = got, f
+                continue
+            if halvings >= ms.halvings:
+                break
+            step, halvings = step / 2, halvings + 1
+        if last_gait is not None and ms.effort:
+            got = attempt(f_done, d, ms.effort, ms.max_iter)
+            if got is not None:
+                last_gait = got[1]
+    if last_gait is None:
+        return GaitMove("kept", "the gait could not be moved toward the robust gait "
+                        f"constraints (first step: {records[0].get('rejected', records[0]['nlp_status'])})",
+                        own, tgt, own, records, gait=gait)
+    last_gait.solver_stats.update(moved_from=gait.cache_key, move_fraction=f_done)
+    reached = own_values(last_gait)
+    change = gait_change(gait, last_gait)
+    status = "moved" if f_done >= 1.0 - 1e-12 else "partly"
+    msg = (f"gait moved to impulse ratio <= {bounds_at(f_done)['impact_mu']:.3g} (from "
+           f"{own['impact_mu']:.3g}) and clearance {bounds_at(f_done)['clearance']:.3g} m "
+           f"(from {own['clearance']:.3g}) in {len(records)} solve(s)"
+           + ("" if status == "moved" else f", {100 * f_done:.0f} % of the way to the targets")
+           + f"; T {change['T'][0]:.4g} -> {change['T'][1]:.4g} s, step length "
+           f"{change['step_length'][0]:.4g} -> {change['step_length'][1]:.4g} m, joints "
+           f"moved by at most {change['max_joint_change']:.3g} rad")
+    return GaitMove(status, msg, own, tgt, reached, records, change, gait=last_gait)
