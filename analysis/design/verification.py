@@ -176,14 +176,15 @@ def full_order_runs(design: Design, kept, settings: RobustnessSettings, scale: f
 
 @task
 def paper_run(design: Design, kept, settings: RobustnessSettings, library: str = ""):
-    """Step 3: the full-order run from the paper's perturbation (direction 0 at scale 1).
+    """Step 3: the full-order run from the paper's perturbation (at scale 1).
 
     Parameters
     ----------
     design : Design
         The design on its gait.
     kept : KeptDirections
-        The kept directions (the paper's first).
+        The kept directions (not used: the run is from the paper's perturbation, kept
+        or not; the argument keeps the protocol's signature).
     settings : RobustnessSettings
         Steps, mu, torque limit.
     library : str
@@ -193,7 +194,10 @@ def paper_run(design: Design, kept, settings: RobustnessSettings, library: str =
     -------
     SimulationResult
     """
-    q0, dq0 = start_states(design.gait, kept.directions[:1], [1.0])
+    # the paper's perturbation itself (the first kept direction is the paper's only when
+    # virtual constraints walk from it at full scale)
+    paper = np.ones((1, 2 * design.gait.model.nq))
+    q0, dq0 = start_states(design.gait, paper, [1.0])
     return simulate(design.controller_for(), q0[0], dq0[0], _options(settings))
 
 

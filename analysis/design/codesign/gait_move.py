@@ -20,6 +20,9 @@ parameters) under the constraints of that step:
    impact, the speed and step length, torque, friction, impulse cone, clearance, strike
    and lift-off speeds, knees) at the targets, with exact Jacobians, from the user's
    gait;
+   An infinite effort weight is the effort alone: the toolkit's optimal gait under the
+   robust gait options at the user's speed (:func:`gait_opt.optimize_gait`, warm-started
+   from the user's gait), the farthest move;
 3. when that solve fails: the continuation, ``steps`` steps from the gait's own values
    to the targets (linear), each solved from the last on the distance alone, a step
    that fails halved (at most ``halvings`` times; the move ends where it cannot go on
@@ -33,12 +36,13 @@ stays the user's.  :func:`gait_change` says how far a gait moved.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from biped_casadi.results import Result, internal
-from gait_opt import Gait
+from gait_opt import Gait, GaitOptimizationError, optimize_gait
 
 from ...tasks import task
 from .functions import TranscriptionSettings
@@ -91,6 +95,10 @@ class GaitMove(Result):
     SUCCESS = ("moved", "partly", "kept")
 
 
+#: the constraints reached by continuation from the gait's own values
+CONTINUED = ("impact_mu", "clearance", "mu", "torque_limit")
+
+
 def own_values(gait) -> dict:
     """The gait's own values of the continued constraints.
 
@@ -103,7 +111,8 @@ def own_values(gait) -> dict:
     -------
     dict
         ``impact_mu``: its impulse ratio ``|F_x| / F_z``; ``clearance``: the largest c
-        with z_sw >= c 4 s (1 - s) inside the step, m.
+        with z_sw >= c 4 s (1 - s) inside the step, m; ``mu``: its largest friction
+        ratio ``|F_x| / F_z`` in single support; ``torque_limit``: its peak torque, N m.
     """
     c = gait.check()
     t = np.linspace(0.0, gait.T, 2001)[1:-1]
@@ -111,7 +120,8 @@ def own_values(gait) -> dict:
     z = np.array(gait.model.swing_foot.map(t.size)(q)[1]).ravel()
     s = t / gait.T
     return dict(impact_mu=float(c["impact_friction_ratio"]),
-                clearance=float(np.min(z / (4 * s * (1 - s)))))
+                clearance=float(np.min(z / (4 * s * (1 - s)))),
+                mu=float(c["max_friction_ratio"]), torque_limit=float(c["max_abs_torque"]))
 
 
 def gait_change(g_from, g_to) -> dict:
@@ -137,6 +147,28 @@ def gait_change(g_from, g_to) -> dict:
                 T=[float(g_from.T), float(g_to.T)],
                 max_joint_change=float(np.max(np.abs(q1 - q0))),
                 max_velocity_change=float(np.max(np.abs(dq1 - dq0))))
+
+
+def _optimal(gait, targets: dict, own: dict, tgt: dict) -> GaitMove:
+    """The effort alone (an infinite effort weight): the toolkit's optimal gait under the
+    gait's options with the targets, at its speed, warm-started from it
+    (:func:`gait_opt.optimize_gait`, exact Hessian)."""
+    opts = gait.options.replace(**targets)
+    try:
+        g2 = optimize_gait(gait.model, opts, warm_start=gait)
+    except GaitOptimizationError as e:
+        return GaitMove("kept", f"no optimal gait under the robust gait constraints ({e})",
+                        own, tgt, own, [dict(effort=math.inf, nlp_status=str(e.status))],
+                        gait=gait)
+    change = gait_change(gait, g2)
+    return GaitMove("moved", f"the optimal gait at {gait.speed:.3g} m/s under the gait's "
+                    f"options and {targets} (gait_opt, warm-started from the given gait); "
+                    f"T {change['T'][0]:.4g} -> {change['T'][1]:.4g} s, step length "
+                    f"{change['step_length'][0]:.4g} -> {change['step_length'][1]:.4g} m, "
+                    f"joints moved by at most {change['max_joint_change']:.3g} rad", own,
+                    tgt, own_values(g2), [dict(effort=math.inf, nlp_status=g2.solver_stats.get(
+                        "status", ""), iterations=g2.solver_stats.get("iterations", 0))],
+                    change, gait=g2)
 
 
 class GaitProjection(GaitTable):
@@ -292,12 +324,18 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
                         "(legs without knees), which the gait rows of the move do not "
                         "model", {}, dict(targets), {}, gait=gait)
     own = own_values(gait)
+    ms = settings
     base = gait.options.replace(**_relaxed(gait), **{k: v for k, v in targets.items()
-                                                     if k not in ("impact_mu", "clearance")})
+                                                     if k not in CONTINUED})
+    # the continued constraints: those of the targets, and margins on the path's friction
+    # ratio and torques (a gait at the cone's edge or the torque limit slips or saturates
+    # under the smallest perturbation)
     tgt = dict(impact_mu=float(targets.get("impact_mu", base.impulse_mu)),
-               clearance=float(targets.get("clearance", base.clearance)))
-    start = dict(impact_mu=max(own["impact_mu"], tgt["impact_mu"]),
-                 clearance=min(max(own["clearance"], 0.0), tgt["clearance"]))
+               clearance=float(targets.get("clearance", base.clearance)),
+               mu=min(float(ms.path_mu), base.mu),
+               torque_limit=float(ms.torque_fraction * base.torque_limit))
+    start = {k: (min(max(own[k], 0.0), tgt[k]) if k == "clearance" else max(own[k], tgt[k]))
+             for k in tgt}
 
     def bounds_at(f):
         return {k: start[k] + f * (tgt[k] - start[k]) for k in tgt}
@@ -308,7 +346,6 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
         return GaitMove("kept", "the gait meets the robust gait constraints already",
                         own, tgt, own_values(moved), change=gait_change(gait, moved),
                         gait=moved)
-    ms = settings
     G_user = GaitTable(gait.model, gait, transcription).gait_vector(gait)
     records = []
 
@@ -317,8 +354,8 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
         b = bounds_at(f)
         solve_opts = base.replace(impact_mu=max(b["impact_mu"] - ms.impulse_margin, 1e-3),
                                   clearance=b["clearance"] + ms.clearance_margin,
-                                  mu=base.mu - ms.friction_margin,
-                                  torque_limit=base.torque_limit - ms.torque_margin)
+                                  mu=b["mu"] - ms.friction_margin,
+                                  torque_limit=b["torque_limit"] - ms.torque_margin)
         g_solve = Gait(gait.model, solve_opts, gait.alpha, gait.x0, gait.T)
         nlp = GaitProjection(g_solve, G_user, ms.scale, transcription, effort)
         lb, ub = nlp.gait_bounds()
@@ -342,6 +379,8 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
             return None
         return res.d, step_gait.gait
 
+    if np.isinf(ms.effort):
+        return _optimal(gait, targets, own, tgt)
     # 1. straight to the targets with the effort term (one solve when it goes)
     got = attempt(1.0, G_user, ms.effort, ms.max_iter) if ms.effort else None
     f_done, last_gait = (1.0, got[1]) if got else (0.0, None)
@@ -370,9 +409,11 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
     reached = own_values(last_gait)
     change = gait_change(gait, last_gait)
     status = "moved" if f_done >= 1.0 - 1e-12 else "partly"
-    msg = (f"gait moved to impulse ratio <= {bounds_at(f_done)['impact_mu']:.3g} (from "
-           f"{own['impact_mu']:.3g}) and clearance {bounds_at(f_done)['clearance']:.3g} m "
-           f"(from {own['clearance']:.3g}) in {len(records)} solve(s)"
+    b = bounds_at(f_done)
+    msg = (f"gait moved to impulse ratio <= {b['impact_mu']:.3g} (from {own['impact_mu']:.3g}), "
+           f"clearance {b['clearance']:.3g} m (from {own['clearance']:.3g}), friction ratio "
+           f"<= {b['mu']:.3g} (from {own['mu']:.3g}), torques <= {b['torque_limit']:.4g} N m "
+           f"(from {own['torque_limit']:.4g}) in {len(records)} solve(s)"
            + ("" if status == "moved" else f", {100 * f_done:.0f} % of the way to the targets")
            + f"; T {change['T'][0]:.4g} -> {change['T'][1]:.4g} s, step length "
            f"{change['step_length'][0]:.4g} -> {change['step_length'][1]:.4g} m, joints "

@@ -80,8 +80,13 @@ class Candidate:
     solve: Solve
 
 
-def _score(r, by: int = 4) -> tuple:
+def _score(r, by: int = 4, fit: bool = False) -> tuple:
+    """(the paper's perturbation converged by step ``by``, s*); with starts that fit the
+    gait (a gait the target may be far from), (the target met, s*, converged)."""
     conv = r.paper.get("steps_to_converge", math.inf) if r.paper else math.inf
+    conv = math.inf if conv is None or not conv == conv else conv
+    if fit:
+        return (bool(conv <= by and r.s_star >= 1.0), float(r.s_star), bool(conv <= by))
     return (bool(conv <= by), float(r.s_star))
 
 
@@ -119,7 +124,10 @@ class Method:
 
     def __post_init__(self):
         st = self.st
-        self.free = st.free_gait and self.fixed_gait is None
+        # legs without knees: the gait's own rows (a swing foot above the ground) do not
+        # hold, so a given gait stays fixed (moved by nothing)
+        self.free = st.free_gait and self.fixed_gait is None and not (
+            self.start_gait is not None and self.model.scuffing_ignored)
         self.screen, self.moved, self.vc_ref = None, None, None
         self.rs = st.robustness_settings()
         tl = st.verification.torque_limit
@@ -165,8 +173,8 @@ class Method:
         ok = m.max_abs <= self.run(vc_radius, gait) and r.s_star > 0
         return Candidate(gait=gait, kept=kept, M1=res.M1, rejoin=float(rejoin),
                          s_star=r.s_star, nlp_s=res.s, max_abs=m.max_abs, active=list(active),
-                         score=_score(r, self.st.converge_by), ok=bool(ok), failure=r.failure,
-                         solve=res)
+                         score=_score(r, self.st.converge_by, self.st.starts.fit_gait),
+                         ok=bool(ok), failure=r.failure, solve=res)
 
     def solve_round(self, gait, kept, M1, active, s0: float, label: str, rejoin: float,
                     screen_budget: bool = False):
@@ -192,7 +200,7 @@ class Method:
         """Whether a candidate meets the target by the walker's measures (s* >= 1, the
         paper's perturbation converged by ``converge_by``, max|lambda| within virtual
         constraints')."""
-        return bool(c.ok and c.score[0] and c.s_star >= 1.0)
+        return bool(c.ok and c.score[0] and c.s_star >= 1.0 and c.score[-1])
 
     # ----------------------------------------------------------- phases
     def setup(self):
@@ -230,6 +238,8 @@ class Method:
             self.moved = self.run(move_gait, g, targets,
                                   dataclasses.replace(st.move, effort=float(effort)), self.tst)
             self.say(f"  effort weight {effort:g}: " + self.moved.message)
+            if self.moved.status == "kept" and tried:
+                continue                   # nothing new to screen
             self.gait0 = self.moved.gait
             try:
                 starts = self._starts(raise_below=False)
@@ -487,7 +497,8 @@ class Method:
         self.say(f"  IPOPT {res.status} ({res.iterations} it): NLP s {res.s:.4g}; new gait T "
                  f"{g_new.T:.4g} s, verified s* {r.s_star:.4g} over {len(kept_new)} kept "
                  f"directions, max|lambda| {lam:.3g} (VC {lvc:.3g})")
-        score, full = _score(r, st.converge_by), len(kept_new) == st.verification.directions
+        score = _score(r, st.converge_by, st.starts.fit_gait)
+        full = len(kept_new) == st.verification.directions
         if score > best.score and lam <= lvc and full:
             best = Candidate(gait=g_new, kept=kept_new, M1=res.M1, rejoin=self.rejoin,
                              s_star=r.s_star, nlp_s=res.s, max_abs=lam, active=best.active,

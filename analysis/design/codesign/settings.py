@@ -169,9 +169,15 @@ class MoveSettings:
     effort : float
         Weight of the nominal step's effort int u'u ds, relative to the user's gait's,
         beside the distance (0: the nearest gait).
+    path_mu : float
+        The friction ratio the moved gait keeps in single support (the verification's
+        mu is 0.6: the margin is room for perturbations).
+    torque_fraction : float
+        The moved gait's torques stay within this fraction of the torque limit.
     efforts : tuple of float
         The effort weights the co-design tries in turn (:meth:`.method.Method.setup`):
-        the gait nearest the given one first, then one smoother and farther.
+        the gait nearest the given one first, then smoother ones farther away; inf: the
+        toolkit's optimal gait under the robust gait options at the given gait's speed.
     """
 
     steps: int = 1
@@ -183,7 +189,9 @@ class MoveSettings:
     torque_margin: float = 0.5
     max_iter: int = 200
     effort: float = 300.0
-    efforts: tuple = (0.0, 300.0)
+    path_mu: float = 0.45
+    torque_fraction: float = 0.8
+    efforts: tuple = (0.0, 300.0, 3000.0, math.inf)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,154 @@
+"""Over a gait family (issue 47, item 4): a robust design for every member, an M1 schedule
+over the whole range, and the ramp 0.4 -> 1.2 -> 0.4 m/s walked in full order.
+
+1. The family ``biped gait --speeds 0.4:1.2:0.05`` (the default options, 17 gaits; kept in
+   ``$BIPED_CACHE_DIR/codesign_family``).
+2. At every member, the design of ``biped m1 --robust --gait MEMBER``
+   (:data:`analysis.design.codesign.FIT`: M1 on the member as given, the member moved to
+   the robust gait constraints near it when that misses the target), or why there is
+   none (one line).
+3. The M1 schedule: the members' designs as the points of an
+   :class:`analysis.design.schedule.M1Schedule` (linear in speed between them: at each
+   member its own design).
+4. The ramp 0.4 -> 1.2 -> 0.4 m/s by 0.05 per step, then 10 steps at 0.4 m/s: step k
+   walks the gait of its speed's design (the member, or the member moved) with the
+   schedule's M1, in full order (every validity condition, mu = 0.6, |u| <= 150 N m);
+   virtual constraints on the same gaits beside it.
+
+Results: ``benchmarks/results/codesign_family.json``; the ramp's figure
+``docs/_static/codesign_ramp.png`` (``--figures DIR``).
+
+    python benchmarks/bench_codesign_family.py [--range 0.4 1.2 0.05] [--hold 10]
+        [--workers N] [--figures DIR] [--no-save]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from analysis.design.codesign import FIT, NoDesign, codesign
+from analysis.design.schedule import M1Schedule, ramp_speeds
+from analysis.reporting.plots import save_figure, speed_profile_plot
+from analysis.robustness.speed import walk_gaits
+from biped_casadi import SimulationOptions, cache_dir, rabbit
+from gait_opt import gait_family, speed_range
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _results import Run  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+OPTS = SimulationOptions(mu=0.6, torque_limit=150.0)
+
+
+def _record(v, r, wall) -> dict:
+    ch = r.gait_change.get("from_given") or {}
+    return dict(speed=v, status=r.status, s_star=float(r.s_star),
+                vc_s_star=float(r.vc_s_star), max_abs=float(r.max_abs),
+                vc_eigenvalue=float(r.vc_eigenvalue), steps_to_converge=r.steps_to_converge,
+                M1=[float(x) for x in r.design.M1], rejoin=float(r.design.rejoin),
+                gait_moved=bool(ch), max_joint_change=ch.get("max_joint_change", 0.0),
+                T=ch.get("T", [r.gait.T, r.gait.T]), wall=round(wall, 1),
+                load=round(os.getloadavg()[0], 2))
+
+
+def _summary(r) -> dict:
+    e = r.errors()
+    return dict(status=r.status, message=r.message, n_steps=r.n_steps,
+                valid_steps=sum(s.status == "ok" for s in r.steps), errors=e.tolist(),
+                max_error_on_ramp=float(np.nanmax(e[:-10])) if len(e) > 10 else None,
+                final_error=float(e[len(r.steps) - 1]) if len(r.steps) else None,
+                peak_torque=r.peak_torque, friction_margin=r.friction_margin,
+                min_normal_force=r.min_normal_force)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--range", nargs=3, type=float, default=[0.4, 1.2, 0.05],
+                    metavar=("V1", "V2", "DV"))
+    ap.add_argument("--hold", type=int, default=10)
+    ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--figures", default=str(ROOT / "docs" / "_static"))
+    ap.add_argument("--no-save", action="store_true")
+    a = ap.parse_args(argv)
+    v1, v2, dv = a.range
+    with Run("codesign_family", f"robust designs over the gait family {v1:g}:{v2:g}:{dv:g} "
+             f"(default options), the M1 schedule and the ramp {v1:g} -> {v2:g} -> {v1:g} "
+             "m/s in full order", save=not a.no_save) as bench:
+        t = time.perf_counter()
+        path = cache_dir() / "codesign_family" / f"family_{v1:g}_{v2:g}_{dv:g}.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fam = gait_family(rabbit(), speed_range(v1, v2, dv), path=path)
+        bench.row(f"the family, {len(fam)} gaits", round(time.perf_counter() - t, 1))
+        print(f"family: {fam.message}", flush=True)
+
+        records, designs = [], {}
+        t_all = time.perf_counter()
+        for v in fam.member_speeds:
+            t = time.perf_counter()
+            try:
+                r = codesign(fam.gait(v), FIT, workers=a.workers)
+            except NoDesign as e:
+                records.append(dict(speed=float(v), status="no_design", message=str(e),
+                                    wall=round(time.perf_counter() - t, 1)))
+                print(f"{v:.2f} m/s: no design: {e}", flush=True)
+                continue
+            rec = _record(float(v), r, time.perf_counter() - t)
+            records.append(rec)
+            designs[round(float(v), 6)] = r
+            print(f"{v:.2f} m/s: {r.status}, s* {r.s_star:.3g} (virtual constraints "
+                  f"{r.vc_s_star:.3g}), below 1e-3 from step {r.steps_to_converge}, "
+                  f"max|lambda| {r.max_abs:.3g} (virtual constraints {r.vc_eigenvalue:.3g})"
+                  f", gait {'moved' if rec['gait_moved'] else 'as given'}; {rec['wall']} s",
+                  flush=True)
+        n_met = sum(x["status"] == "target_met" for x in records)
+        bench.row(f"{len(fam)} co-designs (`biped m1 --robust --gait MEMBER`)",
+                  round(time.perf_counter() - t_all, 1))
+        bench.row("members with a design (of the family's)", len(designs), unit="",
+                  target=str(len(fam)))
+        bench.row("members whose design meets the target (s* >= 1, below 1e-3 by step 5, "
+                  "max|lambda| <= virtual constraints')", n_met, unit="", target=str(len(fam)))
+        bench.data["members"] = records
+        if len(designs) < len(fam):
+            bench.note("members without a design: " + ", ".join(
+                f"{x['speed']:.2f} ({x['message']})" for x in records
+                if x["status"] == "no_design"))
+            print("the ramp needs a design at every speed: not walked", flush=True)
+            return records
+
+        # the schedule through the designs, and the ramp on their gaits
+        vs = sorted(designs)
+        sched = M1Schedule(tuple(vs), tuple(tuple(designs[v].design.M1) for v in vs),
+                           tuple(designs[v].design.rejoin for v in vs))
+        bench.data["schedule"] = sched.to_dict()
+        speeds = ramp_speeds(v1, v2, dv, hold=a.hold)
+        gaits = [designs[round(float(v), 6)].gait for v in speeds]
+        t = time.perf_counter()
+        runs = {"time-varying, M1 schedule": walk_gaits(gaits, speeds, "tv", sched, OPTS),
+                "virtual constraints": walk_gaits(gaits, speeds, "vc", None, OPTS)}
+        bench.row(f"the ramp, {len(speeds)} steps, two controllers",
+                  round(time.perf_counter() - t, 1))
+        for k, r in runs.items():
+            s = _summary(r)
+            bench.data.setdefault("ramp", {})[k] = s
+            bench.row(f"ramp {v1:g} -> {v2:g} -> {v1:g} m/s by {dv:g} per step + {a.hold} "
+                      f"at {v1:g}, {k}: valid steps ({r.status}); peak torque "
+                      f"{r.peak_torque:.1f} N m", s["valid_steps"], unit="steps",
+                      target=str(len(speeds)))
+            print(f"ramp, {k}: {r.status}, {s['valid_steps']} of {len(speeds)} steps valid, "
+                  f"largest error on the ramp {s['max_error_on_ramp']}, final "
+                  f"{s['final_error']}, peak torque {r.peak_torque:.1f} N m", flush=True)
+        figs = Path(a.figures)
+        figs.mkdir(parents=True, exist_ok=True)
+        fig = speed_profile_plot(runs, title=f"ramp {v1:g} -> {v2:g} -> {v1:g} m/s on the "
+                                 "members' robust designs (full order)")
+        bench.data["figure"] = str(save_figure(fig, figs / "codesign_ramp.png"))
+    return records
+
+
+if __name__ == "__main__":
+    main()
