@@ -25,11 +25,9 @@ INSTALL = 'needs the optional extra: pip install "biped-casadi[view]"'
 
 def cmd_view(args):
     """``biped view``: check, load, start, print the address, serve until interrupted."""
-    # ---- arguments, before anything slow
+    # ---- arguments (the extra is needed only to serve)
     check_m1_values(args.m1)
     _check_numbers(args)
-    if importlib.util.find_spec("viser") is None:
-        raise UserError(INSTALL)
     _check_listen(args.host, args.port)
     say = Progress("view")
     gait = load_gait(args, say)
@@ -41,9 +39,11 @@ def cmd_view(args):
         raise UserError(f"--m1: M1 = {list(M1)} makes the controller singular on the "
                         "reference step (D11 - D12 M1 vanishes, eq. 24)")
     explicit = any(v is not None for v in (args.perturb, args.perturb_q, args.perturb_dq))
+    perturbation = _perturbation(args, model.nq) if explicit else None
+    if importlib.util.find_spec("viser") is None:
+        raise UserError(INSTALL)
     settings = ViewSettings(
-        gait, args.controller, M1, args.rejoin, gains,
-        _perturbation(args, model.nq) if explicit else None,
+        gait, args.controller, M1, args.rejoin, gains, perturbation,
         SimulationOptions(steps=args.steps, mu=args.mu, torque_limit=args.torque_limit),
         replay=tuple(_replay_options(args)))
 
@@ -53,16 +53,22 @@ def cmd_view(args):
     if args.port and app.server.get_port() != args.port:       # taken since the check
         app.stop()
         raise UserError(f"--port: {args.port} is in use on {args.host}")
-    print(f"view: {app.url}", flush=True)
-    previous = signal.signal(signal.SIGTERM, _interrupt)
+    # Ctrl-C and SIGTERM end the serving, also in a background job (where SIGINT starts
+    # out ignored); a second one while stopping is ignored
+    signals = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, _interrupt) for s in signals}
     try:
+        print(f"view: {app.url}", flush=True)
         while True:
             time.sleep(3600)
     except KeyboardInterrupt:
         pass
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for s in signals:
+            signal.signal(s, signal.SIG_IGN)
         app.stop()
+        for s, handler in previous.items():
+            signal.signal(s, handler)
     return 0
 
 

@@ -27,8 +27,9 @@ def number_text(x: float) -> str:
 
 
 def eigenvalues_text(eigenvalues) -> str:
-    """Complex eigenvalues as ``re+imj``, comma separated, :data:`EIG_DIGITS` significant
-    digits each.
+    """Complex eigenvalues as ``re+imj``, comma separated, as ``biped eig`` prints them.
+
+    Each part has :data:`EIG_DIGITS` significant digits.
 
     Parameters
     ----------
@@ -43,9 +44,11 @@ def eigenvalues_text(eigenvalues) -> str:
 
 
 def walk_text(res) -> str:
-    """How a run walked, in one line: ``ok: 10 of 10 steps valid, final error 1.3e-05``,
-    or the status of its first invalid state and the simulator's message, which names
-    the step (0-based, as ``biped simulate`` reports it): ``slipped: step 6: ...``.
+    """How a run walked, in one line.
+
+    ``ok: 10 of 10 steps valid, final error 1.3e-05``, or the status of its first invalid
+    state and the simulator's message, which names the step (0-based, as ``biped
+    simulate`` reports it): ``slipped: step 6: ...``.
 
     Parameters
     ----------

@@ -19,6 +19,8 @@ import io
 import threading
 import time
 
+import numpy as np
+
 from ..reporting.plots.images import basin_image
 from .scene import RobotScene
 from .session import Explorer, Walk
@@ -53,27 +55,25 @@ class ViewApp:
         self.explorer = explorer
         self.host = host
         self.controller = explorer.settings.controller
-        first = explorer.walk(self.controller, explorer.space.M1)
-        if first.poses is None:
-            raise ValueError(f"--m1: {first.text.splitlines()[0]}")
         with contextlib.redirect_stdout(io.StringIO()):          # viser's address table
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.scene = RobotScene(self.server)
+        RobotScene.initial_camera(self.server, _hip_height(explorer))
         self.walk: Walk | None = None
         self._clock = 0.0
         self._playing = True
         self._stop = threading.Event()
-        self._pending = None
         self._wake = threading.Condition()
         self._readout_lock = threading.Lock()
-        self._gui()
-        self._on_design()
-        RobotScene.initial_camera(self.server, first.poses)
-        self._show(first)
+        self._basin_lock = threading.Lock()
+        self._pending = None
         self._threads = [threading.Thread(target=self._walker, name="view-walks", daemon=True),
                          threading.Thread(target=self._player, name="view-clock", daemon=True)]
+        self._gui()
         for t in self._threads:
             t.start()
+        self.request_walk()                  # the first walk, while the readout is computed
+        self._on_design()
 
     # ---------------------------------------------------------------- state
     @property
@@ -223,6 +223,10 @@ class ViewApp:
 
     def _show_basin(self, walk: Walk):
         b = self.explorer.basin(walk.controller, walk.M1)
+        with self._basin_lock:
+            self._put_basin(b)
+
+    def _put_basin(self, b):
         if self.basin_panel is not None:
             self.basin_panel.remove()
             self.basin_panel = None
@@ -244,7 +248,14 @@ class ViewApp:
             self._clock += dt
             if self._clock > w.poses.duration + 0.5:       # half a second at the end
                 self._clock = 0.0
-            self.time.value = round(min(self._clock, w.poses.duration), 2)
+            if self._playing:                              # not paused meanwhile
+                self.time.value = round(min(self._clock, w.poses.duration), 2)
+
+
+def _hip_height(ex: Explorer) -> float:
+    """The hip's height at the start of the gait, m."""
+    m = ex.model
+    return float(np.array(m.points(ex.gait.q(0.0)))[1, m.hip_index])
 
 
 def _header(ex: Explorer) -> str:

@@ -106,7 +106,7 @@ class RobotScene:
         self._world.position = (-x, 0.0, 0.0)
 
     @staticmethod
-    def initial_camera(server, poses: WalkPoses):
+    def initial_camera(server, hip_height: float):
         """Point new clients' cameras at the robot from the side (-y), a little above
         and behind.
 
@@ -114,9 +114,9 @@ class RobotScene:
         ----------
         server : viser.ViserServer
             The server.
-        poses : WalkPoses
-            The walk (the height of its hip).
+        hip_height : float
+            Height of the hip, m.
         """
-        z = float(poses.hip[0, 2])
+        z = float(hip_height)
         server.initial_camera.look_at = (0.35, 0.0, 0.65 * z)
         server.initial_camera.position = (-0.45, -2.0 - DEPTH, 1.15 * z)

@@ -153,8 +153,9 @@ class Explorer:
         return Design.tv(self.gait, [float(v) for v in M1], s.rejoin, s.gains)
 
     def readout(self, controller: str, M1=None) -> str:
-        """The ``max|lambda|`` box: max|lambda|, the status, the eigenvalues and the design,
-        with the digits of ``biped eig``.
+        """The ``max|lambda|`` box, with the digits of ``biped eig``.
+
+        max|lambda|, the status, the eigenvalues and the design, one line each.
 
         Parameters
         ----------
@@ -262,12 +263,13 @@ class Explorer:
                            gains=s.gains.to_dict()))
 
     # ------------------------------------------------------------ basins
-    def basin(self, controller: str, M1=None, store: ResultStore | None = None):
+    def basin(self, controller: str, M1=None, store: ResultStore | None = None,
+              sizes: tuple = BASIN_SIZES):
         """The section basin of a design, if the cache keeps one.
 
         Looks for the basins the reproduction computes
-        (:func:`analysis.robustness.basin_to_boundary` on :data:`BASIN_SIZES` cells per
-        axis), by their task keys; nothing is computed.
+        (:func:`analysis.robustness.basin_to_boundary` on ``sizes`` cells per axis, refined
+        as the reproduction refines them), by their task keys; nothing is computed.
 
         Parameters
         ----------
@@ -277,6 +279,8 @@ class Explorer:
             The outputs (time-varying only).
         store : ResultStore, optional
             Where results are kept (default: the cache folder's).
+        sizes : tuple of int
+            The cells per axis of the basins looked for.
 
         Returns
         -------
@@ -285,7 +289,7 @@ class Explorer:
         store = store or ResultStore()
         d = self.design(controller, M1)
         info = basin_to_boundary.task_info
-        for n in BASIN_SIZES:
+        for n in sizes:
             key = task_key(info.name, info.version, info.code, (d, n),
                            dict(refine=BASIN_REFINE))
             rec = store.read(key)

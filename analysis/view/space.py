@@ -128,14 +128,14 @@ def _start(gait, rejoin, walks_ok):
     grid = grid_results(gait)
     stable = np.flatnonzero(grid.point_status == "stable")
     if not stable.size:
-        return tuple([0.0] * nu), "zero (no stable point on the 9^nu grid)"
+        return tuple([0.0] * nu), f"zero (no stable point on the paper's 9^{nu} grid)"
     order = stable[np.argsort(grid.max_abs[stable])]
     for i in order[:CANDIDATES]:
         if walks_ok(grid.points[i]):
             return (tuple(map(float, grid.points[i])),
-                    "the most stable point of the 9^nu grid whose walk is valid")
+                    f"the most stable point of the paper's 9^{nu} grid whose walk is valid")
     return (tuple(map(float, grid.points[order[0]])),
-            "the most stable point of the 9^nu grid (no walk of the first "
+            f"the most stable point of the paper's 9^{nu} grid (no walk of the first "
             f"{min(CANDIDATES, order.size)} valid)")
 
 
@@ -165,7 +165,7 @@ def slider_space(gait, M1=None, rejoin: float = 0.5, walks_ok=None, walk_key=Non
     """
     body = dict(gait=gait.cache_key, M1=None if M1 is None else [float(v) for v in M1],
                 rejoin=float(rejoin), walk=walk_key if M1 is None else None,
-                rule=[SCAN_HALF_WIDTH, SCAN_POINTS, MIN_PAD, FALLBACK_HALF_WIDTH, ROUND_TO,
+                rule=[2, SCAN_HALF_WIDTH, SCAN_POINTS, MIN_PAD, FALLBACK_HALF_WIDTH, ROUND_TO,
                       CANDIDATES])
     path = SPACES.path(body)
     if cache:
