@@ -9,6 +9,8 @@ import importlib.util
 import json
 import shlex
 import socket
+import subprocess
+import sys
 import time
 import urllib.request
 
@@ -143,19 +145,31 @@ def test_sliders_cross_the_stability_boundary(gait, tmp_path):
 
 
 @pytest.mark.slow
-def test_a_kept_basin_is_found(explorer, gait, tmp_path):
+def test_a_kept_basin_is_found_and_shown(gait, tmp_path, monkeypatch):
     from analysis.reporting.plots.images import basin_image
     from analysis.robustness import basin_to_boundary
     from analysis.tasks import Engine, ResultStore
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path))
+    ex = Explorer(ViewSettings(gait, M1=START), cache=False)
+    ex.basin_sizes = (5,)                          # a small basin, as the reproduction keeps
     d = Design.tv(gait, START)
-    assert explorer.basin("tv", START, store=ResultStore(tmp_path)) is None
+    assert ex.basin("tv", START) is None
     with Engine(scheduler="synchronous", cache=tmp_path) as eng:
         b = eng.submit(basin_to_boundary, d, 5, refine=4).result()
-    found = explorer.basin("tv", START, store=ResultStore(tmp_path), sizes=(5,))
+    found = ex.basin("tv", START, store=ResultStore(tmp_path))
     assert found is not None and found.to_dict() == b.to_dict()
-    assert explorer.basin("vc", store=ResultStore(tmp_path), sizes=(5,)) is None
+    assert ex.basin("vc") is None
     img = basin_image(found)
     assert img.ndim == 3 and img.shape[2] == 3 and min(img.shape[:2]) > 100
+    if importlib.util.find_spec("viser") is None:
+        return
+    from analysis.view import ViewApp
+    app = ViewApp(ex, port=0)
+    try:
+        _until(lambda: app.basin_panel is not None)
+        assert b.message in app.basin_note.content
+    finally:
+        app.stop()
 
 
 # ------------------------------------------------------------------ the page, headless
@@ -218,6 +232,13 @@ def test_bad_options_are_one_line_and_exit_2(args, expect, capsys):
     lines = cap.err.strip().splitlines()
     assert cap.out == "" and len(lines) == 1 and expect in lines[0], cap.err
     assert lines[0].startswith("biped"), lines[0]
+
+
+def test_bad_option_in_a_fresh_process(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "analysis.cli", "view", "--port", "x"],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert r.returncode == 2 and r.stdout == "" and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "--port" in r.stderr
 
 
 def test_a_port_in_use_is_one_line(capsys):

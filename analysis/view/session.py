@@ -128,6 +128,8 @@ class Explorer:
         self.model = settings.gait.model
         self._eig_lock = threading.Lock()
         self._walk_lock = threading.Lock()
+        #: the cells per axis of the basins the page looks for in the cache
+        self.basin_sizes = BASIN_SIZES
         self.space: SliderSpace = slider_space(
             self.gait, settings.M1, settings.rejoin, walks_ok=self._walks_ok,
             walk_key=self._walk_key(), cache=cache)
@@ -264,7 +266,7 @@ class Explorer:
 
     # ------------------------------------------------------------ basins
     def basin(self, controller: str, M1=None, store: ResultStore | None = None,
-              sizes: tuple = BASIN_SIZES):
+              sizes: tuple | None = None):
         """The section basin of a design, if the cache keeps one.
 
         Looks for the basins the reproduction computes
@@ -279,8 +281,8 @@ class Explorer:
             The outputs (time-varying only).
         store : ResultStore, optional
             Where results are kept (default: the cache folder's).
-        sizes : tuple of int
-            The cells per axis of the basins looked for.
+        sizes : tuple of int, optional
+            The cells per axis of the basins looked for (default :attr:`basin_sizes`).
 
         Returns
         -------
@@ -289,7 +291,7 @@ class Explorer:
         store = store or ResultStore()
         d = self.design(controller, M1)
         info = basin_to_boundary.task_info
-        for n in sizes:
+        for n in sizes or self.basin_sizes:
             key = task_key(info.name, info.version, info.code, (d, n),
                            dict(refine=BASIN_REFINE))
             rec = store.read(key)

@@ -44,7 +44,7 @@ def figure_pixels(fig, dpi: int = 80) -> np.ndarray:
     return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
 
 
-def basin_image(result, dpi: int = 60) -> np.ndarray:
+def basin_image(result, dpi: int = 100) -> np.ndarray:
     """The basin of attraction of one design (:func:`basin_plot`) as an RGB image.
 
     Parameters
