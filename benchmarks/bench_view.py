@@ -98,7 +98,7 @@ def main():
                 med["eig"], target=f"< {TARGET:g} s warm")
         r, p = readout_seconds(200)
         print(f"readout {1e3 * r:.2f} ms a design, poincare_eigenvalues {1e3 * p:.2f} ms")
-        run.row("max|lambda| readout of one M1 in the server", r, p, target="live")
+        run.row("the eigenvalue readout of one M1 in the server", r, p, target="live")
         run.note("baseline of the ready lines: 'biped eig --m1 -10 7.5 10 -5' start to exit, "
                  "run interleaved with them; of the readout: poincare_eigenvalues alone")
         run.data.update(view=view, default=default, eig=eig, repeats=a.repeats)

@@ -11,6 +11,7 @@ import shlex
 import socket
 import subprocess
 import sys
+import threading
 import time
 import urllib.request
 
@@ -206,6 +207,39 @@ def test_the_controls_drive_the_readout_and_the_walk(explorer, capsys):
         assert app.walk.poses.index(1.0) > 0
     finally:
         app.stop()
+
+
+@needs_viser
+def test_walks_replaced_while_the_clock_draws(explorer, capfd):
+    """A new walk (another number of instants) replaces the robot while the clock and a
+    user move the time: no instant of one walk is drawn with the other's frames."""
+    from analysis.view import ViewApp
+    app = ViewApp(explorer, port=0)
+    stop = time.monotonic() + 4.0
+
+    failures = []
+
+    def scrub():                                     # as the slider's callback does
+        rng = np.random.default_rng(1)
+        while time.monotonic() < stop:
+            app.time.value = round(float(rng.uniform(0, 8.0)), 2)   # any walk's length
+            try:
+                app._on_time()
+            except Exception as e:                   # noqa: BLE001 - counted
+                failures.append(e)
+    t = threading.Thread(target=scrub)
+    t.start()
+    try:
+        for M1 in [(-11.0, 7.5, 10.0, -5.0), START, (-9.5, 7.5, 10.0, -5.0), START]:
+            app.sliders[0].value = M1[0]
+            app.request_walk()
+            _until(lambda: f"M1 = {list(M1)}" in app.walk_box.value
+                   and not app.walk_box.value.startswith("walking"))
+    finally:
+        t.join()
+        app.stop()
+    assert not failures, failures[:3]
+    assert "error" not in capfd.readouterr().err and "error" not in app.eig_box.value
 
 
 # ------------------------------------------------------------------ the command line

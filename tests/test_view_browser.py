@@ -170,6 +170,8 @@ def test_view_in_a_browser(gait, capsys):
                 for M1 in DESIGNS:
                     walks.append(_check_design(page, M1, gait, capsys, poincare_eigenvalues))
                 _screenshot(page)
+                readout = _text(page, "max|lambda|")         # nothing broke meanwhile
+                assert readout.endswith(f"M1 = {list(START)}") and "error" not in readout
             finally:
                 browser.close()
         assert not outside, f"the page asked for {outside}"
@@ -187,7 +189,7 @@ def test_view_in_a_browser(gait, capsys):
         rest.append(line)
     err = proc.stderr.read()
     assert rc == 0, err
-    assert rest == [] and "Traceback" not in err, (rest, err)
+    assert rest == [] and "Traceback" not in err and "error" not in err, (rest, err)
     print(f"\nbiped view: ready in {ready:.2f} s (cold or warm as the cache is); "
           f"whole test {time.perf_counter() - t_test:.1f} s")
 

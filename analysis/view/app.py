@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import sys
 import threading
 import time
 
@@ -131,17 +132,22 @@ class ViewApp:
         self.controller_box.on_update(self._guarded(self._on_controller))
         self.centre.on_click(self._guarded(self._on_centre))
         self.walk_button.on_click(lambda _: self.request_walk())
-        self.time.on_update(self._guarded(self._on_time))
-        self.play.on_click(self._guarded(self._on_play))
-        self.follow.on_update(self._guarded(self._on_time))
+        self.time.on_update(self._guarded(self._on_time, shown=False))
+        self.play.on_click(self._guarded(self._on_play, shown=False))
+        self.follow.on_update(self._guarded(self._on_time, shown=False))
 
-    def _guarded(self, fn):
-        """A callback whose failure goes to the readout box, not to a traceback."""
+    def _guarded(self, fn, shown: bool = True):
+        """A callback whose failure is one line (in the readout box when ``shown``, on
+        stderr otherwise), not a traceback."""
         def call(event=None):
             try:
                 fn(event)
-            except Exception as e:          # noqa: BLE001 - shown on the page
-                self.eig_box.value = f"error: {type(e).__name__}: {e}"
+            except Exception as e:          # noqa: BLE001 - reported, the page goes on
+                line = f"error: {type(e).__name__}: {e}"
+                if shown:
+                    self.eig_box.value = line
+                else:
+                    print(f"biped view: {line}", file=sys.stderr, flush=True)
         return call
 
     def _set_disabled(self):
@@ -170,14 +176,9 @@ class ViewApp:
             s.hint = _slider_hint(j, stable[j])
 
     def _on_time(self, event=None):
-        w = self.walk
-        if w is None or w.poses is None:
-            return
         if event is not None and getattr(event, "client", None) is not None:
             self._clock = float(self.time.value)          # the user moved the clock
-        k = w.poses.index(float(self.time.value))
-        self.scene.draw(k)
-        self.scene.follow(k if self.follow.value else None)
+        self.scene.draw(float(self.time.value), follow=self.follow.value)
 
     def _on_play(self, _=None):
         self._playing = not self._playing
@@ -202,11 +203,9 @@ class ViewApp:
             what = "virtual constraints" if M1 is None else f"M1 = {list(M1)}"
             self.walk_box.value = f"walking ... ({what})"
             try:
-                walk = self.explorer.walk(controller, M1)
+                self._show(self.explorer.walk(controller, M1))
             except Exception as e:          # noqa: BLE001 - shown on the page
                 self.walk_box.value = f"not walked: {type(e).__name__}: {e}\n{what}"
-                continue
-            self._show(walk)
 
     def _show(self, walk: Walk):
         if walk.poses is not None:
@@ -215,7 +214,7 @@ class ViewApp:
             self._clock = 0.0
             self.time.max = max(round(walk.poses.duration, 2), TIME_STEP)
             self.time.value = 0.0
-            self.scene.draw(0)
+            self.scene.draw(0.0, follow=self.follow.value)
         self.walk_box.value = walk.text
         self.replay_box.value = (self.explorer.replay(walk.controller, walk.M1)
                                  if walk.result is not None else "")

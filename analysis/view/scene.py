@@ -4,6 +4,8 @@ head), the stance leg, the swing leg and the torso in the colours of every figur
 (:func:`analysis.reporting.plots.images.role_colours`)."""
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..reporting.plots.images import role_colours
@@ -37,6 +39,7 @@ class RobotScene:
         self._prints: list = []
         self.scene.set_up_direction("+z")
         self._world = self.scene.add_frame("/world", show_axes=False)
+        self._lock = threading.RLock()     # a walk replaced while the clock draws
 
     def show_walk(self, poses: WalkPoses):
         """Draw the ground and footprints of a walk and make its robot current.
@@ -46,6 +49,10 @@ class RobotScene:
         poses : WalkPoses
             The walk.
         """
+        with self._lock:
+            self._show(poses)
+
+    def _show(self, poses: WalkPoses):
         scene = self.scene
         x = poses.footprints[:, 0]
         lo, hi = min(x.min(), poses.hip[:, 0].min()) - MARGIN, \
@@ -75,35 +82,37 @@ class RobotScene:
                     subdivisions=2)
         self.poses = poses
 
-    def draw(self, k: int):
-        """Put the robot at instant ``k`` of the current walk.
+    def draw(self, time: float, follow: bool = True) -> int:
+        """Put the robot of the current walk at ``time``.
 
         Parameters
         ----------
-        k : int
-            Index of the instant (:meth:`WalkPoses.index`).
-        """
-        if self.poses is None:
-            return
-        with self.server.atomic():
-            for name, handle in self._links.items():
-                pos, wxyz, _ = self._frames[name]
-                handle.position = pos[k]
-                handle.wxyz = wxyz[k]
-            for name, handle in self._joints.items():
-                handle.position = self.poses.joints[name][2][k]
+        time : float
+            Seconds since the start of the walk (the instant at or before it is drawn).
+        follow : bool
+            Keep the hip under the camera: the world is shifted along x (the camera's
+            angle and distance stay as the user left them); else the world is not moved.
 
-    def follow(self, k: int | None):
-        """Keep the hip of instant ``k`` under the camera: the world is shifted along x
-        (the camera's angle and distance stay as the user left them).
-
-        Parameters
-        ----------
-        k : int or None
-            Index of the instant; None: no shift (the world as it is).
+        Returns
+        -------
+        int
+            The index of the instant drawn (-1: no walk yet).
         """
-        x = 0.0 if k is None or self.poses is None else float(self.poses.hip[k, 0])
-        self._world.position = (-x, 0.0, 0.0)
+        with self._lock:
+            poses = self.poses
+            if poses is None:
+                return -1
+            k = poses.index(time)
+            with self.server.atomic():
+                for name, handle in self._links.items():
+                    pos, wxyz, _ = self._frames[name]
+                    handle.position = pos[k]
+                    handle.wxyz = wxyz[k]
+                for name, handle in self._joints.items():
+                    handle.position = poses.joints[name][2][k]
+                x = float(poses.hip[k, 0]) if follow else 0.0
+                self._world.position = (-x, 0.0, 0.0)
+            return k
 
     @staticmethod
     def initial_camera(server, hip_height: float):
