@@ -215,7 +215,7 @@ def test_walks_replaced_while_the_clock_draws(explorer, capfd):
     user move the time: no instant of one walk is drawn with the other's frames."""
     from analysis.view import ViewApp
     app = ViewApp(explorer, port=0)
-    stop = time.monotonic() + 4.0
+    stop = time.monotonic() + 2.0
 
     failures = []
 
@@ -240,6 +240,33 @@ def test_walks_replaced_while_the_clock_draws(explorer, capfd):
         app.stop()
     assert not failures, failures[:3]
     assert "error" not in capfd.readouterr().err and "error" not in app.eig_box.value
+
+
+def test_three_link_biped(gait3, capsys):
+    """nu = 2: two sliders; the readout and the walk as the commands give them."""
+    ex = Explorer(ViewSettings(gait3, controller="vc", replay=("--robot", "three_link")),
+                  cache=False)
+    M1 = ex.space.M1
+    assert len(M1) == 2 and len(ex.space.ranges) == 2
+    assert biped_main(["eig", "--robot", "three_link", "--m1", *map(repr, M1)]) == 0
+    cli = capsys.readouterr().out.splitlines()
+    lines = ex.readout("tv", M1).splitlines()
+    assert f"max|lambda| = {lines[0].split()[0]}" in cli and lines[1] in cli
+    w = ex.walk("tv", M1)
+    assert biped_main([*shlex.split(ex.replay("tv", M1))[1:], "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == w.result.status
+    if importlib.util.find_spec("viser") is None:
+        return
+    from analysis.view import ViewApp
+    app = ViewApp(ex, port=0)
+    try:
+        assert [s.label for s in app.sliders] == ["M1[1]", "M1[2]"]
+        assert all(s.disabled for s in app.sliders)          # virtual constraints first
+        _until(lambda: "virtual constraints" in app.walk_box.value
+               and not app.walk_box.value.startswith("walking"))
+        assert len(app.walk.poses.segments) == 4              # one link per leg, torso, axle
+    finally:
+        app.stop()
 
 
 # ------------------------------------------------------------------ the command line
