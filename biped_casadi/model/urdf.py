@@ -208,7 +208,8 @@ class _Reader:
             what = {"fixed": "fixes the robot to it"}.get(j.type, "is the robot's base")
             self.notes.append(f"{j.type} joint {j.name!r} from the massless link {name!r}: "
                               f"{what} in the file, not a joint of the model (the stance "
-                              f"foot is its base); pitch is {j.child!r}'s angle in the world")
+                              f"foot is its base); pitch is the angle of link {j.child!r} "
+                              f"in the world")
             if j.type == "planar" and j.axis is not None:
                 self.planar_axis = np.array(j.axis, float)     # in the child's frame
             name = j.child
@@ -274,6 +275,8 @@ def _axis(rd: _Reader, legs) -> tuple:
     def parallel(a, b):
         return np.linalg.norm(np.cross(a, b)) <= 1e-9
     n = max((a for _, a in axes), key=lambda a: sum(parallel(a, b) for _, b in axes))
+    n = np.where(np.abs(n) < 1e-12, 0.0, n)          # round-off of turned frames
+    n = n / np.linalg.norm(n)
     for name, a in axes:
         if not parallel(a, n):
             rd.fail(f"joint {name!r} turns about {np.round(a, 6).tolist()}, not about the "
