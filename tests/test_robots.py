@@ -173,10 +173,16 @@ def test_gait_files_written_before_descriptions_still_load(gait, tmp_path):
 
 
 # ----------------------------------------------------------------- physics
-MODELS = ["three_link", "random_k1", "random_k3"]
+MODELS = ["three_link", "random_k1", "random_k3", "rabbit_com_offsets"]
 
 
 def make_model(name):
+    if name == "rabbit_com_offsets":        # centres of mass off the links' lines
+        d = robot("rabbit").description
+        off = [0.04, -0.03]
+        return BipedModel(dataclasses.replace(
+            d, torso=dataclasses.replace(d.torso, com_offset=0.05),
+            leg=tuple(dataclasses.replace(link, com_offset=o) for link, o in zip(d.leg, off))))
     if name.startswith("random_k"):
         k = int(name[-1])
         return BipedModel(random_description(np.random.default_rng(7 + k), k))
