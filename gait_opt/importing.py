@@ -255,6 +255,11 @@ def _diagnostics(model, nodes: Nodes, gait: Gait) -> dict:
     return dict(data_impact=data, z_end=z, drift=drift)
 
 
+def _convention_hint(angles: str) -> str:
+    return ("another stance leg (--stance)? angles in another convention?" if angles == "urdf"
+            else "another coordinate convention? angles='absolute'")
+
+
 def _cause(d: dict, fit_q: float, angles: str) -> str:
     """The likely reason a trajectory is not an orbit of the robot."""
     other = {"relative": "another coordinate convention (absolute link angles? --angles "
@@ -329,7 +334,7 @@ def import_gait(model, source, *, angles: str = "relative", stance=None,
     if not length > 0:
         raise GaitImportError(f"{where}: the swing foot ends {length:.3g} m from the stance "
                               f"foot at the last node: a step must end in front of it "
-                              f"(another coordinate convention? angles='absolute')")
+                              f"({_convention_hint(angles)})")
     opts = (options or GaitOptions()).replace(speed=length / T, bezier_degree=M)
     fitted = Gait(model, opts.for_model(model), alpha, [nodes.q[0, 0], nodes.dq[0, 0]], T,
                   solver_stats=dict(imported_from=nodes.source, kind=kind))
