@@ -165,3 +165,19 @@ def test_the_map_is_the_geometry(case):
     limit = math.inf if kw.get("continuous") else d.torque_limit
     assert got.torque_limit == limit
     assert any("no torque limit" in n for n in case["imp"].notes) == (limit == math.inf)
+
+
+def test_torques_map_to_pinocchio_joint_torques(case):
+    """The URDF joints' torques of the map deliver the model's generalised forces: with
+    Pinocchio's joint torques tau (zero on the base), G' tau = B u."""
+    model, umap, (m, _) = case["model"], case["imp"].urdf_map, case["pin"]
+    rng = np.random.default_rng(11)
+    for leg in (1, 2):
+        q, dq = rng.uniform(-1, 1, model.nq), rng.uniform(-2, 2, model.nq)
+        _, _, G, _ = _pinned(case, q, dq, leg)
+        u = rng.uniform(-50, 50, model.nu)
+        tau = umap.torques(u, leg)
+        f = np.zeros(m.nv)
+        for name, t in zip(umap.names, tau):
+            f[m.joints[m.getJointId(name)].idx_v] = t
+        assert _rel(G.T @ f, model.B @ u) <= 1e-12

@@ -496,9 +496,10 @@ class _Leg:
         body = _merged(rd, frame, ends, "", pm, plane)
         top, u = self.points[i], self.up[i]
         rel = plane.flat(body.com - top)
-        return dict(name=rd.links[frame.name].name, mass=body.mass, length=self.lengths[i],
-                    com=float(-np.dot(rel, u)), com_offset=float(np.dot(rel, plane.normal(u))),
-                    inertia=float(plane.n @ body.inertia @ plane.n))
+        return dict(name=rd.links[frame.name].name, mass=body.mass,
+                    length=_clean(self.lengths[i]), com=_clean(-np.dot(rel, u)),
+                    com_offset=_clean(np.dot(rel, plane.normal(u)), rd.tol),
+                    inertia=_clean(plane.n @ body.inertia @ plane.n))
 
 
 def _torso(rd: _Reader, frame: _Frame, hip, plane: _Plane, pm: dict) -> tuple:
@@ -521,16 +522,29 @@ def _torso(rd: _Reader, frame: _Frame, hip, plane: _Plane, pm: dict) -> tuple:
         rd.notes.append(f"the torso's centre of mass is at the hip: its up direction goes "
                         f"toward the centre of its geometry ({_fmt(plane.angle(up))} rad "
                         f"from z of {link.name!r})")
-    com = float(np.dot(rel, up))
+    com = _clean(np.dot(rel, up))
     table = dict(name=link.name, mass=body.mass,
-                 length=_torso_length(rd, link, frame, hip, up, com),
-                 com=com, com_offset=float(np.dot(rel, plane.normal(up))),
-                 inertia=float(plane.n @ body.inertia @ plane.n))
+                 length=_clean(_torso_length(rd, link, frame, hip, up, com)),
+                 com=com, com_offset=_clean(np.dot(rel, plane.normal(up)), rd.tol),
+                 inertia=_clean(plane.n @ body.inertia @ plane.n))
     return table, up
 
 
 def _fmt(v: float) -> str:
     return f"{v:.6g}"
+
+
+def _clean(v: float, tol: float = 0.0) -> float:
+    """A length, inertia or angle found through turned frames without the round-off of
+    the turns: 15 significant digits (0.39999999999999997 -> 0.4), 0 within ``tol``."""
+    v = float(v)
+    return 0.0 if abs(v) <= tol else float(f"{v:.15g}")
+
+
+def _clean_angle(a: float) -> float:
+    """An angle within 1e-12 of a multiple of pi/2 is that multiple (else unchanged)."""
+    k = round(a / (math.pi / 2))
+    return float(wrap_angle(k * (math.pi / 2))) if abs(a - k * math.pi / 2) <= 1e-12 else float(a)
 
 
 def _geometries(link, frame: _Frame):
@@ -686,12 +700,13 @@ def _joint_map(rd: _Reader, legs, torso_up, plane: _Plane, signs: dict, reductio
         for i, j in enumerate(leg.joints):
             gamma = plane.angle(leg.up[i])
             joints.append(UrdfJoint(j.name, number, i + 1, signs[j.name],
-                                    float(wrap_angle(gamma - parent)), float(reductions[j.name])))
+                                    _clean_angle(wrap_angle(gamma - parent)),
+                                    float(reductions[j.name])))
             parent = gamma
     joints.sort(key=lambda j: rd.order[j.name])
-    return UrdfMap(joints=tuple(joints), pitch_offset=float(wrap_angle(beta)), root=root,
+    return UrdfMap(joints=tuple(joints), pitch_offset=_clean_angle(wrap_angle(beta)), root=root,
                    axis=tuple(float(v) for v in plane.n),
-                   hip=(float(np.dot(hip, plane.F)), float(np.dot(hip, plane.U))))
+                   hip=(_clean(np.dot(hip, plane.F), 1e-15), _clean(np.dot(hip, plane.U), 1e-15)))
 
 
 def _same_legs(rd: _Reader, links, pms, legs):
