@@ -417,9 +417,10 @@ class PythonTwin(NumericLaw):
 
 
 class CompiledUrdfController(CompiledController):
-    """An export in URDF angles (``biped export --angles urdf``) as a controller of the
-    model: the simulator's (q, dq) go to the library as the robot's URDF coordinates,
-    the library's torques per URDF joint come back as the model's u.
+    """An export in URDF angles (``biped export --angles urdf``) as a model's controller.
+
+    The simulator's (q, dq) go to the library as the robot's URDF coordinates, the
+    library's torques per URDF joint come back as the model's u.
 
     The library's own calls are :meth:`start_urdf`, :meth:`start_leg`,
     :meth:`torque_urdf` and :meth:`outputs_urdf` (URDF coordinates in and out).  As a

@@ -39,7 +39,8 @@ import numpy as np
 
 from ..numerics import quintic_hermite_interval
 from .design import Design
-from .export_urdf import LEG_ORDER, urdf_functions
+from .export_urdf import (LEG_ORDER, URDF_START_C, c_number, urdf_functions, urdf_header_doc,
+                          urdf_readme_doc)
 from .time_varying import TimeVaryingController
 from .virtual_constraints import VirtualConstraintController
 
@@ -288,13 +289,7 @@ def _example_states(ctrl, n: int = 16) -> np.ndarray:
 
 
 # ======================================================================= C text
-def _num(x) -> str:
-    """A double as C source, read back exactly."""
-    x = float(x)
-    if math.isinf(x):
-        return "HUGE_VAL" if x > 0 else "-HUGE_VAL"
-    s = repr(x)
-    return s if ("e" in s or "." in s or "n" in s) else s + ".0"
+_num = c_number
 
 
 def _array(name: str, values, per_line: int = 4) -> str:
@@ -333,52 +328,11 @@ def _provenance_lines(law: ExportedLaw, provenance: dict) -> list:
 
 def _coordinates_doc(law: ExportedLaw) -> str:
     """The header's paragraph on the inputs, outputs and state."""
-    if law.angles != "urdf":
-        return f""" * q, dq: SPEC coordinates (relative joint angles, stance leg first: q1 the stance leg's
+    if law.angles == "urdf":
+        return urdf_header_doc(law.urdf, law.nu, law.motor_side)
+    return f""" * q, dq: SPEC coordinates (relative joint angles, stance leg first: q1 the stance leg's
  * absolute angle, then the stance knee, the stance hip, the swing hip, the swing knee),
  * rad and rad/s; u: torques on q2..q{law.nq}, N m; tau: time since the step started, s."""
-    m = law.urdf
-    names = list(m.names)
-    legs = {leg: [j.name for j in sorted(m.joints, key=lambda j: j.position) if j.leg == leg]
-            for leg in (1, 2)}
-    axis = ", ".join(_num(v) for v in m.axis)
-    torque = ("the motor side: each joint's torque divided by its transmission's reduction "
-              "(" + ", ".join(f"{j.name} {j.reduction:g}" for j in m.joints) + ")"
-              if law.motor_side else "the joint side")
-    lines = [
-        "The robot's own URDF coordinates (no relabelling, no sign or offset to apply):",
-        f"q[0] = pitch: the absolute angle of link '{m.root}' about the joints' axis n = "
-        f"[{axis}] (its frame), right-handed about n, 0 when the link's frame is aligned "
-        "with the world's (z up);",
-        "q[1..] the URDF joint angles in the file's order: " + ", ".join(
-            f"q[{i + 1}] {n}" for i, n in enumerate(names)) + ";",
-        "dq: their rates; rad and rad/s.",
-        f"u[0..{law.nu - 1}]: the torque of each of those joints (u[i] on q[i + 1]) in the "
-        f"URDF's sign (about the joint's own <axis>), N m, on {torque}.",
-        "state[0] is the stance leg: 0 for the leg of hip joint '" + legs[1][0] + "' ("
-        + ", ".join(legs[1]) + "), 1 for the leg of '" + legs[2][0] + "' ("
-        + ", ".join(legs[2]) + "); state[1..] the law's step constants.",
-        "biped_step_start finds the stance leg from q (the leg whose foot is in front, as "
-        "it is just after an impact); biped_step_start_leg is told.  Call one of them at "
-        "start-up and just after every impact, with the angles as read: the law relabels "
-        "the legs inside.",
-        "tau: time since the step started, s.",
-        "The map to the toolkit's coordinates (each joint's child link relative to its "
-        "parent, in the model's sense, = sign * angle + offset; docs/howto/export.md):",
-    ] + [f"  {j.name}: {'+' if j.sign > 0 else '-'}angle {'+' if j.offset >= 0 else '-'} "
-         f"{_num(abs(j.offset))}" for j in m.joints] + [
-        f"  the torso: pitch + {_num(m.pitch_offset)}"]
-    out = []
-    for line in lines:
-        words, cur = line.split(" "), " *"
-        for w in words:
-            if len(cur) + 1 + len(w) > 88:
-                out.append(cur)
-                cur = " *  " + w if line.startswith("  ") else " * " + w
-            else:
-                cur += " " + w
-        out.append(cur)
-    return "\n".join(out)
 
 
 def _header(law: ExportedLaw, provenance: dict) -> str:
@@ -496,28 +450,15 @@ static int not_defined(double *u, double *y, double *dy, double *den)
 """
 
 
-_URDF_START = """int biped_step_start_leg(int stance, const double *q, const double *dq, double *state)
+_START_C = """int biped_step_start(const double *q, const double *dq, double *state)
 {
-    double go = 0.0, leg = (double)stance;
-    if (stance != 0 && stance != 1) return 2;
-    work_arg[0] = q; work_arg[1] = dq; work_arg[2] = &leg;
+    double go = 0.0;
+    work_arg[0] = q; work_arg[1] = dq;
     work_res[0] = state; work_res[1] = &go;
     if (biped_start(work_arg, work_res, work_iw, work_w, 0)) return 3;
     if (!all_finite(q, NQ) || !all_finite(dq, NQ)) return 3;
     if (!(go > 0.0)) return 2;
     return all_finite(state, NSTATE) ? 0 : 3;
-}
-
-/* the stance leg: the one whose foot is in front (the swing foot behind it) */
-int biped_step_start(const double *q, const double *dq, double *state)
-{
-    double ahead = 0.0;   /* the other foot's distance in front of leg 0's foot */
-    work_arg[0] = q;
-    work_res[0] = &ahead;
-    if (biped_front(work_arg, work_res, work_iw, work_w, 0)) return 3;
-    if (!all_finite(&ahead, 1)) return 3;
-    if (ahead == 0.0) return 2;
-    return biped_step_start_leg(ahead < 0.0 ? 0 : 1, q, dq, state);
 }
 """
 
@@ -531,17 +472,7 @@ def _wrapper(law: ExportedLaw) -> str:
     urdf = law.angles == "urdf"
     declare_front = ("int biped_front(const double **arg, double **res, int *iw, double *w, "
                      "int mem);\n" if urdf else "")
-    start_code = _URDF_START if urdf else """int biped_step_start(const double *q, const double *dq, double *state)
-{
-    double go = 0.0;
-    work_arg[0] = q; work_arg[1] = dq;
-    work_res[0] = state; work_res[1] = &go;
-    if (biped_start(work_arg, work_res, work_iw, work_w, 0)) return 3;
-    if (!all_finite(q, NQ) || !all_finite(dq, NQ)) return 3;
-    if (!(go > 0.0)) return 2;
-    return all_finite(state, NSTATE) ? 0 : 3;
-}
-"""
+    start_code = URDF_START_C if urdf else _START_C
     leg_check = ("    if (!(state[0] == 0.0 || state[0] == 1.0)) return not_defined(u, y, dy, den);\n"
                  if urdf else "")
     return f"""/* The exported controller's interface (biped_controller.h) around the law that
@@ -672,7 +603,7 @@ int main(int argc, char **argv)
 
 def _readme_coordinates(law: ExportedLaw, state_doc: str) -> str:
     tv = law.kind == "tv"
-    tau = (f"`tau`: time since the step started, s (restart it at 0 at every impact"
+    tau = (f"`tau`: time since the step started, s\n  (restart it at 0 at every impact"
            f"{f'; accepted up to {law.tau_max:.6g} s' if tv else ''}).")
     if law.angles != "urdf":
         return f"""- `q`, `dq` ({law.nq} each): SPEC coordinates, relative joint angles with the stance leg
@@ -681,23 +612,8 @@ def _readme_coordinates(law: ExportedLaw, state_doc: str) -> str:
   legs (q+ = E q-) before calling `biped_step_start`.
 - `u` ({law.nu}): torques on q2..q{law.nq}, N m. {tau}
 - `state` ({law.nstate}): {state_doc}."""
-    m = law.urdf
-    hips = m.hips
-    joints = ", ".join(f"`{n}`" for n in m.names)
-    side = ("divided by each joint's transmission reduction (the motor's torque: "
-            + ", ".join(f"{j.name} {j.reduction:g}" for j in m.joints) + ")"
-            if law.motor_side else "at the joint")
-    return f"""- `q`, `dq` ({law.nq} each): the robot's own URDF coordinates, as its encoders and
-  attitude estimate give them: `q[0]` the pitch of link `{m.root}` (its absolute angle
-  about the joints' axis [{", ".join(f"{v:g}" for v in m.axis)}], right-handed, 0 when its
-  frame is aligned with the world's, z up), then the joint angles {joints} (the URDF's
-  order, its zero and its sign), rad and rad/s. No relabelling: the law does it.
-- `u` ({law.nu}): the torque of each of those joints in the same order and sign, N m,
-  {side}. {tau}
-- `state` ({law.nstate}): `state[0]` the stance leg (0: the leg of `{hips[0]}`, 1: the leg
-  of `{hips[1]}`), then {state_doc}. `biped_step_start` sets the leg whose foot is in
-  front (the new stance foot just after an impact; code 2 when the feet are level);
-  `biped_step_start_leg(stance, q, dq, state)` takes it from the caller."""
+    return urdf_readme_doc(law.urdf, law.nq, law.nu, law.nstate, law.motor_side, state_doc,
+                           tau)
 
 
 def _readme(law: ExportedLaw, provenance: dict, timing: str = "") -> str:

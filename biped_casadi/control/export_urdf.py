@@ -20,20 +20,24 @@ conversions (what ``--verify`` compares the C code with).
 """
 from __future__ import annotations
 
+import math
+
 import casadi as ca
 import numpy as np
 
 from ..model.urdf_map import UrdfMap, wrap_angle
 
-__all__ = ["urdf_functions", "torque_matrix", "UrdfAngleLaw", "LEG_ORDER"]
+__all__ = ["urdf_functions", "torque_matrix", "UrdfAngleLaw", "LEG_ORDER", "c_number",
+           "urdf_header_doc", "urdf_readme_doc", "URDF_START_C"]
 
 #: how the exported code numbers the legs: 0 for the map's leg 1, 1 for leg 2
 LEG_ORDER = (1, 2)
 
 
 def torque_matrix(umap: UrdfMap, stance, motor_side: bool = False) -> np.ndarray:
-    """T of tau = T u: the URDF joints' torques from the model's (entries 0, +-1, or
-    +-1/reduction on the motor side).
+    """T of tau = T u: the URDF joints' torques from the model's u.
+
+    Entries 0 and +-1 (+-1/reduction on the motor side).
 
     Parameters
     ----------
@@ -116,8 +120,9 @@ def urdf_functions(law: ca.Function, start: ca.Function, model, umap: UrdfMap,
 
 
 class UrdfAngleLaw:
-    """The toolkit's law in URDF angles, evaluated in Python (numpy's conversions
-    around the controller's own law): what the generated C must equal.
+    """The toolkit's law in URDF angles, evaluated in Python: what the C must equal.
+
+    numpy's conversions around the controller's own law.
 
     Parameters
     ----------
@@ -177,3 +182,154 @@ class UrdfAngleLaw:
             out = c.evaluate(q, dq, tau, np.zeros(0), p)
         u = self.umap.torques(np.asarray(out.u, float).ravel(), leg, self.motor_side)
         return u, out.y, out.dy, out.denominator
+
+
+# ======================================================================= C text
+def c_number(x) -> str:
+    """A double as C source, read back exactly.
+
+    Parameters
+    ----------
+    x : float
+
+    Returns
+    -------
+    str
+    """
+    x = float(x)
+    if math.isinf(x):
+        return "HUGE_VAL" if x > 0 else "-HUGE_VAL"
+    s = repr(x)
+    return s if ("e" in s or "." in s or "n" in s) else s + ".0"
+
+
+_num = c_number
+
+#: the step starts of an export in URDF angles (C)
+URDF_START_C = """int biped_step_start_leg(int stance, const double *q, const double *dq, double *state)
+{
+    double go = 0.0, leg = (double)stance;
+    if (stance != 0 && stance != 1) return 2;
+    work_arg[0] = q; work_arg[1] = dq; work_arg[2] = &leg;
+    work_res[0] = state; work_res[1] = &go;
+    if (biped_start(work_arg, work_res, work_iw, work_w, 0)) return 3;
+    if (!all_finite(q, NQ) || !all_finite(dq, NQ)) return 3;
+    if (!(go > 0.0)) return 2;
+    return all_finite(state, NSTATE) ? 0 : 3;
+}
+
+/* the stance leg: the one whose foot is in front (the swing foot behind it) */
+int biped_step_start(const double *q, const double *dq, double *state)
+{
+    double ahead = 0.0;   /* the other foot's distance in front of leg 0's foot */
+    work_arg[0] = q;
+    work_res[0] = &ahead;
+    if (biped_front(work_arg, work_res, work_iw, work_w, 0)) return 3;
+    if (!all_finite(&ahead, 1)) return 3;
+    if (ahead == 0.0) return 2;
+    return biped_step_start_leg(ahead < 0.0 ? 0 : 1, q, dq, state);
+}
+"""
+
+
+
+def urdf_header_doc(m: UrdfMap, nu: int, motor_side: bool) -> str:
+    """The header's comment on the inputs, outputs and state of a law in URDF angles.
+
+    Parameters
+    ----------
+    m : UrdfMap
+        The robot's joint map.
+    nu : int
+        Torques.
+    motor_side : bool
+        Torques divided by the reductions.
+
+    Returns
+    -------
+    str
+        C comment lines (`` * ...``).
+    """
+    names = list(m.names)
+    legs = {leg: [j.name for j in sorted(m.joints, key=lambda j: j.position) if j.leg == leg]
+            for leg in (1, 2)}
+    axis = ", ".join(_num(v) for v in m.axis)
+    torque = ("the motor side: each joint's torque divided by its transmission's reduction "
+              "(" + ", ".join(f"{j.name} {j.reduction:g}" for j in m.joints) + ")"
+              if motor_side else "the joint side")
+    lines = [
+        "The robot's own URDF coordinates (no relabelling, no sign or offset to apply):",
+        f"q[0] = pitch: the absolute angle of link '{m.root}' about the joints' axis n = "
+        f"[{axis}] (its frame), right-handed about n, 0 when the link's frame is aligned "
+        "with the world's (z up);",
+        "q[1..] the URDF joint angles in the file's order: " + ", ".join(
+            f"q[{i + 1}] {n}" for i, n in enumerate(names)) + ";",
+        "dq: their rates; rad and rad/s.",
+        f"u[0..{nu - 1}]: the torque of each of those joints (u[i] on q[i + 1]) in the "
+        f"URDF's sign (about the joint's own <axis>), N m, on {torque}.",
+        "state[0] is the stance leg: 0 for the leg of hip joint '" + legs[1][0] + "' ("
+        + ", ".join(legs[1]) + "), 1 for the leg of '" + legs[2][0] + "' ("
+        + ", ".join(legs[2]) + "); state[1..] the law's step constants.",
+        "biped_step_start finds the stance leg from q (the leg whose foot is in front, as "
+        "it is just after an impact); biped_step_start_leg is told.  Call one of them at "
+        "start-up and just after every impact, with the angles as read: the law relabels "
+        "the legs inside.",
+        "tau: time since the step started, s.",
+        "The map to the toolkit's coordinates (each joint's child link relative to its "
+        "parent, in the model's sense, = sign * angle + offset; docs/howto/export.md):",
+    ] + [f"  {j.name}: {'+' if j.sign > 0 else '-'}angle {'+' if j.offset >= 0 else '-'} "
+         f"{_num(abs(j.offset))}" for j in m.joints] + [
+        f"  the torso: pitch + {_num(m.pitch_offset)}"]
+    out = []
+    for line in lines:
+        words, cur = line.split(" "), " *"
+        for w in words:
+            if len(cur) + 1 + len(w) > 88:
+                out.append(cur)
+                cur = " *  " + w if line.startswith("  ") else " * " + w
+            else:
+                cur += " " + w
+        out.append(cur)
+    return "\n".join(out)
+
+
+
+
+def urdf_readme_doc(m: UrdfMap, nq: int, nu: int, nstate: int, motor_side: bool,
+                    state_doc: str, tau: str) -> str:
+    """The README's bullets on the inputs, outputs and state of a law in URDF angles.
+
+    Parameters
+    ----------
+    m : UrdfMap
+        The robot's joint map.
+    nq, nu, nstate : int
+        Sizes.
+    motor_side : bool
+        Torques divided by the reductions.
+    state_doc : str
+        What the law's own step state is.
+    tau : str
+        The sentence on tau.
+
+    Returns
+    -------
+    str
+        Markdown.
+    """
+    hips = m.hips
+    joints = ", ".join(f"`{n}`" for n in m.names)
+    side = ("divided by each joint's transmission reduction (the motor's torque: "
+            + ", ".join(f"{j.name} {j.reduction:g}" for j in m.joints) + ")"
+            if motor_side else "at the joint")
+    return f"""- `q`, `dq` ({nq} each): the robot's own URDF coordinates, as its encoders and
+  attitude estimate give them: `q[0]` the pitch of link `{m.root}` (its absolute angle
+  about the joints' axis [{", ".join(f"{v:g}" for v in m.axis)}], right-handed, 0 when its
+  frame is aligned with the world's, z up), then the joint angles {joints} (the URDF's
+  order, its zero and its sign), rad and rad/s. No relabelling: the law does it.
+- `u` ({nu}): the torque of each of those joints in the same order and sign, N m,
+  {side}. {tau}
+- `state` ({nstate}): `state[0]` the stance leg (0: the leg of `{hips[0]}`, 1: the leg
+  of `{hips[1]}`), then {state_doc}. `biped_step_start` sets the leg whose foot is in
+  front (the new stance foot just after an impact; code 2 when the feet are level);
+  `biped_step_start_leg(stance, q, dq, state)` takes it from the caller."""

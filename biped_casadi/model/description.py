@@ -74,7 +74,7 @@ from ..files import read_text_file
 from .urdf_map import UrdfMap, urdf_map_from_dict
 
 __all__ = ["Link", "RobotDescription", "load_description", "find_description",
-           "description_from_dict", "BUILTIN", "builtin_path"]
+           "description_from_dict", "description_toml", "BUILTIN", "builtin_path"]
 
 #: descriptions shipped with the toolkit (package data, biped_casadi/model/robots/NAME.toml)
 BUILTIN = ("rabbit", "three_link")
@@ -220,8 +220,7 @@ class RobotDescription:
 
     @property
     def cache_key(self):
-        """What a model built from the description depends on (its fields, and the URDF
-        map when there is one)."""
+        """What a model built from the description depends on (with the URDF map, if any)."""
         key = (self.name, self.torso, self.leg, self.point_masses, self.rotor_inertia,
                self.gravity, self.torque_limit)
         return key if self.urdf is None else key + (self.urdf,)
@@ -540,3 +539,57 @@ def find_description(name_or_path) -> RobotDescription:
         raise ValueError(f"robot: {text!r} is neither a built-in robot "
                          f"({', '.join(BUILTIN)}) nor a description file (.toml)")
     return load_description(text)
+
+
+def description_toml(d: RobotDescription, header: str = "") -> str:
+    """A description file (TOML) that loads back to a description equal to ``d``.
+
+    The schema of the module docstring; the URDF joint map, when
+    there is one, is the ``[urdf]`` table with one ``[[urdf.joints]]`` table per joint.
+
+    Parameters
+    ----------
+    d : RobotDescription
+        The robot.
+    header : str
+        Comment lines to put first (``#`` added).
+
+    Returns
+    -------
+    str
+        TOML text; numbers written with ``repr`` (exact round trip).
+    """
+    def table(t):
+        return "\n".join(f"{k} = {_value(v)}" for k, v in t.items()
+                         if not isinstance(v, list) or not v or not isinstance(v[0], dict))
+    dd = d.to_dict()
+    out = [f"# {line}" for line in header.splitlines()]
+    out += [f"name = {_q(dd['name'])}", f"gravity = {dd['gravity']!r}", "",
+            "[actuators]", table(dd["actuators"]), "", "[torso]", table(dd["torso"])]
+    for link in dd["leg"]:
+        out += ["", "[[leg]]", table(link)]
+    if dd["point_masses"]:
+        out += ["", "[point_masses]", table(dd["point_masses"])]
+    if "urdf" in dd:
+        out += ["", "[urdf]", table(dd["urdf"])]
+        for j in dd["urdf"]["joints"]:
+            out += ["", "[[urdf.joints]]", table(j)]
+    return "\n".join(out) + "\n"
+
+
+def _value(v) -> str:
+    """A TOML value: floats exactly (repr; inf as TOML's inf), ints, strings, lists."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return "inf" if v == math.inf else ("-inf" if v == -math.inf else repr(v))
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    return _q(v)
+
+
+def _q(s: str) -> str:
+    """A TOML basic string."""
+    return '"' + str(s).replace("\\", "\\\\").replace('"', '\\"') + '"'
