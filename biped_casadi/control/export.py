@@ -549,6 +549,8 @@ def _generated(law: ExportedLaw) -> str:
 
 def _example(law: ExportedLaw) -> str:
     nq, ns = law.nq, law.nstate
+    # the example's states are read with leg 0 in stance (an export in URDF angles)
+    start_call = "biped_step_start_leg(0, " if law.angles == "urdf" else "biped_step_start("
     rows = law.example_states
     return f"""/* Time the exported controller: biped_torque in a loop over {rows.shape[0]} states of the
    reference.  Build: gcc -O2 -o example example/main.c *.c -lm (in the export folder). */
@@ -592,7 +594,7 @@ int main(int argc, char **argv)
     t0 = now();
     for (i = 0; i < n / 10 + 1; ++i) {{
         const double *s = states + (i % K) * w;
-        bad += biped_step_start(s + 1, s + 1 + NQ, state) != 0;
+        bad += {start_call}s + 1, s + 1 + NQ, state) != 0;
     }}
     t1 = now();
     printf("biped_step_start: %.4f us per call\\n", 1e6 * (t1 - t0) / (double)(n / 10 + 1));

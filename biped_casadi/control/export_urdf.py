@@ -37,7 +37,7 @@ LEG_ORDER = (1, 2)
 def torque_matrix(umap: UrdfMap, stance, motor_side: bool = False) -> np.ndarray:
     """T of tau = T u: the URDF joints' torques from the model's u.
 
-    Entries 0 and +-1 (+-1/reduction on the motor side).
+    :meth:`UrdfMap.torque_matrix`: entries 0 and +-1 (+-1/reduction on the motor side).
 
     Parameters
     ----------
@@ -53,7 +53,7 @@ def torque_matrix(umap: UrdfMap, stance, motor_side: bool = False) -> np.ndarray
     numpy.ndarray
         (nu, nu).
     """
-    return umap.torques(np.eye(umap.nq - 1), stance, motor_side)
+    return umap.torque_matrix(stance, motor_side)
 
 
 def _model_state(umap: UrdfMap, x, dx, s):

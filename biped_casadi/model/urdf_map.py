@@ -59,6 +59,22 @@ def wrap_angle(a):
     return a - _TWO_PI * np.floor((np.asarray(a, dtype=float) + math.pi) / _TWO_PI)
 
 
+def _apply(A: np.ndarray, x: np.ndarray, c=None) -> np.ndarray:
+    """A x (+ c) summed as CasADi's sparse product is: per row, the non-zero terms in
+    column order (a +-1 entry a sign, no product), then c when it is not zero -- so
+    that numpy's conversion and the generated C agree to the last bit."""
+    out = np.empty((A.shape[0],) + x.shape[1:])
+    for i in range(A.shape[0]):
+        acc = None
+        for j in np.flatnonzero(A[i]):
+            a = A[i, j]
+            term = x[j] if a == 1.0 else (-x[j] if a == -1.0 else a * x[j])
+            acc = term if acc is None else acc + term
+        acc = np.zeros(x.shape[1:]) if acc is None else acc
+        out[i] = acc + c[i] if c is not None and c[i] != 0.0 else acc
+    return out
+
+
 def _continuous(a: np.ndarray) -> np.ndarray:
     """Rows of samples (columns over time) made continuous by whole turns, the first
     sample of each row in [-pi, pi)."""
@@ -233,9 +249,9 @@ class UrdfMap:
         """
         A, c = self.matrices(stance)
         x, dx = np.asarray(x, dtype=float), np.asarray(dx, dtype=float)
-        raw = A @ x + (c if x.ndim == 1 else c[:, None])
+        raw = _apply(A, x, c)
         q = _continuous(raw) if continuous and x.ndim == 2 else wrap_angle(raw)
-        return q, A @ dx
+        return q, _apply(A, dx)
 
     def from_model(self, q, dq, stance, continuous: bool = False) -> tuple:
         """The URDF's (pitch, joint angles) and rates from the model's (q, dq).
@@ -262,6 +278,30 @@ class UrdfMap:
         x = _continuous(raw) if continuous and q.ndim == 2 else wrap_angle(raw)
         return x, Ai @ dq
 
+    def torque_matrix(self, stance, motor_side: bool = False) -> np.ndarray:
+        """T of tau = T u: the URDF joints' torques from the model's u.
+
+        T = (A_s' B) without the pitch row, each row times 1 / reduction on the motor side:
+        one entry +-1 (or +-1/reduction) per row.
+
+        Parameters
+        ----------
+        stance : str or int
+            The stance leg's hip joint.
+        motor_side : bool
+            Divide by each joint's reduction.
+
+        Returns
+        -------
+        numpy.ndarray
+            (nu, nu).
+        """
+        A, _ = self.matrices(stance)
+        T = A.T[1:, 1:].copy()                   # B = [0; I]: the pitch column drops out
+        if motor_side:
+            T *= (1.0 / np.array([j.reduction for j in self.joints]))[:, None]
+        return T
+
     def torques(self, u, stance, motor_side: bool = False) -> np.ndarray:
         """The URDF joints' torques (file order, the file's sign) from the model's u.
 
@@ -279,14 +319,7 @@ class UrdfMap:
         numpy.ndarray
             (nu,) or (nu, N), N m.
         """
-        A, _ = self.matrices(stance)
-        u = np.asarray(u, dtype=float)
-        Bu = np.concatenate([np.zeros((1,) + u.shape[1:]), u], axis=0)
-        tau = (A.T @ Bu)[1:]
-        if motor_side:
-            red = np.array([j.reduction for j in self.joints])
-            tau = tau / (red if u.ndim == 1 else red[:, None])
-        return tau
+        return _apply(self.torque_matrix(stance, motor_side), np.asarray(u, dtype=float))
 
     # ------------------------------------------------------------- records
     def to_dict(self) -> dict:
