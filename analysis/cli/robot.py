@@ -56,8 +56,9 @@ def cmd_import(args):
         print(f"  point mass {m:g} kg at the {joint}")
     limit = f"{d.torque_limit:g} N m" if d.has_torque_limit else "none (infinite)"
     print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 (reflected), torque limit {limit}")
-    print("  joint map (URDF angles theta -> the model's relative angles, swing-leg sense; "
-          "the stance leg's are negated):")
+    print("  joint map, URDF angle theta -> the model's angle of the joint's child link "
+          "relative to its parent (the swing leg's coordinates; the stance leg's are "
+          "their negatives):")
     for line in d.urdf.describe():
         print(f"    {line}")
     for note in imp.notes:
