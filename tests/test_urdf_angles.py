@@ -193,7 +193,7 @@ def _bad_csv(tmp_path, edit):
 
 @pytest.mark.parametrize("case", ["unknown stance", "knee as stance", "no stance",
                                   "missing column", "other stance", "legs-down convention",
-                                  "no map", "stance without urdf"])
+                                  "knees the other way", "no map", "stance without urdf"])
 def test_bad_import_is_one_line_exit_2(case, tmp_path, capsys):
     src, robot_arg, extra = CSV, str(URDF), ["--angles", "urdf", "--stance", "hip_left"]
     message = {"unknown stance": "--stance: the URDF has no leg joint 'hip_middle'",
@@ -202,6 +202,7 @@ def test_bad_import_is_one_line_exit_2(case, tmp_path, capsys):
                "missing column": "missing column(s) dknee_right",
                "other stance": "say the stance foot (leg of hip_right) moves by",
                "legs-down convention": "angles in another convention",
+               "knees the other way": "not an orbit of RABBIT: the fitted gait misses",
                "no map": "--angles urdf: the robot RABBIT has no URDF joint map",
                "stance without urdf": "--stance names the stance leg of --angles urdf"}[case]
     if case == "unknown stance":
@@ -219,6 +220,15 @@ def test_bad_import_is_one_line_exit_2(case, tmp_path, capsys):
         src = _bad_csv(tmp_path, lambda s: "\n".join(",".join(r.split(",")[:11])
                                                      for r in s.splitlines()))
         robot_arg = str(Path(robot("rabbit").description.source).with_suffix(".urdf"))
+    elif case == "knees the other way":     # a knee axis read as -y: no base columns
+        def flip(text):
+            rows = [r.split(",")[:11] for r in text.splitlines()]
+            knees = [i for i, h in enumerate(rows[0]) if "knee" in h]
+            for r in rows[1:]:
+                for i in knees:
+                    r[i] = repr(-float(r[i]))
+            return "\n".join(",".join(r) for r in rows)
+        src = _bad_csv(tmp_path, flip)
     elif case == "no map":
         robot_arg = "rabbit"
     elif case == "stance without urdf":
