@@ -20,8 +20,6 @@ continuous along the step, the first node's in [-pi, pi)).
 """
 from __future__ import annotations
 
-import csv
-import io
 from pathlib import Path
 
 import casadi as ca
@@ -29,7 +27,7 @@ import numpy as np
 
 from biped_casadi.files import read_text_file, write_text_atomic
 
-from .nodes import Nodes, nodes_from_arrays
+from .nodes import Nodes, csv_table, nodes_from_arrays
 
 __all__ = ["urdf_columns", "urdf_nodes", "read_urdf_csv", "gait_table", "write_gait_csv",
            "CSV_ANGLES", "require_urdf_map"]
@@ -212,23 +210,10 @@ def read_urdf_csv(path, model, stance, tol: float = 0.05) -> tuple:
     where = f"gait file {path}"
     if path.suffix.lower() != ".csv":
         raise ValueError(f"{where}: a step in URDF angles is a CSV file (.csv)")
-    text = read_text_file(path, "gait file", 50_000_000)
-    rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
-    if not rows:
-        raise ValueError(f"{where} is empty")
-    head = [c.strip() for c in rows[0]]
+    head, a = csv_table(read_text_file(path, "gait file", 50_000_000), where)
     if len(set(head)) != len(head):
         dup = next(c for c in head if head.count(c) > 1)
         raise ValueError(f"{where}: column {dup!r} appears twice in the header")
-    data = []
-    for i, r in enumerate(rows[1:], start=2):
-        if len(r) != len(head):
-            raise ValueError(f"{where}: line {i} has {len(r)} values, the header {len(head)}")
-        try:
-            data.append([float(c) for c in r])
-        except ValueError:
-            raise ValueError(f"{where}: line {i} has a value that is not a number") from None
-    a = np.array(data, dtype=float).reshape(-1, len(head))
     return urdf_nodes(model, {h: a[:, i] for i, h in enumerate(head)}, stance, where, tol)
 
 

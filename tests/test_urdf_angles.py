@@ -34,7 +34,7 @@ from biped_casadi import (SimulationOptions, TimeVaryingController,
 from biped_casadi.control.compiled import CompiledUrdfController, build_library
 from biped_casadi.control.export import c_sources, exported_law
 from biped_casadi.control.export_folder import write_export
-from biped_casadi.model.description import load_description
+from biped_casadi.model.description import builtin_path, load_description
 from biped_casadi.model.urdf import import_urdf
 from gait_opt import Gait, Nodes, import_gait
 from gait_opt.urdf_angles import write_gait_csv
@@ -219,7 +219,7 @@ def test_bad_import_is_one_line_exit_2(case, tmp_path, capsys):
     elif case == "legs-down convention":    # the walker's angles read as RABBIT's zero pose
         src = _bad_csv(tmp_path, lambda s: "\n".join(",".join(r.split(",")[:11])
                                                      for r in s.splitlines()))
-        robot_arg = str(Path(robot("rabbit").description.source).with_suffix(".urdf"))
+        robot_arg = str(builtin_path("rabbit").with_suffix(".urdf"))
     elif case == "knees the other way":     # a knee axis read as -y: no base columns
         def flip(text):
             rows = [r.split(",")[:11] for r in text.splitlines()]
