@@ -86,6 +86,10 @@ def test_the_walker_is_rabbit(tmp_path, capsys):
     assert "hip_left: leg 1 hip, model angle = theta - 3.14159265359 rad" in text
     back = load_description(out)
     assert back == rabbit and back.urdf == d.urdf
+    # without a limit the file says inf, and reads back the same
+    assert main(["robot", "import", str(URDF), "--out", str(out)]) == 0
+    assert "torque_limit = inf" in out.read_text()
+    assert load_description(out).torque_limit == math.inf
 
 
 def test_the_walkers_step_is_the_same_gait_in_toolkit_coordinates(walker_gait, model):
