@@ -19,7 +19,7 @@ import numpy as np
 
 import biped_casadi
 
-from . import eig, export, gait, m1, reproduce, robot, robust, simulate, sweep, terrain
+from . import eig, export, gait, m1, mujoco, reproduce, robot, robust, simulate, sweep, terrain
 from .common import UserError, add_robot, load_model, print_json
 
 __all__ = ["main", "build_parser", "UserError"]
@@ -98,7 +98,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_model)
 
-    for command in (robot, gait, eig, sweep, m1, robust, simulate, terrain, export, reproduce):
+    for command in (robot, gait, eig, sweep, m1, robust, simulate, terrain, export, mujoco,
+                    reproduce):
         command.register(sub)
     return ap
 

@@ -1,0 +1,670 @@
+"""A design walking in MuJoCo: the closed loop of the exported law and MuJoCo's contacts.
+
+Every MuJoCo step (time step dt) the law is called at MuJoCo's state, read in the
+toolkit's coordinates with the current stance leg (:class:`~biped_casadi.mujoco.mjcf.
+Layout`), and its torques are held over the step (MuJoCo's motors clip them at the
+torque limit).  A step of the walk:
+
+- starts at t = 0 from the gait's start (plus a perturbation), the stance foot's sphere
+  on the ground at x = 0 and at rest, or at the previous touchdown;
+- its old stance foot must lift off (lose its contact) before half the step; then the
+  swing foot's first contact with the floor in front of the stance foot (beyond
+  ``model.scuff_zone``) is the touchdown;
+- MuJoCo's contact list after a step holds the contacts of the state it started from: the
+  touchdown's state (q-, dq-) is the first state with the swing foot in contact, before
+  any contact force has acted on it.  The next step's clock tau starts there, the legs
+  are relabelled, and the law's step state is computed from the rigid impact map
+  applied to (q-, dq-) (``step_start='impact'``, the default) or from MuJoCo's own state
+  one time step later (``'contact'``; MuJoCo's soft impact has then barely begun: the
+  virtual-constraint law's phase still runs backwards and the step cannot start).
+
+MuJoCo's impact is not instantaneous: the walk never jumps the state; only the law's
+step constants come from the rigid map.  For legs without knees
+(``model.scuffing_ignored``) the swing foot's collisions are off while it passes the
+stance foot, as the toolkit ignores that scuffing.
+
+A walk ends 'walked' after its steps, or at the first of (:data:`OUTCOMES`): 'fell' (hip
+below the model's fall height, torso past horizontal), 'scuffed' (the old stance foot
+still on the ground at half the step, or the swing foot touching down behind the stance
+foot), 'slipped' (the stance foot's sphere sliding more than ``max_slip`` in a step:
+its centre's travel less the rolling r dphi), 'no_impact' (no touchdown within
+``horizon`` T), the law's own refusals ('singular', 'out_of_range': tau or the phase out
+of the reference's range, or a step that cannot start) and 'diverged'.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..control.design import Design, design_first
+from ..control.output_law import SECTION
+from ..numerics import FastCall
+from ..results import Result, internal, json_safe
+from ..simulation.perturbation import Perturbation
+from .law import LAWS, control_law
+from .mjcf import STIFF, ContactSettings, layout, mjcf, torque_limit_of
+
+__all__ = ["OUTCOMES", "STEP_STARTS", "MujocoStep", "MujocoWalk", "MujocoLoop", "walk",
+           "mujoco_module", "SETTLE", "start_of"]
+
+#: how a walk ends: 'walked', or the reason it stopped
+OUTCOMES = ("walked", "fell", "scuffed", "slipped", "no_impact", "singular", "out_of_range",
+            "diverged")
+#: where each step's law state comes from: the rigid impact map at touchdown, or MuJoCo
+STEP_STARTS = ("impact", "contact")
+#: the speed and period errors, and the worst pre-impact errors, are over the steps after
+#: this many (the transient of a perturbation)
+SETTLE = 10
+_CODES = {1: "singular", 2: "out_of_range", 3: "diverged"}
+
+
+def mujoco_module():
+    """The ``mujoco`` package, imported on first use (it is not needed to import the
+    toolkit).
+
+    Returns
+    -------
+    module
+    """
+    import mujoco
+    return mujoco
+
+
+@dataclass
+class MujocoStep:
+    """One step walked in MuJoCo, from its start to its touchdown.
+
+    Parameters
+    ----------
+    index : int
+        0-based.
+    t_start, t_touchdown : float
+        Time of its start and of its touchdown since the walk began, s.
+    period : float
+        Its duration, s.
+    step_length : float
+        Horizontal distance from the stance foot's touchdown to the swing foot's, m.
+    speed : float
+        step_length / period, m/s.
+    speed_error, period_error : float
+        Relative to the gait's speed and step duration T.
+    qu_error, dqu_error : float
+        q_u - q_u^d(T) and dq_u - dq_u^d(T) at the touchdown state (rad, rad/s).
+    q_minus, dq_minus : list of float
+        The touchdown state in the toolkit's coordinates (before relabelling).
+    peak_commanded, peak_applied : float
+        Largest torque the law asked for, and MuJoCo applied (clipped at the limit), N m.
+    clipped_time : float
+        Time some commanded torque exceeded the limit, s.
+    slip : float
+        How far the stance foot's sphere slid on the floor in single support (after the
+        old stance foot's lift-off, while in contact: its centre's travel less the rolling
+        r dphi), m.
+    liftoff : float
+        tau at which the old stance foot lifted off, s.
+    impact_travel : float
+        How far the stance foot's sphere moved otherwise: from its touchdown to that
+        lift-off (MuJoCo's soft impact stopping it) and while it was off the ground, m.
+    airborne_time : float
+        Time the stance foot spent off the ground in single support (a bounce after the
+        touchdown), s.
+    section : list of float or None
+        (q_u, dq_u) at tau = 0.75 T, the Poincaré section of A^z (interpolated between
+        MuJoCo's steps); None when the touchdown came earlier.
+    section_error : list of float or None
+        Its difference from the gait's (q_u^d, dq_u^d)(0.75 T).
+    """
+
+    index: int
+    t_start: float
+    t_touchdown: float
+    period: float
+    step_length: float
+    speed: float
+    speed_error: float
+    period_error: float
+    qu_error: float
+    dqu_error: float
+    q_minus: list
+    dq_minus: list
+    peak_commanded: float
+    peak_applied: float
+    clipped_time: float
+    slip: float
+    liftoff: float
+    impact_travel: float
+    airborne_time: float
+    section: list | None = None
+    section_error: list | None = None
+
+    def to_dict(self) -> dict:
+        """Every field in JSON types.
+
+        Returns
+        -------
+        dict
+        """
+        return json_safe(asdict(self))
+
+
+@dataclass
+class MujocoWalk(Result):
+    """A walk in MuJoCo.
+
+    Parameters
+    ----------
+    status : str
+        One of :data:`OUTCOMES`; ``success`` means 'walked'.
+    message : str
+        Why the walk stopped, naming the step (empty when it walked).
+    n_steps : int
+        Steps asked for.
+    steps_walked : int
+        Touchdowns reached.
+    fail_step : int
+        0-based index of the step where the walk stopped (``n_steps`` when it walked).
+    speed_error, period_error : float
+        Relative error of the mean speed and the mean step duration over the steps after
+        :data:`SETTLE` (all the steps when there are fewer than 2 SETTLE), NaN with none.
+    worst_qu_error, worst_dqu_error : float
+        Largest ``|q_u - q_u^d(T)|`` and ``|dq_u - dq_u^d(T)|`` at touchdown after
+        step :data:`SETTLE` (NaN with fewer steps).
+    peak_commanded, peak_applied, clipped_time, max_slip : float
+        Over the walk: N m, N m, s, m.
+    settings : dict
+        The MuJoCo settings (:class:`~biped_casadi.mujoco.mjcf.ContactSettings`).
+    design : dict
+        The design's ``to_dict()``.
+    law : str
+        'c' or 'python'.
+    step_start : str
+        'impact' or 'contact'.
+    torque_limit : float
+        The motors' limit, N m.
+    gait : dict
+        The gait's ``T``, ``speed``, ``step_length``, ``qu_T``, ``dqu_T``.
+    steps : list of MujocoStep
+    mujoco_steps : int
+        MuJoCo steps taken.
+    wall_time : float
+        Seconds.
+    t : numpy.ndarray
+        (N,) time of each logged state, s (empty without ``log``).
+    qpos : numpy.ndarray
+        (N, 3 + 2 k) MuJoCo's coordinates.
+    stance : numpy.ndarray
+        (N,) the stance leg, 0 (a) or 1 (b).
+    u : numpy.ndarray
+        (N, nu) the commanded torques, N m.
+    """
+
+    status: str
+    message: str
+    n_steps: int
+    steps_walked: int
+    fail_step: int
+    speed_error: float
+    period_error: float
+    worst_qu_error: float
+    worst_dqu_error: float
+    peak_commanded: float
+    peak_applied: float
+    clipped_time: float
+    max_slip: float
+    settings: dict
+    design: dict
+    law: str
+    step_start: str
+    torque_limit: float
+    gait: dict
+    steps: list
+    mujoco_steps: int
+    wall_time: float
+    t: np.ndarray = internal()
+    qpos: np.ndarray = internal()
+    stance: np.ndarray = internal()
+    u: np.ndarray = internal()
+
+    SUCCESS = ("walked",)
+
+    @property
+    def speeds(self) -> np.ndarray:
+        """Speed of every step, m/s."""
+        return np.array([s.speed for s in self.steps])
+
+    @property
+    def errors(self) -> np.ndarray:
+        """(steps, 2): q_u and dq_u errors at every touchdown."""
+        return np.array([[s.qu_error, s.dqu_error] for s in self.steps]).reshape(-1, 2)
+
+    @property
+    def pre_impact_states(self) -> np.ndarray:
+        """(steps, 2 nq): (q-, dq-) at every touchdown (the toolkit's coordinates)."""
+        return np.array([s.q_minus + s.dq_minus for s in self.steps])
+
+    @property
+    def steps_per_second(self) -> float:
+        """MuJoCo steps per second of wall time (with the law in the loop)."""
+        return self.mujoco_steps / self.wall_time if self.wall_time > 0 else math.nan
+
+
+def _pair(x, minus=None):
+    if x is None:
+        return None
+    if minus is None:
+        return [float(x[0]), float(x[1])]
+    return [float(x[0]) - minus[0], float(x[1]) - minus[1]]
+
+
+class _Log:
+    """Preallocated rows of the walk's log, grown when full."""
+
+    def __init__(self, rows: int, n: int, nu: int, on: bool):
+        self.on, self.k = on, 0
+        rows = rows if on else 0
+        self.t, self.qpos = np.zeros(rows), np.zeros((rows, n))
+        self.stance, self.u = np.zeros(rows, np.int8), np.zeros((rows, nu))
+
+    def add(self, t, qpos, stance, u):
+        if self.k == self.t.size:
+            for name in ("t", "qpos", "stance", "u"):
+                a = getattr(self, name)
+                setattr(self, name, np.concatenate([a, np.zeros_like(a)]))
+        k = self.k
+        self.t[k], self.stance[k] = t, stance
+        self.qpos[k] = qpos
+        self.u[k] = u
+        self.k = k + 1
+
+    def arrays(self):
+        k = self.k
+        return self.t[:k], self.qpos[:k], self.stance[:k], self.u[:k]
+
+
+class MujocoLoop:
+    """The closed loop of one design in MuJoCo, built once and run many times.
+
+    Holds the compiled MuJoCo model and its data, the law and the coordinate map (the
+    caller owns it; runs reuse its buffers, one run at a time).
+
+    Parameters
+    ----------
+    design : Design
+        The design on its gait.
+    settings : ContactSettings
+        MuJoCo's time step, contact, feet and friction (default :data:`STIFF`).
+    law : {'c', 'python'}
+        The exported C law through ctypes, or the same law in Python.
+    torque_limit : float, optional
+        The motors' limit, N m (default the robot's).
+    step_start : {'impact', 'contact'}
+        Where each step's law state comes from (module docstring).
+    max_slip : float
+        A stance foot sliding more than this in a step ends the walk ('slipped'), m.
+    horizon : float
+        A step without touchdown within ``horizon`` T ends the walk ('no_impact').
+
+    Raises
+    ------
+    ValueError
+        Naming the argument: an unknown ``law`` or ``step_start``, settings MuJoCo
+        rejects, a robot without a finite torque limit, a singular design.
+    """
+
+    def __init__(self, design: Design, settings: ContactSettings = STIFF, law: str = "c",
+                 torque_limit: float | None = None, step_start: str = "impact",
+                 max_slip: float = 0.05, horizon: float = 2.0):
+        if not isinstance(design, Design) or design.gait is None:
+            raise ValueError("design: a Design on its gait is needed (Design.tv(gait, M1) "
+                             "or Design.vc(gait))")
+        if law not in LAWS:
+            raise ValueError(f"law must be one of {', '.join(LAWS)}, got {law!r}")
+        if step_start not in STEP_STARTS:
+            raise ValueError(f"step_start must be one of {', '.join(STEP_STARTS)}, got "
+                             f"{step_start!r}")
+        for name, v in (("max_slip", max_slip), ("horizon", horizon)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0 \
+                    or not math.isfinite(v):
+                raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if not isinstance(settings, ContactSettings):
+            raise ValueError(f"settings must be ContactSettings, got {type(settings).__name__}")
+        mujoco = mujoco_module()
+        self.design, self.settings, self.law_name = design, settings, law
+        self.step_start_kind, self.max_slip, self.horizon = step_start, float(max_slip), \
+            float(horizon)
+        self.gait = g = design.gait
+        self.model = model = g.model
+        self.torque_limit = torque_limit_of(model.description, torque_limit)
+        try:
+            self.m = mujoco.MjModel.from_xml_string(mjcf(model, settings, self.torque_limit))
+        except ValueError as e:
+            raise ValueError(f"settings: MuJoCo rejects the model: {str(e).splitlines()[0]}") \
+                from None
+        self.d = mujoco.MjData(self.m)
+        self.layout = layout(model)
+        self.law = control_law(design, law)
+        self._impact = FastCall(model.impact)
+        self.feet = tuple(mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_GEOM, f"foot_{leg}")
+                          for leg in "ab")
+        self.T = float(g.T)
+        self.qu_T, self.dqu_T = float(g.q(self.T)[0]), float(g.dq(self.T)[0])
+        self.fall_height = 0.5625 * model.description.leg_length
+        ts = SECTION * self.T
+        self.x_star = (float(g.q(ts)[0]), float(g.dq(ts)[0]))
+
+    # -------------------------------------------------------------- helpers
+    def gait_record(self) -> dict:
+        """The gait's figures a walk is measured against.
+
+        Returns
+        -------
+        dict
+            ``T``, ``speed``, ``step_length``, ``qu_T``, ``dqu_T``.
+        """
+        g = self.gait
+        return dict(T=self.T, speed=float(g.speed), step_length=float(g.step_length),
+                    qu_T=self.qu_T, dqu_T=self.dqu_T)
+
+    def initial_state(self, q0, dq0) -> tuple:
+        """MuJoCo's (qpos, qvel) of a toolkit state: leg a on the ground at x = 0, at rest.
+
+        Parameters
+        ----------
+        q0, dq0 : array_like
+            The toolkit's state at the start of a step.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+        """
+        return self.layout.from_toolkit(q0, dq0, 0, foot=(0.0, self.settings.foot_radius))
+
+    # ------------------------------------------------------------------ run
+    def run(self, q0, dq0, steps: int = 10, log: bool = False) -> MujocoWalk:
+        """Walk ``steps`` steps from the toolkit state (q0, dq0) at the start of a step.
+
+        Parameters
+        ----------
+        q0, dq0 : array_like
+            The start (the gait's, perturbed), rad and rad/s.
+        steps : int
+            Touchdowns to reach.
+        log : bool
+            Keep every MuJoCo state (for figures and the animation).
+
+        Returns
+        -------
+        MujocoWalk
+        """
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+            raise ValueError(f"steps must be a positive integer, got {steps!r}")
+        mujoco = mujoco_module()
+        m, d, lay, law = self.m, self.d, self.layout, self.law
+        nq = self.model.nq
+        q0 = np.asarray(q0, float).reshape(nq)
+        dq0 = np.asarray(dq0, float).reshape(nq)
+        mujoco.mj_resetData(m, d)
+        qpos, qvel = self.initial_state(q0, dq0)
+        d.qpos[:], d.qvel[:] = qpos, qvel
+        mujoco.mj_forward(m, d)
+        dt, T, U, r = float(m.opt.timestep), self.T, self.torque_limit, self.settings.foot_radius
+        A, G = lay.A, lay.G
+        feet = self.feet
+        ignore_scuff = self.model.scuffing_ignored
+        zone = self.model.scuff_zone
+        fall, kmax_step = self.fall_height, int(math.ceil(self.horizon * T / dt))
+        logbook = _Log(int(steps * 1.2 * T / dt) + 16, m.nq, self.model.nu, log)
+
+        records = []
+        stance, k, k0 = 0, 0, 0
+        start = law.step_start(q0, dq0)
+        status, message = "walked", ""
+        p = start.p
+        if start.problem:
+            status, message = "out_of_range", f"step 1 cannot start: {start.problem}"
+        lifted, liftoff = False, math.nan
+        slip = travel = 0.0
+        airborne = 0
+        x_prev, phi_prev = float(d.geom_xpos[feet[0], 0]), float(q0[0])
+        x_prev_touch = x_prev
+        peak = 0.0
+        clipped = 0
+        section, qu_prev, dqu_prev = None, 0.0, 0.0
+        t_sec = SECTION * T
+        qpos_v, qvel_v, ctrl = d.qpos, d.qvel, d.ctrl
+        t0 = time.perf_counter()
+        while status == "walked" and len(records) < steps:
+            tau = (k - k0) * dt
+            As = A[stance]
+            q = As @ qpos_v[2:]
+            dq = As @ qvel_v[2:]
+            if section is None and tau >= t_sec:      # the Poincaré section tau = 0.75 T
+                w = (t_sec - tau + dt) / dt
+                section = (qu_prev + w * (q[0] - qu_prev), dqu_prev + w * (dq[0] - dqu_prev))
+            qu_prev, dqu_prev = q[0], dq[0]
+            rc, u = law.torque(tau, q, dq, p)
+            if rc:
+                status = _CODES.get(rc, "diverged")
+                message = (f"step {len(records) + 1}: the law returned {rc} ({status}) at tau "
+                           f"= {tau:.4g} s")
+                break
+            umax = max(abs(u.max()), abs(u.min()))
+            if umax > peak:
+                peak = umax
+            if umax > U:
+                clipped += 1
+            ctrl[:] = G[stance] @ u
+            if log:
+                logbook.add(k * dt, qpos_v, stance, u)
+            mujoco.mj_step(m, d)
+            k += 1
+            # ---- the contacts of the state the step started from (k - 1)
+            ncon = d.ncon
+            touch = [False, False]
+            if ncon:
+                c = d.contact
+                for g1, g2 in zip(c.geom1[:ncon], c.geom2[:ncon]):
+                    for leg in (0, 1):
+                        if g1 == feet[leg] or g2 == feet[leg]:
+                            touch[leg] = True
+            sw = 1 - stance
+            # ---- the stance foot's motion (sliding in contact, or travel off the ground)
+            xs, phs = d.geom_xpos[feet[stance], 0], q[0]
+            if touch[stance]:
+                if lifted:
+                    slip += (xs - x_prev) - r * (phs - phi_prev)
+                else:
+                    travel += xs - x_prev
+            else:
+                travel += xs - x_prev
+                airborne += lifted
+            x_prev, phi_prev = xs, phs
+            if not (qpos_v[1] - r > fall and -1.5707963267948966 < qpos_v[2] < 1.5707963267948966):
+                status = "fell"
+                message = (f"step {len(records) + 1}: fell at t = {k * dt:.4g} s (hip "
+                           f"{qpos_v[1] - r:.3g} m above the feet' level, torso "
+                           f"{qpos_v[2]:.3g} rad)")
+                if not np.all(np.isfinite(qpos_v)):
+                    status, message = "diverged", f"step {len(records) + 1}: MuJoCo's state " \
+                                                  "is not finite"
+                break
+            if not lifted:
+                if not touch[sw]:
+                    lifted, liftoff = True, tau
+                    if ignore_scuff:
+                        m.geom_contype[feet[sw]] = 0
+                elif tau > 0.5 * T:
+                    status = "scuffed"
+                    message = (f"step {len(records) + 1}: the old stance foot is still on the "
+                               f"ground at half the step (tau = {tau:.4g} s)")
+                    break
+            else:
+                if ignore_scuff and m.geom_contype[feet[sw]] == 0 and \
+                        d.geom_xpos[feet[sw], 0] - d.geom_xpos[feet[stance], 0] > zone:
+                    m.geom_contype[feet[sw]] = 1
+                if touch[sw]:
+                    x_sw, x_st = float(d.geom_xpos[feet[sw], 0]), float(d.geom_xpos[feet[stance], 0])
+                    if x_sw - x_st <= zone:
+                        status = "scuffed"
+                        message = (f"step {len(records) + 1}: the swing foot touched the ground "
+                                   f"{x_st - x_sw:.3g} m behind the stance foot at tau = "
+                                   f"{tau:.4g} s")
+                        break
+                    # ---- touchdown at the state of iteration k - 1: (q, dq)
+                    period = (k - 1 - k0) * dt
+                    length = x_sw - x_prev_touch
+                    g = self.gait
+                    speed = length / period
+                    records.append(MujocoStep(
+                        index=len(records), t_start=k0 * dt, t_touchdown=(k - 1) * dt,
+                        period=period, step_length=length, speed=speed,
+                        speed_error=speed / float(g.speed) - 1.0, period_error=period / T - 1.0,
+                        qu_error=float(q[0]) - self.qu_T, dqu_error=float(dq[0]) - self.dqu_T,
+                        q_minus=q.tolist(), dq_minus=dq.tolist(), peak_commanded=peak,
+                        peak_applied=min(peak, U), clipped_time=clipped * dt, slip=slip,
+                        liftoff=liftoff, impact_travel=travel,
+                        airborne_time=airborne * dt, section=_pair(section),
+                        section_error=_pair(section, self.x_star)))
+                    if abs(slip) > self.max_slip:
+                        status = "slipped"
+                        message = (f"step {len(records)}: the stance foot slid {slip:.3g} m "
+                                   f"(more than {self.max_slip:g} m)")
+                        break
+                    if not np.all(np.isfinite(qpos_v)):
+                        status, message = "diverged", f"step {len(records)}: MuJoCo's state " \
+                                                      "is not finite"
+                        break
+                    # ---- the next step: relabel, its law state
+                    x_prev_touch, x_prev = x_sw, x_sw
+                    phi_prev = float(np.sum(q))          # the swing foot's link angle
+                    stance, k0 = sw, k - 1
+                    if ignore_scuff:
+                        m.geom_contype[feet[stance]] = 1
+                    lifted, liftoff, peak, clipped = False, math.nan, 0.0, 0
+                    slip = travel = 0.0
+                    airborne, section = 0, None
+                    if len(records) == steps:
+                        break
+                    if self.step_start_kind == "impact":
+                        qp, dqp = self._impact(q, dq)
+                        start = law.step_start(qp.ravel(), dqp.ravel())
+                    else:
+                        start = law.step_start(A[stance] @ qpos_v[2:], A[stance] @ qvel_v[2:])
+                    p = start.p
+                    if start.problem:
+                        status = "out_of_range"
+                        message = f"step {len(records) + 1} cannot start: {start.problem}"
+                        break
+                    continue
+            if k - k0 > kmax_step:
+                status = "no_impact"
+                message = (f"step {len(records) + 1}: no touchdown within {self.horizon:g} T")
+                break
+        wall = time.perf_counter() - t0
+        if ignore_scuff:
+            for f in feet:
+                m.geom_contype[f] = 1
+        return self._result(records, steps, status, message, k, wall, logbook)
+
+    def _result(self, records, steps, status, message, k, wall, logbook) -> MujocoWalk:
+        n = len(records)
+        after = records[SETTLE:] if n > 2 * SETTLE else records
+        g = self.gait
+        if after:
+            speed = sum(s.step_length for s in after) / sum(s.period for s in after)
+            speed_err = speed / float(g.speed) - 1.0
+            period_err = float(np.mean([s.period for s in after])) / self.T - 1.0
+        else:
+            speed_err = period_err = math.nan
+        late = records[SETTLE:]
+        worst_q = max((abs(s.qu_error) for s in late), default=math.nan)
+        worst_dq = max((abs(s.dqu_error) for s in late), default=math.nan)
+        t, qpos, stance, u = logbook.arrays()
+        return MujocoWalk(
+            status=status, message=message, n_steps=int(steps), steps_walked=n,
+            fail_step=n if status != "walked" else int(steps), speed_error=speed_err,
+            period_error=period_err, worst_qu_error=worst_q, worst_dqu_error=worst_dq,
+            peak_commanded=max((s.peak_commanded for s in records), default=0.0),
+            peak_applied=max((s.peak_applied for s in records), default=0.0),
+            clipped_time=sum(s.clipped_time for s in records),
+            max_slip=max((abs(s.slip) for s in records), default=0.0),
+            settings=self.settings.to_dict(), design=self.design.to_dict(), law=self.law_name,
+            step_start=self.step_start_kind, torque_limit=self.torque_limit,
+            gait=self.gait_record(), steps=records, mujoco_steps=int(k), wall_time=wall,
+            t=t.copy(), qpos=qpos.copy(), stance=stance.copy(), u=u.copy())
+
+
+@design_first
+def walk(design: Design, steps: int = 10, perturbation=None, settings: ContactSettings = STIFF,
+         law: str = "c", step_start: str = "impact", torque_limit: float | None = None,
+         max_slip: float = 0.05, horizon: float = 2.0, log: bool = False) -> MujocoWalk:
+    """Walk a design in MuJoCo (module docstring).
+
+    Parameters
+    ----------
+    design : Design
+        The design on its gait (``walk(gait, M1_or_None, ...)`` works too).
+    steps : int
+        Touchdowns to reach.
+    perturbation : Perturbation or tuple, optional
+        Added to the gait's start: a :class:`~biped_casadi.Perturbation`, or (q error, dq
+        error) on every joint (rad, rad/s); default none.
+    settings : ContactSettings
+        Time step, contact, feet and friction (default :data:`~biped_casadi.mujoco.STIFF`).
+    law : {'c', 'python'}
+        The exported C law (compiled once and cached) or the same law in Python.
+    step_start : {'impact', 'contact'}
+        Each step's law state from the rigid impact map at touchdown, or from MuJoCo.
+    torque_limit : float, optional
+        The motors' limit, N m (default the robot's).
+    max_slip : float
+        Slip of the stance foot in a step that ends the walk, m.
+    horizon : float
+        Steps longer than ``horizon`` T end the walk.
+    log : bool
+        Keep every MuJoCo state (``t``, ``qpos``, ``stance``, ``u``).
+
+    Returns
+    -------
+    MujocoWalk
+
+    Raises
+    ------
+    ValueError
+        Naming the argument.
+    """
+    loop = MujocoLoop(design, settings, law, torque_limit, step_start, max_slip, horizon)
+    q0, dq0 = start_of(design.gait, perturbation)
+    return loop.run(q0, dq0, steps, log)
+
+
+def start_of(gait, perturbation=None) -> tuple:
+    """The gait's start plus a perturbation.
+
+    Parameters
+    ----------
+    gait : Reference
+        The gait.
+    perturbation : Perturbation, tuple of two floats, or None
+        (q error, dq error) on every joint, or per joint as a Perturbation.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        (q0, dq0).
+    """
+    nq = gait.model.nq
+    if perturbation is None:
+        return np.array(gait.q(0.0), float), np.array(gait.dq(0.0), float)
+    if not isinstance(perturbation, Perturbation):
+        try:
+            a, b = perturbation
+        except (TypeError, ValueError):
+            raise ValueError("perturbation must be a Perturbation or (q error, dq error), got "
+                             f"{perturbation!r}") from None
+        perturbation = Perturbation.uniform(nq, a, b)
+    return perturbation.initial_state(gait)
+
