@@ -59,6 +59,7 @@ STEP_STARTS = ("impact", "contact")
 #: this many (the transient of a perturbation)
 SETTLE = 10
 _CODES = {1: "singular", 2: "out_of_range", 3: "diverged"}
+_HALF_PI = math.pi / 2
 
 
 def mujoco_module():
@@ -193,8 +194,8 @@ class MujocoWalk(Result):
         Seconds.
     t : numpy.ndarray
         (N,) time of each logged state, s (empty without ``log``).
-    qpos : numpy.ndarray
-        (N, 3 + 2 k) MuJoCo's coordinates.
+    qpos, qvel : numpy.ndarray
+        (N, 3 + 2 k) MuJoCo's coordinates and velocities.
     stance : numpy.ndarray
         (N,) the stance leg, 0 (a) or 1 (b).
     u : numpy.ndarray
@@ -225,6 +226,7 @@ class MujocoWalk(Result):
     wall_time: float
     t: np.ndarray = internal()
     qpos: np.ndarray = internal()
+    qvel: np.ndarray = internal()
     stance: np.ndarray = internal()
     u: np.ndarray = internal()
 
@@ -265,23 +267,24 @@ class _Log:
     def __init__(self, rows: int, n: int, nu: int, on: bool):
         self.on, self.k = on, 0
         rows = rows if on else 0
-        self.t, self.qpos = np.zeros(rows), np.zeros((rows, n))
+        self.t, self.qpos, self.qvel = np.zeros(rows), np.zeros((rows, n)), np.zeros((rows, n))
         self.stance, self.u = np.zeros(rows, np.int8), np.zeros((rows, nu))
 
-    def add(self, t, qpos, stance, u):
+    def add(self, t, qpos, qvel, stance, u):
         if self.k == self.t.size:
-            for name in ("t", "qpos", "stance", "u"):
+            for name in ("t", "qpos", "qvel", "stance", "u"):
                 a = getattr(self, name)
                 setattr(self, name, np.concatenate([a, np.zeros_like(a)]))
         k = self.k
         self.t[k], self.stance[k] = t, stance
         self.qpos[k] = qpos
+        self.qvel[k] = qvel
         self.u[k] = u
         self.k = k + 1
 
     def arrays(self):
         k = self.k
-        return self.t[:k], self.qpos[:k], self.stance[:k], self.u[:k]
+        return self.t[:k], self.qpos[:k], self.qvel[:k], self.stance[:k], self.u[:k]
 
 
 class MujocoLoop:
@@ -402,174 +405,30 @@ class MujocoLoop:
         if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         mujoco = mujoco_module()
-        m, d, lay, law = self.m, self.d, self.layout, self.law
-        nq = self.model.nq
+        m, d, nq = self.m, self.d, self.model.nq
         q0 = np.asarray(q0, float).reshape(nq)
         dq0 = np.asarray(dq0, float).reshape(nq)
         mujoco.mj_resetData(m, d)
-        qpos, qvel = self.initial_state(q0, dq0)
-        d.qpos[:], d.qvel[:] = qpos, qvel
+        d.qpos[:], d.qvel[:] = self.initial_state(q0, dq0)
         mujoco.mj_forward(m, d)
-        dt, T, U, r = float(m.opt.timestep), self.T, self.torque_limit, self.settings.foot_radius
-        A, G = lay.A, lay.G
-        feet = self.feet
-        ignore_scuff = self.model.scuffing_ignored
-        zone = self.model.scuff_zone
-        fall, kmax_step = self.fall_height, int(math.ceil(self.horizon * T / dt))
-        logbook = _Log(int(steps * 1.2 * T / dt) + 16, m.nq, self.model.nu, log)
-
-        records = []
-        stance, k, k0 = 0, 0, 0
-        start = law.step_start(q0, dq0)
-        status, message = "walked", ""
-        p = start.p
-        if start.problem:
-            status, message = "out_of_range", f"step 1 cannot start: {start.problem}"
-        lifted, liftoff = False, math.nan
-        slip = travel = 0.0
-        airborne = 0
-        x_prev, phi_prev = float(d.geom_xpos[feet[0], 0]), float(q0[0])
-        x_prev_touch = x_prev
-        peak = 0.0
-        clipped = 0
-        section, qu_prev, dqu_prev = None, 0.0, 0.0
-        t_sec = SECTION * T
-        qpos_v, qvel_v, ctrl = d.qpos, d.qvel, d.ctrl
+        run = _Run(self, q0, dq0, int(steps), log)
+        step = mujoco.mj_step
         t0 = time.perf_counter()
-        while status == "walked" and len(records) < steps:
-            tau = (k - k0) * dt
-            As = A[stance]
-            q = As @ qpos_v[2:]
-            dq = As @ qvel_v[2:]
-            if section is None and tau >= t_sec:      # the Poincaré section tau = 0.75 T
-                w = (t_sec - tau + dt) / dt
-                section = (qu_prev + w * (q[0] - qu_prev), dqu_prev + w * (dq[0] - dqu_prev))
-            qu_prev, dqu_prev = q[0], dq[0]
-            rc, u = law.torque(tau, q, dq, p)
-            if rc:
-                status = _CODES.get(rc, "diverged")
-                message = (f"step {len(records) + 1}: the law returned {rc} ({status}) at tau "
-                           f"= {tau:.4g} s")
-                break
-            umax = max(abs(u.max()), abs(u.min()))
-            if umax > peak:
-                peak = umax
-            if umax > U:
-                clipped += 1
-            ctrl[:] = G[stance] @ u
-            if log:
-                logbook.add(k * dt, qpos_v, stance, u)
-            mujoco.mj_step(m, d)
-            k += 1
-            # ---- the contacts of the state the step started from (k - 1)
-            ncon = d.ncon
-            touch = [False, False]
-            if ncon:
-                c = d.contact
-                for g1, g2 in zip(c.geom1[:ncon], c.geom2[:ncon]):
-                    for leg in (0, 1):
-                        if g1 == feet[leg] or g2 == feet[leg]:
-                            touch[leg] = True
-            sw = 1 - stance
-            # ---- the stance foot's motion (sliding in contact, or travel off the ground)
-            xs, phs = d.geom_xpos[feet[stance], 0], q[0]
-            if touch[stance]:
-                if lifted:
-                    slip += (xs - x_prev) - r * (phs - phi_prev)
-                else:
-                    travel += xs - x_prev
-            else:
-                travel += xs - x_prev
-                airborne += lifted
-            x_prev, phi_prev = xs, phs
-            if not (qpos_v[1] - r > fall and -1.5707963267948966 < qpos_v[2] < 1.5707963267948966):
-                status = "fell"
-                message = (f"step {len(records) + 1}: fell at t = {k * dt:.4g} s (hip "
-                           f"{qpos_v[1] - r:.3g} m above the feet' level, torso "
-                           f"{qpos_v[2]:.3g} rad)")
-                if not np.all(np.isfinite(qpos_v)):
-                    status, message = "diverged", f"step {len(records) + 1}: MuJoCo's state " \
-                                                  "is not finite"
-                break
-            if not lifted:
-                if not touch[sw]:
-                    lifted, liftoff = True, tau
-                    if ignore_scuff:
-                        m.geom_contype[feet[sw]] = 0
-                elif tau > 0.5 * T:
-                    status = "scuffed"
-                    message = (f"step {len(records) + 1}: the old stance foot is still on the "
-                               f"ground at half the step (tau = {tau:.4g} s)")
+        try:
+            while run.status == "walked" and len(run.records) < steps:
+                if not run.control():
                     break
-            else:
-                if ignore_scuff and m.geom_contype[feet[sw]] == 0 and \
-                        d.geom_xpos[feet[sw], 0] - d.geom_xpos[feet[stance], 0] > zone:
-                    m.geom_contype[feet[sw]] = 1
-                if touch[sw]:
-                    x_sw, x_st = float(d.geom_xpos[feet[sw], 0]), float(d.geom_xpos[feet[stance], 0])
-                    if x_sw - x_st <= zone:
-                        status = "scuffed"
-                        message = (f"step {len(records) + 1}: the swing foot touched the ground "
-                                   f"{x_st - x_sw:.3g} m behind the stance foot at tau = "
-                                   f"{tau:.4g} s")
-                        break
-                    # ---- touchdown at the state of iteration k - 1: (q, dq)
-                    period = (k - 1 - k0) * dt
-                    length = x_sw - x_prev_touch
-                    g = self.gait
-                    speed = length / period
-                    records.append(MujocoStep(
-                        index=len(records), t_start=k0 * dt, t_touchdown=(k - 1) * dt,
-                        period=period, step_length=length, speed=speed,
-                        speed_error=speed / float(g.speed) - 1.0, period_error=period / T - 1.0,
-                        qu_error=float(q[0]) - self.qu_T, dqu_error=float(dq[0]) - self.dqu_T,
-                        q_minus=q.tolist(), dq_minus=dq.tolist(), peak_commanded=peak,
-                        peak_applied=min(peak, U), clipped_time=clipped * dt, slip=slip,
-                        liftoff=liftoff, impact_travel=travel,
-                        airborne_time=airborne * dt, section=_pair(section),
-                        section_error=_pair(section, self.x_star)))
-                    if abs(slip) > self.max_slip:
-                        status = "slipped"
-                        message = (f"step {len(records)}: the stance foot slid {slip:.3g} m "
-                                   f"(more than {self.max_slip:g} m)")
-                        break
-                    if not np.all(np.isfinite(qpos_v)):
-                        status, message = "diverged", f"step {len(records)}: MuJoCo's state " \
-                                                      "is not finite"
-                        break
-                    # ---- the next step: relabel, its law state
-                    x_prev_touch, x_prev = x_sw, x_sw
-                    phi_prev = float(np.sum(q))          # the swing foot's link angle
-                    stance, k0 = sw, k - 1
-                    if ignore_scuff:
-                        m.geom_contype[feet[stance]] = 1
-                    lifted, liftoff, peak, clipped = False, math.nan, 0.0, 0
-                    slip = travel = 0.0
-                    airborne, section = 0, None
-                    if len(records) == steps:
-                        break
-                    if self.step_start_kind == "impact":
-                        qp, dqp = self._impact(q, dq)
-                        start = law.step_start(qp.ravel(), dqp.ravel())
-                    else:
-                        start = law.step_start(A[stance] @ qpos_v[2:], A[stance] @ qvel_v[2:])
-                    p = start.p
-                    if start.problem:
-                        status = "out_of_range"
-                        message = f"step {len(records) + 1} cannot start: {start.problem}"
-                        break
-                    continue
-            if k - k0 > kmax_step:
-                status = "no_impact"
-                message = (f"step {len(records) + 1}: no touchdown within {self.horizon:g} T")
-                break
-        wall = time.perf_counter() - t0
-        if ignore_scuff:
-            for f in feet:
-                m.geom_contype[f] = 1
-        return self._result(records, steps, status, message, k, wall, logbook)
+                step(m, d)
+                run.k += 1
+                run.advance()
+        finally:
+            if self.model.scuffing_ignored:
+                for f in self.feet:
+                    m.geom_contype[f] = 1
+        return self._result(run, time.perf_counter() - t0)
 
-    def _result(self, records, steps, status, message, k, wall, logbook) -> MujocoWalk:
+    def _result(self, run, wall) -> MujocoWalk:
+        records, steps, status = run.records, run.steps, run.status
         n = len(records)
         after = records[SETTLE:] if n > 2 * SETTLE else records
         g = self.gait
@@ -582,10 +441,10 @@ class MujocoLoop:
         late = records[SETTLE:]
         worst_q = max((abs(s.qu_error) for s in late), default=math.nan)
         worst_dq = max((abs(s.dqu_error) for s in late), default=math.nan)
-        t, qpos, stance, u = logbook.arrays()
+        t, qpos, qvel, stance, u = run.log.arrays()
         return MujocoWalk(
-            status=status, message=message, n_steps=int(steps), steps_walked=n,
-            fail_step=n if status != "walked" else int(steps), speed_error=speed_err,
+            status=status, message=run.message, n_steps=steps, steps_walked=n,
+            fail_step=n if status != "walked" else steps, speed_error=speed_err,
             period_error=period_err, worst_qu_error=worst_q, worst_dqu_error=worst_dq,
             peak_commanded=max((s.peak_commanded for s in records), default=0.0),
             peak_applied=max((s.peak_applied for s in records), default=0.0),
@@ -593,8 +452,173 @@ class MujocoLoop:
             max_slip=max((abs(s.slip) for s in records), default=0.0),
             settings=self.settings.to_dict(), design=self.design.to_dict(), law=self.law_name,
             step_start=self.step_start_kind, torque_limit=self.torque_limit,
-            gait=self.gait_record(), steps=records, mujoco_steps=int(k), wall_time=wall,
-            t=t.copy(), qpos=qpos.copy(), stance=stance.copy(), u=u.copy())
+            gait=self.gait_record(), steps=records, mujoco_steps=int(run.k), wall_time=wall,
+            t=t.copy(), qpos=qpos.copy(), qvel=qvel.copy(), stance=stance.copy(), u=u.copy())
+
+
+class _Run:
+    """The bookkeeping of one walk: the law's state, the step's clock and contacts, the
+    records (one MuJoCo step at a time: :meth:`control` before it, :meth:`advance`
+    after)."""
+
+    def __init__(self, loop: MujocoLoop, q0, dq0, steps: int, log: bool):
+        self.loop, self.steps = loop, steps
+        m, d = loop.m, loop.d
+        self.m, self.d, self.feet = m, d, loop.feet
+        self.dt, self.T, self.U = float(m.opt.timestep), loop.T, loop.torque_limit
+        self.r = loop.settings.foot_radius
+        self.A, self.G = loop.layout.A, loop.layout.G
+        self.t_sec = SECTION * loop.T
+        self.kmax = int(math.ceil(loop.horizon * loop.T / self.dt))
+        self.ignore_scuff = loop.model.scuffing_ignored
+        self.zone = loop.model.scuff_zone
+        self.log = _Log(int(steps * 1.2 * loop.T / self.dt) + 16, m.nq, loop.model.nu, log)
+        self.logging = log
+        self.records, self.status, self.message = [], "walked", ""
+        self.stance, self.k, self.k0 = 0, 0, 0
+        self.x_prev, self.phi_prev = float(d.geom_xpos[self.feet[0], 0]), float(q0[0])
+        self.x_touch = self.x_prev
+        self._new_step()
+        start = loop.law.step_start(q0, dq0)
+        self.p = start.p
+        if start.problem:
+            self.stop("out_of_range", f"step 1 cannot start: {start.problem}")
+
+    def _new_step(self):
+        self.lifted, self.liftoff = False, math.nan
+        self.slip = self.travel = self.peak = 0.0
+        self.airborne = self.clipped = 0
+        self.section, self.qu_prev, self.dqu_prev = None, 0.0, 0.0
+
+    def stop(self, status: str, message: str):
+        self.status, self.message = status, message
+
+    def control(self) -> bool:
+        """The law's torques at MuJoCo's state into ``ctrl``; False when it refuses."""
+        d = self.d
+        tau = (self.k - self.k0) * self.dt
+        As = self.A[self.stance]
+        q = self.q = As @ d.qpos[2:]
+        dq = self.dq = As @ d.qvel[2:]
+        if self.section is None and tau >= self.t_sec:     # the Poincaré section 0.75 T
+            w = (self.t_sec - tau + self.dt) / self.dt
+            self.section = (self.qu_prev + w * (q[0] - self.qu_prev),
+                            self.dqu_prev + w * (dq[0] - self.dqu_prev))
+        self.qu_prev, self.dqu_prev = q[0], dq[0]
+        rc, u = self.loop.law.torque(tau, q, dq, self.p)
+        if rc:
+            status = _CODES.get(rc, "diverged")
+            self.stop(status, f"step {len(self.records) + 1}: the law returned {rc} "
+                              f"({status}) at tau = {tau:.4g} s")
+            return False
+        umax = max(u.max(), -u.min())
+        if umax > self.peak:
+            self.peak = umax
+        if umax > self.U:
+            self.clipped += 1
+        d.ctrl[:] = self.G[self.stance] @ u
+        if self.logging:
+            self.log.add(self.k * self.dt, d.qpos, d.qvel, self.stance, u)
+        return True
+
+    def _touching(self):
+        """Which feet touch the floor in MuJoCo's contacts (of the state the last step
+        started from)."""
+        d, feet = self.d, self.feet
+        touch = [False, False]
+        n = d.ncon
+        if n:
+            c = d.contact
+            for g1, g2 in zip(c.geom1[:n], c.geom2[:n]):
+                for leg in (0, 1):
+                    if g1 == feet[leg] or g2 == feet[leg]:
+                        touch[leg] = True
+        return touch
+
+    def advance(self):
+        """After a MuJoCo step: the stance foot's motion, a fall, the lift-off, the
+        touchdown, the horizon."""
+        d, feet, st = self.d, self.feet, self.stance
+        sw = 1 - st
+        touch = self._touching()
+        xs, phs = d.geom_xpos[feet[st], 0], self.q[0]
+        if touch[st] and self.lifted:                   # sliding in single support
+            self.slip += (xs - self.x_prev) - self.r * (phs - self.phi_prev)
+        else:                                           # the impact, or a bounce
+            self.travel += xs - self.x_prev
+            self.airborne += self.lifted
+        self.x_prev, self.phi_prev = xs, phs
+        qp = d.qpos
+        n = len(self.records) + 1
+        if not (qp[1] - self.r > self.loop.fall_height and -_HALF_PI < qp[2] < _HALF_PI):
+            if not np.all(np.isfinite(qp)):
+                return self.stop("diverged", f"step {n}: MuJoCo's state is not finite")
+            return self.stop("fell", f"step {n}: fell at t = {self.k * self.dt:.4g} s (hip "
+                                     f"{qp[1] - self.r:.3g} m above the feet' level, torso "
+                                     f"{qp[2]:.3g} rad)")
+        tau = (self.k - 1 - self.k0) * self.dt
+        if not self.lifted:
+            if not touch[sw]:
+                self.lifted, self.liftoff = True, tau
+                if self.ignore_scuff:
+                    self.m.geom_contype[feet[sw]] = 0
+            elif tau > 0.5 * self.T:
+                self.stop("scuffed", f"step {n}: the old stance foot is still on the ground "
+                                     f"at half the step (tau = {tau:.4g} s)")
+        else:
+            x_sw, x_st = float(d.geom_xpos[feet[sw], 0]), float(d.geom_xpos[feet[st], 0])
+            if self.ignore_scuff and self.m.geom_contype[feet[sw]] == 0 \
+                    and x_sw - x_st > self.zone:
+                self.m.geom_contype[feet[sw]] = 1
+            if touch[sw]:
+                if x_sw - x_st <= self.zone:
+                    return self.stop("scuffed", f"step {n}: the swing foot touched the ground "
+                                                f"{x_st - x_sw:.3g} m behind the stance foot "
+                                                f"at tau = {tau:.4g} s")
+                return self._touchdown(x_sw, x_st, tau)
+        if self.status == "walked" and self.k - self.k0 > self.kmax:
+            self.stop("no_impact", f"step {n}: no touchdown within {self.loop.horizon:g} T")
+
+    def _touchdown(self, x_sw, x_st, tau):
+        """The touchdown at the state the last MuJoCo step started from (q, dq): record
+        the step, relabel the legs, start the next step's law."""
+        loop, q, dq, g = self.loop, self.q, self.dq, self.loop.gait
+        length = x_sw - self.x_touch
+        speed = length / tau
+        self.records.append(MujocoStep(
+            index=len(self.records), t_start=self.k0 * self.dt,
+            t_touchdown=(self.k - 1) * self.dt, period=tau, step_length=length, speed=speed,
+            speed_error=speed / float(g.speed) - 1.0, period_error=tau / self.T - 1.0,
+            qu_error=float(q[0]) - loop.qu_T, dqu_error=float(dq[0]) - loop.dqu_T,
+            q_minus=q.tolist(), dq_minus=dq.tolist(), peak_commanded=float(self.peak),
+            peak_applied=float(min(self.peak, self.U)), clipped_time=self.clipped * self.dt,
+            slip=float(self.slip), liftoff=self.liftoff, impact_travel=float(self.travel),
+            airborne_time=self.airborne * self.dt, section=_pair(self.section),
+            section_error=_pair(self.section, loop.x_star)))
+        n = len(self.records)
+        if abs(self.slip) > loop.max_slip:
+            return self.stop("slipped", f"step {n}: the stance foot slid {self.slip:.3g} m "
+                                        f"(more than {loop.max_slip:g} m)")
+        if not np.all(np.isfinite(self.d.qpos)):
+            return self.stop("diverged", f"step {n}: MuJoCo's state is not finite")
+        self.x_touch, self.x_prev = x_sw, x_sw
+        self.phi_prev = float(np.sum(q))            # the new stance leg's lowest link
+        self.stance, self.k0 = 1 - self.stance, self.k - 1
+        if self.ignore_scuff:
+            self.m.geom_contype[self.feet[self.stance]] = 1
+        self._new_step()
+        if n == self.steps:
+            return None
+        if loop.step_start_kind == "impact":
+            qp, dqp = loop._impact(q, dq)
+            start = loop.law.step_start(qp.ravel(), dqp.ravel())
+        else:
+            As = self.A[self.stance]
+            start = loop.law.step_start(As @ self.d.qpos[2:], As @ self.d.qvel[2:])
+        self.p = start.p
+        if start.problem:
+            self.stop("out_of_range", f"step {n + 1} cannot start: {start.problem}")
+        return None
 
 
 @design_first
