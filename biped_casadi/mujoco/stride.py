@@ -89,6 +89,9 @@ class StrideMap(Result):
         Its eigenvalues (complex as [re, im] in ``to_dict()``).
     max_abs : float
         Their largest modulus.
+    max_abs_spread : float
+        The standard deviation of max|lambda| over 200 bootstrap resamples of the pairs
+        (seeded): how well the rollouts determine it.
     fixed_point : list of float
         The fit's fixed point (I - Lambda)^-1 c, (q_u, dq_u).
     residual : list of float
@@ -114,6 +117,7 @@ class StrideMap(Result):
     A: list
     eigenvalues: list
     max_abs: float
+    max_abs_spread: float
     fixed_point: list
     residual: list
     relative_residual: float
@@ -263,6 +267,7 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
     if len(X0) < 4 or cycle.status != "ok":
         return StrideMap(status="failed", message="too few steps walked to fit a stride map "
                          f"({cycle.message})", A=nan, eigenvalues=[], max_abs=math.nan,
+                         max_abs_spread=math.nan,
                          fixed_point=nan[0], residual=nan[0], relative_residual=math.nan,
                          pairs=len(X0), directions=directions, fit_steps=fit_steps,
                          size=size.tolist(), failed_rollouts=failed, cycle=cycle)
@@ -276,14 +281,31 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
     ev = np.linalg.eigvals(Lam)
     ev = ev[np.argsort(-np.abs(ev))]
     mx = float(np.max(np.abs(ev)))
+    spread = _bootstrap(X0, X1)
     return StrideMap(
         status="ok",
-        message=(f"MuJoCo's stride map: eigenvalues {_fmt(ev)} (max |lambda| {mx:.3g}) from "
-                 f"{len(X0)} pairs, relative residual {rel:.2g}; {cycle.message}"),
+        message=(f"MuJoCo's stride map: eigenvalues {_fmt(ev)} (max |lambda| {mx:.3g} "
+                 f"+- {spread:.2g}) from {len(X0)} pairs, relative residual {rel:.2g}; "
+                 f"{cycle.message}"),
         A=Lam.tolist(), eigenvalues=[complex(e) for e in ev], max_abs=mx,
+        max_abs_spread=spread,
         fixed_point=xf.tolist(), residual=res.tolist(), relative_residual=rel,
         pairs=int(len(X0)), directions=int(directions), fit_steps=int(fit_steps),
         size=size.tolist(), failed_rollouts=int(failed), cycle=cycle)
+
+
+def _bootstrap(X0, X1, n: int = 200, seed: int = 0) -> float:
+    """Standard deviation of max|lambda| over ``n`` resamples of the pairs."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        i = rng.integers(0, len(X0), len(X0))
+        try:
+            Lam, _, _ = fit_stride_map(X0[i], X1[i])
+        except np.linalg.LinAlgError:
+            continue
+        out.append(np.max(np.abs(np.linalg.eigvals(Lam))))
+    return float(np.std(out)) if out else math.nan
 
 
 def _fmt(ev) -> str:
