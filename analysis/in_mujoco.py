@@ -44,8 +44,10 @@ def exact_eigenvalues(design: Design) -> list:
 
 @dataclass
 class EngineCheck(Result):
-    """One design in MuJoCo at one setting: walks, the largest perturbation it survives,
-    MuJoCo's stride map and the exact eigenvalues.
+    """One design in MuJoCo at one setting, beside the exact analysis.
+
+    Its walks, the largest perturbation it survives, MuJoCo's stride map and the exact
+    eigenvalues.
 
     Parameters
     ----------

@@ -63,8 +63,9 @@ _HALF_PI = math.pi / 2
 
 
 def mujoco_module():
-    """The ``mujoco`` package, imported on first use (it is not needed to import the
-    toolkit).
+    """The ``mujoco`` package, imported on first use.
+
+    It is not needed to import the toolkit.
 
     Returns
     -------
