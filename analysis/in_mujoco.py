@@ -107,7 +107,8 @@ def _brief(w) -> dict:
     return d
 
 
-def largest_scale(loop: MujocoLoop, steps: int = 30, scales=(1, 2, 3, 4, 6, 8)) -> float:
+def largest_scale(loop: MujocoLoop, steps: int = 30, scales=(1, 2, 3, 4, 6, 8),
+                  known: dict | None = None) -> float:
     """The largest scale of the paper's perturbation a loop walks ``steps`` steps from.
 
     Scales are tried in increasing order until one fails.
@@ -120,6 +121,8 @@ def largest_scale(loop: MujocoLoop, steps: int = 30, scales=(1, 2, 3, 4, 6, 8)) 
         Steps to walk.
     scales : sequence of float
         The ladder, increasing.
+    known : dict, optional
+        Scale -> whether a walk from it already walked (not walked again).
 
     Returns
     -------
@@ -128,9 +131,13 @@ def largest_scale(loop: MujocoLoop, steps: int = 30, scales=(1, 2, 3, 4, 6, 8)) 
     """
     best = 0.0
     g = loop.gait
+    known = dict(known or {})
     for s in scales:
-        q0, dq0 = Perturbation.paper(g.model.nq).scaled(float(s)).initial_state(g)
-        if loop.run(q0, dq0, steps).status != "walked":
+        ok = known.get(float(s))
+        if ok is None:
+            q0, dq0 = Perturbation.paper(g.model.nq).scaled(float(s)).initial_state(g)
+            ok = loop.run(q0, dq0, steps).status == "walked"
+        if not ok:
             break
         best = float(s)
     return best
@@ -160,8 +167,8 @@ def engine_check(design: Design, settings: ContactSettings = STIFF, label: str =
     law : {'c', 'python'}
         The law in the loop.
     **stride
-        Options of :func:`~biped_casadi.mujoco.stride_map` (``cycle_steps``,
-        ``directions``, ``size``, ``fit_steps``).
+        Options of :func:`~biped_casadi.mujoco.stride_map` (``directions``, ``size``,
+        ``fit_steps``); its cycle is measured on the walk from the gait.
 
     Returns
     -------
@@ -172,8 +179,8 @@ def engine_check(design: Design, settings: ContactSettings = STIFF, label: str =
     w = loop.run(g.q(0.0), g.dq(0.0), steps)
     q0, dq0 = Perturbation.paper(g.model.nq).scaled(scale).initial_state(g)
     wp = loop.run(q0, dq0, scale_steps)
-    best = largest_scale(loop, scale_steps, scales)
-    sm = stride_map(design, settings, law, loop=loop, **stride)
+    best = largest_scale(loop, scale_steps, scales, {float(scale): wp.status == "walked"})
+    sm = stride_map(design, settings, law, loop=loop, walk=w, **stride)
     ex = exact_eigenvalues(design)
     label = label or design.label()
     msg = (f"{label} ({settings.contact}): {w.status} {w.steps_walked}/{steps} steps, speed "

@@ -219,3 +219,23 @@ def test_done_when_walks_at_stiff_settings(gait):
         assert r.status == "walked", r.message
         assert abs(r.speed_error) < 0.03 and abs(r.period_error) < 0.03
         assert r.worst_qu_error < 0.1 and r.worst_dqu_error < 0.3
+
+
+def test_reproduce_section_from_a_check(gait):
+    """The reproduction's stage task on a small budget: its row, the report's section
+    (table and the sentence on A^z) and the figure."""
+    from analysis.pipeline.mujoco import _row, check_in_mujoco
+    from analysis.reporting.in_mujoco import mujoco_lines
+    from analysis.reporting.plots import mujoco_eigen_plot
+    budget = dict(steps=12, scale_steps=4, scales=(1, 2), directions=4)
+    r = check_in_mujoco(Design.vc(gait), "stiff", "virtual constraints", budget)
+    assert r.success and r.largest_scale == 2.0 and r.stride.status == "ok"
+    assert abs(r.exact_max_abs - abs(r.exact[0])) < 1e-15 and r.exact[1] == 0
+    row = _row("virtual constraints", "stiff", r)
+    json.dumps(row, allow_nan=False)
+    lines = mujoco_lines({"mujoco": {"rows": [row], "budget": budget,
+                                     "settings": {"stiff": STIFF.to_dict()}}})
+    text = "\n".join(lines)
+    assert "## In MuJoCo" in text and "| virtual constraints | stiff | walked 12/12 |" in text
+    assert "the exact A^z is within" in text or "unresolved" in text
+    assert len(mujoco_eigen_plot([row]).axes) == 2

@@ -11,7 +11,8 @@ time section are the exact one and 0).
   spread there (the jitter).  At dt = 2 ms MuJoCo's loop has no clean cycle: touchdowns
   fall on the time grid, and the step durations wander over a dozen time steps.
 - The eigenvalues: rollouts from the gait's start with (q_u, dq_u) moved by ``size`` in
-  ``directions`` directions of the plane, each ``fit_steps`` steps; every pair of
+  ``directions`` directions of the plane (halved while many rollouts fail), each
+  ``fit_steps`` steps; every pair of
   consecutive section states (x_k, x_{k+1}) of the rollouts and of the cycle's walk
   enters one least-squares fit of x_{k+1} = c + Lambda x_k, and the eigenvalues of
   Lambda are MuJoCo's.  Small perturbations fail: below about 1e-3 they are lost in the
@@ -31,7 +32,12 @@ from ..results import Result
 from .mjcf import STIFF, ContactSettings
 from .walk import MujocoLoop
 
-__all__ = ["LimitCycle", "StrideMap", "limit_cycle", "stride_map", "fit_stride_map"]
+__all__ = ["LimitCycle", "StrideMap", "limit_cycle", "stride_map", "fit_stride_map",
+           "HALVINGS"]
+
+#: when more than a quarter of the rollouts fail, the perturbation is halved (up to this
+#: many times): a design with a small basin (a deadbeat one) has little jitter too
+HALVINGS = 3
 
 
 @dataclass
@@ -80,7 +86,9 @@ class StrideMap(Result):
     Parameters
     ----------
     status : str
-        'ok'; 'failed' when too few rollouts walked to fit.
+        'ok'; 'rollouts_failed' when more than a quarter of the rollouts stopped before
+        their steps (the fit then rests on the others, and is doubtful); 'failed' when too
+        few steps were walked to fit.
     message : str
         A summary line.
     A : list
@@ -105,7 +113,8 @@ class StrideMap(Result):
     directions, fit_steps : int
         Rollouts and the steps of each.
     size : list of float
-        The perturbation of (q_u, dq_u) at the start of the rollouts, rad and rad/s.
+        The perturbation of (q_u, dq_u) at the start of the rollouts, rad and rad/s (the
+        one used, after any halving).
     failed_rollouts : int
         Rollouts that stopped before their steps (their pairs up to there are used).
     cycle : LimitCycle
@@ -141,7 +150,7 @@ def _sections(w) -> np.ndarray:
     return np.array(out, float).reshape(-1, 2)
 
 
-def limit_cycle(loop: MujocoLoop, steps: int = 60) -> tuple:
+def limit_cycle(loop: MujocoLoop, steps: int = 60, walk=None) -> tuple:
     """Walk ``steps`` steps from the gait and measure the cycle it settles on.
 
     Parameters
@@ -150,6 +159,9 @@ def limit_cycle(loop: MujocoLoop, steps: int = 60) -> tuple:
         The closed loop.
     steps : int
         Steps to walk (>= 4); the cycle is measured over the second half.
+    walk : MujocoWalk, optional
+        A walk of the loop from the gait's start already made (then nothing is walked
+        and ``steps`` is ignored).
 
     Returns
     -------
@@ -159,7 +171,7 @@ def limit_cycle(loop: MujocoLoop, steps: int = 60) -> tuple:
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 4:
         raise ValueError(f"steps must be an integer >= 4, got {steps!r}")
     g = loop.gait
-    w = loop.run(g.q(0.0), g.dq(0.0), steps)
+    w = walk if walk is not None else loop.run(g.q(0.0), g.dq(0.0), steps)
     X = _sections(w)
     half = X[len(X) // 2:]
     late = w.steps[len(w.steps) // 2:]
@@ -211,7 +223,8 @@ def fit_stride_map(X0, X1) -> tuple:
 @design_first
 def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c",
                cycle_steps: int = 60, directions: int = 16, size=(0.02, 0.2),
-               fit_steps: int = 4, loop: MujocoLoop | None = None) -> StrideMap:
+               fit_steps: int = 4, loop: MujocoLoop | None = None,
+               walk=None) -> StrideMap:
     """MuJoCo's limit cycle and stride-map eigenvalues of a design (module docstring).
 
     Parameters
@@ -228,11 +241,15 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
         Rollouts: directions theta_j = 2 pi j / directions in the (q_u, dq_u) plane.
     size : tuple of float
         (rad, rad/s): the start's q_u moves by size[0] cos theta_j, its dq_u by size[1]
-        sin theta_j.
+        sin theta_j; halved while more than a quarter of the rollouts fail
+        (:data:`HALVINGS` times at most).
     fit_steps : int
         Steps of each rollout (its first ``fit_steps - 1`` pairs enter the fit).
     loop : MujocoLoop, optional
         A loop already built for the design and settings.
+    walk : MujocoWalk, optional
+        A walk of that loop from the gait's start already made: the cycle is measured on
+        it instead of a walk of ``cycle_steps``.
 
     Returns
     -------
@@ -246,22 +263,14 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
         raise ValueError(f"size must be two positive numbers (rad, rad/s), got {size.tolist()}")
     if loop is None:
         loop = MujocoLoop(design, settings, law)
-    cycle, w = limit_cycle(loop, cycle_steps)
-    g = loop.gait
+    cycle, w = limit_cycle(loop, cycle_steps, walk)
     X = _sections(w)
-    pairs0, pairs1 = [X[:-1]], [X[1:]]
-    failed = 0
-    q0, dq0 = np.array(g.q(0.0), float), np.array(g.dq(0.0), float)
-    for j in range(directions):
-        th = 2 * math.pi * j / directions
-        q, dq = q0.copy(), dq0.copy()
-        q[0] += size[0] * math.cos(th)
-        dq[0] += size[1] * math.sin(th)
-        r = loop.run(q, dq, fit_steps)
-        failed += r.status != "walked"
-        Xr = _sections(r)
-        pairs0.append(Xr[:-1])
-        pairs1.append(Xr[1:])
+    for _ in range(HALVINGS + 1):           # smaller perturbations while many fail
+        failed, P0, P1 = _rollouts(loop, size, directions, fit_steps)
+        if failed <= directions // 4:
+            break
+        size = size / 2
+    pairs0, pairs1 = [X[:-1]] + P0, [X[1:]] + P1
     X0, X1 = np.vstack(pairs0), np.vstack(pairs1)
     nan = [[math.nan, math.nan], [math.nan, math.nan]]
     if len(X0) < 4 or cycle.status != "ok":
@@ -282,9 +291,11 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
     ev = ev[np.argsort(-np.abs(ev))]
     mx = float(np.max(np.abs(ev)))
     spread = _bootstrap(X0, X1)
+    bad = failed > directions // 4
     return StrideMap(
-        status="ok",
-        message=(f"MuJoCo's stride map: eigenvalues {_fmt(ev)} (max |lambda| {mx:.3g} "
+        status="rollouts_failed" if bad else "ok",
+        message=(("" if not bad else f"{failed} of {directions} rollouts failed: ")
+                 + f"MuJoCo's stride map: eigenvalues {_fmt(ev)} (max |lambda| {mx:.3g} "
                  f"+- {spread:.2g}) from {len(X0)} pairs, relative residual {rel:.2g}; "
                  f"{cycle.message}"),
         A=Lam.tolist(), eigenvalues=[complex(e) for e in ev], max_abs=mx,
@@ -292,6 +303,25 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
         fixed_point=xf.tolist(), residual=res.tolist(), relative_residual=rel,
         pairs=int(len(X0)), directions=int(directions), fit_steps=int(fit_steps),
         size=size.tolist(), failed_rollouts=int(failed), cycle=cycle)
+
+
+def _rollouts(loop, size, directions, fit_steps) -> tuple:
+    """(failed rollouts, their section states, their successors) from the gait's start
+    moved by ``size`` in ``directions`` directions of the (q_u, dq_u) plane."""
+    g = loop.gait
+    q0, dq0 = np.array(g.q(0.0), float), np.array(g.dq(0.0), float)
+    failed, P0, P1 = 0, [], []
+    for j in range(directions):
+        th = 2 * math.pi * j / directions
+        q, dq = q0.copy(), dq0.copy()
+        q[0] += size[0] * math.cos(th)
+        dq[0] += size[1] * math.sin(th)
+        r = loop.run(q, dq, fit_steps)
+        failed += r.status != "walked"
+        Xr = _sections(r)
+        P0.append(Xr[:-1])
+        P1.append(Xr[1:])
+    return failed, P0, P1
 
 
 def _bootstrap(X0, X1, n: int = 200, seed: int = 0) -> float:

@@ -222,7 +222,8 @@ def mujoco_eigen_plot(rows) -> Figure:
                 Line2D([], [], marker="o", ls="", color="k", label="MuJoCo, stiff"),
                 Line2D([], [], marker="s", ls="", color="k", mfc="none",
                        label="MuJoCo, default contact")]
-    ax.legend(handles=handles, fontsize=7, loc="lower left")
+    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14),
+              ncols=2)
     bx.set_xlabel("step")
     bx.set_ylabel(r"$|\dot q_u - \dot q_u^d(T)|$ at touchdown [rad/s]")
     bx.set_title("error at each touchdown, from the gait (solid: stiff, dashed: default)",
