@@ -16,6 +16,9 @@ Designs: virtual constraints on RABBIT's default gait and the robust design of `
 - The C law in the loop against the Python law in the loop: touchdown times, the largest
   torque difference relative to the peak torque (10 steps).
 - MuJoCo's limit cycle and stride-map eigenvalues beside the exact ones.
+- The floor (the issue's stretch): how far MuJoCo's cycle lies from the gait and how
+  much it jitters, at dt 2, 1 and 0.5 ms, with the touchdown on MuJoCo's time grid and
+  interpolated between time steps.
 
     python benchmarks/bench_mujoco.py [--repeats R] [--no-robust] [--no-save]
 
@@ -37,8 +40,8 @@ import numpy as np
 from analysis.cli import main as biped_main
 from analysis.in_mujoco import exact_eigenvalues
 from biped_casadi import Design, Perturbation, rabbit
-from biped_casadi.mujoco import (MUJOCO_DEFAULT, STIFF, MujocoLoop, mujoco_module,
-                                 stride_map)
+from biped_casadi.mujoco import (MUJOCO_DEFAULT, STIFF, TOUCHDOWNS, ContactSettings,
+                                 MujocoLoop, mujoco_module, stride_map)
 from biped_casadi.results import json_safe
 from gait_opt import Gait, optimize_gait
 
@@ -138,6 +141,30 @@ def eigen(design: Design) -> dict:
     return out
 
 
+def floor(design: Design) -> list:
+    """The stretch: MuJoCo's cycle against the gait (its distance and jitter in dq_u at the
+    section) and its eigenvalues, at dt 2, 1 and 0.5 ms (solref 4 ms), with the touchdown
+    on MuJoCo's time grid and interpolated to where the foot meets the floor."""
+    out = []
+    for dt in (0.002, 0.001, 0.0005):
+        for td in TOUCHDOWNS:
+            loop = MujocoLoop(design, ContactSettings.of("stiff", timestep=dt), touchdown=td)
+            g = design.gait
+            w = loop.run(g.q(0.0), g.dq(0.0), 60)
+            sm = stride_map(design, loop=loop, walk=w)
+            c = sm.cycle
+            out.append(dict(timestep=dt, touchdown=td, status=w.status,
+                            speed_error=w.speed_error, period_error=w.period_error,
+                            section_distance=c.section_distance, jitter=c.jitter,
+                            eigenvalues=sm.eigenvalues, max_abs=sm.max_abs,
+                            max_abs_spread=sm.max_abs_spread,
+                            relative_residual=sm.relative_residual))
+            print(f"  floor dt {1e3 * dt:g} ms, {td}: cycle - gait {np.round(c.section_distance, 4)}"
+                  f", jitter {np.round(c.jitter, 4)}, max|lambda| {sm.max_abs:.3g} +- "
+                  f"{sm.max_abs_spread:.2g} (res {sm.relative_residual:.2g})")
+    return out
+
+
 def _ev(ev) -> str:
     ev = [complex(*e) if isinstance(e, (list, tuple)) else complex(e) for e in ev]
     return "[" + ", ".join(f"{e.real:.3g}" if abs(e.imag) < 1e-12 else
@@ -209,8 +236,20 @@ def main(argv=None):
             run.note(f"{label}: C law against Python law in the loop over {eq['steps']} steps: "
                      f"same touchdowns {eq['same_touchdowns']}, torques differ by at most "
                      f"{eq['max_torque_rel']:.2g} of the peak")
+            fl = floor(design)
+            worst = max(abs(r["section_distance"][1]) + r["jitter"][1] for r in fl
+                        if r["timestep"] == 0.002)
+            run.note(f"{label}, the floor (stretch) at dt 2 ms: MuJoCo's cycle lies "
+                     + ", ".join(f"{r['section_distance'][1]:+.3f} rad/s ({r['touchdown']} "
+                                 f"touchdown, jitter {r['jitter'][1]:.3f})"
+                                 for r in fl if r["timestep"] == 0.002)
+                     + " from the gait's dq_u at 0.75 T; at 1 and 0.5 ms: "
+                     + ", ".join(f"{r['section_distance'][1]:+.3f} (jitter {r['jitter'][1]:.3f})"
+                                 for r in fl if r["timestep"] < 0.002 and r["touchdown"] == "grid")
+                     + f"; the cycle spans up to {worst:.2g} rad/s off the gait at 2 ms")
             run.data[label] = json_safe(dict(speed=sp, walks=walks, c_against_python=eq,
-                                             eigenvalues=ev, design=design.to_dict()))
+                                             eigenvalues=ev, floor=fl,
+                                             design=design.to_dict()))
     return 0
 
 

@@ -239,3 +239,18 @@ def test_reproduce_section_from_a_check(gait):
     assert "## In MuJoCo" in text and "| virtual constraints | stiff | walked 12/12 |" in text
     assert "the exact A^z is within" in text or "unresolved" in text
     assert len(mujoco_eigen_plot([row]).axes) == 2
+
+
+def test_interpolated_touchdown(gait):
+    """The interpolated touchdown lies within one time step before MuJoCo's first state
+    in contact, and its state between the two states around it."""
+    grid = walk(Design.vc(gait), steps=2, log=True)
+    interp = walk(Design.vc(gait), steps=2, log=True, touchdown="interpolated")
+    dt = STIFF.timestep
+    a, b = grid.steps[0], interp.steps[0]
+    assert a.t_touchdown - dt <= b.t_touchdown <= a.t_touchdown
+    k = int(round(a.t_touchdown / dt))
+    lay = layout(gait.model)
+    q_before = lay.to_toolkit(grid.qpos[k - 1], grid.qvel[k - 1], 0)[0]
+    lo, hi = np.minimum(q_before, a.q_minus), np.maximum(q_before, a.q_minus)
+    assert np.all(lo - 1e-12 <= b.q_minus) and np.all(np.array(b.q_minus) <= hi + 1e-12)

@@ -8,7 +8,8 @@ from pathlib import Path
 from biped_casadi import Design, Gains
 from biped_casadi.control.compiled import CompilerError
 from biped_casadi.control.export import exported_law
-from biped_casadi.mujoco import LAWS, SETTLE, STEP_STARTS, MujocoLoop, layout, stride_map
+from biped_casadi.mujoco import (LAWS, SETTLE, STEP_STARTS, TOUCHDOWNS, MujocoLoop, layout,
+                                 stride_map)
 from analysis.in_mujoco import exact_eigenvalues
 from analysis.reporting.plots import mujoco_animation, mujoco_steps_plot, save_figures
 
@@ -67,7 +68,7 @@ def cmd_mujoco(args):
         say("compiling the exported C law (once; kept in the cache) ...")
     try:
         loop = MujocoLoop(design, settings, args.law, args.torque_limit, args.step_start,
-                          args.max_slip)
+                          args.max_slip, touchdown=args.touchdown)
     except CompilerError as e:
         raise UserError(f"--law c: {e} (or use --law python)") from None
     except ValueError as e:
@@ -184,6 +185,9 @@ def register(sub):
     p.add_argument("--step-start", choices=STEP_STARTS, default="impact",
                    help="each step's law state from the rigid impact map at touchdown "
                         "(default) or from MuJoCo's state one time step later")
+    p.add_argument("--touchdown", choices=TOUCHDOWNS, default="grid",
+                   help="the touchdown's time and state: MuJoCo's first state in contact "
+                        "(default), or interpolated to where the swing foot meets the floor")
     add_mujoco_settings(p)
     p.add_argument("--torque-limit", type=float, metavar="U",
                    help="the motors' limit, N m (default the robot's); torques beyond it are "

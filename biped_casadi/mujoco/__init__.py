@@ -9,11 +9,11 @@ from .law import LAWS, compiled_law, control_law
 from .mjcf import (CONTACTS, MIN_INERTIA, MUJOCO_DEFAULT, STIFF, ContactSettings, Layout,
                    floating_base_inertia, layout, mjcf, torque_limit_of)
 from .stride import LimitCycle, StrideMap, fit_stride_map, limit_cycle, stride_map
-from .walk import (OUTCOMES, SETTLE, STEP_STARTS, MujocoLoop, MujocoStep, MujocoWalk,
-                   mujoco_module, start_of, walk)
+from .walk import (OUTCOMES, SETTLE, STEP_STARTS, TOUCHDOWNS, MujocoLoop, MujocoStep,
+                   MujocoWalk, mujoco_module, start_of, walk)
 
 __all__ = ["mjcf", "ContactSettings", "STIFF", "MUJOCO_DEFAULT", "CONTACTS", "MIN_INERTIA",
            "Layout", "layout", "floating_base_inertia", "torque_limit_of", "LAWS",
            "control_law", "compiled_law", "walk", "MujocoLoop", "MujocoWalk", "MujocoStep",
-           "OUTCOMES", "STEP_STARTS", "SETTLE", "start_of", "mujoco_module", "stride_map",
-           "StrideMap", "LimitCycle", "limit_cycle", "fit_stride_map"]
+           "OUTCOMES", "STEP_STARTS", "TOUCHDOWNS", "SETTLE", "start_of", "mujoco_module",
+           "stride_map", "StrideMap", "LimitCycle", "limit_cycle", "fit_stride_map"]

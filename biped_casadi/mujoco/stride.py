@@ -10,9 +10,9 @@ time section are the exact one and 0).
   section state over its second half, and how well the state repeats is said by its
   spread there (the jitter).  At dt = 2 ms MuJoCo's loop has no clean cycle: touchdowns
   fall on the time grid, and the step durations wander over a dozen time steps.
-- The eigenvalues: rollouts from the gait's start with (q_u, dq_u) moved by ``size`` in
-  ``directions`` directions of the plane (halved while many rollouts fail), each
-  ``fit_steps`` steps; every pair of
+- The eigenvalues: rollouts from the gait's start with (q_u, dq_u) moved by ``size`` (by
+  default five times the cycle's jitter, 0.02 to 0.2 rad/s) in ``directions`` directions
+  of the plane (halved while many rollouts fail), each ``fit_steps`` steps; every pair of
   consecutive section states (x_k, x_{k+1}) of the rollouts and of the cycle's walk
   enters one least-squares fit of x_{k+1} = c + Lambda x_k, and the eigenvalues of
   Lambda are MuJoCo's.  Small perturbations fail: below about 1e-3 they are lost in the
@@ -33,11 +33,16 @@ from .mjcf import STIFF, ContactSettings
 from .walk import MujocoLoop
 
 __all__ = ["LimitCycle", "StrideMap", "limit_cycle", "stride_map", "fit_stride_map",
-           "HALVINGS"]
+           "HALVINGS", "JITTER_FACTOR", "SIZE_RANGE"]
 
 #: when more than a quarter of the rollouts fail, the perturbation is halved (up to this
 #: many times): a design with a small basin (a deadbeat one) has little jitter too
 HALVINGS = 3
+#: the default perturbation of dq_u: this many times the cycle's jitter ...
+JITTER_FACTOR = 5.0
+#: ... within this range, rad/s (tiny perturbations are lost in the jitter, large ones
+#: meet the torque limit and the bounce of the touchdown: the map is no longer linear)
+SIZE_RANGE = (0.02, 0.2)
 
 
 @dataclass
@@ -222,7 +227,7 @@ def fit_stride_map(X0, X1) -> tuple:
 
 @design_first
 def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c",
-               cycle_steps: int = 60, directions: int = 16, size=(0.02, 0.2),
+               cycle_steps: int = 60, directions: int = 16, size=None,
                fit_steps: int = 4, loop: MujocoLoop | None = None,
                walk=None) -> StrideMap:
     """MuJoCo's limit cycle and stride-map eigenvalues of a design (module docstring).
@@ -239,10 +244,12 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
         Steps of the walk that finds the cycle.
     directions : int
         Rollouts: directions theta_j = 2 pi j / directions in the (q_u, dq_u) plane.
-    size : tuple of float
+    size : tuple of float, optional
         (rad, rad/s): the start's q_u moves by size[0] cos theta_j, its dq_u by size[1]
         sin theta_j; halved while more than a quarter of the rollouts fail
-        (:data:`HALVINGS` times at most).
+        (:data:`HALVINGS` times at most).  Default: large against the cycle's jitter,
+        dq_u by :data:`JITTER_FACTOR` times its jitter within :data:`SIZE_RANGE`, q_u by
+        a tenth of that (the paper's ratio).
     fit_steps : int
         Steps of each rollout (its first ``fit_steps - 1`` pairs enter the fit).
     loop : MujocoLoop, optional
@@ -258,12 +265,18 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
     for name, v, lo in (("directions", directions, 3), ("fit_steps", fit_steps, 2)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
             raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
-    size = np.asarray(size, float).ravel()
-    if size.shape != (2,) or not np.all(np.isfinite(size)) or np.any(size <= 0):
-        raise ValueError(f"size must be two positive numbers (rad, rad/s), got {size.tolist()}")
+    if size is not None:
+        size = np.asarray(size, float).ravel()
+        if size.shape != (2,) or not np.all(np.isfinite(size)) or np.any(size <= 0):
+            raise ValueError(f"size must be two positive numbers (rad, rad/s), got "
+                             f"{size.tolist()}")
     if loop is None:
         loop = MujocoLoop(design, settings, law)
     cycle, w = limit_cycle(loop, cycle_steps, walk)
+    if size is None:
+        jit = cycle.jitter[1] if math.isfinite(cycle.jitter[1]) else SIZE_RANGE[1]
+        dq = min(max(JITTER_FACTOR * jit, SIZE_RANGE[0]), SIZE_RANGE[1])
+        size = np.array([dq / 10, dq])
     X = _sections(w)
     for _ in range(HALVINGS + 1):           # smaller perturbations while many fail
         failed, P0, P1 = _rollouts(loop, size, directions, fit_steps)

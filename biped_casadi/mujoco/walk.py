@@ -47,7 +47,7 @@ from ..simulation.perturbation import Perturbation
 from .law import LAWS, control_law
 from .mjcf import STIFF, ContactSettings, layout, mjcf, torque_limit_of
 
-__all__ = ["OUTCOMES", "STEP_STARTS", "MujocoStep", "MujocoWalk", "MujocoLoop", "walk",
+__all__ = ["OUTCOMES", "STEP_STARTS", "TOUCHDOWNS", "MujocoStep", "MujocoWalk", "MujocoLoop", "walk",
            "mujoco_module", "SETTLE", "start_of"]
 
 #: how a walk ends: 'walked', or the reason it stopped
@@ -55,6 +55,10 @@ OUTCOMES = ("walked", "fell", "scuffed", "slipped", "no_impact", "singular", "ou
             "diverged")
 #: where each step's law state comes from: the rigid impact map at touchdown, or MuJoCo
 STEP_STARTS = ("impact", "contact")
+#: when a step's clock restarts and which state the impact map takes: MuJoCo's state at the
+#: first contact (on the time grid), or the state interpolated to where the swing foot's
+#: sphere meets the floor between that state and the one before
+TOUCHDOWNS = ("grid", "interpolated")
 #: the speed and period errors, and the worst pre-impact errors, are over the steps after
 #: this many (the transient of a perturbation)
 SETTLE = 10
@@ -184,6 +188,8 @@ class MujocoWalk(Result):
         'c' or 'python'.
     step_start : str
         'impact' or 'contact'.
+    touchdown : str
+        'grid' or 'interpolated'.
     torque_limit : float
         The motors' limit, N m.
     gait : dict
@@ -220,6 +226,7 @@ class MujocoWalk(Result):
     design: dict
     law: str
     step_start: str
+    touchdown: str
     torque_limit: float
     gait: dict
     steps: list
@@ -310,6 +317,10 @@ class MujocoLoop:
         A stance foot sliding more than this in a step ends the walk ('slipped'), m.
     horizon : float
         A step without touchdown within ``horizon`` T ends the walk ('no_impact').
+    touchdown : {'grid', 'interpolated'}
+        The touchdown's time and state: MuJoCo's first state in contact, or interpolated
+        between it and the state before to where the swing foot meets the floor (the
+        clock and the impact map then do not carry the time grid's error).
 
     Raises
     ------
@@ -320,12 +331,16 @@ class MujocoLoop:
 
     def __init__(self, design: Design, settings: ContactSettings = STIFF, law: str = "c",
                  torque_limit: float | None = None, step_start: str = "impact",
-                 max_slip: float = 0.05, horizon: float = 2.0):
+                 max_slip: float = 0.05, horizon: float = 2.0, touchdown: str = "grid"):
         if not isinstance(design, Design) or design.gait is None:
             raise ValueError("design: a Design on its gait is needed (Design.tv(gait, M1) "
                              "or Design.vc(gait))")
         if law not in LAWS:
             raise ValueError(f"law must be one of {', '.join(LAWS)}, got {law!r}")
+        if touchdown not in TOUCHDOWNS:
+            raise ValueError(f"touchdown must be one of {', '.join(TOUCHDOWNS)}, got "
+                             f"{touchdown!r}")
+        self.touchdown = touchdown
         if step_start not in STEP_STARTS:
             raise ValueError(f"step_start must be one of {', '.join(STEP_STARTS)}, got "
                              f"{step_start!r}")
@@ -452,7 +467,8 @@ class MujocoLoop:
             clipped_time=sum(s.clipped_time for s in records),
             max_slip=max((abs(s.slip) for s in records), default=0.0),
             settings=self.settings.to_dict(), design=self.design.to_dict(), law=self.law_name,
-            step_start=self.step_start_kind, torque_limit=self.torque_limit,
+            step_start=self.step_start_kind, touchdown=self.touchdown,
+            torque_limit=self.torque_limit,
             gait=self.gait_record(), steps=records, mujoco_steps=int(run.k), wall_time=wall,
             t=t.copy(), qpos=qpos.copy(), qvel=qvel.copy(), stance=stance.copy(), u=u.copy())
 
@@ -476,7 +492,10 @@ class _Run:
         self.log = _Log(int(steps * 1.2 * loop.T / self.dt) + 16, m.nq, loop.model.nu, log)
         self.logging = log
         self.records, self.status, self.message = [], "walked", ""
-        self.stance, self.k, self.k0 = 0, 0, 0
+        self.stance, self.k, self.t0 = 0, 0, 0.0
+        self.interpolate = loop.touchdown == "interpolated"
+        self.q, self.dq = q0, dq0
+        self.z_old, self.q_old, self.dq_old = math.inf, q0, dq0
         self.x_prev, self.phi_prev = float(d.geom_xpos[self.feet[0], 0]), float(q0[0])
         self.x_touch = self.x_prev
         self._new_step()
@@ -497,7 +516,7 @@ class _Run:
     def control(self) -> bool:
         """The law's torques at MuJoCo's state into ``ctrl``; False when it refuses."""
         d = self.d
-        tau = (self.k - self.k0) * self.dt
+        tau = self.k * self.dt - self.t0
         As = self.A[self.stance]
         q = self.q = As @ d.qpos[2:]
         dq = self.dq = As @ d.qvel[2:]
@@ -542,6 +561,9 @@ class _Run:
         d, feet, st = self.d, self.feet, self.stance
         sw = 1 - st
         touch = self._touching()
+        z_now = d.geom_xpos[feet[sw], 2]
+        olds = (self.z_old, self.q_old, self.dq_old)
+        self.z_old, self.q_old, self.dq_old = z_now, self.q, self.dq
         xs, phs = d.geom_xpos[feet[st], 0], self.q[0]
         if touch[st] and self.lifted:                   # sliding in single support
             self.slip += (xs - self.x_prev) - self.r * (phs - self.phi_prev)
@@ -557,7 +579,7 @@ class _Run:
             return self.stop("fell", f"step {n}: fell at t = {self.k * self.dt:.4g} s (hip "
                                      f"{qp[1] - self.r:.3g} m above the feet' level, torso "
                                      f"{qp[2]:.3g} rad)")
-        tau = (self.k - 1 - self.k0) * self.dt
+        tau = (self.k - 1) * self.dt - self.t0
         if not self.lifted:
             if not touch[sw]:
                 self.lifted, self.liftoff = True, tau
@@ -576,19 +598,27 @@ class _Run:
                     return self.stop("scuffed", f"step {n}: the swing foot touched the ground "
                                                 f"{x_st - x_sw:.3g} m behind the stance foot "
                                                 f"at tau = {tau:.4g} s")
-                return self._touchdown(x_sw, x_st, tau)
-        if self.status == "walked" and self.k - self.k0 > self.kmax:
+                return self._touchdown(x_sw, x_st, z_now, olds)
+        if self.status == "walked" and self.k * self.dt - self.t0 > self.kmax * self.dt:
             self.stop("no_impact", f"step {n}: no touchdown within {self.loop.horizon:g} T")
 
-    def _touchdown(self, x_sw, x_st, tau):
-        """The touchdown at the state the last MuJoCo step started from (q, dq): record
-        the step, relabel the legs, start the next step's law."""
+    def _touchdown(self, x_sw, x_st, z_now, olds):
+        """The touchdown at the state the last MuJoCo step started from (q, dq), or
+        between it and the one before where the swing foot's sphere meets the floor
+        (``touchdown='interpolated'``): record the step, relabel the legs, start the next
+        step's law."""
         loop, q, dq, g = self.loop, self.q, self.dq, self.loop.gait
+        t_td = (self.k - 1) * self.dt
+        z_old, q_old, dq_old = olds
+        if self.interpolate and z_old > z_now:
+            w = min(max((z_old - self.r) / (z_old - z_now), 0.0), 1.0)
+            q, dq = q_old + w * (q - q_old), dq_old + w * (dq - dq_old)
+            t_td -= (1.0 - w) * self.dt
+        tau = t_td - self.t0
         length = x_sw - self.x_touch
         speed = length / tau
         self.records.append(MujocoStep(
-            index=len(self.records), t_start=self.k0 * self.dt,
-            t_touchdown=(self.k - 1) * self.dt, period=tau, step_length=length, speed=speed,
+            index=len(self.records), t_start=self.t0, t_touchdown=t_td, period=tau, step_length=length, speed=speed,
             speed_error=speed / float(g.speed) - 1.0, period_error=tau / self.T - 1.0,
             qu_error=float(q[0]) - loop.qu_T, dqu_error=float(dq[0]) - loop.dqu_T,
             q_minus=q.tolist(), dq_minus=dq.tolist(), peak_commanded=float(self.peak),
@@ -604,7 +634,7 @@ class _Run:
             return self.stop("diverged", f"step {n}: MuJoCo's state is not finite")
         self.x_touch, self.x_prev = x_sw, x_sw
         self.phi_prev = float(np.sum(q))            # the new stance leg's lowest link
-        self.stance, self.k0 = 1 - self.stance, self.k - 1
+        self.stance, self.t0 = 1 - self.stance, t_td
         if self.ignore_scuff:
             self.m.geom_contype[self.feet[self.stance]] = 1
         self._new_step()
@@ -625,7 +655,8 @@ class _Run:
 @design_first
 def walk(design: Design, steps: int = 10, perturbation=None, settings: ContactSettings = STIFF,
          law: str = "c", step_start: str = "impact", torque_limit: float | None = None,
-         max_slip: float = 0.05, horizon: float = 2.0, log: bool = False) -> MujocoWalk:
+         max_slip: float = 0.05, horizon: float = 2.0, log: bool = False,
+         touchdown: str = "grid") -> MujocoWalk:
     """Walk a design in MuJoCo (module docstring).
 
     Parameters
@@ -650,7 +681,9 @@ def walk(design: Design, steps: int = 10, perturbation=None, settings: ContactSe
     horizon : float
         Steps longer than ``horizon`` T end the walk.
     log : bool
-        Keep every MuJoCo state (``t``, ``qpos``, ``stance``, ``u``).
+        Keep every MuJoCo state (``t``, ``qpos``, ``qvel``, ``stance``, ``u``).
+    touchdown : {'grid', 'interpolated'}
+        The touchdown's time and state (:class:`MujocoLoop`).
 
     Returns
     -------
@@ -661,7 +694,8 @@ def walk(design: Design, steps: int = 10, perturbation=None, settings: ContactSe
     ValueError
         Naming the argument.
     """
-    loop = MujocoLoop(design, settings, law, torque_limit, step_start, max_slip, horizon)
+    loop = MujocoLoop(design, settings, law, torque_limit, step_start, max_slip, horizon,
+                      touchdown)
     q0, dq0 = start_of(design.gait, perturbation)
     return loop.run(q0, dq0, steps, log)
 
