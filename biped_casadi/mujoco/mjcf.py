@@ -362,7 +362,7 @@ def layout(robot_or_model) -> Layout:
 def _inertia_function(d: RobotDescription) -> ca.Function:
     model = _robot(d)
     lay = _layout(d)
-    n, nq, k = lay.n, d.nq, d.k
+    n, k = lay.n, d.k
     qm = ca.SX.sym("qpos", n)
     q = ca.mtimes(ca.DM(lay.A[0]), qm[2:])                 # leg a on the ground
     phi = [qm[2] + sum(qm[lay.hinge(0, i)] for i in range(j + 1)) for j in range(k)]
