@@ -43,7 +43,9 @@ def cmd_model(args):
           f"{nq} joints, {model.nu} torques (limit {d.torque_limit:g} N m), g = {d.gravity:g}")
     for link in (d.torso,) + d.leg:
         print(f"  {link.name:8s} mass {link.mass:g} kg, length {link.length:g} m, "
-              f"com {link.com:g} m, inertia {link.inertia:g} kg m^2")
+              f"com {link.com:g} m" + (f" (off its line by {link.com_offset:g} m)"
+                                   if link.com_offset else "")
+              + f", inertia {link.inertia:g} kg m^2")
     for joint, m in d.point_masses:
         print(f"  point mass {m:g} kg at the {joint}" + ("" if joint == "hip" else " (each leg)"))
     print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 on each actuated joint")

@@ -5,6 +5,7 @@ import itself is :func:`biped_casadi.model.urdf.import_urdf`, the MJCF
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -30,16 +31,21 @@ def cmd_import(args):
         foot = np.array(args.foot, dtype=float)
         if not np.all(np.isfinite(foot)):
             raise UserError("--foot takes 3 finite numbers (x y z in m)")
-    imp = import_urdf(src, foot)
+    if args.torque_limit is not None and not (math.isfinite(args.torque_limit)
+                                              and args.torque_limit > 0):
+        raise UserError(f"--torque-limit must be a positive number (N m), got "
+                        f"{args.torque_limit:g}")
+    imp = import_urdf(src, foot, torque_limit=args.torque_limit)
     text = description_toml(imp.description, f"made by 'biped robot import' from {src.name}")
     write_text_atomic(out, text)
     back = load_description(out)                 # the file reads back to the same robot
-    if back != imp.description:
+    if back != imp.description or back.urdf != imp.description.urdf:
         raise RuntimeError(f"{out} does not read back to the imported robot")
     d = imp.description
     summary = dict(file=str(out), source=str(src), robot=d.to_dict(), torso=imp.torso,
                    legs=[list(leg) for leg in imp.legs], foot=imp.foot, notes=imp.notes,
-                   total_mass=d.total_mass)
+                   total_mass=d.total_mass, torque_limit=d.torque_limit,
+                   joint_map=d.urdf.describe())
     if args.json:
         print_json(summary)
         return 0
@@ -47,12 +53,18 @@ def cmd_import(args):
     print(f"  torso {imp.torso!r}; legs {', '.join(' -> '.join(leg) for leg in imp.legs)}; "
           f"foot from {imp.foot}")
     for link in (d.torso,) + d.leg:
+        off = f" (off its line by {link.com_offset:g} m)" if link.com_offset else ""
         print(f"  {link.name:8s} mass {link.mass:g} kg, length {link.length:g} m, "
-              f"com {link.com:g} m, inertia {link.inertia:g} kg m^2")
+              f"com {link.com:g} m{off}, inertia {link.inertia:g} kg m^2")
     for joint, m in d.point_masses:
         print(f"  point mass {m:g} kg at the {joint}")
-    print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 (reflected), torque limit "
-          f"{d.torque_limit:g} N m")
+    limit = f"{d.torque_limit:g} N m" if d.has_torque_limit else "none (infinite)"
+    print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 (reflected), torque limit {limit}")
+    print("  joint map, URDF angle theta -> the model's angle of the joint's child link "
+          "relative to its parent (the swing leg's coordinates; the stance leg's are "
+          "their negatives):")
+    for line in d.urdf.describe():
+        print(f"    {line}")
     for note in imp.notes:
         print(f"  note: {note}")
     return 0
@@ -98,13 +110,20 @@ def register(sub):
     acts.required = True
     q = acts.add_parser("import", help="a URDF file as a robot description (TOML)",
                         description="Read a planar biped from a URDF (a torso and two "
-                                    "identical legs of revolute joints about one axis; "
-                                    "inertials, joint origins, transmissions, effort "
-                                    "limits) and write the equivalent description file.")
+                                    "identical legs of revolute or continuous joints about "
+                                    "one axis, +y or -y per joint, in any zero pose; "
+                                    "inertials anywhere in the plane, joint origins, "
+                                    "transmissions, effort limits) and write the equivalent "
+                                    "description file, with the map from the URDF's joint "
+                                    "angles to the model's (printed; the [urdf] table).")
     q.add_argument("file", metavar="FILE.urdf", help="the URDF file")
     q.add_argument("--foot", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="the foot point in the last leg link's frame, m (when the file has "
                         "no foot link or frame)")
+    q.add_argument("--torque-limit", type=float, metavar="N",
+                   help="the robot's torque limit, N m (default: the smallest <limit "
+                        "effort> of the leg joints; none when they give none, e.g. "
+                        "continuous joints without <limit>)")
     q.add_argument("--out", metavar="FILE.toml", required=True,
                    help="the description file to write")
     q.add_argument("--json", action="store_true", help="print one JSON object")
