@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,14 +34,20 @@ def _mass_matrix(m, d, qpos):
     return M
 
 
-@pytest.mark.parametrize("name", ["rabbit", "three_link", "rabbit.urdf"])
+WALKER = Path(__file__).resolve().parents[1] / "docs" / "howto" / "walker" / "walker.urdf"
+
+
+@pytest.mark.parametrize("name", ["rabbit", "three_link", "rabbit.urdf", "walker.urdf"])
 def test_mjcf_mass_matrix_is_the_toolkits(name, rng):
     """MuJoCo's floating-base inertia matrix of the generated MJCF equals J' De J, the
     impact map's extended-coordinate D in MuJoCo's coordinates, at random poses; the
-    mass, the motors and the armature are the description's."""
-    src = str(builtin_path("rabbit").with_suffix(".urdf")) if name.endswith(".urdf") else name
+    mass, the motors and the armature are the description's (the walker's URDF has no
+    torque limit: the motors get one)."""
+    src = {"rabbit.urdf": str(builtin_path("rabbit").with_suffix(".urdf")),
+           "walker.urdf": str(WALKER)}.get(name, name)
     model = robot(src)
-    m = mujoco.MjModel.from_xml_string(mjcf(model))
+    limit = 40.0 if name == "walker.urdf" else None
+    m = mujoco.MjModel.from_xml_string(mjcf(model, torque_limit=limit))
     d = mujoco.MjData(m)
     desc = model.description
     worst = 0.0
@@ -53,17 +60,14 @@ def test_mjcf_mass_matrix_is_the_toolkits(name, rng):
     # a link of zero inertia carries MIN_INERTIA in MuJoCo: a few 1e-14 at most
     assert worst < 1e-12, worst
     assert np.isclose(m.body_mass.sum(), desc.total_mass, rtol=0, atol=1e-12)
-    assert m.nu == model.nu and np.all(m.actuator_ctrlrange == [-desc.torque_limit,
-                                                                 desc.torque_limit])
+    U = limit or desc.torque_limit
+    assert m.nu == model.nu and np.all(m.actuator_ctrlrange == [-U, U])
     assert np.allclose(m.dof_armature[3:], desc.rotor_inertia) and np.all(m.dof_armature[:3] == 0)
 
 
 def test_mjcf_com_offset(rng):
-    """An off-axis centre of mass (Link.com_offset, once the description has it) is the
-    toolkit's: MuJoCo's mass matrix still equals the toolkit's."""
-    from biped_casadi.model.description import Link
-    if "com_offset" not in {f.name for f in dataclasses.fields(Link)}:
-        pytest.skip("Link.com_offset is not in this version of the description")
+    """Off-axis centres of mass (Link.com_offset) are the toolkit's: MuJoCo's mass matrix
+    still equals the toolkit's."""
     desc = robot("rabbit").description
     leg = (dataclasses.replace(desc.leg[0], com_offset=0.02),
            dataclasses.replace(desc.leg[1], com_offset=-0.01))
@@ -170,6 +174,7 @@ def test_settings_and_torque_limit_refused():
     (["mujoco", "--max-slip", "0", "--no-eig"], "--max-slip"),
     (["robot", "mjcf", "--out", "{tmp}/robot.txt"], "--out"),
     (["robot", "mjcf", "--robot", "nosuch", "--out", "{tmp}/robot.xml"], "nosuch"),
+    (["robot", "mjcf", "--robot", str(WALKER), "--out", "{tmp}/robot.xml"], "--torque-limit"),
 ])
 def test_bad_input_is_one_line_and_exit_2(argv, words, gait, tmp_path, capsys):
     g = gait.save(tmp_path / "gait.json")
