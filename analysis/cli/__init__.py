@@ -19,7 +19,11 @@ import numpy as np
 
 import biped_casadi
 
+<<<<<<< HEAD
 from . import eig, export, gait, m1, reproduce, robot, robust, simulate, sweep, terrain, view
+=======
+from . import eig, export, gait, m1, mujoco, reproduce, robot, robust, simulate, sweep, terrain
+>>>>>>> dev-mujoco
 from .common import UserError, add_robot, load_model, print_json
 
 __all__ = ["main", "build_parser", "UserError"]
@@ -100,8 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_model)
 
-    for command in (robot, gait, eig, sweep, m1, robust, simulate, terrain, export, reproduce,
-                    view):
+    for command in (robot, gait, eig, sweep, m1, robust, simulate, terrain, export, mujoco,
+                    reproduce, view):
         command.register(sub)
     return ap
 

@@ -1,5 +1,7 @@
 """``biped robot import``: a URDF file turned into the equivalent robot description
-(TOML).  Reads top to bottom; the import itself is :func:`biped_casadi.model.urdf.import_urdf`.
+(TOML); ``biped robot mjcf``: a robot as a MuJoCo model (MJCF).  Reads top to bottom; the
+import itself is :func:`biped_casadi.model.urdf.import_urdf`, the MJCF
+:func:`biped_casadi.mujoco.mjcf`.
 """
 from __future__ import annotations
 
@@ -11,8 +13,10 @@ import numpy as np
 from biped_casadi.files import write_text_atomic
 from biped_casadi.model.description import load_description
 from biped_casadi.model.urdf import description_toml, import_urdf
+from biped_casadi.mujoco import mjcf, mujoco_module
 
-from .common import UserError, output_file, print_json
+from .common import ROBOT_HELP, UserError, load_model, output_file, print_json
+from .mujoco_options import add_mujoco_settings, mujoco_settings
 
 
 def cmd_import(args):
@@ -66,11 +70,42 @@ def cmd_import(args):
     return 0
 
 
+def cmd_mjcf(args):
+    out = output_file(args.out, "--out", (".xml",))
+    settings = mujoco_settings(args)
+    model = load_model(args.robot)
+    text = mjcf(model, settings, args.torque_limit)
+    mujoco = mujoco_module()
+    try:
+        m = mujoco.MjModel.from_xml_string(text)
+    except ValueError as e:
+        raise UserError(f"MuJoCo rejects the model: {str(e).splitlines()[0]}") from None
+    write_text_atomic(out, text)
+    d = model.description
+    summary = dict(file=str(out), robot=d.name, settings=settings.to_dict(),
+                   torque_limit=float(m.actuator_ctrlrange[0, 1]), nq=int(m.nq),
+                   actuators=int(m.nu), total_mass=float(sum(m.body_mass)),
+                   joints=[mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, i)
+                           for i in range(m.njnt)])
+    if args.json:
+        print_json(summary)
+        return 0
+    print(f"{d.name}: MuJoCo model written to {out}")
+    print(f"  joints {', '.join(summary['joints'])} (planar floating base at the hip: x, z, "
+          f"pitch); {summary['actuators']} motors limited to "
+          f"{summary['torque_limit']:g} N m; total mass {summary['total_mass']:g} kg")
+    s = settings
+    print(f"  {s.contact} contact (solref {s.solref if s.solref is not None else 'MuJoCo default 0.02'}"
+          f" s), time step {s.timestep:g} s, sphere feet of {s.foot_radius:g} m, mu {s.mu:g}")
+    return 0
+
+
 def register(sub):
-    p = sub.add_parser("robot", help="robot files: import a URDF as a description",
+    p = sub.add_parser("robot", help="robot files: import a URDF, write a MuJoCo model",
                        description="Robot files. 'biped robot import FILE.urdf --out "
                                    "robot.toml' reads a planar point-foot biped from a URDF "
-                                   "and writes the equivalent description file.")
+                                   "and writes the equivalent description file; 'biped robot "
+                                   "mjcf --out robot.xml' writes a robot as a MuJoCo model.")
     acts = p.add_subparsers(dest="action", metavar="ACTION")
     acts.required = True
     q = acts.add_parser("import", help="a URDF file as a robot description (TOML)",
@@ -93,3 +128,18 @@ def register(sub):
                    help="the description file to write")
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.set_defaults(func=cmd_import)
+    q = acts.add_parser(
+        "mjcf", help="a robot as a MuJoCo model (MJCF)",
+        description="Write the MuJoCo model (MJCF) of a robot the toolkit reads: a planar "
+                    "floating base at the hip (slide x, slide z, hinge pitch), hinges with "
+                    "the rotor inertia as armature, motors limited to the torque limit, "
+                    "sphere feet (the only geometry that collides). Its mass matrix equals "
+                    "the toolkit's (tested to 1e-12). MuJoCo's own URDF loader would weld the "
+                    "torso to the world, drop the rotor inertia and make no motors.")
+    q.add_argument("--robot", metavar="NAME|FILE", help=f"{ROBOT_HELP}; default: rabbit")
+    q.add_argument("--out", metavar="FILE.xml", required=True, help="the MJCF file to write")
+    add_mujoco_settings(q)
+    q.add_argument("--torque-limit", type=float, metavar="U",
+                   help="the motors' limit, N m (default the robot's)")
+    q.add_argument("--json", action="store_true", help="print one JSON object")
+    q.set_defaults(func=cmd_mjcf)
