@@ -19,11 +19,8 @@ import numpy as np
 
 import biped_casadi
 
-<<<<<<< HEAD
-from . import eig, export, gait, m1, reproduce, robot, robust, simulate, sweep, terrain, view
-=======
-from . import eig, export, gait, m1, mujoco, reproduce, robot, robust, simulate, sweep, terrain
->>>>>>> dev-mujoco
+from . import (eig, export, gait, m1, mujoco, reproduce, robot, robust, simulate, sweep,
+               terrain, view)
 from .common import UserError, add_robot, load_model, print_json
 
 __all__ = ["main", "build_parser", "UserError"]
