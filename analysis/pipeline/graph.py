@@ -38,6 +38,7 @@ from .options import ReproduceOptions, run_folder
 from .paper import (stage_fig2, stage_fig3, stage_fig4, stage_gait, stage_grid, stage_m1,
                     stage_singular, stage_vc)
 from .family import stage_family
+from .mujoco import mujoco_figure, stage_mujoco
 from .terrain import stage_terrain
 from .walking import (stage_basins, stage_basins_robust, stage_robust_design,
                       stage_robustness, stage_robustness_robust, stage_search, stage_sim,
@@ -146,6 +147,9 @@ STAGES = (
           only="robust", figures=(Figures(F.terrain_figures, ("uneven ground (MFPT, GSN)",)),)),
     Stage("gait family and speed", stage_family, ("robust design",), model=True,
           only="robust", figures=(Figures(F.family_figure, ("gait family and speed",)),)),
+    Stage("in MuJoCo", stage_mujoco, ("gait", "M1 NLP", "robust design",
+                                      "the sampling search's design"),
+          only="robust", figures=(Figures(mujoco_figure, ("in MuJoCo",)),)),
 )
 
 

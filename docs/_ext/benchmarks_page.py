@@ -10,8 +10,8 @@ from pathlib import Path
 __all__ = ["benchmarks_page", "load_results"]
 
 #: the order of the page (others follow by name)
-ORDER = ("reproduce", "codesign", "codesign_gaits", "gait", "family", "sweep", "simulate",
-         "robust", "basin", "terrain", "export", "model")
+ORDER = ("reproduce", "codesign", "codesign_gaits", "codesign_family", "gait", "family",
+         "sweep", "simulate", "robust", "basin", "terrain", "export", "mujoco", "model")
 
 
 def load_results(folder: Path) -> list:
