@@ -103,11 +103,12 @@ def cores() -> int:
 
 def _local_cluster(workers: int | None, preload=(), quiet: bool = False):
     """A ``LocalCluster`` of ``workers`` single-threaded processes (default: the cores),
-    which import ``preload`` as they start; ``quiet``: its logs only from errors."""
+    which import ``preload`` as they start; ``quiet``: no logs (a task's failure reaches
+    its caller as a :class:`~analysis.tasks.TaskError`, not as a worker's log)."""
     import dask
     from dask.distributed import LocalCluster
     check_not_bootstrapping()
-    kw = dict(dashboard_address=None, silence_logs=logging.ERROR) if quiet else \
+    kw = dict(dashboard_address=None, silence_logs=logging.CRITICAL) if quiet else \
         dict(dashboard_address=":0")
     with dask.config.set(LOCAL_CLUSTER_CONFIG):   # the workers get it from their nanny
         return LocalCluster(n_workers=workers or cores(), threads_per_worker=1,

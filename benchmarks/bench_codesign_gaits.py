@@ -1,7 +1,8 @@
 """The robust design from the user's gait (issue 47), cold, in fresh processes.
 
 The gaits: ``biped gait --speed V`` (the default options) at 0.5, 0.6, 0.9 and 1.1 m/s,
-and gaits made by another tool and brought in with ``biped gait --import``: RABBIT at
+the three-link biped's default gait (``--robot three_link``), and gaits made by another
+tool and brought in with ``biped gait --import``: RABBIT at
 0.6 m/s by Hermite-Simpson collocation in absolute link angles minimising int u'u dt
 (``tests/foreign_gait.py``, 14 intervals: no part of gait_opt), and (``--rotor-free``)
 the same optimiser on a five-link walker without rotor inertia (another robot).
@@ -75,7 +76,7 @@ def biped(args, cache: Path, check=True):
                           capture_output=True, text=True, check=check)
 
 
-def make_gaits(tmp: Path, speeds, rotor_free: bool) -> dict:
+def make_gaits(tmp: Path, speeds, rotor_free: bool, three_link: bool = True) -> dict:
     """label -> (gait file, robot argument or None), made in a cache of their own."""
     cache = tmp / "gait_cache"
     out = {}
@@ -83,6 +84,10 @@ def make_gaits(tmp: Path, speeds, rotor_free: bool) -> dict:
         f = tmp / f"gait_{v:g}.json"
         biped(["gait", "--speed", str(v), "--out", str(f)], cache)
         out[f"default options, {v:g} m/s"] = (f, None)
+    if three_link:
+        f = tmp / "gait_three_link.json"
+        biped(["gait", "--robot", "three_link", "--out", str(f)], cache)
+        out["three-link biped, default options, 0.75 m/s"] = (f, None)
     robots = [("rabbit", "RABBIT")]
     if rotor_free:
         desc = (ROOT / "biped_casadi/model/robots/rabbit.toml").read_text()
@@ -154,6 +159,8 @@ def main(argv=None):
     ap.add_argument("--rotor-free", action="store_true",
                     help="also the gait imported for a five-link walker without rotors")
     ap.add_argument("--no-fixed", action="store_true", help="skip the --fixed-gait runs")
+    ap.add_argument("--no-three-link", action="store_true",
+                    help="skip the three-link biped's default gait")
     ap.add_argument("--workers", type=int, help="passed to every run")
     ap.add_argument("--no-save", action="store_true", help="do not write results/")
     a = ap.parse_args(argv)
@@ -164,7 +171,7 @@ def main(argv=None):
              "--gait G), cold in fresh processes: default-option and imported gaits",
              save=not a.no_save) as bench, tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        gaits = make_gaits(tmp, a.speeds, a.rotor_free)
+        gaits = make_gaits(tmp, a.speeds, a.rotor_free, not a.no_three_link)
         for i, (label, (f, rob)) in enumerate(gaits.items()):
             cache = tmp / f"cache{i}"
             robot = ["--robot", rob] if rob not in (None, "rabbit") else []

@@ -176,6 +176,7 @@ COMMANDS = [
     ["terrain", "--gait", "{g}", "--controller", "vc", "--runs", "2", "--max-steps", "3",
      "--sigma", "0.002", "--json"],
     ["export", "--gait", "{g}", "--controller", "vc", "--out", "{tmp}/export"],
+    ["mujoco", "--gait", "{g}", "--controller", "vc", "--steps", "2", "--json"],
     ["m1", "--robust", "--gait", "{g}", "--json"],
     ["m1", "--robust", "--gait", "{g}", "--fixed-gait", "--json"],
 ]

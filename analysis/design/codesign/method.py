@@ -82,11 +82,14 @@ class Candidate:
 
 def _score(r, by: int = 4, fit: bool = False) -> tuple:
     """(the paper's perturbation converged by step ``by``, s*); with starts that fit the
-    gait (a gait the target may be far from), (the target met, s*, converged)."""
+    gait (a gait the target may be far from): (the target met, s* >= 1, then the sooner
+    the paper's perturbation converges, s*, converged by ``by``)."""
     conv = r.paper.get("steps_to_converge", math.inf) if r.paper else math.inf
     conv = math.inf if conv is None or not conv == conv else conv
     if fit:
-        return (bool(conv <= by and r.s_star >= 1.0), float(r.s_star), bool(conv <= by))
+        far = r.s_star >= 1.0
+        return (bool(conv <= by and far), far, -conv if far else 0.0, float(r.s_star),
+                bool(conv <= by))
     return (bool(conv <= by), float(r.s_star))
 
 

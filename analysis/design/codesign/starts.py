@@ -13,10 +13,12 @@ Three sources, screened together by the walker (:func:`fitted_starts`):
   that relation to first order, so M1 = -slope, taken at the Poincaré section (0.75 T)
   and as the least-squares slope over the step (:func:`vc_like_m1`).
 
-Every start stable with max|lambda| within the bound is measured by the walker's s*
-(bisection over the kept directions, :func:`analysis.robustness.s_star.s_star_batch`);
-the best by s* are the starts, and the screen's best scale and the constraint that stops
-it there (the failing run's cause, :func:`binds`) say what binds when nothing walks far.
+Every start stable with max|lambda| within the bound walks the paper's perturbation once;
+those that converge from it soonest (at most ``screened``) are measured by the walker's
+s* (bisection over the kept directions, :func:`analysis.robustness.s_star.s_star_batch`);
+the best by the target (s* >= 1 and the paper's perturbation converged in time) are the
+starts, and the screen's best scale and the constraint that stops it there (the failing
+run's cause, :func:`binds`) say what binds when nothing walks far.
 """
 from __future__ import annotations
 
@@ -192,11 +194,13 @@ def binds(run, mu: float) -> str:
 
 
 @task
-def start_candidates(gait, rejoin: float, sampling, eigen_bound: float, extra=()) -> dict:
-    """The starts to screen (module docstring): the given ones, the virtual-constraint
-    ones and samples in the gait's units, those stable with max ``|lambda|`` within the
-    bound (given and virtual-constraint ones first, then samples in the order drawn, at
-    most ``sampling.screened``).
+def start_candidates(gait, rejoin: float, sampling, eigen_bound: float, extra=(),
+                     settings=None) -> dict:
+    """The starts to screen (module docstring).
+
+    The given ones, the virtual-constraint ones and samples in the gait's units, those
+    stable with max ``|lambda|`` within the bound (given and virtual-constraint ones
+    first, then the samples, at most ``sampling.screened``).
 
     Parameters
     ----------
@@ -210,12 +214,16 @@ def start_candidates(gait, rejoin: float, sampling, eigen_bound: float, extra=()
         The bound on max ``|lambda|``.
     extra : array_like, optional
         (k, nu) given starts (the deadbeat NLP's, the user's).
+    settings : RobustnessSettings, optional
+        The protocol: with it, the stable samples that converge soonest from the
+        paper's perturbation are screened first (else in the order drawn).
 
     Returns
     -------
     dict
-        ``M1`` (m, nu) the starts to screen, ``sources`` (m,), ``candidates`` and
-        ``stable`` (counts), ``scale`` (the samples' box per component).
+        ``M1`` (m, nu) the starts to screen, ``sources`` (m,), ``candidates``,
+        ``stable`` and ``paper_converges`` (counts), ``scale`` (the samples' box per
+        component).
     """
     st, nu = sampling, gait.model.nu
     scale = st.box * gait_scale(gait)
@@ -229,11 +237,25 @@ def start_candidates(gait, rejoin: float, sampling, eigen_bound: float, extra=()
     jb = poincare_map(gait, rejoin=rejoin).jacobian_batch(M)
     ok = (jb.status == "stable") & (jb.max_abs <= eigen_bound)
     idx = np.flatnonzero(ok)
+    # every stable start walks the paper's perturbation once (cheap beside a bisection):
+    # those that converge from it soonest are bisected first, the given and virtual
+    # constraints' ones always
+    conv = np.full(len(idx), np.inf)
+    if idx.size and settings is not None:
+        w = zero_dynamics_walker(gait, settings.simulation_options(), st.screen_rk4,
+                                 jit=True)
+        q0, dq0 = start_states(gait, np.ones((idx.size, 2 * gait.model.nq)), 1.0)
+        c = w.walk(q0, dq0, M[idx], rejoin, steps=settings.steps).steps_to_converge(
+            settings.tol)
+        conv = np.where(np.isfinite(c), c, np.inf)
     k = len(given) + len(vcl)
     first = idx[idx < k]
-    idx = np.r_[first, idx[idx >= k][:max(st.screened - len(first), 0)]].astype(int)
+    rest = np.flatnonzero(idx >= k)
+    rest = rest[np.argsort(conv[rest], kind="stable")]
+    idx = np.r_[first, idx[rest][:max(st.screened - len(first), 0)]].astype(int)
     return dict(M1=M[idx], sources=src[idx].tolist(), candidates=len(M),
-                stable=int(ok.sum()), scale=scale.tolist())
+                stable=int(ok.sum()), scale=scale.tolist(),
+                paper_converges=int(np.sum(conv < np.inf)))
 
 
 @task
@@ -278,9 +300,10 @@ def screen_batch(gait, kept, M1s, rejoin: float, sampling, settings) -> tuple:
 
 @task
 def screen_binds(gait, kept, M1, rejoin: float, scale: float, sampling, settings) -> dict:
-    """What stops a start at a scale: the first failing kept direction (a validity
-    failure before non-convergence, then the earliest step) and the constraint it
-    breaks (:func:`failure_binds`), on the screen's walker.
+    """What stops a start at a scale, on the screen's walker.
+
+    The first failing kept direction (a validity failure before non-convergence, then
+    the earliest step) and the constraint it breaks (:func:`failure_binds`).
 
     Parameters
     ----------
@@ -320,9 +343,10 @@ def screen_binds(gait, kept, M1, rejoin: float, scale: float, sampling, settings
 
 def fitted_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: float,
                   settings, extra=(), parts: int = 2, converge_by: int = 4) -> StartScreen:
-    """Starts that fit the gait, screened by the walker's s* (module docstring): the
-    candidates (:func:`start_candidates`), their s* in ``parts`` batches side by side
-    (:func:`screen_batch`), the best ``sampling.kept`` kept and what stops the best.
+    """Starts that fit the gait, screened by the walker's s* (module docstring).
+
+    The candidates (:func:`start_candidates`), their s* in ``parts`` batches side by
+    side (:func:`screen_batch`), the best ``sampling.kept`` kept and what stops the best.
 
     Parameters
     ----------
@@ -347,7 +371,7 @@ def fitted_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
         Batches screened side by side.
     converge_by : int
         The target's step: starts whose paper perturbation converges by it with s* >= 1
-        rank first, then by s*.
+        rank first, then those with s* >= 1 by that step, then by s*.
 
     Returns
     -------
@@ -355,7 +379,7 @@ def fitted_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
     """
     st, rs, nu = sampling, settings, gait.model.nu
     c = engine.submit(start_candidates, gait, rejoin, st, eigen_bound,
-                      np.asarray(extra, float).reshape(-1, nu)).result()
+                      np.asarray(extra, float).reshape(-1, nu), rs).result()
     M, src = c["M1"], c["sources"]
     if not len(M):
         return StartScreen("none", f"no start of {c['candidates']} is stable with "
@@ -370,8 +394,11 @@ def fitted_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
     cause = [x for p in parts_ for x in p[2]]
     frac = np.concatenate([p[3] for p in parts_])
     conv = np.concatenate([p[4] for p in parts_])
+    # the target first; then, of the starts with s* >= 1, those whose paper perturbation
+    # converges soonest (the target's other half); then s*
     target = (conv <= converge_by) & (s_star >= 1.0)
-    order = np.lexsort((-frac, -s_star, ~target))
+    far = s_star >= 1.0
+    order = np.lexsort((-frac, -s_star, np.where(far, conv, np.inf), ~far, ~target))
     top = order[:st.kept]
     b = int(order[0])
     best = dict(M1=M[b].tolist(), s_star=float(s_star[b]), s_fail=float(s_fail[b]),

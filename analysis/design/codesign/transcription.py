@@ -338,7 +338,7 @@ class Transcription(GaitTable):
         Returns
         -------
         tuple
-            (X (m, 2, n+1), SS (m, 2, nc, n+1), diag (m, 9, n+1), ddiag (m, 9, nc+1, n+1),
+            (X (m, 2, n+1), SS (m, 2, nc, n+1), diag (m, nu+5, n+1), ddiag (m, nu+5, nc+1, n+1),
             P (m, n_par), dP): the states, their sensitivities in the step's columns, the
             diagnostics at the nodes (node 0 at tau = 0) with their sensitivities (the last
             column, eta, zero), the step parameters and their sensitivities.
@@ -352,16 +352,17 @@ class Transcription(GaitTable):
         S0[:, :2] = np.eye(2)
         d0, J0 = self.diag0_fn.map(m)(np.vstack([L[:, :2].T, np.repeat(tab["R"][:, :1], m, 1),
                                                   P.T]), 0.0)
-        d0 = np.array(d0).T                                           # (m, 9)
-        J0 = np.array(J0).reshape(9, m, -1).transpose(1, 0, 2)        # (m, 9, 2 + 15 + 13)
-        dd0 = np.zeros((m, 9, nc + 1))
+        nd = self.nu + 5                                # diagnostics: u, Fx, Fz, x, z, den
+        d0 = np.array(d0).T                                           # (m, nd)
+        J0 = np.array(J0).reshape(nd, m, -1).transpose(1, 0, 2)       # (m, nd, 2 + 3nq + np)
+        dd0 = np.zeros((m, nd, nc + 1))
         dd0[:, :, :nc] = J0[:, :, :2] @ S0 + J0[:, :, 2 + 3 * nq:] @ dP
         if self.free:
             dd0[:, :, nc - self.nG:nc] += J0[:, :, 2:2 + 3 * nq] @ tab["dR"][:, :, 0]
         X = np.zeros((m, 2, n + 1))
         SS = np.zeros((m, 2, nc, n + 1))
-        diag = np.zeros((m, 9, n + 1))
-        ddiag = np.zeros((m, 9, nc + 1, n + 1))
+        diag = np.zeros((m, nd, n + 1))
+        ddiag = np.zeros((m, nd, nc + 1, n + 1))
         X[:, :, 0], SS[:, :, :, 0], diag[:, :, 0], ddiag[:, :, :, 0] = L[:, :2], S0, d0, dd0
         if n > 0:
             if self.node.kernel is not None:
@@ -393,7 +394,7 @@ class Transcription(GaitTable):
         X[:, :, 1:] = Xn.transpose(1, 0, 2)
         SS[:, :, :, 1:] = Sn.reshape(nc, 2, m, n).transpose(2, 1, 0, 3)
         diag[:, :, 1:] = Dg.transpose(1, 0, 2)
-        ddiag[:, :, :nc, 1:] = DD.reshape(nc, 9, m, n).transpose(2, 1, 0, 3)
+        ddiag[:, :, :nc, 1:] = DD.reshape(nc, self.nu + 5, m, n).transpose(2, 1, 0, 3)
 
     def _walk_chunks(self, tab, X, SS, diag, ddiag, n, h, P, dP, S0):
         """Nodes 1..n of every scenario, ``CHUNK`` nodes per call of the scalar node
@@ -416,8 +417,9 @@ class Transcription(GaitTable):
             sl = slice(k0 + 1, k0 + 1 + cnt)
             X[:, :, sl] = Xn.reshape(2, m, C).transpose(1, 0, 2)[:, :, :cnt]
             SS[:, :, :, sl] = Sn.reshape(2, m, C, nc).transpose(1, 0, 3, 2)[..., :cnt]
-            diag[:, :, sl] = Dg.reshape(9, m, C).transpose(1, 0, 2)[:, :, :cnt]
-            ddiag[:, :, :nc, sl] = DD.reshape(9, m, C, nc).transpose(1, 0, 3, 2)[..., :cnt]
+            nd = self.nu + 5
+            diag[:, :, sl] = Dg.reshape(nd, m, C).transpose(1, 0, 2)[:, :, :cnt]
+            ddiag[:, :, :nc, sl] = DD.reshape(nd, m, C, nc).transpose(1, 0, 3, 2)[..., :cnt]
             x = Xn.reshape(2, m, C)[:, :, -1]
             S = Sn.reshape(2, m, C, nc)[:, :, -1, :].transpose(0, 1, 2).reshape(2, m * nc)
 
