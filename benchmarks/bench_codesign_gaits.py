@@ -145,7 +145,8 @@ def _line(label, r) -> str:
     ch = r.get("gait_change") or {}
     moved = (f"; gait moved: T {ch['T'][0]:.3f} -> {ch['T'][1]:.3f} s, step length "
              f"{ch['step_length'][0]:.3f} -> {ch['step_length'][1]:.3f} m, joints by "
-             f"{ch['max_joint_change']:.3f} rad" if ch else "; gait as given")
+             f"{ch['max_joint_change']:.3f} rad" if ch and ch.get("max_joint_change") else
+             "; gait as given")
     return (f"{label}: {r['status']}, s* {r['s_star']:.4g} (virtual constraints "
             f"{r['vc_s_star']:.4g}), below 1e-3 from step {r['steps_to_converge']}, "
             f"max|lambda| {r['max_abs']:.3g} (virtual constraints {r['vc_eigenvalue']:.3g})"

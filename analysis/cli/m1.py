@@ -128,10 +128,14 @@ def no_design_reason(r) -> str | None:
             r.check.failure or "nothing within the scales tried")
     lam = ("" if r.max_abs <= r.vc_eigenvalue else
            f", max|lambda| {r.max_abs:.3g} above virtual constraints' {r.vc_eigenvalue:.3g}")
+    conv = r.steps_to_converge
+    paper = (f"the paper's perturbation below {r.settings['verification']['tol']:g} from "
+             f"step {conv}" if conv is not None else
+             f"the paper's perturbation: {r.check.paper_status}")
     return (f"no design beats virtual constraints on this gait: the best, M1 "
             f"{np.round(r.design.M1, 3).tolist()} (gait {'moved' if r.gait_free else 'fixed'}"
-            f"), reaches s* {r.s_star:.3g}, stopped just above by {stop}{lam}; virtual "
-            f"constraints reach s* {r.vc_s_star:.3g}")
+            f"), reaches s* {r.s_star:.3g}, stopped just above by {stop}{lam}, {paper}; "
+            f"virtual constraints reach s* {r.vc_s_star:.3g}")
 
 
 def _no_design(args, body: dict, line: str) -> int:
@@ -189,12 +193,13 @@ def _family(args, say):
     say(f"designs over the family: the gait-fixed co-design at each of its {len(fam)} "
         "speeds (side by side), an M1 schedule over speed, one M1 for all; each measured "
         "at every speed (about a minute per speed on 2 cores the first time)")
-    st = QUICK.replace(**{k: v for k, v in (("samples", args.samples), ("kept", args.starts),
-                                           ("seed", args.seed), ("mu", args.mu))
-                          if v is not None})
+    # the gait fixed at each speed, the starts fitted to it (those of --gait FILE)
+    st = QUICK.replace(starts=FIT.starts, converge_by=FIT.converge_by, **args.given)
     try:
         r = family_designs(fam, st, progress=say, scheduler=args.scheduler,
                            workers=args.workers)
+    except NoDesign as e:
+        return _no_design(args, e.to_dict(), str(e))
     except CodesignError as e:
         raise UserError(str(e)) from None
     d = r.to_dict()
@@ -207,6 +212,8 @@ def _family(args, say):
         return 0
     print(r.message)
     for rec in r.records:
+        if rec["codesign"].get("status") == "no_design":
+            print(f"  {rec['speed']:.3g} m/s: no design ({rec['codesign']['message']})")
         print(f"  {rec['speed']:.3g} m/s: " + "; ".join(
             f"{lab} s* {v['s_star']:.3g}, max|lambda| {v['max_abs']:.3g}"
             for lab, v in rec["designs"].items()))

@@ -18,7 +18,7 @@ from biped_casadi.results import Result, internal
 from ..robustness.basin import basin
 from ..robustness.s_star import RobustnessSettings, kept_directions, robustness
 from ..tasks import Engine, task
-from .codesign import QUICK, CodesignSettings, codesign_flow
+from .codesign import QUICK, CodesignSettings, NoDesign, NoDesignFound, given_gait_flow
 from .m1_nlp import optimize_m1
 from .schedule import M1Schedule
 
@@ -172,22 +172,32 @@ def family_designs_flow(engine, gaits: list, settings: CodesignSettings,
     FamilyDesigns
     """
     speeds = [round(float(g.speed), 12) for g in gaits]
-    cds = [engine.spawn(codesign_flow, g.model, settings, g) for g in gaits]
+    # a speed without a design is a record of why, not the end of the family
+    cds = [engine.spawn(given_gait_flow, g.model, settings, g) for g in gaits]
     dead = [engine.submit(deadbeat_m1, g, 1 if g.model.nu == 4 else None) for g in gaits]
     cd = [c.result() for c in cds]
-    rejoin = float(cd[0].design.rejoin)
-    schedule, coef, degree = smooth_schedule(speeds, [c.design.M1 for c in cd], rejoin)
-    k = int(np.argmin(np.abs(np.asarray(speeds) - single_speed)))
+    have = [i for i, c in enumerate(cd) if not isinstance(c, NoDesignFound)]
+    if not have:
+        raise NoDesign("no speed of the family has a design: " + "; ".join(
+            f"{v:g} m/s: {c.message}" for v, c in zip(speeds, cd)))
+    rejoin = float(cd[have[0]].design.rejoin)
+    schedule, coef, degree = smooth_schedule([speeds[i] for i in have],
+                                             [cd[i].design.M1 for i in have], rejoin)
+    k = min(have, key=lambda i: abs(speeds[i] - single_speed))
     single = dict(M1=list(cd[k].design.M1), rejoin=rejoin, from_speed=speeds[k])
+    lo, hi = speeds[have[0]], speeds[have[-1]]
     measured = [_measure(engine, {
-        LABELS[0]: c.design, LABELS[1]: Design.tv(g, schedule.at(v)[0], rejoin),
+        **({} if isinstance(c, NoDesignFound) else {LABELS[0]: c.design}),
+        LABELS[1]: Design.tv(g, schedule.at(min(max(v, lo), hi))[0], rejoin),
         LABELS[2]: Design.tv(g, single["M1"], rejoin), LABELS[3]: Design.vc(g)},
         rs, basin_n) for g, v, c in zip(gaits, speeds, cd)]
     records = []
     for v, c, d, m in zip(speeds, cd, dead, measured):
         dr = d.result()
-        records.append(dict(speed=v, codesign=dict(M1=list(c.design.M1), rejoin=rejoin,
-                                                   s_star=float(c.s_star), status=c.status),
+        own = (dict(status="no_design", message=c.message) if isinstance(c, NoDesignFound)
+               else dict(M1=list(c.design.M1), rejoin=rejoin, s_star=float(c.s_star),
+                         status=c.status))
+        records.append(dict(speed=v, codesign=own,
                             deadbeat=dict(M1=np.asarray(dr.M1).tolist(),
                                           max_abs=float(dr.max_abs)),
                             designs={label: _row(refs) for label, refs in m.items()}))
@@ -200,7 +210,8 @@ def family_designs_flow(engine, gaits: list, settings: CodesignSettings,
 
 
 def _message(records) -> str:
-    walk = {lab: sum(r["designs"][lab]["s_star"] >= 1 for r in records) for lab in LABELS}
+    walk = {lab: sum(r["designs"].get(lab, {}).get("s_star", 0) >= 1 for r in records)
+            for lab in LABELS}
     return (f"{len(records)} speeds; s* >= 1 at " + ", ".join(
         f"{n} for {lab}" for lab, n in walk.items()))
 
