@@ -12,7 +12,7 @@ import pytest
 
 from analysis.cli import main
 from analysis.design import ROBUST_GAIT
-from analysis.design.codesign import (FIT, CodesignSettings, IpoptLimits, MoveSettings,
+from analysis.design.codesign import (FIT, IpoptLimits, MoveSettings,
                                       NoDesign, StartSampling, Verification, gait_change,
                                       move_gait)
 from analysis.design.codesign.functions import TranscriptionSettings

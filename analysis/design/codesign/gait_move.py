@@ -402,9 +402,10 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
             if got is not None:
                 last_gait = got[1]
     if last_gait is None:
+        first = records[0].get("rejected", records[0]["nlp_status"])
         return GaitMove("kept", "the gait could not be moved toward the robust gait "
-                        f"constraints (first step: {records[0].get('rejected', records[0]['nlp_status'])})",
-                        own, tgt, own, records, gait=gait)
+                        f"constraints (first step: {first})", own, tgt, own, records,
+                        gait=gait)
     last_gait.solver_stats.update(moved_from=gait.cache_key, move_fraction=f_done)
     reached = own_values(last_gait)
     change = gait_change(gait, last_gait)

@@ -23,7 +23,7 @@ from ..verification import finish_check, hidden_sign_patterns, submit_check
 from .functions import TranscriptionSettings
 from .gait_move import gait_change, move_gait
 from .problem import Problem, Solve, solve, solve_continued
-from .settings import CodesignError, CodesignResult, CodesignSettings, NoDesign
+from .settings import CodesignResult, CodesignSettings, NoDesign
 from .starts import deadbeat_starts, failure_binds, fitted_starts
 from .units import (fixed_problem, gait_step, hardest, measure, node_kernel, paper_first,
                     sampled_starts, screen, vc_radius)
