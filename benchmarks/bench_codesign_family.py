@@ -9,7 +9,8 @@ over the whole range, and the ramp 0.4 -> 1.2 -> 0.4 m/s walked in full order.
    none (one line).
 3. The M1 schedule: the members' designs as the points of an
    :class:`analysis.design.schedule.M1Schedule` (linear in speed between them: at each
-   member its own design).
+   member its own design; a member without a design holds the nearest one's M1, on its
+   gait moved to the robust gait options' optimum at its speed).
 4. The ramp 0.4 -> 1.2 -> 0.4 m/s by 0.05 per step, then 10 steps at 0.4 m/s: step k
    walks the gait of its speed's design (the member, or the member moved) with the
    schedule's M1, in full order (every validity condition, mu = 0.6, |u| <= 150 N m);
@@ -19,19 +20,23 @@ Results: ``benchmarks/results/codesign_family.json``; the ramp's figure
 ``docs/_static/codesign_ramp.png`` (``--figures DIR``).
 
     python benchmarks/bench_codesign_family.py [--range 0.4 1.2 0.05] [--hold 10]
-        [--workers N] [--figures DIR] [--no-save]
+        [--workers N] [--figures DIR] [--no-save] [--tag NAME]
 """
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from analysis.design.codesign import FIT, NoDesign, codesign
+from analysis.design.codesign import FIT, NoDesign, codesign, move_gait
+from analysis.design.codesign.functions import TranscriptionSettings
+from analysis.design.codesign.method import MOVED
 from analysis.design.schedule import M1Schedule, ramp_speeds
 from analysis.reporting.plots import save_figure, speed_profile_plot
 from analysis.robustness.speed import walk_gaits
@@ -53,7 +58,7 @@ def _record(v, r, wall) -> dict:
                 M1=[float(x) for x in r.design.M1], rejoin=float(r.design.rejoin),
                 gait_moved=bool(ch), max_joint_change=ch.get("max_joint_change", 0.0),
                 T=ch.get("T", [r.gait.T, r.gait.T]), wall=round(wall, 1),
-                load=round(os.getloadavg()[0], 2))
+                load=round(os.getloadavg()[0], 2), cached=bool(r.cached))
 
 
 def _summary(r) -> dict:
@@ -74,9 +79,10 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--figures", default=str(ROOT / "docs" / "_static"))
     ap.add_argument("--no-save", action="store_true")
+    ap.add_argument("--tag", default="", help="appended to the results' name (another range)")
     a = ap.parse_args(argv)
     v1, v2, dv = a.range
-    with Run("codesign_family", f"robust designs over the gait family {v1:g}:{v2:g}:{dv:g} "
+    with Run("codesign_family" + (f"_{a.tag}" if a.tag else ""), f"robust designs over the gait family {v1:g}:{v2:g}:{dv:g} "
              f"(default options), the M1 schedule and the ramp {v1:g} -> {v2:g} -> {v1:g} "
              "m/s in full order", save=not a.no_save) as bench:
         t = time.perf_counter()
@@ -106,27 +112,47 @@ def main(argv=None):
                   f", gait {'moved' if rec['gait_moved'] else 'as given'}; {rec['wall']} s",
                   flush=True)
         n_met = sum(x["status"] == "target_met" for x in records)
-        bench.row(f"{len(fam)} co-designs (`biped m1 --robust --gait MEMBER`)",
+        n_cached = sum(bool(x.get("cached")) for x in records)
+        bench.row(f"{len(fam)} co-designs (`biped m1 --robust --gait MEMBER`)"
+                  + (f"; {n_cached} read from the cache" if n_cached else ", cold"),
                   round(time.perf_counter() - t_all, 1))
         bench.row("members with a design (of the family's)", len(designs), unit="",
                   target=str(len(fam)))
         bench.row("members whose design meets the target (s* >= 1, below 1e-3 by step 5, "
                   "max|lambda| <= virtual constraints')", n_met, unit="", target=str(len(fam)))
         bench.data["members"] = records
-        if len(designs) < len(fam):
-            bench.note("members without a design: " + ", ".join(
-                f"{x['speed']:.2f} ({x['message']})" for x in records
-                if x["status"] == "no_design"))
-            print("the ramp needs a design at every speed: not walked", flush=True)
+        if not designs:
+            print("no member has a design: the ramp is not walked", flush=True)
             return records
+        missing = [float(v) for v in fam.member_speeds if round(float(v), 6) not in designs]
+        if missing:
+            bench.note("members without a design (the ramp walks their gait moved to the "
+                       "robust gait options' optimum at their speed, with the M1 of the "
+                       "nearest member's design held): " + "; ".join(
+                           f"{x['speed']:.2f} m/s: {x['message']}" for x in records
+                           if x["status"] == "no_design"))
+            print(f"no design at {missing} m/s: walked on the gait moved (the robust options' "
+                  "optimum), with the nearest design's M1", flush=True)
 
-        # the schedule through the designs, and the ramp on their gaits
-        vs = sorted(designs)
-        sched = M1Schedule(tuple(vs), tuple(tuple(designs[v].design.M1) for v in vs),
-                           tuple(designs[v].design.rejoin for v in vs))
+        # the schedule through the designs (a member without one holds its nearest
+        # neighbour's M1), and the ramp on their gaits
+        def nearest(v):
+            return min(designs, key=lambda d: abs(d - v))
+        vs = sorted(round(float(v), 6) for v in fam.member_speeds)
+        sched = M1Schedule(tuple(vs),
+                           tuple(tuple(designs[nearest(v)].design.M1) for v in vs),
+                           tuple(designs[nearest(v)].design.rejoin for v in vs))
         bench.data["schedule"] = sched.to_dict()
         speeds = ramp_speeds(v1, v2, dv, hold=a.hold)
-        gaits = [designs[round(float(v), 6)].gait for v in speeds]
+        # a member without a design: its gait moved as the co-design moves gaits (the
+        # farthest move, the robust gait options' optimum at its speed), the held M1
+        stand_in = {round(v, 6): move_gait(fam.gait(v), {k: val for k, val in
+                                                         FIT.gait.items() if k in MOVED},
+                                           replace(FIT.move, effort=math.inf),
+                                           TranscriptionSettings()).gait
+                    for v in missing}
+        gaits = [designs[round(float(v), 6)].gait if round(float(v), 6) in designs
+                 else stand_in[round(float(v), 6)] for v in speeds]
         t = time.perf_counter()
         runs = {"time-varying, M1 schedule": walk_gaits(gaits, speeds, "tv", sched, OPTS),
                 "virtual constraints": walk_gaits(gaits, speeds, "vc", None, OPTS)}
@@ -146,7 +172,8 @@ def main(argv=None):
         figs.mkdir(parents=True, exist_ok=True)
         fig = speed_profile_plot(runs, title=f"ramp {v1:g} -> {v2:g} -> {v1:g} m/s on the "
                                  "members' robust designs (full order)")
-        bench.data["figure"] = str(save_figure(fig, figs / "codesign_ramp.png"))
+        bench.data["figure"] = save_figure(
+            fig, figs / ("codesign_ramp" + (f"_{a.tag}" if a.tag else "") + ".png"))
     return records
 
 

@@ -179,6 +179,7 @@ COMMANDS = [
     ["mujoco", "--gait", "{g}", "--controller", "vc", "--steps", "2", "--json"],
     ["m1", "--robust", "--gait", "{g}", "--json"],
     ["m1", "--robust", "--gait", "{g}", "--fixed-gait", "--json"],
+    ["m1", "--robust", "--gait", "{g}", "--free-gait"],
 ]
 
 
