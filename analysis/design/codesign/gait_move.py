@@ -298,6 +298,103 @@ def _relaxed(gait) -> dict:
     return out
 
 
+class _Move:
+    """One move of a gait: its bounds from the gait's own values to the targets, and the
+    solves at a fraction of the way (records kept)."""
+
+    def __init__(self, gait, targets: dict, ms: MoveSettings, transcription):
+        self.gait, self.ms, self.tst = gait, ms, transcription
+        self.own = own_values(gait)
+        self.base = gait.options.replace(**_relaxed(gait), **{
+            k: v for k, v in targets.items() if k not in CONTINUED})
+        # the continued constraints: those of the targets, and margins on the path's
+        # friction ratio and torques (a gait at the cone's edge or the torque limit slips
+        # or saturates under the smallest perturbation)
+        b = self.base
+        self.tgt = dict(impact_mu=float(targets.get("impact_mu", b.impulse_mu)),
+                        clearance=float(targets.get("clearance", b.clearance)),
+                        mu=min(float(ms.path_mu), b.mu),
+                        torque_limit=float(ms.torque_fraction * b.torque_limit))
+        own, tgt = self.own, self.tgt
+        self.start = {k: (min(max(own[k], 0.0), tgt[k]) if k == "clearance"
+                          else max(own[k], tgt[k])) for k in tgt}
+        self.G_user = GaitTable(gait.model, gait, transcription).gait_vector(gait)
+        self.records = []
+
+    def bounds_at(self, f: float) -> dict:
+        """The continued constraints' bounds at fraction f of the way."""
+        return {k: self.start[k] + f * (self.tgt[k] - self.start[k]) for k in self.tgt}
+
+    def attempt(self, f: float, d_from, effort: float):
+        """One solve at the bounds of fraction f from d_from: (G, gait) or None."""
+        ms, g, b = self.ms, self.gait, self.bounds_at(f)
+        solve_opts = self.base.replace(
+            impact_mu=max(b["impact_mu"] - ms.impulse_margin, 1e-3),
+            clearance=b["clearance"] + ms.clearance_margin, mu=b["mu"] - ms.friction_margin,
+            torque_limit=b["torque_limit"] - ms.torque_margin)
+        nlp = GaitProjection(Gait(g.model, solve_opts, g.alpha, g.x0, g.T), self.G_user,
+                             ms.scale, self.tst, effort)
+        lb, ub = nlp.gait_bounds()
+        try:
+            res = solve_nlp(nlp, np.clip(d_from, lb, ub), lb, ub,
+                            {"max_iter": ms.max_iter, "tol": 1e-8})
+            ok = res.success and np.all(np.isfinite(res.d))
+        except NoStrikeAtStart:
+            res, ok = None, False
+        rec = dict(fraction=f, effort=effort, **b,
+                   nlp_status=res.status if res else "not_evaluable",
+                   iterations=res.iterations if res else 0)
+        self.records.append(rec)
+        if not ok:
+            return None
+        rec["distance"] = nlp.distance(res.d)
+        step = gait_step(Gait(g.model, self.base.replace(**b), g.alpha, g.x0, g.T), res.d,
+                         res.status)
+        if step.gait is None:
+            rec["rejected"] = step.rejected
+            return None
+        return res.d, step.gait
+
+    def run(self):
+        """(the moved gait or None, the fraction of the way reached)."""
+        ms = self.ms
+        # 1. straight to the targets with the effort term (one solve when it goes)
+        got = self.attempt(1.0, self.G_user, ms.effort) if ms.effort else None
+        if got is not None:
+            return got[1], 1.0
+        # 2. the nearest gait, by continuation from the gait's own values (a failed step
+        # halved), then the effort term from there
+        d, step, halvings, f_done, last = self.G_user.copy(), 1.0 / ms.steps, 0, 0.0, None
+        while f_done < 1.0 - 1e-12:
+            f = min(1.0, f_done + step)
+            got = self.attempt(f, d, 0.0)
+            if got is not None:
+                (d, last), f_done = got, f
+                continue
+            if halvings >= ms.halvings:
+                break
+            step, halvings = step / 2, halvings + 1
+        if last is not None and ms.effort:
+            got = self.attempt(f_done, d, ms.effort)
+            if got is not None:
+                last = got[1]
+        return last, f_done
+
+    def message(self, f_done: float, change: dict) -> str:
+        """The move in words."""
+        own, b = self.own, self.bounds_at(f_done)
+        return (f"gait moved to impulse ratio <= {b['impact_mu']:.3g} (from "
+                f"{own['impact_mu']:.3g}), clearance {b['clearance']:.3g} m (from "
+                f"{own['clearance']:.3g}), friction ratio <= {b['mu']:.3g} (from "
+                f"{own['mu']:.3g}), torques <= {b['torque_limit']:.4g} N m (from "
+                f"{own['torque_limit']:.4g}) in {len(self.records)} solve(s)"
+                + ("" if f_done >= 1.0 - 1e-12 else
+                   f", {100 * f_done:.0f} % of the way to the targets")
+                + f"; T {change['T'][0]:.4g} -> {change['T'][1]:.4g} s, step length "
+                f"{change['step_length'][0]:.4g} -> {change['step_length'][1]:.4g} m, joints "
+                f"moved by at most {change['max_joint_change']:.3g} rad")
+
+
 @task
 def move_gait(gait, targets: dict, settings: MoveSettings,
               transcription: TranscriptionSettings) -> GaitMove:
@@ -323,100 +420,24 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
         return GaitMove("kept", "the gait is kept: its swing foot may pass below the ground "
                         "(legs without knees), which the gait rows of the move do not "
                         "model", {}, dict(targets), {}, gait=gait)
-    own = own_values(gait)
-    ms = settings
-    base = gait.options.replace(**_relaxed(gait), **{k: v for k, v in targets.items()
-                                                     if k not in CONTINUED})
-    # the continued constraints: those of the targets, and margins on the path's friction
-    # ratio and torques (a gait at the cone's edge or the torque limit slips or saturates
-    # under the smallest perturbation)
-    tgt = dict(impact_mu=float(targets.get("impact_mu", base.impulse_mu)),
-               clearance=float(targets.get("clearance", base.clearance)),
-               mu=min(float(ms.path_mu), base.mu),
-               torque_limit=float(ms.torque_fraction * base.torque_limit))
-    start = {k: (min(max(own[k], 0.0), tgt[k]) if k == "clearance" else max(own[k], tgt[k]))
-             for k in tgt}
-
-    def bounds_at(f):
-        return {k: start[k] + f * (tgt[k] - start[k]) for k in tgt}
-
-    if all(abs(start[k] - tgt[k]) < 1e-12 for k in tgt):
-        moved = Gait(gait.model, base.replace(**tgt), gait.alpha, gait.x0, gait.T,
+    mv = _Move(gait, targets, settings, transcription)
+    own, tgt = mv.own, mv.tgt
+    if all(abs(mv.start[k] - tgt[k]) < 1e-12 for k in tgt):
+        moved = Gait(gait.model, mv.base.replace(**tgt), gait.alpha, gait.x0, gait.T,
                      solver_stats=dict(gait.solver_stats))
         return GaitMove("kept", "the gait meets the robust gait constraints already",
                         own, tgt, own_values(moved), change=gait_change(gait, moved),
                         gait=moved)
-    G_user = GaitTable(gait.model, gait, transcription).gait_vector(gait)
-    records = []
-
-    def attempt(f, d_from, effort, max_iter):
-        """One solve at the bounds of fraction f from d_from: (G, gait) or None."""
-        b = bounds_at(f)
-        solve_opts = base.replace(impact_mu=max(b["impact_mu"] - ms.impulse_margin, 1e-3),
-                                  clearance=b["clearance"] + ms.clearance_margin,
-                                  mu=b["mu"] - ms.friction_margin,
-                                  torque_limit=b["torque_limit"] - ms.torque_margin)
-        g_solve = Gait(gait.model, solve_opts, gait.alpha, gait.x0, gait.T)
-        nlp = GaitProjection(g_solve, G_user, ms.scale, transcription, effort)
-        lb, ub = nlp.gait_bounds()
-        try:
-            res = solve_nlp(nlp, np.clip(d_from, lb, ub), lb, ub,
-                            {"max_iter": max_iter, "tol": 1e-8})
-            ok = res.success and np.all(np.isfinite(res.d))
-        except NoStrikeAtStart:
-            res, ok = None, False
-        rec = dict(fraction=f, effort=effort, **b,
-                   nlp_status=res.status if res else "not_evaluable",
-                   iterations=res.iterations if res else 0)
-        records.append(rec)
-        if not ok:
-            return None
-        rec["distance"] = nlp.distance(res.d)
-        step_gait = gait_step(Gait(gait.model, base.replace(**b), gait.alpha, gait.x0,
-                                   gait.T), res.d, res.status)
-        if step_gait.gait is None:
-            rec["rejected"] = step_gait.rejected
-            return None
-        return res.d, step_gait.gait
-
-    if np.isinf(ms.effort):
+    if np.isinf(settings.effort):
         return _optimal(gait, targets, own, tgt)
-    # 1. straight to the targets with the effort term (one solve when it goes)
-    got = attempt(1.0, G_user, ms.effort, ms.max_iter) if ms.effort else None
-    f_done, last_gait = (1.0, got[1]) if got else (0.0, None)
-    if got is None:
-        # 2. the nearest gait, by continuation from the gait's own values (a failed step
-        # halved), then the effort term from there
-        d, step, halvings = G_user.copy(), 1.0 / ms.steps, 0
-        while f_done < 1.0 - 1e-12:
-            f = min(1.0, f_done + step)
-            got = attempt(f, d, 0.0, ms.max_iter)
-            if got is not None:
-                (d, last_gait), f_done = got, f
-                continue
-            if halvings >= ms.halvings:
-                break
-            step, halvings = step / 2, halvings + 1
-        if last_gait is not None and ms.effort:
-            got = attempt(f_done, d, ms.effort, ms.max_iter)
-            if got is not None:
-                last_gait = got[1]
-    if last_gait is None:
-        first = records[0].get("rejected", records[0]["nlp_status"])
+    last, f_done = mv.run()
+    if last is None:
+        first = mv.records[0].get("rejected", mv.records[0]["nlp_status"])
         return GaitMove("kept", "the gait could not be moved toward the robust gait "
-                        f"constraints (first step: {first})", own, tgt, own, records,
+                        f"constraints (first step: {first})", own, tgt, own, mv.records,
                         gait=gait)
-    last_gait.solver_stats.update(moved_from=gait.cache_key, move_fraction=f_done)
-    reached = own_values(last_gait)
-    change = gait_change(gait, last_gait)
-    status = "moved" if f_done >= 1.0 - 1e-12 else "partly"
-    b = bounds_at(f_done)
-    msg = (f"gait moved to impulse ratio <= {b['impact_mu']:.3g} (from {own['impact_mu']:.3g}), "
-           f"clearance {b['clearance']:.3g} m (from {own['clearance']:.3g}), friction ratio "
-           f"<= {b['mu']:.3g} (from {own['mu']:.3g}), torques <= {b['torque_limit']:.4g} N m "
-           f"(from {own['torque_limit']:.4g}) in {len(records)} solve(s)"
-           + ("" if status == "moved" else f", {100 * f_done:.0f} % of the way to the targets")
-           + f"; T {change['T'][0]:.4g} -> {change['T'][1]:.4g} s, step length "
-           f"{change['step_length'][0]:.4g} -> {change['step_length'][1]:.4g} m, joints "
-           f"moved by at most {change['max_joint_change']:.3g} rad")
-    return GaitMove(status, msg, own, tgt, reached, records, change, gait=last_gait)
+    last.solver_stats.update(moved_from=gait.cache_key, move_fraction=f_done)
+    change = gait_change(gait, last)
+    return GaitMove("moved" if f_done >= 1.0 - 1e-12 else "partly",
+                    mv.message(f_done, change), own, tgt, own_values(last), mv.records,
+                    change, gait=last)

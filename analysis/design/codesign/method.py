@@ -354,7 +354,14 @@ class Method:
                           success=True, M1=M1, s=s0, gait_vector=None)
             first = self.candidate(g, kept, plain, [], "screened start", self.rejoin)
             if self.meets_target(first):
-                return first
+                # one short solve from it (the directions that fail first at its s*):
+                # the better of the two by the target's measures
+                active = self.run(hardest, g, kept, M1, self.rejoin, max(s0, 0.1),
+                                  st.initial_active, self.rs)
+                c = self.finish_round(self.solve_round(
+                    g, kept, M1, active, max(first.s_star - 0.02, 0.1), "from the screened "
+                    "start", self.rejoin, screen_budget=True), kept, "from the screened start")
+                return c if c is not None and c.ok and c.score > first.score else first
             pss = [dict(ps, s_start=float(max(s0, 0.1))) for _, s0 in starts]
             starts = [M1 for M1, _ in starts]
         else:
