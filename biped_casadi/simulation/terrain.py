@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files import write_text_atomic
+
 __all__ = ["Terrain", "random_heights", "step_heights", "ground_levels", "MAX_HEIGHT",
            "TerrainFileError"]
 
@@ -145,14 +147,14 @@ class Terrain:
             raise TerrainFileError(f"terrain file {p}: {e}") from None
 
     def save(self, path):
-        """Write the heights as a JSON profile file (readable by :meth:`load`).
+        """Write the heights as a JSON profile file (readable by :meth:`load`), atomically.
 
         Parameters
         ----------
         path : str or Path
             The file.
         """
-        Path(path).write_text(json.dumps({"heights": list(self.heights)}) + "\n")
+        write_text_atomic(path, json.dumps({"heights": list(self.heights)}) + "\n")
 
     def height(self, k: int) -> float:
         """h_k, m (0 past the last height).
