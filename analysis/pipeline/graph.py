@@ -17,6 +17,7 @@ kind.
 """
 from __future__ import annotations
 
+import concurrent.futures as cf
 import contextlib
 import json
 import os
@@ -343,15 +344,13 @@ def _merge(into: dict, part: dict):
 def _collect(eng, S: dict, jobs: list, staging: Path, log: Log) -> tuple:
     """Wait for every stage (as they finish) and figure; write the figures."""
     stages, files = {}, {}
-    pending = dict(S)
+    pending = {r: n for n, r in S.items()}
     while pending:
-        name = next((n for n, r in pending.items() if r.done()), None)
-        if name is None:
-            time.sleep(0.05)
-            continue
-        stages[name] = _status(eng, name, pending.pop(name))
-        stages[name].update(_counts(eng, name))
-        log.stage(name, stages[name])
+        for r in cf.wait(pending, return_when=cf.FIRST_COMPLETED).done:
+            name = pending.pop(r)
+            stages[name] = _status(eng, name, r)
+            stages[name].update(_counts(eng, name))
+            log.stage(name, stages[name])
     for stage, ref in jobs:
         try:
             for fname, by_fmt in ref.result().items():

@@ -48,7 +48,7 @@ from .functions import FAMILIES, TranscriptionSettings, compiled
 from .method import Candidate, Method
 from .problem import Problem, Solve, build, solve, solve_continued
 from .reduced import NLPSolve, Reduced, solve_nlp
-from .settings import (CODESIGNS, FULL, QUICK, TODAY_DESIGN, CodesignError, CodesignResult,
+from .settings import (FULL, QUICK, TODAY_DESIGN, CodesignError, CodesignResult,
                        CodesignSettings, IpoptLimits, StartSampling, TrustRegion, Verification)
 from .transcription import Transcription
 
@@ -56,5 +56,5 @@ from .transcription import Transcription
 # importable: the NLP's internals, for tests and studies)
 __all__ = ["codesign", "codesign_tradeoff", "codesign_flow", "tradeoff_flow", "replay_args",
            "CodesignSettings", "IpoptLimits", "StartSampling", "TrustRegion", "Verification",
-           "CodesignResult", "CodesignError", "QUICK", "FULL", "TODAY_DESIGN", "CODESIGNS",
+           "CodesignResult", "CodesignError", "QUICK", "FULL", "TODAY_DESIGN",
            "TranscriptionSettings", "solve_nlp", "NLPSolve", "FAMILIES", "compiled"]

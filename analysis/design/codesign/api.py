@@ -140,8 +140,8 @@ def codesign(robot_or_gait, settings: CodesignSettings | None = None, *, gait_fi
     with Engine(scheduler, workers, cache=cache, use_cache=use_cache, log=progress) as eng:
         ref = eng.spawn(codesign_flow, model, st, gait)
         result = ref.result()
-        result.cached = ref.state == "reused"
-    return _with_gait_file(result, gait, gait_file, cache, ref.key)
+        result.cached = eng.state(ref) == "reused"
+    return _with_gait_file(result, gait, gait_file, cache, ref.key.rsplit("-", 1)[-1])
 
 
 def _with_gait_file(result: CodesignResult, gait, gait_file, cache, key: str):
