@@ -46,7 +46,7 @@ Speed as a parameter.  ``build_problem(..., speed_parameter=True)`` makes the sp
 NLP's parameter p instead of a constant: it enters only the speed constraint
 x_end - p T (whose Hessian does not involve p) and the factor 1/p of the per-length
 cost, so one NLP and one solver serve every speed of a family
-(:mod:`gait_opt.family`), the derivatives unchanged in structure.
+(:mod:`gait_opt.speed_family`), the derivatives unchanged in structure.
 """
 from __future__ import annotations
 

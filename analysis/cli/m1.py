@@ -11,7 +11,7 @@ from analysis.design import (
     robust_design,
 )
 from analysis.design.codesign import QUICK, CodesignError, CodesignSettings, codesign
-from analysis.design.family import family_designs
+from analysis.design.designs_over_speed import family_designs
 from analysis.reporting.plots import family_designs_plot, save_figures
 from gait_opt import GaitFamily
 from analysis.sweeps import grid_best

@@ -360,7 +360,7 @@ class _Search:
         (:func:`analysis.design.verification.verify_design`): s* (walker, finer),
         full-order runs at s* and s_fail, the paper's perturbation at s = 1."""
         st = self.st
-        check = verify_design(self.gait, Design(tuple(M1), st.rejoin), self.kept,
+        check = verify_design(Design.tv(self.gait, tuple(M1), st.rejoin), self.kept,
                               st.robustness_settings(), progress=self.say)
         self.stage("verification", s_star=check.s_star, full_order=check.verified)
         return check

@@ -32,12 +32,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from biped_casadi import Design, SimulationOptions, design_first, directions, require_same_robot
+from biped_casadi import Design, SimulationOptions, directions, require_same_robot
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import (WalkBatch, start_states, virtual_constraint_walker,
                                      zero_dynamics_walker)
 from biped_casadi.simulation.outcome import NOT_CONVERGED
-from biped_casadi.control.reference import gait_first
 
 from ..tasks import Engine, resolve_scheduler, task
 from ..stability.poincare import poincare_map
@@ -228,7 +227,6 @@ _KEEP_BATCH = 32          # candidate directions walked at once
 
 
 @task
-@gait_first
 def kept_directions(gait, settings: RobustnessSettings | None = None,
                     progress=None) -> KeptDirections:
     """The directions from which virtual constraints walk at full scale.
@@ -353,13 +351,12 @@ def _runner(gait, design, st: RobustnessSettings):
 
 
 @task
-@design_first
 def robustness(design: Design, settings: RobustnessSettings | None = None, kept=None,
                progress=None) -> RobustnessResult:
     """s* of a design: a time-varying one, or virtual constraints.
 
-    ``robustness(gait)`` measures virtual constraints on the gait, ``robustness(gait,
-    Design(M1, rejoin))`` a time-varying design on it.
+    ``robustness(Design.vc(gait))`` measures virtual constraints on the gait,
+    ``robustness(Design.tv(gait, M1, rejoin))`` a time-varying design on it.
 
     Parameters
     ----------
@@ -376,6 +373,7 @@ def robustness(design: Design, settings: RobustnessSettings | None = None, kept=
     -------
     RobustnessResult
     """
+    design = Design.require(design)
     gait = design.gait
     model = gait.model
     require_same_robot(model, gait)

@@ -10,7 +10,6 @@ import shutil
 import numpy as np
 
 from biped_casadi.caching import ResultStore, cached, task_key
-from biped_casadi.control.reference import gait_first
 
 from .storage import SweepStoreError
 from .sweep import RESULTS_VERSION, SweepResult, grid_points, run_sweep
@@ -18,7 +17,6 @@ from .sweep import RESULTS_VERSION, SweepResult, grid_points, run_sweep
 __all__ = ["grid_results", "grid_best"]
 
 
-@gait_first
 @cached(maxsize=4)
 def grid_results(gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
                  folder=None, progress: bool = False) -> SweepResult:
@@ -58,7 +56,6 @@ def grid_results(gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
     return run_sweep(gait, P, out_dir=folder, progress=progress)
 
 
-@gait_first
 def grid_best(gait, n: int = 9, lo: float = -10.0, hi: float = 10.0) -> dict:
     """The best stable point of the grid.
 

@@ -36,7 +36,6 @@ import numpy as np
 
 from biped_casadi import require_same_robot
 from biped_casadi.caching import code_version
-from biped_casadi.control.reference import gait_first
 
 from ..stability.poincare import singular_m1_values
 from .storage import META, SweepStore, digest_points
@@ -72,7 +71,6 @@ class _Arrays:
         self.A[a:b] = c["A"]
 
 
-@gait_first
 def _check_run_arguments(gait, executor, workers, chunk_size):
     model = gait.model
     require_same_robot(model, gait)
@@ -111,7 +109,6 @@ def _read_stored(store, bounds, P, arrays):
     return reused, {k: v for k, v in corrupt.items() if k not in reused}
 
 
-@gait_first
 def run_sweep(gait, points, out_dir=None, chunk_size: int | None = None,
               workers: int | None = None, scheduler=None, progress: bool = True,
               settings: SweepSettings | dict | None = None,
@@ -303,7 +300,6 @@ class OneDSweeps:
     sweep: SweepResult
 
 
-@gait_first
 def one_d_sweeps(gait, values, out_dir=None, **kw) -> OneDSweeps:
     """Fig. 2: max|lambda| against each component M1(j) with the others zero.
 
