@@ -3,6 +3,7 @@
 the processes of a cluster need (the bootstrapping check, the allocator, progress)."""
 from __future__ import annotations
 
+import copy
 import ctypes
 import logging
 import os
@@ -90,10 +91,10 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
     if scheduler == "local":
         check_not_bootstrapping()
         n = workers or cores()
-        kw = dict(n_workers=0, threads_per_worker=1, env={"BIPED_THREADS": "1"},
-                  preload=list(preload)) if processes else dict(n_workers=1,
-                                                                 threads_per_worker=n)
-        with dask.config.set(LOCAL_CLUSTER_CONFIG):   # the workers get it from their nanny
+        with dask.config.set(LOCAL_CLUSTER_CONFIG):   # the nannies (made later) pass it on
+            kw = dict(n_workers=0, threads_per_worker=1, env={"BIPED_THREADS": "1"},
+                      preload=list(preload), config=copy.deepcopy(dask.config.config)) \
+                if processes else dict(n_workers=1, threads_per_worker=n)
             cluster = LocalCluster(processes=processes, dashboard_address=":0",
                                    silence_logs=logging.ERROR, **kw)
         if processes:

@@ -129,7 +129,7 @@ def test_dask_runs_the_highest_priority_first_and_close_fails_the_rest(tmp_path)
     started beside it go first); closing the engine fails what never started instead
     of leaving it pending."""
     with Engine("local", workers=2, cache=tmp_path) as eng:
-        [r.result() for r in eng.map(started_at, ["warm 1", "warm 2"])]
+        [eng.submit(started_at, w).result() for w in ["warm 1", "warm 2"]]
         busy = [eng.submit(started_at, f"busy {i}", 0.5) for i in range(2)]
         low = [eng.submit(started_at, f"low {i}") for i in range(8)]
         with eng.stage("urgent", priority=10):
@@ -137,8 +137,8 @@ def test_dask_runs_the_highest_priority_first_and_close_fails_the_rest(tmp_path)
         assert sum(r.result() < high.result() for r in low) <= 3
         assert max(r.result() for r in busy) < high.result()
     eng = Engine("local", workers=2, cache=tmp_path / "closed")
-    [r.result() for r in eng.map(started_at, ["warm 1", "warm 2"])]
-    eng.map(started_at, ["busy 1", "busy 2"], 2.0)
+    [eng.submit(started_at, w).result() for w in ["warm 1", "warm 2"]]
+    [eng.submit(started_at, b, 2.0) for b in ["busy 1", "busy 2"]]
     never = eng.submit(started_at, "never")
     eng.close()
     assert never.done()

@@ -15,8 +15,9 @@ __all__ = ["Resolution", "ReproduceOptions", "run_folder"]
 
 @dataclass(frozen=True)
 class Resolution:
-    """What every stage computes at which resolution (what the numbers depend on): the
-    full run's settings by default, the quick run's from :meth:`make`.
+    """What every stage computes at which resolution (what the numbers depend on).
+
+    The full run's settings by default, the quick run's from :meth:`make`.
 
     Parameters
     ----------

@@ -58,15 +58,13 @@ class TaskRecord:
         The task, its stage and its content key.
     state : TaskState
         None while it runs.
-    seconds : float
-        What it took (reused: when it was computed).
-    error : str
-        The failure, if any.
+    seconds, error : float, str
+        What it took (reused: when it was computed); the failure, if any.
     flow : bool
         Whether it is a flow (its seconds are mostly waiting).
     deps : tuple of str
-        The keys it came after: its inputs and, in a flow, the results that had
-        finished when it was submitted.
+        The keys it came after: its inputs and, in a flow, the results finished when
+        it was submitted.
     """
 
     name: str
@@ -326,8 +324,7 @@ class Engine:
         self._settle()
         return list(self._records)
 
-    def _settle(self):
-        """Keep the results that have arrived and the keeper has not kept yet."""
+    def _settle(self):             # what has arrived and the keeper has not kept yet
         for f in list(self._futures.values()):
             if not isinstance(f, cf.Future) and f.done():
                 self._keep_one(f)
@@ -490,8 +487,9 @@ class Engine:
         return self._start(fn, args, kwargs, flow=False)
 
     def spawn(self, flow, *args, **kwargs):
-        """Run a flow, ``flow(self, *args, **kwargs)``, in a thread of its own (here when
-        synchronous); its result is kept like a task's.
+        """Run a flow, ``flow(self, *args, **kwargs)``, in a thread of its own.
+
+        Here when synchronous; its result is kept like a task's.
 
         Parameters
         ----------
@@ -506,27 +504,10 @@ class Engine:
         """
         return self._start(flow, args, kwargs, flow=True)
 
-    def map(self, fn, items, *args, **kwargs) -> list:
-        """``[submit(fn, item, *args, **kwargs) for item in items]``.
-
-        Parameters
-        ----------
-        fn : callable
-            A task.
-        items : iterable
-            Its first arguments.
-        *args, **kwargs
-            Its other arguments.
-
-        Returns
-        -------
-        list of futures
-        """
-        return [self.submit(fn, item, *args, **kwargs) for item in items]
-
     def each(self, fn, calls: dict):
-        """Fan out a task: (tag, result) of each call as it finishes (here, one after
-        the other, when synchronous).
+        """Fan out a task: (tag, result) of each call as it finishes.
+
+        Here, one call after the other, when synchronous.
 
         Parameters
         ----------
@@ -568,8 +549,9 @@ class Engine:
         return rec.state if rec is not None else None
 
     def critical_path(self) -> dict:
-        """The longest chain of computed tasks (flows weigh nothing): the wall time's
-        bound on any number of workers.
+        """The longest chain of computed tasks: the wall time's bound on any workers.
+
+        Flows weigh nothing (their work is in their tasks).
 
         Returns
         -------
