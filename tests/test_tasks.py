@@ -229,45 +229,25 @@ def test_a_worker_running_other_code_is_refused(tmp_path):
     """A real ``dask worker`` started on a copy of the toolkit whose numerical code
     differs (one number in one module): the task fails with one line naming the module,
     and nothing is kept."""
-    import json
+    import os
     import shutil
-    import subprocess
-    import sys
-    import time
     from pathlib import Path
+    from dask_cluster import dask_cluster
     root, tests = Path(__file__).resolve().parents[1], Path(__file__).resolve().parent
     other = tmp_path / "other"
     for top in ("biped_casadi", "gait_opt", "analysis"):
         shutil.copytree(root / top, other / top, ignore=shutil.ignore_patterns("__pycache__"))
     basin = other / "analysis" / "robustness" / "basin.py"
     basin.write_text(basin.read_text().replace("q_span: float = 0.05", "q_span: float = 0.06"))
-    dask = str(Path(sys.executable).with_name("dask"))
-    file = tmp_path / "scheduler.json"
-    env = {k: v for k, v in __import__("os").environ.items() if k != "BIPED_SCHEDULER"}
-    procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
-                               "--no-dashboard", "--scheduler-file", str(file)],
-                              env=dict(env, PYTHONPATH=str(tests)),
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-    try:
-        for _ in range(300):
-            if file.is_file() and file.stat().st_size:
-                break
-            time.sleep(0.1)
-        address = json.loads(file.read_text())["address"]
-        procs.append(subprocess.Popen(
-            [dask, "worker", address, "--nthreads", "1", "--no-dashboard"],
-            env=dict(env, PYTHONPATH=f"{other}:{tests}"), cwd=tmp_path,
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        with Engine(address, cache=tmp_path / "cache") as eng:
-            ref = eng.submit(square, 3.0)
-            with pytest.raises(TaskError) as e:
-                ref.result()
-            assert eng.submit(add, ref, 1.0).exception() is not None  # its dependant too
-        msg = str(e.value)
-        assert "stale worker" in msg and "analysis/robustness/basin.py differs" in msg
-        assert "\n" not in msg
-        assert not list((tmp_path / "cache").rglob("*.pkl"))
-    finally:
-        for p in procs[::-1]:
-            p.terminate()
-            p.wait(20)
+    env = {k: v for k, v in os.environ.items() if k != "BIPED_SCHEDULER"}
+    with dask_cluster(tmp_path, [dict(env, PYTHONPATH=f"{other}:{tests}")], cwd=tmp_path,
+                      scheduler_env=dict(env, PYTHONPATH=str(tests))) as address, \
+            Engine(address, cache=tmp_path / "cache") as eng:
+        ref = eng.submit(square, 3.0)
+        with pytest.raises(TaskError) as e:
+            ref.result()
+        assert eng.submit(add, ref, 1.0).exception() is not None      # its dependant too
+    msg = str(e.value)
+    assert "stale worker" in msg and "analysis/robustness/basin.py differs" in msg
+    assert "\n" not in msg
+    assert not list((tmp_path / "cache").rglob("*.pkl"))

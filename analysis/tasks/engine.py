@@ -1,11 +1,10 @@
 """Long work as a graph of pure, cached tasks scheduled by Dask (the package docstring).
 
-Each task goes to Dask under its content key (``<name>-<key>``, the key from
+Each task goes to Dask under its content key (``<name>-<key>``,
 :func:`biped_casadi.caching.task_key`) with its stage's priority; its inputs are Dask
-futures (a kept result, or a flow's, scattered under its key), so Dask resolves them,
-queues, places and steals the work and fails the dependants of a failure.  This module
-only names the tasks and keeps their results: each result is written to the
-:class:`~biped_casadi.caching.ResultStore` as it arrives, by a thread of its own.
+futures (a kept result, or a flow's, scattered under its key): Dask resolves them,
+queues, places and steals the work and fails the dependants of a failure.  The engine
+names the tasks and keeps their results (a thread of its own writes each as it arrives).
 """
 from __future__ import annotations
 
@@ -20,13 +19,12 @@ import sys
 import threading
 import time
 import traceback
-from dataclasses import dataclass
-from enum import StrEnum
 
 from biped_casadi.caching import (MISSING, ResultStore, TaskInfo, code_files, code_version,
                                   task, task_key)
 
 from ..cluster import check_not_bootstrapping, connect, tune_allocator
+from .records import TaskError, TaskRecord, TaskState
 
 __all__ = ["task", "TaskInfo", "Engine", "TaskError", "TaskRecord", "TaskState",
            "resolve_scheduler", "SCHEDULER_ENV", "in_task"]
@@ -40,66 +38,6 @@ _TOPIC = "biped-task"
 _LOCAL = threading.local()
 
 
-class TaskState(StrEnum):
-    """How a task of a run ended."""
-
-    COMPUTED = "computed"
-    REUSED = "reused"
-    FAILED = "failed"
-
-
-@dataclass
-class TaskRecord:
-    """One task of a run.
-
-    Parameters
-    ----------
-    name, stage, key : str
-        The task, its stage and its content key.
-    state : TaskState
-        None while it runs.
-    seconds, error : float, str
-        What it took (reused: when it was computed); the failure, if any.
-    flow : bool
-        Whether it is a flow (its seconds are mostly waiting).
-    deps : tuple of str
-        The keys it came after: its inputs and, in a flow, the results finished when
-        it was submitted.
-    """
-
-    name: str
-    stage: str
-    key: str
-    state: TaskState = None
-    seconds: float = 0.0
-    error: str = ""
-    flow: bool = False
-    deps: tuple = ()
-
-
-class TaskError(RuntimeError):
-    """A task failed (``str()``: its name and error, on one line).
-
-    Parameters
-    ----------
-    origin : str
-        The task that raised (the first failure of a chain).
-    message : str
-        Its error, ``Type: text``.
-    detail : str
-        Its traceback.
-    key : str
-        The key of the task that raised.
-    """
-
-    def __init__(self, origin: str, message: str, detail: str = "", key: str = ""):
-        super().__init__(origin, message, detail, key)
-        self.origin, self.message, self.detail, self.key = origin, message, detail, key
-
-    def __str__(self):
-        return f"{self.origin.rsplit('.', 1)[-1]}: {self.message}"
-
-
 def in_task() -> bool:
     """Whether this thread runs a task (library calls inside run synchronously).
 
@@ -107,12 +45,9 @@ def in_task() -> bool:
     -------
     bool
     """
-    if getattr(_LOCAL, "task", False):
-        return True
     try:
-        from distributed import get_worker
-        get_worker()
-        return True
+        from dask.distributed import get_worker
+        return getattr(_LOCAL, "task", False) or bool(get_worker())
     except (ImportError, ValueError):
         return False
 
@@ -127,18 +62,13 @@ def resolve_scheduler(scheduler=None, workers: int | None = None):
         'local'.  'synchronous' (or 'inline'): this process, one task after another.
         'local': a Dask ``LocalCluster``.  Another string: a Dask scheduler's address.
     workers : int, optional
-        Workers of the ``LocalCluster`` (default: the cores); 1 means 'synchronous'
-        unless a scheduler is named.
+        Workers of the ``LocalCluster`` (default: the cores); 1: 'synchronous'.
 
     Returns
     -------
     str or Client
-        'synchronous', 'local', an address or the client.
-
-    Raises
-    ------
-    ValueError
-        Naming 'workers' (not a positive integer) or 'scheduler'.
+        'synchronous', 'local', an address or the client (ValueError naming 'workers'
+        or 'scheduler' for anything else).
     """
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
                                 or workers < 1):
@@ -238,7 +168,7 @@ def _run(fn, key: str, code: str | None, args, kwargs):
         _LOCAL.task = was
     if code is not None:            # on a worker: its seconds go to the client
         with contextlib.suppress(Exception):
-            from distributed import get_worker
+            from dask.distributed import get_worker
             get_worker().log_event(_TOPIC, [f"{info.name.rsplit('.', 1)[-1]}-{key}",
                                             time.perf_counter() - t])
     return value
@@ -249,7 +179,7 @@ def _stale(kind: str, code: str) -> str:
     (:meth:`Engine.client` leaves the client's files in the scheduler's metadata)."""
     mine, theirs = code_files(kind), {}
     with contextlib.suppress(Exception):
-        from distributed import get_client
+        from dask.distributed import get_client
         theirs = get_client().get_metadata([_TOPIC, kind, code], None) or {}
     diff = sorted(f for f in set(mine) | set(theirs) if mine.get(f) != theirs.get(f))
     what = (diff[0] + (f" (and {len(diff) - 1} more)" if len(diff) > 1 else "")) if theirs \
@@ -272,36 +202,31 @@ class Engine:
 
     Parameters
     ----------
-    scheduler : None, str or dask.distributed.Client
-        Where tasks run (:func:`resolve_scheduler`).
-    workers : int, optional
-        Workers of a local cluster.
+    scheduler, workers : None, str or Client; int, optional
+        Where tasks run (:func:`resolve_scheduler`); a local cluster's workers.
     cache : str, Path or False, optional
         The cache folder (default :func:`biped_casadi.cache_dir`); False: keep nothing.
     use_cache : bool
         Read kept results (False: compute every task again; results are still written).
     progress : bool
         A bar of finished tasks on stderr (when it is a terminal).
-    on_record : callable, optional
-        Called with each :class:`TaskRecord` as its task ends.
     log : callable, optional
-        Called with the lines flows report (:meth:`say`).
+        Called with the lines of :meth:`say`.
     preload : tuple of str
         Modules the worker processes of a local cluster import as they start.
     processes : bool
-        A local cluster of single-threaded processes, or of threads of this process
-        (tasks that share what this process built).
+        A local cluster of single-threaded processes, or of threads of this process.
     """
 
     def __init__(self, scheduler=None, workers: int | None = None, cache=None,
-                 use_cache: bool = True, progress: bool = False, on_record=None, log=None,
+                 use_cache: bool = True, progress: bool = False, log=None,
                  preload: tuple = (), processes: bool = True):
         self.scheduler = resolve_scheduler(scheduler, workers)
         if self.scheduler == "local":
             check_not_bootstrapping()
         self.workers, self.preload, self.processes = workers, tuple(preload), processes
         self.store, self.use_cache = ResultStore(cache), bool(use_cache)
-        self.on_record, self._log, self._progress = on_record, log, bool(progress)
+        self._log, self._progress = log, bool(progress)
         self.closed, self._records = False, []
         self._futures, self._tasks, self._scattered, self._seconds = {}, {}, {}, {}
         self._published: set = set()
@@ -334,14 +259,12 @@ class Engine:
 
     def __exit__(self, *exc):
         self.close()
-
     def client(self):
-        """The Dask client, connected on first use.
+        """The Dask client (None when synchronous), connected on first use.
 
         Returns
         -------
         dask.distributed.Client or None
-            None when synchronous.
         """
         if self.synchronous:
             return None
@@ -382,13 +305,7 @@ class Engine:
                                                     f"({_one(e)})")
 
     def check_started(self):
-        """Raise the reason the cluster could not start, if it could not.
-
-        Raises
-        ------
-        ValueError
-            ``scheduler: the Dask cluster did not start (...)``.
-        """
+        """Raise ``ValueError('scheduler: ...')`` if the cluster could not start."""
         e = self._start_error
         if e is not None:
             raise ValueError(e.args[0] if isinstance(e, ValueError) and e.args
@@ -433,7 +350,6 @@ class Engine:
         Parameters
         ----------
         message : str
-            The line.
         """
         if self._log is not None:
             with contextlib.suppress(Exception):
@@ -463,7 +379,7 @@ class Engine:
         Returns
         -------
         tuple
-            (stage name, priority).
+            (name, priority).
         """
         return getattr(_LOCAL, "stage", ("", 0))
 
@@ -526,24 +442,22 @@ class Engine:
                 yield tag, self.submit(fn, *args).result()
             return
         futures = {self.submit(fn, *args): tag for tag, args in calls.items()}
-        from distributed import as_completed
+        from dask.distributed import as_completed
         on_dask = [f for f in futures if not isinstance(f, cf.Future)]
         for f in itertools.chain((f for f in futures if isinstance(f, cf.Future)),
                                  as_completed(on_dask) if on_dask else ()):
             yield futures[f], f.result()
 
     def state(self, future):
-        """How a future's task ended.
+        """How a future's task ended (None while it runs).
 
         Parameters
         ----------
         future : future
-            A future of this engine.
 
         Returns
         -------
         TaskState or None
-            None while it runs.
         """
         rec = self._tasks.get(_key(future))
         return rec.state if rec is not None else None
@@ -577,7 +491,6 @@ class Engine:
         Parameters
         ----------
         error : TaskError
-            The failure (its own task's, or of one it depends on).
 
         Returns
         -------
@@ -630,9 +543,7 @@ class Engine:
 
     @staticmethod
     def _seen(ctx, future):
-        if ctx is not None:
-            ctx.append(future)
-        return future
+        return ctx.append(future) or future if ctx is not None else future
 
     def _here(self, fn, key, fut, args, kwargs, inputs):
         t = time.perf_counter()
@@ -738,9 +649,6 @@ class Engine:
             self._records.append(rec)
             if self._bar is not None and state is not TaskState.REUSED:
                 self._bar.update(1)
-        if self.on_record is not None:
-            with contextlib.suppress(Exception):
-                self.on_record(rec)
 
     def _count_new(self):
         with self._lock:
