@@ -359,8 +359,12 @@ def _strip_docstrings(tree):
     return tree
 
 
-#: code_of's results in this process, by file and content
+#: code_of's results in this process, by file and content; one parse at a time: CPython
+#: 3.11 keeps the AST constructor's recursion depth per interpreter, so two threads
+#: building syntax trees at once (ours, or another library's ``ast.literal_eval``) can
+#: fail with "AST constructor recursion depth mismatch" (then the parse is tried again)
 _CODE_OF: dict = {}
+_PARSING = threading.Lock()
 
 
 def code_of(path) -> str:
@@ -380,9 +384,16 @@ def code_of(path) -> str:
     p = Path(path)
     data = p.read_bytes()
     key = (str(p), hashlib.sha256(data).digest())
-    if key not in _CODE_OF:      # several code sets share files: each is parsed once
-        _CODE_OF[key] = ast.dump(_strip_docstrings(ast.parse(data, filename=str(p))),
-                                 include_attributes=False)
+    with _PARSING:               # several code sets share files: each is parsed once
+        for attempt in range(3):
+            if key in _CODE_OF:
+                break
+            try:
+                _CODE_OF[key] = ast.dump(_strip_docstrings(ast.parse(data, filename=str(p))),
+                                         include_attributes=False)
+            except SystemError:
+                if attempt == 2:
+                    raise
     return _CODE_OF[key]
 
 

@@ -152,12 +152,12 @@ def _run(fn, key: str, code: str | None, args, kwargs):
     """Run a task here or on a worker (which refuses it when its code is not ``code``,
     the digest in the key); an error becomes a :class:`TaskError` naming the task."""
     info = _info(fn)
-    if code is not None and code_version(info.code) != code:
-        raise TaskError(info.name, _stale(info.code, code), key=key)
     tune_allocator()
     was, _LOCAL.task = getattr(_LOCAL, "task", False), True
     t = time.perf_counter()
     try:
+        if code is not None and code_version(info.code) != code:
+            raise TaskError(info.name, _stale(info.code, code), key=key)
         value = fn(*_unpack(args), **_unpack(kwargs))
     except TaskError:
         raise
