@@ -34,13 +34,15 @@ import numpy as np
 
 from biped_casadi import SimulationOptions, simulate
 from biped_casadi.control.export import LIBRARY
-from biped_casadi.control.compiled import (CompiledController, CompilerError, PythonTwin,
-                                           build_library, find_c_compiler)
+from biped_casadi.control.export_urdf import LEG_ORDER, UrdfAngleLaw
+from biped_casadi.control.compiled import (CompiledController, CompiledUrdfController,
+                                           CompilerError, PythonTwin, build_library,
+                                           find_c_compiler)
 from biped_casadi.results import Result
 
 __all__ = ["StateComparison", "SimulationComparison", "ExportVerification",
-           "compare_states", "compare_simulations", "time_example", "verify_export",
-           "TORQUE_RTOL", "SIMULATION_TOL"]
+           "compare_states", "compare_urdf_states", "compare_simulations", "time_example",
+           "verify_export", "TORQUE_RTOL", "SIMULATION_TOL"]
 
 #: compiled torques must equal the Python law's to this relative difference
 TORQUE_RTOL = 1e-12
@@ -73,6 +75,9 @@ class StateComparison(Result):
     python_us, ctypes_us : float
         Time per call of the Python law (one state at a time) and of the library through
         ctypes, microseconds.
+    stance_found : int or None
+        An export in URDF angles: of the n step starts (near the orbit's start), how many
+        ``biped_step_start`` gave the stance leg the state was read for (None otherwise).
     """
     status: str
     message: str
@@ -84,6 +89,7 @@ class StateComparison(Result):
     return_codes: dict
     python_us: float
     ctypes_us: float
+    stance_found: int | None = None
 
     SUCCESS = ("equal",)
 
@@ -244,6 +250,77 @@ def compare_states(compiled: CompiledController, ctrl, n: int = 10_000,
         python_us=1e6 * t_py / n, ctypes_us=1e6 * t_c / n)
 
 
+def compare_urdf_states(compiled: CompiledUrdfController, ctrl, n: int = 10_000,
+                        seed: int = 0) -> StateComparison:
+    """An export in URDF angles against the toolkit's law at ``n`` random states.
+
+    The states of :func:`compare_states`, each read with a random stance leg as the
+    robot gives them (pitch and URDF joint angles, :meth:`UrdfMap.from_model`); the
+    library is called in those coordinates (``biped_step_start_leg``, ``biped_torque``)
+    and compared with :class:`~biped_casadi.control.export_urdf.UrdfAngleLaw` (numpy's
+    conversion to the model's coordinates, the Python law, the torques mapped back).
+    ``biped_step_start`` must find the same stance leg at every start.
+
+    Parameters
+    ----------
+    compiled : CompiledUrdfController
+        The library.
+    ctrl : TimeVaryingController or VirtualConstraintController
+        The exported controller.
+    n : int
+        States.
+    seed : int
+        Seed of the random states.
+
+    Returns
+    -------
+    StateComparison
+        ``success`` needs the torques to :data:`TORQUE_RTOL` and every stance leg found.
+    """
+    rng = np.random.default_rng(seed)
+    tau, q, dq, q0, dq0 = _random_states(ctrl, n, rng)
+    legs = rng.integers(0, 2, n)
+    umap = compiled.urdf_map
+    law = UrdfAngleLaw(ctrl, umap, compiled.motor_side)
+    rel = np.zeros(n)
+    absu, outs, dens = np.zeros(n), np.zeros(n), np.zeros(n)
+    codes: dict = {}
+    found = 0
+    t_py = t_c = 0.0
+    for k in range(n):
+        s = int(legs[k])
+        x0, dx0 = umap.from_model(q0[:, k], dq0[:, k], LEG_ORDER[s])
+        x, dx = umap.from_model(q[:, k], dq[:, k], LEG_ORDER[s])
+        p = law.step_start(x0, dx0, s)
+        _, pc = compiled.start_leg(s, x0, dx0)
+        rc_auto, pa = compiled.start_urdf(x0, dx0)
+        found += int(rc_auto == 0 and pa[0] == s)
+        tk = float(tau[k])
+        t0 = time.perf_counter()
+        u, y, dy, den = law.evaluate(tk, x, dx, p)
+        t1 = time.perf_counter()
+        rc, uc = compiled.torque_urdf(tk, x, dx, pc)
+        t2 = time.perf_counter()
+        t_py, t_c = t_py + t1 - t0, t_c + t2 - t1
+        codes[rc] = codes.get(rc, 0) + 1
+        _, yc, dyc, denc = compiled.outputs_urdf(tk, x, dx, pc)
+        absu[k] = np.max(np.abs(uc - u))
+        rel[k] = absu[k] / max(np.max(np.abs(u)), 1e-300)
+        outs[k] = max(np.max(np.abs(yc - np.ravel(y))), np.max(np.abs(dyc - np.ravel(dy))))
+        dens[k] = abs(denc - den) / abs(den)
+    worst = float(rel.max())
+    ok = worst <= TORQUE_RTOL and found == n
+    return StateComparison(
+        status="equal" if ok else "different",
+        message=(f"{n} random states in URDF angles: torques differ by at most {worst:.3g} "
+                 f"relative ({absu.max():.3g} N m), the stance leg found at {found} of {n} "
+                 f"step starts" + ("" if ok else f" (limit {TORQUE_RTOL:g}, all found)")),
+        n=n, max_torque_rel=worst, max_torque_abs=float(absu.max()),
+        max_output_abs=float(outs.max()), max_den_rel=float(dens.max()),
+        return_codes={str(k): v for k, v in sorted(codes.items())},
+        python_us=1e6 * t_py / n, ctypes_us=1e6 * t_c / n, stance_found=found)
+
+
 # ================================================================== simulation
 def _step_differences(a, b) -> list:
     out = []
@@ -360,7 +437,7 @@ def time_example(folder, compiler: list, calls: int = 1_000_000, work=None) -> t
 
 def verify_export(folder, ctrl, q0, dq0, options: SimulationOptions | None = None,
                   compiler: list | None = None, n_states: int = 10_000,
-                  seed: int = 0, calls: int = 1_000_000) -> ExportVerification:
+                  seed: int = 0, calls: int = 1_000_000, law=None) -> ExportVerification:
     """Build an export's library, compare it with the Python law, time it.
 
     Parameters
@@ -382,6 +459,10 @@ def verify_export(folder, ctrl, q0, dq0, options: SimulationOptions | None = Non
         Their seed.
     calls : int
         Calls in the example's timing loop.
+    law : ExportedLaw, optional
+        The export's law; one in URDF angles is compared in those coordinates
+        (:func:`compare_urdf_states`, and the simulation driven through
+        :class:`~biped_casadi.control.compiled.CompiledUrdfController`).
 
     Returns
     -------
@@ -395,9 +476,11 @@ def verify_export(folder, ctrl, q0, dq0, options: SimulationOptions | None = Non
     cc = compiler if compiler is not None else find_c_compiler()
     with tempfile.TemporaryDirectory(prefix="biped-export-") as work:
         lib = build_library(folder, Path(work) / LIBRARY, compiler=cc)
-        compiled = CompiledController(lib, ctrl)     # loaded: the file may go
+        urdf = law is not None and law.angles == "urdf"
+        compiled = (CompiledUrdfController(lib, ctrl, law.urdf, law.motor_side) if urdf
+                    else CompiledController(lib, ctrl))     # loaded: the file may go
         c_us, _ = time_example(folder, cc, calls, work)
-    states = compare_states(compiled, ctrl, n_states, seed)
+    states = (compare_urdf_states if urdf else compare_states)(compiled, ctrl, n_states, seed)
     sim = compare_simulations(compiled, ctrl, q0, dq0, options)
     ok = states.success and sim.success
     return ExportVerification(

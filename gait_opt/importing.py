@@ -31,6 +31,7 @@ from .hzd_orbit import BezierConstraints, constraints_from_dict, hzd_nodes
 from .nodes import ANGLES, Nodes, nodes_from_arrays, read_nodes, relative_angles
 from .options import GaitOptions
 from .polish import close_orbit
+from .urdf_angles import read_urdf_csv, urdf_nodes
 
 __all__ = ["GaitImport", "GaitImportError", "import_gait", "fit_bezier", "IMPORT_TOL",
            "FIT_TOL", "MAX_DEGREE"]
@@ -204,10 +205,22 @@ def _best_fit(nodes: Nodes, degree):
 
 
 # ------------------------------------------------------------------ the import
-def _nodes_of(model, source, angles: str, where: str):
+def _nodes_of(model, source, angles: str, where: str, stance=None, tol: float = IMPORT_TOL):
     """(Nodes in relative angles, kind, info) of any accepted source."""
-    if angles not in ANGLES:
-        raise GaitImportError(f"angles must be one of {ANGLES}, got {angles!r}")
+    if angles not in ANGLES + ("urdf",):
+        raise GaitImportError(f"angles must be one of {ANGLES + ('urdf',)}, got {angles!r}")
+    if (stance is not None) != (angles == "urdf"):
+        raise GaitImportError("stance names the stance leg's hip joint of a step in URDF "
+                              "angles: give it with angles='urdf' (and only then)")
+    if angles == "urdf":
+        if isinstance(source, (str, Path)):
+            nodes, info = read_urdf_csv(source, model, stance, tol)
+        elif isinstance(source, dict):
+            nodes, info = urdf_nodes(model, source, stance, where, tol)
+        else:
+            raise GaitImportError(f"source: a step in URDF angles is a CSV file or a dict of "
+                                  f"columns, got {type(source).__name__}")
+        return nodes, "nodes", info
     info = {}
     if isinstance(source, (str, Path)):
         source = read_nodes(source, model.nq)
@@ -242,10 +255,17 @@ def _diagnostics(model, nodes: Nodes, gait: Gait) -> dict:
     return dict(data_impact=data, z_end=z, drift=drift)
 
 
+def _convention_hint(angles: str) -> str:
+    return ("another stance leg (--stance)? angles in another convention?" if angles == "urdf"
+            else "another coordinate convention? angles='absolute'")
+
+
 def _cause(d: dict, fit_q: float, angles: str) -> str:
     """The likely reason a trajectory is not an orbit of the robot."""
-    other = "another coordinate convention (absolute link angles? --angles absolute)" if angles == "relative" \
-        else "another coordinate convention"
+    other = {"relative": "another coordinate convention (absolute link angles? --angles "
+                         "absolute)",
+             "urdf": "another stance leg (--stance), or angles in another convention"
+             }.get(angles, "another coordinate convention")
     if fit_q > 1e-2:
         return (f"the Bezier fit misses the nodes by {fit_q:.2g} rad (more nodes, or a "
                 f"smoother trajectory?)")
@@ -261,8 +281,9 @@ def _cause(d: dict, fit_q: float, angles: str) -> str:
             f"lengths, rotor inertia), or {other}")
 
 
-def import_gait(model, source, *, angles: str = "relative", bezier_degree: int | None = None,
-                tol: float = IMPORT_TOL, options: GaitOptions | None = None) -> GaitImport:
+def import_gait(model, source, *, angles: str = "relative", stance=None,
+                bezier_degree: int | None = None, tol: float = IMPORT_TOL,
+                options: GaitOptions | None = None) -> GaitImport:
     """A gait from another tool, fitted and made an exact orbit of ``model`` (module doc).
 
     Parameters
@@ -273,9 +294,12 @@ def import_gait(model, source, *, angles: str = "relative", bezier_degree: int |
         A file (CSV, NPZ or JSON of nodes, or JSON with ``virtual_constraints``: see
         :mod:`gait_opt.nodes` and :func:`gait_opt.hzd_orbit.constraints_from_dict`), nodes,
         a dict of arrays ``t``, ``q``, ``dq`` (``ddq``), or virtual constraints.
-    angles : {'relative', 'absolute'}
-        The nodes' coordinates: the toolkit's relative joint angles, or absolute link
-        angles phi (converted).
+    angles : {'relative', 'absolute', 'urdf'}
+        The nodes' coordinates: the toolkit's relative joint angles, absolute link
+        angles phi (converted), or the robot's own URDF joint angles and pitch (a CSV
+        or a dict of columns, :mod:`gait_opt.urdf_angles`; the robot needs its URDF map).
+    stance : str, optional
+        With ``angles='urdf'``: the stance leg's hip joint, as the URDF names it.
     bezier_degree : int, optional
         Degree of q_a^d(s) (4 to 20); default chosen by the fit (module docstring).
     tol : float
@@ -299,7 +323,7 @@ def import_gait(model, source, *, angles: str = "relative", bezier_degree: int |
     if not (isinstance(tol, (int, float)) and math.isfinite(tol) and tol > 0):
         raise GaitImportError(f"tol must be a positive number, got {tol!r}")
     try:
-        nodes, kind, info = _nodes_of(model, source, angles, where)
+        nodes, kind, info = _nodes_of(model, source, angles, where, stance, tol)
     except GaitImportError:
         raise
     except ValueError as e:
@@ -310,7 +334,7 @@ def import_gait(model, source, *, angles: str = "relative", bezier_degree: int |
     if not length > 0:
         raise GaitImportError(f"{where}: the swing foot ends {length:.3g} m from the stance "
                               f"foot at the last node: a step must end in front of it "
-                              f"(another coordinate convention? angles='absolute')")
+                              f"({_convention_hint(angles)})")
     opts = (options or GaitOptions()).replace(speed=length / T, bezier_degree=M)
     fitted = Gait(model, opts.for_model(model), alpha, [nodes.q[0, 0], nodes.dq[0, 0]], T,
                   solver_stats=dict(imported_from=nodes.source, kind=kind))

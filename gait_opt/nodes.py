@@ -169,20 +169,30 @@ def relative_angles(nodes: Nodes) -> Nodes:
     return Nodes(nodes.t, rel(nodes.q), rel(nodes.dq), rel(nodes.ddq), nodes.source)
 
 
-def _read_csv(text: str, where: str, nq: int | None) -> Nodes:
+def csv_table(text: str, where: str) -> tuple:
+    """A CSV of numbers: its header and its rows.
+
+    Parameters
+    ----------
+    text : str
+        The file's text (blank lines skipped).
+    where : str
+        Names the file in messages.
+
+    Returns
+    -------
+    tuple
+        (header: list of the names as written, stripped; values: (rows, columns) array).
+
+    Raises
+    ------
+    ValueError
+        Naming ``where``: empty, a row of another length, a value that is not a number.
+    """
     rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
     if not rows:
         raise ValueError(f"{where} is empty")
-    head = [c.strip().lower() for c in rows[0]]
-    h = len(head) - 1
-    with_acc = h % 3 == 0 and head[-1].startswith("ddq")
-    n = h // 3 if with_acc else h // 2
-    want = ["t"] + [f"q{i}" for i in range(1, n + 1)] + [f"dq{i}" for i in range(1, n + 1)]
-    if with_acc:
-        want += [f"ddq{i}" for i in range(1, n + 1)]
-    if n < 1 or head != want:
-        raise ValueError(f"{where}: the header must be t,q1..qn,dq1..dqn[,ddq1..ddqn], got "
-                         f"{','.join(rows[0])[:120]!r}")
+    head = [c.strip() for c in rows[0]]
     data = []
     for i, r in enumerate(rows[1:], start=2):
         if len(r) != len(head):
@@ -191,7 +201,21 @@ def _read_csv(text: str, where: str, nq: int | None) -> Nodes:
             data.append([float(c) for c in r])
         except ValueError:
             raise ValueError(f"{where}: line {i} has a value that is not a number") from None
-    a = np.array(data).reshape(-1, len(head))
+    return head, np.array(data, dtype=float).reshape(-1, len(head))
+
+
+def _read_csv(text: str, where: str, nq: int | None) -> Nodes:
+    raw, a = csv_table(text, where)
+    head = [c.lower() for c in raw]
+    h = len(head) - 1
+    with_acc = h % 3 == 0 and head[-1].startswith("ddq")
+    n = h // 3 if with_acc else h // 2
+    want = ["t"] + [f"q{i}" for i in range(1, n + 1)] + [f"dq{i}" for i in range(1, n + 1)]
+    if with_acc:
+        want += [f"ddq{i}" for i in range(1, n + 1)]
+    if n < 1 or head != want:
+        raise ValueError(f"{where}: the header must be t,q1..qn,dq1..dqn[,ddq1..ddqn], got "
+                         f"{','.join(raw)[:120]!r}")
     return nodes_from_arrays(a[:, 0], a[:, 1:1 + n], a[:, 1 + n:1 + 2 * n],
                              a[:, 1 + 2 * n:] if with_acc else None, nq, where)
 

@@ -170,7 +170,7 @@ def _solve(model, options: GaitOptions | None = None, *, verbose: bool = False,
     max_refinements : int
         Re-solves allowed for constraints exceeded between the nodes.
     **overrides
-        Replace single option fields (``solve_gait(m, speed=1.0)``).
+        Replace single option fields (``optimize_gait(m, speed=1.0)``).
 
     Returns
     -------

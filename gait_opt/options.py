@@ -34,7 +34,8 @@ class GaitOptions:
     torque_limit : float or None
         Bound on every ``|u_i|``, N m; None (the default): the robot's own (its
         description's ``torque_limit``; RABBIT: 150 N m), filled in by
-        :meth:`for_model` when a gait is solved.
+        :meth:`for_model` when a gait is solved; inf for a robot without one (recorded
+        with imported gaits; solving a gait needs a finite bound).
     min_normal_force : float
         Lower bound of the stance normal force, N.
     clearance : float
@@ -125,8 +126,8 @@ class GaitOptions:
 
         for n in ("speed", "mu"):
             pos(n)
-        if self.torque_limit is not None:
-            pos("torque_limit")
+        if self.torque_limit is not None and self.torque_limit != math.inf:
+            pos("torque_limit")            # inf: the robot has none (no gait can be solved)
         if self.impact_mu is not None:
             pos("impact_mu")
         if self.continuation is not None and not (

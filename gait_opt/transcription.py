@@ -440,7 +440,7 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None, *,
     opts : GaitOptions
     margins : dict, optional
         Family of :data:`MARGINS` -> amount: tightens the path constraints at the nodes,
-        so that they hold between the nodes too (see :func:`gait_opt.solve_gait`).
+        so that they hold between the nodes too (see :func:`gait_opt.optimize_gait`).
     speed_parameter : bool
         The speed is the NLP's parameter p (given to the solver at each call;
         ``opts.speed`` unused) instead of a constant.
@@ -450,6 +450,12 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None, *,
     Problem
     """
     opts = opts.for_model(model)
+    if not np.isfinite(opts.torque_limit):
+        raise ValueError(f"torque_limit: the robot {model.params.name} has no torque limit "
+                         f"(its URDF gives no effort limits) and the gait's |u| <= limit "
+                         f"constraint needs one: give it (--torque-limit N, or "
+                         f"GaitOptions(torque_limit=N)), or import the URDF with "
+                         f"--torque-limit N")
     margins = dict(margins or {})
     unknown = set(margins) - set(MARGINS)
     if unknown:

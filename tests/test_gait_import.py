@@ -200,10 +200,12 @@ def test_bad_import_arguments(gait, tmp_path, capsys):
         assert not out.exists()
 
 
-def test_the_how_to_example_runs(capsys):
-    """The floating-base example of docs/howto/bring-your-robot.md, as written."""
-    text = (Path(__file__).resolve().parents[1] / "docs" / "howto" /
-            "bring-your-robot.md").read_text()
+def test_the_how_to_example_runs(capsys, monkeypatch):
+    """The example of docs/howto/bring-your-robot.md (the walker's step in its own joint
+    angles), as written, from the repository's root."""
+    root = Path(__file__).resolve().parents[1]
+    monkeypatch.chdir(root)
+    text = (root / "docs" / "howto" / "bring-your-robot.md").read_text()
     block = text.split("<!-- the block below runs in tests/test_gait_import.py -->")[1]
     code = block.split("```python\n", 1)[1].split("```", 1)[0]
     exec(compile(code, "bring-your-robot.md", "exec"), {})

@@ -43,4 +43,23 @@ def test_every_third_party_import_is_a_dependency():
              and m not in ("biped_casadi", "gait_opt", "analysis")}
     distribution = {"PIL": "pillow", "urdf_parser_py": "urdf-parser-py"}   # import names that differ
     missing = {m for m in third if distribution.get(m, m).lower() not in names}
+    missing -= _lazy_extras()
     assert not missing, f"imported but not in pyproject.toml's dependencies: {sorted(missing)}"
+
+
+def _lazy_extras() -> set:
+    """The modules of the optional extra 'view' (``biped view``): allowed where they are
+    imported only inside functions, so that everything else runs without them."""
+    import ast
+    import re
+    extra = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"]["view"]
+    names = {re.split(r"[\[<>=!~ ]", d, maxsplit=1)[0].lower() for d in extra}
+    for top in ("biped_casadi", "gait_opt", "analysis"):
+        for f in (ROOT / top).rglob("*.py"):
+            for n in ast.parse(f.read_text()).body:          # module level only
+                mods = ({a.name.split(".")[0] for a in n.names} if isinstance(n, ast.Import)
+                        else {(n.module or "").split(".")[0]} if isinstance(n, ast.ImportFrom)
+                        else set())
+                assert not mods & names, f"{f}: imports {mods & names} at the top"
+    return names

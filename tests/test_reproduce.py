@@ -42,7 +42,8 @@ def test_reproduce_quick(tmp_path):
     assert head["folder"] == str(run) and head["report"] == str(run / "report.md")
     s = json.loads((run / "summary.json").read_text())
     for key in ("gait", "singular", "fig2", "grid", "conjecture", "taylor", "domains",
-                "m1_nlp", "vc_comparison", "simulation", "robust_design", "terrain", "stages",
+                "m1_nlp", "vc_comparison", "simulation", "robust_design", "terrain", "mujoco",
+                "stages",
                 "figures", "paper", "total_time", "mode", "critical_path"):
         assert key in s, key
     assert sum(s["grid"]["counts"].values()) == 9**4
@@ -50,7 +51,7 @@ def test_reproduce_quick(tmp_path):
     assert 0 < s["critical_path"]["seconds"] < s["total_time"]
     for name in ("gait_stick", "gait_profiles", "fig2", "fig3", "fig4", "fig5_qu_error",
                  "fig6_swing_torques", "basin_default", "basin_robust", "terrain_mfpt",
-                 "family", "speed_ramp"):
+                 "family", "speed_ramp", "mujoco"):
         for ext in (".png", ".pdf"):
             f = run / "figures" / f"{name}{ext}"
             assert f.is_file() and f.stat().st_size > 1000, f

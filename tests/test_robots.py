@@ -103,7 +103,10 @@ BAD = [
     ("negative link mass", lambda d: d["leg"][0].update(mass=-1.0), "leg[1].mass must be positive"),
     ("zero length", lambda d: d["torso"].update(length=0.0), "torso.length must be positive"),
     ("negative inertia", lambda d: d["leg"][1].update(inertia=-0.1), "leg[2].inertia must be non-negative"),
-    ("com beyond the link", lambda d: d["leg"][1].update(com=0.5), "leg[2].com must not exceed"),
+    ("com not a number", lambda d: d["leg"][1].update(com="0.5"), "leg[2].com must be a number"),
+    ("com_offset not finite", lambda d: d["torso"].update(com_offset=float("inf")),
+     "torso.com_offset must be finite"),
+    ("urdf map of another k", lambda d: d.update(urdf={"joints": []}), "urdf.joints has 0 entries"),
     ("missing field", lambda d: d["torso"].pop("inertia"), "torso.inertia is missing"),
     ("missing table", lambda d: d.pop("actuators"), "actuators is missing"),
     ("unknown key", lambda d: d["leg"][0].update(colour="red"), "leg[1].colour is not a known key"),
@@ -170,10 +173,16 @@ def test_gait_files_written_before_descriptions_still_load(gait, tmp_path):
 
 
 # ----------------------------------------------------------------- physics
-MODELS = ["three_link", "random_k1", "random_k3"]
+MODELS = ["three_link", "random_k1", "random_k3", "rabbit_com_offsets"]
 
 
 def make_model(name):
+    if name == "rabbit_com_offsets":        # centres of mass off the links' lines
+        d = robot("rabbit").description
+        off = [0.04, -0.03]
+        return BipedModel(dataclasses.replace(
+            d, torso=dataclasses.replace(d.torso, com_offset=0.05),
+            leg=tuple(dataclasses.replace(link, com_offset=o) for link, o in zip(d.leg, off))))
     if name.startswith("random_k"):
         k = int(name[-1])
         return BipedModel(random_description(np.random.default_rng(7 + k), k))

@@ -43,7 +43,10 @@ def test_packaged_urdf_is_the_toml_robot(name):
     assert imp.description == toml                    # every field, names included
     # the models built independently agree (not the memoised object twice)
     assert functions_agree(BipedModel(imp.description), BipedModel(toml)) <= 1e-12
-    assert robot(ROBOTS / f"{name}.urdf") is robot(name)
+    # the URDF's robot carries its joint map (part of the model's key, not of equality)
+    m = robot(ROBOTS / f"{name}.urdf")
+    assert m.description == robot(name).description and m.description.urdf is not None
+    assert m is robot(ROBOTS / f"{name}.urdf")
 
 
 def test_rabbit_urdf_reads_the_transmissions():
@@ -101,16 +104,21 @@ BAD = {
     "missing inertial": (lambda s: re.sub(r'(<link name="femur_right">\s*)<inertial>.*?</inertial>',
                                           r"\1", s, flags=re.S),
                          r"link 'femur_right' has no <inertial>"),
-    "off-axis centre of mass": (lambda s: s.replace('<origin xyz="0 0 -0.11"',
-                                                    '<origin xyz="0.02 0 -0.11"', 1),
-                                r"link 'femur_left': its centre of mass is 0.02 m off"),
+    "one leg's centre of mass off": (lambda s: s.replace('<origin xyz="0 0 -0.11"',
+                                                         '<origin xyz="0.02 0 -0.11"', 1),
+                                     r"legs differ: link 'femur_left' has com_offset 0.02, "
+                                     r"link 'femur_right' 0"),
     "no foot": (lambda s: re.sub(r'<joint name="foot_left_fixed".*?<link name="foot_left"/>',
                                  "", s, flags=re.S), r"no foot: the last leg link 'tibia_left'"),
     "one leg": (lambda s: re.sub(r'<joint name="hip_right".*(?=</robot>)', "", s, flags=re.S),
                 r"the torso 'torso' has 1 jointed children \('hip_left'\); a biped has two legs"),
-    "bent at zero": (lambda s: s.replace('<origin xyz="0 0 -0.4" rpy="0 0 0"/>\n    <axis',
-                                         '<origin xyz="0.05 0 -0.4" rpy="0 0 0"/>\n    <axis', 1),
-                     r"not straight below the hip"),
+    "hips apart": (lambda s: s.replace('<origin xyz="0 -0.1 0" rpy="0 0 0"/>',
+                                       '<origin xyz="0.05 -0.1 0" rpy="0 0 0"/>', 1),
+                   r"hip joints 'hip_left' and 'hip_right' are 0.05 m apart in the plane"),
+    "torso direction unknown": (lambda s: re.sub(r'<origin xyz="0 0 0.24" rpy="0 0 0"/>(.*?)'
+                                                 r'<visual>.*?</visual>', r'\1', s, count=1,
+                                                 flags=re.S),
+                                r"the torso's up direction cannot be found"),
     "not XML": (lambda s: s[:200], r"cannot parse the URDF"),
     "rotors differ": (lambda s: s.replace("<motorInertia>3.32e-4</motorInertia>",
                                           "<motorInertia>1e-4</motorInertia>", 1),

@@ -19,7 +19,8 @@ import numpy as np
 
 import biped_casadi
 
-from . import eig, export, gait, m1, reproduce, robot, robust, simulate, sweep, terrain
+from . import (eig, export, gait, m1, mujoco, reproduce, robot, robust, simulate, sweep,
+               terrain, view)
 from .common import UserError, add_robot, load_model, print_json
 
 __all__ = ["main", "build_parser", "UserError"]
@@ -43,7 +44,9 @@ def cmd_model(args):
           f"{nq} joints, {model.nu} torques (limit {d.torque_limit:g} N m), g = {d.gravity:g}")
     for link in (d.torso,) + d.leg:
         print(f"  {link.name:8s} mass {link.mass:g} kg, length {link.length:g} m, "
-              f"com {link.com:g} m, inertia {link.inertia:g} kg m^2")
+              f"com {link.com:g} m" + (f" (off its line by {link.com_offset:g} m)"
+                                   if link.com_offset else "")
+              + f", inertia {link.inertia:g} kg m^2")
     for joint, m in d.point_masses:
         print(f"  point mass {m:g} kg at the {joint}" + ("" if joint == "hip" else " (each leg)"))
     print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 on each actuated joint")
@@ -98,7 +101,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_model)
 
-    for command in (robot, gait, eig, sweep, m1, robust, simulate, terrain, export, reproduce):
+    for command in (robot, gait, eig, sweep, m1, robust, simulate, terrain, export, mujoco,
+                    reproduce, view):
         command.register(sub)
     return ap
 

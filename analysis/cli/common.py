@@ -152,17 +152,19 @@ def positive(value, name):
     return value
 
 
-def add_design_arguments(p, m1_zero: bool = False, rejoin_default=None):
+def add_design_arguments(p, m1_zero: bool = False, rejoin_default=None,
+                         m1_default: str = "all zero"):
     """--controller, --m1 and --rejoin: which controller, and a time-varying design.
 
-    ``m1_zero``: --m1 defaults to all zero (else --controller tv needs it);
-    ``rejoin_default``: the parsed default of --rejoin (None: the command's own, 0.5)."""
+    ``m1_zero``: --m1 has a default, ``m1_default`` in words (else --controller tv
+    needs it); ``rejoin_default``: the parsed default of --rejoin (None: the command's
+    own, 0.5)."""
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
                    help="tv: time-varying outputs [M1, I] q (default" +
                         ("" if m1_zero else ", needs --m1") + "); vc: virtual constraints")
     p.add_argument("--m1", nargs="+", type=float, metavar="M1",
                    help="the components of M1 for --controller tv, one per torque" +
-                        (f", each within +-{M1_LIMIT:.0e} (default all zero)" if m1_zero
+                        (f", each within +-{M1_LIMIT:.0e} (default {m1_default})" if m1_zero
                          else ""))
     p.add_argument("--rejoin", type=float, metavar="R", default=rejoin_default,
                    help=f"time at which v_c rejoins the reference, fraction of T in "

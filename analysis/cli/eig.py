@@ -5,6 +5,7 @@ import numpy as np
 
 from analysis.stability import METHODS, poincare_eigenvalues
 from analysis.stability import vc_eigenvalue
+from analysis.reporting.text import eigenvalues_text, number_text
 from biped_casadi.control.output_law import M1_LIMIT
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
@@ -47,8 +48,8 @@ def cmd_eig(args):
         return 0
     print("A^z =")
     print(np.array2string(r.A, precision=8))
-    print("eigenvalues: " + ", ".join(f"{e.real:.8g}{e.imag:+.8g}j" for e in r.eigenvalues))
-    print(f"max|lambda| = {r.max_abs:.8g}")
+    print(f"eigenvalues: {eigenvalues_text(r.eigenvalues)}")
+    print(f"max|lambda| = {number_text(r.max_abs)}")
     print(f"x* = {r.x_star.tolist()}, impact at tau = {r.tau_impact:.10g} (T = {gait.T:.10g})")
     print(f"fixed-point residual |P(x*) - x*| = {r.fixed_point_residual:.2e}")
     return 0

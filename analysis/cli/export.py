@@ -10,7 +10,7 @@ from pathlib import Path
 
 from biped_casadi import Gains, SimulationOptions, TimeVaryingController, VirtualConstraintController
 from biped_casadi.control.compiled import CompilerError, find_c_compiler
-from biped_casadi.control.export import HEADER, c_sources, exported_law
+from biped_casadi.control.export import EXPORT_ANGLES, HEADER, c_sources, exported_law
 from biped_casadi.control.export_folder import check_destination, staged_export
 from gait_opt.cache import cache_path
 from analysis.verify_export import SIMULATION_TOL, TORQUE_RTOL, verify_export
@@ -52,6 +52,9 @@ def _check_arguments(args):
     positive(args.mu, "--mu")
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
+    if args.motor_side and args.angles != "urdf":
+        raise UserError("--motor-side divides the URDF joints' torques by their reductions: "
+                        "it needs --angles urdf")
     if not 1 <= args.states <= 1_000_000:
         raise UserError(f"--states must be between 1 and 1000000, got {args.states}")
     _check_perturbation(args)
@@ -114,9 +117,13 @@ def cmd_export(args):
     cc = _check_arguments(args)
     say = Progress("export", quiet=args.json)
     gait = load_gait(args, say)
+    if args.angles == "urdf" and gait.model.description.urdf is None:
+        raise UserError(f"--angles urdf: the robot {gait.model.params.name} has no URDF joint "
+                        f"map (give --robot FILE.urdf, a description written by 'biped robot "
+                        f"import', or a gait made for one); nothing written")
     ctrl = _controller(args, gait)
     try:
-        law = exported_law(ctrl)
+        law = exported_law(ctrl, angles=args.angles, motor_side=args.motor_side)
     except ValueError as e:
         what = "--m1" if args.controller == "tv" else "--controller vc"
         raise UserError(f"{what}: {str(e).split(': ', 1)[1]}; nothing written") from None
@@ -131,7 +138,10 @@ def cmd_export(args):
     result = dict(status="written", out=str(args.out), files=sorted(files) + ["gait.json"],
                   controller=ctrl.describe(), robot=law.robot, gait_file=name,
                   gait_sha256=provenance["gait file sha256"], nq=law.nq, nu=law.nu,
-                  nstate=law.nstate)
+                  nstate=law.nstate, angles=law.angles)
+    if law.angles == "urdf":
+        result.update(inputs=["pitch"] + list(law.urdf.names), torques=list(law.urdf.names),
+                      motor_side=law.motor_side, stance_legs=list(law.urdf.hips))
     with staged_export(files, args.out, {"gait.json": data}) as stage:
         if cc is not None:
             say(f"compiling with {' '.join(cc)} and comparing with the Python law "
@@ -141,7 +151,8 @@ def cmd_export(args):
             opts = SimulationOptions(steps=args.steps, mu=args.mu,
                                      torque_limit=args.torque_limit)
             try:
-                ver = verify_export(stage.path, ctrl, q0, dq0, opts, cc, args.states)
+                ver = verify_export(stage.path, ctrl, q0, dq0, opts, cc, args.states,
+                                    law=law)
             except CompilerError as e:
                 raise UserError(f"--verify: {e}; nothing written") from None
             result["verification"] = ver.to_dict()
@@ -172,6 +183,10 @@ def _report(args, r):
     print(f"  {desc}, gains Kp {g['Kp']:g} Kd {g['Kd']:g} eps {g['eps']:g} s; robot "
           f"{r['robot']} (nq {r['nq']}, nu {r['nu']}, nstate {r['nstate']})")
     print(f"  gait {r['gait_file']}, sha256 {r['gait_sha256']}")
+    if r["angles"] == "urdf":
+        print(f"  inputs: {', '.join(r['inputs'])} (and rates); torques on "
+              f"{', '.join(r['torques'])} ({'motor' if r['motor_side'] else 'joint'} side); "
+              f"state[0] the stance leg: 0 {r['stance_legs'][0]}, 1 {r['stance_legs'][1]}")
     print(f"  build: gcc -O2 -shared -fPIC -o libbiped_controller.so {r['out']}/*.c -lm")
     v = r.get("verification")
     if v is None:
@@ -179,10 +194,14 @@ def _report(args, r):
     s, m = v["states"], v["simulation"]
     print(f"verification: {v['status']}" + ("" if v["success"] else
                                              " (nothing written: the export is not in place)"))
-    print(f"  {s['n']} random states near the orbit: torques differ by at most "
+    where = " (URDF angles, random stance legs)" if r["angles"] == "urdf" else ""
+    print(f"  {s['n']} random states near the orbit{where}: torques differ by at most "
           f"{s['max_torque_rel']:.3g} relative ({s['max_torque_abs']:.3g} N m; limit "
           f"{TORQUE_RTOL:g}); outputs by {s['max_output_abs']:.3g}, denominator by "
           f"{s['max_den_rel']:.3g} relative; return codes {s['return_codes']}")
+    if s.get("stance_found") is not None:
+        print(f"  biped_step_start found the stance leg at {s['stance_found']} of {s['n']} "
+              f"step starts")
     print(f"  {m['steps']}-impact simulation driven by the library ({m['compiled_status']}) "
           f"against biped simulate's ({m['python_status']}): impact times differ by at most "
           f"{m['max_impact_time']:.3g} s, states by {m['max_state']:.3g} (limit "
@@ -224,6 +243,15 @@ def register(sub):
                                              "(as 'biped simulate'; excludes --gains)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="the folder to write (new, empty, or an earlier export, replaced)")
+    p.add_argument("--angles", choices=EXPORT_ANGLES, default="relative",
+                   help="the law's coordinates: the toolkit's relative angles q (default), or "
+                        "'urdf': the robot's own URDF joint angles and its root link's pitch "
+                        "in, one torque per URDF joint out (file order and sign), the stance "
+                        "leg in the state (needs the robot's URDF map: --robot FILE.urdf, a "
+                        "description from 'biped robot import', or a gait made for one)")
+    p.add_argument("--motor-side", action="store_true",
+                   help="with --angles urdf: torques divided by each joint's transmission "
+                        "reduction (the motors' torques)")
     p.add_argument("--verify", action="store_true",
                    help="compile with $CC (or gcc, cc), compare with the Python law, time it")
     p.add_argument("--states", type=int, default=STATES, metavar="N",

@@ -11,7 +11,7 @@ from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 from .common import (Progress, UserError, add_robot, load_model, output_dir, output_file,
                      print_json)
 from .gait_family import add_family_arguments, check_family_arguments, cmd_family, cmd_gait_at
-from .gait_import import add_import_arguments, cmd_import
+from .gait_import import add_import_arguments, check_export_arguments, cmd_export_csv, cmd_import
 
 #: --intervals beyond this make an NLP that takes minutes per iteration
 MAX_INTERVALS = 400
@@ -68,6 +68,7 @@ def cmd_gait(args):
                                            and args.clearance >= 0):
         raise UserError(f"--clearance must be a number >= 0 (m), got {args.clearance:g}")
     check_family_arguments(args)
+    check_export_arguments(args)
     for name in ("speed", "mu", "torque_limit", "impact_mu", "continuation"):
         v = getattr(args, name)
         if v is not None and not (math.isfinite(v) and v > 0):
@@ -80,6 +81,8 @@ def cmd_gait(args):
                         f"{args.intervals}")
     if args.max_iter is not None and args.max_iter < 1:
         raise UserError(f"--max-iter must be >= 1, got {args.max_iter}")
+    if args.export_csv is not None:
+        return cmd_export_csv(args, Progress("gait", quiet=args.json))
     if args.import_file is not None:
         if args.speeds is not None or args.family is not None:
             raise UserError("--import brings in one gait: it excludes --speeds and --family")

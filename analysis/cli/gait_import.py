@@ -7,20 +7,38 @@ import math
 
 from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_figures
 from gait_opt import IMPORT_TOL, GaitOptions, import_gait
+from gait_opt.urdf_angles import CSV_ANGLES, require_urdf_map, write_gait_csv
 
-from .common import UserError, load_model, output_dir, output_file, print_json
+from .common import UserError, load_gait, load_model, output_dir, output_file, print_json
 
 
 def add_import_arguments(p):
-    """--import, --angles, --import-tol and --bezier-degree on ``biped gait``."""
+    """--import, --angles, --stance, --import-tol, --bezier-degree, --export-csv, --gait
+    and --nodes on ``biped gait``."""
     p.add_argument("--import", dest="import_file", metavar="FILE",
                    help="import one step from another tool instead of optimising: a CSV "
                         "with header t,q1..qn,dq1..dqn[,ddq1..ddqn], an NPZ or JSON with "
                         "arrays t, q, dq[, ddq], or a JSON with virtual_constraints "
-                        "(bezier, theta_plus, theta_minus, phase)")
-    p.add_argument("--angles", choices=("relative", "absolute"), default="relative",
-                   help="with --import: the nodes' coordinates, the toolkit's relative "
-                        "joint angles (default) or absolute link angles phi")
+                        "(bezier, theta_plus, theta_minus, phase); with --angles urdf a "
+                        "CSV with header t, pitch, the URDF joint names, dpitch, d<joint> "
+                        "for each (optionally x, z, dx, dz of the root link: checked)")
+    p.add_argument("--angles", choices=CSV_ANGLES, default="relative",
+                   help="with --import or --export-csv: the nodes' coordinates, the "
+                        "toolkit's relative joint angles (default), absolute link angles "
+                        "phi, or the robot's own URDF joint angles and the root link's "
+                        "pitch (the robot's URDF map: --robot FILE.urdf, a description "
+                        "written by 'biped robot import', or the gait file's robot)")
+    p.add_argument("--stance", metavar="HIP_JOINT",
+                   help="with --angles urdf: the stance leg, named by its hip joint as the "
+                        "URDF names it (--export-csv: default the first leg's)")
+    p.add_argument("--export-csv", metavar="FILE",
+                   help="write a gait (--gait, default the robot's default gait) as one "
+                        "step of nodes in --angles coordinates, a CSV that --import reads "
+                        "back, instead of optimising")
+    p.add_argument("--gait", metavar="FILE",
+                   help="with --export-csv: the gait file to write")
+    p.add_argument("--nodes", type=int, default=101, metavar="N",
+                   help="with --export-csv: uniform samples from t = 0 to T (default 101)")
     p.add_argument("--import-tol", type=float, default=IMPORT_TOL, metavar="TOL",
                    help=f"with --import: refuse a trajectory whose fitted orbit misses by "
                         f"more than TOL (rad, rad/s, m; default {IMPORT_TOL:g})")
@@ -40,13 +58,19 @@ def cmd_import(args):
     out = output_file(args.out, "--out", (".json",))
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot)
+    if args.angles == "urdf":
+        umap = require_urdf_map(model, "--angles urdf")
+        if args.stance is None:
+            raise UserError(f"--angles urdf needs --stance HIP_JOINT: the stance leg's hip "
+                            f"joint ({' or '.join(umap.hips)})")
+        _check_stance(umap, args.stance)
     # recorded with the gait: how it continues past T (a late impact), and the
     # constraints its figures are compared with (reported, not enforced)
     options = GaitOptions(mu=args.mu, torque_limit=args.torque_limit, impact_mu=args.impact_mu,
                           continuation=args.continuation,
                           continuation_shape=args.continuation_shape,
                           **({} if args.clearance is None else {"clearance": args.clearance}))
-    r = import_gait(model, args.import_file, angles=args.angles,
+    r = import_gait(model, args.import_file, angles=args.angles, stance=args.stance,
                     bezier_degree=args.bezier_degree, tol=args.import_tol, options=options)
     s = r.to_dict()
     s["file"] = str(r.gait.save(out))
@@ -59,6 +83,11 @@ def cmd_import(args):
     print(f"imported gait of {model.params.name} from {args.import_file} ({r.kind}), saved "
           f"to {out}")
     print(f"  nodes fitted         {r.n_nodes}, Bezier degree {r.bezier_degree}")
+    if args.angles == "urdf":
+        spread = r.info.get("stance_foot_spread")
+        print(f"  URDF angles          stance leg of {r.info['stance']}"
+              + ("" if spread is None else
+                 f"; the base columns keep its foot within {spread:.2e} m"))
     print(f"  fit error            {r.fit_error_q:.2e} rad, {r.fit_error_dq:.2e} rad/s")
     print(f"  data through impact  {r.data_impact_residual:.2e}   unactuated drift "
           f"{r.unactuated_drift:.2e} rad")
@@ -73,4 +102,49 @@ def cmd_import(args):
         print(f"  note: violates the default gait constraint '{name}' by {v:.3g}")
     for p in s.get("plots", []):
         print(f"  plot                 {p}")
+    return 0
+
+
+def _check_stance(umap, stance):
+    try:
+        umap.stance_leg(stance)
+    except ValueError as e:
+        raise UserError(f"--{e}") from None
+
+
+def check_export_arguments(args):
+    """--export-csv excludes the other modes; --stance belongs to --angles urdf."""
+    if args.stance is not None and args.angles != "urdf":
+        raise UserError("--stance names the stance leg of --angles urdf")
+    if args.export_csv is None:
+        if args.gait is not None:
+            raise UserError("--gait FILE is the gait --export-csv writes (give --export-csv)")
+        return
+    if args.import_file is not None or args.speeds is not None or args.family is not None:
+        raise UserError("--export-csv writes a gait: it excludes --import, --speeds and "
+                        "--family")
+    if not 5 <= args.nodes <= 100_000:
+        raise UserError(f"--nodes must be from 5 to 100000, got {args.nodes}")
+
+
+def cmd_export_csv(args, progress):
+    """``biped gait --export-csv FILE``: a gait as nodes in the chosen coordinates."""
+    out = output_file(args.export_csv, "--export-csv", (".csv",))
+    gait = load_gait(args, progress)
+    if args.angles == "urdf":
+        umap = require_urdf_map(gait.model, "--angles urdf")
+        if args.stance is not None:
+            _check_stance(umap, args.stance)
+    path = write_gait_csv(gait, out, args.angles, args.stance, args.nodes)
+    stance = None
+    if args.angles == "urdf":
+        stance = args.stance or gait.model.description.urdf.hips[0]
+    s = dict(file=str(path), angles=args.angles, stance=stance, nodes=args.nodes, T=gait.T,
+             robot=gait.model.params.name, gait=args.gait)
+    if args.json:
+        print_json(s)
+        return 0
+    where = f" (stance leg of {stance})" if stance else ""
+    print(f"wrote {path}: one step of {gait.model.params.name} as {args.nodes} nodes in "
+          f"{args.angles} angles{where}, T = {gait.T:.6f} s")
     return 0

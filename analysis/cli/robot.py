@@ -1,8 +1,11 @@
 """``biped robot import``: a URDF file turned into the equivalent robot description
-(TOML).  Reads top to bottom; the import itself is :func:`biped_casadi.model.urdf.import_urdf`.
+(TOML); ``biped robot mjcf``: a robot as a MuJoCo model (MJCF).  Reads top to bottom; the
+import itself is :func:`biped_casadi.model.urdf.import_urdf`, the MJCF
+:func:`biped_casadi.mujoco.mjcf`.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -10,8 +13,10 @@ import numpy as np
 from biped_casadi.files import write_text_atomic
 from biped_casadi.model.description import load_description
 from biped_casadi.model.urdf import description_toml, import_urdf
+from biped_casadi.mujoco import mjcf, mujoco_module
 
-from .common import UserError, output_file, print_json
+from .common import ROBOT_HELP, UserError, load_model, output_file, print_json
+from .mujoco_options import add_mujoco_settings, mujoco_settings
 
 
 def cmd_import(args):
@@ -26,16 +31,21 @@ def cmd_import(args):
         foot = np.array(args.foot, dtype=float)
         if not np.all(np.isfinite(foot)):
             raise UserError("--foot takes 3 finite numbers (x y z in m)")
-    imp = import_urdf(src, foot)
+    if args.torque_limit is not None and not (math.isfinite(args.torque_limit)
+                                              and args.torque_limit > 0):
+        raise UserError(f"--torque-limit must be a positive number (N m), got "
+                        f"{args.torque_limit:g}")
+    imp = import_urdf(src, foot, torque_limit=args.torque_limit)
     text = description_toml(imp.description, f"made by 'biped robot import' from {src.name}")
     write_text_atomic(out, text)
     back = load_description(out)                 # the file reads back to the same robot
-    if back != imp.description:
+    if back != imp.description or back.urdf != imp.description.urdf:
         raise RuntimeError(f"{out} does not read back to the imported robot")
     d = imp.description
     summary = dict(file=str(out), source=str(src), robot=d.to_dict(), torso=imp.torso,
                    legs=[list(leg) for leg in imp.legs], foot=imp.foot, notes=imp.notes,
-                   total_mass=d.total_mass)
+                   total_mass=d.total_mass, torque_limit=d.torque_limit,
+                   joint_map=d.urdf.describe())
     if args.json:
         print_json(summary)
         return 0
@@ -43,34 +53,93 @@ def cmd_import(args):
     print(f"  torso {imp.torso!r}; legs {', '.join(' -> '.join(leg) for leg in imp.legs)}; "
           f"foot from {imp.foot}")
     for link in (d.torso,) + d.leg:
+        off = f" (off its line by {link.com_offset:g} m)" if link.com_offset else ""
         print(f"  {link.name:8s} mass {link.mass:g} kg, length {link.length:g} m, "
-              f"com {link.com:g} m, inertia {link.inertia:g} kg m^2")
+              f"com {link.com:g} m{off}, inertia {link.inertia:g} kg m^2")
     for joint, m in d.point_masses:
         print(f"  point mass {m:g} kg at the {joint}")
-    print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 (reflected), torque limit "
-          f"{d.torque_limit:g} N m")
+    limit = f"{d.torque_limit:g} N m" if d.has_torque_limit else "none (infinite)"
+    print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 (reflected), torque limit {limit}")
+    print("  joint map, URDF angle theta -> the model's angle of the joint's child link "
+          "relative to its parent (the swing leg's coordinates; the stance leg's are "
+          "their negatives):")
+    for line in d.urdf.describe():
+        print(f"    {line}")
     for note in imp.notes:
         print(f"  note: {note}")
     return 0
 
 
+def cmd_mjcf(args):
+    out = output_file(args.out, "--out", (".xml",))
+    settings = mujoco_settings(args)
+    model = load_model(args.robot)
+    text = mjcf(model, settings, args.torque_limit)
+    mujoco = mujoco_module()
+    try:
+        m = mujoco.MjModel.from_xml_string(text)
+    except ValueError as e:
+        raise UserError(f"MuJoCo rejects the model: {str(e).splitlines()[0]}") from None
+    write_text_atomic(out, text)
+    d = model.description
+    summary = dict(file=str(out), robot=d.name, settings=settings.to_dict(),
+                   torque_limit=float(m.actuator_ctrlrange[0, 1]), nq=int(m.nq),
+                   actuators=int(m.nu), total_mass=float(sum(m.body_mass)),
+                   joints=[mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, i)
+                           for i in range(m.njnt)])
+    if args.json:
+        print_json(summary)
+        return 0
+    print(f"{d.name}: MuJoCo model written to {out}")
+    print(f"  joints {', '.join(summary['joints'])} (planar floating base at the hip: x, z, "
+          f"pitch); {summary['actuators']} motors limited to "
+          f"{summary['torque_limit']:g} N m; total mass {summary['total_mass']:g} kg")
+    s = settings
+    print(f"  {s.contact} contact (solref {s.solref if s.solref is not None else 'MuJoCo default 0.02'}"
+          f" s), time step {s.timestep:g} s, sphere feet of {s.foot_radius:g} m, mu {s.mu:g}")
+    return 0
+
+
 def register(sub):
-    p = sub.add_parser("robot", help="robot files: import a URDF as a description",
+    p = sub.add_parser("robot", help="robot files: import a URDF, write a MuJoCo model",
                        description="Robot files. 'biped robot import FILE.urdf --out "
                                    "robot.toml' reads a planar point-foot biped from a URDF "
-                                   "and writes the equivalent description file.")
+                                   "and writes the equivalent description file; 'biped robot "
+                                   "mjcf --out robot.xml' writes a robot as a MuJoCo model.")
     acts = p.add_subparsers(dest="action", metavar="ACTION")
     acts.required = True
     q = acts.add_parser("import", help="a URDF file as a robot description (TOML)",
                         description="Read a planar biped from a URDF (a torso and two "
-                                    "identical legs of revolute joints about one axis; "
-                                    "inertials, joint origins, transmissions, effort "
-                                    "limits) and write the equivalent description file.")
+                                    "identical legs of revolute or continuous joints about "
+                                    "one axis, +y or -y per joint, in any zero pose; "
+                                    "inertials anywhere in the plane, joint origins, "
+                                    "transmissions, effort limits) and write the equivalent "
+                                    "description file, with the map from the URDF's joint "
+                                    "angles to the model's (printed; the [urdf] table).")
     q.add_argument("file", metavar="FILE.urdf", help="the URDF file")
     q.add_argument("--foot", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="the foot point in the last leg link's frame, m (when the file has "
                         "no foot link or frame)")
+    q.add_argument("--torque-limit", type=float, metavar="N",
+                   help="the robot's torque limit, N m (default: the smallest <limit "
+                        "effort> of the leg joints; none when they give none, e.g. "
+                        "continuous joints without <limit>)")
     q.add_argument("--out", metavar="FILE.toml", required=True,
                    help="the description file to write")
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.set_defaults(func=cmd_import)
+    q = acts.add_parser(
+        "mjcf", help="a robot as a MuJoCo model (MJCF)",
+        description="Write the MuJoCo model (MJCF) of a robot the toolkit reads: a planar "
+                    "floating base at the hip (slide x, slide z, hinge pitch), hinges with "
+                    "the rotor inertia as armature, motors limited to the torque limit, "
+                    "sphere feet (the only geometry that collides). Its mass matrix equals "
+                    "the toolkit's (tested to 1e-12). MuJoCo's own URDF loader would weld the "
+                    "torso to the world, drop the rotor inertia and make no motors.")
+    q.add_argument("--robot", metavar="NAME|FILE", help=f"{ROBOT_HELP}; default: rabbit")
+    q.add_argument("--out", metavar="FILE.xml", required=True, help="the MJCF file to write")
+    add_mujoco_settings(q)
+    q.add_argument("--torque-limit", type=float, metavar="U",
+                   help="the motors' limit, N m (default the robot's)")
+    q.add_argument("--json", action="store_true", help="print one JSON object")
+    q.set_defaults(func=cmd_mjcf)

@@ -41,6 +41,7 @@ from . import figures as F
 from .options import ReproduceOptions, run_folder
 from .paper import (stage_fig2, stage_fig3, stage_fig4, stage_gait, stage_grid, stage_m1,
                     stage_singular, stage_vc)
+from .mujoco import mujoco_figure, stage_mujoco
 from .speed import stage_family
 from .terrain import stage_terrain
 from .walking import (stage_basins, stage_basins_robust, stage_robust_design,
@@ -216,8 +217,10 @@ TERRAIN = Stage("uneven ground (MFPT, GSN)", stage_terrain, (GAIT, M1, ROBUST),
                 scope=Scope.ROBUST, figures=(Figures(F.terrain_figures),))
 FAMILY = Stage("gait family and speed", stage_family, (ROBUST,), model=True,
                scope=Scope.ROBUST, figures=(Figures(F.family_figure),))
+MUJOCO = Stage("in MuJoCo", stage_mujoco, (GAIT, M1, ROBUST, SEARCH), scope=Scope.ROBUST,
+               figures=(Figures(mujoco_figure),))
 STAGES = (GAIT, SINGULAR, FIG2, GRID, FIG3, FIG4, M1, VC, ROBUSTNESS, SIM, BASINS, SEARCH,
-          ROBUST, BASINS_R, TRADEOFF, ROBUSTNESS_R, SIM_R, TERRAIN, FAMILY)
+          ROBUST, BASINS_R, TRADEOFF, ROBUSTNESS_R, SIM_R, TERRAIN, FAMILY, MUJOCO)
 
 
 @dataclass

@@ -55,6 +55,12 @@ class Resolution:
         Uneven ground: runs of each model-error Monte Carlo.
     gsn_every_design : bool
         The gait sensitivity norm of every time-varying design (else of the last).
+    mujoco_steps, mujoco_scale_steps : int
+        In MuJoCo: the steps of each walk, and of each walk from a scaled perturbation.
+    mujoco_scales : tuple of float
+        In MuJoCo: the scales of the paper's perturbation tried.
+    mujoco_directions : int
+        In MuJoCo: the perturbation directions of the stride map.
     """
 
     quick: bool = False
@@ -75,6 +81,10 @@ class Resolution:
     terrain_steps: int = 20
     terrain_error_runs: int = 12
     gsn_every_design: bool = True
+    mujoco_steps: int = 100
+    mujoco_scale_steps: int = 30
+    mujoco_scales: tuple = (1, 2, 3, 4, 6, 8)
+    mujoco_directions: int = 16
 
     @classmethod
     def make(cls, quick: bool = False, **kw) -> "Resolution":
@@ -96,7 +106,8 @@ class Resolution:
                     nlp_random=0, sim_steps=6, animation_steps=2,
                     robustness=RobustnessSettings(directions=8, rounds=6), basin_n=41,
                     codesign=QUICK, terrain_sigmas=(0.004, 0.008), terrain_runs=16,
-                    terrain_steps=12, terrain_error_runs=6, gsn_every_design=False) \
+                    terrain_steps=12, terrain_error_runs=6, gsn_every_design=False,
+                    mujoco_steps=30, mujoco_scales=(1, 2, 3), mujoco_directions=8) \
             if quick else {}
         base.update(kw)
         return cls(**base)

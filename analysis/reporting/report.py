@@ -6,6 +6,7 @@ from pathlib import Path
 
 from biped_casadi.files import write_text_atomic
 
+from .in_mujoco import mujoco_caption, mujoco_lines
 from .plots import COLOUR_NAMES, OUTCOME_COLOURS, STANCE, SWING, TORSO
 
 
@@ -661,7 +662,8 @@ def write_report(out: Path, s: dict) -> Path:
         lines += ["The paper's numbers are RABBIT's; for this robot the same stages give:", "",
                   "## Results", "", "| quantity | ours | note |", "|---|---|---|"]
         lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} |" for a, b, c in _robot_rows(s)]
-    lines += [""] + _robust_lines(s) + _terrain_lines(s) + _family_lines(s) + _replay_lines(s)
+    lines += [""] + _robust_lines(s) + _terrain_lines(s) + _family_lines(s) + mujoco_lines(s) \
+        + _replay_lines(s)
     cp = s.get("critical_path") or {}
     lines += ["## Stages", "", "Each stage is a flow of tasks; every result is kept in the "
               "cache folder by its inputs and the version of the numerical code.  Computed: "
@@ -679,7 +681,7 @@ def write_report(out: Path, s: dict) -> Path:
                      f"{_f(st.get('time'), '.1f')} |")
     lines += ["", "## Figures", ""]
     figures = s.get("figures", {})
-    captions = _figure_captions(s)
+    captions = _figure_captions(s) | mujoco_caption(s)
     for key in [k for k in captions if k in figures] + [k for k in figures if k not in captions]:
         files = figures[key]
         files = [files] if isinstance(files, str) else files

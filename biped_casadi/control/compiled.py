@@ -24,10 +24,11 @@ from ..numerics import FastCall, as_number, as_vector
 from .controller import StepStart
 from .export import LIBRARY, RETURN_CODES, TAU_SLACK, exported_law
 from .export_folder import file_digest
+from .export_urdf import LEG_ORDER, torque_matrix
 from .output_law import singularity_report
 
 __all__ = ["find_c_compiler", "build_library", "NumericLaw", "CompiledController",
-           "PythonTwin", "CompilerError"]
+           "CompiledUrdfController", "PythonTwin", "CompilerError"]
 
 
 class CompilerError(RuntimeError):
@@ -196,9 +197,12 @@ class CompiledController(NumericLaw):
     """
 
     name = "compiled"
+    #: entries of the library's state beyond the exported controller's own
+    extra_state = 0
 
     def __init__(self, library, exported):
         super().__init__(exported)
+        self.n_par += self.extra_state
         self.library = Path(library)
         try:
             self._digest = file_digest(self.library)
@@ -410,3 +414,165 @@ class PythonTwin(NumericLaw):
             ``controller`` ('python'), ``exported`` (the controller's ``describe()``).
         """
         return dict(controller="python", exported=self.exported.describe())
+
+
+class CompiledUrdfController(CompiledController):
+    """An export in URDF angles (``biped export --angles urdf``) as a model's controller.
+
+    The simulator's (q, dq) go to the library as the robot's URDF coordinates, the
+    library's torques per URDF joint come back as the model's u.
+
+    The library's own calls are :meth:`start_urdf`, :meth:`start_leg`,
+    :meth:`torque_urdf` and :meth:`outputs_urdf` (URDF coordinates in and out).  As a
+    controller of the model it plays the robot's loop: at every step start it reads the
+    joint angles with one physical leg in stance (the two legs in turn), lets the library
+    find the stance leg (``biped_step_start``: the foot in front) and reports a step
+    that cannot start when the library takes the other leg; afterwards the state's
+    ``state[0]`` says which leg the angles are read for.
+
+    Parameters
+    ----------
+    library : str or Path
+        The shared library built from the export.
+    exported : TimeVaryingController or VirtualConstraintController
+        The controller that was exported.
+    urdf_map : UrdfMap
+        The robot's joint map (the export's).
+    motor_side : bool
+        Whether the export's torques are on the motor side.
+    """
+
+    name = "compiled-urdf"
+    extra_state = 1
+
+    def __init__(self, library, exported, urdf_map, motor_side: bool = False):
+        super().__init__(library, exported)
+        lib = self._lib
+        try:
+            f = lib.biped_step_start_leg
+        except AttributeError:
+            raise ValueError(f"library: {self.library} is not an export in URDF angles (no "
+                             f"biped_step_start_leg)") from None
+        f.argtypes, f.restype = [ctypes.c_int] + [ctypes.c_void_p] * 3, ctypes.c_int
+        self.urdf_map, self.motor_side = urdf_map, bool(motor_side)
+        self._to_model = {leg: np.linalg.inv(torque_matrix(urdf_map, leg, motor_side))
+                          for leg in LEG_ORDER}
+        self._starts = 0
+
+    # ---------------------------------------------------- the library's own calls
+    def start_urdf(self, x, dx) -> tuple:
+        """``biped_step_start``: the library finds the stance leg.
+
+        Parameters
+        ----------
+        x, dx : numpy.ndarray
+            Pitch and URDF joint angles, and rates.
+
+        Returns
+        -------
+        tuple
+            (return code, state: ``state[0]`` the stance leg 0 or 1).
+        """
+        return CompiledController._start(self, x, dx)
+
+    def start_leg(self, stance: int, x, dx) -> tuple:
+        """``biped_step_start_leg``: the stance leg given (0 or 1).
+
+        Parameters
+        ----------
+        stance : int
+            0 for the map's leg 1, 1 for leg 2.
+        x, dx : numpy.ndarray
+            Pitch and URDF joint angles, and rates.
+
+        Returns
+        -------
+        tuple
+            (return code, state).
+        """
+        self._set(x, dx)
+        rc = self._lib.biped_step_start_leg(int(stance), self._ptr["q"], self._ptr["dq"],
+                                            self._ptr["p"])
+        return rc, self._p[:self.n_par].copy()
+
+    def torque_urdf(self, tau, x, dx, state) -> tuple:
+        """``biped_torque`` in URDF coordinates: (return code, torque per URDF joint).
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        x, dx, state : numpy.ndarray
+            Pitch and URDF joint angles, rates, the state of a step start.
+
+        Returns
+        -------
+        tuple
+        """
+        return CompiledController.torque(self, tau, x, dx, state)
+
+    def outputs_urdf(self, tau, x, dx, state) -> tuple:
+        """``biped_outputs`` in URDF coordinates: (return code, y, dy, den).
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        x, dx, state : numpy.ndarray
+            As :meth:`torque_urdf`.
+
+        Returns
+        -------
+        tuple
+        """
+        return CompiledController.outputs(self, tau, x, dx, state)
+
+    # ---------------------------------------------------- as a controller of the model
+    def _urdf(self, q, dq, leg):
+        return self.urdf_map.from_model(q, dq, leg)
+
+    def _start(self, q, dq):
+        leg = LEG_ORDER[self._starts % 2]
+        self._starts += 1
+        rc, p = self.start_urdf(*self._urdf(q, dq, leg))
+        if rc == 0 and p[0] != LEG_ORDER.index(leg):
+            rc = 2                        # the library would read the angles wrongly
+        return rc, p
+
+    def torque(self, tau, q, dq, p) -> tuple:
+        """The library's torques as the model's u (the stance leg of ``p[0]``).
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq : numpy.ndarray
+            The model's state.
+        p : numpy.ndarray
+            The state of :meth:`step_start`.
+
+        Returns
+        -------
+        tuple
+            (return code, u (nu,), N m).
+        """
+        leg = LEG_ORDER[int(p[0])]
+        rc, tau_urdf = self.torque_urdf(tau, *self._urdf(q, dq, leg), p)
+        return rc, self._to_model[leg] @ tau_urdf
+
+    def outputs(self, tau, q, dq, p) -> tuple:
+        """The library's outputs at the model's state.
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq, p : numpy.ndarray
+            As :meth:`torque`.
+
+        Returns
+        -------
+        tuple
+            (return code, y, dy, den).
+        """
+        return self.outputs_urdf(tau, *self._urdf(q, dq, LEG_ORDER[int(p[0])]), p)

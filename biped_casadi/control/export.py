@@ -39,11 +39,18 @@ import numpy as np
 
 from ..numerics import quintic_hermite_interval
 from .design import Design
+from .export_urdf import (LEG_ORDER, URDF_START_C, c_number, urdf_functions, urdf_header_doc,
+                          urdf_readme_doc)
 from .time_varying import TimeVaryingController
 from .virtual_constraints import VirtualConstraintController
 
 __all__ = ["ExportedLaw", "exported_law", "c_sources", "hermite_state", "HEADER", "WRAPPER",
-           "GENERATED", "LIBRARY", "RETURN_CODES", "MARKER", "SINGULAR_FRACTION", "TAU_SLACK"]
+           "GENERATED", "LIBRARY", "RETURN_CODES", "MARKER", "SINGULAR_FRACTION", "TAU_SLACK",
+           "EXPORT_ANGLES"]
+
+#: the coordinates an exported law can take: the toolkit's relative angles, or the robot's
+#: own URDF joint angles (:mod:`biped_casadi.control.export_urdf`)
+EXPORT_ANGLES = ("relative", "urdf")
 
 #: the files of an export (the header, the wrapper, CasADi's generated law)
 HEADER, WRAPPER, GENERATED = "biped_controller.h", "biped_controller.c", "biped_law.c"
@@ -96,7 +103,17 @@ class ExportedLaw:
     T : float
         Step duration of the reference, s.
     example_states : numpy.ndarray
-        (K, 1 + 2 nq + nstate): (tau, q, dq, state) on the reference, for the example.
+        (K, 1 + 2 nq + nstate): (tau, q, dq, state) on the reference, for the example
+        (in the law's own coordinates).
+    angles : str
+        'relative' (the toolkit's q) or 'urdf' (pitch and URDF joint angles in, torques
+        per URDF joint out; ``state[0]`` the stance leg).
+    urdf : UrdfMap or None
+        With 'urdf': the robot's joint map.
+    motor_side : bool
+        With 'urdf': torques divided by each joint's reduction.
+    front : casadi.Function or None
+        With 'urdf': ``biped_front(x) -> ahead``, which finds the stance leg.
     """
     kind: str
     nq: int
@@ -114,6 +131,10 @@ class ExportedLaw:
     gait_digest: str
     T: float
     example_states: np.ndarray = field(repr=False)
+    angles: str = "relative"
+    urdf: object = field(default=None, repr=False)
+    motor_side: bool = False
+    front: ca.Function | None = field(default=None, repr=False)
 
 
 def hermite_state(tau, node):
@@ -174,7 +195,8 @@ def _law_functions(ctrl, nq):
     return law, start
 
 
-def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION) -> ExportedLaw:
+def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION,
+                 angles: str = "relative", motor_side: bool = False) -> ExportedLaw:
     """The law of a controller as the Functions and constants of an export.
 
     Parameters
@@ -186,6 +208,12 @@ def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION) -> Ex
         The compiled law reports 'singular' where its decoupling denominator (eq. 24 for
         the time-varying law) falls to this fraction of its largest magnitude on the
         reference, or changes sign (default :data:`SINGULAR_FRACTION`).
+    angles : {'relative', 'urdf'}
+        The law's coordinates: the toolkit's q, or the robot's own URDF joint angles and
+        pitch, with torques per URDF joint (the robot needs its URDF map;
+        :mod:`biped_casadi.control.export_urdf`).
+    motor_side : bool
+        With 'urdf': torques divided by each joint's transmission reduction.
 
     Returns
     -------
@@ -195,7 +223,9 @@ def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION) -> Ex
     ------
     ValueError
         Naming ``controller`` for another kind of controller or a design that is
-        singular along its own gait (eq. 24), ``singular_fraction`` outside (0, 1).
+        singular along its own gait (eq. 24), ``singular_fraction`` outside (0, 1),
+        ``angles`` unknown or 'urdf' for a robot without a URDF map, ``motor_side``
+        without 'urdf'.
     """
     if isinstance(controller, Design):
         controller = controller.controller_for()
@@ -204,23 +234,48 @@ def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION) -> Ex
                          f"VirtualConstraintController, got {type(controller).__name__}")
     if not (isinstance(singular_fraction, (int, float)) and 0 < singular_fraction < 1):
         raise ValueError(f"singular_fraction must be in (0, 1), got {singular_fraction!r}")
+    if angles not in EXPORT_ANGLES:
+        raise ValueError(f"angles must be one of {EXPORT_ANGLES}, got {angles!r}")
+    if motor_side and angles != "urdf":
+        raise ValueError("motor_side: the motor side is that of the URDF's transmissions "
+                         "(angles='urdf')")
+    model, ref = controller.model, controller.reference
+    umap = model.description.urdf
+    if angles == "urdf" and umap is None:
+        raise ValueError(f"angles: the robot {model.params.name} has no URDF joint map (give "
+                         f"the robot as its .urdf file, or a description written by 'biped "
+                         f"robot import')")
     rep = controller.singularity()
     if rep.singular:
         raise ValueError(f"controller: the design is singular along its own gait (eq. 24: the "
                          f"decoupling denominator ranges over [{rep.min_value:.4g}, "
                          f"{rep.max_value:.4g}] on the step)")
-    model, ref = controller.model, controller.reference
     law, start = _law_functions(controller, model.nq)
+    front = None
+    nstate = controller.n_par
+    examples = _example_states(controller)
+    if angles == "urdf":
+        law, start, front = urdf_functions(law, start, model, umap, motor_side)
+        nstate += 1
+        examples = _urdf_examples(examples, umap, model.nq)
     table = _state_table(ref) if controller.n_ref > 0 else None
     kind = "tv" if isinstance(controller, TimeVaryingController) else "vc"
     return ExportedLaw(
-        kind=kind, nq=model.nq, nu=model.nu, nstate=controller.n_par, law=law, start=start,
+        kind=kind, nq=model.nq, nu=model.nu, nstate=nstate, law=law, start=start,
         table=table, tau_max=float(ref.t_max) if table is not None else math.inf,
         den_sign=1.0 if rep.max_value > 0 else -1.0,
         den_scale=max(abs(rep.min_value), abs(rep.max_value)),
         singular_fraction=float(singular_fraction), controller=controller.describe(),
         robot=model.params.name, gait_digest=str(ref.cache_key), T=float(ref.T),
-        example_states=_example_states(controller))
+        example_states=examples, angles=angles, urdf=umap if angles == "urdf" else None,
+        motor_side=bool(motor_side), front=front)
+
+
+def _urdf_examples(rows, umap, nq) -> np.ndarray:
+    """The example's states in URDF angles, leg 1 in stance (state[0] = 0)."""
+    x, dx = umap.from_model(rows[:, 1:1 + nq].T, rows[:, 1 + nq:1 + 2 * nq].T, LEG_ORDER[0])
+    return np.column_stack([rows[:, 0], x.T, dx.T, np.zeros(rows.shape[0]),
+                            rows[:, 1 + 2 * nq:]])
 
 
 def _example_states(ctrl, n: int = 16) -> np.ndarray:
@@ -234,13 +289,7 @@ def _example_states(ctrl, n: int = 16) -> np.ndarray:
 
 
 # ======================================================================= C text
-def _num(x) -> str:
-    """A double as C source, read back exactly."""
-    x = float(x)
-    if math.isinf(x):
-        return "HUGE_VAL" if x > 0 else "-HUGE_VAL"
-    s = repr(x)
-    return s if ("e" in s or "." in s or "n" in s) else s + ".0"
+_num = c_number
 
 
 def _array(name: str, values, per_line: int = 4) -> str:
@@ -253,6 +302,10 @@ def _array(name: str, values, per_line: int = 4) -> str:
 def _provenance_lines(law: ExportedLaw, provenance: dict) -> list:
     c = law.controller
     lines = [f"robot: {law.robot} (nq = {law.nq}, nu = {law.nu})"]
+    if law.angles == "urdf":
+        lines.append("coordinates: the URDF's joint angles and the root link's pitch in, "
+                     f"torques per URDF joint out ({'motor' if law.motor_side else 'joint'} "
+                     "side); state[0] the stance leg")
     lines += [f"{k}: {v}" for k, v in provenance.items()]
     lines.append(f"gait definition digest (sha256): {law.gait_digest}")
     lines.append(f"step duration T = {_num(law.T)} s")
@@ -273,8 +326,30 @@ def _provenance_lines(law: ExportedLaw, provenance: dict) -> list:
     return lines
 
 
+def _coordinates_doc(law: ExportedLaw) -> str:
+    """The header's paragraph on the inputs, outputs and state."""
+    if law.angles == "urdf":
+        return urdf_header_doc(law.urdf, law.nu, law.motor_side)
+    return f""" * q, dq: SPEC coordinates (relative joint angles, stance leg first: q1 the stance leg's
+ * absolute angle, then the stance knee, the stance hip, the swing hip, the swing knee),
+ * rad and rad/s; u: torques on q2..q{law.nq}, N m; tau: time since the step started, s."""
+
+
 def _header(law: ExportedLaw, provenance: dict) -> str:
     info = "\n".join(f" *   {line}" for line in _provenance_lines(law, provenance))
+    urdf = law.angles == "urdf"
+    start_doc = ("""/* at start-up and just after every impact: fills the controller state, state[0]
+   the stance leg (the leg whose foot is in front; returns 2 when the feet are level,
+   then name it with biped_step_start_leg); returns 0, or non-zero when the step cannot
+   be controlled */
+int biped_step_start(const double *q, const double *dq, double *state);
+/* the same with the stance leg named: 0 or 1 (see above) */
+int biped_step_start_leg(int stance, const double *q, const double *dq, double *state);"""
+                 if urdf else """/* at start-up and just after every impact (state already relabelled): fills the
+   controller state (the step constants of eq. 17 for the time-varying law, whatever
+   the virtual-constraint law needs); returns 0, or non-zero when the step cannot be
+   controlled */
+int biped_step_start(const double *q, const double *dq, double *state);""")
     return f"""{MARKER} (generated; do not edit) */
 #ifndef BIPED_CONTROLLER_H
 #define BIPED_CONTROLLER_H
@@ -282,11 +357,9 @@ def _header(law: ExportedLaw, provenance: dict) -> str:
  * The exported controller:
 {info}
  *
- * q, dq: SPEC coordinates (relative joint angles, stance leg first: q1 the stance leg's
- * absolute angle, then the stance knee, the stance hip, the swing hip, the swing knee),
- * rad and rad/s; u: torques on q2..q{law.nq}, N m; tau: time since the step started, s.
+{_coordinates_doc(law)}
  * Return codes: 0 ok, 1 singular (eq. 24), 2 out of range (tau, or the phase, outside the
- * reference's range), 3 not finite.  Outputs are written in every case.  Work arrays are
+ * reference's range{", or state[0] not a leg" if urdf else ""}), 3 not finite.  Outputs are written in every case.  Work arrays are
  * static: one caller at a time.
  */
 #ifdef __cplusplus
@@ -295,11 +368,7 @@ extern "C" {{
 
 /* sizes: configuration nq, torques nu, controller state nstate */
 int biped_sizes(int *nq, int *nu, int *nstate);
-/* at start-up and just after every impact (state already relabelled): fills the
-   controller state (the step constants of eq. 17 for the time-varying law, whatever
-   the virtual-constraint law needs); returns 0, or non-zero when the step cannot be
-   controlled */
-int biped_step_start(const double *q, const double *dq, double *state);
+{start_doc}
 /* torques u[nu] at time tau since the step started; returns 0, or non-zero when the
    law is singular (eq. 24) or tau lies outside the reference's range */
 int biped_torque(double tau, const double *q, const double *dq,
@@ -381,11 +450,31 @@ static int not_defined(double *u, double *y, double *dy, double *den)
 """
 
 
+_START_C = """int biped_step_start(const double *q, const double *dq, double *state)
+{
+    double go = 0.0;
+    work_arg[0] = q; work_arg[1] = dq;
+    work_res[0] = state; work_res[1] = &go;
+    if (biped_start(work_arg, work_res, work_iw, work_w, 0)) return 3;
+    if (!all_finite(q, NQ) || !all_finite(dq, NQ)) return 3;
+    if (!(go > 0.0)) return 2;
+    return all_finite(state, NSTATE) ? 0 : 3;
+}
+"""
+
+
 def _wrapper(law: ExportedLaw) -> str:
     sz = lambda f: (f.sz_arg(), f.sz_res(), f.sz_iw(), f.sz_w())  # noqa: E731
-    n_arg, n_res, n_iw, n_w = (max(a, b, 1) for a, b in zip(sz(law.law), sz(law.start)))
+    fns = [law.law, law.start] + ([law.front] if law.front is not None else [])
+    n_arg, n_res, n_iw, n_w = (max(max(v), 1) for v in zip(*(sz(f) for f in fns)))
     nu, nq, ns = law.nu, law.nq, law.nstate
     tv = law.table is not None
+    urdf = law.angles == "urdf"
+    declare_front = ("int biped_front(const double **arg, double **res, int *iw, double *w, "
+                     "int mem);\n" if urdf else "")
+    start_code = URDF_START_C if urdf else _START_C
+    leg_check = ("    if (!(state[0] == 0.0 || state[0] == 1.0)) return not_defined(u, y, dy, den);\n"
+                 if urdf else "")
     return f"""/* The exported controller's interface (biped_controller.h) around the law that
    CasADi generated in {GENERATED}.  C99, the C library and libm only; static work arrays. */
 #include <math.h>
@@ -402,7 +491,7 @@ def _wrapper(law: ExportedLaw) -> str:
 /* generated by CasADi ({GENERATED}) */
 int biped_law(const double **arg, double **res, int *iw, double *w, int mem);
 int biped_start(const double **arg, double **res, int *iw, double *w, int mem);
-
+{declare_front}
 static const double *work_arg[{n_arg}];
 static double *work_res[{n_res}];
 static int work_iw[{n_iw}];
@@ -417,22 +506,12 @@ static double work_w[{n_w}];
     return 0;
 }}
 
-int biped_step_start(const double *q, const double *dq, double *state)
-{{
-    double go = 0.0;
-    work_arg[0] = q; work_arg[1] = dq;
-    work_res[0] = state; work_res[1] = &go;
-    if (biped_start(work_arg, work_res, work_iw, work_w, 0)) return 3;
-    if (!all_finite(q, NQ) || !all_finite(dq, NQ)) return 3;
-    if (!(go > 0.0)) return 2;
-    return all_finite(state, NSTATE) ? 0 : 3;
-}}
-
+{start_code}
 static int evaluate(double tau, const double *q, const double *dq, const double *state,
                     double *u, double *y, double *dy, double *den)
 {{
     double in_range = 0.0;
-{_NODE_CODE if tv else "    if (!(tau >= 0.0 && tau <= TAU_MAX)) return not_defined(u, y, dy, den);" + chr(10) + "    work_arg[4] = NULL;" + chr(10)}    work_arg[0] = q; work_arg[1] = dq; work_arg[2] = &tau; work_arg[3] = state;
+{leg_check}{_NODE_CODE if tv else "    if (!(tau >= 0.0 && tau <= TAU_MAX)) return not_defined(u, y, dy, den);" + chr(10) + "    work_arg[4] = NULL;" + chr(10)}    work_arg[0] = q; work_arg[1] = dq; work_arg[2] = &tau; work_arg[3] = state;
     work_res[0] = u; work_res[1] = y; work_res[2] = dy; work_res[3] = den;
     work_res[4] = &in_range;
     if (biped_law(work_arg, work_res, work_iw, work_w, 0)) return 3;
@@ -463,11 +542,15 @@ def _generated(law: ExportedLaw) -> str:
                                       "casadi_real": "double"})
     cg.add(law.law)
     cg.add(law.start)
+    if law.front is not None:
+        cg.add(law.front)
     return cg.dump()
 
 
 def _example(law: ExportedLaw) -> str:
     nq, ns = law.nq, law.nstate
+    # the example's states are read with leg 0 in stance (an export in URDF angles)
+    start_call = "biped_step_start_leg(0, " if law.angles == "urdf" else "biped_step_start("
     rows = law.example_states
     return f"""/* Time the exported controller: biped_torque in a loop over {rows.shape[0]} states of the
    reference.  Build: gcc -O2 -o example example/main.c *.c -lm (in the export folder). */
@@ -511,13 +594,28 @@ int main(int argc, char **argv)
     t0 = now();
     for (i = 0; i < n / 10 + 1; ++i) {{
         const double *s = states + (i % K) * w;
-        bad += biped_step_start(s + 1, s + 1 + NQ, state) != 0;
+        bad += {start_call}s + 1, s + 1 + NQ, state) != 0;
     }}
     t1 = now();
     printf("biped_step_start: %.4f us per call\\n", 1e6 * (t1 - t0) / (double)(n / 10 + 1));
     return bad != 0;
 }}
 """
+
+
+def _readme_coordinates(law: ExportedLaw, state_doc: str) -> str:
+    tv = law.kind == "tv"
+    tau = (f"`tau`: time since the step started, s\n  (restart it at 0 at every impact"
+           f"{f'; accepted up to {law.tau_max:.6g} s' if tv else ''}).")
+    if law.angles != "urdf":
+        return f"""- `q`, `dq` ({law.nq} each): SPEC coordinates, relative joint angles with the stance leg
+  first (q1 the stance leg's absolute angle from the vertical, then the stance knee, the
+  stance hip, the swing hip, the swing knee), rad and rad/s. After an impact relabel the
+  legs (q+ = E q-) before calling `biped_step_start`.
+- `u` ({law.nu}): torques on q2..q{law.nq}, N m. {tau}
+- `state` ({law.nstate}): {state_doc}."""
+    return urdf_readme_doc(law.urdf, law.nq, law.nu, law.nstate, law.motor_side, state_doc,
+                           tau)
 
 
 def _readme(law: ExportedLaw, provenance: dict, timing: str = "") -> str:
@@ -549,13 +647,7 @@ one caller at a time). `example/main.c` times the law in a loop:
     biped_step_start(q, dq, state);              /* at start-up and after every impact */
     rc = biped_torque(tau, q, dq, state, u);     /* every control period */
 
-- `q`, `dq` ({law.nq} each): SPEC coordinates, relative joint angles with the stance leg
-  first (q1 the stance leg's absolute angle from the vertical, then the stance knee, the
-  stance hip, the swing hip, the swing knee), rad and rad/s. After an impact relabel the
-  legs (q+ = E q-) before calling `biped_step_start`.
-- `u` ({law.nu}): torques on q2..q{law.nq}, N m. `tau`: time since the step started, s
-  (restart it at 0 at every impact{f"; accepted up to {law.tau_max:.6g} s" if tv else ""}).
-- `state` ({law.nstate}): {state_doc}.
+{_readme_coordinates(law, state_doc)}
 - Return codes: 0 ok, 1 singular (the decoupling denominator, eq. 24, below
   {law.singular_fraction:g} of its largest magnitude on the reference, or of the other
   sign), 2 out of range ({"tau outside [0, t_max]" if tv else "the phase theta = c q outside the fitted range"},

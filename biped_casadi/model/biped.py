@@ -110,11 +110,20 @@ def _inner_joint_names(d: RobotDescription) -> list:
 
 def _kinematics(d: RobotDescription, q, base=None, units=None) -> _Kinematics:
     """Positions of every joint, foot, link centre of mass and point mass (SX).  With
-    ``units`` (one 2-vector per link, in the order of phi) the links point along them
-    instead of (sin phi, cos phi): every position is then linear in the units."""
+    ``units`` (one 2-vector (s, c) per link, in the order of phi) the links point along
+    them instead of (sin phi, cos phi), and their forward normals along (c, -s): every
+    position is then linear in the units.
+
+    A link's centre of mass is ``com`` along its line from its proximal joint and
+    ``com_offset`` along its forward normal f = (cos phi, -sin phi) (the description's
+    convention: forward when the robot stands upright)."""
     n, k = d.nq, d.k
     phi = absolute_angles([q[i] for i in range(n)])
     e = [_up(a) for a in phi] if units is None else list(units)
+    f = [ca.vertcat(u[1], -u[0]) for u in e]             # forward normals
+
+    def off(link, i):                  # the centre of mass off the line (none: no term)
+        return link.com_offset * f[i] if link.com_offset != 0.0 else 0.0
     names = _link_names(d)
     inner = _inner_joint_names(d)
     foot_st = ca.SX.zeros(2) if base is None else base
@@ -124,20 +133,20 @@ def _kinematics(d: RobotDescription, q, base=None, units=None) -> _Kinematics:
     for j in range(k):                          # stance leg, from the foot up
         link = d.leg[k - 1 - j]
         top = p + link.length * e[j]
-        coms[names[j]] = top - link.com * e[j]
+        coms[names[j]] = top - link.com * e[j] + off(link, j)
         if j < k - 1:
             points[f"{inner[k - 2 - j]}_st"] = top
         p = top
     hip = p
     points["hip"] = hip
     points["torso_top"] = hip + d.torso.length * e[k]
-    coms["torso"] = hip + d.torso.com * e[k]
+    coms["torso"] = hip + d.torso.com * e[k] + off(d.torso, k)
     p = hip
     for j in range(k):                          # swing leg, from the hip down
         link = d.leg[j]
         i = k + 1 + j
         bottom = p - link.length * e[i]
-        coms[names[i]] = p - link.com * e[i]
+        coms[names[i]] = p - link.com * e[i] + off(link, i)
         if j < k - 1:
             points[f"{inner[j]}_sw"] = bottom
         p = bottom
@@ -191,21 +200,26 @@ def _energies(d: RobotDescription, kin: _Kinematics, coords, dcoords, rotor_rate
 def _pinned_kinetic(d: RobotDescription, q, dq):
     """Kinetic energy of the pinned robot (stance foot fixed) in relative angles.
 
-    Every body's position is c = sum_i A_i (sin phi_i, cos phi_i) with constants A_i,
-    so |dc/dt|^2 = sum_ij A_i A_j dphi_i dphi_j cos(phi_i - phi_j): K is a quadratic
-    form in dphi whose entries depend on the differences phi_i - phi_j, sums of the
-    relative coordinates q_2..q_n only.  The same energy as :func:`_energies`, without
-    products of sines and cosines of absolute angles (D and H in a fraction of the
-    operations, and exactly independent of q_1)."""
+    Every body's position is c = sum_i (A_i u_i + B_i f_i) with constants A_i, B_i,
+    u_i = (sin phi_i, cos phi_i) and f_i = (cos phi_i, -sin phi_i) (B_i: the centres of
+    mass off their links' lines), so |dc/dt|^2 = sum_ij dphi_i dphi_j [(A_i A_j +
+    B_i B_j) cos(phi_i - phi_j) + (A_i B_j - B_i A_j) sin(phi_i - phi_j)]: K is a
+    quadratic form in dphi whose entries depend on the differences phi_i - phi_j, sums
+    of the relative coordinates q_2..q_n only.  The same energy as :func:`_energies`,
+    without products of sines and cosines of absolute angles (D and H in a fraction of
+    the operations, and exactly independent of q_1)."""
     n = d.nq
     S, C = ca.SX.sym("s", n), ca.SX.sym("c", n)
     kin = _kinematics(d, q, units=[ca.vertcat(S[i], C[i]) for i in range(n)])
-    W = np.zeros((n, n))
+    W = np.zeros((n, n))              # cos(phi_i - phi_j) coefficients
+    V = np.zeros((n, n))              # sin(phi_i - phi_j) coefficients (antisymmetric)
     bodies = [(kin.coms[name], m) for name, (m, _) in _link_mass_inertia(d).items()]
     bodies += [(kin.masses[name], m) for name, m in _point_mass_values(d).items()]
     for pos, m in bodies:
         A = np.array(ca.evalf(ca.jacobian(pos[0], S))).ravel()
-        W += m * np.outer(A, A)
+        B = np.array(ca.evalf(ca.jacobian(pos[0], C))).ravel()
+        W += m * (np.outer(A, A) + np.outer(B, B))
+        V += m * (np.outer(A, B) - np.outer(B, A))
     for i, (_, (_, inertia)) in enumerate(_link_mass_inertia(d).items()):
         W[i, i] += inertia
     dphi = absolute_angles([dq[i] for i in range(n)])
@@ -213,9 +227,15 @@ def _pinned_kinetic(d: RobotDescription, q, dq):
     for i in range(n):
         K += 0.5 * W[i, i] * dphi[i] ** 2
         for j in range(i):
-            if W[i, j] != 0.0:
-                rel = sum(q[m] for m in range(j + 1, i + 1))       # phi_i - phi_j
+            if W[i, j] == 0.0 and V[i, j] == 0.0:
+                continue
+            rel = sum(q[m] for m in range(j + 1, i + 1))       # phi_i - phi_j
+            if V[i, j] == 0.0:
                 K += W[i, j] * ca.cos(rel) * dphi[i] * dphi[j]
+            elif W[i, j] == 0.0:
+                K += V[i, j] * ca.sin(rel) * dphi[i] * dphi[j]
+            else:
+                K += (W[i, j] * ca.cos(rel) + V[i, j] * ca.sin(rel)) * dphi[i] * dphi[j]
     return K + 0.5 * d.rotor_inertia * ca.sumsqr(dq[1:])
 
 
@@ -242,7 +262,9 @@ class BipedModel:
     2..n of D ddq + H, eq. (1) with B = [0; I]); ``ground_reaction(q, dq, u)`` -> (Fx, Fz)
     on the stance foot (Newton's law for the centre of mass); ``ground_reaction_acc(q,
     dq, ddq)`` the same from the accelerations;
-    ``energy(q, dq)`` -> (K, V, E); ``com(q)``; ``points(q)`` (2 x (2k + 2): stance
+    ``energy(q, dq)`` -> (K, V, E); ``com(q)``; ``link_coms(q)`` (2 x nq: every link's
+    centre of mass, in the order of phi: stance leg from the foot up, torso, swing leg
+    from the hip down); ``points(q)`` (2 x (2k + 2): stance
     foot, the stance leg's inner joints upward, hip, torso top, the swing leg's inner
     joints downward, swing foot; :attr:`point_names`); ``angular_momentum(q, dq, p)``
     about a point p (links and point masses, rotors excluded).
@@ -392,6 +414,8 @@ class BipedModel:
         self.com = _fn("com", [q], [com], ["q"], ["com"])
         self.com_velocity = _fn("com_velocity", [q, dq], [dcom], ["q", "dq"], ["dcom"])
         self.torso_angle = _fn("torso_angle", [q], [kin.phi[d.k]], ["q"], ["phi_torso"])
+        self.link_coms = _fn("link_coms", [q], [ca.horzcat(*kin.coms.values())], ["q"],
+                             ["C"])
         pts = kin.points
         self.points = _fn("points", [q], [ca.horzcat(*pts.values())], ["q"], ["P"])
         self._build_impact(q, dq)
@@ -494,7 +518,7 @@ def _model(description: RobotDescription) -> BipedModel:
     return BipedModel(description)
 
 
-def resolve_robot(robot, foot=None) -> RobotDescription:
+def resolve_robot(robot, foot=None, torque_limit=None) -> RobotDescription:
     """The description named by ``robot``.
 
     Parameters
@@ -506,6 +530,8 @@ def resolve_robot(robot, foot=None) -> RobotDescription:
         (``.toml`` or ``.json`` with the fields of :class:`RobotParams`), or an object.
     foot : sequence of 3 floats, optional
         For a URDF file only: the foot point in the last leg link's frame, m.
+    torque_limit : float, optional
+        For a URDF file only: the torque limit, N m, instead of the file's efforts.
 
     Returns
     -------
@@ -519,12 +545,13 @@ def resolve_robot(robot, foot=None) -> RobotDescription:
         field).
     """
     is_urdf = isinstance(robot, (str, Path)) and str(robot).lower().endswith(".urdf")
-    if foot is not None and not is_urdf:
-        raise ValueError(f"foot: applies to a URDF file (.urdf) only, not to {robot!r}")
+    for name, value in (("foot", foot), ("torque_limit", torque_limit)):
+        if value is not None and not is_urdf:
+            raise ValueError(f"{name}: applies to a URDF file (.urdf) only, not to {robot!r}")
     if is_urdf:
         if not Path(robot).is_file():
             raise ValueError(f"robot URDF file not found: {robot}")
-        return load_urdf(robot, foot)
+        return load_urdf(robot, foot, torque_limit)
     if isinstance(robot, RobotDescription):
         return robot
     if isinstance(robot, RobotParams):
@@ -561,7 +588,7 @@ def _legacy_file(path: Path) -> bool:
     return RobotParams.is_legacy_record(data)
 
 
-def robot(name_or_path="rabbit", foot=None) -> BipedModel:
+def robot(name_or_path="rabbit", foot=None, torque_limit=None) -> BipedModel:
     """The model of a built-in robot, of a description file or of a URDF file.
 
     Parameters
@@ -573,13 +600,16 @@ def robot(name_or_path="rabbit", foot=None) -> BipedModel:
     foot : sequence of 3 floats, optional
         For a URDF file whose last leg link has no foot link or frame: the foot point
         in that link's frame, m.
+    torque_limit : float, optional
+        For a URDF file: the torque limit, N m (needed when the file gives no effort
+        limits and a command needs one).
 
     Returns
     -------
     BipedModel
         Built once per description (memoised); the same methods as :func:`rabbit`.
     """
-    return _model(resolve_robot(name_or_path, foot))
+    return _model(resolve_robot(name_or_path, foot, torque_limit))
 
 
 def rabbit(params: RobotParams | RobotDescription | None = None) -> BipedModel:

@@ -9,7 +9,8 @@ and the stance foot a passive point contact.  The schema (SI units throughout)::
     gravity = 9.81             # m/s^2, > 0
 
     [actuators]
-    torque_limit = 150.0       # N m, > 0: bound on every joint torque (the gait's default)
+    torque_limit = 150.0       # N m, > 0: bound on every joint torque (the gait's default);
+                               # inf: no limit (a command that needs one says so)
     rotor_inertia = 3.32e-4    # kg m^2, >= 0: rotor inertia of each actuated joint ...
     gear_ratio = 50.0          # optional (default 1), > 0: ... reflected through the gear
                                # as rotor_inertia * gear_ratio^2 on the joint's diagonal
@@ -18,14 +19,17 @@ and the stance foot a passive point contact.  The schema (SI units throughout)::
     [torso]                    # the torso, from the hip up
     mass = 12.0                # kg, > 0
     length = 0.625             # m, > 0
-    com = 0.24                 # m, centre of mass above the hip, 0 <= com <= length
+    com = 0.24                 # m, centre of mass above the hip (along the torso's line)
+    com_offset = 0.0           # optional, m: its distance off that line, positive forward
+                               # when the robot stands upright (q = 0)
     inertia = 1.33             # kg m^2 about the centre of mass, >= 0 (0: a point mass)
 
     [[leg]]                    # the links of one leg, from the hip down to the foot
     name = "femur"             # optional (default link1, link2, ...)
     mass = 6.8                 # kg, > 0
     length = 0.4               # m, > 0
-    com = 0.11                 # m, from the link's upper (proximal) joint, 0 <= com <= length
+    com = 0.11                 # m, from the link's upper (proximal) joint down the link
+    com_offset = 0.0           # optional, m: off the link's line, positive forward upright
     inertia = 0.47             # kg m^2 about the centre of mass, >= 0
 
     [[leg]]
@@ -37,6 +41,15 @@ and the stance foot a passive point contact.  The schema (SI units throughout)::
                                # joints between leg links: "knee" when k = 2, or
                                # "joint1" .. "joint{k-1}" counted from the hip (one on
                                # each leg)
+
+    [urdf]                     # optional: written by 'biped robot import'; how the URDF's
+                               # own joint angles map to q (biped_casadi.model.urdf_map)
+
+A centre of mass may lie anywhere in the plane of motion: ``com`` (along the link's line,
+from its proximal joint; negative or beyond ``length`` is allowed) and ``com_offset``
+(across it).  With a link's upward unit vector u = (sin phi, cos phi) and its forward
+normal f = (cos phi, -sin phi): torso COM = hip + com u + com_offset f; a leg link's COM
+= its proximal joint - com u + com_offset f (u points up the leg).
 
 Coordinates (docs: theory §1, generalised): q1 is the absolute angle of the stance
 leg's lowest link, then the relative angles up the stance leg, the torso relative to
@@ -50,6 +63,7 @@ type, negative mass, no leg link, ...).  The toolkit ships ``rabbit`` and
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -57,16 +71,17 @@ from importlib import resources
 from pathlib import Path
 
 from ..files import read_text_file
+from .urdf_map import UrdfMap, urdf_map_from_dict
 
 __all__ = ["Link", "RobotDescription", "load_description", "find_description",
-           "description_from_dict", "BUILTIN", "builtin_path"]
+           "description_from_dict", "description_toml", "BUILTIN", "builtin_path"]
 
 #: descriptions shipped with the toolkit (package data, biped_casadi/model/robots/NAME.toml)
 BUILTIN = ("rabbit", "three_link")
 
-_TOP = ("name", "gravity", "actuators", "torso", "leg", "point_masses")
+_TOP = ("name", "gravity", "actuators", "torso", "leg", "point_masses", "urdf")
 _ACTUATORS = ("torque_limit", "rotor_inertia", "gear_ratio")
-_LINK = ("name", "mass", "length", "com", "inertia")
+_LINK = ("name", "mass", "length", "com", "inertia", "com_offset")
 
 
 @dataclass(frozen=True)
@@ -82,11 +97,15 @@ class Link:
     length : float
         m, > 0: from the proximal joint to the distal end.
     com : float
-        m, 0 <= com <= length: the centre of mass measured from the link's proximal
+        m: the centre of mass along the link's line, measured from the link's proximal
         joint (the hip for the torso and for the top link of a leg, the joint above it
-        for the other leg links).
+        for the other leg links), up the torso and down a leg.
     inertia : float
         kg m^2 about the centre of mass, >= 0 (0: a point mass).
+    com_offset : float
+        m: the centre of mass's signed distance from the link's line in the plane of
+        motion, positive forward (+x) when the robot stands upright at q = 0 (module
+        docstring); 0 for a centre of mass on the line.
     """
 
     name: str
@@ -94,6 +113,14 @@ class Link:
     length: float
     com: float
     inertia: float
+    com_offset: float = 0.0
+
+    def __repr__(self):
+        # the fields of a link on its line as before com_offset existed: digests of
+        # descriptions (cache keys) stay the same
+        extra = f", com_offset={self.com_offset!r}" if self.com_offset != 0.0 else ""
+        return (f"Link(name={self.name!r}, mass={self.mass!r}, length={self.length!r}, "
+                f"com={self.com!r}, inertia={self.inertia!r}{extra})")
 
     def to_dict(self) -> dict:
         """The fields by name, as in a description file's link table.
@@ -101,10 +128,14 @@ class Link:
         Returns
         -------
         dict
-            ``name``, ``mass``, ``length``, ``com``, ``inertia``.
+            ``name``, ``mass``, ``length``, ``com``, ``inertia``, and ``com_offset``
+            when it is not zero.
         """
-        return dict(name=self.name, mass=self.mass, length=self.length, com=self.com,
-                    inertia=self.inertia)
+        d = dict(name=self.name, mass=self.mass, length=self.length, com=self.com,
+                 inertia=self.inertia)
+        if self.com_offset != 0.0:
+            d["com_offset"] = self.com_offset
+        return d
 
 
 @dataclass(frozen=True)
@@ -134,9 +165,13 @@ class RobotDescription:
         m/s^2.
     torque_limit : float
         N m, the default bound on every torque of the reference gait (and of closed-loop
-        runs).
+        runs); ``inf`` when the robot has none (a URDF without effort limits).
     source : str
         Where the description was read from (a file name; for messages, not compared).
+    urdf : UrdfMap or None
+        For a robot read from a URDF: how the file's joint angles map to q
+        (:mod:`biped_casadi.model.urdf_map`).  Not compared (it changes no dynamics),
+        but part of :attr:`cache_key`.
     """
 
     name: str
@@ -147,6 +182,7 @@ class RobotDescription:
     gravity: float = 9.81
     torque_limit: float = 150.0
     source: str = field(default="", compare=False, repr=False)
+    urdf: UrdfMap | None = field(default=None, compare=False, repr=False)
 
     # --------------------------------------------------------------- sizes
     @property
@@ -184,9 +220,10 @@ class RobotDescription:
 
     @property
     def cache_key(self):
-        """What a model built from the description depends on (its fields)."""
-        return (self.name, self.torso, self.leg, self.point_masses, self.rotor_inertia,
-                self.gravity, self.torque_limit)
+        """What a model built from the description depends on (with the URDF map, if any)."""
+        key = (self.name, self.torso, self.leg, self.point_masses, self.rotor_inertia,
+               self.gravity, self.torque_limit)
+        return key if self.urdf is None else key + (self.urdf,)
 
     # --------------------------------------------------------------- dicts
     def to_dict(self) -> dict:
@@ -196,15 +233,32 @@ class RobotDescription:
         -------
         dict
             ``name``, ``gravity``, ``actuators`` (the reflected rotor inertia with
-            gear_ratio 1), ``torso``, ``leg`` (a list of link tables) and
-            ``point_masses``; :func:`description_from_dict` reads it back to an equal
-            description.
+            gear_ratio 1), ``torso``, ``leg`` (a list of link tables),
+            ``point_masses`` and, for a robot read from a URDF, ``urdf`` (the joint
+            map); :func:`description_from_dict` reads it back to an equal description.
         """
-        return dict(name=self.name, gravity=self.gravity,
-                    actuators=dict(torque_limit=self.torque_limit,
-                                   rotor_inertia=self.rotor_inertia, gear_ratio=1.0),
-                    torso=self.torso.to_dict(), leg=[link.to_dict() for link in self.leg],
-                    point_masses=dict(self.point_masses))
+        d = dict(name=self.name, gravity=self.gravity,
+                 actuators=dict(torque_limit=self.torque_limit,
+                                rotor_inertia=self.rotor_inertia, gear_ratio=1.0),
+                 torso=self.torso.to_dict(), leg=[link.to_dict() for link in self.leg],
+                 point_masses=dict(self.point_masses))
+        if self.urdf is not None:
+            d["urdf"] = self.urdf.to_dict()
+        return d
+
+    @property
+    def has_torque_limit(self) -> bool:
+        """Whether the robot has a (finite) torque limit."""
+        return math.isfinite(self.torque_limit)
+
+    def without_urdf(self) -> "RobotDescription":
+        """The same robot without its URDF joint map (the model of its dynamics alone).
+
+        Returns
+        -------
+        RobotDescription
+        """
+        return dataclasses.replace(self, urdf=None)
 
     def __str__(self):
         return (f"{self.name}: planar biped, {self.k} link(s) per leg, {self.nq} joints, "
@@ -221,7 +275,7 @@ class RobotDescription:
         inertia : float
             Factor on every link's inertia.
         length : float
-            Factor on every link's length and centre-of-mass position.
+            Factor on every link's length and centre-of-mass position (and offset).
         torso_mass : float
             Further factor on the torso's mass.
 
@@ -248,8 +302,11 @@ class RobotDescription:
             t["inertia"] *= inertia
             t["length"] *= length
             t["com"] *= length
+            if "com_offset" in t:
+                t["com_offset"] *= length
             return t
 
+        d.pop("urdf", None)                 # a plant with other parameters: no file map
         d["torso"] = link(d["torso"], torso_mass)
         d["leg"] = [link(t) for t in d["leg"]]
         d["point_masses"] = {k: v * mass for k, v in d["point_masses"].items()}
@@ -319,15 +376,23 @@ class _Checker:
             self.fail(name, f"must be a non-empty string, got {value!r}")
         return value
 
+    def real(self, value, name: str) -> float:
+        """Any finite number (a signed distance)."""
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(name, f"must be a number, got {value!r}")
+        if not math.isfinite(value):
+            self.fail(name, f"must be finite, got {value!r}")
+        return float(value)
+
     def link(self, data, name: str, default_name: str) -> Link:
         self.table(data, name, _LINK, ("mass", "length", "com", "inertia"))
         length = self.number(data["length"], f"{name}.length", strict=True)
         return Link(name=self.text(data.get("name", default_name), f"{name}.name"),
                     mass=self.number(data["mass"], f"{name}.mass", strict=True),
                     length=length,
-                    com=self.number(data["com"], f"{name}.com", hi=length,
-                                    hi_name=f"{name}.length"),
-                    inertia=self.number(data["inertia"], f"{name}.inertia"))
+                    com=self.real(data["com"], f"{name}.com"),
+                    inertia=self.number(data["inertia"], f"{name}.inertia"),
+                    com_offset=self.real(data.get("com_offset", 0.0), f"{name}.com_offset"))
 
 
 def description_from_dict(data: dict, where: str = "robot description",
@@ -362,7 +427,9 @@ def description_from_dict(data: dict, where: str = "robot description",
     name = c.text(data["name"], "name")
     gravity = c.number(data["gravity"], "gravity", strict=True)
     act = c.table(data["actuators"], "actuators", _ACTUATORS, ("torque_limit", "rotor_inertia"))
-    torque_limit = c.number(act["torque_limit"], "actuators.torque_limit", strict=True)
+    limit = act["torque_limit"]
+    torque_limit = math.inf if (isinstance(limit, float) and limit == math.inf) else \
+        c.number(limit, "actuators.torque_limit", strict=True)
     rotor = c.number(act["rotor_inertia"], "actuators.rotor_inertia")
     gear = c.number(act.get("gear_ratio", 1.0), "actuators.gear_ratio", strict=True)
     torso = c.link(data["torso"], "torso", "torso")
@@ -381,10 +448,12 @@ def description_from_dict(data: dict, where: str = "robot description",
     allowed = joint_names(len(leg))
     c.table(pm, "point_masses", allowed, ())
     masses = tuple(sorted((j, c.number(m, f"point_masses.{j}")) for j, m in pm.items()))
+    urdf = urdf_map_from_dict(data["urdf"], len(leg), where) if "urdf" in data else None
     # rotor_inertia * gear_ratio ** 2: the same operations as RobotParams' default
     return RobotDescription(name=name, torso=torso, leg=leg, point_masses=masses,
                             rotor_inertia=rotor * gear**2,
-                            gravity=gravity, torque_limit=torque_limit, source=source)
+                            gravity=gravity, torque_limit=torque_limit, source=source,
+                            urdf=urdf)
 
 
 def load_description(path) -> RobotDescription:
@@ -470,3 +539,57 @@ def find_description(name_or_path) -> RobotDescription:
         raise ValueError(f"robot: {text!r} is neither a built-in robot "
                          f"({', '.join(BUILTIN)}) nor a description file (.toml)")
     return load_description(text)
+
+
+def description_toml(d: RobotDescription, header: str = "") -> str:
+    """A description file (TOML) that loads back to a description equal to ``d``.
+
+    The schema of the module docstring; the URDF joint map, when
+    there is one, is the ``[urdf]`` table with one ``[[urdf.joints]]`` table per joint.
+
+    Parameters
+    ----------
+    d : RobotDescription
+        The robot.
+    header : str
+        Comment lines to put first (``#`` added).
+
+    Returns
+    -------
+    str
+        TOML text; numbers written with ``repr`` (exact round trip).
+    """
+    def table(t):
+        return "\n".join(f"{k} = {_value(v)}" for k, v in t.items()
+                         if not isinstance(v, list) or not v or not isinstance(v[0], dict))
+    dd = d.to_dict()
+    out = [f"# {line}" for line in header.splitlines()]
+    out += [f"name = {_q(dd['name'])}", f"gravity = {dd['gravity']!r}", "",
+            "[actuators]", table(dd["actuators"]), "", "[torso]", table(dd["torso"])]
+    for link in dd["leg"]:
+        out += ["", "[[leg]]", table(link)]
+    if dd["point_masses"]:
+        out += ["", "[point_masses]", table(dd["point_masses"])]
+    if "urdf" in dd:
+        out += ["", "[urdf]", table(dd["urdf"])]
+        for j in dd["urdf"]["joints"]:
+            out += ["", "[[urdf.joints]]", table(j)]
+    return "\n".join(out) + "\n"
+
+
+def _value(v) -> str:
+    """A TOML value: floats exactly (repr; inf as TOML's inf), ints, strings, lists."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return "inf" if v == math.inf else ("-inf" if v == -math.inf else repr(v))
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    return _q(v)
+
+
+def _q(s: str) -> str:
+    """A TOML basic string."""
+    return '"' + str(s).replace("\\", "\\\\").replace('"', '\\"') + '"'

@@ -1,35 +1,50 @@
 """Robots from URDF files: a planar point-foot biped read with ``urdf_parser_py`` (the
-ROS URDF parser) and turned into the equivalent :class:`RobotDescription`.
+ROS URDF parser) and turned into the equivalent :class:`RobotDescription`, with the map
+between the file's own joint angles and the model's coordinates
+(:class:`~biped_casadi.model.urdf_map.UrdfMap`, the description's ``[urdf]`` table).
 
 What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N m):
 
-- the structure: a torso link (the tree's root, or the child of a massless root joined
-  by a ``floating`` or ``planar`` joint) with two chains of ``revolute`` (or
-  ``continuous``) joints, the legs, whose axes are all parallel: the normal of the
-  plane of motion.  At zero joint angles the robot must stand straight (docs: theory §1:
-  q = 0 is upright): each leg's joints and foot on one line below the hip;
-- per link, from ``<inertial>``: the mass, the centre of mass (its distance from the
-  link's proximal joint along the link; off the link's axis in the plane of motion it
-  is refused, naming the link) and the inertia about the centre of mass around the
-  plane's normal;
-- lengths from the joint origins (the last link's from the foot);
-- the foot: the origin of the fixed child link (or frame) of each leg's last link, or
-  ``foot=(x, y, z)`` in that link's frame;
+- the structure: a torso link (the tree's root, or reached from a massless root, a
+  ``world`` link, through one ``floating``, ``planar`` or ``fixed`` joint) with two
+  chains of ``revolute`` or ``continuous`` joints, the legs, listed in any order, whose
+  axes are all parallel, +n or -n per joint: n, the normal of the plane of motion.  Fixed
+  frames (sensors, an IMU, feet) may hang anywhere; moving joints may hang from them.
+  Pitch, the torso's absolute angle, is right-handed about n, with n oriented toward +y
+  of the torso's frame (toward the planar root joint's axis when there is one); the
+  torso frame's z axis, vertical at pitch 0, must lie in the plane of motion;
+- any zero pose: the model's geometry is found from the tree at zero joint angles.  The
+  torso's up direction goes from the hip toward its centre of mass (toward the centre of
+  its visual and collision geometry when the centre of mass is at the hip); each leg
+  link's goes from the next joint down (the foot, for the last link) to its own joint.
+  The angle between a link's up direction and its parent's at zero is the joint's
+  ``offset``, the orientation of its axis against n its ``sign`` (printed on import);
+- per link, from ``<inertial>``, with fixed child links merged in: the mass, the centre
+  of mass anywhere in the plane (``com`` along the link's line from its proximal joint,
+  ``com_offset`` across it, positive forward when upright) and the inertia about the
+  centre of mass around n; a fixed child link with mass and no inertia sitting on the
+  hip, a joint between leg links or the foot is a point mass there;
+- the foot: the origin of the fixed child link (or frame) of each leg's last link
+  (one named like a foot when there are several), or ``foot=(x, y, z)`` in that link's
+  frame;
 - the reflected rotor inertia from ``<transmission>``: ``motorInertia`` x
   ``mechanicalReduction``^2 of each joint's actuator (equal for every joint), 0 without
-  ``motorInertia``;
-- the torque limit from ``<limit effort>`` (the smallest one);
-- fixed child links with mass: a point mass at a joint (hip, knee, foot) when the
-  inertia is zero and the mass sits on the joint, otherwise merged into the parent.
+  ``motorInertia``; each joint's ``mechanicalReduction`` is kept in the map (the motor
+  side of an exported law);
+- the torque limit: the smallest ``<limit effort>``; a robot whose leg joints give none
+  (``continuous`` joints, no ``<limit>``) has none (infinite, said in the notes) unless
+  ``torque_limit=`` sets it.
 
 The torso's length (which only draws the robot) is the top of its visual or collision
-geometry above the hip, else twice its centre-of-mass height.  Gravity is 9.81 m/s^2.
+geometry above the hip along its up direction, else twice its centre-of-mass height.
+Gravity is 9.81 m/s^2 along -z of the world.
 
 Refused, with one ``ValueError`` naming the file and the joint or link: an unparsable
-file, non-planar or prismatic joints, a torso without two legs, legs that differ, a leg
-joint without actuator (the model's one unactuated degree of freedom is the stance
-foot's contact), a link without ``<inertial>``, a centre of mass off its link's axis,
-no foot.
+file, non-planar or prismatic joints, a torso without two legs, legs that differ (links,
+masses, centres of mass, point masses), the hips at two places in the plane, a leg joint
+without actuator (the model's one unactuated degree of freedom is the stance foot's
+contact), a link without ``<inertial>``, a torso whose up direction cannot be found, no
+foot.
 """
 from __future__ import annotations
 
@@ -44,15 +59,15 @@ from urdf_parser_py import urdf as _urdf
 from urdf_parser_py.xml_reflection import core as _xml_core
 
 from ..files import read_text_file
-from .description import RobotDescription, description_from_dict, joint_names
+from .description import RobotDescription, description_from_dict, description_toml, joint_names
+from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
+from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader
 
 __all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "GEOMETRY_TOL"]
 
-#: m: how far a joint, a foot or a centre of mass may sit off its leg's line in the plane
-#: of motion (and how far the two hips may differ) before the file is refused
+#: m: how far the two hips may be apart in the plane of motion, and how far from the hip
+#: a centre of mass (or geometry) must be to give the torso's direction
 GEOMETRY_TOL = 1e-9
-_ROTATING = ("revolute", "continuous")
-_BASE = ("floating", "planar")
 
 
 @dataclass
@@ -62,15 +77,18 @@ class UrdfImport:
     Parameters
     ----------
     description : RobotDescription
-        The robot (validated as a description file is).
+        The robot (validated as a description file is), with its URDF joint map
+        (``description.urdf``).
     torso : str
         The torso link's name.
     legs : tuple of tuple of str
-        The two legs' joint names, from the hip down.
+        The two legs' joint names, from the hip down (leg 1 first: the file's order of
+        the hips).
     foot : str
         Where the foot came from ('link NAME', or 'foot= argument').
     notes : list of str
-        What was assumed or ignored (the torso length's source, unknown tags, ...).
+        What was assumed or ignored (the torso's direction and length, the torque limit,
+        the root joint, merged links, unknown tags, ...).
     """
 
     description: RobotDescription
@@ -79,164 +97,10 @@ class UrdfImport:
     foot: str
     notes: list = field(default_factory=list)
 
-
-# ------------------------------------------------------------------ geometry helpers
-def _rotation(rpy) -> np.ndarray:
-    """URDF's fixed-axis roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    r, p, y = (float(v) for v in (rpy if rpy is not None else (0, 0, 0)))
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), \
-        math.cos(y), math.sin(y)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
-
-
-def _pose(origin):
-    """(R, p) of a URDF <origin> (identity when absent)."""
-    if origin is None:
-        return np.eye(3), np.zeros(3)
-    xyz = np.zeros(3) if origin.xyz is None else np.array(origin.xyz, dtype=float)
-    return _rotation(origin.rpy), xyz
-
-
-class _Reader:
-    """The URDF's tree, posed at zero joint angles in the torso's frame."""
-
-    def __init__(self, robot, where: str, tol: float):
-        self.robot, self.where, self.tol = robot, where, tol
-        self.links = {link.name: link for link in robot.links}
-        self.children = {}
-        for j in robot.joints:
-            self.children.setdefault(j.parent, []).append(j)
-        self.notes = []
-
-    def fail(self, problem: str):
-        raise ValueError(f"{self.where}: {problem}")
-
-    def torso(self) -> str:
-        kids = {j.child for j in self.robot.joints}
-        roots = [name for name in self.links if name not in kids]
-        if len(roots) != 1:
-            self.fail(f"must be one tree of links, found roots {roots}")
-        root = roots[0]
-        joints = self.children.get(root, [])
-        if _mass(self.links[root]) == 0.0 and len(joints) == 1 and joints[0].type in _BASE:
-            self.notes.append(f"{joints[0].type} joint {joints[0].name!r} taken as the "
-                              f"floating base (not a joint of the model)")
-            return joints[0].child
-        return root
-
-
-def _mass(link) -> float:
-    return 0.0 if link.inertial is None or link.inertial.mass is None \
-        else float(link.inertial.mass)
-
-
-def _inertia_matrix(inertial) -> np.ndarray:
-    i = inertial.inertia
-    if i is None:
-        return np.zeros((3, 3))
-    return np.array([[i.ixx, i.ixy, i.ixz], [i.ixy, i.iyy, i.iyz], [i.ixz, i.iyz, i.izz]],
-                    dtype=float)
-
-
-@dataclass
-class _Body:
-    """Mass, centre of mass (torso frame) and inertia tensor about it (torso frame)."""
-    mass: float
-    com: np.ndarray
-    inertia: np.ndarray
-
-    def plus(self, other: "_Body") -> "_Body":
-        m = self.mass + other.mass
-        c = (self.mass * self.com + other.mass * other.com) / m
-        def shifted(b):
-            d = b.com - c
-            return b.inertia + b.mass * (np.dot(d, d) * np.eye(3) - np.outer(d, d))
-        return _Body(m, c, shifted(self) + shifted(other))
-
-
-def _body(link, R, p) -> _Body | None:
-    """The link's <inertial> in the torso frame (link frame at (R, p)), None without."""
-    if link.inertial is None:
-        return None
-    Ri, pi = _pose(link.inertial.origin)
-    Rw = R @ Ri
-    return _Body(_mass(link), p + R @ pi, Rw @ _inertia_matrix(link.inertial) @ Rw.T)
-
-
-# ------------------------------------------------------------------ the tree
-@dataclass
-class _Frame:
-    """A link posed at zero joint angles: its rotation and origin in the torso frame."""
-    name: str
-    R: np.ndarray
-    p: np.ndarray
-
-
-def _child_frame(parent: _Frame, joint) -> _Frame:
-    R, p = _pose(joint.origin)
-    return _Frame(joint.child, parent.R @ R, parent.p + parent.R @ p)
-
-
-def _fixed_descendants(rd: _Reader, frame: _Frame) -> list:
-    """(joint, frame) of every link hanging from ``frame`` by fixed joints only."""
-    out = []
-    for j in rd.children.get(frame.name, []):
-        if j.type == "fixed":
-            f = _child_frame(frame, j)
-            out.append((j, f))
-            out.extend(_fixed_descendants(rd, f))
-    return out
-
-
-def _legs(rd: _Reader, torso: _Frame) -> list:
-    """The torso's two chains of rotating joints: per leg a list of (joint, frame)."""
-    moving = [j for j in rd.children.get(torso.name, []) if j.type != "fixed"]
-    for j in moving:
-        if j.type not in _ROTATING:
-            rd.fail(f"joint {j.name!r} is {j.type}: a planar biped's legs hang from the "
-                    f"torso by revolute joints")
-    if len(moving) != 2:
-        rd.fail(f"the torso {torso.name!r} has {len(moving)} jointed children "
-                f"({', '.join(repr(j.name) for j in moving) or 'none'}); a biped has two legs")
-    legs = []
-    for hip in moving:
-        chain, joint, frame = [], hip, torso
-        while joint is not None:
-            frame = _child_frame(frame, joint)
-            chain.append((joint, frame))
-            nxt = [j for j in rd.children.get(frame.name, []) if j.type != "fixed"]
-            for j in nxt:
-                if j.type not in _ROTATING:
-                    rd.fail(f"joint {j.name!r} is {j.type}: only revolute joints make "
-                            f"a planar biped's legs")
-            if len(nxt) > 1:
-                rd.fail(f"link {frame.name!r} has {len(nxt)} jointed children: a leg is "
-                        f"one chain of links")
-            joint = nxt[0] if nxt else None
-        legs.append(chain)
-    return legs
-
-
-def _axis(rd: _Reader, legs) -> np.ndarray:
-    """The common axis of every leg joint (torso frame, sign: toward +y of the torso)."""
-    axes = []
-    for chain in legs:
-        for joint, frame in chain:
-            a = np.array(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), float)
-            if not np.linalg.norm(a) > 0:
-                rd.fail(f"joint {joint.name!r} has a zero axis")
-            axes.append((joint.name, frame.R @ a / np.linalg.norm(a)))
-    def parallel(a, b):
-        return np.linalg.norm(np.cross(a, b)) <= 1e-9
-    n = max((a for _, a in axes), key=lambda a: sum(parallel(a, b) for _, b in axes))
-    n = n if n[1] >= 0 else -n
-    for name, a in axes:
-        if not parallel(a, n):
-            rd.fail(f"joint {name!r} turns about {np.round(a, 6).tolist()}, not about the "
-                    f"other joints' axis {np.round(n, 6).tolist()}: not a planar robot")
-    return n
+    @property
+    def urdf_map(self) -> UrdfMap:
+        """The map between the file's joint angles and the model's q."""
+        return self.description.urdf
 
 
 # ------------------------------------------------------------------ actuators
@@ -261,8 +125,8 @@ def _motor_inertias(text: str) -> dict:
     return out
 
 
-def _actuators(rd: _Reader, joints, text: str) -> tuple:
-    """(rotor inertia, gear ratio, torque limit) shared by every leg joint."""
+def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
+    """(rotor inertia, gear ratio, torque limit, reduction per joint)."""
     reductions = {}
     for t in rd.robot.transmissions:
         if isinstance(t, _urdf.PR2Transmission):
@@ -273,13 +137,14 @@ def _actuators(rd: _Reader, joints, text: str) -> tuple:
         for j in t.joints:
             reductions[j.name] = red
     motors = _motor_inertias(text)
-    efforts = {j.name: (None if j.limit is None else j.limit.effort) for j in joints}
+    efforts = {j.name: (None if j.limit is None or j.limit.effort is None
+                        else float(j.limit.effort)) for j in joints}
     if rd.robot.transmissions:
         passive = [j.name for j in joints if j.name not in reductions]
     else:
         passive = []
         rd.notes.append("no <transmission>: every leg joint actuated, no rotor inertia")
-    passive += [n for n, e in efforts.items() if e is not None and float(e) == 0.0
+    passive += [n for n, e in efforts.items() if e is not None and e == 0.0
                 and n not in passive]
     if passive:
         rd.fail(f"joint {passive[0]!r} has no actuator (no <transmission>, or effort 0): "
@@ -293,6 +158,9 @@ def _actuators(rd: _Reader, joints, text: str) -> tuple:
         except ValueError:
             rd.fail(f"the transmission of joint {j.name!r} has a non-numeric motorInertia "
                     f"or mechanicalReduction")
+        if not (math.isfinite(gear) and gear > 0):
+            rd.fail(f"the transmission of joint {j.name!r} has mechanicalReduction {gear:g}: "
+                    f"it must be positive")
         rotors[j.name] = (motor, gear)
     values = {n: m * g ** 2 for n, (m, g) in rotors.items()}
     ref = next(iter(values.values()))
@@ -301,14 +169,28 @@ def _actuators(rd: _Reader, joints, text: str) -> tuple:
             rd.fail(f"reflected rotor inertias differ: joint {n!r} {v:g}, joint "
                     f"{next(iter(values))!r} {ref:g} kg m^2 (the model takes one for "
                     f"every joint)")
-    given = [float(e) for e in efforts.values() if e is not None]
-    if not given:
-        rd.fail("no leg joint gives <limit effort=...>: the torque limit is unknown")
-    if len(set(given)) > 1:
-        rd.notes.append(f"joint efforts differ ({', '.join(f'{v:g}' for v in sorted(set(given)))}"
-                        f" N m): the torque limit is the smallest")
+    given = sorted({e for e in efforts.values() if e is not None})
+    unlimited = [n for n, e in efforts.items() if e is None]
+    if torque_limit is not None:
+        limit = float(torque_limit)
+        rd.notes.append(f"torque limit {limit:g} N m from torque_limit (--torque-limit)"
+                        + (f"; the file's efforts: {', '.join(f'{v:g}' for v in given)} N m"
+                           if given else ""))
+    elif not given:
+        limit = math.inf
+        rd.notes.append("no leg joint gives <limit effort=...> (continuous joints, no "
+                        "<limit>): the robot has no torque limit (infinite); commands that "
+                        "need one say so; set one with --torque-limit N (torque_limit=)")
+    else:
+        limit = given[0]
+        if len(given) > 1:
+            rd.notes.append(f"joint efforts differ ({', '.join(f'{v:g}' for v in given)} "
+                            f"N m): the torque limit is the smallest")
+        if unlimited:
+            rd.notes.append(f"joints without an effort limit ({', '.join(unlimited)}) take "
+                            f"the others' smallest, {limit:g} N m")
     motor, gear = next(iter(rotors.values()))
-    return motor, gear, min(given)
+    return motor, gear, limit, {n: g for n, (_, g) in rotors.items()}
 
 
 # ------------------------------------------------------------------ the foot
@@ -320,8 +202,7 @@ def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
     if foot is not None:
         f = np.asarray(foot, dtype=float).ravel()
         return last.p + last.R @ f, "foot= argument", None
-    cands = [(j, f) for j, f in _fixed_descendants(rd, last)
-             if j.parent == last.name]
+    cands = [(j, f) for j, f in rd.fixed_descendants(last) if j.parent == last.name]
     if len(cands) > 1:
         named = [c for c in cands if any(w in c[1].name.lower() for w in _FOOT_WORDS)]
         cands = named if len(named) == 1 else cands
@@ -331,11 +212,11 @@ def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
         rd.fail(f"no foot: the last leg link {last.name!r} has {what}; give the foot "
                 f"point in its frame (foot=(x, y, z), or 'biped robot import FILE --foot "
                 f"X Y Z --out robot.toml')")
-    j, f = cands[0]
+    _, f = cands[0]
     return f.p, f"link {f.name!r}", f.name
 
 
-# ------------------------------------------------------------------ assembly
+# ------------------------------------------------------------------ the plane
 _SIDES = {"left", "right", "l", "r", "lft", "rgt", "lt", "rt"}
 
 
@@ -352,106 +233,150 @@ def _common_name(a: str, b: str, default: str) -> str:
     return a[:i].strip("_- .") or default
 
 
-def _in_plane(d, n) -> float:
-    """The length of ``d`` in the plane of motion (normal ``n``)."""
-    return float(np.linalg.norm(d - np.dot(d, n) * n))
+class _Plane:
+    """The plane of motion in the torso frame at pitch 0: normal n, up U (the torso
+    frame's z), forward F = n x U; angles right-handed about n from U."""
+
+    def __init__(self, n):
+        self.n = n
+        self.U = np.array([0.0, 0.0, 1.0])
+        self.F = np.cross(n, self.U)
+
+    def flat(self, v) -> np.ndarray:
+        """The part of ``v`` in the plane (3-vector)."""
+        return v - np.dot(v, self.n) * self.n
+
+    def angle(self, v) -> float:
+        """The angle of an in-plane vector from U, right-handed about n."""
+        return math.atan2(float(np.dot(v, self.F)), float(np.dot(v, self.U)))
+
+    def normal(self, u) -> np.ndarray:
+        """The forward normal f = n x u of a link's up direction u."""
+        return np.cross(self.n, u)
 
 
-class _Leg:
-    """One leg read in the plane: joint points, link bodies, point masses."""
-
-    def __init__(self, rd: _Reader, chain, foot_p, foot_link):
-        self.rd = rd
-        self.joints = [j for j, _ in chain]
-        self.frames = [f for _, f in chain]
-        self.points = [f.p for f in self.frames] + [foot_p]
-        self.foot_link = foot_link
-
-    def body(self, i: int, up, fwd, pm: dict) -> dict:
-        """Link i (from the hip) in the schema: mass, length, com, inertia; point masses
-        found on it are added to ``pm`` (joint name -> kg)."""
-        rd, frame = self.rd, self.frames[i]
-        link = rd.links[frame.name]
-        body = _body(link, frame.R, frame.p)
-        if body is None or body.mass <= 0:
-            rd.fail(f"link {link.name!r} has no <inertial> with a positive mass")
-        k = len(self.frames)
-        names = joint_names(k)
-        ends = {0: self.points[i], 1: self.points[i + 1]}
-        for j, f in _fixed_descendants(rd, frame):
-            extra = _body(rd.links[f.name], f.R, f.p)
-            if extra is None or extra.mass == 0.0:
-                continue
-            at = [e for e, pt in ends.items() if _in_plane(extra.com - pt, rd.n) <= rd.tol]
-            if at and not np.any(extra.inertia):
-                joint = names[i + at[0]]
-                pm[joint] = pm.get(joint, 0.0) + extra.mass
-            else:
-                body = body.plus(extra)
-                rd.notes.append(f"fixed link {f.name!r} merged into {link.name!r}")
-        top, bottom = self.points[i], self.points[i + 1]
-        length = float(np.dot(top - bottom, up))
-        off = float(np.dot(body.com - top, fwd))
-        if abs(off) > rd.tol:
-            rd.fail(f"link {link.name!r}: its centre of mass is {off:.3g} m off the link's "
-                    f"axis in the plane of motion (off-axis centres of mass are not "
-                    f"supported)")
-        n = np.cross(fwd, up)
-        return dict(name=link.name, mass=body.mass, length=length,
-                    com=float(np.dot(top - body.com, up)), inertia=float(n @ body.inertia @ n))
-
-
-def _check_line(rd: _Reader, legs, up, fwd):
-    """Every joint and foot of both legs on the line below the hip (at zero angles)."""
-    hip = legs[0].points[0]
-    for leg in legs:
-        for pt, name in zip(leg.points, [f.name for f in leg.frames] + ["foot"]):
-            off = float(np.dot(pt - hip, fwd)), float(np.dot(pt - hip, up))
-            if abs(off[0]) > rd.tol:
-                rd.fail(f"at zero joint angles the leg is not straight below the hip: the "
-                        f"{'foot' if name == 'foot' else f'joint of link {name!r}'} is "
-                        f"{off[0]:.3g} m in front of it (q = 0 must be upright)")
-        if abs(float(np.dot(leg.points[0] - hip, up))) > rd.tol:
-            rd.fail("the two hip joints are not at the same height")
-        steps = np.diff([float(np.dot(p - hip, up)) for p in leg.points])
-        if np.any(steps >= 0):
-            rd.fail(f"leg {leg.joints[0].name!r}: its joints and foot must go down from "
-                    f"the hip, one link after the other")
-
-
-def _torso(rd: _Reader, frame: _Frame, hip, up, fwd, pm: dict) -> dict:
+def _merged(rd: _Reader, frame: _Frame, ends: dict, owner: str, pm: dict, plane: _Plane):
+    """A link's body with its fixed child links merged in; those with mass and no
+    inertia that sit on one of ``ends`` (joint name -> point) become point masses in
+    ``pm``."""
     link = rd.links[frame.name]
     body = _body(link, frame.R, frame.p)
     if body is None or body.mass <= 0:
-        rd.fail(f"link {link.name!r} (the torso) has no <inertial> with a positive mass")
-    for j, f in _fixed_descendants(rd, frame):
+        rd.fail(f"link {link.name!r}{owner} has no <inertial> with a positive mass")
+    for _, f in rd.fixed_descendants(frame):
         extra = _body(rd.links[f.name], f.R, f.p)
         if extra is None or extra.mass == 0.0:
             continue
-        if _in_plane(extra.com - hip, rd.n) <= rd.tol and not np.any(extra.inertia):
-            pm["hip"] = pm.get("hip", 0.0) + extra.mass
+        at = [name for name, pt in ends.items()
+              if np.linalg.norm(plane.flat(extra.com - pt)) <= rd.tol]
+        if at and not np.any(extra.inertia):
+            pm[at[0]] = pm.get(at[0], 0.0) + extra.mass
         else:
             body = body.plus(extra)
-            rd.notes.append(f"fixed link {f.name!r} merged into the torso")
-    off = float(np.dot(body.com - hip, fwd))
-    if abs(off) > rd.tol:
-        rd.fail(f"link {link.name!r} (the torso): its centre of mass is {off:.3g} m off "
-                f"the torso's axis in the plane of motion (off-axis centres of mass are "
-                f"not supported)")
-    com = float(np.dot(body.com - hip, up))
-    n = np.cross(fwd, up)
-    return dict(name=link.name, mass=body.mass, length=_torso_length(rd, link, frame, hip, up, com),
-                com=com, inertia=float(n @ body.inertia @ n))
+            rd.notes.append(f"fixed link {f.name!r} merged into {link.name!r}")
+    return body
+
+
+class _Leg:
+    """One leg read in the plane: joint points, link directions, link bodies."""
+
+    def __init__(self, rd: _Reader, chain, foot_p, plane: _Plane):
+        self.rd, self.plane = rd, plane
+        self.joints = [j for j, _ in chain]
+        self.frames = [f for _, f in chain]
+        self.points = [f.p for f in self.frames] + [foot_p]
+        self.up, self.lengths = [], []
+        for i, f in enumerate(self.frames):
+            d = plane.flat(self.points[i] - self.points[i + 1])
+            length = float(np.linalg.norm(d))
+            if not length > rd.tol:
+                what = "the foot" if i == len(self.frames) - 1 else \
+                    f"joint {self.joints[i + 1].name!r}"
+                rd.fail(f"link {f.name!r} has no length in the plane of motion: its joint "
+                        f"{self.joints[i].name!r} and {what} are at the same place")
+            self.up.append(d / length)
+            self.lengths.append(length)
+
+    def body(self, i: int, pm: dict) -> dict:
+        """Link i (from the hip) in the schema; point masses found on it go to ``pm``
+        (joint name -> kg)."""
+        rd, frame, plane = self.rd, self.frames[i], self.plane
+        names = joint_names(len(self.frames))
+        ends = {names[i]: self.points[i], names[i + 1]: self.points[i + 1]}
+        body = _merged(rd, frame, ends, "", pm, plane)
+        top, u = self.points[i], self.up[i]
+        rel = plane.flat(body.com - top)
+        return dict(name=rd.links[frame.name].name, mass=body.mass,
+                    length=_clean(self.lengths[i]), com=_clean(-np.dot(rel, u)),
+                    com_offset=_clean(np.dot(rel, plane.normal(u)), rd.tol),
+                    inertia=_clean(plane.n @ body.inertia @ plane.n))
+
+
+def _torso(rd: _Reader, frame: _Frame, hip, plane: _Plane, pm: dict) -> tuple:
+    """(the torso's table, its up direction)."""
+    link = rd.links[frame.name]
+    body = _merged(rd, frame, {"hip": hip}, " (the torso)", pm, plane)
+    rel = plane.flat(body.com - hip)
+    if np.linalg.norm(rel) > rd.tol:
+        up = rel / np.linalg.norm(rel)
+        rd.notes.append(f"the torso's up direction: from the hip toward its centre of mass "
+                        f"(at {_fmt(plane.angle(up))} rad from z of {link.name!r})")
+    else:
+        centre = _geometry_centre(rd, link, frame)
+        g = None if centre is None else plane.flat(centre - hip)
+        if g is None or not np.linalg.norm(g) > rd.tol:
+            rd.fail(f"the torso's up direction cannot be found: the centre of mass of "
+                    f"{link.name!r} is at the hip and it has no visual or collision "
+                    f"geometry away from the hip")
+        up = g / np.linalg.norm(g)
+        rd.notes.append(f"the torso's centre of mass is at the hip: its up direction goes "
+                        f"toward the centre of its geometry ({_fmt(plane.angle(up))} rad "
+                        f"from z of {link.name!r})")
+    com = _clean(np.dot(rel, up))
+    table = dict(name=link.name, mass=body.mass,
+                 length=_clean(_torso_length(rd, link, frame, hip, up, com)),
+                 com=com, com_offset=_clean(np.dot(rel, plane.normal(up)), rd.tol),
+                 inertia=_clean(plane.n @ body.inertia @ plane.n))
+    return table, up
+
+
+def _fmt(v: float) -> str:
+    return f"{v:.6g}"
+
+
+def _clean(v: float, tol: float = 0.0) -> float:
+    """A length, inertia or angle found through turned frames without the round-off of
+    the turns: 15 significant digits (0.39999999999999997 -> 0.4), 0 within ``tol``."""
+    v = float(v)
+    return 0.0 if abs(v) <= tol else float(f"{v:.15g}")
+
+
+def _clean_angle(a: float) -> float:
+    """An angle within 1e-12 of a multiple of pi/2 is that multiple (else unchanged)."""
+    k = round(a / (math.pi / 2))
+    return float(wrap_angle(k * (math.pi / 2))) if abs(a - k * math.pi / 2) <= 1e-12 else float(a)
+
+
+def _geometries(link, frame: _Frame):
+    """(geometry, R, p) of a link's visuals and collisions, in the torso frame."""
+    for g in list(link.visuals or []) + list(link.collisions or []):
+        R, p = _pose(g.origin)
+        yield g.geometry, frame.R @ R, frame.p + frame.R @ p
+
+
+def _geometry_centre(rd: _Reader, link, frame: _Frame):
+    """The mean of the torso's geometry origins (None without geometry)."""
+    pts = [p for _, _, p in _geometries(link, frame)]
+    for _, f in rd.fixed_descendants(frame):
+        pts += [p for _, _, p in _geometries(rd.links[f.name], f)]
+    return np.mean(pts, axis=0) if pts else None
 
 
 def _torso_length(rd: _Reader, link, frame: _Frame, hip, up, com: float) -> float:
-    """The top of the torso's geometry above the hip (else 2 com)."""
+    """The top of the torso's geometry above the hip along ``up`` (else 2 com)."""
     tops = []
-    for g in list(link.visuals or []) + list(link.collisions or []):
-        R, p = _pose(g.origin)
-        R, p = frame.R @ R, frame.p + frame.R @ p
+    for geo, R, p in _geometries(link, frame):
         u = R.T @ up                         # up in the geometry's frame
-        geo = g.geometry
         if isinstance(geo, _urdf.Box):
             half = 0.5 * float(np.abs(u) @ np.abs(np.array(geo.size, float)))
         elif isinstance(geo, _urdf.Cylinder):
@@ -484,7 +409,17 @@ def _parse(text: str, where: str):
     return robot, said
 
 
-def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL) -> UrdfImport:
+def _check_torque_limit(torque_limit):
+    if torque_limit is None:
+        return None
+    if isinstance(torque_limit, bool) or not isinstance(torque_limit, (int, float, np.floating)) \
+            or not math.isfinite(torque_limit) or not torque_limit > 0:
+        raise ValueError(f"torque_limit must be a positive number (N m), got {torque_limit!r}")
+    return float(torque_limit)
+
+
+def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
+                torque_limit: float | None = None) -> UrdfImport:
     """Read a planar biped from a URDF file (what is read: the module docstring).
 
     Parameters
@@ -495,12 +430,16 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL) -> UrdfImport:
         The foot point in the frame of each leg's last link, m; needed when that link
         has no fixed child link (frame) to mark the foot.
     tol : float
-        m: how far joints, feet and centres of mass may be off the legs' lines.
+        m: how far the hips may be apart in the plane, and how far a centre of mass must
+        be from the hip to give the torso's direction.
+    torque_limit : float, optional
+        N m: the robot's torque limit, instead of the file's effort limits (needed for a
+        limit when the file gives none).
 
     Returns
     -------
     UrdfImport
-        The description, the links and joints found, and notes.
+        The description (with its joint map), the links and joints found, and notes.
 
     Raises
     ------
@@ -513,58 +452,86 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL) -> UrdfImport:
         f = np.asarray(foot, dtype=float).ravel()
         if f.shape != (3,) or not np.all(np.isfinite(f)):
             raise ValueError(f"foot must be 3 finite numbers (x, y, z in m), got {foot!r}")
+    torque_limit = _check_torque_limit(torque_limit)
     text = read_text_file(path, "URDF file", 20_000_000)
     robot, said = _parse(text, where)
     rd = _Reader(robot, where, tol)
     torso = _Frame(rd.torso(), np.eye(3), np.zeros(3))
     chains = _legs(rd, torso)
-    n = rd.n = _axis(rd, chains)
+    n, signs = _axis(rd, chains)
+    plane = _Plane(n)
     feet = [_foot_point(rd, chain[-1][1], foot) for chain in chains]
-    legs = [_Leg(rd, chain, p, link) for chain, (p, _, link) in zip(chains, feet)]
+    legs = [_Leg(rd, chain, p, plane) for chain, (p, _, _) in zip(chains, feet)]
     if len(legs[0].frames) != len(legs[1].frames):
-        rd.fail(f"legs differ: {len(legs[0].frames)} and {len(legs[1].frames)} links")
+        rd.fail(f"legs differ: {len(legs[0].frames)} and {len(legs[1].frames)} links "
+                f"(legs of {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r})")
     hip = legs[0].points[0]
-    down = legs[0].points[-1] - hip
-    down = down - np.dot(down, n) * n
-    if not np.linalg.norm(down) > 0:
-        rd.fail("the foot is at the hip")
-    up = -down / np.linalg.norm(down)
-    fwd = np.cross(n, up)
-    _check_line(rd, legs, up, fwd)
-    motor, gear, effort = _actuators(rd, [j for leg in legs for j in leg.joints], text)
+    apart = float(np.linalg.norm(plane.flat(legs[1].points[0] - hip)))
+    if apart > tol:
+        rd.fail(f"the hip joints {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r} "
+                f"are {apart:.3g} m apart in the plane of motion: the model's legs share "
+                f"one hip")
+    all_joints = [j for leg in legs for j in leg.joints]
+    motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
     pm_legs = [dict(), dict()]
-    links = [[leg.body(i, up, fwd, pm) for i in range(len(leg.frames))]
+    links = [[leg.body(i, pm) for i in range(len(leg.frames))]
              for leg, pm in zip(legs, pm_legs)]
-    _same_legs(rd, links, pm_legs)
+    _same_legs(rd, links, pm_legs, legs)
     pm = {"hip": 0.0}
-    torso_d = _torso(rd, torso, hip, up, fwd, pm)
+    torso_d, torso_up = _torso(rd, torso, hip, plane, pm)
     pm["hip"] += pm_legs[0].pop("hip", 0.0) + pm_legs[1].pop("hip", 0.0)
     pm.update(pm_legs[0])
     if pm["hip"] == 0.0:
         del pm["hip"]
     for i, (a, b) in enumerate(zip(*links)):
         a["name"] = _common_name(a["name"], b["name"], f"link{i + 1}")
+        if a["com_offset"] == 0.0:
+            del a["com_offset"]
+    if torso_d["com_offset"] == 0.0:
+        del torso_d["com_offset"]
+    urdf_map = _joint_map(rd, legs, torso_up, plane, signs, reductions, torso.name, hip)
     data = dict(name=robot.name or path.stem, gravity=9.81,
-                actuators=dict(torque_limit=effort, rotor_inertia=motor, gear_ratio=gear),
-                torso=torso_d, leg=links[0], point_masses=pm)
+                actuators=dict(torque_limit=limit, rotor_inertia=motor, gear_ratio=gear),
+                torso=torso_d, leg=links[0], point_masses=pm, urdf=urdf_map.to_dict())
     rd.notes += [f"ignored: {s}" for s in said if "motorInertia" not in s]
     d = description_from_dict(data, where=where, source=str(path))
     return UrdfImport(d, torso.name, tuple(tuple(j.name for j in leg.joints) for leg in legs),
                       feet[0][1], rd.notes)
 
 
-def _same_legs(rd: _Reader, links, pms):
+def _joint_map(rd: _Reader, legs, torso_up, plane: _Plane, signs: dict, reductions: dict,
+               root: str, hip) -> UrdfMap:
+    """The map of the module docstring: per joint, the angle between its child link's
+    up direction and its parent's at zero (offset) and its axis against n (sign)."""
+    beta = plane.angle(torso_up)
+    joints = []
+    for number, leg in enumerate(legs, start=1):
+        parent = beta
+        for i, j in enumerate(leg.joints):
+            gamma = plane.angle(leg.up[i])
+            joints.append(UrdfJoint(j.name, number, i + 1, signs[j.name],
+                                    _clean_angle(wrap_angle(gamma - parent)),
+                                    float(reductions[j.name])))
+            parent = gamma
+    joints.sort(key=lambda j: rd.order[j.name])
+    return UrdfMap(joints=tuple(joints), pitch_offset=_clean_angle(wrap_angle(beta)), root=root,
+                   axis=tuple(float(v) for v in plane.n),
+                   hip=(_clean(np.dot(hip, plane.F), 1e-15), _clean(np.dot(hip, plane.U), 1e-15)))
+
+
+def _same_legs(rd: _Reader, links, pms, legs):
     for a, b in zip(*links):
-        for key in ("mass", "length", "com", "inertia"):
+        for key in ("mass", "length", "com", "com_offset", "inertia"):
             if not math.isclose(a[key], b[key], rel_tol=1e-9, abs_tol=rd.tol):
                 rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.6g}, link "
                         f"{b['name']!r} {b[key]:.6g}")
     if set(pms[0]) - {"hip"} != set(pms[1]) - {"hip"} or any(
             not math.isclose(pms[0][k], pms[1][k], rel_tol=1e-9) for k in pms[0] if k != "hip"):
-        rd.fail(f"legs differ in their point masses: {pms[0]} and {pms[1]}")
+        rd.fail(f"legs differ in their point masses (legs of {legs[0].joints[0].name!r} and "
+                f"{legs[1].joints[0].name!r}): {pms[0]} and {pms[1]}")
 
 
-def load_urdf(path, foot=None) -> RobotDescription:
+def load_urdf(path, foot=None, torque_limit: float | None = None) -> RobotDescription:
     """The robot description of a URDF file (:func:`import_urdf` without the notes).
 
     Parameters
@@ -573,50 +540,17 @@ def load_urdf(path, foot=None) -> RobotDescription:
         The ``.urdf`` file.
     foot : sequence of 3 floats, optional
         The foot point in the last leg link's frame, m.
+    torque_limit : float, optional
+        N m, instead of the file's effort limits.
 
     Returns
     -------
     RobotDescription
+        With its URDF joint map (``urdf``).
 
     Raises
     ------
     ValueError
         Naming the file and what is wrong.
     """
-    return import_urdf(path, foot).description
-
-
-def description_toml(d: RobotDescription, header: str = "") -> str:
-    """A description file (TOML) that loads back to a description equal to ``d``.
-
-    The schema is that of :mod:`biped_casadi.model.description`.
-
-    Parameters
-    ----------
-    d : RobotDescription
-        The robot.
-    header : str
-        Comment lines to put first (``#`` added).
-
-    Returns
-    -------
-    str
-        TOML text; numbers written with ``repr`` (exact round trip).
-    """
-    def table(t):
-        return "\n".join(f"{k} = {v!r}" if isinstance(v, float) else f"{k} = {_q(v)}"
-                         for k, v in t.items())
-    dd = d.to_dict()
-    out = [f"# {line}" for line in header.splitlines()]
-    out += [f"name = {_q(dd['name'])}", f"gravity = {dd['gravity']!r}", "",
-            "[actuators]", table(dd["actuators"]), "", "[torso]", table(dd["torso"])]
-    for link in dd["leg"]:
-        out += ["", "[[leg]]", table(link)]
-    if dd["point_masses"]:
-        out += ["", "[point_masses]", table(dd["point_masses"])]
-    return "\n".join(out) + "\n"
-
-
-def _q(s: str) -> str:
-    """A TOML basic string."""
-    return '"' + str(s).replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return import_urdf(path, foot, torque_limit=torque_limit).description

@@ -273,6 +273,8 @@ def torso_push(model) -> ca.Function:
     hip, top = pts[:, model.hip_index], pts[:, model.hip_index + 1]
     t = model.description.torso
     com = hip + (t.com / t.length) * (top - hip)
+    if t.com_offset != 0.0:                            # off the torso's line: forward normal
+        com = com + (t.com_offset / t.length) * ca.vertcat(top[1] - hip[1], hip[0] - top[0])
     J = ca.jacobian(com, q)
     dq_plus = dq + ca.solve(model.D(q), ca.mtimes(J.T, ca.vertcat(P, 0)))
     return ca.Function("torso_push", [q, dq, P], [dq_plus], ["q", "dq", "P"], ["dq_plus"])

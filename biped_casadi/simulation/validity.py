@@ -97,6 +97,10 @@ class Limits:
         """
         tl = options.torque_limit if options.torque_limit is not None \
             else model.params.torque_limit
+        if getattr(options, "saturate", False) and not np.isfinite(tl):
+            raise ValueError(f"saturate: the robot {model.params.name} has no torque limit to "
+                             f"clip the torques at (its URDF gives no effort limits): give "
+                             f"torque_limit (--torque-limit N)")
         return cls(mu=float(options.mu), min_normal_force=float(options.min_normal_force),
                    hip_floor=options.fall_height(model),
                    max_torso_angle=float(options.max_torso_angle),

@@ -11,7 +11,7 @@ __all__ = ["benchmarks_page", "load_results"]
 
 #: the order of the page (others follow by name)
 ORDER = ("reproduce", "codesign", "gait", "family", "sweep", "simulate", "robust", "basin",
-         "terrain", "export", "model")
+         "terrain", "export", "mujoco", "model")
 
 
 def load_results(folder: Path) -> list:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from .common import (COLOUR_NAMES, STANCE, SWING, TORSO, _figure, _legs_legend, _stick,
                      run_label, save_figure, save_figures)
+from .mujoco import mujoco_animation, mujoco_eigen_plot, mujoco_steps_plot
 from .speed_family import family_designs_plot, gait_family_plot
 from .paper import (conjecture_plot, gait_profiles_plot, gait_stick_plot, m1_plane_plot,
                     one_d_sweeps_plot, stable_domains_plot, swing_torques_plot,
@@ -24,4 +25,4 @@ __all__ = ["COLOUR_NAMES", "STANCE", "SWING", "TORSO", "save_figure", "save_figu
            "swing_torques_plot", "walking_animation", "run_label", "basin_plot",
            "tradeoff_plot", "OUTCOME_COLOURS", "survival_plot", "mfpt_sigma_plot",
            "gait_family_plot", "family_designs_plot", "speed_profile_plot",
-           "speed_jumps_plot"]
+           "speed_jumps_plot", "mujoco_steps_plot", "mujoco_animation", "mujoco_eigen_plot"]

@@ -1,0 +1,205 @@
+"""``biped mujoco``: a design walked in MuJoCo with the exported C law in the loop, and
+MuJoCo's stride map beside the exact eigenvalues."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from biped_casadi import Design, Gains
+from biped_casadi.control.compiled import CompilerError
+from biped_casadi.control.export import exported_law
+from biped_casadi.mujoco import (LAWS, SETTLE, STEP_STARTS, TOUCHDOWNS, MujocoLoop, layout,
+                                 stride_map)
+from analysis.in_mujoco import exact_eigenvalues
+from analysis.reporting.plots import mujoco_animation, mujoco_steps_plot, save_figures
+
+from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
+                     check_m1_values, load_gait, output_dir, parse_m1, positive, print_json,
+                     rejoin_fraction)
+from .mujoco_options import add_mujoco_settings, mujoco_settings
+from .simulate import MAX_STEPS, _check_perturbation, _perturbation
+
+
+def _check(args):
+    """Everything that can be checked before the gait is loaded; the settings."""
+    check_m1_values(args.m1)
+    if args.controller == "vc" and (args.m1 is not None or args.rejoin is not None):
+        raise UserError("--m1 and --rejoin apply to the time-varying controller "
+                        "(--controller tv)")
+    if args.rejoin is not None:
+        rejoin_fraction(args.rejoin)
+    positive(args.eps, "--eps")
+    if not 1 <= args.steps <= MAX_STEPS:
+        raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
+    if args.torque_limit is not None:
+        positive(args.torque_limit, "--torque-limit")
+    positive(args.max_slip, "--max-slip")
+    _check_perturbation(args)
+    if args.plot is not None:
+        output_dir(args.plot, "--plot")
+    return mujoco_settings(args)
+
+
+def _design(args, gait) -> Design:
+    gains = Gains(eps=args.eps)
+    if args.controller == "vc":
+        d = Design.vc(gait, gains)
+    else:
+        M1 = parse_m1(args.m1, gait.model.nu, default_zero=True)
+        d = Design.tv(gait, M1, 0.5 if args.rejoin is None else args.rejoin, gains)
+    try:
+        exported_law(d)
+    except ValueError as e:
+        what = "--m1" if args.controller == "tv" else "--controller vc"
+        raise UserError(f"{what}: {str(e).split(': ', 1)[-1]}") from None
+    return d
+
+
+def cmd_mujoco(args):
+    # ---- arguments, the gait, the design, the loop
+    settings = _check(args)
+    say = Progress("mujoco", quiet=args.json)
+    gait = load_gait(args, say)
+    model = gait.model
+    design = _design(args, gait)
+    perturbation = _perturbation(args, model.nq)
+    q0, dq0 = perturbation.initial_state(gait)
+    if args.law == "c":
+        say("compiling the exported C law (once; kept in the cache) ...")
+    try:
+        loop = MujocoLoop(design, settings, args.law, args.torque_limit, args.step_start,
+                          args.max_slip, touchdown=args.touchdown)
+    except CompilerError as e:
+        raise UserError(f"--law c: {e} (or use --law python)") from None
+    except ValueError as e:
+        raise UserError(str(e)) from None
+
+    # ---- walk, MuJoCo's stride map
+    say(f"walking {args.steps} step(s) in MuJoCo ...")
+    w = loop.run(q0, dq0, args.steps, log=args.plot is not None)
+    eig = None
+    if not args.no_eig:
+        say("MuJoCo's limit cycle and stride map (rollouts) ...")
+        sm = stride_map(design, settings, args.law, loop=loop)
+        ex = exact_eigenvalues(design)
+        eig = dict(mujoco=sm.eigenvalues, mujoco_max_abs=sm.max_abs,
+                   exact=ex, exact_max_abs=max(abs(e) for e in ex),
+                   relative_residual=sm.relative_residual, stride_map=sm.to_dict())
+
+    # ---- figures
+    figures = {}
+    if args.plot:
+        say("drawing the figure and the animation ...")
+        folder = Path(args.plot)
+        figures["steps"] = save_figures({"mujoco_steps": mujoco_steps_plot([w])}, folder)[0]
+        if w.t.size:
+            figures["animation"] = mujoco_animation(w, layout(model), folder / "mujoco_walk.gif")
+
+    # ---- report
+    d = w.to_dict()
+    d["perturbation"] = perturbation.to_dict()
+    d["steps_per_second"] = w.steps_per_second
+    if eig is not None:
+        d["eigenvalues"] = eig
+    if figures:
+        d["figures"] = figures
+    if args.json:
+        print_json(d)
+    else:
+        _print(w, eig, figures)
+    return 0 if w.success else 1
+
+
+def _pct(x) -> str:
+    return "n/a" if not math.isfinite(x) else f"{100 * x:+.2f} %"
+
+
+def _ev(ev) -> str:
+    return "[" + ", ".join(f"{e.real:.3g}" if abs(e.imag) < 1e-12 else
+                           f"{e.real:.3g}{e.imag:+.3g}j" for e in ev) + "]"
+
+
+def _print(w, eig, figures):
+    s = w.settings
+    print(f"MuJoCo ({s['contact']} contact: solref "
+          f"{s['solref'] if s['solref'] is not None else 'MuJoCo default 0.02'} s, dt "
+          f"{s['timestep']:g} s, feet {s['foot_radius']:g} m, mu {s['mu']:g}), {w.law} law, "
+          f"step start from the {w.step_start}: {w.status}"
+          + (f" - {w.message}" if w.message else ""))
+    over = (f"over steps {SETTLE + 1}-{w.steps_walked}" if w.steps_walked > 2 * SETTLE
+            else "over all steps")
+    print(f"  {w.steps_walked} of {w.n_steps} steps; speed error {_pct(w.speed_error)}, period "
+          f"error {_pct(w.period_error)} ({over}); worst error after step {SETTLE}: "
+          f"{w.worst_qu_error:.3g} rad, {w.worst_dqu_error:.3g} rad/s")
+    print("  step  period [s]  speed [m/s]  q_u err [rad]  dq_u err [rad/s]  peak |u| "
+          "cmd/applied [N m]  clipped [s]  slip [mm]")
+    for r in w.steps:
+        print(f"  {r.index + 1:4d}  {r.period:10.4f}  {r.speed:11.4f}  {r.qu_error:+13.4e}  "
+              f"{r.dqu_error:+16.4e}  {r.peak_commanded:8.1f} / {r.peak_applied:6.1f}        "
+              f"{r.clipped_time:8.3f}  {1e3 * r.slip:8.3f}")
+    print(f"  {w.mujoco_steps} MuJoCo steps in {w.wall_time:.2f} s ({w.steps_per_second:.0f} "
+          "steps/s with the law in the loop)")
+    if eig is not None:
+        c = eig["stride_map"]["cycle"]
+        print(f"MuJoCo's stride map on tau = 0.75 T: eigenvalues {_ev(eig['mujoco'])} (fit "
+              f"residual {eig['relative_residual']:.2g} of the deviations); exact "
+              f"{_ev(eig['exact'])}")
+        print(f"  {c['message']}")
+    for k, v in figures.items():
+        print(f"{k}: {v}")
+
+
+def register(sub):
+    p = sub.add_parser(
+        "mujoco", help="walk a design in MuJoCo with the exported C law in the loop",
+        description="Walk the controller of 'biped simulate' (the same design options; "
+                    "'biped m1 --robust' prints them as simulate_args) in MuJoCo: the robot's "
+                    "MJCF ('biped robot mjcf'), the law of 'biped export' compiled once "
+                    "and called every MuJoCo step (--law python: the same law in Python), "
+                    "touchdown from MuJoCo's contacts once the old stance foot has lifted "
+                    "off, the legs relabelled, each step's law state from the rigid impact "
+                    "map applied to the state at touchdown (--step-start contact: from "
+                    "MuJoCo's state, which is still mid-impact). Prints per step the period, "
+                    "speed, pre-impact error, peak torque commanded and applied, clipping "
+                    "time and stance-foot slip, and how the walk ended (walked, fell, "
+                    "scuffed, slipped, ...); then MuJoCo's limit cycle and its stride-map "
+                    "eigenvalues (a least-squares fit of rollouts) beside the exact ones. "
+                    "Exit 0 when the walk walked its steps, 1 otherwise.")
+    add_gait_arguments(p)
+    add_robot(p)
+    add_design_arguments(p, m1_zero=True)
+    p.add_argument("--eps", type=float, default=0.02,
+                   help="epsilon of the output PD, eq. (13), with Kp = 1, Kd = 2 (0.02)")
+    p.add_argument("--steps", type=int, default=10, metavar="N",
+                   help=f"steps to walk, 1 to {MAX_STEPS} (10)")
+    p.add_argument("--perturb", nargs=2, type=float, default=None,
+                   metavar=("Q_ERR", "DQ_ERR"), help="initial error on every joint (rad) and "
+                   "every velocity (rad/s) (default 0 0; the paper's: 0.01 0.1)")
+    p.add_argument("--perturb-q", nargs="+", type=float, metavar="Q",
+                   help="initial error of each joint angle q1..qn, rad (instead of --perturb)")
+    p.add_argument("--perturb-dq", nargs="+", type=float, metavar="DQ",
+                   help="initial error of each joint velocity, rad/s (instead of --perturb)")
+    p.add_argument("--law", choices=LAWS, default="c",
+                   help="c: the exported C law through ctypes (default); python: the same "
+                        "law in Python (slower)")
+    p.add_argument("--step-start", choices=STEP_STARTS, default="impact",
+                   help="each step's law state from the rigid impact map at touchdown "
+                        "(default) or from MuJoCo's state one time step later")
+    p.add_argument("--touchdown", choices=TOUCHDOWNS, default="grid",
+                   help="the touchdown's time and state: MuJoCo's first state in contact "
+                        "(default), or interpolated to where the swing foot meets the floor")
+    add_mujoco_settings(p)
+    p.add_argument("--torque-limit", type=float, metavar="U",
+                   help="the motors' limit, N m (default the robot's); torques beyond it are "
+                        "clipped by MuJoCo and the time clipped is reported")
+    p.add_argument("--max-slip", type=float, default=0.05, metavar="M",
+                   help="a stance foot sliding more than M in single support ends the walk "
+                        "as slipped (0.05 m; MuJoCo's soft friction creeps about 0.5 mm a "
+                        "step at stiff contact, 12 mm at MuJoCo's default)")
+    p.add_argument("--no-eig", action="store_true",
+                   help="skip MuJoCo's stride map (a second or two of rollouts)")
+    p.add_argument("--plot", metavar="DIR",
+                   help="write DIR/mujoco_steps.png (speed, period and errors per step) and "
+                        "DIR/mujoco_walk.gif (the walk)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_mujoco)

@@ -1,0 +1,39 @@
+"""The MuJoCo settings every command that runs MuJoCo takes: contact, time step, feet,
+friction."""
+from __future__ import annotations
+
+from biped_casadi.mujoco import CONTACTS, ContactSettings
+
+from .common import UserError
+
+__all__ = ["add_mujoco_settings", "mujoco_settings"]
+
+
+def add_mujoco_settings(p, mu: bool = True):
+    """``--contact``, ``--timestep``, ``--solref``, ``--foot-radius`` (and ``--mu``)."""
+    p.add_argument("--contact", choices=CONTACTS, default="stiff",
+                   help="stiff: solref 4 ms, time step 2 ms (recommended); default: MuJoCo's "
+                        "contact (solref 0.02 s) (both with 5 mm feet, mu 0.6)")
+    p.add_argument("--timestep", type=float, metavar="S",
+                   help="MuJoCo's time step, s (default 0.002)")
+    p.add_argument("--solref", type=float, metavar="S",
+                   help="the contact's time constant, s, at least two time steps (default "
+                        "0.004 with --contact stiff, MuJoCo's 0.02 with default)")
+    p.add_argument("--foot-radius", type=float, metavar="M",
+                   help="radius of the sphere feet, m (default 0.005)")
+    p.add_argument("--integrator", choices=("Euler", "implicitfast", "implicit", "RK4"),
+                   help="MuJoCo's integrator (default MuJoCo's, Euler)")
+    if mu:
+        p.add_argument("--mu", type=float, metavar="MU",
+                       help="friction coefficient of feet and floor (default 0.6)")
+
+
+def mujoco_settings(args) -> ContactSettings:
+    """The settings of the options (UserError naming the option MuJoCo would reject)."""
+    try:
+        return ContactSettings.of(args.contact, timestep=args.timestep, solref=args.solref,
+                                  foot_radius=args.foot_radius,
+                                  mu=getattr(args, "mu", None), integrator=args.integrator)
+    except ValueError as e:
+        name = str(e).split(" ", 1)[0].replace("_", "-")
+        raise UserError(f"--{name} {str(e).split(' ', 1)[1]}") from None

@@ -1,0 +1,203 @@
+"""A URDF's tree read at zero joint angles in its torso's frame: poses of links and
+joints, inertials, the torso (through a massless root and its floating, planar or fixed
+joint), the two legs as chains of rotating joints (hanging from the torso or from its
+fixed frames), and the normal of the plane of motion with each joint's sign against it.
+The importer (:mod:`biped_casadi.model.urdf`) builds the robot from these."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+_ROTATING = ("revolute", "continuous")
+_BASE = ("floating", "planar", "fixed")
+
+
+# ------------------------------------------------------------------ geometry helpers
+def _rotation(rpy) -> np.ndarray:
+    """URDF's fixed-axis roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    r, p, y = (float(v) for v in (rpy if rpy is not None else (0, 0, 0)))
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), \
+        math.cos(y), math.sin(y)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def _pose(origin):
+    """(R, p) of a URDF <origin> (identity when absent)."""
+    if origin is None:
+        return np.eye(3), np.zeros(3)
+    xyz = np.zeros(3) if origin.xyz is None else np.array(origin.xyz, dtype=float)
+    return _rotation(origin.rpy), xyz
+
+
+def _mass(link) -> float:
+    return 0.0 if link.inertial is None or link.inertial.mass is None \
+        else float(link.inertial.mass)
+
+
+def _inertia_matrix(inertial) -> np.ndarray:
+    i = inertial.inertia
+    if i is None:
+        return np.zeros((3, 3))
+    return np.array([[i.ixx, i.ixy, i.ixz], [i.ixy, i.iyy, i.iyz], [i.ixz, i.iyz, i.izz]],
+                    dtype=float)
+
+
+@dataclass
+class _Body:
+    """Mass, centre of mass (torso frame) and inertia tensor about it (torso frame)."""
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray
+
+    def plus(self, other: "_Body") -> "_Body":
+        m = self.mass + other.mass
+        c = (self.mass * self.com + other.mass * other.com) / m
+
+        def shifted(b):
+            d = b.com - c
+            return b.inertia + b.mass * (np.dot(d, d) * np.eye(3) - np.outer(d, d))
+        return _Body(m, c, shifted(self) + shifted(other))
+
+
+def _body(link, R, p) -> _Body | None:
+    """The link's <inertial> in the torso frame (link frame at (R, p)), None without."""
+    if link.inertial is None:
+        return None
+    Ri, pi = _pose(link.inertial.origin)
+    Rw = R @ Ri
+    return _Body(_mass(link), p + R @ pi, Rw @ _inertia_matrix(link.inertial) @ Rw.T)
+
+
+@dataclass
+class _Frame:
+    """A link posed at zero joint angles: its rotation and origin in the torso frame."""
+    name: str
+    R: np.ndarray
+    p: np.ndarray
+
+
+def _child_frame(parent: _Frame, joint) -> _Frame:
+    R, p = _pose(joint.origin)
+    return _Frame(joint.child, parent.R @ R, parent.p + parent.R @ p)
+
+
+# ------------------------------------------------------------------ the tree
+class _Reader:
+    """The URDF's tree, posed at zero joint angles in the torso's frame."""
+
+    def __init__(self, robot, where: str, tol: float):
+        self.robot, self.where, self.tol = robot, where, tol
+        self.links = {link.name: link for link in robot.links}
+        self.children = {}
+        for j in robot.joints:
+            self.children.setdefault(j.parent, []).append(j)
+        self.order = {j.name: i for i, j in enumerate(robot.joints)}
+        self.notes = []
+        self.planar_axis = None
+
+    def fail(self, problem: str):
+        raise ValueError(f"{self.where}: {problem}")
+
+    def torso(self) -> str:
+        """The torso: the root, or the first link with mass below a chain of massless
+        links each joined to the next by the one floating, planar or fixed joint."""
+        kids = {j.child for j in self.robot.joints}
+        roots = [name for name in self.links if name not in kids]
+        if len(roots) != 1:
+            self.fail(f"must be one tree of links, found roots {roots}")
+        name = roots[0]
+        while _mass(self.links[name]) == 0.0:
+            joints = self.children.get(name, [])
+            if len(joints) != 1 or joints[0].type not in _BASE:
+                break
+            j = joints[0]
+            what = {"fixed": "fixes the robot to it"}.get(j.type, "is the robot's base")
+            self.notes.append(f"{j.type} joint {j.name!r} from the massless link {name!r}: "
+                              f"{what} in the file, not a joint of the model (the stance "
+                              f"foot is its base); pitch is the angle of link {j.child!r} "
+                              f"in the world")
+            if j.type == "planar" and j.axis is not None:
+                self.planar_axis = np.array(j.axis, float)     # in the child's frame
+            name = j.child
+        return name
+
+    def fixed_descendants(self, frame: _Frame) -> list:
+        """(joint, frame) of every link hanging from ``frame`` by fixed joints only."""
+        out = []
+        for j in self.children.get(frame.name, []):
+            if j.type == "fixed":
+                f = _child_frame(frame, j)
+                out.append((j, f))
+                out.extend(self.fixed_descendants(f))
+        return out
+
+    def moving(self, frame: _Frame) -> list:
+        """(joint, parent frame) of the moving joints of a link and of its fixed frames."""
+        out = []
+        for f in [frame] + [f for _, f in self.fixed_descendants(frame)]:
+            for j in self.children.get(f.name, []):
+                if j.type == "fixed":
+                    continue
+                if j.type not in _ROTATING:
+                    self.fail(f"joint {j.name!r} is {j.type}: a planar biped's legs are "
+                              f"chains of revolute (or continuous) joints")
+                out.append((j, f))
+        return sorted(out, key=lambda jf: self.order[jf[0].name])
+
+
+def _legs(rd: _Reader, torso: _Frame) -> list:
+    """The torso's two chains of rotating joints: per leg a list of (joint, frame)."""
+    hips = rd.moving(torso)
+    if len(hips) != 2:
+        rd.fail(f"the torso {torso.name!r} has {len(hips)} jointed children "
+                f"({', '.join(repr(j.name) for j, _ in hips) or 'none'}); a biped has two legs")
+    legs = []
+    for hip, parent in hips:
+        chain, item = [], (hip, parent)
+        while item is not None:
+            joint, parent = item
+            frame = _child_frame(parent, joint)
+            chain.append((joint, frame))
+            nxt = rd.moving(frame)
+            if len(nxt) > 1:
+                rd.fail(f"link {frame.name!r} has {len(nxt)} jointed children: a leg is "
+                        f"one chain of links")
+            item = nxt[0] if nxt else None
+        legs.append(chain)
+    return legs
+
+
+def _axis(rd: _Reader, legs) -> tuple:
+    """The plane's normal n (torso frame, oriented as the module docstring says) and the
+    sign of every leg joint's axis against it."""
+    axes = []
+    for chain in legs:
+        for joint, frame in chain:
+            a = np.array(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), float)
+            if not np.linalg.norm(a) > 0:
+                rd.fail(f"joint {joint.name!r} has a zero axis")
+            axes.append((joint.name, frame.R @ a / np.linalg.norm(a)))
+
+    def parallel(a, b):
+        return np.linalg.norm(np.cross(a, b)) <= 1e-9
+    n = max((a for _, a in axes), key=lambda a: sum(parallel(a, b) for _, b in axes))
+    n = np.where(np.abs(n) < 1e-12, 0.0, n)          # round-off of turned frames
+    n = n / np.linalg.norm(n)
+    for name, a in axes:
+        if not parallel(a, n):
+            rd.fail(f"joint {name!r} turns about {np.round(a, 6).tolist()}, not about the "
+                    f"other joints' axis {np.round(n, 6).tolist()}: not a planar robot")
+    if rd.planar_axis is not None and parallel(rd.planar_axis, n):
+        n = n if np.dot(rd.planar_axis, n) > 0 else -n
+    elif abs(n[1]) > 1e-9:
+        n = n if n[1] > 0 else -n
+    else:
+        n = n if n[int(np.argmax(np.abs(n)))] > 0 else -n
+    if abs(n[2]) > 1e-9:
+        rd.fail(f"the joints turn about {np.round(n, 6).tolist()} (torso frame): the torso "
+                f"frame's z axis, vertical at pitch 0, must lie in the plane of motion")
+    return n, {name: (1.0 if np.dot(a, n) > 0 else -1.0) for name, a in axes}

@@ -1,0 +1,273 @@
+"""The robot's own URDF joint angles end to end.
+
+- The walker of docs/howto/walker (RABBIT written with continuous joints, no limits, the
+  legs along +z of the torso frame at zero, a floating base, meshes, an IMU frame)
+  imports to RABBIT: with a torque limit of 150 N m its description equals RABBIT's to
+  1e-12, and its joint map puts the hips at -pi.
+- Its step in its own joint angles (walker_step.csv) imports and polishes to an orbit
+  whose eigenvalues (time-varying and virtual-constraint maps) equal those of the same
+  nodes converted by hand to the toolkit's coordinates.
+- A gait written in URDF angles (``biped gait --export-csv --angles urdf``, the other
+  leg in stance; and for a URDF with turned zero pose and flipped axes) imports back to
+  the same orbit: residual <= 1e-10, eigenvalues to 1e-8.
+- The exported law in URDF angles equals the toolkit's law to 1e-12 at 10,000 random
+  states with random stance legs (and finds the stance leg at every step start), and
+  the closed loop it drives equals ``biped simulate``'s.
+- Bad input: one line, exit 2, nothing written.
+"""
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from urdf_variants import variant_urdf
+
+from analysis import poincare_eigenvalues, vc_eigenvalue
+from analysis.cli import main
+from analysis.verify_export import compare_simulations, compare_urdf_states
+from biped_casadi import (SimulationOptions, TimeVaryingController,
+                          VirtualConstraintController, robot)
+from biped_casadi.control.compiled import CompiledUrdfController, build_library
+from biped_casadi.control.export import c_sources, exported_law
+from biped_casadi.control.export_folder import write_export
+from biped_casadi.model.description import builtin_path, load_description
+from biped_casadi.model.urdf import import_urdf
+from gait_opt import Gait, Nodes, import_gait
+from gait_opt.urdf_angles import write_gait_csv
+
+WALKER = Path(__file__).resolve().parents[1] / "docs" / "howto" / "walker"
+URDF, CSV = WALKER / "walker.urdf", WALKER / "walker_step.csv"
+M1 = np.array([0.2, -0.3, 0.1, 0.0])
+
+
+@pytest.fixture(scope="module")
+def walker():
+    return robot(URDF)
+
+
+@pytest.fixture(scope="module")
+def walker_gait(walker):
+    r = import_gait(walker, CSV, angles="urdf", stance="hip_left")
+    assert r.orbit_residual_after <= 1e-10
+    return r.gait
+
+
+def eigenvalues(g):
+    tv, vc = poincare_eigenvalues(g, M1), vc_eigenvalue(g)
+    assert tv.fixed_point_residual <= 1e-8
+    return np.sort_complex(tv.eigenvalues), vc.eigenvalue
+
+
+def test_the_walker_is_rabbit(tmp_path, capsys):
+    rabbit = robot("rabbit").description
+    imp = import_urdf(URDF)
+    assert imp.description.torque_limit == math.inf
+    assert any("no torque limit" in n for n in imp.notes)
+    d = import_urdf(URDF, torque_limit=150.0).description
+    a, b = d.to_dict(), rabbit.to_dict()
+    a.pop("urdf")
+    flat = lambda t: {k: v for k, v in t.items() if isinstance(v, float)}  # noqa: E731
+    for key in ("actuators", "torso"):
+        assert flat(a[key]) == pytest.approx(flat(b[key]), abs=1e-12)
+    for x, y in zip(a["leg"], b["leg"]):
+        assert flat(x) == pytest.approx(flat(y), abs=1e-12)
+    assert d == rabbit                        # names and every number
+    offsets = {j.name: (j.sign, j.offset) for j in d.urdf.joints}
+    assert offsets == {"hip_left": (1.0, -math.pi), "knee_left": (1.0, 0.0),
+                       "hip_right": (1.0, -math.pi), "knee_right": (1.0, 0.0)}
+    # the command prints the map and writes it; the file reads back to the same robot
+    out = tmp_path / "walker.toml"
+    assert main(["robot", "import", str(URDF), "--torque-limit", "150", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "hip_left: leg 1 hip, model angle = theta - 3.14159265359 rad" in text
+    back = load_description(out)
+    assert back == rabbit and back.urdf == d.urdf
+    # without a limit the file says inf, and reads back the same
+    assert main(["robot", "import", str(URDF), "--out", str(out)]) == 0
+    assert "torque_limit = inf" in out.read_text()
+    assert load_description(out).torque_limit == math.inf
+
+
+def test_the_walkers_step_is_the_same_gait_in_toolkit_coordinates(walker_gait, model):
+    """The CSV's nodes converted by hand (the walker's hip is the model's plus pi, the
+    model reads the stance leg from the foot up) import to the same eigenvalues."""
+    a = np.genfromtxt(CSV, delimiter=",", names=True)
+    q3, q2 = np.pi - a["hip_left"], -a["knee_left"]
+    q = np.vstack([a["pitch"] - q2 - q3, q2, q3, a["hip_right"] - np.pi, a["knee_right"]])
+    dq3, dq2 = -a["dhip_left"], -a["dknee_left"]
+    dq = np.vstack([a["dpitch"] - dq2 - dq3, dq2, dq3, a["dhip_right"], a["dknee_right"]])
+    toolkit = import_gait(model, Nodes(a["t"], q, dq)).gait
+    (ev_w, vc_w), (ev_t, vc_t) = eigenvalues(walker_gait), eigenvalues(toolkit)
+    assert np.max(np.abs(ev_w - ev_t)) <= 1e-8 and abs(vc_w - vc_t) <= 1e-8
+    assert walker_gait.T == pytest.approx(toolkit.T, abs=1e-12)
+
+
+def test_cli_export_csv_and_import_back(walker_gait, tmp_path, capsys):
+    g = tmp_path / "walker_gait.json"
+    assert main(["gait", "--import", str(CSV), "--robot", str(URDF), "--angles", "urdf",
+                 "--stance", "hip_left", "--out", str(g)]) == 0
+    back = tmp_path / "back.csv"
+    assert main(["gait", "--export-csv", str(back), "--gait", str(g), "--angles", "urdf",
+                 "--stance", "hip_right", "--nodes", "61"]) == 0
+    head = back.read_text().splitlines()[0].split(",")
+    assert head[:6] == ["t", "pitch", "hip_left", "knee_left", "hip_right", "knee_right"]
+    assert head[-4:] == ["x", "z", "dx", "dz"]
+    g2 = tmp_path / "again.json"
+    assert main(["gait", "--import", str(back), "--angles", "urdf", "--stance", "hip_right",
+                 "--robot", str(URDF), "--out", str(g2), "--json"]) == 0
+    capsys.readouterr()
+    a, b = Gait.load(g), Gait.load(g2)
+    assert b.orbit_residual()["worst"] <= 1e-10
+    (ev_a, vc_a), (ev_b, vc_b) = eigenvalues(a), eigenvalues(b)
+    assert np.max(np.abs(ev_a - ev_b)) <= 1e-8 and abs(vc_a - vc_b) <= 1e-8
+    assert b.model.description.urdf == a.model.description.urdf
+
+
+def test_round_trip_through_a_turned_and_flipped_urdf(gait, tmp_path):
+    """RABBIT's default gait, read for a URDF whose zero pose is turned per joint and
+    whose right leg turns about -y, written in its angles and imported back."""
+    d = robot("rabbit").description
+    path = tmp_path / "turned.urdf"
+    path.write_text(variant_urdf(d, beta={("left", 0): 2.0, ("left", 1): -0.7,
+                                          ("right", 0): -math.pi / 2 + 0.1},
+                                 roll={("right", 1): True}, torso_tilt=0.4,
+                                 axis={("right", 0): -1, ("right", 1): -1}))
+    turned = robot(path)
+    saved = gait.save(tmp_path / "default.json")
+    g = Gait.load(saved, model=turned)
+    csv = write_gait_csv(g, tmp_path / "turned.csv", "urdf", stance="femur_right_joint")
+    r = import_gait(turned, csv, angles="urdf", stance="femur_right_joint")
+    assert r.info["stance_foot_spread"] <= 1e-12
+    assert r.orbit_residual_after <= 1e-10
+    (ev_a, vc_a), (ev_b, vc_b) = eigenvalues(gait), eigenvalues(r.gait)
+    assert np.max(np.abs(ev_a - ev_b)) <= 1e-8 and abs(vc_a - vc_b) <= 1e-8
+
+
+@pytest.fixture(scope="module")
+def urdf_library(walker_gait, tmp_path_factory):
+    """The walker's virtual-constraint law exported in URDF angles (motor side), built."""
+    ctrl = VirtualConstraintController(walker_gait)
+    law = exported_law(ctrl, angles="urdf", motor_side=True)
+    folder = tmp_path_factory.mktemp("urdf_export") / "ctrl"
+    write_export(c_sources(law, {"gait file": "walker"}), folder)
+    return ctrl, law, folder, CompiledUrdfController(build_library(folder), ctrl, law.urdf,
+                                                      True)
+
+
+def test_urdf_law_equals_the_toolkits_law(urdf_library):
+    ctrl, law, folder, lib = urdf_library
+    r = compare_urdf_states(lib, ctrl, n=10_000, seed=4)
+    assert r.success, r.message
+    assert r.max_torque_rel <= 1e-12 and r.stance_found == 10_000
+    header = (folder / "biped_controller.h").read_text()
+    words = " ".join(w for w in header.split() if w != "*")       # the comment's text
+    assert "q[1] hip_left, q[2] knee_left, q[3] hip_right, q[4] knee_right" in words
+    assert "int biped_step_start_leg(int stance" in header
+    assert "knee_right 50" in (folder / "README.md").read_text()       # the reductions
+
+
+def test_closed_loop_driven_by_the_urdf_law_is_biped_simulate(urdf_library, walker_gait):
+    ctrl, _, _, lib = urdf_library
+    q0, dq0 = walker_gait.q(0.0) + 0.01, walker_gait.dq(0.0) + 0.1     # the paper's size
+    r = compare_simulations(lib, ctrl, q0, dq0, SimulationOptions(steps=6))
+    assert r.success and r.steps == 6, r.message
+    assert r.max_state <= 1e-9 and r.twin_max_state <= 1e-9
+
+
+def test_tv_law_in_urdf_angles(walker_gait, tmp_path):
+    ctrl = TimeVaryingController(walker_gait, M1)
+    law = exported_law(ctrl, angles="urdf")
+    write_export(c_sources(law), tmp_path / "tv")
+    lib = CompiledUrdfController(build_library(tmp_path / "tv"), ctrl, law.urdf)
+    r = compare_urdf_states(lib, ctrl, n=500, seed=1)
+    assert r.success and r.max_torque_rel <= 1e-12, r.message
+
+
+# ------------------------------------------------------------------ bad input
+def _bad_csv(tmp_path, edit):
+    text = CSV.read_text()
+    p = tmp_path / "bad.csv"
+    p.write_text(edit(text))
+    return p
+
+
+@pytest.mark.parametrize("case", ["unknown stance", "knee as stance", "no stance",
+                                  "missing column", "other stance", "legs-down convention",
+                                  "knees the other way", "no map", "stance without urdf"])
+def test_bad_import_is_one_line_exit_2(case, tmp_path, capsys):
+    src, robot_arg, extra = CSV, str(URDF), ["--angles", "urdf", "--stance", "hip_left"]
+    message = {"unknown stance": "--stance: the URDF has no leg joint 'hip_middle'",
+               "knee as stance": "--stance: 'knee_left' is not a hip joint",
+               "no stance": "--angles urdf needs --stance HIP_JOINT",
+               "missing column": "missing column(s) dknee_right",
+               "other stance": "say the stance foot (leg of hip_right) moves by",
+               "legs-down convention": "angles in another convention",
+               "knees the other way": "not an orbit of RABBIT: the fitted gait misses",
+               "no map": "--angles urdf: the robot RABBIT has no URDF joint map",
+               "stance without urdf": "--stance names the stance leg of --angles urdf"}[case]
+    if case == "unknown stance":
+        extra[-1] = "hip_middle"
+    elif case == "knee as stance":
+        extra[-1] = "knee_left"
+    elif case == "no stance":
+        extra = extra[:2]
+    elif case == "missing column":
+        src = _bad_csv(tmp_path, lambda s: "\n".join(",".join(r.split(",")[:10])
+                                                     for r in s.splitlines()))
+    elif case == "other stance":
+        extra[-1] = "hip_right"
+    elif case == "legs-down convention":    # the walker's angles read as RABBIT's zero pose
+        src = _bad_csv(tmp_path, lambda s: "\n".join(",".join(r.split(",")[:11])
+                                                     for r in s.splitlines()))
+        robot_arg = str(builtin_path("rabbit").with_suffix(".urdf"))
+    elif case == "knees the other way":     # a knee axis read as -y: no base columns
+        def flip(text):
+            rows = [r.split(",")[:11] for r in text.splitlines()]
+            knees = [i for i, h in enumerate(rows[0]) if "knee" in h]
+            for r in rows[1:]:
+                for i in knees:
+                    r[i] = repr(-float(r[i]))
+            return "\n".join(",".join(r) for r in rows)
+        src = _bad_csv(tmp_path, flip)
+    elif case == "no map":
+        robot_arg = "rabbit"
+    elif case == "stance without urdf":
+        extra = ["--stance", "hip_left"]
+    out = tmp_path / "gait.json"
+    assert main(["gait", "--import", str(src), "--robot", robot_arg, *extra,
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
+def test_bad_export_is_one_line_exit_2(gait, walker_gait, tmp_path, capsys):
+    g = walker_gait.save(tmp_path / "walker.json")
+    plain = gait.save(tmp_path / "plain.json")
+    cases = [
+        (["gait", "--export-csv", str(tmp_path / "x.csv"), "--gait", str(plain), "--angles",
+          "urdf"], "--angles urdf: the robot RABBIT has no URDF joint map", "x.csv"),
+        (["gait", "--export-csv", str(tmp_path / "x.csv"), "--gait", str(g), "--angles",
+          "urdf", "--stance", "tibia"], "--stance: the URDF has no leg joint 'tibia'", "x.csv"),
+        (["export", "--gait", str(plain), "--controller", "vc", "--angles", "urdf", "--out",
+          str(tmp_path / "ctrl")], "--angles urdf: the robot RABBIT has no URDF joint map",
+         "ctrl"),
+        (["export", "--gait", str(g), "--controller", "vc", "--motor-side", "--out",
+          str(tmp_path / "ctrl")], "--motor-side divides", "ctrl"),
+    ]
+    for argv, message, written in cases:
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1, err
+        assert not (tmp_path / written).exists()
+    # the export in URDF angles of a gait with a map works from the command line
+    out = tmp_path / "ok"
+    assert main(["export", "--gait", str(g), "--controller", "vc", "--angles", "urdf",
+                 "--out", str(out), "--json"]) == 0
+    body = json.loads(capsys.readouterr().out)
+    assert body["inputs"] == ["pitch", "hip_left", "knee_left", "hip_right", "knee_right"]
+    shutil.rmtree(out)

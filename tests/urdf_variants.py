@@ -1,0 +1,191 @@
+"""URDF variants of a robot description, written as other tools write them, and the
+independent Pinocchio twin of such a file for the tests.
+
+:func:`variant_urdf` writes a description as a URDF whose zero pose, frames and axes are
+chosen per joint: every leg link's frame at zero joint angles is turned by ``beta``
+about y (absolute, from the torso frame; 0: the link hangs straight down) and optionally
+rolled upside down (``roll``: its z axis then points up the link); each joint's axis is
+written as +y or -y of the torso (``axis`` -1 flips it); the torso's centre of mass may
+sit off the torso frame's z axis (``torso_tilt``: its up direction is then tilted);
+``floating`` / ``planar`` add a world link and a root joint; ``frames`` hangs sensor
+frames (a massless IMU, a sensor with mass and inertia, merged into its link);
+``continuous`` writes continuous joints without <limit>; the legs may be listed in any
+order (``right_first``).
+
+:func:`pinocchio_state` places the Pinocchio model built from the same file (a free
+flyer at the root) in the state of the pinned model: the base orientation from the
+pitch, the joint angles, the base position and velocity such that the stance foot is at
+the origin and at rest.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+
+
+def _ry(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _rx(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _rpy(R) -> str:
+    """URDF rpy of R = Rz(y) Ry(p) Rx(r)."""
+    p = -math.asin(max(-1.0, min(1.0, R[2, 0])))
+    r = math.atan2(R[2, 1], R[2, 2])
+    y = math.atan2(R[1, 0], R[0, 0])
+    return f"{r!r} {p!r} {y!r}"
+
+
+def _vec(v) -> str:
+    return " ".join(repr(float(x)) for x in v)
+
+
+def _inertial(mass, com, I_plane, R_own, ixz=0.0):
+    """<inertial> in a link frame whose rotation from the canonical frame is R_own."""
+    Ic = np.array([[I_plane + 0.05, 0, ixz], [0, I_plane, 0], [ixz, 0, I_plane + 0.07]])
+    Io = R_own.T @ Ic @ R_own
+    Io[np.abs(Io) < 1e-15] = 0.0
+    return (f'<inertial><origin xyz="{_vec(R_own.T @ com)}" rpy="0 0 0"/>'
+            f'<mass value="{float(mass)!r}"/><inertia ixx="{float(Io[0, 0])!r}" '
+            f'ixy="{float(Io[0, 1])!r}" ixz="{float(Io[0, 2])!r}" iyy="{float(Io[1, 1])!r}" '
+            f'iyz="{float(Io[1, 2])!r}" izz="{float(Io[2, 2])!r}"/></inertial>')
+
+
+def variant_urdf(d, beta=None, roll=None, axis=None, torso_tilt=0.0, floating=False,
+                 planar=False, frames=False, continuous=False, right_first=False,
+                 name=None) -> str:
+    """A URDF of description ``d`` (module docstring).
+
+    beta, roll, axis: dicts keyed by (side, i) -> value, side 'left'/'right', i the link
+    from the hip (0-based); missing entries: 0, False, +1."""
+    beta, roll, axis = beta or {}, roll or {}, axis or {}
+    pm = dict(d.point_masses)
+    inner = ["knee"] if d.k == 2 else [f"joint{j}" for j in range(1, d.k)]
+    t = d.torso
+    # the torso's centre of mass, tilted by torso_tilt from z (its up direction)
+    tc = np.array([t.com * math.sin(torso_tilt), 0.0, t.com * math.cos(torso_tilt)])
+    up_t = np.array([math.sin(torso_tilt), 0.0, math.cos(torso_tilt)])
+    fw_t = np.array([math.cos(torso_tilt), 0.0, -math.sin(torso_tilt)])
+    tc = tc + t.com_offset * fw_t
+    top = (t.length / 2) * up_t
+    out = [f'<robot name="{name or d.name}">']
+    if floating or planar:
+        kind = "floating" if floating else "planar"
+        ax = '' if floating else '<axis xyz="0 1 0"/>'
+        out.append(f'<link name="world"/><joint name="root" type="{kind}"><parent link="world"/>'
+                   f'<child link="torso"/>{ax}</joint>')
+    out.append(f'<link name="torso">{_inertial(t.mass, tc, t.inertia, np.eye(3), 0.02)}'
+               f'<visual><origin xyz="{_vec(top)}" rpy="0 {torso_tilt!r} 0"/><geometry>'
+               f'<box size="0.1 0.1 {t.length!r}"/></geometry></visual></link>')
+    if frames:
+        out.append('<joint name="imu_fix" type="fixed"><parent link="torso"/><child link="imu"/>'
+                   '<origin xyz="0.05 0 0.3" rpy="0.3 0.2 0.1"/></joint><link name="imu"/>')
+    if "hip" in pm:
+        out.append(f'<joint name="hip_mass_fix" type="fixed"><parent link="torso"/>'
+                   f'<child link="hip_mass"/></joint><link name="hip_mass"><inertial>'
+                   f'<mass value="{pm["hip"]!r}"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" '
+                   f'iyz="0" izz="0"/></inertial></link>')
+    sides = ("right", "left") if right_first else ("left", "right")
+    for side in sides:
+        y = 0.1 if side == "left" else -0.1
+        parent, R_parent, b_parent = "torso", np.eye(3), 0.0
+        for i, link in enumerate(d.leg):
+            b = float(beta.get((side, i), 0.0))
+            Rc = _ry(b)                                   # canonical: link along -z
+            Rr = _rx(math.pi) if roll.get((side, i)) else np.eye(3)
+            R = Rc @ Rr                                   # the link frame (torso frame)
+            if i == 0:
+                pos = np.array([0.0, y, 0.0])
+            else:                                         # the previous link's distal end
+                pos = R_parent.T @ (_ry(b_parent) @ np.array([0, 0, -d.leg[i - 1].length]))
+            rel = R_parent.T @ R
+            s = axis.get((side, i), 1)
+            ax = R.T @ np.array([0.0, float(s), 0.0])
+            ax[np.abs(ax) < 1e-15] = 0.0
+            jname = f"{link.name}_{side}_joint"
+            kind = "continuous" if continuous else "revolute"
+            limit = "" if continuous else \
+                f'<limit effort="{d.torque_limit!r}" velocity="20" lower="-6" upper="6"/>'
+            out.append(f'<joint name="{jname}" type="{kind}"><parent link="{parent}"/>'
+                       f'<child link="{link.name}_{side}"/><origin xyz="{_vec(pos)}" '
+                       f'rpy="{_rpy(rel)}"/><axis xyz="{_vec(ax)}"/>{limit}</joint>')
+            com_c = np.array([link.com_offset, 0.0, -link.com])      # canonical frame
+            out.append(f'<link name="{link.name}_{side}">'
+                       f'{_inertial(link.mass, com_c, link.inertia, Rr, 0.01)}</link>')
+            if frames and i == 0:        # a sensor with mass and inertia: merged into the link
+                out.append(f'<joint name="sensor_{side}_fix" type="fixed"><parent '
+                           f'link="{link.name}_{side}"/><child link="sensor_{side}"/>'
+                           f'<origin xyz="{_vec(Rr.T @ [0.01, 0.02, -0.05])}" '
+                           f'rpy="{_rpy(Rr.T @ _ry(0.4))}"/></joint>'
+                           f'<link name="sensor_{side}"><inertial><origin xyz="0.01 0 0.02"/>'
+                           f'<mass value="0.5"/><inertia ixx="0.001" ixy="0" ixz="0" '
+                           f'iyy="0.002" iyz="0" izz="0.001"/></inertial></link>')
+            end = Rr.T @ np.array([0.0, 0.0, -link.length])          # distal end, own frame
+            joint_mass = "foot" if i == d.k - 1 else inner[i]
+            if joint_mass in pm:
+                out.append(f'<joint name="{joint_mass}_{side}_mass_fix" type="fixed"><parent '
+                           f'link="{link.name}_{side}"/><child link="{joint_mass}_{side}_mass"/>'
+                           f'<origin xyz="{_vec(end)}"/></joint><link name="{joint_mass}_'
+                           f'{side}_mass"><inertial><mass value="{pm[joint_mass]!r}"/><inertia '
+                           f'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>')
+            out.append(f'<transmission name="{jname}_t"><type>transmission_interface/'
+                       f'SimpleTransmission</type><joint name="{jname}"><hardwareInterface>'
+                       f'EffortJointInterface</hardwareInterface></joint><actuator name='
+                       f'"{jname}_m"><mechanicalReduction>{20.0 + i!r}</mechanicalReduction>'
+                       f'<motorInertia>{d.rotor_inertia / (20.0 + i) ** 2!r}</motorInertia>'
+                       f'</actuator></transmission>')
+            parent, R_parent, b_parent = f"{link.name}_{side}", R, b
+        if "foot" not in pm:
+            end = R_parent.T @ (_ry(b_parent) @ np.array([0, 0, -d.leg[-1].length]))
+            out.append(f'<joint name="foot_{side}_fix" type="fixed"><parent link="{parent}"/>'
+                       f'<child link="foot_{side}"/><origin xyz="{_vec(end)}"/></joint>'
+                       f'<link name="foot_{side}"/>')
+    out.append("</robot>")
+    return "\n".join(out)
+
+
+def pinocchio_model(text: str, rotor: float, joint_names):
+    """Pinocchio's model of a URDF text (free flyer at the root unless the file has a
+    floating joint), the leg joints' armature set to the reflected rotor inertia."""
+    if 'type="floating"' in text:
+        m = pin.buildModelFromXML(text)
+    else:
+        text = text.replace('<link name="world"/><joint name="root" type="planar">'
+                            '<parent link="world"/><child link="torso"/><axis xyz="0 1 0"/>'
+                            '</joint>', "")
+        m = pin.buildModelFromXML(text, pin.JointModelFreeFlyer())
+    for n in joint_names:
+        m.armature[m.joints[m.getJointId(n)].idx_v] = rotor
+    return m
+
+
+def pinocchio_state(m, data, names, x, dx, foot_frame: str):
+    """(q, v) of the Pinocchio model for pitch + joint angles ``x`` and rates ``dx``
+    (joints ``names``, URDF order), the stance foot (frame ``foot_frame``) pinned at the
+    origin: base orientation Ry(pitch)."""
+    q = pin.neutral(m)
+    v = np.zeros(m.nv)
+    R = _ry(x[0])
+    q[3:7] = pin.Quaternion(R).coeffs()
+    v[3:6] = R.T @ np.array([0.0, dx[0], 0.0])
+    for n, a, da in zip(names, x[1:], dx[1:]):
+        j = m.joints[m.getJointId(n)]
+        if j.nq == 2:
+            q[j.idx_q:j.idx_q + 2] = [math.cos(a), math.sin(a)]
+        else:
+            q[j.idx_q] = a
+        v[j.idx_v] = da
+    fid = m.getFrameId(foot_frame)
+    pin.framesForwardKinematics(m, data, q)
+    q[:3] = -data.oMf[fid].translation
+    pin.forwardKinematics(m, data, q, v)
+    vf = pin.getFrameVelocity(m, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).linear
+    v[:3] = R.T @ (-vf)
+    return q, v
