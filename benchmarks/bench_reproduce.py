@@ -168,7 +168,10 @@ def main(argv=None):
             (sys.executable, snapshot(args.baseline_commit, tmp / "baseline"))
             if args.baseline_commit else None)
         if args.baseline_commit:
-            bench.note(f"baseline: commit {args.baseline_commit}")
+            rev = subprocess.run(["git", "rev-parse", "--short", args.baseline_commit],
+                                 cwd=Path(__file__).resolve().parents[1], capture_output=True,
+                                 text=True).stdout.strip()
+            bench.note(f"baseline: commit {args.baseline_commit} ({rev})")
         if not args.scaling_only:
             for quick in ([True] if args.quick else [False, True]):
                 side_by_side(bench, tmp, quick, args.rounds, ours, baseline)
