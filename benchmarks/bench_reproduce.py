@@ -4,13 +4,18 @@ baseline checkout run in turn with it (pair by pair, the order alternating), the
 warm re-run of each; and how the wall time falls with the workers of the local cluster,
 beside the graph's critical path (the bound for any number of workers).
 
+    python benchmarks/bench_reproduce.py --baseline-commit 107a0d5 --rounds 2
     python benchmarks/bench_reproduce.py --baseline ../old/.venv/bin/python
     python benchmarks/bench_reproduce.py --quick --rounds 1      # the quick run only
     python benchmarks/bench_reproduce.py --workers 1 2            # the scaling only
 
-``--baseline PYTHON``: the interpreter of an installed baseline checkout (another
-version of the toolkit); without it only this version runs.  Results are saved in
-benchmarks/results/reproduce.json (the docs' benchmarks page is made from it).
+``--baseline-commit REV``: another version of the toolkit from this repository's history
+(``git archive REV``, run by this interpreter with it first on ``PYTHONPATH``: its
+dependencies must be this environment's); ``--baseline PYTHON``: the interpreter of an
+installed baseline checkout.  Without either only this version runs.  This version runs
+from a snapshot of the working tree taken at the start, so editing the checkout during
+the benchmark changes nothing.  Results are saved in benchmarks/results/reproduce.json
+(the docs' benchmarks page is made from it).
 """
 from __future__ import annotations
 
@@ -26,13 +31,34 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _results import Run  # noqa: E402
+from summary_compare import differences  # noqa: E402
 
 
-def run(python: str, out: Path, cache: Path, quick: bool, workers=None) -> dict:
-    """One ``biped reproduce`` in a fresh process; its wall time and its summary."""
+def snapshot(rev, dest: Path) -> Path:
+    """The packages of a commit (``rev``) or of the working tree (None) copied to ``dest``."""
+    root = Path(__file__).resolve().parents[1]
+    dest.mkdir(parents=True)
+    if rev is None:
+        for top in ("biped_casadi", "gait_opt", "analysis"):
+            shutil.copytree(root / top, dest / top, ignore=shutil.ignore_patterns("__pycache__"))
+    else:
+        tar = subprocess.run(["git", "archive", rev, "biped_casadi", "gait_opt", "analysis"],
+                             cwd=root, capture_output=True, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(dest)], input=tar, check=True)
+    return dest
+
+
+def run(python, out: Path, cache: Path, quick: bool, workers=None) -> dict:
+    """One ``biped reproduce`` in a fresh process; its wall time and its summary
+    (``python``: an interpreter, or (interpreter, packages folder first on the path))."""
     env = dict(os.environ, BIPED_CACHE_DIR=str(cache), MPLBACKEND="Agg")
     env.pop("BIPED_SCHEDULER", None)
+    if isinstance(python, tuple):
+        python, path = python
+        env["PYTHONPATH"] = os.pathsep.join([str(path)] + ([env["PYTHONPATH"]]
+                                                           if env.get("PYTHONPATH") else []))
     cmd = [python, "-m", "analysis.cli", "reproduce", "--out", str(out), "--no-progress"] \
         + (["--quick"] if quick else []) + ([] if workers is None else
                                             ["--workers", str(workers)])
@@ -49,7 +75,7 @@ def run(python: str, out: Path, cache: Path, quick: bool, workers=None) -> dict:
                 ok=all(v.get("status") == "ok" for v in stages.values()) and bool(stages),
                 critical_path=(summary.get("critical_path") or {}).get("seconds"),
                 computed=sum(v.get("computed", 0) for v in stages.values()),
-                stderr=p.stderr[-1500:])
+                stderr=p.stderr[-1500:], summary=summary)
 
 
 def _show(label, r):
@@ -60,16 +86,18 @@ def _show(label, r):
         print("    " + r["stderr"].replace("\n", "\n    "))
 
 
-def side_by_side(bench: Run, tmp: Path, quick: bool, rounds: int, baseline):
+def side_by_side(bench: Run, tmp: Path, quick: bool, rounds: int, ours, baseline):
     """Cold runs of both versions in turn, then warm re-runs."""
     name = "quick" if quick else "full"
-    impls = [("this version", sys.executable)] + ([("baseline", baseline)] if baseline else [])
+    impls = [("this version", ours)] + ([("baseline", baseline)] if baseline else [])
     walls = {k: [] for k, _ in impls}
     for i in range(rounds):
+        summaries = {}
         for label, py in (impls if i % 2 == 0 else impls[::-1]):
             d = tmp / f"{name}-{label.replace(' ', '_')}-{i}"
             r = run(py, d / "out", d / "cache", quick)
             _show(f"{name} cold, {label}", r)
+            summaries[label] = r["summary"]
             if r["rc"] == 0:
                 walls[label].append(r["wall"])
             if i == rounds - 1:
@@ -77,8 +105,14 @@ def side_by_side(bench: Run, tmp: Path, quick: bool, rounds: int, baseline):
                 _show(f"{name} warm, {label}", w)
                 bench.row(f"`biped reproduce{' --quick' if quick else ''}` warm re-run, "
                           f"{label}", round(w["wall"], 1),
-                          target="<= 10 s" if label == "this version" else "")
+                          target="<= 2 s" if label == "this version" else "")
             shutil.rmtree(d, ignore_errors=True)
+        if len(summaries) == 2 and all(summaries.values()):
+            diff = differences(summaries["baseline"], summaries["this version"])
+            print(f"  {name} round {i + 1}: summary.json leaves that differ: {len(diff)}")
+            bench.note(f"{name} round {i + 1}: summary.json leaves that differ from the "
+                       f"baseline's: {len(diff)}" + "".join(f"; {k}: {a!r} -> {b!r}"
+                                                            for k, a, b in diff[:10]))
     ours = walls["this version"]
     base = walls.get("baseline", [])
     bench.data[name] = walls
@@ -89,17 +123,17 @@ def side_by_side(bench: Run, tmp: Path, quick: bool, rounds: int, baseline):
                   round(statistics.median(base), 1) if base else None,
                   ratio=round(statistics.median(pairs), 3) if pairs else None,
                   target=("<= 60 s" if quick else "<= 180 s")
-                  + ("; baseline / ours >= 1" if base else ""))
+                  + ("; baseline / ours >= 0.95" if base else ""))
         if pairs:
             bench.note(f"{name}: wall ratio baseline / this version pair by pair "
                        + ", ".join(f"{p:.3f}" for p in pairs))
 
 
-def scaling(bench: Run, tmp: Path, workers: list, quick: bool):
+def scaling(bench: Run, tmp: Path, workers: list, quick: bool, ours):
     name = "quick" if quick else "full"
     for n in workers:
         d = tmp / f"scale-{n}"
-        r = run(sys.executable, d / "out", d / "cache", quick, workers=n)
+        r = run(ours, d / "out", d / "cache", quick, workers=n)
         _show(f"{name} cold, --workers {n}", r)
         bench.row(f"`biped reproduce{' --quick' if quick else ''} --workers {n}` cold",
                   round(r["wall"], 1), target="falls with workers")
@@ -113,6 +147,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--baseline", metavar="PYTHON",
                     help="interpreter of an installed baseline version, run in turn")
+    ap.add_argument("--baseline-commit", metavar="REV",
+                    help="a commit of this repository as the baseline (run by this "
+                         "interpreter), e.g. 107a0d5")
     ap.add_argument("--quick", action="store_true", help="the quick run only")
     ap.add_argument("--rounds", type=int, default=3, help="cold runs of each (default 3)")
     ap.add_argument("--workers", type=int, nargs="*", default=None,
@@ -126,11 +163,20 @@ def main(argv=None):
              "in turn; wall time against local-cluster workers", save=not args.no_save) \
             as bench, tempfile.TemporaryDirectory(prefix="bench-reproduce-") as tmp:
         tmp = Path(tmp)
+        ours = (sys.executable, snapshot(None, tmp / "this-version"))
+        baseline = args.baseline or (
+            (sys.executable, snapshot(args.baseline_commit, tmp / "baseline"))
+            if args.baseline_commit else None)
+        if args.baseline_commit:
+            rev = subprocess.run(["git", "rev-parse", "--short", args.baseline_commit],
+                                 cwd=Path(__file__).resolve().parents[1], capture_output=True,
+                                 text=True).stdout.strip()
+            bench.note(f"baseline: commit {args.baseline_commit} ({rev})")
         if not args.scaling_only:
             for quick in ([True] if args.quick else [False, True]):
-                side_by_side(bench, tmp, quick, args.rounds, args.baseline)
+                side_by_side(bench, tmp, quick, args.rounds, ours, baseline)
         if args.workers:
-            scaling(bench, tmp, args.workers, args.quick)
+            scaling(bench, tmp, args.workers, args.quick, ours)
     return 0
 
 

@@ -9,7 +9,7 @@ implements.
 from importlib import metadata as _metadata
 
 from .caching import cache_dir, cached
-from .control import (HIP_PHASE, Design, design_first, gait_first, PAPER_REJOIN, SECTION, Gains, Reference, SingularityReport,
+from .control import (HIP_PHASE, Design, PAPER_REJOIN, SECTION, Gains, Reference, SingularityReport,
                       TimeVaryingController, VirtualConstraintController, VirtualConstraints,
                       fit_virtual_constraints, require_same_robot)
 from .model import (B_INPUT, E_RELABEL, RABBIT, RABBIT_DESCRIPTION, BipedModel, Link,
@@ -23,7 +23,7 @@ from .simulation import (PAPER_SIZES, Perturbation, SimulationOptions,
 __all__ = ["rabbit", "robot", "resolve_robot", "RobotDescription", "Link",
            "load_description", "find_description", "description_from_dict",
            "RABBIT_DESCRIPTION", "BipedModel", "RobotParams", "RABBIT", "load_params", "E_RELABEL",
-           "B_INPUT", "Design", "design_first", "gait_first", "Reference", "require_same_robot", "Gains", "SingularityReport",
+           "B_INPUT", "Design", "Reference", "require_same_robot", "Gains", "SingularityReport",
            "SECTION", "TimeVaryingController", "VirtualConstraintController",
            "VirtualConstraints", "fit_virtual_constraints", "HIP_PHASE", "PAPER_REJOIN",
            "Simulator", "SimulationOptions", "SimulationResult", "simulate",

@@ -1,18 +1,28 @@
-"""The toolkit's one caching mechanism, and where it keeps files.
+"""The toolkit's one cache, its one key scheme and its one code digest.
 
-Building CasADi Functions (a model, a Poincaré map, a compiled closed loop) takes from
-milliseconds to seconds; evaluating them is cheap.  Builders are therefore memoised
-with :func:`cached`: a bounded least-recently-used table per builder, keyed by what the
-result depends on.  An argument contributes its ``cache_key`` attribute when it has one
-(a model is keyed by its parameters, a gait by the digest of what defines it, a map by
-its gait and options), otherwise the argument itself (numbers, strings, tuples, frozen
-dataclasses).  Two content-equal objects therefore share one entry, and an entry never
-outlives the bound.
+Keys.  A result is named by the key of what it depends on (:func:`task_key`): the name
+and version of the function that computes it, the version of the code behind it
+(:func:`code_version`) and the content of its arguments (:func:`argument_key`): numbers
+exactly, arrays by their bytes, dataclasses field by field, models and gaits by their
+``cache_key``.  The keys of a whole graph are known before anything runs (an argument
+that is another task's result contributes that task's key).
 
-Files: :func:`cache_dir` is the folder for results kept between sessions; every kind of
-result kept there (optimised gaits, the stored 9^4 sweeps, robust designs) is one
-:class:`DiskCache`, whose entries are named by the :func:`digest` of what they depend
-on and of the kind's version.
+Code.  :func:`code_version` is the digest of the *syntax trees* of a set of modules
+(:data:`CODE_SETS`) with their docstrings removed, and of the CasADi and NumPy
+versions: editing a docstring, a comment or the layout of a line keeps every result;
+changing a number or a statement gives new keys (the old results stay on disk, unused).
+Results kept in folders of their own (a sweep, a Monte Carlo) carry it, and a Dask
+worker whose code differs is refused (:mod:`analysis.tasks`).
+
+Kept results.  :class:`ResultStore` keeps one file per key in :func:`cache_dir`
+(``$BIPED_CACHE_DIR`` or ``~/.cache/biped-casadi``), written atomically and fsynced; a
+damaged entry is computed again, never trusted.  :func:`task` marks a function whose
+results the task engine (:mod:`analysis.tasks`) keeps there.
+
+In memory.  Building CasADi Functions (a model, a Poincaré map, a compiled closed loop)
+takes from milliseconds to seconds; evaluating them is cheap.  Builders are therefore
+memoised with :func:`cached`, a bounded least-recently-used table per builder in this
+process, keyed by what the built object depends on (:func:`cache_key`).
 """
 from __future__ import annotations
 
@@ -21,18 +31,26 @@ import contextlib
 import dataclasses
 import functools
 import hashlib
-import importlib
+import importlib.util
 import json
+import math
 import os
+import pickle
 import threading
 import time
 from collections import OrderedDict
 from pathlib import Path
 
-__all__ = ["cached", "cache_key", "cache_dir", "digest", "modules_digest", "code_of", "DiskCache",
-           "file_lock", "task", "TaskInfo"]
+import numpy as np
+
+from .files import write_bytes_atomic
+
+__all__ = ["cached", "cache_key", "cache_dir", "digest", "code_of", "CODE_SETS",
+           "code_version", "code_files", "argument_key", "task_key", "NotKeyable",
+           "ResultStore", "MISSING", "file_lock", "task", "TaskInfo"]
 
 
+# ------------------------------------------------------------------------ tasks
 @dataclasses.dataclass(frozen=True)
 class TaskInfo:
     """What identifies a task.
@@ -45,8 +63,7 @@ class TaskInfo:
         Its own version (bump it when its result for the same arguments changes without
         any change of code).
     code : str
-        The kind of code it runs ('numerical' or 'figures':
-        :func:`analysis.tasks.code_version`).
+        The set of code it runs (a key of :data:`CODE_SETS`).
     """
 
     name: str
@@ -57,11 +74,11 @@ class TaskInfo:
 def task(fn=None, *, version: int = 1, code: str = "numerical", name: str | None = None):
     """Mark a pure function as a task, whose results are kept by key.
 
-    :class:`analysis.tasks.Engine` keeps its results on disk by the key of its arguments
-    and of the code that computes them.
     The function is returned unchanged (calling it runs it); it gains ``task_info``.  A
     task is a module-level function of typed arguments (numbers, arrays, dataclasses,
-    models, gaits, designs) that always returns the same result for the same arguments.
+    models, gaits, designs) that always returns the same result for the same arguments;
+    :class:`analysis.tasks.Engine` runs it and keeps its results under
+    :func:`task_key`.
 
     Parameters
     ----------
@@ -70,7 +87,7 @@ def task(fn=None, *, version: int = 1, code: str = "numerical", name: str | None
     version : int
         The task's own version.
     code : str
-        'numerical' or 'figures'.
+        Its code set (:data:`CODE_SETS`): 'numerical' or 'figures'.
     name : str, optional
         Default ``module.qualname``.
 
@@ -78,14 +95,18 @@ def task(fn=None, *, version: int = 1, code: str = "numerical", name: str | None
     -------
     callable
     """
+    if code not in CODE_SETS:
+        raise ValueError(f"code must be one of {sorted(CODE_SETS)}, got {code!r}")
+
     def mark(f):
         f.task_info = TaskInfo(name or f"{f.__module__}.{f.__qualname__}", version, code)
         return f
     return mark(fn) if fn is not None else mark
 
 
+# -------------------------------------------------------------- memo in memory
 def cache_key(obj):
-    """The part of a cache key that ``obj`` contributes.
+    """The part of a memo's key that ``obj`` contributes (:func:`cached`).
 
     Parameters
     ----------
@@ -158,6 +179,7 @@ def cached(maxsize: int = 16):
     return decorate
 
 
+# ------------------------------------------------------------------------ keys
 def cache_dir(path=None) -> Path:
     """Folder for results kept between sessions.
 
@@ -180,8 +202,7 @@ def cache_dir(path=None) -> Path:
 def digest(obj) -> str:
     """SHA-256 (hex) of an object's canonical JSON (sorted keys; str() for other types).
 
-    The one content digest of the toolkit: gait files' checksums, cache entries, sweep
-    settings.
+    The content digest of files and settings (gait files' checksums, sweep settings).
 
     Parameters
     ----------
@@ -196,8 +217,122 @@ def digest(obj) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
 
 
-_SOURCES: dict = {}
+class NotKeyable(TypeError):
+    """An argument of a task whose content cannot be keyed (not a typed value)."""
 
+
+def _number(x):
+    x = float(x)
+    return repr(x) if math.isfinite(x) else str(x)
+
+
+def argument_key(obj, ref_key=None):
+    """The JSON-able key an argument contributes.
+
+    Parameters
+    ----------
+    obj : object
+        A task's argument: a number, string, None, a NumPy array, a list, tuple or dict
+        of them, a dataclass of them, or an object with a ``cache_key`` (a model, a
+        gait), or a task's result handle.
+    ref_key : callable, optional
+        ``ref_key(obj)`` returns the key of a result handle, or None for other objects.
+
+    Returns
+    -------
+    object
+        Plain JSON types.
+
+    Raises
+    ------
+    NotKeyable
+        For other objects (a function, an open file, an untyped object).
+    """
+    if ref_key is not None:
+        k = ref_key(obj)
+        if k is not None:
+            return ["task", k]
+    if obj is None or isinstance(obj, (bool, str)):
+        return obj
+    if isinstance(obj, (int, np.integer)) and not isinstance(obj, bool):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return ["f", _number(obj)]
+    if isinstance(obj, np.ndarray):
+        a = np.ascontiguousarray(obj)
+        if a.dtype == object:
+            return ["objects", list(a.shape), [argument_key(v, ref_key) for v in a.ravel()]]
+        return ["array", str(a.dtype), list(a.shape), hashlib.sha256(a.tobytes()).hexdigest()]
+    key = getattr(obj, "cache_key", None)
+    if key is not None and not callable(key):
+        return [type(obj).__name__, argument_key(key, ref_key)]
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return [f"{type(obj).__module__}.{type(obj).__qualname__}",
+                {f.name: argument_key(getattr(obj, f.name), ref_key)
+                 for f in dataclasses.fields(obj)}]
+    if isinstance(obj, (list, tuple)):
+        return [argument_key(v, ref_key) for v in obj]
+    if isinstance(obj, dict):
+        return {str(k): argument_key(v, ref_key) for k, v in sorted(obj.items(), key=str)}
+    raise NotKeyable(f"a task argument of type {type(obj).__name__} has no key (pass "
+                     "numbers, arrays, dataclasses or objects with a cache_key)")
+
+
+def task_key(name: str, version: int, code: str, args=(), kwargs=None, ref_key=None) -> str:
+    """The key of one call of a task (or of any result kept by its inputs).
+
+    Parameters
+    ----------
+    name : str
+        The task's name (module and function).
+    version : int
+        The task's own version.
+    code : str
+        Its code set (:func:`code_version`).
+    args : tuple
+        Positional arguments.
+    kwargs : dict, optional
+        Keyword arguments.
+    ref_key : callable, optional
+        As :func:`argument_key`.
+
+    Returns
+    -------
+    str
+        32 hex digits.
+    """
+    body = dict(task=name, version=int(version), code=code_version(code),
+                args=argument_key(list(args), ref_key),
+                kwargs=argument_key(dict(kwargs or {}), ref_key))
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:32]
+
+
+# ------------------------------------------------------------------------ code
+#: the code each kind of result depends on: (files or package folders, those left out,
+#: those kept inside the left out), as paths relative to the packages' parent folder.
+#: 'numerical': the toolkit without the report, the command line and the figures;
+#: 'figures': with the figures; 'gait': the two lower layers (kept gaits); 'sweep' and
+#: 'montecarlo': what decides a stored sweep's or Monte Carlo's numbers
+CODE_SETS = {
+    "numerical": (("biped_casadi", "gait_opt", "analysis"),
+                  ("analysis/reporting", "analysis/cli", "analysis/pipeline/figures.py"), ()),
+    "figures": (("biped_casadi", "gait_opt", "analysis"),
+                ("analysis/reporting", "analysis/cli"), ("analysis/reporting/plots",)),
+    "gait": (("biped_casadi", "gait_opt"), (), ()),
+    "sweep": (tuple(f"{m}.py" for m in (
+        "analysis/stability/poincare", "analysis/stability/variational",
+        "biped_casadi/control/output_law", "biped_casadi/control/zero_dynamics",
+        "biped_casadi/simulation/kernel", "biped_casadi/numerics", "biped_casadi/model/biped",
+        "gait_opt/gait", "gait_opt/parametrisation")), (), ()),
+    "montecarlo": (tuple(f"{m}.py" for m in (
+        "biped_casadi/model/biped", "biped_casadi/control/output_law",
+        "biped_casadi/control/zero_dynamics", "biped_casadi/control/time_varying",
+        "biped_casadi/control/virtual_constraints", "biped_casadi/simulation/kernel",
+        "biped_casadi/simulation/validity", "biped_casadi/simulation/outcome",
+        "biped_casadi/simulation/full_order", "biped_casadi/simulation/tv_walker",
+        "biped_casadi/simulation/vc_walker", "biped_casadi/simulation/terrain",
+        "analysis/terrain/montecarlo", "analysis/terrain/chunks")), (), ()),
+}
 
 #: the fields of a node that hold statements (where definitions, hence docstrings, are)
 _STATEMENT_FIELDS = ("body", "orelse", "finalbody", "handlers", "cases")
@@ -224,6 +359,14 @@ def _strip_docstrings(tree):
     return tree
 
 
+#: code_of's results in this process, by file and content; one parse at a time: CPython
+#: 3.11 keeps the AST constructor's recursion depth per interpreter, so two threads
+#: building syntax trees at once (ours, or another library's ``ast.literal_eval``) can
+#: fail with "AST constructor recursion depth mismatch" (then the parse is tried again)
+_CODE_OF: dict = {}
+_PARSING = threading.Lock()
+
+
 def code_of(path) -> str:
     """What of a Python file decides what it computes (its syntax tree, ``ast.dump``).
 
@@ -241,100 +384,195 @@ def code_of(path) -> str:
     p = Path(path)
     data = p.read_bytes()
     key = (str(p), hashlib.sha256(data).digest())
-    if key not in _CODE_OF:      # several code sets share files: each is parsed once
-        _CODE_OF[key] = ast.dump(_strip_docstrings(ast.parse(data, filename=str(p))),
-                                 include_attributes=False)
+    with _PARSING:               # several code sets share files: each is parsed once
+        for attempt in range(3):
+            if key in _CODE_OF:
+                break
+            try:
+                _CODE_OF[key] = ast.dump(_strip_docstrings(ast.parse(data, filename=str(p))),
+                                         include_attributes=False)
+            except SystemError:
+                if attempt == 2:
+                    raise
     return _CODE_OF[key]
 
 
-#: code_of's results in this process, by file and content
-_CODE_OF: dict = {}
+_FILES: dict = {}
 
 
-def modules_digest(modules, salt: str = "") -> str:
-    """SHA-256 of the code of some modules: the code that decides a kind of result.
-
-    The code of a module is :func:`code_of` (docstrings, comments and layout left out).
-    Stored results carry it, so a result of other code is refused or recomputed, and a
-    worker running other code is detected; an edit of a docstring keeps them.  Computed
-    once per process per argument.
-
-    Parameters
-    ----------
-    modules : tuple of str
-        Module names (imported to find their files).
-    salt : str
-        Mixed in first (e.g. a results version).
-
-    Returns
-    -------
-    str
-        64 hex digits.
-    """
-    key = (tuple(modules), salt)
-    if key not in _SOURCES:
-        h = hashlib.sha256(salt.encode())
-        for name in key[0]:
-            h.update(name.encode())
-            h.update(code_of(importlib.import_module(name).__file__).encode())
-        _SOURCES[key] = h.hexdigest()
-    return _SOURCES[key]
+def _package_root(name: str):
+    spec = importlib.util.find_spec(name)
+    return Path(spec.origin).parent if spec and spec.origin else None
 
 
-class DiskCache:
-    """One kind of result kept between sessions in :func:`cache_dir`.
-
-    An entry is the file (or folder) ``<cache_dir>/<kind>/<kind>-<key>[suffix]``, ``key``
-    the first 20 hex digits of the :func:`digest` of what the result depends on and of
-    ``version`` (bump it when the code's result for the same inputs changes).  Writing
-    is the caller's (atomically); an entry that cannot be used is recomputed, never
-    trusted.
+def code_files(kind: str = "numerical") -> dict:
+    """The files of a code set and the digest of each one's code (:func:`code_of`).
 
     Parameters
     ----------
     kind : str
-        The kind of result (a folder name: 'gaits', 'robust', 'sweeps', ...).
-    version : int
-        The version of the results of this kind.
+        A key of :data:`CODE_SETS`.
+
+    Returns
+    -------
+    dict
+        Path relative to the packages' parent folder -> 16 hex digits; computed once
+        per process.
+    """
+    if kind not in CODE_SETS:
+        raise ValueError(f"kind must be one of {sorted(CODE_SETS)}, got {kind!r}")
+    if kind not in _FILES:
+        paths, left_out, kept = CODE_SETS[kind]
+        inside = lambda rel, ps: any(rel == p or rel.startswith(p + "/") for p in ps)  # noqa
+        out = {}
+        for top in sorted({p.split("/")[0] for p in paths}):
+            root = _package_root(top)
+            if root is None:
+                continue
+            for f in sorted(root.rglob("*.py")):
+                rel = f.relative_to(root.parent).as_posix()
+                if inside(rel, paths) and not (inside(rel, left_out) and not inside(rel, kept)):
+                    out[rel] = hashlib.sha256(code_of(f).encode()).hexdigest()[:16]
+        _FILES[kind] = out
+    return _FILES[kind]
+
+
+_VERSIONS: dict = {}
+
+
+def code_version(kind: str = "numerical") -> str:
+    """The version of a set of code: the one code digest of the toolkit.
+
+    The SHA-256 of the CasADi and NumPy versions and of each file of the set with the
+    digest of its syntax tree without docstrings (:func:`code_files`).
+
+    Parameters
+    ----------
+    kind : str
+        A key of :data:`CODE_SETS` ('numerical': the toolkit without the report,
+        figures and command line; 'figures': with the figures).
+
+    Returns
+    -------
+    str
+        64 hex digits; computed once per process.
+    """
+    if kind not in _VERSIONS:
+        import casadi
+        h = hashlib.sha256(f"casadi {casadi.__version__} numpy {np.__version__}".encode())
+        for rel, d in code_files(kind).items():
+            h.update(f"{rel} {d}\n".encode())
+        _VERSIONS[kind] = h.hexdigest()
+    return _VERSIONS[kind]
+
+
+# ------------------------------------------------------------------ the store
+#: what :meth:`ResultStore.read` returns for a key with no usable result
+MISSING = object()
+
+
+class ResultStore:
+    """Results kept between runs: ``<cache>/tasks/<key[:2]>/<key>.pkl``.
+
+    Each file holds the result's name, its value and the seconds it took.  A file that
+    cannot be read is treated as absent (the result is computed again and replaces it);
+    a folder that cannot be written keeps nothing, without failing the run.  A result
+    kept in a format of its own (a gait file, a sweep folder) lives at :meth:`path`
+    with its own suffix.
+
+    Parameters
+    ----------
+    folder : str, Path or False, optional
+        The cache folder (default :func:`cache_dir`); False keeps nothing.
     """
 
-    def __init__(self, kind: str, version: int):
-        self.kind, self.version = kind, int(version)
+    def __init__(self, folder=None):
+        self.enabled = folder is not False
+        self.root = cache_dir(None if folder is False else folder) / "tasks"
 
-    def key(self, body) -> str:
-        """The entry's key for what a result depends on.
-
-        Parameters
-        ----------
-        body : object
-            JSON-able description of the inputs.
-
-        Returns
-        -------
-        str
-            20 hex digits.
-        """
-        return digest(dict(kind=self.kind, version=self.version, body=body))[:20]
-
-    def path(self, body, folder=None, suffix: str = ".json") -> Path:
-        """The entry of a result.
+    def path(self, key: str, suffix: str = ".pkl") -> Path:
+        """The file (or folder) of one key.
 
         Parameters
         ----------
-        body : object
-            JSON-able description of the inputs.
-        folder : str or Path, optional
-            The cache folder (default :func:`cache_dir`).
+        key : str
+            A key (:func:`task_key`).
         suffix : str
-            '.json' for a file; '' for a folder.
+            '.pkl' for the store's own entries; another for a file of its own format,
+            '' for a folder.
 
         Returns
         -------
         Path
         """
-        return cache_dir(folder) / self.kind / f"{self.kind}-{self.key(body)}{suffix}"
+        return self.root / key[:2] / f"{key}{suffix}"
+
+    def empty(self) -> bool:
+        """Whether nothing is kept (or nothing can be): every result will be computed.
+
+        Returns
+        -------
+        bool
+        """
+        if not self.enabled:
+            return True
+        try:
+            return not any(self.root.iterdir())
+        except OSError:
+            return True
+
+    def read(self, key: str):
+        """The kept record of a key.
+
+        Parameters
+        ----------
+        key : str
+            A key.
+
+        Returns
+        -------
+        dict or MISSING
+            ``name``, ``value``, ``seconds``.
+        """
+        p = self.path(key)
+        if not self.enabled or not p.is_file():
+            return MISSING
+        try:
+            rec = pickle.loads(p.read_bytes())
+        except Exception:            # noqa: BLE001 - a damaged entry is computed again
+            return MISSING
+        return rec if isinstance(rec, dict) and "value" in rec else MISSING
+
+    def write(self, key: str, name: str, value, seconds: float = 0.0) -> bool:
+        """Keep a result (atomically: the file is complete or absent).
+
+        Parameters
+        ----------
+        key, name : str
+            Its key and name.
+        value : object
+            The result (picklable).
+        seconds : float
+            How long it took.
+
+        Returns
+        -------
+        bool
+            Whether it was written.
+        """
+        if not self.enabled:
+            return False
+        data = pickle.dumps(dict(name=name, value=value, seconds=float(seconds)),
+                            protocol=pickle.HIGHEST_PROTOCOL)
+        with contextlib.suppress(OSError):
+            p = self.path(key)
+            p.parent.mkdir(parents=True, exist_ok=True)
+            write_bytes_atomic(p, data)
+            return True
+        return False
 
 
+# ------------------------------------------------------------------ file lock
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)

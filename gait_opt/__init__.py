@@ -7,17 +7,17 @@ a range of speeds by continuation (a :class:`GaitFamily`, with gaits between its
 by :meth:`GaitFamily.gait_at`).
 """
 from .errors import GaitOptimizationError
-from .family import FamilyGait, GaitFamily, MemberRecord, parse_speed_range, speed_range
+from .speed_family import FamilyGait, GaitFamily, MemberRecord, parse_speed_range, speed_range
 from .family_solve import gait_family
 from .gait import ORBIT_TOL, Gait, GaitFileError, OpenOrbitWarning
 from .hzd_orbit import BezierConstraints, fit_bezier_constraints
 from .importing import IMPORT_TOL, GaitImport, GaitImportError, import_gait
 from .nodes import Nodes, read_nodes
-from .optimize import GaitSolveResult, default_gait, optimize_gait, solve_gait
+from .optimize import GaitSolveResult, optimize_gait
 from .options import GaitOptions
 from .polish import ClosedOrbit, close_orbit
 
-__all__ = ["optimize_gait", "solve_gait", "GaitSolveResult", "default_gait", "Gait",
+__all__ = ["optimize_gait", "GaitSolveResult", "Gait",
            "GaitOptions", "GaitOptimizationError", "GaitFileError", "OpenOrbitWarning",
            "ORBIT_TOL", "import_gait", "GaitImport", "GaitImportError", "IMPORT_TOL", "Nodes",
            "read_nodes", "BezierConstraints", "fit_bezier_constraints", "close_orbit",

@@ -1,9 +1,9 @@
 """On-disk cache of optimised gaits, so the default gait is solved once per machine.
 
-A cached gait is an entry of :data:`GAITS` (a :class:`biped_casadi.caching.DiskCache`):
-``<cache_dir>/gaits/gaits-<key>.json`` in the ordinary gait file format, ``key`` from the
-robot parameters, the gait options, the file format and the optimiser's version (bumped
-whenever its result for the same options changes).  A cached file
+A cached gait is an entry of the cache (:class:`biped_casadi.caching.ResultStore`) in the
+ordinary gait file format, ``<key>.gait.json``, its key
+(:func:`biped_casadi.caching.task_key`) from the robot, the gait options, the file format
+and the code of the two lower layers (``code_version('gait')``).  A cached file
 is used only if it loads cleanly (:meth:`Gait.load`: checksum, format version, schema,
 robot parameters, a periodic orbit to :data:`gait_opt.gait.ORBIT_TOL`) and was made with
 the same options; anything else is recomputed and overwritten, never trusted.
@@ -13,16 +13,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from biped_casadi import rabbit
-from biped_casadi.caching import DiskCache
+from biped_casadi.caching import ResultStore, task_key
 
 from .gait import FORMAT_VERSION, Gait, GaitFileError
 from .options import GaitOptions
 
-__all__ = ["cached_gait", "cache_path", "GAITS"]
-
-#: the optimised gaits kept between sessions (version: the optimiser's output for given
-#: options)
-GAITS = DiskCache("gaits", version=1)
+__all__ = ["cached_gait", "cache_path"]
 
 
 def cache_path(model=None, options: GaitOptions | None = None, cache_dir_=None) -> Path:
@@ -43,8 +39,9 @@ def cache_path(model=None, options: GaitOptions | None = None, cache_dir_=None) 
     """
     model = model or rabbit()
     options = (options or GaitOptions()).for_model(model)
-    return GAITS.path(dict(robot=model.params.to_dict(), options=options.to_dict(),
-                           format_version=FORMAT_VERSION), cache_dir_)
+    key = task_key("gait_opt.optimize_gait", 1, "gait", (model.params.to_dict(),
+                                                        options.to_dict(), FORMAT_VERSION))
+    return ResultStore(cache_dir_).path(key, ".gait.json")
 
 
 def _usable(path: Path, model, options: GaitOptions):

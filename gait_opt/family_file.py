@@ -31,7 +31,7 @@ FAMILY_FORMAT = "biped-casadi-gait-family"
 FAMILY_VERSION = 1
 #: a family file larger than this is not one this toolkit wrote
 MAX_FAMILY_BYTES = 500_000_000
-#: the fields of a member's record (:class:`gait_opt.family.MemberRecord`)
+#: the fields of a member's record (:class:`gait_opt.speed_family.MemberRecord`)
 RECORD_FIELDS = ("speed", "status", "iterations", "substeps", "failed_steps", "time", "T",
                  "step_length", "cost", "orbit_residual", "polish_residual",
                  "polish_change", "active", "margins", "violations", "branch")

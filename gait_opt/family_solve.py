@@ -1,5 +1,5 @@
 """The family of reference gaits over a grid of speeds: :func:`gait_family`, built by
-the continuation of :mod:`gait_opt.continuation` (see :mod:`gait_opt.family` for the
+the continuation of :mod:`gait_opt.continuation` (see :mod:`gait_opt.speed_family` for the
 result and docs/theory.md, "Gait families").
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 from .continuation import (MIN_STEP_FRACTION, Advance, SpeedNLP, active_families, advance,
                            describe_failure, fold_suspected)
 from .errors import GaitOptimizationError
-from .family import SPEED_TOL, GaitFamily, MemberRecord, check_speeds
+from .speed_family import SPEED_TOL, GaitFamily, MemberRecord, check_speeds
 from .family_file import options_record
 from .gait import Gait
 from .options import GaitOptions

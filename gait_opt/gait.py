@@ -45,7 +45,7 @@ class Gait(Reference):
     dq_u^d(0)).  ``step_length``, ``speed``, ``cost``; ``solver_stats``; ``check()``
     computes every physical and consistency figure on a dense grid.
 
-    Gaits come from :func:`optimize_gait`, :func:`default_gait` or :meth:`load`; q_u^d
+    Gaits come from :func:`optimize_gait` or :meth:`load`; q_u^d
     is tabulated on [-T/2, 2 T] by RK4 (``options.polish_steps`` per T) at its first use.
 
     Parameters

@@ -6,7 +6,6 @@ the problem re-solved where a constraint is exceeded between the nodes.
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,7 +23,7 @@ from .transcription import (FIXED_BY, MARGINS, build_problem, constraint_violati
                             describe_violations, initial_guess, make_solver,
                             warm_start_vector)
 
-__all__ = ["optimize_gait", "default_gait", "solve_gait", "GaitSolveResult", "GaitOptimizationError",
+__all__ = ["optimize_gait", "GaitSolveResult", "GaitOptimizationError",
            "solve_collocation", "CollocationResult"]
 
 
@@ -171,7 +170,7 @@ def _solve(model, options: GaitOptions | None = None, *, verbose: bool = False,
     max_refinements : int
         Re-solves allowed for constraints exceeded between the nodes.
     **overrides
-        Replace single option fields (``solve_gait(m, speed=1.0)``).
+        Replace single option fields (``optimize_gait(m, speed=1.0)``).
 
     Returns
     -------
@@ -286,52 +285,3 @@ def optimize_gait(model=None, options: GaitOptions | None = None, *, cache: bool
         raise GaitOptimizationError(res.message, status=res.status,
                                     violations=[tuple(v) for v in res.violations])
     return res.gait
-
-
-def solve_gait(model, options: GaitOptions | None = None, **kw) -> GaitSolveResult:
-    """Deprecated: :func:`optimize_gait` (which raises on failure) is the gait solve.
-
-    Parameters
-    ----------
-    model : BipedModel
-        The robot.
-    options : GaitOptions, optional
-        The problem.
-    **kw
-        As :func:`optimize_gait` (``verbose``, ``warm_start``, ``max_refinements``,
-        option fields).
-
-    Returns
-    -------
-    GaitSolveResult
-    """
-    warnings.warn("solve_gait is deprecated: call optimize_gait (a Gait; "
-                  "GaitOptimizationError on failure)", DeprecationWarning, stacklevel=2)
-    return _solve(model, options, **kw)
-
-
-def default_gait(model=None, options: GaitOptions | None = None, cache_dir=None,
-                 progress=None, **overrides) -> Gait:
-    """Deprecated: ``optimize_gait(model, options, cache=True)``.
-
-    Parameters
-    ----------
-    model : BipedModel, optional
-        The robot.
-    options : GaitOptions, optional
-        The problem.
-    cache_dir : str or Path, optional
-        The cache folder.
-    progress : callable, optional
-        One line before a solve.
-    **overrides
-        Option fields.
-
-    Returns
-    -------
-    Gait
-    """
-    warnings.warn("default_gait is deprecated: call optimize_gait(model, options, "
-                  "cache=True)", DeprecationWarning, stacklevel=2)
-    return optimize_gait(model, options, cache=True, cache_dir=cache_dir, progress=progress,
-                         **overrides)

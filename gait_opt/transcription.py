@@ -46,7 +46,7 @@ Speed as a parameter.  ``build_problem(..., speed_parameter=True)`` makes the sp
 NLP's parameter p instead of a constant: it enters only the speed constraint
 x_end - p T (whose Hessian does not involve p) and the factor 1/p of the per-length
 cost, so one NLP and one solver serve every speed of a family
-(:mod:`gait_opt.family`), the derivatives unchanged in structure.
+(:mod:`gait_opt.speed_family`), the derivatives unchanged in structure.
 """
 from __future__ import annotations
 
@@ -440,7 +440,7 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None, *,
     opts : GaitOptions
     margins : dict, optional
         Family of :data:`MARGINS` -> amount: tightens the path constraints at the nodes,
-        so that they hold between the nodes too (see :func:`gait_opt.solve_gait`).
+        so that they hold between the nodes too (see :func:`gait_opt.optimize_gait`).
     speed_parameter : bool
         The speed is the NLP's parameter p (given to the solver at each call;
         ``opts.speed`` unused) instead of a constant.

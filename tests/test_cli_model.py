@@ -22,10 +22,10 @@ def test_model_json():
 def test_model_bad_inputs(tmp_path):
     r = run("model", "--q", "1", "2")
     assert r.returncode == 2 and "5 numbers" in r.stderr and "Traceback" not in r.stderr
-    r = run("model", "--params", str(tmp_path / "missing.toml"))
+    r = run("model", "--robot", str(tmp_path / "missing.toml"))
     assert r.returncode == 2 and "not found" in r.stderr and "Traceback" not in r.stderr
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
-    r = run("model", "--params", str(bad))
+    r = run("model", "--robot", str(bad))
     assert r.returncode == 2 and "cannot parse" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1

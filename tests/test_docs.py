@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import ast
+import enum
 import importlib
 import inspect
 import pkgutil
@@ -46,7 +47,10 @@ def test_the_public_surface_is_found():
 
 
 def _signature_names(obj) -> list[str]:
-    """The arguments a caller passes: parameters without self/cls, with * and **."""
+    """The arguments a caller passes: parameters without self/cls, with * and **
+    (none for an enumeration: its members are its values)."""
+    if inspect.isclass(obj) and issubclass(obj, enum.Enum):
+        return []
     try:
         sig = inspect.signature(obj)
     except (TypeError, ValueError):          # builtin base classes (exceptions)

@@ -12,7 +12,7 @@ import pytest
 
 from analysis import vc_eigenvalue
 from analysis.cli import main as biped_main
-from analysis.family import actuator_work, cost_of_transport, family_figures
+from analysis.gait_metrics import actuator_work, cost_of_transport, family_figures
 from analysis.reporting.plots import gait_family_plot, save_figures
 from biped_casadi.caching import digest
 from gait_opt import (ORBIT_TOL, Gait, GaitFamily, GaitFileError, gait_family,

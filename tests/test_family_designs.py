@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from analysis.cli import main
-from analysis.design.family import smooth_schedule
+from analysis.design.designs_over_speed import smooth_schedule
 from analysis.design.schedule import M1Schedule
 
 

@@ -371,7 +371,7 @@ def test_cache_reuses_and_recomputes(model, gait, tmp_path, monkeypatch):
     monkeypatch.setattr(optimize, "_solve", fake_solve)
     g1 = optimize_gait(model, cache_dir=tmp_path, cache=True)
     assert len(calls) == 1 and g1.solver_stats["cache"].startswith("computed")
-    files = list(tmp_path.glob("gaits/gaits-*.json"))
+    files = list(tmp_path.glob("tasks/*/*.gait.json"))
     assert len(files) == 1
     g2 = optimize_gait(model, cache_dir=tmp_path, cache=True)
     assert len(calls) == 1 and g2.solver_stats["cache"] == "hit" and g2.T == gait.T

@@ -129,15 +129,14 @@ def test_other_robot_refused(gait):
         PoincareMap(other, gait)
 
 
-def test_the_older_model_gait_form_still_works(model, gait):
-    """poincare_eigenvalues(model, gait, M1) (the stable surface) equals the gait-first
-    form, with a deprecation warning; a model that is not the gait's is refused."""
+def test_the_specification_form_is_the_same_call(model, gait):
+    """poincare_eigenvalues(model, gait, M1) (the specification's form) equals the
+    gait-first form; a model that is not the gait's is refused."""
     from analysis import poincare_eigenvalues
     from biped_casadi import Design, robot
     M1 = np.array([-10.0, 7.5, 10.0, -5.0])
     new = poincare_eigenvalues(gait, M1)
-    with pytest.warns(DeprecationWarning, match="gait carries its model"):
-        old = poincare_eigenvalues(model, gait, M1)
+    old = poincare_eigenvalues(model, gait, M1)
     np.testing.assert_array_equal(old.A, new.A)
     d = poincare_eigenvalues(gait, Design.tv(gait, M1, rejoin=0.75))
     np.testing.assert_array_equal(d.A, poincare_eigenvalues(gait, M1, rejoin=0.75).A)

@@ -78,11 +78,10 @@ def test_reproduce_quick(tmp_path):
 
 
 # ------------------------------------------------- re-runs into the same folder
-LIGHT = (Stage("gait", stage_gait, (), model=True, resolution=False,
-               figures=(Figures(F.gait_figures, ("gait",)),)),
-         Stage("Fig. 2: 1-D sweeps", stage_fig2, ("gait",),
-               figures=(Figures(F.fig2, ("Fig. 2: 1-D sweeps",)),)),
-         Stage("marker", marker_stage, (), figures=(Figures(marker_figure, ("marker",)),)))
+_GAIT = Stage("gait", stage_gait, model=True, resolution=False,
+              figures=(Figures(F.gait_figures),))
+LIGHT = (_GAIT, Stage("Fig. 2: 1-D sweeps", stage_fig2, (_GAIT,), figures=(Figures(F.fig2),)),
+         Stage("marker", marker_stage, figures=(Figures(marker_figure),)))
 
 
 @pytest.fixture
@@ -141,9 +140,9 @@ def test_a_failed_stage_skips_its_dependants_only(tmp_path, gait, light_stages, 
     (out / "figures" / "my_sketch.png").write_bytes(b"mine")
     # the marker stage now fails: its dependant is skipped (no fallback), the others run,
     # and its old figure does not stay beside the new report
-    monkeypatch.setattr(graph, "STAGES", (*light_stages[:2],
-                                          Stage("marker", failing_stage, ()),
-                                          Stage("after", after_marker, ("marker",))))
+    failing = Stage("marker", failing_stage)
+    monkeypatch.setattr(graph, "STAGES", (*light_stages[:2], failing,
+                                          Stage("after", after_marker, (failing,))))
     r = reproduce(out, line_points=5, progress=False)
     assert not r.success and r.status == "failed" and "marker" in r.message
     st = r.stages
@@ -165,7 +164,7 @@ def test_an_interrupted_run_leaves_the_previous_results(tmp_path, gait, light_st
     reproduce(out, line_points=5, progress=False)
     before = _files(out)
     monkeypatch.setattr(graph, "STAGES", (*light_stages,
-                                          Stage("stop", interrupted_stage, ())))
+                                          Stage("stop", interrupted_stage)))
     with pytest.raises(KeyboardInterrupt):
         reproduce(out, line_points=5, progress=False)
     assert _files(out) == before

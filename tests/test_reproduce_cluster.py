@@ -13,9 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from dask_cluster import dask_cluster
 from summary_compare import differences
-
-DASK = str(Path(sys.executable).with_name("dask"))
 
 
 def _env(cache):
@@ -46,30 +45,9 @@ def local(tmp_path_factory):
 @pytest.fixture
 def cluster(tmp_path):
     """A Dask scheduler and two single-threaded workers on loopback: its address."""
-    file = tmp_path / "scheduler.json"
-    procs = [subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", "0",
-                               "--no-dashboard", "--scheduler-file", str(file)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-    try:
-        for _ in range(300):
-            if file.is_file() and file.stat().st_size:
-                break
-            time.sleep(0.1)
-        address = json.loads(file.read_text())["address"]
-        env = dict(_env(tmp_path / "worker-cache"), BIPED_THREADS="1")
-        procs += [subprocess.Popen([DASK, "worker", address, "--nworkers", "1", "--nthreads",
-                                    "1", "--no-dashboard"], env=env,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-                  for _ in range(2)]
+    env = dict(_env(tmp_path / "worker-cache"), BIPED_THREADS="1")
+    with dask_cluster(tmp_path, [env, env]) as address:
         yield address
-    finally:
-        for p in procs[::-1]:
-            p.terminate()
-        for p in procs:
-            try:
-                p.wait(20)
-            except subprocess.TimeoutExpired:
-                p.kill()
 
 
 @pytest.mark.slow

@@ -139,7 +139,7 @@ def test_s_star_replayed_at_and_above(model, gait, deadbeat1):
     st = RobustnessSettings(directions=4, rounds=7)
     kept = kept_directions(gait, st)
     design = Design(tuple(deadbeat1))
-    r = robustness(gait, design, st, kept=kept)
+    r = robustness(Design.of(design, gait), st, kept=kept)
     assert 0 < r.s_star < r.s_fail < 2 and r.failure
     for d in kept.directions:
         run = _full_order(model, gait, design, d, r.s_star)
@@ -214,16 +214,16 @@ def test_smooth_continuation_is_C3_at_T_and_changes_nothing_before(model, robust
 
 
 def test_basin_outcomes(model, gait):
-    b = basin(gait, None, n=5, q_span=0.01, dq_span=0.1, steps=3)
+    b = basin(Design.vc(gait), n=5, q_span=0.01, dq_span=0.1, steps=3)
     assert b.outcome.shape == (5, 5) and b.outcome[2, 2] in ("converged", "walked")
     assert set(b.counts) <= {"converged", "walked", "slipped", "scuffed", "no_impact",
                              "negative_normal_force", "torque_limit", "fell"}
-    t = basin(gait, Design((-2.5, 5.0, -2.5, 5.0)), n=5, q_span=0.01, dq_span=0.1,
+    t = basin(Design.tv(gait, (-2.5, 5.0, -2.5, 5.0)), n=5, q_span=0.01, dq_span=0.1,
               steps=3)
     assert t.outcome[2, 2] in ("converged", "walked")       # the fixed point walks
     assert 0 < t.converged_fraction + np.mean(t.outcome == "walked") <= 1
     with pytest.raises(ValueError, match="n"):
-        basin(gait, None, n=1)
+        basin(Design.vc(gait), n=1)
 
 
 def test_basin_adaptive_grid_draws_the_full_grid(model, gait):
@@ -231,8 +231,8 @@ def test_basin_adaptive_grid_draws_the_full_grid(model, gait):
     fewer cells and gives the full grid's outcome on all but a few of them; where it
     walked a cell, the outcome and the final error are the full grid's exactly."""
     d = Design((-2.5, 5.0, -2.5, 5.0))
-    full = basin(gait, d, n=21, steps=4)
-    ad = basin(gait, d, n=21, steps=4, refine=4)
+    full = basin(Design.of(d, gait), n=21, steps=4)
+    ad = basin(Design.of(d, gait), n=21, steps=4, refine=4)
     assert full.walked_cells == 21 * 21 and ad.walked_cells < 21 * 21
     differ = np.sum(full.outcome != ad.outcome)
     assert differ <= 0.02 * 21 * 21, differ
@@ -240,7 +240,7 @@ def test_basin_adaptive_grid_draws_the_full_grid(model, gait):
     np.testing.assert_array_equal(ad.final_error[w], full.final_error[w])
     assert set(np.unique(full.outcome[w] == ad.outcome[w])) == {True}
     with pytest.raises(ValueError, match="refine"):
-        basin(gait, d, n=21, refine=3)
+        basin(Design.of(d, gait), n=21, refine=3)
 
 
 # ------------------------------------------------------------------------ CLI

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from analysis.sweeps.storage import SweepStore, SweepStoreError
-from biped_casadi.caching import DiskCache, cache_key, cached, digest
+from biped_casadi.caching import MISSING, ResultStore, cache_key, cached, digest, task_key
 
 
 # ------------------------------------------------------------------ caching
@@ -46,14 +46,20 @@ def test_digest_is_canonical():
     assert len(digest("x")) == 64
 
 
-def test_disk_cache_paths(tmp_path):
-    c = DiskCache("things", version=1)
-    p = c.path({"x": 1}, tmp_path)
-    assert p.parent == tmp_path / "things" and p.name.startswith("things-")
-    assert p.suffix == ".json" and c.path({"x": 1}, tmp_path) == p
-    assert c.path({"x": 2}, tmp_path) != p                    # other inputs
-    assert DiskCache("things", version=2).path({"x": 1}, tmp_path) != p   # other version
-    assert c.path({"x": 1}, tmp_path, suffix="").suffix == ""
+def test_the_store_keeps_results_by_key(tmp_path):
+    store = ResultStore(tmp_path)
+    key = task_key("things", 1, "gait", ({"x": 1},))
+    assert task_key("things", 1, "gait", ({"x": 1},)) == key
+    assert task_key("things", 1, "gait", ({"x": 2},)) != key        # other inputs
+    assert task_key("things", 2, "gait", ({"x": 1},)) != key        # other version
+    assert store.path(key).parent == tmp_path / "tasks" / key[:2]
+    assert store.path(key, ".json").suffix == ".json" and store.path(key, "").suffix == ""
+    assert store.read(key) is MISSING and store.empty()
+    assert store.write(key, "things", [1.0, 2.0], 0.5) and not store.empty()
+    assert store.read(key) == dict(name="things", value=[1.0, 2.0], seconds=0.5)
+    store.path(key).write_bytes(b"damaged")                        # computed again
+    assert store.read(key) is MISSING
+    assert ResultStore(False).write(key, "things", 1) is False
 
 
 # ------------------------------------------------------------------ storage

@@ -220,8 +220,8 @@ def test_dask_local_cluster_same_results(sweep_gait, reference, small_grid, tmp_
 
 
 def test_unreachable_scheduler_is_a_user_error(sweep_gait, small_grid, monkeypatch):
-    import analysis.sweeps.workers
-    monkeypatch.setattr(analysis.sweeps.workers, "DASK_CONNECT_TIMEOUT", "1s")
+    import analysis.cluster
+    monkeypatch.setattr(analysis.cluster, "DASK_CONNECT_TIMEOUT", "1s")
     import socket
     s = socket.socket()
     s.bind(("127.0.0.1", 0))

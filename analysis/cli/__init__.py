@@ -95,7 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("model", help="print the robot parameters, D(q) and H(q, 0)",
                        description="Print the robot parameters, total mass, and the mass "
                                    "matrix D(q) and H(q, 0) = G(q) at a configuration.")
-    add_robot(p, with_gait=False, params_alias=True)
+    add_robot(p, with_gait=False)
     p.add_argument("--q", nargs="+", type=float, metavar="Q",
                    help="configuration q1..qn in rad (RABBIT: 5 numbers; default: upright, "
                         "q = 0)")

@@ -54,15 +54,11 @@ class Progress:
 
 
 # --------------------------------------------------------- robot, model, gait
-def add_robot(p, with_gait: bool = True, params_alias: bool = False):
-    """Add ``--robot NAME|FILE`` to a subcommand's parser (and the older ``--params
-    FILE`` as an alias where it existed)."""
+def add_robot(p, with_gait: bool = True):
+    """Add ``--robot NAME|FILE`` to a subcommand's parser."""
     default = ("default: the gait file's robot, else rabbit" if with_gait
                else "default: rabbit")
     p.add_argument("--robot", metavar="NAME|FILE", help=f"{ROBOT_HELP}; {default}")
-    if params_alias:
-        p.add_argument("--params", dest="robot", metavar="FILE", help="same as --robot FILE "
-                       "(also reads the older flat parameter files)")
 
 
 def add_gait_arguments(p, required: bool = False):

@@ -50,7 +50,7 @@ def register(sub):
     p.add_argument("--clearance", type=float, default=None, metavar="H",
                    help="mid-step swing-foot clearance, m (default 0.03; the robust "
                         "design's gait uses 0.05)")
-    add_robot(p, with_gait=False, params_alias=True)
+    add_robot(p, with_gait=False)
     add_family_arguments(p)
     p.add_argument("--out", metavar="FILE", default=None,
                    help="where to save the gait (default gait.json; with --speeds, the "

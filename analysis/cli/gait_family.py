@@ -1,14 +1,14 @@
 """``biped gait --speeds A:B:STEP`` (a gait family by continuation) and ``biped gait
 --family FILE --speed V`` (a gait between its members).  Reads top to bottom; the
 computation is in :mod:`gait_opt` (``gait_family``, ``GaitFamily.gait_at``), the figures
-in :mod:`analysis.family` and :mod:`analysis.reporting.plots`.
+in :mod:`analysis.gait_metrics` and :mod:`analysis.reporting.plots`.
 """
 from __future__ import annotations
 
 import math
 import sys
 
-from analysis.family import family_figures
+from analysis.gait_metrics import family_figures
 from analysis.reporting.plots import (gait_family_plot, gait_profiles_plot, gait_stick_plot,
                                       save_figures)
 from gait_opt import GaitFamily, GaitOptimizationError, gait_family, parse_speed_range

@@ -14,7 +14,7 @@ from analysis.design import (
 )
 from analysis.design.codesign import (FIT, QUICK, CodesignError, CodesignSettings, NoDesign,
                                       codesign)
-from analysis.design.family import family_designs
+from analysis.design.designs_over_speed import family_designs
 from analysis.reporting.plots import family_designs_plot, save_figures
 from gait_opt import GaitFamily
 from analysis.sweeps import grid_best

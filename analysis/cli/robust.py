@@ -38,13 +38,13 @@ def cmd_robust(args):
         f"wanted; about 0.3 s each)")
     kept = kept_directions(gait, st)
     say("s* by bisection (up to a minute)")
-    res = robustness(gait, design, st, kept=kept)
+    res = robustness(Design.of(design, gait), st, kept=kept)
     out = res.to_dict()
     if args.plot is not None:
         say("basins of attraction on windows grown until their boundary is inside, "
             "time-varying beside virtual constraints (about a minute)")
-        runs = [basin_to_boundary(gait, design)] if design is not None else []
-        runs.append(basin_to_boundary(gait, None))
+        runs = [basin_to_boundary(Design.of(design, gait))] if design is not None else []
+        runs.append(basin_to_boundary(Design.vc(gait)))
         out["basins"] = [dict(controller=b.controller, converged_fraction=b.converged_fraction,
                               area=b.area, q_span=b.q_span, dq_span=b.dq_span,
                               status=b.status, counts=b.counts) for b in runs]

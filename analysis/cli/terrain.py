@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from analysis.cluster import dask_client
+from analysis.cluster import DASK_CONNECT_TIMEOUT, connect
 from analysis.reporting.plots import save_figures, survival_plot
 from analysis.terrain import (MAX_RUNS, MAX_STEPS, MonteCarloSettings, WalkerSpec,
                               gait_sensitivity, monte_carlo)
@@ -19,8 +19,6 @@ from .common import (add_design_arguments, Progress, UserError, add_gait_argumen
                      load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
 
 SCALES = ("mass", "inertia", "length", "torso_mass")
-#: how long to wait for a Dask scheduler to answer
-CONNECT = "5s"
 
 
 def _finite_nonnegative(v, name):
@@ -134,12 +132,11 @@ def _check_arguments(args):
 
 
 def _check_scheduler(args, say):
-    """A Dask scheduler given by address answers (within CONNECT), or a UserError."""
+    """A Dask scheduler given by address answers, or a UserError."""
     if args.scheduler not in (None, "inline", "local"):
-        say(f"connecting to the Dask scheduler at {args.scheduler} (up to {CONNECT}) ...")
+        say(f"connecting to the Dask scheduler at {args.scheduler} (up to {DASK_CONNECT_TIMEOUT}) ...")
         try:
-            with dask_client(args.scheduler, CONNECT):
-                pass
+            connect(args.scheduler)[0].close()
         except ValueError as e:
             raise UserError(f"--{e}") from None
 

@@ -25,7 +25,6 @@ import numpy as np
 from biped_casadi.caching import cached
 from biped_casadi.control.output_law import decoupling_denominator
 from biped_casadi.results import Result, internal
-from biped_casadi.control.reference import gait_first
 
 from ..stability.poincare import poincare_eigenvalues, poincare_map
 from .output_selection import (ab_solution_set, coarse_grid_size, domain_grid, group_of,
@@ -250,7 +249,6 @@ def _coarse_best(pm, tay, group, k, coarse=None):
     return np.asarray(jb.M1, float)[order[:k]]
 
 
-@gait_first
 def optimize_m1(gait, group: int | None = 1, starts=None, n_random: int = 2,
                 n_best: int = 10, n_ipopt: int = 4, seed: int = 0, den_margin: float = 1.0,
                 deadbeat: bool = True, coarse=None) -> M1Result:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from biped_casadi.control.reference import gait_first
 
 import casadi as ca
 import numpy as np
@@ -34,7 +33,6 @@ __all__ = ["swing_height_at_Td", "TaylorAB", "taylor_ab", "solve_ab", "ABSolutio
 
 
 # ------------------------------------------------------------------ eq. (25)-(26)
-@gait_first
 def swing_height_at_Td(gait, M1s, dqu: float = 1e-2) -> np.ndarray:
     """The swing-foot height at the desired impact time with an error on q_u.
 
@@ -132,7 +130,6 @@ def _MT(M1s):
     return np.hstack([np.ones((len(M1s), 1)), -M1s])
 
 
-@gait_first
 def taylor_ab(gait) -> TaylorAB:
     """The coefficients of eq. (27): exact (AD) gradient and Hessian of Z_sw at q^d(T^d).
 
@@ -440,7 +437,6 @@ class ABGroups:
     explanation: str
 
 
-@gait_first
 def ab_groups(gait) -> ABGroups:
     """The solution groups of a = b = 0 that :func:`optimize_m1` accepts, and what they are.
 

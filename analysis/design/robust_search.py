@@ -36,7 +36,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from biped_casadi.caching import DiskCache
+from biped_casadi.caching import ResultStore, task_key
 from biped_casadi.files import write_text_atomic
 from biped_casadi.results import Result
 from gait_opt import GaitOptions, optimize_gait
@@ -59,9 +59,9 @@ __all__ = ["RobustDesignSettings", "RobustDesignResult", "robust_design", "ROBUS
 #: clearance 0.1 m -> 0.926 (0.945 with impact_mu 0.15)
 ROBUST_GAIT = dict(impact_mu=0.15, continuation=0.03, clearance=0.05)
 
-#: the robust designs kept between sessions (bump the version when the search's results
-#: for the same settings change)
-DESIGNS = DiskCache("robust", version=3)
+#: the version of the robust designs kept between sessions (bump it when the search's
+#: results for the same settings and code change)
+DESIGNS_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -360,7 +360,7 @@ class _Search:
         (:func:`analysis.design.verification.verify_design`): s* (walker, finer),
         full-order runs at s* and s_fail, the paper's perturbation at s = 1."""
         st = self.st
-        check = verify_design(self.gait, Design(tuple(M1), st.rejoin), self.kept,
+        check = verify_design(Design.tv(self.gait, tuple(M1), st.rejoin), self.kept,
                               st.robustness_settings(), progress=self.say)
         self.stage("verification", s_star=check.s_star, full_order=check.verified)
         return check
@@ -391,7 +391,8 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
         The best design, its s* and how it was found.
     """
     st = settings or RobustDesignSettings()
-    path = DESIGNS.path(dict(robot=model.params.to_dict(), settings=st.to_dict()), cache)
+    path = ResultStore(cache).path(task_key("analysis.design.robust_design", DESIGNS_VERSION,
+                                            "numerical", (model, st)), ".json")
     if use_cache and path.is_file():
         try:
             d = json.loads(path.read_text())

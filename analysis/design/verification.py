@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from biped_casadi import (Design, SimulationOptions, TimeVaryingController,
-                          VirtualConstraintController, design_first, directions, simulate)
+                          VirtualConstraintController, directions, simulate)
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import WalkBatch, simulator, start_states, zero_dynamics_walker
 
@@ -330,7 +330,6 @@ def verify_flow(engine, design: Design, kept, settings: RobustnessSettings) -> D
                         submit_check(engine, design, kept, settings))
 
 
-@design_first
 def verify_design(design: Design, kept, settings: RobustnessSettings, progress=None,
                   scheduler="synchronous") -> DesignCheck:
     """Measure a design by the verification protocol (module docstring).
@@ -338,8 +337,7 @@ def verify_design(design: Design, kept, settings: RobustnessSettings, progress=N
     Parameters
     ----------
     design : Design
-        A time-varying design on its gait (``verify_design(gait, Design(M1, rejoin),
-        ...)`` also works).
+        A time-varying design on its gait.
     kept : KeptDirections
         The kept directions of this gait (:func:`analysis.robustness.kept_directions`).
     settings : RobustnessSettings
@@ -354,6 +352,7 @@ def verify_design(design: Design, kept, settings: RobustnessSettings, progress=N
     -------
     DesignCheck
     """
+    design = Design.require(design)
     if design.M1 is None:
         raise ValueError("design: the protocol measures a time-varying design")
     if progress is not None:
@@ -399,7 +398,6 @@ class HiddenPatterns(Result):
 
 
 @task
-@design_first
 def hidden_sign_patterns(design: Design, kept, settings: RobustnessSettings,
                          scales=(1.0, 1.25), n: int = 12, seeds=(7, 11, 13)) -> HiddenPatterns:
     """Walk the design from sign patterns never used to choose it (module docstring).
@@ -423,6 +421,7 @@ def hidden_sign_patterns(design: Design, kept, settings: RobustnessSettings,
     -------
     HiddenPatterns
     """
+    design = Design.require(design)
     gait = design.gait
     model = gait.model
     st = settings

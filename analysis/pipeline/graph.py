@@ -17,19 +17,23 @@ kind.
 """
 from __future__ import annotations
 
+import concurrent.futures as cf
 import contextlib
 import json
 import os
 import shutil
 import sys
 import time
+import dataclasses
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 from biped_casadi import RABBIT_DESCRIPTION, robot
 from biped_casadi.files import write_bytes_atomic, write_text_atomic
 from biped_casadi.results import Result, json_safe
 
+from ..design.codesign import replay_args
 from ..reporting.constants import PAPER
 from ..reporting.report import write_report
 from ..tasks import Engine, TaskError
@@ -37,41 +41,89 @@ from . import figures as F
 from .options import ReproduceOptions, run_folder
 from .paper import (stage_fig2, stage_fig3, stage_fig4, stage_gait, stage_grid, stage_m1,
                     stage_singular, stage_vc)
-from .family import stage_family
 from .mujoco import mujoco_figure, stage_mujoco
+from .speed import stage_family
 from .terrain import stage_terrain
 from .walking import (stage_basins, stage_basins_robust, stage_robust_design,
                       stage_robustness, stage_robustness_robust, stage_search, stage_sim,
                       stage_sim_robust, stage_tradeoff)
 
-__all__ = ["reproduce", "ReproduceResult", "STAGES", "Stage"]
+__all__ = ["reproduce", "ReproduceResult", "STAGES", "Stage", "Figures", "Need", "optional",
+           "THIS", "Scope", "Outcome", "StageRecord"]
 
 
-@dataclass(frozen=True)
+class Scope(StrEnum):
+    """Where a stage applies."""
+
+    PAPER = "paper"          # every robot
+    ROBUST = "robust"        # RABBIT (the robust designs are calibrated on it)
+    FULL = "full"            # RABBIT, full runs only
+
+
+class Outcome(StrEnum):
+    """How a stage ended."""
+
+    OK = "ok"
+    FAILED = "failed"
+    SKIPPED = "skipped"      # a stage it needs failed
+
+
+@dataclass(frozen=True, eq=False)
+class Need:
+    """A stage whose result another stage or a figure takes.
+
+    Parameters
+    ----------
+    stage : Stage or None
+        The stage (None: the stage the figure belongs to).
+    optional : bool
+        Passed as None when the stage is not in this run's graph (else it must be).
+    """
+
+    stage: object = None
+    optional: bool = False
+
+
+#: in a figure's needs: the result of the stage it belongs to
+THIS = Need()
+
+
+def optional(stage) -> Need:
+    """A need passed as None when ``stage`` is not in the run's graph.
+
+    Parameters
+    ----------
+    stage : Stage
+        The stage.
+
+    Returns
+    -------
+    Need
+    """
+    return Need(stage, optional=True)
+
+
+@dataclass(frozen=True, eq=False)
 class Figures:
-    """Figures drawn from stage results.
+    """Figures drawn from stage results by one task.
 
     Parameters
     ----------
     task : callable
-        The figure task.
-    needs : tuple of str
-        The stages whose results are its arguments (a name starting with '?' is passed
-        as None when that stage is not in the graph).
-    unless : str
-        A stage whose presence makes these figures unnecessary (another declaration
-        draws them).
+        The figure task: it takes the results of ``needs`` in order, then the run's
+        resolution if ``resolution``, and returns name -> format -> bytes.
+    needs : tuple of Need or Stage
+        Whose results it takes (default: its own stage's).
     resolution : bool
         Whether it takes the run's resolution last.
     """
 
     task: object
-    needs: tuple
-    unless: str = ""
+    needs: tuple = (THIS,)
     resolution: bool = False
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Stage:
     """One stage of the graph.
 
@@ -81,16 +133,16 @@ class Stage:
         Its name in the report.
     flow : callable
         Its flow (a task taking the engine first).
-    needs : tuple of str
-        The stages whose results are its arguments.
+    needs : tuple of Stage or Need
+        The stages whose results are its arguments (declared before it).
     model : bool
         Whether it takes the robot's model first.
     resolution : bool
         Whether it takes the run's resolution last.
     priority : int
         Dask's priority of its tasks.
-    only : str
-        Where it applies: 'paper' (every robot), 'robust' (RABBIT), 'full' (full runs).
+    scope : Scope
+        Where it applies.
     figures : tuple of Figures
         The figures it draws.
     """
@@ -101,56 +153,120 @@ class Stage:
     model: bool = False
     resolution: bool = True
     priority: int = 0
-    only: str = "paper"
+    scope: Scope = Scope.PAPER
     figures: tuple = ()
 
+    def applies(self, rabbit: bool, quick: bool) -> bool:
+        """Whether it is in the graph of a run.
 
-_SIM, _SIM_R = "Fig. 5 runs, default gait", "Fig. 5, Fig. 6, animation"
-_FIG56 = (Figures(F.fig5_fig6, (_SIM, _SIM_R)),
-          Figures(F.animation, (_SIM, _SIM_R), resolution=True))
+        Parameters
+        ----------
+        rabbit : bool
+            The robot is RABBIT.
+        quick : bool
+            A quick run.
 
-#: the graph of a reproduction, in the order of its report; the co-design and what hangs
-#: on it first in Dask's priority
-STAGES = (
-    Stage("gait", stage_gait, (), model=True, resolution=False, priority=20,
-          figures=(Figures(F.gait_figures, ("gait",)),)),
-    Stage("singular outputs (eq. 24)", stage_singular, ("gait",), resolution=False),
-    Stage("Fig. 2: 1-D sweeps", stage_fig2, ("gait",),
-          figures=(Figures(F.fig2, ("Fig. 2: 1-D sweeps",)),)),
-    Stage("M1 grid", stage_grid, ("gait",)),
-    Stage("Fig. 3 and the conjecture", stage_fig3, ("gait", "M1 grid"), resolution=False,
-          figures=(Figures(F.fig3, ("Fig. 3 and the conjecture",)),)),
-    Stage("a, b and Fig. 4", stage_fig4, ("gait", "M1 grid"),
-          figures=(Figures(F.fig4, ("a, b and Fig. 4",)),)),
-    Stage("M1 NLP", stage_m1, ("gait", "M1 grid", "a, b and Fig. 4")),
-    Stage("virtual constraints", stage_vc, ("gait", "M1 NLP"), resolution=False),
-    Stage("robustness (s*), default gait", stage_robustness, ("gait", "M1 NLP")),
-    Stage(_SIM, stage_sim, ("gait", "M1 NLP"),
-          figures=tuple(Figures(f.task, (_SIM, "?" + _SIM_R), unless=_SIM_R,
-                                resolution=f.resolution) for f in _FIG56)),
-    Stage("basins of attraction, default gait", stage_basins, ("gait", "M1 NLP"),
-          figures=(Figures(F.basins_default, ("basins of attraction, default gait",)),)),
-    Stage("the sampling search's design", stage_search, (), model=True, only="robust"),
-    Stage("robust design", stage_robust_design, (), model=True, priority=10, only="robust"),
-    Stage("basins of the robust designs", stage_basins_robust,
-          ("robust design", "the sampling search's design"), priority=5, only="robust",
-          figures=(Figures(F.basins_robust, ("basins of the robust designs",)),)),
-    Stage("the NLP's trade-off curve", stage_tradeoff, ("robust design",), priority=5,
-          only="full"),
-    Stage("s* of the robust designs", stage_robustness_robust,
-          ("robust design", "the sampling search's design"), priority=5, only="robust",
-          figures=(Figures(F.tradeoff, ("robust design", "?the NLP's trade-off curve",
-                                        "s* of the robust designs")),)),
-    Stage(_SIM_R, stage_sim_robust, ("robust design", "the sampling search's design"),
-          priority=5, only="robust", figures=_FIG56),
-    Stage("uneven ground (MFPT, GSN)", stage_terrain, ("gait", "M1 NLP", "robust design"),
-          only="robust", figures=(Figures(F.terrain_figures, ("uneven ground (MFPT, GSN)",)),)),
-    Stage("gait family and speed", stage_family, ("robust design",), model=True,
-          only="robust", figures=(Figures(F.family_figure, ("gait family and speed",)),)),
-    Stage("in MuJoCo", stage_mujoco, ("gait", "M1 NLP", "robust design",
-                                      "the sampling search's design"),
-          only="robust", figures=(Figures(mujoco_figure, ("in MuJoCo",)),)),
-)
+        Returns
+        -------
+        bool
+        """
+        return self.scope is Scope.PAPER or (rabbit and not (self.scope is Scope.FULL
+                                                             and quick))
+
+
+def _needed(need, own: Stage, done: dict):
+    """The future a need stands for in a run (``done``: stage -> future)."""
+    need = need if isinstance(need, Need) else Need(need)
+    stage = need.stage or own
+    if stage in done or not need.optional:
+        return done[stage]
+    return None
+
+
+# the graph of a reproduction; the co-design and what hangs on it first in Dask's
+# priority; STAGES lists it in the order of the report
+GAIT = Stage("gait", stage_gait, model=True, resolution=False, priority=20,
+             figures=(Figures(F.gait_figures),))
+SINGULAR = Stage("singular outputs (eq. 24)", stage_singular, (GAIT,), resolution=False)
+FIG2 = Stage("Fig. 2: 1-D sweeps", stage_fig2, (GAIT,), figures=(Figures(F.fig2),))
+GRID = Stage("M1 grid", stage_grid, (GAIT,))
+FIG3 = Stage("Fig. 3 and the conjecture", stage_fig3, (GAIT, GRID), resolution=False,
+             figures=(Figures(F.fig3),))
+FIG4 = Stage("a, b and Fig. 4", stage_fig4, (GAIT, GRID), figures=(Figures(F.fig4),))
+M1 = Stage("M1 NLP", stage_m1, (GAIT, GRID, FIG4))
+VC = Stage("virtual constraints", stage_vc, (GAIT, M1), resolution=False)
+ROBUSTNESS = Stage("robustness (s*), default gait", stage_robustness, (GAIT, M1))
+BASINS = Stage("basins of attraction, default gait", stage_basins, (GAIT, M1),
+               figures=(Figures(F.basins_default),))
+SEARCH = Stage("the sampling search's design", stage_search, model=True, scope=Scope.ROBUST)
+ROBUST = Stage("robust design", stage_robust_design, model=True, priority=10,
+               scope=Scope.ROBUST)
+BASINS_R = Stage("basins of the robust designs", stage_basins_robust, (ROBUST, SEARCH),
+                 priority=5, scope=Scope.ROBUST, figures=(Figures(F.basins_robust),))
+TRADEOFF = Stage("the NLP's trade-off curve", stage_tradeoff, (ROBUST,), priority=5,
+                 scope=Scope.FULL)
+ROBUSTNESS_R = Stage("s* of the robust designs", stage_robustness_robust, (ROBUST, SEARCH),
+                     priority=5, scope=Scope.ROBUST,
+                     figures=(Figures(F.tradeoff, (ROBUST, optional(TRADEOFF), THIS)),))
+SIM_R = Stage("Fig. 5, Fig. 6, animation", stage_sim_robust, (ROBUST, SEARCH), priority=5,
+              scope=Scope.ROBUST)
+SIM = Stage("Fig. 5 runs, default gait", stage_sim, (GAIT, M1),
+            figures=(Figures(F.fig5_fig6, (THIS, optional(SIM_R))),
+                     Figures(F.animation, (THIS, optional(SIM_R)), resolution=True)))
+TERRAIN = Stage("uneven ground (MFPT, GSN)", stage_terrain, (GAIT, M1, ROBUST),
+                scope=Scope.ROBUST, figures=(Figures(F.terrain_figures),))
+FAMILY = Stage("gait family and speed", stage_family, (ROBUST,), model=True,
+               scope=Scope.ROBUST, figures=(Figures(F.family_figure),))
+MUJOCO = Stage("in MuJoCo", stage_mujoco, (GAIT, M1, ROBUST, SEARCH), scope=Scope.ROBUST,
+               figures=(Figures(mujoco_figure),))
+STAGES = (GAIT, SINGULAR, FIG2, GRID, FIG3, FIG4, M1, VC, ROBUSTNESS, SIM, BASINS, SEARCH,
+          ROBUST, BASINS_R, TRADEOFF, ROBUSTNESS_R, SIM_R, TERRAIN, FAMILY, MUJOCO)
+
+
+@dataclass
+class StageRecord:
+    """How a stage of a run went (a row of summary.json's ``stages``).
+
+    Parameters
+    ----------
+    status : Outcome
+        Ok, failed or skipped.
+    reason : str
+        Why it was skipped.
+    error : str
+        Why it failed.
+    traceback : str
+        Where it failed.
+    computed, reused : int
+        Its tasks computed and reused.
+    time : float
+        Its tasks' seconds of work.
+    """
+
+    status: Outcome
+    reason: str = ""
+    error: str = ""
+    traceback: str = ""
+    computed: int = 0
+    reused: int = 0
+    time: float = 0.0
+
+    def to_dict(self) -> dict:
+        """The row (without empty texts).
+
+        Returns
+        -------
+        dict
+        """
+        return {k: v for k, v in dataclasses.asdict(self).items() if v != ""}
+
+
+@dataclass
+class FigureJob:
+    """A figure task submitted for a stage."""
+
+    stage: Stage
+    future: object
 
 
 @dataclass
@@ -197,38 +313,17 @@ class ReproduceResult(Result):
     SUCCESS = ("ok",)
 
 
-def _applies(stage: Stage, rabbit: bool, quick: bool) -> bool:
-    return (stage.only == "paper" or rabbit) and not (stage.only == "full" and quick)
-
-
-def _figure_jobs(eng, stages, S: dict, res) -> list:
-    """(stage, figure task ref) of every figure of the stages in the graph."""
-    jobs = []
-    for st in stages:
-        if st.name not in S:
-            continue
-        for f in st.figures:
-            if f.unless and f.unless in S:
-                continue
-            args = [S.get(n[1:]) if n.startswith("?") else S[n] for n in f.needs]
-            with eng.stage(st.name, st.priority):
-                jobs.append((st.name, eng.submit(f.task, *args, *([res] if f.resolution
-                                                                 else []))))
-    return jobs
-
-
-def build(eng, model, res, quick: bool) -> tuple:
-    """Submit the whole graph: (stage refs by name, figure jobs)."""
+def build(eng, model, res, quick: bool) -> dict:
+    """Spawn every stage of the run's graph: stage -> its future."""
     rabbit = model.description == RABBIT_DESCRIPTION
     S = {}
     for st in STAGES:
-        if not _applies(st, rabbit, quick):
-            continue
-        args = ([model] if st.model else []) + [S[n] for n in st.needs] \
-            + ([res] if st.resolution else [])
-        with eng.stage(st.name, st.priority):
-            S[st.name] = eng.spawn(st.flow, *args)
-    return S, _figure_jobs(eng, STAGES, S, res)
+        if st.applies(rabbit, quick):
+            args = ([model] if st.model else []) + [_needed(n, st, S) for n in st.needs] \
+                + ([res] if st.resolution else [])
+            with eng.stage(st.name, st.priority):
+                S[st] = eng.spawn(st.flow, *args)
+    return S
 
 
 def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceResult:
@@ -272,9 +367,9 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
     try:
         with Engine(opts.scheduler, opts.workers, progress=opts.progress, log=log,
                     preload=(__name__,)) as eng:
-            S, jobs = build(eng, model, res, quick)
+            S = build(eng, model, res, quick)
             log.expect(S)
-            stages, summary, files = _collect(eng, S, jobs, staging, log)
+            stages, summary, files = _collect(eng, S, res, staging, log)
             eng.check_started()
             total = time.perf_counter() - t0
             crit = eng.critical_path()
@@ -286,7 +381,7 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
         _publish(staging, folder)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    bad = [k for k, v in stages.items() if v["status"] != "ok"]
+    bad = [k for k, v in stages.items() if v.status is not Outcome.OK]
     log(f"report: {folder / 'report.md'}  ({total:.0f} s; critical path "
         f"{crit['seconds']:.0f} s)")
     return ReproduceResult(
@@ -313,24 +408,24 @@ class Log:
             stage = Engine.current_stage()[0]
             print(f"   {stage}: {msg.strip()}" if stage else msg, file=sys.stderr, flush=True)
 
-    def stage(self, name: str, st: dict):
+    def stage(self, name: str, st: StageRecord):
         self.done += 1
-        what = st["status"] + (f" ({st.get('reason') or st.get('error')})"
-                               if st["status"] != "ok" else "")
-        self(f"[{self.done}/{self.total}] {name}: {what}; tasks computed {st['computed']}, "
-             f"reused {st['reused']}, {st['time']:.1f} s of work")
+        what = st.status + (f" ({st.reason or st.error})" if st.status is not Outcome.OK
+                            else "")
+        self(f"[{self.done}/{self.total}] {name}: {what}; tasks computed {st.computed}, "
+             f"reused {st.reused}, {st.time:.1f} s of work")
 
 
-def _status(eng, name: str, ref) -> dict:
-    """A stage's status from its ref (waited for)."""
+def _status(eng, name: str, future) -> StageRecord:
+    """A finished stage's record."""
     try:
-        ref.result()
-        return dict(status="ok")
+        future.result()
+        return StageRecord(Outcome.OK)
     except TaskError as e:
         origin = eng.origin_stage(e)
         if origin and origin != name:
-            return dict(status="skipped", reason=f"needs {origin!r}, which failed: {e}")
-        return dict(status="failed", error=str(e), traceback=e.detail[-2000:])
+            return StageRecord(Outcome.SKIPPED, reason=f"needs {origin!r}, which failed: {e}")
+        return StageRecord(Outcome.FAILED, error=str(e), traceback=e.detail[-2000:])
 
 
 def _merge(into: dict, part: dict):
@@ -344,42 +439,82 @@ def _merge(into: dict, part: dict):
             into[k] = v
 
 
-def _collect(eng, S: dict, jobs: list, staging: Path, log: Log) -> tuple:
-    """Wait for every stage (as they finish) and figure; write the figures."""
-    stages, files = {}, {}
-    pending = dict(S)
+def _collect(eng, S: dict, res, staging: Path, log: Log) -> tuple:
+    """Wait for the stages as they finish, submitting each figure once the stages it
+    draws from are done, then for the figures; write the figures and the gaits."""
+    stages, jobs = {}, []
+    figures = [(st, f) for st in S for f in st.figures]
+    pending = {fut: st for st, fut in S.items()}
     while pending:
-        name = next((n for n, r in pending.items() if r.done()), None)
-        if name is None:
-            time.sleep(0.05)
-            continue
-        stages[name] = _status(eng, name, pending.pop(name))
-        stages[name].update(_counts(eng, name))
-        log.stage(name, stages[name])
-    for stage, ref in jobs:
+        for fut in cf.wait(pending, return_when=cf.FIRST_COMPLETED).done:
+            st = pending.pop(fut)
+            stages[st] = _status(eng, st.name, fut)
+        for st, f in list(figures):
+            needs = [n if isinstance(n, Need) else Need(n) for n in f.needs]
+            if all((n.stage or st) in stages or (n.optional and (n.stage or st) not in S)
+                   for n in needs):
+                figures.remove((st, f))
+                if all(stages.get(n.stage or st, StageRecord(Outcome.OK)).status is Outcome.OK
+                       for n in needs):
+                    args = [_needed(n, st, S) for n in needs] + ([res] if f.resolution else [])
+                    with eng.stage(st.name, st.priority):
+                        jobs.append(FigureJob(st, eng.submit(f.task, *args)))
+    for st, rec in stages.items():
+        rec.computed, rec.reused, rec.time = _counts(eng, st.name)
+        log.stage(st.name, rec)
+    files = {}
+    for job in jobs:
         try:
-            for fname, by_fmt in ref.result().items():
+            for fname, by_fmt in job.future.result().items():
                 files[fname] = _write_figure(staging / "figures", fname, by_fmt)
         except TaskError as e:
-            if stages.get(stage, {}).get("status") == "ok":
-                stages[stage] = dict(stages[stage], status="failed",
-                                     error=f"figure: {e}")
+            if stages[job.stage].status is Outcome.OK:
+                stages[job.stage] = dataclasses.replace(stages[job.stage], status=Outcome.FAILED,
+                                                        error=f"figure: {e}")
     summary = {}
-    for name, ref in S.items():
-        if stages[name]["status"] == "ok":
-            _merge(summary, json_safe(ref.result().summary))
-    if stages.get("gait", {}).get("status") == "ok":
-        S["gait"].result().gait.save(staging / "gait.json")
-    order = [s.name for s in STAGES if s.name in stages]
-    return {n: stages[n] for n in order}, summary, files
+    for st, fut in S.items():
+        if stages[st].status is Outcome.OK:
+            _merge(summary, json_safe(fut.result().summary))
+    summary["replay"] = _replay(S, stages, staging, res)
+    return {st.name: stages[st] for st in STAGES if st in stages}, summary, files
 
 
-def _counts(eng, name: str) -> dict:
+def _replay(S: dict, stages: dict, staging: Path, res) -> dict:
+    """The gaits of the run's designs saved beside the report, and the ``biped simulate``
+    arguments that replay each design from the paper's perturbation."""
+    done = {st.flow: fut.result() for st, fut in S.items() if stages[st].status is Outcome.OK}
+    out, tail = {}, ["--perturb", "0.01", "0.1", "--mu", "0.6", "--steps", str(res.sim_steps)]
+    designs = []
+    if stage_gait in done:
+        done[stage_gait].gait.save(staging / "gait.json")
+        designs.append(("virtual constraints, default gait", "gait.json", ["--controller", "vc"]))
+        if stage_m1 in done:
+            designs.append(("the chosen deadbeat M1, default gait", "gait.json",
+                            ["--controller", "tv", "--m1", *_numbers(done[stage_m1].chosen)]))
+    if stage_search in done:
+        d = done[stage_search].design
+        d.gait.save(staging / "gait_search.json")
+        designs.append(("the sampling search's design, its gait", "gait_search.json",
+                        ["--controller", "tv", "--m1", *_numbers(d.M1), "--rejoin",
+                         *_numbers([d.rejoin])]))
+    for label, file, args in designs:
+        out[label] = dict(gait_file=file, simulate_args=["--gait", file, *args, *tail])
+    if stage_robust_design in done:     # with the co-design's own verification settings
+        r = done[stage_robust_design].result
+        r.gait.save(staging / "gait_robust.json")
+        out["the robust co-design, its gait"] = dict(
+            gait_file="gait_robust.json", simulate_args=replay_args(r, "gait_robust.json"))
+    return out
+
+
+def _numbers(x) -> list:
+    return [repr(float(v)) for v in x]
+
+
+def _counts(eng, name: str) -> tuple:
     recs = [r for r in eng.records if r.stage == name]
-    return dict(computed=sum(r.state == "computed" for r in recs),
-                reused=sum(r.state == "reused" for r in recs),
-                time=round(sum(r.seconds for r in recs if r.state == "computed"
-                               and not r.flow), 2))
+    return (sum(r.state == "computed" for r in recs), sum(r.state == "reused" for r in recs),
+            round(sum(r.seconds for r in recs if r.state == "computed" and not r.flow), 2))
 
 
 def _write_figure(folder: Path, name: str, by_fmt: dict) -> list:
@@ -398,7 +533,7 @@ def _finish(summary, stages, files, staging, opts, res, model, quick, total, cri
             skipped="the robust co-design starts from gait options calibrated on RABBIT; "
                     "run 'biped m1 --robust --robot ...' for another robot"))
     summary.update(mode="quick" if quick else "full", stages=stages, figures=files,
-                   options=dict(res.__dict__, robot=opts.robot), total_time=total,
+                   options=dict(res.to_dict(), robot=opts.robot), total_time=total,
                    critical_path=crit, finished=time.strftime("%Y-%m-%d %H:%M:%S %z"))
     if rabbit:
         summary["paper"] = PAPER
@@ -425,6 +560,7 @@ def _publish(staging: Path, folder: Path):
     for p in sorted(old - new):
         if p.parent == figures.resolve() and p.is_file():     # only files in figures/
             p.unlink()
-    for name in ("gait.json", "summary.json", "report.md"):
+    for name in ("gait.json", "gait_robust.json", "gait_search.json", "summary.json",
+                 "report.md"):
         if (staging / name).exists():
             os.replace(staging / name, folder / name)

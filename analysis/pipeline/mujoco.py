@@ -36,10 +36,10 @@ class MujocoStage(StageResult):
 
 
 def _budget(res: Resolution) -> dict:
-    """Steps and rollouts: the issue's 100 steps in a full run, fewer in a quick one."""
-    if res.quick:
-        return dict(steps=30, scale_steps=30, scales=(1, 2, 3), directions=8)
-    return dict(steps=100, scale_steps=30, scales=(1, 2, 3, 4, 6, 8), directions=16)
+    """Steps and rollouts (the run's resolution: 100 steps in a full run, fewer in a
+    quick one)."""
+    return dict(steps=res.mujoco_steps, scale_steps=res.mujoco_scale_steps,
+                scales=tuple(res.mujoco_scales), directions=res.mujoco_directions)
 
 
 @task

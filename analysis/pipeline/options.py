@@ -7,17 +7,22 @@ from pathlib import Path
 
 from biped_casadi import RABBIT_DESCRIPTION, robot
 
+from ..design.codesign import FULL, QUICK, CodesignSettings
+from ..robustness import RobustnessSettings
+
 __all__ = ["Resolution", "ReproduceOptions", "run_folder"]
 
 
 @dataclass(frozen=True)
 class Resolution:
-    """The resolution of every stage (what the numbers depend on).
+    """What every stage computes at which resolution (what the numbers depend on).
+
+    The full run's settings by default, the quick run's from :meth:`make`.
 
     Parameters
     ----------
     quick : bool
-        The coarse variant: fewer points and starts, the co-design's gait fixed.
+        Whether these are the quick run's settings (its folder and report).
     line_points : int
         Fig. 2: points per component on [-10, 10].
     grid_n : int
@@ -30,10 +35,32 @@ class Resolution:
         Fig. 4's range of both components.
     nlp_starts : int
         Starts of the M1 NLP.
+    nlp_random : int
+        Random starts of the M1 NLP besides the grid's best points.
     sim_steps : int
         Steps of the full-order runs of Fig. 5 and 6.
     animation_steps : int
         Steps in the animation.
+    robustness : RobustnessSettings
+        How s* is measured (directions, bisection rounds) by the walking stages.
+    basin_n : int
+        Points per side of the basins' grids.
+    codesign : CodesignSettings
+        The robust co-design (the gait co-designed in the full run, fixed in the quick).
+    terrain_sigmas : tuple of float
+        Uneven ground: the sigmas of the MFPT curves, m.
+    terrain_runs, terrain_steps : int
+        Uneven ground: runs of each Monte Carlo and their steps.
+    terrain_error_runs : int
+        Uneven ground: runs of each model-error Monte Carlo.
+    gsn_every_design : bool
+        The gait sensitivity norm of every time-varying design (else of the last).
+    mujoco_steps, mujoco_scale_steps : int
+        In MuJoCo: the steps of each walk, and of each walk from a scaled perturbation.
+    mujoco_scales : tuple of float
+        In MuJoCo: the scales of the paper's perturbation tried.
+    mujoco_directions : int
+        In MuJoCo: the perturbation directions of the stride map.
     """
 
     quick: bool = False
@@ -43,8 +70,21 @@ class Resolution:
     domain_n: int = 81
     domain_range: tuple = (-10.0, 10.0)
     nlp_starts: int = 10
+    nlp_random: int = 2
     sim_steps: int = 10
     animation_steps: int = 4
+    robustness: RobustnessSettings = RobustnessSettings()
+    basin_n: int = 101
+    codesign: CodesignSettings = FULL
+    terrain_sigmas: tuple = (0.002, 0.004, 0.008, 0.012)
+    terrain_runs: int = 32
+    terrain_steps: int = 20
+    terrain_error_runs: int = 12
+    gsn_every_design: bool = True
+    mujoco_steps: int = 100
+    mujoco_scale_steps: int = 30
+    mujoco_scales: tuple = (1, 2, 3, 4, 6, 8)
+    mujoco_directions: int = 16
 
     @classmethod
     def make(cls, quick: bool = False, **kw) -> "Resolution":
@@ -53,7 +93,8 @@ class Resolution:
         Parameters
         ----------
         quick : bool
-            The coarse variant.
+            The quick run's settings: coarser grids, fewer starts, directions and runs,
+            the co-design's gait fixed.
         **kw
             Fields to change.
 
@@ -62,9 +103,25 @@ class Resolution:
         Resolution
         """
         base = dict(quick=True, line_points=101, domain_n=41, plane_n=81, nlp_starts=4,
-                    sim_steps=6, animation_steps=2) if quick else {}
+                    nlp_random=0, sim_steps=6, animation_steps=2,
+                    robustness=RobustnessSettings(directions=8, rounds=6), basin_n=41,
+                    codesign=QUICK, terrain_sigmas=(0.004, 0.008), terrain_runs=16,
+                    terrain_steps=12, terrain_error_runs=6, gsn_every_design=False,
+                    mujoco_steps=30, mujoco_scales=(1, 2, 3), mujoco_directions=8) \
+            if quick else {}
         base.update(kw)
         return cls(**base)
+
+    def to_dict(self) -> dict:
+        """The fields in JSON types (the settings as their dictionaries).
+
+        Returns
+        -------
+        dict
+        """
+        return {f.name: (v.to_dict() if hasattr(v, "to_dict") else dict(v.__dict__)
+                         if hasattr(v, "__dataclass_fields__") else v)
+                for f in fields(self) for v in (getattr(self, f.name),)}
 
 
 @dataclass

@@ -321,7 +321,7 @@ def stage_m1(engine, gait_stage, grid_stage, domain_stage, res: Resolution) -> M
         if _is_rabbit(g.model) else None
     refs = {}
     for name, grp in groups:
-        kw = dict(n_best=k, n_ipopt=min(4, k), n_random=0 if res.quick else 2)
+        kw = dict(n_best=k, n_ipopt=min(4, k), n_random=res.nlp_random)
         refs[name] = engine.submit(m1_nlp, g, grp, kw, maps)
     out = {}
     for name, _ in groups:

@@ -86,21 +86,19 @@ def stage_terrain(engine, gait_stage, m1_stage, robust_stage, res: Resolution) -
     check against the Monte Carlo's step-time RMS at sigma = 0.5 mm; the MFPT with the
     torso 20 % heavier than the controller's model for two gain sets."""
     g, m1, rb = gait_stage.result().gait, m1_stage.result(), robust_stage.result().result
-    quick = res.quick
     cands = _candidates(g, m1, rb)
-    sigmas = (0.004, 0.008) if quick else (0.002, 0.004, 0.008, 0.012)
-    runs, steps = (16, 12) if quick else (32, 20)
+    sigmas, runs, steps = tuple(res.terrain_sigmas), res.terrain_runs, res.terrain_steps
     mfpt_st = {sig: MonteCarloSettings(sigma=sig, runs=runs, max_steps=steps, chunk=runs)
                for sig in sigmas}
     tv = [c for c in cands if c[2].controller == "tv"]
-    gsn_cands = tv[-1:] if quick else tv
+    gsn_cands = tv if res.gsn_every_design else tv[-1:]
     gsn_st = MonteCarloSettings(sigma=5e-4, runs=runs, max_steps=steps, chunk=runs)
     # the torso 20 % heavier at the largest sigma and twice as heavy at 4 mm, two gain
     # sets (the full-order simulator on CasADi's virtual machine: for a few short runs
     # compiling a simulator per plant takes longer); without an error the gains change
     # nothing
     err_label, err_gait, err_spec = cands[1]
-    err_runs = 6 if quick else 12
+    err_runs = res.terrain_error_runs
     errors = ((0.0, sigmas[-1]), (0.2, sigmas[-1]), (1.0, 0.004))
     err_specs = []
     for gains in TERRAIN_GAINS:

@@ -12,7 +12,7 @@ from biped_casadi import (PAPER_SIZES, RABBIT_DESCRIPTION, Design, SimulationOpt
 from gait_opt import GaitOptions, optimize_gait
 
 from ..design import ROBUST_GAIT
-from ..design.codesign import FULL, QUICK, TODAY_DESIGN, codesign_flow, tradeoff_flow
+from ..design.codesign import TODAY_DESIGN, codesign_flow, tradeoff_flow
 from ..reporting.constants import PAPER
 from ..robustness import RobustnessSettings, basin_to_boundary, kept_directions, robustness
 from ..tasks import task
@@ -22,7 +22,7 @@ from .paper import StageResult
 __all__ = ["SimStage", "BasinStage", "SearchStage", "RobustStage", "simulate_design",
            "stage_robustness", "stage_sim", "stage_basins", "stage_search",
            "stage_robust_design", "stage_tradeoff", "stage_robustness_robust",
-           "stage_sim_robust", "stage_basins_robust", "BASIN_REFINE", "codesign_settings"]
+           "stage_sim_robust", "stage_basins_robust", "BASIN_REFINE"]
 
 #: basins on the adaptive grid (``refine``): every 4th row and column first, the boundary
 #: cell by cell, each on a window grown until it holds the basin's boundary
@@ -63,19 +63,6 @@ class RobustStage(StageResult):
     """The robust co-design (None for a robot it is not calibrated for)."""
 
     result: object = None
-
-
-def codesign_settings(res: Resolution):
-    """The co-design of a quick (the gait fixed) or a full reproduction."""
-    return QUICK if res.quick else FULL
-
-
-def _robustness_settings(res: Resolution) -> RobustnessSettings:
-    return RobustnessSettings(directions=8, rounds=6) if res.quick else RobustnessSettings()
-
-
-def _basin_n(res: Resolution) -> int:
-    return 41 if res.quick else 101
 
 
 def _sim_options(res: Resolution) -> SimulationOptions:
@@ -140,7 +127,7 @@ def stage_robustness(engine, gait_stage, m1_stage, res: Resolution) -> StageResu
                           Design(m1.results[name])))
     if g.model.description == RABBIT_DESCRIPTION:
         cands.append(("the paper's printed M1", Design(PAPER["example_M1"])))
-    st = _robustness_settings(res)
+    st = res.robustness
     return StageResult(dict(robustness=dict(settings=dict(st.__dict__),
                                             rows=s_star_rows(engine, "default", g, cands, st))))
 
@@ -188,7 +175,7 @@ def stage_basins(engine, gait_stage, m1_stage, res: Resolution) -> BasinStage:
     """Basins on the Poincaré section: the deadbeat M1 beside virtual constraints on the
     default gait."""
     g, M1 = gait_stage.result().gait, m1_stage.result().chosen
-    bs = _basins(engine, [Design.tv(g, M1), Design.vc(g)], _basin_n(res))
+    bs = _basins(engine, [Design.tv(g, M1), Design.vc(g)], res.basin_n)
     _log_basins(engine, "default", bs)
     return BasinStage(dict(basins=dict(default=[b.to_dict() for b in bs])), bs,
                       ["deadbeat M1", "virtual constraints"],
@@ -202,10 +189,10 @@ def stage_search(engine, model, res: Resolution) -> SearchStage:
     constraints on that gait, and its basin."""
     g3 = engine.submit(optimize_gait, model, GaitOptions(**ROBUST_GAIT).for_model(model)).result()
     ds = Design.tv(g3, TODAY_DESIGN, 0.75)
-    b = engine.submit(basin_to_boundary, ds, _basin_n(res), refine=BASIN_REFINE)
+    b = engine.submit(basin_to_boundary, ds, res.basin_n, refine=BASIN_REFINE)
     rows = s_star_rows(engine, "search", g3, [("virtual constraints", None),
                                               ("the sampling search's design", ds)],
-                       _robustness_settings(res))
+                       res.robustness)
     return SearchStage(dict(search_design=dict(
         M1=list(ds.M1), rejoin=ds.rejoin, gait_options=dict(ROBUST_GAIT),
         note="the sampling search's shipped design (biped m1 --robust --method search), "
@@ -217,7 +204,7 @@ def stage_search(engine, model, res: Resolution) -> SearchStage:
 def stage_robust_design(engine, model, res: Resolution) -> RobustStage:
     """The robust time-varying design by the co-design NLP: the gait co-designed in the
     full run (the settings of ``biped m1 --robust``), fixed in the quick one."""
-    r = engine.spawn(codesign_flow, model, codesign_settings(res)).result()
+    r = engine.spawn(codesign_flow, model, res.codesign).result()
     engine.say(f"   {r.message}")
     return RobustStage(dict(robust_design=dict(r.to_dict(),
                                                method="co-design NLP (biped m1 --robust)")), r)
@@ -227,7 +214,7 @@ def stage_robust_design(engine, model, res: Resolution) -> RobustStage:
 def stage_tradeoff(engine, robust_stage, res: Resolution) -> StageResult:
     """The (max|lambda|, s*) trade-off traced by the NLP on the co-design's gait."""
     r = robust_stage.result().result
-    pts = engine.spawn(tradeoff_flow, r.design, float(r.s_star), codesign_settings(res),
+    pts = engine.spawn(tradeoff_flow, r.design, float(r.s_star), res.codesign,
                        (0.25, 0.5, 0.75, 1.0)).result()
     return StageResult(dict(robust_design=dict(tradeoff=pts)))
 
@@ -240,7 +227,7 @@ def stage_robustness_robust(engine, robust_stage, search_stage, res: Resolution
     rb, ss = robust_stage.result().result, search_stage.result()
     g2 = rb.gait
     mine = ("robust design (co-design NLP)", rb.design)
-    st = _robustness_settings(res)
+    st = res.robustness
     if g2.cache_key == ss.gait.cache_key:
         rows = s_star_rows(engine, "robust", g2, [("virtual constraints", None), mine,
                                                   ("the sampling search's design",
@@ -270,7 +257,7 @@ def stage_basins_robust(engine, robust_stage, search_stage, res: Resolution) -> 
     constraints."""
     rb, ss = robust_stage.result().result, search_stage.result()
     g2 = rb.gait
-    b_rob, b_vc = _basins(engine, [rb.design, Design.vc(g2)], _basin_n(res))
+    b_rob, b_vc = _basins(engine, [rb.design, Design.vc(g2)], res.basin_n)
     bs = [b_rob, ss.basin, b_vc]
     _log_basins(engine, "robust", bs)
     labels = ["robust design (co-design NLP)", "the sampling search's design",

@@ -477,7 +477,8 @@ def _robust_lines(s: dict) -> list:
     if rd.get("skipped"):
         lines += [f"Robust design: not run ({rd['skipped']}).", ""]
     elif rd:
-        lines += _robust_design_lines(rd)
+        lines += _robust_design_lines(rd, (s.get("replay") or {}).get(
+            "the robust co-design, its gait", {}).get("simulate_args") or [])
         lines += _comparison_lines(s)
     if rob:
         lines += _robustness_table(s, rob)
@@ -491,8 +492,27 @@ def _esc(t) -> str:
     return str(t).replace("|", "\\|").replace("\n", " ")
 
 
-def _robust_design_lines(rd: dict) -> list:
-    """The robust design's finding, the design and its full-order check, what binds."""
+def _replay_lines(s: dict) -> list:
+    """How to replay each design of the run in full order (the gait files beside the
+    report)."""
+    replay = s.get("replay") or {}
+    if not replay:
+        return []
+    return ["## Replay a design", "",
+            "Each design from the paper's perturbation in the full-order simulator (the gait "
+            "files are beside this report; run from this folder):", ""] + [
+        f"- {label}: `biped simulate {' '.join(r.get('simulate_args', []))}`"
+        for label, r in replay.items()] + [""]
+
+
+def _robust_design_lines(rd: dict, replay: list = ()) -> list:
+    """The robust design's finding, the design and its full-order check, what binds
+    (``replay``: the simulate arguments when the design has none of its own)."""
+    args = rd.get("simulate_args") or list(replay)
+    solves = _g(rd, "ipopt", "solves") or []
+    seconds = _g(rd, "ipopt", "time")
+    if seconds is None and solves and all(x.get("time") is not None for x in solves):
+        seconds = sum(x["time"] for x in solves)
     met = rd.get("status") == "target_met"
     lines = [
         "The paper's linear analysis recommends deadbeat outputs (max|λ| -> 0). From the "
@@ -525,16 +545,15 @@ def _robust_design_lines(rd: dict) -> list:
         + "; ".join(f"{k.replace('_', ' ')} (s = {_f(v.get('scale'), '.4g')}) {v.get('passed')} "
                     f"of {len(v.get('outcomes', []))} directions walk and converge"
                     for k, v in (rd.get("verified") or {}).items())
-        + f". Replay: `biped simulate {' '.join(rd.get('simulate_args', []))}`.", ""]
+        + (f". Replay: `biped simulate {' '.join(args)}`." if args else "."), ""]
     act = rd.get("active_constraints") or []
     if act:
         lines += ["What binds at the optimum (the inequalities with the largest "
                   "multipliers): " + "; ".join(
                       f"{a['constraint']} ({_f(a['multiplier'], '.3g')})"
                       for a in act[:4]) + ". IPOPT: "
-                  f"{len(_g(rd, 'ipopt', 'solves') or [])} solves, "
-                  f"{_g(rd, 'ipopt', 'iterations')} iterations, "
-                  f"{_f(_g(rd, 'ipopt', 'time'), '.1f')} s.", ""]
+                  f"{len(solves)} solves, {_g(rd, 'ipopt', 'iterations')} iterations"
+                  + (f", {_f(seconds, '.1f')} s." if seconds is not None else "."), ""]
     return lines
 
 
@@ -643,7 +662,8 @@ def write_report(out: Path, s: dict) -> Path:
         lines += ["The paper's numbers are RABBIT's; for this robot the same stages give:", "",
                   "## Results", "", "| quantity | ours | note |", "|---|---|---|"]
         lines += [f"| {esc(a)} | {esc(b)} | {esc(c)} |" for a, b, c in _robot_rows(s)]
-    lines += [""] + _robust_lines(s) + _terrain_lines(s) + _family_lines(s) + mujoco_lines(s)
+    lines += [""] + _robust_lines(s) + _terrain_lines(s) + _family_lines(s) + mujoco_lines(s) \
+        + _replay_lines(s)
     cp = s.get("critical_path") or {}
     lines += ["## Stages", "", "Each stage is a flow of tasks; every result is kept in the "
               "cache folder by its inputs and the version of the numerical code.  Computed: "

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from biped_casadi import Design, SimulationOptions, design_first
+from biped_casadi import Design, SimulationOptions
 from biped_casadi.control.output_law import SECTION
 from biped_casadi.numerics import as_number
 from biped_casadi.results import Result, internal
@@ -114,7 +114,6 @@ class BasinResult(Result):
 
 
 @task
-@design_first
 def basin(design: Design, n: int = 101,
           q_span: float = 0.05, dq_span: float = 0.5, steps: int = 10, tol: float = 1e-3,
           options: SimulationOptions | None = None, rk4_steps: int = 128,
@@ -127,8 +126,8 @@ def basin(design: Design, n: int = 101,
     of the constraint surface with that q_u and dq_u), walked for ``steps`` impacts with
     every validity condition checked.
 
-    ``basin(gait)`` is the basin of virtual constraints on the gait, ``basin(gait,
-    Design(M1, rejoin))`` a time-varying design's.
+    ``basin(Design.vc(gait))`` is the basin of virtual constraints on the gait,
+    ``basin(Design.tv(gait, M1, rejoin))`` a time-varying design's.
 
     Parameters
     ----------
@@ -162,6 +161,7 @@ def basin(design: Design, n: int = 101,
     -------
     BasinResult
     """
+    design = Design.require(design)
     if isinstance(n, bool) or not isinstance(n, int) or n < 2:
         raise ValueError(f"n (cells per axis) must be an integer >= 2, got {n!r}")
     q_span = as_number(q_span, "q_span", positive=True)

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from biped_casadi import Design, SimulationOptions, design_first
+from biped_casadi import Design, SimulationOptions
 from biped_casadi.control.output_law import SECTION
 from biped_casadi.numerics import as_number
 from biped_casadi.simulation import virtual_constraint_walker
@@ -33,7 +33,6 @@ CAP_SCAN_STEP = 1e-3
 NO_STATE = "no_state"
 
 
-@design_first
 def section_cap(design: Design, nodes: int = 100) -> dict:
     """The largest window of the section that holds states of a walking robot.
 
@@ -71,6 +70,7 @@ def section_cap(design: Design, nodes: int = 100) -> dict:
         past the scan on a side where it always does), ``dq_lift`` (sqrt(g / r),
         rad/s) and ``reason`` (one line).
     """
+    design = Design.require(design)
     gait = design.gait
     model = gait.model
     xs = gait.state_at(SECTION * gait.T)
@@ -178,7 +178,6 @@ def _window_row(b: BasinResult, edges: dict) -> dict:
 
 
 @task
-@design_first
 def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
                       dq_span: float = 0.5, steps: int = 10, tol: float = 1e-3,
                       options: SimulationOptions | None = None, rk4_steps: int = 128,
@@ -242,6 +241,7 @@ def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
         Naming ``factor``, ``zoom``, ``max_q_span`` or ``max_dq_span`` (and the
         arguments :func:`basin` checks).
     """
+    design = Design.require(design)
     factor = as_number(factor, "factor", positive=True)
     if factor <= 1:
         raise ValueError(f"factor must be > 1, got {factor!r}")

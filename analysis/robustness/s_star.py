@@ -32,21 +32,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from biped_casadi import Design, SimulationOptions, design_first, directions, require_same_robot
+from biped_casadi import Design, SimulationOptions, directions, require_same_robot
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import (WalkBatch, start_states, virtual_constraint_walker,
                                      zero_dynamics_walker)
 from biped_casadi.simulation.outcome import NOT_CONVERGED
-from biped_casadi.control.reference import gait_first
-from gait_opt import Gait
 
-from ..cluster import cluster_client
-from ..tasks import resolve_scheduler, task
+from ..tasks import Engine, resolve_scheduler, task
 from ..stability.poincare import poincare_map
 from ..stability.vc_map import vc_eigenvalue
 
 __all__ = ["Design", "RobustnessSettings", "RobustnessResult", "KeptDirections",
-           "kept_directions", "robustness", "BatchSStar", "s_star_batch", "bisect_scale"]
+           "kept_directions", "robustness", "BatchSStar", "s_star_batch", "bisect_scale",
+           "walk_batch"]
 
 
 @dataclass(frozen=True)
@@ -229,7 +227,6 @@ _KEEP_BATCH = 32          # candidate directions walked at once
 
 
 @task
-@gait_first
 def kept_directions(gait, settings: RobustnessSettings | None = None,
                     progress=None) -> KeptDirections:
     """The directions from which virtual constraints walk at full scale.
@@ -354,13 +351,12 @@ def _runner(gait, design, st: RobustnessSettings):
 
 
 @task
-@design_first
 def robustness(design: Design, settings: RobustnessSettings | None = None, kept=None,
                progress=None) -> RobustnessResult:
     """s* of a design: a time-varying one, or virtual constraints.
 
-    ``robustness(gait)`` measures virtual constraints on the gait, ``robustness(gait,
-    Design(M1, rejoin))`` a time-varying design on it.
+    ``robustness(Design.vc(gait))`` measures virtual constraints on the gait,
+    ``robustness(Design.tv(gait, M1, rejoin))`` a time-varying design on it.
 
     Parameters
     ----------
@@ -377,6 +373,7 @@ def robustness(design: Design, settings: RobustnessSettings | None = None, kept=
     -------
     RobustnessResult
     """
+    design = Design.require(design)
     gait = design.gait
     model = gait.model
     require_same_robot(model, gait)
@@ -481,9 +478,33 @@ def _cause(batch: WalkBatch, tol: float) -> str:
     return v if v == NOT_CONVERGED else f"{v} in step {int(batch.fail_step[j])}"
 
 
-def _walk_task(gait_dict, options, rk4_steps, q0, dq0, M1s, rejoin, steps):
-    """One batch walked on a Dask worker (the walker built once per worker process)."""
-    gait = Gait.from_dict(gait_dict)
+@task
+def walk_batch(gait, options: SimulationOptions, rk4_steps: int, q0, dq0, M1s, rejoin,
+               steps: int) -> WalkBatch:
+    """One batch of s*'s bisection walked on the zero dynamics (a task; the walker is
+    built once per process).
+
+    Parameters
+    ----------
+    gait : Gait
+        The reference.
+    options : SimulationOptions
+        The walker's validity thresholds.
+    rk4_steps : int
+        RK4 steps per T.
+    q0, dq0 : numpy.ndarray
+        (n, nq) start states.
+    M1s : numpy.ndarray
+        (n, nu) outputs.
+    rejoin : numpy.ndarray
+        (n,) rejoin times, fractions of T.
+    steps : int
+        Steps to walk.
+
+    Returns
+    -------
+    WalkBatch
+    """
     walker = zero_dynamics_walker(gait, options, rk4_steps, jit=True)
     return walker.walk(q0, dq0, M1s, rejoin, steps=steps)
 
@@ -533,25 +554,24 @@ def s_star_batch(walker, gait, designs, dirs, settings: RobustnessSettings,
                                    np.repeat(scales[a:a + chunk], nk))
             yield part, (q0, dq0, np.repeat(M1[part], nk, axis=0), np.repeat(rj[part], nk))
 
-    def walked(client, idx, scales):
-        if client is None:
+    def walked(eng, idx, scales):
+        if eng is None:
             for part, args in batches(idx, scales):
                 yield part, walker.walk(*args, steps=st.steps)
             return
-        gdict = gait.definition()
-        futs = [(part, client.submit(_walk_task, gdict, walker.options, walker.rk4_steps,
-                                     *args, st.steps, pure=False))
-                for part, args in batches(idx, scales)]
-        for part, f in futs:
-            yield part, f.result()
+        parts = list(batches(idx, scales))
+        out = dict(eng.each(walk_batch, {i: (gait, walker.options, walker.rk4_steps, *args,
+                                             st.steps) for i, (_, args) in enumerate(parts)}))
+        for i, (part, _) in enumerate(parts):
+            yield part, out[i]
 
     where = "synchronous" if scheduler is None else resolve_scheduler(scheduler)
-    with (cluster_client(where) if where != "synchronous" else contextlib.nullcontext()) \
-            as client:
+    with (Engine(where, cache=False) if where != "synchronous" else
+          contextlib.nullcontext()) as eng:
         def evaluate(idx, scales):
             nonlocal used
             ok, info = [], []
-            for part, B in walked(client, idx, scales):
+            for part, B in walked(eng, idx, scales):
                 used += B.scenario_steps
                 for j in range(part.size):
                     b = B.take(slice(j * nk, (j + 1) * nk))

@@ -42,7 +42,6 @@ from biped_casadi.simulation.kernel import strike
 from biped_casadi.control.output_law import (SECTION, check_M1, check_M1_range, check_rejoin,
                                      decoupling_denominator, is_singular)
 from biped_casadi.results import Result
-from biped_casadi.control.reference import gait_first
 
 from .variational import variational_jacobian
 
@@ -608,7 +607,6 @@ class PoincareMap:
         return self.map_jac.map(n, "thread", self.threads)
 
 
-@gait_first
 def singular_m1_values(gait) -> np.ndarray:
     """The single-component singular outputs M1(j) = D11 / D12(j) at q^d(T) (eq. 24).
 
@@ -630,7 +628,6 @@ def singular_m1_values(gait) -> np.ndarray:
     return D[0, 0] / D[0, 1:]
 
 
-@gait_first
 @cached(maxsize=8)
 def poincare_map(gait, **options) -> PoincareMap:
     """The :class:`PoincareMap` of a model, gait and options, built once.
@@ -652,13 +649,14 @@ def poincare_map(gait, **options) -> PoincareMap:
     return PoincareMap(model, gait, **options)
 
 
-@gait_first
 def poincare_eigenvalues(gait, M1=None, method: str = "variational", *,
                          rejoin: float = PAPER_REJOIN) -> PoincareResult:
     """A^z, its eigenvalues and the stability status for outputs M1 (docs: theory, §4).
 
     Implements eq. (22): the fixed point is locally exponentially stable, status
-    'stable', when max ``|lambda|`` of A^z is below 1.  ``poincare_eigenvalues(gait, M1)`` (the older form) still works, with a deprecation warning.
+    'stable', when max ``|lambda|`` of A^z is below 1.  ``poincare_eigenvalues(model, gait,
+    M1)``, the form of the toolkit's specification, is the same call (the model must be
+    the gait's).
 
     Parameters
     ----------
@@ -679,6 +677,9 @@ def poincare_eigenvalues(gait, M1=None, method: str = "variational", *,
     PoincareResult
         ``r.A`` (2x2 A^z), ``r.eigenvalues``, ``r.max_abs``, ``r.status``.
     """
+    if not hasattr(gait, "T") and hasattr(M1, "T"):     # (model, gait, M1)
+        require_same_robot(gait, M1)
+        gait, M1, method = M1, method, "variational"
     if isinstance(M1, Design):
         d = Design.of(M1, gait)
         if d.M1 is None:

@@ -29,7 +29,6 @@ from biped_casadi.caching import cached
 from biped_casadi.numerics import rk4_step
 from biped_casadi.control.output_law import outputs
 from biped_casadi.control.zero_dynamics import zero_dynamics
-from biped_casadi.control.reference import gait_first
 
 __all__ = ["VariationalJacobian", "variational_jacobian"]
 
@@ -279,7 +278,6 @@ def _step_kernels(nu: int):
     return simd.kernels(specs, f"variational_nu{nu}", "-O2")
 
 
-@gait_first
 @cached(maxsize=8)
 def variational_jacobian(gait, tau_s: float, n_pre: int, n_post: int,
                          rejoin: float = 0.5) -> VariationalJacobian:

@@ -39,7 +39,6 @@ from biped_casadi.control.virtual_constraints import (ConstraintSurface, Virtual
                                                      constraint_surface)
 from biped_casadi.control.output_law import SECTION
 from biped_casadi.results import Result
-from biped_casadi.control.reference import gait_first
 
 from .poincare import FIXED_POINT_TOL
 
@@ -289,7 +288,6 @@ class VirtualConstraintMap:
                              delta_zero_squared=delta2, message=message, **common)
 
 
-@gait_first
 @cached(maxsize=8)
 def vc_map(gait, phase=None, H0=None, n_steps: int = 1000) -> VirtualConstraintMap:
     """The :class:`VirtualConstraintMap` of constraints fitted to a gait, built once.
@@ -315,7 +313,6 @@ def vc_map(gait, phase=None, H0=None, n_steps: int = 1000) -> VirtualConstraintM
     return VirtualConstraintMap(model, gait, surface.vc, n_steps, surface=surface)
 
 
-@gait_first
 def vc_eigenvalue(gait, constraints: VirtualConstraints | None = None,
                   phase=None, H0=None, n_steps: int = 1000) -> VCEigenResult:
     """Eigenvalue of the 1-D restricted Poincaré map of the virtual-constraint controller.

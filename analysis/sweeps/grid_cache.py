@@ -9,27 +9,22 @@ import shutil
 
 import numpy as np
 
-from biped_casadi.caching import DiskCache, cached
-from biped_casadi.control.reference import gait_first
+from biped_casadi.caching import ResultStore, cached, task_key
 
 from .storage import SweepStoreError
 from .sweep import RESULTS_VERSION, SweepResult, grid_points, run_sweep
 
-#: the stored grids of gaits (one sweep folder each); the sweep's own settings and code
-#: digest guard the folder's content
-GRIDS = DiskCache("grids", version=RESULTS_VERSION)
-
 __all__ = ["grid_results", "grid_best"]
 
 
-@gait_first
 @cached(maxsize=4)
 def grid_results(gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
                  folder=None, progress: bool = False) -> SweepResult:
     """The sweep of the n^nu grid on [lo, hi]^nu, computed once and kept.
 
-    Memoised, and stored as a resumable sweep in the cache folder (:data:`GRIDS`);
-    nu = ``model.nu``: the paper's 9^4 for RABBIT.
+    Memoised, and stored as a resumable sweep folder in the cache folder (under its key,
+    :class:`biped_casadi.caching.ResultStore`); nu = ``model.nu``: the paper's 9^4 for
+    RABBIT.
 
     Parameters
     ----------
@@ -49,7 +44,8 @@ def grid_results(gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
     SweepResult
     """
     model = gait.model
-    folder = GRIDS.path(dict(gait=gait.cache_key, n=n, lo=lo, hi=hi), folder, suffix="")
+    folder = ResultStore(folder).path(task_key(
+        "analysis.sweeps.grid_results", RESULTS_VERSION, "sweep", (gait, n, lo, hi)), "")
     P = grid_points(n, lo, hi, model.nu)
     try:
         return run_sweep(gait, P, out_dir=folder, progress=progress)
@@ -60,7 +56,6 @@ def grid_results(gait, n: int = 9, lo: float = -10.0, hi: float = 10.0,
     return run_sweep(gait, P, out_dir=folder, progress=progress)
 
 
-@gait_first
 def grid_best(gait, n: int = 9, lo: float = -10.0, hi: float = 10.0) -> dict:
     """The best stable point of the grid.
 

@@ -1,6 +1,5 @@
-"""What a sweep computes and how its numbers are identified: the settings, the result
-(status, max|lambda|, eigenvalues and A^z per point) and the digest of the code that
-decides the numbers (part of a stored sweep's identity)."""
+"""What a sweep computes: the settings and the result (status, max|lambda|, eigenvalues
+and A^z per point)."""
 from __future__ import annotations
 
 import math
@@ -9,42 +8,20 @@ from pathlib import Path
 
 import numpy as np
 
-from biped_casadi.caching import modules_digest
 from biped_casadi.results import Result, internal
 
 from ..stability.poincare import STATUSES
 
 
-__all__ = ["SweepSettings", "SweepResult", "BestPoint", "code_digest", "RESULTS_VERSION",
-           "METHODS", "NUMERIC_MODULES"]
+__all__ = ["SweepSettings", "SweepResult", "BestPoint", "RESULTS_VERSION", "METHODS"]
 
 
 #: bump when a change in analysis/ alters the numbers computed for the same settings,
-#: so that folders written before are refused instead of mixed
+#: so that folders written before are refused instead of mixed (besides the code
+#: digest, ``code_version('sweep')``, which is part of a folder's identity too)
 RESULTS_VERSION = 1
 #: how A^z is computed (SweepSettings.method)
 METHODS = ("variational", "ad")
-#: the modules whose code decides the numbers; their SHA-256 is part of a sweep's
-#: settings (a folder written by other code is refused) and is checked on every result
-#: coming back from a worker (a Dask worker running other code is an error, not a mix)
-NUMERIC_MODULES = ("analysis.stability.poincare", "analysis.stability.variational",
-                   "biped_casadi.control.output_law", "biped_casadi.control.zero_dynamics",
-                   "biped_casadi.simulation.kernel", "biped_casadi.numerics",
-                   "biped_casadi.model.biped", "gait_opt.gait", "gait_opt.parametrisation")
-
-
-
-def code_digest() -> str:
-    """A digest of the code that decides a sweep's numbers.
-
-    Returns
-    -------
-    str
-        SHA-256 (hex) of the source of :data:`NUMERIC_MODULES` and of
-        :data:`RESULTS_VERSION` (:func:`biped_casadi.caching.modules_digest`); part of a
-        sweep folder's settings.
-    """
-    return modules_digest(NUMERIC_MODULES, f"results_version={RESULTS_VERSION}")
 
 
 @dataclass(frozen=True)

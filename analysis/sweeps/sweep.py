@@ -35,19 +35,18 @@ from pathlib import Path
 import numpy as np
 
 from biped_casadi import require_same_robot
-from biped_casadi.control.reference import gait_first
+from biped_casadi.caching import code_version
 
 from ..stability.poincare import singular_m1_values
 from .storage import META, SweepStore, digest_points
 
 from .points import _check_points, grid_points, line_points, max_grid_n
-from .results import (RESULTS_VERSION, BestPoint, SweepResult, SweepSettings, _result,
-                      code_digest)
+from .results import RESULTS_VERSION, BestPoint, SweepResult, SweepSettings, _result
 from .workers import SweepPayload, _progress_bar, dispatch, evaluate_chunk
 
 __all__ = ["run_sweep", "SweepResult", "BestPoint", "SweepSettings", "grid_points", "line_points",
            "max_grid_n", "one_d_sweeps", "OneDSweeps", "load_sweep", "evaluate_chunk",
-           "code_digest", "RESULTS_VERSION", "DEFAULT_CHUNK_SIZE"]
+           "RESULTS_VERSION", "DEFAULT_CHUNK_SIZE"]
 
 DEFAULT_CHUNK_SIZE = 256
 
@@ -72,7 +71,6 @@ class _Arrays:
         self.A[a:b] = c["A"]
 
 
-@gait_first
 def _check_run_arguments(gait, executor, workers, chunk_size):
     model = gait.model
     require_same_robot(model, gait)
@@ -111,7 +109,6 @@ def _read_stored(store, bounds, P, arrays):
     return reused, {k: v for k, v in corrupt.items() if k not in reused}
 
 
-@gait_first
 def run_sweep(gait, points, out_dir=None, chunk_size: int | None = None,
               workers: int | None = None, scheduler=None, progress: bool = True,
               settings: SweepSettings | dict | None = None,
@@ -163,7 +160,7 @@ def run_sweep(gait, points, out_dir=None, chunk_size: int | None = None,
     payload = SweepPayload(gait=gdict, gait_sha256=gait.cache_key, map=settings.to_dict())
     n = len(P)
     bounds = [(k, a, min(a + chunk_size, n)) for k, a in enumerate(range(0, n, chunk_size))]
-    identity = dict(results_version=RESULTS_VERSION, code_sha256=code_digest(),
+    identity = dict(results_version=RESULTS_VERSION, code_sha256=code_version("sweep"),
                     gait_sha256=payload.gait_sha256,
                     robot=model.params.name, points_sha256=digest_points(P), n_points=n,
                     m1_size=model.nu, chunk_size=chunk_size, map=settings.to_dict())
@@ -182,11 +179,6 @@ def run_sweep(gait, points, out_dir=None, chunk_size: int | None = None,
         bar = _progress_bar(progress, total=n, initial=n - sum(b - a for _, a, b in todo))
 
         def record(k, a, b, c):
-            if c.get("code_sha256") != identity["code_sha256"]:
-                raise ValueError(
-                    "a worker runs other analysis code than this process (code_sha256 "
-                    f"{str(c.get('code_sha256'))[:12]} vs {identity['code_sha256'][:12]}); "
-                    "install the same version of the toolkit on every Dask worker")
             arrays.fill(a, b, c)
             if store is not None:
                 store.write_chunk(k, a, P[a:b], c["status"], c["max_abs"], c["A"],
@@ -308,7 +300,6 @@ class OneDSweeps:
     sweep: SweepResult
 
 
-@gait_first
 def one_d_sweeps(gait, values, out_dir=None, **kw) -> OneDSweeps:
     """Fig. 2: max|lambda| against each component M1(j) with the others zero.
 

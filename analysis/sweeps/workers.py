@@ -1,10 +1,9 @@
-"""Where a sweep's chunks are evaluated: threads of this process, worker processes, or the
-workers of a Dask cluster.  Every worker builds the Poincaré map once from the gait's
-definition (:meth:`gait_opt.Gait.definition`) and returns chunks tagged with the digest of
-the code that computed them."""
+"""Where a sweep's chunks are evaluated: each chunk is a task of an engine
+(:mod:`analysis.tasks`) run in this process, on threads of this process sharing one
+Poincaré map (the default), on worker processes, or on the workers of a Dask cluster,
+each building the map once from the gait's definition (:meth:`gait_opt.Gait.definition`)."""
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -12,11 +11,11 @@ import numpy as np
 from biped_casadi.caching import cached, digest
 from gait_opt import Gait
 
-from ..cluster import DASK_CONNECT_TIMEOUT, dask_client, progress_bar, submit_chunks
+from ..cluster import progress_bar
 from ..stability.poincare import PoincareMap, poincare_map
-from ..tasks import resolve_scheduler
+from ..tasks import Engine, TaskError, resolve_scheduler, task
 
-from .results import SweepSettings, code_digest
+from .results import SweepSettings
 
 __all__ = ["SweepPayload", "evaluate_chunk", "dispatch"]
 
@@ -42,12 +41,9 @@ def _poincare_for(payload: SweepPayload) -> PoincareMap:
     return poincare_map(gait, **SweepSettings(**payload.map).map_options())
 
 
-def _init_worker(payload):
-    _poincare_for(payload)
-
-
+@task(code="sweep")
 def evaluate_chunk(payload: SweepPayload, points: np.ndarray) -> dict:
-    """Evaluate one chunk of M1 (runs in worker processes and on Dask workers).
+    """Evaluate one chunk of M1 (a task: in this process, a worker thread or process).
 
     Parameters
     ----------
@@ -61,8 +57,7 @@ def evaluate_chunk(payload: SweepPayload, points: np.ndarray) -> dict:
     -------
     dict
         ``status`` (n,) strings, ``max_abs`` (n,), ``eigenvalues`` (n, 2) complex with
-        ``|.|`` descending, ``A`` (n, 2, 2), and ``code_sha256`` (:func:`code_digest`
-        of the worker's code).
+        ``|.|`` descending and ``A`` (n, 2, 2).
     """
     pm = _poincare_for(payload)
     P = np.asarray(points, dtype=float)
@@ -79,79 +74,32 @@ def evaluate_chunk(payload: SweepPayload, points: np.ndarray) -> dict:
         ev = np.stack([np.asarray(r.eigenvalues, complex) for r in rs])
         max_abs = np.array([r.max_abs for r in rs], dtype=float)
     return dict(status=status, max_abs=np.asarray(max_abs, float),
-                eigenvalues=np.asarray(ev, complex), A=np.asarray(A, float),
-                code_sha256=code_digest())
+                eigenvalues=np.asarray(ev, complex), A=np.asarray(A, float))
 
-
-
-def _cpu_count() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:
-        return max(1, os.cpu_count() or 1)
 
 
 def _progress_bar(progress, total, initial):
     return progress_bar(progress, total, initial, "M1", "sweep")
 
 
-def _run_threads(payload, P, todo, record, workers):
-    from concurrent.futures import ThreadPoolExecutor, as_completed
-    with ThreadPoolExecutor(max_workers=min(workers, len(todo))) as ex:
-        futs = {ex.submit(evaluate_chunk, payload, P[a:b]): (k, a, b) for k, a, b in todo}
-        try:
-            for f in as_completed(futs):
-                record(*futs[f], f.result())
-        except BaseException:
-            for f in futs:
-                f.cancel()
-            raise
-
-
-def _run_processes(payload, P, todo, record, workers):
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    # spawn: safe whatever threads the caller runs (a Dask client, tqdm's monitor)
-    ex = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
-                             mp_context=mp.get_context("spawn"),
-                             initializer=_init_worker, initargs=(payload,))
-    try:
-        futs = {ex.submit(evaluate_chunk, payload, P[a:b]): (k, a, b) for k, a, b in todo}
-        for f in as_completed(futs):
-            record(*futs[f], f.result())
-    except BaseException:
-        ex.shutdown(wait=False, cancel_futures=True)
-        raise
-    ex.shutdown(wait=True)
-
-
-def _run_dask(scheduler, payload, P, todo, record):
-    with dask_client(scheduler, DASK_CONNECT_TIMEOUT) as client:
-        submit_chunks(client, evaluate_chunk, payload, todo, record,
-                      f"sweep-{payload.gait_sha256[:8]}", args_of=lambda t: (P[t[1]:t[2]],))
-
-
 def dispatch(todo, payload, P, record, scheduler, workers, executor):
-    """Evaluate the chunks ``todo`` where the caller asked, calling ``record`` for each:
-    ``scheduler`` resolved by :func:`analysis.tasks.resolve_scheduler` ('synchronous':
-    chunk after chunk in this process; 'local': this machine's cores, threads of this
-    process sharing one map (or processes, ``executor='process'``); a cluster: its
-    workers)."""
+    """Evaluate the chunks ``todo`` where the caller asked, calling ``record`` for each as
+    it arrives: ``scheduler`` resolved by :func:`analysis.tasks.resolve_scheduler`
+    ('synchronous': chunk after chunk in this process; 'local': this machine's cores,
+    threads of this process sharing one map, or processes with ``executor='process'``;
+    a cluster: its workers)."""
     where = resolve_scheduler(scheduler, int(workers) if workers else None)
-    if where not in ("synchronous", "local"):
-        _run_dask(where, payload, P, todo, record)
-        return
-    workers = 1 if where == "synchronous" else (workers or _cpu_count())
-    if executor == "process" and workers > 1 and len(todo) > 1:
-        _run_processes(payload, P, todo, record, workers)
-        return
-    pm = _poincare_for(payload)             # shared by the threads of this process
-    if payload.map["method"] == "variational":
-        pm.variational                      # build the tables before any thread uses them
-    if workers == 1 or len(todo) == 1:
-        for k, a, b in todo:
-            record(k, a, b, evaluate_chunk(payload, P[a:b]))
-    else:
-        _run_threads(payload, P, todo, record, workers)
-
-
+    where = "synchronous" if where == "local" and len(todo) == 1 else where
+    threads = where == "local" and executor != "process"
+    if threads or where == "synchronous":
+        pm = _poincare_for(payload)             # built here, shared by the threads
+        if payload.map["method"] == "variational":
+            pm.variational
+    with Engine(where, int(workers) if workers else None, cache=False, processes=not threads,
+                preload=(__name__,)) as eng:
+        try:
+            for (k, a, b), c in eng.each(evaluate_chunk, {t: (payload, P[t[1]:t[2]])
+                                                          for t in todo}):
+                record(k, a, b, c)
+        except TaskError as e:
+            raise ValueError(f"scheduler: {e}") from None

@@ -1,59 +1,57 @@
-"""Long work as a graph of pure, cached tasks run by Dask.
+"""Long work as a graph of pure, cached tasks scheduled by Dask (the package docstring).
 
-A *task* is a pure, deterministic function of typed arguments (numbers, arrays,
-dataclasses, models, gaits) marked with :func:`task`.  ``engine.submit(fn, *args)``
-returns a :class:`Ref` to its result at once; passing a ``Ref`` as an argument of
-another task makes the edge of the graph.  Every result is kept on disk under the key
-of its task, version, code version and arguments (:mod:`analysis.tasks.keys`), so a
-re-run reads what it computed before and a run that was killed resumes where it
-stopped, with the same numbers: nothing depends on which process computed a result or
-when.
-
-Where it runs is one choice, the ``scheduler`` (:func:`resolve_scheduler`):
-'synchronous' (this process, one task after the other, in the order submitted), a Dask
-``LocalCluster`` of one single-threaded worker process per core (the default), a
-scheduler's address ('tcp://host:8786') or a ``dask.distributed.Client``.
-
-Decisions that need a result (an exchange round that depends on the last solve) are
-*flows*: plain functions ``flow(engine, ...)`` started with :meth:`Engine.spawn`, which
-run in a thread of this process, submit tasks and wait for them; their own result is
-kept like a task's.
+Each task goes to Dask under its content key (``<name>-<key>``,
+:func:`biped_casadi.caching.task_key`) with its stage's priority; its inputs are Dask
+futures (a kept result, or a flow's, scattered under its key): Dask resolves them,
+queues, places and steals the work and fails the dependants of a failure.  The engine
+names the tasks and keeps their results (a thread of its own writes each as it arrives).
 """
 from __future__ import annotations
 
+import concurrent.futures as cf
 import contextlib
-import functools
-import heapq
+import dataclasses
 import itertools
 import logging
 import os
+import queue
 import sys
 import threading
 import time
 import traceback
-from concurrent.futures import ThreadPoolExecutor
 
-from biped_casadi.caching import TaskInfo, task
+from biped_casadi.caching import (MISSING, ResultStore, TaskInfo, code_files, code_version,
+                                  task, task_key)
 
-from ..cluster import check_not_bootstrapping, connect as _connect
-from .keys import task_key
-from .placement import Placement
-from .refs import (_LOCAL, Ref, TaskError, TaskRecord, _execute, _info, _pack, _refs_in,
-                   _RESULT, in_task)
-from .store import MISSING, ResultStore
+from ..cluster import check_not_bootstrapping, connect, tune_allocator
+from .records import TaskError, TaskRecord, TaskState
 
-__all__ = ["task", "TaskInfo", "Engine", "Ref", "TaskError", "resolve_scheduler",
-           "SCHEDULER_ENV", "in_task", "TaskRecord"]
+__all__ = ["task", "TaskInfo", "Engine", "TaskError", "TaskRecord", "TaskState",
+           "resolve_scheduler", "SCHEDULER_ENV", "in_task"]
 
 #: the environment variable that sets the default scheduler ('synchronous', an address)
 SCHEDULER_ENV = "BIPED_SCHEDULER"
+#: the Dask event topic of a task's seconds on a worker, and the metadata key of the
+#: client's code files (a stale worker's message names the module that differs)
+_TOPIC = "biped-task"
+#: per thread: its stage and priority, the futures its flow has seen, whether in a task
+_LOCAL = threading.local()
 
-#: tasks sent to the cluster beyond its threads, so that a worker finishing a task
-#: starts the next one at once instead of waiting for the round trip through this process
-AHEAD = 1
+
+def in_task() -> bool:
+    """Whether this thread runs a task (library calls inside run synchronously).
+
+    Returns
+    -------
+    bool
+    """
+    try:
+        from dask.distributed import get_worker
+        return getattr(_LOCAL, "task", False) or bool(get_worker())
+    except (ImportError, ValueError):
+        return False
 
 
-# ---------------------------------------------------------------------- engine
 def resolve_scheduler(scheduler=None, workers: int | None = None):
     """What ``scheduler`` means, the same for every function that takes it.
 
@@ -62,445 +60,429 @@ def resolve_scheduler(scheduler=None, workers: int | None = None):
     scheduler : None, str or dask.distributed.Client
         None: ``$BIPED_SCHEDULER`` if set; inside a task 'synchronous'; otherwise
         'local'.  'synchronous' (or 'inline'): this process, one task after another.
-        'local': a Dask ``LocalCluster`` of ``workers`` single-threaded processes.  Any
-        other string: a Dask scheduler's address.  A ``Client``: used as it is.
+        'local': a Dask ``LocalCluster``.  Another string: a Dask scheduler's address.
     workers : int, optional
-        Processes of the ``LocalCluster`` (default: this machine's cores); 1 means
-        'synchronous' unless a scheduler is named.
+        Workers of the ``LocalCluster`` (default: the cores); 1: 'synchronous'.
 
     Returns
     -------
     str or Client
-        'synchronous', 'local', an address or the client.
-
-    Raises
-    ------
-    ValueError
-        Naming 'workers' (not a positive integer) or 'scheduler' (not a string or
-        client).
+        'synchronous', 'local', an address or the client (ValueError naming 'workers'
+        or 'scheduler' for anything else).
     """
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
                                 or workers < 1):
         raise ValueError(f"workers must be a positive integer, got {workers!r}")
     if scheduler is None:
-        if in_task():
-            return "synchronous"
-        scheduler = os.environ.get(SCHEDULER_ENV) or None
-    if scheduler is None:
-        return "synchronous" if workers == 1 else "local"
-    if isinstance(scheduler, str):
-        s = scheduler.strip()
-        if not s:
-            raise ValueError("scheduler must not be empty")
-        if s.lower() in ("synchronous", "inline", "sync"):
-            return "synchronous"
-        if s.lower() == "local":
-            return "synchronous" if workers == 1 else "local"
-        return s
+        scheduler = "synchronous" if in_task() else os.environ.get(SCHEDULER_ENV) or "local"
     if type(scheduler).__name__ == "Client":
         return scheduler
-    raise ValueError(f"scheduler must be None, 'synchronous', 'local', an address or a "
-                     f"dask.distributed.Client, got {type(scheduler).__name__}")
+    if not isinstance(scheduler, str) or not scheduler.strip():
+        raise ValueError(f"scheduler must be None, 'synchronous', 'local', an address or a "
+                         f"dask.distributed.Client, got {scheduler!r}")
+    s = scheduler.strip()
+    if s.lower() in ("synchronous", "inline", "sync") or (s.lower() == "local" and workers == 1):
+        return "synchronous"
+    return "local" if s.lower() == "local" else s
+
+
+def _info(fn) -> TaskInfo:
+    info = getattr(fn, "task_info", None)
+    if info is None:
+        raise TypeError(f"{getattr(fn, '__qualname__', fn)!r} is not a task (decorate it "
+                        "with analysis.tasks.task)")
+    return info
+
+
+def _is_future(obj) -> bool:
+    return isinstance(obj, cf.Future) or (type(obj).__name__ == "Future" and
+                                          type(obj).__module__.startswith("distributed"))
+
+
+def _key(future) -> str:
+    """A future's content key (its Dask key is ``<name>-<content key>``)."""
+    return str(future.key).rsplit("-", 1)[-1]
+
+
+def _resolve(f: cf.Future, value=None, error=None) -> cf.Future:
+    """Set a ``concurrent.futures.Future``'s outcome (the first one stands)."""
+    with contextlib.suppress(cf.InvalidStateError):
+        f.set_result(value) if error is None else f.set_exception(error)
+    return f
+
+
+# Dask resolves futures inside lists, tuples and dicts only: a dataclass holding futures
+# travels as a marked dict of its fields
+_DATACLASS = "__task_dataclass__"
+
+
+def _pack(obj, leaf):
+    """``obj`` with every future replaced by ``leaf(future)``."""
+    if _is_future(obj):
+        return leaf(obj)
+    if type(obj) in (list, tuple):
+        return type(obj)(_pack(v, leaf) for v in obj)
+    if type(obj) is dict:
+        return {k: _pack(v, leaf) for k, v in obj.items()}
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        fields = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if f.init}
+        packed = {k: _pack(v, leaf) for k, v in fields.items()}
+        if any(packed[k] is not v for k, v in fields.items()):
+            return {_DATACLASS: type(obj), "fields": packed}
+    return obj
+
+
+def _unpack(obj):
+    if type(obj) is dict:
+        if _DATACLASS in obj and len(obj) == 2:
+            return obj[_DATACLASS](**{k: _unpack(v) for k, v in obj["fields"].items()})
+        return {k: _unpack(v) for k, v in obj.items()}
+    if type(obj) in (list, tuple):
+        return type(obj)(_unpack(v) for v in obj)
+    return obj
+
+
+def _futures_in(obj) -> list:
+    out = []
+    _pack(obj, lambda f: out.append(f) or f)
+    return out
+
+
+def _run(fn, key: str, code: str | None, args, kwargs):
+    """Run a task here or on a worker (which refuses it when its code is not ``code``,
+    the digest in the key); an error becomes a :class:`TaskError` naming the task."""
+    info = _info(fn)
+    tune_allocator()
+    was, _LOCAL.task = getattr(_LOCAL, "task", False), True
+    t = time.perf_counter()
+    try:
+        if code is not None and code_version(info.code) != code:
+            raise TaskError(info.name, _stale(info.code, code), key=key)
+        value = fn(*_unpack(args), **_unpack(kwargs))
+    except TaskError:
+        raise
+    except Exception as e:          # noqa: BLE001 - reported with the task's name
+        raise TaskError(info.name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8),
+                        key) from None
+    finally:
+        _LOCAL.task = was
+    if code is not None:            # on a worker: its seconds go to the client
+        with contextlib.suppress(Exception):
+            from dask.distributed import get_worker
+            get_worker().log_event(_TOPIC, [f"{info.name.rsplit('.', 1)[-1]}-{key}",
+                                            time.perf_counter() - t])
+    return value
+
+
+def _stale(kind: str, code: str) -> str:
+    """Why a worker refuses a task: the first file whose code differs from the client's
+    (:meth:`Engine.client` leaves the client's files in the scheduler's metadata)."""
+    mine, theirs = code_files(kind), {}
+    with contextlib.suppress(Exception):
+        from dask.distributed import get_client
+        theirs = get_client().get_metadata([_TOPIC, kind, code], None) or {}
+    diff = sorted(f for f in set(mine) | set(theirs) if mine.get(f) != theirs.get(f))
+    what = (diff[0] + (f" (and {len(diff) - 1} more)" if len(diff) > 1 else "")) if theirs \
+        else "its code"
+    return (f"stale worker (pid {os.getpid()}): {what} differs from this run's code; run "
+            "the same version of the toolkit on every worker")
+
+
+def _one(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[-1] if text else ''}".rstrip(": ")
 
 
 class Engine:
-    """Runs tasks and flows, keeps their results, counts what was computed or reused.
+    """Submits tasks and flows to Dask, keeps their results, records the run.
 
-    Use it as a context manager (``with Engine(...) as eng:``); the cluster it started,
-    if any, is closed at the end.  The cluster starts only when something must be
-    computed: a run whose results are all kept starts none.  It starts in the background
-    as soon as a flow is spawned whose result is not kept (at once when the cache holds
-    nothing), so that its processes start (and import ``preload``) while the flows
-    compute their tasks' keys.
+    A context manager: the cluster it started is closed at the end.  The cluster is
+    started (its workers join in the background) as the engine is made when nothing is
+    kept, else by the first result to compute: a run of kept results starts none.
 
     Parameters
     ----------
-    scheduler : None, str or dask.distributed.Client
-        Where tasks run (:func:`resolve_scheduler`).
-    workers : int, optional
-        Processes of a local cluster.
+    scheduler, workers : None, str or Client; int, optional
+        Where tasks run (:func:`resolve_scheduler`); a local cluster's workers.
     cache : str, Path or False, optional
         The cache folder (default :func:`biped_casadi.cache_dir`); False: keep nothing.
     use_cache : bool
         Read kept results (False: compute every task again; results are still written).
     progress : bool
-        One bar of finished tasks on stderr (when it is a terminal).
-    on_record : callable, optional
-        Called with each :class:`TaskRecord` as a task finishes.
+        A bar of finished tasks on stderr (when it is a terminal).
     log : callable, optional
-        Called with the lines flows report (:meth:`say`).
+        Called with the lines of :meth:`say`.
     preload : tuple of str
-        Modules the processes of a local cluster import as they start (those of the
-        tasks to come).
+        Modules the worker processes of a local cluster import as they start.
+    processes : bool
+        A local cluster of single-threaded processes, or of threads of this process.
     """
 
     def __init__(self, scheduler=None, workers: int | None = None, cache=None,
-                 use_cache: bool = True, progress: bool = False, on_record=None, log=None,
-                 preload: tuple = ()):
+                 use_cache: bool = True, progress: bool = False, log=None,
+                 preload: tuple = (), processes: bool = True):
         self.scheduler = resolve_scheduler(scheduler, workers)
         if self.scheduler == "local":
             check_not_bootstrapping()
-        self.workers = workers
-        self.store = ResultStore(cache)
-        self.use_cache = bool(use_cache)
-        self.records: list[TaskRecord] = []
-        self.on_record = on_record
-        self._log = log
-        self.closed = False
-        self._refs: dict[str, Ref] = {}
+        self.workers, self.preload, self.processes = workers, tuple(preload), processes
+        self.store, self.use_cache = ResultStore(cache), bool(use_cache)
+        self._log, self._progress = log, bool(progress)
+        self.closed, self._records = False, []
+        self._futures, self._tasks, self._scattered, self._seconds = {}, {}, {}, {}
+        self._published: set = set()
         self._lock = threading.RLock()
-        self._client = None
-        self._cluster = None
-        self.preload = tuple(preload)
-        self._starting = None          # the thread connecting in the background
-        self._start_error = None
-        self._pool = None
-        self._bar = None
-        self._progress = bool(progress)
-        self._known = 0
-        # tasks whose inputs are known, waiting for a free worker thread, highest
-        # priority first (then in submission order); each worker is given its threads'
-        # tasks and AHEAD more, chosen by Placement (kinds it has run first)
-        self._queue: list = []
-        self._order = itertools.count()
-        self._place = Placement(AHEAD)
-        if not self.use_cache or self.store.empty():     # every task will run
-            self._start_early()
+        self._cond = threading.Condition(self._lock)
+        self._client = self._cluster = self._start_error = self._bar = self._keeper = None
+        self._kept = queue.Queue()
+        if not self.synchronous and (not self.use_cache or self.store.empty()):
+            with contextlib.suppress(Exception):       # raised again by the first submit
+                self.client()
 
     @property
     def synchronous(self) -> bool:
         """Whether tasks run in this process, one after another."""
         return self.scheduler == "synchronous"
 
-    # ---------------------------------------------------------------- lifetime
+    @property
+    def records(self) -> list:
+        """The :class:`TaskRecord` of every task that has ended, in that order."""
+        self._settle()
+        return list(self._records)
+
+    def _settle(self):             # what has arrived and the keeper has not kept yet
+        for f in list(self._futures.values()):
+            if not isinstance(f, cf.Future) and f.done():
+                self._keep_one(f)
+
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
         self.close()
-
-    def close(self):
-        """Stop: pending flows are told, the cluster this engine started is closed."""
-        self.closed = True
-        with self._lock:
-            queued, self._queue = self._queue, []
-        for *_, job in queued:                  # never sent: their waiters are told
-            self._done(job[0], "failed", error=_not_run(job[0]))
-        if self._starting is not None:          # a cluster starting is closed once up
-            self._starting.join()
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
-        # the cluster's processes report its shutdown (lost heartbeats, closed streams):
-        # nothing for the user
-        quiet = logging.getLogger("distributed")
-        level = quiet.level
-        quiet.setLevel(logging.CRITICAL)
-        try:
-            if self._client is not None and (self._cluster is not None
-                                             or isinstance(self.scheduler, str)):
-                with contextlib.suppress(Exception):
-                    self._client.close()
-            if self._cluster is not None:
-                with contextlib.suppress(Exception):
-                    self._cluster.close()
-        finally:
-            quiet.setLevel(level)
-        with self._lock:                        # sent, and lost with the cluster
-            lost = [r for r in self._refs.values() if r._future is not None and not r.done()]
-        for r in lost:
-            self._done(r, "failed", error=_not_run(r))
-        if self._bar is not None:
-            self._bar.close()
-
     def client(self):
-        """The Dask client, started on first use.
+        """The Dask client (None when synchronous), connected on first use.
 
         Returns
         -------
         dask.distributed.Client or None
-            None when synchronous.
         """
         if self.synchronous:
             return None
-        starting = self._starting
-        if starting is not None:
-            starting.join()
         with self._lock:
             if self._start_error is not None:
                 raise self._start_error
             if self._client is None:
-                self._client, self._cluster = _connect(self.scheduler, self.workers,
-                                                       self.preload)
+                try:
+                    self._client, self._cluster = connect(self.scheduler, self.workers,
+                                                          self.preload, self.processes)
+                except Exception as e:
+                    self._start_error = e
+                    raise
+                self._client.subscribe_topic(_TOPIC, self._on_seconds)
+                self._keeper = threading.Thread(target=self._keep, daemon=True,
+                                                name="biped-keeper")
+                self._keeper.start()
+                if self._cluster is not None:
+                    threading.Thread(target=self._watch, daemon=True).start()
             return self._client
 
-    def _start_early(self):
-        """Start connecting in a background thread (once), unless synchronous or
-        connected; :meth:`client` waits for it."""
-        with self._lock:
-            if self.synchronous or self.closed or self._client is not None \
-                    or self._starting is not None:
-                return
-
-            def connect():
-                try:
-                    client, cluster = _connect(self.scheduler, self.workers, self.preload)
-                except Exception as e:          # noqa: BLE001 - raised by client()
-                    self._start_error = e
+    def _watch(self):
+        """Wait for the local cluster's workers to start (off the run's path); if they
+        cannot, every task fails with the reason instead of waiting forever."""
+        with contextlib.suppress(Exception):
+            self._cluster.sync(self._cluster._correct_state)
+        nannies = list(self._cluster.workers.values())
+        if nannies and all(getattr(w.status, "name", "") == "failed" for w in nannies):
+            e = RuntimeError("its worker processes failed to start (their error above)")
+            with self._lock:
+                if self.closed:
                     return
-                with self._lock:
-                    self._client, self._cluster = client, cluster
-            self._starting = threading.Thread(target=connect, name="biped-connect",
-                                              daemon=True)
-            self._starting.start()
+                self._start_error = e
+                pending = [f for f in self._futures.values()
+                           if not isinstance(f, cf.Future) and not f.done()]
+            with contextlib.suppress(Exception):
+                self._client.cancel(pending, reason=f"the Dask cluster did not start "
+                                                    f"({_one(e)})")
 
     def check_started(self):
-        """Raise the reason the cluster could not start, if it could not.
-
-        Raises
-        ------
-        ValueError
-            ``scheduler: the Dask cluster did not start (...)``.
-        """
+        """Raise ``ValueError('scheduler: ...')`` if the cluster could not start."""
         e = self._start_error
         if e is not None:
             raise ValueError(e.args[0] if isinstance(e, ValueError) and e.args
                              else f"scheduler: the Dask cluster did not start ({_one(e)})") \
                 from e
 
+    def close(self):
+        """Keep what has arrived, fail what has not, close the cluster it started."""
+        if self.closed:
+            return
+        self.closed = True
+        if self._keeper is not None:
+            self._kept.put(None)
+            self._keeper.join()
+        self._settle()
+        lost = [f for f in list(self._futures.values()) if not f.done()]
+        for f in lost:
+            err = TaskError(self._tasks[_key(f)].name, "not run: the engine was closed first",
+                            key=_key(f))
+            self._finish(_key(f), TaskState.FAILED, error=err)
+            if isinstance(f, cf.Future):
+                _resolve(f, error=err)
+        quiet = logging.getLogger("distributed")         # the cluster's shutdown chatter
+        level, _ = quiet.level, quiet.setLevel(logging.CRITICAL)
+        try:
+            with contextlib.suppress(Exception):
+                if self._client is not None:
+                    self._client.cancel([f for f in lost if not isinstance(f, cf.Future)])
+                    if self._cluster is not None or isinstance(self.scheduler, str):
+                        self._client.close()
+            with contextlib.suppress(Exception):
+                if self._cluster is not None:
+                    self._cluster.close()
+        finally:
+            quiet.setLevel(level)
+        if self._bar is not None:
+            self._bar.close()
+
     def say(self, message: str):
-        """Report one line of a flow's progress (to the ``log`` callable, if any).
+        """Report a line of a flow's progress (to ``log``).
 
         Parameters
         ----------
         message : str
-            The line.
         """
         if self._log is not None:
             with contextlib.suppress(Exception):
                 self._log(message)
 
-    # ---------------------------------------------------------------- stages
     @contextlib.contextmanager
     def stage(self, name: str, priority: int = 0):
-        """Put what this block submits into a stage, with a Dask priority.
-
-        Tasks submitted in the block (by this thread and the flows it spawns) belong to
-        stage ``name`` and run with priority ``priority`` (higher first).
+        """Put what this block submits (and the flows it spawns) into a stage.
 
         Parameters
         ----------
         name : str
             The stage.
         priority : int
-            Dask's priority of its tasks.
+            Dask's priority of its tasks (higher first).
         """
-        old = getattr(_LOCAL, "stage", ("", 0))
-        _LOCAL.stage = (name, int(priority))
+        old, _LOCAL.stage = self.current_stage(), (name, int(priority))
         try:
             yield
         finally:
             _LOCAL.stage = old
 
     @staticmethod
-    def current_stage():
+    def current_stage() -> tuple:
         """The stage of this thread.
 
         Returns
         -------
         tuple
-            (stage name, priority).
+            (name, priority).
         """
         return getattr(_LOCAL, "stage", ("", 0))
 
-    # ---------------------------------------------------------------- submit
-    def key(self, fn, *args, **kwargs) -> str:
-        """The key a call of a task has (nothing is run).
-
-        Parameters
-        ----------
-        fn : callable
-            A task.
-        *args, **kwargs
-            Its arguments.
-
-        Returns
-        -------
-        str
-        """
-        info = _info(fn)
-        return task_key(info.name, info.version, info.code, args, kwargs,
-                        ref_key=lambda o: o.key if isinstance(o, Ref) else None)
-
-    def submit(self, fn, *args, **kwargs) -> Ref:
-        """Run task ``fn(*args, **kwargs)`` (or read its kept result).
+    def submit(self, fn, *args, **kwargs):
+        """Run task ``fn(*args, **kwargs)``, or read its kept result.
 
         Parameters
         ----------
         fn : callable
             A :func:`task`.
         *args, **kwargs
-            Its arguments; :class:`Ref` s anywhere in them (lists, tuples, dicts,
-            dataclass fields) are replaced by their results.
+            Its arguments; futures in them (in lists, tuples, dicts, dataclass fields)
+            stand for their results.
 
         Returns
         -------
-        Ref
+        dask.distributed.Future or concurrent.futures.Future
+            ``key`` is ``<name>-<content key>``; ``result()`` waits for the value and
+            raises :class:`TaskError` when the task, or one it depends on, failed.
         """
-        info = _info(fn)
-        key = self.key(fn, *args, **kwargs)
-        stage, priority = self.current_stage()
-        with self._lock:
-            if key in self._refs:
-                return self._refs[key]
-            ref = Ref(self, key, info.name, stage)
-            ref.deps = self._deps((args, kwargs))
-            self._refs[key] = ref
-        if self._reuse(ref):
-            return ref
-        self._count_new()
-        failed = next((r for r in _refs_in((args, kwargs)) if r.done() and r.state == "failed"),
-                      None)
-        if failed is not None:
-            self._done(ref, "failed", error=failed._error)
-            return ref
-        if self.synchronous:
-            self._run_here(ref, fn, args, kwargs)
-            return ref
-        # inputs still being computed: queued once they are known, without waiting here
-        waiting = [r for r in _refs_in((args, kwargs)) if not r.done()]
-        if not waiting:
-            self._enqueue(ref, fn, args, kwargs, priority)
-            return ref
-        left = [len(waiting)]
-        lock = threading.Lock()
+        return self._start(fn, args, kwargs, flow=False)
 
-        def ready(_):
-            with lock:
-                left[0] -= 1
-                go = left[0] == 0
-            if go:
-                self._enqueue(ref, fn, args, kwargs, priority)
-        for r in waiting:
-            r._when_done(ready)
-        return ref
+    def spawn(self, flow, *args, **kwargs):
+        """Run a flow, ``flow(self, *args, **kwargs)``, in a thread of its own.
 
-    def map(self, fn, items, *args, **kwargs) -> list:
-        """Submit a task once per item: ``[submit(fn, item, *args, **kwargs) ...]``.
+        Here when synchronous; its result is kept like a task's.
+
+        Parameters
+        ----------
+        flow : callable
+            A :func:`task` taking the engine first; it submits tasks and waits for them.
+        *args, **kwargs
+            Its other arguments (futures are passed as they are).
+
+        Returns
+        -------
+        concurrent.futures.Future
+        """
+        return self._start(flow, args, kwargs, flow=True)
+
+    def each(self, fn, calls: dict):
+        """Fan out a task: (tag, result) of each call as it finishes.
+
+        Here, one call after the other, when synchronous.
 
         Parameters
         ----------
         fn : callable
             A task.
-        items : iterable
-            Its first arguments.
-        *args, **kwargs
-            Its other arguments.
+        calls : dict
+            Tag -> the call's arguments (a tuple).
 
-        Returns
-        -------
-        list of Ref
+        Yields
+        ------
+        tuple
+            (tag, result); a failed call raises its :class:`TaskError`.
         """
-        return [self.submit(fn, item, *args, **kwargs) for item in items]
+        if self.synchronous:
+            for tag, args in calls.items():
+                yield tag, self.submit(fn, *args).result()
+            return
+        futures = {self.submit(fn, *args): tag for tag, args in calls.items()}
+        from dask.distributed import as_completed
+        on_dask = [f for f in futures if not isinstance(f, cf.Future)]
+        for f in itertools.chain((f for f in futures if isinstance(f, cf.Future)),
+                                 as_completed(on_dask) if on_dask else ()):
+            yield futures[f], f.result()
 
-    def spawn(self, flow, *args, **kwargs) -> Ref:
-        """Run a flow, ``flow(self, *args, **kwargs)``, in a thread of this process.
-
-        At once when synchronous; ``flow`` is a :func:`task` whose result is kept like a
-        task's.
+    def state(self, future):
+        """How a future's task ended (None while it runs).
 
         Parameters
         ----------
-        flow : callable
-            A task taking the engine first: it submits tasks and waits for them.
-        *args, **kwargs
-            Its other arguments (``Ref`` s are passed as they are: the flow waits for
-            them with ``.result()``).
+        future : future
 
         Returns
         -------
-        Ref
+        TaskState or None
         """
-        info = _info(flow)
-        key = self.key(flow, *args, **kwargs)
-        stage, priority = self.current_stage()
-        with self._lock:
-            if key in self._refs:
-                return self._refs[key]
-            ref = Ref(self, key, info.name, stage)
-            ref.deps, ref.flow = self._deps((args, kwargs)), True
-            self._refs[key] = ref
-        if self._reuse(ref):
-            return ref
-        self._start_early()
-
-        def run():
-            _LOCAL.stage = (stage, priority)
-            _LOCAL.awaited, _LOCAL.flow_deps = [], ref.deps
-            t = time.perf_counter()
-            try:
-                value = flow(self, *args, **kwargs)
-            except TaskError as e:
-                self._done(ref, "failed", error=e)
-                return
-            except Exception as e:          # noqa: BLE001 - reported with the flow's name
-                self._done(ref, "failed", error=TaskError(
-                    info.name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8),
-                    ref.key))
-                return
-            self._done(ref, "computed", value=value, seconds=time.perf_counter() - t,
-                       keep=True)
-
-        def run_flow():
-            try:
-                run()
-            finally:
-                _LOCAL.awaited, _LOCAL.flow_deps = None, ()
-
-        if self.synchronous:
-            saved = getattr(_LOCAL, "awaited", None), getattr(_LOCAL, "flow_deps", ())
-            try:
-                run()
-            finally:
-                _LOCAL.awaited, _LOCAL.flow_deps = saved
-        else:
-            with self._lock:
-                if self._pool is None:
-                    self._pool = ThreadPoolExecutor(32, thread_name_prefix="biped-flow")
-            self._pool.submit(run_flow)
-        return ref
-
-    @staticmethod
-    def _deps(args) -> tuple:
-        """The refs a new task or flow comes after: those in its arguments, and, inside a
-        flow, everything the flow has waited for so far (and the flow's own)."""
-        deps = list(_refs_in(args)) + list(getattr(_LOCAL, "awaited", None) or ()) \
-            + list(getattr(_LOCAL, "flow_deps", ()) or ())
-        return tuple({id(r): r for r in deps}.values())
+        rec = self._tasks.get(_key(future))
+        return rec.state if rec is not None else None
 
     def critical_path(self) -> dict:
-        """The longest chain of computed tasks of this run: the wall time's bound.
+        """The longest chain of computed tasks: the wall time's bound on any workers.
 
-        Flows weigh nothing (their work is in their tasks); on any number of workers the
-        run takes at least this long.
+        Flows weigh nothing (their work is in their tasks).
 
         Returns
         -------
         dict
             ``seconds`` and ``tasks`` (the chain's names, first to last).
         """
-        memo: dict = {}
+        tasks, memo = {r.key: r for r in self.records}, {}
 
-        def longest(r):
-            if id(r) in memo:
-                return memo[id(r)]
-            memo[id(r)] = (0.0, [])                      # (a cycle cannot happen)
-            w = r.seconds if (r.state == "computed" and not r.flow) else 0.0
-            best = max((longest(d) for d in r.deps), key=lambda x: x[0], default=(0.0, []))
-            memo[id(r)] = (w + best[0], best[1] + ([r.name.rsplit(".", 1)[-1]] if w else []))
-            return memo[id(r)]
-        with self._lock:
-            refs = list(self._refs.values())
-        top = max((longest(r) for r in refs), key=lambda x: x[0], default=(0.0, []))
+        def longest(key):
+            if key not in memo:
+                memo[key], r = (0.0, []), tasks[key]         # (a cycle cannot happen)
+                w = r.seconds if (r.state is TaskState.COMPUTED and not r.flow) else 0.0
+                best = max((longest(d) for d in r.deps if d in tasks), key=lambda x: x[0],
+                           default=(0.0, []))
+                memo[key] = (w + best[0], best[1] + ([r.name.rsplit(".", 1)[-1]] if w else []))
+            return memo[key]
+        top = max((longest(k) for k in tasks), key=lambda x: x[0], default=(0.0, []))
         return dict(seconds=round(top[0], 2), tasks=top[1])
 
     def origin_stage(self, error: TaskError) -> str:
@@ -509,168 +491,171 @@ class Engine:
         Parameters
         ----------
         error : TaskError
-            The failure (its own task's, or of one it depends on).
 
         Returns
         -------
         str
         """
-        r = self._refs.get(getattr(error, "key", ""))
+        r = self._tasks.get(getattr(error, "key", ""))
         return r.stage if r is not None else ""
 
-    # ---------------------------------------------------------------- internals
-    def _reuse(self, ref: Ref) -> bool:
-        if not self.use_cache:
-            return False
-        rec = self.store.read(ref.key)
-        if rec is MISSING:
-            return False
-        self._done(ref, "reused", value=rec["value"], seconds=rec.get("seconds", 0.0))
-        return True
+    # ------------------------------------------------------------- internals
+    def _start(self, fn, args, kwargs, flow: bool):
+        info = _info(fn)
+        if self.closed:
+            raise TaskError(info.name, "not run: the engine was closed")
+        key = task_key(info.name, info.version, info.code, args, kwargs,
+                       ref_key=lambda o: _key(o) if _is_future(o) else None)
+        dask_key, inputs = f"{info.name.rsplit('.', 1)[-1]}-{key}", _futures_in((args, kwargs))
+        ctx = getattr(_LOCAL, "flow", None)
+        kept = self.store.read(key) if self.use_cache and key not in self._tasks else MISSING
+        with self._cond:
+            if key in self._tasks:                  # submitted before, or right now
+                while key not in self._futures:
+                    self._cond.wait()
+                return self._seen(ctx, self._futures[key])
+            deps = inputs + [f for f in (ctx or ()) if f.done()]
+            self._tasks[key] = TaskRecord(info.name, self.current_stage()[0], key, flow=flow,
+                                          deps=tuple(dict.fromkeys(map(_key, deps))))
+        if kept is not MISSING:
+            self._finish(key, TaskState.REUSED, seconds=kept.get("seconds", 0.0))
+            return self._seen(ctx, self._set(key, _resolve(cf.Future(), kept["value"]),
+                                             dask_key))
+        self._count_new()
+        bad = next((f.exception() for f in inputs if isinstance(f, cf.Future) and f.done()
+                    and f.exception() is not None), None)
+        if bad is not None:
+            self._finish(key, TaskState.FAILED, error=bad)
+            return self._seen(ctx, self._set(key, _resolve(cf.Future(), error=bad), dask_key))
+        if not (flow or self.synchronous):
+            return self._seen(ctx, self._on_cluster(fn, key, dask_key, args, kwargs))
+        fut = self._set(key, cf.Future(), dask_key)
+        (self._flow if flow else self._here)(fn, key, fut, args, kwargs, inputs)
+        return self._seen(ctx, fut)
+
+    def _set(self, key, future, dask_key=None):
+        if dask_key is not None:
+            future.key = dask_key
+        with self._cond:
+            self._futures[key] = future
+            self._cond.notify_all()
+        return future
+
+    @staticmethod
+    def _seen(ctx, future):
+        return ctx.append(future) or future if ctx is not None else future
+
+    def _here(self, fn, key, fut, args, kwargs, inputs):
+        t = time.perf_counter()
+        try:
+            value = _run(fn, key, None, *(_pack(x, lambda f: f.result()) for x in (args, kwargs)))
+        except TaskError as e:
+            self._finish(key, TaskState.FAILED, error=e)
+            return _resolve(fut, error=e)
+        self._finish(key, TaskState.COMPUTED, value, seconds=time.perf_counter() - t)
+        _resolve(fut, value)
+
+    def _on_cluster(self, fn, key, dask_key, args, kwargs):
+        info = _info(fn)
+        try:
+            client = self.client()
+            a, k = (_pack(x, lambda f: self._on_dask(client, f)) for x in (args, kwargs))
+            code = code_version(info.code)
+            if info.code not in self._published:       # for a stale worker's message
+                self._published.add(info.code)
+                client.set_metadata([_TOPIC, info.code, code], code_files(info.code))
+        except Exception as e:                         # noqa: BLE001 - this task fails
+            err = e if isinstance(e, TaskError) else TaskError(info.name, (
+                f"not run: the Dask cluster did not start ({_one(e)})"
+                if self._start_error is not None else f"not sent to the cluster ({_one(e)})"),
+                key=key)
+            self._finish(key, TaskState.FAILED, error=err)
+            return self._set(key, _resolve(cf.Future(), error=err), dask_key)
+        with self._lock:                     # not while the cluster is found dead
+            if self._start_error is not None:
+                return self._on_cluster(fn, key, dask_key, args, kwargs)
+            fut = self._set(key, client.submit(_run, fn, key, code, a, k, key=dask_key,
+                                               pure=False, priority=self.current_stage()[1]))
+        fut.add_done_callback(self._kept.put)
+        return fut
+
+    def _on_dask(self, client, f):
+        """A future as a Dask future: itself, or its value (waited for: a flow's)
+        scattered under its key."""
+        if not isinstance(f, cf.Future):
+            return f
+        value = f.result()                     # a failed input fails the task
+        if _key(f) not in self._scattered:
+            self._scattered[_key(f)] = client.scatter({f.key: value}, hash=False)[f.key]
+        return self._scattered[_key(f)]
+
+    def _flow(self, flow, key, fut, args, kwargs, inputs):
+        stage = self.current_stage()
+
+        def run():
+            _LOCAL.stage, _LOCAL.flow = stage, list(inputs)
+            t = time.perf_counter()
+            try:
+                value = flow(self, *args, **kwargs)
+            except (Exception if self.synchronous else BaseException) as e:  # noqa: BLE001
+                err = e if isinstance(e, TaskError) else TaskError(
+                    _info(flow).name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8),
+                    key)
+                self._finish(key, TaskState.FAILED, error=err)
+                return _resolve(fut, error=err)
+            self._finish(key, TaskState.COMPUTED, value, seconds=time.perf_counter() - t)
+            _resolve(fut, value)
+
+        if not self.synchronous:
+            with contextlib.suppress(Exception):
+                self.client()                  # its workers join while the flow works
+            threading.Thread(target=run, name=f"flow {_info(flow).name}", daemon=True).start()
+            return
+        saved = self.current_stage(), getattr(_LOCAL, "flow", None)
+        try:
+            run()
+        finally:
+            _LOCAL.stage, _LOCAL.flow = saved
+
+    def _on_seconds(self, event):
+        with contextlib.suppress(Exception):
+            self._seconds[event[1][0]] = float(event[1][1])
+
+    def _keep(self):
+        """The keeper thread: each task's result kept as it arrives."""
+        while (f := self._kept.get()) is not None:
+            self._keep_one(f)
+
+    def _keep_one(self, f):
+        key = _key(f)
+        if self._tasks[key].state is not None:
+            return
+        try:
+            value = f.result()
+        except BaseException as e:             # noqa: BLE001 - failed, cancelled, lost
+            self._finish(key, TaskState.FAILED, error=e if isinstance(e, TaskError) else
+                         TaskError(self._tasks[key].name, _one(e), key=key))
+            return
+        self._finish(key, TaskState.COMPUTED, value, seconds=self._seconds.pop(f.key, 0.0))
+
+    def _finish(self, key: str, state: TaskState, value=None, error=None, seconds=0.0):
+        rec = self._tasks[key]
+        if state is TaskState.COMPUTED and rec.state is None:
+            self.store.write(key, rec.name, value, seconds)
+        with self._lock:
+            if rec.state is not None:
+                return
+            rec.state, rec.seconds, rec.error = state, float(seconds), str(error or "")
+            self._records.append(rec)
+            if self._bar is not None and state is not TaskState.REUSED:
+                self._bar.update(1)
 
     def _count_new(self):
         with self._lock:
-            self._known += 1
             if self._progress and self._bar is None and sys.stderr.isatty():
                 from tqdm.auto import tqdm
                 self._bar = tqdm(total=0, unit="task", desc="tasks", file=sys.stderr,
                                  dynamic_ncols=True)
             if self._bar is not None:
-                self._bar.total = self._known
+                self._bar.total += 1
                 self._bar.refresh()
-
-    def _done(self, ref: Ref, state: str, value=None, error=None, seconds=0.0,
-              keep: bool = False):
-        if keep and state == "computed":
-            self.store.write(ref.key, ref.name, value, seconds)
-        ref._finish(state, value, error, seconds)
-        rec = TaskRecord(ref.name, ref.stage, ref.key, state, float(seconds),
-                         "" if error is None else str(error), ref.flow)
-        with self._lock:
-            self.records.append(rec)
-            if self._bar is not None and state != "reused":
-                self._bar.update(1)
-        if self.on_record is not None:
-            with contextlib.suppress(Exception):
-                self.on_record(rec)
-
-    def _run_here(self, ref, fn, args, kwargs):
-        try:
-            a = _pack(args, lambda r: r.result())
-            k = _pack(kwargs, lambda r: r.result())
-            value, seconds = _execute(fn, ref.key, a, k)
-        except TaskError as e:
-            self._done(ref, "failed", error=e)
-            return
-        self._done(ref, "computed", value=value, seconds=seconds, keep=True)
-
-    def _leaf(self, client, r: Ref):
-        """What a Ref becomes in a Dask call: its future, or its value scattered once."""
-        if r._future is not None and r.state != "failed":
-            return {_RESULT: r._future}
-        if r.state == "pending":              # a flow's result: wait for it here
-            r.result()
-        if r.state == "failed":
-            raise r._error
-        with self._lock:
-            if r._scattered is None:
-                r._scattered = client.scatter((r._value, 0.0), hash=False)
-            return {_RESULT: r._scattered}
-
-    def _enqueue(self, ref, fn, args, kwargs, priority):
-        if self.closed:
-            self._done(ref, "failed", error=_not_run(ref))
-            return
-        with self._lock:
-            heapq.heappush(self._queue, (-int(priority), next(self._order),
-                                         (ref, fn, args, kwargs, priority)))
-        self._pump()
-
-    def _workers(self, client):
-        if not self._place.threads or self._cluster is None:  # an outside cluster can grow
-            try:
-                self._place.update(client.nthreads() or {None: 1})
-            except Exception:                                   # noqa: BLE001
-                if not self._place.threads:
-                    self._place.update({None: 1})
-
-    def _pump(self):
-        """Send queued tasks to the cluster while it has free threads (or, when the
-        cluster could not start, fail them with the reason: nothing waits forever)."""
-        try:
-            client = self.client()
-        except Exception as e:                 # noqa: BLE001 - kept in start_error
-            with self._lock:
-                if self._start_error is None:
-                    self._start_error = e
-                jobs = [j[2] for j in self._queue]
-                self._queue.clear()
-            for ref, *_ in jobs:
-                self._done(ref, "failed", error=TaskError(
-                    ref.name, f"not run: the Dask cluster did not start ({_one(e)})",
-                    key=ref.key))
-            return
-        while True:
-            with self._lock:
-                if not self._queue:
-                    return
-                self._workers(client)
-                worker = self._place.free_worker()
-                if worker is None:
-                    return
-                job = self._place.take(self._queue, worker)
-                self._place.sent(worker, job[0].name)
-            try:
-                self._run_on_cluster(*job, worker=worker)
-            except Exception as e:            # noqa: BLE001 - the task fails, the run goes on
-                self._release(worker)
-                self._done(job[0], "failed", error=TaskError(
-                    job[0].name, f"not sent to the cluster ({_one(e)})", key=job[0].key))
-
-    def _release(self, worker):
-        with self._lock:
-            self._place.finished(worker)
-        if not self.closed:
-            self._pump()
-
-    def _run_on_cluster(self, ref, fn, args, kwargs, priority, worker=None):
-        client = self.client()
-        try:
-            a = _pack(args, lambda r: self._leaf(client, r))
-            k = _pack(kwargs, lambda r: self._leaf(client, r))
-        except TaskError as e:
-            with self._lock:                  # the slot goes back to the pump's loop
-                self._place.finished(worker)
-            self._done(ref, "failed", error=e)
-            return
-        short = ref.name.rsplit(".", 1)[-1]
-        where = {} if worker is None else dict(workers=[worker], allow_other_workers=True)
-        fut = client.submit(_execute, fn, ref.key, a, k, key=f"{short}-{ref.key}", pure=False,
-                            priority=priority, **where)
-        ref._future = fut
-        fut.add_done_callback(functools.partial(self._collect, ref, worker))
-
-    def _collect(self, ref: Ref, worker, fut):
-        try:
-            value, seconds = fut.result()
-        except TaskError as e:
-            self._release(worker)
-            self._done(ref, "failed", error=e)
-            return
-        except BaseException as e:             # noqa: BLE001 - cancelled, lost worker
-            self._release(worker)
-            self._done(ref, "failed", error=TaskError(ref.name, f"{type(e).__name__}: {e}",
-                                                      key=ref.key))
-            return
-        self._release(worker)
-        self._done(ref, "computed", value=value, seconds=seconds, keep=True)
-
-
-def _one(e: BaseException) -> str:
-    """An exception as one line."""
-    text = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {text[-1] if text else ''}".rstrip(": ")
-
-
-def _not_run(ref: Ref) -> TaskError:
-    return TaskError(ref.name, "not run: the engine was closed first", key=ref.key)

@@ -17,8 +17,9 @@ from biped_casadi.simulation.outcome import STATUSES
 from gait_opt import Gait
 
 from ..sweeps.storage import SweepStore
+from ..tasks import task
 
-from .spec import MonteCarloSettings, WalkerSpec, code_digest
+from .spec import MonteCarloSettings, WalkerSpec
 
 __all__ = ["MonteCarloStore", "evaluate_chunk"]
 
@@ -58,8 +59,9 @@ def _engine(payload: _Payload):
     return gait, simulator(spec.controller_for(gait), opts, spec.plant_model())
 
 
+@task(code="montecarlo")
 def evaluate_chunk(payload, start: int, stop: int) -> dict:
-    """Walk runs ``start:stop`` (on a Dask worker, or in this process).
+    """Walk runs ``start:stop`` (a task: on a Dask worker, or in this process).
 
     Parameters
     ----------
@@ -73,8 +75,8 @@ def evaluate_chunk(payload, start: int, stop: int) -> dict:
     dict
         ``status`` (n,), ``fail_step`` (n,), ``duration`` (n, K) s, ``peak_torque``,
         ``saturated_time`` (n,), ``scenario_steps``, ``elapsed`` (s, walking),
-        ``build`` (s, building the walker or simulator when this process had not yet)
-        and ``code_sha256``.
+        and ``build`` (s, building the walker or simulator when this process had not
+        yet).
     """
     t0 = time.perf_counter()
     gait, eng = _engine(payload)                 # built (and compiled) once per process
@@ -94,7 +96,7 @@ def evaluate_chunk(payload, start: int, stop: int) -> dict:
                 duration=np.asarray(b.duration, float), peak_torque=np.asarray(b.peak_torque),
                 saturated_time=np.asarray(b.saturated_time, float),
                 scenario_steps=int(b.scenario_steps), elapsed=time.perf_counter() - built,
-                build=built - t0, code_sha256=code_digest())
+                build=built - t0)
 
 
 

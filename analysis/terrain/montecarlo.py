@@ -31,7 +31,6 @@ interruption computes only the missing chunks and ends with the same numbers.
 """
 from __future__ import annotations
 
-import contextlib
 import math
 import time
 from dataclasses import dataclass
@@ -39,14 +38,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from biped_casadi import Design
+from biped_casadi.caching import code_version
 from biped_casadi.results import Result, internal
 
 
-from ..cluster import cluster_client, progress_bar, submit_chunks
-from ..tasks import resolve_scheduler
+from ..cluster import progress_bar
+from ..tasks import Engine, TaskError
 from .chunks import MonteCarloStore, evaluate_chunk, _Payload
 from .estimates import MFPTEstimate, mfpt_estimate
-from .spec import MonteCarloSettings, WalkerSpec, code_digest
+from .spec import MonteCarloSettings, WalkerSpec
 
 __all__ = ["MonteCarloResult", "monte_carlo"]
 
@@ -193,35 +193,32 @@ def monte_carlo(design, spec=None, settings: MonteCarloSettings | None = None,
     store = None
     if out_dir is not None:
         store = MonteCarloStore(out_dir, dict(gait_sha256=gait.cache_key, spec=spec.to_dict(),
-                                              settings=st.to_dict(), code_sha256=code_digest()))
+                                              settings=st.to_dict(),
+                                              code_sha256=code_version("montecarlo")))
     reused = 0
-    stack = contextlib.ExitStack()
-    client = None
-    where = resolve_scheduler(scheduler, workers)
-    if where not in ("synchronous", "local"):
-        client = stack.enter_context(cluster_client(where, workers))   # before anything is written
-    try:
+    # the chunks are tasks of an engine (kept in the folder, not in the cache); connected
+    # before anything is written
+    with Engine(scheduler, workers, cache=False, preload=(evaluate_chunk.__module__,)) as eng:
         if store is not None:
             store.open()
-            _reuse_chunks(store, todo, results, K)
-            reused = len(results)
-            todo = [t for t in todo if t[0] not in results]
-        bar = progress_bar(progress, N, sum(b - a for k, a, b in
-                                            [(k, k * C, min(k * C + C, N)) for k in results]),
-                           "run", "monte carlo")
         try:
-            computed, compute_time, steps_done = _compute_chunks(
-                payload, todo, results, store, bar, where, client, stack, workers,
-                f"mc-{gait.cache_key[:8]}")
+            if store is not None:
+                _reuse_chunks(store, todo, results, K)
+                reused = len(results)
+                todo = [t for t in todo if t[0] not in results]
+            bar = progress_bar(progress, N, sum(min(k * C + C, N) - k * C for k in results),
+                               "run", "monte carlo")
+            try:
+                computed, compute_time, steps_done = _compute_chunks(eng, payload, todo,
+                                                                     results, store, bar)
+            finally:
+                bar.close()
+            if store is not None:
+                store.log(dict(time=time.strftime("%Y-%m-%dT%H:%M:%S"), reused=reused,
+                               computed=computed))
         finally:
-            bar.close()
-        if store is not None:
-            store.log(dict(time=time.strftime("%Y-%m-%dT%H:%M:%S"), reused=reused,
-                           computed=computed))
-    finally:
-        if store is not None:
-            store.close()
-        stack.close()
+            if store is not None:
+                store.close()
     return _result(gait, spec, st, results, out_dir, t0, compute_time, steps_done,
                    computed, reused)
 
@@ -240,32 +237,21 @@ def _reuse_chunks(store, todo, results, K):
                 store.discard(path)
 
 
-def _compute_chunks(payload, todo, results, store, bar, where, client, stack, workers, name):
-    """Compute the chunks of ``todo`` (in this process, or on the client, a LocalCluster
-    started on ``stack`` when there is none), each recorded in ``results`` (and the
-    folder) as it arrives: (chunks computed, their compute time, their steps)."""
+def _compute_chunks(eng, payload, todo, results, store, bar):
+    """Compute the chunks of ``todo`` on the engine, each recorded in ``results`` (and
+    the folder) as it arrives: (chunks computed, their compute time, their steps)."""
     computed, compute_time, steps_done = 0, 0.0, 0
-
-    def record(k, a, b, out):
-        nonlocal computed, compute_time, steps_done
-        if out["code_sha256"] != code_digest():
-            raise ValueError("scheduler: a worker runs other code than this process "
-                             "(install the same version of the toolkit on every worker)")
-        if store is not None:
-            store.write_runs(k, a, out)
-        results[k] = out
-        computed += 1
-        compute_time += out["elapsed"]
-        steps_done += out["scenario_steps"]
-        bar.update(b - a)
-
-    if todo and where == "synchronous":
-        for k, a, b in todo:
-            record(k, a, b, evaluate_chunk(payload, a, b))
-    elif todo:
-        if client is None:
-            client = stack.enter_context(cluster_client("local", workers))
-        submit_chunks(client, evaluate_chunk, payload, todo, record, name)
+    try:
+        for (k, a, b), out in eng.each(evaluate_chunk, {t: (payload, t[1], t[2]) for t in todo}):
+            if store is not None:
+                store.write_runs(k, a, out)
+            results[k] = out
+            computed += 1
+            compute_time += out["elapsed"]
+            steps_done += out["scenario_steps"]
+            bar.update(b - a)
+    except TaskError as e:
+        raise ValueError(f"scheduler: {e}") from None
     return computed, compute_time, steps_done
 
 

@@ -1,6 +1,5 @@
 """What a Monte Carlo walks (the controller, its design or gains, the plant, the engine)
-and how (runs, steps, terrain, thresholds), and the digest of the code behind its
-numbers."""
+and how (runs, steps, terrain, thresholds)."""
 from __future__ import annotations
 
 import math
@@ -10,31 +9,15 @@ import numpy as np
 
 from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, robot)
-from biped_casadi.caching import modules_digest
 from biped_casadi.model.description import description_from_dict
 from biped_casadi.simulation import (Terrain, random_heights)
 
 
-__all__ = ["WalkerSpec", "MonteCarloSettings", "code_digest", "MAX_RUNS", "MAX_STEPS",
-           "NUMERIC_MODULES"]
+__all__ = ["WalkerSpec", "MonteCarloSettings", "MAX_RUNS", "MAX_STEPS"]
 
 #: the largest number of runs and of steps per run a Monte Carlo accepts
 MAX_RUNS = 1_000_000
 MAX_STEPS = 100_000
-
-#: the modules whose code decides the numbers of a Monte Carlo (part of its settings)
-NUMERIC_MODULES = ("biped_casadi.model.biped", "biped_casadi.control.output_law",
-                   "biped_casadi.control.zero_dynamics", "biped_casadi.control.time_varying",
-                   "biped_casadi.control.virtual_constraints", "biped_casadi.simulation.kernel",
-                   "biped_casadi.simulation.validity", "biped_casadi.simulation.outcome",
-                   "biped_casadi.simulation.full_order", "biped_casadi.simulation.tv_walker",
-                   "biped_casadi.simulation.vc_walker", "biped_casadi.simulation.terrain",
-                   "analysis.terrain.montecarlo")
-
-
-def code_digest() -> str:
-    """SHA-256 of the source of :data:`NUMERIC_MODULES` (part of a Monte Carlo's identity)."""
-    return modules_digest(NUMERIC_MODULES)
 
 
 @dataclass(frozen=True)

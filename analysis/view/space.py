@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from biped_casadi.caching import DiskCache
+from biped_casadi.caching import ResultStore, task_key
 from biped_casadi.control.output_law import M1_LIMIT
 from biped_casadi.files import write_bytes_atomic
 
@@ -39,7 +39,8 @@ FALLBACK_HALF_WIDTH = 2.5
 ROUND_TO = 0.1
 #: stable grid points whose walks are tried, most stable first, for the start
 CANDIDATES = 8
-SPACES = DiskCache("view-space", version=1)
+#: the version of the slider spaces kept in the cache (bump it when the rule changes)
+SPACES_VERSION = 1
 
 
 @dataclass(frozen=True)
@@ -167,7 +168,8 @@ def slider_space(gait, M1=None, rejoin: float = 0.5, walks_ok=None, walk_key=Non
                 rejoin=float(rejoin), walk=walk_key if M1 is None else None,
                 rule=[2, SCAN_HALF_WIDTH, SCAN_POINTS, MIN_PAD, FALLBACK_HALF_WIDTH, ROUND_TO,
                       CANDIDATES])
-    path = SPACES.path(body)
+    path = ResultStore().path(task_key("analysis.view.space.slider_space", SPACES_VERSION,
+                                       "numerical", (body,)), ".json")
     if cache:
         kept = _read(path)
         if kept is not None:

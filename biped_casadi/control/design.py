@@ -9,18 +9,16 @@ saturation and for an exported controller, so they are part of the design.
 """
 from __future__ import annotations
 
-import functools
-import warnings
 
 import numpy as np
 
 from ..caching import digest
 from .output_law import Gains, check_M1, check_rejoin
-from .reference import Reference, _is_model, require_same_robot
+from .reference import Reference, require_same_robot
 from .time_varying import PAPER_REJOIN, TimeVaryingController
 from .virtual_constraints import VirtualConstraintController
 
-__all__ = ["Design", "design_first"]
+__all__ = ["Design"]
 
 
 class Design:
@@ -132,6 +130,29 @@ class Design:
         if d.gait is not gait and _key(d.gait) != _key(gait):
             raise ValueError("design: made for another gait than the one given")
         return d
+
+    @classmethod
+    def require(cls, design) -> "Design":
+        """``design`` checked to be a :class:`Design` on its gait.
+
+        Parameters
+        ----------
+        design : Design
+            The design.
+
+        Returns
+        -------
+        Design
+
+        Raises
+        ------
+        ValueError
+            Naming 'design' when it is not a Design or has no gait.
+        """
+        if not isinstance(design, Design) or design.gait is None:
+            raise ValueError("design: a Design on its gait is needed (Design.tv(gait, M1), "
+                             "Design.vc(gait) or Design.of(M1, gait))")
+        return design
 
     def replace(self, **changes) -> "Design":
         """A copy with some fields changed.
@@ -246,41 +267,3 @@ class Design:
 
 def _key(gait):
     return getattr(gait, "cache_key", None) or id(gait)
-
-
-def design_first(fn):
-    """Decorator: ``fn(design, ...)`` may also be called as ``fn(gait, design, ...)``.
-
-    In the second form ``design`` is a :class:`Design` without a gait, an M1, or None
-    (virtual constraints), and the pair becomes one design on that gait; the older
-    ``fn(model, gait, design, ...)`` also works, with a deprecation warning.
-
-    Parameters
-    ----------
-    fn : callable
-        A function whose first argument is a :class:`Design` with a gait.
-
-    Returns
-    -------
-    callable
-    """
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        args = list(args)
-        if args and _is_model(args[0]):
-            if len(args) < 2 or not hasattr(args[1], "T"):
-                raise TypeError(f"{fn.__qualname__}: pass the design first")
-            require_same_robot(args[0], args[1])
-            warnings.warn(f"{fn.__qualname__}(model, gait, ...) is deprecated: call "
-                          f"{fn.__qualname__}(design, ...) (the gait carries its model)",
-                          DeprecationWarning, stacklevel=2)
-            args = args[1:]
-        if args and not isinstance(args[0], Design) and hasattr(args[0], "T"):
-            gait = args[0]
-            design = args[1] if len(args) > 1 else kwargs.pop("design", None)
-            args = [Design.of(design, gait)] + args[2:]
-        elif args and isinstance(args[0], Design) and args[0].gait is None:
-            raise ValueError("design: no gait (use Design.tv(gait, ...) or pass the gait "
-                             "first)")
-        return fn(*args, **kwargs)
-    return wrapper

@@ -14,13 +14,11 @@ given in closed form has no state (``n_state = 0``).
 from __future__ import annotations
 
 import abc
-import functools
-import warnings
 
 import casadi as ca
 import numpy as np
 
-__all__ = ["Reference", "require_same_robot", "gait_first"]
+__all__ = ["Reference", "require_same_robot"]
 
 
 def require_same_robot(model, reference) -> None:
@@ -234,42 +232,3 @@ class Reference(abc.ABC):
         """
         q, dq, _ = self.evaluate(float(t))
         return np.array([q[0], dq[0]])
-
-
-def _is_model(obj) -> bool:
-    """Whether ``obj`` is a robot model (not a reference)."""
-    return (hasattr(obj, "description") and hasattr(obj, "impact")
-            and not hasattr(obj, "T"))
-
-
-def gait_first(fn):
-    """Decorator: ``fn(gait, ...)`` may also be called as ``fn(model, gait, ...)``.
-
-    The gait carries its model; the older form checks that the two match and warns that
-    it is deprecated (:class:`DeprecationWarning`).
-
-    Parameters
-    ----------
-    fn : callable
-        A function (or ``__init__``) whose first argument is a reference.
-
-    Returns
-    -------
-    callable
-    """
-    method = fn.__name__ == "__init__"
-
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        head, rest = (args[:1], args[1:]) if method else ((), args)
-        if rest and _is_model(rest[0]):
-            if len(rest) < 2 or not hasattr(rest[1], "T"):
-                raise TypeError(f"{fn.__qualname__}: pass the gait first (it carries its "
-                                "model)")
-            require_same_robot(rest[0], rest[1])
-            name = fn.__qualname__.replace(".__init__", "")
-            warnings.warn(f"{name}(model, gait, ...) is deprecated: call {name}(gait, ...) "
-                          "(the gait carries its model)", DeprecationWarning, stacklevel=2)
-            rest = rest[1:]
-        return fn(*head, *rest, **kwargs)
-    return wrapper

@@ -19,7 +19,7 @@ from .output_law import (Gains, SingularityReport, actuated_torque, check_M1, ch
                          correction, decoupling_denominator, initial_output_errors,
                          output_acceleration, output_matrix, outputs, singularity_report,
                          unactuated_acceleration)
-from .reference import gait_first, require_same_robot
+from .reference import require_same_robot
 from .zero_dynamics import denominator_samples
 
 __all__ = ["TimeVaryingController", "PAPER_REJOIN"]
@@ -63,7 +63,6 @@ class TimeVaryingController(Controller):
 
     name = "tv"
 
-    @gait_first
     def __init__(self, reference, M1=None, gains: Gains | None = None,
                  rejoin: float = PAPER_REJOIN):
         model = reference.model

@@ -14,7 +14,7 @@ from ..caching import cached
 from ..numerics import as_vector, rk4_step
 from .controller import ControlOutput, Controller, StepStart
 from .output_law import Gains, SingularityReport, correction, output_acceleration, singularity_report
-from .reference import gait_first, require_same_robot
+from .reference import require_same_robot
 
 __all__ = ["VirtualConstraints", "VirtualConstraintController", "fit_virtual_constraints",
            "ConstraintSurface", "constraint_surface", "HIP_PHASE", "phase_correction",
@@ -335,7 +335,6 @@ class VirtualConstraintController(Controller):
     name = "vc"
     n_ref = 0
 
-    @gait_first
     def __init__(self, gait, constraints: VirtualConstraints | None = None,
                  gains: Gains | None = None, correction: bool = True):
         model = gait.model
@@ -638,7 +637,6 @@ class ConstraintSurface:
         return float(self.vc.c @ np.asarray(q, float))
 
 
-@gait_first
 def constraint_surface(gait, phase=None, H0=None) -> ConstraintSurface:
     """The :class:`ConstraintSurface` of virtual constraints fitted to a gait (memoised).
 

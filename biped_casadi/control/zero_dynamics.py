@@ -28,7 +28,6 @@ import casadi as ca
 import numpy as np
 
 from ..caching import cached
-from .reference import gait_first
 from .output_law import (actuated_torque, coordinates_from_outputs, correction,
                          decoupling_denominator, initial_output_errors, outputs,
                          unactuated_acceleration)
@@ -344,7 +343,6 @@ def zero_dynamics(model) -> ZeroDynamics:
     return ZeroDynamics(model)
 
 
-@gait_first
 @cached(maxsize=16)
 def denominator_samples(reference, n: int = 1001):
     """D11 and D12 along a reference step: the samples of the eq. (24) denominator.

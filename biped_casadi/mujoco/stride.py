@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..control.design import Design, design_first
+from ..control.design import Design
 from ..results import Result
 from .mjcf import STIFF, ContactSettings
 from .walk import MujocoLoop
@@ -225,7 +225,6 @@ def fit_stride_map(X0, X1) -> tuple:
     return Lam, c, np.sqrt(np.mean(res**2, axis=0))
 
 
-@design_first
 def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c",
                cycle_steps: int = 60, directions: int = 16, size=None,
                fit_steps: int = 4, loop: MujocoLoop | None = None,
@@ -262,6 +261,7 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
     -------
     StrideMap
     """
+    design = Design.require(design)
     for name, v, lo in (("directions", directions, 3), ("fit_steps", fit_steps, 2)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
             raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")

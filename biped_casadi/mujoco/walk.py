@@ -38,7 +38,7 @@ import time
 
 import numpy as np
 
-from ..control.design import Design, design_first
+from ..control.design import Design
 from ..control.output_law import SECTION
 from ..numerics import FastCall
 from ..simulation.perturbation import Perturbation
@@ -435,7 +435,6 @@ class _Run:
         return None
 
 
-@design_first
 def walk(design: Design, steps: int = 10, perturbation=None, settings: ContactSettings = STIFF,
          law: str = "c", step_start: str = "impact", torque_limit: float | None = None,
          max_slip: float = 0.05, horizon: float = 2.0, log: bool = False,
@@ -445,7 +444,7 @@ def walk(design: Design, steps: int = 10, perturbation=None, settings: ContactSe
     Parameters
     ----------
     design : Design
-        The design on its gait (``walk(gait, M1_or_None, ...)`` works too).
+        The design on its gait.
     steps : int
         Touchdowns to reach.
     perturbation : Perturbation or tuple, optional
@@ -477,6 +476,7 @@ def walk(design: Design, steps: int = 10, perturbation=None, settings: ContactSe
     ValueError
         Naming the argument.
     """
+    design = Design.require(design)
     loop = MujocoLoop(design, settings, law, torque_limit, step_start, max_slip, horizon,
                       touchdown)
     q0, dq0 = start_of(design.gait, perturbation)

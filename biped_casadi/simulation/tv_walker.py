@@ -34,7 +34,7 @@ import numpy as np
 
 from ..caching import cached
 from ..control.output_law import SECTION, check_M1, decoupling_denominator
-from ..control.reference import gait_first, require_same_robot
+from ..control.reference import require_same_robot
 from ..control.zero_dynamics import denominator_samples, zero_dynamics
 from ..numerics import compiled, rk4_step
 from ..simd import kernels
@@ -510,7 +510,6 @@ class ZeroDynamicsWalker:
         P[gi[go], 2 * nu + 1:] = dyn.T[go]
 
 
-@gait_first
 @cached(maxsize=4)
 def zero_dynamics_walker(gait, options: SimulationOptions | None = None,
                          rk4_steps: int = 400, jit: bool = False) -> ZeroDynamicsWalker:

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..caching import cached
 from ..control.output_law import SECTION
-from ..control.reference import gait_first, require_same_robot
+from ..control.reference import require_same_robot
 from ..control.virtual_constraints import constraint_surface, rejoin_phase
 from ..numerics import compiled, rk4_step
 from ..simd import kernels
@@ -432,7 +432,6 @@ class VirtualConstraintWalker:
         p[gi[go]] = p_p.T[go]
 
 
-@gait_first
 @cached(maxsize=4)
 def virtual_constraint_walker(gait, options: SimulationOptions | None = None,
                               nodes: int = 200, jit: bool = False) -> VirtualConstraintWalker:

@@ -279,8 +279,8 @@ def codesign(robot_or_gait, settings: CodesignSettings | None = None, *, gait_fi
             raise
         if isinstance(result, NoDesignFound):
             raise NoDesign(result.message, result.details)
-        result.cached = ref.state == "reused"
-    return _with_gait_file(result, gait, gait_file, cache, ref.key)
+        result.cached = eng.state(ref) == "reused"
+    return _with_gait_file(result, gait, gait_file, cache, ref.key.rsplit("-", 1)[-1])
 
 
 def _with_gait_file(result: CodesignResult, gait, gait_file, cache, key: str):

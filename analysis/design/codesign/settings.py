@@ -5,7 +5,6 @@ import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
 
-from biped_casadi.caching import DiskCache
 from biped_casadi.results import Result
 
 from ...robustness.s_star import RobustnessSettings
@@ -14,9 +13,6 @@ from ..robust_search import ROBUST_GAIT
 #: the sampling search's shipped design on :data:`ROBUST_GAIT` (M1; v_c rejoining at
 #: 0.75 T): s* 0.969, the co-design's first warm start
 TODAY_DESIGN = (-8.2618, 2.5374, 0.0034, 8.5090)
-
-#: the co-designs kept between sessions
-CODESIGNS = DiskCache("codesign", version=1)
 
 #: what the co-design does with a gait it is given (:class:`CodesignSettings`)
 GIVEN_GAIT = ("fixed", "free", "auto")

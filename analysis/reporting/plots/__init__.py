@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from .common import (COLOUR_NAMES, STANCE, SWING, TORSO, _figure, _legs_legend, _stick,
                      run_label, save_figure, save_figures)
-from .family import family_designs_plot, gait_family_plot
 from .mujoco import mujoco_animation, mujoco_eigen_plot, mujoco_steps_plot
+from .speed_family import family_designs_plot, gait_family_plot
 from .paper import (conjecture_plot, gait_profiles_plot, gait_stick_plot, m1_plane_plot,
                     one_d_sweeps_plot, stable_domains_plot, swing_torques_plot,
                     unactuated_error_plot)

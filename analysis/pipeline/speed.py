@@ -13,7 +13,7 @@ from gait_opt import GaitOptions, gait_family
 
 from ..design import ROBUST_GAIT
 from ..design.schedule import M1Schedule, profile_gaits
-from ..robustness import RobustnessSettings, kept_directions, robustness
+from ..robustness import kept_directions, robustness
 from ..robustness.speed import ramp_profile, walk_gaits
 from ..tasks import task
 from .options import Resolution
@@ -31,7 +31,7 @@ RAMP = dict(dv=0.05, hold=8, options=SimulationOptions(mu=0.6, torque_limit=150.
 @dataclass
 class FamilyStage(StageResult):
     """The family's gaits and the designs measured on them (``records`` as
-    :class:`analysis.design.family.FamilyDesigns`' for its figure)."""
+    :class:`analysis.design.designs_over_speed.FamilyDesigns`' for its figure)."""
 
     speeds: list = field(default_factory=list)
     gaits: list = field(default_factory=list)
@@ -138,7 +138,7 @@ def stage_family(engine, model, robust_stage, res: Resolution) -> FamilyStage:
     fam_ref = engine.submit(family_of, model, speeds,
                             GaitOptions(**ROBUST_GAIT).for_model(model))
     fam = fam_ref.result()
-    rs = RobustnessSettings(directions=8, rounds=6) if res.quick else RobustnessSettings()
+    rs = res.robustness
     kept_refs = [engine.submit(kept_directions, g, rs) for g in fam.gaits]
     ramp = engine.submit(ramp_gaits, fam_ref, speeds[0], speeds[-1], RAMP["dv"], RAMP["hold"])
     d0 = robust_stage.result().result.design

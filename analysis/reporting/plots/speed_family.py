@@ -1,6 +1,6 @@
 """A gait family against speed: cost of transport, step length, period, peak torque,
 impact impulse ratio and the virtual constraints' eigenvalue (computed by
-:func:`analysis.family.family_figures`)."""
+:func:`analysis.gait_metrics.family_figures`)."""
 from __future__ import annotations
 
 import numpy as np
@@ -35,7 +35,7 @@ def gait_family_plot(figures, title: str | None = None) -> Figure:
     Parameters
     ----------
     figures : FamilyFigures
-        From :func:`analysis.family.family_figures`.
+        From :func:`analysis.gait_metrics.family_figures`.
     title : str, optional
 
     Returns
@@ -117,7 +117,7 @@ def family_designs_plot(designs, title: str | None = None) -> Figure:
     Parameters
     ----------
     designs : FamilyDesigns
-        From :func:`analysis.design.family.family_designs` (or any object with
+        From :func:`analysis.design.designs_over_speed.family_designs` (or any object with
         ``records``: per speed ``speed`` and ``designs``, label -> ``max_abs``,
         ``s_star`` and optionally ``basin_area``; ``deadbeat`` optional).
     title : str, optional
