@@ -25,8 +25,8 @@ from .gait_move import gait_change, move_gait
 from .problem import Problem, Solve, solve, solve_continued
 from .settings import CodesignResult, CodesignSettings, NoDesign
 from .starts import deadbeat_starts, failure_binds, fitted_starts
-from .units import (fixed_problem, gait_step, hardest, measure, node_kernel, paper_first,
-                    sampled_starts, screen, vc_radius)
+from .units import (fixed_problem, gait_step, hardest, kept_first, measure, node_kernel,
+                    paper_first, sampled_starts, screen, vc_radius)
 
 #: the gait options a given gait is moved to (the others stay the given gait's)
 MOVED = ("impact_mu", "clearance", "continuation", "continuation_shape")
@@ -456,7 +456,7 @@ class Method:
         for rnd in range(st.gait_rounds):
             if rnd and not st.steps_after_target and self.meets_target(best):
                 break
-            res, p = self._gait_solve(gait, dirs, M1, best.s_star, trust, rnd)
+            res, p = self._gait_solve(gait, kept, dirs, M1, best.s_star, trust, rnd)
             if not res.finite:
                 self.rounds.append(dict(phase="gait free", round=rnd + 1,
                                         nlp_status=res.status, rejected="no solve"))
@@ -480,7 +480,7 @@ class Method:
                     dirs.append(d_fail)
         return best
 
-    def _gait_solve(self, gait, dirs, M1, s_star, trust, rnd):
+    def _gait_solve(self, gait, kept, dirs, M1, s_star, trust, rnd):
         st = self.st
         # max|lambda| is not exact in the free-gait NLP: the Jury bound on the current
         # gait's A^z(M1), tighter, keeps M1 from raising it while the gait moves
@@ -489,7 +489,8 @@ class Method:
                     paper_tol=st.paper_tol, rejoin=self.rejoin,
                     M1=tuple(float(v) for v in M1), s0=max(s_star - 0.02, 0.1),
                     jury_bound=st.gait_eigen_margin * self.run(vc_radius, gait),
-                    trust=(trust * st.trust.alpha, trust * st.trust.T, trust * st.trust.x0))
+                    trust=(trust * st.trust.alpha, trust * st.trust.T, trust * st.trust.x0),
+                    fallback_first=kept_first(kept))
         self.say(f"NLP, gait free: {p.scenarios} scenarios x {st.steps + 1} steps, trust "
                  f"region {trust * st.trust.alpha:g} rad (round {rnd + 1})")
         res = self.run(solve, p, st.gait_step)

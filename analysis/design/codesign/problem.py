@@ -10,7 +10,7 @@ it is deterministic, so a solve is a pure function of the problem and of IPOPT's
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
@@ -61,6 +61,10 @@ class Problem:
         none).
     trust : tuple, optional
         (alpha rad, T s, x0) radii of a gait step's trust region (free gait only).
+    fallback_first : tuple, optional
+        The direction that replaces the paper's (still at scale 1) when the paper's cannot
+        strike from the start (lowering s does not help a direction at a fixed scale): the
+        gait's first kept direction, when it is not the paper's.
     """
 
     gait: object
@@ -75,6 +79,7 @@ class Problem:
     s0: float
     jury_bound: float | None = None
     trust: tuple | None = None
+    fallback_first: tuple | None = None
 
     @property
     def scenarios(self) -> int:
@@ -228,6 +233,28 @@ def _ipopt(tr, red, d0, lb, ub, limits: IpoptLimits) -> NLPSolve:
                     evaluations=0)
 
 
+def _build_striking(p: Problem):
+    """:func:`build`, with the first direction replaced by ``p.fallback_first`` when the
+    paper's direction (at its fixed scale 1) does not strike from the start.
+
+    Returns
+    -------
+    tuple
+        (tr, red, d0, lb, ub, note): ``note`` is ``{"first": "kept"}`` when the fallback
+        was taken, else empty.
+    """
+    tr, red, d0, lb, ub = build(p)
+    if p.fallback_first is None:
+        return tr, red, d0, lb, ub, {}
+    red.evaluate(d0)
+    if not (red.failures and red.failures[-1][0] == 0):
+        red._last = None                  # evaluated again under the caller's bounds
+        return tr, red, d0, lb, ub, {}
+    dirs = np.array(p.directions, float)
+    dirs[0] = np.asarray(p.fallback_first, float)
+    return (*build(replace(p, directions=dirs, fallback_first=None)), {"first": "kept"})
+
+
 def _record(res: NLPSolve) -> dict:
     return dict(status=res.status, iterations=res.iterations, evaluations=res.evaluations,
                 time=round(res.time, 2))
@@ -256,9 +283,9 @@ def solve(problem: Problem, limits: IpoptLimits) -> Solve:
     -------
     Solve
     """
-    tr, red, d0, lb, ub = build(problem)
+    tr, red, d0, lb, ub, note = _build_striking(problem)
     res = _ipopt(tr, red, d0, lb, ub, limits)
-    return _solved(tr, red, res, [_record(res)])
+    return _solved(tr, red, res, [dict(_record(res), **note)])
 
 
 @task
@@ -280,7 +307,7 @@ def solve_continued(problem: Problem, limits: IpoptLimits, paper_steps: int) -> 
     -------
     Solve
     """
-    tr, red, d0, lb, ub = build(problem)
+    tr, red, d0, lb, ub, note = _build_striking(problem)
     target = red.tols[0]
     red.tols[0] = np.inf
     red.evaluate(d0)
@@ -292,7 +319,7 @@ def solve_continued(problem: Problem, limits: IpoptLimits, paper_steps: int) -> 
         red.tols[0] = max(target, target * (e0 / target) ** (i / max(n, 1))) if i else target
         red._last = None
         res = _ipopt(tr, red, d0 if res is None else res.d, lb, ub, limits)
-        records.append(dict(_record(res), paper_bound=float(red.tols[0])))
+        records.append(dict(_record(res), paper_bound=float(red.tols[0]), **note))
         if not np.all(np.isfinite(res.d)):
             break
     return _solved(tr, red, res, records)

@@ -22,7 +22,8 @@ from .problem import Problem, Solve, solve
 from .settings import IpoptLimits, StartSampling
 
 __all__ = ["Measured", "Screened", "GaitStep", "vc_radius", "measure", "hardest",
-           "sampled_starts", "screen", "gait_step", "fixed_problem", "paper_first"]
+           "sampled_starts", "screen", "gait_step", "fixed_problem", "paper_first",
+           "kept_first"]
 
 
 @dataclass
@@ -250,6 +251,23 @@ def paper_first(kept, active) -> np.ndarray:
     return np.vstack([first, d[list(active)]]) if len(active) else first
 
 
+def kept_first(kept) -> tuple | None:
+    """The gait's first kept direction when it is not the paper's (the NLP's first
+    direction when the paper's cannot strike from the start), else None.
+
+    Parameters
+    ----------
+    kept : KeptDirections
+        The gait's kept directions.
+
+    Returns
+    -------
+    tuple or None
+    """
+    d0 = kept.directions[0]
+    return None if np.all(d0 == 1) else tuple(float(v) for v in d0)
+
+
 def fixed_problem(gait, kept, M1, active, s0: float, *, steps: int, tst: TranscriptionSettings,
                   scenario_tol: float, paper_tol: float, rejoin: float,
                   jury_bound: float) -> Problem:
@@ -286,7 +304,7 @@ def fixed_problem(gait, kept, M1, active, s0: float, *, steps: int, tst: Transcr
                    free=False, transcription=tst, scenario_tol=scenario_tol,
                    paper_tol=paper_tol, rejoin=float(rejoin),
                    M1=tuple(float(v) for v in np.asarray(M1, float)), s0=float(s0),
-                   jury_bound=float(jury_bound))
+                   jury_bound=float(jury_bound), fallback_first=kept_first(kept))
 
 
 @task
