@@ -72,6 +72,20 @@ class StartSampling:
         With ``fit_gait``: RK4 steps per T of the screen's walker.
     deadbeat : bool
         With ``fit_gait``: the deadbeat M1 NLP's design among the starts.
+    refine_rounds : int
+        With ``fit_gait``: rounds of the local search near the best starts when no
+        screened start converges from the paper's perturbation by the target's step with
+        s* >= 1 (:mod:`analysis.design.codesign.refine`; 0: none).
+    refine_from : float
+        Refine only when the screen's best s* (converging in time or not) is at least
+        this: the gait carries the scale.
+    refine_draws, refine_bisected, refine_elite : int
+        Per round: draws, of them bisected at most, starts drawn around.
+    refine_radius, refine_shrink : float
+        The draws' standard deviation in units of the gait's scale, and its factor per
+        round.
+    refine_stop : float
+        The search stops once a start converging in time reaches this s*.
     """
 
     samples: int = 2000
@@ -85,6 +99,14 @@ class StartSampling:
     screen_rounds: int = 6
     screen_rk4: int = 200
     deadbeat: bool = True
+    refine_rounds: int = 0
+    refine_from: float = 0.9
+    refine_draws: int = 3200
+    refine_bisected: int = 120
+    refine_elite: int = 8
+    refine_radius: float = 0.15
+    refine_shrink: float = 0.7
+    refine_stop: float = 1.0625
 
 
 @dataclass(frozen=True)
@@ -366,7 +388,8 @@ FULL = CodesignSettings()
 #: target), v_c rejoining at 0.75 T only, the gait fixed first and moved from when that
 #: misses the target (s* >= 1, max|lambda| within virtual constraints', the paper's
 #: perturbation below 1e-3 by step 5), the gait steps only while the target is missed
-FIT = CodesignSettings(starts=StartSampling(samples=20000, kept=3, fit_gait=True),
+FIT = CodesignSettings(starts=StartSampling(samples=20000, kept=3, fit_gait=True,
+                                            refine_rounds=5),
                        rejoin_choices=(), given_gait="auto", converge_by=5,
                        steps_after_target=False)
 

@@ -154,6 +154,9 @@ class StartScreen(Result):
         constraints).
     scale : list of float
         The samples' box per component (:func:`gait_scale` x the box).
+    refined : dict
+        The refinement near the best starts (:func:`.refine.refine_starts`), {} when it
+        did not run.
     """
 
     status: str
@@ -166,6 +169,7 @@ class StartScreen(Result):
     screened: int
     best: dict = field(default_factory=dict)
     scale: list = field(default_factory=list)
+    refined: dict = field(default_factory=dict)
 
     SUCCESS = ("walks", "none")
 
@@ -377,6 +381,7 @@ def fitted_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
     -------
     StartScreen
     """
+    from .refine import Pool, refine_starts      # (refine builds on this module)
     st, rs, nu = sampling, settings, gait.model.nu
     c = engine.submit(start_candidates, gait, rejoin, st, eigen_bound,
                       np.asarray(extra, float).reshape(-1, nu), rs).result()
@@ -389,11 +394,19 @@ def fitted_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
     chunks = [ch for ch in np.array_split(np.arange(len(M)), max(1, min(parts, len(M))))]
     refs = [engine.submit(screen_batch, gait, kept, M[ch], rejoin, st, rs) for ch in chunks]
     parts_ = [r.result() for r in refs]
-    s_star = np.concatenate([p[0] for p in parts_])
-    s_fail = np.concatenate([p[1] for p in parts_])
-    cause = [x for p in parts_ for x in p[2]]
-    frac = np.concatenate([p[3] for p in parts_])
-    conv = np.concatenate([p[4] for p in parts_])
+    pool = Pool(M, np.concatenate([p[0] for p in parts_]),
+                np.concatenate([p[1] for p in parts_]), [x for p in parts_ for x in p[2]],
+                np.concatenate([p[3] for p in parts_]), np.concatenate([p[4] for p in parts_]),
+                src)
+    refined = {}
+    if st.refine_rounds and pool.best_target(converge_by) < 1.0 \
+            and float(pool.s_star.max()) >= st.refine_from:
+        # the gait carries the scale but no screened start converges in time: search near
+        # the best starts (:mod:`.refine`)
+        refined = refine_starts(engine, gait, kept, rejoin, st, eigen_bound, rs, pool,
+                                converge_by, parts)
+    M, s_star, s_fail, cause = pool.M, pool.s_star, pool.s_fail, pool.cause
+    frac, conv, src = pool.frac, pool.conv, pool.sources
     # the target first; then, of the starts with s* >= 1, those whose paper perturbation
     # converges soonest (the target's other half); then s*
     target = (conv <= converge_by) & (s_star >= 1.0)
@@ -411,10 +424,11 @@ def fitted_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
     walks = bool(s_star[b] > 0)
     msg = (f"best of {len(M)} screened starts ({best['source']}): s* {best['s_star']:.3g}"
            + (f", stopped just above by {best['binds']}" if np.isfinite(best["s_fail"])
-              else ""))
+              else "") + (f"; refined in {refined['rounds']} round(s) ({refined['stopped']})"
+                          if refined else ""))
     return StartScreen("walks" if walks else "none", msg, M[top], s_star[top],
                        [src[i] for i in top], c["candidates"], c["stable"], len(M), best,
-                       c["scale"])
+                       c["scale"], refined)
 
 
 def failure_binds(design, direction, scale: float, settings) -> dict:
