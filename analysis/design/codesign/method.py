@@ -211,7 +211,8 @@ class Method:
         the gait: (M1, its screened s*) pairs).
 
         A given gait to move (``start_gait``) is moved with each effort weight of
-        ``settings.move.efforts`` in turn (the first is nearest the given gait) until
+        ``settings.move.efforts`` in turn (the first is nearest the given gait; the next
+        move is computed beside each screen) until
         the start screen on the moved gait finds a start that meets the target; the
         moved gait whose screen is best is kept."""
         st = self.st
@@ -237,9 +238,16 @@ class Method:
         self.say(f"gait given: moved to the robust gait constraints {targets} near it, "
                  "then co-designed from there")
         tried, last_error = [], None
-        for effort in st.move.efforts:
-            self.moved = self.run(move_gait, g, targets,
-                                  dataclasses.replace(st.move, effort=float(effort)), self.tst)
+        efforts = list(st.move.efforts)
+        moves = [self.engine.submit(move_gait, g, targets, dataclasses.replace(
+            st.move, effort=float(e)), self.tst) for e in efforts[:1]]
+        for i, effort in enumerate(efforts):
+            self.moved = moves[i].result()
+            if i + 1 < len(efforts):
+                # the next move runs beside this one's start screen (one ahead only: at
+                # most one move is computed in vain when this one meets the target)
+                moves.append(self.engine.submit(move_gait, g, targets, dataclasses.replace(
+                    st.move, effort=float(efforts[i + 1])), self.tst))
             self.say(f"  effort weight {effort:g}: " + self.moved.message)
             if self.moved.status == "kept" and tried:
                 continue                   # nothing new to screen

@@ -22,7 +22,8 @@ own measures, round after round (:func:`refine_starts`):
    parts); they join the pool.
 
 It stops when a start meets the target with a margin (s* at least ``refine_stop``),
-when a round adds no better start twice in a row, or after ``refine_rounds`` rounds.
+when a round draws nothing that converges in time, when a round adds no better start
+twice in a row, or after ``refine_rounds`` rounds.
 """
 from __future__ import annotations
 
@@ -152,13 +153,15 @@ def refine_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
     Returns
     -------
     dict
-        What the refinement did: ``rounds``, ``draws``, ``bisected``, the best s* of the
-        starts converging by ``converge_by`` before and after, and why it stopped.
+        What the refinement did: ``rounds``, ``bisected``, the best s* of the starts
+        converging by ``converge_by`` before and after (``best_before``,
+        ``best_after``), why it stopped (``stopped``) and, per round, the draws that
+        converged in time (``converging_draws``).
     """
     st = sampling
     scale = gait_scale(gait)
     before = best = pool.best_target(converge_by)
-    rounds, bisected, stale, why = 0, 0, 0, f"{st.refine_rounds} rounds"
+    rounds, bisected, stale, why, found = 0, 0, 0, f"{st.refine_rounds} rounds", []
     for r in range(st.refine_rounds):
         if best >= st.refine_stop:
             why = f"s* {best:.3g} >= {st.refine_stop:g}"
@@ -168,6 +171,11 @@ def refine_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
                           radius, st.refine_draws, st.seed + 1 + r, eigen_bound, settings,
                           st.screen_rk4, converge_by).result()
         rounds += 1
+        found.append(len(M))
+        if not len(M):
+            # no draw near the best starts converges in time: the pockets are not there
+            why = f"no draw converges by step {converge_by} near the best starts"
+            break
         M = M[:st.refine_bisected]
         if len(M):
             chunks = np.array_split(np.arange(len(M)), max(1, min(parts, len(M))))
@@ -189,4 +197,4 @@ def refine_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
         if best >= st.refine_stop:
             why = f"s* {best:.3g} >= {st.refine_stop:g}"
     return dict(rounds=rounds, bisected=bisected, best_before=before, best_after=best,
-                stopped=why)
+                stopped=why, converging_draws=found)
