@@ -244,10 +244,13 @@ class Method:
         for i, effort in enumerate(efforts):
             self.moved = moves[i].result()
             if i + 1 < len(efforts):
-                # the next move runs beside this one's start screen (one ahead only: at
-                # most one move is computed in vain when this one meets the target)
-                moves.append(self.engine.submit(move_gait, g, targets, dataclasses.replace(
-                    st.move, effort=float(efforts[i + 1])), self.tst))
+                # the next move runs beside this one's start screen, after the screen's
+                # tasks (a lower priority: it fills a worker the screen leaves idle; one
+                # ahead only: at most one move is computed in vain)
+                name, prio = self.engine.current_stage()
+                with self.engine.stage(name, prio - 1):
+                    moves.append(self.engine.submit(move_gait, g, targets, dataclasses.replace(
+                        st.move, effort=float(efforts[i + 1])), self.tst))
             self.say(f"  effort weight {effort:g}: " + self.moved.message)
             if self.moved.status == "kept" and tried:
                 continue                   # nothing new to screen
