@@ -39,9 +39,26 @@ __all__ = ["refine_draws", "refine_starts", "Pool"]
 
 
 class Pool:
-    """The starts measured so far: M1 (m, nu) and, per start, s*, the scale where it
-    failed, the cause, the fraction passing there, the step its paper run converged
-    from (inf: not within the steps walked) and where it came from."""
+    """The starts measured so far, and per start the screen's figures.
+
+    Parameters
+    ----------
+    M : array_like
+        (m, nu) the starts.
+    s_star : array_like
+        (m,) their s* (to the screen's resolution).
+    s_fail : array_like
+        (m,) the scale where each failed.
+    cause : list of str
+        (m,) why each failed there.
+    frac : array_like
+        (m,) the fraction of directions passing at ``s_fail``.
+    conv : array_like
+        (m,) the step from which the paper's perturbation stays below the tolerance
+        (inf: not within the steps walked).
+    sources : list of str
+        (m,) where each came from ('sample', 'refined', ...).
+    """
 
     def __init__(self, M, s_star, s_fail, cause, frac, conv, sources):
         self.M = np.asarray(M, float).reshape(len(s_star), -1)
@@ -50,7 +67,18 @@ class Pool:
         self.conv, self.sources = np.asarray(conv, float), list(sources)
 
     def add(self, M, measured, source: str):
-        """Starts and their :func:`~.starts.screen_batch` figures."""
+        """Add starts and their figures.
+
+        Parameters
+        ----------
+        M : array_like
+            (k, nu) the starts.
+        measured : tuple
+            Their :func:`~.starts.screen_batch` figures (s*, s_fail, cause, fraction,
+            convergence step).
+        source : str
+            Where they came from.
+        """
         s, sf, cause, frac, conv = measured
         self.M = np.vstack([self.M, M])
         self.s_star, self.s_fail = np.r_[self.s_star, s], np.r_[self.s_fail, sf]
@@ -59,13 +87,37 @@ class Pool:
         self.sources += [source] * len(s)
 
     def best_target(self, by: int) -> float:
-        """The best s* of the starts whose paper run converges by step ``by`` (0 if none)."""
+        """The best s* of the starts whose paper run converges by step ``by``.
+
+        Parameters
+        ----------
+        by : int
+            The step.
+
+        Returns
+        -------
+        float
+            That s*, 0 when none converges by then.
+        """
         ok = self.conv <= by
         return float(self.s_star[ok].max()) if ok.any() else 0.0
 
     def elite(self, k: int, by: int) -> np.ndarray:
-        """The k starts to draw around: those converging by ``by``, best s* first, then
-        those converging soonest."""
+        """The starts to draw around.
+
+        Parameters
+        ----------
+        k : int
+            How many.
+        by : int
+            The target's step.
+
+        Returns
+        -------
+        numpy.ndarray
+            (k, nu): those converging by ``by``, best s* first, then those converging
+            soonest.
+        """
         fast = self.conv <= by
         order = np.lexsort((-self.frac, -self.s_star, np.where(fast, 0.0, self.conv), ~fast))
         return self.M[order[:k]]
