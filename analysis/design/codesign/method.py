@@ -113,7 +113,9 @@ class Method:
         free).
     stop_below : float, optional
         With starts that fit the gait: end with :class:`NoDesign` when the start
-        screen's best s* is below this (the gait is not worth the solves).
+        screen's best s* is below this (the gait is not worth the solves); at 1 or
+        more, also when the paper's perturbation converges from no stable start (the
+        target is out of reach: the starts are not bisected).
     """
 
     engine: object
@@ -305,7 +307,9 @@ class Method:
                           + [np.asarray(m, float).reshape(1, -1) for m in st.starts.extra])
         self.screen = fitted_starts(self.engine, self.gait0, self.kept0, self.rejoin,
                                     st.starts, bound, self.rs, extra,
-                                    converge_by=st.converge_by)
+                                    converge_by=st.converge_by,
+                                    target_only=raise_below and self.stop_below is not None
+                                    and self.stop_below >= 1.0)
         self.say(f"start screen: {self.screen.stable} of {self.screen.candidates} starts "
                  f"stable within max|lambda| {bound:.3g}; {self.screen.message}")
         if raise_below and (self.screen.status == "none" or (

@@ -346,7 +346,8 @@ def screen_binds(gait, kept, M1, rejoin: float, scale: float, sampling, settings
 
 
 def fitted_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: float,
-                  settings, extra=(), parts: int = 2, converge_by: int = 4) -> StartScreen:
+                  settings, extra=(), parts: int = 2, converge_by: int = 4,
+                  target_only: bool = False) -> StartScreen:
     """Starts that fit the gait, screened by the walker's s* (module docstring).
 
     The candidates (:func:`start_candidates`), their s* in ``parts`` batches side by
@@ -376,6 +377,10 @@ def fitted_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
     converge_by : int
         The target's step: starts whose paper perturbation converges by it with s* >= 1
         rank first, then those with s* >= 1 by that step, then by s*.
+    target_only : bool
+        Only a start that meets the target matters (the gait is given up otherwise):
+        when the paper's perturbation converges from none of the stable starts, the
+        screen ends there (status 'none') without bisecting them.
 
     Returns
     -------
@@ -391,6 +396,12 @@ def fitted_starts(engine, gait, kept, rejoin: float, sampling, eigen_bound: floa
                            f"max|lambda| <= {eigen_bound:.3g}", np.zeros((0, nu)), np.zeros(0),
                            [], c["candidates"], 0, 0,
                            dict(binds="no stable M1 within the eigenvalue bound"), c["scale"])
+    if target_only and not c["paper_converges"]:
+        why = (f"the paper's perturbation converges from none of the {c['stable']} stable "
+               f"starts within {rs.steps} steps (convergence)")
+        return StartScreen("none", f"no start meets the target: {why}", np.zeros((0, nu)),
+                           np.zeros(0), [], c["candidates"], c["stable"], 0,
+                           dict(binds=why), c["scale"])
     chunks = [ch for ch in np.array_split(np.arange(len(M)), max(1, min(parts, len(M))))]
     refs = [engine.submit(screen_batch, gait, kept, M[ch], rejoin, st, rs) for ch in chunks]
     parts_ = [r.result() for r in refs]
