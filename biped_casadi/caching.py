@@ -36,6 +36,7 @@ import json
 import math
 import os
 import pickle
+import sys
 import threading
 import time
 from collections import OrderedDict
@@ -432,9 +433,49 @@ def code_files(kind: str = "numerical") -> dict:
             for f in sorted(root.rglob("*.py")):
                 rel = f.relative_to(root.parent).as_posix()
                 if inside(rel, paths) and not (inside(rel, left_out) and not inside(rel, kept)):
-                    out[rel] = hashlib.sha256(code_of(f).encode()).hexdigest()[:16]
+                    out[rel] = _file_digest(f)
         _FILES[kind] = out
+        _save_digests()
     return _FILES[kind]
+
+
+#: file digests kept on disk by the file's bytes (a syntax tree costs about 5 ms a file
+#: to parse and dump, 0.7 s for the toolkit: once per process without this memo)
+_DIGESTS: dict = {}
+_DIGESTS_NEW: list = []
+_DIGESTS_READ: list = []
+
+
+def _digests_path() -> Path:
+    return cache_dir() / f"code-digests-py{sys.version_info[0]}{sys.version_info[1]}.json"
+
+
+def _file_digest(path: Path) -> str:
+    """16 hex digits of :func:`code_of`, memoised on disk by the SHA-256 of the bytes."""
+    if not _DIGESTS_READ:
+        _DIGESTS_READ.append(True)
+        with contextlib.suppress(OSError, ValueError):
+            memo = json.loads(_digests_path().read_text())
+            if isinstance(memo, dict):
+                _DIGESTS.update(memo)
+    sha = hashlib.sha256(path.read_bytes()).hexdigest()
+    d = _DIGESTS.get(sha)
+    if not (isinstance(d, str) and len(d) == 16):
+        d = _DIGESTS[sha] = hashlib.sha256(code_of(path).encode()).hexdigest()[:16]
+        _DIGESTS_NEW.append(sha)
+    return d
+
+
+def _save_digests():
+    """Write the memo when this process added to it (atomically; a failure is harmless)."""
+    if _DIGESTS_NEW:
+        # edits add entries: past 5000, only the files of this process are kept
+        memo = _DIGESTS if len(_DIGESTS) <= 5000 else {
+            k: _DIGESTS[k] for k in _DIGESTS_NEW}
+        _DIGESTS_NEW.clear()
+        with contextlib.suppress(OSError):
+            _digests_path().parent.mkdir(parents=True, exist_ok=True)
+            write_bytes_atomic(_digests_path(), json.dumps(memo, sort_keys=True).encode())
 
 
 _VERSIONS: dict = {}

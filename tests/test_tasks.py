@@ -177,7 +177,8 @@ def test_a_script_without_a_main_guard_fails_fast_with_the_reason(tmp_path):
 
 
 def _code_version_of(tree, tmp_path, name):
-    """code_version('numerical') of a copy of the packages (in a fresh process)."""
+    """code_version('numerical') of a copy of the packages (in a fresh process; the
+    memo of file digests in ``tmp_path / 'cache'``, shared by the calls)."""
     import shutil
     import subprocess
     import sys
@@ -190,13 +191,16 @@ def _code_version_of(tree, tmp_path, name):
     out = subprocess.run([sys.executable, "-c", "from analysis.tasks import code_version; "
                           "print(code_version('numerical'), code_version('figures'))"],
                          cwd=dest, capture_output=True, text=True, check=True,
-                         env={"PYTHONPATH": str(dest), "PATH": "/usr/bin:/bin"})
+                         env={"PYTHONPATH": str(dest), "PATH": "/usr/bin:/bin",
+                              "BIPED_CACHE_DIR": str(tmp_path / "cache")})
     return out.stdout.split()
 
 
 def test_a_docstring_or_report_edit_keeps_every_result_a_code_edit_does_not(tmp_path):
     """The keys of every kept result: the same after an edit of a docstring in analysis/
-    or of the report (so a re-run is warm), new after an edit of a number."""
+    or of the report (so a re-run is warm), new after an edit of a number; the same with
+    the on-disk memo of file digests read, absent or damaged."""
+    import sys
     from pathlib import Path
 
     def nothing(root):
@@ -218,6 +222,11 @@ def test_a_docstring_or_report_edit_keeps_every_result_a_code_edit_does_not(tmp_
         p.write_text(s.replace("q_span: float = 0.05", "q_span: float = 0.06", 1))
 
     base = _code_version_of(nothing, tmp_path, "a")
+    memo = tmp_path / "cache" / f"code-digests-py{sys.version_info[0]}{sys.version_info[1]}.json"
+    assert memo.is_file()                     # the file digests are kept on disk ...
+    assert _code_version_of(nothing, tmp_path, "a2") == base      # ... and read back
+    memo.write_text("{damaged")
+    assert _code_version_of(nothing, tmp_path, "a3") == base      # a damaged memo: parsed
     assert _code_version_of(docstring, tmp_path, "b") == base
     num, fig = _code_version_of(report, tmp_path, "c")
     assert num == base[0] and fig == base[1]          # the report is neither
