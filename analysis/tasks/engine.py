@@ -532,20 +532,6 @@ class Engine:
         top = max((longest(k) for k in tasks), key=lambda x: x[0], default=(0.0, []))
         return dict(seconds=round(top[0], 2), tasks=top[1])
 
-    def origin_stage(self, error: TaskError) -> str:
-        """The stage of the task where a failure began.
-
-        Parameters
-        ----------
-        error : TaskError
-
-        Returns
-        -------
-        str
-        """
-        r = self._tasks.get(getattr(error, "key", ""))
-        return r.stage if r is not None else ""
-
     # ------------------------------------------------------------- internals
     def _start(self, fn, args, kwargs, flow: bool):
         info = _info(fn)
