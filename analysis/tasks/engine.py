@@ -11,6 +11,7 @@ import dataclasses
 import logging
 import os
 import queue
+import sys
 import threading
 import time
 import traceback
@@ -678,7 +679,8 @@ class Engine:
 
     def _count_new(self):
         with self._lock:
-            if self._bar is None:
-                self._bar = progress_bar(self._progress, 0, 0, "task", "tasks")
-            self._bar.total += 1
-            self._bar.refresh()
+            if self._bar is None and self._progress and sys.stderr.isatty():   # tqdm: 0.1 s
+                self._bar = progress_bar(True, 0, 0, "task", "tasks")
+            if self._bar is not None:
+                self._bar.total += 1
+                self._bar.refresh()
