@@ -85,9 +85,10 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
                 if processes else dict(n_workers=1, threads_per_worker=n)
             cluster = LocalCluster(processes=processes, dashboard_address=":0",
                                    silence_logs=logging.CRITICAL, **kw)
+        client = Client(cluster)        # before scale: a client waits for a scaling cluster
         if processes:
             cluster.scale(n)
-        return Client(cluster), cluster
+        return client, cluster
     if not isinstance(scheduler, str):
         return scheduler, None
     try:
