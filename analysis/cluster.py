@@ -6,10 +6,9 @@ from __future__ import annotations
 import copy
 import ctypes
 import logging
-import os
 import sys
 
-__all__ = ["connect", "check_not_bootstrapping", "cores", "progress_bar", "tune_allocator",
+__all__ = ["connect", "check_not_bootstrapping", "progress_bar", "tune_allocator",
            "LOCAL_CLUSTER_CONFIG", "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
 
 #: how long to wait for a Dask scheduler to answer, and for a first worker to join it
@@ -41,18 +40,6 @@ def check_not_bootstrapping():
             "`if __name__ == \"__main__\":` (or pass scheduler=\"synchronous\")")
 
 
-def cores() -> int:
-    """The cores this process may run on.
-
-    Returns
-    -------
-    int
-    """
-    if hasattr(os, "sched_getaffinity"):
-        return max(1, len(os.sched_getaffinity(0)))
-    return max(1, os.cpu_count() or 1)
-
-
 def connect(scheduler, workers: int | None = None, preload=(), processes: bool = True):
     """A Dask client, and the cluster it started (None for an existing one).
 
@@ -65,7 +52,7 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
         address ('tcp://host:8786'): that scheduler, once a worker has joined; a
         client: itself.
     workers : int, optional
-        The local cluster's workers (default: the cores).
+        The local cluster's workers (default: the cores this process may use).
     preload : tuple of str
         Modules the local cluster's processes import as they start.
     processes : bool
@@ -85,21 +72,23 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
     try:
         import dask
         from dask.distributed import Client, LocalCluster
+        from dask.system import CPU_COUNT
     except ImportError:
         raise ValueError("scheduler: dask.distributed is not installed "
                          "(pip install 'dask[distributed]')") from None
     if scheduler == "local":
         check_not_bootstrapping()
-        n = workers or cores()
+        n = workers or CPU_COUNT       # Dask's count: affinity, cgroup quota
         with dask.config.set(LOCAL_CLUSTER_CONFIG):   # the nannies (made later) pass it on
             kw = dict(n_workers=0, threads_per_worker=1, env={"BIPED_THREADS": "1"},
                       preload=list(preload), config=copy.deepcopy(dask.config.config)) \
                 if processes else dict(n_workers=1, threads_per_worker=n)
             cluster = LocalCluster(processes=processes, dashboard_address=":0",
                                    silence_logs=logging.CRITICAL, **kw)
+        client = Client(cluster)        # before scale: a client waits for a scaling cluster
         if processes:
             cluster.scale(n)
-        return Client(cluster), cluster
+        return client, cluster
     if not isinstance(scheduler, str):
         return scheduler, None
     try:

@@ -157,12 +157,18 @@ def main(argv=None):
     ap.add_argument("--scaling-only", action="store_true",
                     help="only the --workers runs")
     ap.add_argument("--no-save", action="store_true", help="do not write results/")
+    ap.add_argument("--name", default="reproduce",
+                    help="the results file's name (default reproduce: results/reproduce.json)")
+    ap.add_argument("--note", action="append", default=[],
+                    help="a note saved with the results (what is compared; repeatable)")
     args = ap.parse_args(argv)
     print(f"load {os.getloadavg()}")
-    with Run("reproduce", "biped reproduce cold and warm, against a baseline version run "
+    with Run(args.name, "biped reproduce cold and warm, against a baseline version run "
              "in turn; wall time against local-cluster workers", save=not args.no_save) \
             as bench, tempfile.TemporaryDirectory(prefix="bench-reproduce-") as tmp:
         tmp = Path(tmp)
+        for n in args.note:
+            bench.note(n)
         ours = (sys.executable, snapshot(None, tmp / "this-version"))
         baseline = args.baseline or (
             (sys.executable, snapshot(args.baseline_commit, tmp / "baseline"))

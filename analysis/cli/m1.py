@@ -181,7 +181,7 @@ def _print_design(r, st):
         print(f"  binds: {a['constraint']} (multiplier {a['multiplier']:.3g})")
     print(f"  IPOPT: {len(r.ipopt['solves'])} solves, {r.ipopt['iterations']} iterations, "
           f"{r.ipopt['evaluations']} evaluations; last status {r.ipopt['status']}; "
-          f"computed in {r.elapsed:.0f} s")
+          f"this run took {r.elapsed:.1f} s (kept results are read, not recomputed)")
     print("  replay: biped simulate " + " ".join(r.simulate_args))
 
 

@@ -263,8 +263,8 @@ def design_check(r, verified: dict, paper, eigen: tuple, settings: RobustnessSet
 
 def submit_check(engine, design: Design, kept, settings: RobustnessSettings):
     """Submit the protocol's tasks: (the bisection, the paper's run, the eigenvalues,
-    the compiled closed loop the full-order runs share) as :class:`~analysis.tasks.Ref`
-    s; :func:`finish_check` waits for them and adds the full-order runs at s* and just
+    the compiled closed loop the full-order runs share) as the engine's futures;
+    :func:`finish_check` waits for them and adds the full-order runs at s* and just
     above.
 
     Parameters

@@ -422,7 +422,7 @@ def _status(eng, name: str, future) -> StageRecord:
         future.result()
         return StageRecord(Outcome.OK)
     except TaskError as e:
-        origin = eng.origin_stage(e)
+        origin = next((r.stage for r in eng.records if r.key == e.key), "")
         if origin and origin != name:
             return StageRecord(Outcome.SKIPPED, reason=f"needs {origin!r}, which failed: {e}")
         return StageRecord(Outcome.FAILED, error=str(e), traceback=e.detail[-2000:])

@@ -23,12 +23,11 @@ How to declare work (the same before and after the move to Dask's own scheduling
 - ``engine.state(future)`` says whether a result was computed or reused;
   ``engine.records`` lists every task of the run.
 """
-from biped_casadi.caching import (CODE_SETS, MISSING, NotKeyable, ResultStore, argument_key,
-                                  code_files, code_version, task_key)
+from biped_casadi.caching import NotKeyable, ResultStore, argument_key, code_version, task_key
 
 from .engine import (SCHEDULER_ENV, Engine, TaskError, TaskInfo, TaskRecord, TaskState,
-                     in_task, resolve_scheduler, task)
+                     resolve_scheduler, task)
 
-__all__ = ["task", "TaskInfo", "Engine", "TaskError", "TaskRecord", "TaskState", "in_task",
-           "resolve_scheduler", "SCHEDULER_ENV", "code_version", "code_files",
-           "argument_key", "task_key", "CODE_SETS", "NotKeyable", "ResultStore", "MISSING"]
+__all__ = ["task", "TaskInfo", "Engine", "TaskError", "TaskRecord", "TaskState",
+           "resolve_scheduler", "SCHEDULER_ENV", "code_version", "argument_key", "task_key",
+           "NotKeyable", "ResultStore"]

@@ -1,17 +1,13 @@
-"""Long work as a graph of pure, cached tasks scheduled by Dask (the package docstring).
-
-Each task goes to Dask under its content key (``<name>-<key>``,
-:func:`biped_casadi.caching.task_key`) with its stage's priority; its inputs are Dask
-futures (a kept result, or a flow's, scattered under its key): Dask resolves them,
-queues, places and steals the work and fails the dependants of a failure.  The engine
-names the tasks and keeps their results (a thread of its own writes each as it arrives).
-"""
+"""The engine of :mod:`analysis.tasks`: each task goes to Dask under its content key
+(``<name>-<key>``, :func:`biped_casadi.caching.task_key`) with its stage's priority, its
+inputs as Dask futures (a kept result, or a flow's, scattered under its key); Dask
+queues, places and steals the work and fails the dependants of a failure, and a thread
+of the engine keeps each result as it arrives."""
 from __future__ import annotations
 
 import concurrent.futures as cf
 import contextlib
 import dataclasses
-import itertools
 import logging
 import os
 import queue
@@ -19,15 +15,16 @@ import sys
 import threading
 import time
 import traceback
+from dataclasses import dataclass
+from enum import StrEnum
 
 from biped_casadi.caching import (MISSING, ResultStore, TaskInfo, code_files, code_version,
                                   task, task_key)
 
-from ..cluster import check_not_bootstrapping, connect, tune_allocator
-from .records import TaskError, TaskRecord, TaskState
+from ..cluster import check_not_bootstrapping, connect, progress_bar, tune_allocator
 
 __all__ = ["task", "TaskInfo", "Engine", "TaskError", "TaskRecord", "TaskState",
-           "resolve_scheduler", "SCHEDULER_ENV", "in_task"]
+           "resolve_scheduler", "SCHEDULER_ENV"]
 
 #: the environment variable that sets the default scheduler ('synchronous', an address)
 SCHEDULER_ENV = "BIPED_SCHEDULER"
@@ -38,18 +35,58 @@ _TOPIC = "biped-task"
 _LOCAL = threading.local()
 
 
-def in_task() -> bool:
-    """Whether this thread runs a task (library calls inside run synchronously).
+class TaskState(StrEnum):
+    """How a task of a run ended."""
 
-    Returns
-    -------
-    bool
+    COMPUTED = "computed"
+    REUSED = "reused"
+    FAILED = "failed"
+
+
+@dataclass
+class TaskRecord:
+    """One task of a run.
+
+    Parameters
+    ----------
+    name, stage, key : str
+        The task, its stage and its content key.
+    state, seconds, error : TaskState, float, str
+        How it ended (None while it runs), what it took (reused: when it was
+        computed), its failure.
+    flow : bool
+        Whether it is a flow (its seconds are mostly waiting).
+    deps : tuple of str
+        The keys it came after: its inputs and, in a flow, the results finished then.
     """
-    try:
-        from dask.distributed import get_worker
-        return getattr(_LOCAL, "task", False) or bool(get_worker())
-    except (ImportError, ValueError):
-        return False
+
+    name: str
+    stage: str
+    key: str
+    state: TaskState = None
+    seconds: float = 0.0
+    error: str = ""
+    flow: bool = False
+    deps: tuple = ()
+
+
+class TaskError(RuntimeError):
+    """A task failed (``str()``: its name and error, on one line).
+
+    Parameters
+    ----------
+    origin, message : str
+        The task that raised (the first failure of a chain); its error, ``Type: text``.
+    detail, key : str
+        Its traceback; its key.
+    """
+
+    def __init__(self, origin: str, message: str, detail: str = "", key: str = ""):
+        super().__init__(origin, message, detail, key)
+        self.origin, self.message, self.detail, self.key = origin, message, detail, key
+
+    def __str__(self):
+        return f"{self.origin.rsplit('.', 1)[-1]}: {self.message}"
 
 
 def resolve_scheduler(scheduler=None, workers: int | None = None):
@@ -74,7 +111,12 @@ def resolve_scheduler(scheduler=None, workers: int | None = None):
                                 or workers < 1):
         raise ValueError(f"workers must be a positive integer, got {workers!r}")
     if scheduler is None:
-        scheduler = "synchronous" if in_task() else os.environ.get(SCHEDULER_ENV) or "local"
+        try:                                    # inside a task here or on a worker
+            from dask.distributed import get_worker
+            inside = getattr(_LOCAL, "task", False) or bool(get_worker())
+        except (ImportError, ValueError):
+            inside = False
+        scheduler = "synchronous" if inside else os.environ.get(SCHEDULER_ENV) or "local"
     if type(scheduler).__name__ == "Client":
         return scheduler
     if not isinstance(scheduler, str) or not scheduler.strip():
@@ -148,6 +190,17 @@ def _futures_in(obj) -> list:
     return out
 
 
+def _error(name: str, e: BaseException, key: str) -> TaskError:
+    """``e`` as the :class:`TaskError` of task ``name`` (in its ``except`` block)."""
+    return e if isinstance(e, TaskError) else TaskError(
+        name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8), key)
+
+
+def _one(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[-1] if text else ''}".rstrip(": ")
+
+
 def _run(fn, key: str, code: str | None, args, kwargs):
     """Run a task here or on a worker (which refuses it when its code is not ``code``,
     the digest in the key); an error becomes a :class:`TaskError` naming the task."""
@@ -159,11 +212,8 @@ def _run(fn, key: str, code: str | None, args, kwargs):
         if code is not None and code_version(info.code) != code:
             raise TaskError(info.name, _stale(info.code, code), key=key)
         value = fn(*_unpack(args), **_unpack(kwargs))
-    except TaskError:
-        raise
     except Exception as e:          # noqa: BLE001 - reported with the task's name
-        raise TaskError(info.name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8),
-                        key) from None
+        raise _error(info.name, e, key) from None
     finally:
         _LOCAL.task = was
     if code is not None:            # on a worker: its seconds go to the client
@@ -176,7 +226,7 @@ def _run(fn, key: str, code: str | None, args, kwargs):
 
 def _stale(kind: str, code: str) -> str:
     """Why a worker refuses a task: the first file whose code differs from the client's
-    (:meth:`Engine.client` leaves the client's files in the scheduler's metadata)."""
+    (the engine leaves the client's files in the scheduler's metadata)."""
     mine, theirs = code_files(kind), {}
     with contextlib.suppress(Exception):
         from dask.distributed import get_client
@@ -186,11 +236,6 @@ def _stale(kind: str, code: str) -> str:
         else "its code"
     return (f"stale worker (pid {os.getpid()}): {what} differs from this run's code; run "
             "the same version of the toolkit on every worker")
-
-
-def _one(e: BaseException) -> str:
-    text = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {text[-1] if text else ''}".rstrip(": ")
 
 
 class Engine:
@@ -259,6 +304,7 @@ class Engine:
 
     def __exit__(self, *exc):
         self.close()
+
     def client(self):
         """The Dask client (None when synchronous), connected on first use.
 
@@ -334,7 +380,7 @@ class Engine:
             with contextlib.suppress(Exception):
                 if self._client is not None:
                     self._client.cancel([f for f in lost if not isinstance(f, cf.Future)])
-                    if self._cluster is not None or isinstance(self.scheduler, str):
+                    if isinstance(self.scheduler, str):     # a client of its own
                         self._client.close()
             with contextlib.suppress(Exception):
                 if self._cluster is not None:
@@ -423,7 +469,8 @@ class Engine:
     def each(self, fn, calls: dict):
         """Fan out a task: (tag, result) of each call as it finishes.
 
-        Here, one call after the other, when synchronous.
+        Synchronous, or kept, a call's result comes as it is submitted (one call after
+        the other); the others as Dask finishes them.
 
         Parameters
         ----------
@@ -437,16 +484,17 @@ class Engine:
         tuple
             (tag, result); a failed call raises its :class:`TaskError`.
         """
-        if self.synchronous:
-            for tag, args in calls.items():
-                yield tag, self.submit(fn, *args).result()
-            return
-        futures = {self.submit(fn, *args): tag for tag, args in calls.items()}
-        from dask.distributed import as_completed
-        on_dask = [f for f in futures if not isinstance(f, cf.Future)]
-        for f in itertools.chain((f for f in futures if isinstance(f, cf.Future)),
-                                 as_completed(on_dask) if on_dask else ()):
-            yield futures[f], f.result()
+        on_dask = {}
+        for tag, args in calls.items():
+            f = self.submit(fn, *args)
+            if isinstance(f, cf.Future):
+                yield tag, f.result()
+            else:
+                on_dask[f] = tag
+        if on_dask:
+            from dask.distributed import as_completed
+            for f in as_completed(on_dask):
+                yield on_dask[f], f.result()
 
     def state(self, future):
         """How a future's task ended (None while it runs).
@@ -485,20 +533,6 @@ class Engine:
         top = max((longest(k) for k in tasks), key=lambda x: x[0], default=(0.0, []))
         return dict(seconds=round(top[0], 2), tasks=top[1])
 
-    def origin_stage(self, error: TaskError) -> str:
-        """The stage of the task where a failure began.
-
-        Parameters
-        ----------
-        error : TaskError
-
-        Returns
-        -------
-        str
-        """
-        r = self._tasks.get(getattr(error, "key", ""))
-        return r.stage if r is not None else ""
-
     # ------------------------------------------------------------- internals
     def _start(self, fn, args, kwargs, flow: bool):
         info = _info(fn)
@@ -506,56 +540,58 @@ class Engine:
             raise TaskError(info.name, "not run: the engine was closed")
         key = task_key(info.name, info.version, info.code, args, kwargs,
                        ref_key=lambda o: _key(o) if _is_future(o) else None)
-        dask_key, inputs = f"{info.name.rsplit('.', 1)[-1]}-{key}", _futures_in((args, kwargs))
-        ctx = getattr(_LOCAL, "flow", None)
+        inputs, ctx = _futures_in((args, kwargs)), getattr(_LOCAL, "flow", None)
         kept = self.store.read(key) if self.use_cache and key not in self._tasks else MISSING
         with self._cond:
-            if key in self._tasks:                  # submitted before, or right now
-                while key not in self._futures:
-                    self._cond.wait()
-                return self._seen(ctx, self._futures[key])
-            deps = inputs + [f for f in (ctx or ()) if f.done()]
-            self._tasks[key] = TaskRecord(info.name, self.current_stage()[0], key, flow=flow,
-                                          deps=tuple(dict.fromkeys(map(_key, deps))))
-        if kept is not MISSING:
+            new = key not in self._tasks             # else submitted before, or right now
+            if new:
+                deps = inputs + [f for f in (ctx or ()) if f.done()]
+                self._tasks[key] = TaskRecord(info.name, self.current_stage()[0], key, flow=flow,
+                                              deps=tuple(dict.fromkeys(map(_key, deps))))
+            while not new and key not in self._futures:
+                self._cond.wait()
+        fut = cf.Future()
+        fut.key = f"{info.name.rsplit('.', 1)[-1]}-{key}"
+        if not new:
+            fut = self._futures[key]
+        elif kept is not MISSING:
             self._finish(key, TaskState.REUSED, seconds=kept.get("seconds", 0.0))
-            return self._seen(ctx, self._set(key, _resolve(cf.Future(), kept["value"]),
-                                             dask_key))
-        self._count_new()
-        bad = next((f.exception() for f in inputs if isinstance(f, cf.Future) and f.done()
-                    and f.exception() is not None), None)
-        if bad is not None:
-            self._finish(key, TaskState.FAILED, error=bad)
-            return self._seen(ctx, self._set(key, _resolve(cf.Future(), error=bad), dask_key))
-        if not (flow or self.synchronous):
-            return self._seen(ctx, self._on_cluster(fn, key, dask_key, args, kwargs))
-        fut = self._set(key, cf.Future(), dask_key)
-        (self._flow if flow else self._here)(fn, key, fut, args, kwargs, inputs)
-        return self._seen(ctx, fut)
+            self._set(key, _resolve(fut, kept["value"]))
+        elif not (flow or self.synchronous):
+            self._count_new()
+            fut = self._on_cluster(fn, key, fut, args, kwargs)
+        else:
+            self._count_new()
+            self._set(key, fut)
+            if flow:
+                self._flow(fn, key, fut, args, kwargs, inputs)
+            else:
+                self._complete(key, fut, lambda: _run(fn, key, None, *(
+                    _pack(x, lambda f: f.result()) for x in (args, kwargs))))
+        if ctx is not None:
+            ctx.append(fut)
+        return fut
 
-    def _set(self, key, future, dask_key=None):
-        if dask_key is not None:
-            future.key = dask_key
+    def _set(self, key, future):
         with self._cond:
             self._futures[key] = future
             self._cond.notify_all()
         return future
 
-    @staticmethod
-    def _seen(ctx, future):
-        return ctx.append(future) or future if ctx is not None else future
-
-    def _here(self, fn, key, fut, args, kwargs, inputs):
+    def _complete(self, key, fut, call, catch=Exception):
+        """Run ``call`` here: its value or its error is the task's outcome."""
         t = time.perf_counter()
         try:
-            value = _run(fn, key, None, *(_pack(x, lambda f: f.result()) for x in (args, kwargs)))
-        except TaskError as e:
-            self._finish(key, TaskState.FAILED, error=e)
-            return _resolve(fut, error=e)
+            value = call()
+        except catch as e:                              # noqa: BLE001 - the task's error
+            err = _error(self._tasks[key].name, e, key)
+            self._finish(key, TaskState.FAILED, error=err)
+            return _resolve(fut, error=err)
         self._finish(key, TaskState.COMPUTED, value, seconds=time.perf_counter() - t)
         _resolve(fut, value)
 
-    def _on_cluster(self, fn, key, dask_key, args, kwargs):
+    def _on_cluster(self, fn, key, holder, args, kwargs):
+        """Submit a task to Dask (``holder``: its future if it cannot be sent)."""
         info = _info(fn)
         try:
             client = self.client()
@@ -564,18 +600,18 @@ class Engine:
             if info.code not in self._published:       # for a stale worker's message
                 self._published.add(info.code)
                 client.set_metadata([_TOPIC, info.code, code], code_files(info.code))
+            with self._lock:                 # not while the cluster is found dead
+                if self._start_error is not None:
+                    raise self._start_error
+                fut = self._set(key, client.submit(_run, fn, key, code, a, k, key=holder.key,
+                                                   pure=False, priority=self.current_stage()[1]))
         except Exception as e:                         # noqa: BLE001 - this task fails
             err = e if isinstance(e, TaskError) else TaskError(info.name, (
                 f"not run: the Dask cluster did not start ({_one(e)})"
                 if self._start_error is not None else f"not sent to the cluster ({_one(e)})"),
                 key=key)
             self._finish(key, TaskState.FAILED, error=err)
-            return self._set(key, _resolve(cf.Future(), error=err), dask_key)
-        with self._lock:                     # not while the cluster is found dead
-            if self._start_error is not None:
-                return self._on_cluster(fn, key, dask_key, args, kwargs)
-            fut = self._set(key, client.submit(_run, fn, key, code, a, k, key=dask_key,
-                                               pure=False, priority=self.current_stage()[1]))
+            return self._set(key, _resolve(holder, error=err))
         fut.add_done_callback(self._kept.put)
         return fut
 
@@ -590,32 +626,23 @@ class Engine:
         return self._scattered[_key(f)]
 
     def _flow(self, flow, key, fut, args, kwargs, inputs):
+        """Run a flow: in a thread of its own, or here when synchronous."""
         stage = self.current_stage()
 
         def run():
+            saved = self.current_stage(), getattr(_LOCAL, "flow", None)
             _LOCAL.stage, _LOCAL.flow = stage, list(inputs)
-            t = time.perf_counter()
             try:
-                value = flow(self, *args, **kwargs)
-            except (Exception if self.synchronous else BaseException) as e:  # noqa: BLE001
-                err = e if isinstance(e, TaskError) else TaskError(
-                    _info(flow).name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8),
-                    key)
-                self._finish(key, TaskState.FAILED, error=err)
-                return _resolve(fut, error=err)
-            self._finish(key, TaskState.COMPUTED, value, seconds=time.perf_counter() - t)
-            _resolve(fut, value)
+                self._complete(key, fut, lambda: flow(self, *args, **kwargs),
+                               Exception if self.synchronous else BaseException)
+            finally:
+                _LOCAL.stage, _LOCAL.flow = saved
 
-        if not self.synchronous:
-            with contextlib.suppress(Exception):
-                self.client()                  # its workers join while the flow works
-            threading.Thread(target=run, name=f"flow {_info(flow).name}", daemon=True).start()
-            return
-        saved = self.current_stage(), getattr(_LOCAL, "flow", None)
-        try:
-            run()
-        finally:
-            _LOCAL.stage, _LOCAL.flow = saved
+        if self.synchronous:
+            return run()
+        with contextlib.suppress(Exception):
+            self.client()                      # its workers join while the flow works
+        threading.Thread(target=run, name=f"flow {_info(flow).name}", daemon=True).start()
 
     def _on_seconds(self, event):
         with contextlib.suppress(Exception):
@@ -652,10 +679,8 @@ class Engine:
 
     def _count_new(self):
         with self._lock:
-            if self._progress and self._bar is None and sys.stderr.isatty():
-                from tqdm.auto import tqdm
-                self._bar = tqdm(total=0, unit="task", desc="tasks", file=sys.stderr,
-                                 dynamic_ncols=True)
+            if self._bar is None and self._progress and sys.stderr.isatty():   # tqdm: 0.1 s
+                self._bar = progress_bar(True, 0, 0, "task", "tasks")
             if self._bar is not None:
                 self._bar.total += 1
                 self._bar.refresh()

@@ -16,6 +16,9 @@ __all__ = ["mujoco_steps_plot", "mujoco_animation", "mujoco_eigen_plot"]
 _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:cyan")
 
 
+#: how the legend names a law
+_LAW_NAMES = {"c": "C", "python": "Python"}
+
 def _series(w, key):
     """Per-step values of a walk (a MujocoWalk or its summary dict)."""
     if isinstance(w, dict):
@@ -49,7 +52,8 @@ def mujoco_steps_plot(walks, labels=None, title: str | None = None) -> Figure:
     if not walks:
         raise ValueError("walks: nothing to draw")
     labels = list(labels) if labels is not None else [
-        f"{_get(w, 'law')} law, {_get(w, 'settings')['contact']} contact" for w in walks]
+        f"{_LAW_NAMES.get(_get(w, 'law'), _get(w, 'law'))} law, "
+        f"{_get(w, 'settings')['contact']} contact" for w in walks]
     fig = _figure(figsize=(7.5, 7.0))
     ax = fig.subplots(4, 1, sharex=True)
     for i, (w, lab) in enumerate(zip(walks, labels)):
