@@ -29,11 +29,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from biped_casadi.simulation import start_states, zero_dynamics_walker
+from biped_casadi.simulation import zero_dynamics_walker
 
 from ...stability.poincare import poincare_map
 from ...tasks import task
-from .starts import gait_scale, screen_batch
+from .starts import gait_scale, paper_convergence, screen_batch
 
 __all__ = ["refine_draws", "refine_starts", "Pool"]
 
@@ -167,10 +167,7 @@ def refine_draws(gait, rejoin: float, elite, radius, draws: int, seed: int,
     if not idx.size:
         return np.zeros((0, nu))
     w = zero_dynamics_walker(gait, settings.simulation_options(), rk4_steps, jit=True)
-    q0, dq0 = start_states(gait, np.ones((idx.size, 2 * gait.model.nq)), 1.0)
-    conv = w.walk(q0, dq0, M[idx], rejoin, steps=settings.steps).steps_to_converge(
-        settings.tol)
-    conv = np.where(np.isfinite(conv), conv, np.inf)
+    conv = paper_convergence(w, gait, M[idx], rejoin, settings)
     keep = np.flatnonzero(conv <= converge_by)
     return M[idx[keep[np.argsort(conv[keep], kind="stable")]]]
 

@@ -38,7 +38,8 @@ from ...tasks import task
 from ..m1_nlp import optimize_m1
 
 __all__ = ["gait_scale", "vc_like_m1", "deadbeat_starts", "StartScreen", "start_candidates",
-           "screen_batch", "screen_binds", "fitted_starts", "binds", "failure_binds", "BINDS"]
+           "screen_batch", "paper_convergence", "screen_binds", "fitted_starts", "binds",
+           "failure_binds", "BINDS"]
 
 #: the walker's failure statuses in the words of the constraints that bind
 BINDS = {
@@ -248,10 +249,7 @@ def start_candidates(gait, rejoin: float, sampling, eigen_bound: float, extra=()
     if idx.size and settings is not None:
         w = zero_dynamics_walker(gait, settings.simulation_options(), st.screen_rk4,
                                  jit=True)
-        q0, dq0 = start_states(gait, np.ones((idx.size, 2 * gait.model.nq)), 1.0)
-        c = w.walk(q0, dq0, M[idx], rejoin, steps=settings.steps).steps_to_converge(
-            settings.tol)
-        conv = np.where(np.isfinite(c), c, np.inf)
+        conv = paper_convergence(w, gait, M[idx], rejoin, settings)
     k = len(given) + len(vcl)
     first = idx[idx < k]
     rest = np.flatnonzero(idx >= k)
@@ -260,6 +258,34 @@ def start_candidates(gait, rejoin: float, sampling, eigen_bound: float, extra=()
     return dict(M1=M[idx], sources=src[idx].tolist(), candidates=len(M),
                 stable=int(ok.sum()), scale=scale.tolist(),
                 paper_converges=int(np.sum(conv < np.inf)))
+
+
+def paper_convergence(walker, gait, M1s, rejoin: float, settings) -> np.ndarray:
+    """The step from which the paper's perturbation (scale 1) stays below the tolerance,
+    walked by ``walker`` from each M1 (inf where it does not within ``settings.steps``).
+
+    Parameters
+    ----------
+    walker : ZeroDynamicsWalker
+        The walker (:func:`biped_casadi.simulation.zero_dynamics_walker`).
+    gait : Gait
+        The gait.
+    M1s : numpy.ndarray
+        (m, nu) the outputs.
+    rejoin : float
+        Rejoin time of v_c, fraction of T.
+    settings : RobustnessSettings
+        The protocol (steps, tolerance).
+
+    Returns
+    -------
+    numpy.ndarray
+        (m,) the steps.
+    """
+    q0, dq0 = start_states(gait, np.ones((len(M1s), 2 * gait.model.nq)), 1.0)
+    c = walker.walk(q0, dq0, M1s, rejoin, steps=settings.steps).steps_to_converge(
+        settings.tol)
+    return np.where(np.isfinite(c), c, np.inf)
 
 
 @task
@@ -295,11 +321,8 @@ def screen_batch(gait, kept, M1s, rejoin: float, sampling, settings) -> tuple:
                              jit=True)
     bs = s_star_batch(w, gait, [Design.tv(gait, m, rejoin) for m in M1s], kept.directions,
                       settings, rounds=sampling.screen_rounds)
-    paper = np.ones((len(M1s), 2 * gait.model.nq))         # the paper's perturbation
-    q0, dq0 = start_states(gait, paper, 1.0)
-    conv = w.walk(q0, dq0, M1s, rejoin, steps=settings.steps).steps_to_converge(settings.tol)
     return (bs.s_star, bs.s_fail, list(bs.cause), bs.pass_fraction,
-            np.where(np.isfinite(conv), conv, np.inf))
+            paper_convergence(w, gait, M1s, rejoin, settings))
 
 
 @task
