@@ -13,8 +13,8 @@ import pytest
 from analysis.cli import main
 from analysis.design import ROBUST_GAIT
 from analysis.design.codesign import (FIT, IpoptLimits, MoveSettings,
-                                      NoDesign, StartSampling, Verification, gait_change,
-                                      move_gait)
+                                      NoDesign, StartSampling, Verification, continue_gait,
+                                      gait_change, move_gait)
 from analysis.design.codesign.functions import TranscriptionSettings
 from analysis.design.codesign.gait_move import GaitProjection, own_values
 from analysis.design.codesign.starts import BINDS, binds, gait_scale, vc_like_m1
@@ -42,6 +42,27 @@ def test_move_reaches_the_robust_constraints_near_the_gait(gait, moved):
     assert abs(ch["speed"][1] - gait.speed) < 1e-9
     assert 0 < ch["max_joint_change"] < 0.5
     assert g.options.continuation == ROBUST_GAIT["continuation"]
+
+
+def test_continue_gait_changes_speed_by_cadence(moved):
+    """A gait continued to a higher speed keeps its options (the robust gait constraints)
+    and its step length at most the neighbour's; to a lower speed the step is free; the
+    result is an exact orbit valid on the dense grid."""
+    g0 = moved.gait
+    up = continue_gait(g0, g0.speed + 0.05)
+    assert abs(up.speed - (g0.speed + 0.05)) < 1e-9
+    assert up.step_length <= g0.step_length + 1e-7
+    assert up.T < g0.T                                       # faster by cadence
+    assert up.options.replace(speed=g0.options.speed,
+                              step_length_bounds=g0.options.step_length_bounds) == g0.options
+    assert up.violations() == [] and up.orbit_residual()["worst"] < 1e-9
+    assert up.solver_stats["continued_from"] == g0.cache_key
+    down = continue_gait(g0, g0.speed - 0.05)
+    assert abs(down.speed - (g0.speed - 0.05)) < 1e-9
+    assert down.options.step_length_bounds == g0.options.step_length_bounds
+    for bad in (0.0, -1.0, float("nan"), "fast", True):
+        with pytest.raises(ValueError, match="speed"):
+            continue_gait(g0, bad)
 
 
 def test_projection_gradient_matches_central_differences(gait):

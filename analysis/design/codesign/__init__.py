@@ -49,7 +49,7 @@ from .functions import FAMILIES, TranscriptionSettings, compiled
 from .method import Candidate, Method
 from .problem import Problem, Solve, build, solve, solve_continued
 from .reduced import NLPSolve, Reduced, solve_nlp
-from .gait_move import GaitMove, gait_change, move_gait
+from .gait_move import GaitMove, continue_gait, gait_change, move_gait
 from .settings import (FIT, FULL, QUICK, TODAY_DESIGN, CodesignError, CodesignResult,
                        CodesignSettings, IpoptLimits, MoveSettings, NoDesign, StartSampling,
                        TrustRegion, Verification)
@@ -62,6 +62,6 @@ __all__ = ["codesign", "codesign_tradeoff", "codesign_flow", "given_gait_flow", 
            "tradeoff_flow", "replay_args",
            "CodesignSettings", "IpoptLimits", "StartSampling", "TrustRegion", "Verification",
            "MoveSettings", "CodesignResult", "CodesignError", "NoDesign", "QUICK", "FULL", "FIT",
-           "TODAY_DESIGN", "GaitMove", "move_gait", "gait_change", "StartScreen",
+           "TODAY_DESIGN", "GaitMove", "move_gait", "continue_gait", "gait_change", "StartScreen",
            "fitted_starts",
            "TranscriptionSettings", "solve_nlp", "NLPSolve", "FAMILIES", "compiled"]
