@@ -7,10 +7,15 @@ over the whole range, and the ramp 0.4 -> 1.2 -> 0.4 m/s walked in full order.
    (:data:`analysis.design.codesign.FIT`: M1 on the member as given, the member moved to
    the robust gait constraints near it when that misses the target), or why there is
    none (one line).
-3. The M1 schedule: the members' designs as the points of an
+   A member without a design, and whose own orbit no controller walks (at 1.2 m/s the
+   default optimum leans the torso 2.05 rad, past the simulator's fall bound pi/2),
+   gets a gait by speed continuation from the nearest member with a design
+   (:func:`analysis.design.codesign.continue_gait`: that design's gait options at the
+   member's speed, the step length at most the neighbour's) and the co-design on it.
+3. The M1 schedule: the designs as the points of an
    :class:`analysis.design.schedule.M1Schedule` (linear in speed between them: at each
-   member its own design; a member without a design holds the nearest one's M1, on its
-   gait moved to the robust gait options' optimum at its speed).
+   member its own design; a member still without a design holds the nearest one's M1,
+   on its gait moved to the robust gait options' optimum at its speed).
 4. The ramp 0.4 -> 1.2 -> 0.4 m/s by 0.05 per step, then 10 steps at 0.4 m/s: step k
    walks the gait of its speed's design (the member, or the member moved) with the
    schedule's M1, in full order (every validity condition, mu = 0.6, |u| <= 150 N m);
@@ -34,14 +39,15 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.design.codesign import FIT, NoDesign, codesign, move_gait
+from analysis.design.codesign import FIT, NoDesign, codesign, continue_gait, move_gait
 from analysis.design.codesign.functions import TranscriptionSettings
 from analysis.design.codesign.method import MOVED
 from analysis.design.schedule import M1Schedule, ramp_speeds
 from analysis.reporting.plots import save_figure, speed_profile_plot
 from analysis.robustness.speed import walk_gaits
-from biped_casadi import SimulationOptions, cache_dir, rabbit
-from gait_opt import gait_family, speed_range
+from biped_casadi import Design, SimulationOptions, cache_dir, rabbit
+from biped_casadi.simulation.speed_profile import simulate_profile
+from gait_opt import GaitOptimizationError, gait_family, speed_range
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _results import Run  # noqa: E402
@@ -59,6 +65,13 @@ def _record(v, r, wall) -> dict:
                 gait_moved=bool(ch), max_joint_change=ch.get("max_joint_change", 0.0),
                 T=ch.get("T", [r.gait.T, r.gait.T]), wall=round(wall, 1),
                 load=round(os.getloadavg()[0], 2), cached=bool(r.cached))
+
+
+def _torso_max(g) -> float:
+    """The torso's largest lean from the vertical over the step, rad (RABBIT: q1 + q2 + q3)."""
+    t = np.linspace(0.0, g.T, 201)
+    q = g.evaluate(t)[0]
+    return float(np.max(np.abs(np.sum(q[:3], axis=0))))
 
 
 def _summary(r) -> dict:
@@ -111,13 +124,54 @@ def main(argv=None):
                   f"max|lambda| {r.max_abs:.3g} (virtual constraints {r.vc_eigenvalue:.3g})"
                   f", gait {'moved' if rec['gait_moved'] else 'as given'}; {rec['wall']} s",
                   flush=True)
+        # a member without a design whose own orbit is no walk: its gait by speed
+        # continuation from the nearest member with a design, and the co-design on it
+        for x in records:
+            if x["status"] != "no_design":
+                continue
+            v = x["speed"]
+            orbit = simulate_profile([Design.vc(fam.gait(v))], options=OPTS)
+            x["own_orbit"] = dict(status=orbit.status, message=orbit.message)
+            print(f"{v:.2f} m/s: the member's own orbit under virtual constraints: "
+                  f"{orbit.status} {orbit.message}", flush=True)
+        for x in sorted((x for x in records if x["status"] == "no_design"),
+                        key=lambda x: min(abs(x["speed"] - d) for d in designs)
+                        if designs else 0.0):
+            if not designs:
+                break
+            v = x["speed"]
+            src = min(designs, key=lambda d: abs(d - v))
+            t = time.perf_counter()
+            try:
+                g = continue_gait(designs[src].gait, v)
+                r = codesign(g, FIT, workers=a.workers)
+            except (NoDesign, GaitOptimizationError) as e:
+                x["continued"] = dict(source=src, message=str(e))
+                print(f"{v:.2f} m/s, continued from {src:.2f} m/s: no design: {e}", flush=True)
+                continue
+            rec = _record(float(v), r, time.perf_counter() - t)
+            rec.update(continued_from=src, member=x, torso_max=_torso_max(g),
+                       step_length=float(g.step_length), T=[float(g.T), float(r.gait.T)])
+            records[records.index(x)] = rec
+            designs[round(float(v), 6)] = r
+            print(f"{v:.2f} m/s, gait continued from {src:.2f} m/s (step length "
+                  f"{g.step_length:.4g} m, T {g.T:.4g} s, torso at most {rec['torso_max']:.3g} "
+                  f"rad): {r.status}, s* {r.s_star:.3g} (virtual constraints "
+                  f"{r.vc_s_star:.3g}), below 1e-3 from step {r.steps_to_converge}, "
+                  f"max|lambda| {r.max_abs:.3g} (virtual constraints {r.vc_eigenvalue:.3g});"
+                  f" {rec['wall']} s", flush=True)
         n_met = sum(x["status"] == "target_met" for x in records)
         n_cached = sum(bool(x.get("cached")) for x in records)
+        n_cont = sum("continued_from" in x for x in records)
         bench.row(f"{len(fam)} co-designs (`biped m1 --robust --gait MEMBER`)"
+                  + (f" and {n_cont} on gaits continued from a neighbour" if n_cont else "")
                   + (f"; {n_cached} read from the cache" if n_cached else ", cold"),
                   round(time.perf_counter() - t_all, 1))
         bench.row("members with a design (of the family's)", len(designs), unit="",
                   target=str(len(fam)))
+        if n_cont:
+            bench.row("... of them on a gait continued from the nearest member's design "
+                      "(the member's own orbit is no walk)", n_cont, unit="")
         bench.row("members whose design meets the target (s* >= 1, below 1e-3 by step 5, "
                   "max|lambda| <= virtual constraints')", n_met, unit="", target=str(len(fam)))
         bench.data["members"] = records
