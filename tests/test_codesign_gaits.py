@@ -65,6 +65,15 @@ def test_continue_gait_changes_speed_by_cadence(moved):
             continue_gait(g0, bad)
 
 
+def test_own_orbit_says_why_the_gait_is_no_walk(gait):
+    """Virtual constraints walk one step of the session's gait from its own orbit (''),
+    and with a friction coefficient below its friction ratio the line says it slips."""
+    from analysis.design.codesign.units import own_orbit
+    from analysis.robustness.s_star import RobustnessSettings
+    assert own_orbit(gait, RobustnessSettings()) == ""
+    assert "slips" in own_orbit(gait, RobustnessSettings(mu=0.05))
+
+
 def test_projection_gradient_matches_central_differences(gait):
     """The move's objective (distance and effort) and its constraint rows: exact
     derivatives against central differences in T and two Bezier coefficients."""

@@ -26,7 +26,7 @@ from .problem import Problem, Solve, solve, solve_continued
 from .settings import CodesignResult, CodesignSettings, NoDesign
 from .starts import deadbeat_starts, failure_binds, fitted_starts
 from .units import (fixed_problem, gait_step, hardest, kept_first, measure, node_kernel,
-                    paper_first, sampled_starts, screen, vc_radius)
+                    own_orbit, paper_first, sampled_starts, screen, vc_radius)
 
 #: the gait options a given gait is moved to (the others stay the given gait's)
 MOVED = ("impact_mu", "clearance", "continuation", "continuation_shape")
@@ -289,11 +289,14 @@ class Method:
                 if fit and st.starts.deadbeat else None)
         self.kept0 = self.run(kept_directions, self.gait0, self.rs)
         if len(self.kept0) == 0:
+            orbit = self.run(own_orbit, self.gait0, self.rs)
             raise NoDesign("codesign: virtual constraints walk from no perturbation "
                            "direction on this gait at full scale (every candidate fails: "
                            + ", ".join(f"{k} {v}" for k, v in self.kept0.rejected.items())
-                           + "); the protocol's s* is undefined there: try another gait",
-                           dict(directions_rejected=dict(self.kept0.rejected)))
+                           + ")" + (f", nor from its own orbit ({orbit})" if orbit else "")
+                           + "; the protocol's s* is undefined there: try another gait",
+                           dict(directions_rejected=dict(self.kept0.rejected),
+                                own_orbit=orbit))
         bound = st.eigen_margin * self.run(vc_radius, self.gait0)
         if not fit:
             M, _ = self.run(sampled_starts, self.gait0, self.kept0, self.rejoin, st.starts,

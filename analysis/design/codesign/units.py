@@ -4,12 +4,14 @@ that fail first, the sampled starts, a start's screening solve and a gait step's
 periodic gait."""
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from biped_casadi import Design
 from biped_casadi.simulation import start_states, zero_dynamics_walker
+from biped_casadi.simulation.speed_profile import simulate_profile
 from gait_opt import Gait, GaitOptimizationError
 from gait_opt.polish import polish
 
@@ -21,7 +23,7 @@ from .functions import TranscriptionSettings, _node_functions
 from .problem import Problem, Solve, solve
 from .settings import IpoptLimits, StartSampling
 
-__all__ = ["Measured", "Screened", "GaitStep", "vc_radius", "measure", "hardest",
+__all__ = ["Measured", "Screened", "GaitStep", "vc_radius", "measure", "hardest", "own_orbit",
            "sampled_starts", "screen", "gait_step", "fixed_problem", "paper_first",
            "kept_first"]
 
@@ -229,6 +231,27 @@ def sampled_starts(gait, kept, rejoin: float, sampling: StartSampling, eigen_bou
         B = w.walk(q0, dq0, M, rejoin, steps=rs.steps)
         M = M[B.verdict(rs.tol) == "ok"][:st.kept]
     return M, int(ok.sum())
+
+
+@task
+def own_orbit(gait, settings) -> str:
+    """Why virtual constraints do not walk one step from the gait's own orbit, or ''.
+
+    Parameters
+    ----------
+    gait : Gait
+        The gait.
+    settings : RobustnessSettings
+        The protocol (friction coefficient, torque limit).
+
+    Returns
+    -------
+    str
+        The full-order simulator's message for the orbit's first invalid state (e.g.
+        'fell: ... torso angle 2.0546 rad'), empty when the step is valid.
+    """
+    run = simulate_profile([Design.vc(gait)], options=settings.simulation_options())
+    return "" if run.status == "ok" else re.sub(r"^step \d+: ", "", run.message)
 
 
 def paper_first(kept, active) -> np.ndarray:
