@@ -16,7 +16,7 @@ from analysis.design.codesign import (FIT, IpoptLimits, MoveSettings,
                                       NoDesign, StartSampling, Verification, continue_gait,
                                       gait_change, move_gait)
 from analysis.design.codesign.functions import TranscriptionSettings
-from analysis.design.codesign.gait_move import GaitProjection, own_values
+from analysis.design.codesign.gait_move import GaitProjection, optimal_options, own_values
 from analysis.design.codesign.starts import BINDS, binds, gait_scale, vc_like_m1
 
 
@@ -94,6 +94,39 @@ def test_projection_gradient_matches_central_differences(gait):
         assert abs((fp - fm) / (2 * h) - grad[c]) <= 1e-5 * max(1.0, abs(grad[c]))
         scale = max(np.max(np.abs(J[:, c])), 1.0)
         assert np.max(np.abs((gp - gm) / (2 * h) - J[:, c])) <= 1e-5 * scale
+
+
+def test_optimal_gait_is_of_the_toolkits_degree(gait):
+    """The infinite effort weight's gait: the given gait's options with the robust gait
+    constraints, in the toolkit's Bezier degree whatever degree an import fitted."""
+    from gait_opt import GaitOptions
+    imported = dataclasses.make_dataclass("G", ["options"])(
+        gait.options.replace(bezier_degree=12, clearance=0.03))
+    opts = optimal_options(imported, dict(ROBUST_GAIT))
+    assert opts.bezier_degree == GaitOptions().bezier_degree != 12
+    assert opts.speed == gait.options.speed
+    assert all(getattr(opts, k) == v for k, v in ROBUST_GAIT.items())
+    assert optimal_options(gait, dict(ROBUST_GAIT)) == gait.options.replace(**ROBUST_GAIT)
+
+
+def test_bezier_change_across_degrees():
+    """The co-design's largest Bezier change between gaits of other degrees: the lower
+    degree raised exactly (the same polynomials, so no change between them)."""
+    from math import comb
+    from analysis.design.codesign.method import _alpha_change, _elevated
+    a = np.random.default_rng(0).normal(size=(4, 7))
+    e = _elevated(a, 12)
+    s = np.linspace(0.0, 1.0, 11)
+
+    def bez(c):
+        n = c.shape[1] - 1
+        return sum(c[:, [i]] * comb(n, i) * s**i * (1 - s)**(n - i) for i in range(n + 1))
+    assert e.shape == (4, 13)
+    np.testing.assert_allclose(bez(e), bez(a), atol=1e-12)
+    assert _alpha_change(a, e) < 1e-12 and _alpha_change(e, a) < 1e-12
+    b = e.copy()
+    b[2, 5] += 0.1
+    assert abs(_alpha_change(a, b) - 0.1) < 1e-12
 
 
 def test_starts_in_the_gaits_units(gait):

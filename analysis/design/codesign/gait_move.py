@@ -21,8 +21,9 @@ parameters) under the constraints of that step:
    and lift-off speeds, knees) at the targets, with exact Jacobians, from the user's
    gait;
    An infinite effort weight is the effort alone: the toolkit's optimal gait under the
-   robust gait options at the user's speed (:func:`gait_opt.optimize_gait`, warm-started
-   from the user's gait), the farthest move;
+   robust gait options at the user's speed, in the toolkit's Bezier degree
+   (:func:`gait_opt.optimize_gait`, warm-started from the user's gait when it is of that
+   degree), the farthest move;
 3. when that solve fails: the continuation, ``steps`` steps from the gait's own values
    to the targets (linear), each solved from the last on the distance alone, a step
    that fails halved (at most ``halvings`` times; the move ends where it cannot go on
@@ -42,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from biped_casadi.results import Result, internal
-from gait_opt import Gait, GaitOptimizationError, optimize_gait
+from gait_opt import Gait, GaitOptimizationError, GaitOptions, optimize_gait
 
 from ...tasks import task
 from .functions import TranscriptionSettings
@@ -52,7 +53,7 @@ from .transcription import GaitTable, _Rows
 from .units import gait_step
 
 __all__ = ["MoveSettings", "GaitMove", "GaitProjection", "move_gait", "gait_change",
-           "own_values", "continue_gait"]
+           "own_values", "optimal_options", "continue_gait"]
 
 
 @dataclass
@@ -149,6 +150,28 @@ def gait_change(g_from, g_to) -> dict:
                 max_velocity_change=float(np.max(np.abs(dq1 - dq0))))
 
 
+def optimal_options(gait, targets: dict) -> GaitOptions:
+    """The options of the toolkit's optimal gait for a given gait (an infinite effort
+    weight): the gait's options with the targets, in the toolkit's own Bezier degree.
+
+    An imported gait's Bezier degree is the one that fits its samples best
+    (:func:`gait_opt.import_gait`), not a design choice; the optimal gait is the toolkit's
+    (the default co-design's gait is of the default degree).
+
+    Parameters
+    ----------
+    gait : Gait
+        The given gait.
+    targets : dict
+        GaitOptions fields (the robust gait constraints).
+
+    Returns
+    -------
+    GaitOptions
+    """
+    return gait.options.replace(**targets, bezier_degree=GaitOptions().bezier_degree)
+
+
 def continue_gait(gait, speed: float) -> Gait:
     """The gait at another speed, by continuation from ``gait`` (a neighbour's design gait).
 
@@ -195,18 +218,21 @@ def continue_gait(gait, speed: float) -> Gait:
 
 def _optimal(gait, targets: dict, own: dict, tgt: dict) -> GaitMove:
     """The effort alone (an infinite effort weight): the toolkit's optimal gait under the
-    gait's options with the targets, at its speed, warm-started from it
-    (:func:`gait_opt.optimize_gait`, exact Hessian)."""
-    opts = gait.options.replace(**targets)
+    gait's options with the targets (:func:`optimal_options`), at its speed, warm-started
+    from it when it is of the same Bezier degree (:func:`gait_opt.optimize_gait`, exact
+    Hessian)."""
+    opts = optimal_options(gait, targets)
+    same = opts.bezier_degree == gait.options.bezier_degree
     try:
-        g2 = optimize_gait(gait.model, opts, warm_start=gait)
+        g2 = optimize_gait(gait.model, opts, warm_start=gait if same else None)
     except GaitOptimizationError as e:
         return GaitMove("kept", f"no optimal gait under the robust gait constraints ({e})",
                         own, tgt, own, [dict(effort=math.inf, nlp_status=str(e.status))],
                         gait=gait)
     change = gait_change(gait, g2)
     return GaitMove("moved", f"the optimal gait at {gait.speed:.3g} m/s under the gait's "
-                    f"options and {targets} (gait_opt, warm-started from the given gait); "
+                    f"options and {targets}, Bezier degree {opts.bezier_degree} (gait_opt"
+                    f"{', warm-started from the given gait' if same else ''}); "
                     f"T {change['T'][0]:.4g} -> {change['T'][1]:.4g} s, step length "
                     f"{change['step_length'][0]:.4g} -> {change['step_length'][1]:.4g} m, "
                     f"joints moved by at most {change['max_joint_change']:.3g} rad", own,

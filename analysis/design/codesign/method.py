@@ -34,6 +34,25 @@ MOVED = ("impact_mu", "clearance", "continuation", "continuation_shape")
 __all__ = ["Candidate", "Method"]
 
 
+def _elevated(alpha: np.ndarray, degree: int) -> np.ndarray:
+    """Bezier coefficients (rows: joints) raised to ``degree`` (the same polynomials)."""
+    a = np.asarray(alpha, float)
+    while a.shape[1] - 1 < degree:
+        n1 = a.shape[1]                       # the new degree
+        w = np.arange(n1 + 1) / n1
+        a = np.c_[np.zeros((a.shape[0], 1)), a] * w + np.c_[a, np.zeros((a.shape[0], 1))] * (
+            1 - w)
+    return a
+
+
+def _alpha_change(a0, a1) -> float:
+    """The largest change of a Bezier coefficient between two gaits, rad (the lower
+    degree raised to the higher: an imported gait's degree may differ from the
+    co-design's)."""
+    n = max(np.shape(a0)[1], np.shape(a1)[1]) - 1
+    return float(np.max(np.abs(_elevated(a1, n) - _elevated(a0, n))))
+
+
 @dataclass
 class Candidate:
     """A design found by a solve and measured by the walker.
@@ -582,8 +601,8 @@ class Method:
                   f"converged by step {by}) not met"))
         g = best.gait
         g0 = self.start_gait if self.start_gait is not None else self.gait0
-        change = dict(T_start=g0.T, T=g.T, max_alpha_change=float(
-            np.max(np.abs(g.alpha - g0.alpha))))
+        change = dict(T_start=g0.T, T=g.T, max_alpha_change=_alpha_change(g0.alpha,
+                                                                            g.alpha))
         if self.start_gait is not None:
             change.update(from_given=gait_change(g0, g))
         last = self.solves[-1] if self.solves else dict(status="not run")

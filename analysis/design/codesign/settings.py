@@ -195,7 +195,8 @@ class MoveSettings:
     efforts : tuple of float
         The effort weights the co-design tries in turn (:meth:`.method.Method.setup`):
         the gait nearest the given one first, then smoother ones farther away; inf: the
-        toolkit's optimal gait under the robust gait options at the given gait's speed.
+        toolkit's optimal gait under the robust gait options at the given gait's speed, in
+        the toolkit's Bezier degree.
     """
 
     steps: int = 1
