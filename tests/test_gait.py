@@ -483,6 +483,7 @@ def test_cli_gait_json(tmp_path):
     assert max(s["periodicity_q"], s["periodicity_dq"]) <= 1e-8
     assert abs(s["swing_height_at_T"]) <= 1e-10 and s["reintegration_error"] <= 1e-8
     assert s["ipopt_iterations"] > 0 and s["solve_time"] > 0
+    assert 0.0 < s["max_torso_lean"] < 1.5707963
     assert Gait.load(out).T == s["T"]
     for name in ("gait_stick.png", "gait_profiles.png"):
         png = tmp_path / "plots" / name
@@ -498,3 +499,27 @@ def test_cli_gait_errors(tmp_path):
     r = run("gait", "--torque-limit", "2", "--max-iter", "5", "--out", str(tmp_path / "g.json"))
     assert r.returncode == 2 and "IPOPT status" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "g.json").exists()
+
+
+def test_torso_lean_reported_and_tied_to_the_simulators_fall(model, gait):
+    """`biped gait` reports the torso's largest lean: on the default gait (an independent
+    sum of the stance leg's and the torso's relative angles) well inside the simulator's
+    fall bound; at 1.2 m/s the optimum leans past it, and a walk from its own orbit is a
+    fall, as the line says."""
+    import math
+
+    from analysis.cli.common import torso_lean
+    from biped_casadi import SimulationOptions, VirtualConstraintController, simulate
+
+    lean, past, bound = torso_lean(gait)
+    t = np.linspace(0.0, gait.T, 201)
+    q = np.atleast_2d(gait.q(t))
+    q = q if q.shape[0] == 5 else q.T
+    assert lean == pytest.approx(np.max(np.abs(q[0] + q[1] + q[2])), abs=1e-12)
+    assert bound == pytest.approx(math.pi / 2) and not past and lean < 0.5
+    fast = optimize_gait(model, GaitOptions(speed=1.2))
+    lean12, past12, _ = torso_lean(fast)
+    assert past12 and lean12 > bound
+    run = simulate(VirtualConstraintController(fast), fast.q(0.0), fast.dq(0.0),
+                   SimulationOptions(steps=1))
+    assert str(run.status) == "fell"

@@ -54,6 +54,29 @@ class Progress:
 
 
 # --------------------------------------------------------- robot, model, gait
+def torso_lean(gait, n: int = 201) -> tuple:
+    """The torso's largest lean from the vertical on a gait, and whether it passes the
+    simulator's fall bound (every walk of such a gait is a fall at once).
+
+    Parameters
+    ----------
+    gait : Gait
+        The gait.
+    n : int
+        Points on [0, T].
+
+    Returns
+    -------
+    tuple
+        (lean in rad, past the bound: bool, the bound in rad).
+    """
+    from biped_casadi.simulation.options import SimulationOptions
+    f = gait.model.torso_angle
+    lean = max(abs(float(f(gait.q(t)))) for t in np.linspace(0.0, gait.T, n))
+    bound = float(SimulationOptions().max_torso_angle)
+    return lean, lean > bound, bound
+
+
 def add_robot(p, with_gait: bool = True):
     """Add ``--robot NAME|FILE`` to a subcommand's parser."""
     default = ("default: the gait file's robot, else rabbit" if with_gait

@@ -9,6 +9,7 @@ from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_f
 from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 
 from .common import (Progress, UserError, add_robot, load_model, output_dir, output_file,
+                     torso_lean,
                      print_json)
 from .gait_family import add_family_arguments, check_family_arguments, cmd_family, cmd_gait_at
 from .gait_import import add_import_arguments, check_export_arguments, cmd_export_csv, cmd_import
@@ -110,6 +111,7 @@ def cmd_gait(args):
     except GaitOptimizationError as e:
         raise UserError(str(e)) from None
     s = gait.summary()
+    s["max_torso_lean"], past, bound = torso_lean(gait)
     s["file"] = str(gait.save(out))
     if folder is not None:
         s["plots"] = save_figures({"gait_stick": gait_stick_plot(gait),
@@ -126,6 +128,9 @@ def cmd_gait(args):
     print(f"  peak torque          {s['peak_torque']:.3f} N m   (limit "
           f"{gait.options.torque_limit:g})")
     print(f"  min normal force     {s['min_normal_force']:.3f} N")
+    print(f"  torso lean           {s['max_torso_lean']:.4f} rad from the vertical at most"
+          + (f": PAST the simulator's fall bound ({bound:.4g} rad), so every walk of this "
+             "gait is a fall; a lower speed keeps the torso up" if past else ""))
     print(f"  max friction ratio   {s['max_friction_ratio']:.4f}   (mu {args.mu:g}); "
           f"at impact {s['impact_friction_ratio']:.4f}")
     print(f"  swing foot           min height inside the step {s['min_swing_height_inside']:.2e} m, "

@@ -13,7 +13,8 @@ from analysis.reporting.plots import (gait_family_plot, gait_profiles_plot, gait
                                       save_figures)
 from gait_opt import GaitFamily, GaitOptimizationError, gait_family, parse_speed_range
 
-from .common import Progress, UserError, load_model, output_dir, output_file, print_json
+from .common import (Progress, UserError, load_model, output_dir, output_file, print_json,
+                     torso_lean)
 
 __all__ = ["add_family_arguments", "check_family_arguments", "cmd_family", "cmd_gait_at"]
 
@@ -115,12 +116,21 @@ def cmd_family(args, options) -> int:
 def _print_family(fam: GaitFamily, s: dict):
     print(f"gait family of {fam.robot}: {fam.message}; saved to {s['file']}")
     print(f"  {'speed':>6} {'T s':>8} {'step m':>8} {'cost':>10} {'iter':>5} "
-          f"{'orbit resid':>11}  active constraints")
-    for r in fam.records:
+          f"{'orbit resid':>11} {'torso rad':>9}  active constraints")
+    falls = []
+    for r, g in zip(fam.records, fam.gaits):
         tag = f"  branch {r.branch + 1}" if fam.records[-1].branch else ""
+        lean, past, bound = torso_lean(g)
+        if past:
+            falls.append(f"{r.speed:g}")
         print(f"  {r.speed:6.3f} {r.T:8.5f} {r.step_length:8.5f} {r.cost:10.2f} "
-              f"{r.iterations:5d} {r.orbit_residual:11.1e}  {', '.join(r.active) or '-'}"
-              + tag + (f"  VIOLATES {r.violations}" if r.violations else ""))
+              f"{r.iterations:5d} {r.orbit_residual:11.1e} {lean:9.3f}  "
+              f"{', '.join(r.active) or '-'}" + tag
+              + (f"  VIOLATES {r.violations}" if r.violations else "")
+              + ("  TORSO PAST THE FALL BOUND" if past else ""))
+    if falls:
+        print(f"  at {', '.join(falls)} m/s the torso leans past the simulator's fall bound "
+              f"({bound:.4g} rad): every walk of those gaits is a fall")
     for e in fam.events:
         what = e["detail"] if e["change"] == "branch" else \
             f"{e['constraint']} becomes {e['change']}"
