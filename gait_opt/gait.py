@@ -310,6 +310,25 @@ class Gait(Reference):
         return float(integral / (self.step_length if self.options.cost ==
                                  "torque_squared_per_length" else 1.0))
 
+    def torso_lean(self, n: int = 201) -> float:
+        """The torso's largest lean from the vertical over the step, rad.
+
+        A gait past the simulator's fall bound
+        (:attr:`biped_casadi.SimulationOptions.max_torso_angle`, pi/2) cannot be walked:
+        every walk of it is a fall.
+
+        Parameters
+        ----------
+        n : int
+            Grid points on [0, T].
+
+        Returns
+        -------
+        float
+        """
+        f = self.model.torso_angle
+        return max(abs(float(f(self.q(t)))) for t in np.linspace(0.0, self.T, n))
+
     def check(self, n: int = 2001) -> dict:
         """Physical validity and dynamic consistency on a dense grid of [0, T].
 

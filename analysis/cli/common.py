@@ -70,9 +70,8 @@ def torso_lean(gait, n: int = 201) -> tuple:
     tuple
         (lean in rad, past the bound: bool, the bound in rad).
     """
-    from biped_casadi.simulation.options import SimulationOptions
-    f = gait.model.torso_angle
-    lean = max(abs(float(f(gait.q(t)))) for t in np.linspace(0.0, gait.T, n))
+    from biped_casadi import SimulationOptions
+    lean = gait.torso_lean(n)
     bound = float(SimulationOptions().max_torso_angle)
     return lean, lean > bound, bound
 

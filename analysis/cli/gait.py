@@ -120,6 +120,12 @@ def cmd_gait(args):
     if args.json:
         print_json(s)
         return 0
+    _print_gait(s, gait, model, out, args.mu, past, bound)
+    return 0
+
+
+def _print_gait(s: dict, gait, model, out, mu: float, past: bool, bound: float):
+    """``biped gait``'s report of one gait (``s``: its summary)."""
     print(f"reference gait of {model.params.name}, saved to {out}")
     print(f"  step time T          {s['T']:.6f} s")
     print(f"  step length          {s['step_length']:.6f} m")
@@ -131,7 +137,7 @@ def cmd_gait(args):
     print(f"  torso lean           {s['max_torso_lean']:.4f} rad from the vertical at most"
           + (f": PAST the simulator's fall bound ({bound:.4g} rad), so every walk of this "
              "gait is a fall; a lower speed keeps the torso up" if past else ""))
-    print(f"  max friction ratio   {s['max_friction_ratio']:.4f}   (mu {args.mu:g}); "
+    print(f"  max friction ratio   {s['max_friction_ratio']:.4f}   (mu {mu:g}); "
           f"at impact {s['impact_friction_ratio']:.4f}")
     print(f"  swing foot           min height inside the step {s['min_swing_height_inside']:.2e} m, "
           f"strike {s['strike_velocity']:.3f} m/s, lift-off {s['liftoff_velocity']:.3f} m/s")
@@ -147,4 +153,3 @@ def cmd_gait(args):
           f"iterations ({s['ipopt_status']})")
     for p in s.get("plots", []):
         print(f"  plot                 {p}")
-    return 0
