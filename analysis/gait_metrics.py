@@ -9,10 +9,12 @@ objective and the eigenvalue of the virtual constraints' restricted Poincaré ma
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from biped_casadi import SimulationOptions
 from biped_casadi.results import Result
 
 from .stability import vc_eigenvalue
@@ -105,6 +107,10 @@ class FamilyFigures(Result):
         The members' branches (:class:`gait_opt.MemberRecord`).
     events : list of dict
         The family's events (active-set changes, folds).
+    torso_lean : list of float
+        The torso's largest lean from the vertical (:meth:`gait_opt.Gait.torso_lean`), rad.
+    fall_bound : float
+        The simulator's fall bound on that lean (past it every walk is a fall), rad.
     torque_limit, mu, impact_mu : float
         The bounds of the problem (for the figures' reference lines).
     """
@@ -124,6 +130,8 @@ class FamilyFigures(Result):
     vc_status: list
     branch: list
     events: list = field(default_factory=list)
+    torso_lean: list = field(default_factory=list)
+    fall_bound: float = math.pi / 2
     torque_limit: float = float("nan")
     mu: float = float("nan")
     impact_mu: float = float("nan")
@@ -152,15 +160,21 @@ def family_figures(family) -> FamilyFigures:
                          peak_torque=c["max_abs_torque"],
                          impact_impulse_ratio=c["impact_friction_ratio"],
                          friction_ratio=c["max_friction_ratio"], cost=g.cost,
-                         vc_eigenvalue=vc.eigenvalue, vc_status=vc.status))
+                         vc_eigenvalue=vc.eigenvalue, vc_status=vc.status,
+                         torso_lean=g.torso_lean()))
     cols = {k: [r[k] for r in rows] for k in rows[0]} if rows else {}
     o = family.options
     unstable = [v for v, s in zip(cols.get("speed", []), cols.get("vc_status", []))
                 if s != "stable"]
+    bound = float(SimulationOptions().max_torso_angle)
+    falls = [v for v, x in zip(cols.get("speed", []), cols.get("torso_lean", [])) if x > bound]
     return FamilyFigures(
         status="ok", message=(f"{len(rows)} members" + (
             f"; the virtual constraints are not stable at {', '.join(f'{v:g}' for v in unstable)}"
-            f" m/s" if unstable else "")),
+            f" m/s" if unstable else "") + (
+            f"; the torso leans past the simulator's fall bound at "
+            f"{', '.join(f'{v:g}' for v in falls)} m/s (every walk there is a fall)"
+            if falls else "")), fall_bound=bound,
         robot=family.robot, branch=[r.branch for r in family.records],
         events=list(family.events), torque_limit=o.torque_limit, mu=o.mu,
         impact_mu=o.impulse_mu, **cols)

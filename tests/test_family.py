@@ -243,6 +243,8 @@ def test_family_figures_and_plot(family, model, tmp_path):
     assert f.vc_eigenvalue[2] == vc_eigenvalue(g).eigenvalue
     assert f.peak_torque[2] == g.check()["max_abs_torque"]
     assert f.period == [g.T for g in family.gaits]
+    assert f.torso_lean == [g.torso_lean() for g in family.gaits]
+    assert max(f.torso_lean) < f.fall_bound and "fall bound" not in f.message
     assert all(0 < c < 1 for c in f.cost_of_transport)
     files = save_figures({"gait_family": gait_family_plot(f)}, tmp_path)
     assert (tmp_path / "gait_family.png").stat().st_size > 10_000 and len(files) == 1

@@ -30,7 +30,8 @@ def gait_family_plot(figures, title: str | None = None) -> Figure:
     are not joined; a grey band marks the speeds between which each fold was located;
     dotted lines mark where an inequality constraint becomes active (in the panel it
     bounds: torque limit, friction and impulse cones).  The impulse panel also shows the
-    largest friction ratio along the step (dashed).
+    largest friction ratio along the step (dashed); the eigenvalue panel crosses out the
+    members whose torso leans past the simulator's fall bound (their orbit is a fall).
 
     Parameters
     ----------
@@ -68,6 +69,8 @@ def gait_family_plot(figures, title: str | None = None) -> Figure:
                        color="0.6", alpha=0.35, lw=0,
                        label="fold located here" if k == 0 else None)
         _mark_activations(ax, name, figures.events)
+        if name == "vc_eigenvalue":
+            _mark_falls(ax, v, y, figures)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
@@ -79,6 +82,18 @@ def gait_family_plot(figures, title: str | None = None) -> Figure:
                  f"to {v.max():g} m/s{n_folds}", fontsize=11)
     fig.tight_layout()
     return fig
+
+
+def _mark_falls(ax, v, y, figures):
+    """A cross on the members whose torso leans past the simulator's fall bound: their
+    orbit is a fall, whatever its eigenvalue says."""
+    lean = np.asarray(getattr(figures, "torso_lean", []) or [], float)
+    if lean.shape != v.shape:
+        return
+    past = lean > getattr(figures, "fall_bound", np.pi / 2)
+    if past.any():
+        ax.plot(v[past], y[past], "x", color="tab:red", ms=10, mew=2,
+                label="torso past the fall bound:\nthe orbit is a fall")
 
 
 def _line_label(panel, branch, folds, k):
