@@ -44,6 +44,16 @@ def test_move_reaches_the_robust_constraints_near_the_gait(gait, moved):
     assert g.options.continuation == ROBUST_GAIT["continuation"]
 
 
+def test_an_effort_out_of_iterations_is_not_tried_again(gait):
+    """The effort term's straight solve runs out of iterations: the move is the nearest
+    gait (its continuation), without a second effort solve from there."""
+    mv = move_gait(gait, dict(ROBUST_GAIT), MoveSettings(effort=300.0, max_iter=30),
+                   TranscriptionSettings())
+    efforts = [(r["effort"], r["nlp_status"]) for r in mv.steps]
+    assert efforts[0] == (300.0, "Maximum_Iterations_Exceeded")
+    assert efforts[1:] == [(0.0, "Solve_Succeeded")] and mv.status == "moved"
+
+
 def test_continue_gait_changes_speed_by_cadence(moved):
     """A gait continued to a higher speed keeps its options (the robust gait constraints)
     and its step length at most the neighbour's; to a lower speed the step is free; the

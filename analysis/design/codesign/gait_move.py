@@ -432,6 +432,11 @@ class _Move:
         got = self.attempt(1.0, self.G_user, ms.effort) if ms.effort else None
         if got is not None:
             return got[1], 1.0
+        # an effort term IPOPT did not solve in its iteration budget is not tried again
+        # from the nearest gait (measured: where the first ran out of iterations, the
+        # second did too, 200 iterations of a degree-12 import in vain)
+        effort = ms.effort if not (ms.effort and self.records[-1]["nlp_status"] ==
+                                   "Maximum_Iterations_Exceeded") else 0.0
         # 2. the nearest gait, by continuation from the gait's own values (a failed step
         # halved), then the effort term from there
         d, step, halvings, f_done, last = self.G_user.copy(), 1.0 / ms.steps, 0, 0.0, None
@@ -444,8 +449,8 @@ class _Move:
             if halvings >= ms.halvings:
                 break
             step, halvings = step / 2, halvings + 1
-        if last is not None and ms.effort:
-            got = self.attempt(f_done, d, ms.effort)
+        if last is not None and effort:
+            got = self.attempt(f_done, d, effort)
             if got is not None:
                 last = got[1]
         return last, f_done
