@@ -19,7 +19,8 @@ from biped_casadi.results import Result
 
 from .stability import vc_eigenvalue
 
-__all__ = ["FamilyFigures", "family_figures", "cost_of_transport", "actuator_work"]
+__all__ = ["FamilyFigures", "family_figures", "torso_fall", "cost_of_transport",
+           "actuator_work"]
 
 
 def actuator_work(gait, n: int = 4001, absolute: bool = True) -> float:
@@ -139,6 +140,26 @@ class FamilyFigures(Result):
     SUCCESS = ("ok",)
 
 
+def torso_fall(gait) -> tuple:
+    """The torso's largest lean on a gait against the simulator's fall bound.
+
+    The lean is :meth:`gait_opt.Gait.torso_lean`; past the bound, every walk of the gait
+    is a fall at once.
+
+    Parameters
+    ----------
+    gait : Gait
+        The gait.
+
+    Returns
+    -------
+    tuple
+        (lean in rad, past the bound: bool, the bound in rad).
+    """
+    lean, bound = gait.torso_lean(), float(SimulationOptions().max_torso_angle)
+    return lean, lean > bound, bound
+
+
 def family_figures(family) -> FamilyFigures:
     """The figures of every member of a gait family (module docstring).
 
@@ -151,23 +172,24 @@ def family_figures(family) -> FamilyFigures:
     -------
     FamilyFigures
     """
-    rows = []
+    rows, falls, bound = [], [], float(SimulationOptions().max_torso_angle)
     for g in family.gaits:
         c = g.check()
         vc = vc_eigenvalue(g)
+        lean, past, bound = torso_fall(g)
+        if past:
+            falls.append(g.options.speed)
         rows.append(dict(speed=g.options.speed, cost_of_transport=cost_of_transport(g),
                          step_length=g.step_length, period=g.T,
                          peak_torque=c["max_abs_torque"],
                          impact_impulse_ratio=c["impact_friction_ratio"],
                          friction_ratio=c["max_friction_ratio"], cost=g.cost,
                          vc_eigenvalue=vc.eigenvalue, vc_status=vc.status,
-                         torso_lean=g.torso_lean()))
+                         torso_lean=lean))
     cols = {k: [r[k] for r in rows] for k in rows[0]} if rows else {}
     o = family.options
     unstable = [v for v, s in zip(cols.get("speed", []), cols.get("vc_status", []))
                 if s != "stable"]
-    bound = float(SimulationOptions().max_torso_angle)
-    falls = [v for v, x in zip(cols.get("speed", []), cols.get("torso_lean", [])) if x > bound]
     return FamilyFigures(
         status="ok", message=(f"{len(rows)} members" + (
             f"; the virtual constraints are not stable at {', '.join(f'{v:g}' for v in unstable)}"

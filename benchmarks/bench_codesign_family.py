@@ -67,13 +67,6 @@ def _record(v, r, wall) -> dict:
                 load=round(os.getloadavg()[0], 2), cached=bool(r.cached))
 
 
-def _torso_max(g) -> float:
-    """The torso's largest lean from the vertical over the step, rad (RABBIT: q1 + q2 + q3)."""
-    t = np.linspace(0.0, g.T, 201)
-    q = g.evaluate(t)[0]
-    return float(np.max(np.abs(np.sum(q[:3], axis=0))))
-
-
 def _summary(r) -> dict:
     e = r.errors()
     return dict(status=r.status, message=r.message, n_steps=r.n_steps,
@@ -150,7 +143,7 @@ def main(argv=None):
                 print(f"{v:.2f} m/s, continued from {src:.2f} m/s: no design: {e}", flush=True)
                 continue
             rec = _record(float(v), r, time.perf_counter() - t)
-            rec.update(continued_from=src, member=x, torso_max=_torso_max(g),
+            rec.update(continued_from=src, member=x, torso_max=g.torso_lean(),
                        step_length=float(g.step_length), T=[float(g.T), float(r.gait.T)])
             records[records.index(x)] = rec
             designs[round(float(v), 6)] = r

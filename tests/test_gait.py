@@ -508,17 +508,17 @@ def test_torso_lean_reported_and_tied_to_the_simulators_fall(model, gait):
     fall, as the line says."""
     import math
 
-    from analysis.cli.common import torso_lean
+    from analysis.gait_metrics import torso_fall
     from biped_casadi import SimulationOptions, VirtualConstraintController, simulate
 
-    lean, past, bound = torso_lean(gait)
+    lean, past, bound = torso_fall(gait)
     t = np.linspace(0.0, gait.T, 201)
     q = np.atleast_2d(gait.q(t))
     q = q if q.shape[0] == 5 else q.T
     assert lean == pytest.approx(np.max(np.abs(q[0] + q[1] + q[2])), abs=1e-12)
     assert bound == pytest.approx(math.pi / 2) and not past and lean < 0.5
     fast = optimize_gait(model, GaitOptions(speed=1.2))
-    lean12, past12, _ = torso_lean(fast)
+    lean12, past12, _ = torso_fall(fast)
     assert past12 and lean12 > bound
     run = simulate(VirtualConstraintController(fast), fast.q(0.0), fast.dq(0.0),
                    SimulationOptions(steps=1))

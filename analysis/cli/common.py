@@ -54,28 +54,6 @@ class Progress:
 
 
 # --------------------------------------------------------- robot, model, gait
-def torso_lean(gait, n: int = 201) -> tuple:
-    """The torso's largest lean from the vertical on a gait, and whether it passes the
-    simulator's fall bound (every walk of such a gait is a fall at once).
-
-    Parameters
-    ----------
-    gait : Gait
-        The gait.
-    n : int
-        Points on [0, T].
-
-    Returns
-    -------
-    tuple
-        (lean in rad, past the bound: bool, the bound in rad).
-    """
-    from biped_casadi import SimulationOptions
-    lean = gait.torso_lean(n)
-    bound = float(SimulationOptions().max_torso_angle)
-    return lean, lean > bound, bound
-
-
 def add_robot(p, with_gait: bool = True):
     """Add ``--robot NAME|FILE`` to a subcommand's parser."""
     default = ("default: the gait file's robot, else rabbit" if with_gait

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import math
 
+from analysis.gait_metrics import torso_fall
 from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_figures
 from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 
 from .common import (Progress, UserError, add_robot, load_model, output_dir, output_file,
-                     torso_lean,
                      print_json)
 from .gait_family import add_family_arguments, check_family_arguments, cmd_family, cmd_gait_at
 from .gait_import import add_import_arguments, check_export_arguments, cmd_export_csv, cmd_import
@@ -111,7 +111,7 @@ def cmd_gait(args):
     except GaitOptimizationError as e:
         raise UserError(str(e)) from None
     s = gait.summary()
-    s["max_torso_lean"], past, bound = torso_lean(gait)
+    s["max_torso_lean"], past, bound = torso_fall(gait)
     s["file"] = str(gait.save(out))
     if folder is not None:
         s["plots"] = save_figures({"gait_stick": gait_stick_plot(gait),

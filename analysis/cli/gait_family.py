@@ -8,13 +8,12 @@ from __future__ import annotations
 import math
 import sys
 
-from analysis.gait_metrics import family_figures
+from analysis.gait_metrics import family_figures, torso_fall
 from analysis.reporting.plots import (gait_family_plot, gait_profiles_plot, gait_stick_plot,
                                       save_figures)
 from gait_opt import GaitFamily, GaitOptimizationError, gait_family, parse_speed_range
 
-from .common import (Progress, UserError, load_model, output_dir, output_file, print_json,
-                     torso_lean)
+from .common import Progress, UserError, load_model, output_dir, output_file, print_json
 
 __all__ = ["add_family_arguments", "check_family_arguments", "cmd_family", "cmd_gait_at"]
 
@@ -120,7 +119,7 @@ def _print_family(fam: GaitFamily, s: dict):
     falls = []
     for r, g in zip(fam.records, fam.gaits):
         tag = f"  branch {r.branch + 1}" if fam.records[-1].branch else ""
-        lean, past, bound = torso_lean(g)
+        lean, past, bound = torso_fall(g)
         if past:
             falls.append(f"{r.speed:g}")
         print(f"  {r.speed:6.3f} {r.T:8.5f} {r.step_length:8.5f} {r.cost:10.2f} "

@@ -179,10 +179,11 @@ def continue_gait(gait, speed: float) -> Gait:
     torque and friction bounds) at ``speed``, warm-started from ``gait``
     (:func:`gait_opt.optimize_gait`); faster than ``gait``, its step length is held at
     most ``gait``'s, so that the speed rises by cadence.  Along the default family the
-    optimiser lengthens the step and leans the torso forward as the speed rises (RABBIT:
-    0.89 rad at 1.1 m/s, 1.13 rad at 1.15 m/s) until, at 1.2 m/s, the optimum leans it
-    past the horizontal (2.05 rad; the simulator's fall bound is pi/2), from which no
-    controller walks; at 1.15 m/s's step length the 1.2 m/s gait leans 0.82 rad.
+    optimiser lengthens the step and leans the torso forward as the speed rises (RABBIT,
+    largest lean over the step: 0.94 rad at 1.1 m/s, 1.19 rad at 1.15 m/s) until, at
+    1.2 m/s, the optimum leans it past the horizontal (2.10 rad; the simulator's fall
+    bound is pi/2, :func:`analysis.gait_metrics.torso_fall`), from which no controller
+    walks; at 1.15 m/s's step length the 1.2 m/s gait leans at most 0.87 rad.
 
     Parameters
     ----------
