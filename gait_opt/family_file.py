@@ -104,7 +104,8 @@ def write_family(path, body: dict) -> Path:
     -------
     Path
     """
-    return write_text_atomic(Path(path), json.dumps(body, indent=1, allow_nan=False))
+    # Infinity as in a gait file (a robot without a torque limit: its URDF gives none)
+    return write_text_atomic(Path(path), json.dumps(body, indent=1))
 
 
 def read_family_file(path, model=None) -> dict:

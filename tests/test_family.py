@@ -327,3 +327,17 @@ def test_three_link_family_range(model3):
     fam = gait_family(model3, speed_range(0.3, 2.5, 0.05))
     assert fam.success and len(fam) == 45
     assert all(g.orbit_residual()["worst"] <= ORBIT_TOL for g in fam.gaits)
+
+
+def test_family_of_a_robot_without_a_torque_limit(capsys, tmp_path, monkeypatch):
+    """A URDF without effort limits (an infinite torque limit in the robot's record): the
+    family file keeps it as a gait file does, and reads back."""
+    from pathlib import Path
+    urdf = Path(__file__).resolve().parents[1] / "docs" / "howto" / "walker" / "walker.urdf"
+    monkeypatch.chdir(tmp_path)
+    rc, out, err = _run(capsys, "--robot", str(urdf), "--torque-limit", "150", "--speeds",
+                        "0.7:0.75:0.05", "--out", "f.json")
+    assert rc == 0, err
+    fam = GaitFamily.load(tmp_path / "f.json")
+    assert len(fam) == 2 and math.isinf(fam.model.params.torque_limit)
+    assert fam.gait(0.75).options.torque_limit == 150
