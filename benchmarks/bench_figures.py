@@ -132,7 +132,8 @@ def main(argv=None):
         versions = {"ours": snapshot(None, tmp / "ours")}
         if a.baseline_commit:
             versions["base"] = snapshot(a.baseline_commit, tmp / "base")
-        calls = tmp / "calls.pkl"
+        calls = (Path(a.keep) if a.keep else tmp) / "calls.pkl"
+        calls.parent.mkdir(parents=True, exist_ok=True)
         _child(versions["ours"], "--record", str(calls))
         res = {}
         for name, pk in versions.items():

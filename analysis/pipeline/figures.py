@@ -12,6 +12,7 @@ from ..reporting.plots import (basin_plot, conjecture_plot, family_designs_plot,
                                m1_plane_plot, mfpt_sigma_plot, one_d_sweeps_plot,
                                stable_domains_plot, survival_plot, swing_torques_plot,
                                tradeoff_plot, unactuated_error_plot, walking_animation)
+from ..reporting.plots.common import tight_box
 from ..tasks import task
 
 __all__ = ["FORMATS", "figure_files", "gait_figures", "fig2", "fig3", "fig4",
@@ -39,10 +40,11 @@ def figure_files(fig, formats=FORMATS, dpi: int = 150) -> dict:
     dict
     """
     out = {}
-    for ext in formats:
-        buf = io.BytesIO()
-        fig.savefig(buf, dpi=dpi, bbox_inches="tight", format=ext)
-        out[ext] = buf.getvalue()
+    with tight_box(fig, dpi) as box:                      # measured once for all formats
+        for ext in formats:
+            buf = io.BytesIO()
+            fig.savefig(buf, dpi=dpi, bbox_inches=box, format=ext)
+            out[ext] = buf.getvalue()
     return out
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
+from matplotlib import rcParams
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -24,6 +25,48 @@ def _figure(**kw) -> Figure:
     fig = Figure(**kw)
     FigureCanvasAgg(fig)
     return fig
+
+
+@contextlib.contextmanager
+def tight_box(fig: Figure, dpi: float):
+    """The figure's tight bounding box, found once for all its files.
+
+    ``savefig(..., bbox_inches="tight")`` lays out and measures the whole figure again
+    for every file it writes (and draws it twice); this measures it once, at ``dpi`` with
+    the raster renderer, as ``savefig`` does for a PNG, and holds the figure's layout
+    (its layout engine off) while the files are written with ``bbox_inches=box``.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    dpi : float
+        The resolution the box is measured at (the PNG's).
+
+    Yields
+    ------
+    matplotlib.transforms.Bbox or str
+        The box in inches, padded by ``rcParams['savefig.pad_inches']`` ('tight' for a
+        figure whose canvas has no Agg renderer: ``savefig`` measures it per file).
+    """
+    if not hasattr(fig.canvas, "get_renderer"):          # not drawn by Agg: savefig's way
+        yield "tight"
+        return
+    engine, old_dpi = fig.get_layout_engine(), fig.dpi
+    fig.dpi = dpi
+    try:
+        renderer = fig.canvas.get_renderer()
+        with renderer._draw_disabled():                   # the layout, nothing painted
+            fig.draw(renderer)
+        box = fig.get_tightbbox(renderer).padded(rcParams["savefig.pad_inches"])
+    finally:
+        fig.dpi = old_dpi
+    if engine is not None:
+        fig.set_layout_engine("none")
+    try:
+        yield box
+    finally:
+        if engine is not None:
+            fig.set_layout_engine(engine)
 
 
 def save_figure(fig: Figure, path, formats=("png",), dpi: int = 150) -> list[str]:
@@ -48,11 +91,12 @@ def save_figure(fig: Figure, path, formats=("png",), dpi: int = 150) -> list[str
     if base.suffix.lower() in (".png", ".pdf", ".svg"):
         base = base.with_suffix("")
     out = []
-    for ext in formats:
-        p = base.with_name(f"{base.name}.{ext}")
-        with atomic_path(p) as tmp:
-            fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=ext)
-        out.append(str(p))
+    with tight_box(fig, dpi) as box:
+        for ext in formats:
+            p = base.with_name(f"{base.name}.{ext}")
+            with atomic_path(p) as tmp:
+                fig.savefig(tmp, dpi=dpi, bbox_inches=box, format=ext)
+            out.append(str(p))
     return out
 
 
