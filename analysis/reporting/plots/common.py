@@ -34,7 +34,7 @@ def tight_box(fig: Figure, dpi: float):
     ``savefig(..., bbox_inches="tight")`` lays out and measures the whole figure again
     for every file it writes (and draws it twice); this measures it once, at ``dpi`` with
     the raster renderer, as ``savefig`` does for a PNG, and holds the figure's layout
-    (its layout engine off) while the files are written with ``bbox_inches=box``.
+    (no layout engine) while the files are written with ``bbox_inches=box``.
 
     Parameters
     ----------
@@ -60,13 +60,13 @@ def tight_box(fig: Figure, dpi: float):
         box = fig.get_tightbbox(renderer).padded(rcParams["savefig.pad_inches"])
     finally:
         fig.dpi = old_dpi
-    if engine is not None:
-        fig.set_layout_engine("none")
+    # no layout engine while the files are written, not even the placeholder that
+    # tight_layout() leaves: with one, savefig lays the figure out again for each file
+    fig._layout_engine = None
     try:
         yield box
     finally:
-        if engine is not None:
-            fig.set_layout_engine(engine)
+        fig._layout_engine = engine
 
 
 def save_figure(fig: Figure, path, formats=("png",), dpi: int = 150) -> list[str]:
