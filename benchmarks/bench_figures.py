@@ -104,9 +104,8 @@ def compare(ours: Path, base: Path) -> dict:
 
 
 def _child(packages: Path, *args) -> None:
-    env = dict(os.environ, MPLBACKEND="Agg",
-               PYTHONPATH=os.pathsep.join([str(packages)] + ([os.environ["PYTHONPATH"]]
-                                                           if os.environ.get("PYTHONPATH") else [])))
+    path = [str(packages)] + ([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=os.pathsep.join(path))
     subprocess.run([sys.executable, __file__, *args], env=env, check=True, cwd=packages)
 
 

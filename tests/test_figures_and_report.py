@@ -43,6 +43,46 @@ def test_save_figure_is_complete_or_absent(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.pdf", "f.png"]   # no temp, no folder
 
 
+@pytest.mark.parametrize("layout", ["tight", "constrained"])
+def test_figure_files_crop_as_savefig_tight(layout):
+    """The tight box measured once gives the PNG savefig's bbox_inches='tight' gives
+    (pixel for pixel), a PDF page within 2 pt of its own, and the layout engine back."""
+    import io
+
+    from PIL import Image
+
+    from analysis.pipeline.figures import figure_files
+    from analysis.reporting.plots.common import _figure
+
+    def make():
+        fig = _figure(figsize=(5, 3), layout="constrained" if layout == "constrained" else None)
+        ax = fig.add_subplot()
+        ax.semilogy([1, 2, 3], [1, 10, 100], label="a long legend entry")
+        ax.set_ylabel(r"$\dot q_u$ [rad/s]")
+        ax.legend()
+        fig.suptitle("a title wider than the axes, to be cropped around it " * 2)
+        if layout == "tight":
+            fig.tight_layout()
+        return fig
+
+    ref, fig = make(), make()
+    engine = type(fig.get_layout_engine())
+    files = figure_files(fig)
+    assert type(fig.get_layout_engine()) is engine
+    want = {}
+    for ext in ("png", "pdf"):
+        buf = io.BytesIO()
+        ref.savefig(buf, dpi=150, bbox_inches="tight", format=ext)
+        want[ext] = buf.getvalue()
+    a, b = (np.asarray(Image.open(io.BytesIO(f["png"]))) for f in (files, want))
+    assert a.shape == b.shape and np.abs(a.astype(int) - b).max() == 0
+
+    def box(pdf):
+        return np.array(re.search(rb"/MediaBox\s*\[([-\d.\s]+)\]", pdf).group(1).split(), float)
+
+    assert np.abs(box(files["pdf"]) - box(want["pdf"])).max() < 2.0
+
+
 def test_save_figures_is_all_or_none(tmp_path, monkeypatch):
     ok, bad = Figure(), Figure()
     ok.add_subplot()
