@@ -48,8 +48,8 @@ def tight_box(fig: Figure, dpi: float):
         The box in inches, padded by ``rcParams['savefig.pad_inches']`` ('tight' for a
         figure whose canvas has no Agg renderer: ``savefig`` measures it per file).
     """
-    if not hasattr(fig.canvas, "get_renderer"):          # not drawn by Agg: savefig's way
-        yield "tight"
+    if not (hasattr(fig.canvas, "get_renderer") and hasattr(fig, "_layout_engine")):
+        yield "tight"          # not drawn by Agg, or a matplotlib without the attribute
         return
     engine, old_dpi = fig.get_layout_engine(), fig.dpi
     fig.dpi = dpi
