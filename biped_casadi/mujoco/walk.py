@@ -153,6 +153,8 @@ class MujocoLoop:
         self.feet = tuple(mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_GEOM, f"foot_{leg}")
                           for leg in "ab")
         self.T = float(g.T)
+        # the gait's speed and step length, evaluated once (each is a CasADi call)
+        self.speed, self.step_length = float(g.speed), float(g.step_length)
         self.qu_T, self.dqu_T = float(g.q(self.T)[0]), float(g.dq(self.T)[0])
         self.fall_height = 0.5625 * model.description.leg_length
         ts = SECTION * self.T
@@ -167,8 +169,7 @@ class MujocoLoop:
         dict
             ``T``, ``speed``, ``step_length``, ``qu_T``, ``dqu_T``.
         """
-        g = self.gait
-        return dict(T=self.T, speed=float(g.speed), step_length=float(g.step_length),
+        return dict(T=self.T, speed=self.speed, step_length=self.step_length,
                     qu_T=self.qu_T, dqu_T=self.dqu_T)
 
     def initial_state(self, q0, dq0) -> tuple:
@@ -232,10 +233,9 @@ class MujocoLoop:
         records, steps, status = run.records, run.steps, run.status
         n = len(records)
         after = records[SETTLE:] if n > 2 * SETTLE else records
-        g = self.gait
         if after:
             speed = sum(s.step_length for s in after) / sum(s.period for s in after)
-            speed_err = speed / float(g.speed) - 1.0
+            speed_err = speed / self.speed - 1.0
             period_err = float(np.mean([s.period for s in after])) / self.T - 1.0
         else:
             speed_err = period_err = math.nan
@@ -410,7 +410,7 @@ class _Run:
         between it and the one before where the swing foot's sphere meets the floor
         (``touchdown='interpolated'``): record the step, relabel the legs, start the next
         step's law."""
-        loop, q, dq, g = self.loop, self.q, self.dq, self.loop.gait
+        loop, q, dq = self.loop, self.q, self.dq
         t_td = (self.k - 1) * self.dt
         z_old, q_old, dq_old = olds
         if self.interpolate and z_old > z_now:
@@ -422,7 +422,7 @@ class _Run:
         speed = length / tau
         self.records.append(MujocoStep(
             index=len(self.records), t_start=self.t0, t_touchdown=t_td, period=tau, step_length=length, speed=speed,
-            speed_error=speed / float(g.speed) - 1.0, period_error=tau / self.T - 1.0,
+            speed_error=speed / loop.speed - 1.0, period_error=tau / self.T - 1.0,
             qu_error=float(q[0]) - loop.qu_T, dqu_error=float(dq[0]) - loop.dqu_T,
             q_minus=q.tolist(), dq_minus=dq.tolist(), peak_commanded=float(self.peak),
             peak_applied=float(min(self.peak, self.U)), clipped_time=self.clipped * self.dt,
