@@ -1,6 +1,6 @@
 """The one way to reach Dask: :func:`connect` to a scheduler's address, a client or a
 ``LocalCluster`` of this machine (started without waiting for its workers), and what
-the processes of a cluster need (the bootstrapping check, the allocator, progress)."""
+the processes of a cluster need (the bootstrapping check, the allocator)."""
 from __future__ import annotations
 
 import copy
@@ -8,7 +8,7 @@ import ctypes
 import logging
 import sys
 
-__all__ = ["connect", "check_not_bootstrapping", "progress_bar", "tune_allocator",
+__all__ = ["connect", "check_not_bootstrapping", "tune_allocator",
            "LOCAL_CLUSTER_CONFIG", "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
 
 #: how long to wait for a Dask scheduler to answer, and for a first worker to join it
@@ -103,28 +103,6 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
         raise ValueError(f"scheduler: no Dask worker joined {scheduler} within "
                          f"{DASK_WORKER_TIMEOUT} s ({e})") from None
     return client, None
-
-
-def progress_bar(progress: bool, total: int, initial: int, unit: str, desc: str):
-    """A tqdm bar on stderr, shown only when ``progress`` and stderr is a terminal.
-
-    Parameters
-    ----------
-    progress : bool
-        Whether progress is wanted.
-    total, initial : int
-        Units of work in all, and already done (resumed).
-    unit, desc : str
-        What a unit is, and what the work is.
-
-    Returns
-    -------
-    tqdm.tqdm
-    """
-    from tqdm.auto import tqdm
-    return tqdm(total=total, initial=initial, unit=unit, desc=desc,
-                disable=not (bool(progress) and sys.stderr.isatty()), file=sys.stderr,
-                dynamic_ncols=True)
 
 
 _ALLOCATOR_TUNED = False

@@ -11,7 +11,7 @@ import numpy as np
 from biped_casadi.caching import cached, digest
 from gait_opt import Gait
 
-from ..cluster import progress_bar
+from ..reporting.progress import progress_bar
 from ..stability.poincare import PoincareMap, poincare_map
 from ..tasks import Engine, TaskError, resolve_scheduler, task
 

@@ -1,8 +1,6 @@
-"""The engine of :mod:`analysis.tasks`: each task goes to Dask under its content key
-(``<name>-<key>``, :func:`biped_casadi.caching.task_key`) with its stage's priority, its
-inputs as Dask futures (a kept result, or a flow's, scattered under its key); Dask
-queues, places and steals the work and fails the dependants of a failure, and a thread
-of the engine keeps each result as it arrives."""
+"""The engine of :mod:`analysis.tasks`: a task goes to Dask under its content key with its
+stage's priority, its inputs as Dask futures (a kept or flow result scattered under its
+key); Dask queues, places, steals and fails dependants; a thread keeps each result."""
 from __future__ import annotations
 
 import concurrent.futures as cf
@@ -21,7 +19,8 @@ from enum import StrEnum
 from biped_casadi.caching import (MISSING, ResultStore, TaskInfo, code_files, code_version,
                                   task, task_key)
 
-from ..cluster import check_not_bootstrapping, connect, progress_bar, tune_allocator
+from ..cluster import check_not_bootstrapping, connect, tune_allocator
+from ..reporting.progress import progress_bar
 
 __all__ = ["task", "TaskInfo", "Engine", "TaskError", "TaskRecord", "TaskState",
            "resolve_scheduler", "SCHEDULER_ENV"]
@@ -75,10 +74,8 @@ class TaskError(RuntimeError):
 
     Parameters
     ----------
-    origin, message : str
-        The task that raised (the first failure of a chain); its error, ``Type: text``.
-    detail, key : str
-        Its traceback; its key.
+    origin, message, detail, key : str
+        The task that raised first in a chain; its error (``Type: text``), traceback, key.
     """
 
     def __init__(self, origin: str, message: str, detail: str = "", key: str = ""):
@@ -184,12 +181,6 @@ def _unpack(obj):
     return obj
 
 
-def _futures_in(obj) -> list:
-    out = []
-    _pack(obj, lambda f: out.append(f) or f)
-    return out
-
-
 def _error(name: str, e: BaseException, key: str) -> TaskError:
     """``e`` as the :class:`TaskError` of task ``name`` (in its ``except`` block)."""
     return e if isinstance(e, TaskError) else TaskError(
@@ -238,12 +229,16 @@ def _stale(kind: str, code: str) -> str:
             "the same version of the toolkit on every worker")
 
 
+def _stage() -> tuple:
+    return getattr(_LOCAL, "stage", ("", 0))
+
+
 class Engine:
     """Submits tasks and flows to Dask, keeps their results, records the run.
 
-    A context manager: the cluster it started is closed at the end.  The cluster is
-    started (its workers join in the background) as the engine is made when nothing is
-    kept, else by the first result to compute: a run of kept results starts none.
+    A context manager that closes the cluster it started.  The cluster starts (workers
+    joining in the background) with the engine when nothing is kept, else with the first
+    result to compute: a run of kept results starts none.
 
     Parameters
     ----------
@@ -252,15 +247,14 @@ class Engine:
     cache : str, Path or False, optional
         The cache folder (default :func:`biped_casadi.cache_dir`); False: keep nothing.
     use_cache : bool
-        Read kept results (False: compute every task again; results are still written).
+        Read kept results (False: compute every task again, still writing results).
     progress : bool
         A bar of finished tasks on stderr (when it is a terminal).
     log : callable, optional
         Called with the lines of :meth:`say`.
-    preload : tuple of str
-        Modules the worker processes of a local cluster import as they start.
-    processes : bool
-        A local cluster of single-threaded processes, or of threads of this process.
+    preload, processes : tuple of str; bool
+        A local cluster's: modules its workers import as they start; single-threaded
+        processes (else threads of this process).
     """
 
     def __init__(self, scheduler=None, workers: int | None = None, cache=None,
@@ -271,22 +265,21 @@ class Engine:
             check_not_bootstrapping()
         self.workers, self.preload, self.processes = workers, tuple(preload), processes
         self.store, self.use_cache = ResultStore(cache), bool(use_cache)
-        self._log, self._progress = log, bool(progress)
-        self.closed, self._records = False, []
+        self._log, self._progress = log, bool(progress) and sys.stderr.isatty()
+        self.closed, self._records, self._published = False, [], set()
         self._futures, self._tasks, self._scattered, self._seconds = {}, {}, {}, {}
-        self._published: set = set()
-        self._lock = threading.RLock()
-        self._cond = threading.Condition(self._lock)
+        self._cond = threading.Condition(threading.RLock())
         self._client = self._cluster = self._start_error = self._bar = self._keeper = None
         self._kept = queue.Queue()
-        if not self.synchronous and (not self.use_cache or self.store.empty()):
+        if self.scheduler != "synchronous" and (not self.use_cache or self.store.empty()):
             with contextlib.suppress(Exception):       # raised again by the first submit
                 self.client()
 
-    @property
-    def synchronous(self) -> bool:
-        """Whether tasks run in this process, one after another."""
-        return self.scheduler == "synchronous"
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
 
     @property
     def records(self) -> list:
@@ -299,12 +292,6 @@ class Engine:
             if not isinstance(f, cf.Future) and f.done():
                 self._keep_one(f)
 
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
     def client(self):
         """The Dask client (None when synchronous), connected on first use.
 
@@ -312,9 +299,9 @@ class Engine:
         -------
         dask.distributed.Client or None
         """
-        if self.synchronous:
+        if self.scheduler == "synchronous":
             return None
-        with self._lock:
+        with self._cond:
             if self._start_error is not None:
                 raise self._start_error
             if self._client is None:
@@ -325,22 +312,21 @@ class Engine:
                     self._start_error = e
                     raise
                 self._client.subscribe_topic(_TOPIC, self._on_seconds)
-                self._keeper = threading.Thread(target=self._keep, daemon=True,
-                                                name="biped-keeper")
+                self._keeper = threading.Thread(target=self._keep, daemon=True)
                 self._keeper.start()
                 if self._cluster is not None:
                     threading.Thread(target=self._watch, daemon=True).start()
             return self._client
 
     def _watch(self):
-        """Wait for the local cluster's workers to start (off the run's path); if they
-        cannot, every task fails with the reason instead of waiting forever."""
+        """Wait for the local cluster's workers (off the run's path); if none can start,
+        fail every task with the reason instead of waiting forever."""
         with contextlib.suppress(Exception):
             self._cluster.sync(self._cluster._correct_state)
         nannies = list(self._cluster.workers.values())
         if nannies and all(getattr(w.status, "name", "") == "failed" for w in nannies):
             e = RuntimeError("its worker processes failed to start (their error above)")
-            with self._lock:
+            with self._cond:
                 if self.closed:
                     return
                 self._start_error = e
@@ -377,8 +363,8 @@ class Engine:
         quiet = logging.getLogger("distributed")         # the cluster's shutdown chatter
         level, _ = quiet.level, quiet.setLevel(logging.CRITICAL)
         try:
-            with contextlib.suppress(Exception):
-                if self._client is not None:
+            if self._client is not None:
+                with contextlib.suppress(Exception):
                     self._client.cancel([f for f in lost if not isinstance(f, cf.Future)])
                     if isinstance(self.scheduler, str):     # a client of its own
                         self._client.close()
@@ -407,12 +393,10 @@ class Engine:
 
         Parameters
         ----------
-        name : str
-            The stage.
-        priority : int
-            Dask's priority of its tasks (higher first).
+        name, priority : str, int
+            The stage; Dask's priority of its tasks (higher first).
         """
-        old, _LOCAL.stage = self.current_stage(), (name, int(priority))
+        old, _LOCAL.stage = _stage(), (name, int(priority))
         try:
             yield
         finally:
@@ -427,7 +411,7 @@ class Engine:
         tuple
             (name, priority).
         """
-        return getattr(_LOCAL, "stage", ("", 0))
+        return _stage()
 
     def submit(self, fn, *args, **kwargs):
         """Run task ``fn(*args, **kwargs)``, or read its kept result.
@@ -437,14 +421,14 @@ class Engine:
         fn : callable
             A :func:`task`.
         *args, **kwargs
-            Its arguments; futures in them (in lists, tuples, dicts, dataclass fields)
-            stand for their results.
+            Its arguments; futures in them (also in lists, tuples, dicts, dataclass
+            fields) stand for their results.
 
         Returns
         -------
         dask.distributed.Future or concurrent.futures.Future
-            ``key`` is ``<name>-<content key>``; ``result()`` waits for the value and
-            raises :class:`TaskError` when the task, or one it depends on, failed.
+            Keyed ``<name>-<content key>``; ``result()`` raises :class:`TaskError` when
+            the task, or one it depends on, failed.
         """
         return self._start(fn, args, kwargs, flow=False)
 
@@ -456,9 +440,9 @@ class Engine:
         Parameters
         ----------
         flow : callable
-            A :func:`task` taking the engine first; it submits tasks and waits for them.
+            A :func:`task` taking the engine first (it submits tasks and waits for them).
         *args, **kwargs
-            Its other arguments (futures are passed as they are).
+            Its other arguments, futures passed as they are.
 
         Returns
         -------
@@ -469,8 +453,7 @@ class Engine:
     def each(self, fn, calls: dict):
         """Fan out a task: (tag, result) of each call as it finishes.
 
-        Synchronous, or kept, a call's result comes as it is submitted (one call after
-        the other); the others as Dask finishes them.
+        Synchronous, or kept, a call's result comes as it is submitted.
 
         Parameters
         ----------
@@ -540,36 +523,40 @@ class Engine:
             raise TaskError(info.name, "not run: the engine was closed")
         key = task_key(info.name, info.version, info.code, args, kwargs,
                        ref_key=lambda o: _key(o) if _is_future(o) else None)
-        inputs, ctx = _futures_in((args, kwargs)), getattr(_LOCAL, "flow", None)
+        inputs, ctx = [], getattr(_LOCAL, "flow", None)
+        _pack((args, kwargs), lambda f: inputs.append(f) or f)
         kept = self.store.read(key) if self.use_cache and key not in self._tasks else MISSING
         with self._cond:
             new = key not in self._tasks             # else submitted before, or right now
             if new:
                 deps = inputs + [f for f in (ctx or ()) if f.done()]
-                self._tasks[key] = TaskRecord(info.name, self.current_stage()[0], key, flow=flow,
+                self._tasks[key] = TaskRecord(info.name, _stage()[0], key, flow=flow,
                                               deps=tuple(dict.fromkeys(map(_key, deps))))
             while not new and key not in self._futures:
                 self._cond.wait()
-        fut = cf.Future()
-        fut.key = f"{info.name.rsplit('.', 1)[-1]}-{key}"
         if not new:
             fut = self._futures[key]
         elif kept is not MISSING:
             self._finish(key, TaskState.REUSED, seconds=kept.get("seconds", 0.0))
-            self._set(key, _resolve(fut, kept["value"]))
-        elif not (flow or self.synchronous):
-            self._count_new()
-            fut = self._on_cluster(fn, key, fut, args, kwargs)
+            fut = self._set(key, _resolve(self._holder(info, key), kept["value"]))
         else:
             self._count_new()
-            self._set(key, fut)
-            if flow:
-                self._flow(fn, key, fut, args, kwargs, inputs)
+            fut = self._holder(info, key)
+            if not (flow or self.scheduler == "synchronous"):
+                fut = self._on_cluster(fn, key, fut, args, kwargs)
+            elif flow:
+                self._flow(fn, key, self._set(key, fut), args, kwargs, inputs)
             else:
-                self._complete(key, fut, lambda: _run(fn, key, None, *(
+                self._complete(key, self._set(key, fut), lambda: _run(fn, key, None, *(
                     _pack(x, lambda f: f.result()) for x in (args, kwargs))))
         if ctx is not None:
             ctx.append(fut)
+        return fut
+
+    @staticmethod
+    def _holder(info, key) -> cf.Future:
+        fut = cf.Future()
+        fut.key = f"{info.name.rsplit('.', 1)[-1]}-{key}"
         return fut
 
     def _set(self, key, future):
@@ -600,11 +587,11 @@ class Engine:
             if info.code not in self._published:       # for a stale worker's message
                 self._published.add(info.code)
                 client.set_metadata([_TOPIC, info.code, code], code_files(info.code))
-            with self._lock:                 # not while the cluster is found dead
+            with self._cond:                 # not while the cluster is found dead
                 if self._start_error is not None:
                     raise self._start_error
                 fut = self._set(key, client.submit(_run, fn, key, code, a, k, key=holder.key,
-                                                   pure=False, priority=self.current_stage()[1]))
+                                                   pure=False, priority=_stage()[1]))
         except Exception as e:                         # noqa: BLE001 - this task fails
             err = e if isinstance(e, TaskError) else TaskError(info.name, (
                 f"not run: the Dask cluster did not start ({_one(e)})"
@@ -627,18 +614,18 @@ class Engine:
 
     def _flow(self, flow, key, fut, args, kwargs, inputs):
         """Run a flow: in a thread of its own, or here when synchronous."""
-        stage = self.current_stage()
+        stage, sync = _stage(), self.scheduler == "synchronous"
 
         def run():
-            saved = self.current_stage(), getattr(_LOCAL, "flow", None)
+            saved = _stage(), getattr(_LOCAL, "flow", None)
             _LOCAL.stage, _LOCAL.flow = stage, list(inputs)
             try:
                 self._complete(key, fut, lambda: flow(self, *args, **kwargs),
-                               Exception if self.synchronous else BaseException)
+                               Exception if sync else BaseException)
             finally:
                 _LOCAL.stage, _LOCAL.flow = saved
 
-        if self.synchronous:
+        if sync:
             return run()
         with contextlib.suppress(Exception):
             self.client()                      # its workers join while the flow works
@@ -669,7 +656,7 @@ class Engine:
         rec = self._tasks[key]
         if state is TaskState.COMPUTED and rec.state is None:
             self.store.write(key, rec.name, value, seconds)
-        with self._lock:
+        with self._cond:
             if rec.state is not None:
                 return
             rec.state, rec.seconds, rec.error = state, float(seconds), str(error or "")
@@ -678,9 +665,10 @@ class Engine:
                 self._bar.update(1)
 
     def _count_new(self):
-        with self._lock:
-            if self._bar is None and self._progress and sys.stderr.isatty():   # tqdm: 0.1 s
+        if not self._progress:
+            return
+        with self._cond:
+            if self._bar is None:                    # tqdm's import: 0.1 s
                 self._bar = progress_bar(True, 0, 0, "task", "tasks")
-            if self._bar is not None:
-                self._bar.total += 1
-                self._bar.refresh()
+            self._bar.total += 1
+            self._bar.refresh()

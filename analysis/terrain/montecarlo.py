@@ -42,7 +42,7 @@ from biped_casadi.caching import code_version
 from biped_casadi.results import Result, internal
 
 
-from ..cluster import progress_bar
+from ..reporting.progress import progress_bar
 from ..tasks import Engine, TaskError
 from .chunks import MonteCarloStore, evaluate_chunk, _Payload
 from .estimates import MFPTEstimate, mfpt_estimate
