@@ -265,7 +265,8 @@ class _Run:
 
     The per-step work is Python's, about as long as MuJoCo's step itself, so it is kept
     lean without changing a bit of the result: MuJoCo's arrays are read through views
-    taken once; q and dq are computed with the same BLAS product as ``A @ qpos[2:]``,
+    taken once; q and dq are computed with the same BLAS product as ``A @ qpos[2:]``
+    (not by indexing: A's first row adds three angles, in the order of BLAS's kernel),
     written in turn into two pairs of buffers (the previous state stays whole for the
     touchdown), on which the law is bound once (:meth:`~biped_casadi.control.compiled.
     NumericLaw.bind`: the compiled law is called through ctypes with no copies); the
