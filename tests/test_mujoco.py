@@ -121,6 +121,27 @@ def test_c_law_in_the_loop_equals_the_python_law(gait):
             assert rc1 == rc2 == 0 and np.abs(u1 - u2).max() <= 1e-12 * peak
 
 
+def test_bound_law_is_the_law(gait, rng):
+    """The loop's call of the law bound to its buffers (NumericLaw.bind) gives the law's
+    own torques and return codes bit for bit, for the C law and the Python law, on
+    states written into the buffers between calls (and out of range)."""
+    from biped_casadi.mujoco.law import control_law
+    for law_name in ("c", "python"):
+        law = control_law(Design.tv(gait, DEADBEAT), law_name)
+        q, dq, p = np.zeros(5), np.zeros(5), np.zeros(law.n_par)
+        p[:] = law.step_start(gait.q(0.0), gait.dq(0.0)).p
+        call = law.bind(q, dq, p)
+        for tau in (0.05, 0.2, 0.4, 0.5, 10.0):
+            q[:] = np.ravel(gait.q(tau if tau < gait.T else 0.1)) + rng.normal(0, 0.01, 5)
+            dq[:] = np.ravel(gait.dq(tau if tau < gait.T else 0.1)) + rng.normal(0, 0.1, 5)
+            rc, u = call(tau)
+            rc0, u0 = law.torque(tau, q.copy(), dq.copy(), p.copy())
+            assert rc == rc0 and (rc != 0 or u.tobytes() == u0.tobytes()), (law_name, tau)
+        assert rc == 2                              # tau = 10 s: out of range
+    with pytest.raises(ValueError, match="q must be"):
+        control_law(Design.vc(gait), "c").bind(np.zeros(4), np.zeros(5), np.zeros(0))
+
+
 def test_walk_records_and_outcome(gait):
     """A short walk: its records are consistent (periods add up, speed = length /
     period), the touchdown errors are those of its pre-impact states, and the contact

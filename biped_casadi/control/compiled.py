@@ -154,6 +154,29 @@ class NumericLaw:
                                       f"(return code {rc}: {RETURN_CODES.get(rc, 'unknown')})")
         return StepStart(r=np.zeros(0), p=p, problem=problem)
 
+    def bind(self, q, dq, p):
+        """:meth:`torque` bound to the caller's arrays, for a loop calling it every step.
+
+        The caller writes the state into ``q``, ``dq`` and ``p`` before each call (the
+        arrays are read at the call, never copied here).  Here the bound call is
+        :meth:`torque` itself; :class:`CompiledController` calls its library directly.
+
+        Parameters
+        ----------
+        q, dq : numpy.ndarray
+            (nq,) each, float64, C-contiguous; kept alive by the caller.
+        p : numpy.ndarray
+            (nstate,) the controller state, float64, C-contiguous.
+
+        Returns
+        -------
+        callable
+            ``call(tau) -> (return code, u)``, as :meth:`torque` at (tau, q, dq, p); ``u``
+            may be a buffer the next call overwrites.
+        """
+        torque = self.torque
+        return lambda tau: torque(tau, q, dq, p)
+
     def singularity(self, n: int = 1001):
         """The law's denominator sampled along the reference step.
 
@@ -265,6 +288,38 @@ class CompiledController(NumericLaw):
         rc = self._lib.biped_torque(tau, self._ptr["q"], self._ptr["dq"], self._ptr["p"],
                                     self._ptr["u"])
         return rc, self._u.copy()
+
+    def bind(self, q, dq, p):
+        """``biped_torque`` on the caller's arrays, its ctypes arguments made once.
+
+        :meth:`torque` without the copies in and out: the library reads ``q``, ``dq``
+        and ``p`` where they are and writes the torques into the controller's own
+        buffer (the same library call on the same numbers: the same torques, bit for
+        bit).
+
+        Parameters
+        ----------
+        q, dq : numpy.ndarray
+            (nq,) each, float64, C-contiguous; kept alive by the caller, who writes the
+            state into them before each call.
+        p : numpy.ndarray
+            (nstate,) the controller state, float64, C-contiguous (when empty, the
+            library gets the controller's own buffer, which it does not read).
+
+        Returns
+        -------
+        callable
+            ``call(tau) -> (return code, u)``: ``u`` (nu,) is the controller's buffer,
+            overwritten by the next call of this controller.
+        """
+        for name, a, n in (("q", q, self.nq), ("dq", dq, self.nq), ("p", p, self.n_par)):
+            if not (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.size == n
+                    and a.flags.c_contiguous):
+                raise ValueError(f"{name} must be a C-contiguous float64 array of {n} numbers")
+        f, u = self._lib.biped_torque, self._u
+        a_q, a_dq, a_u = q.ctypes.data, dq.ctypes.data, self._ptr["u"]
+        a_p = p.ctypes.data if p.size else self._ptr["p"]
+        return lambda tau: (f(tau, a_q, a_dq, a_p, a_u), u)
 
     def outputs(self, tau, q, dq, p) -> tuple:
         """``biped_outputs`` at one state.

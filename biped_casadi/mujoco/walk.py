@@ -63,6 +63,7 @@ TOUCHDOWNS = ("grid", "interpolated")
 SETTLE = 10
 _CODES = {1: "singular", 2: "out_of_range", 3: "diverged"}
 _HALF_PI = math.pi / 2
+_dot = np.dot
 
 
 def mujoco_module():
@@ -152,6 +153,8 @@ class MujocoLoop:
         self.feet = tuple(mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_GEOM, f"foot_{leg}")
                           for leg in "ab")
         self.T = float(g.T)
+        # the gait's speed and step length, evaluated once (each is a CasADi call)
+        self.speed, self.step_length = float(g.speed), float(g.step_length)
         self.qu_T, self.dqu_T = float(g.q(self.T)[0]), float(g.dq(self.T)[0])
         self.fall_height = 0.5625 * model.description.leg_length
         ts = SECTION * self.T
@@ -166,8 +169,7 @@ class MujocoLoop:
         dict
             ``T``, ``speed``, ``step_length``, ``qu_T``, ``dqu_T``.
         """
-        g = self.gait
-        return dict(T=self.T, speed=float(g.speed), step_length=float(g.step_length),
+        return dict(T=self.T, speed=self.speed, step_length=self.step_length,
                     qu_T=self.qu_T, dqu_T=self.dqu_T)
 
     def initial_state(self, q0, dq0) -> tuple:
@@ -211,15 +213,16 @@ class MujocoLoop:
         d.qpos[:], d.qvel[:] = self.initial_state(q0, dq0)
         mujoco.mj_forward(m, d)
         run = _Run(self, q0, dq0, int(steps), log)
-        step = mujoco.mj_step
+        step, control, advance, records = mujoco.mj_step, run.control, run.advance, \
+            run.records
         t0 = time.perf_counter()
         try:
-            while run.status == "walked" and len(run.records) < steps:
-                if not run.control():
+            while run.status == "walked" and len(records) < steps:
+                if not control():
                     break
                 step(m, d)
                 run.k += 1
-                run.advance()
+                advance()
         finally:
             if self.model.scuffing_ignored:
                 for f in self.feet:
@@ -230,10 +233,9 @@ class MujocoLoop:
         records, steps, status = run.records, run.steps, run.status
         n = len(records)
         after = records[SETTLE:] if n > 2 * SETTLE else records
-        g = self.gait
         if after:
             speed = sum(s.step_length for s in after) / sum(s.period for s in after)
-            speed_err = speed / float(g.speed) - 1.0
+            speed_err = speed / self.speed - 1.0
             period_err = float(np.mean([s.period for s in after])) / self.T - 1.0
         else:
             speed_err = period_err = math.nan
@@ -259,12 +261,30 @@ class MujocoLoop:
 class _Run:
     """The bookkeeping of one walk: the law's state, the step's clock and contacts, the
     records (one MuJoCo step at a time: :meth:`control` before it, :meth:`advance`
-    after)."""
+    after).
+
+    The per-step work is Python's, about as long as MuJoCo's step itself, so it is kept
+    lean without changing a bit of the result: MuJoCo's arrays are read through views
+    taken once; q and dq are computed with the same BLAS product as ``A @ qpos[2:]``
+    (not by indexing: A's first row adds three angles, in the order of BLAS's kernel),
+    written in turn into two pairs of buffers (the previous state stays whole for the
+    touchdown), on which the law is bound once (:meth:`~biped_casadi.control.compiled.
+    NumericLaw.bind`: the compiled law is called through ctypes with no copies); the
+    torques reach ``ctrl`` by the same product as ``G @ u``."""
 
     def __init__(self, loop: MujocoLoop, q0, dq0, steps: int, log: bool):
         self.loop, self.steps = loop, steps
         m, d = loop.m, loop.d
         self.m, self.d, self.feet = m, d, loop.feet
+        # views on MuJoCo's arrays (fixed for the life of its data)
+        self.qpos, self.qvel, self.ctrl, self.xpos = d.qpos, d.qvel, d.ctrl, d.geom_xpos
+        self.angles, self.rates = d.qpos[2:], d.qvel[2:]
+        nq, law = loop.model.nq, loop.law
+        self.qs, self.dqs = (np.zeros(nq), np.zeros(nq)), (np.zeros(nq), np.zeros(nq))
+        self.slot = 1                                   # the buffers of the last state
+        self.p = np.zeros(law.n_par)                    # the law's step state
+        self.calls = tuple(law.bind(q, dq, self.p) for q, dq in zip(self.qs, self.dqs))
+        self.fall_height = loop.fall_height
         self.dt, self.T, self.U = float(m.opt.timestep), loop.T, loop.torque_limit
         self.r = loop.settings.foot_radius
         self.A, self.G = loop.layout.A, loop.layout.G
@@ -283,7 +303,7 @@ class _Run:
         self.x_touch = self.x_prev
         self._new_step()
         start = loop.law.step_start(q0, dq0)
-        self.p = start.p
+        self.p[:] = start.p
         if start.problem:
             self.stop("out_of_range", f"step 1 cannot start: {start.problem}")
 
@@ -298,99 +318,100 @@ class _Run:
 
     def control(self) -> bool:
         """The law's torques at MuJoCo's state into ``ctrl``; False when it refuses."""
-        d = self.d
         tau = self.k * self.dt - self.t0
-        As = self.A[self.stance]
-        q = self.q = As @ d.qpos[2:]
-        dq = self.dq = As @ d.qvel[2:]
+        st = self.stance
+        i = self.slot = 1 - self.slot                   # the buffers not holding q_old
+        q, dq, As = self.qs[i], self.dqs[i], self.A[st]
+        _dot(As, self.angles, out=q)                    # As @ qpos[2:], the same product
+        _dot(As, self.rates, out=dq)
+        self.q, self.dq = q, dq
+        qu, dqu = q[0], dq[0]
         if self.section is None and tau >= self.t_sec:     # the Poincaré section 0.75 T
             w = (self.t_sec - tau + self.dt) / self.dt
-            self.section = (self.qu_prev + w * (q[0] - self.qu_prev),
-                            self.dqu_prev + w * (dq[0] - self.dqu_prev))
-        self.qu_prev, self.dqu_prev = q[0], dq[0]
-        rc, u = self.loop.law.torque(tau, q, dq, self.p)
+            self.section = (self.qu_prev + w * (qu - self.qu_prev),
+                            self.dqu_prev + w * (dqu - self.dqu_prev))
+        self.qu_prev, self.dqu_prev = qu, dqu
+        rc, u = self.calls[i](tau)
         if rc:
             status = _CODES.get(rc, "diverged")
             self.stop(status, f"step {len(self.records) + 1}: the law returned {rc} "
                               f"({status}) at tau = {tau:.4g} s")
             return False
-        umax = max(u.max(), -u.min())
+        ul = u.tolist()                                 # finite: the law checks (code 3)
+        umax = max(max(ul), -min(ul))                   # max |u_i|
         if umax > self.peak:
             self.peak = umax
         if umax > self.U:
             self.clipped += 1
-        d.ctrl[:] = self.G[self.stance] @ u
+        _dot(self.G[st], u, out=self.ctrl)              # G @ u, the same product
         if self.logging:
-            self.log.add(self.k * self.dt, d.qpos, d.qvel, self.stance, u)
+            self.log.add(self.k * self.dt, self.qpos, self.qvel, st, u)
         return True
 
     def _touching(self):
         """Which feet touch the floor in MuJoCo's contacts (of the state the last step
-        started from)."""
-        d, feet = self.d, self.feet
-        touch = [False, False]
-        n = d.ncon
-        if n:
-            c = d.contact
-            for g1, g2 in zip(c.geom1[:n], c.geom2[:n]):
-                for leg in (0, 1):
-                    if g1 == feet[leg] or g2 == feet[leg]:
-                        touch[leg] = True
-        return touch
+        started from): (leg a's, leg b's)."""
+        d = self.d
+        if not d.ncon:
+            return False, False
+        geoms = d.contact.geom.ravel().tolist()         # (ncon, 2): both geoms of each
+        return self.feet[0] in geoms, self.feet[1] in geoms
 
     def advance(self):
         """After a MuJoCo step: the stance foot's motion, a fall, the lift-off, the
         touchdown, the horizon."""
-        d, feet, st = self.d, self.feet, self.stance
+        xpos, feet, st = self.xpos, self.feet, self.stance
         sw = 1 - st
         touch = self._touching()
-        z_now = d.geom_xpos[feet[sw], 2]
+        z_now = xpos[feet[sw], 2]
         olds = (self.z_old, self.q_old, self.dq_old)
         self.z_old, self.q_old, self.dq_old = z_now, self.q, self.dq
-        xs, phs = d.geom_xpos[feet[st], 0], self.q[0]
+        xs, phs = xpos[feet[st], 0], self.q[0]
         if touch[st] and self.lifted:                   # sliding in single support
             self.slip += (xs - self.x_prev) - self.r * (phs - self.phi_prev)
         else:                                           # the impact, or a bounce
             self.travel += xs - self.x_prev
             self.airborne += self.lifted
         self.x_prev, self.phi_prev = xs, phs
-        qp = d.qpos
-        n = len(self.records) + 1
-        if not (qp[1] - self.r > self.loop.fall_height and -_HALF_PI < qp[2] < _HALF_PI):
+        qp = self.qpos
+        if not (qp[1] - self.r > self.fall_height and -_HALF_PI < qp[2] < _HALF_PI):
+            n = len(self.records) + 1
             if not np.all(np.isfinite(qp)):
                 return self.stop("diverged", f"step {n}: MuJoCo's state is not finite")
             return self.stop("fell", f"step {n}: fell at t = {self.k * self.dt:.4g} s (hip "
                                      f"{qp[1] - self.r:.3g} m above the feet' level, torso "
                                      f"{qp[2]:.3g} rad)")
-        tau = (self.k - 1) * self.dt - self.t0
         if not self.lifted:
+            tau = (self.k - 1) * self.dt - self.t0
             if not touch[sw]:
                 self.lifted, self.liftoff = True, tau
                 if self.ignore_scuff:
                     self.m.geom_contype[feet[sw]] = 0
             elif tau > 0.5 * self.T:
-                self.stop("scuffed", f"step {n}: the old stance foot is still on the ground "
-                                     f"at half the step (tau = {tau:.4g} s)")
-        else:
-            x_sw, x_st = float(d.geom_xpos[feet[sw], 0]), float(d.geom_xpos[feet[st], 0])
+                self.stop("scuffed", f"step {len(self.records) + 1}: the old stance foot is "
+                                     f"still on the ground at half the step (tau = {tau:.4g} s)")
+        elif touch[sw] or (self.ignore_scuff and self.m.geom_contype[feet[sw]] == 0):
+            x_sw, x_st = float(xpos[feet[sw], 0]), float(xpos[feet[st], 0])
             if self.ignore_scuff and self.m.geom_contype[feet[sw]] == 0 \
                     and x_sw - x_st > self.zone:
                 self.m.geom_contype[feet[sw]] = 1
             if touch[sw]:
                 if x_sw - x_st <= self.zone:
-                    return self.stop("scuffed", f"step {n}: the swing foot touched the ground "
-                                                f"{x_st - x_sw:.3g} m behind the stance foot "
-                                                f"at tau = {tau:.4g} s")
+                    tau = (self.k - 1) * self.dt - self.t0
+                    return self.stop("scuffed", f"step {len(self.records) + 1}: the swing foot "
+                                                f"touched the ground {x_st - x_sw:.3g} m behind "
+                                                f"the stance foot at tau = {tau:.4g} s")
                 return self._touchdown(x_sw, x_st, z_now, olds)
         if self.status == "walked" and self.k * self.dt - self.t0 > self.kmax * self.dt:
-            self.stop("no_impact", f"step {n}: no touchdown within {self.loop.horizon:g} T")
+            self.stop("no_impact", f"step {len(self.records) + 1}: no touchdown within "
+                                   f"{self.loop.horizon:g} T")
 
     def _touchdown(self, x_sw, x_st, z_now, olds):
         """The touchdown at the state the last MuJoCo step started from (q, dq), or
         between it and the one before where the swing foot's sphere meets the floor
         (``touchdown='interpolated'``): record the step, relabel the legs, start the next
         step's law."""
-        loop, q, dq, g = self.loop, self.q, self.dq, self.loop.gait
+        loop, q, dq = self.loop, self.q, self.dq
         t_td = (self.k - 1) * self.dt
         z_old, q_old, dq_old = olds
         if self.interpolate and z_old > z_now:
@@ -402,7 +423,7 @@ class _Run:
         speed = length / tau
         self.records.append(MujocoStep(
             index=len(self.records), t_start=self.t0, t_touchdown=t_td, period=tau, step_length=length, speed=speed,
-            speed_error=speed / float(g.speed) - 1.0, period_error=tau / self.T - 1.0,
+            speed_error=speed / loop.speed - 1.0, period_error=tau / self.T - 1.0,
             qu_error=float(q[0]) - loop.qu_T, dqu_error=float(dq[0]) - loop.dqu_T,
             q_minus=q.tolist(), dq_minus=dq.tolist(), peak_commanded=float(self.peak),
             peak_applied=float(min(self.peak, self.U)), clipped_time=self.clipped * self.dt,
@@ -429,7 +450,7 @@ class _Run:
         else:
             As = self.A[self.stance]
             start = loop.law.step_start(As @ self.d.qpos[2:], As @ self.d.qvel[2:])
-        self.p = start.p
+        self.p[:] = start.p
         if start.problem:
             self.stop("out_of_range", f"step {n + 1} cannot start: {start.problem}")
         return None
