@@ -271,3 +271,18 @@ def test_bad_export_is_one_line_exit_2(gait, walker_gait, tmp_path, capsys):
     body = json.loads(capsys.readouterr().out)
     assert body["inputs"] == ["pitch", "hip_left", "knee_left", "hip_right", "knee_right"]
     shutil.rmtree(out)
+
+
+def test_a_urdf_without_torque_limits_takes_the_commands_limit_for_its_default_gait(capsys):
+    """The walker URDF has no effort limits: a command's --torque-limit also bounds the
+    default gait it solves; without it, one line says what to give (--torque-limit, or a
+    gait file for a command without the option)."""
+    assert main(["simulate", "--robot", str(URDF), "--torque-limit", "150",
+                 "--controller", "vc", "--steps", "2"]) == 0
+    capsys.readouterr()
+    assert main(["simulate", "--robot", str(URDF), "--controller", "vc", "--steps", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.rstrip().endswith("give --torque-limit N")
+    assert main(["eig", "--robot", str(URDF), "--controller", "vc"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--gait FILE, made by 'biped gait --robot" in err

@@ -88,10 +88,21 @@ def load_gait(args, progress: Progress):
     robot (GaitFileError, exit 2, otherwise).  Without a file, ``progress`` announces the
     optimisation of the default gait (a few seconds) when it is not cached yet.  With
     ``args.allow_open_orbit``, a gait that is not a periodic orbit is loaded and one
-    warning line goes to stderr (always: it qualifies every result that follows)."""
+    warning line goes to stderr (always: it qualifies every result that follows).  A robot
+    without a torque limit (a URDF without effort limits) gets the command's
+    ``--torque-limit`` for its default gait too."""
     robot_arg = getattr(args, "robot", None)
     if not args.gait:
-        return optimize_gait(load_model(robot_arg), progress=progress, cache=True)
+        model, limit = load_model(robot_arg), getattr(args, "torque_limit", None)
+        if math.isfinite(model.description.torque_limit):
+            return optimize_gait(model, progress=progress, cache=True)
+        if limit is None:
+            how = "--torque-limit N" if hasattr(args, "torque_limit") else \
+                "--gait FILE, made by 'biped gait --robot ... --torque-limit N --out FILE'"
+            raise UserError(f"--robot: {_short(robot_arg)} has no torque limit (its URDF "
+                            f"gives no effort limits) and its default gait needs one: "
+                            f"give {how}")
+        return optimize_gait(model, progress=progress, cache=True, torque_limit=float(limit))
     model = load_model(robot_arg) if robot_arg else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OpenOrbitWarning)
