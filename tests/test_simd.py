@@ -120,6 +120,33 @@ def test_unknown_operations_fall_back():
         simd.kernels({"f": (ca.Function("g", [y], [y]), 0, ["sample", "sample"])}, "t")
 
 
+def test_a_library_in_the_cache_is_loaded_without_translating(tmp_path, monkeypatch):
+    """The second process (here: an emptied table of loaded libraries) finds the library
+    by its index and does not translate the Function again; a library removed from the
+    cache folder is made again; another Function gets a library of its own."""
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(simd, "_LOADED", {})
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("index_f", [x], [ca.sin(x[0]) * x[1]])
+    X = np.array([[0.1, 0.2, 0.3, 0.4, 0.5], [1.0, 2.0, 3.0, 4.0, 5.0]])
+    want = simd.kernels({"f": (f, 0, ["sample"])}, "test_index")["f"](X)[0]
+    translated = []
+    body = simd._body
+    monkeypatch.setattr(simd, "_body", lambda g: translated.append(g.name()) or body(g))
+    monkeypatch.setattr(simd, "_LOADED", {})
+    got = simd.kernels({"f": (f, 0, ["sample"])}, "test_index")["f"](X)[0]
+    assert translated == [] and np.array_equal(got, want)
+    (so,) = (tmp_path / "compiled").glob("test_index_simd_*.so")
+    so.unlink()
+    monkeypatch.setattr(simd, "_LOADED", {})
+    got = simd.kernels({"f": (f, 0, ["sample"])}, "test_index")["f"](X)[0]
+    assert translated == ["index_f"] and so.is_file() and np.array_equal(got, want)
+    g = ca.Function("index_f", [x], [ca.cos(x[0]) * x[1]])
+    other = simd.kernels({"f": (g, 0, ["sample"])}, "test_index")["f"](X)[0]
+    assert translated == ["index_f"] * 2
+    np.testing.assert_allclose(other[0, :, 0], np.cos(X[0]) * X[1], rtol=1e-14)
+
+
 def test_walker_kernels_keep_the_verdicts(model):
     """The walker on the SIMD kernels and on CasADi's compiled Functions: the same status
     and failing step for every run, states to round-off."""
