@@ -155,6 +155,12 @@ def test_walk_records_and_outcome(gait):
     assert all(r.section is not None and abs(r.slip) < 0.005 for r in s)
     d = w.to_dict()
     assert d["status"] == "walked" and len(d["steps"]) == 3 and "qpos" not in d
+    from analysis.reporting.plots import mujoco_steps_plot
+    ax = mujoco_steps_plot([w]).axes[3]
+    ax.figure.canvas.draw()
+    lo, hi = ax.get_xlim()
+    ticks = [t for t in ax.get_xticks() if lo <= t <= hi]
+    assert ticks and all(float(t).is_integer() for t in ticks)     # whole steps
     soft = walk(Design.vc(gait), steps=3, settings=MUJOCO_DEFAULT, step_start="contact")
     assert soft.status == "out_of_range" and "cannot start" in soft.message
 
