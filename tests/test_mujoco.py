@@ -260,7 +260,7 @@ def test_reproduce_section_from_a_check(gait):
     from analysis.reporting.in_mujoco import mujoco_lines
     from analysis.reporting.plots import mujoco_eigen_plot
     budget = dict(steps=12, scale_steps=4, scales=(1, 2), directions=4)
-    r = check_in_mujoco(Design.vc(gait), "stiff", "virtual constraints", budget)
+    (r,) = check_in_mujoco(Design.vc(gait), ("stiff",), "virtual constraints", budget)
     assert r.success and r.largest_scale == 2.0 and r.stride.status == "ok"
     assert abs(r.exact_max_abs - abs(r.exact[0])) < 1e-15 and r.exact[1] == 0
     row = _row("virtual constraints", "stiff", r)
