@@ -16,6 +16,7 @@ import numpy as np
 
 from biped_casadi import Design, Perturbation
 from biped_casadi.mujoco import (MujocoLoop, STIFF, ContactSettings, StrideMap, stride_map)
+from biped_casadi.caching import cached
 from biped_casadi.results import Result
 
 from .stability import poincare_eigenvalues, vc_eigenvalue
@@ -36,10 +37,16 @@ def exact_eigenvalues(design: Design) -> list:
     list of complex
         Largest modulus first: A^z's two (time-varying), or (lambda_vc, 0).
     """
+    return list(_exact(design))
+
+
+@cached(maxsize=16)
+def _exact(design: Design) -> tuple:
+    """:func:`exact_eigenvalues`, once per design in a process (its two contacts)."""
     if design.M1 is None:
-        return [complex(vc_eigenvalue(design.gait).eigenvalue), 0j]
+        return complex(vc_eigenvalue(design.gait).eigenvalue), 0j
     ev = np.asarray(poincare_eigenvalues(design.gait, design).eigenvalues, complex)
-    return [complex(e) for e in ev[np.argsort(-np.abs(ev))]]
+    return tuple(complex(e) for e in ev[np.argsort(-np.abs(ev))])
 
 
 @dataclass

@@ -78,7 +78,7 @@ def _summary(r) -> dict:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--range", nargs=3, type=float, default=[0.4, 1.2, 0.05],
                     metavar=("V1", "V2", "DV"))
     ap.add_argument("--hold", type=int, default=10)

@@ -138,7 +138,7 @@ def bench(name, ctrl, cc, args) -> dict:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--calls", type=int, default=1_000_000, help="C loop calls (1000000)")
     ap.add_argument("--repeats", type=int, default=5, help="C loop runs (5)")
     ap.add_argument("--python-calls", type=int, default=2000,

@@ -111,7 +111,7 @@ def compare(c: dict, k: dict) -> dict:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--robot", default="rabbit")
     ap.add_argument("--speeds", default="0.4:1.2:0.05")
     ap.add_argument("--repeats", type=int, default=3)

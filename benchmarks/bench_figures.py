@@ -110,7 +110,7 @@ def _child(packages: Path, *args) -> None:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--baseline-commit", metavar="REV", help="the version to compare with")
     ap.add_argument("--repeats", type=int, default=3, help="draws of each figure (default 3)")
     ap.add_argument("--keep", metavar="DIR", help="keep the files drawn here (ours/, base/)")

@@ -220,7 +220,7 @@ def record_transcriptions(bench: Run, rows):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="one repeat, no expand baseline")
     ap.add_argument("--no-save", action="store_true", help="do not write results/")
     args = ap.parse_args(argv)

@@ -50,7 +50,7 @@ def main(repeats=5, save=True):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=5, help="fresh processes of each (5)")
     ap.add_argument("--no-save", action="store_true", help="do not write results/")
     a = ap.parse_args()

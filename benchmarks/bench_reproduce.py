@@ -144,7 +144,7 @@ def scaling(bench: Run, tmp: Path, workers: list, quick: bool, ours):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--baseline", metavar="PYTHON",
                     help="interpreter of an installed baseline version, run in turn")
     ap.add_argument("--baseline-commit", metavar="REV",

@@ -158,7 +158,7 @@ def cell_states(m, g, design, b, cells):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cells", type=int, default=101)
     ap.add_argument("--baseline-cells", type=int, default=40)
     ap.add_argument("--no-save", action="store_true", help="do not write results/")

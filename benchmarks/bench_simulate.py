@@ -133,7 +133,7 @@ def measure(steps, gait_path):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--gait", metavar="FILE")
     ap.add_argument("--no-save", action="store_true", help="do not write results/")

@@ -80,7 +80,7 @@ def _staircase(r, each: int) -> dict:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--points", nargs="+", type=float,
                     default=[0.45, 0.5, 0.6, 0.75, 0.9, 1.0, 1.05])
     ap.add_argument("--each", type=int, default=10)

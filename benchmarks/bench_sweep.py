@@ -294,7 +294,7 @@ def record(bench: Run, res: dict):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--gait", help="gait file (default: the default gait)")
     ap.add_argument("--points", type=int, default=20, help="points for part (c)")
     ap.add_argument("--skip-grid", action="store_true", help="skip part (b)")

@@ -181,7 +181,7 @@ def main(runs=400, steps=40, sigma=0.01, baseline_runs=8, workers=None, chunk=No
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=400)
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--sigma", type=float, default=0.01)

@@ -157,6 +157,12 @@ def test_walk_records_and_outcome(gait):
     assert all(r.section is not None and abs(r.slip) < 0.005 for r in s)
     d = w.to_dict()
     assert d["status"] == "walked" and len(d["steps"]) == 3 and "qpos" not in d
+    from analysis.reporting.plots import mujoco_steps_plot
+    ax = mujoco_steps_plot([w]).axes[3]
+    ax.figure.canvas.draw()
+    lo, hi = ax.get_xlim()
+    ticks = [t for t in ax.get_xticks() if lo <= t <= hi]
+    assert ticks and all(float(t).is_integer() for t in ticks)     # whole steps
     soft = walk(Design.vc(gait), steps=3, settings=MUJOCO_DEFAULT, step_start="contact")
     assert soft.status == "out_of_range" and "cannot start" in soft.message
 
@@ -293,7 +299,7 @@ def test_reproduce_section_from_a_check(gait):
     from analysis.reporting.in_mujoco import mujoco_lines
     from analysis.reporting.plots import mujoco_eigen_plot
     budget = dict(steps=12, scale_steps=4, scales=(1, 2), directions=4)
-    r = check_in_mujoco(Design.vc(gait), "stiff", "virtual constraints", budget)
+    (r,) = check_in_mujoco(Design.vc(gait), ("stiff",), "virtual constraints", budget)
     assert r.success and r.largest_scale == 2.0 and r.stride.status == "ok"
     assert abs(r.exact_max_abs - abs(r.exact[0])) < 1e-15 and r.exact[1] == 0
     row = _row("virtual constraints", "stiff", r)

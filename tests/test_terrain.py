@@ -255,6 +255,10 @@ def test_mfpt_estimate_covers_a_known_failure_probability():
     none = mfpt_estimate(np.full(50, K), np.zeros(50, bool), K)
     assert none.mfpt == math.inf and 0 < none.mfpt_ci[0] < math.inf
     assert none.failure_probability == 0 and none.failure_probability_ci[1] < 3.7 / (50 * K)
+    from scipy.stats import chi2                       # the exact (Garwood) interval
+    E = int(walked.sum() + failed.sum())
+    F = int(failed.sum())
+    assert (lo, hi) == (chi2.ppf(0.025, 2 * F) / (2 * E), chi2.ppf(0.975, 2 * F + 2) / (2 * E))
 
 
 def test_flat_ground_every_run_walks_and_chunks_change_nothing(robust_gait):

@@ -286,3 +286,16 @@ def test_a_urdf_without_torque_limits_takes_the_commands_limit_for_its_default_g
     assert main(["eig", "--robot", str(URDF), "--controller", "vc"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--gait FILE, made by 'biped gait --robot" in err
+
+
+def test_mujoco_motors_take_the_limit_the_gait_was_made_for(tmp_path, capsys):
+    """The walker URDF has no effort limits: MuJoCo's motors default to the limit its gait
+    was optimised for (150 N m here), not to a refusal."""
+    pytest.importorskip("mujoco")
+    gait = tmp_path / "walker_gait.json"
+    assert main(["gait", "--robot", str(URDF), "--torque-limit", "150", "--out",
+                 str(gait)]) == 0
+    capsys.readouterr()
+    assert main(["mujoco", "--gait", str(gait), "--controller", "vc", "--steps", "2",
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["torque_limit"] == 150.0

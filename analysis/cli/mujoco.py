@@ -130,7 +130,8 @@ def _print(w, eig, figures):
             else "over all steps")
     print(f"  {w.steps_walked} of {w.n_steps} steps; speed error {_pct(w.speed_error)}, period "
           f"error {_pct(w.period_error)} ({over}); worst error after step {SETTLE}: "
-          f"{w.worst_qu_error:.3g} rad, {w.worst_dqu_error:.3g} rad/s")
+          + (f"{w.worst_qu_error:.3g} rad, {w.worst_dqu_error:.3g} rad/s"
+             if w.steps_walked > SETTLE else "none (no step after it)"))
     print("  step  period [s]  speed [m/s]  q_u err [rad]  dq_u err [rad/s]  peak |u| "
           "cmd/applied [N m]  clipped [s]  slip [mm]")
     for r in w.steps:
@@ -190,8 +191,9 @@ def register(sub):
                         "(default), or interpolated to where the swing foot meets the floor")
     add_mujoco_settings(p)
     p.add_argument("--torque-limit", type=float, metavar="U",
-                   help="the motors' limit, N m (default the robot's); torques beyond it are "
-                        "clipped by MuJoCo and the time clipped is reported")
+                   help="the motors' limit, N m (default the robot's, or for a robot without one "
+                        "the limit its gait was made for); torques beyond it are clipped by "
+                        "MuJoCo and the time clipped is reported")
     p.add_argument("--max-slip", type=float, default=0.05, metavar="M",
                    help="a stance foot sliding more than M in single support ends the walk "
                         "as slipped (0.05 m; MuJoCo's soft friction creeps about 0.5 mm a "

@@ -2,7 +2,7 @@
 its exported C law, at the stiff settings and at MuJoCo's default contact, beside the
 exact analysis (:func:`analysis.in_mujoco.engine_check`), and its figure.
 
-Self-contained: one task per (design, contact) computing an
+Self-contained: one task per design computing an
 :class:`~analysis.in_mujoco.EngineCheck`, a flow gathering them into the summary's
 ``mujoco`` record, a figure task; the report's section is
 :func:`analysis.reporting.in_mujoco.mujoco_lines`.
@@ -43,14 +43,15 @@ def _budget(res: Resolution) -> dict:
 
 
 @task
-def check_in_mujoco(design: Design, contact: str, label: str, budget: dict):
-    """One design in MuJoCo at one contact (a task).
+def check_in_mujoco(design: Design, contacts: tuple, label: str, budget: dict) -> list:
+    """One design in MuJoCo at each contact (a task: the contacts share the design's
+    compiled law and exact eigenvalues, made once in the process).
 
     Parameters
     ----------
     design : Design
         The design on its gait.
-    contact : {'stiff', 'default'}
+    contacts : tuple of {'stiff', 'default'}
         MuJoCo's settings (:meth:`~biped_casadi.mujoco.ContactSettings.of`).
     label : str
         The design's name.
@@ -59,11 +60,16 @@ def check_in_mujoco(design: Design, contact: str, label: str, budget: dict):
 
     Returns
     -------
-    EngineCheck
+    list of EngineCheck
+        One per contact, in order.
     """
-    b = dict(budget)
-    return engine_check(design, ContactSettings.of(contact), label, steps=b.pop("steps"),
-                        scale_steps=b.pop("scale_steps"), scales=tuple(b.pop("scales")), **b)
+    out = []
+    for contact in contacts:
+        b = dict(budget)
+        out.append(engine_check(design, ContactSettings.of(contact), label,
+                                steps=b.pop("steps"), scale_steps=b.pop("scale_steps"),
+                                scales=tuple(b.pop("scales")), **b))
+    return out
 
 
 def _row(label: str, contact: str, r) -> dict:
@@ -97,13 +103,14 @@ def stage_mujoco(engine, gait_stage, m1_stage, robust_stage, search_stage,
                ("robust design (co-design NLP)", robust_stage.result().result.design),
                ("the sampling search's design", search_stage.result().design)]
     budget = _budget(res)
-    refs = [(label, c, engine.submit(check_in_mujoco, d, c, label, budget))
-            for c in CONTACTS for label, d in designs]
-    rows = []
-    for label, c, ref in refs:
-        r = ref.result()
-        engine.say(f"   {r.message}")
-        rows.append(_row(label, c, r))
+    refs = [(label, engine.submit(check_in_mujoco, d, CONTACTS, label, budget))
+            for label, d in designs]
+    checks = {}
+    for label, ref in refs:
+        for c, r in zip(CONTACTS, ref.result()):
+            engine.say(f"   {r.message}")
+            checks[c, label] = _row(label, c, r)
+    rows = [checks[c, label] for c in CONTACTS for label, _ in designs]
     return MujocoStage(dict(mujoco=dict(rows=rows, budget=budget,
                                         settings={c: ContactSettings.of(c).to_dict()
                                                   for c in CONTACTS})), rows)

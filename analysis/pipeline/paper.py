@@ -271,15 +271,19 @@ def _groups(model, ab) -> list:
 
 
 @task
-def m1_nlp(gait, group, kw: dict, maps: list):
-    """The M1 NLP on one group (a task), started from the map among ``maps`` that has
+def m1_nlp(gait, groups: tuple, kw: dict, maps: list) -> list:
+    """The M1 NLP on each group, one after the other (a task: the groups share the
+    symbolic A^z(M1), built once), each started from the map among ``maps`` that has
     exactly its coarse points, if any."""
-    coarse = None
-    if not (gait.model.nu < 3 and group is not None):
-        P = coarse_map_points(taylor_ab(gait), group, gait.model.nu)
-        coarse = next((b for b in maps if b.M1.shape == P.shape and np.array_equal(b.M1, P)),
-                      None)
-    return optimize_m1(gait, group=group, coarse=coarse, **kw)
+    out = []
+    for group in groups:
+        coarse = None
+        if not (gait.model.nu < 3 and group is not None):
+            P = coarse_map_points(taylor_ab(gait), group, gait.model.nu)
+            coarse = next((b for b in maps if b.M1.shape == P.shape
+                           and np.array_equal(b.M1, P)), None)
+        out.append(optimize_m1(gait, group=group, coarse=coarse, **kw))
+    return out
 
 
 @task
@@ -319,13 +323,10 @@ def stage_m1(engine, gait_stage, grid_stage, domain_stage, res: Resolution) -> M
     k = res.nlp_starts
     example = engine.submit(eigenvalues_of, g, (tuple(PAPER["example_M1"]),)) \
         if _is_rabbit(g.model) else None
-    refs = {}
-    for name, grp in groups:
-        kw = dict(n_best=k, n_ipopt=min(4, k), n_random=res.nlp_random)
-        refs[name] = engine.submit(m1_nlp, g, grp, kw, maps)
+    kw = dict(n_best=k, n_ipopt=min(4, k), n_random=res.nlp_random)
+    results = engine.submit(m1_nlp, g, tuple(grp for _, grp in groups), kw, maps)
     out = {}
-    for name, _ in groups:
-        r = refs[name].result()
+    for (name, _), r in zip(groups, results.result()):
         out[name] = r.to_dict()
         engine.say(f"   {name}: max|lambda| = {r.max_abs:.3g} "
                    f"(+- {r.eigenvalue_uncertainty:.1g})")

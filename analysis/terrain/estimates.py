@@ -79,7 +79,10 @@ def mfpt_estimate(walked, failed, max_steps: int, confidence: float = 0.95) -> M
     -------
     MFPTEstimate
     """
-    from scipy.stats import chi2
+    from scipy.special import gammaincinv      # (scipy.stats costs 0.3 s more to import)
+
+    def chi2_quantile(q, df):                       # as scipy.stats.chi2.ppf computes it
+        return 2.0 * gammaincinv(df / 2, q)
     walked = np.asarray(walked, np.int64)
     failed = np.asarray(failed, bool)
     F = int(failed.sum())
@@ -87,8 +90,8 @@ def mfpt_estimate(walked, failed, max_steps: int, confidence: float = 0.95) -> M
     E = W + F
     a = 1 - confidence
     p = F / E if E else math.nan
-    p_lo = chi2.ppf(a / 2, 2 * F) / (2 * E) if F else 0.0
-    p_hi = chi2.ppf(1 - a / 2, 2 * F + 2) / (2 * E) if E else 1.0
+    p_lo = chi2_quantile(a / 2, 2 * F) / (2 * E) if F else 0.0
+    p_hi = chi2_quantile(1 - a / 2, 2 * F + 2) / (2 * E) if E else 1.0
     p_hi = min(p_hi, 1.0)
 
     def mf(x):

@@ -95,7 +95,8 @@ class MujocoLoop:
     law : {'c', 'python'}
         The exported C law through ctypes, or the same law in Python.
     torque_limit : float, optional
-        The motors' limit, N m (default the robot's).
+        The motors' limit, N m (default the robot's; for a robot without one, the limit
+        its gait was optimised for).
     step_start : {'impact', 'contact'}
         Where each step's law state comes from (module docstring).
     max_slip : float
@@ -152,6 +153,9 @@ class MujocoLoop:
             float(horizon)
         self.gait = g = design.gait
         self.model = model = g.model
+        if torque_limit is None and not math.isfinite(model.description.torque_limit):
+            # a robot without a limit (a URDF without efforts): the one its gait was made for
+            torque_limit = getattr(getattr(g, "options", None), "torque_limit", None)
         self.torque_limit = torque_limit_of(model.description, torque_limit)
         try:
             self.m = mujoco.MjModel.from_xml_string(mjcf(model, settings, self.torque_limit))
@@ -514,7 +518,8 @@ def walk(design: Design, steps: int = 10, perturbation=None, settings: ContactSe
     step_start : {'impact', 'contact'}
         Each step's law state from the rigid impact map at touchdown, or from MuJoCo.
     torque_limit : float, optional
-        The motors' limit, N m (default the robot's).
+        The motors' limit, N m (default the robot's; for a robot without one, the limit
+        its gait was optimised for).
     max_slip : float
         Slip of the stance foot in a step that ends the walk, m.
     horizon : float

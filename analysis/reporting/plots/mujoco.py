@@ -6,6 +6,7 @@ import numpy as np
 from PIL import Image
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.ticker import MaxNLocator
 
 from biped_casadi.files import atomic_path
 
@@ -18,6 +19,7 @@ _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "t
 
 #: how the legend names a law
 _LAW_NAMES = {"c": "C", "python": "Python"}
+
 
 def _series(w, key):
     """Per-step values of a walk (a MujocoWalk or its summary dict)."""
@@ -75,6 +77,7 @@ def mujoco_steps_plot(walks, labels=None, title: str | None = None) -> Figure:
     ax[2].set_ylabel(r"$q_u - q_u^d(T)$ [rad]")
     ax[3].set_ylabel(r"$\dot q_u - \dot q_u^d(T)$ [rad/s]")
     ax[3].set_xlabel("step")
+    ax[3].xaxis.set_major_locator(MaxNLocator(integer=True))      # steps are whole
     ax[0].legend(fontsize=8, loc="best")
     ax[1].legend(fontsize=8, loc="best")
     for a in ax:
