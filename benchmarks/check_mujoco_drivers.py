@@ -7,9 +7,10 @@ biped's default gaits, virtual constraints and a time-varying (deadbeat) design 
 the stiff and MuJoCo's default contacts, touchdown on the grid and interpolated, the step
 started by the impact map and by MuJoCo's contact, with and without the log, from the
 gait and from perturbed starts (walking and failing ones), and with a small slip limit and
-a short horizon (walks that end 'slipped' and 'no_impact').
+a short horizon (walks that end 'slipped' and 'no_impact'); and long walks (60 steps) from
+the gait and the first perturbed start.
 
-    python benchmarks/check_mujoco_drivers.py [--steps N] [--quick] [--no-save]
+    python benchmarks/check_mujoco_drivers.py [--steps N] [--long N] [--quick] [--no-save]
 
 Saves ``benchmarks/results/mujoco_drivers.json``: the cases, the outcomes met, the cases
 that differ (none expected) and the time of each driver.
@@ -67,40 +68,48 @@ def cases(quick: bool):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=8, help="steps of each walk (default 8)")
+    ap.add_argument("--long", type=int, default=60,
+                    help="steps of the long walks: from the first two starts, at the "
+                         "default slip limit and horizon, without the log (default 60)")
     ap.add_argument("--quick", action="store_true", help="RABBIT only")
     ap.add_argument("--no-save", action="store_true")
     a = ap.parse_args(argv)
     with Run("mujoco_drivers", "the MuJoCo loop driven in C against the Python loop, bit "
              "for bit", save=not a.no_save) as run:
-        n, bad, outcomes, wall = compare(a.steps, a.quick)
+        n, bad, outcomes, wall = compare(a.steps, a.long, a.quick)
         print(f"{n} cases, {len(bad)} differing; outcomes {outcomes}; wall C "
               f"{wall['c']:.2f} s, Python {wall['python']:.2f} s")
         run.row("cases compared bit for bit (walks driven in C and in Python)", n, unit="")
         run.row("cases that differ", len(bad), unit="", target="0")
         run.row(f"wall time of the {n} walks, C driver (Python driver as baseline)",
                 wall["c"], wall["python"])
-        run.data.update(outcomes=outcomes, steps=a.steps, differences=bad)
+        run.data.update(outcomes=outcomes, steps=a.steps, long=a.long, differences=bad)
     return 1 if bad else 0
 
 
-def compare(steps: int, quick: bool) -> tuple:
+def compare(steps: int, long: int, quick: bool) -> tuple:
     """Walk every case with both drivers: (cases, differences, outcomes, wall times)."""
     n, bad, statuses, wall = 0, [], collections.Counter(), {"c": 0.0, "python": 0.0}
     for label, design, kw, starts in cases(quick):
         loops = {d: MujocoLoop(design, driver=d, **kw) for d in ("c", "python")}
-        for start, log in itertools.product(starts, (False, True)):
+        walks = [(start, steps, log) for start in starts for log in (False, True)]
+        if (kw["max_slip"], kw["horizon"]) == (0.05, 2.0):
+            walks += [(start, long, False) for start in starts[:2]]
+        for start, n_steps, log in walks:
             q0, dq0 = start_of(design.gait, start)
             w = {}
             for d, loop in loops.items():
                 t = time.perf_counter()
-                w[d] = loop.run(q0, dq0, steps, log=log)
+                w[d] = loop.run(q0, dq0, n_steps, log=log)
                 wall[d] += time.perf_counter() - t
             diff = walk_differences(w["c"], w["python"])
             n += 1
             statuses[w["python"].status] += 1
             if diff:
-                bad.append(dict(case=label, start=repr(start), log=log, fields=diff[:8]))
-                print(f"DIFFERS: {label} start {start!r} log {log}: {diff[:8]}", flush=True)
+                bad.append(dict(case=label, start=repr(start), steps=n_steps, log=log,
+                                fields=diff[:8]))
+                print(f"DIFFERS: {label} start {start!r} steps {n_steps} log {log}: "
+                      f"{diff[:8]}", flush=True)
     return n, bad, dict(statuses), wall
 
 if __name__ == "__main__":

@@ -183,7 +183,7 @@ def test_c_driven_loop_is_the_python_loop_bit_for_bit(gait, gait3):
     virtual constraints and deadbeat design and the three-link biped's virtual
     constraints, both contacts, both touchdowns and step starts, with and without the
     log, from the gait and from perturbed starts that walk, fall, scuff, slip, run out of
-    the law's range or time.  (benchmarks/check_mujoco_drivers.py: 1152 cases.)"""
+    the law's range or time.  (benchmarks/check_mujoco_drivers.py: 1216 cases.)"""
     from biped_casadi.mujoco.cloop import walk_differences
     paper = Perturbation.paper(5)
     runs = [(Design.vc(gait), [None, paper.scaled(3.0), (0.15, 1.5)]),

@@ -323,8 +323,8 @@ def c_driver_problem(loop) -> str:
     str
         The reason, or ``''`` when the C function can drive its steps.
     """
-    if not isinstance(loop.law, CompiledController):
-        return "the law is not compiled C"
+    if type(loop.law) is not CompiledController:       # a subclass may call it otherwise
+        return "the law is not the compiled C law"
     lib, _, why = _library()
     if lib is None:
         return why
