@@ -214,6 +214,23 @@ def test_c_driven_loop_is_the_python_loop_bit_for_bit(gait, gait3):
         MujocoLoop(Design.vc(gait), driver="fortran")
 
 
+def test_c_driven_loop_raises_mujocos_fatal_error(gait):
+    """A MuJoCo error inside the steps driven in C is the ``mujoco.FatalError`` the
+    Python loop's ``mj_step`` raises, with the same message (MuJoCo would otherwise end
+    the process): a model with too little memory for its contacts."""
+    messages = []
+    for driver in ("c", "python"):
+        lp = MujocoLoop(Design.vc(gait), driver=driver)
+        xml = mjcf(gait.model, lp.settings, lp.torque_limit).replace(
+            "<compiler ", '<size memory="4K"/><compiler ', 1)
+        lp.m = mujoco.MjModel.from_xml_string(xml)
+        lp.d = mujoco.MjData(lp.m)
+        with pytest.raises(mujoco.FatalError, match="mj_stackAlloc") as e:
+            lp.run(gait.q(0.0), gait.dq(0.0), 2)
+        messages.append(str(e.value))
+    assert messages[0] == messages[1]
+
+
 def test_settings_and_torque_limit_refused():
     """Settings MuJoCo would reject or silently change, and a robot without a finite
     torque limit, are a ValueError naming the argument."""

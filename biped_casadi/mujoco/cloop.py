@@ -11,6 +11,9 @@ touching anything of the step, wherever the walk's logic has more to do than tha
 Poincaré section, a law's refusal, a state that is not finite, a full log, and after
 MuJoCo's step a fall, the lift-off, a swing-foot contact, a scuff-zone change, the
 horizon.  Python then does that step exactly as the Python loop does and resumes.
+MuJoCo's fatal errors inside the C function come back as the ``mujoco.FatalError`` that
+``mujoco.mj_step`` raises (a thread-local log handler, as the Python bindings install);
+its warnings go where they go from Python.
 
 Every number is computed by the same floating-point operations in the same order as the
 Python loop: the code is compiled without contraction into FMA (``-ffp-contract=off``)
@@ -41,9 +44,9 @@ __all__ = ["DRIVERS", "c_driver_problem", "walk_differences"]
 #: the Python loop ('python')
 DRIVERS = ("auto", "c", "python")
 
-#: what the C function returns: steps done (the budget), or Python's turn for a whole
-#: step or for the end of one (after MuJoCo's step)
-DONE, PY_STEP, PY_ADVANCE = 0, 1, 2
+#: what the C function returns: steps done (the budget), Python's turn for a whole step
+#: or for the end of one (after MuJoCo's step), or MuJoCo's error
+DONE, PY_STEP, PY_ADVANCE, MUJOCO_ERROR = 0, 1, 2, 3
 #: MuJoCo steps per call at most (Python gets control back for Ctrl-C now and then)
 BUDGET = 100_000
 #: the lengths of the products the C dot product handles (OpenBLAS's dgemv_t, one block)
@@ -52,7 +55,7 @@ MAX_DOT = 7
 _P, _D, _I, _L = ctypes.c_void_p, ctypes.c_double, ctypes.c_int, ctypes.c_longlong
 #: the C struct's fields (in this order), the one definition for C and ctypes
 FIELDS = [
-    ("m", _P), ("d", _P), ("step", _P), ("law", _P),
+    ("m", _P), ("d", _P), ("step", _P), ("law", _P), ("set_tls", _P), ("get_global", _P),
     ("A0", _P), ("A1", _P), ("G0", _P), ("G1", _P),
     ("q0", _P), ("q1", _P), ("dq0", _P), ("dq1", _P), ("p", _P), ("u", _P),
     ("log_t", _P), ("log_qpos", _P), ("log_qvel", _P), ("log_stance", _P), ("log_u", _P),
@@ -65,8 +68,15 @@ FIELDS = [
     ("nq", _I), ("na", _I), ("nu", _I), ("nc", _I), ("foot_a", _I), ("foot_b", _I),
     ("ignore_scuff", _I), ("logging", _I), ("stance", _I), ("slot", _I),
     ("section_none", _I), ("lifted", _I), ("q_slot", _I), ("q_old_slot", _I),
+    ("error", ctypes.c_char * 2048),
 ]
 _CTYPE = {_P: "void *", _D: "double", _I: "int", _L: "long long"}
+
+
+def _declaration(name: str, t) -> str:
+    if isinstance(t, type) and issubclass(t, ctypes.Array):
+        return f"    char {name}[{t._length_}];"
+    return f"    {_CTYPE[t]} {name};"
 
 
 class _State(ctypes.Structure):
@@ -75,6 +85,8 @@ class _State(ctypes.Structure):
 
 _SOURCE = r"""
 #include <math.h>
+#include <setjmp.h>
+#include <stdio.h>
 #include <string.h>
 #include <mujoco/mujoco.h>
 
@@ -84,6 +96,26 @@ typedef struct {
 
 typedef int (*law_fn)(double, const double *, const double *, const double *, double *);
 typedef void (*step_fn)(const mjModel *, mjData *);
+typedef mjfLogHandler (*set_tls_fn)(mjfLogHandler);
+typedef mjfLogHandler (*get_global_fn)(void);
+
+/* MuJoCo's errors inside a call come back here (as the Python bindings do it: a
+   thread-local log handler and a longjmp), its other messages go to the global handler */
+static __thread cloop_t *current;
+static __thread jmp_buf recovery;
+
+static void on_message(const mjLogMessage *msg)
+{
+    if (msg->level == mjLOG_ERROR && current) {
+        if (msg->body && msg->body[0])
+            snprintf(current->error, sizeof current->error, "%%s\n%%s", msg->subject, msg->body);
+        else
+            snprintf(current->error, sizeof current->error, "%%s", msg->subject);
+        longjmp(recovery, 1);
+    }
+    if (current)
+        ((get_global_fn)current->get_global)()(msg);
+}
 
 /* a . x as OpenBLAS's dgemv_t adds it: the first (n & ~3) terms in four lanes from +0,
    the lanes summed (l0 + l2) + (l1 + l3) onto y = +0, then the 1 to 3 terms left */
@@ -119,7 +151,23 @@ void cloop_product(const double *M, const double *x, double *y, int rows, int n)
 
 long long cloop_version(void) { return (long long)mjVERSION_HEADER; }
 
+static int steps(cloop_t *s, long long budget) __attribute__((noinline));
+
 int cloop_run(cloop_t *s, long long budget)
+{
+    set_tls_fn set_tls = (set_tls_fn)s->set_tls;
+    mjfLogHandler volatile before = set_tls(on_message);
+    int volatile event = 3;
+    current = s;
+    s->error[0] = 0;
+    if (setjmp(recovery) == 0)
+        event = steps(s, budget);
+    current = NULL;
+    set_tls(before);
+    return event;
+}
+
+static int steps(cloop_t *s, long long budget)
 {
     mjModel *m = (mjModel *)s->m;
     mjData *d = (mjData *)s->d;
@@ -228,7 +276,7 @@ int cloop_run(cloop_t *s, long long budget)
 
 
 def _source() -> str:
-    return _SOURCE % {"fields": "\n".join(f"    {_CTYPE[t]} {name};" for name, t in FIELDS)}
+    return _SOURCE % {"fields": "\n".join(_declaration(name, t) for name, t in FIELDS)}
 
 
 _FLAGS = ("-O2", "-fno-fast-math", "-ffp-contract=off", "-fPIC", "-shared")
@@ -276,7 +324,9 @@ def _library():
         mj.mj_version.restype = ctypes.c_int
         if lib.cloop_version() != mj.mj_version():
             raise OSError("the loaded libmujoco is not the headers' version")
-        result = (lib, ctypes.cast(mj.mj_step, ctypes.c_void_p).value, "")
+        result = (lib, tuple(ctypes.cast(getattr(mj, f), ctypes.c_void_p).value for f in
+                             ("mj_step", "_mjPRIVATE_setTlsLogHandler",
+                              "_mjPRIVATE_getGlobalLogHandler")), "")
     except (OSError, subprocess.CalledProcessError, AttributeError) as e:
         result = (None, None, f"the C loop is not available ({str(e).splitlines()[0]})")
     _LIB["lib"] = result
@@ -341,7 +391,7 @@ class Driver:
     copied in before each call and back after."""
 
     def __init__(self, run):
-        lib, mj_step, _ = _library()
+        lib, (mj_step, set_tls, get_global), _ = _library()
         self.lib, self.run_c = lib, lib.cloop_run
         loop, s = run.loop, _State()
         self.s, self.ref = s, ctypes.byref(s)
@@ -349,6 +399,7 @@ class Driver:
         self.G = [np.ascontiguousarray(g, float) for g in run.G]
         law = loop.law
         s.m, s.d, s.step = loop.m._address, loop.d._address, mj_step
+        s.set_tls, s.get_global = set_tls, get_global
         s.law = ctypes.cast(law._lib.biped_torque, ctypes.c_void_p).value
         s.A0, s.A1 = self.A[0].ctypes.data, self.A[1].ctypes.data
         s.G0, s.G1 = self.G[0].ctypes.data, self.G[1].ctypes.data
@@ -364,7 +415,8 @@ class Driver:
         s.ignore_scuff, s.logging = int(bool(run.ignore_scuff)), int(bool(run.logging))
 
     def __call__(self, run, budget: int = BUDGET) -> int:
-        """Run steps until Python's turn: DONE, PY_STEP or PY_ADVANCE."""
+        """Run steps until Python's turn: DONE, PY_STEP or PY_ADVANCE (MuJoCo's fatal
+        error: ``mujoco.FatalError``, as ``mujoco.mj_step`` raises it)."""
         s, log = self.s, run.log
         if run.logging:
             s.log_t, s.log_qpos, s.log_qvel = (log.t.ctypes.data, log.qpos.ctypes.data,
@@ -379,6 +431,9 @@ class Driver:
         s.section_none = int(run.section is None)
         s.q_slot = s.q_old_slot = -1
         event = self.run_c(self.ref, budget)
+        if event == MUJOCO_ERROR:                 # what mujoco.mj_step raises
+            import mujoco
+            raise mujoco.FatalError(s.error.decode(errors="replace"))
         if s.q_slot >= 0:                         # a step's control done in C
             i = s.q_slot
             run.slot, run.q, run.dq = i, run.qs[i], run.dqs[i]
