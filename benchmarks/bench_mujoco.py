@@ -4,7 +4,8 @@ against the Python law in the loop, MuJoCo's eigenvalues beside the exact ones.
 Designs: virtual constraints on RABBIT's default gait and the robust design of ``biped m1
 --robust`` on its gait (about 2 minutes the first time, then cached in BIPED_CACHE_DIR).
 
-- Speed: MuJoCo steps per second of a walk with the exported C law in the loop and with
+- Speed: MuJoCo steps per second of a walk with the exported C law in the loop (its steps
+  driven by the C function of biped_casadi.mujoco.cloop, and by the Python loop) and with
   the same law in Python, beside a bare ``mj_step`` loop in Python feeding the same
   walk's controls open loop, timed in the same run: the baseline is what MuJoCo costs
   alone.  Median of ``--repeats``.
@@ -90,13 +91,16 @@ def bare_steps_per_second(loop: MujocoLoop, steps: int = 30) -> tuple:
 
 
 def speed(loops: dict, design: Design, repeats: int) -> dict:
-    """Steps per second: bare MuJoCo, the C law in the loop, the Python law in the loop
-    (the C-law walk without its log, 30 steps; the Python law's, 10 steps)."""
+    """Steps per second: bare MuJoCo, the C law in the loop (its steps driven in C, and
+    by the Python loop), the Python law in the loop (the C-law walks without their log,
+    30 steps; the Python law's, 10 steps)."""
     g = design.gait
-    out = dict(bare=[], c=[], python=[])
+    out = dict(bare=[], c=[], c_python_loop=[], python=[])
     for _ in range(repeats):
         out["bare"].append(bare_steps_per_second(loops["c"])[0])
         out["c"].append(loops["c"].run(g.q(0.0), g.dq(0.0), 30).steps_per_second)
+        out["c_python_loop"].append(loops["c_python_loop"].run(g.q(0.0), g.dq(0.0), 30)
+                                    .steps_per_second)
         out["python"].append(loops["python"].run(g.q(0.0), g.dq(0.0), 10).steps_per_second)
     return {k: statistics.median(v) for k, v in out.items()} | {"all": out}
 
@@ -190,12 +194,17 @@ def main(argv=None):
              save=not args.no_save) as run:
         for label, design in designs.items():
             loops = {law: MujocoLoop(design, STIFF, law) for law in ("c", "python")}
+            loops["c_python_loop"] = MujocoLoop(design, STIFF, "c", driver="python")
             sp = speed(loops, design, args.repeats)
-            print(f"{label}: bare MuJoCo {sp['bare']:.0f} steps/s, C law {sp['c']:.0f}, "
-                  f"Python law {sp['python']:.0f}")
+            print(f"{label}: bare MuJoCo {sp['bare']:.0f} steps/s, C law {sp['c']:.0f} "
+                  f"(steps driven by {loops['c'].driver}; by Python "
+                  f"{sp['c_python_loop']:.0f}), Python law {sp['python']:.0f}")
             run.row(f"{label}: MuJoCo steps/s with the C law in the loop (bare mj_step loop "
                     "as baseline; ratio = ours / bare)", round(sp["c"]), round(sp["bare"]),
                     "steps/s", ratio=sp["c"] / sp["bare"], target=f">= {TARGET} steps/s")
+            run.row(f"{label}: MuJoCo steps/s with the C law, the steps driven in C (driven "
+                    "by the Python loop as baseline)", round(sp["c"]),
+                    round(sp["c_python_loop"]), "steps/s", ratio=sp["c"] / sp["c_python_loop"])
             run.row(f"{label}: the same with the Python law", round(sp["python"]),
                     round(sp["bare"]), "steps/s", ratio=sp["python"] / sp["bare"])
             walks = {name: walk_figures(design, st) for name, st in

@@ -5,6 +5,7 @@ robust design needs the co-design); virtual constraints' are checked here too.""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 from pathlib import Path
@@ -18,6 +19,7 @@ from biped_casadi.model.biped import builtin_path
 from biped_casadi.mujoco import (MIN_INERTIA, MUJOCO_DEFAULT, STIFF, ContactSettings,
                                  MujocoLoop, fit_stride_map, floating_base_inertia, layout,
                                  mjcf, mujoco_module, walk)
+from biped_casadi.mujoco.walk import start_of
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -173,6 +175,60 @@ def test_stride_map_fit_is_exact_on_a_linear_map(rng):
     Lam, c2, res = fit_stride_map(X0, X0 @ A.T + c)
     assert np.allclose(Lam, A, atol=1e-12) and np.allclose(c2, c, atol=1e-12)
     assert np.all(res < 1e-12)
+
+
+def test_c_driven_loop_is_the_python_loop_bit_for_bit(gait, gait3):
+    """The MuJoCo steps driven by the C function (driver 'c') and by the Python loop
+    give the same walk, every field and array bit for bit (the wall time apart): RABBIT's
+    virtual constraints and deadbeat design and the three-link biped's virtual
+    constraints, both contacts, both touchdowns and step starts, with and without the
+    log, from the gait and from perturbed starts that walk, fall, scuff, slip, run out of
+    the law's range or time.  (benchmarks/check_mujoco_drivers.py: 1216 cases.)"""
+    from biped_casadi.mujoco.cloop import walk_differences
+    paper = Perturbation.paper(5)
+    runs = [(Design.vc(gait), [None, paper.scaled(3.0), (0.15, 1.5)]),
+            (Design.tv(gait, DEADBEAT), [None, paper.scaled(1.0), (0.3, 3.0)]),
+            (Design.vc(gait3), [None, (0.05, 0.5), (0.2, 2.0)])]
+    n, outcomes = 0, set()
+    for (design, starts), contact, step_start, touchdown in itertools.product(
+            runs, ("stiff", "default"), ("impact", "contact"), ("grid", "interpolated")):
+        slip = 0.0005 if touchdown == "interpolated" else 0.05
+        kw = dict(settings=ContactSettings.of(contact), step_start=step_start,
+                  touchdown=touchdown, max_slip=slip, horizon=0.9 if contact == "stiff"
+                  else 2.0)
+        c, py = (MujocoLoop(design, driver=d, **kw) for d in ("c", "python"))
+        assert (c.driver, py.driver) == ("c", "python")
+        for k, start in enumerate(starts):
+            q0, dq0 = start_of(design.gait, start)
+            log = bool((n + k) % 2)
+            a, b = c.run(q0, dq0, 5, log=log), py.run(q0, dq0, 5, log=log)
+            assert walk_differences(a, b) == [], (kw, start, log)
+            outcomes.add(b.status)
+        n += len(starts)
+    assert n == 72 and {"walked", "fell", "scuffed", "slipped", "no_impact",
+                        "out_of_range"} <= outcomes, outcomes
+    assert MujocoLoop(Design.vc(gait), law="python").driver == "python"
+    with pytest.raises(ValueError, match="driver"):
+        MujocoLoop(Design.vc(gait), law="python", driver="c")
+    with pytest.raises(ValueError, match="driver"):
+        MujocoLoop(Design.vc(gait), driver="fortran")
+
+
+def test_c_driven_loop_raises_mujocos_fatal_error(gait):
+    """A MuJoCo error inside the steps driven in C is the ``mujoco.FatalError`` the
+    Python loop's ``mj_step`` raises, with the same message (MuJoCo would otherwise end
+    the process): a model with too little memory for its contacts."""
+    messages = []
+    for driver in ("c", "python"):
+        lp = MujocoLoop(Design.vc(gait), driver=driver)
+        xml = mjcf(gait.model, lp.settings, lp.torque_limit).replace(
+            "<compiler ", '<size memory="4K"/><compiler ', 1)
+        lp.m = mujoco.MjModel.from_xml_string(xml)
+        lp.d = mujoco.MjData(lp.m)
+        with pytest.raises(mujoco.FatalError, match="mj_stackAlloc") as e:
+            lp.run(gait.q(0.0), gait.dq(0.0), 2)
+        messages.append(str(e.value))
+    assert messages[0] == messages[1]
 
 
 def test_settings_and_torque_limit_refused():

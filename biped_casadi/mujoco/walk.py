@@ -42,6 +42,7 @@ from ..control.design import Design
 from ..control.output_law import SECTION
 from ..numerics import FastCall
 from ..simulation.perturbation import Perturbation
+from . import cloop
 from .law import LAWS, control_law
 from .mjcf import STIFF, ContactSettings, layout, mjcf, torque_limit_of
 from .records import MujocoStep, MujocoWalk, _Log, _pair
@@ -106,17 +107,25 @@ class MujocoLoop:
         The touchdown's time and state: MuJoCo's first state in contact, or interpolated
         between it and the state before to where the swing foot meets the floor (the
         clock and the impact map then do not carry the time grid's error).
+    driver : {'auto', 'c', 'python'}
+        Who runs the MuJoCo steps: a compiled C function, the Python loop falling back on
+        the cases it does not handle (:mod:`~biped_casadi.mujoco.cloop`; 'auto', with the
+        C law and a C compiler), the C function always ('c'), or the Python loop
+        ('python').  The results are the same, bit for bit; the attribute ``driver`` says
+        which runs.
 
     Raises
     ------
     ValueError
-        Naming the argument: an unknown ``law`` or ``step_start``, settings MuJoCo
-        rejects, a robot without a finite torque limit, a singular design.
+        Naming the argument: an unknown ``law``, ``step_start`` or ``driver``, settings
+        MuJoCo rejects, a robot without a finite torque limit, a singular design,
+        ``driver='c'`` where the C loop cannot run.
     """
 
     def __init__(self, design: Design, settings: ContactSettings = STIFF, law: str = "c",
                  torque_limit: float | None = None, step_start: str = "impact",
-                 max_slip: float = 0.05, horizon: float = 2.0, touchdown: str = "grid"):
+                 max_slip: float = 0.05, horizon: float = 2.0, touchdown: str = "grid",
+                 driver: str = "auto"):
         if not isinstance(design, Design) or design.gait is None:
             raise ValueError("design: a Design on its gait is needed (Design.tv(gait, M1) "
                              "or Design.vc(gait))")
@@ -126,6 +135,9 @@ class MujocoLoop:
             raise ValueError(f"touchdown must be one of {', '.join(TOUCHDOWNS)}, got "
                              f"{touchdown!r}")
         self.touchdown = touchdown
+        if driver not in cloop.DRIVERS:
+            raise ValueError(f"driver must be one of {', '.join(cloop.DRIVERS)}, got "
+                             f"{driver!r}")
         if step_start not in STEP_STARTS:
             raise ValueError(f"step_start must be one of {', '.join(STEP_STARTS)}, got "
                              f"{step_start!r}")
@@ -163,6 +175,10 @@ class MujocoLoop:
         self.fall_height = 0.5625 * model.description.leg_length
         ts = SECTION * self.T
         self.x_star = (float(g.q(ts)[0]), float(g.dq(ts)[0]))
+        problem = cloop.c_driver_problem(self) if driver != "python" else "asked"
+        if driver == "c" and problem:
+            raise ValueError(f"driver: the steps cannot run in C: {problem}")
+        self.driver = "python" if problem else "c"
 
     # -------------------------------------------------------------- helpers
     def gait_record(self) -> dict:
@@ -221,17 +237,37 @@ class MujocoLoop:
             run.records
         t0 = time.perf_counter()
         try:
-            while run.status == "walked" and len(records) < steps:
-                if not control():
-                    break
-                step(m, d)
-                run.k += 1
-                advance()
+            if self.driver == "c":
+                self._run_c(run)
+            else:
+                while run.status == "walked" and len(records) < steps:
+                    if not control():
+                        break
+                    step(m, d)
+                    run.k += 1
+                    advance()
         finally:
             if self.model.scuffing_ignored:
                 for f in self.feet:
                     m.geom_contype[f] = 1
         return self._result(run, time.perf_counter() - t0)
+
+    def _run_c(self, run):
+        """The loop of :meth:`run` with the common steps in C: Python does a whole step,
+        or the end of one, when the C function hands it back."""
+        step, control, advance, records = mujoco_module().mj_step, run.control, \
+            run.advance, run.records
+        m, d, steps, driver = self.m, self.d, run.steps, cloop.Driver(run)
+        while run.status == "walked" and len(records) < steps:
+            event = driver(run)
+            if event == cloop.PY_STEP:
+                if not control():
+                    break
+                step(m, d)
+                run.k += 1
+                advance()
+            elif event == cloop.PY_ADVANCE:
+                advance()
 
     def _result(self, run, wall) -> MujocoWalk:
         records, steps, status = run.records, run.steps, run.status
