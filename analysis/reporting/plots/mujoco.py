@@ -77,7 +77,7 @@ def mujoco_steps_plot(walks, labels=None, title: str | None = None) -> Figure:
     ax[2].set_ylabel(r"$q_u - q_u^d(T)$ [rad]")
     ax[3].set_ylabel(r"$\dot q_u - \dot q_u^d(T)$ [rad/s]")
     ax[3].set_xlabel("step")
-    ax[3].xaxis.set_major_locator(MaxNLocator(integer=True))      # steps are whole
+    ax[3].xaxis.set_major_locator(MaxNLocator(integer=True, steps=[1, 2, 5, 10]))  # whole steps
     ax[0].legend(fontsize=8, loc="best")
     ax[1].legend(fontsize=8, loc="best")
     for a in ax:
