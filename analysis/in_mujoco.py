@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from biped_casadi import Design, Perturbation
-from biped_casadi.mujoco import (MujocoLoop, STIFF, ContactSettings, StrideMap, stride_map)
 from biped_casadi.caching import cached
+from biped_casadi.mujoco import (MujocoLoop, STIFF, ContactSettings, StrideMap, stride_map)
 from biped_casadi.results import Result
 
 from .stability import poincare_eigenvalues, vc_eigenvalue
