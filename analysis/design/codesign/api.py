@@ -284,8 +284,10 @@ def codesign(robot_or_gait, settings: CodesignSettings | None = None, *, gait_fi
 
 
 def _with_gait_file(result: CodesignResult, gait, gait_file, cache, key: str):
-    """The result with its gait saved (beside the cache) and the replay arguments."""
-    if gait is not None and gait_file is not None:
+    """The result with its gait saved (beside the cache) and the replay arguments: the
+    given file only when the design runs on the gait as given (not on one moved from it)."""
+    if (gait is not None and gait_file is not None
+            and result.gait.cache_key == gait.cache_key):
         path = gait_file
     else:
         path = cache_dir(cache) / "codesign" / f"codesign-{key[:20]}.gait.json"
