@@ -64,6 +64,7 @@ def files(model, gait, tmp_path_factory):
     write("truncated.json", good.read_text()[:500])
     write("list.json", "[1, 2, 3]")
     write("number.json", "42")
+    write("family.json", json.dumps({"format": "biped-casadi-gait-family", "version": 1}))
     write("other_format.json", json.dumps({"format": "something-else", "version": 1}))
     write("deep.json", "[" * 100000 + "]" * 100000)
     write("summary.json", json.dumps({"stages": {}, "figures": {}}))
@@ -202,6 +203,12 @@ CASES = [
     (["eig", "--gait", "{number}", *M0], "not a biped-casadi-gait file"),
     (["eig", "--gait", "{other_format}", *M0], "not a biped-casadi-gait file"),
     (["eig", "--gait", "{summary}", *M0], "not a biped-casadi-gait file"),
+    # a gait family where one gait is taken: how to take one from it
+    (["eig", "--gait", "{family}", *M0], "--gait: {family} is a gait family file, not one "
+                                          "gait: take one with 'biped gait --family"),
+    (["simulate", "--gait", "{family}", "--controller", "vc"], "or walk it with --speeds"),
+    (["sweep", "--gait", "{family}", "--grid", "2"], "is a gait family file"),
+    (["m1", "--gait", "{family}"], "'biped m1 --robust' designs over a family"),
     (["eig", "--gait", "{version}", *M0], "format version 99"),
     (["eig", "--gait", "{checksum}", *M0], "checksum"),
     (["eig", "--gait", "{no_solution}", *M0], "missing key(s): solution"),

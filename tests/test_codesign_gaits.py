@@ -302,3 +302,26 @@ def test_replay_names_the_gait_the_design_runs_on(gait, gait3, tmp_path):
     assert moved.simulate_args[:2] == ["--gait", moved.gait_file]
     kept = _with_gait_file(result(gait), gait, given, tmp_path / "cache", "j" * 40)
     assert kept.gait_file == str(given) and kept.simulate_args[:2] == ["--gait", str(given)]
+
+
+def test_no_design_either_way_says_which_gait_each_reason_is_for(monkeypatch):
+    """'auto' with no design on the gait as given nor on the gait moved from it: the one
+    line says which reason is which (they read alike, with different figures)."""
+    from types import SimpleNamespace
+
+    from analysis.design.codesign import api
+
+    calls = []
+
+    def designed(method, settings):
+        calls.append(method)
+        raise NoDesign(f"codesign: no walk (torso {len(calls)} rad)", {})
+
+    monkeypatch.setattr(api, "Method", lambda *a, **k: len(calls))
+    monkeypatch.setattr(api, "_designed", designed)
+    with pytest.raises(NoDesign) as e:
+        api._auto(SimpleNamespace(say=lambda *a: None), None, None, object())
+    msg = str(e.value)
+    assert msg.startswith("codesign: on the gait as given: no walk (torso 3 rad); "), msg
+    assert msg.endswith("on the gait moved from it: no walk (torso 2 rad)"), msg
+    assert msg.count("codesign:") == 1 and "\n" not in msg

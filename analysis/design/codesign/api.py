@@ -164,6 +164,12 @@ def _codesign(engine, model, settings: CodesignSettings, gait=None) -> CodesignR
     return result
 
 
+def _reason(e: NoDesign) -> str:
+    """A NoDesign's line without its 'codesign: ' lead."""
+    s = str(e)
+    return s[len("codesign: "):] if s.startswith("codesign: ") else s
+
+
 def _auto(engine, model, settings: CodesignSettings, gait) -> CodesignResult:
     """'auto': the gait fixed first (given up after the start screen when its best s*
     is below 1: the target is out of reach), then free from it when the target is
@@ -184,7 +190,9 @@ def _auto(engine, model, settings: CodesignSettings, gait) -> CodesignResult:
         try:
             return _designed(Method(engine, model, settings, gait), settings)
         except NoDesign as e_fixed:
-            raise NoDesign(f"{e_fixed}; {e}", dict(e_fixed.details, free=e.details)) from None
+            raise NoDesign(f"codesign: on the gait as given: {_reason(e_fixed)}; on the gait "
+                           f"moved from it: {_reason(e)}",
+                           dict(e_fixed.details, free=e.details)) from None
     if isinstance(fixed, CodesignResult) and not _better(free, fixed):
         fixed.alternative = _summary(free)
         return fixed
