@@ -299,6 +299,9 @@ CASES = [
     (["simulate", *G, "--plot", "{sys}/figs"], "--plot"),
     (["simulate", *G, "--plot", "{read_only}/figs"], "--plot", "nonroot"),
     (["simulate", "--gait", "{garbage}"], "not a text"),
+    # ---- robust: a singular design is refused as simulate refuses it (not "slipped")
+    (["robust", *G, "--m1", "1", "2", "3", "4"], "makes the controller singular"),
+    (["robust", *G, "--m1", "1", "2", "3", "4", "--plot", "figs"], "singular"),
     # ---- reproduce (checked before the first stage)
     (["reproduce", "--out", "{file}"], "--out"),
     (["reproduce", "--quick", "--out", "{file}"], "--out"),

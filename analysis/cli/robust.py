@@ -32,6 +32,9 @@ def cmd_robust(args):
     design = None
     if args.controller == "tv":
         design = Design(tuple(parse_m1(args.m1, model.nu)), rejoin)
+        if Design.of(design, gait).controller_for().singularity().singular:
+            raise UserError(f"M1 = {list(design.M1)} makes the controller singular on the "
+                            "reference step (D11 - D12 M1 vanishes, eq. 24)")
     st = RobustnessSettings(directions=args.directions, mu=args.mu,
                             torque_limit=args.torque_limit, seed=args.seed)
     say(f"perturbation directions from which virtual constraints walk ({args.directions} "
