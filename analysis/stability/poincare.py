@@ -649,14 +649,14 @@ def poincare_map(gait, **options) -> PoincareMap:
     return PoincareMap(model, gait, **options)
 
 
-def poincare_eigenvalues(gait, M1=None, method: str = "variational", *,
+def poincare_eigenvalues(gait, M1=None, *args, method: str | None = None,
                          rejoin: float = PAPER_REJOIN) -> PoincareResult:
     """A^z, its eigenvalues and the stability status for outputs M1 (docs: theory, §4).
 
     Implements eq. (22): the fixed point is locally exponentially stable, status
     'stable', when max ``|lambda|`` of A^z is below 1.  ``poincare_eigenvalues(model, gait,
     M1)``, the form of the toolkit's specification, is the same call (the model must be
-    the gait's).
+    the gait's), also with the method: ``poincare_eigenvalues(model, gait, M1, 'ad')``.
 
     Parameters
     ----------
@@ -665,6 +665,8 @@ def poincare_eigenvalues(gait, M1=None, method: str = "variational", *,
     M1 : array_like or Design
         One number per actuated joint, or a time-varying :class:`~biped_casadi.Design`
         (its M1 and rejoin time; its gait must be ``gait``).
+    *args
+        The method, as the argument after M1 (the older positional form).
     method : {'variational', 'ad'}
         'variational' (default, well under a millisecond per call once the map is built)
         or 'ad' (automatic differentiation through the whole discrete map, ~0.3 s; also
@@ -677,9 +679,16 @@ def poincare_eigenvalues(gait, M1=None, method: str = "variational", *,
     PoincareResult
         ``r.A`` (2x2 A^z), ``r.eigenvalues``, ``r.max_abs``, ``r.status``.
     """
-    if not hasattr(gait, "T") and hasattr(M1, "T"):     # (model, gait, M1)
+    if not hasattr(gait, "T") and hasattr(M1, "T"):     # (model, gait, M1[, method])
         require_same_robot(gait, M1)
-        gait, M1, method = M1, method, "variational"
+        gait, M1, args = M1, (args[0] if args else None), args[1:]
+    if len(args) > 1:
+        raise TypeError(f"poincare_eigenvalues() takes the gait, M1 and the method, got "
+                        f"{len(args) - 1} more argument(s)")
+    if args and method is not None:
+        raise TypeError("poincare_eigenvalues() got the method twice (positional and "
+                        "method=)")
+    method = args[0] if args else "variational" if method is None else method
     if isinstance(M1, Design):
         d = Design.of(M1, gait)
         if d.M1 is None:
