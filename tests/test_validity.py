@@ -138,3 +138,32 @@ def test_convergence_and_verdict():
     assert B[0].completed_steps == 4 and B[0].unactuated_errors().shape == (4,)
     d = B.to_dict()
     assert d["status"] == ["ok", "ok", "slipped"] and len(d["qu_error"][0]) == 4
+
+
+def test_friction_ratio_where_the_normal_force_is_not_positive():
+    """A node with F_z <= 0 makes the single-support ratio infinite, as an impulse with
+    F_z <= 0 makes the impact ratio (it was |F_x| / 1e-300, ~1e303); runs with F_z > 0
+    keep their ratio."""
+    rec = OutcomeRecorder(3, 1)
+    Fx = np.array([[30.0, 10.0], [5.0, 20.0], [1.0, 2.0]])
+    Fz = np.array([[100.0, -50.0], [100.0, 0.0], [100.0, 100.0]])
+    rec.track([0, 1, 2], np.zeros((4, 3, 2)), Fx, Fz)
+    B = rec.batch()
+    assert B.max_friction_ratio.tolist() == [math.inf, math.inf, 0.02]
+    assert B.min_normal_force.tolist() == [-50.0, 0.0, 100.0]
+    rec = OutcomeRecorder(1, 1)                  # a masked node does not count
+    rec.track([0], np.zeros((4, 1, 2)), Fx[:1], Fz[:1], mask=np.array([[True, False]]))
+    assert rec.batch().max_friction_ratio.tolist() == [0.3]
+
+
+def test_simulate_prints_no_giant_ratio(capsys):
+    """A start far off the orbit (F_z <= 0 at once): the text says inf, not a
+    300-digit number, and --json gives null for it."""
+    import json
+
+    from analysis.cli import main
+    assert main(["simulate", "--controller", "vc", "--perturb", "1", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "max |F_x|/F_z inf" in out and max(len(w) for w in out.split()) < 40, out
+    assert main(["simulate", "--controller", "vc", "--perturb", "1", "0", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["max_friction_ratio"] is None

@@ -23,8 +23,9 @@ MAX_STEPS = 1000
 
 
 def _num(x, fmt) -> str:
-    """A figure of the run, or 'n/a' when the run never produced it (no impact)."""
-    return format(x, fmt) if math.isfinite(x) else "n/a"
+    """A figure of the run, 'inf' for a friction ratio where F_z <= 0, or 'n/a' when the
+    run never produced it (no impact)."""
+    return format(x, fmt) if math.isfinite(x) else "inf" if x == math.inf else "n/a"
 
 
 def _controller(kind, model, gait, M1, gains, rejoin=0.5):
