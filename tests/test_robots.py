@@ -396,3 +396,15 @@ def test_cli_robot_errors_are_one_line_exit_2(gait3, tmp_path, capsys, args, mes
     rc, out = run(capsys, *[a.format(**subs) for a in args])
     lines = out.err.strip().splitlines()
     assert rc == 2 and out.out == "" and len(lines) == 1 and message in lines[0], out.err
+
+
+@pytest.mark.slow
+def test_robust_codesign_of_another_robot_without_a_gait_says_why(gait3, capsys):
+    """``biped m1 --robust --robot three_link``: the starts drawn for RABBIT's default
+    flow give none on this robot; the one line says so and names the form that works
+    (``--gait``), not 'IPOPT (not run) found no verified design from 0 start(s)'."""
+    from analysis.cli import main
+    rc = main(["m1", "--robust", "--robot", "three_link", "--workers", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    assert "no start" in err[0] and "--gait" in err[0] and "not run" not in err[0], err[0]

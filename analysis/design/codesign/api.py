@@ -27,6 +27,18 @@ __all__ = ["codesign", "codesign_flow", "given_gait_flow", "NoDesignFound", "cod
 _TYPED = re.compile(r"^(\w+): ")
 
 
+def _no_start_line(sampled: dict, nu: int) -> str:
+    """Why drawn starts gave none: none stable within the bound, or none walking."""
+    n, box, ok = sampled["samples"], sampled["box"], sampled["stable"]
+    why = (f"none is stable with max|lambda| <= {sampled['bound']:.3g} (the virtual "
+           f"constraints' eigenvalue times the margin)" if ok == 0 else
+           f"{ok} are stable with max|lambda| <= {sampled['bound']:.3g}, none walks the "
+           f"paper's perturbation")
+    return (f"codesign: no start for the NLP: of {n} M1 drawn in [-{box:g}, {box:g}]^{nu} "
+            f"(a box for RABBIT's default gait), {why}; start from a gait of this robot "
+            f"instead (biped m1 --robust --gait FILE: starts that fit the gait)")
+
+
 def _designed(m: Method, settings: CodesignSettings) -> CodesignResult:
     """One co-design by a :class:`Method`: starts -> scenario exchange -> rejoin choice
     -> gait steps -> verification."""
@@ -35,6 +47,8 @@ def _designed(m: Method, settings: CodesignSettings) -> CodesignResult:
     if best is None:
         if m.screen is not None:
             raise NoDesign(m.no_design_line(), m.no_design_details())
+        if not starts and m.sampled:
+            raise CodesignError(_no_start_line(m.sampled, m.model.nu))
         last = m.solves[-1] if m.solves else {}
         raise CodesignError(
             f"codesign: IPOPT ({last.get('status', 'not run')}) found no verified design "
