@@ -280,6 +280,13 @@ CASES = [
     (["simulate", *G, "--steps", "2.5"], "invalid int"),
     (["simulate", *G, "--perturb", "0.1"], "expected 2"),
     (["simulate", *G, "--perturb", "nan", "0"], "--perturb"),
+    # errors beyond half a turn / 100 rad/s: overflow and 300-digit angles before
+    (["simulate", *G, "--perturb", "1e300", "0"], "--perturb: angle errors must lie within"),
+    (["simulate", *G, "--perturb", "0", "1e6"], "--perturb: rate errors must lie within"),
+    (["simulate", *G, "--perturb", "-4", "0"], "+-3.14"),
+    (["simulate", *G, "--perturb-dq", "1e308", "0", "0", "0", "0"], "--perturb-dq: rate"),
+    (["simulate", *G, "--perturb-q", "0", "0", "7", "0", "0"], "--perturb-q: angle"),
+    (["mujoco", *G, "--perturb", "1e300", "0"], "--perturb: angle"),
     (["simulate", *G, "--perturb", "0", "0", "--perturb-q", "0", "0", "0", "0", "0"],
      "--perturb"),
     (["simulate", *G, "--perturb-q", "1", "2"], "--perturb-q takes 5"),

@@ -151,6 +151,10 @@ def test_friction_ratio_where_the_normal_force_is_not_positive():
     B = rec.batch()
     assert B.max_friction_ratio.tolist() == [math.inf, math.inf, 0.02]
     assert B.min_normal_force.tolist() == [-50.0, 0.0, 100.0]
+    rec = OutcomeRecorder(2, 1)                  # a node that is not finite: NaN, as before
+    rec.track([0, 1], np.zeros((4, 2, 1)), np.array([[np.nan], [1.0]]),
+              np.array([[np.nan], [np.nan]]))
+    assert np.isnan(rec.batch().max_friction_ratio).all()
     rec = OutcomeRecorder(1, 1)                  # a masked node does not count
     rec.track([0], np.zeros((4, 1, 2)), Fx[:1], Fz[:1], mask=np.array([[True, False]]))
     assert rec.batch().max_friction_ratio.tolist() == [0.3]

@@ -391,7 +391,8 @@ class OutcomeRecorder:
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             pu = np.where(mask, np.max(np.abs(u), axis=0), np.nan)
             # F_z <= 0: no friction cone holds the foot (inf, as for the impulses)
-            ratio = np.where(mask, np.where(Fz > 0, np.abs(Fx) / Fz, np.inf), np.nan)
+            # (a node that is not finite keeps NaN)
+            ratio = np.where(mask, np.where(Fz <= 0, np.inf, np.abs(Fx) / Fz), np.nan)
             fz = np.where(mask, Fz, np.nan)
         self.peak_u[runs] = np.fmax(self.peak_u[runs], np.fmax.reduce(pu, axis=1))
         self.min_fz[runs] = np.fmin(self.min_fz[runs], np.fmin.reduce(fz, axis=1))
