@@ -533,3 +533,11 @@ def test_no_times_give_empty_arrays(gait):
         assert f([]).shape == (5, 0)
     assert all(r.shape == (5, 0) for r in gait.evaluate(np.zeros(0)))
     assert gait.u(np.array([])).shape == (4, 0)
+
+
+def test_optimize_gait_names_a_model_that_is_not_one():
+    """A robot's name (or anything else) where the model goes: a TypeError that says
+    what to pass, not "'str' object has no attribute 'description'"."""
+    for wrong in ("rabbit", 3):
+        with pytest.raises(TypeError, match=r"robot\("):
+            optimize_gait(wrong)

@@ -160,3 +160,13 @@ def test_the_specification_form_takes_the_method_too(model, gait):
         poincare_eigenvalues(gait, M1, "ad", method="ad")
     with pytest.raises(ValueError, match="M1"):
         poincare_eigenvalues(model, gait)
+
+
+def test_something_else_than_a_gait_is_named(model):
+    """The model without its gait (or a file name, or None) where the gait goes: a
+    TypeError that says what is needed, not "'BipedModel' object has no attribute
+    'model'"."""
+    from analysis import poincare_eigenvalues
+    for wrong in (model, "gait.json", None):
+        with pytest.raises(TypeError, match="a gait is needed"):
+            poincare_eigenvalues(wrong, [0.0, 0.0, 0.0, 0.0])

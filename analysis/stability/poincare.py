@@ -682,6 +682,10 @@ def poincare_eigenvalues(gait, M1=None, *args, method: str | None = None,
     if not hasattr(gait, "T") and hasattr(M1, "T"):     # (model, gait, M1[, method])
         require_same_robot(gait, M1)
         gait, M1, args = M1, (args[0] if args else None), args[1:]
+    if not hasattr(gait, "T") or not hasattr(gait, "model"):
+        raise TypeError(f"poincare_eigenvalues(): a gait is needed first (Gait.load(path) "
+                        f"or optimize_gait(model)), got {type(gait).__name__}; the forms are "
+                        f"(gait, M1) and (model, gait, M1)")
     if len(args) > 1:
         raise TypeError(f"poincare_eigenvalues() takes the gait, M1 and the method, got "
                         f"{len(args) - 1} more argument(s)")
