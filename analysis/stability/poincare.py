@@ -510,7 +510,8 @@ class PoincareMap:
         status, message = ("stable" if mx < 1 else "unstable"), ""
         if not res <= FIXED_POINT_TOL:
             status = "open_orbit"
-            message = (f"x* is not a fixed point of the map: |P(x*) - x*| = {res:.2e} (> "
+            message = (f"x* is not a fixed point of the map: |P(x*) - x*| = {res:.2e}"
+                       + (" (with M1 = 0)" if residual is not None else "") + " (> "
                        f"{FIXED_POINT_TOL:g}); the gait is not a periodic orbit of this model "
                        f"and the eigenvalues at x* say nothing of its stability")
         return PoincareResult(M1, A, ev, mx, status, self.x_star, fixed_point_residual=res,
