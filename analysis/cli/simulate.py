@@ -25,6 +25,8 @@ MAX_STEPS = 1000
 def _num(x, fmt) -> str:
     """A figure of the run, 'inf' for a friction ratio where F_z <= 0, or 'n/a' when the
     run never produced it (no impact)."""
+    if x is None:
+        return "n/a"
     return format(x, fmt) if math.isfinite(x) else "inf" if x == math.inf else "n/a"
 
 
