@@ -281,6 +281,11 @@ def unactuated_error_plot(results, title: str | None = None, labels=None) -> Fig
     for a in ax:
         a.axhline(0, color="0.6", lw=0.8)
         a.grid(alpha=0.3)
+    if not any(len(res.steps) for res in results):        # nothing to draw: step 1 shown
+        ax[1].set_xlim(0.5, 1.5)
+        ax[1].set_xticks([1])
+        ax[0].text(0.5, 0.5, "no run reached an impact", transform=ax[0].transAxes,
+                   ha="center", va="center", color="0.3")
     ax[0].legend(fontsize=8)
     fig.suptitle(title or "Fig. 5: error of the unactuated variable at the end of each step")
     fig.tight_layout()
