@@ -225,3 +225,18 @@ def test_fig5_of_runs_without_an_impact_has_a_step_axis(gait):
     lo, hi = ax.get_xlim()
     assert lo < 1 < hi and lo >= 0 and hi <= 2
     assert any("no run reached an impact" in t.get_text() for t in fig.axes[0].texts)
+
+
+def test_fig6_of_runs_stopped_at_the_start_shows_them(gait):
+    """Runs stopped at t = 0 have one sample: Fig. 6 drew no visible line on an axis of
+    -0.04 to 0.04 s; the sample is a marker, the axis starts at 0, and a note says so."""
+    from analysis.reporting.plots import swing_torques_plot
+    from biped_casadi import Design, perturbed_initial_state, simulate
+    run = simulate(Design.vc(gait).controller_for(), *perturbed_initial_state(gait, 1.0, 0.0))
+    assert np.ptp(run.t) == 0
+    fig = swing_torques_plot([run], gait)
+    ax = fig.axes[0]
+    assert ax.lines[0].get_marker() == "o"
+    lo, hi = ax.get_xlim()
+    assert lo <= 0 < hi and lo > -0.2 * gait.T
+    assert any("stopped at t = 0" in t.get_text() for t in ax.texts)
