@@ -26,6 +26,8 @@ def read_text_file(path, what: str, max_bytes: int = 20_000_000) -> str:
     Returns
     -------
     str
+        The text, without the byte order mark some editors write first (Excel's "CSV
+        UTF-8", Notepad): a file with one reads as the same file without.
 
     Raises
     ------
@@ -50,7 +52,7 @@ def read_text_file(path, what: str, max_bytes: int = 20_000_000) -> str:
     except OSError as e:
         raise ValueError(f"{what} {path} cannot be read: {e.strerror or e}") from None
     try:
-        return data.decode("utf-8")
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise ValueError(f"{what} {path} is not a text file") from None
 

@@ -27,8 +27,8 @@ import numpy as np
 
 from biped_casadi.files import read_text_file
 
-__all__ = ["Nodes", "nodes_from_arrays", "read_nodes", "relative_angles", "MIN_NODES",
-           "ANGLES"]
+__all__ = ["Nodes", "nodes_from_arrays", "read_nodes", "relative_angles", "check_radians",
+           "MIN_NODES", "ANGLES"]
 
 #: fewer nodes than this cannot define a step
 MIN_NODES = 5
@@ -147,6 +147,37 @@ def nodes_from_arrays(t, q, dq, ddq=None, nq: int | None = None,
     if out[1].shape != out[0].shape or (out[2] is not None and out[2].shape != out[0].shape):
         raise ValueError(f"{where}: q, dq (and ddq) must have the same shape")
     return Nodes(t, out[0], out[1], out[2], where)
+
+
+def check_radians(q, names, where: str = "nodes") -> None:
+    """Refuse angles that turn by more than a full turn over the step (degrees).
+
+    No joint or link of a walking robot turns by 2 pi or more within one step; angles
+    written in degrees do (a swing of 0.11 rad is 6.3 degrees), and would otherwise be
+    refused later by a check that names another cause (the stance foot, the coordinate
+    convention).
+
+    Parameters
+    ----------
+    q : array_like
+        (n, N) angles over the step, one row per coordinate.
+    names : sequence of str
+        The coordinates' names (the file's column names), for the message.
+    where : str
+        Names the source in messages.
+
+    Raises
+    ------
+    ValueError
+        One line naming the coordinate that turns the most and its range.
+    """
+    q = np.asarray(q, dtype=float)
+    span = np.ptp(q, axis=1)
+    i = int(np.argmax(span))
+    if span[i] >= 2 * np.pi:
+        raise ValueError(f"{where}: {names[i]} spans {span[i]:.4g} over the step, more than "
+                         f"a full turn (2 pi): angles in degrees? (a step is given in rad and "
+                         f"rad/s)")
 
 
 def relative_angles(nodes: Nodes) -> Nodes:

@@ -299,3 +299,42 @@ def test_mujoco_motors_take_the_limit_the_gait_was_made_for(tmp_path, capsys):
     assert main(["mujoco", "--gait", str(gait), "--controller", "vc", "--steps", "2",
                  "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["torque_limit"] == 150.0
+
+
+# ------------------------------------------------------------------ files as tools write them
+def test_files_with_a_byte_order_mark_read_as_without(tmp_path, capsys):
+    """Excel's 'CSV UTF-8' (and Notepad) start a file with a byte order mark: the step,
+    a description file and a gait file read as the same text without it."""
+    bom = "\ufeff"
+    src = tmp_path / "step.csv"
+    src.write_text(bom + CSV.read_text(), encoding="utf-8")
+    out = tmp_path / "gait.json"
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
+                 "--stance", "hip_left", "--out", str(out)]) == 0, capsys.readouterr().err
+    toml = tmp_path / "rabbit.toml"
+    toml.write_text(bom + builtin_path("rabbit").read_text(), encoding="utf-8")
+    assert load_description(toml) == robot("rabbit").description
+    again = tmp_path / "again.json"
+    again.write_text(bom + out.read_text(), encoding="utf-8")
+    assert Gait.load(again).T == Gait.load(out).T
+
+
+@pytest.mark.parametrize("angles", ["urdf", "relative"])
+def test_a_step_in_degrees_is_named(angles, walker_gait, tmp_path, capsys):
+    """Angles in degrees (and rates in deg/s): one line saying so, exit 2, nothing written
+    (not a message about the stance foot or the coordinate convention)."""
+    src = tmp_path / "step.csv"
+    write_gait_csv(walker_gait, src, angles=angles, n_nodes=21)
+    rows = [r.split(",") for r in src.read_text().splitlines()]
+    deg = [i for i, h in enumerate(rows[0]) if h not in ("t", "x", "z", "dx", "dz")]
+    for r in rows[1:]:
+        for i in deg:
+            r[i] = repr(math.degrees(float(r[i])))
+    src.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    out = tmp_path / "gait.json"
+    extra = ["--angles", "urdf", "--stance", "hip_left"] if angles == "urdf" else []
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), *extra,
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "degrees?" in err and "rad" in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
