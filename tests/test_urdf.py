@@ -123,6 +123,12 @@ BAD = {
     "rotors differ": (lambda s: s.replace("<motorInertia>3.32e-4</motorInertia>",
                                           "<motorInertia>1e-4</motorInertia>", 1),
                       r"reflected rotor inertias differ"),
+    "mimic joint": (lambda s: s.replace('<joint name="knee_right" type="revolute">',
+                                        '<joint name="knee_right" type="revolute"><mimic '
+                                        'joint="knee_left" multiplier="1" offset="0"/>'),
+                    r"joint 'knee_right' mimics joint 'knee_left'"),
+    "some efforts 0": (lambda s: s.replace('<limit effort="150"', '<limit effort="0"', 1),
+                       r"joint 'hip_left' has no actuator"),
 }
 
 
@@ -174,3 +180,33 @@ def test_floating_base_and_unknown_tags_are_fine(tmp_path):
     imp = import_urdf(p)
     assert imp.description == robot("rabbit").description
     assert any("floating joint 'base'" in n for n in imp.notes)
+
+
+def test_torso_inertial_in_a_fixed_child_of_a_massless_root(tmp_path):
+    """ROS's habit (KDL refuses a root link with inertia): a massless root link carries
+    the legs and a fixed child link carries the torso's inertial; the two are one body."""
+    text = (ROBOTS / "rabbit.urdf").read_text()
+    inertial = re.search(r'<link name="torso">\s*(<inertial>.*?</inertial>)', text, re.S).group(1)
+    text = text.replace(inertial, "", 1).replace(
+        '<link name="torso">', '<joint name="torso_inertia_fixed" type="fixed"><parent '
+        'link="torso"/><child link="torso_inertia"/></joint><link name="torso_inertia">'
+        f'{inertial}</link><link name="torso">', 1)
+    p = tmp_path / "kdl.urdf"
+    p.write_text(text)
+    imp = import_urdf(p)
+    assert imp.description == robot("rabbit").description
+    assert any("'torso_inertia' merged into 'torso'" in n for n in imp.notes)
+
+
+def test_efforts_all_zero_are_no_limit(tmp_path, capsys):
+    """Exporters write effort="0" (and velocity="0") on every joint when they know no
+    limit: no torque limit, as without <limit effort>, and --torque-limit sets one."""
+    text = (ROBOTS / "rabbit.urdf").read_text().replace('effort="150"', 'effort="0"')
+    p = tmp_path / "zero_efforts.urdf"
+    p.write_text(text)
+    imp = import_urdf(p)
+    assert imp.description.torque_limit == float("inf")
+    assert any('effort="0"' in n and "no torque limit" in n for n in imp.notes)
+    out = tmp_path / "r.toml"
+    assert main(["robot", "import", str(p), "--torque-limit", "150", "--out", str(out)]) == 0
+    assert load_description(out) == robot("rabbit").description

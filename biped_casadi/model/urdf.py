@@ -19,7 +19,8 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   link's goes from the next joint down (the foot, for the last link) to its own joint.
   The angle between a link's up direction and its parent's at zero is the joint's
   ``offset``, the orientation of its axis against n its ``sign`` (printed on import);
-- per link, from ``<inertial>``, with fixed child links merged in: the mass, the centre
+- per link, from ``<inertial>``, with fixed child links merged in (they may carry all of
+  it: a massless ``base_link`` with the legs and a fixed inertial child): the mass, the centre
   of mass anywhere in the plane (``com`` along the link's line from its proximal joint,
   ``com_offset`` across it, positive forward when upright) and the inertia about the
   centre of mass around n; a fixed child link with mass and no inertia sitting on the
@@ -32,8 +33,8 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   ``motorInertia``; each joint's ``mechanicalReduction`` is kept in the map (the motor
   side of an exported law);
 - the torque limit: the smallest ``<limit effort>``; a robot whose leg joints give none
-  (``continuous`` joints, no ``<limit>``) has none (infinite, said in the notes) unless
-  ``torque_limit=`` sets it.
+  (``continuous`` joints, no ``<limit>``), or give ``effort="0"`` every one (exporters'
+  "unknown"), has none (infinite, said in the notes) unless ``torque_limit=`` sets it.
 
 The torso's length (which only draws the robot) is the top of its visual or collision
 geometry above the hip along its up direction, else twice its centre-of-mass height.
@@ -43,7 +44,8 @@ Refused, with one ``ValueError`` naming the file and the joint or link: an unpar
 file, non-planar or prismatic joints, a torso without two legs, legs that differ (links,
 masses, centres of mass, point masses), the hips at two places in the plane, a leg joint
 without actuator (the model's one unactuated degree of freedom is the stance foot's
-contact), a link without ``<inertial>``, a torso whose up direction cannot be found, no
+contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a link without
+``<inertial>`` (its own or a fixed child's), a torso whose up direction cannot be found, no
 foot.
 """
 from __future__ import annotations
@@ -139,6 +141,11 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
     motors = _motor_inertias(text)
     efforts = {j.name: (None if j.limit is None or j.limit.effort is None
                         else float(j.limit.effort)) for j in joints}
+    # effort="0" on every leg joint is what exporters write when they know no limit (a
+    # robot with every joint passive is no robot to control): no limit, not no actuator
+    all_zero = all(e == 0.0 for e in efforts.values())
+    if all_zero:
+        efforts = dict.fromkeys(efforts)
     if rd.robot.transmissions:
         passive = [j.name for j in joints if j.name not in reductions]
     else:
@@ -178,8 +185,11 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
                            if given else ""))
     elif not given:
         limit = math.inf
-        rd.notes.append("no leg joint gives <limit effort=...> (continuous joints, no "
-                        "<limit>): the robot has no torque limit (infinite); commands that "
+        rd.notes.append(("every leg joint gives <limit effort=\"0\"> (what exporters write "
+                         "when they know no limit)" if all_zero else
+                         "no leg joint gives <limit effort=...> (continuous joints, no "
+                         "<limit>)")
+                        + ": the robot has no torque limit (infinite); commands that "
                         "need one say so; set one with --torque-limit N (torque_limit=)")
     else:
         limit = given[0]
@@ -261,8 +271,8 @@ def _merged(rd: _Reader, frame: _Frame, ends: dict, owner: str, pm: dict, plane:
     ``pm``."""
     link = rd.links[frame.name]
     body = _body(link, frame.R, frame.p)
-    if body is None or body.mass <= 0:
-        rd.fail(f"link {link.name!r}{owner} has no <inertial> with a positive mass")
+    if body is not None and body.mass == 0.0:
+        body = None                   # a massless link: its fixed children may carry it
     for _, f in rd.fixed_descendants(frame):
         extra = _body(rd.links[f.name], f.R, f.p)
         if extra is None or extra.mass == 0.0:
@@ -272,8 +282,11 @@ def _merged(rd: _Reader, frame: _Frame, ends: dict, owner: str, pm: dict, plane:
         if at and not np.any(extra.inertia):
             pm[at[0]] = pm.get(at[0], 0.0) + extra.mass
         else:
-            body = body.plus(extra)
+            body = extra if body is None else body.plus(extra)
             rd.notes.append(f"fixed link {f.name!r} merged into {link.name!r}")
+    if body is None or not body.mass > 0:
+        rd.fail(f"link {link.name!r}{owner} has no <inertial> with a positive mass (nor "
+                f"fixed child links with one)")
     return body
 
 

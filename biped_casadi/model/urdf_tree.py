@@ -160,6 +160,10 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
         chain, item = [], (hip, parent)
         while item is not None:
             joint, parent = item
+            if getattr(joint, "mimic", None) is not None:
+                rd.fail(f"joint {joint.name!r} mimics joint {joint.mimic.joint!r} (<mimic>): "
+                        f"its angle is not free, and every leg joint of the model is an "
+                        f"independent, actuated one")
             frame = _child_frame(parent, joint)
             chain.append((joint, frame))
             nxt = rd.moving(frame)
