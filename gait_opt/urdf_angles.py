@@ -155,6 +155,9 @@ def urdf_nodes(model, columns: dict, stance, where: str = "gait",
     if base and set(base) not in ({"x", "z"}, set(_BASE)):
         raise ValueError(f"{where}: base columns {', '.join(base)}: give x and z (and "
                          f"optionally both dx and dz)")
+    for c in base:
+        if not np.all(np.isfinite(np.asarray(columns[c], dtype=float))):
+            raise ValueError(f"{where}: {c} has a NaN or infinite value")
     t = columns["t"]
     x = np.vstack([columns["pitch"]] + [columns[n] for n in umap.names])
     dx = np.vstack([columns["dpitch"]] + [columns[f"d{n}"] for n in umap.names])

@@ -338,3 +338,19 @@ def test_a_step_in_degrees_is_named(angles, walker_gait, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "degrees?" in err and "rad" in err and len(err.splitlines()) == 1, err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("column", ["x", "dx"])
+def test_a_nan_in_a_base_column_is_named(column, tmp_path, capsys):
+    """A NaN in the root's position or velocity columns: one line naming the column (it
+    said the stance foot moves by nan m (x), or was taken silently (dx))."""
+    rows = [r.split(",") for r in CSV.read_text().splitlines()]
+    rows[5][rows[0].index(column)] = "nan"
+    src = tmp_path / "step.csv"
+    src.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    out = tmp_path / "gait.json"
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
+                 "--stance", "hip_left", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{column} has a NaN or infinite value" in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
