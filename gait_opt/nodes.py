@@ -218,12 +218,19 @@ def csv_table(text: str, where: str) -> tuple:
     Raises
     ------
     ValueError
-        Naming ``where``: empty, a row of another length, a value that is not a number.
+        Naming ``where``: empty, separated by ';' or tabs, a row of another length, a
+        value that is not a number.
     """
     rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
     if not rows:
         raise ValueError(f"{where} is empty")
     head = [c.strip() for c in rows[0]]
+    if len(head) == 1:
+        seps = {";": "';'", "\t": "tabs"}
+        used = [name for sep, name in seps.items() if sep in head[0]]
+        if used:
+            raise ValueError(f"{where}: the header is one column: values must be separated "
+                             f"by commas (this file uses {used[0]})")
     data = []
     for i, r in enumerate(rows[1:], start=2):
         if len(r) != len(head):

@@ -171,6 +171,10 @@ BAD = {
                 "missing key(s) theta_minus"),
     "steps.txt": ("x", "must end in .csv, .npz or .json"),
     "broken.npz": ("not a zip", "cannot read the NPZ file"),
+    "semicolons.csv": ("HEAD\n" + "\n".join(f"{i};0;0;0;0;0;0;0;0;0;0" for i in range(6)),
+                       "values must be separated by commas (this file uses ';')"),
+    "tabs.csv": ("HEAD\n" + "\n".join(f"{i}\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0" for i in range(6)),
+                 "values must be separated by commas (this file uses tabs)"),
 }
 HEAD = "t," + ",".join(f"q{i}" for i in range(1, 6)) + "," + ",".join(f"dq{i}" for i in range(1, 6))
 
@@ -180,7 +184,8 @@ def test_bad_import_files(tmp_path, capsys, name):
     text, message = BAD[name]
     src = tmp_path / name
     if text is not None:
-        src.write_text(text.replace("HEAD", HEAD))
+        sep = ";" if "semicolons" in name else "\t" if "tabs" in name else ","
+        src.write_text(text.replace("HEAD", HEAD.replace(",", sep)))
     out = tmp_path / "gait.json"
     assert main(["gait", "--import", str(src), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
