@@ -20,6 +20,8 @@ continuous along the step, the first node's in [-pi, pi)).
 """
 from __future__ import annotations
 
+import csv
+import io
 from pathlib import Path
 
 import casadi as ca
@@ -292,6 +294,8 @@ def write_gait_csv(gait, path, angles: str = "relative", stance=None,
     Path
     """
     head, rows = gait_table(gait, angles, stance, n_nodes)
-    text = ",".join(head) + "\n" + "\n".join(",".join(repr(float(v)) for v in r)
-                                             for r in rows) + "\n"
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerow(head)     # URDF names may hold commas
+    text = out.getvalue() + "\n".join(",".join(repr(float(v)) for v in r)
+                                      for r in rows) + "\n"
     return write_text_atomic(Path(path), text)

@@ -354,3 +354,18 @@ def test_a_nan_in_a_base_column_is_named(column, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert f"{column} has a NaN or infinite value" in err and len(err.splitlines()) == 1, err
     assert not out.exists()
+
+
+def test_joint_names_with_commas_round_trip_through_the_csv(walker_gait, tmp_path):
+    """URDF names may hold commas and quotes: the CSV a gait is written to quotes them
+    (it wrote them bare, and read its own file back as 17 columns over rows of 15)."""
+    text = URDF.read_text().replace("knee_right", "R,knee").replace("hip_left", "L &quot;hip")
+    p = tmp_path / "names.urdf"
+    p.write_text(text)
+    m = robot(p, torque_limit=150)
+    assert 'L "hip' in m.description.urdf.names
+    g = Gait(m, walker_gait.options, walker_gait.alpha, walker_gait.x0, walker_gait.T)
+    src = write_gait_csv(g, tmp_path / "step.csv", angles="urdf", stance='L "hip',
+                         n_nodes=21)
+    r = import_gait(m, src, angles="urdf", stance='L "hip')
+    assert r.orbit_residual_after <= 1e-10
