@@ -369,3 +369,19 @@ def test_joint_names_with_commas_round_trip_through_the_csv(walker_gait, tmp_pat
                          n_nodes=21)
     r = import_gait(m, src, angles="urdf", stance='L "hip')
     assert r.orbit_residual_after <= 1e-10
+
+
+def test_joint_names_that_close_a_c_comment_build(walker_gait, tmp_path):
+    """A URDF name (or a gait path) holding '*/' ends no comment of the exported header:
+    the law builds and is the toolkit's (gcc stopped at the header)."""
+    text = URDF.read_text().replace("knee_right", "knee */ right").replace("RABBIT", "R */ B")
+    p = tmp_path / "names.urdf"
+    p.write_text(text)
+    m = robot(p, torque_limit=150)
+    g = Gait(m, walker_gait.options, walker_gait.alpha, walker_gait.x0, walker_gait.T)
+    ctrl = TimeVaryingController(g, M1)
+    law = exported_law(ctrl, angles="urdf")
+    write_export(c_sources(law, {"gait file": "a*/b.json"}), tmp_path / "tv")
+    lib = CompiledUrdfController(build_library(tmp_path / "tv"), ctrl, law.urdf)
+    r = compare_urdf_states(lib, ctrl, n=50, seed=2)
+    assert r.success and r.max_torque_rel <= 1e-12, r.message
