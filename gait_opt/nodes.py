@@ -174,7 +174,7 @@ def check_radians(q, names, where: str = "nodes") -> None:
     q = np.asarray(q, dtype=float)
     span = np.ptp(q, axis=1)
     i = int(np.argmax(span))
-    if span[i] >= 2 * np.pi:
+    if span[i] > 2 * np.pi + 1e-6:          # wrapped to [-pi, pi] spans 2 pi at most
         raise ValueError(f"{where}: {names[i]} spans {span[i]:.4g} over the step, more than "
                          f"a full turn (2 pi): angles in degrees? (a step is given in rad and "
                          f"rad/s)")
