@@ -29,7 +29,7 @@ import numpy as np
 
 from biped_casadi.files import read_text_file, write_text_atomic
 
-from .nodes import Nodes, check_radians, csv_table, nodes_from_arrays
+from .nodes import Nodes, check_radians, check_rates, csv_table, nodes_from_arrays
 
 __all__ = ["urdf_columns", "urdf_nodes", "read_urdf_csv", "gait_table", "write_gait_csv",
            "CSV_ANGLES", "require_urdf_map"]
@@ -165,6 +165,7 @@ def urdf_nodes(model, columns: dict, stance, where: str = "gait",
     dx = np.vstack([columns["dpitch"]] + [columns[f"d{n}"] for n in umap.names])
     nodes = nodes_from_arrays(t, x, dx, None, model.nq, where)
     check_radians(nodes.q, ["pitch"] + list(umap.names), where)
+    check_rates(nodes.t, nodes.q, nodes.dq, where)
     q, dq = umap.to_model(nodes.q, nodes.dq, leg, continuous=True)
     info = dict(stance=stance_name)
     if base:

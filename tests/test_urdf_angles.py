@@ -385,3 +385,30 @@ def test_joint_names_that_close_a_c_comment_build(walker_gait, tmp_path):
     lib = CompiledUrdfController(build_library(tmp_path / "tv"), ctrl, law.urdf)
     r = compare_urdf_states(lib, ctrl, n=50, seed=2)
     assert r.success and r.max_torque_rel <= 1e-12, r.message
+
+
+@pytest.mark.parametrize("angles, unit", [("urdf", "ms"), ("relative", "ms"),
+                                          ("relative", "deg/s")])
+def test_times_in_ms_or_rates_in_degrees_are_named(angles, unit, walker_gait, tmp_path,
+                                                    capsys):
+    """t in ms (or rates in deg/s beside angles in rad): the rates do not integrate to
+    the angles; one line saying so (it said the Bezier fit misses the nodes by 470 rad)."""
+    src = tmp_path / "step.csv"
+    write_gait_csv(walker_gait, src, angles=angles, n_nodes=21)
+    rows = [r.split(",") for r in src.read_text().splitlines()]
+    rates = [i for i, h in enumerate(rows[0]) if h.startswith("d") and not h.startswith("dd")
+             and h not in ("dx", "dz")]
+    for r in rows[1:]:
+        if unit == "ms":
+            r[0] = repr(1e3 * float(r[0]))
+        else:
+            for i in rates:
+                r[i] = repr(math.degrees(float(r[i])))
+    src.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    out = tmp_path / "gait.json"
+    extra = ["--angles", "urdf", "--stance", "hip_left"] if angles == "urdf" else []
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), *extra,
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "t in ms" in err and "integrate" in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
