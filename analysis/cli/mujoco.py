@@ -20,6 +20,11 @@ from .mujoco_options import add_mujoco_settings, mujoco_settings
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
 
+#: the steps ``--plot``'s animation shows (in real time; a longer walk's axes would leave
+#: the robot a dot, and its GIF take minutes and tens of MB)
+ANIMATED_STEPS = 10
+
+
 def _check(args):
     """Everything that can be checked before the gait is loaded; the settings."""
     check_m1_values(args.m1)
@@ -93,7 +98,8 @@ def cmd_mujoco(args):
         folder = Path(args.plot)
         figures["steps"] = save_figures({"mujoco_steps": mujoco_steps_plot([w])}, folder)[0]
         if w.t.size:
-            figures["animation"] = mujoco_animation(w, layout(model), folder / "mujoco_walk.gif")
+            figures["animation"] = mujoco_animation(w, layout(model), folder / "mujoco_walk.gif",
+                                                    max_steps=ANIMATED_STEPS)
 
     # ---- report
     d = w.to_dict()
@@ -202,6 +208,6 @@ def register(sub):
                    help="skip MuJoCo's stride map (a second or two of rollouts)")
     p.add_argument("--plot", metavar="DIR",
                    help="write DIR/mujoco_steps.png (speed, period and errors per step) and "
-                        "DIR/mujoco_walk.gif (the walk)")
+                        f"DIR/mujoco_walk.gif (the walk, its first {ANIMATED_STEPS} steps)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_mujoco)
