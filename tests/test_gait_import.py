@@ -198,7 +198,9 @@ def test_bad_import_arguments(gait, tmp_path, capsys):
     out = tmp_path / "g.json"
     for extra, message in [(["--import-tol", "-1"], "--import-tol must be a positive"),
                            (["--bezier-degree", "2"], "--bezier-degree must be from 4 to 20"),
-                           (["--out", str(tmp_path / "g.txt")], "must end in .json")]:
+                           (["--out", str(tmp_path / "g.txt")], "must end in .json"),
+                           (["--speed", "0.3"], "--speed: an imported gait walks at its "
+                                                "data's speed")]:
         assert main(["gait", "--import", str(src), "--out", str(out), *extra]) == 2
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1
