@@ -289,8 +289,10 @@ def _read_csv(text: str, where: str, nq: int | None) -> Nodes:
     if with_acc:
         want += [f"ddq{i}" for i in range(1, n + 1)]
     if n < 1 or head != want:
+        hint = ("; a step in URDF angles? (--angles urdf --stance HIP_JOINT)"
+                if "pitch" in head else "")
         raise ValueError(f"{where}: the header must be t,q1..qn,dq1..dqn[,ddq1..ddqn], got "
-                         f"{','.join(raw)[:120]!r}")
+                         f"{','.join(raw)[:120]!r}{hint}")
     return nodes_from_arrays(a[:, 0], a[:, 1:1 + n], a[:, 1 + n:1 + 2 * n],
                              a[:, 1 + 2 * n:] if with_acc else None, nq, where)
 

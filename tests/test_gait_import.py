@@ -171,6 +171,9 @@ BAD = {
                 "missing key(s) theta_minus"),
     "steps.txt": ("x", "must end in .csv, .npz or .json"),
     "broken.npz": ("not a zip", "cannot read the NPZ file"),
+    "urdf_header.csv": ("t,pitch,hip_left,knee_left,dpitch,dhip_left,dknee_left\n"
+                        + "\n".join(f"{i},0,0,0,0,0,0" for i in range(6)),
+                        "a step in URDF angles? (--angles urdf --stance HIP_JOINT)"),
     "semicolons.csv": ("HEAD\n" + "\n".join(f"{i};0;0;0;0;0;0;0;0;0;0" for i in range(6)),
                        "values must be separated by commas (this file uses ';')"),
     "tabs.csv": ("HEAD\n" + "\n".join(f"{i}\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0" for i in range(6)),
