@@ -210,3 +210,16 @@ def test_efforts_all_zero_are_no_limit(tmp_path, capsys):
     out = tmp_path / "r.toml"
     assert main(["robot", "import", str(p), "--torque-limit", "150", "--out", str(out)]) == 0
     assert load_description(out) == robot("rabbit").description
+
+
+def test_joint_damping_and_friction_are_said_to_be_ignored(tmp_path):
+    """<dynamics damping friction> is physics the model has not (rigid, frictionless
+    joints): the import says it leaves it out instead of dropping it silently."""
+    text = (ROBOTS / "rabbit.urdf").read_text().replace(
+        '<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><dynamics damping="0.5" friction="1.2"/>')
+    p = tmp_path / "damped.urdf"
+    p.write_text(text)
+    imp = import_urdf(p)
+    assert imp.description == robot("rabbit").description
+    said = [n for n in imp.notes if "<dynamics>" in n]
+    assert len(said) == 1 and "hip_left" in said[0] and "damping 0.5" in said[0], imp.notes

@@ -36,6 +36,9 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   (``continuous`` joints, no ``<limit>``), or give ``effort="0"`` every one (exporters'
   "unknown"), has none (infinite, said in the notes) unless ``torque_limit=`` sets it.
 
+Joint ``<dynamics>`` (damping, friction) is not in the model (rigid, frictionless joints):
+the notes list it.
+
 The torso's length (which only draws the robot) is the top of its visual or collision
 geometry above the hip along its up direction, else twice its centre-of-mass height.
 Gravity is 9.81 m/s^2 along -z of the world.
@@ -485,6 +488,15 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 f"are {apart:.3g} m apart in the plane of motion: the model's legs share "
                 f"one hip")
     all_joints = [j for leg in legs for j in leg.joints]
+    damped = []
+    for j in all_joints:
+        terms = [f"{k} {getattr(j.dynamics, k):g}" for k in ("damping", "friction")
+                 if j.dynamics is not None and getattr(j.dynamics, k, None)]
+        if terms:
+            damped.append(f"{j.name} ({', '.join(terms)})")
+    if damped:
+        rd.notes.append(f"ignored: joint <dynamics> of {', '.join(damped)}: the model's joints "
+                        f"are frictionless (the torques it computes are the rigid body's)")
     motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
     pm_legs = [dict(), dict()]
     links = [[leg.body(i, pm) for i in range(len(leg.frames))]
