@@ -548,8 +548,9 @@ def _same_legs(rd: _Reader, links, pms, legs):
     for a, b in zip(*links):
         for key in ("mass", "length", "com", "com_offset", "inertia"):
             if not math.isclose(a[key], b[key], rel_tol=1e-9, abs_tol=rd.tol):
-                rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.6g}, link "
-                        f"{b['name']!r} {b[key]:.6g}")
+                rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.12g}, link "
+                        f"{b['name']!r} {b[key]:.12g} (apart by {abs(a[key] - b[key]):.2g}; "
+                        f"the model's legs are identical to 1e-9 relative or {rd.tol:g} m)")
     if set(pms[0]) - {"hip"} != set(pms[1]) - {"hip"} or any(
             not math.isclose(pms[0][k], pms[1][k], rel_tol=1e-9) for k in pms[0] if k != "hip"):
         rd.fail(f"legs differ in their point masses (legs of {legs[0].joints[0].name!r} and "
