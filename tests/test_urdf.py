@@ -127,6 +127,10 @@ BAD = {
                                                          '<mass value="6.80000002"/>', 1),
                                      r"legs differ: link 'femur_left' has mass 6.80000002, "
                                      r"link 'femur_right' 6.8 \(apart by 2e-08; "),
+    "rotors differ in the 8th digit": (lambda s: s.replace(
+        "<motorInertia>3.32e-4</motorInertia>", "<motorInertia>3.3200001e-4</motorInertia>", 1),
+        r"reflected rotor inertias differ: joint 'knee_left' 0.83, joint 'hip_left' "
+        r"0.830000025 kg m\^2 \(apart by 2.5e-08;"),
     "mimic joint": (lambda s: s.replace('<joint name="knee_right" type="revolute">',
                                         '<joint name="knee_right" type="revolute"><mimic '
                                         'joint="knee_left" multiplier="1" offset="0"/>'),

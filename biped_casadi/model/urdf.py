@@ -176,9 +176,9 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
     ref = next(iter(values.values()))
     for n, v in values.items():
         if not math.isclose(v, ref, rel_tol=1e-12, abs_tol=0.0):
-            rd.fail(f"reflected rotor inertias differ: joint {n!r} {v:g}, joint "
-                    f"{next(iter(values))!r} {ref:g} kg m^2 (the model takes one for "
-                    f"every joint)")
+            rd.fail(f"reflected rotor inertias differ: joint {n!r} {v:.12g}, joint "
+                    f"{next(iter(values))!r} {ref:.12g} kg m^2 (apart by {abs(v - ref):.2g}; "
+                    f"the model takes one for every joint)")
     given = sorted({e for e in efforts.values() if e is not None})
     unlimited = [n for n, e in efforts.items() if e is None]
     if torque_limit is not None:
