@@ -313,6 +313,19 @@ def test_animation_shows_the_first_steps_of_a_long_walk(gait, tmp_path, capsys, 
     assert frames <= 25 * two + 2 < 25 * r["steps"][3]["t_touchdown"], (frames, two)
 
 
+def test_steps_figure_of_a_walk_that_took_no_step():
+    """A walk that ends in its first step: the figure's step axis shows step 1 and says
+    no step was completed (it showed steps -0.04 to 0.04 over empty panels)."""
+    from analysis.reporting.plots import mujoco_steps_plot
+    w = dict(law="c", settings=dict(contact="stiff"), status="scuffed",
+             gait=dict(speed=0.6, T=0.54), speeds=[], periods=[], qu_errors=[], dqu_errors=[])
+    fig = mujoco_steps_plot([w])
+    ax = fig.axes[3]
+    ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
+    assert ticks and all(t >= 1 and float(t).is_integer() for t in ticks), ticks
+    assert any("no step" in t.get_text() for t in fig.axes[0].texts)
+
+
 def test_done_when_walks_at_stiff_settings(gait):
     """Virtual constraints at the stiff settings: 100 steps from the gait, 30 from the
     paper's perturbation at scale 2, speed and period within 3 %, errors after step 10

@@ -78,6 +78,11 @@ def mujoco_steps_plot(walks, labels=None, title: str | None = None) -> Figure:
     ax[3].set_ylabel(r"$\dot q_u - \dot q_u^d(T)$ [rad/s]")
     ax[3].set_xlabel("step")
     ax[3].xaxis.set_major_locator(MaxNLocator(integer=True, steps=[1, 2, 5, 10]))  # whole steps
+    if max(_series(w, "speeds").size for w in walks) == 0:      # ended in its first step
+        ax[3].set_xlim(0.5, 1.5)
+        ax[3].set_xticks([1])
+        ax[0].text(0.5, 0.2, "no step completed", transform=ax[0].transAxes, ha="center",
+                   va="center", fontsize=10, bbox=dict(fc="white", ec="0.6"))
     ax[0].legend(fontsize=8, loc="best")
     ax[1].legend(fontsize=8, loc="best")
     for a in ax:
