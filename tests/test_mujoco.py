@@ -326,6 +326,17 @@ def test_steps_figure_of_a_walk_that_took_no_step():
     assert any("no step" in t.get_text() for t in fig.axes[0].texts)
 
 
+def test_no_cycle_prints_no_eigenvalues(gait, tmp_path, capsys):
+    """A design that cannot walk in MuJoCo has no cycle to fit: the stride-map line says
+    so (it printed 'eigenvalues [] (fit residual nan of the deviations)')."""
+    g = gait.save(tmp_path / "gait.json")
+    assert biped_main(["mujoco", "--gait", str(g), "--controller", "vc", "--steps", "1",
+                       "--torque-limit", "1"]) == 1
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("MuJoCo's stride map"))
+    assert "nan" not in line and "[]" not in line and "no cycle" in line, line
+
+
 def test_done_when_walks_at_stiff_settings(gait):
     """Virtual constraints at the stiff settings: 100 steps from the gait, 30 from the
     paper's perturbation at scale 2, speed and period within 3 %, errors after step 10

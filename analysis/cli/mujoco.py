@@ -148,9 +148,13 @@ def _print(w, eig, figures):
           "steps/s with the law in the loop)")
     if eig is not None:
         c = eig["stride_map"]["cycle"]
-        print(f"MuJoCo's stride map on tau = 0.75 T: eigenvalues {_ev(eig['mujoco'])} (fit "
-              f"residual {eig['relative_residual']:.2g} of the deviations); exact "
-              f"{_ev(eig['exact'])}")
+        if len(eig["mujoco"]):
+            print(f"MuJoCo's stride map on tau = 0.75 T: eigenvalues {_ev(eig['mujoco'])} (fit "
+                  f"residual {eig['relative_residual']:.2g} of the deviations); exact "
+                  f"{_ev(eig['exact'])}")
+        else:
+            print(f"MuJoCo's stride map on tau = 0.75 T: none (no cycle to fit it on); exact "
+                  f"{_ev(eig['exact'])}")
         print(f"  {c['message']}")
     for k, v in figures.items():
         print(f"{k}: {v}")
