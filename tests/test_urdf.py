@@ -231,3 +231,16 @@ def test_joint_damping_and_friction_are_said_to_be_ignored(tmp_path):
     assert imp.description == robot("rabbit").description
     said = [n for n in imp.notes if "<dynamics>" in n]
     assert len(said) == 1 and "hip_left" in said[0] and "damping 0.5" in said[0], imp.notes
+
+
+def test_torso_geometry_below_the_hip_is_not_called_missing(tmp_path):
+    """A torso whose centre of mass hangs below the hip (its up direction points down)
+    and whose box stands above it: the note on its drawn length says where the geometry
+    is, not that there is none."""
+    text = (ROBOTS / "rabbit.urdf").read_text().replace(
+        '<origin xyz="0 0 0.24" rpy="0 0 0"/>', '<origin xyz="0 0 -0.05" rpy="0 0 0"/>', 1)
+    p = tmp_path / "low.urdf"
+    p.write_text(text)
+    notes = import_urdf(p).notes
+    assert not any("no box, cylinder or sphere" in n for n in notes), notes
+    assert any("geometry does not reach above the hip" in n for n in notes), notes

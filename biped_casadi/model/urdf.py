@@ -404,8 +404,10 @@ def _torso_length(rd: _Reader, link, frame: _Frame, hip, up, com: float) -> floa
         tops.append(float(np.dot(p - hip, up)) + half)
     if tops and max(tops) > 0:
         return max(tops)
-    rd.notes.append("the torso has no box, cylinder or sphere geometry: its length (for "
-                    "drawings) is twice its centre-of-mass height")
+    rd.notes.append(("the torso's box, cylinder or sphere geometry does not reach above the "
+                     "hip along its up direction (toward its centre of mass)" if tops else
+                     "the torso has no box, cylinder or sphere geometry")
+                    + ": its length (for drawings) is twice its centre-of-mass height")
     return 2.0 * com if com > 0 else 1e-3
 
 
