@@ -131,6 +131,41 @@ BAD = {
         "<motorInertia>3.32e-4</motorInertia>", "<motorInertia>3.3200001e-4</motorInertia>", 1),
         r"reflected rotor inertias differ: joint 'knee_left' 0.83, joint 'hip_left' "
         r"0.830000025 kg m\^2 \(apart by 2.5e-08;"),
+    "link defined twice": (lambda s: s.replace('<link name="tibia_right">',
+                                               '<link name="tibia_left">', 1),
+                           r"link 'tibia_left' is defined twice"),
+    "joint defined twice": (lambda s: s.replace('<joint name="knee_right" type',
+                                                '<joint name="knee_left" type', 1),
+                            r"joint 'knee_left' is defined twice"),
+    "parent not defined": (lambda s: s.replace('<parent link="femur_right"/>',
+                                               '<parent link="femur_rigth"/>', 1),
+                           r"joint 'knee_right' names parent link 'femur_rigth', which the "
+                           r"file does not define"),
+    "child not defined": (lambda s: s.replace('<child link="tibia_right"/>',
+                                              '<child link="tibia_rigth"/>', 1),
+                          r"joint 'knee_right' names child link 'tibia_rigth', which the "
+                          r"file does not define"),
+    "a loop of joints": (lambda s: s.replace('</robot>', '<joint name="loop" type="fixed">'
+                                             '<parent link="foot_left"/><child link="torso"/>'
+                                             '</joint></robot>'),
+                         r"no root link: the joints make a loop"),
+    "a loop beside the root": (lambda s: s.replace('<robot name="RABBIT">',
+                                                   '<robot name="RABBIT"><link name="world"/>', 1)
+                               .replace('</robot>', '<joint name="loop" type="fixed"><parent '
+                                        'link="foot_left"/><child link="torso"/></joint>'
+                                        '</robot>'),
+                               r"link\(s\) 'torso', .* not connected to the root link 'world': "
+                               r"the joints make a loop"),
+    "a nan inertia": (lambda s: s.replace('iyy="0.47"', 'iyy="nan"', 1),
+                      r"link 'femur_left': <inertia> has a value that is not finite \(nan\)"),
+    "a nan origin": (lambda s: s.replace('<origin xyz="0 0 -0.4" rpy="0 0 0"/>',
+                                         '<origin xyz="0 0 nan" rpy="0 0 0"/>', 1),
+                     r"joint 'knee_left': <origin> has a value that is not finite \(nan\)"),
+    "an infinite axis": (lambda s: s.replace('<axis xyz="0 1 0"/>', '<axis xyz="0 inf 0"/>', 1),
+                         r"joint 'hip_left': <axis> has a value that is not finite \(inf\)"),
+    "a nan motor inertia": (lambda s: s.replace("<motorInertia>3.32e-4</motorInertia>",
+                                                "<motorInertia>nan</motorInertia>", 1),
+                            r"the transmission of joint 'hip_left' has motorInertia nan"),
     "mimic joint": (lambda s: s.replace('<joint name="knee_right" type="revolute">',
                                         '<joint name="knee_right" type="revolute"><mimic '
                                         'joint="knee_left" multiplier="1" offset="0"/>'),

@@ -44,7 +44,8 @@ geometry above the hip along its up direction, else twice its centre-of-mass hei
 Gravity is 9.81 m/s^2 along -z of the world.
 
 Refused, with one ``ValueError`` naming the file and the joint or link: an unparsable
-file, non-planar or prismatic joints, a torso without two legs, legs that differ (links,
+file, links or joints defined twice, a joint naming a link the file does not define, a
+loop of joints, a number that is not finite, non-planar or prismatic joints, a torso without two legs, legs that differ (links,
 masses, centres of mass, point masses), the hips at two places in the plane, a leg joint
 without actuator (the model's one unactuated degree of freedom is the stance foot's
 contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a link without
@@ -168,6 +169,9 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
         except ValueError:
             rd.fail(f"the transmission of joint {j.name!r} has a non-numeric motorInertia "
                     f"or mechanicalReduction")
+        if not math.isfinite(motor):
+            rd.fail(f"the transmission of joint {j.name!r} has motorInertia {motor:g}: it must "
+                    f"be a finite number")
         if not (math.isfinite(gear) and gear > 0):
             rd.fail(f"the transmission of joint {j.name!r} has mechanicalReduction {gear:g}: "
                     f"it must be positive")
