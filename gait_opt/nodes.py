@@ -237,13 +237,22 @@ def relative_angles(nodes: Nodes) -> Nodes:
     return Nodes(nodes.t, rel(nodes.q), rel(nodes.dq), rel(nodes.ddq), nodes.source)
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def csv_table(text: str, where: str) -> tuple:
     """A CSV of numbers: its header and its rows.
 
     Parameters
     ----------
     text : str
-        The file's text (blank lines skipped).
+        The file's text (blank lines skipped; a separator that ends every line, the
+        header's too, makes no column).
     where : str
         Names the file in messages.
 
@@ -261,6 +270,8 @@ def csv_table(text: str, where: str) -> tuple:
     rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
     if not rows:
         raise ValueError(f"{where} is empty")
+    while len(rows[0]) > 1 and all(len(r) == len(rows[0]) and not r[-1].strip() for r in rows):
+        rows = [r[:-1] for r in rows]        # a separator ending every line: no column
     head = [c.strip() for c in rows[0]]
     if len(head) == 1:
         seps = {";": "';'", "\t": "tabs"}
@@ -275,7 +286,9 @@ def csv_table(text: str, where: str) -> tuple:
         try:
             data.append([float(c) for c in r])
         except ValueError:
-            raise ValueError(f"{where}: line {i} has a value that is not a number") from None
+            k, c = next((k, c) for k, c in enumerate(r) if not _is_number(c))
+            raise ValueError(f"{where}: line {i} has a value that is not a number: {c.strip()!r} "
+                             f"in column {head[k] or k + 1}") from None
     return head, np.array(data, dtype=float).reshape(-1, len(head))
 
 

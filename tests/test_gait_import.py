@@ -174,6 +174,9 @@ BAD = {
     "urdf_header.csv": ("t,pitch,hip_left,knee_left,dpitch,dhip_left,dknee_left\n"
                         + "\n".join(f"{i},0,0,0,0,0,0" for i in range(6)),
                         "a step in URDF angles? (--angles urdf --stance HIP_JOINT)"),
+    "text.csv": ("HEAD\n" + "\n".join(f"{i},0,0,0,0,0,0,{'n/a' if i == 2 else 0},0,0,0"
+                                     for i in range(6)),
+                 "line 4 has a value that is not a number: 'n/a' in column dq2"),
     "semicolons.csv": ("HEAD\n" + "\n".join(f"{i};0;0;0;0;0;0;0;0;0;0" for i in range(6)),
                        "values must be separated by commas (this file uses ';')"),
     "tabs.csv": ("HEAD\n" + "\n".join(f"{i}\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0" for i in range(6)),

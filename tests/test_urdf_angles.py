@@ -412,3 +412,13 @@ def test_times_in_ms_or_rates_in_degrees_are_named(angles, unit, walker_gait, tm
     err = capsys.readouterr().err.strip()
     assert "t in ms" in err and "integrate" in err and len(err.splitlines()) == 1, err
     assert not out.exists()
+
+
+def test_a_trailing_separator_on_every_line_is_no_column(tmp_path, capsys):
+    """Spreadsheets often end every line with a separator: the empty last column is none
+    (it said 'line 2 has a value that is not a number')."""
+    src = tmp_path / "step.csv"
+    src.write_text("\n".join(r + "," for r in CSV.read_text().splitlines()) + "\n")
+    out = tmp_path / "gait.json"
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
+                 "--stance", "hip_left", "--out", str(out)]) == 0, capsys.readouterr().err
