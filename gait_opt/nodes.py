@@ -267,7 +267,12 @@ def csv_table(text: str, where: str) -> tuple:
         Naming ``where``: empty, separated by ';' or tabs, a row of another length, a
         value that is not a number.
     """
-    rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
+    reader = csv.reader(io.StringIO(text))
+    rows, lines = [], []                   # the rows, and the file's line of each
+    for r in reader:
+        if r and any(c.strip() for c in r):
+            rows.append(r)
+            lines.append(reader.line_num)
     if not rows:
         raise ValueError(f"{where} is empty")
     while len(rows[0]) > 1 and all(len(r) == len(rows[0]) and not r[-1].strip() for r in rows):
@@ -280,7 +285,7 @@ def csv_table(text: str, where: str) -> tuple:
             raise ValueError(f"{where}: the header is one column: values must be separated "
                              f"by commas (this file uses {used[0]})")
     data = []
-    for i, r in enumerate(rows[1:], start=2):
+    for i, r in zip(lines[1:], rows[1:]):
         if len(r) != len(head):
             raise ValueError(f"{where}: line {i} has {len(r)} values, the header {len(head)}")
         try:

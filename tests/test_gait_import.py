@@ -177,6 +177,9 @@ BAD = {
     "text.csv": ("HEAD\n" + "\n".join(f"{i},0,0,0,0,0,0,{'n/a' if i == 2 else 0},0,0,0"
                                      for i in range(6)),
                  "line 4 has a value that is not a number: 'n/a' in column dq2"),
+    "blank_lines.csv": ("HEAD\n\n" + "\n\n".join(f"{i},0,0,0,0,0,0,0,0,0{',0' if i != 3 else ''}"
+                                                 for i in range(6)),
+                        "line 9 has 10 values, the header 11"),
     "semicolons.csv": ("HEAD\n" + "\n".join(f"{i};0;0;0;0;0;0;0;0;0;0" for i in range(6)),
                        "values must be separated by commas (this file uses ';')"),
     "tabs.csv": ("HEAD\n" + "\n".join(f"{i}\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0" for i in range(6)),
