@@ -6,8 +6,8 @@ angles in rad, nodes not necessarily uniform, at least :data:`MIN_NODES`):
 
 - CSV: a header ``t,q1,...,qn,dq1,...,dqn`` (optionally ``,ddq1,...,ddqn``), then one
   row per node;
-- NPZ or JSON: arrays ``t`` (N,), ``q`` and ``dq`` (N, n; (n, N) is accepted too) and
-  optionally ``ddq``.
+- NPZ or JSON: arrays ``t`` (N,), ``q`` and ``dq`` (N, n; (n, N) is accepted too when
+  N != n) and optionally ``ddq``.
 
 Coordinates: the toolkit's (relative joint angles, docs/theory.md), or with
 ``angles='absolute'`` the absolute link angles phi_1..phi_n (phi_1 the stance leg's
@@ -107,7 +107,7 @@ def nodes_from_arrays(t, q, dq, ddq=None, nq: int | None = None,
     t : array_like
         (N,) times, s, strictly increasing.
     q, dq : array_like
-        (N, nq) or (nq, N).
+        (N, nq) or (nq, N); a square array (N = nq) is (N, nq).
     ddq : array_like, optional
         Same shape as q.
     nq : int, optional
@@ -142,7 +142,7 @@ def nodes_from_arrays(t, q, dq, ddq=None, nq: int | None = None,
         if a.ndim != 2 or t.size not in a.shape:
             raise ValueError(f"{where}: {name} must be an (N, n) array with N = {t.size} "
                              f"nodes, got shape {a.shape}")
-        a = a.T if a.shape[0] == t.size and a.shape[1] != t.size else a
+        a = a.T if a.shape[0] == t.size else a      # (N, n); a square one is (N, n) too
         if nq is not None and a.shape[0] != nq:
             raise ValueError(f"{where}: {name} has {a.shape[0]} coordinates per node, the "
                              f"robot {nq}")

@@ -163,7 +163,7 @@ def urdf_nodes(model, columns: dict, stance, where: str = "gait",
     t = columns["t"]
     x = np.vstack([columns["pitch"]] + [columns[n] for n in umap.names])
     dx = np.vstack([columns["dpitch"]] + [columns[f"d{n}"] for n in umap.names])
-    nodes = nodes_from_arrays(t, x, dx, None, model.nq, where)
+    nodes = nodes_from_arrays(t, x.T, dx.T, None, model.nq, where)       # (N, n)
     check_radians(nodes.q, ["pitch"] + list(umap.names), where)
     check_rates(nodes.t, nodes.q, nodes.dq, where)
     q, dq = umap.to_model(nodes.q, nodes.dq, leg, continuous=True)

@@ -77,6 +77,22 @@ def test_nodes_of_the_default_gait_import_back(model, gait, pick):
     assert d_tv <= 1e-6 and d_vc <= 1e-6
 
 
+@pytest.mark.parametrize("form", ["csv", "json"])
+def test_as_many_nodes_as_coordinates(model, gait, tmp_path, form):
+    """Five nodes of a five-coordinate robot: the (N, n) table is not read as (n, N) (the
+    CSV's rows were taken for its coordinates)."""
+    nodes = samples(gait, n=5)
+    if form == "csv":
+        src = write_csv(tmp_path / "five.csv", nodes)
+    else:
+        src = tmp_path / "five.json"
+        src.write_text(json.dumps(dict(t=nodes.t.tolist(), q=nodes.q.T.tolist(),
+                                       dq=nodes.dq.T.tolist())))
+    r = import_gait(model, src)
+    assert r.orbit_residual_after <= 1e-10 and abs(r.gait.T - gait.T) < 1e-12
+    assert np.max(np.abs(r.gait.alpha - gait.alpha)) < 1e-8
+
+
 def test_cli_import_then_eig_and_simulate(gait, tmp_path, capsys):
     src = write_csv(tmp_path / "steps.csv", samples(gait).every(10), acc=True)
     out = tmp_path / "imported.json"

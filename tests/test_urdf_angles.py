@@ -422,3 +422,10 @@ def test_a_trailing_separator_on_every_line_is_no_column(tmp_path, capsys):
     out = tmp_path / "gait.json"
     assert main(["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
                  "--stance", "hip_left", "--out", str(out)]) == 0, capsys.readouterr().err
+
+
+def test_five_nodes_in_urdf_angles(walker, walker_gait, tmp_path):
+    """As many nodes as coordinates in URDF angles: the same orbit."""
+    src = write_gait_csv(walker_gait, tmp_path / "five.csv", angles="urdf", n_nodes=5)
+    r = import_gait(walker, src, angles="urdf", stance="hip_left")
+    assert r.orbit_residual_after <= 1e-10 and abs(r.gait.T - walker_gait.T) < 1e-12
