@@ -243,8 +243,9 @@ def _nodes_of(model, source, angles: str, where: str, stance=None, tol: float = 
         raise GaitImportError(f"{where}: {source.nq} coordinates per node, the robot "
                               f"{model.params.name} has {model.nq}")
     symbol = "phi" if angles == "absolute" else "q"
-    check_radians(source.q, [f"{symbol}{i}" for i in range(1, source.nq + 1)], where)
-    check_rates(source.t, source.q, source.dq, where)
+    names = [f"{symbol}{i}" for i in range(1, source.nq + 1)]
+    check_radians(source.q, names, where)
+    check_rates(source.t, source.q, source.dq, names, where)
     return (relative_angles(source) if angles == "absolute" else source), "nodes", info
 
 

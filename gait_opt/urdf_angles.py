@@ -165,7 +165,7 @@ def urdf_nodes(model, columns: dict, stance, where: str = "gait",
     dx = np.vstack([columns["dpitch"]] + [columns[f"d{n}"] for n in umap.names])
     nodes = nodes_from_arrays(t, x.T, dx.T, None, model.nq, where)       # (N, n)
     check_radians(nodes.q, ["pitch"] + list(umap.names), where)
-    check_rates(nodes.t, nodes.q, nodes.dq, where)
+    check_rates(nodes.t, nodes.q, nodes.dq, ["pitch"] + list(umap.names), where)
     q, dq = umap.to_model(nodes.q, nodes.dq, leg, continuous=True)
     info = dict(stance=stance_name)
     if base:

@@ -388,7 +388,7 @@ def test_joint_names_that_close_a_c_comment_build(walker_gait, tmp_path):
 
 
 @pytest.mark.parametrize("angles, unit", [("urdf", "ms"), ("relative", "ms"),
-                                          ("relative", "deg/s")])
+                                          ("relative", "deg/s"), ("urdf", "dpitch deg/s")])
 def test_times_in_ms_or_rates_in_degrees_are_named(angles, unit, walker_gait, tmp_path,
                                                     capsys):
     """t in ms (or rates in deg/s beside angles in rad): the rates do not integrate to
@@ -401,6 +401,9 @@ def test_times_in_ms_or_rates_in_degrees_are_named(angles, unit, walker_gait, tm
     for r in rows[1:]:
         if unit == "ms":
             r[0] = repr(1e3 * float(r[0]))
+        elif unit == "dpitch deg/s":           # an IMU's rate beside the encoders'
+            i = rows[0].index("dpitch")
+            r[i] = repr(math.degrees(float(r[i])))
         else:
             for i in rates:
                 r[i] = repr(math.degrees(float(r[i])))
