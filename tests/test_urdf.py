@@ -156,6 +156,13 @@ BAD = {
                                         '</robot>'),
                                r"link\(s\) 'torso', .* not connected to the root link 'world': "
                                r"the joints make a loop"),
+    "a negative mass beside a heavier fixed child": (
+        lambda s: s.replace('<mass value="6.8"/>', '<mass value="-1"/>', 1).replace(
+            '<link name="femur_left">', '<joint name="pad_fixed" type="fixed"><parent '
+            'link="femur_left"/><child link="pad"/></joint><link name="pad"><inertial><origin '
+            'xyz="0 0 -0.2"/><mass value="7.8"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" '
+            'iyz="0" izz="0.1"/></inertial></link><link name="femur_left">', 1),
+        r"link 'femur_left' has a negative mass \(-1 kg\)"),
     "a nan inertia": (lambda s: s.replace('iyy="0.47"', 'iyy="nan"', 1),
                       r"link 'femur_left': <inertia> has a value that is not finite \(nan\)"),
     "a nan origin": (lambda s: s.replace('<origin xyz="0 0 -0.4" rpy="0 0 0"/>',

@@ -45,8 +45,9 @@ Gravity is 9.81 m/s^2 along -z of the world.
 
 Refused, with one ``ValueError`` naming the file and the joint or link: an unparsable
 file, links or joints defined twice, a joint naming a link the file does not define, a
-loop of joints, a number that is not finite, non-planar or prismatic joints, a torso without two legs, legs that differ (links,
-masses, centres of mass, point masses), the hips at two places in the plane, a leg joint
+loop of joints, a number that is not finite, a negative mass, non-planar or prismatic
+joints, a torso without two legs, legs that differ (links, masses, centres of mass, point
+masses), the hips at two places in the plane, a leg joint
 without actuator (the model's one unactuated degree of freedom is the stance foot's
 contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a link without
 ``<inertial>`` (its own or a fixed child's), a torso whose up direction cannot be found, no
@@ -278,10 +279,15 @@ def _merged(rd: _Reader, frame: _Frame, ends: dict, owner: str, pm: dict, plane:
     ``pm``."""
     link = rd.links[frame.name]
     body = _body(link, frame.R, frame.p)
+    if body is not None and body.mass < 0:
+        rd.fail(f"link {link.name!r}{owner} has a negative mass ({body.mass:g} kg)")
     if body is not None and body.mass == 0.0:
         body = None                   # a massless link: its fixed children may carry it
     for _, f in rd.fixed_descendants(frame):
         extra = _body(rd.links[f.name], f.R, f.p)
+        if extra is not None and extra.mass < 0:
+            rd.fail(f"link {f.name!r} (fixed to {link.name!r}) has a negative mass "
+                    f"({extra.mass:g} kg)")
         if extra is None or extra.mass == 0.0:
             continue
         at = [name for name, pt in ends.items()
