@@ -163,6 +163,9 @@ BAD = {
             'xyz="0 0 -0.2"/><mass value="7.8"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" '
             'iyz="0" izz="0.1"/></inertial></link><link name="femur_left">', 1),
         r"link 'femur_left' has a negative mass \(-1 kg\)"),
+    "lengths in mm": (lambda s: s.replace('xyz="0 0 -0.4"', 'xyz="0 0 -400"'),
+                      r"the leg of 'hip_left' is 800 m long: URDF lengths are in metres \(a "
+                      r"file in millimetres\?\)"),
     "a nan inertia": (lambda s: s.replace('iyy="0.47"', 'iyy="nan"', 1),
                       r"link 'femur_left': <inertia> has a value that is not finite \(nan\)"),
     "a nan origin": (lambda s: s.replace('<origin xyz="0 0 -0.4" rpy="0 0 0"/>',

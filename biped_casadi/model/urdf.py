@@ -45,7 +45,8 @@ Gravity is 9.81 m/s^2 along -z of the world.
 
 Refused, with one ``ValueError`` naming the file and the joint or link: an unparsable
 file, links or joints defined twice, a joint naming a link the file does not define, a
-loop of joints, a number that is not finite, a negative mass, non-planar or prismatic
+loop of joints, a number that is not finite, a negative mass, a leg longer than
+:data:`MAX_LEG` (a file in mm), non-planar or prismatic
 joints, a torso without two legs, legs that differ (links, masses, centres of mass, point
 masses), the hips at two places in the plane, a leg joint
 without actuator (the model's one unactuated degree of freedom is the stance foot's
@@ -70,8 +71,11 @@ from .description import RobotDescription, description_from_dict, description_to
 from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
 from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader
 
-__all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "GEOMETRY_TOL"]
+__all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "GEOMETRY_TOL",
+           "MAX_LEG"]
 
+#: m: a longer leg is refused as a file in other units (URDF lengths are in metres)
+MAX_LEG = 10.0
 #: m: how far the two hips may be apart in the plane of motion, and how far from the hip
 #: a centre of mass (or geometry) must be to give the torso's direction
 GEOMETRY_TOL = 1e-9
@@ -493,6 +497,10 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     if len(legs[0].frames) != len(legs[1].frames):
         rd.fail(f"legs differ: {len(legs[0].frames)} and {len(legs[1].frames)} links "
                 f"(legs of {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r})")
+    span = sum(legs[0].lengths)
+    if span > MAX_LEG:
+        rd.fail(f"the leg of {legs[0].joints[0].name!r} is {span:.4g} m long: URDF lengths are "
+                f"in metres (a file in millimetres?)")
     hip = legs[0].points[0]
     apart = float(np.linalg.norm(plane.flat(legs[1].points[0] - hip)))
     if apart > tol:
