@@ -319,6 +319,23 @@ def test_files_with_a_byte_order_mark_read_as_without(tmp_path, capsys):
     assert Gait.load(again).T == Gait.load(out).T
 
 
+def test_a_step_saved_as_utf16_reads_and_latin1_is_named(tmp_path, capsys):
+    """Excel's "Unicode text" is UTF-16 with a byte order mark: it reads as the same step.
+    Text in another 8-bit encoding is named as such (it was 'not a text file')."""
+    src = tmp_path / "step.csv"
+    src.write_text(CSV.read_text(), encoding="utf-16")
+    out = tmp_path / "gait.json"
+    argv = ["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
+            "--stance", "hip_left", "--out", str(out)]
+    assert main(argv) == 0, capsys.readouterr().err
+    out.unlink()
+    src.write_text("# Schritt \u00fcber Hindernisse\n" + CSV.read_text(), encoding="latin-1")
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "not UTF-8" in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("angles", ["urdf", "relative"])
 def test_a_step_in_degrees_is_named(angles, walker_gait, tmp_path, capsys):
     """Angles in degrees (and rates in deg/s): one line saying so, exit 2, nothing written
