@@ -253,7 +253,7 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def csv_table(text: str, where: str) -> tuple:
+def csv_table(text: str, where: str, columns: str = "") -> tuple:
     """A CSV of numbers: its header and its rows.
 
     Parameters
@@ -263,6 +263,8 @@ def csv_table(text: str, where: str) -> tuple:
         header's too, makes no column).
     where : str
         Names the file in messages.
+    columns : str
+        The header expected, for the message on a file without one.
 
     Returns
     -------
@@ -272,8 +274,8 @@ def csv_table(text: str, where: str) -> tuple:
     Raises
     ------
     ValueError
-        Naming ``where``: empty, separated by ';' or tabs, a row of another length, a
-        value that is not a number.
+        Naming ``where``: empty, no header line, separated by ';' or tabs, a row of
+        another length, a value that is not a number.
     """
     reader = csv.reader(io.StringIO(text))
     rows, lines = [], []                   # the rows, and the file's line of each
@@ -286,6 +288,9 @@ def csv_table(text: str, where: str) -> tuple:
     while len(rows[0]) > 1 and all(len(r) == len(rows[0]) and not r[-1].strip() for r in rows):
         rows = [r[:-1] for r in rows]        # a separator ending every line: no column
     head = [c.strip() for c in rows[0]]
+    if all(_is_number(c) for c in head):
+        raise ValueError(f"{where}: no header line: line {lines[0]} holds numbers, not the "
+                         f"column names" + (f" ({columns})" if columns else ""))
     if len(head) == 1:
         seps = {";": "';'", "\t": "tabs"}
         used = [name for sep, name in seps.items() if sep in head[0]]
@@ -306,7 +311,7 @@ def csv_table(text: str, where: str) -> tuple:
 
 
 def _read_csv(text: str, where: str, nq: int | None) -> Nodes:
-    raw, a = csv_table(text, where)
+    raw, a = csv_table(text, where, "t,q1..qn,dq1..dqn[,ddq1..ddqn]")
     head = [c.lower() for c in raw]
     h = len(head) - 1
     with_acc = h % 3 == 0 and head[-1].startswith("ddq")

@@ -217,7 +217,10 @@ def read_urdf_csv(path, model, stance, tol: float = 0.05) -> tuple:
     where = f"gait file {path}"
     if path.suffix.lower() != ".csv":
         raise ValueError(f"{where}: a step in URDF angles is a CSV file (.csv)")
-    head, a = csv_table(read_text_file(path, "gait file", 50_000_000), where)
+    umap = model.description.urdf
+    columns = ("" if umap is None else f"t, pitch, the joints {', '.join(umap.names)}, dpitch "
+               f"and d + each joint; optionally x, z, dx, dz")
+    head, a = csv_table(read_text_file(path, "gait file", 50_000_000), where, columns)
     if len(set(head)) != len(head):
         dup = next(c for c in head if head.count(c) > 1)
         raise ValueError(f"{where}: column {dup!r} appears twice in the header")

@@ -196,6 +196,9 @@ BAD = {
     "blank_lines.csv": ("HEAD\n\n" + "\n\n".join(f"{i},0,0,0,0,0,0,0,0,0{',0' if i != 3 else ''}"
                                                  for i in range(6)),
                         "line 9 has 10 values, the header 11"),
+    "no_header.csv": ("\n".join(f"{i},0,0,0,0,0,0,0,0,0,0" for i in range(6)),
+                      "no header line: line 1 holds numbers, not the column names "
+                      "(t,q1..qn,dq1..dqn[,ddq1..ddqn])"),
     "semicolons.csv": ("HEAD\n" + "\n".join(f"{i};0;0;0;0;0;0;0;0;0;0" for i in range(6)),
                        "values must be separated by commas (this file uses ';')"),
     "tabs.csv": ("HEAD\n" + "\n".join(f"{i}\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0" for i in range(6)),

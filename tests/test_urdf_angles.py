@@ -195,12 +195,14 @@ def _bad_csv(tmp_path, edit):
     return p
 
 
-@pytest.mark.parametrize("case", ["unknown stance", "knee as stance", "no stance",
+@pytest.mark.parametrize("case", ["no header", "unknown stance", "knee as stance", "no stance",
                                   "missing column", "other stance", "legs-down convention",
                                   "knees the other way", "no map", "stance without urdf"])
 def test_bad_import_is_one_line_exit_2(case, tmp_path, capsys):
     src, robot_arg, extra = CSV, str(URDF), ["--angles", "urdf", "--stance", "hip_left"]
-    message = {"unknown stance": "--stance: the URDF has no leg joint 'hip_middle'",
+    message = {"no header": "no header line: line 1 holds numbers, not the column names "
+                            "(t, pitch, the joints hip_left, knee_left, hip_right, knee_right",
+               "unknown stance": "--stance: the URDF has no leg joint 'hip_middle'",
                "knee as stance": "--stance: 'knee_left' is not a hip joint",
                "no stance": "--angles urdf needs --stance HIP_JOINT",
                "missing column": "missing column(s) dknee_right",
@@ -209,7 +211,9 @@ def test_bad_import_is_one_line_exit_2(case, tmp_path, capsys):
                "knees the other way": "not an orbit of RABBIT: the fitted gait misses",
                "no map": "--angles urdf: the robot RABBIT has no URDF joint map",
                "stance without urdf": "--stance names the stance leg of --angles urdf"}[case]
-    if case == "unknown stance":
+    if case == "no header":
+        src = _bad_csv(tmp_path, lambda s: s.split("\n", 1)[1])
+    elif case == "unknown stance":
         extra[-1] = "hip_middle"
     elif case == "knee as stance":
         extra[-1] = "knee_left"
