@@ -6,6 +6,7 @@ not a planar biped is refused with one message naming what is wrong."""
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 
@@ -289,3 +290,15 @@ def test_torso_geometry_below_the_hip_is_not_called_missing(tmp_path):
     notes = import_urdf(p).notes
     assert not any("no box, cylinder or sphere" in n for n in notes), notes
     assert any("geometry does not reach above the hip" in n for n in notes), notes
+
+
+def test_all_axes_flipped_print_no_negative_zeros(tmp_path, capsys):
+    """Every joint about -y: the plane's normal is +y, written [0, 1, 0] (it printed
+    [-0, 1, -0] and kept -0.0 in the description's map)."""
+    p = tmp_path / "flipped.urdf"
+    p.write_text((ROBOTS / "rabbit.urdf").read_text().replace('<axis xyz="0 1 0"/>',
+                                                              '<axis xyz="0 -1 0"/>'))
+    axis = import_urdf(p).urdf_map.axis
+    assert axis == (0.0, 1.0, 0.0) and all(math.copysign(1.0, v) > 0 for v in axis), axis
+    assert main(["robot", "import", str(p), "--out", str(tmp_path / "r.toml")]) == 0
+    assert "-0" not in capsys.readouterr().out.split("pitch:")[1].split("\n")[0]

@@ -263,6 +263,7 @@ def _axis(rd: _Reader, legs) -> tuple:
         n = n if n[1] > 0 else -n
     else:
         n = n if n[int(np.argmax(np.abs(n)))] > 0 else -n
+    n = n + 0.0                                       # -0.0 (of a flipped n) is 0.0
     if abs(n[2]) > 1e-9:
         rd.fail(f"the joints turn about {np.round(n, 6).tolist()} (torso frame): the torso "
                 f"frame's z axis, vertical at pitch 0, must lie in the plane of motion")
