@@ -251,6 +251,7 @@ def test_settings_and_torque_limit_refused():
     (["mujoco", "--timestep", "-1", "--no-eig"], "--timestep"),
     (["mujoco", "--solref", "0.001", "--no-eig"], "--solref"),
     (["mujoco", "--timestep", "0.5", "--no-eig"], "--timestep"),
+    (["mujoco", "--timestep", "1e-9", "--no-eig"], "--timestep must be at least 1e-05 s"),
     (["mujoco", "--controller", "vc", "--m1", "1", "2", "3", "4"], "--m1"),
     (["mujoco", "--robot", "three_link", "--gait", "{gait}"], "gait"),
     (["mujoco", "--perturb-q", "1", "2", "--no-eig"], "--perturb-q"),
