@@ -340,6 +340,18 @@ def test_a_step_saved_as_utf16_reads_and_latin1_is_named(tmp_path, capsys):
     assert not out.exists()
 
 
+def _import_refused(src, rows, angles, tmp_path, capsys) -> str:
+    """Write ``rows`` to ``src``, import it (exit 2, one line, no gait written): the line."""
+    src.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    out = tmp_path / "gait.json"
+    extra = ["--angles", "urdf", "--stance", "hip_left"] if angles == "urdf" else []
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), *extra,
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and not out.exists(), err
+    return err
+
+
 @pytest.mark.parametrize("angles", ["urdf", "relative"])
 def test_a_step_in_degrees_is_named(angles, walker_gait, tmp_path, capsys):
     """Angles in degrees (and rates in deg/s): one line saying so, exit 2, nothing written
@@ -351,14 +363,8 @@ def test_a_step_in_degrees_is_named(angles, walker_gait, tmp_path, capsys):
     for r in rows[1:]:
         for i in deg:
             r[i] = repr(math.degrees(float(r[i])))
-    src.write_text("\n".join(",".join(r) for r in rows) + "\n")
-    out = tmp_path / "gait.json"
-    extra = ["--angles", "urdf", "--stance", "hip_left"] if angles == "urdf" else []
-    assert main(["gait", "--import", str(src), "--robot", str(URDF), *extra,
-                 "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "degrees?" in err and "rad" in err and len(err.splitlines()) == 1, err
-    assert not out.exists()
+    err = _import_refused(src, rows, angles, tmp_path, capsys)
+    assert "degrees?" in err and "rad" in err, err
 
 
 @pytest.mark.parametrize("column", ["x", "dx"])
@@ -428,14 +434,8 @@ def test_times_in_ms_or_rates_in_degrees_are_named(angles, unit, walker_gait, tm
         else:
             for i in rates:
                 r[i] = repr(math.degrees(float(r[i])))
-    src.write_text("\n".join(",".join(r) for r in rows) + "\n")
-    out = tmp_path / "gait.json"
-    extra = ["--angles", "urdf", "--stance", "hip_left"] if angles == "urdf" else []
-    assert main(["gait", "--import", str(src), "--robot", str(URDF), *extra,
-                 "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "t in ms" in err and "integrate" in err and len(err.splitlines()) == 1, err
-    assert not out.exists()
+    err = _import_refused(src, rows, angles, tmp_path, capsys)
+    assert "t in ms" in err and "integrate" in err, err
 
 
 def test_a_trailing_separator_on_every_line_is_no_column(tmp_path, capsys):
