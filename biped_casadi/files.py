@@ -26,13 +26,16 @@ def read_text_file(path, what: str, max_bytes: int = 20_000_000) -> str:
     Returns
     -------
     str
+        The text, without the byte order mark some editors write first (Excel's "CSV
+        UTF-8", Notepad): a file with one reads as the same file without; UTF-16 with
+        its byte order mark (Excel's "Unicode text") is read too.
 
     Raises
     ------
     ValueError
         One line naming ``what``, the path and the reason: not found, a broken link, a
         folder, not a regular file (a device, a pipe), too large, unreadable (with the
-        system's reason, e.g. permission denied), or not UTF-8 text.
+        system's reason, e.g. permission denied), or not UTF-8 (nor UTF-16) text.
     """
     path = Path(path)
     try:
@@ -50,9 +53,12 @@ def read_text_file(path, what: str, max_bytes: int = 20_000_000) -> str:
     except OSError as e:
         raise ValueError(f"{what} {path} cannot be read: {e.strerror or e}") from None
     try:
-        return data.decode("utf-8")
+        if data.startswith((b"\xff\xfe", b"\xfe\xff")):     # UTF-16 with its byte order mark
+            return data.decode("utf-16")
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError:
-        raise ValueError(f"{what} {path} is not a text file") from None
+        raise ValueError(f"{what} {path} is not a text file (not UTF-8: binary, or text in "
+                         f"another encoding to save as UTF-8)") from None
 
 
 @contextlib.contextmanager

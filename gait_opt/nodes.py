@@ -6,8 +6,8 @@ angles in rad, nodes not necessarily uniform, at least :data:`MIN_NODES`):
 
 - CSV: a header ``t,q1,...,qn,dq1,...,dqn`` (optionally ``,ddq1,...,ddqn``), then one
   row per node;
-- NPZ or JSON: arrays ``t`` (N,), ``q`` and ``dq`` (N, n; (n, N) is accepted too) and
-  optionally ``ddq``.
+- NPZ or JSON: arrays ``t`` (N,), ``q`` and ``dq`` (N, n; (n, N) is accepted too when
+  N != n) and optionally ``ddq``.
 
 Coordinates: the toolkit's (relative joint angles, docs/theory.md), or with
 ``angles='absolute'`` the absolute link angles phi_1..phi_n (phi_1 the stance leg's
@@ -27,11 +27,14 @@ import numpy as np
 
 from biped_casadi.files import read_text_file
 
-__all__ = ["Nodes", "nodes_from_arrays", "read_nodes", "relative_angles", "MIN_NODES",
-           "ANGLES"]
+__all__ = ["Nodes", "nodes_from_arrays", "read_nodes", "relative_angles", "check_radians",
+           "check_rates", "MIN_NODES", "ANGLES", "RATE_RATIO"]
 
 #: fewer nodes than this cannot define a step
 MIN_NODES = 5
+#: how far (a factor either way) the angles' change over a step may be from what their
+#: rates integrate to over t (trapezoids) before the nodes are refused as in other units
+RATE_RATIO = 3.0
 #: the coordinate conventions a sampled gait may be given in
 ANGLES = ("relative", "absolute")
 
@@ -104,7 +107,7 @@ def nodes_from_arrays(t, q, dq, ddq=None, nq: int | None = None,
     t : array_like
         (N,) times, s, strictly increasing.
     q, dq : array_like
-        (N, nq) or (nq, N).
+        (N, nq) or (nq, N); a square array (N = nq) is (N, nq).
     ddq : array_like, optional
         Same shape as q.
     nq : int, optional
@@ -139,7 +142,7 @@ def nodes_from_arrays(t, q, dq, ddq=None, nq: int | None = None,
         if a.ndim != 2 or t.size not in a.shape:
             raise ValueError(f"{where}: {name} must be an (N, n) array with N = {t.size} "
                              f"nodes, got shape {a.shape}")
-        a = a.T if a.shape[0] == t.size and a.shape[1] != t.size else a
+        a = a.T if a.shape[0] == t.size else a      # (N, n); a square one is (N, n) too
         if nq is not None and a.shape[0] != nq:
             raise ValueError(f"{where}: {name} has {a.shape[0]} coordinates per node, the "
                              f"robot {nq}")
@@ -147,6 +150,79 @@ def nodes_from_arrays(t, q, dq, ddq=None, nq: int | None = None,
     if out[1].shape != out[0].shape or (out[2] is not None and out[2].shape != out[0].shape):
         raise ValueError(f"{where}: q, dq (and ddq) must have the same shape")
     return Nodes(t, out[0], out[1], out[2], where)
+
+
+def check_radians(q, names, where: str = "nodes") -> None:
+    """Refuse angles that turn by more than a full turn over the step (degrees).
+
+    No joint or link of a walking robot turns by 2 pi or more within one step; angles
+    written in degrees do (a swing of 0.11 rad is 6.3 degrees), and would otherwise be
+    refused later by a check that names another cause (the stance foot, the coordinate
+    convention).
+
+    Parameters
+    ----------
+    q : array_like
+        (n, N) angles over the step, one row per coordinate.
+    names : sequence of str
+        The coordinates' names (the file's column names), for the message.
+    where : str
+        Names the source in messages.
+
+    Raises
+    ------
+    ValueError
+        One line naming the coordinate that turns the most and its range.
+    """
+    q = np.asarray(q, dtype=float)
+    span = np.ptp(q, axis=1)
+    i = int(np.argmax(span))
+    if span[i] > 2 * np.pi + 1e-6:          # wrapped to [-pi, pi] spans 2 pi at most
+        raise ValueError(f"{where}: {names[i]} spans {span[i]:.4g} over the step, more than "
+                         f"a full turn (2 pi): angles in degrees? (a step is given in rad and "
+                         f"rad/s)")
+
+
+def check_rates(t, q, dq, names, where: str = "nodes") -> None:
+    """Refuse rates that do not integrate to the angles (t in ms, rates in deg/s).
+
+    Over the step, each coordinate's total change sum |q[k+1] - q[k]| is compared with
+    what its rate integrates to over t (trapezoids, the same sum of magnitudes): the two
+    agree to a few per cent for any sampling a step is given with (within 30 % at 5
+    nodes), and differ by 1000 when t is in ms, by 57 when a rate is in deg/s beside its
+    angle in rad.  Coordinates that move less than 0.05 rad either way are not compared.
+
+    Parameters
+    ----------
+    t : array_like
+        (N,) times.
+    q, dq : array_like
+        (n, N) angles and their rates.
+    names : sequence of str
+        The coordinates' names (the file's column names), for the message.
+    where : str
+        Names the source in messages.
+
+    Raises
+    ------
+    ValueError
+        One line naming the coordinate and the ratio, when it is beyond
+        :data:`RATE_RATIO` either way.
+    """
+    t, q, dq = (np.asarray(a, dtype=float) for a in (t, q, dq))
+    change = np.sum(np.abs(np.diff(q, axis=1)), axis=1)
+    integral = np.sum(np.abs(0.5 * (dq[:, 1:] + dq[:, :-1]) * np.diff(t)), axis=1)
+    moving = (change > 0.05) | (integral > 0.05)
+    if not np.any(moving):
+        return                                   # a robot standing still: nothing to compare
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(moving, change / integral, 1.0)
+    off = np.where(moving, np.abs(np.log(np.maximum(ratio, 1e-300))), 0.0)
+    i = int(np.argmax(off))
+    if not 1.0 / RATE_RATIO <= ratio[i] <= RATE_RATIO:
+        raise ValueError(f"{where}: {names[i]} changes {ratio[i]:.3g} times what its rate "
+                         f"integrates to over t: t in ms, or rates in other units (deg/s)? "
+                         f"(a step is given in s, rad and rad/s)")
 
 
 def relative_angles(nodes: Nodes) -> Nodes:
@@ -169,15 +245,26 @@ def relative_angles(nodes: Nodes) -> Nodes:
     return Nodes(nodes.t, rel(nodes.q), rel(nodes.dq), rel(nodes.ddq), nodes.source)
 
 
-def csv_table(text: str, where: str) -> tuple:
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def csv_table(text: str, where: str, columns: str = "") -> tuple:
     """A CSV of numbers: its header and its rows.
 
     Parameters
     ----------
     text : str
-        The file's text (blank lines skipped).
+        The file's text (blank lines skipped; a separator that ends every line, the
+        header's too, makes no column).
     where : str
         Names the file in messages.
+    columns : str
+        The header expected, for the message on a file without one.
 
     Returns
     -------
@@ -187,25 +274,44 @@ def csv_table(text: str, where: str) -> tuple:
     Raises
     ------
     ValueError
-        Naming ``where``: empty, a row of another length, a value that is not a number.
+        Naming ``where``: empty, no header line, separated by ';' or tabs, a row of
+        another length, a value that is not a number.
     """
-    rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
+    reader = csv.reader(io.StringIO(text))
+    rows, lines = [], []                   # the rows, and the file's line of each
+    for r in reader:
+        if r and any(c.strip() for c in r):
+            rows.append(r)
+            lines.append(reader.line_num)
     if not rows:
         raise ValueError(f"{where} is empty")
+    while len(rows[0]) > 1 and all(len(r) == len(rows[0]) and not r[-1].strip() for r in rows):
+        rows = [r[:-1] for r in rows]        # a separator ending every line: no column
     head = [c.strip() for c in rows[0]]
+    if all(_is_number(c) for c in head):
+        raise ValueError(f"{where}: no header line: line {lines[0]} holds numbers, not the "
+                         f"column names" + (f" ({columns})" if columns else ""))
+    if len(head) == 1:
+        seps = {";": "';'", "\t": "tabs"}
+        used = [name for sep, name in seps.items() if sep in head[0]]
+        if used:
+            raise ValueError(f"{where}: the header is one column: values must be separated "
+                             f"by commas (this file uses {used[0]})")
     data = []
-    for i, r in enumerate(rows[1:], start=2):
+    for i, r in zip(lines[1:], rows[1:]):
         if len(r) != len(head):
             raise ValueError(f"{where}: line {i} has {len(r)} values, the header {len(head)}")
         try:
             data.append([float(c) for c in r])
         except ValueError:
-            raise ValueError(f"{where}: line {i} has a value that is not a number") from None
+            k, c = next((k, c) for k, c in enumerate(r) if not _is_number(c))
+            raise ValueError(f"{where}: line {i} has a value that is not a number: {c.strip()!r} "
+                             f"in column {head[k] or k + 1}") from None
     return head, np.array(data, dtype=float).reshape(-1, len(head))
 
 
 def _read_csv(text: str, where: str, nq: int | None) -> Nodes:
-    raw, a = csv_table(text, where)
+    raw, a = csv_table(text, where, "t,q1..qn,dq1..dqn[,ddq1..ddqn]")
     head = [c.lower() for c in raw]
     h = len(head) - 1
     with_acc = h % 3 == 0 and head[-1].startswith("ddq")
@@ -214,8 +320,10 @@ def _read_csv(text: str, where: str, nq: int | None) -> Nodes:
     if with_acc:
         want += [f"ddq{i}" for i in range(1, n + 1)]
     if n < 1 or head != want:
+        hint = ("; a step in URDF angles? (--angles urdf --stance HIP_JOINT)"
+                if "pitch" in head else "")
         raise ValueError(f"{where}: the header must be t,q1..qn,dq1..dqn[,ddq1..ddqn], got "
-                         f"{','.join(raw)[:120]!r}")
+                         f"{','.join(raw)[:120]!r}{hint}")
     return nodes_from_arrays(a[:, 0], a[:, 1:1 + n], a[:, 1 + n:1 + 2 * n],
                              a[:, 1 + 2 * n:] if with_acc else None, nq, where)
 

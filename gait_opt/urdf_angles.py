@@ -20,6 +20,8 @@ continuous along the step, the first node's in [-pi, pi)).
 """
 from __future__ import annotations
 
+import csv
+import io
 from pathlib import Path
 
 import casadi as ca
@@ -27,7 +29,7 @@ import numpy as np
 
 from biped_casadi.files import read_text_file, write_text_atomic
 
-from .nodes import Nodes, csv_table, nodes_from_arrays
+from .nodes import Nodes, check_radians, check_rates, csv_table, nodes_from_arrays
 
 __all__ = ["urdf_columns", "urdf_nodes", "read_urdf_csv", "gait_table", "write_gait_csv",
            "CSV_ANGLES", "require_urdf_map"]
@@ -155,10 +157,15 @@ def urdf_nodes(model, columns: dict, stance, where: str = "gait",
     if base and set(base) not in ({"x", "z"}, set(_BASE)):
         raise ValueError(f"{where}: base columns {', '.join(base)}: give x and z (and "
                          f"optionally both dx and dz)")
+    for c in base:
+        if not np.all(np.isfinite(np.asarray(columns[c], dtype=float))):
+            raise ValueError(f"{where}: {c} has a NaN or infinite value")
     t = columns["t"]
     x = np.vstack([columns["pitch"]] + [columns[n] for n in umap.names])
     dx = np.vstack([columns["dpitch"]] + [columns[f"d{n}"] for n in umap.names])
-    nodes = nodes_from_arrays(t, x, dx, None, model.nq, where)
+    nodes = nodes_from_arrays(t, x.T, dx.T, None, model.nq, where)       # (N, n)
+    check_radians(nodes.q, ["pitch"] + list(umap.names), where)
+    check_rates(nodes.t, nodes.q, nodes.dq, ["pitch"] + list(umap.names), where)
     q, dq = umap.to_model(nodes.q, nodes.dq, leg, continuous=True)
     info = dict(stance=stance_name)
     if base:
@@ -210,7 +217,10 @@ def read_urdf_csv(path, model, stance, tol: float = 0.05) -> tuple:
     where = f"gait file {path}"
     if path.suffix.lower() != ".csv":
         raise ValueError(f"{where}: a step in URDF angles is a CSV file (.csv)")
-    head, a = csv_table(read_text_file(path, "gait file", 50_000_000), where)
+    umap = model.description.urdf
+    columns = ("" if umap is None else f"t, pitch, the joints {', '.join(umap.names)}, dpitch "
+               f"and d + each joint; optionally x, z, dx, dz")
+    head, a = csv_table(read_text_file(path, "gait file", 50_000_000), where, columns)
     if len(set(head)) != len(head):
         dup = next(c for c in head if head.count(c) > 1)
         raise ValueError(f"{where}: column {dup!r} appears twice in the header")
@@ -288,6 +298,8 @@ def write_gait_csv(gait, path, angles: str = "relative", stance=None,
     Path
     """
     head, rows = gait_table(gait, angles, stance, n_nodes)
-    text = ",".join(head) + "\n" + "\n".join(",".join(repr(float(v)) for v in r)
-                                             for r in rows) + "\n"
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerow(head)     # URDF names may hold commas
+    text = out.getvalue() + "\n".join(",".join(repr(float(v)) for v in r)
+                                      for r in rows) + "\n"
     return write_text_atomic(Path(path), text)

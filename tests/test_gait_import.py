@@ -77,6 +77,22 @@ def test_nodes_of_the_default_gait_import_back(model, gait, pick):
     assert d_tv <= 1e-6 and d_vc <= 1e-6
 
 
+@pytest.mark.parametrize("form", ["csv", "json"])
+def test_as_many_nodes_as_coordinates(model, gait, tmp_path, form):
+    """Five nodes of a five-coordinate robot: the (N, n) table is not read as (n, N) (the
+    CSV's rows were taken for its coordinates)."""
+    nodes = samples(gait, n=5)
+    if form == "csv":
+        src = write_csv(tmp_path / "five.csv", nodes)
+    else:
+        src = tmp_path / "five.json"
+        src.write_text(json.dumps(dict(t=nodes.t.tolist(), q=nodes.q.T.tolist(),
+                                       dq=nodes.dq.T.tolist())))
+    r = import_gait(model, src)
+    assert r.orbit_residual_after <= 1e-10 and abs(r.gait.T - gait.T) < 1e-12
+    assert np.max(np.abs(r.gait.alpha - gait.alpha)) < 1e-8
+
+
 def test_cli_import_then_eig_and_simulate(gait, tmp_path, capsys):
     src = write_csv(tmp_path / "steps.csv", samples(gait).every(10), acc=True)
     out = tmp_path / "imported.json"
@@ -171,6 +187,22 @@ BAD = {
                 "missing key(s) theta_minus"),
     "steps.txt": ("x", "must end in .csv, .npz or .json"),
     "broken.npz": ("not a zip", "cannot read the NPZ file"),
+    "urdf_header.csv": ("t,pitch,hip_left,knee_left,dpitch,dhip_left,dknee_left\n"
+                        + "\n".join(f"{i},0,0,0,0,0,0" for i in range(6)),
+                        "a step in URDF angles? (--angles urdf --stance HIP_JOINT)"),
+    "text.csv": ("HEAD\n" + "\n".join(f"{i},0,0,0,0,0,0,{'n/a' if i == 2 else 0},0,0,0"
+                                     for i in range(6)),
+                 "line 4 has a value that is not a number: 'n/a' in column dq2"),
+    "blank_lines.csv": ("HEAD\n\n" + "\n\n".join(f"{i},0,0,0,0,0,0,0,0,0{',0' if i != 3 else ''}"
+                                                 for i in range(6)),
+                        "line 9 has 10 values, the header 11"),
+    "no_header.csv": ("\n".join(f"{i},0,0,0,0,0,0,0,0,0,0" for i in range(6)),
+                      "no header line: line 1 holds numbers, not the column names "
+                      "(t,q1..qn,dq1..dqn[,ddq1..ddqn])"),
+    "semicolons.csv": ("HEAD\n" + "\n".join(f"{i};0;0;0;0;0;0;0;0;0;0" for i in range(6)),
+                       "values must be separated by commas (this file uses ';')"),
+    "tabs.csv": ("HEAD\n" + "\n".join(f"{i}\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0" for i in range(6)),
+                 "values must be separated by commas (this file uses tabs)"),
 }
 HEAD = "t," + ",".join(f"q{i}" for i in range(1, 6)) + "," + ",".join(f"dq{i}" for i in range(1, 6))
 
@@ -180,7 +212,8 @@ def test_bad_import_files(tmp_path, capsys, name):
     text, message = BAD[name]
     src = tmp_path / name
     if text is not None:
-        src.write_text(text.replace("HEAD", HEAD))
+        sep = ";" if "semicolons" in name else "\t" if "tabs" in name else ","
+        src.write_text(text.replace("HEAD", HEAD.replace(",", sep)))
     out = tmp_path / "gait.json"
     assert main(["gait", "--import", str(src), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
@@ -193,7 +226,9 @@ def test_bad_import_arguments(gait, tmp_path, capsys):
     out = tmp_path / "g.json"
     for extra, message in [(["--import-tol", "-1"], "--import-tol must be a positive"),
                            (["--bezier-degree", "2"], "--bezier-degree must be from 4 to 20"),
-                           (["--out", str(tmp_path / "g.txt")], "must end in .json")]:
+                           (["--out", str(tmp_path / "g.txt")], "must end in .json"),
+                           (["--speed", "0.3"], "--speed: an imported gait walks at its "
+                                                "data's speed")]:
         assert main(["gait", "--import", str(src), "--out", str(out), *extra]) == 2
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1

@@ -251,6 +251,7 @@ def test_settings_and_torque_limit_refused():
     (["mujoco", "--timestep", "-1", "--no-eig"], "--timestep"),
     (["mujoco", "--solref", "0.001", "--no-eig"], "--solref"),
     (["mujoco", "--timestep", "0.5", "--no-eig"], "--timestep"),
+    (["mujoco", "--timestep", "1e-9", "--no-eig"], "--timestep must be at least 1e-05 s"),
     (["mujoco", "--controller", "vc", "--m1", "1", "2", "3", "4"], "--m1"),
     (["mujoco", "--robot", "three_link", "--gait", "{gait}"], "gait"),
     (["mujoco", "--perturb-q", "1", "2", "--no-eig"], "--perturb-q"),
@@ -293,6 +294,48 @@ def test_mujoco_command_json(gait, tmp_path, capsys):
     assert len(e["mujoco"]) == 2 and abs(e["exact_max_abs"] - abs(complex(*e["exact"][0]))) < 1e-12
     assert (tmp_path / "fig" / "mujoco_steps.png").is_file()
     assert (tmp_path / "fig" / "mujoco_walk.gif").is_file()
+
+
+def test_animation_shows_the_first_steps_of_a_long_walk(gait, tmp_path, capsys, monkeypatch):
+    """A long walk's GIF animates its first ANIMATED_STEPS steps (1000 steps drew 14,000
+    frames, 25 MB in two minutes, of axes 300 m wide where the robot was a dot), and its
+    title says so."""
+    from PIL import Image
+
+    import analysis.cli.mujoco as cli
+    monkeypatch.setattr(cli, "ANIMATED_STEPS", 2)
+    g = gait.save(tmp_path / "gait.json")
+    assert biped_main(["mujoco", "--gait", str(g), "--controller", "vc", "--steps", "4",
+                       "--no-eig", "--plot", str(tmp_path / "fig"), "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    with Image.open(tmp_path / "fig" / "mujoco_walk.gif") as im:
+        frames = im.n_frames
+    two = r["steps"][1]["t_touchdown"]                  # the second step's end, s
+    assert frames <= 25 * two + 2 < 25 * r["steps"][3]["t_touchdown"], (frames, two)
+
+
+def test_steps_figure_of_a_walk_that_took_no_step():
+    """A walk that ends in its first step: the figure's step axis shows step 1 and says
+    no step was completed (it showed steps -0.04 to 0.04 over empty panels)."""
+    from analysis.reporting.plots import mujoco_steps_plot
+    w = dict(law="c", settings=dict(contact="stiff"), status="scuffed",
+             gait=dict(speed=0.6, T=0.54), speeds=[], periods=[], qu_errors=[], dqu_errors=[])
+    fig = mujoco_steps_plot([w])
+    ax = fig.axes[3]
+    ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
+    assert ticks and all(t >= 1 and float(t).is_integer() for t in ticks), ticks
+    assert any("no step" in t.get_text() for t in fig.axes[0].texts)
+
+
+def test_no_cycle_prints_no_eigenvalues(gait, tmp_path, capsys):
+    """A design that cannot walk in MuJoCo has no cycle to fit: the stride-map line says
+    so (it printed 'eigenvalues [] (fit residual nan of the deviations)')."""
+    g = gait.save(tmp_path / "gait.json")
+    assert biped_main(["mujoco", "--gait", str(g), "--controller", "vc", "--steps", "1",
+                       "--torque-limit", "1"]) == 1
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("MuJoCo's stride map"))
+    assert "nan" not in line and "[]" not in line and "no cycle" in line, line
 
 
 def test_done_when_walks_at_stiff_settings(gait):

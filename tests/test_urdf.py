@@ -6,6 +6,7 @@ not a planar biped is refused with one message naming what is wrong."""
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 
@@ -123,6 +124,65 @@ BAD = {
     "rotors differ": (lambda s: s.replace("<motorInertia>3.32e-4</motorInertia>",
                                           "<motorInertia>1e-4</motorInertia>", 1),
                       r"reflected rotor inertias differ"),
+    "legs differ in the 9th digit": (lambda s: s.replace('<mass value="6.8"/>',
+                                                         '<mass value="6.80000002"/>', 1),
+                                     r"legs differ: link 'femur_left' has mass 6.80000002, "
+                                     r"link 'femur_right' 6.8 \(apart by 2e-08; "),
+    "rotors differ in the 8th digit": (lambda s: s.replace(
+        "<motorInertia>3.32e-4</motorInertia>", "<motorInertia>3.3200001e-4</motorInertia>", 1),
+        r"reflected rotor inertias differ: joint 'knee_left' 0.83, joint 'hip_left' "
+        r"0.830000025 kg m\^2 \(apart by 2.5e-08;"),
+    "link defined twice": (lambda s: s.replace('<link name="tibia_right">',
+                                               '<link name="tibia_left">', 1),
+                           r"link 'tibia_left' is defined twice"),
+    "joint defined twice": (lambda s: s.replace('<joint name="knee_right" type',
+                                                '<joint name="knee_left" type', 1),
+                            r"joint 'knee_left' is defined twice"),
+    "parent not defined": (lambda s: s.replace('<parent link="femur_right"/>',
+                                               '<parent link="femur_rigth"/>', 1),
+                           r"joint 'knee_right' names parent link 'femur_rigth', which the "
+                           r"file does not define"),
+    "child not defined": (lambda s: s.replace('<child link="tibia_right"/>',
+                                              '<child link="tibia_rigth"/>', 1),
+                          r"joint 'knee_right' names child link 'tibia_rigth', which the "
+                          r"file does not define"),
+    "a loop of joints": (lambda s: s.replace('</robot>', '<joint name="loop" type="fixed">'
+                                             '<parent link="foot_left"/><child link="torso"/>'
+                                             '</joint></robot>'),
+                         r"no root link: the joints make a loop"),
+    "a loop beside the root": (lambda s: s.replace('<robot name="RABBIT">',
+                                                   '<robot name="RABBIT"><link name="world"/>', 1)
+                               .replace('</robot>', '<joint name="loop" type="fixed"><parent '
+                                        'link="foot_left"/><child link="torso"/></joint>'
+                                        '</robot>'),
+                               r"link\(s\) 'torso', .* not connected to the root link 'world': "
+                               r"the joints make a loop"),
+    "a negative mass beside a heavier fixed child": (
+        lambda s: s.replace('<mass value="6.8"/>', '<mass value="-1"/>', 1).replace(
+            '<link name="femur_left">', '<joint name="pad_fixed" type="fixed"><parent '
+            'link="femur_left"/><child link="pad"/></joint><link name="pad"><inertial><origin '
+            'xyz="0 0 -0.2"/><mass value="7.8"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" '
+            'iyz="0" izz="0.1"/></inertial></link><link name="femur_left">', 1),
+        r"link 'femur_left' has a negative mass \(-1 kg\)"),
+    "lengths in mm": (lambda s: s.replace('xyz="0 0 -0.4"', 'xyz="0 0 -400"'),
+                      r"the leg of 'hip_left' is 800 m long: URDF lengths are in metres \(a "
+                      r"file in millimetres\?\)"),
+    "a nan inertia": (lambda s: s.replace('iyy="0.47"', 'iyy="nan"', 1),
+                      r"link 'femur_left': <inertia> has a value that is not finite \(nan\)"),
+    "a nan origin": (lambda s: s.replace('<origin xyz="0 0 -0.4" rpy="0 0 0"/>',
+                                         '<origin xyz="0 0 nan" rpy="0 0 0"/>', 1),
+                     r"joint 'knee_left': <origin> has a value that is not finite \(nan\)"),
+    "an infinite axis": (lambda s: s.replace('<axis xyz="0 1 0"/>', '<axis xyz="0 inf 0"/>', 1),
+                         r"joint 'hip_left': <axis> has a value that is not finite \(inf\)"),
+    "a nan motor inertia": (lambda s: s.replace("<motorInertia>3.32e-4</motorInertia>",
+                                                "<motorInertia>nan</motorInertia>", 1),
+                            r"the transmission of joint 'hip_left' has motorInertia nan"),
+    "mimic joint": (lambda s: s.replace('<joint name="knee_right" type="revolute">',
+                                        '<joint name="knee_right" type="revolute"><mimic '
+                                        'joint="knee_left" multiplier="1" offset="0"/>'),
+                    r"joint 'knee_right' mimics joint 'knee_left'"),
+    "some efforts 0": (lambda s: s.replace('<limit effort="150"', '<limit effort="0"', 1),
+                       r"joint 'hip_left' has no actuator"),
 }
 
 
@@ -174,3 +234,71 @@ def test_floating_base_and_unknown_tags_are_fine(tmp_path):
     imp = import_urdf(p)
     assert imp.description == robot("rabbit").description
     assert any("floating joint 'base'" in n for n in imp.notes)
+
+
+def test_torso_inertial_in_a_fixed_child_of_a_massless_root(tmp_path):
+    """ROS's habit (KDL refuses a root link with inertia): a massless root link carries
+    the legs and a fixed child link carries the torso's inertial; the two are one body."""
+    text = (ROBOTS / "rabbit.urdf").read_text()
+    inertial = re.search(r'<link name="torso">\s*(<inertial>.*?</inertial>)', text, re.S).group(1)
+    text = text.replace(inertial, "", 1).replace(
+        '<link name="torso">', '<joint name="torso_inertia_fixed" type="fixed"><parent '
+        'link="torso"/><child link="torso_inertia"/></joint><link name="torso_inertia">'
+        f'{inertial}</link><link name="torso">', 1)
+    p = tmp_path / "kdl.urdf"
+    p.write_text(text)
+    imp = import_urdf(p)
+    assert imp.description == robot("rabbit").description
+    assert any("'torso_inertia' merged into 'torso'" in n for n in imp.notes)
+
+
+def test_efforts_all_zero_are_no_limit(tmp_path, capsys):
+    """Exporters write effort="0" (and velocity="0") on every joint when they know no
+    limit: no torque limit, as without <limit effort>, and --torque-limit sets one."""
+    text = (ROBOTS / "rabbit.urdf").read_text().replace('effort="150"', 'effort="0"')
+    p = tmp_path / "zero_efforts.urdf"
+    p.write_text(text)
+    imp = import_urdf(p)
+    assert imp.description.torque_limit == float("inf")
+    assert any('effort="0"' in n and "no torque limit" in n for n in imp.notes)
+    out = tmp_path / "r.toml"
+    assert main(["robot", "import", str(p), "--torque-limit", "150", "--out", str(out)]) == 0
+    assert load_description(out) == robot("rabbit").description
+
+
+def test_joint_damping_and_friction_are_said_to_be_ignored(tmp_path):
+    """<dynamics damping friction> is physics the model has not (rigid, frictionless
+    joints): the import says it leaves it out instead of dropping it silently."""
+    text = (ROBOTS / "rabbit.urdf").read_text().replace(
+        '<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><dynamics damping="0.5" friction="1.2"/>')
+    p = tmp_path / "damped.urdf"
+    p.write_text(text)
+    imp = import_urdf(p)
+    assert imp.description == robot("rabbit").description
+    said = [n for n in imp.notes if "<dynamics>" in n]
+    assert len(said) == 1 and "hip_left" in said[0] and "damping 0.5" in said[0], imp.notes
+
+
+def test_torso_geometry_below_the_hip_is_not_called_missing(tmp_path):
+    """A torso whose centre of mass hangs below the hip (its up direction points down)
+    and whose box stands above it: the note on its drawn length says where the geometry
+    is, not that there is none."""
+    text = (ROBOTS / "rabbit.urdf").read_text().replace(
+        '<origin xyz="0 0 0.24" rpy="0 0 0"/>', '<origin xyz="0 0 -0.05" rpy="0 0 0"/>', 1)
+    p = tmp_path / "low.urdf"
+    p.write_text(text)
+    notes = import_urdf(p).notes
+    assert not any("no box, cylinder or sphere" in n for n in notes), notes
+    assert any("geometry does not reach above the hip" in n for n in notes), notes
+
+
+def test_all_axes_flipped_print_no_negative_zeros(tmp_path, capsys):
+    """Every joint about -y: the plane's normal is +y, written [0, 1, 0] (it printed
+    [-0, 1, -0] and kept -0.0 in the description's map)."""
+    p = tmp_path / "flipped.urdf"
+    p.write_text((ROBOTS / "rabbit.urdf").read_text().replace('<axis xyz="0 1 0"/>',
+                                                              '<axis xyz="0 -1 0"/>'))
+    axis = import_urdf(p).urdf_map.axis
+    assert axis == (0.0, 1.0, 0.0) and all(math.copysign(1.0, v) > 0 for v in axis), axis
+    assert main(["robot", "import", str(p), "--out", str(tmp_path / "r.toml")]) == 0
+    assert "-0" not in capsys.readouterr().out.split("pitch:")[1].split("\n")[0]

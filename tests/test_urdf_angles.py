@@ -195,12 +195,14 @@ def _bad_csv(tmp_path, edit):
     return p
 
 
-@pytest.mark.parametrize("case", ["unknown stance", "knee as stance", "no stance",
+@pytest.mark.parametrize("case", ["no header", "unknown stance", "knee as stance", "no stance",
                                   "missing column", "other stance", "legs-down convention",
                                   "knees the other way", "no map", "stance without urdf"])
 def test_bad_import_is_one_line_exit_2(case, tmp_path, capsys):
     src, robot_arg, extra = CSV, str(URDF), ["--angles", "urdf", "--stance", "hip_left"]
-    message = {"unknown stance": "--stance: the URDF has no leg joint 'hip_middle'",
+    message = {"no header": "no header line: line 1 holds numbers, not the column names "
+                            "(t, pitch, the joints hip_left, knee_left, hip_right, knee_right",
+               "unknown stance": "--stance: the URDF has no leg joint 'hip_middle'",
                "knee as stance": "--stance: 'knee_left' is not a hip joint",
                "no stance": "--angles urdf needs --stance HIP_JOINT",
                "missing column": "missing column(s) dknee_right",
@@ -209,7 +211,9 @@ def test_bad_import_is_one_line_exit_2(case, tmp_path, capsys):
                "knees the other way": "not an orbit of RABBIT: the fitted gait misses",
                "no map": "--angles urdf: the robot RABBIT has no URDF joint map",
                "stance without urdf": "--stance names the stance leg of --angles urdf"}[case]
-    if case == "unknown stance":
+    if case == "no header":
+        src = _bad_csv(tmp_path, lambda s: s.split("\n", 1)[1])
+    elif case == "unknown stance":
         extra[-1] = "hip_middle"
     elif case == "knee as stance":
         extra[-1] = "knee_left"
@@ -299,3 +303,153 @@ def test_mujoco_motors_take_the_limit_the_gait_was_made_for(tmp_path, capsys):
     assert main(["mujoco", "--gait", str(gait), "--controller", "vc", "--steps", "2",
                  "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["torque_limit"] == 150.0
+
+
+# ------------------------------------------------------------------ files as tools write them
+def test_files_with_a_byte_order_mark_read_as_without(tmp_path, capsys):
+    """Excel's 'CSV UTF-8' (and Notepad) start a file with a byte order mark: the step,
+    a description file and a gait file read as the same text without it."""
+    bom = "\ufeff"
+    src = tmp_path / "step.csv"
+    src.write_text(bom + CSV.read_text(), encoding="utf-8")
+    out = tmp_path / "gait.json"
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
+                 "--stance", "hip_left", "--out", str(out)]) == 0, capsys.readouterr().err
+    toml = tmp_path / "rabbit.toml"
+    toml.write_text(bom + builtin_path("rabbit").read_text(), encoding="utf-8")
+    assert load_description(toml) == robot("rabbit").description
+    again = tmp_path / "again.json"
+    again.write_text(bom + out.read_text(), encoding="utf-8")
+    assert Gait.load(again).T == Gait.load(out).T
+
+
+def test_a_step_saved_as_utf16_reads_and_latin1_is_named(tmp_path, capsys):
+    """Excel's "Unicode text" is UTF-16 with a byte order mark: it reads as the same step.
+    Text in another 8-bit encoding is named as such (it was 'not a text file')."""
+    src = tmp_path / "step.csv"
+    src.write_text(CSV.read_text(), encoding="utf-16")
+    out = tmp_path / "gait.json"
+    argv = ["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
+            "--stance", "hip_left", "--out", str(out)]
+    assert main(argv) == 0, capsys.readouterr().err
+    out.unlink()
+    src.write_text("# Schritt \u00fcber Hindernisse\n" + CSV.read_text(), encoding="latin-1")
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "not UTF-8" in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
+def _import_refused(src, rows, angles, tmp_path, capsys) -> str:
+    """Write ``rows`` to ``src``, import it (exit 2, one line, no gait written): the line."""
+    src.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    out = tmp_path / "gait.json"
+    extra = ["--angles", "urdf", "--stance", "hip_left"] if angles == "urdf" else []
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), *extra,
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and not out.exists(), err
+    return err
+
+
+@pytest.mark.parametrize("angles", ["urdf", "relative"])
+def test_a_step_in_degrees_is_named(angles, walker_gait, tmp_path, capsys):
+    """Angles in degrees (and rates in deg/s): one line saying so, exit 2, nothing written
+    (not a message about the stance foot or the coordinate convention)."""
+    src = tmp_path / "step.csv"
+    write_gait_csv(walker_gait, src, angles=angles, n_nodes=21)
+    rows = [r.split(",") for r in src.read_text().splitlines()]
+    deg = [i for i, h in enumerate(rows[0]) if h not in ("t", "x", "z", "dx", "dz")]
+    for r in rows[1:]:
+        for i in deg:
+            r[i] = repr(math.degrees(float(r[i])))
+    err = _import_refused(src, rows, angles, tmp_path, capsys)
+    assert "degrees?" in err and "rad" in err, err
+
+
+@pytest.mark.parametrize("column", ["x", "dx"])
+def test_a_nan_in_a_base_column_is_named(column, tmp_path, capsys):
+    """A NaN in the root's position or velocity columns: one line naming the column (it
+    said the stance foot moves by nan m (x), or was taken silently (dx))."""
+    rows = [r.split(",") for r in CSV.read_text().splitlines()]
+    rows[5][rows[0].index(column)] = "nan"
+    src = tmp_path / "step.csv"
+    src.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    out = tmp_path / "gait.json"
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
+                 "--stance", "hip_left", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{column} has a NaN or infinite value" in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
+def test_joint_names_with_commas_round_trip_through_the_csv(walker_gait, tmp_path):
+    """URDF names may hold commas and quotes: the CSV a gait is written to quotes them
+    (it wrote them bare, and read its own file back as 17 columns over rows of 15)."""
+    text = URDF.read_text().replace("knee_right", "R,knee").replace("hip_left", "L &quot;hip")
+    p = tmp_path / "names.urdf"
+    p.write_text(text)
+    m = robot(p, torque_limit=150)
+    assert 'L "hip' in m.description.urdf.names
+    g = Gait(m, walker_gait.options, walker_gait.alpha, walker_gait.x0, walker_gait.T)
+    src = write_gait_csv(g, tmp_path / "step.csv", angles="urdf", stance='L "hip',
+                         n_nodes=21)
+    r = import_gait(m, src, angles="urdf", stance='L "hip')
+    assert r.orbit_residual_after <= 1e-10
+
+
+def test_joint_names_that_close_a_c_comment_build(walker_gait, tmp_path):
+    """A URDF name (or a gait path) holding '*/' ends no comment of the exported header:
+    the law builds and is the toolkit's (gcc stopped at the header)."""
+    text = URDF.read_text().replace("knee_right", "knee */ right").replace("RABBIT", "R */ B")
+    p = tmp_path / "names.urdf"
+    p.write_text(text)
+    m = robot(p, torque_limit=150)
+    g = Gait(m, walker_gait.options, walker_gait.alpha, walker_gait.x0, walker_gait.T)
+    ctrl = TimeVaryingController(g, M1)
+    law = exported_law(ctrl, angles="urdf")
+    write_export(c_sources(law, {"gait file": "a*/b.json"}), tmp_path / "tv")
+    lib = CompiledUrdfController(build_library(tmp_path / "tv"), ctrl, law.urdf)
+    r = compare_urdf_states(lib, ctrl, n=50, seed=2)
+    assert r.success and r.max_torque_rel <= 1e-12, r.message
+
+
+@pytest.mark.parametrize("angles, unit", [("urdf", "ms"), ("relative", "ms"),
+                                          ("relative", "deg/s"), ("urdf", "dpitch deg/s")])
+def test_times_in_ms_or_rates_in_degrees_are_named(angles, unit, walker_gait, tmp_path,
+                                                    capsys):
+    """t in ms (or rates in deg/s beside angles in rad): the rates do not integrate to
+    the angles; one line saying so (it said the Bezier fit misses the nodes by 470 rad)."""
+    src = tmp_path / "step.csv"
+    write_gait_csv(walker_gait, src, angles=angles, n_nodes=21)
+    rows = [r.split(",") for r in src.read_text().splitlines()]
+    rates = [i for i, h in enumerate(rows[0]) if h.startswith("d") and not h.startswith("dd")
+             and h not in ("dx", "dz")]
+    for r in rows[1:]:
+        if unit == "ms":
+            r[0] = repr(1e3 * float(r[0]))
+        elif unit == "dpitch deg/s":           # an IMU's rate beside the encoders'
+            i = rows[0].index("dpitch")
+            r[i] = repr(math.degrees(float(r[i])))
+        else:
+            for i in rates:
+                r[i] = repr(math.degrees(float(r[i])))
+    err = _import_refused(src, rows, angles, tmp_path, capsys)
+    assert "t in ms" in err and "integrate" in err, err
+
+
+def test_a_trailing_separator_on_every_line_is_no_column(tmp_path, capsys):
+    """Spreadsheets often end every line with a separator: the empty last column is none
+    (it said 'line 2 has a value that is not a number')."""
+    src = tmp_path / "step.csv"
+    src.write_text("\n".join(r + "," for r in CSV.read_text().splitlines()) + "\n")
+    out = tmp_path / "gait.json"
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
+                 "--stance", "hip_left", "--out", str(out)]) == 0, capsys.readouterr().err
+
+
+def test_five_nodes_in_urdf_angles(walker, walker_gait, tmp_path):
+    """As many nodes as coordinates in URDF angles: the same orbit."""
+    src = write_gait_csv(walker_gait, tmp_path / "five.csv", angles="urdf", n_nodes=5)
+    r = import_gait(walker, src, angles="urdf", stance="hip_left")
+    assert r.orbit_residual_after <= 1e-10 and abs(r.gait.T - walker_gait.T) < 1e-12

@@ -87,6 +87,9 @@ def cmd_gait(args):
     if args.import_file is not None:
         if args.speeds is not None or args.family is not None:
             raise UserError("--import brings in one gait: it excludes --speeds and --family")
+        if args.speed is not None:
+            raise UserError("--speed: an imported gait walks at its data's speed (its step "
+                            "length over T, printed); the option applies to an optimised gait")
         args.out = "gait.json" if args.out is None else args.out
         return cmd_import(args)
     if args.family is not None:

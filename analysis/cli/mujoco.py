@@ -20,6 +20,11 @@ from .mujoco_options import add_mujoco_settings, mujoco_settings
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
 
+#: the steps ``--plot``'s animation shows (in real time; a longer walk's axes would leave
+#: the robot a dot, and its GIF take minutes and tens of MB)
+ANIMATED_STEPS = 10
+
+
 def _check(args):
     """Everything that can be checked before the gait is loaded; the settings."""
     check_m1_values(args.m1)
@@ -93,7 +98,8 @@ def cmd_mujoco(args):
         folder = Path(args.plot)
         figures["steps"] = save_figures({"mujoco_steps": mujoco_steps_plot([w])}, folder)[0]
         if w.t.size:
-            figures["animation"] = mujoco_animation(w, layout(model), folder / "mujoco_walk.gif")
+            figures["animation"] = mujoco_animation(w, layout(model), folder / "mujoco_walk.gif",
+                                                    max_steps=ANIMATED_STEPS)
 
     # ---- report
     d = w.to_dict()
@@ -142,9 +148,13 @@ def _print(w, eig, figures):
           "steps/s with the law in the loop)")
     if eig is not None:
         c = eig["stride_map"]["cycle"]
-        print(f"MuJoCo's stride map on tau = 0.75 T: eigenvalues {_ev(eig['mujoco'])} (fit "
-              f"residual {eig['relative_residual']:.2g} of the deviations); exact "
-              f"{_ev(eig['exact'])}")
+        if len(eig["mujoco"]):
+            print(f"MuJoCo's stride map on tau = 0.75 T: eigenvalues {_ev(eig['mujoco'])} (fit "
+                  f"residual {eig['relative_residual']:.2g} of the deviations); exact "
+                  f"{_ev(eig['exact'])}")
+        else:
+            print(f"MuJoCo's stride map on tau = 0.75 T: none (no cycle to fit it on); exact "
+                  f"{_ev(eig['exact'])}")
         print(f"  {c['message']}")
     for k, v in figures.items():
         print(f"{k}: {v}")
@@ -203,6 +213,6 @@ def register(sub):
                    help="skip MuJoCo's stride map (a second or two of rollouts)")
     p.add_argument("--plot", metavar="DIR",
                    help="write DIR/mujoco_steps.png (speed, period and errors per step) and "
-                        "DIR/mujoco_walk.gif (the walk)")
+                        f"DIR/mujoco_walk.gif (the walk, its first {ANIMATED_STEPS} steps)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_mujoco)

@@ -15,7 +15,7 @@ def add_mujoco_settings(p, mu: bool = True):
                    help="stiff: solref 4 ms, time step 2 ms (recommended); default: MuJoCo's "
                         "contact (solref 0.02 s) (both with 5 mm feet, mu 0.6)")
     p.add_argument("--timestep", type=float, metavar="S",
-                   help="MuJoCo's time step, s (default 0.002)")
+                   help="MuJoCo's time step, s, 1e-05 to 0.05 (default 0.002)")
     p.add_argument("--solref", type=float, metavar="S",
                    help="the contact's time constant, s, at least two time steps (default "
                         "0.004 with --contact stiff, MuJoCo's 0.02 with default)")

@@ -111,7 +111,8 @@ def register(sub):
     q = acts.add_parser("import", help="a URDF file as a robot description (TOML)",
                         description="Read a planar biped from a URDF (a torso and two "
                                     "identical legs of revolute or continuous joints about "
-                                    "one axis, +y or -y per joint, in any zero pose; "
+                                    "one axis n, +n or -n per joint (n across the torso "
+                                    "frame's z: its y, its x, ...), in any zero pose; "
                                     "inertials anywhere in the plane, joint origins, "
                                     "transmissions, effort limits) and write the equivalent "
                                     "description file, with the map from the URDF's joint "

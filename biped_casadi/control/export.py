@@ -39,8 +39,8 @@ import numpy as np
 
 from ..numerics import quintic_hermite_interval
 from .design import Design
-from .export_urdf import (LEG_ORDER, URDF_START_C, c_number, urdf_functions, urdf_header_doc,
-                          urdf_readme_doc)
+from .export_urdf import (LEG_ORDER, URDF_START_C, c_number, comment_safe, urdf_functions,
+                          urdf_header_doc, urdf_readme_doc)
 from .time_varying import TimeVaryingController
 from .virtual_constraints import VirtualConstraintController
 
@@ -336,7 +336,7 @@ def _coordinates_doc(law: ExportedLaw) -> str:
 
 
 def _header(law: ExportedLaw, provenance: dict) -> str:
-    info = "\n".join(f" *   {line}" for line in _provenance_lines(law, provenance))
+    info = comment_safe("\n".join(f" *   {line}" for line in _provenance_lines(law, provenance)))
     urdf = law.angles == "urdf"
     start_doc = ("""/* at start-up and just after every impact: fills the controller state, state[0]
    the stance leg (the leg whose foot is in front; returns 2 when the feet are level,

@@ -28,7 +28,7 @@ import numpy as np
 from ..model.urdf_map import UrdfMap, wrap_angle
 
 __all__ = ["urdf_functions", "torque_matrix", "UrdfAngleLaw", "LEG_ORDER", "c_number",
-           "urdf_header_doc", "urdf_readme_doc", "URDF_START_C"]
+           "urdf_header_doc", "urdf_readme_doc", "URDF_START_C", "comment_safe"]
 
 #: how the exported code numbers the legs: 0 for the map's leg 1, 1 for leg 2
 LEG_ORDER = (1, 2)
@@ -233,6 +233,25 @@ int biped_step_start(const double *q, const double *dq, double *state)
 
 
 
+def comment_safe(text: str) -> str:
+    """Text that can stand inside a C comment.
+
+    A ``*/`` of a name (URDF names, file paths) would end the comment early: it is
+    written ``* /``.
+
+    Parameters
+    ----------
+    text : str
+        The comment's text.
+
+    Returns
+    -------
+    str
+        The same text without ``*/``.
+    """
+    return text.replace("*/", "* /")
+
+
 def urdf_header_doc(m: UrdfMap, nu: int, motor_side: bool) -> str:
     """The header's comment on the inputs, outputs and state of a law in URDF angles.
 
@@ -290,7 +309,7 @@ def urdf_header_doc(m: UrdfMap, nu: int, motor_side: bool) -> str:
             else:
                 cur += " " + w
         out.append(cur)
-    return "\n".join(out)
+    return comment_safe("\n".join(out))
 
 
 

@@ -19,7 +19,8 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   link's goes from the next joint down (the foot, for the last link) to its own joint.
   The angle between a link's up direction and its parent's at zero is the joint's
   ``offset``, the orientation of its axis against n its ``sign`` (printed on import);
-- per link, from ``<inertial>``, with fixed child links merged in: the mass, the centre
+- per link, from ``<inertial>``, with fixed child links merged in (they may carry all of
+  it: a massless ``base_link`` with the legs and a fixed inertial child): the mass, the centre
   of mass anywhere in the plane (``com`` along the link's line from its proximal joint,
   ``com_offset`` across it, positive forward when upright) and the inertia about the
   centre of mass around n; a fixed child link with mass and no inertia sitting on the
@@ -32,18 +33,25 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   ``motorInertia``; each joint's ``mechanicalReduction`` is kept in the map (the motor
   side of an exported law);
 - the torque limit: the smallest ``<limit effort>``; a robot whose leg joints give none
-  (``continuous`` joints, no ``<limit>``) has none (infinite, said in the notes) unless
-  ``torque_limit=`` sets it.
+  (``continuous`` joints, no ``<limit>``), or give ``effort="0"`` every one (exporters'
+  "unknown"), has none (infinite, said in the notes) unless ``torque_limit=`` sets it.
+
+Joint ``<dynamics>`` (damping, friction) is not in the model (rigid, frictionless joints):
+the notes list it.
 
 The torso's length (which only draws the robot) is the top of its visual or collision
 geometry above the hip along its up direction, else twice its centre-of-mass height.
 Gravity is 9.81 m/s^2 along -z of the world.
 
 Refused, with one ``ValueError`` naming the file and the joint or link: an unparsable
-file, non-planar or prismatic joints, a torso without two legs, legs that differ (links,
-masses, centres of mass, point masses), the hips at two places in the plane, a leg joint
+file, links or joints defined twice, a joint naming a link the file does not define, a
+loop of joints, a number that is not finite, a negative mass, a leg longer than
+:data:`MAX_LEG` (a file in mm), non-planar or prismatic
+joints, a torso without two legs, legs that differ (links, masses, centres of mass, point
+masses), the hips at two places in the plane, a leg joint
 without actuator (the model's one unactuated degree of freedom is the stance foot's
-contact), a link without ``<inertial>``, a torso whose up direction cannot be found, no
+contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a link without
+``<inertial>`` (its own or a fixed child's), a torso whose up direction cannot be found, no
 foot.
 """
 from __future__ import annotations
@@ -63,8 +71,11 @@ from .description import RobotDescription, description_from_dict, description_to
 from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
 from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader
 
-__all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "GEOMETRY_TOL"]
+__all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "GEOMETRY_TOL",
+           "MAX_LEG"]
 
+#: m: a longer leg is refused as a file in other units (URDF lengths are in metres)
+MAX_LEG = 10.0
 #: m: how far the two hips may be apart in the plane of motion, and how far from the hip
 #: a centre of mass (or geometry) must be to give the torso's direction
 GEOMETRY_TOL = 1e-9
@@ -139,6 +150,11 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
     motors = _motor_inertias(text)
     efforts = {j.name: (None if j.limit is None or j.limit.effort is None
                         else float(j.limit.effort)) for j in joints}
+    # effort="0" on every leg joint is what exporters write when they know no limit (a
+    # robot with every joint passive is no robot to control): no limit, not no actuator
+    all_zero = all(e == 0.0 for e in efforts.values())
+    if all_zero:
+        efforts = dict.fromkeys(efforts)
     if rd.robot.transmissions:
         passive = [j.name for j in joints if j.name not in reductions]
     else:
@@ -158,6 +174,9 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
         except ValueError:
             rd.fail(f"the transmission of joint {j.name!r} has a non-numeric motorInertia "
                     f"or mechanicalReduction")
+        if not math.isfinite(motor):
+            rd.fail(f"the transmission of joint {j.name!r} has motorInertia {motor:g}: it must "
+                    f"be a finite number")
         if not (math.isfinite(gear) and gear > 0):
             rd.fail(f"the transmission of joint {j.name!r} has mechanicalReduction {gear:g}: "
                     f"it must be positive")
@@ -166,9 +185,9 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
     ref = next(iter(values.values()))
     for n, v in values.items():
         if not math.isclose(v, ref, rel_tol=1e-12, abs_tol=0.0):
-            rd.fail(f"reflected rotor inertias differ: joint {n!r} {v:g}, joint "
-                    f"{next(iter(values))!r} {ref:g} kg m^2 (the model takes one for "
-                    f"every joint)")
+            rd.fail(f"reflected rotor inertias differ: joint {n!r} {v:.12g}, joint "
+                    f"{next(iter(values))!r} {ref:.12g} kg m^2 (apart by {abs(v - ref):.2g}; "
+                    f"the model takes one for every joint)")
     given = sorted({e for e in efforts.values() if e is not None})
     unlimited = [n for n, e in efforts.items() if e is None]
     if torque_limit is not None:
@@ -178,8 +197,11 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
                            if given else ""))
     elif not given:
         limit = math.inf
-        rd.notes.append("no leg joint gives <limit effort=...> (continuous joints, no "
-                        "<limit>): the robot has no torque limit (infinite); commands that "
+        rd.notes.append(("every leg joint gives <limit effort=\"0\"> (what exporters write "
+                         "when they know no limit)" if all_zero else
+                         "no leg joint gives <limit effort=...> (continuous joints, no "
+                         "<limit>)")
+                        + ": the robot has no torque limit (infinite); commands that "
                         "need one say so; set one with --torque-limit N (torque_limit=)")
     else:
         limit = given[0]
@@ -261,10 +283,15 @@ def _merged(rd: _Reader, frame: _Frame, ends: dict, owner: str, pm: dict, plane:
     ``pm``."""
     link = rd.links[frame.name]
     body = _body(link, frame.R, frame.p)
-    if body is None or body.mass <= 0:
-        rd.fail(f"link {link.name!r}{owner} has no <inertial> with a positive mass")
+    if body is not None and body.mass < 0:
+        rd.fail(f"link {link.name!r}{owner} has a negative mass ({body.mass:g} kg)")
+    if body is not None and body.mass == 0.0:
+        body = None                   # a massless link: its fixed children may carry it
     for _, f in rd.fixed_descendants(frame):
         extra = _body(rd.links[f.name], f.R, f.p)
+        if extra is not None and extra.mass < 0:
+            rd.fail(f"link {f.name!r} (fixed to {link.name!r}) has a negative mass "
+                    f"({extra.mass:g} kg)")
         if extra is None or extra.mass == 0.0:
             continue
         at = [name for name, pt in ends.items()
@@ -272,8 +299,11 @@ def _merged(rd: _Reader, frame: _Frame, ends: dict, owner: str, pm: dict, plane:
         if at and not np.any(extra.inertia):
             pm[at[0]] = pm.get(at[0], 0.0) + extra.mass
         else:
-            body = body.plus(extra)
+            body = extra if body is None else body.plus(extra)
             rd.notes.append(f"fixed link {f.name!r} merged into {link.name!r}")
+    if body is None or not body.mass > 0:
+        rd.fail(f"link {link.name!r}{owner} has no <inertial> with a positive mass (nor "
+                f"fixed child links with one)")
     return body
 
 
@@ -388,8 +418,10 @@ def _torso_length(rd: _Reader, link, frame: _Frame, hip, up, com: float) -> floa
         tops.append(float(np.dot(p - hip, up)) + half)
     if tops and max(tops) > 0:
         return max(tops)
-    rd.notes.append("the torso has no box, cylinder or sphere geometry: its length (for "
-                    "drawings) is twice its centre-of-mass height")
+    rd.notes.append(("the torso's box, cylinder or sphere geometry does not reach above the "
+                     "hip along its up direction (toward its centre of mass)" if tops else
+                     "the torso has no box, cylinder or sphere geometry")
+                    + ": its length (for drawings) is twice its centre-of-mass height")
     return 2.0 * com if com > 0 else 1e-3
 
 
@@ -465,6 +497,10 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     if len(legs[0].frames) != len(legs[1].frames):
         rd.fail(f"legs differ: {len(legs[0].frames)} and {len(legs[1].frames)} links "
                 f"(legs of {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r})")
+    span = sum(legs[0].lengths)
+    if span > MAX_LEG:
+        rd.fail(f"the leg of {legs[0].joints[0].name!r} is {span:.4g} m long: URDF lengths are "
+                f"in metres (a file in millimetres?)")
     hip = legs[0].points[0]
     apart = float(np.linalg.norm(plane.flat(legs[1].points[0] - hip)))
     if apart > tol:
@@ -472,6 +508,15 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 f"are {apart:.3g} m apart in the plane of motion: the model's legs share "
                 f"one hip")
     all_joints = [j for leg in legs for j in leg.joints]
+    damped = []
+    for j in all_joints:
+        terms = [f"{k} {getattr(j.dynamics, k):g}" for k in ("damping", "friction")
+                 if j.dynamics is not None and getattr(j.dynamics, k, None)]
+        if terms:
+            damped.append(f"{j.name} ({', '.join(terms)})")
+    if damped:
+        rd.notes.append(f"ignored: joint <dynamics> of {', '.join(damped)}: the model's joints "
+                        f"are frictionless (the torques it computes are the rigid body's)")
     motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
     pm_legs = [dict(), dict()]
     links = [[leg.body(i, pm) for i in range(len(leg.frames))]
@@ -523,8 +568,9 @@ def _same_legs(rd: _Reader, links, pms, legs):
     for a, b in zip(*links):
         for key in ("mass", "length", "com", "com_offset", "inertia"):
             if not math.isclose(a[key], b[key], rel_tol=1e-9, abs_tol=rd.tol):
-                rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.6g}, link "
-                        f"{b['name']!r} {b[key]:.6g}")
+                rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.12g}, link "
+                        f"{b['name']!r} {b[key]:.12g} (apart by {abs(a[key] - b[key]):.2g}; "
+                        f"the model's legs are identical to 1e-9 relative or {rd.tol:g} m)")
     if set(pms[0]) - {"hip"} != set(pms[1]) - {"hip"} or any(
             not math.isclose(pms[0][k], pms[1][k], rel_tol=1e-9) for k in pms[0] if k != "hip"):
         rd.fail(f"legs differ in their point masses (legs of {legs[0].joints[0].name!r} and "

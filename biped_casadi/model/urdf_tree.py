@@ -91,6 +91,8 @@ class _Reader:
 
     def __init__(self, robot, where: str, tol: float):
         self.robot, self.where, self.tol = robot, where, tol
+        self._check_names()
+        self._check_numbers()
         self.links = {link.name: link for link in robot.links}
         self.children = {}
         for j in robot.joints:
@@ -102,14 +104,74 @@ class _Reader:
     def fail(self, problem: str):
         raise ValueError(f"{self.where}: {problem}")
 
+    def _check_names(self):
+        """Links and joints defined once; every joint's parent and child defined, and no
+        link the child of two joints."""
+        for kind, items in (("link", self.robot.links), ("joint", self.robot.joints)):
+            seen = set()
+            for item in items:
+                if item.name in seen:
+                    self.fail(f"{kind} {item.name!r} is defined twice")
+                seen.add(item.name)
+        links = {link.name for link in self.robot.links}
+        parents = {}
+        for j in self.robot.joints:
+            for role, name in (("parent", j.parent), ("child", j.child)):
+                if name not in links:
+                    self.fail(f"joint {j.name!r} names {role} link {name!r}, which the file "
+                              f"does not define")
+            if j.child in parents:
+                self.fail(f"link {j.child!r} is the child of two joints ({parents[j.child]!r} "
+                          f"and {j.name!r}): not a tree")
+            parents[j.child] = j.name
+
+    def _check_numbers(self):
+        """Every number the model is made from is finite."""
+        def check(owner, tag, values):
+            if values is None:
+                return
+            for v in np.atleast_1d(np.asarray(values, dtype=float)):
+                if not math.isfinite(v):
+                    self.fail(f"{owner}: <{tag}> has a value that is not finite ({v:g})")
+        for j in self.robot.joints:
+            owner = f"joint {j.name!r}"
+            if j.origin is not None:
+                check(owner, "origin", list(j.origin.xyz or []) + list(j.origin.rpy or []))
+            check(owner, "axis", j.axis)
+            if j.limit is not None:
+                check(owner, "limit effort", j.limit.effort)
+        for link in self.robot.links:
+            i = link.inertial
+            if i is None:
+                continue
+            owner = f"link {link.name!r}"
+            if i.origin is not None:
+                check(owner, "inertial origin", list(i.origin.xyz or []) + list(i.origin.rpy or []))
+            check(owner, "mass", i.mass)
+            if i.inertia is not None:
+                check(owner, "inertia", [i.inertia.ixx, i.inertia.ixy, i.inertia.ixz,
+                                         i.inertia.iyy, i.inertia.iyz, i.inertia.izz])
+
     def torso(self) -> str:
         """The torso: the root, or the first link with mass below a chain of massless
         links each joined to the next by the one floating, planar or fixed joint."""
         kids = {j.child for j in self.robot.joints}
         roots = [name for name in self.links if name not in kids]
+        if not roots:
+            self.fail("no root link: the joints make a loop (every link is some joint's child)")
         if len(roots) != 1:
             self.fail(f"must be one tree of links, found roots {roots}")
         name = roots[0]
+        reached, todo = {name}, [name]
+        while todo:
+            for j in self.children.get(todo.pop(), []):
+                if j.child not in reached:
+                    reached.add(j.child)
+                    todo.append(j.child)
+        cut = [n for n in self.links if n not in reached]
+        if cut:
+            self.fail(f"link(s) {', '.join(repr(n) for n in cut[:4])} not connected to the "
+                      f"root link {name!r}: the joints make a loop")
         while _mass(self.links[name]) == 0.0:
             joints = self.children.get(name, [])
             if len(joints) != 1 or joints[0].type not in _BASE:
@@ -160,6 +222,10 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
         chain, item = [], (hip, parent)
         while item is not None:
             joint, parent = item
+            if getattr(joint, "mimic", None) is not None:
+                rd.fail(f"joint {joint.name!r} mimics joint {joint.mimic.joint!r} (<mimic>): "
+                        f"its angle is not free, and every leg joint of the model is an "
+                        f"independent, actuated one")
             frame = _child_frame(parent, joint)
             chain.append((joint, frame))
             nxt = rd.moving(frame)
@@ -197,6 +263,7 @@ def _axis(rd: _Reader, legs) -> tuple:
         n = n if n[1] > 0 else -n
     else:
         n = n if n[int(np.argmax(np.abs(n)))] > 0 else -n
+    n = n + 0.0                                       # -0.0 (of a flipped n) is 0.0
     if abs(n[2]) > 1e-9:
         rd.fail(f"the joints turn about {np.round(n, 6).tolist()} (torso frame): the torso "
                 f"frame's z axis, vertical at pitch 0, must lie in the plane of motion")

@@ -41,13 +41,16 @@ from ..model.biped import BipedModel, resolve_robot, robot as _robot
 from ..model.description import RobotDescription
 
 __all__ = ["mjcf", "ContactSettings", "STIFF", "MUJOCO_DEFAULT", "MIN_INERTIA", "Layout",
-           "layout", "floating_base_inertia", "CONTACTS"]
+           "layout", "floating_base_inertia", "CONTACTS", "MIN_TIMESTEP", "MAX_TIMESTEP"]
 
 #: kg m^2: the inertia given to a link that is a point mass (MuJoCo refuses a moving body
 #: whose inertia is below mjMINVAL = 1e-15); its effect on D is below 1e-13
 MIN_INERTIA = 1e-14
 #: the contact kinds of :func:`mjcf`
 CONTACTS = ("stiff", "default")
+#: s: the time steps a run takes (a smaller one would run for hours, a larger one misses
+#: the step's dynamics)
+MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.05
 
 
 @dataclass(frozen=True)
@@ -57,7 +60,8 @@ class ContactSettings:
     Parameters
     ----------
     timestep : float
-        MuJoCo's time step, s (> 0; MuJoCo's default 0.002).
+        MuJoCo's time step, s (:data:`MIN_TIMESTEP` to :data:`MAX_TIMESTEP`; MuJoCo's
+        default 0.002).
     solref : float or None
         The contact's time constant, s (``solref = (solref, 1)`` on feet and floor);
         None: MuJoCo's default (0.02 s, critically damped).  MuJoCo silently stiffens a
@@ -83,9 +87,13 @@ class ContactSettings:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v <= 0:
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
-        if self.timestep > 0.05:
-            raise ValueError(f"timestep must be at most 0.05 s (a step of RABBIT lasts about "
-                             f"0.6 s), got {self.timestep!r}")
+        if self.timestep > MAX_TIMESTEP:
+            raise ValueError(f"timestep must be at most {MAX_TIMESTEP:g} s (a walking step "
+                             f"lasts about half a second), got {self.timestep!r}")
+        if self.timestep < MIN_TIMESTEP:
+            raise ValueError(f"timestep must be at least {MIN_TIMESTEP:g} s (a walking step of "
+                             f"half a second would take {0.5 / self.timestep:.2g} MuJoCo "
+                             f"steps), got {self.timestep!r}")
         if self.solref is not None:
             v = self.solref
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \

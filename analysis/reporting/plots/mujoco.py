@@ -78,6 +78,11 @@ def mujoco_steps_plot(walks, labels=None, title: str | None = None) -> Figure:
     ax[3].set_ylabel(r"$\dot q_u - \dot q_u^d(T)$ [rad/s]")
     ax[3].set_xlabel("step")
     ax[3].xaxis.set_major_locator(MaxNLocator(integer=True, steps=[1, 2, 5, 10]))  # whole steps
+    if max(_series(w, "speeds").size for w in walks) == 0:      # ended in its first step
+        ax[3].set_xlim(0.5, 1.5)
+        ax[3].set_xticks([1])
+        ax[0].text(0.5, 0.2, "no step completed", transform=ax[0].transAxes, ha="center",
+                   va="center", fontsize=10, bbox=dict(fc="white", ec="0.6"))
     ax[0].legend(fontsize=8, loc="best")
     ax[1].legend(fontsize=8, loc="best")
     for a in ax:
@@ -106,7 +111,8 @@ def mujoco_animation(walk, layout, path, fps: int = 25, max_steps: int | None = 
     fps : int
         Frames per second.
     max_steps : int, optional
-        Animate only the first steps.
+        Animate only the first steps (the title says so): the axes span the steps shown,
+        and a long walk's would leave the robot a dot.
 
     Returns
     -------
@@ -118,9 +124,11 @@ def mujoco_animation(walk, layout, path, fps: int = 25, max_steps: int | None = 
     if walk.t.size == 0:
         raise ValueError("walk: the walk has no logged states (run it with log=True)")
     t, qpos, stance = walk.t, walk.qpos, walk.stance
+    shown = walk.steps
     if max_steps is not None and len(walk.steps) > max_steps:
         keep = t <= walk.steps[max_steps - 1].t_touchdown
         t, qpos, stance = t[keep], qpos[keep], stance[keep]
+        shown = walk.steps[:max_steps]
     frames = np.unique(np.clip(np.searchsorted(t, np.arange(t[0], t[-1] + 1e-12, 1.0 / fps)),
                                0, t.size - 1))
     P = layout.points(qpos)                         # (N, 2k + 3, 2)
@@ -134,7 +142,7 @@ def mujoco_animation(walk, layout, path, fps: int = 25, max_steps: int | None = 
     ax.set_aspect("equal")
     ax.axhline(0, color="0.3", lw=1.5)
     ax.fill_between([x_lo, x_hi], -0.08, 0, color="0.85")
-    prints = [s.step_length for s in walk.steps]
+    prints = [s.step_length for s in shown]
     xs = np.r_[P[0, legs[0][-1], 0], P[0, legs[0][-1], 0] + np.cumsum(prints)]
     foot, = ax.plot(xs, np.zeros_like(xs), "k^", ms=6, label="touchdowns")
     st, = ax.plot([], [], "-o", color=STANCE, lw=3, ms=4)
@@ -143,7 +151,9 @@ def mujoco_animation(walk, layout, path, fps: int = 25, max_steps: int | None = 
     text = ax.text(0.99, 0.95, "", transform=ax.transAxes, va="top", ha="right", fontsize=9)
     s = walk.settings
     ax.set_title(f"In MuJoCo ({s['contact']} contact, dt {1e3 * s['timestep']:g} ms): "
-                 f"{walk.status}, {walk.steps_walked} steps", fontsize=10)
+                 f"{walk.status}, {walk.steps_walked} steps"
+                 + (f" (the first {len(shown)} shown)" if len(shown) < len(walk.steps) else ""),
+                 fontsize=10)
     ax.set_xlabel("x [m]")
     ax.legend(handles=[Line2D([], [], color=STANCE, lw=3, label="stance leg"),
                        Line2D([], [], color=SWING, lw=3, label="swing leg"),
