@@ -171,3 +171,17 @@ def test_simulate_prints_no_giant_ratio(capsys):
     assert "max |F_x|/F_z inf" in out and max(len(w) for w in out.split()) < 40, out
     assert main(["simulate", "--controller", "vc", "--perturb", "1", "0", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["max_friction_ratio"] is None
+
+
+def test_a_gait_at_its_friction_bound_walks_its_own_orbit(model):
+    """RABBIT's gait at 1.1 m/s has its impact impulse on the cone (|F_x| / F_z =
+    0.6 + 1.6e-10, within the optimiser's tolerance; `biped gait`'s dense-grid check:
+    all constraints hold); simulating its own orbit said 'slipped: 0.6000 > mu = 0.6'.
+    The friction checks take the gait's tolerance (1e-7 on the ratio)."""
+    from biped_casadi import Design, simulate
+    from gait_opt import optimize_gait
+    g = optimize_gait(model, speed=1.1, cache=True)
+    assert g.violations() == []
+    run = simulate(Design.vc(g).controller_for(), *g.evaluate(0.0)[:2])
+    assert run.ok, run.message
+    assert 0.6 < run.max_impulse_ratio < 0.6 + 1e-7
