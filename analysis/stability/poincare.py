@@ -684,15 +684,11 @@ def poincare_eigenvalues(gait, M1=None, *args, method: str | None = None,
         require_same_robot(gait, M1)
         gait, M1, args = M1, (args[0] if args else None), args[1:]
     if not hasattr(gait, "T") or not hasattr(gait, "model"):
-        raise TypeError(f"poincare_eigenvalues(): a gait is needed first (Gait.load(path) "
-                        f"or optimize_gait(model)), got {type(gait).__name__}; the forms are "
-                        f"(gait, M1) and (model, gait, M1)")
-    if len(args) > 1:
-        raise TypeError(f"poincare_eigenvalues() takes the gait, M1 and the method, got "
-                        f"{len(args) - 1} more argument(s)")
-    if args and method is not None:
-        raise TypeError("poincare_eigenvalues() got the method twice (positional and "
-                        "method=)")
+        raise TypeError(f"poincare_eigenvalues(): a gait is needed first (Gait.load(path) or "
+                        f"optimize_gait(model)), got {type(gait).__name__}")
+    if len(args) > 1 or (args and method is not None):
+        raise TypeError("poincare_eigenvalues() takes (gait, M1[, method]) or (model, gait, "
+                        "M1[, method]), the method once")
     method = args[0] if args else "variational" if method is None else method
     if isinstance(M1, Design):
         d = Design.of(M1, gait)
