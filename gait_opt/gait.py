@@ -231,6 +231,8 @@ class Gait(Reference):
         scalar = t_arr.ndim == 0
         t1 = np.atleast_1d(t_arr).ravel()
         self._check_times(t1)
+        if t1.size == 0:                     # no times: (nq, 0) each (CasADi maps need n > 0)
+            return tuple(np.zeros((self.model.nq, 0)) for _ in range(3))
         sg, X, A = self._nodes()
         qu, dqu, _ = quintic_hermite(sg * self.T, X[0], X[1], A, t1)
         qa, dqa, ddqa = self._qa(t1 / self.T)

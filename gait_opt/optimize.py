@@ -269,8 +269,14 @@ def optimize_gait(model=None, options: GaitOptions | None = None, *, cache: bool
     ------
     GaitOptimizationError
         With IPOPT's status and the violated constraint families when no gait is found.
+    TypeError
+        When ``model`` is not a robot model.
     """
-    model = model or rabbit()
+    model = rabbit() if model is None else model
+    if not hasattr(model, "description") or not hasattr(model, "params"):
+        raise TypeError(f"model: a robot model is needed (biped_casadi.rabbit() or "
+                        f"biped_casadi.robot(NAME_OR_PATH)), got {type(model).__name__} "
+                        f"{model!r:.60}")
     opts = _options(model, options, overrides)
     if cache:
         return cached_gait(model, opts, cache_dir, progress,

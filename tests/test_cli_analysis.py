@@ -167,3 +167,29 @@ def test_m1_outside_the_valid_range_is_a_value_error(model, gait):
     ad = poincare_eigenvalues(gait, [M1_LIMIT, 0, 0, 0], method="ad")
     assert r.status == ad.status == "unstable"
     assert r.max_abs == pytest.approx(ad.max_abs, rel=1e-4)     # still meaningful there
+
+
+def test_ctrl_c_that_a_library_turns_into_another_error_is_an_interruption(
+        gait_file, capsys, monkeypatch):
+    """Ctrl-C inside CasADi's DM.__array__ in a task came out of ``biped terrain`` as
+    "error: --scheduler: evaluate_chunk: SystemError: ... returned a result with an
+    exception set" (exit 2, as for bad input); any error after a Ctrl-C is the
+    interruption (130), here in a sweep whose chunk turns it into a ValueError."""
+    import os
+    import signal
+
+    from analysis.cli import sweep as cli_sweep
+
+    def interrupted_inside_a_library(*a, **k):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            raise AssertionError("no interruption")
+        except KeyboardInterrupt:
+            raise ValueError("scheduler: evaluate_chunk: SystemError: <function "
+                             "DM.__array__> returned a result with an exception set") from None
+
+    monkeypatch.setattr(cli_sweep, "run_sweep", interrupted_inside_a_library)
+    rc = biped_main(["sweep", "--gait", str(gait_file), "--grid", "2"])
+    err = capsys.readouterr().err
+    assert rc == 130 and err.strip().splitlines()[-1] == "biped sweep: interrupted", err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # put back

@@ -64,6 +64,7 @@ def files(model, gait, tmp_path_factory):
     write("truncated.json", good.read_text()[:500])
     write("list.json", "[1, 2, 3]")
     write("number.json", "42")
+    write("family.json", json.dumps({"format": "biped-casadi-gait-family", "version": 1}))
     write("other_format.json", json.dumps({"format": "something-else", "version": 1}))
     write("deep.json", "[" * 100000 + "]" * 100000)
     write("summary.json", json.dumps({"stages": {}, "figures": {}}))
@@ -202,6 +203,12 @@ CASES = [
     (["eig", "--gait", "{number}", *M0], "not a biped-casadi-gait file"),
     (["eig", "--gait", "{other_format}", *M0], "not a biped-casadi-gait file"),
     (["eig", "--gait", "{summary}", *M0], "not a biped-casadi-gait file"),
+    # a gait family where one gait is taken: how to take one from it
+    (["eig", "--gait", "{family}", *M0], "--gait: {family} is a gait family file, not one "
+                                          "gait: take one with 'biped gait --family"),
+    (["simulate", "--gait", "{family}", "--controller", "vc"], "or walk it with --speeds"),
+    (["sweep", "--gait", "{family}", "--grid", "2"], "is a gait family file"),
+    (["m1", "--gait", "{family}"], "'biped m1 --robust' designs over a family"),
     (["eig", "--gait", "{version}", *M0], "format version 99"),
     (["eig", "--gait", "{checksum}", *M0], "checksum"),
     (["eig", "--gait", "{no_solution}", *M0], "missing key(s): solution"),
@@ -273,6 +280,13 @@ CASES = [
     (["simulate", *G, "--steps", "2.5"], "invalid int"),
     (["simulate", *G, "--perturb", "0.1"], "expected 2"),
     (["simulate", *G, "--perturb", "nan", "0"], "--perturb"),
+    # errors beyond half a turn / 100 rad/s: overflow and 300-digit angles before
+    (["simulate", *G, "--perturb", "1e300", "0"], "--perturb: angle errors must lie within"),
+    (["simulate", *G, "--perturb", "0", "1e6"], "--perturb: rate errors must lie within"),
+    (["simulate", *G, "--perturb", "-4", "0"], "+-3.14"),
+    (["simulate", *G, "--perturb-dq", "1e308", "0", "0", "0", "0"], "--perturb-dq: rate"),
+    (["simulate", *G, "--perturb-q", "0", "0", "7", "0", "0"], "--perturb-q: angle"),
+    (["mujoco", *G, "--perturb", "1e300", "0"], "--perturb: angle"),
     (["simulate", *G, "--perturb", "0", "0", "--perturb-q", "0", "0", "0", "0", "0"],
      "--perturb"),
     (["simulate", *G, "--perturb-q", "1", "2"], "--perturb-q takes 5"),
@@ -292,6 +306,9 @@ CASES = [
     (["simulate", *G, "--plot", "{sys}/figs"], "--plot"),
     (["simulate", *G, "--plot", "{read_only}/figs"], "--plot", "nonroot"),
     (["simulate", "--gait", "{garbage}"], "not a text"),
+    # ---- robust: a singular design is refused as simulate refuses it (not "slipped")
+    (["robust", *G, "--m1", "1", "2", "3", "4"], "makes the controller singular"),
+    (["robust", *G, "--m1", "1", "2", "3", "4", "--plot", "figs"], "singular"),
     # ---- reproduce (checked before the first stage)
     (["reproduce", "--out", "{file}"], "--out"),
     (["reproduce", "--quick", "--out", "{file}"], "--out"),

@@ -277,3 +277,51 @@ def test_every_command_on_any_gait_ends_cleanly(which, gait_files, tmp_path, mon
             assert cap.out.strip(), (argv, rc, cap.err)  # never empty
             body = json.loads(cap.out)                 # one object
             assert isinstance(body, dict), argv
+
+
+def test_replay_names_the_gait_the_design_runs_on(gait, gait3, tmp_path):
+    """With a given gait the co-design moved (gait free), the replay arguments and
+    ``gait_file`` name the moved gait, saved beside the cache, not the given file (whose
+    gait the design's M1 was not made for); a design on the gait as given keeps it."""
+    from types import SimpleNamespace
+
+    from analysis.design.codesign.api import _with_gait_file
+    from gait_opt import Gait
+
+    given = tmp_path / "given.json"
+    gait.save(given)
+
+    def result(on):
+        return SimpleNamespace(design=SimpleNamespace(M1=[0.5, -0.5], rejoin=0.75, gait=on),
+                               gait=on, settings={"verification": dict(
+                                   mu=0.6, walk_steps=10, torque_limit=None)})
+
+    moved = _with_gait_file(result(gait3), gait, given, tmp_path / "cache", "k" * 40)
+    assert moved.gait_file != str(given)
+    assert Gait.load(moved.gait_file).cache_key == gait3.cache_key
+    assert moved.simulate_args[:2] == ["--gait", moved.gait_file]
+    kept = _with_gait_file(result(gait), gait, given, tmp_path / "cache", "j" * 40)
+    assert kept.gait_file == str(given) and kept.simulate_args[:2] == ["--gait", str(given)]
+
+
+def test_no_design_either_way_says_which_gait_each_reason_is_for(monkeypatch):
+    """'auto' with no design on the gait as given nor on the gait moved from it: the one
+    line says which reason is which (they read alike, with different figures)."""
+    from types import SimpleNamespace
+
+    from analysis.design.codesign import api
+
+    calls = []
+
+    def designed(method, settings):
+        calls.append(method)
+        raise NoDesign(f"codesign: no walk (torso {len(calls)} rad)", {})
+
+    monkeypatch.setattr(api, "Method", lambda *a, **k: len(calls))
+    monkeypatch.setattr(api, "_designed", designed)
+    with pytest.raises(NoDesign) as e:
+        api._auto(SimpleNamespace(say=lambda *a: None), None, None, object())
+    msg = str(e.value)
+    assert msg.startswith("codesign: on the gait as given: no walk (torso 3 rad); "), msg
+    assert msg.endswith("on the gait moved from it: no walk (torso 2 rad)"), msg
+    assert msg.count("codesign:") == 1 and "\n" not in msg

@@ -341,3 +341,33 @@ def test_family_of_a_robot_without_a_torque_limit(capsys, tmp_path, monkeypatch)
     fam = GaitFamily.load(tmp_path / "f.json")
     assert len(fam) == 2 and math.isinf(fam.model.params.torque_limit)
     assert fam.gait(0.75).options.torque_limit == 150
+
+
+def test_gait_between_branches_prints_no_nan_and_names_a_fall(capsys, tmp_path, monkeypatch,
+                                                              family_path):
+    """``biped gait --family F --speed V`` where no interpolant was made (between two
+    branches: the gait solved instead) says so instead of 'interpolant residual nan ...',
+    and a gait whose torso leans past the fall bound is named as in ``biped gait``."""
+    import dataclasses
+
+    from analysis.cli import gait_family as cli_family
+    real = GaitFamily.gait_at
+
+    def solved(self, speed, resolve=False):
+        r = real(self, speed, resolve=True)
+        return dataclasses.replace(r, interpolant_residual=math.nan,
+                                   interpolant_orbit_residual=math.nan,
+                                   parameter_change=math.nan, T_change=math.nan)
+
+    monkeypatch.setattr(GaitFamily, "gait_at", solved)
+    monkeypatch.setattr(cli_family, "torso_fall", lambda g: (2.1, True, 1.5708))
+    monkeypatch.chdir(tmp_path)
+    rc, out, _ = _run(capsys, "--family", str(family_path), "--speed", "0.76", "--out",
+                      "g.json")
+    assert rc == 0 and "nan" not in out, out
+    assert "interpolant          none" in out
+    assert "PAST the simulator's fall bound" in out
+    rc, out, _ = _run(capsys, "--family", str(family_path), "--speed", "0.76", "--out",
+                      "g.json", "--json")
+    d = json.loads(out)
+    assert d["torso_past_fall_bound"] is True and d["interpolant_residual"] is None

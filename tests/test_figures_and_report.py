@@ -210,3 +210,33 @@ def test_report_of_a_failed_stage_says_so(tmp_path):
     text = write_report(tmp_path, s).read_text()
     assert "1 of 2 stages not ok" in text and "failed: ValueError: boom line 2" in text
     assert "n/a at n/a" not in text and "not computed" in text
+
+
+def test_fig5_of_runs_without_an_impact_has_a_step_axis(gait):
+    """Runs that fail before their first impact (``biped simulate --perturb 1 0
+    --compare --plot``): Fig. 5 drew an empty axis from -0.04 to 0.04 "steps"; it shows
+    step 1 and says no run reached an impact."""
+    from analysis.reporting.plots import unactuated_error_plot
+    from biped_casadi import Design, perturbed_initial_state, simulate
+    run = simulate(Design.vc(gait).controller_for(), *perturbed_initial_state(gait, 1.0, 0.0))
+    assert len(run.steps) == 0 and not run.ok
+    fig = unactuated_error_plot([run])
+    ax = fig.axes[1]
+    lo, hi = ax.get_xlim()
+    assert lo < 1 < hi and lo >= 0 and hi <= 2
+    assert any("no run reached an impact" in t.get_text() for t in fig.axes[0].texts)
+
+
+def test_fig6_of_runs_stopped_at_the_start_shows_them(gait):
+    """Runs stopped at t = 0 have one sample: Fig. 6 drew no visible line on an axis of
+    -0.04 to 0.04 s; the sample is a marker, the axis starts at 0, and a note says so."""
+    from analysis.reporting.plots import swing_torques_plot
+    from biped_casadi import Design, perturbed_initial_state, simulate
+    run = simulate(Design.vc(gait).controller_for(), *perturbed_initial_state(gait, 1.0, 0.0))
+    assert np.ptp(run.t) == 0
+    fig = swing_torques_plot([run], gait)
+    ax = fig.axes[0]
+    assert ax.lines[0].get_marker() == "o"
+    lo, hi = ax.get_xlim()
+    assert lo <= 0 < hi and lo > -0.2 * gait.T
+    assert any("stopped at t = 0" in t.get_text() for t in ax.texts)

@@ -54,3 +54,12 @@ def test_cli_eig_reports_the_open_orbit(open_gait, tmp_path, capsys):
                  "--json"]) == 0
     body = json.loads(capsys.readouterr().out)
     assert body["status"] == "open_orbit" and body["fixed_point_residual"] > 1e-2
+
+
+def test_open_orbit_residual_says_for_which_M1(open_gait):
+    """The variational method checks the fixed point once, with M1 = 0: its message says
+    so (the residual differs from the AD method's, taken with the M1 asked for)."""
+    v = poincare_eigenvalues(open_gait, M1)
+    a = poincare_eigenvalues(open_gait, M1, method="ad")
+    assert "(with M1 = 0)" in v.message and "(with M1 = 0)" not in a.message
+    assert abs(v.fixed_point_residual - a.fixed_point_residual) > 1e-6

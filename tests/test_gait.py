@@ -523,3 +523,21 @@ def test_torso_lean_reported_and_tied_to_the_simulators_fall(model, gait):
     run = simulate(VirtualConstraintController(fast), fast.q(0.0), fast.dq(0.0),
                    SimulationOptions(steps=1))
     assert str(run.status) == "fell"
+
+
+def test_no_times_give_empty_arrays(gait):
+    """An empty array of times gives (nq, 0) arrays (CasADi's 'Degenerate map
+    operation' before), as N = 0 of the (nq, N) rule."""
+    for f in (gait.q, gait.dq, gait.ddq):
+        assert f(np.array([])).shape == (5, 0)
+        assert f([]).shape == (5, 0)
+    assert all(r.shape == (5, 0) for r in gait.evaluate(np.zeros(0)))
+    assert gait.u(np.array([])).shape == (4, 0)
+
+
+def test_optimize_gait_names_a_model_that_is_not_one():
+    """A robot's name (or anything else) where the model goes: a TypeError that says
+    what to pass, not "'str' object has no attribute 'description'"."""
+    for wrong in ("rabbit", 3):
+        with pytest.raises(TypeError, match=r"robot\("):
+            optimize_gait(wrong)

@@ -143,3 +143,30 @@ def test_the_specification_form_is_the_same_call(model, gait):
     assert np.max(np.abs(d.A - new.A)) > 1e-6          # the rejoin time matters
     with pytest.raises(ValueError, match="other robot"):
         poincare_eigenvalues(robot("three_link"), gait, M1)
+
+
+def test_the_specification_form_takes_the_method_too(model, gait):
+    """poincare_eigenvalues(model, gait, M1, method=...) (and the method as the fourth
+    argument) is the gait-first call with that method; it raised TypeError ('multiple
+    values for argument method')."""
+    from analysis import poincare_eigenvalues
+    M1 = np.array([-10.0, 7.5, 10.0, -5.0])
+    ref = poincare_eigenvalues(gait, M1, method="ad")
+    for r in (poincare_eigenvalues(model, gait, M1, method="ad"),
+              poincare_eigenvalues(model, gait, M1, "ad"), poincare_eigenvalues(gait, M1, "ad")):
+        assert r.method == "ad"
+        np.testing.assert_array_equal(r.A, ref.A)
+    with pytest.raises(TypeError, match="method"):
+        poincare_eigenvalues(gait, M1, "ad", method="ad")
+    with pytest.raises(ValueError, match="M1"):
+        poincare_eigenvalues(model, gait)
+
+
+def test_something_else_than_a_gait_is_named(model):
+    """The model without its gait (or a file name, or None) where the gait goes: a
+    TypeError that says what is needed, not "'BipedModel' object has no attribute
+    'model'"."""
+    from analysis import poincare_eigenvalues
+    for wrong in (model, "gait.json", None):
+        with pytest.raises(TypeError, match="a gait is needed"):
+            poincare_eigenvalues(wrong, [0.0, 0.0, 0.0, 0.0])

@@ -236,3 +236,6 @@ def test_reproduce_quick_three_link(tmp_path, gait3):
     report = (out / "report.md").read_text()
     assert "three_link" in report and "| quantity | ours | note |" in report
     assert "figures/m1_plane.png" in report
+    # the robust design is left to the command that designs from the robot's gait (the
+    # --robot form ends without a start: the starts are drawn for RABBIT)
+    assert "biped m1 --robust --gait gait.json" in s["robust_design"]["skipped"]

@@ -396,3 +396,25 @@ def test_cli_robot_errors_are_one_line_exit_2(gait3, tmp_path, capsys, args, mes
     rc, out = run(capsys, *[a.format(**subs) for a in args])
     lines = out.err.strip().splitlines()
     assert rc == 2 and out.out == "" and len(lines) == 1 and message in lines[0], out.err
+
+
+@pytest.mark.slow
+def test_robust_codesign_of_another_robot_without_a_gait_says_why(gait3, capsys):
+    """``biped m1 --robust --robot three_link``: the starts drawn for RABBIT's default
+    flow give none on this robot; the one line says so and names the form that works
+    (``--gait``), not 'IPOPT (not run) found no verified design from 0 start(s)'."""
+    from analysis.cli import main
+    rc = main(["m1", "--robust", "--robot", "three_link", "--workers", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    assert "no start" in err[0] and "--gait" in err[0] and "not run" not in err[0], err[0]
+
+
+def test_three_link_m1_nlp_free_with_the_commands_starts(gait3):
+    """``biped m1 --free`` on the three-link gait (the default starts): a Newton run
+    from one start went to M1 ~ 4e8, beyond the outputs' valid range, and the
+    verification's range check ended the command with "M1: components must lie within
+    +-1e+06" as if the user had given it; points beyond the range are not candidates."""
+    from biped_casadi.control.output_law import M1_LIMIT
+    r = optimize_m1(gait3, group=None)
+    assert np.max(np.abs(r.M1)) <= M1_LIMIT and r.status == "stable"

@@ -323,3 +323,13 @@ def test_s_star_batch_on_a_dask_cluster(model, gait):
                               scheduler=cluster.scheduler_address)
     np.testing.assert_array_equal(local.s_star, remote.s_star)
     assert local.cause == remote.cause and local.scenario_steps == remote.scenario_steps
+
+
+def test_cli_robust_paper_run_without_impact_prints_no_nan(gait3, tmp_path, capsys):
+    """The paper's perturbation failing before any impact (three-link, deadbeat M1):
+    its impact ratio reads 'n/a' as in ``biped simulate``, not 'nan'."""
+    path = str(gait3.save(tmp_path / "g3.json"))
+    rc = biped_main(["robust", "--gait", path, "--m1", "3.39", "-3.23", "--directions", "2"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "slipped in step 0" in out, out
+    assert "nan" not in out and "max impulse ratio n/a" in out, out

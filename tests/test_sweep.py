@@ -316,3 +316,25 @@ def test_cli_user_errors_exit_2(gait_file, tmp_path, capsys, args, message):
     assert cap.out == ""
     lines = cap.err.strip().splitlines()
     assert len(lines) == 1 and message in lines[0] and lines[0].startswith("biped sweep: error:")
+
+
+def test_open_orbit_sweep_is_stored_and_read_back(model, sweep_gait, tmp_path, capsys):
+    """A gait that is not an orbit (--allow-open-orbit): every point's status is
+    'open_orbit', which the chunk files now store (it raised "tuple.index(x): x not in
+    tuple" with --out, and in `biped m1 --allow-open-orbit`'s grid); a rerun reads it."""
+    from gait_opt import Gait
+    g = sweep_gait
+    open_gait = Gait(model, g.options, g.alpha, g.x0 + np.array([0.0, 0.01]), g.T)
+    pts = grid_points(2, -1, 1)
+    r = run_sweep(open_gait, pts, out_dir=tmp_path / "s", workers=1, progress=False)
+    assert r.counts["open_orbit"] == len(pts)
+    again = run_sweep(open_gait, pts, out_dir=tmp_path / "s", workers=1, progress=False)
+    assert again.counts == r.counts and again.n_computed == 0
+    assert list(load_sweep(tmp_path / "s").point_status) == ["open_orbit"] * len(pts)
+    # in memory too: the counts were all 0 beside "total 16" ('open_orbi' counted nowhere)
+    r = run_sweep(open_gait, pts, workers=1, progress=False)
+    assert r.counts["open_orbit"] == len(pts) and set(r.point_status) == {"open_orbit"}
+    path = open_gait.save(tmp_path / "open.json")
+    assert biped_main(["sweep", "--gait", str(path), "--allow-open-orbit", "--grid", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "open_orbit       16" in out and "(open_orbit)" in out, out

@@ -138,3 +138,50 @@ def test_convergence_and_verdict():
     assert B[0].completed_steps == 4 and B[0].unactuated_errors().shape == (4,)
     d = B.to_dict()
     assert d["status"] == ["ok", "ok", "slipped"] and len(d["qu_error"][0]) == 4
+
+
+def test_friction_ratio_where_the_normal_force_is_not_positive():
+    """A node with F_z <= 0 makes the single-support ratio infinite, as an impulse with
+    F_z <= 0 makes the impact ratio (it was |F_x| / 1e-300, ~1e303); runs with F_z > 0
+    keep their ratio."""
+    rec = OutcomeRecorder(3, 1)
+    Fx = np.array([[30.0, 10.0], [5.0, 20.0], [1.0, 2.0]])
+    Fz = np.array([[100.0, -50.0], [100.0, 0.0], [100.0, 100.0]])
+    rec.track([0, 1, 2], np.zeros((4, 3, 2)), Fx, Fz)
+    B = rec.batch()
+    assert B.max_friction_ratio.tolist() == [math.inf, math.inf, 0.02]
+    assert B.min_normal_force.tolist() == [-50.0, 0.0, 100.0]
+    rec = OutcomeRecorder(2, 1)                  # a node that is not finite: NaN, as before
+    rec.track([0, 1], np.zeros((4, 2, 1)), np.array([[np.nan], [1.0]]),
+              np.array([[np.nan], [np.nan]]))
+    assert np.isnan(rec.batch().max_friction_ratio).all()
+    rec = OutcomeRecorder(1, 1)                  # a masked node does not count
+    rec.track([0], np.zeros((4, 1, 2)), Fx[:1], Fz[:1], mask=np.array([[True, False]]))
+    assert rec.batch().max_friction_ratio.tolist() == [0.3]
+
+
+def test_simulate_prints_no_giant_ratio(capsys):
+    """A start far off the orbit (F_z <= 0 at once): the text says inf, not a
+    300-digit number, and --json gives null for it."""
+    import json
+
+    from analysis.cli import main
+    assert main(["simulate", "--controller", "vc", "--perturb", "1", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "max |F_x|/F_z inf" in out and max(len(w) for w in out.split()) < 40, out
+    assert main(["simulate", "--controller", "vc", "--perturb", "1", "0", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["max_friction_ratio"] is None
+
+
+def test_a_gait_at_its_friction_bound_walks_its_own_orbit(model):
+    """RABBIT's gait at 1.1 m/s has its impact impulse on the cone (|F_x| / F_z =
+    0.6 + 1.6e-10, within the optimiser's tolerance; `biped gait`'s dense-grid check:
+    all constraints hold); simulating its own orbit said 'slipped: 0.6000 > mu = 0.6'.
+    The friction checks take the gait's tolerance (1e-7 on the ratio)."""
+    from biped_casadi import Design, simulate
+    from gait_opt import optimize_gait
+    g = optimize_gait(model, speed=1.1, cache=True)
+    assert g.violations() == []
+    run = simulate(Design.vc(g).controller_for(), *g.evaluate(0.0)[:2])
+    assert run.ok, run.message
+    assert 0.6 < run.max_impulse_ratio < 0.6 + 1e-7

@@ -12,7 +12,9 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import signal
 import sys
+import threading
 import warnings
 
 import numpy as np
@@ -117,11 +119,56 @@ def main(argv=None) -> int:
         args = ap.parse_args(argv)
     except SystemExit as e:        # argparse already printed its one-line usage error
         return int(e.code or 0)
+    ctrl_c = _CtrlC()
     try:
-        with warnings.catch_warnings(record=True) as caught:
+        with warnings.catch_warnings(record=True) as caught, ctrl_c:
             warnings.simplefilter("default")
             rc = args.func(args)
         _note_warnings(args.command, caught)
+    except Exception:
+        if not ctrl_c:
+            return _failed(args, sys.exc_info()[1])
+        print(f"biped {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print(f"biped {args.command}: interrupted", file=sys.stderr)
+        return 130
+    return int(rc or 0)
+
+
+class _CtrlC:
+    """Whether Ctrl-C was pressed while a command ran: an error that follows it (a
+    library may turn the KeyboardInterrupt into its own error, e.g. CasADi's SystemError
+    inside a task) is the interruption, not a failure.  Python's handler is kept (it
+    raises KeyboardInterrupt); it is only observed, from the main thread."""
+
+    def __init__(self):
+        self.pressed, self._old = False, None
+
+    def __bool__(self):
+        return self.pressed
+
+    def __enter__(self):
+        if (threading.current_thread() is threading.main_thread()
+                and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+            self._old = signal.default_int_handler
+            signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def _handler(self, signum, frame):
+        self.pressed = True
+        signal.default_int_handler(signum, frame)
+
+    def __exit__(self, *exc):
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+        return False
+
+
+def _failed(args, e: BaseException) -> int:
+    """The exit code and one line for an error of a command (not an interruption)."""
+    try:
+        raise e
     except (UserError, ValueError) as e:           # GaitFileError, SweepStoreError, ...
         print(f"biped {args.command}: error: {_one_line(e)}", file=sys.stderr)
         return 2
@@ -133,16 +180,12 @@ def main(argv=None) -> int:
         print(f"biped {args.command}: error: {where}{_one_line(e.strerror or e)}",
               file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"biped {args.command}: interrupted", file=sys.stderr)
-        return 130
     except Exception as e:           # a failed task or solver (analysis.cli.failures)
         line = failure_line(e)
         if line is None:
             raise
         print(f"biped {args.command}: error: {line}", file=sys.stderr)
         return 2
-    return int(rc or 0)
 
 
 def _note_warnings(command: str, caught):

@@ -103,6 +103,8 @@ def load_gait(args, progress: Progress):
                             f"gives no effort limits) and its default gait needs one: "
                             f"give {how}")
         return optimize_gait(model, progress=progress, cache=True, torque_limit=float(limit))
+    if is_family_file(args.gait):
+        raise UserError(_family_where_one_gait(args.gait, progress.command))
     model = load_model(robot_arg) if robot_arg else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OpenOrbitWarning)
@@ -115,6 +117,18 @@ def load_gait(args, progress: Progress):
         else:                                         # not ours: pass it on
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return gait
+
+
+#: how each command that also takes a family takes it
+_FAMILY_USE = {"simulate": "; or walk it with --speeds V1 V2 ... or --ramp V1 V2 DV",
+               "m1": "; 'biped m1 --robust' designs over a family"}
+
+
+def _family_where_one_gait(path, command: str) -> str:
+    """The one line for a gait family file given where one gait is taken."""
+    return (f"--gait: {_short(path)} is a gait family file, not one gait: take one with "
+            f"'biped gait --family {_short(path)} --speed V --out gait.json'"
+            + _FAMILY_USE.get(command, ""))
 
 
 def is_family_file(path) -> bool:

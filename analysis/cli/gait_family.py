@@ -159,6 +159,8 @@ def cmd_gait_at(args) -> int:
     s = r.to_dict()
     s["file"] = str(r.gait.save(out))
     s["T"], s["step_length"] = r.gait.T, r.gait.step_length
+    lean, past, bound = torso_fall(r.gait)
+    s["max_torso_lean"], s["torso_past_fall_bound"] = lean, past
     if folder is not None:
         s["plots"] = save_figures({"gait_stick": gait_stick_plot(r.gait),
                                    "gait_profiles": gait_profiles_plot(r.gait)}, folder)
@@ -168,11 +170,18 @@ def cmd_gait_at(args) -> int:
     print(f"gait at {args.speed:g} m/s from the family in {args.family}, saved to {out}")
     print(f"  {r.message}")
     print(f"  neighbours           {r.neighbours[0]:g} and {r.neighbours[1]:g} m/s")
-    print(f"  interpolant residual {r.interpolant_residual:.2e} (orbit "
-          f"{r.interpolant_orbit_residual:.2e}) before the polish; parameters changed by "
-          f"{r.parameter_change:.2e} (T by {r.T_change:.2e} s)")
+    if math.isfinite(r.interpolant_residual):
+        print(f"  interpolant residual {r.interpolant_residual:.2e} (orbit "
+              f"{r.interpolant_orbit_residual:.2e}) before the polish; parameters changed "
+              f"by {r.parameter_change:.2e} (T by {r.T_change:.2e} s)")
+    else:
+        print("  interpolant          none (the gait was solved at this speed)")
     print(f"  orbit residual       {r.orbit_residual:.1e}")
     print(f"  step time T          {r.gait.T:.6f} s, step length {r.gait.step_length:.6f} m")
+    if past:
+        print(f"  torso lean           {lean:.4f} rad from the vertical at most: PAST the "
+              f"simulator's fall bound ({bound:.4g} rad), so every walk of this gait is a "
+              f"fall")
     if r.violations:
         print(f"  VIOLATED on the dense grid: {r.violations} (--resolve gives the optimal "
               f"gait at this speed)")

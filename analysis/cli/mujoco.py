@@ -185,7 +185,8 @@ def register(sub):
                    help=f"steps to walk, 1 to {MAX_STEPS} (10)")
     p.add_argument("--perturb", nargs=2, type=float, default=None,
                    metavar=("Q_ERR", "DQ_ERR"), help="initial error on every joint (rad) and "
-                   "every velocity (rad/s) (default 0 0; the paper's: 0.01 0.1)")
+                   "every velocity (rad/s), within +-pi rad and +-100 rad/s (default 0 0; the "
+                   "paper's: 0.01 0.1)")
     p.add_argument("--perturb-q", nargs="+", type=float, metavar="Q",
                    help="initial error of each joint angle q1..qn, rad (instead of --perturb)")
     p.add_argument("--perturb-dq", nargs="+", type=float, metavar="DQ",

@@ -23,14 +23,22 @@ MAX_STEPS = 1000
 
 
 def _num(x, fmt) -> str:
-    """A figure of the run, or 'n/a' when the run never produced it (no impact)."""
-    return format(x, fmt) if math.isfinite(x) else "n/a"
+    """A figure of the run, 'inf' for a friction ratio where F_z <= 0, or 'n/a' when the
+    run never produced it (no impact)."""
+    if x is None:
+        return "n/a"
+    return format(x, fmt) if math.isfinite(x) else "inf" if x == math.inf else "n/a"
 
 
 def _controller(kind, model, gait, M1, gains, rejoin=0.5):
     if kind == "tv":
         return TimeVaryingController(gait, M1, gains, rejoin=rejoin)
     return VirtualConstraintController(gait, gains=gains)
+
+
+#: the largest initial errors taken: half a turn on an angle (beyond, the same posture
+#: again), and a rate far beyond any a biped has (beyond, the integration overflows)
+MAX_ANGLE_ERROR, MAX_RATE_ERROR = math.pi, 100.0
 
 
 def _check_perturbation(args):
@@ -42,6 +50,16 @@ def _check_perturbation(args):
                     ("--perturb-dq", args.perturb_dq)):
         if v is not None and not np.all(np.isfinite(v)):
             raise UserError(f"{name} values must be finite")
+    for name, v, kind in (("--perturb", None if args.perturb is None else args.perturb[:1],
+                           "angle"),
+                          ("--perturb", None if args.perturb is None else args.perturb[1:],
+                           "rate"),
+                          ("--perturb-q", args.perturb_q, "angle"),
+                          ("--perturb-dq", args.perturb_dq, "rate")):
+        top, unit = (MAX_ANGLE_ERROR, "rad") if kind == "angle" else (MAX_RATE_ERROR, "rad/s")
+        if v is not None and np.max(np.abs(v), initial=0.0) > top:
+            raise UserError(f"{name}: {kind} errors must lie within +-{top:.3g} {unit}, got "
+                            f"{max(v, key=abs):g}")
 
 
 def _perturbation(args, nq) -> Perturbation:
@@ -220,7 +238,8 @@ def register(sub):
                    help=f"number of steps, 1 to {MAX_STEPS} (10)")
     p.add_argument("--perturb", nargs=2, type=float, default=None,
                    metavar=("Q_ERR", "DQ_ERR"), help="initial error on every joint (rad) and "
-                   "every velocity (rad/s) (default 0 0; the paper's: 0.01 0.1)")
+                   "every velocity (rad/s), within +-pi rad and +-100 rad/s (default 0 0; the "
+                   "paper's: 0.01 0.1)")
     p.add_argument("--perturb-q", nargs="+", type=float, metavar="Q",
                    help="initial error of each joint angle q1..qn, rad (instead of --perturb)")
     p.add_argument("--perturb-dq", nargs="+", type=float, metavar="DQ",

@@ -118,7 +118,8 @@ def _print_report(args, r, lines, plots, lo, hi, n, nu):
     print(f"  {'total':10s} {r.n_points:8d}")
     b = r.best()
     if b is not None:
-        print(f"best: M1 = {np.array2string(b.M1, precision=4)}, max|lambda| = {b.max_abs:.6g}")
+        print(f"best: M1 = {np.array2string(b.M1, precision=4)}, max|lambda| = {b.max_abs:.6g}"
+              + ("" if b.status == "stable" else f" ({b.status})"))
     if args.line is not None:
         print("singular values of eq. (24), M1(j) = D11/D12(j) at q^d(T): "
               + ", ".join(f"{v:.6g}" for v in lines.singular_values))

@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from biped_casadi.caching import cached
-from biped_casadi.control.output_law import decoupling_denominator
+from biped_casadi.control.output_law import M1_LIMIT, decoupling_denominator
 from biped_casadi.results import Result, internal
 
 from ..stability.poincare import poincare_eigenvalues, poincare_map
@@ -170,7 +170,9 @@ def _deadbeat_newton(pm, tay, M1, constraints: str, iters: int = 30):
             rt = np.array(F(trial)[0]).ravel()
             with np.errstate(over="ignore"):   # a far trial point: its norm is inf, rejected
                 worse = not np.linalg.norm(rt) < norm
-            if np.all(np.isfinite(rt)) and not worse and not pm.is_singular(trial):
+            # a trial beyond the outputs' valid range (|M1| <= M1_LIMIT) is rejected too
+            if (np.all(np.isfinite(rt)) and not worse and np.max(np.abs(trial)) <= M1_LIMIT
+                    and not pm.is_singular(trial)):
                 break
             lam /= 2
         else:

@@ -531,7 +531,8 @@ def _finish(summary, stages, files, staging, opts, res, model, quick, total, cri
     if not rabbit:
         summary.setdefault("robust_design", dict(
             skipped="the robust co-design starts from gait options calibrated on RABBIT; "
-                    "run 'biped m1 --robust --robot ...' for another robot"))
+                    "run 'biped m1 --robust --gait gait.json' (the gait beside this report) "
+                    "for another robot"))
     summary.update(mode="quick" if quick else "full", stages=stages, figures=files,
                    options=dict(res.to_dict(), robot=opts.robot), total_time=total,
                    critical_path=crit, finished=time.strftime("%Y-%m-%d %H:%M:%S %z"))

@@ -510,7 +510,8 @@ class PoincareMap:
         status, message = ("stable" if mx < 1 else "unstable"), ""
         if not res <= FIXED_POINT_TOL:
             status = "open_orbit"
-            message = (f"x* is not a fixed point of the map: |P(x*) - x*| = {res:.2e} (> "
+            message = (f"x* is not a fixed point of the map: |P(x*) - x*| = {res:.2e}"
+                       + (" (with M1 = 0)" if residual is not None else "") + " (> "
                        f"{FIXED_POINT_TOL:g}); the gait is not a periodic orbit of this model "
                        f"and the eigenvalues at x* say nothing of its stability")
         return PoincareResult(M1, A, ev, mx, status, self.x_star, fixed_point_residual=res,
@@ -649,14 +650,14 @@ def poincare_map(gait, **options) -> PoincareMap:
     return PoincareMap(model, gait, **options)
 
 
-def poincare_eigenvalues(gait, M1=None, method: str = "variational", *,
+def poincare_eigenvalues(gait, M1=None, *args, method: str | None = None,
                          rejoin: float = PAPER_REJOIN) -> PoincareResult:
     """A^z, its eigenvalues and the stability status for outputs M1 (docs: theory, §4).
 
     Implements eq. (22): the fixed point is locally exponentially stable, status
     'stable', when max ``|lambda|`` of A^z is below 1.  ``poincare_eigenvalues(model, gait,
     M1)``, the form of the toolkit's specification, is the same call (the model must be
-    the gait's).
+    the gait's), also with the method: ``poincare_eigenvalues(model, gait, M1, 'ad')``.
 
     Parameters
     ----------
@@ -665,6 +666,8 @@ def poincare_eigenvalues(gait, M1=None, method: str = "variational", *,
     M1 : array_like or Design
         One number per actuated joint, or a time-varying :class:`~biped_casadi.Design`
         (its M1 and rejoin time; its gait must be ``gait``).
+    *args
+        The method, as the argument after M1 (the older positional form).
     method : {'variational', 'ad'}
         'variational' (default, well under a millisecond per call once the map is built)
         or 'ad' (automatic differentiation through the whole discrete map, ~0.3 s; also
@@ -677,9 +680,16 @@ def poincare_eigenvalues(gait, M1=None, method: str = "variational", *,
     PoincareResult
         ``r.A`` (2x2 A^z), ``r.eigenvalues``, ``r.max_abs``, ``r.status``.
     """
-    if not hasattr(gait, "T") and hasattr(M1, "T"):     # (model, gait, M1)
+    if not hasattr(gait, "T") and hasattr(M1, "T"):     # (model, gait, M1[, method])
         require_same_robot(gait, M1)
-        gait, M1, method = M1, method, "variational"
+        gait, M1, args = M1, (args[0] if args else None), args[1:]
+    if not hasattr(gait, "T") or not hasattr(gait, "model"):
+        raise TypeError(f"poincare_eigenvalues(): a gait is needed first (Gait.load(path) or "
+                        f"optimize_gait(model)), got {type(gait).__name__}")
+    if len(args) > 1 or (args and method is not None):
+        raise TypeError("poincare_eigenvalues() takes (gait, M1[, method]) or (model, gait, "
+                        "M1[, method]), the method once")
+    method = args[0] if args else "variational" if method is None else method
     if isinstance(M1, Design):
         d = Design.of(M1, gait)
         if d.M1 is None:

@@ -93,7 +93,7 @@ class BestPoint:
     max_abs : float
         Its max ``|lambda|``.
     status : str
-        Its status ('stable' or 'unstable').
+        Its status ('stable', 'unstable', or 'open_orbit' on a gait that is not an orbit).
     """
 
     M1: np.ndarray

@@ -42,7 +42,7 @@ META = "sweep.json"
 LOG = "log.jsonl"
 LOCK = ".lock"
 CHUNKS = "chunks"
-STATUS_CODES = ("stable", "unstable", "singular", "no_impact")   # docs: theory §4
+STATUS_CODES = ("stable", "unstable", "singular", "no_impact", "open_orbit")   # theory §4
 _KV_KEY = b"biped_sweep"
 
 

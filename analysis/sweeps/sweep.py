@@ -61,7 +61,7 @@ class _Arrays:
 
     @classmethod
     def empty(cls, n):
-        return cls(np.full(n, "", dtype="<U9"), np.full(n, np.nan),
+        return cls(np.full(n, "", dtype="<U10"), np.full(n, np.nan),
                    np.full((n, 2), np.nan + 0j), np.full((n, 2, 2), np.nan))
 
     def fill(self, a, b, c):
@@ -249,7 +249,7 @@ def load_sweep(out_dir) -> SweepResult:
             raise ValueError(f"out_dir: {root} is incomplete (chunk {k} missing or "
                              f"damaged); rerun the sweep to finish it")
     P = np.concatenate([p for p, _ in cols])
-    st = np.concatenate([c["status"] for _, c in cols]).astype("<U9")
+    st = np.concatenate([c["status"] for _, c in cols]).astype("<U10")
     return _result(P, st, np.concatenate([c["max_abs"] for _, c in cols]),
                    np.concatenate([c["eigenvalues"] for _, c in cols]),
                    np.concatenate([c["A"] for _, c in cols]), elapsed=0.0, chunk_size=cs,

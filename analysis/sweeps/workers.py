@@ -64,12 +64,12 @@ def evaluate_chunk(payload: SweepPayload, points: np.ndarray) -> dict:
     if payload.map["method"] == "variational":
         jb = pm.jacobian_batch(P)
         status, A, ev, max_abs = jb.status, jb.A, jb.eigenvalues, jb.max_abs
-        status = np.asarray(status).astype("<U9")
+        status = np.asarray(status).astype("<U10")
         order = np.argsort(-np.abs(ev), axis=1, kind="stable")
         ev = np.take_along_axis(ev, order, axis=1)
     else:
         rs = pm.analyse_batch(P)
-        status = np.array([r.status for r in rs], dtype="<U9")
+        status = np.array([r.status for r in rs], dtype="<U10")
         A = np.stack([np.asarray(r.A, float) for r in rs])
         ev = np.stack([np.asarray(r.eigenvalues, complex) for r in rs])
         max_abs = np.array([r.max_abs for r in rs], dtype=float)

@@ -214,6 +214,8 @@ class Reference(abc.ABC):
         """
         q, dq, ddq = self.evaluate(t)
         q2, dq2, ddq2 = (np.atleast_2d(v.T).T for v in (q, dq, ddq))
+        if q2.shape[1] == 0:
+            return np.zeros((self.model.nu, 0))
         u = np.array(self.model.inverse_dynamics.map(q2.shape[1])(q2, dq2, ddq2))
         return u[:, 0] if np.ndim(t) == 0 else u
 

@@ -169,9 +169,9 @@ class WalkOutcome(_Verdicts, Result):
     min_normal_force : float
         The smallest stance normal force F_z, N.
     max_friction_ratio : float
-        The largest ``|F_x|/F_z`` in single support.
+        The largest ``|F_x|/F_z`` in single support (inf where F_z <= 0).
     max_impulse_ratio : float
-        The largest ``|F_x|/F_z`` of the impact impulses.
+        The largest ``|F_x|/F_z`` of the impact impulses (inf where F_z <= 0).
     saturated_time : float
         Time the commanded torques spent beyond the limit, clipped there, s (0 unless
         the simulation saturates torques, ``SimulationOptions.saturate``).
@@ -390,7 +390,9 @@ class OutcomeRecorder:
                 self.sat_time[runs] += dt * np.sum(mask & (saturated > 0.5), axis=1)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             pu = np.where(mask, np.max(np.abs(u), axis=0), np.nan)
-            ratio = np.where(mask, np.abs(Fx) / np.maximum(Fz, 1e-300), np.nan)
+            # F_z <= 0: no friction cone holds the foot (inf, as for the impulses)
+            # (a node that is not finite keeps NaN)
+            ratio = np.where(mask, np.where(Fz <= 0, np.inf, np.abs(Fx) / Fz), np.nan)
             fz = np.where(mask, Fz, np.nan)
         self.peak_u[runs] = np.fmax(self.peak_u[runs], np.fmax.reduce(pu, axis=1))
         self.min_fz[runs] = np.fmin(self.min_fz[runs], np.fmin.reduce(fz, axis=1))

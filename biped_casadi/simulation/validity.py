@@ -29,6 +29,10 @@ __all__ = ["NODE_CHECKS", "IMPACT_CHECKS", "Limits", "node_violations", "first_v
 #: why a strike is invalid when the swing foot does not move down
 STRIKE_MESSAGE = "the swing foot reaches the ground without moving down"
 
+#: tolerance of the friction cones on |F_x| / F_z, the gait problem's own (a gait with a
+#: cone active holds it to the optimiser's tolerance: its own orbit is no slip)
+FRICTION_TOL = 1e-7
+
 #: single-support statuses in the order of priority at the same node
 NODE_CHECKS = ("diverged", "out_of_range", "singular", "fell", "scuffed",
                "negative_normal_force", "slipped", "torque_limit")
@@ -164,7 +168,7 @@ def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None
         if lim.scuffing_ignored:
             bad["scuffed"] = np.zeros_like(bad["scuffed"])
         bad["negative_normal_force"] = finite & ~(rows["Fz"] > lim.min_normal_force)
-        bad["slipped"] = finite & (np.abs(rows["Fx"]) > lim.mu * rows["Fz"])
+        bad["slipped"] = finite & (np.abs(rows["Fx"]) > (lim.mu + FRICTION_TOL) * rows["Fz"])
         bad["torque_limit"] = finite & (np.max(np.abs(rows["u"]), axis=0) > lim.torque_limit)
         if lim.saturate:
             bad["torque_limit"] = np.zeros_like(bad["torque_limit"])
@@ -271,7 +275,7 @@ def impact_violation(F, v_lift, finite, limits: Limits):
     out = np.full(np.shape(Fz), "", dtype=object)
     with np.errstate(invalid="ignore"):
         conds = (("diverged", ~np.asarray(finite)), ("negative_normal_force", ~(Fz > 0)),
-                 ("slipped", np.abs(Fx) > limits.mu * Fz),
+                 ("slipped", np.abs(Fx) > (limits.mu + FRICTION_TOL) * Fz),
                  ("scuffed", ~(np.asarray(v_lift) > limits.min_liftoff_speed)))
     for name, mask in conds:
         out = np.where((out == "") & mask, name, out)

@@ -27,6 +27,18 @@ __all__ = ["codesign", "codesign_flow", "given_gait_flow", "NoDesignFound", "cod
 _TYPED = re.compile(r"^(\w+): ")
 
 
+def _no_start_line(sampled: dict, nu: int) -> str:
+    """Why drawn starts gave none: none stable within the bound, or none walking."""
+    n, box, ok = sampled["samples"], sampled["box"], sampled["stable"]
+    why = (f"none is stable with max|lambda| <= {sampled['bound']:.3g} (the virtual "
+           f"constraints' eigenvalue times the margin)" if ok == 0 else
+           f"{ok} are stable with max|lambda| <= {sampled['bound']:.3g}, none walks the "
+           f"paper's perturbation")
+    return (f"codesign: no start for the NLP: of {n} M1 drawn in [-{box:g}, {box:g}]^{nu} "
+            f"(a box for RABBIT's default gait), {why}; start from a gait of this robot "
+            f"instead (biped m1 --robust --gait FILE: starts that fit the gait)")
+
+
 def _designed(m: Method, settings: CodesignSettings) -> CodesignResult:
     """One co-design by a :class:`Method`: starts -> scenario exchange -> rejoin choice
     -> gait steps -> verification."""
@@ -35,6 +47,8 @@ def _designed(m: Method, settings: CodesignSettings) -> CodesignResult:
     if best is None:
         if m.screen is not None:
             raise NoDesign(m.no_design_line(), m.no_design_details())
+        if not starts and m.sampled:
+            raise CodesignError(_no_start_line(m.sampled, m.model.nu))
         last = m.solves[-1] if m.solves else {}
         raise CodesignError(
             f"codesign: IPOPT ({last.get('status', 'not run')}) found no verified design "
@@ -164,6 +178,12 @@ def _codesign(engine, model, settings: CodesignSettings, gait=None) -> CodesignR
     return result
 
 
+def _reason(e: NoDesign) -> str:
+    """A NoDesign's line without its 'codesign: ' lead."""
+    s = str(e)
+    return s[len("codesign: "):] if s.startswith("codesign: ") else s
+
+
 def _auto(engine, model, settings: CodesignSettings, gait) -> CodesignResult:
     """'auto': the gait fixed first (given up after the start screen when its best s*
     is below 1: the target is out of reach), then free from it when the target is
@@ -184,7 +204,9 @@ def _auto(engine, model, settings: CodesignSettings, gait) -> CodesignResult:
         try:
             return _designed(Method(engine, model, settings, gait), settings)
         except NoDesign as e_fixed:
-            raise NoDesign(f"{e_fixed}; {e}", dict(e_fixed.details, free=e.details)) from None
+            raise NoDesign(f"codesign: on the gait as given: {_reason(e_fixed)}; on the gait "
+                           f"moved from it: {_reason(e)}",
+                           dict(e_fixed.details, free=e.details)) from None
     if isinstance(fixed, CodesignResult) and not _better(free, fixed):
         fixed.alternative = _summary(free)
         return fixed
@@ -284,8 +306,10 @@ def codesign(robot_or_gait, settings: CodesignSettings | None = None, *, gait_fi
 
 
 def _with_gait_file(result: CodesignResult, gait, gait_file, cache, key: str):
-    """The result with its gait saved (beside the cache) and the replay arguments."""
-    if gait is not None and gait_file is not None:
+    """The result with its gait saved (beside the cache) and the replay arguments: the
+    given file only when the design runs on the gait as given (not on one moved from it)."""
+    if (gait is not None and gait_file is not None
+            and result.gait.cache_key == gait.cache_key):
         path = gait_file
     else:
         path = cache_dir(cache) / "codesign" / f"codesign-{key[:20]}.gait.json"

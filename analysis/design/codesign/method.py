@@ -153,6 +153,9 @@ class Method:
         self.free = st.free_gait and self.fixed_gait is None and not (
             self.start_gait is not None and self.model.scuffing_ignored)
         self.screen, self.moved, self.vc_ref = None, None, None
+        #: the drawn starts (without starts that fit the gait): how many, in which box,
+        #: how many stable within the eigenvalue bound, the bound
+        self.sampled = {}
         self.rs = st.robustness_settings()
         tl = st.verification.torque_limit
         self.tst = TranscriptionSettings(
@@ -318,8 +321,10 @@ class Method:
                                 own_orbit=orbit))
         bound = st.eigen_margin * self.run(vc_radius, self.gait0)
         if not fit:
-            M, _ = self.run(sampled_starts, self.gait0, self.kept0, self.rejoin, st.starts,
-                            bound, self.rs)
+            M, n_ok = self.run(sampled_starts, self.gait0, self.kept0, self.rejoin, st.starts,
+                               bound, self.rs)
+            self.sampled = dict(samples=st.starts.samples, box=st.starts.box, stable=n_ok,
+                                bound=bound)
             return [np.asarray(m, float) for m in M] + [np.asarray(m, float)
                                                         for m in st.starts.extra]
         self.vc_ref = self.engine.submit(robustness, Design.vc(self.gait0), self.rs,

@@ -281,6 +281,11 @@ def unactuated_error_plot(results, title: str | None = None, labels=None) -> Fig
     for a in ax:
         a.axhline(0, color="0.6", lw=0.8)
         a.grid(alpha=0.3)
+    if not any(len(res.steps) for res in results):        # nothing to draw: step 1 shown
+        ax[1].set_xlim(0.5, 1.5)
+        ax[1].set_xticks([1])
+        ax[0].text(0.5, 0.5, "no run reached an impact", transform=ax[0].transAxes,
+                   ha="center", va="center", color="0.3")
     ax[0].legend(fontsize=8)
     fig.suptitle(title or "Fig. 5: error of the unactuated variable at the end of each step")
     fig.tight_layout()
@@ -313,8 +318,13 @@ def swing_torques_plot(results, gait, title: str | None = None, labels=None) -> 
     ax = np.atleast_1d(fig.subplots(len(joints), 1, sharex=True))
     labels = labels or [run_label(r) for r in results]
     for res, name in zip(results, labels):
+        one = np.size(res.t) < 2                    # stopped at its start: a marker
         for i, j in enumerate(joints):
-            ax[i].plot(res.t, res.u[:, j], lw=1.0, label=name)
+            ax[i].plot(res.t, res.u[:, j], "o" if one else "-", lw=1.0, label=name)
+    if all(np.size(r.t) == 0 or np.ptp(r.t) == 0 for r in results):
+        ax[0].set_xlim(-0.05 * gait.T, gait.T)
+        ax[0].text(0.5, 0.5, "every run stopped at t = 0", transform=ax[0].transAxes,
+                   ha="center", va="center", color="0.3")
     res = results[0]
     for k in np.unique(res.step):
         sel = res.step == k
