@@ -667,7 +667,7 @@ def poincare_eigenvalues(gait, M1=None, *args, method: str | None = None,
         One number per actuated joint, or a time-varying :class:`~biped_casadi.Design`
         (its M1 and rejoin time; its gait must be ``gait``).
     *args
-        The method, as the argument after M1 (the older positional form).
+        The method, as the argument after M1 (also after the model, gait and M1).
     method : {'variational', 'ad'}
         'variational' (default, well under a millisecond per call once the map is built)
         or 'ad' (automatic differentiation through the whole discrete map, ~0.3 s; also
