@@ -252,8 +252,12 @@ def test_one_d_sweeps_and_fig2(sweep_gait, tmp_path):
     fin = np.isfinite(r1.max_abs)
     peak = values[fin][np.argmax(r1.max_abs[fin])]
     assert abs(peak - sv[0]) < 0.3 and r1.max_abs[fin].max() > 5 * np.median(r1.max_abs[fin])
-    paths = [Path(p) for p in save_figure(one_d_sweeps_plot(lines), tmp_path / "fig2.png",
-                                          formats=("png", "pdf"))]
+    fig = one_d_sweeps_plot(lines)
+    for ax, r in zip(fig.axes, lines.results):         # a kind with no point says so
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        stable = next(t for t in labels if t.startswith("stable"))
+        assert stable.endswith("(none)") == (not np.any(r.point_status == "stable")), labels
+    paths = [Path(p) for p in save_figure(fig, tmp_path / "fig2.png", formats=("png", "pdf"))]
     assert [p.suffix for p in paths] == [".png", ".pdf"]
     assert paths[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and paths[0].stat().st_size > 20000
     assert paths[1].read_bytes()[:5] == b"%PDF-"

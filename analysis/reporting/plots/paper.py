@@ -106,8 +106,9 @@ def one_d_sweeps_plot(lines) -> Figure:
         fin = np.isfinite(r.max_abs)
         st = r.point_status == "stable"
         ax.semilogy(x[fin & ~st], r.max_abs[fin & ~st], ".", ms=3, color="0.25",
-                    label="unstable")
-        ax.semilogy(x[st], r.max_abs[st], ".", ms=5, color="red", label="stable, max|λ| < 1")
+                    label="unstable" + ("" if (fin & ~st).any() else " (none)"))
+        ax.semilogy(x[st], r.max_abs[st], ".", ms=5, color="red",
+                    label="stable, max|λ| < 1" + ("" if st.any() else " (none)"))
         sing = r.point_status == "singular"
         if sing.any():
             ax.plot(x[sing], np.full(sing.sum(), 1.0), "|", color="tab:blue", ms=6,
