@@ -337,6 +337,7 @@ def test_cli_terrain_json(tmp_path, capsys):
     assert rc == 0
     d = json.loads(capsys.readouterr().out)
     assert d["settings"]["profile"] == [0.002, -0.002, 0.001]
+    assert "not independent draws" in d["message"], d["message"]   # what the interval is
     rc = biped_main(["simulate", "--m1", *map(str, [-10, 7.5, 10, -5]), "--terrain", "0.004",
                      "-0.004", "--steps", "2", "--json"])
     assert rc == 0

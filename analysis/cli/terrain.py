@@ -255,7 +255,9 @@ def register(sub):
                    help="standard deviation of the ground height per step, m (0.005)")
     p.add_argument("--terrain", metavar="FILE",
                    help="a terrain profile (JSON list or numbers in text, m) instead of "
-                        "random heights: run i walks it from its i-th height on")
+                        "random heights: run i walks it from its i-th height on, wrapping "
+                        "round (the runs are then windows of one profile, not independent "
+                        "draws: the MFPT's interval is indicative)")
     p.add_argument("--runs", type=int, default=200, metavar="N", help="runs (200)")
     p.add_argument("--max-steps", type=int, default=50, metavar="K",
                    help="steps per run at most (50)")

@@ -280,7 +280,9 @@ def _result(gait, spec, st, results, out_dir, t0, compute_time, steps_done, comp
         elapsed=el, compute_time=compute_time, steps_computed=steps_done,
         chunks_computed=computed, chunks_reused=reused,
         folder=str(out_dir) if out_dir is not None else "",
-        message=(f"a profile of {len(st.profile)} heights" if st.profile else
+        message=(f"a profile of {len(st.profile)} heights (run i walks it from its i-th "
+                 f"height, wrapping round: the runs are windows of one profile, not "
+                 f"independent draws, so the interval is indicative)" if st.profile else
                  f"sigma = {st.sigma:g} m") + f", {N} runs of up to {K} steps ({spec.engine}): "
                 + est.message,
         walked=walked, failed=failed, duration=duration)
