@@ -279,6 +279,21 @@ def test_joint_damping_and_friction_are_said_to_be_ignored(tmp_path):
     assert len(said) == 1 and "hip_left" in said[0] and "damping 0.5" in said[0], imp.notes
 
 
+def test_joint_ranges_are_said_to_be_not_held_to(tmp_path):
+    """A revolute joint's <limit lower upper> narrower than a turn is not a constraint of
+    the gaits or walks: the import says so (RABBIT's +-3.14 is no range and says nothing)."""
+    src = (ROBOTS / "rabbit.urdf").read_text()
+    assert not [n for n in import_urdf(ROBOTS / "rabbit.urdf").notes if "ranges" in n]
+    knee = src.index('name="knee_left"')
+    at = src.index('lower="-3.14" upper="3.14"', knee)
+    p = tmp_path / "ranged.urdf"
+    p.write_text(src[:at] + 'lower="-0.1" upper="2.5"' + src[at + 26:])
+    imp = import_urdf(p)
+    assert imp.description == robot("rabbit").description
+    said = [n for n in imp.notes if "ranges" in n]
+    assert len(said) == 1 and "knee_left [-0.1, 2.5]" in said[0] and "hip" not in said[0], said
+
+
 def test_torso_geometry_below_the_hip_is_not_called_missing(tmp_path):
     """A torso whose centre of mass hangs below the hip (its up direction points down)
     and whose box stands above it: the note on its drawn length says where the geometry

@@ -36,8 +36,9 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   (``continuous`` joints, no ``<limit>``), or give ``effort="0"`` every one (exporters'
   "unknown"), has none (infinite, said in the notes) unless ``torque_limit=`` sets it.
 
-Joint ``<dynamics>`` (damping, friction) is not in the model (rigid, frictionless joints):
-the notes list it.
+Joint ``<dynamics>`` (damping, friction) is not in the model (rigid, frictionless joints),
+nor is a revolute joint's range ``<limit lower upper>`` narrower than a turn (no gait or
+walk is held to it): the notes list both.
 
 The torso's length (which only draws the robot) is the top of its visual or collision
 geometry above the hip along its up direction, else twice its centre-of-mass height.
@@ -517,6 +518,14 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     if damped:
         rd.notes.append(f"ignored: joint <dynamics> of {', '.join(damped)}: the model's joints "
                         f"are frictionless (the torques it computes are the rigid body's)")
+    ranged = [f"{j.name} [{j.limit.lower:g}, {j.limit.upper:g}]" for j in all_joints
+              if j.type == "revolute" and j.limit is not None
+              and j.limit.lower is not None and j.limit.upper is not None
+              and j.limit.upper - j.limit.lower < 2 * math.pi - 0.01]     # narrower than a turn
+    if ranged:
+        rd.notes.append(f"not held to: the joint ranges (rad, the URDF's angles) of "
+                        f"{', '.join(ranged)}: gaits and walks are not constrained by them "
+                        f"(compare a gait's angles: biped gait --export-csv --angles urdf)")
     motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
     pm_legs = [dict(), dict()]
     links = [[leg.body(i, pm) for i in range(len(leg.frames))]
