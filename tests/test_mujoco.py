@@ -231,6 +231,15 @@ def test_c_driven_loop_raises_mujocos_fatal_error(gait):
     assert messages[0] == messages[1]
 
 
+def test_contact_names_what_it_is():
+    """The contact's name says which it is: MuJoCo's own, the stiff one, or another
+    solref (``--contact default --solref 0.01`` was called 'stiff')."""
+    assert MUJOCO_DEFAULT.contact == "default" and STIFF.contact == "stiff"
+    assert ContactSettings.of("default", solref=0.01).contact == "custom"
+    assert ContactSettings.of("stiff", solref=0.006).to_dict()["contact"] == "custom"
+    assert ContactSettings.of("default", solref=STIFF.solref).contact == "stiff"
+
+
 def test_settings_and_torque_limit_refused():
     """Settings MuJoCo would reject or silently change, and a robot without a finite
     torque limit, are a ValueError naming the argument."""

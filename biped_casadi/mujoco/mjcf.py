@@ -132,8 +132,10 @@ class ContactSettings:
 
     @property
     def contact(self) -> str:
-        """'default' when the contact is MuJoCo's own, else 'stiff'."""
-        return "default" if self.solref is None else "stiff"
+        """'default' (MuJoCo's own contact), 'stiff' (:data:`STIFF`'s solref) or 'custom'."""
+        if self.solref is None:
+            return "default"
+        return "stiff" if self.solref == STIFF.solref else "custom"
 
     def to_dict(self) -> dict:
         """The settings by name.
