@@ -155,6 +155,7 @@ def mujoco_animation(walk, layout, path, fps: int = 25, max_steps: int | None = 
                  + (f" (the first {len(shown)} shown)" if len(shown) < len(walk.steps) else ""),
                  fontsize=10)
     ax.set_xlabel("x [m]")
+    ax.set_ylabel("z [m]")
     ax.legend(handles=[Line2D([], [], color=STANCE, lw=3, label="stance leg"),
                        Line2D([], [], color=SWING, lw=3, label="swing leg"),
                        Line2D([], [], color=TORSO, lw=4, label="torso"), foot],

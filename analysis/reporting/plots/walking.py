@@ -68,6 +68,7 @@ def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = N
     text = ax.text(0.99, 0.95, "", transform=ax.transAxes, va="top", ha="right", fontsize=9)
     ax.set_title(f"{run_label(res)}: {res.status}", fontsize=10)
     ax.set_xlabel("x [m]")
+    ax.set_ylabel("z [m]")
     _legs_legend(ax, [foot])
 
     st, to, sw = (list(c) for c in (model.stance_chain, model.torso_chain, model.swing_chain))
