@@ -142,6 +142,21 @@ def is_family_file(path) -> bool:
     return '"biped-casadi-gait-family"' in head
 
 
+def check_not_singular(controller, M1, where: str = "the reference step"):
+    """Refuse (UserError) a time-varying controller singular on its step (eq. 24)."""
+    if controller.singularity().singular:
+        raise UserError(f"M1 = {list(np.ravel(M1).tolist())} makes the controller singular "
+                        f"on {where} (D11 - D12 M1 vanishes, eq. 24)")
+
+
+def figure_or_na(x, fmt) -> str:
+    """A figure of a run: 'inf' for a friction ratio where F_z <= 0, 'n/a' when the run
+    never produced it (no impact: None or NaN)."""
+    if x is None:
+        return "n/a"
+    return format(x, fmt) if math.isfinite(x) else "inf" if x == math.inf else "n/a"
+
+
 def check_m1_values(values):
     """What can be checked of ``--m1`` before the robot is known: finite, and within the
     model's numerical validity (UserError otherwise)."""

@@ -9,8 +9,8 @@ from analysis.robustness import (Design, RobustnessSettings, basin_to_boundary, 
                                  robustness)
 from biped_casadi.control import PAPER_REJOIN
 
-from .simulate import _num
 from .common import (add_design_arguments, Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+                     check_not_singular, figure_or_na,
                      load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
 
 
@@ -33,9 +33,7 @@ def cmd_robust(args):
     design = None
     if args.controller == "tv":
         design = Design(tuple(parse_m1(args.m1, model.nu)), rejoin)
-        if Design.of(design, gait).controller_for().singularity().singular:
-            raise UserError(f"M1 = {list(design.M1)} makes the controller singular on the "
-                            "reference step (D11 - D12 M1 vanishes, eq. 24)")
+        check_not_singular(Design.of(design, gait).controller_for(), design.M1)
     st = RobustnessSettings(directions=args.directions, mu=args.mu,
                             torque_limit=args.torque_limit, seed=args.seed)
     say(f"perturbation directions from which virtual constraints walk ({args.directions} "
@@ -74,9 +72,9 @@ def cmd_robust(args):
             status = f"{status} in step {p.get('step')}"
         print(f"  the paper's perturbation (s = 1): {status}"
               + (f", below {st.tol:g} from step {int(conv)}" if conv and np.isfinite(conv)
-                 else "") + f"; peak |u| {_num(p['peak_torque'], '.1f')} N m, min F_z "
-              f"{_num(p['min_normal_force'], '.1f')} N, max impulse ratio "
-              f"{_num(p['max_impulse_ratio'], '.3f')}")
+                 else "") + f"; peak |u| {figure_or_na(p['peak_torque'], '.1f')} N m, min F_z "
+              f"{figure_or_na(p['min_normal_force'], '.1f')} N, max impulse ratio "
+              f"{figure_or_na(p['max_impulse_ratio'], '.3f')}")
     for b in out.get("basins", []):
         print(f"  basin ({b['controller']}): area {b['area']:.3g} rad x rad/s, "
               f"{100 * b['converged_fraction']:.1f} % of the window +-{b['q_span']:.3g} rad x "

@@ -14,20 +14,12 @@ from analysis.reporting.plots import (save_figures, swing_torques_plot, unactuat
                             walking_animation)
 
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
-                     check_m1_values, load_gait, output_dir, output_file, parse_m1, positive,
+                     check_m1_values, check_not_singular, figure_or_na, load_gait, output_dir, output_file, parse_m1, positive,
                      print_json, rejoin_fraction)
 from .simulate_profile import add_profile_arguments, check_profile_arguments, cmd_profile
 
 #: --steps beyond this fill the memory with the logged states (2000 RK4 steps a step)
 MAX_STEPS = 1000
-
-
-def _num(x, fmt) -> str:
-    """A figure of the run, 'inf' for a friction ratio where F_z <= 0, or 'n/a' when the
-    run never produced it (no impact)."""
-    if x is None:
-        return "n/a"
-    return format(x, fmt) if math.isfinite(x) else "inf" if x == math.inf else "n/a"
 
 
 def _controller(kind, model, gait, M1, gains, rejoin=0.5):
@@ -160,9 +152,8 @@ def _run(args, model, gait, M1, gains, q0, dq0, opts, terrain, say):
     """The closed loop of the chosen controller (and of the other one with --compare)
     simulated from (q0, dq0): the runs, the chosen controller's first."""
     ctrl = _controller(args.controller, model, gait, M1, gains, args.rejoin)
-    if args.controller == "tv" and ctrl.singularity().singular:
-        raise UserError(f"M1 = {M1.tolist()} makes the controller singular on the reference "
-                        "step (D11 - D12 M1 vanishes, eq. 24)")
+    if args.controller == "tv":
+        check_not_singular(ctrl, M1)
     say(f"simulating {args.steps} step(s)" + (" of each controller" if args.compare else "")
         + (" (compiling the closed loop to C first)" if args.jit else "") + " ...")
     try:
@@ -207,9 +198,9 @@ def _print_report(runs, gait, terrain, figures):
             print(f"  {s.index + 1:4d}   {s.t_impact:11.6f}  {s.duration / gait.T:10.6f}"
                   f"   {s.qu_error:+.6e}    {s.dqu_error:+.6e}"
                   + (f"   {s.ground_height:+.4f}" if terrain is not None else ""))
-        print(f"  peak |u| {_num(r.peak_torque, '.1f')} N m, min F_z "
-              f"{_num(r.min_normal_force, '.1f')} N, max |F_x|/F_z "
-              f"{_num(r.max_friction_ratio, '.3f')}, at impact {_num(r.max_impulse_ratio, '.3f')}")
+        print(f"  peak |u| {figure_or_na(r.peak_torque, '.1f')} N m, min F_z "
+              f"{figure_or_na(r.min_normal_force, '.1f')} N, max |F_x|/F_z "
+              f"{figure_or_na(r.max_friction_ratio, '.3f')}, at impact {figure_or_na(r.max_impulse_ratio, '.3f')}")
     for k, v in figures.items():
         print(f"{k}: {v}")
 

@@ -5,7 +5,6 @@ and :func:`biped_casadi.simulation.simulate_profile`, the figure in
 :mod:`analysis.reporting.plots`."""
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -16,7 +15,8 @@ from analysis.design.schedule import (M1Schedule, check_profile, profile_designs
 from analysis.reporting.plots import save_figures, speed_profile_plot
 from gait_opt import GaitFamily
 
-from .common import UserError, load_model, output_dir, parse_m1, print_json
+from .common import (UserError, check_not_singular, figure_or_na, load_model, output_dir,
+                     parse_m1, print_json)
 
 __all__ = ["add_profile_arguments", "profile_requested", "check_profile_arguments",
            "cmd_profile"]
@@ -116,9 +116,7 @@ def _designs(kind, gaits, speeds, schedule, gains):
             from None
     if kind == "tv":
         for d, v in {id(d): (d, v) for d, v in zip(designs, speeds)}.values():
-            if d.controller_for().singularity().singular:
-                raise UserError(f"M1 = {list(d.M1)} makes the controller singular on the "
-                                f"gait at {v:g} m/s (D11 - D12 M1 vanishes, eq. 24)")
+            check_not_singular(d.controller_for(), d.M1, f"the gait at {v:g} m/s")
     return designs
 
 
@@ -183,22 +181,18 @@ def cmd_profile(args, say, perturbation_of) -> int:
     return 0
 
 
-def _num(x, fmt) -> str:
-    return format(x, fmt) if x is not None and math.isfinite(x) else "n/a"
-
-
 def _print_run(kind, r):
     print(f"{kind}: status {r.status}" + (f" - {r.message}" if r.message else ""))
     print("  step  speed [m/s]  status      q_u - q_u^d(T)   dq_u - dq_u^d(T)   peak |u| [N m]"
           "  friction margin")
     for s in r.steps:
         print(f"  {s.index + 1:4d}  {s.speed:10.4f}  {s.status:10s}  {s.qu_error:+.6e}   "
-              f"{s.dqu_error:+.6e}   {_num(s.peak_torque, '12.1f')}  "
-              f"{_num(s.friction_margin, '.3f')}")
-    conv = [f"{g.speed:.3g} m/s: {_num(g.steps_to_converge, '.0f')}" for g in r.segments
+              f"{s.dqu_error:+.6e}   {figure_or_na(s.peak_torque, '12.1f')}  "
+              f"{figure_or_na(s.friction_margin, '.3f')}")
+    conv = [f"{g.speed:.3g} m/s: {figure_or_na(g.steps_to_converge, '.0f')}" for g in r.segments
             if g.n_steps > 1]
     if conv:
         print("  steps to converge (error < 1e-3) on each held speed: " + ", ".join(conv))
-    print(f"  peak |u| {_num(r.peak_torque, '.1f')} N m, min F_z {_num(r.min_normal_force, '.1f')}"
-          f" N, friction margin {_num(r.friction_margin, '.3f')} (mu - max |F_x|/F_z, "
+    print(f"  peak |u| {figure_or_na(r.peak_torque, '.1f')} N m, min F_z {figure_or_na(r.min_normal_force, '.1f')}"
+          f" N, friction margin {figure_or_na(r.friction_margin, '.3f')} (mu - max |F_x|/F_z, "
           "impulses included)")

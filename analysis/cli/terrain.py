@@ -16,6 +16,7 @@ from biped_casadi.simulation import Terrain, TerrainFileError
 from biped_casadi.simulation.terrain import MAX_HEIGHT
 
 from .common import (add_design_arguments, Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+                     check_not_singular,
                      load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
 
 SCALES = ("mass", "inertia", "length", "torso_mass")
@@ -150,9 +151,8 @@ def _build(args, say, gains, rejoin, profile):
     robot(plant) if plant is not None else None             # a plant that builds
     spec = WalkerSpec(args.controller, tuple(M1) if M1 is not None else (), rejoin, gains,
                       plant.to_dict() if plant is not None else None, args.saturate)
-    if args.controller == "tv" and spec.controller_for(gait).singularity().singular:
-        raise UserError(f"M1 = {M1.tolist()} makes the controller singular on the reference "
-                        "step (D11 - D12 M1 vanishes, eq. 24)")
+    if args.controller == "tv":
+        check_not_singular(spec.controller_for(gait), M1)
     try:
         st = MonteCarloSettings(sigma=0.0 if profile else args.sigma, runs=args.runs,
                                 max_steps=args.max_steps, seed=args.seed, chunk=args.chunk,
