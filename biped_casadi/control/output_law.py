@@ -28,7 +28,7 @@ __all__ = ["SECTION", "SINGULAR_RTOL", "M1_LIMIT", "Gains", "SingularityReport",
            "check_rejoin", "output_matrix", "outputs", "coordinates_from_outputs",
            "initial_output_errors", "correction",
            "decoupling_denominator", "unactuated_acceleration", "actuated_torque",
-           "output_acceleration", "singularity_report", "is_singular"]
+           "output_acceleration", "singularity_report", "is_singular", "require_regular"]
 
 #: Poincaré section tau = SECTION * T (docs: theory §4, paper §IV)
 SECTION = 0.75
@@ -464,6 +464,28 @@ class SingularityReport(Result):
     def singular(self) -> bool:
         """True when the controller is singular on the step."""
         return self.status == "singular"
+
+
+def require_regular(controller, M1, where: str = "the reference step") -> None:
+    """Refuse a time-varying controller that is singular on its step (eq. 24).
+
+    Parameters
+    ----------
+    controller : TimeVaryingController
+        The controller (its :meth:`singularity` report decides).
+    M1 : array_like
+        Its outputs, for the message.
+    where : str
+        Names the step in the message.
+
+    Raises
+    ------
+    ValueError
+        One line naming M1, when D11 - D12 M1 vanishes or changes sign on the step.
+    """
+    if controller.singularity().singular:
+        raise ValueError(f"M1 = {list(np.ravel(M1).tolist())} makes the controller singular "
+                         f"on {where} (D11 - D12 M1 vanishes, eq. 24)")
 
 
 def singularity_report(values) -> SingularityReport:
