@@ -27,8 +27,8 @@ import numpy as np
 
 from biped_casadi.files import read_text_file
 
-__all__ = ["Nodes", "nodes_from_arrays", "read_nodes", "relative_angles", "check_radians",
-           "check_rates", "MIN_NODES", "ANGLES", "RATE_RATIO", "HALF_TURN_BEYOND",
+__all__ = ["Nodes", "nodes_from_arrays", "read_nodes", "relative_angles", "check_units",
+           "MIN_NODES", "ANGLES", "RATE_RATIO", "HALF_TURN_BEYOND",
            "HALF_TURN_WITHIN"]
 
 #: fewer nodes than this cannot define a step
@@ -37,7 +37,7 @@ MIN_NODES = 5
 #: rates integrate to over t (trapezoids) before the nodes are refused as in other units
 RATE_RATIO = 3.0
 #: an angle beyond this (rad) where every other one stays within HALF_TURN_WITHIN is
-#: refused as one in degrees (:func:`check_radians`)
+#: refused as one in degrees (:func:`check_units`)
 HALF_TURN_BEYOND = 4.0
 HALF_TURN_WITHIN = 3.2
 #: the coordinate conventions a sampled gait may be given in
@@ -157,9 +157,40 @@ def nodes_from_arrays(t, q, dq, ddq=None, nq: int | None = None,
     return Nodes(t, out[0], out[1], out[2], where)
 
 
-def check_radians(q, names, where: str = "nodes") -> None:
-    """Refuse angles in degrees: one that turns by more than a full turn over the step, or
-    that lies beyond one, or beyond a half turn where the others lie within it.
+def check_units(t, q, dq, names, where: str = "nodes") -> None:
+    """Refuse a step that is not in s, rad and rad/s, naming the column at fault.
+
+    Angles in degrees (one that turns by more than a full turn over the step; one beyond
+    a full turn, or beyond :data:`HALF_TURN_BEYOND` where the others stay within
+    :data:`HALF_TURN_WITHIN`: a pitch in degrees beside joints in radians), then rates
+    that do not integrate to the angles by a factor beyond :data:`RATE_RATIO` either way
+    (t in ms, rates in deg/s).  Each would otherwise be refused later by a check that
+    names another cause (the stance foot, the coordinate convention, the fit).
+
+    Parameters
+    ----------
+    t : array_like
+        (N,) times.
+    q, dq : array_like
+        (n, N) angles and their rates, one row per coordinate.
+    names : sequence of str
+        The coordinates' names (the file's column names), for the message.
+    where : str
+        Names the source in messages.
+
+    Raises
+    ------
+    ValueError
+        One line naming the coordinate, its range or the ratio, and the likely unit.
+    """
+    _check_radians(q, names, where)
+    _check_rates(t, q, dq, names, where)
+
+
+def _check_radians(q, names, where: str) -> None:
+    """Angles in degrees (:func:`check_units`): one that turns by more than a full turn
+    over the step, or that lies beyond one, or beyond a half turn where the others lie
+    within it.
 
     No joint or link of a walking robot turns by 2 pi or more within one step; angles
     written in degrees do (a swing of 0.11 rad is 6.3 degrees), and would otherwise be
@@ -170,20 +201,6 @@ def check_radians(q, names, where: str = "nodes") -> None:
     :data:`HALF_TURN_BEYOND` where every other angle stays within :data:`HALF_TURN_WITHIN`
     (the joints of a URDF whose zero pose folds them by a half turn reach pi and a little
     more) is one in degrees.
-
-    Parameters
-    ----------
-    q : array_like
-        (n, N) angles over the step, one row per coordinate.
-    names : sequence of str
-        The coordinates' names (the file's column names), for the message.
-    where : str
-        Names the source in messages.
-
-    Raises
-    ------
-    ValueError
-        One line naming the coordinate that turns (or reaches) the most and its range.
     """
     q = np.asarray(q, dtype=float)
     span = np.ptp(q, axis=1)
@@ -206,31 +223,15 @@ def check_radians(q, names, where: str = "nodes") -> None:
                      f"a step is given in rad and rad/s)")
 
 
-def check_rates(t, q, dq, names, where: str = "nodes") -> None:
-    """Refuse rates that do not integrate to the angles (t in ms, rates in deg/s).
+def _check_rates(t, q, dq, names, where: str) -> None:
+    """Rates that do not integrate to the angles (:func:`check_units`; t in ms, rates in
+    deg/s).
 
     Over the step, each coordinate's total change sum |q[k+1] - q[k]| is compared with
     what its rate integrates to over t (trapezoids, the same sum of magnitudes): the two
     agree to a few per cent for any sampling a step is given with (within 30 % at 5
     nodes), and differ by 1000 when t is in ms, by 57 when a rate is in deg/s beside its
     angle in rad.  Coordinates that move less than 0.05 rad either way are not compared.
-
-    Parameters
-    ----------
-    t : array_like
-        (N,) times.
-    q, dq : array_like
-        (n, N) angles and their rates.
-    names : sequence of str
-        The coordinates' names (the file's column names), for the message.
-    where : str
-        Names the source in messages.
-
-    Raises
-    ------
-    ValueError
-        One line naming the coordinate and the ratio, when it is beyond
-        :data:`RATE_RATIO` either way.
     """
     t, q, dq = (np.asarray(a, dtype=float) for a in (t, q, dq))
     change = np.sum(np.abs(np.diff(q, axis=1)), axis=1)

@@ -38,7 +38,7 @@ from biped_casadi.model.description import builtin_path, load_description
 from biped_casadi.model.urdf import import_urdf
 from gait_opt import Gait, Nodes, import_gait
 from gait_opt.urdf_angles import write_gait_csv
-from gait_opt.nodes import check_radians
+from gait_opt.nodes import check_units
 
 WALKER = Path(__file__).resolve().parents[1] / "docs" / "howto" / "walker"
 URDF, CSV = WALKER / "walker.urdf", WALKER / "walker_step.csv"
@@ -390,10 +390,12 @@ def test_degrees_check_spares_half_turn_joints_and_finds_small_degrees():
     a half turn is."""
     t = np.linspace(0.0, 1.0, 11)
     hips = np.vstack([2.3 + 0.85 * t, 3.15 - 0.85 * t])
-    check_radians(np.vstack([0.3 + 0.01 * t, hips, 0.4 * t]), ["pitch", "a", "b", "c"])
+    q = np.vstack([0.3 + 0.01 * t, hips, 0.4 * t])
+    check_units(t, q, np.gradient(q, t, axis=1), ["pitch", "a", "b", "c"])
     with pytest.raises(ValueError, match=r"^nodes: pitch goes from 4\.5 to 5\.5, beyond a "
                                          r"half turn where the other angles stay within 3\.15"):
-        check_radians(np.vstack([4.5 + t, hips, 0.4 * t]), ["pitch", "a", "b", "c"])
+        q = np.vstack([4.5 + t, hips, 0.4 * t])
+        check_units(t, q, np.gradient(q, t, axis=1), ["pitch", "a", "b", "c"])
 
 
 @pytest.mark.parametrize("column", ["x", "dx"])
