@@ -178,6 +178,9 @@ CASES = [
     (["gait", "--out", "{root_dir}/g.json", "--plot", "{file}/figs"], "--plot"),
     (["gait", "--out", "{root_dir}/g.json", "--robot", "{params_garbage}"], "not a text file"),
     # ---- eig: numbers and options
+    (["eig", *G], "--m1 is required for the time-varying controller"),
+    (["terrain", "--runs", "2"], "--m1 is required for the time-varying controller (one "
+                                 "number per torque: 4 for this robot)"),
     (["eig", *G, "--m1", "1", "2", "3"], "--m1 takes 4"),
     (["eig", *G, "--m1", "1", "2", "3", "4", "5"], "--m1 takes 4"),
     (["eig", *G, "--m1", "nan", "0", "0", "0"], "--m1"),
@@ -274,6 +277,7 @@ CASES = [
     (["simulate", *G, "--m1", "nan", "0", "0", "0"], "--m1"),
     (["simulate", *G, "--m1", "1e300", "0", "0", "0"], "--m1"),
     (["simulate", *G, "--m1", "1.70", "0", "0", "0"], "singular"),
+    (["simulate", *G, "--eps", "1e-6"], "need eps >= 0.00069 s at this step"),
     (["simulate", *G, "--controller", "vc", *M0], "--m1"),
     (["simulate", *G, "--steps", "0"], "--steps"),
     (["simulate", *G, "--steps", "-1"], "--steps"),

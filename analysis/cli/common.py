@@ -179,7 +179,8 @@ def parse_m1(values, nu: int, default_zero: bool = False):
     if values is None:
         if default_zero:
             return np.zeros(nu)
-        raise UserError(f"--m1 takes {nu} numbers (one per torque)")
+        raise UserError(f"--m1 is required for the time-varying controller (one number per "
+                        f"torque: {nu} for this robot)")
     M1 = np.array(values, dtype=float)
     if M1.shape != (nu,):
         raise UserError(f"--m1 takes {nu} numbers for this robot (one per torque), "

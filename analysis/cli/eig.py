@@ -17,7 +17,7 @@ def cmd_eig(args):
         raise UserError("--m1 applies to the time-varying controller (--controller tv)")
     if args.controller == "tv" and args.m1 is None:
         raise UserError("--m1 is required for the time-varying controller (one number per "
-                        "torque: 4 for RABBIT)")
+                        "torque)")
     if args.controller == "vc" and args.method is not None:
         raise UserError("--method applies to the time-varying controller (--controller tv)")
     method = args.method or "variational"

@@ -116,8 +116,9 @@ class Gains:
             raise ValueError(
                 f"the output gains (Kp, Kd, eps) = ({self.Kp:g}, {self.Kd:g}, {self.eps:g}) "
                 f"make the closed loop too stiff for the integration step {where} = {h:.3g} "
-                f"s: RK4 would diverge (eq. 13's output dynamics need a step of at most "
-                f"{self.eps / (2 * k):.3g} s: lower Kp or Kd, raise eps, or more rk4_steps)")
+                f"s: RK4 would diverge (eq. 13's output dynamics need eps >= {2 * k * h:.3g} s "
+                f"at this step, or a step of at most {self.eps / (2 * k):.3g} s: raise eps, "
+                f"lower Kp or Kd, or take more RK4 steps per step)")
 
 
 def check_M1(M1, n: int = 4) -> np.ndarray:
