@@ -9,7 +9,8 @@ import contextlib
 import os
 from pathlib import Path
 
-__all__ = ["atomic_path", "write_text_atomic", "write_bytes_atomic", "read_text_file"]
+__all__ = ["atomic_path", "write_text_atomic", "write_bytes_atomic", "read_text_file",
+           "name_destination"]
 
 
 def read_text_file(path, what: str, max_bytes: int = 20_000_000) -> str:
@@ -82,6 +83,9 @@ def atomic_path(path):
     ------
     IsADirectoryError
         ``path`` is an existing folder (checked before anything is written).
+    OSError
+        A failed write (a full disk, ...) names ``path`` as its ``filename``, not the
+        temporary file (:func:`name_destination`).
     """
     path = Path(path)
     if path.is_dir():
@@ -90,10 +94,36 @@ def atomic_path(path):
     try:
         yield tmp
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        name_destination(e, path, tmp)
         raise
+
+
+def name_destination(error: BaseException, path, staging=None) -> None:
+    """Let a failed write's ``OSError`` name what was being written.
+
+    A write that fails (``ENOSPC``: no space left on device) raises an ``OSError``
+    without a file name, so its message would not say which output failed; one naming
+    the temporary file or folder the output was staged in names the output instead.
+
+    Parameters
+    ----------
+    error : BaseException
+        The error (anything but an ``OSError`` is left alone).
+    path : str or Path
+        The output being written.
+    staging : str or Path, optional
+        Where it was being staged (a temporary file or folder beside it).
+    """
+    if not isinstance(error, OSError) or isinstance(error, BrokenPipeError):
+        return
+    name = error.filename
+    staged = staging is not None and name is not None and (
+        Path(name) == Path(staging) or Path(staging) in Path(name).parents)
+    if name is None or staged:
+        error.filename = str(path)
 
 
 def write_bytes_atomic(path, data: bytes) -> Path:

@@ -28,8 +28,8 @@ from biped_casadi.results import Result
 
 from .gait import Gait
 from .hzd_orbit import BezierConstraints, constraints_from_dict, hzd_nodes
-from .nodes import (ANGLES, Nodes, check_radians, check_rates, nodes_from_arrays,
-                    read_nodes, relative_angles)
+from .nodes import (ANGLES, Nodes, check_units, nodes_from_arrays, read_nodes,
+                    relative_angles)
 from .options import GaitOptions
 from .polish import close_orbit
 from .urdf_angles import read_urdf_csv, urdf_nodes
@@ -244,8 +244,7 @@ def _nodes_of(model, source, angles: str, where: str, stance=None, tol: float = 
                               f"{model.params.name} has {model.nq}")
     symbol = "phi" if angles == "absolute" else "q"
     names = [f"{symbol}{i}" for i in range(1, source.nq + 1)]
-    check_radians(source.q, names, where)
-    check_rates(source.t, source.q, source.dq, names, where)
+    check_units(source.t, source.q, source.dq, names, where)
     return (relative_angles(source) if angles == "absolute" else source), "nodes", info
 
 

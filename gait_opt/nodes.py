@@ -27,14 +27,19 @@ import numpy as np
 
 from biped_casadi.files import read_text_file
 
-__all__ = ["Nodes", "nodes_from_arrays", "read_nodes", "relative_angles", "check_radians",
-           "check_rates", "MIN_NODES", "ANGLES", "RATE_RATIO"]
+__all__ = ["Nodes", "nodes_from_arrays", "read_nodes", "relative_angles", "check_units",
+           "MIN_NODES", "ANGLES", "RATE_RATIO", "HALF_TURN_BEYOND",
+           "HALF_TURN_WITHIN"]
 
 #: fewer nodes than this cannot define a step
 MIN_NODES = 5
 #: how far (a factor either way) the angles' change over a step may be from what their
 #: rates integrate to over t (trapezoids) before the nodes are refused as in other units
 RATE_RATIO = 3.0
+#: an angle beyond this (rad) where every other one stays within HALF_TURN_WITHIN is
+#: refused as one in degrees (:func:`check_units`)
+HALF_TURN_BEYOND = 4.0
+HALF_TURN_WITHIN = 3.2
 #: the coordinate conventions a sampled gait may be given in
 ANGLES = ("relative", "absolute")
 
@@ -152,18 +157,22 @@ def nodes_from_arrays(t, q, dq, ddq=None, nq: int | None = None,
     return Nodes(t, out[0], out[1], out[2], where)
 
 
-def check_radians(q, names, where: str = "nodes") -> None:
-    """Refuse angles that turn by more than a full turn over the step (degrees).
+def check_units(t, q, dq, names, where: str = "nodes") -> None:
+    """Refuse a step that is not in s, rad and rad/s, naming the column at fault.
 
-    No joint or link of a walking robot turns by 2 pi or more within one step; angles
-    written in degrees do (a swing of 0.11 rad is 6.3 degrees), and would otherwise be
-    refused later by a check that names another cause (the stance foot, the coordinate
-    convention).
+    Angles in degrees (one that turns by more than a full turn over the step; one beyond
+    a full turn, or beyond :data:`HALF_TURN_BEYOND` where the others stay within
+    :data:`HALF_TURN_WITHIN`: a pitch in degrees beside joints in radians), then rates
+    that do not integrate to the angles by a factor beyond :data:`RATE_RATIO` either way
+    (t in ms, rates in deg/s).  Each would otherwise be refused later by a check that
+    names another cause (the stance foot, the coordinate convention, the fit).
 
     Parameters
     ----------
-    q : array_like
-        (n, N) angles over the step, one row per coordinate.
+    t : array_like
+        (N,) times.
+    q, dq : array_like
+        (n, N) angles and their rates, one row per coordinate.
     names : sequence of str
         The coordinates' names (the file's column names), for the message.
     where : str
@@ -172,7 +181,26 @@ def check_radians(q, names, where: str = "nodes") -> None:
     Raises
     ------
     ValueError
-        One line naming the coordinate that turns the most and its range.
+        One line naming the coordinate, its range or the ratio, and the likely unit.
+    """
+    _check_radians(q, names, where)
+    _check_rates(t, q, dq, names, where)
+
+
+def _check_radians(q, names, where: str) -> None:
+    """Angles in degrees (:func:`check_units`): one that turns by more than a full turn
+    over the step, or that lies beyond one, or beyond a half turn where the others lie
+    within it.
+
+    No joint or link of a walking robot turns by 2 pi or more within one step; angles
+    written in degrees do (a swing of 0.11 rad is 6.3 degrees), and would otherwise be
+    refused later by a check that names another cause (the stance foot, the coordinate
+    convention).  One angle logged in degrees beside the others in radians (a base pitch
+    of 5 to 30 degrees) may turn by less, with its rate in degrees too (so that the rate
+    check passes): no angle in radians needs a value beyond 2 pi, and a value beyond
+    :data:`HALF_TURN_BEYOND` where every other angle stays within :data:`HALF_TURN_WITHIN`
+    (the joints of a URDF whose zero pose folds them by a half turn reach pi and a little
+    more) is one in degrees.
     """
     q = np.asarray(q, dtype=float)
     span = np.ptp(q, axis=1)
@@ -181,33 +209,29 @@ def check_radians(q, names, where: str = "nodes") -> None:
         raise ValueError(f"{where}: {names[i]} spans {span[i]:.4g} over the step, more than "
                          f"a full turn (2 pi): angles in degrees? (a step is given in rad and "
                          f"rad/s)")
+    reach = np.max(np.abs(q), axis=1)
+    i = int(np.argmax(reach))
+    others = float(np.max(np.delete(reach, i))) if reach.size > 1 else 0.0
+    if reach[i] > 2 * np.pi + 1e-6:
+        beyond = "beyond a full turn (2 pi)"
+    elif reach[i] > HALF_TURN_BEYOND and others <= HALF_TURN_WITHIN:
+        beyond = f"beyond a half turn where the other angles stay within {others:.3g}"
+    else:
+        return
+    raise ValueError(f"{where}: {names[i]} goes from {q[i].min():.4g} to {q[i].max():.4g}, "
+                     f"{beyond}: in degrees? (convert it and its rate to radians, x pi/180; "
+                     f"a step is given in rad and rad/s)")
 
 
-def check_rates(t, q, dq, names, where: str = "nodes") -> None:
-    """Refuse rates that do not integrate to the angles (t in ms, rates in deg/s).
+def _check_rates(t, q, dq, names, where: str) -> None:
+    """Rates that do not integrate to the angles (:func:`check_units`; t in ms, rates in
+    deg/s).
 
     Over the step, each coordinate's total change sum |q[k+1] - q[k]| is compared with
     what its rate integrates to over t (trapezoids, the same sum of magnitudes): the two
     agree to a few per cent for any sampling a step is given with (within 30 % at 5
     nodes), and differ by 1000 when t is in ms, by 57 when a rate is in deg/s beside its
     angle in rad.  Coordinates that move less than 0.05 rad either way are not compared.
-
-    Parameters
-    ----------
-    t : array_like
-        (N,) times.
-    q, dq : array_like
-        (n, N) angles and their rates.
-    names : sequence of str
-        The coordinates' names (the file's column names), for the message.
-    where : str
-        Names the source in messages.
-
-    Raises
-    ------
-    ValueError
-        One line naming the coordinate and the ratio, when it is beyond
-        :data:`RATE_RATIO` either way.
     """
     t, q, dq = (np.asarray(a, dtype=float) for a in (t, q, dq))
     change = np.sum(np.abs(np.diff(q, axis=1)), axis=1)

@@ -29,7 +29,7 @@ import numpy as np
 
 from biped_casadi.files import read_text_file, write_text_atomic
 
-from .nodes import Nodes, check_radians, check_rates, csv_table, nodes_from_arrays
+from .nodes import Nodes, check_units, csv_table, nodes_from_arrays
 
 __all__ = ["urdf_columns", "urdf_nodes", "read_urdf_csv", "gait_table", "write_gait_csv",
            "CSV_ANGLES", "require_urdf_map"]
@@ -164,8 +164,7 @@ def urdf_nodes(model, columns: dict, stance, where: str = "gait",
     x = np.vstack([columns["pitch"]] + [columns[n] for n in umap.names])
     dx = np.vstack([columns["dpitch"]] + [columns[f"d{n}"] for n in umap.names])
     nodes = nodes_from_arrays(t, x.T, dx.T, None, model.nq, where)       # (N, n)
-    check_radians(nodes.q, ["pitch"] + list(umap.names), where)
-    check_rates(nodes.t, nodes.q, nodes.dq, ["pitch"] + list(umap.names), where)
+    check_units(nodes.t, nodes.q, nodes.dq, ["pitch"] + list(umap.names), where)
     q, dq = umap.to_model(nodes.q, nodes.dq, leg, continuous=True)
     info = dict(stance=stance_name)
     if base:

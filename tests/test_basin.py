@@ -224,3 +224,11 @@ def test_the_robust_designs_compare_on_windows_that_contain_their_boundary():
         assert auto.status == "contained", auto.message
         assert _converged_on_edges(auto) == 0
         assert auto.area > fixed.area and auto.converged_fraction < 0.5
+
+
+def test_a_window_without_a_converged_cell_is_empty_not_contained(gait):
+    # one step and a tolerance no error meets: no cell converges, not even the fixed point
+    b = basin_to_boundary(Design.vc(gait), n=5, steps=1, tol=1e-300)
+    assert not (b.outcome == "converged").any()
+    assert b.status == "empty" and b.success and b.area == 0
+    assert b.message.startswith("empty: none of the 5x5 cells") and "contains" not in b.message

@@ -21,6 +21,7 @@ import sys
 import pytest
 
 from analysis.cli import main as biped_main
+import biped_casadi
 from biped_casadi import RobotParams
 from analysis.sweeps import grid_points, run_sweep
 
@@ -438,3 +439,49 @@ def test_bad_input_in_a_fresh_process(args, files, tmp_path):
     assert r.returncode == 2, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
     assert r.stdout == "" and list(tmp_path.iterdir()) == []
+
+
+def _disk_full(*args, **kwargs):
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+class _FullStream:
+    """A standard output on a full disk: the write fails at once, or (buffered, as a file
+    is) when flushed."""
+
+    def __init__(self, buffered: bool):
+        self.buffered = buffered
+
+    def write(self, text):
+        if not self.buffered:
+            _disk_full()
+        return len(text)
+
+    def flush(self):
+        if self.buffered:
+            _disk_full()
+
+    def isatty(self):
+        return False
+
+
+@pytest.mark.parametrize("buffered", [False, True])
+def test_a_full_disk_names_the_standard_output(buffered, monkeypatch, capsys):
+    """'No space left on device' said which output failed: none when it was stdout (or
+    nothing at all when the write was buffered until the interpreter's exit)."""
+    monkeypatch.setattr(sys, "stdout", _FullStream(buffered))
+    rc = biped_main(["model", "--json"])
+    assert (rc, capsys.readouterr().err) == (
+        2, "biped model: error: stdout: No space left on device\n")
+
+
+def test_a_full_disk_names_the_output_file(tmp_path, monkeypatch, capsys):
+    """A write that fails for want of space names the file it was writing (not its
+    temporary file, and not nothing), and leaves nothing behind."""
+    urdf = pathlib.Path(biped_casadi.__file__).parent / "model" / "robots" / "rabbit.urdf"
+    out = tmp_path / "robot.toml"
+    monkeypatch.setattr(os, "fsync", _disk_full)
+    rc = biped_main(["robot", "import", str(urdf), "--out", str(out)])
+    assert (rc, capsys.readouterr().err) == (
+        2, f"biped robot: error: {out}: No space left on device\n")
+    assert list(tmp_path.iterdir()) == []

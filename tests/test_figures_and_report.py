@@ -244,7 +244,7 @@ def test_fig5_ticks_whole_steps(gait):
 def test_fig6_of_runs_stopped_at_the_start_shows_them(gait):
     """Runs stopped at t = 0 have one sample: Fig. 6 drew no visible line on an axis of
     -0.04 to 0.04 s; the sample is a marker, the axis starts at 0, and a note says so."""
-    from analysis.reporting.plots import swing_torques_plot
+    from analysis.reporting.plots import run_label, swing_torques_plot
     from biped_casadi import Design, perturbed_initial_state, simulate
     run = simulate(Design.vc(gait).controller_for(), *perturbed_initial_state(gait, 1.0, 0.0))
     assert np.ptp(run.t) == 0
@@ -254,3 +254,6 @@ def test_fig6_of_runs_stopped_at_the_start_shows_them(gait):
     lo, hi = ax.get_xlim()
     assert lo <= 0 < hi and lo > -0.2 * gait.T
     assert any("stopped at t = 0" in t.get_text() for t in ax.texts)
+    # the legend lists what is drawn: the run, not a reference no step drew
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == [run_label(run)]
+    assert not any(line.get_linestyle() == "--" for line in ax.lines)

@@ -151,6 +151,15 @@ def test_s_star_replayed_at_and_above(model, gait, deadbeat1):
     assert r.s_star < 1 and r.paper["status"] != "ok"
 
 
+def test_robustness_refuses_a_singular_design(gait):
+    """A singular M1 (eq. 24) is refused by the Python API as by 'biped robust', before
+    any run, instead of an s* of 0."""
+    st = RobustnessSettings(directions=1, rounds=1)
+    with pytest.raises(ValueError, match=r"^M1 = \[1\.0, 2\.0, 3\.0, 4\.0\] makes the "
+                                         r"controller singular on the reference step"):
+        robustness(Design.tv(gait, [1, 2, 3, 4]), st)
+
+
 def test_virtual_constraints_walk_every_kept_direction(model, gait):
     """Virtual constraints walk 10 valid steps from the paper's full perturbation and
     every kept direction (by construction of the kept set; checked here) and converge

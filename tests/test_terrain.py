@@ -142,6 +142,27 @@ def test_model_error_makes_the_gains_matter(model, robust_gait, tv):
         simulate(tv, options=o, plant=robot("three_link"))
 
 
+def test_gains_too_stiff_for_rk4_are_said_not_walked(robust_gait, capsys):
+    """Output gains too stiff for the RK4 step make the closed loop diverge (it ended as
+    'out_of_range', the GSN as 'does not strike'): they are refused in one line naming
+    them, by the simulator, by 'biped terrain' before any full-order run (exit 2), and
+    as the reason the GSN has no value when the runs do not need them."""
+    c = TimeVaryingController(robust_gait, M1R, Gains(Kp=1e9), rejoin=REJOIN)
+    with pytest.raises(ValueError, match=r"^the output gains \(Kp, Kd, eps\) = \(1e\+09, 2, "
+                                         r"0.02\) make the closed loop too stiff .* RK4 would "
+                                         r"diverge"):
+        simulate(c, options=SimulationOptions(steps=1))
+    args = ["terrain", "--controller", "vc", "--gains", "1e9", "1", "0.02", "--runs", "1",
+            "--max-steps", "1", "--scheduler", "inline"]
+    assert biped_main([*args, "--mass-scale", "1.05"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("biped terrain: error: --gains: (Kp, Kd, eps) = (1e+09, 1, 0.02) "
+                          "make the closed loop too stiff") and "\n" not in err
+    assert biped_main([*args, "--json"]) == 0         # exact walkers: gains do not matter
+    d = json.loads(capsys.readouterr().out)
+    assert d["gsn"] is None and "too stiff" in d["gsn_message"], d["gsn_message"]
+
+
 def test_saturation_keeps_walking_and_reports_the_time(tv):
     low = SimulationOptions(steps=2, torque_limit=40.0, jit=True)
     stop = simulate(tv, options=low, terrain=Terrain((0.01,)))

@@ -38,6 +38,7 @@ from biped_casadi.model.description import builtin_path, load_description
 from biped_casadi.model.urdf import import_urdf
 from gait_opt import Gait, Nodes, import_gait
 from gait_opt.urdf_angles import write_gait_csv
+from gait_opt.nodes import check_units
 
 WALKER = Path(__file__).resolve().parents[1] / "docs" / "howto" / "walker"
 URDF, CSV = WALKER / "walker.urdf", WALKER / "walker_step.csv"
@@ -365,6 +366,36 @@ def test_a_step_in_degrees_is_named(angles, walker_gait, tmp_path, capsys):
             r[i] = repr(math.degrees(float(r[i])))
     err = _import_refused(src, rows, angles, tmp_path, capsys)
     assert "degrees?" in err and "rad" in err, err
+
+
+def test_one_angle_in_degrees_beside_radians_is_named(walker_gait, tmp_path, capsys):
+    """One angle and its rate logged in degrees beside the others in radians (an IMU's
+    pitch beside the encoders): it turns by less than a full turn and its rate agrees with
+    it, so it passed the unit checks and was refused later for another cause; one line
+    names the column and says to convert it."""
+    src = tmp_path / "step.csv"
+    write_gait_csv(walker_gait, src, angles="urdf", n_nodes=21)
+    rows = [r.split(",") for r in src.read_text().splitlines()]
+    for i in (rows[0].index("pitch"), rows[0].index("dpitch")):
+        for r in rows[1:]:
+            r[i] = repr(math.degrees(float(r[i])))
+    err = _import_refused(src, rows, "urdf", tmp_path, capsys)
+    assert ": pitch goes from " in err and "in degrees? (convert it and its rate to " \
+        "radians, x pi/180" in err, err
+
+
+def test_degrees_check_spares_half_turn_joints_and_finds_small_degrees():
+    """A URDF whose zero pose folds the hips by a half turn (the how-to's walker: 2.3 to
+    3.15 rad) is not taken for degrees; a pitch of 4.5 to 5.5 degrees beside angles within
+    a half turn is."""
+    t = np.linspace(0.0, 1.0, 11)
+    hips = np.vstack([2.3 + 0.85 * t, 3.15 - 0.85 * t])
+    q = np.vstack([0.3 + 0.01 * t, hips, 0.4 * t])
+    check_units(t, q, np.gradient(q, t, axis=1), ["pitch", "a", "b", "c"])
+    with pytest.raises(ValueError, match=r"^nodes: pitch goes from 4\.5 to 5\.5, beyond a "
+                                         r"half turn where the other angles stay within 3\.15"):
+        q = np.vstack([4.5 + t, hips, 0.4 * t])
+        check_units(t, q, np.gradient(q, t, axis=1), ["pitch", "a", "b", "c"])
 
 
 @pytest.mark.parametrize("column", ["x", "dx"])

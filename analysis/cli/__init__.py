@@ -25,6 +25,7 @@ from . import (eig, export, gait, m1, mujoco, reproduce, robot, robust, simulate
                terrain, view)
 from .common import UserError, add_robot, load_model, print_json
 from .failures import failure_line
+from .stdout import named_stdout
 
 __all__ = ["main", "build_parser", "UserError"]
 
@@ -121,7 +122,7 @@ def main(argv=None) -> int:
         return int(e.code or 0)
     ctrl_c = _CtrlC()
     try:
-        with warnings.catch_warnings(record=True) as caught, ctrl_c:
+        with warnings.catch_warnings(record=True) as caught, ctrl_c, named_stdout():
             warnings.simplefilter("default")
             rc = args.func(args)
         _note_warnings(args.command, caught)

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from biped_casadi import robot
-from biped_casadi.control.output_law import M1_LIMIT, SECTION, check_M1_range, check_rejoin
+from biped_casadi.control.output_law import (M1_LIMIT, SECTION, check_M1_range, check_rejoin,
+                                             require_regular)
 from biped_casadi.results import json_safe
 from gait_opt import Gait, OpenOrbitWarning, optimize_gait
 
@@ -143,10 +144,12 @@ def is_family_file(path) -> bool:
 
 
 def check_not_singular(controller, M1, where: str = "the reference step"):
-    """Refuse (UserError) a time-varying controller singular on its step (eq. 24)."""
-    if controller.singularity().singular:
-        raise UserError(f"M1 = {list(np.ravel(M1).tolist())} makes the controller singular "
-                        f"on {where} (D11 - D12 M1 vanishes, eq. 24)")
+    """Refuse (UserError) a time-varying controller singular on its step (eq. 24;
+    :func:`biped_casadi.control.output_law.require_regular`)."""
+    try:
+        require_regular(controller, M1, where)
+    except ValueError as e:
+        raise UserError(str(e)) from None
 
 
 def figure_or_na(x, fmt) -> str:

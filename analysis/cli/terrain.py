@@ -159,6 +159,11 @@ def _build(args, say, gains, rejoin, profile):
                                 mu=args.mu, torque_limit=args.torque_limit, profile=profile)
     except ValueError as e:
         raise UserError(str(e)) from None
+    if spec.engine == "full_order":
+        try:
+            st.options(spec, gait.T)                 # gains the runs can integrate
+        except ValueError as e:
+            raise UserError(f"--{e}") from None
     return gait, spec, st
 
 

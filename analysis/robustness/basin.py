@@ -53,8 +53,9 @@ class BasinResult(Result):
     status : str
         'done' (a fixed window); from :func:`analysis.robustness.basin_to_boundary`
         'contained' (no cell on the window's edges converges: the basin's boundary is
-        inside the window) or 'capped' (the window reached its cap with converged cells
-        on an edge: the area is a lower bound).
+        inside the window), 'empty' (no cell converges: the area is 0) or 'capped' (the
+        window reached its cap with converged cells on an edge: the area is a lower
+        bound).
     message : str
         The converged percentage and the area in words.
     q_u : numpy.ndarray
@@ -110,7 +111,7 @@ class BasinResult(Result):
     outcome: np.ndarray = internal(default=None)
     final_error: np.ndarray = internal(default=None)
 
-    SUCCESS = ("done", "contained")
+    SUCCESS = ("done", "contained", "empty")
 
 
 @task

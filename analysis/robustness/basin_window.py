@@ -227,9 +227,10 @@ def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
     Returns
     -------
     BasinResult
-        The last window's basin; ``status`` 'contained' (no converged cell on an edge)
-        or 'capped' (converged cells on an edge of a window at its cap: the boundary is
-        not all inside and ``area`` is a lower bound); ``windows`` lists every window
+        The last window's basin; ``status`` 'contained' (no converged cell on an edge),
+        'empty' (no converged cell at all: area 0) or 'capped' (converged cells on an
+        edge of a window at its cap: the boundary is not all inside and ``area`` is a
+        lower bound); ``windows`` lists every window
         walked (half-widths, converged cells per edge, cells walked, time, and the
         fraction and area of a whole basin; ``probe`` True and no area for a window of
         which the edges alone were walked), ``cap``
@@ -297,7 +298,8 @@ def basin_to_boundary(design: Design, n: int = 101, q_span: float = 0.05,
         if not (any(touch) and grow(touch)):
             break
         touch = probe(spans)
-    status = "capped" if any(touch) else "contained"
+    status = "capped" if any(touch) else "contained" if (b.outcome == "converged").any() \
+        else "empty"
     for _ in range(zoom if status == "contained" else 0):
         inner = _zoomable(b, factor, grew)
         if not any(inner):
@@ -352,6 +354,9 @@ def _finish(b: BasinResult, status: str, rows: list, cap: dict, elapsed: float):
            + (f" (the {' and '.join(at_cap)} window at its cap: {cap['reason']})"
               if at_cap else "")
            if status == "contained" else
+           f"empty: none of the {n}x{n} cells around the fixed point converged, so this "
+           f"grid finds no basin (area 0)"
+           if status == "empty" else
            f"capped: converged cells on the {where} edge(s) of the largest window, so the "
            f"area {b.area:.4g} rad x rad/s is a lower bound ({cap['reason']})")
     return dataclasses.replace(b, status=status, elapsed=elapsed, windows=rows, cap=cap,

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from biped_casadi import Design, SimulationOptions, directions, require_same_robot
+from biped_casadi.control.output_law import require_regular
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import (WalkBatch, start_states, virtual_constraint_walker,
                                      zero_dynamics_walker)
@@ -372,8 +373,22 @@ def robustness(design: Design, settings: RobustnessSettings | None = None, kept=
     Returns
     -------
     RobustnessResult
+
+    Raises
+    ------
+    ValueError
+        When the design is a time-varying one singular on its step (eq. 24): no run of
+        it is a walk, so s* would say nothing about the design.
     """
     design = Design.require(design)
+    if design.M1 is not None:
+        require_regular(design.controller_for(), design.M1)
+    return _robustness(design, settings, kept, progress)
+
+
+def _robustness(design: Design, settings, kept, progress) -> RobustnessResult:
+    """:func:`robustness` without the singularity check: the co-design measures every
+    candidate its solver returns, a singular one too (its s* is 0)."""
     gait = design.gait
     model = gait.model
     require_same_robot(model, gait)

@@ -13,11 +13,15 @@ from biped_casadi.model.description import description_from_dict
 from biped_casadi.simulation import (Terrain, random_heights)
 
 
-__all__ = ["WalkerSpec", "MonteCarloSettings", "MAX_RUNS", "MAX_STEPS"]
+__all__ = ["WalkerSpec", "MonteCarloSettings", "MAX_RUNS", "MAX_STEPS", "MAX_FULL_RK4_STEPS"]
 
 #: the largest number of runs and of steps per run a Monte Carlo accepts
 MAX_RUNS = 1_000_000
 MAX_STEPS = 100_000
+
+#: the most RK4 steps per T the full-order runs take to keep stiff output gains stable
+#: (eps >= 1.4e-5 s with Kp = 1, Kd = 2; about a second of computing per step)
+MAX_FULL_RK4_STEPS = 100_000
 
 
 @dataclass(frozen=True)
@@ -151,7 +155,7 @@ class MonteCarloSettings:
         RK4 nodes per step of the virtual-constraint walker.
     full_rk4_steps : int
         RK4 steps per T of the full-order simulator, at least (raised where the output
-        gains' eps needs a finer step, eps >= 2 h); 200 gives the verdicts of 2000 on every
+        gains need a finer step: Gains.check_step); 200 gives the verdicts of 2000 on every
         run compared (``benchmarks/bench_terrain.py``, README).
     transient : int
         Steps left out at the start of every run for the step-time RMS.
@@ -236,16 +240,31 @@ class MonteCarloSettings:
         spec : WalkerSpec
             What walks (its saturation and its gains).
         T : float, optional
-            The reference's step duration, s: the RK4 steps per T are raised to keep
-            eps >= 2 T / rk4_steps.
+            The reference's step duration, s: the RK4 steps per T are raised until the
+            gains' output dynamics are integrated stably
+            (:meth:`biped_casadi.Gains.check_step`; eps >= 2 T / rk4_steps for Kp = 1,
+            Kd = 2).
 
         Returns
         -------
         SimulationOptions
+
+        Raises
+        ------
+        ValueError
+            When the runs go through the full-order simulator and the gains would need
+            more than :data:`MAX_FULL_RK4_STEPS` RK4 steps per T.
         """
         rk = self.full_rk4_steps
         if T is not None:
-            need = 2.0 * T / spec.gains[2]
+            g = Gains(*spec.gains)
+            need = 2.0 * T * g.stiffness / g.eps
+            if need > MAX_FULL_RK4_STEPS and spec.engine == "full_order":
+                raise ValueError(
+                    f"gains: (Kp, Kd, eps) = ({g.Kp:g}, {g.Kd:g}, {g.eps:g}) make the closed "
+                    f"loop too stiff: the full-order simulator would need {need:.3g} RK4 steps "
+                    f"per step (at most {MAX_FULL_RK4_STEPS}) not to diverge; lower Kp or Kd, "
+                    f"or raise eps")
             rk = max(rk, 8 * int(math.ceil(need / 8 - 1e-9)))
         return SimulationOptions(steps=self.max_steps, mu=self.mu,
                                  torque_limit=self.torque_limit, saturate=spec.saturate,

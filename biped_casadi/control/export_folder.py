@@ -10,6 +10,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from ..files import name_destination
 from .export import HEADER, MARKER
 
 __all__ = ["check_destination", "staged_export", "Stage", "write_export", "file_digest"]
@@ -115,9 +116,10 @@ def staged_export(files: dict, out, extra: dict | None = None):
             os.rmdir(old)
             os.replace(out, old)
         os.replace(tmp, out)
-    except BaseException:
+    except BaseException as e:
         if old is not None and old.exists() and not out.exists():
             os.replace(old, out)
+        name_destination(e, out, tmp)
         raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

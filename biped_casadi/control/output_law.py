@@ -28,7 +28,7 @@ __all__ = ["SECTION", "SINGULAR_RTOL", "M1_LIMIT", "Gains", "SingularityReport",
            "check_rejoin", "output_matrix", "outputs", "coordinates_from_outputs",
            "initial_output_errors", "correction",
            "decoupling_denominator", "unactuated_acceleration", "actuated_torque",
-           "output_acceleration", "singularity_report", "is_singular"]
+           "output_acceleration", "singularity_report", "is_singular", "require_regular"]
 
 #: Poincaré section tau = SECTION * T (docs: theory §4, paper §IV)
 SECTION = 0.75
@@ -83,6 +83,41 @@ class Gains:
             ``Kp``, ``Kd``, ``eps``.
         """
         return dict(Kp=self.Kp, Kd=self.Kd, eps=self.eps)
+
+    @property
+    def stiffness(self) -> float:
+        """The output dynamics' fastest rate times eps (1 for Kp = 1, Kd = 2).
+
+        The largest magnitude of the roots of s^2 + Kd s + Kp."""
+        disc = self.Kd**2 - 4.0 * self.Kp
+        return 0.5 * (self.Kd + math.sqrt(disc)) if disc >= 0 else math.sqrt(self.Kp)
+
+    def check_step(self, h: float, where: str = "h = T / rk4_steps") -> None:
+        """Refuse an RK4 step too long for the output dynamics (they would diverge).
+
+        RK4 integrates ddy = -Kd/eps dy - Kp/eps^2 y stably while h times its fastest
+        rate stays below 2.78; the step must keep it below 1/2 (for Kp = 1, Kd = 2:
+        eps >= 2 h).
+
+        Parameters
+        ----------
+        h : float
+            The integration step, s.
+        where : str
+            Names the step in the message.
+
+        Raises
+        ------
+        ValueError
+            One line naming the gains, the step and the longest step they allow.
+        """
+        k = self.stiffness
+        if self.eps < 2 * k * h:
+            raise ValueError(
+                f"the output gains (Kp, Kd, eps) = ({self.Kp:g}, {self.Kd:g}, {self.eps:g}) "
+                f"make the closed loop too stiff for the integration step {where} = {h:.3g} "
+                f"s: RK4 would diverge (eq. 13's output dynamics need a step of at most "
+                f"{self.eps / (2 * k):.3g} s: lower Kp or Kd, raise eps, or more rk4_steps)")
 
 
 def check_M1(M1, n: int = 4) -> np.ndarray:
@@ -464,6 +499,28 @@ class SingularityReport(Result):
     def singular(self) -> bool:
         """True when the controller is singular on the step."""
         return self.status == "singular"
+
+
+def require_regular(controller, M1, where: str = "the reference step") -> None:
+    """Refuse a time-varying controller that is singular on its step (eq. 24).
+
+    Parameters
+    ----------
+    controller : TimeVaryingController
+        The controller (its :meth:`singularity` report decides).
+    M1 : array_like
+        Its outputs, for the message.
+    where : str
+        Names the step in the message.
+
+    Raises
+    ------
+    ValueError
+        One line naming M1, when D11 - D12 M1 vanishes or changes sign on the step.
+    """
+    if controller.singularity().singular:
+        raise ValueError(f"M1 = {list(np.ravel(M1).tolist())} makes the controller singular "
+                         f"on {where} (D11 - D12 M1 vanishes, eq. 24)")
 
 
 def singularity_report(values) -> SingularityReport:

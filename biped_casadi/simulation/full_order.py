@@ -267,12 +267,7 @@ class Simulator:
         self.gait = controller.reference
         self.T = self.gait.T
         self.h = self.T / self.options.rk4_steps
-        eps = controller.gains.eps
-        if eps < 2 * self.h:        # RK4 is stable for h / eps < 2.78 on the output PD
-            raise ValueError(f"gain eps = {eps:g} s is below twice the integration step "
-                             f"h = T / rk4_steps = {self.h:.3g} s: the output dynamics would "
-                             f"be integrated unstably (use eps >= {2 * self.h:.2g} or more "
-                             "rk4_steps)")
+        controller.gains.check_step(self.h)
         self.chunk = self.options.rk4_steps // CHUNKS_PER_STEP
         self.schema = Diagnostics(self.model.nu, outputs=True)
         self.limits = Limits.of(self.options, self.plant)

@@ -15,7 +15,7 @@ from biped_casadi.simulation.speed_profile import simulate_profile
 from gait_opt import Gait, GaitOptimizationError
 from gait_opt.polish import polish
 
-from ...robustness.s_star import RobustnessResult, _run_summary, robustness
+from ...robustness.s_star import RobustnessResult, _robustness, _run_summary
 from ...stability.poincare import poincare_map
 from ...stability.vc_map import vc_eigenvalue
 from ...tasks import task
@@ -142,7 +142,7 @@ def measure(gait, kept, M1, rejoin: float, settings) -> Measured:
     Measured
     """
     M1 = np.asarray(M1, float)
-    r = robustness(Design.tv(gait, M1, rejoin), settings, kept=kept)
+    r = _robustness(Design.tv(gait, M1, rejoin), settings, kept, None)
     if not r.paper:
         # the paper's direction is not among the kept ones (virtual constraints do not
         # walk from it at full scale): its run is measured all the same (the target)

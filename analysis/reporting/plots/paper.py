@@ -329,14 +329,17 @@ def swing_torques_plot(results, gait, title: str | None = None, labels=None) -> 
         ax[0].text(0.5, 0.5, "every run stopped at t = 0", transform=ax[0].transAxes,
                    ha="center", va="center", color="0.3")
     res = results[0]
+    ref_label = (f"reference $u^d$ on the steps of {labels[0]}" if len(results) > 1
+                 else "reference $u^d$")
     for k in np.unique(res.step):
         sel = res.step == k
+        if np.count_nonzero(sel) < 2:               # one sample: no dashed line to draw
+            continue
         tau = np.clip(res.tau[sel], 0, gait.t_max)
         ud = gait.u(tau)
         for i, j in enumerate(joints):
-            ax[i].plot(res.t[sel], ud[j], "k--", lw=0.8,
-                       label=(f"reference $u^d$ on the steps of {labels[0]}"
-                              if len(results) > 1 else "reference $u^d$") if k == 0 else None)
+            ax[i].plot(res.t[sel], ud[j], "k--", lw=0.8, label=ref_label)
+        ref_label = None                            # listed once, with the first drawn
     for i, j in enumerate(joints):
         ax[i].set_ylabel(f"u{j + 1}, {model.joint_names[j + 1]} [N m]")
     ax[-1].set_xlabel("t [s]")
