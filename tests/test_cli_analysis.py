@@ -42,6 +42,19 @@ def test_eig_ad_method_reports_the_fixed_point(gait_file, capsys):
     assert body["max_abs"] == pytest.approx(12.13, abs=0.01)
 
 
+def test_eig_rejoin_is_the_library_result(gait, gait_file, capsys):
+    """--rejoin reaches A^z (a robust design's simulate_args carry it), tv only."""
+    M1 = [-2.5, 5.0, -2.5, 5.0]
+    body = run_json(capsys, "eig", "--gait", gait_file, "--m1", *map(str, M1),
+                    "--rejoin", "0.75", "--json")
+    ref = poincare_eigenvalues(gait, M1, rejoin=0.75)
+    np.testing.assert_allclose(body["A"], ref.A, rtol=1e-12)
+    assert abs(ref.max_abs - poincare_eigenvalues(gait, M1).max_abs) > 1e-3
+    assert biped_main(["eig", "--gait", gait_file, "--controller", "vc", "--rejoin",
+                       "0.75"]) == 2
+    assert "--rejoin applies to the time-varying" in capsys.readouterr().err
+
+
 def test_eig_singular_and_vc(model, gait, gait_file, capsys):
     body = run_json(capsys, "eig", "--gait", gait_file, "--m1", "1.70", "0", "0", "0", "--json")
     assert body["status"] == "singular" and body["success"] is False and body["max_abs"] is None

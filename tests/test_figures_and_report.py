@@ -227,6 +227,20 @@ def test_fig5_of_runs_without_an_impact_has_a_step_axis(gait):
     assert any("no run reached an impact" in t.get_text() for t in fig.axes[0].texts)
 
 
+def test_fig5_ticks_whole_steps(gait):
+    """A short run (3 steps, notebook 04) had ticks at 1.25, 1.5, ... steps."""
+    from analysis.reporting.plots import unactuated_error_plot
+    from biped_casadi import Design, SimulationOptions, perturbed_initial_state, simulate
+    run = simulate(Design.vc(gait).controller_for(), *perturbed_initial_state(gait, 0.001, 0.01),
+                   options=SimulationOptions(steps=3))
+    assert len(run.steps) == 3
+    fig = unactuated_error_plot([run])
+    fig.canvas.draw()
+    lo, hi = fig.axes[1].get_xlim()
+    ticks = [t for t in fig.axes[1].get_xticks() if lo <= t <= hi]
+    assert ticks and all(float(t).is_integer() for t in ticks), ticks
+
+
 def test_fig6_of_runs_stopped_at_the_start_shows_them(gait):
     """Runs stopped at t = 0 have one sample: Fig. 6 drew no visible line on an axis of
     -0.04 to 0.04 s; the sample is a marker, the axis starts at 0, and a note says so."""

@@ -6,10 +6,10 @@ import numpy as np
 from analysis.stability import METHODS, poincare_eigenvalues
 from analysis.stability import vc_eigenvalue
 from analysis.reporting.text import eigenvalues_text, number_text
-from biped_casadi.control.output_law import M1_LIMIT
+from biped_casadi.control.output_law import M1_LIMIT, SECTION
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
-                     load_gait, parse_m1, print_json)
+                     load_gait, parse_m1, print_json, rejoin_fraction)
 
 
 def cmd_eig(args):
@@ -20,6 +20,9 @@ def cmd_eig(args):
                         "torque)")
     if args.controller == "vc" and args.method is not None:
         raise UserError("--method applies to the time-varying controller (--controller tv)")
+    if args.controller == "vc" and args.rejoin is not None:
+        raise UserError("--rejoin applies to the time-varying controller (--controller tv)")
+    rejoin = 0.5 if args.rejoin is None else rejoin_fraction(args.rejoin)
     method = args.method or "variational"
     check_m1_values(args.m1)                 # before the gait: finite, within the range
     say = Progress("eig", quiet=args.json)
@@ -38,11 +41,12 @@ def cmd_eig(args):
     M1 = parse_m1(args.m1, model.nu)
     if method == "ad":
         say("AD through the whole Poincare map (builds it once, a few seconds) ...")
-    r = poincare_eigenvalues(gait, M1, method=method)
+    r = poincare_eigenvalues(gait, M1, method=method, rejoin=rejoin)
     if args.json:
         print_json(r)
         return 0
-    print(f"M1 = {M1.tolist()}   status: {r.status}")
+    when = "" if rejoin == 0.5 else f", v_c rejoins at {rejoin:g} T"
+    print(f"M1 = {M1.tolist()}{when}   status: {r.status}")
     if not r.success:                    # singular, no_impact or open_orbit
         print(f"  {r.message}")
         return 0
@@ -71,6 +75,10 @@ def register(sub):
                         f"three_link), each within +-{M1_LIMIT:.0e}")
     p.add_argument("--controller", choices=("tv", "vc"), default="tv",
                    help="tv: time-varying outputs (default); vc: virtual constraints")
+    p.add_argument("--rejoin", type=float, metavar="R", default=None,
+                   help=f"time at which v_c rejoins the reference, fraction of T in "
+                        f"(0, {SECTION}] (default 0.5, the paper's); A^z depends on it, as "
+                        f"in biped simulate")
     p.add_argument("--method", choices=METHODS, default=None,
                    help="how A^z is differentiated: the variational equation along the orbit "
                         "(default, ~1 ms) or AD through the whole map (ad, ~0.3 s); both "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from .common import SWING, _figure, _legs_legend, _stick, run_label
 
@@ -279,6 +280,7 @@ def unactuated_error_plot(results, title: str | None = None, labels=None) -> Fig
     ax[0].set_ylabel(r"$q_u - q_u^d(T)$ [rad]")
     ax[1].set_ylabel(r"$\dot q_u - \dot q_u^d(T)$ [rad/s]")
     ax[1].set_xlabel("step (error just before its impact)")
+    ax[1].xaxis.set_major_locator(MaxNLocator(integer=True))         # whole steps
     for a in ax:
         a.axhline(0, color="0.6", lw=0.8)
         a.grid(alpha=0.3)
