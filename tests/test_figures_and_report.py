@@ -176,7 +176,7 @@ def _summary(tv_status="ok", tv_message=""):
 
 
 @pytest.mark.parametrize("tv_status, tv_message", [("ok", ""),
-                                                   ("slipped", "step 0: stance foot slips")])
+                                                   ("slipped", "step 1: stance foot slips")])
 def test_report_reads_well(tmp_path, tv_status, tv_message):
     """Issue 12: two figure headings both called 'gait', figures without captions, one
     sentence repeated on five rows, 'see the message' with no message."""

@@ -390,3 +390,31 @@ def test_cli_simulate_bad_input(gait, tmp_path, capsys):
     assert "excludes" in capsys.readouterr().err
     assert biped_main(["simulate", "--gait", str(path), "--torque-limit", "-3"]) == 2
     assert "--torque-limit" in capsys.readouterr().err
+
+
+def test_messages_count_steps_from_one(gait, vc, tmp_path, capsys):
+    """A message names a step counted from 1 (step 1: from the start state to the first
+    impact), the row of ``biped simulate``'s table and Fig. 5's axis for the same step;
+    ``fail_step`` stays the 0-based index (a field scripts read)."""
+    from biped_casadi.simulation import NOT_CONVERGED, failure_text
+    # an 8 cm step up at the third foothold: the third step cannot strike, two rows
+    r = simulate(vc, steps=4, terrain=[0.0, 0.0, 0.08])
+    assert r.status == "scuffed" and r.message.startswith("step 3: "), r.message
+    assert r.fail_step == 2 and [s.index + 1 for s in r.steps] == [1, 2]
+    # a 3 cm step up at the second foothold: the second impact's impulse leaves the cone;
+    # its row (2) is in the table, and the message names step 2
+    path = gait.save(tmp_path / "gait.json")
+    args = ["simulate", "--gait", str(path), "--controller", "vc", "--steps", "4",
+            "--terrain", "0", "0.03", "0.03"]
+    biped_main(args + ["--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "slipped" and out["message"].startswith("step 2: impact impulse")
+    assert out["fail_step"] == 1 and len(out["steps"]) == 2
+    biped_main(args)
+    text = capsys.readouterr().out.splitlines()
+    assert text[0].startswith("vc: status slipped - step 2: impact impulse"), text
+    rows = [line.split()[0] for line in text[2:] if line.split()[0].isdigit()]
+    assert rows == ["1", "2"], text
+    # the same rule in the robustness texts
+    assert failure_text("slipped", 0) == "slipped in step 1"
+    assert failure_text(NOT_CONVERGED, 10) == "not_converged after step 10"

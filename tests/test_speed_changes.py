@@ -100,7 +100,7 @@ def test_a_profile_stops_at_its_first_invalid_state(family):
     r = simulate_profile(ds, options=SimulationOptions(torque_limit=limit))
     assert r.status == "torque_limit" and r.fail_step == 1 and len(r.steps) == 2
     assert r.steps[0].status == "ok" and r.steps[1].status == "torque_limit"
-    assert r.message.startswith("step 1:") and np.all(np.isnan(r.qu_error[1:]))
+    assert r.message.startswith("step 2:") and np.all(np.isnan(r.qu_error[1:]))  # 1-based
     assert r.steps[1].peak_torque > limit and r.steps[1].q_plus is None
     assert math.isnan(r.segments[1].steps_to_converge) and r.segments[1].walked == 0
 

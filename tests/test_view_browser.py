@@ -224,7 +224,7 @@ def _check_design(page, M1, gait, capsys, poincare_eigenvalues) -> str:
         assert rest.startswith(f"{sim['n_steps']} of {sim['n_steps']} steps valid"), walk
     else:
         assert rest == sim["message"], (walk, sim["message"])
-        assert int(re.match(r"step (\d+):", rest).group(1)) == sim["fail_step"]
+        assert int(re.match(r"step (\d+):", rest).group(1)) == sim["fail_step"] + 1  # 1-based
     return walk[0]
 
 

@@ -6,7 +6,7 @@ from .full_order import (SimulationResult, Simulator, StepRecord, perturbed_init
                          simulate, simulator)
 from .kernel import Diagnostics, locate_strike, strike
 from .options import SimulationOptions
-from .outcome import NOT_CONVERGED, STATUSES, WalkBatch, WalkOutcome, verdict
+from .outcome import NOT_CONVERGED, STATUSES, WalkBatch, WalkOutcome, failure_text, verdict
 from .perturbation import (PAPER_SIZES, Perturbation, direction_errors, directions,
                            start_states, torso_push)
 from .speed_profile import (ProfileResult, ProfileSegment, ProfileStep, simulate_profile,
@@ -18,7 +18,7 @@ from .vc_walker import VirtualConstraintWalker, virtual_constraint_walker
 
 __all__ = ["SimulationOptions", "SimulationResult", "StepRecord", "Simulator", "simulate",
            "simulator", "perturbed_initial_state", "STATUSES", "NOT_CONVERGED", "WalkOutcome",
-           "WalkBatch", "verdict", "Perturbation", "directions", "direction_errors",
+           "WalkBatch", "verdict", "failure_text", "Perturbation", "directions", "direction_errors",
            "start_states", "PAPER_SIZES", "ZeroDynamicsWalker", "VirtualConstraintWalker",
            "zero_dynamics_walker", "virtual_constraint_walker", "Diagnostics", "strike",
            "locate_strike", "Limits", "torso_push", "Terrain", "TerrainFileError",

@@ -157,7 +157,7 @@ class SimulationResult(WalkOutcome):
     t, tau : numpy.ndarray
         (N,) time since the start of the run and since the start of the step, s.
     step : numpy.ndarray
-        (N,) index of the step each node belongs to.
+        (N,) 0-based index of the step each node belongs to.
     q, dq : numpy.ndarray
         (N, nq) configuration (rad) and velocity (rad/s).
     u, y, dy : numpy.ndarray
@@ -414,7 +414,7 @@ class Simulator:
         if failure is not None:
             status, message, t_fail = failure
             if not message.startswith("step"):
-                message = f"step {len(records)}: {message}"
+                message = f"step {k + 1}: {message}"      # step 1: the first (k = 0)
             rec.fail([0], [status], k, [message])
         return log.result(rec, self.controller.describe(), self.options, records, t_fail,
                           dict(T=self.T, qu_T=self._ref_T[0], dqu_T=self._ref_T[1]),
@@ -438,7 +438,7 @@ class Simulator:
         fail = self._first_failure(D0, X[:, None], den_sign=sign, ground=ground)
         z0 = S.row(D0, "zsw")[0]
         if fail is None and start_violation(z0, self.limits, behind) != "":
-            fail = (0, "scuffed", f"swing foot below the ground at the start of step {k} "
+            fail = (0, "scuffed", f"swing foot below the ground at the start of step {k + 1} "
                                   f"(z_sw = {z0:.3g} m, ground {behind:.3g} m)")
         log.add(t0, np.zeros(1), k, X[:, None], D0, sx, walk["rec"], S)
         if fail is not None:
@@ -480,7 +480,7 @@ class Simulator:
             log.add(t0, taus, k, Xs, Dg, sx, walk["rec"], S)
             X, z_prev = Xs[:, -1], zs[-1]
             ci += n if first else 1
-        return ("no_impact", f"step {k}: no valid impact of the swing foot within "
+        return ("no_impact", f"step {k + 1}: no valid impact of the swing foot within "
                              f"{o.horizon:g} T = {o.horizon * T:.4f} s", t0 + o.horizon * T), None
 
     def _impact(self, k, event, walk, log):
@@ -514,7 +514,7 @@ class Simulator:
         which = str(impact_violation(F, v_old[1], finite, self.limits))
         if which:
             msg = impact_message(which, F, v_old[1], self.limits)
-            return (which, f"step {k}: {msg}", t0 + tau_m), record
+            return (which, f"step {k + 1}: {msg}", t0 + tau_m), record
         return None, record
 
     def _locate(self, Xa, ta, za, zb, p, height=0.0):

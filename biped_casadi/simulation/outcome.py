@@ -22,7 +22,7 @@ import numpy as np
 from ..results import Result, json_safe
 
 __all__ = ["STATUSES", "NOT_CONVERGED", "WalkOutcome", "WalkBatch", "verdict",
-           "OutcomeRecorder"]
+           "failure_text", "OutcomeRecorder"]
 
 #: how a run ends: 'ok' (every step valid) or the first invalid state's status
 STATUSES = ("ok", "fell", "scuffed", "negative_normal_force", "slipped", "torque_limit",
@@ -73,6 +73,31 @@ def verdict(status, final_error, tol: float):
         out = np.where((status == "ok") & ~(np.asarray(final_error) < tol), NOT_CONVERGED,
                        status)
     return str(out) if out.ndim == 0 else out
+
+
+def failure_text(status: str, fail_step: int) -> str:
+    """How a run ended, in words for people: the step counted from 1.
+
+    ``failure_text('slipped', 0)`` is 'slipped in step 1' (the first step, from the start
+    state to the first impact), the row of that step in ``biped simulate``'s table;
+    a run that walked every step but did not converge (:data:`NOT_CONVERGED`, whose
+    ``fail_step`` is the number of steps) 'not_converged after step 10'.
+
+    Parameters
+    ----------
+    status : str
+        The run's verdict: 'ok', :data:`NOT_CONVERGED` or one of :data:`STATUSES`.
+    fail_step : int
+        The 0-based index of the failed step (``WalkOutcome.fail_step``); for 'ok' and
+        :data:`NOT_CONVERGED` the number of steps walked.
+
+    Returns
+    -------
+    str
+    """
+    if status in ("ok", NOT_CONVERGED):
+        return f"{status} after step {int(fail_step)}"
+    return f"{status} in step {int(fail_step) + 1}"
 
 
 class _Verdicts:
@@ -153,11 +178,13 @@ class WalkOutcome(_Verdicts, Result):
     status : str
         One of :data:`STATUSES`.
     message : str
-        What went wrong, naming the step (empty when 'ok').
+        What went wrong, naming the step counted from 1 ('step 1' is the first step, from
+        the start state to the first impact); empty when 'ok'.
     n_steps : int
         Steps the run was to walk.
     fail_step : int
-        The index of the step where the run failed (``n_steps`` when 'ok').
+        The 0-based index of the step where the run failed (``n_steps`` when 'ok'); the
+        message names it as step ``fail_step + 1``.
     qu_error : numpy.ndarray
         (n_steps,) q_u - q_u^d(T) just before each impact, rad.
     dqu_error : numpy.ndarray
@@ -214,7 +241,7 @@ class WalkBatch(_Verdicts):
     n_steps : int
         Steps every run was to walk.
     fail_step : numpy.ndarray
-        (n,) the index of the failed step (``n_steps`` when 'ok').
+        (n,) the 0-based index of the failed step (``n_steps`` when 'ok').
     qu_error, dqu_error, duration : numpy.ndarray
         (n, n_steps) as :class:`WalkOutcome`'s.
     peak_torque, min_normal_force, max_friction_ratio, max_impulse_ratio : numpy.ndarray

@@ -261,8 +261,8 @@ def _designs(designs) -> list:
         try:
             require_same_robot(model, _gait(d))
         except ValueError:
-            raise ValueError(f"designs[{k}]: its gait is of another robot than step 0's") \
-                from None
+            raise ValueError(f"designs[{k}]: its gait is of another robot than the first "
+                             "step's (designs[0])") from None
     return out
 
 
@@ -295,7 +295,7 @@ def simulate_profile(designs, q0=None, dq0=None, options: SimulationOptions | No
     designs : sequence of Design
         One design per step, each on its gait (all of one robot); or the controllers.
     q0, dq0 : array_like, optional
-        The state at the start of step 0 (tau = 0); default step 0's gait at tau = 0.
+        The state at the start of the first step (tau = 0); default its gait at tau = 0.
     options : SimulationOptions, optional
         Validity thresholds and integration (``steps`` is ignored: the profile has
         ``len(designs)`` steps).
@@ -350,7 +350,7 @@ def _profile_step(k, d, sim, res, t0) -> ProfileStep:
     desc = d.to_dict() if isinstance(d, Design) else dict(sim.controller.describe())
     return ProfileStep(
         index=k, speed=reference_speed(g), T=float(g.T), controller=desc,
-        status=res.status, message=f"step {k}: {message}" if message else "",
+        status=res.status, message=f"step {k + 1}: {message}" if message else "",
         qu_error=float(qe), dqu_error=float(dqe), error=float(max(abs(qe), abs(dqe))),
         section_error=None if rec is None or rec.section_error is None
         else [float(x) for x in rec.section_error],
@@ -456,7 +456,7 @@ def walk_profile(designs, q0=None, dq0=None, options: SimulationOptions | None =
     designs : sequence of Design
         One design per step (module docstring), all of one controller kind or mixed.
     q0, dq0 : array_like, optional
-        (n, nq) start states (tau = 0 of step 0); default step 0's gait at tau = 0.
+        (n, nq) start states (tau = 0 of the first step); default its gait at tau = 0.
     options : SimulationOptions, optional
         Validity thresholds.
     rk4_steps : int
@@ -515,7 +515,7 @@ def _fold(rec: OutcomeRecorder, idx, k: int, b: WalkBatch):
     rec.max_fr[idx] = np.fmax(rec.max_fr[idx], b.max_friction_ratio)
     rec.max_ir[idx] = np.fmax(rec.max_ir[idx], b.max_impulse_ratio)
     bad = ~b.ok
-    rec.fail(idx[bad], b.status[bad], k, np.array([f"step {k}: {m}" if m else ""
+    rec.fail(idx[bad], b.status[bad], k, np.array([f"step {k + 1}: {m}" if m else ""
                                                    for m in b.message[bad]], dtype=object))
 
 
