@@ -84,7 +84,7 @@ def test_output_gains_change_nothing(model, robust_gait):
 
 def test_walker_torque_limit_as_the_simulator(model, gait):
     """The walker stops at the torque limit exactly like the full-order simulator (one
-    definition of validity): a limit below the reference's peak fails both in step 0."""
+    definition of validity): a limit below the reference's peak fails both in the first step."""
     opts = SimulationOptions(steps=1, torque_limit=20.0)
     B = ZeroDynamicsWalker(model, gait, opts).walk(gait.q(0.0)[None], gait.dq(0.0)[None],
                                                    np.zeros(4), 0.5, steps=1)
@@ -340,5 +340,5 @@ def test_cli_robust_paper_run_without_impact_prints_no_nan(gait3, tmp_path, caps
     path = str(gait3.save(tmp_path / "g3.json"))
     rc = biped_main(["robust", "--gait", path, "--m1", "3.39", "-3.23", "--directions", "2"])
     out = capsys.readouterr().out
-    assert rc == 0 and "slipped in step 0" in out, out
+    assert rc == 0 and "slipped in step 1" in out, out       # the first step, counted from 1
     assert "nan" not in out and "max impulse ratio n/a" in out, out

@@ -16,6 +16,7 @@ from analysis.design.codesign import (FIT, QUICK, CodesignError, CodesignSetting
                                       codesign)
 from analysis.design.designs_over_speed import family_designs
 from analysis.reporting.plots import family_designs_plot, save_figures
+from biped_casadi.simulation import NOT_CONVERGED
 from gait_opt import GaitFamily
 from analysis.sweeps import grid_best
 
@@ -124,7 +125,10 @@ def no_design_reason(r) -> str | None:
     if r.max_abs <= r.vc_eigenvalue and r.s_star > r.vc_s_star:
         return None
     b = r.binds or {}
-    stop = (f"{b.get('binds')} (in step {b.get('step')})" if b else
+    # b['step'] counts from 1; a run that walked every step but did not converge has none
+    where = (f" (in step {b['step']})" if "step" in b and b.get("status") != NOT_CONVERGED
+             else "")
+    stop = (f"{b.get('binds')}{where}" if b else
             r.check.failure or "nothing within the scales tried")
     lam = ("" if r.max_abs <= r.vc_eigenvalue else
            f", max|lambda| {r.max_abs:.3g} above virtual constraints' {r.vc_eigenvalue:.3g}")

@@ -8,6 +8,7 @@ from analysis.reporting.plots import basin_plot, save_figures
 from analysis.robustness import (Design, RobustnessSettings, basin_to_boundary, kept_directions,
                                  robustness)
 from biped_casadi.control import PAPER_REJOIN
+from biped_casadi.simulation import failure_text
 
 from .common import (add_design_arguments, Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
                      check_not_singular, figure_or_na,
@@ -69,7 +70,7 @@ def cmd_robust(args):
         elif status == "ok":
             status = f"walks {p.get('step')} valid steps"
         else:
-            status = f"{status} in step {p.get('step')}"
+            status = failure_text(status, p.get('step'))
         print(f"  the paper's perturbation (s = 1): {status}"
               + (f", below {st.tol:g} from step {int(conv)}" if conv and np.isfinite(conv)
                  else "") + f"; peak |u| {figure_or_na(p['peak_torque'], '.1f')} N m, min F_z "

@@ -43,7 +43,7 @@ from gait_opt import GaitOptions, optimize_gait
 from gait_opt.cache import cache_path
 
 from ..stability.poincare import poincare_map
-from biped_casadi.simulation import start_states
+from biped_casadi.simulation import failure_text, start_states
 
 from ..robustness.s_star import Design, RobustnessSettings, kept_directions, s_star_batch
 from ..stability.vc_map import vc_eigenvalue
@@ -427,12 +427,12 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
     msg = (f"robust design: s* = {r.s_star:.4g} with max|lambda| = {max_abs:.3g} "
            f"(virtual constraints {search.lam_vc:.3g}); from the paper's perturbation "
            + (f"below {st.tol:g} from step {conv}" if conv else f"{check.paper_status}")
-           + (f"; just above s*: {fail['status']} in step {fail['step']}" if fail else "")
+           + (f"; just above s*: {failure_text(fail['status'], fail['step'])}" if fail else "")
            + ("" if met else "; target (s* >= 1, converged by step 4) not met"))
     result = RobustDesignResult(
         status="target_met" if met else "target_not_met", message=msg, design=design,
         gait_options=search.options.to_dict(), gait_file=gait_file, s_star=r.s_star,
-        s_fail=r.s_fail, failure=(f"{fail['status']} in step {fail['step']} (direction "
+        s_fail=r.s_fail, failure=(f"{failure_text(fail['status'], fail['step'])} (direction "
                                   f"{fail['direction']})" if fail else ""),
         verified=verified, max_abs=max_abs, vc_eigenvalue=search.lam_vc,
         steps_to_converge=conv, paper_errors=errs, directions_kept=len(search.dirs),

@@ -26,7 +26,8 @@ import numpy as np
 from biped_casadi import (Design, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, directions, simulate)
 from biped_casadi.results import Result, internal
-from biped_casadi.simulation import WalkBatch, simulator, start_states, zero_dynamics_walker
+from biped_casadi.simulation import (WalkBatch, failure_text, simulator, start_states,
+                                     zero_dynamics_walker)
 
 from ..robustness.s_star import RobustnessSettings, robustness
 from ..stability.poincare import poincare_map
@@ -249,7 +250,7 @@ def design_check(r, verified: dict, paper, eigen: tuple, settings: RobustnessSet
     conv = int(conv) if math.isfinite(conv) else None
     max_abs, lam_vc = eigen
     fail = r.failure
-    failure = (f"{fail['status']} in step {fail['step']} (direction {fail['direction']})"
+    failure = (f"{failure_text(fail['status'], fail['step'])} (direction {fail['direction']})"
                if fail else "")
     msg = (f"s* = {r.s_star:.4g}" + (f" ({failure} at {r.s_fail:.4g})" if fail else "")
            + f"; max|lambda| {max_abs:.3g} (virtual constraints {lam_vc:.3g}); paper's "

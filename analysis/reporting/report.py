@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from biped_casadi.files import write_text_atomic
+from biped_casadi.simulation import failure_text
 
 from .in_mujoco import mujoco_caption, mujoco_lines
 from .plots import COLOUR_NAMES, OUTCOME_COLOURS, STANCE, SWING, TORSO
@@ -567,7 +568,7 @@ def _robustness_table(s: dict, rob: list) -> list:
              "directions kept |", "|---|---|---|---|---|---|"]
     for r in rob:
         f = r.get("failure") or {}
-        fail = (f"{f.get('status')} in step {f.get('step')} (direction "
+        fail = (f"{failure_text(f.get('status'), f.get('step'))} (direction "
                 f"{f.get('direction')}) at s = {_f(r.get('s_fail'), '.4g')}" if f else
                 "none up to the largest scale tried")
         lines.append(f"| {_esc(r.get('label'))} | {r.get('gait')} | "

@@ -47,8 +47,8 @@ def walk_text(res) -> str:
     """How a run walked, in one line.
 
     ``ok: 10 of 10 steps valid, final error 1.3e-05``, or the status of its first invalid
-    state and the simulator's message, which names the step (0-based, as ``biped
-    simulate`` reports it): ``slipped: step 6: ...``.
+    state and the simulator's message, which names the step counted from 1 (step 1 is
+    the first, row 1 of ``biped simulate``'s table): ``slipped: step 6: ...``.
 
     Parameters
     ----------

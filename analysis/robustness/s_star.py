@@ -37,7 +37,7 @@ from biped_casadi.control.output_law import require_regular
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import (WalkBatch, start_states, virtual_constraint_walker,
                                      zero_dynamics_walker)
-from biped_casadi.simulation.outcome import NOT_CONVERGED
+from biped_casadi.simulation.outcome import NOT_CONVERGED, failure_text
 
 from ..tasks import Engine, resolve_scheduler, task
 from ..stability.poincare import poincare_map
@@ -127,7 +127,8 @@ class RobustnessResult(Result):
         when every direction passes at ``s_max``.
     failure : dict
         The failure at ``s_fail``: direction index, status ('not_converged' or a
-        validity status), step and final error; empty when there is none.
+        validity status), step (0-based, ``WalkOutcome.fail_step``; the message says
+        step + 1) and final error; empty when there is none.
     steps_to_converge : float
         At s*, the worst over the kept directions of the steps until the error stays
         below ``tol``; NaN when no scale passed.
@@ -439,7 +440,7 @@ def _robustness(design: Design, settings, kept, progress) -> RobustnessResult:
         f"(all {len(dirs)} directions walk {st.steps} valid steps and converge below "
         f"{st.tol:g})" if s_star > 0 else "(no scale tried passed)") + (
                f"; at s = {s_fail:.4g} direction {failure['direction']} fails: "
-               f"{failure['status']} in step {failure['step']}" if failure else ""))
+               + failure_text(failure['status'], failure['step']) if failure else ""))
     return RobustnessResult(
         controller=design.controller, design=design_dict,
         s_star=s_star, s_fail=s_fail, failure=failure, steps_to_converge=worst,
@@ -490,7 +491,7 @@ def _cause(batch: WalkBatch, tol: float) -> str:
     if j is None:
         return ""
     v = str(batch.verdict(tol)[j])
-    return v if v == NOT_CONVERGED else f"{v} in step {int(batch.fail_step[j])}"
+    return v if v == NOT_CONVERGED else failure_text(v, int(batch.fail_step[j]))
 
 
 @task

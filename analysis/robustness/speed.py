@@ -43,7 +43,7 @@ __all__ = ["SpeedChange", "SpeedJumps", "profile_run", "speed_change", "speed_ju
 @task
 def profile_run(designs: tuple, options: SimulationOptions, tol: float = CONVERGED
                 ) -> ProfileResult:
-    """One speed profile walked in full order from step 0's orbit (a task).
+    """One speed profile walked in full order from the first step's orbit (a task).
 
     Parameters
     ----------

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from biped_casadi import Design
+from biped_casadi.simulation import NOT_CONVERGED
 from gait_opt import GaitOptions, optimize_gait
 
 from ...robustness.basin import basin
@@ -375,7 +376,8 @@ class Method:
             s_best = b["s_star"] if best is None else max(best, b["s_star"])
             text = (f"no design {where}: the start screen's best scale is s* {s_best:.3g} "
                     f"({b.get('source')} M1 {np.round(b['M1'], 3).tolist()}), stopped by "
-                    f"{b.get('binds')}" + (f" in step {b['step']}" if "step" in b else ""))
+                    f"{b.get('binds')}" + (f" in step {b['step']}" if "step" in b and
+                                           b.get("status") != NOT_CONVERGED else ""))
         if self.vc_ref is not None:
             text += f"; virtual constraints reach s* {self.vc_ref.result().s_star:.3g}"
         return text
