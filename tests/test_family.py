@@ -371,3 +371,21 @@ def test_gait_between_branches_prints_no_nan_and_names_a_fall(capsys, tmp_path, 
                       "g.json", "--json")
     d = json.loads(out)
     assert d["torso_past_fall_bound"] is True and d["interpolant_residual"] is None
+
+
+def test_activations_are_named_in_the_legend_once_each_not_written_across_the_curves():
+    from matplotlib.figure import Figure
+
+    from analysis.reporting.plots.speed_family import _mark_activations
+    ax = Figure().subplots()
+    ax.plot([0.4, 1.2], [0.3, 0.6])
+    events = [dict(change="active", constraint="impact impulse cone", speed=1.1),
+              dict(change="active", constraint="friction cone", speed=1.15),
+              dict(change="active", constraint="friction cone", speed=1.18),
+              dict(change="active", constraint="torque limit", speed=0.9)]   # another panel
+    _mark_activations(ax, "impact_impulse_ratio", events)
+    labels = ax.get_legend_handles_labels()[1]
+    assert labels == ["impact impulse cone active from here", "friction cone active from here"]
+    assert len(ax.lines) == 1 + 3 and not ax.texts
+    styles = {line.get_label(): line.get_linestyle() for line in ax.lines[1:]}
+    assert len(set(styles.values()) - {"-"}) == 2           # the two constraints told apart

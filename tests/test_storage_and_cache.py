@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -88,6 +89,27 @@ def test_store_round_trip_is_exact(tmp_path):
     assert list(store.chunk_files()) == [0]
     meta = json.loads((tmp_path / "s" / "sweep.json").read_text())
     assert meta["settings"] == {"grid": 9} and meta["settings_sha256"] == digest({"grid": 9})
+
+
+def test_a_full_disk_names_the_chunk_and_leaves_no_partial_file(tmp_path, monkeypatch):
+    import errno
+    import os
+    M1, status, max_abs, A, ev = _chunk()
+    with SweepStore(tmp_path / "s", {"grid": 9}) as store:
+        def full(fd):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        monkeypatch.setattr(os, "fsync", full)
+        with pytest.raises(OSError) as e:
+            store.write_chunk(0, 0, M1, status, max_abs, A, ev)
+        monkeypatch.undo()
+        name = Path(e.value.filename)
+        assert name.parent == tmp_path / "s" / "chunks" and name.name.startswith("part-000000.")
+        assert list((tmp_path / "s" / "chunks").iterdir()) == []
+        assert list(store.chunk_files()) == []
+        # a temporary file a killed run left is removed when the folder is opened again
+        (tmp_path / "s" / "chunks" / ".part-000001.abc.99.tmp.parquet").write_bytes(b"x")
+    with SweepStore(tmp_path / "s", {"grid": 9}):
+        assert list((tmp_path / "s" / "chunks").iterdir()) == []
 
 
 def test_store_detects_every_kind_of_damage(tmp_path):

@@ -382,8 +382,7 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     bad = [k for k, v in stages.items() if v.status is not Outcome.OK]
-    log(f"report: {folder / 'report.md'}  ({total:.0f} s; critical path "
-        f"{crit['seconds']:.0f} s)")
+    log(f"done in {total:.0f} s (critical path {crit['seconds']:.0f} s)")
     return ReproduceResult(
         status="failed" if bad else "ok",
         message=f"stages not ok: {', '.join(bad)}" if bad else "every stage ok",

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_casadi.caching import digest
+from biped_casadi.files import write_bytes_atomic
 
 __all__ = ["SweepStore", "SweepStoreError", "FORMAT", "FORMAT_VERSION", "STATUS_CODES",
            "digest_points"]
@@ -71,13 +72,6 @@ def _content_digest(index, M1, status_code, max_abs, A, eigenvalues) -> str:
     return h.hexdigest()
 
 
-def _write_atomic(path: Path, data: bytes):
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-    os.replace(tmp, path)
-
-
 class SweepStore:
     """A sweep's output folder.  ``open`` creates or checks it (refusing other settings)
     and takes the lock; ``valid_chunks`` reads back what is stored; ``write_chunk`` adds
@@ -114,9 +108,9 @@ class SweepStore:
             body = dict(format=self.FORMAT, version=self.FORMAT_VERSION, settings=self.settings,
                         settings_sha256=self.digest,
                         created=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
-            _write_atomic(meta_path, (json.dumps(body, indent=1) + "\n").encode())
+            write_bytes_atomic(meta_path, (json.dumps(body, indent=1) + "\n").encode())
         self.chunk_dir.mkdir(exist_ok=True)
-        for p in self.chunk_dir.glob(".*.tmp"):      # left by a killed run
+        for p in self.chunk_dir.glob(".*.tmp*"):     # left by a killed run
             p.unlink(missing_ok=True)
         return self
 
@@ -211,7 +205,7 @@ class SweepStore:
         data = buf.getvalue().to_pybytes()
         sha = hashlib.sha256(data).hexdigest()[:16]
         path = self.chunk_dir / f"part-{k:06d}.{sha}.parquet"
-        _write_atomic(path, data)
+        write_bytes_atomic(path, data)      # a failed write names the chunk
         return path
 
     def read_table(self, path: Path, k: int, start: int, n: int):

@@ -54,7 +54,7 @@ def speed_profile_plot(runs: dict, tol: float = 1e-3, title: str | None = None) 
                           xycoords=("data", "axes fraction"), xytext=(3, -12 - 12 * i),
                           textcoords="offset points", fontsize=7, color=c)
     ax_e.axhline(tol, color="tab:red", ls="--", lw=1, label=f"converged ({tol:g})")
-    ax_v.set_ylabel("speed of the step's gait, m/s")
+    ax_v.set_ylabel("speed of the step's gait [m/s]")
     ax_e.set_ylabel("max(|q_u err|, |dq_u err|) before impact\n(rad, rad/s; vs the step's gait)",
                     fontsize=8)
     ax_e.set_xlabel("step")
@@ -118,11 +118,11 @@ def speed_jumps_plot(jumps: dict, family_range=None, title: str | None = None) -
         ax_m.plot(x[cens], big[cens], m, color=c, ms=5, mfc="none")
     ax_s.plot([], [], ":", color="0.4", label="dotted: every step valid, not converged")
     ax_s.axhline(0, color="0.3", lw=0.8)
-    ax_s.set_ylabel("largest single-step change survived, dv = v2 - v1, m/s")
-    ax_m.set_ylabel("largest |dv| survived, m/s")
+    ax_s.set_ylabel("largest single-step change survived, dv = v2 - v1 [m/s]")
+    ax_m.set_ylabel("largest |dv| survived [m/s]")
     ax_m.plot([], [], "o", color="0.4", mfc="none", label="open: censored (family edge)")
     for ax in (ax_s, ax_m):
-        ax.set_xlabel("start speed v1, m/s")
+        ax.set_xlabel("start speed v1 [m/s]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="best")
     fig.suptitle(title or f"Largest single-step speed change survived (then "

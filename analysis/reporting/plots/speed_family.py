@@ -13,9 +13,9 @@ __all__ = ["gait_family_plot", "family_designs_plot"]
 #: (field, axis label, reference line field or value, its label)
 _PANELS = (
     ("cost_of_transport", "mechanical cost of transport", None, None),
-    ("step_length", "step length, m", None, None),
-    ("period", "step period T, s", None, None),
-    ("peak_torque", "peak |u|, N m", "torque_limit", "torque limit"),
+    ("step_length", "step length [m]", None, None),
+    ("period", "step period T [s]", None, None),
+    ("peak_torque", "peak |u| [N m]", "torque_limit", "torque limit"),
     ("impact_impulse_ratio", "friction ratio |F_x| / F_z", "impact_mu", "impulse bound"),
     ("vc_eigenvalue", "virtual constraints' eigenvalue", 1.0, "stability limit"),
 )
@@ -76,7 +76,7 @@ def gait_family_plot(figures, title: str | None = None) -> Figure:
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7, loc="best")
     for ax in axes[3:]:
-        ax.set_xlabel("speed, m/s")
+        ax.set_xlabel("speed [m/s]")
     n_folds = f", {len(folds)} fold(s) crossed (grey)" if folds else ""
     fig.suptitle(title or f"Gait family of {figures.robot}: {len(v)} gaits from {v.min():g} "
                  f"to {v.max():g} m/s{n_folds}", fontsize=11)
@@ -111,13 +111,16 @@ _BOUNDS = {"torque limit": "peak_torque", "friction cone": "impact_impulse_ratio
 
 
 def _mark_activations(ax, panel, events):
-    """Dotted vertical lines where a constraint bounding this panel becomes active."""
+    """Dotted vertical lines where a constraint bounding this panel becomes active (in
+    the legend once per constraint: a label on the line would cross the curves)."""
+    styles = {}                                  # a line style per constraint
     for e in events:
         if e["change"] == "active" and _BOUNDS.get(e["constraint"]) == panel:
-            ax.axvline(e["speed"], color="tab:orange", lw=1, ls=":")
-            ax.annotate(f"{e['constraint']} active", (e["speed"], 0.02),
-                        xycoords=("data", "axes fraction"), rotation=90, fontsize=6,
-                        color="tab:orange", ha="right", va="bottom")
+            c = e["constraint"]
+            first = c not in styles
+            ls = styles.setdefault(c, (":", "-.", "--")[len(styles) % 3])
+            ax.axvline(e["speed"], color="tab:orange", lw=1, ls=ls,
+                       label=f"{c} active from here" if first else None)
 
 
 _DESIGN_STYLE = {"co-design at each speed": ("tab:blue", "o", "-"),
@@ -170,7 +173,7 @@ def family_designs_plot(designs, title: str | None = None) -> Figure:
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].legend(fontsize=7, loc="best")
-    np.atleast_1d(axes)[-1].set_xlabel("speed, m/s")
+    np.atleast_1d(axes)[-1].set_xlabel("speed [m/s]")
     fig.suptitle(title or "Designs over the gait family: max|λ|, s* and basin against "
                           "speed", fontsize=10)
     fig.tight_layout()
