@@ -174,13 +174,20 @@ def check_m1_values(values):
         raise UserError(str(e)) from None
 
 
+def m1_required(nu: int | None = None) -> UserError:
+    """The error of a time-varying design without ``--m1`` (with the robot's count when
+    it is known)."""
+    count = f": {nu} for this robot" if nu else ""
+    return UserError(f"--m1 is required for the time-varying controller (one number per "
+                     f"torque{count})")
+
+
 def parse_m1(values, nu: int, default_zero: bool = False):
     """``--m1`` as a vector of the robot's nu components (UserError otherwise)."""
     if values is None:
         if default_zero:
             return np.zeros(nu)
-        raise UserError(f"--m1 is required for the time-varying controller (one number per "
-                        f"torque: {nu} for this robot)")
+        raise m1_required(nu)
     M1 = np.array(values, dtype=float)
     if M1.shape != (nu,):
         raise UserError(f"--m1 takes {nu} numbers for this robot (one per torque), "

@@ -9,15 +9,14 @@ from analysis.reporting.text import eigenvalues_text, number_text
 from biped_casadi.control.output_law import M1_LIMIT, SECTION
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
-                     load_gait, parse_m1, print_json, rejoin_fraction)
+                     load_gait, m1_required, parse_m1, print_json, rejoin_fraction)
 
 
 def cmd_eig(args):
     if args.controller == "vc" and args.m1 is not None:
         raise UserError("--m1 applies to the time-varying controller (--controller tv)")
     if args.controller == "tv" and args.m1 is None:
-        raise UserError("--m1 is required for the time-varying controller (one number per "
-                        "torque)")
+        raise m1_required()                  # before the gait (its count is not known yet)
     if args.controller == "vc" and args.method is not None:
         raise UserError("--method applies to the time-varying controller (--controller tv)")
     if args.controller == "vc" and args.rejoin is not None:

@@ -258,7 +258,7 @@ class MonteCarloSettings:
         rk = self.full_rk4_steps
         if T is not None:
             g = Gains(*spec.gains)
-            need = 2.0 * T * g.stiffness / g.eps
+            need = T / g.max_step                 # RK4 steps per T the gains need
             if need > MAX_FULL_RK4_STEPS and spec.engine == "full_order":
                 raise ValueError(
                     f"gains: (Kp, Kd, eps) = ({g.Kp:g}, {g.Kd:g}, {g.eps:g}) make the closed "

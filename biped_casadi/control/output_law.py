@@ -92,6 +92,13 @@ class Gains:
         disc = self.Kd**2 - 4.0 * self.Kp
         return 0.5 * (self.Kd + math.sqrt(disc)) if disc >= 0 else math.sqrt(self.Kp)
 
+    @property
+    def max_step(self) -> float:
+        """The longest RK4 step that keeps the output dynamics stable with margin, s.
+
+        eps / (2 stiffness): eps / 2 for Kp = 1, Kd = 2."""
+        return self.eps / (2 * self.stiffness)
+
     def check_step(self, h: float, where: str = "h = T / rk4_steps") -> None:
         """Refuse an RK4 step too long for the output dynamics (they would diverge).
 
@@ -112,12 +119,12 @@ class Gains:
             One line naming the gains, the step and the longest step they allow.
         """
         k = self.stiffness
-        if self.eps < 2 * k * h:
+        if h > self.max_step:
             raise ValueError(
                 f"the output gains (Kp, Kd, eps) = ({self.Kp:g}, {self.Kd:g}, {self.eps:g}) "
                 f"make the closed loop too stiff for the integration step {where} = {h:.3g} "
                 f"s: RK4 would diverge (eq. 13's output dynamics need eps >= {2 * k * h:.3g} s "
-                f"at this step, or a step of at most {self.eps / (2 * k):.3g} s: raise eps, "
+                f"at this step, or a step of at most {self.max_step:.3g} s: raise eps, "
                 f"lower Kp or Kd, or take more RK4 steps per step)")
 
 
