@@ -232,3 +232,14 @@ def test_a_window_without_a_converged_cell_is_empty_not_contained(gait):
     assert not (b.outcome == "converged").any()
     assert b.status == "empty" and b.success and b.area == 0
     assert b.message.startswith("empty: none of the 5x5 cells") and "contains" not in b.message
+
+
+def test_a_grid_the_adaptive_refinement_cannot_fill_says_which_sizes_fit():
+    from analysis.robustness.basin import _adaptive
+    with pytest.raises(ValueError, match=r"^refine = 4 must divide n - 1 = 10: take n = 9 or "
+                                         r"13, another refine, or refine=None"):
+        _adaptive(None, 11, 4)
+    with pytest.raises(ValueError, match=r"refine = 4 must divide n - 1 = 2: take n = 5 or 9"):
+        _adaptive(None, 3, 4)
+    with pytest.raises(ValueError, match="refine must be an integer >= 2"):
+        _adaptive(None, 11, 1)

@@ -237,9 +237,14 @@ def grid_cells(design: Design, n: int, q_span: float, dq_span: float, steps: int
 def _adaptive(cells, n: int, k: int):
     """The adaptive grid of :func:`basin` (``refine=k``): (outcome, final error, cells
     walked), flat arrays of n^2."""
-    if isinstance(k, bool) or not isinstance(k, int) or k < 2 or (n - 1) % k:
+    if isinstance(k, bool) or not isinstance(k, int) or k < 2:
         raise ValueError(f"refine must be an integer >= 2 dividing n - 1 = {n - 1}, "
                          f"got {k!r}")
+    if (n - 1) % k:
+        lo = (n - 1) // k * k + 1                 # the sizes that fit, around n
+        a, b = (lo, lo + k) if lo > 1 else (lo + k, lo + 2 * k)
+        raise ValueError(f"refine = {k} must divide n - 1 = {n - 1}: take n = {a} or {b}, "
+                         f"another refine, or refine=None (every cell walked)")
     outcome = np.full(n * n, None, dtype=object)
     err = np.full(n * n, np.nan)
     walked = np.zeros(n * n, bool)
