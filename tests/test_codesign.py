@@ -206,6 +206,30 @@ def test_robust_cli_reports_ipopt_failure_in_one_line(monkeypatch, capsys, gait,
     assert "IPOPT" in err and "try" in err and len(err.splitlines()) == 1
 
 
+def test_robust_cli_out_writes_the_design_gait(monkeypatch, capsys, tmp_path):
+    """`biped m1 --robust --out FILE`: the design's gait is copied there from the cache
+    folder, and the replay line reads it; an --out that cannot be written is refused
+    before any work."""
+    import types
+
+    import analysis.cli.m1 as m1cli
+    kept = tmp_path / "cache" / "codesign-abc.gait.json"
+    kept.parent.mkdir()
+    kept.write_text('{"a gait": 1}')
+    design = types.SimpleNamespace(
+        gait_file=str(kept), simulate_args=["--gait", str(kept), "--controller", "tv"])
+    calls = []
+    monkeypatch.setattr(m1cli, "codesign", lambda *a, **k: calls.append(1) or design)
+    monkeypatch.setattr(m1cli, "_print_design", lambda r, st: print(
+        "replay: biped simulate " + " ".join(r.simulate_args)))
+    out = tmp_path / "mine.json"
+    assert main(["m1", "--robust", "--out", str(out)]) == 0
+    assert out.read_text() == '{"a gait": 1}' and design.gait_file == str(out)
+    assert f"--gait {out} --controller tv" in capsys.readouterr().out
+    assert main(["m1", "--robust", "--out", str(tmp_path / "no" / "x.json")]) == 2
+    assert "--out: folder" in capsys.readouterr().err and calls == [1]
+
+
 @pytest.mark.slow
 def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     """`biped m1 --robust --gait FILE` on the robust gait: the targets of a given gait,
@@ -217,8 +241,11 @@ def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     from gait_opt import GaitOptions, optimize_gait
     g = optimize_gait(BipedModel(RABBIT), GaitOptions(**ROBUST_GAIT), cache=True)
     path = g.save(tmp_path / "robust.json")
-    assert main(["m1", "--robust", "--gait", str(path), "--json"]) == 0
+    out = tmp_path / "design_gait.json"
+    assert main(["m1", "--robust", "--gait", str(path), "--json", "--out", str(out)]) == 0
     r = json.loads(capsys.readouterr().out)
+    assert r["gait_file"] == str(out) and out.read_bytes() == path.read_bytes()
+    assert r["simulate_args"][r["simulate_args"].index("--gait") + 1] == str(out)
     assert r["status"] == "target_met", r["message"]
     assert r["s_star"] >= 1.0 and r["steps_to_converge"] <= 5
     assert r["max_abs"] <= r["vc_eigenvalue"]
