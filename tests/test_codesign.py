@@ -206,10 +206,11 @@ def test_robust_cli_reports_ipopt_failure_in_one_line(monkeypatch, capsys, gait,
     assert "IPOPT" in err and "try" in err and len(err.splitlines()) == 1
 
 
-def test_robust_cli_out_writes_the_design_gait(monkeypatch, capsys, tmp_path):
-    """`biped m1 --robust --out FILE`: the design's gait is copied there from the cache
-    folder, and the replay line reads it; an --out that cannot be written is refused
-    before any work."""
+@pytest.mark.parametrize("method", ["nlp", "search"])
+def test_robust_cli_out_writes_the_design_gait(method, monkeypatch, capsys, tmp_path):
+    """`biped m1 --robust --out FILE` (the co-design NLP or the sampling search): the
+    design's gait is copied there from the cache folder, and the replay line reads it;
+    an --out that cannot be written is refused before any work."""
     import types
 
     import analysis.cli.m1 as m1cli
@@ -217,16 +218,20 @@ def test_robust_cli_out_writes_the_design_gait(monkeypatch, capsys, tmp_path):
     kept.parent.mkdir()
     kept.write_text('{"a gait": 1}')
     design = types.SimpleNamespace(
-        gait_file=str(kept), simulate_args=["--gait", str(kept), "--controller", "tv"])
+        gait_file=str(kept), simulate_args=["--gait", str(kept), "--controller", "tv"],
+        message="a design", cached=False, design=dict(M1=[0.0] * 4, rejoin=0.75),
+        gait_options={}, verified={})
     calls = []
-    monkeypatch.setattr(m1cli, "codesign", lambda *a, **k: calls.append(1) or design)
+    monkeypatch.setattr(m1cli, "codesign" if method == "nlp" else "robust_design",
+                        lambda *a, **k: calls.append(1) or design)
     monkeypatch.setattr(m1cli, "_print_design", lambda r, st: print(
         "replay: biped simulate " + " ".join(r.simulate_args)))
     out = tmp_path / "mine.json"
-    assert main(["m1", "--robust", "--out", str(out)]) == 0
+    assert main(["m1", "--robust", "--method", method, "--out", str(out)]) == 0
     assert out.read_text() == '{"a gait": 1}' and design.gait_file == str(out)
     assert f"--gait {out} --controller tv" in capsys.readouterr().out
-    assert main(["m1", "--robust", "--out", str(tmp_path / "no" / "x.json")]) == 2
+    assert main(["m1", "--robust", "--method", method, "--out",
+                 str(tmp_path / "no" / "x.json")]) == 2
     assert "--out: folder" in capsys.readouterr().err and calls == [1]
 
 
