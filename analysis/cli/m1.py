@@ -206,8 +206,10 @@ def _print_design(r, st):
         print(f"  hidden sign patterns: {r.hidden.get('message', '')}")
     for a in r.active_constraints[:4]:
         print(f"  binds: {a['constraint']} (multiplier {a['multiplier']:.3g})")
+    capped = (" (each solve stops at a set iteration count; the design counts by "
+              "the checks above)" if str(r.ipopt['status']).startswith("Maximum_") else "")
     print(f"  IPOPT: {len(r.ipopt['solves'])} solves, {r.ipopt['iterations']} iterations, "
-          f"{r.ipopt['evaluations']} evaluations; last status {r.ipopt['status']}; "
+          f"{r.ipopt['evaluations']} evaluations; last status {r.ipopt['status']}{capped}; "
           f"this run took {r.elapsed:.1f} s (kept results are read, not recomputed)")
     print("  replay: biped simulate " + " ".join(r.simulate_args))
 
