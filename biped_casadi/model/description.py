@@ -7,6 +7,8 @@ and the stance foot a passive point contact.  The schema (SI units throughout)::
 
     name = "RABBIT"            # any non-empty string; recorded in gait files
     gravity = 9.81             # m/s^2, > 0
+    torso_upright = 0.0        # optional, rad, finite (default 0): the torso's angle phi
+                               # when it stands upright (module docstring)
 
     [actuators]
     torque_limit = 150.0       # N m, > 0: bound on every joint torque (the gait's default);
@@ -51,6 +53,14 @@ from its proximal joint; negative or beyond ``length`` is allowed) and ``com_off
 normal f = (cos phi, -sin phi): torso COM = hip + com u + com_offset f; a leg link's COM
 = its proximal joint - com u + com_offset f (u points up the leg).
 
+The torso's angle phi is that of its up direction, from the hip toward its centre of mass
+(``com`` > 0) or along its line.  A torso whose centre of mass hangs below the hip (a URDF
+import puts ``com`` on the line from the hip toward it) stands upright at phi = pi, not 0:
+``torso_upright`` says where (:func:`torso_lean`).  Every judgement of the torso's
+posture -- the simulators' fall checks, a gait's largest lean, the gait problem's start --
+takes the lean wrap(phi - torso_upright) in (-pi, pi]; with the default 0 the lean is phi
+itself.  It changes no dynamics.
+
 Coordinates (docs: theory §1, generalised): q1 is the absolute angle of the stance
 leg's lowest link, then the relative angles up the stance leg, the torso relative to
 the stance leg's top link, the swing leg's top link relative to the torso, and the
@@ -70,16 +80,62 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+import casadi as ca
+import numpy as np
+
 from ..files import read_text_file
 from .urdf_map import UrdfMap, urdf_map_from_dict
 
 __all__ = ["Link", "RobotDescription", "load_description", "find_description",
-           "description_from_dict", "description_toml", "BUILTIN", "builtin_path"]
+           "description_from_dict", "description_toml", "BUILTIN", "builtin_path",
+           "torso_lean", "wrap_lean"]
 
 #: descriptions shipped with the toolkit (package data, biped_casadi/model/robots/NAME.toml)
 BUILTIN = ("rabbit", "three_link")
 
-_TOP = ("name", "gravity", "actuators", "torso", "leg", "point_masses", "urdf")
+_TOP = ("name", "gravity", "torso_upright", "actuators", "torso", "leg", "point_masses",
+        "urdf")
+_TWO_PI = 2.0 * math.pi
+
+
+def wrap_lean(a):
+    """Angles taken to (-pi, pi] by whole turns: ``a - 2 pi ceil((a - pi) / (2 pi))``.
+
+    Parameters
+    ----------
+    a : float, numpy.ndarray or casadi.SX
+        Angles, rad.
+
+    Returns
+    -------
+    same type as ``a`` (a float array for a float)
+        Equal to ``a`` bit for bit where ``-pi < a <= pi``.
+    """
+    if isinstance(a, (ca.SX, ca.MX, ca.DM)):
+        return a - _TWO_PI * ca.ceil((a - math.pi) / _TWO_PI)
+    return a - _TWO_PI * np.ceil((np.asarray(a, dtype=float) - math.pi) / _TWO_PI)
+
+
+def torso_lean(phi, upright: float = 0.0):
+    """The torso's lean from upright: wrap(phi - upright) in (-pi, pi].
+
+    Parameters
+    ----------
+    phi : float, numpy.ndarray or casadi.SX
+        The torso's angle in the model (phi of the torso; its up direction), rad.
+    upright : float
+        The torso's angle when it stands upright
+        (:attr:`RobotDescription.torso_upright`), rad.
+
+    Returns
+    -------
+    same type as ``phi``
+        ``phi`` itself (the same object) when ``upright`` is 0, as the toolkit has always
+        judged a torso; else the wrapped difference.
+    """
+    if upright == 0.0:
+        return phi
+    return wrap_lean(phi - upright)
 _ACTUATORS = ("torque_limit", "rotor_inertia", "gear_ratio")
 _LINK = ("name", "mass", "length", "com", "inertia", "com_offset")
 
@@ -172,6 +228,11 @@ class RobotDescription:
         For a robot read from a URDF: how the file's joint angles map to q
         (:mod:`biped_casadi.model.urdf_map`).  Not compared (it changes no dynamics),
         but part of :attr:`cache_key`.
+    torso_upright : float
+        rad: the torso's angle phi when it stands upright (0 for a torso whose centre of
+        mass is above the hip; pi or -pi for one hanging below it, set by the URDF
+        import); judgements of the torso's posture take :func:`torso_lean`.  Not
+        compared (it changes no dynamics), but part of :attr:`cache_key` when not 0.
     """
 
     name: str
@@ -183,6 +244,7 @@ class RobotDescription:
     torque_limit: float = 150.0
     source: str = field(default="", compare=False, repr=False)
     urdf: UrdfMap | None = field(default=None, compare=False, repr=False)
+    torso_upright: float = field(default=0.0, compare=False, repr=False)
 
     # --------------------------------------------------------------- sizes
     @property
@@ -220,10 +282,28 @@ class RobotDescription:
 
     @property
     def cache_key(self):
-        """What a model built from the description depends on (with the URDF map, if any)."""
+        """What a model built from the description depends on (with the URDF map, if any,
+        and the torso's upright angle when it is not 0)."""
         key = (self.name, self.torso, self.leg, self.point_masses, self.rotor_inertia,
                self.gravity, self.torque_limit)
-        return key if self.urdf is None else key + (self.urdf,)
+        key = key if self.urdf is None else key + (self.urdf,)
+        return key if self.torso_upright == 0.0 else key + (("torso_upright",
+                                                              self.torso_upright),)
+
+    def torso_lean(self, phi):
+        """The torso's lean from upright, :func:`torso_lean` with :attr:`torso_upright`.
+
+        Parameters
+        ----------
+        phi : float, numpy.ndarray or casadi.SX
+            The torso's angle in the model, rad.
+
+        Returns
+        -------
+        same type as ``phi``
+            wrap(phi - torso_upright) in (-pi, pi]; ``phi`` itself when torso_upright is 0.
+        """
+        return torso_lean(phi, self.torso_upright)
 
     # --------------------------------------------------------------- dicts
     def to_dict(self) -> dict:
@@ -232,13 +312,16 @@ class RobotDescription:
         Returns
         -------
         dict
-            ``name``, ``gravity``, ``actuators`` (the reflected rotor inertia with
-            gear_ratio 1), ``torso``, ``leg`` (a list of link tables),
-            ``point_masses`` and, for a robot read from a URDF, ``urdf`` (the joint
-            map); :func:`description_from_dict` reads it back to an equal description.
+            ``name``, ``gravity``, ``torso_upright`` when it is not 0, ``actuators``
+            (the reflected rotor inertia with gear_ratio 1), ``torso``, ``leg`` (a list
+            of link tables), ``point_masses`` and, for a robot read from a URDF,
+            ``urdf`` (the joint map); :func:`description_from_dict` reads it back to an
+            equal description.
         """
-        d = dict(name=self.name, gravity=self.gravity,
-                 actuators=dict(torque_limit=self.torque_limit,
+        d = dict(name=self.name, gravity=self.gravity)
+        if self.torso_upright != 0.0:
+            d["torso_upright"] = self.torso_upright
+        d.update(actuators=dict(torque_limit=self.torque_limit,
                                 rotor_inertia=self.rotor_inertia, gear_ratio=1.0),
                  torso=self.torso.to_dict(), leg=[link.to_dict() for link in self.leg],
                  point_masses=dict(self.point_masses))
@@ -426,6 +509,10 @@ def description_from_dict(data: dict, where: str = "robot description",
     c.table(data, "", _TOP, ("name", "gravity", "actuators", "torso", "leg"))
     name = c.text(data["name"], "name")
     gravity = c.number(data["gravity"], "gravity", strict=True)
+    upright = c.real(data.get("torso_upright", 0.0), "torso_upright")
+    if abs(upright) > _TWO_PI:
+        c.fail("torso_upright", f"must be an angle in rad within [-2 pi, 2 pi] (pi for a "
+                                f"torso hanging below the hip), got {data['torso_upright']!r}")
     act = c.table(data["actuators"], "actuators", _ACTUATORS, ("torque_limit", "rotor_inertia"))
     limit = act["torque_limit"]
     torque_limit = math.inf if (isinstance(limit, float) and limit == math.inf) else \
@@ -453,7 +540,7 @@ def description_from_dict(data: dict, where: str = "robot description",
     return RobotDescription(name=name, torso=torso, leg=leg, point_masses=masses,
                             rotor_inertia=rotor * gear**2,
                             gravity=gravity, torque_limit=torque_limit, source=source,
-                            urdf=urdf)
+                            urdf=urdf, torso_upright=upright + 0.0)
 
 
 def load_description(path) -> RobotDescription:
@@ -564,8 +651,10 @@ def description_toml(d: RobotDescription, header: str = "") -> str:
                          if not isinstance(v, list) or not v or not isinstance(v[0], dict))
     dd = d.to_dict()
     out = [f"# {line}" for line in header.splitlines()]
-    out += [f"name = {_q(dd['name'])}", f"gravity = {dd['gravity']!r}", "",
-            "[actuators]", table(dd["actuators"]), "", "[torso]", table(dd["torso"])]
+    out += [f"name = {_q(dd['name'])}", f"gravity = {dd['gravity']!r}"]
+    if "torso_upright" in dd:
+        out += [f"torso_upright = {_value(dd['torso_upright'])}"]
+    out += ["", "[actuators]", table(dd["actuators"]), "", "[torso]", table(dd["torso"])]
     for link in dd["leg"]:
         out += ["", "[[leg]]", table(link)]
     if dd["point_masses"]:
