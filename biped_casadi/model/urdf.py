@@ -18,7 +18,10 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   its visual and collision geometry when the centre of mass is at the hip); each leg
   link's goes from the next joint down (the foot, for the last link) to its own joint.
   The angle between a link's up direction and its parent's at zero is the joint's
-  ``offset``, the orientation of its axis against n its ``sign`` (printed on import);
+  ``offset``, the orientation of its axis against n its ``sign`` (printed on import); a
+  torso whose centre of mass is at or below the hip's height (its up direction at pitch 0
+  at least a quarter turn from z) stands upright at the model angle ``pitch_offset``
+  (pi for one hanging straight below): the description's ``torso_upright``;
 - per link, from ``<inertial>``, with fixed child links merged in (they may carry all of
   it: a massless ``base_link`` with the legs and a fixed inertial child): the mass, the centre
   of mass anywhere in the plane (``com`` along the link's line from its proximal joint,
@@ -544,8 +547,16 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     if torso_d["com_offset"] == 0.0:
         del torso_d["com_offset"]
     urdf_map = _joint_map(rd, legs, torso_up, plane, signs, reductions, torso.name, hip)
-    data = dict(name=robot.name or path.stem, gravity=9.81,
-                actuators=dict(torque_limit=limit, rotor_inertia=motor, gear_ratio=gear),
+    data = dict(name=robot.name or path.stem, gravity=9.81)
+    if abs(plane.angle(torso_up)) >= math.pi / 2:
+        # the centre of mass at or below the hip's height: the model's torso (up toward
+        # it) points down when the file's torso stands upright, at pitch 0
+        data["torso_upright"] = urdf_map.pitch_offset
+        rd.notes.append(f"the torso's centre of mass is not above the hip: the model's torso "
+                        f"points down at pitch 0, so it stands upright at torso angle "
+                        f"{_fmt(urdf_map.pitch_offset)} rad (torso_upright; falls and leans "
+                        f"are judged from there)")
+    data.update(actuators=dict(torque_limit=limit, rotor_inertia=motor, gear_ratio=gear),
                 torso=torso_d, leg=links[0], point_masses=pm, urdf=urdf_map.to_dict())
     rd.notes += [f"ignored: {s}" for s in said if "motorInertia" not in s]
     d = description_from_dict(data, where=where, source=str(path))
