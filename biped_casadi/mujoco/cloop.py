@@ -9,7 +9,8 @@ function, from the library the ``mujoco`` package has loaded) and keeps the step
 accounts (slip, travel, peak torque, clipping, the log).  It hands back to Python, before
 touching anything of the step, wherever the walk's logic has more to do than that: the
 Poincaré section, a law's refusal, a state that is not finite, a full log, and after
-MuJoCo's step a fall, the lift-off, a swing-foot contact, a scuff-zone change, the
+MuJoCo's step a fall (the torso's lean judged from the robot's ``torso_upright`` as the
+Python loop judges it), the lift-off, a swing-foot contact, a scuff-zone change, the
 horizon.  Python then does that step exactly as the Python loop does and resumes.
 MuJoCo's fatal errors inside the C function come back as the ``mujoco.FatalError`` that
 ``mujoco.mj_step`` raises (a thread-local log handler, as the Python bindings install);
@@ -60,7 +61,7 @@ FIELDS = [
     ("q0", _P), ("q1", _P), ("dq0", _P), ("dq1", _P), ("p", _P), ("u", _P),
     ("log_t", _P), ("log_qpos", _P), ("log_qvel", _P), ("log_stance", _P), ("log_u", _P),
     ("dt", _D), ("T", _D), ("U", _D), ("r", _D), ("t_sec", _D), ("fall_height", _D),
-    ("half_pi", _D), ("zone", _D),
+    ("half_pi", _D), ("zone", _D), ("upright", _D), ("pi", _D), ("two_pi", _D),
     ("t0", _D), ("qu_prev", _D), ("dqu_prev", _D), ("peak", _D), ("z_old", _D),
     ("slip", _D), ("travel", _D), ("x_prev", _D), ("phi_prev", _D),
     ("kmax", _L), ("k", _L), ("clipped", _L), ("airborne", _L), ("log_k", _L),
@@ -235,13 +236,18 @@ static int steps(cloop_t *s, long long budget)
         {
             int touch[2] = {0, 0}, c;
             const double *xpos = d->geom_xpos, *qp = d->qpos;
-            double z_now, xs, phs;
+            double z_now, xs, phs, lean;
             for (c = 0; c < d->ncon; c++) {
                 int g0 = d->contact[c].geom[0], g1 = d->contact[c].geom[1];
                 if (g0 == feet[0] || g1 == feet[0]) touch[0] = 1;
                 if (g0 == feet[1] || g1 == feet[1]) touch[1] = 1;
             }
-            if (!(qp[1] - s->r > s->fall_height && -s->half_pi < qp[2] && qp[2] < s->half_pi))
+            lean = qp[2];                               /* the torso's lean from upright */
+            if (s->upright != 0.0) {
+                lean = qp[2] - s->upright;
+                lean = lean - s->two_pi * ceil((lean - s->pi) / s->two_pi);
+            }
+            if (!(qp[1] - s->r > s->fall_height && -s->half_pi < lean && lean < s->half_pi))
                 return 2;                               /* a fall, or not finite */
             if (!s->lifted) {
                 double t = (double)(s->k - 1) * dt - s->t0;
@@ -409,6 +415,7 @@ class Driver:
         s.u = law._ptr["u"]
         s.dt, s.T, s.U, s.r, s.t_sec = run.dt, run.T, run.U, run.r, run.t_sec
         s.fall_height, s.half_pi, s.zone = run.fall_height, math.pi / 2, float(run.zone)
+        s.upright, s.pi, s.two_pi = run.upright, math.pi, 2.0 * math.pi
         s.kmax, s.nq, s.na = run.kmax, len(q0), self.A[0].shape[1]
         s.nu, s.nc = self.G[0].shape[1], self.G[0].shape[0]
         s.foot_a, s.foot_b = run.feet

@@ -24,7 +24,8 @@ step constants come from the rigid map.  For legs without knees
 stance foot, as the toolkit ignores that scuffing.
 
 A walk ends 'walked' after its steps, or at the first of (:data:`OUTCOMES`): 'fell' (hip
-below the model's fall height, torso past horizontal), 'scuffed' (the old stance foot
+below the model's fall height, torso past horizontal: leaning more than pi/2 from the
+robot's ``torso_upright``), 'scuffed' (the old stance foot
 still on the ground at half the step, or the swing foot touching down behind the stance
 foot), 'slipped' (the stance foot's sphere sliding more than ``max_slip`` in a step:
 its centre's travel less the rolling r dphi), 'no_impact' (no touchdown within
@@ -40,6 +41,7 @@ import numpy as np
 
 from ..control.design import Design
 from ..control.output_law import SECTION
+from ..model.description import torso_lean
 from ..numerics import FastCall
 from ..simulation.perturbation import Perturbation
 from . import cloop
@@ -325,6 +327,8 @@ class _Run:
         self.p = np.zeros(law.n_par)                    # the law's step state
         self.calls = tuple(law.bind(q, dq, self.p) for q, dq in zip(self.qs, self.dqs))
         self.fall_height = loop.fall_height
+        #: the torso's angle when upright (rad): falls are judged on the lean from it
+        self.upright = float(loop.model.description.torso_upright)
         self.dt, self.T, self.U = float(m.opt.timestep), loop.T, loop.torque_limit
         self.r = loop.settings.foot_radius
         self.A, self.G = loop.layout.A, loop.layout.G
@@ -414,13 +418,16 @@ class _Run:
             self.airborne += self.lifted
         self.x_prev, self.phi_prev = xs, phs
         qp = self.qpos
-        if not (qp[1] - self.r > self.fall_height and -_HALF_PI < qp[2] < _HALF_PI):
+        lean = qp[2] if self.upright == 0.0 else float(torso_lean(qp[2], self.upright))
+        if not (qp[1] - self.r > self.fall_height and -_HALF_PI < lean < _HALF_PI):
             n = len(self.records) + 1
             if not np.all(np.isfinite(qp)):
                 return self.stop("diverged", f"step {n}: MuJoCo's state is not finite")
             return self.stop("fell", f"step {n}: fell at t = {self.k * self.dt:.4g} s (hip "
                                      f"{qp[1] - self.r:.3g} m above the feet' level, torso "
-                                     f"{qp[2]:.3g} rad)")
+                                     f"{qp[2]:.3g} rad"
+                             + ("" if self.upright == 0.0 else
+                                f", {lean:.3g} rad from upright") + ")")
         if not self.lifted:
             tau = (self.k - 1) * self.dt - self.t0
             if not touch[sw]:

@@ -20,7 +20,8 @@ the unperturbed closed loop repeats the reference to ~1e-11.
 Every node is checked, in time order, and the run stops at the first invalid state
 with one of the statuses of :data:`STATUSES` (the logs end with that state):
 
-- ``fell``: hip lower than ``min_hip_height`` or torso past horizontal;
+- ``fell``: hip lower than ``min_hip_height`` or torso past horizontal (leaning more than
+  ``max_torso_angle`` from its upright angle, the robot's ``torso_upright``);
 - ``scuffed``: swing foot below the ground where it cannot strike (behind the stance
   foot), or the old stance foot not lifting off after an impact; for legs without knees
   (``model.scuffing_ignored``) the swing foot may pass below the ground during the step

@@ -28,8 +28,9 @@ class SimulationOptions:
         The robot has fallen when the hip is lower, m; None (default): 0.5625 leg length
         (0.45 m for RABBIT), see :meth:`fall_height`.
     max_torso_angle : float
-        The robot has also fallen when the torso leans more than this from the
-        vertical, rad.
+        The robot has also fallen when the torso leans more than this from upright
+        (the vertical, or the robot's ``torso_upright`` angle: a torso hanging below
+        the hip), rad.
     horizon : float
         A step without a valid impact within ``horizon`` T ends the run ('no_impact').
     ground_tolerance : float

@@ -2,7 +2,8 @@
 
 A closed-loop run may never continue past a state the robot cannot be in.  At every
 integration node of single support: the state is finite, the controller's reference is
-defined, the controller is not singular, the robot has not fallen, the swing foot is not
+defined, the controller is not singular, the robot has not fallen (hip too low, or the
+torso leaning past the bound from its upright angle), the swing foot is not
 in the ground where it cannot strike (scuffing), the stance foot is pressed on the
 ground (F_z > 0, or above a floor), the reaction is inside the friction cone
 (|F_x| <= mu F_z) and every torque is within the limit.  At the start of a step the
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..model.description import torso_lean
 from .kernel import ground_height
 
 __all__ = ["NODE_CHECKS", "IMPACT_CHECKS", "Limits", "node_violations", "first_violation",
@@ -53,7 +55,7 @@ class Limits:
     hip_floor : float
         The robot has fallen when the hip is lower, m.
     max_torso_angle : float
-        ... or when the torso leans more than this from the vertical, rad.
+        ... or when the torso leans more than this from upright, rad.
     ground_tolerance : float
         How far below the ground the swing foot may graze where it cannot strike, m.
     singular_tolerance : float
@@ -68,6 +70,11 @@ class Limits:
     saturate : bool
         Torques are clipped at ``torque_limit`` and the run goes on (the torque limit
         is then not a failure).
+    torso_upright : float
+        The torso's angle when upright (the robot's
+        :attr:`~biped_casadi.model.description.RobotDescription.torso_upright`), rad: the
+        lean is wrap(torso - torso_upright) (:func:`~biped_casadi.model.description.
+        torso_lean`).
     """
 
     mu: float
@@ -80,6 +87,7 @@ class Limits:
     min_liftoff_speed: float
     scuffing_ignored: bool = False
     saturate: bool = False
+    torso_upright: float = 0.0
 
     @classmethod
     def of(cls, options, model) -> "Limits":
@@ -112,7 +120,8 @@ class Limits:
                    singular_tolerance=float(options.singular_tolerance),
                    torque_limit=float(tl), min_liftoff_speed=float(options.min_liftoff_speed),
                    scuffing_ignored=bool(model.scuffing_ignored),
-                   saturate=bool(getattr(options, "saturate", False)))
+                   saturate=bool(getattr(options, "saturate", False)),
+                   torso_upright=float(getattr(model.description, "torso_upright", 0.0)))
 
 
 def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None,
@@ -160,7 +169,8 @@ def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None
             bad["out_of_range"] = finite & (rows["in_range"] < 0.5)
         bad["singular"] = finite & (rows["den"] * den_sign <= lim.singular_tolerance * den_scale)
         bad["fell"] = finite & ((rows["hip"] < lim.hip_floor)
-                                | (np.abs(rows["torso"]) > lim.max_torso_angle))
+                                | (np.abs(torso_lean(rows["torso"], lim.torso_upright))
+                                   > lim.max_torso_angle))
         behind = rows["xsw"] <= 0
         if z_prev is not None:
             behind = behind | (np.asarray(z_prev) < 0)
@@ -307,7 +317,10 @@ def node_message(which: str, node: dict, limits: Limits, den_scale: float) -> st
                         "defined",
         "singular": f"controller singular: decoupling denominator {d['den']:.4g} "
                     f"(below {limits.singular_tolerance:g} of {den_scale:.4g}, eq. 23-24)",
-        "fell": f"fell: hip height {d['hip']:.4f} m, torso angle {d['torso']:.4f} rad",
+        "fell": f"fell: hip height {d['hip']:.4f} m, torso angle {d['torso']:.4f} rad"
+                + ("" if limits.torso_upright == 0.0 else
+                   f" (lean {float(torso_lean(d['torso'], limits.torso_upright)):.4f} rad "
+                   f"from upright, {limits.torso_upright:.4f})"),
         "scuffed": f"swing foot below the ground where it cannot strike (behind the "
                    f"stance foot, or already under the ground): x_sw = {d['xsw']:.4f} m, "
                    f"z_sw = {d['zsw']:.3g} m",
