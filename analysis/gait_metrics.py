@@ -19,7 +19,7 @@ from biped_casadi.results import Result
 
 from .stability import vc_eigenvalue
 
-__all__ = ["FamilyFigures", "family_figures", "torso_fall", "cost_of_transport",
+__all__ = ["FamilyFigures", "family_figures", "torso_fall", "lean_from", "cost_of_transport",
            "actuator_work"]
 
 
@@ -109,7 +109,8 @@ class FamilyFigures(Result):
     events : list of dict
         The family's events (active-set changes, folds).
     torso_lean : list of float
-        The torso's largest lean from the vertical (:meth:`gait_opt.Gait.torso_lean`), rad.
+        The torso's largest lean from upright (:meth:`gait_opt.Gait.torso_lean`: from the
+        vertical, or from the robot's ``torso_upright`` angle), rad.
     fall_bound : float
         The simulator's fall bound on that lean (past it every walk is a fall), rad.
     torque_limit, mu, impact_mu : float
@@ -158,6 +159,24 @@ def torso_fall(gait) -> tuple:
     """
     lean, bound = gait.torso_lean(), float(SimulationOptions().max_torso_angle)
     return lean, lean > bound, bound
+
+
+def lean_from(model) -> str:
+    """Where a robot's torso lean is measured from, in words.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+
+    Returns
+    -------
+    str
+        'from the vertical' (a torso whose upright angle is 0), else 'from upright
+        (torso angle ... rad)' (a torso hanging below the hip).
+    """
+    up = float(model.description.torso_upright)
+    return "from the vertical" if up == 0.0 else f"from upright (torso angle {up:.4g} rad)"
 
 
 def family_figures(family) -> FamilyFigures:

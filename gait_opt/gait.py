@@ -313,9 +313,12 @@ class Gait(Reference):
                                  "torque_squared_per_length" else 1.0))
 
     def torso_lean(self, n: int = 201) -> float:
-        """The torso's largest lean from the vertical over the step, rad.
+        """The torso's largest lean from upright over the step, rad.
 
-        A gait past the simulator's fall bound
+        The lean is the torso's angle less the robot's upright angle
+        (:attr:`~biped_casadi.model.description.RobotDescription.torso_upright`: 0, the
+        vertical, unless the torso hangs below the hip), wrapped to (-pi, pi].  A gait past
+        the simulator's fall bound
         (:attr:`biped_casadi.SimulationOptions.max_torso_angle`, pi/2) cannot be walked:
         every walk of it is a fall.
 
@@ -328,8 +331,9 @@ class Gait(Reference):
         -------
         float
         """
-        f = self.model.torso_angle
-        return max(abs(float(f(self.q(t)))) for t in np.linspace(0.0, self.T, n))
+        f, d = self.model.torso_angle, self.model.description
+        return max(abs(float(d.torso_lean(float(f(self.q(t))))))
+                   for t in np.linspace(0.0, self.T, n))
 
     def check(self, n: int = 2001) -> dict:
         """Physical validity and dynamic consistency on a dense grid of [0, T].

@@ -526,7 +526,8 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None, *,
 def initial_guess(model, opts: GaitOptions):
     """Built-in guess: a double-support pose at impact, feet ``L0`` apart, the stance leg
     bent by kappa at its lowest knee and the swing leg's link angles the negatives of
-    the stance leg's (so both knees bend the human way), joints interpolated linearly in
+    the stance leg's (so both knees bend the human way), the torso leaning 0.05 rad
+    forward from upright (the description's ``torso_upright``), joints interpolated linearly in
     s, the swing leg's knees bending mid-step for clearance (legs without knees: straight
     legs, no bend)."""
     M = opts.bezier_degree
@@ -543,7 +544,8 @@ def initial_guess(model, opts: GaitOptions):
     R, delta = float(np.hypot(P, Q)), float(np.arctan2(Q, P))
     a = delta + float(np.arcsin(np.clip(L0 / (2 * R), -0.95, 0.95)))
     stance = a - bends
-    phi = np.r_[stance, lean, -stance]      # swing leg from the hip down
+    up = d.torso_upright                    # the torso upright (a hanging torso: pi)
+    phi = np.r_[stance, lean if up == 0.0 else up + lean, -stance]   # swing leg: hip down
     qT = np.r_[phi[0], np.diff(phi)]
     q0 = model.E @ qT
     qa0, qaT = q0[1:], qT[1:]

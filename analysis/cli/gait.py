@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from analysis.gait_metrics import torso_fall
+from analysis.gait_metrics import lean_from, torso_fall
 from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_figures
 from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 
@@ -137,7 +137,7 @@ def _print_gait(s: dict, gait, model, out, mu: float, past: bool, bound: float):
     print(f"  peak torque          {s['peak_torque']:.3f} N m   (limit "
           f"{gait.options.torque_limit:g})")
     print(f"  min normal force     {s['min_normal_force']:.3f} N")
-    print(f"  torso lean           {s['max_torso_lean']:.4f} rad from the vertical at most"
+    print(f"  torso lean           {s['max_torso_lean']:.4f} rad {lean_from(model)} at most"
           + (f": PAST the simulator's fall bound ({bound:.4g} rad), so every walk of this "
              "gait is a fall; a lower speed keeps the torso up" if past else ""))
     print(f"  max friction ratio   {s['max_friction_ratio']:.4f}   (mu {mu:g}); "

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import sys
 
-from analysis.gait_metrics import family_figures, torso_fall
+from analysis.gait_metrics import family_figures, lean_from, torso_fall
 from analysis.reporting.plots import (gait_family_plot, gait_profiles_plot, gait_stick_plot,
                                       save_figures)
 from gait_opt import GaitFamily, GaitOptimizationError, gait_family, parse_speed_range
@@ -179,8 +179,8 @@ def cmd_gait_at(args) -> int:
     print(f"  orbit residual       {r.orbit_residual:.1e}")
     print(f"  step time T          {r.gait.T:.6f} s, step length {r.gait.step_length:.6f} m")
     if past:
-        print(f"  torso lean           {lean:.4f} rad from the vertical at most: PAST the "
-              f"simulator's fall bound ({bound:.4g} rad), so every walk of this gait is a "
+        print(f"  torso lean           {lean:.4f} rad {lean_from(r.gait.model)} at most: "
+              f"PAST the simulator's fall bound ({bound:.4g} rad), so every walk of this gait is a "
               f"fall")
     if r.violations:
         print(f"  VIOLATED on the dense grid: {r.violations} (--resolve gives the optimal "
