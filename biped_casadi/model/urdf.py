@@ -547,21 +547,27 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     if torso_d["com_offset"] == 0.0:
         del torso_d["com_offset"]
     urdf_map = _joint_map(rd, legs, torso_up, plane, signs, reductions, torso.name, hip)
-    data = dict(name=robot.name or path.stem, gravity=9.81)
-    if abs(plane.angle(torso_up)) >= math.pi / 2:
-        # the centre of mass at or below the hip's height: the model's torso (up toward
-        # it) points down when the file's torso stands upright, at pitch 0
-        data["torso_upright"] = urdf_map.pitch_offset
-        rd.notes.append(f"the torso's centre of mass is not above the hip: the model's torso "
-                        f"points down at pitch 0, so it stands upright at torso angle "
-                        f"{_fmt(urdf_map.pitch_offset)} rad (torso_upright; falls and leans "
-                        f"are judged from there)")
+    data = dict(name=robot.name or path.stem, gravity=9.81,
+                **_torso_upright(rd, plane, torso_up, urdf_map))
     data.update(actuators=dict(torque_limit=limit, rotor_inertia=motor, gear_ratio=gear),
                 torso=torso_d, leg=links[0], point_masses=pm, urdf=urdf_map.to_dict())
     rd.notes += [f"ignored: {s}" for s in said if "motorInertia" not in s]
     d = description_from_dict(data, where=where, source=str(path))
     return UrdfImport(d, torso.name, tuple(tuple(j.name for j in leg.joints) for leg in legs),
                       feet[0][1], rd.notes)
+
+
+def _torso_upright(rd: _Reader, plane: _Plane, torso_up, urdf_map: UrdfMap) -> dict:
+    """``{'torso_upright': pitch_offset}`` for a torso whose centre of mass is at or below
+    the hip's height (the model's torso, up toward it, points down when the file's torso
+    stands upright, at pitch 0), said in the notes; else ``{}`` (upright at 0)."""
+    if abs(plane.angle(torso_up)) < math.pi / 2:
+        return {}
+    rd.notes.append(f"the torso's centre of mass is not above the hip: the model's torso "
+                    f"points down at pitch 0, so it stands upright at torso angle "
+                    f"{_fmt(urdf_map.pitch_offset)} rad (torso_upright; falls and leans "
+                    f"are judged from there)")
+    return {"torso_upright": urdf_map.pitch_offset}
 
 
 def _joint_map(rd: _Reader, legs, torso_up, plane: _Plane, signs: dict, reductions: dict,
