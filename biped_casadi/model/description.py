@@ -282,8 +282,10 @@ class RobotDescription:
 
     @property
     def cache_key(self):
-        """What a model built from the description depends on (with the URDF map, if any,
-        and the torso's upright angle when it is not 0)."""
+        """What a model built from the description depends on (with the URDF map, if any).
+
+        The torso's upright angle joins it when it is not 0 (existing keys unchanged).
+        """
         key = (self.name, self.torso, self.leg, self.point_masses, self.rotor_inertia,
                self.gravity, self.torque_limit)
         key = key if self.urdf is None else key + (self.urdf,)
