@@ -137,7 +137,8 @@ def _print(w, eig, figures):
     print(f"  {w.steps_walked} of {w.n_steps} steps; speed error {_pct(w.speed_error)}, period "
           f"error {_pct(w.period_error)} ({over}); worst error after step {SETTLE}: "
           + (f"{w.worst_qu_error:.3g} rad, {w.worst_dqu_error:.3g} rad/s"
-             if w.steps_walked > SETTLE else "none (no step after it)"))
+             if w.steps_walked > SETTLE else
+             f"none: it needs more than {SETTLE} steps (--steps {2 * SETTLE + 10})"))
     print("  step  period [s]  speed [m/s]  q_u err [rad]  dq_u err [rad/s]  peak |u| "
           "cmd/applied [N m]  clipped [s]  slip [mm]")
     for r in w.steps:
