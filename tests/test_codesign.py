@@ -268,3 +268,30 @@ def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     assert hp["full_order"]["passed"] == hp["patterns"], hp
 
 
+
+
+def test_robust_cli_prints_a_design_that_never_converges(capsys):
+    """A design whose paper's perturbation never converges (it slips) is printed as such,
+    not as "below 0.001 from step None"; a fixed gait prints no "moved from" line; an
+    IPOPT status at its iteration cap says the design counts by the checks."""
+    import types
+
+    from analysis.cli.m1 import _print_design
+    from analysis.design.codesign import FIT
+    ns = types.SimpleNamespace
+    r = ns(message="co-design (gait fixed)", cached=False,
+           design=ns(M1=[3.39, -3.23], rejoin=0.75), gait_free=False, gait_file="g.json",
+           gait_change=dict(T_start=0.48, T=0.48, max_alpha_change=0.0,
+                            from_given=dict(speed=(0.75, 0.75), step_length=(0.36, 0.36),
+                                            T=(0.48, 0.48), max_joint_change=0.0)),
+           gait_move=None, s_star=0.066, directions_kept=16, vc_s_star=0.016, max_abs=0.12,
+           vc_eigenvalue=0.86, steps_to_converge=None, check=ns(paper_status="slipped"),
+           peak_torque=58.5, alternative=None, verified={}, hidden=None,
+           active_constraints=[], elapsed=10.4, simulate_args=["--gait", "g.json"],
+           ipopt=dict(solves=[1], iterations=30, evaluations=30,
+                      status="Maximum_Iterations_Exceeded"))
+    _print_design(r, FIT)
+    out = capsys.readouterr().out
+    assert "step None" not in out and "paper's perturbation: slipped" in out
+    assert "moved from the given gait" not in out
+    assert "the design counts by the checks above" in out

@@ -182,7 +182,7 @@ def _print_design(r, st):
     print(f"  gait ({'co-designed' if r.gait_free else 'fixed'}): T {ch['T_start']:.4g} -> "
           f"{ch['T']:.4g} s, largest Bezier change {ch['max_alpha_change']:.3g} rad "
           f"({r.gait_file})")
-    if "from_given" in ch:
+    if "from_given" in ch and r.gait_free:
         c = ch["from_given"]
         print(f"  moved from the given gait: speed {c['speed'][0]:.4g} -> {c['speed'][1]:.4g} "
               f"m/s, step length {c['step_length'][0]:.4g} -> {c['step_length'][1]:.4g} m, "
@@ -194,8 +194,9 @@ def _print_design(r, st):
           + (f" (virtual constraints {r.vc_s_star:.4g})" if r.vc_s_star == r.vc_s_star
              else "") + f"; max|lambda| "
           f"{r.max_abs:.3g} (virtual constraints {r.vc_eigenvalue:.3g}); paper's "
-          f"perturbation below {st.verification.tol:g} from step {r.steps_to_converge}; "
-          f"peak torque "
+          + (f"perturbation below {st.verification.tol:g} from step {r.steps_to_converge}"
+             if r.steps_to_converge is not None else
+             f"perturbation: {r.check.paper_status}") + "; peak torque "
           f"{r.peak_torque:.1f} N m")
     if r.alternative:
         print(f"  also tried: {r.alternative.get('message', '')}")
