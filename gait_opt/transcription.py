@@ -415,12 +415,17 @@ def _hessian_of_lagrangian(model, point_hess, bnd_hess, lay, z_index, z_all, xw,
 
 def _variable_bounds(model, opts, lay: _Layout):
     """T within its bounds, knee limits on the Bezier coefficients (so on the whole
-    polynomial; only where the legs have knees), joint angles within +-pi."""
+    polynomial; only where the legs have knees), joint angles within +-pi of the upright
+    pose (q = 0 but for a torso hanging below the hip: the hips at +-torso_upright)."""
     lbx = np.full(lay.nw, -np.inf)
     ubx = np.full(lay.nw, np.inf)
     lbx[0], ubx[0] = opts.step_time_bounds
     a_lb = np.full((lay.nu, lay.M + 1), -np.pi)
     a_ub = np.full((lay.nu, lay.M + 1), np.pi)
+    up = model.description.upright_q      # a torso hanging below the hip: hips near +-pi
+    if any(up):
+        a_lb += np.array(up[1:])[:, None]
+        a_ub += np.array(up[1:])[:, None]
     for i in model.stance_knees:          # alpha row i - 1 is joint i
         a_ub[i - 1, :] = opts.stance_knee_max
     for i in model.swing_knees:

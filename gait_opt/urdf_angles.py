@@ -165,7 +165,8 @@ def urdf_nodes(model, columns: dict, stance, where: str = "gait",
     dx = np.vstack([columns["dpitch"]] + [columns[f"d{n}"] for n in umap.names])
     nodes = nodes_from_arrays(t, x.T, dx.T, None, model.nq, where)       # (N, n)
     check_units(nodes.t, nodes.q, nodes.dq, ["pitch"] + list(umap.names), where)
-    q, dq = umap.to_model(nodes.q, nodes.dq, leg, continuous=True)
+    q, dq = umap.to_model(nodes.q, nodes.dq, leg, continuous=True,
+                          centre=model.description.upright_q)
     info = dict(stance=stance_name)
     if base:
         P, V = _hip_positions(model, q, dq)

@@ -56,14 +56,19 @@ def torque_matrix(umap: UrdfMap, stance, motor_side: bool = False) -> np.ndarray
     return umap.torque_matrix(stance, motor_side)
 
 
-def _model_state(umap: UrdfMap, x, dx, s):
+def _model_state(umap: UrdfMap, x, dx, s, centre=None):
     """(q, dq) for the stance leg s (SX 0: leg 1, 1: leg 2), both relabellings computed
-    and the one of s chosen."""
+    and the one of s chosen; angles within pi of ``centre`` (the robot's upright pose)
+    when it is not all zeros."""
     qs, dqs = [], []
+    centre = None if centre is None or not any(centre) else ca.DM(list(centre))
     for leg in LEG_ORDER:
         A, c = umap.matrices(leg)
         As = ca.sparsify(ca.DM(A))
-        qs.append(wrap_angle(ca.mtimes(As, x) + ca.DM(c)))
+        if centre is None:
+            qs.append(wrap_angle(ca.mtimes(As, x) + ca.DM(c)))
+        else:
+            qs.append(wrap_angle(ca.mtimes(As, x) + ca.DM(c) - centre) + centre)
         dqs.append(ca.mtimes(As, dx))
     second = s > 0.5
     return ca.if_else(second, qs[1], qs[0]), ca.if_else(second, dqs[1], dqs[0])
@@ -101,7 +106,8 @@ def urdf_functions(law: ca.Function, start: ca.Function, model, umap: UrdfMap,
     state = ca.SX.sym("state", 1 + ns)
     node = ca.SX.sym("node", law.size1_in(4))
     s = state[0]
-    q, dq = _model_state(umap, x, dx, s)
+    centre = model.description.upright_q
+    q, dq = _model_state(umap, x, dx, s, centre)
     u, y, dy, den, inr = law(q, dq, tau, state[1:], node)
     T1, T2 = (ca.sparsify(ca.DM(torque_matrix(umap, leg, motor_side))) for leg in LEG_ORDER)
     tq = ca.if_else(s > 0.5, ca.mtimes(T2, u), ca.mtimes(T1, u))
@@ -109,11 +115,11 @@ def urdf_functions(law: ca.Function, start: ca.Function, model, umap: UrdfMap,
                         ["x", "dx", "tau", "state", "node"],
                         ["u", "y", "dy", "den", "in_range"])
     stance = ca.SX.sym("stance")
-    q0, dq0 = _model_state(umap, x, dx, stance)
+    q0, dq0 = _model_state(umap, x, dx, stance, centre)
     p, go = start(q0, dq0)
     f_start = ca.Function("biped_start", [x, dx, stance], [ca.vertcat(stance, p), go],
                           ["x", "dx", "stance"], ["state", "go"])
-    q1, _ = _model_state(umap, x, dx, ca.SX(0))
+    q1, _ = _model_state(umap, x, dx, ca.SX(0), centre)
     ahead, _ = model.swing_foot(q1)
     f_front = ca.Function("biped_front", [x], [ahead], ["x"], ["ahead"])
     return f_law, f_start, f_front
@@ -137,6 +143,8 @@ class UrdfAngleLaw:
     def __init__(self, controller, umap: UrdfMap, motor_side: bool = False):
         self.controller, self.umap, self.motor_side = controller, umap, motor_side
         self.nu = controller.model.nu
+        #: the angles' centre: the robot's upright pose (hips near +-pi for a hanging torso)
+        self.centre = controller.model.description.upright_q
 
     def step_start(self, x, dx, stance: int) -> np.ndarray:
         """The state (stance, law state) at the start of a step.
@@ -153,7 +161,7 @@ class UrdfAngleLaw:
         numpy.ndarray
             (1 + law state,).
         """
-        q, dq = self.umap.to_model(x, dx, LEG_ORDER[stance])
+        q, dq = self.umap.to_model(x, dx, LEG_ORDER[stance], centre=self.centre)
         return np.r_[float(stance), self.controller.step_start(q, dq).p]
 
     def evaluate(self, tau, x, dx, state) -> tuple:
@@ -174,7 +182,7 @@ class UrdfAngleLaw:
         """
         c, state = self.controller, np.asarray(state, dtype=float)
         leg = LEG_ORDER[int(state[0])]
-        q, dq = self.umap.to_model(x, dx, leg)
+        q, dq = self.umap.to_model(x, dx, leg, centre=self.centre)
         p = state[1:]
         if c.n_ref:
             out = c.torque(q, dq, tau, p[:self.nu], p[self.nu:])

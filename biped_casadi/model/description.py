@@ -292,6 +292,20 @@ class RobotDescription:
         return key if self.torso_upright == 0.0 else key + (("torso_upright",
                                                               self.torso_upright),)
 
+    @property
+    def upright_q(self) -> tuple:
+        """The configuration q of the robot standing straight upright (rad, nq numbers).
+
+        Zeros but the hips when :attr:`torso_upright` is not 0: the stance hip (torso
+        relative to the stance leg) at torso_upright, the swing hip at -torso_upright.
+        Angles of the model are taken within pi of it where they are wrapped (URDF angles,
+        the gait problem's joint bounds).
+        """
+        q = [0.0] * self.nq
+        if self.torso_upright != 0.0:
+            q[self.k], q[self.k + 1] = self.torso_upright, -self.torso_upright
+        return tuple(q)
+
     def torso_lean(self, phi):
         """The torso's lean from upright, :func:`torso_lean` with :attr:`torso_upright`.
 

@@ -25,7 +25,9 @@ angles:
 
     q = wrap(A_s x + c_s),   x = (pitch, theta_1, ..., theta_m)   (URDF order)
 
-with ``wrap`` taking every angle to [-pi, pi).  Rates follow dq = A_s dx; torques, by
+with ``wrap`` taking every angle to [-pi, pi) (to within pi of the robot's upright pose,
+``RobotDescription.upright_q``, for a torso hanging below the hip: its hips are near
++-pi).  Rates follow dq = A_s dx; torques, by
 the power they deliver (u . dq_a = tau . dtheta), tau = (A_s' B u) without the pitch
 row: each URDF joint's torque is plus or minus one model torque.
 """
@@ -75,12 +77,26 @@ def _apply(A: np.ndarray, x: np.ndarray, c=None) -> np.ndarray:
     return out
 
 
-def _continuous(a: np.ndarray) -> np.ndarray:
+def _continuous(a: np.ndarray, centre=None) -> np.ndarray:
     """Rows of samples (columns over time) made continuous by whole turns, the first
-    sample of each row in [-pi, pi)."""
+    sample of each row in [-pi, pi) (``centre``: in [centre - pi, centre + pi) per row)."""
     a = np.unwrap(np.asarray(a, dtype=float), axis=-1)
     first = a[..., :1]
+    if centre is not None:
+        return a + (_wrap_about(first, np.asarray(centre, float)[:, None]) - first)
     return a + (wrap_angle(first) - first)
+
+
+def _wrap_about(a, centre):
+    """Angles taken to [centre - pi, centre + pi) by whole turns."""
+    return wrap_angle(a - centre) + centre
+
+
+def _centre(centre):
+    """None for no centre (all zeros): the plain wrap to [-pi, pi)."""
+    if centre is None or not np.any(np.asarray(centre, dtype=float)):
+        return None
+    return np.asarray(centre, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -228,7 +244,7 @@ class UrdfMap:
                 A[row, 1 + i], c[row] = j.sign, j.offset
         return A, c
 
-    def to_model(self, x, dx, stance, continuous: bool = False) -> tuple:
+    def to_model(self, x, dx, stance, continuous: bool = False, centre=None) -> tuple:
         """The model's (q, dq) from the URDF's (pitch, joint angles) and their rates.
 
         Parameters
@@ -241,6 +257,10 @@ class UrdfMap:
             For (nq, N) samples of a motion: angles continuous along the samples (whole
             turns added as needed), the first sample's in [-pi, pi); otherwise every
             angle in [-pi, pi).
+        centre : array_like, optional
+            (nq,) rad: each angle within pi of its entry instead of 0 (the robot's
+            :attr:`~biped_casadi.model.description.RobotDescription.upright_q`: a torso
+            hanging below the hip puts the hips near +-pi).
 
         Returns
         -------
@@ -250,7 +270,13 @@ class UrdfMap:
         A, c = self.matrices(stance)
         x, dx = np.asarray(x, dtype=float), np.asarray(dx, dtype=float)
         raw = _apply(A, x, c)
-        q = _continuous(raw) if continuous and x.ndim == 2 else wrap_angle(raw)
+        centre = _centre(centre)
+        if centre is None:
+            q = _continuous(raw) if continuous and x.ndim == 2 else wrap_angle(raw)
+        elif continuous and x.ndim == 2:
+            q = _continuous(raw, centre)
+        else:
+            q = _wrap_about(raw, centre if raw.ndim == 1 else centre[:, None])
         return q, _apply(A, dx)
 
     def from_model(self, q, dq, stance, continuous: bool = False) -> tuple:
