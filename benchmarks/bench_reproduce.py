@@ -8,11 +8,17 @@ beside the graph's critical path (the bound for any number of workers).
     python benchmarks/bench_reproduce.py --baseline ../old/.venv/bin/python
     python benchmarks/bench_reproduce.py --quick --rounds 1      # the quick run only
     python benchmarks/bench_reproduce.py --workers 1 2            # the scaling only
+    python benchmarks/bench_reproduce.py --baseline-commit 107a0d5 --rounds 2 \
+        --cluster --name reproduce_cluster       # on a real `dask scheduler`, two workers
 
 ``--baseline-commit REV``: another version of the toolkit from this repository's history
 (``git archive REV``, run by this interpreter with it first on ``PYTHONPATH``: its
 dependencies must be this environment's); ``--baseline PYTHON``: the interpreter of an
-installed baseline checkout.  Without either only this version runs.  This version runs
+installed baseline checkout.  Without either only this version runs.  ``--cluster``: each
+run (cold or warm) against a ``dask scheduler`` with two single-threaded ``dask worker``
+processes on loopback, started afresh for the run with its version's code and cache and
+joined before the clock starts (a real cluster exists before the job), instead of the
+local cluster that ``biped reproduce`` starts itself.  This version runs
 from a snapshot of the working tree taken at the start, so editing the checkout during
 the benchmark changes nothing.  Results are saved in benchmarks/results/reproduce.json
 (the docs' benchmarks page is made from it).
@@ -20,6 +26,7 @@ the benchmark changes nothing.  Results are saved in benchmarks/results/reproduc
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shutil
@@ -33,7 +40,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _results import Run  # noqa: E402
+from dask_cluster import dask_cluster  # noqa: E402
 from summary_compare import differences  # noqa: E402
+
+#: the workers of --cluster
+CLUSTER_WORKERS = 2
 
 
 def snapshot(rev, dest: Path) -> Path:
@@ -50,9 +61,11 @@ def snapshot(rev, dest: Path) -> Path:
     return dest
 
 
-def run(python, out: Path, cache: Path, quick: bool, workers=None) -> dict:
+def run(python, out: Path, cache: Path, quick: bool, workers=None,
+        cluster: bool = False) -> dict:
     """One ``biped reproduce`` in a fresh process; its wall time and its summary
-    (``python``: an interpreter, or (interpreter, packages folder first on the path))."""
+    (``python``: an interpreter, or (interpreter, packages folder first on the path);
+    ``cluster``: on a real Dask cluster started for it, see the module docstring)."""
     env = dict(os.environ, BIPED_CACHE_DIR=str(cache), MPLBACKEND="Agg")
     env.pop("BIPED_SCHEDULER", None)
     if isinstance(python, tuple):
@@ -63,10 +76,17 @@ def run(python, out: Path, cache: Path, quick: bool, workers=None) -> dict:
         + (["--quick"] if quick else []) + ([] if workers is None else
                                             ["--workers", str(workers)])
     out.parent.mkdir(parents=True, exist_ok=True)   # the run's folder, outside any checkout
-    load0 = os.getloadavg()[0]
-    t = time.perf_counter()
-    p = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=out.parent)
-    wall = time.perf_counter() - t
+    with contextlib.ExitStack() as stack:
+        if cluster:
+            where = Path(tempfile.mkdtemp(prefix="cluster-", dir=out.parent))
+            address = stack.enter_context(dask_cluster(
+                where, [dict(env, BIPED_THREADS="1")] * CLUSTER_WORKERS, cwd=out.parent))
+            _wait_for_workers(address, CLUSTER_WORKERS)
+            cmd += ["--scheduler", address]
+        load0 = os.getloadavg()[0]
+        t = time.perf_counter()
+        p = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=out.parent)
+        wall = time.perf_counter() - t
     folder = out / "quick" if quick else out
     summary = json.loads((folder / "summary.json").read_text()) \
         if (folder / "summary.json").is_file() else {}
@@ -78,6 +98,13 @@ def run(python, out: Path, cache: Path, quick: bool, workers=None) -> dict:
                 stderr=p.stderr[-1500:], summary=summary)
 
 
+def _wait_for_workers(address: str, n: int):
+    """Block until ``n`` workers have joined the scheduler at ``address``."""
+    from dask.distributed import Client
+    with Client(address, timeout="30s") as client:
+        client.wait_for_workers(n, timeout=120)
+
+
 def _show(label, r):
     cp = f", critical path {r['critical_path']:.1f} s" if r.get("critical_path") else ""
     print(f"  {label:34s} wall {r['wall']:7.1f} s, exit {r['rc']}, stages ok {r['ok']}, "
@@ -86,7 +113,8 @@ def _show(label, r):
         print("    " + r["stderr"].replace("\n", "\n    "))
 
 
-def side_by_side(bench: Run, tmp: Path, quick: bool, rounds: int, ours, baseline):
+def side_by_side(bench: Run, tmp: Path, quick: bool, rounds: int, ours, baseline,
+                 cluster: bool = False):
     """Cold runs of both versions in turn, then warm re-runs."""
     name = "quick" if quick else "full"
     impls = [("this version", ours)] + ([("baseline", baseline)] if baseline else [])
@@ -95,13 +123,13 @@ def side_by_side(bench: Run, tmp: Path, quick: bool, rounds: int, ours, baseline
         summaries = {}
         for label, py in (impls if i % 2 == 0 else impls[::-1]):
             d = tmp / f"{name}-{label.replace(' ', '_')}-{i}"
-            r = run(py, d / "out", d / "cache", quick)
+            r = run(py, d / "out", d / "cache", quick, cluster=cluster)
             _show(f"{name} cold, {label}", r)
             summaries[label] = r["summary"]
             if r["rc"] == 0:
                 walls[label].append(r["wall"])
             if i == rounds - 1:
-                w = run(py, d / "out", d / "cache", quick)
+                w = run(py, d / "out", d / "cache", quick, cluster=cluster)
                 _show(f"{name} warm, {label}", w)
                 bench.row(f"`biped reproduce{' --quick' if quick else ''}` warm re-run, "
                           f"{label}", round(w["wall"], 1),
@@ -156,15 +184,23 @@ def main(argv=None):
                     help="also cold runs with these local-cluster sizes (e.g. 1 2)")
     ap.add_argument("--scaling-only", action="store_true",
                     help="only the --workers runs")
+    ap.add_argument("--cluster", action="store_true",
+                    help=f"run on a real `dask scheduler` with {CLUSTER_WORKERS} `dask worker` "
+                         "processes on loopback (started for each run, joined before the "
+                         "clock starts) instead of the local cluster")
     ap.add_argument("--no-save", action="store_true", help="do not write results/")
     ap.add_argument("--name", default="reproduce",
                     help="the results file's name (default reproduce: results/reproduce.json)")
     ap.add_argument("--note", action="append", default=[],
                     help="a note saved with the results (what is compared; repeatable)")
     args = ap.parse_args(argv)
+    if args.cluster and (args.workers or args.scaling_only):
+        ap.error("--cluster has its own two workers: it excludes --workers and --scaling-only")
     print(f"load {os.getloadavg()}")
+    what = (f"on a real Dask scheduler with {CLUSTER_WORKERS} `dask worker` processes"
+            if args.cluster else "wall time against local-cluster workers")
     with Run(args.name, "biped reproduce cold and warm, against a baseline version run "
-             "in turn; wall time against local-cluster workers", save=not args.no_save) \
+             f"in turn; {what}", save=not args.no_save) \
             as bench, tempfile.TemporaryDirectory(prefix="bench-reproduce-") as tmp:
         tmp = Path(tmp)
         for n in args.note:
@@ -180,7 +216,7 @@ def main(argv=None):
             bench.note(f"baseline: commit {args.baseline_commit} ({rev})")
         if not args.scaling_only:
             for quick in ([True] if args.quick else [False, True]):
-                side_by_side(bench, tmp, quick, args.rounds, ours, baseline)
+                side_by_side(bench, tmp, quick, args.rounds, ours, baseline, args.cluster)
         if args.workers:
             scaling(bench, tmp, args.workers, args.quick, ours)
     return 0

@@ -206,6 +206,35 @@ def test_robust_cli_reports_ipopt_failure_in_one_line(monkeypatch, capsys, gait,
     assert "IPOPT" in err and "try" in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.parametrize("method", ["nlp", "search"])
+def test_robust_cli_out_writes_the_design_gait(method, monkeypatch, capsys, tmp_path):
+    """`biped m1 --robust --out FILE` (the co-design NLP or the sampling search): the
+    design's gait is copied there from the cache folder, and the replay line reads it;
+    an --out that cannot be written is refused before any work."""
+    import types
+
+    import analysis.cli.m1 as m1cli
+    kept = tmp_path / "cache" / "codesign-abc.gait.json"
+    kept.parent.mkdir()
+    kept.write_text('{"a gait": 1}')
+    design = types.SimpleNamespace(
+        gait_file=str(kept), simulate_args=["--gait", str(kept), "--controller", "tv"],
+        message="a design", cached=False, design=dict(M1=[0.0] * 4, rejoin=0.75),
+        gait_options={}, verified={})
+    calls = []
+    monkeypatch.setattr(m1cli, "codesign" if method == "nlp" else "robust_design",
+                        lambda *a, **k: calls.append(1) or design)
+    monkeypatch.setattr(m1cli, "_print_design", lambda r, st: print(
+        "replay: biped simulate " + " ".join(r.simulate_args)))
+    out = tmp_path / "mine.json"
+    assert main(["m1", "--robust", "--method", method, "--out", str(out)]) == 0
+    assert out.read_text() == '{"a gait": 1}' and design.gait_file == str(out)
+    assert f"--gait {out} --controller tv" in capsys.readouterr().out
+    assert main(["m1", "--robust", "--method", method, "--out",
+                 str(tmp_path / "no" / "x.json")]) == 2
+    assert "--out: folder" in capsys.readouterr().err and calls == [1]
+
+
 @pytest.mark.slow
 def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     """`biped m1 --robust --gait FILE` on the robust gait: the targets of a given gait,
@@ -217,8 +246,11 @@ def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     from gait_opt import GaitOptions, optimize_gait
     g = optimize_gait(BipedModel(RABBIT), GaitOptions(**ROBUST_GAIT), cache=True)
     path = g.save(tmp_path / "robust.json")
-    assert main(["m1", "--robust", "--gait", str(path), "--json"]) == 0
+    out = tmp_path / "design_gait.json"
+    assert main(["m1", "--robust", "--gait", str(path), "--json", "--out", str(out)]) == 0
     r = json.loads(capsys.readouterr().out)
+    assert r["gait_file"] == str(out) and out.read_bytes() == path.read_bytes()
+    assert r["simulate_args"][r["simulate_args"].index("--gait") + 1] == str(out)
     assert r["status"] == "target_met", r["message"]
     assert r["s_star"] >= 1.0 and r["steps_to_converge"] <= 5
     assert r["max_abs"] <= r["vc_eigenvalue"]
@@ -236,3 +268,30 @@ def test_codesign_gait_fixed_meets_the_targets(tmp_path, capsys):
     assert hp["full_order"]["passed"] == hp["patterns"], hp
 
 
+
+
+def test_robust_cli_prints_a_design_that_never_converges(capsys):
+    """A design whose paper's perturbation never converges (it slips) is printed as such,
+    not as "below 0.001 from step None"; a fixed gait prints no "moved from" line; an
+    IPOPT status at its iteration cap says the design counts by the checks."""
+    import types
+
+    from analysis.cli.m1 import _print_design
+    from analysis.design.codesign import FIT
+    ns = types.SimpleNamespace
+    r = ns(message="co-design (gait fixed)", cached=False,
+           design=ns(M1=[3.39, -3.23], rejoin=0.75), gait_free=False, gait_file="g.json",
+           gait_change=dict(T_start=0.48, T=0.48, max_alpha_change=0.0,
+                            from_given=dict(speed=(0.75, 0.75), step_length=(0.36, 0.36),
+                                            T=(0.48, 0.48), max_joint_change=0.0)),
+           gait_move=None, s_star=0.066, directions_kept=16, vc_s_star=0.016, max_abs=0.12,
+           vc_eigenvalue=0.86, steps_to_converge=None, check=ns(paper_status="slipped"),
+           peak_torque=58.5, alternative=None, verified={}, hidden=None,
+           active_constraints=[], elapsed=10.4, simulate_args=["--gait", "g.json"],
+           ipopt=dict(solves=[1], iterations=30, evaluations=30,
+                      status="Maximum_Iterations_Exceeded"))
+    _print_design(r, FIT)
+    out = capsys.readouterr().out
+    assert "step None" not in out and "paper's perturbation: slipped" in out
+    assert "moved from the given gait" not in out
+    assert "the design counts by the checks above" in out

@@ -347,6 +347,22 @@ def test_no_cycle_prints_no_eigenvalues(gait, tmp_path, capsys):
     assert "nan" not in line and "[]" not in line and "no cycle" in line, line
 
 
+def test_short_walk_says_how_to_see_the_settled_errors(gait, tmp_path, capsys):
+    """A walk of at most SETTLE steps has no settled worst error: the line says how many
+    steps it takes (it said "none (no step after it)" on every default run)."""
+    from biped_casadi.mujoco import SETTLE
+    g = gait.save(tmp_path / "gait.json")
+    assert biped_main(["mujoco", "--gait", str(g), "--controller", "vc", "--steps", "2",
+                       "--no-eig"]) == 0
+    out = capsys.readouterr().out
+    assert f"needs more than {SETTLE} steps (--steps {2 * SETTLE + 10})" in out, out
+    # a walk that ended early gets no such advice, and an unstable design says so
+    assert biped_main(["mujoco", "--gait", str(g), "--steps", "12"]) == 1
+    out = capsys.readouterr().out
+    assert "none (the walk ended first)" in out and "--steps 30" not in out, out
+    assert "the design is unstable (exact max|lambda|" in out and "biped m1" in out, out
+
+
 def test_done_when_walks_at_stiff_settings(gait):
     """Virtual constraints at the stiff settings: 100 steps from the gait, 30 from the
     paper's perturbation at scale 2, speed and period within 3 %, errors after step 10

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -16,6 +17,7 @@ from analysis.design.codesign import (FIT, QUICK, CodesignError, CodesignSetting
                                       codesign)
 from analysis.design.designs_over_speed import family_designs
 from analysis.reporting.plots import family_designs_plot, save_figures
+from biped_casadi.files import write_bytes_atomic
 from biped_casadi.simulation import NOT_CONVERGED
 from gait_opt import GaitFamily
 from analysis.sweeps import grid_best
@@ -74,9 +76,9 @@ def cmd_robust_design(args, say):
         return _search(args, say)
     if args.gait and is_family_file(args.gait):
         return _family(args, say)
-    if args.out is not None or args.plot is not None:
-        raise UserError("--out and --plot apply to --robust with a gait family (--gait "
-                        "FAMILY.json)")
+    if args.plot is not None:
+        raise UserError("--plot applies to --robust with a gait family (--gait FAMILY.json)")
+    out = output_file(args.out, "--out") if args.out is not None else None
     model = load_model(args.robot) if not args.gait else None
     gait = None
     if args.gait:
@@ -109,11 +111,32 @@ def cmd_robust_design(args, say):
         if why is not None:
             return _no_design(args, dict(r.to_dict(), status="no_design", success=False,
                                          message=why, design_status=r.status), why)
+    if out is not None:
+        save_design_gait(r, out)
     if args.json:
         print_json(r)
         return 0
     _print_design(r, st)
     return 0
+
+
+def save_design_gait(r, out):
+    """Write a robust design's gait to ``out`` (a copy of the file it was kept in) and
+    point the design's ``gait_file`` and replay arguments at it.
+
+    Parameters
+    ----------
+    r : CodesignResult or RobustDesignResult
+        The design (its ``gait_file`` and ``simulate_args`` are rewritten).
+    out : Path
+        The file to write (checked writable by :func:`output_file`).
+    """
+    old = r.gait_file
+    write_bytes_atomic(out, Path(old).read_bytes())
+    r.gait_file = str(out)
+    args = list(r.simulate_args)
+    args[args.index("--gait") + 1] = str(out)
+    r.simulate_args = args
 
 
 def no_design_reason(r) -> str | None:
@@ -159,7 +182,7 @@ def _print_design(r, st):
     print(f"  gait ({'co-designed' if r.gait_free else 'fixed'}): T {ch['T_start']:.4g} -> "
           f"{ch['T']:.4g} s, largest Bezier change {ch['max_alpha_change']:.3g} rad "
           f"({r.gait_file})")
-    if "from_given" in ch:
+    if "from_given" in ch and r.gait_free:
         c = ch["from_given"]
         print(f"  moved from the given gait: speed {c['speed'][0]:.4g} -> {c['speed'][1]:.4g} "
               f"m/s, step length {c['step_length'][0]:.4g} -> {c['step_length'][1]:.4g} m, "
@@ -171,8 +194,9 @@ def _print_design(r, st):
           + (f" (virtual constraints {r.vc_s_star:.4g})" if r.vc_s_star == r.vc_s_star
              else "") + f"; max|lambda| "
           f"{r.max_abs:.3g} (virtual constraints {r.vc_eigenvalue:.3g}); paper's "
-          f"perturbation below {st.verification.tol:g} from step {r.steps_to_converge}; "
-          f"peak torque "
+          + (f"perturbation below {st.verification.tol:g} from step {r.steps_to_converge}"
+             if r.steps_to_converge is not None else
+             f"perturbation: {r.check.paper_status}") + "; peak torque "
           f"{r.peak_torque:.1f} N m")
     if r.alternative:
         print(f"  also tried: {r.alternative.get('message', '')}")
@@ -183,8 +207,10 @@ def _print_design(r, st):
         print(f"  hidden sign patterns: {r.hidden.get('message', '')}")
     for a in r.active_constraints[:4]:
         print(f"  binds: {a['constraint']} (multiplier {a['multiplier']:.3g})")
+    capped = (" (each solve stops at a set iteration count; the design counts by "
+              "the checks above)" if str(r.ipopt['status']).startswith("Maximum_") else "")
     print(f"  IPOPT: {len(r.ipopt['solves'])} solves, {r.ipopt['iterations']} iterations, "
-          f"{r.ipopt['evaluations']} evaluations; last status {r.ipopt['status']}; "
+          f"{r.ipopt['evaluations']} evaluations; last status {r.ipopt['status']}{capped}; "
           f"this run took {r.elapsed:.1f} s (kept results are read, not recomputed)")
     print("  replay: biped simulate " + " ".join(r.simulate_args))
 
@@ -239,8 +265,13 @@ def _search(args, say):
     say(f"robust design by sampling search: gait {ROBUST_GAIT}, v_c rejoining at "
         f"{st.rejoin} T; about 3-8 minutes on 2 cores the first time, then read from the "
         "cache")
+    out = output_file(args.out, "--out") if args.out is not None else None
+    if args.plot is not None:
+        raise UserError("--plot applies to --robust with a gait family (--gait FAMILY.json)")
     r = robust_design(model, st, progress=say, use_cache=not args.no_cache,
                       scheduler=args.scheduler)
+    if out is not None:
+        save_design_gait(r, out)
     if args.json:
         print_json(r)
         return 0
@@ -354,8 +385,11 @@ def register(sub):
                    help="with --robust: friction coefficient (0.6)")
     add_scheduler(p)
     p.add_argument("--out", metavar="FILE",
-                   help="with --robust and a gait family (--gait FAMILY.json): write the M1 "
-                        "schedule over speed there (JSON; biped simulate --schedule reads it)")
+                   help="with --robust: write the design's gait there (JSON; the replay "
+                        "line and --json's gait_file then name it; without --out the gait "
+                        "stays in the cache folder); with a gait family (--gait "
+                        "FAMILY.json): the M1 schedule over speed (biped simulate "
+                        "--schedule reads it)")
     p.add_argument("--plot", metavar="DIR",
                    help="with --robust and a gait family: family_designs.png into DIR "
                         "(max|lambda|, s* and the basin against speed)")
