@@ -148,6 +148,9 @@ def cached_library(filename: str, build):
         staged = next((p for p in ([name] + list(name.parents) if name else [])
                        if p.parent == root and p.name.startswith(prefix)), None)
         name_destination(e, so, staged)          # the library, not its staging folder
+        if isinstance(e, FileExistsError) and name is not None and name.is_symlink() \
+                and not name.exists():           # mkdir of a link to nowhere: not 'exists'
+            e.strerror = f"a broken link (to {os.readlink(name)})"
         raise
     return so
 

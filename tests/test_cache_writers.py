@@ -85,6 +85,17 @@ def test_a_cache_folder_that_is_a_file_is_named(tmp_path, monkeypatch):
     assert e.value.filename == str(afile / "compiled") and e.value.errno == errno.ENOTDIR
 
 
+def test_a_cache_folder_that_is_a_broken_link_says_so(tmp_path, monkeypatch):
+    """Not 'File exists' (what making a folder at a link to nowhere says)."""
+    link = tmp_path / "cache"
+    link.symlink_to(tmp_path / "nowhere" / "cache")
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(link))
+    with pytest.raises(OSError) as e:
+        cached_library("lib.so", lambda tmp, out: None)
+    assert (e.value.filename, e.value.strerror) == (
+        str(link), f"a broken link (to {tmp_path / 'nowhere' / 'cache'})")
+
+
 def test_a_lock_that_cannot_be_written_is_not_left(tmp_path, monkeypatch):
     """A full disk when the lock's process id is written: the block runs unguarded (as
     in a folder that cannot be written) and no empty lock file stays behind."""
