@@ -141,8 +141,8 @@ def cached_library(filename: str, build):
                         os.fsync(fh.fileno())
                     os.replace(out, so)
     except subprocess.CalledProcessError as e:
-        raise OSError(None, f"the C compiler failed (exit {e.returncode}): "
-                            f"{compiler_reason(e.stderr)}", str(so)) from None
+        raise _BuildFailed(None, f"the C compiler failed (exit {e.returncode}): "
+                                 f"{compiler_reason(e.stderr)}", str(so)) from None
     except OSError as e:
         name = Path(str(e.filename)) if e.filename is not None else None
         staged = next((p for p in ([name] + list(name.parents) if name else [])
@@ -153,6 +153,13 @@ def cached_library(filename: str, build):
             e.strerror = f"a broken link (to {os.readlink(name)})"
         raise
     return so
+
+
+class _BuildFailed(OSError):
+    """A library of the cache that the compiler could not build (no errno of its own)."""
+
+    def __str__(self):
+        return f"{self.filename}: {self.strerror}"
 
 
 def compiler_reason(stderr) -> str:

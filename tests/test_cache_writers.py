@@ -54,6 +54,8 @@ def test_a_failed_build_names_the_library_and_leaves_nothing(build, reason, tmp_
     assert (e.value.filename, e.value.strerror) == (str(tmp_path / "compiled" / "lib_0123.so"),
                                                     reason)
     assert list((tmp_path / "compiled").iterdir()) == []
+    assert str(e.value) in (f"[Errno 28] {reason}: '{e.value.filename}'",
+                            f"{e.value.filename}: {reason}")
 
 
 def test_a_library_is_on_disk_before_it_is_in_place(tmp_path, monkeypatch):
