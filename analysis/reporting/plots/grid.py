@@ -195,7 +195,7 @@ def grid_sweep_plot(sweep, gait=None, title: str | None = None) -> Figure:
             per_cell = n_cell
         if best is not None:
             ax.plot(best.M1[i], best.M1[j], marker="*", ms=15 if nu == 2 else 11,
-                    color="gold", mec="k", mew=1.0, ls="none", zorder=5)
+                    color="gold", mec="k", mew=1.0, ls="none", zorder=5, gid="best")
             if nu == 2:
                 ax.annotate(f"best: {best.max_abs:.3g}", (best.M1[i], best.M1[j]),
                             xytext=(8, 8), textcoords="offset points", fontsize=9,
@@ -272,9 +272,8 @@ def _cmap():
     from matplotlib import colormaps
     below = colormaps["Blues_r"](np.linspace(0.05, 0.6, 128))
     above = colormaps["YlOrRd"](np.linspace(0.08, 1.0, 128))
-    c = ListedColormap(np.vstack([below, above]), name="stable_unstable")
-    c.set_bad("white", 0.0)
-    return c
+    return ListedColormap(np.vstack([below, above]),
+                          name="stable_unstable").with_extremes(bad=(1.0, 1.0, 1.0, 0.0))
 
 
 def _norm(values):
