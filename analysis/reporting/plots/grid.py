@@ -95,7 +95,8 @@ def grid_cells(sweep, i: int, j: int):
             counts.append(C.transpose(order).reshape(shape[i], shape[j], -1).sum(axis=2))
         pick = np.array(list(NO_VALUE_COLOURS))[np.argmax(np.stack(counts), axis=0)]
         other[empty] = pick[empty]
-    return values[i], values[j], best, n_stable, int(np.prod(shape) // (shape[i] * shape[j])), other
+    per_cell = int(np.prod(shape)) // (shape[i] * shape[j])
+    return values[i], values[j], best, n_stable, per_cell, other
 
 
 def _grid_index(P):
@@ -122,17 +123,18 @@ def grid_sweep_plot(sweep, gait=None, title: str | None = None) -> Figure:
     every point over the plane (M1(1), M1(2)).  With nu > 2 (RABBIT's 4) there is one
     panel per pair (M1(i), M1(j)), as in a corner plot, and each cell shows the
     *smallest* max ``|lambda|`` over the other nu - 2 components: blue where some choice
-    of the other components is stable, so the contour max ``|lambda|`` = 1 of a panel
-    bounds the pairs that admit a stable M1, and the values say how stable the best of
+    of the other components is stable, so the boundary max ``|lambda|`` = 1 of a panel
+    encloses the pairs that admit a stable M1, and the values say how stable the best of
     them is (the design question a grid answers).  The fraction of stable points of a
-    cell, the other candidate, is below 5 % in almost every cell of the paper's 9^4 grid
-    and would draw nearly uniform panels; the number of stable points of a cell is
-    written in it instead when the panels are small enough to read it (at most 13 values
-    per component).
+    cell, the other candidate, is at most 4 of 81 (4.9 %) in every cell of the paper's
+    9^4 grid on RABBIT's default gait and would draw nearly uniform panels; the number
+    of stable points of a cell is written in its corner instead, when the panels are
+    small enough to read it (at most 13 values per component).
 
     Colour: log scale of max ``|lambda|`` that steps at 1 (blues: stable, darker the
-    more; yellow to dark red: unstable), clipped to 10^-3 .. 10^3, with the contour
-    max ``|lambda|`` = 1 in black.  Cells without a value are painted per status (grey:
+    more; yellow to dark red: unstable), clipped to 10^-3 .. 10^3, with the boundary
+    max ``|lambda|`` = 1 in black along the cell edges (a contour would cut through the
+    cells of a coarse grid).  Cells without a value are painted per status (grey:
     singular controller; dark grey: no impact; purple: open orbit), and on the plane of
     two components each such point is marked too.  The sweep's best point (smallest
     finite max ``|lambda|``, :meth:`SweepResult.best`) is starred in every panel.  The
@@ -206,7 +208,8 @@ def grid_sweep_plot(sweep, gait=None, title: str | None = None) -> Figure:
     cb = fig.colorbar(im, ax=list(axes.values()), extend=extend,
                       shrink=1.0 if nu == 2 else 0.8, aspect=30)
     cb.set_label("max|λ| of $A^z$ (log scale)" if nu == 2 else
-                 f"smallest max|λ| of $A^z$ over the other {nu - 2} components (log scale)")
+                 "smallest max|λ| of $A^z$ over the other "
+                 + ("component" if nu == 3 else f"{nu - 2} components") + " (log scale)")
     _log_ticks(cb, norm)
     cb.ax.axhline(0.0, color="k", lw=1.4)
     handles, labels = _legend(best, drawn, nu, st,
@@ -330,9 +333,9 @@ def _axes_style(ax, xv, yv, i, j, nu):
     ax.set_xlim(_edges(xv)[[0, -1]])
     ax.set_ylim(_edges(yv)[[0, -1]])
     for axis, v in ((ax.xaxis, xv), (ax.yaxis, yv)):
-        if len(v) <= 9:
-            axis.set_major_locator(FixedLocator(v))
-            axis.set_major_formatter(FuncFormatter(lambda t, _: f"{t:g}"))
+        if len(v) <= 9:                     # ticks at grid values, at most 5 labelled
+            axis.set_major_locator(FixedLocator(v[::-(-len(v) // 5)]))
+            axis.set_major_formatter(FuncFormatter(lambda t, _: f"{t:.3g}"))
         else:
             axis.set_major_locator(MaxNLocator(6))
     ax.tick_params(labelsize=8 if nu > 2 else 9)
