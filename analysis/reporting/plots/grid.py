@@ -136,7 +136,8 @@ def grid_sweep_plot(sweep, gait=None, title: str | None = None) -> Figure:
     max ``|lambda|`` = 1 in black along the cell edges (a contour would cut through the
     cells of a coarse grid).  Cells without a value are painted per status (grey:
     singular controller; dark grey: no impact; purple: open orbit), and on the plane of
-    two components each such point is marked too.  The sweep's best point (smallest
+    two components each such point is marked too; in a pairs panel a cell is painted so
+    only when none of its points has a value (the title counts every status).  The sweep's best point (smallest
     finite max ``|lambda|``, :meth:`SweepResult.best`) is starred in every panel.  The
     title names the gait, the grid and the counts, and says so when no point is stable
     or no point has a value.
