@@ -356,6 +356,11 @@ def test_short_walk_says_how_to_see_the_settled_errors(gait, tmp_path, capsys):
                        "--no-eig"]) == 0
     out = capsys.readouterr().out
     assert f"needs more than {SETTLE} steps (--steps {2 * SETTLE + 10})" in out, out
+    # a walk that ended early gets no such advice, and an unstable design says so
+    assert biped_main(["mujoco", "--gait", str(g), "--steps", "12"]) == 1
+    out = capsys.readouterr().out
+    assert "none (the walk ended first)" in out and "--steps 30" not in out, out
+    assert "the design is unstable (exact max|lambda|" in out and "biped m1" in out, out
 
 
 def test_done_when_walks_at_stiff_settings(gait):

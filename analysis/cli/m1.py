@@ -263,7 +263,7 @@ def _search(args, say):
     st = RobustDesignSettings(samples=args.samples, starts=args.starts, seed=args.seed,
                               mu=args.mu)
     say(f"robust design by sampling search: gait {ROBUST_GAIT}, v_c rejoining at "
-        f"{st.rejoin} T; about 3-8 minutes on 2 cores the first time, then read from the "
+        f"{st.rejoin} T; under a minute on 2 cores the first time, then read from the "
         "cache")
     out = output_file(args.out, "--out") if args.out is not None else None
     if args.plot is not None:
@@ -363,7 +363,8 @@ def register(sub):
                         "the first time, cached afterwards")
     p.add_argument("--method", choices=("nlp", "search"), default=None,
                    help="with --robust: 'nlp' (default) the co-design NLP; 'search' the "
-                        "sampling search over M1 on a hand-set gait (the baseline, 3-8 min)")
+                        "sampling search over M1 on a hand-set gait (the baseline, under a "
+                        "minute)")
     given = p.add_mutually_exclusive_group()
     given.add_argument("--fixed-gait", action="store_true",
                        help="with --robust --gait FILE: only M1 moves; a design whose s* "

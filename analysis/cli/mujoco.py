@@ -137,7 +137,8 @@ def _print(w, eig, figures):
     print(f"  {w.steps_walked} of {w.n_steps} steps; speed error {_pct(w.speed_error)}, period "
           f"error {_pct(w.period_error)} ({over}); worst error after step {SETTLE}: "
           + (f"{w.worst_qu_error:.3g} rad, {w.worst_dqu_error:.3g} rad/s"
-             if w.steps_walked > SETTLE else
+             if w.steps_walked > SETTLE else "none (the walk ended first)"
+             if w.steps_walked < w.n_steps else
              f"none: it needs more than {SETTLE} steps (--steps {2 * SETTLE + 10})"))
     print("  step  period [s]  speed [m/s]  q_u err [rad]  dq_u err [rad/s]  peak |u| "
           "cmd/applied [N m]  clipped [s]  slip [mm]")
@@ -157,6 +158,9 @@ def _print(w, eig, figures):
             print(f"MuJoCo's stride map on tau = 0.75 T: none (no cycle to fit it on); exact "
                   f"{_ev(eig['exact'])}")
         print(f"  {c['message']}")
+        if eig["exact_max_abs"] > 1:
+            print(f"  the design is unstable (exact max|lambda| {eig['exact_max_abs']:.3g} > 1): "
+                  "choose M1 with 'biped m1' (--m1 defaults to all zero)")
     for k, v in figures.items():
         print(f"{k}: {v}")
 
