@@ -38,6 +38,7 @@ from biped_casadi.control.export_urdf import LEG_ORDER, UrdfAngleLaw
 from biped_casadi.control.compiled import (CompiledController, CompiledUrdfController,
                                            CompilerError, PythonTwin, build_library,
                                            find_c_compiler)
+from biped_casadi.numerics import compiler_reason
 from biped_casadi.results import Result
 
 __all__ = ["StateComparison", "SimulationComparison", "ExportVerification",
@@ -422,7 +423,7 @@ def time_example(folder, compiler: list, calls: int = 1_000_000, work=None) -> t
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode != 0:
         raise CompilerError(f"{compiler[0]} failed on the example: "
-                            f"{(r.stderr.strip().splitlines() or [''])[0]}")
+                            f"{compiler_reason(r.stderr)}")
     try:
         run = subprocess.run([str(exe), str(int(calls))], capture_output=True, text=True,
                              timeout=600)

@@ -630,7 +630,8 @@ def file_lock(path: Path, poll: float = 0.2):
 
     While another live process holds it, wait: two processes then never build the same
     file (a compiled library) at once.  A lock left by a process that died is taken
-    over; where the folder cannot be written, the block runs unguarded.
+    over; where the folder cannot be written (or the lock's process id cannot: a full
+    disk), the block runs unguarded and no lock file is left.
 
     Parameters
     ----------
@@ -662,8 +663,14 @@ def file_lock(path: Path, poll: float = 0.2):
         except OSError:
             yield
             return
-        with os.fdopen(fd, "w") as f:
-            f.write(str(os.getpid()))
+        try:
+            with os.fdopen(fd, "w") as f:
+                f.write(str(os.getpid()))
+        except OSError:                             # a full disk: no lock, no stray file
+            with contextlib.suppress(OSError):
+                lock.unlink()
+            yield
+            return
         break
     try:
         yield

@@ -7,19 +7,22 @@ so the schemes are the same by construction.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import math
 import os
 import subprocess
 import tempfile
 import threading
+from pathlib import Path
 
 import numpy as np
 
 from .caching import cache_dir, file_lock
+from .files import name_destination
 
-__all__ = ["rk4_step", "quintic_hermite_interval", "as_vector", "as_number", "jit_options", "compiled",
-           "cached_library", "FastCall"]
+__all__ = ["rk4_step", "quintic_hermite_interval", "as_vector", "as_number", "jit_options",
+           "compiled", "cached_library", "compiler_reason", "FastCall"]
 
 
 def jit_options(optimisation: str = "-O2") -> dict:
@@ -98,7 +101,11 @@ def cached_library(filename: str, build):
     """A shared library in the cache folder's ``compiled/``, built once per name.
 
     Two processes asking for the same one: the second waits for the first
-    (:func:`biped_casadi.caching.file_lock`); the library appears atomically.
+    (:func:`biped_casadi.caching.file_lock`).  The build runs in a temporary folder
+    inside ``compiled/`` (its sources and its output), and the output is fsynced and
+    moved into place only when complete: a failed or interrupted build (a full disk, a
+    failing compiler, Ctrl-C) leaves nothing behind, never half a library a later run
+    would load.
 
     Parameters
     ----------
@@ -115,19 +122,78 @@ def cached_library(filename: str, build):
 
     Raises
     ------
-    OSError, subprocess.CalledProcessError
-        When the folder cannot be written or the build fails.
+    OSError
+        When the folder cannot be written or the build fails: its ``filename`` names the
+        library (or the folder that cannot be made), its ``strerror`` the reason (the
+        system's, or the compiler's first error line).
     """
     root = cache_dir() / "compiled"
     so = root / filename
-    root.mkdir(parents=True, exist_ok=True)
-    with _LIBRARY_LOCKS.setdefault(filename, threading.Lock()), file_lock(so):
-        if not so.is_file():
-            with tempfile.TemporaryDirectory() as tmp:
-                out = str(so) + f".tmp{os.getpid()}"
-                build(tmp, out)
-                os.replace(out, so)
+    prefix = f".{filename}.build-"
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        with _LIBRARY_LOCKS.setdefault(filename, threading.Lock()), file_lock(so):
+            if not so.is_file():
+                with tempfile.TemporaryDirectory(prefix=prefix, dir=root) as tmp:
+                    out = os.path.join(tmp, filename)
+                    build(tmp, out)
+                    with open(out, "rb+") as fh:      # on disk before it is in place
+                        os.fsync(fh.fileno())
+                    os.replace(out, so)
+    except subprocess.CalledProcessError as e:
+        raise _BuildFailed(None, f"the C compiler failed (exit {e.returncode}): "
+                                 f"{compiler_reason(e.stderr)}", str(so)) from None
+    except OSError as e:
+        name = Path(str(e.filename)) if e.filename is not None else None
+        staged = next((p for p in ([name] + list(name.parents) if name else [])
+                       if p.parent == root and p.name.startswith(prefix)), None)
+        name_destination(e, so, staged)          # the library, not its staging folder
+        if isinstance(e, FileExistsError) and name is not None and name.is_symlink() \
+                and not name.exists():           # mkdir of a link to nowhere: not 'exists'
+            e.strerror = f"a broken link (to {os.readlink(name)})"
+        raise
     return so
+
+
+class _BuildFailed(OSError):
+    """A library of the cache that the compiler could not build (no errno of its own)."""
+
+    def __str__(self):
+        return f"{self.filename}: {self.strerror}"
+
+
+def compiler_reason(stderr) -> str:
+    """The line of a C compiler's error output that says why it failed.
+
+    The system's reason when a line gives one (``/usr/bin/ld: final link failed: No
+    space left on device``), else the first error line that is not the driver's
+    summary (``collect2: error: ld returned 1 exit status``), else the first line.
+
+    Parameters
+    ----------
+    stderr : str or bytes or None
+        What the compiler wrote on its standard error.
+
+    Returns
+    -------
+    str
+        One line ('' for no output).
+    """
+    if isinstance(stderr, bytes):
+        stderr = stderr.decode(errors="replace")
+    lines = [ln.strip() for ln in (stderr or "").splitlines() if ln.strip()]
+    for ln in lines:
+        if any(r in ln for r in _SYSTEM_REASONS):
+            return ln
+    for ln in lines:
+        if ("error" in ln.lower() or "failed" in ln) and not ln.startswith("collect2:"):
+            return ln
+    return next((ln for ln in lines if "error" in ln), lines[0] if lines else "")
+
+
+#: the system's reasons a compiler's output may quote (the C library's wording)
+_SYSTEM_REASONS = tuple(os.strerror(e) for e in (errno.ENOSPC, errno.EDQUOT, errno.EACCES,
+                                                 errno.EROFS, errno.EIO, errno.EFBIG))
 
 
 class FastCall:

@@ -32,16 +32,19 @@ translator does not know, :func:`kernels` returns None and the caller keeps CasA
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import functools
 import hashlib
 import os
+import re
 import subprocess
 from concurrent.futures import ThreadPoolExecutor
 
 import casadi as ca
 import numpy as np
 
+from .files import write_text_atomic
 from .numerics import cached_library
 
 __all__ = ["AccumulatedMap", "kernels", "available"]
@@ -413,9 +416,20 @@ def _kernels_library(name: str, maps: dict, optimisation: str) -> ctypes.CDLL:
             fh.write(_library(name, sources(), optimisation).name)
 
     index = cached_library(f"{name}_simd_{key}.idx", build)
-    so = index.parent / index.read_text().strip()
-    if not so.is_file():               # the library was removed from the cache folder
+    try:
+        held = index.read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        held = ""
+    so = index.parent / held
+    if not (re.fullmatch(rf"{re.escape(name)}_simd_[0-9a-f]{{16}}\.so", held)
+            and so.is_file()):
+        # the library was removed from the cache folder, or the index is damaged (not a
+        # library's name): made again (from its objects when they are kept), and a
+        # damaged index replaced
         so = _library(name, sources(), optimisation)
+        if held != so.name:
+            with contextlib.suppress(OSError):     # a full disk: made again next time
+                write_text_atomic(index, so.name)
     return _LOADED.setdefault(key, ctypes.CDLL(str(so)))
 
 

@@ -247,7 +247,7 @@ CASES = [
     (["sweep", *G, "--range", "nan", "1"], "--range"),
     (["sweep", *G, "--range", "-1e300", "1e300"], "--range"),
     (["sweep", *G, "--range", "0"], "--range"),
-    (["sweep", *G, "--grid", "2", "--plot", "{dir}"], "--plot needs --line"),
+    (["sweep", *G, "--grid", "2", "--plot", "{file}"], "--plot"),
     (["sweep", *G, "--grid", "2", "--workers", "0"], "--workers"),
     (["sweep", *G, "--grid", "2", "--workers", "100000"], "--workers"),
     (["sweep", *G, "--grid", "2", "--chunk-size", "0"], "--chunk-size"),

@@ -410,3 +410,23 @@ def test_interpolated_touchdown(gait):
     q_before = lay.to_toolkit(grid.qpos[k - 1], grid.qvel[k - 1], 0)[0]
     lo, hi = np.minimum(q_before, a.q_minus), np.maximum(q_before, a.q_minus)
     assert np.all(lo - 1e-12 <= b.q_minus) and np.all(np.array(b.q_minus) <= hi + 1e-12)
+
+
+def test_a_failure_at_a_touchdown_is_the_step_it_ends(gait):
+    """A walk that fails at a touchdown (the stance foot slid more than ``max_slip`` in
+    step 1, measured when step 1 ends) has ``fail_step`` 0, the step the touchdown ends,
+    as the Python simulator counts a failure at an impact; its message names it as step
+    1 (``failure_text``'s rule); the C-driven and the Python loops agree.  A step that
+    cannot start after a touchdown is the next one."""
+    from biped_casadi.mujoco.cloop import walk_differences
+    from biped_casadi.simulation.outcome import failure_text
+    q0, dq0 = start_of(gait)
+    a, b = (MujocoLoop(Design.vc(gait), max_slip=2e-4, driver=d).run(q0, dq0, 3)
+            for d in ("c", "python"))
+    assert walk_differences(a, b) == []
+    assert (a.status, a.fail_step, a.steps_walked, a.steps[-1].index) == ("slipped", 0, 1, 0)
+    assert a.message.startswith("step 1: ") and failure_text(a.status, a.fail_step) == \
+        "slipped in step 1"
+    soft = walk(Design.vc(gait), steps=3, settings=MUJOCO_DEFAULT, step_start="contact")
+    assert soft.status == "out_of_range" and soft.fail_step == soft.steps_walked
+    assert soft.message.startswith(f"step {soft.fail_step + 1} cannot start")

@@ -1,6 +1,6 @@
 """``biped sweep``: max|lambda| of A^z over many M1 (paper §V-A and Fig. 2).
 
-    biped sweep --gait FILE --grid N --range LO HI --out DIR [--json]
+    biped sweep --gait FILE --grid N --range LO HI --out DIR [--plot DIR] [--json]
                 [--scheduler ADDRESS] [--workers K] [--processes] [--chunk-size K]
                 [--no-progress]
     biped sweep --gait FILE --line N --range LO HI [--out DIR] [--plot DIR] [--json]
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.reporting.plots import one_d_sweeps_plot, save_figures
+from analysis.reporting.plots import grid_sweep_plot, one_d_sweeps_plot, save_figures
 from analysis.sweeps import grid_points, max_grid_n, one_d_sweeps, run_sweep
 from biped_casadi.control.output_law import M1_LIMIT, check_M1_range
 
@@ -24,7 +24,8 @@ MAX_WORKERS = 256
 
 def cmd_sweep(args):
     """``biped sweep``: check the arguments and output folders, run the grid or the 1-D
-    sweeps, draw Fig. 2 (--plot), then report (JSON or a table of the counts)."""
+    sweeps, draw the grid's figure or Fig. 2 (--plot), then report (JSON or a table of
+    the counts)."""
     # ---- arguments, then the output folders: all before any work
     lo, hi, n = _check_arguments(args)
     say = Progress("sweep", quiet=args.json or args.no_progress)
@@ -38,8 +39,11 @@ def cmd_sweep(args):
     r, lines = _run(args, gait, lo, hi, n, say)
     plots = []
     if args.plot is not None:
-        plots = save_figures({"fig2_one_d_sweeps": one_d_sweeps_plot(lines)}, args.plot,
-                             formats=("png", "pdf"))
+        if args.line is not None:
+            figures = {"fig2_one_d_sweeps": one_d_sweeps_plot(lines)}
+        else:
+            figures = {"m1_grid_" + "x".join([str(n)] * model.nu): grid_sweep_plot(r, gait)}
+        plots = save_figures(figures, args.plot, formats=("png", "pdf"))
 
     if args.json:
         out = r.to_dict()
@@ -47,6 +51,7 @@ def cmd_sweep(args):
             out["singular_values"] = lines.singular_values.tolist()
             out["lines"] = [dict(component=j + 1, counts=p.counts)
                             for j, p in enumerate(lines.results)]
+        if args.line is not None or args.plot is not None:
             out["plots"] = plots
         print_json(out)
         return 0
@@ -63,8 +68,6 @@ def _check_arguments(args):
         check_M1_range([lo, hi], "--range")
     except ValueError as e:
         raise UserError(str(e)) from None
-    if args.plot is not None and args.line is None:
-        raise UserError("--plot needs --line (the 1-D sweeps of Fig. 2)")
     if args.line is not None and not 2 <= args.line <= MAX_LINE:
         raise UserError(f"--line takes 2 to {MAX_LINE} points per component, got {args.line}")
     n = 9 if args.grid is None else args.grid
@@ -158,7 +161,10 @@ def register(sub):
                    f"+-{M1_LIMIT:.0e} (default -10 10)")
     p.add_argument("--out", metavar="DIR", help="results folder (resumable); "
                    "default: keep results in memory only")
-    p.add_argument("--plot", metavar="DIR", help="with --line: write Fig. 2 (PNG and PDF)")
+    p.add_argument("--plot", metavar="DIR", help="write the figure (PNG and PDF): with "
+                   "--grid, max|lambda| over M1 (the plane of two components, or one panel "
+                   "per pair of components, the smallest over the others); with --line, "
+                   "Fig. 2")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="Dask distributed scheduler, e.g. tcp://127.0.0.1:8786")
     p.add_argument("--workers", type=int, metavar="K",

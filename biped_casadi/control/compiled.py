@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..numerics import FastCall, as_number, as_vector
+from ..numerics import FastCall, as_number, as_vector, compiler_reason
 from .controller import StepStart
 from .export import LIBRARY, RETURN_CODES, TAU_SLACK, exported_law
 from .export_folder import file_digest
@@ -78,7 +78,8 @@ def build_library(folder, out=None, compiler: list | None = None,
     Raises
     ------
     CompilerError
-        No compiler, or the compilation failed (with its first error line).
+        No compiler, or the compilation failed (with the line of its output that says
+        why: :func:`~biped_casadi.numerics.compiler_reason`).
     """
     folder = Path(folder)
     cc = compiler if compiler is not None else find_c_compiler()
@@ -92,20 +93,24 @@ def build_library(folder, out=None, compiler: list | None = None,
     except OSError as e:
         raise CompilerError(f"{cc[0]}: {e.strerror or e}") from None
     if r.returncode != 0:
-        first = next((ln for ln in r.stderr.splitlines() if "error" in ln),
-                     r.stderr.strip().splitlines()[0] if r.stderr.strip() else "")
-        raise CompilerError(f"{cc[0]} failed (exit {r.returncode}): {first}")
+        raise CompilerError(f"{cc[0]} failed (exit {r.returncode}): "
+                            f"{compiler_reason(r.stderr)}")
     return out
 
 
 def _load_copy(library: Path):
     """The library loaded from a private copy: a library rebuilt at the same path later
     loads afresh (the dynamic loader keeps one handle per path)."""
+    data = library.read_bytes()
     fd, name = tempfile.mkstemp(prefix="biped_controller_", suffix=".so")
     try:
         with os.fdopen(fd, "wb") as f:
-            f.write(library.read_bytes())
+            f.write(data)
         return ctypes.CDLL(name)
+    except OSError as e:               # a full temporary folder: say where the copy was
+        if e.filename is None and e.errno is not None:
+            e.filename = f"{name} (its private copy)"
+        raise
     finally:
         os.unlink(name)
 
@@ -231,7 +236,9 @@ class CompiledController(NumericLaw):
             self._digest = file_digest(self.library)
             self._lib = lib = _load_copy(self.library)
         except OSError as e:
-            raise ValueError(f"library: cannot load {self.library} ({e})") from None
+            why = e.strerror or str(e).splitlines()[0]
+            where = f"{e.filename}: " if e.filename not in (None, str(self.library)) else ""
+            raise ValueError(f"library: cannot load {self.library} ({where}{why})") from None
         for fn, args in (("biped_sizes", [ctypes.c_void_p] * 3),
                          ("biped_step_start", [ctypes.c_void_p] * 3),
                          ("biped_torque", [ctypes.c_double] + [ctypes.c_void_p] * 4),

@@ -12,7 +12,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..caching import digest
-from ..control.compiled import CompiledController, PythonTwin, build_library
+from ..control.compiled import (CompiledController, CompilerError, PythonTwin,
+                                build_library, find_c_compiler)
 from ..control.design import Design
 from ..control.export import c_sources, exported_law
 from ..numerics import cached_library
@@ -41,18 +42,27 @@ def compiled_law(design: Design, exported=None) -> Path:
     Raises
     ------
     CompilerError
-        No C compiler, or the build failed.
+        No C compiler, or the build failed (naming the library).
+    OSError
+        The cache folder cannot be written (naming the library or the folder).
     """
     law = exported if exported is not None else exported_law(design)
     files = c_sources(law)
     sources = {k: v for k, v in files.items() if k.endswith((".c", ".h")) and "/" not in k}
 
+    filename = f"mujoco-law-{digest(sources)[:24]}.so"
+
     def build(tmp, out):
         for name, text in sources.items():
             (Path(tmp) / name).write_text(text, encoding="utf-8")
-        build_library(tmp, out)
+        try:
+            build_library(tmp, out)
+        except CompilerError as e:          # a failed compilation names the library
+            if find_c_compiler() is None:
+                raise
+            raise CompilerError(f"{Path(tmp).parent / filename}: {e}") from None
 
-    return cached_library(f"mujoco-law-{digest(sources)[:24]}.so", build)
+    return cached_library(filename, build)
 
 
 def control_law(design: Design, law: str = "c"):

@@ -104,7 +104,10 @@ class MujocoWalk(Result):
     steps_walked : int
         Touchdowns reached.
     fail_step : int
-        0-based index of the step where the walk stopped (``n_steps`` when it walked).
+        0-based index of the step where the walk stopped (``n_steps`` when it walked): a
+        failure at a touchdown (a slip beyond the limit) is the step that touchdown ends,
+        as in the Python simulator; ``message`` names it counted from 1
+        (:func:`~biped_casadi.simulation.failure_text`).
     speed_error, period_error : float
         Relative error of the mean speed and the mean step duration over the steps after
         :data:`SETTLE` (all the steps when there are fewer than 2 SETTLE), NaN with none.

@@ -287,7 +287,7 @@ class MujocoLoop:
         t, qpos, qvel, stance, u = run.log.arrays()
         return MujocoWalk(
             status=status, message=run.message, n_steps=steps, steps_walked=n,
-            fail_step=n if status != "walked" else steps, speed_error=speed_err,
+            fail_step=run.fail_step if status != "walked" else steps, speed_error=speed_err,
             period_error=period_err, worst_qu_error=worst_q, worst_dqu_error=worst_dq,
             peak_commanded=max((s.peak_commanded for s in records), default=0.0),
             peak_applied=max((s.peak_applied for s in records), default=0.0),
@@ -339,6 +339,7 @@ class _Run:
         self.log = _Log(int(steps * 1.2 * loop.T / self.dt) + 16, m.nq, loop.model.nu, log)
         self.logging = log
         self.records, self.status, self.message = [], "walked", ""
+        self.fail_step = steps
         self.stance, self.k, self.t0 = 0, 0, 0.0
         self.interpolate = loop.touchdown == "interpolated"
         self.q, self.dq = q0, dq0
@@ -357,8 +358,11 @@ class _Run:
         self.airborne = self.clipped = 0
         self.section, self.qu_prev, self.dqu_prev = None, 0.0, 0.0
 
-    def stop(self, status: str, message: str):
+    def stop(self, status: str, message: str, step: int | None = None):
+        """End the walk: ``step`` the 0-based index of the step that failed (default
+        the step under way, the one after the last touchdown recorded)."""
         self.status, self.message = status, message
+        self.fail_step = len(self.records) if step is None else step
 
     def control(self) -> bool:
         """The law's torques at MuJoCo's state into ``ctrl``; False when it refuses."""
@@ -478,11 +482,13 @@ class _Run:
             airborne_time=self.airborne * self.dt, section=_pair(self.section),
             section_error=_pair(self.section, loop.x_star)))
         n = len(self.records)
+        # a failure at the touchdown is the failure of the step it ends (index n - 1,
+        # recorded), as in the Python simulator
         if abs(self.slip) > loop.max_slip:
             return self.stop("slipped", f"step {n}: the stance foot slid {self.slip:.3g} m "
-                                        f"(more than {loop.max_slip:g} m)")
+                                        f"(more than {loop.max_slip:g} m)", n - 1)
         if not np.all(np.isfinite(self.d.qpos)):
-            return self.stop("diverged", f"step {n}: MuJoCo's state is not finite")
+            return self.stop("diverged", f"step {n}: MuJoCo's state is not finite", n - 1)
         self.x_touch, self.x_prev = x_sw, x_sw
         self.phi_prev = float(np.sum(q))            # the new stance leg's lowest link
         self.stance, self.t0 = 1 - self.stance, t_td

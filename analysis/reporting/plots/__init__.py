@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from .common import (COLOUR_NAMES, STANCE, SWING, TORSO, _figure, _legs_legend, _stick,
                      run_label, save_figure, save_figures)
+from .grid import grid_sweep_plot
 from .mujoco import mujoco_animation, mujoco_eigen_plot, mujoco_steps_plot
 from .speed_family import family_designs_plot, gait_family_plot
 from .paper import (conjecture_plot, gait_profiles_plot, gait_stick_plot, m1_plane_plot,
@@ -20,7 +21,7 @@ from .walking import (OUTCOME_COLOURS, basin_plot, mfpt_sigma_plot, survival_plo
                       tradeoff_plot, walking_animation)
 
 __all__ = ["COLOUR_NAMES", "STANCE", "SWING", "TORSO", "save_figure", "save_figures",
-           "gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot",
+           "gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot", "grid_sweep_plot",
            "conjecture_plot", "stable_domains_plot", "m1_plane_plot", "unactuated_error_plot",
            "swing_torques_plot", "walking_animation", "run_label", "basin_plot",
            "tradeoff_plot", "OUTCOME_COLOURS", "survival_plot", "mfpt_sigma_plot",
