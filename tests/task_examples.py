@@ -88,6 +88,13 @@ def marker_figure(stage):
     return dict(marker=figure_files(fig))
 
 
+@task(code="figures")
+def slow_marker_figure(stage):
+    """:func:`marker_figure`, a second late: still running when its stage has ended."""
+    time.sleep(1.0)
+    return marker_figure(stage)
+
+
 @task
 def failing_stage(engine, res):
     raise RuntimeError("this stage fails on purpose")

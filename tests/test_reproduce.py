@@ -17,7 +17,7 @@ from analysis.pipeline.graph import Figures, Stage, reproduce
 from analysis.pipeline.paper import stage_fig2, stage_gait
 from analysis.pipeline import figures as F
 from task_examples import (after_marker, failing_stage, interrupted_stage, marker_figure,
-                           marker_stage)
+                           marker_stage, slow_marker_figure)
 
 
 def _cluster_env(tmp_path):
@@ -121,6 +121,21 @@ def test_full_and_quick_runs_share_a_folder_without_mixing(tmp_path, gait, light
     assert json.loads((out / "summary.json").read_text())["marker"]["line_points"] == 9
     assert (out / "notes.txt").read_text() == "mine\n"
     assert not list(out.glob(".staging-*")) and not list(out.rglob("*.tmp*"))
+
+
+def test_a_figure_still_running_counts_in_its_stage(tmp_path, monkeypatch):
+    """A stage's counts include its figures' tasks, also one that finishes after every
+    stage (they were counted before the figures had finished: 109 or 110 tasks in the
+    same cold run)."""
+    from dask.distributed import Client, LocalCluster
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(graph, "STAGES", (Stage("marker", marker_stage,
+                                                figures=(Figures(slow_marker_figure),)),))
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                      dashboard_address=":0") as cluster, Client(cluster) as client:
+        r = reproduce(tmp_path / "rep", line_points=5, progress=False, scheduler=client)
+    assert r.success, r.message
+    assert r.stages["marker"]["computed"] == 2, r.stages       # the flow and its figure
 
 
 def test_a_second_run_reads_every_result(tmp_path, gait, light_stages):

@@ -458,9 +458,6 @@ def _collect(eng, S: dict, res, staging: Path, log: Log) -> tuple:
                     args = [_needed(n, st, S) for n in needs] + ([res] if f.resolution else [])
                     with eng.stage(st.name, st.priority):
                         jobs.append(FigureJob(st, eng.submit(f.task, *args)))
-    for st, rec in stages.items():
-        rec.computed, rec.reused, rec.time = _counts(eng, st.name)
-        log.stage(st.name, rec)
     files = {}
     for job in jobs:
         try:
@@ -470,6 +467,9 @@ def _collect(eng, S: dict, res, staging: Path, log: Log) -> tuple:
             if stages[job.stage].status is Outcome.OK:
                 stages[job.stage] = dataclasses.replace(stages[job.stage], status=Outcome.FAILED,
                                                         error=f"figure: {e}")
+    for st, rec in stages.items():          # after the figures: their tasks count too
+        rec.computed, rec.reused, rec.time = _counts(eng, st.name)
+        log.stage(st.name, rec)
     summary = {}
     for st, fut in S.items():
         if stages[st].status is Outcome.OK:
