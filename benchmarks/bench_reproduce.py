@@ -16,8 +16,8 @@ beside the graph's critical path (the bound for any number of workers).
 dependencies must be this environment's); ``--baseline PYTHON``: the interpreter of an
 installed baseline checkout.  Without either only this version runs.  ``--cluster``: each
 run (cold or warm) against a ``dask scheduler`` with two single-threaded ``dask worker``
-processes on loopback, started afresh for the run with its version's code and cache and
-joined before the clock starts (a real cluster exists before the job), instead of the
+processes on loopback, started afresh for the run with its version's code and cache (the
+scheduler too: it unpickles the tasks) and joined before the clock starts (a real cluster exists before the job), instead of the
 local cluster that ``biped reproduce`` starts itself.  This version runs
 from a snapshot of the working tree taken at the start, so editing the checkout during
 the benchmark changes nothing.  Results are saved in benchmarks/results/reproduce.json
@@ -79,8 +79,10 @@ def run(python, out: Path, cache: Path, quick: bool, workers=None,
     with contextlib.ExitStack() as stack:
         if cluster:
             where = Path(tempfile.mkdtemp(prefix="cluster-", dir=out.parent))
+            # the scheduler too unpickles the tasks: it runs the version's code as well
             address = stack.enter_context(dask_cluster(
-                where, [dict(env, BIPED_THREADS="1")] * CLUSTER_WORKERS, cwd=out.parent))
+                where, [dict(env, BIPED_THREADS="1")] * CLUSTER_WORKERS, scheduler_env=env,
+                cwd=out.parent))
             _wait_for_workers(address, CLUSTER_WORKERS)
             cmd += ["--scheduler", address]
         load0 = os.getloadavg()[0]
