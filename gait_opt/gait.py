@@ -317,7 +317,7 @@ class Gait(Reference):
 
         The lean is the torso's angle less the robot's upright angle
         (:attr:`~biped_casadi.model.description.RobotDescription.torso_upright`: 0, the
-        vertical, unless the torso hangs below the hip), wrapped to (-pi, pi].  A gait past
+        vertical, unless the torso hangs below the hip), wrapped to [-pi, pi).  A gait past
         the simulator's fall bound
         (:attr:`biped_casadi.SimulationOptions.max_torso_angle`, pi/2) cannot be walked:
         every walk of it is a fall.

@@ -108,10 +108,10 @@ def test_torso_upright_is_validated(tmp_path, capsys, value, text):
 
 
 def test_lean_wraps_from_upright():
-    """wrap(phi - upright) in (-pi, pi]; phi itself (the same object) when upright is 0."""
+    """wrap(phi - upright) in [-pi, pi); phi itself (the same object) when upright is 0."""
     phi = np.array([-math.pi, math.pi, -math.pi + 0.2, math.pi - 0.2, 0.0, 1.6])
     lean = torso_lean(phi, -math.pi)
-    assert np.allclose(lean, [0.0, 0.0, 0.2, -0.2, math.pi, 1.6 - math.pi], atol=1e-15)
+    assert np.allclose(lean, [0.0, 0.0, 0.2, -0.2, -math.pi, 1.6 - math.pi], atol=1e-15)
     assert torso_lean(phi, 0.0) is phi
     assert float(torso_lean(math.pi, 0.0)) == math.pi
 

@@ -58,7 +58,7 @@ The torso's angle phi is that of its up direction, from the hip toward its centr
 import puts ``com`` on the line from the hip toward it) stands upright at phi = pi, not 0:
 ``torso_upright`` says where (:func:`torso_lean`).  Every judgement of the torso's
 posture -- the simulators' fall checks, a gait's largest lean, the gait problem's start --
-takes the lean wrap(phi - torso_upright) in (-pi, pi]; with the default 0 the lean is phi
+takes the lean wrap(phi - torso_upright) in [-pi, pi); with the default 0 the lean is phi
 itself.  It changes no dynamics.
 
 Coordinates (docs: theory §1, generalised): q1 is the absolute angle of the stance
@@ -84,11 +84,11 @@ import casadi as ca
 import numpy as np
 
 from ..files import read_text_file
-from .urdf_map import UrdfMap, urdf_map_from_dict
+from .urdf_map import UrdfMap, urdf_map_from_dict, wrap_angle
 
 __all__ = ["Link", "RobotDescription", "load_description", "find_description",
            "description_from_dict", "description_toml", "BUILTIN", "builtin_path",
-           "torso_lean", "wrap_lean"]
+           "torso_lean"]
 
 #: descriptions shipped with the toolkit (package data, biped_casadi/model/robots/NAME.toml)
 BUILTIN = ("rabbit", "three_link")
@@ -98,26 +98,8 @@ _TOP = ("name", "gravity", "torso_upright", "actuators", "torso", "leg", "point_
 _TWO_PI = 2.0 * math.pi
 
 
-def wrap_lean(a):
-    """Angles taken to (-pi, pi] by whole turns: ``a - 2 pi ceil((a - pi) / (2 pi))``.
-
-    Parameters
-    ----------
-    a : float, numpy.ndarray or casadi.SX
-        Angles, rad.
-
-    Returns
-    -------
-    same type as ``a`` (a float array for a float)
-        Equal to ``a`` bit for bit where ``-pi < a <= pi``.
-    """
-    if isinstance(a, (ca.SX, ca.MX, ca.DM)):
-        return a - _TWO_PI * ca.ceil((a - math.pi) / _TWO_PI)
-    return a - _TWO_PI * np.ceil((np.asarray(a, dtype=float) - math.pi) / _TWO_PI)
-
-
 def torso_lean(phi, upright: float = 0.0):
-    """The torso's lean from upright: wrap(phi - upright) in (-pi, pi].
+    """The torso's lean from upright: wrap(phi - upright) in [-pi, pi).
 
     Parameters
     ----------
@@ -135,7 +117,7 @@ def torso_lean(phi, upright: float = 0.0):
     """
     if upright == 0.0:
         return phi
-    return wrap_lean(phi - upright)
+    return wrap_angle(phi - upright)
 _ACTUATORS = ("torque_limit", "rotor_inertia", "gear_ratio")
 _LINK = ("name", "mass", "length", "com", "inertia", "com_offset")
 
@@ -317,7 +299,7 @@ class RobotDescription:
         Returns
         -------
         same type as ``phi``
-            wrap(phi - torso_upright) in (-pi, pi]; ``phi`` itself when torso_upright is 0.
+            wrap(phi - torso_upright) in [-pi, pi); ``phi`` itself when torso_upright is 0.
         """
         return torso_lean(phi, self.torso_upright)
 

@@ -245,7 +245,7 @@ static int steps(cloop_t *s, long long budget)
             lean = qp[2];                               /* the torso's lean from upright */
             if (s->upright != 0.0) {
                 lean = qp[2] - s->upright;
-                lean = lean - s->two_pi * ceil((lean - s->pi) / s->two_pi);
+                lean = lean - s->two_pi * floor((lean + s->pi) / s->two_pi);
             }
             if (!(qp[1] - s->r > s->fall_height && -s->half_pi < lean && lean < s->half_pi))
                 return 2;                               /* a fall, or not finite */
