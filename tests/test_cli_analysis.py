@@ -202,7 +202,13 @@ def test_ctrl_c_that_a_library_turns_into_another_error_is_an_interruption(
                              "DM.__array__> returned a result with an exception set") from None
 
     monkeypatch.setattr(cli_sweep, "run_sweep", interrupted_inside_a_library)
-    rc = biped_main(["sweep", "--gait", str(gait_file), "--grid", "2"])
-    err = capsys.readouterr().err
-    assert rc == 130 and err.strip().splitlines()[-1] == "biped sweep: interrupted", err
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # put back
+    # Ctrl-C as in a terminal: a suite started as a background job inherits SIGINT ignored
+    # (the command line then leaves it ignored, and the kill above would do nothing)
+    outer = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        rc = biped_main(["sweep", "--gait", str(gait_file), "--grid", "2"])
+        err = capsys.readouterr().err
+        assert rc == 130 and err.strip().splitlines()[-1] == "biped sweep: interrupted", err
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # put back
+    finally:
+        signal.signal(signal.SIGINT, outer)
