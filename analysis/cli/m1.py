@@ -87,7 +87,7 @@ def cmd_robust_design(args, say):
     if gait is None:
         st = CodesignSettings().replace(free_gait=True, **args.given)
         say(f"robust co-design NLP: gait and M1 from the gait {ROBUST_GAIT}, v_c rejoining "
-            f"at {st.rejoin} T; about 2 minutes on 2 cores the first time, then read from "
+            f"at {st.rejoin} T; under a minute on 2 cores the first time, then read from "
             "the cache")
     else:
         mode = "fixed" if args.fixed_gait else "free" if args.free_gait else "auto"
@@ -359,7 +359,7 @@ def register(sub):
                         "robust gait constraints and co-designed (--fixed-gait, "
                         "--free-gait: one of them only). Ends in a design or in one line "
                         "naming what binds (exit 2). Verified by the protocol of "
-                        "'biped robust' (s*, full order, hidden sign patterns). About 2 min "
+                        "'biped robust' (s*, full order, hidden sign patterns). Under a minute "
                         "the first time, cached afterwards")
     p.add_argument("--method", choices=("nlp", "search"), default=None,
                    help="with --robust: 'nlp' (default) the co-design NLP; 'search' the "
