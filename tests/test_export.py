@@ -320,7 +320,7 @@ def test_exported_law_refuses(model, gait):
 @pytest.mark.slow
 @needs_cc
 def test_robust_design_exports_and_verifies(tmp_path, capsys):
-    """`biped m1 --robust` (about 2 minutes, then cached) replayed into `biped export
+    """`biped m1 --robust` (under a minute, then cached) replayed into `biped export
     --verify`: 10,000 states to 1e-12, the 10-step run from the paper's perturbation to
     1e-9, and at most 5 microseconds per call in C."""
     rc, o = run(capsys, "m1", "--robust", "--json")
