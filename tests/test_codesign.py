@@ -278,6 +278,7 @@ def test_robust_cli_prints_a_design_that_never_converges(capsys):
 
     from analysis.cli.m1 import _print_design
     from analysis.design.codesign import FIT
+    from analysis.design.verification import DesignCheck
     ns = types.SimpleNamespace
     r = ns(message="co-design (gait fixed)", cached=False,
            design=ns(M1=[3.39, -3.23], rejoin=0.75), gait_free=False, gait_file="g.json",
@@ -285,7 +286,10 @@ def test_robust_cli_prints_a_design_that_never_converges(capsys):
                             from_given=dict(speed=(0.75, 0.75), step_length=(0.36, 0.36),
                                             T=(0.48, 0.48), max_joint_change=0.0)),
            gait_move=None, s_star=0.066, directions_kept=16, vc_s_star=0.016, max_abs=0.12,
-           vc_eigenvalue=0.86, steps_to_converge=None, check=ns(paper_status="slipped"),
+           vc_eigenvalue=0.86, steps_to_converge=None,
+           check=DesignCheck(s_star=0.066, s_fail=0.07, failure="", verified={}, max_abs=0.12,
+                             vc_eigenvalue=0.86, steps_to_converge=None, paper_errors=[],
+                             paper_status="slipped", peak_torque=58.5),
            peak_torque=58.5, alternative=None, verified={}, hidden=None,
            active_constraints=[], elapsed=10.4, simulate_args=["--gait", "g.json"],
            ipopt=dict(solves=[1], iterations=30, evaluations=30,

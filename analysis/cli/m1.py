@@ -194,9 +194,7 @@ def _print_design(r, st):
           + (f" (virtual constraints {r.vc_s_star:.4g})" if r.vc_s_star == r.vc_s_star
              else "") + f"; max|lambda| "
           f"{r.max_abs:.3g} (virtual constraints {r.vc_eigenvalue:.3g}); paper's "
-          + (f"perturbation below {st.verification.tol:g} from step {r.steps_to_converge}"
-             if r.steps_to_converge is not None else
-             f"perturbation: {r.check.paper_status}") + "; peak torque "
+          f"perturbation: {r.check.paper_outcome(st.verification.tol)}; peak torque "
           f"{r.peak_torque:.1f} N m")
     if r.alternative:
         print(f"  also tried: {r.alternative.get('message', '')}")

@@ -426,7 +426,7 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
     fail = r.failure
     msg = (f"robust design: s* = {r.s_star:.4g} with max|lambda| = {max_abs:.3g} "
            f"(virtual constraints {search.lam_vc:.3g}); from the paper's perturbation "
-           + (f"below {st.tol:g} from step {conv}" if conv else f"{check.paper_status}")
+           + check.paper_outcome(st.tol)
            + (f"; just above s*: {failure_text(fail['status'], fail['step'])}" if fail else "")
            + ("" if met else "; target (s* >= 1, converged by step 4) not met"))
     result = RobustDesignResult(

@@ -95,6 +95,22 @@ class DesignCheck(Result):
 
     SUCCESS = ("done",)
 
+    def paper_outcome(self, tol: float) -> str:
+        """How the walk from the paper's perturbation ended, in words.
+
+        Parameters
+        ----------
+        tol : float
+            The error it had to fall below.
+
+        Returns
+        -------
+        str
+            'below TOL from step N', or the walk's status when it never got there.
+        """
+        conv = self.steps_to_converge
+        return f"below {tol:g} from step {conv}" if conv else str(self.paper_status)
+
 
 @task
 def s_star_bisection(design: Design, kept, settings: RobustnessSettings):
@@ -252,14 +268,15 @@ def design_check(r, verified: dict, paper, eigen: tuple, settings: RobustnessSet
     fail = r.failure
     failure = (f"{failure_text(fail['status'], fail['step'])} (direction {fail['direction']})"
                if fail else "")
-    msg = (f"s* = {r.s_star:.4g}" + (f" ({failure} at {r.s_fail:.4g})" if fail else "")
-           + f"; max|lambda| {max_abs:.3g} (virtual constraints {lam_vc:.3g}); paper's "
-           f"perturbation: " + (f"below {st.tol:g} from step {conv}" if conv else paper.status))
-    return DesignCheck(s_star=r.s_star, s_fail=r.s_fail, failure=failure, verified=verified,
-                       max_abs=float(max_abs), vc_eigenvalue=float(lam_vc),
-                       steps_to_converge=conv, paper_errors=errs, paper_status=str(paper.status),
-                       peak_torque=float(paper.peak_torque), message=msg, robustness=r,
-                       paper_run=paper)
+    check = DesignCheck(s_star=r.s_star, s_fail=r.s_fail, failure=failure, verified=verified,
+                        max_abs=float(max_abs), vc_eigenvalue=float(lam_vc),
+                        steps_to_converge=conv, paper_errors=errs,
+                        paper_status=str(paper.status), peak_torque=float(paper.peak_torque),
+                        robustness=r, paper_run=paper)
+    check.message = (f"s* = {r.s_star:.4g}" + (f" ({failure} at {r.s_fail:.4g})" if fail else "")
+                     + f"; max|lambda| {max_abs:.3g} (virtual constraints {lam_vc:.3g}); "
+                     f"paper's perturbation: {check.paper_outcome(st.tol)}")
+    return check
 
 
 def submit_check(engine, design: Design, kept, settings: RobustnessSettings):
