@@ -418,3 +418,34 @@ def test_messages_count_steps_from_one(gait, vc, tmp_path, capsys):
     # the same rule in the robustness texts
     assert failure_text("slipped", 0) == "slipped in step 1"
     assert failure_text(NOT_CONVERGED, 10) == "not_converged after step 10"
+
+
+def test_cli_simulate_says_whether_the_error_settled(gait, stable_m1, tmp_path, capsys):
+    """A valid run is not a converged one: the text says from which step the error stays
+    below 1e-3, or that it did not settle and which way it went (with the default M1 = 0,
+    unstable on RABBIT's gait, that it is not a design); the JSON carries the verdict and
+    the step, as the library computes them."""
+    path = str(gait.save(tmp_path / "gait.json"))
+    args = ["simulate", "--gait", path, "--controller", "tv", "--steps", "2",
+            "--perturb", "0.0001", "0.001"]
+    assert biped_main(args) == 0
+    text = capsys.readouterr().out
+    assert "tv: status ok" in text and "at step 2 (growing); not converged" in text
+    assert "M1 = 0 (the default) is not a stable design" in text
+    assert biped_main(args + ["--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "ok" and out["verdict"] == "not_converged"
+    assert out["steps_to_converge"] is None and out["converged_below"] == 1e-3
+    m1 = [str(v) for v in stable_m1]
+    stable = ["simulate", "--gait", path, "--controller", "tv", "--m1", *m1, "--steps", "10",
+              "--perturb", "0.001", "0.01"]
+    assert biped_main(stable + ["--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    r = simulate(TimeVaryingController(gait, stable_m1), *Perturbation.uniform(
+        gait.model.nq, 0.001, 0.01).initial_state(gait), SimulationOptions(steps=10))
+    assert out["verdict"] == r.verdict(1e-3) == "ok"
+    assert out["steps_to_converge"] == int(r.steps_to_converge(1e-3))
+    assert biped_main(stable) == 0
+    text = capsys.readouterr().out
+    assert f"below 0.001 from step {out['steps_to_converge']}" in text
+    assert "(falling)" in text and "not converged" not in text and "M1 = 0" not in text

@@ -9,6 +9,7 @@ import numpy as np
 from biped_casadi import (Gains, Perturbation, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, simulate)
 from biped_casadi.simulation import Terrain
+from biped_casadi.simulation.speed_profile import CONVERGED
 from biped_casadi.simulation.terrain import MAX_HEIGHT
 from analysis.reporting.plots import (save_figures, swing_torques_plot, unactuated_error_plot,
                             walking_animation)
@@ -18,6 +19,8 @@ from .common import (Progress, UserError, add_design_arguments, add_gait_argumen
                      print_json, rejoin_fraction)
 from .simulate_profile import add_profile_arguments, check_profile_arguments, cmd_profile
 
+#: errors below this at every impact are round-off: no trend is read from them
+ROUND_OFF = 1e-8
 #: --steps beyond this fill the memory with the logged states (2000 RK4 steps a step)
 MAX_STEPS = 1000
 
@@ -108,14 +111,45 @@ def cmd_simulate(args):
         d["perturbation"] = perturbation.to_dict()
         if terrain is not None:
             d["terrain"] = terrain.to_dict()
+        d.update(_settling(res))
         if args.compare:
-            d["compare"] = runs[1].to_dict()
+            d["compare"] = dict(runs[1].to_dict(), **_settling(runs[1]))
         if figures:
             d["figures"] = figures
         print_json(d)
         return 0
-    _print_report(runs, gait, terrain, figures)
+    _print_report(runs, gait, terrain, figures, default_m1=args.m1 is None)
     return 0
+
+
+def _settling(run) -> dict:
+    """The JSON's verdict on the error: 'ok' (valid, below :data:`CONVERGED` at the
+    end), 'not_converged' or the status, and the step it stays below from (or None)."""
+    k = run.steps_to_converge(CONVERGED)
+    return dict(verdict=run.verdict(CONVERGED), converged_below=CONVERGED,
+                steps_to_converge=int(k) if np.isfinite(k) else None)
+
+
+def _settling_line(run, default_m1: bool) -> str:
+    """A valid run's error at the impacts in words: at the first and last step, which way
+    it went, and whether it settled below :data:`CONVERGED` ('' for a failed run, whose
+    status says how it ended); a growing error under the default M1 = 0 says that it is
+    not a design."""
+    if not run.ok:
+        return ""
+    k, e = run.steps_to_converge(CONVERGED), run.unactuated_errors()
+    if max(e) < ROUND_OFF:
+        trend = "round-off"
+    else:
+        trend = "growing" if e[-1] > 2 * e[0] else "falling" if e[-1] < e[0] / 2 else "steady"
+    line = (f"  max(|q_u err|, |dq_u err|) {e[0]:.3g} at step 1"
+            + (f", {e[-1]:.3g} at step {len(e)} ({trend})" if len(e) > 1 else "") + "; "
+            + (f"below {CONVERGED:g} from step {int(k)}" if np.isfinite(k) else
+               f"not converged (not below {CONVERGED:g} at the end)"))
+    if trend == "growing" and default_m1 and run.controller["controller"] == "tv":
+        line += ("\n  M1 = 0 (the default) is not a stable design here: choose M1 with "
+                 "'biped m1', check it with 'biped eig --m1 ...'")
+    return line
 
 
 def _check_numbers(args):
@@ -185,8 +219,9 @@ def _figures(args, runs, model, gait, say):
     return figures
 
 
-def _print_report(runs, gait, terrain, figures):
-    """The text report: per run its status and a table of its steps, then the files."""
+def _print_report(runs, gait, terrain, figures, default_m1: bool = False):
+    """The text report: per run its status, a table of its steps and whether the error
+    settled, then the files."""
     for r in runs:
         print(f"{r.controller['controller']}: status {r.status}"
               + (f" - {r.message}" if r.message else ""))
@@ -201,6 +236,8 @@ def _print_report(runs, gait, terrain, figures):
         print(f"  peak |u| {figure_or_na(r.peak_torque, '.1f')} N m, min F_z "
               f"{figure_or_na(r.min_normal_force, '.1f')} N, max |F_x|/F_z "
               f"{figure_or_na(r.max_friction_ratio, '.3f')}, at impact {figure_or_na(r.max_impulse_ratio, '.3f')}")
+        if line := _settling_line(r, default_m1):
+            print(line)
     for k, v in figures.items():
         print(f"{k}: {v}")
 
