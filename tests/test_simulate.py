@@ -430,7 +430,8 @@ def test_cli_simulate_says_whether_the_error_settled(gait, stable_m1, tmp_path, 
             "--perturb", "0.0001", "0.001"]
     assert biped_main(args) == 0
     text = capsys.readouterr().out
-    assert "tv: status ok" in text and "at step 2 (growing); not converged" in text
+    assert "tv: status ok" in text and "at step 2 (growing, x" in text
+    assert "a step); not converged (not below 0.001" in text
     assert "M1 = 0 (the default) is not a stable design" in text
     assert biped_main(args + ["--json"]) == 0
     out = json.loads(capsys.readouterr().out)
@@ -448,4 +449,4 @@ def test_cli_simulate_says_whether_the_error_settled(gait, stable_m1, tmp_path, 
     assert biped_main(stable) == 0
     text = capsys.readouterr().out
     assert f"below 0.001 from step {out['steps_to_converge']}" in text
-    assert "(falling)" in text and "not converged" not in text and "M1 = 0" not in text
+    assert "(falling, x0." in text and "not converged" not in text and "M1 = 0" not in text

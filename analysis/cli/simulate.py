@@ -138,15 +138,17 @@ def _settling_line(run, default_m1: bool) -> str:
     if not run.ok:
         return ""
     k, e = run.steps_to_converge(CONVERGED), run.unactuated_errors()
-    if max(e) < ROUND_OFF:
+    if max(e) < ROUND_OFF or len(e) < 2:
         trend = "round-off"
-    else:
-        trend = "growing" if e[-1] > 2 * e[0] else "falling" if e[-1] < e[0] / 2 else "steady"
+    else:                                   # the mean factor per step, first to last
+        rate = (e[-1] / max(e[0], ROUND_OFF)) ** (1 / (len(e) - 1))
+        trend = ("growing" if rate > 1.05 else "falling" if rate < 0.95 else "steady") \
+            + f", x{rate:.3g} a step"
     line = (f"  max(|q_u err|, |dq_u err|) {e[0]:.3g} at step 1"
             + (f", {e[-1]:.3g} at step {len(e)} ({trend})" if len(e) > 1 else "") + "; "
             + (f"below {CONVERGED:g} from step {int(k)}" if np.isfinite(k) else
                f"not converged (not below {CONVERGED:g} at the end)"))
-    if trend == "growing" and default_m1 and run.controller["controller"] == "tv":
+    if trend.startswith("growing") and default_m1 and run.controller["controller"] == "tv":
         line += ("\n  M1 = 0 (the default) is not a stable design here: choose M1 with "
                  "'biped m1', check it with 'biped eig --m1 ...'")
     return line
