@@ -301,3 +301,20 @@ def test_cli_bad_locks_exit_2_with_one_line(tmp_path, capsys, extra, text):
     err = capsys.readouterr().err.strip()
     assert text in err and len(err.splitlines()) == 1, err
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_the_sagittal_model_walks(tmp_path, capsys):
+    """End to end: the 3-D biped (arms held at their angles) imported with its joints
+    locked, a reference gait at 0.5 m/s, the virtual-constraint controller's
+    eigenvalue: a walking, stable robot."""
+    p = _write(tmp_path, biped3d_urdf(arms=True))
+    toml, gait = tmp_path / "biped3d.toml", tmp_path / "g.json"
+    locks = [f"{k}={v!r}" for k, v in ARMS.items()]
+    assert main(["robot", "import", str(p), "--lock-off-axis", "--lock", "ankle_pitch_l",
+                 "ankle_pitch_r", *locks, "--out", str(toml)]) == 0
+    assert main(["gait", "--robot", str(toml), "--speed", "0.5", "--out", str(gait)]) == 0
+    capsys.readouterr()
+    assert main(["eig", "--gait", str(gait), "--controller", "vc", "--json"]) == 0
+    body = json.loads(capsys.readouterr().out)
+    assert body["success"] and body["status"] == "stable", body
