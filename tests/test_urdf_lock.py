@@ -211,6 +211,12 @@ def test_lock_off_axis_locks_yaw_and_roll(tmp_path):
                                 f"torso frame ({why})") for n in imp.notes), imp.notes
     ref = import_urdf(p, lock={**SAGITTAL, **ARMS}).description
     assert imp.description == ref
+    # a joint named in lock keeps its angle; the others off the axis are locked at 0
+    rolls = {"ankle_roll_l": 0.05, "ankle_roll_r": -0.05}
+    imp = import_urdf(p, lock={"ankle_pitch_l": 0.0, "ankle_pitch_r": 0.0, **ARMS, **rolls},
+                      lock_off_axis=True)
+    assert imp.locked == {**import_urdf(p, lock={**SAGITTAL, **ARMS}).locked, **rolls}
+    assert imp.description == import_urdf(p, lock={**SAGITTAL, **ARMS, **rolls}).description
 
 
 def test_mirror_images_and_differences_across_the_plane_are_the_same_legs(tmp_path):
