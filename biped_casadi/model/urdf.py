@@ -265,8 +265,8 @@ def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
             soles[0].name
     rd.notes.append(f"the foot point is the origin of the locked joint {j.name!r} (where "
                     f"{f.name!r} hangs from {last.name!r}: an ankle, not a sole): the model's "
-                    f"foot is the point that touches the ground; with no fixed frame below "
-                    f"it named like a sole or contact, give that point with --foot X Y Z "
+                    f"foot is the point that touches the ground; with no single fixed frame "
+                    f"below it named like a sole or contact, give that point with --foot X Y Z "
                     f"(foot=) in the frame of {last.name!r}")
     return f.p, f"link {f.name!r} (the locked joint {j.name!r})", f.name
 
