@@ -189,3 +189,139 @@ def pinocchio_state(m, data, names, x, dx, foot_frame: str):
     vf = pin.getFrameVelocity(m, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).linear
     v[:3] = R.T @ (-vf)
     return q, v
+
+
+# ------------------------------------------------------------------ a 3-D biped
+#: per side: (joint, parent, child, joint position (torso frame, left side), axis
+#: (torso frame), link mass, centre of mass from the joint, principal inertias, the
+#: link frame's rotation from the torso's (exporters' frames: turned), effort)
+_LEG3D = (
+    ("hip_yaw", None, "hip_yaw_link", (0.0, 0.09, -0.06), "z", 0.6, (-0.01, 0.005, -0.03),
+     (0.0012, 0.0010, 0.0008), (0.0, 0.0, 0.0), 60.0),
+    ("hip_roll", "hip_yaw_link", "hip_roll_link", (0.0, 0.10, -0.11), "x", 0.9,
+     (0.005, 0.012, -0.02), (0.0020, 0.0018, 0.0011), (0.0, 0.0, 0.4), 60.0),
+    ("hip_pitch", "hip_roll_link", "thigh", (0.0, 0.11, -0.14), "y", 4.2,
+     (0.015, 0.01, -0.16), (0.065, 0.060, 0.012), (0.0, 0.0, math.pi / 2), 120.0),
+    ("knee", "thigh", "shin", (0.0, 0.10, -0.54), "y", 2.6, (0.005, 0.005, -0.17),
+     (0.035, 0.033, 0.005), (0.3, 0.2, 0.0), 120.0),
+    ("ankle_pitch", "shin", "ankle_link", (0.0, 0.10, -0.92), "y", 0.25, (0.0, 0.0, -0.01),
+     (0.0002, 0.0002, 0.0002), (0.0, 0.0, 0.0), 80.0),
+    ("ankle_roll", "ankle_link", "foot", (0.0, 0.10, -0.935), "x", 0.9, (0.04, 0.005, -0.035),
+     (0.0012, 0.0040, 0.0045), (math.pi / 2, 0.0, -0.5), 60.0),
+)
+#: the arms: shoulder pitch and elbow, as the legs' rows
+_ARM3D = (
+    ("shoulder", None, "upper_arm", (0.0, 0.20, 0.42), "y", 1.3, (0.0, 0.02, -0.12),
+     (0.008, 0.0082, 0.0012), (0.0, 0.0, 0.0), 40.0),
+    ("elbow", "upper_arm", "forearm", (0.0, 0.22, 0.16), "y", 0.9, (0.01, 0.0, -0.12),
+     (0.005, 0.0052, 0.0008), (0.0, -0.7, 0.0), 40.0),
+)
+_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+
+
+def _rot_rpy(r, p, y):
+    cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p),
+                              math.cos(y), math.sin(y))
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def _tensor(principal, seed):
+    """A full inertia tensor (products of inertia) of the principal moments, turned by a
+    rotation fixed by ``seed``."""
+    a, b, c = 0.3 + 0.1 * seed, -0.2 + 0.05 * seed, 0.15 * seed
+    Q = _rot_rpy(a, b, c)
+    return Q @ np.diag(principal) @ Q.T
+
+
+def _mirror(v, side):
+    return np.array([v[0], side * v[1], v[2]])
+
+
+def _link3d(name, mass, com, I, R, p, visual=""):
+    """A link whose frame is at p, turned by R (torso frame), its inertial given in the
+    torso frame."""
+    Io = R.T @ I @ R
+    c = R.T @ (np.asarray(com, float) - p)
+    return (f'<link name="{name}"><inertial><origin xyz="{_vec(c)}" rpy="0 0 0"/>'
+            f'<mass value="{float(mass)!r}"/><inertia ixx="{float(Io[0, 0])!r}" ixy="{float(Io[0, 1])!r}" '
+            f'ixz="{float(Io[0, 2])!r}" iyy="{float(Io[1, 1])!r}" iyz="{float(Io[1, 2])!r}" '
+            f'izz="{float(Io[2, 2])!r}"/>'
+            f'</inertial>{visual}</link>')
+
+
+def biped3d_urdf(arms=False, sole=True, mirror=True, flip_right_knee=False, differ=None,
+                 rotor=0.4, name="biped3d") -> str:
+    """A 3-D biped as CAD exporters write one: per leg hip yaw (z), hip roll (x), hip
+    pitch (y), knee (y), ankle pitch (y) and ankle roll (x), the hips 0.18 m apart
+    across, link frames turned every which way, centres of mass off the links (also
+    across) and full inertia tensors with products of inertia; the right leg the mirror
+    image of the left (``mirror``; else the left's tensors as they are), optionally its
+    knee's axis flipped; a sole frame under each foot (``sole``); ``arms``: a shoulder
+    and an elbow (both about y) per side.  ``differ``: 'plane' gives the right thigh 1 %
+    more inertia about y, 'across' changes only what the plane does not see (its
+    moments about x and z, its products with x, its centre of mass across).  Every
+    joint has a transmission (reflected rotor inertia ``rotor``) and an effort limit."""
+    torso_I = np.array([[0.45, 0.004, 0.03], [0.004, 0.40, -0.006], [0.03, -0.006, 0.12]])
+    out = [f'<robot name="{name}">',
+           _link3d("torso", 11.0 if arms else 14.0, (0.02, 0.004, 0.22), torso_I, np.eye(3),
+                   np.zeros(3), '<visual><origin xyz="0 0 0.25"/><geometry><box size="0.2 '
+                   '0.3 0.5"/></geometry></visual>')]
+    rows = [(r, "leg") for r in _LEG3D] + ([(r, "arm") for r in _ARM3D] if arms else [])
+    for side, s in (("l", 1.0), ("r", -1.0)):
+        frames = {"torso": (np.eye(3), np.zeros(3))}
+        for k, ((jn, parent, child, pos, ax, mass, com, pr, rpy, effort), _) in enumerate(rows):
+            parent = f"{parent}_{side}" if parent else "torso"
+            p = _mirror(pos, s)
+            R = _rot_rpy(*rpy) if s > 0 else _rot_rpy(-rpy[0], rpy[1], -rpy[2])
+            I = _tensor(pr, k)
+            if s < 0 and mirror:
+                M = np.diag([1.0, -1.0, 1.0])
+                I = M @ I @ M
+            c = p + _mirror(com, s)
+            if s < 0 and differ == "plane" and child == "thigh":
+                I = I + np.diag([0.0, 0.01 * I[1, 1], 0.0])
+            if s < 0 and differ == "across" and child == "thigh":
+                I = I + np.array([[0.004, 0.0, 0.002], [0.0, 0.0, 0.0], [0.002, 0.0, 0.003]])
+                c = c + np.array([0.0, 0.02, 0.0])
+            Rp, pp = frames[parent]
+            a = np.array(_AXES[ax]) * (-1.0 if flip_right_knee and s < 0 and jn == "knee" else 1.0)
+            a = R.T @ a
+            a[np.abs(a) < 1e-15] = 0.0
+            out.append(f'<joint name="{jn}_{side}" type="revolute"><parent link="{parent}"/>'
+                       f'<child link="{child}_{side}"/><origin xyz="{_vec(Rp.T @ (p - pp))}" '
+                       f'rpy="{_rpy(Rp.T @ R)}"/><axis xyz="{_vec(a)}"/><limit effort='
+                       f'"{effort!r}" velocity="10" lower="-2.5" upper="2.5"/></joint>')
+            visual = ('<visual><origin xyz="0.03 0 -0.05"/><geometry><box size="0.22 0.1 '
+                      '0.03"/></geometry></visual>') if child == "foot" else ""
+            out.append(_link3d(f"{child}_{side}", mass, c, I, R, p, visual))
+            red = 50.0 + k
+            out.append(f'<transmission name="{jn}_{side}_t"><type>transmission_interface/'
+                       f'SimpleTransmission</type><joint name="{jn}_{side}"><hardwareInterface>'
+                       f'EffortJointInterface</hardwareInterface></joint><actuator name='
+                       f'"{jn}_{side}_m"><mechanicalReduction>{red!r}</mechanicalReduction>'
+                       f'<motorInertia>{rotor / red ** 2!r}</motorInertia></actuator>'
+                       f'</transmission>')
+            frames[f"{child}_{side}"] = (R, p)
+        if sole:
+            R, p = frames[f"foot_{side}"]
+            out.append(f'<joint name="sole_{side}_fix" type="fixed"><parent link="foot_{side}"/>'
+                       f'<child link="sole_{side}"/><origin xyz="{_vec(R.T @ np.array([0.01, 0.0, -0.055]))}"'
+                       f'/></joint><link name="sole_{side}"/>')
+    out.append("</robot>")
+    return "\n".join(out)
+
+
+def pinocchio_reduced(text: str, rotor: float, joint_names, locked: dict):
+    """Pinocchio's model of a URDF text (free flyer at the root) with the joints of
+    ``locked`` (name -> angle) locked at their angles by ``pinocchio.buildReducedModel``,
+    the remaining leg joints' armature the reflected rotor inertia."""
+    full = pin.buildModelFromXML(text, pin.JointModelFreeFlyer())
+    q_ref = pin.neutral(full)
+    for n, a in locked.items():
+        q_ref[full.joints[full.getJointId(n)].idx_q] = a
+    m = pin.buildReducedModel(full, [full.getJointId(n) for n in locked], q_ref)
+    for n in joint_names:
+        m.armature[m.joints[m.getJointId(n)].idx_v] = rotor
+    return m

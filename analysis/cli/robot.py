@@ -13,10 +13,31 @@ import numpy as np
 from biped_casadi.files import write_text_atomic
 from biped_casadi.model.description import load_description
 from biped_casadi.model.urdf import description_toml, import_urdf
+from biped_casadi.model.urdf_tree import lock_table
 from biped_casadi.mujoco import mjcf, mujoco_module
 
 from .common import ROBOT_HELP, UserError, load_model, output_file, print_json
 from .mujoco_options import add_mujoco_settings, mujoco_settings
+
+
+def _locks(args) -> dict:
+    """--lock NAME[=RAD] ... as name -> angle; --axis only with --lock-off-axis."""
+    pairs = []
+    for token in args.lock or []:
+        name, eq, value = token.partition("=")
+        try:
+            angle = float(value) if eq else 0.0
+        except ValueError:
+            raise UserError(f"--lock {token}: the angle after '=' must be a number (rad)"
+                            ) from None
+        pairs.append((name.strip(), angle))
+    if args.axis is not None and not args.lock_off_axis:
+        raise UserError("--axis chooses the plane's normal for --lock-off-axis; give both "
+                        "or neither")
+    try:
+        return lock_table(pairs, args.lock_off_axis, args.axis)
+    except ValueError as e:
+        raise UserError(f"--{e}") from None
 
 
 def cmd_import(args):
@@ -35,8 +56,13 @@ def cmd_import(args):
                                               and args.torque_limit > 0):
         raise UserError(f"--torque-limit must be a positive number (N m), got "
                         f"{args.torque_limit:g}")
-    imp = import_urdf(src, foot, torque_limit=args.torque_limit)
-    text = description_toml(imp.description, f"made by 'biped robot import' from {src.name}")
+    imp = import_urdf(src, foot, torque_limit=args.torque_limit, lock=_locks(args),
+                      lock_off_axis=args.lock_off_axis, axis=args.axis)
+    header = f"made by 'biped robot import' from {src.name}"
+    if imp.locked:
+        header += "\nits sagittal model, with these joints locked (rad): " + ", ".join(
+            f"{k} = {v!r}" for k, v in imp.locked.items())
+    text = description_toml(imp.description, header)
     write_text_atomic(out, text)
     back = load_description(out)                 # the file reads back to the same robot
     if back != imp.description or back.urdf != imp.description.urdf:
@@ -44,6 +70,7 @@ def cmd_import(args):
     d = imp.description
     summary = dict(file=str(out), source=str(src), robot=d.to_dict(), torso=imp.torso,
                    legs=[list(leg) for leg in imp.legs], foot=imp.foot, notes=imp.notes,
+                   locked=imp.locked,
                    total_mass=d.total_mass, torque_limit=d.torque_limit,
                    joint_map=d.urdf.describe())
     if args.json:
@@ -116,7 +143,9 @@ def register(sub):
                                     "inertials anywhere in the plane, joint origins, "
                                     "transmissions, effort limits) and write the equivalent "
                                     "description file, with the map from the URDF's joint "
-                                    "angles to the model's (printed; the [urdf] table).")
+                                    "angles to the model's (printed; the [urdf] table). A "
+                                    "3-D biped's sagittal model: lock its other joints "
+                                    "(--lock NAME[=RAD], --lock-off-axis).")
     q.add_argument("file", metavar="FILE.urdf", help="the URDF file")
     q.add_argument("--foot", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="the foot point in the last leg link's frame, m (when the file has "
@@ -125,6 +154,21 @@ def register(sub):
                    help="the robot's torque limit, N m (default: the smallest <limit "
                         "effort> of the leg joints; none when they give none, e.g. "
                         "continuous joints without <limit>)")
+    q.add_argument("--lock", nargs="+", action="extend", metavar="NAME[=RAD]",
+                   help="hold these revolute/continuous joints fixed at RAD (default 0; "
+                        "repeatable): a 3-D robot's sagittal model (hip yaw and roll, ankle "
+                        "joints, arms); each becomes a fixed joint and its child links merge "
+                        "into its parent")
+    q.add_argument("--lock-off-axis", action="store_true",
+                   help="also lock at 0 every revolute/continuous joint below the torso "
+                        "whose axis (at the file's zero angles) is not parallel to the "
+                        "plane's normal n: --axis, else the direction across the torso "
+                        "frame's z that most of those joints turn about (a tie: the one "
+                        "nearer the torso's y, then the first in the file); a joint given "
+                        "with --lock keeps its angle")
+    q.add_argument("--axis", choices=("x", "y"),
+                   help="with --lock-off-axis: the plane's normal n is this axis of the "
+                        "torso's frame (z, vertical at pitch 0, lies in the plane)")
     q.add_argument("--out", metavar="FILE.toml", required=True,
                    help="the description file to write")
     q.add_argument("--json", action="store_true", help="print one JSON object")

@@ -30,7 +30,16 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   hip, a joint between leg links or the foot is a point mass there;
 - the foot: the origin of the fixed child link (or frame) of each leg's last link
   (one named like a foot when there are several), or ``foot=(x, y, z)`` in that link's
-  frame;
+  frame; when that child hangs by a locked joint (a 3-D robot's ankle), the one fixed
+  frame below it named like a sole or contact point, else the ankle (said in the notes:
+  ``foot=`` then gives the point that touches the ground);
+- a 3-D robot, as its sagittal-plane model: ``lock={name: angle}`` holds joints fixed
+  (each becomes a fixed joint, its child frame turned by the angle about its axis, so
+  its child links merge into its parent: hip yaw and roll links into the torso, a foot
+  into the shin, arms into the torso), ``lock_off_axis=True`` every revolute or
+  continuous joint off the plane's normal at 0; out-of-plane offsets (hips apart along
+  n, lateral centres of mass, products of inertia) do not enter the planar model, so
+  mirror-image legs are the same legs;
 - the reflected rotor inertia from ``<transmission>``: ``motorInertia`` x
   ``mechanicalReduction``^2 of each joint's actuator (equal for every joint), 0 without
   ``motorInertia``; each joint's ``mechanicalReduction`` is kept in the map (the motor
@@ -56,7 +65,9 @@ masses), the hips at two places in the plane, a leg joint
 without actuator (the model's one unactuated degree of freedom is the stance foot's
 contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a link without
 ``<inertial>`` (its own or a fixed child's), a torso whose up direction cannot be found, no
-foot.
+foot; in ``lock``, a joint the file does not define, one that is not revolute or
+continuous, an angle that is not finite, a joint given twice.  A non-planar joint's
+refusal names it and its axis, and how to lock it.
 """
 from __future__ import annotations
 
@@ -73,7 +84,7 @@ from urdf_parser_py.xml_reflection import core as _xml_core
 from ..files import read_text_file
 from .description import RobotDescription, description_from_dict, description_toml, joint_names
 from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
-from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader
+from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader, apply_locks, lock_table
 
 __all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "GEOMETRY_TOL",
            "MAX_LEG"]
@@ -103,7 +114,10 @@ class UrdfImport:
         Where the foot came from ('link NAME', or 'foot= argument').
     notes : list of str
         What was assumed or ignored (the torso's direction and length, the torque limit,
-        the root joint, merged links, unknown tags, ...).
+        the root joint, merged links, locked joints, unknown tags, ...).
+    locked : dict
+        The joints held fixed (``lock``, ``lock_off_axis``): name -> angle, rad, in the
+        file's order.
     """
 
     description: RobotDescription
@@ -111,6 +125,7 @@ class UrdfImport:
     legs: tuple
     foot: str
     notes: list = field(default_factory=list)
+    locked: dict = field(default_factory=dict)
 
     @property
     def urdf_map(self) -> UrdfMap:
@@ -221,6 +236,8 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
 
 # ------------------------------------------------------------------ the foot
 _FOOT_WORDS = ("foot", "toe", "sole", "contact", "ankle")
+#: below a foot that hangs by a locked joint (an ankle), the frame that marks the sole
+_SOLE_WORDS = ("sole", "contact")
 
 
 def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
@@ -238,8 +255,20 @@ def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
         rd.fail(f"no foot: the last leg link {last.name!r} has {what}; give the foot "
                 f"point in its frame (foot=(x, y, z), or 'biped robot import FILE --foot "
                 f"X Y Z --out robot.toml')")
-    _, f = cands[0]
-    return f.p, f"link {f.name!r}", f.name
+    j, f = cands[0]
+    if j.name not in rd.locked:
+        return f.p, f"link {f.name!r}", f.name
+    soles = [g for _, g in rd.fixed_descendants(f)
+             if any(w in g.name.lower() for w in _SOLE_WORDS)]
+    if len(soles) == 1:
+        return soles[0].p, f"link {soles[0].name!r} (below the locked joint {j.name!r})", \
+            soles[0].name
+    rd.notes.append(f"the foot point is the origin of the locked joint {j.name!r} (where "
+                    f"{f.name!r} hangs from {last.name!r}: an ankle, not a sole): the model's "
+                    f"foot is the point that touches the ground; with no single fixed frame "
+                    f"below it named like a sole or contact, give that point with --foot X Y Z "
+                    f"(foot=) in the frame of {last.name!r}")
+    return f.p, f"link {f.name!r} (the locked joint {j.name!r})", f.name
 
 
 # ------------------------------------------------------------------ the plane
@@ -454,8 +483,37 @@ def _check_torque_limit(torque_limit):
     return float(torque_limit)
 
 
+def _check_foot(foot):
+    if foot is not None:
+        f = np.asarray(foot, dtype=float).ravel()
+        if f.shape != (3,) or not np.all(np.isfinite(f)):
+            raise ValueError(f"foot must be 3 finite numbers (x, y, z in m), got {foot!r}")
+
+
+def _joint_notes(rd: _Reader, joints) -> None:
+    """Notes on the leg joints' <dynamics> and ranges (not in the model)."""
+    damped = []
+    for j in joints:
+        terms = [f"{k} {getattr(j.dynamics, k):g}" for k in ("damping", "friction")
+                 if j.dynamics is not None and getattr(j.dynamics, k, None)]
+        if terms:
+            damped.append(f"{j.name} ({', '.join(terms)})")
+    if damped:
+        rd.notes.append(f"ignored: joint <dynamics> of {', '.join(damped)}: the model's joints "
+                        f"are frictionless (the torques it computes are the rigid body's)")
+    ranged = [f"{j.name} [{j.limit.lower:g}, {j.limit.upper:g}]" for j in joints
+              if j.type == "revolute" and j.limit is not None
+              and j.limit.lower is not None and j.limit.upper is not None
+              and j.limit.upper - j.limit.lower < 2 * math.pi - 0.01]     # narrower than a turn
+    if ranged:
+        rd.notes.append(f"not held to: the joint ranges (rad, the URDF's angles) of "
+                        f"{', '.join(ranged)}: gaits and walks are not constrained by them "
+                        f"(compare a gait's angles: biped gait --export-csv --angles urdf)")
+
+
 def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
-                torque_limit: float | None = None) -> UrdfImport:
+                torque_limit: float | None = None, lock=None, lock_off_axis: bool = False,
+                axis: str | None = None) -> UrdfImport:
     """Read a planar biped from a URDF file (what is read: the module docstring).
 
     Parameters
@@ -471,6 +529,19 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     torque_limit : float, optional
         N m: the robot's torque limit, instead of the file's effort limits (needed for a
         limit when the file gives none).
+    lock : mapping or iterable, optional
+        Joints held fixed: name -> angle (rad), or names (angle 0) and (name, angle)
+        pairs.  Each revolute or continuous joint named becomes a fixed joint whose child
+        frame is its origin turned by the angle about its axis, before the rest of the
+        import (so its child link merges into its parent): a 3-D robot's sagittal model.
+    lock_off_axis : bool
+        Also lock at 0 every revolute or continuous joint below the torso whose axis, at
+        the file's zero joint angles, is not parallel to the plane's normal n (a joint
+        named in ``lock`` keeps its angle there): n is the torso frame's ``axis``, else
+        the direction across the torso frame's z that most of the joints below the torso
+        turn about (a tie: the one nearer the torso's y, then the first in the file).
+    axis : {'x', 'y'}, optional
+        The plane's normal for ``lock_off_axis``, in the torso's frame.
 
     Returns
     -------
@@ -484,15 +555,14 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     """
     path = Path(path)
     where = f"URDF file {path}"
-    if foot is not None:
-        f = np.asarray(foot, dtype=float).ravel()
-        if f.shape != (3,) or not np.all(np.isfinite(f)):
-            raise ValueError(f"foot must be 3 finite numbers (x, y, z in m), got {foot!r}")
+    _check_foot(foot)
     torque_limit = _check_torque_limit(torque_limit)
+    lock = lock_table(lock, lock_off_axis, axis)
     text = read_text_file(path, "URDF file", 20_000_000)
     robot, said = _parse(text, where)
     rd = _Reader(robot, where, tol)
     torso = _Frame(rd.torso(), np.eye(3), np.zeros(3))
+    apply_locks(rd, torso.name, lock, lock_off_axis, axis)
     chains = _legs(rd, torso)
     n, signs = _axis(rd, chains)
     plane = _Plane(n)
@@ -512,23 +582,7 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 f"are {apart:.3g} m apart in the plane of motion: the model's legs share "
                 f"one hip")
     all_joints = [j for leg in legs for j in leg.joints]
-    damped = []
-    for j in all_joints:
-        terms = [f"{k} {getattr(j.dynamics, k):g}" for k in ("damping", "friction")
-                 if j.dynamics is not None and getattr(j.dynamics, k, None)]
-        if terms:
-            damped.append(f"{j.name} ({', '.join(terms)})")
-    if damped:
-        rd.notes.append(f"ignored: joint <dynamics> of {', '.join(damped)}: the model's joints "
-                        f"are frictionless (the torques it computes are the rigid body's)")
-    ranged = [f"{j.name} [{j.limit.lower:g}, {j.limit.upper:g}]" for j in all_joints
-              if j.type == "revolute" and j.limit is not None
-              and j.limit.lower is not None and j.limit.upper is not None
-              and j.limit.upper - j.limit.lower < 2 * math.pi - 0.01]     # narrower than a turn
-    if ranged:
-        rd.notes.append(f"not held to: the joint ranges (rad, the URDF's angles) of "
-                        f"{', '.join(ranged)}: gaits and walks are not constrained by them "
-                        f"(compare a gait's angles: biped gait --export-csv --angles urdf)")
+    _joint_notes(rd, all_joints)
     motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
     pm_legs = [dict(), dict()]
     links = [[leg.body(i, pm) for i in range(len(leg.frames))]
@@ -553,8 +607,9 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 torso=torso_d, leg=links[0], point_masses=pm, urdf=urdf_map.to_dict())
     rd.notes += [f"ignored: {s}" for s in said if "motorInertia" not in s]
     d = description_from_dict(data, where=where, source=str(path))
+    locked = {k: rd.locked[k] for k in sorted(rd.locked, key=rd.order.get)}
     return UrdfImport(d, torso.name, tuple(tuple(j.name for j in leg.joints) for leg in legs),
-                      feet[0][1], rd.notes)
+                      feet[0][1], rd.notes, locked)
 
 
 def _torso_upright(rd: _Reader, plane: _Plane, torso_up, urdf_map: UrdfMap) -> dict:
@@ -603,7 +658,8 @@ def _same_legs(rd: _Reader, links, pms, legs):
                 f"{legs[1].joints[0].name!r}): {pms[0]} and {pms[1]}")
 
 
-def load_urdf(path, foot=None, torque_limit: float | None = None) -> RobotDescription:
+def load_urdf(path, foot=None, torque_limit: float | None = None, lock=None,
+              lock_off_axis: bool = False, axis: str | None = None) -> RobotDescription:
     """The robot description of a URDF file (:func:`import_urdf` without the notes).
 
     Parameters
@@ -614,6 +670,12 @@ def load_urdf(path, foot=None, torque_limit: float | None = None) -> RobotDescri
         The foot point in the last leg link's frame, m.
     torque_limit : float, optional
         N m, instead of the file's effort limits.
+    lock : mapping or iterable, optional
+        Joints held fixed at the angles given (:func:`import_urdf`).
+    lock_off_axis : bool
+        Also lock at 0 every joint off the plane's normal (:func:`import_urdf`).
+    axis : {'x', 'y'}, optional
+        The plane's normal for ``lock_off_axis``.
 
     Returns
     -------
@@ -625,4 +687,5 @@ def load_urdf(path, foot=None, torque_limit: float | None = None) -> RobotDescri
     ValueError
         Naming the file and what is wrong.
     """
-    return import_urdf(path, foot, torque_limit=torque_limit).description
+    return import_urdf(path, foot, torque_limit=torque_limit, lock=lock,
+                       lock_off_axis=lock_off_axis, axis=axis).description

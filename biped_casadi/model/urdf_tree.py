@@ -1,7 +1,8 @@
 """A URDF's tree read at zero joint angles in its torso's frame: poses of links and
 joints, inertials, the torso (through a massless root and its floating, planar or fixed
 joint), the two legs as chains of rotating joints (hanging from the torso or from its
-fixed frames), and the normal of the plane of motion with each joint's sign against it.
+fixed frames), and the normal of the plane of motion with each joint's sign against it;
+the joints held fixed (``lock``: each a fixed joint, its child frame turned by its angle).
 The importer (:mod:`biped_casadi.model.urdf`) builds the robot from these."""
 from __future__ import annotations
 
@@ -26,11 +27,85 @@ def _rotation(rpy) -> np.ndarray:
 
 
 def _pose(origin):
-    """(R, p) of a URDF <origin> (identity when absent)."""
+    """(R, p) of a URDF <origin> (identity when absent; a locked joint's exact turn)."""
+    if isinstance(origin, _LockedPose):
+        return origin.R, origin.xyz
     if origin is None:
         return np.eye(3), np.zeros(3)
     xyz = np.zeros(3) if origin.xyz is None else np.array(origin.xyz, dtype=float)
     return _rotation(origin.rpy), xyz
+
+
+@dataclass
+class _LockedPose:
+    """The origin of a locked joint: its own pose composed with the turn by the lock's
+    angle about its axis, kept as a matrix (no round trip through roll-pitch-yaw)."""
+    R: np.ndarray
+    xyz: np.ndarray
+
+
+def _turn(axis: np.ndarray, angle: float) -> np.ndarray:
+    """The rotation by ``angle`` about the unit ``axis`` (Rodrigues; exactly I at 0)."""
+    K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
+                  [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
+
+
+def lock_table(lock, lock_off_axis: bool = False, axis=None) -> dict:
+    """``lock`` (a mapping name -> angle, or names and (name, angle) pairs) as a dict
+    name -> float angle (rad, 0 for a bare name), the options checked.
+
+    Parameters
+    ----------
+    lock : mapping or iterable or None
+        The joints to hold fixed and their angles.
+    lock_off_axis : bool
+        Whether the joints off the plane's normal are locked too.
+    axis : {'x', 'y'} or None
+        The plane's normal for ``lock_off_axis`` (torso frame).
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    ValueError
+        One line naming the joint: a name that is not a non-empty string, an angle that
+        is not a finite number, a joint given twice; an ``axis`` other than 'x' or 'y',
+        or without ``lock_off_axis``.
+    """
+    if axis is not None and axis not in ("x", "y"):
+        raise ValueError(f"axis must be 'x' or 'y' (the torso frame's axis that is the "
+                         f"plane's normal; z, vertical at pitch 0, lies in the plane), got "
+                         f"{axis!r}")
+    if axis is not None and not lock_off_axis:
+        raise ValueError("axis chooses the plane's normal for lock_off_axis: give it with "
+                         "lock_off_axis=True (--lock-off-axis)")
+    if lock is None:
+        return {}
+    if hasattr(lock, "items"):
+        items = list(lock.items())
+    elif isinstance(lock, str):
+        items = [(lock, 0.0)]
+    else:
+        items = []
+        for x in lock:
+            if not isinstance(x, (str, tuple, list)) or (not isinstance(x, str) and len(x) != 2):
+                raise ValueError(f"lock: give joint names, (name, angle) pairs or a mapping "
+                                 f"name -> angle, got {x!r}")
+            items.append((x, 0.0) if isinstance(x, str) else tuple(x))
+    out = {}
+    for name, angle in items:
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"lock: joint names must be non-empty strings, got {name!r}")
+        if name in out:
+            raise ValueError(f"lock: joint {name!r} is locked twice")
+        if isinstance(angle, bool) or not isinstance(angle, (int, float, np.floating, np.integer)) \
+                or not math.isfinite(angle):
+            raise ValueError(f"lock: joint {name!r} needs a finite angle in rad, got {angle!r}")
+        out[name] = float(angle)
+    return out
 
 
 def _mass(link) -> float:
@@ -80,6 +155,11 @@ class _Frame:
     p: np.ndarray
 
 
+def _parallel(a, b) -> bool:
+    """Unit vectors along one line (either sense)."""
+    return bool(np.linalg.norm(np.cross(a, b)) <= 1e-9)
+
+
 def _child_frame(parent: _Frame, joint) -> _Frame:
     R, p = _pose(joint.origin)
     return _Frame(joint.child, parent.R @ R, parent.p + parent.R @ p)
@@ -100,9 +180,75 @@ class _Reader:
         self.order = {j.name: i for i, j in enumerate(robot.joints)}
         self.notes = []
         self.planar_axis = None
+        self.locked = {}
 
     def fail(self, problem: str):
         raise ValueError(f"{self.where}: {problem}")
+
+    def unit_axis(self, joint) -> np.ndarray:
+        """A rotating joint's axis as a unit vector in its own frame (x without one)."""
+        a = np.array(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), float)
+        if not np.linalg.norm(a) > 0:
+            self.fail(f"joint {joint.name!r} has a zero axis")
+        return a / np.linalg.norm(a)
+
+    def lock(self, lock: dict):
+        """Hold the joints of ``lock`` (name -> angle, rad) fixed: each becomes a fixed
+        joint whose child frame is its origin turned by the angle about its axis."""
+        joints = {j.name: j for j in self.robot.joints}
+        for name, angle in lock.items():
+            j = joints.get(name)
+            if j is None:
+                self.fail(f"lock: the file has no joint {name!r}")
+            if j.type not in _ROTATING:
+                self.fail(f"lock: joint {name!r} is {j.type}: only revolute and continuous "
+                          f"joints can be locked")
+            R, p = _pose(j.origin)
+            j.origin = _LockedPose(R @ _turn(self.unit_axis(j), angle), p)
+            j.type = "fixed"
+            self.locked[name] = angle
+            lim = j.limit
+            if lim is not None and lim.lower is not None and lim.upper is not None \
+                    and lim.lower < lim.upper and not lim.lower <= angle <= lim.upper:
+                self.notes.append(f"joint {name!r} is locked at {angle:g} rad, outside its "
+                                  f"range [{lim.lower:g}, {lim.upper:g}]")
+
+    def rotating_axes(self, torso: str) -> list:
+        """(joint name, unit axis in the torso frame) of every revolute or continuous
+        joint below the torso at zero joint angles, in the file's order."""
+        out, todo = [], [_Frame(torso, np.eye(3), np.zeros(3))]
+        while todo:
+            frame = todo.pop()
+            for j in self.children.get(frame.name, []):
+                child = _child_frame(frame, j)
+                todo.append(child)
+                if j.type in _ROTATING:
+                    out.append((j.name, child.R @ self.unit_axis(j)))
+        return sorted(out, key=lambda na: self.order[na[0]])
+
+    def off_axis(self, torso: str, axis, keep) -> tuple:
+        """(n, joints off it, why): the plane's normal for ``lock_off_axis`` and the
+        revolute or continuous joints below the torso (but those of ``keep``) whose axis
+        at zero joint angles is not parallel to it.  n is the torso frame's ``axis``
+        ('x' or 'y'), else the direction across the torso's z that most of the joints
+        below the torso turn about (a tie: the one nearer the torso's y, then the first
+        in the file)."""
+        axes = self.rotating_axes(torso)
+        if axis is not None:
+            n = np.eye(3)[{"x": 0, "y": 1}[axis]]
+            why = f"--axis {axis}"
+        else:
+            across = [a for _, a in axes if abs(a[2]) <= 1e-9]
+            if not across:
+                self.fail("lock_off_axis: no revolute or continuous joint below the torso "
+                          "turns about an axis across its frame's z (the plane's normal)")
+            counts = [sum(_parallel(a, b) for _, b in axes) for a in across]
+            best = max(range(len(across)),
+                       key=lambda i: (counts[i], round(abs(across[i][1]), 9), -i))
+            n = across[best]
+            why = f"the axis of {counts[best]} of the {len(axes)} joints"
+        off = [name for name, a in axes if name not in keep and not _parallel(a, n)]
+        return n, off, why
 
     def _check_names(self):
         """Links and joints defined once; every joint's parent and child defined, and no
@@ -211,12 +357,33 @@ class _Reader:
         return sorted(out, key=lambda jf: self.order[jf[0].name])
 
 
+def apply_locks(rd: "_Reader", torso: str, lock: dict, off_axis: bool, axis) -> None:
+    """Hold the joints of ``lock`` fixed, and with ``off_axis`` every revolute or
+    continuous joint off the plane's normal at 0 (said in the notes)."""
+    if off_axis:
+        n, off, why = rd.off_axis(torso, axis, lock)
+        rd.notes.append(f"lock_off_axis: the plane's normal is "
+                        f"{(np.round(np.where(np.abs(n) < 1e-12, 0.0, n), 6) + 0.0).tolist()} "
+                        f"in the torso frame ({why}); "
+                        f"locked at 0 as off it: {', '.join(off) or 'no joint'}")
+        lock = {**lock, **dict.fromkeys(off, 0.0)}
+    rd.lock(lock)
+    if lock:
+        names = sorted(lock, key=rd.order.get)
+        rd.notes.append(f"locked: {', '.join(f'{k} at {lock[k]:g}' for k in names)} rad: "
+                        f"fixed joints of the model, merged into their parent links (the "
+                        f"robot must hold them at these angles with its own position loops; "
+                        f"the planar model leaves out lateral balance and out-of-plane motion)")
+
+
 def _legs(rd: _Reader, torso: _Frame) -> list:
     """The torso's two chains of rotating joints: per leg a list of (joint, frame)."""
     hips = rd.moving(torso)
     if len(hips) != 2:
         rd.fail(f"the torso {torso.name!r} has {len(hips)} jointed children "
-                f"({', '.join(repr(j.name) for j, _ in hips) or 'none'}); a biped has two legs")
+                f"({', '.join(repr(j.name) for j, _ in hips) or 'none'}); a biped has two legs"
+                + (" (lock the joints of the others, e.g. arms: --lock NAME, lock=)"
+                   if len(hips) > 2 else ""))
     legs = []
     for hip, parent in hips:
         chain, item = [], (hip, parent)
@@ -230,8 +397,9 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
             chain.append((joint, frame))
             nxt = rd.moving(frame)
             if len(nxt) > 1:
-                rd.fail(f"link {frame.name!r} has {len(nxt)} jointed children: a leg is "
-                        f"one chain of links")
+                rd.fail(f"link {frame.name!r} has {len(nxt)} jointed children "
+                        f"({', '.join(repr(j.name) for j, _ in nxt)}): a leg is one chain "
+                        f"of links (lock the joints of the others: --lock NAME, lock=)")
             item = nxt[0] if nxt else None
         legs.append(chain)
     return legs
@@ -240,24 +408,21 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
 def _axis(rd: _Reader, legs) -> tuple:
     """The plane's normal n (torso frame, oriented as the module docstring says) and the
     sign of every leg joint's axis against it."""
-    axes = []
-    for chain in legs:
-        for joint, frame in chain:
-            a = np.array(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), float)
-            if not np.linalg.norm(a) > 0:
-                rd.fail(f"joint {joint.name!r} has a zero axis")
-            axes.append((joint.name, frame.R @ a / np.linalg.norm(a)))
-
-    def parallel(a, b):
-        return np.linalg.norm(np.cross(a, b)) <= 1e-9
-    n = max((a for _, a in axes), key=lambda a: sum(parallel(a, b) for _, b in axes))
+    axes = [(joint.name, frame.R @ rd.unit_axis(joint)) for chain in legs
+            for joint, frame in chain]
+    n = max((a for _, a in axes), key=lambda a: sum(_parallel(a, b) for _, b in axes))
     n = np.where(np.abs(n) < 1e-12, 0.0, n)          # round-off of turned frames
     n = n / np.linalg.norm(n)
     for name, a in axes:
-        if not parallel(a, n):
-            rd.fail(f"joint {name!r} turns about {np.round(a, 6).tolist()}, not about the "
-                    f"other joints' axis {np.round(n, 6).tolist()}: not a planar robot")
-    if rd.planar_axis is not None and parallel(rd.planar_axis, n):
+        if not _parallel(a, n):
+            turned = " (turned by the locked joints' angles)" if any(rd.locked.values()) \
+                else ""
+            rd.fail(f"joint {name!r} turns about {np.round(a, 6).tolist()}{turned}, not about "
+                    f"the other joints' axis {np.round(n, 6).tolist()} (torso frame): not a "
+                    f"planar robot; for its sagittal model lock it ('biped robot import "
+                    f"FILE --lock {name}', lock={{{name!r}: 0}}) or every joint off that "
+                    f"axis (--lock-off-axis)")
+    if rd.planar_axis is not None and _parallel(rd.planar_axis, n):
         n = n if np.dot(rd.planar_axis, n) > 0 else -n
     elif abs(n[1]) > 1e-9:
         n = n if n[1] > 0 else -n
