@@ -12,7 +12,7 @@ import numpy as np
 
 from biped_casadi.files import write_text_atomic
 from biped_casadi.model.description import load_description
-from biped_casadi.model.urdf import description_toml, import_urdf
+from biped_casadi.model.urdf import MATCH_TOL, MAX_MATCH_TOL, description_toml, import_urdf
 from biped_casadi.model.urdf_tree import lock_table
 from biped_casadi.mujoco import mjcf, mujoco_module
 
@@ -40,6 +40,16 @@ def _locks(args) -> dict:
         raise UserError(f"--{e}") from None
 
 
+def _match_tol(value) -> float:
+    """--match-tol checked (UserError naming the range)."""
+    if value is None:
+        return MATCH_TOL
+    if not (math.isfinite(value) and 0 < value <= MAX_MATCH_TOL):
+        raise UserError(f"--match-tol must be a number in (0, {MAX_MATCH_TOL:g}] (relative "
+                        f"to the leg's size), got {value:g}")
+    return value
+
+
 def cmd_import(args):
     src = Path(args.file)
     if src.suffix.lower() != ".urdf":
@@ -57,7 +67,8 @@ def cmd_import(args):
         raise UserError(f"--torque-limit must be a positive number (N m), got "
                         f"{args.torque_limit:g}")
     imp = import_urdf(src, foot, torque_limit=args.torque_limit, lock=_locks(args),
-                      lock_off_axis=args.lock_off_axis, axis=args.axis)
+                      lock_off_axis=args.lock_off_axis, axis=args.axis,
+                      match_tol=_match_tol(args.match_tol))
     header = f"made by 'biped robot import' from {src.name}"
     if imp.locked:
         header += "\nits sagittal model, with these joints locked (rad): " + ", ".join(
@@ -166,6 +177,13 @@ def register(sub):
                         "frame's z that most of those joints turn about (a tie: the one "
                         "nearer the torso's y, then the first in the file); a joint given "
                         "with --lock keeps its angle")
+    q.add_argument("--match-tol", type=float, metavar="REL",
+                   help="how closely the two legs (masses, lengths, centres of mass, "
+                        "inertias, relative to the leg's mass and length) and the hips in "
+                        "the plane must agree; within it the model's leg is their mean, "
+                        f"the notes give the largest difference (default {MATCH_TOL:g}: "
+                        "identical legs; a CAD export's mirrored legs differ by about 1e-4; "
+                        f"at most {MAX_MATCH_TOL:g})")
     q.add_argument("--axis", choices=("x", "y"),
                    help="with --lock-off-axis: the plane's normal n is this axis of the "
                         "torso's frame (z, vertical at pitch 0, lies in the plane)")

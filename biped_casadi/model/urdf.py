@@ -8,7 +8,9 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
 - the structure: a torso link (the tree's root, or reached from a massless root, a
   ``world`` link, through one ``floating``, ``planar`` or ``fixed`` joint) with two
   chains of ``revolute`` or ``continuous`` joints, the legs, listed in any order, whose
-  axes are all parallel, +n or -n per joint: n, the normal of the plane of motion.  Fixed
+  axes are all parallel, +n or -n per joint: n, the normal of the plane of motion (axes
+  within ``AXIS_TOL``, 1e-3 rad, as a CAD export's rounded angles leave them, are
+  parallel: n is their mean, the notes give the largest deviation).  Fixed
   frames (sensors, an IMU, feet) may hang anywhere; moving joints may hang from them.
   Pitch, the torso's absolute angle, is right-handed about n, with n oriented toward +y
   of the torso's frame (toward the planar root joint's axis when there is one); the
@@ -65,7 +67,8 @@ masses), the hips at two places in the plane, a leg joint
 without actuator (the model's one unactuated degree of freedom is the stance foot's
 contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a link without
 ``<inertial>`` (its own or a fixed child's), a torso whose up direction cannot be found, no
-foot; in ``lock``, a joint the file does not define, one that is not revolute or
+foot (legs and hips agree within ``match_tol`` of the leg's size, default identical; the
+model's leg is their mean); in ``lock``, a joint the file does not define, one that is not revolute or
 continuous, an angle that is not finite, a joint given twice.  A non-planar joint's
 refusal names it and its axis, and how to lock it.
 """
@@ -84,9 +87,11 @@ from urdf_parser_py.xml_reflection import core as _xml_core
 from ..files import read_text_file
 from .description import RobotDescription, description_from_dict, description_toml, joint_names
 from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
+from .urdf_match import MATCH_TOL, MAX_MATCH_TOL, _check_match_tol, _same_legs, _wider
 from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader, apply_locks, lock_table
 
 __all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "GEOMETRY_TOL",
+           "MATCH_TOL", "MAX_MATCH_TOL",
            "MAX_LEG"]
 
 #: m: a longer leg is refused as a file in other units (URDF lengths are in metres)
@@ -513,7 +518,7 @@ def _joint_notes(rd: _Reader, joints) -> None:
 
 def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 torque_limit: float | None = None, lock=None, lock_off_axis: bool = False,
-                axis: str | None = None) -> UrdfImport:
+                axis: str | None = None, match_tol: float = MATCH_TOL) -> UrdfImport:
     """Read a planar biped from a URDF file (what is read: the module docstring).
 
     Parameters
@@ -542,6 +547,12 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
         turn about (a tie: the one nearer the torso's y, then the first in the file).
     axis : {'x', 'y'}, optional
         The plane's normal for ``lock_off_axis``, in the torso's frame.
+    match_tol : float
+        How closely the two legs must agree, relative to the leg's size (masses to its
+        mass, lengths and centres of mass to its length, inertias to mass x length^2),
+        and the hips in the plane (to its length); within it the model's leg is the mean
+        of the two (the notes give the largest difference).  Default :data:`MATCH_TOL`
+        (identical legs); a CAD export's mirrored legs differ by about 1e-4.
 
     Returns
     -------
@@ -557,6 +568,7 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     where = f"URDF file {path}"
     _check_foot(foot)
     torque_limit = _check_torque_limit(torque_limit)
+    match_tol = _check_match_tol(match_tol)
     lock = lock_table(lock, lock_off_axis, axis)
     text = read_text_file(path, "URDF file", 20_000_000)
     robot, said = _parse(text, where)
@@ -577,17 +589,20 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 f"in metres (a file in millimetres?)")
     hip = legs[0].points[0]
     apart = float(np.linalg.norm(plane.flat(legs[1].points[0] - hip)))
-    if apart > tol:
+    if apart > tol + match_tol * span:
         rd.fail(f"the hip joints {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r} "
                 f"are {apart:.3g} m apart in the plane of motion: the model's legs share "
-                f"one hip")
+                f"one hip{_wider(apart / span, match_tol, 'accepts them')}")
+    if apart > tol:
+        rd.notes.append(f"the hips are {apart:.2g} m apart in the plane of motion (match_tol "
+                        f"{match_tol:g}): the model's hip is that of {legs[0].joints[0].name!r}")
     all_joints = [j for leg in legs for j in leg.joints]
     _joint_notes(rd, all_joints)
     motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
     pm_legs = [dict(), dict()]
     links = [[leg.body(i, pm) for i in range(len(leg.frames))]
              for leg, pm in zip(legs, pm_legs)]
-    _same_legs(rd, links, pm_legs, legs)
+    _same_legs(rd, links, pm_legs, legs, match_tol)
     pm = {"hip": 0.0}
     torso_d, torso_up = _torso(rd, torso, hip, plane, pm)
     pm["hip"] += pm_legs[0].pop("hip", 0.0) + pm_legs[1].pop("hip", 0.0)
@@ -645,21 +660,9 @@ def _joint_map(rd: _Reader, legs, torso_up, plane: _Plane, signs: dict, reductio
                    hip=(_clean(np.dot(hip, plane.F), 1e-15), _clean(np.dot(hip, plane.U), 1e-15)))
 
 
-def _same_legs(rd: _Reader, links, pms, legs):
-    for a, b in zip(*links):
-        for key in ("mass", "length", "com", "com_offset", "inertia"):
-            if not math.isclose(a[key], b[key], rel_tol=1e-9, abs_tol=rd.tol):
-                rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.12g}, link "
-                        f"{b['name']!r} {b[key]:.12g} (apart by {abs(a[key] - b[key]):.2g}; "
-                        f"the model's legs are identical to 1e-9 relative or {rd.tol:g} m)")
-    if set(pms[0]) - {"hip"} != set(pms[1]) - {"hip"} or any(
-            not math.isclose(pms[0][k], pms[1][k], rel_tol=1e-9) for k in pms[0] if k != "hip"):
-        rd.fail(f"legs differ in their point masses (legs of {legs[0].joints[0].name!r} and "
-                f"{legs[1].joints[0].name!r}): {pms[0]} and {pms[1]}")
-
-
 def load_urdf(path, foot=None, torque_limit: float | None = None, lock=None,
-              lock_off_axis: bool = False, axis: str | None = None) -> RobotDescription:
+              lock_off_axis: bool = False, axis: str | None = None,
+              match_tol: float = MATCH_TOL) -> RobotDescription:
     """The robot description of a URDF file (:func:`import_urdf` without the notes).
 
     Parameters
@@ -676,6 +679,9 @@ def load_urdf(path, foot=None, torque_limit: float | None = None, lock=None,
         Also lock at 0 every joint off the plane's normal (:func:`import_urdf`).
     axis : {'x', 'y'}, optional
         The plane's normal for ``lock_off_axis``.
+    match_tol : float
+        How closely the legs must agree; within it the model's leg is their mean
+        (:func:`import_urdf`).
 
     Returns
     -------
@@ -688,4 +694,4 @@ def load_urdf(path, foot=None, torque_limit: float | None = None, lock=None,
         Naming the file and what is wrong.
     """
     return import_urdf(path, foot, torque_limit=torque_limit, lock=lock,
-                       lock_off_axis=lock_off_axis, axis=axis).description
+                       lock_off_axis=lock_off_axis, axis=axis, match_tol=match_tol).description

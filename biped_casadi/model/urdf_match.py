@@ -1,0 +1,73 @@
+"""How closely a URDF's two legs must agree: identical by default, or within
+``match_tol`` of the leg's size (a CAD export's mirrored parts differ in their last
+digits), the model's leg then their mean.  Used by :mod:`biped_casadi.model.urdf`."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["MATCH_TOL", "MAX_MATCH_TOL"]
+
+#: the legs' agreement by default (identical), and the widest match_tol taken: legs
+#: that differ by more are two robots, not one robot's mirrored legs
+MATCH_TOL, MAX_MATCH_TOL = 1e-9, 0.01
+
+
+def _same_legs(rd, links, pms, legs, match_tol: float):
+    """The legs agree within ``match_tol`` (relative to the leg's size, by quantity);
+    the first leg's links become their mean where they differ (said in the notes)."""
+    span = sum(a["length"] for a in links[0])
+    mass = sum(a["mass"] for a in links[0]) + sum(v for k, v in pms[0].items() if k != "hip")
+    scale = dict(mass=mass, length=span, com=span, com_offset=span, inertia=mass * span ** 2)
+    worst = (0.0, "")
+    for a, b in zip(*links):
+        for key, size in scale.items():
+            d = abs(a[key] - b[key])
+            if d <= rd.tol or math.isclose(a[key], b[key], rel_tol=1e-12):
+                continue
+            rel = d / size
+            if rel > match_tol:
+                rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.12g}, link "
+                        f"{b['name']!r} {b[key]:.12g} (apart by {d:.2g}, {rel:.2g} of the "
+                        f"leg's {_SIZE[key]}){_wider(rel, match_tol)}")
+            worst = max(worst, (rel, f"{key} of {a['name']!r} and {b['name']!r}"))
+            a[key] = 0.5 * (a[key] + b[key])
+    if set(pms[0]) - {"hip"} != set(pms[1]) - {"hip"}:
+        rd.fail(f"legs differ in their point masses (legs of {legs[0].joints[0].name!r} and "
+                f"{legs[1].joints[0].name!r}): {pms[0]} and {pms[1]}")
+    for k in set(pms[0]) - {"hip"}:
+        rel = abs(pms[0][k] - pms[1][k]) / mass
+        if rel > max(match_tol, 1e-12):
+            rd.fail(f"legs differ in their point masses (legs of {legs[0].joints[0].name!r} "
+                    f"and {legs[1].joints[0].name!r}): {pms[0]} and {pms[1]}"
+                    f"{_wider(rel, match_tol)}")
+        if rel > 0:
+            worst = max(worst, (rel, f"point mass at {k}"))
+            pms[0][k] = 0.5 * (pms[0][k] + pms[1][k])
+    if worst[0] > 0:
+        rd.notes.append(f"the legs differ by up to {worst[0]:.2g} of the leg's size "
+                        f"({worst[1]}; match_tol {match_tol:g}): the model's leg is their mean")
+
+
+#: what each quantity of a leg is measured against in ``match_tol``
+_SIZE = dict(mass="mass", length="length", com="length", com_offset="length",
+             inertia="mass x length^2")
+
+
+def _wider(rel: float, match_tol: float, outcome: str = "takes their mean") -> str:
+    """The way out of a refusal for legs or hips that differ by ``rel`` of the leg's
+    size: the tolerance that takes their mean (unless it is too wide to be one robot)."""
+    need = 10.0 ** math.ceil(math.log10(rel)) if rel > 0 else match_tol
+    if need > MAX_MATCH_TOL:
+        return f" (beyond any match_tol, at most {MAX_MATCH_TOL:g}: not one robot's two legs)"
+    return (f"; match_tol {match_tol:g} allows less: --match-tol {need:g} (match_tol=) "
+            f"{outcome}")
+
+
+def _check_match_tol(match_tol) -> float:
+    if isinstance(match_tol, bool) or not isinstance(match_tol, (int, float, np.floating)) \
+            or not 0 < match_tol <= MAX_MATCH_TOL:
+        raise ValueError(f"match_tol must be a number in (0, {MAX_MATCH_TOL:g}] (relative to "
+                         f"the leg's size), got {match_tol!r}")
+    return float(match_tol)
