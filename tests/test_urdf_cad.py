@@ -15,10 +15,9 @@ from __future__ import annotations
 import re
 
 import numpy as np
-import pinocchio as pin
 import pytest
-from test_urdf_lock import SAGITTAL, _mass_matrix, _rel, _same, _states
-from urdf_variants import biped3d_urdf, pinocchio_reduced, pinocchio_state
+from test_urdf_lock import SAGITTAL, _same
+from urdf_variants import biped3d_urdf, energy_error, pinocchio_reduced, random_states
 
 from analysis.cli import main
 from biped_casadi import BipedModel
@@ -80,16 +79,10 @@ def test_rounded_model_against_pinocchio_on_the_rounded_file(tmp_path, exact, de
     imp = import_urdf(_write(tmp_path, text, "r.urdf"), lock=SAGITTAL)
     spread = float(re.search(r"parallel within (\S+) rad", " ".join(imp.notes)).group(1))
     m = pinocchio_reduced(text, imp.description.rotor_inertia, imp.urdf_map.names, SAGITTAL)
-    data, model, umap = m.createData(), BipedModel(imp.description), imp.urdf_map
-    worst = 0.0
-    for leg in (1, 2):
-        for q, dq in _states(model.nq):
-            x, dx = umap.from_model(q, dq, leg)
-            qp, vp = pinocchio_state(m, data, umap.names, x, dx,
-                                     f"sole_{umap.hips[leg - 1][-1]}")
-            K, V, _ = (float(v) for v in model.energy(q, dq))
-            worst = max(worst, _rel(K, 0.5 * vp @ _mass_matrix(m, data, qp) @ vp),
-                        _rel(V, pin.computePotentialEnergy(m, data, qp)))
+    model, umap = BipedModel(imp.description), imp.urdf_map
+    worst = energy_error(model, umap, m, m.createData(),
+                         lambda leg: f"sole_{umap.hips[leg - 1][-1]}",
+                         random_states(model.nq, 5, 3))
     assert 1e-10 < worst <= 0.1 * spread, (worst, spread)
 
 

@@ -22,10 +22,10 @@ import math
 import re
 
 import numpy as np
-import pinocchio as pin
 import pytest
 from scipy.spatial.transform import Rotation
-from urdf_variants import biped3d_urdf, pinocchio_reduced, pinocchio_state
+from urdf_variants import (biped3d_urdf, dynamics_error, energy_error, pinocchio_reduced,
+                           random_states, torque_error)
 
 from analysis.cli import main
 from biped_casadi import BipedModel
@@ -69,30 +69,15 @@ def case(request, tmp_path_factory):
                 pin=(m, m.createData()), foot=foot)
 
 
-def _rel(a, b):
-    return float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / max(1.0, np.max(np.abs(b))))
+def _foot_of(case):
+    umap = case["imp"].urdf_map
+    return lambda leg: f"{case['foot']}_{umap.hips[leg - 1][-1]}"
 
 
-def _states(nq, n=5, seed=3):
-    rng = np.random.default_rng(seed)
-    return zip(rng.uniform(-1.0, 1.0, (n, nq)), rng.uniform(-3, 3, (n, nq)))
-
-
-def _pinned(case, q, dq, leg):
-    """Pinocchio's (q, v, G, foot frame) for the model state, stance leg ``leg``."""
-    umap, (m, data) = case["imp"].urdf_map, case["pin"]
-    foot = f"{case['foot']}_{umap.hips[leg - 1][-1]}"
-    x, dx = umap.from_model(q, dq, leg)
-    qp, vp = pinocchio_state(m, data, umap.names, x, dx, foot)
-    G = np.column_stack([pinocchio_state(m, data, umap.names, x,
-                                         umap.from_model(q, e, leg)[1], foot)[1]
-                         for e in np.eye(len(q))])
-    return qp, vp, G, foot
-
-
-def _mass_matrix(m, data, qp):
-    M = pin.crba(m, data, qp)
-    return np.triu(M) + np.triu(M, 1).T
+def _check(case, what, states, tol):
+    model, umap, (m, data) = case["model"], case["imp"].urdf_map, case["pin"]
+    worst = what(model, umap, m, data, _foot_of(case), states)
+    assert worst <= tol, (case["name"], worst)
 
 
 def test_the_locked_import_is_the_planar_robot(case):
@@ -110,43 +95,16 @@ def test_the_locked_import_is_the_planar_robot(case):
 
 
 def test_energies_equal_pinocchio_reduced(case):
-    model, (m, data) = case["model"], case["pin"]
-    worst = 0.0
-    for leg in (1, 2):
-        for q, dq in _states(model.nq):
-            qp, vp, _, _ = _pinned(case, q, dq, leg)
-            K, V, _ = (float(v) for v in model.energy(q, dq))
-            worst = max(worst, _rel(K, 0.5 * vp @ _mass_matrix(m, data, qp) @ vp),
-                        _rel(V, pin.computePotentialEnergy(m, data, qp)))
-    assert worst <= 1e-10, (case["name"], worst)
+    _check(case, energy_error, random_states(case["model"].nq, 5, 3), 1e-10)
 
 
 def test_D_and_H_equal_pinocchio_reduced(case):
-    model, (m, data) = case["model"], case["pin"]
-    for leg in (1, 2):
-        for q, dq in _states(model.nq, n=3, seed=5):
-            qp, vp, G, foot = _pinned(case, q, dq, leg)
-            assert _rel(model.D(q), G.T @ _mass_matrix(m, data, qp) @ G) <= 1e-10
-            a = np.zeros(m.nv)             # the base's acceleration keeping the foot at rest
-            pin.forwardKinematics(m, data, qp, vp, a)
-            af = pin.getFrameClassicalAcceleration(m, data, m.getFrameId(foot),
-                                                   pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).linear
-            a[:3] = pin.Quaternion(qp[3:7]).matrix().T @ (-af)
-            H = G.T @ pin.rnea(m, data, qp, vp, a)
-            assert _rel(np.array(model.H(q, dq)).ravel(), H) <= 1e-10, case["name"]
+    _check(case, dynamics_error, random_states(case["model"].nq, 3, 5), 1e-10)
 
 
 def test_torques_equal_pinocchio_reduced_joint_torques(case):
-    model, umap, (m, _) = case["model"], case["imp"].urdf_map, case["pin"]
-    rng = np.random.default_rng(11)
-    for leg in (1, 2):
-        q, dq = rng.uniform(-1, 1, model.nq), rng.uniform(-2, 2, model.nq)
-        _, _, G, _ = _pinned(case, q, dq, leg)
-        u = rng.uniform(-50, 50, model.nu)
-        f = np.zeros(m.nv)
-        for name, t in zip(umap.names, umap.torques(u, leg)):
-            f[m.joints[m.getJointId(name)].idx_v] = t
-        assert _rel(G.T @ f, model.B @ u) <= 1e-12
+    model, umap, (m, data) = case["model"], case["imp"].urdf_map, case["pin"]
+    assert torque_error(model, umap, m, data, _foot_of(case)) <= 1e-12
 
 
 def _same(a, b, tol=1e-12):

@@ -18,10 +18,9 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-import pinocchio as pin
 import pytest
-from urdf_variants import pinocchio_model, pinocchio_state, variant_urdf
+from urdf_variants import (dynamics_error, energy_error, pinocchio_model, random_states,
+                           torque_error, variant_urdf)
 
 from biped_casadi import BipedModel, Link, robot
 from biped_casadi.model.urdf import import_urdf
@@ -86,59 +85,22 @@ def _foot(umap, leg):
     return "foot_" + ("left" if "left" in umap.hips[leg - 1] else "right")
 
 
-def _states(nq, n=6, seed=3):
-    rng = np.random.default_rng(seed)
-    return zip(rng.uniform(-1.2, 1.2, (n, nq)), rng.uniform(-3, 3, (n, nq)))
+def _foot_of(case):
+    return lambda leg: _foot(case["imp"].urdf_map, leg)
 
 
-def _rel(a, b):
-    return float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / max(1.0, np.max(np.abs(b))))
-
-
-def _pinned(case, q, dq, leg):
-    """Pinocchio's (q, v, G) for the model state: G maps dq to Pinocchio's v."""
-    umap, (m, data) = case["imp"].urdf_map, case["pin"]
-    foot = _foot(umap, leg)
-    x, dx = umap.from_model(q, dq, leg)
-    qp, vp = pinocchio_state(m, data, umap.names, x, dx, foot)
-    G = np.column_stack([pinocchio_state(m, data, umap.names, x,
-                                         umap.from_model(q, e, leg)[1], foot)[1]
-                         for e in np.eye(len(q))])
-    return qp, vp, G, foot
+def _check(case, what, states, tol):
+    model, umap, (m, data) = case["model"], case["imp"].urdf_map, case["pin"]
+    worst = what(model, umap, m, data, _foot_of(case), states)
+    assert worst <= tol, (case["name"], worst)
 
 
 def test_energies_equal_pinocchio(case):
-    model, (m, data) = case["model"], case["pin"]
-    worst = 0.0
-    for leg in (1, 2):
-        for q, dq in _states(model.nq):
-            qp, vp, _, _ = _pinned(case, q, dq, leg)
-            M = pin.crba(m, data, qp)
-            M = np.triu(M) + np.triu(M, 1).T
-            K, V, _ = (float(v) for v in model.energy(q, dq))
-            worst = max(worst, _rel(K, 0.5 * vp @ M @ vp),
-                        _rel(V, pin.computePotentialEnergy(m, data, qp)))
-    assert worst <= 1e-10, (case["name"], worst)
+    _check(case, energy_error, random_states(case["model"].nq, 6, 3, span=1.2), 1e-10)
 
 
 def test_D_and_H_equal_pinocchio_on_the_pinned_motions(case):
-    model, (m, data) = case["model"], case["pin"]
-    for leg in (1, 2):
-        for q, dq in _states(model.nq, n=3, seed=5):
-            qp, vp, G, foot = _pinned(case, q, dq, leg)
-            M = pin.crba(m, data, qp)
-            M = np.triu(M) + np.triu(M, 1).T
-            assert _rel(model.D(q), G.T @ M @ G) <= 1e-10
-            # the base's acceleration that keeps the stance foot at rest with ddq = 0
-            a = np.zeros(m.nv)
-            pin.forwardKinematics(m, data, qp, vp, a)
-            fid = m.getFrameId(foot)
-            af = pin.getFrameClassicalAcceleration(m, data, fid,
-                                                   pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).linear
-            R = pin.Quaternion(qp[3:7]).matrix()
-            a[:3] = R.T @ (-af)
-            H = G.T @ pin.rnea(m, data, qp, vp, a)
-            assert _rel(np.array(model.H(q, dq)).ravel(), H) <= 1e-10, case["name"]
+    _check(case, dynamics_error, random_states(case["model"].nq, 3, 5, span=1.2), 1e-10)
 
 
 def test_the_map_is_the_geometry(case):
@@ -170,14 +132,5 @@ def test_the_map_is_the_geometry(case):
 def test_torques_map_to_pinocchio_joint_torques(case):
     """The URDF joints' torques of the map deliver the model's generalised forces: with
     Pinocchio's joint torques tau (zero on the base), G' tau = B u."""
-    model, umap, (m, _) = case["model"], case["imp"].urdf_map, case["pin"]
-    rng = np.random.default_rng(11)
-    for leg in (1, 2):
-        q, dq = rng.uniform(-1, 1, model.nq), rng.uniform(-2, 2, model.nq)
-        _, _, G, _ = _pinned(case, q, dq, leg)
-        u = rng.uniform(-50, 50, model.nu)
-        tau = umap.torques(u, leg)
-        f = np.zeros(m.nv)
-        for name, t in zip(umap.names, tau):
-            f[m.joints[m.getJointId(name)].idx_v] = t
-        assert _rel(G.T @ f, model.B @ u) <= 1e-12
+    model, umap, (m, data) = case["model"], case["imp"].urdf_map, case["pin"]
+    assert torque_error(model, umap, m, data, _foot_of(case)) <= 1e-12

@@ -191,6 +191,83 @@ def pinocchio_state(m, data, names, x, dx, foot_frame: str):
     return q, v
 
 
+# ------------------------------------------------------------------ the comparisons
+def rel_error(a, b) -> float:
+    """Largest difference relative to max(1, |b|)."""
+    return float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / max(1.0, np.max(np.abs(b))))
+
+
+def random_states(nq: int, n: int, seed: int, span: float = 1.0):
+    """``n`` (q, dq): angles within +-span rad, rates within +-3 rad/s."""
+    rng = np.random.default_rng(seed)
+    return zip(rng.uniform(-span, span, (n, nq)), rng.uniform(-3, 3, (n, nq)))
+
+
+def mass_matrix(m, data, qp) -> np.ndarray:
+    """Pinocchio's joint-space mass matrix, both triangles."""
+    M = pin.crba(m, data, qp)
+    return np.triu(M) + np.triu(M, 1).T
+
+
+def pinned(m, data, umap, q, dq, leg: int, foot: str) -> tuple:
+    """Pinocchio's (q, v, G) for the model's state, stance leg ``leg`` on frame ``foot``
+    pinned at the origin: G maps dq to Pinocchio's v."""
+    x, dx = umap.from_model(q, dq, leg)
+    qp, vp = pinocchio_state(m, data, umap.names, x, dx, foot)
+    G = np.column_stack([pinocchio_state(m, data, umap.names, x,
+                                         umap.from_model(q, e, leg)[1], foot)[1]
+                         for e in np.eye(len(q))])
+    return qp, vp, G
+
+
+def energy_error(model, umap, m, data, foot_of, states) -> float:
+    """The largest relative difference of kinetic and potential energy, the model
+    against Pinocchio, over ``states`` on either stance leg (``foot_of(leg)``: its
+    foot frame)."""
+    worst = 0.0
+    for q, dq in states:
+        for leg in (1, 2):
+            qp, vp, _ = pinned(m, data, umap, q, dq, leg, foot_of(leg))
+            K, V, _ = (float(v) for v in model.energy(q, dq))
+            worst = max(worst, rel_error(K, 0.5 * vp @ mass_matrix(m, data, qp) @ vp),
+                        rel_error(V, pin.computePotentialEnergy(m, data, qp)))
+    return worst
+
+
+def dynamics_error(model, umap, m, data, foot_of, states) -> float:
+    """The largest relative difference of D and H against Pinocchio's mass matrix and
+    bias forces projected on the pinned motions (D = G' M G, H = G' rnea(q, v, a) with
+    the base's acceleration a that keeps the stance foot at rest at ddq = 0)."""
+    worst = 0.0
+    for q, dq in states:
+        for leg in (1, 2):
+            qp, vp, G = pinned(m, data, umap, q, dq, leg, foot_of(leg))
+            worst = max(worst, rel_error(model.D(q), G.T @ mass_matrix(m, data, qp) @ G))
+            a = np.zeros(m.nv)
+            pin.forwardKinematics(m, data, qp, vp, a)
+            af = pin.getFrameClassicalAcceleration(m, data, m.getFrameId(foot_of(leg)),
+                                                   pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).linear
+            a[:3] = pin.Quaternion(qp[3:7]).matrix().T @ (-af)
+            H = G.T @ pin.rnea(m, data, qp, vp, a)
+            worst = max(worst, rel_error(np.array(model.H(q, dq)).ravel(), H))
+    return worst
+
+
+def torque_error(model, umap, m, data, foot_of, seed: int = 11) -> float:
+    """The URDF joints' torques of the map against the model's generalised forces: with
+    Pinocchio's joint torques tau (zero on the base), G' tau = B u."""
+    rng, worst = np.random.default_rng(seed), 0.0
+    for leg in (1, 2):
+        q, dq = rng.uniform(-1, 1, model.nq), rng.uniform(-2, 2, model.nq)
+        _, _, G = pinned(m, data, umap, q, dq, leg, foot_of(leg))
+        u = rng.uniform(-50, 50, model.nu)
+        f = np.zeros(m.nv)
+        for name, t in zip(umap.names, umap.torques(u, leg)):
+            f[m.joints[m.getJointId(name)].idx_v] = t
+        worst = max(worst, rel_error(G.T @ f, model.B @ u))
+    return worst
+
+
 # ------------------------------------------------------------------ a 3-D biped
 #: per side: (joint, parent, child, joint position (torso frame, left side), axis
 #: (torso frame), link mass, centre of mass from the joint, principal inertias, the
