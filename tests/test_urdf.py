@@ -129,7 +129,7 @@ BAD = {
                                      r"legs differ: link 'femur_left' has mass 6.80000002, "
                                      r"link 'femur_right' 6.8 \(apart by 2e-08, 2e-09 of "
                                      r"the leg's mass\); match_tol 1e-09 allows less: "
-                                     r"--match-tol 1e-08 \(match_tol=\) takes their mean"),
+                                     r"--match-tol 2e-09 \(match_tol=\) takes their mean"),
     "rotors differ in the 8th digit": (lambda s: s.replace(
         "<motorInertia>3.32e-4</motorInertia>", "<motorInertia>3.3200001e-4</motorInertia>", 1),
         r"reflected rotor inertias differ: joint 'knee_left' 0.83, joint 'hip_left' "

@@ -105,7 +105,7 @@ def test_mirrored_legs_that_differ_import_as_their_mean_within_match_tol(tmp_pat
     path = _write(tmp_path, _heavier_right(exact, 5e-5), "heavy.urdf")
     with pytest.raises(ValueError, match=r"legs differ: link 'thigh_l' has mass .* of the "
                                          r"leg's mass\); match_tol 1e-09 allows less: "
-                                         r"--match-tol 0\.0001 \(match_tol=\) takes their "
+                                         r"--match-tol 5e-05 \(match_tol=\) takes their "
                                          r"mean"):
         import_urdf(path, lock=SAGITTAL)
     ref = import_urdf(_write(tmp_path, exact, "exact.urdf"), lock=SAGITTAL).description
@@ -114,14 +114,14 @@ def test_mirrored_legs_that_differ_import_as_their_mean_within_match_tol(tmp_pat
         assert a.mass == pytest.approx(b.mass * (1 + 2.5e-5), rel=1e-12)
     assert any(n.startswith("the legs differ by up to") and "the model's leg is their mean"
                in n for n in imp.notes), imp.notes
-    with pytest.raises(ValueError, match=r"beyond any match_tol, at most 0\.01"):
-        import_urdf(_write(tmp_path, _heavier_right(exact, 0.2), "h2.urdf"), lock=SAGITTAL,
+    with pytest.raises(ValueError, match=r"beyond any match_tol, at most 0\.05: too different"):
+        import_urdf(_write(tmp_path, _heavier_right(exact, 0.3), "h2.urdf"), lock=SAGITTAL,
                     match_tol=MAX_MATCH_TOL)
 
 
-@pytest.mark.parametrize("bad", [0.0, -1e-3, 0.05, float("nan"), "1e-3", True])
+@pytest.mark.parametrize("bad", [0.0, -1e-3, 0.06, float("nan"), "1e-3", True])
 def test_bad_match_tol(tmp_path, exact, bad):
-    with pytest.raises(ValueError, match=r"match_tol must be a number in \(0, 0\.01\]"):
+    with pytest.raises(ValueError, match=r"match_tol must be a number in \(0, 0\.05\]"):
         import_urdf(_write(tmp_path, exact, "e.urdf"), lock=SAGITTAL, match_tol=bad)
 
 
@@ -131,7 +131,7 @@ def test_cli_match_tol(tmp_path, exact, capsys):
     out = str(tmp_path / "r.toml")
     assert main(["robot", "import", path, "--lock", *locks, "--out", out]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--match-tol 0.0001" in err[0], err
+    assert len(err) == 1 and "--match-tol 5e-05" in err[0], err
     assert main(["robot", "import", path, "--lock", *locks, "--match-tol", "1e-4",
                  "--out", out]) == 0
     text = capsys.readouterr().out
@@ -140,4 +140,4 @@ def test_cli_match_tol(tmp_path, exact, capsys):
         assert main(["robot", "import", path, "--lock", *locks, "--match-tol", bad,
                      "--out", out]) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and "--match-tol must be a number in (0, 0.01]" in err[0], err
+        assert len(err) == 1 and "--match-tol must be a number in (0, 0.05]" in err[0], err

@@ -11,7 +11,7 @@ __all__ = ["MATCH_TOL", "MAX_MATCH_TOL"]
 
 #: the legs' agreement by default (identical), and the widest match_tol taken: legs
 #: that differ by more are two robots, not one robot's mirrored legs
-MATCH_TOL, MAX_MATCH_TOL = 1e-9, 0.01
+MATCH_TOL, MAX_MATCH_TOL = 1e-9, 0.05
 
 
 def _same_legs(rd, links, pms, legs, match_tol: float):
@@ -58,11 +58,19 @@ _SIZE = dict(mass="mass", length="length", com="length", com_offset="length",
 def _wider(rel: float, match_tol: float, outcome: str = "takes their mean") -> str:
     """The way out of a refusal for legs or hips that differ by ``rel`` of the leg's
     size: the tolerance that takes their mean (unless it is too wide to be one robot)."""
-    need = 10.0 ** math.ceil(math.log10(rel)) if rel > 0 else match_tol
+    need = _round_up(rel) if rel > 0 else match_tol
     if need > MAX_MATCH_TOL:
-        return f" (beyond any match_tol, at most {MAX_MATCH_TOL:g}: not one robot's two legs)"
+        return (f" (beyond any match_tol, at most {MAX_MATCH_TOL:g}: too different for one "
+                f"mean leg)")
     return (f"; match_tol {match_tol:g} allows less: --match-tol {need:g} (match_tol=) "
             f"{outcome}")
+
+
+def _round_up(x: float) -> float:
+    """The smallest of 1, 2 and 5 x 10^k that is at least ``x``."""
+    k = math.floor(math.log10(x))
+    return next(float(f"{m}e{k + i}") for i in (0, 1) for m in (1, 2, 5)
+                if float(f"{m}e{k + i}") >= x)
 
 
 def _check_match_tol(match_tol) -> float:
