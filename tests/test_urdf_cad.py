@@ -141,3 +141,37 @@ def test_cli_match_tol(tmp_path, exact, capsys):
                      "--out", out]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--match-tol must be a number in (0, 0.05]" in err[0], err
+
+
+def test_foot_beyond_the_locked_ankle(tmp_path, exact):
+    """Without a sole frame the foot is the locked ankle; ``foot_beyond`` moves it along
+    the shin's line: the shin exactly that much longer, every other number the same;
+    one line and exit 2 for a bad distance."""
+    text = biped3d_urdf(sole=False)
+    path = _write(tmp_path, text, "nosole.urdf")
+    ankle = import_urdf(path, lock=SAGITTAL)
+    assert any("--foot-beyond D" in n for n in ankle.notes)
+    imp = import_urdf(path, lock=SAGITTAL, foot_beyond=0.05)
+    a, b = ankle.description, imp.description
+    assert b.leg[-1].length == pytest.approx(a.leg[-1].length + 0.05, abs=1e-12)
+    for x, y in zip((a.torso,) + a.leg, (b.torso,) + b.leg):
+        for f in ("mass", "com", "com_offset", "inertia") + (("length",) if x is not a.leg[-1]
+                                                             else ()):
+            assert getattr(x, f) == pytest.approx(getattr(y, f), abs=1e-12), (x.name, f)
+    assert imp.foot.endswith("+ 0.05 m") and any("foot_beyond" in n for n in imp.notes)
+    for bad in (-0.01, float("nan"), 11.0, True):
+        with pytest.raises(ValueError, match=r"foot_beyond must be a number of metres"):
+            import_urdf(path, lock=SAGITTAL, foot_beyond=bad)
+
+
+def test_cli_foot_beyond(tmp_path, capsys):
+    path = str(_write(tmp_path, biped3d_urdf(sole=False), "nosole.urdf"))
+    locks = [f"{k}" for k in SAGITTAL]
+    out = str(tmp_path / "r.toml")
+    assert main(["robot", "import", path, "--lock", *locks, "--foot-beyond", "0.05",
+                 "--out", out, "--json"]) == 0
+    assert capsys.readouterr().out.count("+ 0.05 m") >= 1
+    assert main(["robot", "import", path, "--lock", *locks, "--foot-beyond", "-1",
+                 "--out", out]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--foot-beyond must be a distance in [0, 10] m" in err[0], err

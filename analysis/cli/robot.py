@@ -40,6 +40,16 @@ def _locks(args) -> dict:
         raise UserError(f"--{e}") from None
 
 
+def _beyond(args) -> float:
+    """--foot-beyond checked (UserError)."""
+    d = args.foot_beyond
+    if d is None:
+        return 0.0
+    if not (math.isfinite(d) and 0 <= d <= 10):
+        raise UserError(f"--foot-beyond must be a distance in [0, 10] m, got {d:g}")
+    return d
+
+
 def _match_tol(value) -> float:
     """--match-tol checked (UserError naming the range)."""
     if value is None:
@@ -68,7 +78,7 @@ def cmd_import(args):
                         f"{args.torque_limit:g}")
     imp = import_urdf(src, foot, torque_limit=args.torque_limit, lock=_locks(args),
                       lock_off_axis=args.lock_off_axis, axis=args.axis,
-                      match_tol=_match_tol(args.match_tol))
+                      match_tol=_match_tol(args.match_tol), foot_beyond=_beyond(args))
     header = f"made by 'biped robot import' from {src.name}"
     if imp.locked:
         header += "\nits sagittal model, with these joints locked (rad): " + ", ".join(
@@ -177,6 +187,11 @@ def register(sub):
                         "frame's z that most of those joints turn about (a tie: the one "
                         "nearer the torso's y, then the first in the file); a joint given "
                         "with --lock keeps its angle")
+    q.add_argument("--foot-beyond", type=float, metavar="D",
+                   help="the foot D m beyond the foot point found (or --foot), along the "
+                        "last link's line: the sole below a locked ankle, for legs whose "
+                        "shins' frames differ (a mirrored export), where one --foot point "
+                        "cannot serve both")
     q.add_argument("--match-tol", type=float, metavar="REL",
                    help="how closely the two legs (masses, lengths, centres of mass, "
                         "inertias, relative to the leg's mass and length) and the hips in "

@@ -87,7 +87,8 @@ from urdf_parser_py.xml_reflection import core as _xml_core
 from ..files import read_text_file
 from .description import RobotDescription, description_from_dict, description_toml, joint_names
 from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
-from .urdf_match import MATCH_TOL, MAX_MATCH_TOL, _check_match_tol, _same_legs, _wider
+from .urdf_legs import (MATCH_TOL, MAX_MATCH_TOL, _beyond, _check_foot, _check_match_tol,
+                        _foot_point, _same_legs, _wider)
 from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader, apply_locks, lock_table
 
 __all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "GEOMETRY_TOL",
@@ -237,43 +238,6 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
                             f"the others' smallest, {limit:g} N m")
     motor, gear = next(iter(rotors.values()))
     return motor, gear, limit, {n: g for n, (_, g) in rotors.items()}
-
-
-# ------------------------------------------------------------------ the foot
-_FOOT_WORDS = ("foot", "toe", "sole", "contact", "ankle")
-#: below a foot that hangs by a locked joint (an ankle), the frame that marks the sole
-_SOLE_WORDS = ("sole", "contact")
-
-
-def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
-    """(foot point in the torso frame, where it came from, the foot link or None)."""
-    if foot is not None:
-        f = np.asarray(foot, dtype=float).ravel()
-        return last.p + last.R @ f, "foot= argument", None
-    cands = [(j, f) for j, f in rd.fixed_descendants(last) if j.parent == last.name]
-    if len(cands) > 1:
-        named = [c for c in cands if any(w in c[1].name.lower() for w in _FOOT_WORDS)]
-        cands = named if len(named) == 1 else cands
-    if len(cands) != 1:
-        what = "no child link or fixed frame" if not cands else \
-            f"{len(cands)} fixed children ({', '.join(repr(c[1].name) for c in cands)})"
-        rd.fail(f"no foot: the last leg link {last.name!r} has {what}; give the foot "
-                f"point in its frame (foot=(x, y, z), or 'biped robot import FILE --foot "
-                f"X Y Z --out robot.toml')")
-    j, f = cands[0]
-    if j.name not in rd.locked:
-        return f.p, f"link {f.name!r}", f.name
-    soles = [g for _, g in rd.fixed_descendants(f)
-             if any(w in g.name.lower() for w in _SOLE_WORDS)]
-    if len(soles) == 1:
-        return soles[0].p, f"link {soles[0].name!r} (below the locked joint {j.name!r})", \
-            soles[0].name
-    rd.notes.append(f"the foot point is the origin of the locked joint {j.name!r} (where "
-                    f"{f.name!r} hangs from {last.name!r}: an ankle, not a sole): the model's "
-                    f"foot is the point that touches the ground; with no single fixed frame "
-                    f"below it named like a sole or contact, give that point with --foot X Y Z "
-                    f"(foot=) in the frame of {last.name!r}")
-    return f.p, f"link {f.name!r} (the locked joint {j.name!r})", f.name
 
 
 # ------------------------------------------------------------------ the plane
@@ -488,13 +452,6 @@ def _check_torque_limit(torque_limit):
     return float(torque_limit)
 
 
-def _check_foot(foot):
-    if foot is not None:
-        f = np.asarray(foot, dtype=float).ravel()
-        if f.shape != (3,) or not np.all(np.isfinite(f)):
-            raise ValueError(f"foot must be 3 finite numbers (x, y, z in m), got {foot!r}")
-
-
 def _joint_notes(rd: _Reader, joints) -> None:
     """Notes on the leg joints' <dynamics> and ranges (not in the model)."""
     damped = []
@@ -518,7 +475,8 @@ def _joint_notes(rd: _Reader, joints) -> None:
 
 def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 torque_limit: float | None = None, lock=None, lock_off_axis: bool = False,
-                axis: str | None = None, match_tol: float = MATCH_TOL) -> UrdfImport:
+                axis: str | None = None, match_tol: float = MATCH_TOL,
+                foot_beyond: float = 0.0) -> UrdfImport:
     """Read a planar biped from a URDF file (what is read: the module docstring).
 
     Parameters
@@ -553,6 +511,11 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
         and the hips in the plane (to its length); within it the model's leg is the mean
         of the two (the notes give the largest difference).  Default :data:`MATCH_TOL`
         (identical legs); a CAD export's mirrored legs differ by about 1e-4.
+    foot_beyond : float
+        m: the foot (the point that touches the ground) this far beyond the foot point
+        found or given, along the last link's line (the sole below a locked ankle, for
+        legs whose last links' frames differ, where one ``foot`` point cannot serve
+        both).
 
     Returns
     -------
@@ -567,6 +530,10 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     path = Path(path)
     where = f"URDF file {path}"
     _check_foot(foot)
+    if isinstance(foot_beyond, bool) or not isinstance(foot_beyond, (int, float, np.floating)) \
+            or not 0 <= foot_beyond <= MAX_LEG:
+        raise ValueError(f"foot_beyond must be a number of metres in [0, {MAX_LEG:g}], got "
+                         f"{foot_beyond!r}")
     torque_limit = _check_torque_limit(torque_limit)
     match_tol = _check_match_tol(match_tol)
     lock = lock_table(lock, lock_off_axis, axis)
@@ -579,6 +546,8 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     n, signs = _axis(rd, chains)
     plane = _Plane(n)
     feet = [_foot_point(rd, chain[-1][1], foot) for chain in chains]
+    if foot_beyond:
+        feet = [_beyond(rd, chain, f, foot_beyond, plane) for chain, f in zip(chains, feet)]
     legs = [_Leg(rd, chain, p, plane) for chain, (p, _, _) in zip(chains, feet)]
     if len(legs[0].frames) != len(legs[1].frames):
         rd.fail(f"legs differ: {len(legs[0].frames)} and {len(legs[1].frames)} links "

@@ -1,11 +1,15 @@
-"""How closely a URDF's two legs must agree: identical by default, or within
-``match_tol`` of the leg's size (a CAD export's mirrored parts differ in their last
-digits), the model's leg then their mean.  Used by :mod:`biped_casadi.model.urdf`."""
+"""The ends of a URDF's legs and how closely the two must agree: the foot point (a
+fixed frame of the last link, a sole below a locked ankle, ``foot=``, ``foot_beyond``),
+and the legs identical by default or within ``match_tol`` of the leg's size (a CAD
+export's mirrored parts differ in their last digits), the model's leg then their mean.
+Used by :mod:`biped_casadi.model.urdf`."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
+
+from .urdf_tree import _Frame, _Reader
 
 __all__ = ["MATCH_TOL", "MAX_MATCH_TOL"]
 
@@ -79,3 +83,60 @@ def _check_match_tol(match_tol) -> float:
         raise ValueError(f"match_tol must be a number in (0, {MAX_MATCH_TOL:g}] (relative to "
                          f"the leg's size), got {match_tol!r}")
     return float(match_tol)
+
+
+# ------------------------------------------------------------------ the foot
+_FOOT_WORDS = ("foot", "toe", "sole", "contact", "ankle")
+#: below a foot that hangs by a locked joint (an ankle), the frame that marks the sole
+_SOLE_WORDS = ("sole", "contact")
+
+
+def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
+    """(foot point in the torso frame, where it came from, the foot link or None)."""
+    if foot is not None:
+        f = np.asarray(foot, dtype=float).ravel()
+        return last.p + last.R @ f, "foot= argument", None
+    cands = [(j, f) for j, f in rd.fixed_descendants(last) if j.parent == last.name]
+    if len(cands) > 1:
+        named = [c for c in cands if any(w in c[1].name.lower() for w in _FOOT_WORDS)]
+        cands = named if len(named) == 1 else cands
+    if len(cands) != 1:
+        what = "no child link or fixed frame" if not cands else \
+            f"{len(cands)} fixed children ({', '.join(repr(c[1].name) for c in cands)})"
+        rd.fail(f"no foot: the last leg link {last.name!r} has {what}; give the foot "
+                f"point in its frame (foot=(x, y, z), or 'biped robot import FILE --foot "
+                f"X Y Z --out robot.toml')")
+    j, f = cands[0]
+    if j.name not in rd.locked:
+        return f.p, f"link {f.name!r}", f.name
+    soles = [g for _, g in rd.fixed_descendants(f)
+             if any(w in g.name.lower() for w in _SOLE_WORDS)]
+    if len(soles) == 1:
+        return soles[0].p, f"link {soles[0].name!r} (below the locked joint {j.name!r})", \
+            soles[0].name
+    rd.notes.append(f"the foot point is the origin of the locked joint {j.name!r} (where "
+                    f"{f.name!r} hangs from {last.name!r}: an ankle, not a sole): the model's "
+                    f"foot is the point that touches the ground; with no single fixed frame "
+                    f"below it named like a sole or contact, give that point with --foot X Y Z "
+                    f"(foot=) in the frame of {last.name!r}, or its distance beyond the ankle "
+                    f"along the shin with --foot-beyond D (foot_beyond=)")
+    return f.p, f"link {f.name!r} (the locked joint {j.name!r})", f.name
+
+
+def _beyond(rd: _Reader, chain, foot: tuple, d: float, plane) -> tuple:
+    """The foot moved ``d`` beyond its point along the last link's line in the plane."""
+    p, where, name = foot
+    line = plane.flat(p - chain[-1][1].p)
+    if not np.linalg.norm(line) > rd.tol:
+        rd.fail(f"foot_beyond: the foot point is at the joint {chain[-1][0].name!r}: the last "
+                f"link has no line to extend")
+    rd.notes.append(f"the foot is {d:g} m beyond {where}, along the line from "
+                    f"{chain[-1][0].name!r} (foot_beyond)")
+    return p + d * line / np.linalg.norm(line), f"{where} + {d:g} m", name
+
+
+def _check_foot(foot):
+    if foot is not None:
+        f = np.asarray(foot, dtype=float).ravel()
+        if f.shape != (3,) or not np.all(np.isfinite(f)):
+            raise ValueError(f"foot must be 3 finite numbers (x, y, z in m), got {foot!r}")
