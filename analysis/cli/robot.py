@@ -166,7 +166,10 @@ def register(sub):
                                     "description file, with the map from the URDF's joint "
                                     "angles to the model's (printed; the [urdf] table). A "
                                     "3-D biped's sagittal model: lock its other joints "
-                                    "(--lock NAME[=RAD], --lock-off-axis).")
+                                    "(--lock NAME[=RAD], --lock-off-axis). A CAD export: "
+                                    "axes within 1e-3 rad (rounded angles) turn about their "
+                                    "mean; mirrored legs that differ in their last digits "
+                                    "import as their mean with --match-tol.")
     q.add_argument("file", metavar="FILE.urdf", help="the URDF file")
     q.add_argument("--foot", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="the foot point in the last leg link's frame, m (when the file has "
