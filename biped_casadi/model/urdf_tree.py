@@ -442,10 +442,11 @@ def _axis(rd: _Reader, legs) -> tuple:
     if abs(n[2]) > AXIS_TOL:
         rd.fail(f"the joints turn about {np.round(n, 6).tolist()} (torso frame): the torso "
                 f"frame's z axis, vertical at pitch 0, must lie in the plane of motion")
-    if n[2] != 0.0:                 # within the tolerance: the plane holds z exactly
+    if abs(n[2]) > 1e-9:            # within the tolerance: the plane holds z exactly
         rd.notes.append(f"the joints' mean axis is {abs(math.asin(n[2])):.2g} rad off the "
                         f"plane across the torso frame's z (rounded angles in the file): the "
                         f"model's plane holds z")
+    if n[2] != 0.0:
         n = np.array([n[0], n[1], 0.0]) / math.hypot(n[0], n[1])
     return n, {name: (1.0 if np.dot(a, n) > 0 else -1.0) for name, a in axes}
 
