@@ -12,7 +12,8 @@ import numpy as np
 
 from biped_casadi.files import write_text_atomic
 from biped_casadi.model.description import load_description
-from biped_casadi.model.urdf import MATCH_TOL, MAX_MATCH_TOL, description_toml, import_urdf
+from biped_casadi.model.urdf import MATCH_TOL, MAX_LEG, MAX_MATCH_TOL, description_toml, import_urdf
+from biped_casadi.model.urdf_legs import check_match_tol
 from biped_casadi.model.urdf_tree import lock_table
 from biped_casadi.mujoco import mjcf, mujoco_module
 
@@ -45,19 +46,19 @@ def _beyond(args) -> float:
     d = args.foot_beyond
     if d is None:
         return 0.0
-    if not (math.isfinite(d) and 0 <= d <= 10):
-        raise UserError(f"--foot-beyond must be a distance in [0, 10] m, got {d:g}")
+    if not (math.isfinite(d) and 0 <= d <= MAX_LEG):
+        raise UserError(f"--foot-beyond must be a distance in [0, {MAX_LEG:g}] m, got {d:g}")
     return d
 
 
 def _match_tol(value) -> float:
-    """--match-tol checked (UserError naming the range)."""
+    """--match-tol checked by the importer's own check (UserError naming the option)."""
     if value is None:
         return MATCH_TOL
-    if not (math.isfinite(value) and 0 < value <= MAX_MATCH_TOL):
-        raise UserError(f"--match-tol must be a number in (0, {MAX_MATCH_TOL:g}] (relative "
-                        f"to the leg's size), got {value:g}")
-    return value
+    try:
+        return check_match_tol(value)
+    except ValueError as e:
+        raise UserError("--" + str(e).replace("match_tol", "match-tol", 1)) from None
 
 
 def cmd_import(args):

@@ -87,7 +87,7 @@ from urdf_parser_py.xml_reflection import core as _xml_core
 from ..files import read_text_file
 from .description import RobotDescription, description_from_dict, description_toml, joint_names
 from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
-from .urdf_legs import (MATCH_TOL, MAX_MATCH_TOL, _beyond, _check_foot, _check_match_tol,
+from .urdf_legs import (MATCH_TOL, MAX_MATCH_TOL, _beyond, _check_foot, check_match_tol,
                         _foot_point, _same_legs, _wider)
 from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader, apply_locks, lock_table
 
@@ -535,7 +535,7 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
         raise ValueError(f"foot_beyond must be a number of metres in [0, {MAX_LEG:g}], got "
                          f"{foot_beyond!r}")
     torque_limit = _check_torque_limit(torque_limit)
-    match_tol = _check_match_tol(match_tol)
+    match_tol = check_match_tol(match_tol)
     lock = lock_table(lock, lock_off_axis, axis)
     text = read_text_file(path, "URDF file", 20_000_000)
     robot, said = _parse(text, where)

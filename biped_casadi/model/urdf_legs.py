@@ -11,7 +11,7 @@ import numpy as np
 
 from .urdf_tree import _Frame, _Reader
 
-__all__ = ["MATCH_TOL", "MAX_MATCH_TOL"]
+__all__ = ["MATCH_TOL", "MAX_MATCH_TOL", "check_match_tol"]
 
 #: the legs' agreement by default (identical), and the widest match_tol taken: legs
 #: that differ by more are two robots, not one robot's mirrored legs
@@ -77,7 +77,23 @@ def _round_up(x: float) -> float:
                 if float(f"{m}e{k + i}") >= x)
 
 
-def _check_match_tol(match_tol) -> float:
+def check_match_tol(match_tol) -> float:
+    """``match_tol`` checked, as a float.
+
+    Parameters
+    ----------
+    match_tol : float
+        How closely the legs must agree, relative to the leg's size.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ValueError
+        Naming the range (0, :data:`MAX_MATCH_TOL`].
+    """
     if isinstance(match_tol, bool) or not isinstance(match_tol, (int, float, np.floating)) \
             or not 0 < match_tol <= MAX_MATCH_TOL:
         raise ValueError(f"match_tol must be a number in (0, {MAX_MATCH_TOL:g}] (relative to "
