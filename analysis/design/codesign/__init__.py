@@ -53,7 +53,8 @@ from .gait_move import GaitMove, continue_gait, gait_change, move_gait
 from .settings import (FIT, FULL, QUICK, TODAY_DESIGN, CodesignError, CodesignResult,
                        CodesignSettings, IpoptLimits, MoveSettings, NoDesign, StartSampling,
                        TrustRegion, Verification)
-from .starts import StartScreen, fitted_starts
+from .screen import fitted_starts
+from .starts import StartScreen
 from .transcription import Transcription
 
 # the documented surface (Transcription, Reduced, Problem and the method's parts stay

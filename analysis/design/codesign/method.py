@@ -25,7 +25,8 @@ from .functions import TranscriptionSettings
 from .gait_move import gait_change, move_gait
 from .problem import Problem, Solve, solve, solve_continued
 from .settings import CodesignResult, CodesignSettings, NoDesign
-from .starts import deadbeat_starts, failure_binds, fitted_starts
+from .screen import fitted_starts
+from .starts import deadbeat_starts, failure_binds
 from .units import (fixed_problem, gait_step, hardest, kept_first, measure, node_kernel,
                     own_orbit, paper_first, sampled_starts, screen, vc_radius)
 
