@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from .urdf_tree import _Frame, _Reader
+from .urdf_tree import _Frame, _parallel, _Reader
 
 __all__ = ["MATCH_TOL", "MAX_MATCH_TOL", "check_match_tol"]
 
@@ -107,15 +107,18 @@ _FOOT_WORDS = ("foot", "toe", "sole", "contact", "ankle")
 _SOLE_WORDS = ("sole", "contact")
 
 
-def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
-    """(foot point in the torso frame, where it came from, the foot link or None)."""
+def _foot_point(rd: _Reader, last: _Frame, foot, n=None) -> tuple:
+    """(foot point in the torso frame, where it came from, the foot link or None).
+    ``n``: the plane's normal (torso frame), which locked joints below an ankle are the
+    leg's own (turning in the plane: a spring, a tarsus, a toe held fixed)."""
     if foot is not None:
         f = np.asarray(foot, dtype=float).ravel()
         return last.p + last.R @ f, "foot= argument", None
     cands = [(j, f) for j, f in rd.fixed_descendants(last) if j.parent == last.name]
     if len(cands) > 1:
         named = [c for c in cands if any(w in c[1].name.lower() for w in _FOOT_WORDS)]
-        cands = named if len(named) == 1 else cands
+        soles = [c for c in named if any(w in c[1].name.lower() for w in _SOLE_WORDS)]
+        cands = named if len(named) == 1 else soles if len(soles) == 1 else cands
     if len(cands) != 1:
         what = "no child link or fixed frame" if not cands else \
             f"{len(cands)} fixed children ({', '.join(repr(c[1].name) for c in cands)})"
@@ -130,13 +133,27 @@ def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
     if len(soles) == 1:
         return soles[0].p, f"link {soles[0].name!r} (below the locked joint {j.name!r})", \
             soles[0].name
+    if n is not None:
+        j, f = _lowest_in_plane(rd, j, f, n)
     rd.notes.append(f"the foot point is the origin of the locked joint {j.name!r} (where "
-                    f"{f.name!r} hangs from {last.name!r}: an ankle, not a sole): the model's "
+                    f"{f.name!r} hangs from {j.parent!r}: an ankle, not a sole): the model's "
                     f"foot is the point that touches the ground; with no single fixed frame "
                     f"below it named like a sole or contact, give that point with --foot X Y Z "
                     f"(foot=) in the frame of {last.name!r}, or its distance beyond the ankle "
                     f"along the shin with --foot-beyond D (foot_beyond=)")
     return f.p, f"link {f.name!r} (the locked joint {j.name!r})", f.name
+
+
+def _lowest_in_plane(rd: _Reader, j, f: _Frame, n) -> tuple:
+    """Down a chain of locked joints that turn in the plane (about n: the leg's own
+    joints held fixed, as a spring, a tarsus and a toe below a knee), the last one and
+    its child frame: the ankle; a locked joint off the plane (an ankle roll) ends it."""
+    while True:
+        below = [(k, g) for k, g in rd.fixed_descendants(f) if k.parent == f.name
+                 and k.name in rd.locked and _parallel(g.R @ rd.unit_axis(k), n)]
+        if len(below) != 1:
+            return j, f
+        j, f = below[0]
 
 
 def _beyond(rd: _Reader, chain, foot: tuple, d: float, plane) -> tuple:

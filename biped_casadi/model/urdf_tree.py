@@ -389,6 +389,9 @@ def apply_locks(rd: "_Reader", torso: str, lock: dict, off_axis: bool, axis) -> 
 
 def _legs(rd: _Reader, torso: _Frame) -> list:
     """The torso's two chains of rotating joints: per leg a list of (joint, frame)."""
+    below = _jointed(rd, torso)
+    if len(below) == 1:
+        _held(rd, torso, below[0])
     hips = rd.moving(torso)
     if len(hips) != 2:
         rd.fail(f"the torso {torso.name!r} has {len(hips)} jointed children "
@@ -414,6 +417,34 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
             item = nxt[0] if nxt else None
         legs.append(chain)
     return legs
+
+
+def _jointed(rd: _Reader, frame: _Frame) -> list:
+    """(joint, parent frame) of the joints of any type but fixed below a link and its
+    fixed frames."""
+    return [(k, f) for f in [frame] + [g for _, g in rd.fixed_descendants(frame)]
+            for k in rd.children.get(f.name, []) if k.type != "fixed"]
+
+
+def _held(rd: _Reader, torso: _Frame, joint) -> None:
+    """Refuse a torso whose one moving joint leads to the link the legs hang from: the
+    joints above that link hold the robot (a test rig, a boom, a pin to the world)."""
+    j, parent = joint
+    above = [j]
+    while True:
+        frame = _child_frame(parent, j)
+        nxt = _jointed(rd, frame)
+        if len(nxt) != 1:
+            break
+        j, parent = nxt[0]
+        above.append(j)
+    if len(nxt) == 2:
+        names = ", ".join(f"{k.name!r} ({k.type})" for k in above)
+        rd.fail(f"the legs hang from link {frame.name!r}, held by the joint(s) {names} "
+                f"from {torso.name!r} (a test rig, a boom, a pin?): not joints of "
+                f"a free biped; make {frame.name!r} the file's root link (delete the links "
+                f"and joints above it), or hang it from a massless 'world' link by a "
+                f"floating or planar joint")
 
 
 def _axis(rd: _Reader, legs) -> tuple:
