@@ -454,7 +454,18 @@ _XACRO_NS = ("http://www.ros.org/wiki/xacro", "http://ros.org/wiki/xacro")
 
 
 def xacro_refusal(name: str) -> str:
-    """What to do with a xacro file (the refusal's advice): expand it to a URDF first."""
+    """What to do with a xacro file (the refusal's advice): expand it to a URDF first.
+
+    Parameters
+    ----------
+    name : str
+        The xacro file's name, as the command to run names it.
+
+    Returns
+    -------
+    str
+        The advice, ending a refusal's line.
+    """
     return (f"expand it to a URDF first ('xacro {name} > robot.urdf', with ROS's xacro or "
             f"'pip install xacro') and import robot.urdf")
 
