@@ -205,3 +205,14 @@ def test_a_robot_held_by_a_rig_says_make_the_torso_the_root(tmp_path, capsys, ri
     err = _cli_error(capsys, ["robot", "import", str(path), "--out", str(tmp_path / "r.toml")])
     assert f"the legs hang from link 'torso', held by the joint(s) {joints}" in err
     assert "make 'torso' the file's root link" in err
+
+
+def test_no_foot_names_the_legs_joints(tmp_path, capsys):
+    # the leg's joints show which plane and chain were found (a file whose joints are
+    # mislabelled reads as another plane's legs)
+    text = re.sub(r'<joint name="foot_(left|right)_fixed".*?<link name="foot_(left|right)"/>',
+                  "", RABBIT_URDF, flags=re.S)
+    path = _write(tmp_path, text, "r.urdf")
+    err = _cli_error(capsys, ["robot", "import", str(path), "--out", str(tmp_path / "r.toml")])
+    assert "no foot: the last leg link 'tibia_left' (the leg's joints: hip_left -> knee_left)" in err
+    assert "--foot X Y Z" in err and "--lock NAME" in err

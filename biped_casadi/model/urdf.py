@@ -615,7 +615,8 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     chains = _legs(rd, torso)
     n, signs = _axis(rd, chains)
     plane = _Plane(n)
-    feet = [_foot_point(rd, chain[-1][1], foot, n) for chain in chains]
+    feet = [_foot_point(rd, chain[-1][1], foot, n, [j.name for j, _ in chain])
+            for chain in chains]
     if foot_beyond:
         feet = [_beyond(rd, chain, f, foot_beyond, plane) for chain, f in zip(chains, feet)]
     legs = [_Leg(rd, chain, p, plane) for chain, (p, _, _) in zip(chains, feet)]

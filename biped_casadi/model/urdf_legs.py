@@ -107,10 +107,11 @@ _FOOT_WORDS = ("foot", "toe", "sole", "contact", "ankle")
 _SOLE_WORDS = ("sole", "contact")
 
 
-def _foot_point(rd: _Reader, last: _Frame, foot, n=None) -> tuple:
+def _foot_point(rd: _Reader, last: _Frame, foot, n=None, leg=()) -> tuple:
     """(foot point in the torso frame, where it came from, the foot link or None).
     ``n``: the plane's normal (torso frame), which locked joints below an ankle are the
-    leg's own (turning in the plane: a spring, a tarsus, a toe held fixed)."""
+    leg's own (turning in the plane: a spring, a tarsus, a toe held fixed); ``leg``: the
+    leg's joint names (for the refusal)."""
     if foot is not None:
         f = np.asarray(foot, dtype=float).ravel()
         return last.p + last.R @ f, "foot= argument", None
@@ -122,9 +123,11 @@ def _foot_point(rd: _Reader, last: _Frame, foot, n=None) -> tuple:
     if len(cands) != 1:
         what = "no child link or fixed frame" if not cands else \
             f"{len(cands)} fixed children ({', '.join(repr(c[1].name) for c in cands)})"
-        rd.fail(f"no foot: the last leg link {last.name!r} has {what}; give the foot "
+        chain = f" (the leg's joints: {' -> '.join(leg)})" if leg else ""
+        rd.fail(f"no foot: the last leg link {last.name!r}{chain} has {what}; give the foot "
                 f"point in its frame (foot=(x, y, z), or 'biped robot import FILE --foot "
-                f"X Y Z --out robot.toml')")
+                f"X Y Z --out robot.toml'), or lock the joint above it if that is an ankle "
+                f"(--lock NAME, lock=)")
     j, f = cands[0]
     if j.name not in rd.locked:
         return f.p, f"link {f.name!r}", f.name
