@@ -216,3 +216,16 @@ def test_no_foot_names_the_legs_joints(tmp_path, capsys):
     err = _cli_error(capsys, ["robot", "import", str(path), "--out", str(tmp_path / "r.toml")])
     assert "no foot: the last leg link 'tibia_left' (the leg's joints: hip_left -> knee_left)" in err
     assert "--foot X Y Z" in err and "--lock NAME" in err
+
+
+def test_a_massless_link_without_joints_is_not_a_second_root(tmp_path, capsys):
+    text = RABBIT_URDF.replace('<robot name="RABBIT">', '<robot name="RABBIT"><link name="world"/>')
+    imp = import_urdf(_write(tmp_path, text, "r.urdf"))
+    assert imp.description == robot("rabbit").description
+    assert any("ignored: link(s) 'world' without mass and joints" in n for n in imp.notes)
+    heavy = RABBIT_URDF.replace(
+        '<robot name="RABBIT">', '<robot name="RABBIT"><link name="table"><inertial><mass '
+        'value="5"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>')
+    err = _cli_error(capsys, ["robot", "import", str(_write(tmp_path, heavy, "t.urdf")),
+                              "--out", str(tmp_path / "r.toml")])
+    assert "found roots ['table', 'torso']: join them by joints" in err

@@ -64,7 +64,8 @@ Gravity is 9.81 m/s^2 along -z of the world.
 
 Refused, with one ``ValueError`` naming the file and the joint or link: an unparsable
 file, a xacro file (macros, ``${...}``: expand it with xacro first), a file without links
-(a fragment that a xacro file includes), links or joints defined twice, a joint naming a link the file does not define, a
+(a fragment that a xacro file includes), links in several trees (a link without mass
+and joints beside the tree, as an unused ``world``, is ignored), links or joints defined twice, a joint naming a link the file does not define, a
 loop of joints, a number that is not finite, a negative mass, a leg longer than
 :data:`MAX_LEG` (a file in mm), non-planar or prismatic
 joints, a torso without two legs (held by a rig: a pin or a boom above the link the

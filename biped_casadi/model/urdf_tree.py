@@ -316,8 +316,17 @@ class _Reader:
         roots = [name for name in self.links if name not in kids]
         if not roots:
             self.fail("no root link: the joints make a loop (every link is some joint's child)")
+        alone = [n for n in roots if n not in self.children and _mass(self.links[n]) == 0.0]
+        if len(roots) > 1 and len(roots) - len(alone) == 1:
+            self.notes.append(f"ignored: link(s) {', '.join(repr(n) for n in alone)} without "
+                              f"mass and joints (not part of the robot's tree)")
+            roots = [n for n in roots if n not in alone]
+        else:
+            alone = []
         if len(roots) != 1:
-            self.fail(f"must be one tree of links, found roots {roots}")
+            self.fail(f"must be one tree of links, found roots {roots}: join them by joints "
+                      f"(a fixed joint for a part of one body) or delete the links that are "
+                      f"not the robot's")
         name = roots[0]
         reached, todo = {name}, [name]
         while todo:
@@ -325,7 +334,7 @@ class _Reader:
                 if j.child not in reached:
                     reached.add(j.child)
                     todo.append(j.child)
-        cut = [n for n in self.links if n not in reached]
+        cut = [n for n in self.links if n not in reached and n not in alone]
         if cut:
             self.fail(f"link(s) {', '.join(repr(n) for n in cut[:4])} not connected to the "
                       f"root link {name!r}: the joints make a loop")
