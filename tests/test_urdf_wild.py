@@ -229,3 +229,24 @@ def test_a_massless_link_without_joints_is_not_a_second_root(tmp_path, capsys):
     err = _cli_error(capsys, ["robot", "import", str(_write(tmp_path, heavy, "t.urdf")),
                               "--out", str(tmp_path / "r.toml")])
     assert "found roots ['table', 'torso']: join them by joints" in err
+
+
+def _on_a_world(rpy: str) -> str:
+    return RABBIT_URDF.replace(
+        '<robot name="RABBIT">', '<robot name="RABBIT"><link name="world"/><joint '
+        'name="world_fix" type="fixed"><parent link="world"/><child link="torso"/>'
+        f'<origin xyz="0 0 1" rpy="{rpy}"/></joint>')
+
+
+def test_a_torso_turned_so_gravity_leaves_the_legs_plane_is_refused(tmp_path, capsys):
+    # the world link's z (the vertical) is the legs' axis in the torso's frame: the robot
+    # lies on its side in the file (a y-up file, as animation and RL humanoids are
+    # written); read with the torso frame's z as vertical it would be another robot
+    path = _write(tmp_path, _on_a_world("1.5707963267948966 0 0"), "side.urdf")
+    err = _cli_error(capsys, ["robot", "import", str(path), "--out", str(tmp_path / "r.toml")])
+    assert ("the world's vertical (z of the root link 'world') is [0.0, 1.0, 0.0] in the "
+            "torso's frame, turned by the origin of 'world_fix'") in err
+    assert "gravity would act across it" in err
+    # turned about the legs' axis (pitched): the same robot (pitch is a coordinate)
+    pitched = import_urdf(_write(tmp_path, _on_a_world("0 0.3 0"), "pitched.urdf"))
+    assert pitched.description == robot("rabbit").description

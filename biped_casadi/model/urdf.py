@@ -70,7 +70,9 @@ loop of joints, a number that is not finite, a negative mass, a leg longer than
 :data:`MAX_LEG` (a file in mm), non-planar or prismatic
 joints, a torso without two legs (held by a rig: a pin or a boom above the link the
 legs hang from, the refusal says to make that link the root), a last leg link without
-length in the plane (an ankle at the foot: lock it, or give the foot), legs that differ (links, masses, centres of mass, point
+length in the plane (an ankle at the foot: lock it, or give the foot), a torso hung from
+a massless root by joints whose origins turn the root's z (the world's vertical) out of
+the legs' plane (a file written with y up), legs that differ (links, masses, centres of mass, point
 masses), the hips at two places in the plane, a leg joint
 without actuator (the model's one unactuated degree of freedom is the stance foot's
 contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a link without

@@ -191,6 +191,9 @@ class _Reader:
         self.order = {j.name: i for i, j in enumerate(robot.joints)}
         self.notes = []
         self.planar_axis = None
+        #: (the world's z in the torso frame, the links and joints above the torso) when
+        #: the torso hangs from a massless root (a world link), else None
+        self.world_up = None
         self.locked = {}
 
     def fail(self, problem: str):
@@ -338,11 +341,17 @@ class _Reader:
         if cut:
             self.fail(f"link(s) {', '.join(repr(n) for n in cut[:4])} not connected to the "
                       f"root link {name!r}: the joints make a loop")
+        R, above = np.eye(3), []
         while _mass(self.links[name]) == 0.0:
             joints = self.children.get(name, [])
             if len(joints) != 1 or joints[0].type not in _BASE:
                 break
             j = joints[0]
+            Rj = _pose(j.origin)[0]
+            R = R @ Rj
+            if not np.allclose(Rj, np.eye(3), rtol=0.0, atol=1e-12):
+                above.append(j.name)            # the joints that turn the torso's frame
+            self.world_up = (R.T @ np.array([0.0, 0.0, 1.0]), roots[0], above)
             what = {"fixed": "fixes the robot to it"}.get(j.type, "is the robot's base")
             self.notes.append(f"{j.type} joint {j.name!r} from the massless link {name!r}: "
                               f"{what} in the file, not a joint of the model (the stance "
@@ -482,6 +491,15 @@ def _axis(rd: _Reader, legs) -> tuple:
     if abs(n[2]) > AXIS_TOL:
         rd.fail(f"the joints turn about {np.round(n, 6).tolist()} (torso frame): the torso "
                 f"frame's z axis, vertical at pitch 0, must lie in the plane of motion")
+    if rd.world_up is not None and abs(float(np.dot(rd.world_up[0], n))) > AXIS_TOL:
+        up, root, above = rd.world_up
+        rd.fail(f"the world's vertical (z of the root link {root!r}) is "
+                f"{(np.round(up, 6) + 0.0).tolist()} in the torso's frame, turned by the "
+                f"origin of {', '.join(repr(a) for a in above)} above it: not in the plane of "
+                f"the legs (normal {(np.round(n, 6) + 0.0).tolist()}), so gravity would act "
+                f"across it (a file written with another axis up?); the importer takes z of "
+                f"the torso's frame as vertical: write the file with the torso's up along the "
+                f"world's z")
     if abs(n[2]) > 1e-9:            # within the tolerance: the plane holds z exactly
         rd.notes.append(f"the joints' mean axis is {abs(math.asin(n[2])):.2g} rad off the "
                         f"plane across the torso frame's z (rounded angles in the file): the "
