@@ -250,3 +250,25 @@ def test_a_torso_turned_so_gravity_leaves_the_legs_plane_is_refused(tmp_path, ca
     # turned about the legs' axis (pitched): the same robot (pitch is a coordinate)
     pitched = import_urdf(_write(tmp_path, _on_a_world("0 0.3 0"), "pitched.urdf"))
     assert pitched.description == robot("rabbit").description
+
+
+def test_the_suggested_match_tol_takes_every_difference_at_once(tmp_path):
+    # a CAD export's legs: the hips 1e-6 m apart, the right femur's centre of mass
+    # 1e-5 m off (first in the file), the right tibia 1 % heavier (later): the refusal
+    # names the largest and its tolerance takes all three in one step
+    text = RABBIT_URDF.replace('<origin xyz="0 -0.1 0" rpy="0 0 0"/>',
+                               '<origin xyz="0.000001 -0.1 0" rpy="0 0 0"/>', 1)
+    femur_r = text.index('<link name="femur_right">')
+    text = text[:femur_r] + text[femur_r:].replace('<origin xyz="0 0 -0.11"',
+                                                   '<origin xyz="0.00001 0 -0.11"', 1)
+    tibia_r = text.index('<link name="tibia_right">')
+    text = text[:tibia_r] + text[tibia_r:].replace('<mass value="3.2"/>',
+                                                   '<mass value="3.232"/>', 1)
+    path = _write(tmp_path, text, "cad.urdf")
+    with pytest.raises(ValueError) as e:
+        import_urdf(path)
+    msg = str(e.value)
+    assert "legs differ: link 'tibia_left' has mass 3.2, link 'tibia_right' 3.232" in msg
+    tol = float(re.search(r"--match-tol (\S+) \(match_tol=\)", msg).group(1))
+    imp = import_urdf(path, match_tol=tol)
+    assert any("the hips are 1e-06 m apart" in n for n in imp.notes)

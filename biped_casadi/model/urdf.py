@@ -632,20 +632,21 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 f"in metres (a file in millimetres?)")
     hip = legs[0].points[0]
     apart = float(np.linalg.norm(plane.flat(legs[1].points[0] - hip)))
-    if apart > tol + match_tol * span:
-        rd.fail(f"the hip joints {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r} "
-                f"are {apart:.3g} m apart in the plane of motion: the model's legs share "
-                f"one hip{_wider(apart / span, match_tol, 'accepts them')}")
-    if apart > tol:
-        rd.notes.append(f"the hips are {apart:.2g} m apart in the plane of motion (match_tol "
-                        f"{match_tol:g}): the model's hip is that of {legs[0].joints[0].name!r}")
+    hips = apart / span if apart > tol else 0.0
     all_joints = [j for leg in legs for j in leg.joints]
-    _joint_notes(rd, all_joints)
-    motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
     pm_legs = [dict(), dict()]
     links = [[leg.body(i, pm) for i in range(len(leg.frames))]
              for leg, pm in zip(legs, pm_legs)]
-    _same_legs(rd, links, pm_legs, legs, match_tol)
+    worst = _same_legs(rd, links, pm_legs, legs, match_tol, hips)
+    if apart > tol + match_tol * span:
+        rd.fail(f"the hip joints {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r} "
+                f"are {apart:.3g} m apart in the plane of motion: the model's legs share "
+                f"one hip{_wider(max(hips, worst), match_tol, 'accepts them')}")
+    if apart > tol:
+        rd.notes.append(f"the hips are {apart:.2g} m apart in the plane of motion (match_tol "
+                        f"{match_tol:g}): the model's hip is that of {legs[0].joints[0].name!r}")
+    _joint_notes(rd, all_joints)
+    motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
     pm = {"hip": 0.0}
     torso_d, torso_up = _torso(rd, torso, hip, plane, pm)
     pm["hip"] += pm_legs[0].pop("hip", 0.0) + pm_legs[1].pop("hip", 0.0)

@@ -18,25 +18,31 @@ __all__ = ["MATCH_TOL", "MAX_MATCH_TOL", "check_match_tol"]
 MATCH_TOL, MAX_MATCH_TOL = 1e-9, 0.05
 
 
-def _same_legs(rd, links, pms, legs, match_tol: float):
+def _same_legs(rd, links, pms, legs, match_tol: float, hips: float = 0.0) -> float:
     """The legs agree within ``match_tol`` (relative to the leg's size, by quantity);
-    the first leg's links become their mean where they differ (said in the notes)."""
+    the first leg's links become their mean where they differ (said in the notes).  A
+    refusal names the largest difference and the tolerance that takes every one, the
+    hips' (``hips``, relative) too.  Returns the largest difference taken."""
     span = sum(a["length"] for a in links[0])
     mass = sum(a["mass"] for a in links[0]) + sum(v for k, v in pms[0].items() if k != "hip")
     scale = dict(mass=mass, length=span, com=span, com_offset=span, inertia=mass * span ** 2)
-    worst = (0.0, "")
+    diffs = []
     for a, b in zip(*links):
         for key, size in scale.items():
             d = abs(a[key] - b[key])
             if d <= rd.tol or math.isclose(a[key], b[key], rel_tol=1e-12):
                 continue
-            rel = d / size
-            if rel > match_tol:
-                rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.12g}, link "
-                        f"{b['name']!r} {b[key]:.12g} (apart by {d:.2g}, {rel:.2g} of the "
-                        f"leg's {_SIZE[key]}){_wider(rel, match_tol)}")
-            worst = max(worst, (rel, f"{key} of {a['name']!r} and {b['name']!r}"))
-            a[key] = 0.5 * (a[key] + b[key])
+            diffs.append((d / size, d, key, a, b))
+    big = max(diffs, key=lambda x: x[0], default=None)
+    if big is not None and big[0] > match_tol:
+        rel, d, key, a, b = big
+        rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.12g}, link "
+                f"{b['name']!r} {b[key]:.12g} (apart by {d:.2g}, {rel:.2g} of the "
+                f"leg's {_SIZE[key]}){_wider(max(rel, hips), match_tol)}")
+    worst = (0.0, "")
+    for rel, d, key, a, b in diffs:
+        worst = max(worst, (rel, f"{key} of {a['name']!r} and {b['name']!r}"))
+        a[key] = 0.5 * (a[key] + b[key])
     if set(pms[0]) - {"hip"} != set(pms[1]) - {"hip"}:
         rd.fail(f"legs differ in their point masses (legs of {legs[0].joints[0].name!r} and "
                 f"{legs[1].joints[0].name!r}): {pms[0]} and {pms[1]}")
@@ -45,13 +51,14 @@ def _same_legs(rd, links, pms, legs, match_tol: float):
         if rel > max(match_tol, 1e-12):
             rd.fail(f"legs differ in their point masses (legs of {legs[0].joints[0].name!r} "
                     f"and {legs[1].joints[0].name!r}): {pms[0]} and {pms[1]}"
-                    f"{_wider(rel, match_tol)}")
+                    f"{_wider(max(rel, hips, worst[0]), match_tol)}")
         if rel > 0:
             worst = max(worst, (rel, f"point mass at {k}"))
             pms[0][k] = 0.5 * (pms[0][k] + pms[1][k])
     if worst[0] > 0:
         rd.notes.append(f"the legs differ by up to {worst[0]:.2g} of the leg's size "
                         f"({worst[1]}; match_tol {match_tol:g}): the model's leg is their mean")
+    return worst[0]
 
 
 #: what each quantity of a leg is measured against in ``match_tol``
