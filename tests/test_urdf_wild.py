@@ -272,3 +272,23 @@ def test_the_suggested_match_tol_takes_every_difference_at_once(tmp_path):
     tol = float(re.search(r"--match-tol (\S+) \(match_tol=\)", msg).group(1))
     imp = import_urdf(path, match_tol=tol)
     assert any("the hips are 1e-06 m apart" in n for n in imp.notes)
+
+
+def test_a_mimic_leg_joint_says_lock_it(tmp_path, capsys):
+    # a linkage joint (a foot kept level by a parallelogram) written as <mimic>: held
+    # fixed, the robot imports as its model with that joint locked
+    text = RABBIT_URDF
+    for side in ("left", "right"):
+        text = text.replace(
+            f'<link name="foot_{side}"/>',
+            f'<link name="foot_{side}"/><joint name="toe_{side}" type="revolute"><parent '
+            f'link="foot_{side}"/><child link="toe_{side}"/><axis xyz="0 1 0"/><mimic '
+            f'joint="knee_{side}" multiplier="-1"/><limit effort="1" velocity="1" lower="-1" '
+            f'upper="1"/></joint><link name="toe_{side}"><inertial><mass value="0.1"/><inertia '
+            f'ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial></link>')
+    path = _write(tmp_path, text, "mimic.urdf")
+    err = _cli_error(capsys, ["robot", "import", str(path), "--out", str(tmp_path / "r.toml")])
+    assert "joint 'toe_left' mimics joint 'knee_left'" in err
+    assert "--lock toe_left[=RAD]" in err
+    imp = import_urdf(path, lock={"toe_left": 0, "toe_right": 0})
+    assert imp.legs == (("hip_left", "knee_left"), ("hip_right", "knee_right"))

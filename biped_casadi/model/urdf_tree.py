@@ -424,7 +424,9 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
             if getattr(joint, "mimic", None) is not None:
                 rd.fail(f"joint {joint.name!r} mimics joint {joint.mimic.joint!r} (<mimic>): "
                         f"its angle is not free, and every leg joint of the model is an "
-                        f"independent, actuated one")
+                        f"independent, actuated one; a sagittal model that holds it fixed "
+                        f"locks it ('biped robot import FILE --lock {joint.name}[=RAD]', "
+                        f"lock={{{joint.name!r}: 0}})")
             frame = _child_frame(parent, joint)
             chain.append((joint, frame))
             nxt = rd.moving(frame)
