@@ -292,3 +292,18 @@ def test_a_mimic_leg_joint_says_lock_it(tmp_path, capsys):
     assert "--lock toe_left[=RAD]" in err
     imp = import_urdf(path, lock={"toe_left": 0, "toe_right": 0})
     assert imp.legs == (("hip_left", "knee_left"), ("hip_right", "knee_right"))
+
+
+def test_a_branching_leg_says_a_cut_linkage_is_not_a_leg(tmp_path, capsys):
+    # a four-bar leg as FROST-style files write it: the loop cut open, two branches
+    strut = ('<joint name="strut_{s}" type="revolute"><parent link="femur_{s}"/><child '
+             'link="strut_{s}"/><origin xyz="0 0 -0.1"/><axis xyz="0 1 0"/><limit effort="150" '
+             'velocity="20" lower="-3" upper="3"/></joint><link name="strut_{s}"><inertial>'
+             '<mass value="0.5"/><inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" '
+             'izz="1e-3"/></inertial></link>')
+    text = RABBIT_URDF.replace("</robot>", "".join(strut.format(s=s) for s in ("left", "right"))
+                               + "</robot>")
+    err = _cli_error(capsys, ["robot", "import", str(_write(tmp_path, text, "b.urdf")),
+                              "--out", str(tmp_path / "r.toml")])
+    assert "link 'femur_left' has 2 jointed children ('knee_left', 'strut_left')" in err
+    assert "a four-bar leg, is not one" in err

@@ -433,7 +433,9 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
             if len(nxt) > 1:
                 rd.fail(f"link {frame.name!r} has {len(nxt)} jointed children "
                         f"({', '.join(repr(j.name) for j, _ in nxt)}): a leg is one chain "
-                        f"of links (lock the joints of the others: --lock NAME, lock=)")
+                        f"of links (lock the joints of the others: --lock NAME, lock=; a "
+                        f"closed linkage cut open in the file, as a four-bar leg, is not one "
+                        f"and locking a branch makes another robot)")
             item = nxt[0] if nxt else None
         legs.append(chain)
     return legs
