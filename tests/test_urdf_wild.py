@@ -307,3 +307,11 @@ def test_a_branching_leg_says_a_cut_linkage_is_not_a_leg(tmp_path, capsys):
                               "--out", str(tmp_path / "r.toml")])
     assert "link 'femur_left' has 2 jointed children ('knee_left', 'strut_left')" in err
     assert "a four-bar leg, is not one" in err
+
+
+@pytest.mark.parametrize("left,right,name", [
+    ("LeftThigh", "RightThigh", "Thigh"), ("thighLeft", "thighRight", "thigh"),
+    ("femur_left", "femur_right", "femur"), ("l_uleg", "r_uleg", "uleg")])
+def test_camel_case_sides_give_the_links_name(tmp_path, left, right, name):
+    text = RABBIT_URDF.replace('"femur_left"', f'"{left}"').replace('"femur_right"', f'"{right}"')
+    assert import_urdf(_write(tmp_path, text, "r.urdf")).description.leg[0].name == name

@@ -256,9 +256,11 @@ _SIDES = {"left", "right", "l", "r", "lft", "rgt", "lt", "rt"}
 
 
 def _common_name(a: str, b: str, default: str) -> str:
-    """'femur' from 'femur_left' / 'femur_right', 'l_femur' / 'r_femur', ..."""
+    """'femur' from 'femur_left' / 'femur_right', 'l_femur' / 'r_femur', 'Thigh' from
+    'LeftThigh' / 'RightThigh', ..."""
     def tokens(s):
-        return [t for t in re.split(r"[_\-\s.]+", s) if t and t.lower() not in _SIDES]
+        return [t for t in re.split(r"[_\-\s.]+|(?<=[a-z])(?=[A-Z])", s)
+                if t and t.lower() not in _SIDES]
     ta, tb = tokens(a), tokens(b)
     if ta and ta == tb:
         return "_".join(ta)
