@@ -315,3 +315,19 @@ def test_a_branching_leg_says_a_cut_linkage_is_not_a_leg(tmp_path, capsys):
 def test_camel_case_sides_give_the_links_name(tmp_path, left, right, name):
     text = RABBIT_URDF.replace('"femur_left"', f'"{left}"').replace('"femur_right"', f'"{right}"')
     assert import_urdf(_write(tmp_path, text, "r.urdf")).description.leg[0].name == name
+
+
+def test_frame_elements_mark_the_foot(tmp_path):
+    # Drake's and FROST's <frame name link xyz rpy/> (Atlas's soles and toes in FROST's
+    # file): read as massless links fixed to their links, a sole among them is the foot
+    text = re.sub(r'<joint name="foot_(left|right)_fixed".*?<link name="foot_(left|right)"/>',
+                  "", RABBIT_URDF, flags=re.S)
+    text = text.replace("</robot>", "".join(
+        f'<frame link="tibia_{s}" name="{s}_sole" xyz="0 0 -0.4" rpy="0 0 0"/>'
+        f'<frame link="tibia_{s}" name="{s}_toe" xyz="0.1 0 -0.4" rpy="0 0 0"/>'
+        for s in ("left", "right")) + "</robot>")
+    imp = import_urdf(_write(tmp_path, text, "frames.urdf"))
+    assert imp.description == robot("rabbit").description
+    assert imp.foot == "link 'left_sole'"
+    assert any(n.startswith("read the <frame> elements 'left_sole' on 'tibia_left'")
+               for n in imp.notes)

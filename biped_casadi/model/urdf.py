@@ -33,7 +33,8 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   hip, a joint between leg links or the foot is a point mass there;
 - the foot: the origin of the fixed child link (or frame) of each leg's last link
   (one named like a foot when there are several; of several, the one named like a sole
-  or contact), or ``foot=(x, y, z)`` in that link's
+  or contact; a top-level ``<frame name link xyz rpy/>``, Drake's and FROST's extension,
+  is such a frame), or ``foot=(x, y, z)`` in that link's
   frame; when that child hangs by a locked joint (a 3-D robot's ankle), the one fixed
   frame below it named like a sole or contact point, else the ankle: the lowest of the
   locked joints down from there that turn in the plane (a spring, a tarsus and a toe
@@ -493,14 +494,47 @@ def _xacro_marker(text: str) -> str | None:
     return None
 
 
+def _frames_as_links(text: str) -> tuple:
+    """(text, notes): each top-level ``<frame name= link= xyz= rpy=/>`` (an extension
+    of Drake's and FROST's files: contact points, soles) written as a massless link fixed
+    to its link, so that it can mark the foot; the text as it was without one."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        return text, []
+    frames = [f for f in root.findall("frame") if f.get("name") and f.get("link")]
+    if not frames:
+        return text, []
+    names = {el.get("name") for el in root if el.tag in ("link", "joint")}
+    done = []
+    for f in frames:
+        name = f.get("name")
+        if name in names or f"{name}__frame" in names:
+            continue
+        root.remove(f)
+        link = ET.SubElement(root, "link", name=name)
+        link.tail = "\n"
+        joint = ET.SubElement(root, "joint", name=f"{name}__frame", type="fixed")
+        ET.SubElement(joint, "parent", link=f.get("link"))
+        ET.SubElement(joint, "child", link=name)
+        ET.SubElement(joint, "origin", xyz=f.get("xyz", "0 0 0"), rpy=f.get("rpy", "0 0 0"))
+        names.add(name)
+        done.append(f"{name!r} on {f.get('link')!r}")
+    notes = [f"read the <frame> elements {', '.join(done)} as massless links fixed to their "
+             f"links (Drake's and FROST's extension)"] if done else []
+    return ET.tostring(root, encoding="unicode"), notes
+
+
 def _parse(text: str, where: str, name: str = "FILE"):
-    """The parsed robot and the parser's complaints (unknown tags are not errors).
-    A xacro file (macros, substitutions) and a file without links (a fragment that a
-    xacro file includes) are refused with what to do."""
+    """The parsed robot, the parser's complaints (unknown tags are not errors) and what
+    was read beyond URDF (``<frame>`` elements).  A xacro file (macros, substitutions)
+    and a file without links (a fragment that a xacro file includes) are refused with
+    what to do."""
     marker = _xacro_marker(text)
     if marker is not None:
         raise ValueError(f"{where}: a xacro file, not a URDF ({marker[:80]}): "
                          f"{xacro_refusal(name)}")
+    text, framed = _frames_as_links(text)
     said = []
     keep = _xml_core.on_error
     _xml_core.on_error = said.append
@@ -515,7 +549,7 @@ def _parse(text: str, where: str, name: str = "FILE"):
         raise ValueError(f"{where}: defines no <link>: not a robot's description (a fragment "
                          f"that a xacro file includes, e.g. ros2_control or gazebo tags?); "
                          f"import the robot's own file, expanded by xacro if it is one")
-    return robot, said
+    return robot, said, framed
 
 
 def _check_torque_limit(torque_limit):
@@ -613,8 +647,9 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     match_tol = check_match_tol(match_tol)
     lock = lock_table(lock, lock_off_axis, axis)
     text = read_text_file(path, "URDF file", 20_000_000)
-    robot, said = _parse(text, where, path.name)
+    robot, said, framed = _parse(text, where, path.name)
     rd = _Reader(robot, where, tol)
+    rd.notes += framed
     torso = _Frame(rd.torso(), np.eye(3), np.zeros(3))
     apply_locks(rd, torso.name, lock, lock_off_axis, axis)
     chains = _legs(rd, torso)
