@@ -214,7 +214,8 @@ def test_no_foot_names_the_legs_joints(tmp_path, capsys):
                   "", RABBIT_URDF, flags=re.S)
     path = _write(tmp_path, text, "r.urdf")
     err = _cli_error(capsys, ["robot", "import", str(path), "--out", str(tmp_path / "r.toml")])
-    assert "no foot: the last leg link 'tibia_left' (the leg's joints: hip_left -> knee_left)" in err
+    assert ("no foot: the last leg link 'tibia_left' (the leg's joints: hip_left -> "
+            "knee_left)") in err
     assert "--foot X Y Z" in err and "--lock NAME" in err
 
 

@@ -64,23 +64,23 @@ geometry above the hip along its up direction, else twice its centre-of-mass hei
 Gravity is 9.81 m/s^2 along -z of the world.
 
 Refused, with one ``ValueError`` naming the file and the joint or link: an unparsable
-file, a xacro file (macros, ``${...}``: expand it with xacro first), a file without links
-(a fragment that a xacro file includes), links in several trees (a link without mass
-and joints beside the tree, as an unused ``world``, is ignored), links or joints defined twice, a joint naming a link the file does not define, a
-loop of joints, a number that is not finite, a negative mass, a leg longer than
-:data:`MAX_LEG` (a file in mm), non-planar or prismatic
-joints, a torso without two legs (held by a rig: a pin or a boom above the link the
-legs hang from, the refusal says to make that link the root), a last leg link without
-length in the plane (an ankle at the foot: lock it, or give the foot), a torso hung from
-a massless root by joints whose origins turn the root's z (the world's vertical) out of
-the legs' plane (a file written with y up), legs that differ (links, masses, centres of mass, point
-masses), the hips at two places in the plane, a leg joint
-without actuator (the model's one unactuated degree of freedom is the stance foot's
-contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a link without
-``<inertial>`` (its own or a fixed child's), no
-foot (legs and hips agree within ``match_tol`` of the leg's size, default identical; the
-model's leg is their mean); in ``lock``, a joint the file does not define, one that is not revolute or
-continuous, an angle that is not finite, a joint given twice.  A non-planar joint's
+file, a xacro file (macros, ``${...}``: expand it with xacro first), a file without
+links (a fragment that a xacro file includes), links in several trees (a link without
+mass and joints beside the tree, as an unused ``world``, is ignored), links or joints
+defined twice, a joint naming a link the file does not define, a loop of joints, a
+number that is not finite, a negative mass, a leg longer than :data:`MAX_LEG` (a file in
+mm), non-planar or prismatic joints, a torso without two legs (held by a rig: a pin or a
+boom above the link the legs hang from, the refusal says to make that link the root), a
+last leg link without length in the plane (an ankle at the foot: lock it, or give the
+foot), a torso hung from a massless root by joints whose origins turn the root's z (the
+world's vertical) out of the legs' plane (a file written with y up), legs that differ
+(links, masses, centres of mass, point masses), the hips at two places in the plane, a
+leg joint without actuator (the model's one unactuated degree of freedom is the stance
+foot's contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a
+link without ``<inertial>`` (its own or a fixed child's), no foot (legs and hips agree
+within ``match_tol`` of the leg's size, default identical; the model's leg is their
+mean); in ``lock``, a joint the file does not define, one that is not revolute or
+continuous, an angle that is not finite, a joint given twice. A non-planar joint's
 refusal names it and its axis, and how to lock it.
 """
 from __future__ import annotations
