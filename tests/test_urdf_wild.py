@@ -204,7 +204,19 @@ def test_a_robot_held_by_a_rig_says_make_the_torso_the_root(tmp_path, capsys, ri
     path = _write(tmp_path, text, "rig.urdf")
     err = _cli_error(capsys, ["robot", "import", str(path), "--out", str(tmp_path / "r.toml")])
     assert f"the legs hang from link 'torso', held by the joint(s) {joints}" in err
-    assert "make 'torso' the file's root link" in err
+    assert "--torso torso" in err and "make 'torso' the file's root link" in err
+    # named, the torso is the robot: the rig's joints and links are left out
+    imp = import_urdf(path, torso="torso")
+    assert imp.description == robot("rabbit").description
+    assert any(n.startswith(f"torso 'torso' (torso=): the joint(s) {joints} from the root "
+                            f"'stand' hold it") for n in imp.notes)
+    out = tmp_path / "r.toml"
+    assert main(["robot", "import", str(path), "--torso", "torso", "--out", str(out)]) == 0
+    assert out.is_file()
+    capsys.readouterr()
+    err = _cli_error(capsys, ["robot", "import", str(path), "--torso", "pelvis",
+                              "--out", str(tmp_path / "p.toml")])
+    assert "torso: the file has no link 'pelvis'" in err
 
 
 def test_no_foot_names_the_legs_joints(tmp_path, capsys):

@@ -83,7 +83,8 @@ def cmd_import(args):
                         f"{args.torque_limit:g}")
     imp = import_urdf(src, foot, torque_limit=args.torque_limit, lock=_locks(args),
                       lock_off_axis=args.lock_off_axis, axis=args.axis,
-                      match_tol=_match_tol(args.match_tol), foot_beyond=_beyond(args))
+                      match_tol=_match_tol(args.match_tol), foot_beyond=_beyond(args),
+                      torso=args.torso)
     header = f"made by 'biped robot import' from {src.name}"
     if imp.locked:
         header += "\nits sagittal model, with these joints locked (rad): " + ", ".join(
@@ -202,6 +203,11 @@ def register(sub):
                         "last link's line: the sole below a locked ankle, for legs whose "
                         "shins' frames differ (a mirrored export), where one --foot point "
                         "cannot serve both")
+    q.add_argument("--torso", metavar="LINK",
+                   help="the torso link, when the file hangs the robot from a test rig or "
+                        "a boom (joints of any type above it): those joints and the links "
+                        "above and beside it are left out (default: the root, or the first "
+                        "link with mass below a massless world link)")
     q.add_argument("--match-tol", type=float, metavar="REL",
                    help="how closely the two legs (masses, lengths, centres of mass, "
                         "inertias, relative to the leg's mass and length) and the hips in "

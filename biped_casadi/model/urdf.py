@@ -6,7 +6,9 @@ between the file's own joint angles and the model's coordinates
 What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N m):
 
 - the structure: a torso link (the tree's root, or reached from a massless root, a
-  ``world`` link, through one ``floating``, ``planar`` or ``fixed`` joint) with two
+  ``world`` link, through one ``floating``, ``planar`` or ``fixed`` joint, or named by
+  ``torso=``: a robot on a test rig or a boom, whose joints above it and the links above
+  and beside it are left out) with two
   chains of ``revolute`` or ``continuous`` joints, the legs, listed in any order, whose
   axes are all parallel, +n or -n per joint: n, the normal of the plane of motion (axes
   within ``AXIS_TOL``, 1e-3 rad, as a CAD export's rounded angles leave them, are
@@ -70,7 +72,7 @@ mass and joints beside the tree, as an unused ``world``, is ignored), links or j
 defined twice, a joint naming a link the file does not define, a loop of joints, a
 number that is not finite, a negative mass, a leg longer than :data:`MAX_LEG` (a file in
 mm), non-planar or prismatic joints, a torso without two legs (held by a rig: a pin or a
-boom above the link the legs hang from, the refusal says to make that link the root), a
+boom above the link the legs hang from, the refusal suggests ``torso=`` that link), a
 last leg link without length in the plane (an ankle at the foot: lock it, or give the
 foot), a torso hung from a massless root by joints whose origins turn the root's z (the
 world's vertical) out of the legs' plane (a file written with y up), legs that differ
@@ -585,7 +587,7 @@ def _joint_notes(rd: _Reader, joints) -> None:
 def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 torque_limit: float | None = None, lock=None, lock_off_axis: bool = False,
                 axis: str | None = None, match_tol: float = MATCH_TOL,
-                foot_beyond: float = 0.0) -> UrdfImport:
+                foot_beyond: float = 0.0, torso: str | None = None) -> UrdfImport:
     """Read a planar biped from a URDF file (what is read: the module docstring).
 
     Parameters
@@ -625,6 +627,11 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
         found or given, along the last link's line (the sole below a locked ankle, for
         legs whose last links' frames differ, where one ``foot`` point cannot serve
         both).
+    torso : str, optional
+        The torso link's name, when the robot hangs in the file from a test rig or a boom
+        (joints of any type above it): the joints from the root to it hold it in the
+        file, and the links above and beside it are left out of the model (the notes
+        give their mass).  Default: found as the module docstring says.
 
     Returns
     -------
@@ -650,7 +657,7 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     robot, said, framed = _parse(text, where, path.name)
     rd = _Reader(robot, where, tol)
     rd.notes += framed
-    torso = _Frame(rd.torso(), np.eye(3), np.zeros(3))
+    torso = _Frame(rd.torso(torso), np.eye(3), np.zeros(3))
     apply_locks(rd, torso.name, lock, lock_off_axis, axis)
     chains = _legs(rd, torso)
     n, signs = _axis(rd, chains)

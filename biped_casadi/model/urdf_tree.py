@@ -312,9 +312,12 @@ class _Reader:
                 check(owner, "inertia", [i.inertia.ixx, i.inertia.ixy, i.inertia.ixz,
                                          i.inertia.iyy, i.inertia.iyz, i.inertia.izz])
 
-    def torso(self) -> str:
-        """The torso: the root, or the first link with mass below a chain of massless
-        links each joined to the next by the one floating, planar or fixed joint."""
+    def torso(self, given: str | None = None) -> str:
+        """The torso: ``given``, else the root, or the first link with mass below a chain
+        of massless links each joined to the next by the one floating, planar or fixed
+        joint."""
+        if given is not None:
+            return self._given_torso(given)
         kids = {j.child for j in self.robot.joints}
         roots = [name for name in self.links if name not in kids]
         if not roots:
@@ -360,6 +363,45 @@ class _Reader:
             if j.type == "planar" and j.axis is not None:
                 self.planar_axis = np.array(j.axis, float)     # in the child's frame
             name = j.child
+        return name
+
+    def _given_torso(self, name: str) -> str:
+        """The link ``name`` as the torso: the links above and beside it (a test rig, a
+        boom) are not the robot's; the joints from the root to it hold it in the file."""
+        if not isinstance(name, str) or name not in self.links:
+            self.fail(f"torso: the file has no link {name!r}")
+        parent = {j.child: j for j in self.robot.joints}
+        path, at, seen = [], name, {name}
+        while at in parent:
+            j = parent[at]
+            path.insert(0, j)
+            at = j.parent
+            if at in seen:
+                self.fail("no root link: the joints make a loop (every link is some joint's "
+                          "child)")
+            seen.add(at)
+        reached, todo = {name}, [name]
+        while todo:
+            for j in self.children.get(todo.pop(), []):
+                if j.child not in reached:
+                    reached.add(j.child)
+                    todo.append(j.child)
+        if path:
+            R, turning = np.eye(3), []
+            for j in path:
+                Rj = _pose(j.origin)[0]
+                R = R @ Rj
+                if not np.allclose(Rj, np.eye(3), rtol=0.0, atol=1e-12):
+                    turning.append(j.name)
+            self.world_up = (R.T @ np.array([0.0, 0.0, 1.0]), at, turning)
+            out = [n for n in self.links if n not in reached]
+            mass = sum(_mass(self.links[n]) for n in out)
+            self.notes.append(
+                f"torso {name!r} (torso=): the joint(s) "
+                f"{', '.join(f'{j.name!r} ({j.type})' for j in path)} from the root {at!r} "
+                f"hold it in the file, not joints of the model (the stance foot is its base); "
+                f"the {len(out)} link(s) above and beside it ({mass:g} kg) are not in the "
+                f"model; pitch is the angle of link {name!r} in the world")
         return name
 
     def fixed_descendants(self, frame: _Frame) -> list:
@@ -464,9 +506,9 @@ def _held(rd: _Reader, torso: _Frame, joint) -> None:
         names = ", ".join(f"{k.name!r} ({k.type})" for k in above)
         rd.fail(f"the legs hang from link {frame.name!r}, held by the joint(s) {names} "
                 f"from {torso.name!r} (a test rig, a boom, a pin?): not joints of "
-                f"a free biped; make {frame.name!r} the file's root link (delete the links "
-                f"and joints above it), or hang it from a massless 'world' link by a "
-                f"floating or planar joint")
+                f"a free biped; name the torso ('biped robot import FILE --torso "
+                f"{frame.name}', torso={frame.name!r}: what is above it is left out) or make "
+                f"{frame.name!r} the file's root link")
 
 
 def _axis(rd: _Reader, legs) -> tuple:
