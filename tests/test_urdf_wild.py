@@ -13,9 +13,14 @@ small file of its own (tests/urdf_variants.py and the packaged rabbit.urdf):
   contact frame: the contact frame is the foot (Pinocchio again);
 - a pelvis whose centre of mass and geometry sit on the hip: its up direction is its
   frame's z, and the model equals Pinocchio's;
-- a last leg link of no length (an ankle pitch joint at the locked roll joint's point)
-  and a robot held by a rig (a pin or a boom of prismatic joints above the torso) are
-  refused with what to do.
+- a robot held by a rig (a pin, or a boom of prismatic joints, above the torso) is
+  refused with what to do, and imports as the robot with ``torso=``;
+- a torso turned under a world link so that gravity leaves the legs' plane (a y-up
+  file) is refused; a massless link without joints beside the tree is ignored;
+- legs that differ: the refusal names the largest difference and a tolerance that takes
+  them all at once; camel-case sides name the links; ``<frame>`` elements mark a sole;
+- a last leg link without length, no foot, a ``<mimic>`` leg joint and a branching leg
+  are refused in one line that says what to do.
 """
 from __future__ import annotations
 
