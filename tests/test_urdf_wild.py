@@ -349,3 +349,15 @@ def test_frame_elements_mark_the_foot(tmp_path):
     assert imp.foot == "link 'left_sole'"
     assert any(n.startswith("read the <frame> elements 'left_sole' on 'tibia_left'")
                for n in imp.notes)
+
+
+def test_a_passive_leg_joint_says_lock_it(tmp_path, capsys):
+    # Cassie's shin spring: a leg joint with effort 0 among actuated ones
+    text = RABBIT_URDF.replace('<limit effort="150" velocity="20" lower="-3.14" upper="3.14"/>\n'
+                               '  </joint>\n  <link name="tibia_left">',
+                               '<limit effort="0" velocity="20" lower="-3.14" upper="3.14"/>\n'
+                               '  </joint>\n  <link name="tibia_left">')
+    assert text != RABBIT_URDF
+    err = _cli_error(capsys, ["robot", "import", str(_write(tmp_path, text, "p.urdf")),
+                              "--out", str(tmp_path / "r.toml")])
+    assert "joint 'knee_left' has no actuator" in err and "--lock knee_left[=RAD]" in err

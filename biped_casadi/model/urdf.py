@@ -204,7 +204,9 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
     if passive:
         rd.fail(f"joint {passive[0]!r} has no actuator (no <transmission>, or effort 0): "
                 f"with the passive stance foot that makes more than one unactuated joint, "
-                f"which the model does not support")
+                f"which the model does not support; a passive joint held still (a stiff "
+                f"spring) is locked ('biped robot import FILE --lock {passive[0]}[=RAD]', "
+                f"lock={{{passive[0]!r}: 0}}), or its actuator is missing from the file")
     rotors = {}
     for j in joints:
         try:
