@@ -116,10 +116,6 @@ BAD = {
     "hips apart": (lambda s: s.replace('<origin xyz="0 -0.1 0" rpy="0 0 0"/>',
                                        '<origin xyz="0.05 -0.1 0" rpy="0 0 0"/>', 1),
                    r"hip joints 'hip_left' and 'hip_right' are 0.05 m apart in the plane"),
-    "torso direction unknown": (lambda s: re.sub(r'<origin xyz="0 0 0.24" rpy="0 0 0"/>(.*?)'
-                                                 r'<visual>.*?</visual>', r'\1', s, count=1,
-                                                 flags=re.S),
-                                r"the torso's up direction cannot be found"),
     "not XML": (lambda s: s[:200], r"cannot parse the URDF"),
     "rotors differ": (lambda s: s.replace("<motorInertia>3.32e-4</motorInertia>",
                                           "<motorInertia>1e-4</motorInertia>", 1),

@@ -12,7 +12,8 @@ import numpy as np
 
 from biped_casadi.files import write_text_atomic
 from biped_casadi.model.description import load_description
-from biped_casadi.model.urdf import MATCH_TOL, MAX_LEG, MAX_MATCH_TOL, description_toml, import_urdf
+from biped_casadi.model.urdf import (MATCH_TOL, MAX_LEG, MAX_MATCH_TOL, description_toml,
+                                     import_urdf, xacro_refusal)
 from biped_casadi.model.urdf_legs import check_match_tol
 from biped_casadi.model.urdf_tree import lock_table
 from biped_casadi.mujoco import mjcf, mujoco_module
@@ -63,6 +64,9 @@ def _match_tol(value) -> float:
 
 def cmd_import(args):
     src = Path(args.file)
+    if src.suffix.lower() == ".xacro":
+        raise UserError(f"FILE: {src.name} is a xacro file, not a URDF: "
+                        f"{xacro_refusal(src.name)}")
     if src.suffix.lower() != ".urdf":
         raise UserError(f"FILE: a URDF file (.urdf) is expected, got {str(args.file)!r}")
     if not src.is_file():
@@ -79,7 +83,8 @@ def cmd_import(args):
                         f"{args.torque_limit:g}")
     imp = import_urdf(src, foot, torque_limit=args.torque_limit, lock=_locks(args),
                       lock_off_axis=args.lock_off_axis, axis=args.axis,
-                      match_tol=_match_tol(args.match_tol), foot_beyond=_beyond(args))
+                      match_tol=_match_tol(args.match_tol), foot_beyond=_beyond(args),
+                      torso=args.torso)
     header = f"made by 'biped robot import' from {src.name}"
     if imp.locked:
         header += "\nits sagittal model, with these joints locked (rad): " + ", ".join(
@@ -171,7 +176,9 @@ def register(sub):
                                     "axes within 1e-3 rad (rounded angles) turn about their "
                                     "mean; mirrored legs that differ in their last digits "
                                     "import as their mean with --match-tol.")
-    q.add_argument("file", metavar="FILE.urdf", help="the URDF file")
+    q.add_argument("file", metavar="FILE.urdf",
+                   help="the URDF file (a xacro file: expand it first, 'xacro FILE.xacro "
+                        "> robot.urdf')")
     q.add_argument("--foot", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="the foot point in the last leg link's frame, m (when the file has "
                         "no foot link or frame)")
@@ -196,6 +203,11 @@ def register(sub):
                         "last link's line: the sole below a locked ankle, for legs whose "
                         "shins' frames differ (a mirrored export), where one --foot point "
                         "cannot serve both")
+    q.add_argument("--torso", metavar="LINK",
+                   help="the torso link, when the file hangs the robot from a test rig or "
+                        "a boom (joints of any type above it): those joints and the links "
+                        "above and beside it are left out (default: the root, or the first "
+                        "link with mass below a massless world link)")
     q.add_argument("--match-tol", type=float, metavar="REL",
                    help="how closely the two legs (masses, lengths, centres of mass, "
                         "inertias, relative to the leg's mass and length) and the hips in "

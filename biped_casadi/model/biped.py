@@ -23,7 +23,7 @@ import numpy as np
 from ..caching import cached
 from .description import BUILTIN, RobotDescription, builtin_path, load_description
 from .params import RABBIT, RobotParams, load_params
-from .urdf import load_urdf
+from .urdf import load_urdf, xacro_refusal
 
 __all__ = ["BipedModel", "rabbit", "robot", "resolve_robot", "E_RELABEL", "B_INPUT",
            "absolute_angles", "relabelling", "RABBIT_DESCRIPTION"]
@@ -545,6 +545,9 @@ def resolve_robot(robot, foot=None, torque_limit=None) -> RobotDescription:
         field).
     """
     is_urdf = isinstance(robot, (str, Path)) and str(robot).lower().endswith(".urdf")
+    if isinstance(robot, (str, Path)) and str(robot).lower().endswith(".xacro"):
+        raise ValueError(f"robot: {Path(robot).name} is a xacro file, not a URDF: "
+                         f"{xacro_refusal(Path(robot).name)}")
     for name, value in (("foot", foot), ("torque_limit", torque_limit)):
         if value is not None and not is_urdf:
             raise ValueError(f"{name}: applies to a URDF file (.urdf) only, not to {robot!r}")

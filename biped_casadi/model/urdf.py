@@ -6,7 +6,9 @@ between the file's own joint angles and the model's coordinates
 What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N m):
 
 - the structure: a torso link (the tree's root, or reached from a massless root, a
-  ``world`` link, through one ``floating``, ``planar`` or ``fixed`` joint) with two
+  ``world`` link, through one ``floating``, ``planar`` or ``fixed`` joint, or named by
+  ``torso=``: a robot on a test rig or a boom, whose joints above it and the links above
+  and beside it are left out) with two
   chains of ``revolute`` or ``continuous`` joints, the legs, listed in any order, whose
   axes are all parallel, +n or -n per joint: n, the normal of the plane of motion (axes
   within ``AXIS_TOL``, 1e-3 rad, as a CAD export's rounded angles leave them, are
@@ -17,7 +19,8 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   torso frame's z axis, vertical at pitch 0, must lie in the plane of motion;
 - any zero pose: the model's geometry is found from the tree at zero joint angles.  The
   torso's up direction goes from the hip toward its centre of mass (toward the centre of
-  its visual and collision geometry when the centre of mass is at the hip); each leg
+  its visual and collision geometry when the centre of mass is at the hip, along its
+  frame's z when that is at the hip too: a pelvis with its mass on the hip); each leg
   link's goes from the next joint down (the foot, for the last link) to its own joint.
   The angle between a link's up direction and its parent's at zero is the joint's
   ``offset``, the orientation of its axis against n its ``sign`` (printed on import); a
@@ -31,10 +34,14 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   centre of mass around n; a fixed child link with mass and no inertia sitting on the
   hip, a joint between leg links or the foot is a point mass there;
 - the foot: the origin of the fixed child link (or frame) of each leg's last link
-  (one named like a foot when there are several), or ``foot=(x, y, z)`` in that link's
+  (one named like a foot when there are several; of several, the one named like a sole
+  or contact; a top-level ``<frame name link xyz rpy/>``, Drake's and FROST's extension,
+  is such a frame), or ``foot=(x, y, z)`` in that link's
   frame; when that child hangs by a locked joint (a 3-D robot's ankle), the one fixed
-  frame below it named like a sole or contact point, else the ankle (said in the notes:
-  ``foot=`` then gives the point that touches the ground);
+  frame below it named like a sole or contact point, else the ankle: the lowest of the
+  locked joints down from there that turn in the plane (a spring, a tarsus and a toe
+  locked below a knee: the toe's joint), said in the notes (``foot=`` then gives the
+  point that touches the ground);
 - a 3-D robot, as its sagittal-plane model: ``lock={name: angle}`` holds joints fixed
   (each becomes a fixed joint, its child frame turned by the angle about its axis, so
   its child links merge into its parent: hip yaw and roll links into the torso, a foot
@@ -59,17 +66,23 @@ geometry above the hip along its up direction, else twice its centre-of-mass hei
 Gravity is 9.81 m/s^2 along -z of the world.
 
 Refused, with one ``ValueError`` naming the file and the joint or link: an unparsable
-file, links or joints defined twice, a joint naming a link the file does not define, a
-loop of joints, a number that is not finite, a negative mass, a leg longer than
-:data:`MAX_LEG` (a file in mm), non-planar or prismatic
-joints, a torso without two legs, legs that differ (links, masses, centres of mass, point
-masses), the hips at two places in the plane, a leg joint
-without actuator (the model's one unactuated degree of freedom is the stance foot's
-contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a link without
-``<inertial>`` (its own or a fixed child's), a torso whose up direction cannot be found, no
-foot (legs and hips agree within ``match_tol`` of the leg's size, default identical; the
-model's leg is their mean); in ``lock``, a joint the file does not define, one that is not revolute or
-continuous, an angle that is not finite, a joint given twice.  A non-planar joint's
+file, a xacro file (macros, ``${...}``: expand it with xacro first), a file without
+links (a fragment that a xacro file includes), links in several trees (a link without
+mass and joints beside the tree, as an unused ``world``, is ignored), links or joints
+defined twice, a joint naming a link the file does not define, a loop of joints, a
+number that is not finite, a negative mass, a leg longer than :data:`MAX_LEG` (a file in
+mm), non-planar or prismatic joints, a torso without two legs (held by a rig: a pin or a
+boom above the link the legs hang from, the refusal suggests ``torso=`` that link), a
+last leg link without length in the plane (an ankle at the foot: lock it, or give the
+foot), a torso hung from a massless root by joints whose origins turn the root's z (the
+world's vertical) out of the legs' plane (a file written with y up), legs that differ
+(links, masses, centres of mass, point masses), the hips at two places in the plane, a
+leg joint without actuator (the model's one unactuated degree of freedom is the stance
+foot's contact; effort 0 beside others' positive efforts), a ``<mimic>`` leg joint, a
+link without ``<inertial>`` (its own or a fixed child's), no foot (legs and hips agree
+within ``match_tol`` of the leg's size, default identical; the model's leg is their
+mean); in ``lock``, a joint the file does not define, one that is not revolute or
+continuous, an angle that is not finite, a joint given twice. A non-planar joint's
 refusal names it and its axis, and how to lock it.
 """
 from __future__ import annotations
@@ -91,7 +104,8 @@ from .urdf_legs import (MATCH_TOL, MAX_MATCH_TOL, _beyond, _check_foot, check_ma
                         _foot_point, _same_legs, _wider)
 from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader, apply_locks, lock_table
 
-__all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "GEOMETRY_TOL",
+__all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "xacro_refusal",
+           "GEOMETRY_TOL",
            "MATCH_TOL", "MAX_MATCH_TOL",
            "MAX_LEG"]
 
@@ -190,7 +204,9 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
     if passive:
         rd.fail(f"joint {passive[0]!r} has no actuator (no <transmission>, or effort 0): "
                 f"with the passive stance foot that makes more than one unactuated joint, "
-                f"which the model does not support")
+                f"which the model does not support; a passive joint held still (a stiff "
+                f"spring) is locked ('biped robot import FILE --lock {passive[0]}[=RAD]', "
+                f"lock={{{passive[0]!r}: 0}}), or its actuator is missing from the file")
     rotors = {}
     for j in joints:
         try:
@@ -245,9 +261,11 @@ _SIDES = {"left", "right", "l", "r", "lft", "rgt", "lt", "rt"}
 
 
 def _common_name(a: str, b: str, default: str) -> str:
-    """'femur' from 'femur_left' / 'femur_right', 'l_femur' / 'r_femur', ..."""
+    """'femur' from 'femur_left' / 'femur_right', 'l_femur' / 'r_femur', 'Thigh' from
+    'LeftThigh' / 'RightThigh', ..."""
     def tokens(s):
-        return [t for t in re.split(r"[_\-\s.]+", s) if t and t.lower() not in _SIDES]
+        return [t for t in re.split(r"[_\-\s.]+|(?<=[a-z])(?=[A-Z])", s)
+                if t and t.lower() not in _SIDES]
     ta, tb = tokens(a), tokens(b)
     if ta and ta == tb:
         return "_".join(ta)
@@ -322,10 +340,18 @@ class _Leg:
             d = plane.flat(self.points[i] - self.points[i + 1])
             length = float(np.linalg.norm(d))
             if not length > rd.tol:
-                what = "the foot" if i == len(self.frames) - 1 else \
-                    f"joint {self.joints[i + 1].name!r}"
+                j = self.joints[i].name
+                if i == len(self.frames) - 1:
+                    what = "the foot"
+                    todo = (f"for a point foot lock that joint, an ankle ('biped robot import "
+                            f"FILE --lock {j}', lock={{{j!r}: 0}}: {f.name!r} merges into the "
+                            f"link above), or give the foot point (--foot X Y Z in the frame "
+                            f"of {f.name!r}, foot=)")
+                else:
+                    what = f"joint {self.joints[i + 1].name!r}"
+                    todo = f"lock one of them (--lock {j}, lock=)"
                 rd.fail(f"link {f.name!r} has no length in the plane of motion: its joint "
-                        f"{self.joints[i].name!r} and {what} are at the same place")
+                        f"{j!r} and {what} are at the same place; {todo}")
             self.up.append(d / length)
             self.lengths.append(length)
 
@@ -357,13 +383,18 @@ def _torso(rd: _Reader, frame: _Frame, hip, plane: _Plane, pm: dict) -> tuple:
         centre = _geometry_centre(rd, link, frame)
         g = None if centre is None else plane.flat(centre - hip)
         if g is None or not np.linalg.norm(g) > rd.tol:
-            rd.fail(f"the torso's up direction cannot be found: the centre of mass of "
-                    f"{link.name!r} is at the hip and it has no visual or collision "
-                    f"geometry away from the hip")
-        up = g / np.linalg.norm(g)
-        rd.notes.append(f"the torso's centre of mass is at the hip: its up direction goes "
-                        f"toward the centre of its geometry ({_fmt(plane.angle(up))} rad "
-                        f"from z of {link.name!r})")
+            up = plane.flat(np.array([0.0, 0.0, 1.0]))
+            up = up / np.linalg.norm(up)
+            rd.notes.append(f"the torso's centre of mass is at the hip, and so is the centre "
+                            f"of its geometry{'' if g is not None else ' (it has none)'}: "
+                            f"its up direction is z of {link.name!r} (upright at pitch 0); "
+                            f"it only sets where the torso's angle is measured from (a pelvis "
+                            f"whose mass sits on the hip)")
+        else:
+            up = g / np.linalg.norm(g)
+            rd.notes.append(f"the torso's centre of mass is at the hip: its up direction "
+                            f"goes toward the centre of its geometry "
+                            f"({_fmt(plane.angle(up))} rad from z of {link.name!r})")
     com = _clean(np.dot(rel, up))
     table = dict(name=link.name, mass=body.mass,
                  length=_clean(_torso_length(rd, link, frame, hip, up, com)),
@@ -428,8 +459,86 @@ def _torso_length(rd: _Reader, link, frame: _Frame, hip, up, com: float) -> floa
 
 
 # ------------------------------------------------------------------ entry points
-def _parse(text: str, where: str):
-    """The parsed robot and the parser's complaints (unknown tags are not errors)."""
+#: the namespaces a xacro file declares for its macros
+_XACRO_NS = ("http://www.ros.org/wiki/xacro", "http://ros.org/wiki/xacro")
+
+
+def xacro_refusal(name: str) -> str:
+    """What to do with a xacro file (the refusal's advice): expand it to a URDF first.
+
+    Parameters
+    ----------
+    name : str
+        The xacro file's name, as the command to run names it.
+
+    Returns
+    -------
+    str
+        The advice, ending a refusal's line.
+    """
+    return (f"expand it to a URDF first ('xacro {name} > robot.urdf', with ROS's xacro or "
+            f"'pip install xacro') and import robot.urdf")
+
+
+def _xacro_marker(text: str) -> str | None:
+    """The first xacro macro element or substitution in ``text`` (a xacro file saved
+    as .urdf), or None: the URDF parser would read it as links without their macros."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        m = re.search(r"<xacro:[A-Za-z_]+", text)      # a prefix without its namespace
+        return m.group(0) + ">" if m else None
+    for el in root.iter():
+        tag = el.tag if isinstance(el.tag, str) else ""
+        if tag.startswith("{") and tag[1:].split("}")[0].rstrip("#/") in _XACRO_NS:
+            return f"<xacro:{tag.split('}', 1)[1]}>"
+        for key, value in el.attrib.items():
+            if "${" in value or "$(" in value:
+                return f'{key}="{value}"'
+    return None
+
+
+def _frames_as_links(text: str) -> tuple:
+    """(text, notes): each top-level ``<frame name= link= xyz= rpy=/>`` (an extension
+    of Drake's and FROST's files: contact points, soles) written as a massless link fixed
+    to its link, so that it can mark the foot; the text as it was without one."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        return text, []
+    frames = [f for f in root.findall("frame") if f.get("name") and f.get("link")]
+    if not frames:
+        return text, []
+    names = {el.get("name") for el in root if el.tag in ("link", "joint")}
+    done = []
+    for f in frames:
+        name = f.get("name")
+        if name in names or f"{name}__frame" in names:
+            continue
+        root.remove(f)
+        link = ET.SubElement(root, "link", name=name)
+        link.tail = "\n"
+        joint = ET.SubElement(root, "joint", name=f"{name}__frame", type="fixed")
+        ET.SubElement(joint, "parent", link=f.get("link"))
+        ET.SubElement(joint, "child", link=name)
+        ET.SubElement(joint, "origin", xyz=f.get("xyz", "0 0 0"), rpy=f.get("rpy", "0 0 0"))
+        names.add(name)
+        done.append(f"{name!r} on {f.get('link')!r}")
+    notes = [f"read the <frame> elements {', '.join(done)} as massless links fixed to their "
+             f"links (Drake's and FROST's extension)"] if done else []
+    return ET.tostring(root, encoding="unicode"), notes
+
+
+def _parse(text: str, where: str, name: str = "FILE"):
+    """The parsed robot, the parser's complaints (unknown tags are not errors) and what
+    was read beyond URDF (``<frame>`` elements).  A xacro file (macros, substitutions)
+    and a file without links (a fragment that a xacro file includes) are refused with
+    what to do."""
+    marker = _xacro_marker(text)
+    if marker is not None:
+        raise ValueError(f"{where}: a xacro file, not a URDF ({marker[:80]}): "
+                         f"{xacro_refusal(name)}")
+    text, framed = _frames_as_links(text)
     said = []
     keep = _xml_core.on_error
     _xml_core.on_error = said.append
@@ -440,7 +549,11 @@ def _parse(text: str, where: str):
                          ) from None
     finally:
         _xml_core.on_error = keep
-    return robot, said
+    if not robot.links:
+        raise ValueError(f"{where}: defines no <link>: not a robot's description (a fragment "
+                         f"that a xacro file includes, e.g. ros2_control or gazebo tags?); "
+                         f"import the robot's own file, expanded by xacro if it is one")
+    return robot, said, framed
 
 
 def _check_torque_limit(torque_limit):
@@ -476,7 +589,7 @@ def _joint_notes(rd: _Reader, joints) -> None:
 def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 torque_limit: float | None = None, lock=None, lock_off_axis: bool = False,
                 axis: str | None = None, match_tol: float = MATCH_TOL,
-                foot_beyond: float = 0.0) -> UrdfImport:
+                foot_beyond: float = 0.0, torso: str | None = None) -> UrdfImport:
     """Read a planar biped from a URDF file (what is read: the module docstring).
 
     Parameters
@@ -516,6 +629,11 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
         found or given, along the last link's line (the sole below a locked ankle, for
         legs whose last links' frames differ, where one ``foot`` point cannot serve
         both).
+    torso : str, optional
+        The torso link's name, when the robot hangs in the file from a test rig or a boom
+        (joints of any type above it): the joints from the root to it hold it in the
+        file, and the links above and beside it are left out of the model (the notes
+        give their mass).  Default: found as the module docstring says.
 
     Returns
     -------
@@ -538,14 +656,16 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     match_tol = check_match_tol(match_tol)
     lock = lock_table(lock, lock_off_axis, axis)
     text = read_text_file(path, "URDF file", 20_000_000)
-    robot, said = _parse(text, where)
+    robot, said, framed = _parse(text, where, path.name)
     rd = _Reader(robot, where, tol)
-    torso = _Frame(rd.torso(), np.eye(3), np.zeros(3))
+    rd.notes += framed
+    torso = _Frame(rd.torso(torso), np.eye(3), np.zeros(3))
     apply_locks(rd, torso.name, lock, lock_off_axis, axis)
     chains = _legs(rd, torso)
     n, signs = _axis(rd, chains)
     plane = _Plane(n)
-    feet = [_foot_point(rd, chain[-1][1], foot) for chain in chains]
+    feet = [_foot_point(rd, chain[-1][1], foot, n, [j.name for j, _ in chain])
+            for chain in chains]
     if foot_beyond:
         feet = [_beyond(rd, chain, f, foot_beyond, plane) for chain, f in zip(chains, feet)]
     legs = [_Leg(rd, chain, p, plane) for chain, (p, _, _) in zip(chains, feet)]
@@ -558,20 +678,21 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 f"in metres (a file in millimetres?)")
     hip = legs[0].points[0]
     apart = float(np.linalg.norm(plane.flat(legs[1].points[0] - hip)))
-    if apart > tol + match_tol * span:
-        rd.fail(f"the hip joints {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r} "
-                f"are {apart:.3g} m apart in the plane of motion: the model's legs share "
-                f"one hip{_wider(apart / span, match_tol, 'accepts them')}")
-    if apart > tol:
-        rd.notes.append(f"the hips are {apart:.2g} m apart in the plane of motion (match_tol "
-                        f"{match_tol:g}): the model's hip is that of {legs[0].joints[0].name!r}")
+    hips = apart / span if apart > tol else 0.0
     all_joints = [j for leg in legs for j in leg.joints]
-    _joint_notes(rd, all_joints)
-    motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
     pm_legs = [dict(), dict()]
     links = [[leg.body(i, pm) for i in range(len(leg.frames))]
              for leg, pm in zip(legs, pm_legs)]
-    _same_legs(rd, links, pm_legs, legs, match_tol)
+    worst = _same_legs(rd, links, pm_legs, legs, match_tol, hips)
+    if apart > tol + match_tol * span:
+        rd.fail(f"the hip joints {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r} "
+                f"are {apart:.3g} m apart in the plane of motion: the model's legs share "
+                f"one hip{_wider(max(hips, worst), match_tol, 'accepts them')}")
+    if apart > tol:
+        rd.notes.append(f"the hips are {apart:.2g} m apart in the plane of motion (match_tol "
+                        f"{match_tol:g}): the model's hip is that of {legs[0].joints[0].name!r}")
+    _joint_notes(rd, all_joints)
+    motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
     pm = {"hip": 0.0}
     torso_d, torso_up = _torso(rd, torso, hip, plane, pm)
     pm["hip"] += pm_legs[0].pop("hip", 0.0) + pm_legs[1].pop("hip", 0.0)

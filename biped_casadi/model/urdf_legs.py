@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from .urdf_tree import _Frame, _Reader
+from .urdf_tree import _Frame, _parallel, _Reader
 
 __all__ = ["MATCH_TOL", "MAX_MATCH_TOL", "check_match_tol"]
 
@@ -18,25 +18,31 @@ __all__ = ["MATCH_TOL", "MAX_MATCH_TOL", "check_match_tol"]
 MATCH_TOL, MAX_MATCH_TOL = 1e-9, 0.05
 
 
-def _same_legs(rd, links, pms, legs, match_tol: float):
+def _same_legs(rd, links, pms, legs, match_tol: float, hips: float = 0.0) -> float:
     """The legs agree within ``match_tol`` (relative to the leg's size, by quantity);
-    the first leg's links become their mean where they differ (said in the notes)."""
+    the first leg's links become their mean where they differ (said in the notes).  A
+    refusal names the largest difference and the tolerance that takes every one, the
+    hips' (``hips``, relative) too.  Returns the largest difference taken."""
     span = sum(a["length"] for a in links[0])
     mass = sum(a["mass"] for a in links[0]) + sum(v for k, v in pms[0].items() if k != "hip")
     scale = dict(mass=mass, length=span, com=span, com_offset=span, inertia=mass * span ** 2)
-    worst = (0.0, "")
+    diffs = []
     for a, b in zip(*links):
         for key, size in scale.items():
             d = abs(a[key] - b[key])
             if d <= rd.tol or math.isclose(a[key], b[key], rel_tol=1e-12):
                 continue
-            rel = d / size
-            if rel > match_tol:
-                rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.12g}, link "
-                        f"{b['name']!r} {b[key]:.12g} (apart by {d:.2g}, {rel:.2g} of the "
-                        f"leg's {_SIZE[key]}){_wider(rel, match_tol)}")
-            worst = max(worst, (rel, f"{key} of {a['name']!r} and {b['name']!r}"))
-            a[key] = 0.5 * (a[key] + b[key])
+            diffs.append((d / size, d, key, a, b))
+    big = max(diffs, key=lambda x: x[0], default=None)
+    if big is not None and big[0] > match_tol:
+        rel, d, key, a, b = big
+        rd.fail(f"legs differ: link {a['name']!r} has {key} {a[key]:.12g}, link "
+                f"{b['name']!r} {b[key]:.12g} (apart by {d:.2g}, {rel:.2g} of the "
+                f"leg's {_SIZE[key]}){_wider(max(rel, hips), match_tol)}")
+    worst = (0.0, "")
+    for rel, d, key, a, b in diffs:
+        worst = max(worst, (rel, f"{key} of {a['name']!r} and {b['name']!r}"))
+        a[key] = 0.5 * (a[key] + b[key])
     if set(pms[0]) - {"hip"} != set(pms[1]) - {"hip"}:
         rd.fail(f"legs differ in their point masses (legs of {legs[0].joints[0].name!r} and "
                 f"{legs[1].joints[0].name!r}): {pms[0]} and {pms[1]}")
@@ -45,13 +51,14 @@ def _same_legs(rd, links, pms, legs, match_tol: float):
         if rel > max(match_tol, 1e-12):
             rd.fail(f"legs differ in their point masses (legs of {legs[0].joints[0].name!r} "
                     f"and {legs[1].joints[0].name!r}): {pms[0]} and {pms[1]}"
-                    f"{_wider(rel, match_tol)}")
+                    f"{_wider(max(rel, hips, worst[0]), match_tol)}")
         if rel > 0:
             worst = max(worst, (rel, f"point mass at {k}"))
             pms[0][k] = 0.5 * (pms[0][k] + pms[1][k])
     if worst[0] > 0:
         rd.notes.append(f"the legs differ by up to {worst[0]:.2g} of the leg's size "
                         f"({worst[1]}; match_tol {match_tol:g}): the model's leg is their mean")
+    return worst[0]
 
 
 #: what each quantity of a leg is measured against in ``match_tol``
@@ -107,21 +114,27 @@ _FOOT_WORDS = ("foot", "toe", "sole", "contact", "ankle")
 _SOLE_WORDS = ("sole", "contact")
 
 
-def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
-    """(foot point in the torso frame, where it came from, the foot link or None)."""
+def _foot_point(rd: _Reader, last: _Frame, foot, n=None, leg=()) -> tuple:
+    """(foot point in the torso frame, where it came from, the foot link or None).
+    ``n``: the plane's normal (torso frame), which locked joints below an ankle are the
+    leg's own (turning in the plane: a spring, a tarsus, a toe held fixed); ``leg``: the
+    leg's joint names (for the refusal)."""
     if foot is not None:
         f = np.asarray(foot, dtype=float).ravel()
         return last.p + last.R @ f, "foot= argument", None
     cands = [(j, f) for j, f in rd.fixed_descendants(last) if j.parent == last.name]
     if len(cands) > 1:
         named = [c for c in cands if any(w in c[1].name.lower() for w in _FOOT_WORDS)]
-        cands = named if len(named) == 1 else cands
+        soles = [c for c in named if any(w in c[1].name.lower() for w in _SOLE_WORDS)]
+        cands = named if len(named) == 1 else soles if len(soles) == 1 else cands
     if len(cands) != 1:
         what = "no child link or fixed frame" if not cands else \
             f"{len(cands)} fixed children ({', '.join(repr(c[1].name) for c in cands)})"
-        rd.fail(f"no foot: the last leg link {last.name!r} has {what}; give the foot "
+        chain = f" (the leg's joints: {' -> '.join(leg)})" if leg else ""
+        rd.fail(f"no foot: the last leg link {last.name!r}{chain} has {what}; give the foot "
                 f"point in its frame (foot=(x, y, z), or 'biped robot import FILE --foot "
-                f"X Y Z --out robot.toml')")
+                f"X Y Z --out robot.toml'), or lock the joint above it if that is an ankle "
+                f"(--lock NAME, lock=)")
     j, f = cands[0]
     if j.name not in rd.locked:
         return f.p, f"link {f.name!r}", f.name
@@ -130,13 +143,27 @@ def _foot_point(rd: _Reader, last: _Frame, foot) -> tuple:
     if len(soles) == 1:
         return soles[0].p, f"link {soles[0].name!r} (below the locked joint {j.name!r})", \
             soles[0].name
+    if n is not None:
+        j, f = _lowest_in_plane(rd, j, f, n)
     rd.notes.append(f"the foot point is the origin of the locked joint {j.name!r} (where "
-                    f"{f.name!r} hangs from {last.name!r}: an ankle, not a sole): the model's "
+                    f"{f.name!r} hangs from {j.parent!r}: an ankle, not a sole): the model's "
                     f"foot is the point that touches the ground; with no single fixed frame "
                     f"below it named like a sole or contact, give that point with --foot X Y Z "
                     f"(foot=) in the frame of {last.name!r}, or its distance beyond the ankle "
                     f"along the shin with --foot-beyond D (foot_beyond=)")
     return f.p, f"link {f.name!r} (the locked joint {j.name!r})", f.name
+
+
+def _lowest_in_plane(rd: _Reader, j, f: _Frame, n) -> tuple:
+    """Down a chain of locked joints that turn in the plane (about n: the leg's own
+    joints held fixed, as a spring, a tarsus and a toe below a knee), the last one and
+    its child frame: the ankle; a locked joint off the plane (an ankle roll) ends it."""
+    while True:
+        below = [(k, g) for k, g in rd.fixed_descendants(f) if k.parent == f.name
+                 and k.name in rd.locked and _parallel(g.R @ rd.unit_axis(k), n)]
+        if len(below) != 1:
+            return j, f
+        j, f = below[0]
 
 
 def _beyond(rd: _Reader, chain, foot: tuple, d: float, plane) -> tuple:

@@ -191,6 +191,9 @@ class _Reader:
         self.order = {j.name: i for i, j in enumerate(robot.joints)}
         self.notes = []
         self.planar_axis = None
+        #: (the world's z in the torso frame, the links and joints above the torso) when
+        #: the torso hangs from a massless root (a world link), else None
+        self.world_up = None
         self.locked = {}
 
     def fail(self, problem: str):
@@ -309,15 +312,27 @@ class _Reader:
                 check(owner, "inertia", [i.inertia.ixx, i.inertia.ixy, i.inertia.ixz,
                                          i.inertia.iyy, i.inertia.iyz, i.inertia.izz])
 
-    def torso(self) -> str:
-        """The torso: the root, or the first link with mass below a chain of massless
-        links each joined to the next by the one floating, planar or fixed joint."""
+    def torso(self, given: str | None = None) -> str:
+        """The torso: ``given``, else the root, or the first link with mass below a chain
+        of massless links each joined to the next by the one floating, planar or fixed
+        joint."""
+        if given is not None:
+            return self._given_torso(given)
         kids = {j.child for j in self.robot.joints}
         roots = [name for name in self.links if name not in kids]
         if not roots:
             self.fail("no root link: the joints make a loop (every link is some joint's child)")
+        alone = [n for n in roots if n not in self.children and _mass(self.links[n]) == 0.0]
+        if len(roots) > 1 and len(roots) - len(alone) == 1:
+            self.notes.append(f"ignored: link(s) {', '.join(repr(n) for n in alone)} without "
+                              f"mass and joints (not part of the robot's tree)")
+            roots = [n for n in roots if n not in alone]
+        else:
+            alone = []
         if len(roots) != 1:
-            self.fail(f"must be one tree of links, found roots {roots}")
+            self.fail(f"must be one tree of links, found roots {roots}: join them by joints "
+                      f"(a fixed joint for a part of one body) or delete the links that are "
+                      f"not the robot's")
         name = roots[0]
         reached, todo = {name}, [name]
         while todo:
@@ -325,15 +340,21 @@ class _Reader:
                 if j.child not in reached:
                     reached.add(j.child)
                     todo.append(j.child)
-        cut = [n for n in self.links if n not in reached]
+        cut = [n for n in self.links if n not in reached and n not in alone]
         if cut:
             self.fail(f"link(s) {', '.join(repr(n) for n in cut[:4])} not connected to the "
                       f"root link {name!r}: the joints make a loop")
+        R, above = np.eye(3), []
         while _mass(self.links[name]) == 0.0:
             joints = self.children.get(name, [])
             if len(joints) != 1 or joints[0].type not in _BASE:
                 break
             j = joints[0]
+            Rj = _pose(j.origin)[0]
+            R = R @ Rj
+            if not np.allclose(Rj, np.eye(3), rtol=0.0, atol=1e-12):
+                above.append(j.name)            # the joints that turn the torso's frame
+            self.world_up = (R.T @ np.array([0.0, 0.0, 1.0]), roots[0], above)
             what = {"fixed": "fixes the robot to it"}.get(j.type, "is the robot's base")
             self.notes.append(f"{j.type} joint {j.name!r} from the massless link {name!r}: "
                               f"{what} in the file, not a joint of the model (the stance "
@@ -342,6 +363,45 @@ class _Reader:
             if j.type == "planar" and j.axis is not None:
                 self.planar_axis = np.array(j.axis, float)     # in the child's frame
             name = j.child
+        return name
+
+    def _given_torso(self, name: str) -> str:
+        """The link ``name`` as the torso: the links above and beside it (a test rig, a
+        boom) are not the robot's; the joints from the root to it hold it in the file."""
+        if not isinstance(name, str) or name not in self.links:
+            self.fail(f"torso: the file has no link {name!r}")
+        parent = {j.child: j for j in self.robot.joints}
+        path, at, seen = [], name, {name}
+        while at in parent:
+            j = parent[at]
+            path.insert(0, j)
+            at = j.parent
+            if at in seen:
+                self.fail("no root link: the joints make a loop (every link is some joint's "
+                          "child)")
+            seen.add(at)
+        reached, todo = {name}, [name]
+        while todo:
+            for j in self.children.get(todo.pop(), []):
+                if j.child not in reached:
+                    reached.add(j.child)
+                    todo.append(j.child)
+        if path:
+            R, turning = np.eye(3), []
+            for j in path:
+                Rj = _pose(j.origin)[0]
+                R = R @ Rj
+                if not np.allclose(Rj, np.eye(3), rtol=0.0, atol=1e-12):
+                    turning.append(j.name)
+            self.world_up = (R.T @ np.array([0.0, 0.0, 1.0]), at, turning)
+            out = [n for n in self.links if n not in reached]
+            mass = sum(_mass(self.links[n]) for n in out)
+            self.notes.append(
+                f"torso {name!r} (torso=): the joint(s) "
+                f"{', '.join(f'{j.name!r} ({j.type})' for j in path)} from the root {at!r} "
+                f"hold it in the file, not joints of the model (the stance foot is its base); "
+                f"the {len(out)} link(s) above and beside it ({mass:g} kg) are not in the "
+                f"model; pitch is the angle of link {name!r} in the world")
         return name
 
     def fixed_descendants(self, frame: _Frame) -> list:
@@ -389,6 +449,9 @@ def apply_locks(rd: "_Reader", torso: str, lock: dict, off_axis: bool, axis) -> 
 
 def _legs(rd: _Reader, torso: _Frame) -> list:
     """The torso's two chains of rotating joints: per leg a list of (joint, frame)."""
+    below = _jointed(rd, torso)
+    if len(below) == 1:
+        _held(rd, torso, below[0])
     hips = rd.moving(torso)
     if len(hips) != 2:
         rd.fail(f"the torso {torso.name!r} has {len(hips)} jointed children "
@@ -403,17 +466,49 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
             if getattr(joint, "mimic", None) is not None:
                 rd.fail(f"joint {joint.name!r} mimics joint {joint.mimic.joint!r} (<mimic>): "
                         f"its angle is not free, and every leg joint of the model is an "
-                        f"independent, actuated one")
+                        f"independent, actuated one; a sagittal model that holds it fixed "
+                        f"locks it ('biped robot import FILE --lock {joint.name}[=RAD]', "
+                        f"lock={{{joint.name!r}: 0}})")
             frame = _child_frame(parent, joint)
             chain.append((joint, frame))
             nxt = rd.moving(frame)
             if len(nxt) > 1:
                 rd.fail(f"link {frame.name!r} has {len(nxt)} jointed children "
                         f"({', '.join(repr(j.name) for j, _ in nxt)}): a leg is one chain "
-                        f"of links (lock the joints of the others: --lock NAME, lock=)")
+                        f"of links (lock the joints of the others: --lock NAME, lock=; a "
+                        f"closed linkage cut open in the file, as a four-bar leg, is not one "
+                        f"and locking a branch makes another robot)")
             item = nxt[0] if nxt else None
         legs.append(chain)
     return legs
+
+
+def _jointed(rd: _Reader, frame: _Frame) -> list:
+    """(joint, parent frame) of the joints of any type but fixed below a link and its
+    fixed frames."""
+    return [(k, f) for f in [frame] + [g for _, g in rd.fixed_descendants(frame)]
+            for k in rd.children.get(f.name, []) if k.type != "fixed"]
+
+
+def _held(rd: _Reader, torso: _Frame, joint) -> None:
+    """Refuse a torso whose one moving joint leads to the link the legs hang from: the
+    joints above that link hold the robot (a test rig, a boom, a pin to the world)."""
+    j, parent = joint
+    above = [j]
+    while True:
+        frame = _child_frame(parent, j)
+        nxt = _jointed(rd, frame)
+        if len(nxt) != 1:
+            break
+        j, parent = nxt[0]
+        above.append(j)
+    if len(nxt) == 2:
+        names = ", ".join(f"{k.name!r} ({k.type})" for k in above)
+        rd.fail(f"the legs hang from link {frame.name!r}, held by the joint(s) {names} "
+                f"from {torso.name!r} (a test rig, a boom, a pin?): not joints of "
+                f"a free biped; name the torso ('biped robot import FILE --torso "
+                f"{frame.name}', torso={frame.name!r}: what is above it is left out) or make "
+                f"{frame.name!r} the file's root link")
 
 
 def _axis(rd: _Reader, legs) -> tuple:
@@ -442,6 +537,15 @@ def _axis(rd: _Reader, legs) -> tuple:
     if abs(n[2]) > AXIS_TOL:
         rd.fail(f"the joints turn about {np.round(n, 6).tolist()} (torso frame): the torso "
                 f"frame's z axis, vertical at pitch 0, must lie in the plane of motion")
+    if rd.world_up is not None and abs(float(np.dot(rd.world_up[0], n))) > AXIS_TOL:
+        up, root, above = rd.world_up
+        rd.fail(f"the world's vertical (z of the root link {root!r}) is "
+                f"{(np.round(up, 6) + 0.0).tolist()} in the torso's frame, turned by the "
+                f"origin of {', '.join(repr(a) for a in above)} above it: not in the plane of "
+                f"the legs (normal {(np.round(n, 6) + 0.0).tolist()}), so gravity would act "
+                f"across it (a file written with another axis up?); the importer takes z of "
+                f"the torso's frame as vertical: write the file with the torso's up along the "
+                f"world's z")
     if abs(n[2]) > 1e-9:            # within the tolerance: the plane holds z exactly
         rd.notes.append(f"the joints' mean axis is {abs(math.asin(n[2])):.2g} rad off the "
                         f"plane across the torso frame's z (rounded angles in the file): the "
