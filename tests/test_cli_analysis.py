@@ -212,3 +212,16 @@ def test_ctrl_c_that_a_library_turns_into_another_error_is_an_interruption(
         assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # put back
     finally:
         signal.signal(signal.SIGINT, outer)
+
+
+def test_m1_robust_help_states_the_target_the_gait_path_uses(capsys):
+    """`biped m1 --help` names the convergence step of the settings `--robust --gait`
+    runs with (FIT), not another number."""
+    import re
+
+    from analysis.design.codesign import FIT
+
+    assert biped_main(["m1", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())       # argparse wraps the lines
+    steps = re.findall(r"perturbation below 1e-3 by step (\d+)", text)
+    assert steps == [str(FIT.converge_by)]

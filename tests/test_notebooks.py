@@ -30,3 +30,20 @@ def test_notebook_runs(path, tmp_path, monkeypatch, gait):
     assert any(o.get("output_type") == "stream" for o in outputs)   # it printed results
     figures = [o for o in outputs if "image/png" in o.get("data", {})]
     assert figures                                                   # figures were shown
+
+
+def test_progress_bars_print_nothing_in_a_notebook(tmp_path):
+    """The progress bar is a terminal's: in a Jupyter kernel (stderr not a terminal) it is
+    off and prints nothing, not tqdm's notebook warning about missing widgets."""
+    nb = nbformat.v4.new_notebook()
+    nb.cells = [nbformat.v4.new_code_cell(
+        "from analysis.reporting.progress import progress_bar\n"
+        "bar = progress_bar(False, 10, 0, 'M1', 'sweep')\n"
+        "bar.update(10); bar.close()\n"
+        "print('done')")]
+    NotebookClient(nb, timeout=120, kernel_name="python3",
+                   resources={"metadata": {"path": str(tmp_path)}}).execute()
+    outputs = nb.cells[0].outputs
+    assert [o.get("text") for o in outputs if o.get("name") == "stdout"] == ["done\n"]
+    assert not [o for o in outputs if o.get("name") == "stderr" or "error" in o.get(
+        "output_type", "")], outputs

@@ -23,7 +23,7 @@ def progress_bar(progress: bool, total: int, initial: int, unit: str, desc: str)
     -------
     tqdm.tqdm
     """
-    from tqdm.auto import tqdm
+    from tqdm import tqdm          # a terminal bar: tqdm.auto warns in a Jupyter kernel
     return tqdm(total=total, initial=initial, unit=unit, desc=desc,
                 disable=not (bool(progress) and sys.stderr.isatty()), file=sys.stderr,
                 dynamic_ncols=True)
