@@ -271,6 +271,7 @@ def test_mfpt_estimate_covers_a_known_failure_probability():
     lo, hi = e.failure_probability_ci
     assert lo < p < hi and abs(e.failure_probability - p) < 0.15 * p
     assert e.mfpt_ci[0] < (1 - p) / p < e.mfpt_ci[1]
+    assert all(type(x) is float for x in e.failure_probability_ci + e.mfpt_ci)   # repr
     assert e.mean_steps_walked < e.mfpt                # censoring biases the plain mean
     assert e.survival[0] == 1.0 and np.all(np.diff(e.survival) <= 0)
     none = mfpt_estimate(np.full(50, K), np.zeros(50, bool), K)

@@ -82,7 +82,7 @@ def mfpt_estimate(walked, failed, max_steps: int, confidence: float = 0.95) -> M
     from scipy.special import gammaincinv      # (scipy.stats costs 0.3 s more to import)
 
     def chi2_quantile(q, df):                       # as scipy.stats.chi2.ppf computes it
-        return 2.0 * gammaincinv(df / 2, q)
+        return float(2.0 * gammaincinv(df / 2, q))
     walked = np.asarray(walked, np.int64)
     failed = np.asarray(failed, bool)
     F = int(failed.sum())
