@@ -87,6 +87,7 @@ def files(model, gait, tmp_path_factory):
                                                             m_torso=-12.0)))
     edited("robot_list.json", lambda b: b.update(robot=[1, 2]))
     edited("options_bad.json", lambda b: b["options"].update(speed="fast"))
+    edited("options_huge.json", lambda b: b["options"].update(n_intervals=10**7))
     edited("extra_key.json", lambda b: b.update(comment="edited by hand"))
     write("params_garbage.toml", bytes(range(256)))
     write("params_empty.toml", "")
@@ -230,6 +231,9 @@ CASES = [
     (["eig", "--gait", "{robot_flat}", *M0], "m_torso"),
     (["eig", "--gait", "{robot_list}", *M0], "'robot'"),
     (["eig", "--gait", "{options_bad}", *M0], "speed"),
+    # read as it was, `gait --family F --resolve` and `m1 --robust --gait F` built an NLP
+    # of 10^7 intervals until the memory ran out
+    (["eig", "--gait", "{options_huge}", *M0], "'n_intervals' must be at most"),
     (["eig", "--gait", "{extra_key}", *M0], "unknown key(s): comment"),
     (["eig", "--gait", "{unreadable}", *M0], "cannot be read", "nonroot"),
     (["eig", "--gait", "{broken_link}", *M0], "broken link"),

@@ -274,6 +274,12 @@ def _resigned(path, edit):
     (lambda b: b.update(options=[]), "'options' must be an object"),
     (lambda b: b["options"].update(bezier_degree="6"), "bezier_degree"),
     (lambda b: b["options"].update(polish_steps=10**9), "polish_steps"),
+    # beyond these a command that solves the file's problem (gait --family --resolve,
+    # m1 --robust) exhausted the memory (n_intervals) or failed inside CasADi (degree)
+    (lambda b: b["options"].update(n_intervals=10**7), "'n_intervals' must be at most"),
+    (lambda b: b["options"].update(degree=10), "'degree' must be at most 9"),
+    (lambda b: b["options"].update(expand="yes"), "'expand' must be true or false"),
+    (lambda b: b["options"].update(speed=True), "'speed' must be a positive number"),
     (lambda b: b["solution"].update(T=None), "solution.T"),
     (lambda b: b["solution"].update(T=True), "solution.T"),
     (lambda b: b["solution"].update(T=float("nan")), "solution.T"),
@@ -410,6 +416,10 @@ def test_bad_options_are_value_errors(model):
         optimize_gait(model, mu=-1.0)
     with pytest.raises(ValueError, match="'derivatives'"):
         GaitOptions(derivatives="numeric")
+    with pytest.raises(ValueError, match="'n_intervals' must be at most"):
+        optimize_gait(model, n_intervals=10**7)         # refused before any memory is used
+    with pytest.raises(ValueError, match="'degree' must be at most 9"):
+        GaitOptions(degree=10)
 
 
 # ------------------------------------------------ the optimiser's derivatives
