@@ -22,7 +22,7 @@ from gait_opt import Gait, OpenOrbitWarning, optimize_gait
 
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
-           "add_gait_arguments", "add_scheduler", "is_family_file"]
+           "add_gait_arguments", "add_scheduler", "is_family_file", "require_members"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
               "(.toml, schema in biped_casadi.model.description) or a URDF file (.urdf)")
@@ -130,6 +130,15 @@ def _family_where_one_gait(path, command: str) -> str:
     return (f"--gait: {_short(path)} is a gait family file, not one gait: take one with "
             f"'biped gait --family {_short(path)} --speed V --out gait.json'"
             + _FAMILY_USE.get(command, ""))
+
+
+def require_members(family, path, option: str):
+    """UserError naming ``option`` when the family ``family`` read from ``path`` holds no
+    gait yet (a family solve interrupted before its first speed)."""
+    if not len(family):
+        raise UserError(f"{option}: {_short(path)} holds no gait yet (its 'biped gait "
+                        f"--speeds' run stopped before the first speed: rerun it to "
+                        f"continue)")
 
 
 def is_family_file(path) -> bool:
