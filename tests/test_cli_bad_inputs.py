@@ -318,6 +318,14 @@ CASES = [
     # ---- robust: a singular design is refused as simulate refuses it (not "slipped")
     (["robust", *G, "--m1", "1", "2", "3", "4"], "makes the controller singular"),
     (["robust", *G, "--m1", "1", "2", "3", "4", "--plot", "figs"], "singular"),
+    # ---- robot mjcf: the motors' limit named as the option (inf said "RABBIT has no
+    # finite torque limit", nan and -5 "torque_limit must be ...")
+    (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--torque-limit", "inf"],
+     "--torque-limit must be a positive number, got inf"),
+    (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--torque-limit", "nan"],
+     "--torque-limit must be a positive number"),
+    (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--torque-limit", "-5"],
+     "--torque-limit must be a positive number"),
     # ---- reproduce (checked before the first stage)
     (["reproduce", "--out", "{file}"], "--out"),
     (["reproduce", "--quick", "--out", "{file}"], "--out"),

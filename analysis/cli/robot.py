@@ -17,7 +17,7 @@ from biped_casadi.model.urdf_legs import check_match_tol
 from biped_casadi.model.urdf_tree import lock_table
 from biped_casadi.mujoco import mjcf, mujoco_module
 
-from .common import ROBOT_HELP, UserError, load_model, output_file, print_json
+from .common import ROBOT_HELP, UserError, load_model, output_file, positive, print_json
 from .mujoco_options import add_mujoco_settings, mujoco_settings
 
 
@@ -122,6 +122,8 @@ def cmd_import(args):
 def cmd_mjcf(args):
     out = output_file(args.out, "--out", (".xml",))
     settings = mujoco_settings(args)
+    if args.torque_limit is not None:
+        positive(args.torque_limit, "--torque-limit")
     model = load_model(args.robot)
     text = mjcf(model, settings, args.torque_limit)
     mujoco = mujoco_module()
