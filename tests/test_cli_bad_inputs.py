@@ -113,6 +113,9 @@ def files(model, gait, tmp_path_factory):
     write("plant_bad.toml", (pathlib.Path(__file__).parent.parent / "biped_casadi" / "model"
                              / "robots" / "rabbit.toml").read_text().replace("mass = 12.0",
                                                                              "mass = -12.0"))
+    write("robot_huge.toml", (pathlib.Path(__file__).parent.parent / "biped_casadi" / "model"
+                              / "robots" / "rabbit.toml").read_text().replace(
+                                  "length = 0.4", "length = 1e300", 1))
     write("terrain_text.txt", "0.01 0.02 zero\n")
     write("terrain_high.json", "[0.01, 0.5]")
     out["long"] = "x" * 5000
@@ -361,6 +364,11 @@ CASES = [
     (["terrain", *TV, "--length-scale", "nan"], "--length-scale"),
     (["terrain", *TV, "--torso-mass-scale", "inf"], "--torso-mass-scale"),
     (["terrain", *TV, "--plant", "rabbit", "--mass-scale", "1.1"], "excludes"),
+    # a plant scaled beyond the description's range: the option named (the line was
+    # '--scaled robot: ...-scale: scaled robot: ...')
+    (["terrain", *TV, "--length-scale", "1e200"], "error: --length-scale: scaled robot: "
+                                                  "torso.length must be at most"),
+    (["model", "--robot", "{robot_huge}"], "leg[1].length must be at most 1e+06"),
     (["terrain", *TV, "--gains", "1", "2", "0"], "--gains"),
     (["terrain", "--m1", "1", "2"], "--m1 takes 4"),
     (["terrain", "--controller", "vc", "--m1", "1", "2", "3", "4"], "--m1"),

@@ -56,8 +56,9 @@ def _plant(args, model):
     try:
         return model.description.scaled(**{k: (1.0 if v is None else v)
                                            for k, v in scales.items()})
-    except ValueError as e:
-        raise UserError(f"--{str(e).split(' scale')[0].replace('_', '-')}-scale: {e}") from None
+    except ValueError as e:               # the scaled robot's numbers out of range
+        names = ", ".join(f"--{k.replace('_', '-')}-scale" for k in given)
+        raise UserError(f"{names}: {e}") from None
 
 
 def _check_scales(args):
