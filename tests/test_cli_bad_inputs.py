@@ -181,6 +181,17 @@ CASES = [
     (["gait", "--out", "{root_dir}/g.json", "--plot", "{file}"], "--plot"),
     (["gait", "--out", "{root_dir}/g.json", "--plot", "{file}/figs"], "--plot"),
     (["gait", "--out", "{root_dir}/g.json", "--robot", "{params_garbage}"], "not a text file"),
+    # the options of --import and --export-csv without them: ignored before (the gait was
+    # optimised and written with exit 0), the solver's with --import likewise
+    (["gait", "--nodes", "0", "--out", "{root_dir}/g.json"], "--nodes applies with "
+                                                              "--export-csv only"),
+    (["gait", "--import-tol", "nan", "--out", "{root_dir}/g.json"], "--import-tol applies"),
+    (["gait", "--bezier-degree", "2", "--out", "{root_dir}/g.json"], "--bezier-degree applies"),
+    (["gait", "--angles", "absolute", "--out", "{root_dir}/g.json"], "--angles applies with"),
+    (["gait", "--import", "{missing}", "--intervals", "60", "--out", "{root_dir}/g.json"],
+     "--intervals does not apply with --import"),
+    (["gait", "--export-csv", "{root_dir}/g.csv", "--gait", "{gait}", "--max-iter", "5"],
+     "--max-iter does not apply with --export-csv"),
     # ---- eig: numbers and options
     (["eig", *G], "--m1 is required for the time-varying controller"),
     (["terrain", "--runs", "2"], "--m1 is required for the time-varying controller (one "
