@@ -151,6 +151,12 @@ CASES = [
     (["model", "--robot", "{long}.toml"], "--robot"),
     (["model", "--robot", "{dir}"], "is a folder"),
     (["model", "--robot", "octopus"], "neither a built-in robot"),
+    # an empty name (an unset shell variable) meant the default robot or gait
+    (["model", "--robot", ""], "--robot: empty name"),
+    (["eig", "--gait", "", *M0], "--gait: empty name"),
+    (["eig", *G, "--robot", " ", *M0], "--robot: empty name"),
+    (["terrain", *TV, "--plant", ""], "--plant: empty name"),
+    (["robot", "import", "", "--out", "{root_dir}/r.toml"], "FILE: empty name"),
     (["eig", "--robot", "three_link", *G, *M0], "other robot"),
     (["model", "--robot", "{unreadable}"], "cannot be read", "nonroot"),
     # ---- gait: numbers, then output paths (checked before the 3 s solve)

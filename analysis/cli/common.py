@@ -22,7 +22,8 @@ from gait_opt import Gait, OpenOrbitWarning, optimize_gait
 
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
-           "add_gait_arguments", "add_scheduler", "is_family_file", "require_members"]
+           "add_gait_arguments", "add_scheduler", "is_family_file", "require_members",
+           "check_inputs"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
               "(.toml, schema in biped_casadi.model.description) or a URDF file (.urdf)")
@@ -60,6 +61,21 @@ def add_robot(p, with_gait: bool = True):
     default = ("default: the gait file's robot, else rabbit" if with_gait
                else "default: rabbit")
     p.add_argument("--robot", metavar="NAME|FILE", help=f"{ROBOT_HELP}; {default}")
+
+
+#: the options that name an input (a file, or a robot by name), as the user writes them
+INPUT_OPTIONS = {"robot": "--robot", "gait": "--gait", "family": "--family",
+                 "import_file": "--import", "plant": "--plant", "schedule": "--schedule",
+                 "terrain": "--terrain", "file": "FILE"}
+
+
+def check_inputs(args):
+    """UserError for an input option given an empty value (``--robot ""``, ``--gait ""``
+    from an unset shell variable): it meant the default robot or gait before."""
+    for dest, option in INPUT_OPTIONS.items():
+        v = getattr(args, dest, None)
+        if isinstance(v, str) and not v.strip():
+            raise UserError(f"{option}: empty name (leave the option out for the default)")
 
 
 def add_gait_arguments(p, required: bool = False):
