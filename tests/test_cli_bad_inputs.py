@@ -335,6 +335,13 @@ CASES = [
     (["simulate", *G, "--plot", "{sys}/figs"], "--plot"),
     (["simulate", *G, "--plot", "{read_only}/figs"], "--plot", "nonroot"),
     (["simulate", "--gait", "{garbage}"], "not a text"),
+    # taken as given and ignored before: the virtual constraints have no rejoin time
+    (["simulate", *G, "--controller", "vc", "--rejoin", "0.3"], "--rejoin applies to the "
+                                                                "time-varying controller"),
+    # --perturb-q of another robot's length: export wrote the law with exit 0 (only
+    # --verify used it)
+    (["export", *G, "--out", "{root_dir}/law", "--perturb-q", "0", "0"],
+     "--perturb-q takes 5 numbers"),
     # ---- robust: a singular design is refused as simulate refuses it (not "slipped")
     (["robust", *G, "--m1", "1", "2", "3", "4"], "makes the controller singular"),
     (["robust", *G, "--m1", "1", "2", "3", "4", "--plot", "figs"], "singular"),
