@@ -353,6 +353,13 @@ CASES = [
      "--torque-limit must be a positive number"),
     (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--torque-limit", "-5"],
      "--torque-limit must be a positive number"),
+    # a foot larger than the leg, a friction MuJoCo overflows on: a walk that fell or
+    # diverged (exit 1) and an MJCF written with exit 0 before
+    (["mujoco", *G, "--foot-radius", "100", "--steps", "2", "--no-eig"],
+     "--foot-radius must be smaller than the leg's last link (0.4 m"),
+    (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--foot-radius", "0.5"],
+     "--foot-radius must be smaller"),
+    (["mujoco", *G, "--mu", "1e300", "--steps", "2", "--no-eig"], "--mu must be at most"),
     # ---- reproduce (checked before the first stage)
     (["reproduce", "--out", "{file}"], "--out"),
     (["reproduce", "--quick", "--out", "{file}"], "--out"),
