@@ -18,7 +18,7 @@ from biped_casadi.model.urdf_tree import lock_table
 from biped_casadi.mujoco import mjcf, mujoco_module
 
 from .common import ROBOT_HELP, UserError, load_model, output_file, positive, print_json
-from .mujoco_options import add_mujoco_settings, mujoco_settings
+from .mujoco_options import add_mujoco_settings, mujoco_settings, settings_error
 
 
 def _locks(args) -> dict:
@@ -125,7 +125,10 @@ def cmd_mjcf(args):
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
     model = load_model(args.robot)
-    text = mjcf(model, settings, args.torque_limit)
+    try:
+        text = mjcf(model, settings, args.torque_limit)
+    except ValueError as e:
+        raise settings_error(e) from None
     mujoco = mujoco_module()
     try:
         m = mujoco.MjModel.from_xml_string(text)
