@@ -151,6 +151,10 @@ CASES = [
     (["model", "--robot", "{long}.toml"], "--robot"),
     (["model", "--robot", "{dir}"], "is a folder"),
     (["model", "--robot", "octopus"], "neither a built-in robot"),
+    # a gait file as the robot: 'unknown robot parameter(s): actuators, gravity, ...'
+    (["model", "--robot", "{gait}"], "is a biped-casadi-gait file, not a robot description"),
+    (["terrain", *TV, "--plant", "{family}"], "--plant: {family} is a biped-casadi-gait-family "
+                                               "file, not a robot"),
     # an empty name (an unset shell variable) meant the default robot or gait
     (["model", "--robot", ""], "--robot: empty name"),
     (["eig", "--gait", "", *M0], "--gait: empty name"),
