@@ -414,6 +414,15 @@ CASES = [
     (["terrain", *TV, "--plot", "{file}/figs"], "--plot"),
     (["simulate", "--terrain", "nan"], "--terrain"),
     (["simulate", "--terrain", "0.01", "1.0"], "--terrain"),
+    # a scheduler that does not answer: every stage's failure (21 lines) and an empty
+    # output folder left behind before
+    (["reproduce", "--quick", "--scheduler", "nonsense", "--out", "{root_dir}/rep"],
+     "--scheduler: cannot connect to the Dask scheduler at nonsense"),
+    (["reproduce", "--scheduler", " ", "--out", "{root_dir}/rep"], "--scheduler: empty address"),
+    (["m1", "--robust", "--scheduler", "nonsense"], "--scheduler: cannot connect"),
+    # a local cluster of 100000 processes was started
+    (["reproduce", "--workers", "100000", "--out", "{root_dir}/rep"], "--workers: must be "
+                                                                     "between 1 and 64"),
     (["reproduce", "--out", ""], "--out"),
     (["reproduce", "--out", "{sys}/rep"], "--out"),
     (["reproduce", "--out", "{read_only}/rep", "--quick"], "--out", "nonroot"),

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.cluster import DASK_CONNECT_TIMEOUT, connect
 from biped_casadi import robot
 from biped_casadi.control.output_law import (M1_LIMIT, SECTION, check_M1_range, check_rejoin,
                                              require_regular)
@@ -23,7 +24,7 @@ from gait_opt import Gait, OpenOrbitWarning, optimize_gait
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
            "add_gait_arguments", "add_scheduler", "is_family_file", "require_members",
-           "check_inputs"]
+           "check_inputs", "check_scheduler"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
               "(.toml, schema in biped_casadi.model.description) or a URDF file (.urdf)")
@@ -354,14 +355,37 @@ def output_file(path, option: str, suffixes: tuple = ()) -> Path:
     return p
 
 
+#: --workers of a local cluster: processes, each of which builds its own CasADi functions
+MAX_WORKERS = 64
+
+
 def _workers(text) -> int:
     try:
         n = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {n}")
+    if not 1 <= n <= MAX_WORKERS:
+        raise argparse.ArgumentTypeError(f"must be between 1 and {MAX_WORKERS}, got {n}")
     return n
+
+
+def check_scheduler(scheduler, say=None):
+    """``--scheduler``: not empty, and a scheduler given by address answers (UserError
+    otherwise), before any work: a run of tasks on an address that does not answer
+    reported every stage's failure and left its output folder behind."""
+    if scheduler is None:
+        return
+    if not scheduler.strip():
+        raise UserError("--scheduler: empty address")
+    if scheduler in ("inline", "local", "synchronous"):
+        return
+    if say is not None:
+        say(f"connecting to the Dask scheduler at {scheduler} (up to "
+            f"{DASK_CONNECT_TIMEOUT}) ...")
+    try:
+        connect(scheduler)[0].close()
+    except ValueError as e:
+        raise UserError(f"--{e}") from None
 
 
 def add_scheduler(p):

@@ -28,6 +28,7 @@ from .common import (
     add_gait_arguments,
     add_robot,
     add_scheduler,
+    check_scheduler,
     is_family_file,
     output_dir,
     output_file,
@@ -72,6 +73,7 @@ def _robust_defaults(args):
 def cmd_robust_design(args, say):
     """``biped m1 --robust``: the co-design NLP (default) or the sampling search."""
     _robust_defaults(args)
+    check_scheduler(args.scheduler, say)
     if args.method == "search":
         return _search(args, say)
     if args.gait and is_family_file(args.gait):
