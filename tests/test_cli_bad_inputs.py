@@ -329,6 +329,8 @@ CASES = [
     (["simulate", *G, "--eps", "0"], "--eps"),
     (["simulate", *G, "--eps", "1e-300"], "eps"),
     (["simulate", *G, "--eps", "1e-5"], "eps"),
+    (["simulate", *G, "--eps", "1e300"], "'eps' = 1e+300 s is too large"),  # OverflowError
+    (["export", *G, "--out", "{root_dir}/law", "--gains", "1", "2", "1e300"], "too large"),
     (["simulate", *G, "--torque-limit", "0"], "--torque-limit"),
     (["simulate", *G, "--animate", "{root_dir}/walk.mp4"], ".gif"),
     (["simulate", *G, "--animate", "{dir_gif}"], "is a folder"),

@@ -104,6 +104,8 @@ def test_tv_bad_input(model, gait):
         TimeVaryingController(gait, [0, np.nan, 0, 0])
     with pytest.raises(ValueError, match="eps"):
         Gains(eps=0.0)
+    with pytest.raises(ValueError, match="'eps' = 1e\\+300 s is too large"):   # OverflowError
+        Gains(eps=1e300)
     ctrl = TimeVaryingController(gait)
     with pytest.raises(ValueError, match="q"):
         ctrl.torque(np.zeros(4), np.zeros(5), 0.1)
