@@ -65,6 +65,8 @@ def _robust_defaults(args):
     args.mu = 0.6 if args.mu is None else args.mu
     if not 100 <= args.samples <= 10_000_000:
         raise UserError(f"--samples must be between 100 and 10000000, got {args.samples}")
+    if args.seed < 0:
+        raise UserError(f"--seed must be >= 0, got {args.seed}")
     if not 1 <= args.starts <= 50:
         raise UserError(f"--starts must be between 1 and 50, got {args.starts}")
     positive(args.mu, "--mu")
