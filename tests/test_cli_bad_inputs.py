@@ -110,6 +110,8 @@ def files(model, gait, tmp_path_factory):
     out["notes"] = str(d / "notes")
     (d / "broken_link.json").symlink_to(d / "gone.json")
     out["broken_link"] = str(d / "broken_link.json")
+    os.mkfifo(d / "pipe.json")
+    out["pipe"] = str(d / "pipe.json")
     write("plant_bad.toml", (pathlib.Path(__file__).parent.parent / "biped_casadi" / "model"
                              / "robots" / "rabbit.toml").read_text().replace("mass = 12.0",
                                                                              "mass = -12.0"))
@@ -261,6 +263,8 @@ CASES = [
     (["eig", "--gait", "{extra_key}", *M0], "unknown key(s): comment"),
     (["eig", "--gait", "{unreadable}", *M0], "cannot be read", "nonroot"),
     (["eig", "--gait", "{broken_link}", *M0], "broken link"),
+    # a named pipe: the test for a family file opened it and waited for a writer forever
+    (["eig", "--gait", "{pipe}", *M0], "not a regular file"),
     (["eig", "--gait", "{long}.json", *M0], "gait file"),
     # ---- sweep
     (["sweep"], "--gait"),
@@ -349,6 +353,9 @@ CASES = [
     (["export", *G, "--out", "{root_dir}/law", "--perturb-q", "0", "0"],
      "--perturb-q takes 5 numbers"),
     # ---- robust: a singular design is refused as simulate refuses it (not "slipped")
+    # numpy's 'expected non-negative integer' was the whole line
+    (["robust", *G, *M0, "--seed", "-1"], "--seed must be >= 0, got -1"),
+    (["m1", "--robust", "--method", "search", "--seed", "-1"], "--seed must be >= 0"),
     (["robust", *G, "--m1", "1", "2", "3", "4"], "makes the controller singular"),
     (["robust", *G, "--m1", "1", "2", "3", "4", "--plot", "figs"], "singular"),
     # ---- robot mjcf: the motors' limit named as the option (inf said "RABBIT has no

@@ -160,8 +160,11 @@ def require_members(family, path, option: str):
 
 def is_family_file(path) -> bool:
     """Whether ``path`` looks like a gait family file (its format field), without
-    validating it (the loader does, with its own errors)."""
+    validating it (the loader does, with its own errors).  Only a regular file is
+    opened: reading a named pipe (a FIFO) waited for a writer forever."""
     try:
+        if not os.path.isfile(path):
+            return False
         with open(path, "rb") as f:
             head = f.read(4096).decode("utf-8", "ignore")
     except OSError:
