@@ -235,6 +235,10 @@ CASES = [
     (["eig", "--gait", "{other_format}", *M0], "not a biped-casadi-gait file"),
     (["eig", "--gait", "{summary}", *M0], "not a biped-casadi-gait file"),
     # a gait family where one gait is taken: how to take one from it
+    # an output that is the input: the family was replaced by the one gait taken from it
+    (["gait", "--family", "{family}", "--speed", "0.75", "--out", "{family}"],
+     "--out: {family} is the --family file; writing there would replace it"),
+    (["m1", "--robust", "--gait", "{gait}", "--out", "{gait}"], "--out: {gait} is the --gait"),
     (["eig", "--gait", "{family}", *M0], "--gait: {family} is a gait family file, not one "
                                           "gait: take one with 'biped gait --family"),
     (["simulate", "--gait", "{family}", "--controller", "vc"], "or walk it with --speeds"),

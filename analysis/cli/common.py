@@ -24,7 +24,7 @@ from gait_opt import Gait, OpenOrbitWarning, optimize_gait
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
            "add_gait_arguments", "add_scheduler", "is_family_file", "require_members",
-           "check_inputs", "check_scheduler"]
+           "check_inputs", "check_scheduler", "not_an_input"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
               "(.toml, schema in biped_casadi.model.description) or a URDF file (.urdf)")
@@ -360,6 +360,23 @@ def output_file(path, option: str, suffixes: tuple = ()) -> Path:
 
 #: --workers of a local cluster: processes, each of which builds its own CasADi functions
 MAX_WORKERS = 64
+
+
+def not_an_input(out, option: str, inputs: dict):
+    """UserError when the output ``out`` of ``option`` is one of the command's input files
+    (``inputs``: option -> path or None): writing it replaced the input (a gait family
+    given with --family and --out was overwritten by the one gait taken from it)."""
+    for name, path in inputs.items():
+        if path is None:
+            continue
+        try:
+            same = Path(out).resolve() == Path(path).resolve() or (
+                Path(out).exists() and os.path.samefile(out, path))
+        except (OSError, RuntimeError):
+            same = False
+        if same:
+            raise UserError(f"{option}: {_short(out)} is the {name} file; writing there "
+                            f"would replace it (give another file name)")
 
 
 def _workers(text) -> int:

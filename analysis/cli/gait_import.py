@@ -9,7 +9,8 @@ from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_f
 from gait_opt import IMPORT_TOL, GaitOptions, import_gait
 from gait_opt.urdf_angles import CSV_ANGLES, require_urdf_map, write_gait_csv
 
-from .common import UserError, load_gait, load_model, output_dir, output_file, print_json
+from .common import (UserError, load_gait, load_model, not_an_input, output_dir, output_file,
+                     print_json)
 
 
 def add_import_arguments(p):
@@ -57,6 +58,7 @@ def cmd_import(args):
     if args.bezier_degree is not None and not 4 <= args.bezier_degree <= 20:
         raise UserError(f"--bezier-degree must be from 4 to 20, got {args.bezier_degree}")
     out = output_file(args.out, "--out", (".json",))
+    not_an_input(out, "--out", {"--import": args.import_file})
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot)
     if args.angles == "urdf":

@@ -34,6 +34,7 @@ from .common import (
     output_file,
     load_gait,
     load_model,
+    not_an_input,
     positive,
     print_json,
 )
@@ -83,6 +84,8 @@ def cmd_robust_design(args, say):
     if args.plot is not None:
         raise UserError("--plot applies to --robust with a gait family (--gait FAMILY.json)")
     out = output_file(args.out, "--out") if args.out is not None else None
+    if out is not None:
+        not_an_input(out, "--out", {"--gait": args.gait})
     model = load_model(args.robot) if not args.gait else None
     gait = None
     if args.gait:
@@ -220,6 +223,8 @@ def _print_design(r, st):
 def _family(args, say):
     """``biped m1 --robust --gait FAMILY.json``: the designs over a gait family."""
     out = output_file(args.out, "--out") if args.out is not None else None
+    if out is not None:
+        not_an_input(out, "--out", {"--gait": args.gait})
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     fam = GaitFamily.load(args.gait, load_model(args.robot) if args.robot else None)
     say(f"designs over the family: the gait-fixed co-design at each of its {len(fam)} "
@@ -268,6 +273,8 @@ def _search(args, say):
         f"{st.rejoin} T; under a minute on 2 cores the first time, then read from the "
         "cache")
     out = output_file(args.out, "--out") if args.out is not None else None
+    if out is not None:
+        not_an_input(out, "--out", {"--gait": args.gait})
     if args.plot is not None:
         raise UserError("--plot applies to --robust with a gait family (--gait FAMILY.json)")
     r = robust_design(model, st, progress=say, use_cache=not args.no_cache,
