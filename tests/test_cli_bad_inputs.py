@@ -81,6 +81,7 @@ def files(model, gait, tmp_path_factory):
     edited("T_text.json", lambda b: b["solution"].update(T="0.69"))
     edited("T_negative.json", lambda b: b["solution"].update(T=-0.69))
     edited("T_huge.json", lambda b: b["solution"].update(T=1e300))
+    edited("T_tiny.json", lambda b: b["solution"].update(T=1e-300))
     edited("open_orbit.json", lambda b: b["solution"].update(T=b["solution"]["T"] * 1.01))
     edited("robot_mass.json", lambda b: b["robot"]["torso"].update(mass=-12.0))
     edited("robot_flat.json", lambda b: b.update(robot=dict(RobotParams().to_dict(),
@@ -257,6 +258,8 @@ CASES = [
     (["eig", "--gait", "{T_negative}", *M0], "solution.T"),
     (["eig", "--gait", "{T_huge}", *M0], "not a periodic orbit"),
     (["eig", "--gait", "{open_orbit}", *M0], "not a periodic orbit"),
+    (["simulate", "--gait", "{T_huge}", "--allow-open-orbit"], "cannot be evaluated"),
+    (["eig", "--gait", "{T_tiny}", *M0], "cannot be evaluated"),
     (["eig", "--gait", "{robot_mass}", *M0], "'robot': torso.mass must be positive"),
     (["eig", "--gait", "{robot_flat}", *M0], "m_torso"),
     (["eig", "--gait", "{robot_list}", *M0], "'robot'"),

@@ -320,6 +320,21 @@ def test_a_gait_that_is_not_a_periodic_orbit_is_refused(gait, tmp_path, edit):
         Gait.load(path)
 
 
+@pytest.mark.parametrize("edit", [
+    lambda b: b["solution"].update(T=1e300),
+    lambda b: b["solution"].update(T=1e-300),      # an IndexError, also without the flag
+    lambda b: b["solution"]["alpha"][0].__setitem__(0, 1e300),
+])
+def test_a_gait_that_cannot_be_evaluated_is_refused_even_as_an_open_orbit(gait, tmp_path,
+                                                                          edit):
+    """allow_open_orbit let it through with a warning, and every command then failed on
+    an IndexError or OverflowError ('internal error')."""
+    path = _resigned(gait.save(tmp_path / "g.json"), edit)
+    for allow in (False, True):
+        with pytest.raises(GaitFileError, match="its motion cannot be evaluated up to T"):
+            Gait.load(path, allow_open_orbit=allow)
+
+
 def test_open_orbit_can_be_loaded_with_a_warning(gait, tmp_path):
     path = _resigned(gait.save(tmp_path / "g.json"),
                      lambda b: b["solution"].update(T=b["solution"]["T"] * 1.01))
