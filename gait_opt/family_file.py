@@ -161,12 +161,22 @@ def read_family_file(path, model=None) -> dict:
              for i, (m, r) in enumerate(zip(members, records))]
     if gaits:
         opts = gaits[0].options
-    if not isinstance(body["events"], list):
-        raise GaitFileError(f"{where}: 'events' must be a list")
-    if body["end"] is not None and not isinstance(body["end"], dict):
-        raise GaitFileError(f"{where}: 'end' must be an object or null")
+    _events(body["events"], where)
+    _end(body["end"], where)
     if body["status"] not in STATUSES:
         raise GaitFileError(f"{where}: unknown status {body['status']!r}")
+    status = ("ended" if body["end"] is not None else
+              "partial" if len(records) < len(speeds) else
+              "violates" if any(r["violations"] for r in records) else "complete")
+    if body["status"] != status:
+        raise GaitFileError(f"{where}: status {body['status']!r} does not match its "
+                            f"contents ({len(records)} of {len(speeds)} speeds solved, "
+                            f"{'an' if body['end'] is not None else 'no'} end: {status!r})")
+    if not isinstance(body["message"], str):
+        raise GaitFileError(f"{where}: 'message' must be a string")
+    for k in ("total_time", "build_time"):
+        if not _is_number(body[k]):
+            raise GaitFileError(f"{where}: {k!r} must be a number")
     return dict(options=opts, speeds=speeds, records=records, gaits=gaits,
                 **{k: body[k] for k in ("status", "message", "events", "end", "total_time",
                                         "build_time")})
@@ -200,16 +210,81 @@ def _speeds(speeds, where):
     return [float(v) for v in speeds]
 
 
+def _is_number(v) -> bool:
+    """A JSON number (not a boolean); NaN and infinity included (a figure that was not
+    computed)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _is_count(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= 0
+
+
+#: the type of each field of a record, as (check, what it must be); the speed is a
+#: finite number, checked apart
+_RECORD_TYPES = dict(
+    status=(lambda v: v in ("ok", "violates"), "'ok' or 'violates'"),
+    **{k: (_is_count, "a count (an integer >= 0)")
+       for k in ("iterations", "substeps", "failed_steps", "branch")},
+    **{k: (_is_number, "a number")
+       for k in ("time", "cost", "orbit_residual", "polish_residual", "polish_change")},
+    **{k: (lambda v: _is_number(v) and math.isfinite(v) and v > 0, "a positive number")
+       for k in ("T", "step_length")},
+    active=(lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v),
+            "a list of constraint names"),
+    margins=(lambda v: isinstance(v, dict), "an object"),
+    violations=(lambda v: isinstance(v, list) and all(
+        isinstance(x, list) and len(x) == 2 and isinstance(x[0], str) and _is_number(x[1])
+        for x in v), "a list of [constraint, amount] pairs"),
+)
+
+
 def _records(records, where):
+    """The records, every field of the type the family's solve writes (GaitFileError)."""
     if not isinstance(records, list):
         raise GaitFileError(f"{where}: 'records' must be a list")
     for i, r in enumerate(records):
         if not isinstance(r, dict) or set(r) != set(RECORD_FIELDS):
             raise GaitFileError(f"{where}: record {i + 1} must have the fields "
                                 f"{', '.join(RECORD_FIELDS)}")
-        if not isinstance(r["speed"], (int, float)) or not math.isfinite(r["speed"]):
+        if not _is_number(r["speed"]) or not math.isfinite(r["speed"]):
             raise GaitFileError(f"{where}: record {i + 1}: 'speed' must be a number")
+        for k, (ok, what) in _RECORD_TYPES.items():
+            if not ok(r[k]):
+                raise GaitFileError(f"{where}: record {i + 1}: {k!r} must be {what}, got "
+                                    f"{r[k]!r:.40}")
     return records
+
+
+#: what an event says changed at its speed
+EVENT_CHANGES = ("branch", "active", "inactive")
+
+
+def _events(events, where):
+    """The events: objects with a speed, a change, the constraint (None for a change of
+    branch) and a detail in words (GaitFileError)."""
+    if not isinstance(events, list):
+        raise GaitFileError(f"{where}: 'events' must be a list")
+    for i, e in enumerate(events):
+        ok = (isinstance(e, dict) and _is_number(e.get("speed"))
+              and e.get("change") in EVENT_CHANGES
+              and isinstance(e.get("detail", ""), str)
+              and (e.get("constraint") is None if e.get("change") == "branch"
+                   else isinstance(e.get("constraint"), str)))
+        if not ok:
+            raise GaitFileError(f"{where}: event {i + 1} must be an object with a 'speed', "
+                                f"a 'change' ({', '.join(EVENT_CHANGES)}), the 'constraint' "
+                                f"and a 'detail'")
+
+
+def _end(end, where):
+    """The family's end: null, or an object with the speed and the reason (GaitFileError)."""
+    if end is None:
+        return
+    if not (isinstance(end, dict) and _is_number(end.get("speed"))
+            and isinstance(end.get("reason"), str)):
+        raise GaitFileError(f"{where}: 'end' must be null or an object with the 'speed' "
+                            f"and the 'reason'")
 
 
 def _member(body, i, record, model, opts, robot, where):

@@ -659,14 +659,22 @@ class Gait(Reference):
         """
         gait = cls.from_dict(body, model, where=where)
         T = gait.T
-        r = gait.orbit_residual()
+        try:
+            with np.errstate(all="ignore"):
+                r = gait.orbit_residual()
+        except (ValueError, IndexError, OverflowError, FloatingPointError, RuntimeError):
+            r = dict(worst=math.inf)              # a T of 1e-300 s: no grid to evaluate on
+        if not math.isfinite(r["worst"]):
+            # not even an open orbit: nothing of it can be analysed (with allow_open_orbit
+            # the commands failed later on an IndexError or OverflowError)
+            raise GaitFileError(f"{where} is not a periodic orbit of its robot: its motion "
+                                f"cannot be evaluated up to T = {T:.6g} s; was T or the "
+                                f"solution edited?")
         if not r["worst"] <= orbit_tol:
-            msg = (f"{where} is not a periodic orbit of its robot: " + (
-                f"the impact of the state at T misses the start by {r['q']:.2g} rad / "
-                f"{r['dq']:.2g} rad/s and the swing foot is {r['z']:.2g} m off the ground "
-                f"at T (tolerance {orbit_tol:g})" if math.isfinite(r["worst"]) else
-                f"its motion cannot be evaluated up to T = {T:.6g} s")
-                + "; was T or the solution edited?")
+            msg = (f"{where} is not a periodic orbit of its robot: the impact of the state "
+                   f"at T misses the start by {r['q']:.2g} rad / {r['dq']:.2g} rad/s and the "
+                   f"swing foot is {r['z']:.2g} m off the ground at T (tolerance "
+                   f"{orbit_tol:g}); was T or the solution edited?")
             if not allow_open_orbit:
                 raise GaitFileError(msg)
             warnings.warn(msg, OpenOrbitWarning, stacklevel=2)

@@ -11,6 +11,11 @@ COSTS = ("torque_squared_per_length", "torque_squared")
 SCHEMES = ("legendre", "radau")
 DERIVATIVES = ("structured", "casadi")
 CONTINUATIONS = ("ramp", "smooth")
+#: collocation points per interval: CasADi's collocation schemes stop at 9
+MAX_DEGREE = 9
+#: collocation intervals: 2000 already take about 1 GB and 15 s per IPOPT iteration, and a
+#: number read from a file without a bound exhausts the memory
+MAX_N_INTERVALS = 5000
 
 
 @dataclass(frozen=True)
@@ -114,14 +119,17 @@ class GaitOptions:
     derivatives: str = "structured"
 
     def __post_init__(self):
+        def number(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool)
+
         def pos(name):
             v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            if not number(v) or not math.isfinite(v) or v <= 0:
                 raise ValueError(f"gait option {name!r} must be a positive number, got {v!r}")
 
         def nonneg(name):
             v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            if not number(v) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"gait option {name!r} must be a non-negative number, got {v!r}")
 
         for n in ("speed", "mu"):
@@ -146,7 +154,7 @@ class GaitOptions:
             nonneg(n)
         for n in ("step_length_bounds", "step_time_bounds"):
             lo_hi = tuple(getattr(self, n))
-            if len(lo_hi) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in lo_hi) \
+            if len(lo_hi) != 2 or not all(number(v) and math.isfinite(v) for v in lo_hi) \
                     or not 0 < lo_hi[0] < lo_hi[1]:
                 raise ValueError(f"gait option {n!r} must be (low, high) with 0 < low < high, got {lo_hi!r}")
             object.__setattr__(self, n, tuple(float(v) for v in lo_hi))
@@ -154,6 +162,12 @@ class GaitOptions:
             v = getattr(self, n)
             if not isinstance(v, int) or isinstance(v, bool) or v < lo:
                 raise ValueError(f"gait option {n!r} must be an integer >= {lo}, got {v!r}")
+        for n, hi in (("n_intervals", MAX_N_INTERVALS), ("degree", MAX_DEGREE)):
+            if getattr(self, n) > hi:
+                raise ValueError(f"gait option {n!r} must be at most {hi}, got "
+                                 f"{getattr(self, n)!r}")
+        if not isinstance(self.expand, bool):
+            raise ValueError(f"gait option 'expand' must be true or false, got {self.expand!r}")
         if self.scheme not in SCHEMES:
             raise ValueError(f"gait option 'scheme' must be one of {SCHEMES}, got {self.scheme!r}")
         if self.derivatives not in DERIVATIVES:

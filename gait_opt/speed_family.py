@@ -274,7 +274,10 @@ class GaitFamily(Result):
 
     @property
     def model(self):
-        """The robot (of the first member)."""
+        """The robot (of the first member); ValueError for a family without one yet."""
+        if not self.gaits:
+            raise ValueError("family: it has no members yet (its solve stopped before the "
+                             "first speed), hence no robot")
         return self.gaits[0].model
 
     @property

@@ -81,12 +81,14 @@ def files(model, gait, tmp_path_factory):
     edited("T_text.json", lambda b: b["solution"].update(T="0.69"))
     edited("T_negative.json", lambda b: b["solution"].update(T=-0.69))
     edited("T_huge.json", lambda b: b["solution"].update(T=1e300))
+    edited("T_tiny.json", lambda b: b["solution"].update(T=1e-300))
     edited("open_orbit.json", lambda b: b["solution"].update(T=b["solution"]["T"] * 1.01))
     edited("robot_mass.json", lambda b: b["robot"]["torso"].update(mass=-12.0))
     edited("robot_flat.json", lambda b: b.update(robot=dict(RobotParams().to_dict(),
                                                             m_torso=-12.0)))
     edited("robot_list.json", lambda b: b.update(robot=[1, 2]))
     edited("options_bad.json", lambda b: b["options"].update(speed="fast"))
+    edited("options_huge.json", lambda b: b["options"].update(n_intervals=10**7))
     edited("extra_key.json", lambda b: b.update(comment="edited by hand"))
     write("params_garbage.toml", bytes(range(256)))
     write("params_empty.toml", "")
@@ -109,9 +111,14 @@ def files(model, gait, tmp_path_factory):
     out["notes"] = str(d / "notes")
     (d / "broken_link.json").symlink_to(d / "gone.json")
     out["broken_link"] = str(d / "broken_link.json")
+    os.mkfifo(d / "pipe.json")
+    out["pipe"] = str(d / "pipe.json")
     write("plant_bad.toml", (pathlib.Path(__file__).parent.parent / "biped_casadi" / "model"
                              / "robots" / "rabbit.toml").read_text().replace("mass = 12.0",
                                                                              "mass = -12.0"))
+    write("robot_huge.toml", (pathlib.Path(__file__).parent.parent / "biped_casadi" / "model"
+                              / "robots" / "rabbit.toml").read_text().replace(
+                                  "length = 0.4", "length = 1e300", 1))
     write("terrain_text.txt", "0.01 0.02 zero\n")
     write("terrain_high.json", "[0.01, 0.5]")
     out["long"] = "x" * 5000
@@ -147,6 +154,16 @@ CASES = [
     (["model", "--robot", "{long}.toml"], "--robot"),
     (["model", "--robot", "{dir}"], "is a folder"),
     (["model", "--robot", "octopus"], "neither a built-in robot"),
+    # a gait file as the robot: 'unknown robot parameter(s): actuators, gravity, ...'
+    (["model", "--robot", "{gait}"], "is a biped-casadi-gait file, not a robot description"),
+    (["terrain", *TV, "--plant", "{family}"], "--plant: {family} is a biped-casadi-gait-family "
+                                               "file, not a robot"),
+    # an empty name (an unset shell variable) meant the default robot or gait
+    (["model", "--robot", ""], "--robot: empty name"),
+    (["eig", "--gait", "", *M0], "--gait: empty name"),
+    (["eig", *G, "--robot", " ", *M0], "--robot: empty name"),
+    (["terrain", *TV, "--plant", ""], "--plant: empty name"),
+    (["robot", "import", "", "--out", "{root_dir}/r.toml"], "FILE: empty name"),
     (["eig", "--robot", "three_link", *G, *M0], "other robot"),
     (["model", "--robot", "{unreadable}"], "cannot be read", "nonroot"),
     # ---- gait: numbers, then output paths (checked before the 3 s solve)
@@ -177,6 +194,17 @@ CASES = [
     (["gait", "--out", "{root_dir}/g.json", "--plot", "{file}"], "--plot"),
     (["gait", "--out", "{root_dir}/g.json", "--plot", "{file}/figs"], "--plot"),
     (["gait", "--out", "{root_dir}/g.json", "--robot", "{params_garbage}"], "not a text file"),
+    # the options of --import and --export-csv without them: ignored before (the gait was
+    # optimised and written with exit 0), the solver's with --import likewise
+    (["gait", "--nodes", "0", "--out", "{root_dir}/g.json"], "--nodes applies with "
+                                                              "--export-csv only"),
+    (["gait", "--import-tol", "nan", "--out", "{root_dir}/g.json"], "--import-tol applies"),
+    (["gait", "--bezier-degree", "2", "--out", "{root_dir}/g.json"], "--bezier-degree applies"),
+    (["gait", "--angles", "absolute", "--out", "{root_dir}/g.json"], "--angles applies with"),
+    (["gait", "--import", "{missing}", "--intervals", "60", "--out", "{root_dir}/g.json"],
+     "--intervals does not apply with --import"),
+    (["gait", "--export-csv", "{root_dir}/g.csv", "--gait", "{gait}", "--max-iter", "5"],
+     "--max-iter does not apply with --export-csv"),
     # ---- eig: numbers and options
     (["eig", *G], "--m1 is required for the time-varying controller"),
     (["terrain", "--runs", "2"], "--m1 is required for the time-varying controller (one "
@@ -208,6 +236,10 @@ CASES = [
     (["eig", "--gait", "{other_format}", *M0], "not a biped-casadi-gait file"),
     (["eig", "--gait", "{summary}", *M0], "not a biped-casadi-gait file"),
     # a gait family where one gait is taken: how to take one from it
+    # an output that is the input: the family was replaced by the one gait taken from it
+    (["gait", "--family", "{family}", "--speed", "0.75", "--out", "{family}"],
+     "--out: {family} is the --family file; writing there would replace it"),
+    (["m1", "--robust", "--gait", "{gait}", "--out", "{gait}"], "--out: {gait} is the --gait"),
     (["eig", "--gait", "{family}", *M0], "--gait: {family} is a gait family file, not one "
                                           "gait: take one with 'biped gait --family"),
     (["simulate", "--gait", "{family}", "--controller", "vc"], "or walk it with --speeds"),
@@ -226,13 +258,20 @@ CASES = [
     (["eig", "--gait", "{T_negative}", *M0], "solution.T"),
     (["eig", "--gait", "{T_huge}", *M0], "not a periodic orbit"),
     (["eig", "--gait", "{open_orbit}", *M0], "not a periodic orbit"),
+    (["simulate", "--gait", "{T_huge}", "--allow-open-orbit"], "cannot be evaluated"),
+    (["eig", "--gait", "{T_tiny}", *M0], "cannot be evaluated"),
     (["eig", "--gait", "{robot_mass}", *M0], "'robot': torso.mass must be positive"),
     (["eig", "--gait", "{robot_flat}", *M0], "m_torso"),
     (["eig", "--gait", "{robot_list}", *M0], "'robot'"),
     (["eig", "--gait", "{options_bad}", *M0], "speed"),
+    # read as it was, `gait --family F --resolve` and `m1 --robust --gait F` built an NLP
+    # of 10^7 intervals until the memory ran out
+    (["eig", "--gait", "{options_huge}", *M0], "'n_intervals' must be at most"),
     (["eig", "--gait", "{extra_key}", *M0], "unknown key(s): comment"),
     (["eig", "--gait", "{unreadable}", *M0], "cannot be read", "nonroot"),
     (["eig", "--gait", "{broken_link}", *M0], "broken link"),
+    # a named pipe: the test for a family file opened it and waited for a writer forever
+    (["eig", "--gait", "{pipe}", *M0], "not a regular file"),
     (["eig", "--gait", "{long}.json", *M0], "gait file"),
     # ---- sweep
     (["sweep"], "--gait"),
@@ -301,6 +340,8 @@ CASES = [
     (["simulate", *G, "--eps", "0"], "--eps"),
     (["simulate", *G, "--eps", "1e-300"], "eps"),
     (["simulate", *G, "--eps", "1e-5"], "eps"),
+    (["simulate", *G, "--eps", "1e300"], "'eps' = 1e+300 s is too large"),  # OverflowError
+    (["export", *G, "--out", "{root_dir}/law", "--gains", "1", "2", "1e300"], "too large"),
     (["simulate", *G, "--torque-limit", "0"], "--torque-limit"),
     (["simulate", *G, "--animate", "{root_dir}/walk.mp4"], ".gif"),
     (["simulate", *G, "--animate", "{dir_gif}"], "is a folder"),
@@ -311,9 +352,34 @@ CASES = [
     (["simulate", *G, "--plot", "{sys}/figs"], "--plot"),
     (["simulate", *G, "--plot", "{read_only}/figs"], "--plot", "nonroot"),
     (["simulate", "--gait", "{garbage}"], "not a text"),
+    # taken as given and ignored before: the virtual constraints have no rejoin time
+    (["simulate", *G, "--controller", "vc", "--rejoin", "0.3"], "--rejoin applies to the "
+                                                                "time-varying controller"),
+    # --perturb-q of another robot's length: export wrote the law with exit 0 (only
+    # --verify used it)
+    (["export", *G, "--out", "{root_dir}/law", "--perturb-q", "0", "0"],
+     "--perturb-q takes 5 numbers"),
     # ---- robust: a singular design is refused as simulate refuses it (not "slipped")
+    # numpy's 'expected non-negative integer' was the whole line
+    (["robust", *G, *M0, "--seed", "-1"], "--seed must be >= 0, got -1"),
+    (["m1", "--robust", "--method", "search", "--seed", "-1"], "--seed must be >= 0"),
     (["robust", *G, "--m1", "1", "2", "3", "4"], "makes the controller singular"),
     (["robust", *G, "--m1", "1", "2", "3", "4", "--plot", "figs"], "singular"),
+    # ---- robot mjcf: the motors' limit named as the option (inf said "RABBIT has no
+    # finite torque limit", nan and -5 "torque_limit must be ...")
+    (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--torque-limit", "inf"],
+     "--torque-limit must be a positive number, got inf"),
+    (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--torque-limit", "nan"],
+     "--torque-limit must be a positive number"),
+    (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--torque-limit", "-5"],
+     "--torque-limit must be a positive number"),
+    # a foot larger than the leg, a friction MuJoCo overflows on: a walk that fell or
+    # diverged (exit 1) and an MJCF written with exit 0 before
+    (["mujoco", *G, "--foot-radius", "100", "--steps", "2", "--no-eig"],
+     "--foot-radius must be smaller than the leg's last link (0.4 m"),
+    (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--foot-radius", "0.5"],
+     "--foot-radius must be smaller"),
+    (["mujoco", *G, "--mu", "1e300", "--steps", "2", "--no-eig"], "--mu must be at most"),
     # ---- reproduce (checked before the first stage)
     (["reproduce", "--out", "{file}"], "--out"),
     (["reproduce", "--quick", "--out", "{file}"], "--out"),
@@ -349,6 +415,11 @@ CASES = [
     (["terrain", *TV, "--length-scale", "nan"], "--length-scale"),
     (["terrain", *TV, "--torso-mass-scale", "inf"], "--torso-mass-scale"),
     (["terrain", *TV, "--plant", "rabbit", "--mass-scale", "1.1"], "excludes"),
+    # a plant scaled beyond the description's range: the option named (the line was
+    # '--scaled robot: ...-scale: scaled robot: ...')
+    (["terrain", *TV, "--length-scale", "1e200"], "error: --length-scale: scaled robot: "
+                                                  "torso.length must be at most"),
+    (["model", "--robot", "{robot_huge}"], "leg[1].length must be at most 1e+06"),
     (["terrain", *TV, "--gains", "1", "2", "0"], "--gains"),
     (["terrain", "--m1", "1", "2"], "--m1 takes 4"),
     (["terrain", "--controller", "vc", "--m1", "1", "2", "3", "4"], "--m1"),
@@ -359,6 +430,15 @@ CASES = [
     (["terrain", *TV, "--plot", "{file}/figs"], "--plot"),
     (["simulate", "--terrain", "nan"], "--terrain"),
     (["simulate", "--terrain", "0.01", "1.0"], "--terrain"),
+    # a scheduler that does not answer: every stage's failure (21 lines) and an empty
+    # output folder left behind before
+    (["reproduce", "--quick", "--scheduler", "nonsense", "--out", "{root_dir}/rep"],
+     "--scheduler: cannot connect to the Dask scheduler at nonsense"),
+    (["reproduce", "--scheduler", " ", "--out", "{root_dir}/rep"], "--scheduler: empty address"),
+    (["m1", "--robust", "--scheduler", "nonsense"], "--scheduler: cannot connect"),
+    # a local cluster of 100000 processes was started
+    (["reproduce", "--workers", "100000", "--out", "{root_dir}/rep"], "--workers: must be "
+                                                                     "between 1 and 64"),
     (["reproduce", "--out", ""], "--out"),
     (["reproduce", "--out", "{sys}/rep"], "--out"),
     (["reproduce", "--out", "{read_only}/rep", "--quick"], "--out", "nonroot"),

@@ -104,6 +104,8 @@ def test_tv_bad_input(model, gait):
         TimeVaryingController(gait, [0, np.nan, 0, 0])
     with pytest.raises(ValueError, match="eps"):
         Gains(eps=0.0)
+    with pytest.raises(ValueError, match="'eps' = 1e\\+300 s is too large"):   # OverflowError
+        Gains(eps=1e300)
     ctrl = TimeVaryingController(gait)
     with pytest.raises(ValueError, match="q"):
         ctrl.torque(np.zeros(4), np.zeros(5), 0.1)
@@ -173,6 +175,8 @@ def test_vc_bad_input(gait):
         fit_virtual_constraints(gait, H0=np.eye(4))
     with pytest.raises(ValueError, match="c"):
         fit_virtual_constraints(gait, c=[1, 0.5, 0, 0])
+    with pytest.raises(TypeError, match=r"vc_eigenvalue\(\): gait must be a gait"):
+        vc_eigenvalue(None)                 # an AttributeError on None.model before
 
 
 # --------------------------------------------------------------- eigenvalues

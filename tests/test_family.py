@@ -149,6 +149,42 @@ def test_family_file_tampering(family_path, tmp_path):
         GaitFamily.load(tmp_path / "c.json")
 
 
+def _member_less(body: dict) -> dict:
+    """A family file's content as an interrupted solve leaves it before its first member."""
+    body = copy.deepcopy(body)
+    body.update(records=[], members=[], status="partial", message="0 of 3 speeds done")
+    return body
+
+
+@pytest.mark.parametrize("edit, words", [
+    # the records, events and end steer what is read back (a record's branch decides
+    # whether gaits are interpolated across it); a wrong type was taken as it came
+    (lambda b: b["records"][0].update(branch="b"), "record 1: 'branch' must be a count"),
+    (lambda b: b["records"][0].update(T="x"), "record 1: 'T' must be a positive number"),
+    (lambda b: b["records"][1].update(status=5), "record 2: 'status' must be 'ok' or"),
+    (lambda b: b["records"][0].update(active=5), "'active' must be a list"),
+    (lambda b: b["records"][0].update(violations=["x"]), "'violations' must be a list of"),
+    (lambda b: b["records"][0].update(iterations=-1), "'iterations' must be a count"),
+    (lambda b: b.update(events=[5]), "event 1 must be an object"),
+    (lambda b: b.update(events=[dict(speed=0.7, change="grew", constraint=None,
+                                     detail="")]), "event 1 must be an object"),
+    (lambda b: b.update(end={"speed": "x"}), "'end' must be null or an object"),
+    (lambda b: b.update(message=5), "'message' must be a string"),
+    (lambda b: b.update(total_time="x"), "'total_time' must be a number"),
+    # 'complete' with a member removed: a rerun of its --speeds took it as finished
+    (lambda b: (b["records"].pop(), b["members"].pop()),
+     "status 'complete' does not match its contents (2 of 3 speeds solved"),
+    (lambda b: b.update(status="partial"), "status 'partial' does not match"),
+])
+def test_family_file_fields_of_the_wrong_type(family_path, tmp_path, edit, words):
+    body = json.loads(family_path.read_text())
+    edit(body)
+    (tmp_path / "e.json").write_text(json.dumps(_resign(body)))
+    with pytest.raises(GaitFileError) as e:
+        GaitFamily.load(tmp_path / "e.json")
+    assert words in str(e.value) and "e.json" in str(e.value)
+
+
 def test_interrupted_family_resumes(model, family, tmp_path):
     path = tmp_path / "f.json"
     calls = []
@@ -295,11 +331,30 @@ def test_cli_bad_input(argv, words, capsys, tmp_path, monkeypatch, family_path):
     monkeypatch.chdir(tmp_path)
     body = json.loads(family_path.read_text())
     body["speeds"] = [0.7, 0.75, 0.8, 0.85]     # another request than --speeds 0.7:0.8:0.05
+    body.update(status="partial", message="3 of 4 speeds done")      # as such a file says
     (tmp_path / "f.json").write_text(json.dumps(_resign(body)))
     before = sorted(p.name for p in tmp_path.iterdir())
     rc, out, err = _run(capsys, *argv, *([] if "--out" in argv else ["--out", "o.json"]))
     assert rc == 2 and out == "" and words in err and len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+@pytest.mark.parametrize("argv", [
+    ["gait", "--family", "{f}", "--speed", "0.75", "--out", "g.json"],
+    ["simulate", "--gait", "{f}", "--speeds", "0.75", "0.75", "--controller", "vc"],
+])
+def test_cli_family_without_members(argv, capsys, tmp_path, monkeypatch, family_path):
+    """A family file whose solve stopped before its first member: an internal IndexError
+    before; one line naming the file, exit 2, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "f.json").write_text(json.dumps(_resign(_member_less(
+        json.loads(family_path.read_text())))))
+    rc = biped_main([a.format(f="f.json") for a in argv])
+    out, err = capsys.readouterr()
+    assert (rc, out) == (2, ""), err
+    assert len(err.strip().splitlines()) == 1 and "internal error" not in err, err
+    assert "f.json holds no gait yet" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.json"]
 
 
 def test_cli_family_beyond_its_existence(capsys, tmp_path, monkeypatch):

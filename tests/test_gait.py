@@ -274,6 +274,12 @@ def _resigned(path, edit):
     (lambda b: b.update(options=[]), "'options' must be an object"),
     (lambda b: b["options"].update(bezier_degree="6"), "bezier_degree"),
     (lambda b: b["options"].update(polish_steps=10**9), "polish_steps"),
+    # beyond these a command that solves the file's problem (gait --family --resolve,
+    # m1 --robust) exhausted the memory (n_intervals) or failed inside CasADi (degree)
+    (lambda b: b["options"].update(n_intervals=10**7), "'n_intervals' must be at most"),
+    (lambda b: b["options"].update(degree=10), "'degree' must be at most 9"),
+    (lambda b: b["options"].update(expand="yes"), "'expand' must be true or false"),
+    (lambda b: b["options"].update(speed=True), "'speed' must be a positive number"),
     (lambda b: b["solution"].update(T=None), "solution.T"),
     (lambda b: b["solution"].update(T=True), "solution.T"),
     (lambda b: b["solution"].update(T=float("nan")), "solution.T"),
@@ -312,6 +318,21 @@ def test_a_gait_that_is_not_a_periodic_orbit_is_refused(gait, tmp_path, edit):
     path = _resigned(gait.save(tmp_path / "g.json"), edit)
     with pytest.raises(GaitFileError, match="not a periodic orbit of its robot"):
         Gait.load(path)
+
+
+@pytest.mark.parametrize("edit", [
+    lambda b: b["solution"].update(T=1e300),
+    lambda b: b["solution"].update(T=1e-300),      # an IndexError, also without the flag
+    lambda b: b["solution"]["alpha"][0].__setitem__(0, 1e300),
+])
+def test_a_gait_that_cannot_be_evaluated_is_refused_even_as_an_open_orbit(gait, tmp_path,
+                                                                          edit):
+    """allow_open_orbit let it through with a warning, and every command then failed on
+    an IndexError or OverflowError ('internal error')."""
+    path = _resigned(gait.save(tmp_path / "g.json"), edit)
+    for allow in (False, True):
+        with pytest.raises(GaitFileError, match="its motion cannot be evaluated up to T"):
+            Gait.load(path, allow_open_orbit=allow)
 
 
 def test_open_orbit_can_be_loaded_with_a_warning(gait, tmp_path):
@@ -410,6 +431,10 @@ def test_bad_options_are_value_errors(model):
         optimize_gait(model, mu=-1.0)
     with pytest.raises(ValueError, match="'derivatives'"):
         GaitOptions(derivatives="numeric")
+    with pytest.raises(ValueError, match="'n_intervals' must be at most"):
+        optimize_gait(model, n_intervals=10**7)         # refused before any memory is used
+    with pytest.raises(ValueError, match="'degree' must be at most 9"):
+        GaitOptions(degree=10)
 
 
 #: a light shin under a heavy torso (round numbers): Newton's residual on the orbit

@@ -249,6 +249,11 @@ def test_settings_and_torque_limit_refused():
         ContactSettings(timestep=0.002, solref=0.003)
     with pytest.raises(ValueError, match="foot_radius"):
         ContactSettings.of("stiff", foot_radius=-1.0)
+    with pytest.raises(ValueError, match="mu must be at most"):      # MuJoCo's NaN state
+        ContactSettings.of("stiff", mu=1e300)
+    with pytest.raises(ValueError, match=r"foot_radius must be smaller than the leg's last "
+                                         r"link \(0\.4 m"):
+        mjcf(robot("rabbit"), ContactSettings.of("stiff", foot_radius=0.4))
     inf = dataclasses.replace(robot("rabbit").description, torque_limit=math.inf)
     with pytest.raises(ValueError, match="torque_limit"):
         mjcf(inf)

@@ -120,6 +120,11 @@ BAD = [
     ("zero torque limit", lambda d: d["actuators"].update(torque_limit=0), "actuators.torque_limit must be positive"),
     ("negative rotor", lambda d: d["actuators"].update(rotor_inertia=-1e-4), "actuators.rotor_inertia must be non-negative"),
     ("same link names", lambda d: d["leg"][1].update(name="femur"), "link names must differ"),
+    # a leg 1e300 m long made D overflow to inf: `biped model` printed it with exit 0
+    ("huge length", lambda d: d["leg"][0].update(length=1e300), "leg[1].length must be at most 1e+06"),
+    ("huge com", lambda d: d["torso"].update(com=-1e300), "torso.com must be at most 1e+06"),
+    ("huge mass", lambda d: d["torso"].update(mass=1e200), "torso.mass must be at most 1e+06"),
+    ("huge point mass", lambda d: d.update(point_masses={"hip": 1e300}), "point_masses.hip must be at most"),
 ]
 
 

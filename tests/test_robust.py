@@ -342,3 +342,13 @@ def test_cli_robust_paper_run_without_impact_prints_no_nan(gait3, tmp_path, caps
     out = capsys.readouterr().out
     assert rc == 0 and "slipped in step 1" in out, out       # the first step, counted from 1
     assert "nan" not in out and "max impulse ratio n/a" in out, out
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, True])
+def test_a_seed_that_is_not_one_is_named(seed):
+    """numpy's generators said only 'expected non-negative integer' (that was the whole
+    error line of 'biped robust --seed -1')."""
+    from analysis.design import RobustDesignSettings
+    for settings in (RobustnessSettings, RobustDesignSettings):
+        with pytest.raises(ValueError, match=r"^seed must be an integer >= 0, got "):
+            settings(seed=seed)

@@ -23,7 +23,7 @@ import biped_casadi
 
 from . import (eig, export, gait, m1, mujoco, reproduce, robot, robust, simulate, sweep,
                terrain, view)
-from .common import UserError, add_robot, load_model, print_json
+from .common import UserError, add_robot, check_inputs, load_model, print_json
 from .failures import failure_line
 from .stdout import named_stdout
 
@@ -124,6 +124,7 @@ def main(argv=None) -> int:
     try:
         with warnings.catch_warnings(record=True) as caught, ctrl_c, named_stdout():
             warnings.simplefilter("default")
+            check_inputs(args)
             rc = args.func(args)
         _note_warnings(args.command, caught)
     except Exception:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.cluster import DASK_CONNECT_TIMEOUT, connect
 from biped_casadi import robot
 from biped_casadi.control.output_law import (M1_LIMIT, SECTION, check_M1_range, check_rejoin,
                                              require_regular)
@@ -22,7 +23,8 @@ from gait_opt import Gait, OpenOrbitWarning, optimize_gait
 
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
-           "add_gait_arguments", "add_scheduler", "is_family_file"]
+           "add_gait_arguments", "add_scheduler", "is_family_file", "require_members",
+           "check_inputs", "check_scheduler", "not_an_input"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
               "(.toml, schema in biped_casadi.model.description) or a URDF file (.urdf)")
@@ -60,6 +62,21 @@ def add_robot(p, with_gait: bool = True):
     default = ("default: the gait file's robot, else rabbit" if with_gait
                else "default: rabbit")
     p.add_argument("--robot", metavar="NAME|FILE", help=f"{ROBOT_HELP}; {default}")
+
+
+#: the options that name an input (a file, or a robot by name), as the user writes them
+INPUT_OPTIONS = {"robot": "--robot", "gait": "--gait", "family": "--family",
+                 "import_file": "--import", "plant": "--plant", "schedule": "--schedule",
+                 "terrain": "--terrain", "file": "FILE"}
+
+
+def check_inputs(args):
+    """UserError for an input option given an empty value (``--robot ""``, ``--gait ""``
+    from an unset shell variable): it meant the default robot or gait before."""
+    for dest, option in INPUT_OPTIONS.items():
+        v = getattr(args, dest, None)
+        if isinstance(v, str) and not v.strip():
+            raise UserError(f"{option}: empty name (leave the option out for the default)")
 
 
 def add_gait_arguments(p, required: bool = False):
@@ -132,10 +149,22 @@ def _family_where_one_gait(path, command: str) -> str:
             + _FAMILY_USE.get(command, ""))
 
 
+def require_members(family, path, option: str):
+    """UserError naming ``option`` when the family ``family`` read from ``path`` holds no
+    gait yet (a family solve interrupted before its first speed)."""
+    if not len(family):
+        raise UserError(f"{option}: {_short(path)} holds no gait yet (its 'biped gait "
+                        f"--speeds' run stopped before the first speed: rerun it to "
+                        f"continue)")
+
+
 def is_family_file(path) -> bool:
     """Whether ``path`` looks like a gait family file (its format field), without
-    validating it (the loader does, with its own errors)."""
+    validating it (the loader does, with its own errors).  Only a regular file is
+    opened: reading a named pipe (a FIFO) waited for a writer forever."""
     try:
+        if not os.path.isfile(path):
+            return False
         with open(path, "rb") as f:
             head = f.read(4096).decode("utf-8", "ignore")
     except OSError:
@@ -329,14 +358,54 @@ def output_file(path, option: str, suffixes: tuple = ()) -> Path:
     return p
 
 
+#: --workers of a local cluster: processes, each of which builds its own CasADi functions
+MAX_WORKERS = 64
+
+
+def not_an_input(out, option: str, inputs: dict):
+    """UserError when the output ``out`` of ``option`` is one of the command's input files
+    (``inputs``: option -> path or None): writing it replaced the input (a gait family
+    given with --family and --out was overwritten by the one gait taken from it)."""
+    for name, path in inputs.items():
+        if path is None:
+            continue
+        try:
+            same = Path(out).resolve() == Path(path).resolve() or (
+                Path(out).exists() and os.path.samefile(out, path))
+        except (OSError, RuntimeError):
+            same = False
+        if same:
+            raise UserError(f"{option}: {_short(out)} is the {name} file; writing there "
+                            f"would replace it (give another file name)")
+
+
 def _workers(text) -> int:
     try:
         n = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {n}")
+    if not 1 <= n <= MAX_WORKERS:
+        raise argparse.ArgumentTypeError(f"must be between 1 and {MAX_WORKERS}, got {n}")
     return n
+
+
+def check_scheduler(scheduler, say=None):
+    """``--scheduler``: not empty, and a scheduler given by address answers (UserError
+    otherwise), before any work: a run of tasks on an address that does not answer
+    reported every stage's failure and left its output folder behind."""
+    if scheduler is None:
+        return
+    if not scheduler.strip():
+        raise UserError("--scheduler: empty address")
+    if scheduler in ("inline", "local", "synchronous"):
+        return
+    if say is not None:
+        say(f"connecting to the Dask scheduler at {scheduler} (up to "
+            f"{DASK_CONNECT_TIMEOUT}) ...")
+    try:
+        connect(scheduler)[0].close()
+    except ValueError as e:
+        raise UserError(f"--{e}") from None
 
 
 def add_scheduler(p):

@@ -121,6 +121,7 @@ def cmd_export(args):
         raise UserError(f"--angles urdf: the robot {gait.model.params.name} has no URDF joint "
                         f"map (give --robot FILE.urdf, a description written by 'biped robot "
                         f"import', or a gait made for one); nothing written")
+    _perturbation(args, gait.model.nq)       # its shape, also when only --verify uses it
     ctrl = _controller(args, gait)
     try:
         law = exported_law(ctrl, angles=args.angles, motor_side=args.motor_side)

@@ -13,7 +13,8 @@ from analysis.reporting.plots import (gait_family_plot, gait_profiles_plot, gait
                                       save_figures)
 from gait_opt import GaitFamily, GaitOptimizationError, gait_family, parse_speed_range
 
-from .common import Progress, UserError, load_model, output_dir, output_file, print_json
+from .common import (Progress, UserError, load_model, not_an_input, output_dir, output_file,
+                     print_json, require_members)
 
 __all__ = ["add_family_arguments", "check_family_arguments", "cmd_family", "cmd_gait_at"]
 
@@ -145,9 +146,11 @@ def cmd_gait_at(args) -> int:
     if not math.isfinite(args.speed):
         raise UserError(f"--speed must be a finite number, got {args.speed:g}")
     out = output_file("gait.json" if args.out is None else args.out, "--out")
+    not_an_input(out, "--out", {"--family": args.family})
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot) if args.robot else None
     fam = GaitFamily.load(args.family, model)
+    require_members(fam, args.family, "--family")
     lo, hi = fam.member_speeds[0], fam.member_speeds[-1]
     if not lo - 1e-9 <= args.speed <= hi + 1e-9:
         raise UserError(f"--speed {args.speed:g} m/s is outside the family in "

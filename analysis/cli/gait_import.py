@@ -9,7 +9,8 @@ from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_f
 from gait_opt import IMPORT_TOL, GaitOptions, import_gait
 from gait_opt.urdf_angles import CSV_ANGLES, require_urdf_map, write_gait_csv
 
-from .common import UserError, load_gait, load_model, output_dir, output_file, print_json
+from .common import (UserError, load_gait, load_model, not_an_input, output_dir, output_file,
+                     print_json)
 
 
 def add_import_arguments(p):
@@ -37,9 +38,9 @@ def add_import_arguments(p):
                         "back, instead of optimising")
     p.add_argument("--gait", metavar="FILE",
                    help="with --export-csv: the gait file to write")
-    p.add_argument("--nodes", type=int, default=101, metavar="N",
+    p.add_argument("--nodes", type=int, default=None, metavar="N",
                    help="with --export-csv: uniform samples from t = 0 to T (default 101)")
-    p.add_argument("--import-tol", type=float, default=IMPORT_TOL, metavar="TOL",
+    p.add_argument("--import-tol", type=float, default=None, metavar="TOL",
                    help=f"with --import: refuse a trajectory whose fitted orbit misses by "
                         f"more than TOL (rad, rad/s, m; default {IMPORT_TOL:g})")
     p.add_argument("--bezier-degree", type=int, default=None, metavar="M",
@@ -51,11 +52,13 @@ def add_import_arguments(p):
 
 
 def cmd_import(args):
+    args.import_tol = IMPORT_TOL if args.import_tol is None else args.import_tol
     if not (math.isfinite(args.import_tol) and args.import_tol > 0):
         raise UserError(f"--import-tol must be a positive number, got {args.import_tol:g}")
     if args.bezier_degree is not None and not 4 <= args.bezier_degree <= 20:
         raise UserError(f"--bezier-degree must be from 4 to 20, got {args.bezier_degree}")
     out = output_file(args.out, "--out", (".json",))
+    not_an_input(out, "--out", {"--import": args.import_file})
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot)
     if args.angles == "urdf":
@@ -112,14 +115,35 @@ def _check_stance(umap, stance):
         raise UserError(f"--{e}") from None
 
 
+#: the options of an optimised gait that an imported one does not have, with their defaults
+SOLVER_OPTIONS = dict(intervals=30, scheme="legendre", max_iter=None)
+
+
 def check_export_arguments(args):
-    """--export-csv excludes the other modes; --stance belongs to --angles urdf."""
+    """--export-csv excludes the other modes; --stance belongs to --angles urdf; the
+    options of --import and --export-csv are refused without them (they were ignored:
+    '--nodes 0' on an optimisation said nothing), the solver's with --import."""
     if args.stance is not None and args.angles != "urdf":
         raise UserError("--stance names the stance leg of --angles urdf")
+    if args.import_file is None:
+        for name in ("import_tol", "bezier_degree"):
+            if getattr(args, name) is not None:
+                raise UserError(f"--{name.replace('_', '-')} applies with --import only")
+    if args.import_file is not None or args.export_csv is not None:
+        for name, default in SOLVER_OPTIONS.items():
+            if getattr(args, name) != default:
+                raise UserError(f"--{name.replace('_', '-')} does not apply with "
+                                f"{'--import' if args.import_file else '--export-csv'} (no "
+                                f"gait is optimised: it is fitted to the nodes, or read)")
+    if args.import_file is None and args.export_csv is None and args.angles != "relative":
+        raise UserError("--angles applies with --import or --export-csv")
     if args.export_csv is None:
         if args.gait is not None:
             raise UserError("--gait FILE is the gait --export-csv writes (give --export-csv)")
+        if args.nodes is not None:
+            raise UserError("--nodes applies with --export-csv only")
         return
+    args.nodes = 101 if args.nodes is None else args.nodes
     if args.import_file is not None or args.speeds is not None or args.family is not None:
         raise UserError("--export-csv writes a gait: it excludes --import, --speeds and "
                         "--family")

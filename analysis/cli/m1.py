@@ -28,11 +28,13 @@ from .common import (
     add_gait_arguments,
     add_robot,
     add_scheduler,
+    check_scheduler,
     is_family_file,
     output_dir,
     output_file,
     load_gait,
     load_model,
+    not_an_input,
     positive,
     print_json,
 )
@@ -64,6 +66,8 @@ def _robust_defaults(args):
     args.mu = 0.6 if args.mu is None else args.mu
     if not 100 <= args.samples <= 10_000_000:
         raise UserError(f"--samples must be between 100 and 10000000, got {args.samples}")
+    if args.seed < 0:
+        raise UserError(f"--seed must be >= 0, got {args.seed}")
     if not 1 <= args.starts <= 50:
         raise UserError(f"--starts must be between 1 and 50, got {args.starts}")
     positive(args.mu, "--mu")
@@ -72,6 +76,7 @@ def _robust_defaults(args):
 def cmd_robust_design(args, say):
     """``biped m1 --robust``: the co-design NLP (default) or the sampling search."""
     _robust_defaults(args)
+    check_scheduler(args.scheduler, say)
     if args.method == "search":
         return _search(args, say)
     if args.gait and is_family_file(args.gait):
@@ -79,6 +84,8 @@ def cmd_robust_design(args, say):
     if args.plot is not None:
         raise UserError("--plot applies to --robust with a gait family (--gait FAMILY.json)")
     out = output_file(args.out, "--out") if args.out is not None else None
+    if out is not None:
+        not_an_input(out, "--out", {"--gait": args.gait})
     model = load_model(args.robot) if not args.gait else None
     gait = None
     if args.gait:
@@ -216,6 +223,8 @@ def _print_design(r, st):
 def _family(args, say):
     """``biped m1 --robust --gait FAMILY.json``: the designs over a gait family."""
     out = output_file(args.out, "--out") if args.out is not None else None
+    if out is not None:
+        not_an_input(out, "--out", {"--gait": args.gait})
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     fam = GaitFamily.load(args.gait, load_model(args.robot) if args.robot else None)
     say(f"designs over the family: the gait-fixed co-design at each of its {len(fam)} "
@@ -264,6 +273,8 @@ def _search(args, say):
         f"{st.rejoin} T; under a minute on 2 cores the first time, then read from the "
         "cache")
     out = output_file(args.out, "--out") if args.out is not None else None
+    if out is not None:
+        not_an_input(out, "--out", {"--gait": args.gait})
     if args.plot is not None:
         raise UserError("--plot applies to --robust with a gait family (--gait FAMILY.json)")
     r = robust_design(model, st, progress=say, use_cache=not args.no_cache,

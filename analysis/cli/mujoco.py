@@ -16,7 +16,7 @@ from analysis.reporting.plots import mujoco_animation, mujoco_steps_plot, save_f
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
                      check_m1_values, load_gait, output_dir, parse_m1, positive, print_json,
                      rejoin_fraction)
-from .mujoco_options import add_mujoco_settings, mujoco_settings
+from .mujoco_options import add_mujoco_settings, mujoco_settings, settings_error
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
 
@@ -77,7 +77,7 @@ def cmd_mujoco(args):
     except CompilerError as e:
         raise UserError(f"--law c: {e} (or use --law python)") from None
     except ValueError as e:
-        raise UserError(str(e)) from None
+        raise settings_error(e) from None
 
     # ---- walk, MuJoCo's stride map
     say(f"walking {args.steps} step(s) in MuJoCo ...")

@@ -6,7 +6,7 @@ from biped_casadi.mujoco import CONTACTS, ContactSettings
 
 from .common import UserError
 
-__all__ = ["add_mujoco_settings", "mujoco_settings"]
+__all__ = ["add_mujoco_settings", "mujoco_settings", "settings_error"]
 
 
 def add_mujoco_settings(p, mu: bool = True):
@@ -28,6 +28,19 @@ def add_mujoco_settings(p, mu: bool = True):
                        help="friction coefficient of feet and floor (default 0.6)")
 
 
+#: the fields of the settings, each set by the option of its name
+_FIELDS = ("contact", "timestep", "solref", "foot_radius", "mu", "integrator")
+
+
+def settings_error(e: ValueError) -> UserError:
+    """A ValueError about a setting ('foot_radius must ...') as the option that set it
+    ('--foot-radius must ...'); any other as it is."""
+    name, _, rest = str(e).partition(" ")
+    if name in _FIELDS:
+        return UserError(f"--{name.replace('_', '-')} {rest}")
+    return UserError(str(e))
+
+
 def mujoco_settings(args) -> ContactSettings:
     """The settings of the options (UserError naming the option MuJoCo would reject)."""
     try:
@@ -35,5 +48,4 @@ def mujoco_settings(args) -> ContactSettings:
                                   foot_radius=args.foot_radius,
                                   mu=getattr(args, "mu", None), integrator=args.integrator)
     except ValueError as e:
-        name = str(e).split(" ", 1)[0].replace("_", "-")
-        raise UserError(f"--{name} {str(e).split(' ', 1)[1]}") from None
+        raise settings_error(e) from None

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from analysis.pipeline import reproduce, run_folder
 
-from .common import UserError, add_robot, add_scheduler, load_model, output_dir, print_json
+from .common import (UserError, add_robot, add_scheduler, check_scheduler, load_model,
+                     output_dir, print_json)
 
 
 def cmd_reproduce(args):
@@ -14,6 +15,7 @@ def cmd_reproduce(args):
     if args.scheduler is not None and args.workers is not None:
         raise UserError("--workers sets the local cluster's processes; it excludes "
                         "--scheduler (an existing cluster has its own workers)")
+    check_scheduler(args.scheduler)
     r = reproduce(args.out, quick=args.quick, progress=not (args.no_progress or args.json),
                   robot=args.robot or "rabbit", scheduler=args.scheduler,
                   workers=args.workers)

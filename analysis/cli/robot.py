@@ -18,8 +18,8 @@ from biped_casadi.model.urdf_legs import check_match_tol
 from biped_casadi.model.urdf_tree import lock_table
 from biped_casadi.mujoco import mjcf, mujoco_module
 
-from .common import ROBOT_HELP, UserError, load_model, output_file, print_json
-from .mujoco_options import add_mujoco_settings, mujoco_settings
+from .common import ROBOT_HELP, UserError, load_model, output_file, positive, print_json
+from .mujoco_options import add_mujoco_settings, mujoco_settings, settings_error
 
 
 def _locks(args) -> dict:
@@ -127,8 +127,13 @@ def cmd_import(args):
 def cmd_mjcf(args):
     out = output_file(args.out, "--out", (".xml",))
     settings = mujoco_settings(args)
+    if args.torque_limit is not None:
+        positive(args.torque_limit, "--torque-limit")
     model = load_model(args.robot)
-    text = mjcf(model, settings, args.torque_limit)
+    try:
+        text = mjcf(model, settings, args.torque_limit)
+    except ValueError as e:
+        raise settings_error(e) from None
     mujoco = mujoco_module()
     try:
         m = mujoco.MjModel.from_xml_string(text)

@@ -24,6 +24,8 @@ def cmd_robust(args):
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
     rejoin = rejoin_fraction(PAPER_REJOIN if args.rejoin is None else args.rejoin)
+    if args.seed < 0:
+        raise UserError(f"--seed must be >= 0, got {args.seed}")
     if not 1 <= args.directions <= 200:
         raise UserError(f"--directions must be between 1 and 200, got {args.directions}")
     if args.plot is not None:

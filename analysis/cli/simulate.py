@@ -159,6 +159,13 @@ def _check_numbers(args):
     if args.controller == "vc" and args.m1 is not None and not args.compare:
         raise UserError("--m1 applies to the time-varying controller (--controller tv, "
                         "or --compare)")
+    if args.controller == "vc" and args.rejoin is not None and not args.compare:
+        raise UserError("--rejoin applies to the time-varying controller (--controller tv, "
+                        "or --compare)")
+    if args.schedule is not None and args.rejoin is not None:
+        raise UserError("--schedule and --rejoin exclude each other (the schedule gives the "
+                        "rejoin time)")
+    args.rejoin = 0.5 if args.rejoin is None else args.rejoin
     positive(args.mu, "--mu")
     positive(args.eps, "--eps")
     rejoin_fraction(args.rejoin)
@@ -263,7 +270,7 @@ def register(sub):
                     "errors q_u - q_u^d(T), dq_u - dq_u^d(T) just before each impact.")
     add_gait_arguments(p)
     add_robot(p)
-    add_design_arguments(p, m1_zero=True, rejoin_default=0.5)
+    add_design_arguments(p, m1_zero=True)
     p.add_argument("--steps", type=int, default=None, metavar="N",
                    help=f"number of steps, 1 to {MAX_STEPS} (10)")
     p.add_argument("--perturb", nargs=2, type=float, default=None,

@@ -16,7 +16,7 @@ from analysis.reporting.plots import save_figures, speed_profile_plot
 from gait_opt import GaitFamily
 
 from .common import (UserError, check_not_singular, figure_or_na, load_model, output_dir,
-                     parse_m1, print_json)
+                     parse_m1, print_json, require_members)
 
 __all__ = ["add_profile_arguments", "profile_requested", "check_profile_arguments",
            "cmd_profile"]
@@ -132,6 +132,7 @@ def cmd_profile(args, say, perturbation_of) -> int:
     except ValueError as e:
         raise UserError(f"--gait: {e} (--speeds/--ramp need a gait family from 'biped gait "
                         "--speeds A:B:STEP')") from None
+    require_members(family, args.gait, "--gait")
     model = family.model
     schedule = _schedule(args, model.nu) if args.controller == "tv" or args.compare else None
     perturbation = perturbation_of(args, model.nq)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from analysis.cluster import DASK_CONNECT_TIMEOUT, connect
 from analysis.reporting.plots import save_figures, survival_plot
 from analysis.terrain import (MAX_RUNS, MAX_STEPS, MonteCarloSettings, WalkerSpec,
                               gait_sensitivity, monte_carlo)
@@ -16,6 +15,7 @@ from biped_casadi.simulation import Terrain, TerrainFileError
 from biped_casadi.simulation.terrain import MAX_HEIGHT
 
 from .common import (add_design_arguments, Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
+                     check_scheduler,
                      check_not_singular,
                      load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
 
@@ -56,8 +56,9 @@ def _plant(args, model):
     try:
         return model.description.scaled(**{k: (1.0 if v is None else v)
                                            for k, v in scales.items()})
-    except ValueError as e:
-        raise UserError(f"--{str(e).split(' scale')[0].replace('_', '-')}-scale: {e}") from None
+    except ValueError as e:               # the scaled robot's numbers out of range
+        names = ", ".join(f"--{k.replace('_', '-')}-scale" for k in given)
+        raise UserError(f"{names}: {e}") from None
 
 
 def _check_scales(args):
@@ -134,12 +135,7 @@ def _check_arguments(args):
 
 def _check_scheduler(args, say):
     """A Dask scheduler given by address answers, or a UserError."""
-    if args.scheduler not in (None, "inline", "local"):
-        say(f"connecting to the Dask scheduler at {args.scheduler} (up to {DASK_CONNECT_TIMEOUT}) ...")
-        try:
-            connect(args.scheduler)[0].close()
-        except ValueError as e:
-            raise UserError(f"--{e}") from None
+    check_scheduler(args.scheduler, say)
 
 
 def _build(args, say, gains, rejoin, profile):

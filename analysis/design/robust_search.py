@@ -45,7 +45,8 @@ from gait_opt.cache import cache_path
 from ..stability.poincare import poincare_map
 from biped_casadi.simulation import failure_text, start_states
 
-from ..robustness.s_star import Design, RobustnessSettings, kept_directions, s_star_batch
+from ..robustness.s_star import (Design, RobustnessSettings, check_seed, kept_directions,
+                                s_star_batch)
 from ..stability.vc_map import vc_eigenvalue
 from biped_casadi.simulation import zero_dynamics_walker
 from .verification import verify_design
@@ -120,6 +121,9 @@ class RobustDesignSettings:
     directions: int = 16
     steps: int = 10
     tol: float = 1e-3
+
+    def __post_init__(self):
+        check_seed(self.seed)
 
     def robustness_settings(self, rk4_steps: int = 400, rounds: int = 10) -> RobustnessSettings:
         """The matching robustness settings, with the given integration and rounds.

@@ -43,9 +43,16 @@ from ..tasks import Engine, resolve_scheduler, task
 from ..stability.poincare import poincare_map
 from ..stability.vc_map import vc_eigenvalue
 
-__all__ = ["Design", "RobustnessSettings", "RobustnessResult", "KeptDirections",
+__all__ = ["check_seed", "Design", "RobustnessSettings", "RobustnessResult", "KeptDirections",
            "kept_directions", "robustness", "BatchSStar", "s_star_batch", "bisect_scale",
            "walk_batch"]
+
+
+def check_seed(seed, name: str = "seed"):
+    """ValueError naming ``name`` unless ``seed`` is an integer >= 0 (numpy's generators
+    said only 'expected non-negative integer')."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"{name} must be an integer >= 0, got {seed!r}")
 
 
 @dataclass(frozen=True)
@@ -87,6 +94,9 @@ class RobustnessSettings:
     mu: float = 0.6
     torque_limit: float | None = None
     rk4_steps: int = 400
+
+    def __post_init__(self):
+        check_seed(self.seed)
 
     def simulation_options(self, jit: bool = False) -> SimulationOptions:
         """The simulation options of the runs: ``steps``, ``mu`` and ``torque_limit``.

@@ -335,7 +335,15 @@ def vc_eigenvalue(gait, constraints: VirtualConstraints | None = None,
     -------
     VCEigenResult
         The eigenvalue, its status and the fixed point.
+
+    Raises
+    ------
+    TypeError
+        ``gait`` not a gait (it was an AttributeError on ``gait.model``).
     """
+    if not hasattr(gait, "T") or not hasattr(gait, "model"):
+        raise TypeError(f"vc_eigenvalue(): gait must be a gait (Gait.load(path) or "
+                        f"optimize_gait(model)), got {type(gait).__name__}")
     model = gait.model
     if constraints is None:
         phase = tuple(np.asarray(model.hip_phase if phase is None else phase, float).ravel())

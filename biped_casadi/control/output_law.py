@@ -50,6 +50,10 @@ def _symbolic(*args) -> bool:
 
 
 # ------------------------------------------------------------------ parameters
+#: s: the largest time scale eps of the output PD
+MAX_EPS = 10.0
+
+
 @dataclass(frozen=True)
 class Gains:
     """PD gains of the output dynamics, eq. (13): ddy = -Kd/eps dy - Kp/eps^2 y.
@@ -71,6 +75,10 @@ class Gains:
         for name in ("Kp", "Kd", "eps"):
             object.__setattr__(self, name, as_number(getattr(self, name), f"gain {name!r}",
                                                      positive=True))
+        if self.eps > MAX_EPS:           # eps**2 overflowed (OverflowError) from 1e155 s
+            raise ValueError(f"gain 'eps' = {self.eps!r} s is too large: at most {MAX_EPS:g} "
+                             f"s (the outputs' time scale; beyond, tens of steps, the PD "
+                             f"leaves them uncontrolled)")
         if not math.isfinite(self.Kp / max(self.eps**2, 1e-300)) or self.eps**2 == 0.0:
             raise ValueError(f"gain 'eps' = {self.eps!r} is too small: Kp / eps^2 overflows")
 

@@ -96,6 +96,10 @@ BUILTIN = ("rabbit", "three_link")
 _TOP = ("name", "gravity", "torso_upright", "actuators", "torso", "leg", "point_masses",
         "urdf")
 _TWO_PI = 2.0 * math.pi
+#: the largest magnitude of a number of a description (SI units: m, kg, kg m^2, m/s^2);
+#: beyond, the mass matrix overflows (a leg 1e300 m long gave D full of inf) -- a file
+#: in other units.  The torque limit may be larger (or inf: none).
+MAX_VALUE = 1e6
 
 
 def torso_lean(phi, upright: float = 0.0):
@@ -438,7 +442,7 @@ class _Checker:
         return data
 
     def number(self, value, name: str, lo: float = 0.0, strict: bool = False,
-               hi: float | None = None, hi_name: str = "") -> float:
+               hi: float | None = None, hi_name: str = "", bounded: bool = True) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(name, f"must be a number, got {value!r}")
         v = float(value)
@@ -450,7 +454,14 @@ class _Checker:
             self.fail(name, f"must be non-negative, got {value!r}")
         if hi is not None and v > hi:
             self.fail(name, f"must not exceed {hi_name} ({hi:g}), got {value!r}")
+        if bounded:
+            self.bounded(v, name)
         return v
+
+    def bounded(self, v: float, name: str):
+        if abs(v) > MAX_VALUE:
+            self.fail(name, f"must be at most {MAX_VALUE:g} in magnitude (SI units: m, kg, "
+                            f"kg m^2; a file in other units?), got {v!r}")
 
     def text(self, value, name: str) -> str:
         if not isinstance(value, str) or not value.strip():
@@ -463,6 +474,7 @@ class _Checker:
             self.fail(name, f"must be a number, got {value!r}")
         if not math.isfinite(value):
             self.fail(name, f"must be finite, got {value!r}")
+        self.bounded(float(value), name)
         return float(value)
 
     def link(self, data, name: str, default_name: str) -> Link:
@@ -514,7 +526,7 @@ def description_from_dict(data: dict, where: str = "robot description",
     act = c.table(data["actuators"], "actuators", _ACTUATORS, ("torque_limit", "rotor_inertia"))
     limit = act["torque_limit"]
     torque_limit = math.inf if (isinstance(limit, float) and limit == math.inf) else \
-        c.number(limit, "actuators.torque_limit", strict=True)
+        c.number(limit, "actuators.torque_limit", strict=True, bounded=False)
     rotor = c.number(act["rotor_inertia"], "actuators.rotor_inertia")
     gear = c.number(act.get("gear_ratio", 1.0), "actuators.gear_ratio", strict=True)
     torso = c.link(data["torso"], "torso", "torso")

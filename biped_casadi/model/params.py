@@ -221,6 +221,11 @@ def load_params(path: str | Path) -> RobotParams:
             raise ValueError(f"parameter file must end in .toml or .json: {path}")
     except (tomllib.TOMLDecodeError, json.JSONDecodeError, RecursionError) as e:
         raise ValueError(f"cannot parse parameter file {path}: {e}") from None
+    kind = data.get("format") if isinstance(data, dict) else None
+    if isinstance(kind, str) and kind.startswith("biped-casadi-gait"):
+        raise ValueError(f"{path} is a {kind} file, not a robot description: a gait "
+                         f"file carries its robot (read it with Gait.load, on the command "
+                         f"line with --gait)")
     if isinstance(data, dict) and "robot" in data and isinstance(data["robot"], dict):
         data = data["robot"]
     try:

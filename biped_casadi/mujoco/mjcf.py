@@ -41,7 +41,8 @@ from ..model.biped import BipedModel, resolve_robot, robot as _robot
 from ..model.description import RobotDescription
 
 __all__ = ["mjcf", "ContactSettings", "STIFF", "MUJOCO_DEFAULT", "MIN_INERTIA", "Layout",
-           "layout", "floating_base_inertia", "CONTACTS", "MIN_TIMESTEP", "MAX_TIMESTEP"]
+           "layout", "floating_base_inertia", "CONTACTS", "MIN_TIMESTEP", "MAX_TIMESTEP",
+           "MAX_MU"]
 
 #: kg m^2: the inertia given to a link that is a point mass (MuJoCo refuses a moving body
 #: whose inertia is below mjMINVAL = 1e-15); its effect on D is below 1e-13
@@ -51,6 +52,9 @@ CONTACTS = ("stiff", "default")
 #: s: the time steps a run takes (a smaller one would run for hours, a larger one misses
 #: the step's dynamics)
 MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.05
+#: the largest friction coefficient (any real contact is below about 2; near 1e200
+#: MuJoCo's contact solver overflows and the state is NaN at the first contact)
+MAX_MU = 1e6
 
 
 @dataclass(frozen=True)
@@ -87,6 +91,8 @@ class ContactSettings:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v <= 0:
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if self.mu > MAX_MU:
+            raise ValueError(f"mu must be at most {MAX_MU:g}, got {self.mu!r}")
         if self.timestep > MAX_TIMESTEP:
             raise ValueError(f"timestep must be at most {MAX_TIMESTEP:g} s (a walking step "
                              f"lasts about half a second), got {self.timestep!r}")
@@ -482,13 +488,18 @@ def mjcf(robot, settings: ContactSettings = STIFF, torque_limit: float | None = 
     ------
     ValueError
         Naming ``torque_limit`` when the robot has no finite limit and none is given,
-        ``settings`` of another type.
+        ``settings`` of another type, ``foot_radius`` when the foot is not smaller than
+        the leg's last link.
     """
     d = _description(robot)
     if not isinstance(settings, ContactSettings):
         raise ValueError(f"settings must be ContactSettings, got {type(settings).__name__}")
     U = torque_limit_of(d, torque_limit)
     s = settings
+    if s.foot_radius >= d.leg[-1].length:
+        raise ValueError(f"foot_radius must be smaller than the leg's last link "
+                         f"({d.leg[-1].length:g} m; a sphere foot is the point foot rounded "
+                         f"off), got {s.foot_radius!r}")
     pm = dict(d.point_masses)
     inner = ["knee"] if d.k == 2 else [f"joint{j}" for j in range(1, d.k)]
     solref = "" if s.solref is None else f' solref="{_vec(s.solref, 1)}"'

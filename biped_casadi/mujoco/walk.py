@@ -159,8 +159,9 @@ class MujocoLoop:
             # a robot without a limit (a URDF without efforts): the one its gait was made for
             torque_limit = getattr(getattr(g, "options", None), "torque_limit", None)
         self.torque_limit = torque_limit_of(model.description, torque_limit)
+        text = mjcf(model, settings, self.torque_limit)        # our checks: as they are
         try:
-            self.m = mujoco.MjModel.from_xml_string(mjcf(model, settings, self.torque_limit))
+            self.m = mujoco.MjModel.from_xml_string(text)
         except ValueError as e:
             raise ValueError(f"settings: MuJoCo rejects the model: {str(e).splitlines()[0]}") \
                 from None
