@@ -463,6 +463,28 @@ class Gait(Reference):
         bad = [(k, float(v)) for k, v in amounts.items() if v > tol]
         return sorted(bad, key=lambda t: -t[1])
 
+    def bounds_hit(self, rtol: float = 1e-6) -> list:
+        """The optimiser's bounds on the step length and the step time that the gait
+        lies on: its optimum lies beyond them (default bounds are RABBIT's sizes).
+
+        Parameters
+        ----------
+        rtol : float
+            Relative distance from a bound that counts as on it.
+
+        Returns
+        -------
+        list of list
+            [option name, 'lower' or 'upper', bound] for each bound the gait lies on.
+        """
+        hit = []
+        for name, value in (("step_length_bounds", self.step_length),
+                            ("step_time_bounds", self.T)):
+            for side, b in zip(("lower", "upper"), getattr(self.options, name)):
+                if abs(value - b) <= rtol * abs(b):
+                    hit.append([name, side, float(b)])
+        return hit
+
     def summary(self) -> dict:
         """Every figure of the gait: physics on a dense grid and consistency.
 
@@ -470,7 +492,8 @@ class Gait(Reference):
         -------
         dict
             T, step length, speed, cost, the figures of :meth:`check`, the
-            :meth:`reintegration_error`, the dense-grid violations and the solver's
+            :meth:`reintegration_error`, the dense-grid violations, the
+            :meth:`bounds_hit` and the solver's
             status, iterations and time (what ``biped gait --json`` prints).
         """
         c = self.check()
@@ -487,6 +510,7 @@ class Gait(Reference):
                     reintegration_error=self.reintegration_error(),
                     dense_grid_points=c["n_points"],
                     dense_grid_violations=[list(v) for v in self.violations(c)],
+                    bounds_hit=self.bounds_hit(),
                     solve_time=self.solver_stats.get("total_time"),
                     ipopt_iterations=self.solver_stats.get("iterations"),
                     ipopt_status=self.solver_stats.get("status"))

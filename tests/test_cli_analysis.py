@@ -63,6 +63,26 @@ def test_eig_singular_and_vc(model, gait, gait_file, capsys):
     assert body["status"] == "stable"
 
 
+def test_eig_names_a_gait_whose_torso_passes_the_fall_bound(model, gait_file, tmp_path,
+                                                            capsys):
+    """RABBIT's optimum at 1.2 m/s leans its torso past the simulator's fall bound: its
+    map may be stable, but every walk of it is a fall, and `biped eig` says so under
+    both controllers; the default gait gets no such line."""
+    from analysis.gait_metrics import torso_fall
+    from gait_opt import GaitOptions, optimize_gait
+    fast = optimize_gait(model, GaitOptions(speed=1.2))
+    lean, past, bound = torso_fall(fast)
+    assert past
+    f = str(fast.save(tmp_path / "fast.json"))
+    M1 = ["-2.5", "5.0", "-2.5", "5.0"]
+    for args in (["--controller", "vc"], ["--m1", *M1]):
+        assert biped_main(["eig", "--gait", f, *args]) == 0
+        out = capsys.readouterr().out
+        assert f"torso leans {lean:.4g} rad, PAST the simulator's fall bound" in out, out
+        assert biped_main(["eig", "--gait", gait_file, *args]) == 0
+        assert "fall bound" not in capsys.readouterr().out
+
+
 def test_m1_json_group2(gait_file, capsys):
     body = run_json(capsys, "m1", "--gait", gait_file, "--group", "2", "--json")
     assert body["group"] == 2 and body["status"] == "stable" and body["success"]

@@ -16,9 +16,9 @@ import pytest
 from analysis import singular_m1_values
 from analysis.cli import main as biped_main
 from analysis.verify_export import (SIMULATION_TOL, TORQUE_RTOL, compare_simulations,
-                                    compare_states, time_example)
+                                    compare_states, time_example, verify_export)
 from biped_casadi import (Perturbation, SimulationOptions, TimeVaryingController,
-                          VirtualConstraintController)
+                          VirtualConstraintController, simulate)
 from biped_casadi.control.compiled import CompiledController, build_library, find_c_compiler
 from biped_casadi.control.export import GENERATED, HEADER, WRAPPER, c_sources, exported_law
 from biped_casadi.control.export_folder import staged_export, write_export
@@ -183,6 +183,35 @@ def test_three_link_exports_and_verifies(model3, gait3, tmp_path):
     """Both controllers of the three-link biped (M1 = (0.3, 1.7)), 3 steps from the
     paper's perturbation (10 in the slow test)."""
     three_link_check(model3, gait3, tmp_path, 3)
+
+
+@needs_cc
+def test_verify_compares_impacts_when_the_perturbed_start_fails_in_its_first_step(
+        gait3, tmp_path):
+    """A torque limit the orbit keeps and a large perturbation does not (a heavy robot's
+    case): the runs from the perturbed start end in their first step and compare no
+    impact, so the verification compares the runs from the orbit's start too, and says
+    so."""
+    ctrl = VirtualConstraintController(gait3)
+    q0, dq0 = Perturbation.uniform(3, 0.05, 0.5).initial_state(gait3)
+    orbit = simulate(ctrl, *Perturbation.uniform(3, 0.0, 0.0).initial_state(gait3),
+                     SimulationOptions(steps=2))
+    hit = simulate(ctrl, q0, dq0, SimulationOptions(steps=2))
+    assert orbit.status == "ok" and hit.peak_torque > 1.2 * orbit.peak_torque
+    limit = (orbit.peak_torque + hit.peak_torque) / 2
+    folder = tmp_path / "vc"
+    write_export(c_sources(exported_law(ctrl), {"gait file": "test"}), folder)
+    opts = SimulationOptions(steps=2, torque_limit=limit)
+    v = verify_export(folder, ctrl, q0, dq0, opts, n_states=100, calls=1000)
+    sim = v.simulation
+    assert v.status == "verified", v.message
+    assert sim.start == "orbit" and sim.steps == 2 and sim.compiled_status == "ok", sim.message
+    assert "from the given start the runs ended before an impact (" in sim.message
+    assert sim.max_state <= SIMULATION_TOL
+    # a start that walks is compared from where it was given
+    v = verify_export(folder, ctrl, *Perturbation.uniform(3, 0.001, 0.01).initial_state(gait3),
+                      opts, n_states=100, calls=1000)
+    assert v.simulation.start == "given" and v.simulation.steps == 2, v.message
 
 
 @pytest.mark.slow

@@ -628,3 +628,22 @@ def test_optimize_gait_names_a_model_that_is_not_one():
     for wrong in ("rabbit", 3):
         with pytest.raises(TypeError, match=r"robot\("):
             optimize_gait(wrong)
+
+
+def test_bounds_hit_names_a_step_length_bound_the_optimum_lies_beyond(model3, gait3, tmp_path,
+                                                                       capsys):
+    """The three-link gait's step length is inside the default bounds; with an upper bound
+    below it the optimiser stops on that bound, and the gait (and ``biped gait``'s
+    report of it) says so."""
+    from analysis.cli.gait import _print_gait
+    assert gait3.bounds_hit() == []
+    L = gait3.step_length
+    hi = round(0.9 * L, 3)
+    g = optimize_gait(model3, gait3.options.replace(step_length_bounds=(0.1, hi)))
+    assert g.step_length == pytest.approx(hi, rel=1e-6)
+    assert g.bounds_hit() == [["step_length_bounds", "upper", hi]]
+    s = g.summary()
+    assert s["bounds_hit"] == g.bounds_hit()
+    _print_gait(dict(s, max_torso_lean=0.0), g, model3, tmp_path / "g.json", 0.6, False, 1.0)
+    line = next(x for x in capsys.readouterr().out.splitlines() if "step length" in x)
+    assert f"on its upper bound {hi:g} m, GaitOptions.step_length_bounds" in line

@@ -95,3 +95,20 @@ def test_m1_nlp_runs_ipopt_only_until_a_deadbeat_point(model, gait, nlp2):
     assert {h["how"] for h in r.history} <= {"start", "ipopt"}
     assert r.group == 2 and abs(r.a) < 1e-9 and abs(r.b) < 1e-9
     assert r.max_abs >= nlp2.max_abs - nlp2.eigenvalue_uncertainty
+
+
+def test_m1_nlp_says_when_it_stops_on_its_box(gait3, monkeypatch):
+    """The three-link biped's free optimum lies outside a box |M1(i)| <= 1: IPOPT from
+    inside the box ends on it, and the result says the search stopped on the bound
+    instead of presenting it as an optimum; the default box holds the optimum inside."""
+    import analysis.design.m1_nlp as m1_nlp
+    free = optimize_m1(gait3, group=None)
+    assert not free.at_bound and "bound" not in free.message
+    box = 1.0
+    assert np.max(np.abs(free.M1)) > 2 * box       # the premise: the optimum lies outside
+    monkeypatch.setattr(m1_nlp, "M1_BOX", box)
+    r = optimize_m1(gait3, group=None, starts=[[0.3, -0.3]], n_random=0, n_best=0,
+                    deadbeat=False)
+    assert r.ipopt_runs == 1 and np.max(np.abs(r.M1)) == pytest.approx(box, rel=1e-3)
+    assert r.at_bound and "on the NLP's bound 1" in r.message, r.message
+    assert r.max_abs > free.max_abs

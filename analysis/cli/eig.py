@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from analysis.gait_metrics import torso_fall
 from analysis.stability import METHODS, poincare_eigenvalues
 from analysis.stability import vc_eigenvalue
 from analysis.reporting.text import eigenvalues_text, number_text
@@ -36,6 +37,7 @@ def cmd_eig(args):
         else:
             for k, v in d.items():
                 print(f"{k:22s} {v}")
+            _fall_note(gait)
         return 0
     M1 = parse_m1(args.m1, model.nu)
     if method == "ad":
@@ -55,7 +57,19 @@ def cmd_eig(args):
     print(f"max|lambda| = {number_text(r.max_abs)}")
     print(f"x* = {r.x_star.tolist()}, impact at tau = {r.tau_impact:.10g} (T = {gait.T:.10g})")
     print(f"fixed-point residual |P(x*) - x*| = {r.fixed_point_residual:.2e}")
+    _fall_note(gait)
     return 0
+
+
+def _fall_note(gait):
+    """One line when the gait's torso leans past the simulator's fall bound: the map's
+    eigenvalues are those of an orbit every walk of which is a fall."""
+    lean, past, bound = torso_fall(gait)
+    if past:
+        print(f"note: the gait's torso leans {lean:.4g} rad, PAST the simulator's fall bound "
+              f"({bound:.4g} rad): the eigenvalues are the orbit's, but every walk of this "
+              "gait is a fall (biped simulate, terrain, mujoco); a lower speed keeps the "
+              "torso up")
 
 
 def register(sub):

@@ -203,6 +203,9 @@ def _report(args, r):
     if s.get("stance_found") is not None:
         print(f"  biped_step_start found the stance leg at {s['stance_found']} of {s['n']} "
               f"step starts")
+    if m.get("start") == "orbit":
+        print(f"  {m['message'].split('; from the orbit')[0]}: compared from the orbit's start "
+              "instead")
     print(f"  {m['steps']}-impact simulation driven by the library ({m['compiled_status']}) "
           f"against biped simulate's ({m['python_status']}): impact times differ by at most "
           f"{m['max_impact_time']:.3g} s, states by {m['max_state']:.3g} (limit "

@@ -130,8 +130,17 @@ def cmd_gait(args):
 def _print_gait(s: dict, gait, model, out, mu: float, past: bool, bound: float):
     """``biped gait``'s report of one gait (``s``: its summary)."""
     print(f"reference gait of {model.params.name}, saved to {out}")
-    print(f"  step time T          {s['T']:.6f} s")
-    print(f"  step length          {s['step_length']:.6f} m")
+    hit = {n: (side, b) for n, side, b in s.get("bounds_hit", [])}
+
+    def on_bound(name, unit):
+        if name not in hit:
+            return ""
+        side, b = hit[name]
+        return (f"   (on its {side} bound {b:g} {unit}, GaitOptions.{name}: the optimum lies "
+                "beyond it; set other bounds in Python, gait_opt.GaitOptions)")
+    print(f"  step time T          {s['T']:.6f} s" + on_bound("step_time_bounds", "s"))
+    print(f"  step length          {s['step_length']:.6f} m"
+          + on_bound("step_length_bounds", "m"))
     print(f"  speed                {s['speed']:.6f} m/s")
     print(f"  cost                 {s['cost']:.6f} N^2 m s (int u'u dt / step length)")
     print(f"  peak torque          {s['peak_torque']:.3f} N m   (limit "

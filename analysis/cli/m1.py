@@ -331,6 +331,8 @@ def cmd_m1(args):
         print(f"{label}: M1 = {np.array2string(r.M1, precision=6)}  max|lambda| = "
               f"{r.max_abs:.3g} (+- {r.eigenvalue_uncertainty:.1g})  a = {r.a:.2g}, "
               f"b = {r.b:.2g}  [{r.solve_time:.1f} s, {r.starts} starts]")
+        if r.at_bound:
+            print("  " + r.message.split("; ", 1)[1])
     if not valid and not args.free:
         print(f"a = b = 0: {why}; all components free instead")
     print(f"best of the 9^{model.nu} grid: " + ("no stable point" if gb["M1"] is None else

@@ -34,6 +34,9 @@ __all__ = ["optimize_m1", "M1Result", "coarse_map_points", "COARSE_N"]
 
 #: points per free component of a group's coarse map (the full run's Fig. 4 grid)
 COARSE_N = 81
+#: the box of the M1 NLP, |M1(i)| <= M1_BOX: a result on it says max|lambda| still falls
+#: beyond it (an asymptote, M1 growing without bound), not an optimum
+M1_BOX = 1e3
 
 
 # ------------------------------------------------------------------ the M1 NLP
@@ -70,6 +73,10 @@ class M1Result(Result):
         Wall time, s.
     message : str
         The result in words.
+    at_bound : bool
+        Whether a component of M1 lies on the NLP's box |M1(i)| <= :data:`M1_BOX` (to
+        1e-3 relative): max|lambda| still falls beyond it, so M1 is where the search
+        stopped, not an optimum.
     history : list of dict
         Every local solution found (start, M1, max_abs, how); left out of
         ``to_dict()``.
@@ -88,6 +95,7 @@ class M1Result(Result):
     solve_time: float
     message: str = ""
     ipopt_runs: int = 0
+    at_bound: bool = False
     history: list = internal(default_factory=list)
 
     SUCCESS = ("stable", "unstable")
@@ -315,6 +323,10 @@ def optimize_m1(gait, group: int | None = 1, starts=None, n_random: int = 2,
     r, val, unc = _verified_best(gait, pm, history)
     M1 = r.M1
     label = f"group {group}" if constrained else "all components free"
+    at_bound = bool(np.any(np.abs(np.abs(M1) - M1_BOX) <= 1e-3 * M1_BOX))
+    bound = (f"; M1({int(np.argmin(np.abs(np.abs(M1) - M1_BOX))) + 1}) is on the NLP's bound {M1_BOX:g}: "
+             "max|lambda| still falls beyond it, so this M1 is where the search stopped, "
+             "not an optimum") if at_bound else ""
     return M1Result(M1=M1, max_abs=r.max_abs, eigenvalues=r.eigenvalues,
                     group=group_of(tay, M1) if constrained else group_of(tay, M1, 1e-9),
                     a=float(tay.a(M1)[0]), b=float(tay.b(M1)[0]), status=r.status,
@@ -324,8 +336,8 @@ def optimize_m1(gait, group: int | None = 1, starts=None, n_random: int = 2,
                             f"full-AD map) from {len(cand)} starts"
                             + (f", IPOPT from {ipopt_runs}" if ipopt_runs else "")
                             + (f" (skipped from {ipopt_skipped}: a deadbeat point was "
-                               "already found)" if ipopt_skipped else ""),
-                    ipopt_runs=ipopt_runs, history=history)
+                               "already found)" if ipopt_skipped else "") + bound,
+                    ipopt_runs=ipopt_runs, at_bound=at_bound, history=history)
 
 
 def _m1_starts(pm, tay, group, nu, sampler, starts, n_random, n_best, seed, den_margin,
@@ -397,8 +409,8 @@ def _ipopt_from(pm, tay, nu, M1, constraints, den_margin):
     solver, lbg, ubg = _epigraph_nlp(pm, tay, constraints, den_margin)
     mx = pm.jacobian_batch(M1[None]).max_abs
     rho0 = float(mx[0]) * 1.01 + 1e-3 if np.isfinite(mx[0]) else 100.0
-    sol = solver(x0=np.r_[M1, rho0], lbg=lbg, ubg=ubg, lbx=np.r_[[-1e3] * nu, 0.0],
-                 ubx=np.r_[[1e3] * nu, 1e6])
+    sol = solver(x0=np.r_[M1, rho0], lbg=lbg, ubg=ubg, lbx=np.r_[[-M1_BOX] * nu, 0.0],
+                 ubx=np.r_[[M1_BOX] * nu, 1e6])
     return np.array(sol["x"]).ravel()[:nu]
 
 
