@@ -329,6 +329,26 @@ def test_bad_input(gait, vc):
         Simulator(vc, options={"steps": 2})
 
 
+def test_bad_input_from_a_notebook(gait, vc):
+    """What a user gets wrong: no controller, a path for the gait, words for heights;
+    each one line naming the argument.  numpy integers count as integers."""
+    for call in (lambda: simulate(None), lambda: Simulator("tv")):
+        with pytest.raises(TypeError, match="^controller: .* is needed, got (NoneType|str)$"):
+            call()
+    for bad in (None, "gait.json"):
+        with pytest.raises(TypeError, match="^gait: a gait is needed"):
+            perturbed_initial_state(bad, 0.01, 0.1)
+    with pytest.raises(ValueError, match="^terrain must be numbers"):
+        simulate(vc, steps=2, terrain=[0.0, "x"])
+    assert SimulationOptions(steps=np.int64(3), rk4_steps=np.int32(400)) == \
+        SimulationOptions(steps=3, rk4_steps=400)
+    assert type(SimulationOptions(steps=np.int64(3)).steps) is int
+    with pytest.raises(ValueError, match="steps"):
+        SimulationOptions(steps=np.float64(3.0))
+    run = simulate(vc, steps=np.int64(1))
+    assert run.n_steps == 1
+
+
 # ---------------------------------------------------------------- CLI
 def test_cli_simulate_json(gait, tmp_path, capsys):
     path = gait.save(tmp_path / "gait.json")
