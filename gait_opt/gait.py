@@ -523,6 +523,8 @@ class Gait(Reference):
         Path
             ``path``.
         """
+        if not isinstance(path, (str, os.PathLike)):
+            raise TypeError(f"path must be a file name (str or Path), got {type(path).__name__}")
         path = Path(path)
         body = self.to_dict()
         body["sha256"] = digest(body)

@@ -145,7 +145,9 @@ class GaitOptions:
         for n in ("min_normal_force", "clearance", "min_liftoff_speed", "min_strike_speed"):
             nonneg(n)
         for n in ("step_length_bounds", "step_time_bounds"):
-            lo_hi = tuple(getattr(self, n))
+            lo_hi = getattr(self, n)
+            lo_hi = tuple(lo_hi) if hasattr(lo_hi, "__len__") and not isinstance(lo_hi, str) \
+                else (lo_hi,)
             if len(lo_hi) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in lo_hi) \
                     or not 0 < lo_hi[0] < lo_hi[1]:
                 raise ValueError(f"gait option {n!r} must be (low, high) with 0 < low < high, got {lo_hi!r}")

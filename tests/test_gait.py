@@ -410,6 +410,16 @@ def test_bad_options_are_value_errors(model):
         optimize_gait(model, mu=-1.0)
     with pytest.raises(ValueError, match="'derivatives'"):
         GaitOptions(derivatives="numeric")
+    with pytest.raises(ValueError, match="^gait option 'step_length_bounds' must be \\(low, high\\)"):
+        GaitOptions(step_length_bounds=0.5)
+    assert GaitOptions(step_time_bounds=[0.3, 1]).step_time_bounds == (0.3, 1.0)
+
+
+def test_warm_start_and_save_name_what_is_wrong(model, gait):
+    with pytest.raises(TypeError, match="^warm_start: a Gait is needed, got str$"):
+        optimize_gait(model, warm_start="gait.json")
+    with pytest.raises(TypeError, match="^path must be a file name"):
+        gait.save(None)
 
 
 #: a light shin under a heavy torso (round numbers): Newton's residual on the orbit

@@ -119,6 +119,12 @@ def test_singular_values_eq24(model, gait, pm):
         assert mx[2] > mx[1] > mx[0] or mx[0] < 1
 
 
+def test_rejoin_is_checked_by_name(gait):
+    for bad in ("x", None, 0.9):
+        with pytest.raises(ValueError, match="^rejoin must"):
+            poincare_eigenvalues(gait, [0.0] * 4, rejoin=bad)
+
+
 def test_other_robot_refused(gait):
     import dataclasses
 

@@ -697,4 +697,4 @@ def poincare_eigenvalues(gait, M1=None, *args, method: str | None = None,
         M1, rejoin = d.M1, d.rejoin
     if M1 is None:
         raise ValueError("M1: give the outputs (one number per torque) or a Design")
-    return poincare_map(gait, rejoin=float(rejoin)).analyse(M1, method=method)
+    return poincare_map(gait, rejoin=check_rejoin(rejoin)).analyse(M1, method=method)
