@@ -342,3 +342,34 @@ def test_cli_robust_paper_run_without_impact_prints_no_nan(gait3, tmp_path, caps
     out = capsys.readouterr().out
     assert rc == 0 and "slipped in step 1" in out, out       # the first step, counted from 1
     assert "nan" not in out and "max impulse ratio n/a" in out, out
+
+
+@pytest.mark.parametrize("field, value", [("directions", 0), ("directions", -2),
+                                          ("directions", 2.5), ("steps", 0), ("rounds", 0),
+                                          ("seed", -1), ("max_candidates", 0),
+                                          ("rk4_steps", 100), ("tol", float("nan")),
+                                          ("s_max", 0), ("mu", -0.6), ("torque_limit", 0)])
+def test_robustness_settings_refuse_bad_values(field, value):
+    with pytest.raises(ValueError, match=f"^{field} must") as e:
+        RobustnessSettings(**{field: value})
+    assert "\n" not in str(e.value)
+
+
+def test_robustness_settings_take_numpy_integers():
+    st = RobustnessSettings(directions=np.int64(4), rounds=np.int32(6))
+    assert st == RobustnessSettings(directions=4, rounds=6)
+    assert type(st.directions) is int and type(st.rounds) is int
+
+
+def test_robustness_arguments_of_the_wrong_type_are_named(gait):
+    d = Design.tv(gait, [-10, 7.5, 10, -5])
+    with pytest.raises(ValueError, match="^settings must be a RobustnessSettings, got dict$"):
+        robustness(d, {"directions": 2})
+    with pytest.raises(ValueError, match="^settings must be a RobustnessSettings, got dict$"):
+        kept_directions(gait, {})                   # an empty dict was the defaults
+    with pytest.raises(ValueError, match="^kept must be the KeptDirections"):
+        robustness(d, kept="kept.json")
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        kept_directions("gait.json")
+    with pytest.raises(ValueError, match="^options must be a SimulationOptions, got dict$"):
+        basin(d, n=3, options={"steps": 2})

@@ -74,6 +74,9 @@ class ZeroDynamicsWalker:
                 or rk4_steps % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {rk4_steps!r}")
         self.options = options if options is not None else SimulationOptions()
+        if not isinstance(self.options, SimulationOptions):
+            raise ValueError(f"options must be a SimulationOptions, got "
+                             f"{type(self.options).__name__}")
         if self.options.saturate:
             raise ValueError("options: saturate needs the full-order simulator (the walker is "
                              "the zero dynamics, exact only with the law's own torques)")

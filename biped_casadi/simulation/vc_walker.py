@@ -67,6 +67,9 @@ class VirtualConstraintWalker:
         require_same_robot(model, gait)
         self._jit = jit
         self.options = options if options is not None else SimulationOptions()
+        if not isinstance(self.options, SimulationOptions):
+            raise ValueError(f"options must be a SimulationOptions, got "
+                             f"{type(self.options).__name__}")
         if self.options.saturate:
             raise ValueError("options: saturate needs the full-order simulator (the walker is "
                              "the zero dynamics, exact only with the law's own torques)")
