@@ -245,3 +245,14 @@ def test_tv_eigenvalues_depend_on_m1(model, gait, random_m1):
     assert r0.status in ("stable", "unstable") and r1.status in ("stable", "unstable")
     assert abs(r0.max_abs - r1.max_abs) > 1e-3 * max(r0.max_abs, r1.max_abs)
     assert np.max(np.abs(r0.A - r1.A)) > 1e-3
+
+
+def test_vc_phase_is_named(gait):
+    """A phase of the wrong length was reported as 'c' (the fit's own name for it)."""
+    from analysis.stability import vc_map
+    for call in (lambda: vc_eigenvalue(gait, phase=[1.0, 0.5]),
+                 lambda: vc_map(gait, phase=[1.0, 0.5])):
+        with pytest.raises(ValueError, match=r"^phase must have 5 components, got shape \(2,\)"):
+            call()
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        vc_eigenvalue("gait.json")

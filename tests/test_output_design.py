@@ -95,3 +95,17 @@ def test_m1_nlp_runs_ipopt_only_until_a_deadbeat_point(model, gait, nlp2):
     assert {h["how"] for h in r.history} <= {"start", "ipopt"}
     assert r.group == 2 and abs(r.a) < 1e-9 and abs(r.b) < 1e-9
     assert r.max_abs >= nlp2.max_abs - nlp2.eigenvalue_uncertainty
+
+
+def test_m1_nlp_names_bad_arguments(gait):
+    """Checked before any work: NaN starts were dropped silently (random starts took
+    their place), a negative count was taken, a path for the gait failed inside."""
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        optimize_m1("gait.json")
+    with pytest.raises(ValueError, match="^starts must be finite$"):
+        optimize_m1(gait, starts=[[np.nan, 0, 0, 0]])
+    with pytest.raises(ValueError, match=r"^starts must be an array \(k, 4\) of M1, got shape \(1, 3\)"):
+        optimize_m1(gait, starts=[1.0, 2.0, 3.0])
+    for name in ("n_random", "n_best", "n_ipopt", "seed"):
+        with pytest.raises(ValueError, match=f"^{name} must be a non-negative integer"):
+            optimize_m1(gait, **{name: -1})

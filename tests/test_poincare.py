@@ -125,6 +125,25 @@ def test_rejoin_is_checked_by_name(gait):
             poincare_eigenvalues(gait, [0.0] * 4, rejoin=bad)
 
 
+@pytest.mark.parametrize("option, value, message", [
+    ("n_pre", 0, "^n_pre must be a positive integer"),
+    ("n_post", 2.5, "^n_post must be a positive integer"),
+    ("n_scan", -1, "^n_scan must be a positive integer"),
+    ("threads", 0, "^threads must be a positive integer"),
+    ("horizon", -1.0, "^horizon must exceed 0.75"),
+    ("horizon", float("nan"), "^horizon must be finite")])
+def test_map_options_are_checked_by_name(gait, option, value, message):
+    """n_pre = 0 was CasADi's 'mapaccum: N must be positive'; a negative horizon was
+    taken."""
+    with pytest.raises(ValueError, match=message):
+        poincare_map(gait, **{option: value})
+
+
+def test_a_path_for_the_gait_is_named(gait):
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        poincare_map("gait.json")
+
+
 def test_other_robot_refused(gait):
     import dataclasses
 

@@ -37,7 +37,8 @@ from biped_casadi import require_same_robot
 from biped_casadi.caching import cached
 from biped_casadi.control import PAPER_REJOIN, Design
 from biped_casadi.control.zero_dynamics import denominator_samples, zero_dynamics
-from biped_casadi.numerics import as_vector, rk4_step
+from biped_casadi.control.reference import require_reference
+from biped_casadi.numerics import as_number, as_vector, rk4_step
 from biped_casadi.simulation.kernel import strike
 from biped_casadi.control.output_law import (SECTION, check_M1, check_M1_range, check_rejoin,
                                      decoupling_denominator, is_singular)
@@ -228,12 +229,19 @@ class PoincareMap:
 
     def __init__(self, model, gait, n_pre: int = 80, n_post: int = 240, n_scan: int = 250,
                  horizon: float = 2.0, rejoin: float = PAPER_REJOIN, threads: int | None = None):
-        require_same_robot(model, gait)
+        require_same_robot(model, require_reference(gait))
         self.model, self.gait = model, gait
         self.nu = model.nu
         self.T = T = gait.T
-        self.n_pre, self.n_post, self.n_scan = n_pre, n_post, n_scan
-        self.horizon = horizon
+        for name, v in (("n_pre", n_pre), ("n_post", n_post), ("n_scan", n_scan)) + (
+                (("threads", threads),) if threads is not None else ()):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        self.n_pre, self.n_post, self.n_scan = int(n_pre), int(n_post), int(n_scan)
+        self.horizon = as_number(horizon, "horizon")
+        if self.horizon <= SECTION:
+            raise ValueError(f"horizon must exceed {SECTION} (the Poincaré section, a "
+                             f"multiple of T), got {horizon!r}")
         self.rejoin = check_rejoin(rejoin)
         self.tau_s = SECTION * T
         self.x_star = gait.state_at(self.tau_s)
@@ -624,7 +632,7 @@ def singular_m1_values(gait) -> np.ndarray:
     numpy.ndarray
         (nu,).
     """
-    model = gait.model
+    model = require_reference(gait).model
     D = np.array(model.D(gait.q(gait.T)))
     return D[0, 0] / D[0, 1:]
 
@@ -646,7 +654,7 @@ def poincare_map(gait, **options) -> PoincareMap:
     -------
     PoincareMap
     """
-    model = gait.model
+    model = require_reference(gait).model
     return PoincareMap(model, gait, **options)
 
 
