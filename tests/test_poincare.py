@@ -144,6 +144,16 @@ def test_a_path_for_the_gait_is_named(gait):
         poincare_map("gait.json")
 
 
+def test_result_repr_is_one_line_of_python_numbers(gait):
+    import json
+    r = poincare_eigenvalues(gait, [-10, 7.5, 10, -5])
+    text = repr(r)
+    assert "\n" not in text and len(text) < 500 and "array(" not in text and "np." not in text
+    assert f"max_abs={r.max_abs!r}" in text and f"status={r.status!r}" in text
+    assert "A=[[" in text and "eigenvalues=[(" in text      # 2x2 and complex, 6 digits
+    json.dumps(r.to_dict(), allow_nan=False)
+
+
 def test_other_robot_refused(gait):
     import dataclasses
 

@@ -470,3 +470,16 @@ def test_cli_simulate_says_whether_the_error_settled(gait, stable_m1, tmp_path, 
     text = capsys.readouterr().out
     assert f"below 0.001 from step {out['steps_to_converge']}" in text
     assert "(falling, x0." in text and "not converged" not in text and "M1 = 0" not in text
+
+
+def test_result_repr_reads_in_a_notebook(gait, vc):
+    """The repr of a run is one short line of Python numbers: the logs (20 000 samples
+    of every signal) and the per-step records are summarised, not printed."""
+    run = simulate(vc, steps=3)
+    text = repr(run)
+    assert text.startswith("SimulationResult(status='ok', ")
+    assert "\n" not in text and len(text) < 800
+    assert "np." not in text and "array(" not in text
+    assert "steps=<list of 3>" in text and "qu_error=[" in text   # 3 numbers: shown
+    assert "dq=" not in text                                    # a log: left out
+    json.dumps(run.to_dict(), allow_nan=False)
