@@ -13,7 +13,7 @@ import casadi as ca
 
 from biped_casadi import Reference
 from biped_casadi.caching import cached, digest
-from biped_casadi.files import atomic_path
+from biped_casadi.files import atomic_path, file_path
 
 from .files import (FORMAT, FORMAT_VERSION, GaitFileError, OpenOrbitWarning, gait_parts,
                     read_gait_file)
@@ -523,9 +523,7 @@ class Gait(Reference):
         Path
             ``path``.
         """
-        if not isinstance(path, (str, os.PathLike)):
-            raise TypeError(f"path must be a file name (str or Path), got {type(path).__name__}")
-        path = Path(path)
+        path = file_path(path)
         body = self.to_dict()
         body["sha256"] = digest(body)
         text = json.dumps(body, indent=1)
