@@ -483,3 +483,9 @@ def test_result_repr_reads_in_a_notebook(gait, vc):
     assert "steps=<list of 3>" in text and "qu_error=[" in text   # 3 numbers: shown
     assert "dq=" not in text                                    # a log: left out
     json.dumps(run.to_dict(), allow_nan=False)
+
+
+def test_directions_need_joints():
+    with pytest.raises(ValueError, match=r"^nq \(joints\) must be a positive integer"):
+        directions(3, nq=0)                            # was an empty (3, 0) array
+    assert directions(3, nq=np.int64(3)).shape == (3, 6)

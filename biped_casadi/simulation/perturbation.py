@@ -185,6 +185,8 @@ def directions(n: int, nq: int = 5, seed: int = 2024) -> np.ndarray:
     """
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise ValueError(f"n (number of directions) must be a positive integer, got {n!r}")
+    if isinstance(nq, bool) or not isinstance(nq, (int, np.integer)) or nq < 1:
+        raise ValueError(f"nq (joints) must be a positive integer, got {nq!r}")
     rng = np.random.default_rng(seed)
     out = [np.ones(2 * nq)]
     while len(out) < n:
