@@ -7,6 +7,16 @@ from dataclasses import dataclass, field
 
 __all__ = ["GaitOptions"]
 
+
+def require_model(model):
+    """``model`` checked to be a robot model: a TypeError naming ``model`` otherwise (a
+    robot's name, a path, a gait)."""
+    if not hasattr(model, "description") or not hasattr(model, "params"):
+        raise TypeError(f"model: a robot model is needed (biped_casadi.rabbit() or "
+                        f"biped_casadi.robot(NAME_OR_PATH)), got {type(model).__name__} "
+                        f"{model!r:.60}")
+    return model
+
 COSTS = ("torque_squared_per_length", "torque_squared")
 SCHEMES = ("legendre", "radau")
 DERIVATIVES = ("structured", "casadi")

@@ -613,3 +613,29 @@ def test_optimize_gait_names_a_model_that_is_not_one():
     for wrong in ("rabbit", 3):
         with pytest.raises(TypeError, match=r"robot\("):
             optimize_gait(wrong)
+
+
+def test_orbit_tools_name_bad_arguments(gait):
+    """max_iter = 0 and n = 0 were IndexErrors; a path for the gait an AttributeError."""
+    from gait_opt import close_orbit, fit_bezier_constraints, gait_family
+    from gait_opt.urdf_angles import write_gait_csv
+    with pytest.raises(TypeError, match="^gait: a Gait is needed"):
+        close_orbit("gait.json")
+    for bad in (0, -1, float("nan"), "1e-12"):
+        with pytest.raises(ValueError, match="^tol must be a positive number"):
+            close_orbit(gait, tol=bad)
+    for bad in (0, 2.5):
+        with pytest.raises(ValueError, match="^max_iter must be a positive integer"):
+            close_orbit(gait, max_iter=bad)
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        fit_bezier_constraints("gait.json")
+    for bad in (0, 10, 2.5):
+        with pytest.raises(ValueError, match=r"^n \(samples of the fit\) must be an integer"):
+            fit_bezier_constraints(gait, degree=10, n=bad)
+    with pytest.raises(ValueError, match=r"^phase must have 5 components"):
+        fit_bezier_constraints(gait, phase=[1.0, 0.5])
+    assert fit_bezier_constraints(gait, degree=6, n=11).alpha.shape[1] == 7
+    with pytest.raises(TypeError, match="^path must be a file name"):
+        write_gait_csv(gait, None)
+    with pytest.raises(TypeError, match="^model: a robot model is needed"):
+        gait_family("rabbit", [0.7, 0.8])
