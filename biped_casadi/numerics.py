@@ -21,7 +21,8 @@ import numpy as np
 from .caching import cache_dir, file_lock
 from .files import name_destination
 
-__all__ = ["rk4_step", "quintic_hermite_interval", "as_vector", "as_number", "jit_options",
+__all__ = ["rk4_step", "quintic_hermite_interval", "as_vector", "as_number", "as_count",
+           "jit_options",
            "compiled", "cached_library", "compiler_reason", "FastCall"]
 
 
@@ -387,3 +388,29 @@ def as_number(x, name: str, *, positive: bool = False, nonnegative: bool = False
     if nonnegative and not v >= 0:
         raise ValueError(f"{name} must be non-negative, got {x!r}")
     return v
+
+
+def as_count(x, name: str, low: int = 1) -> int:
+    """``x`` as an integer of at least ``low`` (numpy integers too; not bools or floats).
+
+    Parameters
+    ----------
+    x : object
+        The value given by the user.
+    name : str
+        The argument's name, used in the error message.
+    low : int
+        The least value allowed.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` when ``x`` is not an integer >= ``low``.
+    """
+    if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {x!r}")
+    return int(x)

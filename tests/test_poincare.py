@@ -126,11 +126,11 @@ def test_rejoin_is_checked_by_name(gait):
 
 
 @pytest.mark.parametrize("option, value, message", [
-    ("n_pre", 0, "^n_pre must be a positive integer"),
-    ("n_post", 2.5, "^n_post must be a positive integer"),
-    ("n_scan", -1, "^n_scan must be a positive integer"),
-    ("threads", 0, "^threads must be a positive integer"),
-    ("horizon", -1.0, "^horizon must exceed 0.75"),
+    ("n_pre", 0, "^n_pre must be an integer >= 1"),
+    ("n_post", 2.5, "^n_post must be an integer >= 1"),
+    ("n_scan", -1, "^n_scan must be an integer >= 1"),
+    ("threads", -1, "^threads must be an integer >= 1"),
+    ("horizon", -1.0, "^horizon must exceed 0.75 \\(the section\\)"),
     ("horizon", float("nan"), "^horizon must be finite")])
 def test_map_options_are_checked_by_name(gait, option, value, message):
     """n_pre = 0 was CasADi's 'mapaccum: N must be positive'; a negative horizon was

@@ -35,10 +35,9 @@ import numpy as np
 
 from biped_casadi import require_same_robot
 from biped_casadi.caching import cached
-from biped_casadi.control import PAPER_REJOIN, Design
+from biped_casadi.control import PAPER_REJOIN, Design, require_reference
 from biped_casadi.control.zero_dynamics import denominator_samples, zero_dynamics
-from biped_casadi.control.reference import require_reference
-from biped_casadi.numerics import as_number, as_vector, rk4_step
+from biped_casadi.numerics import as_count, as_number, as_vector, rk4_step
 from biped_casadi.simulation.kernel import strike
 from biped_casadi.control.output_law import (SECTION, check_M1, check_M1_range, check_rejoin,
                                      decoupling_denominator, is_singular)
@@ -233,21 +232,15 @@ class PoincareMap:
         self.model, self.gait = model, gait
         self.nu = model.nu
         self.T = T = gait.T
-        for name, v in (("n_pre", n_pre), ("n_post", n_post), ("n_scan", n_scan)) + (
-                (("threads", threads),) if threads is not None else ()):
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        self.n_pre, self.n_post, self.n_scan = int(n_pre), int(n_post), int(n_scan)
-        self.horizon = as_number(horizon, "horizon")
-        if self.horizon <= SECTION:
-            raise ValueError(f"horizon must exceed {SECTION} (the Poincaré section, a "
-                             f"multiple of T), got {horizon!r}")
-        self.rejoin = check_rejoin(rejoin)
-        self.tau_s = SECTION * T
+        self.n_pre, self.n_post, self.n_scan = map(as_count, (n_pre, n_post, n_scan),
+                                                   ("n_pre", "n_post", "n_scan"))
+        if (h := as_number(horizon, "horizon")) <= SECTION:
+            raise ValueError(f"horizon must exceed {SECTION} (the section), got {horizon!r}")
+        self.horizon, self.rejoin, self.tau_s = h, check_rejoin(rejoin), SECTION * T
         self.x_star = gait.state_at(self.tau_s)
         self.ref_s = gait.state(self.tau_s)           # reference state at the section
         self.ref_0 = np.asarray(gait.r0, dtype=float)
-        self.threads = threads or max(1, min(os.cpu_count() or 1, 8))
+        self.threads = as_count(threads or min(os.cpu_count() or 1, 8), "threads")
         self._open = None
         self._build()
         #: D11 and D12 along the reference on [0, T] (1001 points), for eq. (23)-(24)
@@ -632,8 +625,7 @@ def singular_m1_values(gait) -> np.ndarray:
     numpy.ndarray
         (nu,).
     """
-    model = require_reference(gait).model
-    D = np.array(model.D(gait.q(gait.T)))
+    D = np.array(require_reference(gait).model.D(gait.q(gait.T)))
     return D[0, 0] / D[0, 1:]
 
 
@@ -654,8 +646,7 @@ def poincare_map(gait, **options) -> PoincareMap:
     -------
     PoincareMap
     """
-    model = require_reference(gait).model
-    return PoincareMap(model, gait, **options)
+    return PoincareMap(require_reference(gait).model, gait, **options)
 
 
 def poincare_eigenvalues(gait, M1=None, *args, method: str | None = None,
