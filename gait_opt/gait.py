@@ -33,6 +33,15 @@ EXTENT_BEFORE = 0.5
 ORBIT_TOL = 1e-8
 
 
+
+def _times(t) -> np.ndarray:
+    """``t`` as float times; words (a str, an array of them) are refused, not parsed."""
+    a = np.asarray(t)
+    if a.dtype.kind not in "biuf" and not (a.dtype == object and a.size and all(
+            isinstance(v, (int, float, np.number)) and not isinstance(v, bool) for v in a.flat)):
+        raise ValueError(f"gait: t must be a number or an array of numbers, got {t!r:.60}")
+    return np.asarray(a, dtype=float)
+
 class Gait(Reference):
     """A cyclic reference step of duration ``T`` (docs: theory §2).
 
@@ -227,7 +236,7 @@ class Gait(Reference):
         ValueError
             When a time is not finite or outside [t_min, t_max].
         """
-        t_arr = np.asarray(t, dtype=float)
+        t_arr = _times(t)
         scalar = t_arr.ndim == 0
         t1 = np.atleast_1d(t_arr).ravel()
         self._check_times(t1)
@@ -271,7 +280,7 @@ class Gait(Reference):
         numpy.ndarray
             Shape (2, N).
         """
-        t1 = np.atleast_1d(np.asarray(t, dtype=float)).ravel()
+        t1 = np.atleast_1d(_times(t)).ravel()
         self._check_times(t1)
         sg, X, A = self._nodes()
         qu, dqu, _ = quintic_hermite(sg * self.T, X[0], X[1], A, t1)

@@ -639,3 +639,13 @@ def test_orbit_tools_name_bad_arguments(gait):
         write_gait_csv(gait, None)
     with pytest.raises(TypeError, match="^model: a robot model is needed"):
         gait_family("rabbit", [0.7, 0.8])
+
+
+def test_times_are_numbers_not_words(gait):
+    """q('0.1') was parsed as 0.1; None is named as a missing time, not as NaN."""
+    for bad in ("0.1", ["0.1", "0.2"], None):
+        for f in (gait.q, gait.dq, gait.ddq, gait.states):
+            with pytest.raises(ValueError, match="^gait: t must be a number or an array of numbers"):
+                f(bad)
+    np.testing.assert_array_equal(gait.q(np.float32(0.25)), gait.q(float(np.float32(0.25))))
+    assert gait.q([0.1, 0.2]).shape == (5, 2)
