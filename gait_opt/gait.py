@@ -14,6 +14,7 @@ import casadi as ca
 from biped_casadi import Reference
 from biped_casadi.caching import cached, digest
 from biped_casadi.files import atomic_path, file_path
+from biped_casadi.numerics import as_numbers
 
 from .files import (FORMAT, FORMAT_VERSION, GaitFileError, OpenOrbitWarning, gait_parts,
                     read_gait_file)
@@ -32,15 +33,6 @@ EXTENT_BEFORE = 0.5
 #: to ~1e-12; the optimiser's own polish accepts at most 1e-10.
 ORBIT_TOL = 1e-8
 
-
-
-def _times(t) -> np.ndarray:
-    """``t`` as float times; words (a str, an array of them) are refused, not parsed."""
-    a = np.asarray(t)
-    if a.dtype.kind not in "biuf" and not (a.dtype == object and a.size and all(
-            isinstance(v, (int, float, np.number)) and not isinstance(v, bool) for v in a.flat)):
-        raise ValueError(f"gait: t must be a number or an array of numbers, got {t!r:.60}")
-    return np.asarray(a, dtype=float)
 
 class Gait(Reference):
     """A cyclic reference step of duration ``T`` (docs: theory §2).
@@ -236,7 +228,7 @@ class Gait(Reference):
         ValueError
             When a time is not finite or outside [t_min, t_max].
         """
-        t_arr = _times(t)
+        t_arr = as_numbers(t, "gait: t")
         scalar = t_arr.ndim == 0
         t1 = np.atleast_1d(t_arr).ravel()
         self._check_times(t1)
@@ -280,7 +272,7 @@ class Gait(Reference):
         numpy.ndarray
             Shape (2, N).
         """
-        t1 = np.atleast_1d(_times(t)).ravel()
+        t1 = np.atleast_1d(as_numbers(t, "gait: t")).ravel()
         self._check_times(t1)
         sg, X, A = self._nodes()
         qu, dqu, _ = quintic_hermite(sg * self.T, X[0], X[1], A, t1)
