@@ -72,3 +72,12 @@ def test_as_count_takes_integers_only():
     for bad in (0, -1, 2.5, 3.0, True, "3", None):
         with pytest.raises(ValueError, match=r"^n must be an integer >= 1, got "):
             as_count(bad, "n")
+
+
+def test_as_rows_refuses_columns_and_words():
+    from biped_casadi.numerics import as_rows
+    assert as_rows([1, 2], 2, "x").shape == (1, 2) and as_rows(np.ones((3, 2)), 2, "x").shape == (3, 2)
+    for bad, message in ((np.ones((2, 1)), r"got shape \(2, 1\)"), ([], r"got shape \(0,\)"),
+                         ("ab", "must be numbers"), ([np.inf, 0], "must be finite")):
+        with pytest.raises(ValueError, match="^x " + message if "must" in message else message):
+            as_rows(bad, 2, "x")

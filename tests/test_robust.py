@@ -373,3 +373,28 @@ def test_robustness_arguments_of_the_wrong_type_are_named(gait):
         kept_directions("gait.json")
     with pytest.raises(ValueError, match="^options must be a SimulationOptions, got dict$"):
         basin(d, n=3, options={"steps": 2})
+
+
+def test_walker_inputs_are_named(gait):
+    """A column M1 was reported as 'shape (1,)', a short q0 was CasADi's dimension error,
+    a NaN start walked (status 'diverged') and a rejoin past the section was taken."""
+    from biped_casadi.simulation import virtual_constraint_walker, zero_dynamics_walker
+    w = zero_dynamics_walker(gait)
+    q0, dq0, M1 = gait.q(0.0), gait.dq(0.0), [-10.0, 7.5, 10.0, -5.0]
+    cases = [((q0, dq0, np.array(M1)[:, None], 0.5), r"^M1s must be \(4,\) or \(n, 4\), got shape \(4, 1\)$"),
+             ((q0[:4], dq0, M1, 0.5), r"^q0 must be \(5,\) or \(n, 5\), got shape \(4,\)$"),
+             ((q0 * np.nan, dq0, M1, 0.5), "^q0 must be finite$"),
+             ((q0, dq0, M1, 2.0), r"^rejoin must be a number or \(n,\) numbers in \(0, 0.75\]"),
+             ((q0, dq0, np.tile(M1, (3, 1)), [0.5, 0.5]), r"^scenarios: every argument has 1 or n rows"),
+             ((np.tile(q0, (2, 1)), dq0, np.tile(M1, (3, 1)), 0.5), "^scenarios: every argument")]
+    for args, message in cases:
+        with pytest.raises(ValueError, match=message):
+            w.walk(*args, steps=1)
+    with pytest.raises(ValueError, match=r"^x must be \(2,\) or \(n, 2\)"):
+        w.walk_from_section([0.1, 0.2, 0.3], M1, 0.5, steps=1)
+    assert w.walk(np.tile(q0, (2, 1)), dq0, M1, [0.5, 0.75], steps=1).status.tolist() == \
+        ["ok", "ok"]
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        zero_dynamics_walker("gait.json")
+    with pytest.raises(ValueError, match=r"^nodes must be an integer >= 1, got 0$"):
+        virtual_constraint_walker(gait, nodes=0)
