@@ -205,3 +205,20 @@ def test_something_else_than_a_gait_is_named(model):
     for wrong in (model, "gait.json", None):
         with pytest.raises(TypeError, match="a gait is needed"):
             poincare_eigenvalues(wrong, [0.0, 0.0, 0.0, 0.0])
+
+
+def test_variational_jacobian_checks_its_arguments(gait):
+    """n_pre = 0 was a ZeroDivisionError, a section time outside the step the gait's
+    message about t, a path for the gait an AttributeError."""
+    from analysis.stability import variational_jacobian
+    tau_s = 0.75 * gait.T
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        variational_jacobian("gait.json", tau_s, 80, 240)
+    for bad in (0, 2.5):
+        with pytest.raises(ValueError, match="^n_pre must be an integer >= 1"):
+            variational_jacobian(gait, tau_s, bad, 240)
+    for bad in (-1.0, 0.0, gait.T, float("nan")):
+        with pytest.raises(ValueError, match="^tau_s"):
+            variational_jacobian(gait, bad, 80, 240)
+    with pytest.raises(ValueError, match="^rejoin must be in"):
+        variational_jacobian(gait, tau_s, 80, 240, rejoin=0.9)
