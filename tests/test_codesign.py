@@ -11,8 +11,8 @@ import pytest
 from analysis.cli import main
 from analysis.design import RobustDesignSettings
 from analysis.design.codesign import (CodesignError, CodesignSettings, IpoptLimits, Reduced,
-                                      Transcription, TranscriptionSettings, TrustRegion,
-                                      Verification)
+                                      StartSampling, Transcription, TranscriptionSettings,
+                                      TrustRegion, Verification)
 
 #: a design of the good region (small M1) found by the co-design; any stable M1 would do
 M1 = np.array([0.0385, 0.6158, 0.4359, -0.6560])
@@ -314,6 +314,9 @@ def test_robust_cli_prints_a_design_that_never_converges(capsys):
     (lambda: Verification(tol=float("nan")), "^tol must be finite"),
     (lambda: IpoptLimits(max_iter=0), r"^max_iter must be an integer >= 1"),
     (lambda: TrustRegion(alpha=-0.05), "^alpha must be positive"),
+    (lambda: StartSampling(samples=0), r"^samples must be an integer >= 1"),
+    (lambda: StartSampling(box=-1.0), "^box must be positive"),
+    (lambda: StartSampling(refine_rounds=-1), r"^refine_rounds must be an integer >= 0"),
     (lambda: RobustDesignSettings(samples=0), r"^samples must be an integer >= 1"),
     (lambda: RobustDesignSettings(rejoin=0), "^rejoin must be positive"),
     (lambda: RobustDesignSettings(eigen_bound="x"), r"^eigen_bound \(a number, or 'vc'\) must be a number"),

@@ -115,6 +115,14 @@ class StartSampling:
     refine_shrink: float = 0.7
     refine_stop: float = 1.0625
 
+    def __post_init__(self):
+        check_fields(self, ("samples", "kept", "screened", "screen_rounds", "refine_draws",
+                            "refine_bisected", "refine_elite"),
+                     ("box", "s_start", "refine_from", "refine_radius", "refine_shrink",
+                      "refine_stop"))
+        check_fields(self, ("seed", "refine_rounds"), low=0)
+        check_fields(self, ("screen_rk4",), low=8)
+
 
 @dataclass(frozen=True)
 class TrustRegion:
