@@ -344,3 +344,8 @@ def test_export_destination_must_be_a_folder_name(tmp_path):
         with pytest.raises(TypeError, match="^out must be a file name"):
             write_export({"a.c": "int a;\n"}, bad)
     assert check_destination(str(tmp_path / "new")) == tmp_path / "new"
+
+
+def test_c_sources_names_a_missing_law():
+    with pytest.raises(TypeError, match=r"^law: an ExportedLaw is needed \(exported_law"):
+        c_sources(None)
