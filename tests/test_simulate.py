@@ -489,3 +489,14 @@ def test_directions_need_joints():
     with pytest.raises(ValueError, match=r"^nq \(joints\) must be a positive integer"):
         directions(3, nq=0)                            # was an empty (3, 0) array
     assert directions(3, nq=np.int64(3)).shape == (3, 6)
+
+
+def test_start_states_name_the_directions(gait):
+    """Directions of the wrong width were numpy's 'operands could not be broadcast'."""
+    from biped_casadi.simulation import start_states
+    with pytest.raises(ValueError, match=r"^dirs must be \(10,\) or \(n, 10\), got shape \(2, 3\)$"):
+        start_states(gait, np.ones((2, 3)), 1.0)
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        start_states("gait.json", directions(2), 1.0)
+    q0, dq0 = start_states(gait, directions(2), 0.0)
+    np.testing.assert_array_equal(q0, np.tile(gait.q(0.0), (2, 1)))
