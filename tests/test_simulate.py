@@ -500,3 +500,16 @@ def test_start_states_name_the_directions(gait):
         start_states("gait.json", directions(2), 1.0)
     q0, dq0 = start_states(gait, directions(2), 0.0)
     np.testing.assert_array_equal(q0, np.tile(gait.q(0.0), (2, 1)))
+
+
+def test_a_design_runs_wherever_its_controller_does(gait):
+    """Simulator and step_map (hence gait_sensitivity) take a Design as simulate does
+    (Simulator(design) was an AttributeError, then a TypeError naming the Design)."""
+    from analysis.stability import step_map
+    from biped_casadi import Design
+    d = Design.tv(gait, [-10, 7.5, 10, -5])
+    a = Simulator(d, SimulationOptions(steps=1)).run(gait.q(0.0), gait.dq(0.0))
+    b = simulate(d.controller_for(), steps=1)
+    assert a.status == b.status == "ok"
+    np.testing.assert_array_equal(a.qu_error, b.qu_error)
+    assert isinstance(step_map(d).controller, TimeVaryingController)

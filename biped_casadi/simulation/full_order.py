@@ -241,7 +241,7 @@ class Simulator:
 
     Parameters
     ----------
-    controller : TimeVaryingController or VirtualConstraintController
+    controller : Design, TimeVaryingController or VirtualConstraintController
         The control law (and through it the model and the reference); or a
         :class:`~biped_casadi.control.compiled.CompiledController`, an exported law's
         compiled library, whose closed loop is made of numeric calls
@@ -259,6 +259,8 @@ class Simulator:
         if not isinstance(self.options, SimulationOptions):
             raise ValueError(f"options must be a SimulationOptions, got "
                              f"{type(self.options).__name__}")
+        if isinstance(controller, Design):
+            controller = controller.controller_for()
         if not (hasattr(controller, "reference") and hasattr(controller, "model")):
             raise TypeError("controller: a TimeVaryingController, VirtualConstraintController "
                             f"or Design is needed, got {type(controller).__name__}")
@@ -584,7 +586,7 @@ def simulator(controller, options: SimulationOptions | None = None, plant=None) 
 
     Parameters
     ----------
-    controller : TimeVaryingController or VirtualConstraintController
+    controller : Design, TimeVaryingController or VirtualConstraintController
         The control law.
     options : SimulationOptions, optional
         Default ``SimulationOptions()``.
