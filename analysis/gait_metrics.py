@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from biped_casadi import SimulationOptions
+from biped_casadi.control.reference import require_reference
 from biped_casadi.results import Result
 
 from .stability import vc_eigenvalue
@@ -41,6 +42,9 @@ def actuator_work(gait, n: int = 4001, absolute: bool = True) -> float:
     -------
     float
     """
+    require_reference(gait)
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
+        raise ValueError(f"n (trapezoid points) must be an integer >= 2, got {n!r}")
     t = np.linspace(0.0, gait.T, n)
     _, dq, _ = gait.evaluate(t)
     power = gait.u(t) * dq[1:]
@@ -68,7 +72,7 @@ def cost_of_transport(gait, n: int = 4001) -> float:
     -------
     float
     """
-    d = gait.model.description
+    d = require_reference(gait).model.description
     return actuator_work(gait, n) / (gait.model.params.total_mass * d.gravity
                                      * gait.step_length)
 
@@ -157,7 +161,7 @@ def torso_fall(gait) -> tuple:
     tuple
         (lean in rad, past the bound: bool, the bound in rad).
     """
-    lean, bound = gait.torso_lean(), float(SimulationOptions().max_torso_angle)
+    lean, bound = require_reference(gait).torso_lean(), float(SimulationOptions().max_torso_angle)
     return lean, lean > bound, bound
 
 

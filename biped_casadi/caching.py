@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import write_bytes_atomic
+from .files import file_path, write_bytes_atomic
 
 __all__ = ["cached", "cache_key", "cache_dir", "digest", "code_of", "CODE_SETS",
            "code_version", "code_files", "argument_key", "task_key", "NotKeyable",
@@ -195,7 +195,7 @@ def cache_dir(path=None) -> Path:
         ``path``, else ``$BIPED_CACHE_DIR``, else ``~/.cache/biped-casadi``.
     """
     if path is not None:
-        return Path(path)
+        return file_path(path)
     env = os.environ.get("BIPED_CACHE_DIR")
     return Path(env) if env else Path.home() / ".cache" / "biped-casadi"
 

@@ -10,7 +10,27 @@ import os
 from pathlib import Path
 
 __all__ = ["atomic_path", "write_text_atomic", "write_bytes_atomic", "read_text_file",
-           "name_destination"]
+           "name_destination", "file_path"]
+
+
+def file_path(path, name: str = "path") -> Path:
+    """``path`` as a Path, or a TypeError naming ``name`` when it is not a file name.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        What the user passed.
+    name : str
+        The argument's name, used in the error message.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"{name} must be a file name (str or pathlib.Path), got "
+                        f"{type(path).__name__}")
+    return Path(path)
 
 
 def read_text_file(path, what: str, max_bytes: int = 20_000_000) -> str:

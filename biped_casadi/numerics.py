@@ -21,7 +21,9 @@ import numpy as np
 from .caching import cache_dir, file_lock
 from .files import name_destination
 
-__all__ = ["rk4_step", "quintic_hermite_interval", "as_vector", "as_number", "jit_options",
+__all__ = ["rk4_step", "quintic_hermite_interval", "as_vector", "as_number", "as_count", "as_rows",
+           "as_numbers",
+           "jit_options",
            "compiled", "cached_library", "compiler_reason", "FastCall"]
 
 
@@ -387,3 +389,92 @@ def as_number(x, name: str, *, positive: bool = False, nonnegative: bool = False
     if nonnegative and not v >= 0:
         raise ValueError(f"{name} must be non-negative, got {x!r}")
     return v
+
+
+def as_count(x, name: str, low: int = 1) -> int:
+    """``x`` as an integer of at least ``low`` (numpy integers too; not bools or floats).
+
+    Parameters
+    ----------
+    x : object
+        The value given by the user.
+    name : str
+        The argument's name, used in the error message.
+    low : int
+        The least value allowed.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` when ``x`` is not an integer >= ``low``.
+    """
+    if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {x!r}")
+    return int(x)
+
+
+def as_rows(x, width: int, name: str) -> np.ndarray:
+    """``x`` as finite rows of ``width`` numbers: one row ``(width,)`` or ``(n, width)``.
+
+    Parameters
+    ----------
+    x : array_like
+        The value given by the user.
+    width : int
+        Numbers per row.
+    name : str
+        The argument's name, used in the error message.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (n, width), dtype float.
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` when it is not numbers, has another shape (a column) or is not
+        finite.
+    """
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numbers, ({width},) or (n, {width})") from None
+    if a.ndim not in (1, 2) or a.shape[-1] != width or a.size == 0:
+        raise ValueError(f"{name} must be ({width},) or (n, {width}), got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be finite")
+    return np.atleast_2d(a)
+
+
+def as_numbers(x, name: str) -> np.ndarray:
+    """``x`` (a number or an array of numbers, any shape) as floats; words are refused.
+
+    ``numpy.asarray("0.1", dtype=float)`` parses the text: a user's string would pass.
+
+    Parameters
+    ----------
+    x : object
+        The value given by the user.
+    name : str
+        The argument's name, used in the error message.
+
+    Returns
+    -------
+    numpy.ndarray
+        dtype float, the shape of ``x``.
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` when ``x`` holds text, None or other objects.
+    """
+    a = np.asarray(x)
+    if a.dtype.kind not in "biuf" and not (a.dtype == object and a.size and all(
+            isinstance(v, (int, float, np.number)) and not isinstance(v, bool) for v in a.flat)):
+        raise ValueError(f"{name} must be a number or an array of numbers, got {x!r:.60}")
+    return np.asarray(a, dtype=float)

@@ -15,7 +15,7 @@ from .errors import GaitOptimizationError
 from .speed_family import SPEED_TOL, GaitFamily, MemberRecord, check_speeds
 from .family_file import options_record
 from .gait import Gait
-from .options import GaitOptions
+from .options import GaitOptions, require_model
 from .polish import polish
 from .transcription import FIXED_BY, MARGINS, describe_violations, warm_start_vector
 
@@ -196,6 +196,7 @@ def gait_family(model, speeds, options: GaitOptions | None = None, *, path=None,
     GaitOptimizationError
         No gait at the first speed.
     """
+    require_model(model)
     speeds = check_speeds(speeds)
     if options is not None and not isinstance(options, GaitOptions):
         raise ValueError(f"options must be GaitOptions, got {type(options).__name__}")

@@ -13,7 +13,8 @@ import casadi as ca
 
 from biped_casadi import Reference
 from biped_casadi.caching import cached, digest
-from biped_casadi.files import atomic_path
+from biped_casadi.files import atomic_path, file_path
+from biped_casadi.numerics import as_numbers
 
 from .files import (FORMAT, FORMAT_VERSION, GaitFileError, OpenOrbitWarning, gait_parts,
                     read_gait_file)
@@ -227,7 +228,7 @@ class Gait(Reference):
         ValueError
             When a time is not finite or outside [t_min, t_max].
         """
-        t_arr = np.asarray(t, dtype=float)
+        t_arr = as_numbers(t, "gait: t")
         scalar = t_arr.ndim == 0
         t1 = np.atleast_1d(t_arr).ravel()
         self._check_times(t1)
@@ -271,7 +272,7 @@ class Gait(Reference):
         numpy.ndarray
             Shape (2, N).
         """
-        t1 = np.atleast_1d(np.asarray(t, dtype=float)).ravel()
+        t1 = np.atleast_1d(as_numbers(t, "gait: t")).ravel()
         self._check_times(t1)
         sg, X, A = self._nodes()
         qu, dqu, _ = quintic_hermite(sg * self.T, X[0], X[1], A, t1)
@@ -547,7 +548,7 @@ class Gait(Reference):
         Path
             ``path``.
         """
-        path = Path(path)
+        path = file_path(path)
         body = self.to_dict()
         body["sha256"] = digest(body)
         text = json.dumps(body, indent=1)

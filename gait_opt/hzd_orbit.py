@@ -23,7 +23,8 @@ from math import comb
 import casadi as ca
 import numpy as np
 
-from biped_casadi.numerics import rk4_step
+from biped_casadi.control.reference import require_reference
+from biped_casadi.numerics import as_vector, rk4_step
 
 from .nodes import Nodes
 
@@ -271,10 +272,13 @@ def fit_bezier_constraints(gait, degree: int = 10, phase=None, n: int = 2001) ->
     BezierConstraints
         With ``H0`` None (the outputs are q_a).
     """
-    m = gait.model
-    c = np.asarray(m.hip_phase if phase is None else phase, dtype=float).ravel()
+    m = require_reference(gait).model
+    c = as_vector(m.hip_phase if phase is None else phase, m.nq, "phase")
     if isinstance(degree, bool) or not isinstance(degree, int) or degree < 4:
         raise ValueError(f"degree must be an integer >= 4, got {degree!r}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < degree + 1:
+        raise ValueError(f"n (samples of the fit) must be an integer >= degree + 1 = "
+                         f"{degree + 1}, got {n!r}")
     t = np.linspace(0, gait.T, n)
     q, dq, _ = gait.evaluate(t)
     th = c @ q

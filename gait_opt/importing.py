@@ -17,6 +17,7 @@ toolkit's representation and made an exact orbit of the robot given.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from math import comb
@@ -30,7 +31,7 @@ from .gait import Gait
 from .hzd_orbit import BezierConstraints, constraints_from_dict, hzd_nodes
 from .nodes import (ANGLES, Nodes, check_units, nodes_from_arrays, read_nodes,
                     relative_angles)
-from .options import GaitOptions
+from .options import GaitOptions, require_model
 from .polish import close_orbit
 from .urdf_angles import read_urdf_csv, urdf_nodes
 
@@ -242,6 +243,12 @@ def _nodes_of(model, source, angles: str, where: str, stance=None, tol: float = 
     if source.nq != model.nq:
         raise GaitImportError(f"{where}: {source.nq} coordinates per node, the robot "
                               f"{model.params.name} has {model.nq}")
+    # a Nodes made by hand gets the checks of arrays (NaN, shapes, increasing times)
+    source = dataclasses.replace(
+        nodes_from_arrays(source.t, np.transpose(source.q), np.transpose(source.dq),
+                          None if source.ddq is None else np.transpose(source.ddq), model.nq,
+                          where),
+        source=source.source)
     symbol = "phi" if angles == "absolute" else "q"
     names = [f"{symbol}{i}" for i in range(1, source.nq + 1)]
     check_units(source.t, source.q, source.dq, names, where)
@@ -323,6 +330,7 @@ def import_gait(model, source, *, angles: str = "relative", stance=None,
         (a ValueError) One line: bad input, or not close to an orbit of ``model`` (the
         residual and the likely cause).
     """
+    require_model(model)
     where = str(source) if isinstance(source, (str, Path)) else "gait"
     if not (isinstance(tol, (int, float)) and math.isfinite(tol) and tol > 0):
         raise GaitImportError(f"tol must be a positive number, got {tol!r}")

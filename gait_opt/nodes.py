@@ -21,11 +21,10 @@ import io
 import json
 import zipfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from biped_casadi.files import read_text_file
+from biped_casadi.files import file_path, read_text_file
 
 __all__ = ["Nodes", "nodes_from_arrays", "read_nodes", "relative_angles", "check_units",
            "MIN_NODES", "ANGLES", "RATE_RATIO", "HALF_TURN_BEYOND",
@@ -388,7 +387,7 @@ def read_nodes(path, nq: int | None = None):
       coefficients of h_d (one row per output) over s = (theta - theta^+) / (theta^- -
       theta^+), theta = phase . q, outputs H0 (optional, default the actuated joints).
     """
-    path = Path(path)
+    path = file_path(path)
     where = f"gait file {path}"
     suffix = path.suffix.lower()
     if suffix not in (".csv", ".npz", ".json"):

@@ -17,7 +17,7 @@ from biped_casadi.results import Result, internal
 from .cache import cached_gait
 from .errors import GaitOptimizationError
 from .gait import Gait
-from .options import GaitOptions
+from .options import GaitOptions, require_model
 from .polish import polish
 from .transcription import (FIXED_BY, MARGINS, build_problem, constraint_violations,
                             describe_violations, initial_guess, make_solver,
@@ -273,10 +273,7 @@ def optimize_gait(model=None, options: GaitOptions | None = None, *, cache: bool
         When ``model`` is not a robot model.
     """
     model = rabbit() if model is None else model
-    if not hasattr(model, "description") or not hasattr(model, "params"):
-        raise TypeError(f"model: a robot model is needed (biped_casadi.rabbit() or "
-                        f"biped_casadi.robot(NAME_OR_PATH)), got {type(model).__name__} "
-                        f"{model!r:.60}")
+    require_model(model)
     opts = _options(model, options, overrides)
     if cache:
         return cached_gait(model, opts, cache_dir, progress,

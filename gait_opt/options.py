@@ -7,6 +7,16 @@ from dataclasses import dataclass, field
 
 __all__ = ["GaitOptions"]
 
+
+def require_model(model):
+    """``model`` checked to be a robot model: a TypeError naming ``model`` otherwise (a
+    robot's name, a path, a gait)."""
+    if not hasattr(model, "description") or not hasattr(model, "params"):
+        raise TypeError(f"model: a robot model is needed (biped_casadi.rabbit() or "
+                        f"biped_casadi.robot(NAME_OR_PATH)), got {type(model).__name__} "
+                        f"{model!r:.60}")
+    return model
+
 COSTS = ("torque_squared_per_length", "torque_squared")
 SCHEMES = ("legendre", "radau")
 DERIVATIVES = ("structured", "casadi")
@@ -153,7 +163,9 @@ class GaitOptions:
         for n in ("min_normal_force", "clearance", "min_liftoff_speed", "min_strike_speed"):
             nonneg(n)
         for n in ("step_length_bounds", "step_time_bounds"):
-            lo_hi = tuple(getattr(self, n))
+            lo_hi = getattr(self, n)
+            lo_hi = tuple(lo_hi) if hasattr(lo_hi, "__len__") and not isinstance(lo_hi, str) \
+                else (lo_hi,)
             if len(lo_hi) != 2 or not all(number(v) and math.isfinite(v) for v in lo_hi) \
                     or not 0 < lo_hi[0] < lo_hi[1]:
                 raise ValueError(f"gait option {n!r} must be (low, high) with 0 < low < high, got {lo_hi!r}")

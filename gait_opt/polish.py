@@ -196,6 +196,13 @@ def close_orbit(gait, speed: float | None = None, tol: float = 1e-12,
     ClosedOrbit
         The closed gait (options with ``speed``) and what moved.
     """
+    if not isinstance(gait, Gait):
+        raise TypeError(f"gait: a Gait is needed (Gait.load(path) or optimize_gait(model)), "
+                        f"got {type(gait).__name__}")
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < math.inf:
+        raise ValueError(f"tol must be a positive number, got {tol!r}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
     opts = gait.options if speed is None else gait.options.replace(speed=float(speed))
     p0 = np.r_[gait.alpha.ravel(order="F"), gait.x0, gait.T]
     try:

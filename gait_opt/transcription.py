@@ -627,6 +627,8 @@ def make_solver(prob: Problem, opts: GaitOptions, verbose: bool = False):
 
 def warm_start_vector(model, opts, gait):
     """The decision vector of a previous gait (same Bezier degree), to warm-start IPOPT."""
+    if not hasattr(gait, "alpha") or not hasattr(gait, "T"):
+        raise TypeError(f"warm_start: a Gait is needed, got {type(gait).__name__}")
     if gait.alpha.shape != (model.nu, opts.bezier_degree + 1):
         raise ValueError("warm_start gait has another bezier_degree")
     s_start, s_coll = _grid(opts)

@@ -27,7 +27,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from biped_casadi.files import read_text_file, write_text_atomic
+from biped_casadi.files import file_path, read_text_file, write_text_atomic
 
 from .nodes import Nodes, check_units, csv_table, nodes_from_arrays
 
@@ -302,4 +302,4 @@ def write_gait_csv(gait, path, angles: str = "relative", stance=None,
     csv.writer(out, lineterminator="\n").writerow(head)     # URDF names may hold commas
     text = out.getvalue() + "\n".join(",".join(repr(float(v)) for v in r)
                                       for r in rows) + "\n"
-    return write_text_atomic(Path(path), text)
+    return write_text_atomic(file_path(path), text)

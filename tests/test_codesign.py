@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from analysis.cli import main
-from analysis.design.codesign import (CodesignError, Reduced, Transcription,
-                                      TranscriptionSettings)
+from analysis.design import RobustDesignSettings
+from analysis.design.codesign import (CodesignError, CodesignSettings, IpoptLimits, Reduced,
+                                      StartSampling, Transcription, TranscriptionSettings,
+                                      TrustRegion, Verification)
 
 #: a design of the good region (small M1) found by the co-design; any stable M1 would do
 M1 = np.array([0.0385, 0.6158, 0.4359, -0.6560])
@@ -299,3 +301,38 @@ def test_robust_cli_prints_a_design_that_never_converges(capsys):
     assert "step None" not in out and "paper's perturbation: slipped" in out
     assert "moved from the given gait" not in out
     assert "the design counts by the checks above" in out
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: CodesignSettings(rejoin=2.0), "^rejoin must be in"),
+    (lambda: CodesignSettings(rejoin_choices=(0.5, 0.9)), "^rejoin_choices must be in"),
+    (lambda: CodesignSettings(steps=0), r"^steps must be an integer >= 1"),
+    (lambda: CodesignSettings(gait={"sped": 1.0}), "^gait: 'sped' is not a GaitOptions field"),
+    (lambda: CodesignSettings(gait={"speed": -1.0}), "^gait option 'speed' must be"),
+    (lambda: CodesignSettings(verification={"directions": 4}), "^verification must be a Verification"),
+    (lambda: Verification(directions=0), r"^directions must be an integer >= 1"),
+    (lambda: Verification(tol=float("nan")), "^tol must be finite"),
+    (lambda: IpoptLimits(max_iter=0), r"^max_iter must be an integer >= 1"),
+    (lambda: TrustRegion(alpha=-0.05), "^alpha must be positive"),
+    (lambda: StartSampling(samples=0), r"^samples must be an integer >= 1"),
+    (lambda: StartSampling(box=-1.0), "^box must be positive"),
+    (lambda: StartSampling(refine_rounds=-1), r"^refine_rounds must be an integer >= 0"),
+    (lambda: RobustDesignSettings(samples=0), r"^samples must be an integer >= 1"),
+    (lambda: RobustDesignSettings(rejoin=0), "^rejoin must be positive"),
+    (lambda: RobustDesignSettings(eigen_bound="x"), r"^eigen_bound \(a number, or 'vc'\) must be a number"),
+    (lambda: RobustDesignSettings(seed=-1), r"^seed must be an integer >= 0"),
+    (lambda: RobustDesignSettings(search_rk4_steps=4), r"^search_rk4_steps must be an integer >= 8")])
+def test_design_settings_refuse_bad_values(make, message):
+    """All of these were taken; steps = 0 ran a co-design of no steps, the others failed
+    inside a task or not at all."""
+    with pytest.raises(ValueError, match=message) as e:
+        make()
+    assert "\n" not in str(e.value)
+
+
+def test_design_settings_defaults_unchanged():
+    """The checks keep the defaults (the cache keys of cached designs are made of them)."""
+    assert RobustDesignSettings(samples=np.int64(40000), box=12) == RobustDesignSettings()
+    assert type(RobustDesignSettings(samples=np.int64(5)).samples) is int
+    assert RobustDesignSettings(eigen_bound=0.9).eigen_bound == 0.9
+    assert CodesignSettings(rejoin_choices=[0.5, 0.75]).rejoin_choices == (0.5, 0.75)

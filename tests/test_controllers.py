@@ -113,6 +113,40 @@ def test_tv_bad_input(model, gait):
         ctrl.torque(gait.q(0.0), gait.dq(0.0), 5 * gait.T)
 
 
+@pytest.mark.parametrize("not_a_gait", [None, "gait.json", "model"])
+def test_a_model_or_path_for_the_gait_is_one_type_error(model, gait, not_a_gait):
+    """What a user passes for the gait by mistake (its file, the model) is a TypeError
+    naming the gait, not an AttributeError from inside."""
+    bad = model if not_a_gait == "model" else not_a_gait
+    from biped_casadi import Design
+    calls = [lambda: TimeVaryingController(bad, [0.0] * 4),
+             lambda: VirtualConstraintController(bad),
+             lambda: fit_virtual_constraints(bad)]
+    if bad is not None:                     # Design(gait=None) is a design without a gait
+        calls += [lambda: Design.tv(bad, [0.0] * 4), lambda: Design.vc(bad)]
+    for call in calls:
+        with pytest.raises(TypeError, match=r"^(gait|reference): a gait is needed") as e:
+            call()
+        assert "\n" not in str(e.value)
+
+
+def test_design_inputs(gait):
+    from biped_casadi import Design
+    M1 = [-10, 7.5, 10, -5]
+    with pytest.raises(ValueError, match="M1: .*Design.vc"):
+        Design.tv(gait, None)                       # not virtual constraints in disguise
+    with pytest.raises(ValueError, match="^M1 must be numbers"):
+        Design.tv(gait, "abcd")
+    for bad in ((1.0, 2.0), 5, "1 2 0.02"):
+        with pytest.raises(ValueError, match="^gains must be a Gains or the three numbers"):
+            Design.tv(gait, M1, gains=bad)
+    with pytest.raises(ValueError, match="^gains: unknown gain 'kp'"):
+        Design.tv(gait, M1, gains={"kp": 2.0})
+    d = Design.tv(gait, M1, gains={"Kp": 2.0})     # some gains by name, the others default
+    assert d.gains == Gains(Kp=2.0) and d.gains != Gains()
+    assert Design.tv(gait, M1, gains=(2.0, 3.0, 0.01)).gains == Gains(2.0, 3.0, 0.01)
+
+
 # ------------------------------------------------------ virtual constraints
 def test_vc_fit_reproduces_orbit(gait):
     """h_d(c q^d(t)) = q_a^d(t) all along the step (between the knots too) and the
@@ -215,3 +249,14 @@ def test_tv_eigenvalues_depend_on_m1(model, gait, random_m1):
     assert r0.status in ("stable", "unstable") and r1.status in ("stable", "unstable")
     assert abs(r0.max_abs - r1.max_abs) > 1e-3 * max(r0.max_abs, r1.max_abs)
     assert np.max(np.abs(r0.A - r1.A)) > 1e-3
+
+
+def test_vc_phase_is_named(gait):
+    """A phase of the wrong length was reported as 'c' (the fit's own name for it)."""
+    from analysis.stability import vc_map
+    for call in (lambda: vc_eigenvalue(gait, phase=[1.0, 0.5]),
+                 lambda: vc_map(gait, phase=[1.0, 0.5])):
+        with pytest.raises(ValueError, match=r"^phase must have 5 components, got shape \(2,\)"):
+            call()
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        vc_eigenvalue("gait.json")

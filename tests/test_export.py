@@ -363,3 +363,18 @@ def test_robust_design_exports_and_verifies(tmp_path, capsys):
     assert v["simulation"]["steps"] == 10 and v["simulation"]["python_status"] == "ok"
     assert v["simulation"]["max_impact_time"] <= 1e-9 and v["simulation"]["max_state"] <= 1e-9
     assert v["c_us"] <= 5.0
+
+
+def test_export_destination_must_be_a_folder_name(tmp_path):
+    from biped_casadi.control.export_folder import check_destination
+    for bad in (None, 5):
+        with pytest.raises(TypeError, match="^out must be a file name"):
+            check_destination(bad)
+        with pytest.raises(TypeError, match="^out must be a file name"):
+            write_export({"a.c": "int a;\n"}, bad)
+    assert check_destination(str(tmp_path / "new")) == tmp_path / "new"
+
+
+def test_c_sources_names_a_missing_law():
+    with pytest.raises(TypeError, match=r"^law: an ExportedLaw is needed \(exported_law"):
+        c_sources(None)

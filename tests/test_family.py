@@ -444,3 +444,18 @@ def test_activations_are_named_in_the_legend_once_each_not_written_across_the_cu
     assert len(ax.lines) == 1 + 3 and not ax.texts
     styles = {line.get_label(): line.get_linestyle() for line in ax.lines[1:]}
     assert len(set(styles.values()) - {"-"}) == 2           # the two constraints told apart
+
+
+def test_gait_metrics_name_bad_arguments(gait):
+    """n = 0 or 1 trapezoid points were IndexErrors; a path for the gait an
+    AttributeError."""
+    from analysis.gait_metrics import torso_fall
+    for bad in (0, 1, 2.5):
+        with pytest.raises(ValueError, match=r"^n \(trapezoid points\) must be an integer >= 2"):
+            actuator_work(gait, n=bad)
+        with pytest.raises(ValueError, match=r"^n \(trapezoid points\)"):
+            cost_of_transport(gait, n=bad)
+    for f in (actuator_work, cost_of_transport, torso_fall):
+        with pytest.raises(TypeError, match="^gait: a gait is needed"):
+            f("gait.json")
+    assert actuator_work(gait, n=2) > 0

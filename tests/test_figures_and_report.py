@@ -257,3 +257,13 @@ def test_fig6_of_runs_stopped_at_the_start_shows_them(gait):
     # the legend lists what is drawn: the run, not a reference no step drew
     assert [t.get_text() for t in ax.get_legend().get_texts()] == [run_label(run)]
     assert not any(line.get_linestyle() == "--" for line in ax.lines)
+
+
+def test_stick_plot_names_bad_arguments(gait):
+    """frames = 0 drew an empty figure; a path for the gait was an AttributeError."""
+    from analysis.reporting.plots import gait_stick_plot
+    for bad in (0, 1, 2.5):
+        with pytest.raises(ValueError, match=r"^frames must be an integer >= 2"):
+            gait_stick_plot(gait, frames=bad)
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        gait_stick_plot("gait.json")

@@ -435,6 +435,16 @@ def test_bad_options_are_value_errors(model):
         optimize_gait(model, n_intervals=10**7)         # refused before any memory is used
     with pytest.raises(ValueError, match="'degree' must be at most 9"):
         GaitOptions(degree=10)
+    with pytest.raises(ValueError, match="^gait option 'step_length_bounds' must be \\(low, high\\)"):
+        GaitOptions(step_length_bounds=0.5)
+    assert GaitOptions(step_time_bounds=[0.3, 1]).step_time_bounds == (0.3, 1.0)
+
+
+def test_warm_start_and_save_name_what_is_wrong(model, gait):
+    with pytest.raises(TypeError, match="^warm_start: a Gait is needed, got str$"):
+        optimize_gait(model, warm_start="gait.json")
+    with pytest.raises(TypeError, match="^path must be a file name"):
+        gait.save(None)
 
 
 #: a light shin under a heavy torso (round numbers): Newton's residual on the orbit
@@ -647,3 +657,37 @@ def test_bounds_hit_names_a_step_length_bound_the_optimum_lies_beyond(model3, ga
     _print_gait(dict(s, max_torso_lean=0.0), g, model3, tmp_path / "g.json", 0.6, False, 1.0)
     line = next(x for x in capsys.readouterr().out.splitlines() if "step length" in x)
     assert f"on its upper bound {hi:g} m, GaitOptions.step_length_bounds" in line
+def test_orbit_tools_name_bad_arguments(gait):
+    """max_iter = 0 and n = 0 were IndexErrors; a path for the gait an AttributeError."""
+    from gait_opt import close_orbit, fit_bezier_constraints, gait_family
+    from gait_opt.urdf_angles import write_gait_csv
+    with pytest.raises(TypeError, match="^gait: a Gait is needed"):
+        close_orbit("gait.json")
+    for bad in (0, -1, float("nan"), "1e-12"):
+        with pytest.raises(ValueError, match="^tol must be a positive number"):
+            close_orbit(gait, tol=bad)
+    for bad in (0, 2.5):
+        with pytest.raises(ValueError, match="^max_iter must be a positive integer"):
+            close_orbit(gait, max_iter=bad)
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        fit_bezier_constraints("gait.json")
+    for bad in (0, 10, 2.5):
+        with pytest.raises(ValueError, match=r"^n \(samples of the fit\) must be an integer"):
+            fit_bezier_constraints(gait, degree=10, n=bad)
+    with pytest.raises(ValueError, match=r"^phase must have 5 components"):
+        fit_bezier_constraints(gait, phase=[1.0, 0.5])
+    assert fit_bezier_constraints(gait, degree=6, n=11).alpha.shape[1] == 7
+    with pytest.raises(TypeError, match="^path must be a file name"):
+        write_gait_csv(gait, None)
+    with pytest.raises(TypeError, match="^model: a robot model is needed"):
+        gait_family("rabbit", [0.7, 0.8])
+
+
+def test_times_are_numbers_not_words(gait):
+    """q('0.1') was parsed as 0.1; None is named as a missing time, not as NaN."""
+    for bad in ("0.1", ["0.1", "0.2"], None):
+        for f in (gait.q, gait.dq, gait.ddq, gait.states):
+            with pytest.raises(ValueError, match="^gait: t must be a number or an array of numbers"):
+                f(bad)
+    np.testing.assert_array_equal(gait.q(np.float32(0.25)), gait.q(float(np.float32(0.25))))
+    assert gait.q([0.1, 0.2]).shape == (5, 2)

@@ -245,3 +245,19 @@ def test_the_how_to_example_runs(capsys, monkeypatch):
     code = block.split("```python\n", 1)[1].split("```", 1)[0]
     exec(compile(code, "bring-your-robot.md", "exec"), {})
     assert "orbit residual" in capsys.readouterr().out
+
+
+def test_import_checks_the_model_and_hand_made_nodes(model, gait):
+    """A robot's name for the model, and a Nodes with NaN (made by hand, not read from a
+    file), were failures inside (AttributeError, StopIteration)."""
+    from gait_opt import GaitImportError, Nodes, import_gait, read_nodes
+    t = np.linspace(0.0, gait.T, 41)
+    with pytest.raises(TypeError, match="^model: a robot model is needed"):
+        import_gait("rabbit", {"t": t, "q": gait.q(t).T, "dq": gait.dq(t).T})
+    bad = Nodes(t, np.full((5, t.size), np.nan), gait.dq(t))
+    with pytest.raises(GaitImportError, match="^gait: q has a NaN or infinite value$"):
+        import_gait(model, bad)
+    ok = import_gait(model, Nodes(t, gait.q(t), gait.dq(t), gait.ddq(t), source="by hand"))
+    assert ok.status == "imported" and ok.gait.orbit_residual()["q"] < 1e-9
+    with pytest.raises(TypeError, match="^path must be a file name"):
+        read_nodes(None)

@@ -180,3 +180,15 @@ def test_params_validation(tmp_path):
 
 def test_model_cached():
     assert rabbit() is rabbit()
+
+
+def test_relabelling_and_description_files_name_bad_arguments():
+    """relabelling(4) returned a matrix: no planar biped of this kind has 4 joints."""
+    from biped_casadi import load_description
+    from biped_casadi.model import relabelling
+    for bad in (0, 4, 6, "5", 5.0):
+        with pytest.raises(ValueError, match="^nq must be an odd integer >= 3"):
+            relabelling(bad)
+    np.testing.assert_array_equal(relabelling(np.int64(5)), E_RELABEL)
+    with pytest.raises(TypeError, match="^path must be a file name"):
+        load_description(None)

@@ -435,3 +435,9 @@ def test_a_failure_at_a_touchdown_is_the_step_it_ends(gait):
     soft = walk(Design.vc(gait), steps=3, settings=MUJOCO_DEFAULT, step_start="contact")
     assert soft.status == "out_of_range" and soft.fail_step == soft.steps_walked
     assert soft.message.startswith(f"step {soft.fail_step + 1} cannot start")
+
+
+def test_start_of_names_a_missing_gait():
+    for bad in (None, "gait.json"):
+        with pytest.raises(TypeError, match="^gait: a gait is needed"):
+            start_of(bad)

@@ -6,6 +6,7 @@ import threading
 
 import casadi as ca
 import numpy as np
+import pytest
 
 from biped_casadi.numerics import FastCall, compiled
 
@@ -62,3 +63,21 @@ def test_several_functions_in_one_library():
     a, b = compiled(fs, "-O1")
     assert float(b([3.0, 4.0])) == 25.0
     np.testing.assert_array_equal(np.array(a([1.0, 2.0])).ravel(), [2.0, 4.0])
+
+
+def test_as_count_takes_integers_only():
+    from biped_casadi.numerics import as_count
+    assert as_count(3, "n") == 3 and type(as_count(np.int64(3), "n")) is int
+    assert as_count(0, "seed", low=0) == 0
+    for bad in (0, -1, 2.5, 3.0, True, "3", None):
+        with pytest.raises(ValueError, match=r"^n must be an integer >= 1, got "):
+            as_count(bad, "n")
+
+
+def test_as_rows_refuses_columns_and_words():
+    from biped_casadi.numerics import as_rows
+    assert as_rows([1, 2], 2, "x").shape == (1, 2) and as_rows(np.ones((3, 2)), 2, "x").shape == (3, 2)
+    for bad, message in ((np.ones((2, 1)), r"got shape \(2, 1\)"), ([], r"got shape \(0,\)"),
+                         ("ab", "must be numbers"), ([np.inf, 0], "must be finite")):
+        with pytest.raises(ValueError, match="^x " + message if "must" in message else message):
+            as_rows(bad, 2, "x")

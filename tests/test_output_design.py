@@ -112,3 +112,15 @@ def test_m1_nlp_says_when_it_stops_on_its_box(gait3, monkeypatch):
     assert r.ipopt_runs == 1 and np.max(np.abs(r.M1)) == pytest.approx(box, rel=1e-3)
     assert r.at_bound and "on the NLP's bound 1" in r.message, r.message
     assert r.max_abs > free.max_abs
+def test_m1_nlp_names_bad_arguments(gait):
+    """Checked before any work: NaN starts were dropped silently (random starts took
+    their place), a negative count was taken, a path for the gait failed inside."""
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        optimize_m1("gait.json")
+    with pytest.raises(ValueError, match="^starts must be finite$"):
+        optimize_m1(gait, starts=[[np.nan, 0, 0, 0]])
+    with pytest.raises(ValueError, match=r"^starts must be an array \(k, 4\) of M1, got shape \(1, 3\)"):
+        optimize_m1(gait, starts=[1.0, 2.0, 3.0])
+    for name in ("n_random", "n_best", "n_ipopt", "seed"):
+        with pytest.raises(ValueError, match=f"^{name} must be a non-negative integer"):
+            optimize_m1(gait, **{name: -1})

@@ -119,6 +119,41 @@ def test_singular_values_eq24(model, gait, pm):
         assert mx[2] > mx[1] > mx[0] or mx[0] < 1
 
 
+def test_rejoin_is_checked_by_name(gait):
+    for bad in ("x", None, 0.9):
+        with pytest.raises(ValueError, match="^rejoin must"):
+            poincare_eigenvalues(gait, [0.0] * 4, rejoin=bad)
+
+
+@pytest.mark.parametrize("option, value, message", [
+    ("n_pre", 0, "^n_pre must be an integer >= 1"),
+    ("n_post", 2.5, "^n_post must be an integer >= 1"),
+    ("n_scan", -1, "^n_scan must be an integer >= 1"),
+    ("threads", -1, "^threads must be an integer >= 1"),
+    ("horizon", -1.0, "^horizon must exceed 0.75 \\(the section\\)"),
+    ("horizon", float("nan"), "^horizon must be finite")])
+def test_map_options_are_checked_by_name(gait, option, value, message):
+    """n_pre = 0 was CasADi's 'mapaccum: N must be positive'; a negative horizon was
+    taken."""
+    with pytest.raises(ValueError, match=message):
+        poincare_map(gait, **{option: value})
+
+
+def test_a_path_for_the_gait_is_named(gait):
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        poincare_map("gait.json")
+
+
+def test_result_repr_is_one_line_of_python_numbers(gait):
+    import json
+    r = poincare_eigenvalues(gait, [-10, 7.5, 10, -5])
+    text = repr(r)
+    assert "\n" not in text and len(text) < 500 and "array(" not in text and "np." not in text
+    assert f"max_abs={r.max_abs!r}" in text and f"status={r.status!r}" in text
+    assert "A=[[" in text and "eigenvalues=[(" in text      # 2x2 and complex, 6 digits
+    json.dumps(r.to_dict(), allow_nan=False)
+
+
 def test_other_robot_refused(gait):
     import dataclasses
 
@@ -170,3 +205,20 @@ def test_something_else_than_a_gait_is_named(model):
     for wrong in (model, "gait.json", None):
         with pytest.raises(TypeError, match="a gait is needed"):
             poincare_eigenvalues(wrong, [0.0, 0.0, 0.0, 0.0])
+
+
+def test_variational_jacobian_checks_its_arguments(gait):
+    """n_pre = 0 was a ZeroDivisionError, a section time outside the step the gait's
+    message about t, a path for the gait an AttributeError."""
+    from analysis.stability import variational_jacobian
+    tau_s = 0.75 * gait.T
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        variational_jacobian("gait.json", tau_s, 80, 240)
+    for bad in (0, 2.5):
+        with pytest.raises(ValueError, match="^n_pre must be an integer >= 1"):
+            variational_jacobian(gait, tau_s, bad, 240)
+    for bad in (-1.0, 0.0, gait.T, float("nan")):
+        with pytest.raises(ValueError, match="^tau_s"):
+            variational_jacobian(gait, bad, 80, 240)
+    with pytest.raises(ValueError, match="^rejoin must be in"):
+        variational_jacobian(gait, tau_s, 80, 240, rejoin=0.9)

@@ -352,3 +352,57 @@ def test_a_seed_that_is_not_one_is_named(seed):
     for settings in (RobustnessSettings, RobustDesignSettings):
         with pytest.raises(ValueError, match=r"^seed must be an integer >= 0, got "):
             settings(seed=seed)
+@pytest.mark.parametrize("field, value", [("directions", 0), ("directions", -2),
+                                          ("directions", 2.5), ("steps", 0), ("rounds", 0),
+                                          ("seed", -1), ("max_candidates", 0),
+                                          ("rk4_steps", 100), ("tol", float("nan")),
+                                          ("s_max", 0), ("mu", -0.6), ("torque_limit", 0)])
+def test_robustness_settings_refuse_bad_values(field, value):
+    with pytest.raises(ValueError, match=f"^{field} must") as e:
+        RobustnessSettings(**{field: value})
+    assert "\n" not in str(e.value)
+
+
+def test_robustness_settings_take_numpy_integers():
+    st = RobustnessSettings(directions=np.int64(4), rounds=np.int32(6))
+    assert st == RobustnessSettings(directions=4, rounds=6)
+    assert type(st.directions) is int and type(st.rounds) is int
+
+
+def test_robustness_arguments_of_the_wrong_type_are_named(gait):
+    d = Design.tv(gait, [-10, 7.5, 10, -5])
+    with pytest.raises(ValueError, match="^settings must be a RobustnessSettings, got dict$"):
+        robustness(d, {"directions": 2})
+    with pytest.raises(ValueError, match="^settings must be a RobustnessSettings, got dict$"):
+        kept_directions(gait, {})                   # an empty dict was the defaults
+    with pytest.raises(ValueError, match="^kept must be the KeptDirections"):
+        robustness(d, kept="kept.json")
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        kept_directions("gait.json")
+    with pytest.raises(ValueError, match="^options must be a SimulationOptions, got dict$"):
+        basin(d, n=3, options={"steps": 2})
+
+
+def test_walker_inputs_are_named(gait):
+    """A column M1 was reported as 'shape (1,)', a short q0 was CasADi's dimension error,
+    a NaN start walked (status 'diverged') and a rejoin past the section was taken."""
+    from biped_casadi.simulation import virtual_constraint_walker, zero_dynamics_walker
+    w = zero_dynamics_walker(gait)
+    q0, dq0, M1 = gait.q(0.0), gait.dq(0.0), [-10.0, 7.5, 10.0, -5.0]
+    cases = [((q0, dq0, np.array(M1)[:, None], 0.5), r"^M1s must be \(4,\) or \(n, 4\), got shape \(4, 1\)$"),
+             ((q0[:4], dq0, M1, 0.5), r"^q0 must be \(5,\) or \(n, 5\), got shape \(4,\)$"),
+             ((q0 * np.nan, dq0, M1, 0.5), "^q0 must be finite$"),
+             ((q0, dq0, M1, 2.0), r"^rejoin must be a number or \(n,\) numbers in \(0, 0.75\]"),
+             ((q0, dq0, np.tile(M1, (3, 1)), [0.5, 0.5]), r"^scenarios: every argument has 1 or n rows"),
+             ((np.tile(q0, (2, 1)), dq0, np.tile(M1, (3, 1)), 0.5), "^scenarios: every argument")]
+    for args, message in cases:
+        with pytest.raises(ValueError, match=message):
+            w.walk(*args, steps=1)
+    with pytest.raises(ValueError, match=r"^x must be \(2,\) or \(n, 2\)"):
+        w.walk_from_section([0.1, 0.2, 0.3], M1, 0.5, steps=1)
+    assert w.walk(np.tile(q0, (2, 1)), dq0, M1, [0.5, 0.75], steps=1).status.tolist() == \
+        ["ok", "ok"]
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        zero_dynamics_walker("gait.json")
+    with pytest.raises(ValueError, match=r"^nodes must be an integer >= 1, got 0$"):
+        virtual_constraint_walker(gait, nodes=0)

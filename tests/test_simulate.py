@@ -329,6 +329,26 @@ def test_bad_input(gait, vc):
         Simulator(vc, options={"steps": 2})
 
 
+def test_bad_input_from_a_notebook(gait, vc):
+    """What a user gets wrong: no controller, a path for the gait, words for heights;
+    each one line naming the argument.  numpy integers count as integers."""
+    for call in (lambda: simulate(None), lambda: Simulator("tv")):
+        with pytest.raises(TypeError, match="^controller: .* is needed, got (NoneType|str)$"):
+            call()
+    for bad in (None, "gait.json"):
+        with pytest.raises(TypeError, match="^gait: a gait is needed"):
+            perturbed_initial_state(bad, 0.01, 0.1)
+    with pytest.raises(ValueError, match="^terrain must be numbers"):
+        simulate(vc, steps=2, terrain=[0.0, "x"])
+    assert SimulationOptions(steps=np.int64(3), rk4_steps=np.int32(400)) == \
+        SimulationOptions(steps=3, rk4_steps=400)
+    assert type(SimulationOptions(steps=np.int64(3)).steps) is int
+    with pytest.raises(ValueError, match="steps"):
+        SimulationOptions(steps=np.float64(3.0))
+    run = simulate(vc, steps=np.int64(1))
+    assert run.n_steps == 1
+
+
 # ---------------------------------------------------------------- CLI
 def test_cli_simulate_json(gait, tmp_path, capsys):
     path = gait.save(tmp_path / "gait.json")
@@ -450,3 +470,46 @@ def test_cli_simulate_says_whether_the_error_settled(gait, stable_m1, tmp_path, 
     text = capsys.readouterr().out
     assert f"below 0.001 from step {out['steps_to_converge']}" in text
     assert "(falling, x0." in text and "not converged" not in text and "M1 = 0" not in text
+
+
+def test_result_repr_reads_in_a_notebook(gait, vc):
+    """The repr of a run is one short line of Python numbers: the logs (20 000 samples
+    of every signal) and the per-step records are summarised, not printed."""
+    run = simulate(vc, steps=3)
+    text = repr(run)
+    assert text.startswith("SimulationResult(status='ok', ")
+    assert "\n" not in text and len(text) < 800
+    assert "np." not in text and "array(" not in text
+    assert "steps=<list of 3>" in text and "qu_error=[" in text   # 3 numbers: shown
+    assert "dq=" not in text                                    # a log: left out
+    json.dumps(run.to_dict(), allow_nan=False)
+
+
+def test_directions_need_joints():
+    with pytest.raises(ValueError, match=r"^nq \(joints\) must be a positive integer"):
+        directions(3, nq=0)                            # was an empty (3, 0) array
+    assert directions(3, nq=np.int64(3)).shape == (3, 6)
+
+
+def test_start_states_name_the_directions(gait):
+    """Directions of the wrong width were numpy's 'operands could not be broadcast'."""
+    from biped_casadi.simulation import start_states
+    with pytest.raises(ValueError, match=r"^dirs must be \(10,\) or \(n, 10\), got shape \(2, 3\)$"):
+        start_states(gait, np.ones((2, 3)), 1.0)
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        start_states("gait.json", directions(2), 1.0)
+    q0, dq0 = start_states(gait, directions(2), 0.0)
+    np.testing.assert_array_equal(q0, np.tile(gait.q(0.0), (2, 1)))
+
+
+def test_a_design_runs_wherever_its_controller_does(gait):
+    """Simulator and step_map (hence gait_sensitivity) take a Design as simulate does
+    (Simulator(design) was an AttributeError, then a TypeError naming the Design)."""
+    from analysis.stability import step_map
+    from biped_casadi import Design
+    d = Design.tv(gait, [-10, 7.5, 10, -5])
+    a = Simulator(d, SimulationOptions(steps=1)).run(gait.q(0.0), gait.dq(0.0))
+    b = simulate(d.controller_for(), steps=1)
+    assert a.status == b.status == "ok"
+    np.testing.assert_array_equal(a.qu_error, b.qu_error)
+    assert isinstance(step_map(d).controller, TimeVaryingController)

@@ -156,3 +156,10 @@ def test_store_log_skips_a_cut_line(tmp_path):
         with open(tmp_path / "s" / "log.jsonl", "a") as f:
             f.write('{"chunk": 1')                               # cut by a kill
         assert store.read_log() == [{"chunk": 0}]
+
+
+def test_cache_dir_names_a_bad_folder(tmp_path):
+    from biped_casadi import cache_dir
+    with pytest.raises(TypeError, match="^path must be a file name"):
+        cache_dir(5)
+    assert cache_dir(str(tmp_path)) == cache_dir(tmp_path) == tmp_path

@@ -342,3 +342,16 @@ def test_open_orbit_sweep_is_stored_and_read_back(model, sweep_gait, tmp_path, c
     assert biped_main(["sweep", "--gait", str(path), "--allow-open-orbit", "--grid", "2"]) == 0
     out = capsys.readouterr().out
     assert "open_orbit       16" in out and "(open_orbit)" in out, out
+
+
+def test_points_and_sweeps_name_bad_arguments(sweep_gait):
+    with pytest.raises(ValueError, match="^lo must be less than hi, got lo = 1, hi = -1$"):
+        grid_points(3, 1.0, -1.0)
+    with pytest.raises(ValueError, match="^lo, hi must be finite"):
+        grid_points(3, float("nan"), 1.0)
+    with pytest.raises(ValueError, match="^values must be"):
+        line_points(0, "ab")
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        run_sweep("gait.json", np.zeros((2, 4)), progress=False)
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        singular_m1_values(None)

@@ -365,3 +365,33 @@ def test_cli_terrain_json(tmp_path, capsys):
     assert rc == 0
     d = json.loads(capsys.readouterr().out)
     assert [s["ground_height"] for s in d["steps"]] == [0.004, -0.004]
+
+
+def test_mfpt_estimate_refuses_bad_counts():
+    with pytest.raises(ValueError, match="^walked must be whole numbers"):
+        mfpt_estimate([-1, 3], [False, True], 10)
+    with pytest.raises(ValueError, match="^walked must be whole numbers"):
+        mfpt_estimate([11, 3], [False, True], 10)      # beyond max_steps
+    with pytest.raises(ValueError, match="^walked must be whole numbers"):
+        mfpt_estimate([2.5, 3], [False, True], 10)
+    with pytest.raises(ValueError, match="^failed must have one entry per run"):
+        mfpt_estimate([10, 3], [True], 10)
+    for bad in (0, -1, 2.0, None):
+        with pytest.raises(ValueError, match="^max_steps must be a positive integer"):
+            mfpt_estimate([5], [True], bad)
+    for bad in (0, 1, 95, float("nan"), "0.95"):
+        with pytest.raises(ValueError, match="^confidence must be a number in"):
+            mfpt_estimate([5], [True], 10, confidence=bad)
+    e = mfpt_estimate(np.array([10, 3]), [False, True], np.int64(10))
+    assert e.failures == 1 and e.censored == 1
+
+
+def test_monte_carlo_names_a_missing_design_or_bad_settings(gait):
+    from biped_casadi import Design
+    for bad in (None, [-10, 7.5, 10, -5], "gait.json"):
+        with pytest.raises(TypeError, match="^design: a Design on its gait"):
+            monte_carlo(bad)
+    with pytest.raises(ValueError, match="^design: a Design on its gait is needed"):
+        monte_carlo(Design([-10, 7.5, 10, -5]))     # a design without its gait
+    with pytest.raises(ValueError, match="^settings must be a MonteCarloSettings, got dict$"):
+        monte_carlo(Design.tv(gait, [-10, 7.5, 10, -5]), settings={"runs": 2})

@@ -319,3 +319,22 @@ def test_without_the_extra_it_says_how_to_install(monkeypatch, capsys):
     assert biped_main(["view"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and 'pip install "biped-casadi[view]"' in err[0], err
+
+
+def test_settings_name_what_is_wrong(gait):
+    """ViewSettings took a path for the gait, any controller, an M1 of any shape and a
+    rejoin past the section; they failed later, inside the explorer."""
+    with pytest.raises(TypeError, match="^gait: a gait is needed"):
+        ViewSettings("gait.json")
+    with pytest.raises(ValueError, match="^controller must be 'tv' or 'vc', got 'x'$"):
+        ViewSettings(gait, controller="x")
+    for bad in (np.zeros((4, 1)), [1.0, 2.0, 3.0], [np.nan, 0, 0, 0]):
+        with pytest.raises(ValueError, match="^M1 must"):
+            ViewSettings(gait, M1=bad)
+    with pytest.raises(ValueError, match="^rejoin must be in"):
+        ViewSettings(gait, rejoin=2.0)
+    with pytest.raises(ValueError, match="^options must be a SimulationOptions, got dict$"):
+        ViewSettings(gait, options={"steps": 3})
+    with pytest.raises(ValueError, match="^perturbation must be a Perturbation or None"):
+        ViewSettings(gait, perturbation=(0.01, 0.1))
+    assert ViewSettings(gait, M1=np.array(START)).M1 == START

@@ -24,6 +24,7 @@ import numpy as np
 
 from biped_casadi.caching import cached
 from biped_casadi.control.output_law import M1_LIMIT, decoupling_denominator
+from biped_casadi.control.reference import require_reference
 from biped_casadi.results import Result, internal
 
 from ..stability.poincare import poincare_eigenvalues, poincare_map
@@ -303,9 +304,24 @@ def optimize_m1(gait, group: int | None = 1, starts=None, n_random: int = 2,
     M1Result
         The best M1 found, verified.
     """
-    model = gait.model
+    model = require_reference(gait).model
     if group not in (1, 2, None):
         raise ValueError(f"group must be 1, 2 or None, got {group!r}")
+    for name, v in (("n_random", n_random), ("n_best", n_best), ("n_ipopt", n_ipopt),
+                    ("seed", seed)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise ValueError(f"{name} must be a non-negative integer, got {v!r}")
+    if starts is not None:
+        try:
+            starts = np.atleast_2d(np.asarray(starts, dtype=float))
+        except (TypeError, ValueError):
+            raise ValueError(f"starts must be numbers, (k, {model.nu}), got {starts!r}") \
+                from None
+        if starts.ndim != 2 or starts.shape[1] != model.nu or not starts.size:
+            raise ValueError(f"starts must be an array (k, {model.nu}) of M1, got shape "
+                             f"{starts.shape}")
+        if not np.all(np.isfinite(starts)):
+            raise ValueError("starts must be finite")
     t0 = time.perf_counter()
     pm = poincare_map(gait)
     tay = taylor_ab(gait)

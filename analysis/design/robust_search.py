@@ -38,6 +38,8 @@ import numpy as np
 
 from biped_casadi.caching import ResultStore, task_key
 from biped_casadi.files import write_text_atomic
+from biped_casadi.control.output_law import check_rejoin
+from biped_casadi.numerics import as_number
 from biped_casadi.results import Result
 from gait_opt import GaitOptions, optimize_gait
 from gait_opt.cache import cache_path
@@ -45,10 +47,10 @@ from gait_opt.cache import cache_path
 from ..stability.poincare import poincare_map
 from biped_casadi.simulation import failure_text, start_states
 
-from ..robustness.s_star import (Design, RobustnessSettings, check_seed, kept_directions,
-                                s_star_batch)
+from ..robustness.s_star import Design, RobustnessSettings, kept_directions, s_star_batch
 from ..stability.vc_map import vc_eigenvalue
 from biped_casadi.simulation import zero_dynamics_walker
+from .settings_checks import check_fields, check_gait_fields
 from .verification import verify_design
 
 __all__ = ["RobustDesignSettings", "RobustDesignResult", "robust_design", "ROBUST_GAIT"]
@@ -123,7 +125,16 @@ class RobustDesignSettings:
     tol: float = 1e-3
 
     def __post_init__(self):
-        check_seed(self.seed)
+        check_gait_fields(self.gait)
+        object.__setattr__(self, "rejoin", check_rejoin(self.rejoin))
+        check_fields(self, ("samples", "starts", "max_polls", "directions", "steps"),
+                     ("box", "screen_eigen", "screen_scale", "step", "min_step", "mu",
+                      "torque_limit", "tol"))
+        check_fields(self, ("seed",), low=0)
+        check_fields(self, ("search_rk4_steps",), low=8)
+        if self.eigen_bound != "vc":
+            object.__setattr__(self, "eigen_bound", as_number(
+                self.eigen_bound, "eigen_bound (a number, or 'vc')", positive=True))
 
     def robustness_settings(self, rk4_steps: int = 400, rounds: int = 10) -> RobustnessSettings:
         """The matching robustness settings, with the given integration and rounds.

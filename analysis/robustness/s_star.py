@@ -34,6 +34,8 @@ import numpy as np
 
 from biped_casadi import Design, SimulationOptions, directions, require_same_robot
 from biped_casadi.control.output_law import require_regular
+from biped_casadi.control.reference import require_reference
+from biped_casadi.numerics import as_number
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import (WalkBatch, start_states, virtual_constraint_walker,
                                      zero_dynamics_walker)
@@ -43,16 +45,9 @@ from ..tasks import Engine, resolve_scheduler, task
 from ..stability.poincare import poincare_map
 from ..stability.vc_map import vc_eigenvalue
 
-__all__ = ["check_seed", "Design", "RobustnessSettings", "RobustnessResult", "KeptDirections",
+__all__ = ["Design", "RobustnessSettings", "RobustnessResult", "KeptDirections",
            "kept_directions", "robustness", "BatchSStar", "s_star_batch", "bisect_scale",
            "walk_batch"]
-
-
-def check_seed(seed, name: str = "seed"):
-    """ValueError naming ``name`` unless ``seed`` is an integer >= 0 (numpy's generators
-    said only 'expected non-negative integer')."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"{name} must be an integer >= 0, got {seed!r}")
 
 
 @dataclass(frozen=True)
@@ -96,7 +91,17 @@ class RobustnessSettings:
     rk4_steps: int = 400
 
     def __post_init__(self):
-        check_seed(self.seed)
+        for name, low in (("directions", 1), ("seed", 0), ("max_candidates", 1), ("steps", 1),
+                          ("rounds", 1), ("rk4_steps", 8)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
+                raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
+            object.__setattr__(self, name, int(v))
+        if self.rk4_steps % 8:
+            raise ValueError(f"rk4_steps must be a positive multiple of 8, got {self.rk4_steps}")
+        for name in ("tol", "s_max", "mu") + (("torque_limit",) if self.torque_limit is not None
+                                              else ()):
+            object.__setattr__(self, name, as_number(getattr(self, name), name, positive=True))
 
     def simulation_options(self, jit: bool = False) -> SimulationOptions:
         """The simulation options of the runs: ``steps``, ``mu`` and ``torque_limit``.
@@ -256,8 +261,8 @@ def kept_directions(gait, settings: RobustnessSettings | None = None,
     -------
     KeptDirections
     """
-    model = gait.model
-    st = settings or RobustnessSettings()
+    model = require_reference(gait).model
+    st = _settings(settings)
     opts = st.simulation_options()
     cand = directions(st.max_candidates, model.nq, st.seed)
     kept, rejected = [], {}
@@ -283,6 +288,15 @@ def kept_directions(gait, settings: RobustnessSettings | None = None,
 
 
 # ---------------------------------------------------------------- verdicts
+def _settings(settings) -> RobustnessSettings:
+    """``settings`` or the defaults; anything but a RobustnessSettings named."""
+    if settings is None:
+        return RobustnessSettings()
+    if not isinstance(settings, RobustnessSettings):
+        raise ValueError(f"settings must be a RobustnessSettings, got {type(settings).__name__}")
+    return settings
+
+
 def _failure(batch: WalkBatch, tol: float):
     """The failing run to report of a design's runs (one per direction), or None: a
     validity failure before non-convergence, then the earliest step, then the first."""
@@ -403,10 +417,13 @@ def _robustness(design: Design, settings, kept, progress) -> RobustnessResult:
     gait = design.gait
     model = gait.model
     require_same_robot(model, gait)
-    st = settings or RobustnessSettings()
+    st = _settings(settings)
     t0 = time.perf_counter()
     if kept is None:
         kept = kept_directions(gait, st, progress)
+    elif not isinstance(kept, KeptDirections):
+        raise ValueError(f"kept must be the KeptDirections of kept_directions(gait), got "
+                         f"{type(kept).__name__}")
     dirs = kept.directions
     if len(dirs) == 0:
         raise ValueError("no perturbation direction is walkable by virtual constraints on "

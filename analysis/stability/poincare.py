@@ -35,9 +35,9 @@ import numpy as np
 
 from biped_casadi import require_same_robot
 from biped_casadi.caching import cached
-from biped_casadi.control import PAPER_REJOIN, Design
+from biped_casadi.control import PAPER_REJOIN, Design, require_reference
 from biped_casadi.control.zero_dynamics import denominator_samples, zero_dynamics
-from biped_casadi.numerics import as_vector, rk4_step
+from biped_casadi.numerics import as_count, as_number, as_vector, rk4_step
 from biped_casadi.simulation.kernel import strike
 from biped_casadi.control.output_law import (SECTION, check_M1, check_M1_range, check_rejoin,
                                      decoupling_denominator, is_singular)
@@ -228,18 +228,19 @@ class PoincareMap:
 
     def __init__(self, model, gait, n_pre: int = 80, n_post: int = 240, n_scan: int = 250,
                  horizon: float = 2.0, rejoin: float = PAPER_REJOIN, threads: int | None = None):
-        require_same_robot(model, gait)
+        require_same_robot(model, require_reference(gait))
         self.model, self.gait = model, gait
         self.nu = model.nu
         self.T = T = gait.T
-        self.n_pre, self.n_post, self.n_scan = n_pre, n_post, n_scan
-        self.horizon = horizon
-        self.rejoin = check_rejoin(rejoin)
-        self.tau_s = SECTION * T
+        self.n_pre, self.n_post, self.n_scan = map(as_count, (n_pre, n_post, n_scan),
+                                                   ("n_pre", "n_post", "n_scan"))
+        if (h := as_number(horizon, "horizon")) <= SECTION:
+            raise ValueError(f"horizon must exceed {SECTION} (the section), got {horizon!r}")
+        self.horizon, self.rejoin, self.tau_s = h, check_rejoin(rejoin), SECTION * T
         self.x_star = gait.state_at(self.tau_s)
         self.ref_s = gait.state(self.tau_s)           # reference state at the section
         self.ref_0 = np.asarray(gait.r0, dtype=float)
-        self.threads = threads or max(1, min(os.cpu_count() or 1, 8))
+        self.threads = as_count(threads or min(os.cpu_count() or 1, 8), "threads")
         self._open = None
         self._build()
         #: D11 and D12 along the reference on [0, T] (1001 points), for eq. (23)-(24)
@@ -624,8 +625,7 @@ def singular_m1_values(gait) -> np.ndarray:
     numpy.ndarray
         (nu,).
     """
-    model = gait.model
-    D = np.array(model.D(gait.q(gait.T)))
+    D = np.array(require_reference(gait).model.D(gait.q(gait.T)))
     return D[0, 0] / D[0, 1:]
 
 
@@ -646,8 +646,7 @@ def poincare_map(gait, **options) -> PoincareMap:
     -------
     PoincareMap
     """
-    model = gait.model
-    return PoincareMap(model, gait, **options)
+    return PoincareMap(require_reference(gait).model, gait, **options)
 
 
 def poincare_eigenvalues(gait, M1=None, *args, method: str | None = None,
@@ -697,4 +696,4 @@ def poincare_eigenvalues(gait, M1=None, *args, method: str | None = None,
         M1, rejoin = d.M1, d.rejoin
     if M1 is None:
         raise ValueError("M1: give the outputs (one number per torque) or a Design")
-    return poincare_map(gait, rejoin=float(rejoin)).analyse(M1, method=method)
+    return poincare_map(gait, rejoin=check_rejoin(rejoin)).analyse(M1, method=method)

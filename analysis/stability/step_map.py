@@ -137,7 +137,7 @@ class StepMap:
 
     Parameters
     ----------
-    controller : TimeVaryingController or VirtualConstraintController
+    controller : Design, TimeVaryingController or VirtualConstraintController
         The control law (any controller with ``law`` and ``start``).
     options : SimulationOptions, optional
         The simulator's (its ``rk4_steps`` set the discrete map); default
@@ -148,7 +148,7 @@ class StepMap:
 
     def __init__(self, controller, options: SimulationOptions | None = None, plant=None):
         self.sim = simulator(controller, options, plant)
-        self.controller, self.plant = controller, self.sim.plant
+        self.controller, self.plant = self.sim.controller, self.sim.plant   # a Design's
         self.nq = self.plant.nq
         self.h = self.sim.h
         self._build()
@@ -333,7 +333,7 @@ def step_map(controller, options: SimulationOptions | None = None, plant=None) -
 
     Parameters
     ----------
-    controller : TimeVaryingController or VirtualConstraintController
+    controller : Design, TimeVaryingController or VirtualConstraintController
         The control law.
     options : SimulationOptions, optional
         The simulator's options.

@@ -26,8 +26,9 @@ import casadi as ca
 import numpy as np
 
 from biped_casadi.caching import cached
-from biped_casadi.numerics import rk4_step
-from biped_casadi.control.output_law import outputs
+from biped_casadi.numerics import as_count, as_number, rk4_step
+from biped_casadi.control import require_reference, require_same_robot
+from biped_casadi.control.output_law import check_rejoin, outputs
 from biped_casadi.control.zero_dynamics import zero_dynamics
 
 __all__ = ["VariationalJacobian", "variational_jacobian"]
@@ -56,10 +57,14 @@ class VariationalJacobian:
 
     def __init__(self, model, gait, tau_s: float, n_pre: int, n_post: int,
                  rejoin: float = 0.5):
+        require_same_robot(model, require_reference(gait))
         self.model, self.gait = model, gait
         self.T = T = gait.T
-        self.t_c = rejoin * T
-        self.n_pre, self.n_post = n_pre, n_post
+        self.t_c = check_rejoin(rejoin) * T
+        self.n_pre, self.n_post = as_count(n_pre, "n_pre"), as_count(n_post, "n_post")
+        if not 0 < as_number(tau_s, "tau_s") < T:
+            raise ValueError(f"tau_s (the section time) must lie in (0, T = {T:.6g}), "
+                             f"got {tau_s!r}")
         self._zd = zero_dynamics(model)
         q, dq = model.q_sym, model.dq_sym
         self.h_pre, self.t_pre = _rk4_times(tau_s, T, n_pre)
@@ -298,5 +303,4 @@ def variational_jacobian(gait, tau_s: float, n_pre: int, n_post: int,
     -------
     VariationalJacobian
     """
-    model = gait.model
-    return VariationalJacobian(model, gait, tau_s, n_pre, n_post, rejoin)
+    return VariationalJacobian(require_reference(gait).model, gait, tau_s, n_pre, n_post, rejoin)

@@ -38,6 +38,8 @@ from biped_casadi.caching import cached
 from biped_casadi.control.virtual_constraints import (ConstraintSurface, VirtualConstraints,
                                                      constraint_surface)
 from biped_casadi.control.output_law import SECTION
+from biped_casadi.control.reference import require_reference
+from biped_casadi.numerics import as_vector
 from biped_casadi.results import Result
 
 from .poincare import FIXED_POINT_TOL
@@ -308,7 +310,9 @@ def vc_map(gait, phase=None, H0=None, n_steps: int = 1000) -> VirtualConstraintM
     -------
     VirtualConstraintMap
     """
-    model = gait.model
+    model = require_reference(gait).model
+    if phase is not None:
+        phase = tuple(as_vector(phase, model.nq, "phase").tolist())
     surface = constraint_surface(gait, phase, H0)
     return VirtualConstraintMap(model, gait, surface.vc, n_steps, surface=surface)
 
@@ -341,12 +345,10 @@ def vc_eigenvalue(gait, constraints: VirtualConstraints | None = None,
     TypeError
         ``gait`` not a gait (it was an AttributeError on ``gait.model``).
     """
-    if not hasattr(gait, "T") or not hasattr(gait, "model"):
-        raise TypeError(f"vc_eigenvalue(): gait must be a gait (Gait.load(path) or "
-                        f"optimize_gait(model)), got {type(gait).__name__}")
-    model = gait.model
+    model = require_reference(gait).model
     if constraints is None:
-        phase = tuple(np.asarray(model.hip_phase if phase is None else phase, float).ravel())
+        phase = tuple(as_vector(model.hip_phase if phase is None else phase, model.nq,
+                                "phase").tolist())
         H0 = None if H0 is None else tuple(map(tuple, np.asarray(H0, float)))
         return vc_map(gait, phase, H0, n_steps).analyse()
     return VirtualConstraintMap(model, gait, constraints, n_steps).analyse()

@@ -78,7 +78,10 @@ def line_points(j: int, values, nu: int = 4) -> np.ndarray:
     if isinstance(j, bool) or not isinstance(j, (int, np.integer)) or not 0 <= j < nu:
         raise ValueError(f"j (component of M1, 0..{nu - 1}) must be one of "
                          f"{', '.join(map(str, range(nu)))}, got {j!r}")
-    v = np.asarray(values, dtype=float).ravel()
+    try:
+        v = np.asarray(values, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise ValueError("values must be a non-empty list of finite numbers") from None
     if v.size == 0 or not np.all(np.isfinite(v)):
         raise ValueError("values must be a non-empty list of finite numbers")
     P = np.zeros((v.size, nu))
@@ -90,12 +93,12 @@ def _check_range(lo, hi):
     try:
         lo, hi = float(lo), float(hi)
     except (TypeError, ValueError):
-        raise ValueError(f"range must be two numbers, got {lo!r} {hi!r}") from None
+        raise ValueError(f"lo, hi must be two numbers, got {lo!r} {hi!r}") from None
     if not (math.isfinite(lo) and math.isfinite(hi)):
-        raise ValueError(f"range must be finite, got {lo} {hi}")
+        raise ValueError(f"lo, hi must be finite, got {lo} {hi}")
     if not lo < hi:
-        raise ValueError(f"range: LO must be less than HI, got {lo:g} {hi:g}")
-    check_M1_range([lo, hi], "range")
+        raise ValueError(f"lo must be less than hi, got lo = {lo:g}, hi = {hi:g}")
+    check_M1_range([lo, hi], "lo, hi")
     return lo, hi
 
 

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_casadi import require_same_robot
+from biped_casadi.control.reference import require_reference
 from biped_casadi.caching import code_version
 
 from ..stability.poincare import singular_m1_values
@@ -147,7 +148,7 @@ def run_sweep(gait, points, out_dir=None, chunk_size: int | None = None,
     SweepResult
         Row i for ``points[i]``.
     """
-    model = gait.model
+    model = require_reference(gait).model
     t0 = time.perf_counter()
     settings = _settings(settings)
     P = _check_points(points, model.nu)

@@ -83,8 +83,22 @@ def mfpt_estimate(walked, failed, max_steps: int, confidence: float = 0.95) -> M
 
     def chi2_quantile(q, df):                       # as scipy.stats.chi2.ppf computes it
         return float(2.0 * gammaincinv(df / 2, q))
-    walked = np.asarray(walked, np.int64)
-    failed = np.asarray(failed, bool)
+    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) \
+            or max_steps < 1:
+        raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
+    if isinstance(confidence, bool) or not isinstance(confidence, (int, float)) \
+            or not 0 < confidence < 1:
+        raise ValueError(f"confidence must be a number in (0, 1), got {confidence!r}")
+    w = np.atleast_1d(np.asarray(walked))
+    if w.ndim != 1 or not np.issubdtype(w.dtype, np.number) or np.any(~np.isfinite(w)) \
+            or np.any(w != np.round(w)) or np.any(w < 0) or np.any(w > max_steps):
+        raise ValueError(f"walked must be whole numbers of steps in [0, max_steps = "
+                         f"{max_steps}], one per run")
+    walked = w.astype(np.int64)
+    failed = np.atleast_1d(np.asarray(failed, bool))
+    if failed.shape != walked.shape:
+        raise ValueError(f"failed must have one entry per run ({walked.size}), got shape "
+                         f"{failed.shape}")
     F = int(failed.sum())
     W = int(walked.sum())
     E = W + F

@@ -163,7 +163,7 @@ def gait_sensitivity(controller, options=None, plant=None) -> GaitSensitivity:
 
     Parameters
     ----------
-    controller : TimeVaryingController or VirtualConstraintController
+    controller : Design, TimeVaryingController or VirtualConstraintController
         The control law (any controller of the law interface).
     options : SimulationOptions, optional
         The simulator's (its ``rk4_steps`` fix the discrete map).

@@ -177,10 +177,16 @@ def monte_carlo(design, spec=None, settings: MonteCarloSettings | None = None,
         if spec is not None:
             raise ValueError("spec: with a design, give the settings (what walks is the "
                              "design)")
-        gait, spec = design.gait, WalkerSpec.of(design, plant=plant, saturate=saturate)
-    else:
+        gait, spec = Design.require(design).gait, WalkerSpec.of(design, plant=plant,
+                                                                saturate=saturate)
+    elif hasattr(design, "T") and hasattr(getattr(design, "model", None), "nq"):
         gait = design
-    st = settings or MonteCarloSettings()
+    else:
+        raise TypeError("design: a Design on its gait (or a gait with a WalkerSpec) is "
+                        f"needed, got {type(design).__name__}")
+    st = settings if settings is not None else MonteCarloSettings()
+    if not isinstance(st, MonteCarloSettings):
+        raise ValueError(f"settings must be a MonteCarloSettings, got {type(st).__name__}")
     if not isinstance(spec, WalkerSpec):
         raise ValueError("spec must be a WalkerSpec")
     if spec.controller == "tv" and len(spec.M1) != gait.model.nu:

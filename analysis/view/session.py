@@ -19,6 +19,9 @@ import numpy as np
 
 from biped_casadi import Design, Gains, Perturbation, SimulationOptions, simulate
 from biped_casadi.caching import digest
+from biped_casadi.control import check_M1
+from biped_casadi.control.output_law import check_rejoin
+from biped_casadi.control.reference import require_reference
 
 from ..pipeline.walking import BASIN_REFINE
 from ..reporting.text import eigenvalues_text, number_text, walk_text
@@ -77,6 +80,21 @@ class ViewSettings:
     perturbation: Perturbation | None = None
     options: SimulationOptions = field(default_factory=SimulationOptions)
     replay: tuple = ()
+
+    def __post_init__(self):
+        nu = require_reference(self.gait).model.nu
+        if self.controller not in ("tv", "vc"):
+            raise ValueError(f"controller must be 'tv' or 'vc', got {self.controller!r}")
+        if self.M1 is not None:
+            object.__setattr__(self, "M1", tuple(check_M1(self.M1, nu).tolist()))
+        object.__setattr__(self, "rejoin", check_rejoin(self.rejoin))
+        for name, kind in (("gains", Gains), ("options", SimulationOptions)):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(f"{name} must be a {kind.__name__}, got "
+                                 f"{type(getattr(self, name)).__name__}")
+        if self.perturbation is not None and not isinstance(self.perturbation, Perturbation):
+            raise ValueError(f"perturbation must be a Perturbation or None, got "
+                             f"{type(self.perturbation).__name__}")
 
     @property
     def start(self) -> Perturbation:

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..caching import digest
 from .output_law import Gains, check_M1, check_rejoin
-from .reference import Reference, require_same_robot
+from .reference import Reference, require_reference, require_same_robot
 from .time_varying import PAPER_REJOIN, TimeVaryingController
 from .virtual_constraints import VirtualConstraintController
 
@@ -35,8 +35,9 @@ class Design:
     gait : Reference, optional
         The gait the design runs on (a design without one is completed by the function
         it is given to, with the gait given there).
-    gains : Gains or tuple, optional
-        (Kp, Kd, eps) of eq. (13); default ``Gains()``.
+    gains : Gains, tuple or dict, optional
+        (Kp, Kd, eps) of eq. (13), all three, or a dict of some of them by name; default
+        ``Gains()``.
 
     Examples
     --------
@@ -48,17 +49,19 @@ class Design:
 
     def __init__(self, M1=None, rejoin: float = PAPER_REJOIN, gait: Reference | None = None,
                  gains=None):
+        if gait is not None:
+            require_reference(gait)
         if M1 is not None:
-            M1 = np.atleast_1d(np.asarray(M1, dtype=float))
+            try:
+                M1 = np.atleast_1d(np.asarray(M1, dtype=float))
+            except (TypeError, ValueError):
+                raise ValueError(f"M1 must be numbers (one per torque), got {M1!r}") from None
             if gait is not None and M1.size != gait.model.nu:
                 raise ValueError(f"M1 must have {gait.model.nu} components (one per torque) "
                                  f"for {gait.model.params.name}, got {M1.size}")
             M1 = tuple(check_M1(M1, M1.size).tolist())
         rejoin = check_rejoin(rejoin)
-        if gains is None:
-            gains = Gains()
-        elif not isinstance(gains, Gains):
-            gains = Gains(*gains)
+        gains = _gains(gains)
         for k, v in (("M1", M1), ("rejoin", rejoin), ("gait", gait), ("gains", gains)):
             object.__setattr__(self, k, v)
 
@@ -88,6 +91,9 @@ class Design:
         -------
         Design
         """
+        if M1 is None:
+            raise ValueError("M1: give one number per torque (Design.vc(gait) for virtual "
+                             "constraints)")
         return cls(M1, rejoin, gait, gains)
 
     @classmethod
@@ -263,6 +269,22 @@ class Design:
         if self.M1 is None:
             return f"Design.vc({self.gains!r}{gait})"
         return f"Design(M1={list(self.M1)}, rejoin={self.rejoin:g}{gait})"
+
+
+def _gains(gains) -> Gains:
+    """``gains`` as a :class:`Gains`: None (the defaults), a Gains, a mapping by name or
+    the three numbers (Kp, Kd, eps)."""
+    if gains is None or isinstance(gains, Gains):
+        return Gains() if gains is None else gains
+    if isinstance(gains, dict):
+        unknown = sorted(set(gains) - {"Kp", "Kd", "eps"})
+        if unknown:
+            raise ValueError(f"gains: unknown gain {unknown[0]!r} (Kp, Kd, eps)")
+        return Gains(**gains)
+    if isinstance(gains, (str, bytes)) or not hasattr(gains, "__len__") or len(gains) != 3:
+        raise ValueError(f"gains must be a Gains or the three numbers (Kp, Kd, eps), "
+                         f"got {gains!r}")
+    return Gains(*gains)
 
 
 def _key(gait):

@@ -676,6 +676,9 @@ def c_sources(law: ExportedLaw, provenance: dict | None = None, timing: str = ""
         :data:`HEADER`, :data:`WRAPPER`, :data:`GENERATED`, ``README.md`` and
         ``example/main.c``.
     """
+    if not isinstance(law, ExportedLaw):
+        raise TypeError(f"law: an ExportedLaw is needed (exported_law(controller)), got "
+                        f"{type(law).__name__}")
     provenance = dict(provenance or {})
     return {HEADER: _header(law, provenance), WRAPPER: _wrapper(law),
             GENERATED: _generated(law), "README.md": _readme(law, provenance, timing),

@@ -10,7 +10,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from ..files import name_destination
+from ..files import file_path, name_destination
 from .export import HEADER, MARKER
 
 __all__ = ["check_destination", "staged_export", "Stage", "write_export", "file_digest"]
@@ -43,7 +43,7 @@ def check_destination(out) -> Path:
     ValueError
         Naming ``out`` when it is a file or a folder holding something else.
     """
-    p = Path(out)
+    p = file_path(out, "out")
     if p.exists() or p.is_symlink():
         if not p.is_dir():
             raise ValueError(f"out: {p} exists and is not a folder")

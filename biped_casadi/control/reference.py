@@ -18,7 +18,34 @@ import abc
 import casadi as ca
 import numpy as np
 
-__all__ = ["Reference", "require_same_robot"]
+__all__ = ["Reference", "require_same_robot", "require_reference"]
+
+
+def require_reference(reference, name: str = "gait"):
+    """``reference`` checked to be a gait (a :class:`Reference`, or an object like one).
+
+    Parameters
+    ----------
+    reference : Reference
+        What the caller passed as the gait.
+    name : str
+        The argument's name, used in the error message.
+
+    Returns
+    -------
+    Reference
+        ``reference`` itself.
+
+    Raises
+    ------
+    TypeError
+        Naming ``name`` when it has no ``model`` and ``T`` (a path, a model, None).
+    """
+    if isinstance(reference, Reference) or (hasattr(reference, "T") and
+                                            hasattr(getattr(reference, "model", None), "nq")):
+        return reference
+    raise TypeError(f"{name}: a gait is needed (gait_opt.Gait.load(path) or "
+                    f"optimize_gait(model)), got {type(reference).__name__}")
 
 
 def require_same_robot(model, reference) -> None:

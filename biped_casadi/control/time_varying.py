@@ -19,7 +19,7 @@ from .output_law import (Gains, SingularityReport, actuated_torque, check_M1, ch
                          correction, decoupling_denominator, initial_output_errors,
                          output_acceleration, output_matrix, outputs, singularity_report,
                          unactuated_acceleration)
-from .reference import require_same_robot
+from .reference import require_reference, require_same_robot
 from .zero_dynamics import denominator_samples
 
 __all__ = ["TimeVaryingController", "PAPER_REJOIN"]
@@ -65,7 +65,7 @@ class TimeVaryingController(Controller):
 
     def __init__(self, reference, M1=None, gains: Gains | None = None,
                  rejoin: float = PAPER_REJOIN):
-        model = reference.model
+        model = require_reference(reference, "reference").model
         require_same_robot(model, reference)
         self.model, self.reference = model, reference
         nu = model.nu

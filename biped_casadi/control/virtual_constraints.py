@@ -14,7 +14,7 @@ from ..caching import cached
 from ..numerics import as_vector, rk4_step
 from .controller import ControlOutput, Controller, StepStart
 from .output_law import Gains, SingularityReport, correction, output_acceleration, singularity_report
-from .reference import require_same_robot
+from .reference import require_reference, require_same_robot
 
 __all__ = ["VirtualConstraints", "VirtualConstraintController", "fit_virtual_constraints",
            "ConstraintSurface", "constraint_surface", "HIP_PHASE", "phase_correction",
@@ -234,7 +234,7 @@ def fit_virtual_constraints(gait, c=None, H0=None, segments_per_step: int = 200,
         When c q is not strictly monotonic along the step, [H0; c] is singular, or an
         argument is out of range.
     """
-    nq = gait.model.nq
+    nq = require_reference(gait).model.nq
     c = as_vector(gait.model.hip_phase if c is None else c, nq, "c")
     H0 = np.hstack([np.zeros((nq - 1, 1)), np.eye(nq - 1)]) if H0 is None \
         else np.asarray(H0, dtype=float)
@@ -337,7 +337,7 @@ class VirtualConstraintController(Controller):
 
     def __init__(self, gait, constraints: VirtualConstraints | None = None,
                  gains: Gains | None = None, correction: bool = True):
-        model = gait.model
+        model = require_reference(gait).model
         require_same_robot(model, gait)
         self.model, self.reference = model, gait
         self.constraints = constraints if constraints is not None else fit_virtual_constraints(gait)
@@ -655,7 +655,7 @@ def constraint_surface(gait, phase=None, H0=None) -> ConstraintSurface:
         The same object for the same robot, gait, phase and outputs (the defaults
         spelled out or not).
     """
-    model = gait.model
+    model = require_reference(gait).model
     phase = tuple(np.asarray(model.hip_phase if phase is None else phase, float).ravel())
     H0 = None if H0 is None else tuple(map(tuple, np.asarray(H0, float)))
     return _surface(model, gait, phase, H0)

@@ -79,6 +79,9 @@ def relabelling(nq: int) -> np.ndarray:
     numpy.ndarray
         (nq, nq), entries 0 and +-1; :data:`E_RELABEL` for RABBIT.
     """
+    if isinstance(nq, bool) or not isinstance(nq, (int, np.integer)) or nq < 3 or nq % 2 == 0:
+        raise ValueError(f"nq must be an odd integer >= 3 (the stance leg's angle and two "
+                         f"legs of k joints each, with the torso: 1 + 2 k), got {nq!r}")
     S = np.eye(nq) - np.eye(nq, k=-1)
     J = np.eye(nq)[::-1]
     return S @ J @ np.linalg.inv(S)

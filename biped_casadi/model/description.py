@@ -83,7 +83,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..files import read_text_file
+from ..files import file_path, read_text_file
 from .urdf_map import UrdfMap, urdf_map_from_dict, wrap_angle
 
 __all__ = ["Link", "RobotDescription", "load_description", "find_description",
@@ -572,7 +572,7 @@ def load_description(path) -> RobotDescription:
         File missing or unparsable, or a field missing, unknown or out of range (the
         message names the file and the field).
     """
-    path = Path(path)
+    path = file_path(path)
     text = read_text_file(path, "robot description file", 1_000_000)
     try:
         data = tomllib.loads(text)

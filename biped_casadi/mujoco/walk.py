@@ -41,6 +41,7 @@ import numpy as np
 
 from ..control.design import Design
 from ..control.output_law import SECTION
+from ..control.reference import require_reference
 from ..model.description import torso_lean
 from ..numerics import FastCall
 from ..simulation.perturbation import Perturbation
@@ -574,7 +575,7 @@ def start_of(gait, perturbation=None) -> tuple:
     tuple of numpy.ndarray
         (q0, dq0).
     """
-    nq = gait.model.nq
+    nq = require_reference(gait).model.nq
     if perturbation is None:
         return np.array(gait.q(0.0), float), np.array(gait.dq(0.0), float)
     if not isinstance(perturbation, Perturbation):

@@ -55,6 +55,7 @@ import numpy as np
 from ..caching import cached
 from ..control.design import Design
 from ..control.output_law import SECTION
+from ..control.reference import require_reference
 from ..numerics import FastCall, as_vector, compiled, rk4_step
 from ..results import internal, json_safe
 from .compiled_loop import compiled_closed_loop
@@ -217,7 +218,7 @@ def perturbed_initial_state(gait, q_error=0.0, dq_error=0.0):
     tuple of numpy.ndarray
         (q, dq), each (nq,).
     """
-    nq = gait.model.nq
+    nq = require_reference(gait).model.nq
     if np.ndim(q_error) == 0 and np.ndim(dq_error) == 0:
         pert = Perturbation.uniform(nq, q_error, dq_error)
     else:
@@ -240,7 +241,7 @@ class Simulator:
 
     Parameters
     ----------
-    controller : TimeVaryingController or VirtualConstraintController
+    controller : Design, TimeVaryingController or VirtualConstraintController
         The control law (and through it the model and the reference); or a
         :class:`~biped_casadi.control.compiled.CompiledController`, an exported law's
         compiled library, whose closed loop is made of numeric calls
@@ -258,6 +259,11 @@ class Simulator:
         if not isinstance(self.options, SimulationOptions):
             raise ValueError(f"options must be a SimulationOptions, got "
                              f"{type(self.options).__name__}")
+        if isinstance(controller, Design):
+            controller = controller.controller_for()
+        if not (hasattr(controller, "reference") and hasattr(controller, "model")):
+            raise TypeError("controller: a TimeVaryingController, VirtualConstraintController "
+                            f"or Design is needed, got {type(controller).__name__}")
         self.controller = controller
         self.model = controller.model
         self.plant = self.model if plant is None else plant
@@ -390,6 +396,8 @@ class Simulator:
         q = as_vector(q0, nq, "q0")
         dq = as_vector(dq0, nq, "dq0")
         steps = self.options.steps if steps is None else steps
+        if isinstance(steps, np.integer):
+            steps = int(steps)
         if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         heights = step_heights(terrain, 1, steps)[0]
@@ -578,7 +586,7 @@ def simulator(controller, options: SimulationOptions | None = None, plant=None) 
 
     Parameters
     ----------
-    controller : TimeVaryingController or VirtualConstraintController
+    controller : Design, TimeVaryingController or VirtualConstraintController
         The control law.
     options : SimulationOptions, optional
         Default ``SimulationOptions()``.
@@ -621,6 +629,9 @@ def simulate(controller, q0=None, dq0=None, options: SimulationOptions | None = 
     """
     if isinstance(controller, Design):
         controller = controller.controller_for()
+    if not hasattr(controller, "reference"):
+        raise TypeError("controller: a TimeVaryingController, VirtualConstraintController "
+                        f"or Design is needed, got {type(controller).__name__}")
     sim = simulator(controller, options if options is not None else SimulationOptions(), plant)
     g = controller.reference
     q0 = g.q(0.0) if q0 is None else q0

@@ -3,6 +3,7 @@ thresholds of the validity conditions (:mod:`biped_casadi.simulation.validity`).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass
 
 from ..control.output_law import SECTION
@@ -71,7 +72,11 @@ class SimulationOptions:
     saturate: bool = False
 
     def __post_init__(self):
-        if not isinstance(self.steps, int) or self.steps < 1:
+        for name in ("steps", "rk4_steps"):          # numpy integers are integers too
+            v = getattr(self, name)
+            if isinstance(v, numbers.Integral) and not isinstance(v, bool):
+                object.__setattr__(self, name, int(v))
+        if isinstance(self.steps, bool) or not isinstance(self.steps, int) or self.steps < 1:
             raise ValueError(f"steps must be a positive integer, got {self.steps!r}")
         if not isinstance(self.rk4_steps, int) or self.rk4_steps < 8 or self.rk4_steps % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {self.rk4_steps!r}")

@@ -20,7 +20,8 @@ import casadi as ca
 import numpy as np
 
 from ..caching import cached
-from ..numerics import as_number, as_vector
+from ..control.reference import require_reference
+from ..numerics import as_number, as_rows, as_vector
 
 __all__ = ["Perturbation", "directions", "direction_errors", "start_states", "PAPER_SIZES",
            "torso_push"]
@@ -185,6 +186,8 @@ def directions(n: int, nq: int = 5, seed: int = 2024) -> np.ndarray:
     """
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise ValueError(f"n (number of directions) must be a positive integer, got {n!r}")
+    if isinstance(nq, bool) or not isinstance(nq, (int, np.integer)) or nq < 1:
+        raise ValueError(f"nq (joints) must be a positive integer, got {nq!r}")
     rng = np.random.default_rng(seed)
     out = [np.ones(2 * nq)]
     while len(out) < n:
@@ -247,7 +250,9 @@ def start_states(reference, dirs, scales, sizes=PAPER_SIZES):
     q0, dq0 : numpy.ndarray
         (n, nq) start configurations (rad) and velocities (rad/s).
     """
-    return _add_to_start(reference, *direction_errors(dirs, scales, sizes))
+    nq = require_reference(reference).model.nq
+    return _add_to_start(reference, *direction_errors(as_rows(dirs, 2 * nq, "dirs"), scales,
+                                                      sizes))
 
 
 @cached(maxsize=8)

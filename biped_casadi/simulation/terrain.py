@@ -281,7 +281,7 @@ def step_heights(terrain, n: int, steps: int) -> np.ndarray:
     if isinstance(terrain, Terrain):
         row = np.array([terrain.height(k) for k in range(steps)])
         return np.broadcast_to(row, (n, steps)).copy()
-    h = _check_heights(np.asarray(terrain, float), "terrain").reshape(np.shape(terrain))
+    h = _check_heights(terrain, "terrain").reshape(np.shape(terrain))
     h = np.atleast_2d(h)
     if h.shape[1] < steps:
         h = np.hstack([h, np.zeros((h.shape[0], steps - h.shape[1]))])

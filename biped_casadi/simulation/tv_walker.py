@@ -34,9 +34,9 @@ import numpy as np
 
 from ..caching import cached
 from ..control.output_law import SECTION, check_M1, decoupling_denominator
-from ..control.reference import require_same_robot
+from ..control.reference import require_reference, require_same_robot
 from ..control.zero_dynamics import denominator_samples, zero_dynamics
-from ..numerics import compiled, rk4_step
+from ..numerics import as_rows, compiled, rk4_step
 from ..simd import kernels
 from .kernel import (CHUNKS_PER_STEP, Diagnostics, call_batched, locate_strike, mapped,
                      strike, threads)
@@ -48,6 +48,21 @@ from .validity import (Limits, first_violation, impact_violation, node_violation
 
 __all__ = ["ZeroDynamicsWalker", "zero_dynamics_walker"]
 
+
+
+def _scenarios(*arrays_and_rejoin) -> int:
+    """The number of scenarios n of row arrays and rejoin times that broadcast along them
+    (each has 1 or n rows); rejoin checked in (0, SECTION]."""
+    *arrays, rejoin = arrays_and_rejoin
+    r = np.asarray(rejoin, dtype=float) if not isinstance(rejoin, str) else np.array(np.nan)
+    if r.ndim > 1 or not np.all((r > 0) & (r <= SECTION)):
+        raise ValueError(f"rejoin must be a number or (n,) numbers in (0, {SECTION}], "
+                         f"got {rejoin!r:.60}")
+    sizes = [len(a) for a in arrays] + [r.size]
+    n = max(sizes)
+    if any(k not in (1, n) for k in sizes):
+        raise ValueError(f"scenarios: every argument has 1 or n rows, got {sizes}")
+    return n
 
 class ZeroDynamicsWalker:
     """The hybrid zero dynamics of the time-varying controller as a batched simulator.
@@ -74,6 +89,9 @@ class ZeroDynamicsWalker:
                 or rk4_steps % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {rk4_steps!r}")
         self.options = options if options is not None else SimulationOptions()
+        if not isinstance(self.options, SimulationOptions):
+            raise ValueError(f"options must be a SimulationOptions, got "
+                             f"{type(self.options).__name__}")
         if self.options.saturate:
             raise ValueError("options: saturate needs the full-order simulator (the walker is "
                              "the zero dynamics, exact only with the law's own torques)")
@@ -250,8 +268,10 @@ class ZeroDynamicsWalker:
             (n, 3 nu + 1) step parameters (M1, t_c, y_i, dy_i) of
             :meth:`ZeroDynamics.params`.
         """
-        q0, dq0, M1s = (np.atleast_2d(np.asarray(a, float)) for a in (q0, dq0, M1s))
-        n = max(len(q0), len(dq0), len(M1s), np.size(rejoin))
+        nq = self.model.nq
+        q0, dq0, M1s = (as_rows(a, k, name) for a, k, name in (
+            (q0, nq, "q0"), (dq0, nq, "dq0"), (M1s, self.nu, "M1s")))
+        n = _scenarios(q0, dq0, M1s, rejoin)
         q0, dq0, M1s = (np.broadcast_to(a, (n, a.shape[1])) for a in (q0, dq0, M1s))
         for i in range(min(n, len(M1s))):
             check_M1(M1s[i], self.nu)
@@ -328,9 +348,10 @@ class ZeroDynamicsWalker:
         -------
         WalkBatch
         """
-        x = np.atleast_2d(np.asarray(x, float))
-        n, nu = len(x), self.nu
-        M1s = np.broadcast_to(np.atleast_2d(np.asarray(M1s, float)), (n, nu))
+        x, M1s = as_rows(x, 2, "x"), as_rows(M1s, self.nu, "M1s")
+        n, nu = _scenarios(x, M1s, rejoin), self.nu
+        x = np.broadcast_to(x, (n, 2))
+        M1s = np.broadcast_to(M1s, (n, nu))
         tc = np.broadcast_to(np.asarray(rejoin, float), (n,)) * self.T
         P = self.zd.params(M1s, tc, np.zeros((n, nu)), np.zeros((n, nu))).reshape(n, -1)
         return self._walk(x.copy(), P, steps, tau0=SECTION * self.T, terrain=terrain)
@@ -531,5 +552,5 @@ def zero_dynamics_walker(gait, options: SimulationOptions | None = None,
     ZeroDynamicsWalker
         The same object for the same arguments.
     """
-    model = gait.model
+    model = require_reference(gait).model
     return ZeroDynamicsWalker(model, gait, options, rk4_steps, jit)

@@ -21,9 +21,9 @@ import numpy as np
 
 from ..caching import cached
 from ..control.output_law import SECTION
-from ..control.reference import require_same_robot
+from ..control.reference import require_reference, require_same_robot
 from ..control.virtual_constraints import constraint_surface, rejoin_phase
-from ..numerics import compiled, rk4_step
+from ..numerics import as_count, compiled, rk4_step
 from ..simd import kernels
 from .kernel import Diagnostics, call_batched, mapped, threads
 from .options import SimulationOptions
@@ -67,6 +67,9 @@ class VirtualConstraintWalker:
         require_same_robot(model, gait)
         self._jit = jit
         self.options = options if options is not None else SimulationOptions()
+        if not isinstance(self.options, SimulationOptions):
+            raise ValueError(f"options must be a SimulationOptions, got "
+                             f"{type(self.options).__name__}")
         if self.options.saturate:
             raise ValueError("options: saturate needs the full-order simulator (the walker is "
                              "the zero dynamics, exact only with the law's own torques)")
@@ -75,7 +78,7 @@ class VirtualConstraintWalker:
         self.n_par = 1 + 2 * self.nu
         self.vmap = constraint_surface(gait)
         self.theta_s = self.vmap.phase(gait.q(SECTION * gait.T))
-        self.nodes = nodes
+        self.nodes = as_count(nodes, "nodes")
         self.limits = Limits.of(self.options, model)
         self.schema = Diagnostics(self.nu, outputs=False)
         self.ref_T = gait.state_at(gait.T)
@@ -453,5 +456,5 @@ def virtual_constraint_walker(gait, options: SimulationOptions | None = None,
     VirtualConstraintWalker
         The same object for the same arguments.
     """
-    model = gait.model
+    model = require_reference(gait).model
     return VirtualConstraintWalker(model, gait, options, nodes, jit)

@@ -5,7 +5,10 @@ import dataclasses
 import math
 from dataclasses import asdict, dataclass, field
 
+from biped_casadi.control.output_law import check_rejoin
 from biped_casadi.results import Result
+
+from ..settings_checks import check_fields, check_gait_fields
 
 from ...robustness.s_star import RobustnessSettings
 from ..robust_search import ROBUST_GAIT
@@ -16,6 +19,7 @@ TODAY_DESIGN = (-8.2618, 2.5374, 0.0034, 8.5090)
 
 #: what the co-design does with a gait it is given (:class:`CodesignSettings`)
 GIVEN_GAIT = ("fixed", "free", "auto")
+
 
 
 @dataclass(frozen=True)
@@ -36,6 +40,9 @@ class IpoptLimits:
 
     max_iter: int = 100
     max_evaluations: int = 150
+
+    def __post_init__(self):
+        check_fields(self, ("max_iter", "max_evaluations"))
 
 
 @dataclass(frozen=True)
@@ -108,6 +115,14 @@ class StartSampling:
     refine_shrink: float = 0.7
     refine_stop: float = 1.0625
 
+    def __post_init__(self):
+        check_fields(self, ("samples", "kept", "screened", "screen_rounds", "refine_draws",
+                            "refine_bisected", "refine_elite"),
+                     ("box", "s_start", "refine_from", "refine_radius", "refine_shrink",
+                      "refine_stop"))
+        check_fields(self, ("seed", "refine_rounds"), low=0)
+        check_fields(self, ("screen_rk4",), low=8)
+
 
 @dataclass(frozen=True)
 class TrustRegion:
@@ -126,6 +141,9 @@ class TrustRegion:
     alpha: float = 0.05
     T: float = 0.025
     x0: float = 0.25
+
+    def __post_init__(self):
+        check_fields(self, numbers=("alpha", "T", "x0"))
 
 
 @dataclass(frozen=True)
@@ -157,6 +175,9 @@ class Verification:
     tol: float = 1e-3
     hidden: bool = True
     basin: bool = False
+
+    def __post_init__(self):
+        check_fields(self, ("directions", "walk_steps"), ("mu", "torque_limit", "tol"))
 
 
 @dataclass(frozen=True)
@@ -313,6 +334,18 @@ class CodesignSettings:
     move: MoveSettings = field(default_factory=MoveSettings)
 
     def __post_init__(self):
+        check_gait_fields(self.gait)
+        object.__setattr__(self, "rejoin", check_rejoin(self.rejoin))
+        object.__setattr__(self, "rejoin_choices", tuple(
+            check_rejoin(r, "rejoin_choices") for r in self.rejoin_choices))
+        check_fields(self, ("steps",))
+        for name, kind in (("starts", StartSampling), ("trust", TrustRegion),
+                           ("solve", IpoptLimits), ("screen", IpoptLimits),
+                           ("gait_step", IpoptLimits), ("verification", Verification),
+                           ("move", MoveSettings)):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(f"{name} must be a {kind.__name__}, got "
+                                 f"{type(getattr(self, name)).__name__}")
         if self.given_gait not in GIVEN_GAIT:
             raise ValueError(f"given_gait must be one of {GIVEN_GAIT}, got "
                              f"{self.given_gait!r}")

@@ -6,6 +6,9 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from biped_casadi.control import require_reference
+from biped_casadi.numerics import as_count
+
 from .common import SWING, _figure, _legs_legend, _stick, run_label
 
 __all__ = ["gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot", "conjecture_plot",
@@ -29,8 +32,8 @@ def gait_stick_plot(gait, frames: int = 9) -> Figure:
     -------
     Figure
     """
-    T = gait.T
-    model = gait.model
+    T, model = require_reference(gait).T, gait.model
+    frames = as_count(frames, "frames", low=2)
     fig = _figure(figsize=(8, 4.5))
     ax = fig.add_subplot()
     for k, tk in enumerate(np.linspace(0.0, T, frames)):
