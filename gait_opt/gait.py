@@ -18,6 +18,7 @@ from biped_casadi.numerics import as_numbers
 
 from .files import (FORMAT, FORMAT_VERSION, GaitFileError, OpenOrbitWarning, gait_parts,
                     read_gait_file)
+from . import gait_checks
 from .options import GaitOptions
 from .parametrisation import quintic_hermite, reference_dynamics
 
@@ -30,7 +31,7 @@ EXTENT_BEFORE = 0.5
 #: a gait must be a periodic orbit of its own robot to this accuracy: the impact map
 #: applied to (q^d(T), dq^d(T)) returns (q^d(0), dq^d(0)) within ORBIT_TOL (rad, rad/s)
 #: and the swing foot is on the ground at T within ORBIT_TOL (m).  Optimised gaits close
-#: to ~1e-12; the optimiser's own polish accepts at most 1e-10.
+#: to ~1e-12 (at round-off, up to ~1e-9, on an ill-conditioned robot: gait_opt.polish).
 ORBIT_TOL = 1e-8
 
 
@@ -356,49 +357,7 @@ class Gait(Reference):
             the state at T against the state at 0) and ``unactuated_row_residual``
             (first row of eq. 1, N m), plus ``n_points``.
         """
-        m = self.model
-        t = np.linspace(0, self.T, n)
-        q, dq, ddq = self.evaluate(t)
-        u = np.array(self.model.inverse_dynamics.map(n)(q, dq, ddq))
-        Fx, Fz = (np.array(v).ravel() for v in m.ground_reaction_acc.map(n)(q, dq, ddq))
-        xs, zs = (np.array(v).ravel() for v in m.swing_foot.map(n)(q))
-        qm, dqm = q[:, -1], dq[:, -1]
-        qp, dqp, F, _, v_old = (np.array(v).ravel() for v in m.impact_full(qm, dqm))
-        _, dz_end = m.swing_foot_velocity(qm, dqm)
-        # unactuated row of eq. (1) with the reference accelerations
-        D = np.array(m.D.map(n)(q)).reshape(m.nq, m.nq, n, order="F")
-        H = np.array(m.H.map(n)(q, dq))
-        row1 = np.einsum("jn,jn->n", D[0], ddq) + H[0]
-        inner = slice(1, n - 1)
-        s = t / self.T
-        profile = self.options.clearance * 4 * s * (1 - s)
-        if m.scuffing_ignored:
-            # legs without knees: the swing foot must be above the ground beyond the
-            # scuff zone in front of the stance foot (transcription.py); nearer, or
-            # behind, it may graze below
-            height = np.where(xs > m.scuff_zone, zs, np.inf)
-            margin = zs - profile * (xs - m.scuff_zone) / m.description.leg_length
-        else:
-            height, margin = zs, zs - profile
-        knees = (q[list(m.stance_knees)], q[list(m.swing_knees)])
-        return dict(
-            n_points=n,
-            max_abs_torque=float(np.max(np.abs(u))),
-            min_normal_force=float(np.min(Fz)),
-            max_friction_ratio=float(np.max(np.abs(Fx) / np.maximum(Fz, 1e-300))),
-            min_swing_height_inside=float(np.min(height[inner])),
-            min_clearance_margin=float(np.min(margin[inner])),
-            swing_height_at_T=float(zs[-1]),
-            strike_velocity=float(dz_end),
-            liftoff_velocity=float(v_old[1]),
-            impact_impulse=F.tolist(),
-            impact_friction_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else math.inf,
-            max_stance_knee=float(np.max(knees[0])) if m.has_knees else None,
-            min_swing_knee=float(np.min(knees[1])) if m.has_knees else None,
-            periodicity_q=float(np.max(np.abs(qp - q[:, 0]))),
-            periodicity_dq=float(np.max(np.abs(dqp - dq[:, 0]))),
-            unactuated_row_residual=float(np.max(np.abs(row1))),
-        )
+        return gait_checks.dense_check(self, n)
 
     def reintegration_error(self, n: int = 201) -> float:
         """How well q_u^d solves the unactuated row of eq. (1), checked independently.
@@ -444,25 +403,7 @@ class Gait(Reference):
             (constraint family, worst amount), worst first; empty for a valid gait.
             Amounts in N m, N, m, m/s, rad; friction as a ratio.
         """
-        c = check or self.check()
-        o = self.options
-        F = c["impact_impulse"]
-        amounts = {
-            "torque limit": c["max_abs_torque"] - o.torque_limit,
-            "normal force": o.min_normal_force - c["min_normal_force"],
-            "friction cone": c["max_friction_ratio"] - o.mu,
-            "swing foot above ground": (-c["min_swing_height_inside"] + 2 * tol
-                                        if c["min_swing_height_inside"] <= 0 else 0.0),
-            "swing-foot clearance": -c["min_clearance_margin"],
-            "strike velocity": c["strike_velocity"] + o.min_strike_speed,
-            "lift-off velocity": o.min_liftoff_speed - c["liftoff_velocity"],
-            "impact impulse cone": max(-F[1], abs(F[0]) - o.impulse_mu * F[1]),
-        }
-        if self.model.has_knees:
-            amounts["stance knee (hyperextension)"] = c["max_stance_knee"] - o.stance_knee_max
-            amounts["swing knee (hyperextension)"] = o.swing_knee_min - c["min_swing_knee"]
-        bad = [(k, float(v)) for k, v in amounts.items() if v > tol]
-        return sorted(bad, key=lambda t: -t[1])
+        return gait_checks.dense_violations(self, check or self.check(), tol)
 
     def bounds_hit(self, rtol: float = 1e-6) -> list:
         """The optimiser's bounds on the step length and the step time that the gait
@@ -478,13 +419,7 @@ class Gait(Reference):
         list of list
             [option name, 'lower' or 'upper', bound] for each bound the gait lies on.
         """
-        hit = []
-        for name, value in (("step_length_bounds", self.step_length),
-                            ("step_time_bounds", self.T)):
-            for side, b in zip(("lower", "upper"), getattr(self.options, name)):
-                if abs(value - b) <= rtol * abs(b):
-                    hit.append([name, side, float(b)])
-        return hit
+        return gait_checks.bounds_hit(self, rtol)
 
     def summary(self) -> dict:
         """Every figure of the gait: physics on a dense grid and consistency.

@@ -167,6 +167,25 @@ def register(sub):
                                    "mjcf --out robot.xml' writes a robot as a MuJoCo model.")
     acts = p.add_subparsers(dest="action", metavar="ACTION")
     acts.required = True
+    _register_import(acts)
+    q = acts.add_parser(
+        "mjcf", help="a robot as a MuJoCo model (MJCF)",
+        description="Write the MuJoCo model (MJCF) of a robot the toolkit reads: a planar "
+                    "floating base at the hip (slide x, slide z, hinge pitch), hinges with "
+                    "the rotor inertia as armature, motors limited to the torque limit, "
+                    "sphere feet (the only geometry that collides). Its mass matrix equals "
+                    "the toolkit's (tested to 1e-12). MuJoCo's own URDF loader would weld the "
+                    "torso to the world, drop the rotor inertia and make no motors.")
+    q.add_argument("--robot", metavar="NAME|FILE", help=f"{ROBOT_HELP}; default: rabbit")
+    q.add_argument("--out", metavar="FILE.xml", required=True, help="the MJCF file to write")
+    add_mujoco_settings(q)
+    q.add_argument("--torque-limit", type=float, metavar="U",
+                   help="the motors' limit, N m (default the robot's)")
+    q.add_argument("--json", action="store_true", help="print one JSON object")
+    q.set_defaults(func=cmd_mjcf)
+
+
+def _register_import(acts):
     q = acts.add_parser("import", help="a URDF file as a robot description (TOML)",
                         description="Read a planar biped from a URDF (a torso and two "
                                     "identical legs of revolute or continuous joints about "
@@ -227,18 +246,3 @@ def register(sub):
                    help="the description file to write")
     q.add_argument("--json", action="store_true", help="print one JSON object")
     q.set_defaults(func=cmd_import)
-    q = acts.add_parser(
-        "mjcf", help="a robot as a MuJoCo model (MJCF)",
-        description="Write the MuJoCo model (MJCF) of a robot the toolkit reads: a planar "
-                    "floating base at the hip (slide x, slide z, hinge pitch), hinges with "
-                    "the rotor inertia as armature, motors limited to the torque limit, "
-                    "sphere feet (the only geometry that collides). Its mass matrix equals "
-                    "the toolkit's (tested to 1e-12). MuJoCo's own URDF loader would weld the "
-                    "torso to the world, drop the rotor inertia and make no motors.")
-    q.add_argument("--robot", metavar="NAME|FILE", help=f"{ROBOT_HELP}; default: rabbit")
-    q.add_argument("--out", metavar="FILE.xml", required=True, help="the MJCF file to write")
-    add_mujoco_settings(q)
-    q.add_argument("--torque-limit", type=float, metavar="U",
-                   help="the motors' limit, N m (default the robot's)")
-    q.add_argument("--json", action="store_true", help="print one JSON object")
-    q.set_defaults(func=cmd_mjcf)

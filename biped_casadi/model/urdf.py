@@ -95,13 +95,13 @@ from pathlib import Path
 
 import numpy as np
 from urdf_parser_py import urdf as _urdf
-from urdf_parser_py.xml_reflection import core as _xml_core
 
 from ..files import read_text_file
 from .description import RobotDescription, description_from_dict, description_toml, joint_names
 from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
 from .urdf_legs import (MATCH_TOL, MAX_MATCH_TOL, _beyond, _check_foot, check_match_tol,
                         _foot_point, _same_legs, _wider)
+from .urdf_text import _parse, xacro_refusal
 from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader, apply_locks, lock_table
 
 __all__ = ["UrdfImport", "import_urdf", "load_urdf", "description_toml", "xacro_refusal",
@@ -459,103 +459,6 @@ def _torso_length(rd: _Reader, link, frame: _Frame, hip, up, com: float) -> floa
 
 
 # ------------------------------------------------------------------ entry points
-#: the namespaces a xacro file declares for its macros
-_XACRO_NS = ("http://www.ros.org/wiki/xacro", "http://ros.org/wiki/xacro")
-
-
-def xacro_refusal(name: str) -> str:
-    """What to do with a xacro file (the refusal's advice): expand it to a URDF first.
-
-    Parameters
-    ----------
-    name : str
-        The xacro file's name, as the command to run names it.
-
-    Returns
-    -------
-    str
-        The advice, ending a refusal's line.
-    """
-    return (f"expand it to a URDF first ('xacro {name} > robot.urdf', with ROS's xacro or "
-            f"'pip install xacro') and import robot.urdf")
-
-
-def _xacro_marker(text: str) -> str | None:
-    """The first xacro macro element or substitution in ``text`` (a xacro file saved
-    as .urdf), or None: the URDF parser would read it as links without their macros."""
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError:
-        m = re.search(r"<xacro:[A-Za-z_]+", text)      # a prefix without its namespace
-        return m.group(0) + ">" if m else None
-    for el in root.iter():
-        tag = el.tag if isinstance(el.tag, str) else ""
-        if tag.startswith("{") and tag[1:].split("}")[0].rstrip("#/") in _XACRO_NS:
-            return f"<xacro:{tag.split('}', 1)[1]}>"
-        for key, value in el.attrib.items():
-            if "${" in value or "$(" in value:
-                return f'{key}="{value}"'
-    return None
-
-
-def _frames_as_links(text: str) -> tuple:
-    """(text, notes): each top-level ``<frame name= link= xyz= rpy=/>`` (an extension
-    of Drake's and FROST's files: contact points, soles) written as a massless link fixed
-    to its link, so that it can mark the foot; the text as it was without one."""
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError:
-        return text, []
-    frames = [f for f in root.findall("frame") if f.get("name") and f.get("link")]
-    if not frames:
-        return text, []
-    names = {el.get("name") for el in root if el.tag in ("link", "joint")}
-    done = []
-    for f in frames:
-        name = f.get("name")
-        if name in names or f"{name}__frame" in names:
-            continue
-        root.remove(f)
-        link = ET.SubElement(root, "link", name=name)
-        link.tail = "\n"
-        joint = ET.SubElement(root, "joint", name=f"{name}__frame", type="fixed")
-        ET.SubElement(joint, "parent", link=f.get("link"))
-        ET.SubElement(joint, "child", link=name)
-        ET.SubElement(joint, "origin", xyz=f.get("xyz", "0 0 0"), rpy=f.get("rpy", "0 0 0"))
-        names.add(name)
-        done.append(f"{name!r} on {f.get('link')!r}")
-    notes = [f"read the <frame> elements {', '.join(done)} as massless links fixed to their "
-             f"links (Drake's and FROST's extension)"] if done else []
-    return ET.tostring(root, encoding="unicode"), notes
-
-
-def _parse(text: str, where: str, name: str = "FILE"):
-    """The parsed robot, the parser's complaints (unknown tags are not errors) and what
-    was read beyond URDF (``<frame>`` elements).  A xacro file (macros, substitutions)
-    and a file without links (a fragment that a xacro file includes) are refused with
-    what to do."""
-    marker = _xacro_marker(text)
-    if marker is not None:
-        raise ValueError(f"{where}: a xacro file, not a URDF ({marker[:80]}): "
-                         f"{xacro_refusal(name)}")
-    text, framed = _frames_as_links(text)
-    said = []
-    keep = _xml_core.on_error
-    _xml_core.on_error = said.append
-    try:
-        robot = _urdf.URDF.from_xml_string(text.encode())
-    except Exception as e:       # noqa: BLE001 - lxml, assertions and KeyErrors of the parser
-        raise ValueError(f"{where}: cannot parse the URDF ({' '.join(str(e).split()) or type(e).__name__})"
-                         ) from None
-    finally:
-        _xml_core.on_error = keep
-    if not robot.links:
-        raise ValueError(f"{where}: defines no <link>: not a robot's description (a fragment "
-                         f"that a xacro file includes, e.g. ros2_control or gazebo tags?); "
-                         f"import the robot's own file, expanded by xacro if it is one")
-    return robot, said, framed
-
-
 def _check_torque_limit(torque_limit):
     if torque_limit is None:
         return None

@@ -1,0 +1,93 @@
+"""A gait's checks on a dense grid of its step: the physics and consistency figures
+(:meth:`Gait.check <gait_opt.Gait.check>`), the constraints of its options they violate
+(:meth:`Gait.violations <gait_opt.Gait.violations>`), and the step-length and step-time
+bounds it lies on (:meth:`Gait.bounds_hit <gait_opt.Gait.bounds_hit>`): the docstrings
+are the methods'."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["dense_check", "dense_violations", "bounds_hit"]
+
+
+def dense_check(gait, n: int) -> dict:
+    """:meth:`Gait.check <gait_opt.Gait.check>` of ``gait`` on ``n`` points."""
+    m = gait.model
+    t = np.linspace(0, gait.T, n)
+    q, dq, ddq = gait.evaluate(t)
+    u = np.array(gait.model.inverse_dynamics.map(n)(q, dq, ddq))
+    Fx, Fz = (np.array(v).ravel() for v in m.ground_reaction_acc.map(n)(q, dq, ddq))
+    xs, zs = (np.array(v).ravel() for v in m.swing_foot.map(n)(q))
+    qm, dqm = q[:, -1], dq[:, -1]
+    qp, dqp, F, _, v_old = (np.array(v).ravel() for v in m.impact_full(qm, dqm))
+    _, dz_end = m.swing_foot_velocity(qm, dqm)
+    # unactuated row of eq. (1) with the reference accelerations
+    D = np.array(m.D.map(n)(q)).reshape(m.nq, m.nq, n, order="F")
+    H = np.array(m.H.map(n)(q, dq))
+    row1 = np.einsum("jn,jn->n", D[0], ddq) + H[0]
+    inner = slice(1, n - 1)
+    s = t / gait.T
+    profile = gait.options.clearance * 4 * s * (1 - s)
+    if m.scuffing_ignored:
+        # legs without knees: the swing foot must be above the ground beyond the
+        # scuff zone in front of the stance foot (transcription.py); nearer, or
+        # behind, it may graze below
+        height = np.where(xs > m.scuff_zone, zs, np.inf)
+        margin = zs - profile * (xs - m.scuff_zone) / m.description.leg_length
+    else:
+        height, margin = zs, zs - profile
+    knees = (q[list(m.stance_knees)], q[list(m.swing_knees)])
+    return dict(
+        n_points=n,
+        max_abs_torque=float(np.max(np.abs(u))),
+        min_normal_force=float(np.min(Fz)),
+        max_friction_ratio=float(np.max(np.abs(Fx) / np.maximum(Fz, 1e-300))),
+        min_swing_height_inside=float(np.min(height[inner])),
+        min_clearance_margin=float(np.min(margin[inner])),
+        swing_height_at_T=float(zs[-1]),
+        strike_velocity=float(dz_end),
+        liftoff_velocity=float(v_old[1]),
+        impact_impulse=F.tolist(),
+        impact_friction_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else math.inf,
+        max_stance_knee=float(np.max(knees[0])) if m.has_knees else None,
+        min_swing_knee=float(np.min(knees[1])) if m.has_knees else None,
+        periodicity_q=float(np.max(np.abs(qp - q[:, 0]))),
+        periodicity_dq=float(np.max(np.abs(dqp - dq[:, 0]))),
+        unactuated_row_residual=float(np.max(np.abs(row1))),
+    )
+
+
+def dense_violations(gait, check: dict, tol: float) -> list:
+    """:meth:`Gait.violations <gait_opt.Gait.violations>` of ``gait`` from ``check``."""
+    c = check
+    o = gait.options
+    F = c["impact_impulse"]
+    amounts = {
+        "torque limit": c["max_abs_torque"] - o.torque_limit,
+        "normal force": o.min_normal_force - c["min_normal_force"],
+        "friction cone": c["max_friction_ratio"] - o.mu,
+        "swing foot above ground": (-c["min_swing_height_inside"] + 2 * tol
+                                    if c["min_swing_height_inside"] <= 0 else 0.0),
+        "swing-foot clearance": -c["min_clearance_margin"],
+        "strike velocity": c["strike_velocity"] + o.min_strike_speed,
+        "lift-off velocity": o.min_liftoff_speed - c["liftoff_velocity"],
+        "impact impulse cone": max(-F[1], abs(F[0]) - o.impulse_mu * F[1]),
+    }
+    if gait.model.has_knees:
+        amounts["stance knee (hyperextension)"] = c["max_stance_knee"] - o.stance_knee_max
+        amounts["swing knee (hyperextension)"] = o.swing_knee_min - c["min_swing_knee"]
+    bad = [(k, float(v)) for k, v in amounts.items() if v > tol]
+    return sorted(bad, key=lambda t: -t[1])
+
+
+def bounds_hit(gait, rtol: float) -> list:
+    """:meth:`Gait.bounds_hit <gait_opt.Gait.bounds_hit>` of ``gait``."""
+    hit = []
+    for name, value in (("step_length_bounds", gait.step_length),
+                        ("step_time_bounds", gait.T)):
+        for side, b in zip(("lower", "upper"), getattr(gait.options, name)):
+            if abs(value - b) <= rtol * abs(b):
+                hit.append([name, side, float(b)])
+    return hit
