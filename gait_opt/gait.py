@@ -406,8 +406,9 @@ class Gait(Reference):
         return gait_checks.dense_violations(self, check or self.check(), tol)
 
     def bounds_hit(self, rtol: float = 1e-6) -> list:
-        """The optimiser's bounds on the step length and the step time that the gait
-        lies on: its optimum lies beyond them (default bounds are RABBIT's sizes).
+        """The step-length and step-time bounds of the optimiser that the gait lies on.
+
+        Its optimum lies beyond them (the default bounds are RABBIT's sizes).
 
         Parameters
         ----------
