@@ -334,12 +334,7 @@ class _Reader:
                       f"(a fixed joint for a part of one body) or delete the links that are "
                       f"not the robot's")
         name = roots[0]
-        reached, todo = {name}, [name]
-        while todo:
-            for j in self.children.get(todo.pop(), []):
-                if j.child not in reached:
-                    reached.add(j.child)
-                    todo.append(j.child)
+        reached = self.subtree(name)
         cut = [n for n in self.links if n not in reached and n not in alone]
         if cut:
             self.fail(f"link(s) {', '.join(repr(n) for n in cut[:4])} not connected to the "
@@ -380,12 +375,7 @@ class _Reader:
                 self.fail("no root link: the joints make a loop (every link is some joint's "
                           "child)")
             seen.add(at)
-        reached, todo = {name}, [name]
-        while todo:
-            for j in self.children.get(todo.pop(), []):
-                if j.child not in reached:
-                    reached.add(j.child)
-                    todo.append(j.child)
+        reached = self.subtree(name)
         if path:
             R, turning = np.eye(3), []
             for j in path:
@@ -403,6 +393,16 @@ class _Reader:
                 f"the {len(out)} link(s) above and beside it ({mass:g} kg) are not in the "
                 f"model; pitch is the angle of link {name!r} in the world")
         return name
+
+    def subtree(self, name: str) -> set:
+        """The links at and below link ``name``."""
+        reached, todo = {name}, [name]
+        while todo:
+            for j in self.children.get(todo.pop(), []):
+                if j.child not in reached:
+                    reached.add(j.child)
+                    todo.append(j.child)
+        return reached
 
     def fixed_descendants(self, frame: _Frame) -> list:
         """(joint, frame) of every link hanging from ``frame`` by fixed joints only."""
