@@ -96,7 +96,9 @@ def cmd_mujoco(args):
     if args.plot:
         say("drawing the figure and the animation ...")
         folder = Path(args.plot)
-        figures["steps"] = save_figures({"mujoco_steps": mujoco_steps_plot([w])}, folder)[0]
+        title = f"In MuJoCo, {design.label()}:\nspeed, step duration and error at each touchdown"
+        figures["steps"] = save_figures({"mujoco_steps": mujoco_steps_plot([w], title=title)},
+                                        folder)[0]
         if w.t.size:
             figures["animation"] = mujoco_animation(w, layout(model), folder / "mujoco_walk.gif",
                                                     max_steps=ANIMATED_STEPS)
