@@ -75,9 +75,9 @@ class M1Result(Result):
     message : str
         The result in words.
     at_bound : bool
-        Whether a component of M1 lies on the NLP's box |M1(i)| <= :data:`M1_BOX` (to
-        1e-3 relative): max|lambda| still falls beyond it, so M1 is where the search
-        stopped, not an optimum.
+        Whether a component of M1 lies on the NLP's box ``|M1(i)| <= M1_BOX`` (to 1e-3
+        relative): max|lambda| still falls beyond it, so M1 is where the search stopped,
+        not an optimum.
     history : list of dict
         Every local solution found (start, M1, max_abs, how); left out of
         ``to_dict()``.
