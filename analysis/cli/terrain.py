@@ -73,7 +73,7 @@ def cmd_terrain(args):
     sensitivity norm, run the Monte Carlo, then report (JSON or text) and draw."""
     gains, rejoin, profile = _check_arguments(args)
     say = Progress("terrain", quiet=args.json)
-    _check_scheduler(args, say)
+    check_scheduler(args.scheduler, say)
     gait, spec, st = _build(args, say, gains, rejoin, profile)
 
     # ---- the exact gait sensitivity norm, then the Monte Carlo
@@ -131,11 +131,6 @@ def _check_arguments(args):
     if args.plot is not None:
         output_dir(args.plot, "--plot")
     return gains, rejoin, profile
-
-
-def _check_scheduler(args, say):
-    """A Dask scheduler given by address answers, or a UserError."""
-    check_scheduler(args.scheduler, say)
 
 
 def _build(args, say, gains, rejoin, profile):

@@ -35,7 +35,7 @@ import numpy as np
 from biped_casadi import Design, SimulationOptions, directions, require_same_robot
 from biped_casadi.control.output_law import require_regular
 from biped_casadi.control.reference import require_reference
-from biped_casadi.numerics import as_number
+from biped_casadi.numerics import as_count, as_number
 from biped_casadi.results import Result, internal
 from biped_casadi.simulation import (WalkBatch, start_states, virtual_constraint_walker,
                                      zero_dynamics_walker)
@@ -93,10 +93,7 @@ class RobustnessSettings:
     def __post_init__(self):
         for name, low in (("directions", 1), ("seed", 0), ("max_candidates", 1), ("steps", 1),
                           ("rounds", 1), ("rk4_steps", 8)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
-                raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
-            object.__setattr__(self, name, int(v))
+            object.__setattr__(self, name, as_count(getattr(self, name), name, low))
         if self.rk4_steps % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {self.rk4_steps}")
         for name in ("tol", "s_max", "mu") + (("torque_limit",) if self.torque_limit is not None
