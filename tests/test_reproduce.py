@@ -211,6 +211,26 @@ def test_reproduce_refuses_a_file_as_folder(tmp_path):
     assert f.read_text() == "a file" and sorted(tmp_path.iterdir()) == [f]
 
 
+@pytest.mark.parametrize("kw, match", [
+    (dict(grid_n=1), "grid_n must be an integer >= 2"),
+    (dict(sim_steps=2.5), "sim_steps must be an integer"),
+    (dict(terrain_sigmas=(0.004, -0.1)), r"terrain_sigmas\[1\] must be positive"),
+    (dict(domain_range=(5, -5)), "low < high"),
+    (dict(robustness=3), "robustness must be a RobustnessSettings"),
+    (dict(workers=0), "workers must be an integer >= 1"),
+    (dict(progress="no"), "progress must be True or False"),
+    (dict(robot=""), "robot must be"),
+    (dict(resolution={"grid": 3}), "unknown option 'grid'")])
+def test_options_are_checked_before_anything_runs(tmp_path, kw, match):
+    out = tmp_path / "rep"
+    with pytest.raises(ValueError, match=match):
+        reproduce(out, **kw)
+    assert not out.exists()
+    # a list where a tuple goes is kept as the tuple (the settings stay hashable)
+    from analysis.pipeline.options import Resolution
+    assert Resolution.make(False, mujoco_scales=[1, 2]).mujoco_scales == (1, 2)
+
+
 def test_cli_json_is_the_result(tmp_path, gait, light_stages, capsys):
     from analysis.cli import main
     assert main(["reproduce", "--out", str(tmp_path / "r"), "--quick", "--json",

@@ -104,7 +104,8 @@ def cmd_robust_design(args, say):
             free=f"the gait moved to the robust gait constraints {ROBUST_GAIT} near it, "
                  "then gait and M1 co-designed",
             auto="M1 on the gait as given, the gait moved from it when that misses the "
-                 "target")[mode] + "; about a minute on 2 cores the first time")
+                 "target")[mode] + "; on 2 cores the first time under a minute for RABBIT's "
+            "gaits, a few minutes for other robots")
     try:
         r = codesign(gait if gait is not None else model, st, gait_file=args.gait,
                      progress=say, use_cache=not args.no_cache, scheduler=args.scheduler,

@@ -474,7 +474,8 @@ def hidden_sign_patterns(design: Design, kept, settings: RobustnessSettings,
     fo = [str(x) for x in runs.verdict(st.tol)] if runs is not None else []
     full = dict(passed=int(sum(x == "ok" for x in fo)), outcomes=fo)
     msg = (f"{len(hidden)} hidden sign patterns (of {tried} tried): "
-           + ", ".join(f"{v['passed']} walk at s = {k}" for k, v in by_scale.items())
-           + f"; full order at s = 1: {full['passed']}")
+           + ", ".join(f"{v['passed']} of {len(hidden)} walk at s = {k}"
+                       for k, v in by_scale.items())
+           + f"; full order at s = 1: {full['passed']} of {len(hidden)}")
     return HiddenPatterns(patterns=len(hidden), candidates=tried, by_scale=by_scale,
                           full_order=full, message=msg, directions=hidden)

@@ -3,9 +3,12 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, fields
-from pathlib import Path
+from pathlib import Path, PurePath
+
+import numpy as np
 
 from biped_casadi import RABBIT_DESCRIPTION, robot
+from biped_casadi.numerics import as_count, as_number
 
 from ..design.codesign import FULL, QUICK, CodesignSettings
 from ..robustness import RobustnessSettings
@@ -40,7 +43,7 @@ class Resolution:
     sim_steps : int
         Steps of the full-order runs of Fig. 5 and 6.
     animation_steps : int
-        Steps in the animation.
+        Steps in the animation (0: none).
     robustness : RobustnessSettings
         How s* is measured (directions, bisection rounds) by the walking stages.
     basin_n : int
@@ -85,6 +88,34 @@ class Resolution:
     mujoco_scale_steps: int = 30
     mujoco_scales: tuple = (1, 2, 3, 4, 6, 8)
     mujoco_directions: int = 16
+
+    def __post_init__(self):
+        """Each field checked as it is given (ValueError naming it), not when a stage
+        first uses it."""
+        lows = dict(line_points=2, grid_n=2, plane_n=2, domain_n=2, nlp_starts=1,
+                    nlp_random=0, sim_steps=1, animation_steps=0, basin_n=2, terrain_runs=1,
+                    terrain_steps=1, terrain_error_runs=1, mujoco_steps=1,
+                    mujoco_scale_steps=1, mujoco_directions=1)
+        for name, low in lows.items():
+            object.__setattr__(self, name, as_count(getattr(self, name), name, low))
+        for name in ("quick", "gsn_every_design"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        for name, kind in (("robustness", RobustnessSettings), ("codesign", CodesignSettings)):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(f"{name} must be a {kind.__name__}, got "
+                                 f"{type(getattr(self, name)).__name__}")
+        for name in ("terrain_sigmas", "mujoco_scales", "domain_range"):
+            v = getattr(self, name)
+            v = tuple(v) if isinstance(v, (list, tuple, np.ndarray)) else v
+            if not isinstance(v, tuple) or not v:
+                raise ValueError(f"{name} must be a non-empty tuple of numbers, got {v!r}")
+            for i, x in enumerate(v):
+                as_number(x, f"{name}[{i}]", positive=name != "domain_range")
+            object.__setattr__(self, name, v)
+        lo_hi = self.domain_range
+        if len(lo_hi) != 2 or not lo_hi[0] < lo_hi[1]:
+            raise ValueError(f"domain_range must be (low, high) with low < high, got {lo_hi!r}")
 
     @classmethod
     def make(cls, quick: bool = False, **kw) -> "Resolution":
@@ -150,6 +181,26 @@ class ReproduceOptions:
     scheduler: object = None
     workers: int | None = None
     resolution: dict = None
+
+    def __post_init__(self):
+        """The fields checked as they are given (ValueError naming one); the robot and
+        the scheduler where they are resolved."""
+        for name in ("quick", "progress"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if not isinstance(self.robot, (str, PurePath)) or not str(self.robot).strip():
+            raise ValueError(f"robot must be a robot's name or a description file, got "
+                             f"{self.robot!r}")
+        if self.workers is not None:
+            object.__setattr__(self, "workers", as_count(self.workers, "workers", 1))
+        if self.resolution is not None:
+            if not isinstance(self.resolution, dict):
+                raise ValueError(f"resolution must be a dict of Resolution fields, got "
+                                 f"{type(self.resolution).__name__}")
+            bad = set(self.resolution) - {f.name for f in fields(Resolution)}
+            if bad:
+                raise ValueError(f"reproduce: unknown option {sorted(bad)[0]!r}")
+        self.resolution_of()                    # its fields checked now
 
     @classmethod
     def make(cls, quick: bool = False, **kw) -> "ReproduceOptions":

@@ -459,10 +459,10 @@ class _Move:
     def message(self, f_done: float, change: dict) -> str:
         """The move in words."""
         own, b = self.own, self.bounds_at(f_done)
-        return (f"gait moved to impulse ratio <= {b['impact_mu']:.3g} (from "
-                f"{own['impact_mu']:.3g}), clearance {b['clearance']:.3g} m (from "
-                f"{own['clearance']:.3g}), friction ratio <= {b['mu']:.3g} (from "
-                f"{own['mu']:.3g}), torques <= {b['torque_limit']:.4g} N m (from "
+        return (f"gait moved to impulse ratio <= {b['impact_mu']:.3g} (the given gait "
+                f"{own['impact_mu']:.3g}), swing-foot clearance >= {b['clearance']:.3g} m "
+                f"(given {own['clearance']:.3g}), friction ratio <= {b['mu']:.3g} (given "
+                f"{own['mu']:.3g}), torques <= {b['torque_limit']:.4g} N m (given "
                 f"{own['torque_limit']:.4g}) in {len(self.records)} solve(s)"
                 + ("" if f_done >= 1.0 - 1e-12 else
                    f", {100 * f_done:.0f} % of the way to the targets")
