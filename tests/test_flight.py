@@ -17,6 +17,8 @@ RABBIT and the three-link biped (one-link legs: the same kinematics, no rotors).
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 import pinocchio as pin
@@ -254,3 +256,10 @@ def test_flight_model_is_built_once_and_checks_its_argument(case):
         flight_model("rabbit")
     with pytest.raises(ValueError, match="model"):
         FlightModel(None)
+
+
+def test_the_how_to_example_runs():
+    """The example of docs/howto/running.md, as written there (its assert included)."""
+    page = Path(__file__).resolve().parents[1] / "docs" / "howto" / "running.md"
+    block = page.read_text().split("```python\n", 1)[1].split("```", 1)[0]
+    exec(compile(block, str(page), "exec"), {})
