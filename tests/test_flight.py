@@ -13,7 +13,8 @@
   angular momentum about the landing point is kept, energy is lost, and with a zero base
   velocity the swing-foot landing is the walking impact.
 
-RABBIT and the three-link biped (one-link legs: the same kinematics, no rotors).
+RABBIT and the three-link biped (one-link legs: the same kinematics, no rotors); the
+flight dynamics also for random bipeds of one to three links per leg.
 """
 from __future__ import annotations
 
@@ -23,10 +24,10 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 import pytest
-from robot_factory import pinocchio_chain
+from robot_factory import pinocchio_chain, random_description
 from scipy.integrate import solve_ivp
 
-from biped_casadi import robot
+from biped_casadi import BipedModel, robot
 from biped_casadi.model import FlightModel, flight_model
 
 ROBOTS = ["rabbit", "three_link"]
@@ -68,6 +69,24 @@ def test_mass_matrix_and_bias_against_pinocchio(case):
         worst[0] = max(worst[0], rel(arr(fl.De(qe)), D_pin[np.ix_(idx, idx)]))
         worst[1] = max(worst[1], rel(arr(fl.He(qe, dqe)), H_pin[idx]))
     assert worst[0] <= 1e-12 and worst[1] <= 1e-12, worst
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_random_bipeds_against_pinocchio(k):
+    """Legs of one to three links, point masses at every joint, rotor inertia."""
+    d = random_description(np.random.default_rng(200 + k), k, name=f"random_k{k}")
+    model = BipedModel(d)
+    fl, n = FlightModel(model), model.nq
+    pm, _ = pinocchio_chain(d, planar_base=True)
+    data = pm.createData()
+    idx = np.r_[np.arange(2, fl.ne), 0, 1]
+    for qe, dqe in zip(*states(fl.ne, 5, seed=k)):
+        qp, dqp = qe[np.r_[n, n + 1, :n]], dqe[np.r_[n, n + 1, :n]]
+        D_pin = pin.crba(pm, data, qp)
+        D_pin = np.triu(D_pin) + np.triu(D_pin, 1).T
+        assert rel(arr(fl.De(qe)), D_pin[np.ix_(idx, idx)]) <= 1e-12
+        H_pin = pin.rnea(pm, data, qp, dqp, np.zeros(fl.ne))
+        assert rel(arr(fl.He(qe, dqe)), H_pin[idx]) <= 1e-12
 
 
 def test_flight_dynamics_solves_the_equation(case):
