@@ -14,6 +14,7 @@ import os
 import subprocess
 import tempfile
 import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,8 @@ from .files import name_destination
 __all__ = ["rk4_step", "quintic_hermite_interval", "as_vector", "as_number", "as_count", "as_rows",
            "as_numbers",
            "jit_options",
-           "compiled", "cached_library", "compiler_reason", "FastCall"]
+           "compiled", "cached_library", "compiler_reason", "FastCall", "NotCompiledWarning",
+           "note_not_compiled"]
 
 
 def jit_options(optimisation: str = "-O2") -> dict:
@@ -88,10 +90,43 @@ def compiled(f, flags: str = "-O2"):
 
     try:
         so = cached_library(f"{name}_{key}.so", build)
-    except (OSError, subprocess.CalledProcessError):
+    except (OSError, subprocess.CalledProcessError) as e:
+        note_not_compiled(e)
         return f
     out = [ca.external(g.name(), str(so)) for g in fs]
     return out if isinstance(f, (list, tuple)) else out[0]
+
+
+class NotCompiledWarning(UserWarning):
+    """Compiled code could not be built (a full disk, a cache folder that cannot be
+    written, a failing compiler): CasADi evaluates the Functions itself, more slowly."""
+
+
+_NOT_COMPILED: set = set()
+
+
+def note_not_compiled(error: BaseException):
+    """Warn once per process and reason that compiled code was not built.
+
+    No warning when there is no C compiler at all (a property of the machine, see
+    :func:`compiled`), only when one failed to build or the cache could not keep it.
+
+    Parameters
+    ----------
+    error : OSError or subprocess.CalledProcessError
+        Why the library was not built (``filename`` and ``strerror`` of
+        :func:`cached_library`'s error name the library and the reason).
+    """
+    if isinstance(error, FileNotFoundError) and error.filename == "gcc":
+        return
+    reason = (f"{error.filename}: {error.strerror}" if isinstance(error, OSError)
+              and error.filename and error.strerror else str(error).strip() or
+              type(error).__name__)
+    if reason in _NOT_COMPILED:
+        return
+    _NOT_COMPILED.add(reason)
+    warnings.warn(f"compiled code not built ({reason}); CasADi evaluates the Functions "
+                  "instead, more slowly", NotCompiledWarning, stacklevel=3)
 
 
 #: threads of one process building the same library wait for each other (the cache's

@@ -45,7 +45,7 @@ import casadi as ca
 import numpy as np
 
 from .files import write_text_atomic
-from .numerics import cached_library
+from .numerics import cached_library, note_not_compiled
 
 __all__ = ["AccumulatedMap", "kernels", "available"]
 
@@ -624,7 +624,10 @@ def kernels(specs, name: str = "kernels", optimisation: str = "-O2") -> dict | N
         if len({m.name for m in maps.values()}) != len(maps):
             raise ValueError("kernels: the Functions' names must differ")
         lib = _kernels_library(name, maps, optimisation)
-    except (_Untranslatable, OSError, subprocess.CalledProcessError):
+    except _Untranslatable:
+        return None
+    except (OSError, subprocess.CalledProcessError) as e:
+        note_not_compiled(e)
         return None
     for m in maps.values():
         m._bind(lib)

@@ -131,9 +131,12 @@ def test_simd_cache_on_a_full_disk_and_a_damaged_index(tmp_path, monkeypatch):
     (a file of zeros after a crash) is replaced, the library made again."""
     monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(simd, "_LOADED", {})
+    from biped_casadi import numerics
+    monkeypatch.setattr(numerics, "_NOT_COMPILED", set())
     with monkeypatch.context() as m:
         m.setattr(os, "fsync", _disk_full)
-        assert simd.kernels(_kernel(), "writers") is None
+        with pytest.warns(numerics.NotCompiledWarning, match="No space left on device"):
+            assert simd.kernels(_kernel(), "writers") is None
     assert list((tmp_path / "compiled").iterdir()) == []
     X = np.array([[0.1, 0.2, 0.3, 0.4, 0.5], [1.0, 2.0, 3.0, 4.0, 5.0]])
     want = simd.kernels(_kernel(), "writers")["f"](X)[0]
@@ -225,3 +228,19 @@ def test_the_private_copy_of_a_library_on_a_full_disk(gait, tmp_path, monkeypatc
     assert str(e.value) == (f"library: cannot load {lib} ({copy} (its private copy): No "
                             "space left on device)")
     assert not copy.exists()
+
+
+def test_compiled_code_not_built_is_one_note(gait_file, tmp_path, monkeypatch, capsys):
+    """A full disk while the closed loop's library is built: the command still runs
+    (CasADi evaluates the Functions) and says once why it is slower."""
+    from biped_casadi import numerics
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(numerics, "_NOT_COMPILED", set())
+    monkeypatch.setattr(os, "fsync", _disk_full)
+    rc = biped_main(["simulate", "--gait", gait_file, "--controller", "vc", "--steps", "1",
+                     "--jit"])
+    err = capsys.readouterr().err
+    notes = [ln for ln in err.splitlines() if "compiled code not built" in ln]
+    assert rc == 0 and len(notes) == 1, err
+    assert notes[0].startswith("biped simulate: note: compiled code not built (") \
+        and "No space left on device" in notes[0], err

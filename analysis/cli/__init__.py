@@ -20,6 +20,7 @@ import warnings
 import numpy as np
 
 import biped_casadi
+from biped_casadi.numerics import NotCompiledWarning
 
 from . import (eig, export, gait, m1, mujoco, reproduce, robot, robust, simulate, sweep,
                terrain, view)
@@ -193,7 +194,11 @@ def _failed(args, e: BaseException) -> int:
 def _note_warnings(command: str, caught):
     """Numerical warnings (numpy's RuntimeWarning) become at most one line; the result's
     status already says whether the computation failed.  Others (deprecations of the
-    libraries underneath) are not the user's business and are dropped."""
+    libraries underneath) are not the user's business and are dropped; compiled code
+    that could not be built is a note of its own (the run is slower)."""
+    for text in dict.fromkeys(str(w.message) for w in caught
+                              if issubclass(w.category, NotCompiledWarning)):
+        print(f"biped {command}: note: {text}", file=sys.stderr)
     numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
     if numeric:
         print(f"biped {command}: note: {len(numeric)} numerical warning(s) during the "
