@@ -8,8 +8,8 @@ from pathlib import Path
 from biped_casadi import Design, Gains
 from biped_casadi.control.compiled import CompilerError
 from biped_casadi.control.export import exported_law
-from biped_casadi.mujoco import (LAWS, SETTLE, STEP_STARTS, TOUCHDOWNS, MujocoLoop, layout,
-                                 stride_map)
+from biped_casadi.mujoco import (LAWS, SETTLE, STEP_STARTS, TOUCHDOWNS, MujocoLoop,
+                                 check_timestep, layout, stride_map)
 from analysis.in_mujoco import exact_eigenvalues
 from analysis.reporting.plots import mujoco_animation, mujoco_steps_plot, save_figures
 
@@ -82,6 +82,9 @@ def cmd_mujoco(args):
     # ---- walk, MuJoCo's stride map
     say(f"walking {args.steps} step(s) in MuJoCo ...")
     w = loop.run(q0, dq0, args.steps, log=args.plot is not None)
+    if not w.success:
+        say("the same walk at finer time steps (is the time step the cause?) ...")
+    check = check_timestep(loop, q0, dq0, args.steps, w)
     eig = None
     if not args.no_eig:
         say("MuJoCo's limit cycle and stride map (rollouts) ...")
@@ -107,6 +110,7 @@ def cmd_mujoco(args):
     d = w.to_dict()
     d["perturbation"] = perturbation.to_dict()
     d["steps_per_second"] = w.steps_per_second
+    d["timestep_check"] = check.to_dict()
     if eig is not None:
         d["eigenvalues"] = eig
     if figures:
@@ -114,7 +118,7 @@ def cmd_mujoco(args):
     if args.json:
         print_json(d)
     else:
-        _print(w, eig, figures)
+        _print(w, eig, figures, check)
     return 0 if w.success else 1
 
 
@@ -127,13 +131,15 @@ def _ev(ev) -> str:
                            f"{e.real:.3g}{e.imag:+.3g}j" for e in ev) + "]"
 
 
-def _print(w, eig, figures):
+def _print(w, eig, figures, check=None):
     s = w.settings
     print(f"MuJoCo ({s['contact']} contact: solref "
           f"{s['solref'] if s['solref'] is not None else 'MuJoCo default 0.02'} s, dt "
           f"{s['timestep']:g} s, feet {s['foot_radius']:g} m, mu {s['mu']:g}), {w.law} law, "
           f"step start from the {w.step_start}: {w.status}"
           + (f" - {w.message}" if w.message else ""))
+    if check is not None and check.message:
+        print(f"  {check.message}")
     over = (f"over steps {SETTLE + 1}-{w.steps_walked}" if w.steps_walked > 2 * SETTLE
             else "over all steps")
     print(f"  {w.steps_walked} of {w.n_steps} steps; speed error {_pct(w.speed_error)}, period "
@@ -182,7 +188,9 @@ def register(sub):
                     "time and stance-foot slip, and how the walk ended (walked, fell, "
                     "scuffed, slipped, ...); then MuJoCo's limit cycle and its stride-map "
                     "eigenvalues (a least-squares fit of rollouts) beside the exact ones. "
-                    "Exit 0 when the walk walked its steps, 1 otherwise.")
+                    "A walk that fails is walked again at a half and a quarter of the time "
+                    "step: one line says whether the time step is the likely cause and which "
+                    "--timestep to use (JSON: timestep_check). Exit 0 when the walk walked its steps, 1 otherwise.")
     add_gait_arguments(p)
     add_robot(p)
     add_design_arguments(p, m1_zero=True)
