@@ -85,3 +85,33 @@ def test_strike_velocity_is_the_impact_of_the_gait(gait):
     c = check_timestep(loop, q0, dq0, 1, w)
     assert w.status == "walked" and c.success and c.tried == [], c
     assert c.strike_travel == pytest.approx(abs(v[1]) * settings.timestep, rel=1e-12)
+
+
+def test_auto_time_step_walks_at_the_time_step_that_walked(gait3, tmp_path, capsys,
+                                                           monkeypatch):
+    """``--timestep auto``: from the default time step (here made the coarse one of
+    COARSE, as no built-in robot fails at 2 ms), a failed walk is replaced by the walk at
+    the time step that walked; the JSON records both; where the default walks, auto is the
+    default, bit for bit."""
+    import importlib
+    mjcf_module = importlib.import_module("biped_casadi.mujoco.mjcf")
+    g = str(gait3.save(tmp_path / "gait3.json"))
+    base = ["mujoco", "--gait", g, "--controller", "vc", "--steps", "10", "--no-eig", "--json"]
+    rc, out = _run(base, capsys)
+    plain = json.loads(out)
+    rc_auto, out = _run(base + ["--timestep", "auto"], capsys)
+    auto = json.loads(out)
+    assert rc == rc_auto == 0 and auto["timestep_check"]["auto_timestep"] is None
+    assert auto["steps"] == plain["steps"] and auto["settings"] == plain["settings"]
+
+    coarse = mjcf_module.ContactSettings(timestep=float(COARSE[1]), solref=float(COARSE[3]))
+    monkeypatch.setattr(mjcf_module, "STIFF", coarse)
+    rc, out = _run(base + ["--solref", COARSE[3], "--timestep", "auto"], capsys)
+    r = json.loads(out)
+    c = r["timestep_check"]
+    assert c["status"] == "too_coarse" and c["walk"]["status"] != "walked", c
+    assert c["timestep"] == coarse.timestep and c["auto_timestep"] == c["suggested_timestep"]
+    assert rc == 0 and r["status"] == "walked" and r["steps_walked"] == 10, r["message"]
+    assert r["settings"]["timestep"] == c["auto_timestep"] < coarse.timestep
+    rc, out = _run(base[:-1] + ["--solref", COARSE[3], "--timestep", "auto"], capsys)
+    assert rc == 0 and out.startswith("--timestep auto: at"), out

@@ -48,6 +48,8 @@ class TimestepCheck(Result):
         One line naming the likely cause and, for 'too_coarse', the ``--timestep`` to use.
     timestep : float
         The walk's time step, s.
+    walk : dict
+        That walk's ``status``, ``steps_walked`` and ``message``.
     suggested_timestep : float or None
         The coarsest time step tried that walked every step ('too_coarse' only), s.
     tried : list of dict
@@ -62,6 +64,7 @@ class TimestepCheck(Result):
     status: str
     message: str
     timestep: float
+    walk: dict
     suggested_timestep: float | None
     tried: list
     strike_velocity: list
@@ -116,7 +119,8 @@ def check_timestep(loop: MujocoLoop, q0, dq0, steps: int, walk,
     speed = abs(float(v[1]))                            # into the floor
     strike = (f"the swing foot strikes the floor at {speed:.2g} m/s, {1e3 * speed * dt:.2g} "
               "mm per time step")
-    base = dict(timestep=dt, strike_velocity=v.tolist(), strike_travel=speed * dt)
+    base = dict(timestep=dt, walk=dict(status=walk.status, steps_walked=walk.steps_walked,
+                                       message=walk.message), strike_velocity=v.tolist(), strike_travel=speed * dt)
     if walk.status == "walked":
         return TimestepCheck(status="not_needed", message="", suggested_timestep=None,
                              tried=[], **base)
