@@ -3,11 +3,11 @@
 MuJoCo's documentation asks for a contact time constant (``solref``) of at least two
 time steps; the stiff settings sit exactly there (4 ms at 2 ms).  That holds for every
 robot, yet a robot whose swing foot strikes the floor hard can still fall at 2 ms and
-walk at 0.5 ms: measured on the imported robots of the MuJoCo how-to, the one that fell
-(a Cassie-type leg, Casia) strikes at 1.65 m/s downward, 3.3 mm per 2 ms step, where the
-robots that walked strike at 0.3 to 0.65 m/s; at 2 ms its new stance foot slid 5 to
-10 mm during each impact (0.1 to 0.2 mm for the others) and each step came slower than
-the last until the swing foot came down behind the stance foot.
+walk at 1 and 0.5 ms: measured on the imported robots of the MuJoCo how-to, the one that
+fell (Casia) strikes the floor at 1.65 m/s, 3.3 mm per 2 ms step, where the robots that
+walked strike at 0.3 to 0.65 m/s; at 2 ms its new stance foot slid 5.5 and 10.5 mm during
+its impacts (0.2 mm at most for the others) and each step came slower than the last until
+the swing foot came down behind the stance foot.
 
 One robot that fails is too few to fit a threshold on the strike speed, so the verdict
 is the cheapest one that cannot be wrong about the time step: the same walk (the same
