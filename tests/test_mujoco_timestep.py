@@ -36,6 +36,7 @@ def test_too_coarse_time_step_is_named_and_its_advice_walks(gait3, tmp_path, cap
     c = r["timestep_check"]
     assert rc == 1 and r["status"] != "walked", r["status"]
     assert c["status"] == "too_coarse" and c["timestep"] == 0.03, c
+    assert c["contact_steps"] == pytest.approx(float(COARSE[3]) / float(COARSE[1])), c
     last = c["tried"][-1]
     assert last["status"] == "walked" and last["steps_walked"] == 10, c["tried"]
     assert all(t["status"] != "walked" for t in c["tried"][:-1]), c["tried"]

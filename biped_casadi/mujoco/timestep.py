@@ -7,15 +7,19 @@ walk at 1 and 0.5 ms: measured on the imported robots of the MuJoCo how-to, the 
 fell (Casia) strikes the floor at 1.65 m/s, 3.3 mm per 2 ms step, where the robots that
 walked strike at 0.3 to 0.65 m/s; at 2 ms its new stance foot slid 5.5 and 10.5 mm during
 its impacts (0.2 mm at most for the others) and each step came slower than the last until
-the swing foot came down behind the stance foot.
+the swing foot came down behind the stance foot.  What counts is the contact's time
+constant in time steps, not the time step alone: the same robot walks at 2 ms with solref
+6 ms (3 time steps) and fails at 1 ms with solref 2 ms and at 0.5 ms with 1 ms (2 each);
+a finer time step at the same solref raises that ratio.
 
 One robot that fails is too few to fit a threshold on the strike speed, so the verdict
-is the cheapest one that cannot be wrong about the time step: the same walk (the same
+is the cheapest one that rests on no threshold: the same walk (the same
 start, design, contact and steps) again at a half and at a quarter of the time step,
 only after a walk failed.  :func:`check_timestep` says 'too_coarse' and the time step
 to use when one of them walks every step, 'not_timestep' when none does (the cause is
 elsewhere: the design, the perturbation, the torque limit, ...).  The strike speed of
-the gait and the foot's travel into the floor in one time step are recorded beside it.
+the gait, the foot's travel into the floor in one time step and the contact's time
+constant in time steps are recorded beside it.
 """
 from __future__ import annotations
 
@@ -59,6 +63,9 @@ class TimestepCheck(Result):
         The gait's swing foot velocity (x, z) at the impact, m/s.
     strike_travel : float
         How far the foot moves into the floor in one time step at that speed (|v_z| dt), m.
+    contact_steps : float
+        The feet's contact time constant (solref) in time steps: 2 at the stiff settings,
+        the least MuJoCo allows.
     """
 
     status: str
@@ -69,6 +76,7 @@ class TimestepCheck(Result):
     tried: list
     strike_velocity: list
     strike_travel: float
+    contact_steps: float
 
     SUCCESS = ("not_needed",)
 
@@ -117,10 +125,14 @@ def check_timestep(loop: MujocoLoop, q0, dq0, steps: int, walk,
     dt = float(s.timestep)
     v = strike_velocity(loop.gait)
     speed = abs(float(v[1]))                            # into the floor
+    solref = float(loop.m.geom_solref[loop.feet[0], 0])  # as MuJoCo compiled it
     strike = (f"the swing foot strikes the floor at {speed:.2g} m/s, {1e3 * speed * dt:.2g} "
-              "mm per time step")
+              f"mm per time step, on a contact of time constant {solref:g} s = "
+              f"{solref / dt:.3g} time steps")
     base = dict(timestep=dt, walk=dict(status=walk.status, steps_walked=walk.steps_walked,
-                                       message=walk.message), strike_velocity=v.tolist(), strike_travel=speed * dt)
+                                       message=walk.message),
+                strike_velocity=v.tolist(), strike_travel=speed * dt,
+                contact_steps=solref / dt)
     if walk.status == "walked":
         return TimestepCheck(status="not_needed", message="", suggested_timestep=None,
                              tried=[], **base)
