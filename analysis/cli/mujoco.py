@@ -205,7 +205,8 @@ def register(sub):
                     "eigenvalues (a least-squares fit of rollouts) beside the exact ones. "
                     "A walk that fails is walked again at a half and a quarter of the time "
                     "step: one line says whether the time step is the likely cause and which "
-                    "--timestep to use (JSON: timestep_check). Exit 0 when the walk walked its steps, 1 otherwise.")
+                    "--timestep to use (JSON: timestep_check). Exit 0 when the walk walked "
+                    "its steps, 1 otherwise.")
     add_gait_arguments(p)
     add_robot(p)
     add_design_arguments(p, m1_zero=True)
