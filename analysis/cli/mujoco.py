@@ -2,21 +2,22 @@
 MuJoCo's stride map beside the exact eigenvalues."""
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
 from biped_casadi import Design, Gains
 from biped_casadi.control.compiled import CompilerError
 from biped_casadi.control.export import exported_law
-from biped_casadi.mujoco import (LAWS, SETTLE, STEP_STARTS, TOUCHDOWNS, MujocoLoop, layout,
-                                 stride_map)
+from biped_casadi.mujoco import (LAWS, SETTLE, STEP_STARTS, TOUCHDOWNS, MujocoLoop,
+                                 check_timestep, layout, stride_map)
 from analysis.in_mujoco import exact_eigenvalues
 from analysis.reporting.plots import mujoco_animation, mujoco_steps_plot, save_figures
 
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
                      check_m1_values, load_gait, output_dir, parse_m1, positive, print_json,
                      rejoin_fraction)
-from .mujoco_options import add_mujoco_settings, mujoco_settings, settings_error
+from .mujoco_options import AUTO, add_mujoco_settings, mujoco_settings, settings_error
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
 
@@ -82,10 +83,23 @@ def cmd_mujoco(args):
     # ---- walk, MuJoCo's stride map
     say(f"walking {args.steps} step(s) in MuJoCo ...")
     w = loop.run(q0, dq0, args.steps, log=args.plot is not None)
+    if not w.success:
+        say("the same walk at finer time steps (is the time step the cause?) ...")
+    check = check_timestep(loop, q0, dq0, args.steps, w)
+    chosen = None
+    if args.timestep == AUTO and check.status == "too_coarse":
+        # --timestep auto: the walk, the figures and the stride map at the time step that
+        # walked (the walk again, for its log)
+        chosen = check.suggested_timestep
+        say(f"--timestep auto: walking at {chosen:g} s ...")
+        loop = MujocoLoop(design, dataclasses.replace(settings, timestep=chosen), args.law,
+                          args.torque_limit, args.step_start, args.max_slip,
+                          touchdown=args.touchdown)
+        w = loop.run(q0, dq0, args.steps, log=args.plot is not None)
     eig = None
     if not args.no_eig:
         say("MuJoCo's limit cycle and stride map (rollouts) ...")
-        sm = stride_map(design, settings, args.law, loop=loop)
+        sm = stride_map(design, loop.settings, args.law, loop=loop)
         ex = exact_eigenvalues(design)
         eig = dict(mujoco=sm.eigenvalues, mujoco_max_abs=sm.max_abs,
                    exact=ex, exact_max_abs=max(abs(e) for e in ex),
@@ -107,6 +121,8 @@ def cmd_mujoco(args):
     d = w.to_dict()
     d["perturbation"] = perturbation.to_dict()
     d["steps_per_second"] = w.steps_per_second
+    d["timestep_check"] = check.to_dict()
+    d["timestep_check"]["auto_timestep"] = chosen
     if eig is not None:
         d["eigenvalues"] = eig
     if figures:
@@ -114,7 +130,7 @@ def cmd_mujoco(args):
     if args.json:
         print_json(d)
     else:
-        _print(w, eig, figures)
+        _print(w, eig, figures, check, chosen)
     return 0 if w.success else 1
 
 
@@ -127,13 +143,18 @@ def _ev(ev) -> str:
                            f"{e.real:.3g}{e.imag:+.3g}j" for e in ev) + "]"
 
 
-def _print(w, eig, figures):
+def _print(w, eig, figures, check=None, chosen=None):
     s = w.settings
+    if chosen is not None:
+        print(f"--timestep auto: at {check.timestep:g} s the walk {check.walk['status']} "
+              f"({check.walk['message']}); the walk below is at {chosen:g} s")
     print(f"MuJoCo ({s['contact']} contact: solref "
           f"{s['solref'] if s['solref'] is not None else 'MuJoCo default 0.02'} s, dt "
           f"{s['timestep']:g} s, feet {s['foot_radius']:g} m, mu {s['mu']:g}), {w.law} law, "
           f"step start from the {w.step_start}: {w.status}"
           + (f" - {w.message}" if w.message else ""))
+    if check is not None and check.message and chosen is None:
+        print(f"  {check.message}")
     over = (f"over steps {SETTLE + 1}-{w.steps_walked}" if w.steps_walked > 2 * SETTLE
             else "over all steps")
     print(f"  {w.steps_walked} of {w.n_steps} steps; speed error {_pct(w.speed_error)}, period "
@@ -182,7 +203,10 @@ def register(sub):
                     "time and stance-foot slip, and how the walk ended (walked, fell, "
                     "scuffed, slipped, ...); then MuJoCo's limit cycle and its stride-map "
                     "eigenvalues (a least-squares fit of rollouts) beside the exact ones. "
-                    "Exit 0 when the walk walked its steps, 1 otherwise.")
+                    "A walk that fails is walked again at a half and a quarter of the time "
+                    "step: one line says whether the time step is the likely cause and which "
+                    "--timestep to use (JSON: timestep_check). Exit 0 when the walk walked "
+                    "its steps, 1 otherwise.")
     add_gait_arguments(p)
     add_robot(p)
     add_design_arguments(p, m1_zero=True)
@@ -207,7 +231,7 @@ def register(sub):
     p.add_argument("--touchdown", choices=TOUCHDOWNS, default="grid",
                    help="the touchdown's time and state: MuJoCo's first state in contact "
                         "(default), or interpolated to where the swing foot meets the floor")
-    add_mujoco_settings(p)
+    add_mujoco_settings(p, auto=True)
     p.add_argument("--torque-limit", type=float, metavar="U",
                    help="the motors' limit, N m (default the robot's, or for a robot without one "
                         "the limit its gait was made for); torques beyond it are clipped by "

@@ -2,20 +2,44 @@
 friction."""
 from __future__ import annotations
 
+import argparse
+
 from biped_casadi.mujoco import CONTACTS, ContactSettings
 
 from .common import UserError
 
-__all__ = ["add_mujoco_settings", "mujoco_settings", "settings_error"]
+__all__ = ["add_mujoco_settings", "mujoco_settings", "settings_error", "AUTO"]
 
 
-def add_mujoco_settings(p, mu: bool = True):
-    """``--contact``, ``--timestep``, ``--solref``, ``--foot-radius`` (and ``--mu``)."""
+#: the value of ``--timestep`` that lets ``biped mujoco`` choose it
+AUTO = "auto"
+
+
+def _timestep(text: str):
+    """A time step in seconds, or :data:`AUTO`."""
+    if text == AUTO:
+        return AUTO
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a time step in seconds or '{AUTO}', got "
+                                         f"{text!r}") from None
+
+
+def add_mujoco_settings(p, mu: bool = True, auto: bool = False):
+    """``--contact``, ``--timestep``, ``--solref``, ``--foot-radius`` (and ``--mu``);
+    with ``auto``, ``--timestep auto`` too."""
     p.add_argument("--contact", choices=CONTACTS, default="stiff",
                    help="stiff: solref 4 ms, time step 2 ms (recommended); default: MuJoCo's "
                         "contact (solref 0.02 s) (both with 5 mm feet, mu 0.6)")
-    p.add_argument("--timestep", type=float, metavar="S",
-                   help="MuJoCo's time step, s, 1e-05 to 0.05 (default 0.002)")
+    if auto:
+        p.add_argument("--timestep", type=_timestep, metavar="S",
+                       help="MuJoCo's time step, s, 1e-05 to 0.05 (default 0.002); 'auto': "
+                            "0.002, and when the walk fails there but walks at a half or a "
+                            "quarter of it, that time step")
+    else:
+        p.add_argument("--timestep", type=float, metavar="S",
+                       help="MuJoCo's time step, s, 1e-05 to 0.05 (default 0.002)")
     p.add_argument("--solref", type=float, metavar="S",
                    help="the contact's time constant, s, at least two time steps (default "
                         "0.004 with --contact stiff, MuJoCo's 0.02 with default)")
@@ -42,9 +66,11 @@ def settings_error(e: ValueError) -> UserError:
 
 
 def mujoco_settings(args) -> ContactSettings:
-    """The settings of the options (UserError naming the option MuJoCo would reject)."""
+    """The settings of the options (UserError naming the option MuJoCo would reject);
+    ``--timestep auto`` starts from the default time step."""
+    timestep = None if args.timestep == AUTO else args.timestep
     try:
-        return ContactSettings.of(args.contact, timestep=args.timestep, solref=args.solref,
+        return ContactSettings.of(args.contact, timestep=timestep, solref=args.solref,
                                   foot_radius=args.foot_radius,
                                   mu=getattr(args, "mu", None), integrator=args.integrator)
     except ValueError as e:
