@@ -33,3 +33,23 @@ def test_settings_steps_are_the_floor_and_bad_eigenvalues_refused():
     for bad in (1.0, -1.2, math.nan):
         with pytest.raises(ValueError, match="eigenvalue"):
             decay_steps(bad)
+
+
+def test_m1_robust_notes_too_few_steps():
+    """``biped m1 --robust`` says when its 10 steps only measure the convergence rate, and
+    which ``biped robust`` command walks enough steps; nothing on a RABBIT-like rate."""
+    from types import SimpleNamespace
+
+    from analysis.cli.m1 import decay_note
+    from analysis.design.codesign import CodesignSettings
+    st = CodesignSettings()
+    design = SimpleNamespace(M1=(0.5, -1.25), rejoin=0.75)
+    slow = SimpleNamespace(vc_eigenvalue=0.85, design=design, gait_file="g.json")
+    n = decay_steps(0.85, st.robustness_settings())
+    note = decay_note(slow, st)
+    assert f"--m1 0.5 -1.25 --rejoin 0.75 --steps auto' walks {n} steps" in note
+    assert "--gait g.json" in note
+    assert decay_note(SimpleNamespace(vc_eigenvalue=0.54, design=design,
+                                      gait_file="g.json"), st) is None
+    assert decay_note(SimpleNamespace(vc_eigenvalue=1.2, design=design,
+                                      gait_file="g.json"), st) is None
