@@ -108,8 +108,8 @@ class GaitOptions:
         Lower bound of the stance normal force, N.
     clearance : float or None
         None (the default): 0.0375 x the robot's leg length (RABBIT: 0.03 m), filled in
-        by :meth:`for_model`.  Swing-foot height bound inside the step, m: z_sw >= clearance * 4 s (1 - s)
-        with s = t / T (a parabola: 0 at both ends, ``clearance`` mid-step).  Legs
+        by :meth:`for_model`.  Swing-foot height bound inside the step, m:
+        z_sw >= clearance * 4 s (1 - s) with s = t / T (a parabola: 0 at both ends, ``clearance`` mid-step).  Legs
         without knees (``model.scuffing_ignored``): z_sw >= clearance * 4 s (1 - s) *
         (x_sw - scuff_zone) / leg length, above the ground beyond the model's scuff
         zone in front of the stance foot, grazing at most that deep nearer.

@@ -11,7 +11,7 @@ import numpy as np
 from biped_casadi import Design, SimulationOptions
 from gait_opt import GaitOptions, gait_family
 
-from ..design import ROBUST_GAIT, robust_gait
+from ..design import robust_gait
 from ..design.schedule import M1Schedule, profile_gaits
 from ..robustness import kept_directions, robustness
 from ..robustness.speed import ramp_profile, walk_gaits

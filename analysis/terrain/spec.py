@@ -193,8 +193,8 @@ class MonteCarloSettings:
 
     def __post_init__(self):
         s = self.sigma
-        if s is not None and (isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) \
-                or s < 0):
+        if s is not None and (isinstance(s, bool) or not isinstance(s, (int, float))
+                              or not math.isfinite(s) or s < 0):
             raise ValueError(f"sigma must be a finite number >= 0 (m), got {s!r}")
         for name, hi in (("runs", MAX_RUNS), ("max_steps", MAX_STEPS), ("chunk", MAX_RUNS)):
             v = getattr(self, name)

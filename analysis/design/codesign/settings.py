@@ -11,7 +11,7 @@ from biped_casadi.results import Result
 from ..settings_checks import check_fields, check_gait_fields
 
 from ...robustness.s_star import RobustnessSettings
-from ..robust_search import ROBUST_GAIT, robust_gait
+from ..robust_search import robust_gait
 
 #: the sampling search's shipped design on :data:`ROBUST_GAIT` (M1; v_c rejoining at
 #: 0.75 T): s* 0.969, the co-design's first warm start
