@@ -14,7 +14,7 @@ from .hzd_orbit import BezierConstraints, fit_bezier_constraints
 from .importing import IMPORT_TOL, GaitImport, GaitImportError, import_gait
 from .nodes import Nodes, read_nodes
 from .optimize import GaitSolveResult, optimize_gait
-from .options import GaitOptions
+from .options import REFERENCE_LEG_LENGTH, GaitOptions, LegScaled, gait_fields, leg_scale
 from .polish import ClosedOrbit, close_orbit
 
 __all__ = ["optimize_gait", "GaitSolveResult", "Gait",
@@ -22,4 +22,5 @@ __all__ = ["optimize_gait", "GaitSolveResult", "Gait",
            "ORBIT_TOL", "import_gait", "GaitImport", "GaitImportError", "IMPORT_TOL", "Nodes",
            "read_nodes", "BezierConstraints", "fit_bezier_constraints", "close_orbit",
            "ClosedOrbit", "gait_family", "GaitFamily", "MemberRecord",
-           "FamilyGait", "speed_range", "parse_speed_range"]
+           "FamilyGait", "speed_range", "parse_speed_range", "REFERENCE_LEG_LENGTH",
+           "leg_scale", "LegScaled", "gait_fields"]

@@ -5,7 +5,58 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["GaitOptions"]
+__all__ = ["GaitOptions", "REFERENCE_LEG_LENGTH", "leg_scale", "LegScaled", "gait_fields"]
+
+#: hip-to-foot length of a straight leg, m, of the robot the length-valued defaults were
+#: set on (RABBIT); on another robot they scale with its leg length over this one
+REFERENCE_LEG_LENGTH = 0.8
+#: length-valued gait defaults on RABBIT's legs, m (scaled by :func:`leg_scale`)
+STEP_LENGTH_BOUNDS = (0.2, 0.8)
+CLEARANCE = 0.03
+#: GaitOptions fields measured in metres (scaled together by :class:`LegScaled`)
+LENGTH_FIELDS = ("step_length_bounds", "clearance")
+
+
+def leg_scale(model) -> float:
+    """The robot's leg length over RABBIT's (:data:`REFERENCE_LEG_LENGTH`): the factor
+    on the length-valued defaults.
+
+    Parameters
+    ----------
+    model : BipedModel or RobotDescription
+        The robot (a model, or its description).
+
+    Returns
+    -------
+    float
+        ``leg_length / 0.8``; exactly 1.0 for RABBIT (its legs are 0.4 + 0.4 m), so that
+        its scaled defaults equal the constants bit for bit.
+    """
+    d = getattr(model, "description", model)
+    return float(d.leg_length) / REFERENCE_LEG_LENGTH
+
+
+class LegScaled(dict):
+    """GaitOptions fields given for RABBIT's legs: :meth:`for_model` scales the
+    length-valued ones (``step_length_bounds``, ``clearance``) with the robot's leg
+    length (:func:`leg_scale`).  A plain dict of fields is taken as it is (a user's
+    explicit values)."""
+
+    def for_model(self, model) -> dict:
+        """The fields for ``model`` (a plain dict)."""
+        k = leg_scale(model)
+        out = dict(self)
+        if "clearance" in out:
+            out["clearance"] = out["clearance"] * k
+        if "step_length_bounds" in out:
+            out["step_length_bounds"] = tuple(v * k for v in out["step_length_bounds"])
+        return out
+
+
+def gait_fields(fields: dict, model) -> dict:
+    """GaitOptions fields for ``model``: a :class:`LegScaled` mapping scaled to its legs,
+    any other mapping as given."""
+    return fields.for_model(model) if isinstance(fields, LegScaled) else dict(fields)
 
 
 def require_model(model):
@@ -36,8 +87,10 @@ class GaitOptions:
     ----------
     speed : float
         Average forward speed (step length / T), m/s.
-    step_length_bounds : tuple of float
-        (low, high) bounds on the step length chosen by the optimiser, m.
+    step_length_bounds : tuple of float or None
+        (low, high) bounds on the step length chosen by the optimiser, m; None (the
+        default): (0.25, 1.0) x the robot's leg length (RABBIT: (0.2, 0.8)), filled in
+        by :meth:`for_model` and recorded in the gait's options.
     step_time_bounds : tuple of float
         (low, high) bounds on the step duration T, s.
     mu : float
@@ -53,9 +106,10 @@ class GaitOptions:
         with imported gaits; solving a gait needs a finite bound).
     min_normal_force : float
         Lower bound of the stance normal force, N.
-    clearance : float
-        Swing-foot height bound inside the step, m: z_sw >= clearance * 4 s (1 - s)
-        with s = t / T (a parabola: 0 at both ends, ``clearance`` mid-step).  Legs
+    clearance : float or None
+        None (the default): 0.0375 x the robot's leg length (RABBIT: 0.03 m), filled in
+        by :meth:`for_model`.  Swing-foot height bound inside the step, m:
+        z_sw >= clearance * 4 s (1 - s) with s = t / T (a parabola: 0 at both ends, ``clearance`` mid-step).  Legs
         without knees (``model.scuffing_ignored``): z_sw >= clearance * 4 s (1 - s) *
         (x_sw - scuff_zone) / leg length, above the ground beyond the model's scuff
         zone in front of the stance foot, grazing at most that deep nearer.
@@ -105,13 +159,13 @@ class GaitOptions:
     """
 
     speed: float = 0.75
-    step_length_bounds: tuple = (0.2, 0.8)
+    step_length_bounds: tuple | None = None
     step_time_bounds: tuple = (0.2, 1.5)
     mu: float = 0.6
     impact_mu: float | None = None
     torque_limit: float | None = None
     min_normal_force: float = 0.0
-    clearance: float = 0.03
+    clearance: float | None = None
     min_liftoff_speed: float = 0.02
     min_strike_speed: float = 0.02
     stance_knee_max: float = 0.0
@@ -160,10 +214,13 @@ class GaitOptions:
                                                     or math.isinf(self.continuation)):
             raise ValueError("gait option 'continuation_shape' 'smooth' needs a finite "
                              "'continuation' (its decay time, a fraction of T)")
-        for n in ("min_normal_force", "clearance", "min_liftoff_speed", "min_strike_speed"):
+        for n in ("min_normal_force", "min_liftoff_speed", "min_strike_speed") + (
+                () if self.clearance is None else ("clearance",)):
             nonneg(n)
         for n in ("step_length_bounds", "step_time_bounds"):
             lo_hi = getattr(self, n)
+            if lo_hi is None and n == "step_length_bounds":
+                continue                   # the robot's, filled in by for_model
             lo_hi = tuple(lo_hi) if hasattr(lo_hi, "__len__") and not isinstance(lo_hi, str) \
                 else (lo_hi,)
             if len(lo_hi) != 2 or not all(number(v) and math.isfinite(v) for v in lo_hi) \
@@ -206,7 +263,8 @@ class GaitOptions:
                 del d[name]
         if d["continuation_shape"] == "ramp":
             del d["continuation_shape"]
-        d["step_length_bounds"] = list(self.step_length_bounds)
+        if self.step_length_bounds is not None:
+            d["step_length_bounds"] = list(self.step_length_bounds)
         d["step_time_bounds"] = list(self.step_time_bounds)
         return d
 
@@ -234,7 +292,7 @@ class GaitOptions:
             raise ValueError(f"unknown gait option(s): {', '.join(sorted(unknown))}")
         d = dict(d)
         for n in ("step_length_bounds", "step_time_bounds"):
-            if n in d:
+            if d.get(n) is not None:
                 d[n] = tuple(d[n])
         return cls(**d)
 
@@ -257,8 +315,10 @@ class GaitOptions:
         """
         return dataclasses.replace(self, **changes)
 
-    def for_model(self, model) -> "GaitOptions":
-        """These options with the robot's torque limit filled in when none is given.
+    def with_lengths(self, model) -> "GaitOptions":
+        """These options with the length-valued defaults (``step_length_bounds``,
+        ``clearance``) filled in for the robot when none is given: RABBIT's scaled by
+        :func:`leg_scale` (RABBIT itself: exactly (0.2, 0.8) m and 0.03 m).
 
         Parameters
         ----------
@@ -268,8 +328,31 @@ class GaitOptions:
         Returns
         -------
         GaitOptions
-            ``torque_limit`` a number.
         """
-        if self.torque_limit is None:
-            return self.replace(torque_limit=float(model.description.torque_limit))
-        return self
+        fill = {}
+        if self.step_length_bounds is None or self.clearance is None:
+            k = leg_scale(model)
+            if self.step_length_bounds is None:
+                fill["step_length_bounds"] = tuple(v * k for v in STEP_LENGTH_BOUNDS)
+            if self.clearance is None:
+                fill["clearance"] = CLEARANCE * k
+        return self.replace(**fill) if fill else self
+
+    def for_model(self, model) -> "GaitOptions":
+        """These options with the robot's torque limit and length-valued defaults filled
+        in when none is given (:meth:`with_lengths`).
+
+        Parameters
+        ----------
+        model : BipedModel
+            The robot the gait is solved for.
+
+        Returns
+        -------
+        GaitOptions
+            ``torque_limit``, ``step_length_bounds`` and ``clearance`` numbers.
+        """
+        opts = self.with_lengths(model)
+        if opts.torque_limit is None:
+            return opts.replace(torque_limit=float(model.description.torque_limit))
+        return opts

@@ -535,6 +535,7 @@ def initial_guess(model, opts: GaitOptions):
     forward from upright (the description's ``torso_upright``), joints interpolated linearly in
     s, the swing leg's knees bending mid-step for clearance (legs without knees: straight
     legs, no bend)."""
+    opts = opts.for_model(model)
     M = opts.bezier_degree
     d = model.description
     lo, hi = opts.step_length_bounds

@@ -362,6 +362,10 @@ CASES = [
     # ---- robust: a singular design is refused as simulate refuses it (not "slipped")
     # numpy's 'expected non-negative integer' was the whole line
     (["robust", *G, *M0, "--seed", "-1"], "--seed must be >= 0, got -1"),
+    (["robust", *G, "--controller", "vc", "--steps", "ten"],
+     "--steps must be a whole number of steps or 'auto'"),
+    (["robust", *G, "--controller", "vc", "--steps", "0"],
+     "--steps must be between 1 and 1000, got 0"),
     (["m1", "--robust", "--method", "search", "--seed", "-1"], "--seed must be >= 0"),
     (["robust", *G, "--m1", "1", "2", "3", "4"], "makes the controller singular"),
     (["robust", *G, "--m1", "1", "2", "3", "4", "--plot", "figs"], "singular"),

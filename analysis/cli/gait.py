@@ -49,8 +49,10 @@ def register(sub):
                         "acceleration decays exponentially over C T, matching the jerk at "
                         "T (no kink where late impacts land)")
     p.add_argument("--clearance", type=float, default=None, metavar="H",
-                   help="mid-step swing-foot clearance, m (default 0.03; the robust "
-                        "design's gait uses 0.05)")
+                   help="mid-step swing-foot clearance, m (default scaled with leg length: "
+                        "0.0375 x leg, 0.03 for RABBIT; the robust design's gait uses "
+                        "0.0625 x leg, 0.05 for RABBIT; the step length is bounded to "
+                        "0.25-1.0 x leg, recorded in the gait's options)")
     add_robot(p, with_gait=False)
     add_family_arguments(p)
     p.add_argument("--out", metavar="FILE", default=None,
@@ -139,8 +141,9 @@ def _print_gait(s: dict, gait, model, out, mu: float, past: bool, bound: float):
         return (f"   (on its {side} bound {b:g} {unit}, GaitOptions.{name}: the optimum lies "
                 "beyond it; set other bounds in Python, gait_opt.GaitOptions)")
     print(f"  step time T          {s['T']:.6f} s" + on_bound("step_time_bounds", "s"))
+    lo, hi = gait.options.step_length_bounds
     print(f"  step length          {s['step_length']:.6f} m"
-          + on_bound("step_length_bounds", "m"))
+          + (on_bound("step_length_bounds", "m") or f"   (bounds {lo:.4g} to {hi:.4g} m)"))
     print(f"  speed                {s['speed']:.6f} m/s")
     print(f"  cost                 {s['cost']:.6f} N^2 m s (int u'u dt / step length)")
     print(f"  peak torque          {s['peak_torque']:.3f} N m   (limit "

@@ -17,6 +17,7 @@ from analysis.design.codesign import (FIT, QUICK, CodesignError, CodesignSetting
                                       codesign)
 from analysis.design.designs_over_speed import family_designs
 from analysis.reporting.plots import family_designs_plot, save_figures
+from analysis.robustness import decay_steps
 from biped_casadi.files import write_bytes_atomic
 from biped_casadi.simulation import NOT_CONVERGED
 from gait_opt import GaitFamily
@@ -182,6 +183,25 @@ def _no_design(args, body: dict, line: str) -> int:
     return 2
 
 
+def decay_note(r, st) -> str | None:
+    """One line when the verification's steps are too few for s* to measure more than the
+    convergence rate (:func:`analysis.robustness.decay_steps` above them), naming the
+    ``biped robust`` command that measures the design over enough steps; None otherwise."""
+    rs = st.robustness_settings()
+    try:
+        n = decay_steps(r.vc_eigenvalue, rs)
+    except ValueError:                      # virtual constraints not stable: no decay
+        return None
+    if n <= rs.steps:
+        return None
+    m1 = " ".join(f"{v:.6g}" for v in r.design.M1)
+    return (f"note: at the virtual constraints' rate {abs(r.vc_eigenvalue):.3g} a "
+            f"perturbation of scale {rs.s_max:g} cannot fall below {rs.tol:g} in "
+            f"{rs.steps} steps, so s* above measures how fast the design converges; "
+            f"'biped robust --gait {r.gait_file} --m1 {m1} --rejoin {r.design.rejoin:g} "
+            f"--steps auto' walks {n} steps")
+
+
 def _print_design(r, st):
     """The human output of a co-design."""
     print(r.message + (" (from the cache)" if r.cached else ""))
@@ -204,6 +224,9 @@ def _print_design(r, st):
           f"{r.max_abs:.3g} (virtual constraints {r.vc_eigenvalue:.3g}); paper's "
           f"perturbation: {r.check.paper_outcome(st.verification.tol)}; peak torque "
           f"{r.peak_torque:.1f} N m")
+    note = decay_note(r, st)
+    if note is not None:
+        print(f"  {note}")
     if r.alternative:
         print(f"  also tried: {r.alternative.get('message', '')}")
     for k, v in r.verified.items():

@@ -2,11 +2,14 @@
 contact condition checked, and its basin of attraction beside virtual constraints'."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from analysis.reporting.plots import basin_plot, save_figures
-from analysis.robustness import (Design, RobustnessSettings, basin_to_boundary, kept_directions,
-                                 robustness)
+from analysis.robustness import (Design, RobustnessSettings, basin_to_boundary, decay_steps,
+                                 kept_directions, robustness)
+from analysis.stability.vc_map import vc_eigenvalue
 from biped_casadi.control import PAPER_REJOIN
 from biped_casadi.simulation import failure_text
 
@@ -28,6 +31,15 @@ def cmd_robust(args):
         raise UserError(f"--seed must be >= 0, got {args.seed}")
     if not 1 <= args.directions <= 200:
         raise UserError(f"--directions must be between 1 and 200, got {args.directions}")
+    steps = RobustnessSettings.steps
+    if args.steps != "auto":
+        try:
+            steps = int(args.steps)
+        except ValueError:
+            raise UserError(f"--steps must be a whole number of steps or 'auto', got "
+                            f"{args.steps!r}") from None
+        if not 1 <= steps <= 1000:
+            raise UserError(f"--steps must be between 1 and 1000, got {steps}")
     if args.plot is not None:
         output_dir(args.plot, "--plot")
     say = Progress("robust", quiet=args.json)
@@ -38,7 +50,15 @@ def cmd_robust(args):
         design = Design(tuple(parse_m1(args.m1, model.nu)), rejoin)
         check_not_singular(Design.of(design, gait).controller_for(), design.M1)
     st = RobustnessSettings(directions=args.directions, mu=args.mu,
-                            torque_limit=args.torque_limit, seed=args.seed)
+                            torque_limit=args.torque_limit, seed=args.seed, steps=steps)
+    if args.steps == "auto":
+        lam = vc_eigenvalue(gait).eigenvalue
+        try:
+            st = dataclasses.replace(st, steps=decay_steps(lam, st))
+        except ValueError as e:
+            raise UserError(f"--steps auto: {e}") from None
+        say(f"{st.steps} steps: the largest perturbation decays below {st.tol:g} at the "
+            f"virtual constraints' rate {abs(lam):.3g}")
     say(f"perturbation directions from which virtual constraints walk ({args.directions} "
         f"wanted; about 0.3 s each)")
     kept = kept_directions(gait, st)
@@ -94,7 +114,7 @@ def register(sub):
                     "perturbation (0.01 rad on every joint, 0.1 rad/s on every velocity) at "
                     "which every kept direction (the paper's, then seeded sign patterns and "
                     "random directions of the same size, kept only when virtual constraints "
-                    "walk from them) walks 10 valid steps (normal force, friction cone, "
+                    "walk from them) walks --steps valid steps (10) (normal force, friction cone, "
                     "impact impulse, lift-off, scuffing, torque limit) and ends with "
                     "max(|q_u err|, |dq_u err|) < 1e-3; the first failure just above s* and "
                     "its cause. Both controllers run on their hybrid zero dynamics, batched "
@@ -112,6 +132,12 @@ def register(sub):
     p.add_argument("--directions", type=int, default=16, metavar="N",
                    help="perturbation directions kept (16)")
     p.add_argument("--seed", type=int, default=2024, help="seed of the directions (2024)")
+    p.add_argument("--steps", default="10", metavar="N|auto",
+                   help="steps every run walks, converging below 1e-3 at the last (10); "
+                        "'auto': at least 10, and enough for the largest perturbation tried "
+                        "to decay below 1e-3 at the virtual constraints' eigenvalue (a gait "
+                        "whose eigenvalue is near 0.85 needs about 35: in 10 steps s* only "
+                        "measures how fast it converges)")
     p.add_argument("--plot", metavar="DIR", help="write the basin picture into DIR")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_robust)

@@ -99,8 +99,9 @@ def _check_arguments(args):
     if args.controller == "vc" and (args.m1 is not None or args.rejoin is not None):
         raise UserError("--m1 and --rejoin apply to the time-varying controller "
                         "(--controller tv)")
-    _finite_nonnegative(args.sigma, "--sigma")
-    if args.sigma > MAX_HEIGHT:
+    if args.sigma is not None:
+        _finite_nonnegative(args.sigma, "--sigma")
+    if args.sigma is not None and args.sigma > MAX_HEIGHT:
         raise UserError(f"--sigma must be at most {MAX_HEIGHT} m, got {args.sigma}")
     _count(args.runs, "--runs", MAX_RUNS)
     _count(args.max_steps, "--max-steps", MAX_STEPS)
@@ -147,7 +148,8 @@ def _build(args, say, gains, rejoin, profile):
     try:
         st = MonteCarloSettings(sigma=0.0 if profile else args.sigma, runs=args.runs,
                                 max_steps=args.max_steps, seed=args.seed, chunk=args.chunk,
-                                mu=args.mu, torque_limit=args.torque_limit, profile=profile)
+                                mu=args.mu, torque_limit=args.torque_limit,
+                                profile=profile).for_model(model)
     except ValueError as e:
         raise UserError(str(e)) from None
     if spec.engine == "full_order":
@@ -248,7 +250,8 @@ def register(sub):
     add_robot(p)
     add_design_arguments(p)
     p.add_argument("--sigma", type=float, default=None, metavar="S",
-                   help="standard deviation of the ground height per step, m (0.005)")
+                   help="standard deviation of the ground height per step, m (default "
+                        "scaled with leg length: 0.00625 x leg, 0.005 for RABBIT)")
     p.add_argument("--terrain", metavar="FILE",
                    help="a terrain profile (JSON list or numbers in text, m) instead of "
                         "random heights: run i walks it from its i-th height on, wrapping "
@@ -287,9 +290,7 @@ def register(sub):
 
 
 def _with_sigma_default(args):
-    args.sigma_given = args.sigma is not None
-    if args.sigma is None:
-        args.sigma = 0.005
+    args.sigma_given = args.sigma is not None        # None: the robot's (MonteCarloSettings)
     if args.workers is not None and not 1 <= args.workers <= 64:
         raise UserError(f"--workers must be between 1 and 64, got {args.workers}")
     if not 1 <= args.chunk <= MAX_RUNS:

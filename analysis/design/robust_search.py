@@ -41,7 +41,7 @@ from biped_casadi.files import write_text_atomic
 from biped_casadi.control.output_law import check_rejoin
 from biped_casadi.numerics import as_number
 from biped_casadi.results import Result
-from gait_opt import GaitOptions, optimize_gait
+from gait_opt import GaitOptions, LegScaled, gait_fields, optimize_gait
 from gait_opt.cache import cache_path
 
 from ..stability.poincare import poincare_map
@@ -53,14 +53,22 @@ from biped_casadi.simulation import zero_dynamics_walker
 from .settings_checks import check_fields, check_gait_fields
 from .verification import verify_design
 
-__all__ = ["RobustDesignSettings", "RobustDesignResult", "robust_design", "ROBUST_GAIT"]
+__all__ = ["RobustDesignSettings", "RobustDesignResult", "robust_design", "ROBUST_GAIT",
+           "robust_gait"]
 
 #: the gait options of the robust design: the impact impulse kept to a ratio of 0.15
 #: (the path friction stays mu = 0.6), the reference continued past T by an
 #: acceleration ramp over 0.03 T, a 5 cm swing clearance.  Measured with the default
 #: search (s*, 16 directions): impact_mu 0.2 -> 0.945, 0.15 -> 0.969, 0.1 -> 0.875;
-#: clearance 0.1 m -> 0.926 (0.945 with impact_mu 0.15)
+#: clearance 0.1 m -> 0.926 (0.945 with impact_mu 0.15).  On RABBIT's legs (0.8 m): the
+#: settings' default gait is :func:`robust_gait`, its clearance scaled with the leg length
 ROBUST_GAIT = dict(impact_mu=0.15, continuation=0.03, clearance=0.05)
+
+
+def robust_gait() -> LegScaled:
+    """The settings' default gait fields: :data:`ROBUST_GAIT`, its clearance scaled with
+    the robot's leg length when the gait is built (0.0625 x leg; RABBIT exactly 0.05 m)."""
+    return LegScaled(ROBUST_GAIT)
 
 #: the version of the robust designs kept between sessions (bump it when the search's
 #: results for the same settings and code change)
@@ -74,7 +82,9 @@ class RobustDesignSettings:
     Parameters
     ----------
     gait : dict
-        GaitOptions fields of the gait to design on (default :data:`ROBUST_GAIT`).
+        GaitOptions fields of the gait to design on (default :func:`robust_gait`:
+        :data:`ROBUST_GAIT` with its clearance scaled with the leg length; a plain dict is
+        used as given).
     rejoin : float
         Rejoin time of v_c, fraction of T.
     samples : int
@@ -105,7 +115,7 @@ class RobustDesignSettings:
         steps walked and convergence threshold of every robustness run.
     """
 
-    gait: dict = field(default_factory=lambda: dict(ROBUST_GAIT))
+    gait: dict = field(default_factory=robust_gait)
     rejoin: float = 0.75
     samples: int = 40000
     box: float = 12.0
@@ -279,7 +289,7 @@ class _Search:
         st, m = self.st, self.model
         self._last = time.perf_counter()
         self.say(f"gait {st.gait} (optimised once, then cached)")
-        self.options = GaitOptions(**st.gait)
+        self.options = GaitOptions(**gait_fields(st.gait, m)).with_lengths(m)
         self.gait = optimize_gait(m, self.options, cache=True)
         self.lam_vc = vc_eigenvalue(self.gait).eigenvalue
         self.bound = self.lam_vc if st.eigen_bound == "vc" else float(st.eigen_bound)

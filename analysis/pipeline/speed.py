@@ -11,7 +11,7 @@ import numpy as np
 from biped_casadi import Design, SimulationOptions
 from gait_opt import GaitOptions, gait_family
 
-from ..design import ROBUST_GAIT
+from ..design import robust_gait
 from ..design.schedule import M1Schedule, profile_gaits
 from ..robustness import kept_directions, robustness
 from ..robustness.speed import ramp_profile, walk_gaits
@@ -136,7 +136,7 @@ def stage_family(engine, model, robust_stage, res: Resolution) -> FamilyStage:
     # the family and its kept directions do not depend on the co-design: submitted first
     speeds = family_speeds(res)
     fam_ref = engine.submit(family_of, model, speeds,
-                            GaitOptions(**ROBUST_GAIT).for_model(model))
+                            GaitOptions(**robust_gait().for_model(model)).for_model(model))
     fam = fam_ref.result()
     rs = res.robustness
     kept_refs = [engine.submit(kept_directions, g, rs) for g in fam.gaits]

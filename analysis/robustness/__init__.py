@@ -4,9 +4,9 @@ basins of attraction on the Poincaré section (on a fixed window, or on one that
 contains their boundary)."""
 from .basin import BasinResult, basin
 from .basin_window import basin_to_boundary, edge_cells, section_cap
-from .s_star import (BatchSStar, Design, RobustnessResult, RobustnessSettings, kept_directions,
-                     robustness, s_star_batch, start_states)
+from .s_star import (BatchSStar, Design, RobustnessResult, RobustnessSettings, decay_steps,
+                     kept_directions, robustness, s_star_batch, start_states)
 
 __all__ = ["Design", "RobustnessSettings", "RobustnessResult", "kept_directions", "robustness",
            "start_states", "BatchSStar", "s_star_batch", "BasinResult", "basin",
-           "basin_to_boundary", "section_cap", "edge_cells"]
+           "basin_to_boundary", "section_cap", "edge_cells", "decay_steps"]

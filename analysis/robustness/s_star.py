@@ -40,12 +40,13 @@ from biped_casadi.results import Result, internal
 from biped_casadi.simulation import (WalkBatch, start_states, virtual_constraint_walker,
                                      zero_dynamics_walker)
 from biped_casadi.simulation.outcome import NOT_CONVERGED, failure_text
+from biped_casadi.simulation.perturbation import PAPER_SIZES
 
 from ..tasks import Engine, resolve_scheduler, task
 from ..stability.poincare import poincare_map
 from ..stability.vc_map import vc_eigenvalue
 
-__all__ = ["Design", "RobustnessSettings", "RobustnessResult", "KeptDirections",
+__all__ = ["Design", "RobustnessSettings", "RobustnessResult", "KeptDirections", "decay_steps",
            "kept_directions", "robustness", "BatchSStar", "s_star_batch", "bisect_scale",
            "walk_batch"]
 
@@ -116,6 +117,44 @@ class RobustnessSettings:
         """
         return SimulationOptions(steps=self.steps, mu=self.mu, torque_limit=self.torque_limit,
                                  jit=jit)
+
+
+def decay_steps(eigenvalue: float, settings: RobustnessSettings | None = None) -> int:
+    """Steps for s* on a slowly converging gait: enough for the largest perturbation tried
+    to decay below the tolerance at the virtual constraints' rate.
+
+    With ``tol`` 1e-3 within 10 steps, a gait whose virtual-constraint eigenvalue is near
+    0.85 has s* near 0 for every design (0.85^10 = 0.2: the paper's perturbation, 0.1
+    rad/s, cannot fall below 1e-3), so s* then measures the convergence rate, not the
+    perturbations survived.  This count N is the least with
+    ``s_max * 0.1 * |eigenvalue|^N <= tol``, and at least ``settings.steps``: RABBIT's
+    default gait (0.54) keeps 10.
+
+    Parameters
+    ----------
+    eigenvalue : float
+        The virtual constraints' eigenvalue on the gait (:func:`vc_eigenvalue`).
+    settings : RobustnessSettings, optional
+        ``tol``, ``s_max`` and the least count ``steps`` (default: the defaults).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        An eigenvalue not inside the unit circle (no decay: no count is enough).
+    """
+    st = _settings(settings)
+    lam = abs(as_number(eigenvalue, "eigenvalue"))
+    if not lam < 1:
+        raise ValueError(f"eigenvalue: virtual constraints must be stable for a decay, got "
+                         f"|{eigenvalue!r}| >= 1")
+    start = st.s_max * max(PAPER_SIZES)
+    if lam == 0 or start <= st.tol:
+        return st.steps
+    return max(st.steps, math.ceil(math.log(st.tol / start) / math.log(lam)))
 
 
 @dataclass

@@ -187,6 +187,7 @@ def monte_carlo(design, spec=None, settings: MonteCarloSettings | None = None,
     st = settings if settings is not None else MonteCarloSettings()
     if not isinstance(st, MonteCarloSettings):
         raise ValueError(f"settings must be a MonteCarloSettings, got {type(st).__name__}")
+    st = st.for_model(gait.model)
     if not isinstance(spec, WalkerSpec):
         raise ValueError("spec must be a WalkerSpec")
     if spec.controller == "tv" and len(spec.M1) != gait.model.nu:

@@ -3,7 +3,7 @@ and how (runs, steps, terrain, thresholds)."""
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -11,9 +11,14 @@ from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, robot)
 from biped_casadi.model.description import description_from_dict
 from biped_casadi.simulation import (Terrain, random_heights)
+from gait_opt import leg_scale
 
 
 __all__ = ["WalkerSpec", "MonteCarloSettings", "MAX_RUNS", "MAX_STEPS", "MAX_FULL_RK4_STEPS"]
+
+#: the default standard deviation of the ground heights on RABBIT's legs (0.8 m), m;
+#: scaled with the robot's leg length (:meth:`MonteCarloSettings.for_model`)
+SIGMA = 0.005
 
 #: the largest number of runs and of steps per run a Monte Carlo accepts
 MAX_RUNS = 1_000_000
@@ -135,8 +140,10 @@ class MonteCarloSettings:
 
     Parameters
     ----------
-    sigma : float
-        Standard deviation of the ground heights, m (>= 0).
+    sigma : float or None
+        Standard deviation of the ground heights, m (>= 0); None (the default): 5 mm on
+        RABBIT, scaled with the robot's leg length (0.00625 x leg), filled in by
+        :meth:`for_model` (``monte_carlo`` does) and recorded in :meth:`to_dict`.
     runs : int
         N runs.
     max_steps : int
@@ -170,7 +177,7 @@ class MonteCarloSettings:
         keys).
     """
 
-    sigma: float = 0.005
+    sigma: float | None = None
     runs: int = 200
     max_steps: int = 50
     seed: int = 0
@@ -186,8 +193,8 @@ class MonteCarloSettings:
 
     def __post_init__(self):
         s = self.sigma
-        if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) \
-                or s < 0:
+        if s is not None and (isinstance(s, bool) or not isinstance(s, (int, float))
+                              or not math.isfinite(s) or s < 0):
             raise ValueError(f"sigma must be a finite number >= 0 (m), got {s!r}")
         for name, hi in (("runs", MAX_RUNS), ("max_steps", MAX_STEPS), ("chunk", MAX_RUNS)):
             v = getattr(self, name)
@@ -213,6 +220,24 @@ class MonteCarloSettings:
         object.__setattr__(self, "profile", Terrain(tuple(self.profile)).heights)
         if self.profile and self.sigma:
             raise ValueError("sigma and profile exclude each other (a profile is the terrain)")
+
+    def for_model(self, model) -> "MonteCarloSettings":
+        """These settings with the default ``sigma`` filled in for the robot: 5 mm
+        scaled with its leg length (:func:`gait_opt.leg_scale`; RABBIT exactly 0.005 m),
+        0 with a terrain profile.
+
+        Parameters
+        ----------
+        model : BipedModel
+            The robot that walks (the gait's).
+
+        Returns
+        -------
+        MonteCarloSettings
+        """
+        if self.sigma is not None:
+            return self
+        return replace(self, sigma=0.0 if self.profile else SIGMA * leg_scale(model))
 
     def heights(self, runs) -> np.ndarray:
         """The ground heights of runs (module docstring), (len(runs), max_steps), m.

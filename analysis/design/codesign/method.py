@@ -16,7 +16,7 @@ import numpy as np
 
 from biped_casadi import Design
 from biped_casadi.simulation import NOT_CONVERGED
-from gait_opt import GaitOptions, optimize_gait
+from gait_opt import GaitOptions, gait_fields, optimize_gait
 
 from ...robustness.basin import basin
 from ...robustness.s_star import kept_directions, robustness
@@ -250,7 +250,7 @@ class Method:
             return self._starts()
         if self.start_gait is None:
             self.say(f"start gait {st.gait}")
-            opts = GaitOptions(**st.gait).for_model(self.model)
+            opts = GaitOptions(**gait_fields(st.gait, self.model)).for_model(self.model)
             if self.free:
                 self.engine.submit(node_kernel, self.model,
                                    self.model.nu * (opts.bezier_degree + 1) + 3)
@@ -260,7 +260,7 @@ class Method:
         if self.free and st.gait_rounds:
             self.engine.submit(node_kernel, self.model,
                                self.model.nu * (g.options.bezier_degree + 1) + 3)
-        targets = {k: v for k, v in st.gait.items() if k in MOVED}
+        targets = {k: v for k, v in gait_fields(st.gait, self.model).items() if k in MOVED}
         self.say(f"gait given: moved to the robust gait constraints {targets} near it, "
                  "then co-designed from there")
         tried, last_error = [], None

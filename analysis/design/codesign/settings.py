@@ -11,7 +11,7 @@ from biped_casadi.results import Result
 from ..settings_checks import check_fields, check_gait_fields
 
 from ...robustness.s_star import RobustnessSettings
-from ..robust_search import ROBUST_GAIT
+from ..robust_search import robust_gait
 
 #: the sampling search's shipped design on :data:`ROBUST_GAIT` (M1; v_c rejoining at
 #: 0.75 T): s* 0.969, the co-design's first warm start
@@ -242,7 +242,8 @@ class CodesignSettings:
     ----------
     gait : dict
         GaitOptions fields of the gait to start from (and whose constraints the free
-        gait keeps); default :data:`ROBUST_GAIT`.
+        gait keeps); default :func:`~analysis.design.robust_gait` (:data:`ROBUST_GAIT`,
+        its clearance scaled with the robot's leg length; a plain dict is used as given).
     free_gait : bool
         Co-design the gait (else only M1 moves, on the given or start gait).
     rejoin : float
@@ -306,7 +307,7 @@ class CodesignSettings:
         How a given gait is moved.
     """
 
-    gait: dict = field(default_factory=lambda: dict(ROBUST_GAIT))
+    gait: dict = field(default_factory=robust_gait)
     free_gait: bool = True
     rejoin: float = 0.75
     rejoin_choices: tuple = (0.5, 0.625, 0.75)
