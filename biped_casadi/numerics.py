@@ -98,8 +98,10 @@ def compiled(f, flags: str = "-O2"):
 
 
 class NotCompiledWarning(UserWarning):
-    """Compiled code could not be built (a full disk, a cache folder that cannot be
-    written, a failing compiler): CasADi evaluates the Functions itself, more slowly."""
+    """Compiled code could not be built: CasADi evaluates the Functions, more slowly.
+
+    Raised as a warning on a full disk, a cache folder that cannot be written or a
+    failing compiler (not where there is no C compiler at all)."""
 
 
 _NOT_COMPILED: set = set()
