@@ -18,8 +18,9 @@ LENGTH_FIELDS = ("step_length_bounds", "clearance")
 
 
 def leg_scale(model) -> float:
-    """The robot's leg length over RABBIT's (:data:`REFERENCE_LEG_LENGTH`): the factor
-    on the length-valued defaults.
+    """The factor on the length-valued defaults: the robot's leg length over RABBIT's.
+
+    RABBIT's is :data:`REFERENCE_LEG_LENGTH`.
 
     Parameters
     ----------
@@ -37,13 +38,25 @@ def leg_scale(model) -> float:
 
 
 class LegScaled(dict):
-    """GaitOptions fields given for RABBIT's legs: :meth:`for_model` scales the
-    length-valued ones (``step_length_bounds``, ``clearance``) with the robot's leg
-    length (:func:`leg_scale`).  A plain dict of fields is taken as it is (a user's
-    explicit values)."""
+    """GaitOptions fields given for RABBIT's legs, their lengths scaled to a robot's.
+
+    :meth:`for_model` scales the length-valued ones (``step_length_bounds``,
+    ``clearance``) with the robot's leg length (:func:`leg_scale`).  A plain dict of
+    fields is taken as it is (a user's explicit values)."""
 
     def for_model(self, model) -> dict:
-        """The fields for ``model`` (a plain dict)."""
+        """The fields for ``model``.
+
+        Parameters
+        ----------
+        model : BipedModel or RobotDescription
+            The robot.
+
+        Returns
+        -------
+        dict
+            A plain dict, the lengths scaled by :func:`leg_scale`.
+        """
         k = leg_scale(model)
         out = dict(self)
         if "clearance" in out:
@@ -54,8 +67,20 @@ class LegScaled(dict):
 
 
 def gait_fields(fields: dict, model) -> dict:
-    """GaitOptions fields for ``model``: a :class:`LegScaled` mapping scaled to its legs,
-    any other mapping as given."""
+    """GaitOptions fields for ``model``.
+
+    Parameters
+    ----------
+    fields : dict
+        A :class:`LegScaled` mapping (scaled to the robot's legs) or any other mapping
+        (taken as given).
+    model : BipedModel or RobotDescription
+        The robot.
+
+    Returns
+    -------
+    dict
+    """
     return fields.for_model(model) if isinstance(fields, LegScaled) else dict(fields)
 
 
@@ -316,8 +341,9 @@ class GaitOptions:
         return dataclasses.replace(self, **changes)
 
     def with_lengths(self, model) -> "GaitOptions":
-        """These options with the length-valued defaults (``step_length_bounds``,
-        ``clearance``) filled in for the robot when none is given: RABBIT's scaled by
+        """These options with the length-valued defaults filled in for the robot.
+
+        ``step_length_bounds`` and ``clearance``, when none is given: RABBIT's scaled by
         :func:`leg_scale` (RABBIT itself: exactly (0.2, 0.8) m and 0.03 m).
 
         Parameters
@@ -339,8 +365,9 @@ class GaitOptions:
         return self.replace(**fill) if fill else self
 
     def for_model(self, model) -> "GaitOptions":
-        """These options with the robot's torque limit and length-valued defaults filled
-        in when none is given (:meth:`with_lengths`).
+        """These options with the robot's torque limit and length defaults filled in.
+
+        Each only when none is given (the lengths: :meth:`with_lengths`).
 
         Parameters
         ----------

@@ -66,8 +66,15 @@ ROBUST_GAIT = dict(impact_mu=0.15, continuation=0.03, clearance=0.05)
 
 
 def robust_gait() -> LegScaled:
-    """The settings' default gait fields: :data:`ROBUST_GAIT`, its clearance scaled with
-    the robot's leg length when the gait is built (0.0625 x leg; RABBIT exactly 0.05 m)."""
+    """The settings' default gait fields: :data:`ROBUST_GAIT`, scaled to the robot.
+
+    Its clearance scales with the robot's leg length when the gait is built (0.0625 x
+    leg; RABBIT exactly 0.05 m).
+
+    Returns
+    -------
+    LegScaled
+    """
     return LegScaled(ROBUST_GAIT)
 
 #: the version of the robust designs kept between sessions (bump it when the search's

@@ -120,8 +120,9 @@ class RobustnessSettings:
 
 
 def decay_steps(eigenvalue: float, settings: RobustnessSettings | None = None) -> int:
-    """Steps for s* on a slowly converging gait: enough for the largest perturbation tried
-    to decay below the tolerance at the virtual constraints' rate.
+    """Steps for s* on a slowly converging gait, from the virtual constraints' rate.
+
+    Enough for the largest perturbation tried to decay below the tolerance at that rate.
 
     With ``tol`` 1e-3 within 10 steps, a gait whose virtual-constraint eigenvalue is near
     0.85 has s* near 0 for every design (0.85^10 = 0.2: the paper's perturbation, 0.1

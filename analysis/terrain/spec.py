@@ -222,9 +222,10 @@ class MonteCarloSettings:
             raise ValueError("sigma and profile exclude each other (a profile is the terrain)")
 
     def for_model(self, model) -> "MonteCarloSettings":
-        """These settings with the default ``sigma`` filled in for the robot: 5 mm
-        scaled with its leg length (:func:`gait_opt.leg_scale`; RABBIT exactly 0.005 m),
-        0 with a terrain profile.
+        """These settings with the default ``sigma`` filled in for the robot.
+
+        5 mm scaled with its leg length (:func:`gait_opt.leg_scale`; RABBIT exactly
+        0.005 m), 0 with a terrain profile.
 
         Parameters
         ----------
