@@ -18,6 +18,32 @@ from .common import (add_design_arguments, Progress, UserError, add_gait_argumen
                      load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
 
 
+def _steps(text: str):
+    """``--steps``: a count, or None for 'auto'."""
+    if text == "auto":
+        return None
+    try:
+        steps = int(text)
+    except ValueError:
+        raise UserError(f"--steps must be a whole number of steps or 'auto', got "
+                        f"{text!r}") from None
+    if not 1 <= steps <= 1000:
+        raise UserError(f"--steps must be between 1 and 1000, got {steps}")
+    return steps
+
+
+def _decay_steps(gait, st, say):
+    """``--steps auto``: the settings with the steps of :func:`decay_steps`."""
+    lam = vc_eigenvalue(gait).eigenvalue
+    try:
+        st = dataclasses.replace(st, steps=decay_steps(lam, st))
+    except ValueError as e:
+        raise UserError(f"--steps auto: {e}") from None
+    say(f"{st.steps} steps: the largest perturbation decays below {st.tol:g} at the "
+        f"virtual constraints' rate {abs(lam):.3g}")
+    return st
+
+
 def cmd_robust(args):
     check_m1_values(args.m1)
     if args.controller == "vc" and (args.m1 is not None or args.rejoin is not None):
@@ -31,15 +57,7 @@ def cmd_robust(args):
         raise UserError(f"--seed must be >= 0, got {args.seed}")
     if not 1 <= args.directions <= 200:
         raise UserError(f"--directions must be between 1 and 200, got {args.directions}")
-    steps = RobustnessSettings.steps
-    if args.steps != "auto":
-        try:
-            steps = int(args.steps)
-        except ValueError:
-            raise UserError(f"--steps must be a whole number of steps or 'auto', got "
-                            f"{args.steps!r}") from None
-        if not 1 <= steps <= 1000:
-            raise UserError(f"--steps must be between 1 and 1000, got {steps}")
+    steps = _steps(args.steps)
     if args.plot is not None:
         output_dir(args.plot, "--plot")
     say = Progress("robust", quiet=args.json)
@@ -50,15 +68,10 @@ def cmd_robust(args):
         design = Design(tuple(parse_m1(args.m1, model.nu)), rejoin)
         check_not_singular(Design.of(design, gait).controller_for(), design.M1)
     st = RobustnessSettings(directions=args.directions, mu=args.mu,
-                            torque_limit=args.torque_limit, seed=args.seed, steps=steps)
-    if args.steps == "auto":
-        lam = vc_eigenvalue(gait).eigenvalue
-        try:
-            st = dataclasses.replace(st, steps=decay_steps(lam, st))
-        except ValueError as e:
-            raise UserError(f"--steps auto: {e}") from None
-        say(f"{st.steps} steps: the largest perturbation decays below {st.tol:g} at the "
-            f"virtual constraints' rate {abs(lam):.3g}")
+                            torque_limit=args.torque_limit, seed=args.seed,
+                            steps=RobustnessSettings.steps if steps is None else steps)
+    if steps is None:
+        st = _decay_steps(gait, st, say)
     say(f"perturbation directions from which virtual constraints walk ({args.directions} "
         f"wanted; about 0.3 s each)")
     kept = kept_directions(gait, st)
