@@ -134,6 +134,39 @@ def save_figures(figures: dict, folder, formats=("png",), dpi: int = 150) -> lis
     return written
 
 
+def _legend_below(fig: Figure, axes, fontsize: float = 8, ncol: int = 1, x: float = 0.5):
+    """One legend for ``axes`` under the figure, where it cannot cover a curve.
+
+    Call it after the layout (``tight_layout``): the legend hangs below the figure's
+    bottom edge, and the saved file's tight box (:func:`save_figure`) takes it in.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    axes : Axes or sequence of Axes
+        Their labelled artists, in order, each label once.
+    fontsize : float
+    ncol : int
+    x : float
+        The legend's centre, in figure coordinates (0.5: under the middle).
+
+    Returns
+    -------
+    matplotlib.legend.Legend or None
+        None when nothing is labelled.
+    """
+    handles, labels = [], []
+    for ax in (axes if isinstance(axes, (list, tuple)) else [axes]):
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    if not handles:
+        return None
+    return fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(x, 0.0),
+                      fontsize=fontsize, ncol=ncol, frameon=False)
+
+
 # ---------------------------------------------------------- stick figures
 def _stick(ax, model, P, alpha=1.0, lw=2.0):
     """One stick figure from the model's points (``model.points``: stance foot, stance

@@ -9,7 +9,7 @@ from matplotlib.ticker import MaxNLocator
 from biped_casadi.control import require_reference
 from biped_casadi.numerics import as_count
 
-from .common import SWING, _figure, _legs_legend, _stick, run_label
+from .common import SWING, _figure, _legend_below, _legs_legend, _stick, run_label
 
 __all__ = ["gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot", "conjecture_plot",
            "stable_domains_plot", "m1_plane_plot", "unactuated_error_plot",
@@ -80,7 +80,8 @@ def gait_profiles_plot(gait) -> Figure:
     a2.set_ylabel(r"$u^d(t)$ [N m]")
     a2.set_xlabel("t [s]")
     a2.legend(ncol=min(u.shape[0], 4), fontsize=8)
-    a1.set_title("Reference joint angles and torques over one step")
+    a1.set_title(f"{gait.model.params.name}: reference joint angles and torques over one "
+                 f"step (T = {gait.T:.3f} s, {gait.speed:.2f} m/s)")
     fig.tight_layout()
     return fig
 
@@ -292,9 +293,12 @@ def unactuated_error_plot(results, title: str | None = None, labels=None) -> Fig
         ax[1].set_xticks([1])
         ax[0].text(0.5, 0.5, "no run reached an impact", transform=ax[0].transAxes,
                    ha="center", va="center", color="0.3")
-    ax[0].legend(fontsize=8)
     fig.suptitle(title or "Fig. 5: error of the unactuated variable at the end of each step")
     fig.tight_layout()
+    if len(results) > 1:                 # several runs: under the panels, off the curves
+        _legend_below(fig, ax[0])
+    else:
+        ax[0].legend(fontsize=8)
     return fig
 
 
@@ -348,7 +352,10 @@ def swing_torques_plot(results, gait, title: str | None = None, labels=None) -> 
     ax[-1].set_xlabel("t [s]")
     for a in ax:
         a.grid(alpha=0.3)
-    ax[0].legend(fontsize=8)
-    fig.suptitle(title or "Fig. 6: torques of the swing leg")
+    fig.suptitle(title or f"Fig. 6: torques of the swing leg ({model.params.name})")
     fig.tight_layout()
+    if len(results) > 1:                 # several runs: under the panels, off the curves
+        _legend_below(fig, ax[0])
+    else:
+        ax[0].legend(fontsize=8)
     return fig
