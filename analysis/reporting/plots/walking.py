@@ -250,7 +250,7 @@ def tradeoff_plot(front, others=None, bound=None, title: str | None = None,
         ax.plot([lam], [s], mk, ms=8, label=f"{label}: s* {s:.3g}, max|λ| {lam:.2g}")
     if bound is not None:
         ax.axvline(bound, color="tab:red", ls=":", lw=1, label=f"bound max|λ| = {bound:.3g}")
-    ax.axhline(1.0, color="tab:green", ls="--", lw=1, label="the paper's perturbation (s = 1)")
+    ax.axhline(1.0, color="0.5", ls="--", lw=1, label="the paper's perturbation (s = 1)")
     lams = [p[0] for p in front] + [v[0] for v in (others or {}).values()]
     if lams and min(lams) < 0.02:                        # deadbeat designs: log scale
         ax.set_xscale("symlog", linthresh=1e-3)
@@ -291,7 +291,9 @@ def survival_plot(results, labels=None, title: str | None = None) -> Figure:
         mf = r.estimate.mfpt
         lab += f" (MFPT {mf:.3g})" if np.isfinite(mf) else \
             f" (MFPT > {r.estimate.mfpt_ci[0]:.3g})"
-        ax.step(np.arange(S.size), S, where="post", lw=1.4, label=lab)
+        # a line style each: equal curves (every run walked) stay visible, one over another
+        ax.step(np.arange(S.size), S, where="post", lw=1.4, label=lab,
+                ls=("-", "--", ":", "-.")[i % 4])
     ax.set_xlabel("steps k")
     ax.set_ylabel("fraction of runs that walked at least k steps")
     ax.set_ylim(-0.02, 1.02)
@@ -330,8 +332,10 @@ def mfpt_sigma_plot(curves, title: str | None = None) -> Figure:
         y = np.where(finite, r[:, 1], r[:, 2])
         lo = np.maximum(y - r[:, 2], 0)
         hi = np.where(np.isfinite(r[:, 3]), r[:, 3] - y, 0)
+        # no legend entry for a curve with nothing drawn (no run failed at any sigma)
         line = ax.errorbar(sig[finite], y[finite], yerr=[lo[finite], hi[finite]], fmt=mk + "-",
-                           capsize=3, ms=5, lw=1.2, label=label)
+                           capsize=3, ms=5, lw=1.2,
+                           label=label if finite.any() else "_nolegend_")
         if (~finite).any():
             ax.plot(sig[~finite], y[~finite], "^", ms=8, mfc="none",
                     color=line[0].get_color(), label=f"{label}: no failure (lower bound)")
