@@ -209,6 +209,16 @@ def test_the_figure_draws_each_basin_on_its_window(auto_vc, auto_tv):
     assert any(t.startswith("fixed window") for t in labels)
 
 
+def test_the_figure_names_each_panel_and_keeps_its_design(auto_vc, auto_tv):
+    """The reproduction's robust basins showed two panels titled 'time-varying, M1 = [...]'
+    only: which was the co-design and which the sampling search's design was left to the
+    order of the words in the figure's title."""
+    fig = basin_plot([auto_vc, auto_tv], labels=["virtual constraints", "the co-design"])
+    vc, tv = (ax.get_title().splitlines() for ax in fig.axes[:2])
+    assert vc[0] == "virtual constraints" and vc.count("virtual constraints") == 1
+    assert tv[0] == "the co-design" and tv[1].startswith("time-varying, M1 = [")
+
+
 @pytest.mark.slow
 def test_the_robust_designs_compare_on_windows_that_contain_their_boundary():
     """The co-design of `biped m1 --robust` and virtual constraints on its gait converge

@@ -87,14 +87,16 @@ def fig4(domain_stage) -> dict:
 def basins_default(basin_stage) -> dict:
     """The default gait's basins side by side."""
     return dict(basin_default=figure_files(basin_plot(basin_stage.basins,
-                                                      title=basin_stage.title)))
+                                                      title=basin_stage.title,
+                                                      labels=basin_stage.labels)))
 
 
 @task(code="figures")
 def basins_robust(basin_stage) -> dict:
     """The robust designs' basins side by side."""
     return dict(basin_robust=figure_files(basin_plot(basin_stage.basins,
-                                                     title=basin_stage.title)))
+                                                     title=basin_stage.title,
+                                                     labels=basin_stage.labels)))
 
 
 @task(code="figures")

@@ -137,7 +137,7 @@ def basin_plot(results, title: str | None = None, labels=None,
         :func:`analysis.robustness.basin_to_boundary` (each on its own window).
     title : str, optional
     labels : list of str, optional
-        One panel title per result (default: the design).
+        A name per panel, written above its design (default: the design alone).
     reference_window : (float, float) or None
         Half-widths (rad, rad/s) of a window drawn dashed on panels whose own window is
         larger (default the fixed window of the report's basins); None: not drawn.
@@ -196,10 +196,11 @@ def _basin_panel(ax, r, label, names, cmap, reference_window) -> dict:
             extra["window"] = Line2D([], [], color="w", ls="--", lw=1.2, path_effects=_OUTLINE,
                                      label=f"fixed window ±{qw:g} rad x ±{dw:g} rad/s")
     ax.plot(0, 0, "w*", ms=12, mec="k")
-    if label is None:
-        label = ("virtual constraints" if r.controller == "vc" else
-                 "time-varying, M1 = [" + ", ".join(f"{v:.3g}" for v in r.design["M1"])
-                 + f"], v_c rejoins at {r.design['rejoin']:g} T")
+    design = ("virtual constraints" if r.controller == "vc" else
+              "time-varying, M1 = [" + ", ".join(f"{v:.3g}" for v in r.design["M1"])
+              + f"], v_c rejoins at {r.design['rejoin']:g} T")
+    # the name (which design of the study) and the design (its numbers): both, once each
+    label = design if label in (None, design) else f"{label}\n{design}"
     area = getattr(r, "area", 0.0)
     capped = " (capped: boundary not all inside)" if r.status == "capped" else ""
     ax.set_title(f"{label}\n{100 * r.converged_fraction:.1f} % of the window converges in "
