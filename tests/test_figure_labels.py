@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from matplotlib.colors import to_hex
 
-from analysis.reporting.plots import (gait_profiles_plot, mfpt_sigma_plot, mujoco_steps_plot,
-                                      speed_profile_plot, survival_plot, swing_torques_plot,
-                                      tradeoff_plot, unactuated_error_plot)
+from analysis.reporting.plots import (gait_profiles_plot, gait_stick_plot, mfpt_sigma_plot,
+                                      mujoco_steps_plot, speed_profile_plot, survival_plot,
+                                      swing_torques_plot, tradeoff_plot, unactuated_error_plot)
 
 
 def _overlaps(fig, legend, axes) -> list:
@@ -130,3 +130,13 @@ def test_mujoco_steps_legend_is_off_the_panels():
     assert {"C law, stiff contact: walked", "the gait's speed", "the gait's T"} <= {
         t.get_text() for t in legend.get_texts()}
     assert _overlaps(fig, legend, fig.axes) == []
+
+
+@pytest.mark.parametrize("which", ["gait", "gait3"])
+def test_stick_diagram_legend_is_beside_the_poses(which, request):
+    """The legend in the upper left covered the three-link biped's first torsos."""
+    g = request.getfixturevalue(which)
+    fig = gait_stick_plot(g)
+    ax = fig.axes[0]
+    assert ax.get_title().startswith(g.model.params.name + ", reference step")
+    assert _overlaps(fig, ax.get_legend(), [ax]) == []

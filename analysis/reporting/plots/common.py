@@ -177,11 +177,16 @@ def _stick(ax, model, P, alpha=1.0, lw=2.0):
     ax.plot(P[0, sw], P[1, sw], "-", color=SWING, lw=lw, alpha=alpha)
 
 
-def _legs_legend(ax, extra=()):
+def _legs_legend(ax, extra=(), outside: bool = False):
+    """The legend of the stick figures' colours: in the axes' upper left corner, or
+    (``outside``) beside the axes, clear of the poses."""
     handles = [Line2D([], [], color=STANCE, lw=2, label="stance leg"),
                Line2D([], [], color=SWING, lw=2, label="swing leg"),
                Line2D([], [], color=TORSO, lw=3, label="torso"), *extra]
-    ax.legend(handles=handles, loc="upper left", fontsize=8)
+    if outside:
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)
+    else:
+        ax.legend(handles=handles, loc="upper left", fontsize=8)
 
 
 # ------------------------------------------------------------------ runs

@@ -51,7 +51,7 @@ def gait_stick_plot(gait, frames: int = 9) -> Figure:
     ax.set_title(f"{model.params.name}, reference step: T = {T:.3f} s, step length "
                  f"{gait.step_length:.3f} m, {gait.speed:.2f} m/s ({frames} poses, later "
                  f"ones darker)", fontsize=10)
-    _legs_legend(ax, [path])
+    _legs_legend(ax, [path], outside=True)      # the first poses reach the upper left
     return fig
 
 

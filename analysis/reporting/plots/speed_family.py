@@ -154,7 +154,7 @@ def family_designs_plot(designs, title: str | None = None) -> Figure:
     rec = designs.records
     v = np.array([r["speed"] for r in rec])
     basins = all("basin_area" in d for r in rec for d in r["designs"].values())
-    panels = [("max_abs", "max |λ| of A^z (VC: |eigenvalue|)"),
+    panels = [("max_abs", "max |λ| of $A^z$ (VC: |eigenvalue|)"),
               ("s_star", "s*: largest scale of the paper's\nperturbation survived")]
     if basins:
         panels.append(("basin_area", "basin: converged area\n(rad x rad/s)"))
