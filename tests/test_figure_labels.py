@@ -140,3 +140,28 @@ def test_stick_diagram_legend_is_beside_the_poses(which, request):
     ax = fig.axes[0]
     assert ax.get_title().startswith(g.model.params.name + ", reference step")
     assert _overlaps(fig, ax.get_legend(), [ax]) == []
+
+
+def test_fig3_says_what_it_leaves_out():
+    """Points beyond the drawn range and points without a value were left out silently:
+    the legend's counts did not add up to the grid."""
+    from analysis.reporting.plots import conjecture_plot
+    max_abs = np.array([0.5, 2.0, 60.0, 70.0, np.inf, np.nan])
+    status = np.array(["stable", "unstable", "unstable", "unstable", "singular", "singular"])
+    fig = conjecture_plot(np.zeros(6), max_abs, status, limit=50.0)
+    assert "not drawn: 2 at 50 or more, 2 without a value" in fig.axes[0].get_xlabel()
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert labels == ["unstable (1)", "stable (1)"]
+
+
+def test_fig4_legend_is_off_the_contours():
+    """The star's legend sat in each panel's lower right corner, on group 2's contour."""
+    from analysis.reporting.plots import stable_domains_plot
+    m2, m3 = np.meshgrid(np.linspace(-10, 10, 9), np.linspace(-10, 10, 9), indexing="ij")
+    fig = stable_domains_plot(m2, m3, np.exp(m2 / 5), np.exp(m3 / 5),
+                              best={1: [0, 1, 2, 3], 2: [0, -1, -2, 3]})
+    panels = fig.axes[:2]
+    assert all(ax.get_legend() is None for ax in panels)
+    (legend,) = fig.legends
+    assert [t.get_text() for t in legend.get_texts()] == ["best point of the group"]
+    assert _overlaps(fig, legend, fig.axes) == []

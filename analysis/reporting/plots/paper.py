@@ -156,7 +156,11 @@ def conjecture_plot(zsw, max_abs, status, limit: float = 50.0) -> Figure:
     ax.scatter(max_abs[un], zsw[un], s=4, c="0.5", label=f"unstable ({un.sum()})")
     ax.scatter(max_abs[st], zsw[st], s=10, c="red", label=f"stable ({st.sum()})")
     ax.axvline(1.0, color="k", lw=0.8, ls="--")
-    ax.set_xlabel(r"max $|\lambda_{1,2}|$")
+    beyond = int(np.count_nonzero(np.isfinite(max_abs) & (max_abs >= limit)))
+    none = int(np.count_nonzero(~np.isfinite(max_abs)))
+    ax.set_xlabel(r"max $|\lambda_{1,2}|$" + (f"  (not drawn: {beyond} at {limit:g} or more, "
+                                               f"{none} without a value)"
+                                               if beyond or none else ""))
     ax.set_ylabel(r"$Z_{sw}(T^d)$ [m]  ($\Delta q_u = 10^{-2}$ rad)")
     ax.set_title(r"Fig. 3: swing-foot height at $T^d$ vs. max $|\lambda|$ (the M1 grid)")
     ax.legend(loc="best", fontsize=8)
@@ -194,13 +198,13 @@ def stable_domains_plot(m2, m3, max_abs_1, max_abs_2, best=None) -> Figure:
             ax.contour(m2, m3, filled, levels=[1.0], colors="red", linewidths=1.5)
         if best is not None and best.get(k) is not None:
             b = best[k]
-            ax.plot(b[1], b[2], "w*", ms=12, mec="k", label="best point")
-            ax.legend(loc="lower right", fontsize=8)
+            ax.plot(b[1], b[2], "w*", ms=12, mec="k", label="best point of the group")
         ax.set_title(f"group {k}: contour max|λ| = 1 (red)")
         ax.set_xlabel("M1(2)")
     axes[0].set_ylabel("M1(3)")
     fig.colorbar(im, ax=list(axes), label="log10 max|λ|")
     fig.suptitle("Fig. 4: stable domains of the a = b = 0 groups")
+    _legend_below(fig, list(axes))           # inside, it sat on a group's contour
     return fig
 
 
