@@ -180,9 +180,9 @@ def _basin_panel(ax, r, label, names, cmap, reference_window) -> dict:
     codes = np.vectorize(lambda o: names.index(o) if o in names else names.index("diverged"))(
         r.outcome.astype(str))
     da, db = np.diff(r.q_u[:2])[0] / 2, np.diff(r.dq_u[:2])[0] / 2
+    extent = [r.dq_u[0] - db, r.dq_u[-1] + db, r.q_u[0] - da, r.q_u[-1] + da]
     ax.imshow(codes, origin="lower", aspect="auto", cmap=cmap, vmin=-0.5,
-              vmax=len(names) - 0.5, interpolation="nearest",
-              extent=[r.dq_u[0] - db, r.dq_u[-1] + db, r.q_u[0] - da, r.q_u[-1] + da])
+              vmax=len(names) - 0.5, interpolation="nearest", extent=extent)
     extra = {}
     conv = (r.outcome == "converged").astype(float)
     if 0 < conv.sum() < conv.size:
@@ -196,6 +196,10 @@ def _basin_panel(ax, r, label, names, cmap, reference_window) -> dict:
             extra["window"] = Line2D([], [], color="w", ls="--", lw=1.2, path_effects=_OUTLINE,
                                      label=f"fixed window ±{qw:g} rad x ±{dw:g} rad/s")
     ax.plot(0, 0, "w*", ms=12, mec="k")
+    # the axes span the basin's window: a reference window taller (or wider) than it is
+    # cut at the edge, not drawn over an empty band
+    ax.set_xlim(extent[:2])
+    ax.set_ylim(extent[2:])
     design = ("virtual constraints" if r.controller == "vc" else
               "time-varying, M1 = [" + ", ".join(f"{v:.3g}" for v in r.design["M1"])
               + f"], v_c rejoins at {r.design['rejoin']:g} T")
