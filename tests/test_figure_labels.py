@@ -165,3 +165,18 @@ def test_fig4_legend_is_off_the_contours():
     (legend,) = fig.legends
     assert [t.get_text() for t in legend.get_texts()] == ["best point of the group"]
     assert _overlaps(fig, legend, fig.axes) == []
+
+
+def test_animation_names_the_robot_and_takes_a_title(gait3, tmp_path, monkeypatch):
+    """The animation's title was the controller alone: neither the robot nor, in the
+    reproduction, which design of the study was walking."""
+    from analysis.reporting.plots import walking
+    from biped_casadi import Design, SimulationOptions, perturbed_initial_state, simulate
+    made, real = [], walking._figure              # keep the figures the animation draws on
+    monkeypatch.setattr(walking, "_figure", lambda **kw: made.append(real(**kw)) or made[-1])
+    run = simulate(Design.vc(gait3).controller_for(), *perturbed_initial_state(gait3, 0.01, 0.1),
+                   options=SimulationOptions(steps=1))
+    walking.walking_animation(run, gait3.model, tmp_path / "a.gif", fps=5)
+    walking.walking_animation(run, gait3.model, tmp_path / "b.gif", fps=5, title="the design")
+    assert made[0].axes[0].get_title() == f"three_link, virtual constraints: {run.status}"
+    assert made[1].axes[0].get_title() == "the design"

@@ -156,10 +156,11 @@ def animation(sim_stage, robust_sim_stage, res) -> dict:
     if not steps:
         return {}
     pair, gait = _pair(sim_stage, robust_sim_stage)
-    run, model = pair[-1][0], gait.model
+    (run, label), model = pair[-1], gait.model
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "walk.gif"
-        walking_animation(run, model, path, max_steps=steps)
+        walking_animation(run, model, path, max_steps=steps,
+                          title=f"{model.params.name}, {label}: {run.status}")
         return dict(walk_tv=dict(gif=path.read_bytes()))
 
 

@@ -19,7 +19,8 @@ __all__ = ["walking_animation", "OUTCOME_COLOURS", "FIXED_WINDOW", "basin_plot",
 
 
 # ------------------------------------------------------------------ animation
-def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = None) -> str:
+def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = None,
+                      title: str | None = None) -> str:
     """Stick-figure animation of a run, written as a GIF (Pillow).
 
     It shows the ground, the footprints of every stance foot, the stance leg, the swing
@@ -34,6 +35,8 @@ def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = N
     fps : int
     max_steps : int, optional
         Animate only the first steps.
+    title : str, optional
+        What is walking (default the robot, the controller and the run's status).
 
     Returns
     -------
@@ -66,7 +69,7 @@ def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = N
     swing, = ax.plot([], [], "-o", color=SWING, lw=3, ms=4)
     torso, = ax.plot([], [], "-", color=TORSO, lw=4)
     text = ax.text(0.99, 0.95, "", transform=ax.transAxes, va="top", ha="right", fontsize=9)
-    ax.set_title(f"{run_label(res)}: {res.status}", fontsize=10)
+    ax.set_title(title or f"{model.params.name}, {run_label(res)}: {res.status}", fontsize=10)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("z [m]")
     _legs_legend(ax, [foot])
