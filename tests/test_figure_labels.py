@@ -180,3 +180,17 @@ def test_animation_names_the_robot_and_takes_a_title(gait3, tmp_path, monkeypatc
     walking.walking_animation(run, gait3.model, tmp_path / "b.gif", fps=5, title="the design")
     assert made[0].axes[0].get_title() == f"three_link, virtual constraints: {run.status}"
     assert made[1].axes[0].get_title() == "the design"
+
+
+def test_cli_simulate_fig5_names_the_robot(gait3, tmp_path, capsys, monkeypatch):
+    from analysis.cli import main as biped_main
+    from analysis.cli import simulate as cli
+    made, real = [], cli.unactuated_error_plot
+    monkeypatch.setattr(cli, "unactuated_error_plot",
+                        lambda *a, **kw: made.append(real(*a, **kw)) or made[-1])
+    path = gait3.save(tmp_path / "gait.json")
+    assert biped_main(["simulate", "--gait", str(path), "--controller", "vc", "--steps", "1",
+                       "--plot", str(tmp_path / "fig")]) == 0
+    capsys.readouterr()
+    (title,) = [t.get_text() for t in made[0].texts]
+    assert title.startswith("Fig. 5") and title.endswith("(three_link)")
