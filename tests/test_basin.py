@@ -209,6 +209,16 @@ def test_the_figure_draws_each_basin_on_its_window(auto_vc, auto_tv):
     assert any(t.startswith("fixed window") for t in labels)
 
 
+def test_the_figure_names_each_panel_and_keeps_its_design(auto_vc, auto_tv):
+    """The reproduction's robust basins showed two panels titled 'time-varying, M1 = [...]'
+    only: which was the co-design and which the sampling search's design was left to the
+    order of the words in the figure's title."""
+    fig = basin_plot([auto_vc, auto_tv], labels=["virtual constraints", "the co-design"])
+    vc, tv = (ax.get_title().splitlines() for ax in fig.axes[:2])
+    assert vc[0] == "virtual constraints" and vc.count("virtual constraints") == 1
+    assert tv[0] == "the co-design" and tv[1].startswith("time-varying, M1 = [")
+
+
 @pytest.mark.slow
 def test_the_robust_designs_compare_on_windows_that_contain_their_boundary():
     """The co-design of `biped m1 --robust` and virtual constraints on its gait converge
@@ -243,3 +253,17 @@ def test_a_grid_the_adaptive_refinement_cannot_fill_says_which_sizes_fit():
         _adaptive(None, 3, 4)
     with pytest.raises(ValueError, match="refine must be an integer >= 2"):
         _adaptive(None, 11, 1)
+
+
+def test_a_reference_window_taller_than_the_basin_leaves_no_empty_band(auto_vc):
+    """A basin on a window narrower in q_u than the fixed window but wider in dq_u (the
+    three-link biped's deadbeat M1) had its axes stretched to the fixed window: white
+    bands above and below the cells."""
+    qw, dw = auto_vc.q_span * 2, auto_vc.dq_span / 2
+    fig = basin_plot(auto_vc, reference_window=(qw, dw))
+    ax = fig.axes[0]
+    da, db = np.diff(auto_vc.q_u[:2])[0] / 2, np.diff(auto_vc.dq_u[:2])[0] / 2
+    assert ax.get_ylim() == pytest.approx((-auto_vc.q_span - da, auto_vc.q_span + da))
+    assert ax.get_xlim() == pytest.approx((-auto_vc.dq_span - db, auto_vc.dq_span + db))
+    assert any(t.startswith("fixed window")
+               for t in (t.get_text() for t in fig.legends[0].get_texts()))

@@ -287,6 +287,19 @@ def _run(capsys, *argv):
     return rc, out, err
 
 
+def test_cli_speed_profile_figure_names_the_robot(capsys, tmp_path, family_path, monkeypatch):
+    """The command's figure said neither the robot nor how many steps it walked."""
+    from analysis.cli import simulate_profile as cli
+    made, real = [], cli.speed_profile_plot
+    monkeypatch.setattr(cli, "speed_profile_plot",
+                        lambda *a, **kw: made.append(real(*a, **kw)) or made[-1])
+    rc, _, err = _run(capsys, "--gait", str(family_path), "--speeds", "0.7", "0.75",
+                      "--controller", "vc", "--plot", str(tmp_path / "figs"))
+    assert rc == 0 and err == ""
+    (title,) = [t.get_text() for t in made[0].texts]
+    assert title.startswith("RABBIT: speed profile of 2 steps"), title
+
+
 def test_cli_speeds_and_ramp(capsys, tmp_path, family_path):
     rc, out, err = _run(capsys, "--gait", str(family_path), "--speeds", "0.7", "0.75", "0.8",
                         "--m1", *map(str, M1), "--rejoin", "0.75", "--json",

@@ -218,7 +218,9 @@ def _figures(args, runs, model, gait, say):
     """Figures 5 and 6 (--plot) and the animation of the first run (--animate)."""
     figures = {}
     if args.plot:
-        fig5, fig6 = save_figures({"fig5_qu_error": unactuated_error_plot(runs),
+        title5 = (f"Fig. 5: error of the unactuated variable at the end of each step "
+                  f"({model.params.name})")
+        fig5, fig6 = save_figures({"fig5_qu_error": unactuated_error_plot(runs, title=title5),
                                    "fig6_swing_torques": swing_torques_plot(runs, gait)},
                                   args.plot)
         figures.update(fig5=fig5, fig6=fig6)

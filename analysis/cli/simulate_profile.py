@@ -155,7 +155,10 @@ def cmd_profile(args, say, perturbation_of) -> int:
         names = {"tv": "time-varying" + (" (scheduled M1)" if args.schedule else ""),
                  "vc": "virtual constraints"}
         (figures["speed_profile"],) = save_figures(
-            {"speed_profile": speed_profile_plot({names[k]: r for k, r in runs.items()})},
+            {"speed_profile": speed_profile_plot(
+                {names[k]: r for k, r in runs.items()},
+                title=f"{model.params.name}: speed profile of {speeds.size} steps in full "
+                      f"order, speed and error per step")},
             args.plot)
     res = runs[args.controller]
     if args.json:

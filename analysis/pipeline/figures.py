@@ -87,14 +87,16 @@ def fig4(domain_stage) -> dict:
 def basins_default(basin_stage) -> dict:
     """The default gait's basins side by side."""
     return dict(basin_default=figure_files(basin_plot(basin_stage.basins,
-                                                      title=basin_stage.title)))
+                                                      title=basin_stage.title,
+                                                      labels=basin_stage.labels)))
 
 
 @task(code="figures")
 def basins_robust(basin_stage) -> dict:
     """The robust designs' basins side by side."""
     return dict(basin_robust=figure_files(basin_plot(basin_stage.basins,
-                                                     title=basin_stage.title)))
+                                                     title=basin_stage.title,
+                                                     labels=basin_stage.labels)))
 
 
 @task(code="figures")
@@ -154,10 +156,11 @@ def animation(sim_stage, robust_sim_stage, res) -> dict:
     if not steps:
         return {}
     pair, gait = _pair(sim_stage, robust_sim_stage)
-    run, model = pair[-1][0], gait.model
+    (run, label), model = pair[-1], gait.model
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "walk.gif"
-        walking_animation(run, model, path, max_steps=steps)
+        walking_animation(run, model, path, max_steps=steps,
+                          title=f"{model.params.name}, {label}: {run.status}")
         return dict(walk_tv=dict(gif=path.read_bytes()))
 
 

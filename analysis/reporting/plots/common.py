@@ -134,6 +134,39 @@ def save_figures(figures: dict, folder, formats=("png",), dpi: int = 150) -> lis
     return written
 
 
+def _legend_below(fig: Figure, axes, fontsize: float = 8, ncol: int = 1, x: float = 0.5):
+    """One legend for ``axes`` under the figure, where it cannot cover a curve.
+
+    Call it after the layout (``tight_layout``): the legend hangs below the figure's
+    bottom edge, and the saved file's tight box (:func:`save_figure`) takes it in.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    axes : Axes or sequence of Axes
+        Their labelled artists, in order, each label once.
+    fontsize : float
+    ncol : int
+    x : float
+        The legend's centre, in figure coordinates (0.5: under the middle).
+
+    Returns
+    -------
+    matplotlib.legend.Legend or None
+        None when nothing is labelled.
+    """
+    handles, labels = [], []
+    for ax in (axes if isinstance(axes, (list, tuple)) else [axes]):
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    if not handles:
+        return None
+    return fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(x, 0.0),
+                      fontsize=fontsize, ncol=ncol, frameon=False)
+
+
 # ---------------------------------------------------------- stick figures
 def _stick(ax, model, P, alpha=1.0, lw=2.0):
     """One stick figure from the model's points (``model.points``: stance foot, stance
@@ -144,11 +177,16 @@ def _stick(ax, model, P, alpha=1.0, lw=2.0):
     ax.plot(P[0, sw], P[1, sw], "-", color=SWING, lw=lw, alpha=alpha)
 
 
-def _legs_legend(ax, extra=()):
+def _legs_legend(ax, extra=(), outside: bool = False):
+    """The legend of the stick figures' colours: in the axes' upper left corner, or
+    (``outside``) beside the axes, clear of the poses."""
     handles = [Line2D([], [], color=STANCE, lw=2, label="stance leg"),
                Line2D([], [], color=SWING, lw=2, label="swing leg"),
                Line2D([], [], color=TORSO, lw=3, label="torso"), *extra]
-    ax.legend(handles=handles, loc="upper left", fontsize=8)
+    if outside:
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8)
+    else:
+        ax.legend(handles=handles, loc="upper left", fontsize=8)
 
 
 # ------------------------------------------------------------------ runs

@@ -361,7 +361,7 @@ def _legend(best, drawn, nu, st, per_cell):
         if name not in drawn:
             continue
         n = int(np.count_nonzero(st == name))
-        label = NO_VALUE_LABELS[name] + (f" ({n} points)" if nu == 2 else
+        label = NO_VALUE_LABELS[name] + (f" ({n} point{'s' * (n != 1)})" if nu == 2 else
                                          "\n  (every point of the cell)")
         patch = Patch(fc=NO_VALUE_COLOURS[name], ec="0.4", lw=0.5, label=label)
         if nu == 2 and n <= MAX_MARKED:        # the cell's colour with the point's marker

@@ -10,7 +10,7 @@ from matplotlib.ticker import MaxNLocator
 
 from biped_casadi.files import atomic_path
 
-from .common import STANCE, SWING, TORSO, _figure
+from .common import STANCE, SWING, TORSO, _figure, _legend_below
 
 __all__ = ["mujoco_steps_plot", "mujoco_animation", "mujoco_eigen_plot"]
 
@@ -83,13 +83,12 @@ def mujoco_steps_plot(walks, labels=None, title: str | None = None) -> Figure:
         ax[3].set_xticks([1])
         ax[0].text(0.5, 0.2, "no step completed", transform=ax[0].transAxes, ha="center",
                    va="center", fontsize=10, bbox=dict(fc="white", ec="0.6"))
-    ax[0].legend(fontsize=8, loc="best")
-    ax[1].legend(fontsize=8, loc="best")
     for a in ax:
         a.grid(alpha=0.3)
     fig.suptitle(title or "In MuJoCo: speed, step duration and error at each touchdown",
                  fontsize=11)
     fig.tight_layout()
+    _legend_below(fig, [ax[0], ax[1]], ncol=2)     # the walks fill their panels
     return fig
 
 

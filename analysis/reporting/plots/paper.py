@@ -9,7 +9,7 @@ from matplotlib.ticker import MaxNLocator
 from biped_casadi.control import require_reference
 from biped_casadi.numerics import as_count
 
-from .common import SWING, _figure, _legs_legend, _stick, run_label
+from .common import SWING, _figure, _legend_below, _legs_legend, _stick, run_label
 
 __all__ = ["gait_stick_plot", "gait_profiles_plot", "one_d_sweeps_plot", "conjecture_plot",
            "stable_domains_plot", "m1_plane_plot", "unactuated_error_plot",
@@ -51,7 +51,7 @@ def gait_stick_plot(gait, frames: int = 9) -> Figure:
     ax.set_title(f"{model.params.name}, reference step: T = {T:.3f} s, step length "
                  f"{gait.step_length:.3f} m, {gait.speed:.2f} m/s ({frames} poses, later "
                  f"ones darker)", fontsize=10)
-    _legs_legend(ax, [path])
+    _legs_legend(ax, [path], outside=True)      # the first poses reach the upper left
     return fig
 
 
@@ -80,7 +80,8 @@ def gait_profiles_plot(gait) -> Figure:
     a2.set_ylabel(r"$u^d(t)$ [N m]")
     a2.set_xlabel("t [s]")
     a2.legend(ncol=min(u.shape[0], 4), fontsize=8)
-    a1.set_title("Reference joint angles and torques over one step")
+    a1.set_title(f"{gait.model.params.name}: reference joint angles and torques over one "
+                 f"step (T = {gait.T:.3f} s, {gait.speed:.2f} m/s)")
     fig.tight_layout()
     return fig
 
@@ -155,7 +156,11 @@ def conjecture_plot(zsw, max_abs, status, limit: float = 50.0) -> Figure:
     ax.scatter(max_abs[un], zsw[un], s=4, c="0.5", label=f"unstable ({un.sum()})")
     ax.scatter(max_abs[st], zsw[st], s=10, c="red", label=f"stable ({st.sum()})")
     ax.axvline(1.0, color="k", lw=0.8, ls="--")
-    ax.set_xlabel(r"max $|\lambda_{1,2}|$")
+    beyond = int(np.count_nonzero(np.isfinite(max_abs) & (max_abs >= limit)))
+    none = int(np.count_nonzero(~np.isfinite(max_abs)))
+    ax.set_xlabel(r"max $|\lambda_{1,2}|$" + (f"  (not drawn: {beyond} at {limit:g} or more, "
+                                               f"{none} without a value)"
+                                               if beyond or none else ""))
     ax.set_ylabel(r"$Z_{sw}(T^d)$ [m]  ($\Delta q_u = 10^{-2}$ rad)")
     ax.set_title(r"Fig. 3: swing-foot height at $T^d$ vs. max $|\lambda|$ (the M1 grid)")
     ax.legend(loc="best", fontsize=8)
@@ -193,13 +198,13 @@ def stable_domains_plot(m2, m3, max_abs_1, max_abs_2, best=None) -> Figure:
             ax.contour(m2, m3, filled, levels=[1.0], colors="red", linewidths=1.5)
         if best is not None and best.get(k) is not None:
             b = best[k]
-            ax.plot(b[1], b[2], "w*", ms=12, mec="k", label="best point")
-            ax.legend(loc="lower right", fontsize=8)
+            ax.plot(b[1], b[2], "w*", ms=12, mec="k", label="best point of the group")
         ax.set_title(f"group {k}: contour max|λ| = 1 (red)")
         ax.set_xlabel("M1(2)")
     axes[0].set_ylabel("M1(3)")
     fig.colorbar(im, ax=list(axes), label="log10 max|λ|")
     fig.suptitle("Fig. 4: stable domains of the a = b = 0 groups")
+    _legend_below(fig, list(axes))           # inside, it sat on a group's contour
     return fig
 
 
@@ -292,9 +297,12 @@ def unactuated_error_plot(results, title: str | None = None, labels=None) -> Fig
         ax[1].set_xticks([1])
         ax[0].text(0.5, 0.5, "no run reached an impact", transform=ax[0].transAxes,
                    ha="center", va="center", color="0.3")
-    ax[0].legend(fontsize=8)
     fig.suptitle(title or "Fig. 5: error of the unactuated variable at the end of each step")
     fig.tight_layout()
+    if len(results) > 1:                 # several runs: under the panels, off the curves
+        _legend_below(fig, ax[0])
+    else:
+        ax[0].legend(fontsize=8)
     return fig
 
 
@@ -348,7 +356,10 @@ def swing_torques_plot(results, gait, title: str | None = None, labels=None) -> 
     ax[-1].set_xlabel("t [s]")
     for a in ax:
         a.grid(alpha=0.3)
-    ax[0].legend(fontsize=8)
-    fig.suptitle(title or "Fig. 6: torques of the swing leg")
+    fig.suptitle(title or f"Fig. 6: torques of the swing leg ({model.params.name})")
     fig.tight_layout()
+    if len(results) > 1:                 # several runs: under the panels, off the curves
+        _legend_below(fig, ax[0])
+    else:
+        ax[0].legend(fontsize=8)
     return fig

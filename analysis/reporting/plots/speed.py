@@ -41,8 +41,9 @@ def speed_profile_plot(runs: dict, tol: float = 1e-3, title: str | None = None) 
         c, m = _COLOURS[i % len(_COLOURS)], _MARKERS[i % len(_MARKERS)]
         walked = np.array([s.index + 1 for s in r.steps if s.status == "ok"])
         if walked.size:
-            ax_v.plot(walked, np.asarray(r.speeds)[walked - 1], m, color=c, ms=4,
-                      label=f"{label}: walked", alpha=0.8)
+            # open markers of decreasing size: runs that walked the same steps all show
+            ax_v.plot(walked, np.asarray(r.speeds)[walked - 1], m, color=c,
+                      ms=max(7 - 2 * i, 3), mfc="none", mew=1.2, label=f"{label}: walked")
         e = r.errors()
         ax_e.semilogy(k, np.where(e > 0, e, np.nan), m + "-", color=c, ms=3.5, lw=1,
                       label=f"{label} ({r.status})")

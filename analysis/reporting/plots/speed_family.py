@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from .common import _figure
+from .common import _figure, _legend_below
 
 __all__ = ["gait_family_plot", "family_designs_plot"]
 
@@ -21,6 +21,8 @@ _PANELS = (
 )
 _MARKERS = "osD^vP*X"
 _COLOURS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
+#: the most entries a panel's legend holds inside the panel (more go under the figure)
+_LEGEND_INSIDE = 4
 
 
 def gait_family_plot(figures, title: str | None = None) -> Figure:
@@ -73,7 +75,7 @@ def gait_family_plot(figures, title: str | None = None) -> Figure:
             _mark_falls(ax, v, y, figures)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
+        if 0 < len(ax.get_legend_handles_labels()[0]) <= _LEGEND_INSIDE:
             ax.legend(fontsize=7, loc="best")
     for ax in axes[3:]:
         ax.set_xlabel("speed [m/s]")
@@ -81,6 +83,10 @@ def gait_family_plot(figures, title: str | None = None) -> Figure:
     fig.suptitle(title or f"Gait family of {figures.robot}: {len(v)} gaits from {v.min():g} "
                  f"to {v.max():g} m/s{n_folds}", fontsize=11)
     fig.tight_layout()
+    for ax in axes:            # a long legend would cover the curves: under its panel
+        if len(ax.get_legend_handles_labels()[0]) > _LEGEND_INSIDE:
+            box = ax.get_position()
+            _legend_below(fig, ax, fontsize=7, ncol=2, x=(box.x0 + box.x1) / 2)
     return fig
 
 
@@ -148,7 +154,7 @@ def family_designs_plot(designs, title: str | None = None) -> Figure:
     rec = designs.records
     v = np.array([r["speed"] for r in rec])
     basins = all("basin_area" in d for r in rec for d in r["designs"].values())
-    panels = [("max_abs", "max |λ| of A^z (VC: |eigenvalue|)"),
+    panels = [("max_abs", "max |λ| of $A^z$ (VC: |eigenvalue|)"),
               ("s_star", "s*: largest scale of the paper's\nperturbation survived")]
     if basins:
         panels.append(("basin_area", "basin: converged area\n(rad x rad/s)"))

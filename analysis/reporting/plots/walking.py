@@ -19,7 +19,8 @@ __all__ = ["walking_animation", "OUTCOME_COLOURS", "FIXED_WINDOW", "basin_plot",
 
 
 # ------------------------------------------------------------------ animation
-def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = None) -> str:
+def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = None,
+                      title: str | None = None) -> str:
     """Stick-figure animation of a run, written as a GIF (Pillow).
 
     It shows the ground, the footprints of every stance foot, the stance leg, the swing
@@ -34,6 +35,8 @@ def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = N
     fps : int
     max_steps : int, optional
         Animate only the first steps.
+    title : str, optional
+        What is walking (default the robot, the controller and the run's status).
 
     Returns
     -------
@@ -66,7 +69,7 @@ def walking_animation(res, model, path, fps: int = 25, max_steps: int | None = N
     swing, = ax.plot([], [], "-o", color=SWING, lw=3, ms=4)
     torso, = ax.plot([], [], "-", color=TORSO, lw=4)
     text = ax.text(0.99, 0.95, "", transform=ax.transAxes, va="top", ha="right", fontsize=9)
-    ax.set_title(f"{run_label(res)}: {res.status}", fontsize=10)
+    ax.set_title(title or f"{model.params.name}, {run_label(res)}: {res.status}", fontsize=10)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("z [m]")
     _legs_legend(ax, [foot])
@@ -137,7 +140,7 @@ def basin_plot(results, title: str | None = None, labels=None,
         :func:`analysis.robustness.basin_to_boundary` (each on its own window).
     title : str, optional
     labels : list of str, optional
-        One panel title per result (default: the design).
+        A name per panel, written above its design (default: the design alone).
     reference_window : (float, float) or None
         Half-widths (rad, rad/s) of a window drawn dashed on panels whose own window is
         larger (default the fixed window of the report's basins); None: not drawn.
@@ -180,9 +183,9 @@ def _basin_panel(ax, r, label, names, cmap, reference_window) -> dict:
     codes = np.vectorize(lambda o: names.index(o) if o in names else names.index("diverged"))(
         r.outcome.astype(str))
     da, db = np.diff(r.q_u[:2])[0] / 2, np.diff(r.dq_u[:2])[0] / 2
+    extent = [r.dq_u[0] - db, r.dq_u[-1] + db, r.q_u[0] - da, r.q_u[-1] + da]
     ax.imshow(codes, origin="lower", aspect="auto", cmap=cmap, vmin=-0.5,
-              vmax=len(names) - 0.5, interpolation="nearest",
-              extent=[r.dq_u[0] - db, r.dq_u[-1] + db, r.q_u[0] - da, r.q_u[-1] + da])
+              vmax=len(names) - 0.5, interpolation="nearest", extent=extent)
     extra = {}
     conv = (r.outcome == "converged").astype(float)
     if 0 < conv.sum() < conv.size:
@@ -196,10 +199,15 @@ def _basin_panel(ax, r, label, names, cmap, reference_window) -> dict:
             extra["window"] = Line2D([], [], color="w", ls="--", lw=1.2, path_effects=_OUTLINE,
                                      label=f"fixed window ±{qw:g} rad x ±{dw:g} rad/s")
     ax.plot(0, 0, "w*", ms=12, mec="k")
-    if label is None:
-        label = ("virtual constraints" if r.controller == "vc" else
-                 "time-varying, M1 = [" + ", ".join(f"{v:.3g}" for v in r.design["M1"])
-                 + f"], v_c rejoins at {r.design['rejoin']:g} T")
+    # the axes span the basin's window: a reference window taller (or wider) than it is
+    # cut at the edge, not drawn over an empty band
+    ax.set_xlim(extent[:2])
+    ax.set_ylim(extent[2:])
+    design = ("virtual constraints" if r.controller == "vc" else
+              "time-varying, M1 = [" + ", ".join(f"{v:.3g}" for v in r.design["M1"])
+              + f"], v_c rejoins at {r.design['rejoin']:g} T")
+    # the name (which design of the study) and the design (its numbers): both, once each
+    label = design if label in (None, design) else f"{label}\n{design}"
     area = getattr(r, "area", 0.0)
     capped = " (capped: boundary not all inside)" if r.status == "capped" else ""
     ax.set_title(f"{label}\n{100 * r.converged_fraction:.1f} % of the window converges in "
@@ -250,7 +258,7 @@ def tradeoff_plot(front, others=None, bound=None, title: str | None = None,
         ax.plot([lam], [s], mk, ms=8, label=f"{label}: s* {s:.3g}, max|λ| {lam:.2g}")
     if bound is not None:
         ax.axvline(bound, color="tab:red", ls=":", lw=1, label=f"bound max|λ| = {bound:.3g}")
-    ax.axhline(1.0, color="tab:green", ls="--", lw=1, label="the paper's perturbation (s = 1)")
+    ax.axhline(1.0, color="0.5", ls="--", lw=1, label="the paper's perturbation (s = 1)")
     lams = [p[0] for p in front] + [v[0] for v in (others or {}).values()]
     if lams and min(lams) < 0.02:                        # deadbeat designs: log scale
         ax.set_xscale("symlog", linthresh=1e-3)
@@ -291,7 +299,9 @@ def survival_plot(results, labels=None, title: str | None = None) -> Figure:
         mf = r.estimate.mfpt
         lab += f" (MFPT {mf:.3g})" if np.isfinite(mf) else \
             f" (MFPT > {r.estimate.mfpt_ci[0]:.3g})"
-        ax.step(np.arange(S.size), S, where="post", lw=1.4, label=lab)
+        # a line style each: equal curves (every run walked) stay visible, one over another
+        ax.step(np.arange(S.size), S, where="post", lw=1.4, label=lab,
+                ls=("-", "--", ":", "-.")[i % 4])
     ax.set_xlabel("steps k")
     ax.set_ylabel("fraction of runs that walked at least k steps")
     ax.set_ylim(-0.02, 1.02)
@@ -330,8 +340,10 @@ def mfpt_sigma_plot(curves, title: str | None = None) -> Figure:
         y = np.where(finite, r[:, 1], r[:, 2])
         lo = np.maximum(y - r[:, 2], 0)
         hi = np.where(np.isfinite(r[:, 3]), r[:, 3] - y, 0)
+        # no legend entry for a curve with nothing drawn (no run failed at any sigma)
         line = ax.errorbar(sig[finite], y[finite], yerr=[lo[finite], hi[finite]], fmt=mk + "-",
-                           capsize=3, ms=5, lw=1.2, label=label)
+                           capsize=3, ms=5, lw=1.2,
+                           label=label if finite.any() else "_nolegend_")
         if (~finite).any():
             ax.plot(sig[~finite], y[~finite], "^", ms=8, mfc="none",
                     color=line[0].get_color(), label=f"{label}: no failure (lower bound)")
