@@ -60,3 +60,34 @@ def test_designs_over_a_family(model, tmp_path, capsys):
     np.testing.assert_allclose([sched.at(rec["speed"])[0] for rec in r["records"]],
                                [rec["codesign"]["M1"] for rec in r["records"]], rtol=1e-9)
     assert (figs / "family_designs.png").stat().st_size > 10_000
+
+
+def test_a_speed_without_a_deadbeat_m1_is_a_record(gait, monkeypatch):
+    """At a family's fastest member the deadbeat NLP finds no non-singular start on group
+    1 (RABBIT's default family at 1.2 m/s, whose torso leans past the fall bound): that
+    speed records why, the other speeds and the figure go on; other errors still stop."""
+    from analysis.design import designs_over_speed as dos
+    from analysis.reporting.plots import family_designs_plot
+    from analysis.tasks import Engine, TaskError
+
+    def refuse(g, group=None, n_random=0):
+        raise ValueError(f"no non-singular start found on group {group}")
+    monkeypatch.setattr(dos, "optimize_m1", refuse)
+    with Engine("synchronous", cache=False) as eng:
+        rec = dos._deadbeat(eng.submit(dos.deadbeat_m1, gait, 1))
+    assert rec == dict(status="failed", message="no non-singular start found on group 1")
+
+    def broken(g, group=None, n_random=0):
+        raise RuntimeError("a bug")
+    monkeypatch.setattr(dos, "optimize_m1", broken)
+    with Engine("synchronous", cache=False) as eng, pytest.raises(TaskError, match="a bug"):
+        dos._deadbeat(eng.submit(dos.deadbeat_m1, gait, 1))
+
+    class Designs:               # two speeds, the second without a deadbeat M1
+        records = [dict(speed=v, designs={"virtual constraints": dict(max_abs=0.5,
+                                                                       s_star=0.6)},
+                        deadbeat=d) for v, d in ((0.7, dict(M1=[0, 0, 0, 0], max_abs=1e-5)),
+                                                 (1.2, rec))]
+    fig = family_designs_plot(Designs())
+    (line,) = [ln for ln in fig.axes[0].lines if ln.get_label().startswith("deadbeat")]
+    assert list(line.get_xdata()) == [0.7]

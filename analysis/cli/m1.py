@@ -275,6 +275,8 @@ def _family(args, say):
     for rec in r.records:
         if rec["codesign"].get("status") == "no_design":
             print(f"  {rec['speed']:.3g} m/s: no design ({rec['codesign']['message']})")
+        if rec["deadbeat"].get("status") == "failed":
+            print(f"  {rec['speed']:.3g} m/s: no deadbeat M1 ({rec['deadbeat']['message']})")
         print(f"  {rec['speed']:.3g} m/s: " + "; ".join(
             f"{lab} s* {v['s_star']:.3g}, max|lambda| {v['max_abs']:.3g}"
             for lab, v in rec["designs"].items()))

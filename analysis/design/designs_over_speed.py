@@ -17,7 +17,7 @@ from biped_casadi.results import Result, internal
 
 from ..robustness.basin import basin
 from ..robustness.s_star import RobustnessSettings, kept_directions, robustness
-from ..tasks import Engine, task
+from ..tasks import Engine, TaskError, task
 from .codesign import QUICK, CodesignSettings, NoDesign, NoDesignFound, given_gait_flow
 from .m1_nlp import optimize_m1
 from .schedule import M1Schedule
@@ -76,7 +76,8 @@ class FamilyDesigns(Result):
         The family's speeds, m/s.
     records : list of dict
         Per speed: ``speed``, the co-design (``M1``, ``rejoin``, its own ``s_star``,
-        ``status``), the deadbeat M1 NLP's ``M1`` and ``max_abs``, and per design of
+        ``status``), the deadbeat M1 NLP's ``M1`` and ``max_abs`` (or its ``status``
+        'failed' and ``message``), and per design of
         :data:`LABELS` its ``max_abs``, ``s_star`` and (with basins) ``basin_fraction``
         and ``basin_area`` (rad x rad/s).
     schedule : M1Schedule
@@ -193,13 +194,10 @@ def family_designs_flow(engine, gaits: list, settings: CodesignSettings,
         rs, basin_n) for g, v, c in zip(gaits, speeds, cd)]
     records = []
     for v, c, d, m in zip(speeds, cd, dead, measured):
-        dr = d.result()
         own = (dict(status="no_design", message=c.message) if isinstance(c, NoDesignFound)
                else dict(M1=list(c.design.M1), rejoin=rejoin, s_star=float(c.s_star),
                          status=c.status))
-        records.append(dict(speed=v, codesign=own,
-                            deadbeat=dict(M1=np.asarray(dr.M1).tolist(),
-                                          max_abs=float(dr.max_abs)),
+        records.append(dict(speed=v, codesign=own, deadbeat=_deadbeat(d),
                             designs={label: _row(refs) for label, refs in m.items()}))
         engine.say(f"{v:g} m/s: " + ", ".join(
             f"{lab}: s* {r['s_star']:.3g}" for lab, r in records[-1]["designs"].items()))
@@ -207,6 +205,19 @@ def family_designs_flow(engine, gaits: list, settings: CodesignSettings,
                          records=records, schedule=schedule,
                          fit=dict(degree=degree, coefficients=coef), single=single,
                          settings=dict(rs.__dict__), gaits=list(gaits))
+
+
+def _deadbeat(ref) -> dict:
+    """The deadbeat M1 NLP's record at one speed: its ``M1`` and ``max_abs``, or
+    ``status`` 'failed' and ``message`` when it refused the gait (no non-singular start
+    on the group: a record of that speed, not the end of the family)."""
+    try:
+        r = ref.result()
+    except TaskError as e:
+        if not e.message.startswith("ValueError"):
+            raise
+        return dict(status="failed", message=e.message.split(": ", 1)[-1])
+    return dict(M1=np.asarray(r.M1).tolist(), max_abs=float(r.max_abs))
 
 
 def _message(records) -> str:

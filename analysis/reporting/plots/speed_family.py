@@ -167,9 +167,11 @@ def family_designs_plot(designs, title: str | None = None) -> Figure:
                                                 _MARKERS[i % len(_MARKERS)], "-"))
             y = [r["designs"].get(name, {}).get(key, np.nan) for r in rec]
             ax.plot(v, y, color=c, marker=m, ls=ls, ms=4, label=name)
-        if key == "max_abs" and all("deadbeat" in r for r in rec):
+        dead = [(r["speed"], r["deadbeat"]["max_abs"]) for r in rec
+                if "max_abs" in r.get("deadbeat", {})]
+        if key == "max_abs" and dead:
             # deadbeat points are below the map's accuracy (about 1e-4): drawn at 1e-4
-            ax.plot(v, [max(r["deadbeat"]["max_abs"], 1e-4) for r in rec], color="grey",
+            ax.plot([x for x, _ in dead], [max(y, 1e-4) for _, y in dead], color="grey",
                     marker="x", ls="", label="deadbeat M1 NLP, group 1 (< 1e-4)")
         if key == "max_abs":
             ax.axhline(1.0, color="red", lw=0.8, ls=":", label="stability limit")
