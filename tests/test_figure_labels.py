@@ -78,6 +78,9 @@ def test_survival_curves_that_coincide_stay_visible():
     fig = survival_plot(runs, labels=["a", "b", "c"])
     styles = [line.get_linestyle() for line in fig.axes[0].lines]
     assert len(styles) == 3 and len(set(styles)) == 3
+    # the legend gives the MFPT's unit (or the lower bound where no run failed)
+    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert texts == ["a (MFPT > 51 steps)", "b (MFPT > 51 steps)", "c (MFPT 2.5 steps)"]
 
 
 def test_mfpt_legend_lists_only_what_is_drawn():

@@ -82,10 +82,14 @@ def cmd_terrain(args):
 
     out = _summary(mc, st, gsn, gsn_error)
     if args.plot is not None:
-        label = (f"{spec.controller} sigma = {st.sigma:g} m" if not profile
-                 else f"{spec.controller} on {Path(args.terrain).name}")
-        out["figures"] = save_figures({"survival": survival_plot([mc], labels=[label])},
-                                      args.plot)
+        name = dict(vc="virtual constraints", tv="time-varying").get(spec.controller,
+                                                                     spec.controller)
+        label = (f"{name}, sigma = {1000 * st.sigma:g} mm" if not profile
+                 else f"{name} on {Path(args.terrain).name}")
+        title = (f"{gait.model.description.name}: survival of {st.runs} runs on "
+                 + ("random ground" if not profile else "a measured terrain"))
+        out["figures"] = save_figures({"survival": survival_plot([mc], labels=[label],
+                                                                 title=title)}, args.plot)
     if args.json:
         print_json(out)
         return 0

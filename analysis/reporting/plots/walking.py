@@ -297,8 +297,8 @@ def survival_plot(results, labels=None, title: str | None = None) -> Figure:
         lab = labels[i] if labels is not None else (
             f"{r.spec['controller']}, sigma = {r.settings['sigma']:g} m")
         mf = r.estimate.mfpt
-        lab += f" (MFPT {mf:.3g})" if np.isfinite(mf) else \
-            f" (MFPT > {r.estimate.mfpt_ci[0]:.3g})"
+        lab += f" (MFPT {mf:.3g} steps)" if np.isfinite(mf) else \
+            f" (MFPT > {r.estimate.mfpt_ci[0]:.3g} steps)"
         # a line style each: equal curves (every run walked) stay visible, one over another
         ax.step(np.arange(S.size), S, where="post", lw=1.4, label=lab,
                 ls=("-", "--", ":", "-.")[i % 4])
