@@ -64,8 +64,9 @@ def test_designs_over_a_family(model, tmp_path, capsys):
 
 def test_a_speed_without_a_deadbeat_m1_is_a_record(gait, monkeypatch):
     """At a family's fastest member the deadbeat NLP finds no non-singular start on group
-    1 (RABBIT's default family at 1.2 m/s, whose torso leans past the fall bound): that
-    speed records why, the other speeds and the figure go on; other errors still stop."""
+    1 (RABBIT's default family at 1.2 m/s, whose torso leans past the fall bound), the
+    co-design no start: that speed records why, the other speeds and the figure go on;
+    other errors still stop."""
     from analysis.design import designs_over_speed as dos
     from analysis.reporting.plots import family_designs_plot
     from analysis.tasks import Engine, TaskError
@@ -76,6 +77,16 @@ def test_a_speed_without_a_deadbeat_m1_is_a_record(gait, monkeypatch):
     with Engine("synchronous", cache=False) as eng:
         rec = dos._deadbeat(eng.submit(dos.deadbeat_m1, gait, 1))
     assert rec == dict(status="failed", message="no non-singular start found on group 1")
+
+    from analysis.design.codesign import CodesignError
+
+    def no_start(g, group=None, n_random=0):     # the co-design's refusal of a gait
+        raise CodesignError("codesign: no start for the NLP")
+    monkeypatch.setattr(dos, "optimize_m1", no_start)
+    with Engine("synchronous", cache=False) as eng:
+        err = dos._refused(eng.submit(dos.deadbeat_m1, gait, 1))
+    assert isinstance(err, TaskError) and dos._failed(err) == dict(
+        status="failed", message="codesign: no start for the NLP")
 
     def broken(g, group=None, n_random=0):
         raise RuntimeError("a bug")

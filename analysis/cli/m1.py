@@ -278,8 +278,8 @@ def _family(args, say):
         if rec["deadbeat"].get("status") == "failed":
             print(f"  {rec['speed']:.3g} m/s: no deadbeat M1 ({rec['deadbeat']['message']})")
         print(f"  {rec['speed']:.3g} m/s: " + "; ".join(
-            f"{lab} s* {v['s_star']:.3g}, max|lambda| {v['max_abs']:.3g}"
-            for lab, v in rec["designs"].items()))
+            f"{lab} s* {v['s_star']:.3g}, max|lambda| {v['max_abs']:.3g}" if "s_star" in v
+            else f"{lab}: {v['message']}" for lab, v in rec["designs"].items()))
     print(f"  schedule: polynomials of degree {r.fit['degree']} in speed, sampled at the "
           f"family's speeds, v_c rejoining at {r.schedule.rejoin[0]} T"
           + (f" ({d['schedule_file']})" if out is not None else ""))

@@ -79,7 +79,8 @@ class FamilyDesigns(Result):
         ``status``), the deadbeat M1 NLP's ``M1`` and ``max_abs`` (or its ``status``
         'failed' and ``message``), and per design of
         :data:`LABELS` its ``max_abs``, ``s_star`` and (with basins) ``basin_fraction``
-        and ``basin_area`` (rad x rad/s).
+        and ``basin_area`` (rad x rad/s); a measurement the gait refused (no walkable
+        direction: s* undefined) is ``status`` 'failed' and its ``message``.
     schedule : M1Schedule
         M1 over speed (the polynomials sampled at the family's speeds).
     fit : dict
@@ -134,10 +135,32 @@ def _measure(engine, designs: dict, rs: RobustnessSettings, basin_n) -> dict:
     return out
 
 
+#: the errors by which one gait of a family refuses a computation (no non-singular
+#: start, no walkable direction, no start for the co-design NLP): recorded for its speed
+REFUSALS = ("ValueError", "CodesignError", "NoDesign")
+
+
+def _refused(ref):
+    """``ref``'s result, or its :class:`TaskError` when that is one of
+    :data:`REFUSALS`: a record of its speed, not the end of the family; any other
+    failure is raised."""
+    try:
+        return ref.result()
+    except TaskError as e:
+        if e.message.split(":", 1)[0] not in REFUSALS:
+            raise
+        return e
+
+
+def _failed(e: TaskError) -> dict:
+    return dict(status="failed", message=e.message.split(": ", 1)[-1])
+
+
 def _row(refs) -> dict:
-    r, b = refs[0].result(), (refs[1].result() if refs[1] is not None else None)
-    row = dict(max_abs=float(r.max_abs), s_star=float(r.s_star))
-    if b is not None:
+    r, b = _refused(refs[0]), (_refused(refs[1]) if refs[1] is not None else None)
+    row = _failed(r) if isinstance(r, TaskError) else dict(max_abs=float(r.max_abs),
+                                                            s_star=float(r.s_star))
+    if b is not None and not isinstance(b, TaskError):
         cell = (b.q_u[1] - b.q_u[0]) * (b.dq_u[1] - b.dq_u[0])
         row.update(basin_fraction=float(b.converged_fraction),
                    basin_area=float(np.sum(b.outcome == "converged") * cell))
@@ -176,7 +199,9 @@ def family_designs_flow(engine, gaits: list, settings: CodesignSettings,
     # a speed without a design is a record of why, not the end of the family
     cds = [engine.spawn(given_gait_flow, g.model, settings, g) for g in gaits]
     dead = [engine.submit(deadbeat_m1, g, 1 if g.model.nu == 4 else None) for g in gaits]
-    cd = [c.result() for c in cds]
+    cd = [_refused(c) for c in cds]
+    cd = [NoDesignFound(message=_failed(c)["message"], details={})
+          if isinstance(c, TaskError) else c for c in cd]
     have = [i for i, c in enumerate(cd) if not isinstance(c, NoDesignFound)]
     if not have:
         raise NoDesign("no speed of the family has a design: " + "; ".join(
@@ -200,7 +225,8 @@ def family_designs_flow(engine, gaits: list, settings: CodesignSettings,
         records.append(dict(speed=v, codesign=own, deadbeat=_deadbeat(d),
                             designs={label: _row(refs) for label, refs in m.items()}))
         engine.say(f"{v:g} m/s: " + ", ".join(
-            f"{lab}: s* {r['s_star']:.3g}" for lab, r in records[-1]["designs"].items()))
+            f"{lab}: s* {r['s_star']:.3g}" if "s_star" in r else f"{lab}: {r['message']}"
+            for lab, r in records[-1]["designs"].items()))
     return FamilyDesigns(status="done", message=_message(records), speeds=speeds,
                          records=records, schedule=schedule,
                          fit=dict(degree=degree, coefficients=coef), single=single,
@@ -211,13 +237,9 @@ def _deadbeat(ref) -> dict:
     """The deadbeat M1 NLP's record at one speed: its ``M1`` and ``max_abs``, or
     ``status`` 'failed' and ``message`` when it refused the gait (no non-singular start
     on the group: a record of that speed, not the end of the family)."""
-    try:
-        r = ref.result()
-    except TaskError as e:
-        if not e.message.startswith("ValueError"):
-            raise
-        return dict(status="failed", message=e.message.split(": ", 1)[-1])
-    return dict(M1=np.asarray(r.M1).tolist(), max_abs=float(r.max_abs))
+    r = _refused(ref)
+    return _failed(r) if isinstance(r, TaskError) else dict(
+        M1=np.asarray(r.M1).tolist(), max_abs=float(r.max_abs))
 
 
 def _message(records) -> str:

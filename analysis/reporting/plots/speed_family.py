@@ -153,7 +153,7 @@ def family_designs_plot(designs, title: str | None = None) -> Figure:
     """
     rec = designs.records
     v = np.array([r["speed"] for r in rec])
-    basins = all("basin_area" in d for r in rec for d in r["designs"].values())
+    basins = any("basin_area" in d for r in rec for d in r["designs"].values())
     panels = [("max_abs", "max |λ| of $A^z$ (VC: |eigenvalue|)"),
               ("s_star", "s*: largest scale of the paper's\nperturbation survived")]
     if basins:
@@ -172,7 +172,7 @@ def family_designs_plot(designs, title: str | None = None) -> Figure:
         if key == "max_abs" and dead:
             # deadbeat points are below the map's accuracy (about 1e-4): drawn at 1e-4
             ax.plot([x for x, _ in dead], [max(y, 1e-4) for _, y in dead], color="grey",
-                    marker="x", ls="", label="deadbeat M1 NLP, group 1 (< 1e-4)")
+                    marker="x", ls="", label="deadbeat M1 NLP, group 1 (below 1e-4: at 1e-4)")
         if key == "max_abs":
             ax.axhline(1.0, color="red", lw=0.8, ls=":", label="stability limit")
             ax.set_yscale("log")
