@@ -229,10 +229,6 @@ def _stale(kind: str, code: str) -> str:
             "the same version of the toolkit on every worker")
 
 
-def _stage() -> tuple:
-    return getattr(_LOCAL, "stage", ("", 0))
-
-
 class Engine:
     """Submits tasks and flows to Dask, keeps their results, records the run.
 
@@ -396,7 +392,7 @@ class Engine:
         name, priority : str, int
             The stage; Dask's priority of its tasks (higher first).
         """
-        old, _LOCAL.stage = _stage(), (name, int(priority))
+        old, _LOCAL.stage = self.current_stage(), (name, int(priority))
         try:
             yield
         finally:
@@ -411,7 +407,7 @@ class Engine:
         tuple
             (name, priority).
         """
-        return _stage()
+        return getattr(_LOCAL, "stage", ("", 0))
 
     def submit(self, fn, *args, **kwargs):
         """Run task ``fn(*args, **kwargs)``, or read its kept result.
@@ -530,7 +526,7 @@ class Engine:
             new = key not in self._tasks             # else submitted before, or right now
             if new:
                 deps = inputs + [f for f in (ctx or ()) if f.done()]
-                self._tasks[key] = TaskRecord(info.name, _stage()[0], key, flow=flow,
+                self._tasks[key] = TaskRecord(info.name, self.current_stage()[0], key, flow=flow,
                                               deps=tuple(dict.fromkeys(map(_key, deps))))
             while not new and key not in self._futures:
                 self._cond.wait()
@@ -591,7 +587,7 @@ class Engine:
                 if self._start_error is not None:
                     raise self._start_error
                 fut = self._set(key, client.submit(_run, fn, key, code, a, k, key=holder.key,
-                                                   pure=False, priority=_stage()[1]))
+                                                   pure=False, priority=self.current_stage()[1]))
         except Exception as e:                         # noqa: BLE001 - this task fails
             err = e if isinstance(e, TaskError) else TaskError(info.name, (
                 f"not run: the Dask cluster did not start ({_one(e)})"
@@ -614,10 +610,10 @@ class Engine:
 
     def _flow(self, flow, key, fut, args, kwargs, inputs):
         """Run a flow: in a thread of its own, or here when synchronous."""
-        stage, sync = _stage(), self.scheduler == "synchronous"
+        stage, sync = self.current_stage(), self.scheduler == "synchronous"
 
         def run():
-            saved = _stage(), getattr(_LOCAL, "flow", None)
+            saved = self.current_stage(), getattr(_LOCAL, "flow", None)
             _LOCAL.stage, _LOCAL.flow = stage, list(inputs)
             try:
                 self._complete(key, fut, lambda: flow(self, *args, **kwargs),
