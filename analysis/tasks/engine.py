@@ -210,8 +210,7 @@ def _run(fn, key: str, code: str | None, args, kwargs):
     if code is not None:            # on a worker: its seconds go to the client
         with contextlib.suppress(Exception):
             from dask.distributed import get_worker
-            get_worker().log_event(_TOPIC, [f"{info.name.rsplit('.', 1)[-1]}-{key}",
-                                            time.perf_counter() - t])
+            get_worker().log_event(_TOPIC, [key, time.perf_counter() - t])
     return value
 
 
@@ -349,11 +348,10 @@ class Engine:
             self._kept.put(None)
             self._keeper.join()
         self._settle()
-        lost = [f for f in list(self._futures.values()) if not f.done()]
-        for f in lost:
-            err = TaskError(self._tasks[_key(f)].name, "not run: the engine was closed first",
-                            key=_key(f))
-            self._finish(_key(f), TaskState.FAILED, error=err)
+        lost = {k: f for k, f in list(self._futures.items()) if not f.done()}
+        for key, f in lost.items():
+            err = TaskError(self._tasks[key].name, "not run: the engine was closed first", key=key)
+            self._finish(key, TaskState.FAILED, error=err)
             if isinstance(f, cf.Future):
                 _resolve(f, error=err)
         quiet = logging.getLogger("distributed")         # the cluster's shutdown chatter
@@ -361,7 +359,7 @@ class Engine:
         try:
             if self._client is not None:
                 with contextlib.suppress(Exception):
-                    self._client.cancel([f for f in lost if not isinstance(f, cf.Future)])
+                    self._client.cancel([f for f in lost.values() if not isinstance(f, cf.Future)])
                     if isinstance(self.scheduler, str):     # a client of its own
                         self._client.close()
             with contextlib.suppress(Exception):
@@ -646,7 +644,7 @@ class Engine:
             self._finish(key, TaskState.FAILED, error=e if isinstance(e, TaskError) else
                          TaskError(self._tasks[key].name, _one(e), key=key))
             return
-        self._finish(key, TaskState.COMPUTED, value, seconds=self._seconds.pop(f.key, 0.0))
+        self._finish(key, TaskState.COMPUTED, value, seconds=self._seconds.pop(key, 0.0))
 
     def _finish(self, key: str, state: TaskState, value=None, error=None, seconds=0.0):
         rec = self._tasks[key]
