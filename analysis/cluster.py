@@ -3,10 +3,11 @@
 the processes of a cluster need (the bootstrapping check, the allocator)."""
 from __future__ import annotations
 
+import contextlib
 import copy
 import ctypes
+import functools
 import logging
-import sys
 
 __all__ = ["connect", "check_not_bootstrapping", "tune_allocator",
            "LOCAL_CLUSTER_CONFIG", "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
@@ -105,9 +106,7 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
     return client, None
 
 
-_ALLOCATOR_TUNED = False
-
-
+@functools.cache
 def tune_allocator():
     """Let this process's allocator keep freed memory (once per process; Linux/glibc).
 
@@ -116,13 +115,7 @@ def tune_allocator():
     afresh, which halves the walkers' throughput in a worker
     (``benchmarks/bench_terrain.py``).  Raising both thresholds here undoes that.
     """
-    global _ALLOCATOR_TUNED
-    if _ALLOCATOR_TUNED or not sys.platform.startswith("linux"):
-        return
-    _ALLOCATOR_TUNED = True
-    try:
+    with contextlib.suppress(OSError, AttributeError):      # no glibc: nothing to tune
         libc = ctypes.CDLL("libc.so.6")
         libc.mallopt(-3, 1 << 26)         # M_MMAP_THRESHOLD: 64 MB
         libc.mallopt(-1, 1 << 27)         # M_TRIM_THRESHOLD: 128 MB
-    except (OSError, AttributeError):
-        pass

@@ -210,8 +210,7 @@ def _run(fn, key: str, code: str | None, args, kwargs):
     if code is not None:            # on a worker: its seconds go to the client
         with contextlib.suppress(Exception):
             from dask.distributed import get_worker
-            get_worker().log_event(_TOPIC, [f"{info.name.rsplit('.', 1)[-1]}-{key}",
-                                            time.perf_counter() - t])
+            get_worker().log_event(_TOPIC, [key, time.perf_counter() - t])
     return value
 
 
@@ -227,10 +226,6 @@ def _stale(kind: str, code: str) -> str:
         else "its code"
     return (f"stale worker (pid {os.getpid()}): {what} differs from this run's code; run "
             "the same version of the toolkit on every worker")
-
-
-def _stage() -> tuple:
-    return getattr(_LOCAL, "stage", ("", 0))
 
 
 class Engine:
@@ -353,11 +348,10 @@ class Engine:
             self._kept.put(None)
             self._keeper.join()
         self._settle()
-        lost = [f for f in list(self._futures.values()) if not f.done()]
-        for f in lost:
-            err = TaskError(self._tasks[_key(f)].name, "not run: the engine was closed first",
-                            key=_key(f))
-            self._finish(_key(f), TaskState.FAILED, error=err)
+        lost = {k: f for k, f in list(self._futures.items()) if not f.done()}
+        for key, f in lost.items():
+            err = TaskError(self._tasks[key].name, "not run: the engine was closed first", key=key)
+            self._finish(key, TaskState.FAILED, error=err)
             if isinstance(f, cf.Future):
                 _resolve(f, error=err)
         quiet = logging.getLogger("distributed")         # the cluster's shutdown chatter
@@ -365,7 +359,7 @@ class Engine:
         try:
             if self._client is not None:
                 with contextlib.suppress(Exception):
-                    self._client.cancel([f for f in lost if not isinstance(f, cf.Future)])
+                    self._client.cancel([f for f in lost.values() if not isinstance(f, cf.Future)])
                     if isinstance(self.scheduler, str):     # a client of its own
                         self._client.close()
             with contextlib.suppress(Exception):
@@ -396,7 +390,7 @@ class Engine:
         name, priority : str, int
             The stage; Dask's priority of its tasks (higher first).
         """
-        old, _LOCAL.stage = _stage(), (name, int(priority))
+        old, _LOCAL.stage = self.current_stage(), (name, int(priority))
         try:
             yield
         finally:
@@ -411,7 +405,7 @@ class Engine:
         tuple
             (name, priority).
         """
-        return _stage()
+        return getattr(_LOCAL, "stage", ("", 0))
 
     def submit(self, fn, *args, **kwargs):
         """Run task ``fn(*args, **kwargs)``, or read its kept result.
@@ -530,7 +524,7 @@ class Engine:
             new = key not in self._tasks             # else submitted before, or right now
             if new:
                 deps = inputs + [f for f in (ctx or ()) if f.done()]
-                self._tasks[key] = TaskRecord(info.name, _stage()[0], key, flow=flow,
+                self._tasks[key] = TaskRecord(info.name, self.current_stage()[0], key, flow=flow,
                                               deps=tuple(dict.fromkeys(map(_key, deps))))
             while not new and key not in self._futures:
                 self._cond.wait()
@@ -591,7 +585,7 @@ class Engine:
                 if self._start_error is not None:
                     raise self._start_error
                 fut = self._set(key, client.submit(_run, fn, key, code, a, k, key=holder.key,
-                                                   pure=False, priority=_stage()[1]))
+                                                   pure=False, priority=self.current_stage()[1]))
         except Exception as e:                         # noqa: BLE001 - this task fails
             err = e if isinstance(e, TaskError) else TaskError(info.name, (
                 f"not run: the Dask cluster did not start ({_one(e)})"
@@ -614,10 +608,10 @@ class Engine:
 
     def _flow(self, flow, key, fut, args, kwargs, inputs):
         """Run a flow: in a thread of its own, or here when synchronous."""
-        stage, sync = _stage(), self.scheduler == "synchronous"
+        stage, sync = self.current_stage(), self.scheduler == "synchronous"
 
         def run():
-            saved = _stage(), getattr(_LOCAL, "flow", None)
+            saved = self.current_stage(), getattr(_LOCAL, "flow", None)
             _LOCAL.stage, _LOCAL.flow = stage, list(inputs)
             try:
                 self._complete(key, fut, lambda: flow(self, *args, **kwargs),
@@ -650,7 +644,7 @@ class Engine:
             self._finish(key, TaskState.FAILED, error=e if isinstance(e, TaskError) else
                          TaskError(self._tasks[key].name, _one(e), key=key))
             return
-        self._finish(key, TaskState.COMPUTED, value, seconds=self._seconds.pop(f.key, 0.0))
+        self._finish(key, TaskState.COMPUTED, value, seconds=self._seconds.pop(key, 0.0))
 
     def _finish(self, key: str, state: TaskState, value=None, error=None, seconds=0.0):
         rec = self._tasks[key]
