@@ -100,6 +100,9 @@ def test_local_cluster_gives_the_synchronous_numbers(tmp_path):
         assert got.result() == want and f.result() == flow
         with pytest.raises(TaskError, match="no good: 2"):
             bad.result()
+        # a fan-out whose calls share arguments (one task) yields every tag
+        calls = {"a": (2.0,), "b": (2.0,), "c": (3.0,)}
+        assert dict(eng.each(square, calls)) == {"a": 4.0, "b": 4.0, "c": 9.0}
     assert len(pids) >= 1
 
 

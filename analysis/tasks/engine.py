@@ -466,12 +466,13 @@ class Engine:
             f = self.submit(fn, *args)
             if isinstance(f, cf.Future):
                 yield tag, f.result()
-            else:
-                on_dask[f] = tag
+            else:                      # calls with equal arguments share one future
+                on_dask.setdefault(f, []).append(tag)
         if on_dask:
             from dask.distributed import as_completed
-            for f in as_completed(on_dask):
-                yield on_dask[f], f.result()
+            for f in as_completed(list(on_dask)):
+                for tag in on_dask[f]:
+                    yield tag, f.result()
 
     def state(self, future):
         """How a future's task ended (None while it runs).
