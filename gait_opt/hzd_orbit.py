@@ -130,7 +130,7 @@ def constraints_from_dict(d, nq: int, where: str = "virtual constraints") -> Bez
 
 def _curve(model, vc: BezierConstraints):
     """theta -> (Q, Q', Q'') and the zero-dynamics acceleration (theta, w) -> ddtheta."""
-    nq, nu = model.nq, model.nu
+    nu = model.nu
     M = vc.alpha.shape[1] - 1
     H0 = np.hstack([np.zeros((nu, 1)), np.eye(nu)]) if vc.H0 is None else vc.H0
     Pinv = np.linalg.inv(np.vstack([H0, vc.phase]))

@@ -80,9 +80,6 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-import casadi as ca
-import numpy as np
-
 from ..files import file_path, read_text_file
 from .urdf_map import UrdfMap, urdf_map_from_dict, wrap_angle
 
