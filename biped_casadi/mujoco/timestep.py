@@ -62,7 +62,7 @@ class TimestepCheck(Result):
     strike_velocity : list of float
         The gait's swing foot velocity (x, z) at the impact, m/s.
     strike_travel : float
-        How far the foot moves into the floor in one time step at that speed (|v_z| dt), m.
+        How far the foot moves into the floor in one time step at that speed (``|v_z| dt``), m.
     contact_steps : float
         The feet's contact time constant (solref) in time steps: 2 at the stiff settings,
         the least MuJoCo allows.
