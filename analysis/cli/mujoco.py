@@ -2,7 +2,6 @@
 MuJoCo's stride map beside the exact eigenvalues."""
 from __future__ import annotations
 
-import dataclasses
 import math
 from pathlib import Path
 
@@ -92,9 +91,7 @@ def cmd_mujoco(args):
         # walked (the walk again, for its log)
         chosen = check.suggested_timestep
         say(f"--timestep auto: walking at {chosen:g} s ...")
-        loop = MujocoLoop(design, dataclasses.replace(settings, timestep=chosen), args.law,
-                          args.torque_limit, args.step_start, args.max_slip,
-                          touchdown=args.touchdown)
+        loop = loop.at_timestep(chosen)
         w = loop.run(q0, dq0, args.steps, log=args.plot is not None)
     eig = None
     if not args.no_eig:

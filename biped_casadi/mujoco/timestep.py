@@ -23,7 +23,6 @@ constant in time steps are recorded beside it.
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -141,10 +140,7 @@ def check_timestep(loop: MujocoLoop, q0, dq0, steps: int, walk,
         fine = dt / k
         if fine < MIN_TIMESTEP:
             continue
-        finer = MujocoLoop(loop.design, dataclasses.replace(s, timestep=fine), loop.law_name,
-                           loop.torque_limit, loop.step_start_kind, loop.max_slip,
-                           loop.horizon, loop.touchdown)
-        w = finer.run(q0, dq0, steps)
+        w = loop.at_timestep(fine).run(q0, dq0, steps)
         tried.append(dict(timestep=fine, status=w.status, steps_walked=w.steps_walked,
                           speed_error=w.speed_error, message=w.message,
                           wall_time=w.wall_time))

@@ -34,6 +34,7 @@ of the reference's range, or a step that cannot start) and 'diverged'.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -185,6 +186,24 @@ class MujocoLoop:
         self.driver = "python" if problem else "c"
 
     # -------------------------------------------------------------- helpers
+    def at_timestep(self, timestep: float) -> "MujocoLoop":
+        """The same loop at another MuJoCo time step.
+
+        Its design, settings, law, torque limit, step start and touchdown kept.
+
+        Parameters
+        ----------
+        timestep : float
+            MuJoCo's time step, s.
+
+        Returns
+        -------
+        MujocoLoop
+        """
+        return MujocoLoop(self.design, dataclasses.replace(self.settings, timestep=timestep),
+                          self.law_name, self.torque_limit, self.step_start_kind,
+                          self.max_slip, self.horizon, self.touchdown)
+
     def gait_record(self) -> dict:
         """The gait's figures a walk is measured against.
 
