@@ -355,14 +355,9 @@ class GaitOptions:
         -------
         GaitOptions
         """
-        fill = {}
-        if self.step_length_bounds is None or self.clearance is None:
-            k = leg_scale(model)
-            if self.step_length_bounds is None:
-                fill["step_length_bounds"] = tuple(v * k for v in STEP_LENGTH_BOUNDS)
-            if self.clearance is None:
-                fill["clearance"] = CLEARANCE * k
-        return self.replace(**fill) if fill else self
+        defaults = LegScaled(step_length_bounds=STEP_LENGTH_BOUNDS, clearance=CLEARANCE)
+        fill = {n: defaults[n] for n in LENGTH_FIELDS if getattr(self, n) is None}
+        return self.replace(**LegScaled(fill).for_model(model)) if fill else self
 
     def for_model(self, model) -> "GaitOptions":
         """These options with the robot's torque limit and length defaults filled in.
