@@ -200,8 +200,8 @@ def stable_domains_plot(m2, m3, max_abs_1, max_abs_2, best=None) -> Figure:
             b = best[k]
             ax.plot(b[1], b[2], "w*", ms=12, mec="k", label="best point of the group")
         ax.set_title(f"group {k}: contour max|λ| = 1 (red)")
-        ax.set_xlabel("M1(2)")
-    axes[0].set_ylabel("M1(3)")
+        ax.set_xlabel("$M_1(2)$ (dimensionless)")
+    axes[0].set_ylabel("$M_1(3)$ (dimensionless)")
     fig.colorbar(im, ax=list(axes), label="log10 max|λ|")
     fig.suptitle("Fig. 4: stable domains of the a = b = 0 groups")
     _legend_below(fig, list(axes))           # inside, it sat on a group's contour
@@ -254,8 +254,8 @@ def m1_plane_plot(m1, m2, max_abs, ab_points=(), ab_line=None, best=None,
         ax.legend(loc="lower right", fontsize=8)
     ax.set_xlim(np.min(m1), np.max(m1))
     ax.set_ylim(np.min(m2), np.max(m2))
-    ax.set_xlabel("M1(1)")
-    ax.set_ylabel("M1(2)")
+    ax.set_xlabel("$M_1(1)$ (dimensionless)")
+    ax.set_ylabel("$M_1(2)$ (dimensionless)")
     fig.colorbar(im, ax=ax, label="log10 max|λ|")
     ax.set_title(title or "Stable domain of M1: contour max|λ| = 1 (red)")
     return fig
