@@ -1,0 +1,545 @@
+"""The stride map over a cycle of domains and its exact Jacobian: walking is the cycle of
+one domain, running the cycle stance -> flight -> stance.
+
+A domain is a smooth piece of a hybrid system: a closed-loop vector field, a guard whose
+downward zero crossing ends it, a reset into the next domain's state (possibly of
+another dimension) and validity constraints that must hold along it (:class:`Domain`).
+A cycle of domains D_0 -> D_1 -> ... -> D_(k-1) -> D_0 (:class:`HybridCycle`) has the
+stride map
+
+    x_0  ->  P(x_0) = Delta_(k-1)( ... Delta_0(phi_0(x_0)) ... ),
+
+phi_i the flow of domain i from its entry to its guard.  P is evaluated by the same
+operations as the step-to-step map of the walking closed loop
+(:mod:`analysis.stability.step_map`): fixed-step RK4 from the domain's entry, a crossing
+where the guard goes from >= 0 at one node to < 0 at the next (and an optional arming
+function is positive there), the crossing time inside that RK4 interval as the length
+eta of the last RK4 step with g(RK4(X_N, eta)) = 0, by the safeguarded Newton of
+:func:`~biped_casadi.simulation.kernel.locate_strike`.  The Jacobian dP/dx_0 is exact for
+this discrete scheme: forward algorithmic differentiation through every RK4 step, the
+domain's entry and reset, and the crossing time by the implicit function theorem,
+
+    d eta = -(g_X dX_N + g_p dp) / (g_X dX/d eta + g_t),
+
+the saltation term of each guard.
+
+Domain i's state x has ``n`` numbers (what the resets map); it integrates an augmented
+state X = (x, r) of ``nX`` numbers (r: a controller's internal states, e.g. the
+time-varying controller's reference state) with parameters p fixed for the domain (its
+step constants, eq. 17), both set at entry by ``start(x) -> (X0, p)``.  Time t restarts
+at 0 in each domain.
+
+The domains of the walking and running robot are built in
+:mod:`analysis.stability.cycle_domains`: walking is the cycle of one domain, and its
+stride map is :class:`~analysis.stability.step_map.StepMap`'s S.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from biped_casadi.numerics import rk4_step
+from biped_casadi.results import Result
+from biped_casadi.simulation.kernel import locate_strike
+
+__all__ = ["Domain", "HybridCycle", "HybridCycleError", "DomainPass", "StrideValue",
+           "StrideLinearisation"]
+
+
+class HybridCycleError(ValueError):
+    """A domain of a cycle that cannot be built or traversed (one line, naming it).
+
+    The message starts with the domain's name: "domain 'flight': ...".
+
+    Parameters
+    ----------
+    domain : str
+        The domain's name (kept as the attribute ``domain``).
+    kind : str
+        'no_crossing' (the guard is not crossed within the domain's time limit),
+        'dimension' (a reset, entry or vector field of the wrong size), 'constraint' (a
+        validity constraint violated), 'not_finite' (the state diverged); kept as the
+        attribute ``kind``.
+    message : str
+        What happened, after the domain's name.
+    """
+
+    def __init__(self, domain: str, kind: str, message: str):
+        self.domain, self.kind = domain, kind
+        super().__init__(f"domain '{domain}': {message}")
+
+
+def _size(f: ca.Function, i: int, out: bool = False) -> int:
+    return f.numel_out(i) if out else f.numel_in(i)
+
+
+@dataclass
+class Domain:
+    """One domain of a hybrid cycle (module docstring).
+
+    Parameters
+    ----------
+    name : str
+        Named in every error.
+    n : int
+        Size of the domain's state x (the previous reset's output, this reset's input).
+    vector_field : casadi.Function
+        ``f(X, t, p) -> dX/dt``: the closed loop on the augmented state X (``nX``
+        numbers, X[:n] = x), t the time since entry, p the domain's parameters.
+    guard : casadi.Function
+        ``g(X, t, p)`` (scalar): the domain ends where g crosses zero going down.
+    reset : casadi.Function
+        ``Delta(x) -> x+`` (first output), x = X[:n] at the crossing, x+ the next
+        domain's state.
+    h : float
+        RK4 step, s.
+    t_max : float
+        Time limit: the guard must be crossed within it, s.
+    start : casadi.Function, optional
+        ``start(x) -> (X0, p)`` at entry; default X0 = x, no parameters.
+    arming : casadi.Function, optional
+        ``a(X, t, p)`` (scalar): a crossing counts only at a node where a > 0 (the
+        swing foot in front of the stance foot).
+    constraints : casadi.Function, optional
+        ``c(X, t, p)`` (m numbers): c >= -``tolerance`` at every node before the
+        crossing and at the crossing.
+    constraint_names : tuple of str
+        One per entry of c (default 'constraint 0', ...).
+    exit_constraints : casadi.Function, optional
+        ``e(x)`` (k numbers) >= -``tolerance`` at the crossing, e.g. the landing
+        impulse and the lift-off of the other foot.
+    exit_constraint_names : tuple of str
+        One per entry of e.
+    guard_name : str
+        The guard in words.
+    tolerance : float
+        How far below zero a constraint may go (round-off), in its own unit.
+    """
+
+    name: str
+    n: int
+    vector_field: ca.Function
+    guard: ca.Function
+    reset: ca.Function
+    h: float
+    t_max: float
+    start: ca.Function | None = None
+    arming: ca.Function | None = None
+    constraints: ca.Function | None = None
+    constraint_names: tuple = ()
+    exit_constraints: ca.Function | None = None
+    exit_constraint_names: tuple = ()
+    guard_name: str = "guard"
+    tolerance: float = 0.0
+
+    def __post_init__(self):
+        f = self.vector_field
+        if not isinstance(f, ca.Function) or f.n_in() != 3:
+            raise HybridCycleError(self.name, "dimension",
+                                   "vector_field must be a casadi.Function f(X, t, p)")
+        self.nX, self.n_par = _size(f, 0), _size(f, 2)
+        if _size(f, 0, out=True) != self.nX:
+            raise HybridCycleError(self.name, "dimension",
+                                   f"the vector field gives {_size(f, 0, out=True)} numbers "
+                                   f"for a state of {self.nX}")
+        if self.n > self.nX:
+            raise HybridCycleError(self.name, "dimension",
+                                   f"state of {self.n} numbers, but the vector field "
+                                   f"integrates {self.nX}")
+        if self.start is None:
+            if self.nX != self.n or self.n_par:
+                raise HybridCycleError(self.name, "dimension",
+                                       "a start(x) -> (X0, p) is needed when the vector "
+                                       "field's state or parameters are not x alone")
+        else:
+            got = (_size(self.start, 0), _size(self.start, 0, True), _size(self.start, 1, True))
+            if got != (self.n, self.nX, self.n_par):
+                raise HybridCycleError(self.name, "dimension",
+                                       f"start maps {got[0]} numbers to ({got[1]}, {got[2]}), "
+                                       f"expected {self.n} to ({self.nX}, {self.n_par})")
+        for what in ("guard", "arming", "constraints"):
+            g = getattr(self, what)
+            if g is None:
+                continue
+            sizes = tuple(_size(g, i) for i in range(g.n_in()))
+            if sizes != (self.nX, 1, self.n_par):
+                raise HybridCycleError(self.name, "dimension",
+                                       f"{what} takes {sizes}, expected (X, t, p) of "
+                                       f"{(self.nX, 1, self.n_par)}")
+        for what in ("guard", "arming"):
+            g = getattr(self, what)
+            if g is not None and _size(g, 0, True) != 1:
+                raise HybridCycleError(self.name, "dimension", f"{what} must be a scalar")
+        if _size(self.reset, 0) != self.n:
+            raise HybridCycleError(self.name, "dimension",
+                                   f"the reset takes {_size(self.reset, 0)} numbers, the "
+                                   f"domain's state has {self.n}")
+        if self.exit_constraints is not None and _size(self.exit_constraints, 0) != self.n:
+            raise HybridCycleError(self.name, "dimension",
+                                   f"exit_constraints take {_size(self.exit_constraints, 0)} "
+                                   f"numbers, the domain's state has {self.n}")
+        self.max_steps = int(np.ceil(self.t_max / self.h - 1e-9))
+        self.constraint_names = self._names(self.constraints, self.constraint_names,
+                                            "constraint")
+        self.exit_constraint_names = self._names(self.exit_constraints,
+                                                 self.exit_constraint_names, "exit constraint")
+
+    def _names(self, f, names, word):
+        if f is None:
+            return ()
+        m = _size(f, 0, True)
+        names = tuple(names) or tuple(f"{word} {i}" for i in range(m))
+        if len(names) != m:
+            raise HybridCycleError(self.name, "dimension",
+                                   f"{len(names)} names for {m} {word}s")
+        return names
+
+    @property
+    def n_next(self) -> int:
+        """Size of the reset's output, the next domain's state."""
+        return _size(self.reset, 0, out=True)
+
+
+@dataclass
+class DomainPass:
+    """One domain's part of a stride.
+
+    Parameters
+    ----------
+    name : str
+        The domain.
+    entry : numpy.ndarray
+        (nX,) the augmented state at entry.
+    parameters : numpy.ndarray
+        (n_par,) the domain's parameters.
+    duration : float
+        Time from entry to the crossing, s.
+    exit_state : numpy.ndarray
+        (n,) x at the crossing (before the reset).
+    next_state : numpy.ndarray
+        The reset's output.
+    times, nodes : numpy.ndarray or None
+        With ``record``: the RK4 nodes' times (N,) and augmented states (nX, N) from entry
+        to the crossing (the last node is the crossing).
+    """
+
+    name: str
+    entry: np.ndarray
+    parameters: np.ndarray
+    duration: float
+    exit_state: np.ndarray
+    next_state: np.ndarray
+    times: np.ndarray | None = None
+    nodes: np.ndarray | None = None
+
+
+@dataclass
+class StrideValue(Result):
+    """One application of the stride map.
+
+    Parameters
+    ----------
+    state : numpy.ndarray
+        x_0, the first domain's state at entry.
+    next_state : numpy.ndarray
+        P(x_0).
+    durations : numpy.ndarray
+        Each domain's duration, s.
+    passes : list of DomainPass
+        Each domain's part.
+    status, message : str
+        'ok'.
+    """
+
+    state: np.ndarray
+    next_state: np.ndarray
+    durations: np.ndarray
+    passes: list = field(default_factory=list, metadata={"dict": False})
+    status: str = "ok"
+    message: str = ""
+
+    SUCCESS = ("ok",)
+
+
+@dataclass
+class StrideLinearisation(Result):
+    """The stride map and its exact Jacobian at a state.
+
+    Parameters
+    ----------
+    state, next_state : numpy.ndarray
+        x_0 and P(x_0).
+    A : numpy.ndarray
+        dP/dx_0.
+    durations : numpy.ndarray
+        Each domain's duration, s.
+    duration_gradients : numpy.ndarray
+        (domains, n) their derivatives with respect to x_0.
+    eigenvalues : numpy.ndarray
+        Of A, by decreasing magnitude.
+    residual : float
+        ``max |P(x_0) - x_0|``.
+    passes : list of DomainPass
+        Each domain's part.
+    status, message : str
+        'done'.
+    """
+
+    state: np.ndarray
+    next_state: np.ndarray
+    A: np.ndarray
+    durations: np.ndarray
+    duration_gradients: np.ndarray
+    eigenvalues: np.ndarray
+    residual: float
+    passes: list = field(default_factory=list, metadata={"dict": False})
+    status: str = "done"
+    message: str = ""
+
+    SUCCESS = ("done",)
+
+    @property
+    def spectral_radius(self) -> float:
+        """max ``|eigenvalue|`` of A."""
+        return float(np.max(np.abs(self.eigenvalues))) if self.eigenvalues.size else 0.0
+
+
+class _Compiled:
+    """A domain's Functions for one number of seeds (the cycle's first state)."""
+
+    def __init__(self, d: Domain, ns: int):
+        nX, npar = d.nX, d.n_par
+        X, t, h, p = ca.SX.sym("X", nX), ca.SX.sym("t"), ca.SX.sym("h"), ca.SX.sym("p", npar)
+        J, Jp = ca.SX.sym("J", nX, ns), ca.SX.sym("Jp", npar, ns)
+
+        def rhs(Xv, stage):
+            return d.vector_field(Xv, t + stage * h, p)
+
+        Xn = ca.cse(rk4_step(rhs, X, h))
+        rk4 = ca.Function(f"{_ident(d.name)}_rk4", [X, t, h, p], [Xn, t + h])
+        Y, s = ca.SX.sym("Y", nX), ca.SX.sym("s")
+
+        def node(Yv, sv):
+            a = d.arming(Yv, sv, p) if d.arming is not None else ca.SX(1)
+            c = d.constraints(Yv, sv, p) if d.constraints is not None else ca.SX(0, 1)
+            return d.guard(Yv, sv, p), a, c
+
+        Xr, tr = rk4(X, t, h, p)
+        self.node = ca.Function("node", [X, t, p], list(node(X, t)))
+        self.step = ca.Function("step", [X, t, h, p], [Xr, tr, *node(Xr, tr)])
+        Jn = ca.jtimes(Xr, X, J) + (ca.jtimes(Xr, p, Jp) if npar else 0)
+        self.step_sens = ca.Function("step_sens", [X, J, t, h, p, Jp],
+                                     [Xr, ca.cse(Jn), tr, *node(Xr, tr)])
+        eta = ca.SX.sym("eta")
+        Xe, te = rk4(X, t, eta, p)
+        ge = d.guard(Xe, te, p)
+        self.event = ca.Function("event", [X, t, eta, p], [ge, ca.jacobian(ge, eta)])
+        Je = ca.jtimes(Xe, X, J) + (ca.jtimes(Xe, p, Jp) if npar else 0)
+        gY = d.guard(Y, s, p)
+        grads = ca.Function("guard_gradients", [Y, s, p],
+                            [ca.jacobian(gY, Y), ca.jacobian(gY, p), ca.jacobian(gY, s)])
+        gX, gp, gt = grads(Xe, te, p)
+        self.last = ca.Function("last", [X, J, t, eta, p, Jp],
+                                [Xe, ca.cse(Je), ca.jacobian(Xe, eta), gX, gp, gt,
+                                 node(Xe, te)[2]])
+        x = ca.SX.sym("x", d.n)
+        if d.start is None:
+            X0, p0 = x, ca.SX(0, 1)
+        else:
+            X0, p0 = d.start(x)
+        self.entry = ca.Function("entry", [x], [X0, p0, ca.jacobian(X0, x), ca.jacobian(p0, x)])
+        xp = d.reset(x)
+        xp = xp[0] if isinstance(xp, (list, tuple)) else xp
+        e = d.exit_constraints(x) if d.exit_constraints is not None else ca.SX(0, 1)
+        e = e[0] if isinstance(e, (list, tuple)) else e
+        self.reset = ca.Function("reset", [x], [xp, ca.jacobian(xp, x), e])
+
+
+def _ident(name: str) -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in name) or "domain"
+
+
+def _col(v) -> np.ndarray:
+    return np.array(v, float).ravel()
+
+
+class HybridCycle:
+    """The stride map of a cycle of domains (module docstring).
+
+    Parameters
+    ----------
+    domains : sequence of Domain
+        D_0, ..., D_(k-1); domain i's reset maps into domain i+1's state, the last
+        domain's into the first's.
+
+    Raises
+    ------
+    HybridCycleError
+        A reset gives a state of another size than the next domain takes (one line,
+        naming the domain).
+    """
+
+    def __init__(self, domains):
+        self.domains = list(domains)
+        if not self.domains or not all(isinstance(d, Domain) for d in self.domains):
+            raise ValueError("a cycle needs at least one Domain")
+        k = len(self.domains)
+        for i, d in enumerate(self.domains):
+            nxt = self.domains[(i + 1) % k]
+            if d.n_next != nxt.n:
+                raise HybridCycleError(d.name, "dimension",
+                                       f"its reset gives {d.n_next} numbers, domain "
+                                       f"'{nxt.name}' takes {nxt.n}")
+        self.n = self.domains[0].n
+        self._fns = [_Compiled(d, self.n) for d in self.domains]
+
+    def __repr__(self):
+        return "HybridCycle(" + " -> ".join(d.name for d in self.domains) + ")"
+
+    # ---------------------------------------------------------------- one domain
+    def _check(self, d: Domain, c, t, names):
+        c = _col(c)
+        if not np.all(np.isfinite(c)):
+            raise HybridCycleError(d.name, "not_finite", f"state not finite at t = {t:.6g} s")
+        bad = np.flatnonzero(c < -d.tolerance)
+        if bad.size:
+            j = int(bad[0])
+            raise HybridCycleError(d.name, "constraint",
+                                   f"{names[j]} violated at t = {t:.6g} s ({c[j]:.3g} < 0)")
+
+    def _domain(self, i, x, Jx, derivatives, record):
+        """Domain i from its state x (with dx/dx0 = Jx): the pass, the next state and
+        its Jacobian, the duration's gradient."""
+        d, f = self.domains[i], self._fns[i]
+        X, p, XJ, pJ = (np.array(v) for v in f.entry(x))
+        X, p = X.ravel(), p.ravel()
+        if derivatives:
+            J, Jp = XJ @ Jx, pJ @ Jx
+        ns = self.n
+        t, h = 0.0, d.h
+        g_prev, _, c = f.node(X, t, p)
+        g_prev = float(g_prev)
+        self._check(d, c, t, d.constraint_names)
+        times, nodes = ([t], [X]) if record else (None, None)
+        for _ in range(d.max_steps):
+            if derivatives:
+                Xn, Jn, tn, g, a, c = f.step_sens(X, J, t, h, p, Jp)
+            else:
+                Xn, tn, g, a, c = f.step(X, t, h, p)
+            g, a = float(g), float(a)
+            if not np.isfinite(g):
+                raise HybridCycleError(d.name, "not_finite",
+                                       f"state not finite at t = {float(tn):.6g} s")
+            if g_prev >= 0 > g and a > 0:
+                break
+            self._check(d, c, float(tn), d.constraint_names)
+            X, t, g_prev = _col(Xn), float(tn), g
+            if derivatives:
+                J = np.array(Jn)
+            if record:
+                times.append(t)
+                nodes.append(X)
+        else:
+            raise HybridCycleError(d.name, "no_crossing",
+                                   f"{d.guard_name} not crossed going down within the time "
+                                   f"limit {d.t_max:.6g} s ({d.max_steps} RK4 steps of "
+                                   f"{h:.4g} s)")
+
+        def event(eta_):
+            ge, dge = f.event(X, t, float(eta_[0]), p)
+            return np.array([float(ge)]), np.array([float(dge)])
+
+        eta = float(locate_strike(event, h, g_prev, g)[0])
+        Xe, Je, Xeta, gX, gp, gt, ce = f.last(X, J if derivatives else np.zeros((d.nX, ns)),
+                                              t, eta, p,
+                                              Jp if derivatives else np.zeros((d.n_par, ns)))
+        Xe = _col(Xe)
+        self._check(d, ce, t + eta, d.constraint_names)
+        xm = Xe[:d.n]
+        xp, R, e = f.reset(xm)
+        self._check(d, e, t + eta, d.exit_constraint_names)
+        xp = _col(xp)
+        if record:
+            times.append(t + eta)
+            nodes.append(Xe)
+        ps = DomainPass(d.name, _col(f.entry(x)[0]), p, t + eta, xm, xp,
+                        None if not record else np.array(times),
+                        None if not record else np.array(nodes).T)
+        if not derivatives:
+            return ps, xp, None, None
+        Je, Xeta, gX, gp, gt = (np.array(v) for v in (Je, Xeta, gX, gp, gt))
+        slope = (gX @ Xeta).item() + gt.item()
+        deta = -(gX @ Je + (gp @ Jp if d.n_par else 0)) / slope        # (1, ns)
+        dxm = (Je + Xeta @ deta)[:d.n]
+        return ps, xp, np.array(R) @ dxm, deta.ravel()
+
+    def _pass(self, x0, derivatives: bool, record: bool):
+        x = np.asarray(x0, float).ravel()
+        if x.size != self.n:
+            raise ValueError(f"the cycle's state has {self.n} numbers, got {x.size}")
+        Jx = np.eye(self.n)
+        passes, grads = [], []
+        for i in range(len(self.domains)):
+            ps, x, Jx, dT = self._domain(i, x, Jx, derivatives, record)
+            passes.append(ps)
+            grads.append(dT)
+        return passes, x, Jx, grads
+
+    # ---------------------------------------------------------------- the map
+    def stride(self, x0, record: bool = False) -> StrideValue:
+        """One application P(x_0) (no derivatives).
+
+        Parameters
+        ----------
+        x0 : array_like
+            (n,) the first domain's state at entry.
+        record : bool
+            Keep every domain's RK4 nodes (:class:`DomainPass`).
+
+        Returns
+        -------
+        StrideValue
+
+        Raises
+        ------
+        HybridCycleError
+            A guard not crossed within its domain's time limit, a constraint violated, a
+            state that diverged (one line naming the domain).
+        """
+        passes, x, _, _ = self._pass(x0, False, record)
+        return StrideValue(np.asarray(x0, float).ravel(), x,
+                           np.array([ps.duration for ps in passes]), passes,
+                           message=" -> ".join(f"{ps.name} {ps.duration:.4g} s"
+                                               for ps in passes))
+
+    def linearise(self, x0, record: bool = False) -> StrideLinearisation:
+        """P(x_0) and its exact Jacobian dP/dx_0 (forward AD, saltation at each guard).
+
+        Parameters
+        ----------
+        x0 : array_like
+            (n,) the first domain's state at entry.
+        record : bool
+            Keep every domain's RK4 nodes.
+
+        Returns
+        -------
+        StrideLinearisation
+
+        Raises
+        ------
+        HybridCycleError
+            As :meth:`stride`.
+        """
+        x0 = np.asarray(x0, float).ravel()
+        passes, x, A, grads = self._pass(x0, True, record)
+        ev = np.linalg.eigvals(A)
+        ev = ev[np.argsort(-np.abs(ev), kind="stable")]
+        res = float(np.max(np.abs(x - x0)))
+        return StrideLinearisation(
+            state=x0, next_state=x, A=A, durations=np.array([ps.duration for ps in passes]),
+            duration_gradients=np.array(grads), eigenvalues=ev, residual=res, passes=passes,
+            message=f"stride map linearised (spectral radius {np.max(np.abs(ev)):.4g}, "
+                    f"fixed-point residual {res:.2g})")

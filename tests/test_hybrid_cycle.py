@@ -1,0 +1,178 @@
+"""The stride map over a cycle of domains (analysis.stability.hybrid_cycle).
+
+Walking is the cycle of one domain: its stride map must be the step map's S, value and
+Jacobian, to round-off, for both controllers, and so have the restricted Poincaré map's
+eigenvalues.  Stance -> flight -> stance of RABBIT under a PD law exercises resets that
+change the state's dimension and a second guard: the Jacobian against central
+differences, the centre of mass ballistic and the angular momentum about it constant in
+flight.  Errors name the domain in one line.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from analysis import poincare_map
+from analysis.design import ROBUST_GAIT
+from analysis.stability import (Domain, HybridCycle, HybridCycleError, stance_flight_cycle,
+                                step_map, vc_eigenvalue, walking_cycle)
+from biped_casadi import SimulationOptions, TimeVaryingController, VirtualConstraintController
+from biped_casadi.model import flight_model
+from biped_casadi.simulation import directions
+from gait_opt import GaitOptions, optimize_gait
+
+#: the step map's own tests' design and options (tests/test_terrain.py)
+M1, OPTIONS, GROUND = np.array([-10, 7.5, 10, -5.0]), \
+    SimulationOptions(steps=1, rk4_steps=400, ground_tolerance=1e-4), 0.002
+#: the robust design of the reproduction (README), as in tests/test_terrain.py
+M1R, REJOIN = np.array([-8.2618, 2.5374, 0.0034, 8.5090]), 0.75
+
+
+def _controller(gait, kind):
+    return TimeVaryingController(gait, M1) if kind == "tv" else VirtualConstraintController(gait)
+
+
+# ------------------------------------------------------------------ walking
+@pytest.mark.parametrize("kind", ["tv", pytest.param("vc", marks=pytest.mark.slow)])
+def test_walking_is_the_one_domain_cycle(model, gait, kind):
+    """Same next state, step time and Jacobian A as StepMap (ground height and state off
+    the flat orbit, as step_map's own test), with and without derivatives."""
+    c = _controller(gait, kind)
+    sm = step_map(c, OPTIONS)
+    cycle = walking_cycle(c, OPTIONS, ground=GROUND)
+    assert len(cycle.domains) == 1 and cycle.n == 2 * model.nq
+    s = np.r_[gait.q(0.0), gait.dq(0.0)] + 1e-4 * directions(1, model.nq, seed=3)[0]
+    ref = sm.linearise(s, h=GROUND)
+    lin = cycle.linearise(s)
+    assert np.max(np.abs(lin.next_state - sm.step(s, GROUND).next_state)) < 1e-12
+    assert abs(lin.durations[0] - ref.step_time) < 1e-12
+    assert np.max(np.abs(lin.A - ref.A)) < 1e-12 * np.max(np.abs(ref.A))
+    assert np.max(np.abs(lin.duration_gradients[0] - ref.C[0])) < 1e-12 * np.max(np.abs(ref.C))
+    v = cycle.stride(s)
+    assert np.max(np.abs(v.next_state - lin.next_state)) < 1e-12 and v.success
+    # the domain's pieces: x- before the impact, the impact's output after it
+    ps = lin.passes[0]
+    qp, dqp = model.impact(ps.exit_state[:model.nq], ps.exit_state[model.nq:])
+    assert np.array_equal(np.r_[np.array(qp).ravel(), np.array(dqp).ravel()], ps.next_state)
+    assert abs(float(model.swing_foot(ps.exit_state[:model.nq])[1]) - GROUND) < 1e-14
+
+
+@pytest.mark.slow
+def test_walking_cycle_eigenvalues_are_the_poincare_maps(model):
+    """The eigenvalue comparison of step_map's own test (robust design, 2000 RK4 steps,
+    ground 1e-7 off the orbit's last node, rtol 1e-4): the time-varying controller's two
+    non-zero eigenvalues are A^z's; virtual constraints' one is vc_map's."""
+    g = optimize_gait(model, GaitOptions(**ROBUST_GAIT), cache=True)
+    o = SimulationOptions(rk4_steps=2000)
+    s = np.r_[g.q(0.0), g.dq(0.0)]
+    tv = TimeVaryingController(g, M1R, rejoin=REJOIN)
+    lin = walking_cycle(tv, o, ground=1e-7).linearise(s)
+    Az = poincare_map(g, rejoin=REJOIN).analyse(M1R)
+    ev = np.sort(np.abs(lin.eigenvalues))[::-1]
+    assert np.allclose(ev[:2], np.sort(np.abs(Az.eigenvalues))[::-1], rtol=1e-4)
+    assert np.all(ev[2:] < 1e-6)
+    vc = walking_cycle(VirtualConstraintController(g), o, ground=1e-7).linearise(s)
+    ev = np.abs(vc.eigenvalues)
+    assert np.isclose(vc.eigenvalues[0].real, vc_eigenvalue(g).eigenvalue, rtol=1e-4)
+    assert np.all(ev[1:] < 1e-6)
+
+
+# ------------------------------------------------------------ stance, flight
+@pytest.fixture(scope="module")
+def hop(model, gait):
+    """RABBIT at 0.6 T of the default gait with the stance knee extending 4 rad/s
+    faster: under a PD law holding the joints the normal force reaches zero, the robot
+    flies with the stance knee bending 0.3 rad and the swing knee 0.5 rad straighter,
+    and lands on the swing foot."""
+    q, dq = gait.q(0.6 * gait.T).copy(), gait.dq(0.6 * gait.T).copy()
+    dq[1] += 4.0
+    cycle = stance_flight_cycle(model, q[1:], q[1:] + np.array([-0.3, 0.0, 0.0, -0.5]))
+    x0 = np.r_[q, dq]
+    return cycle, x0, cycle.linearise(x0, record=True)
+
+
+def test_stance_flight_jacobian_against_central_differences(model, hop):
+    cycle, x0, lin = hop
+    assert [d.name for d in cycle.domains] == ["stance", "flight"]
+    assert [ps.next_state.size for ps in lin.passes] == [2 * model.nq + 4, 2 * model.nq]
+    assert np.all(lin.durations > 0)
+    d = 1e-6
+    cols = []
+    for e in np.eye(x0.size):
+        a, b = cycle.stride(x0 + d * e), cycle.stride(x0 - d * e)
+        cols.append(np.r_[a.next_state - b.next_state, a.durations - b.durations] / (2 * d))
+    fd = np.array(cols).T
+    n = x0.size
+    assert np.max(np.abs(fd[:n] - lin.A)) < 1e-6 * np.max(np.abs(lin.A))
+    assert np.max(np.abs(fd[n:] - lin.duration_gradients)) < \
+        1e-6 * np.max(np.abs(lin.duration_gradients))
+    assert np.array_equal(cycle.stride(x0).next_state, lin.next_state)
+
+
+def test_flight_is_ballistic_and_the_edges_are_the_flight_models(model, hop):
+    """Along flight the centre of mass falls at g from its takeoff state and the angular
+    momentum about it stays at its takeoff value; the flight starts at ``takeoff`` of the
+    stance's end (where Fz = 0) and the stride ends at ``landing_swing`` of the flight's
+    end (where the swing foot is on the ground)."""
+    fl = flight_model(model)
+    cycle, _, lin = hop
+    st, fp = lin.passes
+    ne = fl.ne
+    q, dq = st.exit_state[:model.nq], st.exit_state[model.nq:]
+    Fz = float(cycle.domains[0].guard(st.exit_state, st.duration, []))   # takeoff_guard's
+    assert abs(Fz) < 1e-9 * model.description.total_mass * model.description.gravity
+    qe, dqe = fl.takeoff(q, dq)
+    assert np.array_equal(np.r_[np.array(qe).ravel(), np.array(dqe).ravel()], fp.entry)
+    t, N = fp.times, fp.nodes
+    assert t[-1] == fp.duration and N.shape == (2 * ne, t.size)
+    com = np.array([np.array(fl.com(N[:ne, j])).ravel() for j in range(t.size)]).T
+    v0 = np.array(fl.com_velocity(N[:ne, 0], N[ne:, 0])).ravel()
+    g = model.description.gravity
+    ballistic = com[:, :1] + v0[:, None] * t + np.array([[0.0], [-0.5 * g]]) * t ** 2
+    assert np.max(np.abs(com - ballistic)) < 1e-9
+    L = np.array([float(fl.angular_momentum(N[:ne, j], N[ne:, j], com[:, j]))
+                  for j in range(t.size)])
+    assert np.max(np.abs(L - L[0])) < 1e-9 * abs(L[0])
+    feet = np.array(fl.feet(N[:ne, -1]))
+    assert abs(feet[1, 1]) < 1e-12 and np.all(np.array(
+        [float(fl.feet(N[:ne, j])[1, 0]) for j in range(1, t.size)]) > 0)
+    qp, dqp = fl.landing_swing(N[:ne, -1], N[ne:, -1])[:2]
+    assert np.array_equal(np.r_[np.array(qp).ravel(), np.array(dqp).ravel()], lin.next_state)
+
+
+# ------------------------------------------------------------------ errors
+def _ball(name="ball", reset_size=2, t_max=1.0, ceiling=None):
+    """A ball falling on the ground: x = (z, v), guard z, reset (z, -v / 2)."""
+    X, t, p = ca.SX.sym("X", 2), ca.SX.sym("t"), ca.SX.sym("p", 0)
+    f = ca.Function("f", [X, t, p], [ca.vertcat(X[1], -9.81)])
+    g = ca.Function("g", [X, t, p], [X[0]])
+    x = ca.SX.sym("x", 2)
+    r = ca.Function("r", [x], [ca.vertcat(x[0], -0.5 * x[1], ca.SX.zeros(reset_size - 2))])
+    c = None if ceiling is None else ca.Function("c", [X, t, p], [ceiling - X[0]])
+    return Domain(name, 2, f, g, r, 1e-3, t_max, constraints=c,
+                  constraint_names=("below the ceiling",) if c is not None else ())
+
+
+def test_errors_name_the_domain_in_one_line(hop):
+    ball = HybridCycle([_ball()])
+    v = ball.linearise([1.0, 0.0])
+    assert abs(v.durations[0] - np.sqrt(2 / 9.81)) < 1e-12     # RK4 is exact on a parabola
+    with pytest.raises(HybridCycleError, match=r"^domain 'ball': guard not crossed going down "
+                                               r"within the time limit 0.1 s \(100 RK4 steps"):
+        HybridCycle([_ball(t_max=0.1)]).stride([1.0, 0.0])
+    with pytest.raises(HybridCycleError, match=r"^domain 'ball': its reset gives 3 numbers, "
+                                               r"domain 'ball' takes 2$") as e:
+        HybridCycle([_ball(reset_size=3)])
+    assert e.value.domain == "ball" and e.value.kind == "dimension"
+    with pytest.raises(HybridCycleError, match=r"^domain 'high': below the ceiling violated "
+                                               r"at t = 0.\d+ s"):
+        HybridCycle([_ball("high", ceiling=1.2)]).stride([1.0, 2.0])
+    cycle, x0, _ = hop
+    for i, d, msg in ((2, -0.5, r"^domain 'stance': swing foot height violated at t = "),
+                      (1, 0.5, r"^domain 'flight': landing normal impulse violated at t = ")):
+        with pytest.raises(HybridCycleError, match=msg) as e:
+            cycle.stride(x0 + d * np.eye(x0.size)[i])
+        assert "\n" not in str(e.value) and e.value.kind == "constraint"
+    with pytest.raises(ValueError, match="has 10 numbers, got 3"):
+        cycle.stride(np.zeros(3))
