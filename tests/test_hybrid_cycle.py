@@ -9,6 +9,8 @@ flight.  Errors name the domain in one line.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -154,7 +156,7 @@ def _ball(name="ball", reset_size=2, t_max=1.0, ceiling=None):
                   constraint_names=("below the ceiling",) if c is not None else ())
 
 
-def test_errors_name_the_domain_in_one_line(hop):
+def test_errors_name_the_domain_in_one_line(model, hop):
     ball = HybridCycle([_ball()])
     v = ball.linearise([1.0, 0.0])
     assert abs(v.durations[0] - np.sqrt(2 / 9.81)) < 1e-12     # RK4 is exact on a parabola
@@ -169,10 +171,27 @@ def test_errors_name_the_domain_in_one_line(hop):
                                                r"at t = 0.\d+ s"):
         HybridCycle([_ball("high", ceiling=1.2)]).stride([1.0, 2.0])
     cycle, x0, _ = hop
+    with pytest.raises(HybridCycleError, match=rf"^domain 'stance': its reset gives "
+                                               rf"{2 * model.nq + 4} numbers, domain 'stance' "
+                                               rf"takes {2 * model.nq}$"):
+        HybridCycle(cycle.domains[:1])
     for i, d, msg in ((2, -0.5, r"^domain 'stance': swing foot height violated at t = "),
                       (1, 0.5, r"^domain 'flight': landing normal impulse violated at t = ")):
         with pytest.raises(HybridCycleError, match=msg) as e:
             cycle.stride(x0 + d * np.eye(x0.size)[i])
         assert "\n" not in str(e.value) and e.value.kind == "constraint"
-    with pytest.raises(ValueError, match="has 10 numbers, got 3"):
+    with pytest.raises(ValueError, match=f"has {2 * model.nq} numbers, got 3"):
         cycle.stride(np.zeros(3))
+
+
+@pytest.mark.slow
+def test_the_how_to_example_runs(model):
+    """The stride-map example of docs/howto/running.md, as written there."""
+    page = Path(__file__).resolve().parents[1] / "docs" / "howto" / "running.md"
+    block = page.read_text().split("## The stride map over a cycle of domains", 1)[1] \
+        .split("```python\n", 1)[1].split("```", 1)[0]
+    ns = {}
+    exec(compile(block, str(page), "exec"), ns)
+    n = 2 * model.nq
+    assert ns["lin"].A.shape == (n, n) and ns["r"].A.shape == (n, n)
+    assert [ps.next_state.size for ps in ns["r"].passes] == [n + 4, n]
