@@ -415,6 +415,7 @@ class HybridCycle:
         d, f = self.domains[i], self._fns[i]
         X, p, XJ, pJ = (np.array(v) for v in f.entry(x))
         X, p = X.ravel(), p.ravel()
+        X0 = X
         if derivatives:
             J, Jp = XJ @ Jx, pJ @ Jx
         ns = self.n
@@ -464,7 +465,7 @@ class HybridCycle:
         if record:
             times.append(t + eta)
             nodes.append(Xe)
-        ps = DomainPass(d.name, _col(f.entry(x)[0]), p, t + eta, xm, xp,
+        ps = DomainPass(d.name, X0, p, t + eta, xm, xp,
                         None if not record else np.array(times),
                         None if not record else np.array(nodes).T)
         if not derivatives:
