@@ -35,14 +35,25 @@ def _controller(gait, kind):
     return TimeVaryingController(gait, M1) if kind == "tv" else VirtualConstraintController(gait)
 
 
+@pytest.fixture(scope="module")
+def walking(gait):
+    """The walking cycle and the step map of each controller, built once."""
+    built = {}
+
+    def get(kind):
+        if kind not in built:
+            c = _controller(gait, kind)
+            built[kind] = walking_cycle(c, OPTIONS, ground=GROUND), step_map(c, OPTIONS)
+        return built[kind]
+    return get
+
+
 # ------------------------------------------------------------------ walking
 @pytest.mark.parametrize("kind", ["tv", pytest.param("vc", marks=pytest.mark.slow)])
-def test_walking_is_the_one_domain_cycle(model, gait, kind):
+def test_walking_is_the_one_domain_cycle(model, gait, walking, kind):
     """Same next state, step time and Jacobian A as StepMap (ground height and state off
     the flat orbit, as step_map's own test), with and without derivatives."""
-    c = _controller(gait, kind)
-    sm = step_map(c, OPTIONS)
-    cycle = walking_cycle(c, OPTIONS, ground=GROUND)
+    cycle, sm = walking(kind)
     assert len(cycle.domains) == 1 and cycle.n == 2 * model.nq
     s = np.r_[gait.q(0.0), gait.dq(0.0)] + 1e-4 * directions(1, model.nq, seed=3)[0]
     ref = sm.linearise(s, h=GROUND)
@@ -58,6 +69,16 @@ def test_walking_is_the_one_domain_cycle(model, gait, kind):
     qp, dqp = model.impact(ps.exit_state[:model.nq], ps.exit_state[model.nq:])
     assert np.array_equal(np.r_[np.array(qp).ravel(), np.array(dqp).ravel()], ps.next_state)
     assert abs(float(model.swing_foot(ps.exit_state[:model.nq])[1]) - GROUND) < 1e-14
+
+
+def test_walking_fixed_point_is_the_step_maps(model, gait, walking):
+    """Newton on the cycle from the perturbed start closes the orbit at the ground
+    height 2 mm; the step map maps that state to itself as well."""
+    cycle, sm = walking("tv")
+    s = np.r_[gait.q(0.0), gait.dq(0.0)] + 1e-4 * directions(1, model.nq, seed=3)[0]
+    fp = cycle.fixed_point(s)
+    assert fp.residual < 1e-11 and fp.spectral_radius < 1
+    assert np.max(np.abs(sm.step(fp.state, GROUND).next_state - fp.state)) < 1e-11
 
 
 @pytest.mark.slow

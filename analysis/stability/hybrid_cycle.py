@@ -544,3 +544,33 @@ class HybridCycle:
             duration_gradients=np.array(grads), eigenvalues=ev, residual=res, passes=passes,
             message=f"stride map linearised (spectral radius {np.max(np.abs(ev)):.4g}, "
                     f"fixed-point residual {res:.2g})")
+
+    def fixed_point(self, x0, tol: float = 1e-11, max_iter: int = 12) -> StrideLinearisation:
+        """A periodic orbit of the cycle, P(x*) = x*, by Newton with the exact A.
+
+        Parameters
+        ----------
+        x0 : array_like
+            (n,) start of the iteration.
+        tol : float
+            Stop when ``max |P(x) - x| < tol``.
+        max_iter : int
+            Newton steps at most.
+
+        Returns
+        -------
+        StrideLinearisation
+            At the last iterate (``residual`` says how well the orbit closes).
+
+        Raises
+        ------
+        HybridCycleError
+            As :meth:`stride`, at an iterate.
+        """
+        lin = self.linearise(x0)
+        for _ in range(max_iter):
+            if lin.residual < tol:
+                break
+            r = lin.next_state - lin.state
+            lin = self.linearise(lin.state + np.linalg.solve(np.eye(self.n) - lin.A, r))
+        return lin
