@@ -200,7 +200,23 @@ class MujocoLoop:
         -------
         MujocoLoop
         """
-        return MujocoLoop(self.design, dataclasses.replace(self.settings, timestep=timestep),
+        return self.with_settings(timestep=timestep)
+
+    def with_settings(self, **changes) -> "MujocoLoop":
+        """The same loop with some MuJoCo settings changed (a time step, a contact).
+
+        Its design, law, torque limit, step start and touchdown kept.
+
+        Parameters
+        ----------
+        **changes
+            Fields of :class:`~biped_casadi.mujoco.mjcf.ContactSettings` to change.
+
+        Returns
+        -------
+        MujocoLoop
+        """
+        return MujocoLoop(self.design, dataclasses.replace(self.settings, **changes),
                           self.law_name, self.torque_limit, self.step_start_kind,
                           self.max_slip, self.horizon, self.touchdown)
 
