@@ -11,8 +11,7 @@ import pytest
 
 from analysis.cli import main as biped_main
 from biped_casadi import Design
-from biped_casadi.mujoco import (FACTORS, ContactSettings, MujocoLoop, check_contact,
-                                 max_penetration)
+from biped_casadi.mujoco import FACTORS, ContactSettings, MujocoLoop, check_contact
 
 pytest.importorskip("mujoco")
 
@@ -152,21 +151,26 @@ def test_auto_solref_walks_with_the_contact_that_walked(gait3, tmp_path, capsys,
 
 
 def test_max_penetration_is_the_feet_depth_in_the_floor(gait):
-    """The depth: the sphere's radius less the lowest height of either foot's centre
-    (MuJoCo's own geometry of the logged states); deeper at a softer contact."""
+    """The walk's depth: the sphere's radius less the lowest height of either foot's
+    centre over the states it went through (MuJoCo's own geometry of the logged states),
+    the same bit for bit with the steps driven in C and in Python; deeper at a softer
+    contact."""
     import mujoco
     q0, dq0 = gait.q(0.0), gait.dq(0.0)
     depth = []
     for solref in (0.004, 0.008):
-        loop = MujocoLoop(Design.vc(gait), ContactSettings(timestep=0.002, solref=solref))
+        settings = ContactSettings(timestep=0.002, solref=solref)
+        loop = MujocoLoop(Design.vc(gait), settings)
         w = loop.run(q0, dq0, 2, log=True)
+        py = MujocoLoop(Design.vc(gait), settings, driver="python").run(q0, dq0, 2)
+        assert py.max_penetration == w.max_penetration, (py.max_penetration, loop.driver)
         d = mujoco.MjData(loop.m)
         lowest = np.inf
         for qpos in w.qpos:
             d.qpos[:] = qpos
             mujoco.mj_kinematics(loop.m, d)
             lowest = min(lowest, float(d.geom_xpos[list(loop.feet), 2].min()))
-        p = max_penetration(loop, w)
+        p = w.max_penetration
         assert p == pytest.approx(loop.settings.foot_radius - lowest, abs=1e-12), (p, lowest)
         depth.append(p)
         assert check_contact(loop, q0, dq0, 2, w).tried == []

@@ -15,8 +15,8 @@ time step and steps) again with the contact's time constant multiplied by each o
 :data:`FACTORS` in turn (each at least two time steps), until one walks every step.  It
 says 'too_stiff' and the ``--solref`` to use when one walks, 'not_stiffness' when none
 does.  Each walk tried records what the softer contact costs: its speed error against the
-gait and the deepest a foot went into the floor (:func:`max_penetration`), beside the same
-figures of the walk that walked at a finer time step and the stiff contact, when the time
+gait and the deepest a foot went into the floor (``MujocoWalk.max_penetration``), beside
+the same figures of the walk that walked at a finer time step and the stiff contact, when the time
 step check found one.  The factors are the trial's steps, like the time step check's
 divisors, not thresholds fitted on a robot: 1.5 and 2 are the next time constants above
 two time steps on MuJoCo's time grid of the stiff settings (3 and 4 time steps).
@@ -25,13 +25,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from ..results import Result
 from .mjcf import MAX_SOLREF
 from .walk import MujocoLoop
 
-__all__ = ["ContactCheck", "check_contact", "max_penetration", "FACTORS", "run_record"]
+__all__ = ["ContactCheck", "check_contact", "FACTORS", "run_record"]
 
 #: the softer contacts tried after a failed walk: the time constant times 1.5, then times 2
 FACTORS = (1.5, 2.0)
@@ -75,30 +73,8 @@ class ContactCheck(Result):
     SUCCESS = ("not_needed",)
 
 
-def max_penetration(loop: MujocoLoop, walk) -> float:
-    """The deepest either foot's sphere went into the floor during a logged walk, m.
-
-    Parameters
-    ----------
-    loop : MujocoLoop
-        The loop that walked it.
-    walk : MujocoWalk
-        A walk run with ``log=True``.
-
-    Returns
-    -------
-    float
-        ``foot_radius - min z`` of the spheres' centres over the logged states (0 when
-        neither foot reached the floor; NaN without a log).
-    """
-    if walk.qpos.size == 0:
-        return float("nan")
-    z = loop.layout.feet(walk.qpos)[..., 1]
-    return max(0.0, float(loop.settings.foot_radius - np.min(z)))
-
-
 def run_record(loop: MujocoLoop, q0, dq0, steps: int) -> dict:
-    """Walk a loop (logged) and record what a check reports of it.
+    """Walk a loop and record what a check reports of it.
 
     Parameters
     ----------
@@ -111,12 +87,13 @@ def run_record(loop: MujocoLoop, q0, dq0, steps: int) -> dict:
     -------
     dict
         ``timestep``, ``solref``, ``status``, ``steps_walked``, ``speed_error``,
-        ``max_penetration`` (m, :func:`max_penetration`), ``message``, ``wall_time``.
+        ``max_penetration`` (m, the deepest a foot went into the floor), ``message``,
+        ``wall_time``.
     """
-    w = loop.run(q0, dq0, steps, log=True)
+    w = loop.run(q0, dq0, steps)
     return dict(timestep=float(loop.settings.timestep), solref=contact_time_constant(loop),
                 status=w.status, steps_walked=w.steps_walked, speed_error=w.speed_error,
-                max_penetration=max_penetration(loop, w), message=w.message,
+                max_penetration=w.max_penetration, message=w.message,
                 wall_time=w.wall_time)
 
 
@@ -164,7 +141,7 @@ def check_contact(loop: MujocoLoop, q0, dq0, steps: int, walk, timestep_check=No
         r = next(t for t in timestep_check.tried
                  if t["timestep"] == timestep_check.suggested_timestep)
         reference = dict(timestep=r["timestep"], solref=solref, speed_error=r["speed_error"],
-                         max_penetration=r.get("max_penetration", float("nan")))
+                         max_penetration=r["max_penetration"])
     base = dict(timestep=dt, solref=solref, reference=reference)
     if walk.status == "walked":
         return ContactCheck(status="not_needed", message="", suggested_solref=None, tried=[],
