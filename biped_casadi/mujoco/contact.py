@@ -2,13 +2,14 @@
 MuJoCo's time step, and what a softer contact costs.
 
 MuJoCo's contact is a damped spring that the solver asks the penetration to follow; its
-time constant (``solref``) must be at least two time steps (MuJoCo's modelling guide:
-below that the discrete solver cannot follow the spring and MuJoCo silently raises it),
-and the stiff settings sit exactly there (4 ms at 2 ms).  :mod:`.timestep` resolves that
-spring better by shortening the time step; the other way is a softer spring at the same
-time step, which MuJoCo's step then resolves in more time steps.  Softer means the feet
-sink further into the floor and each impact lasts longer, so the walk drifts from the
-gait (:file:`docs/howto/mujoco.md` measures both ways on six robots).
+time constant (``solref``) must be at least two time steps (MuJoCo's modelling guide;
+MuJoCo silently raises a shorter one to that: ``mjDSBL_REFSAFE``, ``make
+ref[0]>=2*timestep`` in its header), and the stiff settings sit exactly there (4 ms at
+2 ms).  :mod:`.timestep` resolves that spring better by shortening the time step; the other way is a softer
+spring at the same time step, which MuJoCo's step then resolves in more time steps.
+Softer means the feet sink further into the floor and each impact lasts longer, so the
+walk drifts from the gait (:file:`docs/howto/mujoco.md` measures both ways on six
+robots).
 
 :func:`check_contact` runs only after a walk failed: the same walk (the same start, design,
 time step and steps) again with the contact's time constant multiplied by each of
@@ -16,10 +17,10 @@ time step and steps) again with the contact's time constant multiplied by each o
 says 'too_stiff' and the ``--solref`` to use when one walks, 'not_stiffness' when none
 does.  Each walk tried records what the softer contact costs: its speed error against the
 gait and the deepest a foot went into the floor (``MujocoWalk.max_penetration``), beside
-the same figures of the walk that walked at a finer time step and the stiff contact, when the time
-step check found one.  The factors are the trial's steps, like the time step check's
-divisors, not thresholds fitted on a robot: 1.5 and 2 are the next time constants above
-two time steps on MuJoCo's time grid of the stiff settings (3 and 4 time steps).
+the same figures of the walk that walked at a finer time step with the walk's contact,
+when the time step check found one.  The factors are the trial's steps, like the time
+step check's divisors, not thresholds fitted on a robot: 1.5 and 2 are the next time
+constants above two time steps on the stiff settings' time grid (3 and 4 time steps).
 """
 from __future__ import annotations
 

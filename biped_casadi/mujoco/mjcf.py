@@ -71,8 +71,9 @@ class ContactSettings:
         default 0.002).
     solref : float or None
         The contact's time constant, s (``solref = (solref, 1)`` on feet and floor);
-        None: MuJoCo's default (0.02 s, critically damped).  MuJoCo silently stiffens a
-        time constant below two time steps, so that is refused, as is one above
+        None: MuJoCo's default (0.02 s, critically damped).  MuJoCo silently raises a
+        time constant below two time steps to two (a softer contact than asked: its
+        'refsafe' flag, on by default), so that is refused, as is one above
         :data:`MAX_SOLREF`.
     foot_radius : float
         Radius of the sphere feet, m (> 0).
@@ -114,7 +115,7 @@ class ContactSettings:
                                  f"walking step), got {v!r}")
             if v < 2 * self.timestep:
                 raise ValueError(f"solref must be at least two time steps ({2 * self.timestep:g}"
-                                 f" s): MuJoCo would silently stiffen {v!r} s to that")
+                                 f" s): MuJoCo would silently raise {v!r} s to that")
         if self.integrator not in ("Euler", "implicitfast", "implicit", "RK4"):
             raise ValueError(f"integrator must be Euler, implicitfast, implicit or RK4, got "
                              f"{self.integrator!r}")
