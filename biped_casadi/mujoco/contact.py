@@ -5,11 +5,11 @@ MuJoCo's contact is a damped spring that the solver asks the penetration to foll
 time constant (``solref``) must be at least two time steps (MuJoCo's modelling guide;
 MuJoCo silently raises a shorter one to that: ``mjDSBL_REFSAFE``, ``make
 ref[0]>=2*timestep`` in its header), and the stiff settings sit exactly there (4 ms at
-2 ms).  :mod:`.timestep` resolves that spring better by shortening the time step; the other way is a softer
-spring at the same time step, which MuJoCo's step then resolves in more time steps.
-Softer means the feet sink further into the floor and each impact lasts longer, so the
-walk drifts from the gait (:file:`docs/howto/mujoco.md` measures both ways on six
-robots).
+2 ms).  :mod:`.timestep` resolves that spring better by shortening the time step; the
+other way is a softer spring at the same time step, which MuJoCo's step then resolves in
+more time steps.  Softer means the feet sink further into the floor and each impact
+lasts longer, so the walk drifts from the gait (:file:`docs/howto/mujoco.md` measures
+both ways on six robots).
 
 :func:`check_contact` runs only after a walk failed: the same walk (the same start, design,
 time step and steps) again with the contact's time constant multiplied by each of
