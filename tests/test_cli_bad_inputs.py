@@ -384,6 +384,17 @@ CASES = [
     (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--foot-radius", "0.5"],
      "--foot-radius must be smaller"),
     (["mujoco", *G, "--mu", "1e300", "--steps", "2", "--no-eig"], "--mu must be at most"),
+    # the contact's time constant: a word other than 'auto', below two time steps, not a
+    # positive number, longer than a walking step (1e300 walked, slipped, and the softer
+    # contacts the check tried were 1.5e300 and 2e300 s)
+    (["mujoco", *G, "--solref", "soft"], "--solref: a time constant in seconds or 'auto'"),
+    (["mujoco", *G, "--solref", "0.003"], "--solref must be at least two time steps"),
+    (["mujoco", *G, "--solref", "auto", "--timestep", "0.01", "--contact", "stiff"],
+     "--solref must be at least two time steps"),
+    (["mujoco", *G, "--solref", "-0.01"], "--solref must be a positive time constant"),
+    (["mujoco", *G, "--solref", "nan"], "--solref must be a positive time constant"),
+    (["mujoco", *G, "--solref", "1e300"], "--solref must be at most 1 s"),
+    (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--solref", "auto"], "--solref"),
     # ---- reproduce (checked before the first stage)
     (["reproduce", "--out", "{file}"], "--out"),
     (["reproduce", "--quick", "--out", "{file}"], "--out"),

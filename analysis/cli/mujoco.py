@@ -9,7 +9,7 @@ from biped_casadi import Design, Gains
 from biped_casadi.control.compiled import CompilerError
 from biped_casadi.control.export import exported_law
 from biped_casadi.mujoco import (LAWS, SETTLE, STEP_STARTS, TOUCHDOWNS, MujocoLoop,
-                                 check_timestep, layout, stride_map)
+                                 check_contact, check_timestep, layout, stride_map)
 from analysis.in_mujoco import exact_eigenvalues
 from analysis.reporting.plots import mujoco_animation, mujoco_steps_plot, save_figures
 
@@ -83,15 +83,23 @@ def cmd_mujoco(args):
     say(f"walking {args.steps} step(s) in MuJoCo ...")
     w = loop.run(q0, dq0, args.steps, log=args.plot is not None)
     if not w.success:
-        say("the same walk at finer time steps (is the time step the cause?) ...")
+        say("the same walk at finer time steps and with softer contacts (is the time step "
+            "or the contact the cause?) ...")
     check = check_timestep(loop, q0, dq0, args.steps, w)
-    chosen = None
+    contact = check_contact(loop, q0, dq0, args.steps, w, check)
+    chosen = chosen_solref = None
     if args.timestep == AUTO and check.status == "too_coarse":
         # --timestep auto: the walk, the figures and the stride map at the time step that
-        # walked (the walk again, for its log)
+        # walked (the walk again, for its log); it keeps the contact asked for, so it comes
+        # before --solref auto
         chosen = check.suggested_timestep
         say(f"--timestep auto: walking at {chosen:g} s ...")
         loop = loop.at_timestep(chosen)
+    elif args.solref == AUTO and contact.status == "too_stiff":
+        chosen_solref = contact.suggested_solref
+        say(f"--solref auto: walking with solref {chosen_solref:g} s ...")
+        loop = loop.with_settings(solref=chosen_solref)
+    if chosen is not None or chosen_solref is not None:
         w = loop.run(q0, dq0, args.steps, log=args.plot is not None)
     eig = None
     if not args.no_eig:
@@ -120,6 +128,8 @@ def cmd_mujoco(args):
     d["steps_per_second"] = w.steps_per_second
     d["timestep_check"] = check.to_dict()
     d["timestep_check"]["auto_timestep"] = chosen
+    d["contact_check"] = contact.to_dict()
+    d["contact_check"]["auto_solref"] = chosen_solref
     if eig is not None:
         d["eigenvalues"] = eig
     if figures:
@@ -127,7 +137,7 @@ def cmd_mujoco(args):
     if args.json:
         print_json(d)
     else:
-        _print(w, eig, figures, check, chosen)
+        _print(w, eig, figures, check, chosen, contact, chosen_solref)
     return 0 if w.success else 1
 
 
@@ -140,18 +150,24 @@ def _ev(ev) -> str:
                            f"{e.real:.3g}{e.imag:+.3g}j" for e in ev) + "]"
 
 
-def _print(w, eig, figures, check=None, chosen=None):
+def _print(w, eig, figures, check=None, chosen=None, contact=None, chosen_solref=None):
     s = w.settings
     if chosen is not None:
         print(f"--timestep auto: at {check.timestep:g} s the walk {check.walk['status']} "
               f"({check.walk['message']}); the walk below is at {chosen:g} s")
+    if chosen_solref is not None:
+        print(f"--solref auto: with solref {contact.solref:g} s the walk "
+              f"{check.walk['status']} ({check.walk['message']}); the walk below is with "
+              f"solref {chosen_solref:g} s")
     print(f"MuJoCo ({s['contact']} contact: solref "
           f"{s['solref'] if s['solref'] is not None else 'MuJoCo default 0.02'} s, dt "
           f"{s['timestep']:g} s, feet {s['foot_radius']:g} m, mu {s['mu']:g}), {w.law} law, "
           f"step start from the {w.step_start}: {w.status}"
           + (f" - {w.message}" if w.message else ""))
-    if check is not None and check.message and chosen is None:
-        print(f"  {check.message}")
+    if chosen is None and chosen_solref is None:
+        for c in (check, contact):
+            if c is not None and c.message:
+                print(f"  {c.message}")
     over = (f"over steps {SETTLE + 1}-{w.steps_walked}" if w.steps_walked > 2 * SETTLE
             else "over all steps")
     print(f"  {w.steps_walked} of {w.n_steps} steps; speed error {_pct(w.speed_error)}, period "
@@ -202,8 +218,11 @@ def register(sub):
                     "eigenvalues (a least-squares fit of rollouts) beside the exact ones. "
                     "A walk that fails is walked again at a half and a quarter of the time "
                     "step: one line says whether the time step is the likely cause and which "
-                    "--timestep to use (JSON: timestep_check). Exit 0 when the walk walked "
-                    "its steps, 1 otherwise.")
+                    "--timestep to use (JSON: timestep_check); and again at the same time step "
+                    "with a contact 1.5 and 2 times softer: a second line says whether a "
+                    "softer contact walks, which --solref to use and what it costs (speed "
+                    "error, feet' depth into the floor; JSON: contact_check). Exit 0 when the "
+                    "walk walked its steps, 1 otherwise.")
     add_gait_arguments(p)
     add_robot(p)
     add_design_arguments(p, m1_zero=True)

@@ -26,9 +26,20 @@ def _timestep(text: str):
                                          f"{text!r}") from None
 
 
+def _solref(text: str):
+    """A contact time constant in seconds, or :data:`AUTO`."""
+    if text == AUTO:
+        return AUTO
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a time constant in seconds or '{AUTO}', got "
+                                         f"{text!r}") from None
+
+
 def add_mujoco_settings(p, mu: bool = True, auto: bool = False):
     """``--contact``, ``--timestep``, ``--solref``, ``--foot-radius`` (and ``--mu``);
-    with ``auto``, ``--timestep auto`` too."""
+    with ``auto``, ``--timestep auto`` and ``--solref auto`` too."""
     p.add_argument("--contact", choices=CONTACTS, default="stiff",
                    help="stiff: solref 4 ms, time step 2 ms (recommended); default: MuJoCo's "
                         "contact (solref 0.02 s) (both with 5 mm feet, mu 0.6)")
@@ -40,9 +51,16 @@ def add_mujoco_settings(p, mu: bool = True, auto: bool = False):
     else:
         p.add_argument("--timestep", type=float, metavar="S",
                        help="MuJoCo's time step, s, 1e-05 to 0.05 (default 0.002)")
-    p.add_argument("--solref", type=float, metavar="S",
-                   help="the contact's time constant, s, at least two time steps (default "
-                        "0.004 with --contact stiff, MuJoCo's 0.02 with default)")
+    solref = ("the contact's time constant, s, two time steps to 1 (default 0.004 with "
+              "--contact stiff, MuJoCo's 0.02 with default)")
+    if auto:
+        p.add_argument("--solref", type=_solref, metavar="S",
+                       help=solref + "; 'auto': that default, and when the walk fails there "
+                            "but walks with a contact 1.5 or 2 times softer at the same time "
+                            "step, that contact (after --timestep auto's finer time step, "
+                            "when both are auto)")
+    else:
+        p.add_argument("--solref", type=float, metavar="S", help=solref)
     p.add_argument("--foot-radius", type=float, metavar="M",
                    help="radius of the sphere feet, m (default 0.005)")
     p.add_argument("--integrator", choices=("Euler", "implicitfast", "implicit", "RK4"),
@@ -67,10 +85,11 @@ def settings_error(e: ValueError) -> UserError:
 
 def mujoco_settings(args) -> ContactSettings:
     """The settings of the options (UserError naming the option MuJoCo would reject);
-    ``--timestep auto`` starts from the default time step."""
+    ``--timestep auto`` and ``--solref auto`` start from the defaults."""
     timestep = None if args.timestep == AUTO else args.timestep
+    solref = None if args.solref == AUTO else args.solref
     try:
-        return ContactSettings.of(args.contact, timestep=timestep, solref=args.solref,
+        return ContactSettings.of(args.contact, timestep=timestep, solref=solref,
                                   foot_radius=args.foot_radius,
                                   mu=getattr(args, "mu", None), integrator=args.integrator)
     except ValueError as e:

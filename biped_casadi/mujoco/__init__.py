@@ -5,6 +5,7 @@ stride map.
 Importing this package does not import ``mujoco`` (a second or so): the functions that
 run MuJoCo import it when called.
 """
+from .contact import FACTORS, ContactCheck, check_contact
 from .law import LAWS, compiled_law, control_law
 from .mjcf import (CONTACTS, MIN_INERTIA, MUJOCO_DEFAULT, STIFF, ContactSettings, Layout,
                    floating_base_inertia, layout, mjcf, torque_limit_of)
@@ -18,4 +19,5 @@ __all__ = ["mjcf", "ContactSettings", "STIFF", "MUJOCO_DEFAULT", "CONTACTS", "MI
            "control_law", "compiled_law", "walk", "MujocoLoop", "MujocoWalk", "MujocoStep",
            "OUTCOMES", "STEP_STARTS", "TOUCHDOWNS", "SETTLE", "start_of", "mujoco_module",
            "stride_map", "StrideMap", "LimitCycle", "limit_cycle", "fit_stride_map",
-           "check_timestep", "TimestepCheck", "strike_velocity", "DIVISORS"]
+           "check_timestep", "TimestepCheck", "strike_velocity", "DIVISORS", "check_contact",
+           "ContactCheck", "FACTORS"]

@@ -6,7 +6,7 @@ machine into the cache folder's ``compiled/``, runs those steps one after the ot
 reads MuJoCo's state in the toolkit's coordinates, calls the exported law's
 ``biped_torque`` (its function pointer), writes ``ctrl``, calls ``mj_step`` (MuJoCo's own
 function, from the library the ``mujoco`` package has loaded) and keeps the step's
-accounts (slip, travel, peak torque, clipping, the log).  It hands back to Python, before
+accounts (slip, travel, peak torque, clipping, the feet's lowest point, the log).  It hands back to Python, before
 touching anything of the step, wherever the walk's logic has more to do than that: the
 Poincaré section, a law's refusal, a state that is not finite, a full log, and after
 MuJoCo's step a fall (the torso's lean judged from the robot's ``torso_upright`` as the
@@ -63,7 +63,7 @@ FIELDS = [
     ("dt", _D), ("T", _D), ("U", _D), ("r", _D), ("t_sec", _D), ("fall_height", _D),
     ("half_pi", _D), ("zone", _D), ("upright", _D), ("pi", _D), ("two_pi", _D),
     ("t0", _D), ("qu_prev", _D), ("dqu_prev", _D), ("peak", _D), ("z_old", _D),
-    ("slip", _D), ("travel", _D), ("x_prev", _D), ("phi_prev", _D),
+    ("slip", _D), ("travel", _D), ("x_prev", _D), ("phi_prev", _D), ("z_min", _D),
     ("kmax", _L), ("k", _L), ("clipped", _L), ("airborne", _L), ("log_k", _L),
     ("log_cap", _L),
     ("nq", _I), ("na", _I), ("nu", _I), ("nc", _I), ("foot_a", _I), ("foot_b", _I),
@@ -274,6 +274,8 @@ static int steps(cloop_t *s, long long budget)
             }
             s->x_prev = xs;
             s->phi_prev = phs;
+            if (xpos[3 * feet[0] + 2] < s->z_min) s->z_min = xpos[3 * feet[0] + 2];
+            if (xpos[3 * feet[1] + 2] < s->z_min) s->z_min = xpos[3 * feet[1] + 2];
         }
     }
     return 0;
@@ -432,7 +434,7 @@ class Driver:
             s.log_k, s.log_cap = log.k, log.t.size
         s.t0, s.qu_prev, s.dqu_prev, s.peak = run.t0, run.qu_prev, run.dqu_prev, run.peak
         s.z_old, s.slip, s.travel = run.z_old, run.slip, run.travel
-        s.x_prev, s.phi_prev = run.x_prev, run.phi_prev
+        s.x_prev, s.phi_prev, s.z_min = run.x_prev, run.phi_prev, run.z_min
         s.k, s.clipped, s.airborne = run.k, run.clipped, run.airborne
         s.stance, s.slot, s.lifted = run.stance, run.slot, int(run.lifted)
         s.section_none = int(run.section is None)
@@ -453,7 +455,7 @@ class Driver:
             i = s.q_old_slot
             run.q_old, run.dq_old, run.z_old = run.qs[i], run.dqs[i], s.z_old
             run.slip, run.travel, run.airborne = s.slip, s.travel, s.airborne
-            run.x_prev, run.phi_prev = s.x_prev, s.phi_prev
+            run.x_prev, run.phi_prev, run.z_min = s.x_prev, s.phi_prev, s.z_min
         return event
 
 

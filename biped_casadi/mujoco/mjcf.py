@@ -42,7 +42,7 @@ from ..model.description import RobotDescription
 
 __all__ = ["mjcf", "ContactSettings", "STIFF", "MUJOCO_DEFAULT", "MIN_INERTIA", "Layout",
            "layout", "floating_base_inertia", "CONTACTS", "MIN_TIMESTEP", "MAX_TIMESTEP",
-           "MAX_MU"]
+           "MAX_MU", "MAX_SOLREF"]
 
 #: kg m^2: the inertia given to a link that is a point mass (MuJoCo refuses a moving body
 #: whose inertia is below mjMINVAL = 1e-15); its effect on D is below 1e-13
@@ -52,6 +52,9 @@ CONTACTS = ("stiff", "default")
 #: s: the time steps a run takes (a smaller one would run for hours, a larger one misses
 #: the step's dynamics)
 MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.05
+#: s: the softest contact a run takes: a time constant longer than a walking step (0.4 to
+#: 1 s for the robots measured) leaves the stance foot still sinking when the step ends
+MAX_SOLREF = 1.0
 #: the largest friction coefficient (any real contact is below about 2; near 1e200
 #: MuJoCo's contact solver overflows and the state is NaN at the first contact)
 MAX_MU = 1e6
@@ -68,8 +71,10 @@ class ContactSettings:
         default 0.002).
     solref : float or None
         The contact's time constant, s (``solref = (solref, 1)`` on feet and floor);
-        None: MuJoCo's default (0.02 s, critically damped).  MuJoCo silently stiffens a
-        time constant below two time steps, so that is refused.
+        None: MuJoCo's default (0.02 s, critically damped).  MuJoCo silently raises a
+        time constant below two time steps to two (a softer contact than asked: its
+        'refsafe' flag, on by default), so that is refused, as is one above
+        :data:`MAX_SOLREF`.
     foot_radius : float
         Radius of the sphere feet, m (> 0).
     mu : float
@@ -105,9 +110,12 @@ class ContactSettings:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v <= 0:
                 raise ValueError(f"solref must be a positive time constant (s), got {v!r}")
+            if v > MAX_SOLREF:
+                raise ValueError(f"solref must be at most {MAX_SOLREF:g} s (longer than a "
+                                 f"walking step), got {v!r}")
             if v < 2 * self.timestep:
                 raise ValueError(f"solref must be at least two time steps ({2 * self.timestep:g}"
-                                 f" s): MuJoCo would silently stiffen {v!r} s to that")
+                                 f" s): MuJoCo would silently raise {v!r} s to that")
         if self.integrator not in ("Euler", "implicitfast", "implicit", "RK4"):
             raise ValueError(f"integrator must be Euler, implicitfast, implicit or RK4, got "
                              f"{self.integrator!r}")

@@ -116,6 +116,11 @@ class MujocoWalk(Result):
         step :data:`SETTLE` (NaN with fewer steps).
     peak_commanded, peak_applied, clipped_time, max_slip : float
         Over the walk: N m, N m, s, m.
+    max_penetration : float
+        The deepest either foot's sphere went into the floor over the walk (its radius
+        less the lowest height of its centre, 0 when no foot went below the floor's
+        surface), m: MuJoCo's soft contact lets a foot sink, deeper with a softer
+        contact.
     settings : dict
         The MuJoCo settings (:class:`~biped_casadi.mujoco.mjcf.ContactSettings`).
     design : dict
@@ -158,6 +163,7 @@ class MujocoWalk(Result):
     peak_applied: float
     clipped_time: float
     max_slip: float
+    max_penetration: float
     settings: dict
     design: dict
     law: str

@@ -19,7 +19,8 @@ only after a walk failed.  :func:`check_timestep` says 'too_coarse' and the time
 to use when one of them walks every step, 'not_timestep' when none does (the cause is
 elsewhere: the design, the perturbation, the torque limit, ...).  The strike speed of
 the gait, the foot's travel into the floor in one time step and the contact's time
-constant in time steps are recorded beside it.
+constant in time steps are recorded beside it.  The other remedy, a softer contact at the
+same time step, is :mod:`.contact`'s.
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..results import Result
+from .contact import contact_time_constant, run_record
 from .mjcf import MIN_TIMESTEP
 from .walk import MujocoLoop
 
@@ -56,8 +58,10 @@ class TimestepCheck(Result):
     suggested_timestep : float or None
         The coarsest time step tried that walked every step ('too_coarse' only), s.
     tried : list of dict
-        The walks at finer time steps, in order: ``timestep``, ``status``,
-        ``steps_walked``, ``speed_error``, ``message``, ``wall_time``.
+        The walks at finer time steps, in order: ``timestep``, ``solref``, ``status``,
+        ``steps_walked``, ``speed_error``, ``max_penetration`` (the deepest a foot went
+        into the floor, m), ``message``, ``wall_time``
+        (:func:`~biped_casadi.mujoco.contact.run_record`).
     strike_velocity : list of float
         The gait's swing foot velocity (x, z) at the impact, m/s.
     strike_travel : float
@@ -124,7 +128,7 @@ def check_timestep(loop: MujocoLoop, q0, dq0, steps: int, walk,
     dt = float(s.timestep)
     v = strike_velocity(loop.gait)
     speed = abs(float(v[1]))                            # into the floor
-    solref = float(loop.m.geom_solref[loop.feet[0], 0])  # as MuJoCo compiled it
+    solref = contact_time_constant(loop)
     strike = (f"the swing foot strikes the floor at {speed:.2g} m/s, {1e3 * speed * dt:.2g} "
               f"mm per time step, on a contact of time constant {solref:g} s = "
               f"{solref / dt:.3g} time steps")
@@ -140,11 +144,9 @@ def check_timestep(loop: MujocoLoop, q0, dq0, steps: int, walk,
         fine = dt / k
         if fine < MIN_TIMESTEP:
             continue
-        w = loop.at_timestep(fine).run(q0, dq0, steps)
-        tried.append(dict(timestep=fine, status=w.status, steps_walked=w.steps_walked,
-                          speed_error=w.speed_error, message=w.message,
-                          wall_time=w.wall_time))
-        if w.status == "walked":
+        r = run_record(loop.at_timestep(fine), q0, dq0, steps)
+        tried.append(r)
+        if r["status"] == "walked":
             msg = (f"likely cause: MuJoCo's time step {dt:g} s is too coarse for this robot's "
                    f"foot strike ({strike}): the same walk at {fine:g} s walks all {steps} "
                    f"steps; try --timestep {fine:g}")

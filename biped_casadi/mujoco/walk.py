@@ -200,7 +200,23 @@ class MujocoLoop:
         -------
         MujocoLoop
         """
-        return MujocoLoop(self.design, dataclasses.replace(self.settings, timestep=timestep),
+        return self.with_settings(timestep=timestep)
+
+    def with_settings(self, **changes) -> "MujocoLoop":
+        """The same loop with some MuJoCo settings changed (a time step, a contact).
+
+        Its design, law, torque limit, step start and touchdown kept.
+
+        Parameters
+        ----------
+        **changes
+            Fields of :class:`~biped_casadi.mujoco.mjcf.ContactSettings` to change.
+
+        Returns
+        -------
+        MujocoLoop
+        """
+        return MujocoLoop(self.design, dataclasses.replace(self.settings, **changes),
                           self.law_name, self.torque_limit, self.step_start_kind,
                           self.max_slip, self.horizon, self.touchdown)
 
@@ -314,6 +330,7 @@ class MujocoLoop:
             peak_applied=max((s.peak_applied for s in records), default=0.0),
             clipped_time=sum(s.clipped_time for s in records),
             max_slip=max((abs(s.slip) for s in records), default=0.0),
+            max_penetration=max(0.0, float(run.r - run.z_min)),
             settings=self.settings.to_dict(), design=self.design.to_dict(), law=self.law_name,
             step_start=self.step_start_kind, touchdown=self.touchdown,
             torque_limit=self.torque_limit,
@@ -367,6 +384,9 @@ class _Run:
         self.z_old, self.q_old, self.dq_old = math.inf, q0, dq0
         self.x_prev, self.phi_prev = float(d.geom_xpos[self.feet[0], 0]), float(q0[0])
         self.x_touch = self.x_prev
+        #: the lowest height of either foot's centre over the walk (the feet's depth in
+        #: the floor), m
+        self.z_min = math.inf
         self._new_step()
         start = loop.law.step_start(q0, dq0)
         self.p[:] = start.p
@@ -433,6 +453,9 @@ class _Run:
         sw = 1 - st
         touch = self._touching()
         z_now = xpos[feet[sw], 2]
+        z_low = min(xpos[feet[0], 2], xpos[feet[1], 2])
+        if z_low < self.z_min:
+            self.z_min = z_low
         olds = (self.z_old, self.q_old, self.dq_old)
         self.z_old, self.q_old, self.dq_old = z_now, self.q, self.dq
         xs, phs = xpos[feet[st], 0], self.q[0]
