@@ -1,0 +1,515 @@
+"""A periodic running gait: two domains (stance, flight) by direct collocation.
+
+One running step of a planar point-foot biped (docs: howto/running.md) is a single
+support phase on the stance foot, a takeoff when the normal ground force reaches zero,
+a flight phase with both feet off the ground, and the landing of the swing foot, a
+rigid impact followed by the relabelling E, which starts the next step on the other
+leg.  A periodic gait returns, after the relabelling, to the state it started from.
+
+Transcription.  Each phase has its own duration (a decision variable) and its own grid
+of ``n`` Hermite-Simpson intervals in the separated form: states and torques at the
+interval ends and midpoints, the midpoint interpolation condition and Simpson's rule
+for every interval (Betts; Kelly 2017).  The stance state is x = (q, dq) with the
+model's ``forward_dynamics``; the flight state is the extended (qe, dqe), qe = (q, x_st,
+z_st), with ``flight_dynamics`` of :func:`biped_casadi.model.flight_model`.  The edges
+are the exact Functions of the flight model: ``takeoff`` (the stance state embedded,
+base at the foot, at rest) when ``takeoff_guard`` gives Fz = 0 at the last stance
+point, and ``landing_swing`` (impact and relabelling) when the swing foot reaches the
+ground; periodicity ties its output to the first stance state.
+
+Constraints: |u| <= the model's torque limit at every point; in stance Fz >= 0 and
+|Fx| <= mu Fz, the swing foot above a parabolic clearance profile; in flight both feet
+above the ground; no knee hyperextension; at landing the swing foot moving down, the
+impulse inside the friction cone and the other foot moving up after the impact; the
+average speed: step length (the landing foot's x in the stance frame) = v (Ts + Tf).
+
+Cost: as the walking optimiser's default (:mod:`gait_opt.transcription`), the integral
+of u'u over the step divided by the step length, by Simpson's rule on both phases.
+
+Solved with CasADi's ``Opti`` and IPOPT (exact Hessian of the expanded SX graph).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from biped_casadi.model import flight_model
+
+__all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
+           "hermite_simpson"]
+
+
+@dataclass(frozen=True)
+class RunningOptions:
+    """The running-gait problem; every field has a default.
+
+    Parameters
+    ----------
+    speed : float
+        Average forward speed, m/s: step length / (stance + flight duration).
+    n_stance, n_flight : int
+        Hermite-Simpson intervals of the stance and of the flight phase.
+    mu : float
+        Friction coefficient of the ground (stance force and landing impulse).
+    torque_limit : float or None
+        Bound on every joint torque, N m; None: the model's (RABBIT: 150).
+    clearance : float
+        Swing-foot clearance in stance, m: z_sw >= clearance 4 s (1 - s), s = t / Ts.
+    min_strike_speed : float
+        The landing foot's downward speed at touchdown, at least, m/s.
+    min_liftoff_speed : float
+        The other foot's upward speed just after the landing impact, at least, m/s.
+    stance_time_bounds, flight_time_bounds : tuple of float
+        (low, high) bounds on the phase durations, s.
+    trailing_clearance : float
+        Height of the trailing foot (the one that pushed off) when the swing foot
+        touches down, at least, m: without it the optimum grazes the ground with both
+        feet, a walk with a vanishing flight.
+    torso_lean_max : float
+        |torso angle from upright| <= this at every point, rad (unbounded, the optimum
+        leans the torso to the horizontal).
+    stance_knee_max, swing_knee_min : float
+        No hyperextension: q2 <= stance_knee_max and q5 >= swing_knee_min, rad (legs of
+        two links; ignored for legs without knees).
+    knee_flexion_max : float
+        Knees bent by at most this, rad: q2 >= -knee_flexion_max, q5 <= knee_flexion_max
+        (without it the optimiser folds a knee through itself, the links being lines).
+        Every other joint stays within pi of upright, as in the walking problem.
+    torque_rate_max : float or None
+        Bound on |du/dt| between neighbouring points of a phase, N m/s (None: none).
+        It gives the takeoff condition its meaning: with torques free to jump, Fz = 0
+        at the last stance point is met by the last point's torque alone (in the limit
+        of a fine grid, a jump at one instant that moves nothing), whereas the foot
+        should unload as the torques evolve.
+    ipopt : dict
+        Extra IPOPT options.
+    """
+
+    speed: float = 1.5
+    n_stance: int = 16
+    n_flight: int = 10
+    mu: float = 0.6
+    torque_limit: float | None = None
+    clearance: float = 0.03
+    min_strike_speed: float = 0.05
+    min_liftoff_speed: float = 0.05
+    stance_time_bounds: tuple = (0.05, 0.8)
+    flight_time_bounds: tuple = (0.02, 0.4)
+    trailing_clearance: float = 0.03
+    torso_lean_max: float = 0.3
+    stance_knee_max: float = 0.0
+    swing_knee_min: float = 0.0
+    knee_flexion_max: float = 2.0
+    torque_rate_max: float | None = 2000.0
+    ipopt: dict = field(default_factory=dict)
+
+    def limit(self, model) -> float:
+        """The torque bound for ``model``.
+
+        Parameters
+        ----------
+        model : BipedModel
+            The robot.
+
+        Returns
+        -------
+        float
+            ``torque_limit``, or the model's own when it is None, N m.
+        """
+        return float(model.description.torque_limit if self.torque_limit is None
+                     else self.torque_limit)
+
+
+# ----------------------------------------------------------------- interpolation
+def hermite_simpson(t_nodes, X, F, U, t):
+    """The Hermite-Simpson interpolant of a collocated phase at times ``t``.
+
+    On each interval the state is the cubic whose derivative is the quadratic through
+    the dynamics at the ends and the midpoint (Kelly 2017, eq. 4.10); the torque is the
+    quadratic through its three values.
+
+    Parameters
+    ----------
+    t_nodes : array_like
+        (2 n + 1,) times of the ends and midpoints, s (even indices: interval ends).
+    X, F, U : array_like
+        (nx, 2 n + 1) states, their time derivatives and (nu, 2 n + 1) torques there.
+    t : array_like
+        Times in [t_nodes[0], t_nodes[-1]], s.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        (x, u): (nx, len(t)) and (nu, len(t)).
+    """
+    tn, X, F, U = (np.asarray(a, dtype=float) for a in (t_nodes, X, F, U))
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    n = (tn.size - 1) // 2
+    k = np.clip(np.searchsorted(tn[::2], t, side="right") - 1, 0, n - 1)
+    i0 = 2 * k
+    h = tn[i0 + 2] - tn[i0]
+    tau = t - tn[i0]
+    s = tau / h
+    f0, fm, f1 = F[:, i0], F[:, i0 + 1], F[:, i0 + 2]
+    x = (X[:, i0] + f0 * tau + 0.5 * (-3 * f0 + 4 * fm - f1) * tau * s
+         + (2 * f0 - 4 * fm + 2 * f1) / 3 * tau * s * s)
+    u0, um, u1 = U[:, i0], U[:, i0 + 1], U[:, i0 + 2]
+    u = u0 * (1 - s) * (1 - 2 * s) + um * 4 * s * (1 - s) + u1 * s * (2 * s - 1)
+    return x, u
+
+
+def _simpson(T, values):
+    """Simpson's rule over one phase: values at ends and midpoints, (2 n + 1,)."""
+    n = (values.shape[1] - 1) // 2
+    w = np.zeros(2 * n + 1)
+    w[0:-1:2] += 1
+    w[2::2] += 1
+    w[1::2] += 4
+    return T / (6 * n) * ca.mtimes(values, ca.DM(w))
+
+
+# ----------------------------------------------------------------- the gait
+@dataclass
+class RunningGait:
+    """One step of a periodic running gait: stance, takeoff, flight, landing.
+
+    Times start at 0 in each phase; the stance phase's states are (q, dq) in the stance
+    frame (foot at the origin), the flight phase's (qe, dqe), qe = (q, x_st, z_st), in
+    the same frame; the landing foot's x is the step length and the origin of the next
+    step, whose state is the relabelled landing state.
+
+    Parameters
+    ----------
+    robot : str
+        The robot's name (its description's).
+    options : RunningOptions
+        The problem solved.
+    T_stance, T_flight : float
+        Phase durations, s.
+    x_stance : numpy.ndarray
+        (2 nq, 2 n_stance + 1) stance states at interval ends and midpoints.
+    u_stance : numpy.ndarray
+        (nu, 2 n_stance + 1) stance torques, N m.
+    x_flight : numpy.ndarray
+        (2 nq + 4, 2 n_flight + 1) flight states.
+    u_flight : numpy.ndarray
+        (nu, 2 n_flight + 1) flight torques, N m.
+    step_length : float
+        The landing foot's x in the stance frame, m.
+    cost : float
+        Integral of u'u over the step / step length, N^2 m s.
+    solver_stats : dict
+        IPOPT's return status, iterations and wall time.
+    """
+
+    robot: str
+    options: RunningOptions
+    T_stance: float
+    T_flight: float
+    x_stance: np.ndarray
+    u_stance: np.ndarray
+    x_flight: np.ndarray
+    u_flight: np.ndarray
+    step_length: float
+    cost: float
+    solver_stats: dict = field(default_factory=dict)
+
+    @property
+    def T(self) -> float:
+        """Step duration (stance + flight), s."""
+        return self.T_stance + self.T_flight
+
+    @property
+    def speed(self) -> float:
+        """Average speed achieved, m/s."""
+        return self.step_length / self.T
+
+    @property
+    def t_stance(self) -> np.ndarray:
+        """Times of the stance points (ends and midpoints), s."""
+        return np.linspace(0.0, self.T_stance, self.x_stance.shape[1])
+
+    @property
+    def t_flight(self) -> np.ndarray:
+        """Times of the flight points from takeoff, s."""
+        return np.linspace(0.0, self.T_flight, self.x_flight.shape[1])
+
+    @property
+    def success(self) -> bool:
+        """IPOPT reported success."""
+        return bool(self.solver_stats.get("success", False))
+
+    def save(self, path) -> Path:
+        """Write the gait as JSON.
+
+        Parameters
+        ----------
+        path : str or Path
+            The file.
+
+        Returns
+        -------
+        Path
+            The file written.
+        """
+        body = {k: (v.tolist() if isinstance(v, np.ndarray) else v)
+                for k, v in dataclasses.asdict(self).items()}
+        body["kind"] = "running gait"
+        path = Path(path)
+        path.write_text(json.dumps(body, indent=1, default=str))
+        return path
+
+    @classmethod
+    def load(cls, path) -> "RunningGait":
+        """Read a gait written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or Path
+            The file.
+
+        Returns
+        -------
+        RunningGait
+        """
+        body = json.loads(Path(path).read_text())
+        if body.pop("kind", None) != "running gait":
+            raise ValueError(f"{path}: not a running gait")
+        o = body.pop("options")
+        o = {k: tuple(v) if isinstance(v, list) else v for k, v in o.items()}
+        arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
+        return cls(options=RunningOptions(**o),
+                   **{k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()})
+
+
+# ----------------------------------------------------------------- the guess
+def _pose_absolute(phi):
+    """q from the absolute link angles (legs of two links: RABBIT's layout)."""
+    phi = np.asarray(phi, dtype=float)
+    return np.r_[phi[0], np.diff(phi)]
+
+
+def running_guess(model, opts: RunningOptions) -> dict:
+    """A hand-made initial guess: three poses (landing, takeoff, touchdown) in absolute
+    link angles, joints linear in time between them, a ballistic base in flight.
+
+    The poses (stance tibia and femur leaning back at landing, forward at takeoff; the
+    swing leg trailing, then reaching forward) close through the relabelling; the
+    durations follow from the hip's travel at ``opts.speed`` with a 0.1 s flight.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot (legs of two links).
+    opts : RunningOptions
+        The problem.
+
+    Returns
+    -------
+    dict
+        ``T_stance``, ``T_flight``, ``x_stance``, ``u_stance``, ``x_flight``,
+        ``u_flight`` (the shapes of :class:`RunningGait`).
+    """
+    if model.nq != 5:
+        raise ValueError("running_guess: legs of two links (nq = 5) only")
+    fl = flight_model(model)
+    A = _pose_absolute([-0.3, -0.45, 0.1, 0.35, 0.6])        # just after landing
+    B = _pose_absolute([0.35, 0.25, 0.1, -0.25, -0.05])       # takeoff
+    C = _pose_absolute([0.6, 0.35, 0.1, -0.45, -0.3])         # touchdown (flight frame)
+    hip = lambda q: float(np.array(model.points(q))[0, model.hip_index])   # noqa: E731
+    Ts = (hip(B) - hip(A)) / opts.speed
+    Tf = 0.1
+    # base position at touchdown: the hip moves on at the speed; the swing foot at z = 0
+    zero = np.zeros(2)
+    feet_C = np.array(fl.feet(np.r_[C, zero]))
+    xb = hip(B) + opts.speed * Tf - hip(C)
+    zb = -feet_C[1, 1]
+    ns, nf = 2 * opts.n_stance + 1, 2 * opts.n_flight + 1
+    s = np.linspace(0, 1, ns)
+    q_s = A[:, None] + s[None, :] * (B - A)[:, None]
+    dq_s = np.repeat(((B - A) / Ts)[:, None], ns, axis=1)
+    s = np.linspace(0, 1, nf)
+    qe_B, qe_C = np.r_[B, zero], np.r_[C, xb, zb]
+    q_f = qe_B[:, None] + s[None, :] * (qe_C - qe_B)[:, None]
+    dq_f = np.repeat(((qe_C - qe_B) / Tf)[:, None], nf, axis=1)
+    # the base rises and falls: the ballistic parabola g t (Tf - t) / 2 above the line
+    g = model.description.gravity
+    q_f[-1] += 0.5 * g * Tf ** 2 * s * (1 - s)
+    return dict(T_stance=Ts, T_flight=Tf, x_stance=np.vstack([q_s, dq_s]),
+                u_stance=np.zeros((model.nu, ns)), x_flight=np.vstack([q_f, dq_f]),
+                u_flight=np.zeros((model.nu, nf)))
+
+
+# ----------------------------------------------------------------- transcription
+def _phase(opti, f, nx, nu, n, T_bounds):
+    """Variables of one phase and its Hermite-Simpson defects: (T, X, U, F)."""
+    T = opti.variable()
+    X = opti.variable(nx, 2 * n + 1)
+    U = opti.variable(nu, 2 * n + 1)
+    opti.subject_to(opti.bounded(T_bounds[0], T, T_bounds[1]))
+    F = f.map(2 * n + 1)(X, U)
+    h = T / n
+    x0, xm, x1 = X[:, 0:-1:2], X[:, 1::2], X[:, 2::2]
+    f0, fm, f1 = F[:, 0:-1:2], F[:, 1::2], F[:, 2::2]
+    opti.subject_to(ca.vec(xm - (x0 + x1) / 2 - h / 8 * (f0 - f1)) == 0)
+    opti.subject_to(ca.vec(x1 - x0 - h / 6 * (f0 + 4 * fm + f1)) == 0)
+    return T, X, U, F
+
+
+def _dynamics(model, fl):
+    """Right-hand sides x' = f(x, u) of both phases, as Functions."""
+    n, ne = model.nq, fl.ne
+    x, u = ca.SX.sym("x", 2 * n), ca.SX.sym("u", model.nu)
+    fs = ca.Function("stance_rhs", [x, u],
+                     [ca.vertcat(x[n:], model.forward_dynamics(x[:n], x[n:], u))])
+    xe = ca.SX.sym("xe", 2 * ne)
+    ff = ca.Function("flight_rhs", [xe, u],
+                     [ca.vertcat(xe[ne:], fl.flight_dynamics(xe[:ne], xe[ne:], u))])
+    return fs, ff
+
+
+def _torques(opti, opts, U, umax, T, n):
+    """|u| <= umax at every point and at the quarter points of every interval (where
+    the quadratic torque of Hermite-Simpson overshoots its three values most), and, with
+    ``torque_rate_max``, a bound on the torque's rate between neighbouring points."""
+    opti.subject_to(opti.bounded(-umax, ca.vec(U), umax))
+    u0, um, u1 = U[:, 0:-1:2], U[:, 1::2], U[:, 2::2]
+    for a, b, c in ((0.375, 0.75, -0.125), (-0.125, 0.75, 0.375)):
+        opti.subject_to(opti.bounded(-umax, ca.vec(a * u0 + b * um + c * u1), umax))
+    if opts.torque_rate_max is not None:
+        du = ca.vec(U[:, 1:] - U[:, :-1])
+        step = opts.torque_rate_max * T / (2 * n)
+        opti.subject_to(du <= step)
+        opti.subject_to(du >= -step)
+
+
+def _posture(opti, model, opts, Q):
+    """Knees between straight and ``knee_flexion_max``, the other joints within pi of
+    upright; the torso within ``torso_lean_max`` of upright."""
+    lean = model.torso_angle.map(Q.shape[1])(Q) - model.description.torso_upright
+    opti.subject_to(opti.bounded(-opts.torso_lean_max, ca.vec(lean), opts.torso_lean_max))
+    up = model.description.upright_q
+    for i in range(1, model.nq):
+        if i in model.stance_knees:
+            lo, hi = -opts.knee_flexion_max, opts.stance_knee_max
+        elif i in model.swing_knees:
+            lo, hi = opts.swing_knee_min, opts.knee_flexion_max
+        else:
+            lo, hi = up[i] - np.pi, up[i] + np.pi
+        opti.subject_to(opti.bounded(lo, ca.vec(Q[i, :]), hi))
+
+
+def _stance_constraints(opti, model, fl, opts, Xs, Us):
+    """Ground force, friction, clearance, torques along stance; Fz = 0 at takeoff."""
+    n, N = model.nq, Xs.shape[1]
+    Fz, Fx = fl.takeoff_guard.map(N)(Xs[:n, :], Xs[n:, :], Us)
+    opti.subject_to(ca.vec(Fz[:-1]) >= 0)
+    opti.subject_to(Fz[-1] == 0)
+    opti.subject_to(ca.vec(opts.mu * Fz - Fx) >= 0)
+    opti.subject_to(ca.vec(opts.mu * Fz + Fx) >= 0)
+    _, zsw = model.swing_foot.map(N)(Xs[:n, :])
+    s = np.linspace(0, 1, N)
+    opti.subject_to(ca.vec(zsw) >= ca.DM(opts.clearance * 4 * s * (1 - s)))
+    _posture(opti, model, opts, Xs[:n, :])
+    return Fz, Fx
+
+
+def _flight_constraints(opti, model, fl, opts, Xf):
+    """Both feet above the ground in flight; touchdown of the swing foot moving down."""
+    ne, N = fl.ne, Xf.shape[1]
+    feet = fl.feet.map(N)(Xf[:ne, :])             # 2 x 2N: (stance, swing) pairs
+    z_st, z_sw = feet[1, 0::2], feet[1, 1::2]
+    opti.subject_to(ca.vec(z_st[1:]) >= 0)
+    opti.subject_to(ca.vec(z_sw[:-1]) >= 0)
+    opti.subject_to(z_sw[-1] == 0)
+    opti.subject_to(z_st[-1] >= opts.trailing_clearance)
+    v_end = fl.feet_velocity(Xf[:ne, -1], Xf[ne:, -1])
+    opti.subject_to(v_end[1, 1] <= -opts.min_strike_speed)
+    _posture(opti, model, opts, Xf[:model.nq, :])
+
+
+def _edges(opti, model, fl, opts, Xs, Xf):
+    """Takeoff embedding, landing with relabelling and periodicity, impulse cone and
+    lift-off of the other foot; returns the landing foot's position."""
+    n, ne = model.nq, fl.ne
+    qe0, dqe0 = fl.takeoff(Xs[:n, -1], Xs[n:, -1])
+    opti.subject_to(Xf[:, 0] - ca.vertcat(qe0, dqe0) == 0)
+    q_plus, dq_plus, F, _, v_other, p_foot = fl.landing_swing(Xf[:ne, -1], Xf[ne:, -1])
+    opti.subject_to(ca.vertcat(q_plus, dq_plus) - Xs[:, 0] == 0)
+    opti.subject_to(F[1] >= 0)
+    opti.subject_to(opts.mu * F[1] - F[0] >= 0)
+    opti.subject_to(opts.mu * F[1] + F[0] >= 0)
+    opti.subject_to(v_other[1] >= opts.min_liftoff_speed)
+    return p_foot
+
+
+def optimize_running(model, opts: RunningOptions | None = None, guess: dict | None = None,
+                     verbose: bool = False) -> RunningGait:
+    """Optimise one periodic running step (stance, takeoff, flight, landing).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot (legs of two links for the built-in guess).
+    opts : RunningOptions, optional
+        The problem; default ``RunningOptions()`` (1.5 m/s).
+    guess : dict or RunningGait, optional
+        An initial guess with the fields of :func:`running_guess` (a previous gait on
+        the same grids works: a warm start); default :func:`running_guess`.
+    verbose : bool
+        IPOPT's iteration log.
+
+    Returns
+    -------
+    RunningGait
+        The last iterate, whatever IPOPT's status (``gait.success`` tells).
+    """
+    opts = opts or RunningOptions()
+    fl = flight_model(model)
+    n, nu = model.nq, model.nu
+    if guess is None:
+        guess = running_guess(model, opts)
+    elif isinstance(guess, RunningGait):
+        guess = {k: getattr(guess, k) for k in ("T_stance", "T_flight", "x_stance",
+                                                  "u_stance", "x_flight", "u_flight")}
+    opti = ca.Opti()
+    fs, ff = _dynamics(model, fl)
+    Ts, Xs, Us, _ = _phase(opti, fs, 2 * n, nu, opts.n_stance, opts.stance_time_bounds)
+    Tf, Xf, Uf, _ = _phase(opti, ff, 2 * fl.ne, nu, opts.n_flight, opts.flight_time_bounds)
+    umax = opts.limit(model)
+    for U, T, n_int in ((Us, Ts, opts.n_stance), (Uf, Tf, opts.n_flight)):
+        _torques(opti, opts, U, umax, T, n_int)
+    _stance_constraints(opti, model, fl, opts, Xs, Us)
+    _flight_constraints(opti, model, fl, opts, Xf)
+    p_foot = _edges(opti, model, fl, opts, Xs, Xf)
+    opti.subject_to(p_foot[0] - opts.speed * (Ts + Tf) == 0)
+    opti.subject_to(p_foot[0] >= 0.05)
+    effort = _simpson(Ts, ca.sum1(Us ** 2)) + _simpson(Tf, ca.sum1(Uf ** 2))
+    opti.minimize(1e-3 * effort / p_foot[0])
+    for var, key in ((Ts, "T_stance"), (Tf, "T_flight"), (Xs, "x_stance"), (Us, "u_stance"),
+                     (Xf, "x_flight"), (Uf, "u_flight")):
+        opti.set_initial(var, guess[key])
+    ipopt = {"print_level": 5 if verbose else 0, "max_iter": 3000, "tol": 1e-8,
+             "mu_strategy": "adaptive", "sb": "yes"}
+    ipopt.update(opts.ipopt)
+    opti.solver("ipopt", {"expand": True, "print_time": False, "error_on_fail": False},
+                ipopt)
+    t0 = time.perf_counter()
+    sol = opti.solve_limited() if hasattr(opti, "solve_limited") else opti.solve()
+    wall = time.perf_counter() - t0
+    st = sol.stats()
+    val = sol.value
+    stats = {"success": bool(st.get("success")), "return_status": st.get("return_status"),
+             "iterations": int(st.get("iter_count", -1)), "wall_s": wall}
+    return RunningGait(robot=model.description.name, options=opts,
+                       T_stance=float(val(Ts)), T_flight=float(val(Tf)),
+                       x_stance=np.array(val(Xs)), u_stance=np.array(val(Us)).reshape(nu, -1),
+                       x_flight=np.array(val(Xf)), u_flight=np.array(val(Uf)).reshape(nu, -1),
+                       step_length=float(val(p_foot[0])), cost=float(val(effort / p_foot[0])),
+                       solver_stats=stats)
