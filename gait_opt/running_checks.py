@@ -1,0 +1,315 @@
+"""Measured checks of a running gait (:mod:`gait_opt.running`), independent of the NLP.
+
+- Dense grid: the Hermite-Simpson interpolant of each phase (states cubic, torques
+  quadratic per interval) between the collocation points, with the ground force from
+  the model's exact dynamics under the interpolated torques (not the collocation's).
+- ODE integration: each phase integrated by scipy's DOP853 (tight tolerances) from its
+  collocated initial state under the interpolated torques; the deviation from the
+  collocated end state measures the transcription's error (open loop: the error grows
+  with the phase's instability, so it is an upper estimate at the end of the phase).
+- The step map through the exact edges: from the collocated end states through
+  ``takeoff`` and ``landing_swing``, and from the integrated phases composed with the
+  same edges (stance from the gait's start, the takeoff, flight to the swing foot's
+  touchdown found as an event, the landing): both residuals against the start state.
+- Physics of flight along the collocated and the integrated trajectory: the centre of
+  mass on the parabola of its takeoff position and velocity, the angular momentum about
+  it constant.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from biped_casadi.model import flight_model
+
+from .running import RunningGait, hermite_simpson
+
+__all__ = ["RunningReport", "check_running", "phase_rhs", "dense", "integrate_phase"]
+
+DENSE = 20          # dense samples per Hermite-Simpson interval
+
+
+@dataclass
+class RunningReport:
+    """What :func:`check_running` measured (SI units; forces N, lengths m, speeds m/s).
+
+    Parameters
+    ----------
+    fz_takeoff : float
+        Fz at the last stance point (the takeoff guard), N.
+    fz_min_nodes, fz_min_dense : float
+        Smallest Fz over the stance points and over the dense grid, N.
+    friction_ratio_max : float
+        Largest |Fx| / Fz on the dense grid where Fz > 1 % of the weight.
+    torque_max_dense : float
+        Largest |u| on the dense grid of both phases, N m.
+    swing_min_stance : float
+        Smallest swing-foot height in stance (dense grid), m.
+    feet_min_flight : float
+        Smallest height of either foot in flight, its ends excluded (dense grid), m.
+    flight_duration : float
+        s.
+    strike_velocity : float
+        The swing foot's vertical velocity at touchdown, m/s (< 0: moving down).
+    other_foot_velocity : float
+        The other foot's vertical velocity just after the landing impact, m/s (> 0).
+    impulse_ratio : float
+        |Fx| / Fz of the landing impulse.
+    periodicity_collocated : float
+        max |landing(end of flight) - start of stance| and |takeoff(end of stance) -
+        start of flight| of the collocated states through the exact edges.
+    stance_end_error, flight_end_error : float
+        max |x_integrated(T) - x_collocated(T)| of each phase integrated from its own
+        collocated start (rad, rad/s, m, m/s mixed: the largest entry).
+    step_map_residual : float
+        max |P(x0) - x0| of the step map composed of the integrated phases (flight to
+        the touchdown event) and the exact edges, open loop under the gait's torques.
+    touchdown_time_error : float
+        Integrated touchdown time minus the collocated flight duration, s.
+    com_ballistic_collocated, com_ballistic_integrated : float
+        Largest distance of the centre of mass from its ballistic parabola in flight, m.
+    momentum_drift_collocated, momentum_drift_integrated : float
+        Largest change of the angular momentum about the centre of mass in flight, kg
+        m^2/s.
+    momentum_scale : float
+        Largest |angular momentum about the centre of mass| in flight, kg m^2/s (the
+        drifts' scale).
+    """
+
+    fz_takeoff: float
+    fz_min_nodes: float
+    fz_min_dense: float
+    friction_ratio_max: float
+    torque_max_dense: float
+    swing_min_stance: float
+    feet_min_flight: float
+    flight_duration: float
+    strike_velocity: float
+    other_foot_velocity: float
+    impulse_ratio: float
+    periodicity_collocated: float
+    stance_end_error: float
+    flight_end_error: float
+    step_map_residual: float
+    touchdown_time_error: float
+    com_ballistic_collocated: float
+    com_ballistic_integrated: float
+    momentum_drift_collocated: float
+    momentum_drift_integrated: float
+    momentum_scale: float
+
+    def as_dict(self) -> dict:
+        """The figures as a plain dict.
+
+        Returns
+        -------
+        dict
+        """
+        return asdict(self)
+
+
+def phase_rhs(model, phase: str):
+    """x' = f(x, u) of one phase as a numpy function.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    phase : str
+        'stance' (x = (q, dq)) or 'flight' (x = (qe, dqe)).
+
+    Returns
+    -------
+    callable
+        f(x, u) -> numpy array of x's size (vectorised over columns).
+    """
+    fl = flight_model(model)
+    if phase == "stance":
+        n, dyn = model.nq, model.forward_dynamics
+    elif phase == "flight":
+        n, dyn = fl.ne, fl.flight_dynamics
+    else:
+        raise ValueError(f"phase must be 'stance' or 'flight', got {phase!r}")
+
+    def f(x, u):
+        x = np.asarray(x, dtype=float)
+        cols = x.reshape(2 * n, -1)
+        u = np.asarray(u, dtype=float).reshape(model.nu, -1)
+        acc = np.array(dyn.map(cols.shape[1])(cols[:n], cols[n:], u))
+        return np.vstack([cols[n:], acc]).reshape(x.shape)
+    return f
+
+
+def _phase_data(model, gait: RunningGait, phase: str):
+    """(t nodes, X, F, U, f) of one phase."""
+    f = phase_rhs(model, phase)
+    t, X, U = ((gait.t_stance, gait.x_stance, gait.u_stance) if phase == "stance" else
+               (gait.t_flight, gait.x_flight, gait.u_flight))
+    return t, X, f(X, U), U, f
+
+
+def dense(model, gait: RunningGait, phase: str, per_interval: int = DENSE):
+    """One phase on a dense grid: the Hermite-Simpson interpolant.
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : RunningGait
+        The gait.
+    phase : str
+        'stance' or 'flight'.
+    per_interval : int
+        Samples per Hermite-Simpson interval.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        (t, x, u): times from the phase's start (s), states and torques as columns.
+    """
+    tn, X, F, U, _ = _phase_data(model, gait, phase)
+    t = np.linspace(tn[0], tn[-1], per_interval * (tn.size - 1) // 2 + 1)
+    x, u = hermite_simpson(tn, X, F, U, t)
+    return t, x, u
+
+
+def integrate_phase(model, gait: RunningGait, phase: str, x0=None, t_end=None,
+                    events=None):
+    """One phase integrated by scipy's DOP853 (rtol = atol = 1e-11) under the gait's
+    interpolated torques (held at their end values past the phase's end).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    gait : RunningGait
+        The gait.
+    phase : str
+        'stance' or 'flight'.
+    x0 : array_like, optional
+        The initial state; default the collocated one.
+    t_end : float, optional
+        The final time from the phase's start, s; default the phase's duration.
+    events : callable, optional
+        ``solve_ivp`` events (e.g. the swing foot's touchdown).
+
+    Returns
+    -------
+    scipy.integrate._ivp.ivp.OdeResult
+        ``solve_ivp``'s result, with dense output.
+    """
+    tn, X, F, U, f = _phase_data(model, gait, phase)
+    x0 = X[:, 0] if x0 is None else np.asarray(x0, dtype=float)
+    t_end = tn[-1] if t_end is None else t_end
+
+    def rhs(t, x):
+        _, u = hermite_simpson(tn, X, F, U, [min(max(t, tn[0]), tn[-1])])
+        return f(x, u[:, 0])
+    return solve_ivp(rhs, (0.0, t_end), x0, method="DOP853", rtol=1e-11, atol=1e-11,
+                     dense_output=True, events=events)
+
+
+def _flight_physics(fl, xs, ts):
+    """(largest CoM distance from its parabola, largest change of the angular momentum
+    about the CoM, largest |momentum|) along flight states xs (columns) at times ts."""
+    ne = fl.ne
+    g = fl.model.description.gravity
+    c = np.array(fl.com.map(xs.shape[1])(xs[:ne]))
+    dc = np.array(fl.com_velocity(xs[:ne, 0], xs[ne:, 0])).ravel()
+    para = c[:, :1] + dc[:, None] * ts[None, :] + np.vstack([0 * ts, -0.5 * g * ts ** 2])
+    L = np.array([float(fl.angular_momentum(xs[:ne, k], xs[ne:, k], c[:, k]))
+                  for k in range(xs.shape[1])])
+    return (float(np.max(np.linalg.norm(c - para, axis=0))), float(np.max(np.abs(L - L[0]))),
+            float(np.max(np.abs(L))))
+
+
+def _edges(model, fl, gait: RunningGait):
+    """Figures of the two edges from the collocated end states."""
+    n, ne = model.nq, fl.ne
+    xs, xf = gait.x_stance, gait.x_flight
+    qe0, dqe0 = fl.takeoff(xs[:n, -1], xs[n:, -1])
+    r_take = np.max(np.abs(np.r_[np.array(qe0).ravel(), np.array(dqe0).ravel()] - xf[:, 0]))
+    q_p, dq_p, F, _, v_other, _ = fl.landing_swing(xf[:ne, -1], xf[ne:, -1])
+    r_land = np.max(np.abs(np.r_[np.array(q_p).ravel(), np.array(dq_p).ravel()] - xs[:, 0]))
+    F = np.array(F).ravel()
+    v_sw = np.array(fl.feet_velocity(xf[:ne, -1], xf[ne:, -1]))[1, 1]
+    return dict(periodicity_collocated=float(max(r_take, r_land)),
+                strike_velocity=float(v_sw), other_foot_velocity=float(np.array(v_other)[1, 0]),
+                impulse_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else float("inf"))
+
+
+def _stance_figures(model, fl, gait: RunningGait):
+    n = model.nq
+    xs, us = gait.x_stance, gait.u_stance
+    Fz_n, _ = (np.array(v).ravel() for v in fl.takeoff_guard.map(xs.shape[1])(xs[:n], xs[n:], us))
+    t, x, u = dense(model, gait, "stance")
+    Fz, Fx = (np.array(v).ravel() for v in fl.takeoff_guard.map(t.size)(x[:n], x[n:], u))
+    weight = model.description.total_mass * model.description.gravity
+    loaded = Fz > 0.01 * weight
+    _, zsw = model.swing_foot.map(t.size)(x[:n])
+    return dict(fz_takeoff=float(Fz_n[-1]), fz_min_nodes=float(Fz_n.min()),
+                fz_min_dense=float(Fz.min()),
+                friction_ratio_max=float(np.max(np.abs(Fx[loaded]) / Fz[loaded], initial=0.0)),
+                swing_min_stance=float(np.array(zsw).min())), np.abs(u).max()
+
+
+def _step_map(model, fl, gait: RunningGait):
+    """Integrated stance, takeoff, integrated flight to touchdown, landing."""
+    n, ne = model.nq, fl.ne
+    st = integrate_phase(model, gait, "stance")
+    x_take = st.y[:, -1]
+    qe0, dqe0 = fl.takeoff(x_take[:n], x_take[n:])
+    x_fl0 = np.r_[np.array(qe0).ravel(), np.array(dqe0).ravel()]
+
+    def touchdown(t, x):
+        return float(np.array(fl.feet(x[:ne]))[1, 1]) if t > 0.5 * gait.T_flight else 1.0
+    touchdown.terminal, touchdown.direction = True, -1
+    fl_run = integrate_phase(model, gait, "flight", x_fl0, 1.5 * gait.T_flight, touchdown)
+    if fl_run.t_events[0].size:
+        t_td, x_td = fl_run.t_events[0][0], fl_run.y_events[0][0]
+    else:
+        t_td, x_td = np.nan, fl_run.y[:, -1]
+    q_p, dq_p, *_ = fl.landing_swing(x_td[:ne], x_td[ne:])
+    x_next = np.r_[np.array(q_p).ravel(), np.array(dq_p).ravel()]
+    return dict(stance_end_error=float(np.max(np.abs(x_take - gait.x_stance[:, -1]))),
+                step_map_residual=float(np.max(np.abs(x_next - gait.x_stance[:, 0]))),
+                touchdown_time_error=float(t_td - gait.T_flight))
+
+
+def check_running(model, gait: RunningGait) -> RunningReport:
+    """Measure a running gait: dense path constraints, integrated phases, the step map
+    through the exact edges, the physics of flight (module docstring).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot the gait was optimised for.
+    gait : RunningGait
+        The gait.
+
+    Returns
+    -------
+    RunningReport
+    """
+    fl = flight_model(model)
+    ne = fl.ne
+    stance, u_max_s = _stance_figures(model, fl, gait)
+    t, x, u = dense(model, gait, "flight")
+    feet = np.array(fl.feet.map(t.size)(x[:ne]))
+    inner = slice(1, t.size - 1)
+    fl_int = integrate_phase(model, gait, "flight")
+    tf = np.linspace(0, gait.T_flight, 101)
+    xi = fl_int.sol(tf)
+    coll = _flight_physics(fl, x, t)
+    integ = _flight_physics(fl, xi, tf)
+    return RunningReport(
+        **stance, torque_max_dense=float(max(u_max_s, np.abs(u).max())),
+        feet_min_flight=float(min(feet[1, 0::2][inner].min(), feet[1, 1::2][inner].min())),
+        flight_duration=gait.T_flight, **_edges(model, fl, gait),
+        flight_end_error=float(np.max(np.abs(fl_int.y[:, -1] - gait.x_flight[:, -1]))),
+        **_step_map(model, fl, gait),
+        com_ballistic_collocated=coll[0], com_ballistic_integrated=integ[0],
+        momentum_drift_collocated=coll[1], momentum_drift_integrated=integ[1],
+        momentum_scale=max(coll[2], integ[2]))
