@@ -1,0 +1,206 @@
+"""A periodic running gait of RABBIT (gait_opt.running) and its measured checks
+(gait_opt.running_checks).
+
+The gait is solved once per session on a small grid (fast) and once on the default
+grid (slow); every check is computed outside the NLP: the ground force from the exact
+dynamics on a dense grid of the Hermite-Simpson interpolant, the phases integrated by
+scipy under the gait's torques, the step map through the exact takeoff and landing
+Functions, the centre of mass and the angular momentum in flight.  A constraint
+dropped from the NLP shows in one of them; checks of a gait that violates them on
+purpose (the hand-made guess, a takeoff torque changed) show that the checks see it.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from biped_casadi import rabbit
+from biped_casadi.model import flight_model
+from gait_opt.running import (RunningGait, RunningOptions, hermite_simpson,
+                              optimize_running, running_guess)
+from gait_opt.running_checks import check_running, dense, phase_rhs
+
+SPEED = 1.5
+
+
+@pytest.fixture(scope="session")
+def model():
+    return rabbit()
+
+
+@pytest.fixture(scope="session")
+def small(model):
+    """A small grid (6 stance, 4 flight intervals): a few seconds."""
+    g = optimize_running(model, RunningOptions(speed=SPEED, n_stance=6, n_flight=4))
+    return g, check_running(model, g)
+
+
+@pytest.fixture(scope="session")
+def default(model):
+    """The default grid (16 + 10 intervals)."""
+    g = optimize_running(model, RunningOptions(speed=SPEED))
+    return g, check_running(model, g)
+
+
+def _physical(model, g, r, integration_tol):
+    """Every measured figure of a solved running gait within its tolerance."""
+    o = g.options
+    weight = model.description.total_mass * model.description.gravity
+    assert g.success, g.solver_stats
+    assert g.speed == pytest.approx(o.speed, rel=1e-8)
+    assert g.step_length > 0.3
+    # stance: the foot pressed and not slipping, the force at zero at takeoff
+    assert abs(r.fz_takeoff) <= 1e-6 * weight
+    assert r.fz_min_nodes >= -1e-6 * weight
+    assert r.fz_min_dense >= -1e-6 * weight
+    assert r.friction_ratio_max <= o.mu + 1e-6
+    assert r.swing_min_stance >= -1e-7
+    # torques within the limit between the points too (1 % for the quadratic's overshoot)
+    assert r.torque_max_dense <= 1.01 * o.limit(model)
+    # flight: a real one, both feet above the ground, the touchdown valid
+    assert r.flight_duration >= o.flight_time_bounds[0] - 1e-9
+    assert r.feet_min_flight >= -1e-7
+    assert r.strike_velocity <= -o.min_strike_speed + 1e-8
+    assert r.other_foot_velocity >= o.min_liftoff_speed - 1e-8
+    assert r.impulse_ratio <= o.mu + 1e-6
+    # the two edges close the orbit; the transcription agrees with an ODE integrator
+    assert r.periodicity_collocated <= 1e-8
+    assert r.stance_end_error <= integration_tol
+    assert r.flight_end_error <= integration_tol
+    assert r.step_map_residual <= 5 * integration_tol
+    assert abs(r.touchdown_time_error) <= integration_tol
+    # flight physics: exact along the integration, to the transcription's error along
+    # the collocated trajectory
+    assert r.com_ballistic_integrated <= 1e-9
+    assert r.momentum_drift_integrated <= 1e-8 * max(1.0, r.momentum_scale)
+    assert r.com_ballistic_collocated <= integration_tol
+    assert r.momentum_drift_collocated <= integration_tol * max(1.0, r.momentum_scale)
+
+
+def test_small_grid_gait_is_physical(model, small):
+    g, r = small
+    _physical(model, g, r, integration_tol=1e-2)
+
+
+@pytest.mark.slow
+def test_default_gait_is_physical(model, default):
+    g, r = default
+    _physical(model, g, r, integration_tol=1e-3)
+
+
+@pytest.mark.slow
+def test_grids_agree(small, default):
+    """The small and the default grid find the same gait (cost and durations)."""
+    (gs, _), (gd, _) = small, default
+    assert gs.cost == pytest.approx(gd.cost, rel=0.01)
+    assert gs.T_stance == pytest.approx(gd.T_stance, rel=0.02)
+    assert gs.T_flight == pytest.approx(gd.T_flight, rel=0.05)
+
+
+def test_takeoff_and_landing_states(model, small):
+    """Recomputed from the stored states: the flight starts at the takeoff embedding,
+    the base at rest at the origin; the landing foot is where the step ends."""
+    g, _ = small
+    fl = flight_model(model)
+    n, ne = model.nq, fl.ne
+    assert np.allclose(g.x_flight[:n, 0], g.x_stance[:n, -1], atol=1e-9)
+    assert np.allclose(g.x_flight[[n, n + 1, ne + n, ne + n + 1], 0], 0, atol=1e-9)
+    feet = np.array(fl.feet(g.x_flight[:ne, -1]))
+    assert feet[1, 1] == pytest.approx(0, abs=1e-8)
+    assert feet[0, 1] == pytest.approx(g.step_length, abs=1e-8)
+    assert feet[1, 0] >= g.options.trailing_clearance - 1e-8
+    q_plus, dq_plus, *_ = fl.landing_swing(g.x_flight[:ne, -1], g.x_flight[ne:, -1])
+    assert np.allclose(np.r_[np.array(q_plus).ravel(), np.array(dq_plus).ravel()],
+                       g.x_stance[:, 0], atol=1e-8)
+
+
+def test_posture_bounds(model, small):
+    g, _ = small
+    o = g.options
+    for x in (g.x_stance, g.x_flight):
+        q = x[:model.nq]
+        assert np.all(q[1] <= o.stance_knee_max + 1e-8) and np.all(q[1] >= -o.knee_flexion_max - 1e-8)
+        assert np.all(q[4] >= o.swing_knee_min - 1e-8) and np.all(q[4] <= o.knee_flexion_max + 1e-8)
+        lean = np.array(model.torso_angle.map(q.shape[1])(q)).ravel()
+        assert np.all(np.abs(lean) <= o.torso_lean_max + 1e-8)
+
+
+def test_save_and_load(tmp_path, small):
+    g, _ = small
+    back = RunningGait.load(g.save(tmp_path / "run.json"))
+    assert back.options == g.options
+    for f in dataclasses.fields(RunningGait):
+        a, b = getattr(g, f.name), getattr(back, f.name)
+        if isinstance(a, np.ndarray):
+            assert np.array_equal(a, b), f.name
+        elif f.name != "solver_stats":
+            assert a == b, f.name
+    (tmp_path / "other.json").write_text('{"kind": "gait"}')
+    with pytest.raises(ValueError, match="not a running gait"):
+        RunningGait.load(tmp_path / "other.json")
+
+
+def test_checks_see_a_gait_that_is_not_one(model):
+    """The hand-made guess is no orbit: the checks say so (the edges do not close, the
+    phases do not follow the dynamics, the takeoff force is not zero)."""
+    o = RunningOptions(speed=SPEED, n_stance=6, n_flight=4)
+    guess = running_guess(model, o)
+    g = RunningGait(robot="RABBIT", options=o, step_length=1.0, cost=0.0, **guess)
+    r = check_running(model, g)
+    assert r.periodicity_collocated > 1e-2
+    assert r.stance_end_error > 1e-2
+    assert abs(r.fz_takeoff) > 10.0
+
+
+def test_checks_see_a_changed_takeoff_torque(model, small):
+    g, r = small
+    bad = dataclasses.replace(g, u_stance=g.u_stance.copy())
+    bad.u_stance[0, -1] += 20.0                 # the stance knee at takeoff
+    r_bad = check_running(model, bad)
+    assert abs(r.fz_takeoff) < 1e-3 < abs(r_bad.fz_takeoff)
+    assert r_bad.stance_end_error > r.stance_end_error
+
+
+def test_hermite_simpson_interpolant_is_exact_for_cubics():
+    """States cubic and torques quadratic in time are reproduced exactly between the
+    points (the interpolant of the transcription)."""
+    tn = np.linspace(0.0, 0.6, 7)
+    c = np.array([0.3, -1.0, 2.0, 0.7])
+    x = lambda t: np.polyval(c, t)[None, :]                  # noqa: E731
+    f = lambda t: np.polyval(np.polyder(c), t)[None, :]      # noqa: E731
+    u = lambda t: np.polyval([1.5, -0.2, 0.1], t)[None, :]   # noqa: E731
+    t = np.linspace(0.0, 0.6, 37)
+    xi, ui = hermite_simpson(tn, x(tn), f(tn), u(tn), t)
+    assert np.allclose(xi, x(t), atol=1e-13) and np.allclose(ui, u(t), atol=1e-13)
+
+
+def test_phase_rhs_is_the_models_dynamics(model, small):
+    g, _ = small
+    fl = flight_model(model)
+    n, ne = model.nq, fl.ne
+    fs, ff = phase_rhs(model, "stance"), phase_rhs(model, "flight")
+    xs, us = g.x_stance[:, 3], g.u_stance[:, 3]
+    xf, uf = g.x_flight[:, 2], g.u_flight[:, 2]
+    assert np.allclose(fs(xs, us)[n:], np.array(model.forward_dynamics(xs[:n], xs[n:], us)).ravel())
+    assert np.allclose(ff(xf, uf)[ne:], np.array(fl.flight_dynamics(xf[:ne], xf[ne:], uf)).ravel())
+    with pytest.raises(ValueError):
+        phase_rhs(model, "double support")
+
+
+def test_running_plot(tmp_path, model, small):
+    from analysis.reporting.plots import save_figure
+    from analysis.reporting.plots.running import running_plot
+    g, _ = small
+    fig = running_plot(model, g)
+    axes = fig.get_axes()
+    assert "RABBIT" in fig._suptitle.get_text() and "m/s" in fig._suptitle.get_text()
+    assert axes[0].get_xlabel() == "x [m]" and axes[0].get_ylabel() == "z [m]"
+    assert "[rad]" in axes[1].get_ylabel() and "[N m]" in axes[2].get_ylabel()
+    assert "[s]" in axes[2].get_xlabel()
+    assert all(ax.get_legend() is not None for ax in axes)
+    t, _, _ = dense(model, g, "stance")
+    assert t[-1] == pytest.approx(g.T_stance)
+    out = save_figure(fig, tmp_path / "running.png")
+    assert out and all((tmp_path / "running.png").exists() for _ in out)
