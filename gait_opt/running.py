@@ -72,7 +72,7 @@ class RunningOptions:
         touches down, at least, m: without it the optimum grazes the ground with both
         feet, a walk with a vanishing flight.
     torso_lean_max : float
-        |torso angle from upright| <= this at every point, rad (unbounded, the optimum
+        ``|torso angle from upright|`` <= this at every point, rad (unbounded, the optimum
         leans the torso to the horizontal).
     stance_knee_max, swing_knee_min : float
         No hyperextension: q2 <= stance_knee_max and q5 >= swing_knee_min, rad (legs of
@@ -82,7 +82,7 @@ class RunningOptions:
         (without it the optimiser folds a knee through itself, the links being lines).
         Every other joint stays within pi of upright, as in the walking problem.
     torque_rate_max : float or None
-        Bound on |du/dt| between neighbouring points of a phase, N m/s (None: none).
+        Bound on ``|du/dt|`` between neighbouring points of a phase, N m/s (None: none).
         It gives the takeoff condition its meaning: with torques free to jump, Fz = 0
         at the last stance point is met by the last point's torque alone (in the limit
         of a fine grid, a jump at one instant that moves nothing), whereas the foot
@@ -296,10 +296,10 @@ def _pose_absolute(phi):
 
 
 def running_guess(model, opts: RunningOptions) -> dict:
-    """A hand-made initial guess: three poses (landing, takeoff, touchdown) in absolute
-    link angles, joints linear in time between them, a ballistic base in flight.
+    """A hand-made initial guess of a running step.
 
-    The poses (stance tibia and femur leaning back at landing, forward at takeoff; the
+    Three poses (landing, takeoff, touchdown) in absolute link angles, joints linear in
+    time between them, a ballistic base in flight.  The poses (stance tibia and femur leaning back at landing, forward at takeoff; the
     swing leg trailing, then reaching forward) close through the relabelling; the
     durations follow from the hip's travel at ``opts.speed`` with a 0.1 s flight.
 

@@ -42,9 +42,9 @@ class RunningReport:
     fz_min_nodes, fz_min_dense : float
         Smallest Fz over the stance points and over the dense grid, N.
     friction_ratio_max : float
-        Largest |Fx| / Fz on the dense grid where Fz > 1 % of the weight.
+        Largest ``|Fx|`` / Fz on the dense grid where Fz > 1 % of the weight.
     torque_max_dense : float
-        Largest |u| on the dense grid of both phases, N m.
+        Largest ``|u|`` on the dense grid of both phases, N m.
     swing_min_stance : float
         Smallest swing-foot height in stance (dense grid), m.
     feet_min_flight : float
@@ -56,15 +56,16 @@ class RunningReport:
     other_foot_velocity : float
         The other foot's vertical velocity just after the landing impact, m/s (> 0).
     impulse_ratio : float
-        |Fx| / Fz of the landing impulse.
+        ``|Fx|`` / Fz of the landing impulse.
     periodicity_collocated : float
-        max |landing(end of flight) - start of stance| and |takeoff(end of stance) -
-        start of flight| of the collocated states through the exact edges.
+        The larger of max ``|landing(end of flight) - start of stance|`` and max
+        ``|takeoff(end of stance) - start of flight|``, the collocated states through
+        the exact edges.
     stance_end_error, flight_end_error : float
-        max |x_integrated(T) - x_collocated(T)| of each phase integrated from its own
+        max ``|x_integrated(T) - x_collocated(T)|`` of each phase integrated from its own
         collocated start (rad, rad/s, m, m/s mixed: the largest entry).
     step_map_residual : float
-        max |P(x0) - x0| of the step map composed of the integrated phases (flight to
+        max ``|P(x0) - x0|`` of the step map composed of the integrated phases (flight to
         the touchdown event) and the exact edges, open loop under the gait's torques.
     touchdown_time_error : float
         Integrated touchdown time minus the collocated flight duration, s.
@@ -74,7 +75,7 @@ class RunningReport:
         Largest change of the angular momentum about the centre of mass in flight, kg
         m^2/s.
     momentum_scale : float
-        Largest |angular momentum about the centre of mass| in flight, kg m^2/s (the
+        Largest ``|angular momentum about the centre of mass|`` in flight, kg m^2/s (the
         drifts' scale).
     """
 
@@ -177,8 +178,9 @@ def dense(model, gait: RunningGait, phase: str, per_interval: int = DENSE):
 
 def integrate_phase(model, gait: RunningGait, phase: str, x0=None, t_end=None,
                     events=None):
-    """One phase integrated by scipy's DOP853 (rtol = atol = 1e-11) under the gait's
-    interpolated torques (held at their end values past the phase's end).
+    """One phase integrated by scipy's DOP853 under the gait's interpolated torques.
+
+    rtol = atol = 1e-11; past the phase's end the torques are held at their end values.
 
     Parameters
     ----------
@@ -279,8 +281,10 @@ def _step_map(model, fl, gait: RunningGait):
 
 
 def check_running(model, gait: RunningGait) -> RunningReport:
-    """Measure a running gait: dense path constraints, integrated phases, the step map
-    through the exact edges, the physics of flight (module docstring).
+    """Measure a running gait outside the NLP.
+
+    Dense path constraints, integrated phases, the step map through the exact edges,
+    the physics of flight (module docstring).
 
     Parameters
     ----------
