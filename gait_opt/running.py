@@ -17,7 +17,10 @@ base at the foot, at rest) when ``takeoff_guard`` gives Fz = 0 at the last stanc
 point, and ``landing_swing`` (impact and relabelling) when the swing foot reaches the
 ground; periodicity ties its output to the first stance state.
 
-Constraints: |u| <= the model's torque limit at every point; in stance Fz >= 0 and
+Constraints: |u| <= the model's torque limit at every point (and at the quarter points
+of every interval), the torque's rate bounded, the torques continuous through takeoff
+(so that the stance and flight accelerations agree there and the foot leaves the
+ground smoothly, docs: howto/running.md); in stance Fz >= 0 and
 |Fx| <= mu Fz, the swing foot above a parabolic clearance profile; in flight both feet
 above the ground; no knee hyperextension; at landing the swing foot moving down, the
 impulse inside the friction cone and the other foot moving up after the impact; the
@@ -488,6 +491,9 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
     _stance_constraints(opti, model, fl, opts, Xs, Us)
     _flight_constraints(opti, model, fl, opts, Xf)
     p_foot = _edges(opti, model, fl, opts, Xs, Xf)
+    # torques continuous through takeoff: with a jump, the stance force under the flight's
+    # first torques could be positive (the ground would hold the foot down)
+    opti.subject_to(Uf[:, 0] - Us[:, -1] == 0)
     opti.subject_to(p_foot[0] - opts.speed * (Ts + Tf) == 0)
     opti.subject_to(p_foot[0] >= 0.05)
     effort = _simpson(Ts, ca.sum1(Us ** 2)) + _simpson(Tf, ca.sum1(Uf ** 2))

@@ -43,6 +43,10 @@ class RunningReport:
         Smallest Fz over the stance points and over the dense grid, N.
     friction_ratio_max : float
         Largest ``|Fx|`` / Fz on the dense grid where Fz > 1 % of the weight.
+    friction_excess_nodes, friction_excess_dense : float
+        Largest ``|Fx|`` - mu Fz over the stance points and over the dense grid, N (<= 0:
+        inside the cone; the ratio alone exaggerates a small excess where Fz is small,
+        near takeoff).
     torque_max_dense : float
         Largest ``|u|`` on the dense grid of both phases, N m.
     swing_min_stance : float
@@ -51,6 +55,11 @@ class RunningReport:
         Smallest height of either foot in flight, its ends excluded (dense grid), m.
     flight_duration : float
         s.
+    takeoff_torque_jump : float
+        max ``|u_flight(0) - u_stance(Ts)|``, N m (0: the accelerations agree at takeoff).
+    takeoff_foot_acceleration : float
+        The pushing-off foot's vertical acceleration at the start of flight, m/s^2 (with
+        Fz = 0 and continuous torques, 0; negative would push it into the ground).
     strike_velocity : float
         The swing foot's vertical velocity at touchdown, m/s (< 0: moving down).
     other_foot_velocity : float
@@ -83,10 +92,14 @@ class RunningReport:
     fz_min_nodes: float
     fz_min_dense: float
     friction_ratio_max: float
+    friction_excess_nodes: float
+    friction_excess_dense: float
     torque_max_dense: float
     swing_min_stance: float
     feet_min_flight: float
     flight_duration: float
+    takeoff_torque_jump: float
+    takeoff_foot_acceleration: float
     strike_velocity: float
     other_foot_velocity: float
     impulse_ratio: float
@@ -236,8 +249,13 @@ def _edges(model, fl, gait: RunningGait):
     q_p, dq_p, F, _, v_other, _ = fl.landing_swing(xf[:ne, -1], xf[ne:, -1])
     r_land = np.max(np.abs(np.r_[np.array(q_p).ravel(), np.array(dq_p).ravel()] - xs[:, 0]))
     F = np.array(F).ravel()
+    u0 = gait.u_flight[:, 0]
+    acc = np.array(fl.flight_dynamics(xf[:ne, 0], xf[ne:, 0], u0)).ravel()
+    # foot_st of the flight frame is the base: its acceleration is the base's
     v_sw = np.array(fl.feet_velocity(xf[:ne, -1], xf[ne:, -1]))[1, 1]
     return dict(periodicity_collocated=float(max(r_take, r_land)),
+                takeoff_torque_jump=float(np.max(np.abs(u0 - gait.u_stance[:, -1]))),
+                takeoff_foot_acceleration=float(acc[n + 1]),
                 strike_velocity=float(v_sw), other_foot_velocity=float(np.array(v_other)[1, 0]),
                 impulse_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else float("inf"))
 
@@ -245,7 +263,9 @@ def _edges(model, fl, gait: RunningGait):
 def _stance_figures(model, fl, gait: RunningGait):
     n = model.nq
     xs, us = gait.x_stance, gait.u_stance
-    Fz_n, _ = (np.array(v).ravel() for v in fl.takeoff_guard.map(xs.shape[1])(xs[:n], xs[n:], us))
+    Fz_n, Fx_n = (np.array(v).ravel()
+                  for v in fl.takeoff_guard.map(xs.shape[1])(xs[:n], xs[n:], us))
+    mu = gait.options.mu
     t, x, u = dense(model, gait, "stance")
     Fz, Fx = (np.array(v).ravel() for v in fl.takeoff_guard.map(t.size)(x[:n], x[n:], u))
     weight = model.description.total_mass * model.description.gravity
@@ -254,6 +274,8 @@ def _stance_figures(model, fl, gait: RunningGait):
     return dict(fz_takeoff=float(Fz_n[-1]), fz_min_nodes=float(Fz_n.min()),
                 fz_min_dense=float(Fz.min()),
                 friction_ratio_max=float(np.max(np.abs(Fx[loaded]) / Fz[loaded], initial=0.0)),
+                friction_excess_nodes=float(np.max(np.abs(Fx_n) - mu * Fz_n)),
+                friction_excess_dense=float(np.max(np.abs(Fx) - mu * Fz)),
                 swing_min_stance=float(np.array(zsw).min())), np.abs(u).max()
 
 

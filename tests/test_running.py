@@ -55,12 +55,17 @@ def _physical(model, g, r, integration_tol):
     assert abs(r.fz_takeoff) <= 1e-6 * weight
     assert r.fz_min_nodes >= -1e-6 * weight
     assert r.fz_min_dense >= -1e-6 * weight
-    assert r.friction_ratio_max <= o.mu + 1e-6
+    # inside the friction cone at the points; between them, near takeoff where both
+    # forces vanish, within 1 % of the weight
+    assert r.friction_excess_nodes <= 1e-6 * weight
+    assert r.friction_excess_dense <= 1e-2 * weight
     assert r.swing_min_stance >= -1e-7
     # torques within the limit between the points too (1 % for the quadratic's overshoot)
     assert r.torque_max_dense <= 1.01 * o.limit(model)
     # flight: a real one, both feet above the ground, the touchdown valid
     assert r.flight_duration >= o.flight_time_bounds[0] - 1e-9
+    assert r.takeoff_torque_jump <= 1e-8
+    assert abs(r.takeoff_foot_acceleration) <= 1e-5
     assert r.feet_min_flight >= -1e-7
     assert r.strike_velocity <= -o.min_strike_speed + 1e-8
     assert r.other_foot_velocity >= o.min_liftoff_speed - 1e-8

@@ -58,7 +58,7 @@ def _profiles(ax_q, ax_u, model, gait):
     q = np.hstack([xs[:n], xf[:n]])
     u = np.hstack([us, uf])
     for i in range(n):
-        ax_q.plot(t, q[i], lw=1.5, label=f"q{i + 1} ({model.joint_names[i]})")
+        ax_q.plot(t, q[i], lw=1.5, label=f"q{i + 1}: {model.joint_names[i]}")
     for i in range(model.nu):
         ax_u.plot(t, u[i], lw=1.5, label=f"u{i + 1} (on q{i + 2})")
     limit = gait.options.limit(model)
