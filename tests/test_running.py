@@ -209,3 +209,16 @@ def test_running_plot(tmp_path, model, small):
     assert t[-1] == pytest.approx(g.T_stance)
     out = save_figure(fig, tmp_path / "running.png")
     assert out and all((tmp_path / "running.png").exists() for _ in out)
+
+
+@pytest.mark.slow
+def test_the_how_to_example_runs(tmp_path, monkeypatch):
+    """The running-gait example of docs/howto/running.md (its python block that calls
+    optimize_running), as written there (its asserts included), in a temporary folder."""
+    from pathlib import Path
+    page = Path(__file__).resolve().parents[1] / "docs" / "howto" / "running.md"
+    blocks = [b.split("```", 1)[0] for b in page.read_text().split("```python\n")[1:]]
+    (block,) = [b for b in blocks if "optimize_running(" in b]
+    monkeypatch.chdir(tmp_path)
+    exec(compile(block, str(page), "exec"), {})
+    assert (tmp_path / "running.json").exists() and (tmp_path / "running_step.png").exists()
