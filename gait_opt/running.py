@@ -409,7 +409,8 @@ def _posture(opti, model, opts, Q):
 
 
 def _stance_constraints(opti, model, fl, opts, Xs, Us):
-    """Ground force, friction, clearance, torques along stance; Fz = 0 at takeoff."""
+    """Ground force, friction cone, swing-foot clearance and posture along stance; Fz =
+    0 at takeoff (and so Fx = 0, the cone's apex)."""
     n, N = model.nq, Xs.shape[1]
     Fz, Fx = fl.takeoff_guard.map(N)(Xs[:n, :], Xs[n:, :], Us)
     opti.subject_to(ca.vec(Fz[:-1]) >= 0)

@@ -104,6 +104,15 @@ def test_grids_agree(small, default):
     assert gs.T_flight == pytest.approx(gd.T_flight, rel=0.05)
 
 
+def test_warm_start_from_a_gait(model, small):
+    """A solved gait as the guess of the same problem: IPOPT stops at once, same gait."""
+    g, _ = small
+    again = optimize_running(model, g.options, guess=g)
+    assert again.success
+    assert again.solver_stats["iterations"] < g.solver_stats["iterations"] / 2
+    assert again.cost == pytest.approx(g.cost, rel=1e-6)
+
+
 def test_takeoff_and_landing_states(model, small):
     """Recomputed from the stored states: the flight starts at the takeoff embedding,
     the base at rest at the origin; the landing foot is where the step ends."""
