@@ -166,3 +166,27 @@ def test_slow_three_link_gait_is_not_held_by_the_leg_bound(model3):
     L0, T0 = guess_step(model3, g.options)
     assert g.solver_stats["initial_guess"] == dict(step_length=L0, T=T0)
     assert L0 == pytest.approx(guess_step_length(model3, 0.3), rel=1e-15)
+
+
+def test_codesign_lengths_scale_and_rabbit_keeps_the_constants(model, model3, doubled):
+    """The co-design's clearance margin of a moved gait and its mid-step clearance row's
+    unit: RABBIT's constants exactly, other robots' scaled with the leg, given values
+    kept; the settings record the margin used."""
+    from analysis.design.codesign.functions import CLEARANCE_SCALE, TranscriptionSettings
+    from analysis.design.codesign.settings import CLEARANCE_MARGIN, MoveSettings
+    assert (CLEARANCE_MARGIN, CLEARANCE_SCALE) == (0.002, 0.05)
+    assert MoveSettings().clearance_margin is None
+    assert MoveSettings().for_model(model).clearance_margin == 0.002
+    assert TranscriptionSettings().for_model(model).clearance_scale == 0.05
+    for m in (model3, doubled):
+        k = leg_scale(m)
+        assert MoveSettings().for_model(m).clearance_margin == CLEARANCE_MARGIN * k
+        assert TranscriptionSettings().for_model(m).clearance_scale == CLEARANCE_SCALE * k
+        assert MoveSettings(clearance_margin=0.001).for_model(m).clearance_margin == 0.001
+        assert TranscriptionSettings(clearance_scale=0.04).for_model(m).clearance_scale == 0.04
+    # recorded: the filled settings write the number used (RABBIT: the old 0.002)
+    assert CodesignSettings().for_model(model).to_dict()["move"]["clearance_margin"] == 0.002
+    assert CodesignSettings().for_model(doubled).to_dict()["move"]["clearance_margin"] == \
+        2 * CLEARANCE_MARGIN
+    given = CodesignSettings(move=MoveSettings(clearance_margin=0.003))
+    assert given.for_model(doubled).move.clearance_margin == 0.003
