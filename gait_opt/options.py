@@ -91,8 +91,9 @@ def default_step_length_bounds(model, speed: float) -> tuple:
 
 
 def guess_step_length(model, speed: float) -> float:
-    """The step length of the built-in initial guess before it is clipped to the bounds,
-    m: :data:`GUESS_STEP_LENGTH` x :func:`leg_scale` x sqrt(speed / reference speed)
+    """The step length of the built-in initial guess, before it is clipped to the bounds.
+
+    :data:`GUESS_STEP_LENGTH` x :func:`leg_scale` x sqrt(speed / reference speed), m
     (RABBIT: 0.45 sqrt(speed / 0.75) m).
 
     Parameters

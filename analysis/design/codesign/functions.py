@@ -106,9 +106,10 @@ class TranscriptionSettings:
     threads: int = 2
 
     def for_model(self, model) -> "TranscriptionSettings":
-        """These settings with ``clearance_scale`` filled in for the robot when none is
-        given: :data:`CLEARANCE_SCALE` scaled with its leg length (RABBIT exactly
-        0.05 m).
+        """These settings with ``clearance_scale`` filled in for the robot.
+
+        When none is given: :data:`CLEARANCE_SCALE` scaled with its leg length (RABBIT
+        exactly 0.05 m).
 
         Parameters
         ----------

@@ -241,9 +241,10 @@ class MoveSettings:
     efforts: tuple = (0.0, 300.0, 3000.0, math.inf)
 
     def for_model(self, model) -> "MoveSettings":
-        """These settings with ``clearance_margin`` filled in for the robot when none is
-        given: :data:`CLEARANCE_MARGIN` scaled with its leg length (RABBIT exactly
-        0.002 m).
+        """These settings with ``clearance_margin`` filled in for the robot.
+
+        When none is given: :data:`CLEARANCE_MARGIN` scaled with its leg length (RABBIT
+        exactly 0.002 m).
 
         Parameters
         ----------
@@ -377,8 +378,10 @@ class CodesignSettings:
                              f"{self.given_gait!r}")
 
     def for_model(self, model) -> "CodesignSettings":
-        """These settings with the robot's defaults filled in (:meth:`MoveSettings.for_model`;
-        the gait fields stay as given, scaled when the gait is built).
+        """These settings with the robot's defaults filled in.
+
+        :meth:`MoveSettings.for_model`; the gait fields stay as given (scaled when the
+        gait is built).
 
         Parameters
         ----------
