@@ -14,7 +14,9 @@ from .hzd_orbit import BezierConstraints, fit_bezier_constraints
 from .importing import IMPORT_TOL, GaitImport, GaitImportError, import_gait
 from .nodes import Nodes, read_nodes
 from .optimize import GaitSolveResult, optimize_gait
-from .options import REFERENCE_LEG_LENGTH, GaitOptions, LegScaled, gait_fields, leg_scale
+from .options import (REFERENCE_LEG_LENGTH, REFERENCE_SPEED, GaitOptions, LegScaled,
+                      default_step_length_bounds, gait_fields, guess_step_length, leg_scale,
+                      reference_speed)
 from .polish import ClosedOrbit, close_orbit
 
 __all__ = ["optimize_gait", "GaitSolveResult", "Gait",
@@ -23,4 +25,5 @@ __all__ = ["optimize_gait", "GaitSolveResult", "Gait",
            "read_nodes", "BezierConstraints", "fit_bezier_constraints", "close_orbit",
            "ClosedOrbit", "gait_family", "GaitFamily", "MemberRecord",
            "FamilyGait", "speed_range", "parse_speed_range", "REFERENCE_LEG_LENGTH",
-           "leg_scale", "LegScaled", "gait_fields"]
+           "leg_scale", "LegScaled", "gait_fields", "REFERENCE_SPEED", "reference_speed",
+           "default_step_length_bounds", "guess_step_length"]

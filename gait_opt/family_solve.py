@@ -164,7 +164,8 @@ def gait_family(model, speeds, options: GaitOptions | None = None, *, path=None,
     speeds : sequence of float
         At least two strictly increasing speeds, m/s (:func:`gait_opt.speed_range`).
     options : GaitOptions, optional
-        The problem (default SPEC section 2); its ``speed`` is replaced by each speed.
+        The problem (default SPEC section 2); its ``speed`` is replaced by each speed,
+        its defaults (:meth:`GaitOptions.for_model`) are filled at the slowest.
     path : str or Path, optional
         Save the family there after every member (atomically); with ``resume``,
         continue a partial family found there made for the same robot, options and
@@ -200,7 +201,11 @@ def gait_family(model, speeds, options: GaitOptions | None = None, *, path=None,
     speeds = check_speeds(speeds)
     if options is not None and not isinstance(options, GaitOptions):
         raise ValueError(f"options must be GaitOptions, got {type(options).__name__}")
-    opts = (options or GaitOptions()).for_model(model)
+    base = options or GaitOptions()
+    # the defaults filled at the slowest speed (the lower step-length bound follows the
+    # speed below the reference speed: one bound for the family, no slower member bound
+    # by a faster one's)
+    opts = base.replace(speed=float(speeds[0])).for_model(model).replace(speed=base.speed)
     for v in speeds:
         _reachable(opts, v)
     family = _resumable(path, model, opts, speeds) if (path is not None and resume) else None

@@ -20,7 +20,7 @@ from .gait import Gait
 from .options import GaitOptions, require_model
 from .polish import polish
 from .transcription import (FIXED_BY, MARGINS, build_problem, constraint_violations,
-                            describe_violations, initial_guess, make_solver,
+                            describe_violations, guess_step, initial_guess, make_solver,
                             warm_start_vector)
 
 __all__ = ["optimize_gait", "GaitSolveResult", "GaitOptimizationError",
@@ -179,6 +179,7 @@ def _solve(model, options: GaitOptions | None = None, *, verbose: bool = False,
     """
     opts = _options(model, options, overrides)
     t0 = time.perf_counter()
+    guessed = warm_start is None           # the first pass starts from the built-in guess
     margins, passes, best = {}, [], None
     for attempt in range(1 + max_refinements):
         try:
@@ -216,6 +217,9 @@ def _solve(model, options: GaitOptions | None = None, *, verbose: bool = False,
         polish_change=float(np.max(np.abs(np.r_[(alpha_p - r.alpha).ravel(),
                                                 x0_p - r.Xs[:, 0], T_p - r.T]))),
         dense_grid_violations=[list(v) for v in viol])
+    if guessed:                            # its step, scaled to the robot and speed
+        L0, T0 = guess_step(model, opts)
+        gait.solver_stats["initial_guess"] = dict(step_length=L0, T=T0)
     if len(passes) > 1:
         gait.solver_stats["refinements"] = passes
     message = ("optimal gait found" if not viol else
@@ -262,7 +266,9 @@ def optimize_gait(model=None, options: GaitOptions | None = None, *, cache: bool
     Gait
         The polished gait; ``gait.solver_stats`` holds IPOPT's status, iterations and
         timings, ``solver_stats['dense_grid_violations']`` what remains violated between
-        the nodes (empty for a valid gait) and, with ``cache``, ``solver_stats['cache']``
+        the nodes (empty for a valid gait), ``solver_stats['initial_guess']`` the step
+        length and T of the built-in guess when it was started from (they scale with the
+        robot's leg and the speed) and, with ``cache``, ``solver_stats['cache']``
         ('hit' or why it was computed).
 
     Raises

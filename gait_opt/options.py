@@ -5,7 +5,9 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["GaitOptions", "REFERENCE_LEG_LENGTH", "leg_scale", "LegScaled", "gait_fields"]
+__all__ = ["GaitOptions", "REFERENCE_LEG_LENGTH", "REFERENCE_SPEED", "leg_scale",
+           "reference_speed", "default_step_length_bounds", "guess_step_length", "LegScaled",
+           "gait_fields"]
 
 #: hip-to-foot length of a straight leg, m, of the robot the length-valued defaults were
 #: set on (RABBIT); on another robot they scale with its leg length over this one
@@ -13,8 +15,12 @@ REFERENCE_LEG_LENGTH = 0.8
 #: length-valued gait defaults on RABBIT's legs, m (scaled by :func:`leg_scale`)
 STEP_LENGTH_BOUNDS = (0.2, 0.8)
 CLEARANCE = 0.03
-#: GaitOptions fields measured in metres (scaled together by :class:`LegScaled`)
-LENGTH_FIELDS = ("step_length_bounds", "clearance")
+#: RABBIT's default speed, m/s, the speed the step-length defaults were set at: on another
+#: robot the speed of the same Froude number v^2 / (g leg) (:func:`reference_speed`)
+REFERENCE_SPEED = 0.75
+#: the built-in guess's step length at :data:`REFERENCE_SPEED` on RABBIT's legs, m
+#: (scaled by :func:`leg_scale`; at other speeds times sqrt(speed / reference speed))
+GUESS_STEP_LENGTH = 0.45
 
 
 def leg_scale(model) -> float:
@@ -35,6 +41,73 @@ def leg_scale(model) -> float:
     """
     d = getattr(model, "description", model)
     return float(d.leg_length) / REFERENCE_LEG_LENGTH
+
+
+def reference_speed(model) -> float:
+    """RABBIT's default speed carried to the robot at the same Froude number.
+
+    Geometrically similar walkers at equal v^2 / (g leg) take equal steps relative to
+    their legs; the step-length defaults were set on RABBIT at 0.75 m/s.
+
+    Parameters
+    ----------
+    model : BipedModel or RobotDescription
+        The robot (a model, or its description).
+
+    Returns
+    -------
+    float
+        ``0.75 * sqrt(leg_scale * g / 9.81)`` m/s; exactly 0.75 for RABBIT.
+    """
+    d = getattr(model, "description", model)
+    return REFERENCE_SPEED * math.sqrt(leg_scale(model) * (float(d.gravity) / 9.81))
+
+
+def default_step_length_bounds(model, speed: float) -> tuple:
+    """The default ``step_length_bounds`` for the robot at ``speed``, m.
+
+    (0.25, 1.0) leg lengths (RABBIT: (0.2, 0.8) m) at and above :func:`reference_speed`;
+    below it the lower bound shrinks in proportion to the speed (a bound on the step
+    time, 0.25 leg / reference speed, no longer on the length): the factor 0.25 was
+    set on RABBIT's speeds, where its optimal steps are longer, and a slow walker's
+    optimal step can be shorter (the three-link biped at 0.3 m/s: 0.19 leg lengths).
+
+    Parameters
+    ----------
+    model : BipedModel or RobotDescription
+        The robot.
+    speed : float
+        The gait's average speed, m/s.
+
+    Returns
+    -------
+    tuple of float
+        (low, high); RABBIT at 0.75 m/s and faster exactly (0.2, 0.8).
+    """
+    lo, hi = LegScaled(step_length_bounds=STEP_LENGTH_BOUNDS).for_model(model)[
+        "step_length_bounds"]
+    slow = min(1.0, float(speed) / reference_speed(model))
+    return (lo * slow, hi)
+
+
+def guess_step_length(model, speed: float) -> float:
+    """The step length of the built-in initial guess, before it is clipped to the bounds.
+
+    :data:`GUESS_STEP_LENGTH` x :func:`leg_scale` x sqrt(speed / reference speed), m
+    (RABBIT: 0.45 sqrt(speed / 0.75) m).
+
+    Parameters
+    ----------
+    model : BipedModel or RobotDescription
+        The robot.
+    speed : float
+        The gait's average speed, m/s.
+
+    Returns
+    -------
+    float
+    """
+    return GUESS_STEP_LENGTH * leg_scale(model) * math.sqrt(float(speed) / reference_speed(model))
 
 
 class LegScaled(dict):
@@ -114,8 +187,10 @@ class GaitOptions:
         Average forward speed (step length / T), m/s.
     step_length_bounds : tuple of float or None
         (low, high) bounds on the step length chosen by the optimiser, m; None (the
-        default): (0.25, 1.0) x the robot's leg length (RABBIT: (0.2, 0.8)), filled in
-        by :meth:`for_model` and recorded in the gait's options.
+        default): (0.25, 1.0) x the robot's leg length (RABBIT: (0.2, 0.8)), the lower
+        bound shrinking in proportion to the speed below 0.75 m/s x sqrt(leg / 0.8 m)
+        (:func:`default_step_length_bounds`), filled in by :meth:`for_model` at
+        ``speed`` and recorded in the gait's options.
     step_time_bounds : tuple of float
         (low, high) bounds on the step duration T, s.
     mu : float
@@ -344,7 +419,9 @@ class GaitOptions:
         """These options with the length-valued defaults filled in for the robot.
 
         ``step_length_bounds`` and ``clearance``, when none is given: RABBIT's scaled by
-        :func:`leg_scale` (RABBIT itself: exactly (0.2, 0.8) m and 0.03 m).
+        :func:`leg_scale`, the lower step-length bound also with ``speed`` below the
+        reference speed (:func:`default_step_length_bounds`; RABBIT itself from 0.75 m/s
+        on: exactly (0.2, 0.8) m, and 0.03 m).
 
         Parameters
         ----------
@@ -355,9 +432,12 @@ class GaitOptions:
         -------
         GaitOptions
         """
-        defaults = LegScaled(step_length_bounds=STEP_LENGTH_BOUNDS, clearance=CLEARANCE)
-        fill = {n: defaults[n] for n in LENGTH_FIELDS if getattr(self, n) is None}
-        return self.replace(**LegScaled(fill).for_model(model)) if fill else self
+        fill = {}
+        if self.step_length_bounds is None:
+            fill["step_length_bounds"] = default_step_length_bounds(model, self.speed)
+        if self.clearance is None:
+            fill.update(LegScaled(clearance=CLEARANCE).for_model(model))
+        return self.replace(**fill) if fill else self
 
     def for_model(self, model) -> "GaitOptions":
         """These options with the robot's torque limit and length defaults filled in.

@@ -57,7 +57,7 @@ import numpy as np
 
 from biped_casadi.caching import cached
 
-from .options import GaitOptions
+from .options import GaitOptions, guess_step_length
 from .parametrisation import reference_dynamics
 
 __all__ = ["Problem", "build_problem", "initial_guess", "make_solver", "describe_violations",
@@ -528,19 +528,29 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None, *,
                    speed_parameter)
 
 
+def guess_step(model, opts: GaitOptions) -> tuple:
+    """(step length m, T s) of the built-in guess: :func:`~gait_opt.options.guess_step_length`
+    (RABBIT: 0.45 sqrt(speed / 0.75) m; scaled with the leg length, at the same Froude
+    number on another robot) kept inside the step-length bounds by a tenth of their
+    width, T its time at ``speed`` within the step-time bounds."""
+    opts = opts.for_model(model)
+    lo, hi = opts.step_length_bounds
+    L0 = float(np.clip(guess_step_length(model, opts.speed), lo + 0.1 * (hi - lo),
+                       hi - 0.1 * (hi - lo)))
+    return L0, float(np.clip(L0 / opts.speed, *opts.step_time_bounds))
+
+
 def initial_guess(model, opts: GaitOptions):
-    """Built-in guess: a double-support pose at impact, feet ``L0`` apart, the stance leg
-    bent by kappa at its lowest knee and the swing leg's link angles the negatives of
-    the stance leg's (so both knees bend the human way), the torso leaning 0.05 rad
-    forward from upright (the description's ``torso_upright``), joints interpolated linearly in
-    s, the swing leg's knees bending mid-step for clearance (legs without knees: straight
+    """Built-in guess: a double-support pose at impact, feet ``L0`` apart (``L0`` and the
+    step time: :func:`guess_step`), the stance leg bent by kappa at its lowest knee and
+    the swing leg's link angles the negatives of the stance leg's (so both knees bend the
+    human way), the torso leaning 0.05 rad forward from upright (the description's
+    ``torso_upright``), joints interpolated linearly in s, the swing leg's knees bending mid-step for clearance (legs without knees: straight
     legs, no bend)."""
     opts = opts.for_model(model)
     M = opts.bezier_degree
     d = model.description
-    lo, hi = opts.step_length_bounds
-    L0 = float(np.clip(0.45 * np.sqrt(opts.speed / 0.75), lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)))
-    T0 = float(np.clip(L0 / opts.speed, *opts.step_time_bounds))
+    L0, T0 = guess_step(model, opts)
     kappa, lean = 0.15, 0.05
     # stance links from the foot up at angles a - b_j (b = 0, kappa, kappa, ...); the hip
     # is at x = sum l_j sin(a - b_j) = R sin(a - delta); the swing foot lands at 2 x

@@ -52,7 +52,8 @@ def register(sub):
                    help="mid-step swing-foot clearance, m (default scaled with leg length: "
                         "0.0375 x leg, 0.03 for RABBIT; the robust design's gait uses "
                         "0.0625 x leg, 0.05 for RABBIT; the step length is bounded to "
-                        "0.25-1.0 x leg, recorded in the gait's options)")
+                        "0.25-1.0 x leg, the lower bound shrinking with the speed below "
+                        "0.75 m/s x sqrt(leg / 0.8 m), recorded in the gait's options)")
     add_robot(p, with_gait=False)
     add_family_arguments(p)
     p.add_argument("--out", metavar="FILE", default=None,

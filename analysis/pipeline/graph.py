@@ -532,8 +532,10 @@ def _finish(summary, stages, files, staging, opts, res, model, quick, total, cri
             skipped="the robust co-design starts from gait options calibrated on RABBIT; "
                     "run 'biped m1 --robust --gait gait.json' (the gait beside this report) "
                     "for another robot"))
+    # the settings as run on this robot (its scaled defaults filled in)
+    used = dataclasses.replace(res, codesign=res.codesign.for_model(model))
     summary.update(mode="quick" if quick else "full", stages=stages, figures=files,
-                   options=dict(res.to_dict(), robot=opts.robot), total_time=total,
+                   options=dict(used.to_dict(), robot=opts.robot), total_time=total,
                    critical_path=crit, finished=time.strftime("%Y-%m-%d %H:%M:%S %z"))
     if rabbit:
         summary["paper"] = PAPER

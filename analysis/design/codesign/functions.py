@@ -3,7 +3,7 @@ dynamics with its sensitivities, the step's start, partial step and impact, the 
 reference (the module docstring of :mod:`analysis.design.codesign.transcription`)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -14,6 +14,7 @@ from biped_casadi.numerics import compiled as _compiled
 from biped_casadi.numerics import rk4_step
 from biped_casadi.simd import kernels
 from biped_casadi.simulation.perturbation import PAPER_SIZES
+from gait_opt import leg_scale
 from gait_opt.parametrisation import reference_dynamics
 
 #: the constraint families of a scenario-step, in the user's words
@@ -33,6 +34,11 @@ FAMILIES = {
     "final_error": "error at the last step",
     "gait": "gait",
 }
+
+
+#: the unit of the co-design's mid-step clearance row on RABBIT's legs (0.8 m), m; scaled
+#: with the robot's leg length (:meth:`TranscriptionSettings.for_model`)
+CLEARANCE_SCALE = 0.05
 
 
 @dataclass(frozen=True)
@@ -69,6 +75,10 @@ class TranscriptionSettings:
         magnitude on the reference (the walker stops at 0.01).
     clearance_mid : float
         m: swing-foot height kept between 0.1 T and 0.9 T (above 0 elsewhere).
+    clearance_scale : float or None
+        m: the mid-step clearance row's unit (its aggregation's sharpness is
+        ``ks_rho`` in this unit); None (the default): 0.0625 x the robot's leg length
+        (RABBIT: 0.05 m), filled in by :meth:`for_model` (the transcription does).
     chunk : int
         Nodes per aggregated constraint.
     ks_rho : float
@@ -90,9 +100,29 @@ class TranscriptionSettings:
     strike_front_min: float = 0.02
     den_margin: float = 0.03
     clearance_mid: float = 0.001
+    clearance_scale: float | None = None
     chunk: int = 10
     ks_rho: float = 300.0
     threads: int = 2
+
+    def for_model(self, model) -> "TranscriptionSettings":
+        """These settings with ``clearance_scale`` filled in for the robot.
+
+        When none is given: :data:`CLEARANCE_SCALE` scaled with its leg length (RABBIT
+        exactly 0.05 m).
+
+        Parameters
+        ----------
+        model : BipedModel
+            The robot.
+
+        Returns
+        -------
+        TranscriptionSettings
+        """
+        if self.clearance_scale is not None:
+            return self
+        return replace(self, clearance_scale=CLEARANCE_SCALE * leg_scale(model))
 
 
 # ------------------------------------------------------------------ compiled functions

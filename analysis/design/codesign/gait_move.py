@@ -484,7 +484,8 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
         GaitOptions fields: ``impact_mu`` and ``clearance`` are reached by continuation,
         the others (``continuation``, ...) are set at once.
     settings : MoveSettings
-        The continuation.
+        The continuation (its defaults filled in for the gait's robot:
+        :meth:`MoveSettings.for_model`).
     transcription : TranscriptionSettings
         The grid of the gait's rows (and the torque limit).
 
@@ -496,6 +497,7 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
         return GaitMove("kept", "the gait is kept: its swing foot may pass below the ground "
                         "(legs without knees), which the gait rows of the move do not "
                         "model", {}, dict(targets), {}, gait=gait)
+    settings = settings.for_model(gait.model)
     mv = _Move(gait, targets, settings, transcription)
     own, tgt = mv.own, mv.tgt
     if all(abs(mv.start[k] - tgt[k]) < 1e-12 for k in tgt):

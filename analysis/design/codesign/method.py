@@ -149,7 +149,8 @@ class Method:
     solves: list = field(default_factory=list)
 
     def __post_init__(self):
-        st = self.st
+        # the robot's defaults filled in (recorded with the result's settings)
+        self.st = st = self.st.for_model(self.model)
         # legs without knees: the gait's own rows (a swing foot above the ground) do not
         # hold, so a given gait stays fixed (moved by nothing)
         self.free = st.free_gait and self.fixed_gait is None and not (

@@ -288,8 +288,9 @@ class Reduced:
         # a step that strikes before 0.1 T has no mid-step nodes: its last node (at the
         # ground) must then be clear, which the step cannot be, so the row stays violated
         mid = mid if mid.size else np.array([len(tn) - 1])
-        rows.ks(((st.clearance_mid - zsw[mid]) / 0.05)[None],
-                (-dzsw[:, mid] / 0.05)[None], rho, f"clearance {tag} mid-step")
+        h = st.clearance_scale             # m: the row's unit (0.0625 leg, RABBIT 0.05)
+        rows.ks(((st.clearance_mid - zsw[mid]) / h)[None],
+                (-dzsw[:, mid] / h)[None], rho, f"clearance {tag} mid-step")
 
     def _strike_rows(self, rows, out, Jl, D, tag, c):
         """A step's strike rows (swing foot speed and position, the impulse in its cone,

@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass, field
 
 from biped_casadi.control.output_law import check_rejoin
 from biped_casadi.results import Result
+from gait_opt import leg_scale
 
 from ..settings_checks import check_fields, check_gait_fields
 
@@ -16,6 +17,10 @@ from ..robust_search import robust_gait
 #: the sampling search's shipped design on :data:`ROBUST_GAIT` (M1; v_c rejoining at
 #: 0.75 T): s* 0.969, the co-design's first warm start
 TODAY_DESIGN = (-8.2618, 2.5374, 0.0034, 8.5090)
+
+#: the margin a moved gait keeps above the clearance on RABBIT's legs (0.8 m), m; scaled
+#: with the robot's leg length (:meth:`MoveSettings.for_model`)
+CLEARANCE_MARGIN = 0.002
 
 #: what the co-design does with a gait it is given (:class:`CodesignSettings`)
 GIVEN_GAIT = ("fixed", "free", "auto")
@@ -197,8 +202,10 @@ class MoveSettings:
     impulse_margin : float
         The impulse ratio is solved this much below each step's bound (between the
         nodes the polished gait may exceed the nodes' values).
-    clearance_margin : float
-        m: the clearance likewise, above.
+    clearance_margin : float or None
+        m: the clearance likewise, above; None (the default): 0.0025 x the robot's leg
+        length (RABBIT: 0.002 m), filled in by :meth:`for_model` (the co-design records
+        the value used in its settings).
     friction_margin : float
         The path's friction ratio likewise, below mu.
     torque_margin : float
@@ -224,7 +231,7 @@ class MoveSettings:
     halvings: int = 4
     scale: tuple = (0.05, 0.025, 0.25)
     impulse_margin: float = 0.005
-    clearance_margin: float = 0.002
+    clearance_margin: float | None = None
     friction_margin: float = 1e-4
     torque_margin: float = 0.5
     max_iter: int = 200
@@ -232,6 +239,25 @@ class MoveSettings:
     path_mu: float = 0.45
     torque_fraction: float = 0.8
     efforts: tuple = (0.0, 300.0, 3000.0, math.inf)
+
+    def for_model(self, model) -> "MoveSettings":
+        """These settings with ``clearance_margin`` filled in for the robot.
+
+        When none is given: :data:`CLEARANCE_MARGIN` scaled with its leg length (RABBIT
+        exactly 0.002 m).
+
+        Parameters
+        ----------
+        model : BipedModel
+            The robot whose gait is moved.
+
+        Returns
+        -------
+        MoveSettings
+        """
+        if self.clearance_margin is not None:
+            return self
+        return dataclasses.replace(self, clearance_margin=CLEARANCE_MARGIN * leg_scale(model))
 
 
 @dataclass(frozen=True)
@@ -350,6 +376,24 @@ class CodesignSettings:
         if self.given_gait not in GIVEN_GAIT:
             raise ValueError(f"given_gait must be one of {GIVEN_GAIT}, got "
                              f"{self.given_gait!r}")
+
+    def for_model(self, model) -> "CodesignSettings":
+        """These settings with the robot's defaults filled in.
+
+        :meth:`MoveSettings.for_model`; the gait fields stay as given (scaled when the
+        gait is built).
+
+        Parameters
+        ----------
+        model : BipedModel
+            The robot co-designed.
+
+        Returns
+        -------
+        CodesignSettings
+        """
+        move = self.move.for_model(model)
+        return self if move is self.move else dataclasses.replace(self, move=move)
 
     def robustness_settings(self, rounds: int = 8) -> RobustnessSettings:
         """The protocol's settings (400 RK4 steps per T, ``rounds`` bisection rounds).

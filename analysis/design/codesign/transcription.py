@@ -102,7 +102,8 @@ class GaitTable:
         The gait (fixed) or the gait to start from (free); its options give the Bezier
         degree, the continuation past T and the gait's own constraints.
     settings : TranscriptionSettings, optional
-        The rule (nodes per T, horizon) and the torque limit.
+        The rule (nodes per T, horizon) and the torque limit (its defaults filled in for
+        the robot: :meth:`TranscriptionSettings.for_model`).
     free_gait : bool
         Whether G is variable (the first ``nG`` entries of the decision vector).
     """
@@ -113,7 +114,7 @@ class GaitTable:
     def __init__(self, model, gait, settings: TranscriptionSettings | None = None,
                  free_gait: bool = True):
         self.model, self.gait = model, gait
-        self.st = st = settings or TranscriptionSettings()
+        self.st = st = (settings or TranscriptionSettings()).for_model(model)
         self.free = bool(free_gait)
         o = gait.options
         self.degree, self.cont, self.shape = o.bezier_degree, o.continuation, o.continuation_shape
