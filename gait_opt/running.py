@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,6 +43,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from biped_casadi.files import write_text_atomic
 from biped_casadi.model import flight_model
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
@@ -111,6 +113,40 @@ class RunningOptions:
     knee_flexion_max: float = 2.0
     torque_rate_max: float | None = 2000.0
     ipopt: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        def number(name, value, low=0.0, strict=True, none=False):
+            if value is None and none:
+                return
+            ok = (not isinstance(value, bool) and isinstance(value, (int, float))
+                  and math.isfinite(value) and (value > low if strict else value >= low))
+            if not ok:
+                raise ValueError(f"RunningOptions.{name} must be a finite number "
+                                 f"{'>' if strict else '>='} {low:g}"
+                                 f"{' or None' if none else ''}, got {value!r}")
+        for name in ("speed", "mu", "torso_lean_max", "knee_flexion_max"):
+            number(name, getattr(self, name))
+        for name in ("clearance", "min_strike_speed", "min_liftoff_speed",
+                     "trailing_clearance"):
+            number(name, getattr(self, name), strict=False)
+        number("torque_limit", self.torque_limit, none=True)
+        number("torque_rate_max", self.torque_rate_max, none=True)
+        for name in ("n_stance", "n_flight"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not 2 <= v <= 200:
+                raise ValueError(f"RunningOptions.{name} must be an integer from 2 to 200, "
+                                 f"got {v!r}")
+        for name in ("stance_time_bounds", "flight_time_bounds"):
+            v = tuple(getattr(self, name)) if isinstance(getattr(self, name), (tuple, list)) \
+                else ()
+            if len(v) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                      and math.isfinite(x) for x in v) \
+                    or not 0 < v[0] < v[1]:
+                raise ValueError(f"RunningOptions.{name} must be (low, high) seconds with "
+                                 f"0 < low < high, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, v)
+        if not isinstance(self.ipopt, dict):
+            raise ValueError(f"RunningOptions.ipopt must be a dict, got {self.ipopt!r}")
 
     def limit(self, model) -> float:
         """The torque bound for ``model``.
@@ -264,9 +300,7 @@ class RunningGait:
         body = {k: (v.tolist() if isinstance(v, np.ndarray) else v)
                 for k, v in dataclasses.asdict(self).items()}
         body["kind"] = "running gait"
-        path = Path(path)
-        path.write_text(json.dumps(body, indent=1, default=str))
-        return path
+        return write_text_atomic(Path(path), json.dumps(body, indent=1, default=str))
 
     @classmethod
     def load(cls, path) -> "RunningGait":
@@ -280,15 +314,26 @@ class RunningGait:
         Returns
         -------
         RunningGait
+
+        Raises
+        ------
+        ValueError
+            One line naming the file: unreadable, not a running gait, or malformed.
         """
-        body = json.loads(Path(path).read_text())
-        if body.pop("kind", None) != "running gait":
+        try:
+            body = json.loads(Path(path).read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise ValueError(f"{path}: cannot read a running gait ({e})") from None
+        if not isinstance(body, dict) or body.pop("kind", None) != "running gait":
             raise ValueError(f"{path}: not a running gait")
-        o = body.pop("options")
-        o = {k: tuple(v) if isinstance(v, list) else v for k, v in o.items()}
-        arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
-        return cls(options=RunningOptions(**o),
-                   **{k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()})
+        try:
+            o = {k: tuple(v) if isinstance(v, list) else v for k, v in body.pop("options").items()}
+            arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
+            return cls(options=RunningOptions(**o), **{
+                k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()})
+        except (KeyError, TypeError, ValueError, AttributeError) as e:
+            raise ValueError(f"{path}: a malformed running gait ({type(e).__name__}: {e})") \
+                from None
 
 
 # ----------------------------------------------------------------- the guess

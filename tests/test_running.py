@@ -12,6 +12,7 @@ purpose (the hand-made guess, a takeoff torque changed) show that the checks see
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -232,3 +233,58 @@ def test_the_how_to_example_runs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     exec(compile(block, str(page), "exec"), {})
     assert (tmp_path / "running.json").exists() and (tmp_path / "running_step.png").exists()
+
+
+# ----------------------------------------------------------- options, files, command line
+@pytest.mark.parametrize("field, value", [
+    ("speed", 0.0), ("speed", float("nan")), ("mu", -0.1), ("torque_limit", float("inf")),
+    ("clearance", -0.01), ("n_stance", 1), ("n_flight", 2.5), ("n_flight", True),
+    ("stance_time_bounds", (0.3, 0.1)), ("flight_time_bounds", (0.0, 0.2)),
+    ("stance_time_bounds", (0.1,)), ("torque_rate_max", -1.0), ("ipopt", "max_iter=3")])
+def test_options_refuse_bad_values(field, value):
+    with pytest.raises(ValueError, match=f"RunningOptions.{field}"):
+        RunningOptions(**{field: value})
+
+
+def test_options_keep_good_values():
+    o = RunningOptions(speed=2, n_stance=6, stance_time_bounds=[0.1, 0.5], torque_rate_max=None)
+    assert o.stance_time_bounds == (0.1, 0.5) and o.speed == 2 and o.torque_rate_max is None
+
+
+@pytest.mark.parametrize("text, match", [
+    ("{not json", "cannot read"), ('{"kind": "gait"}', "not a running gait"),
+    ('[1, 2]', "not a running gait"),
+    ('{"kind": "running gait", "options": {"speed": -1}}', "malformed")])
+def test_load_names_the_file(tmp_path, text, match):
+    p = tmp_path / "r.json"
+    p.write_text(text)
+    with pytest.raises(ValueError, match=match) as e:
+        RunningGait.load(p)
+    assert str(p) in str(e.value)
+
+
+@pytest.mark.parametrize("args, names", [
+    (["--speed", "-1"], "--speed"), (["--intervals", "1", "4"], "--intervals STANCE"),
+    (["--intervals", "6", "500"], "--intervals FLIGHT"), (["--robot", "three_link"], "--robot"),
+    (["--out", "r.txt"], "--out"), (["--max-iter", "0"], "--max-iter"),
+    (["--speed", "6", "--max-iter", "5", "--intervals", "6", "4"], "did not converge")])
+def test_command_line_refuses_in_one_line(tmp_path, monkeypatch, capsys, args, names):
+    from analysis.cli import main
+    monkeypatch.chdir(tmp_path)
+    assert main(["running", *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and names in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []            # nothing written
+
+
+def test_command_line_saves_checks_and_draws(tmp_path, capsys):
+    from analysis.cli import main
+    out, figs = tmp_path / "run.json", tmp_path / "figs"
+    assert main(["running", "--intervals", "6", "4", "--out", str(out), "--plot", str(figs),
+                 "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    g = RunningGait.load(out)
+    assert s["cost"] == g.cost and s["step_length"] == g.step_length
+    assert abs(s["speed"] - 1.5) < 1e-9 and s["T_flight"] > 0
+    assert abs(s["checks"]["fz_takeoff"]) < 1e-6 and s["checks"]["periodicity_collocated"] < 1e-8
+    assert (figs / "running_step.png").stat().st_size > 10_000

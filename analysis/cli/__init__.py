@@ -22,8 +22,8 @@ import numpy as np
 import biped_casadi
 from biped_casadi.numerics import NotCompiledWarning
 
-from . import (eig, export, gait, m1, mujoco, reproduce, robot, robust, simulate, sweep,
-               terrain, view)
+from . import (eig, export, gait, m1, mujoco, reproduce, robot, robust, running, simulate,
+               sweep, terrain, view)
 from .common import UserError, add_robot, check_inputs, load_model, print_json
 from .failures import failure_line
 from .stdout import named_stdout
@@ -106,8 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_model)
 
-    for command in (robot, gait, eig, sweep, m1, robust, simulate, terrain, export, mujoco,
-                    reproduce, view):
+    for command in (robot, gait, running, eig, sweep, m1, robust, simulate, terrain, export,
+                    mujoco, reproduce, view):
         command.register(sub)
     return ap
 
