@@ -279,6 +279,7 @@ def test_command_line_refuses_in_one_line(tmp_path, monkeypatch, capsys, args, n
 
 def test_command_line_saves_checks_and_draws(tmp_path, capsys):
     from analysis.cli import main
+    from analysis.cli.running import COARSE
     out, figs = tmp_path / "run.json", tmp_path / "figs"
     assert main(["running", "--intervals", "6", "4", "--out", str(out), "--plot", str(figs),
                  "--json"]) == 0
@@ -288,3 +289,8 @@ def test_command_line_saves_checks_and_draws(tmp_path, capsys):
     assert abs(s["speed"] - 1.5) < 1e-9 and s["T_flight"] > 0
     assert abs(s["checks"]["fz_takeoff"]) < 1e-6 and s["checks"]["periodicity_collocated"] < 1e-8
     assert (figs / "running_step.png").stat().st_size > 10_000
+    # the 6 + 4 grid departs from its integration by more than COARSE: said, with the
+    # grid that cuts it
+    worst = max(s["checks"]["stance_end_error"], s["checks"]["flight_end_error"])
+    assert (worst > COARSE) == bool(s["notes"])
+    assert all("--intervals 12 8" in n for n in s["notes"])

@@ -14,6 +14,11 @@ from .common import Progress, UserError, add_robot, load_model, output_dir, outp
     print_json
 
 
+#: a phase's integration departing from its collocation by more than this (the largest
+#: entry, rad or rad/s) is said on a note line: the grid is coarse for that robot
+COARSE = 1e-3
+
+
 def register(sub):
     p = sub.add_parser(
         "running", help="optimise a periodic running step (stance + flight; no controller "
@@ -79,6 +84,11 @@ def cmd_running(args):
     s = dict(robot=model.params.name, speed=gait.speed, T_stance=gait.T_stance,
              T_flight=gait.T_flight, step_length=gait.step_length, cost=gait.cost,
              solver=gait.solver_stats, checks=report, file=str(gait.save(out)))
+    worst = max(report["stance_end_error"], report["flight_end_error"])
+    s["notes"] = [] if worst <= COARSE else [
+        f"the phases integrated from their collocated starts depart from the collocation "
+        f"by {worst:.1e} (more than {COARSE:g}): the grid is coarse for this robot; "
+        f"--intervals {2 * opts.n_stance} {2 * opts.n_flight} cuts that about 16-fold"]
     if folder is not None:
         s["plots"] = save_figures({"running_step": running_plot(model, gait)}, folder)
     if args.json:
@@ -111,3 +121,5 @@ def _print(s: dict, gait, limit: float):
           f"{s['solver'].get('wall_s', 0.0):.1f} s")
     for p in s.get("plots", []):
         print(f"  plot                 {p}")
+    for n in s["notes"]:
+        print(f"note: {n}")

@@ -60,7 +60,7 @@ def _profiles(ax_q, ax_u, model, gait):
     for i in range(n):
         ax_q.plot(t, q[i], lw=1.5, label=f"q{i + 1}: {model.joint_names[i]}")
     for i in range(model.nu):
-        ax_u.plot(t, u[i], lw=1.5, label=f"u{i + 1} (on q{i + 2})")
+        ax_u.plot(t, u[i], lw=1.5, label=f"u{i + 1}: {model.joint_names[i + 1]}")
     limit = gait.options.limit(model)
     for ax in (ax_q, ax_u):
         ax.axvspan(gait.T_stance, gait.T, color="0.9", label="flight")
