@@ -150,6 +150,22 @@ def test_auto_solref_walks_with_the_contact_that_walked(gait3, tmp_path, capsys,
         assert r["settings"]["timestep"] == r["timestep_check"]["auto_timestep"]
 
 
+def test_auto_solref_starts_at_two_time_steps_of_a_coarse_timestep(gait3, tmp_path, capsys):
+    """``--solref auto`` with a ``--timestep`` whose two steps exceed the stiff contact's
+    4 ms: the walk starts from a contact of two time steps (the stiffest MuJoCo takes as
+    given) instead of refusing the default it was not asked for; the same contact given
+    as a number is still refused."""
+    g = str(gait3.save(tmp_path / "gait3.json"))
+    base = ["mujoco", "--gait", g, "--controller", "vc", "--steps", "2", "--no-eig",
+            "--timestep", "0.01"]
+    rc, out = _run(base + ["--solref", "auto", "--json"], capsys)
+    r = json.loads(out)
+    assert r["contact_check"]["solref"] == 0.02, r["contact_check"]
+    assert rc in (0, 1) and r["settings"]["timestep"] == 0.01
+    assert biped_main(base + ["--solref", "0.004"]) == 2
+    assert "at least two time steps" in capsys.readouterr().err
+
+
 def test_max_penetration_is_the_feet_depth_in_the_floor(gait):
     """The walk's depth: the sphere's radius less the lowest height of either foot's
     centre over the states it went through (MuJoCo's own geometry of the logged states),

@@ -55,7 +55,8 @@ def add_mujoco_settings(p, mu: bool = True, auto: bool = False):
               "--contact stiff, MuJoCo's 0.02 with default)")
     if auto:
         p.add_argument("--solref", type=_solref, metavar="S",
-                       help=solref + "; 'auto': that default, and when the walk fails there "
+                       help=solref + "; 'auto': that default (raised to two time steps "
+                            "when --timestep is coarser), and when the walk fails there "
                             "but walks with a contact 1.5 or 2 times softer at the same time "
                             "step, that contact (after --timestep auto's finer time step, "
                             "when both are auto)")
@@ -85,9 +86,15 @@ def settings_error(e: ValueError) -> UserError:
 
 def mujoco_settings(args) -> ContactSettings:
     """The settings of the options (UserError naming the option MuJoCo would reject);
-    ``--timestep auto`` and ``--solref auto`` start from the defaults."""
+    ``--timestep auto`` and ``--solref auto`` start from the defaults (``--solref auto``
+    from the contact's default raised to two of the time steps asked for, the stiffest
+    contact MuJoCo takes as given)."""
     timestep = None if args.timestep == AUTO else args.timestep
     solref = None if args.solref == AUTO else args.solref
+    if args.solref == AUTO and isinstance(timestep, (int, float)) and timestep > 0:
+        default = ContactSettings.of(args.contact).solref
+        if default is not None and default < 2 * timestep:
+            solref = float(f"{2 * timestep:.12g}")
     try:
         return ContactSettings.of(args.contact, timestep=timestep, solref=solref,
                                   foot_radius=args.foot_radius,
