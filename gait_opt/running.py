@@ -111,7 +111,7 @@ class RunningOptions:
         The friction cone also at every stance interval's quarter points, on the
         Hermite-Simpson interpolant (the dense check's state and torque); it cuts what
         is left between the points away from takeoff (RABBIT at 2.5 m/s, 32 + 20: 0.65
-        to 0.10 N) and makes the solve about three times slower.
+        to 0.10 N) and makes the solve two to three times slower.
     ipopt : dict
         Extra IPOPT options.
     """
