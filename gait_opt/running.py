@@ -378,6 +378,8 @@ class RunningGait:
             raise ValueError(f"{path}: not a running gait")
         try:
             o = {k: tuple(v) if isinstance(v, list) else v for k, v in body.pop("options").items()}
+            # a file written before the takeoff cone condition existed was solved without it
+            o.setdefault("takeoff_cone_rate", False)
             arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
             return cls(options=RunningOptions(**o), **{
                 k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()})
