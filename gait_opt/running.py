@@ -46,8 +46,16 @@ import numpy as np
 from biped_casadi.files import write_text_atomic
 from biped_casadi.model import flight_model
 
+from .options import leg_scale
+
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
-           "hermite_simpson"]
+           "hermite_simpson", "CLEARANCE", "TRAILING_CLEARANCE", "MIN_STEP_LENGTH"]
+
+#: length-valued defaults on RABBIT's legs (0.8 m), m; on another robot times its leg
+#: length over RABBIT's (:func:`gait_opt.options.leg_scale`, exactly 1.0 for RABBIT)
+CLEARANCE = 0.03
+TRAILING_CLEARANCE = 0.03
+MIN_STEP_LENGTH = 0.05
 
 
 @dataclass(frozen=True)
@@ -64,18 +72,20 @@ class RunningOptions:
         Friction coefficient of the ground (stance force and landing impulse).
     torque_limit : float or None
         Bound on every joint torque, N m; None: the model's (RABBIT: 150).
-    clearance : float
+    clearance : float or None
         Swing-foot clearance in stance, m: z_sw >= clearance 4 s (1 - s), s = t / Ts.
+        None: 0.03 m times the robot's leg length over RABBIT's 0.8 m (:meth:`for_model`).
     min_strike_speed : float
         The landing foot's downward speed at touchdown, at least, m/s.
     min_liftoff_speed : float
         The other foot's upward speed just after the landing impact, at least, m/s.
     stance_time_bounds, flight_time_bounds : tuple of float
         (low, high) bounds on the phase durations, s.
-    trailing_clearance : float
+    trailing_clearance : float or None
         Height of the trailing foot (the one that pushed off) when the swing foot
         touches down, at least, m: without it the optimum grazes the ground with both
-        feet, a walk with a vanishing flight.
+        feet, a walk with a vanishing flight.  None: 0.03 m times the leg length over
+        RABBIT's, as ``clearance``.
     torso_lean_max : float
         ``|torso angle from upright|`` <= this at every point, rad (unbounded, the optimum
         leans the torso to the horizontal).
@@ -92,6 +102,16 @@ class RunningOptions:
         at the last stance point is met by the last point's torque alone (in the limit
         of a fine grid, a jump at one instant that moves nothing), whereas the foot
         should unload as the torques evolve.
+    takeoff_cone_rate : bool
+        The friction cone at takeoff on the ground force's rate: there Fz = Fx = 0 (the
+        cone's apex) and the point condition says nothing about the direction in which
+        the force vanishes; without it the force between the last points left the cone
+        by up to 0.93 N (RABBIT at 1.5 m/s, 32 + 20 intervals, 3 ms before takeoff).
+    cone_quarter_points : bool
+        The friction cone also at every stance interval's quarter points, on the
+        Hermite-Simpson interpolant (the dense check's state and torque); it cuts what
+        is left between the points away from takeoff (RABBIT at 2.5 m/s, 32 + 20: 0.65
+        to 0.10 N) and makes the solve two to three times slower.
     ipopt : dict
         Extra IPOPT options.
     """
@@ -101,17 +121,19 @@ class RunningOptions:
     n_flight: int = 10
     mu: float = 0.6
     torque_limit: float | None = None
-    clearance: float = 0.03
+    clearance: float | None = None
     min_strike_speed: float = 0.05
     min_liftoff_speed: float = 0.05
     stance_time_bounds: tuple = (0.05, 0.8)
     flight_time_bounds: tuple = (0.02, 0.4)
-    trailing_clearance: float = 0.03
+    trailing_clearance: float | None = None
     torso_lean_max: float = 0.3
     stance_knee_max: float = 0.0
     swing_knee_min: float = 0.0
     knee_flexion_max: float = 2.0
     torque_rate_max: float | None = 2000.0
+    takeoff_cone_rate: bool = True
+    cone_quarter_points: bool = False
     ipopt: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -126,9 +148,10 @@ class RunningOptions:
                                  f"{' or None' if none else ''}, got {value!r}")
         for name in ("speed", "mu", "torso_lean_max", "knee_flexion_max"):
             number(name, getattr(self, name))
-        for name in ("clearance", "min_strike_speed", "min_liftoff_speed",
-                     "trailing_clearance"):
+        for name in ("min_strike_speed", "min_liftoff_speed"):
             number(name, getattr(self, name), strict=False)
+        for name in ("clearance", "trailing_clearance"):
+            number(name, getattr(self, name), strict=False, none=True)
         number("torque_limit", self.torque_limit, none=True)
         number("torque_rate_max", self.torque_rate_max, none=True)
         for name in ("n_stance", "n_flight"):
@@ -145,8 +168,35 @@ class RunningOptions:
                 raise ValueError(f"RunningOptions.{name} must be (low, high) seconds with "
                                  f"0 < low < high, got {getattr(self, name)!r}")
             object.__setattr__(self, name, v)
+        for name in ("takeoff_cone_rate", "cone_quarter_points"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"RunningOptions.{name} must be True or False, "
+                                 f"got {getattr(self, name)!r}")
         if not isinstance(self.ipopt, dict):
             raise ValueError(f"RunningOptions.ipopt must be a dict, got {self.ipopt!r}")
+
+    def for_model(self, model) -> "RunningOptions":
+        """These options with the length-valued defaults filled in for the robot.
+
+        ``clearance`` and ``trailing_clearance``, when None: :data:`CLEARANCE` and
+        :data:`TRAILING_CLEARANCE` (RABBIT's) times :func:`~gait_opt.options.leg_scale`,
+        the robot's leg length over RABBIT's, exactly 1.0 for RABBIT (so its values are
+        the constants bit for bit).  Values given are kept.
+
+        Parameters
+        ----------
+        model : BipedModel
+            The robot.
+
+        Returns
+        -------
+        RunningOptions
+        """
+        k = leg_scale(model)
+        fill = {name: value * k for name, value in (("clearance", CLEARANCE),
+                                                    ("trailing_clearance", TRAILING_CLEARANCE))
+                if getattr(self, name) is None}
+        return dataclasses.replace(self, **fill) if fill else self
 
     def limit(self, model) -> float:
         """The torque bound for ``model``.
@@ -328,6 +378,8 @@ class RunningGait:
             raise ValueError(f"{path}: not a running gait")
         try:
             o = {k: tuple(v) if isinstance(v, list) else v for k, v in body.pop("options").items()}
+            # a file written before the takeoff cone condition existed was solved without it
+            o.setdefault("takeoff_cone_rate", False)
             arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
             return cls(options=RunningOptions(**o), **{
                 k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()})
@@ -453,15 +505,63 @@ def _posture(opti, model, opts, Q):
         opti.subject_to(opti.bounded(lo, ca.vec(Q[i, :]), hi))
 
 
-def _stance_constraints(opti, model, fl, opts, Xs, Us):
+def _quarter_points(X, F, U, T, n):
+    """The Hermite-Simpson interpolant (:func:`hermite_simpson`) at the quarter points
+    s = 1/4 and 3/4 of every interval: (states, torques), 2 n columns each."""
+    h = T / n
+    x0, f0, fm, f1 = X[:, 0:-1:2], F[:, 0:-1:2], F[:, 1::2], F[:, 2::2]
+    u0, um, u1 = U[:, 0:-1:2], U[:, 1::2], U[:, 2::2]
+    xs, us = [], []
+    for s in (0.25, 0.75):
+        tau = s * h
+        xs.append(x0 + f0 * tau + 0.5 * (-3 * f0 + 4 * fm - f1) * tau * s
+                  + (2 * f0 - 4 * fm + 2 * f1) / 3 * tau * s * s)
+        us.append(u0 * (1 - s) * (1 - 2 * s) + um * 4 * s * (1 - s) + u1 * s * (2 * s - 1))
+    return ca.horzcat(*xs), ca.horzcat(*us)
+
+
+def _cone_at_quarter_points(opti, model, fl, opts, Xs, Fs, Us, Ts):
+    """The friction cone at the quarter points of every stance interval, on the state
+    and torque of the Hermite-Simpson interpolant (what the dense check measures)."""
+    n = model.nq
+    xq, uq = _quarter_points(Xs, Fs, Us, Ts, opts.n_stance)
+    Fz, Fx = fl.takeoff_guard.map(xq.shape[1])(xq[:n, :], xq[n:, :], uq)
+    opti.subject_to(ca.vec(opts.mu * Fz - Fx) >= 0)
+    opti.subject_to(ca.vec(opts.mu * Fz + Fx) >= 0)
+
+
+def _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts):
+    """The friction cone at takeoff, on the forces' rates.  At the last point Fz = Fx =
+    0, the cone's apex, where the point condition says nothing about the direction in
+    which the force vanishes; the force just before takeoff is -dF/dt dt, inside the
+    cone when mu dFz/dt + |dFx/dt| <= 0.  dF/dt along the interpolant: x' = f at the
+    last point, u' of the last interval's quadratic torque."""
+    n, N = model.nq, Xs.shape[1]
+    x, u = ca.SX.sym("x", 2 * n), ca.SX.sym("u", model.nu)
+    dx, du = ca.SX.sym("dx", 2 * n), ca.SX.sym("du", model.nu)
+    force = ca.vertcat(*fl.takeoff_guard(x[:n], x[n:], u))
+    rate = ca.Function("force_rate", [x, u, dx, du],
+                       [ca.jtimes(force, ca.vertcat(x, u), ca.vertcat(dx, du))])
+    du_end = (Us[:, N - 3] - 4 * Us[:, N - 2] + 3 * Us[:, N - 1]) / (Ts / opts.n_stance)
+    dF = rate(Xs[:, -1], Us[:, -1], Fs[:, -1], du_end)
+    opti.subject_to(opts.mu * dF[0] + dF[1] <= 0)
+    opti.subject_to(opts.mu * dF[0] - dF[1] <= 0)
+
+
+def _stance_constraints(opti, model, fl, opts, Xs, Us, Fs=None, Ts=None):
     """Ground force, friction cone, swing-foot clearance and posture along stance; Fz =
-    0 at takeoff (and so Fx = 0, the cone's apex)."""
+    0 at takeoff (and so Fx = 0, the cone's apex); the cone on the forces' rates there
+    (``opts.takeoff_cone_rate``) and at the quarter points (``opts.cone_quarter_points``)."""
     n, N = model.nq, Xs.shape[1]
     Fz, Fx = fl.takeoff_guard.map(N)(Xs[:n, :], Xs[n:, :], Us)
     opti.subject_to(ca.vec(Fz[:-1]) >= 0)
     opti.subject_to(Fz[-1] == 0)
     opti.subject_to(ca.vec(opts.mu * Fz - Fx) >= 0)
     opti.subject_to(ca.vec(opts.mu * Fz + Fx) >= 0)
+    if opts.takeoff_cone_rate:
+        _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts)
+    if opts.cone_quarter_points:
+        _cone_at_quarter_points(opti, model, fl, opts, Xs, Fs, Us, Ts)
     _, zsw = model.swing_foot.map(N)(Xs[:n, :])
     s = np.linspace(0, 1, N)
     opti.subject_to(ca.vec(zsw) >= ca.DM(opts.clearance * 4 * s * (1 - s)))
@@ -499,7 +599,8 @@ def _edges(opti, model, fl, opts, Xs, Xf):
 
 
 def optimize_running(model, opts: RunningOptions | None = None, guess: dict | None = None,
-                     verbose: bool = False) -> RunningGait:
+                     verbose: bool = False, *, cache: bool = False, cache_dir=None,
+                     progress=None) -> RunningGait:
     """Optimise one periodic running step (stance, takeoff, flight, landing).
 
     Parameters
@@ -513,13 +614,29 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
         the same grids works: a warm start); default :func:`running_guess`.
     verbose : bool
         IPOPT's iteration log.
+    cache : bool
+        Reuse the step kept in the on-disk cache for the same robot, options and code
+        (:mod:`gait_opt.running_cache`), and keep a converged new one there; a kept
+        step is returned whatever ``guess``.
+    cache_dir : str or Path, optional
+        That cache's folder (default :func:`biped_casadi.cache_dir`).
+    progress : callable, optional
+        Called with one line of text before a solve.
 
     Returns
     -------
     RunningGait
-        The last iterate, whatever IPOPT's status (``gait.success`` tells).
+        The last iterate, whatever IPOPT's status (``gait.success`` tells); with
+        ``cache``, ``gait.solver_stats['cache']`` is 'hit' or says why it was solved.
     """
-    opts = opts or RunningOptions()
+    opts = (opts or RunningOptions()).for_model(model)
+    if cache:
+        from .running_cache import cached_running
+        return cached_running(model, opts, cache_dir, progress,
+                              lambda: optimize_running(model, opts, guess, verbose))
+    if progress is not None:
+        progress(f"optimising a running step of {model.description.name} at "
+                 f"{opts.speed:g} m/s (about 10 s) ...")
     fl = flight_model(model)
     n, nu = model.nq, model.nu
     if guess is None:
@@ -529,19 +646,19 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
                                                   "u_stance", "x_flight", "u_flight")}
     opti = ca.Opti()
     fs, ff = _dynamics(model, fl)
-    Ts, Xs, Us, _ = _phase(opti, fs, 2 * n, nu, opts.n_stance, opts.stance_time_bounds)
+    Ts, Xs, Us, Fs = _phase(opti, fs, 2 * n, nu, opts.n_stance, opts.stance_time_bounds)
     Tf, Xf, Uf, _ = _phase(opti, ff, 2 * fl.ne, nu, opts.n_flight, opts.flight_time_bounds)
     umax = opts.limit(model)
     for U, T, n_int in ((Us, Ts, opts.n_stance), (Uf, Tf, opts.n_flight)):
         _torques(opti, opts, U, umax, T, n_int)
-    _stance_constraints(opti, model, fl, opts, Xs, Us)
+    _stance_constraints(opti, model, fl, opts, Xs, Us, Fs, Ts)
     _flight_constraints(opti, model, fl, opts, Xf)
     p_foot = _edges(opti, model, fl, opts, Xs, Xf)
     # torques continuous through takeoff: with a jump, the stance force under the flight's
     # first torques could be positive (the ground would hold the foot down)
     opti.subject_to(Uf[:, 0] - Us[:, -1] == 0)
     opti.subject_to(p_foot[0] - opts.speed * (Ts + Tf) == 0)
-    opti.subject_to(p_foot[0] >= 0.05)
+    opti.subject_to(p_foot[0] >= MIN_STEP_LENGTH * leg_scale(model))
     effort = _simpson(Ts, ca.sum1(Us ** 2)) + _simpson(Tf, ca.sum1(Uf ** 2))
     opti.minimize(1e-3 * effort / p_foot[0])
     for var, key in ((Ts, "T_stance"), (Tf, "T_flight"), (Xs, "x_stance"), (Us, "u_stance"),

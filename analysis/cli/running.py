@@ -41,6 +41,9 @@ def register(sub):
                    help="Hermite-Simpson intervals of each phase, 2 to 200 (default 16 10)")
     p.add_argument("--max-iter", type=int, default=None, metavar="K",
                    help="IPOPT iteration limit (default 3000)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="solve again even when a step of the same robot, options and code "
+                        "is kept in the cache ($BIPED_CACHE_DIR or ~/.cache/biped-casadi)")
     add_robot(p, with_gait=False)
     p.add_argument("--out", metavar="FILE", default="running.json",
                    help="where to save the step (default running.json; "
@@ -73,8 +76,8 @@ def cmd_running(args):
         raise UserError(f"--robot: {model.params.name} has legs of {links}; the running "
                         "step's built-in guess needs legs of two links (RABBIT's)")
     say = Progress("running", quiet=args.json)
-    say(f"optimising a running step at {args.speed:g} m/s (about 10 s) ...")
-    gait = optimize_running(model, opts)
+    gait = optimize_running(model, opts, cache=not args.no_cache, progress=say)
+    reused = gait.solver_stats.get("cache") == "hit"
     if not gait.success:
         raise UserError(f"the running step did not converge at {args.speed:g} m/s (IPOPT: "
                         f"{gait.solver_stats.get('return_status')} after "
@@ -94,6 +97,9 @@ def cmd_running(args):
     if args.json:
         print_json(s)
         return 0
+    if reused:
+        print(f"reused the running step kept in {gait.solver_stats['cache_file']} (same "
+              "robot, options and code; --no-cache solves it again)")
     _print(s, gait, gait.options.limit(model))
     return 0
 
