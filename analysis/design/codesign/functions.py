@@ -36,9 +36,18 @@ FAMILIES = {
 }
 
 
-#: the unit of the co-design's mid-step clearance row on RABBIT's legs (0.8 m), m; scaled
-#: with the robot's leg length (:meth:`TranscriptionSettings.for_model`)
+#: the co-design's length-valued margins on RABBIT's legs (0.8 m), m, each scaled with the
+#: robot's leg length (:meth:`TranscriptionSettings.for_model`): the mid-step clearance
+#: row's unit, the mid-step clearance, the strike's distance in front of the stance foot
+#: and the lift-off row's height per unit of tau / T
 CLEARANCE_SCALE = 0.05
+CLEARANCE_MID = 0.001
+STRIKE_FRONT_MIN = 0.02
+LIFT_SCALE = 0.3
+#: the fields :meth:`TranscriptionSettings.for_model` fills with the constant above times
+#: the leg scale when none is given
+_LEG_SCALED = dict(clearance_scale=CLEARANCE_SCALE, clearance_mid=CLEARANCE_MID,
+                   strike_front_min=STRIKE_FRONT_MIN, lift_scale=LIFT_SCALE)
 
 
 @dataclass(frozen=True)
@@ -55,8 +64,10 @@ class TranscriptionSettings:
     mu : float
         Friction coefficient of the scenarios' stance foot and impulse (with the margin
         below).
-    torque_limit : float
-        N m (with the margin below).
+    torque_limit : float or None
+        N m (with the margin below); None (the default): the robot's own
+        (``model.description.torque_limit``, RABBIT 150 N m), filled in by
+        :meth:`for_model`.  The co-design passes its verification's limit.
     torque_margin : float
         N m kept below the torque limit (peaks between the NLP's nodes).
     mu_margin : float
@@ -68,17 +79,26 @@ class TranscriptionSettings:
     liftoff_min, strike_speed_min : float
         m/s: the old stance foot's upward speed after an impact, the swing foot's
         downward speed at a strike.
-    strike_front_min : float
-        m: the strike lands at least this far in front of the stance foot.
+    strike_front_min : float or None
+        m: the strike lands at least this far in front of the stance foot; None (the
+        default): 0.025 x the robot's leg length (RABBIT: 0.02 m), filled in by
+        :meth:`for_model`.
     den_margin : float
         The eq. 24 denominator keeps its sign and at least this fraction of its largest
         magnitude on the reference (the walker stops at 0.01).
-    clearance_mid : float
-        m: swing-foot height kept between 0.1 T and 0.9 T (above 0 elsewhere).
+    clearance_mid : float or None
+        m: swing-foot height kept between 0.1 T and 0.9 T (above 0 elsewhere); None (the
+        default): 0.00125 x the robot's leg length (RABBIT: 0.001 m), filled in by
+        :meth:`for_model`.
     clearance_scale : float or None
         m: the mid-step clearance row's unit (its aggregation's sharpness is
         ``ks_rho`` in this unit); None (the default): 0.0625 x the robot's leg length
         (RABBIT: 0.05 m), filled in by :meth:`for_model` (the transcription does).
+    lift_scale : float or None
+        m per unit of tau / T: between the impact and 0.1 T the swing foot's height at
+        tau is kept above 0 in units of ``lift_scale x tau / T`` (the lift-off row's
+        scale); None (the default): 0.375 x the robot's leg length (RABBIT: 0.3 m),
+        filled in by :meth:`for_model`.
     chunk : int
         Nodes per aggregated constraint.
     ks_rho : float
@@ -90,26 +110,31 @@ class TranscriptionSettings:
     nodes_per_T: int = 100
     horizon: float = 1.6
     mu: float = 0.6
-    torque_limit: float = 150.0
+    torque_limit: float | None = None
     torque_margin: float = 3.0
     mu_margin: float = 0.02
     normal_force_min: float = 0.05
     impulse_min: float = 0.5
     liftoff_min: float = 0.02
     strike_speed_min: float = 0.02
-    strike_front_min: float = 0.02
+    strike_front_min: float | None = None
     den_margin: float = 0.03
-    clearance_mid: float = 0.001
+    clearance_mid: float | None = None
     clearance_scale: float | None = None
+    lift_scale: float | None = None
     chunk: int = 10
     ks_rho: float = 300.0
     threads: int = 2
 
     def for_model(self, model) -> "TranscriptionSettings":
-        """These settings with ``clearance_scale`` filled in for the robot.
+        """These settings with the robot's defaults filled in.
 
-        When none is given: :data:`CLEARANCE_SCALE` scaled with its leg length (RABBIT
-        exactly 0.05 m).
+        Each only when none is given: ``torque_limit`` the robot's own; the lengths
+        ``clearance_scale``, ``clearance_mid``, ``strike_front_min`` and ``lift_scale``
+        RABBIT's (:data:`CLEARANCE_SCALE`, :data:`CLEARANCE_MID`,
+        :data:`STRIKE_FRONT_MIN`, :data:`LIFT_SCALE`) times the robot's leg length over
+        0.8 m (:func:`gait_opt.leg_scale`; on RABBIT exactly 1.0, so its settings are the
+        constants bit for bit).
 
         Parameters
         ----------
@@ -120,9 +145,11 @@ class TranscriptionSettings:
         -------
         TranscriptionSettings
         """
-        if self.clearance_scale is not None:
-            return self
-        return replace(self, clearance_scale=CLEARANCE_SCALE * leg_scale(model))
+        fill = {name: value * leg_scale(model) for name, value in _LEG_SCALED.items()
+                if getattr(self, name) is None}
+        if self.torque_limit is None:
+            fill["torque_limit"] = float(model.description.torque_limit)
+        return replace(self, **fill) if fill else self
 
 
 # ------------------------------------------------------------------ compiled functions

@@ -280,7 +280,7 @@ class Reduced:
         lift = np.flatnonzero((tn > 0) & (tn < 0.1))
         mid = np.flatnonzero((tn >= 0.1) & (tn <= 0.9))
         if lift.size:
-            vref = 0.3 * tn[lift]          # m per unit of s: a lift-off speed scale
+            vref = st.lift_scale * tn[lift]    # m (lift_scale: 0.375 leg per unit of tau/T)
             rows.ks((-zsw[lift] / vref)[None], (-dzsw[:, lift] / vref)[None], rho,
                     f"clearance {tag} lift-off")
         else:                              # no node inside (0, 0.1 T): nothing to bound

@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass, field
 
 from biped_casadi.control.output_law import check_rejoin
 from biped_casadi.results import Result
-from gait_opt import leg_scale
+from gait_opt import LegScaled, gait_fields, leg_scale
 
 from ..settings_checks import check_fields, check_gait_fields
 
@@ -380,8 +380,10 @@ class CodesignSettings:
     def for_model(self, model) -> "CodesignSettings":
         """These settings with the robot's defaults filled in.
 
-        :meth:`MoveSettings.for_model`; the gait fields stay as given (scaled when the
-        gait is built).
+        :meth:`MoveSettings.for_model`, and the gait fields as used on the robot
+        (:func:`gait_opt.gait_fields`: a :class:`~gait_opt.LegScaled` default's clearance
+        scaled with the leg length, a plain dict as given), so that the co-design records
+        the clearance it used (RABBIT: :data:`ROBUST_GAIT`'s numbers exactly).
 
         Parameters
         ----------
@@ -393,7 +395,10 @@ class CodesignSettings:
         CodesignSettings
         """
         move = self.move.for_model(model)
-        return self if move is self.move else dataclasses.replace(self, move=move)
+        fill = {} if move is self.move else dict(move=move)
+        if isinstance(self.gait, LegScaled):
+            fill["gait"] = gait_fields(self.gait, model)
+        return dataclasses.replace(self, **fill) if fill else self
 
     def robustness_settings(self, rounds: int = 8) -> RobustnessSettings:
         """The protocol's settings (400 RK4 steps per T, ``rounds`` bisection rounds).
