@@ -180,6 +180,51 @@ def test_codesign_path_rows_of_an_early_strike(reduced):
     assert len(set(counts.values())) == 1, counts
 
 
+def test_codesign_clearance_rows_scale_with_the_legs(model, gait, reduced):
+    """The lift-off and mid-step clearance rows and the strike-front bound use the
+    settings' lengths: with every length doubled (the doubled robot's defaults) and the
+    swing foot twice as high, the clearance rows are the same to rounding, and the
+    strike-front row's bound is twice RABBIT's."""
+    import dataclasses
+    from analysis.design.codesign.reduced import _Dense
+    from biped_casadi import BipedModel
+    tr, red = reduced
+    doubled = BipedModel(model.description.scaled(length=2))
+    lengths = ("strike_front_min", "clearance_mid", "lift_scale", "clearance_scale")
+    big = TranscriptionSettings().for_model(doubled)
+    st2 = dataclasses.replace(tr.st, **{n: getattr(big, n) for n in lengths})
+    tr2 = Transcription(model, gait, tr.dirs, steps=2, free_gait=False, settings=st2)
+    assert tr2.st == st2 and st2.lift_scale == 2 * tr.st.lift_scale
+    red2 = Reduced(tr2)
+    red2.tols[:], red2.steps[:] = red.tols, red.steps
+    c = red._constants(tr.table(_design(tr)))
+    n = 60
+    tn = np.arange(n + 2) / tr.N
+    diag = np.zeros((tr.nu + 5, n + 2))
+    diag[tr.nu + 1] = 300.0
+    diag[tr.nu + 4] = tr.den_sign * tr.den_scale
+    diag[tr.nu + 3] = 0.004 * np.sin(np.pi * tn) - 0.0005     # touches 0 near the ends
+    out = {}
+    for r, z in ((red, 1.0), (red2, 2.0)):
+        d = diag.copy()
+        d[tr.nu + 3] *= z
+        rows = _Dense(r.nd)
+        r._path_rows(rows, d, np.zeros((tr.nu + 5, r.nd, n + 2)), n, "k0 j0", c)
+        out[z] = {name: v for v, name in zip(np.concatenate(rows.g), rows.names)
+                  if name.startswith("clearance")}
+    assert set(out[1.0]) == set(out[2.0]) and len(out[1.0]) == 2
+    for name, v in out[1.0].items():
+        assert out[2.0][name] == pytest.approx(v, rel=1e-12, abs=1e-14), name
+    # the strike-front bound (the strike rows of a walked design)
+    lo = {}
+    for r in (red, red2):
+        r.evaluate(_design(r.tr))
+        lo[r is red2] = {r._lo[i] for i, name in enumerate(r.names)
+                         if name.startswith("strike_front")}
+    assert lo[False] == {tr.st.strike_front_min}
+    assert lo[True] == {2 * tr.st.strike_front_min}
+
+
 @pytest.mark.parametrize("argv, msg", [
     (["m1", "--robust", "--method", "search", "--gait", "g.json"], "--gait with --robust"),
     (["m1", "--robust", "--scheduler", "tcp://127.0.0.1:1", "--workers", "2"], "--workers"),

@@ -190,3 +190,57 @@ def test_codesign_lengths_scale_and_rabbit_keeps_the_constants(model, model3, do
         2 * CLEARANCE_MARGIN
     given = CodesignSettings(move=MoveSettings(clearance_margin=0.003))
     assert given.for_model(doubled).move.clearance_margin == 0.003
+
+
+def test_codesign_margins_follow_the_robot(model, model3, doubled):
+    """The co-design's strike-front margin, mid-step clearance and lift-off row scale:
+    RABBIT's old constants exactly, twice on RABBIT with every length doubled, the leg
+    scale on the three-link biped; the torque limit the robot's own; given values kept."""
+    import dataclasses
+    from analysis.design.codesign.functions import (CLEARANCE_MID, LIFT_SCALE,
+                                                    STRIKE_FRONT_MIN, TranscriptionSettings)
+    lengths = ("strike_front_min", "clearance_mid", "lift_scale", "clearance_scale")
+    blank = TranscriptionSettings()
+    assert all(getattr(blank, n) is None for n in lengths + ("torque_limit",))
+    r = blank.for_model(model)
+    assert (r.strike_front_min, r.clearance_mid, r.lift_scale, r.torque_limit) == \
+        (STRIKE_FRONT_MIN, CLEARANCE_MID, LIFT_SCALE, model.description.torque_limit)
+    assert (STRIKE_FRONT_MIN, CLEARANCE_MID, LIFT_SCALE) == (0.02, 0.001, 0.3)
+    assert model.description.torque_limit == 150.0
+    d = blank.for_model(doubled)
+    for n in lengths:
+        assert getattr(d, n) == 2 * getattr(r, n), n
+    k = leg_scale(model3)
+    t = blank.for_model(model3)
+    for n in lengths:
+        assert getattr(t, n) == pytest.approx(k * getattr(r, n), rel=1e-15), n
+    # the fields that are not lengths stay as they are
+    others = [f.name for f in dataclasses.fields(TranscriptionSettings)
+              if f.name not in lengths + ("torque_limit",)]
+    assert all(getattr(d, n) == getattr(r, n) for n in others)
+    # the robot's own torque limit, unless one is given
+    weak = BipedModel(dataclasses.replace(model.description, torque_limit=40.0))
+    assert blank.for_model(weak).torque_limit == 40.0
+    assert TranscriptionSettings(torque_limit=90.0).for_model(weak).torque_limit == 90.0
+    given = TranscriptionSettings(strike_front_min=0.01, clearance_mid=0.0, lift_scale=0.5)
+    g = given.for_model(doubled)
+    assert (g.strike_front_min, g.clearance_mid, g.lift_scale) == (0.01, 0.0, 0.5)
+    assert g.clearance_scale == d.clearance_scale
+    # filled settings are filled: a second call changes nothing
+    assert d.for_model(model) == d
+
+
+def test_codesign_records_the_clearance_it_used(model, doubled):
+    """The co-design's settings, filled for the robot, record the robust gait's clearance
+    as used (doubled robot: twice ROBUST_GAIT's), RABBIT's exactly ROBUST_GAIT; a plain
+    dict stays as given."""
+    assert json.dumps(CodesignSettings().for_model(model).to_dict()["gait"]) == \
+        json.dumps(ROBUST_GAIT)
+    rec = CodesignSettings().for_model(doubled).to_dict()["gait"]
+    assert rec == gait_fields(CodesignSettings().gait, doubled)
+    assert rec["clearance"] == 2 * ROBUST_GAIT["clearance"]
+    plain = CodesignSettings(gait=dict(ROBUST_GAIT)).for_model(doubled)
+    assert plain.to_dict()["gait"] == ROBUST_GAIT
+    # filling twice is filling once
+    once = CodesignSettings().for_model(doubled)
+    assert once.for_model(doubled).to_dict() == once.to_dict()
