@@ -389,7 +389,7 @@ CASES = [
     # contacts the check tried were 1.5e300 and 2e300 s)
     (["mujoco", *G, "--solref", "soft"], "--solref: a time constant in seconds or 'auto'"),
     (["mujoco", *G, "--solref", "0.003"], "--solref must be at least two time steps"),
-    (["mujoco", *G, "--solref", "auto", "--timestep", "0.01", "--contact", "stiff"],
+    (["mujoco", *G, "--solref", "0.004", "--timestep", "0.01", "--contact", "stiff"],
      "--solref must be at least two time steps"),
     (["mujoco", *G, "--solref", "-0.01"], "--solref must be a positive time constant"),
     (["mujoco", *G, "--solref", "nan"], "--solref must be a positive time constant"),

@@ -381,3 +381,20 @@ def test_design_settings_defaults_unchanged():
     assert type(RobustDesignSettings(samples=np.int64(5)).samples) is int
     assert RobustDesignSettings(eigen_bound=0.9).eigen_bound == 0.9
     assert CodesignSettings(rejoin_choices=[0.5, 0.75]).rejoin_choices == (0.5, 0.75)
+
+
+@pytest.mark.parametrize("fields, words", [
+    ({"bogus": 1}, ["no field 'bogus'", "strike_front_min"]),
+    ({"torque_limit": 40.0}, ["torque_limit is the verification's"]),
+    ({"mu": 0.4}, ["mu is the verification's"]),
+])
+def test_transcription_fields_the_codesign_cannot_take_are_named(fields, words):
+    """A ``transcription`` field TranscriptionSettings does not have, or one the
+    verification sets (its friction and torque limit), is refused when the settings are
+    made (it used to reach the co-design as a duplicate keyword); a known field passes."""
+    from analysis.design.codesign.settings import CodesignSettings
+    with pytest.raises(ValueError) as e:
+        CodesignSettings(transcription=fields)
+    assert all(w in str(e.value) for w in words), str(e.value)
+    assert CodesignSettings(transcription={"strike_front_min": 0.01}).transcription == {
+        "strike_front_min": 0.01}

@@ -260,6 +260,25 @@ class MoveSettings:
         return dataclasses.replace(self, clearance_margin=CLEARANCE_MARGIN * leg_scale(model))
 
 
+def _check_transcription(fields) -> None:
+    """ValueError naming a ``transcription`` field the co-design cannot take: one
+    :class:`~analysis.design.codesign.functions.TranscriptionSettings` does not have, or
+    ``mu`` / ``torque_limit``, which the verification sets."""
+    from .functions import TranscriptionSettings
+    if not isinstance(fields, dict):
+        raise ValueError(f"transcription must be a dict of TranscriptionSettings fields, got "
+                         f"{type(fields).__name__}")
+    known = {f.name for f in dataclasses.fields(TranscriptionSettings)}
+    unknown = sorted(set(fields) - known)
+    if unknown:
+        raise ValueError(f"transcription: no field {unknown[0]!r} (TranscriptionSettings has "
+                         f"{', '.join(sorted(known - {'mu', 'torque_limit'}))})")
+    for name in ("mu", "torque_limit"):
+        if name in fields:
+            raise ValueError(f"transcription: {name} is the verification's "
+                             f"(Verification({name}=...)): the transcription keeps it equal")
+
+
 @dataclass(frozen=True)
 class CodesignSettings:
     """The co-design of :func:`codesign` (module docstring); all have defaults.
@@ -376,6 +395,7 @@ class CodesignSettings:
         if self.given_gait not in GIVEN_GAIT:
             raise ValueError(f"given_gait must be one of {GIVEN_GAIT}, got "
                              f"{self.given_gait!r}")
+        _check_transcription(self.transcription)
 
     def for_model(self, model) -> "CodesignSettings":
         """These settings with the robot's defaults filled in.
