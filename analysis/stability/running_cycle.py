@@ -9,7 +9,7 @@ of a :class:`~biped_casadi.control.running.RunningController`:
   t the time since landing; guard the normal ground force Fz of ``takeoff_guard``
   (takeoff where it reaches 0 going down); constraints the friction cone
   mu Fz -/+ Fx >= 0 (with a slack near takeoff, below), the swing foot above the
-  ground and, without saturation, |u| <= the torque limit; reset ``takeoff``;
+  ground and, without saturation, ``|u|`` <= the torque limit; reset ``takeoff``;
 - flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff;
   guard the swing foot's height (landing where it reaches 0 going down); constraints
   the other foot (the one that pushed off) above the ground and the torque limit;
@@ -23,9 +23,9 @@ polynomial reference fall on RK4 nodes.
 
 Friction near takeoff.  Fz and Fx reach zero together only on the optimised orbit;
 off it (and at the closed loop's fixed point, which is not the collocation's) Fx is a
-little off zero where Fz vanishes, and mu Fz - |Fx| turns negative in the last instant
+little off zero where Fz vanishes, and mu Fz - ``|Fx|`` turns negative in the last instant
 before the foot leaves.  The cone constraints carry a slack ``friction_slack`` (N): the
-excess |Fx| - mu Fz may reach it (default 1 % of the robot's weight, the margin of
+excess ``|Fx|`` - mu Fz may reach it (default 1 % of the robot's weight, the margin of
 :func:`gait_opt.running_checks.check_running` between the collocation points).
 
 :func:`running_stability` finds the fixed point near the gait's first stance state
@@ -70,10 +70,17 @@ def _start(n: int, gains) -> ca.Function:
 
 
 class RunningCycle(HybridCycle):
-    """The running stride map of :func:`running_cycle`: a
-    :class:`~analysis.stability.hybrid_cycle.HybridCycle` whose domains take the gains
+    """The running stride map of :func:`running_cycle`, retunable.
+
+    A :class:`~analysis.stability.hybrid_cycle.HybridCycle` whose domains take the gains
     k = (Kp, Kd, M1) as their parameters p, so that :meth:`retuned` changes them without
     building the domains' Functions again.
+
+    Parameters
+    ----------
+    domains : sequence of Domain
+        Stance and flight, as :func:`running_cycle` builds them (it also sets the
+        attributes below).
 
     Attributes
     ----------
@@ -126,7 +133,7 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     steps_per_interval : int
         RK4 steps per collocation interval of each phase.
     friction_slack : float, optional
-        How far |Fx| may exceed mu Fz in stance, N (default 1 % of the weight).
+        How far ``|Fx|`` may exceed mu Fz in stance, N (default 1 % of the weight).
     time_limits : float
         Each phase must end within this many times its reference duration.
     tolerance : float
@@ -212,22 +219,22 @@ class RunningStability(Result):
     fixed_point : numpy.ndarray
         (2 nq,) x* = (q, dq) at landing, P(x*) = x*.
     residual : float
-        max |P(x*) - x*|.
+        max ``|P(x*) - x*|``.
     distance : float
-        max |x* - x_collocated(0)|, the gap between the closed loop's orbit (RK4 of the
+        max ``|x* - x_collocated(0)|``, the gap between the closed loop's orbit (RK4 of the
         exact dynamics) and the collocated one (rad, rad/s: the largest entry).
     A : numpy.ndarray
         (2 nq, 2 nq) the exact Jacobian dP/dx at x*.
     eigenvalues : numpy.ndarray
         Of A, by decreasing modulus.
     spectral_radius : float
-        max |eigenvalue|.
+        max ``|eigenvalue|``.
     durations : numpy.ndarray
         (stance, flight) at x*, s.
     stable : bool
         spectral radius < 1.
     newton_start_residual : float
-        max |P(x0) - x0| at the collocated start.
+        max ``|P(x0) - x0|`` at the collocated start.
     status, message : str
         'stable', 'unstable', or 'failed' (no fixed point found; message says why).
     """
@@ -249,8 +256,9 @@ class RunningStability(Result):
 
 def running_stability(cycle: HybridCycle, x0=None, tol: float = 1e-11,
                       max_iter: int = 12) -> RunningStability:
-    """The fixed point of the running stride map near the gait's first stance state,
-    with the eigenvalues of its exact Jacobian.
+    """The fixed point of the running stride map and the eigenvalues of its Jacobian.
+
+    Newton with the exact Jacobian from the gait's first stance state.
 
     Parameters
     ----------
@@ -326,25 +334,25 @@ class StrideRecord:
     Parameters
     ----------
     deviation : float
-        max |x_k - x*| at the stride's start (landing).
+        max ``|x_k - x*|`` at the stride's start (landing).
     next_deviation : float
-        max |x_(k+1) - x*| after it.
+        max ``|x_(k+1) - x*|`` after it.
     durations : tuple of float
         (stance, flight), s.
     fz_min : float
         Smallest normal force at the stance RK4 nodes before the takeoff crossing, N.
     friction_ratio_max : float
-        Largest |Fx| / Fz at the stance nodes where Fz > 1 % of the weight.
+        Largest ``|Fx|`` / Fz at the stance nodes where Fz > 1 % of the weight.
     friction_excess_max : float
-        Largest |Fx| - mu Fz at the stance nodes and the crossing, N (<= 0: in the cone).
+        Largest ``|Fx|`` - mu Fz at the stance nodes and the crossing, N (<= 0: in the cone).
     torque_max : float
-        Largest |u| the law asked for in both phases, N m.
+        Largest ``|u|`` the law asked for in both phases, N m.
     swing_min : float
         Lowest swing-foot height in stance, m.
     other_foot_min : float
         Lowest height of the pushing foot in flight, m.
     landing_impulse_ratio : float
-        |Fx| / Fz of the landing impulse.
+        ``|Fx|`` / Fz of the landing impulse.
     """
 
     deviation: float
@@ -372,7 +380,7 @@ class RunningRun(Result):
     strides : list of StrideRecord
         Each completed stride.
     deviations : numpy.ndarray
-        max |x_k - x*|, k = 0 .. completed strides.
+        max ``|x_k - x*|``, k = 0 .. completed strides.
     contraction : numpy.ndarray
         deviations[k + 1] / deviations[k].
     status, message : str
@@ -420,8 +428,9 @@ def _margins(cycle: HybridCycle, passes) -> dict:
 
 
 def simulate_running(cycle: HybridCycle, x_star, start, strides: int = 20) -> RunningRun:
-    """Iterate the stride map from ``start``: each stride's deviation from x* and the
-    margins of its constraints; stop at the first stride the robot cannot run.
+    """Iterate the stride map from ``start``, stopping at the first invalid stride.
+
+    Records each stride's deviation from x* and the margins of its constraints.
 
     Parameters
     ----------

@@ -37,13 +37,14 @@ extended coordinates; the base is not an output).  Two laws:
 
 Torques are saturated at the model's limit, as the walking simulator does with
 ``SimulationOptions(saturate=True)``, when ``saturate`` is set; otherwise the closed
-loop that uses this controller treats |u| > limit as a violation
+loop that uses this controller treats ``|u|`` > limit as a violation
 (:mod:`analysis.stability.running_cycle`).
 
 This module is in the bottom layer: it imports nothing from :mod:`gait_opt`.
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import casadi as ca
@@ -234,9 +235,34 @@ class RunningController:
     """
 
     def __init__(self, model, gait, Kp=400.0, Kd=30.0, M1=None, law: str = "pd",
-                 saturate: bool = False, torque_limit: float | None = None, _shared=None):
-        nq, nu = model.nq, model.nu
-        self.model, self.gait = model, gait
+                 saturate: bool = False, torque_limit: float | None = None):
+        missing = [f for f in _FIELDS if not hasattr(gait, f)]
+        if missing:
+            raise TypeError(f"a running gait is needed (fields {', '.join(missing)} "
+                            f"missing): gait_opt.running.optimize_running or RunningGait.load")
+        if law not in LAWS:
+            raise ValueError(f"law must be one of {', '.join(LAWS)}, got {law!r}")
+        nq = model.nq
+        self.model, self.gait, self.law = model, gait, law
+        lim = float(model.description.torque_limit if torque_limit is None else torque_limit)
+        if not (math.isfinite(lim) and lim > 0):
+            raise ValueError(f"torque_limit must be a positive number, got {torque_limit!r}")
+        self.torque_limit, self.saturate = lim, bool(saturate)
+        fl = flight_model(model)
+        self.fl = fl
+        Fs = phase_derivatives(model, "stance", gait.x_stance, gait.u_stance)
+        Ff = phase_derivatives(model, "flight", gait.x_flight, gait.u_flight)
+        self.stance = PhaseReference("stance", float(gait.T_stance), gait.x_stance, Fs,
+                                     gait.u_stance, nq)
+        self.flight = PhaseReference("flight", float(gait.T_flight), gait.x_flight, Ff,
+                                     gait.u_flight, nq)
+        self.stance_law_k = self._law("stance", nq)
+        self.flight_law_k = self._law("flight", fl.ne)
+        self._set_gains(Kp, Kd, M1)
+
+    def _set_gains(self, Kp, Kd, M1):
+        """Check and keep the gains; the two laws at them."""
+        nq, nu = self.model.nq, self.model.nu
         self.Kp, self.Kd = _gain("Kp", Kp, nu), _gain("Kd", Kd, nu)
         m1 = np.zeros(nu) if M1 is None else np.asarray(M1, float).ravel()
         if m1.size != nu or not np.all(np.isfinite(m1)):
@@ -244,34 +270,6 @@ class RunningController:
         self.M1 = m1
         self.M = np.hstack([m1[:, None], np.eye(nu)])
         self.gains = np.r_[self.Kp, self.Kd, self.M1]
-        if _shared is not None:                  # with_gains: the same law, other gains
-            (self.law, self.torque_limit, self.saturate, self.fl, self.stance, self.flight,
-             self.stance_law_k, self.flight_law_k) = _shared
-        else:
-            missing = [f for f in _FIELDS if not hasattr(gait, f)]
-            if missing:
-                raise TypeError(f"a running gait is needed (fields {', '.join(missing)} "
-                                f"missing): gait_opt.running.optimize_running or "
-                                f"RunningGait.load")
-            if law not in LAWS:
-                raise ValueError(f"law must be one of {', '.join(LAWS)}, got {law!r}")
-            self.law = law
-            lim = float(model.description.torque_limit if torque_limit is None
-                        else torque_limit)
-            if not (math.isfinite(lim) and lim > 0):
-                raise ValueError(f"torque_limit must be a positive number, "
-                                 f"got {torque_limit!r}")
-            self.torque_limit, self.saturate = lim, bool(saturate)
-            fl = flight_model(model)
-            self.fl = fl
-            Fs = phase_derivatives(model, "stance", gait.x_stance, gait.u_stance)
-            Ff = phase_derivatives(model, "flight", gait.x_flight, gait.u_flight)
-            self.stance = PhaseReference("stance", float(gait.T_stance), gait.x_stance, Fs,
-                                         gait.u_stance, nq)
-            self.flight = PhaseReference("flight", float(gait.T_flight), gait.x_flight, Ff,
-                                         gait.u_flight, nq)
-            self.stance_law_k = self._law("stance", nq)
-            self.flight_law_k = self._law("flight", fl.ne)
         k = ca.DM(self.gains)
         for phase, n in (("stance", nq), ("flight", self.fl.ne)):
             q, dq, t = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("t")
@@ -284,8 +282,9 @@ class RunningController:
                 f"M1={self.M1.tolist()})")
 
     def with_gains(self, Kp=None, Kd=None, M1=None) -> "RunningController":
-        """The same law and reference with other gains (nothing rebuilt but the two small
-        Functions at the gains).
+        """The same law and reference with other gains.
+
+        Nothing is rebuilt but the two small Functions at the gains.
 
         Parameters
         ----------
@@ -296,11 +295,10 @@ class RunningController:
         -------
         RunningController
         """
-        return RunningController(
-            self.model, self.gait, self.Kp if Kp is None else Kp,
-            self.Kd if Kd is None else Kd, self.M1 if M1 is None else M1,
-            _shared=(self.law, self.torque_limit, self.saturate, self.fl, self.stance,
-                     self.flight, self.stance_law_k, self.flight_law_k))
+        new = copy.copy(self)
+        new._set_gains(self.Kp if Kp is None else Kp, self.Kd if Kd is None else Kd,
+                       self.M1 if M1 is None else M1)
+        return new
 
     def _law(self, phase: str, n: int) -> ca.Function:
         """u(q, dq, t, k) of a phase, k = (Kp, Kd, M1)."""
