@@ -203,3 +203,17 @@ def test_command_line_names_a_bad_gait_file(tmp_path, capsys):
     assert main(["running", "--gait", str(p)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and str(p) in err
+
+
+def test_stability_figure_is_labelled():
+    from analysis.reporting.plots import running_stability_plot
+    c = np.linspace(0.5, 1.5, 5)
+    r = np.array([3.0, 1.2, 0.4, 0.9, np.nan])
+    fig = running_stability_plot("RABBIT", 1.5, {"PD, Kp 400": (c, r)},
+                                 {"M1[2]": (c, 2 * r)}, "PD")
+    assert "RABBIT" in fig._suptitle.get_text() and "1.5 m/s" in fig._suptitle.get_text()
+    for ax in fig.axes:
+        assert "[" in ax.get_xlabel() and "spectral radius" in ax.get_ylabel()
+        assert ax.get_yscale() == "log"
+        assert any(t.get_text() == "spectral radius 1" for t in ax.get_legend().get_texts())
+    assert len(fig.axes[0].get_lines()) == 2      # the family and the line at 1

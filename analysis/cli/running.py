@@ -30,16 +30,17 @@ COARSE = 1e-3
 
 def register(sub):
     p = sub.add_parser(
-        "running", help="optimise a periodic running step (stance + flight; no controller "
-                        "yet)",
+        "running", help="optimise a periodic running step (stance + flight) and, with "
+                        "--stability, the stability of its tracking controller",
         description="Optimise one periodic running step of a robot with legs of two links "
                     "(RABBIT by default): single support, takeoff where the ground's normal "
                     "force reaches zero, flight, the swing foot's landing with the legs "
                     "relabelled (Hermite-Simpson collocation on both phases + IPOPT), then "
                     "measure it outside the NLP: the phases integrated by an ODE solver, "
                     "the step map through the exact takeoff and landing, the ground force "
-                    "and the feet on a dense grid.  An open-loop reference: no controller "
-                    "tracks it yet.")
+                    "and the feet on a dense grid.  With --stability (or --gait FILE), track "
+                    "it with a controller in stance and flight and give the stride map's "
+                    "fixed point, exact eigenvalues and a perturbed run.")
     p.add_argument("--speed", type=float, default=1.5, metavar="V",
                    help="average speed, m/s (default 1.5)")
     p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
@@ -270,8 +271,8 @@ def _print_stability(s: dict):
 def _print(s: dict, gait, limit: float):
     """``biped running``'s report."""
     c = s["checks"]
-    print(f"running step of {s['robot']}, saved to {s['file']} (open loop: no controller "
-          "tracks it yet)")
+    print(f"running step of {s['robot']}, saved to {s['file']} (the checks below are open "
+          "loop; --stability closes it)")
     print(f"  stance / flight      {s['T_stance']:.4f} s / {s['T_flight']:.4f} s")
     print(f"  step length          {s['step_length']:.4f} m at {s['speed']:.4f} m/s")
     print(f"  cost                 {s['cost']:.1f} N^2 m s (int u'u dt / step length)")
