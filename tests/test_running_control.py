@@ -188,7 +188,8 @@ def test_command_line_stability(gait_file, stable, capsys):
 @pytest.mark.parametrize("args, words", [
     (["--kp", "-5"], "--kp"), (["--kd", "nan"], "--kd"), (["--m1", "1", "2"], "--m1"),
     (["--steps", "-1"], "--steps"), (["--perturb", "inf"], "--perturb"),
-    (["--m1", "0", "inf", "0", "0"], "--m1")])
+    (["--m1", "0", "inf", "0", "0"], "--m1"), (["--speed", "2"], "--speed"),
+    (["--plot", "figs"], "--plot")])
 def test_command_line_refuses_bad_gains(gait_file, capsys, args, words):
     from analysis.cli import main
     assert main(["running", "--gait", gait_file, *args]) == 2
@@ -217,3 +218,32 @@ def test_stability_figure_is_labelled():
         assert ax.get_yscale() == "log"
         assert any(t.get_text() == "spectral radius 1" for t in ax.get_legend().get_texts())
     assert len(fig.axes[0].get_lines()) == 2      # the family and the line at 1
+
+
+def test_saturation_clips_at_the_limit(model, run_gait, cycle):
+    import casadi as ca
+    c = RunningController(model, run_gait, KP, KD, M1=STABLE_M1, saturate=True,
+                          torque_limit=50.0)
+    u = np.array([-80.0, -20.0, 49.0, 120.0])
+    assert np.array_equal(np.array(c.applied(ca.DM(u))).ravel(), [-50.0, -20.0, 49.0, 50.0])
+    # without saturation the torques pass, and the limit is the model's
+    assert cycle.controller.torque_limit == model.description.torque_limit
+    assert np.array_equal(np.array(cycle.controller.applied(ca.DM(u))).ravel(), u)
+    with pytest.raises(ValueError, match="torque_limit"):
+        RunningController(model, run_gait, torque_limit=-1.0)
+
+
+@pytest.mark.slow
+def test_the_how_to_example_runs(tmp_path, monkeypatch):
+    """The closed-loop example of docs/howto/running.md as written there (its asserts
+    included), after the page's first example, which saves the step it loads."""
+    from pathlib import Path
+    page = Path(__file__).resolve().parents[1] / "docs" / "howto" / "running.md"
+    blocks = [b.split("```", 1)[0] for b in page.read_text().split("```python\n")[1:]]
+    (first,) = [b for b in blocks if "optimize_running(" in b]
+    (block,) = [b for b in blocks if "running_cycle(" in b]
+    monkeypatch.chdir(tmp_path)
+    exec(compile(first, str(page), "exec"), {})
+    space = {}
+    exec(compile(block, str(page), "exec"), space)
+    assert space["r"].stable and np.allclose(space["J"], space["r"].A, rtol=0, atol=1e-5)

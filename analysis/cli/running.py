@@ -167,6 +167,16 @@ def cmd_running(args):
 
 def _stability_of_file(args):
     """``--gait FILE``: the closed loop of a saved step."""
+    given = [opt for opt, dest, default in (
+        ("--speed", "speed", 1.5), ("--mu", "mu", 0.6), ("--torque-limit", "torque_limit", None),
+        ("--intervals", "intervals", (16, 10)), ("--max-iter", "max_iter", None),
+        ("--out", "out", "running.json"), ("--plot", "plot", None))
+        if (tuple(getattr(args, dest)) if dest == "intervals" else getattr(args, dest))
+        != default]
+    if given:
+        raise UserError(f"--gait analyses a saved step; {', '.join(given)} "
+                        f"{'is' if len(given) == 1 else 'are'} for optimising one (leave "
+                        "--gait out for that)")
     if args.robot is not None and not str(args.robot).strip():
         raise UserError("--robot: empty name (leave the option out for the default)")
     if not str(args.gait).strip():
