@@ -295,8 +295,9 @@ def running_stability(cycle: HybridCycle, x0=None, tol: float = 1e-11,
         eigenvalues=lin.eigenvalues, spectral_radius=rho, durations=lin.durations,
         stable=bool(rho < 1), newton_start_residual=r0,
         status=status if ok else "failed",
-        message=(f"fixed point {lin.residual:.1e} from closing, {np.max(np.abs(lin.state - xc)):.1e} "
-                 f"from the collocated state; spectral radius {rho:.4g}" if ok else
+        message=(f"fixed point {lin.residual:.1e} from closing, "
+                 f"{np.max(np.abs(lin.state - xc)):.1e} from the collocated state; "
+                 f"spectral radius {rho:.4g}" if ok else
                  f"Newton did not close the orbit (residual {lin.residual:.1e})"))
 
 
