@@ -7,9 +7,11 @@ of a :class:`~biped_casadi.control.running.RunningController`:
 - stance: x = (q, dq) (2 nq numbers, the stride map's state), the robot's
   ``forward_dynamics`` under the law's torques (clipped when the controller saturates),
   t the time since landing; guard the normal ground force Fz of ``takeoff_guard``
-  (takeoff where it reaches 0 going down); constraints the friction cone
-  mu Fz -/+ Fx >= 0 (with a slack near takeoff, below), the swing foot above the
-  ground and, without saturation, ``|u|`` <= the torque limit; reset ``takeoff``;
+  (takeoff where it reaches 0 going down); constraints Fz >= 0 (from landing on: a
+  landing the foot cannot stay on is refused at once; at the crossing Fz is 0 to
+  round-off), the friction cone mu Fz -/+ Fx >= 0 (with a slack near takeoff, below),
+  the swing foot above the ground and, without saturation, ``|u|`` <= the torque limit;
+  reset ``takeoff``;
 - flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff;
   guard the swing foot's height (landing where it reaches 0 going down); constraints
   the other foot (the one that pushed off) above the ground and the torque limit;
@@ -169,8 +171,9 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     Fz, Fx = fl.takeoff_guard(q, dq, ua)
     g_st = ca.Function("normal_force", [X, t, k], [Fz])
     cons, names = _phase_constraints(
-        c, u, ca.vertcat(mu * Fz - Fx + slack, mu * Fz + Fx + slack, m.swing_foot(q)[1]),
-        ("friction cone (Fx <= mu Fz)", "friction cone (-Fx <= mu Fz)", "swing foot height"))
+        c, u, ca.vertcat(Fz, mu * Fz - Fx + slack, mu * Fz + Fx + slack, m.swing_foot(q)[1]),
+        ("stance normal force", "friction cone (Fx <= mu Fz)", "friction cone (-Fx <= mu Fz)",
+         "swing foot height"))
     c_st = ca.Function("stance_constraints", [X, t, k], [cons])
     x = ca.SX.sym("x", 2 * nq)
     qe0, dqe0 = fl.takeoff(x[:nq], x[nq:])
