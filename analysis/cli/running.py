@@ -1,18 +1,27 @@
 """``biped running``: optimise one periodic running step (stance, takeoff, flight,
-landing), check it outside the NLP, save it and optionally draw it.  A first step
-toward running (docs: how-to "Prepare a second domain"); every computation is in
-``gait_opt.running`` and ``gait_opt.running_checks``."""
+landing), check it outside the NLP, save it and optionally draw it; with
+``--stability``, close the loop with the tracking controller and give the stride map's
+fixed point, its exact eigenvalues and a perturbed run (docs: how-to "Prepare a second
+domain"); every computation is in ``gait_opt.running``, ``gait_opt.running_checks``,
+``biped_casadi.control.running`` and ``analysis.stability.running_cycle``."""
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from analysis.reporting.plots import running_plot, save_figures
-from gait_opt.running import RunningOptions, optimize_running
+from gait_opt.running import RunningGait, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
 
 from .common import Progress, UserError, add_robot, load_model, output_dir, output_file, \
     print_json
 
+
+#: the stability analysis's default design: PD gains and the output's column on q1 that
+#: make RABBIT's 1.5 m/s running gait stable (docs: how-to running, "Closing the loop")
+DEFAULT_KP, DEFAULT_KD = 400.0, 30.0
+DEFAULT_M1 = (0.0, 0.95, 0.95, 0.0)
 
 #: a phase's integration departing from its collocation by more than this (the largest
 #: entry, rad or rad/s) is said on a note line: the grid is coarse for that robot
@@ -21,16 +30,17 @@ COARSE = 1e-3
 
 def register(sub):
     p = sub.add_parser(
-        "running", help="optimise a periodic running step (stance + flight; no controller "
-                        "yet)",
+        "running", help="optimise a periodic running step (stance + flight) and, with "
+                        "--stability, the stability of its tracking controller",
         description="Optimise one periodic running step of a robot with legs of two links "
                     "(RABBIT by default): single support, takeoff where the ground's normal "
                     "force reaches zero, flight, the swing foot's landing with the legs "
                     "relabelled (Hermite-Simpson collocation on both phases + IPOPT), then "
                     "measure it outside the NLP: the phases integrated by an ODE solver, "
                     "the step map through the exact takeoff and landing, the ground force "
-                    "and the feet on a dense grid.  An open-loop reference: no controller "
-                    "tracks it yet.")
+                    "and the feet on a dense grid.  With --stability (or --gait FILE), track "
+                    "it with a controller in stance and flight and give the stride map's "
+                    "fixed point, exact eigenvalues and a perturbed run.")
     p.add_argument("--speed", type=float, default=1.5, metavar="V",
                    help="average speed, m/s (default 1.5)")
     p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
@@ -51,10 +61,56 @@ def register(sub):
     p.add_argument("--plot", metavar="DIR",
                    help="write running_step.png into DIR (poses, joint angles, torques)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    st = p.add_argument_group(
+        "closed loop (--stability)",
+        "track the step with u = u_d(t) + Kp (v_d - v) + Kd (dv_d - dv), v = [M1, I] q, in "
+        "stance and in flight (t restarts in each phase); find the stride map's fixed point "
+        "(landing state), the eigenvalues of its exact Jacobian and run STEPS strides from "
+        "the fixed point with PERTURB added to every velocity")
+    st.add_argument("--stability", action="store_true",
+                    help="analyse the closed loop of the step (optimised, or --gait FILE)")
+    st.add_argument("--gait", metavar="FILE",
+                    help="a running step saved by 'biped running' (no optimisation, nothing "
+                         "written); implies --stability")
+    st.add_argument("--kp", type=float, default=DEFAULT_KP,
+                    help=f"proportional gain, N m/rad (default {DEFAULT_KP:g}; 1/s^2 with "
+                         "--law computed_torque)")
+    st.add_argument("--kd", type=float, default=DEFAULT_KD,
+                    help=f"derivative gain, N m s/rad (default {DEFAULT_KD:g}; 1/s with "
+                         "--law computed_torque)")
+    st.add_argument("--m1", type=float, nargs="+", metavar="M",
+                    help="the output's column on q1, one number per torque (default "
+                         f"{' '.join(f'{v:g}' for v in DEFAULT_M1)}, stable for RABBIT at "
+                         "1.5 m/s; 0 0 0 0 is plain joint tracking)")
+    st.add_argument("--law", choices=("pd", "computed_torque"), default="pd",
+                    help="feedforward + PD (default) or computed torque on the outputs")
+    st.add_argument("--steps", type=int, default=20, metavar="N",
+                    help="strides of the perturbed run (default 20; 0: none)")
+    st.add_argument("--perturb", type=float, default=1e-2, metavar="DQ",
+                    help="added to every velocity of the fixed point, rad/s (default 0.01)")
     p.set_defaults(func=cmd_running)
 
 
+def _check_closed_loop(args):
+    """The closed-loop options (UserError, one line, before any work)."""
+    for name in ("kp", "kd"):
+        v = getattr(args, name)
+        if not (math.isfinite(v) and v >= 0):
+            raise UserError(f"--{name} must be a finite number >= 0, got {v:g}")
+    if args.m1 is not None and not all(math.isfinite(v) for v in args.m1):
+        raise UserError("--m1 values must be finite")
+    if args.steps < 0:
+        raise UserError(f"--steps must be >= 0, got {args.steps}")
+    if not math.isfinite(args.perturb):
+        raise UserError(f"--perturb must be a finite number, got {args.perturb:g}")
+
+
 def cmd_running(args):
+    if args.gait is not None:
+        args.stability = True
+    _check_closed_loop(args)
+    if args.gait is not None:
+        return _stability_of_file(args)
     for name in ("speed", "mu", "torque_limit"):
         v = getattr(args, name)
         if v is not None and not (math.isfinite(v) and v > 0):
@@ -94,6 +150,9 @@ def cmd_running(args):
         f"--intervals {2 * opts.n_stance} {2 * opts.n_flight} cuts that about 16-fold"]
     if folder is not None:
         s["plots"] = save_figures({"running_step": running_plot(model, gait)}, folder)
+    if args.stability:
+        say("closing the loop: fixed point, eigenvalues, perturbed run (about 10 s) ...")
+        s["stability"] = closed_loop(model, gait, args)
     if args.json:
         print_json(s)
         return 0
@@ -101,14 +160,129 @@ def cmd_running(args):
         print(f"reused the running step kept in {gait.solver_stats['cache_file']} (same "
               "robot, options and code; --no-cache solves it again)")
     _print(s, gait, gait.options.limit(model))
+    if args.stability:
+        _print_stability(s["stability"])
     return 0
+
+
+def _stability_of_file(args):
+    """``--gait FILE``: the closed loop of a saved step."""
+    given = [opt for opt, dest, default in (
+        ("--speed", "speed", 1.5), ("--mu", "mu", 0.6), ("--torque-limit", "torque_limit", None),
+        ("--intervals", "intervals", (16, 10)), ("--max-iter", "max_iter", None),
+        ("--out", "out", "running.json"), ("--plot", "plot", None))
+        if (tuple(getattr(args, dest)) if dest == "intervals" else getattr(args, dest))
+        != default]
+    if given:
+        raise UserError(f"--gait analyses a saved step; {', '.join(given)} "
+                        f"{'is' if len(given) == 1 else 'are'} for optimising one (leave "
+                        "--gait out for that)")
+    if args.robot is not None and not str(args.robot).strip():
+        raise UserError("--robot: empty name (leave the option out for the default)")
+    if not str(args.gait).strip():
+        raise UserError("--gait: empty name (leave the option out for the default)")
+    try:
+        gait = RunningGait.load(args.gait)
+    except ValueError as e:
+        raise UserError(f"--gait: {e}") from None
+    model = load_model(args.robot or gait.robot)
+    if model.description.name != gait.robot:
+        raise UserError(f"--gait: {args.gait} is a step of {gait.robot}, not of "
+                        f"{model.description.name}")
+    say = Progress("running", quiet=args.json)
+    say("closing the loop: fixed point, eigenvalues, perturbed run (about 10 s) ...")
+    s = dict(robot=model.params.name, file=str(args.gait), speed=gait.speed,
+             T_stance=gait.T_stance, T_flight=gait.T_flight,
+             stability=closed_loop(model, gait, args))
+    if args.json:
+        print_json(s)
+    else:
+        print(f"running step of {s['robot']} from {s['file']}: {gait.speed:.4f} m/s, stance "
+              f"{gait.T_stance:.4f} s, flight {gait.T_flight:.4f} s")
+        _print_stability(s["stability"])
+    return 0
+
+
+def closed_loop(model, gait, args) -> dict:
+    """The stride map of ``gait`` under the tracking controller of ``args``: fixed point,
+    eigenvalues, perturbed run, as a dict (the ``stability`` field of ``--json``)."""
+    from biped_casadi.control.running import RunningController
+    from analysis.stability.running_cycle import (running_cycle, running_stability,
+                                                  simulate_running)
+    M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
+    if len(M1) != model.nu:
+        raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
+                        f"got {len(M1)}")
+    c = RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law)
+    cyc = running_cycle(c)
+    r = running_stability(cyc)
+    out = dict(law=args.law, Kp=args.kp, Kd=args.kd, M1=list(M1), status=r.status,
+               message=r.message, stable=r.stable,
+               fixed_point=r.fixed_point.tolist(), fixed_point_residual=r.residual,
+               fixed_point_distance=r.distance, spectral_radius=r.spectral_radius,
+               eigenvalues=[[float(e.real), float(e.imag)] for e in r.eigenvalues],
+               eigenvalue_moduli=np.abs(r.eigenvalues).tolist(),
+               durations=r.durations.tolist())
+    if r.status == "failed" or args.steps == 0:
+        out["simulation"] = None
+        return out
+    x = r.fixed_point.copy()
+    x[model.nq:] += args.perturb
+    run = simulate_running(cyc, r.fixed_point, x, args.steps)
+    d = run.deviations
+    n = d.size - 1
+    rate = float((d[-1] / d[1]) ** (1.0 / (n - 1))) if n >= 2 and d[1] > 0 else None
+    margins = {}
+    if run.strides:
+        st = run.strides
+        margins = dict(fz_min=min(s.fz_min for s in st),
+                       friction_ratio_max=max(s.friction_ratio_max for s in st),
+                       friction_excess_max=max(s.friction_excess_max for s in st),
+                       torque_max=max(s.torque_max for s in st),
+                       swing_foot_min=min(s.swing_min for s in st),
+                       landing_impulse_ratio_max=max(s.landing_impulse_ratio for s in st))
+    out["simulation"] = dict(steps=args.steps, perturb=args.perturb, status=run.status,
+                             message=run.message, strides=len(run.strides),
+                             deviations=d.tolist(), contraction=run.contraction.tolist(),
+                             mean_contraction=rate, mu=cyc.mu,
+                             friction_slack=cyc.friction_slack,
+                             torque_limit=c.torque_limit, margins=margins)
+    return out
+
+
+def _print_stability(s: dict):
+    """The closed loop's report."""
+    print(f"closed loop ({s['law']}, Kp {s['Kp']:g}, Kd {s['Kd']:g}, M1 "
+          f"{' '.join(f'{v:g}' for v in s['M1'])}): {s['status']}")
+    if s["status"] == "failed":
+        print(f"  {s['message']}")
+        return
+    print(f"  fixed point          residual {s['fixed_point_residual']:.1e}, "
+          f"{s['fixed_point_distance']:.1e} from the collocated landing state")
+    print(f"  spectral radius      {s['spectral_radius']:.4f} "
+          f"({'stable' if s['stable'] else 'unstable'})")
+    print("  |eigenvalues|        " + " ".join(f"{v:.3g}" for v in s["eigenvalue_moduli"]))
+    sim = s.get("simulation")
+    if not sim:
+        return
+    print(f"  perturbed run        {sim['perturb']:g} rad/s on every velocity: "
+          f"{sim['message']} ({sim['status']})")
+    print("  per-stride contraction " + " ".join(f"{v:.3g}" for v in sim["contraction"]))
+    if sim["mean_contraction"] is not None:
+        print(f"  mean contraction     {sim['mean_contraction']:.4f} per stride after the "
+              f"first (spectral radius {s['spectral_radius']:.4f})")
+    mg = sim["margins"]
+    if mg:
+        print(f"  margins              Fz >= {mg['fz_min']:.3g} N before takeoff; |Fx| - mu Fz "
+              f"<= {mg['friction_excess_max']:.3g} N (slack {sim['friction_slack']:.3g}); "
+              f"|u| <= {mg['torque_max']:.1f} N m (limit {sim['torque_limit']:g})")
 
 
 def _print(s: dict, gait, limit: float):
     """``biped running``'s report."""
     c = s["checks"]
-    print(f"running step of {s['robot']}, saved to {s['file']} (open loop: no controller "
-          "tracks it yet)")
+    print(f"running step of {s['robot']}, saved to {s['file']} (the checks below are open "
+          "loop; --stability closes it)")
     print(f"  stance / flight      {s['T_stance']:.4f} s / {s['T_flight']:.4f} s")
     print(f"  step length          {s['step_length']:.4f} m at {s['speed']:.4f} m/s")
     print(f"  cost                 {s['cost']:.1f} N^2 m s (int u'u dt / step length)")

@@ -16,7 +16,7 @@ from .speed_family import family_designs_plot, gait_family_plot
 from .paper import (conjecture_plot, gait_profiles_plot, gait_stick_plot, m1_plane_plot,
                     one_d_sweeps_plot, stable_domains_plot, swing_torques_plot,
                     unactuated_error_plot)
-from .running import running_plot
+from .running import running_plot, running_stability_plot
 from .speed import speed_jumps_plot, speed_profile_plot
 from .walking import (OUTCOME_COLOURS, basin_plot, mfpt_sigma_plot, survival_plot,
                       tradeoff_plot, walking_animation)
@@ -28,4 +28,4 @@ __all__ = ["COLOUR_NAMES", "STANCE", "SWING", "TORSO", "save_figure", "save_figu
            "tradeoff_plot", "OUTCOME_COLOURS", "survival_plot", "mfpt_sigma_plot",
            "gait_family_plot", "family_designs_plot", "speed_profile_plot",
            "speed_jumps_plot", "mujoco_steps_plot", "mujoco_animation", "mujoco_eigen_plot",
-           "running_plot"]
+           "running_plot", "running_stability_plot"]

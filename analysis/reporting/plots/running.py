@@ -11,7 +11,7 @@ from gait_opt.running_checks import dense
 
 from .common import STANCE, SWING, _figure, _stick
 
-__all__ = ["running_plot"]
+__all__ = ["running_plot", "running_stability_plot"]
 
 
 def _poses(ax, model, gait, frames):
@@ -100,4 +100,48 @@ def running_plot(model, gait, frames: int = 10) -> Figure:
                  f"stance {gait.T_stance:.3f} s + flight {gait.T_flight:.3f} s, "
                  f"step length {gait.step_length:.3f} m", fontsize=10)
     fig.tight_layout()
+    return fig
+
+
+def running_stability_plot(robot: str, speed: float, families: dict, singles: dict | None = None,
+                           single_label: str = "") -> Figure:
+    """The spectral radius of a running gait's stride map against the output's M1.
+
+    Parameters
+    ----------
+    robot : str
+        The robot's name (in the title).
+    speed : float
+        The gait's speed, m/s (in the title).
+    families : dict
+        label -> (c, radius): the spectral radius along M1 = (0, c, c, 0) for one set of
+        gains (the label names them), NaN where no fixed point was found.
+    singles : dict, optional
+        label -> (value, radius): one component of M1 swept alone (a second panel).
+    single_label : str
+        The gains of the second panel, in words.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    panels = 2 if singles else 1
+    fig = _figure(figsize=(5.2 * panels, 4.0), layout="constrained")
+    axes = [fig.add_subplot(1, panels, i + 1) for i in range(panels)]
+    for label, (c, r) in families.items():
+        axes[0].semilogy(c, r, "o-", ms=3, lw=1.4, label=label)
+    axes[0].set_xlabel("c in M1 = (0, c, c, 0), on both hips [rad/rad]")
+    axes[0].set_title("both hips' outputs lean on q1", fontsize=9)
+    if singles:
+        for label, (v, r) in singles.items():
+            axes[1].semilogy(v, r, "o-", ms=3, lw=1.4, label=label)
+        axes[1].set_xlabel("one component of M1, the others 0 [rad/rad]")
+        axes[1].set_title(f"one joint's output leans on q1 ({single_label})", fontsize=9)
+    for ax in axes:
+        ax.axhline(1.0, color="k", ls="--", lw=0.8, label="spectral radius 1")
+        ax.set_ylabel("spectral radius of the stride map [-]")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, loc="upper left")
+    fig.suptitle(f"{robot} running at {speed:g} m/s, tracked in stance and flight: "
+                 "exact stride-map spectral radius (below 1: stable)", fontsize=10)
     return fig

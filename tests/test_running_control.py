@@ -1,0 +1,249 @@
+"""The tracking controller of a running gait (biped_casadi.control.running) and the exact
+stability of its closed loop (analysis.stability.running_cycle, biped running
+--stability).
+
+RABBIT's 1.5 m/s gait is solved once per session on the default grid (about 10 s) and
+its stride map built once (about 5 s); the gains change without a rebuild
+(RunningCycle.retuned).  Every figure is compared with another computation: the
+reference with the gait's own interpolant and the dynamics at the points, the AD
+Jacobian with central differences, the perturbed run's contraction with the spectral
+radius, the command line's numbers with the library's.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from biped_casadi.control.running import RunningController, phase_derivatives
+from gait_opt.running import RunningOptions, hermite_simpson, optimize_running
+from analysis.stability.running_cycle import (finite_difference_jacobian, running_cycle,
+                                              running_stability, simulate_running)
+
+STABLE_M1 = (0.0, 0.95, 0.95, 0.0)     # the design of docs/howto/running.md
+KP, KD = 400.0, 30.0
+
+
+@pytest.fixture(scope="session")
+def run_gait(model):
+    g = optimize_running(model, RunningOptions(speed=1.5))
+    assert g.success
+    return g
+
+
+@pytest.fixture(scope="session")
+def cycle(model, run_gait):
+    return running_cycle(RunningController(model, run_gait, KP, KD, M1=STABLE_M1))
+
+
+@pytest.fixture(scope="session")
+def stable(cycle):
+    return running_stability(cycle)
+
+
+@pytest.fixture(scope="session")
+def gait_file(run_gait, tmp_path_factory):
+    return str(run_gait.save(tmp_path_factory.mktemp("run") / "run15.json"))
+
+
+# ------------------------------------------------------------------ the reference
+@pytest.mark.parametrize("phase", ["stance", "flight"])
+def test_reference_reproduces_the_collocation(model, cycle, run_gait, phase):
+    c = cycle.controller
+    ref = getattr(c, phase)
+    X, U = getattr(run_gait, f"x_{phase}"), getattr(run_gait, f"u_{phase}")
+    F = phase_derivatives(model, phase, X, U)
+    ne, nq = X.shape[0] // 2, model.nq
+    q, dq, ddq, u = ref.sample(ref.t_nodes)
+    # every point, ends and midpoints: states, accelerations f(x, u) and torques
+    assert np.abs(q - X[:nq]).max() < 1e-9
+    assert np.abs(dq - X[ne:ne + nq]).max() < 1e-9
+    assert np.abs(ddq - F[ne:ne + nq]).max() < 1e-8
+    assert np.abs(u - U).max() < 1e-9
+    # between the points: the gait's own Hermite-Simpson interpolant (another code)
+    t = np.linspace(0, ref.duration, 20 * ref.n_intervals + 1)
+    x_hs, u_hs = hermite_simpson(ref.t_nodes, X, F, U, t)
+    q, dq, _, u = ref.sample(t)
+    assert np.abs(q - x_hs[:nq]).max() < 1e-10
+    assert np.abs(dq - x_hs[ne:ne + nq]).max() < 1e-10
+    assert np.abs(u - u_hs).max() < 1e-9
+    # past the end: the last interval's polynomials go on, continuously
+    q_end = np.array(ref.function(ref.duration)[0]).ravel()
+    q_past = np.array(ref.function(ref.duration + 1e-7)[0]).ravel()
+    assert 0 < np.abs(q_past - q_end).max() < 1e-5
+
+
+@pytest.mark.parametrize("law", ["pd", "computed_torque"])
+def test_on_the_reference_the_law_gives_the_gaits_torques(model, cycle, run_gait, law):
+    c = cycle.controller
+    if law != c.law:
+        c = RunningController(model, run_gait, 900.0, 60.0, M1=STABLE_M1, law=law)
+    for phase in ("stance", "flight"):
+        X, U = getattr(run_gait, f"x_{phase}"), getattr(run_gait, f"u_{phase}")
+        ref, f = getattr(c, phase), getattr(c, f"{phase}_law")
+        n = X.shape[0] // 2
+        u = np.array(f.map(X.shape[1])(X[:n], X[n:], ref.t_nodes[None, :]))
+        assert np.abs(u - U).max() < 1e-8, (law, phase)
+        # and off it, the law corrects: a joint behind its reference gets more torque
+        x = X[:, 3].copy()
+        x[2] -= 0.01
+        du = np.array(f(x[:n], x[n:], ref.t_nodes[3])).ravel() - U[:, 3]
+        assert du[1] > 0
+
+
+def test_gains_are_checked(model, run_gait):
+    for kw, word in ((dict(Kp=-1.0), "Kp"), (dict(Kd=np.nan), "Kd"), (dict(M1=[1, 2]), "M1"),
+                     (dict(law="lqr"), "law"), (dict(Kp=[1, 2, 3]), "Kp")):
+        with pytest.raises(ValueError, match=word):
+            RunningController(model, run_gait, **kw)
+    with pytest.raises(TypeError, match="running gait"):
+        RunningController(model, object())
+
+
+# ------------------------------------------------------------------ the stride map
+def test_fixed_point_near_the_collocation(stable, run_gait):
+    assert stable.status == "stable", stable.message
+    assert stable.residual < 1e-10
+    # the closed loop's orbit (RK4 of the exact dynamics) is not the collocated one, but
+    # close: the transcription's and the integration's errors
+    assert 0 < stable.distance < 1e-3
+    assert np.allclose(stable.durations, [run_gait.T_stance, run_gait.T_flight], atol=1e-3)
+    assert stable.spectral_radius == pytest.approx(np.abs(np.linalg.eigvals(stable.A)).max())
+    assert stable.spectral_radius < 1 and stable.stable
+
+
+def test_exact_jacobian_matches_central_differences(cycle, stable):
+    J = finite_difference_jacobian(cycle, stable.fixed_point, 1e-6)
+    rel = np.abs(J - stable.A).max() / np.abs(stable.A).max()
+    assert rel < 1e-6
+    assert np.abs(stable.A).max() > 1e-2          # not a trivial comparison
+
+
+def test_retuned_cycle_is_the_cycle_built_at_those_gains(model, run_gait, cycle, stable):
+    x = stable.fixed_point
+    fresh = running_cycle(RunningController(model, run_gait, 700.0, 45.0, M1=(0, 1, 0.5, 0)))
+    re = cycle.retuned(700.0, 45.0, (0, 1, 0.5, 0))
+    a, b = fresh.linearise(x), re.linearise(x)
+    assert np.array_equal(a.next_state, b.next_state) and np.array_equal(a.A, b.A)
+    assert not np.array_equal(a.A, stable.A)
+    assert np.array_equal(cycle.controller.M1, STABLE_M1)       # the original is unchanged
+
+
+def test_perturbed_run_converges_at_the_spectral_radius(cycle, stable, model):
+    x = stable.fixed_point.copy()
+    x[model.nq:] += 1e-2
+    run = simulate_running(cycle, stable.fixed_point, x, 20)
+    assert run.status == "ok", run.message
+    d = run.deviations
+    assert d.size == 21 and d[-1] < 1e-4 * d[0]
+    # the first stride moves the perturbation onto the map's modes; after it, the
+    # geometric mean of the per-stride contraction is the spectral radius's
+    rate = (d[-1] / d[1]) ** (1 / 19)
+    assert abs(np.log(rate / stable.spectral_radius)) < np.log(1.3)
+    c = cycle.controller
+    for s in run.strides:
+        assert s.fz_min >= -1e-9
+        assert s.friction_excess_max <= cycle.friction_slack
+        assert s.torque_max <= c.torque_limit
+        assert s.landing_impulse_ratio <= cycle.mu
+        assert s.swing_min >= 0 and s.other_foot_min >= -1e-9
+
+
+def test_plain_tracking_is_unstable_and_its_run_diverges(cycle, model):
+    plain = cycle.retuned(M1=np.zeros(model.nu))
+    r = running_stability(plain)
+    assert r.status == "unstable" and r.spectral_radius > 1
+    x = r.fixed_point.copy()
+    x[model.nq:] += 1e-2
+    run = simulate_running(plain, r.fixed_point, x, 20)
+    d = run.deviations
+    assert d.max() > 10 * d[0]
+    # it stops at the first stride the robot cannot run, and says where and why
+    if run.status != "ok":
+        assert run.message.startswith(f"stride {d.size}: domain '")
+        assert "violated" in run.message or "not crossed" in run.message
+
+
+# ------------------------------------------------------------------ command line
+def test_command_line_stability(gait_file, stable, capsys):
+    from analysis.cli import main
+    assert main(["running", "--gait", gait_file, "--steps", "4", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)["stability"]
+    assert s["spectral_radius"] == pytest.approx(stable.spectral_radius, rel=1e-9)
+    assert s["fixed_point_distance"] == pytest.approx(stable.distance, rel=1e-6)
+    assert np.allclose(s["eigenvalue_moduli"], np.abs(stable.eigenvalues), rtol=1e-9)
+    sim = s["simulation"]
+    assert sim["status"] == "ok" and len(sim["contraction"]) == 4
+    d = np.array(sim["deviations"])
+    assert np.allclose(sim["contraction"], d[1:] / d[:-1])
+    # the human report prints the same figures (no second build of the cycle)
+    from analysis.cli.running import _print_stability
+    _print_stability(s)
+    out = capsys.readouterr().out
+    assert f"spectral radius      {stable.spectral_radius:.4f}" in out
+    assert "per-stride contraction " + " ".join(f"{v:.3g}" for v in sim["contraction"]) in out
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--kp", "-5"], "--kp"), (["--kd", "nan"], "--kd"), (["--m1", "1", "2"], "--m1"),
+    (["--steps", "-1"], "--steps"), (["--perturb", "inf"], "--perturb"),
+    (["--m1", "0", "inf", "0", "0"], "--m1"), (["--speed", "2"], "--speed"),
+    (["--plot", "figs"], "--plot")])
+def test_command_line_refuses_bad_gains(gait_file, capsys, args, words):
+    from analysis.cli import main
+    assert main(["running", "--gait", gait_file, *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and words in err and "Traceback" not in err
+
+
+def test_command_line_names_a_bad_gait_file(tmp_path, capsys):
+    from analysis.cli import main
+    p = tmp_path / "walk.json"
+    p.write_text('{"kind": "gait"}')
+    assert main(["running", "--gait", str(p)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(p) in err
+
+
+def test_stability_figure_is_labelled():
+    from analysis.reporting.plots import running_stability_plot
+    c = np.linspace(0.5, 1.5, 5)
+    r = np.array([3.0, 1.2, 0.4, 0.9, np.nan])
+    fig = running_stability_plot("RABBIT", 1.5, {"PD, Kp 400": (c, r)},
+                                 {"M1[2]": (c, 2 * r)}, "PD")
+    assert "RABBIT" in fig._suptitle.get_text() and "1.5 m/s" in fig._suptitle.get_text()
+    for ax in fig.axes:
+        assert "[" in ax.get_xlabel() and "spectral radius" in ax.get_ylabel()
+        assert ax.get_yscale() == "log"
+        assert any(t.get_text() == "spectral radius 1" for t in ax.get_legend().get_texts())
+    assert len(fig.axes[0].get_lines()) == 2      # the family and the line at 1
+
+
+def test_saturation_clips_at_the_limit(model, run_gait, cycle):
+    import casadi as ca
+    c = RunningController(model, run_gait, KP, KD, M1=STABLE_M1, saturate=True,
+                          torque_limit=50.0)
+    u = np.array([-80.0, -20.0, 49.0, 120.0])
+    assert np.array_equal(np.array(c.applied(ca.DM(u))).ravel(), [-50.0, -20.0, 49.0, 50.0])
+    # without saturation the torques pass, and the limit is the model's
+    assert cycle.controller.torque_limit == model.description.torque_limit
+    assert np.array_equal(np.array(cycle.controller.applied(ca.DM(u))).ravel(), u)
+    with pytest.raises(ValueError, match="torque_limit"):
+        RunningController(model, run_gait, torque_limit=-1.0)
+
+
+@pytest.mark.slow
+def test_the_how_to_example_runs(tmp_path, monkeypatch):
+    """The closed-loop example of docs/howto/running.md as written there (its asserts
+    included), after the page's first example, which saves the step it loads."""
+    from pathlib import Path
+    page = Path(__file__).resolve().parents[1] / "docs" / "howto" / "running.md"
+    blocks = [b.split("```", 1)[0] for b in page.read_text().split("```python\n")[1:]]
+    (first,) = [b for b in blocks if "optimize_running(" in b]
+    (block,) = [b for b in blocks if "running_cycle(" in b]
+    monkeypatch.chdir(tmp_path)
+    exec(compile(first, str(page), "exec"), {})
+    space = {}
+    exec(compile(block, str(page), "exec"), space)
+    assert space["r"].stable and np.allclose(space["J"], space["r"].A, rtol=0, atol=1e-5)
