@@ -103,6 +103,8 @@ def _cached(path, model, options):
 
 
 def _store(g, path, reason):
+    """Write a solved gait or running step to its cache file; its ``solver_stats`` say
+    where, or why it could not be written (a read-only cache is not fatal)."""
     note = f"computed ({reason})"
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -17,6 +17,8 @@ from pathlib import Path
 
 from biped_casadi.caching import ResultStore, task_key
 
+from .cache import _store
+
 __all__ = ["running_cache_path", "cached_running"]
 
 #: the kind written into a running-gait file, part of the key (the file format)
@@ -95,15 +97,7 @@ def cached_running(model, options, cache_dir, progress, compute):
         progress(f"optimising a running step of {model.description.name} at "
                  f"{options.speed:g} m/s (about 10 s; kept in {path.parent}) ...")
     g = compute()
-    note = f"computed ({reason})"
     if not g.success:
-        note += "; not kept: it did not converge"
-    else:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            g.save(path)
-            g.solver_stats["cache_file"] = str(path)
-        except OSError as e:      # a read-only cache is not fatal: the step is still valid
-            note += f"; not kept: {e}"
-    g.solver_stats["cache"] = note
-    return g
+        g.solver_stats["cache"] = f"computed ({reason}); not kept: it did not converge"
+        return g
+    return _store(g, path, reason)
