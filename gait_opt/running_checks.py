@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from biped_casadi.control.running import phase_derivatives
 from biped_casadi.model import flight_model
 
 from .running import RunningGait, hermite_simpson
@@ -139,20 +140,14 @@ def phase_rhs(model, phase: str):
     callable
         f(x, u) -> numpy array of x's size (vectorised over columns).
     """
-    fl = flight_model(model)
-    if phase == "stance":
-        n, dyn = model.nq, model.forward_dynamics
-    elif phase == "flight":
-        n, dyn = fl.ne, fl.flight_dynamics
-    else:
+    if phase not in ("stance", "flight"):
         raise ValueError(f"phase must be 'stance' or 'flight', got {phase!r}")
+    n = model.nq if phase == "stance" else flight_model(model).ne
 
     def f(x, u):
         x = np.asarray(x, dtype=float)
-        cols = x.reshape(2 * n, -1)
         u = np.asarray(u, dtype=float).reshape(model.nu, -1)
-        acc = np.array(dyn.map(cols.shape[1])(cols[:n], cols[n:], u))
-        return np.vstack([cols[n:], acc]).reshape(x.shape)
+        return phase_derivatives(model, phase, x.reshape(2 * n, -1), u).reshape(x.shape)
     return f
 
 
