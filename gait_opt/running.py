@@ -47,6 +47,7 @@ from biped_casadi.files import write_text_atomic
 from biped_casadi.model import flight_model
 
 from .options import leg_scale
+from .running_cache import cached_running
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
            "hermite_simpson", "CLEARANCE", "TRAILING_CLEARANCE", "MIN_STEP_LENGTH"]
@@ -631,9 +632,9 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
     """
     opts = (opts or RunningOptions()).for_model(model)
     if cache:
-        from .running_cache import cached_running
         return cached_running(model, opts, cache_dir, progress,
-                              lambda: optimize_running(model, opts, guess, verbose))
+                              lambda: optimize_running(model, opts, guess, verbose),
+                              RunningGait.load)
     if progress is not None:
         progress(f"optimising a running step of {model.description.name} at "
                  f"{opts.speed:g} m/s (about 10 s) ...")

@@ -48,13 +48,12 @@ def running_cache_path(model, options, cache_dir=None) -> Path:
     return ResultStore(cache_dir).path(key, ".running.json")
 
 
-def _kept(path: Path, model, options):
+def _kept(path: Path, model, options, load):
     """(the kept step at ``path``, or None and why not)."""
-    from .running import RunningGait
     if not path.exists():
         return None, "no kept step"
     try:
-        g = RunningGait.load(path)
+        g = load(path)
     except ValueError as e:
         return None, str(e)
     if g.robot != model.description.name:
@@ -66,7 +65,7 @@ def _kept(path: Path, model, options):
     return g, ""
 
 
-def cached_running(model, options, cache_dir, progress, compute):
+def cached_running(model, options, cache_dir, progress, compute, load):
     """The running step of ``options`` from the on-disk cache, or ``compute()`` kept there.
 
     Parameters
@@ -81,6 +80,9 @@ def cached_running(model, options, cache_dir, progress, compute):
         Called with one line before a solve.
     compute : callable
         Solves the step; returns a :class:`RunningGait`.
+    load : callable
+        Reads a kept file (:meth:`RunningGait.load`: this module sits below the one
+        that defines it).
 
     Returns
     -------
@@ -89,7 +91,7 @@ def cached_running(model, options, cache_dir, progress, compute):
         not kept, why); ``solver_stats['cache_file']`` the file.
     """
     path = running_cache_path(model, options, cache_dir)
-    g, reason = _kept(path, model, options)
+    g, reason = _kept(path, model, options, load)
     if g is not None:
         g.solver_stats.update(cache="hit", cache_file=str(path))
         return g

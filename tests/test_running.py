@@ -416,14 +416,14 @@ def test_cache_recomputes_a_damaged_or_foreign_file(tmp_path, model, small):
     path.parent.mkdir(parents=True)
     path.write_text("{broken")
     fresh = lambda: dataclasses.replace(g, solver_stats=dict(g.solver_stats))  # noqa: E731
-    out = cached_running(model, g.options, tmp_path, None, fresh)
+    out = cached_running(model, g.options, tmp_path, None, fresh, RunningGait.load)
     assert out.solver_stats["cache"].startswith("computed (") and "cannot read" in \
         out.solver_stats["cache"]
     assert RunningGait.load(path).cost == g.cost             # replaced by the new one
     dataclasses.replace(g, options=dataclasses.replace(g.options, mu=0.5)).save(path)
-    out = cached_running(model, g.options, tmp_path, None, fresh)
+    out = cached_running(model, g.options, tmp_path, None, fresh, RunningGait.load)
     assert out.solver_stats["cache"] == "computed (made with other options)"
-    assert cached_running(model, g.options, tmp_path, None, fresh).solver_stats["cache"] == "hit"
+    assert cached_running(model, g.options, tmp_path, None, fresh, RunningGait.load).solver_stats["cache"] == "hit"
 
 
 def test_command_line_reuses_a_kept_step(tmp_path, monkeypatch, capsys, model, small):

@@ -11,6 +11,8 @@ import math
 import numpy as np
 
 from analysis.reporting.plots import running_plot, save_figures
+from analysis.stability.running_cycle import running_cycle, running_stability, simulate_running
+from biped_casadi.control.running import RunningController
 from gait_opt.running import RunningGait, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
 
@@ -206,9 +208,6 @@ def _stability_of_file(args):
 def closed_loop(model, gait, args) -> dict:
     """The stride map of ``gait`` under the tracking controller of ``args``: fixed point,
     eigenvalues, perturbed run, as a dict (the ``stability`` field of ``--json``)."""
-    from biped_casadi.control.running import RunningController
-    from analysis.stability.running_cycle import (running_cycle, running_stability,
-                                                  simulate_running)
     M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
     if len(M1) != model.nu:
         raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "

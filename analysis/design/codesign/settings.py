@@ -13,6 +13,7 @@ from ..settings_checks import check_fields, check_gait_fields
 
 from ...robustness.s_star import RobustnessSettings
 from ..robust_search import robust_gait
+from .functions import TranscriptionSettings
 
 #: the sampling search's shipped design on :data:`ROBUST_GAIT` (M1; v_c rejoining at
 #: 0.75 T): s* 0.969, the co-design's first warm start
@@ -264,7 +265,6 @@ def _check_transcription(fields) -> None:
     """ValueError naming a ``transcription`` field the co-design cannot take: one
     :class:`~analysis.design.codesign.functions.TranscriptionSettings` does not have, or
     ``mu`` / ``torque_limit``, which the verification sets."""
-    from .functions import TranscriptionSettings
     if not isinstance(fields, dict):
         raise ValueError(f"transcription must be a dict of TranscriptionSettings fields, got "
                          f"{type(fields).__name__}")
