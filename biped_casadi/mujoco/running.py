@@ -120,7 +120,12 @@ class RunningStride:
     bounce_time: float = 0.0
 
     def to_dict(self) -> dict:
-        """The stride's figures by name."""
+        """The stride's figures by name.
+
+        Returns
+        -------
+        dict
+        """
         return dict(self.__dict__)
 
 
@@ -155,8 +160,10 @@ class MujocoRun(Result):
     wall_time : float
         s.
     t, qpos, qvel, phase : numpy.ndarray
-        The log with ``log=True`` (every MuJoCo state; phase 0 stance, 1 flight; the
-        stance leg is in ``stance_leg``), else empty; not in ``to_dict()``.
+        The log with ``log=True`` (every MuJoCo state; phase 0 stance, 1 flight), else
+        empty; not in ``to_dict()``.
+    stance_leg : numpy.ndarray
+        The stance leg at each logged state (0: a, 1: b).
     """
 
     status: str
@@ -192,8 +199,14 @@ class MujocoRun(Result):
         return np.array([self.start] + [s.landing_state for s in self.strides], float)
 
     def to_dict(self) -> dict:
-        """Plain JSON types; with ``strides_run``, the mean speed and durations and the
-        decay of the deviation (:func:`decay_rate`)."""
+        """Plain JSON types, with the run's summary figures.
+
+        Returns
+        -------
+        dict
+            The fields, ``strides_run``, the mean speed and durations over the last two
+            thirds of the strides and the decay of the deviation (:func:`decay_rate`).
+        """
         d = super().to_dict()
         d["strides_run"] = self.strides_run
         late = self.strides[len(self.strides) // 3:]
@@ -446,18 +459,36 @@ class RunningLoop:
         self.upright = float(model.description.torso_upright)
 
     def gait_record(self) -> dict:
-        """The gait's figures a run is measured against."""
+        """The gait's figures a run is measured against.
+
+        Returns
+        -------
+        dict
+            ``T_stance``, ``T_flight`` (s), ``speed`` (m/s), ``step_length`` (m).
+        """
         return dict(T_stance=self.T_stance, T_flight=self.T_flight,
                     speed=self.step_length / (self.T_stance + self.T_flight),
                     step_length=self.step_length)
 
     def controller_record(self) -> dict:
+        """The controller's law and gains.
+
+        Returns
+        -------
+        dict
+            ``law``, ``Kp``, ``Kd``, ``M1``, ``saturate``.
+        """
         c = self.controller
         return dict(law=c.law, Kp=c.Kp.tolist(), Kd=c.Kd.tolist(), M1=c.M1.tolist(),
                     saturate=c.saturate)
 
     def at(self, **changes) -> "RunningLoop":
         """The same loop with some MuJoCo settings changed (``timestep``, ``solref``, ...).
+
+        Parameters
+        ----------
+        **changes
+            Fields of :class:`~biped_casadi.mujoco.mjcf.ContactSettings` to change.
 
         Returns
         -------
@@ -505,7 +536,17 @@ class RunningLoop:
         return touch, fz
 
     def initial_state(self, x) -> tuple:
-        """MuJoCo's (qpos, qvel) of a stance state: leg a on the floor at x = 0, at rest."""
+        """MuJoCo's (qpos, qvel) of a stance state: leg a on the floor at x = 0, at rest.
+
+        Parameters
+        ----------
+        x : array_like
+            (2 nq,) the toolkit's (q, dq), rad and rad/s.
+
+        Returns
+        -------
+        tuple of numpy.ndarray
+        """
         nq = self.model.nq
         return self.layout.from_toolkit(x[:nq], x[nq:], 0, foot=(0.0, self.settings.foot_radius))
 
