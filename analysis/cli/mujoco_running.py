@@ -7,6 +7,11 @@ import math
 
 import numpy as np
 
+from biped_casadi.control.running import RunningController
+from biped_casadi.mujoco.running import RunningLoop, fit_running_map
+from gait_opt.running import RunningGait
+from analysis.stability.running_cycle import running_cycle, running_stability
+
 from .common import Progress, UserError, add_robot, load_model, print_json
 from .mujoco_options import add_mujoco_settings, mujoco_settings, settings_error
 from .running import DEFAULT_KD, DEFAULT_KP, DEFAULT_M1
@@ -36,10 +41,6 @@ def _check(args):
 
 
 def cmd_mujoco_running(args):
-    from gait_opt.running import RunningGait
-    from biped_casadi.control.running import RunningController
-    from biped_casadi.mujoco.running import RunningLoop, fit_running_map
-
     settings = _check(args)
     say = Progress("mujoco-running", quiet=args.json)
     try:
@@ -58,7 +59,6 @@ def cmd_mujoco_running(args):
     exact = None
     x_star = None
     if args.exact:
-        from analysis.stability.running_cycle import running_cycle, running_stability
         say("the exact stride map: fixed point and eigenvalues (about 20 s) ...")
         st = running_stability(running_cycle(c))
         if st.status == "failed":

@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -54,8 +53,9 @@ from ..control.running import RunningController
 from ..model import flight_model
 from ..model.description import torso_lean
 from ..numerics import FastCall
-from ..results import Result
 from .mjcf import STIFF, ContactSettings, layout, mjcf, torque_limit_of
+from .running_records import (MujocoRun, RunningMapFit, RunningStride, decay_rate,
+                              fit_running_map)
 
 __all__ = ["RUN_OUTCOMES", "RunningLoop", "MujocoRun", "RunningStride", "run_in_mujoco",
            "decay_rate", "fit_running_map", "RunningMapFit"]
@@ -69,299 +69,6 @@ _HALF_PI = math.pi / 2
 def _mujoco():
     import mujoco
     return mujoco
-
-
-@dataclass
-class RunningStride:
-    """One stride in MuJoCo, landing to landing (SI units).
-
-    Parameters
-    ----------
-    index : int
-        0-based.
-    t_landing : float
-        MuJoCo's time at the landing that starts it, s.
-    stance, flight : float
-        The phases' durations, s.
-    step_length : float
-        The landing foot's x less the previous landing foot's, m.
-    speed : float
-        step_length / (stance + flight), m/s.
-    landing_state : list of float
-        The rigid landing map of MuJoCo's state at the stride's closing touchdown: the next
-        stance state (q, dq), as the exact stride map's.
-    deviation : float
-        max ``|landing_state - x*|`` (rad, rad/s).
-    peak_torque : float
-        Largest ``|u|`` commanded over the stride, N m.
-    clipped_time : float
-        Time with a commanded torque beyond the limit (MuJoCo clips it), s.
-    slip : float
-        The stance foot's sliding in the stance, m.
-    fz_max : float
-        Largest normal force on the stance foot, N (MuJoCo's soft landing shows here).
-    bounce_time : float
-        Time the stance foot spent off the floor early in the stance (a bounce off the
-        landing, before ``min_stance`` of the gait's stance), s.
-    """
-
-    index: int
-    t_landing: float
-    stance: float
-    flight: float
-    step_length: float
-    speed: float
-    landing_state: list
-    deviation: float
-    peak_torque: float
-    clipped_time: float
-    slip: float
-    fz_max: float
-    bounce_time: float = 0.0
-
-    def to_dict(self) -> dict:
-        """The stride's figures by name.
-
-        Returns
-        -------
-        dict
-        """
-        return dict(self.__dict__)
-
-
-@dataclass
-class MujocoRun(Result):
-    """A run of the running controller in MuJoCo.
-
-    Parameters
-    ----------
-    status, message : str
-        'ran' or the reason it stopped (:data:`RUN_OUTCOMES`), and a summary line.
-    n_strides : int
-        Strides asked for.
-    strides : list of RunningStride
-        The completed strides.
-    start : list of float
-        The stance state the run started from.
-    fixed_point : list of float
-        x*, the exact map's fixed point the deviations are measured from.
-    deviations : list of float
-        max ``|x_k - x*|``: the start's, then each stride's landing state's.
-    gait : dict
-        The gait's ``T_stance``, ``T_flight``, ``speed``, ``step_length``.
-    controller : dict
-        ``law``, ``Kp``, ``Kd``, ``M1``, ``saturate``.
-    settings : dict
-        MuJoCo's settings.
-    torque_limit : float
-        N m.
-    mujoco_steps : int
-        MuJoCo steps taken.
-    wall_time : float
-        s.
-    t, qpos, qvel, phase : numpy.ndarray
-        The log with ``log=True`` (every MuJoCo state; phase 0 stance, 1 flight), else
-        empty; not in ``to_dict()``.
-    stance_leg : numpy.ndarray
-        The stance leg at each logged state (0: a, 1: b).
-    """
-
-    status: str
-    message: str
-    n_strides: int
-    strides: list
-    start: list
-    fixed_point: list
-    deviations: list
-    gait: dict
-    controller: dict
-    settings: dict
-    torque_limit: float
-    mujoco_steps: int
-    wall_time: float
-    t: np.ndarray = field(default_factory=lambda: np.zeros(0), metadata={"dict": False})
-    qpos: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), metadata={"dict": False})
-    qvel: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), metadata={"dict": False})
-    phase: np.ndarray = field(default_factory=lambda: np.zeros(0), metadata={"dict": False})
-    stance_leg: np.ndarray = field(default_factory=lambda: np.zeros(0),
-                                   metadata={"dict": False})
-
-    SUCCESS = ("ran",)
-
-    @property
-    def strides_run(self) -> int:
-        """Completed strides."""
-        return len(self.strides)
-
-    @property
-    def landing_states(self) -> np.ndarray:
-        """(strides + 1, 2 nq): the start, then each stride's landing state."""
-        return np.array([self.start] + [s.landing_state for s in self.strides], float)
-
-    def to_dict(self) -> dict:
-        """Plain JSON types, with the run's summary figures.
-
-        Returns
-        -------
-        dict
-            The fields, ``strides_run``, the mean speed and durations over the last two
-            thirds of the strides and the decay of the deviation (:func:`decay_rate`).
-        """
-        d = super().to_dict()
-        d["strides_run"] = self.strides_run
-        late = self.strides[len(self.strides) // 3:]
-        for k in ("speed", "stance", "flight"):
-            d[f"mean_{k}"] = float(np.mean([getattr(s, k) for s in late])) if late \
-                else math.nan
-        d["decay"] = decay_rate(self)
-        from ..results import json_safe
-        return json_safe(d)
-
-
-def decay_rate(run: MujocoRun, skip: int = 1) -> dict:
-    """How fast a run's landing states settle, per stride.
-
-    Two distances per landing state: from the exact fixed point x* (``deviations``) and
-    from MuJoCo's own cycle, the mean landing state over the last third of the run.  The
-    rate is exp of the slope of a least-squares line through log(distance to MuJoCo's
-    cycle) over the strides from ``skip`` on while that distance is above three times the
-    cycle's spread (the jitter: the largest distance of a last-third landing state from
-    the mean; below it the deviation is the time grid's noise, not the map's modes).
-
-    Parameters
-    ----------
-    run : MujocoRun
-        The run.
-    skip : int
-        Strides left out at the start (the first stride moves a perturbation onto the map's
-        modes).
-
-    Returns
-    -------
-    dict
-        ``rate`` (NaN when fewer than three strides are above the floor), ``strides_fitted``,
-        ``cycle_offset`` (max ``|mean - x*|``: MuJoCo's cycle against the exact one),
-        ``jitter``, ``to_cycle`` (the distances to MuJoCo's cycle).
-    """
-    X = run.landing_states
-    xs = np.asarray(run.fixed_point, float)
-    nan = dict(rate=math.nan, strides_fitted=0, cycle_offset=math.nan, jitter=math.nan,
-               to_cycle=[])
-    if len(X) < 6:
-        return nan
-    tail = X[len(X) - max(2, (len(X) - 1) // 3):]
-    mean = tail.mean(axis=0)
-    jitter = float(np.max(np.abs(tail - mean)))
-    d = np.max(np.abs(X - mean), axis=1)
-    k = np.arange(len(d))
-    ok = (k >= skip) & (d > 3 * jitter)
-    # the fit stops at the first stride below the floor
-    last = skip
-    while last < len(d) and ok[last]:
-        last += 1
-    sel = np.arange(skip, last)
-    rate = math.nan
-    if sel.size >= 3:
-        slope = np.polyfit(sel, np.log(d[sel]), 1)[0]
-        rate = float(math.exp(slope))
-    return dict(rate=rate, strides_fitted=int(sel.size),
-                cycle_offset=float(np.max(np.abs(mean - xs))), jitter=jitter,
-                to_cycle=d.tolist())
-
-
-@dataclass
-class RunningMapFit(Result):
-    """MuJoCo's running stride map fitted from the landing states of a run.
-
-    Parameters
-    ----------
-    status, message : str
-        'ok', or 'failed' (too few strides for the fit).
-    A : list
-        The (n, n) Lambda of the least-squares fit x_{k+1} = c + Lambda x_k.
-    eigenvalues : list
-        Its eigenvalues by decreasing modulus.
-    max_abs : float
-        Their largest modulus.
-    max_abs_spread : float
-        Standard deviation of max|lambda| over 200 bootstrap resamples of the pairs
-        (seeded).
-    relative_residual : float
-        RMS residual over the RMS spread of x_{k+1}, the largest over the components:
-        the share of the next landing state the map does not explain (MuJoCo's jitter).
-    pairs : int
-        (x_k, x_{k+1}) pairs fitted.
-    """
-
-    status: str
-    message: str
-    A: list
-    eigenvalues: list
-    max_abs: float
-    max_abs_spread: float
-    relative_residual: float
-    pairs: int
-
-    SUCCESS = ("ok",)
-
-
-def fit_running_map(runs, skip: int = 1, seed: int = 0) -> RunningMapFit:
-    """MuJoCo's stride map from runs: a least-squares fit of x_{k+1} = c + Lambda x_k.
-
-    At stiff contact MuJoCo's landing states do not repeat: each stride adds a jitter of
-    tenths of a rad/s (the contact's chatter, the time grid) that a perturbation meets
-    after a stride or two, so a decay cannot be read off one perturbed run.  The jitter
-    keeps the state moving about MuJoCo's cycle; over a long run the pairs of
-    consecutive landing states determine the linear map as an autoregression does (the
-    jitter enters as noise independent of x_k).
-
-    Parameters
-    ----------
-    runs : MujocoRun or list of MujocoRun
-        Runs of one loop (their completed strides).
-    skip : int
-        Landing states left out at the start of each run (the start itself, a transient).
-    seed : int
-        Of the bootstrap.
-
-    Returns
-    -------
-    RunningMapFit
-    """
-    runs = [runs] if isinstance(runs, MujocoRun) else list(runs)
-    P0, P1 = [], []
-    for r in runs:
-        X = r.landing_states[skip:]
-        if len(X) > 1:
-            P0.append(X[:-1])
-            P1.append(X[1:])
-    n = len(runs[0].start) if runs else 0
-    if not P0 or sum(len(p) for p in P0) < 3 * (n + 1):
-        m = sum(len(p) for p in P0)
-        return RunningMapFit("failed", f"{m} pairs of landing states: at least {3 * (n + 1)} "
-                             "are needed to fit the stride map", [], [], math.nan, math.nan,
-                             math.nan, m)
-    X0, X1 = np.vstack(P0), np.vstack(P1)
-    Phi = np.column_stack([np.ones(len(X0)), X0])
-    coef = np.linalg.lstsq(Phi, X1, rcond=None)[0]
-    Lam = coef[1:].T
-    res = X1 - Phi @ coef
-    spread = X1.std(axis=0)
-    rel = float(np.max(np.sqrt(np.mean(res ** 2, axis=0)) / np.where(spread > 0, spread,
-                                                                       np.inf)))
-    ev = np.linalg.eigvals(Lam)
-    ev = ev[np.argsort(-np.abs(ev))]
-    rng = np.random.default_rng(seed)
-    mx = []
-    for _ in range(200):
-        i = rng.integers(0, len(X0), len(X0))
-        cf = np.linalg.lstsq(Phi[i], X1[i], rcond=None)[0]
-        mx.append(np.max(np.abs(np.linalg.eigvals(cf[1:].T))))
-    top = float(np.abs(ev[0]))
-    return RunningMapFit(
-        "ok", f"MuJoCo's stride map from {len(X0)} pairs: max |lambda| {top:.3g} +- "
-              f"{np.std(mx):.2g}, relative residual {rel:.2g}",
-        Lam.tolist(), [complex(e) for e in ev], top, float(np.std(mx)), rel, int(len(X0)))
 
 
 class RunningLoop:
@@ -575,152 +282,180 @@ class RunningLoop:
             raise ValueError(f"start must be {2 * nq} finite numbers (q, dq), got "
                              f"{np.asarray(start).shape}")
         mujoco = _mujoco()
-        m, d, lay = self.m, self.d, self.layout
+        m, d = self.m, self.d
         mujoco.mj_resetData(m, d)
         d.qpos[:], d.qvel[:] = self.initial_state(x0)
         mujoco.mj_forward(m, d)
-        dt, r, U = float(m.opt.timestep), self.settings.foot_radius, self.torque_limit
-        xs = self.x_star
-        records, devs = [], [float(np.max(np.abs(x0 - xs)))]
-        logs = ([], [], [], [], []) if log else None
-        status, message = "ran", ""
-        leg, phase = 0, 0                  # stance leg (0: a), phase (0 stance, 1 flight)
-        k, t0 = 0, 0.0                     # MuJoCo steps, the phase's start time
-        t_land, stance_T = 0.0, math.nan
-        x_land = float(d.geom_xpos[self.feet[0], 0])
-        origin = np.zeros(2)               # the pushing foot's point at takeoff
-        peak = slip = fz_max = 0.0
-        clipped, loaded, off, bounce = 0, False, None, 0
-        x_prev, phi_prev = x_land, float(x0[0])
-        prev = self._prev2 = (d.qpos.copy(), d.qvel.copy())
-        kmax = [self.time_limits * self.T_stance, self.time_limits * self.T_flight]
+        run = _Run(self, x0, log)
         t_wall = time.perf_counter()
-        while status == "ran" and len(records) < strides:
-            t = k * dt
-            qpos, qvel = d.qpos, d.qvel
-            A = lay.A[leg]
-            if phase == 0:
-                u = self._stance_law(A @ qpos[2:], A @ qvel[2:], t - t0)[0].ravel()
-            else:
-                qe, dqe = self._extended(qpos, qvel, leg, origin)
-                u = self._flight_law(qe, dqe, t - t0)[0].ravel()
-            if not np.all(np.isfinite(u)):
-                status, message = "diverged", f"stride {len(records) + 1}: the torque is not finite"
+        while run.status == "ran" and len(run.records) < strides:
+            if not run.control():
                 break
-            umax = float(np.max(np.abs(u)))
-            peak = max(peak, umax)
-            if umax > U:
-                clipped += 1
-                if self.stop_on_saturation:
-                    status, message = "saturated", (
-                        f"stride {len(records) + 1}: {umax:.1f} N m commanded (limit {U:g}) "
-                        f"at {t - t0:.4f} s into the {('stance', 'flight')[phase]}")
-                    break
-            d.ctrl[:] = lay.G[leg] @ u
-            if log:
-                for a, v in zip(logs, (t, qpos.copy(), qvel.copy(), phase, leg)):
-                    a.append(v)
-            prev = (qpos.copy(), qvel.copy())
             mujoco.mj_step(m, d)
-            k += 1
-            # ---- the contacts of the state the step started from (time t)
-            st_touch, fz = self._fz(leg)
-            sw_touch, _ = self._fz(1 - leg)
-            n = len(records) + 1
-            qp = d.qpos
-            if not np.all(np.isfinite(qp)):
-                status, message = "diverged", f"stride {n}: MuJoCo's state is not finite"
-                break
-            lean = qp[2] if self.upright == 0.0 else float(torso_lean(qp[2], self.upright))
-            if not (qp[1] - r > self.fall_height and -_HALF_PI < lean < _HALF_PI):
-                status, message = "fell", (f"stride {n}: fell at t = {k * dt:.4g} s (hip "
-                                           f"{qp[1] - r:.3g} m above the feet' level, torso "
-                                           f"{qp[2]:.3g} rad)")
-                break
-            if phase == 0:
-                fz_max = max(fz_max, fz)
-                xf = float(d.geom_xpos[self.feet[leg], 0])      # of the state at t
-                phi = float((lay.A[leg] @ prev[0][2:])[0])
-                if st_touch:
-                    slip += (xf - x_prev) - r * (phi - phi_prev)
-                x_prev, phi_prev = xf, phi
-                if abs(slip) > self.max_slip:
-                    status, message = "slipped", (f"stride {n}: the stance foot slid "
-                                                  f"{slip:.3g} m (more than {self.max_slip:g} m)")
-                    break
-                if sw_touch:
-                    status, message = "double_contact", (
-                        f"stride {n}: the swing foot touched the floor in stance at "
-                        f"{t - t0:.4f} s")
-                    break
-                if fz > 0.0:
-                    loaded, off = True, None
-                elif loaded and off is None:
-                    off = (t, self._foot(prev[0], prev[1], leg)[0])
-                if off is not None and t - off[0] >= self.liftoff_time - 1e-12 \
-                        and d.geom_xpos[self.feet[leg], 2] > r + self.liftoff_height:
-                    if off[0] - t0 < self.min_stance * self.T_stance:
-                        bounce += 1              # off the floor early: a bounce, not a takeoff
-                    else:
-                        stance_T, phase, t0, loaded = off[0] - t_land, 1, off[0], False
-                        origin, off = off[1], None
-                        self._prev2 = prev
-                        continue
-            else:
-                if st_touch:
-                    status, message = "double_contact", (
-                        f"stride {n}: the foot that pushed off touched the floor again "
-                        f"{t - t0:.4f} s into the flight")
-                    break
-                if sw_touch:
-                    # the touchdown, interpolated to where the sphere meets the floor
-                    q_a, v_a = self._prev2
-                    q_b, v_b = prev
-                    z_a = self._foot(q_a, v_a, 1 - leg)[0][1]
-                    z_b = self._foot(q_b, v_b, 1 - leg)[0][1]
-                    w = 1.0 if z_a <= z_b else min(max((z_a - r) / (z_a - z_b), 0.0), 1.0)
-                    qpos_td, qvel_td = q_a + w * (q_b - q_a), v_a + w * (v_b - v_a)
-                    t_td = t - (1.0 - w) * dt
-                    qe, dqe = self._extended(qpos_td, qvel_td, leg, origin)
-                    qp_, dqp_ = self._landing(qe, dqe)[:2]
-                    x_next = np.r_[qp_.ravel(), dqp_.ravel()]
-                    foot_td = self._foot(qpos_td, qvel_td, 1 - leg)[0][0]
-                    length = foot_td - x_land
-                    dev = float(np.max(np.abs(x_next - xs)))
-                    devs.append(dev)
-                    records.append(RunningStride(
-                        index=len(records), t_landing=t_land, stance=stance_T,
-                        flight=t_td - t0, step_length=float(length),
-                        speed=float(length / (t_td - t_land)), landing_state=x_next.tolist(),
-                        deviation=dev, peak_torque=peak, clipped_time=clipped * dt,
-                        slip=float(slip), fz_max=float(fz_max), bounce_time=bounce * dt))
-                    leg, phase, t0, t_land, x_land = 1 - leg, 0, t_td, t_td, foot_td
-                    peak = slip = fz_max = 0.0
-                    clipped, loaded, bounce = 0, False, 0
-                    x_prev = float(d.geom_xpos[self.feet[leg], 0])
-                    phi_prev = float((lay.A[leg] @ prev[0][2:])[0])
-                    self._prev2 = prev
-                    continue
-            self._prev2 = prev
-            if t + dt - t0 > kmax[phase]:
-                status, message = "phase_too_long", (
-                    f"stride {n}: the {('stance', 'flight')[phase]} lasted more than "
-                    f"{self.time_limits:g} times the gait's "
-                    f"({kmax[phase] / self.time_limits:.4f} s)")
+            run.k += 1
+            run.advance()
         wall = time.perf_counter() - t_wall
-        if status == "ran":
-            message = (f"{len(records)} strides, deviation from x* {devs[0]:.2e} -> "
-                       f"{devs[-1]:.2e}")
+        devs = run.devs
+        if run.status == "ran":
+            run.message = (f"{len(run.records)} strides, deviation from x* {devs[0]:.2e} -> "
+                           f"{devs[-1]:.2e}")
         arrays = {}
         if log:
-            arrays = dict(t=np.array(logs[0]), qpos=np.array(logs[1]), qvel=np.array(logs[2]),
-                          phase=np.array(logs[3], np.int8), stance_leg=np.array(logs[4], np.int8))
-        return MujocoRun(status=status, message=message, n_strides=int(strides),
-                         strides=records, start=x0.tolist(), fixed_point=xs.tolist(),
-                         deviations=devs, gait=self.gait_record(),
-                         controller=self.controller_record(), settings=self.settings.to_dict(),
-                         torque_limit=self.torque_limit, mujoco_steps=k, wall_time=wall,
-                         **arrays)
+            lg = run.logs
+            arrays = dict(t=np.array(lg[0]), qpos=np.array(lg[1]), qvel=np.array(lg[2]),
+                          phase=np.array(lg[3], np.int8), stance_leg=np.array(lg[4], np.int8))
+        return MujocoRun(status=run.status, message=run.message, n_strides=int(strides),
+                         strides=run.records, start=x0.tolist(),
+                         fixed_point=self.x_star.tolist(), deviations=devs,
+                         gait=self.gait_record(), controller=self.controller_record(),
+                         settings=self.settings.to_dict(), torque_limit=self.torque_limit,
+                         mujoco_steps=run.k, wall_time=wall, **arrays)
+
+
+class _Run:
+    """The bookkeeping of one run: the phase, its clock and the stance foot's contact,
+    the records (one MuJoCo step at a time: :meth:`control` before it, :meth:`advance`
+    after, which reads the contacts of the state the step started from)."""
+
+    def __init__(self, loop: RunningLoop, x0, log: bool):
+        self.loop, self.d, self.lay = loop, loop.d, loop.layout
+        self.dt = float(loop.m.opt.timestep)
+        self.r, self.U = loop.settings.foot_radius, loop.torque_limit
+        self.records, self.devs = [], [float(np.max(np.abs(x0 - loop.x_star)))]
+        self.logs = ([], [], [], [], []) if log else None
+        self.status, self.message = "ran", ""
+        self.leg, self.phase = 0, 0            # stance leg (0: a), phase (0 stance, 1 flight)
+        self.k, self.t0 = 0, 0.0               # MuJoCo steps, the phase's start time
+        self.t_land, self.stance_T = 0.0, math.nan
+        self.x_land = float(self.d.geom_xpos[loop.feet[0], 0])
+        self.origin = np.zeros(2)              # the pushing foot's point at takeoff
+        self.x_prev, self.phi_prev = self.x_land, float(x0[0])
+        self.prev = self.prev2 = (self.d.qpos.copy(), self.d.qvel.copy())
+        self.kmax = (loop.time_limits * loop.T_stance, loop.time_limits * loop.T_flight)
+        self._new_stride()
+
+    def _new_stride(self):
+        self.peak = self.slip = self.fz_max = 0.0
+        self.clipped, self.bounce, self.loaded, self.off = 0, 0, False, None
+
+    def stop(self, status: str, message: str):
+        """End the run in stride ``len(records) + 1``."""
+        self.status = status
+        self.message = f"stride {len(self.records) + 1}: {message}"
+
+    def control(self) -> bool:
+        """The law's torques at MuJoCo's state into ``ctrl``; False when the run stops."""
+        loop, d, lay = self.loop, self.d, self.lay
+        t = self.k * self.dt
+        qpos, qvel, A = d.qpos, d.qvel, lay.A[self.leg]
+        if self.phase == 0:
+            u = loop._stance_law(A @ qpos[2:], A @ qvel[2:], t - self.t0)[0].ravel()
+        else:
+            qe, dqe = loop._extended(qpos, qvel, self.leg, self.origin)
+            u = loop._flight_law(qe, dqe, t - self.t0)[0].ravel()
+        if not np.all(np.isfinite(u)):
+            self.stop("diverged", "the torque is not finite")
+            return False
+        umax = float(np.max(np.abs(u)))
+        self.peak = max(self.peak, umax)
+        if umax > self.U:
+            self.clipped += 1
+            if loop.stop_on_saturation:
+                self.stop("saturated", f"{umax:.1f} N m commanded (limit {self.U:g}) at "
+                                       f"{t - self.t0:.4f} s into the "
+                                       f"{('stance', 'flight')[self.phase]}")
+                return False
+        d.ctrl[:] = lay.G[self.leg] @ u
+        if self.logs is not None:
+            for a, v in zip(self.logs, (t, qpos.copy(), qvel.copy(), self.phase, self.leg)):
+                a.append(v)
+        self.prev2, self.prev = self.prev, (qpos.copy(), qvel.copy())
+        return True
+
+    def advance(self):
+        """After a MuJoCo step: a fall, then the phase's contacts (of the state at t)."""
+        loop, d = self.loop, self.d
+        t = (self.k - 1) * self.dt                  # the state the step started from
+        qp = d.qpos
+        if not np.all(np.isfinite(qp)):
+            return self.stop("diverged", "MuJoCo's state is not finite")
+        lean = qp[2] if loop.upright == 0.0 else float(torso_lean(qp[2], loop.upright))
+        if not (qp[1] - self.r > loop.fall_height and -_HALF_PI < lean < _HALF_PI):
+            return self.stop("fell", f"fell at t = {self.k * self.dt:.4g} s (hip "
+                                     f"{qp[1] - self.r:.3g} m above the feet' level, torso "
+                                     f"{qp[2]:.3g} rad)")
+        st_touch, fz = loop._fz(self.leg)
+        sw_touch = loop._fz(1 - self.leg)[0]
+        if self.phase == 0:
+            self._stance(t, st_touch, fz, sw_touch)
+        elif st_touch:
+            self.stop("double_contact", f"the foot that pushed off touched the floor again "
+                                        f"{t - self.t0:.4f} s into the flight")
+        elif sw_touch:
+            return self._touchdown(t)
+        if self.status == "ran" and t + self.dt - self.t0 > self.kmax[self.phase]:
+            self.stop("phase_too_long", f"the {('stance', 'flight')[self.phase]} lasted more "
+                                        f"than {loop.time_limits:g} times the gait's "
+                                        f"({self.kmax[self.phase] / loop.time_limits:.4f} s)")
+        return None
+
+    def _stance(self, t, st_touch, fz, sw_touch):
+        """Slip, a touch of the swing foot, the takeoff (confirmed, dated back)."""
+        loop, prev, leg = self.loop, self.prev, self.leg
+        self.fz_max = max(self.fz_max, fz)
+        xf = float(self.d.geom_xpos[loop.feet[leg], 0])      # of the state at t
+        phi = float((self.lay.A[leg] @ prev[0][2:])[0])
+        if st_touch:
+            self.slip += (xf - self.x_prev) - self.r * (phi - self.phi_prev)
+        self.x_prev, self.phi_prev = xf, phi
+        if abs(self.slip) > loop.max_slip:
+            return self.stop("slipped", f"the stance foot slid {self.slip:.3g} m (more than "
+                                        f"{loop.max_slip:g} m)")
+        if sw_touch:
+            return self.stop("double_contact", f"the swing foot touched the floor in stance "
+                                               f"at {t - self.t0:.4f} s")
+        if fz > 0.0:
+            self.loaded, self.off = True, None
+        elif self.loaded and self.off is None:
+            self.off = (t, loop._foot(prev[0], prev[1], leg)[0])
+        if self.off is not None and t - self.off[0] >= loop.liftoff_time - 1e-12 \
+                and self.d.geom_xpos[loop.feet[leg], 2] > self.r + loop.liftoff_height:
+            if self.off[0] - self.t0 < loop.min_stance * loop.T_stance:
+                self.bounce += 1                 # off the floor early: a bounce, not a takeoff
+            else:
+                self.stance_T, self.phase, self.t0 = self.off[0] - self.t_land, 1, self.off[0]
+                self.origin, self.off, self.loaded = self.off[1], None, False
+        return None
+
+    def _touchdown(self, t):
+        """The swing foot's first contact, interpolated to where its sphere meets the
+        floor: record the stride (the rigid landing map's state), relabel, restart."""
+        loop, leg, r = self.loop, self.leg, self.r
+        (q_a, v_a), (q_b, v_b) = self.prev2, self.prev
+        z_a = loop._foot(q_a, v_a, 1 - leg)[0][1]
+        z_b = loop._foot(q_b, v_b, 1 - leg)[0][1]
+        w = 1.0 if z_a <= z_b else min(max((z_a - r) / (z_a - z_b), 0.0), 1.0)
+        qpos_td, qvel_td = q_a + w * (q_b - q_a), v_a + w * (v_b - v_a)
+        t_td = t - (1.0 - w) * self.dt
+        qe, dqe = loop._extended(qpos_td, qvel_td, leg, self.origin)
+        qp_, dqp_ = loop._landing(qe, dqe)[:2]
+        x_next = np.r_[qp_.ravel(), dqp_.ravel()]
+        foot_td = float(loop._foot(qpos_td, qvel_td, 1 - leg)[0][0])
+        length = foot_td - self.x_land
+        dev = float(np.max(np.abs(x_next - loop.x_star)))
+        self.devs.append(dev)
+        self.records.append(RunningStride(
+            index=len(self.records), t_landing=self.t_land, stance=self.stance_T,
+            flight=t_td - self.t0, step_length=length, speed=length / (t_td - self.t_land),
+            landing_state=x_next.tolist(), deviation=dev, peak_torque=self.peak,
+            clipped_time=self.clipped * self.dt, slip=float(self.slip),
+            fz_max=float(self.fz_max), bounce_time=self.bounce * self.dt))
+        self.leg, self.phase = 1 - leg, 0
+        self.t0 = self.t_land = t_td
+        self.x_land = foot_td
+        self.x_prev = float(self.d.geom_xpos[loop.feet[self.leg], 0])
+        self.phi_prev = float((self.lay.A[self.leg] @ q_b[2:])[0])
+        self._new_stride()
 
 
 def run_in_mujoco(controller: RunningController, start=None, strides: int = 30,
