@@ -156,7 +156,9 @@ def register(sub):
                         "eigenvalues (builds the map: about 20 s)")
     p.add_argument("--fit", type=int, default=0, metavar="N",
                    help="fit MuJoCo's stride map on a run of N strides from the fixed point "
-                        "(30 to 5000; 300 takes 6 to 12 s; default 0: no fit)")
+                        "(30 to 5000; default 0: no fit). The 10 x 10 map needs a few hundred "
+                        "strides: at dt 2 ms, 60 gave max|lambda| 0.87 +- 0.09, 300 give "
+                        "0.69 +- 0.05 (6 to 12 s)")
     add_mujoco_settings(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_mujoco_running)
