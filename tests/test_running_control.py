@@ -206,6 +206,26 @@ def test_command_line_names_a_bad_gait_file(tmp_path, capsys):
     assert len(err.splitlines()) == 1 and str(p) in err
 
 
+@pytest.mark.parametrize("command", ["running", "mujoco-running"])
+def test_a_step_of_a_robot_that_is_not_built_in_asks_for_its_description(
+        gait_file, tmp_path, capsys, command):
+    """A saved step names its robot; one that is not built in (an imported robot's) needs
+    ``--robot FILE``: both commands say so in one line (exit 2) instead of 'not a built-in
+    robot' alone, and a ``--robot`` of another robot is named."""
+    import json
+    from analysis.cli import main
+    d = json.loads(open(gait_file).read())
+    d["robot"] = "my_walker"
+    p = tmp_path / "mine.json"
+    p.write_text(json.dumps(d))
+    assert main([command, "--gait", str(p)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--robot FILE" in err and "my_walker" in err, err
+    assert main([command, "--gait", str(p), "--robot", "three_link"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "is a step of my_walker, not of" in err, err
+
+
 def test_stability_figure_is_labelled():
     from analysis.reporting.plots import running_stability_plot
     c = np.linspace(0.5, 1.5, 5)

@@ -20,8 +20,9 @@ from biped_casadi.control.output_law import (M1_LIMIT, SECTION, check_M1_range, 
                                              require_regular)
 from biped_casadi.results import json_safe
 from gait_opt import Gait, OpenOrbitWarning, optimize_gait
+from gait_opt.running import RunningGait
 
-__all__ = ["UserError", "print_json", "load_model", "load_gait", "positive", "add_robot",
+__all__ = ["UserError", "print_json", "load_model", "load_gait", "load_running_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
            "add_gait_arguments", "add_scheduler", "is_family_file", "require_members",
            "check_inputs", "check_scheduler", "not_an_input"]
@@ -96,6 +97,34 @@ def load_model(name_or_path):
         return robot(name_or_path or "rabbit")
     except OSError as e:                  # a name too long, a loop of links, ...
         raise UserError(f"--robot: {_short(name_or_path)}: {e.strerror or e}") from None
+
+
+def load_running_gait(args):
+    """The running step of ``--gait FILE`` and its robot: ``--robot``, else the one the
+    file names (UserError, exit 2: a file that cannot be read, a robot that is not
+    built in without ``--robot FILE``, a ``--robot`` that is another robot).
+
+    Returns
+    -------
+    tuple
+        (RunningGait, BipedModel).
+    """
+    try:
+        gait = RunningGait.load(args.gait)
+    except (ValueError, OSError) as e:
+        raise UserError(f"--gait: {e}") from None
+    if args.robot is None:
+        try:
+            model = robot(gait.robot)
+        except (ValueError, OSError):
+            raise UserError(f"--gait: {args.gait} is a step of {gait.robot}, not a built-in "
+                            "robot: give its description with --robot FILE") from None
+    else:
+        model = load_model(args.robot)
+    if model.description.name != gait.robot:
+        raise UserError(f"--gait: {args.gait} is a step of {gait.robot}, not of "
+                        f"{model.description.name}")
+    return gait, model
 
 
 def load_gait(args, progress: Progress):

@@ -9,10 +9,9 @@ import numpy as np
 
 from biped_casadi.control.running import RunningController
 from biped_casadi.mujoco.running import RunningLoop, fit_running_map
-from gait_opt.running import RunningGait
 from analysis.stability.running_cycle import running_cycle, running_stability
 
-from .common import Progress, UserError, add_robot, load_model, print_json
+from .common import Progress, UserError, add_robot, load_running_gait, print_json
 from .mujoco_options import add_mujoco_settings, mujoco_settings, settings_error
 from .running import DEFAULT_KD, DEFAULT_KP, DEFAULT_M1
 
@@ -43,14 +42,7 @@ def _check(args):
 def cmd_mujoco_running(args):
     settings = _check(args)
     say = Progress("mujoco-running", quiet=args.json)
-    try:
-        gait = RunningGait.load(args.gait)
-    except (ValueError, OSError) as e:
-        raise UserError(f"--gait: {e}") from None
-    model = load_model(args.robot or gait.robot)
-    if model.description.name != gait.robot:
-        raise UserError(f"--gait: {args.gait} is a step of {gait.robot}, not of "
-                        f"{model.description.name}")
+    gait, model = load_running_gait(args)
     M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
     if len(M1) != model.nu:
         raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "

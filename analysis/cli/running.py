@@ -13,11 +13,11 @@ import numpy as np
 from analysis.reporting.plots import running_plot, save_figures
 from analysis.stability.running_cycle import running_cycle, running_stability, simulate_running
 from biped_casadi.control.running import RunningController
-from gait_opt.running import RunningGait, RunningOptions, optimize_running
+from gait_opt.running import RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
 
-from .common import Progress, UserError, add_robot, load_model, output_dir, output_file, \
-    print_json
+from .common import Progress, UserError, add_robot, load_model, load_running_gait, \
+    output_dir, output_file, print_json
 
 
 #: the stability analysis's default design: PD gains and the output's column on q1 that
@@ -183,14 +183,7 @@ def _stability_of_file(args):
         raise UserError("--robot: empty name (leave the option out for the default)")
     if not str(args.gait).strip():
         raise UserError("--gait: empty name (leave the option out for the default)")
-    try:
-        gait = RunningGait.load(args.gait)
-    except ValueError as e:
-        raise UserError(f"--gait: {e}") from None
-    model = load_model(args.robot or gait.robot)
-    if model.description.name != gait.robot:
-        raise UserError(f"--gait: {args.gait} is a step of {gait.robot}, not of "
-                        f"{model.description.name}")
+    gait, model = load_running_gait(args)
     say = Progress("running", quiet=args.json)
     say("closing the loop: fixed point, eigenvalues, perturbed run (about 10 s) ...")
     s = dict(robot=model.params.name, file=str(args.gait), speed=gait.speed,
