@@ -132,7 +132,9 @@ def test_dask_runs_the_highest_priority_first_and_close_fails_the_rest(tmp_path)
     of leaving it pending."""
     with Engine("local", workers=2, cache=tmp_path) as eng:
         [eng.submit(started_at, w).result() for w in ["warm 1", "warm 2"]]
-        busy = [eng.submit(started_at, f"busy {i}", 0.5) for i in range(2)]
+        # busy for 2 s: the nine submissions below fit in that even on a loaded machine
+        # (at 0.5 s a busy one could end before the high one was sent)
+        busy = [eng.submit(started_at, f"busy {i}", 2.0) for i in range(2)]
         low = [eng.submit(started_at, f"low {i}") for i in range(8)]
         with eng.stage("urgent", priority=10):
             high = eng.submit(started_at, "high")
