@@ -74,6 +74,13 @@ class M1Evaluation:
     seconds: float
 
     def to_dict(self) -> dict:
+        """The evaluation in plain JSON types.
+
+        Returns
+        -------
+        dict
+            Its fields (NaN as None).
+        """
         from biped_casadi.results import json_safe
         return json_safe(dict(M1=self.M1, Kp=self.Kp, Kd=self.Kd,
                               spectral_radius=self.spectral_radius, status=self.status,
@@ -108,6 +115,8 @@ class RunningM1Choice(Result):
         Their number, and how many were infeasible.
     method : str
         The scipy method.
+    tune_gains : bool
+        Whether Kp and Kd were searched too.
     optimizer_message : str
         What scipy said when it stopped (converged, or the evaluation cap).
     seconds : float
@@ -129,6 +138,7 @@ class RunningM1Choice(Result):
     n_evaluations: int = 0
     n_infeasible: int = 0
     method: str = "nelder-mead"
+    tune_gains: bool = False
     optimizer_message: str = ""
     seconds: float = 0.0
     status: str = "stable"
@@ -296,7 +306,7 @@ def choose_running_m1(cycle, start=None, tune_gains: bool = False,
             M1=m0, Kp=_g(Kp0), Kd=_g(Kd0), spectral_radius=math.nan,
             start_M1=m0, start_radius=math.nan, start_status=first.status, stability=None,
             evaluations=evals, n_evaluations=len(evals), n_infeasible=n_bad, method=method,
-            optimizer_message=opt_msg, seconds=seconds, status="failed",
+            tune_gains=bool(tune_gains), optimizer_message=opt_msg, seconds=seconds, status="failed",
             message=f"no feasible design among {len(evals)} evaluations (the start: "
                     f"{first.message})")
     M1 = np.asarray(best["ev"].M1, float)
@@ -313,4 +323,4 @@ def choose_running_m1(cycle, start=None, tune_gains: bool = False,
         M1=M1, Kp=Kp, Kd=Kd, spectral_radius=rho, start_M1=m0,
         start_radius=first.spectral_radius, start_status=first.status, stability=stab,
         evaluations=evals, n_evaluations=len(evals), n_infeasible=n_bad, method=method,
-        optimizer_message=opt_msg, seconds=seconds, status=status, message=msg)
+        tune_gains=bool(tune_gains), optimizer_message=opt_msg, seconds=seconds, status=status, message=msg)
