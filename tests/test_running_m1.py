@@ -136,3 +136,14 @@ def test_command_line_refuses_bad_combinations(m1_gait_file, capsys, args, words
     assert main(["running", "--gait", m1_gait_file, *args]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and words in err
+
+
+def test_the_gains_can_be_searched_too(m1_cycle):
+    ch = choose_running_m1(m1_cycle, tune_gains=True, max_evaluations=6, gain_step=0.3)
+    assert ch.tune_gains and ch.n_evaluations == 6
+    # Nelder-Mead's first simplex: the start, then a step on each M1 component and log Kp
+    assert ch.evaluations[5].Kp == pytest.approx(400.0 * np.exp(0.3), rel=1e-12)
+    assert ch.evaluations[5].Kd == pytest.approx(30.0, rel=1e-12)
+    assert ch.spectral_radius <= ch.start_radius
+    fresh = running_stability(m1_cycle.retuned(Kp=ch.Kp, Kd=ch.Kd, M1=ch.M1))
+    assert ch.spectral_radius == pytest.approx(fresh.spectral_radius, rel=1e-10)
