@@ -31,6 +31,7 @@ from biped_casadi import rabbit  # noqa: E402
 from biped_casadi.control.running import RunningController  # noqa: E402
 from gait_opt.running import RunningOptions, optimize_running  # noqa: E402
 from analysis.design.running_m1 import choose_running_m1  # noqa: E402
+from analysis.stability.hybrid_cycle import HybridCycleError  # noqa: E402
 from analysis.stability.running_cycle import (finite_difference_jacobian,  # noqa: E402
                                               running_cycle, running_stability,
                                               simulate_running)
@@ -49,15 +50,18 @@ def _radius(cyc, M1):
 def _check(cyc, r, nq):
     """Central differences and a perturbed run at a design's fixed point."""
     t0 = time.perf_counter()
-    J = finite_difference_jacobian(cyc, r.fixed_point, 1e-5)
-    fd = float(np.abs(J - r.A).max() / np.abs(r.A).max())
+    try:
+        J = finite_difference_jacobian(cyc, r.fixed_point, 1e-5)
+        fd, fd_message = float(np.abs(J - r.A).max() / np.abs(r.A).max()), ""
+    except HybridCycleError as e:      # a fixed point on a constraint's edge
+        fd, fd_message = None, str(e)
     x = r.fixed_point.copy()
     x[nq:] += 1e-2
     run = simulate_running(cyc, r.fixed_point, x, 20)
     d = run.deviations
     mean = float((d[-1] / d[1]) ** (1 / (d.size - 2))) if d.size > 2 and d[1] > 0 else None
     st = run.strides
-    return dict(fd_relative_error=fd, run_status=run.status, run_message=run.message,
+    return dict(fd_relative_error=fd, fd_message=fd_message, run_status=run.status, run_message=run.message,
                 deviations=d.tolist(), contraction=run.contraction.tolist(),
                 mean_contraction_after_first=mean,
                 torque_max=max((s.torque_max for s in st), default=None),
@@ -71,7 +75,12 @@ def speed_row(m, v, max_evaluations, gait_torque_limit=None):
     default the robot's; the controller always has the robot's)."""
     out = dict(speed=v, gait_torque_limit=gait_torque_limit)
     t0 = time.perf_counter()
-    g = optimize_running(m, RunningOptions(speed=v, torque_limit=gait_torque_limit))
+    try:
+        g = optimize_running(m, RunningOptions(speed=v, torque_limit=gait_torque_limit))
+    except RuntimeError as e:              # IPOPT's failure (infeasible problem)
+        out.update(gait_success=False, gait_message=str(e).splitlines()[-1],
+                   gait_seconds=time.perf_counter() - t0)
+        return out
     out.update(gait_success=bool(g.success), gait_seconds=time.perf_counter() - t0,
                T_stance=float(g.T_stance), T_flight=float(g.T_flight),
                step_length=float(g.step_length))
@@ -136,6 +145,11 @@ def figure(rows):
     line([r["chosen"]["spectral_radius"] if r.get("chosen") else None for r in rows],
          label="chosen M1 (choose_running_m1)", color="k")
     ax.axhline(1.0, color="0.5", lw=0.8, ls=":")
+    for r in rows:
+        if r.get("gait_torque_limit") is not None:
+            ax.annotate(f"gait optimised at |u| <= {r['gait_torque_limit']:g} N m",
+                        (r["speed"], 1.0), textcoords="offset points", xytext=(-60, 8),
+                        fontsize=7, color="0.3")
     ax.set_xlabel("running speed (m/s)")
     ax.set_ylabel("spectral radius of the stride Jacobian")
     ax.set_title("RABBIT running, PD Kp 400 N m/rad, Kd 30 N m s/rad")
@@ -154,13 +168,33 @@ def main():
                          "again with the torque limit this much lower (N m) and measure that")
     ap.add_argument("--out", default=str(ROOT / "docs" / "_static"))
     ap.add_argument("--no-save", action="store_true")
+    ap.add_argument("--name", default="running_m1",
+                    help="the results file's name (benchmarks/results/NAME.json)")
+    ap.add_argument("--combine", nargs="+", metavar="FILE",
+                    help="measure nothing: merge the rows of saved results (runs over parts "
+                         "of the speeds) into NAME.json and draw the figure")
     a = ap.parse_args()
     from analysis.reporting.plots import save_figure
     m = rabbit()
-    with Run("running_m1", "the running stride map's spectral radius across speeds: plain "
+    with Run(a.name, "the running stride map's spectral radius across speeds: plain "
              "tracking, the hand-picked M1 and the chosen one", save=not a.no_save) as run:
         rows = []
-        for v in a.speeds:
+        if a.combine:
+            import json
+            for f in a.combine:
+                rows += json.loads(Path(f).read_text())["data"]["rows"]
+            rows.sort(key=lambda r: r["speed"])
+            for r in rows:
+                ch = r.get("chosen") or {}
+                for key, label in (("plain", "plain tracking"), ("hand", "hand-picked M1")):
+                    run.row(f"{r['speed']:g} m/s, {label}: spectral radius", r.get(key),
+                            unit="")
+                run.row(f"{r['speed']:g} m/s, chosen M1: spectral radius",
+                        ch.get("spectral_radius"), unit="")
+                run.row(f"{r['speed']:g} m/s, the choice ({ch.get('n_evaluations')} "
+                        "evaluations)", ch.get("seconds"), unit="s")
+            run.note("merged from " + ", ".join(Path(f).name for f in a.combine))
+        for v in ([] if a.combine else a.speeds):
             t0 = time.perf_counter()
             row = speed_row(m, v, a.max_evaluations)
             if row.get("gait_success") and row.get("plain") is None and \
