@@ -90,6 +90,15 @@ def register(sub):
                     help="strides of the perturbed run (default 20; 0: none)")
     st.add_argument("--perturb", type=float, default=1e-2, metavar="DQ",
                     help="added to every velocity of the fixed point, rad/s (default 0.01)")
+    st.add_argument("--choose-m1", action="store_true",
+                    help="choose M1 first: minimise the stride map's spectral radius over "
+                         "M1 (Nelder-Mead on the exact radius, about 0.5 s an evaluation) "
+                         "from --m1 (the start; default the design above), then analyse "
+                         "the chosen M1; implies --stability")
+    st.add_argument("--max-evaluations", type=int, default=None, metavar="N",
+                    help="with --choose-m1: fixed points solved at most (default 150)")
+    st.add_argument("--tune-gains", action="store_true",
+                    help="with --choose-m1: search Kp and Kd too (log scale, from --kp, --kd)")
     p.set_defaults(func=cmd_running)
 
 
@@ -105,10 +114,20 @@ def _check_closed_loop(args):
         raise UserError(f"--steps must be >= 0, got {args.steps}")
     if not math.isfinite(args.perturb):
         raise UserError(f"--perturb must be a finite number, got {args.perturb:g}")
+    if not args.choose_m1:
+        for opt, given in (("--max-evaluations", args.max_evaluations is not None),
+                           ("--tune-gains", args.tune_gains)):
+            if given:
+                raise UserError(f"{opt} is an option of --choose-m1 (add --choose-m1)")
+    elif args.max_evaluations is not None and args.max_evaluations < 1:
+        raise UserError(f"--max-evaluations must be >= 1, got {args.max_evaluations}")
+    if args.tune_gains and (args.kp <= 0 or args.kd <= 0):
+        raise UserError("--tune-gains searches Kp and Kd on a log scale: --kp and --kd must "
+                        "be > 0")
 
 
 def cmd_running(args):
-    if args.gait is not None:
+    if args.gait is not None or args.choose_m1:
         args.stability = True
     _check_closed_loop(args)
     if args.gait is not None:
@@ -207,14 +226,31 @@ def closed_loop(model, gait, args) -> dict:
                         f"got {len(M1)}")
     c = RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law)
     cyc = running_cycle(c)
+    choice = None
+    if getattr(args, "choose_m1", False):
+        from analysis.design.running_m1 import choose_running_m1
+        say = Progress("running", quiet=args.json)
+        ch = choose_running_m1(cyc, tune_gains=args.tune_gains,
+                               max_evaluations=args.max_evaluations or 150, progress=say)
+        choice = dict(ch.to_dict(), start_M1=list(M1))
+        if ch.status == "failed":
+            return dict(law=args.law, Kp=args.kp, Kd=args.kd, M1=list(M1), status="failed",
+                        message=ch.message, stable=False, choice=choice, simulation=None)
+        cyc = cyc.retuned(Kp=ch.Kp, Kd=ch.Kd, M1=ch.M1)
+        c = cyc.controller
+        M1 = tuple(float(v) for v in ch.M1)
     r = running_stability(cyc)
-    out = dict(law=args.law, Kp=args.kp, Kd=args.kd, M1=list(M1), status=r.status,
+    kp = float(c.Kp[0]) if np.ptp(c.Kp) == 0 else c.Kp.tolist()
+    kd = float(c.Kd[0]) if np.ptp(c.Kd) == 0 else c.Kd.tolist()
+    out = dict(law=args.law, Kp=kp, Kd=kd, M1=list(M1), status=r.status,
                message=r.message, stable=r.stable,
                fixed_point=r.fixed_point.tolist(), fixed_point_residual=r.residual,
                fixed_point_distance=r.distance, spectral_radius=r.spectral_radius,
                eigenvalues=[[float(e.real), float(e.imag)] for e in r.eigenvalues],
                eigenvalue_moduli=np.abs(r.eigenvalues).tolist(),
                durations=r.durations.tolist())
+    if choice is not None:
+        out["choice"] = choice
     if r.status == "failed" or args.steps == 0:
         out["simulation"] = None
         return out
@@ -244,8 +280,25 @@ def closed_loop(model, gait, args) -> dict:
 
 def _print_stability(s: dict):
     """The closed loop's report."""
-    print(f"closed loop ({s['law']}, Kp {s['Kp']:g}, Kd {s['Kd']:g}, M1 "
-          f"{' '.join(f'{v:g}' for v in s['M1'])}): {s['status']}")
+    ch = s.get("choice")
+    if ch is not None:
+        print(f"choice of M1 ({ch['method']}, {ch['n_evaluations']} evaluations, "
+              f"{ch['n_infeasible']} infeasible, {ch['seconds']:.1f} s): {ch['status']}")
+        rad0 = ch["start_radius"]
+        print("  start                M1 " + " ".join(f"{v:g}" for v in ch["start_M1"])
+              + (f", spectral radius {rad0:.4f}" if rad0 is not None
+                 else f" ({ch['start_status']})"))
+        if ch["status"] == "failed":
+            print(f"  {ch['message']}")
+            return
+        print("  chosen               M1 " + " ".join(f"{v:.5g}" for v in ch["M1"])
+              + (f", Kp {ch['Kp']:.5g}, Kd {ch['Kd']:.5g}"
+                 if ch["tune_gains"] else "")
+              + f", spectral radius {ch['spectral_radius']:.4f}")
+    def gain(v):
+        return f"{v:g}" if isinstance(v, float) else " ".join(f"{x:g}" for x in v)
+    print(f"closed loop ({s['law']}, Kp {gain(s['Kp'])}, Kd {gain(s['Kd'])}, M1 "
+          f"{' '.join(f'{v:.5g}' for v in s['M1'])}): {s['status']}")
     if s["status"] == "failed":
         print(f"  {s['message']}")
         return

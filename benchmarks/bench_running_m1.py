@@ -1,0 +1,229 @@
+"""The running closed loop's stability across speeds: plain tracking, the hand-picked
+output and the chosen one (docs/howto/running.md, "Choosing M1 for running").
+
+For RABBIT's running gait at each speed (default grid, PD Kp 400 N m/rad, Kd 30 N m s/rad):
+the spectral radius of the exact stride Jacobian at the closed loop's fixed point with
+M1 = 0 (plain tracking), with the hand-picked M1 = (0, 0.95, 0.95, 0) of 1.5 m/s, along
+M1 = (0, c, c, 0) on a grid of c, and with the M1 that
+:func:`analysis.design.running_m1.choose_running_m1` chooses (Nelder-Mead from the best
+of the hand-picked design and the grid).  The choice is checked at every speed: a fresh
+``running_stability`` at it, central differences of the stride map against the AD
+Jacobian, and 20 strides from the fixed point with 0.01 rad/s on every velocity (the
+per-stride contraction against the radius).
+
+Run: ``python benchmarks/bench_running_m1.py [--speeds 1.0 1.5 ...] [--max-evaluations N]
+[--no-save]``; writes ``benchmarks/results/running_m1.json`` and
+``docs/_static/running_m1_speeds.png``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _results import Run  # noqa: E402
+
+from biped_casadi import rabbit  # noqa: E402
+from biped_casadi.control.running import RunningController  # noqa: E402
+from gait_opt.running import RunningOptions, optimize_running  # noqa: E402
+from analysis.design.running_m1 import choose_running_m1  # noqa: E402
+from analysis.stability.hybrid_cycle import HybridCycleError  # noqa: E402
+from analysis.stability.running_cycle import (finite_difference_jacobian,  # noqa: E402
+                                              running_cycle, running_stability,
+                                              simulate_running)
+
+ROOT = Path(__file__).resolve().parents[1]
+KP, KD = 400.0, 30.0
+HAND = (0.0, 0.95, 0.95, 0.0)
+CS = np.round(np.arange(0.5, 1.501, 0.05), 4)
+
+
+def _radius(cyc, M1):
+    r = running_stability(cyc.retuned(M1=M1))
+    return (r.spectral_radius if r.status != "failed" else None), r
+
+
+def _check(cyc, r, nq):
+    """Central differences and a perturbed run at a design's fixed point."""
+    t0 = time.perf_counter()
+    try:
+        J = finite_difference_jacobian(cyc, r.fixed_point, 1e-5)
+        fd, fd_message = float(np.abs(J - r.A).max() / np.abs(r.A).max()), ""
+    except HybridCycleError as e:      # a fixed point on a constraint's edge
+        fd, fd_message = None, str(e)
+    x = r.fixed_point.copy()
+    x[nq:] += 1e-2
+    run = simulate_running(cyc, r.fixed_point, x, 20)
+    d = run.deviations
+    mean = float((d[-1] / d[1]) ** (1 / (d.size - 2))) if d.size > 2 and d[1] > 0 else None
+    st = run.strides
+    return dict(fd_relative_error=fd, fd_message=fd_message, run_status=run.status, run_message=run.message,
+                deviations=d.tolist(), contraction=run.contraction.tolist(),
+                mean_contraction_after_first=mean,
+                torque_max=max((s.torque_max for s in st), default=None),
+                friction_excess_max=max((s.friction_excess_max for s in st), default=None),
+                fz_min=min((s.fz_min for s in st), default=None),
+                seconds=time.perf_counter() - t0)
+
+
+def speed_row(m, v, max_evaluations, gait_torque_limit=None):
+    """Everything measured at one speed (the gait optimised with ``gait_torque_limit``,
+    default the robot's; the controller always has the robot's)."""
+    out = dict(speed=v, gait_torque_limit=gait_torque_limit)
+    t0 = time.perf_counter()
+    try:
+        g = optimize_running(m, RunningOptions(speed=v, torque_limit=gait_torque_limit))
+    except RuntimeError as e:              # IPOPT's failure (infeasible problem)
+        out.update(gait_success=False, gait_message=str(e).splitlines()[-1],
+                   gait_seconds=time.perf_counter() - t0)
+        return out
+    out.update(gait_success=bool(g.success), gait_seconds=time.perf_counter() - t0,
+               T_stance=float(g.T_stance), T_flight=float(g.T_flight),
+               step_length=float(g.step_length))
+    if not g.success:
+        return out
+    t0 = time.perf_counter()
+    cyc = running_cycle(RunningController(m, g, KP, KD, M1=HAND,
+                                          torque_limit=m.description.torque_limit))
+    out["build_seconds"] = time.perf_counter() - t0
+    out["plain"], rp = _radius(cyc, np.zeros(4))
+    out["plain_message"] = rp.message
+    out["hand"], rh = _radius(cyc, HAND)
+    out["hand_message"] = rh.message
+    grid = []
+    for c in CS:
+        rad, _ = _radius(cyc, (0.0, c, c, 0.0))
+        grid.append(rad)
+    out["sweep_c"] = dict(c=CS.tolist(), radius=grid)
+    ok = [(rad, c) for rad, c in zip(grid, CS) if rad is not None]
+    best_c = min(ok) if ok else (None, None)
+    out["best_c"] = dict(c=None if best_c[1] is None else float(best_c[1]), radius=best_c[0])
+    starts = [(out["hand"], HAND, "hand-picked")] if out["hand"] is not None else []
+    if best_c[0] is not None:
+        starts.append((best_c[0], (0.0, best_c[1], best_c[1], 0.0), f"c = {best_c[1]:g}"))
+    if not starts:
+        out["chosen"] = None
+        return out
+    rad0, start, label = min(starts, key=lambda s: s[0])
+    ch = choose_running_m1(cyc, start=start, max_evaluations=max_evaluations,
+                           progress=lambda s: print(f"[{v:g} m/s] {s}", flush=True))
+    out["chosen"] = dict(start=list(start), start_label=label, **ch.to_dict(),
+                         evaluations=[e.to_dict() for e in ch.evaluations])
+    if ch.stability is None:
+        return out
+    fresh = running_stability(cyc.retuned(M1=ch.M1))
+    out["chosen"]["fresh_radius"] = fresh.spectral_radius
+    out["chosen"]["moduli"] = np.abs(fresh.eigenvalues).tolist()
+    out["chosen"]["distance"] = fresh.distance
+    out["chosen"]["check"] = _check(cyc.retuned(M1=ch.M1), fresh, m.nq)
+    if out["hand"] is not None:
+        out["hand_check"] = _check(cyc.retuned(M1=HAND), rh, m.nq)
+    return out
+
+
+def figure(rows):
+    """Spectral radius against speed, log scale, the three designs (and the best c)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    sp = [r["speed"] for r in rows]
+
+    def line(vals, **kw):
+        v = np.array([np.nan if x is None else x for x in vals], float)
+        ax.semilogy(sp, v, marker="o", **kw)
+
+    line([r.get("plain") for r in rows], label="plain tracking, M1 = 0", color="C3")
+    line([r.get("hand") for r in rows], label="hand-picked M1 = (0, 0.95, 0.95, 0)",
+         color="C0")
+    line([r["best_c"]["radius"] if r.get("best_c") else None for r in rows],
+         label="best M1 = (0, c, c, 0), c on a 0.05 grid", color="C2", ls="--", ms=4)
+    line([r["chosen"]["spectral_radius"] if r.get("chosen") else None for r in rows],
+         label="chosen M1 (choose_running_m1)", color="k")
+    ax.axhline(1.0, color="0.5", lw=0.8, ls=":")
+    for r in rows:
+        if r.get("gait_torque_limit") is not None:
+            ax.annotate(f"gait optimised at |u| <= {r['gait_torque_limit']:g} N m",
+                        (r["speed"], 1.0), textcoords="offset points", xytext=(-60, 8),
+                        fontsize=7, color="0.3")
+    ax.set_xlabel("running speed (m/s)")
+    ax.set_ylabel("spectral radius of the stride Jacobian")
+    ax.set_title("RABBIT running, PD Kp 400 N m/rad, Kd 30 N m s/rad")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--speeds", type=float, nargs="+", default=[1.0, 1.5, 2.0, 2.5, 3.0])
+    ap.add_argument("--max-evaluations", type=int, default=150)
+    ap.add_argument("--reserve", type=float, default=5.0,
+                    help="where no design is feasible on the default gait, optimise the gait "
+                         "again with the torque limit this much lower (N m) and measure that")
+    ap.add_argument("--out", default=str(ROOT / "docs" / "_static"))
+    ap.add_argument("--no-save", action="store_true")
+    ap.add_argument("--name", default="running_m1",
+                    help="the results file's name (benchmarks/results/NAME.json)")
+    ap.add_argument("--combine", nargs="+", metavar="FILE",
+                    help="measure nothing: merge the rows of saved results (runs over parts "
+                         "of the speeds) into NAME.json and draw the figure")
+    a = ap.parse_args()
+    from analysis.reporting.plots import save_figure
+    m = rabbit()
+    with Run(a.name, "the running stride map's spectral radius across speeds: plain "
+             "tracking, the hand-picked M1 and the chosen one", save=not a.no_save) as run:
+        rows = []
+        if a.combine:
+            import json
+            for f in a.combine:
+                rows += json.loads(Path(f).read_text())["data"]["rows"]
+            rows.sort(key=lambda r: r["speed"])
+            for r in rows:
+                ch = r.get("chosen") or {}
+                for key, label in (("plain", "plain tracking"), ("hand", "hand-picked M1")):
+                    run.row(f"{r['speed']:g} m/s, {label}: spectral radius", r.get(key),
+                            unit="")
+                run.row(f"{r['speed']:g} m/s, chosen M1: spectral radius",
+                        ch.get("spectral_radius"), unit="")
+                run.row(f"{r['speed']:g} m/s, the choice ({ch.get('n_evaluations')} "
+                        "evaluations)", ch.get("seconds"), unit="s")
+            run.note("merged from " + ", ".join(Path(f).name for f in a.combine))
+        for v in ([] if a.combine else a.speeds):
+            t0 = time.perf_counter()
+            row = speed_row(m, v, a.max_evaluations)
+            if row.get("gait_success") and row.get("plain") is None and \
+                    row.get("hand") is None and row["best_c"]["radius"] is None \
+                    and a.reserve > 0:
+                lim = m.description.torque_limit - a.reserve
+                print(f"{v:g} m/s: no design feasible ({row['hand_message']}); the gait "
+                      f"again with the torque limit {lim:g} N m", flush=True)
+                row = dict(speed_row(m, v, a.max_evaluations, lim), default_gait=row)
+            row["seconds"] = time.perf_counter() - t0
+            rows.append(row)
+            ch = row.get("chosen") or {}
+            print(f"{v:g} m/s: plain {row.get('plain')}, hand {row.get('hand')}, best c "
+                  f"{row.get('best_c')}, chosen {ch.get('M1')} {ch.get('spectral_radius')} "
+                  f"({row['seconds']:.0f} s)", flush=True)
+            for key, label in (("plain", "plain tracking"), ("hand", "hand-picked M1")):
+                run.row(f"{v:g} m/s, {label}: spectral radius", row.get(key), unit="")
+            run.row(f"{v:g} m/s, chosen M1: spectral radius", ch.get("spectral_radius"),
+                    unit="")
+            run.row(f"{v:g} m/s, the choice ({ch.get('n_evaluations')} evaluations)",
+                    ch.get("seconds"), unit="s")
+        run.data["rows"] = rows
+        run.data["Kp"], run.data["Kd"], run.data["hand"] = KP, KD, list(HAND)
+        run.data["max_evaluations"] = a.max_evaluations
+        run.note("Nelder-Mead on the exact spectral radius, from the better of the "
+                 "hand-picked M1 and the best of M1 = (0, c, c, 0) on a 0.05 grid")
+        Path(a.out).mkdir(parents=True, exist_ok=True)
+        run.data["figure"] = save_figure(figure(rows), Path(a.out) / "running_m1_speeds.png")
+
+
+if __name__ == "__main__":
+    main()
