@@ -45,3 +45,23 @@ def gait3(model3):
     limit), from the on-disk cache."""
     from gait_opt import optimize_gait
     return optimize_gait(model3, cache=True)
+
+
+@pytest.fixture(scope="session")
+def running_gait(model):
+    """RABBIT's running step at 1.5 m/s on the default grid, from the on-disk cache
+    (solved at most once per machine; shared by the running tests)."""
+    from gait_opt.running import RunningOptions, optimize_running
+    g = optimize_running(model, RunningOptions(speed=1.5), cache=True)
+    assert g.success
+    return g
+
+
+@pytest.fixture(scope="session")
+def running_cycle15(model, running_gait):
+    """Its stride map under the how-to's design (PD Kp 400 N m/rad, Kd 30 N m s/rad,
+    M1 = (0, 0.95, 0.95, 0)), built once per session (other gains: ``retuned``)."""
+    from analysis.stability.running_cycle import running_cycle
+    from biped_casadi.control.running import RunningController
+    return running_cycle(RunningController(model, running_gait, 400.0, 30.0,
+                                           M1=(0.0, 0.95, 0.95, 0.0)))

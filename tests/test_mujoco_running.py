@@ -20,7 +20,6 @@ from biped_casadi.control.running import RunningController
 from biped_casadi.mujoco import STIFF, ContactSettings
 from biped_casadi.mujoco.running import (RUN_OUTCOMES, RunningLoop, decay_rate,
                                          fit_running_map, run_in_mujoco)
-from gait_opt.running import RunningOptions, optimize_running
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -30,10 +29,8 @@ FINE = ContactSettings(timestep=0.001)
 
 
 @pytest.fixture(scope="session")
-def run_gait15(model):
-    g = optimize_running(model, RunningOptions(speed=1.5), cache=True)
-    assert g.success
-    return g
+def run_gait15(running_gait):
+    return running_gait
 
 
 @pytest.fixture(scope="session")

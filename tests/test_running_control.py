@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from biped_casadi.control.running import RunningController, phase_derivatives
-from gait_opt.running import RunningOptions, hermite_simpson, optimize_running
+from gait_opt.running import hermite_simpson
 from analysis.stability.running_cycle import (finite_difference_jacobian, running_cycle,
                                               running_stability, simulate_running)
 
@@ -26,15 +26,16 @@ KP, KD = 400.0, 30.0
 
 
 @pytest.fixture(scope="session")
-def run_gait(model):
-    g = optimize_running(model, RunningOptions(speed=1.5))
-    assert g.success
-    return g
+def run_gait(running_gait):
+    return running_gait
 
 
 @pytest.fixture(scope="session")
-def cycle(model, run_gait):
-    return running_cycle(RunningController(model, run_gait, KP, KD, M1=STABLE_M1))
+def cycle(running_cycle15):
+    c = running_cycle15.controller
+    assert np.all(c.Kp == KP) and np.all(c.Kd == KD)
+    np.testing.assert_array_equal(c.M1, STABLE_M1)
+    return running_cycle15
 
 
 @pytest.fixture(scope="session")

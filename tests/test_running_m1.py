@@ -15,26 +15,23 @@ import json
 import numpy as np
 import pytest
 
-from biped_casadi.control.running import RunningController
-from gait_opt.running import RunningOptions, optimize_running
 from analysis.design.running_m1 import INFEASIBLE, choose_running_m1
-from analysis.stability.running_cycle import (finite_difference_jacobian, running_cycle,
-                                              running_stability, simulate_running)
+from analysis.stability.running_cycle import (finite_difference_jacobian, running_stability,
+                                              simulate_running)
 
 HAND = (0.0, 0.95, 0.95, 0.0)        # the hand-picked design of docs/howto/running.md
-CAP = 30
+CAP = 15
 
 
 @pytest.fixture(scope="session")
-def m1_gait(model):
-    g = optimize_running(model, RunningOptions(speed=1.5))
-    assert g.success
-    return g
+def m1_gait(running_gait):
+    return running_gait
 
 
 @pytest.fixture(scope="session")
-def m1_cycle(model, m1_gait):
-    return running_cycle(RunningController(model, m1_gait, 400.0, 30.0, M1=HAND))
+def m1_cycle(running_cycle15):
+    np.testing.assert_array_equal(running_cycle15.controller.M1, HAND)
+    return running_cycle15
 
 
 @pytest.fixture(scope="session")
