@@ -13,7 +13,7 @@ from analysis.stability.running_cycle import running_cycle, running_stability
 
 from .common import Progress, UserError, add_robot, load_running_gait, print_json
 from .mujoco_options import add_mujoco_settings, mujoco_settings, settings_error
-from .running import DEFAULT_KD, DEFAULT_KP, DEFAULT_M1
+from .running import DEFAULT_M1, add_tracking_arguments
 
 #: at most this many strides in a run (and in the fitted run)
 MAX_STRIDES = 5000
@@ -128,17 +128,7 @@ def register(sub):
     p.add_argument("--gait", required=True, metavar="FILE",
                    help="a running step saved by 'biped running --out FILE'")
     add_robot(p)
-    p.add_argument("--kp", type=float, default=DEFAULT_KP,
-                   help=f"proportional gain, N m/rad (default {DEFAULT_KP:g}; 1/s^2 with "
-                        "--law computed_torque)")
-    p.add_argument("--kd", type=float, default=DEFAULT_KD,
-                   help=f"derivative gain, N m s/rad (default {DEFAULT_KD:g}; 1/s with "
-                        "--law computed_torque)")
-    p.add_argument("--m1", type=float, nargs="+", metavar="M",
-                   help="the output's column on q1, one number per torque (default "
-                        f"{' '.join(f'{v:g}' for v in DEFAULT_M1)}; 0 0 0 0: plain tracking)")
-    p.add_argument("--law", choices=("pd", "computed_torque"), default="pd",
-                   help="feedforward + PD (default) or computed torque on the outputs")
+    add_tracking_arguments(p)
     p.add_argument("--strides", type=int, default=30, metavar="N",
                    help=f"strides to run, 1 to {MAX_STRIDES} (30)")
     p.add_argument("--perturb", type=float, default=0.0, metavar="DQ",

@@ -30,6 +30,23 @@ DEFAULT_M1 = (0.0, 0.95, 0.95, 0.0)
 COARSE = 1e-3
 
 
+def add_tracking_arguments(p):
+    """``--kp``, ``--kd``, ``--m1``, ``--law``: the running controller's design (this
+    command's closed loop, and ``biped mujoco-running``)."""
+    p.add_argument("--kp", type=float, default=DEFAULT_KP,
+                   help=f"proportional gain, N m/rad (default {DEFAULT_KP:g}; 1/s^2 with "
+                        "--law computed_torque)")
+    p.add_argument("--kd", type=float, default=DEFAULT_KD,
+                   help=f"derivative gain, N m s/rad (default {DEFAULT_KD:g}; 1/s with "
+                        "--law computed_torque)")
+    p.add_argument("--m1", type=float, nargs="+", metavar="M",
+                   help="the output's column on q1, one number per torque (default "
+                        f"{' '.join(f'{v:g}' for v in DEFAULT_M1)}, stable for RABBIT at "
+                        "1.5 m/s; 0 0 0 0 is plain joint tracking)")
+    p.add_argument("--law", choices=("pd", "computed_torque"), default="pd",
+                   help="feedforward + PD (default) or computed torque on the outputs")
+
+
 def register(sub):
     p = sub.add_parser(
         "running", help="optimise a periodic running step (stance + flight) and, with "
@@ -74,18 +91,7 @@ def register(sub):
     st.add_argument("--gait", metavar="FILE",
                     help="a running step saved by 'biped running' (no optimisation, nothing "
                          "written); implies --stability")
-    st.add_argument("--kp", type=float, default=DEFAULT_KP,
-                    help=f"proportional gain, N m/rad (default {DEFAULT_KP:g}; 1/s^2 with "
-                         "--law computed_torque)")
-    st.add_argument("--kd", type=float, default=DEFAULT_KD,
-                    help=f"derivative gain, N m s/rad (default {DEFAULT_KD:g}; 1/s with "
-                         "--law computed_torque)")
-    st.add_argument("--m1", type=float, nargs="+", metavar="M",
-                    help="the output's column on q1, one number per torque (default "
-                         f"{' '.join(f'{v:g}' for v in DEFAULT_M1)}, stable for RABBIT at "
-                         "1.5 m/s; 0 0 0 0 is plain joint tracking)")
-    st.add_argument("--law", choices=("pd", "computed_torque"), default="pd",
-                    help="feedforward + PD (default) or computed torque on the outputs")
+    add_tracking_arguments(st)
     st.add_argument("--steps", type=int, default=20, metavar="N",
                     help="strides of the perturbed run (default 20; 0: none)")
     st.add_argument("--perturb", type=float, default=1e-2, metavar="DQ",
