@@ -29,8 +29,10 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import minimize
 
 from biped_casadi.results import Result
+from analysis.stability.running_cycle import running_stability
 
 __all__ = ["choose_running_m1", "RunningM1Choice", "M1Evaluation", "INFEASIBLE",
            "METHODS"]
@@ -155,7 +157,6 @@ def _g(v):
 
 def _evaluate(cycle, M1, Kp, Kd, max_distance):
     """The spectral radius at one design, or the reason it is infeasible."""
-    from analysis.stability.running_cycle import running_stability
     t0 = time.perf_counter()
     try:
         r = running_stability(cycle.retuned(Kp=Kp, Kd=Kd, M1=M1))
@@ -174,6 +175,80 @@ def _evaluate(cycle, M1, Kp, Kd, max_distance):
     rho = r.spectral_radius if status != "infeasible" else math.nan
     return M1Evaluation(list(map(float, M1)), _g(Kp), _g(Kd), float(rho), status, msg,
                         float(r.distance), dt), r
+
+
+def _check_options(method, max_evaluations, **positive):
+    """ValueError naming a bad option of :func:`choose_running_m1`."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if isinstance(max_evaluations, bool) or not isinstance(max_evaluations, (int, np.integer)) \
+            or max_evaluations < 1:
+        raise ValueError(f"max_evaluations must be a positive integer, got {max_evaluations!r}")
+    for name, v in positive.items():
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a positive number, got {v!r}")
+
+
+class _Cap(Exception):
+    """The evaluation cap was reached (ends the optimiser's run)."""
+
+
+class _Objective:
+    """The spectral radius as a function of z = M1 (and log Kp, log Kd): each distinct
+    point evaluated once, every evaluation recorded, the best feasible one kept."""
+
+    def __init__(self, cycle, Kp0, Kd0, tune_gains, cap, max_distance, say):
+        self.cycle, self.Kp0, self.Kd0, self.tune_gains = cycle, Kp0, Kd0, tune_gains
+        self.cap, self.max_distance, self.say = cap, max_distance, say
+        self.nu = cycle.controller.model.nu
+        self.evals, self.cache, self.best = [], {}, {"f": math.inf, "key": None}
+
+    def unpack(self, z):
+        z, nu = np.asarray(z, float), self.nu
+        if self.tune_gains:
+            return z[:nu], float(math.exp(z[nu])), float(math.exp(z[nu + 1]))
+        return z[:nu], self.Kp0, self.Kd0
+
+    def __call__(self, z):
+        key = tuple(np.round(np.asarray(z, float), 12))
+        if key in self.cache:
+            return self.cache[key]
+        if len(self.evals) >= self.cap:
+            raise _Cap
+        M1, Kp, Kd = self.unpack(z)
+        ev, _ = _evaluate(self.cycle, M1, Kp, Kd, self.max_distance)
+        self.evals.append(ev)
+        val = ev.spectral_radius if ev.status != "infeasible" else INFEASIBLE
+        self.cache[key] = val
+        best = self.best
+        if val < best["f"]:
+            best.update(f=val, key=key, ev=ev)
+        if len(self.evals) % 10 == 0:
+            self.say(f"  {len(self.evals)} evaluations, best spectral radius {best['f']:.4g} "
+                     "at M1 " + " ".join(f"{v:.4g}" for v in best["ev"].M1)
+                     + (f", Kp {best['ev'].Kp:.4g}, Kd {best['ev'].Kd:.4g}"
+                        if self.tune_gains else ""))
+        return val
+
+
+def _search(f, z0, nu, method, initial_step, gain_step, xatol, fatol, cap) -> str:
+    """Run the optimiser on ``f`` from ``z0``; its message."""
+    try:
+        if method == "nelder-mead":
+            simplex = [z0]
+            for i in range(z0.size):
+                z = z0.copy()
+                z[i] += initial_step if i < nu else gain_step
+                simplex.append(z)
+            res = minimize(f, z0, method="Nelder-Mead",
+                           options=dict(initial_simplex=np.array(simplex), xatol=xatol,
+                                        fatol=fatol, maxfev=10 * cap))
+        else:
+            res = minimize(f, z0, method="Powell",
+                           options=dict(xtol=xatol, ftol=fatol, maxfev=10 * cap))
+        return str(res.message)
+    except _Cap:
+        return f"stopped at the evaluation cap ({cap})"
 
 
 def choose_running_m1(cycle, start=None, tune_gains: bool = False,
@@ -219,19 +294,9 @@ def choose_running_m1(cycle, start=None, tune_gains: bool = False,
     ValueError
         A bad option (method, evaluation cap, steps, start of the wrong size).
     """
-    from scipy.optimize import minimize
-
-    from analysis.stability.running_cycle import running_stability
     method = str(method).lower()
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-    if isinstance(max_evaluations, bool) or not isinstance(max_evaluations, (int, np.integer)) \
-            or max_evaluations < 1:
-        raise ValueError(f"max_evaluations must be a positive integer, got {max_evaluations!r}")
-    for name, v in (("initial_step", initial_step), ("gain_step", gain_step),
-                    ("xatol", xatol), ("fatol", fatol), ("max_distance", max_distance)):
-        if not (math.isfinite(v) and v > 0):
-            raise ValueError(f"{name} must be a positive number, got {v!r}")
+    _check_options(method, max_evaluations, initial_step=initial_step, gain_step=gain_step,
+                   xatol=xatol, fatol=fatol, max_distance=max_distance)
     c = cycle.controller
     nu = c.model.nu
     m0 = np.array(c.M1 if start is None else start, float).ravel()
@@ -243,36 +308,8 @@ def choose_running_m1(cycle, start=None, tune_gains: bool = False,
     Kp0, Kd0 = c.Kp.copy(), c.Kd.copy()
     say = progress or (lambda s: None)
     t_start = time.perf_counter()
-    evals, cache, best = [], {}, {"f": math.inf, "key": None}
-
-    def unpack(z):
-        z = np.asarray(z, float)
-        if tune_gains:
-            return z[:nu], float(math.exp(z[nu])), float(math.exp(z[nu + 1]))
-        return z[:nu], Kp0, Kd0
-
-    class _Cap(Exception):
-        pass
-
-    def f(z):
-        key = tuple(np.round(np.asarray(z, float), 12))
-        if key in cache:
-            return cache[key]
-        if len(evals) >= max_evaluations:
-            raise _Cap
-        M1, Kp, Kd = unpack(z)
-        ev, _ = _evaluate(cycle, M1, Kp, Kd, max_distance)
-        evals.append(ev)
-        val = ev.spectral_radius if ev.status != "infeasible" else INFEASIBLE
-        cache[key] = val
-        if val < best["f"]:
-            best.update(f=val, key=key, ev=ev)
-        if len(evals) % 10 == 0:
-            say(f"  {len(evals)} evaluations, best spectral radius {best['f']:.4g} at M1 "
-                + " ".join(f"{v:.4g}" for v in best["ev"].M1)
-                + (f", Kp {best['ev'].Kp:.4g}, Kd {best['ev'].Kd:.4g}" if tune_gains else ""))
-        return val
-
+    f = _Objective(cycle, Kp0, Kd0, tune_gains, max_evaluations, max_distance, say)
+    evals, best = f.evals, f.best
     z0 = m0.copy()
     if tune_gains:
         z0 = np.r_[z0, math.log(Kp0[0]), math.log(Kd0[0])]
@@ -281,23 +318,8 @@ def choose_running_m1(cycle, start=None, tune_gains: bool = False,
         + " ".join(f"{v:g}" for v in m0))
     f(z0)
     first = evals[0]
-    opt_msg = ""
-    try:
-        if method == "nelder-mead":
-            simplex = [z0]
-            for i in range(z0.size):
-                z = z0.copy()
-                z[i] += initial_step if i < nu else gain_step
-                simplex.append(z)
-            res = minimize(f, z0, method="Nelder-Mead",
-                           options=dict(initial_simplex=np.array(simplex), xatol=xatol,
-                                        fatol=fatol, maxfev=10 * max_evaluations))
-        else:
-            res = minimize(f, z0, method="Powell",
-                           options=dict(xtol=xatol, ftol=fatol, maxfev=10 * max_evaluations))
-        opt_msg = str(res.message)
-    except _Cap:
-        opt_msg = f"stopped at the evaluation cap ({max_evaluations})"
+    opt_msg = _search(f, z0, nu, method, initial_step, gain_step, xatol, fatol,
+                      max_evaluations)
     n_bad = sum(e.status == "infeasible" for e in evals)
     seconds = time.perf_counter() - t_start
     if best["key"] is None or best["f"] >= INFEASIBLE:
