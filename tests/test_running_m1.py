@@ -127,7 +127,10 @@ def test_command_line_choose_m1(m1_gait_file, m1_cycle, capsys):
 @pytest.mark.parametrize("args, words", [
     (["--max-evaluations", "5"], "--choose-m1"), (["--tune-gains"], "--choose-m1"),
     (["--choose-m1", "--max-evaluations", "0"], "--max-evaluations"),
-    (["--choose-m1", "--tune-gains", "--kd", "0"], "--tune-gains")])
+    (["--choose-m1", "--tune-gains", "--kd", "0"], "--tune-gains"),
+    (["--max-distance", "0.1"], "--choose-m1"),
+    (["--choose-m1", "--max-distance", "-1"], "--max-distance must be a positive"),
+    (["--choose-m1", "--max-distance", "nan"], "--max-distance must be a positive")])
 def test_command_line_refuses_bad_combinations(m1_gait_file, capsys, args, words):
     from analysis.cli import main
     assert main(["running", "--gait", m1_gait_file, *args]) == 2
@@ -144,3 +147,15 @@ def test_the_gains_can_be_searched_too(m1_cycle):
     assert ch.spectral_radius <= ch.start_radius
     fresh = running_stability(m1_cycle.retuned(Kp=ch.Kp, Kd=ch.Kd, M1=ch.M1))
     assert ch.spectral_radius == pytest.approx(fresh.spectral_radius, rel=1e-10)
+
+
+def test_command_line_choice_without_a_feasible_design_is_one_line(m1_gait_file, capsys):
+    """Every fixed point farther than --max-distance from the gait: the choice fails as a
+    solver that did not converge (one line naming why and what to change, exit 2), not a
+    report that exits 0."""
+    from analysis.cli import main
+    assert main(["running", "--gait", m1_gait_file, "--choose-m1", "--max-evaluations", "2",
+                 "--max-distance", "1e-9"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no feasible design among 2 evaluations" in err
+    assert "larger --max-distance than 1e-09" in err, err

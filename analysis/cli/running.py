@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from analysis.design.running_m1 import choose_running_m1
 from analysis.reporting.plots import running_plot, save_figures
 from analysis.stability.running_cycle import running_cycle, running_stability, simulate_running
 from biped_casadi.control.running import RunningController
@@ -24,6 +25,10 @@ from .common import Progress, UserError, add_robot, load_model, load_running_gai
 #: make RABBIT's 1.5 m/s running gait stable (docs: how-to running, "Closing the loop")
 DEFAULT_KP, DEFAULT_KD = 400.0, 30.0
 DEFAULT_M1 = (0.0, 0.95, 0.95, 0.0)
+
+#: --choose-m1's default bound on a fixed point's distance from the collocated landing
+#: state (largest entry, rad or rad/s): farther is another orbit than the gait's
+MAX_DISTANCE = 1e-2
 
 #: a phase's integration departing from its collocation by more than this (the largest
 #: entry, rad or rad/s) is said on a note line: the grid is coarse for that robot
@@ -105,6 +110,11 @@ def register(sub):
                     help="with --choose-m1: fixed points solved at most (default 150)")
     st.add_argument("--tune-gains", action="store_true",
                     help="with --choose-m1: search Kp and Kd too (log scale, from --kp, --kd)")
+    st.add_argument("--max-distance", type=float, default=None, metavar="D",
+                    help="with --choose-m1: a fixed point farther than D from the collocated "
+                         "landing state (largest entry, rad or rad/s) is another orbit than "
+                         "the gait's, infeasible (default 0.01; a coarse grid for the robot "
+                         "may need more)")
     p.set_defaults(func=cmd_running)
 
 
@@ -122,11 +132,15 @@ def _check_closed_loop(args):
         raise UserError(f"--perturb must be a finite number, got {args.perturb:g}")
     if not args.choose_m1:
         for opt, given in (("--max-evaluations", args.max_evaluations is not None),
-                           ("--tune-gains", args.tune_gains)):
+                           ("--tune-gains", args.tune_gains),
+                           ("--max-distance", args.max_distance is not None)):
             if given:
                 raise UserError(f"{opt} is an option of --choose-m1 (add --choose-m1)")
     elif args.max_evaluations is not None and args.max_evaluations < 1:
         raise UserError(f"--max-evaluations must be >= 1, got {args.max_evaluations}")
+    if args.max_distance is not None and not (math.isfinite(args.max_distance)
+                                              and args.max_distance > 0):
+        raise UserError(f"--max-distance must be a positive number, got {args.max_distance:g}")
     if args.tune_gains and (args.kp <= 0 or args.kd <= 0):
         raise UserError("--tune-gains searches Kp and Kd on a log scale: --kp and --kd must "
                         "be > 0")
@@ -234,14 +248,17 @@ def closed_loop(model, gait, args) -> dict:
     cyc = running_cycle(c)
     choice = None
     if getattr(args, "choose_m1", False):
-        from analysis.design.running_m1 import choose_running_m1
         say = Progress("running", quiet=args.json)
+        dist = MAX_DISTANCE if args.max_distance is None else args.max_distance
         ch = choose_running_m1(cyc, tune_gains=args.tune_gains,
-                               max_evaluations=args.max_evaluations or 150, progress=say)
+                               max_evaluations=args.max_evaluations or 150,
+                               max_distance=dist, progress=say)
+        if ch.status == "failed":          # as a solver that did not converge: one line
+            far = "collocated landing state" in ch.message
+            raise UserError(f"--choose-m1: {ch.message}" + (
+                f"; the grid may be coarse for the robot (a step optimised with a finer "
+                f"--intervals), or give a larger --max-distance than {dist:g}" if far else ""))
         choice = dict(ch.to_dict(), start_M1=list(M1))
-        if ch.status == "failed":
-            return dict(law=args.law, Kp=args.kp, Kd=args.kd, M1=list(M1), status="failed",
-                        message=ch.message, stable=False, choice=choice, simulation=None)
         cyc = cyc.retuned(Kp=ch.Kp, Kd=ch.Kd, M1=ch.M1)
         c = cyc.controller
         M1 = tuple(float(v) for v in ch.M1)
@@ -294,9 +311,6 @@ def _print_stability(s: dict):
         print("  start                M1 " + " ".join(f"{v:g}" for v in ch["start_M1"])
               + (f", spectral radius {rad0:.4f}" if rad0 is not None
                  else f" ({ch['start_status']})"))
-        if ch["status"] == "failed":
-            print(f"  {ch['message']}")
-            return
         print("  chosen               M1 " + " ".join(f"{v:.5g}" for v in ch["M1"])
               + (f", Kp {ch['Kp']:.5g}, Kd {ch['Kd']:.5g}"
                  if ch["tune_gains"] else "")
