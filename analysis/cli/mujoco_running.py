@@ -13,19 +13,14 @@ from analysis.stability.running_cycle import running_cycle, running_stability
 
 from .common import Progress, UserError, add_robot, load_running_gait, print_json
 from .mujoco_options import add_mujoco_settings, mujoco_settings, settings_error
-from .running import DEFAULT_M1, add_tracking_arguments
+from .running import DEFAULT_M1, add_tracking_arguments, check_tracking_arguments
 
 #: at most this many strides in a run (and in the fitted run)
 MAX_STRIDES = 5000
 
 
 def _check(args):
-    for name in ("kp", "kd"):
-        v = getattr(args, name)
-        if not (math.isfinite(v) and v >= 0):
-            raise UserError(f"--{name} must be a finite number >= 0, got {v:g}")
-    if args.m1 is not None and not all(math.isfinite(v) for v in args.m1):
-        raise UserError("--m1 values must be finite")
+    check_tracking_arguments(args)
     if not 1 <= args.strides <= MAX_STRIDES:
         raise UserError(f"--strides must be between 1 and {MAX_STRIDES}, got {args.strides}")
     if args.fit != 0 and not 30 <= args.fit <= MAX_STRIDES:

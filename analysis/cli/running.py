@@ -52,6 +52,17 @@ def add_tracking_arguments(p):
                    help="feedforward + PD (default) or computed torque on the outputs")
 
 
+def check_tracking_arguments(args):
+    """UserError (one line) for a gain of :func:`add_tracking_arguments` that is not a
+    finite number >= 0, or a non-finite ``--m1``."""
+    for name in ("kp", "kd"):
+        v = getattr(args, name)
+        if not (math.isfinite(v) and v >= 0):
+            raise UserError(f"--{name} must be a finite number >= 0, got {v:g}")
+    if args.m1 is not None and not all(math.isfinite(v) for v in args.m1):
+        raise UserError("--m1 values must be finite")
+
+
 def register(sub):
     p = sub.add_parser(
         "running", help="optimise a periodic running step (stance + flight) and, with "
@@ -120,12 +131,7 @@ def register(sub):
 
 def _check_closed_loop(args):
     """The closed-loop options (UserError, one line, before any work)."""
-    for name in ("kp", "kd"):
-        v = getattr(args, name)
-        if not (math.isfinite(v) and v >= 0):
-            raise UserError(f"--{name} must be a finite number >= 0, got {v:g}")
-    if args.m1 is not None and not all(math.isfinite(v) for v in args.m1):
-        raise UserError("--m1 values must be finite")
+    check_tracking_arguments(args)
     if args.steps < 0:
         raise UserError(f"--steps must be >= 0, got {args.steps}")
     if not math.isfinite(args.perturb):
