@@ -102,6 +102,10 @@ class RunningLoop:
     liftoff_height : float
         ... and its sphere must be this far above the floor, m (the chatter lifts it by
         hundredths of a millimetre).
+    compiled : CompiledRunningLaw, optional
+        The controller's law from its C export
+        (:class:`~biped_casadi.control.compiled_running.CompiledRunningLaw`), called
+        instead of its CasADi Functions (default None: the Functions).
 
     Raises
     ------
@@ -113,7 +117,7 @@ class RunningLoop:
                  fixed_point=None, max_slip: float = 0.05, time_limits: float = 2.0,
                  min_stance: float = 0.25, stop_on_saturation: bool = False,
                  torque_limit: float | None = None, liftoff_time: float = 0.006,
-                 liftoff_height: float = 1e-4):
+                 liftoff_height: float = 1e-4, compiled=None):
         if not isinstance(controller, RunningController):
             raise ValueError("controller: a RunningController is needed "
                              f"(biped_casadi.control.running), got {type(controller).__name__}")
@@ -126,6 +130,11 @@ class RunningLoop:
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
         if time_limits <= 1:
             raise ValueError(f"time_limits must be above 1, got {time_limits!r}")
+        if compiled is not None and not (callable(getattr(compiled, "stance", None))
+                                         and callable(getattr(compiled, "flight", None))):
+            raise ValueError("compiled: a CompiledRunningLaw is needed "
+                             f"(biped_casadi.control.compiled_running), got "
+                             f"{type(compiled).__name__}")
         if isinstance(min_stance, bool) or not isinstance(min_stance, (int, float)) \
                 or not 0 <= min_stance < 1:
             raise ValueError(f"min_stance must be a fraction in [0, 1), got {min_stance!r}")
@@ -150,8 +159,9 @@ class RunningLoop:
         self.feet = tuple(mujoco.mj_name2id(self.m, mujoco.mjtObj.mjOBJ_GEOM, f"foot_{leg}")
                           for leg in "ab")
         self.fl = flight_model(model)
-        self._stance_law = FastCall(c.stance_law)
-        self._flight_law = FastCall(c.flight_law)
+        self.compiled = compiled
+        self._stance_law = FastCall(c.stance_law) if compiled is None else compiled.stance
+        self._flight_law = FastCall(c.flight_law) if compiled is None else compiled.flight
         self._landing = FastCall(self.fl.landing_swing)
         self.T_stance, self.T_flight = float(g.T_stance), float(g.T_flight)
         self.step_length = float(g.step_length)
@@ -183,11 +193,15 @@ class RunningLoop:
         Returns
         -------
         dict
-            ``law``, ``Kp``, ``Kd``, ``M1``, ``saturate``.
+            ``law``, ``Kp``, ``Kd``, ``M1``, ``saturate``; ``compiled`` (the library's
+            ``describe()``) when the law is the compiled one.
         """
         c = self.controller
-        return dict(law=c.law, Kp=c.Kp.tolist(), Kd=c.Kd.tolist(), M1=c.M1.tolist(),
-                    saturate=c.saturate)
+        rec = dict(law=c.law, Kp=c.Kp.tolist(), Kd=c.Kd.tolist(), M1=c.M1.tolist(),
+                   saturate=c.saturate)
+        if self.compiled is not None:
+            rec["compiled"] = self.compiled.describe()
+        return rec
 
     def at(self, **changes) -> "RunningLoop":
         """The same loop with some MuJoCo settings changed (``timestep``, ``solref``, ...).
@@ -205,7 +219,7 @@ class RunningLoop:
         return RunningLoop(self.controller, dataclasses.replace(self.settings, **changes),
                            self.x_star, self.max_slip, self.time_limits, self.min_stance,
                            self.stop_on_saturation, self.torque_limit, self.liftoff_time,
-                           self.liftoff_height)
+                           self.liftoff_height, self.compiled)
 
     def _foot(self, qpos, qvel, leg):
         """World (x, z) of leg ``leg``'s point foot and its velocity."""
@@ -480,7 +494,8 @@ def run_in_mujoco(controller: RunningController, start=None, strides: int = 30,
         Keep every MuJoCo state.
     **options
         Of :class:`RunningLoop` (``max_slip``, ``time_limits``, ``min_stance``,
-        ``stop_on_saturation``, ``torque_limit``, ``liftoff_time``).
+        ``stop_on_saturation``, ``torque_limit``, ``liftoff_time``, ``compiled``: the
+        law of the controller's C export).
 
     Returns
     -------
