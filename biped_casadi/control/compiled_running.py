@@ -170,7 +170,7 @@ class CompiledRunningLaw:
         tuple
             (return code, torques u (nu,), N m).
         """
-        n = self.nq if phase == 0 else self.nqe
+        n = self.nq if phase == 0 else (self.nqe if phase == 1 else 0)   # 0: not read
         self._q[:n] = np.asarray(q, float).ravel()[:n]
         self._dq[:n] = np.asarray(dq, float).ravel()[:n]
         rc = self._f(int(phase), float(t), *self._ptr)
