@@ -194,7 +194,6 @@ def _bad(capsys, *args):
     return o.err
 
 
-@needs_cc
 def test_cli_bad_inputs(running_gait, pd, tmp_path, capsys, monkeypatch):
     ctrl, _ = pd
     g = running_gait.save(tmp_path / "running.json")
@@ -217,3 +216,8 @@ def test_cli_bad_inputs(running_gait, pd, tmp_path, capsys, monkeypatch):
     assert "the export's Kp is" in _bad(capsys, *M, "--compiled", out, "--kp", 300)
     assert "not a folder" in _bad(capsys, *M, "--compiled", tmp_path / "none")
     assert "not a running export" in _bad(capsys, *M, "--compiled", tmp_path / "notes")
+    assert "empty folder name" in _bad(capsys, *M, "--compiled", "")
+    (tmp_path / "notes" / "controller.json").write_text("[1, 2]\n")
+    assert "not a running export" in _bad(capsys, *M, "--compiled", tmp_path / "notes")
+    (tmp_path / "notes" / "controller.json").write_text('{"kind": "running"}\n')
+    assert "another robot" in _bad(capsys, *M, "--compiled", tmp_path / "notes")

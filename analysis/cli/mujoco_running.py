@@ -36,6 +36,8 @@ def _check(args):
                         f"{args.perturb:g}")
     if not str(args.gait).strip():
         raise UserError("--gait: empty name")
+    if args.compiled is not None and not str(args.compiled).strip():
+        raise UserError("--compiled: empty folder name")
     if args.compiled is not None and not Path(args.compiled).is_dir():
         raise UserError(f"--compiled: {args.compiled} is not a folder (an export of "
                         "'biped export-running')")

@@ -56,8 +56,9 @@ def check_running_export(folder, controller: RunningController) -> dict:
             what = "gait" if key == "gait_digest" else key
             raise ValueError(f"{folder}: the export is of another {what} ({key} "
                              f"{info.get(key)!r}, this run's {want[key]!r})")
+    have = info.get("controller") if isinstance(info.get("controller"), dict) else {}
     for key, v in want["controller"].items():
-        got = (info.get("controller") or {}).get(key)
+        got = have.get(key)
         if got != v:
             raise ValueError(f"{folder}: the export's {key} is {got!r}, this run's {v!r}")
     return info
