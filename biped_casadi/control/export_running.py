@@ -45,8 +45,9 @@ from .export_urdf import c_number, comment_safe
 from .running import RunningController
 
 __all__ = ["ExportedRunningLaw", "exported_running_law", "running_c_sources",
-           "running_digest", "running_info", "RUNNING_HEADER", "RUNNING_WRAPPER", "RUNNING_GENERATED",
-           "RUNNING_LIBRARY", "RUNNING_INFO", "RUNNING_RETURN_CODES", "PHASES"]
+           "running_digest", "running_info", "RUNNING_HEADER", "RUNNING_WRAPPER",
+           "RUNNING_GENERATED", "RUNNING_LIBRARY", "RUNNING_INFO", "RUNNING_RETURN_CODES",
+           "PHASES"]
 
 #: the files of a running export (the header, the wrapper, CasADi's generated law)
 RUNNING_HEADER, RUNNING_WRAPPER, RUNNING_GENERATED = ("biped_running.h", "biped_running.c",
@@ -301,8 +302,8 @@ int biped_running_torque(int phase, double t, const double *q, const double *dq,
 
 def _example(law: ExportedRunningLaw) -> str:
     s, f = law.example_states["stance"], law.example_states["flight"]
-    return f"""/* Time the exported running controller: biped_running_torque in a loop over {s.shape[0]}
-   states of each phase, alternately.  Build: gcc -O2 -o example/main example/main.c *.c -lm
+    return f"""/* Time the exported running controller: biped_running_torque in a loop over
+   {s.shape[0]} states of each phase, alternately.  Build: gcc -O2 -o example/main example/main.c *.c -lm
    (in the export folder). */
 #define _POSIX_C_SOURCE 199309L
 #include <stdio.h>

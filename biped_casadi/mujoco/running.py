@@ -200,7 +200,8 @@ class RunningLoop:
         rec = dict(law=c.law, Kp=c.Kp.tolist(), Kd=c.Kd.tolist(), M1=c.M1.tolist(),
                    saturate=c.saturate)
         if self.compiled is not None:
-            rec["compiled"] = self.compiled.describe()
+            describe = getattr(self.compiled, "describe", None)
+            rec["compiled"] = describe() if callable(describe) else type(self.compiled).__name__
         return rec
 
     def at(self, **changes) -> "RunningLoop":
