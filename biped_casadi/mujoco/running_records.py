@@ -46,6 +46,10 @@ class RunningStride:
     bounce_time : float
         Time the stance foot spent off the floor early in the stance (a bounce off the
         landing, before ``min_stance`` of the gait's stance), s.
+    takeoff_guard_gap : float
+        Where the flight clock started (the rigid model's takeoff guard on MuJoCo's
+        states) less MuJoCo's first zero-force state, s; NaN when the clock started at
+        MuJoCo's contact (``takeoff_clock='contact'``, or the guard had not crossed).
     """
 
     index: int
@@ -61,6 +65,7 @@ class RunningStride:
     slip: float
     fz_max: float
     bounce_time: float = 0.0
+    takeoff_guard_gap: float = math.nan
 
     def to_dict(self) -> dict:
         """The stride's figures by name.
