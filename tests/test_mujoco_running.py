@@ -11,6 +11,7 @@ about twice as large).
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -185,7 +186,8 @@ def test_command_json(gait_file, capsys):
     r = json.loads(capsys.readouterr().out)
     assert rc == 0 and r["status"] == "ran" and r["strides_run"] == 3
     assert r["fixed_point_kind"] == "collocated" and r["settings"]["timestep"] == 0.001
-    assert r["controller"]["M1"] == list(STABLE_M1)
+    assert r["controller"]["M1"] == list(STABLE_M1) and r["takeoff_clock"] == "guard"
+    assert all(math.isfinite(s["takeoff_guard_gap"]) for s in r["strides"])
 
 
 def test_command_plain_tracking_exits_1(gait_file, capsys):
@@ -203,6 +205,7 @@ def test_command_plain_tracking_exits_1(gait_file, capsys):
     (["--perturb", "nan"], "--perturb"),
     (["--timestep", "-1"], "--timestep"),
     (["--solref", "0.001"], "--solref"),
+    (["--takeoff-clock", "late"], "--takeoff-clock"),
 ])
 def test_command_bad_input_is_one_line_and_exit_2(gait_file, argv, words, capsys):
     assert biped_main(["mujoco-running", "--gait", gait_file] + argv) == 2
