@@ -226,8 +226,10 @@ def _figure(res, path):
                        label=lab)
     for a, t in zip(ax[:2], ("spread: RMS over strides of the error\n(root of the summed variances)",
                              "offset: norm of the mean error")):
-        a.set_xticks(x, names, rotation=40, ha="right", fontsize=8)
-        a.set_ylabel("rigid model's next landing state less MuJoCo's\n(rad, rad/s: 10 components)")
+        a.set_xticks(x, ["landing (rigid map)" if n == "landing" else n for n in names],
+                     rotation=40, ha="right", fontsize=8)
+        a.set_ylabel("MuJoCo's next landing state less the rigid model's\n"
+                     "(rad, rad/s: 10 components)")
         a.set_xlabel("the rigid closed loop starts from MuJoCo's state at")
         a.set_title(t, fontsize=10)
         a.grid(True, alpha=0.3)
@@ -263,7 +265,12 @@ def main(argv=None):
     ap.add_argument("--strides", type=int, default=300, help="strides of the fitted runs")
     ap.add_argument("--decomp", type=int, default=40, help="strides of the decomposition")
     ap.add_argument("--held", type=int, default=200, help="strides of the held rigid runs")
+    ap.add_argument("--replot", metavar="JSON", help="draw the figure from a saved output")
     args = ap.parse_args(argv)
+    if args.replot:
+        res = json.loads(Path(args.replot).read_text())
+        print(_figure(res, Path(args.out) / "mujoco_running_gap.png"))
+        return
     t0 = time.perf_counter()
     st = _setup()[3]
     res = dict(exact_radius=st.spectral_radius, strides=args.strides, mujoco={}, held={})
