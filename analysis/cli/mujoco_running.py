@@ -135,8 +135,9 @@ def register(sub):
     p.add_argument("--fit", type=int, default=0, metavar="N",
                    help="fit MuJoCo's stride map on a run of N strides from the fixed point "
                         "(30 to 5000; default 0: no fit). The 10 x 10 map needs a few hundred "
-                        "strides: at dt 2 ms, 60 gave max|lambda| 0.87 +- 0.09, 300 give "
-                        "0.69 +- 0.05 (6 to 12 s). The estimate is biased upward: with "
+                        "strides: at dt 2 ms, 300 give max|lambda| 0.46 +- 0.06 (0.69 +- "
+                        "0.05 with --takeoff-clock contact; 60 gave 0.87 +- 0.09) in 6 to "
+                        "12 s. The estimate is biased upward: with "
                         "--exact the same fit is also run on the exact map driven by the "
                         "fit's residuals (reference_max_abs), the figure to compare with")
     p.add_argument("--takeoff-clock", choices=TAKEOFF_CLOCKS, default="guard",
