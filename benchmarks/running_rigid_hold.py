@@ -103,7 +103,7 @@ class HeldLoop:
         u = self.law(0, X, 0.0)
         h_next = dt if offset is None else offset
         while len(out) <= strides and t < 1e4:
-            rem, h_next, h = h_next, dt, h_next
+            rem, h_next = h_next, dt
             while rem > 1e-15:
                 hs = min(rem, dt / self.sub)
                 Xn = self.step(phase, X, u, hs)
