@@ -75,12 +75,9 @@ class RunningOptions:
     mu : float
         Friction coefficient of the ground (stance force and landing impulse).
     mu_margin : float
-        Kept below ``mu`` in every friction cone of the problem: the stance force (at the
-        points, at the quarter points with ``cone_quarter_points``, and on the forces'
-        rates at takeoff) and the landing impulse meet ``|Fx| <= (mu - mu_margin) Fz``;
-        0 <= mu_margin < mu.  Without it the optimum lands with the impulse on the cone's
-        edge from 2 m/s on (RABBIT), and a closed loop perturbed off the orbit slips at
-        its first landing; the checks and the closed loop measure against ``mu`` itself.
+        Every cone of the problem (stance force, its rates at takeoff, landing impulse) is
+        ``|Fx| <= (mu - mu_margin) Fz``, 0 <= mu_margin < mu: without it the impulse lands
+        on the cone's edge from 2 m/s on (RABBIT), and a perturbed closed loop slips there.
     torque_limit : float or None
         Bound on every joint torque, N m; None: the model's (RABBIT: 150).
     clearance : float or None
@@ -394,9 +391,8 @@ class RunningGait:
             raise ValueError(f"{path}: not a running gait")
         try:
             o = {k: tuple(v) if isinstance(v, list) else v for k, v in body.pop("options").items()}
-            # a file written before the takeoff cone condition existed was solved without it
+            # a file written before the takeoff cone condition (the margin) was without it
             o.setdefault("takeoff_cone_rate", False)
-            # ... and one written before the friction margin existed, without a margin
             o.setdefault("mu_margin", 0.0)
             arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
             return cls(options=RunningOptions(**o), **{
@@ -544,9 +540,8 @@ def _cone_at_quarter_points(opti, model, fl, opts, Xs, Fs, Us, Ts):
     n = model.nq
     xq, uq = _quarter_points(Xs, Fs, Us, Ts, opts.n_stance)
     Fz, Fx = fl.takeoff_guard.map(xq.shape[1])(xq[:n, :], xq[n:, :], uq)
-    mu = opts.mu - opts.mu_margin
-    opti.subject_to(ca.vec(mu * Fz - Fx) >= 0)
-    opti.subject_to(ca.vec(mu * Fz + Fx) >= 0)
+    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz - Fx) >= 0)
+    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz + Fx) >= 0)
 
 
 def _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts):
@@ -563,9 +558,8 @@ def _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts):
                        [ca.jtimes(force, ca.vertcat(x, u), ca.vertcat(dx, du))])
     du_end = (Us[:, N - 3] - 4 * Us[:, N - 2] + 3 * Us[:, N - 1]) / (Ts / opts.n_stance)
     dF = rate(Xs[:, -1], Us[:, -1], Fs[:, -1], du_end)
-    mu = opts.mu - opts.mu_margin
-    opti.subject_to(mu * dF[0] + dF[1] <= 0)
-    opti.subject_to(mu * dF[0] - dF[1] <= 0)
+    opti.subject_to((opts.mu - opts.mu_margin) * dF[0] + dF[1] <= 0)
+    opti.subject_to((opts.mu - opts.mu_margin) * dF[0] - dF[1] <= 0)
 
 
 def _stance_constraints(opti, model, fl, opts, Xs, Us, Fs=None, Ts=None):
@@ -576,9 +570,8 @@ def _stance_constraints(opti, model, fl, opts, Xs, Us, Fs=None, Ts=None):
     Fz, Fx = fl.takeoff_guard.map(N)(Xs[:n, :], Xs[n:, :], Us)
     opti.subject_to(ca.vec(Fz[:-1]) >= 0)
     opti.subject_to(Fz[-1] == 0)
-    mu = opts.mu - opts.mu_margin
-    opti.subject_to(ca.vec(mu * Fz - Fx) >= 0)
-    opti.subject_to(ca.vec(mu * Fz + Fx) >= 0)
+    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz - Fx) >= 0)
+    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz + Fx) >= 0)
     if opts.takeoff_cone_rate:
         _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts)
     if opts.cone_quarter_points:
@@ -613,9 +606,8 @@ def _edges(opti, model, fl, opts, Xs, Xf):
     q_plus, dq_plus, F, _, v_other, p_foot = fl.landing_swing(Xf[:ne, -1], Xf[ne:, -1])
     opti.subject_to(ca.vertcat(q_plus, dq_plus) - Xs[:, 0] == 0)
     opti.subject_to(F[1] >= 0)
-    mu = opts.mu - opts.mu_margin
-    opti.subject_to(mu * F[1] - F[0] >= 0)
-    opti.subject_to(mu * F[1] + F[0] >= 0)
+    opti.subject_to((opts.mu - opts.mu_margin) * F[1] - F[0] >= 0)
+    opti.subject_to((opts.mu - opts.mu_margin) * F[1] + F[0] >= 0)
     opti.subject_to(v_other[1] >= opts.min_liftoff_speed)
     return p_foot
 
