@@ -85,7 +85,13 @@ def test_on_the_reference_the_law_gives_the_gaits_torques(model, cycle, run_gait
         ref, f = getattr(c, phase), getattr(c, f"{phase}_law")
         n = X.shape[0] // 2
         u = np.array(f.map(X.shape[1])(X[:n], X[n:], ref.t_nodes[None, :]))
-        assert np.abs(u - U).max() < 1e-8, (law, phase)
+        # the reference meets the points to the NLP's tolerance (its Hermite-Simpson
+        # defects, 1e-10 rad/s here): the gains (and the computed torque's inverse
+        # dynamics, entries of a few kg m^2) carry that into the torque
+        q, dq, _, _ = ref.sample(ref.t_nodes)
+        off = (np.abs(c.Kp).max() * np.abs(q - X[:model.nq]).max()
+               + np.abs(c.Kd).max() * np.abs(dq - X[n:n + model.nq]).max())
+        assert np.abs(u - U).max() < 1e-8 + 10 * off, (law, phase)
         # and off it, the law corrects: a joint behind its reference gets more torque
         x = X[:, 3].copy()
         x[2] -= 0.01
