@@ -7,16 +7,19 @@ sampling search records (and keys) the clearance it used."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import pytest
 
+from analysis.design import ROBUST_GAIT, RobustDesignSettings
 from analysis.design.codesign import CodesignSettings
 from analysis.design.codesign.functions import (IMPULSE_MIN, LIFTOFF_MIN, STRIKE_SPEED_MIN,
                                                 TORQUE_MARGIN, TranscriptionSettings)
 from analysis.design.codesign.scales import physical_scales
 from analysis.design.codesign.settings import MOVE_TORQUE_MARGIN, MoveSettings
 from biped_casadi import BipedModel, find_description
+from biped_casadi.caching import argument_key
 from gait_opt import leg_scale
 
 PHYSICAL = ("liftoff_min", "strike_speed_min", "impulse_min", "torque_margin")
@@ -126,3 +129,19 @@ def test_bad_values_are_refused_naming_the_field(make, message):
     with pytest.raises(ValueError, match=message):
         make()
 
+
+def test_sampling_search_records_the_clearance_it_used(model):
+    """Filled for the robot, the sampling search's settings hold the gait's clearance as
+    used (the doubled robot: twice ROBUST_GAIT's); RABBIT's are ROBUST_GAIT's, with the
+    same JSON and the same argument key as the unfilled settings."""
+    st = RobustDesignSettings()
+    rab = st.for_model(model)
+    assert json.dumps(rab.to_dict()["gait"]) == json.dumps(ROBUST_GAIT)
+    assert argument_key((model, rab)) == argument_key((model, st))
+    doubled = _model(model.description.scaled(length=2))
+    big = st.for_model(doubled)
+    assert big.to_dict()["gait"]["clearance"] == 2 * ROBUST_GAIT["clearance"]
+    assert argument_key((doubled, big)) != argument_key((doubled, st))
+    assert big.for_model(doubled) == big
+    plain = RobustDesignSettings(gait=dict(ROBUST_GAIT))
+    assert plain.for_model(doubled) is plain
