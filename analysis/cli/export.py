@@ -156,19 +156,38 @@ def cmd_export(args):
                                     law=law)
             except CompilerError as e:
                 raise UserError(f"--verify: {e}; nothing written") from None
-            result["verification"] = ver.to_dict()
-            result["status"] = ver.status
-            if ver.success:
-                timing = (f"\nMeasured by `biped export --verify` ({_machine()}): "
-                          f"{ver.c_us:.3f} us per `biped_torque` call in the example's loop "
-                          f"({ver.c_calls} calls).\n")
-                (stage.path / "README.md").write_text(
-                    c_sources(law, provenance, timing)["README.md"], encoding="utf-8")
-            else:
-                stage.discard()
+            keep_verified(stage, result, ver, "biped export", "biped_torque",
+                          lambda timing: c_sources(law, provenance, timing)["README.md"])
     _report(args, result)
     return 0 if result["status"] in ("written", "verified") else 1
 
+
+
+def keep_verified(stage, result: dict, ver, command: str, function: str, readme):
+    """Record a verification in ``result``: a verified export's README gets the measured
+    time per call, a failed one is discarded (nothing is put in place).
+
+    Parameters
+    ----------
+    stage : export_folder.Stage
+        The staged export.
+    result : dict
+        The command's result; gets ``verification`` and ``status``.
+    ver : Result
+        The verification (``success``, ``status``, ``c_us``, ``c_calls``, ``to_dict()``).
+    command, function : str
+        The command that measured, the C function timed.
+    readme : callable
+        The README's text for a timing line.
+    """
+    result["verification"] = ver.to_dict()
+    result["status"] = ver.status
+    if not ver.success:
+        stage.discard()
+        return
+    timing = (f"\nMeasured by `{command} --verify` ({_machine()}): {ver.c_us:.3f} us per "
+              f"`{function}` call in the example's loop ({ver.c_calls} calls).\n")
+    (stage.path / "README.md").write_text(readme(timing), encoding="utf-8")
 
 
 def _report(args, r):

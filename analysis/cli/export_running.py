@@ -16,7 +16,7 @@ from analysis.verify_running_export import STRIDE_TOL, verify_running_export
 from analysis.verify_export import TORQUE_RTOL
 
 from .common import Progress, UserError, add_robot, load_running_gait, output_dir, print_json
-from .export import _machine
+from .export import keep_verified
 from .running import DEFAULT_M1, add_tracking_arguments, check_tracking_arguments
 
 #: random states per phase --verify compares by default
@@ -86,16 +86,9 @@ def cmd_export_running(args):
                 ver = verify_running_export(stage.path, ctrl, cc, args.states, args.strides)
             except CompilerError as e:
                 raise UserError(f"--verify: {e}; nothing written") from None
-            result["verification"] = ver.to_dict()
-            result["status"] = ver.status
-            if ver.success:
-                timing = (f"\nMeasured by `biped export-running --verify` ({_machine()}): "
-                          f"{ver.c_us:.3f} us per `biped_running_torque` call in the "
-                          f"example's loop ({ver.c_calls} calls).\n")
-                (stage.path / "README.md").write_text(
-                    running_c_sources(law, provenance, timing)["README.md"], encoding="utf-8")
-            else:
-                stage.discard()
+            keep_verified(stage, result, ver, "biped export-running", "biped_running_torque",
+                          lambda timing: running_c_sources(law, provenance,
+                                                           timing)["README.md"])
     _report(args, result)
     return 0 if result["status"] in ("written", "verified") else 1
 
