@@ -48,6 +48,7 @@ from biped_casadi.model import flight_model
 
 from .options import leg_scale
 from .running_cache import cached_running
+from .running_file import check_running_file
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
            "hermite_simpson", "CLEARANCE", "TRAILING_CLEARANCE", "MIN_STEP_LENGTH"]
@@ -382,8 +383,10 @@ class RunningGait:
             # a file written before the takeoff cone condition existed was solved without it
             o.setdefault("takeoff_cone_rate", False)
             arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
-            return cls(options=RunningOptions(**o), **{
+            g = cls(options=RunningOptions(**o), **{
                 k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()})
+            check_running_file(g)
+            return g
         except (KeyError, TypeError, ValueError, AttributeError) as e:
             raise ValueError(f"{path}: a malformed running gait ({type(e).__name__}: {e})") \
                 from None
