@@ -602,6 +602,16 @@ def _edges(opti, model, fl, opts, Xs, Xf):
     return p_foot
 
 
+def _failed_solve(opti, error):
+    """(stats, value) of a failed solve; ValueError when IPOPT never started (an option)."""
+    try:
+        return opti.stats(), opti.debug.value
+    except RuntimeError:
+        why = (str(error).split("ipopt_interface.cpp:")[-1].partition(": ")[2] or str(error))
+        raise ValueError(f"RunningOptions.ipopt: IPOPT refuses the options "
+                         f"({why.strip().splitlines()[0]})") from None
+
+
 def optimize_running(model, opts: RunningOptions | None = None, guess: dict | None = None,
                      verbose: bool = False, *, cache: bool = False, cache_dir=None,
                      progress=None) -> RunningGait:
@@ -671,13 +681,15 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
     ipopt = {"print_level": 5 if verbose else 0, "max_iter": 3000, "tol": 1e-8,
              "mu_strategy": "adaptive", "sb": "yes"}
     ipopt.update(opts.ipopt)
-    opti.solver("ipopt", {"expand": True, "print_time": False, "error_on_fail": False},
-                ipopt)
+    opti.solver("ipopt", {"expand": True, "print_time": False, "error_on_fail": False,
+                          "show_eval_warnings": False}, ipopt)
     t0 = time.perf_counter()
-    sol = opti.solve_limited() if hasattr(opti, "solve_limited") else opti.solve()
+    try:
+        sol = opti.solve_limited()
+        st, val = sol.stats(), sol.value
+    except RuntimeError as e:  # IPOPT failed (infeasible, ...): the last iterate, success False
+        st, val = _failed_solve(opti, e)
     wall = time.perf_counter() - t0
-    st = sol.stats()
-    val = sol.value
     stats = {"success": bool(st.get("success")), "return_status": st.get("return_status"),
              "iterations": int(st.get("iter_count", -1)), "wall_s": wall}
     return RunningGait(robot=model.description.name, options=opts,
