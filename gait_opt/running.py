@@ -48,7 +48,7 @@ from biped_casadi.model import flight_model
 
 from .options import leg_scale
 from .running_cache import cached_running
-from .running_file import check_running_file
+from .running_file import check_running_file, running_problem
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
            "hermite_simpson", "CLEARANCE", "TRAILING_CLEARANCE", "MIN_STEP_LENGTH"]
@@ -643,7 +643,7 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
         The last iterate, whatever IPOPT's status (``gait.success`` tells); with
         ``cache``, ``gait.solver_stats['cache']`` is 'hit' or says why it was solved.
     """
-    opts = (opts or RunningOptions()).for_model(model)
+    opts = running_problem(model, opts, guess, RunningOptions)
     if cache:
         return cached_running(model, opts, cache_dir, progress,
                               lambda: optimize_running(model, opts, guess, verbose),

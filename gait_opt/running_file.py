@@ -1,13 +1,14 @@
 """What a running-gait file must hold to be read (:meth:`gait_opt.running.RunningGait.load`):
 the fields a solve writes, each of its kind, size and range; an edited or damaged file is
-refused with one line naming the field, before anything is built from it."""
+refused with one line naming the field, before anything is built from it.  And the
+arguments of :func:`gait_opt.running.optimize_running`, checked by name."""
 from __future__ import annotations
 
 import math
 
 from biped_casadi.control.running import check_running_gait
 
-__all__ = ["check_running_file"]
+__all__ = ["check_running_file", "running_problem"]
 
 #: slack on the phase durations' bounds (IPOPT meets a bound to about 1e-8 s)
 BOUND_SLACK = 1e-6
@@ -53,3 +54,38 @@ def check_running_file(g):
         raise ValueError(f"'cost' must be a finite number, got {g.cost!r}")
     if not isinstance(g.solver_stats, dict):
         raise ValueError(f"'solver_stats' must be an object, got {g.solver_stats!r}")
+
+
+_GUESS = ("T_stance", "T_flight", "x_stance", "u_stance", "x_flight", "u_flight")
+
+
+def running_problem(model, opts, guess, options_type):
+    """The options of :func:`~gait_opt.running.optimize_running` for the robot
+    (``opts`` or the defaults, lengths filled in), after its arguments are checked.
+
+    Parameters
+    ----------
+    model, opts, guess
+        As :func:`~gait_opt.running.optimize_running`.
+    options_type : type
+        :class:`~gait_opt.running.RunningOptions`.
+
+    Returns
+    -------
+    RunningOptions
+
+    Raises
+    ------
+    TypeError
+        Naming ``model``, ``opts`` or ``guess`` when it is not of its kind.
+    """
+    if not all(hasattr(model, a) for a in ("nq", "nu", "description", "forward_dynamics")):
+        raise TypeError(f"model must be a robot model (biped_casadi.robot), got "
+                        f"{type(model).__name__}")
+    if opts is not None and not isinstance(opts, options_type):
+        raise TypeError(f"opts must be RunningOptions(...) or None, got {type(opts).__name__}")
+    if guess is not None and not (isinstance(guess, dict) and all(k in guess for k in _GUESS)
+                                  or all(hasattr(guess, k) for k in _GUESS)):
+        raise TypeError(f"guess must be a RunningGait or a dict of {', '.join(_GUESS)}, got "
+                        f"{type(guess).__name__}")
+    return (opts or options_type()).for_model(model)

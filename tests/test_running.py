@@ -254,6 +254,17 @@ def test_options_ipopt_refuses_are_named(model, ipopt):
         optimize_running(model, RunningOptions(n_stance=2, n_flight=2, ipopt=ipopt))
 
 
+@pytest.mark.parametrize("args, words", [
+    (lambda m: (m, {"speed": 1.5}), "opts must be RunningOptions"),
+    (lambda m: (None, None), "model must be a robot model"),
+    (lambda m: (m, None, "gait.json"), "guess must be a RunningGait")])
+def test_problem_arguments_are_named(model, args, words):
+    """AttributeErrors ('dict' object has no attribute 'for_model') and a TypeError of
+    string indices before."""
+    with pytest.raises(TypeError, match=words):
+        optimize_running(*args(model))
+
+
 def test_a_failed_solve_is_the_last_iterate(model):
     """IPOPT stopping on a failure raised CasADi's assertion; now success is False and
     the status says why."""
