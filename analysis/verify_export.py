@@ -395,7 +395,8 @@ def compare_simulations(compiled: CompiledController, ctrl, q0, dq0,
 
 
 # ====================================================================== timing
-def time_example(folder, compiler: list, calls: int = 1_000_000, work=None) -> tuple:
+def time_example(folder, compiler: list, calls: int = 1_000_000, work=None,
+                 function: str = "biped_torque") -> tuple:
     """Build and run the export's example (``example/main.c``): the C time per call.
 
     Parameters
@@ -409,6 +410,9 @@ def time_example(folder, compiler: list, calls: int = 1_000_000, work=None) -> t
     work : str or Path, optional
         Where the executable goes (default the system's temporary folder); it is removed
         after the run.
+    function : str
+        The function the example times (its line ``FUNCTION: X us per call``):
+        ``biped_running_torque`` for a running export.
 
     Returns
     -------
@@ -434,7 +438,7 @@ def time_example(folder, compiler: list, calls: int = 1_000_000, work=None) -> t
                              timeout=600)
     finally:
         exe.unlink(missing_ok=True)
-    m = re.search(r"biped_torque: ([0-9.eE+-]+) us per call", run.stdout)
+    m = re.search(rf"{re.escape(function)}: ([0-9.eE+-]+) us per call", run.stdout)
     if run.returncode != 0 or m is None:
         raise CompilerError(f"the example failed (exit {run.returncode}): "
                             f"{(run.stdout + run.stderr).strip()[:200]}")

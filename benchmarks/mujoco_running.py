@@ -90,7 +90,7 @@ def main(argv=None):
             for dt in TIMESTEPS[:2]:
                 r = run_in_mujoco(ctl, st.fixed_point, args.long,
                                   ContactSettings(timestep=dt), fixed_point=st.fixed_point)
-                f = fit_running_map(r)
+                f = fit_running_map(r, reference=st.A)
                 out["fits"][f"{dt:g}"] = dict(f.to_dict(), run=_summary(r, gait))
     out["wall_time"] = time.perf_counter() - t0
 

@@ -21,9 +21,9 @@ Constraints: |u| <= the model's torque limit at every point (and at the quarter 
 of every interval), the torque's rate bounded, the torques continuous through takeoff
 (so that the stance and flight accelerations agree there and the foot leaves the
 ground smoothly, docs: howto/running.md); in stance Fz >= 0 and
-|Fx| <= mu Fz, the swing foot above a parabolic clearance profile; in flight both feet
+|Fx| <= (mu - mu_margin) Fz, the swing foot above a parabolic clearance profile; in flight both feet
 above the ground; no knee hyperextension; at landing the swing foot moving down, the
-impulse inside the friction cone and the other foot moving up after the impact; the
+impulse inside the cone of mu - mu_margin and the other foot moving up after the impact; the
 average speed: step length (the landing foot's x in the stance frame) = v (Ts + Tf).
 
 Cost: as the walking optimiser's default (:mod:`gait_opt.transcription`), the integral
@@ -51,13 +51,16 @@ from .running_cache import cached_running
 from .running_file import check_running_file, running_problem
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
-           "hermite_simpson", "CLEARANCE", "TRAILING_CLEARANCE", "MIN_STEP_LENGTH"]
+           "hermite_simpson", "CLEARANCE", "TRAILING_CLEARANCE", "MIN_STEP_LENGTH",
+           "MU_MARGIN"]
 
 #: length-valued defaults on RABBIT's legs (0.8 m), m; on another robot times its leg
 #: length over RABBIT's (:func:`gait_opt.options.leg_scale`, exactly 1.0 for RABBIT)
 CLEARANCE = 0.03
 TRAILING_CLEARANCE = 0.03
 MIN_STEP_LENGTH = 0.05
+#: friction kept below mu in every cone of the running step (RunningOptions.mu_margin)
+MU_MARGIN = 0.05
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,10 @@ class RunningOptions:
         Hermite-Simpson intervals of the stance and of the flight phase.
     mu : float
         Friction coefficient of the ground (stance force and landing impulse).
+    mu_margin : float
+        Every cone of the problem (stance force, its rates at takeoff, landing impulse) is
+        ``|Fx| <= (mu - mu_margin) Fz``, 0 <= mu_margin < mu: without it the impulse lands
+        on the cone's edge from 2 m/s on (RABBIT), and a perturbed closed loop slips there.
     torque_limit : float or None
         Bound on every joint torque, N m; None: the model's (RABBIT: 150).
     clearance : float or None
@@ -122,6 +129,7 @@ class RunningOptions:
     n_stance: int = 16
     n_flight: int = 10
     mu: float = 0.6
+    mu_margin: float = MU_MARGIN
     torque_limit: float | None = None
     clearance: float | None = None
     min_strike_speed: float = 0.05
@@ -152,6 +160,10 @@ class RunningOptions:
             number(name, getattr(self, name))
         for name in ("min_strike_speed", "min_liftoff_speed"):
             number(name, getattr(self, name), strict=False)
+        number("mu_margin", self.mu_margin, strict=False)
+        if self.mu_margin >= self.mu:
+            raise ValueError(f"RunningOptions.mu_margin must be below mu ({self.mu:g}), "
+                             f"got {self.mu_margin!r}")
         for name in ("clearance", "trailing_clearance"):
             number(name, getattr(self, name), strict=False, none=True)
         number("torque_limit", self.torque_limit, none=True)
@@ -380,8 +392,9 @@ class RunningGait:
             raise ValueError(f"{path}: not a running gait")
         try:
             o = {k: tuple(v) if isinstance(v, list) else v for k, v in body.pop("options").items()}
-            # a file written before the takeoff cone condition existed was solved without it
+            # a file written before the takeoff cone condition (the margin) was without it
             o.setdefault("takeoff_cone_rate", False)
+            o.setdefault("mu_margin", 0.0)
             arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
             g = cls(options=RunningOptions(**o), **{
                 k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()})
@@ -530,8 +543,8 @@ def _cone_at_quarter_points(opti, model, fl, opts, Xs, Fs, Us, Ts):
     n = model.nq
     xq, uq = _quarter_points(Xs, Fs, Us, Ts, opts.n_stance)
     Fz, Fx = fl.takeoff_guard.map(xq.shape[1])(xq[:n, :], xq[n:, :], uq)
-    opti.subject_to(ca.vec(opts.mu * Fz - Fx) >= 0)
-    opti.subject_to(ca.vec(opts.mu * Fz + Fx) >= 0)
+    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz - Fx) >= 0)
+    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz + Fx) >= 0)
 
 
 def _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts):
@@ -548,8 +561,8 @@ def _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts):
                        [ca.jtimes(force, ca.vertcat(x, u), ca.vertcat(dx, du))])
     du_end = (Us[:, N - 3] - 4 * Us[:, N - 2] + 3 * Us[:, N - 1]) / (Ts / opts.n_stance)
     dF = rate(Xs[:, -1], Us[:, -1], Fs[:, -1], du_end)
-    opti.subject_to(opts.mu * dF[0] + dF[1] <= 0)
-    opti.subject_to(opts.mu * dF[0] - dF[1] <= 0)
+    opti.subject_to((opts.mu - opts.mu_margin) * dF[0] + dF[1] <= 0)
+    opti.subject_to((opts.mu - opts.mu_margin) * dF[0] - dF[1] <= 0)
 
 
 def _stance_constraints(opti, model, fl, opts, Xs, Us, Fs=None, Ts=None):
@@ -560,8 +573,8 @@ def _stance_constraints(opti, model, fl, opts, Xs, Us, Fs=None, Ts=None):
     Fz, Fx = fl.takeoff_guard.map(N)(Xs[:n, :], Xs[n:, :], Us)
     opti.subject_to(ca.vec(Fz[:-1]) >= 0)
     opti.subject_to(Fz[-1] == 0)
-    opti.subject_to(ca.vec(opts.mu * Fz - Fx) >= 0)
-    opti.subject_to(ca.vec(opts.mu * Fz + Fx) >= 0)
+    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz - Fx) >= 0)
+    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz + Fx) >= 0)
     if opts.takeoff_cone_rate:
         _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts)
     if opts.cone_quarter_points:
@@ -596,8 +609,8 @@ def _edges(opti, model, fl, opts, Xs, Xf):
     q_plus, dq_plus, F, _, v_other, p_foot = fl.landing_swing(Xf[:ne, -1], Xf[ne:, -1])
     opti.subject_to(ca.vertcat(q_plus, dq_plus) - Xs[:, 0] == 0)
     opti.subject_to(F[1] >= 0)
-    opti.subject_to(opts.mu * F[1] - F[0] >= 0)
-    opti.subject_to(opts.mu * F[1] + F[0] >= 0)
+    opti.subject_to((opts.mu - opts.mu_margin) * F[1] - F[0] >= 0)
+    opti.subject_to((opts.mu - opts.mu_margin) * F[1] + F[0] >= 0)
     opti.subject_to(v_other[1] >= opts.min_liftoff_speed)
     return p_foot
 

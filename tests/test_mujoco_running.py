@@ -5,12 +5,12 @@ docs/howto/running.md against plain tracking M1 = 0.
 
 The deviations are measured from the collocated landing state (1.6e-4 from the exact
 fixed point: far below MuJoCo's stride-to-stride jitter of tenths of a rad/s, so the
-exact map is not built here).  Runs at dt 1 ms unless said (at 2 ms the jitter is
-about twice as large).
+exact map is not built here).  Runs at dt 1 ms unless said.
 """
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -103,7 +103,9 @@ def test_phase_durations_follow_the_reference(stable_run, run_gait15):
     Ts, Tf = run_gait15.T_stance, run_gait15.T_flight
     assert np.all(np.abs(st / Ts - 1) < 0.04), st
     assert np.all(np.abs(fl / Tf - 1) < 0.15), fl
-    assert abs(st.mean() / Ts - 1) < 0.025 and abs(fl.mean() / Tf - 1) < 0.06
+    # the mean flight: 5.3 % long on the gait without the friction margin, 6.2 % with the
+    # default margin 0.05 (dt 1 ms, 0.02 and 0.03 rad on every angle alike)
+    assert abs(st.mean() / Ts - 1) < 0.025 and abs(fl.mean() / Tf - 1) < 0.08
 
 
 def test_default_time_step_runs_too(stable_ctl):
@@ -113,13 +115,38 @@ def test_default_time_step_runs_too(stable_ctl):
 
 def test_fitted_stride_map_is_stable(stable_ctl):
     """MuJoCo's stride map, fitted on a long run's landing states, contracts (the exact
-    spectral radius is 0.41; MuJoCo's measured 0.58 at 1 ms, 0.69 at 2 ms)."""
+    spectral radius is 0.41; the same fit of the exact map with MuJoCo's residuals gives
+    0.49 to 0.59; MuJoCo's measured 0.58 at 1 ms, 0.46 at 2 ms on 300 strides)."""
     r = run_in_mujoco(stable_ctl, None, 200, STIFF)
     f = fit_running_map(r)
     assert f.status == "ok" and f.pairs == 199
     assert f.max_abs < 0.95 and f.max_abs + 3 * f.max_abs_spread < 1.1
     assert np.array(f.A).shape == (10, 10) and 0 < f.relative_residual < 1
     json.dumps(f.to_dict(), allow_nan=False)
+
+
+def test_flight_clock_starts_at_the_model_guard(stable_run, loop_fine):
+    """By default the flight clock starts where the rigid model's takeoff guard crossed
+    zero on MuJoCo's states: within a few ms of MuJoCo's first zero-force state, in
+    every stride; 'contact' keeps the first zero-force state (no gap recorded)."""
+    gaps = np.array([s.takeoff_guard_gap for s in stable_run.strides])
+    assert loop_fine.takeoff_clock == "guard" and np.all(np.isfinite(gaps))
+    assert np.all(np.abs(gaps) < 0.015), gaps        # measured: -3 to +7.3 ms
+    assert loop_fine.at(timestep=0.002).takeoff_clock == "guard"
+    r = RunningLoop(loop_fine.controller, FINE, takeoff_clock="contact").run(None, 3)
+    assert r.status == "ran" and all(np.isnan(s.takeoff_guard_gap) for s in r.strides)
+
+
+def test_guard_clock_takes_out_most_of_the_jitter(stable_ctl):
+    """At dt 2 ms, MuJoCo's takeoff scatters by a few ms with the contact's chatter; the
+    flight clock started at the model's guard leaves a smaller stride-to-stride spread of
+    the landing states (300 strides: 0.15 against 0.61, largest component's std)."""
+    spread = {}
+    for clock in ("guard", "contact"):
+        r = run_in_mujoco(stable_ctl, None, 40, STIFF, takeoff_clock=clock)
+        assert r.status == "ran"
+        spread[clock] = float(np.max(np.std(r.landing_states[10:], axis=0)))
+    assert spread["guard"] < 0.6 * spread["contact"], spread
 
 
 def test_fit_and_decay_need_strides(plain_run):
@@ -132,6 +159,7 @@ def test_fit_and_decay_need_strides(plain_run):
     (dict(time_limits=1.0), "time_limits"),
     (dict(min_stance=1.5), "min_stance"),
     (dict(liftoff_time=-1), "liftoff_time"),
+    (dict(takeoff_clock="late"), "takeoff_clock"),
     (dict(fixed_point=[1, 2]), "fixed_point"),
     (dict(settings="stiff"), "settings"),
 ])
@@ -160,7 +188,8 @@ def test_command_json(gait_file, capsys):
     r = json.loads(capsys.readouterr().out)
     assert rc == 0 and r["status"] == "ran" and r["strides_run"] == 3
     assert r["fixed_point_kind"] == "collocated" and r["settings"]["timestep"] == 0.001
-    assert r["controller"]["M1"] == list(STABLE_M1)
+    assert r["controller"]["M1"] == list(STABLE_M1) and r["takeoff_clock"] == "guard"
+    assert all(math.isfinite(s["takeoff_guard_gap"]) for s in r["strides"])
 
 
 def test_command_plain_tracking_exits_1(gait_file, capsys):
@@ -178,6 +207,7 @@ def test_command_plain_tracking_exits_1(gait_file, capsys):
     (["--perturb", "nan"], "--perturb"),
     (["--timestep", "-1"], "--timestep"),
     (["--solref", "0.001"], "--solref"),
+    (["--takeoff-clock", "late"], "--takeoff-clock"),
 ])
 def test_command_bad_input_is_one_line_and_exit_2(gait_file, argv, words, capsys):
     assert biped_main(["mujoco-running", "--gait", gait_file] + argv) == 2
@@ -189,3 +219,15 @@ def test_command_missing_gait_file(tmp_path, capsys):
     assert biped_main(["mujoco-running", "--gait", str(tmp_path / "none.json")]) == 2
     out, err = capsys.readouterr()
     assert out == "" and "--gait" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_command_fit_with_exact_map_reports_the_reference(gait_file, capsys):
+    """--exact --fit: the fit also run on the exact map with its own residuals."""
+    rc = biped_main(["mujoco-running", "--gait", gait_file, "--strides", "2", "--exact",
+                     "--fit", "60", "--json"])
+    r = json.loads(capsys.readouterr().out)
+    f = r["fit"]
+    assert rc == 0 and f["status"] == "ok"
+    assert abs(f["reference_radius"] - r["exact"]["spectral_radius"]) < 1e-9
+    assert f["reference_max_abs"] > f["reference_radius"] and f["reference_max_abs_spread"] > 0

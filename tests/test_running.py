@@ -19,7 +19,7 @@ import pytest
 
 from biped_casadi import rabbit
 from biped_casadi.model import flight_model
-from gait_opt.running import (RunningGait, RunningOptions, hermite_simpson,
+from gait_opt.running import (MU_MARGIN, RunningGait, RunningOptions, hermite_simpson,
                               optimize_running, running_guess)
 from gait_opt.running_checks import check_running, dense, phase_rhs
 
@@ -241,7 +241,9 @@ def test_the_how_to_example_runs(tmp_path, monkeypatch):
     ("clearance", -0.01), ("n_stance", 1), ("n_flight", 2.5), ("n_flight", True),
     ("stance_time_bounds", (0.3, 0.1)), ("flight_time_bounds", (0.0, 0.2)),
     ("stance_time_bounds", (0.1,)), ("torque_rate_max", -1.0), ("ipopt", "max_iter=3"),
-    ("trailing_clearance", -0.01), ("takeoff_cone_rate", 1), ("cone_quarter_points", None)])
+    ("trailing_clearance", -0.01), ("takeoff_cone_rate", 1), ("cone_quarter_points", None),
+    ("mu_margin", -0.01), ("mu_margin", float("nan")), ("mu_margin", 0.6), ("mu_margin", "0.05"),
+    ("mu_margin", None)])
 def test_options_refuse_bad_values(field, value):
     with pytest.raises(ValueError, match=f"RunningOptions.{field}"):
         RunningOptions(**{field: value})
@@ -293,6 +295,7 @@ def test_load_names_the_file(tmp_path, text, match):
     (["--speed", "-1"], "--speed"), (["--intervals", "1", "4"], "--intervals STANCE"),
     (["--intervals", "6", "500"], "--intervals FLIGHT"), (["--robot", "three_link"], "--robot"),
     (["--out", "r.txt"], "--out"), (["--max-iter", "0"], "--max-iter"),
+    (["--mu-margin", "0.6"], "--mu-margin"), (["--mu-margin", "-0.1"], "--mu-margin"),
     (["--speed", "6", "--max-iter", "5", "--intervals", "6", "4"], "did not converge")])
 def test_command_line_refuses_in_one_line(tmp_path, monkeypatch, capsys, args, names):
     from analysis.cli import main
@@ -323,9 +326,10 @@ def test_command_line_saves_checks_and_draws(tmp_path, capsys):
 
 
 # ----------------------------------------------------------- the friction cone between points
-def _cone_excess_at(model, g, s):
+def _cone_excess_at(model, g, s, mu=None):
     """Largest |Fx| - mu Fz (N) at the fractions ``s`` of every stance interval, on the
-    Hermite-Simpson interpolant and the exact ground force (as the dense check)."""
+    Hermite-Simpson interpolant and the exact ground force (as the dense check); mu
+    default the gait's ``options.mu``."""
     fl = flight_model(model)
     n, tn = model.nq, g.t_stance
     ends = tn[::2]
@@ -333,7 +337,7 @@ def _cone_excess_at(model, g, s):
     x, u = hermite_simpson(tn, g.x_stance, phase_rhs(model, "stance")(g.x_stance, g.u_stance),
                            g.u_stance, t)
     Fz, Fx = (np.array(v).ravel() for v in fl.takeoff_guard.map(t.size)(x[:n], x[n:], u))
-    return float(np.max(np.abs(Fx) - g.options.mu * Fz))
+    return float(np.max(np.abs(Fx) - (g.options.mu if mu is None else mu) * Fz))
 
 
 def test_cone_at_takeoff_holds_on_the_dense_grid(model, small):
@@ -355,7 +359,7 @@ def test_cone_left_near_takeoff_without_the_rate_condition(model):
     """At 1.0 m/s on the default grid, the gait without the takeoff cone condition leaves
     the cone between the last points (the force vanishes in a direction outside it);
     with it, it does not, for about the same cost."""
-    o = RunningOptions(speed=1.0)
+    o = RunningOptions(speed=1.0, mu_margin=0.0)          # the cone of the NLP is mu's
     weight = model.description.total_mass * model.description.gravity
     off = optimize_running(model, dataclasses.replace(o, takeoff_cone_rate=False))
     on = optimize_running(model, o)
@@ -481,3 +485,83 @@ def test_a_file_from_before_the_takeoff_cone_says_so(tmp_path, small):
     del body["options"]["takeoff_cone_rate"]
     (tmp_path / "old.json").write_text(json.dumps(body))
     assert RunningGait.load(tmp_path / "old.json").options.takeoff_cone_rate is False
+
+
+def test_a_file_from_before_the_friction_margin_says_so(tmp_path, small):
+    """A step saved before ``mu_margin`` existed was solved with the cones at mu: loaded,
+    its margin is 0, not the new default."""
+    g, _ = small
+    body = json.loads(g.save(tmp_path / "new.json").read_text())
+    assert RunningGait.load(tmp_path / "new.json").options.mu_margin == MU_MARGIN > 0
+    del body["options"]["mu_margin"]
+    (tmp_path / "old.json").write_text(json.dumps(body))
+    assert RunningGait.load(tmp_path / "old.json").options.mu_margin == 0.0
+
+
+# ----------------------------------------------------------- the friction margin
+def _cone_ratios(model, g):
+    """(largest |Fx| - (mu - mu_margin) Fz over the stance points, N; the same on the
+    interpolant over the last stance interval, where the force falls to the cone's apex,
+    N; the landing impulse's |Fx| / Fz), from the exact model, not from the NLP."""
+    fl = flight_model(model)
+    n, o = model.nq, g.options
+    mu = o.mu - o.mu_margin
+    xs = g.x_stance
+    Fz, Fx = (np.array(v).ravel() for v in fl.takeoff_guard.map(xs.shape[1])(xs[:n], xs[n:],
+                                                                              g.u_stance))
+    last = (1 - np.linspace(0.0, 1.0, 201)[1:]) / o.n_stance     # fractions of the stance
+    tn = g.t_stance
+    x, u = hermite_simpson(tn, xs, phase_rhs(model, "stance")(xs, g.u_stance), g.u_stance,
+                           tn[-1] * (1 - last))
+    Fz_d, Fx_d = (np.array(v).ravel() for v in fl.takeoff_guard.map(x.shape[1])(x[:n], x[n:], u))
+    xf, ne = g.x_flight, fl.ne
+    F = np.array(fl.landing_swing(xf[:ne, -1], xf[ne:, -1])[2]).ravel()
+    return (float(np.max(np.abs(Fx) - mu * Fz)), float(np.max(np.abs(Fx_d) - mu * Fz_d)),
+            float(abs(F[0]) / F[1]))
+
+
+def test_friction_margin_holds_at_the_solution(model):
+    """At 2 m/s (6 + 4 grid) the landing impulse of the gait without a margin sits on
+    the cone's edge; with the default margin every cone of the NLP holds at mu -
+    mu_margin (the stance points, the last interval on the interpolant, the impulse), the
+    impulse is moved off mu by the margin, and the cost rises by less than 1 %."""
+    o = RunningOptions(speed=2.0, n_stance=6, n_flight=4)
+    assert o.mu_margin == MU_MARGIN > 0
+    on = optimize_running(model, o)
+    off = optimize_running(model, dataclasses.replace(o, mu_margin=0.0))
+    assert on.success and off.success
+    weight = model.description.total_mass * model.description.gravity
+    nodes, last, impulse = _cone_ratios(model, on)
+    assert nodes <= 1e-6 * weight and last <= 1e-6 * weight
+    assert impulse <= o.mu - o.mu_margin + 1e-7
+    assert _cone_ratios(model, off)[2] >= o.mu - 1e-6             # on the edge without it
+    assert check_running(model, on).impulse_ratio == pytest.approx(impulse, abs=1e-12)
+    assert off.cost <= on.cost * (1 + 1e-9) and on.cost <= 1.01 * off.cost
+
+
+def test_default_gait_keeps_the_margin(model, running_gait):
+    """The shared 1.5 m/s step (default options and grid) keeps every cone at mu -
+    mu_margin, as solved."""
+    assert running_gait.options.mu_margin == MU_MARGIN
+    weight = model.description.total_mass * model.description.gravity
+    nodes, last, impulse = _cone_ratios(model, running_gait)
+    assert nodes <= 1e-6 * weight and last <= 1e-6 * weight
+    assert impulse <= running_gait.options.mu - MU_MARGIN + 1e-7
+
+
+def test_command_line_passes_the_margin(tmp_path, monkeypatch, capsys, small):
+    """--mu-margin reaches the options solved; with --gait (a saved step) it is refused."""
+    from analysis.cli import main, running as cli
+    g, _ = small
+    seen = []
+
+    def solve(model, opts, **kw):
+        seen.append(opts)
+        return dataclasses.replace(g, solver_stats={"success": False})
+    monkeypatch.setattr(cli, "optimize_running", solve)
+    out = tmp_path / "r.json"
+    assert main(["running", "--mu-margin", "0.1", "--out", str(out)]) == 2
+    assert [o.mu_margin for o in seen] == [0.1] and "did not converge" in capsys.readouterr().err
+    g.save(out)
+    assert main(["running", "--gait", str(out), "--mu-margin", "0.1"]) == 2
+    assert "--mu-margin" in capsys.readouterr().err

@@ -214,9 +214,11 @@ def test_codesign_margins_follow_the_robot(model, model3, doubled):
     t = blank.for_model(model3)
     for n in lengths:
         assert getattr(t, n) == pytest.approx(k * getattr(r, n), rel=1e-15), n
-    # the fields that are not lengths stay as they are
+    # the fields that are neither lengths nor other physical margins stay as they are
+    # (the speeds, impulse and torque margin: tests/test_codesign_scales.py)
+    physical = ("liftoff_min", "strike_speed_min", "impulse_min", "torque_margin")
     others = [f.name for f in dataclasses.fields(TranscriptionSettings)
-              if f.name not in lengths + ("torque_limit",)]
+              if f.name not in lengths + physical + ("torque_limit",)]
     assert all(getattr(d, n) == getattr(r, n) for n in others)
     # the robot's own torque limit, unless one is given
     weak = BipedModel(dataclasses.replace(model.description, torque_limit=40.0))

@@ -22,8 +22,8 @@ import numpy as np
 import biped_casadi
 from biped_casadi.numerics import NotCompiledWarning
 
-from . import (eig, export, gait, m1, mujoco, mujoco_running, reproduce, robot, robust,
-               running, simulate, sweep, terrain, view)
+from . import (eig, export, export_running, gait, m1, mujoco, mujoco_running, reproduce,
+               robot, robust, running, simulate, sweep, terrain, view)
 from .common import UserError, add_robot, check_inputs, load_model, print_json
 from .failures import failure_line
 from .stdout import named_stdout
@@ -107,7 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_model)
 
     for command in (robot, gait, running, eig, sweep, m1, robust, simulate, terrain, export,
-                    mujoco, mujoco_running, reproduce, view):
+                    export_running, mujoco, mujoco_running, reproduce, view):
         command.register(sub)
     return ap
 

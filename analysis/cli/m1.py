@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 
 from analysis.design import (
-    ROBUST_GAIT,
     RobustDesignSettings,
     ab_groups,
     optimize_m1,
@@ -94,16 +93,16 @@ def cmd_robust_design(args, say):
         model = gait.model
     if gait is None:
         st = CodesignSettings().replace(free_gait=True, **args.given)
-        say(f"robust co-design NLP: gait and M1 from the gait {ROBUST_GAIT}, v_c rejoining "
-            f"at {st.rejoin} T; under a minute on 2 cores the first time, then read from "
-            "the cache")
+        say(f"robust co-design NLP: gait and M1 from the gait {st.for_model(model).gait}, "
+            f"v_c rejoining at {st.rejoin} T; under a minute on 2 cores the first time, "
+            "then read from the cache")
     else:
         mode = "fixed" if args.fixed_gait else "free" if args.free_gait else "auto"
         st = FIT.replace(given_gait=mode, **args.given)
         say("robust co-design NLP on the given gait: " + dict(
             fixed="M1 only (the gait fixed)",
-            free=f"the gait moved to the robust gait constraints {ROBUST_GAIT} near it, "
-                 "then gait and M1 co-designed",
+            free=f"the gait moved to the robust gait constraints {st.for_model(model).gait} "
+                 "near it, then gait and M1 co-designed",
             auto="M1 on the gait as given, the gait moved from it when that misses the "
                  "target")[mode] + "; on 2 cores the first time under a minute for RABBIT's "
             "gaits, a few minutes for other robots")
@@ -295,7 +294,7 @@ def _search(args, say):
     model = load_model(args.robot)
     st = RobustDesignSettings(samples=args.samples, starts=args.starts, seed=args.seed,
                               mu=args.mu)
-    say(f"robust design by sampling search: gait {ROBUST_GAIT}, v_c rejoining at "
+    say(f"robust design by sampling search: gait {st.for_model(model).gait}, v_c rejoining at "
         f"{st.rejoin} T; under a minute on 2 cores the first time, then read from the "
         "cache")
     out = output_file(args.out, "--out") if args.out is not None else None

@@ -3,10 +3,16 @@ controller, the landing states against the exact stride map's fixed point, and M
 stride map fitted from a long run."""
 from __future__ import annotations
 
+import tempfile
+from pathlib import Path
+
 import numpy as np
 
+from biped_casadi.control.compiled import CompilerError
+from biped_casadi.control.compiled_running import CompiledRunningLaw
+from biped_casadi.control.export_running import RUNNING_LIBRARY
 from biped_casadi.control.running import RunningController
-from biped_casadi.mujoco.running import RunningLoop, fit_running_map
+from biped_casadi.mujoco.running import TAKEOFF_CLOCKS, RunningLoop, fit_running_map
 from analysis.stability.running_cycle import running_cycle, running_stability
 
 from .common import Progress, UserError, add_robot, load_running_gait, print_json
@@ -23,7 +29,25 @@ def _check(args):
                         f"{args.fit}")
     if not str(args.gait).strip():
         raise UserError("--gait: empty name")
+    if args.compiled is not None and not str(args.compiled).strip():
+        raise UserError("--compiled: empty folder name")
+    if args.compiled is not None and not Path(args.compiled).is_dir():
+        raise UserError(f"--compiled: {args.compiled} is not a folder (an export of "
+                        "'biped export-running')")
     return mujoco_settings(args)
+
+
+def _compiled(args, controller):
+    """The law of --compiled DIR, checked to be this run's controller and built (None
+    without)."""
+    if args.compiled is None:
+        return None
+    try:
+        with tempfile.TemporaryDirectory(prefix="biped-running-") as work:
+            return CompiledRunningLaw.build(args.compiled, controller,
+                                            Path(work) / RUNNING_LIBRARY)
+    except (ValueError, CompilerError) as e:
+        raise UserError(f"--compiled: {e}") from None
 
 
 def cmd_mujoco_running(args):
@@ -35,19 +59,21 @@ def cmd_mujoco_running(args):
         raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
                         f"got {len(M1)}")
     c = RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law)
+    compiled = _compiled(args, c)
     exact = None
-    x_star = None
+    x_star = A = None
     if args.exact:
         say("the exact stride map: fixed point and eigenvalues (about 20 s) ...")
         st = running_stability(running_cycle(c))
         if st.status == "failed":
             raise UserError(f"--exact: {st.message}")
-        x_star = st.fixed_point
+        x_star, A = st.fixed_point, st.A
         exact = dict(status=st.status, spectral_radius=st.spectral_radius,
                      eigenvalues=st.eigenvalues, durations=st.durations,
                      fixed_point=st.fixed_point)
     try:
-        loop = RunningLoop(c, settings, x_star)
+        loop = RunningLoop(c, settings, x_star, takeoff_clock=args.takeoff_clock,
+                           compiled=compiled)
     except ValueError as e:
         raise settings_error(e) from None
     x0 = loop.x_star.copy()
@@ -57,9 +83,10 @@ def cmd_mujoco_running(args):
     fit = None
     if args.fit:
         say(f"MuJoCo's stride map from a run of {args.fit} strides ...")
-        fit = fit_running_map(loop.run(loop.x_star, args.fit))
+        fit = fit_running_map(loop.run(loop.x_star, args.fit), reference=A)
     d = r.to_dict()
     d.update(exact=exact, fit=None if fit is None else fit.to_dict(),
+             takeoff_clock=args.takeoff_clock,
              fixed_point_kind="exact" if args.exact else "collocated",
              perturb=args.perturb, file=str(args.gait))
     if args.json:
@@ -79,6 +106,8 @@ def _print(r, d, exact, fit):
     print(f"MuJoCo (solref {s['solref'] if s['solref'] is not None else 'default 0.02'} s, dt "
           f"{s['timestep']:g} s, feet {s['foot_radius']:g} m, mu {s['mu']:g}), M1 = "
           f"{r.controller['M1']}: {r.status} - {r.message}")
+    if "compiled" in r.controller:
+        print(f"  the law compiled from the export {r.controller['compiled']['export']}")
     print(f"  deviations from the {d['fixed_point_kind']} fixed point (largest entry of the "
           "landing state, rad or rad/s)")
     print("  stride  stance [s]  flight [s]  speed [m/s]  deviation  peak |u| [N m]  "
@@ -101,7 +130,8 @@ def register(sub):
         description="Run a step saved by 'biped running' in MuJoCo (the robot's MJCF, sphere "
                     "feet) under the tracking controller of 'biped running --stability' "
                     "(the same --kp, --kd, --m1, --law), called from Python every MuJoCo "
-                    "step: stance until the stance foot's contact force vanishes, flight "
+                    "step (or its C export: --compiled DIR): stance until the stance "
+                    "foot's contact force vanishes, flight "
                     "until the swing foot touches, the legs relabelled there. Starts just "
                     "after a landing at the collocated landing state (--exact: the exact "
                     "stride map's fixed point, and its eigenvalues), PERTURB added to every "
@@ -123,11 +153,23 @@ def register(sub):
     p.add_argument("--exact", action="store_true",
                    help="measure from the exact stride map's fixed point and print its "
                         "eigenvalues (builds the map: about 20 s)")
+    p.add_argument("--compiled", metavar="DIR",
+                   help="call the law compiled from DIR, an export of this gait and design "
+                        "by 'biped export-running' (built with $CC, gcc or cc), instead of "
+                        "its CasADi Functions")
     p.add_argument("--fit", type=int, default=0, metavar="N",
                    help="fit MuJoCo's stride map on a run of N strides from the fixed point "
                         "(30 to 5000; default 0: no fit). The 10 x 10 map needs a few hundred "
-                        "strides: at dt 2 ms, 60 gave max|lambda| 0.87 +- 0.09, 300 give "
-                        "0.69 +- 0.05 (6 to 12 s)")
+                        "strides: at dt 2 ms, 300 give max|lambda| 0.46 +- 0.06 (0.69 +- "
+                        "0.05 with --takeoff-clock contact; 60 gave 0.87 +- 0.09) in 6 to "
+                        "12 s. The estimate is biased upward: with "
+                        "--exact the same fit is also run on the exact map driven by the "
+                        "fit's residuals (reference_max_abs), the figure to compare with")
+    p.add_argument("--takeoff-clock", choices=TAKEOFF_CLOCKS, default="guard",
+                   help="where the flight law's clock starts: 'guard' (the rigid model's "
+                        "takeoff guard on MuJoCo's states, default) or 'contact' (MuJoCo's "
+                        "first zero-force state, whose scatter with the contact's chatter "
+                        "makes most of the stride-to-stride jitter)")
     add_mujoco_settings(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_mujoco_running)

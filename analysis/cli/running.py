@@ -14,7 +14,7 @@ from analysis.design.running_m1 import choose_running_m1
 from analysis.reporting.plots import running_plot, save_figures
 from analysis.stability.running_cycle import running_cycle, running_stability, simulate_running
 from biped_casadi.control.running import RunningController
-from gait_opt.running import RunningOptions, optimize_running
+from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
 
 from .common import Progress, UserError, add_robot, check_m1_values, load_model, \
@@ -94,6 +94,10 @@ def register(sub):
     p.add_argument("--speed", type=float, default=1.5, metavar="V",
                    help="average speed, m/s (default 1.5)")
     p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
+    p.add_argument("--mu-margin", type=float, default=MU_MARGIN, metavar="M",
+                   help="kept below --mu in every friction cone of the optimised step (stance "
+                        f"force, landing impulse), 0 <= M < mu (default {MU_MARGIN:g}: room "
+                        "for a perturbed closed loop's landing)")
     p.add_argument("--torque-limit", type=float, default=None, metavar="U",
                    help="|u| bound in N m (default: the robot's, 150 for RABBIT)")
     p.add_argument("--intervals", type=int, nargs=2, default=(16, 10),
@@ -179,12 +183,14 @@ def cmd_running(args):
     if args.max_iter is not None and args.max_iter < 1:
         raise UserError(f"--max-iter must be >= 1, got {args.max_iter}")
     try:
-        opts = RunningOptions(speed=args.speed, mu=args.mu, torque_limit=args.torque_limit,
+        opts = RunningOptions(speed=args.speed, mu=args.mu, mu_margin=args.mu_margin,
+                              torque_limit=args.torque_limit,
                               n_stance=args.intervals[0], n_flight=args.intervals[1],
                               ipopt={} if args.max_iter is None else {"max_iter": args.max_iter})
     except ValueError as e:
         raise UserError(str(e).replace("RunningOptions.n_stance", "--intervals STANCE")
-                        .replace("RunningOptions.n_flight", "--intervals FLIGHT")) from None
+                        .replace("RunningOptions.n_flight", "--intervals FLIGHT")
+                        .replace("RunningOptions.mu_margin", "--mu-margin")) from None
     out = output_file(args.out, "--out", (".json",))          # before the solve
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot)
@@ -229,7 +235,8 @@ def cmd_running(args):
 def _stability_of_file(args):
     """``--gait FILE``: the closed loop of a saved step."""
     given = [opt for opt, dest, default in (
-        ("--speed", "speed", 1.5), ("--mu", "mu", 0.6), ("--torque-limit", "torque_limit", None),
+        ("--speed", "speed", 1.5), ("--mu", "mu", 0.6), ("--mu-margin", "mu_margin", MU_MARGIN),
+        ("--torque-limit", "torque_limit", None),
         ("--intervals", "intervals", (16, 10)), ("--max-iter", "max_iter", None),
         ("--out", "out", "running.json"), ("--plot", "plot", None),
         ("--no-cache", "no_cache", False))
@@ -376,7 +383,7 @@ def _print(s: dict, gait, limit: float):
           f"{limit:g})")
     print(f"  ground force         Fz at takeoff {c['fz_takeoff']:.2g} N, smallest "
           f"{c['fz_min_dense']:.2g} N (dense); |Fx|/Fz at most {c['friction_ratio_max']:.3f}"
-          f" (mu {gait.options.mu:g})")
+          f" (mu {gait.options.mu:g}, optimised with {gait.options.mu_margin:g} below it)")
     print(f"  flight               feet at least {c['feet_min_flight']:.2g} m up; lands at "
           f"{c['strike_velocity']:.2f} m/s, the other foot leaves at "
           f"{c['other_foot_velocity']:.2f} m/s; impulse |Fx|/Fz {c['impulse_ratio']:.3f}")

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -172,6 +172,28 @@ class RobustDesignSettings:
         return RobustnessSettings(directions=self.directions, steps=self.steps, tol=self.tol,
                                   mu=self.mu, torque_limit=self.torque_limit,
                                   rk4_steps=rk4_steps, rounds=rounds)
+
+    def for_model(self, model) -> "RobustDesignSettings":
+        """These settings with the gait fields as used on the robot.
+
+        A :class:`~gait_opt.LegScaled` gait (the default) becomes the plain fields with
+        its clearance scaled with the leg length (:func:`gait_opt.gait_fields`), so that
+        the settings the result records, and its cache key, hold the clearance the
+        search used; RABBIT's are :data:`ROBUST_GAIT`'s numbers exactly (same key).  A
+        plain dict is used as given.
+
+        Parameters
+        ----------
+        model : BipedModel
+            The robot searched on.
+
+        Returns
+        -------
+        RobustDesignSettings
+        """
+        if not isinstance(self.gait, LegScaled):
+            return self
+        return replace(self, gait=gait_fields(self.gait, model))
 
     def to_dict(self) -> dict:
         """The settings as a dictionary (the search's part of the cache key).
@@ -422,7 +444,7 @@ def robust_design(model, settings: RobustDesignSettings | None = None, progress=
     RobustDesignResult
         The best design, its s* and how it was found.
     """
-    st = settings or RobustDesignSettings()
+    st = (settings or RobustDesignSettings()).for_model(model)
     path = ResultStore(cache).path(task_key("analysis.design.robust_design", DESIGNS_VERSION,
                                             "numerical", (model, st)), ".json")
     if use_cache and path.is_file():

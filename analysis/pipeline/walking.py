@@ -11,7 +11,7 @@ from biped_casadi import (PAPER_SIZES, RABBIT_DESCRIPTION, Design, SimulationOpt
                           perturbed_initial_state, simulate)
 from gait_opt import GaitOptions, optimize_gait
 
-from ..design import ROBUST_GAIT, robust_gait
+from ..design import robust_gait
 from ..design.codesign import TODAY_DESIGN, codesign_flow, tradeoff_flow
 from ..reporting.constants import PAPER
 from ..robustness import RobustnessSettings, basin_to_boundary, kept_directions, robustness
@@ -187,15 +187,15 @@ def stage_search(engine, model, res: Resolution) -> SearchStage:
     """The sampling search's shipped design (``biped m1 --robust --method search``) on its
     gait, evaluated by the same stages (not searched again): s* of it and of virtual
     constraints on that gait, and its basin."""
-    g3 = engine.submit(optimize_gait, model,
-                       GaitOptions(**robust_gait().for_model(model)).for_model(model)).result()
+    fields = robust_gait().for_model(model)            # the clearance scaled with the leg
+    g3 = engine.submit(optimize_gait, model, GaitOptions(**fields).for_model(model)).result()
     ds = Design.tv(g3, TODAY_DESIGN, 0.75)
     b = engine.submit(basin_to_boundary, ds, res.basin_n, refine=BASIN_REFINE)
     rows = s_star_rows(engine, "search", g3, [("virtual constraints", None),
                                               ("the sampling search's design", ds)],
                        res.robustness)
     return SearchStage(dict(search_design=dict(
-        M1=list(ds.M1), rejoin=ds.rejoin, gait_options=dict(ROBUST_GAIT),
+        M1=list(ds.M1), rejoin=ds.rejoin, gait_options=dict(fields),
         note="the sampling search's shipped design (biped m1 --robust --method search), "
              "evaluated here by the same stages, not searched again")),
         gait=g3, design=ds, rows=rows, basin=b.result())

@@ -61,7 +61,7 @@ def walking_domain(controller, options: SimulationOptions | None = None, plant=N
     X, t, p = ca.SX.sym("X", 2 * nq + c.n_ref), ca.SX.sym("t"), ca.SX.sym("p", c.n_par)
     q, dq, r = X[:nq], X[nq:2 * nq], X[2 * nq:]
     u, _, _, _, dr, _ = c.law(q, dq, t, r, p)
-    ua = sim._applied(u)[0]
+    ua = sim.applied_torque(u)[0]
     f = ca.Function("walking_vector_field", [X, t, p],
                     [ca.vertcat(dq, m.forward_dynamics(q, dq, ua), dr)])
     xs, zs = m.swing_foot(q)

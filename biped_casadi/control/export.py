@@ -426,7 +426,8 @@ static double floor_div(double a, double b)
 """
 
 
-_HELPERS = """static int all_finite(const double *x, int n)
+#: C text shared by the exports' wrappers: whether n doubles are all finite
+ALL_FINITE_C = """static int all_finite(const double *x, int n)
 {
     int j;
     for (j = 0; j < n; ++j)
@@ -434,7 +435,9 @@ _HELPERS = """static int all_finite(const double *x, int n)
     return 1;
 }
 
-/* tau outside the reference's range: every output NaN, return code 2 */
+"""
+
+_HELPERS = ALL_FINITE_C + """/* tau outside the reference's range: every output NaN, return code 2 */
 static int not_defined(double *u, double *y, double *dy, double *den)
 {
     int j;
@@ -537,14 +540,18 @@ int biped_outputs(double tau, const double *q, const double *dq, const double *s
 """
 
 
-def _generated(law: ExportedLaw) -> str:
-    cg = ca.CodeGenerator(GENERATED, {"with_header": False, "casadi_int": "int",
-                                      "casadi_real": "double"})
-    cg.add(law.law)
-    cg.add(law.start)
-    if law.front is not None:
-        cg.add(law.front)
+def casadi_c(name: str, functions) -> str:
+    """CasADi's C for some Functions, one file (int and double, no header of its own)."""
+    cg = ca.CodeGenerator(name, {"with_header": False, "casadi_int": "int",
+                                 "casadi_real": "double"})
+    for f in functions:
+        cg.add(f)
     return cg.dump()
+
+
+def _generated(law: ExportedLaw) -> str:
+    return casadi_c(GENERATED, [law.law, law.start] + ([law.front] if law.front is not None
+                                                       else []))
 
 
 def _example(law: ExportedLaw) -> str:

@@ -12,16 +12,21 @@ from pathlib import Path
 
 from ..files import file_path, name_destination
 from .export import HEADER, MARKER
+from .export_running import RUNNING_HEADER
 
 __all__ = ["check_destination", "staged_export", "Stage", "write_export", "file_digest"]
 
 
 def _is_export(folder: Path) -> bool:
-    try:
-        with open(folder / HEADER, encoding="utf-8") as f:
-            return f.read(len(MARKER)) == MARKER
-    except OSError:
-        return False
+    """The folder holds an export: a walking or a running controller's header."""
+    for name in (HEADER, RUNNING_HEADER):
+        try:
+            with open(folder / name, encoding="utf-8") as f:
+                if f.read(len(MARKER)) == MARKER:
+                    return True
+        except OSError:
+            pass
+    return False
 
 
 def check_destination(out) -> Path:

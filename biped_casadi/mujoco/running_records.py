@@ -10,7 +10,8 @@ import numpy as np
 
 from ..results import Result, json_safe
 
-__all__ = ["RunningStride", "MujocoRun", "decay_rate", "RunningMapFit", "fit_running_map"]
+__all__ = ["RunningStride", "MujocoRun", "decay_rate", "RunningMapFit", "fit_running_map",
+           "reference_fit"]
 
 
 @dataclass
@@ -45,6 +46,10 @@ class RunningStride:
     bounce_time : float
         Time the stance foot spent off the floor early in the stance (a bounce off the
         landing, before ``min_stance`` of the gait's stance), s.
+    takeoff_guard_gap : float
+        Where the flight clock started (the rigid model's takeoff guard on MuJoCo's
+        states) less MuJoCo's first zero-force state, s; NaN when the clock started at
+        MuJoCo's contact (``takeoff_clock='contact'``, or the guard had not crossed).
     """
 
     index: int
@@ -60,6 +65,7 @@ class RunningStride:
     slip: float
     fz_max: float
     bounce_time: float = 0.0
+    takeoff_guard_gap: float = math.nan
 
     def to_dict(self) -> dict:
         """The stride's figures by name.
@@ -232,6 +238,14 @@ class RunningMapFit(Result):
         the share of the next landing state the map does not explain (MuJoCo's jitter).
     pairs : int
         (x_k, x_{k+1}) pairs fitted.
+    reference_max_abs, reference_max_abs_spread : float
+        With a ``reference`` map (the exact stride map's Jacobian): the mean and standard
+        deviation of the max|lambda| the same fit returns on runs of that linear map
+        driven by this fit's own residuals (resampled; as many runs and pairs as
+        fitted).  What the fit would report if MuJoCo's map were the reference: compare
+        ``max_abs`` with this, not with the reference's own radius (NaN without one).
+    reference_radius : float
+        The reference's own max|lambda| (NaN without one).
     """
 
     status: str
@@ -242,11 +256,80 @@ class RunningMapFit(Result):
     max_abs_spread: float
     relative_residual: float
     pairs: int
+    reference_max_abs: float = math.nan
+    reference_max_abs_spread: float = math.nan
+    reference_radius: float = math.nan
 
     SUCCESS = ("ok",)
 
 
-def fit_running_map(runs, skip: int = 1, seed: int = 0) -> RunningMapFit:
+def _pairs(runs, skip):
+    """The (x_k, x_{k+1}) pairs of each run, from landing state ``skip`` on."""
+    P0, P1 = [], []
+    for r in runs:
+        X = r.landing_states[skip:]
+        if len(X) > 1:
+            P0.append(X[:-1])
+            P1.append(X[1:])
+    return P0, P1
+
+
+def _lstsq_map(X0, X1):
+    """(c, Lambda, residuals) of the least-squares fit x_{k+1} = c + Lambda x_k."""
+    Phi = np.column_stack([np.ones(len(X0)), X0])
+    coef = np.linalg.lstsq(Phi, X1, rcond=None)[0]
+    return coef[0], coef[1:].T, X1 - Phi @ coef
+
+
+def _radius(L) -> float:
+    return float(np.max(np.abs(np.linalg.eigvals(L))))
+
+
+def reference_fit(reference, residuals, lengths, rng, replicas: int = 50) -> tuple:
+    """The max|lambda| the least-squares fit returns when the map is ``reference``.
+
+    Runs of x_{k+1} = reference x_k + e_k (deviations from the fixed point), each as long
+    as a fitted run, e_k drawn with replacement from ``residuals`` (centred), then the
+    same fit.  The fit of a 10 x 10 map on a few hundred noisy strides is biased: the
+    noise excites few directions of the state, and the largest modulus of eigenvalues
+    estimated with noise lies above the true one.
+
+    Parameters
+    ----------
+    reference : array_like
+        (n, n) the map, e.g. the exact stride map's Jacobian.
+    residuals : array_like
+        (m, n) the fit's residuals (MuJoCo's stride-to-stride noise).
+    lengths : sequence of int
+        Pairs per run.
+    rng : numpy.random.Generator
+        The draws.
+    replicas : int
+        Fits averaged.
+
+    Returns
+    -------
+    tuple of float
+        (mean, standard deviation) of the fitted max|lambda| over the replicas.
+    """
+    A = np.asarray(reference, float)
+    E = np.asarray(residuals, float)
+    E = E - E.mean(axis=0)
+    out = []
+    for _ in range(replicas):
+        P0, P1 = [], []
+        for n in lengths:
+            x = np.zeros((n + 1, A.shape[0]))
+            e = E[rng.integers(0, len(E), n)]
+            for k in range(n):
+                x[k + 1] = A @ x[k] + e[k]
+            P0.append(x[:-1])
+            P1.append(x[1:])
+        out.append(_radius(_lstsq_map(np.vstack(P0), np.vstack(P1))[1]))
+    return float(np.mean(out)), float(np.std(out))
+
+
+def fit_running_map(runs, skip: int = 1, seed: int = 0, reference=None) -> RunningMapFit:
     """MuJoCo's stride map from runs: a least-squares fit of x_{k+1} = c + Lambda x_k.
 
     At stiff contact MuJoCo's landing states do not repeat: each stride adds a jitter of
@@ -254,7 +337,9 @@ def fit_running_map(runs, skip: int = 1, seed: int = 0) -> RunningMapFit:
     after a stride or two, so a decay cannot be read off one perturbed run.  The jitter
     keeps the state moving about MuJoCo's cycle; over a long run the pairs of
     consecutive landing states determine the linear map as an autoregression does (the
-    jitter enters as noise independent of x_k).
+    jitter enters as noise independent of x_k).  The estimate of max|lambda| is biased
+    upward at a few hundred strides (:func:`reference_fit`): give ``reference`` to
+    measure the bias.
 
     Parameters
     ----------
@@ -263,19 +348,17 @@ def fit_running_map(runs, skip: int = 1, seed: int = 0) -> RunningMapFit:
     skip : int
         Landing states left out at the start of each run (the start itself, a transient).
     seed : int
-        Of the bootstrap.
+        Of the bootstrap and of the reference's runs.
+    reference : array_like, optional
+        (n, n) a map to calibrate the fit against (the exact stride map's Jacobian,
+        ``running_stability(cycle).A``): fills ``reference_max_abs`` and its spread.
 
     Returns
     -------
     RunningMapFit
     """
     runs = [runs] if isinstance(runs, MujocoRun) else list(runs)
-    P0, P1 = [], []
-    for r in runs:
-        X = r.landing_states[skip:]
-        if len(X) > 1:
-            P0.append(X[:-1])
-            P1.append(X[1:])
+    P0, P1 = _pairs(runs, skip)
     n = len(runs[0].start) if runs else 0
     if not P0 or sum(len(p) for p in P0) < 3 * (n + 1):
         m = sum(len(p) for p in P0)
@@ -283,10 +366,7 @@ def fit_running_map(runs, skip: int = 1, seed: int = 0) -> RunningMapFit:
                              "are needed to fit the stride map", [], [], math.nan, math.nan,
                              math.nan, m)
     X0, X1 = np.vstack(P0), np.vstack(P1)
-    Phi = np.column_stack([np.ones(len(X0)), X0])
-    coef = np.linalg.lstsq(Phi, X1, rcond=None)[0]
-    Lam = coef[1:].T
-    res = X1 - Phi @ coef
+    _, Lam, res = _lstsq_map(X0, X1)
     spread = X1.std(axis=0)
     rel = float(np.max(np.sqrt(np.mean(res ** 2, axis=0)) / np.where(spread > 0, spread,
                                                                        np.inf)))
@@ -296,10 +376,17 @@ def fit_running_map(runs, skip: int = 1, seed: int = 0) -> RunningMapFit:
     mx = []
     for _ in range(200):
         i = rng.integers(0, len(X0), len(X0))
-        cf = np.linalg.lstsq(Phi[i], X1[i], rcond=None)[0]
-        mx.append(np.max(np.abs(np.linalg.eigvals(cf[1:].T))))
+        mx.append(_radius(_lstsq_map(X0[i], X1[i])[1]))
     top = float(np.abs(ev[0]))
-    return RunningMapFit(
-        "ok", f"MuJoCo's stride map from {len(X0)} pairs: max |lambda| {top:.3g} +- "
-              f"{np.std(mx):.2g}, relative residual {rel:.2g}",
-        Lam.tolist(), [complex(e) for e in ev], top, float(np.std(mx)), rel, int(len(X0)))
+    msg = (f"MuJoCo's stride map from {len(X0)} pairs: max |lambda| {top:.3g} +- "
+           f"{np.std(mx):.2g}, relative residual {rel:.2g}")
+    ref = (math.nan, math.nan, math.nan)
+    if reference is not None:
+        A = np.asarray(reference, float)
+        if A.shape != (n, n) or not np.all(np.isfinite(A)):
+            raise ValueError(f"reference must be a finite ({n}, {n}) matrix, got {A.shape}")
+        ref = reference_fit(A, res, [len(p) for p in P0], rng) + (_radius(A),)
+        msg += (f"; the same fit on the reference map ({ref[2]:.3g}) with these residuals "
+                f"gives {ref[0]:.3g} +- {ref[1]:.2g}")
+    return RunningMapFit("ok", msg, Lam.tolist(), [complex(e) for e in ev], top,
+                         float(np.std(mx)), rel, int(len(X0)), *ref)

@@ -294,14 +294,28 @@ class Simulator:
         """What the simulator depends on: controller, options and plant."""
         return (self.controller.cache_key, self.options, self.plant.cache_key)
 
-    # ------------------------------------------------------------------ build
-    def _applied(self, u):
-        """The torques the plant receives, and whether they were clipped (CasADi)."""
+    def applied_torque(self, u):
+        """The torques the plant receives for the law's torques ``u``.
+
+        Clipped at the torque limit when the options saturate, else ``u`` itself.
+
+        Parameters
+        ----------
+        u : casadi.SX or casadi.MX
+            The law's torques.
+
+        Returns
+        -------
+        tuple
+            (applied torques, whether any ``|u_i|`` exceeds the limit: a CasADi
+            expression, or 0 when nothing is clipped).
+        """
         if not self.options.saturate:
             return u, 0
         U = self.limits.torque_limit
         return ca.fmin(ca.fmax(u, -U), U), ca.mmax(ca.fabs(u)) > U
 
+    # ------------------------------------------------------------------ build
     def _build(self):
         m, c = self.plant, self.controller
         if getattr(c, "numeric_law", False):    # a compiled library: numeric calls only
@@ -321,7 +335,7 @@ class Simulator:
         def rhs(Xv, stage):
             q, dq, r = Xv[:nq], Xv[nq:2 * nq], Xv[2 * nq:]
             u, _, _, _, dr, _ = c.law(q, dq, tau + stage * h, r, p)
-            ddq = m.forward_dynamics(q, dq, self._applied(u)[0])     # the plant, eq. (1)
+            ddq = m.forward_dynamics(q, dq, self.applied_torque(u)[0])     # the plant, eq. (1)
             return ca.vertcat(dq, ddq, dr)
 
         Xn = ca.cse(rk4_step(rhs, X, h))
@@ -330,7 +344,7 @@ class Simulator:
                                ["X", "tau", "h", "p"], ["X_next", "tau_next"])
         q, dq, r = X[:nq], X[nq:2 * nq], X[2 * nq:]
         u, y, dy, den, _, inr = c.law(q, dq, tau, r, p)
-        ua, sat = self._applied(u)
+        ua, sat = self.applied_torque(u)
         Fx, Fz = m.ground_reaction(q, dq, ua)
         diag = ca.cse(self.schema.vector(m, q, dq, ua, Fx, Fz, den, y, dy, inr, sat))
         diagnostics = ca.Function("closed_loop_diagnostics", [X, tau, p], [diag],

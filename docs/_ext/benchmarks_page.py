@@ -11,7 +11,8 @@ __all__ = ["benchmarks_page", "load_results"]
 
 #: the order of the page (others follow by name)
 ORDER = ("reproduce", "codesign", "codesign_gaits", "codesign_family", "gait", "family",
-         "sweep", "simulate", "robust", "basin", "terrain", "export", "mujoco", "model")
+         "sweep", "simulate", "robust", "basin", "terrain", "export", "export_running", "mujoco",
+         "model")
 
 
 def load_results(folder: Path) -> list:

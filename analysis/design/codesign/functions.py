@@ -10,12 +10,14 @@ import numpy as np
 
 from biped_casadi.caching import cached
 from biped_casadi.control.zero_dynamics import zero_dynamics
+from biped_casadi.numerics import as_number
 from biped_casadi.numerics import compiled as _compiled
 from biped_casadi.numerics import rk4_step
 from biped_casadi.simd import kernels
 from biped_casadi.simulation.perturbation import PAPER_SIZES
-from gait_opt import leg_scale
 from gait_opt.parametrisation import reference_dynamics
+
+from .scales import physical_scales
 
 #: the constraint families of a scenario-step, in the user's words
 FAMILIES = {
@@ -44,10 +46,27 @@ CLEARANCE_SCALE = 0.05
 CLEARANCE_MID = 0.001
 STRIKE_FRONT_MIN = 0.02
 LIFT_SCALE = 0.3
-#: the fields :meth:`TranscriptionSettings.for_model` fills with the constant above times
-#: the leg scale when none is given
+#: the co-design's other RABBIT-sized margins, each scaled with the robot by its kind
+#: (:func:`~analysis.design.codesign.scales.physical_scales`): the old stance foot's
+#: upward speed after an impact and the swing foot's downward speed at a strike, m/s
+#: (with sqrt(g leg)); the lowest normal impulse at a strike, N s (with mass x
+#: sqrt(g leg)); the torque kept below the limit, N m (with the robot's torque limit:
+#: 0.02 x it)
+LIFTOFF_MIN = 0.02
+STRIKE_SPEED_MIN = 0.02
+IMPULSE_MIN = 0.5
+TORQUE_MARGIN = 3.0
+#: the fields :meth:`TranscriptionSettings.for_model` fills, when none is given, with the
+#: constant above times the robot's scale of that kind
 _LEG_SCALED = dict(clearance_scale=CLEARANCE_SCALE, clearance_mid=CLEARANCE_MID,
                    strike_front_min=STRIKE_FRONT_MIN, lift_scale=LIFT_SCALE)
+_SCALED = dict({name: ("length", v) for name, v in _LEG_SCALED.items()},
+               liftoff_min=("speed", LIFTOFF_MIN), strike_speed_min=("speed", STRIKE_SPEED_MIN),
+               impulse_min=("impulse", IMPULSE_MIN), torque_margin=("torque", TORQUE_MARGIN))
+#: the filled fields that must be >= 0 and those that must be > 0 (units of rows)
+_NONNEGATIVE = ("torque_margin", "impulse_min", "liftoff_min", "strike_speed_min",
+                "clearance_mid")
+_POSITIVE = ("clearance_scale", "lift_scale")
 
 
 @dataclass(frozen=True)
@@ -68,17 +87,23 @@ class TranscriptionSettings:
         N m (with the margin below); None (the default): the robot's own
         (``model.description.torque_limit``, RABBIT 150 N m), filled in by
         :meth:`for_model`.  The co-design passes its verification's limit.
-    torque_margin : float
-        N m kept below the torque limit (peaks between the NLP's nodes).
+    torque_margin : float or None
+        N m kept below the torque limit (peaks between the NLP's nodes); None (the
+        default): 0.02 x the robot's own torque limit (RABBIT: 3 N m; a robot without
+        one: RABBIT's 3 N m times its weight x leg length over RABBIT's), filled in by
+        :meth:`for_model`.
     mu_margin : float
         Kept below mu in every cone.
     normal_force_min : float
         Lowest stance normal force, fraction of the weight.
-    impulse_min : float
-        Lowest normal impulse at a strike, N s.
-    liftoff_min, strike_speed_min : float
+    impulse_min : float or None
+        Lowest normal impulse at a strike, N s; None (the default): RABBIT's 0.5 N s
+        times the robot's mass x sqrt(g leg) over RABBIT's, filled in by
+        :meth:`for_model`.
+    liftoff_min, strike_speed_min : float or None
         m/s: the old stance foot's upward speed after an impact, the swing foot's
-        downward speed at a strike.
+        downward speed at a strike; None (the default): RABBIT's 0.02 m/s times the
+        robot's sqrt(g leg) over RABBIT's, filled in by :meth:`for_model`.
     strike_front_min : float or None
         m: the strike lands at least this far in front of the stance foot; None (the
         default): 0.025 x the robot's leg length (RABBIT: 0.02 m), filled in by
@@ -111,12 +136,12 @@ class TranscriptionSettings:
     horizon: float = 1.6
     mu: float = 0.6
     torque_limit: float | None = None
-    torque_margin: float = 3.0
+    torque_margin: float | None = None
     mu_margin: float = 0.02
     normal_force_min: float = 0.05
-    impulse_min: float = 0.5
-    liftoff_min: float = 0.02
-    strike_speed_min: float = 0.02
+    impulse_min: float | None = None
+    liftoff_min: float | None = None
+    strike_speed_min: float | None = None
     strike_front_min: float | None = None
     den_margin: float = 0.03
     clearance_mid: float | None = None
@@ -126,6 +151,13 @@ class TranscriptionSettings:
     ks_rho: float = 300.0
     threads: int = 2
 
+    def __post_init__(self):
+        for name in _NONNEGATIVE + _POSITIVE + ("strike_front_min",):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, as_number(
+                    getattr(self, name), name, nonnegative=name in _NONNEGATIVE,
+                    positive=name in _POSITIVE))
+
     def for_model(self, model) -> "TranscriptionSettings":
         """These settings with the robot's defaults filled in.
 
@@ -133,8 +165,13 @@ class TranscriptionSettings:
         ``clearance_scale``, ``clearance_mid``, ``strike_front_min`` and ``lift_scale``
         RABBIT's (:data:`CLEARANCE_SCALE`, :data:`CLEARANCE_MID`,
         :data:`STRIKE_FRONT_MIN`, :data:`LIFT_SCALE`) times the robot's leg length over
-        0.8 m (:func:`gait_opt.leg_scale`; on RABBIT exactly 1.0, so its settings are the
-        constants bit for bit).
+        0.8 m (:func:`gait_opt.leg_scale`); the speeds ``liftoff_min`` and
+        ``strike_speed_min`` (:data:`LIFTOFF_MIN`, :data:`STRIKE_SPEED_MIN`) times its
+        sqrt(g leg) over RABBIT's; ``impulse_min`` (:data:`IMPULSE_MIN`) times its mass x
+        sqrt(g leg) over RABBIT's; ``torque_margin`` (:data:`TORQUE_MARGIN`) times its
+        torque limit over RABBIT's
+        (:func:`~analysis.design.codesign.scales.physical_scales`).  On RABBIT every
+        factor is exactly 1.0, so its settings are the constants bit for bit.
 
         Parameters
         ----------
@@ -145,7 +182,8 @@ class TranscriptionSettings:
         -------
         TranscriptionSettings
         """
-        fill = {name: value * leg_scale(model) for name, value in _LEG_SCALED.items()
+        k = physical_scales(model)
+        fill = {name: value * k[kind] for name, (kind, value) in _SCALED.items()
                 if getattr(self, name) is None}
         if self.torque_limit is None:
             fill["torque_limit"] = float(model.description.torque_limit)

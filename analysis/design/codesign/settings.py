@@ -6,14 +6,16 @@ import math
 from dataclasses import asdict, dataclass, field
 
 from biped_casadi.control.output_law import check_rejoin
+from biped_casadi.numerics import as_number
 from biped_casadi.results import Result
-from gait_opt import LegScaled, gait_fields, leg_scale
+from gait_opt import LegScaled, gait_fields
 
 from ..settings_checks import check_fields, check_gait_fields
 
 from ...robustness.s_star import RobustnessSettings
 from ..robust_search import robust_gait
 from .functions import TranscriptionSettings
+from .scales import physical_scales
 
 #: the sampling search's shipped design on :data:`ROBUST_GAIT` (M1; v_c rejoining at
 #: 0.75 T): s* 0.969, the co-design's first warm start
@@ -22,6 +24,9 @@ TODAY_DESIGN = (-8.2618, 2.5374, 0.0034, 8.5090)
 #: the margin a moved gait keeps above the clearance on RABBIT's legs (0.8 m), m; scaled
 #: with the robot's leg length (:meth:`MoveSettings.for_model`)
 CLEARANCE_MARGIN = 0.002
+#: the torque a moved gait keeps below the limit on RABBIT (limit 150 N m), N m; scaled
+#: with the robot's torque limit (:meth:`MoveSettings.for_model`)
+MOVE_TORQUE_MARGIN = 0.5
 
 #: what the co-design does with a gait it is given (:class:`CodesignSettings`)
 GIVEN_GAIT = ("fixed", "free", "auto")
@@ -209,8 +214,11 @@ class MoveSettings:
         the value used in its settings).
     friction_margin : float
         The path's friction ratio likewise, below mu.
-    torque_margin : float
-        N m: the torques likewise, below the limit.
+    torque_margin : float or None
+        N m: the torques likewise, below the limit; None (the default): 1/300 of the
+        robot's own torque limit (RABBIT: 0.5 N m; a robot without one: RABBIT's
+        0.5 N m times its weight x leg length over RABBIT's), filled in by
+        :meth:`for_model`.
     max_iter : int
         IPOPT iterations per step.
     effort : float
@@ -234,18 +242,26 @@ class MoveSettings:
     impulse_margin: float = 0.005
     clearance_margin: float | None = None
     friction_margin: float = 1e-4
-    torque_margin: float = 0.5
+    torque_margin: float | None = None
     max_iter: int = 200
     effort: float = 300.0
     path_mu: float = 0.45
     torque_fraction: float = 0.8
     efforts: tuple = (0.0, 300.0, 3000.0, math.inf)
 
-    def for_model(self, model) -> "MoveSettings":
-        """These settings with ``clearance_margin`` filled in for the robot.
+    def __post_init__(self):
+        for name in ("clearance_margin", "torque_margin"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, as_number(getattr(self, name), name,
+                                                         nonnegative=True))
 
-        When none is given: :data:`CLEARANCE_MARGIN` scaled with its leg length (RABBIT
-        exactly 0.002 m).
+    def for_model(self, model) -> "MoveSettings":
+        """These settings with ``clearance_margin`` and ``torque_margin`` filled in for
+        the robot.
+
+        Each when none is given: :data:`CLEARANCE_MARGIN` scaled with its leg length
+        (RABBIT exactly 0.002 m), :data:`MOVE_TORQUE_MARGIN` with its torque limit
+        (:func:`~analysis.design.codesign.scales.physical_scales`; RABBIT exactly 0.5 N m).
 
         Parameters
         ----------
@@ -256,15 +272,17 @@ class MoveSettings:
         -------
         MoveSettings
         """
-        if self.clearance_margin is not None:
-            return self
-        return dataclasses.replace(self, clearance_margin=CLEARANCE_MARGIN * leg_scale(model))
+        k = physical_scales(model)
+        fill = {name: value * k[kind] for name, kind, value in (
+            ("clearance_margin", "length", CLEARANCE_MARGIN),
+            ("torque_margin", "torque", MOVE_TORQUE_MARGIN)) if getattr(self, name) is None}
+        return dataclasses.replace(self, **fill) if fill else self
 
 
 def _check_transcription(fields) -> None:
     """ValueError naming a ``transcription`` field the co-design cannot take: one
-    :class:`~analysis.design.codesign.functions.TranscriptionSettings` does not have, or
-    ``mu`` / ``torque_limit``, which the verification sets."""
+    :class:`~analysis.design.codesign.functions.TranscriptionSettings` does not have,
+    ``mu`` / ``torque_limit``, which the verification sets, or a value it refuses."""
     if not isinstance(fields, dict):
         raise ValueError(f"transcription must be a dict of TranscriptionSettings fields, got "
                          f"{type(fields).__name__}")
@@ -277,6 +295,10 @@ def _check_transcription(fields) -> None:
         if name in fields:
             raise ValueError(f"transcription: {name} is the verification's "
                              f"(Verification({name}=...)): the transcription keeps it equal")
+    try:
+        TranscriptionSettings(**fields)                  # its values' own checks
+    except ValueError as e:
+        raise ValueError(f"transcription: {e}") from None
 
 
 @dataclass(frozen=True)
