@@ -48,7 +48,7 @@ from biped_casadi.model import flight_model
 
 from .options import leg_scale
 from .running_cache import cached_running
-from .running_file import check_running_file, running_problem
+from .running_file import check_running_file, running_problem, solve_or_last_iterate
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
            "hermite_simpson", "CLEARANCE", "TRAILING_CLEARANCE", "MIN_STEP_LENGTH",
@@ -396,10 +396,8 @@ class RunningGait:
             o.setdefault("takeoff_cone_rate", False)
             o.setdefault("mu_margin", 0.0)
             arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
-            g = cls(options=RunningOptions(**o), **{
-                k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()})
-            check_running_file(g)
-            return g
+            return check_running_file(cls(options=RunningOptions(**o), **{
+                k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()}))
         except (KeyError, TypeError, ValueError, AttributeError) as e:
             raise ValueError(f"{path}: a malformed running gait ({type(e).__name__}: {e})") \
                 from None
@@ -615,16 +613,6 @@ def _edges(opti, model, fl, opts, Xs, Xf):
     return p_foot
 
 
-def _failed_solve(opti, error):
-    """(stats, value) of a failed solve; ValueError when IPOPT never started (an option)."""
-    try:
-        return opti.stats(), opti.debug.value
-    except RuntimeError:
-        why = (str(error).split("ipopt_interface.cpp:")[-1].partition(": ")[2] or str(error))
-        raise ValueError(f"RunningOptions.ipopt: IPOPT refuses the options "
-                         f"({why.strip().splitlines()[0]})") from None
-
-
 def optimize_running(model, opts: RunningOptions | None = None, guess: dict | None = None,
                      verbose: bool = False, *, cache: bool = False, cache_dir=None,
                      progress=None) -> RunningGait:
@@ -697,11 +685,7 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
     opti.solver("ipopt", {"expand": True, "print_time": False, "error_on_fail": False,
                           "show_eval_warnings": False}, ipopt)
     t0 = time.perf_counter()
-    try:
-        sol = opti.solve_limited()
-        st, val = sol.stats(), sol.value
-    except RuntimeError as e:  # IPOPT failed (infeasible, ...): the last iterate, success False
-        st, val = _failed_solve(opti, e)
+    st, val = solve_or_last_iterate(opti)        # the last iterate when IPOPT failed
     wall = time.perf_counter() - t0
     stats = {"success": bool(st.get("success")), "return_status": st.get("return_status"),
              "iterations": int(st.get("iter_count", -1)), "wall_s": wall}

@@ -1,14 +1,15 @@
 """What a running-gait file must hold to be read (:meth:`gait_opt.running.RunningGait.load`):
 the fields a solve writes, each of its kind, size and range; an edited or damaged file is
 refused with one line naming the field, before anything is built from it.  And the
-arguments of :func:`gait_opt.running.optimize_running`, checked by name."""
+arguments of :func:`gait_opt.running.optimize_running`, checked by name, and its solve
+when IPOPT fails (the last iterate, not CasADi's exception)."""
 from __future__ import annotations
 
 import math
 
 from biped_casadi.control.running import check_running_gait
 
-__all__ = ["check_running_file", "running_problem"]
+__all__ = ["check_running_file", "running_problem", "solve_or_last_iterate"]
 
 #: slack on the phase durations' bounds (IPOPT meets a bound to about 1e-8 s)
 BOUND_SLACK = 1e-6
@@ -25,6 +26,11 @@ def check_running_file(g):
     ----------
     g : RunningGait
         As read from a file.
+
+    Returns
+    -------
+    RunningGait
+        ``g``.
 
     Raises
     ------
@@ -54,6 +60,7 @@ def check_running_file(g):
         raise ValueError(f"'cost' must be a finite number, got {g.cost!r}")
     if not isinstance(g.solver_stats, dict):
         raise ValueError(f"'solver_stats' must be an object, got {g.solver_stats!r}")
+    return g
 
 
 _GUESS = ("T_stance", "T_flight", "x_stance", "u_stance", "x_flight", "u_flight")
@@ -89,3 +96,36 @@ def running_problem(model, opts, guess, options_type):
         raise TypeError(f"guess must be a RunningGait or a dict of {', '.join(_GUESS)}, got "
                         f"{type(guess).__name__}")
     return (opts or options_type()).for_model(model)
+
+
+def solve_or_last_iterate(opti):
+    """Solve ``opti`` (IPOPT with ``error_on_fail`` off): its stats and value function,
+    those of the last iterate when IPOPT ended in failure (infeasible, an invalid number:
+    CasADi raises there even so), so that the caller reports the status.
+
+    Parameters
+    ----------
+    opti : casadi.Opti
+        The problem, its solver set.
+
+    Returns
+    -------
+    tuple
+        (stats dict, value function).
+
+    Raises
+    ------
+    ValueError
+        Naming ``RunningOptions.ipopt`` when IPOPT never started (an option it refuses).
+    """
+    try:
+        sol = opti.solve_limited()
+        return sol.stats(), sol.value
+    except RuntimeError as error:
+        try:
+            return opti.stats(), opti.debug.value
+        except RuntimeError:
+            why = (str(error).split("ipopt_interface.cpp:")[-1].partition(": ")[2]
+                   or str(error))
+            raise ValueError(f"RunningOptions.ipopt: IPOPT refuses the options "
+                             f"({why.strip().splitlines()[0]})") from None
