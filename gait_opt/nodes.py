@@ -302,10 +302,14 @@ def csv_table(text: str, where: str, columns: str = "") -> tuple:
     """
     reader = csv.reader(io.StringIO(text))
     rows, lines = [], []                   # the rows, and the file's line of each
-    for r in reader:
-        if r and any(c.strip() for c in r):
-            rows.append(r)
-            lines.append(reader.line_num)
+    try:
+        for r in reader:
+            if r and any(c.strip() for c in r):
+                rows.append(r)
+                lines.append(reader.line_num)
+    except csv.Error as e:                 # a stray carriage return, a NUL: not a CSV table
+        why = str(e).split(" - ")[0]       # csv's advice on newline modes does not apply
+        raise ValueError(f"{where}: not a CSV table (line {reader.line_num}: {why})") from None
     if not rows:
         raise ValueError(f"{where} is empty")
     while len(rows[0]) > 1 and all(len(r) == len(rows[0]) and not r[-1].strip() for r in rows):

@@ -48,6 +48,7 @@ from biped_casadi.model import flight_model
 
 from .options import leg_scale
 from .running_cache import cached_running
+from .running_file import check_running_file, running_problem, solve_or_last_iterate
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
            "hermite_simpson", "CLEARANCE", "TRAILING_CLEARANCE", "MIN_STEP_LENGTH",
@@ -395,8 +396,8 @@ class RunningGait:
             o.setdefault("takeoff_cone_rate", False)
             o.setdefault("mu_margin", 0.0)
             arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
-            return cls(options=RunningOptions(**o), **{
-                k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()})
+            return check_running_file(cls(options=RunningOptions(**o), **{
+                k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()}))
         except (KeyError, TypeError, ValueError, AttributeError) as e:
             raise ValueError(f"{path}: a malformed running gait ({type(e).__name__}: {e})") \
                 from None
@@ -643,7 +644,7 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
         The last iterate, whatever IPOPT's status (``gait.success`` tells); with
         ``cache``, ``gait.solver_stats['cache']`` is 'hit' or says why it was solved.
     """
-    opts = (opts or RunningOptions()).for_model(model)
+    opts = running_problem(model, opts, guess, RunningOptions)
     if cache:
         return cached_running(model, opts, cache_dir, progress,
                               lambda: optimize_running(model, opts, guess, verbose),
@@ -681,13 +682,11 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
     ipopt = {"print_level": 5 if verbose else 0, "max_iter": 3000, "tol": 1e-8,
              "mu_strategy": "adaptive", "sb": "yes"}
     ipopt.update(opts.ipopt)
-    opti.solver("ipopt", {"expand": True, "print_time": False, "error_on_fail": False},
-                ipopt)
+    opti.solver("ipopt", {"expand": True, "print_time": False, "error_on_fail": False,
+                          "show_eval_warnings": False}, ipopt)
     t0 = time.perf_counter()
-    sol = opti.solve_limited() if hasattr(opti, "solve_limited") else opti.solve()
+    st, val = solve_or_last_iterate(opti)        # the last iterate when IPOPT failed
     wall = time.perf_counter() - t0
-    st = sol.stats()
-    val = sol.value
     stats = {"success": bool(st.get("success")), "return_status": st.get("return_status"),
              "iterations": int(st.get("iter_count", -1)), "wall_s": wall}
     return RunningGait(robot=model.description.name, options=opts,

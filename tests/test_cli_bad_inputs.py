@@ -525,6 +525,86 @@ def test_bad_input_is_one_line_and_exit_2(case, files, tmp_path, monkeypatch, ca
     assert _snapshot(files["root_dir"], tmp_path) == before, "a file was written or changed"
 
 
+@pytest.fixture(scope="module")
+def run_files(files, running_gait):
+    """A running step (RABBIT, 1.5 m/s, from the cache) and edited copies, beside the
+    walking gait's files."""
+    d = pathlib.Path(files["root_dir"]) / "running"
+    d.mkdir(exist_ok=True)
+    good = running_gait.save(d / "run.json")
+    body = json.loads(good.read_text())
+    out = dict(files, run=str(good))
+
+    def edited(name, edit):
+        b = copy.deepcopy(body)
+        edit(b)
+        (d / f"{name}.json").write_text(json.dumps(b))
+        out[name] = str(d / f"{name}.json")
+
+    edited("run_nan", lambda b: b["x_stance"][0].__setitem__(0, float("nan")))
+    edited("run_inf_u", lambda b: b["u_flight"][1].__setitem__(3, float("inf")))
+    edited("run_rows", lambda b: b.update(x_stance=b["x_stance"][:7]))
+    edited("run_cols", lambda b: b.update(x_stance=[r[:5] for r in b["x_stance"]]))
+    edited("run_T_huge", lambda b: b.update(T_stance=1e300))
+    edited("run_T_text", lambda b: b.update(T_stance="0.3"))
+    edited("run_step_nan", lambda b: b.update(step_length=float("nan")))
+    edited("run_x_empty", lambda b: b.update(x_stance=[]))
+    edited("run_three_link", lambda b: b.update(robot="three_link"))
+    (d / "not_a_table.csv").write_bytes(b"t,q1\r0,1\n")       # a stray carriage return
+    out["not_a_table"] = str(d / "not_a_table.csv")
+    return out
+
+
+RG = ["--gait", "{run}"]
+
+#: (arguments, a word the error line must contain): running steps, and walking gaits where
+#: running steps are taken (each refused before the closed loop is built)
+RUNNING_CASES = [
+    # a file of NaN states analysed its closed loop ('state not finite', exit 0); shapes of
+    # another robot failed inside CasADi; 1e300 s overflowed; text and an empty table
+    # were internal errors; NaN step length and cost were taken
+    (["running", "--gait", "{run_nan}"], "'x_stance' has non-finite entries"),
+    (["running", "--gait", "{run_inf_u}"], "'u_flight' has non-finite entries"),
+    (["mujoco-running", "--gait", "{run_nan}"], "'x_stance' has non-finite entries"),
+    (["running", "--gait", "{run_rows}"], "'x_stance' must have 2 nq rows"),
+    (["running", "--gait", "{run_cols}"], "has shape"),
+    (["running", "--gait", "{run_T_huge}"], "outside the problem's bounds"),
+    (["mujoco-running", "--gait", "{run_T_huge}"], "outside the problem's bounds"),
+    (["running", "--gait", "{run_T_text}"], "'T_stance' must be a positive number"),
+    (["running", "--gait", "{run_step_nan}"], "'step_length' must be a positive number"),
+    (["running", "--gait", "{run_x_empty}"], "'x_stance' must be a table"),
+    (["running", "--gait", "{run_three_link}"], "not a running step of three_link"),
+    # a walking gait where a running step is taken, and the reverse
+    (["running", "--gait", "{gait}"], "is a walking gait (from 'biped gait'), not a running "
+                                      "step"),
+    (["mujoco-running", "--gait", "{family}"], "is a walking gait family"),
+    (["eig", "--gait", "{run}", *M0], "is a running step (from 'biped running'), not a "
+                                      "walking gait"),
+    (["mujoco", "--gait", "{run}", "--controller", "vc"], "is a running step"),
+    # options: ignored (--no-cache), taken beyond the model's range or without bound
+    (["running", *RG, "--no-cache"], "--no-cache is for optimising one"),
+    (["running", *RG, "--m1", "1e300", "0", "0", "0"], "--m1: components must lie within"),
+    (["running", *RG, "--steps", "100000"], "--steps must be between 0 and 5000"),
+    (["running", "--stability", "--perturb", "1e300"], "--perturb must be a finite number "
+                                                       "within +-100 rad/s"),
+    (["mujoco-running", *RG, "--foot-radius", "10"], "--foot-radius must be smaller"),
+    # IPOPT ending in failure: CasADi's assertion text ('Error in Opti::solve ... Solver
+    # failed ...') and, here, its evaluation warnings on stderr
+    (["running", "--speed", "1e300", "--intervals", "2", "2", "--no-cache", "--out",
+      "{root_dir}/r.json"], "the running step did not converge at 1e+300 m/s (IPOPT: "
+                            "Invalid_Number_Detected"),
+    # csv's own error with its advice on newline modes was an internal error
+    (["gait", "--import", "{not_a_table}", "--out", "{root_dir}/g.json"],
+     "not a CSV table (line 1: new-line character seen in unquoted field)"),
+]
+
+
+@pytest.mark.parametrize("case", RUNNING_CASES, ids=[_id(c) for c in RUNNING_CASES])
+def test_bad_running_input_is_one_line_and_exit_2(case, run_files, tmp_path, monkeypatch,
+                                                   capsys):
+    test_bad_input_is_one_line_and_exit_2(case, run_files, tmp_path, monkeypatch, capsys)
+
+
 @pytest.mark.parametrize("args", [
     ["gait", "--out", "{dir}"],
     ["eig", "--gait", "{ragged}", "--m1", "0", "0", "0", "0"],

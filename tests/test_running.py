@@ -249,6 +249,31 @@ def test_options_refuse_bad_values(field, value):
         RunningOptions(**{field: value})
 
 
+@pytest.mark.parametrize("ipopt", [{"no_such_option": 1}, {"max_iter": -1}])
+def test_options_ipopt_refuses_are_named(model, ipopt):
+    """IPOPT refusing an option was CasADi's 'forbidden since you have not solved'."""
+    with pytest.raises(ValueError, match="RunningOptions.ipopt: IPOPT refuses the options"):
+        optimize_running(model, RunningOptions(n_stance=2, n_flight=2, ipopt=ipopt))
+
+
+@pytest.mark.parametrize("args, words", [
+    (lambda m: (m, {"speed": 1.5}), "opts must be RunningOptions"),
+    (lambda m: (None, None), "model must be a robot model"),
+    (lambda m: (m, None, "gait.json"), "guess must be a RunningGait")])
+def test_problem_arguments_are_named(model, args, words):
+    """AttributeErrors ('dict' object has no attribute 'for_model') and a TypeError of
+    string indices before."""
+    with pytest.raises(TypeError, match=words):
+        optimize_running(*args(model))
+
+
+def test_a_failed_solve_is_the_last_iterate(model):
+    """IPOPT stopping on a failure raised CasADi's assertion; now success is False and
+    the status says why."""
+    g = optimize_running(model, RunningOptions(speed=1e300, n_stance=2, n_flight=2))
+    assert not g.success and g.solver_stats["return_status"] == "Invalid_Number_Detected"
+
+
 def test_options_keep_good_values():
     o = RunningOptions(speed=2, n_stance=6, stance_time_bounds=[0.1, 0.5], torque_rate_max=None)
     assert o.stance_time_bounds == (0.1, 0.5) and o.speed == 2 and o.torque_rate_max is None

@@ -11,6 +11,7 @@ radius, the command line's numbers with the library's.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -106,6 +107,65 @@ def test_gains_are_checked(model, run_gait):
             RunningController(model, run_gait, **kw)
     with pytest.raises(TypeError, match="running gait"):
         RunningController(model, object())
+
+
+def _edited(gait, **fields):
+    return dataclasses.replace(gait, **fields)
+
+
+@pytest.mark.parametrize("edit, error, words", [
+    (lambda g: _edited(g, x_stance=np.where(np.eye(*g.x_stance.shape) > 0, np.nan,
+                                            g.x_stance)), ValueError, "gait.x_stance has non-finite"),
+    (lambda g: _edited(g, u_flight=g.u_flight[:2]), ValueError, "gait.u_flight has shape"),
+    (lambda g: _edited(g, x_flight=g.x_flight[:, :4]), ValueError, "gait.x_flight must be a table"),
+    (lambda g: _edited(g, T_stance="0.3"), ValueError, "gait.T_stance must be a positive"),
+    (lambda g: _edited(g, T_flight=float("inf")), ValueError, "gait.T_flight"),
+])
+def test_controller_refuses_a_gait_no_solve_writes(model, run_gait, edit, error, words):
+    """NaN states built a controller (its runs said 'state not finite'); rows of another
+    robot failed inside CasADi; a duration given as text was converted."""
+    with pytest.raises(error, match=words):
+        RunningController(model, edit(run_gait))
+
+
+@pytest.mark.parametrize("kw, error, words", [
+    (dict(Kp="high"), ValueError, "Kp must be numbers"), (dict(M1="abc"), ValueError, "M1"),
+    (dict(M1=[0, 0, 1e300, 0]), ValueError, "M1: components must lie within"),
+    (dict(torque_limit="a"), ValueError, "torque_limit")])
+def test_controller_arguments_are_named(model, run_gait, kw, error, words):
+    with pytest.raises(error, match=words):
+        RunningController(model, run_gait, **kw)
+
+
+def test_controller_of_another_robot_is_refused(model3, run_gait):
+    with pytest.raises(ValueError, match=r"x_stance has shape .* for three_link"):
+        RunningController(model3, run_gait)
+    with pytest.raises(TypeError, match="model must be a robot model"):
+        RunningController(None, run_gait)
+
+
+def test_cycle_arguments_are_named(cycle):
+    """Each of these ran (a negative slack or time limit, a NaN tolerance, a start of
+    the wrong size broadcast by numpy, a NaN fixed point gave NaN deviations, -1
+    strides an empty 'ok' run) or failed without naming the argument."""
+    c, n = cycle.controller, cycle.n
+    x = np.asarray(cycle.controller.gait.x_stance)[:, 0]
+    for call, error, words in (
+            (lambda: running_cycle(cycle.controller.gait), TypeError, "controller must be"),
+            (lambda: running_cycle(c, mu="a"), ValueError, "mu must be"),
+            (lambda: running_cycle(c, friction_slack=-5.0), ValueError, "friction_slack"),
+            (lambda: running_cycle(c, time_limits=-1.0), ValueError, "time_limits"),
+            (lambda: running_cycle(c, tolerance=float("nan")), ValueError, "tolerance"),
+            (lambda: running_stability(None), TypeError, "cycle must be a running cycle"),
+            (lambda: running_stability(cycle, x0=np.full(n, np.nan)), ValueError, "x0"),
+            (lambda: running_stability(cycle, tol=-1.0), ValueError, "tol"),
+            (lambda: running_stability(cycle, max_iter=2.5), ValueError, "max_iter"),
+            (lambda: simulate_running(cycle, x, x[:3], 2), ValueError, "start must be"),
+            (lambda: simulate_running(cycle, np.full(n, np.nan), x, 2), ValueError, "x_star"),
+            (lambda: simulate_running(cycle, x, x, -1), ValueError, "strides"),
+            (lambda: simulate_running(cycle, x, x, 2.5), ValueError, "strides")):
+        with pytest.raises(error, match=words):
+            call()
 
 
 # ------------------------------------------------------------------ the stride map

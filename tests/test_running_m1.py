@@ -98,10 +98,20 @@ def test_infeasible_points_are_recorded_with_their_reason(m1_cycle):
 @pytest.mark.parametrize("kw, word", [
     (dict(method="bfgs"), "method"), (dict(max_evaluations=0), "max_evaluations"),
     (dict(start=(1.0, 2.0)), "start"), (dict(initial_step=-1.0), "initial_step"),
-    (dict(max_distance=float("nan")), "max_distance")])
+    (dict(max_distance=float("nan")), "max_distance"),
+    # a TypeError of math.isfinite ('must be real number, not str') named nothing
+    (dict(initial_step="a"), "initial_step"), (dict(max_distance=None), "max_distance"),
+    (dict(start="abc"), "start"), (dict(start=(0.0, 0.0, 1e300, 0.0)), "start: components")])
 def test_bad_options_are_refused(m1_cycle, kw, word):
     with pytest.raises(ValueError, match=word):
         choose_running_m1(m1_cycle, **kw)
+
+
+def test_bad_cycle_and_progress_are_refused(m1_cycle):
+    with pytest.raises(TypeError, match="cycle must be a running cycle"):
+        choose_running_m1(None)
+    with pytest.raises(TypeError, match="progress must be a function"):
+        choose_running_m1(m1_cycle, progress=5)
 
 
 def test_command_line_choose_m1(m1_gait_file, m1_cycle, capsys):

@@ -16,6 +16,7 @@ import numpy as np
 
 from analysis.cluster import DASK_CONNECT_TIMEOUT, connect
 from biped_casadi import robot
+from biped_casadi.control.running import check_running_gait
 from biped_casadi.control.output_law import (M1_LIMIT, SECTION, check_M1_range, check_rejoin,
                                              require_regular)
 from biped_casadi.results import json_safe
@@ -112,6 +113,12 @@ def load_running_gait(args):
     try:
         gait = RunningGait.load(args.gait)
     except (ValueError, OSError) as e:
+        kind = gait_file_kind(args.gait)
+        if kind in ("gait", "family"):
+            raise UserError(f"--gait: {_short(args.gait)} is a walking gait"
+                            f"{' family' if kind == 'family' else ''} (from 'biped gait'), "
+                            "not a running step: make one with 'biped running --out FILE'"
+                            ) from None
         raise UserError(f"--gait: {e}") from None
     if args.robot is None:
         try:
@@ -124,6 +131,11 @@ def load_running_gait(args):
     if model.description.name != gait.robot:
         raise UserError(f"--gait: {args.gait} is a step of {gait.robot}, not of "
                         f"{model.description.name}")
+    try:
+        check_running_gait(gait, model, name=None)
+    except ValueError as e:
+        raise UserError(f"--gait: {args.gait}: not a running step of {gait.robot}: {e}") \
+            from None
     return gait, model
 
 
@@ -155,8 +167,15 @@ def load_gait(args, progress: Progress):
     model = load_model(robot_arg) if robot_arg else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", OpenOrbitWarning)
-        gait = Gait.load(args.gait, model=model,
-                         allow_open_orbit=getattr(args, "allow_open_orbit", False))
+        try:
+            gait = Gait.load(args.gait, model=model,
+                             allow_open_orbit=getattr(args, "allow_open_orbit", False))
+        except ValueError:
+            if gait_file_kind(args.gait) == "running":
+                raise UserError(f"--gait: {_short(args.gait)} is a running step (from 'biped "
+                                "running'), not a walking gait: 'biped running --gait' and "
+                                "'biped mujoco-running --gait' take it") from None
+            raise
     for w in caught:
         if issubclass(w.category, OpenOrbitWarning):
             print(f"biped {progress.command}: warning: {w.message}", file=sys.stderr,
@@ -185,6 +204,29 @@ def require_members(family, path, option: str):
         raise UserError(f"{option}: {_short(path)} holds no gait yet (its 'biped gait "
                         f"--speeds' run stopped before the first speed: rerun it to "
                         f"continue)")
+
+
+#: the largest gait file whose kind is looked at (a gait file is tens of kilobytes)
+_KIND_BYTES = 50_000_000
+
+
+def gait_file_kind(path) -> str | None:
+    """'running' (a step of 'biped running'), 'family', 'gait' (a walking gait) or None,
+    from a regular file's JSON, without validating it (for the message of a file given
+    where the other kind is taken)."""
+    if is_family_file(path):
+        return "family"
+    try:
+        if not os.path.isfile(path) or os.path.getsize(path) > _KIND_BYTES:
+            return None
+        body = json.loads(Path(path).read_text())
+    except (OSError, ValueError, RecursionError):
+        return None
+    if not isinstance(body, dict):
+        return None
+    if body.get("kind") == "running gait":
+        return "running"
+    return "gait" if body.get("format") == "biped-casadi-gait" else None
 
 
 def is_family_file(path) -> bool:

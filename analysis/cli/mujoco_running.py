@@ -3,7 +3,6 @@ controller, the landing states against the exact stride map's fixed point, and M
 stride map fitted from a long run."""
 from __future__ import annotations
 
-import math
 import tempfile
 from pathlib import Path
 
@@ -18,22 +17,16 @@ from analysis.stability.running_cycle import running_cycle, running_stability
 
 from .common import Progress, UserError, add_robot, load_running_gait, print_json
 from .mujoco_options import add_mujoco_settings, mujoco_settings, settings_error
-from .running import DEFAULT_M1, add_tracking_arguments, check_tracking_arguments
-
-#: at most this many strides in a run (and in the fitted run)
-MAX_STRIDES = 5000
+from .running import (DEFAULT_M1, MAX_STRIDES, add_tracking_arguments,
+                      check_strides_and_perturb, check_tracking_arguments)
 
 
 def _check(args):
     check_tracking_arguments(args)
-    if not 1 <= args.strides <= MAX_STRIDES:
-        raise UserError(f"--strides must be between 1 and {MAX_STRIDES}, got {args.strides}")
+    check_strides_and_perturb(args.strides, args.perturb)
     if args.fit != 0 and not 30 <= args.fit <= MAX_STRIDES:
         raise UserError(f"--fit must be 0 or between 30 and {MAX_STRIDES} strides, got "
                         f"{args.fit}")
-    if not math.isfinite(args.perturb) or abs(args.perturb) > 100:
-        raise UserError(f"--perturb must be a finite number within +-100 rad/s, got "
-                        f"{args.perturb:g}")
     if not str(args.gait).strip():
         raise UserError("--gait: empty name")
     if args.compiled is not None and not str(args.compiled).strip():

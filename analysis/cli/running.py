@@ -17,8 +17,9 @@ from biped_casadi.control.running import RunningController
 from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
 
-from .common import Progress, UserError, add_robot, load_model, load_running_gait, \
-    output_dir, output_file, print_json
+from .common import Progress, UserError, add_robot, check_m1_values, load_model, \
+    load_running_gait, output_dir, output_file, print_json
+from .simulate import MAX_RATE_ERROR
 
 
 #: the stability analysis's default design: PD gains and the output's column on q1 that
@@ -29,6 +30,9 @@ DEFAULT_M1 = (0.0, 0.95, 0.95, 0.0)
 #: --choose-m1's default bound on a fixed point's distance from the collocated landing
 #: state (largest entry, rad or rad/s): farther is another orbit than the gait's
 MAX_DISTANCE = 1e-2
+
+#: at most this many strides in a run (--steps here, --strides and --fit of mujoco-running)
+MAX_STRIDES = 5000
 
 #: a phase's integration departing from its collocation by more than this (the largest
 #: entry, rad or rad/s) is said on a note line: the grid is coarse for that robot
@@ -54,13 +58,24 @@ def add_tracking_arguments(p):
 
 def check_tracking_arguments(args):
     """UserError (one line) for a gain of :func:`add_tracking_arguments` that is not a
-    finite number >= 0, or a non-finite ``--m1``."""
+    finite number >= 0, or an ``--m1`` that is not finite or beyond the model's numerical
+    validity (as every command's ``--m1``)."""
     for name in ("kp", "kd"):
         v = getattr(args, name)
         if not (math.isfinite(v) and v >= 0):
             raise UserError(f"--{name} must be a finite number >= 0, got {v:g}")
-    if args.m1 is not None and not all(math.isfinite(v) for v in args.m1):
-        raise UserError("--m1 values must be finite")
+    check_m1_values(args.m1)
+
+
+def check_strides_and_perturb(strides, perturb, option: str = "--strides", low: int = 1):
+    """UserError for a stride count outside ``low``..:data:`MAX_STRIDES` (``option``), or
+    a ``--perturb`` of the velocities that is not finite or beyond +-100 rad/s (as
+    ``biped simulate``'s rate errors)."""
+    if not low <= strides <= MAX_STRIDES:
+        raise UserError(f"{option} must be between {low} and {MAX_STRIDES}, got {strides}")
+    if not (math.isfinite(perturb) and abs(perturb) <= MAX_RATE_ERROR):
+        raise UserError(f"--perturb must be a finite number within +-{MAX_RATE_ERROR:g} "
+                        f"rad/s, got {perturb:g}")
 
 
 def register(sub):
@@ -113,9 +128,11 @@ def register(sub):
                          "written); implies --stability")
     add_tracking_arguments(st)
     st.add_argument("--steps", type=int, default=20, metavar="N",
-                    help="strides of the perturbed run (default 20; 0: none)")
+                    help=f"strides of the perturbed run, 0 to {MAX_STRIDES} (default 20; 0: "
+                         "none)")
     st.add_argument("--perturb", type=float, default=1e-2, metavar="DQ",
-                    help="added to every velocity of the fixed point, rad/s (default 0.01)")
+                    help="added to every velocity of the fixed point, rad/s, within +-100 "
+                         "(default 0.01)")
     st.add_argument("--choose-m1", action="store_true",
                     help="choose M1 first: minimise the stride map's spectral radius over "
                          "M1 (Nelder-Mead on the exact radius, about 0.5 s an evaluation) "
@@ -136,10 +153,7 @@ def register(sub):
 def _check_closed_loop(args):
     """The closed-loop options (UserError, one line, before any work)."""
     check_tracking_arguments(args)
-    if args.steps < 0:
-        raise UserError(f"--steps must be >= 0, got {args.steps}")
-    if not math.isfinite(args.perturb):
-        raise UserError(f"--perturb must be a finite number, got {args.perturb:g}")
+    check_strides_and_perturb(args.steps, args.perturb, "--steps", low=0)
     if not args.choose_m1:
         for opt, given in (("--max-evaluations", args.max_evaluations is not None),
                            ("--tune-gains", args.tune_gains),
@@ -224,7 +238,8 @@ def _stability_of_file(args):
         ("--speed", "speed", 1.5), ("--mu", "mu", 0.6), ("--mu-margin", "mu_margin", MU_MARGIN),
         ("--torque-limit", "torque_limit", None),
         ("--intervals", "intervals", (16, 10)), ("--max-iter", "max_iter", None),
-        ("--out", "out", "running.json"), ("--plot", "plot", None))
+        ("--out", "out", "running.json"), ("--plot", "plot", None),
+        ("--no-cache", "no_cache", False))
         if (tuple(getattr(args, dest)) if dest == "intervals" else getattr(args, dest))
         != default]
     if given:

@@ -31,8 +31,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
+from biped_casadi.control.output_law import check_M1_range
 from biped_casadi.results import Result
-from analysis.stability.running_cycle import running_stability
+from analysis.stability.running_cycle import require_running_cycle, running_stability
 
 __all__ = ["choose_running_m1", "RunningM1Choice", "M1Evaluation", "INFEASIBLE",
            "METHODS"]
@@ -177,15 +178,19 @@ def _evaluate(cycle, M1, Kp, Kd, max_distance):
                         float(r.distance), dt), r
 
 
-def _check_options(method, max_evaluations, **positive):
-    """ValueError naming a bad option of :func:`choose_running_m1`."""
+def _check_options(method, max_evaluations, progress, **positive):
+    """ValueError (TypeError for a progress that is not callable) naming a bad option of
+    :func:`choose_running_m1`."""
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be a function of one line of text, got {progress!r}")
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     if isinstance(max_evaluations, bool) or not isinstance(max_evaluations, (int, np.integer)) \
             or max_evaluations < 1:
         raise ValueError(f"max_evaluations must be a positive integer, got {max_evaluations!r}")
     for name, v in positive.items():
-        if not (math.isfinite(v) and v > 0):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(v) and v > 0):
             raise ValueError(f"{name} must be a positive number, got {v!r}")
 
 
@@ -205,8 +210,9 @@ class _Objective:
 
     def unpack(self, z):
         z, nu = np.asarray(z, float), self.nu
-        if self.tune_gains:
-            return z[:nu], float(math.exp(z[nu])), float(math.exp(z[nu + 1]))
+        if self.tune_gains:          # a gain that overflows is refused (infeasible) later
+            with np.errstate(over="ignore"):
+                return z[:nu], float(np.exp(z[nu])), float(np.exp(z[nu + 1]))
         return z[:nu], self.Kp0, self.Kd0
 
     def __call__(self, z):
@@ -294,14 +300,19 @@ def choose_running_m1(cycle, start=None, tune_gains: bool = False,
     ValueError
         A bad option (method, evaluation cap, steps, start of the wrong size).
     """
+    require_running_cycle(cycle)
     method = str(method).lower()
-    _check_options(method, max_evaluations, initial_step=initial_step, gain_step=gain_step,
-                   xatol=xatol, fatol=fatol, max_distance=max_distance)
+    _check_options(method, max_evaluations, progress, initial_step=initial_step,
+                   gain_step=gain_step, xatol=xatol, fatol=fatol, max_distance=max_distance)
     c = cycle.controller
     nu = c.model.nu
-    m0 = np.array(c.M1 if start is None else start, float).ravel()
+    try:
+        m0 = np.array(c.M1 if start is None else start, float).ravel()
+    except (TypeError, ValueError):
+        m0 = np.zeros(0)
     if m0.size != nu or not np.all(np.isfinite(m0)):
         raise ValueError(f"start must be {nu} finite numbers, got {start!r}")
+    check_M1_range(m0, "start")
     if tune_gains and (np.ptp(c.Kp) > 0 or np.ptp(c.Kd) > 0 or c.Kp[0] <= 0 or c.Kd[0] <= 0):
         raise ValueError("tune_gains needs one positive Kp and Kd for every output, got "
                          f"Kp {c.Kp.tolist()}, Kd {c.Kd.tolist()}")

@@ -51,7 +51,11 @@ from biped_casadi.results import Result
 from .hybrid_cycle import Domain, HybridCycle, HybridCycleError
 
 __all__ = ["running_cycle", "RunningCycle", "running_stability", "RunningStability",
-           "finite_difference_jacobian", "simulate_running", "RunningRun", "StrideRecord"]
+           "finite_difference_jacobian", "simulate_running", "RunningRun", "StrideRecord",
+           "require_running_cycle"]
+
+#: RK4 steps per collocation interval at most (more only costs time)
+MAX_STEPS_PER_INTERVAL = 1000
 
 
 def _phase_constraints(c: RunningController, u, extra, names):
@@ -63,6 +67,46 @@ def _phase_constraints(c: RunningController, u, extra, names):
     nu = c.model.nu
     return cons, names + tuple(f"torque u{i + 1} <= {lim:g} N m" for i in range(nu)) \
         + tuple(f"torque u{i + 1} >= -{lim:g} N m" for i in range(nu))
+
+
+def _real(name, v, low=0.0, strict=True, top=None) -> float:
+    """``v`` as a float if it is a finite number above ``low`` (at least, unless
+    ``strict``) and at most ``top``, else a ValueError naming ``name``."""
+    ok = not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating)) \
+        and np.isfinite(v) and (v > low if strict else v >= low) and (top is None or v <= top)
+    if not ok:
+        raise ValueError(f"{name} must be a finite number {'>' if strict else '>='} {low:g}"
+                         + (f" and <= {top:g}" if top is not None else "") + f", got {v!r}")
+    return float(v)
+
+
+def _count(name, v, low=0, top=None) -> int:
+    """``v`` if it is an integer from ``low`` to ``top``, else a ValueError naming it."""
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low \
+            or (top is not None and v > top):
+        raise ValueError(f"{name} must be an integer from {low}" + (
+            f" to {top}" if top is not None else " up") + f", got {v!r}")
+    return int(v)
+
+
+def require_running_cycle(cycle, name: str = "cycle"):
+    """TypeError unless ``cycle`` is the stride map of :func:`running_cycle`."""
+    if not (isinstance(cycle, HybridCycle) and isinstance(getattr(cycle, "controller", None),
+                                                          RunningController)):
+        raise TypeError(f"{name} must be a running cycle (running_cycle(controller)), got "
+                        f"{type(cycle).__name__}")
+
+
+def _state(name, v, n: int) -> np.ndarray:
+    """``v`` as (n,) finite floats, else a ValueError naming ``name``."""
+    try:
+        x = np.asarray(v, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {n} numbers, got {v!r}") from None
+    if x.size != n or not np.all(np.isfinite(x)):
+        raise ValueError(f"{name} must be {n} finite numbers (the landing state q, dq), got "
+                         f"{x.size} number(s)" + ("" if x.size != n else " not all finite"))
+    return x
 
 
 def _start(n: int, gains) -> ca.Function:
@@ -147,18 +191,19 @@ def running_cycle(controller: RunningController, mu: float | None = None,
         Stance then flight; its state is the stance state (q, dq) at landing.
     """
     c = controller
+    if not isinstance(c, RunningController):
+        raise TypeError(f"controller must be a RunningController, got {type(c).__name__}")
     m, fl, g = c.model, c.fl, c.gait
     nq, ne, nu = m.nq, fl.ne, m.nu
     if mu is None:
         mu = float(getattr(getattr(g, "options", None), "mu", 0.6))
-    if not (np.isfinite(mu) and mu > 0):
-        raise ValueError(f"mu must be a positive number, got {mu!r}")
-    if isinstance(steps_per_interval, bool) or not isinstance(steps_per_interval, int) \
-            or steps_per_interval < 1:
-        raise ValueError(f"steps_per_interval must be a positive integer, "
-                         f"got {steps_per_interval!r}")
+    mu = _real("mu", mu)
+    _count("steps_per_interval", steps_per_interval, 1, MAX_STEPS_PER_INTERVAL)
+    _real("time_limits", time_limits, 1.0)
+    _real("tolerance", tolerance, strict=False)
     weight = m.description.total_mass * m.description.gravity
-    slack = 0.01 * weight if friction_slack is None else float(friction_slack)
+    slack = 0.01 * weight if friction_slack is None else _real("friction_slack",
+                                                              friction_slack, strict=False)
     t, k = ca.SX.sym("t"), ca.SX.sym("k", 3 * nu)
 
     # ---- stance
@@ -278,9 +323,12 @@ def running_stability(cycle: HybridCycle, x0=None, tol: float = 1e-11,
         status 'failed' (NaN figures) when a stride leaves the robot's validity or
         Newton does not reach ``100 tol``.
     """
+    require_running_cycle(cycle)
+    _real("tol", tol)
+    _count("max_iter", max_iter)
     xc = np.asarray(cycle.controller.gait.x_stance, float)[:, 0]
-    x0 = xc if x0 is None else np.asarray(x0, float).ravel()
     n = cycle.n
+    x0 = xc if x0 is None else _state("x0", x0, n)
     nan = np.full(n, np.nan)
     try:
         start = cycle.stride(x0)
@@ -454,8 +502,9 @@ def simulate_running(cycle: HybridCycle, x_star, start, strides: int = 20) -> Ru
         otherwise, with the stride and the reason (the domain, the constraint, the time)
         in the message.
     """
-    xs = np.asarray(x_star, float).ravel()
-    x = np.asarray(start, float).ravel()
+    require_running_cycle(cycle)
+    xs, x = _state("x_star", x_star, cycle.n), _state("start", start, cycle.n)
+    _count("strides", strides)
     devs = [float(np.max(np.abs(x - xs)))]
     recs = []
     status, msg = "ok", ""

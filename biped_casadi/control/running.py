@@ -51,8 +51,10 @@ import casadi as ca
 import numpy as np
 
 from ..model import flight_model
+from .output_law import check_M1_range
 
-__all__ = ["PhaseReference", "RunningController", "LAWS", "phase_derivatives"]
+__all__ = ["PhaseReference", "RunningController", "LAWS", "phase_derivatives",
+           "check_running_gait"]
 
 #: the tracking laws (module docstring)
 LAWS = ("pd", "computed_torque")
@@ -187,8 +189,62 @@ class PhaseReference:
         return tuple(np.array(v) for v in out)
 
 
+def _number_array(name, value) -> np.ndarray:
+    """``value`` as floats, or a ValueError naming ``name`` (text, ragged lists)."""
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numbers, got {value!r}") from None
+
+
+def check_running_gait(gait, model=None, name: str | None = "gait"):
+    """Refuse a running gait no solve produces: durations that are not positive finite
+    numbers, states or torques that are not finite or of inconsistent shapes (and, with
+    ``model``, not of that robot's size).
+
+    Parameters
+    ----------
+    gait : RunningGait
+        Or any object with its fields (module docstring).
+    model : BipedModel, optional
+        The robot it must fit.
+    name : str or None
+        How the gait is named in the message (None: the fields alone, as in a file).
+
+    Raises
+    ------
+    ValueError
+        One line naming the field.
+    """
+    def label(f):
+        return f"'{f}'" if name is None else f"{name}.{f}"
+    for f in ("T_stance", "T_flight"):
+        v = getattr(gait, f)
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
+                or not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{label(f)} must be a positive number of seconds, got {v!r}")
+    a = {f: _number_array(label(f), getattr(gait, f)) for f in _FIELDS[2:]}
+    for f, v in a.items():
+        if v.ndim != 2 or v.shape[0] < 1 or v.shape[1] < 3 or v.shape[1] % 2 != 1:
+            raise ValueError(f"{label(f)} must be a table of 2 n + 1 columns (n >= 1), got "
+                             f"shape {v.shape}")
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"{label(f)} has non-finite entries (NaN or inf)")
+    ns, cs = a["x_stance"].shape
+    if model is None and ns % 2:
+        raise ValueError(f"{label('x_stance')} must have 2 nq rows (q, dq), got {ns}")
+    nq, nu = (model.nq, model.nu) if model is not None else (ns // 2, a["u_stance"].shape[0])
+    cf = a["x_flight"].shape[1]
+    want = dict(x_stance=(2 * nq, cs), u_stance=(nu, cs), x_flight=(2 * nq + 4, cf),
+                u_flight=(nu, cf))
+    robot = f" for {model.description.name} (nq = {nq})" if model is not None else ""
+    for f, shape in want.items():
+        if a[f].shape != shape:
+            raise ValueError(f"{label(f)} has shape {a[f].shape}, {shape} expected{robot}")
+
+
 def _gain(name, value, nu) -> np.ndarray:
-    v = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+    v = np.atleast_1d(_number_array(name, value)).ravel()
     if v.size == 1:
         v = np.repeat(v, nu)
     if v.size != nu or not np.all(np.isfinite(v)) or np.any(v < 0):
@@ -242,9 +298,14 @@ class RunningController:
                             f"missing): gait_opt.running.optimize_running or RunningGait.load")
         if law not in LAWS:
             raise ValueError(f"law must be one of {', '.join(LAWS)}, got {law!r}")
+        if not all(hasattr(model, a) for a in ("nq", "nu", "description", "forward_dynamics")):
+            raise TypeError(f"model must be a robot model (biped_casadi.robot), got "
+                            f"{type(model).__name__}")
+        check_running_gait(gait, model)
         nq = model.nq
         self.model, self.gait, self.law = model, gait, law
-        lim = float(model.description.torque_limit if torque_limit is None else torque_limit)
+        lim = float(_number_array("torque_limit", model.description.torque_limit
+                                  if torque_limit is None else torque_limit))
         if not (math.isfinite(lim) and lim > 0):
             raise ValueError(f"torque_limit must be a positive number, got {torque_limit!r}")
         self.torque_limit, self.saturate = lim, bool(saturate)
@@ -264,9 +325,10 @@ class RunningController:
         """Check and keep the gains; the two laws at them."""
         nq, nu = self.model.nq, self.model.nu
         self.Kp, self.Kd = _gain("Kp", Kp, nu), _gain("Kd", Kd, nu)
-        m1 = np.zeros(nu) if M1 is None else np.asarray(M1, float).ravel()
+        m1 = np.zeros(nu) if M1 is None else _number_array("M1", M1).ravel()
         if m1.size != nu or not np.all(np.isfinite(m1)):
             raise ValueError(f"M1 must be {nu} finite numbers, got {M1!r}")
+        check_M1_range(m1, "M1")
         self.M1 = m1
         self.M = np.hstack([m1[:, None], np.eye(nu)])
         self.gains = np.r_[self.Kp, self.Kd, self.M1]

@@ -167,8 +167,9 @@ class RunningLoop:
         self.torque_limit = torque_limit_of(model.description,
                                             c.torque_limit if torque_limit is None
                                             else torque_limit)
+        text = mjcf(model, settings, self.torque_limit)        # our checks: as they are
         try:
-            self.m = mujoco.MjModel.from_xml_string(mjcf(model, settings, self.torque_limit))
+            self.m = mujoco.MjModel.from_xml_string(text)
         except ValueError as e:
             raise ValueError(f"settings: MuJoCo rejects the model: {str(e).splitlines()[0]}") \
                 from None
