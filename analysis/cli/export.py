@@ -55,11 +55,33 @@ def _check_arguments(args):
     if args.motor_side and args.angles != "urdf":
         raise UserError("--motor-side divides the URDF joints' torques by their reductions: "
                         "it needs --angles urdf")
-    if not 1 <= args.states <= 1_000_000:
-        raise UserError(f"--states must be between 1 and 1000000, got {args.states}")
     _check_perturbation(args)
     if args.perturb is None and args.perturb_q is None and args.perturb_dq is None:
         args.perturb = list(PAPER_PERTURBATION)
+    return check_target(args)
+
+
+def check_target(args):
+    """``--out`` (a folder that can be written, or an earlier export to replace) and
+    ``--states``; the C compiler of ``--verify`` (None without).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``out``, ``states`` and ``verify``.
+
+    Returns
+    -------
+    list of str or None
+        The compiler's command.
+
+    Raises
+    ------
+    UserError
+        A bad ``--out`` or ``--states``, or ``--verify`` without a compiler.
+    """
+    if not 1 <= args.states <= 1_000_000:
+        raise UserError(f"--states must be between 1 and 1000000, got {args.states}")
     output_dir(args.out, "--out")
     try:
         check_destination(args.out)

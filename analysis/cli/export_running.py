@@ -4,19 +4,18 @@ Python law (``--verify``: random states of both phases, and a MuJoCo run)."""
 from __future__ import annotations
 
 import hashlib
-import os
 from pathlib import Path
 
-from biped_casadi.control.compiled import CompilerError, find_c_compiler
-from biped_casadi.control.export_folder import check_destination, staged_export
+from biped_casadi.control.compiled import CompilerError
+from biped_casadi.control.export_folder import staged_export
 from biped_casadi.control.export_running import (RUNNING_HEADER, RUNNING_LIBRARY,
                                                  exported_running_law, running_c_sources)
 from biped_casadi.control.running import RunningController
 from analysis.verify_running_export import STRIDE_TOL, verify_running_export
 from analysis.verify_export import TORQUE_RTOL
 
-from .common import Progress, UserError, add_robot, load_running_gait, output_dir, print_json
-from .export import keep_verified
+from .common import Progress, UserError, add_robot, load_running_gait, print_json
+from .export import check_target, keep_verified
 from .running import DEFAULT_M1, add_tracking_arguments, check_tracking_arguments
 
 #: random states per phase --verify compares by default
@@ -33,24 +32,9 @@ def _check(args):
     check_tracking_arguments(args)
     if not str(args.gait).strip():
         raise UserError("--gait: empty name")
-    if not 1 <= args.states <= 1_000_000:
-        raise UserError(f"--states must be between 1 and 1000000, got {args.states}")
     if not 0 <= args.strides <= 5000:
         raise UserError(f"--strides must be between 0 and 5000, got {args.strides}")
-    output_dir(args.out, "--out")
-    try:
-        check_destination(args.out)
-    except ValueError as e:
-        raise UserError(f"--{e}") from None
-    if not args.verify:
-        return None
-    cc = find_c_compiler()
-    if cc is None:
-        env = os.environ.get("CC", "").strip()
-        why = (f"CC={env} is not a program found on PATH" if env
-               else "neither gcc nor cc is installed, and CC is not set")
-        raise UserError(f"--verify: no C compiler ({why}); nothing written")
-    return cc
+    return check_target(args)
 
 
 def running_controller(args, gait, model) -> RunningController:

@@ -90,7 +90,20 @@ def _count(name, v, low=0, top=None) -> int:
 
 
 def require_running_cycle(cycle, name: str = "cycle"):
-    """TypeError unless ``cycle`` is the stride map of :func:`running_cycle`."""
+    """Refuse anything but the stride map of :func:`running_cycle`.
+
+    Parameters
+    ----------
+    cycle : object
+        What was given.
+    name : str
+        The argument's name in the message.
+
+    Raises
+    ------
+    TypeError
+        Naming ``name`` and the type given.
+    """
     if not (isinstance(cycle, HybridCycle) and isinstance(getattr(cycle, "controller", None),
                                                           RunningController)):
         raise TypeError(f"{name} must be a running cycle (running_cycle(controller)), got "

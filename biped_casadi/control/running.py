@@ -198,9 +198,10 @@ def _number_array(name, value) -> np.ndarray:
 
 
 def check_running_gait(gait, model=None, name: str | None = "gait"):
-    """Refuse a running gait no solve produces: durations that are not positive finite
-    numbers, states or torques that are not finite or of inconsistent shapes (and, with
-    ``model``, not of that robot's size).
+    """Refuse a running gait that no solve produces.
+
+    Durations that are not positive finite numbers, states or torques that are not finite
+    or of inconsistent shapes (and, with ``model``, not of that robot's size).
 
     Parameters
     ----------

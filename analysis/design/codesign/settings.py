@@ -256,10 +256,9 @@ class MoveSettings:
                                                          nonnegative=True))
 
     def for_model(self, model) -> "MoveSettings":
-        """These settings with ``clearance_margin`` and ``torque_margin`` filled in for
-        the robot.
+        """These settings with the robot's margins filled in.
 
-        Each when none is given: :data:`CLEARANCE_MARGIN` scaled with its leg length
+        ``clearance_margin`` and ``torque_margin``, each when none is given: :data:`CLEARANCE_MARGIN` scaled with its leg length
         (RABBIT exactly 0.002 m), :data:`MOVE_TORQUE_MARGIN` with its torque limit
         (:func:`~analysis.design.codesign.scales.physical_scales`; RABBIT exactly 0.5 N m).
 
