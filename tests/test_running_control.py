@@ -338,26 +338,21 @@ def test_the_how_to_example_runs(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_the_margin_lets_a_perturbed_run_land_at_2_m_s(model):
-    """At 2 m/s the gait without a friction margin lands with its impulse on the cone's
-    edge: the perturbed run (0.01 rad/s on every velocity, the how-to's design) stops at
-    its first landing on the impulse's cone.  With the default margin it runs every
-    stride, each landing impulse inside the ground's cone (mu, not mu - mu_margin)."""
-    import dataclasses
+    """At 2 m/s, with the default friction margin, the perturbed run (0.01 rad/s on every
+    velocity, the how-to's design) lands in every stride with its impulse inside the
+    ground's cone (mu, not mu - mu_margin) and converges.  (Without the margin the
+    impulse sits on the cone's edge: ``test_running.py``'s margin test; the run then
+    stops at its first landing: the how-to's measurement.)"""
     from gait_opt.running import RunningOptions, optimize_running
     o = RunningOptions(speed=2.0)
-    runs = {}
-    for margin in (0.0, o.mu_margin):
-        g = optimize_running(model, dataclasses.replace(o, mu_margin=margin), cache=True)
-        assert g.success
-        cyc = running_cycle(RunningController(model, g, KP, KD, M1=STABLE_M1))
-        r = running_stability(cyc)
-        assert r.status == "stable"
-        x = r.fixed_point.copy()
-        x[model.nq:] += 1e-2
-        runs[margin] = simulate_running(cyc, r.fixed_point, x, 12)
-    off, on = runs[0.0], runs[o.mu_margin]
-    assert off.status == "stopped" and off.message.startswith("stride 1:")
-    assert "landing impulse in the cone" in off.message
-    assert on.status == "ok" and len(on.strides) == 12, on.message
+    g = optimize_running(model, o, cache=True)
+    assert g.success
+    cyc = running_cycle(RunningController(model, g, KP, KD, M1=STABLE_M1))
+    r = running_stability(cyc)
+    assert r.status == "stable"
+    x = r.fixed_point.copy()
+    x[model.nq:] += 1e-2
+    on = simulate_running(cyc, r.fixed_point, x, 8)
+    assert on.status == "ok" and len(on.strides) == 8, on.message
     assert max(s.landing_impulse_ratio for s in on.strides) < o.mu
     assert on.deviations[-1] < on.deviations[1]
