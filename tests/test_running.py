@@ -1,8 +1,8 @@
 """A periodic running gait of RABBIT (gait_opt.running) and its measured checks
 (gait_opt.running_checks).
 
-The gait is solved once per session on a small grid (fast) and once on the default
-grid (slow); every check is computed outside the NLP: the ground force from the exact
+The gait is solved once per session on a small grid (fast) and read on the default
+grid (the session's shared step, cached on disk); every check is computed outside the NLP: the ground force from the exact
 dynamics on a dense grid of the Hermite-Simpson interpolant, the phases integrated by
 scipy under the gait's torques, the step map through the exact takeoff and landing
 Functions, the centre of mass and the angular momentum in flight.  A constraint
@@ -39,10 +39,11 @@ def small(model):
 
 
 @pytest.fixture(scope="session")
-def default(model):
-    """The default grid (16 + 10 intervals)."""
-    g = optimize_running(model, RunningOptions(speed=SPEED))
-    return g, check_running(model, g)
+def default(model, running_gait):
+    """The default grid (16 + 10 intervals): the session's shared 1.5 m/s step."""
+    o, d = running_gait.options, RunningOptions(speed=SPEED)
+    assert (o.speed, o.n_stance, o.n_flight) == (d.speed, d.n_stance, d.n_flight)
+    return running_gait, check_running(model, running_gait)
 
 
 def _physical(model, g, r, integration_tol):
