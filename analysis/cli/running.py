@@ -241,8 +241,9 @@ def failure(speed: float, stats: dict) -> str:
     most, :mod:`gait_opt.running_solve`)."""
     n = stats.get("iterations")
     if stats.get("return_status") == "Stalled":
-        how = (f"its constraint violation made no progress over {stats['stall_window']} "
-               f"iterations (stopped after {n}; --max-iter K searches on up to K)")
+        how = (f"stalled: its constraint violation did not halve over "
+               f"{stats['stall_window']} iterations, stopped after {n}; --max-iter K "
+               "searches on up to K iterations")
     else:
         how = f"IPOPT: {stats.get('return_status')} after {n} iterations"
     said = []
