@@ -3,8 +3,8 @@ on the constraint violation that ends a search no longer approaching feasibility
 when a solve fails, the constraints its last iterate violates most.
 
 Why a watch.  A speed the robot cannot run at (RABBIT beyond about 3 m/s under its
-150 N m limit, docs: howto/running.md) left IPOPT searching its 3000 iterations (about
-4 to 8 minutes) before the one line "did not converge".  The converging solves of the
+150 N m limit, docs: howto/running.md) left IPOPT searching its 3000 iterations (at
+4 m/s 142 to 207 s on two shared cores) before the one line "did not converge".  The converging solves of the
 default grid take 22 to 77 iterations (RABBIT, 0.8 to 3 m/s); the watch reads the
 largest constraint violation at every iterate and stops the search (IPOPT's
 'User_Requested_Stop', reported as a stall) when, over the last ``window`` iterations,
@@ -25,8 +25,8 @@ import numpy as np
 
 from .running_file import solve_or_last_iterate
 
-__all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "STALL_FACTOR", "FEASIBLE",
-           "STALL_WINDOW"]
+__all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "STALL_FACTOR",
+           "FEASIBLE", "STALL_WINDOW"]
 
 #: the default window, iterations (``RunningOptions.stall_window``)
 STALL_WINDOW = 100
