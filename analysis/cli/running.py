@@ -15,8 +15,8 @@ from analysis.reporting.plots import running_plot, save_figures
 from analysis.stability.running_cycle import running_cycle, running_stability, simulate_running
 from biped_casadi.control.running import RunningController
 from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
-from gait_opt.running_solve import STALL_WINDOW
 from gait_opt.running_checks import check_running
+from gait_opt.running_solve import STALL_WINDOW
 
 from .common import Progress, UserError, add_robot, check_m1_values, load_model, \
     load_running_gait, output_dir, output_file, print_json
@@ -106,9 +106,9 @@ def register(sub):
                    help="Hermite-Simpson intervals of each phase, 2 to 200 (default 16 10)")
     p.add_argument("--max-iter", type=int, default=None, metavar="K",
                    help="IPOPT iteration limit (default 3000); giving it also turns off the "
-                        f"stop of a search whose constraint violation made no progress over "
-                        f"{STALL_WINDOW} iterations (an unreachable speed fails in about 30 s "
-                        "without it): the long search")
+                        "stop of a search whose constraint violation did not halve over "
+                        f"{STALL_WINDOW} iterations (with it an unreachable speed fails in "
+                        "about 30 s): the long search")
     p.add_argument("--no-cache", action="store_true",
                    help="solve again even when a step of the same robot, options and code "
                         "is kept in the cache ($BIPED_CACHE_DIR or ~/.cache/biped-casadi)")
@@ -236,9 +236,22 @@ def cmd_running(args):
 
 
 def failure(speed: float, stats: dict) -> str:
-    """The one line of a running step that did not converge: how the search ended and
-    what its last iterate says (the torques at their limit, the constraints violated
-    most, :mod:`gait_opt.running_solve`)."""
+    """The one line of a running step that did not converge.
+
+    How the search ended and what its last iterate says: the torques at their limit and
+    the constraints violated most (:mod:`gait_opt.running_solve`).
+
+    Parameters
+    ----------
+    speed : float
+        The speed asked, m/s.
+    stats : dict
+        The step's ``solver_stats``.
+
+    Returns
+    -------
+    str
+    """
     n = stats.get("iterations")
     if stats.get("return_status") == "Stalled":
         how = (f"stalled: its constraint violation did not halve over "
