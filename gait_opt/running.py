@@ -36,7 +36,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,7 +47,8 @@ from biped_casadi.model import flight_model
 
 from .options import leg_scale
 from .running_cache import cached_running
-from .running_file import check_running_file, running_problem, solve_or_last_iterate
+from .running_file import check_running_file, running_problem
+from .running_solve import STALL_WINDOW, solve_running
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
            "hermite_simpson", "CLEARANCE", "TRAILING_CLEARANCE", "MIN_STEP_LENGTH",
@@ -123,6 +123,9 @@ class RunningOptions:
         to 0.10 N) and makes the solve two to three times slower.
     ipopt : dict
         Extra IPOPT options.
+    stall_window : int or None
+        End a search whose constraint violation made no progress over this many
+        iterations (:func:`gait_opt.running_solve.stalled`); None: IPOPT alone.
     """
 
     speed: float = 1.5
@@ -145,6 +148,7 @@ class RunningOptions:
     takeoff_cone_rate: bool = True
     cone_quarter_points: bool = False
     ipopt: dict = field(default_factory=dict)
+    stall_window: int | None = STALL_WINDOW
 
     def __post_init__(self):
         def number(name, value, low=0.0, strict=True, none=False):
@@ -186,6 +190,10 @@ class RunningOptions:
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"RunningOptions.{name} must be True or False, "
                                  f"got {getattr(self, name)!r}")
+        w = self.stall_window
+        if w is not None and (isinstance(w, bool) or not isinstance(w, int) or w < 1):
+            raise ValueError(f"RunningOptions.stall_window must be an integer >= 1 or None, "
+                             f"got {w!r}")
         if not isinstance(self.ipopt, dict):
             raise ValueError(f"RunningOptions.ipopt must be a dict, got {self.ipopt!r}")
 
@@ -679,16 +687,7 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
     for var, key in ((Ts, "T_stance"), (Tf, "T_flight"), (Xs, "x_stance"), (Us, "u_stance"),
                      (Xf, "x_flight"), (Uf, "u_flight")):
         opti.set_initial(var, guess[key])
-    ipopt = {"print_level": 5 if verbose else 0, "max_iter": 3000, "tol": 1e-8,
-             "mu_strategy": "adaptive", "sb": "yes"}
-    ipopt.update(opts.ipopt)
-    opti.solver("ipopt", {"expand": True, "print_time": False, "error_on_fail": False,
-                          "show_eval_warnings": False}, ipopt)
-    t0 = time.perf_counter()
-    st, val = solve_or_last_iterate(opti)        # the last iterate when IPOPT failed
-    wall = time.perf_counter() - t0
-    stats = {"success": bool(st.get("success")), "return_status": st.get("return_status"),
-             "iterations": int(st.get("iter_count", -1)), "wall_s": wall}
+    val, stats = solve_running(opti, opts, verbose, model)  # last iterate if it failed
     return RunningGait(robot=model.description.name, options=opts,
                        T_stance=float(val(Ts)), T_flight=float(val(Tf)),
                        x_stance=np.array(val(Xs)), u_stance=np.array(val(Us)).reshape(nu, -1),

@@ -244,7 +244,7 @@ def test_the_how_to_example_runs(tmp_path, monkeypatch):
     ("stance_time_bounds", (0.1,)), ("torque_rate_max", -1.0), ("ipopt", "max_iter=3"),
     ("trailing_clearance", -0.01), ("takeoff_cone_rate", 1), ("cone_quarter_points", None),
     ("mu_margin", -0.01), ("mu_margin", float("nan")), ("mu_margin", 0.6), ("mu_margin", "0.05"),
-    ("mu_margin", None)])
+    ("mu_margin", None), ("stall_window", 0), ("stall_window", True), ("stall_window", 2.5)])
 def test_options_refuse_bad_values(field, value):
     with pytest.raises(ValueError, match=f"RunningOptions.{field}"):
         RunningOptions(**{field: value})

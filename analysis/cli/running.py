@@ -16,6 +16,7 @@ from analysis.stability.running_cycle import running_cycle, running_stability, s
 from biped_casadi.control.running import RunningController
 from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
+from gait_opt.running_solve import STALL_WINDOW
 
 from .common import Progress, UserError, add_robot, check_m1_values, load_model, \
     load_running_gait, output_dir, output_file, print_json
@@ -104,7 +105,10 @@ def register(sub):
                    metavar=("STANCE", "FLIGHT"),
                    help="Hermite-Simpson intervals of each phase, 2 to 200 (default 16 10)")
     p.add_argument("--max-iter", type=int, default=None, metavar="K",
-                   help="IPOPT iteration limit (default 3000)")
+                   help="IPOPT iteration limit (default 3000); giving it also turns off the "
+                        "stop of a search whose constraint violation did not halve over "
+                        f"{STALL_WINDOW} iterations (with it an unreachable speed fails in "
+                        "about 30 s): the long search")
     p.add_argument("--no-cache", action="store_true",
                    help="solve again even when a step of the same robot, options and code "
                         "is kept in the cache ($BIPED_CACHE_DIR or ~/.cache/biped-casadi)")
@@ -186,7 +190,8 @@ def cmd_running(args):
         opts = RunningOptions(speed=args.speed, mu=args.mu, mu_margin=args.mu_margin,
                               torque_limit=args.torque_limit,
                               n_stance=args.intervals[0], n_flight=args.intervals[1],
-                              ipopt={} if args.max_iter is None else {"max_iter": args.max_iter})
+                              ipopt={} if args.max_iter is None else {"max_iter": args.max_iter},
+                              stall_window=STALL_WINDOW if args.max_iter is None else None)
     except ValueError as e:
         raise UserError(str(e).replace("RunningOptions.n_stance", "--intervals STANCE")
                         .replace("RunningOptions.n_flight", "--intervals FLIGHT")
@@ -202,9 +207,7 @@ def cmd_running(args):
     gait = optimize_running(model, opts, cache=not args.no_cache, progress=say)
     reused = gait.solver_stats.get("cache") == "hit"
     if not gait.success:
-        raise UserError(f"the running step did not converge at {args.speed:g} m/s (IPOPT: "
-                        f"{gait.solver_stats.get('return_status')} after "
-                        f"{gait.solver_stats.get('iterations')} iterations); nothing written")
+        raise UserError(failure(args.speed, gait.solver_stats))
     say("checking it outside the NLP (about 2 s) ...")
     report = check_running(model, gait).as_dict()
     s = dict(robot=model.params.name, speed=gait.speed, T_stance=gait.T_stance,
@@ -230,6 +233,42 @@ def cmd_running(args):
     if args.stability:
         _print_stability(s["stability"])
     return 0
+
+
+def failure(speed: float, stats: dict) -> str:
+    """The one line of a running step that did not converge.
+
+    How the search ended and what its last iterate says: the torques at their limit and
+    the constraints violated most (:mod:`gait_opt.running_solve`).
+
+    Parameters
+    ----------
+    speed : float
+        The speed asked, m/s.
+    stats : dict
+        The step's ``solver_stats``.
+
+    Returns
+    -------
+    str
+    """
+    n = stats.get("iterations")
+    if stats.get("return_status") == "Stalled":
+        how = (f"stalled: its constraint violation did not halve over "
+               f"{stats['stall_window']} iterations, stopped after {n}; --max-iter K "
+               "searches on up to K iterations")
+    else:
+        how = f"IPOPT: {stats.get('return_status')} after {n} iterations"
+    said = []
+    limit = stats.get("torque_at_limit") or []
+    if limit:
+        said.append(f"torques at their {limit[0]['limit']:g} N m limit (" + ", ".join(
+            f"{d['joint']} at {d['count']} points" for d in limit) + ")")
+    for d in stats.get("violated") or []:
+        said.append(f"{d['name']} violated by {d['violation']:.2g}"
+                    + (f" {d['unit']}" if d["unit"] else ""))
+    last = f"; at the last iterate: {'; '.join(said)}" if said else ""
+    return f"the running step did not converge at {speed:g} m/s ({how}){last}; nothing written"
 
 
 def _stability_of_file(args):
