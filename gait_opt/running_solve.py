@@ -142,7 +142,7 @@ def solve_running(opti, opts, verbose, model):
     if not stats["success"]:
         g, rows = np.array(val(opti.g)).ravel(), _sources(opti)
         stats["violated"] = violated(opti, g, rows)
-        names = model._joint_names()
+        names = model.joint_names
         joints = [names[int(np.argmax(np.abs(np.asarray(model.B)[:, j])))]
                   for j in range(model.nu)]
         stats["torque_at_limit"] = torque_at_limit(opti, g, rows, joints)
