@@ -440,3 +440,21 @@ def test_command_line_saturates(gait_file, saturated, cycle, monkeypatch, capsys
     assert main(["running", "--gait", gait_file, "--steps", "1", "--json"]) == 0
     sim = json.loads(capsys.readouterr().out)["stability"]["simulation"]
     assert asked == [True, False] and not sim["saturate"] and sim["saturated_time"] == [0.0]
+
+
+def test_saturate_closes_the_loop_of_an_optimised_step(run_gait, tmp_path, monkeypatch,
+                                                       capsys):
+    """``biped running --saturate`` without ``--stability`` still runs the closed loop
+    (as ``--choose-m1`` and ``--gait``): the solve and the loop are replaced here by the
+    session's step and a record of the call."""
+    import analysis.cli.running as cli
+    from analysis.cli import main
+    calls = []
+    monkeypatch.setattr(cli, "optimize_running", lambda *a, **k: run_gait)
+    monkeypatch.setattr(cli, "closed_loop", lambda model, gait, args: calls.append(
+        args.saturate) or {"law": "pd", "Kp": KP, "Kd": KD, "M1": list(STABLE_M1),
+                           "status": "failed", "message": "recorded"})
+    out = str(tmp_path / "run.json")
+    assert main(["running", "--saturate", "--out", out, "--json"]) == 0
+    assert calls == [True] and json.loads(capsys.readouterr().out)["stability"]["message"] \
+        == "recorded"

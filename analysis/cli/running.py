@@ -136,7 +136,8 @@ def register(sub):
     st.add_argument("--saturate", action="store_true",
                     help="clip the law's torques at the robot's limit (the motors give their "
                          "maximum) instead of stopping the run where the law asks for more; "
-                         "the report gives each stride's time saturated")
+                         "the report gives each stride's time saturated; implies "
+                         "--stability")
     st.add_argument("--choose-m1", action="store_true",
                     help="choose M1 first: minimise the stride map's spectral radius over "
                          "M1 (Nelder-Mead on the exact radius, about 0.5 s an evaluation) "
@@ -175,7 +176,7 @@ def _check_closed_loop(args):
 
 
 def cmd_running(args):
-    if args.gait is not None or args.choose_m1:
+    if args.gait is not None or args.choose_m1 or args.saturate:
         args.stability = True
     _check_closed_loop(args)
     if args.gait is not None:
