@@ -356,3 +356,105 @@ def test_the_margin_lets_a_perturbed_run_land_at_2_m_s(model):
     assert on.status == "ok" and len(on.strides) == 8, on.message
     assert max(s.landing_impulse_ratio for s in on.strides) < o.mu
     assert on.deviations[-1] < on.deviations[1]
+
+
+# ------------------------------------------------------------------ saturation
+SAT_LIMIT = 100.0      # below the 1.5 m/s orbit's peak (106 N m): its torques saturate
+
+
+@pytest.fixture(scope="module")
+def saturated(model, run_gait):
+    """The how-to's design with the torques clipped at SAT_LIMIT (one build, about 6 s)."""
+    c = RunningController(model, run_gait, KP, KD, M1=STABLE_M1, saturate=True,
+                          torque_limit=SAT_LIMIT)
+    cyc = running_cycle(c)
+    return cyc, running_stability(cyc)
+
+
+def test_time_above_interpolates_the_crossings():
+    from analysis.stability.running_cycle import _time_above
+    t = np.array([0.0, 1.0, 2.0, 4.0])
+    assert _time_above(t, [-1.0, 1.0, 3.0, -1.0]) == pytest.approx(0.5 + 1.0 + 1.5)
+    assert _time_above(t, [-1.0, -2.0, 0.0, -1.0]) == 0.0
+    assert _time_above(t[:2], [2.0, 2.0]) == 1.0
+
+
+def test_a_saturated_run_goes_on_at_the_limit_and_says_how_long(model, saturated, cycle,
+                                                                 stable):
+    cyc, r = saturated
+    assert r.status == "stable"
+    x = r.fixed_point.copy()
+    x[model.nq:] += 1e-2
+    run = simulate_running(cyc, r.fixed_point, x, 4)
+    assert run.status == "ok", run.message
+    c = cyc.controller
+    for s in run.strides:
+        assert s.torque_max > SAT_LIMIT and s.saturated_time > 0
+    # the time lies between the node intervals saturated at both ends and at either end
+    low = high = 0.0
+    for p, law in zip(cyc.stride(r.fixed_point, record=True).passes,
+                      (c.stance_law, c.flight_law)):
+        n = p.nodes.shape[0] // 2
+        u = np.array(law.map(p.times.size)(p.nodes[:n], p.nodes[n:], p.times[None, :]))
+        over = np.abs(u).max(axis=0) > SAT_LIMIT
+        dt = np.diff(p.times)
+        low += dt[over[:-1] & over[1:]].sum()
+        high += dt[over[:-1] | over[1:]].sum()
+    sat = simulate_running(cyc, r.fixed_point, r.fixed_point, 1).strides[0].saturated_time
+    assert 0 < low <= sat <= high
+    # at the robot's limit the 1.5 m/s run never asks for more: no time saturated
+    x = stable.fixed_point.copy()
+    x[model.nq:] += 1e-2
+    assert all(s.saturated_time == 0 for s in simulate_running(cycle, stable.fixed_point, x,
+                                                                2).strides)
+
+
+def test_command_line_saturates(gait_file, saturated, cycle, monkeypatch, capsys):
+    """``--saturate`` builds the cycle of a saturating controller and reports each
+    stride's time saturated (the build is replaced by the fixture's: its limit is lower
+    than the robot's, so that the 1.5 m/s orbit saturates)."""
+    import analysis.cli.running as cli
+    from analysis.cli import main
+    asked = []
+
+    def build(c):
+        asked.append(c.saturate)
+        return saturated[0] if c.saturate else cycle
+    monkeypatch.setattr(cli, "running_cycle", build)
+    assert main(["running", "--gait", gait_file, "--steps", "3", "--saturate", "--json"]) == 0
+    sim = json.loads(capsys.readouterr().out)["stability"]["simulation"]
+    cyc, r = saturated
+    x = r.fixed_point.copy()
+    x[cyc.controller.model.nq:] += 1e-2
+    lib = simulate_running(cyc, r.fixed_point, x, 3)
+    assert sim["saturate"] and sim["torque_limit"] == SAT_LIMIT and sim["status"] == "ok"
+    assert sim["saturated_time"] == [s.saturated_time for s in lib.strides]
+    assert min(sim["saturated_time"]) > 0
+    assert sim["margins"]["saturated_time"] == pytest.approx(sum(sim["saturated_time"]))
+    cli._print_stability({"law": "pd", "Kp": KP, "Kd": KD, "M1": list(STABLE_M1),
+                          "status": "stable", "stable": True, "fixed_point_residual": 0.0,
+                          "fixed_point_distance": 0.0, "spectral_radius": 0.5,
+                          "eigenvalue_moduli": [0.5], "simulation": sim})
+    out = capsys.readouterr().out
+    assert "clipped at 100 N m in 3 of 3 strides" in out and "|u| asked <=" in out
+    assert main(["running", "--gait", gait_file, "--steps", "1", "--json"]) == 0
+    sim = json.loads(capsys.readouterr().out)["stability"]["simulation"]
+    assert asked == [True, False] and not sim["saturate"] and sim["saturated_time"] == [0.0]
+
+
+def test_saturate_closes_the_loop_of_an_optimised_step(run_gait, tmp_path, monkeypatch,
+                                                       capsys):
+    """``biped running --saturate`` without ``--stability`` still runs the closed loop
+    (as ``--choose-m1`` and ``--gait``): the solve and the loop are replaced here by the
+    session's step and a record of the call."""
+    import analysis.cli.running as cli
+    from analysis.cli import main
+    calls = []
+    monkeypatch.setattr(cli, "optimize_running", lambda *a, **k: run_gait)
+    monkeypatch.setattr(cli, "closed_loop", lambda model, gait, args: calls.append(
+        args.saturate) or {"law": "pd", "Kp": KP, "Kd": KD, "M1": list(STABLE_M1),
+                           "status": "failed", "message": "recorded"})
+    out = str(tmp_path / "run.json")
+    assert main(["running", "--saturate", "--out", out, "--json"]) == 0
+    assert calls == [True] and json.loads(capsys.readouterr().out)["stability"]["message"] \
+        == "recorded"

@@ -137,6 +137,11 @@ def register(sub):
     st.add_argument("--perturb", type=float, default=1e-2, metavar="DQ",
                     help="added to every velocity of the fixed point, rad/s, within +-100 "
                          "(default 0.01)")
+    st.add_argument("--saturate", action="store_true",
+                    help="clip the law's torques at the robot's limit (the motors give their "
+                         "maximum) instead of stopping the run where the law asks for more; "
+                         "the report gives each stride's time saturated; implies "
+                         "--stability")
     st.add_argument("--choose-m1", action="store_true",
                     help="choose M1 first: minimise the stride map's spectral radius over "
                          "M1 (Nelder-Mead on the exact radius, about 0.5 s an evaluation) "
@@ -175,7 +180,7 @@ def _check_closed_loop(args):
 
 
 def cmd_running(args):
-    if args.gait is not None or args.choose_m1:
+    if args.gait is not None or args.choose_m1 or args.saturate:
         args.stability = True
     _check_closed_loop(args)
     if args.gait is not None:
@@ -311,8 +316,10 @@ def closed_loop(model, gait, args) -> dict:
     if len(M1) != model.nu:
         raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
                         f"got {len(M1)}")
-    c = RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law)
+    c = RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law,
+                          saturate=args.saturate)
     cyc = running_cycle(c)
+    c = cyc.controller
     choice = None
     if getattr(args, "choose_m1", False):
         say = Progress("running", quiet=args.json)
@@ -357,6 +364,7 @@ def closed_loop(model, gait, args) -> dict:
                        friction_ratio_max=max(s.friction_ratio_max for s in st),
                        friction_excess_max=max(s.friction_excess_max for s in st),
                        torque_max=max(s.torque_max for s in st),
+                       saturated_time=sum(s.saturated_time for s in st),
                        swing_foot_min=min(s.swing_min for s in st),
                        landing_impulse_ratio_max=max(s.landing_impulse_ratio for s in st))
     out["simulation"] = dict(steps=args.steps, perturb=args.perturb, status=run.status,
@@ -364,7 +372,9 @@ def closed_loop(model, gait, args) -> dict:
                              deviations=d.tolist(), contraction=run.contraction.tolist(),
                              mean_contraction=rate, mu=cyc.mu,
                              friction_slack=cyc.friction_slack,
-                             torque_limit=c.torque_limit, margins=margins)
+                             torque_limit=c.torque_limit, saturate=c.saturate,
+                             saturated_time=[s.saturated_time for s in run.strides],
+                             torque_max=[s.torque_max for s in run.strides], margins=margins)
     return out
 
 
@@ -407,7 +417,14 @@ def _print_stability(s: dict):
     if mg:
         print(f"  margins              Fz >= {mg['fz_min']:.3g} N before takeoff; |Fx| - mu Fz "
               f"<= {mg['friction_excess_max']:.3g} N (slack {sim['friction_slack']:.3g}); "
-              f"|u| <= {mg['torque_max']:.1f} N m (limit {sim['torque_limit']:g})")
+              f"|u| {'asked ' if sim.get('saturate') else ''}<= {mg['torque_max']:.1f} N m "
+              f"(limit {sim['torque_limit']:g})")
+    if sim.get("saturate"):
+        n = sum(1 for v in sim["saturated_time"] if v > 0)
+        print(f"  saturation           torques clipped at {sim['torque_limit']:g} N m in {n} of "
+              f"{len(sim['saturated_time'])} strides, {1e3 * mg.get('saturated_time', 0.0):.1f}"
+              " ms in all; per stride (ms) "
+              + " ".join(f"{1e3 * v:.1f}" for v in sim["saturated_time"]))
 
 
 def _print(s: dict, gait, limit: float):

@@ -412,6 +412,11 @@ class StrideRecord:
         Largest ``|Fx|`` - mu Fz at the stance nodes and the crossing, N (<= 0: in the cone).
     torque_max : float
         Largest ``|u|`` the law asked for in both phases, N m.
+    saturated_time : float
+        How long the law asked for more than the torque limit in some joint, s (both
+        phases; between RK4 nodes the excess is interpolated linearly).  Without
+        saturation such a stride stops, so a completed one has 0; with it the motors gave
+        their limit for that long.
     swing_min : float
         Lowest swing-foot height in stance, m.
     other_foot_min : float
@@ -427,6 +432,7 @@ class StrideRecord:
     friction_ratio_max: float
     friction_excess_max: float
     torque_max: float
+    saturated_time: float
     swing_min: float
     other_foot_min: float
     landing_impulse_ratio: float
@@ -464,6 +470,17 @@ class RunningRun(Result):
     SUCCESS = ("ok",)
 
 
+def _time_above(t, e) -> float:
+    """How long the piecewise linear interpolant of ``e`` over the times ``t`` is > 0."""
+    t, e = np.asarray(t, float), np.asarray(e, float)
+    a, b, dt = e[:-1], e[1:], np.diff(t)
+    both = (a > 0) & (b > 0)
+    one = (a > 0) != (b > 0)
+    pos = np.where(a > 0, a, b)
+    frac = np.divide(pos, np.abs(b - a), out=np.zeros_like(pos), where=one)
+    return float(np.sum(dt[both]) + np.sum(dt[one] * frac[one]))
+
+
 def _margins(cycle: HybridCycle, passes) -> dict:
     """The constraints' margins along a recorded stride."""
     c = cycle.controller
@@ -488,6 +505,8 @@ def _margins(cycle: HybridCycle, passes) -> dict:
                 friction_ratio_max=float(np.max(np.abs(Fx[loaded]) / Fz[loaded], initial=0.0)),
                 friction_excess_max=float(np.max(np.abs(Fx) - cycle.mu * Fz)),
                 torque_max=float(max(np.abs(us).max(), np.abs(uf).max())),
+                saturated_time=sum(_time_above(tt, np.abs(uu).max(axis=0) - c.torque_limit)
+                                   for tt, uu in ((ts, us), (tf, uf))),
                 swing_min=float(zsw.min()), other_foot_min=float(feet[1, 0::2].min()),
                 landing_impulse_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else float("inf"))
 

@@ -1,0 +1,106 @@
+"""RABBIT's running closed loop at 2.0 and 2.5 m/s with the torques clipped at the limit
+(docs/howto/running.md, "Across speeds", the bullet on ``--saturate``).
+
+Per case (the gait optimised at a torque bound, a design M1 and gains, clipping on or
+off): the stride map's spectral radius, and 20 strides from the fixed point with
+0.01 rad/s on every velocity: the status and the reason it stopped, the deviations, the
+mean contraction per stride after the first, the largest torque the law asked for and
+the time saturated in each completed stride.
+
+Run: ``python benchmarks/running_saturation.py [--strides N] [--no-save]``; writes
+``benchmarks/results/running_saturation.json``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _results import Run  # noqa: E402
+
+from biped_casadi import rabbit  # noqa: E402
+from biped_casadi.control.running import RunningController  # noqa: E402
+from gait_opt.running import RunningOptions, optimize_running  # noqa: E402
+from analysis.stability.running_cycle import (running_cycle, running_stability,  # noqa: E402
+                                              simulate_running)
+
+HAND = (0.0, 0.95, 0.95, 0.0)
+# the M1 choose_running_m1 gave (benchmarks/results/running_m1.json; the how-to)
+CHOSEN_20 = (-0.5315165122596279, 1.434598561891546, 1.0326676704468913, 0.09340438714204541)
+CHOSEN_25 = (-1.8546200457197717, 1.322012671072324, 2.562564925658691, 0.8382205038714805)
+CHOSEN_25_140 = (-1.828, 1.939, 2.066, 0.087)
+# (speed, gait's torque bound or None for the robot's, saturate, Kp, Kd, [(label, M1)])
+CASES = [
+    (2.0, None, False, 400.0, 30.0, [("hand-picked", HAND), ("chosen", CHOSEN_20)]),
+    (2.0, None, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen", CHOSEN_20)]),
+    (2.5, 145.0, False, 400.0, 30.0, [("hand-picked", HAND), ("chosen", CHOSEN_25)]),
+    (2.5, 145.0, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen", CHOSEN_25)]),
+    (2.5, 145.0, True, 400.0, 60.0, [("hand-picked", HAND), ("chosen", CHOSEN_25)]),
+    (2.5, 145.0, True, 1000.0, 100.0, [("hand-picked", HAND), ("chosen", CHOSEN_25)]),
+    (2.5, 140.0, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen at 140", CHOSEN_25_140)]),
+    (2.5, None, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen", CHOSEN_25)]),
+]
+
+
+def one(cyc, M1, nq, strides):
+    """The radius at M1 and the perturbed run."""
+    c = cyc.retuned(M1=M1)
+    r = running_stability(c)
+    out = dict(M1=list(M1), status=r.status, spectral_radius=r.spectral_radius)
+    if r.status == "failed":
+        return out
+    x = r.fixed_point.copy()
+    x[nq:] += 1e-2
+    run = simulate_running(c, r.fixed_point, x, strides)
+    d = run.deviations
+    n = d.size - 1
+    st = run.strides
+    out.update(run_status=run.status, message=run.message, strides=len(st),
+               deviations=d.tolist(),
+               mean_contraction=float((d[-1] / d[1]) ** (1 / (n - 1))) if n >= 2 else None,
+               torque_asked=[s.torque_max for s in st],
+               saturated_time=[s.saturated_time for s in st],
+               other_foot_min=[s.other_foot_min for s in st])
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--strides", type=int, default=20)
+    ap.add_argument("--no-save", action="store_true")
+    a = ap.parse_args()
+    m = rabbit()
+    gaits = {}
+    with Run("running_saturation", "the running closed loop at 2.0 and 2.5 m/s with the "
+             "torques clipped at the limit", save=not a.no_save) as run:
+        rows = []
+        for v, lim, sat, kp, kd, designs in CASES:
+            if (v, lim) not in gaits:
+                g = optimize_running(m, RunningOptions(speed=v, torque_limit=lim), cache=True)
+                gaits[v, lim] = g
+                run.row(f"{v:g} m/s, gait at {lim or 'the robot limit'}: cost", g.cost,
+                        unit="N^2 m s")
+            g = gaits[v, lim]
+            t0 = time.perf_counter()
+            cyc = running_cycle(RunningController(m, g, kp, kd, M1=HAND, saturate=sat))
+            for label, M1 in designs:
+                r = dict(speed=v, gait_torque_limit=lim, saturate=sat, Kp=kp, Kd=kd,
+                         design=label, **one(cyc, M1, m.nq, a.strides))
+                rows.append(r)
+                what = (f"{v:g} m/s, gait {lim or 150:g} N m, {label}, Kp {kp:g}, Kd {kd:g}"
+                        f"{', clipped' if sat else ''}")
+                run.row(f"{what}: spectral radius", r["spectral_radius"], unit="")
+                run.row(f"{what}: strides run", r.get("strides"), unit="")
+                print(what, r["status"], r.get("message"), flush=True)
+            print(f"  {time.perf_counter() - t0:.1f} s", flush=True)
+        run.data["rows"] = rows
+        run.note(f"0.01 rad/s on every velocity, {a.strides} strides; torque_asked is the "
+                 "law's, before clipping")
+
+
+if __name__ == "__main__":
+    main()
