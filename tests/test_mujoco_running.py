@@ -177,6 +177,23 @@ def test_bad_run_arguments(loop_fine, run_gait15):
         loop_fine.run(np.zeros(3), 1)
 
 
+def test_a_saturating_law_is_clipped_in_the_loop(model, run_gait15, loop_fine):
+    """With saturate=True the loop's Python law gives the torques clipped at the limit,
+    as the controller's C export does (so the two runs' records compare); without it,
+    the law as it is."""
+    sat = RunningController(model, run_gait15, KP, KD, M1=STABLE_M1, saturate=True,
+                            torque_limit=60.0)
+    loop = RunningLoop(sat, FINE)
+    for phase, n in (("stance", 5), ("flight", 7)):
+        X = np.asarray(getattr(run_gait15, f"x_{phase}"), float)
+        q, dq = X[:n, 3] + 0.3, X[n:, 3] + 3.0
+        u = getattr(loop_fine, f"_{phase}_law")(q, dq, 0.1)[0].ravel()
+        if phase == "stance":
+            assert np.max(np.abs(u)) > 60.0
+        clipped = getattr(loop, f"_{phase}_law")(q, dq, 0.1)[0].ravel()
+        assert np.array_equal(clipped, np.clip(u, -60.0, 60.0))
+
+
 @pytest.fixture(scope="session")
 def gait_file(run_gait15, tmp_path_factory):
     return str(run_gait15.save(tmp_path_factory.mktemp("runmj") / "run15.json"))
