@@ -142,7 +142,9 @@ class RunningLoop:
     compiled : CompiledRunningLaw, optional
         The controller's law from its C export
         (:class:`~biped_casadi.control.compiled_running.CompiledRunningLaw`), called
-        instead of its CasADi Functions (default None: the Functions).
+        instead of its CasADi Functions (default None: the Functions).  Either way a
+        saturating controller's torques are clipped at its limit before the loop sees
+        them (``stop_on_saturation`` then never stops the run).
 
     Raises
     ------
