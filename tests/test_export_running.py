@@ -228,7 +228,8 @@ def test_cli_saturate_reaches_the_export_and_the_verification(model, running_gai
                                                               capsys, monkeypatch):
     """--saturate: the written controller clips at the robot's limit, and --verify
     compares the C law with a Python law that clips the same (no compiler needed: the
-    verification is intercepted)."""
+    verification is intercepted); mujoco-running --compiled takes that export only with
+    --saturate."""
     g = running_gait.save(tmp_path / "running.json")
     for extra in ([], ["--saturate"]):
         out = tmp_path / f"export{len(extra)}"
@@ -251,3 +252,8 @@ def test_cli_saturate_reaches_the_export_and_the_verification(model, running_gai
                                              tmp_path / "v", "--verify", *extra)
     assert [(c["saturate"], s) for c, s in seen] == [(False, False), (True, True)]
     assert not (tmp_path / "v").exists()
+    M = ["mujoco-running", "--gait", g, "--strides", 1]
+    assert "the export's saturate is True, this run's False" in _bad(
+        capsys, *M, "--compiled", tmp_path / "export1")
+    rc, o = run(capsys, *M, "--saturate", "--json")
+    assert rc == 0 and json.loads(o.out)["controller"]["saturate"] is True, o.err
