@@ -3,7 +3,7 @@ RABBIT's 1.5 m/s step (solved once per session, from the on-disk cache after the
 time) under PD Kp 400, Kd 30, the stable design M1 = (0, 0.95, 0.95, 0) of
 docs/howto/running.md against plain tracking M1 = 0.
 
-The deviations are measured from the collocated landing state (1.6e-4 from the exact
+The deviations are measured from the collocated landing state (1.1e-4 from the exact
 fixed point: far below MuJoCo's stride-to-stride jitter of tenths of a rad/s, so the
 exact map is not built here).  Runs at dt 1 ms unless said.
 """
