@@ -13,17 +13,18 @@ import subprocess
 import numpy as np
 import pytest
 
+from analysis.cli import export_running as export_running_cli
 from analysis.cli import main as biped_main
 from analysis.verify_export import TORQUE_RTOL, time_example
 from analysis.verify_running_export import (STRIDE_TOL, compare_running_mujoco,
                                             compare_running_states)
-from biped_casadi.control.compiled import find_c_compiler
+from biped_casadi.control.compiled import CompilerError, find_c_compiler
 from biped_casadi.control.compiled_running import CompiledRunningLaw, check_running_export
 from biped_casadi.control.export import c_sources, exported_law
 from biped_casadi.control.export_folder import check_destination, write_export
 from biped_casadi.control.export_running import (RUNNING_GENERATED, RUNNING_HEADER,
-                                                 RUNNING_WRAPPER, exported_running_law,
-                                                 running_c_sources)
+                                                 RUNNING_INFO, RUNNING_WRAPPER,
+                                                 exported_running_law, running_c_sources)
 from biped_casadi.control.running import RunningController
 from biped_casadi import VirtualConstraintController
 
@@ -221,3 +222,38 @@ def test_cli_bad_inputs(running_gait, pd, tmp_path, capsys, monkeypatch):
     assert "not a running export" in _bad(capsys, *M, "--compiled", tmp_path / "notes")
     (tmp_path / "notes" / "controller.json").write_text('{"kind": "running"}\n')
     assert "another robot" in _bad(capsys, *M, "--compiled", tmp_path / "notes")
+
+
+def test_cli_saturate_reaches_the_export_and_the_verification(model, running_gait, tmp_path,
+                                                              capsys, monkeypatch):
+    """--saturate: the written controller clips at the robot's limit, and --verify
+    compares the C law with a Python law that clips the same (no compiler needed: the
+    verification is intercepted); mujoco-running --compiled takes that export only with
+    --saturate."""
+    g = running_gait.save(tmp_path / "running.json")
+    for extra in ([], ["--saturate"]):
+        out = tmp_path / f"export{len(extra)}"
+        rc, o = run(capsys, "export-running", "--gait", g, "--out", out, *extra)
+        info = json.loads((out / RUNNING_INFO).read_text())["controller"]
+        assert rc == 0 and info["saturate"] is bool(extra), o.err
+        assert ("torques clipped at" in o.out) is bool(extra)
+    assert info["torque_limit"] == float(np.asarray(model.description.torque_limit))
+    seen = []
+
+    def fake_verify(folder, ctrl, *args):
+        seen.append((json.loads((folder / RUNNING_INFO).read_text())["controller"],
+                     ctrl.saturate))
+        raise CompilerError("stopped by the test")
+
+    monkeypatch.setattr(export_running_cli, "check_target", lambda args: ["cc"])
+    monkeypatch.setattr(export_running_cli, "verify_running_export", fake_verify)
+    for extra in ([], ["--saturate"]):
+        assert "stopped by the test" in _bad(capsys, "export-running", "--gait", g, "--out",
+                                             tmp_path / "v", "--verify", *extra)
+    assert [(c["saturate"], s) for c, s in seen] == [(False, False), (True, True)]
+    assert not (tmp_path / "v").exists()
+    M = ["mujoco-running", "--gait", g, "--strides", 1]
+    assert "the export's saturate is True, this run's False" in _bad(
+        capsys, *M, "--compiled", tmp_path / "export1")
+    rc, o = run(capsys, *M, "--saturate", "--json")
+    assert rc == 0 and json.loads(o.out)["controller"]["saturate"] is True, o.err

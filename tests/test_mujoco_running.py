@@ -3,7 +3,7 @@ RABBIT's 1.5 m/s step (solved once per session, from the on-disk cache after the
 time) under PD Kp 400, Kd 30, the stable design M1 = (0, 0.95, 0.95, 0) of
 docs/howto/running.md against plain tracking M1 = 0.
 
-The deviations are measured from the collocated landing state (1.6e-4 from the exact
+The deviations are measured from the collocated landing state (1.1e-4 from the exact
 fixed point: far below MuJoCo's stride-to-stride jitter of tenths of a rad/s, so the
 exact map is not built here).  Runs at dt 1 ms unless said.
 """
@@ -175,6 +175,23 @@ def test_bad_run_arguments(loop_fine, run_gait15):
         loop_fine.run(None, 0)
     with pytest.raises(ValueError, match="start"):
         loop_fine.run(np.zeros(3), 1)
+
+
+def test_a_saturating_law_is_clipped_in_the_loop(model, run_gait15, loop_fine):
+    """With saturate=True the loop's Python law gives the torques clipped at the limit,
+    as the controller's C export does (so the two runs' records compare); without it,
+    the law as it is."""
+    sat = RunningController(model, run_gait15, KP, KD, M1=STABLE_M1, saturate=True,
+                            torque_limit=60.0)
+    loop = RunningLoop(sat, FINE)
+    for phase, n in (("stance", 5), ("flight", 7)):
+        X = np.asarray(getattr(run_gait15, f"x_{phase}"), float)
+        q, dq = X[:n, 3] + 0.3, X[n:, 3] + 3.0
+        u = getattr(loop_fine, f"_{phase}_law")(q, dq, 0.1)[0].ravel()
+        if phase == "stance":
+            assert np.max(np.abs(u)) > 60.0
+        clipped = getattr(loop, f"_{phase}_law")(q, dq, 0.1)[0].ravel()
+        assert np.array_equal(clipped, np.clip(u, -60.0, 60.0))
 
 
 @pytest.fixture(scope="session")

@@ -15,6 +15,7 @@ import json
 import numpy as np
 import pytest
 
+from analysis.cli.running import MAX_EVALUATIONS
 from analysis.design.running_m1 import INFEASIBLE, choose_running_m1
 from analysis.stability.running_cycle import (finite_difference_jacobian, running_stability,
                                               simulate_running)
@@ -137,6 +138,8 @@ def test_command_line_choose_m1(m1_gait_file, m1_cycle, capsys):
 @pytest.mark.parametrize("args, words", [
     (["--max-evaluations", "5"], "--choose-m1"), (["--tune-gains"], "--choose-m1"),
     (["--choose-m1", "--max-evaluations", "0"], "--max-evaluations"),
+    (["--choose-m1", "--max-evaluations", "100000"], "--max-evaluations must be between 1 "
+                                                     f"and {MAX_EVALUATIONS}, got 100000"),
     (["--choose-m1", "--tune-gains", "--kd", "0"], "--tune-gains"),
     (["--max-distance", "0.1"], "--choose-m1"),
     (["--choose-m1", "--max-distance", "-1"], "--max-distance must be a positive"),

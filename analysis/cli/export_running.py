@@ -38,12 +38,14 @@ def _check(args):
 
 
 def running_controller(args, gait, model) -> RunningController:
-    """The controller of the tracking arguments (``--kp``, ``--kd``, ``--m1``, ``--law``)."""
+    """The controller of the tracking arguments (``--kp``, ``--kd``, ``--m1``, ``--law``)
+    and ``--saturate``."""
     M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
     if len(M1) != model.nu:
         raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
                         f"got {len(M1)}")
-    return RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law)
+    return RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law,
+                             saturate=args.saturate)
 
 
 def cmd_export_running(args):
@@ -84,8 +86,9 @@ def _report(args, r):
     c = r["controller"]
     if r["status"] != "different":
         print(f"wrote {r['out']}: " + ", ".join(r["files"]))
-    print(f"  running controller ({c['law']}), Kp {c['Kp']}, Kd {c['Kd']}, M1 {c['M1']}; "
-          f"robot {r['robot']} (nq {r['nq']}, nu {r['nu']}, flight nqe {r['nqe']})")
+    clip = f", torques clipped at {c['torque_limit']:g} N m" if c["saturate"] else ""
+    print(f"  running controller ({c['law']}), Kp {c['Kp']}, Kd {c['Kd']}, M1 {c['M1']}"
+          f"{clip}; robot {r['robot']} (nq {r['nq']}, nu {r['nu']}, flight nqe {r['nqe']})")
     print(f"  gait {r['gait_file']}, sha256 {r['gait_sha256']}")
     print(f"  build: gcc -O2 -shared -fPIC -o {RUNNING_LIBRARY} {r['out']}/*.c -lm")
     v = r.get("verification")
@@ -133,6 +136,10 @@ def register(sub):
                    help="a running step saved by 'biped running --out FILE'")
     add_robot(p)
     add_tracking_arguments(p)
+    p.add_argument("--saturate", action="store_true",
+                   help="clip the law's torques at the robot's limit, as 'biped running "
+                        "--saturate' does (the clipping is part of the C code; --verify "
+                        "compares it with the Python law clipped the same way)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="the folder to write (new, empty, or an earlier export, replaced)")
     p.add_argument("--verify", action="store_true",

@@ -58,7 +58,8 @@ def cmd_mujoco_running(args):
     if len(M1) != model.nu:
         raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
                         f"got {len(M1)}")
-    c = RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law)
+    c = RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law,
+                          saturate=args.saturate)
     compiled = _compiled(args, c)
     exact = None
     x_star = A = None
@@ -146,6 +147,11 @@ def register(sub):
                    help="a running step saved by 'biped running --out FILE'")
     add_robot(p)
     add_tracking_arguments(p)
+    p.add_argument("--saturate", action="store_true",
+                   help="the law clips its torques at the robot's limit, as 'biped running "
+                        "--saturate' (MuJoCo's motors clip them anyway: the strides' peak "
+                        "torque is then at most the limit); the design of an export made "
+                        "with 'biped export-running --saturate'")
     p.add_argument("--strides", type=int, default=30, metavar="N",
                    help=f"strides to run, 1 to {MAX_STRIDES} (30)")
     p.add_argument("--perturb", type=float, default=0.0, metavar="DQ",

@@ -35,6 +35,10 @@ MAX_DISTANCE = 1e-2
 #: at most this many strides in a run (--steps here, --strides and --fit of mujoco-running)
 MAX_STRIDES = 5000
 
+#: --choose-m1 solves at most this many fixed points (--max-evaluations; about 0.5 s
+#: each at RABBIT's 1.5 m/s step, some 17 minutes; the default is 150)
+MAX_EVALUATIONS = 2000
+
 #: a phase's integration departing from its collocation by more than this (the largest
 #: entry, rad or rad/s) is said on a note line: the grid is coarse for that robot
 COARSE = 1e-3
@@ -148,7 +152,8 @@ def register(sub):
                          "from --m1 (the start; default the design above), then analyse "
                          "the chosen M1; implies --stability")
     st.add_argument("--max-evaluations", type=int, default=None, metavar="N",
-                    help="with --choose-m1: fixed points solved at most (default 150)")
+                    help="with --choose-m1: fixed points solved at most, 1 to "
+                         f"{MAX_EVALUATIONS} (default 150)")
     st.add_argument("--tune-gains", action="store_true",
                     help="with --choose-m1: search Kp and Kd too (log scale, from --kp, --kd)")
     st.add_argument("--max-distance", type=float, default=None, metavar="D",
@@ -169,8 +174,9 @@ def _check_closed_loop(args):
                            ("--max-distance", args.max_distance is not None)):
             if given:
                 raise UserError(f"{opt} is an option of --choose-m1 (add --choose-m1)")
-    elif args.max_evaluations is not None and args.max_evaluations < 1:
-        raise UserError(f"--max-evaluations must be >= 1, got {args.max_evaluations}")
+    elif args.max_evaluations is not None and not 1 <= args.max_evaluations <= MAX_EVALUATIONS:
+        raise UserError(f"--max-evaluations must be between 1 and {MAX_EVALUATIONS}, got "
+                        f"{args.max_evaluations}")
     if args.max_distance is not None and not (math.isfinite(args.max_distance)
                                               and args.max_distance > 0):
         raise UserError(f"--max-distance must be a positive number, got {args.max_distance:g}")

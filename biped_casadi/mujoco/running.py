@@ -54,6 +54,7 @@ from __future__ import annotations
 import math
 import time
 
+import casadi as ca
 import numpy as np
 
 from ..control.running import RunningController
@@ -78,6 +79,29 @@ _HALF_PI = math.pi / 2
 def _mujoco():
     import mujoco
     return mujoco
+
+
+def _applied_law(c: RunningController, phase: str) -> FastCall:
+    """The controller's law of a phase as the robot receives it: clipped at its limit when
+    it saturates, as its C export's torques are.
+
+    Parameters
+    ----------
+    c : RunningController
+        The controller.
+    phase : {'stance', 'flight'}
+        The phase.
+
+    Returns
+    -------
+    FastCall
+        ``u(q, dq, t)`` as a list holding the (nu, 1) torques.
+    """
+    law = getattr(c, f"{phase}_law")
+    if not c.saturate:
+        return FastCall(law)
+    q, dq, t = (ca.SX.sym(name, law.size1_in(i)) for i, name in enumerate(("q", "dq", "t")))
+    return FastCall(ca.Function(f"{phase}_applied", [q, dq, t], [c.applied(law(q, dq, t))]))
 
 
 class RunningLoop:
@@ -118,7 +142,9 @@ class RunningLoop:
     compiled : CompiledRunningLaw, optional
         The controller's law from its C export
         (:class:`~biped_casadi.control.compiled_running.CompiledRunningLaw`), called
-        instead of its CasADi Functions (default None: the Functions).
+        instead of its CasADi Functions (default None: the Functions).  Either way a
+        saturating controller's torques are clipped at its limit before the loop sees
+        them (``stop_on_saturation`` then never stops the run).
 
     Raises
     ------
@@ -179,8 +205,8 @@ class RunningLoop:
                           for leg in "ab")
         self.fl = flight_model(model)
         self.compiled = compiled
-        self._stance_law = FastCall(c.stance_law) if compiled is None else compiled.stance
-        self._flight_law = FastCall(c.flight_law) if compiled is None else compiled.flight
+        self._stance_law = _applied_law(c, "stance") if compiled is None else compiled.stance
+        self._flight_law = _applied_law(c, "flight") if compiled is None else compiled.flight
         self._landing = FastCall(self.fl.landing_swing)
         self._guard = FastCall(self.fl.takeoff_guard)
         self.T_stance, self.T_flight = float(g.T_stance), float(g.T_flight)
