@@ -384,8 +384,10 @@ def test_one_m1_for_all_speeds_fails_the_ramp_below_its_stable_range(study_famil
 
 @pytest.mark.slow
 def test_the_ramp_walks_with_an_m1_schedule_of_gait_fixed_codesigns(study_family):
+    """Three co-designs (the how-to's schedule has seven; three walk too and cost 50 s
+    instead of 120 s)."""
     from analysis.design.codesign import QUICK, codesign
-    pts = (0.45, 0.5, 0.6, 0.75, 0.9, 1.0, 1.05)
+    pts = (0.45, 0.75, 1.05)
     res = [codesign(study_family.gait(v), QUICK, workers=1) for v in pts]
     s = M1Schedule(pts, tuple(tuple(r.design.M1) for r in res),
                    tuple(r.design.rejoin for r in res))
