@@ -26,7 +26,7 @@ __all__ = ["rk4_step", "quintic_hermite_interval", "as_vector", "as_number", "as
            "as_numbers",
            "jit_options",
            "compiled", "cached_library", "compiler_reason", "FastCall", "NotCompiledWarning",
-           "note_not_compiled"]
+           "note_not_compiled", "iteration_stop"]
 
 
 def jit_options(optimisation: str = "-O2") -> dict:
@@ -515,3 +515,52 @@ def as_numbers(x, name: str) -> np.ndarray:
             isinstance(v, (int, float, np.number)) and not isinstance(v, bool) for v in a.flat)):
         raise ValueError(f"{name} must be a number or an array of numbers, got {x!r:.60}")
     return np.asarray(a, dtype=float)
+
+
+def iteration_stop(name: str, nx: int, ng: int, stop):
+    """An IPOPT iteration callback that ends the search when ``stop`` says so.
+
+    For CasADi's ``iteration_callback`` option.  CasADi keeps only a weak reference to it: the caller keeps the object alive for the
+    solve.
+
+    Parameters
+    ----------
+    name : str
+        The callback Function's name.
+    nx, ng : int
+        The NLP's variables and constraints.
+    stop : callable
+        ``stop(g)`` with the constraint values of an iterate (a NumPy vector): True to
+        end the search (IPOPT's 'User_Requested_Stop').
+
+    Returns
+    -------
+    casadi.Callback
+    """
+    import casadi as ca
+
+    class _Stop(ca.Callback):
+        def __init__(self):
+            ca.Callback.__init__(self)
+            self.construct(name, {})
+
+        def get_n_in(self):
+            return ca.nlpsol_n_out()
+
+        def get_n_out(self):
+            return 1
+
+        def get_name_in(self, i):
+            return ca.nlpsol_out(i)
+
+        def get_name_out(self, i):
+            return "stop"
+
+        def get_sparsity_in(self, i):
+            n = {"f": 1, "x": nx, "lam_x": nx, "g": ng, "lam_g": ng}.get(ca.nlpsol_out(i))
+            return ca.Sparsity(0, 0) if n is None else ca.Sparsity.dense(n)
+
+        def eval(self, arg):
+            return [1 if stop(np.array(arg[2]).ravel()) else 0]
+
+    return _Stop()

@@ -23,6 +23,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from biped_casadi.numerics import iteration_stop
+
 from .running_file import solve_or_last_iterate
 
 __all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "STALL_FACTOR",
@@ -64,41 +66,23 @@ def stalled(violations, window, factor=STALL_FACTOR, tol=FEASIBLE) -> bool:
     return recent > tol and recent > factor * min(violations[:-window])
 
 
-class _Watch(ca.Callback):
-    """IPOPT's iteration callback: the largest violation of every iterate; returns 1
-    (stop) when :func:`stalled`."""
+class _Watch:
+    """The largest violation of every iterate, and whether the search has
+    :func:`stalled` (IPOPT's iteration callback stops it then)."""
 
     def __init__(self, opti, window):
-        ca.Callback.__init__(self)
-        self.nx, self.ng, self.window = opti.nx, opti.ng, window
+        self.window = window
         self.lbg = np.array(ca.evalf(opti.lbg)).ravel()
         self.ubg = np.array(ca.evalf(opti.ubg)).ravel()
         self.violations, self.stopped = [], False
-        self.construct("running_watch", {})
+        self.callback = iteration_stop("running_watch", opti.nx, opti.ng, self.see)
 
-    def get_n_in(self):
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ca.nlpsol_out(i)
-
-    def get_name_out(self, i):
-        return "stop"
-
-    def get_sparsity_in(self, i):
-        n = {"f": 1, "x": self.nx, "lam_x": self.nx, "g": self.ng, "lam_g": self.ng}
-        name = ca.nlpsol_out(i)
-        return ca.Sparsity.dense(n[name]) if name in n else ca.Sparsity(0, 0)
-
-    def eval(self, arg):
-        g = np.array(arg[2]).ravel()
+    def see(self, g) -> bool:
+        """Record an iterate's constraint values ``g``; True: stop."""
         v = np.maximum(self.lbg - g, g - self.ubg)
         self.violations.append(float(max(0.0, np.max(v))) if v.size else 0.0)
         self.stopped = stalled(self.violations, self.window)
-        return [1 if self.stopped else 0]
+        return self.stopped
 
 
 def solve_running(opti, opts, verbose, model):
@@ -129,7 +113,7 @@ def solve_running(opti, opts, verbose, model):
              "mu_strategy": "adaptive", "sb": "yes", **opts.ipopt}
     window = opts.stall_window
     watch = None if window is None else _Watch(opti, window)
-    extra = {} if watch is None else {"iteration_callback": watch}
+    extra = {} if watch is None else {"iteration_callback": watch.callback}
     opti.solver("ipopt", {"expand": True, "print_time": False, "error_on_fail": False,
                           "show_eval_warnings": False, **extra}, ipopt)
     t0 = time.perf_counter()

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from biped_casadi.numerics import iteration_stop
+
 from .functions import _ks
 from .transcription import Transcription, _Rows
 
@@ -407,43 +409,6 @@ class _Oracle(ca.Callback):
         return [Jd] if k == "dg" else [g, Jd]
 
 
-class _Budget(ca.Callback):
-    """IPOPT's iteration callback: stop once the NLP has been evaluated ``cap`` times
-    since the solve began (a budget that, unlike wall time, does not depend on the
-    machine's load; an iteration's line search may evaluate many trial points)."""
-
-    def __init__(self, nlp, ng, cap):
-        ca.Callback.__init__(self)
-        self.nlp, self.nd, self.ng, self.cap = nlp, nlp.nd, ng, cap
-        self.n0 = nlp.evaluations
-        self.construct("codesign_budget", {})
-
-    def get_n_in(self):
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ca.nlpsol_out(i)
-
-    def get_name_out(self, i):
-        return "stop"
-
-    def get_sparsity_in(self, i):
-        n = ca.nlpsol_out(i)
-        if n == "f":
-            return ca.Sparsity.dense(1)
-        if n in ("x", "lam_x"):
-            return ca.Sparsity.dense(self.nd)
-        if n in ("g", "lam_g"):
-            return ca.Sparsity.dense(self.ng)
-        return ca.Sparsity(0, 0)
-
-    def eval(self, arg):
-        return [1 if self.nlp.evaluations - self.n0 >= self.cap else 0]
-
-
 @dataclass
 class NLPSolve:
     """One IPOPT solve of the reduced co-design NLP.
@@ -501,6 +466,7 @@ def solve_nlp(nlp: "Reduced", d0, lb, ub, ipopt: dict | None = None,
     if not np.all(np.isfinite(g0)):
         raise NoStrikeAtStart("codesign: a scenario does not strike from the starting "
                               "design")
+    n0 = nlp.evaluations
     sp = ca.Sparsity.dense(g0.size, nlp.nd)
     cbs = [_Oracle("codesign_f", nlp, "f", sp), _Oracle("codesign_g", nlp, "g", sp),
            _Oracle("codesign_grad_f", nlp, "grad_f", sp), _Oracle("codesign_jac_g", nlp, "jac_g", sp)]
@@ -511,7 +477,11 @@ def solve_nlp(nlp: "Reduced", d0, lb, ub, ipopt: dict | None = None,
             "linear_solver": "mumps", "sb": "yes"}
     opts.update(ipopt or {})
     # CasADi keeps only a weak reference to a Python callback: this name keeps it alive
-    budget = None if max_evaluations is None else _Budget(nlp, g0.size, max_evaluations)
+    # (a budget of NLP evaluations that, unlike wall time, does not depend on the
+    # machine's load; an iteration's line search may evaluate many trial points)
+    budget = None if max_evaluations is None else iteration_stop(
+        "codesign_budget", nlp.nd, g0.size,
+        lambda g: nlp.evaluations - n0 >= max_evaluations)
     solver = ca.nlpsol("codesign", "ipopt", {"x": x, "f": cbs[0](x), "g": cbs[1](x)},
                        {"ipopt": opts, "grad_f": cbs[2], "jac_g": cbs[3], "print_time": False,
                         "error_on_fail": False,
@@ -519,7 +489,6 @@ def solve_nlp(nlp: "Reduced", d0, lb, ub, ipopt: dict | None = None,
                         # (IPOPT steps back); CasADi's warning per such point is noise
                         "show_eval_warnings": False,
                         **({} if budget is None else {"iteration_callback": budget})})
-    n0 = nlp.evaluations
     t0 = time.perf_counter()
     sol = solver(x0=d0, lbx=lb, ubx=ub, lbg=lo, ubg=hi)
     st = solver.stats()
