@@ -45,6 +45,17 @@ def test_builtin_rabbit_is_spec_section_1():
     assert robot("rabbit") is rabbit() is rabbit(RABBIT)
 
 
+def test_joint_names_are_distinct_when_a_link_is_named_like_a_joint():
+    """The absolute angle is named after the lowest link; an imported robot whose lower
+    link is called 'knee' (Cassie's URDF) would have had two 'stance knee' names."""
+    assert robot("rabbit").joint_names[0] == "stance tibia (absolute)"
+    d = rabbit_dict()
+    d["leg"][1]["name"] = "knee"
+    names = BipedModel(description_from_dict(d)).joint_names
+    assert names[:2] == ("stance knee link (absolute)", "stance knee")
+    assert len(set(names)) == len(names)
+
+
 def test_builtin_three_link_is_grizzle_abba_plestan():
     """three_link.toml: legs r = 1 m with 5 kg at mid-leg, 15 kg at the hip, torso
     l = 0.5 m with 10 kg at its end (literature values of the 2001 paper)."""

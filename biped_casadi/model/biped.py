@@ -351,7 +351,9 @@ class BipedModel:
         inner = _inner_joint_names(d)
         st = [f"stance {n}" for n in reversed(inner)]
         sw = [f"swing {n}" for n in inner]
-        lowest = "stance leg" if k == 1 else f"stance {d.leg[-1].name}"
+        low = d.leg[-1].name
+        # a link named like a joint (an imported Cassie's lower link 'knee') says 'link'
+        lowest = "stance leg" if k == 1 else f"stance {low}" + (" link" if low in inner else "")
         return tuple([f"{lowest} (absolute)"] + st + ["stance hip (torso)", "swing hip"] + sw)
 
     # ------------------------------------------------------------------ build
