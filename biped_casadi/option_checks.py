@@ -81,7 +81,7 @@ class FieldChecks:
                          + (f", got {value!r}" if got else ""))
 
     def numbers(self, names, low: float = 0.0, strict: bool = True, none: bool = False,
-                skip=(), phrase: str | None = None) -> None:
+                inf: bool = False, phrase: str | None = None) -> None:
         """Refuse fields that are not finite numbers > ``low`` (>= when not ``strict``).
 
         Parameters
@@ -94,14 +94,14 @@ class FieldChecks:
             ``value > low``, else ``value >= low``.
         none : bool
             None is allowed (and said in the message).
-        skip : tuple
-            Values let through unchecked (e.g. ``(None,)`` without saying so).
+        inf : bool
+            ``math.inf`` is allowed too (said by ``phrase`` if at all).
         phrase : str or None
             The phrase, else the class's ``positive`` or ``nonnegative``.
         """
         for name in names:
             v = getattr(self.obj, name)
-            if (v is None and none) or any(v is s or (is_real(v) and v == s) for s in skip):
+            if (v is None and none) or (inf and is_real(v) and v == math.inf):
                 continue
             if not (is_real(v) and math.isfinite(v) and (v > low if strict else v >= low)):
                 what = phrase or (self.positive if strict else self.nonnegative)

@@ -287,9 +287,9 @@ class GaitOptions:
     def __post_init__(self):
         c = FieldChecks(self, "gait option {!r}")
         c.numbers(("speed", "mu"))
-        c.numbers(("torque_limit",), skip=(None, math.inf))   # inf: the robot has none
-        c.numbers(("impact_mu",), skip=(None,))
-        c.numbers(("continuation",), skip=(None, math.inf),
+        c.numbers(("torque_limit",), none=True, inf=True)   # inf: the robot has none
+        c.numbers(("impact_mu",), none=True)
+        c.numbers(("continuation",), none=True, inf=True,
                   phrase="None or a positive number (inf allowed)")
         c.choice("continuation_shape", CONTINUATIONS)
         if self.continuation_shape == "smooth" and (self.continuation is None
@@ -297,7 +297,7 @@ class GaitOptions:
             raise ValueError("gait option 'continuation_shape' 'smooth' needs a finite "
                              "'continuation' (its decay time, a fraction of T)")
         c.numbers(("min_normal_force", "min_liftoff_speed", "min_strike_speed"), strict=False)
-        c.numbers(("clearance",), strict=False, skip=(None,))
+        c.numbers(("clearance",), strict=False, none=True)
         c.pairs(("step_length_bounds",), none=True, to_float=True)   # None: for_model's
         c.pairs(("step_time_bounds",), to_float=True)
         for n, lo, hi in (("n_intervals", 4, MAX_N_INTERVALS), ("degree", 1, MAX_DEGREE),
