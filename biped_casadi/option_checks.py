@@ -51,6 +51,8 @@ class FieldChecks:
         Phrase of a bool.
     none : str
         Added to a phrase when None is allowed.
+    real : callable
+        Whether a value is a number (default :func:`is_real`: bools are not).
     """
 
     obj: object
@@ -62,6 +64,7 @@ class FieldChecks:
     pair: str = "(low, high) with 0 < low < high"
     flag: str = "true or false"
     none: str = ""
+    real: object = is_real
 
     def fail(self, name: str, phrase: str, value=None, got: bool = True):
         """Raise the ValueError of field ``name``.
@@ -101,9 +104,9 @@ class FieldChecks:
         """
         for name in names:
             v = getattr(self.obj, name)
-            if (v is None and none) or (inf and is_real(v) and v == math.inf):
+            if (v is None and none) or (inf and self.real(v) and v == math.inf):
                 continue
-            if not (is_real(v) and math.isfinite(v) and (v > low if strict else v >= low)):
+            if not (self.real(v) and math.isfinite(v) and (v > low if strict else v >= low)):
                 what = phrase or (self.positive if strict else self.nonnegative)
                 self.fail(name, what.format(low=low) + (self.none if none else ""), v)
 
