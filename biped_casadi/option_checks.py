@@ -111,7 +111,7 @@ class FieldChecks:
                 self.fail(name, what.format(low=low) + (self.none if none else ""), v)
 
     def integers(self, names, low: int, high: int | None = None, none: bool = False,
-                 phrase: str | None = None) -> None:
+                 phrase: str | None = None, kinds: tuple = (int,)) -> None:
         """Refuse fields that are not ints (not bools) from ``low`` to ``high``.
 
         Parameters
@@ -126,13 +126,16 @@ class FieldChecks:
             None is allowed (and said in the message).
         phrase : str or None
             The phrase, else the class's ``integer``.
+        kinds : tuple of type
+            The integer types taken (e.g. ``(int, numpy.integer)``; bools never), kept as
+            given.
         """
         for name in names:
             v = getattr(self.obj, name)
             if v is None and none:
                 continue
-            too_high = high is not None and isinstance(v, int) and v > high
-            if isinstance(v, bool) or not isinstance(v, int) or v < low or (
+            too_high = high is not None and isinstance(v, kinds) and v > high
+            if isinstance(v, bool) or not isinstance(v, kinds) or v < low or (
                     too_high and self.at_most is None):
                 self.fail(name, (phrase or self.integer).format(low=low, high=high)
                           + (self.none if none else ""), v)
