@@ -5,6 +5,8 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+from biped_casadi.option_checks import FieldChecks
+
 __all__ = ["GaitOptions", "REFERENCE_LEG_LENGTH", "REFERENCE_SPEED", "leg_scale",
            "reference_speed", "default_step_length_bounds", "guess_step_length", "LegScaled",
            "gait_fields"]
@@ -283,69 +285,30 @@ class GaitOptions:
     derivatives: str = "structured"
 
     def __post_init__(self):
-        def number(v):
-            return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-        def pos(name):
-            v = getattr(self, name)
-            if not number(v) or not math.isfinite(v) or v <= 0:
-                raise ValueError(f"gait option {name!r} must be a positive number, got {v!r}")
-
-        def nonneg(name):
-            v = getattr(self, name)
-            if not number(v) or not math.isfinite(v) or v < 0:
-                raise ValueError(f"gait option {name!r} must be a non-negative number, got {v!r}")
-
-        for n in ("speed", "mu"):
-            pos(n)
-        if self.torque_limit is not None and self.torque_limit != math.inf:
-            pos("torque_limit")            # inf: the robot has none (no gait can be solved)
-        if self.impact_mu is not None:
-            pos("impact_mu")
-        if self.continuation is not None and not (
-                isinstance(self.continuation, (int, float)) and not isinstance(
-                    self.continuation, bool) and self.continuation > 0):
-            raise ValueError(f"gait option 'continuation' must be None or a positive number "
-                             f"(inf allowed), got {self.continuation!r}")
-        if self.continuation_shape not in CONTINUATIONS:
-            raise ValueError(f"gait option 'continuation_shape' must be one of "
-                             f"{CONTINUATIONS}, got {self.continuation_shape!r}")
+        c = FieldChecks(self, "gait option {!r}")
+        c.numbers(("speed", "mu"))
+        c.numbers(("torque_limit",), none=True, inf=True)   # inf: the robot has none
+        c.numbers(("impact_mu",), none=True)
+        c.numbers(("continuation",), none=True, inf=True,
+                  phrase="None or a positive number (inf allowed)")
+        c.choice("continuation_shape", CONTINUATIONS)
         if self.continuation_shape == "smooth" and (self.continuation is None
                                                     or math.isinf(self.continuation)):
             raise ValueError("gait option 'continuation_shape' 'smooth' needs a finite "
                              "'continuation' (its decay time, a fraction of T)")
-        for n in ("min_normal_force", "min_liftoff_speed", "min_strike_speed") + (
-                () if self.clearance is None else ("clearance",)):
-            nonneg(n)
-        for n in ("step_length_bounds", "step_time_bounds"):
-            lo_hi = getattr(self, n)
-            if lo_hi is None and n == "step_length_bounds":
-                continue                   # the robot's, filled in by for_model
-            lo_hi = tuple(lo_hi) if hasattr(lo_hi, "__len__") and not isinstance(lo_hi, str) \
-                else (lo_hi,)
-            if len(lo_hi) != 2 or not all(number(v) and math.isfinite(v) for v in lo_hi) \
-                    or not 0 < lo_hi[0] < lo_hi[1]:
-                raise ValueError(f"gait option {n!r} must be (low, high) with 0 < low < high, got {lo_hi!r}")
-            object.__setattr__(self, n, tuple(float(v) for v in lo_hi))
-        for n, lo in (("n_intervals", 4), ("degree", 1), ("bezier_degree", 4), ("polish_steps", 100)):
-            v = getattr(self, n)
-            if not isinstance(v, int) or isinstance(v, bool) or v < lo:
-                raise ValueError(f"gait option {n!r} must be an integer >= {lo}, got {v!r}")
-        for n, hi in (("n_intervals", MAX_N_INTERVALS), ("degree", MAX_DEGREE)):
-            if getattr(self, n) > hi:
-                raise ValueError(f"gait option {n!r} must be at most {hi}, got "
-                                 f"{getattr(self, n)!r}")
-        if not isinstance(self.expand, bool):
-            raise ValueError(f"gait option 'expand' must be true or false, got {self.expand!r}")
-        if self.scheme not in SCHEMES:
-            raise ValueError(f"gait option 'scheme' must be one of {SCHEMES}, got {self.scheme!r}")
-        if self.derivatives not in DERIVATIVES:
-            raise ValueError(f"gait option 'derivatives' must be one of {DERIVATIVES}, "
-                             f"got {self.derivatives!r}")
-        if self.cost not in COSTS:
-            raise ValueError(f"gait option 'cost' must be one of {COSTS}, got {self.cost!r}")
+        c.numbers(("min_normal_force", "min_liftoff_speed", "min_strike_speed"), strict=False)
+        c.numbers(("clearance",), strict=False, none=True)
+        c.pairs(("step_length_bounds",), none=True, to_float=True)   # None: for_model's
+        c.pairs(("step_time_bounds",), to_float=True)
+        for n, lo, hi in (("n_intervals", 4, MAX_N_INTERVALS), ("degree", 1, MAX_DEGREE),
+                          ("bezier_degree", 4, None), ("polish_steps", 100, None)):
+            c.integers((n,), lo, hi)
+        c.flags(("expand",))
+        c.choice("scheme", SCHEMES)
+        c.choice("derivatives", DERIVATIVES)
+        c.choice("cost", COSTS)
         if not isinstance(self.ipopt, dict):
-            raise ValueError("gait option 'ipopt' must be a dict of IPOPT options")
+            c.fail("ipopt", "a dict of IPOPT options", got=False)
 
     def to_dict(self) -> dict:
         """The options by name, as recorded in gait files (and cache keys).

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,6 +43,7 @@ import numpy as np
 
 from biped_casadi.files import write_text_atomic
 from biped_casadi.model import flight_model
+from biped_casadi.option_checks import FieldChecks
 
 from .options import leg_scale
 from .running_cache import cached_running
@@ -151,51 +151,24 @@ class RunningOptions:
     stall_window: int | None = STALL_WINDOW
 
     def __post_init__(self):
-        def number(name, value, low=0.0, strict=True, none=False):
-            if value is None and none:
-                return
-            ok = (not isinstance(value, bool) and isinstance(value, (int, float))
-                  and math.isfinite(value) and (value > low if strict else value >= low))
-            if not ok:
-                raise ValueError(f"RunningOptions.{name} must be a finite number "
-                                 f"{'>' if strict else '>='} {low:g}"
-                                 f"{' or None' if none else ''}, got {value!r}")
-        for name in ("speed", "mu", "torso_lean_max", "knee_flexion_max"):
-            number(name, getattr(self, name))
-        for name in ("min_strike_speed", "min_liftoff_speed"):
-            number(name, getattr(self, name), strict=False)
-        number("mu_margin", self.mu_margin, strict=False)
+        c = FieldChecks(self, "RunningOptions.{}", positive="a finite number > {low:g}",
+                        nonnegative="a finite number >= {low:g}", at_most=None,
+                        integer="an integer from {low} to {high}",
+                        pair="(low, high) seconds with 0 < low < high", flag="True or False",
+                        none=" or None")
+        c.numbers(("speed", "mu", "torso_lean_max", "knee_flexion_max"))
+        c.numbers(("min_strike_speed", "min_liftoff_speed", "mu_margin"), strict=False)
         if self.mu_margin >= self.mu:
             raise ValueError(f"RunningOptions.mu_margin must be below mu ({self.mu:g}), "
                              f"got {self.mu_margin!r}")
-        for name in ("clearance", "trailing_clearance"):
-            number(name, getattr(self, name), strict=False, none=True)
-        number("torque_limit", self.torque_limit, none=True)
-        number("torque_rate_max", self.torque_rate_max, none=True)
-        for name in ("n_stance", "n_flight"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or not 2 <= v <= 200:
-                raise ValueError(f"RunningOptions.{name} must be an integer from 2 to 200, "
-                                 f"got {v!r}")
-        for name in ("stance_time_bounds", "flight_time_bounds"):
-            v = tuple(getattr(self, name)) if isinstance(getattr(self, name), (tuple, list)) \
-                else ()
-            if len(v) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                      and math.isfinite(x) for x in v) \
-                    or not 0 < v[0] < v[1]:
-                raise ValueError(f"RunningOptions.{name} must be (low, high) seconds with "
-                                 f"0 < low < high, got {getattr(self, name)!r}")
-            object.__setattr__(self, name, v)
-        for name in ("takeoff_cone_rate", "cone_quarter_points"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"RunningOptions.{name} must be True or False, "
-                                 f"got {getattr(self, name)!r}")
-        w = self.stall_window
-        if w is not None and (isinstance(w, bool) or not isinstance(w, int) or w < 1):
-            raise ValueError(f"RunningOptions.stall_window must be an integer >= 1 or None, "
-                             f"got {w!r}")
+        c.numbers(("clearance", "trailing_clearance"), strict=False, none=True)
+        c.numbers(("torque_limit", "torque_rate_max"), none=True)
+        c.integers(("n_stance", "n_flight"), 2, 200)
+        c.pairs(("stance_time_bounds", "flight_time_bounds"), kinds=(tuple, list))
+        c.flags(("takeoff_cone_rate", "cone_quarter_points"))
+        c.integers(("stall_window",), 1, none=True, phrase="an integer >= {low}")
         if not isinstance(self.ipopt, dict):
-            raise ValueError(f"RunningOptions.ipopt must be a dict, got {self.ipopt!r}")
+            c.fail("ipopt", "a dict", self.ipopt)
 
     def for_model(self, model) -> "RunningOptions":
         """These options with the length-valued defaults filled in for the robot.

@@ -10,6 +10,7 @@ import numpy as np
 from biped_casadi import (Gains, SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, robot)
 from biped_casadi.model.description import description_from_dict
+from biped_casadi.option_checks import FieldChecks
 from biped_casadi.simulation import (Terrain, random_heights)
 from gait_opt import leg_scale
 
@@ -192,31 +193,20 @@ class MonteCarloSettings:
     compiled: bool = True
 
     def __post_init__(self):
-        s = self.sigma
-        if s is not None and (isinstance(s, bool) or not isinstance(s, (int, float))
-                              or not math.isfinite(s) or s < 0):
-            raise ValueError(f"sigma must be a finite number >= 0 (m), got {s!r}")
+        c = FieldChecks(self, "{}", flag="True or False", at_most=None,
+                        integer="an integer between {low} and {high}")
+        c.numbers(("sigma",), strict=False, none=True, phrase="a finite number >= 0 (m)")
         for name, hi in (("runs", MAX_RUNS), ("max_steps", MAX_STEPS), ("chunk", MAX_RUNS)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= hi:
-                raise ValueError(f"{name} must be an integer between 1 and {hi}, got {v!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) \
-                or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+            c.integers((name,), 1, hi, kinds=(int, np.integer))
+        c.integers(("seed",), 0, phrase="a non-negative integer", kinds=(int, np.integer))
         SimulationOptions(mu=self.mu, torque_limit=self.torque_limit,
                           rk4_steps=self.full_rk4_steps)          # checked there
         v = self.rk4_steps
         if isinstance(v, bool) or not isinstance(v, int) or v < 8 or v % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {v!r}")
-        v = self.vc_nodes
-        if isinstance(v, bool) or not isinstance(v, int) or v < 8:
-            raise ValueError(f"vc_nodes must be an integer >= 8, got {v!r}")
-        if isinstance(self.transient, bool) or not isinstance(self.transient, int) \
-                or self.transient < 0:
-            raise ValueError(f"transient must be a non-negative integer, got "
-                             f"{self.transient!r}")
-        if not isinstance(self.compiled, bool):
-            raise ValueError(f"compiled must be True or False, got {self.compiled!r}")
+        c.integers(("vc_nodes",), 8, phrase="an integer >= 8")
+        c.integers(("transient",), 0, phrase="a non-negative integer")
+        c.flags(("compiled",))
         object.__setattr__(self, "profile", Terrain(tuple(self.profile)).heights)
         if self.profile and self.sigma:
             raise ValueError("sigma and profile exclude each other (a profile is the terrain)")

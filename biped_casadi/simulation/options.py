@@ -7,6 +7,7 @@ import numbers
 from dataclasses import asdict, dataclass
 
 from ..control.output_law import SECTION
+from ..option_checks import FieldChecks
 
 __all__ = ["SimulationOptions"]
 
@@ -76,27 +77,17 @@ class SimulationOptions:
             v = getattr(self, name)
             if isinstance(v, numbers.Integral) and not isinstance(v, bool):
                 object.__setattr__(self, name, int(v))
-        if isinstance(self.steps, bool) or not isinstance(self.steps, int) or self.steps < 1:
-            raise ValueError(f"steps must be a positive integer, got {self.steps!r}")
+        c = FieldChecks(self, "{}", flag="True or False",
+                        real=lambda v: isinstance(v, (int, float)))   # bools too, as before
+        c.integers(("steps",), 1, phrase="a positive integer")
         if not isinstance(self.rk4_steps, int) or self.rk4_steps < 8 or self.rk4_steps % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {self.rk4_steps!r}")
-        for name in ("mu", "max_torso_angle", "horizon") + (
-                ("min_hip_height",) if self.min_hip_height is not None else ()):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-                raise ValueError(f"{name} must be a positive number, got {v!r}")
-        if self.torque_limit is not None and not (
-                isinstance(self.torque_limit, (int, float)) and self.torque_limit > 0):
-            raise ValueError(f"torque_limit must be a positive number or None, "
-                             f"got {self.torque_limit!r}")
-        for name in ("min_normal_force", "ground_tolerance", "singular_tolerance",
-                     "min_liftoff_speed"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-                raise ValueError(f"{name} must be a non-negative number, got {v!r}")
-        for name in ("jit", "saturate"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        c.numbers(("mu", "max_torso_angle", "horizon"))
+        c.numbers(("min_hip_height",), none=True)
+        c.numbers(("torque_limit",), none=True, inf=True, phrase="a positive number or None")
+        c.numbers(("min_normal_force", "ground_tolerance", "singular_tolerance",
+                   "min_liftoff_speed"), strict=False)
+        c.flags(("jit", "saturate"))
         if self.horizon <= SECTION:
             raise ValueError(f"horizon must exceed {SECTION} (the Poincaré section), "
                              f"got {self.horizon!r}")
