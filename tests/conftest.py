@@ -9,20 +9,6 @@ import pytest
 
 from biped_casadi import rabbit
 
-def pytest_collection_modifyitems(config, items):
-    """The files with the most end-to-end (slow) tests first, the rest in their order.
-
-    With the tests shared out file by file over the cores (pyproject's addopts, xdist's
-    reordering by test count switched off), the long files start first and the short
-    ones fill in at the end, instead of one core running a long file alone at the end.
-    A file's tests stay together and in their order."""
-    slow, first = {}, {}
-    for i, item in enumerate(items):
-        first.setdefault(item.path, i)
-        slow[item.path] = slow.get(item.path, 0) + bool(item.get_closest_marker("slow"))
-    items.sort(key=lambda item: (-slow[item.path], first[item.path]))
-
-
 # tasks run in the test process unless a test asks for a cluster (analysis.tasks: the
 # scheduler's default); the tests of the cluster paths start their own
 os.environ.setdefault("BIPED_SCHEDULER", "synchronous")
