@@ -123,14 +123,6 @@ def running_digest(gait) -> str:
     return h.hexdigest()
 
 
-def _phase_function(ctrl: RunningController, phase: str, n: int) -> ca.Function:
-    """The controller's law of a phase, its torques as applied, named for the export."""
-    q, dq, t = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("t")
-    u = ctrl.applied(getattr(ctrl, f"{phase}_law")(q, dq, t))
-    names = ("q", "dq", "t") if phase == "stance" else ("qe", "dqe", "t")
-    return ca.Function(f"biped_running_{phase}", [q, dq, t], [u], list(names), ["u"])
-
-
 def _examples(ctrl: RunningController, n: int = 16) -> dict:
     """n collocated states of each phase with their times (rows t, q, dq)."""
     g, out = ctrl.gait, {}
@@ -166,8 +158,8 @@ def exported_running_law(controller: RunningController) -> ExportedRunningLaw:
     nqe = c.fl.ne
     g = c.gait
     return ExportedRunningLaw(
-        nq=model.nq, nu=model.nu, nqe=nqe, stance=_phase_function(c, "stance", model.nq),
-        flight=_phase_function(c, "flight", nqe),
+        nq=model.nq, nu=model.nu, nqe=nqe, stance=c.applied_law("stance", "biped_running_stance"),
+        flight=c.applied_law("flight", "biped_running_flight"),
         controller=dict(law=c.law, Kp=c.Kp.tolist(), Kd=c.Kd.tolist(), M1=c.M1.tolist(),
                         saturate=c.saturate, torque_limit=c.torque_limit),
         robot=model.params.name, gait_digest=running_digest(g),

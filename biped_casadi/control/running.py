@@ -404,3 +404,25 @@ class RunningController:
             return u
         U = self.torque_limit
         return ca.fmin(ca.fmax(u, -U), U)
+
+    def applied_law(self, phase: str, name: str | None = None) -> ca.Function:
+        """A phase's law with its torques as the robot receives them (:meth:`applied`).
+
+        Parameters
+        ----------
+        phase : {'stance', 'flight'}
+            The phase.
+        name : str, optional
+            The Function's name (default ``'<phase>_applied'``).
+
+        Returns
+        -------
+        casadi.Function
+            ``u(q, dq, t)`` (flight: ``u(qe, dqe, t)``, the extended coordinates).
+        """
+        law = getattr(self, f"{phase}_law")
+        n = law.size1_in(0)
+        q, dq, t = ca.SX.sym("q", n), ca.SX.sym("dq", n), ca.SX.sym("t")
+        names = ["q", "dq", "t"] if phase == "stance" else ["qe", "dqe", "t"]
+        return ca.Function(name or f"{phase}_applied", [q, dq, t],
+                           [self.applied(law(q, dq, t))], names, ["u"])

@@ -54,7 +54,6 @@ from __future__ import annotations
 import math
 import time
 
-import casadi as ca
 import numpy as np
 
 from ..control.running import RunningController
@@ -98,10 +97,7 @@ def _applied_law(c: RunningController, phase: str) -> FastCall:
         ``u(q, dq, t)`` as a list holding the (nu, 1) torques.
     """
     law = getattr(c, f"{phase}_law")
-    if not c.saturate:
-        return FastCall(law)
-    q, dq, t = (ca.SX.sym(name, law.size1_in(i)) for i, name in enumerate(("q", "dq", "t")))
-    return FastCall(ca.Function(f"{phase}_applied", [q, dq, t], [c.applied(law(q, dq, t))]))
+    return FastCall(c.applied_law(phase) if c.saturate else law)
 
 
 class RunningLoop:
