@@ -98,6 +98,9 @@ def test_local_cluster_gives_the_synchronous_numbers(tmp_path):
         pids = {eng.submit(pid, i).result() for i in range(8)}
         bad = eng.submit(add, eng.submit(fails, 2), 1.0)
         assert got.result() == want and f.result() == flow
+        # a task's state is known as soon as its result has arrived
+        assert all(eng.submit(square, x).result() >= 0 and
+                   eng.state(eng.submit(square, x)) == "computed" for x in (0.5, 1.5))
         with pytest.raises(TaskError, match="no good: 2"):
             bad.result()
         # a fan-out whose calls share arguments (one task) yields every tag

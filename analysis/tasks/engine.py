@@ -485,6 +485,7 @@ class Engine:
         -------
         TaskState or None
         """
+        self._settle()
         rec = self._tasks.get(_key(future))
         return rec.state if rec is not None else None
 
