@@ -143,13 +143,6 @@ def _key(future) -> str:
     return str(future.key).rsplit("-", 1)[-1]
 
 
-def _resolve(f: cf.Future, value=None, error=None) -> cf.Future:
-    """Set a ``concurrent.futures.Future``'s outcome (the first one stands)."""
-    with contextlib.suppress(cf.InvalidStateError):
-        f.set_result(value) if error is None else f.set_exception(error)
-    return f
-
-
 # Dask resolves futures inside lists, tuples and dicts only: a dataclass holding futures
 # travels as a marked dict of its fields
 _DATACLASS = "__task_dataclass__"
@@ -351,9 +344,7 @@ class Engine:
         lost = {k: f for k, f in list(self._futures.items()) if not f.done()}
         for key, f in lost.items():
             err = TaskError(self._tasks[key].name, "not run: the engine was closed first", key=key)
-            self._finish(key, TaskState.FAILED, error=err)
-            if isinstance(f, cf.Future):
-                _resolve(f, error=err)
+            self._finish(key, TaskState.FAILED, error=err, fut=f)
         quiet = logging.getLogger("distributed")         # the cluster's shutdown chatter
         level, _ = quiet.level, quiet.setLevel(logging.CRITICAL)
         try:
@@ -533,8 +524,9 @@ class Engine:
         if not new:
             fut = self._futures[key]
         elif kept is not MISSING:
-            self._finish(key, TaskState.REUSED, seconds=kept.get("seconds", 0.0))
-            fut = self._set(key, _resolve(self._holder(info, key), kept["value"]))
+            fut = self._set(key, self._finish(key, TaskState.REUSED, kept["value"],
+                                              seconds=kept.get("seconds", 0.0),
+                                              fut=self._holder(info, key)))
         else:
             self._count_new()
             fut = self._holder(info, key)
@@ -568,10 +560,8 @@ class Engine:
             value = call()
         except catch as e:                              # noqa: BLE001 - the task's error
             err = _error(self._tasks[key].name, e, key)
-            self._finish(key, TaskState.FAILED, error=err)
-            return _resolve(fut, error=err)
-        self._finish(key, TaskState.COMPUTED, value, seconds=time.perf_counter() - t)
-        _resolve(fut, value)
+            return self._finish(key, TaskState.FAILED, error=err, fut=fut)
+        self._finish(key, TaskState.COMPUTED, value, seconds=time.perf_counter() - t, fut=fut)
 
     def _on_cluster(self, fn, key, holder, args, kwargs):
         """Submit a task to Dask (``holder``: its future if it cannot be sent)."""
@@ -593,8 +583,7 @@ class Engine:
                 f"not run: the Dask cluster did not start ({_one(e)})"
                 if self._start_error is not None else f"not sent to the cluster ({_one(e)})"),
                 key=key)
-            self._finish(key, TaskState.FAILED, error=err)
-            return self._set(key, _resolve(holder, error=err))
+            return self._set(key, self._finish(key, TaskState.FAILED, error=err, fut=holder))
         fut.add_done_callback(self._kept.put)
         return fut
 
@@ -648,17 +637,23 @@ class Engine:
             return
         self._finish(key, TaskState.COMPUTED, value, seconds=self._seconds.pop(key, 0.0))
 
-    def _finish(self, key: str, state: TaskState, value=None, error=None, seconds=0.0):
+    def _finish(self, key: str, state: TaskState, value=None, error=None, seconds=0.0,
+                fut=None):
+        """Record how a task ended and give ``fut``, when it is one of the engine's own
+        futures (not Dask's), that outcome; the first outcome stands."""
         rec = self._tasks[key]
         if state is TaskState.COMPUTED and rec.state is None:
             self.store.write(key, rec.name, value, seconds)
         with self._cond:
-            if rec.state is not None:
-                return
-            rec.state, rec.seconds, rec.error = state, float(seconds), str(error or "")
-            self._records.append(rec)
-            if self._bar is not None and state is not TaskState.REUSED:
-                self._bar.update(1)
+            if rec.state is None:
+                rec.state, rec.seconds, rec.error = state, float(seconds), str(error or "")
+                self._records.append(rec)
+                if self._bar is not None and state is not TaskState.REUSED:
+                    self._bar.update(1)
+        if isinstance(fut, cf.Future):
+            with contextlib.suppress(cf.InvalidStateError):
+                fut.set_result(value) if error is None else fut.set_exception(error)
+        return fut
 
     def _count_new(self):
         if not self._progress:
