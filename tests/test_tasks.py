@@ -43,6 +43,10 @@ def test_scheduler_spellings():
         resolve_scheduler(None, workers=0)
     with pytest.raises(ValueError, match="scheduler"):
         resolve_scheduler(3.0)
+    # the command line takes the same spellings (it tried to connect to 'Local')
+    from analysis.cli.common import check_scheduler
+    for s in ("Local", "sync", " inline"):
+        check_scheduler(s)
 
 
 def test_synchronous_results_are_kept_and_reused(tmp_path):

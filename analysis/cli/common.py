@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.cluster import DASK_CONNECT_TIMEOUT, connect
+from analysis.tasks import resolve_scheduler
 from biped_casadi import robot
 from biped_casadi.control.running import check_running_gait
 from biped_casadi.control.output_law import (M1_LIMIT, SECTION, check_M1_range, check_rejoin,
@@ -468,7 +469,8 @@ def check_scheduler(scheduler, say=None):
         return
     if not scheduler.strip():
         raise UserError("--scheduler: empty address")
-    if scheduler in ("inline", "local", "synchronous"):
+    scheduler = resolve_scheduler(scheduler)          # the engine's spellings
+    if scheduler in ("synchronous", "local"):
         return
     if say is not None:
         say(f"connecting to the Dask scheduler at {scheduler} (up to "
