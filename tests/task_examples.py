@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import threading
 import time
 from dataclasses import dataclass
 
@@ -53,6 +54,17 @@ def chain(engine, n):
     for _ in range(n):
         v = engine.submit(add, v, engine.submit(square, v).result()).result()
     return v
+
+
+@task
+def unkept(x):
+    """A result that cannot be kept: a lock cannot be pickled."""
+    return threading.Lock()
+
+
+@task
+def unkept_flow(engine, x):
+    return threading.Lock()
 
 
 @task

@@ -10,7 +10,8 @@ import pytest
 
 from analysis.tasks import Engine, NotKeyable, TaskError, argument_key, resolve_scheduler
 from biped_casadi.caching import _strip_docstrings
-from task_examples import Pair, add, chain, fails, pair_sum, pid, square, started_at, total
+from task_examples import (Pair, add, chain, fails, pair_sum, pid, square, started_at, total,
+                           unkept, unkept_flow)
 
 
 def _tree(src):
@@ -78,6 +79,16 @@ def test_a_failure_marks_its_dependants(tmp_path):
     with Engine("synchronous", cache=tmp_path) as eng:
         assert eng.state(eng.submit(fails, 1)) == "failed"
         assert [r.state for r in eng.records] == ["failed"]
+
+
+def test_a_result_that_cannot_be_kept_fails_its_task(tmp_path):
+    """A task's or a flow's result that cannot be pickled fails it, with the reason (the
+    flow's future had no outcome; the task's call raised and a second call waited)."""
+    with Engine("synchronous", cache=tmp_path) as eng:
+        for f in (eng.submit(unkept, 1), eng.submit(unkept, 1), eng.spawn(unkept_flow, 1)):
+            with pytest.raises(TaskError, match="pickle"):
+                f.result(timeout=10)
+        assert [r.state for r in eng.records] == ["failed"] * 2
 
 
 def test_flows_wait_for_their_tasks(tmp_path):

@@ -554,14 +554,15 @@ class Engine:
         return future
 
     def _complete(self, key, fut, call, catch=Exception):
-        """Run ``call`` here: its value or its error is the task's outcome."""
+        """Run ``call`` here: its value or its error (also one keeping the value: it
+        cannot be pickled) is the task's outcome."""
         t = time.perf_counter()
         try:
-            value = call()
+            self._finish(key, TaskState.COMPUTED, call(), seconds=time.perf_counter() - t,
+                         fut=fut)
         except catch as e:                              # noqa: BLE001 - the task's error
-            err = _error(self._tasks[key].name, e, key)
-            return self._finish(key, TaskState.FAILED, error=err, fut=fut)
-        self._finish(key, TaskState.COMPUTED, value, seconds=time.perf_counter() - t, fut=fut)
+            self._finish(key, TaskState.FAILED, error=_error(self._tasks[key].name, e, key),
+                         fut=fut)
 
     def _on_cluster(self, fn, key, holder, args, kwargs):
         """Submit a task to Dask (``holder``: its future if it cannot be sent)."""
@@ -629,13 +630,11 @@ class Engine:
         key = _key(f)
         if self._tasks[key].state is not None:
             return
-        try:
-            value = f.result()
+        try:                                   # (a result may fail to be kept too)
+            self._finish(key, TaskState.COMPUTED, f.result(), seconds=self._seconds.pop(key, 0.0))
         except BaseException as e:             # noqa: BLE001 - failed, cancelled, lost
             self._finish(key, TaskState.FAILED, error=e if isinstance(e, TaskError) else
                          TaskError(self._tasks[key].name, _one(e), key=key))
-            return
-        self._finish(key, TaskState.COMPUTED, value, seconds=self._seconds.pop(key, 0.0))
 
     def _finish(self, key: str, state: TaskState, value=None, error=None, seconds=0.0,
                 fut=None):
