@@ -4,13 +4,14 @@ and on a Dask cluster of worker processes, and a worker running other code refus
 from __future__ import annotations
 
 import ast
+import collections
 
 import numpy as np
 import pytest
 
 from analysis.tasks import Engine, NotKeyable, TaskError, argument_key, resolve_scheduler
 from biped_casadi.caching import _strip_docstrings
-from task_examples import (Pair, add, chain, fails, pair_sum, pid, square, started_at, total,
+from task_examples import (Pair, add, chain, echo, fails, pair_sum, pid, square, started_at, total,
                            unkept, unkept_flow)
 
 
@@ -89,6 +90,18 @@ def test_a_result_that_cannot_be_kept_fails_its_task(tmp_path):
             with pytest.raises(TaskError, match="pickle"):
                 f.result(timeout=10)
         assert [r.state for r in eng.records] == ["failed"] * 2
+
+
+def test_a_future_the_engine_cannot_pass_is_refused(tmp_path):
+    """A future inside a namedtuple or an object array would reach the task as a future
+    (its key counts it as an input): refused with what to pass instead."""
+    P = collections.namedtuple("P", "a b")
+    with Engine("synchronous", cache=tmp_path) as eng:
+        x = eng.submit(square, 2.0)
+        for arg in (P(x, 1.0), np.array([x, None], dtype=object)):
+            with pytest.raises(TypeError, match="inside lists, tuples, dicts or dataclasses"):
+                eng.submit(echo, arg)
+        assert eng.submit(echo, [x, {"b": x}]).result() == [4.0, {"b": 4.0}]
 
 
 def test_flows_wait_for_their_tasks(tmp_path):

@@ -351,7 +351,8 @@ class Engine:
             if self._client is not None:
                 with contextlib.suppress(Exception):
                     self._client.cancel([f for f in lost.values() if not isinstance(f, cf.Future)])
-                    if isinstance(self.scheduler, str):     # a client of its own
+                if isinstance(self.scheduler, str):         # a client of its own
+                    with contextlib.suppress(Exception):
                         self._client.close()
             with contextlib.suppress(Exception):
                 if self._cluster is not None:
@@ -508,10 +509,14 @@ class Engine:
         info = _info(fn)
         if self.closed:
             raise TaskError(info.name, "not run: the engine was closed")
+        seen, inputs, ctx = [], [], getattr(_LOCAL, "flow", None)
         key = task_key(info.name, info.version, info.code, args, kwargs,
-                       ref_key=lambda o: _key(o) if _is_future(o) else None)
-        inputs, ctx = [], getattr(_LOCAL, "flow", None)
+                       ref_key=lambda o: seen.append(o) or _key(o) if _is_future(o) else None)
         _pack((args, kwargs), lambda f: inputs.append(f) or f)
+        if len(inputs) != len(seen):            # (a namedtuple, an object array, ...)
+            raise TypeError(f"{info.name}: a future inside an argument the engine cannot "
+                            "unpack; pass futures as arguments or inside lists, tuples, dicts "
+                            "or dataclasses")
         kept = self.store.read(key) if self.use_cache and key not in self._tasks else MISSING
         with self._cond:
             new = key not in self._tasks             # else submitted before, or right now
