@@ -335,6 +335,21 @@ def test_camel_case_sides_give_the_links_name(tmp_path, left, right, name):
     assert import_urdf(_write(tmp_path, text, "r.urdf")).description.leg[0].name == name
 
 
+@pytest.mark.parametrize("left,right,names", [
+    (("FL_UPPER_LEG", "FL_LOWER_LEG"), ("FR_UPPER_LEG", "FR_LOWER_LEG"),
+     ("UPPER_LEG", "LOWER_LEG")),                      # ODRI's Bolt: a quadruped's names
+    (("leg1_thigh", "leg1_shin"), ("leg2_a", "leg2_b"), ("link1", "link2"))])
+def test_side_tokens_of_any_spelling_give_distinct_link_names(tmp_path, left, right, names):
+    # the side is the one token in which the two names differ; names that still coincide
+    # (a prefix shared by both links) become the links' positions
+    text = RABBIT_URDF
+    for old, new in zip(("femur_left", "tibia_left", "femur_right", "tibia_right"),
+                        left + right):
+        text = text.replace(f'"{old}"', f'"{new}"')
+    d = import_urdf(_write(tmp_path, text, "r.urdf")).description
+    assert tuple(link.name for link in d.leg) == names
+
+
 def test_frame_elements_mark_the_foot(tmp_path):
     # Drake's and FROST's <frame name link xyz rpy/> (Atlas's soles and toes in FROST's
     # file): read as massless links fixed to their links, a sole among them is the foot

@@ -262,13 +262,18 @@ _SIDES = {"left", "right", "l", "r", "lft", "rgt", "lt", "rt"}
 
 def _common_name(a: str, b: str, default: str) -> str:
     """'femur' from 'femur_left' / 'femur_right', 'l_femur' / 'r_femur', 'Thigh' from
-    'LeftThigh' / 'RightThigh', ..."""
+    'LeftThigh' / 'RightThigh', 'UPPER_LEG' from 'FL_UPPER_LEG' / 'FR_UPPER_LEG'; the
+    common prefix else, or ``default``."""
     def tokens(s):
         return [t for t in re.split(r"[_\-\s.]+|(?<=[a-z])(?=[A-Z])", s)
                 if t and t.lower() not in _SIDES]
     ta, tb = tokens(a), tokens(b)
     if ta and ta == tb:
         return "_".join(ta)
+    if len(ta) == len(tb):         # 'FL_UPPER_LEG' / 'FR_UPPER_LEG': the side is the token
+        same = [x for x, y in zip(ta, tb) if x == y]      # that differs
+        if same and len(same) == len(ta) - 1:
+            return "_".join(same)
     i = 0
     while i < min(len(a), len(b)) and a[i] == b[i]:
         i += 1
@@ -602,8 +607,10 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     pm.update(pm_legs[0])
     if pm["hip"] == 0.0:
         del pm["hip"]
-    for i, (a, b) in enumerate(zip(*links)):
-        a["name"] = _common_name(a["name"], b["name"], f"link{i + 1}")
+    names = [_common_name(a["name"], b["name"], f"link{i + 1}")
+             for i, (a, b) in enumerate(zip(*links))]
+    for i, a in enumerate(links[0]):       # names that coincide: the links' positions
+        a["name"] = names[i] if names.count(names[i]) == 1 else f"link{i + 1}"
         if a["com_offset"] == 0.0:
             del a["com_offset"]
     if torso_d["com_offset"] == 0.0:
