@@ -350,6 +350,20 @@ def test_side_tokens_of_any_spelling_give_distinct_link_names(tmp_path, left, ri
     assert tuple(link.name for link in d.leg) == names
 
 
+def test_a_leg_welded_to_the_torso_says_the_legs_differ_first(tmp_path, capsys):
+    # Drake's kneed compass gait: one thigh welded to the hip, no foot links; the refusal
+    # is the legs' joints, not the shorter chain's foot or the longer one's lengths
+    text = re.sub(r'<joint name="hip_left" type="revolute">', '<joint name="hip_left" '
+                  'type="fixed">', RABBIT_URDF)
+    text = re.sub(r'<joint name="foot_(left|right)_fixed".*?</joint>\s*<link name="foot_\1"/>',
+                  "", text, flags=re.S)
+    assert "foot_left" not in text and "foot_right" not in text
+    err = _cli_error(capsys, ["robot", "import", str(_write(tmp_path, text, "c.urdf")),
+                              "--out", str(tmp_path / "c.toml")])
+    assert ("legs differ: 1 joint(s) (knee_left) and 2 joint(s) (hip_right -> knee_right)"
+            in err), err
+
+
 def test_frame_elements_mark_the_foot(tmp_path):
     # Drake's and FROST's <frame name link xyz rpy/> (Atlas's soles and toes in FROST's
     # file): read as massless links fixed to their links, a sole among them is the foot

@@ -570,6 +570,10 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     torso = _Frame(rd.torso(torso), np.eye(3), np.zeros(3))
     apply_locks(rd, torso.name, lock, lock_off_axis, axis)
     chains = _legs(rd, torso)
+    if len(chains[0]) != len(chains[1]):          # before the feet: a leg's own checks
+        rd.fail("legs differ: " + " and ".join(   # would blame the longer leg's links
+            f"{len(c)} joint(s) ({' -> '.join(j.name for j, _ in c)})" for c in chains)
+            + ": the model's two legs are alike chains of joints from the torso")
     n, signs = _axis(rd, chains)
     plane = _Plane(n)
     feet = [_foot_point(rd, chain[-1][1], foot, n, [j.name for j, _ in chain])
@@ -577,9 +581,6 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     if foot_beyond:
         feet = [_beyond(rd, chain, f, foot_beyond, plane) for chain, f in zip(chains, feet)]
     legs = [_Leg(rd, chain, p, plane) for chain, (p, _, _) in zip(chains, feet)]
-    if len(legs[0].frames) != len(legs[1].frames):
-        rd.fail(f"legs differ: {len(legs[0].frames)} and {len(legs[1].frames)} links "
-                f"(legs of {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r})")
     span = sum(legs[0].lengths)
     if span > MAX_LEG:
         rd.fail(f"the leg of {legs[0].joints[0].name!r} is {span:.4g} m long: URDF lengths are "
