@@ -356,6 +356,27 @@ def _agree(a, b):
     return alike and dt <= SIMULATION_TOL and ds <= SIMULATION_TOL, dt, ds, diffs
 
 
+def apart_reason(n_ref: int) -> str:
+    """Why ``biped simulate``'s run differs from the Python law's in the library's loop.
+
+    Parameters
+    ----------
+    n_ref : int
+        The controller's reference state's size (0: the law does not read one).
+
+    Returns
+    -------
+    str
+        The time-varying law's reference state, integrated with the robot there: O(h^4);
+        without one, round-off, which the closed loop grows.
+    """
+    if n_ref:
+        return ("its integration of the reference state, O(h^4): 16 times smaller at half "
+                "the RK4 step")
+    return ("round-off: there the law and the robot are one CasADi expression per RK4 step, "
+            "evaluated in another order, and the closed loop grows the difference")
+
+
 def compare_simulations(compiled: CompiledController, ctrl, q0, dq0,
                         options: SimulationOptions | None = None,
                         law=None) -> SimulationComparison:
@@ -395,8 +416,7 @@ def compare_simulations(compiled: CompiledController, ctrl, q0, dq0,
            f"{tw.status} (Python law), {b.status} (compiled)")
     if status == "discretisation":
         msg += (f" (the difference from biped simulate's run, above {SIMULATION_TOL:g}, is "
-                "its integration of the reference state, O(h^4): 16 times smaller at half the "
-                "RK4 step)")
+                f"{apart_reason(ctrl.n_ref)})")
     return SimulationComparison(
         status=status, message=msg, python_status=a.status, twin_status=tw.status,
         compiled_status=b.status, steps=len(diffs), max_impact_time=dt, max_state=ds,
