@@ -364,6 +364,18 @@ def test_a_leg_welded_to_the_torso_says_the_legs_differ_first(tmp_path, capsys):
             in err), err
 
 
+def test_a_tag_unknown_to_urdf_on_every_link_is_one_note(tmp_path):
+    # Bolt's file (PyBullet's <contact> on each of its 9 links): one line per tag, not
+    # one per link
+    text = re.sub(r'(<link name="[^"]+">)', r'\1<contact><lateral_friction value="1"/></contact>',
+                  RABBIT_URDF)
+    notes = [n for n in import_urdf(_write(tmp_path, text, "r.urdf")).notes
+             if n.startswith("ignored: Unknown tag")]
+    n_links = len(re.findall(r'<link name="[^"]+">', RABBIT_URDF))
+    assert notes == [f"ignored: Unknown tag \"contact\" in {n_links} places "
+                     f"(/robot[@name='RABBIT']/link[@name='torso'], ...)"], notes
+
+
 def test_frame_elements_mark_the_foot(tmp_path):
     # Drake's and FROST's <frame name link xyz rpy/> (Atlas's soles and toes in FROST's
     # file): read as massless links fixed to their links, a sole among them is the foot
