@@ -11,7 +11,9 @@ Three comparisons (docs/howto/export.md):
   (:class:`~biped_casadi.control.compiled.CompiledController`) against two runs driven by
   the Python law, impact times and states (q, dq before and after every impact): the
   Python law called as the library is (:class:`~biped_casadi.control.compiled.PythonTwin`,
-  the same closed loop of numeric calls: the runs agree to round-off), and ``biped
+  the same closed loop of numeric calls: the runs agree to round-off; for an export in
+  URDF angles :class:`~biped_casadi.control.urdf_twin.PythonUrdfTwin`, the export's own
+  Functions through the same conversions), and ``biped
   simulate``'s run.  The latter differs by discretisation: in ``biped simulate`` the
   time-varying law's reference state r = (q_u^d, dq_u^d) is integrated with the robot in
   every RK4 stage, while the compiled law reads it from the gait's interpolant (as on a
@@ -38,6 +40,7 @@ from biped_casadi.control.export_urdf import LEG_ORDER, UrdfAngleLaw
 from biped_casadi.control.compiled import (CompiledController, CompiledUrdfController,
                                            CompilerError, PythonTwin, build_library,
                                            find_c_compiler)
+from biped_casadi.control.urdf_twin import PythonUrdfTwin
 from biped_casadi.numerics import compiler_reason
 from biped_casadi.results import Result
 
@@ -101,7 +104,8 @@ class SimulationComparison(Result):
 
     Two Python runs: ``biped simulate``'s (the Python controller in the simulator, its
     reference state integrated with the robot) and the twin's (the Python law called as
-    the library is, :class:`~biped_casadi.control.compiled.PythonTwin`, in the same
+    the library is, :class:`~biped_casadi.control.compiled.PythonTwin`, or for an export
+    in URDF angles :class:`~biped_casadi.control.urdf_twin.PythonUrdfTwin`, in the same
     numeric loop).
 
     Parameters
@@ -352,8 +356,30 @@ def _agree(a, b):
     return alike and dt <= SIMULATION_TOL and ds <= SIMULATION_TOL, dt, ds, diffs
 
 
+def apart_reason(n_ref: int) -> str:
+    """Why ``biped simulate``'s run differs from the Python law's in the library's loop.
+
+    Parameters
+    ----------
+    n_ref : int
+        The controller's reference state's size (0: the law does not read one).
+
+    Returns
+    -------
+    str
+        The time-varying law's reference state, integrated with the robot there: O(h^4);
+        without one, round-off, which the closed loop grows.
+    """
+    if n_ref:
+        return ("its integration of the reference state, O(h^4): 16 times smaller at half "
+                "the RK4 step")
+    return ("round-off: there the law and the robot are one CasADi expression per RK4 step, "
+            "evaluated in another order, and the closed loop grows the difference")
+
+
 def compare_simulations(compiled: CompiledController, ctrl, q0, dq0,
-                        options: SimulationOptions | None = None) -> SimulationComparison:
+                        options: SimulationOptions | None = None,
+                        law=None) -> SimulationComparison:
     """A full-order run driven by the compiled law against the Python-driven runs.
 
     Parameters
@@ -366,6 +392,10 @@ def compare_simulations(compiled: CompiledController, ctrl, q0, dq0,
         The initial state (the start of a step).
     options : SimulationOptions, optional
         The runs' options (default ``SimulationOptions()``: 10 steps).
+    law : ExportedLaw, optional
+        The export; one in URDF angles is driven in Python the way the library is
+        (:class:`~biped_casadi.control.urdf_twin.PythonUrdfTwin`: through the same
+        conversions), else the toolkit's law is (:class:`PythonTwin`).
 
     Returns
     -------
@@ -373,7 +403,9 @@ def compare_simulations(compiled: CompiledController, ctrl, q0, dq0,
     """
     options = options if options is not None else SimulationOptions()
     a, ta = _timed(ctrl, q0, dq0, options)
-    tw, tt = _timed(PythonTwin(ctrl), q0, dq0, options)
+    urdf = law is not None and law.angles == "urdf"
+    twin = PythonUrdfTwin(ctrl, law) if urdf else PythonTwin(ctrl)
+    tw, tt = _timed(twin, q0, dq0, options)
     b, tb = _timed(compiled, q0, dq0, options)
     ok, dt, ds, diffs = _agree(a, b)
     ok_twin, dt_twin, ds_twin, _ = _agree(tw, b)
@@ -384,8 +416,7 @@ def compare_simulations(compiled: CompiledController, ctrl, q0, dq0,
            f"{tw.status} (Python law), {b.status} (compiled)")
     if status == "discretisation":
         msg += (f" (the difference from biped simulate's run, above {SIMULATION_TOL:g}, is "
-                "its integration of the reference state, O(h^4): 16 times smaller at half the "
-                "RK4 step)")
+                f"{apart_reason(ctrl.n_ref)})")
     return SimulationComparison(
         status=status, message=msg, python_status=a.status, twin_status=tw.status,
         compiled_status=b.status, steps=len(diffs), max_impact_time=dt, max_state=ds,
@@ -491,7 +522,7 @@ def verify_export(folder, ctrl, q0, dq0, options: SimulationOptions | None = Non
                     else CompiledController(lib, ctrl))     # loaded: the file may go
         c_us, _ = time_example(folder, cc, calls, work)
     states = (compare_urdf_states if urdf else compare_states)(compiled, ctrl, n_states, seed)
-    sim = compare_simulations(compiled, ctrl, q0, dq0, options)
+    sim = compare_simulations(compiled, ctrl, q0, dq0, options, law)
     if sim.steps == 0 and (options is None or options.steps > 0):
         # the runs from the given start ended before an impact (a heavy robot out of its
         # torque limit, say): the impact map and the step start of the library would go
@@ -499,7 +530,7 @@ def verify_export(folder, ctrl, q0, dq0, options: SimulationOptions | None = Non
         first = sim
         q_orbit, dq_orbit = Perturbation.uniform(ctrl.gait.model.nq, 0.0, 0.0).initial_state(
             ctrl.gait)
-        sim = compare_simulations(compiled, ctrl, q_orbit, dq_orbit, options)
+        sim = compare_simulations(compiled, ctrl, q_orbit, dq_orbit, options, law)
         sim.start = "orbit"
         sim.message = (f"from the given start the runs ended before an impact ("
                        f"{first.compiled_status} compiled, {first.python_status} biped "

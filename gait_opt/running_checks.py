@@ -74,6 +74,10 @@ class RunningReport:
     stance_end_error, flight_end_error : float
         max ``|x_integrated(T) - x_collocated(T)|`` of each phase integrated from its own
         collocated start (rad, rad/s, m, m/s mixed: the largest entry).
+    interval_error : float
+        The same over one collocation interval, each integrated from its own collocated
+        start, the largest of both phases: the grid's own error (O(h^4) per interval),
+        which the phases' errors above also hold grown by the open loop.
     step_map_residual : float
         max ``|P(x0) - x0|`` of the step map composed of the integrated phases (flight to
         the touchdown event) and the exact edges, open loop under the gait's torques.
@@ -107,6 +111,7 @@ class RunningReport:
     periodicity_collocated: float
     stance_end_error: float
     flight_end_error: float
+    interval_error: float
     step_map_residual: float
     touchdown_time_error: float
     com_ballistic_collocated: float
@@ -221,6 +226,23 @@ def integrate_phase(model, gait: RunningGait, phase: str, x0=None, t_end=None,
                      dense_output=True, events=events)
 
 
+def _interval_error(model, gait: RunningGait) -> float:
+    """The largest error of one collocation interval integrated (DOP853, as
+    :func:`integrate_phase`) from its collocated start, over both phases."""
+    worst = 0.0
+    for phase in ("stance", "flight"):
+        tn, X, F, U, f = _phase_data(model, gait, phase)
+
+        def rhs(t, x):
+            _, u = hermite_simpson(tn, X, F, U, [t])
+            return f(x, u[:, 0])
+        for k in range(0, tn.size - 2, 2):
+            r = solve_ivp(rhs, (tn[k], tn[k + 2]), X[:, k], method="DOP853", rtol=1e-11,
+                          atol=1e-11)
+            worst = max(worst, float(np.max(np.abs(r.y[:, -1] - X[:, k + 2]))))
+    return worst
+
+
 def _flight_physics(fl, xs, ts):
     """(largest CoM distance from its parabola, largest change of the angular momentum
     about the CoM, largest |momentum|) along flight states xs (columns) at times ts."""
@@ -330,7 +352,7 @@ def check_running(model, gait: RunningGait) -> RunningReport:
         feet_min_flight=float(min(feet[1, 0::2][inner].min(), feet[1, 1::2][inner].min())),
         flight_duration=gait.T_flight, **_edges(model, fl, gait),
         flight_end_error=float(np.max(np.abs(fl_int.y[:, -1] - gait.x_flight[:, -1]))),
-        **_step_map(model, fl, gait),
+        **_step_map(model, fl, gait), interval_error=_interval_error(model, gait),
         com_ballistic_collocated=coll[0], com_ballistic_integrated=integ[0],
         momentum_drift_collocated=coll[1], momentum_drift_integrated=integ[1],
         momentum_scale=max(coll[2], integ[2]))

@@ -149,6 +149,16 @@ def test_arms_merge_into_the_torso(tmp_path):
     with pytest.raises(ValueError, match=r"the torso 'torso' has 4 jointed children .* "
                                          r"\(lock the joints of the others, e\.g\. arms"):
         import_urdf(p, lock=SAGITTAL)
+    # without locks the hips' yaw joints are children of the torso too: the refusal says
+    # that --lock-off-axis locks them (the Unitree H1 and G1 meet this first)
+    with pytest.raises(ValueError) as e:
+        import_urdf(p)
+    assert str(e.value).endswith("(lock the joints of the others, e.g. arms: --lock NAME, "
+                                 "lock=); 'hip_yaw_l', 'hip_yaw_r' turn(s) out of the plane "
+                                 "most joints turn in: a 3-D robot's sagittal model locks "
+                                 "every such joint with --lock-off-axis (lock_off_axis=True)")
+    with pytest.raises(ValueError, match=r"lock=\)$"):     # the arms' only: no such hint
+        import_urdf(p, lock_off_axis=True)
     imp = import_urdf(p, lock={**SAGITTAL, **ARMS})
     no_arms = import_urdf(_write(tmp_path, biped3d_urdf(), "no_arms.urdf"), lock=SAGITTAL)
     hips = 2 * (0.6 + 0.9)

@@ -335,6 +335,47 @@ def test_camel_case_sides_give_the_links_name(tmp_path, left, right, name):
     assert import_urdf(_write(tmp_path, text, "r.urdf")).description.leg[0].name == name
 
 
+@pytest.mark.parametrize("left,right,names", [
+    (("FL_UPPER_LEG", "FL_LOWER_LEG"), ("FR_UPPER_LEG", "FR_LOWER_LEG"),
+     ("UPPER_LEG", "LOWER_LEG")),                      # ODRI's Bolt: a quadruped's names
+    (("leg1_thigh", "leg1_shin"), ("leg2_a", "leg2_b"), ("link1", "link2"))])
+def test_side_tokens_of_any_spelling_give_distinct_link_names(tmp_path, left, right, names):
+    # the side is the one token in which the two names differ; names that still coincide
+    # (a prefix shared by both links) become the links' positions
+    text = RABBIT_URDF
+    for old, new in zip(("femur_left", "tibia_left", "femur_right", "tibia_right"),
+                        left + right):
+        text = text.replace(f'"{old}"', f'"{new}"')
+    d = import_urdf(_write(tmp_path, text, "r.urdf")).description
+    assert tuple(link.name for link in d.leg) == names
+
+
+def test_a_leg_welded_to_the_torso_says_the_legs_differ_first(tmp_path, capsys):
+    # Drake's kneed compass gait: one thigh welded to the hip, no foot links; the refusal
+    # is the legs' joints, not the shorter chain's foot or the longer one's lengths
+    text = re.sub(r'<joint name="hip_left" type="revolute">', '<joint name="hip_left" '
+                  'type="fixed">', RABBIT_URDF)
+    text = re.sub(r'<joint name="foot_(left|right)_fixed".*?</joint>\s*<link name="foot_\1"/>',
+                  "", text, flags=re.S)
+    assert "foot_left" not in text and "foot_right" not in text
+    err = _cli_error(capsys, ["robot", "import", str(_write(tmp_path, text, "c.urdf")),
+                              "--out", str(tmp_path / "c.toml")])
+    assert ("legs differ: 1 joint(s) (knee_left) and 2 joint(s) (hip_right -> knee_right)"
+            in err), err
+
+
+def test_a_tag_unknown_to_urdf_on_every_link_is_one_note(tmp_path):
+    # Bolt's file (PyBullet's <contact> on each of its 9 links): one line per tag, not
+    # one per link
+    text = re.sub(r'(<link name="[^"]+">)', r'\1<contact><lateral_friction value="1"/></contact>',
+                  RABBIT_URDF)
+    notes = [n for n in import_urdf(_write(tmp_path, text, "r.urdf")).notes
+             if n.startswith("ignored: Unknown tag")]
+    n_links = len(re.findall(r'<link name="[^"]+">', RABBIT_URDF))
+    assert notes == [f"ignored: Unknown tag \"contact\" in {n_links} places "
+                     f"(/robot[@name='RABBIT']/link[@name='torso'], ...)"], notes
+
+
 def test_frame_elements_mark_the_foot(tmp_path):
     # Drake's and FROST's <frame name link xyz rpy/> (Atlas's soles and toes in FROST's
     # file): read as massless links fixed to their links, a sole among them is the foot

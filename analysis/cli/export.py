@@ -13,7 +13,7 @@ from biped_casadi.control.compiled import CompilerError, find_c_compiler
 from biped_casadi.control.export import EXPORT_ANGLES, HEADER, c_sources, exported_law
 from biped_casadi.control.export_folder import check_destination, staged_export
 from gait_opt.cache import cache_path
-from analysis.verify_export import SIMULATION_TOL, TORQUE_RTOL, verify_export
+from analysis.verify_export import SIMULATION_TOL, TORQUE_RTOL, apart_reason, verify_export
 
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
                      check_m1_values, load_gait, output_dir, parse_m1, positive, print_json,
@@ -254,8 +254,8 @@ def _report(args, r):
     print(f"  against the Python law driven the same way ({m['twin_status']}): "
           f"{m['twin_max_impact_time']:.3g} s, {m['twin_max_state']:.3g}"
           + ("" if m["status"] != "discretisation" else
-             "; the larger difference from biped simulate is its integration of the "
-             "reference state (O(h^4), 16 times smaller at half the RK4 step)"))
+             "; the larger difference from biped simulate is "
+             + apart_reason(int(c["controller"] == "tv"))))
     print(f"  time per call: {v['c_us']:.3f} us in C (the example's loop, {v['c_calls']} "
           f"calls), {s['ctypes_us']:.2f} us through ctypes, {s['python_us']:.1f} us for the "
           f"Python law one state at a time (C {s['python_us'] / v['c_us']:.0f} times faster)")

@@ -28,7 +28,7 @@ from .export_urdf import LEG_ORDER, torque_matrix
 from .output_law import singularity_report
 
 __all__ = ["find_c_compiler", "build_library", "NumericLaw", "CompiledController",
-           "CompiledUrdfController", "PythonTwin", "CompilerError"]
+           "CompiledUrdfController", "PythonTwin", "UrdfLoop", "CompilerError"]
 
 
 class CompilerError(RuntimeError):
@@ -478,7 +478,75 @@ class PythonTwin(NumericLaw):
         return dict(controller="python", exported=self.exported.describe())
 
 
-class CompiledUrdfController(CompiledController):
+class UrdfLoop:
+    """A law in URDF angles as a controller of the model, the robot's loop around it.
+
+    The class it is mixed into provides the law's calls ``start_urdf``, ``start_leg``,
+    ``torque_urdf`` and ``outputs_urdf`` (URDF coordinates in and out).
+
+    At every step start the joint angles are read with one physical leg in stance (the
+    two legs in turn), the law finds the stance leg (``biped_step_start``: the foot in
+    front), and a step whose stance leg the law takes wrongly cannot start; afterwards
+    ``state[0]`` says which leg the angles are read for.
+    """
+
+    def _urdf_loop(self, urdf_map, motor_side: bool) -> None:
+        self.urdf_map, self.motor_side = urdf_map, bool(motor_side)
+        self._to_model = {leg: np.linalg.inv(torque_matrix(urdf_map, leg, motor_side))
+                          for leg in LEG_ORDER}
+        self._starts = 0
+
+    def _urdf(self, q, dq, leg):
+        return self.urdf_map.from_model(q, dq, leg)
+
+    def _start(self, q, dq):
+        leg = LEG_ORDER[self._starts % 2]
+        self._starts += 1
+        rc, p = self.start_urdf(*self._urdf(q, dq, leg))
+        if rc == 0 and p[0] != LEG_ORDER.index(leg):
+            rc = 2                        # the library would read the angles wrongly
+        return rc, p
+
+    def torque(self, tau, q, dq, p) -> tuple:
+        """The library's torques as the model's u (the stance leg of ``p[0]``).
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq : numpy.ndarray
+            The model's state.
+        p : numpy.ndarray
+            The state of :meth:`step_start`.
+
+        Returns
+        -------
+        tuple
+            (return code, u (nu,), N m).
+        """
+        leg = LEG_ORDER[int(p[0])]
+        rc, tau_urdf = self.torque_urdf(tau, *self._urdf(q, dq, leg), p)
+        return rc, self._to_model[leg] @ tau_urdf
+
+    def outputs(self, tau, q, dq, p) -> tuple:
+        """The library's outputs at the model's state.
+
+        Parameters
+        ----------
+        tau : float
+            Time since the step started, s.
+        q, dq, p : numpy.ndarray
+            As :meth:`torque`.
+
+        Returns
+        -------
+        tuple
+            (return code, y, dy, den).
+        """
+        return self.outputs_urdf(tau, *self._urdf(q, dq, LEG_ORDER[int(p[0])]), p)
+
+
+class CompiledUrdfController(UrdfLoop, CompiledController):
     """An export in URDF angles (``biped export --angles urdf``) as a model's controller.
 
     The simulator's (q, dq) go to the library as the robot's URDF coordinates, the
@@ -516,10 +584,7 @@ class CompiledUrdfController(CompiledController):
             raise ValueError(f"library: {self.library} is not an export in URDF angles (no "
                              f"biped_step_start_leg)") from None
         f.argtypes, f.restype = [ctypes.c_int] + [ctypes.c_void_p] * 3, ctypes.c_int
-        self.urdf_map, self.motor_side = urdf_map, bool(motor_side)
-        self._to_model = {leg: np.linalg.inv(torque_matrix(urdf_map, leg, motor_side))
-                          for leg in LEG_ORDER}
-        self._starts = 0
+        self._urdf_loop(urdf_map, motor_side)
 
     # ---------------------------------------------------- the library's own calls
     def start_urdf(self, x, dx) -> tuple:
@@ -588,53 +653,3 @@ class CompiledUrdfController(CompiledController):
         tuple
         """
         return CompiledController.outputs(self, tau, x, dx, state)
-
-    # ---------------------------------------------------- as a controller of the model
-    def _urdf(self, q, dq, leg):
-        return self.urdf_map.from_model(q, dq, leg)
-
-    def _start(self, q, dq):
-        leg = LEG_ORDER[self._starts % 2]
-        self._starts += 1
-        rc, p = self.start_urdf(*self._urdf(q, dq, leg))
-        if rc == 0 and p[0] != LEG_ORDER.index(leg):
-            rc = 2                        # the library would read the angles wrongly
-        return rc, p
-
-    def torque(self, tau, q, dq, p) -> tuple:
-        """The library's torques as the model's u (the stance leg of ``p[0]``).
-
-        Parameters
-        ----------
-        tau : float
-            Time since the step started, s.
-        q, dq : numpy.ndarray
-            The model's state.
-        p : numpy.ndarray
-            The state of :meth:`step_start`.
-
-        Returns
-        -------
-        tuple
-            (return code, u (nu,), N m).
-        """
-        leg = LEG_ORDER[int(p[0])]
-        rc, tau_urdf = self.torque_urdf(tau, *self._urdf(q, dq, leg), p)
-        return rc, self._to_model[leg] @ tau_urdf
-
-    def outputs(self, tau, q, dq, p) -> tuple:
-        """The library's outputs at the model's state.
-
-        Parameters
-        ----------
-        tau : float
-            Time since the step started, s.
-        q, dq, p : numpy.ndarray
-            As :meth:`torque`.
-
-        Returns
-        -------
-        tuple
-            (return code, y, dy, den).
-        """
-        return self.outputs_urdf(tau, *self._urdf(q, dq, LEG_ORDER[int(p[0])]), p)

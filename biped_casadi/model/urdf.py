@@ -262,13 +262,18 @@ _SIDES = {"left", "right", "l", "r", "lft", "rgt", "lt", "rt"}
 
 def _common_name(a: str, b: str, default: str) -> str:
     """'femur' from 'femur_left' / 'femur_right', 'l_femur' / 'r_femur', 'Thigh' from
-    'LeftThigh' / 'RightThigh', ..."""
+    'LeftThigh' / 'RightThigh', 'UPPER_LEG' from 'FL_UPPER_LEG' / 'FR_UPPER_LEG'; the
+    common prefix else, or ``default``."""
     def tokens(s):
         return [t for t in re.split(r"[_\-\s.]+|(?<=[a-z])(?=[A-Z])", s)
                 if t and t.lower() not in _SIDES]
     ta, tb = tokens(a), tokens(b)
     if ta and ta == tb:
         return "_".join(ta)
+    if len(ta) == len(tb):         # 'FL_UPPER_LEG' / 'FR_UPPER_LEG': the side is the token
+        same = [x for x, y in zip(ta, tb) if x == y]      # that differs
+        if same and len(same) == len(ta) - 1:
+            return "_".join(same)
     i = 0
     while i < min(len(a), len(b)) and a[i] == b[i]:
         i += 1
@@ -565,6 +570,10 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     torso = _Frame(rd.torso(torso), np.eye(3), np.zeros(3))
     apply_locks(rd, torso.name, lock, lock_off_axis, axis)
     chains = _legs(rd, torso)
+    if len(chains[0]) != len(chains[1]):          # before the feet: a leg's own checks
+        rd.fail("legs differ: " + " and ".join(   # would blame the longer leg's links
+            f"{len(c)} joint(s) ({' -> '.join(j.name for j, _ in c)})" for c in chains)
+            + ": the model's two legs are alike chains of joints from the torso")
     n, signs = _axis(rd, chains)
     plane = _Plane(n)
     feet = [_foot_point(rd, chain[-1][1], foot, n, [j.name for j, _ in chain])
@@ -572,9 +581,6 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     if foot_beyond:
         feet = [_beyond(rd, chain, f, foot_beyond, plane) for chain, f in zip(chains, feet)]
     legs = [_Leg(rd, chain, p, plane) for chain, (p, _, _) in zip(chains, feet)]
-    if len(legs[0].frames) != len(legs[1].frames):
-        rd.fail(f"legs differ: {len(legs[0].frames)} and {len(legs[1].frames)} links "
-                f"(legs of {legs[0].joints[0].name!r} and {legs[1].joints[0].name!r})")
     span = sum(legs[0].lengths)
     if span > MAX_LEG:
         rd.fail(f"the leg of {legs[0].joints[0].name!r} is {span:.4g} m long: URDF lengths are "
@@ -602,8 +608,10 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     pm.update(pm_legs[0])
     if pm["hip"] == 0.0:
         del pm["hip"]
-    for i, (a, b) in enumerate(zip(*links)):
-        a["name"] = _common_name(a["name"], b["name"], f"link{i + 1}")
+    names = [_common_name(a["name"], b["name"], f"link{i + 1}")
+             for i, (a, b) in enumerate(zip(*links))]
+    for i, a in enumerate(links[0]):       # names that coincide: the links' positions
+        a["name"] = names[i] if names.count(names[i]) == 1 else f"link{i + 1}"
         if a["com_offset"] == 0.0:
             del a["com_offset"]
     if torso_d["com_offset"] == 0.0:

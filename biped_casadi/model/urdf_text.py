@@ -107,4 +107,16 @@ def _parse(text: str, where: str, name: str = "FILE"):
         raise ValueError(f"{where}: defines no <link>: not a robot's description (a fragment "
                          f"that a xacro file includes, e.g. ros2_control or gazebo tags?); "
                          f"import the robot's own file, expanded by xacro if it is one")
-    return robot, said, framed
+    return robot, _grouped(said), framed
+
+
+def _grouped(said: list) -> list:
+    """The parser's complaints, one line per kind: 'Unknown tag "contact" in /robot/...'
+    said for every link becomes one line that counts the places and names the first."""
+    places: dict = {}
+    for line in said:
+        head, sep, where = line.partition(" in /")
+        places.setdefault(head if sep else line, []).append("/" + where if sep else "")
+    return [head + ("" if not ws[0] else f" in {ws[0]}" if len(ws) == 1 else
+                    f" in {len(ws)} places ({ws[0]}, ...)")
+            for head, ws in places.items()]

@@ -457,7 +457,7 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
         rd.fail(f"the torso {torso.name!r} has {len(hips)} jointed children "
                 f"({', '.join(repr(j.name) for j, _ in hips) or 'none'}); a biped has two legs"
                 + (" (lock the joints of the others, e.g. arms: --lock NAME, lock=)"
-                   if len(hips) > 2 else ""))
+                   + _off_plane_hint(rd, torso, hips) if len(hips) > 2 else ""))
     legs = []
     for hip, parent in hips:
         chain, item = [], (hip, parent)
@@ -481,6 +481,19 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
             item = nxt[0] if nxt else None
         legs.append(chain)
     return legs
+
+
+def _off_plane_hint(rd: _Reader, torso: _Frame, hips) -> str:
+    """'; ... --lock-off-axis' when some of the torso's jointed children turn out of the
+    plane most joints below it turn in (a 3-D robot), else ''."""
+    try:
+        _, off, _ = rd.off_axis(torso.name, None, ())
+    except ValueError:                    # no joint turns across the torso's z
+        return ""
+    off = [j.name for j, _ in hips if j.name in off]
+    return (f"; {', '.join(map(repr, off))} turn(s) out of the plane most joints turn in: "
+            f"a 3-D robot's sagittal model locks every such joint with --lock-off-axis "
+            f"(lock_off_axis=True)") if off else ""
 
 
 def _jointed(rd: _Reader, frame: _Frame) -> list:
