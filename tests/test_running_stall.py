@@ -21,6 +21,8 @@ from gait_opt.running_solve import FEASIBLE, STALL_FACTOR, STALL_WINDOW, _NAMES,
     ([8.0] * 5 + [3.9] * 5, 5, False),            # halved within the window
     ([1e-3] * 5 + [2e-7] * 5, 5, False),          # feasible: never stalled
     ([1e-3] * 5 + [FEASIBLE * 2] + [1.0] * 4, 5, False),  # progress, though it rose again
+    ([1.0, FEASIBLE / 2] + [1e-3] * 5, 5, False),  # feasible once: left for the cost
+    ([1.0, FEASIBLE * 2] + [1e-3] * 5, 5, True),   # never feasible, then no progress
 ])
 def test_stalled_on_made_up_histories(history, window, expected):
     assert stalled(history, window) is expected
