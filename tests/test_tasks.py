@@ -104,6 +104,14 @@ def test_a_future_the_engine_cannot_pass_is_refused(tmp_path):
         assert eng.submit(echo, [x, {"b": x}]).result() == [4.0, {"b": 4.0}]
 
 
+def test_a_task_error_is_one_line():
+    """str() of a TaskError is one line (a report's line, the command line's error)
+    however many lines its task's error has; the message keeps them."""
+    e = TaskError("pkg.mod.multi", "ValueError: first line\n  second line")
+    assert str(e) == "multi: ValueError: first line second line"
+    assert e.message.count("\n") == 1
+
+
 def test_flows_wait_for_their_tasks(tmp_path):
     with Engine("synchronous", cache=tmp_path) as eng:
         v = eng.spawn(chain, 3).result()

@@ -83,7 +83,7 @@ class TaskError(RuntimeError):
         self.origin, self.message, self.detail, self.key = origin, message, detail, key
 
     def __str__(self):
-        return f"{self.origin.rsplit('.', 1)[-1]}: {self.message}"
+        return " ".join(f"{self.origin.rsplit('.', 1)[-1]}: {self.message}".split())
 
 
 def resolve_scheduler(scheduler=None, workers: int | None = None):
