@@ -129,6 +129,31 @@ class RunningReport:
         """
         return asdict(self)
 
+    def violations(self, torque_limit: float, tol: float = 1e-7) -> list:
+        """The path constraints violated between the collocation points (dense grid).
+
+        As :meth:`gait_opt.Gait.violations` says of a walking gait.
+
+        Parameters
+        ----------
+        torque_limit : float
+            The torque limit the step was made for, N m (friction: the step's own mu).
+        tol : float
+            Amounts up to this count as satisfied (round-off where Fz and Fx vanish).
+
+        Returns
+        -------
+        list of (str, float)
+            (constraint, worst amount), worst first, in N m, N and m; empty when all hold.
+        """
+        amounts = {"torque limit": self.torque_max_dense - torque_limit,
+                   "normal force in stance": -self.fz_min_dense,
+                   "friction cone in stance (|Fx| - mu Fz)": self.friction_excess_dense,
+                   "swing foot above the ground in stance": -self.swing_min_stance,
+                   "feet above the ground in flight": -self.feet_min_flight}
+        bad = [(k, float(v)) for k, v in amounts.items() if v > tol]
+        return sorted(bad, key=lambda kv: -kv[1])
+
 
 def phase_rhs(model, phase: str):
     """x' = f(x, u) of one phase as a numpy function.

@@ -180,6 +180,24 @@ def test_checks_see_a_changed_takeoff_torque(model, small):
     assert r_bad.stance_end_error > r.stance_end_error
 
 
+def test_dense_grid_violations_are_named(model, default):
+    """The default step holds its constraints between the points; a limit below its
+    dense peak, or a foot below the ground, is named with its amount, worst first, and
+    the command line's note says so."""
+    from analysis.cli.running import _violation_notes
+    g, r = default
+    limit = g.options.limit(model)
+    assert r.violations(limit) == []
+    low = dataclasses.replace(r, feet_min_flight=-2e-3)
+    v = low.violations(r.torque_max_dense - 0.5)
+    assert [name for name, _ in v] == ["torque limit", "feet above the ground in flight"]
+    assert v[0][1] == pytest.approx(0.5) and v[1][1] == pytest.approx(2e-3)
+    assert low.violations(limit, tol=1e-2) == []
+    note = _violation_notes(v)[0]
+    assert "VIOLATED torque limit by 0.5 N m; feet above the ground in flight by 0.002 m" \
+        in note and _violation_notes([]) == []
+
+
 def test_hermite_simpson_interpolant_is_exact_for_cubics():
     """States cubic and torques quadratic in time are reproduced exactly between the
     points (the interpolant of the transcription)."""

@@ -205,6 +205,17 @@ def _grid_notes(report: dict, opts) -> list:
             f"not cut the phase's; the closed loop (--stability) is the check"]
 
 
+def _violation_notes(violations: list) -> list:
+    """The note on path constraints violated between the collocation points."""
+    if not violations:
+        return []
+    unit = {"torque limit": "N m", "feet above the ground in flight": "m",
+            "swing foot above the ground in stance": "m"}
+    return ["between the collocation points (dense grid) VIOLATED " + "; ".join(
+        f"{name} by {v:.2g} {unit.get(name, 'N')}" for name, v in violations) +
+        " (the NLP bounds them at its points only; a finer --intervals need not cut it)"]
+
+
 def cmd_running(args):
     if args.gait is not None or args.choose_m1 or args.saturate:
         args.stability = True
@@ -240,11 +251,13 @@ def cmd_running(args):
     if not gait.success:
         raise UserError(failure(args.speed, gait.solver_stats))
     say("checking it outside the NLP (about 2 s) ...")
-    report = check_running(model, gait).as_dict()
+    check = check_running(model, gait)
+    report = check.as_dict()
     s = dict(robot=model.params.name, speed=gait.speed, T_stance=gait.T_stance,
              T_flight=gait.T_flight, step_length=gait.step_length, cost=gait.cost,
              solver=gait.solver_stats, checks=report, file=str(gait.save(out)))
-    s["notes"] = _grid_notes(report, opts)
+    s["dense_grid_violations"] = [list(v) for v in check.violations(gait.options.limit(model))]
+    s["notes"] = _grid_notes(report, opts) + _violation_notes(s["dense_grid_violations"])
     if folder is not None:
         s["plots"] = save_figures({"running_step": running_plot(model, gait)}, folder)
     if args.stability:
