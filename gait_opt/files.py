@@ -73,7 +73,39 @@ def read_gait_file(path: Path) -> dict:
     GaitFileError
         Naming the file and what is wrong.
     """
-    return gait_body(_read_json(path), f"gait file {path}", str(path))
+    try:
+        body = _read_json(path)
+    except GaitFileError as e:
+        raise GaitFileError(_another_input(path) or str(e)) from None
+    if not (isinstance(body, dict) and body.get("format") == FORMAT):
+        hint = _another_input(path, body)
+        if hint:
+            raise GaitFileError(hint)
+    return gait_body(body, f"gait file {path}", str(path))
+
+
+#: the suffixes of the toolkit's other inputs: a sampled step to import, a robot
+_STEP_SUFFIXES = (".csv", ".npz")
+_ROBOT_SUFFIXES = (".toml", ".urdf")
+
+
+def _another_input(path: Path, body=None) -> str:
+    """The message for a file given as a gait file that is one of the toolkit's other
+    inputs (a sampled step, which becomes a gait by import; a robot description), by its
+    suffix or its JSON ``body``; '' for anything else (the reader's own message)."""
+    path = Path(path)
+    if not path.is_file():
+        return ""
+    keys = set(body) if isinstance(body, dict) else set()
+    if path.suffix.lower() in _STEP_SUFFIXES or {"t", "q", "dq"} <= keys \
+            or "virtual_constraints" in keys:
+        return (f"{path} is a sampled step, not a gait file: make a gait of it with "
+                f"gait_opt.import_gait (on the command line 'biped gait --import {path} "
+                f"--out gait.json', then --gait gait.json)")
+    if path.suffix.lower() in _ROBOT_SUFFIXES or {"torso", "leg"} <= keys:
+        return (f"{path} is a robot description, not a gait file: load it with "
+                f"biped_casadi.robot (on the command line --robot {path})")
+    return ""
 
 
 def gait_body(body, where: str, name: str | None = None) -> dict:

@@ -90,6 +90,11 @@ def files(model, gait, tmp_path_factory):
     edited("options_bad.json", lambda b: b["options"].update(speed="fast"))
     edited("options_huge.json", lambda b: b["options"].update(n_intervals=10**7))
     edited("extra_key.json", lambda b: b.update(comment="edited by hand"))
+    # the toolkit's other inputs given as a gait: a sampled step, a robot description
+    write("step.csv", "t,q1,q2,q3,q4,q5,dq1,dq2,dq3,dq4,dq5\n" + "0,0,0,0,0,0,0,0,0,0,0\n")
+    write("step_nodes.json", json.dumps({"t": [0.0], "q": [[0.0] * 5], "dq": [[0.0] * 5]}))
+    write("robot_desc.toml", (pathlib.Path(__file__).parent.parent / "biped_casadi" / "model"
+                              / "robots" / "rabbit.toml").read_text())
     write("params_garbage.toml", bytes(range(256)))
     write("params_empty.toml", "")
     write("params_bad.json", json.dumps(dict(RobotParams().to_dict(), m_torso=-12.0)))
@@ -235,6 +240,14 @@ CASES = [
     (["eig", "--gait", "{number}", *M0], "not a biped-casadi-gait file"),
     (["eig", "--gait", "{other_format}", *M0], "not a biped-casadi-gait file"),
     (["eig", "--gait", "{summary}", *M0], "not a biped-casadi-gait file"),
+    # a sampled step or a robot given as the gait: "not valid JSON (truncated or
+    # corrupted?)" before; what to do with it instead
+    (["eig", "--gait", "{step}", *M0], "{step} is a sampled step, not a gait file: make a "
+                                      "gait of it with gait_opt.import_gait (on the command "
+                                      "line 'biped gait --import {step} --out gait.json'"),
+    (["simulate", "--gait", "{step_nodes}"], "{step_nodes} is a sampled step"),
+    (["sweep", "--gait", "{robot_desc}", "--grid", "2"], "{robot_desc} is a robot "
+                                                         "description, not a gait file"),
     # a gait family where one gait is taken: how to take one from it
     # an output that is the input: the family was replaced by the one gait taken from it
     (["gait", "--family", "{family}", "--speed", "0.75", "--out", "{family}"],

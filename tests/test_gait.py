@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import pathlib
 import subprocess
 import sys
 from math import comb
@@ -22,6 +23,7 @@ from biped_casadi import RobotParams, rabbit
 from gait_opt import (ORBIT_TOL, Gait, GaitFileError, GaitOptimizationError, GaitOptions,
                       GaitSolveResult, OpenOrbitWarning, optimize_gait)
 from gait_opt.transcription import build_problem, initial_guess
+from gait_opt.urdf_angles import write_gait_csv
 
 N_DENSE = 2001
 
@@ -355,6 +357,28 @@ def test_not_a_file(gait, tmp_path):
     (tmp_path / "bin.json").write_bytes(bytes(range(256)))
     with pytest.raises(GaitFileError, match="not a text"):
         Gait.load(tmp_path / "bin.json")
+
+
+def test_another_input_as_a_gait_file_says_what_to_do(gait, tmp_path):
+    """A sampled step (the exported CSV, an NPZ, a JSON of nodes) or a robot description
+    given as a gait file: 'not valid JSON (truncated or corrupted?)' or 'not a text
+    file' before; now what it is and how it becomes a gait."""
+    write_gait_csv(gait, tmp_path / "step.csv")
+    np.savez(tmp_path / "step.npz", t=np.zeros(5), q=np.zeros((5, 5)), dq=np.zeros((5, 5)))
+    (tmp_path / "step.json").write_text(json.dumps({"t": [0.0], "q": [[0.0] * 5],
+                                                    "dq": [[0.0] * 5]}))
+    for name in ("step.csv", "step.npz", "step.json"):
+        with pytest.raises(GaitFileError, match=r"is a sampled step, not a gait file: make "
+                                                r"a gait of it with gait_opt.import_gait"):
+            Gait.load(tmp_path / name)
+    toml = tmp_path / "robot.toml"
+    toml.write_text((pathlib.Path(__file__).parent.parent / "biped_casadi" / "model" / "robots"
+                     / "rabbit.toml").read_text())
+    with pytest.raises(GaitFileError, match="is a robot description, not a gait file"):
+        Gait.load(toml)
+    (tmp_path / "missing.csv").unlink(missing_ok=True)
+    with pytest.raises(GaitFileError, match="not found"):     # still the reader's own line
+        Gait.load(tmp_path / "missing.csv")
 
 
 def test_save_leaves_nothing_behind_on_failure(gait, tmp_path, monkeypatch):
