@@ -20,7 +20,7 @@ from pathlib import Path
 from biped_casadi.caching import digest
 from biped_casadi.files import read_text_file, write_text_atomic
 
-from .files import GaitFileError, gait_body
+from .files import GaitFileError, checksum_error, gait_body
 from .gait import Gait
 from .options import GaitOptions
 
@@ -191,7 +191,7 @@ def _envelope(body, where, path):
                             f"toolkit reads version {FAMILY_VERSION}")
     rest = {k: v for k, v in body.items() if k != "sha256"}
     if body.get("sha256") != digest(rest):
-        raise GaitFileError(f"{where} is corrupted (checksum mismatch)")
+        raise checksum_error(where, body.get("sha256"))
     missing = [k for k in _KEYS if k not in body]
     unknown = sorted(set(body) - set(_KEYS))
     if missing or unknown:

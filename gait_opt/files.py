@@ -25,7 +25,7 @@ from biped_casadi.files import read_text_file
 from .options import GaitOptions
 
 __all__ = ["GaitFileError", "OpenOrbitWarning", "FORMAT", "FORMAT_VERSION", "read_gait_file",
-           "gait_body", "gait_parts"]
+           "gait_body", "gait_parts", "checksum_error"]
 
 FORMAT = "biped-casadi-gait"
 FORMAT_VERSION = 1
@@ -139,7 +139,7 @@ def gait_body(body, where: str, name: str | None = None) -> dict:
     body = dict(body)
     checksum = body.pop("sha256", None)
     if checksum != digest(body):
-        raise GaitFileError(f"{where} is corrupted (checksum mismatch)")
+        raise checksum_error(where, checksum)
     missing = [k for k in _KEYS if k != "sha256" and k not in body]
     unknown = sorted(set(body) - set(_KEYS) - {"solver_stats"})
     if missing or unknown:
@@ -147,6 +147,16 @@ def gait_body(body, where: str, name: str | None = None) -> dict:
             ([f"missing key(s): {', '.join(missing)}"] if missing else [])
             + ([f"unknown key(s): {', '.join(unknown)}"] if unknown else [])))
     return body
+
+
+def checksum_error(where: str, checksum) -> GaitFileError:
+    """The error of a file whose ``sha256`` is missing (``checksum`` None) or is not the
+    digest of the rest: what happened, and what to do instead of editing it."""
+    what = ("has no 'sha256' checksum" if checksum is None else
+            "is corrupted or was edited (checksum mismatch)")
+    return GaitFileError(f"{where} {what}: only the numbers the toolkit wrote are read; "
+                         f"write the file again, or import a step edited by hand "
+                         f"(gait_opt.import_gait, 'biped gait --import')")
 
 
 def gait_parts(body: dict, model, where: str):

@@ -71,6 +71,7 @@ def files(model, gait, tmp_path_factory):
     write("summary.json", json.dumps({"stages": {}, "figures": {}}))
     edited("version.json", lambda b: b.update(version=99))
     edited("checksum.json", lambda b: b["solution"].update(T=0.7), sign=False)
+    edited("no_sha.json", lambda b: b.pop("sha256"), sign=False)
     edited("no_solution.json", lambda b: b.pop("solution"))
     edited("no_x0.json", lambda b: b["solution"].pop("x0"))
     edited("solution_list.json", lambda b: b.update(solution=[1, 2]))
@@ -259,7 +260,14 @@ CASES = [
     (["sweep", "--gait", "{family}", "--grid", "2"], "is a gait family file"),
     (["m1", "--gait", "{family}"], "'biped m1 --robust' designs over a family"),
     (["eig", "--gait", "{version}", *M0], "format version 99"),
-    (["eig", "--gait", "{checksum}", *M0], "checksum"),
+    # edited by hand: what to do instead ("corrupted (checksum mismatch)" before, also
+    # for a file without a checksum)
+    (["eig", "--gait", "{checksum}", *M0], "is corrupted or was edited (checksum mismatch):"
+                                           " only the numbers the toolkit wrote are read; "
+                                           "write the file again, or import a step edited "
+                                           "by hand"),
+    (["eig", "--gait", "{no_sha}", *M0], "{no_sha} has no 'sha256' checksum: only the "
+                                         "numbers"),
     (["eig", "--gait", "{no_solution}", *M0], "missing key(s): solution"),
     (["eig", "--gait", "{no_x0}", *M0], "x0"),
     (["eig", "--gait", "{solution_list}", *M0], "'solution' must be an object"),
