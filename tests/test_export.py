@@ -13,6 +13,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
+import analysis.verify_export as export_check
 from analysis import singular_m1_values
 from analysis.cli import main as biped_main
 from analysis.verify_export import (SIMULATION_TOL, TORQUE_RTOL, compare_simulations,
@@ -102,6 +103,23 @@ def test_compiled_torques_equal_the_python_law(which, tv, vc):
     assert r.success, r.message
     assert r.max_torque_rel <= TORQUE_RTOL and r.max_output_abs <= 1e-10
     assert r.max_den_rel <= 1e-12 and r.return_codes == {"0": 2000}
+
+
+@needs_cc
+def test_step_starts_both_laws_refuse_are_counted_not_evaluated(vc, monkeypatch):
+    """Random step starts whose phase moves backwards (on a 0.1 m/s gait 14 of 1000 near
+    the orbit's start) had the Python law called with its NaN step state: `biped export
+    --verify` of that gait ended in "p must be finite" (exit 2).  Both laws refuse such a
+    start; it is counted, not compared."""
+    ctrl, lib = vc
+    draw = export_check._random_states
+    monkeypatch.setattr(export_check, "_random_states",
+                        lambda c, n, rng: draw(c, n, rng, dq_err=2.0))
+    r = compare_states(lib, ctrl, n=300, seed=1)
+    assert r.success, r.message
+    assert r.starts_refused > 0 and r.starts_disagree == 0
+    assert sum(r.return_codes.values()) == 300 - r.starts_refused
+    assert f"{r.starts_refused} step starts refused by both laws" in r.message
 
 
 @needs_cc

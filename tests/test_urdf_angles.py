@@ -28,6 +28,7 @@ from urdf_variants import variant_urdf
 
 from analysis import poincare_eigenvalues, vc_eigenvalue
 from analysis.cli import main
+from analysis import verify_export
 from analysis.verify_export import compare_simulations, compare_urdf_states
 from biped_casadi import (SimulationOptions, TimeVaryingController,
                           VirtualConstraintController, robot)
@@ -169,6 +170,19 @@ def test_urdf_law_equals_the_toolkits_law(urdf_library):
     assert "q[1] hip_left, q[2] knee_left, q[3] hip_right, q[4] knee_right" in words
     assert "int biped_step_start_leg(int stance" in header
     assert "knee_right 50" in (folder / "README.md").read_text()       # the reductions
+
+
+def test_urdf_step_starts_both_laws_refuse_are_counted(urdf_library, monkeypatch):
+    """The URDF comparison called the Python law with the NaN state of a start whose
+    phase moves backwards (ValueError: p must be finite); both laws refuse it."""
+    ctrl, law, folder, lib = urdf_library
+    draw = verify_export._random_states
+    monkeypatch.setattr(verify_export, "_random_states",
+                        lambda c, n, rng: draw(c, n, rng, dq_err=2.0))
+    r = compare_urdf_states(lib, ctrl, n=300, seed=4)
+    assert r.success, r.message
+    assert r.starts_refused > 0 and r.starts_disagree == 0
+    assert r.stance_found == 300 - r.starts_refused
 
 
 def test_closed_loop_driven_by_the_urdf_law_is_biped_simulate(urdf_library, walker_gait):

@@ -241,8 +241,12 @@ def _report(args, r):
           f"{s['max_torque_rel']:.3g} relative ({s['max_torque_abs']:.3g} N m; limit "
           f"{TORQUE_RTOL:g}); outputs by {s['max_output_abs']:.3g}, denominator by "
           f"{s['max_den_rel']:.3g} relative; return codes {s['return_codes']}")
+    if s.get("starts_refused") or s.get("starts_disagree"):
+        print(f"  step starts: {s['starts_refused']} of the {s['n']} refused by both laws "
+              f"(the phase moving backwards), {s['starts_disagree']} by one law only")
     if s.get("stance_found") is not None:
-        print(f"  biped_step_start found the stance leg at {s['stance_found']} of {s['n']} "
+        started = s["n"] - s.get("starts_refused", 0) - s.get("starts_disagree", 0)
+        print(f"  biped_step_start found the stance leg at {s['stance_found']} of {started} "
               f"step starts")
     if m.get("start") == "orbit":
         print(f"  {m['message'].split('; from the orbit')[0]}: compared from the orbit's start "
