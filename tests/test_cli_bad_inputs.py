@@ -24,6 +24,7 @@ from analysis.cli import main as biped_main
 import biped_casadi
 from biped_casadi import RobotParams
 from analysis.sweeps import grid_points, run_sweep
+from gait_opt import GaitFileError
 
 ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
 READ_ONLY_SYSTEM = "/sys"          # EACCES on create, also for root
@@ -544,6 +545,18 @@ def test_bad_input_is_one_line_and_exit_2(case, files, tmp_path, monkeypatch, ca
     assert lines[0].startswith("biped"), lines[0]
     assert expect.format(**files) in lines[0], lines[0]
     assert _snapshot(files["root_dir"], tmp_path) == before, "a file was written or changed"
+
+
+def test_debug_lets_a_library_value_error_through(files, monkeypatch, capsys):
+    """BIPED_DEBUG=1 showed the traceback of every failure but a ValueError: a library's
+    ValueError from a bug ('p must be finite' of `biped export --verify` on a slow gait)
+    stayed one line, with no way to see where it came from.  A UserError (the command
+    line's own check) stays one line."""
+    monkeypatch.setenv("BIPED_DEBUG", "1")
+    with pytest.raises(GaitFileError, match="checksum"):
+        biped_main(["eig", "--gait", files["checksum"], *M0])
+    assert biped_main(["eig", "--gait", files["gait"], "--m1", "1", "2"]) == 2
+    assert "--m1 takes 4" in capsys.readouterr().err
 
 
 @pytest.fixture(scope="module")

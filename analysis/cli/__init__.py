@@ -25,7 +25,7 @@ from biped_casadi.numerics import NotCompiledWarning
 from . import (eig, export, export_running, gait, m1, mujoco, mujoco_running, reproduce,
                robot, robust, running, simulate, sweep, terrain, view)
 from .common import UserError, add_robot, check_inputs, load_model, print_json
-from .failures import failure_line
+from .failures import debugging, failure_line
 from .stdout import named_stdout
 
 __all__ = ["main", "build_parser", "UserError"]
@@ -173,6 +173,8 @@ def _failed(args, e: BaseException) -> int:
     try:
         raise e
     except (UserError, ValueError) as e:           # GaitFileError, SweepStoreError, ...
+        if not isinstance(e, UserError) and debugging():
+            raise                                  # a library's: where it came from
         print(f"biped {args.command}: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except BrokenPipeError:        # output piped into `head` and the like

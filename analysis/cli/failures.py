@@ -17,7 +17,7 @@ from gait_opt import GaitOptimizationError
 
 from ..tasks import TaskError
 
-__all__ = ["failure_line", "DEBUG_ENV"]
+__all__ = ["failure_line", "debugging", "DEBUG_ENV"]
 
 #: set (to anything but '' or '0') to see the traceback of a failure
 DEBUG_ENV = "BIPED_DEBUG"
