@@ -94,7 +94,10 @@ def _another_input(path: Path, body=None) -> str:
     inputs (a sampled step, which becomes a gait by import; a robot description), by its
     suffix or its JSON ``body``; '' for anything else (the reader's own message)."""
     path = Path(path)
-    if not path.is_file():
+    try:
+        if not path.is_file():
+            return ""
+    except OSError:                       # a name too long, say: the reader's own line
         return ""
     keys = set(body) if isinstance(body, dict) else set()
     if path.suffix.lower() in _STEP_SUFFIXES or {"t", "q", "dq"} <= keys \
