@@ -225,7 +225,7 @@ def _nodes_of(model, source, angles: str, where: str, stance=None, tol: float = 
         return nodes, "nodes", info
     info = {}
     if isinstance(source, (str, Path)):
-        source = read_nodes(source, model.nq)
+        source = read_nodes(source)                 # its size checked below, naming the robot
     if isinstance(source, dict) and "bezier" in source:
         source = constraints_from_dict(source, model.nq, where)
     if isinstance(source, BezierConstraints):
@@ -236,13 +236,15 @@ def _nodes_of(model, source, angles: str, where: str, stance=None, tol: float = 
         if missing:
             raise GaitImportError(f"{where}: missing {', '.join(missing)}")
         source = nodes_from_arrays(source["t"], source["q"], source["dq"], source.get("ddq"),
-                                   model.nq, where)
+                                   None, where)
     if not isinstance(source, Nodes):
         raise GaitImportError(f"source must be a file name, a Nodes, a dict of arrays or "
                               f"BezierConstraints, got {type(source).__name__}")
     if source.nq != model.nq:
         raise GaitImportError(f"{where}: {source.nq} coordinates per node, the robot "
-                              f"{model.params.name} has {model.nq}")
+                              f"{model.params.name} has {model.nq}: a step of another robot? "
+                              f"(give its robot: import_gait's model, on the command line "
+                              f"--robot)")
     # a Nodes made by hand gets the checks of arrays (NaN, shapes, increasing times)
     source = dataclasses.replace(
         nodes_from_arrays(source.t, np.transpose(source.q), np.transpose(source.dq),

@@ -179,7 +179,9 @@ BAD = {
                   "t must increase strictly"),
     "few.csv": ("HEAD\n0,0,0,0,0,0,0,0,0,0,0\n1,0,0,0,0,0,0,0,0,0,0\n", "a step needs at least 5"),
     "three.csv": ("t,q1,q2,q3,dq1,dq2,dq3\n" + "\n".join(f"{i},0,0,0,0,0,0" for i in range(6)),
-                  "3 coordinates per node, the robot 5"),
+                  # the robot named and what to do ("the robot 5" before)
+                  "3 coordinates per node, the robot RABBIT has 5: a step of another robot? "
+                  "(give its robot: import_gait's model, on the command line --robot)"),
     "shape.json": (json.dumps({"t": [0, 1, 2, 3, 4], "q": [[0] * 4] * 3, "dq": [[0] * 5] * 5}),
                    "q must be an (N, n) array"),
     "vc.json": (json.dumps({"virtual_constraints": {"bezier": [[0, 0, 0, 0]] * 4,
