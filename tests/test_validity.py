@@ -97,6 +97,23 @@ def test_limits_of_options(model):
     assert lim.hip_floor == pytest.approx(0.5625 * model.description.leg_length)
 
 
+def test_a_robot_without_a_torque_limit_is_held_to_its_gaits():
+    """A URDF without effort limits: the runs are held to the limit its gait was made
+    for (a gait for 60 N m motors walked at 139 N m with status ok), unless the options
+    give one; without a gait's limit there is none."""
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from biped_casadi import robot
+    walker = robot(Path(__file__).resolve().parents[1] / "docs/howto/walker/walker.urdf")
+    assert not math.isfinite(walker.params.torque_limit)
+    gait = SimpleNamespace(options=SimpleNamespace(torque_limit=60.0))
+    assert Limits.of(SimulationOptions(), walker, gait).torque_limit == 60.0
+    assert Limits.of(SimulationOptions(torque_limit=80.0), walker, gait).torque_limit == 80.0
+    assert Limits.of(SimulationOptions(saturate=True), walker, gait).saturate
+    assert not math.isfinite(Limits.of(SimulationOptions(), walker).torque_limit)
+
+
 # ------------------------------------------------------------------ outcomes
 def _recorded():
     rec = OutcomeRecorder(3, 4)

@@ -285,7 +285,8 @@ def register(sub):
                    help="initial error of each joint velocity, rad/s (instead of --perturb)")
     p.add_argument("--torque-limit", type=float, metavar="U",
                    help="stop with status torque_limit where some |u_i| exceeds U, N m "
-                        "(default: the robot's limit, 150 for RABBIT)")
+                        "(default: the robot's limit, 150 for RABBIT; for a robot without "
+                        "one, the limit its gait was made for)")
     p.add_argument("--terrain", nargs="+", type=float, metavar="H",
                    help="ground heights h1 h2 ... of the steps' footholds above the stance "
                         "foot, m (a step up > 0; flat after the last)")

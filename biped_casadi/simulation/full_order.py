@@ -277,7 +277,7 @@ class Simulator:
         controller.gains.check_step(self.h)
         self.chunk = self.options.rk4_steps // CHUNKS_PER_STEP
         self.schema = Diagnostics(self.model.nu, outputs=True)
-        self.limits = Limits.of(self.options, self.plant)
+        self.limits = Limits.of(self.options, self.plant, self.gait)
         self._build()
         ref = self.controller.singularity()
         self._den_scale = max(abs(ref.min_value), abs(ref.max_value))

@@ -45,7 +45,8 @@ class SimulationOptions:
         like its inverse).
     torque_limit : float or None
         The run stops ('torque_limit') where some ``|u_i|`` exceeds it, N m; None
-        (default): the robot's own limit (``model.params.torque_limit``).
+        (default): the robot's own limit (``model.params.torque_limit``), or for a robot
+        without one the limit its gait was made for (``gait.options.torque_limit``).
     min_liftoff_speed : float
         The old stance foot must leave the ground after an impact with at least this
         upward speed, m/s (default 0: any upward speed).

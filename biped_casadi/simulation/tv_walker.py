@@ -101,7 +101,7 @@ class ZeroDynamicsWalker:
         self.rk4_steps, self.jit = rk4_steps, jit
         self.h = self.T / rk4_steps
         self.K = rk4_steps // CHUNKS_PER_STEP
-        self.limits = Limits.of(self.options, model)
+        self.limits = Limits.of(self.options, model, gait)
         self.schema = Diagnostics(self.nu, outputs=False)
         self.zd = zero_dynamics(model)
         self.horizon = min(self.options.horizon, (gait.t_max - self.h) / self.T)

@@ -90,11 +90,12 @@ class Limits:
     torso_upright: float = 0.0
 
     @classmethod
-    def of(cls, options, model) -> "Limits":
+    def of(cls, options, model, gait=None) -> "Limits":
         """The limits of simulation options for a robot.
 
         The robot's own torque limit and fall height are used where the options leave
-        them unset.
+        them unset; a robot without a torque limit (a URDF without effort limits) is held
+        to the one its gait was made for, as MuJoCo's motors are.
 
         Parameters
         ----------
@@ -102,6 +103,8 @@ class Limits:
             The thresholds.
         model : BipedModel
             The robot.
+        gait : Gait, optional
+            The reference (its ``options.torque_limit``).
 
         Returns
         -------
@@ -109,6 +112,8 @@ class Limits:
         """
         tl = options.torque_limit if options.torque_limit is not None \
             else model.params.torque_limit
+        if options.torque_limit is None and not np.isfinite(tl):
+            tl = getattr(getattr(gait, "options", None), "torque_limit", None) or tl
         if getattr(options, "saturate", False) and not np.isfinite(tl):
             raise ValueError(f"saturate: the robot {model.params.name} has no torque limit to "
                              f"clip the torques at (its URDF gives no effort limits): give "

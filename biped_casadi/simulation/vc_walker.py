@@ -79,7 +79,7 @@ class VirtualConstraintWalker:
         self.vmap = constraint_surface(gait)
         self.theta_s = self.vmap.phase(gait.q(SECTION * gait.T))
         self.nodes = as_count(nodes, "nodes")
-        self.limits = Limits.of(self.options, model)
+        self.limits = Limits.of(self.options, model, gait)
         self.schema = Diagnostics(self.nu, outputs=False)
         self.ref_T = gait.state_at(gait.T)
         self.direction = float(np.sign(self.vmap.theta_minus - self.vmap.theta_plus))
