@@ -7,7 +7,9 @@ so the schemes are the same by construction.
 """
 from __future__ import annotations
 
+import ctypes
 import errno
+import functools
 import hashlib
 import math
 import os
@@ -26,7 +28,7 @@ __all__ = ["rk4_step", "quintic_hermite_interval", "as_vector", "as_number", "as
            "as_numbers",
            "jit_options",
            "compiled", "cached_library", "compiler_reason", "FastCall", "NotCompiledWarning",
-           "note_not_compiled", "iteration_stop"]
+           "note_not_compiled", "iteration_stop", "ipopt_solver"]
 
 
 def jit_options(optimisation: str = "-O2") -> dict:
@@ -564,3 +566,37 @@ def iteration_stop(name: str, nx: int, ng: int, stop):
             return [1 if stop(np.array(arg[2]).ravel()) else 0]
 
     return _Stop()
+
+
+def ipopt_solver(name: str, problem: dict, options: dict):
+    """CasADi's IPOPT on ``problem``, its linear algebra on one thread.
+
+    MUMPS factorises with the OpenBLAS that CasADi ships, whose threads default to the
+    cores (or ``OMP_NUM_THREADS``): the same solve ended 1e-4 apart on two threads and
+    on one (a Dask worker's nanny sets one).  One thread makes a solve's numbers the same
+    in this process, on any machine and on any worker.
+
+    Parameters
+    ----------
+    name : str
+        The solver Function's name.
+    problem, options : dict
+        ``casadi.nlpsol``'s problem and options.
+
+    Returns
+    -------
+    casadi.Function
+    """
+    import casadi as ca
+    solver = ca.nlpsol(name, "ipopt", problem, options)     # (loads IPOPT and its BLAS)
+    _one_blas_thread()
+    return solver
+
+
+@functools.cache
+def _one_blas_thread():
+    """CasADi's OpenBLAS on one thread, for this process (once it is loaded)."""
+    try:                           # loaded with IPOPT: found by its name, not loaded again
+        ctypes.CDLL("libcasadi-tp-openblas.so.0").openblas_set_num_threads(1)
+    except (OSError, AttributeError):     # another platform's build: no such library
+        pass

@@ -56,6 +56,7 @@ import casadi as ca
 import numpy as np
 
 from biped_casadi.caching import cached
+from biped_casadi.numerics import ipopt_solver
 
 from .options import GaitOptions, guess_step_length
 from .parametrisation import reference_dynamics
@@ -633,7 +634,7 @@ def make_solver(prob: Problem, opts: GaitOptions, verbose: bool = False):
     sopts = {"ipopt": ipopt, "print_time": False, "expand": opts.expand, "error_on_fail": False}
     if opts.derivatives == "structured":
         sopts.update(hess_lag=prob.hess_lag, jac_g=prob.jac_g, grad_f=prob.grad_f)
-    return ca.nlpsol("gait_nlp", "ipopt", prob.nlp, sopts)
+    return ipopt_solver("gait_nlp", prob.nlp, sopts)
 
 
 def warm_start_vector(model, opts, gait):

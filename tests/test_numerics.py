@@ -81,3 +81,23 @@ def test_as_rows_refuses_columns_and_words():
                          ("ab", "must be numbers"), ([np.inf, 0], "must be finite")):
         with pytest.raises(ValueError, match="^x " + message if "must" in message else message):
             as_rows(bad, 2, "x")
+
+
+def test_ipopt_factorises_on_one_blas_thread():
+    """MUMPS's BLAS on more threads moved the co-design's optimum by 1e-4 (a Dask
+    worker's nanny pins one): every solver of the toolkit pins one in its process."""
+    import os
+    import subprocess
+    import sys
+    code = ("import ctypes, casadi as ca; from biped_casadi.numerics import ipopt_solver;"
+            "x = ca.SX.sym('x'); s = ipopt_solver('t', {'x': x, 'f': (x - 1) ** 2},"
+            " {'ipopt': {'print_level': 0, 'sb': 'yes'}, 'print_time': False});"
+            "b = ctypes.CDLL('libcasadi-tp-openblas.so.0');"
+            "print(float(s(x0=0)['x']), b.openblas_get_num_threads())")
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="2", OMP_NUM_THREADS="2")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, timeout=120)
+    if "OSError" in out.stderr:
+        pytest.skip("CasADi's build has no OpenBLAS of its own")
+    x, n = out.stdout.split()
+    assert abs(float(x) - 1) < 1e-8 and n == "1", out.stderr

@@ -25,6 +25,7 @@ import numpy as np
 from biped_casadi.caching import cached
 from biped_casadi.control.output_law import M1_LIMIT, decoupling_denominator
 from biped_casadi.control.reference import require_reference
+from biped_casadi.numerics import ipopt_solver
 from biped_casadi.results import Result, internal
 
 from ..stability.poincare import poincare_eigenvalues, poincare_map
@@ -142,7 +143,7 @@ def _epigraph_nlp(pm, tay, constraints: str, den_margin: float):
     lbg += [den_margin] * nd
     ubg += [np.inf] * nd
     nlp = {"x": ca.vertcat(M1, rho), "f": rho, "g": ca.vertcat(*g)}
-    solver = ca.nlpsol("m1_nlp", "ipopt", nlp, {
+    solver = ipopt_solver("m1_nlp", nlp, {
         "ipopt": {"print_level": 0, "sb": "yes", "max_iter": 300, "tol": 1e-10,
                   "hessian_approximation": "exact" if pm.nu <= 2 else "limited-memory"},
         "print_time": False, "error_on_fail": False})

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from biped_casadi.numerics import iteration_stop
+from biped_casadi.numerics import ipopt_solver, iteration_stop
 
 from .functions import _ks
 from .transcription import Transcription, _Rows
@@ -482,7 +482,7 @@ def solve_nlp(nlp: "Reduced", d0, lb, ub, ipopt: dict | None = None,
     budget = None if max_evaluations is None else iteration_stop(
         "codesign_budget", nlp.nd, g0.size,
         lambda g: nlp.evaluations - n0 >= max_evaluations)
-    solver = ca.nlpsol("codesign", "ipopt", {"x": x, "f": cbs[0](x), "g": cbs[1](x)},
+    solver = ipopt_solver("codesign", {"x": x, "f": cbs[0](x), "g": cbs[1](x)},
                        {"ipopt": opts, "grad_f": cbs[2], "jac_g": cbs[3], "print_time": False,
                         "error_on_fail": False,
                         # a trial point where a scenario cannot strike is NaN by design
