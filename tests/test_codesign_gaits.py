@@ -196,7 +196,10 @@ def test_a_failed_task_is_one_line(monkeypatch, capsys, gait, tmp_path):
         return f
     for message, expect in (("GaitOptimizationError: no feasible gait: IPOPT status "
                              "'Infeasible_Problem_Detected'", "no feasible gait"),
-                            ("KeyError: 'x'", "internal error")):
+                            ("KeyError: 'x'", "internal error"),
+                            # the engine's own line (a worker refusing the task): no bug
+                            ("stale worker (tcp://h:1, pid 7): analysis/x.py differs",
+                             "error: stale worker (tcp://h:1, pid 7): analysis/x.py differs\n")):
         monkeypatch.setattr(eigcli, "load_gait", failing(message))
         assert main(["eig", "--gait", path, "--m1", "0", "0", "0", "0"]) == 2
         err = capsys.readouterr().err

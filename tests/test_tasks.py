@@ -306,3 +306,38 @@ def test_a_worker_running_other_code_is_refused(tmp_path):
     assert "stale worker" in msg and "analysis/robustness/basin.py differs" in msg
     assert "\n" not in msg
     assert not list((tmp_path / "cache").rglob("*.pkl"))
+
+
+def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
+    """``kill -9`` of the worker that holds a kept result another task needs: Dask makes
+    it again on the other worker (a scattered copy was lost with it and failed every
+    later dependant).  Then the scheduler killed: a waiting task's ``result()`` raises a
+    TaskError of one line, and the engine says the scheduler was lost."""
+    import os
+    import signal
+    import time
+    from pathlib import Path
+    from dask_cluster import dask_cluster
+    env = {k: v for k, v in os.environ.items() if k != "BIPED_SCHEDULER"}
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parent)
+    with Engine("synchronous", cache=tmp_path / "cache") as eng:
+        eng.submit(square, 3.0).result()                      # kept
+    with dask_cluster(tmp_path, [env, env], scheduler_env=env) as address, \
+            Engine(address, cache=tmp_path / "cache") as eng:
+        client = eng.client()
+        client.wait_for_workers(2, timeout=60)
+        kept = eng.submit(square, 3.0)
+        assert eng.submit(add, kept, 1.0).result() == 10.0
+        holder = client.who_has()[kept.key][0]
+        os.kill(client.run(os.getpid, workers=[holder])[holder], signal.SIGKILL)
+        t0 = time.time()
+        while holder in client.scheduler_info()["workers"] and time.time() - t0 < 30:
+            time.sleep(0.2)
+        assert eng.submit(add, kept, 2.0).result(timeout=60) == 11.0
+        waiting = eng.submit(started_at, 0.0, 60.0)
+        os.kill(client.run_on_scheduler(os.getpid), signal.SIGKILL)
+        with pytest.raises(TaskError, match=r"dropped the run's tasks \(scheduler-conn") as e:
+            waiting.result(timeout=60)
+        assert "\n" not in str(e.value)
+        with pytest.raises(ValueError, match="^scheduler: lost the Dask scheduler at tcp://"):
+            eng.check_started()

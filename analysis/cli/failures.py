@@ -69,8 +69,8 @@ def failure_line(error: BaseException) -> str | None:
         text = str(error.message)
         m = _TYPE.match(text)
         name = m.group(1).rsplit(".", 1)[-1] if m else ""
-        if m and name not in _BUGS:             # its text is written for the user
-            return _one_line(text[m.end():])
+        if name not in _BUGS:      # its text is written for the user (no type: the engine's)
+            return _one_line(text[m.end():] if m else text)
         return _one_line(f"task {error.origin.rsplit('.', 1)[-1]} failed: {text} (an internal "
                          f"error: {DEBUG_ENV}=1 shows its traceback)")
     if isinstance(error, GaitOptimizationError):

@@ -1,26 +1,28 @@
 """The engine of :mod:`analysis.tasks`: a task goes to Dask under its content key with its
-stage's priority, its inputs as Dask futures (a kept or flow result scattered under its
-key); Dask queues, places, steals and fails dependants; a thread keeps each result."""
+stage's priority, its inputs as Dask futures (a kept or flow result sent as a task of its
+own under its key, so that a lost worker's copy is made again); Dask queues, places,
+steals and fails dependants; a thread keeps each result."""
 from __future__ import annotations
 
 import concurrent.futures as cf
 import contextlib
 import dataclasses
+import functools
 import logging
 import os
 import queue
+import re
 import sys
 import threading
 import time
 import traceback
-from dataclasses import dataclass
-from enum import StrEnum
 
 from biped_casadi.caching import (MISSING, ResultStore, TaskInfo, code_files, code_version,
                                   task, task_key)
 
 from ..cluster import check_not_bootstrapping, connect, tune_allocator
 from ..reporting.progress import progress_bar
+from .records import TaskError, TaskRecord, TaskState
 
 __all__ = ["task", "TaskInfo", "Engine", "TaskError", "TaskRecord", "TaskState",
            "resolve_scheduler", "SCHEDULER_ENV"]
@@ -33,57 +35,6 @@ _TOPIC = "biped-task"
 #: per thread: its stage and priority, the futures its flow has seen, whether in a task
 _LOCAL = threading.local()
 
-
-class TaskState(StrEnum):
-    """How a task of a run ended."""
-
-    COMPUTED = "computed"
-    REUSED = "reused"
-    FAILED = "failed"
-
-
-@dataclass
-class TaskRecord:
-    """One task of a run.
-
-    Parameters
-    ----------
-    name, stage, key : str
-        The task, its stage and its content key.
-    state, seconds, error : TaskState, float, str
-        How it ended (None while it runs), what it took (reused: when it was
-        computed), its failure.
-    flow : bool
-        Whether it is a flow (its seconds are mostly waiting).
-    deps : tuple of str
-        The keys it came after: its inputs and, in a flow, the results finished then.
-    """
-
-    name: str
-    stage: str
-    key: str
-    state: TaskState = None
-    seconds: float = 0.0
-    error: str = ""
-    flow: bool = False
-    deps: tuple = ()
-
-
-class TaskError(RuntimeError):
-    """A task failed (``str()``: its name and error, on one line).
-
-    Parameters
-    ----------
-    origin, message, detail, key : str
-        The task that raised first in a chain; its error (``Type: text``), traceback, key.
-    """
-
-    def __init__(self, origin: str, message: str, detail: str = "", key: str = ""):
-        super().__init__(origin, message, detail, key)
-        self.origin, self.message, self.detail, self.key = origin, message, detail, key
-
-    def __str__(self):
-        return " ".join(f"{self.origin.rsplit('.', 1)[-1]}: {self.message}".split())
 
 
 def resolve_scheduler(scheduler=None, workers: int | None = None):
@@ -134,8 +85,27 @@ def _info(fn) -> TaskInfo:
 
 
 def _is_future(obj) -> bool:
-    return isinstance(obj, cf.Future) or (type(obj).__name__ == "Future" and
-                                          type(obj).__module__.startswith("distributed"))
+    return isinstance(obj, cf.Future) or any(c.__name__ == "Future" and c.__module__.startswith(
+        "distributed") for c in type(obj).__mro__)
+
+
+@functools.cache
+def _dask_future():
+    """Dask's future, ``result()`` raising a TaskError also for a task Dask cancelled."""
+    from dask.distributed import Future
+
+    class TaskFuture(Future):
+        def result(self, timeout=None):
+            try:
+                return super().result(timeout)
+            except cf.CancelledError as e:
+                raise _error(str(self.key).rsplit("-", 1)[0], e, _key(self)) from None
+    return TaskFuture
+
+
+def _given(value):
+    """A kept or flow result as a task's (Dask makes it again if its worker is lost)."""
+    return value
 
 
 def _key(future) -> str:
@@ -176,8 +146,15 @@ def _unpack(obj):
 
 def _error(name: str, e: BaseException, key: str) -> TaskError:
     """``e`` as the :class:`TaskError` of task ``name`` (in its ``except`` block)."""
-    return e if isinstance(e, TaskError) else TaskError(
-        name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8), key)
+    if isinstance(e, TaskError):
+        return e
+    if isinstance(e, cf.CancelledError) and "reason" in str(e):        # Dask's
+        reason = re.search(r"reason: ([^.]+)", str(e)).group(1)
+        return TaskError(name, f"ConnectionError: the Dask cluster dropped the run's tasks "
+                               f"({reason}): start its scheduler and workers again and run "
+                               "the same command (it resumes from the results kept so far)",
+                         key=key)
+    return TaskError(name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8), key)
 
 
 def _one(e: BaseException) -> str:
@@ -210,14 +187,15 @@ def _run(fn, key: str, code: str | None, args, kwargs):
 def _stale(kind: str, code: str) -> str:
     """Why a worker refuses a task: the first file whose code differs from the client's
     (the engine leaves the client's files in the scheduler's metadata)."""
-    mine, theirs = code_files(kind), {}
+    mine, theirs, at = code_files(kind), {}, ""
     with contextlib.suppress(Exception):
-        from dask.distributed import get_client
+        from dask.distributed import get_client, get_worker
+        at = f"{get_worker().address}, "
         theirs = get_client().get_metadata([_TOPIC, kind, code], None) or {}
     diff = sorted(f for f in set(mine) | set(theirs) if mine.get(f) != theirs.get(f))
     what = (diff[0] + (f" (and {len(diff) - 1} more)" if len(diff) > 1 else "")) if theirs \
         else "its code"
-    return (f"stale worker (pid {os.getpid()}): {what} differs from this run's code; run "
+    return (f"stale worker ({at}pid {os.getpid()}): {what} differs from this run's code; run "
             "the same version of the toolkit on every worker")
 
 
@@ -255,9 +233,10 @@ class Engine:
         self.store, self.use_cache = ResultStore(cache), bool(use_cache)
         self._log, self._progress = log, bool(progress) and sys.stderr.isatty()
         self.closed, self._records, self._published = False, [], set()
-        self._futures, self._tasks, self._scattered, self._seconds = {}, {}, {}, {}
+        self._futures, self._tasks, self._sent, self._seconds = {}, {}, {}, {}
         self._cond = threading.Condition(threading.RLock())
         self._client = self._cluster = self._start_error = self._bar = self._keeper = None
+        self._client_level = None
         self._kept = queue.Queue()
         if self.scheduler != "synchronous" and (not self.use_cache or self.store.empty()):
             with contextlib.suppress(Exception):       # raised again by the first submit
@@ -300,6 +279,9 @@ class Engine:
                     self._start_error = e
                     raise
                 self._client.subscribe_topic(_TOPIC, self._on_seconds)
+                if self._cluster is None:    # a lost scheduler: one line, not Dask's log
+                    log = logging.getLogger("distributed.client")
+                    self._client_level, _ = log.level, log.setLevel(logging.CRITICAL)
                 self._keeper = threading.Thread(target=self._keep, daemon=True)
                 self._keeper.start()
                 if self._cluster is not None:
@@ -325,12 +307,20 @@ class Engine:
                                                     f"({_one(e)})")
 
     def check_started(self):
-        """Raise ``ValueError('scheduler: ...')`` if the cluster could not start."""
-        e = self._start_error
+        """Raise ``ValueError('scheduler: ...')`` if the cluster did not start or was lost.
+
+        Lost: the client is reconnecting or closed (Dask cancelled every task then).
+        """
+        e, c = self._start_error, self._client
         if e is not None:
             raise ValueError(e.args[0] if isinstance(e, ValueError) and e.args
                              else f"scheduler: the Dask cluster did not start ({_one(e)})") \
                 from e
+        if c is not None and self._cluster is None and c.status != "running":
+            at = f" at {self.scheduler}" if isinstance(self.scheduler, str) else ""
+            raise ValueError(f"scheduler: lost the Dask scheduler{at} during the run: start it "
+                             "and its workers again and run the same command (it resumes "
+                             "from the results kept so far)")
 
     def close(self):
         """Keep what has arrived, fail what has not, close the cluster it started."""
@@ -359,6 +349,8 @@ class Engine:
                     self._cluster.close()
         finally:
             quiet.setLevel(level)
+            if self._client_level is not None:
+                logging.getLogger("distributed.client").setLevel(self._client_level)
         if self._bar is not None:
             self._bar.close()
 
@@ -582,8 +574,9 @@ class Engine:
             with self._cond:                 # not while the cluster is found dead
                 if self._start_error is not None:
                     raise self._start_error
-                fut = self._set(key, client.submit(_run, fn, key, code, a, k, key=holder.key,
-                                                   pure=False, priority=self.current_stage()[1]))
+                fut = client.submit(_run, fn, key, code, a, k, key=holder.key, pure=False,
+                                    priority=self.current_stage()[1])
+                fut = self._set(key, _dask_future()(fut.key, client))
         except Exception as e:                         # noqa: BLE001 - this task fails
             err = e if isinstance(e, TaskError) else TaskError(info.name, (
                 f"not run: the Dask cluster did not start ({_one(e)})"
@@ -594,14 +587,15 @@ class Engine:
         return fut
 
     def _on_dask(self, client, f):
-        """A future as a Dask future: itself, or its value (waited for: a flow's)
-        scattered under its key."""
+        """A future as a Dask future: itself, or its value (waited for: a flow's) as a
+        task under its key: scattered, it would be lost with the worker that holds it."""
         if not isinstance(f, cf.Future):
             return f
         value = f.result()                     # a failed input fails the task
-        if _key(f) not in self._scattered:
-            self._scattered[_key(f)] = client.scatter({f.key: value}, hash=False)[f.key]
-        return self._scattered[_key(f)]
+        if _key(f) not in self._sent:
+            self._sent[_key(f)] = client.submit(_given, value, key=f.key, pure=False,
+                                                     priority=self.current_stage()[1])
+        return self._sent[_key(f)]
 
     def _flow(self, flow, key, fut, args, kwargs, inputs):
         """Run a flow: in a thread of its own, or here when synchronous."""
