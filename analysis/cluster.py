@@ -9,7 +9,7 @@ import ctypes
 import functools
 import logging
 
-__all__ = ["connect", "check_not_bootstrapping", "tune_allocator",
+__all__ = ["connect", "check_workers", "check_not_bootstrapping", "tune_allocator",
            "LOCAL_CLUSTER_CONFIG", "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
 
 #: how long to wait for a Dask scheduler to answer, and for a first worker to join it
@@ -104,6 +104,34 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
         raise ValueError(f"scheduler: no Dask worker joined {scheduler} within "
                          f"{DASK_WORKER_TIMEOUT} s ({e})") from None
     return client, None
+
+
+def check_workers(client, kind: str = "numerical"):
+    """Refuse a cluster whose workers run other code than this process, before any work
+    (each task is refused on such a worker too, one by one: a whole report of failed
+    stages).
+
+    Parameters
+    ----------
+    client : dask.distributed.Client
+        Connected to the cluster.
+    kind : str
+        The code set to compare (:data:`biped_casadi.caching.CODE_SETS`).
+
+    Raises
+    ------
+    ValueError
+        Naming 'scheduler', the first worker that differs and its first file.
+    """
+    from biped_casadi.caching import code_files
+    mine = code_files(kind)
+    for address, theirs in sorted(client.run(code_files, kind).items()):
+        diff = sorted(f for f in set(mine) | set(theirs) if mine.get(f) != theirs.get(f))
+        if diff:
+            more = f" (and {len(diff) - 1} more)" if len(diff) > 1 else ""
+            raise ValueError(f"scheduler: the Dask worker {address} runs other code: "
+                             f"{diff[0]}{more} differs from this checkout's; run the same "
+                             "version of the toolkit on every worker")
 
 
 @functools.cache

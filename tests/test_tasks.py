@@ -302,6 +302,10 @@ def test_a_worker_running_other_code_is_refused(tmp_path):
         with pytest.raises(TaskError) as e:
             ref.result()
         assert eng.submit(add, ref, 1.0).exception() is not None      # its dependant too
+        from analysis.cluster import check_workers            # before any work: one line
+        with pytest.raises(ValueError, match=r"^scheduler: the Dask worker tcp://\S+ runs "
+                                             r"other code: analysis/robustness/basin.py diff"):
+            check_workers(eng.client())
     msg = str(e.value)
     assert "stale worker" in msg and "analysis/robustness/basin.py differs" in msg
     assert "\n" not in msg

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.cluster import DASK_CONNECT_TIMEOUT, connect
+from analysis.cluster import DASK_CONNECT_TIMEOUT, check_workers, connect
 from analysis.tasks import resolve_scheduler
 from biped_casadi import robot
 from biped_casadi.control.running import check_running_gait
@@ -476,7 +476,11 @@ def check_scheduler(scheduler, say=None):
         say(f"connecting to the Dask scheduler at {scheduler} (up to "
             f"{DASK_CONNECT_TIMEOUT}) ...")
     try:
-        connect(scheduler)[0].close()
+        client = connect(scheduler)[0]
+        try:
+            check_workers(client)                  # a stale worker: one line, no report
+        finally:
+            client.close()
     except ValueError as e:
         raise UserError(f"--{e}") from None
 
