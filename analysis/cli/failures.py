@@ -33,6 +33,10 @@ _BUGS = ("KeyError", "IndexError", "AttributeError", "TypeError", "NameError",
 #: at most this many characters of a message (a solver's can be pages long)
 MAX_CHARS = 600
 
+#: Dask's words for the tasks it drops when the run loses its scheduler or workers (the
+#: future's CancelledError, or its text inside a flow's TaskError)
+_DROPPED = re.compile(r"cancelled for reason: ([^.\s]+)")
+
 
 def _one_line(text: str) -> str:
     text = " ".join(str(text).split())
@@ -65,6 +69,11 @@ def failure_line(error: BaseException) -> str | None:
     """
     if not isinstance(error, Exception) or debugging():
         return None
+    dropped = _DROPPED.search(str(error.message if isinstance(error, TaskError) else error))
+    if dropped:
+        return (f"the Dask cluster dropped the run's tasks ({dropped.group(1)}): start its "
+                "scheduler and workers again and run the same command (it resumes from the "
+                "results kept so far)")
     if isinstance(error, TaskError):
         text = str(error.message)
         m = _TYPE.match(text)

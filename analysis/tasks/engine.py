@@ -7,11 +7,9 @@ from __future__ import annotations
 import concurrent.futures as cf
 import contextlib
 import dataclasses
-import functools
 import logging
 import os
 import queue
-import re
 import sys
 import threading
 import time
@@ -85,22 +83,8 @@ def _info(fn) -> TaskInfo:
 
 
 def _is_future(obj) -> bool:
-    return isinstance(obj, cf.Future) or any(c.__name__ == "Future" and c.__module__.startswith(
-        "distributed") for c in type(obj).__mro__)
-
-
-@functools.cache
-def _dask_future():
-    """Dask's future, ``result()`` raising a TaskError also for a task Dask cancelled."""
-    from dask.distributed import Future
-
-    class TaskFuture(Future):
-        def result(self, timeout=None):
-            try:
-                return super().result(timeout)
-            except cf.CancelledError as e:
-                raise _error(str(self.key).rsplit("-", 1)[0], e, _key(self)) from None
-    return TaskFuture
+    return isinstance(obj, cf.Future) or (type(obj).__name__ == "Future" and
+                                          type(obj).__module__.startswith("distributed"))
 
 
 def _given(value):
@@ -146,15 +130,8 @@ def _unpack(obj):
 
 def _error(name: str, e: BaseException, key: str) -> TaskError:
     """``e`` as the :class:`TaskError` of task ``name`` (in its ``except`` block)."""
-    if isinstance(e, TaskError):
-        return e
-    if isinstance(e, cf.CancelledError) and "reason" in str(e):        # Dask's
-        reason = re.search(r"reason: ([^.]+)", str(e)).group(1)
-        return TaskError(name, f"ConnectionError: the Dask cluster dropped the run's tasks "
-                               f"({reason}): start its scheduler and workers again and run "
-                               "the same command (it resumes from the results kept so far)",
-                         key=key)
-    return TaskError(name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8), key)
+    return e if isinstance(e, TaskError) else TaskError(
+        name, f"{type(e).__name__}: {e}", traceback.format_exc(limit=8), key)
 
 
 def _one(e: BaseException) -> str:
@@ -574,9 +551,8 @@ class Engine:
             with self._cond:                 # not while the cluster is found dead
                 if self._start_error is not None:
                     raise self._start_error
-                fut = client.submit(_run, fn, key, code, a, k, key=holder.key, pure=False,
-                                    priority=self.current_stage()[1])
-                fut = self._set(key, _dask_future()(fut.key, client))
+                fut = self._set(key, client.submit(_run, fn, key, code, a, k, key=holder.key,
+                                                   pure=False, priority=self.current_stage()[1]))
         except Exception as e:                         # noqa: BLE001 - this task fails
             err = e if isinstance(e, TaskError) else TaskError(info.name, (
                 f"not run: the Dask cluster did not start ({_one(e)})"
