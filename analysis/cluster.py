@@ -123,15 +123,13 @@ def check_workers(client, kind: str = "numerical"):
     ValueError
         Naming 'scheduler', the first worker that differs and its first file.
     """
-    from biped_casadi.caching import code_files
+    from biped_casadi.caching import code_files, files_differing
     mine = code_files(kind)
     for address, theirs in sorted(client.run(code_files, kind).items()):
-        diff = sorted(f for f in set(mine) | set(theirs) if mine.get(f) != theirs.get(f))
-        if diff:
-            more = f" (and {len(diff) - 1} more)" if len(diff) > 1 else ""
+        if files_differing(mine, theirs):
             raise ValueError(f"scheduler: the Dask worker {address} runs other code: "
-                             f"{diff[0]}{more} differs from this checkout's; run the same "
-                             "version of the toolkit on every worker")
+                             f"{files_differing(mine, theirs)} differs from this checkout's; "
+                             "run the same version of the toolkit on every worker")
 
 
 @functools.cache

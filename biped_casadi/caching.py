@@ -47,7 +47,7 @@ import numpy as np
 from .files import file_path, write_bytes_atomic
 
 __all__ = ["cached", "cache_key", "cache_dir", "digest", "code_of", "CODE_SETS",
-           "code_version", "code_files", "argument_key", "task_key", "NotKeyable",
+           "code_version", "code_files", "files_differing", "argument_key", "task_key", "NotKeyable",
            "ResultStore", "MISSING", "file_lock", "task", "TaskInfo"]
 
 
@@ -404,6 +404,24 @@ _FILES: dict = {}
 def _package_root(name: str):
     spec = importlib.util.find_spec(name)
     return Path(spec.origin).parent if spec and spec.origin else None
+
+
+def files_differing(mine: dict, theirs: dict) -> str:
+    """The first file whose code differs between two :func:`code_files` ('' if none).
+
+    Parameters
+    ----------
+    mine, theirs : dict
+        Two processes' :func:`code_files` of one code set.
+
+    Returns
+    -------
+    str
+        The file, with how many more differ (``'a.py (and 2 more)'``).
+    """
+    diff = sorted(f for f in set(mine) | set(theirs) if mine.get(f) != theirs.get(f))
+    return (diff[0] + (f" (and {len(diff) - 1} more)" if len(diff) > 1 else "")) if diff \
+        else ""
 
 
 def code_files(kind: str = "numerical") -> dict:

@@ -16,7 +16,7 @@ import time
 import traceback
 
 from biped_casadi.caching import (MISSING, ResultStore, TaskInfo, code_files, code_version,
-                                  task, task_key)
+                                  files_differing, task, task_key)
 
 from ..cluster import check_not_bootstrapping, connect, tune_allocator
 from ..reporting.progress import progress_bar
@@ -169,9 +169,7 @@ def _stale(kind: str, code: str) -> str:
         from dask.distributed import get_client, get_worker
         at = f"{get_worker().address}, "
         theirs = get_client().get_metadata([_TOPIC, kind, code], None) or {}
-    diff = sorted(f for f in set(mine) | set(theirs) if mine.get(f) != theirs.get(f))
-    what = (diff[0] + (f" (and {len(diff) - 1} more)" if len(diff) > 1 else "")) if theirs \
-        else "its code"
+    what = files_differing(mine, theirs) if theirs else "its code"
     return (f"stale worker ({at}pid {os.getpid()}): {what} differs from this run's code; run "
             "the same version of the toolkit on every worker")
 
