@@ -28,7 +28,7 @@ __all__ = ["rk4_step", "quintic_hermite_interval", "as_vector", "as_number", "as
            "as_numbers",
            "jit_options",
            "compiled", "cached_library", "compiler_reason", "FastCall", "NotCompiledWarning",
-           "note_not_compiled", "iteration_stop", "ipopt_solver"]
+           "note_not_compiled", "iteration_stop", "ipopt_solver", "ipopt_on_one_thread"]
 
 
 def jit_options(optimisation: str = "-O2") -> dict:
@@ -588,15 +588,19 @@ def ipopt_solver(name: str, problem: dict, options: dict):
     casadi.Function
     """
     import casadi as ca
-    solver = ca.nlpsol(name, "ipopt", problem, options)     # (loads IPOPT and its BLAS)
-    _one_blas_thread()
-    return solver
+    ipopt_on_one_thread()
+    return ca.nlpsol(name, "ipopt", problem, options)
 
 
 @functools.cache
-def _one_blas_thread():
-    """CasADi's OpenBLAS on one thread, for this process (once it is loaded)."""
-    try:                           # loaded with IPOPT: found by its name, not loaded again
+def ipopt_on_one_thread() -> None:
+    """Load CasADi's IPOPT and put its OpenBLAS on one thread, for this process.
+
+    :func:`ipopt_solver` calls it; a ``casadi.Opti`` solved with IPOPT calls it first.
+    """
+    import casadi as ca
+    ca.load_nlpsol("ipopt")        # loads IPOPT and the OpenBLAS it links
+    try:                           # found by its name, not loaded again
         ctypes.CDLL("libcasadi-tp-openblas.so.0").openblas_set_num_threads(1)
     except (OSError, AttributeError):     # another platform's build: no such library
         pass

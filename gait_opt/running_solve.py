@@ -23,7 +23,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from biped_casadi.numerics import iteration_stop
+from biped_casadi.numerics import ipopt_on_one_thread, iteration_stop
 
 from .running_file import solve_or_last_iterate
 
@@ -117,6 +117,7 @@ def solve_running(opti, opts, verbose, model):
     window = opts.stall_window
     watch = None if window is None else _Watch(opti, window)
     extra = {} if watch is None else {"iteration_callback": watch.callback}
+    ipopt_on_one_thread()
     opti.solver("ipopt", {"expand": True, "print_time": False, "error_on_fail": False,
                           "show_eval_warnings": False, **extra}, ipopt)
     t0 = time.perf_counter()

@@ -83,17 +83,22 @@ def test_as_rows_refuses_columns_and_words():
             as_rows(bad, 2, "x")
 
 
-def test_ipopt_factorises_on_one_blas_thread():
+@pytest.mark.parametrize("solve", [
+    "x = ca.SX.sym('x'); s = ipopt_solver('t', {'x': x, 'f': (x - 1) ** 2}, "
+    "{'ipopt': {'print_level': 0, 'sb': 'yes'}, 'print_time': False}); x = s(x0=0)['x']",
+    "o = ca.Opti(); x = o.variable(); o.minimize((x - 1) ** 2); ipopt_on_one_thread(); "
+    "o.solver('ipopt', {'print_time': False}, {'print_level': 0, 'sb': 'yes'}); "
+    "x = o.solve().value(x)"])
+def test_ipopt_factorises_on_one_blas_thread(solve):
     """MUMPS's BLAS on more threads moved the co-design's optimum by 1e-4 (a Dask
-    worker's nanny pins one): every solver of the toolkit pins one in its process."""
+    worker's nanny pins one): every solver of the toolkit pins one in its process (an
+    nlpsol, or an Opti as the running step's)."""
     import os
     import subprocess
     import sys
-    code = ("import ctypes, casadi as ca; from biped_casadi.numerics import ipopt_solver;"
-            "x = ca.SX.sym('x'); s = ipopt_solver('t', {'x': x, 'f': (x - 1) ** 2},"
-            " {'ipopt': {'print_level': 0, 'sb': 'yes'}, 'print_time': False});"
-            "b = ctypes.CDLL('libcasadi-tp-openblas.so.0');"
-            "print(float(s(x0=0)['x']), b.openblas_get_num_threads())")
+    code = ("import ctypes, casadi as ca; from biped_casadi.numerics import ipopt_solver, "
+            f"ipopt_on_one_thread; {solve}; b = ctypes.CDLL('libcasadi-tp-openblas.so.0');"
+            "print(float(x), b.openblas_get_num_threads())")
     env = dict(os.environ, OPENBLAS_NUM_THREADS="2", OMP_NUM_THREADS="2")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, timeout=120)
