@@ -96,7 +96,8 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
         client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as e:
         raise ValueError(f"scheduler: cannot connect to the Dask scheduler at {scheduler} "
-                         f"({type(e).__name__}: {e})") from None
+                         f"({type(e).__name__}: {e}); is 'dask scheduler' running there? "
+                         "(its log prints the address to give)") from None
     try:
         client.wait_for_workers(1, timeout=DASK_WORKER_TIMEOUT)
     except (TimeoutError, OSError) as e:

@@ -473,6 +473,11 @@ CASES = [
      "--scheduler: cannot connect to the Dask scheduler at nonsense"),
     (["reproduce", "--scheduler", " ", "--out", "{root_dir}/rep"], "--scheduler: empty address"),
     (["m1", "--robust", "--scheduler", "nonsense"], "--scheduler: cannot connect"),
+    # a sweep asked for the scheduler only for its chunks: a nested line repeated after
+    # its timeout, and its --out folder (sweep.json, log, chunks) left behind
+    (["sweep", "--gait", "{gait}", "--grid", "3", "--scheduler", "nonsense", "--out",
+      "{root_dir}/sw"],
+     "--scheduler: cannot connect to the Dask scheduler at nonsense"),
     # a local cluster of 100000 processes was started
     (["reproduce", "--workers", "100000", "--out", "{root_dir}/rep"], "--workers: must be "
                                                                      "between 1 and 64"),

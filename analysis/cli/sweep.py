@@ -13,8 +13,8 @@ from analysis.reporting.plots import grid_sweep_plot, one_d_sweeps_plot, save_fi
 from analysis.sweeps import grid_points, max_grid_n, one_d_sweeps, run_sweep
 from biped_casadi.control.output_law import M1_LIMIT, check_M1_range
 
-from .common import (Progress, UserError, add_gait_arguments, add_robot, load_gait,
-                     output_dir, print_json)
+from .common import (Progress, UserError, add_gait_arguments, add_robot, check_scheduler,
+                     load_gait, output_dir, print_json)
 
 #: --line N evaluates nu N points
 MAX_LINE = 1_000_000
@@ -29,6 +29,7 @@ def cmd_sweep(args):
     # ---- arguments, then the output folders: all before any work
     lo, hi, n = _check_arguments(args)
     say = Progress("sweep", quiet=args.json or args.no_progress)
+    check_scheduler(args.scheduler, say)      # before any file: one line, nothing left
     gait = load_gait(args, say)
     model = gait.model
     if args.line is None and n > max_grid_n(model.nu):
@@ -78,8 +79,6 @@ def _check_arguments(args):
         raise UserError(f"--workers must be between 1 and {MAX_WORKERS}, got {args.workers}")
     if args.chunk_size is not None and args.chunk_size < 1:
         raise UserError(f"--chunk-size must be at least 1, got {args.chunk_size}")
-    if args.scheduler is not None and not args.scheduler.strip():
-        raise UserError("--scheduler: empty address")
     if args.out is not None:
         output_dir(args.out, "--out")
     if args.plot is not None:
@@ -93,8 +92,6 @@ def _run(args, gait, lo, hi, n, say):
     kw = dict(out_dir=args.out, chunk_size=args.chunk_size, workers=args.workers,
               scheduler=args.scheduler, progress=not (args.no_progress or args.json),
               executor="process" if args.processes else "thread")
-    if args.scheduler is not None:
-        say(f"connecting to the Dask scheduler at {args.scheduler} (up to 10 s) ...")
     lines = None
     try:
         if args.line is not None:
