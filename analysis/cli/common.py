@@ -436,13 +436,13 @@ def output_file(path, option: str, suffixes: tuple = ()) -> Path:
     if path is None or str(path).strip() == "":
         raise UserError(f"{option}: empty file name")
     p = Path(path)
-    if suffixes and p.suffix.lower() not in suffixes:
-        raise UserError(f"{option}: the file name must end in {' or '.join(suffixes)}, "
-                        f"got {str(path)!r}")
     if p.is_dir():
         raise UserError(f"{option}: {p} is a folder; give a file name")
     if p.exists() and not p.is_file():
         raise UserError(f"{option}: {p} exists and is not a regular file")
+    if suffixes and p.suffix.lower() not in suffixes:
+        raise UserError(f"{option}: the file name must end in {' or '.join(suffixes)}, "
+                        f"got {str(path)!r}")
     folder = p.parent
     if not folder.exists():
         anc = _nearest_existing(folder)

@@ -84,7 +84,8 @@ def cmd_robust_design(args, say):
         return _family(args, say)
     if args.plot is not None:
         raise UserError("--plot applies to --robust with a gait family (--gait FAMILY.json)")
-    out = output_file(args.out, "--out") if args.out is not None else None
+    out = output_file(args.out, "--out", (".json",)) if args.out is not None \
+        else None
     if out is not None:
         not_an_input(out, "--out", {"--gait": args.gait})
     model = load_model(args.robot) if not args.gait else None
@@ -247,7 +248,8 @@ def _print_design(r, st):
 
 def _family(args, say):
     """``biped m1 --robust --gait FAMILY.json``: the designs over a gait family."""
-    out = output_file(args.out, "--out") if args.out is not None else None
+    out = output_file(args.out, "--out", (".json",)) if args.out is not None \
+        else None
     if out is not None:
         not_an_input(out, "--out", {"--gait": args.gait})
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
@@ -300,7 +302,8 @@ def _search(args, say):
     say(f"robust design by sampling search: gait {st.for_model(model).gait}, v_c rejoining at "
         f"{st.rejoin} T; under a minute on 2 cores the first time, then read from the "
         "cache")
-    out = output_file(args.out, "--out") if args.out is not None else None
+    out = output_file(args.out, "--out", (".json",)) if args.out is not None \
+        else None
     if out is not None:
         not_an_input(out, "--out", {"--gait": args.gait})
     if args.plot is not None:
