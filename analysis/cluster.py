@@ -127,9 +127,9 @@ def check_workers(client, kind: str = "numerical"):
     from biped_casadi.caching import code_files, files_differing
     mine = code_files(kind)
     for address, theirs in sorted(client.run(code_files, kind).items()):
-        if files_differing(mine, theirs):
+        if differing := files_differing(mine, theirs):
             raise ValueError(f"scheduler: the Dask worker {address} runs other code: "
-                             f"{files_differing(mine, theirs)} differs from this checkout's; "
+                             f"{differing} differs from this checkout's; "
                              "run the same version of the toolkit on every worker")
 
 

@@ -195,6 +195,8 @@ CASES = [
     (["gait", "--out", "{file}/gait.json"], "is a file"),
     (["gait", "--out", ""], "--out"),
     (["gait", "--out", "/dev/null"], "not a regular file"),
+    (["gait", "--out", "{root_dir}/plain"], "--out: the file name must end in .json"),
+    (["gait", "--speeds", "0.7:0.8:0.1", "--out", "{root_dir}/fam"], "must end in .json"),
     (["gait", "--out", "{root_dir}/{long}.json"], "--out"),
     (["gait", "--out", "{sys}/gait.json"], "cannot write"),
     (["gait", "--out", "{read_only}/gait.json"], "cannot write", "nonroot"),

@@ -253,6 +253,29 @@ def test_robust_cli_reports_ipopt_failure_in_one_line(monkeypatch, capsys, gait,
     assert "IPOPT" in err and "try" in err and len(err.splitlines()) == 1
 
 
+def test_robust_cli_verifies_at_the_gaits_friction(gait, monkeypatch, capsys, tmp_path):
+    """`biped m1 --robust --gait FILE` verifies the designs at the friction coefficient the
+    gait was optimised for unless --mu is given; a name without .json for --out is
+    refused before any work."""
+    import analysis.cli.m1 as m1cli
+    from gait_opt import Gait
+    own = Gait(gait.model, gait.options.replace(mu=0.9), gait.alpha, gait.x0, gait.T)
+    g = str(own.save(tmp_path / "own.json"))
+    seen = []
+
+    def codesign(target, st, **kw):
+        seen.append(st.verification.mu)
+        raise CodesignError("stop here")
+
+    monkeypatch.setattr(m1cli, "codesign", codesign)
+    assert main(["m1", "--robust", "--gait", g]) == 2
+    assert main(["m1", "--robust", "--gait", g, "--mu", "0.7"]) == 2
+    assert seen == [0.9, 0.7] and "stop here" in capsys.readouterr().err
+    assert main(["m1", "--robust", "--gait", g, "--out", str(tmp_path / "design")]) == 2
+    assert "--out: the file name must end in .json" in capsys.readouterr().err
+    assert seen == [0.9, 0.7]
+
+
 @pytest.mark.parametrize("method", ["nlp", "search"])
 def test_robust_cli_out_writes_the_design_gait(method, monkeypatch, capsys, tmp_path):
     """`biped m1 --robust --out FILE` (the co-design NLP or the sampling search): the

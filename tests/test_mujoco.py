@@ -295,6 +295,18 @@ def test_robot_mjcf_command(tmp_path, capsys):
     assert m.geom_size[foot, 0] == 0.01 and np.allclose(m.geom_solref[foot], [0.02, 1])
 
 
+def test_mujoco_floor_has_the_gaits_friction(gait, tmp_path, capsys):
+    """Without --mu the floor has the friction coefficient the gait was optimised for
+    (as the simulators judge it), and says so; --mu overrides."""
+    from gait_opt import Gait
+    own = Gait(gait.model, gait.options.replace(mu=0.9), gait.alpha, gait.x0, gait.T)
+    g = own.save(tmp_path / "gait.json")
+    args = ["mujoco", "--gait", str(g), "--controller", "vc", "--steps", "1", "--json"]
+    for extra, mu in (([], 0.9), (["--mu", "0.7"], 0.7)):
+        assert biped_main(args + extra) == 0
+        assert json.loads(capsys.readouterr().out)["settings"]["mu"] == mu
+
+
 def test_mujoco_command_json(gait, tmp_path, capsys):
     """``biped mujoco --json``: the walk, its records and MuJoCo's eigenvalues beside the
     exact ones; --plot writes the figure and the animation."""

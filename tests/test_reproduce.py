@@ -129,6 +129,27 @@ def test_an_interrupted_run_leaves_the_previous_results(tmp_path, gait, light_st
     assert not list(out.glob(".staging-*"))
 
 
+def test_an_interrupted_first_run_leaves_no_empty_folder(tmp_path, light_stages,
+                                                         monkeypatch):
+    """Ctrl-C before any result: the folders the run made (OUT, OUT/quick) are removed,
+    a folder the user made or one with files is kept as it was."""
+    monkeypatch.setattr(graph, "STAGES", (Stage("stop", interrupted_stage),))
+    new = tmp_path / "new" / "out"
+    with pytest.raises(KeyboardInterrupt):
+        reproduce(new, quick=True, progress=False)
+    assert not (tmp_path / "new").exists()
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    with pytest.raises(KeyboardInterrupt):
+        reproduce(mine, quick=True, progress=False)
+    assert mine.is_dir() and not list(mine.iterdir())
+    (mine / "quick").mkdir()
+    (mine / "quick" / "notes.txt").write_text("kept")
+    with pytest.raises(KeyboardInterrupt):
+        reproduce(mine, quick=True, progress=False)
+    assert _files(mine).keys() == {"quick/notes.txt"}
+
+
 def test_each_kind_of_run_has_its_folder(tmp_path):
     from biped_casadi.model.description import builtin_path
     mine = tmp_path / "my_biped.toml"

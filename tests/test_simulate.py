@@ -22,6 +22,7 @@ from analysis.stability import vc_eigenvalue
 from analysis.cli import main as biped_main
 from biped_casadi.control import TimeVaryingController, VirtualConstraintController
 from biped_casadi import Perturbation, directions
+from biped_casadi.simulation.options import friction_of
 from biped_casadi.simulation import (PAPER_SIZES, STATUSES, SimulationOptions, Simulator,
                                    perturbed_initial_state, simulate)
 
@@ -167,18 +168,19 @@ def test_paper_fig5_perturbation_tv_reports_status(model, gait, stable_m1):
     earlier state satisfies all the checks: nothing continues silently."""
     ctrl = TimeVaryingController(gait, stable_m1)
     opts = SimulationOptions(steps=6)
+    mu = friction_of(gait, opts.mu)                     # the gait's
     res = simulate(ctrl, *perturbed_initial_state(gait, *PAPER_SIZES), options=opts)
     assert res.status in STATUSES
     ok_nodes = slice(0, -1) if res.status != "ok" else slice(None)
     assert np.all(res.Fz[ok_nodes] >= 0)
-    assert np.all(np.abs(res.Fx[ok_nodes]) <= opts.mu * res.Fz[ok_nodes])
+    assert np.all(np.abs(res.Fx[ok_nodes]) <= mu * res.Fz[ok_nodes])
     if res.status == "ok":
         assert len(res.steps) == 6
     else:
         assert res.message and res.failure_time <= res.t[-1] + 1e-12
         if res.status == "slipped" and "impulse" in res.message:
             F = res.steps[-1].impulse
-            assert abs(F[0]) > opts.mu * F[1]
+            assert abs(F[0]) > mu * F[1]
 
 
 # ------------------------------------------------------------- statuses
@@ -513,3 +515,27 @@ def test_a_design_runs_wherever_its_controller_does(gait):
     assert a.status == b.status == "ok"
     np.testing.assert_array_equal(a.qu_error, b.qu_error)
     assert isinstance(step_map(d).controller, TimeVaryingController)
+
+
+def test_friction_defaults_to_the_gaits(gait, tmp_path, capsys):
+    """A gait that records a friction coefficient is judged at it when none is given (in
+    Python and by ``biped simulate``), and the output says which; ``--mu`` overrides.
+    The gait's orbit with mu between its single-support ratio and its impact-impulse
+    ratio recorded: only the impact leaves that cone."""
+    from gait_opt import Gait
+    c = gait.check()
+    mu = 0.5 * (c["max_friction_ratio"] + c["impact_friction_ratio"])
+    own = Gait(gait.model, gait.options.replace(mu=mu), gait.alpha, gait.x0, gait.T)
+    res = simulate(VirtualConstraintController(own), options=SimulationOptions(steps=2))
+    assert res.status == "slipped" and "impulse" in res.message
+    path = own.save(tmp_path / "own.json")
+    args = ["simulate", "--gait", str(path), "--controller", "vc", "--steps", "2"]
+    assert biped_main(args + ["--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "slipped" and out["mu"] == pytest.approx(mu)
+    assert biped_main(args) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("vc: status slipped") and f"(mu {mu:g}, the gait's)" in text
+    assert biped_main(args + ["--mu", "0.6", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "ok" and out["mu"] == 0.6

@@ -312,6 +312,40 @@ def test_a_worker_running_other_code_is_refused(tmp_path):
     assert not list((tmp_path / "cache").rglob("*.pkl"))
 
 
+def test_check_workers_compares_each_worker_once(monkeypatch):
+    """A worker that differs is compared with this process once (the message reuses the
+    file found); one that runs the same code passes; a second differing worker is not
+    reached (the first one refuses the cluster)."""
+    from analysis import cluster
+    import biped_casadi.caching as caching
+    calls = []
+
+    def counted(mine, theirs):
+        calls.append(1)
+        return files_differing(mine, theirs)
+
+    files_differing = caching.files_differing
+    mine = caching.code_files()
+    other = dict(mine, **{"analysis/cli/main.py": "another digest"})
+
+    class Client:
+        def __init__(self, workers):
+            self.workers = workers
+
+        def run(self, fn, kind):
+            return self.workers
+
+    monkeypatch.setattr(caching, "files_differing", counted)
+    cluster.check_workers(Client({"tcp://a:1": mine}))
+    assert len(calls) == 1
+    calls.clear()
+    with pytest.raises(ValueError, match=r"^scheduler: the Dask worker tcp://b:1 runs other "
+                                         r"code: analysis/cli/main.py differs from this"):
+        cluster.check_workers(Client({"tcp://a:1": mine, "tcp://b:1": other,
+                                      "tcp://c:1": other}))
+    assert len(calls) == 2
+
+
 def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
     """``kill -9`` of the worker that holds a kept result another task needs: Dask makes
     it again on the other worker (a scattered copy was lost with it and failed every

@@ -516,3 +516,42 @@ def test_five_nodes_in_urdf_angles(walker, walker_gait, tmp_path):
     src = write_gait_csv(walker_gait, tmp_path / "five.csv", angles="urdf", n_nodes=5)
     r = import_gait(walker, src, angles="urdf", stance="hip_left")
     assert r.orbit_residual_after <= 1e-10 and abs(r.gait.T - walker_gait.T) < 1e-12
+
+
+def _walker_columns():
+    """t, q (pitch and the four joints) and their rates, from the walker's step file."""
+    with open(CSV) as f:
+        head = f.readline().strip().split(",")
+    a = np.loadtxt(CSV, delimiter=",", skiprows=1)
+    names = head[1:6]
+    return a[:, 0], a[:, 1:6].T, a[:, 6:11].T, names
+
+
+def test_a_time_column_scaled_alone_is_named_as_such(tmp_path, capsys):
+    """The walker's step with t doubled and the rates unchanged: every coordinate changes
+    0.5 times what its rate integrates to (within the factor 3 of the rate check), and
+    the import says the time scales disagree by a factor 2, instead of blaming the fit.
+    The file as given, and noised resamplings of it at 8 to 20 nodes, pass."""
+    t, q, dq, names = _walker_columns()
+    check_units(t, q, dq, names)
+    with pytest.raises(ValueError, match=r"^nodes: every coordinate changes 0\.5 times what "
+                                         r"its rate integrates to over t .*different time "
+                                         r"scales, by a factor 2 "):
+        check_units(2 * t, q, dq, names)
+    with pytest.raises(ValueError, match=r"by a factor 0\.66\d "):
+        check_units(t / 1.5, q, dq, names)
+    rng = np.random.default_rng(0)
+    for n in (8, 12, 20):
+        for _ in range(5):
+            ts = np.linspace(t[0], t[-1], n)
+            qs = np.array([np.interp(ts, t, r) for r in q]) + rng.normal(0, 1e-4, (5, n))
+            dqs = np.array([np.interp(ts, t, r) for r in dq]) + rng.normal(0, 2e-3, (5, n))
+            check_units(ts, qs, dqs, names)
+    src = tmp_path / "step_t2.csv"
+    lines = CSV.read_text().splitlines()
+    src.write_text("\n".join([lines[0]] + [",".join([repr(2 * float(r.split(",")[0]))]
+                                                    + r.split(",")[1:]) for r in lines[1:]]))
+    rc = main(["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
+               "--stance", "hip_left", "--out", str(tmp_path / "g.json")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "\n" not in err and "by a factor 2 " in err, err

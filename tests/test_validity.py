@@ -202,3 +202,18 @@ def test_a_gait_at_its_friction_bound_walks_its_own_orbit(model):
     run = simulate(Design.vc(g).controller_for(), *g.evaluate(0.0)[:2])
     assert run.ok, run.message
     assert 0.6 < run.max_impulse_ratio < 0.6 + 1e-7
+
+
+def test_limits_friction_is_the_gaits_unless_given(model):
+    """Without ``mu`` in the options a run is held to the friction coefficient its gait
+    was optimised for (``biped gait --mu``), else 0.6; a given ``mu`` wins."""
+    from types import SimpleNamespace
+
+    gait = SimpleNamespace(options=SimpleNamespace(mu=0.9))
+    assert SimulationOptions().mu is None
+    assert Limits.of(SimulationOptions(), model, gait).mu == 0.9
+    assert Limits.of(SimulationOptions(mu=0.5), model, gait).mu == 0.5
+    assert Limits.of(SimulationOptions(), model).mu == 0.6
+    assert Limits.of(SimulationOptions(), model, SimpleNamespace()).mu == 0.6
+    with pytest.raises(ValueError, match="mu"):
+        SimulationOptions(mu=0.0)

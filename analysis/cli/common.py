@@ -21,13 +21,14 @@ from biped_casadi.control.running import check_running_gait
 from biped_casadi.control.output_law import (M1_LIMIT, SECTION, check_M1_range, check_rejoin,
                                              require_regular)
 from biped_casadi.results import json_safe
+from biped_casadi.simulation.options import DEFAULT_MU, friction_of
 from gait_opt import Gait, OpenOrbitWarning, optimize_gait
 from gait_opt.running import RunningGait
 
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "load_running_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
            "add_gait_arguments", "add_scheduler", "is_family_file", "require_members",
-           "check_inputs", "check_scheduler", "not_an_input"]
+           "check_inputs", "check_scheduler", "not_an_input", "MU_HELP", "gait_friction"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
               "(.toml, schema in biped_casadi.model.description) or a URDF file (.urdf)")
@@ -304,6 +305,30 @@ def positive(value, name):
     return value
 
 
+#: --help of --mu in the commands that judge a gait: its default
+MU_HELP = (f"default: the one the gait was optimised for, its 'biped gait --mu'; "
+           f"{DEFAULT_MU:g} for a gait that records none")
+
+
+def gait_friction(args, gait) -> str:
+    """Set ``args.mu`` to the friction coefficient the run is held to: ``--mu``, else the
+    one ``gait`` was optimised for, else 0.6 (as the simulators do without ``--mu``).
+
+    Returns
+    -------
+    str
+        The coefficient and where it came from, for the command's output.
+    """
+    if args.mu is not None:
+        source = "--mu"
+    elif getattr(getattr(gait, "options", None), "mu", None) is not None:
+        source = "the gait's"
+    else:
+        source = "default"
+    args.mu = friction_of(gait, args.mu)
+    return f"mu {args.mu:g}, {source}"
+
+
 def add_design_arguments(p, m1_zero: bool = False, rejoin_default=None,
                          m1_default: str = "all zero"):
     """--controller, --m1 and --rejoin: which controller, and a time-varying design.
@@ -411,13 +436,13 @@ def output_file(path, option: str, suffixes: tuple = ()) -> Path:
     if path is None or str(path).strip() == "":
         raise UserError(f"{option}: empty file name")
     p = Path(path)
-    if suffixes and p.suffix.lower() not in suffixes:
-        raise UserError(f"{option}: the file name must end in {' or '.join(suffixes)}, "
-                        f"got {str(path)!r}")
     if p.is_dir():
         raise UserError(f"{option}: {p} is a folder; give a file name")
     if p.exists() and not p.is_file():
         raise UserError(f"{option}: {p} exists and is not a regular file")
+    if suffixes and p.suffix.lower() not in suffixes:
+        raise UserError(f"{option}: the file name must end in {' or '.join(suffixes)}, "
+                        f"got {str(path)!r}")
     folder = p.parent
     if not folder.exists():
         anc = _nearest_existing(folder)

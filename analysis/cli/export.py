@@ -16,8 +16,8 @@ from gait_opt.cache import cache_path
 from analysis.verify_export import SIMULATION_TOL, TORQUE_RTOL, apart_reason, verify_export
 
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
-                     check_m1_values, load_gait, output_dir, parse_m1, positive, print_json,
-                     rejoin_fraction)
+                     check_m1_values, gait_friction, load_gait, MU_HELP, output_dir, parse_m1,
+                     positive, print_json, rejoin_fraction)
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
 #: random states the check compares by default
@@ -49,7 +49,8 @@ def _check_arguments(args):
     _gains(args)
     if not 1 <= args.steps <= MAX_STEPS:
         raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
-    positive(args.mu, "--mu")
+    if args.mu is not None:
+        positive(args.mu, "--mu")
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
     if args.motor_side and args.angles != "urdf":
@@ -171,6 +172,7 @@ def cmd_export(args):
                 f"({args.states} states, a {args.steps}-step simulation) ...")
             model = gait.model
             q0, dq0 = _perturbation(args, model.nq).initial_state(gait)
+            result["friction"] = gait_friction(args, gait)
             opts = SimulationOptions(steps=args.steps, mu=args.mu,
                                      torque_limit=args.torque_limit)
             try:
@@ -251,7 +253,8 @@ def _report(args, r):
     if m.get("start") == "orbit":
         print(f"  {m['message'].split('; from the orbit')[0]}: compared from the orbit's start "
               "instead")
-    print(f"  {m['steps']}-impact simulation driven by the library ({m['compiled_status']}) "
+    print(f"  {m['steps']}-impact simulation ({r['friction']}) driven by the library "
+          f"({m['compiled_status']}) "
           f"against biped simulate's ({m['python_status']}): impact times differ by at most "
           f"{m['max_impact_time']:.3g} s, states by {m['max_state']:.3g} (limit "
           f"{SIMULATION_TOL:g})")
@@ -314,8 +317,8 @@ def register(sub):
                    help="initial error of each joint angle, rad (instead of --perturb)")
     p.add_argument("--perturb-dq", nargs="+", type=float, metavar="DQ",
                    help="initial error of each joint velocity, rad/s (instead of --perturb)")
-    p.add_argument("--mu", type=float, default=0.6,
-                   help="friction coefficient of --verify's simulation (0.6)")
+    p.add_argument("--mu", type=float,
+                   help=f"friction coefficient of --verify's simulation ({MU_HELP})")
     p.add_argument("--torque-limit", type=float, metavar="U",
                    help="torque limit of --verify's simulation, N m (default the robot's)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

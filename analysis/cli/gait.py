@@ -56,8 +56,9 @@ def register(sub):
                         "0.75 m/s x sqrt(leg / 0.8 m), recorded in the gait's options)")
     add_robot(p, with_gait=False)
     add_family_arguments(p)
-    p.add_argument("--out", metavar="FILE", default=None,
-                   help="where to save the gait (default gait.json; with --speeds, the "
+    p.add_argument("--out", metavar="FILE.json", default=None,
+                   help="where to save the gait, a name ending in .json as every --out "
+                        "file names its format (default gait.json; with --speeds, the "
                         "family: default family.json)")
     p.add_argument("--plot", metavar="DIR",
                    help="write gait_stick.png and gait_profiles.png into DIR (with "
@@ -106,7 +107,7 @@ def cmd_gait(args):
                           **({} if args.clearance is None else {"clearance": args.clearance}))
     if args.speeds is not None:
         return cmd_family(args, options)
-    out = output_file("gait.json" if args.out is None else args.out, "--out")  # before the solve
+    out = output_file("gait.json" if args.out is None else args.out, "--out", (".json",))  # before the solve
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot)
 

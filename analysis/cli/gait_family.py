@@ -80,7 +80,7 @@ def cmd_family(args, options) -> int:
         speeds = parse_speed_range(args.speeds)
     except ValueError as e:
         raise UserError(_option(str(e))) from None
-    out = output_file("family.json" if args.out is None else args.out, "--out")
+    out = output_file("family.json" if args.out is None else args.out, "--out", (".json",))
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot)
     say = Progress("gait", quiet=args.json)
@@ -145,7 +145,7 @@ def cmd_gait_at(args) -> int:
     """``biped gait --family FILE --speed V``: the gait at V, saved to --out."""
     if not math.isfinite(args.speed):
         raise UserError(f"--speed must be a finite number, got {args.speed:g}")
-    out = output_file("gait.json" if args.out is None else args.out, "--out")
+    out = output_file("gait.json" if args.out is None else args.out, "--out", (".json",))
     not_an_input(out, "--out", {"--family": args.family})
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     model = load_model(args.robot) if args.robot else None

@@ -19,6 +19,7 @@ from analysis.reporting.plots import family_designs_plot, save_figures
 from analysis.robustness import decay_steps
 from biped_casadi.files import write_bytes_atomic
 from biped_casadi.simulation import NOT_CONVERGED
+from biped_casadi.simulation.options import friction_of
 from gait_opt import GaitFamily
 from analysis.sweeps import grid_best
 
@@ -83,7 +84,8 @@ def cmd_robust_design(args, say):
         return _family(args, say)
     if args.plot is not None:
         raise UserError("--plot applies to --robust with a gait family (--gait FAMILY.json)")
-    out = output_file(args.out, "--out") if args.out is not None else None
+    out = output_file(args.out, "--out", (".json",)) if args.out is not None \
+        else None
     if out is not None:
         not_an_input(out, "--out", {"--gait": args.gait})
     model = load_model(args.robot) if not args.gait else None
@@ -91,6 +93,7 @@ def cmd_robust_design(args, say):
     if args.gait:
         gait = load_gait(args, say)
         model = gait.model
+        args.given["mu"] = friction_of(gait, args.given.get("mu"))
     if gait is None:
         st = CodesignSettings().replace(free_gait=True, **args.given)
         say(f"robust co-design NLP: gait and M1 from the gait {st.for_model(model).gait}, "
@@ -245,11 +248,13 @@ def _print_design(r, st):
 
 def _family(args, say):
     """``biped m1 --robust --gait FAMILY.json``: the designs over a gait family."""
-    out = output_file(args.out, "--out") if args.out is not None else None
+    out = output_file(args.out, "--out", (".json",)) if args.out is not None \
+        else None
     if out is not None:
         not_an_input(out, "--out", {"--gait": args.gait})
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     fam = GaitFamily.load(args.gait, load_model(args.robot) if args.robot else None)
+    args.given["mu"] = friction_of(fam, args.given.get("mu"))
     say(f"designs over the family: the gait-fixed co-design at each of its {len(fam)} "
         "speeds (side by side), an M1 schedule over speed, one M1 for all; each measured "
         "at every speed (about a minute per speed on 2 cores the first time)")
@@ -297,7 +302,8 @@ def _search(args, say):
     say(f"robust design by sampling search: gait {st.for_model(model).gait}, v_c rejoining at "
         f"{st.rejoin} T; under a minute on 2 cores the first time, then read from the "
         "cache")
-    out = output_file(args.out, "--out") if args.out is not None else None
+    out = output_file(args.out, "--out", (".json",)) if args.out is not None \
+        else None
     if out is not None:
         not_an_input(out, "--out", {"--gait": args.gait})
     if args.plot is not None:
@@ -419,7 +425,8 @@ def register(sub):
                         "searches from the K best samples (search: 3)")
     p.add_argument("--seed", type=int, help="with --robust: seed of the samples (0)")
     p.add_argument("--mu", type=float,
-                   help="with --robust: friction coefficient (0.6)")
+                   help="with --robust: friction coefficient of the verification (default: "
+                        "with --gait, the one that gait was optimised for; else 0.6)")
     add_scheduler(p)
     p.add_argument("--out", metavar="FILE",
                    help="with --robust: write the design's gait there (JSON; the replay "

@@ -16,7 +16,8 @@ from analysis.reporting.plots import mujoco_animation, mujoco_steps_plot, save_f
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
                      check_m1_values, load_gait, output_dir, parse_m1, positive, print_json,
                      rejoin_fraction)
-from .mujoco_options import AUTO, add_mujoco_settings, mujoco_settings, settings_error
+from .mujoco_options import (AUTO, add_mujoco_settings, gait_settings, mujoco_settings,
+                             settings_error)
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
 
@@ -65,6 +66,7 @@ def cmd_mujoco(args):
     settings = _check(args)
     say = Progress("mujoco", quiet=args.json)
     gait = load_gait(args, say)
+    settings = gait_settings(args, settings, gait)
     model = gait.model
     design = _design(args, gait)
     perturbation = _perturbation(args, model.nq)

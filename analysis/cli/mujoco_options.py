@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 
 from biped_casadi.mujoco import CONTACTS, ContactSettings
+from biped_casadi.simulation.options import friction_of
 
-from .common import UserError
+from .common import MU_HELP, UserError
 
 __all__ = ["add_mujoco_settings", "mujoco_settings", "settings_error", "AUTO"]
 
@@ -37,9 +38,10 @@ def _solref(text: str):
                                          f"{text!r}") from None
 
 
-def add_mujoco_settings(p, mu: bool = True, auto: bool = False):
-    """``--contact``, ``--timestep``, ``--solref``, ``--foot-radius`` (and ``--mu``);
-    with ``auto``, ``--timestep auto`` and ``--solref auto`` too."""
+def add_mujoco_settings(p, mu: bool = True, auto: bool = False, gait: bool = True):
+    """``--contact``, ``--timestep``, ``--solref``, ``--foot-radius`` (and ``--mu``, by
+    default the gait's when the command walks one, see :func:`gait_settings`); with
+    ``auto``, ``--timestep auto`` and ``--solref auto`` too."""
     p.add_argument("--contact", choices=CONTACTS, default="stiff",
                    help="stiff: solref 4 ms, time step 2 ms (recommended); default: MuJoCo's "
                         "contact (solref 0.02 s) (both with 5 mm feet, mu 0.6)")
@@ -68,7 +70,8 @@ def add_mujoco_settings(p, mu: bool = True, auto: bool = False):
                    help="MuJoCo's integrator (default MuJoCo's, Euler)")
     if mu:
         p.add_argument("--mu", type=float, metavar="MU",
-                       help="friction coefficient of feet and floor (default 0.6)")
+                       help=f"friction coefficient of feet and floor ({MU_HELP})" if gait
+                       else "friction coefficient of feet and floor (default 0.6)")
 
 
 #: the fields of the settings, each set by the option of its name
@@ -82,6 +85,15 @@ def settings_error(e: ValueError) -> UserError:
     if name in _FIELDS:
         return UserError(f"--{name.replace('_', '-')} {rest}")
     return UserError(str(e))
+
+
+def gait_settings(args, settings: ContactSettings, gait) -> ContactSettings:
+    """``settings`` with the floor's friction the one ``gait`` was optimised for when
+    ``--mu`` is not given (else 0.6), as the simulators judge it."""
+    if args.mu is not None:
+        return settings
+    args.mu = friction_of(gait)
+    return mujoco_settings(args)
 
 
 def mujoco_settings(args) -> ContactSettings:

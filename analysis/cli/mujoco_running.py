@@ -16,7 +16,7 @@ from biped_casadi.mujoco.running import TAKEOFF_CLOCKS, RunningLoop, fit_running
 from analysis.stability.running_cycle import running_cycle, running_stability
 
 from .common import Progress, UserError, add_robot, load_running_gait, print_json
-from .mujoco_options import add_mujoco_settings, mujoco_settings, settings_error
+from .mujoco_options import add_mujoco_settings, gait_settings, mujoco_settings, settings_error
 from .running import (DEFAULT_M1, MAX_STRIDES, add_tracking_arguments,
                       check_strides_and_perturb, check_tracking_arguments)
 
@@ -54,6 +54,7 @@ def cmd_mujoco_running(args):
     settings = _check(args)
     say = Progress("mujoco-running", quiet=args.json)
     gait, model = load_running_gait(args)
+    settings = gait_settings(args, settings, gait)
     M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
     if len(M1) != model.nu:
         raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "

@@ -178,7 +178,7 @@ def register(sub):
                     "torso to the world, drop the rotor inertia and make no motors.")
     q.add_argument("--robot", metavar="NAME|FILE", help=f"{ROBOT_HELP}; default: rabbit")
     q.add_argument("--out", metavar="FILE.xml", required=True, help="the MJCF file to write")
-    add_mujoco_settings(q)
+    add_mujoco_settings(q, gait=False)
     q.add_argument("--torque-limit", type=float, metavar="U",
                    help="the motors' limit, N m (default the robot's)")
     q.add_argument("--json", action="store_true", help="print one JSON object")

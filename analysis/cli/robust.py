@@ -15,7 +15,8 @@ from biped_casadi.simulation import failure_text
 
 from .common import (add_design_arguments, Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
                      check_not_singular, figure_or_na,
-                     load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
+                     gait_friction, load_gait, MU_HELP, output_dir, parse_m1, positive,
+                     print_json, rejoin_fraction)
 
 
 def _steps(text: str):
@@ -49,7 +50,8 @@ def cmd_robust(args):
     if args.controller == "vc" and (args.m1 is not None or args.rejoin is not None):
         raise UserError("--m1 and --rejoin apply to the time-varying controller "
                         "(--controller tv)")
-    positive(args.mu, "--mu")
+    if args.mu is not None:
+        positive(args.mu, "--mu")
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
     rejoin = rejoin_fraction(PAPER_REJOIN if args.rejoin is None else args.rejoin)
@@ -67,6 +69,7 @@ def cmd_robust(args):
     if args.controller == "tv":
         design = Design(tuple(parse_m1(args.m1, model.nu)), rejoin)
         check_not_singular(Design.of(design, gait).controller_for(), design.M1)
+    friction = gait_friction(args, gait)
     st = RobustnessSettings(directions=args.directions, mu=args.mu,
                             torque_limit=args.torque_limit, seed=args.seed,
                             steps=RobustnessSettings.steps if steps is None else steps)
@@ -77,7 +80,7 @@ def cmd_robust(args):
     kept = kept_directions(gait, st)
     say("s* by bisection (up to a minute)")
     res = robustness(Design.of(design, gait), st, kept=kept)
-    out = res.to_dict()
+    out = dict(res.to_dict(), mu=args.mu)
     if args.plot is not None:
         say("basins of attraction on windows grown until their boundary is inside, "
             "time-varying beside virtual constraints (about a minute)")
@@ -91,6 +94,7 @@ def cmd_robust(args):
         print_json(out)
         return 0
     print(res.message)
+    print(f"  friction coefficient {friction}")
     print(f"  max|lambda| {res.max_abs:.4g}; directions kept {res.directions_kept} of "
           f"{res.directions_tried} tried (rejected: "
           + (", ".join(f"{k} {v}" for k, v in res.directions_rejected.items()) or "none") + ")")
@@ -139,7 +143,7 @@ def register(sub):
     add_gait_arguments(p)
     add_robot(p)
     add_design_arguments(p)
-    p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (0.6)")
+    p.add_argument("--mu", type=float, help=f"friction coefficient ({MU_HELP})")
     p.add_argument("--torque-limit", type=float, metavar="U",
                    help="|u_i| bound, N m (default: the robot's, 150 for RABBIT)")
     p.add_argument("--directions", type=int, default=16, metavar="N",

@@ -15,8 +15,9 @@ from analysis.reporting.plots import (save_figures, swing_torques_plot, unactuat
                             walking_animation)
 
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
-                     check_m1_values, check_not_singular, figure_or_na, load_gait, output_dir, output_file, parse_m1, positive,
-                     print_json, rejoin_fraction)
+                     check_m1_values, check_not_singular, figure_or_na, gait_friction, load_gait,
+                     MU_HELP, output_dir, output_file, parse_m1, positive, print_json,
+                     rejoin_fraction)
 from .simulate_profile import add_profile_arguments, check_profile_arguments, cmd_profile
 
 #: errors below this at every impact are round-off: no trend is read from them
@@ -94,6 +95,7 @@ def cmd_simulate(args):
     M1 = parse_m1(args.m1, model.nu, default_zero=True)
     perturbation = _perturbation(args, model.nq)
     gains = Gains(eps=args.eps)
+    friction = gait_friction(args, gait)
     opts = SimulationOptions(steps=args.steps, mu=args.mu, jit=args.jit,
                              torque_limit=args.torque_limit)
     q0, dq0 = perturbation.initial_state(gait)
@@ -109,6 +111,7 @@ def cmd_simulate(args):
     if args.json:
         d = res.to_dict()
         d["perturbation"] = perturbation.to_dict()
+        d["mu"] = args.mu
         if terrain is not None:
             d["terrain"] = terrain.to_dict()
         d.update(_settling(res))
@@ -118,7 +121,7 @@ def cmd_simulate(args):
             d["figures"] = figures
         print_json(d)
         return 0
-    _print_report(runs, gait, terrain, figures, default_m1=args.m1 is None)
+    _print_report(runs, gait, terrain, figures, friction, default_m1=args.m1 is None)
     return 0
 
 
@@ -166,7 +169,8 @@ def _check_numbers(args):
         raise UserError("--schedule and --rejoin exclude each other (the schedule gives the "
                         "rejoin time)")
     args.rejoin = 0.5 if args.rejoin is None else args.rejoin
-    positive(args.mu, "--mu")
+    if args.mu is not None:
+        positive(args.mu, "--mu")
     positive(args.eps, "--eps")
     rejoin_fraction(args.rejoin)
     if args.torque_limit is not None:
@@ -230,9 +234,9 @@ def _figures(args, runs, model, gait, say):
     return figures
 
 
-def _print_report(runs, gait, terrain, figures, default_m1: bool = False):
-    """The text report: per run its status, a table of its steps and whether the error
-    settled, then the files."""
+def _print_report(runs, gait, terrain, figures, friction: str, default_m1: bool = False):
+    """The text report: per run its status, a table of its steps, its peaks (with the
+    friction coefficient ``friction``) and whether the error settled, then the files."""
     for r in runs:
         print(f"{r.controller['controller']}: status {r.status}"
               + (f" - {r.message}" if r.message else ""))
@@ -246,7 +250,8 @@ def _print_report(runs, gait, terrain, figures, default_m1: bool = False):
                   + (f"   {s.ground_height:+.4f}" if terrain is not None else ""))
         print(f"  peak |u| {figure_or_na(r.peak_torque, '.1f')} N m, min F_z "
               f"{figure_or_na(r.min_normal_force, '.1f')} N, max |F_x|/F_z "
-              f"{figure_or_na(r.max_friction_ratio, '.3f')}, at impact {figure_or_na(r.max_impulse_ratio, '.3f')}")
+              f"{figure_or_na(r.max_friction_ratio, '.3f')}, at impact "
+              f"{figure_or_na(r.max_impulse_ratio, '.3f')} ({friction})")
         if line := _settling_line(r, default_m1):
             print(line)
     for k, v in figures.items():
@@ -290,7 +295,7 @@ def register(sub):
     p.add_argument("--terrain", nargs="+", type=float, metavar="H",
                    help="ground heights h1 h2 ... of the steps' footholds above the stance "
                         "foot, m (a step up > 0; flat after the last)")
-    p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (0.6)")
+    p.add_argument("--mu", type=float, help=f"friction coefficient ({MU_HELP})")
     p.add_argument("--eps", type=float, default=0.02,
                    help="epsilon of the output PD, eq. (13), with Kp = 1, Kd = 2 (0.02)")
     p.add_argument("--compare", action="store_true",

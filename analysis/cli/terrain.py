@@ -17,7 +17,8 @@ from biped_casadi.simulation.terrain import MAX_HEIGHT
 from .common import (add_design_arguments, Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
                      check_scheduler,
                      check_not_singular,
-                     load_gait, output_dir, parse_m1, positive, print_json, rejoin_fraction)
+                     gait_friction, load_gait, MU_HELP, output_dir, parse_m1, positive,
+                     print_json, rejoin_fraction)
 
 SCALES = ("mass", "inertia", "length", "torso_mass")
 
@@ -93,7 +94,7 @@ def cmd_terrain(args):
     if args.json:
         print_json(out)
         return 0
-    _print_report(mc, st, gsn, out)
+    _print_report(mc, st, gsn, out, args.friction)
     return 0
 
 
@@ -111,7 +112,8 @@ def _check_arguments(args):
     _count(args.max_steps, "--max-steps", MAX_STEPS)
     if args.seed < 0:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
-    positive(args.mu, "--mu")
+    if args.mu is not None:
+        positive(args.mu, "--mu")
     if args.torque_limit is not None:
         positive(args.torque_limit, "--torque-limit")
     gains = (1.0, 2.0, 0.02)
@@ -142,6 +144,7 @@ def _build(args, say, gains, rejoin, profile):
     """The gait, the walker's spec (controller, plant) and the Monte Carlo settings."""
     gait = load_gait(args, say)
     model = gait.model
+    args.friction = gait_friction(args, gait)
     M1 = parse_m1(args.m1, model.nu) if args.controller == "tv" else None
     plant = _plant(args, model)
     robot(plant) if plant is not None else None             # a plant that builds
@@ -216,9 +219,10 @@ def _summary(mc, st, gsn, gsn_error):
     return out
 
 
-def _print_report(mc, st, gsn, out):
+def _print_report(mc, st, gsn, out, friction):
     """The text report."""
     print(mc.message)
+    print(f"  friction coefficient {friction}")
     print("  how the runs ended: " + ", ".join(f"{k} {v}" for k, v in mc.status_counts.items()))
     if math.isfinite(mc.step_time_rms):
         print(f"  step time RMS deviation {mc.step_time_rms:.3g} s (from step "
@@ -278,7 +282,7 @@ def register(sub):
                    help="clip torques at the limit and keep walking (full-order simulator)")
     p.add_argument("--gains", nargs=3, type=float, metavar=("KP", "KD", "EPS"),
                    help="output PD of eq. (13) (1 2 0.02); they matter with a model error")
-    p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (0.6)")
+    p.add_argument("--mu", type=float, help=f"friction coefficient ({MU_HELP})")
     p.add_argument("--torque-limit", type=float, metavar="U",
                    help="|u_i| bound, N m (default: the robot's, 150 for RABBIT)")
     p.add_argument("--scheduler", metavar="ADDRESS",

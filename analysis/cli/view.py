@@ -15,7 +15,7 @@ from analysis.view import ViewSettings, serve
 from biped_casadi import Design, Gains, SimulationOptions
 
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments,
-                     add_robot, check_m1_values, load_gait, parse_m1, positive,
+                     add_robot, check_m1_values, load_gait, MU_HELP, parse_m1, positive,
                      rejoin_fraction)
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
@@ -78,7 +78,8 @@ def _interrupt(signum, frame):
 
 def _check_numbers(args):
     """The design's and the walks' numbers, and the address (UserError)."""
-    positive(args.mu, "--mu")
+    if args.mu is not None:
+        positive(args.mu, "--mu")
     positive(args.eps, "--eps")
     rejoin_fraction(args.rejoin)
     if args.torque_limit is not None:
@@ -152,7 +153,7 @@ def register(sub):
     p.add_argument("--torque-limit", type=float, metavar="U",
                    help="a walk stops with status torque_limit where some |u_i| exceeds U, "
                         "N m (default: the robot's limit)")
-    p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (0.6)")
+    p.add_argument("--mu", type=float, help=f"friction coefficient ({MU_HELP})")
     p.add_argument("--eps", type=float, default=0.02,
                    help="epsilon of the output PD, eq. (13), with Kp = 1, Kd = 2 (0.02)")
     p.add_argument("--host", default="127.0.0.1",

@@ -358,13 +358,13 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
     for p in (Path(out_dir), folder, folder / "figures"):
         if p.exists() and not p.is_dir():
             raise ValueError(f"out_dir: {p} is a file, not a folder")
-    folder.mkdir(parents=True, exist_ok=True)
+    made = _make_folder(folder)
     staging = folder / f".staging-{os.getpid()}"
-    shutil.rmtree(staging, ignore_errors=True)
-    (staging / "figures").mkdir(parents=True)
     log = Log(opts.progress)
     t0 = time.perf_counter()
     try:
+        shutil.rmtree(staging, ignore_errors=True)
+        (staging / "figures").mkdir(parents=True)
         with Engine(opts.scheduler, opts.workers, progress=opts.progress, log=log,
                     preload=(__name__,)) as eng:
             S = build(eng, model, res, quick)
@@ -381,6 +381,7 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
         _publish(staging, folder)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+        _remove_empty(made)
     bad = [k for k, v in stages.items() if v.status is not Outcome.OK]
     log(f"done in {total:.0f} s (critical path {crit['seconds']:.0f} s)")
     return ReproduceResult(
@@ -389,6 +390,25 @@ def reproduce(out_dir="reproduce_out", quick: bool = False, **kw) -> ReproduceRe
         mode="quick" if quick else "full", folder=str(folder), report=str(folder / "report.md"),
         summary_file=str(folder / "summary.json"), stages=summary["stages"], total_time=total,
         critical_path=crit, summary=summary)
+
+
+def _make_folder(folder: Path) -> list:
+    """Create ``folder`` and its missing parents; those it created, deepest first."""
+    made, p = [], folder
+    while not p.exists():
+        made.append(p)
+        p = p.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    return made
+
+
+def _remove_empty(folders: list):
+    """Remove those of ``folders`` (deepest first) that are still empty: a run stopped
+    before its results (Ctrl-C, an error) leaves no folder it made; a folder with files,
+    or one that was there before, is kept."""
+    for p in folders:
+        with contextlib.suppress(OSError):
+            p.rmdir()
 
 
 class Log:

@@ -266,7 +266,7 @@ class Explorer:
             if s.rejoin != 0.5:
                 args += ["--rejoin", repr(s.rejoin)]
         args += _perturbation_args(s.start) + ["--steps", str(o.steps)]
-        if o.mu != 0.6:
+        if o.mu is not None:
             args += ["--mu", repr(o.mu)]
         if o.torque_limit is not None:
             args += ["--torque-limit", repr(o.torque_limit)]

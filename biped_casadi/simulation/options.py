@@ -9,7 +9,32 @@ from dataclasses import asdict, dataclass
 from ..control.output_law import SECTION
 from ..option_checks import FieldChecks
 
-__all__ = ["SimulationOptions"]
+__all__ = ["SimulationOptions", "DEFAULT_MU", "friction_of"]
+
+#: the friction coefficient of a run when neither its options nor its gait give one
+DEFAULT_MU = 0.6
+
+
+def friction_of(gait=None, mu=None) -> float:
+    """The friction coefficient a run is held to.
+
+    Parameters
+    ----------
+    gait : Gait or GaitFamily, optional
+        The reference; its ``options.mu`` (the friction its optimisation assumed) counts
+        when ``mu`` is None.
+    mu : float, optional
+        A given coefficient (it wins).
+
+    Returns
+    -------
+    float
+        ``mu``, else the gait's ``options.mu``, else :data:`DEFAULT_MU`.
+    """
+    if mu is not None:
+        return float(mu)
+    own = getattr(getattr(gait, "options", None), "mu", None)
+    return float(own) if own is not None else DEFAULT_MU
 
 
 @dataclass(frozen=True)
@@ -22,8 +47,10 @@ class SimulationOptions:
         Number of steps (impacts) to simulate.
     rk4_steps : int
         RK4 steps per reference step duration T (a positive multiple of 8).
-    mu : float
-        Friction coefficient for the stance foot and the impact impulse.
+    mu : float or None
+        Friction coefficient for the stance foot and the impact impulse; None (default):
+        the one the gait was optimised for (``gait.options.mu``, ``biped gait --mu``),
+        else :data:`DEFAULT_MU` (0.6), see :func:`friction_of`.
     min_normal_force : float
         Lowest admissible stance normal force, N.
     min_hip_height : float or None
@@ -61,7 +88,7 @@ class SimulationOptions:
     """
     steps: int = 10
     rk4_steps: int = 2000
-    mu: float = 0.6
+    mu: float | None = None
     min_normal_force: float = 0.0
     min_hip_height: float | None = None
     max_torso_angle: float = math.pi / 2
@@ -83,8 +110,8 @@ class SimulationOptions:
         c.integers(("steps",), 1, phrase="a positive integer")
         if not isinstance(self.rk4_steps, int) or self.rk4_steps < 8 or self.rk4_steps % 8:
             raise ValueError(f"rk4_steps must be a positive multiple of 8, got {self.rk4_steps!r}")
-        c.numbers(("mu", "max_torso_angle", "horizon"))
-        c.numbers(("min_hip_height",), none=True)
+        c.numbers(("max_torso_angle", "horizon"))
+        c.numbers(("mu", "min_hip_height"), none=True)
         c.numbers(("torque_limit",), none=True, inf=True, phrase="a positive number or None")
         c.numbers(("min_normal_force", "ground_tolerance", "singular_tolerance",
                    "min_liftoff_speed"), strict=False)

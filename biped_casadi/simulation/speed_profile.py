@@ -361,7 +361,7 @@ def _profile_step(k, d, sim, res, t0) -> ProfileStep:
         min_normal_force=float(res.min_normal_force),
         max_friction_ratio=float(res.max_friction_ratio),
         max_impulse_ratio=float(res.max_impulse_ratio),
-        friction_margin=float(sim.options.mu - max(ratios)) if ratios else nan,
+        friction_margin=float(sim.limits.mu - max(ratios)) if ratios else nan,
         q_plus=None if rec is None else rec.q_plus.copy(),
         dq_plus=None if rec is None else rec.dq_plus.copy())
 
@@ -380,8 +380,6 @@ def _result(ds, steps, runs, opts, tol) -> ProfileResult:
         return float(fn(vals)) if vals else math.nan
 
     speeds = [reference_speed(_gait(d)) for d in ds]
-    ratios = [r for s in steps for r in (s.max_friction_ratio, s.max_impulse_ratio)
-              if math.isfinite(r)]
     return ProfileResult(
         status=last.status if failed else "ok", message=last.message if failed else "",
         n_steps=n, fail_step=last.index if failed else n, qu_error=qu, dqu_error=dqu,
@@ -392,7 +390,7 @@ def _result(ds, steps, runs, opts, tol) -> ProfileResult:
         saturated_time=float(sum(r.saturated_time for r in runs)),
         speeds=speeds, steps=steps, segments=segments(ds, speeds, qu, dqu, len(steps),
                                                       failed, tol),
-        tol=float(tol), friction_margin=float(opts.mu - max(ratios)) if ratios else math.nan,
+        tol=float(tol), friction_margin=ext(min, "friction_margin"),
         options=opts, runs=runs)
 
 

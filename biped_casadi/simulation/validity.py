@@ -23,6 +23,7 @@ import numpy as np
 
 from ..model.description import torso_lean
 from .kernel import ground_height
+from .options import friction_of
 
 __all__ = ["NODE_CHECKS", "IMPACT_CHECKS", "Limits", "node_violations", "first_violation",
            "start_violation", "strike_violation", "impact_violation", "node_message",
@@ -95,7 +96,9 @@ class Limits:
 
         The robot's own torque limit and fall height are used where the options leave
         them unset; a robot without a torque limit (a URDF without effort limits) is held
-        to the one its gait was made for, as MuJoCo's motors are.
+        to the one its gait was made for, as MuJoCo's motors are.  Without a friction
+        coefficient in the options, the ground has the one the gait was made for
+        (:func:`~biped_casadi.simulation.options.friction_of`).
 
         Parameters
         ----------
@@ -104,7 +107,7 @@ class Limits:
         model : BipedModel
             The robot.
         gait : Gait, optional
-            The reference (its ``options.torque_limit``).
+            The reference (its ``options.torque_limit`` and ``options.mu``).
 
         Returns
         -------
@@ -118,7 +121,8 @@ class Limits:
             raise ValueError(f"saturate: the robot {model.params.name} has no torque limit to "
                              f"clip the torques at (its URDF gives no effort limits): give "
                              f"torque_limit (--torque-limit N)")
-        return cls(mu=float(options.mu), min_normal_force=float(options.min_normal_force),
+        return cls(mu=friction_of(gait, options.mu),
+                   min_normal_force=float(options.min_normal_force),
                    hip_floor=options.fall_height(model),
                    max_torso_angle=float(options.max_torso_angle),
                    ground_tolerance=float(options.ground_tolerance),
