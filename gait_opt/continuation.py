@@ -86,8 +86,9 @@ class SpeedNLP:
     """The gait NLP with the speed as its parameter, with a cold and a warm IPOPT.
 
     The node margins of the torque limit, the normal force, the swing-foot clearance and
-    the torso lean (:func:`gait_opt.optimize_gait`) shift only constraint bounds, so every solve takes its
-    own; the friction cone's margin is part of the constraint and of the NLP.
+    the torso lean (:func:`gait_opt.optimize_gait`) shift only constraint bounds, so every
+    solve takes its own; the friction cone's margin is part of the constraint and of the
+    NLP.
 
     Parameters
     ----------

@@ -334,7 +334,8 @@ class GaitOptions:
             written before the options existed).
         """
         d = dataclasses.asdict(self)
-        for name in ("impact_mu", "continuation", "torso_lean_max"):   # unset: files and cache keys as before
+        # unset: files and cache keys as before
+        for name in ("impact_mu", "continuation", "torso_lean_max"):
             if d[name] is None:
                 del d[name]
         if d["continuation_shape"] == "ramp":

@@ -8,8 +8,8 @@ eq. (1) is an ODE, x = (q_u, dq_u), and it is transcribed by orthogonal collocat
 of variables as Radau; Radau is available for comparison, see benchmarks/bench_gait.py).
 Path constraints (torques, contact force, friction cone, swing-foot clearance, with
 ``torso_lean_max`` the torso's lean) are imposed at every interval boundary and
-collocation point; knee limits on the Bezier
-coefficients, which bounds the polynomial on the whole step (convex hull).
+collocation point; knee limits on the Bezier coefficients, which bounds the polynomial
+on the whole step (convex hull).
 
 Robots.  Everything is sized by the model: n = nq joints, nu = n - 1 torques (RABBIT:
 5 and 4, the numbers quoted below).  Knee limits apply to the joints between leg links
@@ -329,7 +329,9 @@ def _point_constraints(model, opts, lay: _Layout, margins, OUT):
                 margin - slope * model.scuff_zone, np.inf)
     else:
         con.add("swing-foot clearance", zsw - ca.DM(profile + margin).T, 0, np.inf)
-    if opts.torso_lean_max is not None:      # q at every point: (q_u, q_a)
+    if opts.torso_lean_max is not None:
+        # q = (q_u, q_a) at every point; the torso's angle is a sum of joint angles, so
+        # the rows are linear in w, as build_problem requires
         q_all = ca.vertcat(ca.horzcat(lay.Xs, lay.Xc)[0, :], lay.QA[:lay.nu, :])
         lo, lean, hi = torso_lean_bound(model, q_all, opts.torso_lean_max
                                         - margins.get("torso lean", 0.0))
