@@ -85,9 +85,10 @@ class NLPPoint:
 class SpeedNLP:
     """The gait NLP with the speed as its parameter, with a cold and a warm IPOPT.
 
-    The node margins of the torque limit, the normal force and the swing-foot clearance
-    (:func:`gait_opt.optimize_gait`) shift only constraint bounds, so every solve takes its
-    own; the friction cone's margin is part of the constraint and of the NLP.
+    The node margins of the torque limit, the normal force, the swing-foot clearance and
+    the torso lean (:func:`gait_opt.optimize_gait`) shift only constraint bounds, so every
+    solve takes its own; the friction cone's margin is part of the constraint and of the
+    NLP.
 
     Parameters
     ----------
@@ -138,10 +139,9 @@ class SpeedNLP:
             return self.prob
         lbg, ubg = self.prob.lbg.copy(), self.prob.ubg.copy()
         for name, a, b in self.prob.groups:
-            if name in shifts:
-                lbg[a:b] += shifts[name]          # -inf stays -inf
-                if name == "torque limit":
-                    ubg[a:b] -= shifts[name]
+            if name in shifts:                    # both sides of a two-sided family;
+                lbg[a:b] += shifts[name]          # -inf and inf stay
+                ubg[a:b] -= shifts[name]
         return dataclasses.replace(self.prob, lbg=lbg, ubg=ubg)
 
     def _point(self, solver, speed, sol, t0, prob, margins) -> NLPPoint:

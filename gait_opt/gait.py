@@ -353,7 +353,8 @@ class Gait(Reference):
             step), ``swing_height_at_T`` (m), ``strike_velocity`` and
             ``liftoff_velocity`` (m/s), ``impact_impulse`` (N s) and
             ``impact_friction_ratio``, ``max_stance_knee`` / ``min_swing_knee`` (rad;
-            None without knees), ``periodicity_q`` / ``periodicity_dq`` (the impact of
+            None without knees), ``max_torso_lean`` (rad, as :meth:`torso_lean`),
+            ``periodicity_q`` / ``periodicity_dq`` (the impact of
             the state at T against the state at 0) and ``unactuated_row_residual``
             (first row of eq. 1, N m), plus ``n_points``.
         """

@@ -39,6 +39,7 @@ def dense_check(gait, n: int) -> dict:
     else:
         height, margin = zs, zs - profile
     knees = (q[list(m.stance_knees)], q[list(m.swing_knees)])
+    lean = m.description.torso_lean(np.array(m.torso_angle.map(n)(q)).ravel())
     return dict(
         n_points=n,
         max_abs_torque=float(np.max(np.abs(u))),
@@ -53,6 +54,7 @@ def dense_check(gait, n: int) -> dict:
         impact_friction_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else math.inf,
         max_stance_knee=float(np.max(knees[0])) if m.has_knees else None,
         min_swing_knee=float(np.min(knees[1])) if m.has_knees else None,
+        max_torso_lean=float(np.max(np.abs(lean))),
         periodicity_q=float(np.max(np.abs(qp - q[:, 0]))),
         periodicity_dq=float(np.max(np.abs(dqp - dq[:, 0]))),
         unactuated_row_residual=float(np.max(np.abs(row1))),
@@ -75,6 +77,8 @@ def dense_violations(gait, check: dict, tol: float) -> list:
         "lift-off velocity": o.min_liftoff_speed - c["liftoff_velocity"],
         "impact impulse cone": max(-F[1], abs(F[0]) - o.impulse_mu * F[1]),
     }
+    if o.torso_lean_max is not None:
+        amounts["torso lean"] = c["max_torso_lean"] - o.torso_lean_max
     if gait.model.has_knees:
         amounts["stance knee (hyperextension)"] = c["max_stance_knee"] - o.stance_knee_max
         amounts["swing knee (hyperextension)"] = o.swing_knee_min - c["min_swing_knee"]

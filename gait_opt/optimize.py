@@ -153,9 +153,9 @@ def _solve(model, options: GaitOptions | None = None, *, verbose: bool = False,
 
     The path constraints are imposed at the nodes; the polished gait is then checked on
     a dense grid (``Gait.violations``).  Where an active constraint is exceeded between
-    the nodes (torque, normal force, friction, clearance), its node bound is tightened
-    by twice the excess and the problem solved again from the gait found, at most
-    ``max_refinements`` times.
+    the nodes (torque, normal force, friction, clearance, torso lean), its node bound is
+    tightened by twice the excess and the problem solved again from the gait found, at
+    most ``max_refinements`` times.
 
     Parameters
     ----------

@@ -177,6 +177,8 @@ MAX_DEGREE = 9
 #: collocation intervals: 2000 already take about 1 GB and 15 s per IPOPT iteration, and a
 #: number read from a file without a bound exhausts the memory
 MAX_N_INTERVALS = 5000
+#: what ``torso_lean_max`` must be (a lean is an angle in [-pi, pi))
+LEAN_PHRASE = "None or a number of rad between 0 and pi (both excluded)"
 
 
 @dataclass(frozen=True)
@@ -218,6 +220,13 @@ class GaitOptions:
     min_liftoff_speed, min_strike_speed : float
         The swing foot leaves the ground upward after the impact and strikes it
         downward with at least these vertical speeds, m/s.
+    torso_lean_max : float or None
+        Bound on the torso's lean from upright (``model.torso_angle`` less the robot's
+        ``torso_upright``), rad, 0 < torso_lean_max < pi, imposed at every interval
+        boundary and collocation point as the running problem's
+        (:attr:`gait_opt.RunningOptions.torso_lean_max`); None (the default): no bound.
+        Unbounded, RABBIT's optimum leans the torso past the simulator's fall bound
+        (pi/2) from about 1.2 m/s on.
     stance_knee_max, swing_knee_min : float
         No hyperextension, rad: every stance knee (RABBIT: q2) <= ``stance_knee_max``
         and every swing knee (RABBIT: q5) >= ``swing_knee_min`` over the whole step
@@ -270,6 +279,7 @@ class GaitOptions:
     clearance: float | None = None
     min_liftoff_speed: float = 0.02
     min_strike_speed: float = 0.02
+    torso_lean_max: float | None = None
     stance_knee_max: float = 0.0
     swing_knee_min: float = 0.0
     n_intervals: int = 30
@@ -298,6 +308,9 @@ class GaitOptions:
                              "'continuation' (its decay time, a fraction of T)")
         c.numbers(("min_normal_force", "min_liftoff_speed", "min_strike_speed"), strict=False)
         c.numbers(("clearance",), strict=False, none=True)
+        c.numbers(("torso_lean_max",), none=True, phrase=LEAN_PHRASE)
+        if self.torso_lean_max is not None and not self.torso_lean_max < math.pi:
+            c.fail("torso_lean_max", LEAN_PHRASE, self.torso_lean_max)
         c.pairs(("step_length_bounds",), none=True, to_float=True)   # None: for_model's
         c.pairs(("step_time_bounds",), to_float=True)
         for n, lo, hi in (("n_intervals", 4, MAX_N_INTERVALS), ("degree", 1, MAX_DEGREE),
@@ -316,12 +329,13 @@ class GaitOptions:
         Returns
         -------
         dict
-            Field name -> value; bounds as lists, ``impact_mu`` and ``continuation`` left
-            out when unset (so files and cache keys are those written before the options
-            existed).
+            Field name -> value; bounds as lists, ``impact_mu``, ``continuation`` and
+            ``torso_lean_max`` left out when unset (so files and cache keys are those
+            written before the options existed).
         """
         d = dataclasses.asdict(self)
-        for name in ("impact_mu", "continuation"):   # unset: files and cache keys as before
+        # unset: files and cache keys as before
+        for name in ("impact_mu", "continuation", "torso_lean_max"):
             if d[name] is None:
                 del d[name]
         if d["continuation_shape"] == "ramp":

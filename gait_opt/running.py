@@ -49,6 +49,7 @@ from .options import leg_scale
 from .running_cache import cached_running
 from .running_file import check_running_file, running_problem
 from .running_solve import STALL_WINDOW, solve_running
+from .transcription import torso_lean_bound
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
            "hermite_simpson", "CLEARANCE", "TRAILING_CLEARANCE", "MIN_STEP_LENGTH",
@@ -488,8 +489,7 @@ def _torques(opti, opts, U, umax, T, n):
 def _posture(opti, model, opts, Q):
     """Knees between straight and ``knee_flexion_max``, the other joints within pi of
     upright; the torso within ``torso_lean_max`` of upright."""
-    lean = model.torso_angle.map(Q.shape[1])(Q) - model.description.torso_upright
-    opti.subject_to(opti.bounded(-opts.torso_lean_max, ca.vec(lean), opts.torso_lean_max))
+    opti.subject_to(opti.bounded(*torso_lean_bound(model, Q, opts.torso_lean_max)))
     up = model.description.upright_q
     for i in range(1, model.nq):
         if i in model.stance_knees:

@@ -6,9 +6,10 @@ dq_a^d, ddq_a^d are exact everywhere and continue past T); only the unactuated r
 eq. (1) is an ODE, x = (q_u, dq_u), and it is transcribed by orthogonal collocation
 (Legendre by default: order 2d at interval ends, i.e. 6 for d = 3, with the same number
 of variables as Radau; Radau is available for comparison, see benchmarks/bench_gait.py).
-Path constraints (torques, contact force, friction cone, swing-foot clearance) are
-imposed at every interval boundary and collocation point; knee limits on the Bezier
-coefficients, which bounds the polynomial on the whole step (convex hull).
+Path constraints (torques, contact force, friction cone, swing-foot clearance, with
+``torso_lean_max`` the torso's lean) are imposed at every interval boundary and
+collocation point; knee limits on the Bezier coefficients, which bounds the polynomial
+on the whole step (convex hull).
 
 Robots.  Everything is sized by the model: n = nq joints, nu = n - 1 torques (RABBIT:
 5 and 4, the numbers quoted below).  Knee limits apply to the joints between leg links
@@ -62,7 +63,8 @@ from .options import GaitOptions, guess_step_length
 from .parametrisation import reference_dynamics
 
 __all__ = ["Problem", "build_problem", "initial_guess", "make_solver", "describe_violations",
-           "constraint_violations", "warm_start_vector", "MARGINS", "FIXED_BY", "UNITS"]
+           "constraint_violations", "warm_start_vector", "torso_lean_bound", "MARGINS",
+           "FIXED_BY", "UNITS"]
 
 
 def _rows(model) -> tuple[dict, int, int]:
@@ -194,7 +196,7 @@ def _boundary_function(model, opts: GaitOptions):
 #: path-constraint families that between-node violations can be fixed for, by tightening
 #: the node constraints: family -> unit of the margin
 MARGINS = {"torque limit": "N m", "normal force": "N", "friction cone": "(ratio)",
-           "swing-foot clearance": "m"}
+           "swing-foot clearance": "m", "torso lean": "rad"}
 #: dense-grid families (Gait.violations) fixed by another family's margin
 FIXED_BY = {"swing foot above ground": "swing-foot clearance"}
 
@@ -327,7 +329,37 @@ def _point_constraints(model, opts, lay: _Layout, margins, OUT):
                 margin - slope * model.scuff_zone, np.inf)
     else:
         con.add("swing-foot clearance", zsw - ca.DM(profile + margin).T, 0, np.inf)
+    if opts.torso_lean_max is not None:
+        # q = (q_u, q_a) at every point; the torso's angle is a sum of joint angles, so
+        # the rows are linear in w, as build_problem requires
+        q_all = ca.vertcat(ca.horzcat(lay.Xs, lay.Xc)[0, :], lay.QA[:lay.nu, :])
+        lo, lean, hi = torso_lean_bound(model, q_all, opts.torso_lean_max
+                                        - margins.get("torso lean", 0.0))
+        con.add("torso lean", lean, lo, hi)
     return con, QA_of_alpha
+
+
+def torso_lean_bound(model, Q, lean_max: float) -> tuple:
+    """The torso-lean constraint of a transcription (walking and running alike).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    Q : casadi.MX or casadi.SX
+        Joint angles (nq x n), one column per constrained point.
+    lean_max : float
+        The bound, rad.
+
+    Returns
+    -------
+    tuple
+        (-lean_max, lean, lean_max): ``lean`` the torso's angle less the robot's
+        ``torso_upright`` at every column (a column vector), which the constraint keeps
+        between the two bounds.
+    """
+    lean = model.torso_angle.map(Q.shape[1])(Q) - model.description.torso_upright
+    return -lean_max, ca.vec(lean), lean_max
 
 
 def _cost_of_outputs(model, opts, lay: _Layout, OUT, per_speed: bool = True):
@@ -596,7 +628,7 @@ UNITS = {
     "friction cone": "N", "swing-foot clearance": "m", "periodicity (q)": "rad",
     "periodicity (dq)": "rad/s", "swing foot on ground at T": "m", "speed": "m",
     "step length": "m", "strike velocity": "m/s", "lift-off velocity": "m/s",
-    "impact impulse cone": "N s",
+    "impact impulse cone": "N s", "torso lean": "rad",
 }
 
 

@@ -54,6 +54,10 @@ def register(sub):
                         "0.0625 x leg, 0.05 for RABBIT; the step length is bounded to "
                         "0.25-1.0 x leg, the lower bound shrinking with the speed below "
                         "0.75 m/s x sqrt(leg / 0.8 m), recorded in the gait's options)")
+    p.add_argument("--torso-lean-max", type=float, default=None, metavar="RAD",
+                   help="bound on the torso's lean from upright at every node, rad, "
+                        "between 0 and pi (default: none; unbounded, RABBIT's optimum "
+                        "leans past the simulator's fall bound pi/2 from about 1.2 m/s)")
     add_robot(p, with_gait=False)
     add_family_arguments(p)
     p.add_argument("--out", metavar="FILE.json", default=None,
@@ -78,6 +82,10 @@ def cmd_gait(args):
         v = getattr(args, name)
         if v is not None and not (math.isfinite(v) and v > 0):
             raise UserError(f"--{name.replace('_', '-')} must be a positive number, got {v:g}")
+    lean = args.torso_lean_max
+    if lean is not None and not (math.isfinite(lean) and 0 < lean < math.pi):
+        raise UserError(f"--torso-lean-max must be a number of rad between 0 and pi (both "
+                        f"excluded), got {lean:g}")
     if args.continuation_shape == "smooth" and args.continuation is None:
         raise UserError("--continuation-shape smooth needs --continuation C (the decay "
                         "time, a fraction of T)")
@@ -104,6 +112,7 @@ def cmd_gait(args):
                           ipopt={} if args.max_iter is None else {"max_iter": args.max_iter},
                           impact_mu=args.impact_mu, continuation=args.continuation,
                           continuation_shape=args.continuation_shape,
+                          torso_lean_max=args.torso_lean_max,
                           **({} if args.clearance is None else {"clearance": args.clearance}))
     if args.speeds is not None:
         return cmd_family(args, options)
@@ -151,9 +160,13 @@ def _print_gait(s: dict, gait, model, out, mu: float, past: bool, bound: float):
     print(f"  peak torque          {s['peak_torque']:.3f} N m   (limit "
           f"{gait.options.torque_limit:g})")
     print(f"  min normal force     {s['min_normal_force']:.3f} N")
+    lean_max = gait.options.torso_lean_max
     print(f"  torso lean           {s['max_torso_lean']:.4f} rad {lean_from(model)} at most"
           + (f": PAST the simulator's fall bound ({bound:.4g} rad), so every walk of this "
-             "gait is a fall; a lower speed keeps the torso up" if past else ""))
+             f"gait is a fall; a lower speed, or --torso-lean-max RAD (below {bound:.4g}), "
+             "keeps the torso up" if past else "")
+          + (f"   (bound {lean_max:g} rad, --torso-lean-max)" if lean_max is not None
+             else ""))
     print(f"  max friction ratio   {s['max_friction_ratio']:.4f}   (mu {mu:g}); "
           f"at impact {s['impact_friction_ratio']:.4f}")
     print(f"  swing foot           min height inside the step {s['min_swing_height_inside']:.2e} m, "

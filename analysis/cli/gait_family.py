@@ -22,7 +22,7 @@ __all__ = ["add_family_arguments", "check_family_arguments", "cmd_family", "cmd_
 #: --family the family's own options hold, so these must be left alone
 PROBLEM_OPTIONS = dict(mu=0.6, torque_limit=None, intervals=30, scheme="legendre",
                        max_iter=None, impact_mu=None, continuation=None,
-                       continuation_shape="ramp", clearance=None)
+                       continuation_shape="ramp", clearance=None, torso_lean_max=None)
 
 
 def add_family_arguments(p):
@@ -130,7 +130,8 @@ def _print_family(fam: GaitFamily, s: dict):
               + ("  TORSO PAST THE FALL BOUND" if past else ""))
     if falls:
         print(f"  at {', '.join(falls)} m/s the torso leans past the simulator's fall bound "
-              f"({bound:.4g} rad): every walk of those gaits is a fall")
+              f"({bound:.4g} rad): every walk of those gaits is a fall; --torso-lean-max RAD "
+              f"(below {bound:.4g}) bounds the lean")
     for e in fam.events:
         what = e["detail"] if e["change"] == "branch" else \
             f"{e['constraint']} becomes {e['change']}"
@@ -184,7 +185,7 @@ def cmd_gait_at(args) -> int:
     if past:
         print(f"  torso lean           {lean:.4f} rad {lean_from(r.gait.model)} at most: "
               f"PAST the simulator's fall bound ({bound:.4g} rad), so every walk of this gait is a "
-              f"fall")
+              f"fall (a family solved with --torso-lean-max RAD keeps the torso up)")
     if r.violations:
         print(f"  VIOLATED on the dense grid: {r.violations} (--resolve gives the optimal "
               f"gait at this speed)")

@@ -116,7 +116,7 @@ def _check_stance(umap, stance):
 
 
 #: the options of an optimised gait that an imported one does not have, with their defaults
-SOLVER_OPTIONS = dict(intervals=30, scheme="legendre", max_iter=None)
+SOLVER_OPTIONS = dict(intervals=30, scheme="legendre", max_iter=None, torso_lean_max=None)
 
 
 def check_export_arguments(args):
