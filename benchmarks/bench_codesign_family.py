@@ -8,7 +8,7 @@ over the whole range, and the ramp 0.4 -> 1.2 -> 0.4 m/s walked in full order.
    the robust gait constraints near it when that misses the target), or why there is
    none (one line).
    A member without a design, and whose own orbit no controller walks (at 1.2 m/s the
-   default optimum leans the torso 2.05 rad, past the simulator's fall bound pi/2),
+   default optimum leans the torso 2.10 rad, past the simulator's fall bound pi/2),
    gets a gait by speed continuation from the nearest member with a design
    (:func:`analysis.design.codesign.continue_gait`: that design's gait options at the
    member's speed, the step length at most the neighbour's) and the co-design on it.

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +19,8 @@ from analysis.design.codesign import (FIT, IpoptLimits, MoveSettings,
 from analysis.design.codesign.functions import TranscriptionSettings
 from analysis.design.codesign.gait_move import GaitProjection, optimal_options, own_values
 from analysis.design.codesign.starts import BINDS, binds, gait_scale, vc_like_m1
+from biped_casadi import robot
+from gait_opt import import_gait
 
 
 @pytest.fixture(scope="module")
@@ -42,6 +45,20 @@ def test_move_reaches_the_robust_constraints_near_the_gait(gait, moved):
     assert abs(ch["speed"][1] - gait.speed) < 1e-9
     assert 0 < ch["max_joint_change"] < 0.5
     assert g.options.continuation == ROBUST_GAIT["continuation"]
+
+
+def test_move_of_a_gait_without_torque_limit():
+    """A robot without a torque limit (a URDF without <limit effort>): the move keeps the
+    limit infinite (it was inf + f x (inf - inf) = nan, and every move was refused)."""
+    walker = Path(__file__).resolve().parents[1] / "docs" / "howto" / "walker"
+    g = import_gait(robot(walker / "walker.urdf"), walker / "walker_step.csv",
+                    angles="urdf", stance="hip_left").gait
+    assert g.options.torque_limit == np.inf
+    mv = move_gait(g, dict(ROBUST_GAIT), MoveSettings(), TranscriptionSettings())
+    assert mv.status == "moved", mv.message
+    assert [r["torque_limit"] for r in mv.steps] == [np.inf] * len(mv.steps)
+    assert mv.gait.options.torque_limit == np.inf and mv.gait.violations() == []
+    assert own_values(mv.gait)["impact_mu"] <= ROBUST_GAIT["impact_mu"] + 1e-7
 
 
 def test_an_effort_out_of_iterations_is_not_tried_again(gait):

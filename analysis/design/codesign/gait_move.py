@@ -393,8 +393,10 @@ class _Move:
         self.records = []
 
     def bounds_at(self, f: float) -> dict:
-        """The continued constraints' bounds at fraction f of the way."""
-        return {k: self.start[k] + f * (self.tgt[k] - self.start[k]) for k in self.tgt}
+        """The continued constraints' bounds at fraction f of the way (a bound that
+        does not move stays as it is: an infinite torque limit stays infinite)."""
+        return {k: self.start[k] if self.start[k] == self.tgt[k]
+                else self.start[k] + f * (self.tgt[k] - self.start[k]) for k in self.tgt}
 
     def attempt(self, f: float, d_from, effort: float):
         """One solve at the bounds of fraction f from d_from: (G, gait) or None."""
