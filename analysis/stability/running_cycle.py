@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from biped_casadi.control.running import RunningController
+from biped_casadi.control.running import FLIGHT_CLOCKS, RunningController
 from biped_casadi.results import Result
 
 from .hybrid_cycle import Domain, HybridCycle, HybridCycleError, entry_function
@@ -57,9 +57,6 @@ __all__ = ["running_cycle", "RunningCycle", "running_stability", "RunningStabili
 #: RK4 steps per collocation interval at most (more only costs time)
 MAX_STEPS_PER_INTERVAL = 1000
 
-#: the flight reference's clock (:func:`running_cycle`): restarted at the takeoff, or the
-#: stance's continued through it
-FLIGHT_CLOCKS = ("takeoff", "stride")
 
 
 def _phase_constraints(c: RunningController, u, extra, names):
