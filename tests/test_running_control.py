@@ -308,6 +308,21 @@ def test_command_line_says_a_failed_loop_and_exits_1(gait_file, capsys):
                              f"stopped at {s['simulation']['message']}")
 
 
+def test_a_foot_back_below_the_ground_names_the_flight_clock(capsys):
+    """The failure of H1's loop (Unitree H1 at 1 m/s: the pushing foot 2.3e-7 m below the
+    ground 0.5 ms into flight) says what was measured to cause it, with the restarted
+    clock only; a loop that completes is exit 0, silent."""
+    from analysis.cli.running import loop_exit_code
+    msg = "domain 'flight': other foot height violated at t = 0.000513555 s (-2.28e-07 < 0)"
+    for clock, hint in (("takeoff", True), ("stride", False)):
+        assert loop_exit_code(dict(status="failed", message=msg, flight_clock=clock)) == 1
+        err = capsys.readouterr().err
+        assert err.startswith(f"biped running: the closed loop failed: {msg}")
+        assert ("--flight-clock stride" in err) == hint
+    assert loop_exit_code(dict(status="unstable", simulation=dict(status="ok"))) == 0
+    assert loop_exit_code(None) == 0 and capsys.readouterr().err == ""
+
+
 @pytest.mark.parametrize("args, words", [
     (["--kp", "-5"], "--kp"), (["--kd", "nan"], "--kd"), (["--m1", "1", "2"], "--m1"),
     (["--steps", "-1"], "--steps"), (["--perturb", "inf"], "--perturb"),

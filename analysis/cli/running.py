@@ -302,6 +302,11 @@ def loop_exit_code(s: dict | None) -> int:
         why = f"the perturbed run stopped at {sim.get('message', '')}"
     else:
         return 0
+    if "domain 'flight': other foot height" in why and s.get("flight_clock") == "takeoff":
+        why += ("; the foot that pushed off went below the ground in flight: with the flight "
+                "clock restarted at the takeoff the law's torque jumps there when the stance "
+                "ends off the reference's time (--flight-clock stride continues the "
+                "stance's clock)")
     print(f"biped running: the closed loop failed: {why}", file=sys.stderr)
     return 1
 
