@@ -12,7 +12,10 @@ of a :class:`~biped_casadi.control.running.RunningController`:
   round-off), the friction cone mu Fz -/+ Fx >= 0 (with a slack near takeoff, below),
   the swing foot above the ground and, without saturation, ``|u|`` <= the torque limit;
   reset ``takeoff``;
-- flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff;
+- flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff
+  (the flight law's clock: t, or with ``flight_clock='stride'`` the stance's clock
+  continued, t plus the stance's duration less T_stance, a parameter set at entry from
+  the time the stride ran);
   guard the swing foot's height (landing where it reaches 0 going down); constraints
   the other foot (the one that pushed off) above the ground and the torque limit;
   exit constraints the landing's normal impulse >= 0 and inside the friction cone, the
@@ -56,7 +59,6 @@ __all__ = ["running_cycle", "RunningCycle", "running_stability", "RunningStabili
 
 #: RK4 steps per collocation interval at most (more only costs time)
 MAX_STEPS_PER_INTERVAL = 1000
-
 
 
 def _phase_constraints(c: RunningController, u, extra, names):
