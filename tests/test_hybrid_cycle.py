@@ -216,3 +216,48 @@ def test_the_how_to_example_runs(model):
     n = 2 * model.nq
     assert ns["lin"].A.shape == (n, n) and ns["r"].A.shape == (n, n)
     assert [ps.next_state.size for ps in ns["r"].passes] == [n + 4, n]
+
+
+# ------------------------------------------------------------------ a clock through the stride
+def _clocked_cycle():
+    """Two domains of a scalar state.  The first moves at rate 1 from x0 to 1 (it lasts
+    1 - x0), the reset takes 1 off; the second moves at the rate given by its parameter
+    p = 1 + s, s the time the stride ran before it (a law whose clock runs on through the
+    stride), for 0.555 s, and the reset takes 2 off: P(x0) = 0.555 (2 - x0) - 2, with
+    dP/dx0 = -0.555 entirely through s (the second domain starts at 0 whatever x0)."""
+    X, t, p = ca.SX.sym("X"), ca.SX.sym("t"), ca.SX.sym("p")
+    x, s = ca.SX.sym("x"), ca.SX.sym("s")
+    e = ca.SX(0, 1)
+    first = Domain("first", 1, ca.Function("f0", [X, t, e], [ca.SX(1)]),
+                   ca.Function("g0", [X, t, e], [1 - X]),
+                   ca.Function("r0", [x], [x - 1]), 0.01, 5.0)
+    second = Domain("second", 1, ca.Function("f1", [X, t, p], [p]),
+                    ca.Function("g1", [X, t, p], [0.555 - t]),
+                    ca.Function("r1", [x], [x - 2]), 0.01, 5.0,
+                    start=ca.Function("s1", [x, s], [x, 1 + s]))
+    return HybridCycle([first, second])
+
+
+def test_a_domain_entry_sees_the_time_the_stride_ran():
+    """``start(x, s)`` gets the previous domains' durations; the Jacobian carries s."""
+    cyc = _clocked_cycle()
+    x0 = 0.3
+    lin = cyc.linearise([x0])
+    first, second = lin.passes
+    assert first.duration == pytest.approx(1 - x0, abs=1e-12)
+    assert second.parameters[0] == pytest.approx(1 + first.duration, abs=1e-12)
+    assert second.duration == pytest.approx(0.555, abs=1e-12)
+    assert lin.next_state[0] == pytest.approx(0.555 * (2 - x0) - 2, abs=1e-12)
+    assert lin.A[0, 0] == pytest.approx(-0.555, rel=1e-10)
+    assert lin.duration_gradients[0, 0] == pytest.approx(-1.0, rel=1e-12)
+    assert abs(lin.duration_gradients[1, 0]) < 1e-12
+    assert cyc.stride([x0]).next_state[0] == lin.next_state[0]
+
+
+def test_a_start_of_two_inputs_takes_one_number_of_time():
+    x, s = ca.SX.sym("x"), ca.SX.sym("s", 2)
+    X, t = ca.SX.sym("X"), ca.SX.sym("t")
+    with pytest.raises(HybridCycleError, match="domain 'd': start takes x, or x and"):
+        Domain("d", 1, ca.Function("f", [X, t, ca.SX(0, 1)], [ca.SX(1)]),
+               ca.Function("g", [X, t, ca.SX(0, 1)], [1 - X]), ca.Function("r", [x], [x]),
+               0.01, 1.0, start=ca.Function("s", [x, s], [x, ca.SX(0, 1)]))

@@ -149,6 +149,25 @@ def test_guard_clock_takes_out_most_of_the_jitter(stable_ctl):
     assert spread["guard"] < 0.6 * spread["contact"], spread
 
 
+def test_stride_flight_clock_continues_the_stance_clock(stable_ctl, run_gait15):
+    """``flight_clock='stride'`` gives the flight law the time since landing less
+    T_stance, the exact map's 'stride' clock: in the first stride (landing at 0) its
+    first flight time is the 'takeoff' clock's plus the stance's duration less T_stance
+    (the two runs are the same until then)."""
+    first = {}
+    for clock in ("takeoff", "stride"):
+        loop = RunningLoop(stable_ctl, FINE, flight_clock=clock)
+        law, times = loop._flight_law, []
+        loop._flight_law = lambda qe, dqe, t, law=law, times=times: times.append(t) or \
+            law(qe, dqe, t)
+        r = loop.run(None, 1)
+        assert r.status == "ran" and loop.flight_clock == clock
+        first[clock] = (times[0], r.strides[0].stance)
+    (t0, stance0), (t1, stance1) = first["takeoff"], first["stride"]
+    assert stance1 == stance0 and 0 < t0 < 0.02
+    assert t1 == pytest.approx(t0 + stance0 - run_gait15.T_stance, abs=1e-12)
+
+
 def test_fit_and_decay_need_strides(plain_run):
     assert fit_running_map(plain_run).status == "failed"
     assert np.isnan(decay_rate(plain_run)["rate"])
@@ -160,6 +179,7 @@ def test_fit_and_decay_need_strides(plain_run):
     (dict(min_stance=1.5), "min_stance"),
     (dict(liftoff_time=-1), "liftoff_time"),
     (dict(takeoff_clock="late"), "takeoff_clock"),
+    (dict(flight_clock="late"), "flight_clock"),
     (dict(fixed_point=[1, 2]), "fixed_point"),
     (dict(settings="stiff"), "settings"),
 ])
@@ -206,6 +226,7 @@ def test_command_json(gait_file, capsys):
     assert rc == 0 and r["status"] == "ran" and r["strides_run"] == 3
     assert r["fixed_point_kind"] == "collocated" and r["settings"]["timestep"] == 0.001
     assert r["controller"]["M1"] == list(STABLE_M1) and r["takeoff_clock"] == "guard"
+    assert r["flight_clock"] == "takeoff"
     assert all(math.isfinite(s["takeoff_guard_gap"]) for s in r["strides"])
 
 

@@ -156,6 +156,7 @@ def test_cycle_arguments_are_named(cycle):
             (lambda: running_cycle(c, friction_slack=-5.0), ValueError, "friction_slack"),
             (lambda: running_cycle(c, time_limits=-1.0), ValueError, "time_limits"),
             (lambda: running_cycle(c, tolerance=float("nan")), ValueError, "tolerance"),
+            (lambda: running_cycle(c, flight_clock="landing"), ValueError, "flight_clock"),
             (lambda: running_stability(None), TypeError, "cycle must be a running cycle"),
             (lambda: running_stability(cycle, x0=np.full(n, np.nan)), ValueError, "x0"),
             (lambda: running_stability(cycle, tol=-1.0), ValueError, "tol"),
@@ -232,6 +233,47 @@ def test_plain_tracking_is_unstable_and_its_run_diverges(cycle, model):
         assert "violated" in run.message or "not crossed" in run.message
 
 
+def _takeoff_jump(cyc, x):
+    """The law's torque at the takeoff: stance law's last, flight law's first (N m)."""
+    c = cyc.controller
+    st, fl = cyc.stride(x, record=True).passes
+    nq = c.model.nq
+    q, dq = st.exit_state[:nq], st.exit_state[nq:]
+    u_st = np.array(c.stance_law(q, dq, st.duration)).ravel()
+    qe, dqe = (np.array(v).ravel() for v in c.fl.takeoff(q, dq))
+    u_fl = np.array(c.flight_law(qe, dqe, fl.parameters[-1])).ravel()
+    return np.abs(u_fl - u_st).max(), st, fl
+
+
+@pytest.fixture(scope="session")
+def stride_clock(cycle):
+    return running_cycle(cycle.controller, flight_clock="stride")
+
+
+def test_the_stride_clock_continues_the_stance_reference_through_takeoff(
+        model, run_gait, cycle, stable, stride_clock):
+    """With ``flight_clock='stride'`` the flight law starts at the stance's clock less
+    T_stance, so a takeoff off the reference's time leaves the torque continuous where
+    the restarted clock jumps; the exact Jacobian carries the takeoff time into flight."""
+    x = stable.fixed_point.copy()
+    x[model.nq:] += 1e-2
+    jump0, st0, fl0 = _takeoff_jump(cycle, x)
+    jump1, st1, fl1 = _takeoff_jump(stride_clock, x)
+    assert fl0.parameters[-1] == 0.0
+    assert fl1.parameters[-1] == pytest.approx(st1.duration - run_gait.T_stance, abs=1e-15)
+    assert abs(st1.duration - run_gait.T_stance) > 1e-4          # off the reference's time
+    assert st1.duration == st0.duration                          # stance is the same
+    assert jump1 < 0.3 * jump0                                   # 2.48 -> 0.65 N m measured
+    r = running_stability(stride_clock)
+    assert r.status in ("stable", "unstable") and r.residual < 1e-10
+    J = finite_difference_jacobian(stride_clock, r.fixed_point, 1e-5)
+    assert np.max(np.abs(J - r.A)) < 1e-6 * np.max(np.abs(r.A))
+    # retuning keeps the clock
+    re = stride_clock.retuned(M1=STABLE_M1)
+    assert re.flight_clock == "stride"
+    assert np.array_equal(re.stride(x).next_state, stride_clock.stride(x).next_state)
+
+
 # ------------------------------------------------------------------ command line
 def test_command_line_stability(gait_file, stable, capsys):
     from analysis.cli import main
@@ -250,6 +292,35 @@ def test_command_line_stability(gait_file, stable, capsys):
     out = capsys.readouterr().out
     assert f"spectral radius      {stable.spectral_radius:.4f}" in out
     assert "per-stride contraction " + " ".join(f"{v:.3g}" for v in sim["contraction"]) in out
+
+
+def test_command_line_says_a_failed_loop_and_exits_1(gait_file, capsys):
+    """Plain tracking's perturbed run stops (its third stance leaves the friction cone):
+    the report is printed, then one line on stderr, exit code 1 (as ``biped
+    mujoco-running``'s run that stops); the flight clock is reported."""
+    from analysis.cli import main
+    assert main(["running", "--gait", gait_file, "--m1", "0", "0", "0", "0", "--json"]) == 1
+    o = capsys.readouterr()
+    s = json.loads(o.out)["stability"]
+    assert s["status"] == "unstable" and s["simulation"]["status"] == "stopped"
+    assert s["flight_clock"] == "takeoff"
+    assert o.err.strip() == ("biped running: the closed loop failed: the perturbed run "
+                             f"stopped at {s['simulation']['message']}")
+
+
+def test_a_foot_back_below_the_ground_names_the_flight_clock(capsys):
+    """The failure of H1's loop (Unitree H1 at 1 m/s: the pushing foot 2.3e-7 m below the
+    ground 0.5 ms into flight) says what was measured to cause it, with the restarted
+    clock only; a loop that completes is exit 0, silent."""
+    from analysis.cli.running import loop_exit_code
+    msg = "domain 'flight': other foot height violated at t = 0.000513555 s (-2.28e-07 < 0)"
+    for clock, hint in (("takeoff", True), ("stride", False)):
+        assert loop_exit_code(dict(status="failed", message=msg, flight_clock=clock)) == 1
+        err = capsys.readouterr().err
+        assert err.startswith(f"biped running: the closed loop failed: {msg}")
+        assert ("--flight-clock stride" in err) == hint
+    assert loop_exit_code(dict(status="unstable", simulation=dict(status="ok"))) == 0
+    assert loop_exit_code(None) == 0 and capsys.readouterr().err == ""
 
 
 @pytest.mark.parametrize("args, words", [
@@ -417,7 +488,7 @@ def test_command_line_saturates(gait_file, saturated, cycle, monkeypatch, capsys
     from analysis.cli import main
     asked = []
 
-    def build(c):
+    def build(c, **options):
         asked.append(c.saturate)
         return saturated[0] if c.saturate else cycle
     monkeypatch.setattr(cli, "running_cycle", build)
@@ -455,6 +526,7 @@ def test_saturate_closes_the_loop_of_an_optimised_step(run_gait, tmp_path, monke
         args.saturate) or {"law": "pd", "Kp": KP, "Kd": KD, "M1": list(STABLE_M1),
                            "status": "failed", "message": "recorded"})
     out = str(tmp_path / "run.json")
-    assert main(["running", "--saturate", "--out", out, "--json"]) == 0
-    assert calls == [True] and json.loads(capsys.readouterr().out)["stability"]["message"] \
-        == "recorded"
+    assert main(["running", "--saturate", "--out", out, "--json"]) == 1     # a failed loop
+    o = capsys.readouterr()
+    assert calls == [True] and json.loads(o.out)["stability"]["message"] == "recorded"
+    assert o.err.strip() == "biped running: the closed loop failed: recorded"

@@ -11,7 +11,7 @@ import numpy as np
 from biped_casadi.control.compiled import CompilerError
 from biped_casadi.control.compiled_running import CompiledRunningLaw
 from biped_casadi.control.export_running import RUNNING_LIBRARY
-from biped_casadi.control.running import RunningController
+from biped_casadi.control.running import FLIGHT_CLOCKS, RunningController
 from biped_casadi.mujoco.running import TAKEOFF_CLOCKS, RunningLoop, fit_running_map
 from analysis.stability.running_cycle import running_cycle, running_stability
 
@@ -66,7 +66,7 @@ def cmd_mujoco_running(args):
     x_star = A = None
     if args.exact:
         say("the exact stride map: fixed point and eigenvalues (about 20 s) ...")
-        st = running_stability(running_cycle(c))
+        st = running_stability(running_cycle(c, flight_clock=args.flight_clock))
         if st.status == "failed":
             raise UserError(f"--exact: {st.message}")
         x_star, A = st.fixed_point, st.A
@@ -75,6 +75,7 @@ def cmd_mujoco_running(args):
                      fixed_point=st.fixed_point)
     try:
         loop = RunningLoop(c, settings, x_star, takeoff_clock=args.takeoff_clock,
+                           flight_clock=args.flight_clock,
                            compiled=compiled)
     except ValueError as e:
         raise settings_error(e) from None
@@ -88,7 +89,7 @@ def cmd_mujoco_running(args):
         fit = fit_running_map(loop.run(loop.x_star, args.fit), reference=A)
     d = r.to_dict()
     d.update(exact=exact, fit=None if fit is None else fit.to_dict(),
-             takeoff_clock=args.takeoff_clock,
+             takeoff_clock=args.takeoff_clock, flight_clock=args.flight_clock,
              fixed_point_kind="exact" if args.exact else "collocated",
              perturb=args.perturb, file=str(args.gait))
     if args.json:
@@ -177,6 +178,10 @@ def register(sub):
                         "takeoff guard on MuJoCo's states, default) or 'contact' (MuJoCo's "
                         "first zero-force state, whose scatter with the contact's chatter "
                         "makes most of the stride-to-stride jitter)")
+    p.add_argument("--flight-clock", choices=FLIGHT_CLOCKS, default="takeoff",
+                   help="the flight reference's clock: from the takeoff (default; dated by "
+                        "--takeoff-clock) or the stance's continued (t - T_stance, t since "
+                        "landing), as biped running --flight-clock")
     add_mujoco_settings(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_mujoco_running)

@@ -7,12 +7,14 @@ domain"); every computation is in ``gait_opt.running``, ``gait_opt.running_check
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 
 from analysis.design.running_m1 import choose_running_m1
 from analysis.reporting.plots import running_plot, save_figures
-from analysis.stability.running_cycle import running_cycle, running_stability, simulate_running
+from analysis.stability.running_cycle import (FLIGHT_CLOCKS, running_cycle, running_stability,
+                                              simulate_running)
 from biped_casadi.control.running import RunningController
 from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
@@ -126,12 +128,19 @@ def register(sub):
     p.add_argument("--plot", metavar="DIR",
                    help="write running_step.png into DIR (poses, joint angles, torques)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_closed_loop_arguments(p)
+    p.set_defaults(func=cmd_running)
+
+
+def _add_closed_loop_arguments(p):
+    """The options of ``--stability`` (the closed loop), in their own group."""
     st = p.add_argument_group(
         "closed loop (--stability)",
         "track the step with u = u_d(t) + Kp (v_d - v) + Kd (dv_d - dv), v = [M1, I] q, in "
-        "stance and in flight (t restarts in each phase); find the stride map's fixed point "
-        "(landing state), the eigenvalues of its exact Jacobian and run STEPS strides from "
-        "the fixed point with PERTURB added to every velocity")
+        "stance and in flight (t restarts in each phase, see --flight-clock); find the stride "
+        "map's fixed point (landing state), the eigenvalues of its exact Jacobian and run "
+        "STEPS strides from the fixed point with PERTURB added to every velocity; exit code 1 "
+        "when the closed loop fails (no fixed point, or the perturbed run stops)")
     st.add_argument("--stability", action="store_true",
                     help="analyse the closed loop of the step (optimised, or --gait FILE)")
     st.add_argument("--gait", metavar="FILE",
@@ -149,6 +158,11 @@ def register(sub):
                          "maximum) instead of stopping the run where the law asks for more; "
                          "the report gives each stride's time saturated; implies "
                          "--stability")
+    st.add_argument("--flight-clock", choices=FLIGHT_CLOCKS, default="takeoff",
+                    help="the flight reference's clock: restarted at 0 at the takeoff "
+                         "(default) or the stance's continued through it (t - T_stance, t "
+                         "since landing), which keeps the law's torque continuous through a "
+                         "takeoff earlier or later than the reference's")
     st.add_argument("--choose-m1", action="store_true",
                     help="choose M1 first: minimise the stride map's spectral radius over "
                          "M1 (Nelder-Mead on the exact radius, about 0.5 s an evaluation) "
@@ -164,7 +178,6 @@ def register(sub):
                          "landing state (largest entry, rad or rad/s) is another orbit than "
                          "the gait's, infeasible (default 0.01; a coarse grid for the robot "
                          "may need more)")
-    p.set_defaults(func=cmd_running)
 
 
 def _check_closed_loop(args):
@@ -265,14 +278,37 @@ def cmd_running(args):
         s["stability"] = closed_loop(model, gait, args)
     if args.json:
         print_json(s)
-        return 0
+        return loop_exit_code(s.get("stability"))
     if reused:
         print(f"reused the running step kept in {gait.solver_stats['cache_file']} (same "
               "robot, options and code; --no-cache solves it again)")
     _print(s, gait, gait.options.limit(model))
     if args.stability:
         _print_stability(s["stability"])
-    return 0
+    return loop_exit_code(s.get("stability"))
+
+
+def loop_exit_code(s: dict | None) -> int:
+    """1 when the closed loop of ``s`` (the ``stability`` report, or None) failed: no fixed
+    point, or a perturbed run that stopped, said in one line on stderr (as ``biped
+    mujoco-running``'s run that stops: exit 1 for a stage or run that failed); else 0.
+    An unstable fixed point whose run completes is a result, 0."""
+    if not s:
+        return 0
+    sim = s.get("simulation")
+    if s.get("status") == "failed":
+        why = s.get("message", "")
+    elif sim and sim.get("status") not in (None, "ok"):
+        why = f"the perturbed run stopped at {sim.get('message', '')}"
+    else:
+        return 0
+    if "domain 'flight': other foot height" in why and s.get("flight_clock") == "takeoff":
+        why += ("; the foot that pushed off went below the ground in flight: with the flight "
+                "clock restarted at the takeoff the law's torque jumps there when the stance "
+                "ends off the reference's time (--flight-clock stride continues the "
+                "stance's clock)")
+    print(f"biped running: the closed loop failed: {why}", file=sys.stderr)
+    return 1
 
 
 def failure(speed: float, stats: dict) -> str:
@@ -341,7 +377,7 @@ def _stability_of_file(args):
         print(f"running step of {s['robot']} from {s['file']}: {gait.speed:.4f} m/s, stance "
               f"{gait.T_stance:.4f} s, flight {gait.T_flight:.4f} s")
         _print_stability(s["stability"])
-    return 0
+    return loop_exit_code(s["stability"])
 
 
 def closed_loop(model, gait, args) -> dict:
@@ -353,7 +389,7 @@ def closed_loop(model, gait, args) -> dict:
                         f"got {len(M1)}")
     c = RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law,
                           saturate=args.saturate)
-    cyc = running_cycle(c)
+    cyc = running_cycle(c, flight_clock=args.flight_clock)
     c = cyc.controller
     choice = None
     if getattr(args, "choose_m1", False):
@@ -374,7 +410,8 @@ def closed_loop(model, gait, args) -> dict:
     r = running_stability(cyc)
     kp = float(c.Kp[0]) if np.ptp(c.Kp) == 0 else c.Kp.tolist()
     kd = float(c.Kd[0]) if np.ptp(c.Kd) == 0 else c.Kd.tolist()
-    out = dict(law=args.law, Kp=kp, Kd=kd, M1=list(M1), status=r.status,
+    out = dict(law=args.law, Kp=kp, Kd=kd, M1=list(M1), flight_clock=args.flight_clock,
+               status=r.status,
                message=r.message, stable=r.stable,
                fixed_point=r.fixed_point.tolist(), fixed_point_residual=r.residual,
                fixed_point_distance=r.distance, spectral_radius=r.spectral_radius,
@@ -429,8 +466,10 @@ def _print_stability(s: dict):
               + f", spectral radius {ch['spectral_radius']:.4f}")
     def gain(v):
         return f"{v:g}" if isinstance(v, float) else " ".join(f"{x:g}" for x in v)
+    clock = "" if s.get("flight_clock", "takeoff") == "takeoff" else \
+        f", flight clock {s['flight_clock']}"
     print(f"closed loop ({s['law']}, Kp {gain(s['Kp'])}, Kd {gain(s['Kd'])}, M1 "
-          f"{' '.join(f'{v:.5g}' for v in s['M1'])}): {s['status']}")
+          f"{' '.join(f'{v:.5g}' for v in s['M1'])}{clock}): {s['status']}")
     if s["status"] == "failed":
         print(f"  {s['message']}")
         return

@@ -26,8 +26,10 @@ the saltation term of each guard.
 Domain i's state x has ``n`` numbers (what the resets map); it integrates an augmented
 state X = (x, r) of ``nX`` numbers (r: a controller's internal states, e.g. the
 time-varying controller's reference state) with parameters p fixed for the domain (its
-step constants, eq. 17), both set at entry by ``start(x) -> (X0, p)``.  Time t restarts
-at 0 in each domain.
+step constants, eq. 17), both set at entry by ``start(x) -> (X0, p)``, or by
+``start(x, s) -> (X0, p)`` when they depend on s, the time the stride has run before the
+domain began (0 in the first domain): a law whose clock runs on through the stride.  Time
+t restarts at 0 in each domain; s and its gradient are carried through the Jacobian.
 
 The domains of the walking and running robot are built in
 :mod:`analysis.stability.cycle_domains`: walking is the cycle of one domain, and its
@@ -45,7 +47,7 @@ from biped_casadi.results import Result
 from biped_casadi.simulation.kernel import locate_strike
 
 __all__ = ["Domain", "HybridCycle", "HybridCycleError", "DomainPass", "StrideValue",
-           "StrideLinearisation"]
+           "StrideLinearisation", "entry_function"]
 
 
 class HybridCycleError(ValueError):
@@ -98,7 +100,9 @@ class Domain:
     t_max : float
         Time limit: the guard must be crossed within it, s.
     start : casadi.Function, optional
-        ``start(x) -> (X0, p)`` at entry; default X0 = x, no parameters.
+        ``start(x) -> (X0, p)`` at entry, or ``start(x, s) -> (X0, p)`` with s the time
+        the stride has run before this domain (the previous domains' durations; 0 in the
+        cycle's first domain); default X0 = x, no parameters.
     arming : casadi.Function, optional
         ``a(X, t, p)`` (scalar): a crossing counts only at a node where a > 0 (the
         swing foot in front of the stance foot).
@@ -155,6 +159,11 @@ class Domain:
                                        "field's state or parameters are not x alone")
         else:
             got = (_size(self.start, 0), _size(self.start, 0, True), _size(self.start, 1, True))
+            if self.start.n_in() not in (1, 2) or (self.start.n_in() == 2
+                                                    and _size(self.start, 1) != 1):
+                raise HybridCycleError(self.name, "dimension",
+                                       "start takes x, or x and the stride's time s (one "
+                                       "number)")
             if got != (self.n, self.nX, self.n_par):
                 raise HybridCycleError(self.name, "dimension",
                                        f"start maps {got[0]} numbers to ({got[1]}, {got[2]}), "
@@ -344,17 +353,25 @@ class _Compiled:
         self.last = ca.Function("last", [X, J, t, eta, p, Jp],
                                 [Xe, ca.cse(Je), ca.jacobian(Xe, eta), gX, gp, gt,
                                  node(Xe, te)[2]])
+        self.entry = entry_function(d)
         x = ca.SX.sym("x", d.n)
-        if d.start is None:
-            X0, p0 = x, ca.SX(0, 1)
-        else:
-            X0, p0 = d.start(x)
-        self.entry = ca.Function("entry", [x], [X0, p0, ca.jacobian(X0, x), ca.jacobian(p0, x)])
         xp = d.reset(x)
         xp = xp[0] if isinstance(xp, (list, tuple)) else xp
         e = d.exit_constraints(x) if d.exit_constraints is not None else ca.SX(0, 1)
         e = e[0] if isinstance(e, (list, tuple)) else e
         self.reset = ca.Function("reset", [x], [xp, ca.jacobian(xp, x), e])
+
+
+def entry_function(d: Domain) -> ca.Function:
+    """``entry(x, s) -> (X0, p, dX0/dx, dp/dx, dX0/ds, dp/ds)`` of a domain: its start at the
+    state x and the stride's time s (module docstring), with the derivatives."""
+    x, s = ca.SX.sym("x", d.n), ca.SX.sym("s")
+    if d.start is None:
+        X0, p0 = x, ca.SX(0, 1)
+    else:
+        X0, p0 = d.start(x, s) if d.start.n_in() == 2 else d.start(x)
+    return ca.Function("entry", [x, s], [X0, p0, ca.jacobian(X0, x), ca.jacobian(p0, x),
+                                         ca.jacobian(X0, s), ca.jacobian(p0, s)])
 
 
 def _ident(name: str) -> str:
@@ -409,15 +426,17 @@ class HybridCycle:
             raise HybridCycleError(d.name, "constraint",
                                    f"{names[j]} violated at t = {t:.6g} s ({c[j]:.3g} < 0)")
 
-    def _domain(self, i, x, Jx, derivatives, record):
-        """Domain i from its state x (with dx/dx0 = Jx): the pass, the next state and
-        its Jacobian, the duration's gradient."""
+    def _domain(self, i, x, Jx, derivatives, record, s=0.0, ds=None):
+        """Domain i from its state x (with dx/dx0 = Jx) and the stride's time s (with
+        ds/dx0 = ds): the pass, the next state and its Jacobian, the duration's gradient."""
         d, f = self.domains[i], self._fns[i]
-        X, p, XJ, pJ = (np.array(v) for v in f.entry(x))
+        X, p, XJ, pJ, Xs, ps_ = (np.array(v) for v in f.entry(x, s))
         X, p = X.ravel(), p.ravel()
         X0 = X
         if derivatives:
             J, Jp = XJ @ Jx, pJ @ Jx
+            if ds is not None:
+                J, Jp = J + Xs @ ds[None, :], Jp + ps_ @ ds[None, :]
         ns = self.n
         t, h = 0.0, d.h
         g_prev, _, c = f.node(X, t, p)
@@ -482,10 +501,14 @@ class HybridCycle:
             raise ValueError(f"the cycle's state has {self.n} numbers, got {x.size}")
         Jx = np.eye(self.n)
         passes, grads = [], []
+        s, ds = 0.0, np.zeros(self.n)
         for i in range(len(self.domains)):
-            ps, x, Jx, dT = self._domain(i, x, Jx, derivatives, record)
+            ps, x, Jx, dT = self._domain(i, x, Jx, derivatives, record, s, ds)
             passes.append(ps)
             grads.append(dT)
+            s += ps.duration
+            if derivatives:
+                ds = ds + dT
         return passes, x, Jx, grads
 
     # ---------------------------------------------------------------- the map

@@ -12,7 +12,10 @@ of a :class:`~biped_casadi.control.running.RunningController`:
   round-off), the friction cone mu Fz -/+ Fx >= 0 (with a slack near takeoff, below),
   the swing foot above the ground and, without saturation, ``|u|`` <= the torque limit;
   reset ``takeoff``;
-- flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff;
+- flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff
+  (the flight law's clock: t, or with ``flight_clock='stride'`` the stance's clock
+  continued, t plus the stance's duration less T_stance, a parameter set at entry from
+  the time the stride ran);
   guard the swing foot's height (landing where it reaches 0 going down); constraints
   the other foot (the one that pushed off) above the ground and the torque limit;
   exit constraints the landing's normal impulse >= 0 and inside the friction cone, the
@@ -45,14 +48,14 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from biped_casadi.control.running import RunningController
+from biped_casadi.control.running import FLIGHT_CLOCKS, RunningController
 from biped_casadi.results import Result
 
-from .hybrid_cycle import Domain, HybridCycle, HybridCycleError
+from .hybrid_cycle import Domain, HybridCycle, HybridCycleError, entry_function
 
 __all__ = ["running_cycle", "RunningCycle", "running_stability", "RunningStability",
            "finite_difference_jacobian", "simulate_running", "RunningRun", "StrideRecord",
-           "require_running_cycle"]
+           "require_running_cycle", "FLIGHT_CLOCKS"]
 
 #: RK4 steps per collocation interval at most (more only costs time)
 MAX_STEPS_PER_INTERVAL = 1000
@@ -122,10 +125,18 @@ def _state(name, v, n: int) -> np.ndarray:
     return x
 
 
-def _start(n: int, gains) -> ca.Function:
-    """Entry of a domain: X0 = x, p = the gains."""
+def _start(n: int, gains, clock_origin: float | None = None) -> ca.Function:
+    """Entry of a domain: X0 = x, p = the gains; with ``clock_origin`` (the flight),
+    also the law's clock at entry: 0 when the origin is 0 (the clock restarts), else
+    s - ``clock_origin`` (s the time since landing)."""
     x = ca.SX.sym("x", n)
-    return ca.Function("running_start", [x], [x, ca.DM(np.asarray(gains, float))])
+    k = ca.DM(np.asarray(gains, float))
+    if clock_origin is None:
+        return ca.Function("running_start", [x], [x, k])
+    if clock_origin == 0.0:
+        return ca.Function("running_start", [x], [x, ca.vertcat(k, 0.0)])
+    s = ca.SX.sym("s")
+    return ca.Function("running_start", [x, s], [x, ca.vertcat(k, s - clock_origin)])
 
 
 class RunningCycle(HybridCycle):
@@ -165,22 +176,20 @@ class RunningCycle(HybridCycle):
         c = self.controller.with_gains(Kp, Kd, M1)
         new = copy.copy(self)
         new.controller = c
-        new.domains = [dataclasses.replace(d, start=_start(d.n, c.gains))
-                       for d in self.domains]
+        new.domains = [dataclasses.replace(d, start=_start(d.n, c.gains, origin))
+                       for d, origin in zip(self.domains, self.clock_origins)]
         new._fns = []
         for d, f in zip(new.domains, self._fns):
             g = copy.copy(f)
-            x = ca.SX.sym("x", d.n)
-            X0, p0 = d.start(x)
-            g.entry = ca.Function("entry", [x], [X0, p0, ca.jacobian(X0, x),
-                                                 ca.jacobian(p0, x)])
+            g.entry = entry_function(d)
             new._fns.append(g)
         return new
 
 
 def running_cycle(controller: RunningController, mu: float | None = None,
                   steps_per_interval: int = 8, friction_slack: float | None = None,
-                  time_limits: float = 2.0, tolerance: float = 1e-9) -> RunningCycle:
+                  time_limits: float = 2.0, tolerance: float = 1e-9,
+                  flight_clock: str = "takeoff") -> RunningCycle:
     """The stride map of a running gait under a tracking controller (module docstring).
 
     Parameters
@@ -197,6 +206,12 @@ def running_cycle(controller: RunningController, mu: float | None = None,
         Each phase must end within this many times its reference duration.
     tolerance : float
         Round-off allowed below zero in every constraint (its own unit).
+    flight_clock : {'takeoff', 'stride'}
+        The flight reference's clock (:data:`FLIGHT_CLOCKS`): 'takeoff' (the default)
+        restarts it at 0 at the takeoff; 'stride' continues the stance's, t - T_stance
+        with t the time since landing, so that a takeoff earlier or later than the
+        reference's does not shift the flight reference (the law's torque is continuous
+        through the takeoff where the gait's is).
 
     Returns
     -------
@@ -211,6 +226,10 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     if mu is None:
         mu = float(getattr(getattr(g, "options", None), "mu", 0.6))
     mu = _real("mu", mu)
+    if flight_clock not in FLIGHT_CLOCKS:
+        raise ValueError(f"flight_clock must be one of {', '.join(FLIGHT_CLOCKS)}, got "
+                         f"{flight_clock!r}")
+    origin = float(g.T_stance) if flight_clock == "stride" else 0.0
     _count("steps_per_interval", steps_per_interval, 1, MAX_STEPS_PER_INTERVAL)
     _real("time_limits", time_limits, 1.0)
     _real("tolerance", tolerance, strict=False)
@@ -244,13 +263,14 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     # ---- flight
     Y = ca.SX.sym("Y", 2 * ne)
     qe, dqe = Y[:ne], Y[ne:]
-    uf = c.flight_law_k(qe, dqe, t, k)
-    f_fl = ca.Function("running_flight", [Y, t, k],
+    kf = ca.SX.sym("k", 3 * nu + 1)              # the gains, then the law's clock at takeoff
+    uf = c.flight_law_k(qe, dqe, t + kf[-1], kf[:-1])
+    f_fl = ca.Function("running_flight", [Y, t, kf],
                        [ca.vertcat(dqe, fl.flight_dynamics(qe, dqe, c.applied(uf)))])
     feet = fl.feet(qe)
-    g_fl = ca.Function("swing_foot_height", [Y, t, k], [feet[1, 1]])
+    g_fl = ca.Function("swing_foot_height", [Y, t, kf], [feet[1, 1]])
     cons, names = _phase_constraints(c, uf, feet[1, 0], ("other foot height",))
-    c_fl = ca.Function("flight_constraints", [Y, t, k], [cons])
+    c_fl = ca.Function("flight_constraints", [Y, t, kf], [cons])
     y = ca.SX.sym("y", 2 * ne)
     qp, dqp, F, _, v_other, _ = fl.landing_swing(y[:ne], y[ne:])
     r_fl = ca.Function("landing", [y], [ca.vertcat(qp, dqp)])
@@ -258,7 +278,8 @@ def running_cycle(controller: RunningController, mu: float | None = None,
                        [ca.vertcat(F[1], mu * F[1] - F[0], mu * F[1] + F[0], v_other[1])])
     h_fl = float(g.T_flight) / (c.flight.n_intervals * steps_per_interval)
     flight = Domain("flight", 2 * ne, f_fl, g_fl, r_fl, h_fl, time_limits * float(g.T_flight),
-                    start=_start(2 * ne, c.gains), constraints=c_fl, constraint_names=names,
+                    start=_start(2 * ne, c.gains, origin), constraints=c_fl,
+                    constraint_names=names,
                     exit_constraints=e_fl,
                     exit_constraint_names=("landing normal impulse",
                                            "landing impulse in the cone (Fx <= mu Fz)",
@@ -267,6 +288,7 @@ def running_cycle(controller: RunningController, mu: float | None = None,
                     guard_name="swing foot height", tolerance=tolerance)
     cyc = RunningCycle([stance, flight])
     cyc.controller, cyc.mu, cyc.friction_slack = c, mu, slack
+    cyc.clock_origins, cyc.flight_clock = (None, origin), flight_clock
     return cyc
 
 
@@ -497,7 +519,7 @@ def _margins(cycle: HybridCycle, passes) -> dict:
     zsw = np.array(m.swing_foot.map(N)(Xs[:nq])[1]).ravel()
     Yf, tf = fli.nodes, fli.times
     Nf = tf.size
-    uf = np.array(c.flight_law.map(Nf)(Yf[:ne], Yf[ne:], tf[None, :]))
+    uf = np.array(c.flight_law.map(Nf)(Yf[:ne], Yf[ne:], tf[None, :] + fli.parameters[-1]))
     feet = np.array(fl.feet.map(Nf)(Yf[:ne]))
     y = fli.exit_state
     F = np.array(fl.landing_swing(y[:ne], y[ne:])[2]).ravel()

@@ -373,7 +373,10 @@ not reentrant: one caller at a time). `example/main.c` times the law in a loop:
   leg that pushed off as the stance leg, (x, z) its foot's point relative to where it
   left the ground, m.
 - `t`: time since the phase began, s; restart it at 0 at the takeoff and at the landing
-  (after the landing, relabel the legs: q+ = E q-). The gait's phases last
+  (after the landing, relabel the legs: q+ = E q-).  That is the default flight clock;
+  with the stance's clock continued (`biped running --flight-clock stride`) give the
+  flight the time since landing less {law.T_stance:.6g} s (below 0 when the stance
+  ended early). The gait's phases last
   {law.T_stance:.6g} s (stance) and {law.T_flight:.6g} s (flight); the reference continues
   its polynomials past them.
 - `u` ({law.nu}): torques on q2..q{law.nq}, N m.

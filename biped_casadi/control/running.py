@@ -35,6 +35,14 @@ extended coordinates; the base is not an output).  Two laws:
   He = Be u), u = (M D^-1 B)^-1 (a + M D^-1 H); Kp in 1/s^2, Kd in 1/s.  Singular where
   M D^-1 B is (never for M1 = 0: B' D^-1 B is positive definite).
 
+Clock.  The laws take the time t of their reference.  In stance it is the time since
+landing.  In flight the closed loop gives either the time since the takeoff
+('takeoff', the reference restarting there) or the stance's clock continued, the time
+since landing less T_stance ('stride'; before 0 when the stance ended early, where the
+first interval's polynomials continue): the two differ when the takeoff is earlier or
+later than the reference's, and only the second keeps the law's torque continuous
+through it where the gait's is (:data:`FLIGHT_CLOCKS`).
+
 Torques are saturated at the model's limit, as the walking simulator does with
 ``SimulationOptions(saturate=True)``, when ``saturate`` is set; otherwise the closed
 loop that uses this controller treats ``|u|`` > limit as a violation
@@ -53,11 +61,16 @@ import numpy as np
 from ..model import flight_model
 from .output_law import check_M1_range
 
-__all__ = ["PhaseReference", "RunningController", "LAWS", "phase_derivatives",
-           "check_running_gait"]
+__all__ = ["PhaseReference", "RunningController", "LAWS", "FLIGHT_CLOCKS",
+           "phase_derivatives", "check_running_gait"]
 
 #: the tracking laws (module docstring)
 LAWS = ("pd", "computed_torque")
+
+#: the flight reference's clock, which the closed loop gives the flight law (module
+#: docstring): 'takeoff', the time since the takeoff; 'stride', the stance's clock
+#: continued, the time since landing less T_stance
+FLIGHT_CLOCKS = ("takeoff", "stride")
 
 _FIELDS = ("T_stance", "T_flight", "x_stance", "u_stance", "x_flight", "u_flight")
 

@@ -56,7 +56,7 @@ import time
 
 import numpy as np
 
-from ..control.running import RunningController
+from ..control.running import FLIGHT_CLOCKS, RunningController
 from ..model import flight_model
 from ..model.description import torso_lean
 from ..numerics import FastCall
@@ -135,6 +135,11 @@ class RunningLoop:
         Where the flight clock starts (module docstring): 'guard' (the rigid model's
         takeoff guard on MuJoCo's states, the default) or 'contact' (MuJoCo's first
         zero-force state).
+    flight_clock : str
+        The flight law's clock (:data:`~biped_casadi.control.running.FLIGHT_CLOCKS`):
+        'takeoff' (the time since the takeoff dated by ``takeoff_clock``, the default) or
+        'stride' (the time since landing less the gait's stance, as the exact map's
+        ``running_cycle(..., flight_clock='stride')``).
     compiled : CompiledRunningLaw, optional
         The controller's law from its C export
         (:class:`~biped_casadi.control.compiled_running.CompiledRunningLaw`), called
@@ -153,7 +158,7 @@ class RunningLoop:
                  min_stance: float = 0.25, stop_on_saturation: bool = False,
                  torque_limit: float | None = None, liftoff_time: float = 0.006,
                  liftoff_height: float = 1e-4, takeoff_clock: str = "guard",
-                 compiled=None):
+                 compiled=None, flight_clock: str = "takeoff"):
         if not isinstance(controller, RunningController):
             raise ValueError("controller: a RunningController is needed "
                              f"(biped_casadi.control.running), got {type(controller).__name__}")
@@ -169,6 +174,9 @@ class RunningLoop:
         if takeoff_clock not in TAKEOFF_CLOCKS:
             raise ValueError(f"takeoff_clock must be one of {', '.join(TAKEOFF_CLOCKS)}, got "
                              f"{takeoff_clock!r}")
+        if flight_clock not in FLIGHT_CLOCKS:
+            raise ValueError(f"flight_clock must be one of {', '.join(FLIGHT_CLOCKS)}, got "
+                             f"{flight_clock!r}")
         if compiled is not None and not (callable(getattr(compiled, "stance", None))
                                          and callable(getattr(compiled, "flight", None))):
             raise ValueError("compiled: a CompiledRunningLaw is needed "
@@ -185,7 +193,7 @@ class RunningLoop:
         self.max_slip, self.time_limits = float(max_slip), float(time_limits)
         self.min_stance, self.stop_on_saturation = float(min_stance), bool(stop_on_saturation)
         self.liftoff_time, self.liftoff_height = float(liftoff_time), float(liftoff_height)
-        self.takeoff_clock = takeoff_clock
+        self.takeoff_clock, self.flight_clock = takeoff_clock, flight_clock
         self.torque_limit = torque_limit_of(model.description,
                                             c.torque_limit if torque_limit is None
                                             else torque_limit)
@@ -262,7 +270,8 @@ class RunningLoop:
         return RunningLoop(self.controller, dataclasses.replace(self.settings, **changes),
                            self.x_star, self.max_slip, self.time_limits, self.min_stance,
                            self.stop_on_saturation, self.torque_limit, self.liftoff_time,
-                           self.liftoff_height, self.takeoff_clock, self.compiled)
+                           self.liftoff_height, self.takeoff_clock, self.compiled,
+                           self.flight_clock)
 
     def _foot(self, qpos, qvel, leg):
         """World (x, z) of leg ``leg``'s point foot and its velocity."""
@@ -411,7 +420,8 @@ class _Run:
             u = loop._stance_law(A @ qpos[2:], A @ qvel[2:], t - self.t0)[0].ravel()
         else:
             qe, dqe = loop._extended(qpos, qvel, self.leg, self.origin)
-            u = loop._flight_law(qe, dqe, t - self.t0)[0].ravel()
+            origin = self.t0 if loop.flight_clock == "takeoff" else self.t_land + loop.T_stance
+            u = loop._flight_law(qe, dqe, t - origin)[0].ravel()
         if not np.all(np.isfinite(u)):
             self.stop("diverged", "the torque is not finite")
             return False
