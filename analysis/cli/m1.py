@@ -333,7 +333,8 @@ def cmd_m1(args):
         args.method = args.method or "nlp"
         return cmd_robust_design(args, say)
     for name in ROBUST_ONLY:
-        if getattr(args, name.lstrip("-").replace("-", "_")) not in (None, False):
+        value = getattr(args, name.lstrip("-").replace("-", "_"))
+        if value is not None and value is not False:       # (0 is given, 0 == False)
             raise UserError(f"{name} applies to --robust")
     gait = load_gait(args, say)
     model = gait.model
