@@ -261,3 +261,66 @@ def test_a_start_of_two_inputs_takes_one_number_of_time():
         Domain("d", 1, ca.Function("f", [X, t, ca.SX(0, 1)], [ca.SX(1)]),
                ca.Function("g", [X, t, ca.SX(0, 1)], [1 - X]), ca.Function("r", [x], [x]),
                0.01, 1.0, start=ca.Function("s", [x, s], [x, ca.SX(0, 1)]))
+
+
+# ------------------------------------------------------------------ between the nodes
+def _cubic(dense=True, on_guard=False):
+    """A height on the cubic z0 + v0 t + a0 t^2 / 2 + j t^3 / 6 (x = (z, v, a, j), RK4
+    steps of 0.02 s, exact on it): a constraint of a domain that ends at t = 0.09 s, or
+    the domain's guard."""
+    X, t, p = ca.SX.sym("X", 4), ca.SX.sym("t"), ca.SX.sym("p", 0)
+    f = ca.Function("f", [X, t, p], [ca.vertcat(X[1], X[2], X[3], 0.0)])
+    z = ca.Function("z", [X, t, p], [X[0]])
+    x = ca.SX.sym("x", 4)
+    r = ca.Function("r", [x], [x])
+    if on_guard:
+        return HybridCycle([Domain("dip", 4, f, z, r, 0.02, 0.2, guard_name="height",
+                                   dense_guard=dense)])
+    clock = ca.Function("clock", [X, t, p], [0.09 - t])
+    return HybridCycle([Domain("dip", 4, f, clock, r, 0.02, 0.2, constraints=z,
+                               constraint_names=("height",), tolerance=1e-12,
+                               dense_constraints=("height",) if dense else ())])
+
+
+def test_a_constraint_below_zero_between_two_nodes_stops_the_domain():
+    """z = 1e-4 - 0.1 t + 5 t^2 is 4e-4 below zero at t = 0.01 s and above it at every
+    node (0, 0.02, ...): checked at the nodes only the domain passes; checked between
+    them it stops there.  From rest (z = 0, v = 0: the rate vanishes at the node, as a
+    foot's at takeoff) z = -5 t^2 + 2000 t^3 / 6 dips to -1/6000 at t = 0.01 s and is
+    back above 0 at the next node."""
+    x = [1e-4, -0.1, 10.0, 0.0]
+    plain = _cubic(dense=False).stride(x, record=True).passes[0]
+    assert np.all(plain.nodes[0] > 0) and plain.dips == []
+    with pytest.raises(HybridCycleError, match=r"^domain 'dip': height violated at t = 0.01 s "
+                                               r"\(-0.0004 < 0, between two RK4 nodes\)$") as e:
+        _cubic().stride(x)
+    assert e.value.kind == "constraint"
+    with pytest.raises(HybridCycleError, match=r"^domain 'dip': height violated at t = 0.01 s "
+                                               r"\(-0.000167 < 0, between two RK4 nodes\)$"):
+        _cubic().stride([0.0, 0.0, -10.0, 2000.0])
+
+
+def test_a_minimum_above_zero_is_recorded():
+    """z = 1e-3 - 0.1 t + 5 t^2: its minimum 5e-4 at t = 0.01 s, between two nodes."""
+    ps = _cubic().linearise([1e-3, -0.1, 10.0, 0.0], record=True).passes[0]
+    (t, name, v), = ps.dips
+    assert name == "height" and t == pytest.approx(0.01, abs=1e-12)
+    assert v == pytest.approx(5e-4, abs=1e-15)
+    assert np.min(ps.nodes[0]) > v + 1e-4             # the nodes are well above it
+
+
+def test_a_guard_that_dips_and_rises_within_a_step_is_crossed():
+    """The guard z = 1e-4 - 0.1 t + 5 t^2 is below zero from t = 0.00106 s to 0.0189 s,
+    inside the first RK4 step: the nodes never see the crossing; between them it is the
+    first root, and the duration's gradient is the implicit function's,
+    dt/d(z0, v0) = -(1, t) / (v0 + a t)."""
+    x = [1e-4, -0.1, 10.0, 0.0]
+    with pytest.raises(HybridCycleError, match="not crossed going down") as e:
+        _cubic(dense=False, on_guard=True).stride(x)
+    assert e.value.kind == "no_crossing"
+    lin = _cubic(on_guard=True).linearise(x)
+    root = (0.1 - np.sqrt(0.1 ** 2 - 2 * 10.0 * 1e-4)) / 10.0
+    assert lin.durations[0] == pytest.approx(root, abs=1e-15)
+    slope = -0.1 + 10.0 * root
+    assert np.allclose(lin.duration_gradients[0, :2], [-1 / slope, -root / slope], rtol=1e-9)
+    assert abs(lin.next_state[0]) < 1e-15

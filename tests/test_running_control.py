@@ -11,14 +11,18 @@ radius, the command line's numbers with the library's.
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
 
 from biped_casadi.control.running import RunningController, phase_derivatives
+from biped_casadi.numerics import rk4_step
 from gait_opt.running import hermite_simpson
+from analysis.stability.hybrid_cycle import HybridCycleError
 from analysis.stability.running_cycle import (finite_difference_jacobian, running_cycle,
                                               running_stability, simulate_running)
 
@@ -218,6 +222,36 @@ def test_perturbed_run_converges_at_the_spectral_radius(cycle, stable, model):
         assert s.swing_min >= 0 and s.other_foot_min >= -1e-9
 
 
+def test_the_pushing_foot_is_checked_between_the_nodes(cycle, stable, model):
+    """0.01 rad/s less on dq1 at the fixed point: after the takeoff the foot that pushed
+    off goes below the ground and is back above it at the first flight node (1.29 ms).
+    The same cycle checked at its nodes only runs the stride; the RK4 step from the
+    takeoff state, sampled at 400 lengths, has the foot below the ground where and as
+    deep as the cycle says."""
+    x = stable.fixed_point.copy()
+    x[model.nq] -= 0.01
+    with pytest.raises(HybridCycleError, match=r"^domain 'flight': other foot height "
+                                               r"violated at t = \S+ s \(\S+ < 0, between "
+                                               r"two RK4 nodes\)$") as e:
+        cycle.stride(x)
+    t_dip, z_dip = (float(v) for v in re.search(r"t = (\S+) s \((\S+) <", str(e.value)).groups())
+    at_nodes = copy.copy(cycle)
+    at_nodes.domains = [dataclasses.replace(d, dense_constraints=(), dense_guard=False)
+                        for d in cycle.domains]
+    _, fl = at_nodes.stride(x, record=True).passes
+    c, d = cycle.controller, cycle.domains[1]
+    ne = c.fl.ne
+    z_nodes = np.array(c.fl.feet.map(fl.times.size)(fl.nodes[:ne]))[1, 0::2]
+    assert np.all(z_nodes >= -d.tolerance) and 0 < t_dip < fl.times[1]
+    etas = np.linspace(0, fl.times[1], 401)
+    z = [float(c.fl.feet(np.array(rk4_step(
+        lambda X, stage: d.vector_field(X, stage * eta, fl.parameters), fl.entry, eta))
+        .ravel()[:ne])[1, 0]) for eta in etas]
+    assert min(z) < -d.tolerance
+    assert min(z) == pytest.approx(z_dip, rel=1e-2)
+    assert abs(etas[int(np.argmin(z))] - t_dip) <= etas[1]
+
+
 def test_plain_tracking_is_unstable_and_its_run_diverges(cycle, model):
     plain = cycle.retuned(M1=np.zeros(model.nu))
     r = running_stability(plain)
@@ -409,11 +443,13 @@ def test_the_how_to_example_runs(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_the_margin_lets_a_perturbed_run_land_at_2_m_s(model):
-    """At 2 m/s, with the default friction margin, the perturbed run (0.01 rad/s on every
+    """At 2 m/s, with the default friction margin, the perturbed run (0.002 rad/s on every
     velocity, the how-to's design) lands in every stride with its impulse inside the
     ground's cone (mu, not mu - mu_margin) and converges.  (Without the margin the
     impulse sits on the cone's edge: ``test_running.py``'s margin test; the run then
-    stops at its first landing: the how-to's measurement.)"""
+    stops at its first landing: the how-to's measurement.)  With 0.01 rad/s the first
+    landing is inside the cone too, but the second flight stops: the foot that pushed
+    off goes below the ground between the takeoff and the first RK4 node."""
     from gait_opt.running import RunningOptions, optimize_running
     o = RunningOptions(speed=2.0)
     g = optimize_running(model, o, cache=True)
@@ -422,11 +458,16 @@ def test_the_margin_lets_a_perturbed_run_land_at_2_m_s(model):
     r = running_stability(cyc)
     assert r.status == "stable"
     x = r.fixed_point.copy()
-    x[model.nq:] += 1e-2
+    x[model.nq:] += 2e-3
     on = simulate_running(cyc, r.fixed_point, x, 8)
     assert on.status == "ok" and len(on.strides) == 8, on.message
     assert max(s.landing_impulse_ratio for s in on.strides) < o.mu
     assert on.deviations[-1] < on.deviations[1]
+    x[model.nq:] += 8e-3
+    off = simulate_running(cyc, r.fixed_point, x, 8)
+    assert off.strides and max(s.landing_impulse_ratio for s in off.strides) < o.mu
+    assert re.match(rf"stride {len(off.strides) + 1}: domain 'flight': other foot height "
+                    r"violated at t = \S+ s \(\S+ < 0, between two RK4 nodes\)$", off.message)
 
 
 # ------------------------------------------------------------------ saturation

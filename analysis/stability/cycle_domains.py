@@ -167,7 +167,7 @@ def stance_flight_cycle(model, target, flight_target=None, Kp: float = 300.0,
     r_st = ca.Function("takeoff", [x], [ca.vertcat(qe0, dqe0)])
     stance = Domain("stance", 2 * nq, f_st, g_st, r_st, h, t_max[0],
                     constraints=c_st, constraint_names=("swing foot height",),
-                    guard_name="stance normal force")
+                    guard_name="stance normal force", dense_constraints=("swing foot height",))
 
     Y = ca.SX.sym("Y", 2 * ne)
     qe, dqe = Y[:ne], Y[ne:]
@@ -186,5 +186,6 @@ def stance_flight_cycle(model, target, flight_target=None, Kp: float = 300.0,
                     exit_constraints=e_fl,
                     exit_constraint_names=("landing normal impulse",
                                            "other foot's lift-off velocity"),
-                    guard_name="swing foot height")
+                    guard_name="swing foot height",
+                    dense_constraints=("stance foot height",), dense_guard=True)
     return HybridCycle([stance, flight])

@@ -23,6 +23,18 @@ domain's entry and reset, and the crossing time by the implicit function theorem
 
 the saltation term of each guard.
 
+Between the nodes.  A domain may name outputs that must hold on the continuous solution,
+not only at its nodes: constraints (``dense_constraints``, e.g. a foot's height above the
+ground) and its guard (``dense_guard``).  Between two nodes the solution is the RK4 step of
+length eta from the first, the one the crossing is located on; an output whose rate along
+the flow goes from <= 0 at one node to > 0 at the next has a minimum in between (where the
+rate is 0 at the first node, the step's curvature there says whether it goes down first),
+found by the same safeguarded Newton (:func:`~biped_casadi.simulation.kernel.locate_strike`)
+on its rate in eta.  A constraint below ``-tolerance`` there is violated; a guard below 0
+there is a crossing, the first root before that minimum (a foot that touches the ground and
+rises again within one step has landed).  Every minimum found is recorded
+(:attr:`DomainPass.dips`).
+
 Domain i's state x has ``n`` numbers (what the resets map); it integrates an augmented
 state X = (x, r) of ``nX`` numbers (r: a controller's internal states, e.g. the
 time-varying controller's reference state) with parameters p fixed for the domain (its
@@ -120,6 +132,13 @@ class Domain:
         The guard in words.
     tolerance : float
         How far below zero a constraint may go (round-off), in its own unit.
+    dense_constraints : tuple of str
+        Names of constraints (of ``constraint_names``) that must also hold between the
+        nodes (module docstring); their rates are taken along the flow at every node, so
+        they should be cheap (a foot's height: its rate needs the velocities only).
+    dense_guard : bool
+        Look for the guard's crossing between the nodes too: a dip below 0 and back within
+        one RK4 step ends the domain at its first root.
     """
 
     name: str
@@ -137,6 +156,8 @@ class Domain:
     exit_constraint_names: tuple = ()
     guard_name: str = "guard"
     tolerance: float = 0.0
+    dense_constraints: tuple = ()
+    dense_guard: bool = False
 
     def __post_init__(self):
         f = self.vector_field
@@ -194,6 +215,15 @@ class Domain:
                                             "constraint")
         self.exit_constraint_names = self._names(self.exit_constraints,
                                                  self.exit_constraint_names, "exit constraint")
+        unknown = [c for c in self.dense_constraints if c not in self.constraint_names]
+        if unknown:
+            raise HybridCycleError(self.name, "dimension",
+                                   f"dense_constraints names no constraint {unknown[0]!r}")
+        #: the outputs checked between the nodes: (name, index in the constraints or
+        #: None for the guard)
+        self.watched = ((((self.guard_name, None),) if self.dense_guard else ())
+                        + tuple((c, self.constraint_names.index(c))
+                                for c in self.dense_constraints))
 
     def _names(self, f, names, word):
         if f is None:
@@ -232,6 +262,9 @@ class DomainPass:
     times, nodes : numpy.ndarray or None
         With ``record``: the RK4 nodes' times (N,) and augmented states (nX, N) from entry
         to the crossing (the last node is the crossing).
+    dips : list of tuple
+        (t, name, value): each minimum of a domain's ``dense_constraints`` and dense guard
+        found between two nodes before the crossing (module docstring), in time order.
     """
 
     name: str
@@ -242,6 +275,7 @@ class DomainPass:
     next_state: np.ndarray
     times: np.ndarray | None = None
     nodes: np.ndarray | None = None
+    dips: list = field(default_factory=list)
 
 
 @dataclass
@@ -330,10 +364,19 @@ class _Compiled:
         rk4 = ca.Function(f"{_ident(d.name)}_rk4", [X, t, h, p], [Xn, t + h])
         Y, s = ca.SX.sym("Y", nX), ca.SX.sym("s")
 
+        def watched(Yv, sv):
+            out = [d.guard(Yv, sv, p) if i is None else d.constraints(Yv, sv, p)[i]
+                   for _, i in d.watched]
+            return ca.vertcat(*out) if out else ca.SX(0, 1)
+
+        W = watched(Y, s)        # rates along the flow (the velocities alone for a height)
+        rate = ca.Function("rate", [Y, s, p], [ca.jtimes(W, Y, d.vector_field(Y, s, p))
+                                                + ca.jacobian(W, s)])
+
         def node(Yv, sv):
             a = d.arming(Yv, sv, p) if d.arming is not None else ca.SX(1)
             c = d.constraints(Yv, sv, p) if d.constraints is not None else ca.SX(0, 1)
-            return d.guard(Yv, sv, p), a, c
+            return d.guard(Yv, sv, p), a, c, rate(Yv, sv, p)
 
         Xr, tr = rk4(X, t, h, p)
         self.node = ca.Function("node", [X, t, p], list(node(X, t)))
@@ -345,6 +388,9 @@ class _Compiled:
         Xe, te = rk4(X, t, eta, p)
         ge = d.guard(Xe, te, p)
         self.event = ca.Function("event", [X, t, eta, p], [ge, ca.jacobian(ge, eta)])
+        We = watched(Xe, te)
+        dW = ca.jacobian(We, eta)
+        self.between = ca.Function("between", [X, t, eta, p], [We, dW, ca.jacobian(dW, eta)])
         Je = ca.jtimes(Xe, X, J) + (ca.jtimes(Xe, p, Jp) if npar else 0)
         gY = d.guard(Y, s, p)
         grads = ca.Function("guard_gradients", [Y, s, p],
@@ -426,6 +472,79 @@ class HybridCycle:
             raise HybridCycleError(d.name, "constraint",
                                    f"{names[j]} violated at t = {t:.6g} s ({c[j]:.3g} < 0)")
 
+    @staticmethod
+    def _between(d: Domain, f, X, t, h, p, ra, rb) -> list:
+        """The minima of the watched outputs between the node (X, t) and the next one, h
+        later, their rates there ``ra`` and ``rb`` (module docstring): (eta, watched
+        index, value) by eta."""
+        ra, rb = _col(ra), _col(rb)
+        found = []
+        for j in np.flatnonzero((ra <= 0) & (rb > 0)):
+            za = -ra[j]
+            if za == 0:            # at rest at the node: a minimum inside if it curves down
+                curv = _col(f.between(X, t, 0.0, p)[2])[j]
+                if not curv < 0:
+                    continue
+                za = -0.5 * curv * h                       # the Newton's first guess only
+
+            def event(eta_, j=j):
+                _, dw, ddw = f.between(X, t, float(eta_[0]), p)
+                return -_col(dw)[j:j + 1], -_col(ddw)[j:j + 1]
+
+            eta = float(locate_strike(event, h, za, -rb[j])[0])
+            found.append((eta, int(j), float(_col(f.between(X, t, eta, p)[0])[j])))
+        return sorted(found)
+
+    def _dips(self, d: Domain, t, between, eta_max, dips):
+        """Record the minima before ``eta_max`` into ``dips``; a constraint below
+        -tolerance there is violated."""
+        for eta, j, v in between:
+            if eta >= eta_max:
+                break
+            name, k = d.watched[j]
+            dips.append((t + eta, name, v))
+            if k is not None and not v >= -d.tolerance:
+                raise HybridCycleError(d.name, "constraint",
+                                       f"{name} violated at t = {t + eta:.6g} s ({v:.3g} < 0, "
+                                       f"between two RK4 nodes)")
+
+    def _integrate(self, d: Domain, f, X, p, J, Jp, record):
+        """RK4 from the entry state X to the step that crosses the guard: (the node before
+        it, its time, its J, the guard there, the bracket's end eta and the guard there,
+        the minima in that last step, the minima before, times, nodes)."""
+        t, h = 0.0, d.h
+        g_prev, _, c, r_prev = f.node(X, t, p)
+        g_prev = float(g_prev)
+        self._check(d, c, t, d.constraint_names)
+        times, nodes = ([t], [X]) if record else (None, None)
+        dips = []
+        for _ in range(d.max_steps):
+            if J is not None:
+                Xn, Jn, tn, g, a, c, r = f.step_sens(X, J, t, h, p, Jp)
+            else:
+                Xn, tn, g, a, c, r = f.step(X, t, h, p)
+            g, a = float(g), float(a)
+            if not np.isfinite(g):
+                raise HybridCycleError(d.name, "not_finite",
+                                       f"state not finite at t = {float(tn):.6g} s")
+            between = self._between(d, f, X, t, h, p, r_prev, r) if d.watched else []
+            hi, g_hi = next(((e, v) for e, j, v in between
+                             if d.watched[j][1] is None and v < 0), (h, g))
+            if g_prev >= 0 > g_hi and a > 0:
+                return X, t, J, g_prev, hi, g_hi, between, dips, times, nodes
+            self._dips(d, t, between, np.inf, dips)
+            self._check(d, c, float(tn), d.constraint_names)
+            X, t, g_prev, r_prev = _col(Xn), float(tn), g, r
+            if J is not None:
+                J = np.array(Jn)
+            if record:
+                times.append(t)
+                nodes.append(X)
+        raise HybridCycleError(d.name, "no_crossing",
+                               f"{d.guard_name} not crossed going down within the time "
+                               f"limit {d.t_max:.6g} s ({d.max_steps} RK4 steps of "
+                               f"{h:.4g} s)")
+
     def _domain(self, i, x, Jx, derivatives, record, s=0.0, ds=None):
         """Domain i from its state x (with dx/dx0 = Jx) and the stride's time s (with
         ds/dx0 = ds): the pass, the next state and its Jacobian, the duration's gradient."""
@@ -433,45 +552,21 @@ class HybridCycle:
         X, p, XJ, pJ, Xs, ps_ = (np.array(v) for v in f.entry(x, s))
         X, p = X.ravel(), p.ravel()
         X0 = X
+        J = Jp = None
         if derivatives:
             J, Jp = XJ @ Jx, pJ @ Jx
             if ds is not None:
                 J, Jp = J + Xs @ ds[None, :], Jp + ps_ @ ds[None, :]
         ns = self.n
-        t, h = 0.0, d.h
-        g_prev, _, c = f.node(X, t, p)
-        g_prev = float(g_prev)
-        self._check(d, c, t, d.constraint_names)
-        times, nodes = ([t], [X]) if record else (None, None)
-        for _ in range(d.max_steps):
-            if derivatives:
-                Xn, Jn, tn, g, a, c = f.step_sens(X, J, t, h, p, Jp)
-            else:
-                Xn, tn, g, a, c = f.step(X, t, h, p)
-            g, a = float(g), float(a)
-            if not np.isfinite(g):
-                raise HybridCycleError(d.name, "not_finite",
-                                       f"state not finite at t = {float(tn):.6g} s")
-            if g_prev >= 0 > g and a > 0:
-                break
-            self._check(d, c, float(tn), d.constraint_names)
-            X, t, g_prev = _col(Xn), float(tn), g
-            if derivatives:
-                J = np.array(Jn)
-            if record:
-                times.append(t)
-                nodes.append(X)
-        else:
-            raise HybridCycleError(d.name, "no_crossing",
-                                   f"{d.guard_name} not crossed going down within the time "
-                                   f"limit {d.t_max:.6g} s ({d.max_steps} RK4 steps of "
-                                   f"{h:.4g} s)")
+        X, t, J, g_prev, hi, g_hi, between, dips, times, nodes = \
+            self._integrate(d, f, X, p, J, Jp, record)
 
         def event(eta_):
             ge, dge = f.event(X, t, float(eta_[0]), p)
             return np.array([float(ge)]), np.array([float(dge)])
 
-        eta = float(locate_strike(event, h, g_prev, g)[0])
+        eta = float(locate_strike(event, hi, g_prev, g_hi)[0])
+        self._dips(d, t, between, eta, dips)
         Xe, Je, Xeta, gX, gp, gt, ce = f.last(X, J if derivatives else np.zeros((d.nX, ns)),
                                               t, eta, p,
                                               Jp if derivatives else np.zeros((d.n_par, ns)))
@@ -486,7 +581,7 @@ class HybridCycle:
             nodes.append(Xe)
         ps = DomainPass(d.name, X0, p, t + eta, xm, xp,
                         None if not record else np.array(times),
-                        None if not record else np.array(nodes).T)
+                        None if not record else np.array(nodes).T, dips)
         if not derivatives:
             return ps, xp, None, None
         Je, Xeta, gX, gp, gt = (np.array(v) for v in (Je, Xeta, gX, gp, gt))

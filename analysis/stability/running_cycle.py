@@ -24,7 +24,11 @@ of a :class:`~biped_casadi.control.running.RunningController`:
 
 The RK4 step of each phase divides the phase's collocation interval into
 ``steps_per_interval`` steps, so that on the reference orbit the kinks of the piecewise
-polynomial reference fall on RK4 nodes.
+polynomial reference fall on RK4 nodes.  The feet's heights (the swing foot's in stance,
+the pushing foot's in flight, and the landing guard) are checked between the nodes too,
+on the RK4 step from the node before (:mod:`analysis.stability.hybrid_cycle`): a foot
+that dips below the ground and rises again within one step is a violation (the pushing
+foot) or the landing (the swing foot).
 
 Friction near takeoff.  Fz and Fx reach zero together only on the optimised orbit;
 off it (and at the closed loop's fixed point, which is not the collocation's) Fx is a
@@ -258,7 +262,8 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     h_st = float(g.T_stance) / (c.stance.n_intervals * steps_per_interval)
     stance = Domain("stance", 2 * nq, f_st, g_st, r_st, h_st, time_limits * float(g.T_stance),
                     start=_start(2 * nq, c.gains), constraints=c_st, constraint_names=names,
-                    guard_name="stance normal force", tolerance=tolerance)
+                    guard_name="stance normal force", tolerance=tolerance,
+                    dense_constraints=("swing foot height",))
 
     # ---- flight
     Y = ca.SX.sym("Y", 2 * ne)
@@ -285,7 +290,8 @@ def running_cycle(controller: RunningController, mu: float | None = None,
                                            "landing impulse in the cone (Fx <= mu Fz)",
                                            "landing impulse in the cone (-Fx <= mu Fz)",
                                            "other foot's lift-off velocity"),
-                    guard_name="swing foot height", tolerance=tolerance)
+                    guard_name="swing foot height", tolerance=tolerance,
+                    dense_constraints=("other foot height",), dense_guard=True)
     cyc = RunningCycle([stance, flight])
     cyc.controller, cyc.mu, cyc.friction_slack = c, mu, slack
     cyc.clock_origins, cyc.flight_clock = (None, origin), flight_clock
@@ -440,9 +446,10 @@ class StrideRecord:
         saturation such a stride stops, so a completed one has 0; with it the motors gave
         their limit for that long.
     swing_min : float
-        Lowest swing-foot height in stance, m.
+        Lowest swing-foot height in stance, m (at the RK4 nodes and at its minima between
+        them, :attr:`~analysis.stability.hybrid_cycle.DomainPass.dips`).
     other_foot_min : float
-        Lowest height of the pushing foot in flight, m.
+        Lowest height of the pushing foot in flight, m (likewise).
     landing_impulse_ratio : float
         ``|Fx|`` / Fz of the landing impulse.
     """
@@ -503,6 +510,11 @@ def _time_above(t, e) -> float:
     return float(np.sum(dt[both]) + np.sum(dt[one] * frac[one]))
 
 
+def _lowest(nodes, ps, name: str) -> float:
+    """The lowest of an output at the nodes of a pass and at its minima between them."""
+    return float(min([np.min(nodes), *(v for _, n, v in ps.dips if n == name)]))
+
+
 def _margins(cycle: HybridCycle, passes) -> dict:
     """The constraints' margins along a recorded stride."""
     c = cycle.controller
@@ -529,7 +541,8 @@ def _margins(cycle: HybridCycle, passes) -> dict:
                 torque_max=float(max(np.abs(us).max(), np.abs(uf).max())),
                 saturated_time=sum(_time_above(tt, np.abs(uu).max(axis=0) - c.torque_limit)
                                    for tt, uu in ((ts, us), (tf, uf))),
-                swing_min=float(zsw.min()), other_foot_min=float(feet[1, 0::2].min()),
+                swing_min=_lowest(zsw, st, "swing foot height"),
+                other_foot_min=_lowest(feet[1, 0::2], fli, "other foot height"),
                 landing_impulse_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else float("inf"))
 
 
