@@ -69,8 +69,8 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
     Raises
     ------
     ValueError
-        Naming 'scheduler': dask.distributed missing, no scheduler at the address, or
-        no worker joined it within :data:`DASK_WORKER_TIMEOUT` seconds.
+        Naming 'scheduler': dask.distributed missing, a malformed address or none at
+        it, or no worker joined it within :data:`DASK_WORKER_TIMEOUT` seconds.
     """
     try:
         import dask
@@ -104,7 +104,9 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
         return client, cluster
     if not isinstance(scheduler, str):
         return scheduler, None
-    try:
+    try:        # an address without host and port: refused before a client (its thread)
+        from distributed.comm import get_address_host_port
+        get_address_host_port(scheduler)
         client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as e:
         raise ValueError(f"scheduler: cannot connect to the Dask scheduler at {scheduler} "
