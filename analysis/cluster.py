@@ -82,9 +82,8 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
     if scheduler == "local":
         check_not_bootstrapping()
         n = workers or CPU_COUNT       # Dask's count: affinity, cgroup quota
-        # SIGINT blocked in the cluster's threads and so in the worker processes they start:
-        # a Ctrl-C of the terminal's process group stops this process, which closes them
-        # (the resource tracker first: starting it unblocks SIGINT in the starting thread)
+        # SIGINT blocked in the cluster's threads and so in its workers: a terminal's Ctrl-C
+        # stops this process, which closes them (the resource tracker first: it unblocks it)
         multiprocessing.resource_tracker.ensure_running()
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
