@@ -8,6 +8,8 @@ import copy
 import ctypes
 import functools
 import logging
+import multiprocessing.resource_tracker
+import signal
 
 __all__ = ["connect", "check_workers", "check_not_bootstrapping", "tune_allocator",
            "LOCAL_CLUSTER_CONFIG", "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
@@ -67,8 +69,8 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
     Raises
     ------
     ValueError
-        Naming 'scheduler': dask.distributed missing, no scheduler at the address, or
-        no worker joined it within :data:`DASK_WORKER_TIMEOUT` seconds.
+        Naming 'scheduler': dask.distributed missing, a malformed address or none at
+        it, or no worker joined it within :data:`DASK_WORKER_TIMEOUT` seconds.
     """
     try:
         import dask
@@ -80,19 +82,30 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
     if scheduler == "local":
         check_not_bootstrapping()
         n = workers or CPU_COUNT       # Dask's count: affinity, cgroup quota
-        with dask.config.set(LOCAL_CLUSTER_CONFIG):   # the nannies (made later) pass it on
-            kw = dict(n_workers=0, threads_per_worker=1, env={"BIPED_THREADS": "1"},
-                      preload=list(preload), config=copy.deepcopy(dask.config.config)) \
-                if processes else dict(n_workers=1, threads_per_worker=n)
-            cluster = LocalCluster(processes=processes, dashboard_address=":0",
-                                   silence_logs=logging.CRITICAL, **kw)
+        # SIGINT blocked in the cluster's threads and so in its workers: a terminal's Ctrl-C
+        # stops this process, which closes them (the resource tracker first: it unblocks it)
+        multiprocessing.resource_tracker.ensure_running()
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            with dask.config.set(LOCAL_CLUSTER_CONFIG):   # the nannies (made later) pass it on
+                kw = dict(n_workers=0, threads_per_worker=1, env={"BIPED_THREADS": "1"},
+                          preload=list(preload), config=copy.deepcopy(dask.config.config)) \
+                    if processes else dict(n_workers=1, threads_per_worker=n)
+                cluster = LocalCluster(processes=processes, dashboard_address=":0",
+                                       silence_logs=logging.CRITICAL, **kw)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        from distributed.gc import disable_gc_diagnosis     # its gc callback (logs we
+        disable_gc_diagnosis(force=True)    # silence) took a Ctrl-C raised in it for itself
         client = Client(cluster)        # before scale: a client waits for a scaling cluster
         if processes:
             cluster.scale(n)
         return client, cluster
     if not isinstance(scheduler, str):
         return scheduler, None
-    try:
+    try:        # an address without host and port: refused before a client (its thread)
+        from distributed.comm import get_address_host_port
+        get_address_host_port(scheduler)
         client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as e:
         raise ValueError(f"scheduler: cannot connect to the Dask scheduler at {scheduler} "

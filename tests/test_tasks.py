@@ -346,6 +346,23 @@ def test_check_workers_compares_each_worker_once(monkeypatch):
     assert len(calls) == 2
 
 
+def test_a_malformed_address_is_refused_before_any_client(monkeypatch):
+    """An address without host and port ('--scheduler nonsense') was refused by the
+    Dask client made for it, whose IO-loop thread must start within 10 s: on a loaded
+    machine the refusal was Dask's bare AssertionError ('internal error')."""
+    import dask.distributed
+    from analysis import cluster
+
+    def client(*args, **kwargs):
+        raise AssertionError("a client was made for a malformed address")
+
+    monkeypatch.setattr(dask.distributed, "Client", client)
+    for address in ("nonsense", "tcp://host", "tcp://host:port"):
+        with pytest.raises(ValueError, match=f"^scheduler: cannot connect to the Dask "
+                                             f"scheduler at {address} \\(ValueError: "):
+            cluster.connect(address)
+
+
 def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
     """``kill -9`` of the worker that holds a kept result another task needs: Dask makes
     it again on the other worker (a scattered copy was lost with it and failed every

@@ -311,7 +311,7 @@ class Engine:
             err = TaskError(self._tasks[key].name, "not run: the engine was closed first", key=key)
             self._finish(key, TaskState.FAILED, error=err, fut=f)
         quiet = logging.getLogger("distributed")         # the cluster's shutdown chatter
-        level, _ = quiet.level, quiet.setLevel(logging.CRITICAL)
+        level, _ = quiet.level, quiet.setLevel(logging.CRITICAL + 1)   # its own too
         try:
             if self._client is not None:
                 with contextlib.suppress(Exception):
