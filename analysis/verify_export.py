@@ -29,7 +29,7 @@ import re
 import subprocess
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -233,7 +233,7 @@ def _python_law(ctrl):
 
 
 def compare_states(compiled: CompiledController, ctrl, n: int = 10_000,
-                   seed: int = 0) -> StateComparison:
+                   seed: int = 0, torque_limit: float | None = None) -> StateComparison:
     """The compiled law against the Python law at ``n`` random states near the orbit.
 
     Parameters
@@ -246,6 +246,9 @@ def compare_states(compiled: CompiledController, ctrl, n: int = 10_000,
         States.
     seed : int
         Seed of the random states.
+    torque_limit : float, optional
+        The export clips its torques at +-torque_limit (N m): the Python law's are
+        clipped the same way before the comparison.
 
     Returns
     -------
@@ -254,6 +257,7 @@ def compare_states(compiled: CompiledController, ctrl, n: int = 10_000,
     rng = np.random.default_rng(seed)
     tau, q, dq, q0, dq0 = _random_states(ctrl, n, rng)
     law = _python_law(ctrl)
+    lim = np.inf if torque_limit is None else torque_limit
     rel = np.zeros(n)
     absu, outs, dens = np.zeros(n), np.zeros(n), np.zeros(n)
     codes: dict = {}
@@ -274,8 +278,9 @@ def compare_states(compiled: CompiledController, ctrl, n: int = 10_000,
         t_py, t_c = t_py + t1 - t0, t_c + t2 - t1
         codes[rc] = codes.get(rc, 0) + 1
         _, y, dy, den = compiled.outputs(tk, qk, dqk, pc)
-        absu[k] = np.max(np.abs(u - out.u))
-        rel[k] = absu[k] / max(np.max(np.abs(out.u)), 1e-300)
+        u_py = np.clip(out.u, -lim, lim)
+        absu[k] = np.max(np.abs(u - u_py))
+        rel[k] = absu[k] / max(np.max(np.abs(u_py)), 1e-300)
         outs[k] = max(np.max(np.abs(y - out.y)), np.max(np.abs(dy - out.dy)))
         dens[k] = abs(den - out.denominator) / abs(out.denominator)
     worst = float(rel.max())
@@ -295,7 +300,7 @@ def compare_states(compiled: CompiledController, ctrl, n: int = 10_000,
 
 
 def compare_urdf_states(compiled: CompiledUrdfController, ctrl, n: int = 10_000,
-                        seed: int = 0) -> StateComparison:
+                        seed: int = 0, torque_limit: float | None = None) -> StateComparison:
     """An export in URDF angles against the toolkit's law at ``n`` random states.
 
     The states of :func:`compare_states`, each read with a random stance leg as the
@@ -315,6 +320,8 @@ def compare_urdf_states(compiled: CompiledUrdfController, ctrl, n: int = 10_000,
         States.
     seed : int
         Seed of the random states.
+    torque_limit : float, optional
+        As in :func:`compare_states` (the model's torques clipped before the mapping).
 
     Returns
     -------
@@ -325,7 +332,7 @@ def compare_urdf_states(compiled: CompiledUrdfController, ctrl, n: int = 10_000,
     tau, q, dq, q0, dq0 = _random_states(ctrl, n, rng)
     legs = rng.integers(0, 2, n)
     umap = compiled.urdf_map
-    law = UrdfAngleLaw(ctrl, umap, compiled.motor_side)
+    law = UrdfAngleLaw(ctrl, umap, compiled.motor_side, torque_limit)
     rel = np.zeros(n)
     absu, outs, dens = np.zeros(n), np.zeros(n), np.zeros(n)
     codes: dict = {}
@@ -544,7 +551,9 @@ def verify_export(folder, ctrl, q0, dq0, options: SimulationOptions | None = Non
     law : ExportedLaw, optional
         The export's law; one in URDF angles is compared in those coordinates
         (:func:`compare_urdf_states`, and the simulation driven through
-        :class:`~biped_casadi.control.compiled.CompiledUrdfController`).
+        :class:`~biped_casadi.control.compiled.CompiledUrdfController`); one that clips
+        its torques (``law.torque_limit``) against the Python law clipped the same way,
+        and simulated with ``options`` saturating at that limit.
 
     Returns
     -------
@@ -562,7 +571,11 @@ def verify_export(folder, ctrl, q0, dq0, options: SimulationOptions | None = Non
         compiled = (CompiledUrdfController(lib, ctrl, law.urdf, law.motor_side) if urdf
                     else CompiledController(lib, ctrl))     # loaded: the file may go
         c_us, _ = time_example(folder, cc, calls, work)
-    states = (compare_urdf_states if urdf else compare_states)(compiled, ctrl, n_states, seed)
+    limit = None if law is None else law.torque_limit
+    if limit is not None:             # the robot receives what the law gives, clipped alike
+        options = replace(options or SimulationOptions(), saturate=True, torque_limit=limit)
+    states = (compare_urdf_states if urdf else compare_states)(compiled, ctrl, n_states, seed,
+                                                               limit)
     sim = compare_simulations(compiled, ctrl, q0, dq0, options, law)
     if sim.steps == 0 and (options is None or options.steps > 0):
         # the runs from the given start ended before an impact (a heavy robot out of its

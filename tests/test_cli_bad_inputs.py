@@ -233,6 +233,14 @@ CASES = [
     (["eig", *G, *M0, "--method", "fd"], "invalid choice"),
     (["eig", *G, *M0, "--controller", "hzd"], "invalid choice"),
     # ---- eig: gait files (the same loader serves every command)
+    # a missing or broken gait file without --m1: the file named first (eig said "--m1 is
+    # required" before; robust and terrain named the file), then --m1 with the count
+    (["eig", "--gait", "{missing}"], "gait file not found"),
+    (["eig", "--gait", "{truncated}"], "not valid JSON"),
+    (["robust", "--gait", "{missing}"], "gait file not found"),
+    (["terrain", "--gait", "{truncated}", "--runs", "2"], "not valid JSON"),
+    (["eig", *G], "--m1 is required for the time-varying controller (one number per "
+                  "torque: 4 for this robot)"),
     (["eig", "--gait", "{missing}", *M0], "not found"),
     (["eig", "--gait", "{dir}", *M0], "is a folder"),
     (["eig", "--gait", "/dev/null", *M0], "not a regular file"),

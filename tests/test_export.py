@@ -339,6 +339,43 @@ def test_cli_verification_difference_writes_nothing(gait, tmp_path, capsys, monk
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gait.json"]
 
 
+@needs_cc
+def test_a_saturating_export_clips_its_torques_in_c(tv, gait, tmp_path, capsys):
+    """``biped export --saturate`` (as ``export-running --saturate``): the C law clips
+    its torques at the limit; compared with the Python law clipped the same way, it is
+    equal, and unclipped it is not (the clip is active at these states)."""
+    ctrl, plain = tv
+    ref = ctrl.reference
+    tau = np.linspace(0.0, ref.T, 9)
+    p = ctrl.step_start(ref.q(0.0), ref.dq(0.0)).p
+    peak = max(np.max(np.abs(plain.torque(float(t), ref.q(t), ref.dq(t), p)[1])) for t in tau)
+    limit = 0.5 * float(peak)                   # below what the law asks on its own orbit
+    law = exported_law(ctrl, saturate=True, torque_limit=limit)
+    assert law.torque_limit == limit and exported_law(ctrl).torque_limit is None
+    folder = tmp_path / "sat"
+    write_export(c_sources(law, {"gait file": "test"}), folder)
+    lib = CompiledController(build_library(folder, tmp_path / "sat.so"), ctrl)
+    pc = lib.step_start(ref.q(0.0), ref.dq(0.0)).p
+    u = np.array([lib.torque(float(t), ref.q(t), ref.dq(t), pc)[1] for t in tau])
+    assert np.max(np.abs(u)) == limit and np.any(np.abs(u) < limit)
+    assert compare_states(lib, ctrl, n=300, seed=2, torque_limit=limit).success
+    assert not compare_states(lib, ctrl, n=300, seed=2).success
+    assert f"torques clipped at +-{limit!r} N m" in (folder / HEADER).read_text()
+    with pytest.raises(ValueError, match="saturate: the robot RABBIT has no torque limit"):
+        exported_law(ctrl, saturate=True, torque_limit=float("inf"))
+    g = gait.save(tmp_path / "gait.json")
+    rc, o = run(capsys, "export", "--gait", g, "--m1", *M1, "--out", tmp_path / "cli",
+                "--saturate", "--torque-limit", limit, "--verify", "--states", 300,
+                "--steps", 2, "--json")
+    d = json.loads(o.out)
+    assert rc == 0 and d["status"] == "verified", o.err
+    assert d["saturate"] is True and d["clipped_at"] == limit
+    assert d["verification"]["states"]["max_torque_rel"] <= TORQUE_RTOL
+    rc, o = run(capsys, "export", "--gait", g, "--m1", *M1, "--out", tmp_path / "cli",
+                "--saturate", "--torque-limit", limit)
+    assert rc == 0 and f"torques clipped at {limit:g} N m" in o.out, o.err
+
+
 def _bad(capsys, tmp_path, *args, env=None, monkeypatch=None):
     before = sorted(p.name for p in tmp_path.iterdir())
     rc, o = run(capsys, "export", *args)

@@ -369,6 +369,28 @@ def test_command_line_refuses_bad_gains(gait_file, capsys, args, words):
     assert len(err.splitlines()) == 1 and words in err and "Traceback" not in err
 
 
+def test_a_closed_loop_option_implies_the_closed_loop(run_gait, tmp_path, capsys,
+                                                      monkeypatch):
+    """``biped running --kp 1e300`` optimised the step, ignored the gain (no --stability)
+    and exited 0: now any closed-loop option analyses the loop, which fails (exit 1) and
+    says so; without one the command stays the optimisation alone."""
+    import analysis.cli.running as cli
+    monkeypatch.setattr(cli, "optimize_running", lambda *a, **k: run_gait)
+    out = str(tmp_path / "r.json")
+    assert cli.cmd_running(cli_args("--kp", "1e300", "--steps", "0", "--out", out)) == 1
+    o = capsys.readouterr()
+    assert "Kp 1e+300" in o.out and "closed loop failed" in o.err, (o.out, o.err)
+    assert cli.cmd_running(cli_args("--out", out, "--json")) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert "stability" not in d
+
+
+def cli_args(*argv):
+    """The namespace ``biped running`` parses from ``argv``."""
+    from analysis.cli import build_parser
+    return build_parser().parse_args(["running", *argv])
+
+
 def test_command_line_names_a_bad_gait_file(tmp_path, capsys):
     from analysis.cli import main
     p = tmp_path / "walk.json"

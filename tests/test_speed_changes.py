@@ -22,6 +22,7 @@ from analysis.robustness.speed import (schedule_eigenvalues, speed_change, speed
                                        speed_ramp)
 from biped_casadi import Design, SimulationOptions, simulate
 from biped_casadi.simulation import simulate_profile, walk_profile
+from biped_casadi.simulation.options import friction_of
 from gait_opt import GaitFamily, GaitOptions, gait_family, speed_range
 
 SPEEDS = (0.7, 0.75, 0.8)
@@ -322,6 +323,25 @@ def test_cli_speeds_and_ramp(capsys, tmp_path, family_path):
     rc, out, err = _run(capsys, "--gait", str(family_path), "--speeds", "0.7", "0.725",
                         "--controller", "vc")
     assert rc == 0 and "interpolated" in out and "vc: status ok" in out
+
+
+def test_cli_profile_names_the_mu_of_each_gait(capsys, family, family_path):
+    """A profile's output named no friction coefficient (a single gait's says 'mu 0.6,
+    the gait's'): the table names it at each gait switch, the JSON at every step."""
+    own = friction_of(family)                       # the family's gaits' own
+    for extra, mu, source in (([], own, "the gait's"), (["--mu", "0.9"], 0.9, "--mu")):
+        rc, out, err = _run(capsys, "--gait", str(family_path), "--speeds", "0.7", "0.75",
+                            "0.75", "--controller", "vc", *extra)
+        assert rc == 0 and err == "", err
+        head, *rows = [ln for ln in out.splitlines() if ln.startswith("  ")][:4]
+        assert head.endswith("mu (at a gait switch)"), head
+        assert [r.endswith(f"  {mu:g}, {source}") for r in rows] == [True, True, False], rows
+        rc, out, _ = _run(capsys, "--gait", str(family_path), "--speeds", "0.7", "0.75",
+                          "--controller", "vc", "--json", *extra)
+        steps = json.loads(out)["steps"]
+        assert [s["mu"] for s in steps] == [mu, mu]
+        assert all(s["mu"] - s["friction_margin"] == pytest.approx(
+            max(s["max_friction_ratio"], s["max_impulse_ratio"])) for s in steps)
 
 
 @pytest.mark.parametrize("argv, words", [

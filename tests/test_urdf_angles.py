@@ -220,6 +220,25 @@ def test_tv_law_in_urdf_angles(walker_gait, tmp_path):
     assert s.steps >= 1 and s.twin_max_state <= 1e-13, s.message   # the reference's table
 
 
+def test_a_saturating_law_in_urdf_angles_clips_the_joints_torques(walker_gait, tmp_path):
+    """``--saturate`` with ``--angles urdf --motor-side``: the model's torques are clipped
+    before the mapping (the motor side divides them by the reductions after), in C as in
+    the Python law; unclipped, the comparison fails (the clip is active)."""
+    ctrl = TimeVaryingController(walker_gait, M1)
+    ref = ctrl.reference
+    p = ctrl.step_start(ref.q(0.0), ref.dq(0.0)).p
+    peak = max(np.max(np.abs(ctrl.torque(ref.q(t), ref.dq(t), t, p[:ctrl.model.nu],
+                                         p[ctrl.model.nu:]).u)) for t in (0.2, 0.5, 0.8))
+    limit = 0.5 * float(peak)
+    law = exported_law(ctrl, angles="urdf", motor_side=True, saturate=True,
+                       torque_limit=limit)
+    write_export(c_sources(law), tmp_path / "sat")
+    lib = CompiledUrdfController(build_library(tmp_path / "sat"), ctrl, law.urdf, True)
+    r = compare_urdf_states(lib, ctrl, n=500, seed=1, torque_limit=limit)
+    assert r.success and r.max_torque_rel <= 1e-12, r.message
+    assert not compare_urdf_states(lib, ctrl, n=500, seed=1).success
+
+
 # ------------------------------------------------------------------ bad input
 def _bad_csv(tmp_path, edit):
     text = CSV.read_text()

@@ -28,7 +28,8 @@ from gait_opt.running import RunningGait
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "load_running_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
            "add_gait_arguments", "add_scheduler", "is_family_file", "require_members",
-           "check_inputs", "check_scheduler", "not_an_input", "MU_HELP", "gait_friction"]
+           "check_inputs", "check_scheduler", "not_an_input", "MU_HELP", "gait_friction",
+           "friction_source"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
               "(.toml, schema in biped_casadi.model.description) or a URDF file (.urdf)")
@@ -310,6 +311,17 @@ MU_HELP = (f"default: the one the gait was optimised for, its 'biped gait --mu';
            f"{DEFAULT_MU:g} for a gait that records none")
 
 
+def friction_source(gait, mu=None) -> str:
+    """Where the friction coefficient of a run on ``gait`` comes from
+    (:func:`~biped_casadi.simulation.options.friction_of`): '--mu' (``mu`` given), "the
+    gait's" (the one it was optimised for) or 'default' (0.6)."""
+    if mu is not None:
+        return "--mu"
+    if getattr(getattr(gait, "options", None), "mu", None) is not None:
+        return "the gait's"
+    return "default"
+
+
 def gait_friction(args, gait) -> str:
     """Set ``args.mu`` to the friction coefficient the run is held to: ``--mu``, else the
     one ``gait`` was optimised for, else 0.6 (as the simulators do without ``--mu``).
@@ -319,12 +331,7 @@ def gait_friction(args, gait) -> str:
     str
         The coefficient and where it came from, for the command's output.
     """
-    if args.mu is not None:
-        source = "--mu"
-    elif getattr(getattr(gait, "options", None), "mu", None) is not None:
-        source = "the gait's"
-    else:
-        source = "default"
+    source = friction_source(gait, args.mu)
     args.mu = friction_of(gait, args.mu)
     return f"mu {args.mu:g}, {source}"
 

@@ -10,14 +10,12 @@ from analysis.reporting.text import eigenvalues_text, number_text
 from biped_casadi.control.output_law import M1_LIMIT, SECTION
 
 from .common import (Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
-                     load_gait, m1_required, parse_m1, print_json, rejoin_fraction)
+                     load_gait, parse_m1, print_json, rejoin_fraction)
 
 
 def cmd_eig(args):
     if args.controller == "vc" and args.m1 is not None:
         raise UserError("--m1 applies to the time-varying controller (--controller tv)")
-    if args.controller == "tv" and args.m1 is None:
-        raise m1_required()                  # before the gait (its count is not known yet)
     if args.controller == "vc" and args.method is not None:
         raise UserError("--method applies to the time-varying controller (--controller tv)")
     if args.controller == "vc" and args.rejoin is not None:
@@ -39,7 +37,7 @@ def cmd_eig(args):
                 print(f"{k:22s} {v}")
             _fall_note(gait)
         return 0
-    M1 = parse_m1(args.m1, model.nu)
+    M1 = parse_m1(args.m1, model.nu)      # after the gait: its file's errors come first
     if method == "ad":
         say("AD through the whole Poincare map (builds it once, a few seconds) ...")
     r = poincare_eigenvalues(gait, M1, method=method, rejoin=rejoin)

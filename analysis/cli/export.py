@@ -3,6 +3,7 @@ example), optionally compiled and compared with the Python law (``--verify``).""
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import platform
 import tempfile
@@ -135,6 +136,14 @@ def _machine() -> str:
     return cpu
 
 
+def _check_saturation(args, model):
+    """``--saturate`` needs a limit to clip at: the robot's, or ``--torque-limit``."""
+    if args.saturate and args.torque_limit is None \
+            and not math.isfinite(model.description.torque_limit):
+        raise UserError(f"--saturate: the robot {model.params.name} has no torque limit to "
+                        "clip at: give --torque-limit U")
+
+
 def cmd_export(args):
     # ---- arguments (the output folder and the compiler before any work)
     cc = _check_arguments(args)
@@ -145,9 +154,11 @@ def cmd_export(args):
                         f"map (give --robot FILE.urdf, a description written by 'biped robot "
                         f"import', or a gait made for one); nothing written")
     _perturbation(args, gait.model.nq)       # its shape, also when only --verify uses it
+    _check_saturation(args, gait.model)
     ctrl = _controller(args, gait)
     try:
-        law = exported_law(ctrl, angles=args.angles, motor_side=args.motor_side)
+        law = exported_law(ctrl, angles=args.angles, motor_side=args.motor_side,
+                           saturate=args.saturate, torque_limit=args.torque_limit)
     except ValueError as e:
         what = "--m1" if args.controller == "tv" else "--controller vc"
         raise UserError(f"{what}: {str(e).split(': ', 1)[1]}; nothing written") from None
@@ -162,7 +173,8 @@ def cmd_export(args):
     result = dict(status="written", out=str(args.out), files=sorted(files) + ["gait.json"],
                   controller=ctrl.describe(), robot=law.robot, gait_file=name,
                   gait_sha256=provenance["gait file sha256"], nq=law.nq, nu=law.nu,
-                  nstate=law.nstate, angles=law.angles)
+                  nstate=law.nstate, angles=law.angles, saturate=args.saturate,
+                  clipped_at=law.torque_limit)
     if law.angles == "urdf":
         result.update(inputs=["pitch"] + list(law.urdf.names), torques=list(law.urdf.names),
                       motor_side=law.motor_side, stance_legs=list(law.urdf.hips))
@@ -173,7 +185,7 @@ def cmd_export(args):
             model = gait.model
             q0, dq0 = _perturbation(args, model.nq).initial_state(gait)
             result["friction"] = gait_friction(args, gait)
-            opts = SimulationOptions(steps=args.steps, mu=args.mu,
+            opts = SimulationOptions(steps=args.steps, mu=args.mu, saturate=args.saturate,
                                      torque_limit=args.torque_limit)
             try:
                 ver = verify_export(stage.path, ctrl, q0, dq0, opts, cc, args.states,
@@ -224,6 +236,8 @@ def _report(args, r):
     desc = (f"time-varying controller, M1 = {c['M1']}, rejoin {c['rejoin']:g} T"
             if c["controller"] == "tv" else "virtual-constraint controller fitted to the gait")
     g = c["gains"]
+    if r["saturate"]:
+        desc += f", torques clipped at {r['clipped_at']:g} N m"
     print(f"  {desc}, gains Kp {g['Kp']:g} Kd {g['Kd']:g} eps {g['eps']:g} s; robot "
           f"{r['robot']} (nq {r['nq']}, nu {r['nu']}, nstate {r['nstate']})")
     print(f"  gait {r['gait_file']}, sha256 {r['gait_sha256']}")
@@ -320,6 +334,14 @@ def register(sub):
     p.add_argument("--mu", type=float,
                    help=f"friction coefficient of --verify's simulation ({MU_HELP})")
     p.add_argument("--torque-limit", type=float, metavar="U",
-                   help="torque limit of --verify's simulation, N m (default the robot's)")
+                   help="torque limit of --verify's simulation, N m (default the robot's); "
+                        "with --saturate also the limit the law clips at")
+    p.add_argument("--saturate", action="store_true",
+                   help="clip the law's torques at the robot's limit (or --torque-limit), as "
+                        "'biped simulate' does with saturation and 'biped export-running "
+                        "--saturate' for running (the clipping is part of the C code; "
+                        "--verify compares it with the Python law clipped the same way and "
+                        "simulates with the torques saturated instead of stopping at the "
+                        "limit)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_export)

@@ -34,6 +34,12 @@ DEFAULT_M1 = (0.0, 0.95, 0.95, 0.0)
 #: state (largest entry, rad or rad/s): farther is another orbit than the gait's
 MAX_DISTANCE = 1e-2
 
+#: the closed loop's options and their defaults: given any of them (or --m1), the closed
+#: loop is analysed (--stability implied; before, they were ignored without it, and a
+#: run with --kp 1e300 optimised the step and exited 0 as if the gain were fine)
+CLOSED_LOOP_DEFAULTS = dict(kp=DEFAULT_KP, kd=DEFAULT_KD, law="pd", steps=20, perturb=1e-2,
+                            flight_clock="takeoff")
+
 #: at most this many strides in a run (--steps here, --strides and --fit of mujoco-running)
 MAX_STRIDES = 5000
 
@@ -140,7 +146,8 @@ def _add_closed_loop_arguments(p):
         "stance and in flight (t restarts in each phase, see --flight-clock); find the stride "
         "map's fixed point (landing state), the eigenvalues of its exact Jacobian and run "
         "STEPS strides from the fixed point with PERTURB added to every velocity; exit code 1 "
-        "when the closed loop fails (no fixed point, or the perturbed run stops)")
+        "when the closed loop fails (no fixed point, or the perturbed run stops); any option "
+        "of this group implies --stability")
     st.add_argument("--stability", action="store_true",
                     help="analyse the closed loop of the step (optimised, or --gait FILE)")
     st.add_argument("--gait", metavar="FILE",
@@ -168,6 +175,7 @@ def _add_closed_loop_arguments(p):
                          "M1 (Nelder-Mead on the exact radius, about 0.5 s an evaluation) "
                          "from --m1 (the start; default the design above), then analyse "
                          "the chosen M1; implies --stability")
+    p.set_defaults(**{k: None for k in CLOSED_LOOP_DEFAULTS})     # given or not
     st.add_argument("--max-evaluations", type=int, default=None, metavar="N",
                     help="with --choose-m1: fixed points solved at most, 1 to "
                          f"{MAX_EVALUATIONS} (default 150)")
@@ -230,7 +238,11 @@ def _violation_notes(violations: list) -> list:
 
 
 def cmd_running(args):
-    if args.gait is not None or args.choose_m1 or args.saturate:
+    given = args.m1 is not None or any(getattr(args, k) is not None
+                                       for k in CLOSED_LOOP_DEFAULTS)
+    for k, v in CLOSED_LOOP_DEFAULTS.items():
+        setattr(args, k, v if getattr(args, k) is None else getattr(args, k))
+    if args.gait is not None or args.choose_m1 or args.saturate or given:
         args.stability = True
     _check_closed_loop(args)
     if args.gait is not None:

@@ -15,8 +15,8 @@ from analysis.design.schedule import (M1Schedule, check_profile, profile_designs
 from analysis.reporting.plots import save_figures, speed_profile_plot
 from gait_opt import GaitFamily
 
-from .common import (UserError, check_not_singular, figure_or_na, load_model, output_dir,
-                     parse_m1, print_json, require_members)
+from .common import (UserError, check_not_singular, figure_or_na, friction_source, load_model,
+                     output_dir, parse_m1, print_json, require_members)
 
 __all__ = ["add_profile_arguments", "profile_requested", "check_profile_arguments",
            "cmd_profile"]
@@ -175,7 +175,7 @@ def cmd_profile(args, say, perturbation_of) -> int:
         print_json(d)
         return 0
     for k, r in runs.items():
-        _print_run(k, r)
+        _print_run(k, r, [friction_source(g, args.mu) for g in gaits])
     for s in sources:
         if s.source == "interpolated":
             print(f"gait at {s.speed:g} m/s: interpolated ({s.status}; interpolant "
@@ -185,14 +185,18 @@ def cmd_profile(args, say, perturbation_of) -> int:
     return 0
 
 
-def _print_run(kind, r):
+def _print_run(kind, r, sources):
+    """One run's table; its last column names the friction coefficient of each gait the
+    profile switches to (``sources``: where each step's came from), once per switch."""
     print(f"{kind}: status {r.status}" + (f" - {r.message}" if r.message else ""))
     print("  step  speed [m/s]  status      q_u - q_u^d(T)   dq_u - dq_u^d(T)   peak |u| [N m]"
-          "  friction margin")
-    for s in r.steps:
-        print(f"  {s.index + 1:4d}  {s.speed:10.4f}  {s.status:10s}  {s.qu_error:+.6e}   "
-              f"{s.dqu_error:+.6e}   {figure_or_na(s.peak_torque, '12.1f')}  "
-              f"{figure_or_na(s.friction_margin, '.3f')}")
+          "  friction margin  mu (at a gait switch)")
+    for s, before in zip(r.steps, [None] + r.steps):
+        switch = before is None or s.controller.get("gait") != before.controller.get("gait")
+        print((f"  {s.index + 1:4d}  {s.speed:10.4f}  {s.status:10s}  {s.qu_error:+.6e}   "
+               f"{s.dqu_error:+.6e}   {figure_or_na(s.peak_torque, '12.1f')}  "
+               f"{figure_or_na(s.friction_margin, '.3f'):15s}"
+               + (f"  {s.mu:g}, {sources[s.index]}" if switch else "")).rstrip())
     conv = [f"{g.speed:.3g} m/s: {figure_or_na(g.steps_to_converge, '.0f')}" for g in r.segments
             if g.n_steps > 1]
     if conv:

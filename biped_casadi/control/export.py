@@ -39,8 +39,9 @@ import numpy as np
 
 from ..numerics import quintic_hermite_interval
 from .design import Design
-from .export_urdf import (LEG_ORDER, URDF_START_C, c_number, comment_safe, urdf_functions,
-                          urdf_header_doc, urdf_readme_doc)
+from .export_urdf import (ALL_FINITE_C, LEG_ORDER, URDF_START_C, c_array as _array, c_number,
+                          casadi_c, comment_safe, urdf_functions, urdf_header_doc,
+                          urdf_readme_doc)
 from .time_varying import TimeVaryingController
 from .virtual_constraints import VirtualConstraintController
 
@@ -114,6 +115,9 @@ class ExportedLaw:
         With 'urdf': torques divided by each joint's reduction.
     front : casadi.Function or None
         With 'urdf': ``biped_front(x) -> ahead``, which finds the stance leg.
+    torque_limit : float or None
+        The law's torques are clipped at +-torque_limit, N m (``saturate``), in the
+        model's coordinates before any URDF mapping; None: not clipped.
     """
     kind: str
     nq: int
@@ -135,6 +139,7 @@ class ExportedLaw:
     urdf: object = field(default=None, repr=False)
     motor_side: bool = False
     front: ca.Function | None = field(default=None, repr=False)
+    torque_limit: float | None = None
 
 
 def hermite_state(tau, node):
@@ -173,8 +178,9 @@ def _state_table(reference) -> dict:
                 h=h, offset=offset, n_full=int(t.size))
 
 
-def _law_functions(ctrl, nq):
-    """(law, start) Functions of the export, with the export's inputs and outputs."""
+def _law_functions(ctrl, nq, limit=None):
+    """(law, start) Functions of the export, with the export's inputs and outputs; the
+    torques clipped at +-``limit`` (None: not clipped)."""
     q, dq, tau = ca.SX.sym("q", nq), ca.SX.sym("dq", nq), ca.SX.sym("tau")
     p = ca.SX.sym("state", ctrl.n_par)
     qs, dqs = ca.SX.sym("q", nq), ca.SX.sym("dq", nq)
@@ -189,6 +195,8 @@ def _law_functions(ctrl, nq):
         vc = ctrl.constraints
         go = ca.mtimes(ca.DM(vc.c).T, dqs) * float(vc.direction) if ctrl.correction \
             else ca.SX(1)
+    if limit is not None:        # as numpy's clip: a NaN stays NaN (fmin/fmax would drop it)
+        u = ca.if_else(u > limit, limit, ca.if_else(u < -limit, -limit, u))
     law = ca.Function("biped_law", [q, dq, tau, p, node], [u, y, dy, den, inr],
                       ["q", "dq", "tau", "state", "node"], ["u", "y", "dy", "den", "in_range"])
     start = ca.Function("biped_start", [qs, dqs], [p0, go], ["q", "dq"], ["state", "go"])
@@ -196,7 +204,8 @@ def _law_functions(ctrl, nq):
 
 
 def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION,
-                 angles: str = "relative", motor_side: bool = False) -> ExportedLaw:
+                 angles: str = "relative", motor_side: bool = False, saturate: bool = False,
+                 torque_limit: float | None = None) -> ExportedLaw:
     """The law of a controller as the Functions and constants of an export.
 
     Parameters
@@ -214,6 +223,11 @@ def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION,
         :mod:`biped_casadi.control.export_urdf`).
     motor_side : bool
         With 'urdf': torques divided by each joint's transmission reduction.
+    saturate : bool
+        Clip the law's torques at +-``torque_limit`` in the C code, as
+        ``SimulationOptions(saturate=True)`` clips those the robot receives.
+    torque_limit : float, optional
+        N m; default the robot's limit.
 
     Returns
     -------
@@ -225,7 +239,7 @@ def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION,
         Naming ``controller`` for another kind of controller or a design that is
         singular along its own gait (eq. 24), ``singular_fraction`` outside (0, 1),
         ``angles`` unknown or 'urdf' for a robot without a URDF map, ``motor_side``
-        without 'urdf'.
+        without 'urdf', ``saturate`` without a finite positive limit.
     """
     if isinstance(controller, Design):
         controller = controller.controller_for()
@@ -245,12 +259,16 @@ def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION,
         raise ValueError(f"angles: the robot {model.params.name} has no URDF joint map (give "
                          f"the robot as its .urdf file, or a description written by 'biped "
                          f"robot import')")
+    limit = float(model.description.torque_limit if torque_limit is None else torque_limit)
+    if saturate and not (math.isfinite(limit) and limit > 0):
+        raise ValueError(f"saturate: the robot {model.params.name} has no torque limit to clip "
+                         f"at (give torque_limit), got {limit!r}")
     rep = controller.singularity()
     if rep.singular:
         raise ValueError(f"controller: the design is singular along its own gait (eq. 24: the "
                          f"decoupling denominator ranges over [{rep.min_value:.4g}, "
                          f"{rep.max_value:.4g}] on the step)")
-    law, start = _law_functions(controller, model.nq)
+    law, start = _law_functions(controller, model.nq, limit if saturate else None)
     front = None
     nstate = controller.n_par
     examples = _example_states(controller)
@@ -268,7 +286,7 @@ def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION,
         singular_fraction=float(singular_fraction), controller=controller.describe(),
         robot=model.params.name, gait_digest=str(ref.cache_key), T=float(ref.T),
         example_states=examples, angles=angles, urdf=umap if angles == "urdf" else None,
-        motor_side=bool(motor_side), front=front)
+        motor_side=bool(motor_side), front=front, torque_limit=limit if saturate else None)
 
 
 def _urdf_examples(rows, umap, nq) -> np.ndarray:
@@ -290,13 +308,6 @@ def _example_states(ctrl, n: int = 16) -> np.ndarray:
 
 # ======================================================================= C text
 _num = c_number
-
-
-def _array(name: str, values, per_line: int = 4) -> str:
-    vals = [_num(v) for v in np.ravel(values)]
-    lines = [", ".join(vals[i:i + per_line]) for i in range(0, len(vals), per_line)]
-    body = ",\n    ".join(lines) if lines else "0.0"
-    return f"static const double {name}[{max(len(vals), 1)}] = {{\n    {body}\n}};\n"
 
 
 def _provenance_lines(law: ExportedLaw, provenance: dict) -> list:
@@ -323,6 +334,8 @@ def _provenance_lines(law: ExportedLaw, provenance: dict) -> list:
                      f"{c['n_segments']} quintic Bezier segments, fit residual "
                      f"{c['fit_residual']:.3g} rad")
     lines.append(f"gains: Kp = {_num(g['Kp'])}, Kd = {_num(g['Kd'])}, eps = {_num(g['eps'])} s")
+    if law.torque_limit is not None:
+        lines.append(f"torques clipped at +-{_num(law.torque_limit)} N m (the model's joints)")
     return lines
 
 
@@ -426,17 +439,6 @@ static double floor_div(double a, double b)
 """
 
 
-#: C text shared by the exports' wrappers: whether n doubles are all finite
-ALL_FINITE_C = """static int all_finite(const double *x, int n)
-{
-    int j;
-    for (j = 0; j < n; ++j)
-        if (!(x[j] - x[j] == 0.0)) return 0;
-    return 1;
-}
-
-"""
-
 _HELPERS = ALL_FINITE_C + """/* tau outside the reference's range: every output NaN, return code 2 */
 static int not_defined(double *u, double *y, double *dy, double *den)
 {
@@ -538,15 +540,6 @@ int biped_outputs(double tau, const double *q, const double *dq, const double *s
     return evaluate(tau, q, dq, state, u, y, dy, den);
 }}
 """
-
-
-def casadi_c(name: str, functions) -> str:
-    """CasADi's C for some Functions, one file (int and double, no header of its own)."""
-    cg = ca.CodeGenerator(name, {"with_header": False, "casadi_int": "int",
-                                 "casadi_real": "double"})
-    for f in functions:
-        cg.add(f)
-    return cg.dump()
 
 
 def _generated(law: ExportedLaw) -> str:

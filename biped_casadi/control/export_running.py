@@ -40,8 +40,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from .export import ALL_FINITE_C, MARKER, _array, casadi_c
-from .export_urdf import c_number, comment_safe
+from .export import MARKER
+from .export_urdf import ALL_FINITE_C, c_array as _array, c_number, casadi_c, comment_safe
 from .running import RunningController
 
 __all__ = ["ExportedRunningLaw", "exported_running_law", "running_c_sources",

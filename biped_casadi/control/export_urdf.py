@@ -138,10 +138,15 @@ class UrdfAngleLaw:
         The robot's joint map.
     motor_side : bool
         Torques divided by each joint's reduction.
+    torque_limit : float, optional
+        The model's torques clipped at +-torque_limit (N m) before the mapping, as an
+        export that saturates clips them.
     """
 
-    def __init__(self, controller, umap: UrdfMap, motor_side: bool = False):
+    def __init__(self, controller, umap: UrdfMap, motor_side: bool = False,
+                 torque_limit: float | None = None):
         self.controller, self.umap, self.motor_side = controller, umap, motor_side
+        self.limit = math.inf if torque_limit is None else float(torque_limit)
         self.nu = controller.model.nu
         #: the angles' centre: the robot's upright pose (hips near +-pi for a hanging torso)
         self.centre = controller.model.description.upright_q
@@ -188,7 +193,8 @@ class UrdfAngleLaw:
             out = c.torque(q, dq, tau, p[:self.nu], p[self.nu:])
         else:
             out = c.evaluate(q, dq, tau, np.zeros(0), p)
-        u = self.umap.torques(np.asarray(out.u, float).ravel(), leg, self.motor_side)
+        u = self.umap.torques(np.clip(np.asarray(out.u, float).ravel(), -self.limit,
+                                      self.limit), leg, self.motor_side)
         return u, out.y, out.dy, out.denominator
 
 
@@ -212,6 +218,35 @@ def c_number(x) -> str:
 
 
 _num = c_number
+
+
+def c_array(name: str, values, per_line: int = 4) -> str:
+    """A static const double array of ``values`` as C source (exact numbers)."""
+    vals = [_num(v) for v in np.ravel(values)]
+    lines = [", ".join(vals[i:i + per_line]) for i in range(0, len(vals), per_line)]
+    body = ",\n    ".join(lines) if lines else "0.0"
+    return f"static const double {name}[{max(len(vals), 1)}] = {{\n    {body}\n}};\n"
+
+
+def casadi_c(name: str, functions) -> str:
+    """CasADi's C for some Functions, one file (int and double, no header of its own)."""
+    cg = ca.CodeGenerator(name, {"with_header": False, "casadi_int": "int",
+                                 "casadi_real": "double"})
+    for f in functions:
+        cg.add(f)
+    return cg.dump()
+
+
+#: C text shared by the exports' wrappers: whether n doubles are all finite
+ALL_FINITE_C = """static int all_finite(const double *x, int n)
+{
+    int j;
+    for (j = 0; j < n; ++j)
+        if (!(x[j] - x[j] == 0.0)) return 0;
+    return 1;
+}
+
+"""
 
 #: the step starts of an export in URDF angles (C)
 URDF_START_C = """int biped_step_start_leg(int stance, const double *q, const double *dq, double *state)

@@ -112,8 +112,11 @@ class ProfileStep:
         The smallest stance F_z of the step, N.
     max_friction_ratio, max_impulse_ratio : float
         The largest ``|F_x| / F_z`` along the step and of its impact impulse.
+    mu : float
+        The friction coefficient the step was held to: the options' ``mu``, else its
+        gait's own (:func:`~biped_casadi.simulation.options.friction_of`).
     friction_margin : float
-        mu minus the larger of the two ratios (negative: the cone was left).
+        ``mu`` minus the larger of the two ratios (negative: the cone was left).
     q_plus, dq_plus : numpy.ndarray or None
         The state after the impact and relabelling (the next step's start); None when
         the step ended without a valid strike.
@@ -136,6 +139,7 @@ class ProfileStep:
     min_normal_force: float
     max_friction_ratio: float
     max_impulse_ratio: float
+    mu: float
     friction_margin: float
     q_plus: np.ndarray | None = None
     dq_plus: np.ndarray | None = None
@@ -361,6 +365,7 @@ def _profile_step(k, d, sim, res, t0) -> ProfileStep:
         min_normal_force=float(res.min_normal_force),
         max_friction_ratio=float(res.max_friction_ratio),
         max_impulse_ratio=float(res.max_impulse_ratio),
+        mu=float(sim.limits.mu),
         friction_margin=float(sim.limits.mu - max(ratios)) if ratios else nan,
         q_plus=None if rec is None else rec.q_plus.copy(),
         dq_plus=None if rec is None else rec.dq_plus.copy())
