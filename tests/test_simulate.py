@@ -393,8 +393,8 @@ def test_cli_simulate_per_joint_perturbation(gait, tmp_path, capsys):
     rc = biped_main(["simulate", "--gait", str(path), "--controller", "vc", "--steps", "1",
                      "--torque-limit", "20", "--json"])
     out = json.loads(capsys.readouterr().out)
-    # success: the run was simulated; its verdict is the status
-    assert rc == 0 and out["status"] == "torque_limit" and out["success"]
+    # success: the run was simulated; its verdict is the status, and the exit code 1
+    assert rc == 1 and out["status"] == "torque_limit" and out["success"]
 
 
 def test_cli_simulate_bad_input(gait, tmp_path, capsys):
@@ -530,10 +530,10 @@ def test_friction_defaults_to_the_gaits(gait, tmp_path, capsys):
     assert res.status == "slipped" and "impulse" in res.message
     path = own.save(tmp_path / "own.json")
     args = ["simulate", "--gait", str(path), "--controller", "vc", "--steps", "2"]
-    assert biped_main(args + ["--json"]) == 0
+    assert biped_main(args + ["--json"]) == 1                  # the walk stopped
     out = json.loads(capsys.readouterr().out)
     assert out["status"] == "slipped" and out["mu"] == pytest.approx(mu)
-    assert biped_main(args) == 0
+    assert biped_main(args) == 1
     text = capsys.readouterr().out
     assert text.startswith("vc: status slipped") and f"(mu {mu:g}, the gait's)" in text
     assert biped_main(args + ["--mu", "0.6", "--json"]) == 0

@@ -183,10 +183,10 @@ def test_simulate_prints_no_giant_ratio(capsys):
     import json
 
     from analysis.cli import main
-    assert main(["simulate", "--controller", "vc", "--perturb", "1", "0"]) == 0
+    assert main(["simulate", "--controller", "vc", "--perturb", "1", "0"]) == 1   # stopped
     out = capsys.readouterr().out
     assert "max |F_x|/F_z inf" in out and max(len(w) for w in out.split()) < 40, out
-    assert main(["simulate", "--controller", "vc", "--perturb", "1", "0", "--json"]) == 0
+    assert main(["simulate", "--controller", "vc", "--perturb", "1", "0", "--json"]) == 1
     assert json.loads(capsys.readouterr().out)["max_friction_ratio"] is None
 
 

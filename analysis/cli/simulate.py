@@ -18,7 +18,8 @@ from .common import (Progress, UserError, add_design_arguments, add_gait_argumen
                      check_m1_values, check_not_singular, figure_or_na, gait_friction, load_gait,
                      MU_HELP, output_dir, output_file, parse_m1, positive, print_json,
                      rejoin_fraction)
-from .simulate_profile import add_profile_arguments, check_profile_arguments, cmd_profile
+from .simulate_profile import (add_profile_arguments, check_profile_arguments, cmd_profile,
+                               walked)
 
 #: errors below this at every impact are round-off: no trend is read from them
 ROUND_OFF = 1e-8
@@ -120,9 +121,10 @@ def cmd_simulate(args):
         if figures:
             d["figures"] = figures
         print_json(d)
-        return 0
+        return walked(res)
     _print_report(runs, gait, terrain, figures, friction, default_m1=args.m1 is None)
-    return 0
+    return walked(res)
+
 
 
 def _settling(run) -> dict:
@@ -268,7 +270,8 @@ def register(sub):
                     "the ground, or the old stance foot not lifting off), slipped (|F_x| > "
                     "mu F_z, in single support or for the impact impulse), "
                     "negative_normal_force (F_z <= 0), torque_limit (|u_i| > U), singular, "
-                    "no_impact; 'ok' only when every step was valid. With --gait FAMILY.json "
+                    "no_impact; 'ok' only when every step was valid (exit code 0; 1 when the "
+                    "--controller run stopped; 2 for bad input). With --gait FAMILY.json "
                     "and --speeds V1 V2 ... (or --ramp V1 V2 DV) step k walks the family's "
                     "gait at Vk, the reference switching gait at each impact. --json prints "
                     "{status, "

@@ -173,7 +173,7 @@ def cmd_profile(args, say, perturbation_of) -> int:
         if figures:
             d["figures"] = figures
         print_json(d)
-        return 0
+        return walked(res)
     for k, r in runs.items():
         _print_run(k, r, [friction_source(g, args.mu) for g in gaits])
     for s in sources:
@@ -182,7 +182,19 @@ def cmd_profile(args, say, perturbation_of) -> int:
                   f"residual {s.interpolant_residual:.1e}, polished to {s.orbit_residual:.1e})")
     for k, v in figures.items():
         print(f"{k}: {v}")
-    return 0
+    return walked(res)
+
+
+def walked(run) -> int:
+    """The exit code of ``biped simulate``: 0 when every step of the walk of
+    ``--controller`` was valid, 1 when it stopped at an invalid state (reported; the other
+    controller's walk of ``--compare`` is reported only; bad input is 2).
+
+    Parameters
+    ----------
+    run : WalkOutcome
+    """
+    return 0 if run.ok else 1
 
 
 def _print_run(kind, r, sources):
