@@ -40,6 +40,7 @@ from biped_casadi.control.export_urdf import LEG_ORDER, UrdfAngleLaw
 from biped_casadi.control.compiled import (CompiledController, CompiledUrdfController,
                                            CompilerError, PythonTwin, build_library,
                                            find_c_compiler)
+from biped_casadi.control.saturation import clip_torques
 from biped_casadi.control.urdf_twin import PythonUrdfTwin
 from biped_casadi.numerics import compiler_reason
 from biped_casadi.results import Result
@@ -278,7 +279,7 @@ def compare_states(compiled: CompiledController, ctrl, n: int = 10_000,
         t_py, t_c = t_py + t1 - t0, t_c + t2 - t1
         codes[rc] = codes.get(rc, 0) + 1
         _, y, dy, den = compiled.outputs(tk, qk, dqk, pc)
-        u_py = np.clip(out.u, -lim, lim)
+        u_py = clip_torques(out.u, lim)
         absu[k] = np.max(np.abs(u - u_py))
         rel[k] = absu[k] / max(np.max(np.abs(u_py)), 1e-300)
         outs[k] = max(np.max(np.abs(y - out.y)), np.max(np.abs(dy - out.dy)))

@@ -42,6 +42,7 @@ from .design import Design
 from .export_urdf import (ALL_FINITE_C, LEG_ORDER, URDF_START_C, c_array as _array, c_number,
                           casadi_c, comment_safe, urdf_functions, urdf_header_doc,
                           urdf_readme_doc)
+from .saturation import clip_torques
 from .time_varying import TimeVaryingController
 from .virtual_constraints import VirtualConstraintController
 
@@ -195,8 +196,8 @@ def _law_functions(ctrl, nq, limit=None):
         vc = ctrl.constraints
         go = ca.mtimes(ca.DM(vc.c).T, dqs) * float(vc.direction) if ctrl.correction \
             else ca.SX(1)
-    if limit is not None:        # as numpy's clip: a NaN stays NaN (fmin/fmax would drop it)
-        u = ca.if_else(u > limit, limit, ca.if_else(u < -limit, -limit, u))
+    if limit is not None:
+        u = clip_torques(u, limit)
     law = ca.Function("biped_law", [q, dq, tau, p, node], [u, y, dy, den, inr],
                       ["q", "dq", "tau", "state", "node"], ["u", "y", "dy", "den", "in_range"])
     start = ca.Function("biped_start", [qs, dqs], [p0, go], ["q", "dq"], ["state", "go"])

@@ -26,6 +26,7 @@ import casadi as ca
 import numpy as np
 
 from ..model.urdf_map import UrdfMap, wrap_angle
+from .saturation import clip_torques
 
 __all__ = ["urdf_functions", "torque_matrix", "UrdfAngleLaw", "LEG_ORDER", "c_number",
            "urdf_header_doc", "urdf_readme_doc", "URDF_START_C", "comment_safe"]
@@ -193,8 +194,8 @@ class UrdfAngleLaw:
             out = c.torque(q, dq, tau, p[:self.nu], p[self.nu:])
         else:
             out = c.evaluate(q, dq, tau, np.zeros(0), p)
-        u = self.umap.torques(np.clip(np.asarray(out.u, float).ravel(), -self.limit,
-                                      self.limit), leg, self.motor_side)
+        u = self.umap.torques(clip_torques(np.asarray(out.u, float).ravel(), self.limit), leg,
+                              self.motor_side)
         return u, out.y, out.dy, out.denominator
 
 

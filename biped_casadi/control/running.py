@@ -60,6 +60,7 @@ import numpy as np
 
 from ..model import flight_model
 from .output_law import check_M1_range
+from .saturation import clip_torques
 
 __all__ = ["PhaseReference", "RunningController", "LAWS", "FLIGHT_CLOCKS",
            "phase_derivatives", "check_running_gait"]
@@ -404,6 +405,8 @@ class RunningController:
     def applied(self, u):
         """The torques the robot receives: ``u`` clipped at the limit when ``saturate``.
 
+        As :func:`~biped_casadi.control.saturation.clip_torques`: a NaN stays NaN.
+
         Parameters
         ----------
         u : casadi.SX or array_like
@@ -415,8 +418,7 @@ class RunningController:
         """
         if not self.saturate:
             return u
-        U = self.torque_limit
-        return ca.fmin(ca.fmax(u, -U), U)
+        return clip_torques(u, self.torque_limit)
 
     def applied_law(self, phase: str, name: str | None = None) -> ca.Function:
         """A phase's law with its torques as the robot receives them (:meth:`applied`).

@@ -22,6 +22,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ..control.saturation import clip_torques
 from ..numerics import FastCall, rk4_step
 
 __all__ = ["compiled_closed_loop"]
@@ -53,7 +54,7 @@ class _NumericLoop:
         """The torques the plant receives, and whether they were clipped."""
         if not self.saturate:
             return u, 0.0
-        return np.clip(u, -self.limit, self.limit), float(np.max(np.abs(u)) > self.limit)
+        return clip_torques(u, self.limit), float(np.max(np.abs(u)) > self.limit)
 
     def step(self, X, tau, h, p, u0=None):
         """One RK4 step; u0: the torques at (X, tau) when already known."""

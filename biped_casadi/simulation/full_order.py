@@ -56,6 +56,7 @@ from ..caching import cached
 from ..control.design import Design
 from ..control.output_law import SECTION
 from ..control.reference import require_reference
+from ..control.saturation import clip_torques
 from ..numerics import FastCall, as_vector, compiled, rk4_step
 from ..results import internal, json_safe
 from .compiled_loop import compiled_closed_loop
@@ -297,7 +298,8 @@ class Simulator:
     def applied_torque(self, u):
         """The torques the plant receives for the law's torques ``u``.
 
-        Clipped at the torque limit when the options saturate, else ``u`` itself.
+        Clipped at the torque limit when the options saturate (a NaN stays NaN:
+        :func:`~biped_casadi.control.saturation.clip_torques`), else ``u`` itself.
 
         Parameters
         ----------
@@ -313,7 +315,7 @@ class Simulator:
         if not self.options.saturate:
             return u, 0
         U = self.limits.torque_limit
-        return ca.fmin(ca.fmax(u, -U), U), ca.mmax(ca.fabs(u)) > U
+        return clip_torques(u, U), ca.mmax(ca.fabs(u)) > U
 
     # ------------------------------------------------------------------ build
     def _build(self):
