@@ -48,7 +48,7 @@ from biped_casadi.option_checks import FieldChecks
 from .options import leg_scale
 from .running_cache import cached_running
 from .running_file import check_running_file, running_problem
-from .running_solve import STALL_WINDOW, solve_running
+from .running_solve import STALL_WINDOW, TORQUE_LIMIT, LabelledConstraints, solve_running
 from .transcription import torso_lean_bound
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
@@ -444,18 +444,21 @@ def running_guess(model, opts: RunningOptions) -> dict:
 
 
 # ----------------------------------------------------------------- transcription
-def _phase(opti, f, nx, nu, n, T_bounds):
-    """Variables of one phase and its Hermite-Simpson defects: (T, X, U, F)."""
+def _phase(con, name, f, nx, nu, n, T_bounds):
+    """Variables of one phase (``name``: stance or flight) and its Hermite-Simpson
+    defects: (T, X, U, F)."""
+    opti = con.opti
     T = opti.variable()
     X = opti.variable(nx, 2 * n + 1)
     U = opti.variable(nu, 2 * n + 1)
-    opti.subject_to(opti.bounded(T_bounds[0], T, T_bounds[1]))
+    con.add(f"{name} duration bounds", "s", opti.bounded(T_bounds[0], T, T_bounds[1]))
     F = f.map(2 * n + 1)(X, U)
     h = T / n
     x0, xm, x1 = X[:, 0:-1:2], X[:, 1::2], X[:, 2::2]
     f0, fm, f1 = F[:, 0:-1:2], F[:, 1::2], F[:, 2::2]
-    opti.subject_to(ca.vec(xm - (x0 + x1) / 2 - h / 8 * (f0 - f1)) == 0)
-    opti.subject_to(ca.vec(x1 - x0 - h / 6 * (f0 + 4 * fm + f1)) == 0)
+    defects = f"collocation defects of {name} (the dynamics)"
+    con.add(defects, "", ca.vec(xm - (x0 + x1) / 2 - h / 8 * (f0 - f1)) == 0)
+    con.add(defects, "", ca.vec(x1 - x0 - h / 6 * (f0 + 4 * fm + f1)) == 0)
     return T, X, U, F
 
 
@@ -471,25 +474,28 @@ def _dynamics(model, fl):
     return fs, ff
 
 
-def _torques(opti, opts, U, umax, T, n):
+def _torques(con, opts, U, umax, T, n):
     """|u| <= umax at every point and at the quarter points of every interval (where
     the quadratic torque of Hermite-Simpson overshoots its three values most), and, with
     ``torque_rate_max``, a bound on the torque's rate between neighbouring points."""
-    opti.subject_to(opti.bounded(-umax, ca.vec(U), umax))
+    bounded = con.opti.bounded
+    con.add(TORQUE_LIMIT, "N m", bounded(-umax, ca.vec(U), umax))
     u0, um, u1 = U[:, 0:-1:2], U[:, 1::2], U[:, 2::2]
     for a, b, c in ((0.375, 0.75, -0.125), (-0.125, 0.75, 0.375)):
-        opti.subject_to(opti.bounded(-umax, ca.vec(a * u0 + b * um + c * u1), umax))
+        con.add(TORQUE_LIMIT, "N m", bounded(-umax, ca.vec(a * u0 + b * um + c * u1), umax))
     if opts.torque_rate_max is not None:
         du = ca.vec(U[:, 1:] - U[:, :-1])
         step = opts.torque_rate_max * T / (2 * n)
-        opti.subject_to(du <= step)
-        opti.subject_to(du >= -step)
+        con.add("torque rate bound", "N m", du <= step)
+        con.add("torque rate bound", "N m", du >= -step)
 
 
-def _posture(opti, model, opts, Q):
+def _posture(con, model, opts, Q):
     """Knees between straight and ``knee_flexion_max``, the other joints within pi of
     upright; the torso within ``torso_lean_max`` of upright."""
-    opti.subject_to(opti.bounded(*torso_lean_bound(model, Q, opts.torso_lean_max)))
+    bounded = con.opti.bounded
+    con.add("torso lean bound", "rad",
+            bounded(*torso_lean_bound(model, Q, opts.torso_lean_max)))
     up = model.description.upright_q
     for i in range(1, model.nq):
         if i in model.stance_knees:
@@ -498,7 +504,7 @@ def _posture(opti, model, opts, Q):
             lo, hi = opts.swing_knee_min, opts.knee_flexion_max
         else:
             lo, hi = up[i] - np.pi, up[i] + np.pi
-        opti.subject_to(opti.bounded(lo, ca.vec(Q[i, :]), hi))
+        con.add("joint range (knees, hips)", "rad", bounded(lo, ca.vec(Q[i, :]), hi))
 
 
 def _quarter_points(X, F, U, T, n):
@@ -516,17 +522,18 @@ def _quarter_points(X, F, U, T, n):
     return ca.horzcat(*xs), ca.horzcat(*us)
 
 
-def _cone_at_quarter_points(opti, model, fl, opts, Xs, Fs, Us, Ts):
+def _cone_at_quarter_points(con, model, fl, opts, Xs, Fs, Us, Ts):
     """The friction cone at the quarter points of every stance interval, on the state
     and torque of the Hermite-Simpson interpolant (what the dense check measures)."""
     n = model.nq
     xq, uq = _quarter_points(Xs, Fs, Us, Ts, opts.n_stance)
     Fz, Fx = fl.takeoff_guard.map(xq.shape[1])(xq[:n, :], xq[n:, :], uq)
-    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz - Fx) >= 0)
-    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz + Fx) >= 0)
+    cone = "friction cone at the quarter points"
+    con.add(cone, "N", ca.vec((opts.mu - opts.mu_margin) * Fz - Fx) >= 0)
+    con.add(cone, "N", ca.vec((opts.mu - opts.mu_margin) * Fz + Fx) >= 0)
 
 
-def _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts):
+def _cone_at_takeoff(con, model, fl, opts, Xs, Fs, Us, Ts):
     """The friction cone at takeoff, on the forces' rates.  At the last point Fz = Fx =
     0, the cone's apex, where the point condition says nothing about the direction in
     which the force vanishes; the force just before takeoff is -dF/dt dt, inside the
@@ -540,57 +547,61 @@ def _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts):
                        [ca.jtimes(force, ca.vertcat(x, u), ca.vertcat(dx, du))])
     du_end = (Us[:, N - 3] - 4 * Us[:, N - 2] + 3 * Us[:, N - 1]) / (Ts / opts.n_stance)
     dF = rate(Xs[:, -1], Us[:, -1], Fs[:, -1], du_end)
-    opti.subject_to((opts.mu - opts.mu_margin) * dF[0] + dF[1] <= 0)
-    opti.subject_to((opts.mu - opts.mu_margin) * dF[0] - dF[1] <= 0)
+    cone = "friction cone on the force's rate at takeoff"
+    con.add(cone, "N/s", (opts.mu - opts.mu_margin) * dF[0] + dF[1] <= 0)
+    con.add(cone, "N/s", (opts.mu - opts.mu_margin) * dF[0] - dF[1] <= 0)
 
 
-def _stance_constraints(opti, model, fl, opts, Xs, Us, Fs=None, Ts=None):
+def _stance_constraints(con, model, fl, opts, Xs, Us, Fs=None, Ts=None):
     """Ground force, friction cone, swing-foot clearance and posture along stance; Fz =
     0 at takeoff (and so Fx = 0, the cone's apex); the cone on the forces' rates there
     (``opts.takeoff_cone_rate``) and at the quarter points (``opts.cone_quarter_points``)."""
     n, N = model.nq, Xs.shape[1]
     Fz, Fx = fl.takeoff_guard.map(N)(Xs[:n, :], Xs[n:, :], Us)
-    opti.subject_to(ca.vec(Fz[:-1]) >= 0)
-    opti.subject_to(Fz[-1] == 0)
-    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz - Fx) >= 0)
-    opti.subject_to(ca.vec((opts.mu - opts.mu_margin) * Fz + Fx) >= 0)
+    con.add("normal ground force Fz >= 0 in stance", "N", ca.vec(Fz[:-1]) >= 0)
+    con.add("Fz = 0 at takeoff", "N", Fz[-1] == 0)
+    cone = "friction cone in stance"
+    con.add(cone, "N", ca.vec((opts.mu - opts.mu_margin) * Fz - Fx) >= 0)
+    con.add(cone, "N", ca.vec((opts.mu - opts.mu_margin) * Fz + Fx) >= 0)
     if opts.takeoff_cone_rate:
-        _cone_at_takeoff(opti, model, fl, opts, Xs, Fs, Us, Ts)
+        _cone_at_takeoff(con, model, fl, opts, Xs, Fs, Us, Ts)
     if opts.cone_quarter_points:
-        _cone_at_quarter_points(opti, model, fl, opts, Xs, Fs, Us, Ts)
+        _cone_at_quarter_points(con, model, fl, opts, Xs, Fs, Us, Ts)
     _, zsw = model.swing_foot.map(N)(Xs[:n, :])
     s = np.linspace(0, 1, N)
-    opti.subject_to(ca.vec(zsw) >= ca.DM(opts.clearance * 4 * s * (1 - s)))
-    _posture(opti, model, opts, Xs[:n, :])
+    con.add("swing-foot clearance in stance", "m",
+            ca.vec(zsw) >= ca.DM(opts.clearance * 4 * s * (1 - s)))
+    _posture(con, model, opts, Xs[:n, :])
     return Fz, Fx
 
 
-def _flight_constraints(opti, model, fl, opts, Xf):
+def _flight_constraints(con, model, fl, opts, Xf):
     """Both feet above the ground in flight; touchdown of the swing foot moving down."""
     ne, N = fl.ne, Xf.shape[1]
     feet = fl.feet.map(N)(Xf[:ne, :])             # 2 x 2N: (stance, swing) pairs
     z_st, z_sw = feet[1, 0::2], feet[1, 1::2]
-    opti.subject_to(ca.vec(z_st[1:]) >= 0)
-    opti.subject_to(ca.vec(z_sw[:-1]) >= 0)
-    opti.subject_to(z_sw[-1] == 0)
-    opti.subject_to(z_st[-1] >= opts.trailing_clearance)
+    con.add("stance foot above the ground in flight", "m", ca.vec(z_st[1:]) >= 0)
+    con.add("swing foot above the ground in flight", "m", ca.vec(z_sw[:-1]) >= 0)
+    con.add("touchdown of the swing foot", "m", z_sw[-1] == 0)
+    con.add("trailing-foot clearance at touchdown", "m", z_st[-1] >= opts.trailing_clearance)
     v_end = fl.feet_velocity(Xf[:ne, -1], Xf[ne:, -1])
-    opti.subject_to(v_end[1, 1] <= -opts.min_strike_speed)
-    _posture(opti, model, opts, Xf[:model.nq, :])
+    con.add("swing foot's strike speed", "m/s", v_end[1, 1] <= -opts.min_strike_speed)
+    _posture(con, model, opts, Xf[:model.nq, :])
 
 
-def _edges(opti, model, fl, opts, Xs, Xf):
+def _edges(con, model, fl, opts, Xs, Xf):
     """Takeoff embedding, landing with relabelling and periodicity, impulse cone and
     lift-off of the other foot; returns the landing foot's position."""
     n, ne = model.nq, fl.ne
     qe0, dqe0 = fl.takeoff(Xs[:n, -1], Xs[n:, -1])
-    opti.subject_to(Xf[:, 0] - ca.vertcat(qe0, dqe0) == 0)
+    con.add("takeoff state", "", Xf[:, 0] - ca.vertcat(qe0, dqe0) == 0)
     q_plus, dq_plus, F, _, v_other, p_foot = fl.landing_swing(Xf[:ne, -1], Xf[ne:, -1])
-    opti.subject_to(ca.vertcat(q_plus, dq_plus) - Xs[:, 0] == 0)
-    opti.subject_to(F[1] >= 0)
-    opti.subject_to((opts.mu - opts.mu_margin) * F[1] - F[0] >= 0)
-    opti.subject_to((opts.mu - opts.mu_margin) * F[1] + F[0] >= 0)
-    opti.subject_to(v_other[1] >= opts.min_liftoff_speed)
+    con.add("periodicity through the landing", "", ca.vertcat(q_plus, dq_plus) - Xs[:, 0] == 0)
+    impulse = "landing impulse (upward, in the friction cone)"
+    con.add(impulse, "N s", F[1] >= 0)
+    con.add(impulse, "N s", (opts.mu - opts.mu_margin) * F[1] - F[0] >= 0)
+    con.add(impulse, "N s", (opts.mu - opts.mu_margin) * F[1] + F[0] >= 0)
+    con.add("other foot's lift-off speed", "m/s", v_other[1] >= opts.min_liftoff_speed)
     return p_foot
 
 
@@ -641,26 +652,30 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
         guess = {k: getattr(guess, k) for k in ("T_stance", "T_flight", "x_stance",
                                                   "u_stance", "x_flight", "u_flight")}
     opti = ca.Opti()
+    con = LabelledConstraints(opti)
     fs, ff = _dynamics(model, fl)
-    Ts, Xs, Us, Fs = _phase(opti, fs, 2 * n, nu, opts.n_stance, opts.stance_time_bounds)
-    Tf, Xf, Uf, _ = _phase(opti, ff, 2 * fl.ne, nu, opts.n_flight, opts.flight_time_bounds)
+    Ts, Xs, Us, Fs = _phase(con, "stance", fs, 2 * n, nu, opts.n_stance,
+                            opts.stance_time_bounds)
+    Tf, Xf, Uf, _ = _phase(con, "flight", ff, 2 * fl.ne, nu, opts.n_flight,
+                           opts.flight_time_bounds)
     umax = opts.limit(model)
     for U, T, n_int in ((Us, Ts, opts.n_stance), (Uf, Tf, opts.n_flight)):
-        _torques(opti, opts, U, umax, T, n_int)
-    _stance_constraints(opti, model, fl, opts, Xs, Us, Fs, Ts)
-    _flight_constraints(opti, model, fl, opts, Xf)
-    p_foot = _edges(opti, model, fl, opts, Xs, Xf)
+        _torques(con, opts, U, umax, T, n_int)
+    _stance_constraints(con, model, fl, opts, Xs, Us, Fs, Ts)
+    _flight_constraints(con, model, fl, opts, Xf)
+    p_foot = _edges(con, model, fl, opts, Xs, Xf)
     # torques continuous through takeoff: with a jump, the stance force under the flight's
     # first torques could be positive (the ground would hold the foot down)
-    opti.subject_to(Uf[:, 0] - Us[:, -1] == 0)
-    opti.subject_to(p_foot[0] - opts.speed * (Ts + Tf) == 0)
-    opti.subject_to(p_foot[0] >= MIN_STEP_LENGTH * leg_scale(model))
+    con.add("torques continuous through takeoff", "N m", Uf[:, 0] - Us[:, -1] == 0)
+    con.add("step length = speed x (stance + flight)", "m",
+            p_foot[0] - opts.speed * (Ts + Tf) == 0)
+    con.add("minimum step length", "m", p_foot[0] >= MIN_STEP_LENGTH * leg_scale(model))
     effort = _simpson(Ts, ca.sum1(Us ** 2)) + _simpson(Tf, ca.sum1(Uf ** 2))
     opti.minimize(1e-3 * effort / p_foot[0])
     for var, key in ((Ts, "T_stance"), (Tf, "T_flight"), (Xs, "x_stance"), (Us, "u_stance"),
                      (Xf, "x_flight"), (Uf, "u_flight")):
         opti.set_initial(var, guess[key])
-    val, stats = solve_running(opti, opts, verbose, model)  # last iterate if it failed
+    val, stats = solve_running(con, opts, verbose, model)  # last iterate if it failed
     return RunningGait(robot=model.description.name, options=opts,
                        T_stance=float(val(Ts)), T_flight=float(val(Tf)),
                        x_stance=np.array(val(Xs)), u_stance=np.array(val(Us)).reshape(nu, -1),

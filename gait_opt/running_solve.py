@@ -12,13 +12,14 @@ its smallest value came no lower than :data:`STALL_FACTOR` times the smallest be
 them, and no iterate so far came within :data:`FEASIBLE`.  It cannot act before IPOPT's iteration
 ``window`` (it needs the window's iterates and one before them), so a solve that
 converges in fewer iterations is the same with or without it, bit for bit.
+
+The report of a failure names the violated rows by the labels they were added under
+(:class:`LabelledConstraints`, the running step's transcription adds every constraint
+through it).
 """
 from __future__ import annotations
 
-import ast
-import re
 import time
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -27,8 +28,8 @@ from biped_casadi.numerics import ipopt_on_one_thread, iteration_stop
 
 from .running_file import solve_or_last_iterate
 
-__all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "STALL_FACTOR",
-           "FEASIBLE", "STALL_WINDOW"]
+__all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "LabelledConstraints",
+           "STALL_FACTOR", "FEASIBLE", "STALL_WINDOW", "TORQUE_LIMIT"]
 
 #: the default window, iterations (``RunningOptions.stall_window``)
 STALL_WINDOW = 100
@@ -37,6 +38,44 @@ STALL_FACTOR = 0.5
 #: a violation at most this (the constraints' own units) is feasible for the watch and
 #: the report of the violated constraints
 FEASIBLE = 1e-6
+#: the label of the rows |u| <= umax (:func:`torque_at_limit` reads them)
+TORQUE_LIMIT = "torque limit |u| <= umax"
+
+
+class LabelledConstraints:
+    """The constraints of an ``Opti``, each added under the label its failure report shows.
+
+    Parameters
+    ----------
+    opti : casadi.Opti
+        The problem the constraints are added to (``groups`` covers every row of its
+        ``g`` when all of them come through :meth:`add`).
+
+    Attributes
+    ----------
+    groups : list of tuple
+        (label, unit, start, stop) of every :meth:`add`, in order: its rows
+        ``start:stop`` of ``opti.g``.
+    """
+
+    def __init__(self, opti):
+        self.opti, self.groups = opti, []
+
+    def add(self, label, unit, constraint):
+        """``opti.subject_to(constraint)``, its rows of ``opti.g`` kept under ``label``.
+
+        Parameters
+        ----------
+        label : str
+            What the rows are, as a failure shows it (:func:`violated`).
+        unit : str
+            Their unit ('' for none, or mixed).
+        constraint : casadi.MX
+            The constraint, as ``opti.subject_to`` takes it.
+        """
+        start = self.opti.ng
+        self.opti.subject_to(constraint)
+        self.groups.append((label, unit, start, self.opti.ng))
 
 
 def stalled(violations, window, factor=STALL_FACTOR, tol=FEASIBLE) -> bool:
@@ -88,13 +127,13 @@ class _Watch:
         return self.stopped
 
 
-def solve_running(opti, opts, verbose, model):
-    """Solve the running step's ``opti`` with IPOPT under the stall watch.
+def solve_running(con, opts, verbose, model):
+    """Solve the running step's problem with IPOPT under the stall watch.
 
     Parameters
     ----------
-    opti : casadi.Opti
-        The problem, its initial values set.
+    con : LabelledConstraints
+        The problem (``con.opti``, its initial values set) and its labelled rows.
     opts : RunningOptions
         Its options: ``ipopt`` over the defaults (3000 iterations, tol 1e-8, adaptive
         barrier), ``stall_window`` the watch's window (:func:`stalled`; None: no watch).
@@ -114,7 +153,7 @@ def solve_running(opti, opts, verbose, model):
     """
     ipopt = {"print_level": 5 if verbose else 0, "max_iter": 3000, "tol": 1e-8,
              "mu_strategy": "adaptive", "sb": "yes", **opts.ipopt}
-    window = opts.stall_window
+    opti, window = con.opti, opts.stall_window
     watch = None if window is None else _Watch(opti, window)
     extra = {} if watch is None else {"iteration_callback": watch.callback}
     ipopt_on_one_thread()
@@ -128,78 +167,13 @@ def solve_running(opti, opts, verbose, model):
         stats["return_status"] = "Stalled"
         stats["stall_window"] = window
     if not stats["success"]:
-        g, rows = np.array(val(opti.g)).ravel(), _sources(opti)
-        stats["violated"] = violated(opti, g, rows)
+        g = np.array(val(opti.g)).ravel()
+        stats["violated"] = violated(opti, g, con.groups)
         names = model.joint_names
         joints = [names[int(np.argmax(np.abs(np.asarray(model.B)[:, j])))]
                   for j in range(model.nu)]
-        stats["torque_at_limit"] = torque_at_limit(opti, g, rows, joints)
+        stats["torque_at_limit"] = torque_at_limit(opti, g, con.groups, joints)
     return val, stats
-
-
-def _labels():
-    """{line number of gait_opt.running: (function name, stripped source line)}."""
-    src = (Path(__file__).parent / "running.py").read_text()
-    lines = src.splitlines()
-    out = {}
-    for node in ast.walk(ast.parse(src)):
-        if isinstance(node, ast.FunctionDef):
-            for k in range(node.lineno, (node.end_lineno or node.lineno) + 1):
-                out[k] = (node.name, lines[k - 1].strip())    # inner functions come later
-    return out
-
-
-#: what a constraint of gait_opt.running is, from (function, a piece of its source line)
-_NAMES = (("_phase stance", "bounded", "stance duration bounds", "s"),
-          ("_phase stance", "", "collocation defects of stance (the dynamics)", ""),
-          ("_phase flight", "bounded", "flight duration bounds", "s"),
-          ("_phase flight", "", "collocation defects of flight (the dynamics)", ""),
-          ("_torques", "step", "torque rate bound", "N m"),
-          ("_torques", "", "torque limit |u| <= umax", "N m"),
-          ("_posture", "lean", "torso lean bound", "rad"),
-          ("_posture", "", "joint range (knees, hips)", "rad"),
-          ("_stance_constraints", "Fz[:-1]", "normal ground force Fz >= 0 in stance", "N"),
-          ("_stance_constraints", "Fz[-1]", "Fz = 0 at takeoff", "N"),
-          ("_stance_constraints", "mu", "friction cone in stance", "N"),
-          ("_stance_constraints", "zsw", "swing-foot clearance in stance", "m"),
-          ("_cone_at_takeoff", "", "friction cone on the force's rate at takeoff", "N/s"),
-          ("_cone_at_quarter_points", "", "friction cone at the quarter points", "N"),
-          ("_flight_constraints", "z_st[1:]", "stance foot above the ground in flight", "m"),
-          ("_flight_constraints", "z_sw[:-1]", "swing foot above the ground in flight", "m"),
-          ("_flight_constraints", "z_sw[-1]", "touchdown of the swing foot", "m"),
-          ("_flight_constraints", "trailing", "trailing-foot clearance at touchdown", "m"),
-          ("_flight_constraints", "strike", "swing foot's strike speed", "m/s"),
-          ("_edges", "qe0", "takeoff state", ""),
-          ("_edges", "q_plus", "periodicity through the landing", ""),
-          ("_edges", "v_other", "other foot's lift-off speed", "m/s"),
-          ("_edges", "", "landing impulse (upward, in the friction cone)", "N s"),
-          ("optimize_running", "Uf[:, 0]", "torques continuous through takeoff", "N m"),
-          ("optimize_running", "opts.speed", "step length = speed x (stance + flight)", "m"),
-          ("optimize_running", "MIN_STEP", "minimum step length", "m"))
-
-
-def _name(fn, line):
-    """(label, unit) of a constraint added by ``fn`` of gait_opt.running at ``line``."""
-    for f, piece, label, unit in _NAMES:
-        if f == fn and piece in line:
-            return label, unit
-    return f"{fn}: {line}", ""
-
-
-def _sources(opti) -> list:
-    """(function, line number, source line) of gait_opt.running that added each row of
-    ``opti.g``; the function '_phase stance' or '_phase flight' for a phase's rows."""
-    labels, out, phases = _labels(), [], iter(("stance", "flight"))
-    phase = "?"
-    for i in range(opti.ng):
-        m = re.search(r"running\.py:(\d+)", opti.debug.g_describe(i))
-        k = int(m.group(1)) if m else -1
-        fn, line = labels.get(k, ("?", "?"))
-        if fn == "_phase":              # its duration's bounds first, then its defects
-            phase = next(phases, "?") if "bounded" in line else phase
-            fn = f"_phase {phase}"
-        out.append((fn, k, line))
-    return out
 
 
 def _bounds(opti, g):
@@ -210,7 +184,7 @@ def _bounds(opti, g):
     return lbg, ubg, np.maximum(lbg - g, g - ubg)
 
 
-def torque_at_limit(opti, g, rows, joints, rel=1e-3) -> list:
+def torque_at_limit(opti, g, groups, joints, rel=1e-3) -> list:
     """The torques at (or beyond) their limit, joint by joint.
 
     Parameters
@@ -219,8 +193,9 @@ def torque_at_limit(opti, g, rows, joints, rel=1e-3) -> list:
         The running step's problem.
     g : array_like
         Its constraint values at an iterate.
-    rows : list
-        :func:`_sources` of ``opti``.
+    groups : list
+        ``LabelledConstraints.groups`` of ``opti``: the groups labelled
+        :data:`TORQUE_LIMIT` are read, each one's rows the torques point after point.
     joints : sequence of str
         The joint of every torque.
     rel : float
@@ -232,23 +207,21 @@ def torque_at_limit(opti, g, rows, joints, rel=1e-3) -> list:
         ``joint``, ``count`` (points at the limit, both phases, the quarter points
         counted), ``limit`` (N m), most points first; joints with none left out.
     """
-    lbg, ubg, _ = _bounds(opti, g)
-    counts, start, prev, limit = {}, 0, None, None
-    for i, (fn, k, line) in enumerate(rows):
-        if fn != "_torques" or "umax" not in line:
-            prev = None
+    ubg = _bounds(opti, g)[1]
+    counts, limit = {}, None
+    for label, _, start, stop in groups:
+        if label != TORQUE_LIMIT:
             continue
-        if k != prev:
-            start, prev = i, k
-        limit = float(ubg[i])
-        if abs(float(g[i])) >= (1 - rel) * limit:
-            j = joints[(i - start) % len(joints)]
-            counts[j] = counts.get(j, 0) + 1
+        for i in range(start, stop):
+            limit = float(ubg[i])
+            if abs(float(g[i])) >= (1 - rel) * limit:
+                j = joints[(i - start) % len(joints)]
+                counts[j] = counts.get(j, 0) + 1
     out = [dict(joint=j, count=c, limit=limit) for j, c in counts.items()]
     return sorted(out, key=lambda d: -d["count"])
 
 
-def violated(opti, g, rows, tol=FEASIBLE, most=3) -> list:
+def violated(opti, g, groups, tol=FEASIBLE, most=3) -> list:
     """The constraint groups of the running step that ``g`` violates most.
 
     Parameters
@@ -257,8 +230,8 @@ def violated(opti, g, rows, tol=FEASIBLE, most=3) -> list:
         The running step's problem (:func:`gait_opt.running.optimize_running`).
     g : array_like
         Its constraint values (``opti.g``) at an iterate.
-    rows : list
-        :func:`_sources` of ``opti``.
+    groups : list
+        ``LabelledConstraints.groups`` of ``opti``: (label, unit, start, stop).
     tol : float
         Violations at most this are not counted.
     most : int or None
@@ -270,12 +243,12 @@ def violated(opti, g, rows, tol=FEASIBLE, most=3) -> list:
         ``name``, ``unit``, ``violation`` (the largest), ``count`` (entries violated),
         largest violation first.
     """
-    v, groups = _bounds(opti, g)[2], {}
-    for i in np.flatnonzero(v > tol):
-        fn, _, line = rows[int(i)]
-        key = _name(fn, line)
-        worst, count = groups.get(key, (0.0, 0))
-        groups[key] = (max(worst, float(v[i])), count + 1)
+    v, named = _bounds(opti, g)[2], {}
+    for label, unit, start, stop in groups:
+        bad = v[start:stop][v[start:stop] > tol]
+        if bad.size:
+            worst, count = named.get((label, unit), (0.0, 0))
+            named[label, unit] = (max(worst, float(np.max(bad))), count + bad.size)
     out = [dict(name=k[0], unit=k[1], violation=w, count=c)
-           for k, (w, c) in groups.items()]
+           for k, (w, c) in named.items()]
     return sorted(out, key=lambda d: -d["violation"])[:most]
