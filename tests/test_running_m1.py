@@ -130,9 +130,13 @@ def test_command_line_choose_m1(m1_gait_file, m1_cycle, capsys):
     assert s["simulation"]["status"] == "ok" and len(s["simulation"]["contraction"]) == 3
     from analysis.cli.running import _print_stability
     _print_stability(s)
-    out = capsys.readouterr().out
-    assert "chosen               M1 " + " ".join(f"{v:.5g}" for v in ch["M1"]) in out
-    assert f"spectral radius {ch['spectral_radius']:.4f}" in out
+    line = next(ln for ln in capsys.readouterr().out.splitlines()
+                if ln.startswith("  chosen               M1 "))
+    printed, radius = line.split("M1 ", 1)[1].split(", spectral radius ")
+    M1 = [float(v) for v in printed.split()]
+    assert M1 == ch["M1"]                               # the printed M1 is the one analysed
+    again = running_stability(m1_cycle.retuned(M1=M1)).spectral_radius
+    assert f"{again:.4f}" == radius == f"{ch['spectral_radius']:.4f}"
 
 
 @pytest.mark.parametrize("args, words", [
