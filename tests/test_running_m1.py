@@ -130,9 +130,21 @@ def test_command_line_choose_m1(m1_gait_file, m1_cycle, capsys):
     assert s["simulation"]["status"] == "ok" and len(s["simulation"]["contraction"]) == 3
     from analysis.cli.running import _print_stability
     _print_stability(s)
+    line = next(ln for ln in capsys.readouterr().out.splitlines()
+                if ln.startswith("  chosen               M1 "))
+    printed, radius = line.split("M1 ", 1)[1].split(", spectral radius ")
+    M1 = [float(v) for v in printed.split()]
+    assert M1 == ch["M1"]                               # the printed M1 is the one analysed
+    again = running_stability(m1_cycle.retuned(M1=M1)).spectral_radius
+    assert f"{again:.4f}" == radius == f"{ch['spectral_radius']:.4f}"
+    # every digit, also where 5 significant digits would round (the radius at a chosen
+    # M1 of 150 evaluations moves in the 4th decimal with them)
+    fine = [v + np.pi * 1e-7 for v in ch["M1"]]
+    _print_stability(dict(s, M1=fine, choice=dict(ch, M1=fine)))
     out = capsys.readouterr().out
-    assert "chosen               M1 " + " ".join(f"{v:.5g}" for v in ch["M1"]) in out
-    assert f"spectral radius {ch['spectral_radius']:.4f}" in out
+    for head in ("  chosen               M1 ", "closed loop (pd, Kp 400, Kd 30, M1 "):
+        line = next(ln for ln in out.splitlines() if ln.startswith(head))
+        assert [float(v) for v in line[len(head):].split(",")[0].split(")")[0].split()] == fine
 
 
 @pytest.mark.parametrize("args, words", [

@@ -462,6 +462,14 @@ def closed_loop(model, gait, args) -> dict:
     return out
 
 
+def _exact(values) -> str:
+    """Numbers as they round-trip (Python's shortest repr, "0.95", "0" for 0.0): a gain
+    printed so is the gain analysed, and gives back the printed radius when passed to
+    ``--m1`` (the spectral radius at a chosen M1 is not smooth: three decimals of the
+    M1 can move it in the second)."""
+    return " ".join(repr(float(v)).removesuffix(".0") for v in values)
+
+
 def _print_stability(s: dict):
     """The closed loop's report."""
     ch = s.get("choice")
@@ -469,19 +477,19 @@ def _print_stability(s: dict):
         print(f"choice of M1 ({ch['method']}, {ch['n_evaluations']} evaluations, "
               f"{ch['n_infeasible']} infeasible, {ch['seconds']:.1f} s): {ch['status']}")
         rad0 = ch["start_radius"]
-        print("  start                M1 " + " ".join(f"{v:g}" for v in ch["start_M1"])
+        print("  start                M1 " + _exact(ch["start_M1"])
               + (f", spectral radius {rad0:.4f}" if rad0 is not None
                  else f" ({ch['start_status']})"))
-        print("  chosen               M1 " + " ".join(f"{v:.5g}" for v in ch["M1"])
-              + (f", Kp {ch['Kp']:.5g}, Kd {ch['Kd']:.5g}"
+        print("  chosen               M1 " + _exact(ch["M1"])
+              + (f", Kp {_exact([ch['Kp']])}, Kd {_exact([ch['Kd']])}"
                  if ch["tune_gains"] else "")
               + f", spectral radius {ch['spectral_radius']:.4f}")
     def gain(v):
-        return f"{v:g}" if isinstance(v, float) else " ".join(f"{x:g}" for x in v)
+        return _exact([v] if isinstance(v, float) else v)
     clock = "" if s.get("flight_clock", "takeoff") == "takeoff" else \
         f", flight clock {s['flight_clock']}"
     print(f"closed loop ({s['law']}, Kp {gain(s['Kp'])}, Kd {gain(s['Kd'])}, M1 "
-          f"{' '.join(f'{v:.5g}' for v in s['M1'])}{clock}): {s['status']}")
+          f"{_exact(s['M1'])}{clock}): {s['status']}")
     if s["status"] == "failed":
         print(f"  {s['message']}")
         return
