@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
+import math
 import re
 
 import numpy as np
@@ -593,3 +594,19 @@ def test_saturate_closes_the_loop_of_an_optimised_step(run_gait, tmp_path, monke
     o = capsys.readouterr()
     assert calls == [True] and json.loads(o.out)["stability"]["message"] == "recorded"
     assert o.err.strip() == "biped running: the closed loop failed: recorded"
+
+
+def test_a_robot_without_a_torque_limit_runs_the_closed_loop(model, run_gait, cycle, stable):
+    """No limit (a URDF without <limit effort>): no torque constraint, nothing saturated,
+    the same stride map; a clip then needs a limit of its own."""
+    import warnings
+    free = RunningController(model, run_gait, KP, KD, M1=STABLE_M1, torque_limit=math.inf)
+    c = running_cycle(free)
+    x = stable.fixed_point
+    np.testing.assert_allclose(c.linearise(x).A, cycle.linearise(x).A, rtol=0, atol=1e-12)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                  # (inf - inf made a NaN warning)
+        run = simulate_running(c, x, x, 2)
+    assert run.status == "ok" and all(s.saturated_time == 0.0 for s in run.strides)
+    with pytest.raises(ValueError, match="torque_limit must be a positive number, got inf"):
+        RunningController(model, run_gait, KP, KD, saturate=True, torque_limit=math.inf)

@@ -66,10 +66,11 @@ MAX_STEPS_PER_INTERVAL = 1000
 
 
 def _phase_constraints(c: RunningController, u, extra, names):
-    """The torque limit (without saturation) after the phase's own constraints."""
-    if c.saturate:
-        return extra, names
+    """The torque limit (without saturation; a robot without one has none) after the
+    phase's own constraints."""
     lim = c.torque_limit
+    if c.saturate or not np.isfinite(lim):
+        return extra, names
     cons = ca.vertcat(extra, lim - u, lim + u)
     nu = c.model.nu
     return cons, names + tuple(f"torque u{i + 1} <= {lim:g} N m" for i in range(nu)) \
@@ -540,7 +541,8 @@ def _margins(cycle: HybridCycle, passes) -> dict:
                 friction_excess_max=float(np.max(np.abs(Fx) - cycle.mu * Fz)),
                 torque_max=float(max(np.abs(us).max(), np.abs(uf).max())),
                 saturated_time=sum(_time_above(tt, np.abs(uu).max(axis=0) - c.torque_limit)
-                                   for tt, uu in ((ts, us), (tf, uf))),
+                                   for tt, uu in ((ts, us), (tf, uf)))
+                if np.isfinite(c.torque_limit) else 0.0,               # no limit: never
                 swing_min=_lowest(zsw, st, "swing foot height"),
                 other_foot_min=_lowest(feet[1, 0::2], fli, "other foot height"),
                 landing_impulse_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else float("inf"))

@@ -288,7 +288,8 @@ class RunningController:
     saturate : bool
         Clip the torques at ``torque_limit``.
     torque_limit : float, optional
-        N m; default the model's.
+        N m; default the model's (inf for a robot without one: nothing to clip, and
+        ``saturate`` then needs a finite ``torque_limit``).
 
     Attributes
     ----------
@@ -321,8 +322,11 @@ class RunningController:
         self.model, self.gait, self.law = model, gait, law
         lim = float(_number_array("torque_limit", model.description.torque_limit
                                   if torque_limit is None else torque_limit))
-        if not (math.isfinite(lim) and lim > 0):
-            raise ValueError(f"torque_limit must be a positive number, got {torque_limit!r}")
+        if not lim > 0 or (saturate and not math.isfinite(lim)):   # inf: a robot without one
+            raise ValueError(
+                f"torque_limit must be a positive number, got {torque_limit!r}"
+                if torque_limit is not None or not lim > 0 else
+                "saturate needs a torque limit: the robot has none (pass torque_limit)")
         self.torque_limit, self.saturate = lim, bool(saturate)
         fl = flight_model(model)
         self.fl = fl
