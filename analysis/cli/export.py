@@ -16,8 +16,9 @@ from gait_opt.cache import cache_path
 from analysis.verify_export import SIMULATION_TOL, TORQUE_RTOL, apart_reason, verify_export
 
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
-                     check_m1_values, check_saturation, check_torque_limit, gait_friction, load_gait, MU_HELP, output_dir, parse_m1,
-                     positive, print_json, rejoin_fraction)
+                     check_m1_values, check_saturation, check_torque_limit, gait_friction,
+                     load_gait, MU_HELP, output_dir, parse_m1, positive, print_json,
+                     rejoin_fraction)
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
 #: random states the check compares by default

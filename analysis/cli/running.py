@@ -103,13 +103,17 @@ def running_controller(args, gait, model) -> RunningController:
     Raises
     ------
     UserError
-        An ``--m1`` of another length, or ``--saturate`` with no limit to clip at.
+        An ``--m1`` of another length, or no limit (a robot without one, and no
+        ``--torque-limit``).
     """
     M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
     if len(M1) != model.nu:
         raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
                         f"got {len(M1)}")
     check_saturation(args, model)
+    if args.torque_limit is None and not math.isfinite(model.description.torque_limit):
+        raise UserError(f"the robot {model.params.name} has no torque limit, which the "
+                        "closed loop needs: give --saturate --torque-limit U")
     return RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law,
                              saturate=args.saturate, torque_limit=args.torque_limit)
 
