@@ -639,8 +639,9 @@ def test_a_robot_without_a_limit_needs_one_to_clip_at(model, run_gait):
     import argparse
     from analysis.cli.common import UserError
     from analysis.cli.running import running_controller
-    free = copy.copy(model)
-    free.description = dataclasses.replace(model.description, torque_limit=float("inf"))
+    from biped_casadi import robot
+    free = robot(dataclasses.replace(model.description, torque_limit=float("inf")))
+    assert free is not model and model.description.torque_limit == 150.0
 
     def built(saturate, limit):
         return running_controller(argparse.Namespace(m1=None, kp=KP, kd=KD, law="pd",
