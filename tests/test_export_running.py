@@ -257,3 +257,44 @@ def test_cli_saturate_reaches_the_export_and_the_verification(model, running_gai
         capsys, *M, "--compiled", tmp_path / "export1")
     rc, o = run(capsys, *M, "--saturate", "--json")
     assert rc == 0 and json.loads(o.out)["controller"]["saturate"] is True, o.err
+
+
+@needs_cc
+def test_cli_saturate_at_a_torque_limit(model, running_gait, tmp_path, capsys):
+    """``--saturate --torque-limit U``: the C code clips at U (compiled and called here),
+    --verify compares it with the Python law clipped alike and runs MuJoCo with motors of
+    U; ``mujoco-running --saturate --torque-limit U`` runs that export and the Python law
+    to the same strides, every peak at most U; --torque-limit alone is refused."""
+    U = 80.0                 # below the 1.5 m/s orbit's peak (106 N m): its torques clip
+    g = running_gait.save(tmp_path / "running.json")
+    out = tmp_path / "export"
+    rc, o = run(capsys, "export-running", "--gait", g, "--out", out, "--saturate",
+                "--torque-limit", U, "--verify", "--states", 200, "--strides", 2, "--json")
+    d = json.loads(o.out)
+    assert rc == 0 and d["status"] == "verified", o.err
+    assert d["clipped_at"] == U and d["controller"]["torque_limit"] == U
+    assert d["verification"]["mujoco"]["identical_strides"] == 2
+    ctrl = RunningController(model, running_gait, 400.0, 30.0, M1=STABLE_M1, saturate=True,
+                             torque_limit=U)
+    lib = CompiledRunningLaw.build(out, ctrl, tmp_path / "lib.so")
+    X = running_gait.x_stance
+    rc, u = lib.torque(0, 0.1, X[:5, 3] + 0.3, X[5:, 3] + 3.0)
+    assert rc == 0 and np.max(np.abs(u)) == U
+    assert f"clipped at +-{U} N m" in (out / RUNNING_HEADER).read_text()
+    M = ["mujoco-running", "--gait", g, "--strides", 2, "--saturate", "--torque-limit", U]
+    runs = []
+    for extra in (["--json"], ["--json", "--compiled", out]):
+        rc, o = run(capsys, *M, *extra)
+        runs.append(json.loads(o.out))
+        assert runs[-1]["clipped_at"] == U and runs[-1]["torque_limit"] == U
+    assert runs[0]["strides"] == runs[1]["strides"] and runs[0]["status"] == "ran"
+    assert max(s["peak_torque"] for s in runs[0]["strides"]) == pytest.approx(U, rel=1e-12)
+    rc, o = run(capsys, *M)
+    assert f"torques clipped at {U:g} N m" in o.out.splitlines()[0]
+    assert "the export's torque_limit is 80.0, this run's 150.0" in _bad(
+        capsys, *M[:-2], "--compiled", out)
+    for extra in (["export-running", "--out", tmp_path / "o"], ["mujoco-running"]):
+        err = _bad(capsys, *extra, "--gait", g, "--torque-limit", U)
+        assert "--torque-limit is the limit --saturate clips at (add --saturate)" in err
+    assert "--torque-limit must be a positive number" in _bad(
+        capsys, *M[:-1], "nan")

@@ -362,7 +362,8 @@ def test_a_foot_back_below_the_ground_names_the_flight_clock(capsys):
     (["--kp", "-5"], "--kp"), (["--kd", "nan"], "--kd"), (["--m1", "1", "2"], "--m1"),
     (["--steps", "-1"], "--steps"), (["--perturb", "inf"], "--perturb"),
     (["--m1", "0", "inf", "0", "0"], "--m1"), (["--speed", "2"], "--speed"),
-    (["--plot", "figs"], "--plot")])
+    (["--plot", "figs"], "--plot"), (["--torque-limit", "100"], "add --saturate"),
+    (["--saturate", "--torque-limit", "0"], "--torque-limit must be a positive number")])
 def test_command_line_refuses_bad_gains(gait_file, capsys, args, words):
     from analysis.cli import main
     assert main(["running", "--gait", gait_file, *args]) == 2
@@ -553,11 +554,14 @@ def test_command_line_saturates(gait_file, saturated, cycle, monkeypatch, capsys
     asked = []
 
     def build(c, **options):
-        asked.append(c.saturate)
+        asked.append((c.saturate, c.torque_limit))
         return saturated[0] if c.saturate else cycle
     monkeypatch.setattr(cli, "running_cycle", build)
-    assert main(["running", "--gait", gait_file, "--steps", "3", "--saturate", "--json"]) == 0
-    sim = json.loads(capsys.readouterr().out)["stability"]["simulation"]
+    assert main(["running", "--gait", gait_file, "--steps", "3", "--saturate",
+                 "--torque-limit", str(SAT_LIMIT), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)["stability"]
+    sim = s["simulation"]
+    assert s["clipped_at"] == SAT_LIMIT
     cyc, r = saturated
     x = r.fixed_point.copy()
     x[cyc.controller.model.nq:] += 1e-2
@@ -567,14 +571,19 @@ def test_command_line_saturates(gait_file, saturated, cycle, monkeypatch, capsys
     assert min(sim["saturated_time"]) > 0
     assert sim["margins"]["saturated_time"] == pytest.approx(sum(sim["saturated_time"]))
     cli._print_stability({"law": "pd", "Kp": KP, "Kd": KD, "M1": list(STABLE_M1),
+                          "clipped_at": s["clipped_at"],
                           "status": "stable", "stable": True, "fixed_point_residual": 0.0,
                           "fixed_point_distance": 0.0, "spectral_radius": 0.5,
                           "eigenvalue_moduli": [0.5], "simulation": sim})
     out = capsys.readouterr().out
     assert "clipped at 100 N m in 3 of 3 strides" in out and "|u| asked <=" in out
+    assert "M1 0 0.95 0.95 0, torques clipped at 100 N m): stable" in out
     assert main(["running", "--gait", gait_file, "--steps", "1", "--json"]) == 0
-    sim = json.loads(capsys.readouterr().out)["stability"]["simulation"]
-    assert asked == [True, False] and not sim["saturate"] and sim["saturated_time"] == [0.0]
+    s = json.loads(capsys.readouterr().out)["stability"]
+    sim = s["simulation"]
+    robot = float(cycle.controller.torque_limit)
+    assert asked == [(True, SAT_LIMIT), (False, robot)] and s["clipped_at"] is None
+    assert not sim["saturate"] and sim["saturated_time"] == [0.0]
 
 
 def test_saturate_closes_the_loop_of_an_optimised_step(run_gait, tmp_path, monkeypatch,
@@ -610,3 +619,57 @@ def test_a_robot_without_a_torque_limit_runs_the_closed_loop(model, run_gait, cy
     assert run.status == "ok" and all(s.saturated_time == 0.0 for s in run.strides)
     with pytest.raises(ValueError, match="torque_limit must be a positive number, got inf"):
         RunningController(model, run_gait, KP, KD, saturate=True, torque_limit=math.inf)
+
+
+def test_an_optimised_steps_torque_limit_is_its_closed_loops(run_gait, tmp_path,
+                                                              monkeypatch, capsys):
+    """``biped running --torque-limit U --saturate`` (no --gait): U bounds the optimised
+    step and is the limit its closed loop clips at (without --saturate, the limit its
+    runs stop beyond); the solve and the loop are replaced by the session's step and a
+    record of the controller built."""
+    import analysis.cli.running as cli
+    from analysis.cli import main
+    bounds, limits = [], []
+
+    def solve(model, opts, **kw):
+        bounds.append(opts.torque_limit)
+        return run_gait
+
+    def loop(model, gait, args):
+        c = cli.running_controller(args, gait, model)
+        limits.append((c.saturate, c.torque_limit))
+        return {"law": "pd", "Kp": KP, "Kd": KD, "M1": list(STABLE_M1), "status": "failed",
+                "message": "recorded"}
+    monkeypatch.setattr(cli, "optimize_running", solve)
+    monkeypatch.setattr(cli, "closed_loop", loop)
+    out = str(tmp_path / "run.json")
+    for extra in (["--saturate"], ["--stability"]):
+        assert main(["running", "--torque-limit", "120", *extra, "--out", out, "--json"]) == 1
+        capsys.readouterr()
+    assert bounds == [120.0, 120.0] and limits == [(True, 120.0), (False, 120.0)]
+
+
+def test_a_robot_without_a_limit_needs_one_to_clip_at(model, run_gait):
+    """The closed loop of a robot without a torque limit (a URDF without effort limits):
+    --saturate asks for --torque-limit in the words of 'biped export --saturate'; without
+    --saturate the loop has no limit, but MuJoCo's motors need one; one line each."""
+    import argparse
+    from analysis.cli.common import UserError
+    from analysis.cli.running import running_controller
+    from biped_casadi import robot
+    free = robot(dataclasses.replace(model.description, torque_limit=float("inf")))
+    assert free is not model and model.description.torque_limit == 150.0
+
+    def built(saturate, limit, engine=""):
+        return running_controller(argparse.Namespace(m1=None, kp=KP, kd=KD, law="pd",
+                                                     saturate=saturate, torque_limit=limit),
+                                  run_gait, free, engine)
+    with pytest.raises(UserError, match="^--saturate: the robot RABBIT has no torque limit "
+                                        "to clip at: give --torque-limit U$"):
+        built(True, None)
+    assert built(False, None).torque_limit == math.inf
+    with pytest.raises(UserError, match="no torque limit, which MuJoCo's motors need: "
+                                        "give --saturate --torque-limit U$"):
+        built(False, None, "MuJoCo")
+    c = built(True, 90.0)
+    assert c.saturate and c.torque_limit == 90.0

@@ -306,6 +306,41 @@ def positive(value, name):
     return value
 
 
+def check_torque_limit(args, clip_only: bool = False):
+    """``--torque-limit``: a positive number; where it is only the limit ``--saturate``
+    clips at (``clip_only``), ``--saturate`` too (UserError, one line).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``torque_limit`` and ``saturate``.
+    clip_only : bool
+        The command gives ``--torque-limit`` no other meaning.
+    """
+    if args.torque_limit is None:
+        return
+    positive(args.torque_limit, "--torque-limit")
+    if clip_only and not args.saturate:
+        raise UserError("--torque-limit is the limit --saturate clips at (add --saturate)")
+
+
+def check_saturation(args, model):
+    """``--saturate`` needs a limit to clip at: the robot's, or ``--torque-limit``
+    (UserError, one line, naming the robot).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``torque_limit`` and ``saturate``.
+    model : BipedModel
+        The robot.
+    """
+    if args.saturate and args.torque_limit is None \
+            and not math.isfinite(model.description.torque_limit):
+        raise UserError(f"--saturate: the robot {model.params.name} has no torque limit to "
+                        "clip at: give --torque-limit U")
+
+
 #: --help of --mu in the commands that judge a gait: its default
 MU_HELP = (f"default: the one the gait was optimised for, its 'biped gait --mu'; "
            f"{DEFAULT_MU:g} for a gait that records none")

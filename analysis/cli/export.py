@@ -3,7 +3,6 @@ example), optionally compiled and compared with the Python law (``--verify``).""
 from __future__ import annotations
 
 import hashlib
-import math
 import os
 import platform
 import tempfile
@@ -17,8 +16,9 @@ from gait_opt.cache import cache_path
 from analysis.verify_export import SIMULATION_TOL, TORQUE_RTOL, apart_reason, verify_export
 
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
-                     check_m1_values, gait_friction, load_gait, MU_HELP, output_dir, parse_m1,
-                     positive, print_json, rejoin_fraction)
+                     check_m1_values, check_saturation, check_torque_limit, gait_friction,
+                     load_gait, MU_HELP, output_dir, parse_m1, positive, print_json,
+                     rejoin_fraction)
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
 #: random states the check compares by default
@@ -52,8 +52,7 @@ def _check_arguments(args):
         raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
     if args.mu is not None:
         positive(args.mu, "--mu")
-    if args.torque_limit is not None:
-        positive(args.torque_limit, "--torque-limit")
+    check_torque_limit(args)
     if args.motor_side and args.angles != "urdf":
         raise UserError("--motor-side divides the URDF joints' torques by their reductions: "
                         "it needs --angles urdf")
@@ -136,14 +135,6 @@ def _machine() -> str:
     return cpu
 
 
-def _check_saturation(args, model):
-    """``--saturate`` needs a limit to clip at: the robot's, or ``--torque-limit``."""
-    if args.saturate and args.torque_limit is None \
-            and not math.isfinite(model.description.torque_limit):
-        raise UserError(f"--saturate: the robot {model.params.name} has no torque limit to "
-                        "clip at: give --torque-limit U")
-
-
 def cmd_export(args):
     # ---- arguments (the output folder and the compiler before any work)
     cc = _check_arguments(args)
@@ -154,7 +145,7 @@ def cmd_export(args):
                         f"map (give --robot FILE.urdf, a description written by 'biped robot "
                         f"import', or a gait made for one); nothing written")
     _perturbation(args, gait.model.nq)       # its shape, also when only --verify uses it
-    _check_saturation(args, gait.model)
+    check_saturation(args, gait.model)
     ctrl = _controller(args, gait)
     try:
         law = exported_law(ctrl, angles=args.angles, motor_side=args.motor_side,

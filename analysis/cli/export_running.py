@@ -10,13 +10,13 @@ from biped_casadi.control.compiled import CompilerError
 from biped_casadi.control.export_folder import staged_export
 from biped_casadi.control.export_running import (RUNNING_HEADER, RUNNING_LIBRARY,
                                                  exported_running_law, running_c_sources)
-from biped_casadi.control.running import RunningController
 from analysis.verify_running_export import STRIDE_TOL, verify_running_export
 from analysis.verify_export import TORQUE_RTOL
 
-from .common import Progress, UserError, add_robot, load_running_gait, print_json
+from .common import (Progress, UserError, add_robot, check_torque_limit, load_running_gait,
+                     print_json)
 from .export import check_target, keep_verified
-from .running import DEFAULT_M1, add_tracking_arguments, check_tracking_arguments
+from .running import add_tracking_arguments, check_tracking_arguments, running_controller
 
 #: random states per phase --verify compares by default
 STATES = 10_000
@@ -30,6 +30,7 @@ def _check(args):
     """Everything that can be checked before the gait is loaded; the C compiler of
     --verify (None without)."""
     check_tracking_arguments(args)
+    check_torque_limit(args, clip_only=True)
     if not str(args.gait).strip():
         raise UserError("--gait: empty name")
     if not 0 <= args.strides <= 5000:
@@ -37,22 +38,11 @@ def _check(args):
     return check_target(args)
 
 
-def running_controller(args, gait, model) -> RunningController:
-    """The controller of the tracking arguments (``--kp``, ``--kd``, ``--m1``, ``--law``)
-    and ``--saturate``."""
-    M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
-    if len(M1) != model.nu:
-        raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
-                        f"got {len(M1)}")
-    return RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law,
-                             saturate=args.saturate)
-
-
 def cmd_export_running(args):
     cc = _check(args)
     say = Progress("export-running", quiet=args.json)
     gait, model = load_running_gait(args)
-    ctrl = running_controller(args, gait, model)
+    ctrl = running_controller(args, gait, model, engine="MuJoCo" if args.verify else "")
     data = Path(args.gait).read_bytes()
     provenance = {"gait file": str(args.gait),
                   "gait file sha256": hashlib.sha256(data).hexdigest(),
@@ -63,7 +53,8 @@ def cmd_export_running(args):
     result = dict(status="written", out=str(args.out), files=sorted(files) + [GAIT_COPY],
                   controller=law.controller, robot=law.robot, gait_file=str(args.gait),
                   gait_sha256=provenance["gait file sha256"], gait_digest=law.gait_digest,
-                  nq=law.nq, nu=law.nu, nqe=law.nqe)
+                  nq=law.nq, nu=law.nu, nqe=law.nqe, saturate=ctrl.saturate,
+                  clipped_at=ctrl.torque_limit if ctrl.saturate else None)
     with staged_export(files, args.out, {GAIT_COPY: data}) as stage:
         if cc is not None:
             say(f"compiling with {' '.join(cc)} and comparing with the Python law "
@@ -137,9 +128,13 @@ def register(sub):
     add_robot(p)
     add_tracking_arguments(p)
     p.add_argument("--saturate", action="store_true",
-                   help="clip the law's torques at the robot's limit, as 'biped running "
-                        "--saturate' does (the clipping is part of the C code; --verify "
-                        "compares it with the Python law clipped the same way)")
+                   help="clip the law's torques at the robot's limit (or --torque-limit), as "
+                        "'biped running --saturate' does (the clipping is part of the C "
+                        "code; --verify compares it with the Python law clipped the same "
+                        "way and runs MuJoCo with motors of that limit)")
+    p.add_argument("--torque-limit", type=float, metavar="U",
+                   help="with --saturate: the limit the law clips at, N m (default the "
+                        "robot's)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="the folder to write (new, empty, or an earlier export, replaced)")
     p.add_argument("--verify", action="store_true",

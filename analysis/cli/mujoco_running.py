@@ -11,18 +11,20 @@ import numpy as np
 from biped_casadi.control.compiled import CompilerError
 from biped_casadi.control.compiled_running import CompiledRunningLaw
 from biped_casadi.control.export_running import RUNNING_LIBRARY
-from biped_casadi.control.running import FLIGHT_CLOCKS, RunningController
+from biped_casadi.control.running import FLIGHT_CLOCKS
 from biped_casadi.mujoco.running import TAKEOFF_CLOCKS, RunningLoop, fit_running_map
 from analysis.stability.running_cycle import running_cycle, running_stability
 
-from .common import Progress, UserError, add_robot, load_running_gait, print_json
+from .common import (Progress, UserError, add_robot, check_torque_limit, load_running_gait,
+                     print_json)
 from .mujoco_options import add_mujoco_settings, gait_settings, mujoco_settings, settings_error
-from .running import (DEFAULT_M1, MAX_STRIDES, add_tracking_arguments,
-                      check_strides_and_perturb, check_tracking_arguments)
+from .running import (MAX_STRIDES, add_tracking_arguments, check_strides_and_perturb,
+                      check_tracking_arguments, running_controller)
 
 
 def _check(args):
     check_tracking_arguments(args)
+    check_torque_limit(args, clip_only=True)
     check_strides_and_perturb(args.strides, args.perturb)
     if args.fit != 0 and not 30 <= args.fit <= MAX_STRIDES:
         raise UserError(f"--fit must be 0 or between 30 and {MAX_STRIDES} strides, got "
@@ -55,12 +57,7 @@ def cmd_mujoco_running(args):
     say = Progress("mujoco-running", quiet=args.json)
     gait, model = load_running_gait(args)
     settings = gait_settings(args, settings, gait)
-    M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
-    if len(M1) != model.nu:
-        raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
-                        f"got {len(M1)}")
-    c = RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law,
-                          saturate=args.saturate)
+    c = running_controller(args, gait, model, engine="MuJoCo")
     compiled = _compiled(args, c)
     exact = None
     x_star = A = None
@@ -91,7 +88,8 @@ def cmd_mujoco_running(args):
     d.update(exact=exact, fit=None if fit is None else fit.to_dict(),
              takeoff_clock=args.takeoff_clock, flight_clock=args.flight_clock,
              fixed_point_kind="exact" if args.exact else "collocated",
-             perturb=args.perturb, file=str(args.gait))
+             perturb=args.perturb, file=str(args.gait),
+             clipped_at=c.torque_limit if c.saturate else None)
     if args.json:
         print_json(d)
     else:
@@ -104,11 +102,15 @@ def _ev(ev) -> str:
                            f"{e.real:.3g}{e.imag:+.3g}j" for e in ev) + "]"
 
 
+def _clip(d) -> str:
+    return "" if d["clipped_at"] is None else f", torques clipped at {d['clipped_at']:g} N m"
+
+
 def _print(r, d, exact, fit):
     s, g = r.settings, r.gait
     print(f"MuJoCo (solref {s['solref'] if s['solref'] is not None else 'default 0.02'} s, dt "
           f"{s['timestep']:g} s, feet {s['foot_radius']:g} m, mu {s['mu']:g}), M1 = "
-          f"{r.controller['M1']}: {r.status} - {r.message}")
+          f"{r.controller['M1']}{_clip(d)}: {r.status} - {r.message}")
     if "compiled" in r.controller:
         print(f"  the law compiled from the export {r.controller['compiled']['export']}")
     print(f"  deviations from the {d['fixed_point_kind']} fixed point (largest entry of the "
@@ -150,10 +152,13 @@ def register(sub):
     add_robot(p)
     add_tracking_arguments(p)
     p.add_argument("--saturate", action="store_true",
-                   help="the law clips its torques at the robot's limit, as 'biped running "
-                        "--saturate' (MuJoCo's motors clip them anyway: the strides' peak "
-                        "torque is then at most the limit); the design of an export made "
-                        "with 'biped export-running --saturate'")
+                   help="the law clips its torques at the robot's limit (or --torque-limit), "
+                        "as 'biped running --saturate' (MuJoCo's motors clip them anyway: "
+                        "the strides' peak torque is then at most the limit); the design of "
+                        "an export made with 'biped export-running --saturate'")
+    p.add_argument("--torque-limit", type=float, metavar="U",
+                   help="with --saturate: the limit the law and MuJoCo's motors clip at, "
+                        "N m (default the robot's)")
     p.add_argument("--strides", type=int, default=30, metavar="N",
                    help=f"strides to run, 1 to {MAX_STRIDES} (30)")
     p.add_argument("--perturb", type=float, default=0.0, metavar="DQ",

@@ -20,8 +20,8 @@ from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
 from gait_opt.running_solve import STALL_WINDOW
 
-from .common import Progress, UserError, add_robot, check_m1_values, load_model, \
-    load_running_gait, output_dir, output_file, print_json
+from .common import Progress, UserError, add_robot, check_m1_values, check_saturation, \
+    check_torque_limit, load_model, load_running_gait, output_dir, output_file, print_json
 from .simulate import MAX_RATE_ERROR
 
 
@@ -83,6 +83,45 @@ def check_tracking_arguments(args):
     check_m1_values(args.m1)
 
 
+def running_controller(args, gait, model, engine: str = "") -> RunningController:
+    """The controller of the tracking arguments (``--kp``, ``--kd``, ``--m1``, ``--law``),
+    ``--saturate`` and ``--torque-limit`` (the limit: default the robot's; none for a
+    robot without one, unless it runs in ``engine``, whose motors need one).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command's arguments.
+    gait : RunningGait
+        The step.
+    model : BipedModel
+        Its robot.
+    engine : str
+        'MuJoCo' when the controller drives MuJoCo's motors ('' otherwise).
+
+    Returns
+    -------
+    RunningController
+
+    Raises
+    ------
+    UserError
+        An ``--m1`` of another length, or, for ``engine``, no limit (a robot without
+        one, and no ``--torque-limit``).
+    """
+    M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
+    if len(M1) != model.nu:
+        raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
+                        f"got {len(M1)}")
+    check_saturation(args, model)
+    if engine and args.torque_limit is None \
+            and not math.isfinite(model.description.torque_limit):
+        raise UserError(f"the robot {model.params.name} has no torque limit, which "
+                        f"{engine}'s motors need: give --saturate --torque-limit U")
+    return RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law,
+                             saturate=args.saturate, torque_limit=args.torque_limit)
+
+
 def check_strides_and_perturb(strides, perturb, option: str = "--strides", low: int = 1):
     """UserError for a stride count outside ``low``..:data:`MAX_STRIDES` (``option``), or
     a ``--perturb`` of the velocities that is not finite or beyond +-100 rad/s (as
@@ -115,7 +154,10 @@ def register(sub):
                         f"force, landing impulse), 0 <= M < mu (default {MU_MARGIN:g}: room "
                         "for a perturbed closed loop's landing)")
     p.add_argument("--torque-limit", type=float, default=None, metavar="U",
-                   help="|u| bound in N m (default: the robot's, 150 for RABBIT)")
+                   help="|u| bound in N m (default: the robot's, 150 for RABBIT): the "
+                        "optimised step's and its closed loop's (a run stops beyond it, or "
+                        "with --saturate clips at it); with --gait only the limit --saturate "
+                        "clips at")
     p.add_argument("--intervals", type=int, nargs=2, default=(16, 10),
                    metavar=("STANCE", "FLIGHT"),
                    help="Hermite-Simpson intervals of each phase, 2 to 200 (default 16 10)")
@@ -161,8 +203,9 @@ def _add_closed_loop_arguments(p):
                     help="added to every velocity of the fixed point, rad/s, within +-100 "
                          "(default 0.01)")
     st.add_argument("--saturate", action="store_true",
-                    help="clip the law's torques at the robot's limit (the motors give their "
-                         "maximum) instead of stopping the run where the law asks for more; "
+                    help="clip the law's torques at the robot's limit or --torque-limit "
+                         "(the motors give their maximum) instead of stopping the run where "
+                         "the law asks for more; "
                          "the report gives each stride's time saturated; implies "
                          "--stability")
     st.add_argument("--flight-clock", choices=FLIGHT_CLOCKS, default="takeoff",
@@ -361,9 +404,9 @@ def failure(speed: float, stats: dict) -> str:
 
 def _stability_of_file(args):
     """``--gait FILE``: the closed loop of a saved step."""
+    check_torque_limit(args, clip_only=True)
     given = [opt for opt, dest, default in (
         ("--speed", "speed", 1.5), ("--mu", "mu", 0.6), ("--mu-margin", "mu_margin", MU_MARGIN),
-        ("--torque-limit", "torque_limit", None),
         ("--intervals", "intervals", (16, 10)), ("--max-iter", "max_iter", None),
         ("--out", "out", "running.json"), ("--plot", "plot", None),
         ("--no-cache", "no_cache", False))
@@ -395,12 +438,8 @@ def _stability_of_file(args):
 def closed_loop(model, gait, args) -> dict:
     """The stride map of ``gait`` under the tracking controller of ``args``: fixed point,
     eigenvalues, perturbed run, as a dict (the ``stability`` field of ``--json``)."""
-    M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
-    if len(M1) != model.nu:
-        raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
-                        f"got {len(M1)}")
-    c = RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law,
-                          saturate=args.saturate)
+    c = running_controller(args, gait, model)
+    M1 = tuple(float(v) for v in c.M1)
     cyc = running_cycle(c, flight_clock=args.flight_clock)
     c = cyc.controller
     choice = None
@@ -423,7 +462,7 @@ def closed_loop(model, gait, args) -> dict:
     kp = float(c.Kp[0]) if np.ptp(c.Kp) == 0 else c.Kp.tolist()
     kd = float(c.Kd[0]) if np.ptp(c.Kd) == 0 else c.Kd.tolist()
     out = dict(law=args.law, Kp=kp, Kd=kd, M1=list(M1), flight_clock=args.flight_clock,
-               status=r.status,
+               clipped_at=c.torque_limit if c.saturate else None, status=r.status,
                message=r.message, stable=r.stable,
                fixed_point=r.fixed_point.tolist(), fixed_point_residual=r.residual,
                fixed_point_distance=r.distance, spectral_radius=r.spectral_radius,
@@ -488,6 +527,8 @@ def _print_stability(s: dict):
         return _exact([v] if isinstance(v, float) else v)
     clock = "" if s.get("flight_clock", "takeoff") == "takeoff" else \
         f", flight clock {s['flight_clock']}"
+    if s.get("clipped_at") is not None:
+        clock += f", torques clipped at {s['clipped_at']:g} N m"
     print(f"closed loop ({s['law']}, Kp {gain(s['Kp'])}, Kd {gain(s['Kd'])}, M1 "
           f"{_exact(s['M1'])}{clock}): {s['status']}")
     if s["status"] == "failed":
