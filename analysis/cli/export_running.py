@@ -54,7 +54,7 @@ def cmd_export_running(args):
                   controller=law.controller, robot=law.robot, gait_file=str(args.gait),
                   gait_sha256=provenance["gait file sha256"], gait_digest=law.gait_digest,
                   nq=law.nq, nu=law.nu, nqe=law.nqe, saturate=ctrl.saturate,
-                  clipped_at=ctrl.torque_limit if ctrl.saturate else None)
+                  clipped_at=ctrl.clipped_at)
     with staged_export(files, args.out, {GAIT_COPY: data}) as stage:
         if cc is not None:
             say(f"compiling with {' '.join(cc)} and comparing with the Python law "

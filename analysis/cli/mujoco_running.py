@@ -89,7 +89,7 @@ def cmd_mujoco_running(args):
              takeoff_clock=args.takeoff_clock, flight_clock=args.flight_clock,
              fixed_point_kind="exact" if args.exact else "collocated",
              perturb=args.perturb, file=str(args.gait),
-             clipped_at=c.torque_limit if c.saturate else None)
+             clipped_at=c.clipped_at)
     if args.json:
         print_json(d)
     else:

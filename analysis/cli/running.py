@@ -462,7 +462,7 @@ def closed_loop(model, gait, args) -> dict:
     kp = float(c.Kp[0]) if np.ptp(c.Kp) == 0 else c.Kp.tolist()
     kd = float(c.Kd[0]) if np.ptp(c.Kd) == 0 else c.Kd.tolist()
     out = dict(law=args.law, Kp=kp, Kd=kd, M1=list(M1), flight_clock=args.flight_clock,
-               clipped_at=c.torque_limit if c.saturate else None, status=r.status,
+               clipped_at=c.clipped_at, status=r.status,
                message=r.message, stable=r.stable,
                fixed_point=r.fixed_point.tolist(), fixed_point_residual=r.residual,
                fixed_point_distance=r.distance, spectral_radius=r.spectral_radius,

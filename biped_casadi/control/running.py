@@ -406,6 +406,11 @@ class RunningController:
         return ca.Function(f"{phase}_running_law_k", [q, dq, t, k], [u],
                            ["q", "dq", "t", "k"], ["u"])
 
+    @property
+    def clipped_at(self) -> float | None:
+        """The limit the torques are clipped at, N m (None without ``saturate``)."""
+        return self.torque_limit if self.saturate else None
+
     def applied(self, u):
         """The torques the robot receives: ``u`` clipped at the limit when ``saturate``.
 
