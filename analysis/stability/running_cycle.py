@@ -24,11 +24,13 @@ of a :class:`~biped_casadi.control.running.RunningController`:
 
 The RK4 step of each phase divides the phase's collocation interval into
 ``steps_per_interval`` steps, so that on the reference orbit the kinks of the piecewise
-polynomial reference fall on RK4 nodes.  The feet's heights (the swing foot's in stance,
-the pushing foot's in flight, and the landing guard) are checked between the nodes too,
-on the RK4 step from the node before (:mod:`analysis.stability.hybrid_cycle`): a foot
-that dips below the ground and rises again within one step is a violation (the pushing
-foot) or the landing (the swing foot).
+polynomial reference fall on RK4 nodes.  Every constraint of both phases (the normal
+force, the friction cone, the feet's heights, the torque limit) and both guards are
+checked between the nodes too, on the RK4 step from the node before
+(:mod:`analysis.stability.hybrid_cycle`): a margin that dips below zero and rises again
+within one step is a violation (the cone, the pushing foot, a torque), and a guard that
+does is the phase's end at its first root (the stance force reaching 0: the takeoff;
+the swing foot: the landing).
 
 Friction near takeoff.  Fz and Fx reach zero together only on the optimised orbit;
 off it (and at the closed loop's fixed point, which is not the collocation's) Fx is a
@@ -264,7 +266,7 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     stance = Domain("stance", 2 * nq, f_st, g_st, r_st, h_st, time_limits * float(g.T_stance),
                     start=_start(2 * nq, c.gains), constraints=c_st, constraint_names=names,
                     guard_name="stance normal force", tolerance=tolerance,
-                    dense_constraints=("swing foot height",))
+                    dense_constraints=names, dense_guard=True)
 
     # ---- flight
     Y = ca.SX.sym("Y", 2 * ne)
@@ -292,7 +294,7 @@ def running_cycle(controller: RunningController, mu: float | None = None,
                                            "landing impulse in the cone (-Fx <= mu Fz)",
                                            "other foot's lift-off velocity"),
                     guard_name="swing foot height", tolerance=tolerance,
-                    dense_constraints=("other foot height",), dense_guard=True)
+                    dense_constraints=names, dense_guard=True)
     cyc = RunningCycle([stance, flight])
     cyc.controller, cyc.mu, cyc.friction_slack = c, mu, slack
     cyc.clock_origins, cyc.flight_clock = (None, origin), flight_clock
