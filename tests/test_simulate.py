@@ -224,6 +224,36 @@ def test_status_scuffed_foot_starts_in_ground(gait, vc):
     assert res.status == "scuffed" and res.failure_time == 0.0 and not res.steps
 
 
+def test_a_scuff_between_two_nodes_stops_the_run(gait, vc, monkeypatch):
+    """At the step's start (the swing foot on the ground behind the stance foot) the swing
+    knee turned so that the foot moves down at 2 mm/s: the law lifts it again within
+    the first RK4 step, the foot below the ground between the first two nodes (found
+    here by sampling the step at 64 lengths) and above it at both.  The run stops there,
+    scuffed, at the time the samples say; checked at the nodes only it goes on."""
+    q0, dq0 = perturbed_initial_state(gait, 0.0, 0.0)
+    model = gait.model
+
+    def foot_speed(dq):
+        return float(model.swing_foot_velocity(q0, dq)[1])
+
+    knee = np.eye(model.nq)[-1]                     # z_sw's rate is linear in dq
+    dq = dq0 + (-2e-3 - foot_speed(dq0)) / (foot_speed(dq0 + knee) - foot_speed(dq0)) * knee
+    sim = Simulator(vc, SimulationOptions(steps=1))
+    start = vc.step_start(q0, dq)
+    X = np.r_[q0, dq, start.r]
+    etas = np.linspace(0, sim.h, 65)
+    z = np.array([float(np.ravel(sim.event(X, 0.0, eta, start.p)[0])[0]) for eta in etas])
+    tol = sim.limits.ground_tolerance
+    assert z[0] >= -tol and z[-1] > 0 and z.min() < -10 * tol
+    res = sim.run(q0, dq)
+    assert res.status == "scuffed" and "between two RK4 nodes" in res.message
+    assert abs(res.failure_time - etas[np.argmin(z)]) <= etas[1]
+    assert float(model.swing_foot(res.q[-1])[1]) == pytest.approx(z.min(), rel=1e-2)
+    monkeypatch.setattr(Simulator, "_dip", lambda *args: None)      # the nodes only
+    at_nodes = Simulator(vc, SimulationOptions(steps=1)).run(q0, dq)
+    assert not at_nodes.failure_time <= sim.h
+
+
 def test_status_fell(gait, vc):
     """'fell' when the hip is lower than min_hip_height or the torso leans more than
     max_torso_angle: thresholds beyond the reference's extremes let it walk; a hip
