@@ -25,24 +25,11 @@ the saltation term of each guard.
 
 Between the nodes.  A domain may name outputs that must hold on the continuous solution,
 not only at its nodes: constraints (``dense_constraints``, e.g. a foot's height above the
-ground, a contact force's friction margin) and its guard (``dense_guard``).  Between two
-nodes the solution is the RK4 step of length eta from the first, the one the crossing is
-located on.  A step is screened by the values at the nodes alone: an output c that
-dips inside a step of length h goes below its lower node value by at most max |c''| h^2 / 8;
-c'' h^2 is estimated by the second differences of the nodes around (the step's first
-node's and the one before's, and their linear extrapolation to the step's end), and the
-step is refined where the lower node value less ``SCREEN_SAFETY`` times that bound is below
-the output's bound (0 for a guard, ``-tolerance`` for a constraint), and always in a
-domain's first step.  Refining takes the outputs' rates along the flow at both nodes (by
-AD of the outputs, exact); an output whose rate goes from <= 0 at one node to > 0 at the
-next has a minimum in between (where the rate is 0 at the first node, the step's
-curvature there says whether it goes down first), found by the same safeguarded Newton
-(:func:`~biped_casadi.simulation.kernel.locate_strike`) on its rate in eta.  A constraint
-below ``-tolerance`` there is violated; a guard below 0 there is a crossing, the first root
+ground, a contact force's friction margin) and its guard (``dense_guard``), checked on
+the RK4 step from each node (:mod:`analysis.stability.between_nodes`): a constraint below
+``-tolerance`` there is violated; a guard below 0 there is a crossing, the first root
 before that minimum (a foot that touches the ground and rises again within one step has
-landed).  Every minimum found is recorded (:attr:`DomainPass.dips`); far from their bounds
-the outputs' minima are not searched.  The rates and the derivatives in eta are built the
-first time a step is refined.
+landed).  Every minimum found is recorded (:attr:`DomainPass.dips`).
 
 Domain i's state x has ``n`` numbers (what the resets map); it integrates an augmented
 state X = (x, r) of ``nX`` numbers (r: a controller's internal states, e.g. the
@@ -68,11 +55,7 @@ from biped_casadi.numerics import rk4_step
 from biped_casadi.results import Result
 from biped_casadi.simulation.kernel import locate_strike
 
-#: a step's output checked between the nodes is refined (its rates at both nodes, its
-#: minimum located) where its lower node value less this many times the bound
-#: c'' h^2 / 8 on a dip inside the step (c'' from the second differences of the nodes
-#: around) is below its bound (module docstring)
-SCREEN_SAFETY = 2.0
+from .between_nodes import minima, watch
 
 __all__ = ["Domain", "HybridCycle", "HybridCycleError", "DomainPass", "StrideValue",
            "StrideLinearisation", "entry_function"]
@@ -150,8 +133,8 @@ class Domain:
         How far below zero a constraint may go (round-off), in its own unit.
     dense_constraints : tuple of str
         Names of constraints (of ``constraint_names``) that must also hold between the
-        nodes (module docstring): screened at every step by the nodes' values, their
-        rates taken only where a step may dip below the bound.
+        nodes (:mod:`analysis.stability.between_nodes`): screened at every step by the
+        nodes' values, their rates taken only where a step may dip below the bound.
     dense_guard : bool
         Look for the guard's crossing between the nodes too: a dip below 0 and back within
         one RK4 step ends the domain at its first root.
@@ -419,7 +402,8 @@ class _Compiled:
         self.reset = ca.Function("reset", [x], [xp, ca.jacobian(xp, x), e])
 
     def _watched_outputs(self):
-        """Symbols (Y, s, p) and the watched outputs W(Y, s, p) (module docstring)."""
+        """Symbols (Y, s, p) and the watched outputs W(Y, s, p) (the guard where dense, the
+        dense constraints)."""
         d = self._d
         Y, s, p = ca.SX.sym("Y", d.nX), ca.SX.sym("s"), ca.SX.sym("p", d.n_par)
         out = [d.guard(Y, s, p) if i is None else d.constraints(Y, s, p)[i]
@@ -466,11 +450,6 @@ def _col(v) -> np.ndarray:
     return np.array(v, float).ravel()
 
 
-def _watch(d: Domain, g, c) -> np.ndarray:
-    """The watched outputs' values at a node from its guard g and constraints c."""
-    return np.concatenate(([g], c))[d.watched_index]
-
-
 class HybridCycle:
     """The stride map of a cycle of domains (module docstring).
 
@@ -515,45 +494,6 @@ class HybridCycle:
             raise HybridCycleError(d.name, "constraint",
                                    f"{names[j]} violated at t = {t:.6g} s ({c[j]:.3g} < 0)")
 
-    @staticmethod
-    def _screened(d: Domain, w) -> np.ndarray:
-        """Which watched outputs may go below their bound between the last two of the
-        nodes ``w`` (up to four consecutive nodes' watched values; module docstring)."""
-        if len(w) < 3:                  # the domain's first step: no curvature yet
-            return np.ones(len(d.watched), bool)
-        d1 = w[-1] - 2 * w[-2] + w[-3]           # second differences, c'' h^2
-        curv = np.abs(d1)
-        if len(w) == 4:
-            d0 = w[-2] - 2 * w[-3] + w[-4]
-            curv = np.maximum(np.maximum(curv, np.abs(d0)), np.abs(2 * d1 - d0))
-        return np.minimum(w[-2], w[-1]) - (SCREEN_SAFETY / 8) * curv < d.watched_bounds
-
-    @classmethod
-    def _between(cls, d: Domain, f, X, t, h, p, Xb, w) -> list:
-        """The minima of the watched outputs between the node (X, t) and the next one, Xb
-        h later, the watched values ``w`` at the nodes up to Xb (module docstring): (eta,
-        watched index, value) by eta."""
-        near = cls._screened(d, w)
-        if not near.any():
-            return []
-        ra, rb = _col(f.rate(X, t, p)), _col(f.rate(Xb, t + h, p))
-        found = []
-        for j in np.flatnonzero(near & (ra <= 0) & (rb > 0)):
-            za = -ra[j]
-            if za == 0:            # at rest at the node: a minimum inside if it curves down
-                curv = _col(f.between(X, t, 0.0, p)[2])[j]
-                if not curv < 0:
-                    continue
-                za = -0.5 * curv * h                       # the Newton's first guess only
-
-            def event(eta_, j=j):
-                _, dw, ddw = f.between(X, t, float(eta_[0]), p)
-                return -_col(dw)[j:j + 1], -_col(ddw)[j:j + 1]
-
-            eta = float(locate_strike(event, h, za, -rb[j])[0])
-            found.append((eta, int(j), float(_col(f.between(X, t, eta, p)[0])[j])))
-        return sorted(found)
-
     def _dips(self, d: Domain, t, between, eta_max, dips):
         """Record the minima before ``eta_max`` into ``dips``; a constraint below
         -tolerance there is violated."""
@@ -577,7 +517,7 @@ class HybridCycle:
         self._check(d, c, t, d.constraint_names)
         times, nodes = ([t], [X]) if record else (None, None)
         dips = []
-        w = [_watch(d, g_prev, c)]              # the watched values at the last nodes
+        w = [watch(d, g_prev, c)]               # the watched values at the last nodes
         for _ in range(d.max_steps):
             if J is not None:
                 Xn, Jn, tn, g, a, c = f.step_sens(X, J, t, h, p, Jp)
@@ -587,8 +527,8 @@ class HybridCycle:
             if not np.isfinite(g):
                 raise HybridCycleError(d.name, "not_finite",
                                        f"state not finite at t = {float(tn):.6g} s")
-            w = w[-3:] + [_watch(d, g, c)]
-            between = self._between(d, f, X, t, h, p, Xn, w) if d.watched else []
+            w = w[-3:] + [watch(d, g, c)]
+            between = minima(d, f, X, t, h, p, Xn, w) if d.watched else []
             hi, g_hi = next(((e, v) for e, j, v in between
                              if d.watched[j][1] is None and v < 0), (h, g))
             if g_prev >= 0 > g_hi and a > 0:

@@ -65,7 +65,7 @@ from ..control.saturation import clip_torques
 from ..numerics import FastCall, as_vector, compiled, rk4_step
 from ..results import internal, json_safe
 from .compiled_loop import compiled_closed_loop
-from .kernel import CHUNKS_PER_STEP, Diagnostics, ground_height, locate_strike, strike
+from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, strike, swing_foot_dip
 from .options import SimulationOptions
 from .outcome import STATUSES, OutcomeRecorder, WalkOutcome
 from .perturbation import Perturbation
@@ -577,42 +577,25 @@ class Simulator:
 
 
     def _dip(self, X, tau0, p, Xs, taus, z_prev, dz_a, dz_b, ground, stop):
-        """The swing foot between the nodes of a block (module docstring): the first of
-        its minima before node ``stop`` that is below the ground, (j, kind, z, eta, X):
-        inside the step that ends at node j, 'strike' (it crossed the ground going down
-        beyond the scuff zone: the step ends at the first root) with z_sw at the minimum,
-        or 'scuffed' with the message; eta into that step, X the state there.  None
-        where there is none.  z_prev, dz_a, dz_b: the height and its rate at each step's
-        first node, the rate at its last; the minima are where the rate goes from <= 0
-        to > 0, found by Newton's method on the rate of the last RK4 step
-        (:func:`~biped_casadi.simulation.kernel.locate_strike`)."""
+        """The swing foot between the nodes of a block before node ``stop`` (module
+        docstring; :func:`~biped_casadi.simulation.kernel.swing_foot_dip`): None, or (j,
+        kind, z, eta, X) inside the step that ends at node j: 'strike' with z_sw at the
+        minimum, or 'scuffed' with the message; eta into that step, X the state there.
+        z_prev, dz_a, dz_b: per step, the height and its rate at its first node, the rate
+        at its last."""
         lim = self.limits
-        for j in np.flatnonzero((dz_a[:stop] <= 0) & (dz_b[:stop] > 0)):
-            Xa, ta = (X, tau0) if j == 0 else (Xs[:, j - 1], taus[j - 1])
-            ra = dz_a[j]
-            if ra == 0:            # at rest at the node: a minimum inside if it curves down
-                ra = 0.5 * float(self.dip(Xa, ta, 0.0, p)[2]) * self.h
-                if not ra < 0:
-                    continue
-
-            def rate(eta, Xa=Xa, ta=ta):
-                _, dz, ddz, _, _ = self.dip(Xa, ta, eta[0], p)
-                return -np.ravel(dz), -np.ravel(ddz)
-
-            eta = float(locate_strike(rate, self.h, -ra, -dz_b[j])[0])
-            z, _, _, x, Xe = (np.ravel(v) for v in self.dip(Xa, ta, eta, p))
-            z, x = float(z[0]), float(x[0])
-            g = float(ground_height(x, ground))
-            if not z < g:
-                continue
-            if z_prev[j] >= g and x > self.plant.scuff_zone:
-                return int(j), "strike", z, eta, Xe
-            if not lim.scuffing_ignored and z - g < -lim.ground_tolerance:
-                return int(j), "scuffed", (
-                    f"swing foot below the ground where it cannot strike (behind the stance "
-                    f"foot, or already under the ground): x_sw = {x:.4f} m, z_sw = {z:.3g} m, "
-                    f"between two RK4 nodes"), eta, Xe
-        return None
+        found = swing_foot_dip(
+            lambda Xa, ta, eta: self.dip(Xa, ta, eta, p), self.h,
+            lambda j: (X, tau0) if j == 0 else (Xs[:, j - 1], taus[j - 1]),
+            z_prev[:stop], dz_a[:stop], dz_b[:stop], ground, self.plant.scuff_zone,
+            lim.scuffing_ignored, lim.ground_tolerance)
+        if found is None:
+            return None
+        j, kind, eta, z, x, Xe = found
+        return j, kind, z if kind == "strike" else (
+            f"swing foot below the ground where it cannot strike (behind the stance foot, "
+            f"or already under the ground): x_sw = {x:.4f} m, z_sw = {z:.3g} m, between two "
+            f"RK4 nodes"), eta, Xe
 
 
 class _Log:
