@@ -296,9 +296,8 @@ def swing_foot_dip(dip, h: float, step_start, z_prev, dz_a, dz_b, ground, scuff_
     Parameters
     ----------
     dip : callable
-        ``dip(X, tau, eta, p) -> (z_sw, dz/deta, d2z/deta2, x_sw, X_eta)`` at the end of the
-        last RK4 step of length eta from the node (X, tau) (p bound by the caller: called
-        as ``dip(X, tau, eta)``).
+        ``dip(X, tau, eta) -> (z_sw, dz/deta, d2z/deta2, x_sw, X_eta)`` at the end of the
+        last RK4 step of length eta from the node (X, tau).
     h : float
         The RK4 step, s.
     step_start : callable
