@@ -46,7 +46,6 @@ stride map is :class:`~analysis.stability.step_map.StepMap`'s S.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
 
 import casadi as ca
 import numpy as np
@@ -367,7 +366,7 @@ class _Compiled:
 
         Xn = ca.cse(rk4_step(rhs, X, h))
         rk4 = ca.Function(f"{_ident(d.name)}_rk4", [X, t, h, p], [Xn, t + h])
-        self._d, self._rk4 = d, rk4
+        self._d, self._rk4, self._lazy = d, rk4, {}    # built at first use, shared by copies
 
         def node(Yv, sv):
             a = d.arming(Yv, sv, p) if d.arming is not None else ca.SX(1)
@@ -402,32 +401,37 @@ class _Compiled:
         self.reset = ca.Function("reset", [x], [xp, ca.jacobian(xp, x), e])
 
     def _watched_outputs(self):
-        """Symbols (Y, s, p) and the watched outputs W(Y, s, p) (the guard where dense, the
-        dense constraints)."""
+        """Symbols (Y, s, p) and the watched outputs W(Y, s, p)."""
         d = self._d
         Y, s, p = ca.SX.sym("Y", d.nX), ca.SX.sym("s"), ca.SX.sym("p", d.n_par)
         out = [d.guard(Y, s, p) if i is None else d.constraints(Y, s, p)[i]
                for _, i in d.watched]
         return Y, s, p, ca.Function("watched", [Y, s, p], [ca.vertcat(*out)])
 
-    @cached_property
+    @property
     def rate(self) -> ca.Function:
         """``rate(X, t, p)``: the watched outputs' rates along the flow (built when a step
         is first refined)."""
-        Y, s, p, W = self._watched_outputs()
-        w = W(Y, s, p)
-        return ca.Function("rate", [Y, s, p], [ca.jtimes(w, Y, self._d.vector_field(Y, s, p))
-                                               + ca.jacobian(w, s)])
+        if "rate" not in self._lazy:
+            Y, s, p, W = self._watched_outputs()
+            w = W(Y, s, p)
+            self._lazy["rate"] = ca.Function(
+                "rate", [Y, s, p], [ca.jtimes(w, Y, self._d.vector_field(Y, s, p))
+                                    + ca.jacobian(w, s)])
+        return self._lazy["rate"]
 
-    @cached_property
+    @property
     def between(self) -> ca.Function:
         """``between(X, t, eta, p) -> (W, dW/deta, d2W/deta2)`` on the RK4 step of length
         eta from the node (X, t) (built when a minimum is first located)."""
-        X, t, p, W = self._watched_outputs()
-        eta = ca.SX.sym("eta")
-        We = W(*self._rk4(X, t, eta, p)[:2], p)
-        dW = ca.jacobian(We, eta)
-        return ca.Function("between", [X, t, eta, p], [We, dW, ca.jacobian(dW, eta)])
+        if "between" not in self._lazy:
+            X, t, p, W = self._watched_outputs()
+            eta = ca.SX.sym("eta")
+            We = W(*self._rk4(X, t, eta, p)[:2], p)
+            dW = ca.jacobian(We, eta)
+            self._lazy["between"] = ca.Function("between", [X, t, eta, p],
+                                                [We, dW, ca.jacobian(dW, eta)])
+        return self._lazy["between"]
 
 
 def entry_function(d: Domain) -> ca.Function:
