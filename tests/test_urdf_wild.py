@@ -19,6 +19,8 @@ small file of its own (tests/urdf_variants.py and the packaged rabbit.urdf):
   file) is refused; a massless link without joints beside the tree is ignored;
 - legs that differ: the refusal names the largest difference and a tolerance that takes
   them all at once; camel-case sides name the links; ``<frame>`` elements mark a sole;
+- materials that ``urdf_parser_py`` would refuse (iCub's ``<texture/>`` without a file
+  name), appearance the model does not read, import as the robot without them;
 - a last leg link without length, no foot, a ``<mimic>`` leg joint and a branching leg
   are refused in one line that says what to do.
 """
@@ -28,6 +30,7 @@ import re
 from pathlib import Path
 
 import pytest
+from urdf_parser_py import urdf as parser
 from urdf_variants import (biped3d_urdf, dynamics_error, energy_error, pinocchio_model,
                            pinocchio_reduced, random_states, torque_error)
 
@@ -402,3 +405,15 @@ def test_a_passive_leg_joint_says_lock_it(tmp_path, capsys):
     err = _cli_error(capsys, ["robot", "import", str(_write(tmp_path, text, "p.urdf")),
                               "--out", str(tmp_path / "r.toml")])
     assert "joint 'knee_left' has no actuator" in err and "--lock knee_left[=RAD]" in err
+
+
+def test_a_texture_without_a_file_name_is_appearance_the_model_does_not_read(tmp_path):
+    # the iCub of example-robot-data: <material name=...><texture/></material> in its
+    # visuals, which urdf_parser_py refuses (filename required) and ROS's parser passes over
+    text = RABBIT_URDF.replace(
+        "</visual>", '<material name="metal"><texture/><color rgba="0 0 0 1"/></material>'
+        "</visual>").replace("<link ", '<material name="grey"><texture/></material><link ', 1)
+    assert text.count("<texture/>") >= 2
+    with pytest.raises(Exception, match="filename"):     # the parser alone refuses it
+        parser.URDF.from_xml_string(text.encode())
+    assert import_urdf(_write(tmp_path, text, "t.urdf")).description == robot("rabbit").description

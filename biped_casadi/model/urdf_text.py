@@ -1,7 +1,9 @@
 """Reading a URDF file's text for :mod:`.urdf`: the parser's robot, and what it would
 misread refused or rewritten first: a xacro file (macros, ``${...}`` substitutions), a
 file without links (a fragment a xacro file includes), and top-level ``<frame>``
-elements (Drake's and FROST's extension) as massless links fixed to their links."""
+elements (Drake's and FROST's extension) as massless links fixed to their links; the
+appearance (``<material>``: colours, textures), which the model does not read, is left
+out before parsing, as ROS's own parser would pass over what this one refuses in it."""
 from __future__ import annotations
 
 import re
@@ -83,6 +85,24 @@ def _frames_as_links(text: str) -> tuple:
     return ET.tostring(root, encoding="unicode"), notes
 
 
+def _without_appearance(text: str) -> str:
+    """``text`` without its ``<material>`` elements (top-level and in visuals): colours and
+    textures, which no model quantity reads.  ``urdf_parser_py`` refuses a ``<texture/>``
+    without a file name or a colour without four numbers, which ROS's C++ parser (and
+    Pinocchio) pass over: the iCub of example-robot-data writes such textures."""
+    if "<material" not in text:
+        return text
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        return text
+    parents = [root, *root.findall("link/visual")]
+    found = [(p, m) for p in parents for m in p.findall("material")]
+    for parent, material in found:
+        parent.remove(material)
+    return ET.tostring(root, encoding="unicode") if found else text
+
+
 def _parse(text: str, where: str, name: str = "FILE"):
     """The parsed robot, the parser's complaints (unknown tags are not errors) and what
     was read beyond URDF (``<frame>`` elements).  A xacro file (macros, substitutions)
@@ -92,7 +112,7 @@ def _parse(text: str, where: str, name: str = "FILE"):
     if marker is not None:
         raise ValueError(f"{where}: a xacro file, not a URDF ({marker[:80]}): "
                          f"{xacro_refusal(name)}")
-    text, framed = _frames_as_links(text)
+    text, framed = _frames_as_links(_without_appearance(text))
     said = []
     keep = _xml_core.on_error
     _xml_core.on_error = said.append
