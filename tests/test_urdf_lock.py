@@ -157,8 +157,10 @@ def test_arms_merge_into_the_torso(tmp_path):
                                  "lock=); 'hip_yaw_l', 'hip_yaw_r' turn(s) out of the plane "
                                  "most joints turn in: a 3-D robot's sagittal model locks "
                                  "every such joint with --lock-off-axis (lock_off_axis=True)")
-    with pytest.raises(ValueError, match=r"lock=\)$"):     # the arms' only: no such hint
-        import_urdf(p, lock_off_axis=True)
+    with pytest.raises(ValueError, match=r"lock=\) \(--lock-off-axis took the plane's normal "
+                                         r"\[0\.0, 1\.0, 0\.0\] of the torso frame, the axis of 10 "
+                                         r"of the 16 joints: --axis x\|y chooses it\)$"):
+        import_urdf(p, lock_off_axis=True)       # the arms' only: no hint to lock off the axis
     imp = import_urdf(p, lock={**SAGITTAL, **ARMS})
     no_arms = import_urdf(_write(tmp_path, biped3d_urdf(), "no_arms.urdf"), lock=SAGITTAL)
     hips = 2 * (0.6 + 0.9)
@@ -174,7 +176,7 @@ def test_lock_off_axis_locks_yaw_and_roll(tmp_path):
         imp = import_urdf(p, lock={"ankle_pitch_l": 0.0, "ankle_pitch_r": 0.0, **ARMS},
                           lock_off_axis=True, axis=axis)
         assert set(imp.locked) == set(SAGITTAL) | set(ARMS)
-        why = "--axis y" if axis else "the axis of 10 of the 16 joints"
+        why = "--axis y" if axis else "the axis of 4 of the 10 joints not named by --lock"
         assert any(n.startswith(f"lock_off_axis: the plane's normal is [0.0, 1.0, 0.0] in the "
                                 f"torso frame ({why})") for n in imp.notes), imp.notes
     ref = import_urdf(p, lock={**SAGITTAL, **ARMS}).description
@@ -185,6 +187,33 @@ def test_lock_off_axis_locks_yaw_and_roll(tmp_path):
                       lock_off_axis=True)
     assert imp.locked == {**import_urdf(p, lock={**SAGITTAL, **ARMS}).locked, **rolls}
     assert imp.description == import_urdf(p, lock={**SAGITTAL, **ARMS, **rolls}).description
+
+
+def test_joints_named_by_lock_do_not_vote_for_the_plane(tmp_path):
+    # JVRC-1 (mc_rtc_data): its fingers, wrists and rolls turn about x, 22 of its 44
+    # joints against 12 about y; locked by name they no longer choose the plane
+    fingers = "".join(
+        f'<link name="finger{k}"><inertial><mass value="0.05"/><inertia ixx="1e-5" ixy="0" '
+        f'ixz="0" iyy="1e-5" iyz="0" izz="1e-5"/></inertial></link><joint name="finger{k}" '
+        f'type="revolute"><parent link="torso"/><child link="finger{k}"/><origin '
+        f'xyz="0.1 0 {0.3 + 0.01 * k}"/><axis xyz="1 0 0"/><limit effort="1" velocity="1" '
+        f'lower="-1" upper="1"/></joint>' for k in range(8))
+    p = _write(tmp_path, biped3d_urdf(arms=True).replace("</robot>", fingers + "</robot>"))
+    upper = {**ARMS, **{f"finger{k}": 0.0 for k in range(8)}}
+    imp = import_urdf(p, lock=upper, lock_off_axis=True)
+    assert any(n.startswith("lock_off_axis: the plane's normal is [0.0, 1.0, 0.0] in the torso "
+                            "frame (the axis of 6 of the 12 joints not named by --lock)")
+               for n in imp.notes), imp.notes
+    off = {f"{j}_{s}": 0.0 for s in SIDES for j in ("hip_yaw", "hip_roll", "ankle_roll")}
+    assert imp.description == import_urdf(p, lock={**upper, **off}).description
+    # without the locks the fingers outvote the legs, and the refusal says which plane
+    # was taken and how to choose the other
+    with pytest.raises(ValueError, match=r"--lock-off-axis took the plane's normal \[1\.0, "
+                                         r"0\.0, 0\.0\] of the torso frame, the axis of 12 of "
+                                         r"the 24 joints: --axis x\|y chooses it\)$"):
+        import_urdf(p, lock_off_axis=True)
+    assert import_urdf(p, lock=upper, lock_off_axis=True, axis="y").description \
+        == imp.description
 
 
 def test_mirror_images_and_differences_across_the_plane_are_the_same_legs(tmp_path):

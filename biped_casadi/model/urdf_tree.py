@@ -182,6 +182,8 @@ class _Reader:
 
     def __init__(self, robot, where: str, tol: float):
         self.robot, self.where, self.tol = robot, where, tol
+        #: said after every refusal once ``lock_off_axis`` chose the plane by its vote
+        self.plane_vote = ""
         self._check_names()
         self._check_numbers()
         self.links = {link.name: link for link in robot.links}
@@ -197,7 +199,7 @@ class _Reader:
         self.locked = {}
 
     def fail(self, problem: str):
-        raise ValueError(f"{self.where}: {problem}")
+        raise ValueError(f"{self.where}: {problem}{self.plane_vote}")
 
     def unit_axis(self, joint) -> np.ndarray:
         """A rotating joint's axis as a unit vector in its own frame (x without one)."""
@@ -245,22 +247,26 @@ class _Reader:
         revolute or continuous joints below the torso (but those of ``keep``) whose axis
         at zero joint angles is not parallel to it.  n is the torso frame's ``axis``
         ('x' or 'y'), else the direction across the torso's z that most of the joints
-        below the torso turn about (a tie: the one nearer the torso's y, then the first
-        in the file)."""
+        below the torso turn about, but those of ``keep`` when others remain (joints the
+        user locked are not the model's: the fingers, wrists and shoulder rolls of a
+        humanoid would outvote its legs' pitch joints; a tie: the one nearer the torso's
+        y, then the first in the file)."""
         axes = self.rotating_axes(torso)
         if axis is not None:
             n = np.eye(3)[{"x": 0, "y": 1}[axis]]
             why = f"--axis {axis}"
         else:
-            across = [a for _, a in axes if abs(a[2]) <= AXIS_TOL]
+            voters = [a for name, a in axes if name not in keep] or [a for _, a in axes]
+            across = [a for a in voters if abs(a[2]) <= AXIS_TOL]
             if not across:
                 self.fail("lock_off_axis: no revolute or continuous joint below the torso "
                           "turns about an axis across its frame's z (the plane's normal)")
-            counts = [sum(_parallel(a, b) for _, b in axes) for a in across]
+            counts = [sum(_parallel(a, b) for b in voters) for a in across]
             best = max(range(len(across)),
                        key=lambda i: (counts[i], round(abs(across[i][1]), 9), -i))
             n = across[best]
-            why = f"the axis of {counts[best]} of the {len(axes)} joints"
+            why = (f"the axis of {counts[best]} of the {len(voters)} joints"
+                   + (" not named by --lock" if len(voters) < len(axes) else ""))
         off = [name for name, a in axes if name not in keep and not _parallel(a, n)]
         return n, off, why
 
@@ -433,10 +439,12 @@ def apply_locks(rd: "_Reader", torso: str, lock: dict, off_axis: bool, axis) -> 
     continuous joint off the plane's normal at 0 (said in the notes)."""
     if off_axis:
         n, off, why = rd.off_axis(torso, axis, lock)
-        rd.notes.append(f"lock_off_axis: the plane's normal is "
-                        f"{(np.round(np.where(np.abs(n) < 1e-12, 0.0, n), 6) + 0.0).tolist()} "
-                        f"in the torso frame ({why}); "
-                        f"locked at 0 as off it: {', '.join(off) or 'no joint'}")
+        normal = (np.round(np.where(np.abs(n) < 1e-12, 0.0, n), 6) + 0.0).tolist()
+        rd.notes.append(f"lock_off_axis: the plane's normal is {normal} in the torso frame "
+                        f"({why}); locked at 0 as off it: {', '.join(off) or 'no joint'}")
+        if axis is None:
+            rd.plane_vote = (f" (--lock-off-axis took the plane's normal {normal} of the "
+                             f"torso frame, {why}: --axis x|y chooses it)")
         lock = {**lock, **dict.fromkeys(off, 0.0)}
     rd.lock(lock)
     if lock:
