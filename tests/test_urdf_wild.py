@@ -21,7 +21,8 @@ small file of its own (tests/urdf_variants.py and the packaged rabbit.urdf):
   them all at once; camel-case sides name the links; ``<frame>`` elements mark a sole;
 - materials that ``urdf_parser_py`` would refuse (iCub's ``<texture/>`` without a file
   name), appearance the model does not read, import as the robot without them, and a
-  file in a default XML namespace (Drake's older files) as the file without it;
+  file in a default XML namespace (Drake's older files) as the file without it, and a
+  file whose XML declaration follows its licence comment (NAO's) as the file;
 - a last leg link without length, no foot, a ``<mimic>`` leg joint and a branching leg
   are refused in one line that says what to do.
 """
@@ -434,3 +435,12 @@ def test_a_texture_without_a_file_name_is_appearance_the_model_does_not_read(tmp
     with pytest.raises(Exception, match="filename"):     # the parser alone refuses it
         parser.URDF.from_xml_string(text.encode())
     assert import_urdf(_write(tmp_path, text, "t.urdf")).description == robot("rabbit").description
+
+
+def test_an_xml_declaration_after_a_comment_is_read_as_ros_reads_it(tmp_path):
+    # ijnek/nao_description's nao.urdf: a licence comment, then <?xml version="1.0" ?>,
+    # which an XML parser refuses ("XML or text declaration not at start of entity")
+    assert RABBIT_URDF.startswith('<?xml version="1.0"?>')
+    text = "<!-- licence -->\n\n" + RABBIT_URDF
+    imp = import_urdf(_write(tmp_path, text, "late.urdf"))
+    assert imp.description == robot("rabbit").description

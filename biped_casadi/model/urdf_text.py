@@ -16,6 +16,9 @@ from urdf_parser_py.xml_reflection import core as _xml_core
 __all__ = ["xacro_refusal"]
 
 
+#: an XML declaration ``<?xml version="1.0" ...?>`` (not ``<?xml-stylesheet ...?>``)
+_XML_DECLARATION = re.compile(r"<\?xml\s[^>]*\?>")
+
 #: the namespaces a xacro file declares for its macros
 _XACRO_NS = ("http://www.ros.org/wiki/xacro", "http://ros.org/wiki/xacro")
 
@@ -125,7 +128,11 @@ def _parse(text: str, where: str, name: str = "FILE"):
     """The parsed robot, the parser's complaints (unknown tags are not errors), what
     was read beyond URDF (``<frame>`` elements) and the text parsed (:func:`_rewritten`).
     A xacro file (macros, substitutions) and a file without links (a fragment that a
-    xacro file includes) are refused with what to do."""
+    xacro file includes) are refused with what to do.  The XML declaration is dropped
+    first, wherever it stands: the text is already decoded, and a NAO file of ROS 2
+    (ijnek/nao_description) has it after its licence comment, which ROS's parser reads
+    and an XML parser refuses ("XML or text declaration not at start of entity")."""
+    text = _XML_DECLARATION.sub("", text)
     marker = _xacro_marker(text)
     if marker is not None:
         raise ValueError(f"{where}: a xacro file, not a URDF ({marker[:80]}): "
