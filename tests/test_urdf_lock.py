@@ -157,10 +157,8 @@ def test_arms_merge_into_the_torso(tmp_path):
                                  "lock=); 'hip_yaw_l', 'hip_yaw_r' turn(s) out of the plane "
                                  "most joints turn in: a 3-D robot's sagittal model locks "
                                  "every such joint with --lock-off-axis (lock_off_axis=True)")
-    with pytest.raises(ValueError, match=r"lock=\) \(--lock-off-axis took the plane's normal "
-                                         r"\[0\.0, 1\.0, 0\.0\] of the torso frame, the axis of 10 "
-                                         r"of the 16 joints: --axis x\|y chooses it\)$"):
-        import_urdf(p, lock_off_axis=True)       # the arms' only: no hint to lock off the axis
+    with pytest.raises(ValueError, match=r"lock=\)$"):     # the arms' only: no such hint
+        import_urdf(p, lock_off_axis=True)       # (and the plane voted is the torso's y)
     imp = import_urdf(p, lock={**SAGITTAL, **ARMS})
     no_arms = import_urdf(_write(tmp_path, biped3d_urdf(), "no_arms.urdf"), lock=SAGITTAL)
     hips = 2 * (0.6 + 0.9)

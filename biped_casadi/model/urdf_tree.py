@@ -182,7 +182,8 @@ class _Reader:
 
     def __init__(self, robot, where: str, tol: float):
         self.robot, self.where, self.tol = robot, where, tol
-        #: said after every refusal once ``lock_off_axis`` chose the plane by its vote
+        #: said after every refusal once ``lock_off_axis`` chose by its vote a plane
+        #: whose normal is not the torso frame's y
         self.plane_vote = ""
         self._check_names()
         self._check_numbers()
@@ -442,7 +443,9 @@ def apply_locks(rd: "_Reader", torso: str, lock: dict, off_axis: bool, axis) -> 
         normal = (np.round(np.where(np.abs(n) < 1e-12, 0.0, n), 6) + 0.0).tolist()
         rd.notes.append(f"lock_off_axis: the plane's normal is {normal} in the torso frame "
                         f"({why}); locked at 0 as off it: {', '.join(off) or 'no joint'}")
-        if axis is None:
+        if axis is None and not _parallel(n, np.array([0.0, 1.0, 0.0])):
+            # a vote for other than the torso's y (across a frame of x forward, z up) may
+            # be the hands' and rolls': every refusal says which plane it took
             rd.plane_vote = (f" (--lock-off-axis took the plane's normal {normal} of the "
                              f"torso frame, {why}: --axis x|y chooses it)")
         lock = {**lock, **dict.fromkeys(off, 0.0)}
