@@ -248,26 +248,25 @@ class _Reader:
         revolute or continuous joints below the torso (but those of ``keep``) whose axis
         at zero joint angles is not parallel to it.  n is the torso frame's ``axis``
         ('x' or 'y'), else the direction across the torso's z that most of the joints
-        below the torso turn about, but those of ``keep`` when others remain (joints the
-        user locked are not the model's: the fingers, wrists and shoulder rolls of a
-        humanoid would outvote its legs' pitch joints; a tie: the one nearer the torso's
-        y, then the first in the file)."""
+        below the torso turn about (those of ``keep`` too: a robot's locked ankle pitch
+        and arm joints vote for its sagittal plane, where a frame turned so that its x is
+        lateral would otherwise tie its pitch and roll joints; a tie: the one nearer the
+        torso's y, then the first in the file).  A humanoid's hands can outvote its legs
+        (JVRC-1: 22 joints about x against 12): the refusals that follow say so."""
         axes = self.rotating_axes(torso)
         if axis is not None:
             n = np.eye(3)[{"x": 0, "y": 1}[axis]]
             why = f"--axis {axis}"
         else:
-            voters = [a for name, a in axes if name not in keep] or [a for _, a in axes]
-            across = [a for a in voters if abs(a[2]) <= AXIS_TOL]
+            across = [a for _, a in axes if abs(a[2]) <= AXIS_TOL]
             if not across:
                 self.fail("lock_off_axis: no revolute or continuous joint below the torso "
                           "turns about an axis across its frame's z (the plane's normal)")
-            counts = [sum(_parallel(a, b) for b in voters) for a in across]
+            counts = [sum(_parallel(a, b) for _, b in axes) for a in across]
             best = max(range(len(across)),
                        key=lambda i: (counts[i], round(abs(across[i][1]), 9), -i))
             n = across[best]
-            why = (f"the axis of {counts[best]} of the {len(voters)} joints"
-                   + (" not named by --lock" if len(voters) < len(axes) else ""))
+            why = f"the axis of {counts[best]} of the {len(axes)} joints"
         off = [name for name, a in axes if name not in keep and not _parallel(a, n)]
         return n, off, why
 
