@@ -10,9 +10,10 @@ given): from the fixed point of the 'takeoff' clock plus 0.01 rad/s on every vel
 end, the torque jump of each clock at the switch, the freed foot's vertical
 acceleration under the stance's last torques and under each clock's first flight
 torques; then the normal force under the restarted clock's first flight torques, and
-how long the foot would stay on the ground under them (unilateral contact: stance
-dynamics under the flight law until that force reaches 0, RK4 at 10 us, the crossing
-bisected) and its acceleration when it leaves.  Then, per clock, the stride map's
+the cycle's push-off: how long the foot stays on the ground under them (unilateral
+contact: stance dynamics under the flight law until that force reaches 0), the
+tangential force and the foot's acceleration when it leaves, and the pushing foot's
+minima in the flight after.  Then, per clock, the stride map's
 status, spectral radius and the perturbed run (20 strides).
 
 Run: ``python benchmarks/running_takeoff.py [--case ROBOT GAIT_FILE [M1 ...]] [--no-save]``
@@ -47,45 +48,10 @@ def _foot_acceleration(fl, q, dq, u) -> float:
     return float(np.array(fl.flight_dynamics(qe, dqe, u))[-1, 0])
 
 
-def _push_off(c, q, dq, h=1e-5, t_max=0.05) -> dict:
-    """Stance dynamics under the restarted clock's flight law until Fz reaches 0."""
-    m, fl = c.model, c.fl
-    nq = m.nq
-
-    def law(X, t):
-        qe, dqe = fl.takeoff(X[:nq], X[nq:])
-        return np.array(c.flight_law(qe, dqe, t)).ravel()
-
-    def f(X, t):
-        return np.r_[X[nq:], np.array(m.forward_dynamics(X[:nq], X[nq:], law(X, t))).ravel()]
-
-    def rk4(X, t, s):
-        k1 = f(X, t)
-        k2 = f(X + s / 2 * k1, t + s / 2)
-        k3 = f(X + s / 2 * k2, t + s / 2)
-        return X + s / 6 * (k1 + 2 * k2 + 2 * k3 + f(X + s * k3, t + s))
-
-    def fz(X, t):
-        return [float(v) for v in fl.takeoff_guard(X[:nq], X[nq:], law(X, t))]
-
-    X, t = np.r_[q, dq], 0.0
-    fz0 = fz(X, t)
-    if fz0[0] <= 0:
-        return dict(fz_at_switch=fz0[0], fx_at_switch=fz0[1], duration=0.0)
-    while t < t_max and fz(rk4(X, t, h), t + h)[0] > 0:
-        X, t = rk4(X, t, h), t + h
-    lo, hi = 0.0, h
-    for _ in range(50):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if fz(rk4(X, t, mid), t + mid)[0] > 0 else (lo, mid)
-    X, t = rk4(X, t, lo), t + lo
-    end = fz(X, t)
-    return dict(fz_at_switch=fz0[0], fx_at_switch=fz0[1], duration=t, fx_at_end=end[1],
-                foot_acceleration=_foot_acceleration(fl, X[:nq], X[nq:], law(X, t)))
-
-
 def takeoff(cyc, x) -> tuple:
-    """The stance pass from x and what happens at its end; the next state (or None)."""
+    """The stance pass from x, what happens at its end and the push-off after it (the
+    cycle's: stance dynamics under the restarted clock's flight law until the normal
+    force reaches 0); the next state (or None)."""
     c, g = cyc.controller, cyc.controller.gait
     nq, fl = c.model.nq, c.fl
     try:
@@ -102,9 +68,23 @@ def takeoff(cyc, x) -> tuple:
         u_fl = np.array(c.flight_law(qe, dqe, tf)).ravel()
         out[f"torque_jump_{clock}"] = float(np.abs(u_fl - u_st).max())
         out[f"foot_acceleration_{clock}"] = _foot_acceleration(fl, q, dq, u_fl)
-    out["push_off"] = _push_off(c, q, dq)
+    u_fl = np.array(c.flight_law(qe, dqe, 0.0)).ravel()
+    fz0, fx0 = (float(v) for v in fl.takeoff_guard(q, dq, u_fl))
+    push = out["push_off"] = dict(fz_at_switch=fz0, fx_at_switch=fx0)
     try:
-        nxt = cyc._domain(1, xp, None, False, False)[1]
+        po, xp, _, _ = cyc._domain(1, xp, None, False, False)
+    except HybridCycleError as e:
+        push["error"] = str(e)
+        return out, None
+    q, dq = po.exit_state[:nq], po.exit_state[nq:]
+    qe, dqe = fl.takeoff(q, dq)
+    u_end = np.array(c.flight_law(qe, dqe, po.duration)).ravel()
+    push.update(duration=po.duration, fx_at_end=float(fl.takeoff_guard(q, dq, u_end)[1]),
+                foot_acceleration=_foot_acceleration(fl, q, dq, u_end))
+    try:
+        fp = cyc._domain(2, xp, None, False, False, po.duration)[0]
+        out["flight_dips"] = [v for _, _, v in fp.dips]
+        nxt = fp.next_state
     except HybridCycleError as e:
         out["flight"] = str(e)
         nxt = None

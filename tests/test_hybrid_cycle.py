@@ -254,6 +254,48 @@ def test_a_domain_entry_sees_the_time_the_stride_ran():
     assert cyc.stride([x0]).next_state[0] == lin.next_state[0]
 
 
+def _optional_cycle(clock_from=1):
+    """First: dX/dt = 1 for 1 s.  Middle (may be empty): dX/dt = -1 down to X = 1.5, so
+    empty for x0 <= 0.5 and x0 - 0.5 s long above.  Last: dX/dt = p for 0.2 s, p = s the
+    time since the middle's entry (``clock_from=1``), then 1 off:
+    P(x0) = x0 (empty middle) or 0.5 + 0.2 (x0 - 0.5)."""
+    X, t, p = ca.SX.sym("X"), ca.SX.sym("t"), ca.SX.sym("p")
+    x, s = ca.SX.sym("x"), ca.SX.sym("s")
+    e = ca.SX(0, 1)
+    ident = ca.Function("r", [x], [x])
+    first = Domain("first", 1, ca.Function("f0", [X, t, e], [ca.SX(1)]),
+                   ca.Function("g0", [X, t, e], [1 - t]), ident, 0.01, 5.0)
+    middle = Domain("middle", 1, ca.Function("f1", [X, t, e], [ca.SX(-1)]),
+                    ca.Function("g1", [X, t, e], [X - 1.5]), ident, 0.01, 5.0,
+                    may_be_empty=True)
+    last = Domain("last", 1, ca.Function("f2", [X, t, p], [p]),
+                  ca.Function("g2", [X, t, p], [0.2 - t]),
+                  ca.Function("r2", [x], [x - 1]), 0.01, 5.0,
+                  start=ca.Function("s2", [x, s], [x, s]), clock_from=clock_from)
+    return HybridCycle([first, middle, last])
+
+
+def test_an_empty_domain_and_a_clock_from_a_later_entry():
+    """A domain whose guard is <= 0 at entry ends there (duration 0, its reset at the
+    entry state); ``clock_from`` counts s from that domain's entry."""
+    cyc = _optional_cycle()
+    lin = cyc.linearise([0.3], record=True)
+    assert lin.durations[1] == 0.0 and lin.passes[1].times.tolist() == [0.0]
+    assert lin.passes[2].parameters[0] == 0.0
+    assert lin.next_state[0] == pytest.approx(0.3, abs=1e-12)
+    assert lin.A[0, 0] == pytest.approx(1.0, rel=1e-12)
+    lin = cyc.linearise([0.8])
+    assert lin.durations[1] == pytest.approx(0.3, abs=1e-12)
+    assert lin.passes[2].parameters[0] == pytest.approx(0.3, abs=1e-12)
+    assert lin.next_state[0] == pytest.approx(0.56, abs=1e-12)
+    assert lin.A[0, 0] == pytest.approx(0.2, rel=1e-9)
+    # counted from the stride's start instead, the last domain sees 1.3 s
+    assert _optional_cycle(0).stride([0.8]).passes[2].parameters[0] == pytest.approx(1.3)
+    with pytest.raises(HybridCycleError, match="domain 'last': clock_from must be a "
+                                               "domain's index from 0 to 2, got 3"):
+        _optional_cycle(3)
+
+
 def test_a_start_of_two_inputs_takes_one_number_of_time():
     x, s = ca.SX.sym("x"), ca.SX.sym("s", 2)
     X, t = ca.SX.sym("X"), ca.SX.sym("t")

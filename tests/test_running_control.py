@@ -17,13 +17,14 @@ import json
 import math
 import re
 
+import casadi as ca
 import numpy as np
 import pytest
 
 from biped_casadi.control.running import RunningController, phase_derivatives
 from biped_casadi.numerics import rk4_step
 from gait_opt.running import hermite_simpson
-from analysis.stability.hybrid_cycle import HybridCycleError
+from analysis.stability.hybrid_cycle import HybridCycle, HybridCycleError
 from analysis.stability.running_cycle import (finite_difference_jacobian, running_cycle,
                                               running_stability, simulate_running)
 
@@ -224,20 +225,20 @@ def test_perturbed_run_converges_at_the_spectral_radius(cycle, stable, model):
 
 
 def test_the_pushing_foot_is_checked_between_the_nodes(cycle, stable, model):
-    """0.01 rad/s less on dq1 at the fixed point: after the takeoff the foot that pushed
+    """0.02 rad/s less on dq1 at the fixed point: after the takeoff the foot that pushed
     off goes below the ground and is back above it at the first flight node (1.29 ms).
     The same cycle checked at its nodes only runs the stride; the RK4 step from the
     takeoff state, sampled at 400 lengths, has the foot below the ground where and as
     deep as the cycle says."""
     x = stable.fixed_point.copy()
-    x[model.nq] -= 0.01
+    x[model.nq] -= 0.02
     with pytest.raises(HybridCycleError, match=r"^domain 'flight': other foot height "
                                                r"violated at t = \S+ s \(\S+ < 0, between "
                                                r"two RK4 nodes\)$") as e:
         cycle.stride(x)
     t_dip, z_dip = (float(v) for v in re.search(r"t = (\S+) s \((\S+) <", str(e.value)).groups())
-    _, fl = _at_nodes(cycle).stride(x, record=True).passes
-    c, d = cycle.controller, cycle.domains[1]
+    _, _, fl = _at_nodes(cycle).stride(x, record=True).passes
+    c, d = cycle.controller, cycle.domains[2]
     ne = c.fl.ne
     z_nodes = np.array(c.fl.feet.map(fl.times.size)(fl.nodes[:ne]))[1, 0::2]
     assert np.all(z_nodes >= -d.tolerance) and 0 < t_dip < fl.times[1]
@@ -300,6 +301,45 @@ def test_the_friction_cone_is_checked_between_the_nodes(cycle, run_gait):
     assert abs(t_dip - t_between) < d.h and t_dip not in st.times
 
 
+def test_the_ground_pushes_the_foot_until_the_flight_law_lets_it_go(cycle, stable, model):
+    """0.01 rad/s less on dq1 at the fixed point: the stance law's normal force reaches 0
+    late (0.31 ms after T_stance), the restarted flight law's first torques differ from
+    the stance law's last, and under them the ground would still push the foot.  It stays
+    on the ground (the push-off) until that force reaches 0; freed at the law's switch
+    instead, it would start down and go below the ground between two nodes.  At the
+    fixed point the push-off is empty: the foot leaves at the switch."""
+    c, nq = cycle.controller, model.nq
+    at_star = cycle.stride(stable.fixed_point, record=True)
+    assert at_star.durations[1] == 0.0 and at_star.passes[1].times.tolist() == [0.0]
+    x = stable.fixed_point.copy()
+    x[nq] -= 0.01
+    st, po, fl = cycle.stride(x, record=True).passes
+    q, dq = st.exit_state[:nq], st.exit_state[nq:]
+    qe, dqe = c.fl.takeoff(q, dq)
+    assert po.parameters[-1] == 0.0 and fl.parameters[-1] == pytest.approx(po.duration, abs=1e-15)
+    Fz_stance = float(c.fl.takeoff_guard(q, dq, c.stance_law(q, dq, st.duration))[0])
+    Fz_switch = float(c.fl.takeoff_guard(q, dq, c.flight_law(qe, dqe, 0.0))[0])
+    assert abs(Fz_stance) < 1e-9 and Fz_switch > 0.1             # 2.2 N measured
+    assert 0 < po.duration < 1e-3                                 # 0.125 ms measured
+    q, dq = po.exit_state[:nq], po.exit_state[nq:]
+    qe, dqe = c.fl.takeoff(q, dq)
+    assert abs(float(c.fl.takeoff_guard(q, dq, c.flight_law(qe, dqe, po.duration))[0])) < 1e-9
+    run = simulate_running(cycle, stable.fixed_point, x, 20)
+    assert run.status == "ok", run.message
+    assert run.strides[0].pushoff == po.duration
+    assert run.strides[0].durations[0] == pytest.approx(st.duration + po.duration, abs=1e-15)
+    # the foot freed at the switch: the push-off's guard below 0 at its entry
+    d = cycle.domains[1]
+    X, t, p = ca.SX.sym("X", d.nX), ca.SX.sym("t"), ca.SX.sym("p", d.n_par)
+    freed = HybridCycle([cycle.domains[0],
+                         dataclasses.replace(d, guard=ca.Function("g", [X, t, p], [-1 + 0 * t])),
+                         cycle.domains[2]])
+    with pytest.raises(HybridCycleError, match=r"^domain 'flight': other foot height "
+                                               r"violated at t = \S+ s \(\S+ < 0, between "
+                                               r"two RK4 nodes\)$"):
+        freed.stride(x)
+
+
 def test_plain_tracking_is_unstable_and_its_run_diverges(cycle, model):
     plain = cycle.retuned(M1=np.zeros(model.nu))
     r = running_stability(plain)
@@ -316,15 +356,15 @@ def test_plain_tracking_is_unstable_and_its_run_diverges(cycle, model):
 
 
 def _takeoff_jump(cyc, x):
-    """The law's torque at the takeoff: stance law's last, flight law's first (N m)."""
+    """The law's torque at its switch: stance law's last, flight law's first (N m)."""
     c = cyc.controller
-    st, fl = cyc.stride(x, record=True).passes
+    st, po, _ = cyc.stride(x, record=True).passes
     nq = c.model.nq
     q, dq = st.exit_state[:nq], st.exit_state[nq:]
     u_st = np.array(c.stance_law(q, dq, st.duration)).ravel()
     qe, dqe = (np.array(v).ravel() for v in c.fl.takeoff(q, dq))
-    u_fl = np.array(c.flight_law(qe, dqe, fl.parameters[-1])).ravel()
-    return np.abs(u_fl - u_st).max(), st, fl
+    u_fl = np.array(c.flight_law(qe, dqe, po.parameters[-1])).ravel()
+    return np.abs(u_fl - u_st).max(), st, po
 
 
 @pytest.fixture(scope="session")
@@ -390,17 +430,20 @@ def test_command_line_says_a_failed_loop_and_exits_1(gait_file, capsys):
                              f"stopped at {s['simulation']['message']}")
 
 
-def test_a_foot_back_below_the_ground_names_the_flight_clock(capsys):
-    """The failure of H1's loop (Unitree H1 at 1 m/s: the pushing foot 2.3e-7 m below the
-    ground 0.5 ms into flight) says what was measured to cause it, with the restarted
-    clock only; a loop that completes is exit 0, silent."""
+def test_a_foot_back_below_the_ground_names_the_tangential_force(capsys):
+    """A pushing foot below the ground in flight: the message says what was measured to
+    cause it (with either clock, the law's switch being taken up by the push-off); a
+    loop that completes is exit 0, silent."""
     from analysis.cli.running import loop_exit_code
-    msg = "domain 'flight': other foot height violated at t = 0.000513555 s (-2.28e-07 < 0)"
-    for clock, hint in (("takeoff", True), ("stride", False)):
+    msg = "domain 'flight': other foot height violated at t = 0.000580279 s (-6.09e-09 < 0)"
+    for clock in ("takeoff", "stride"):
         assert loop_exit_code(dict(status="failed", message=msg, flight_clock=clock)) == 1
         err = capsys.readouterr().err
         assert err.startswith(f"biped running: the closed loop failed: {msg}")
-        assert ("--flight-clock stride" in err) == hint
+        assert "tangential ground force" in err and "--flight-clock" not in err
+    other = "domain 'stance': torque u1 <= 150 N m violated at t = 0.00923782 s (-0.511 < 0)"
+    assert loop_exit_code(dict(status="failed", message=other, flight_clock="takeoff")) == 1
+    assert "tangential" not in capsys.readouterr().err
     assert loop_exit_code(dict(status="unstable", simulation=dict(status="ok"))) == 0
     assert loop_exit_code(None) == 0 and capsys.readouterr().err == ""
 
@@ -575,10 +618,13 @@ def test_a_saturated_run_goes_on_at_the_limit_and_says_how_long(model, saturated
         assert s.torque_max > SAT_LIMIT and s.saturated_time > 0
     # the time lies between the node intervals saturated at both ends and at either end
     low = high = 0.0
-    for p, law in zip(cyc.stride(r.fixed_point, record=True).passes,
-                      (c.stance_law, c.flight_law)):
-        n = p.nodes.shape[0] // 2
-        u = np.array(law.map(p.times.size)(p.nodes[:n], p.nodes[n:], p.times[None, :]))
+    st, po, fl = cyc.stride(r.fixed_point, record=True).passes
+    qe, dqe = c.fl.takeoff.map(po.times.size)(po.nodes[:model.nq], po.nodes[model.nq:])
+    for p, law, q, dq in ((st, c.stance_law, st.nodes[:model.nq], st.nodes[model.nq:]),
+                          (po, c.flight_law, qe, dqe),
+                          (fl, c.flight_law, fl.nodes[:c.fl.ne], fl.nodes[c.fl.ne:])):
+        clock = p.parameters[-1] if law is c.flight_law else 0.0
+        u = np.array(law.map(p.times.size)(q, dq, p.times[None, :] + clock))
         over = np.abs(u).max(axis=0) > SAT_LIMIT
         dt = np.diff(p.times)
         low += dt[over[:-1] & over[1:]].sum()

@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
@@ -158,7 +159,7 @@ def test_arms_merge_into_the_torso(tmp_path):
                                  "most joints turn in: a 3-D robot's sagittal model locks "
                                  "every such joint with --lock-off-axis (lock_off_axis=True)")
     with pytest.raises(ValueError, match=r"lock=\)$"):     # the arms' only: no such hint
-        import_urdf(p, lock_off_axis=True)
+        import_urdf(p, lock_off_axis=True)       # (and the plane voted is the torso's y)
     imp = import_urdf(p, lock={**SAGITTAL, **ARMS})
     no_arms = import_urdf(_write(tmp_path, biped3d_urdf(), "no_arms.urdf"), lock=SAGITTAL)
     hips = 2 * (0.6 + 0.9)
@@ -185,6 +186,69 @@ def test_lock_off_axis_locks_yaw_and_roll(tmp_path):
                       lock_off_axis=True)
     assert imp.locked == {**import_urdf(p, lock={**SAGITTAL, **ARMS}).locked, **rolls}
     assert imp.description == import_urdf(p, lock={**SAGITTAL, **ARMS, **rolls}).description
+
+
+def test_a_plane_voted_by_the_hands_is_named_in_the_refusals(tmp_path):
+    # JVRC-1 (mc_rtc_data): its fingers, wrists and rolls turn about x, 22 of its 44
+    # joints against 12 about y: --lock-off-axis takes x, and the refusal says so and
+    # how to choose the plane
+    fingers = "".join(
+        f'<link name="finger{k}"><inertial><mass value="0.05"/><inertia ixx="1e-5" ixy="0" '
+        f'ixz="0" iyy="1e-5" iyz="0" izz="1e-5"/></inertial></link><joint name="finger{k}" '
+        f'type="revolute"><parent link="torso"/><child link="finger{k}"/><origin '
+        f'xyz="0.1 0 {0.3 + 0.01 * k}"/><axis xyz="1 0 0"/><limit effort="1" velocity="1" '
+        f'lower="-1" upper="1"/></joint>' for k in range(8))
+    p = _write(tmp_path, biped3d_urdf(arms=True).replace("</robot>", fingers + "</robot>"))
+    upper = {**ARMS, **{f"finger{k}": 0.0 for k in range(8)}}
+    with pytest.raises(ValueError, match=r" \(--lock-off-axis took the plane's normal \[1\.0, "
+                                         r"0\.0, 0\.0\] of the torso frame, the axis of 12 of "
+                                         r"the 24 joints: --axis x\|y chooses it\)$"):
+        import_urdf(p, lock=upper, lock_off_axis=True)
+    imp = import_urdf(p, lock=upper, lock_off_axis=True, axis="y")
+    off = {f"{j}_{s}": 0.0 for s in SIDES for j in ("hip_yaw", "hip_roll", "ankle_roll")}
+    assert imp.description == import_urdf(p, lock={**upper, **off}).description
+
+
+def _torso_turned(text: str, yaw: float) -> str:
+    """The same robot with its torso's frame turned by ``yaw`` about its z: the torso's
+    inertial, visual and the origins of the joints below it written in the turned frame."""
+    R = Rotation.from_euler("z", yaw).as_matrix()
+    root = ET.fromstring(text)
+
+    def vec(el, key):
+        return np.array(el.get(key, "0 0 0").split(), float)
+
+    inertial = root.find("link[@name='torso']/inertial")
+    origin, inertia = inertial.find("origin"), inertial.find("inertia")
+    origin.set("xyz", " ".join(map(str, R.T @ vec(origin, "xyz"))))
+    keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+    I = np.array([[float(inertia.get(f"i{a}{b}" if a <= b else f"i{b}{a}")) for b in "xyz"]
+                  for a in "xyz"])
+    I = R.T @ I @ R
+    for k in keys:
+        inertia.set(k, repr(float(I["xyz".index(k[1]), "xyz".index(k[2])])))
+    frames = [j.find("origin") for j in root.findall("joint")
+              if j.find("parent").get("link") == "torso"]
+    for o in frames + root.findall("link[@name='torso']/visual/origin"):
+        Rj = R.T @ Rotation.from_euler("xyz", vec(o, "rpy")).as_matrix()
+        o.set("xyz", " ".join(map(str, R.T @ vec(o, "xyz"))))
+        o.set("rpy", " ".join(map(str, Rotation.from_matrix(Rj).as_euler("xyz"))))
+    return ET.tostring(root, encoding="unicode")
+
+
+def test_locked_joints_vote_for_the_plane_of_a_turned_torso_frame(tmp_path):
+    # ddlyRabbit/biped_lower's robot.urdf: its torso frame's x is lateral; with the ankle
+    # pitch locked by name, the legs' pitch joints (with it, 6 of 12) outvote the rolls
+    # (4): without the locked joints' votes they would tie, and the tie go to the rolls
+    text = _torso_turned(biped3d_urdf(), math.pi / 2)
+    p = _write(tmp_path, text, "turned.urdf")
+    ankles = {"ankle_pitch_l": 0.0, "ankle_pitch_r": 0.0}
+    imp = import_urdf(p, lock=ankles, lock_off_axis=True)
+    assert any(n.startswith("lock_off_axis: the plane's normal is [1.0, 0.0, 0.0] in the torso "
+                            "frame (the axis of 6 of the 12 joints)") for n in imp.notes)
+    assert imp.description == import_urdf(p, lock=SAGITTAL).description
+    _same(imp.description, import_urdf(_write(tmp_path, biped3d_urdf()), lock=SAGITTAL)
+          .description)                       # the same robot as the file not turned
 
 
 def test_mirror_images_and_differences_across_the_plane_are_the_same_legs(tmp_path):

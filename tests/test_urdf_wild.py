@@ -19,6 +19,10 @@ small file of its own (tests/urdf_variants.py and the packaged rabbit.urdf):
   file) is refused; a massless link without joints beside the tree is ignored;
 - legs that differ: the refusal names the largest difference and a tolerance that takes
   them all at once; camel-case sides name the links; ``<frame>`` elements mark a sole;
+- materials that ``urdf_parser_py`` would refuse (iCub's ``<texture/>`` without a file
+  name), appearance the model does not read, import as the robot without them, and a
+  file in a default XML namespace (Drake's older files) as the file without it, and a
+  file whose XML declaration follows its licence comment (NAO's) as the file;
 - a last leg link without length, no foot, a ``<mimic>`` leg joint and a branching leg
   are refused in one line that says what to do.
 """
@@ -28,6 +32,7 @@ import re
 from pathlib import Path
 
 import pytest
+from urdf_parser_py import urdf as parser
 from urdf_variants import (biped3d_urdf, dynamics_error, energy_error, pinocchio_model,
                            pinocchio_reduced, random_states, torque_error)
 
@@ -362,6 +367,11 @@ def test_a_leg_welded_to_the_torso_says_the_legs_differ_first(tmp_path, capsys):
                               "--out", str(tmp_path / "c.toml")])
     assert ("legs differ: 1 joint(s) (knee_left) and 2 joint(s) (hip_right -> knee_right)"
             in err), err
+    assert err.endswith("('knee_left' hangs from link 'femur_left', fixed to the torso "
+                        "'torso': if that is a thigh welded to the hip, as in a compass-gait "
+                        "walker with one joint between its thighs, the robot has no torso "
+                        "apart from its legs, which the model needs to carry both legs by "
+                        "their hip joints)"), err
 
 
 def test_a_tag_unknown_to_urdf_on_every_link_is_one_note(tmp_path):
@@ -376,15 +386,26 @@ def test_a_tag_unknown_to_urdf_on_every_link_is_one_note(tmp_path):
                      f"(/robot[@name='RABBIT']/link[@name='torso'], ...)"], notes
 
 
-def test_frame_elements_mark_the_foot(tmp_path):
-    # Drake's and FROST's <frame name link xyz rpy/> (Atlas's soles and toes in FROST's
-    # file): read as massless links fixed to their links, a sole among them is the foot
+def _with_frames(text: str) -> str:
+    """RABBIT's file with its foot links written as <frame> elements, two per leg."""
     text = re.sub(r'<joint name="foot_(left|right)_fixed".*?<link name="foot_(left|right)"/>',
-                  "", RABBIT_URDF, flags=re.S)
+                  "", text, flags=re.S)
     text = text.replace("</robot>", "".join(
         f'<frame link="tibia_{s}" name="{s}_sole" xyz="0 0 -0.4" rpy="0 0 0"/>'
         f'<frame link="tibia_{s}" name="{s}_toe" xyz="0.1 0 -0.4" rpy="0 0 0"/>'
         for s in ("left", "right")) + "</robot>")
+    return text
+
+
+@pytest.mark.parametrize("namespace", ["", ' xmlns="http://drake.mit.edu"'])
+def test_frame_elements_mark_the_foot(tmp_path, namespace):
+    # Drake's and FROST's <frame name link xyz rpy/> (Atlas's soles and toes in FROST's
+    # file): read as massless links fixed to their links, a sole among them is the foot;
+    # Drake's older files (the kneed compass gait) put every element in a default
+    # namespace, where urdf_parser_py alone would find no link
+    text = _with_frames(RABBIT_URDF).replace('<robot name="RABBIT">',
+                                             f'<robot name="RABBIT"{namespace}>')
+    assert namespace in text
     imp = import_urdf(_write(tmp_path, text, "frames.urdf"))
     assert imp.description == robot("rabbit").description
     assert imp.foot == "link 'left_sole'"
@@ -402,3 +423,24 @@ def test_a_passive_leg_joint_says_lock_it(tmp_path, capsys):
     err = _cli_error(capsys, ["robot", "import", str(_write(tmp_path, text, "p.urdf")),
                               "--out", str(tmp_path / "r.toml")])
     assert "joint 'knee_left' has no actuator" in err and "--lock knee_left[=RAD]" in err
+
+
+def test_a_texture_without_a_file_name_is_appearance_the_model_does_not_read(tmp_path):
+    # the iCub of example-robot-data: <material name=...><texture/></material> in its
+    # visuals, which urdf_parser_py refuses (filename required) and ROS's parser passes over
+    text = RABBIT_URDF.replace(
+        "</visual>", '<material name="metal"><texture/><color rgba="0 0 0 1"/></material>'
+        "</visual>").replace("<link ", '<material name="grey"><texture/></material><link ', 1)
+    assert text.count("<texture/>") >= 2
+    with pytest.raises(Exception, match="filename"):     # the parser alone refuses it
+        parser.URDF.from_xml_string(text.encode())
+    assert import_urdf(_write(tmp_path, text, "t.urdf")).description == robot("rabbit").description
+
+
+def test_an_xml_declaration_after_a_comment_is_read_as_ros_reads_it(tmp_path):
+    # ijnek/nao_description's nao.urdf: a licence comment, then <?xml version="1.0" ?>,
+    # which an XML parser refuses ("XML or text declaration not at start of entity")
+    assert RABBIT_URDF.startswith('<?xml version="1.0"?>')
+    text = "<!-- licence -->\n\n" + RABBIT_URDF
+    imp = import_urdf(_write(tmp_path, text, "late.urdf"))
+    assert imp.description == robot("rabbit").description

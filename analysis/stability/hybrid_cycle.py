@@ -45,16 +45,16 @@ stride map is :class:`~analysis.stability.step_map.StepMap`'s S.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
 from biped_casadi.numerics import rk4_step
-from biped_casadi.results import Result
 from biped_casadi.simulation.kernel import locate_strike
 
 from .between_nodes import minima, watch
+from .cycle_results import DomainPass, StrideLinearisation, StrideValue
 
 __all__ = ["Domain", "HybridCycle", "HybridCycleError", "DomainPass", "StrideValue",
            "StrideLinearisation", "entry_function"]
@@ -111,7 +111,8 @@ class Domain:
         Time limit: the guard must be crossed within it, s.
     start : casadi.Function, optional
         ``start(x) -> (X0, p)`` at entry, or ``start(x, s) -> (X0, p)`` with s the time
-        the stride has run before this domain (the previous domains' durations; 0 in the
+        the stride has run before this domain since the entry of domain ``clock_from``
+        (the durations of the domains from that one to this one's predecessor; 0 in the
         cycle's first domain); default X0 = x, no parameters.
     arming : casadi.Function, optional
         ``a(X, t, p)`` (scalar): a crossing counts only at a node where a > 0 (the
@@ -137,6 +138,14 @@ class Domain:
     dense_guard : bool
         Look for the guard's crossing between the nodes too: a dip below 0 and back within
         one RK4 step ends the domain at its first root.
+    clock_from : int
+        The domain (its index in the cycle, at most this one's) from whose entry the s of
+        ``start(x, s)`` is counted; 0: from the stride's start.
+    may_be_empty : bool
+        A guard at or below 0 at entry ends the domain there: a pass of duration 0 whose
+        reset acts on the entry state (the domain's constraints, which hold inside it, are
+        not checked; its exit constraints are).  Without it such a guard waits for a
+        crossing from >= 0.
     """
 
     name: str
@@ -156,6 +165,8 @@ class Domain:
     tolerance: float = 0.0
     dense_constraints: tuple = ()
     dense_guard: bool = False
+    clock_from: int = 0
+    may_be_empty: bool = False
 
     def __post_init__(self):
         f = self.vector_field
@@ -243,114 +254,6 @@ class Domain:
     def n_next(self) -> int:
         """Size of the reset's output, the next domain's state."""
         return _size(self.reset, 0, out=True)
-
-
-@dataclass
-class DomainPass:
-    """One domain's part of a stride.
-
-    Parameters
-    ----------
-    name : str
-        The domain.
-    entry : numpy.ndarray
-        (nX,) the augmented state at entry.
-    parameters : numpy.ndarray
-        (n_par,) the domain's parameters.
-    duration : float
-        Time from entry to the crossing, s.
-    exit_state : numpy.ndarray
-        (n,) x at the crossing (before the reset).
-    next_state : numpy.ndarray
-        The reset's output.
-    times, nodes : numpy.ndarray or None
-        With ``record``: the RK4 nodes' times (N,) and augmented states (nX, N) from entry
-        to the crossing (the last node is the crossing).
-    dips : list of tuple
-        (t, name, value): each minimum of a domain's ``dense_constraints`` and dense guard
-        found between two nodes before the crossing (module docstring), in time order.
-    """
-
-    name: str
-    entry: np.ndarray
-    parameters: np.ndarray
-    duration: float
-    exit_state: np.ndarray
-    next_state: np.ndarray
-    times: np.ndarray | None = None
-    nodes: np.ndarray | None = None
-    dips: list = field(default_factory=list)
-
-
-@dataclass
-class StrideValue(Result):
-    """One application of the stride map.
-
-    Parameters
-    ----------
-    state : numpy.ndarray
-        x_0, the first domain's state at entry.
-    next_state : numpy.ndarray
-        P(x_0).
-    durations : numpy.ndarray
-        Each domain's duration, s.
-    passes : list of DomainPass
-        Each domain's part.
-    status, message : str
-        'ok'.
-    """
-
-    state: np.ndarray
-    next_state: np.ndarray
-    durations: np.ndarray
-    passes: list = field(default_factory=list, metadata={"dict": False})
-    status: str = "ok"
-    message: str = ""
-
-    SUCCESS = ("ok",)
-
-
-@dataclass
-class StrideLinearisation(Result):
-    """The stride map and its exact Jacobian at a state.
-
-    Parameters
-    ----------
-    state, next_state : numpy.ndarray
-        x_0 and P(x_0).
-    A : numpy.ndarray
-        dP/dx_0.
-    durations : numpy.ndarray
-        Each domain's duration, s.
-    duration_gradients : numpy.ndarray
-        (domains, n) their derivatives with respect to x_0.
-    eigenvalues : numpy.ndarray
-        Of A, by decreasing magnitude.
-    residual : float
-        ``max |P(x_0) - x_0|``.
-    passes : list of DomainPass
-        Each domain's part.
-    status, message : str
-        'done'.
-    """
-
-    state: np.ndarray
-    next_state: np.ndarray
-    A: np.ndarray
-    durations: np.ndarray
-    duration_gradients: np.ndarray
-    eigenvalues: np.ndarray
-    residual: float
-    passes: list = field(default_factory=list, metadata={"dict": False})
-    status: str = "done"
-    message: str = ""
-
-    SUCCESS = ("done",)
-
-    @property
-    def spectral_radius(self) -> float:
-        """max ``|eigenvalue|`` of A."""
-        return float(np.max(np.abs(self.eigenvalues))) if self.eigenvalues.size else 0.0
 
 
 class _Compiled:
@@ -481,6 +384,12 @@ class HybridCycle:
                 raise HybridCycleError(d.name, "dimension",
                                        f"its reset gives {d.n_next} numbers, domain "
                                        f"'{nxt.name}' takes {nxt.n}")
+        for i, d in enumerate(self.domains):
+            if isinstance(d.clock_from, bool) or not isinstance(d.clock_from, int) \
+                    or not 0 <= d.clock_from <= i:
+                raise HybridCycleError(d.name, "dimension",
+                                       f"clock_from must be a domain's index from 0 to {i}, "
+                                       f"got {d.clock_from!r}")
         self.n = self.domains[0].n
         self._fns = [_Compiled(d, self.n) for d in self.domains]
 
@@ -563,6 +472,8 @@ class HybridCycle:
             if ds is not None:
                 J, Jp = J + Xs @ ds[None, :], Jp + ps_ @ ds[None, :]
         ns = self.n
+        if d.may_be_empty and float(f.node(X, 0.0, p)[0]) <= 0:
+            return self._empty(d, f, X0, p, J, derivatives, record)
         X, t, J, g_prev, hi, g_hi, between, dips, times, nodes = \
             self._integrate(d, f, X, p, J, Jp, record)
 
@@ -595,6 +506,19 @@ class HybridCycle:
         dxm = (Je + Xeta @ deta)[:d.n]
         return ps, xp, np.array(R) @ dxm, deta.ravel()
 
+    def _empty(self, d: Domain, f, X, p, J, derivatives, record):
+        """A domain that ends at its entry (``may_be_empty``): duration 0, the reset of
+        the entry state."""
+        xm = X[:d.n]
+        xp, R, e = f.reset(xm)
+        self._check(d, e, 0.0, d.exit_constraint_names)
+        xp = _col(xp)
+        ps = DomainPass(d.name, X, p, 0.0, xm, xp, None if not record else np.zeros(1),
+                        None if not record else X[:, None].copy())
+        if not derivatives:
+            return ps, xp, None, None
+        return ps, xp, np.array(R) @ J[:d.n], np.zeros(self.n)
+
     def _pass(self, x0, derivatives: bool, record: bool):
         x = np.asarray(x0, float).ravel()
         if x.size != self.n:
@@ -602,8 +526,11 @@ class HybridCycle:
         Jx = np.eye(self.n)
         passes, grads = [], []
         s, ds = 0.0, np.zeros(self.n)
-        for i in range(len(self.domains)):
-            ps, x, Jx, dT = self._domain(i, x, Jx, derivatives, record, s, ds)
+        entries = []                      # (s, ds) at each domain's entry
+        for i, d in enumerate(self.domains):
+            entries.append((s, ds))
+            s0, ds0 = entries[d.clock_from]
+            ps, x, Jx, dT = self._domain(i, x, Jx, derivatives, record, s - s0, ds - ds0)
             passes.append(ps)
             grads.append(dT)
             s += ps.duration

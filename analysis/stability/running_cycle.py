@@ -7,15 +7,25 @@ of a :class:`~biped_casadi.control.running.RunningController`:
 - stance: x = (q, dq) (2 nq numbers, the stride map's state), the robot's
   ``forward_dynamics`` under the law's torques (clipped when the controller saturates),
   t the time since landing; guard the normal ground force Fz of ``takeoff_guard``
-  (takeoff where it reaches 0 going down); constraints Fz >= 0 (from landing on: a
-  landing the foot cannot stay on is refused at once; at the crossing Fz is 0 to
-  round-off), the friction cone mu Fz -/+ Fx >= 0 (with a slack near takeoff, below),
-  the swing foot above the ground and, without saturation, ``|u|`` <= the torque limit;
-  reset ``takeoff``;
+  (the law switches to the flight's where it reaches 0 going down); constraints Fz >= 0
+  (from landing on: a landing the foot cannot stay on is refused at once; at the crossing
+  Fz is 0 to round-off), the friction cone mu Fz -/+ Fx >= 0 (with a slack near takeoff,
+  below), the swing foot above the ground and, without saturation, ``|u|`` <= the torque
+  limit; reset the identity;
+- push-off: the same state and stance dynamics under the flight law (on the extended
+  state of ``takeoff``, the foot at rest), t the time since the law's switch; guard Fz
+  under those torques; constraints the cone, the swing foot and the torque limit; reset
+  ``takeoff``.  Where the stance ends off the reference's time, the flight law's first
+  torques differ from the stance law's last, and under them the ground may still push
+  the foot (Fz > 0): the foot then stays on the ground until that force reaches 0,
+  instead of being freed at the switch with a downward acceleration.  Where Fz <= 0 at
+  the switch (at the fixed point, and whenever the flight law pulls the foot up) the
+  domain is empty (``Domain.may_be_empty``) and the foot leaves there;
 - flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff
-  (the flight law's clock: t, or with ``flight_clock='stride'`` the stance's clock
-  continued, t plus the stance's duration less T_stance, a parameter set at entry from
-  the time the stride ran);
+  (the flight law's clock: the time since the law's switch, t plus the push-off's
+  duration, or with ``flight_clock='stride'`` the stance's clock continued, t plus the
+  time since landing less T_stance; parameters set at entry from the time the stride
+  ran, ``Domain.clock_from``);
   guard the swing foot's height (landing where it reaches 0 going down); constraints
   the other foot (the one that pushed off) above the ground and the torque limit;
   exit constraints the landing's normal impulse >= 0 and inside the friction cone, the
@@ -24,20 +34,23 @@ of a :class:`~biped_casadi.control.running.RunningController`:
 
 The RK4 step of each phase divides the phase's collocation interval into
 ``steps_per_interval`` steps, so that on the reference orbit the kinks of the piecewise
-polynomial reference fall on RK4 nodes.  Every constraint of both phases (the normal
-force, the friction cone, the feet's heights, the torque limit) and both guards are
+polynomial reference fall on RK4 nodes.  Every constraint of the phases (the normal
+force, the friction cone, the feet's heights, the torque limit) and the guards are
 checked between the nodes too, on the RK4 step from the node before
 (:mod:`analysis.stability.hybrid_cycle`): a margin that dips below zero and rises again
 within one step is a violation (the cone, the pushing foot, a torque), and a guard that
-does is the phase's end at its first root (the stance force reaching 0: the takeoff;
-the swing foot: the landing).
+does is the phase's end at its first root (the stance force reaching 0: the switch to
+the flight law, or the takeoff; the swing foot: the landing).
 
 Friction near takeoff.  Fz and Fx reach zero together only on the optimised orbit;
 off it (and at the closed loop's fixed point, which is not the collocation's) Fx is a
 little off zero where Fz vanishes, and mu Fz - ``|Fx|`` turns negative in the last instant
 before the foot leaves.  The cone constraints carry a slack ``friction_slack`` (N): the
 excess ``|Fx|`` - mu Fz may reach it (default 1 % of the robot's weight, the margin of
-:func:`gait_opt.running_checks.check_running` between the collocation points).
+:func:`gait_opt.running_checks.check_running` between the collocation points).  The
+pinned foot keeps that Fx to the instant Fz vanishes; freed there it starts with the
+acceleration Fx took away, downward for one sign of Fx, and the flight's check of the
+pushing foot stops such a stride (a real foot would have slid before it left).
 
 :func:`running_stability` finds the fixed point near the gait's first stance state
 and its eigenvalues; :func:`finite_difference_jacobian` checks the exact Jacobian;
@@ -133,15 +146,13 @@ def _state(name, v, n: int) -> np.ndarray:
 
 
 def _start(n: int, gains, clock_origin: float | None = None) -> ca.Function:
-    """Entry of a domain: X0 = x, p = the gains; with ``clock_origin`` (the flight),
-    also the law's clock at entry: 0 when the origin is 0 (the clock restarts), else
-    s - ``clock_origin`` (s the time since landing)."""
+    """Entry of a domain: X0 = x, p = the gains; with ``clock_origin`` (the domains under
+    the flight law), also the law's clock at entry, s - ``clock_origin`` (s the time since
+    the domain's ``clock_from`` entry: the switch to the flight law, or the landing)."""
     x = ca.SX.sym("x", n)
     k = ca.DM(np.asarray(gains, float))
     if clock_origin is None:
         return ca.Function("running_start", [x], [x, k])
-    if clock_origin == 0.0:
-        return ca.Function("running_start", [x], [x, ca.vertcat(k, 0.0)])
     s = ca.SX.sym("s")
     return ca.Function("running_start", [x, s], [x, ca.vertcat(k, s - clock_origin)])
 
@@ -156,8 +167,8 @@ class RunningCycle(HybridCycle):
     Parameters
     ----------
     domains : sequence of Domain
-        Stance and flight, as :func:`running_cycle` builds them (it also sets the
-        attributes below).
+        Stance, push-off and flight, as :func:`running_cycle` builds them (it also sets
+        the attributes below).
 
     Attributes
     ----------
@@ -215,7 +226,8 @@ def running_cycle(controller: RunningController, mu: float | None = None,
         Round-off allowed below zero in every constraint (its own unit).
     flight_clock : {'takeoff', 'stride'}
         The flight reference's clock (:data:`FLIGHT_CLOCKS`): 'takeoff' (the default)
-        restarts it at 0 at the takeoff; 'stride' continues the stance's, t - T_stance
+        restarts it at 0 at the law's switch (the takeoff, or the push-off's start when
+        the ground still pushes the foot); 'stride' continues the stance's, t - T_stance
         with t the time since landing, so that a takeoff earlier or later than the
         reference's does not shift the flight reference (the law's torque is continuous
         through the takeoff where the gait's is).
@@ -223,7 +235,7 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     Returns
     -------
     RunningCycle
-        Stance then flight; its state is the stance state (q, dq) at landing.
+        Stance, push-off and flight; its state is the stance state (q, dq) at landing.
     """
     c = controller
     if not isinstance(c, RunningController):
@@ -237,6 +249,7 @@ def running_cycle(controller: RunningController, mu: float | None = None,
         raise ValueError(f"flight_clock must be one of {', '.join(FLIGHT_CLOCKS)}, got "
                          f"{flight_clock!r}")
     origin = float(g.T_stance) if flight_clock == "stride" else 0.0
+    clock_from = 0 if flight_clock == "stride" else 1     # landing, or the law's switch
     _count("steps_per_interval", steps_per_interval, 1, MAX_STEPS_PER_INTERVAL)
     _real("time_limits", time_limits, 1.0)
     _real("tolerance", tolerance, strict=False)
@@ -255,23 +268,24 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     Fz, Fx = fl.takeoff_guard(q, dq, ua)
     g_st = ca.Function("normal_force", [X, t, k], [Fz])
     cons, names = _phase_constraints(
-        c, u, ca.vertcat(Fz, mu * Fz - Fx + slack, mu * Fz + Fx + slack, m.swing_foot(q)[1]),
-        ("stance normal force", "friction cone (Fx <= mu Fz)", "friction cone (-Fx <= mu Fz)",
-         "swing foot height"))
+        c, u, ca.vertcat(Fz, *_on_ground(m, mu, slack, q, Fz, Fx)),
+        ("stance normal force",) + _ON_GROUND)
     c_st = ca.Function("stance_constraints", [X, t, k], [cons])
     x = ca.SX.sym("x", 2 * nq)
-    qe0, dqe0 = fl.takeoff(x[:nq], x[nq:])
-    r_st = ca.Function("takeoff", [x], [ca.vertcat(qe0, dqe0)])
     h_st = float(g.T_stance) / (c.stance.n_intervals * steps_per_interval)
-    stance = Domain("stance", 2 * nq, f_st, g_st, r_st, h_st, time_limits * float(g.T_stance),
+    h_fl = float(g.T_flight) / (c.flight.n_intervals * steps_per_interval)
+    stance = Domain("stance", 2 * nq, f_st, g_st, ca.Function("switch", [x], [x]), h_st,
+                    time_limits * float(g.T_stance),
                     start=_start(2 * nq, c.gains), constraints=c_st, constraint_names=names,
                     guard_name="stance normal force", tolerance=tolerance,
                     dense_constraints=names, dense_guard=True)
+    pushoff = _pushoff_domain(c, mu, slack, h_fl, time_limits * float(g.T_stance), tolerance,
+                              origin, clock_from)
 
     # ---- flight
     Y = ca.SX.sym("Y", 2 * ne)
     qe, dqe = Y[:ne], Y[ne:]
-    kf = ca.SX.sym("k", 3 * nu + 1)              # the gains, then the law's clock at takeoff
+    kf = ca.SX.sym("k", 3 * nu + 1)              # the gains, then the law's clock at entry
     uf = c.flight_law_k(qe, dqe, t + kf[-1], kf[:-1])
     f_fl = ca.Function("running_flight", [Y, t, kf],
                        [ca.vertcat(dqe, fl.flight_dynamics(qe, dqe, c.applied(uf)))])
@@ -284,7 +298,6 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     r_fl = ca.Function("landing", [y], [ca.vertcat(qp, dqp)])
     e_fl = ca.Function("landing_checks", [y],
                        [ca.vertcat(F[1], mu * F[1] - F[0], mu * F[1] + F[0], v_other[1])])
-    h_fl = float(g.T_flight) / (c.flight.n_intervals * steps_per_interval)
     flight = Domain("flight", 2 * ne, f_fl, g_fl, r_fl, h_fl, time_limits * float(g.T_flight),
                     start=_start(2 * ne, c.gains, origin), constraints=c_fl,
                     constraint_names=names,
@@ -294,11 +307,49 @@ def running_cycle(controller: RunningController, mu: float | None = None,
                                            "landing impulse in the cone (-Fx <= mu Fz)",
                                            "other foot's lift-off velocity"),
                     guard_name="swing foot height", tolerance=tolerance,
-                    dense_constraints=names, dense_guard=True)
-    cyc = RunningCycle([stance, flight])
+                    dense_constraints=names, dense_guard=True, clock_from=clock_from)
+    cyc = RunningCycle([stance, pushoff, flight])
     cyc.controller, cyc.mu, cyc.friction_slack = c, mu, slack
-    cyc.clock_origins, cyc.flight_clock = (None, origin), flight_clock
+    cyc.clock_origins, cyc.flight_clock = (None, origin, origin), flight_clock
     return cyc
+
+
+#: the constraints while the stance foot is on the ground, after its normal force
+_ON_GROUND = ("friction cone (Fx <= mu Fz)", "friction cone (-Fx <= mu Fz)",
+              "swing foot height")
+
+
+def _on_ground(m, mu, slack, q, Fz, Fx) -> tuple:
+    """The friction cone with its slack and the swing foot's height (:data:`_ON_GROUND`)."""
+    return mu * Fz - Fx + slack, mu * Fz + Fx + slack, m.swing_foot(q)[1]
+
+
+def _pushoff_domain(c: RunningController, mu, slack, h, t_max, tolerance, origin,
+                    clock_from) -> Domain:
+    """The push-off (module docstring): the stance foot on the ground under the flight
+    law, while the ground still pushes it."""
+    m, fl, nq, nu = c.model, c.fl, c.model.nq, c.model.nu
+    X, t = ca.SX.sym("X", 2 * nq), ca.SX.sym("t")
+    q, dq = X[:nq], X[nq:]
+    kf = ca.SX.sym("k", 3 * nu + 1)              # the gains, then the law's clock at the switch
+    qe, dqe = fl.takeoff(q, dq)
+    u = c.flight_law_k(qe, dqe, t + kf[-1], kf[:-1])
+    ua = c.applied(u)
+    Fz, Fx = fl.takeoff_guard(q, dq, ua)
+    cons, names = _phase_constraints(c, u, ca.vertcat(*_on_ground(m, mu, slack, q, Fz, Fx)),
+                                     _ON_GROUND)
+    x = ca.SX.sym("x", 2 * nq)
+    qe, dqe = fl.takeoff(x[:nq], x[nq:])
+    return Domain("push-off", 2 * nq,
+                  ca.Function("running_pushoff", [X, t, kf],
+                              [ca.vertcat(dq, m.forward_dynamics(q, dq, ua))]),
+                  ca.Function("normal_force", [X, t, kf], [Fz]),
+                  ca.Function("takeoff", [x], [ca.vertcat(qe, dqe)]), h, t_max,
+                  start=_start(2 * nq, c.gains, origin),
+                  constraints=ca.Function("pushoff_constraints", [X, t, kf], [cons]),
+                  constraint_names=names, guard_name="stance normal force",
+                  tolerance=tolerance, dense_constraints=names, dense_guard=True,
+                  clock_from=clock_from, may_be_empty=True)
 
 
 # ------------------------------------------------------------------ fixed point
@@ -387,7 +438,7 @@ def running_stability(cycle: HybridCycle, x0=None, tol: float = 1e-11,
     return RunningStability(
         fixed_point=lin.state, residual=lin.residual,
         distance=float(np.max(np.abs(lin.state - xc))), A=lin.A,
-        eigenvalues=lin.eigenvalues, spectral_radius=rho, durations=lin.durations,
+        eigenvalues=lin.eigenvalues, spectral_radius=rho, durations=_phases(lin.durations),
         stable=bool(rho < 1), newton_start_residual=r0,
         status=status if ok else "failed",
         message=(f"fixed point {lin.residual:.1e} from closing, "
@@ -434,7 +485,11 @@ class StrideRecord:
     next_deviation : float
         max ``|x_(k+1) - x*|`` after it.
     durations : tuple of float
-        (stance, flight), s.
+        (stance, flight), s: the stance foot's time on the ground (to the law's switch
+        and the push-off after it) and the flight's.
+    pushoff : float
+        How long the ground still pushed the stance foot after the law switched to the
+        flight's, s (0: the foot left at the switch).
     fz_min : float
         Smallest normal force at the stance RK4 nodes before the takeoff crossing, N.
     friction_ratio_max : float
@@ -460,6 +515,7 @@ class StrideRecord:
     deviation: float
     next_deviation: float
     durations: tuple
+    pushoff: float
     fz_min: float
     friction_ratio_max: float
     friction_excess_max: float
@@ -513,6 +569,12 @@ def _time_above(t, e) -> float:
     return float(np.sum(dt[both]) + np.sum(dt[one] * frac[one]))
 
 
+def _phases(durations) -> np.ndarray:
+    """(stance, flight) from the three domains' durations: the stance foot is on the
+    ground in the stance and the push-off."""
+    return np.array([durations[0] + durations[1], durations[2]])
+
+
 def _lowest(nodes, ps, name: str) -> float:
     """The lowest of an output at the nodes of a pass and at its minima between them."""
     return float(min([np.min(nodes), *(v for _, n, v in ps.dips if n == name)]))
@@ -523,7 +585,7 @@ def _margins(cycle: HybridCycle, passes) -> dict:
     c = cycle.controller
     m, fl = c.model, c.fl
     nq, ne = m.nq, fl.ne
-    st, fli = passes
+    st, po, fli = passes
     Xs, ts = st.nodes, st.times
     N = ts.size
     us = np.array(c.stance_law.map(N)(Xs[:nq], Xs[nq:], ts[None, :]))
@@ -532,6 +594,10 @@ def _margins(cycle: HybridCycle, passes) -> dict:
     weight = m.description.total_mass * m.description.gravity
     loaded = Fz > 0.01 * weight
     zsw = np.array(m.swing_foot.map(N)(Xs[:nq])[1]).ravel()
+    Xp, tp = po.nodes, po.times
+    qe, dqe = fl.takeoff.map(tp.size)(Xp[:nq], Xp[nq:])
+    up = np.array(c.flight_law.map(tp.size)(qe, dqe, tp[None, :] + po.parameters[-1]))
+    zsp = np.array(m.swing_foot.map(tp.size)(Xp[:nq])[1]).ravel()
     Yf, tf = fli.nodes, fli.times
     Nf = tf.size
     uf = np.array(c.flight_law.map(Nf)(Yf[:ne], Yf[ne:], tf[None, :] + fli.parameters[-1]))
@@ -541,11 +607,12 @@ def _margins(cycle: HybridCycle, passes) -> dict:
     return dict(fz_min=float(Fz[:-1].min()),
                 friction_ratio_max=float(np.max(np.abs(Fx[loaded]) / Fz[loaded], initial=0.0)),
                 friction_excess_max=float(np.max(np.abs(Fx) - cycle.mu * Fz)),
-                torque_max=float(max(np.abs(us).max(), np.abs(uf).max())),
+                torque_max=float(max(np.abs(us).max(), np.abs(up).max(), np.abs(uf).max())),
                 saturated_time=sum(_time_above(tt, np.abs(uu).max(axis=0) - c.torque_limit)
-                                   for tt, uu in ((ts, us), (tf, uf)))
+                                   for tt, uu in ((ts, us), (tp, up), (tf, uf)))
                 if np.isfinite(c.torque_limit) else 0.0,               # no limit: never
-                swing_min=_lowest(zsw, st, "swing foot height"),
+                swing_min=min(_lowest(zsw, st, "swing foot height"),
+                              _lowest(zsp, po, "swing foot height")),
                 other_foot_min=_lowest(feet[1, 0::2], fli, "other foot height"),
                 landing_impulse_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else float("inf"))
 
@@ -591,7 +658,8 @@ def simulate_running(cycle: HybridCycle, x_star, start, strides: int = 20) -> Ru
             break
         devs.append(float(np.max(np.abs(x - xs))))
         recs.append(StrideRecord(deviation=devs[-2], next_deviation=devs[-1],
-                                 durations=tuple(float(d) for d in sv.durations),
+                                 durations=tuple(_phases(sv.durations).tolist()),
+                                 pushoff=float(sv.durations[1]),
                                  **_margins(cycle, sv.passes)))
     d = np.array(devs)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -100,7 +100,7 @@ from ..files import read_text_file
 from .description import RobotDescription, description_from_dict, description_toml, joint_names
 from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
 from .urdf_legs import (MATCH_TOL, MAX_MATCH_TOL, _beyond, _check_foot, check_match_tol,
-                        _foot_point, _same_legs, _wider)
+                        _foot_point, _same_legs, _unequal_legs, _wider)
 from .urdf_text import _parse, xacro_refusal
 from .urdf_tree import _axis, _body, _Frame, _legs, _pose, _Reader, apply_locks, lock_table
 
@@ -564,16 +564,14 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
     match_tol = check_match_tol(match_tol)
     lock = lock_table(lock, lock_off_axis, axis)
     text = read_text_file(path, "URDF file", 20_000_000)
-    robot, said, framed = _parse(text, where, path.name)
+    robot, said, framed, text = _parse(text, where, path.name)   # text as parsed
     rd = _Reader(robot, where, tol)
     rd.notes += framed
     torso = _Frame(rd.torso(torso), np.eye(3), np.zeros(3))
     apply_locks(rd, torso.name, lock, lock_off_axis, axis)
     chains = _legs(rd, torso)
     if len(chains[0]) != len(chains[1]):          # before the feet: a leg's own checks
-        rd.fail("legs differ: " + " and ".join(   # would blame the longer leg's links
-            f"{len(c)} joint(s) ({' -> '.join(j.name for j, _ in c)})" for c in chains)
-            + ": the model's two legs are alike chains of joints from the torso")
+        _unequal_legs(rd, torso.name, chains)     # would blame the longer leg's links
     n, signs = _axis(rd, chains)
     plane = _Plane(n)
     feet = [_foot_point(rd, chain[-1][1], foot, n, [j.name for j, _ in chain])

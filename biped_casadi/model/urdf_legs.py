@@ -1,7 +1,8 @@
 """The ends of a URDF's legs and how closely the two must agree: the foot point (a
 fixed frame of the last link, a sole below a locked ankle, ``foot=``, ``foot_beyond``),
-and the legs identical by default or within ``match_tol`` of the leg's size (a CAD
-export's mirrored parts differ in their last digits), the model's leg then their mean.
+and the legs alike chains of joints, identical by default or within ``match_tol`` of
+the leg's size (a CAD export's mirrored parts differ in their last digits), the model's
+leg then their mean.
 Used by :mod:`biped_casadi.model.urdf`."""
 from __future__ import annotations
 
@@ -64,6 +65,21 @@ def _same_legs(rd, links, pms, legs, match_tol: float, hips: float = 0.0) -> flo
 #: what each quantity of a leg is measured against in ``match_tol``
 _SIZE = dict(mass="mass", length="length", com="length", com_offset="length",
              inertia="mass x length^2")
+
+
+def _unequal_legs(rd: _Reader, torso: str, chains) -> None:
+    """Refuse legs of different numbers of joints; when the shorter one hangs from a link
+    welded to the torso (Drake's kneed compass gait: one thigh fixed to the hip, one pin
+    between the thighs), say that such a walker has no torso of the model's kind."""
+    short = min(chains, key=len)[0][0]
+    welded = "" if short.parent == torso or abs(len(chains[0]) - len(chains[1])) != 1 else (
+        f" ({short.name!r} hangs from link {short.parent!r}, fixed to the torso {torso!r}: "
+        f"if that is a thigh welded to the hip, as in a compass-gait walker with one joint "
+        f"between its thighs, the robot has no torso apart from its legs, which the model "
+        f"needs to carry both legs by their hip joints)")
+    rd.fail("legs differ: " + " and ".join(
+        f"{len(c)} joint(s) ({' -> '.join(j.name for j, _ in c)})" for c in chains)
+        + ": the model's two legs are alike chains of joints from the torso" + welded)
 
 
 def _wider(rel: float, match_tol: float, outcome: str = "takes their mean") -> str:

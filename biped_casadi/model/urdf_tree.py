@@ -182,6 +182,9 @@ class _Reader:
 
     def __init__(self, robot, where: str, tol: float):
         self.robot, self.where, self.tol = robot, where, tol
+        #: said after every refusal once ``lock_off_axis`` chose by its vote a plane
+        #: whose normal is not the torso frame's y
+        self.plane_vote = ""
         self._check_names()
         self._check_numbers()
         self.links = {link.name: link for link in robot.links}
@@ -197,7 +200,7 @@ class _Reader:
         self.locked = {}
 
     def fail(self, problem: str):
-        raise ValueError(f"{self.where}: {problem}")
+        raise ValueError(f"{self.where}: {problem}{self.plane_vote}")
 
     def unit_axis(self, joint) -> np.ndarray:
         """A rotating joint's axis as a unit vector in its own frame (x without one)."""
@@ -245,8 +248,11 @@ class _Reader:
         revolute or continuous joints below the torso (but those of ``keep``) whose axis
         at zero joint angles is not parallel to it.  n is the torso frame's ``axis``
         ('x' or 'y'), else the direction across the torso's z that most of the joints
-        below the torso turn about (a tie: the one nearer the torso's y, then the first
-        in the file)."""
+        below the torso turn about (those of ``keep`` too: a robot's locked ankle pitch
+        and arm joints vote for its sagittal plane, where a frame turned so that its x is
+        lateral would otherwise tie its pitch and roll joints; a tie: the one nearer the
+        torso's y, then the first in the file).  A humanoid's hands can outvote its legs
+        (JVRC-1: 22 joints about x against 12): the refusals that follow say so."""
         axes = self.rotating_axes(torso)
         if axis is not None:
             n = np.eye(3)[{"x": 0, "y": 1}[axis]]
@@ -433,10 +439,14 @@ def apply_locks(rd: "_Reader", torso: str, lock: dict, off_axis: bool, axis) -> 
     continuous joint off the plane's normal at 0 (said in the notes)."""
     if off_axis:
         n, off, why = rd.off_axis(torso, axis, lock)
-        rd.notes.append(f"lock_off_axis: the plane's normal is "
-                        f"{(np.round(np.where(np.abs(n) < 1e-12, 0.0, n), 6) + 0.0).tolist()} "
-                        f"in the torso frame ({why}); "
-                        f"locked at 0 as off it: {', '.join(off) or 'no joint'}")
+        normal = (np.round(np.where(np.abs(n) < 1e-12, 0.0, n), 6) + 0.0).tolist()
+        rd.notes.append(f"lock_off_axis: the plane's normal is {normal} in the torso frame "
+                        f"({why}); locked at 0 as off it: {', '.join(off) or 'no joint'}")
+        if axis is None and not _parallel(n, np.array([0.0, 1.0, 0.0])):
+            # a vote for other than the torso's y (across a frame of x forward, z up) may
+            # be the hands' and rolls': every refusal says which plane it took
+            rd.plane_vote = (f" (--lock-off-axis took the plane's normal {normal} of the "
+                             f"torso frame, {why}: --axis x|y chooses it)")
         lock = {**lock, **dict.fromkeys(off, 0.0)}
     rd.lock(lock)
     if lock:
