@@ -351,6 +351,22 @@ def test_a_minimum_above_zero_is_recorded():
     assert np.min(ps.nodes[0]) > v + 1e-4             # the nodes are well above it
 
 
+def test_a_dip_after_the_first_step_is_screened_in_and_one_far_above_out():
+    """z = zmin + 5 (t - 0.05)^2, its minimum in the third RK4 step (0.04 to 0.06 s), the
+    nodes there 5e-4 above it.  With zmin = -1e-4 the nodes are all above zero and
+    the domain stops at t = 0.05 s; with zmin = 1e-2 the nodes' second differences
+    (c'' h^2 = 4e-3) bound the dip well above zero and no minimum is searched."""
+    def start(zmin):
+        return [zmin + 5 * 0.05 ** 2, -0.5, 10.0, 0.0]
+
+    plain = _cubic(dense=False).stride(start(-1e-4), record=True).passes[0]
+    assert np.all(plain.nodes[0] > 0) and plain.dips == []
+    with pytest.raises(HybridCycleError, match=r"^domain 'dip': height violated at t = 0.05 s "
+                                               r"\(-0.0001 < 0, between two RK4 nodes\)$"):
+        _cubic().stride(start(-1e-4))
+    assert _cubic().stride(start(1e-2), record=True).passes[0].dips == []
+
+
 def test_a_guard_that_dips_and_rises_within_a_step_is_crossed():
     """The guard z = 1e-4 - 0.1 t + 5 t^2 is below zero from t = 0.00106 s to 0.0189 s,
     inside the first RK4 step: the nodes never see the crossing; between them it is the

@@ -237,10 +237,7 @@ def test_the_pushing_foot_is_checked_between_the_nodes(cycle, stable, model):
                                                r"two RK4 nodes\)$") as e:
         cycle.stride(x)
     t_dip, z_dip = (float(v) for v in re.search(r"t = (\S+) s \((\S+) <", str(e.value)).groups())
-    at_nodes = copy.copy(cycle)
-    at_nodes.domains = [dataclasses.replace(d, dense_constraints=(), dense_guard=False)
-                        for d in cycle.domains]
-    _, _, fl = at_nodes.stride(x, record=True).passes
+    _, _, fl = _at_nodes(cycle).stride(x, record=True).passes
     c, d = cycle.controller, cycle.domains[2]
     ne = c.fl.ne
     z_nodes = np.array(c.fl.feet.map(fl.times.size)(fl.nodes[:ne]))[1, 0::2]
@@ -252,6 +249,56 @@ def test_the_pushing_foot_is_checked_between_the_nodes(cycle, stable, model):
     assert min(z) < -d.tolerance
     assert min(z) == pytest.approx(z_dip, rel=1e-2)
     assert abs(etas[int(np.argmin(z))] - t_dip) <= etas[1]
+
+
+def _at_nodes(cycle):
+    """The cycle checked at its RK4 nodes only."""
+    at_nodes = copy.copy(cycle)
+    at_nodes.domains = [dataclasses.replace(d, dense_constraints=(), dense_guard=False)
+                        for d in cycle.domains]
+    return at_nodes
+
+
+def test_the_friction_cone_is_checked_between_the_nodes(cycle, run_gait):
+    """0.05 rad/s more on dq1 at the collocated landing state: the stance's largest
+    (Fx - slack) / Fz, sampled at 16 lengths of the RK4 steps around its largest node,
+    is between two nodes.  With mu halfway between that and the nodes' largest, the
+    cycle checked at its nodes passes the stance (and stops at the landing, whose impulse
+    is outside that narrower cone); checked between them it stops in that step of the
+    stance at the cone.  mu only enters the constraints: the motion is the same."""
+    x = np.asarray(run_gait.x_stance, float)[:, 0].copy()
+    x[cycle.n // 2] += 0.05
+    st = cycle.stride(x, record=True).passes[0]
+    d, mu, s = cycle.domains[0], cycle.mu, cycle.friction_slack
+    assert d.constraint_names[:2] == ("stance normal force", "friction cone (Fx <= mu Fz)")
+
+    def ratio(X, t):
+        Fz, cone = np.array(d.constraints(X, t, st.parameters)).ravel()[:2]
+        return (mu * Fz - cone) / Fz                   # (Fx - slack) / Fz
+
+    at_nodes = [ratio(st.nodes[:, k], t) for k, t in enumerate(st.times[:-1])]
+    k = int(np.argmax(at_nodes))
+    samples = []
+    for i in (k - 1, k):
+        X, t = st.nodes[:, i], st.times[i]
+        for eta in np.linspace(0, d.h, 17)[1:-1]:
+            Xe = np.array(rk4_step(lambda Y, stage: d.vector_field(Y, t + stage * eta,
+                                                                    st.parameters),
+                                   X, eta)).ravel()
+            samples.append((ratio(Xe, t + eta), t + eta))
+    r_between, t_between = max(samples)
+    assert r_between > at_nodes[k]
+    tight = running_cycle(cycle.controller, mu=(at_nodes[k] + r_between) / 2)
+    with pytest.raises(HybridCycleError) as at_nodes_only:      # the stance passes
+        _at_nodes(tight).stride(x)
+    assert at_nodes_only.value.domain == "flight" and "landing impulse" in str(
+        at_nodes_only.value)                           # (its cone is now narrower too)
+    with pytest.raises(HybridCycleError, match=r"^domain 'stance': friction cone \(Fx <= mu "
+                                               r"Fz\) violated at t = \S+ s \(\S+ < 0, "
+                                               r"between two RK4 nodes\)$") as e:
+        tight.stride(x)
+    t_dip = float(re.search(r"t = (\S+) s", str(e.value)).group(1))
+    assert abs(t_dip - t_between) < d.h and t_dip not in st.times
 
 
 def test_the_ground_pushes_the_foot_until_the_flight_law_lets_it_go(cycle, stable, model):

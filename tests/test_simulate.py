@@ -224,6 +224,68 @@ def test_status_scuffed_foot_starts_in_ground(gait, vc):
     assert res.status == "scuffed" and res.failure_time == 0.0 and not res.steps
 
 
+def test_a_scuff_between_two_nodes_stops_the_run(gait, vc, monkeypatch):
+    """At the step's start (the swing foot on the ground behind the stance foot) the swing
+    knee turned so that the foot moves down at 2 mm/s: the law lifts it again within
+    the first RK4 step, the foot below the ground between the first two nodes (found
+    here by sampling the step at 64 lengths) and above it at both.  The run stops there,
+    scuffed, at the time the samples say; checked at the nodes only it goes on."""
+    q0, dq0 = perturbed_initial_state(gait, 0.0, 0.0)
+    model = gait.model
+
+    def foot_speed(dq):
+        return float(model.swing_foot_velocity(q0, dq)[1])
+
+    knee = np.eye(model.nq)[-1]                     # z_sw's rate is linear in dq
+    dq = dq0 + (-2e-3 - foot_speed(dq0)) / (foot_speed(dq0 + knee) - foot_speed(dq0)) * knee
+    sim = Simulator(vc, SimulationOptions(steps=1))
+    start = vc.step_start(q0, dq)
+    X = np.r_[q0, dq, start.r]
+    etas = np.linspace(0, sim.h, 65)
+    z = np.array([float(np.ravel(sim.event(X, 0.0, eta, start.p)[0])[0]) for eta in etas])
+    tol = sim.limits.ground_tolerance
+    assert z[0] >= -tol and z[-1] > 0 and z.min() < -10 * tol
+    res = sim.run(q0, dq)
+    assert res.status == "scuffed" and "between two RK4 nodes" in res.message
+    assert abs(res.failure_time - etas[np.argmin(z)]) <= etas[1]
+    assert float(model.swing_foot(res.q[-1])[1]) == pytest.approx(z.min(), rel=1e-2)
+    monkeypatch.setattr(Simulator, "_dip", lambda *args: None)      # the nodes only
+    at_nodes = Simulator(vc, SimulationOptions(steps=1)).run(q0, dq)
+    assert not at_nodes.failure_time <= sim.h
+
+
+@pytest.mark.parametrize("z0, x_sw, scuff_zone, ignored, kind", [
+    (1e-7, 0.3, 0.0, False, "strike"), (1e-7, -0.3, 0.0, False, "scuffed"),
+    (1e-7, -0.3, 0.1, True, None), (1e-7, 0.05, 0.1, True, None),
+    (1e-7, 0.3, 0.1, True, "strike"), (3e-7, -0.3, 0.0, False, None)])
+def test_a_dip_between_two_nodes_is_a_strike_in_front_and_a_scuff_behind(
+        z0, x_sw, scuff_zone, ignored, kind):
+    """The swing foot on z = z0 - 2e-3 eta + 5 eta^2 along a step of 1 ms (its rate -2 mm/s
+    at the first node, +8 mm/s at the last), lowest at eta = 0.2 ms, z0 - 2e-7 m: below
+    the ground, in front of the stance foot (beyond the scuff zone) it is a strike, behind
+    it a scuff, ignored where the robot's scuffing is; above the ground, nothing."""
+    from types import SimpleNamespace
+
+    def dip(X, tau, eta, p):
+        return (np.array([[z0 - 2e-3 * eta + 5 * eta ** 2]]), np.array([[-2e-3 + 10 * eta]]),
+                np.array([[10.0]]), np.array([[x_sw]]), np.zeros((1, 1)))
+
+    sim = SimpleNamespace(dip=dip, h=1e-3, plant=SimpleNamespace(scuff_zone=scuff_zone),
+                          limits=SimpleNamespace(scuffing_ignored=ignored,
+                                                 ground_tolerance=1e-9))
+    got = Simulator._dip(sim, np.zeros(1), 0.0, None, np.zeros((1, 1)), np.array([1e-3]),
+                         np.array([z0]), np.array([-2e-3]), np.array([8e-3]), None, 1)
+    if kind is None:
+        assert got is None
+        return
+    j, what, info, eta, _ = got
+    assert (j, what) == (0, kind) and eta == pytest.approx(2e-4, rel=1e-12)
+    if kind == "strike":
+        assert info == pytest.approx(z0 - 2e-7, rel=1e-9)      # z at the minimum
+    else:
+        assert info.endswith("x_sw = -0.3000 m, z_sw = -1e-07 m, between two RK4 nodes")
+
+
 def test_status_fell(gait, vc):
     """'fell' when the hip is lower than min_hip_height or the torso leans more than
     max_torso_angle: thresholds beyond the reference's extremes let it walk; a hip

@@ -25,15 +25,11 @@ the saltation term of each guard.
 
 Between the nodes.  A domain may name outputs that must hold on the continuous solution,
 not only at its nodes: constraints (``dense_constraints``, e.g. a foot's height above the
-ground) and its guard (``dense_guard``).  Between two nodes the solution is the RK4 step of
-length eta from the first, the one the crossing is located on; an output whose rate along
-the flow goes from <= 0 at one node to > 0 at the next has a minimum in between (where the
-rate is 0 at the first node, the step's curvature there says whether it goes down first),
-found by the same safeguarded Newton (:func:`~biped_casadi.simulation.kernel.locate_strike`)
-on its rate in eta.  A constraint below ``-tolerance`` there is violated; a guard below 0
-there is a crossing, the first root before that minimum (a foot that touches the ground and
-rises again within one step has landed).  Every minimum found is recorded
-(:attr:`DomainPass.dips`).
+ground, a contact force's friction margin) and its guard (``dense_guard``), checked on
+the RK4 step from each node (:mod:`analysis.stability.between_nodes`): a constraint below
+``-tolerance`` there is violated; a guard below 0 there is a crossing, the first root
+before that minimum (a foot that touches the ground and rises again within one step has
+landed).  Every minimum found is recorded (:attr:`DomainPass.dips`).
 
 Domain i's state x has ``n`` numbers (what the resets map); it integrates an augmented
 state X = (x, r) of ``nX`` numbers (r: a controller's internal states, e.g. the
@@ -57,6 +53,7 @@ import numpy as np
 from biped_casadi.numerics import rk4_step
 from biped_casadi.simulation.kernel import locate_strike
 
+from .between_nodes import minima, watch
 from .cycle_results import DomainPass, StrideLinearisation, StrideValue
 
 __all__ = ["Domain", "HybridCycle", "HybridCycleError", "DomainPass", "StrideValue",
@@ -136,8 +133,8 @@ class Domain:
         How far below zero a constraint may go (round-off), in its own unit.
     dense_constraints : tuple of str
         Names of constraints (of ``constraint_names``) that must also hold between the
-        nodes (module docstring); their rates are taken along the flow at every node, so
-        they should be cheap (a foot's height: its rate needs the velocities only).
+        nodes (:mod:`analysis.stability.between_nodes`): screened at every step by the
+        nodes' values, their rates taken only where a step may dip below the bound.
     dense_guard : bool
         Look for the guard's crossing between the nodes too: a dip below 0 and back within
         one RK4 step ends the domain at its first root.
@@ -236,6 +233,12 @@ class Domain:
         self.watched = ((((self.guard_name, None),) if self.dense_guard else ())
                         + tuple((c, self.constraint_names.index(c))
                                 for c in self.dense_constraints))
+        #: their bounds (0 for the guard, -tolerance for a constraint) and their places
+        #: in (guard, constraints)
+        self.watched_bounds = np.array([0.0 if i is None else -self.tolerance
+                                        for _, i in self.watched])
+        self.watched_index = np.array([0 if i is None else i + 1 for _, i in self.watched],
+                                      int)
 
     def _names(self, f, names, word):
         if f is None:
@@ -266,21 +269,12 @@ class _Compiled:
 
         Xn = ca.cse(rk4_step(rhs, X, h))
         rk4 = ca.Function(f"{_ident(d.name)}_rk4", [X, t, h, p], [Xn, t + h])
-        Y, s = ca.SX.sym("Y", nX), ca.SX.sym("s")
-
-        def watched(Yv, sv):
-            out = [d.guard(Yv, sv, p) if i is None else d.constraints(Yv, sv, p)[i]
-                   for _, i in d.watched]
-            return ca.vertcat(*out) if out else ca.SX(0, 1)
-
-        W = watched(Y, s)        # rates along the flow (the velocities alone for a height)
-        rate = ca.Function("rate", [Y, s, p], [ca.jtimes(W, Y, d.vector_field(Y, s, p))
-                                                + ca.jacobian(W, s)])
+        self._d, self._rk4, self._lazy = d, rk4, {}    # built at first use, shared by copies
 
         def node(Yv, sv):
             a = d.arming(Yv, sv, p) if d.arming is not None else ca.SX(1)
             c = d.constraints(Yv, sv, p) if d.constraints is not None else ca.SX(0, 1)
-            return d.guard(Yv, sv, p), a, c, rate(Yv, sv, p)
+            return d.guard(Yv, sv, p), a, c
 
         Xr, tr = rk4(X, t, h, p)
         self.node = ca.Function("node", [X, t, p], list(node(X, t)))
@@ -292,10 +286,8 @@ class _Compiled:
         Xe, te = rk4(X, t, eta, p)
         ge = d.guard(Xe, te, p)
         self.event = ca.Function("event", [X, t, eta, p], [ge, ca.jacobian(ge, eta)])
-        We = watched(Xe, te)
-        dW = ca.jacobian(We, eta)
-        self.between = ca.Function("between", [X, t, eta, p], [We, dW, ca.jacobian(dW, eta)])
         Je = ca.jtimes(Xe, X, J) + (ca.jtimes(Xe, p, Jp) if npar else 0)
+        Y, s = ca.SX.sym("Y", nX), ca.SX.sym("s")
         gY = d.guard(Y, s, p)
         grads = ca.Function("guard_gradients", [Y, s, p],
                             [ca.jacobian(gY, Y), ca.jacobian(gY, p), ca.jacobian(gY, s)])
@@ -310,6 +302,39 @@ class _Compiled:
         e = d.exit_constraints(x) if d.exit_constraints is not None else ca.SX(0, 1)
         e = e[0] if isinstance(e, (list, tuple)) else e
         self.reset = ca.Function("reset", [x], [xp, ca.jacobian(xp, x), e])
+
+    def _watched_outputs(self):
+        """Symbols (Y, s, p) and the watched outputs W(Y, s, p)."""
+        d = self._d
+        Y, s, p = ca.SX.sym("Y", d.nX), ca.SX.sym("s"), ca.SX.sym("p", d.n_par)
+        out = [d.guard(Y, s, p) if i is None else d.constraints(Y, s, p)[i]
+               for _, i in d.watched]
+        return Y, s, p, ca.Function("watched", [Y, s, p], [ca.vertcat(*out)])
+
+    @property
+    def rate(self) -> ca.Function:
+        """``rate(X, t, p)``: the watched outputs' rates along the flow (built when a step
+        is first refined)."""
+        if "rate" not in self._lazy:
+            Y, s, p, W = self._watched_outputs()
+            w = W(Y, s, p)
+            self._lazy["rate"] = ca.Function(
+                "rate", [Y, s, p], [ca.jtimes(w, Y, self._d.vector_field(Y, s, p))
+                                    + ca.jacobian(w, s)])
+        return self._lazy["rate"]
+
+    @property
+    def between(self) -> ca.Function:
+        """``between(X, t, eta, p) -> (W, dW/deta, d2W/deta2)`` on the RK4 step of length
+        eta from the node (X, t) (built when a minimum is first located)."""
+        if "between" not in self._lazy:
+            X, t, p, W = self._watched_outputs()
+            eta = ca.SX.sym("eta")
+            We = W(*self._rk4(X, t, eta, p)[:2], p)
+            dW = ca.jacobian(We, eta)
+            self._lazy["between"] = ca.Function("between", [X, t, eta, p],
+                                                [We, dW, ca.jacobian(dW, eta)])
+        return self._lazy["between"]
 
 
 def entry_function(d: Domain) -> ca.Function:
@@ -382,29 +407,6 @@ class HybridCycle:
             raise HybridCycleError(d.name, "constraint",
                                    f"{names[j]} violated at t = {t:.6g} s ({c[j]:.3g} < 0)")
 
-    @staticmethod
-    def _between(d: Domain, f, X, t, h, p, ra, rb) -> list:
-        """The minima of the watched outputs between the node (X, t) and the next one, h
-        later, their rates there ``ra`` and ``rb`` (module docstring): (eta, watched
-        index, value) by eta."""
-        ra, rb = _col(ra), _col(rb)
-        found = []
-        for j in np.flatnonzero((ra <= 0) & (rb > 0)):
-            za = -ra[j]
-            if za == 0:            # at rest at the node: a minimum inside if it curves down
-                curv = _col(f.between(X, t, 0.0, p)[2])[j]
-                if not curv < 0:
-                    continue
-                za = -0.5 * curv * h                       # the Newton's first guess only
-
-            def event(eta_, j=j):
-                _, dw, ddw = f.between(X, t, float(eta_[0]), p)
-                return -_col(dw)[j:j + 1], -_col(ddw)[j:j + 1]
-
-            eta = float(locate_strike(event, h, za, -rb[j])[0])
-            found.append((eta, int(j), float(_col(f.between(X, t, eta, p)[0])[j])))
-        return sorted(found)
-
     def _dips(self, d: Domain, t, between, eta_max, dips):
         """Record the minima before ``eta_max`` into ``dips``; a constraint below
         -tolerance there is violated."""
@@ -423,28 +425,30 @@ class HybridCycle:
         it, its time, its J, the guard there, the bracket's end eta and the guard there,
         the minima in that last step, the minima before, times, nodes)."""
         t, h = 0.0, d.h
-        g_prev, _, c, r_prev = f.node(X, t, p)
-        g_prev = float(g_prev)
+        g_prev, _, c = f.node(X, t, p)
+        g_prev, c = float(g_prev), _col(c)
         self._check(d, c, t, d.constraint_names)
         times, nodes = ([t], [X]) if record else (None, None)
         dips = []
+        w = [watch(d, g_prev, c)]               # the watched values at the last nodes
         for _ in range(d.max_steps):
             if J is not None:
-                Xn, Jn, tn, g, a, c, r = f.step_sens(X, J, t, h, p, Jp)
+                Xn, Jn, tn, g, a, c = f.step_sens(X, J, t, h, p, Jp)
             else:
-                Xn, tn, g, a, c, r = f.step(X, t, h, p)
-            g, a = float(g), float(a)
+                Xn, tn, g, a, c = f.step(X, t, h, p)
+            g, a, c = float(g), float(a), _col(c)
             if not np.isfinite(g):
                 raise HybridCycleError(d.name, "not_finite",
                                        f"state not finite at t = {float(tn):.6g} s")
-            between = self._between(d, f, X, t, h, p, r_prev, r) if d.watched else []
+            w = w[-3:] + [watch(d, g, c)]
+            between = minima(d, f, X, t, h, p, Xn, w) if d.watched else []
             hi, g_hi = next(((e, v) for e, j, v in between
                              if d.watched[j][1] is None and v < 0), (h, g))
             if g_prev >= 0 > g_hi and a > 0:
                 return X, t, J, g_prev, hi, g_hi, between, dips, times, nodes
             self._dips(d, t, between, np.inf, dips)
             self._check(d, c, float(tn), d.constraint_names)
-            X, t, g_prev, r_prev = _col(Xn), float(tn), g, r
+            X, t, g_prev = _col(Xn), float(tn), g
             if J is not None:
                 J = np.array(Jn)
             if record:

@@ -34,11 +34,13 @@ of a :class:`~biped_casadi.control.running.RunningController`:
 
 The RK4 step of each phase divides the phase's collocation interval into
 ``steps_per_interval`` steps, so that on the reference orbit the kinks of the piecewise
-polynomial reference fall on RK4 nodes.  The feet's heights (the swing foot's in stance,
-the pushing foot's in flight, and the landing guard) are checked between the nodes too,
-on the RK4 step from the node before (:mod:`analysis.stability.hybrid_cycle`): a foot
-that dips below the ground and rises again within one step is a violation (the pushing
-foot) or the landing (the swing foot).
+polynomial reference fall on RK4 nodes.  Every constraint of the phases (the normal
+force, the friction cone, the feet's heights, the torque limit) and the guards are
+checked between the nodes too, on the RK4 step from the node before
+(:mod:`analysis.stability.hybrid_cycle`): a margin that dips below zero and rises again
+within one step is a violation (the cone, the pushing foot, a torque), and a guard that
+does is the phase's end at its first root (the stance force reaching 0: the switch to
+the flight law, or the takeoff; the swing foot: the landing).
 
 Friction near takeoff.  Fz and Fx reach zero together only on the optimised orbit;
 off it (and at the closed loop's fixed point, which is not the collocation's) Fx is a
@@ -276,7 +278,7 @@ def running_cycle(controller: RunningController, mu: float | None = None,
                     time_limits * float(g.T_stance),
                     start=_start(2 * nq, c.gains), constraints=c_st, constraint_names=names,
                     guard_name="stance normal force", tolerance=tolerance,
-                    dense_constraints=("swing foot height",))
+                    dense_constraints=names, dense_guard=True)
     pushoff = _pushoff_domain(c, mu, slack, h_fl, time_limits * float(g.T_stance), tolerance,
                               origin, clock_from)
 
@@ -305,8 +307,7 @@ def running_cycle(controller: RunningController, mu: float | None = None,
                                            "landing impulse in the cone (-Fx <= mu Fz)",
                                            "other foot's lift-off velocity"),
                     guard_name="swing foot height", tolerance=tolerance,
-                    dense_constraints=("other foot height",), dense_guard=True,
-                    clock_from=clock_from)
+                    dense_constraints=names, dense_guard=True, clock_from=clock_from)
     cyc = RunningCycle([stance, pushoff, flight])
     cyc.controller, cyc.mu, cyc.friction_slack = c, mu, slack
     cyc.clock_origins, cyc.flight_clock = (None, origin, origin), flight_clock
@@ -347,7 +348,7 @@ def _pushoff_domain(c: RunningController, mu, slack, h, t_max, tolerance, origin
                   start=_start(2 * nq, c.gains, origin),
                   constraints=ca.Function("pushoff_constraints", [X, t, kf], [cons]),
                   constraint_names=names, guard_name="stance normal force",
-                  tolerance=tolerance, dense_constraints=("swing foot height",),
+                  tolerance=tolerance, dense_constraints=names, dense_guard=True,
                   clock_from=clock_from, may_be_empty=True)
 
 

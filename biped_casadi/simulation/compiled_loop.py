@@ -12,7 +12,8 @@ in the simulator's schema.  The impact time is found by the simulator's safeguar
 Newton iteration with the swing foot's vertical velocity at the end of the last RK4
 step as the slope (the exact derivative of that step would need the library's
 derivatives; with this slope Newton converges to the same root, |z_sw| < 1e-15 m, in one
-or two more iterations).
+or two more iterations); the swing foot's minima between two nodes are located by
+bisection on that velocity.
 
 :func:`compiled_closed_loop` returns the callables :class:`~biped_casadi.simulation.
 Simulator` uses in place of its CasADi blocks.
@@ -110,8 +111,17 @@ class _NumericLoop:
         """(z_sw, dz_sw/dt, X) at the end of a last RK4 step of length eta."""
         X = np.asarray(X, float).ravel()
         Xe = self.step(X, float(tau), float(eta), np.asarray(p, float).ravel())
-        z, dz = self.foot(Xe[:self.nq], Xe[self.nq:2 * self.nq])
+        _, z, dz = self.foot(Xe[:self.nq], Xe[self.nq:2 * self.nq])
         return z, dz, Xe[:, None]
+
+    def dip(self, X, tau, eta, p):
+        """(z_sw, its slope, 0, x_sw, X) at the end of a last RK4 step of length eta: the
+        slope is the foot's vertical velocity there and no curvature is given, so that
+        Newton's method on the slope bisects (module docstring)."""
+        X = np.asarray(X, float).ravel()
+        Xe = self.step(X, float(tau), float(eta), np.asarray(p, float).ravel())
+        x, z, dz = self.foot(Xe[:self.nq], Xe[self.nq:2 * self.nq])
+        return z, dz, np.zeros((1, 1)), x, Xe[:, None]
 
 
 def compiled_closed_loop(controller, plant, schema, limits, saturate, block_sizes):
@@ -135,19 +145,22 @@ def compiled_closed_loop(controller, plant, schema, limits, saturate, block_size
     Returns
     -------
     tuple
-        (first block, quarter block, diagnostics, event, impact map), called as the
+        (first block, quarter block, diagnostics, event, impact map, dip), called as the
         simulator's: ``block(X, tau, h, p) -> (X_nodes, tau_nodes, diag)``,
         ``diagnostics(X, tau, p) -> [diag]``, ``event(X, tau, eta, p) -> (z_sw, slope,
-        X_event)``, ``impact(q, dq) -> impact_full``.
+        X_event)``, ``impact(q, dq) -> impact_full``, ``dip(X, tau, eta, p) -> (z_sw,
+        slope, curvature, x_sw, X_event)``.
     """
     loop = _NumericLoop(controller, plant, schema, limits, saturate, block_sizes)
     first, quarter = (loop.block(n) for n in block_sizes)
-    return first, quarter, loop.diagnostics, loop.event, FastCall(plant.impact_full)
+    return (first, quarter, loop.diagnostics, loop.event, FastCall(plant.impact_full),
+            loop.dip)
 
 
 def _foot(plant):
-    """(q, dq) -> (z_sw, dz_sw/dt)."""
+    """(q, dq) -> (x_sw, z_sw, dz_sw/dt)."""
     q, dq = ca.SX.sym("q", plant.nq), ca.SX.sym("dq", plant.nq)
-    _, z = plant.swing_foot(q)
+    x, z = plant.swing_foot(q)
     _, dz = plant.swing_foot_velocity(q, dq)
-    return ca.Function("compiled_loop_foot", [q, dq], [z, dz], ["q", "dq"], ["z_sw", "dz_sw"])
+    return ca.Function("compiled_loop_foot", [q, dq], [x, z, dz], ["q", "dq"],
+                       ["x_sw", "z_sw", "dz_sw"])

@@ -18,7 +18,12 @@ scheme.  With the default 2000 steps per T the scheme is the gait's own (docs: t
 the unperturbed closed loop repeats the reference to ~1e-11.
 
 Every node is checked, in time order, and the run stops at the first invalid state
-with one of the statuses of :data:`STATUSES` (the logs end with that state):
+with one of the statuses of :data:`STATUSES` (the logs end with that state).  The swing
+foot is checked between the nodes too: where its vertical velocity goes from <= 0 at one
+node to > 0 at the next, its lowest point on the RK4 step between them is found by
+Newton's method on the velocity (the strike's, on its rate); below the ground there, it
+is the strike (a crossing going down beyond ``model.scuff_zone``: the step ends at the
+first root before that point) or a scuff (where it cannot strike):
 
 - ``fell``: hip lower than ``min_hip_height`` or torso past horizontal (leaning more than
   ``max_torso_angle`` from its upright angle, the robot's ``torso_upright``);
@@ -60,7 +65,7 @@ from ..control.saturation import clip_torques
 from ..numerics import FastCall, as_vector, compiled, rk4_step
 from ..results import internal, json_safe
 from .compiled_loop import compiled_closed_loop
-from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, strike
+from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, strike, swing_foot_dip
 from .options import SimulationOptions
 from .outcome import STATUSES, OutcomeRecorder, WalkOutcome
 from .perturbation import Perturbation
@@ -323,7 +328,7 @@ class Simulator:
         if getattr(c, "numeric_law", False):    # a compiled library: numeric calls only
             self.rk4 = None
             (self.step_block, self.quarter_block, self.diagnostics, self.event,
-             self._impact_map) = compiled_closed_loop(
+             self._impact_map, self.dip) = compiled_closed_loop(
                 c, m, self.schema, self.limits, self.options.saturate,
                 (CHUNKS_PER_STEP * self.chunk, self.chunk))
             return
@@ -354,8 +359,13 @@ class Simulator:
         eta = ca.SX.sym("eta")
         Xe, _ = self.rk4(X, tau, eta, p)
         ze = m.swing_foot(Xe[:nq])[1]
-        event = ca.Function("impact_event", [X, tau, eta, p], [ze, ca.jacobian(ze, eta), Xe],
+        dze = ca.jacobian(ze, eta)
+        event = ca.Function("impact_event", [X, tau, eta, p], [ze, dze, Xe],
                             ["X", "tau", "eta", "p"], ["z_sw", "dz_deta", "X_event"])
+        dip = ca.Function("swing_foot_dip", [X, tau, eta, p],
+                          [ze, dze, ca.jacobian(dze, eta), m.swing_foot(Xe[:nq])[0], Xe],
+                          ["X", "tau", "eta", "p"],
+                          ["z_sw", "dz_deta", "d2z_deta2", "x_sw", "X_event"])
         # a block of n RK4 nodes and their diagnostics in one call: the first block of a
         # step spans T (where most steps end), then quarters of T
         blocks = []
@@ -366,12 +376,12 @@ class Simulator:
             Dg = diagnostics.map(n)(Xs, ts, pm)
             blocks.append(ca.Function(f"closed_loop_block_{n}", [Xm, tm, hm, pm], [Xs, ts, Dg],
                                       ["X", "tau", "h", "p"], ["X_nodes", "tau_nodes", "diag"]))
-        fs = blocks + [diagnostics, event, m.impact_full]
+        fs = blocks + [diagnostics, event, m.impact_full, dip]
         if self.options.jit:      # compiled once per content (one library), kept in the cache
             fs = compiled(fs, "-O1")
         # called through their buffers: a plain call's conversions cost more than a block
-        self.step_block, self.quarter_block, self.diagnostics, self.event, self._impact_map = \
-            (FastCall(f) for f in fs)
+        (self.step_block, self.quarter_block, self.diagnostics, self.event, self._impact_map,
+         self.dip) = (FastCall(f) for f in fs)
 
     # ---------------------------------------------------------------- checks
     def _first_failure(self, D, X, z_prev=None, den_sign=1.0, ground=None):
@@ -469,7 +479,7 @@ class Simulator:
         if fail is not None:
             return (fail[1], fail[2], t0), None
         walk["p"], walk["section"] = p, None
-        z_prev = z0
+        z_prev, dz_prev = z0, S.row(D0, "dzsw")[0]
         n = CHUNKS_PER_STEP
         i_section = int(round(SECTION * n)) * self.chunk - 1   # node at 0.75 T, 1st block
         end = o.horizon * T + 1e-12
@@ -487,6 +497,10 @@ class Simulator:
             zprev = np.r_[z_prev, zs[:-1]]
             hits = strike(zs, zprev, S.row(Dg, "xsw"), self.plant.scuff_zone, ground)
             i_strike = int(np.argmax(hits)) if hits.any() else Xs.shape[1]
+            dzs = S.row(Dg, "dzsw")
+            dip = self._dip(X, tau0, p, Xs, taus, zprev, np.r_[dz_prev, dzs[:-1]], dzs, ground,
+                            i_strike)
+            i_strike = i_strike if dip is None else dip[0]
             fail = self._first_failure(Dg[:, :i_strike], Xs[:, :i_strike], zprev[:i_strike],
                                        den_sign=sign, ground=ground)
             if fail is not None:
@@ -501,9 +515,16 @@ class Simulator:
                 za = z_prev if i_strike == 0 else zs[i_strike - 1]
                 log.add(t0, taus[:i_strike], k, Xs[:, :i_strike], Dg[:, :i_strike], sx,
                         walk["rec"], S)
-                return None, self._locate(Xa, ta, za - hk, zs[i_strike] - hk, p, hk)
+                if dip is None:
+                    return None, self._locate(Xa, ta, za - hk, zs[i_strike] - hk, p, hk)
+                if dip[1] == "strike":                 # the first root before the minimum
+                    return None, self._locate(Xa, ta, za - hk, dip[2] - hk, p, hk, dip[3])
+                Xe, te = dip[4], ta + dip[3]
+                log.add(t0, np.array([te]), k, Xe[:, None], self.diagnostics(Xe, te, p)[0],
+                        sx, walk["rec"], S)
+                return ("scuffed", dip[2], t0 + te), None
             log.add(t0, taus, k, Xs, Dg, sx, walk["rec"], S)
-            X, z_prev = Xs[:, -1], zs[-1]
+            X, z_prev, dz_prev = Xs[:, -1], zs[-1], dzs[-1]
             ci += n if first else 1
         return ("no_impact", f"step {k + 1}: no valid impact of the swing foot within "
                              f"{o.horizon:g} T = {o.horizon * T:.4f} s", t0 + o.horizon * T), None
@@ -542,17 +563,39 @@ class Simulator:
             return (which, f"step {k + 1}: {msg}", t0 + tau_m), record
         return None, record
 
-    def _locate(self, Xa, ta, za, zb, p, height=0.0):
-        """Pre-impact state: the RK4 step length eta in (0, h] with z_sw = ``height``
-        (:func:`~biped_casadi.simulation.kernel.locate_strike`; za, zb measured from
-        there)."""
+    def _locate(self, Xa, ta, za, zb, p, height=0.0, h=None):
+        """Pre-impact state: the RK4 step length eta in (0, h] (default the step) with z_sw =
+        ``height`` (:func:`~biped_casadi.simulation.kernel.locate_strike`; za, zb measured
+        from there, zb at eta = h)."""
         def event(eta):
             z, dz, _ = self.event(Xa, ta, eta[0], p)
             return z.ravel() - height, dz.ravel()
 
-        eta = float(locate_strike(event, self.h, za, zb)[0])
+        eta = float(locate_strike(event, self.h if h is None else h, za, zb)[0])
         _, _, Xe = self.event(Xa, ta, eta, p)
         return Xe.ravel(), ta + eta
+
+
+    def _dip(self, X, tau0, p, Xs, taus, z_prev, dz_a, dz_b, ground, stop):
+        """The swing foot between the nodes of a block before node ``stop`` (module
+        docstring; :func:`~biped_casadi.simulation.kernel.swing_foot_dip`): None, or (j,
+        kind, z, eta, X) inside the step that ends at node j: 'strike' with z_sw at the
+        minimum, or 'scuffed' with the message; eta into that step, X the state there.
+        z_prev, dz_a, dz_b: per step, the height and its rate at its first node, the rate
+        at its last."""
+        lim = self.limits
+        found = swing_foot_dip(
+            lambda Xa, ta, eta: self.dip(Xa, ta, eta, p), self.h,
+            lambda j: (X, tau0) if j == 0 else (Xs[:, j - 1], taus[j - 1]),
+            z_prev[:stop], dz_a[:stop], dz_b[:stop], ground, self.plant.scuff_zone,
+            lim.scuffing_ignored, lim.ground_tolerance)
+        if found is None:
+            return None
+        j, kind, eta, z, x, Xe = found
+        return j, kind, z if kind == "strike" else (
+            f"swing foot below the ground where it cannot strike (behind the stance foot, "
+            f"or already under the ground): x_sw = {x:.4f} m, z_sw = {z:.3g} m, between two "
+            f"RK4 nodes"), eta, Xe
 
 
 class _Log:

@@ -30,8 +30,8 @@ import os
 import casadi as ca
 import numpy as np
 
-__all__ = ["Diagnostics", "strike", "locate_strike", "mapped", "threads", "NEWTON_ITERATIONS",
-           "ground_height", "CHUNKS_PER_STEP"]
+__all__ = ["Diagnostics", "strike", "locate_strike", "locate_minimum", "swing_foot_dip",
+           "mapped", "threads", "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
 
 #: CasADi calls per reference step duration T of the simulators' integration: each call
 #: integrates a quarter of T (the Poincaré section 0.75 T falls on a boundary); RK4 steps
@@ -242,6 +242,103 @@ def locate_strike(event, h: float, z_a, z_b):
         if not active.any():
             break
     return eta
+
+
+def locate_minimum(rate, h: float, r_a: float, r_b: float, curvature=None):
+    """The length eta in (0, h) of the last RK4 step that ends at an output's minimum.
+
+    The output's rate goes from ``r_a`` <= 0 at the step's first node to ``r_b`` > 0 at its
+    last: the minimum is the root of the rate, found by :func:`locate_strike` on the
+    rate's negative.  At ``r_a`` = 0 (at rest at the node) there is a minimum inside only
+    where the rate's slope there is negative.
+
+    Parameters
+    ----------
+    rate : callable
+        ``rate(eta) -> (r, dr/deta)``, arrays (1,): the output's rate in eta at the end of
+        the last RK4 step of length eta, and its derivative.
+    h : float
+        The RK4 step, s.
+    r_a, r_b : float
+        The rates at the step's nodes.
+    curvature : callable, optional
+        ``curvature() -> dr/deta`` at eta = 0 (needed only where ``r_a`` = 0).
+
+    Returns
+    -------
+    float or None
+        eta, s; None where ``r_a`` = 0 and the output does not go down first.
+    """
+    if r_a == 0:
+        c = float(curvature())
+        if not c < 0:
+            return None
+        r_a = 0.5 * c * h                               # the Newton's first guess only
+
+    def event(eta):
+        r, dr = rate(eta)
+        return -np.ravel(r), -np.ravel(dr)
+
+    return float(locate_strike(event, h, -r_a, -r_b)[0])
+
+
+def swing_foot_dip(dip, h: float, step_start, z_prev, dz_a, dz_b, ground, scuff_zone: float,
+                   scuffing_ignored: bool, tolerance: float):
+    """The first of the swing foot's minima between two nodes that is below the ground.
+
+    The minima are in the steps where the foot's vertical velocity goes from <= 0 at the
+    first node to > 0 at the last (:func:`locate_minimum`).  Below the ground (measured
+    from the ground under the foot there, :func:`ground_height`) it is a 'strike' when
+    the foot was above it at the step's first node and is beyond ``scuff_zone`` (it
+    crossed the ground going down: the strike is the first root before the minimum),
+    else 'scuffed' when more than ``tolerance`` below it, unless ``scuffing_ignored``.
+
+    Parameters
+    ----------
+    dip : callable
+        ``dip(X, tau, eta) -> (z_sw, dz/deta, d2z/deta2, x_sw, X_eta)`` at the end of the
+        last RK4 step of length eta from the node (X, tau).
+    h : float
+        The RK4 step, s.
+    step_start : callable
+        ``step_start(j) -> (X, tau)``: the first node of step j.
+    z_prev, dz_a, dz_b : numpy.ndarray
+        Per step: the height at its first node, the vertical velocity there and at its
+        last node (m, m/s; the steps to look at).
+    ground : tuple or None
+        (ahead, behind) ground heights (:func:`ground_height`).
+    scuff_zone : float
+        ``model.scuff_zone``, m.
+    scuffing_ignored : bool
+        ``model.scuffing_ignored``.
+    tolerance : float
+        How far below the ground the foot may graze, m.
+
+    Returns
+    -------
+    tuple or None
+        (j, 'strike' or 'scuffed', eta, z_sw, x_sw, X_eta) at the minimum.
+    """
+    for j in np.flatnonzero((dz_a <= 0) & (dz_b > 0)):
+        Xa, ta = step_start(j)
+
+        def rate(eta, Xa=Xa, ta=ta):
+            return dip(Xa, ta, eta[0])[1:3]
+
+        eta = locate_minimum(rate, h, dz_a[j], dz_b[j],
+                             lambda Xa=Xa, ta=ta: np.ravel(dip(Xa, ta, 0.0)[2])[0])
+        if eta is None:
+            continue
+        z, _, _, x, Xe = (np.ravel(v) for v in dip(Xa, ta, eta))
+        z, x = float(z[0]), float(x[0])
+        g = float(ground_height(x, ground))
+        if not z < g:
+            continue
+        if z_prev[j] >= g and x > scuff_zone:
+            return int(j), "strike", eta, z, x, Xe
+        if not scuffing_ignored and z - g < -tolerance:
+            return int(j), "scuffed", eta, z, x, Xe
+    return None
 
 
 def threads() -> int:
