@@ -189,6 +189,30 @@ def test_cli_export_running_and_mujoco_compiled(running_gait, tmp_path, capsys):
     assert rc == 0 and f"the law compiled from the export {out}" in o.out
 
 
+@needs_cc
+def test_cli_verify_that_compared_no_stride_is_not_verified(running_gait, tmp_path, capsys):
+    """--kp 1e300: both MuJoCo runs stop in their first stride (a double contact), so the
+    comparison had no stride record; --verify said 'verified', wrote the export and
+    exited 0.  Now 'unverified', exit 1, nothing written; --strides 0 (the states only)
+    still verifies."""
+    g = running_gait.save(tmp_path / "running.json")
+    out = tmp_path / "export"
+    args = ["export-running", "--gait", g, "--out", out, "--kp", "1e300", "--verify",
+            "--states", 50]
+    rc, o = run(capsys, *args, "--strides", 2, "--json")
+    d = json.loads(o.out)
+    m = d["verification"]["mujoco"]
+    assert (rc, d["status"], m["status"], m["strides"]) == (1, "unverified",
+                                                           "nothing_compared", 0), o.out
+    assert m["python_status"] == m["compiled_status"] != "ran"
+    rc, o = run(capsys, *args, "--strides", 2)
+    assert rc == 1 and "both MuJoCo runs stopped in stride 1" in o.out, o.out
+    assert "wrote" not in o.out and not out.exists()
+    rc, o = run(capsys, *args, "--strides", 0, "--json")
+    assert rc == 0 and json.loads(o.out)["status"] == "verified", o.err
+    assert out.exists()
+
+
 def _bad(capsys, *args):
     rc, o = run(capsys, *args)
     assert rc == 2 and o.out == "" and len(o.err.strip().splitlines()) == 1, o.err
