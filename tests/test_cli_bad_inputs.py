@@ -632,6 +632,11 @@ RUNNING_CASES = [
     (["mujoco", "--gait", "{run}", "--controller", "vc"], "is a running step"),
     # options: ignored (--no-cache), taken beyond the model's range or without bound
     (["running", *RG, "--no-cache"], "--no-cache is for optimising one"),
+    # an optimisation option given its default value was taken silently (the saved step
+    # may be of another speed, grid or output file)
+    (["running", *RG, "--speed", "1.5"], "--speed is for optimising one"),
+    (["running", *RG, "--intervals", "16", "10", "--out", "running.json"],
+     "--intervals, --out are for optimising one"),
     (["running", *RG, "--m1", "1e300", "0", "0", "0"], "--m1: components must lie within"),
     (["running", *RG, "--steps", "100000"], "--steps must be between 0 and 5000"),
     (["running", "--stability", "--perturb", "1e300"], "--perturb must be a finite number "
