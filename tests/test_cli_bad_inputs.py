@@ -183,6 +183,12 @@ CASES = [
     (["gait", "--impact-mu", "-0.1"], "--impact-mu"),
     (["gait", "--continuation", "nan"], "--continuation"),
     (["gait", "--continuation-shape", "smooth"], "--continuation"),
+    # a decay time whose closed form overflows (imported: written, then 'not a periodic
+    # orbit, |P(x*) - x*| = inf' from biped eig) or loses its digits (0.6 rad at 1e5)
+    (["gait", "--continuation", "1e5", "--continuation-shape", "smooth", "--out",
+      "{root_dir}/g.json"], "--continuation C, at most 10 (the decay time, in T), got 100000"),
+    (["gait", "--import", "{step}", "--continuation", "1e300", "--continuation-shape",
+      "smooth", "--out", "{root_dir}/g.json"], "at most 10"),
     (["gait", "--clearance", "-0.01"], "--clearance"),
     (["gait", "--intervals", "2"], "--intervals"),
     (["gait", "--intervals", "100000"], "--intervals"),
