@@ -98,9 +98,11 @@ def _report(args, r):
               "('biped mujoco-running' shows how it stops; --strides 0 compares the states "
               "only)")
     elif m is not None:
+        worst = m["max_difference"]         # None: inf (a number in one record only)
         print(f"  MuJoCo, {m['strides']} strides with the library ({m['compiled_status']}) and "
               f"with the Python law ({m['python_status']}): records differ by at most "
-              f"{m['max_difference']:.3g} (limit {STRIDE_TOL:g}), {m['identical_strides']} "
+              f"{'inf' if worst is None else format(worst, '.3g')} (limit {STRIDE_TOL:g}), "
+              f"{m['identical_strides']} "
               f"strides identical; {m['compiled_seconds']:.2f} s against "
               f"{m['python_seconds']:.2f} s")
     print(f"  time per call: {v['c_us']:.3f} us in C (the example's loop, {v['c_calls']} "
