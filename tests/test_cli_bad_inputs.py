@@ -605,6 +605,10 @@ def run_files(files, running_gait):
     edited("run_step_nan", lambda b: b.update(step_length=float("nan")))
     edited("run_x_empty", lambda b: b.update(x_stance=[]))
     edited("run_three_link", lambda b: b.update(robot="three_link"))
+    edited("run_no_options", lambda b: b.pop("options"))
+    edited("run_options_list", lambda b: b.update(options=[1, 2]))
+    edited("run_extra_key", lambda b: b.update(surprise=1))
+    edited("run_extra_option", lambda b: b["options"].update(surprise=1))
     (d / "not_a_table.csv").write_bytes(b"t,q1\r0,1\n")       # a stray carriage return
     out["not_a_table"] = str(d / "not_a_table.csv")
     return out
@@ -629,6 +633,14 @@ RUNNING_CASES = [
     (["running", "--gait", "{run_step_nan}"], "'step_length' must be a positive number"),
     (["running", "--gait", "{run_x_empty}"], "'x_stance' must be a table"),
     (["running", "--gait", "{run_three_link}"], "not a running step of three_link"),
+    # keys missing, unknown or of the wrong type were Python's own words ("KeyError:
+    # 'options'", "AttributeError: 'list' object has no attribute 'items'", "TypeError:
+    # RunningGait.__init__() got an unexpected keyword argument 'surprise'")
+    (["running", "--gait", "{run_no_options}"], "a malformed running gait (missing key(s) "
+                                                "'options')"),
+    (["running", "--gait", "{run_options_list}"], "('options' must be an object, got [1, 2])"),
+    (["running", "--gait", "{run_extra_key}"], "(unknown key(s) 'surprise')"),
+    (["mujoco-running", "--gait", "{run_extra_option}"], "(unknown option(s) 'surprise')"),
     # a walking gait where a running step is taken, and the reverse
     (["running", "--gait", "{gait}"], "is a walking gait (from 'biped gait'), not a running "
                                       "step"),
