@@ -119,11 +119,13 @@ class SimulationComparison(Result):
 
     Parameters
     ----------
-    status : {'equal', 'discretisation', 'different'}
+    status : {'equal', 'discretisation', 'different', 'nothing_compared'}
         'equal' when both Python runs end as the compiled one, with as many steps, and
         impact times and states agree to :data:`SIMULATION_TOL`; 'discretisation' when
         the twin's do but ``biped simulate``'s differ by more (the reference state's
-        discretisation, O(h^4): see the module docstring); 'different' otherwise.
+        discretisation, O(h^4): see the module docstring); 'nothing_compared' when
+        :func:`verify_export`'s runs end alike before an impact from the given start and
+        from the orbit's (no impact compared); 'different' otherwise.
     message : str
         A summary line.
     python_status, twin_status, compiled_status : str
@@ -169,8 +171,10 @@ class ExportVerification(Result):
 
     Parameters
     ----------
-    status : {'verified', 'different'}
-        'verified' when the states and the simulation agree.
+    status : {'verified', 'unverified', 'different'}
+        'verified' when the states and the simulation agree; 'unverified' when the
+        states agree but the simulations compared no impact (they all ended before one);
+        'different' otherwise.
     message : str
         A summary line.
     states : StateComparison
@@ -592,9 +596,13 @@ def verify_export(folder, ctrl, q0, dq0, options: SimulationOptions | None = Non
                        f"simulate, {first.status}); from the orbit's start: {sim.message}")
         if first.status not in SimulationComparison.SUCCESS:
             sim.status = first.status
+        elif sim.steps == 0 and sim.success:
+            sim.status = "nothing_compared"
+            sim.message += "; from neither start an impact to compare"
     ok = states.success and sim.success
+    unverified = states.success and sim.status == "nothing_compared"
     return ExportVerification(
-        status="verified" if ok else "different",
+        status="verified" if ok else "unverified" if unverified else "different",
         message=f"{states.message}; {sim.message}; {c_us:.3g} us per biped_torque call in C",
         states=states, simulation=sim, c_us=c_us, c_calls=int(calls))
 

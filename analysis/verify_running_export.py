@@ -85,9 +85,11 @@ class RunningMujocoComparison(Result):
 
     Parameters
     ----------
-    status : {'equal', 'different'}
+    status : {'equal', 'different', 'nothing_compared'}
         'equal' when both runs end alike with as many strides and every number of their
-        stride records agrees to :data:`STRIDE_TOL`.
+        stride records agrees to :data:`STRIDE_TOL`; 'nothing_compared' when both end
+        alike before their first stride is complete (no record to compare: the design
+        does not run in MuJoCo); 'different' otherwise.
     message : str
         A summary line.
     python_status, compiled_status : str
@@ -95,7 +97,8 @@ class RunningMujocoComparison(Result):
     strides : int
         Strides compared.
     max_difference : float
-        Largest difference of any number of the stride records.
+        Largest difference of any number of the stride records (a NaN in both records
+        counts as equal, in one only as inf).
     identical_strides : int
         Strides whose records are the same bit for bit.
     python_seconds, compiled_seconds : float
@@ -123,8 +126,10 @@ class RunningExportVerification(Result):
 
     Parameters
     ----------
-    status : {'verified', 'different'}
-        'verified' when the state comparison and the MuJoCo comparison (when run) succeed.
+    status : {'verified', 'unverified', 'different'}
+        'verified' when the state comparison and the MuJoCo comparison (when run) succeed;
+        'unverified' when the states agree but the MuJoCo runs compared nothing (both
+        stopped in their first stride); 'different' otherwise.
     message : str
         A summary line.
     states : RunningStateComparison
@@ -213,6 +218,17 @@ def _stride_numbers(s) -> np.ndarray:
     return np.hstack([np.ravel(np.asarray(v, float)) for v in d.values()])
 
 
+def _stride_difference(a, b) -> float:
+    """The largest difference of two stride records' numbers: equal numbers (infinite
+    ones too) and a NaN in both (a field the stride has no value for, e.g. the takeoff
+    guard's gap when the guard did not cross) differ by 0, a NaN in one only by inf."""
+    x, y = _stride_numbers(a), _stride_numbers(b)
+    with np.errstate(invalid="ignore"):
+        d = np.where(x == y, 0.0, np.abs(x - y))
+    d[np.isnan(x) & np.isnan(y)] = 0.0
+    return float(np.nan_to_num(d, nan=np.inf).max(initial=0.0))
+
+
 def compare_running_mujoco(compiled: CompiledRunningLaw, ctrl, start=None, strides: int = 30,
                            **loop_options) -> RunningMujocoComparison:
     """The same MuJoCo run with the Python law and with the compiled one.
@@ -238,16 +254,20 @@ def compare_running_mujoco(compiled: CompiledRunningLaw, ctrl, start=None, strid
     runs = [RunningLoop(ctrl, compiled=law, **loop_options).run(start, strides)
             for law in (None, compiled)]
     rp, rc = runs
-    diffs = [float(np.max(np.abs(_stride_numbers(a) - _stride_numbers(b))))
-             for a, b in zip(rp.strides, rc.strides)]
+    diffs = [_stride_difference(a, b) for a, b in zip(rp.strides, rc.strides)]
     worst = max(diffs, default=0.0)
     same = sum(d == 0.0 for d in diffs)
     ok = (rp.status == rc.status and len(rp.strides) == len(rc.strides) and
           worst <= STRIDE_TOL)
+    if ok and not diffs:
+        status, message = "nothing_compared", (
+            f"both MuJoCo runs stopped in stride 1 ({rc.status}): no stride to compare")
+    else:
+        status, message = "equal" if ok else "different", (
+            f"{len(diffs)} MuJoCo strides ({rc.status} compiled, {rp.status} Python): "
+            f"records differ by at most {worst:.3g}, {same} identical bit for bit")
     return RunningMujocoComparison(
-        status="equal" if ok else "different",
-        message=(f"{len(diffs)} MuJoCo strides ({rc.status} compiled, {rp.status} Python): "
-                 f"records differ by at most {worst:.3g}, {same} identical bit for bit"),
+        status=status, message=message,
         python_status=rp.status, compiled_status=rc.status, strides=len(diffs),
         max_difference=worst, identical_strides=int(same), python_seconds=rp.wall_time,
         compiled_seconds=rc.wall_time, mujoco_steps=rc.mujoco_steps)
@@ -295,8 +315,9 @@ def verify_running_export(folder, ctrl, compiler: list | None = None, n_states: 
     states = compare_running_states(lib, ctrl, n_states, seed)
     mj = compare_running_mujoco(lib, ctrl, None, strides, **loop_options) if strides else None
     ok = states.success and (mj is None or mj.success)
+    unverified = states.success and mj is not None and mj.status == "nothing_compared"
     return RunningExportVerification(
-        status="verified" if ok else "different",
+        status="verified" if ok else "unverified" if unverified else "different",
         message="; ".join([states.message] + ([mj.message] if mj else [])
                           + [f"{c_us:.3g} us per biped_running_torque call in C"]),
         states=states, mujoco=mj, c_us=c_us, c_calls=int(calls))

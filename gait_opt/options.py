@@ -9,7 +9,7 @@ from biped_casadi.option_checks import FieldChecks
 
 __all__ = ["GaitOptions", "REFERENCE_LEG_LENGTH", "REFERENCE_SPEED", "leg_scale",
            "reference_speed", "default_step_length_bounds", "guess_step_length", "LegScaled",
-           "gait_fields"]
+           "gait_fields", "SMOOTH_CONTINUATION_MAX"]
 
 #: hip-to-foot length of a straight leg, m, of the robot the length-valued defaults were
 #: set on (RABBIT); on another robot they scale with its leg length over this one
@@ -172,6 +172,11 @@ COSTS = ("torque_squared_per_length", "torque_squared")
 SCHEMES = ("legendre", "radau")
 DERIVATIVES = ("structured", "casadi")
 CONTINUATIONS = ("ramp", "smooth")
+#: the longest decay time of the 'smooth' continuation, in T: its closed form cancels
+#: terms of order (c T)^3, so that its round-off grows as c^3 (T 0.69 s, unit acceleration
+#: and jerk at T: 1e-12 rad at c = 10, 1e-9 at 100, 1e-3 at 1e4; inf and nan from about
+#: 1e100), and past a few T the acceleration barely decays within a step anyway
+SMOOTH_CONTINUATION_MAX = 10.0
 #: collocation points per interval: CasADi's collocation schemes stop at 9
 MAX_DEGREE = 9
 #: collocation intervals: 2000 already take about 1 GB and 15 s per IPOPT iteration, and a
@@ -251,7 +256,8 @@ class GaitOptions:
         jerk jumps at T and (1 + c) T; 'smooth', the acceleration decays as
         (a_T + k sigma) exp(-sigma / (c T)), sigma = t - T, with k matching the jerk at
         T: C^3 at T and smooth after it (no kink where late impacts land, which an NLP
-        over the impact time needs), the velocity tending to a constant.
+        over the impact time needs), the velocity tending to a constant; c at most
+        :data:`SMOOTH_CONTINUATION_MAX`.
     cost : {'torque_squared_per_length', 'torque_squared'}
         The integral of u'u over the step divided by the step length, or the integral
         alone.
@@ -302,10 +308,12 @@ class GaitOptions:
         c.numbers(("continuation",), none=True, inf=True,
                   phrase="None or a positive number (inf allowed)")
         c.choice("continuation_shape", CONTINUATIONS)
-        if self.continuation_shape == "smooth" and (self.continuation is None
-                                                    or math.isinf(self.continuation)):
-            raise ValueError("gait option 'continuation_shape' 'smooth' needs a finite "
-                             "'continuation' (its decay time, a fraction of T)")
+        if self.continuation_shape == "smooth" and not (
+                self.continuation is not None
+                and self.continuation <= SMOOTH_CONTINUATION_MAX):
+            raise ValueError("gait option 'continuation_shape' 'smooth' needs a "
+                             f"'continuation' of at most {SMOOTH_CONTINUATION_MAX:g} (its "
+                             f"decay time, in T), got {self.continuation!r}")
         c.numbers(("min_normal_force", "min_liftoff_speed", "min_strike_speed"), strict=False)
         c.numbers(("clearance",), strict=False, none=True)
         c.numbers(("torso_lean_max",), none=True, phrase=LEAN_PHRASE)

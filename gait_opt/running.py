@@ -373,6 +373,10 @@ class RunningGait:
         if not isinstance(body, dict) or body.pop("kind", None) != "running gait":
             raise ValueError(f"{path}: not a running gait")
         try:
+            _check_keys(body, cls, "key")
+            if not isinstance(body["options"], dict):
+                raise ValueError(f"'options' must be an object, got {body['options']!r}")
+            _check_keys(body["options"], RunningOptions, "option")
             o = {k: tuple(v) if isinstance(v, list) else v for k, v in body.pop("options").items()}
             # a file written before the takeoff cone condition (the margin) was without it
             o.setdefault("takeoff_cone_rate", False)
@@ -380,9 +384,20 @@ class RunningGait:
             arrays = ("x_stance", "u_stance", "x_flight", "u_flight")
             return check_running_file(cls(options=RunningOptions(**o), **{
                 k: np.array(v, dtype=float) if k in arrays else v for k, v in body.items()}))
-        except (KeyError, TypeError, ValueError, AttributeError) as e:
-            raise ValueError(f"{path}: a malformed running gait ({type(e).__name__}: {e})") \
-                from None
+        except (ValueError, TypeError, AttributeError) as e:    # ValueError: our own words
+            why = e if isinstance(e, ValueError) else f"{type(e).__name__}: {e}"
+            raise ValueError(f"{path}: a malformed running gait ({why})") from None
+
+
+def _check_keys(body: dict, kind, what: str):
+    """ValueError naming the keys of a running gait file's object that the dataclass
+    ``kind`` lacks, or the ones it needs (no default) that the object lacks."""
+    fields = dataclasses.fields(kind)
+    need = [f.name for f in fields if f.default is f.default_factory is dataclasses.MISSING]
+    for how, names in (("missing", [n for n in need if n not in body]),
+                       ("unknown", sorted(set(body) - {f.name for f in fields}))):
+        if names:
+            raise ValueError(f"{how} {what}(s) " + ", ".join(map(repr, names)))
 
 
 # ----------------------------------------------------------------- the guess

@@ -50,8 +50,8 @@ def speed_range(start: float, stop: float, step: float) -> np.ndarray:
     Parameters
     ----------
     start, stop, step : float
-        m/s; 0 < start < stop, step > 0, and stop - start a whole number of steps
-        (within 1e-6 of one).
+        m/s; 0 < start < stop, 0 < step <= stop - start, and stop - start a whole
+        number of steps (within 1e-6 of one).
 
     Returns
     -------
@@ -62,7 +62,8 @@ def speed_range(start: float, stop: float, step: float) -> np.ndarray:
     ------
     ValueError
         Naming 'speeds' and what is wrong: not finite, not positive, empty (start =
-        stop), reversed (start > stop), not a whole number of steps, too many.
+        stop), reversed (start > stop), a step longer than the range, not a whole number
+        of steps, too many.
     """
     vals = (start, stop, step)
     if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
@@ -80,6 +81,9 @@ def speed_range(start: float, stop: float, step: float) -> np.ndarray:
     if start > stop:
         raise ValueError(f"speeds: the range {start:g}:{stop:g} is reversed (start > stop)")
     n = (stop - start) / step
+    if n < 1 - 1e-6:           # 0.7:0.8:1e300 was the one speed 0.7, never reaching 0.8
+        raise ValueError(f"speeds: the step {step:g} is longer than the range "
+                         f"{start:g}:{stop:g} (at most {stop - start:g})")
     if n > MAX_SPEEDS:
         raise ValueError(f"speeds: {start:g}:{stop:g}:{step:g} makes {n:.0f} steps, more "
                          f"than {MAX_SPEEDS}")

@@ -183,6 +183,12 @@ CASES = [
     (["gait", "--impact-mu", "-0.1"], "--impact-mu"),
     (["gait", "--continuation", "nan"], "--continuation"),
     (["gait", "--continuation-shape", "smooth"], "--continuation"),
+    # a decay time whose closed form overflows (imported: written, then 'not a periodic
+    # orbit, |P(x*) - x*| = inf' from biped eig) or loses its digits (0.6 rad at 1e5)
+    (["gait", "--continuation", "1e5", "--continuation-shape", "smooth", "--out",
+      "{root_dir}/g.json"], "--continuation C, at most 10 (the decay time, in T), got 100000"),
+    (["gait", "--import", "{step}", "--continuation", "1e300", "--continuation-shape",
+      "smooth", "--out", "{root_dir}/g.json"], "at most 10"),
     (["gait", "--clearance", "-0.01"], "--clearance"),
     (["gait", "--intervals", "2"], "--intervals"),
     (["gait", "--intervals", "100000"], "--intervals"),
@@ -599,6 +605,10 @@ def run_files(files, running_gait):
     edited("run_step_nan", lambda b: b.update(step_length=float("nan")))
     edited("run_x_empty", lambda b: b.update(x_stance=[]))
     edited("run_three_link", lambda b: b.update(robot="three_link"))
+    edited("run_no_options", lambda b: b.pop("options"))
+    edited("run_options_list", lambda b: b.update(options=[1, 2]))
+    edited("run_extra_key", lambda b: b.update(surprise=1))
+    edited("run_extra_option", lambda b: b["options"].update(surprise=1))
     (d / "not_a_table.csv").write_bytes(b"t,q1\r0,1\n")       # a stray carriage return
     out["not_a_table"] = str(d / "not_a_table.csv")
     return out
@@ -623,6 +633,14 @@ RUNNING_CASES = [
     (["running", "--gait", "{run_step_nan}"], "'step_length' must be a positive number"),
     (["running", "--gait", "{run_x_empty}"], "'x_stance' must be a table"),
     (["running", "--gait", "{run_three_link}"], "not a running step of three_link"),
+    # keys missing, unknown or of the wrong type were Python's own words ("KeyError:
+    # 'options'", "AttributeError: 'list' object has no attribute 'items'", "TypeError:
+    # RunningGait.__init__() got an unexpected keyword argument 'surprise'")
+    (["running", "--gait", "{run_no_options}"], "a malformed running gait (missing key(s) "
+                                                "'options')"),
+    (["running", "--gait", "{run_options_list}"], "('options' must be an object, got [1, 2])"),
+    (["running", "--gait", "{run_extra_key}"], "(unknown key(s) 'surprise')"),
+    (["mujoco-running", "--gait", "{run_extra_option}"], "(unknown option(s) 'surprise')"),
     # a walking gait where a running step is taken, and the reverse
     (["running", "--gait", "{gait}"], "is a walking gait (from 'biped gait'), not a running "
                                       "step"),
@@ -632,6 +650,11 @@ RUNNING_CASES = [
     (["mujoco", "--gait", "{run}", "--controller", "vc"], "is a running step"),
     # options: ignored (--no-cache), taken beyond the model's range or without bound
     (["running", *RG, "--no-cache"], "--no-cache is for optimising one"),
+    # an optimisation option given its default value was taken silently (the saved step
+    # may be of another speed, grid or output file)
+    (["running", *RG, "--speed", "1.5"], "--speed is for optimising one"),
+    (["running", *RG, "--intervals", "16", "10", "--out", "running.json"],
+     "--intervals, --out are for optimising one"),
     (["running", *RG, "--m1", "1e300", "0", "0", "0"], "--m1: components must lie within"),
     (["running", *RG, "--steps", "100000"], "--steps must be between 0 and 5000"),
     (["running", "--stability", "--perturb", "1e300"], "--perturb must be a finite number "

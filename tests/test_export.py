@@ -340,6 +340,27 @@ def test_cli_verification_difference_writes_nothing(gait, tmp_path, capsys, monk
 
 
 @needs_cc
+def test_cli_verification_that_compared_no_impact_is_not_verified(gait, tmp_path, capsys):
+    """A torque limit the orbit does not keep (1 N m): the runs from the perturbation and
+    from the orbit's start all end at once (torque_limit), no impact compared; --verify
+    said 'verified', wrote the export and exited 0.  Now 'unverified', exit 1, nothing
+    written."""
+    g = gait.save(tmp_path / "gait.json")
+    out = tmp_path / "out"
+    args = ["export", "--gait", g, "--out", out, "--verify", "--states", 20, "--steps", 2,
+            "--torque-limit", 1]
+    rc, o = run(capsys, *args, "--json")
+    d = json.loads(o.out)
+    sim = d["verification"]["simulation"]
+    assert (rc, d["status"], sim["status"], sim["steps"]) == (1, "unverified",
+                                                             "nothing_compared", 0), o.out
+    assert sim["start"] == "orbit" and sim["compiled_status"] == "torque_limit"
+    rc, o = run(capsys, *args)
+    assert rc == 1 and "no impact to compare, nothing verified" in o.out, o.out
+    assert "wrote" not in o.out and not out.exists()
+
+
+@needs_cc
 def test_a_saturating_export_clips_its_torques_in_c(tv, gait, tmp_path, capsys):
     """``biped export --saturate`` (as ``export-running --saturate``): the C law clips
     its torques at the limit; compared with the Python law clipped the same way, it is

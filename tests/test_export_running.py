@@ -5,6 +5,7 @@ line, the example), 30 MuJoCo strides with the library against the Python law, a
 ``biped export-running`` / ``biped mujoco-running --compiled`` with their bad inputs."""
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import re
@@ -187,6 +188,58 @@ def test_cli_export_running_and_mujoco_compiled(running_gait, tmp_path, capsys):
     assert runs[0]["strides"] == runs[1]["strides"]
     rc, o = run(capsys, "mujoco-running", "--gait", g, "--strides", 3, "--compiled", out)
     assert rc == 0 and f"the law compiled from the export {out}" in o.out
+
+
+@needs_cc
+def test_cli_verify_that_compared_no_stride_is_not_verified(running_gait, tmp_path, capsys):
+    """--kp 1e300: both MuJoCo runs stop in their first stride (a double contact), so the
+    comparison had no stride record; --verify said 'verified', wrote the export and
+    exited 0.  Now 'unverified', exit 1, nothing written; --strides 0 (the states only)
+    still verifies."""
+    g = running_gait.save(tmp_path / "running.json")
+    out = tmp_path / "export"
+    args = ["export-running", "--gait", g, "--out", out, "--kp", "1e300", "--verify",
+            "--states", 50]
+    rc, o = run(capsys, *args, "--strides", 2, "--json")
+    d = json.loads(o.out)
+    m = d["verification"]["mujoco"]
+    assert (rc, d["status"], m["status"], m["strides"]) == (1, "unverified",
+                                                           "nothing_compared", 0), o.out
+    assert m["python_status"] == m["compiled_status"] != "ran"
+    rc, o = run(capsys, *args, "--strides", 2)
+    assert rc == 1 and "both MuJoCo runs stopped in stride 1" in o.out, o.out
+    assert "wrote" not in o.out and not out.exists()
+    rc, o = run(capsys, *args, "--strides", 0, "--json")
+    assert rc == 0 and json.loads(o.out)["status"] == "verified", o.err
+    assert out.exists()
+
+
+def test_stride_records_with_nan_compare_equal(running_gait):
+    """A NaN in both records (the takeoff guard's gap of a stride whose guard did not
+    cross) is no difference, in one record only an infinite one; equal infinities are
+    equal.  Before, NaN - NaN made the difference NaN: 'different' for identical runs."""
+    from analysis.verify_running_export import _stride_difference
+    from biped_casadi.mujoco.running_records import RunningStride
+    a = RunningStride(index=0, t_landing=0.0, stance=0.3, flight=0.1, step_length=0.5,
+                      speed=1.3, landing_state=[0.1] * 10, deviation=1.0,
+                      peak_torque=float("inf"), clipped_time=0.0, slip=0.0, fz_max=1e3,
+                      bounce_time=0.0, takeoff_guard_gap=float("nan"))
+    b = dataclasses.replace(a, speed=1.3 + 1e-12)
+    assert _stride_difference(a, a) == 0.0
+    assert _stride_difference(a, b) == pytest.approx(1e-12, rel=1e-3)
+    assert _stride_difference(a, dataclasses.replace(a, takeoff_guard_gap=0.0)) == np.inf
+
+
+@needs_cc
+def test_cli_verify_with_a_stride_whose_guard_did_not_cross(running_gait, tmp_path, capsys):
+    """--kd 1e300: the MuJoCo runs stop in stride 2, the first stride's takeoff guard gap
+    NaN in both: --verify ended in 'internal error: TypeError' (the NaN difference, null
+    in the result, formatted as a number).  Now the stride compares equal."""
+    g = running_gait.save(tmp_path / "running.json")
+    rc, o = run(capsys, "export-running", "--gait", g, "--out", tmp_path / "export", "--kd",
+                "1e300", "--verify", "--states", 50, "--strides", 3)
+    assert rc == 0 and "verification: verified" in o.out, o.err + o.out
+    assert "records differ by at most 0 " in o.out
 
 
 def _bad(capsys, *args):

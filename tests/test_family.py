@@ -314,6 +314,9 @@ def test_cli_family_and_gait_between(capsys, tmp_path, monkeypatch):
 @pytest.mark.parametrize("argv, words", [
     (["--speeds", "0.8:0.8:0.05"], "--speeds: the range 0.8:0.8 is empty"),
     (["--speeds", "1:0.5:0.05"], "reversed"),
+    # a step longer than the range: the one speed 0.7 ('a family needs 2 ... got 1')
+    (["--speeds", "0.7:0.8:1e300"], "--speeds: the step 1e+300 is longer than the range "
+                                     "0.7:0.8 (at most 0.1)"),
     (["--speeds", "nan:1:0.1"], "finite"),
     (["--speeds", "0.5-1"], "A:B:STEP"),
     (["--speeds", "-1:1:0.5"], "positive"),

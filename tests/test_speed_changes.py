@@ -349,6 +349,9 @@ def test_cli_profile_names_the_mu_of_each_gait(capsys, family, family_path):
     (["--speeds", "0.7", "nan"], "--speeds: speeds must be finite"),
     (["--ramp", "0.8", "0.7", "0.05"], "--ramp: the range 0.8:0.7 is reversed"),
     (["--ramp", "0.7", "0.7", "0.05"], "empty"),
+    # a step longer than the ramp walked one step at 0.7 and exited 0
+    (["--ramp", "0.7", "0.8", "1e300"], "--ramp: the step 1e+300 is longer than the range"),
+    (["--ramp", "0.7", "0.8", "0.16"], "--ramp: the step 0.16 is longer than the range"),
     (["--ramp", "0.7", "0.9", "0.05"], "--ramp: 0.85 m/s is outside the family"),
     (["--speeds", "0.7", "--steps", "3"], "--steps does not apply"),
     (["--speeds", "0.7", "--ramp", "0.7", "0.8", "0.05"], "exclude"),

@@ -222,7 +222,7 @@ def _report(args, r):
         print_json(r)
         return
     c = r["controller"]
-    if r["status"] != "different":
+    if r["status"] in ("written", "verified"):
         print(f"wrote {r['out']}: " + ", ".join(r["files"]))
     desc = (f"time-varying controller, M1 = {c['M1']}, rejoin {c['rejoin']:g} T"
             if c["controller"] == "tv" else "virtual-constraint controller fitted to the gait")
@@ -258,7 +258,19 @@ def _report(args, r):
     if m.get("start") == "orbit":
         print(f"  {m['message'].split('; from the orbit')[0]}: compared from the orbit's start "
               "instead")
-    print(f"  {m['steps']}-impact simulation ({r['friction']}) driven by the library "
+    if m["status"] == "nothing_compared":
+        print(f"  from the orbit's start too the runs ended before an impact "
+              f"({m['compiled_status']}): no impact to compare, nothing verified (the "
+              "design does not walk there: 'biped simulate' shows how it stops)")
+    else:
+        _report_simulation(m, r["friction"], c["controller"])
+    print(f"  time per call: {v['c_us']:.3f} us in C (the example's loop, {v['c_calls']} "
+          f"calls), {s['ctypes_us']:.2f} us through ctypes, {s['python_us']:.1f} us for the "
+          f"Python law one state at a time (C {s['python_us'] / v['c_us']:.0f} times faster)")
+
+
+def _report_simulation(m: dict, friction: str, controller: str):
+    print(f"  {m['steps']}-impact simulation ({friction}) driven by the library "
           f"({m['compiled_status']}) "
           f"against biped simulate's ({m['python_status']}): impact times differ by at most "
           f"{m['max_impact_time']:.3g} s, states by {m['max_state']:.3g} (limit "
@@ -267,10 +279,7 @@ def _report(args, r):
           f"{m['twin_max_impact_time']:.3g} s, {m['twin_max_state']:.3g}"
           + ("" if m["status"] != "discretisation" else
              "; the larger difference from biped simulate is "
-             + apart_reason(int(c["controller"] == "tv"))))
-    print(f"  time per call: {v['c_us']:.3f} us in C (the example's loop, {v['c_calls']} "
-          f"calls), {s['ctypes_us']:.2f} us through ctypes, {s['python_us']:.1f} us for the "
-          f"Python law one state at a time (C {s['python_us'] / v['c_us']:.0f} times faster)")
+             + apart_reason(int(controller == "tv"))))
 
 
 def register(sub):
@@ -289,7 +298,8 @@ def register(sub):
                     "same way; biped simulate's run, which integrates the time-varying "
                     "law's reference state with the robot, is compared too and differs by "
                     "that discretisation), and prints the largest differences and the time "
-                    "per call; a difference beyond the limits exits with 1 and writes "
+                    "per call; a difference beyond the limits, or runs that all end "
+                    "before an impact (nothing compared), exits with 1 and writes "
                     "nothing. The folder appears complete or not at all.")
     add_gait_arguments(p)
     add_robot(p)

@@ -75,7 +75,7 @@ def _report(args, r):
         print_json(r)
         return
     c = r["controller"]
-    if r["status"] != "different":
+    if r["status"] in ("written", "verified"):
         print(f"wrote {r['out']}: " + ", ".join(r["files"]))
     clip = f", torques clipped at {c['torque_limit']:g} N m" if c["saturate"] else ""
     print(f"  running controller ({c['law']}), Kp {c['Kp']}, Kd {c['Kd']}, M1 {c['M1']}"
@@ -93,10 +93,16 @@ def _report(args, r):
           f"{rel['stance']:.3g} (stance), {rel['flight']:.3g} (flight) relative (limit "
           f"{TORQUE_RTOL:g}); equal bit for bit at {same['stance'] + same['flight']} of "
           f"{2 * s['n']}; return codes {s['return_codes']}")
-    if m is not None:
+    if m is not None and m["status"] == "nothing_compared":
+        print(f"  {m['message']}, nothing verified: the design does not run in MuJoCo "
+              "('biped mujoco-running' shows how it stops; --strides 0 compares the states "
+              "only)")
+    elif m is not None:
+        worst = m["max_difference"]         # None: inf (a number in one record only)
         print(f"  MuJoCo, {m['strides']} strides with the library ({m['compiled_status']}) and "
               f"with the Python law ({m['python_status']}): records differ by at most "
-              f"{m['max_difference']:.3g} (limit {STRIDE_TOL:g}), {m['identical_strides']} "
+              f"{'inf' if worst is None else format(worst, '.3g')} (limit {STRIDE_TOL:g}), "
+              f"{m['identical_strides']} "
               f"strides identical; {m['compiled_seconds']:.2f} s against "
               f"{m['python_seconds']:.2f} s")
     print(f"  time per call: {v['c_us']:.3f} us in C (the example's loop, {v['c_calls']} "
@@ -120,7 +126,8 @@ def register(sub):
                     "torques with the Python law's at random states of both phases (to 1e-12 "
                     "relative) and a MuJoCo run driven by the library with the same run "
                     "driven by the Python law (stride records to 1e-9), and prints the "
-                    "time per call; a difference beyond the limits exits with 1 and writes "
+                    "time per call; a difference beyond the limits, or runs that both stop "
+                    "in their first stride (nothing compared), exits with 1 and writes "
                     "nothing. 'biped mujoco-running --compiled DIR' runs the export in "
                     "MuJoCo. The folder appears complete or not at all.")
     p.add_argument("--gait", required=True, metavar="FILE",

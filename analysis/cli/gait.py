@@ -8,6 +8,7 @@ import math
 from analysis.gait_metrics import lean_from, torso_fall
 from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_figures
 from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
+from gait_opt.options import SMOOTH_CONTINUATION_MAX
 
 from .common import (Progress, UserError, add_robot, load_model, output_dir, output_file,
                      print_json)
@@ -47,7 +48,8 @@ def register(sub):
     p.add_argument("--continuation-shape", choices=("ramp", "smooth"), default="ramp",
                    help="with --continuation: 'ramp' (default), or 'smooth': the "
                         "acceleration decays exponentially over C T, matching the jerk at "
-                        "T (no kink where late impacts land)")
+                        f"T (no kink where late impacts land; C at most "
+                        f"{SMOOTH_CONTINUATION_MAX:g})")
     p.add_argument("--clearance", type=float, default=None, metavar="H",
                    help="mid-step swing-foot clearance, m (default scaled with leg length: "
                         "0.0375 x leg, 0.03 for RABBIT; the robust design's gait uses "
@@ -86,9 +88,12 @@ def cmd_gait(args):
     if lean is not None and not (math.isfinite(lean) and 0 < lean < math.pi):
         raise UserError(f"--torso-lean-max must be a number of rad between 0 and pi (both "
                         f"excluded), got {lean:g}")
-    if args.continuation_shape == "smooth" and args.continuation is None:
-        raise UserError("--continuation-shape smooth needs --continuation C (the decay "
-                        "time, a fraction of T)")
+    if args.continuation_shape == "smooth" and not (
+            args.continuation is not None and args.continuation <= SMOOTH_CONTINUATION_MAX):
+        raise UserError(f"--continuation-shape smooth needs --continuation C, at most "
+                        f"{SMOOTH_CONTINUATION_MAX:g} (the decay time, in T)"
+                        + ("" if args.continuation is None else
+                           f", got {args.continuation:g}"))
     if not 4 <= args.intervals <= MAX_INTERVALS:
         raise UserError(f"--intervals must be between 4 and {MAX_INTERVALS}, got "
                         f"{args.intervals}")

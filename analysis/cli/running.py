@@ -40,6 +40,10 @@ MAX_DISTANCE = 1e-2
 CLOSED_LOOP_DEFAULTS = dict(kp=DEFAULT_KP, kd=DEFAULT_KD, law="pd", steps=20, perturb=1e-2,
                             flight_clock="takeoff")
 
+#: the options of the optimisation and their defaults (given or not: refused with --gait)
+OPTIMISE_DEFAULTS = dict(speed=1.5, mu=0.6, mu_margin=MU_MARGIN, intervals=(16, 10),
+                         out="running.json")
+
 #: at most this many strides in a run (--steps here, --strides and --fit of mujoco-running)
 MAX_STRIDES = 5000
 
@@ -146,10 +150,10 @@ def register(sub):
                     "and the feet on a dense grid.  With --stability (or --gait FILE), track "
                     "it with a controller in stance and flight and give the stride map's "
                     "fixed point, exact eigenvalues and a perturbed run.")
-    p.add_argument("--speed", type=float, default=1.5, metavar="V",
+    p.add_argument("--speed", type=float, metavar="V",
                    help="average speed, m/s (default 1.5)")
-    p.add_argument("--mu", type=float, default=0.6, help="friction coefficient (default 0.6)")
-    p.add_argument("--mu-margin", type=float, default=MU_MARGIN, metavar="M",
+    p.add_argument("--mu", type=float, help="friction coefficient (default 0.6)")
+    p.add_argument("--mu-margin", type=float, metavar="M",
                    help="kept below --mu in every friction cone of the optimised step (stance "
                         f"force, landing impulse), 0 <= M < mu (default {MU_MARGIN:g}: room "
                         "for a perturbed closed loop's landing)")
@@ -158,8 +162,7 @@ def register(sub):
                         "optimised step's and its closed loop's (a run stops beyond it, or "
                         "with --saturate clips at it); with --gait only the limit --saturate "
                         "clips at")
-    p.add_argument("--intervals", type=int, nargs=2, default=(16, 10),
-                   metavar=("STANCE", "FLIGHT"),
+    p.add_argument("--intervals", type=int, nargs=2, metavar=("STANCE", "FLIGHT"),
                    help="Hermite-Simpson intervals of each phase, 2 to 200 (default 16 10)")
     p.add_argument("--max-iter", type=int, default=None, metavar="K",
                    help="IPOPT iteration limit (default 3000); giving it also turns off the "
@@ -170,7 +173,7 @@ def register(sub):
                    help="solve again even when a step of the same robot, options and code "
                         "is kept in the cache ($BIPED_CACHE_DIR or ~/.cache/biped-casadi)")
     add_robot(p, with_gait=False)
-    p.add_argument("--out", metavar="FILE", default="running.json",
+    p.add_argument("--out", metavar="FILE",
                    help="where to save the step (default running.json; "
                         "gait_opt.running.RunningGait.load reads it)")
     p.add_argument("--plot", metavar="DIR",
@@ -290,6 +293,8 @@ def cmd_running(args):
     _check_closed_loop(args)
     if args.gait is not None:
         return _stability_of_file(args)
+    for k, v in OPTIMISE_DEFAULTS.items():
+        setattr(args, k, v if getattr(args, k) is None else getattr(args, k))
     for name in ("speed", "mu", "torque_limit"):
         v = getattr(args, name)
         if v is not None and not (math.isfinite(v) and v > 0):
@@ -404,13 +409,9 @@ def failure(speed: float, stats: dict) -> str:
 def _stability_of_file(args):
     """``--gait FILE``: the closed loop of a saved step."""
     check_torque_limit(args, clip_only=True)
-    given = [opt for opt, dest, default in (
-        ("--speed", "speed", 1.5), ("--mu", "mu", 0.6), ("--mu-margin", "mu_margin", MU_MARGIN),
-        ("--intervals", "intervals", (16, 10)), ("--max-iter", "max_iter", None),
-        ("--out", "out", "running.json"), ("--plot", "plot", None),
-        ("--no-cache", "no_cache", False))
-        if (tuple(getattr(args, dest)) if dest == "intervals" else getattr(args, dest))
-        != default]
+    given = ["--" + dest.replace("_", "-")
+             for dest in (*OPTIMISE_DEFAULTS, "max_iter", "plot", "no_cache")
+             if getattr(args, dest) not in (None, False)]
     if given:
         raise UserError(f"--gait analyses a saved step; {', '.join(given)} "
                         f"{'is' if len(given) == 1 else 'are'} for optimising one (leave "
