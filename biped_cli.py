@@ -16,9 +16,21 @@ def main() -> int:
     """
     try:
         from analysis.cli import main as run
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ImportError) as e:
+        if not _interrupted(e):
+            raise
         command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
         print(f"biped {command}: interrupted" if command else "biped: interrupted",
               file=sys.stderr)
         return 130
     return run()
+
+
+def _interrupted(e: BaseException) -> bool:
+    """Whether ``e`` is a Ctrl-C, or an error an extension module's initialisation made
+    of one (``ImportError: initialization failed``, caused by the KeyboardInterrupt)."""
+    while e is not None:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        e = e.__cause__ or e.__context__
+    return False

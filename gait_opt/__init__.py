@@ -11,7 +11,7 @@ from .speed_family import FamilyGait, GaitFamily, MemberRecord, parse_speed_rang
 from .family_solve import gait_family
 from .gait import ORBIT_TOL, Gait, GaitFileError, OpenOrbitWarning
 from .hzd_orbit import BezierConstraints, fit_bezier_constraints
-from .importing import IMPORT_TOL, GaitImport, GaitImportError, import_gait
+from .importing import IMPORT_TOL, MAX_IMPORT_TOL, GaitImport, GaitImportError, import_gait
 from .nodes import Nodes, read_nodes
 from .optimize import GaitSolveResult, optimize_gait
 from .options import (REFERENCE_LEG_LENGTH, REFERENCE_SPEED, GaitOptions, LegScaled,
@@ -21,7 +21,8 @@ from .polish import ClosedOrbit, close_orbit
 
 __all__ = ["optimize_gait", "GaitSolveResult", "Gait",
            "GaitOptions", "GaitOptimizationError", "GaitFileError", "OpenOrbitWarning",
-           "ORBIT_TOL", "import_gait", "GaitImport", "GaitImportError", "IMPORT_TOL", "Nodes",
+           "ORBIT_TOL", "import_gait", "GaitImport", "GaitImportError", "IMPORT_TOL",
+           "MAX_IMPORT_TOL", "Nodes",
            "read_nodes", "BezierConstraints", "fit_bezier_constraints", "close_orbit",
            "ClosedOrbit", "gait_family", "GaitFamily", "MemberRecord",
            "FamilyGait", "speed_range", "parse_speed_range", "REFERENCE_LEG_LENGTH",

@@ -36,10 +36,15 @@ from .polish import close_orbit
 from .urdf_angles import read_urdf_csv, urdf_nodes
 
 __all__ = ["GaitImport", "GaitImportError", "import_gait", "fit_bezier", "IMPORT_TOL",
-           "FIT_TOL", "MAX_DEGREE"]
+           "MAX_IMPORT_TOL", "FIT_TOL", "MAX_DEGREE"]
 
 #: the fitted gait's orbit residual (rad, rad/s, m) beyond which an import is refused
 IMPORT_TOL = 0.05
+#: the largest tolerance taken: a residual of a radian, a rad/s or a metre (more than a
+#: step) is not close to an orbit, and beyond it data of another robot passed (RABBIT's
+#: own gait against RABBIT without its rotor inertia misses by 5.7, and the polish then
+#: made it an orbit of that other robot)
+MAX_IMPORT_TOL = 1.0
 #: rad: a Bezier degree whose fit meets every node within this is enough
 FIT_TOL = 1e-6
 #: the highest Bezier degree tried
@@ -316,7 +321,8 @@ def import_gait(model, source, *, angles: str = "relative", stance=None,
     bezier_degree : int, optional
         Degree of q_a^d(s) (4 to 20); default chosen by the fit (module docstring).
     tol : float
-        The largest orbit residual of the fitted gait (before the polish) accepted.
+        The largest orbit residual of the fitted gait (before the polish) accepted
+        (positive, at most :data:`MAX_IMPORT_TOL`).
     options : GaitOptions, optional
         Recorded with the gait (its constraints are reported, not enforced); the speed
         and Bezier degree are the import's.
@@ -336,6 +342,9 @@ def import_gait(model, source, *, angles: str = "relative", stance=None,
     where = str(source) if isinstance(source, (str, Path)) else "gait"
     if not (isinstance(tol, (int, float)) and math.isfinite(tol) and tol > 0):
         raise GaitImportError(f"tol must be a positive number, got {tol!r}")
+    if tol > MAX_IMPORT_TOL:
+        raise GaitImportError(f"tol must be at most {MAX_IMPORT_TOL:g} (rad, rad/s, m: a "
+                              f"larger residual is not close to an orbit), got {tol!r}")
     try:
         nodes, kind, info = _nodes_of(model, source, angles, where, stance, tol)
     except GaitImportError:

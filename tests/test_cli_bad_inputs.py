@@ -660,6 +660,13 @@ RUNNING_CASES = [
     (["running", "--stability", "--perturb", "1e300"], "--perturb must be a finite number "
                                                        "within +-100 rad/s"),
     (["mujoco-running", *RG, "--foot-radius", "10"], "--foot-radius must be smaller"),
+    # MuJoCo's time step and contact bounds said "a walking step" in a running command
+    (["mujoco-running", *RG, "--timestep", "1"], "--timestep must be at most 0.05 s (a "
+                                                 "step, walking or running, lasts a few"),
+    (["mujoco-running", *RG, "--timestep", "1e-6"], "(half a second of walking or running "
+                                                    "would take"),
+    (["mujoco-running", *RG, "--solref", "2"], "--solref must be at most 1 s (longer than "
+                                               "a step, walking or running)"),
     # IPOPT ending in failure: CasADi's assertion text ('Error in Opti::solve ... Solver
     # failed ...') and, here, its evaluation warnings on stderr
     (["running", "--speed", "1e300", "--intervals", "2", "2", "--no-cache", "--out",

@@ -27,7 +27,8 @@ from foreign_gait import hermite_simpson_gait
 from analysis import poincare_eigenvalues, vc_eigenvalue
 from analysis.cli import main
 from biped_casadi import BipedModel
-from gait_opt import Gait, GaitImportError, Nodes, fit_bezier_constraints, import_gait
+from gait_opt import (MAX_IMPORT_TOL, Gait, GaitImportError, Nodes, fit_bezier_constraints,
+                      import_gait)
 
 M1 = np.array([0.2, -0.3, 0.1, 0.0])
 
@@ -170,6 +171,16 @@ def test_tolerance_is_the_users(model, foreign):
         import_gait(model, foreign, angles="absolute", tol=1e-8)
 
 
+def test_the_largest_tolerance_still_refuses_another_robot(model, foreign):
+    """A tolerance is bounded (--import-tol 1e300 was taken, and the polish made the data
+    of another robot an orbit of this one); the largest still refuses another robot."""
+    no_rotor = BipedModel(dataclasses.replace(model.description, rotor_inertia=0.0))
+    with pytest.raises(GaitImportError, match=f"tolerance {MAX_IMPORT_TOL:g}\\)"):
+        import_gait(no_rotor, foreign, angles="absolute", tol=MAX_IMPORT_TOL)
+    with pytest.raises(GaitImportError, match=f"tol must be at most {MAX_IMPORT_TOL:g} "):
+        import_gait(model, foreign, angles="absolute", tol=MAX_IMPORT_TOL * 1.5)
+
+
 BAD = {
     "missing.csv": (None, "not found"),
     "header.csv": ("t,a,b\n0,1,2\n", "the header must be t,q1..qn,dq1..dqn"),
@@ -227,6 +238,7 @@ def test_bad_import_arguments(gait, tmp_path, capsys):
     src = write_csv(tmp_path / "s.csv", samples(gait).every(20))
     out = tmp_path / "g.json"
     for extra, message in [(["--import-tol", "-1"], "--import-tol must be a positive"),
+                           (["--import-tol", "1e300"], "--import-tol must be at most 1 "),
                            (["--bezier-degree", "2"], "--bezier-degree must be from 4 to 20"),
                            (["--out", str(tmp_path / "g.txt")], "must end in .json"),
                            (["--speed", "0.3"], "--speed: an imported gait walks at its "

@@ -9,6 +9,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 import biped_cli
 
 
@@ -25,6 +27,59 @@ def test_ctrl_c_while_the_command_line_loads_is_one_line(monkeypatch, capsys):
     monkeypatch.setattr(sys, "argv", ["biped", "reproduce", "--quick", "--out", "X"])
     assert biped_cli.main() == 130
     assert capsys.readouterr().err == "biped reproduce: interrupted\n"
+
+
+def test_an_import_error_made_of_a_ctrl_c_is_the_interruption(monkeypatch, capsys):
+    """An extension module whose initialisation is interrupted raises ImportError
+    ('initialization failed', caused by the KeyboardInterrupt): that was a traceback."""
+    class Interrupted:
+        def find_spec(self, name, path=None, target=None):
+            if name == "analysis.cli.app":
+                raise ImportError("initialization failed") from KeyboardInterrupt()
+
+    monkeypatch.delitem(sys.modules, "analysis.cli.app", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [Interrupted()] + sys.meta_path)
+    monkeypatch.setattr(sys, "argv", ["biped", "model"])
+    assert biped_cli.main() == 130
+    assert capsys.readouterr().err == "biped model: interrupted\n"
+
+
+def test_an_import_error_alone_is_not_an_interruption(monkeypatch):
+    class Broken:
+        def find_spec(self, name, path=None, target=None):
+            if name == "analysis.cli.app":
+                raise ImportError("a broken installation")
+
+    monkeypatch.delitem(sys.modules, "analysis.cli.app", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [Broken()] + sys.meta_path)
+    with pytest.raises(ImportError, match="a broken installation"):
+        biped_cli.main()
+
+
+_MODULE = """
+import runpy, sys
+class Interrupted:                        # a Ctrl-C while the command line loads
+    def find_spec(self, name, path=None, target=None):
+        if name == "analysis.cli.common":
+            raise KeyboardInterrupt
+sys.meta_path.insert(0, Interrupted())
+sys.argv = ["analysis.cli", "model"]
+runpy.run_module("analysis.cli", run_name="__main__", alter_sys=True)
+"""
+
+
+def test_python_m_is_interrupted_as_biped_is(tmp_path):
+    """``python -m analysis.cli`` imported the command line (``analysis`` and
+    ``analysis.cli``, a second or two) before any of it could catch a Ctrl-C: a
+    traceback of the imports.  Importing the packages now loads nothing else."""
+    r = subprocess.run([sys.executable, "-c", _MODULE], capture_output=True, text=True,
+                       cwd=tmp_path, timeout=120)
+    assert (r.returncode, r.stderr) == (130, "biped model: interrupted\n"), r.stderr
+    loaded = subprocess.run(
+        [sys.executable, "-c", "import sys, analysis.cli; print(sorted(m for m in "
+                               "sys.modules if m.split('.')[0] in ('analysis', 'numpy')))"],
+        capture_output=True, text=True, cwd=tmp_path, timeout=120).stdout
+    assert loaded == "['analysis', 'analysis.cli']\n"
 
 
 _CLUSTER = """

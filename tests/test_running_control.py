@@ -453,7 +453,10 @@ def test_a_foot_back_below_the_ground_names_the_tangential_force(capsys):
     (["--steps", "-1"], "--steps"), (["--perturb", "inf"], "--perturb"),
     (["--m1", "0", "inf", "0", "0"], "--m1"), (["--speed", "2"], "--speed"),
     (["--plot", "figs"], "--plot"), (["--torque-limit", "100"], "add --saturate"),
-    (["--saturate", "--torque-limit", "0"], "--torque-limit must be a positive number")])
+    (["--saturate", "--torque-limit", "0"], "--torque-limit must be a positive number"),
+    # RK4 diverged: 'state not finite at t = 0.0028 s', exit 1
+    (["--kp", "1e300"], "the step supports Kp at most"),
+    (["--kd", "1e300"], "the step supports Kd at most")])
 def test_command_line_refuses_bad_gains(gait_file, capsys, args, words):
     from analysis.cli import main
     assert main(["running", "--gait", gait_file, *args]) == 2
@@ -464,14 +467,14 @@ def test_command_line_refuses_bad_gains(gait_file, capsys, args, words):
 def test_a_closed_loop_option_implies_the_closed_loop(run_gait, tmp_path, capsys,
                                                       monkeypatch):
     """``biped running --kp 1e300`` optimised the step, ignored the gain (no --stability)
-    and exited 0: now any closed-loop option analyses the loop, which fails (exit 1) and
-    says so; without one the command stays the optimisation alone."""
+    and exited 0: now any closed-loop option analyses the loop, which refuses the gain
+    (too stiff for its RK4 step); without one the command stays the optimisation alone."""
     import analysis.cli.running as cli
     monkeypatch.setattr(cli, "optimize_running", lambda *a, **k: run_gait)
     out = str(tmp_path / "r.json")
-    assert cli.cmd_running(cli_args("--kp", "1e300", "--steps", "0", "--out", out)) == 1
-    o = capsys.readouterr()
-    assert "Kp 1e+300" in o.out and "closed loop failed" in o.err, (o.out, o.err)
+    with pytest.raises(ValueError, match="Kp 1e[+]300.*the step supports Kp at most"):
+        cli.cmd_running(cli_args("--kp", "1e300", "--steps", "0", "--out", out))
+    capsys.readouterr()
     assert cli.cmd_running(cli_args("--out", out, "--json")) == 0
     d = json.loads(capsys.readouterr().out)
     assert "stability" not in d
@@ -766,3 +769,26 @@ def test_a_robot_without_a_limit_needs_one_to_clip_at(model, run_gait):
         built(False, None, "MuJoCo")
     c = built(True, 90.0)
     assert c.saturate and c.torque_limit == 90.0
+
+
+@pytest.mark.parametrize("gain, h2_bound", [("Kp", 8.0), ("Kd", None)])
+def test_the_rk4_bound_on_the_gains_is_rk4s(model, run_gait, gain, h2_bound):
+    """The bound :func:`check_rk4_steps` puts on the gains is RK4's stability region: for
+    the computed torque each output is dd e = -Kp e - Kd de, so Kp alone is stable while
+    h^2 Kp <= 8 (the imaginary axis, |h lambda| <= 2 sqrt 2) and Kd alone while h Kd is
+    at most the root of 1 - x + x^2/2 - x^3/6 + x^4/24 = 1 (the negative real axis)."""
+    from biped_casadi.control.running_step import check_rk4_steps
+    h = 1e-3
+    x = [r.real for r in np.roots([1 / 24, -1 / 6, 1 / 2, -1]) if abs(r.imag) < 1e-12][0]
+    limit = h2_bound / h**2 if gain == "Kp" else x / h
+    for scale, refused in ((0.999, False), (1.001, True)):
+        gains = {"Kp": 0.0, "Kd": 0.0}
+        gains[gain] = limit * scale
+        c = RunningController(model, run_gait, law="computed_torque", **gains)
+        if not refused:
+            check_rk4_steps(c, dict(stance=h, flight=h))
+            continue
+        with pytest.raises(ValueError, match=f"{gain} at most ([0-9.e+]+) ") as e:
+            check_rk4_steps(c, dict(stance=h, flight=h))
+        top = float(re.search(f"{gain} at most ([0-9.e+]+) ", str(e.value)).group(1))
+        assert top == pytest.approx(limit, rel=2e-3)

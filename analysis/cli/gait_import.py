@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_figures
-from gait_opt import IMPORT_TOL, GaitOptions, import_gait
+from gait_opt import IMPORT_TOL, MAX_IMPORT_TOL, GaitOptions, import_gait
 from gait_opt.urdf_angles import CSV_ANGLES, require_urdf_map, write_gait_csv
 
 from .common import (UserError, load_gait, load_model, not_an_input, output_dir, output_file,
@@ -42,7 +42,8 @@ def add_import_arguments(p):
                    help="with --export-csv: uniform samples from t = 0 to T (default 101)")
     p.add_argument("--import-tol", type=float, default=None, metavar="TOL",
                    help=f"with --import: refuse a trajectory whose fitted orbit misses by "
-                        f"more than TOL (rad, rad/s, m; default {IMPORT_TOL:g})")
+                        f"more than TOL (rad, rad/s, m; default {IMPORT_TOL:g}, at most "
+                        f"{MAX_IMPORT_TOL:g})")
     p.add_argument("--bezier-degree", type=int, default=None, metavar="M",
                    help="with --import: degree of the fitted Bezier polynomials (4 to 20; "
                         "default: chosen by the fit). With --import, --continuation and "
@@ -55,6 +56,9 @@ def cmd_import(args):
     args.import_tol = IMPORT_TOL if args.import_tol is None else args.import_tol
     if not (math.isfinite(args.import_tol) and args.import_tol > 0):
         raise UserError(f"--import-tol must be a positive number, got {args.import_tol:g}")
+    if args.import_tol > MAX_IMPORT_TOL:
+        raise UserError(f"--import-tol must be at most {MAX_IMPORT_TOL:g} (rad, rad/s, m: a "
+                        f"larger residual is not close to an orbit), got {args.import_tol:g}")
     if args.bezier_degree is not None and not 4 <= args.bezier_degree <= 20:
         raise UserError(f"--bezier-degree must be from 4 to 20, got {args.bezier_degree}")
     out = output_file(args.out, "--out", (".json",))

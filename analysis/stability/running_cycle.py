@@ -68,6 +68,7 @@ import casadi as ca
 import numpy as np
 
 from biped_casadi.control.running import FLIGHT_CLOCKS, RunningController
+from biped_casadi.control.running_step import check_rk4_steps
 from biped_casadi.results import Result
 
 from .hybrid_cycle import Domain, HybridCycle, HybridCycleError, entry_function
@@ -274,6 +275,7 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     x = ca.SX.sym("x", 2 * nq)
     h_st = float(g.T_stance) / (c.stance.n_intervals * steps_per_interval)
     h_fl = float(g.T_flight) / (c.flight.n_intervals * steps_per_interval)
+    check_rk4_steps(c, dict(stance=h_st, flight=h_fl))
     stance = Domain("stance", 2 * nq, f_st, g_st, ca.Function("switch", [x], [x]), h_st,
                     time_limits * float(g.T_stance),
                     start=_start(2 * nq, c.gains), constraints=c_st, constraint_names=names,

@@ -50,10 +50,11 @@ MIN_INERTIA = 1e-14
 #: the contact kinds of :func:`mjcf`
 CONTACTS = ("stiff", "default")
 #: s: the time steps a run takes (a smaller one would run for hours, a larger one misses
-#: the step's dynamics)
+#: the step's dynamics: a step lasts a few tenths of a second, walking (0.4 to 1 s for the
+#: robots measured) or running (RABBIT at 1.5 m/s: 0.36 s stance, 0.10 s flight))
 MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.05
-#: s: the softest contact a run takes: a time constant longer than a walking step (0.4 to
-#: 1 s for the robots measured) leaves the stance foot still sinking when the step ends
+#: s: the softest contact a run takes: a time constant longer than a step, walking or
+#: running, leaves the stance foot still sinking when the step ends
 MAX_SOLREF = 1.0
 #: the largest friction coefficient (any real contact is below about 2; near 1e200
 #: MuJoCo's contact solver overflows and the state is NaN at the first contact)
@@ -99,12 +100,13 @@ class ContactSettings:
         if self.mu > MAX_MU:
             raise ValueError(f"mu must be at most {MAX_MU:g}, got {self.mu!r}")
         if self.timestep > MAX_TIMESTEP:
-            raise ValueError(f"timestep must be at most {MAX_TIMESTEP:g} s (a walking step "
-                             f"lasts about half a second), got {self.timestep!r}")
+            raise ValueError(f"timestep must be at most {MAX_TIMESTEP:g} s (a step, walking "
+                             f"or running, lasts a few tenths of a second), got "
+                             f"{self.timestep!r}")
         if self.timestep < MIN_TIMESTEP:
-            raise ValueError(f"timestep must be at least {MIN_TIMESTEP:g} s (a walking step of "
-                             f"half a second would take {0.5 / self.timestep:.2g} MuJoCo "
-                             f"steps), got {self.timestep!r}")
+            raise ValueError(f"timestep must be at least {MIN_TIMESTEP:g} s (half a second "
+                             f"of walking or running would take {0.5 / self.timestep:.2g} "
+                             f"MuJoCo steps), got {self.timestep!r}")
         if self.solref is not None:
             v = self.solref
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
@@ -112,7 +114,7 @@ class ContactSettings:
                 raise ValueError(f"solref must be a positive time constant (s), got {v!r}")
             if v > MAX_SOLREF:
                 raise ValueError(f"solref must be at most {MAX_SOLREF:g} s (longer than a "
-                                 f"walking step), got {v!r}")
+                                 f"step, walking or running), got {v!r}")
             if v < 2 * self.timestep:
                 raise ValueError(f"solref must be at least two time steps ({2 * self.timestep:g}"
                                  f" s): MuJoCo would silently raise {v!r} s to that")
