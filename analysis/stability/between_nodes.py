@@ -27,14 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from biped_casadi.simulation.kernel import locate_minimum
+from biped_casadi.simulation.kernel import SCREEN_SAFETY, minima_between, screen_steps
 
 __all__ = ["SCREEN_SAFETY", "watch", "screened", "minima"]
-
-#: a step's output is refined (its rates at both nodes, its minimum located) where its
-#: lower node value less this many times the bound c'' h^2 / 8 on a dip inside the step
-#: (c'' from the second differences of the nodes around) is below its bound
-SCREEN_SAFETY = 2.0
 
 
 def _col(v) -> np.ndarray:
@@ -50,21 +45,16 @@ def watch(d, g, c) -> np.ndarray:
 def screened(d, w) -> np.ndarray:
     """Which watched outputs of domain ``d`` may go below their bounds between the last
     two of the nodes ``w`` (up to four consecutive nodes' watched values; module
-    docstring).
+    docstring, :func:`~biped_casadi.simulation.kernel.screen_steps`).
 
     Returns
     -------
     numpy.ndarray of bool
         One per watched output.
     """
-    if len(w) < 3:                  # the domain's first step: no curvature yet
+    if len(w) < 2:
         return np.ones(len(d.watched), bool)
-    d1 = w[-1] - 2 * w[-2] + w[-3]           # second differences, c'' h^2
-    curv = np.abs(d1)
-    if len(w) == 4:
-        d0 = w[-2] - 2 * w[-3] + w[-4]
-        curv = np.maximum(np.maximum(curv, np.abs(d0)), np.abs(2 * d1 - d0))
-    return np.minimum(w[-2], w[-1]) - (SCREEN_SAFETY / 8) * curv < d.watched_bounds
+    return screen_steps(np.array(w[-4:], float), d.watched_bounds)[-1]
 
 
 def minima(d, f, X, t, h, p, Xb, w) -> list:
@@ -93,14 +83,4 @@ def minima(d, f, X, t, h, p, Xb, w) -> list:
     if not near.any():
         return []
     ra, rb = _col(f.rate(X, t, p)), _col(f.rate(Xb, t + h, p))
-    found = []
-    for j in np.flatnonzero(near & (ra <= 0) & (rb > 0)):
-        def rate(eta_, j=j):
-            _, dw, ddw = f.between(X, t, float(eta_[0]), p)
-            return _col(dw)[j:j + 1], _col(ddw)[j:j + 1]
-
-        eta = locate_minimum(rate, h, ra[j], rb[j],
-                             lambda j=j: _col(f.between(X, t, 0.0, p)[2])[j])
-        if eta is not None:
-            found.append((eta, int(j), float(_col(f.between(X, t, eta, p)[0])[j])))
-    return sorted(found)
+    return minima_between(near, ra, rb, lambda eta: f.between(X, t, eta, p), h)

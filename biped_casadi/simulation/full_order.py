@@ -18,12 +18,12 @@ scheme.  With the default 2000 steps per T the scheme is the gait's own (docs: t
 the unperturbed closed loop repeats the reference to ~1e-11.
 
 Every node is checked, in time order, and the run stops at the first invalid state
-with one of the statuses of :data:`STATUSES` (the logs end with that state).  The swing
-foot is checked between the nodes too: where its vertical velocity goes from <= 0 at one
-node to > 0 at the next, its lowest point on the RK4 step between them is found by
-Newton's method on the velocity (the strike's, on its rate); below the ground there, it
-is the strike (a crossing going down beyond ``model.scuff_zone``: the step ends at the
-first root before that point) or a scuff (where it cannot strike):
+with one of the statuses of :data:`STATUSES` (the logs end with that state).  Between
+the nodes, where the swing foot's vertical velocity goes from <= 0 to > 0 its lowest
+point is found by Newton's method (the strike's); below the ground it is the strike (the
+first root before it, beyond ``model.scuff_zone``) or a scuff.  The stance force, the
+friction cone and the torques are screened between the nodes and their minima located
+where they may dip (:mod:`~biped_casadi.simulation.margins`):
 
 - ``fell``: hip lower than ``min_hip_height`` or torso past horizontal (leaning more than
   ``max_torso_angle`` from its upright angle, the robot's ``torso_upright``);
@@ -52,7 +52,7 @@ and the run reports the time spent saturated instead of stopping at 'torque_limi
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -63,12 +63,13 @@ from ..control.output_law import SECTION
 from ..control.reference import require_reference
 from ..control.saturation import clip_torques
 from ..numerics import FastCall, as_vector, compiled, rk4_step
-from ..results import internal, json_safe
+from ..results import internal
 from .compiled_loop import compiled_closed_loop
 from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, strike, swing_foot_dip
+from .margins import MarginCheck
 from .options import SimulationOptions
-from .outcome import STATUSES, OutcomeRecorder, WalkOutcome
-from .perturbation import Perturbation
+from .outcome import STATUSES, OutcomeRecorder, StepRecord, WalkOutcome
+from .perturbation import perturbed_initial_state
 from .terrain import ground_levels, step_heights
 from .validity import (STRIKE_MESSAGE, Limits, first_violation, impact_message,
                        impact_violation, node_message, node_violations, start_violation,
@@ -76,61 +77,6 @@ from .validity import (STRIKE_MESSAGE, Limits, first_violation, impact_message,
 
 __all__ = ["SimulationOptions", "StepRecord", "SimulationResult", "Simulator", "simulate",
            "simulator", "perturbed_initial_state", "STATUSES"]
-
-
-@dataclass
-class StepRecord:
-    """One completed step, from tau = 0 to its impact.
-
-    Parameters
-    ----------
-    index : int
-        The step's index (0-based).
-    t_start, t_impact : float
-        Time of its start and of its impact since the start of the run, s.
-    duration : float
-        tau at the impact, s.
-    q_minus, dq_minus : numpy.ndarray
-        The state just before the impact.
-    q_plus, dq_plus : numpy.ndarray
-        The state just after the impact and relabelling (the next step's start).
-    impulse : numpy.ndarray
-        (F_x, F_z) of the impact impulse on the new stance foot, N s.
-    qu_error, dqu_error : float
-        q_u - q_u^d(T) and dq_u - dq_u^d(T) just before the impact.
-    section : numpy.ndarray or None
-        (q_u, dq_u) at tau = 0.75 T (None if the impact came earlier).
-    section_error : numpy.ndarray or None
-        Its difference from the reference's (q_u^d, dq_u^d)(0.75 T).
-    step_length : float
-        x of the swing foot at the impact, m.
-    ground_height : float
-        The height h_k of the foothold the step struck, above its stance foot, m.
-    """
-    index: int
-    t_start: float
-    t_impact: float
-    duration: float
-    q_minus: np.ndarray
-    dq_minus: np.ndarray
-    q_plus: np.ndarray
-    dq_plus: np.ndarray
-    impulse: np.ndarray
-    qu_error: float
-    dqu_error: float
-    section: np.ndarray | None
-    section_error: np.ndarray | None
-    step_length: float
-    ground_height: float = 0.0
-
-    def to_dict(self) -> dict:
-        """Every field in plain JSON types.
-
-        Returns
-        -------
-        dict
-        """
-        return json_safe(asdict(self))
 
 
 @dataclass
@@ -208,33 +154,6 @@ class SimulationResult(WalkOutcome):
                          for s in self.steps]).reshape(-1, 2)
 
 
-def perturbed_initial_state(gait, q_error=0.0, dq_error=0.0):
-    """A perturbed start (q, dq) = (q^d(0) + q_error, dq^d(0) + dq_error).
-
-    Parameters
-    ----------
-    gait : Reference
-        The reference; its state at tau = 0 is perturbed.
-    q_error, dq_error : float or array_like
-        A number added to every joint (paper §V-C: 0.01 rad and 0.1 rad/s) or one
-        number per joint.
-
-    Returns
-    -------
-    tuple of numpy.ndarray
-        (q, dq), each (nq,).
-    """
-    nq = require_reference(gait).model.nq
-    if np.ndim(q_error) == 0 and np.ndim(dq_error) == 0:
-        pert = Perturbation.uniform(nq, q_error, dq_error)
-    else:
-        def err(e, name):
-            return np.full(nq, as_vector([e], 1, name)[0]) if np.ndim(e) == 0 \
-                else as_vector(e, nq, name)
-        pert = Perturbation(tuple(err(q_error, "q_error")), tuple(err(dq_error, "dq_error")))
-    return pert.initial_state(gait)
-
-
 class Simulator:
     """The full-order hybrid closed loop of one controller, its CasADi Functions built once.
 
@@ -284,6 +203,7 @@ class Simulator:
         self.chunk = self.options.rk4_steps // CHUNKS_PER_STEP
         self.schema = Diagnostics(self.model.nu, outputs=True)
         self.limits = Limits.of(self.options, self.plant, self.gait)
+        self.margin, self._margins = MarginCheck(self.limits, self.schema), None
         self._build()
         ref = self.controller.singularity()
         self._den_scale = max(abs(ref.min_value), abs(ref.max_value))
@@ -356,6 +276,8 @@ class Simulator:
         diag = ca.cse(self.schema.vector(m, q, dq, ua, Fx, Fz, den, y, dy, inr, sat))
         diagnostics = ca.Function("closed_loop_diagnostics", [X, tau, p], [diag],
                                   ["X", "tau", "p"], ["diag"])
+        self._margins = ca.Function("margins", [X, tau, p],
+                                    [self.margin.values(ua, Fx, Fz, ca)])
         eta = ca.SX.sym("eta")
         Xe, _ = self.rk4(X, tau, eta, p)
         ze = m.swing_foot(Xe[:nq])[1]
@@ -430,7 +352,7 @@ class Simulator:
         log = _Log(self.schema.size, self.h)
         rec = OutcomeRecorder(1, steps)
         records: list[StepRecord] = []
-        walk = dict(t0=0.0, stance_x=0.0, rec=rec, heights=heights)
+        walk = dict(t0=0.0, stance_x=0.0, rec=rec, heights=heights, log=log)
         failure = None
         for k in range(steps):
             rec.scenario_steps += 1
@@ -478,7 +400,7 @@ class Simulator:
         log.add(t0, np.zeros(1), k, X[:, None], D0, sx, walk["rec"], S)
         if fail is not None:
             return (fail[1], fail[2], t0), None
-        walk["p"], walk["section"] = p, None
+        walk["p"], walk["section"], walk["w"] = p, None, self.margin.at_nodes(D0)
         z_prev, dz_prev = z0, S.row(D0, "dzsw")[0]
         n = CHUNKS_PER_STEP
         i_section = int(round(SECTION * n)) * self.chunk - 1   # node at 0.75 T, 1st block
@@ -503,6 +425,13 @@ class Simulator:
             i_strike = i_strike if dip is None else dip[0]
             fail = self._first_failure(Dg[:, :i_strike], Xs[:, :i_strike], zprev[:i_strike],
                                        den_sign=sign, ground=ground)
+            stop = i_strike if fail is None else fail[0] + 1
+            W = np.vstack([walk["w"], self.margin.at_nodes(Dg[:, :stop])])
+            walk["w"] = W[-3:]
+            dense = self._between(W, p, ([(X, tau0)] + list(zip(Xs.T, taus)))[:stop],
+                                  t0, k, Xs, taus, Dg, sx, walk)
+            if dense is not None:
+                return dense, None
             if fail is not None:
                 j = fail[0]
                 log.add(t0, taus[:j + 1], k, Xs[:, :j + 1], Dg[:, :j + 1], sx, walk["rec"], S)
@@ -515,14 +444,14 @@ class Simulator:
                 za = z_prev if i_strike == 0 else zs[i_strike - 1]
                 log.add(t0, taus[:i_strike], k, Xs[:, :i_strike], Dg[:, :i_strike], sx,
                         walk["rec"], S)
-                if dip is None:
-                    return None, self._locate(Xa, ta, za - hk, zs[i_strike] - hk, p, hk)
-                if dip[1] == "strike":                 # the first root before the minimum
-                    return None, self._locate(Xa, ta, za - hk, dip[2] - hk, p, hk, dip[3])
-                Xe, te = dip[4], ta + dip[3]
-                log.add(t0, np.array([te]), k, Xe[:, None], self.diagnostics(Xe, te, p)[0],
-                        sx, walk["rec"], S)
-                return ("scuffed", dip[2], t0 + te), None
+                if dip is not None and dip[1] != "strike":
+                    return self._log_stop(walk, k, dip[4], ta + dip[3], "scuffed", dip[2]), None
+                event = self._locate(Xa, ta, za - hk, (zs[i_strike] if dip is None else dip[2])
+                                     - hk, p, hk, None if dip is None else dip[3])
+                W = np.vstack([walk["w"], self.margin.at_nodes(
+                    self.diagnostics(event[0], event[1], p)[0])])
+                return self._between(W, p, [(Xa, ta)], t0, k, Xs, taus, Dg, sx, walk,
+                                     event[1] - ta), event
             log.add(t0, taus, k, Xs, Dg, sx, walk["rec"], S)
             X, z_prev, dz_prev = Xs[:, -1], zs[-1], dzs[-1]
             ci += n if first else 1
@@ -575,6 +504,33 @@ class Simulator:
         _, _, Xe = self.event(Xa, ta, eta, p)
         return Xe.ravel(), ta + eta
 
+    def _between(self, W, p, starts, t0, k, Xs, taus, Dg, sx, walk, last=None):
+        """Force, friction and torques between the nodes (:mod:`.margins`) in the steps
+        from ``starts`` ((X, tau) each; W the margins at their nodes and up to three
+        before), the last ``last`` long (default h): None, or the failure (status,
+        message, time), the nodes before it logged."""
+        if self._margins is None or not starts:      # a compiled law: at the nodes only
+            return None
+        steps = [(Xa, ta, self.h, p) for Xa, ta in starts[:-1]] + \
+            [(*starts[-1], self.h if last is None else last, p)]
+        found = self.margin.first_dip(self.margin.build(self.rk4, self._margins), W, steps)
+        if found is None:
+            return None
+        j, eta, status = found
+        if last is None:
+            walk["log"].add(t0, taus[:j], k, Xs[:, :j], Dg[:, :j], sx, walk["rec"], self.schema)
+        Xe = self.event(steps[j][0], steps[j][1], eta, p)[2].ravel()
+        D = self.diagnostics(Xe, steps[j][1] + eta, p)[0]
+        return self._log_stop(walk, k, Xe, steps[j][1] + eta, status,
+                              self.margin.message(status, D, self._den_scale))
+
+    def _log_stop(self, walk, k, Xe, te, status, message):
+        """Log the state Xe at tau = te of step k, where the run stops: (status, message,
+        time)."""
+        walk["log"].add(walk["t0"], np.array([te]), k, Xe[:, None],
+                        self.diagnostics(Xe, te, walk["p"])[0], walk["stance_x"], walk["rec"],
+                        self.schema)
+        return status, message, walk["t0"] + te
 
     def _dip(self, X, tau0, p, Xs, taus, z_prev, dz_a, dz_b, ground, stop):
         """The swing foot between the nodes of a block before node ``stop`` (module

@@ -31,12 +31,17 @@ import casadi as ca
 import numpy as np
 
 __all__ = ["Diagnostics", "strike", "locate_strike", "locate_minimum", "swing_foot_dip",
-           "mapped", "threads", "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
+           "SCREEN_SAFETY", "screen_steps", "minima_between", "mapped", "threads", "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
 
 #: CasADi calls per reference step duration T of the simulators' integration: each call
 #: integrates a quarter of T (the Poincaré section 0.75 T falls on a boundary); RK4 steps
 #: per T are a multiple of 8
 CHUNKS_PER_STEP = 4
+
+#: a step's output is refined (its rates at both nodes, its minimum located) where its
+#: lower node value less this many times the bound c'' h^2 / 8 on a dip inside the step
+#: (c'' from the second differences of the nodes around) is below its bound
+SCREEN_SAFETY = 2.0
 
 #: most Newton iterations of :func:`locate_strike` (it stops at ``|z_sw| < 1e-15`` m, usually
 #: after 3 to 5)
@@ -280,6 +285,82 @@ def locate_minimum(rate, h: float, r_a: float, r_b: float, curvature=None):
         return -np.ravel(r), -np.ravel(dr)
 
     return float(locate_strike(event, h, -r_a, -r_b)[0])
+
+
+def screen_steps(W, bounds) -> np.ndarray:
+    """Which outputs may go below their bounds inside each step between consecutive
+    nodes, from the nodes' values alone.
+
+    An output c that dips inside a step of length h goes below its lower node value by at
+    most max |c''| h^2 / 8; c'' h^2 is estimated by the second differences of the nodes
+    around (centred on the step's first node and on the one before, and their linear
+    extrapolation to the step's end).  A step is flagged where its lower node value less
+    :data:`SCREEN_SAFETY` times that bound is below the bound; the first step (no node
+    before it) always.  An estimate, not a proof: it holds while c'' changes by less than
+    that factor over three steps.
+
+    Parameters
+    ----------
+    W : array_like
+        (n, m): the m outputs at n >= 2 consecutive nodes.
+    bounds : array_like
+        (m,) the outputs' lower bounds.
+
+    Returns
+    -------
+    numpy.ndarray of bool
+        (n - 1, m): per step (from node i to i + 1), per output.
+    """
+    W = np.asarray(W, float)
+    out = np.ones((W.shape[0] - 1,) + W.shape[1:], bool)
+    if W.shape[0] < 3:
+        return out
+    d1 = W[2:] - 2 * W[1:-1] + W[:-2]            # c'' h^2 centred on steps 1.. first nodes
+    curv = np.abs(d1)
+    d0 = d1[:-1]                                    # ... and on the node before
+    curv[1:] = np.maximum(np.maximum(curv[1:], np.abs(d0)), np.abs(2 * d1[1:] - d0))
+    out[1:] = np.minimum(W[1:-1], W[2:]) - (SCREEN_SAFETY / 8) * curv < bounds
+    return out
+
+
+def _flat(v) -> np.ndarray:
+    return np.array(v, float).ravel()
+
+
+def minima_between(near, r_a, r_b, between, h: float) -> list:
+    """The minima inside one RK4 step of the outputs flagged ``near``.
+
+    An output whose rate goes from <= 0 at the step's first node to > 0 at its last has
+    a minimum in between (where the rate is 0 at the first node, its slope there says
+    whether it goes down first), found by :func:`locate_minimum`.
+
+    Parameters
+    ----------
+    near : array_like of bool
+        (m,) the outputs to look at (:func:`screen_steps`).
+    r_a, r_b : array_like
+        (m,) the outputs' rates at the step's nodes.
+    between : callable
+        ``between(eta) -> (W, dW/deta, d2W/deta2)``, each (m,): the outputs at the end of
+        the last RK4 step of length eta from the step's first node.
+    h : float
+        The step, s.
+
+    Returns
+    -------
+    list of tuple
+        (eta, output index, value), by eta.
+    """
+    found = []
+    for j in np.flatnonzero(np.asarray(near) & (r_a <= 0) & (r_b > 0)):
+        def rate(eta_, j=j):
+            _, dw, ddw = between(float(eta_[0]))
+            return _flat(dw)[j:j + 1], _flat(ddw)[j:j + 1]
+
+        eta = locate_minimum(rate, h, r_a[j], r_b[j], lambda j=j: _flat(between(0.0)[2])[j])
+        if eta is not None:
+            found.append((eta, int(j), float(_flat(between(eta)[0])[j])))
+    return sorted(found)
 
 
 def swing_foot_dip(dip, h: float, step_start, z_prev, dz_a, dz_b, ground, scuff_zone: float,

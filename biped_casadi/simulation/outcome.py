@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from ..results import Result, json_safe
 
-__all__ = ["STATUSES", "NOT_CONVERGED", "WalkOutcome", "WalkBatch", "verdict",
+__all__ = ["StepRecord", "STATUSES", "NOT_CONVERGED", "WalkOutcome", "WalkBatch", "verdict",
            "failure_text", "OutcomeRecorder"]
 
 #: how a run ends: 'ok' (every step valid) or the first invalid state's status
@@ -483,3 +483,58 @@ class OutcomeRecorder:
 def nan_to_none(x):
     """``None`` for a NaN, the float otherwise (for JSON-facing fields)."""
     return None if x is None or (isinstance(x, float) and math.isnan(x)) else x
+
+
+@dataclass
+class StepRecord:
+    """One completed step, from tau = 0 to its impact.
+
+    Parameters
+    ----------
+    index : int
+        The step's index (0-based).
+    t_start, t_impact : float
+        Time of its start and of its impact since the start of the run, s.
+    duration : float
+        tau at the impact, s.
+    q_minus, dq_minus : numpy.ndarray
+        The state just before the impact.
+    q_plus, dq_plus : numpy.ndarray
+        The state just after the impact and relabelling (the next step's start).
+    impulse : numpy.ndarray
+        (F_x, F_z) of the impact impulse on the new stance foot, N s.
+    qu_error, dqu_error : float
+        q_u - q_u^d(T) and dq_u - dq_u^d(T) just before the impact.
+    section : numpy.ndarray or None
+        (q_u, dq_u) at tau = 0.75 T (None if the impact came earlier).
+    section_error : numpy.ndarray or None
+        Its difference from the reference's (q_u^d, dq_u^d)(0.75 T).
+    step_length : float
+        x of the swing foot at the impact, m.
+    ground_height : float
+        The height h_k of the foothold the step struck, above its stance foot, m.
+    """
+    index: int
+    t_start: float
+    t_impact: float
+    duration: float
+    q_minus: np.ndarray
+    dq_minus: np.ndarray
+    q_plus: np.ndarray
+    dq_plus: np.ndarray
+    impulse: np.ndarray
+    qu_error: float
+    dqu_error: float
+    section: np.ndarray | None
+    section_error: np.ndarray | None
+    step_length: float
+    ground_height: float = 0.0
+
+    def to_dict(self) -> dict:
+        """Every field in plain JSON types.
+
+        Returns
+        -------
+        dict
+        """
+        return json_safe(asdict(self))

@@ -23,7 +23,7 @@ from ..caching import cached
 from ..control.reference import require_reference
 from ..numerics import as_number, as_rows, as_vector
 
-__all__ = ["Perturbation", "directions", "direction_errors", "start_states", "PAPER_SIZES",
+__all__ = ["Perturbation", "perturbed_initial_state", "directions", "direction_errors", "start_states", "PAPER_SIZES",
            "torso_push"]
 
 #: the per-joint sizes of the paper's perturbation: 0.01 rad and 0.1 rad/s (§V-C)
@@ -283,3 +283,30 @@ def torso_push(model) -> ca.Function:
     J = ca.jacobian(com, q)
     dq_plus = dq + ca.solve(model.D(q), ca.mtimes(J.T, ca.vertcat(P, 0)))
     return ca.Function("torso_push", [q, dq, P], [dq_plus], ["q", "dq", "P"], ["dq_plus"])
+
+
+def perturbed_initial_state(gait, q_error=0.0, dq_error=0.0):
+    """A perturbed start (q, dq) = (q^d(0) + q_error, dq^d(0) + dq_error).
+
+    Parameters
+    ----------
+    gait : Reference
+        The reference; its state at tau = 0 is perturbed.
+    q_error, dq_error : float or array_like
+        A number added to every joint (paper §V-C: 0.01 rad and 0.1 rad/s) or one
+        number per joint.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        (q, dq), each (nq,).
+    """
+    nq = require_reference(gait).model.nq
+    if np.ndim(q_error) == 0 and np.ndim(dq_error) == 0:
+        pert = Perturbation.uniform(nq, q_error, dq_error)
+    else:
+        def err(e, name):
+            return np.full(nq, as_vector([e], 1, name)[0]) if np.ndim(e) == 0 \
+                else as_vector(e, nq, name)
+        pert = Perturbation(tuple(err(q_error, "q_error")), tuple(err(dq_error, "dq_error")))
+    return pert.initial_state(gait)
