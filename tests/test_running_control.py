@@ -269,7 +269,7 @@ def test_the_friction_cone_is_checked_between_the_nodes(cycle, run_gait):
     x = np.asarray(run_gait.x_stance, float)[:, 0].copy()
     x[cycle.n // 2] += 0.05
     st = cycle.stride(x, record=True).passes[0]
-    d, mu, s = cycle.domains[0], cycle.mu, cycle.friction_slack
+    d, mu = cycle.domains[0], cycle.mu
     assert d.constraint_names[:2] == ("stance normal force", "friction cone (Fx <= mu Fz)")
 
     def ratio(X, t):

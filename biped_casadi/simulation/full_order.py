@@ -60,7 +60,6 @@ import numpy as np
 from ..caching import cached
 from ..control.design import Design
 from ..control.output_law import SECTION
-from ..control.reference import require_reference
 from ..control.saturation import clip_torques
 from ..numerics import FastCall, as_vector, compiled, rk4_step
 from ..results import internal
