@@ -4,29 +4,41 @@ stance -> flight -> stance, its fixed point, its exact Jacobian and a perturbed 
 :func:`running_cycle` builds the :class:`~analysis.stability.hybrid_cycle.HybridCycle`
 of a :class:`~biped_casadi.control.running.RunningController`:
 
-- stance: x = (q, dq) (2 nq numbers, the stride map's state), the robot's
-  ``forward_dynamics`` under the law's torques (clipped when the controller saturates),
-  t the time since landing; guard the normal ground force Fz of ``takeoff_guard``
-  (the law switches to the flight's where it reaches 0 going down); constraints Fz >= 0
-  (from landing on: a landing the foot cannot stay on is refused at once; at the crossing
-  Fz is 0 to round-off), the friction cone mu Fz -/+ Fx >= 0 (with a slack near takeoff,
-  below), the swing foot above the ground and, without saturation, ``|u|`` <= the torque
-  limit; reset the identity;
-- push-off: the same state and stance dynamics under the flight law (on the extended
-  state of ``takeoff``, the foot at rest), t the time since the law's switch; guard Fz
-  under those torques; constraints the cone, the swing foot and the torque limit; reset
-  ``takeoff``.  Where the stance ends off the reference's time, the flight law's first
-  torques differ from the stance law's last, and under them the ground may still push
-  the foot (Fz > 0): the foot then stays on the ground until that force reaches 0,
-  instead of being freed at the switch with a downward acceleration.  Where Fz <= 0 at
-  the switch (at the fixed point, and whenever the flight law pulls the foot up) the
-  domain is empty (``Domain.may_be_empty``) and the foot leaves there;
+- stance: x = (q, dq) (2 nq numbers, the stride map's state), the foot pinned, the
+  robot's ``forward_dynamics`` under the law's torques (clipped when the controller
+  saturates), t the time since landing; guard the friction cone's margin
+  mu Fz - ``|Fx|`` of ``takeoff_guard`` (the foot starts to slide where it reaches 0
+  going down: off the optimised orbit always before Fz vanishes, below); constraints
+  Fz >= 0 and the cone mu Fz -/+ Fx >= 0 (from landing on: a landing the foot cannot
+  stay on, or would slide from at once, is refused), the swing foot above the ground
+  and, without saturation, ``|u|`` <= the torque limit; reset ``takeoff`` into the
+  flight coordinates (the foot at rest);
+- slide: x = (qe, dqe) (2 nq + 4), the foot held on the ground vertically only
+  (``sliding_dynamics`` of the flight model: the constrained Lagrangian with one contact
+  constraint, z of the foot 0, and the Coulomb force Fx = sigma mu Fz at the foot),
+  under the stance law (which sees q, dq), t the time since the slide began (the law's
+  clock the time since landing); sigma, the sign of the Fx the pinned foot needed at
+  entry, fixed for the slide (the foot slips against it); guard the normal force Fz
+  (the law switches to the flight's where it reaches 0 going down); constraints the
+  slip velocity against the friction force, -sigma dx_st >= 0 (a foot that stops
+  before takeoff would stick again: stick-slip is not modelled, and such a stride is
+  refused with that reason), the swing foot above the ground and the torque limit;
+  reset the identity;
+- push-off: the same sliding state and dynamics under the flight law (t the time since
+  the law's switch), sigma the slip's direction at entry; guard Fz under those
+  torques; the same constraints; reset the identity.  Where the stance ends off the
+  reference's time, the flight law's first torques differ from the stance law's last,
+  and under them the ground may still push the foot (Fz > 0): the foot then stays on
+  the ground, sliding, until that force reaches 0.  Where Fz <= 0 at the switch (at the
+  fixed point, and whenever the flight law pulls the foot up) the domain is empty
+  (``Domain.may_be_empty``) and the foot leaves there;
 - flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff
   (the flight law's clock: the time since the law's switch, t plus the push-off's
   duration, or with ``flight_clock='stride'`` the stance's clock continued, t plus the
   time since landing less T_stance; parameters set at entry from the time the stride
   ran, ``Domain.clock_from``);
-  guard the swing foot's height (landing where it reaches 0 going down); constraints
+  guard the swing foot's height (landing where it reaches 0 going down; the flight
+  starts where the foot left, moving as it slid); constraints
   the other foot (the one that pushed off) above the ground and the torque limit;
   exit constraints the landing's normal impulse >= 0 and inside the friction cone, the
   other foot moving up after the impact; reset ``landing_swing`` (impact and
@@ -44,13 +56,16 @@ the flight law, or the takeoff; the swing foot: the landing).
 
 Friction near takeoff.  Fz and Fx reach zero together only on the optimised orbit;
 off it (and at the closed loop's fixed point, which is not the collocation's) Fx is a
-little off zero where Fz vanishes, and mu Fz - ``|Fx|`` turns negative in the last instant
-before the foot leaves.  The cone constraints carry a slack ``friction_slack`` (N): the
-excess ``|Fx|`` - mu Fz may reach it (default 1 % of the robot's weight, the margin of
-:func:`gait_opt.running_checks.check_running` between the collocation points).  The
-pinned foot keeps that Fx to the instant Fz vanishes; freed there it starts with the
-acceleration Fx took away, downward for one sign of Fx, and the flight's check of the
-pushing foot stops such a stride (a real foot would have slid before it left).
+little off zero where Fz vanishes, so a pinned foot would need more friction than
+mu Fz in the last instant before it leaves.  The foot slides instead, from where
+``|Fx|`` reaches mu Fz to the takeoff, with Fx on the cone's edge, and leaves with
+Fx = 0 (the slide's duration and distance are in each :class:`StrideRecord`).  With
+``sliding=False`` the model before sliding: the foot pinned to the takeoff, under the
+stance law to its Fz = 0, then under the flight law while that law's Fz is > 0 (the
+push-off, in stance coordinates, reset ``takeoff``), the cone constraints carrying a
+slack ``friction_slack`` (N, default 1 % of the robot's weight): the excess
+``|Fx|`` - mu Fz may reach it, and the foot is freed with the acceleration that Fx
+took away.
 
 :func:`running_stability` finds the fixed point near the gait's first stance state
 and its eigenvalues; :func:`finite_difference_jacobian` checks the exact Jacobian;
