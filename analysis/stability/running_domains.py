@@ -15,8 +15,8 @@ import numpy as np
 
 from .hybrid_cycle import Domain
 
-__all__ = ["stance_domain", "slide_domain", "pushoff_domain", "flight_domain",
-           "SLIP_STOP", "ON_GROUND"]
+__all__ = ["stance_domain", "slide_domain", "pushoff_domain", "flight_domain", "start",
+           "slide_start", "SLIP_STOP", "ON_GROUND"]
 
 #: the sliding foot's velocity against the friction force (must stay >= 0)
 SLIP_STOP = "slip velocity (the sliding foot stops before takeoff: stick-slip not modelled)"
