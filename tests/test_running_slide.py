@@ -129,3 +129,20 @@ def test_the_slack_is_the_pinned_models(running_cycle15):
         running_cycle(c, friction_slack=3.0)
     with pytest.raises(ValueError, match="sliding must be"):
         running_cycle(c, sliding="yes")
+
+
+def test_the_stride_clock_slides_too(running_cycle15, model):
+    """With the stance's clock continued through the flight, the sliding push-off and the
+    flight take the law's time from the landing: the fixed point closes and its exact
+    Jacobian, through the slide, is the central differences'."""
+    cyc = running_cycle(running_cycle15.controller, flight_clock="stride")
+    assert cyc.domains[2].clock_from == 0 and cyc.domains[3].clock_from == 0
+    r = running_stability(cyc)
+    assert r.status in ("stable", "unstable") and r.residual < 1e-10
+    sv = cyc.stride(r.fixed_point, record=True)
+    assert sv.durations[1] > 0                                 # it slides
+    g = cyc.controller.gait
+    assert sv.passes[3].parameters[-1] == pytest.approx(
+        sum(sv.durations[:3]) - g.T_stance, abs=1e-15)
+    J = finite_difference_jacobian(cyc, r.fixed_point, 1e-5)
+    assert np.abs(J - r.A).max() < 1e-6 * np.abs(r.A).max()
