@@ -281,7 +281,7 @@ class _Compiled:
         self.step = ca.Function("step", [X, t, h, p], [Xr, tr, *node(Xr, tr)])
         Jn = ca.jtimes(Xr, X, J) + (ca.jtimes(Xr, p, Jp) if npar else 0)
         self.step_sens = ca.Function("step_sens", [X, J, t, h, p, Jp],
-                                     [Xr, ca.cse(Jn), tr, *node(Xr, tr)])
+                                     [Xr, Jn, tr, *node(Xr, tr)])
         eta = ca.SX.sym("eta")
         Xe, te = rk4(X, t, eta, p)
         ge = d.guard(Xe, te, p)
@@ -293,7 +293,7 @@ class _Compiled:
                             [ca.jacobian(gY, Y), ca.jacobian(gY, p), ca.jacobian(gY, s)])
         gX, gp, gt = grads(Xe, te, p)
         self.last = ca.Function("last", [X, J, t, eta, p, Jp],
-                                [Xe, ca.cse(Je), ca.jacobian(Xe, eta), gX, gp, gt,
+                                [Xe, Je, ca.jacobian(Xe, eta), gX, gp, gt,
                                  node(Xe, te)[2]])
         self.entry = entry_function(d)
         x = ca.SX.sym("x", d.n)
