@@ -100,7 +100,8 @@ def stance_domain(c, mu, slack, h, t_max, tolerance, sliding: bool) -> Domain:
                   start=start(2 * nq, c.gains),
                   constraints=ca.Function("stance_constraints", [X, t, k], [cons]),
                   constraint_names=names, guard_name=gname, tolerance=tolerance,
-                  dense_constraints=names, dense_guard=True)
+                  dense_constraints=names, dense_guard=True,
+                  common_subexpressions=False)
 
 
 def _on_ground(m, mu, slack, q, Fz, Fx) -> tuple:
@@ -131,6 +132,7 @@ def slide_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
                   constraints=ca.Function("slide_constraints", [Y, t, p], [cons]),
                   constraint_names=names, guard_name="sliding foot's normal force",
                   tolerance=tolerance, dense_constraints=names, dense_guard=True,
+                  common_subexpressions=False,
                   clock_from=clock_from, may_be_empty=True)
 
 
@@ -159,6 +161,7 @@ def pushoff_domain(c, mu, slack, h, t_max, tolerance, origin, clock_from) -> Dom
                   constraints=ca.Function("pushoff_constraints", [X, t, kf], [cons]),
                   constraint_names=names, guard_name="stance normal force",
                   tolerance=tolerance, dense_constraints=names, dense_guard=True,
+                  common_subexpressions=False,
                   clock_from=clock_from, may_be_empty=True)
 
 
@@ -191,4 +194,5 @@ def flight_domain(c, mu, h, t_max, tolerance, origin, clock_from) -> Domain:
                                          "landing impulse in the cone (-Fx <= mu Fz)",
                                          "other foot's lift-off velocity"),
                   guard_name="swing foot height", tolerance=tolerance,
-                  dense_constraints=names, dense_guard=True, clock_from=clock_from)
+                  dense_constraints=names, dense_guard=True,
+                  common_subexpressions=False, clock_from=clock_from)
