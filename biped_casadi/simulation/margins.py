@@ -18,7 +18,7 @@ import casadi as ca
 import numpy as np
 
 from ..numerics import FastCall
-from .kernel import minima_between, screen_steps
+from .kernel import minima_between, minima_sampled, screen_steps
 from .validity import FRICTION_TOL, node_message
 
 __all__ = ["MarginCheck"]
@@ -80,32 +80,42 @@ class MarginCheck:
                 ["X", "tau", "eta", "p"], ["W", "dW_deta", "d2W_deta2"]))
         return self._between
 
-    def first_dip(self, between, W, steps):
+    def first_dip(self, between, W, steps, samples: int = 0):
         """The first minimum below its bound inside the steps, or None.
 
         Parameters
         ----------
         between : callable
-            From :meth:`build`.
+            From :meth:`build`; with ``samples``, ``between(X, tau, eta, p) -> W`` (m,):
+            the margins alone (a law without derivatives).
         W : numpy.ndarray
             (n, m) margins at consecutive nodes (up to three before the steps').
         steps : list of tuple
             (Xa, ta, length, p) of the last len(steps) steps between the rows of W.
+        samples : int
+            0: the minima located by their rates (:func:`~biped_casadi.simulation.
+            kernel.minima_between`); else by the margins at this many equal parts of
+            the step (:func:`~biped_casadi.simulation.kernel.minima_sampled`).
 
         Returns
         -------
         tuple or None
             (step index, eta, status) at the minimum.
         """
-        near = screen_steps(W, np.zeros(W.shape[1]))[len(W) - 1 - len(steps):]
+        base = len(W) - 1 - len(steps)
+        near = screen_steps(W, np.zeros(W.shape[1]))[base:]
         for j in np.flatnonzero(near.any(axis=1)):
             Xa, ta, h, p = steps[j]
 
             def at(eta, Xa=Xa, ta=ta, p=p):
                 return between(Xa, ta, eta, p)
 
-            r_a, r_b = (np.asarray(at(e)[1], float).ravel() for e in (0.0, h))
-            for eta, i, v in minima_between(near[j], r_a, r_b, at, h):
+            if samples:
+                found = minima_sampled(near[j], at, h, W[base + j], W[base + j + 1], samples)
+            else:
+                r_a, r_b = (np.asarray(at(e)[1], float).ravel() for e in (0.0, h))
+                found = minima_between(near[j], r_a, r_b, at, h)
+            for eta, i, v in found:
                 if v < 0 or (i == 0 and not v > 0):
                     return int(j), eta, self.status[i]
         return None
