@@ -23,7 +23,8 @@ the nodes, where the swing foot's vertical velocity goes from <= 0 to > 0 its lo
 point is found by Newton's method (the strike's); below the ground it is the strike (the
 first root before it, beyond ``model.scuff_zone``) or a scuff.  The stance force, the
 friction cone and the torques are screened between the nodes and their minima located
-where they may dip (:mod:`~biped_casadi.simulation.margins`):
+where they may dip (:mod:`~biped_casadi.simulation.margins`; by their rates, or for a
+compiled law from sampled values):
 
 - ``fell``: hip lower than ``min_hip_height`` or torso past horizontal (leaning more than
   ``max_torso_angle`` from its upright angle, the robot's ``torso_upright``);
