@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from biped_casadi.simulation import SimulationOptions, Simulator, perturbed_initial_state
-from biped_casadi.simulation.kernel import SUB_STEPS, Diagnostics, screen_steps
+from biped_casadi.simulation.kernel import (SUB_STEPS, Diagnostics, minima_sampled,
+                                           screen_steps)
 from biped_casadi.simulation.margins import MarginCheck
 from biped_casadi.simulation.validity import Limits
 
@@ -67,6 +68,35 @@ def test_a_margin_below_its_bound_between_two_nodes_is_found_where_the_nodes_pas
     assert set(np.round(np.array(calls) / h).astype(int)) <= {0, 5, 6, 7}   # screened
     W = np.array([margins(t, -0.5) for t in ts])
     assert check.first_dip(lambda *x: between(*x, depth=-0.5), W, steps, samples) is None
+
+
+def test_sampled_minima_are_inside_the_step_not_at_its_nodes():
+    """From values alone (minima_sampled, 16 parts of a 1 ms step): a margin falling
+    through the step to below 0 at its last node has no minimum inside (it is that
+    node's, as where the rate has no root); a dip below 0 inside the first part, every
+    sample above 0, is found (the first part screened by the samples after it) at its
+    lowest point; one far from its bound costs no search beyond the samples, nor one not
+    flagged."""
+    h, a = 1e-3, 2e8
+    t1 = 0.3 * h / SUB_STEPS
+    d = 0.5 * a * t1 ** 2                               # c(0) = a t1^2 - d > 0
+    calls = []
+
+    def between(eta):
+        calls.append(eta)
+        return np.array([0.5 - 1e3 * eta, a * (eta - t1) ** 2 - d, -1.0, 50.0 + 1e3 * eta])
+
+    ends = between(0.0), between(h)
+    assert min(between(e)[1] for e in np.linspace(0, h, SUB_STEPS + 1)) > 0   # samples pass
+    counts = []
+    for far in (False, True):
+        calls.clear()
+        found = minima_sampled([True, True, False, far], between, h, *ends)
+        counts.append(len(calls))
+        assert [i for _, i, _ in found] == [1]
+        eta, _, v = found[0]
+        assert v < 0 and a * (eta - t1) ** 2 <= np.spacing(d)
+    assert counts[0] == counts[1] > SUB_STEPS - 1
 
 
 def test_screen_steps_is_the_running_cycles_screen():

@@ -31,8 +31,8 @@ import casadi as ca
 import numpy as np
 
 __all__ = ["Diagnostics", "strike", "locate_strike", "locate_minimum", "swing_foot_dip",
-           "SCREEN_SAFETY", "screen_steps", "minima_between", "SUB_STEPS", "minima_sampled",
-           "golden_minimum", "mapped", "threads", "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
+           "SCREEN_SAFETY", "screen_steps", "minima_between", "SUB_STEPS", "SAMPLED_TOL",
+           "minima_sampled", "golden_minimum", "mapped", "threads", "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
 
 #: CasADi calls per reference step duration T of the simulators' integration: each call
 #: integrates a quarter of T (the Poincaré section 0.75 T falls on a boundary); RK4 steps

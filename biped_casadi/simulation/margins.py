@@ -11,9 +11,10 @@ screen_steps`, the running cycle's screen); where a margin may dip below 0 its r
 eta at both ends of the step are taken (AD, exact) and its minimum located by Newton's
 method on the rate (:func:`~biped_casadi.simulation.kernel.minima_between`).  A law
 without derivatives (a compiled library, :mod:`~biped_casadi.simulation.compiled_loop`)
-has the same screen; in a flagged step the margins are taken at 16 equal parts of it
-(each the RK4 step of that length from the first node), the parts screened alike, and a
-minimum located by golden-section search on the margin's values
+has the same screen; in a flagged step the margins are taken at
+:data:`~biped_casadi.simulation.kernel.SUB_STEPS` (16) equal parts of it (each the RK4
+step of that length from the first node), the parts screened alike, and a minimum
+located by golden-section search on the margin's values
 (:func:`~biped_casadi.simulation.kernel.minima_sampled`).  A minimum below its bound is
 the first invalid state, named with "between two RK4 nodes".
 """
