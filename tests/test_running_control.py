@@ -204,6 +204,19 @@ def test_retuned_cycle_is_the_cycle_built_at_those_gains(model, run_gait, cycle,
     assert np.array_equal(cycle.controller.M1, STABLE_M1)       # the original is unchanged
 
 
+@pytest.mark.parametrize("gains", [dict(Kp=1e300), dict(Kd=1e5)])
+def test_retuned_refuses_the_gains_running_cycle_refuses(model, run_gait, cycle, gains):
+    """A retuned cycle is checked at the cycle's RK4 steps as a built one: the same
+    refusal, and the largest gain it names is accepted."""
+    with pytest.raises(ValueError, match="RK4 step") as built:
+        running_cycle(cycle.controller.with_gains(**gains))
+    with pytest.raises(ValueError) as retuned:
+        cycle.retuned(**gains)
+    assert str(retuned.value) == str(built.value)
+    (name, top), = re.findall(r"(Kp|Kd) at most ([0-9.e+]+) ", str(built.value))
+    cycle.retuned(**{name: 0.99 * float(top)})
+
+
 def test_perturbed_run_converges_at_the_spectral_radius(cycle, stable, model):
     x = stable.fixed_point.copy()
     x[model.nq:] += 1e-2

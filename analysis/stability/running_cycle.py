@@ -179,6 +179,11 @@ class RunningCycle(HybridCycle):
         The friction coefficient and the cone's slack near takeoff, N.
     """
 
+    @property
+    def rk4_steps(self) -> dict:
+        """The RK4 step of each phase's law, s: ``{'stance': h, 'flight': h}``."""
+        return dict(stance=self.domains[0].h, flight=self.domains[-1].h)
+
     def retuned(self, Kp=None, Kd=None, M1=None) -> "RunningCycle":
         """The same cycle at other gains (None keeps the current ones).
 
@@ -191,8 +196,16 @@ class RunningCycle(HybridCycle):
         -------
         RunningCycle
             Shares every Function but the domains' entries.
+
+        Raises
+        ------
+        ValueError
+            Gains whose output error RK4 amplifies at the cycle's steps, as
+            :func:`running_cycle` refuses them
+            (:func:`~biped_casadi.control.running_step.check_rk4_steps`).
         """
         c = self.controller.with_gains(Kp, Kd, M1)
+        check_rk4_steps(c, self.rk4_steps)
         new = copy.copy(self)
         new.controller = c
         new.domains = [dataclasses.replace(d, start=_start(d.n, c.gains, origin))
