@@ -22,6 +22,7 @@ import numpy as np
 
 import biped_casadi
 from biped_casadi.numerics import NotCompiledWarning
+from biped_cli import interrupted
 
 from . import (eig, export, export_running, gait, m1, mujoco, mujoco_running, reproduce,
                robot, robust, running, simulate, sweep, terrain, view)
@@ -117,11 +118,12 @@ def main(argv=None) -> int:
     """Run ``biped`` with ``argv`` (default: the process's arguments); returns the exit
     code: 0 done, 1 a stage or run failed, 2 a user error or a failed computation (one
     line, :mod:`analysis.cli.failures`), 130 interrupted."""
-    ap = build_parser()
     try:
-        args = ap.parse_args(argv)
+        args = build_parser().parse_args(argv)
     except SystemExit as e:        # argparse already printed its one-line usage error
         return int(e.code or 0)
+    except KeyboardInterrupt:      # building the parser takes some 20 ms
+        return interrupted(argv)
     ctrl_c = _CtrlC()
     try:
         with warnings.catch_warnings(record=True) as caught, ctrl_c, named_stdout():
