@@ -698,6 +698,25 @@ def test_bad_running_input_is_one_line_and_exit_2(case, run_files, tmp_path, mon
     test_bad_input_is_one_line_and_exit_2(case, run_files, tmp_path, monkeypatch, capsys)
 
 
+@pytest.mark.parametrize("gains", [["--kp", "1e300"], ["--kd", "1e300"],
+                                   ["--kp", "1e9", "--law", "computed_torque"]])
+def test_running_gains_too_stiff_for_any_step_are_refused_before_optimising(
+        gains, tmp_path, monkeypatch, capsys):
+    """Gains whose closed loop diverges at every RK4 step an optimised step can have were
+    refused only after the optimisation (about 35 s), by the check at its nodes."""
+    import analysis.cli.running as running
+
+    def optimise(*args, **kwargs):
+        raise AssertionError("optimised")
+
+    monkeypatch.setattr(running, "optimize_running", optimise)
+    assert biped_main(["running", *gains, "--out", str(tmp_path / "r.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"biped running: error: {gains[0]} {float(gains[1]):g} (above ")
+    assert "whatever step is optimised: a step is at least" in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("args", [
     ["gait", "--out", "{dir}"],
     ["eig", "--gait", "{ragged}", "--m1", "0", "0", "0", "0"],

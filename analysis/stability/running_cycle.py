@@ -79,6 +79,8 @@ __all__ = ["running_cycle", "RunningCycle", "running_stability", "RunningStabili
 
 #: RK4 steps per collocation interval at most (more only costs time)
 MAX_STEPS_PER_INTERVAL = 1000
+#: and by default
+STEPS_PER_INTERVAL = 8
 
 
 def _phase_constraints(c: RunningController, u, extra, names):
@@ -219,7 +221,7 @@ class RunningCycle(HybridCycle):
 
 
 def running_cycle(controller: RunningController, mu: float | None = None,
-                  steps_per_interval: int = 8, friction_slack: float | None = None,
+                  steps_per_interval: int = STEPS_PER_INTERVAL, friction_slack: float | None = None,
                   time_limits: float = 2.0, tolerance: float = 1e-9,
                   flight_clock: str = "takeoff") -> RunningCycle:
     """The stride map of a running gait under a tracking controller (module docstring).
