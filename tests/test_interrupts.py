@@ -99,6 +99,35 @@ def test_ctrl_c_while_the_parser_is_built_is_one_line(monkeypatch, capsys):
     assert capsys.readouterr().err == "biped reproduce: interrupted\n"
 
 
+def test_a_ctrl_c_dropped_in_a_callback_is_sent_again(monkeypatch, capsys):
+    """A Ctrl-C raised in a weakref's callback (an import's lock, while the Dask cluster
+    started) was printed as ignored and dropped: the command ran on to its end."""
+    import weakref
+
+    from analysis.cli import app
+
+    class Thing:
+        pass
+
+    def command(args):
+        thing = Thing()
+        ref = weakref.ref(thing, lambda r: signal.raise_signal(signal.SIGINT))
+        del thing                        # the callback's Ctrl-C is dropped there
+        assert ref() is None
+        time.sleep(10)
+        return 0
+
+    monkeypatch.setattr(app, "cmd_model", command)
+    hook, t = sys.unraisablehook, time.perf_counter()
+    try:
+        rc = app.main(["model"])
+    except KeyboardInterrupt:                  # not this session's: fail, do not stop
+        pytest.fail("the Ctrl-C left main")
+    assert rc == 130 and time.perf_counter() - t < 5
+    assert capsys.readouterr().err.endswith("biped model: interrupted\n")
+    assert sys.unraisablehook is hook
+
+
 _IN_EXEC = """
 import sys
 class Interrupted:                        # a Ctrl-C while a dataclass's methods are made

@@ -146,10 +146,18 @@ class _CtrlC:
     """Whether Ctrl-C was pressed while a command ran: an error that follows it (a
     library may turn the KeyboardInterrupt into its own error, e.g. CasADi's SystemError
     inside a task) is the interruption, not a failure.  Python's handler is kept (it
-    raises KeyboardInterrupt); it is only observed, from the main thread."""
+    raises KeyboardInterrupt); it is only observed, from the main thread.
+
+    Python raises it wherever the main thread runs, also in a weakref's callback or a
+    finalizer, where an error is printed ("Exception ignored in ...") and dropped: the
+    command then ran on (an import's lock callback while the Dask cluster started).
+    Such a Ctrl-C is sent to the main thread again, once the callback has returned."""
+
+    #: after a dropped Ctrl-C, the main thread is sent SIGINT again this much later, s
+    AGAIN = 0.05
 
     def __init__(self):
-        self.pressed, self._old = False, None
+        self.pressed, self._old, self._hook = False, None, None
 
     def __bool__(self):
         return self.pressed
@@ -159,15 +167,25 @@ class _CtrlC:
                 and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
             self._old = signal.default_int_handler
             signal.signal(signal.SIGINT, self._handler)
+            self._hook, sys.unraisablehook = sys.unraisablehook, self._dropped
         return self
 
     def _handler(self, signum, frame):
         self.pressed = True
         signal.default_int_handler(signum, frame)
 
+    def _dropped(self, unraisable):
+        """sys.unraisablehook: a Ctrl-C dropped where errors are ignored is sent again."""
+        if self.pressed and issubclass(unraisable.exc_type, KeyboardInterrupt):
+            threading.Timer(self.AGAIN, signal.pthread_kill,
+                            (threading.main_thread().ident, signal.SIGINT)).start()
+            return
+        self._hook(unraisable)
+
     def __exit__(self, *exc):
         if self._old is not None:
             signal.signal(signal.SIGINT, self._old)
+            sys.unraisablehook = self._hook
         return False
 
 
