@@ -17,21 +17,30 @@ of a :class:`~biped_casadi.control.running.RunningController`:
   (``sliding_dynamics`` of the flight model: the constrained Lagrangian with one contact
   constraint, z of the foot 0, and the Coulomb force Fx = sigma mu Fz at the foot),
   under the stance law (which sees q, dq), t the time since the slide began (the law's
-  clock the time since landing); sigma, the sign of the Fx the pinned foot needed at
-  entry, fixed for the slide (the foot slips against it); guard the normal force Fz
-  (the law switches to the flight's where it reaches 0 going down); constraints the
-  slip velocity against the friction force, -sigma dx_st >= 0 (a foot that stops
-  before takeoff would stick again: stick-slip is not modelled, and such a stride is
-  refused with that reason), the swing foot above the ground and the torque limit;
-  reset the identity;
-- push-off: the same sliding state and dynamics under the flight law (t the time since
-  the law's switch), sigma the slip's direction at entry; guard Fz under those
-  torques; the same constraints; reset the identity.  Where the stance ends off the
+  clock the time since landing); sigma, -sign of the foot's velocity, or at rest the
+  sign of the Fx the pinned foot needs, fixed for the slide (the foot slips against
+  it); guard min(Fz, -sigma dx_st): the normal force (the law switches to the flight's
+  where it reaches 0 going down) or the slip velocity against the friction force (the
+  slip stops); constraints that slip velocity >= 0, the swing foot above the ground and
+  the torque limit; reset the identity, a stopped slip's velocity set to 0;
+- stick: the foot pinned again where its slip stopped (the stance's dynamics in the
+  flight coordinates, the foot's place kept), under the same law; guard the cone's
+  margin, to the next slide; constraints Fz >= 0, the swing foot above the ground and
+  the torque limit.  Empty where the foot moves at entry (the slide ended at Fz = 0) and
+  where the margin is <= 0 at entry: the pinned foot would need more than mu Fz the
+  other way, and the next slide starts against that force;
+- slide again: as the slide to Fz = 0, but its slip must not stop (stick-slip beyond
+  slide -> stick -> slide under one law is not modelled: such a stride is refused with
+  that reason, :data:`~analysis.stability.running_domains.SLIP_STOP`); empty where
+  Fz <= 0 at entry (the slide before ended there);
+- push-off, push-off stick, push-off slide again: the same three under the flight law
+  (t the time since the law's switch).  Where the stance ends off the
   reference's time, the flight law's first torques differ from the stance law's last,
   and under them the ground may still push the foot (Fz > 0): the foot then stays on
-  the ground, sliding, until that force reaches 0.  Where Fz <= 0 at the switch (at the
-  fixed point, and whenever the flight law pulls the foot up) the domain is empty
-  (``Domain.may_be_empty``) and the foot leaves there;
+  the ground, sliding (sticking again where its slip stops), until that force reaches
+  0.  Where Fz <= 0 at the switch (at the fixed point, and whenever the flight law
+  pulls the foot up) the push-off is empty (``Domain.may_be_empty``) and the foot
+  leaves there;
 - flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff
   (the flight law's clock: the time since the law's switch, t plus the push-off's
   duration, or with ``flight_clock='stride'`` the stance's clock continued, t plus the
