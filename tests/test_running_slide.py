@@ -120,7 +120,8 @@ def test_a_slip_that_stops_sticks_again(running_cycle15, star, model):
     """The slide under the stance law entered mid-stance (the landing state, Fz ~ the
     weight) with the foot moving at 1 cm/s: friction stops it long before Fz reaches 0;
     the foot sticks there (pinned, the cone met at every node) until the cone's edge near
-    takeoff, and slides again to Fz = 0."""
+    takeoff, and slides again to Fz = 0; the exact Jacobian of that map, through the
+    slip's stop and the stick, is the central differences'."""
     cyc, nq = running_cycle15, model.nq
     c, fl = cyc.controller, cyc.controller.fl
     ne = fl.ne
@@ -137,6 +138,10 @@ def test_a_slip_that_stops_sticks_again(running_cycle15, star, model):
     assert abs(abs(Fx[-1]) - cyc.mu * Fz[-1]) < 1e-9                           # to the edge
     assert np.all(X[nq] == sl.exit_state[nq])                                  # in place
     assert again.parameters[-3] == 1 and again.parameters[-2] == np.sign(Fx[-1])
+    sub = HybridCycle(cyc.domains[1:4])
+    J = finite_difference_jacobian(sub, y, 1e-6)
+    A = sub.linearise(y).A
+    assert np.abs(J - A).max() / np.abs(A).max() < 1e-6
 
 
 def test_a_third_slip_stop_is_refused(running_cycle15, star, model):
