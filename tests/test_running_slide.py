@@ -1,7 +1,8 @@
 """The stance foot sliding near takeoff (analysis.stability.running_cycle with
 ``sliding``, biped_casadi.model.flight's ``sliding_dynamics``): the sliding dynamics
 against the pinned foot's and the energy balance, a stride whose pinned foot would
-leave the cone sliding instead, and the slip that stops before takeoff refused."""
+leave the cone sliding instead, a slip that stops sticking again (or sliding the other
+way), and a third slip stop under one law refused."""
 from __future__ import annotations
 
 import casadi as ca
@@ -11,8 +12,8 @@ import pytest
 from biped_casadi.model import flight_model
 from analysis.stability.hybrid_cycle import HybridCycle, HybridCycleError
 from analysis.stability.running_cycle import (finite_difference_jacobian, running_cycle,
-                                              running_stability)
-from analysis.stability.running_domains import SLIP_STOP
+                                              running_stability, simulate_running)
+from analysis.stability.running_domains import SLIP_STOP, V_REST
 
 
 @pytest.fixture(scope="session")
@@ -79,7 +80,8 @@ def test_a_stride_slides_where_the_pinned_foot_leaves_the_cone(running_cycle15, 
     with pytest.raises(HybridCycleError, match=r"friction cone"):
         pinned.stride(x)
     sv = cyc.stride(x, record=True)
-    st, sl, po, fli = sv.passes
+    st, sl, po, fli = sv.passes[0], sv.passes[1], sv.passes[4], sv.passes[-1]
+    assert sv.durations[[2, 3, 5, 6]].tolist() == [0.0] * 4      # no slip stops
     assert sl.duration > 1e-5                                    # 1.26 ms measured
     N = st.times.size
     u = c.applied(c.stance_law.map(N)(st.nodes[:nq], st.nodes[nq:], st.times[None, :]))
@@ -106,20 +108,74 @@ def test_at_the_fixed_point_the_foot_slides_briefly(running_cycle15, star):
     assert 0 < d[1] < 1e-4
 
 
-def test_a_slip_that_stops_before_takeoff_is_refused(running_cycle15, star, model):
+def _landing_slip(cyc, star, nq, v=0.01):
+    """The landing state in flight coordinates with the foot slipping at ``v``."""
+    qe, dqe = (np.array(w).ravel() for w in cyc.controller.fl.takeoff(star.fixed_point[:nq],
+                                                                    star.fixed_point[nq:]))
+    dqe[nq] = v
+    return np.r_[qe, dqe]
+
+
+def test_a_slip_that_stops_sticks_again(running_cycle15, star, model):
     """The slide under the stance law entered mid-stance (the landing state, Fz ~ the
-    weight) with the foot moving at 1 cm/s: friction stops it long before Fz reaches 0,
-    and the stride is refused with the named reason (stick-slip is not modelled)."""
+    weight) with the foot moving at 1 cm/s: friction stops it long before Fz reaches 0;
+    the foot sticks there (pinned, the cone met at every node) until the cone's edge near
+    takeoff, and slides again to Fz = 0; the exact Jacobian of that map, through the
+    slip's stop and the stick, is the central differences'."""
     cyc, nq = running_cycle15, model.nq
-    fl = cyc.controller.fl
-    qe, dqe = (np.array(v).ravel() for v in fl.takeoff(star.fixed_point[:nq],
-                                                      star.fixed_point[nq:]))
-    dqe[nq] = 0.01
-    with pytest.raises(HybridCycleError, match=r"^domain 'slide': slip velocity \(the "
-                       r"sliding foot stops before takeoff: stick-slip not modelled\) "
-                       r"violated at t = "):
-        HybridCycle([cyc.domains[1]]).stride(np.r_[qe, dqe])
+    c, fl = cyc.controller, cyc.controller.fl
+    ne = fl.ne
+    y = _landing_slip(cyc, star, nq)
+    sv = HybridCycle(cyc.domains[1:4]).stride(y, record=True)
+    sl, st, again = sv.passes
+    assert 0 < sl.duration < st.duration and again.duration > 0
+    assert abs(sl.exit_state[ne + nq]) < V_REST and st.entry[ne + nq] == 0.0   # stopped
+    X, t = st.nodes, st.times + st.parameters[-1]
+    N = t.size
+    u = c.applied(c.stance_law.map(N)(X[:nq], X[ne:ne + nq], t[None, :]))
+    Fz, Fx = (np.array(w).ravel() for w in fl.takeoff_guard.map(N)(X[:nq], X[ne:ne + nq], u))
+    assert np.all(np.abs(Fx) <= cyc.mu * Fz + 1e-9) and Fz.min() > 0          # stuck
+    assert abs(abs(Fx[-1]) - cyc.mu * Fz[-1]) < 1e-9                           # to the edge
+    assert np.all(X[nq] == sl.exit_state[nq])                                  # in place
+    assert again.parameters[-3] == 1 and again.parameters[-2] == np.sign(Fx[-1])
+    sub = HybridCycle(cyc.domains[1:4])
+    J = finite_difference_jacobian(sub, y, 1e-6)
+    A = sub.linearise(y).A
+    assert np.abs(J - A).max() / np.abs(A).max() < 1e-6
+
+
+def test_a_third_slip_stop_is_refused(running_cycle15, star, model):
+    """The last slide under a law (after a stick) entered in the same way: its slip must
+    not stop, and the stride is refused with the named reason."""
+    cyc = running_cycle15
+    with pytest.raises(HybridCycleError, match=r"^domain 'slide again': slip velocity \(the "
+                       r"sliding foot stops again before takeoff: stick-slip beyond slide -> "
+                       r"stick -> slide under one law not modelled\) violated at t = "):
+        HybridCycle([cyc.domains[3]]).stride(_landing_slip(cyc, star, model.nq))
     assert SLIP_STOP.startswith("slip velocity")
+
+
+def test_a_push_off_that_stops_slides_the_other_way(running_cycle15, star, model):
+    """x* less 0.01 rad/s on dq1, its second stride: the sliding push-off's foot stops
+    before takeoff (the model without re-sticking refused this stride), where the pinned
+    foot would need more than mu Fz the other way: the stick is empty, the foot slides
+    back to the takeoff, the cone is met, the run goes on, and the exact Jacobian through
+    the slip's stop is the central differences'."""
+    cyc, nq = running_cycle15, model.nq
+    x = star.fixed_point.copy()
+    x[nq] -= 0.01
+    x2 = cyc.stride(x).next_state
+    sv = cyc.stride(x2, record=True)
+    po, stick, back = sv.passes[4:7]
+    assert po.duration > 0 and stick.duration == 0.0 and back.duration > 0
+    assert po.exit_state[cyc.controller.fl.ne + nq] != 0 and back.entry[-2] == 0.0
+    assert back.parameters[-2] == -po.parameters[-2]
+    run = simulate_running(cyc, star.fixed_point, x, 4)
+    assert run.status == "ok", run.message
+    assert max(s.friction_excess_max for s in run.strides) < 1e-9
+    J = finite_difference_jacobian(cyc, x2, 1e-6)
+    A = cyc.linearise(x2).A
+    assert np.abs(J - A).max() / np.abs(A).max() < 1e-6
 
 
 def test_the_slack_is_the_pinned_models(running_cycle15):
@@ -136,13 +192,13 @@ def test_the_stride_clock_slides_too(running_cycle15, model):
     flight take the law's time from the landing: the fixed point closes and its exact
     Jacobian, through the slide, is the central differences'."""
     cyc = running_cycle(running_cycle15.controller, flight_clock="stride")
-    assert cyc.domains[2].clock_from == 0 and cyc.domains[3].clock_from == 0
+    assert all(d.clock_from == 0 for d in cyc.domains)
     r = running_stability(cyc)
     assert r.status in ("stable", "unstable") and r.residual < 1e-10
     sv = cyc.stride(r.fixed_point, record=True)
     assert sv.durations[1] > 0                                 # it slides
     g = cyc.controller.gait
-    assert sv.passes[3].parameters[-1] == pytest.approx(
-        sum(sv.durations[:3]) - g.T_stance, abs=1e-15)
+    assert sv.passes[-1].parameters[-1] == pytest.approx(
+        sum(sv.durations[:-1]) - g.T_stance, abs=1e-15)
     J = finite_difference_jacobian(cyc, r.fixed_point, 1e-5)
     assert np.abs(J - r.A).max() < 1e-6 * np.abs(r.A).max()

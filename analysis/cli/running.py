@@ -524,6 +524,7 @@ def closed_loop(model, gait, args) -> dict:
                        swing_foot_min=min(s.swing_min for s in st),
                        landing_impulse_ratio_max=max(s.landing_impulse_ratio for s in st),
                        slip_max=max(s.slip for s in st),
+                       restick_max=max(s.restick for s in st),
                        slide_max=max(abs(s.slide) for s in st))
     out["simulation"] = dict(steps=args.steps, perturb=args.perturb, status=run.status,
                              message=run.message, strides=len(run.strides),
@@ -593,7 +594,9 @@ def _print_stability(s: dict):
               f"(limit {sim['torque_limit']:g})")
     if mg and sim.get("sliding"):
         print(f"  sliding near takeoff up to {1e3 * mg['slip_max']:.3g} ms and "
-              f"{1e3 * mg['slide_max']:.3g} mm a stride (friction on the cone's edge)")
+              f"{1e3 * mg['slide_max']:.3g} mm a stride (friction on the cone's edge)"
+              + (f", stuck again up to {1e3 * mg['restick_max']:.3g} ms"
+                 if mg.get("restick_max", 0.0) > 0 else ""))
     if sim.get("saturate"):
         n = sum(1 for v in sim["saturated_time"] if v > 0)
         print(f"  saturation           torques clipped at {sim['torque_limit']:g} N m in {n} of "

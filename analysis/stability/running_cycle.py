@@ -17,21 +17,30 @@ of a :class:`~biped_casadi.control.running.RunningController`:
   (``sliding_dynamics`` of the flight model: the constrained Lagrangian with one contact
   constraint, z of the foot 0, and the Coulomb force Fx = sigma mu Fz at the foot),
   under the stance law (which sees q, dq), t the time since the slide began (the law's
-  clock the time since landing); sigma, the sign of the Fx the pinned foot needed at
-  entry, fixed for the slide (the foot slips against it); guard the normal force Fz
-  (the law switches to the flight's where it reaches 0 going down); constraints the
-  slip velocity against the friction force, -sigma dx_st >= 0 (a foot that stops
-  before takeoff would stick again: stick-slip is not modelled, and such a stride is
-  refused with that reason), the swing foot above the ground and the torque limit;
-  reset the identity;
-- push-off: the same sliding state and dynamics under the flight law (t the time since
-  the law's switch), sigma the slip's direction at entry; guard Fz under those
-  torques; the same constraints; reset the identity.  Where the stance ends off the
+  clock the time since landing); sigma, -sign of the foot's velocity, or at rest the
+  sign of the Fx the pinned foot needs, fixed for the slide (the foot slips against
+  it); guard min(Fz, -sigma dx_st): the normal force (the law switches to the flight's
+  where it reaches 0 going down) or the slip velocity against the friction force (the
+  slip stops); constraints that slip velocity >= 0, the swing foot above the ground and
+  the torque limit; reset the identity, a stopped slip's velocity set to 0;
+- stick: the foot pinned again where its slip stopped (the stance's dynamics in the
+  flight coordinates, the foot's place kept), under the same law; guard the cone's
+  margin, to the next slide; constraints Fz >= 0, the swing foot above the ground and
+  the torque limit.  Empty where the foot moves at entry (the slide ended at Fz = 0) and
+  where the margin is <= 0 at entry: the pinned foot would need more than mu Fz the
+  other way, and the next slide starts against that force;
+- slide again: as the slide to Fz = 0, but its slip must not stop (stick-slip beyond
+  slide -> stick -> slide under one law is not modelled: such a stride is refused with
+  that reason, :data:`~analysis.stability.running_domains.SLIP_STOP`); empty where
+  Fz <= 0 at entry (the slide before ended there);
+- push-off, push-off stick, push-off slide again: the same three under the flight law
+  (t the time since the law's switch).  Where the stance ends off the
   reference's time, the flight law's first torques differ from the stance law's last,
   and under them the ground may still push the foot (Fz > 0): the foot then stays on
-  the ground, sliding, until that force reaches 0.  Where Fz <= 0 at the switch (at the
-  fixed point, and whenever the flight law pulls the foot up) the domain is empty
-  (``Domain.may_be_empty``) and the foot leaves there;
+  the ground, sliding (sticking again where its slip stops), until that force reaches
+  0.  Where Fz <= 0 at the switch (at the fixed point, and whenever the flight law
+  pulls the foot up) the push-off is empty (``Domain.may_be_empty``) and the foot
+  leaves there;
 - flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff
   (the flight law's clock: the time since the law's switch, t plus the push-off's
   duration, or with ``flight_clock='stride'`` the stance's clock continued, t plus the
@@ -98,6 +107,9 @@ __all__ = ["running_cycle", "RunningCycle", "running_stability", "RunningStabili
 MAX_STEPS_PER_INTERVAL = 1000
 #: and by default
 STEPS_PER_INTERVAL = 8
+#: the names of the domains on the ground after the pinned stance, under each law
+_GROUND_NAMES = dict(stance=("slide", "stick", "slide again"),
+                     flight=("push-off", "push-off stick", "push-off slide again"))
 
 
 def _real(name, v, low=0.0, strict=True, top=None) -> float:
@@ -176,6 +188,10 @@ class RunningCycle(HybridCycle):
         Whether the stance foot slides where it reaches the cone (module docstring).
     laws : tuple of str
         Each domain's law, 'stance' or 'flight'.
+    kinds : tuple of str
+        Each domain's contact: 'stance' (pinned, the stride's start), 'slide', 'stick'
+        (pinned again where a slip stopped), 'push-off' (pinned, without sliding) or
+        'flight'.
     starts : list of callable
         Each domain's start at given gains (:meth:`retuned`).
     flight_clock : str
@@ -258,8 +274,9 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     Returns
     -------
     RunningCycle
-        Stance, slide, push-off (sliding) and flight; without ``sliding``, stance,
-        push-off and flight.  Its state is the stance state (q, dq) at landing.
+        Stance, slide, stick, slide again, push-off, push-off stick, push-off slide
+        again and flight (with ``sliding``; the sticks and the second slides empty unless
+        a slip stops); without ``sliding``, stance, push-off and flight.  Its state is the stance state (q, dq) at landing.
     """
     c = controller
     if not isinstance(c, RunningController):
@@ -287,17 +304,19 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     check_rk4_steps(c, dict(stance=h_st, flight=h_fl))
     t_st, tol = time_limits * float(g.T_stance), tolerance
     origin = float(g.T_stance) if flight_clock == "stride" else 0.0
-    switch = 2 if sliding else 1                 # the push-off: where the flight law starts
+    k = len(rd.GROUND_PHASES)
+    switch = 1 + k if sliding else 1             # the push-off: where the flight law starts
     clock_from = 0 if flight_clock == "stride" else switch
     n, ne = 2 * m.nq, 2 * c.fl.ne
     domains = [rd.stance_domain(c, mu, slack, h_st, t_st, tol, sliding)]
     starts = [partial(rd.start, n)]
     if sliding:
-        domains += [rd.slide_domain(c, "stance", mu, h_st, t_st, tol, 0.0, 0, "slide"),
-                    rd.slide_domain(c, "flight", mu, h_fl, t_st, tol, origin, clock_from,
-                                    "push-off")]
-        starts += [partial(rd.slide_start, c, "stance", clock_origin=0.0),
-                   partial(rd.slide_start, c, "flight", clock_origin=origin)]
+        for law, h, o, cf, names in (("stance", h_st, 0.0, 0, _GROUND_NAMES["stance"]),
+                                     ("flight", h_fl, origin, clock_from,
+                                      _GROUND_NAMES["flight"])):
+            ds, ss = rd.ground_domains(c, law, mu, h, t_st, tol, o, cf, names)
+            domains += ds
+            starts += ss
     else:
         domains.append(rd.pushoff_domain(c, mu, slack, h_fl, t_st, tol, origin, clock_from))
         starts.append(partial(rd.start, n, clock_origin=origin))
@@ -307,7 +326,10 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     cyc = RunningCycle(domains)
     cyc.controller, cyc.mu, cyc.friction_slack, cyc.sliding = c, mu, slack, bool(sliding)
     cyc.starts, cyc.flight_clock = starts, flight_clock
-    cyc.laws = ("stance",) + (("stance", "flight") if sliding else ("flight",)) + ("flight",)
+    cyc.laws = ("stance",) + (("stance",) * k + ("flight",) * k if sliding else ("flight",)) \
+        + ("flight",)
+    cyc.kinds = ("stance",) + (rd.GROUND_PHASES * 2 if sliding else ("push-off",)) \
+        + ("flight",)
     return cyc
 
 
@@ -473,6 +495,8 @@ class StrideRecord:
         How long the stance foot slid before it left the ground, s (0 without sliding).
     slide : float
         How far it slid, m (signed, forward positive; 0 without sliding).
+    restick : float
+        How long it stuck again after a slip stopped, s (0 without sliding).
     """
 
     deviation: float
@@ -489,6 +513,7 @@ class StrideRecord:
     landing_impulse_ratio: float
     slip: float = 0.0
     slide: float = 0.0
+    restick: float = 0.0
 
 
 @dataclass
@@ -597,8 +622,13 @@ def _margins(cycle: HybridCycle, passes) -> dict:
                               *(_lowest(z, ps, "swing foot height") for ps, _, z in ground)),
                 other_foot_min=_lowest(feet[1, 0::2], fli, "other foot height"),
                 landing_impulse_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else float("inf"),
-                slip=float(sum(ps.duration for ps in passes[1:-1])) if cycle.sliding else 0.0,
+                slip=_time_in(cycle, passes, "slide"), restick=_time_in(cycle, passes, "stick"),
                 slide=float(fli.entry[nq]))
+
+
+def _time_in(cycle, passes, kind: str) -> float:
+    """How long the stride's domains of one contact kind (``RunningCycle.kinds``) ran."""
+    return float(sum(ps.duration for ps, k in zip(passes, cycle.kinds) if k == kind))
 
 
 def simulate_running(cycle: HybridCycle, x_star, start, strides: int = 20) -> RunningRun:
@@ -643,7 +673,9 @@ def simulate_running(cycle: HybridCycle, x_star, start, strides: int = 20) -> Ru
         devs.append(float(np.max(np.abs(x - xs))))
         recs.append(StrideRecord(deviation=devs[-2], next_deviation=devs[-1],
                                  durations=tuple(_phases(sv.durations).tolist()),
-                                 pushoff=float(sv.durations[-2]),
+                                 pushoff=float(sum(
+                                     d for d, law in zip(sv.durations[1:-1], cycle.laws[1:-1])
+                                     if law == "flight")),
                                  **_margins(cycle, sv.passes)))
     d = np.array(devs)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -1,25 +1,42 @@
 """The domains of the running stride map (:mod:`analysis.stability.running_cycle`): the
-stance with the foot pinned, the foot sliding under either law, the push-off with the
-foot pinned (the model without sliding) and the flight.
+stance with the foot pinned, the foot sliding and sticking again under either law
+(:func:`ground_domains`), the push-off with the foot pinned (the model without sliding)
+and the flight.
 
 Every domain takes the gains k = (Kp, Kd, M1) as its first parameters, set at entry by a
 start Function that :func:`starts` builds again at other gains
 (:meth:`~analysis.stability.running_cycle.RunningCycle.retuned`).  A domain under a
 law with a clock (all but the pinned stance) has that clock at entry as its last
-parameter; a sliding domain has the slip's sign before it.
+parameter; a sliding domain has the slip's sign before it, and before that whether the
+slide began at rest.
 """
 from __future__ import annotations
+
+from functools import partial
 
 import casadi as ca
 import numpy as np
 
 from .hybrid_cycle import Domain
 
-__all__ = ["stance_domain", "slide_domain", "pushoff_domain", "flight_domain", "start",
-           "slide_start", "SLIP_STOP", "ON_GROUND"]
+__all__ = ["stance_domain", "slide_domain", "stick_domain", "ground_domains",
+           "pushoff_domain", "flight_domain", "start", "slide_start", "SLIP_STOP", "ON_GROUND",
+           "GROUND_PHASES", "V_REST"]
 
-#: the sliding foot's velocity against the friction force (must stay >= 0)
-SLIP_STOP = "slip velocity (the sliding foot stops before takeoff: stick-slip not modelled)"
+#: the sliding foot's velocity against the friction force (must stay >= 0 in the last
+#: slide under a law, which has no stick after it)
+SLIP_STOP = ("slip velocity (the sliding foot stops again before takeoff: stick-slip beyond "
+             "slide -> stick -> slide under one law not modelled)")
+
+#: the foot's states on the ground after the pinned stance, under each law, in order
+GROUND_PHASES = ("slide", "stick", "slide")
+
+#: a slip velocity below this at a slide's end has stopped (m/s; the slip's stop is
+#: located to round-off, a takeoff's slip is of another order)
+V_REST = 1e-12
+
+#: the slip guard's ramp over the first RK4 step of a slide begun at rest, m/s
+_V_RAMP = 1.0
 
 #: the constraints while the stance foot is pinned on the ground, after its normal force
 ON_GROUND = ("friction cone (Fx <= mu Fz)", "friction cone (-Fx <= mu Fz)",
@@ -59,10 +76,10 @@ def _law(c, phase: str, qe, dqe, t, k):
 
 
 def slide_start(c, phase: str, gains, clock_origin: float) -> ca.Function:
-    """Entry of a sliding domain: X0 = x; p = (the gains, the slip's sign sigma, the
-    law's clock at entry).  The friction force on the foot is sigma mu Fz: sigma is
-    -sign of the foot's velocity, or, with the foot at rest, the sign of the tangential
-    force the pinned foot needs there (the slip starts against it)."""
+    """Entry of a sliding domain: X0 = x; p = (the gains, rest, the slip's sign sigma,
+    the law's clock at entry).  The friction force on the foot is sigma mu Fz: sigma is
+    -sign of the foot's velocity, or, with the foot at rest (rest = 1, else 0), the sign
+    of the tangential force the pinned foot needs there (the slip starts against it)."""
     fl, nq, ne = c.fl, c.model.nq, c.fl.ne
     x, s = ca.SX.sym("x", 2 * ne), ca.SX.sym("s")
     k = ca.DM(np.asarray(gains, float))
@@ -71,7 +88,8 @@ def slide_start(c, phase: str, gains, clock_origin: float) -> ca.Function:
     _, Fx = fl.takeoff_guard(qe[:nq], dqe[:nq], c.applied(_law(c, phase, qe, dqe, tau, k)))
     v = dqe[nq]
     sigma = ca.if_else(v != 0, -ca.sign(v), ca.sign(Fx))
-    return ca.Function("sliding_start", [x, s], [x, ca.vertcat(k, sigma, tau)])
+    rest = ca.if_else(v != 0, 0, 1)
+    return ca.Function("sliding_start", [x, s], [x, ca.vertcat(k, rest, sigma, tau)])
 
 
 def stance_domain(c, mu, slack, h, t_max, tolerance, sliding: bool) -> Domain:
@@ -110,30 +128,106 @@ def _on_ground(m, mu, slack, q, Fz, Fx) -> tuple:
 
 
 def slide_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
-                 name: str) -> Domain:
+                 name: str, last: bool = True) -> Domain:
     """The stance foot sliding under a phase's law (``fl.sliding_dynamics``, the
-    friction force sigma mu Fz): guard the normal force (the takeoff, or the law's switch);
-    constraints the slip against the friction force (:data:`SLIP_STOP`), the swing foot's
-    height and the torque limit; reset the identity; empty where Fz <= 0 at entry."""
+    friction force sigma mu Fz); empty where Fz <= 0 at entry.
+
+    The ``last`` slide under a law: guard the normal force (the takeoff, or the law's
+    switch); constraints the slip against the friction force (:data:`SLIP_STOP`), the
+    swing foot's height and the torque limit; reset the identity.  A slide before a
+    stick (not ``last``): guard min(Fz, the slip velocity against the friction force),
+    which ends it at the takeoff or the switch, or where the slip stops; a slide begun at
+    rest adds to the slip's part a ramp from ``_V_RAMP`` at entry to 0 at the first RK4
+    node (the slip starts from 0 there, and has not stopped); the same constraints (the
+    slip's would bind only for a slip begun at rest that reverses within its first step);
+    reset a stopped slip's velocity (below :data:`V_REST`) to 0.
+    """
     fl, nq, ne, nu = c.fl, c.model.nq, c.fl.ne, c.model.nu
-    Y, t, p = ca.SX.sym("Y", 2 * ne), ca.SX.sym("t"), ca.SX.sym("p", 3 * nu + 2)
+    Y, t, p = ca.SX.sym("Y", 2 * ne), ca.SX.sym("t"), ca.SX.sym("p", 3 * nu + 3)
     qe, dqe = Y[:ne], Y[ne:]
     u = _law(c, phase, qe, dqe, t + p[-1], p[:3 * nu])
-    sigma = p[3 * nu]
+    rest, sigma = p[3 * nu], p[3 * nu + 1]
     ddqe, Fz = fl.sliding_dynamics(qe, dqe, c.applied(u), sigma * mu)
-    cons, names = _phase_constraints(c, u, ca.vertcat(-sigma * dqe[nq], fl.feet(qe)[1, 1]),
+    slip = -sigma * dqe[nq]
+    cons, names = _phase_constraints(c, u, ca.vertcat(slip, fl.feet(qe)[1, 1]),
                                      (SLIP_STOP, "swing foot height"))
     y = ca.SX.sym("y", 2 * ne)
+    if last:
+        guard, gname, end = Fz, "sliding foot's normal force", y
+    else:
+        guard = ca.fmin(Fz, slip + rest * _V_RAMP * ca.fmax(0, 1 - t / h))
+        gname = "sliding foot's normal force or slip velocity"
+        v = y[ne + nq]
+        end = ca.vertcat(y[:ne + nq], ca.if_else(ca.fabs(v) < V_REST, 0, v), y[ne + nq + 1:])
     return Domain(name, 2 * ne, ca.Function(f"running_{phase}_slide", [Y, t, p],
                                             [ca.vertcat(dqe, ddqe)]),
-                  ca.Function("sliding_normal_force", [Y, t, p], [Fz]),
-                  ca.Function("slide_end", [y], [y]), h, t_max,
+                  ca.Function("slide_guard", [Y, t, p], [guard]),
+                  ca.Function("slide_end", [y], [end]), h, t_max,
                   start=slide_start(c, phase, c.gains, origin),
                   constraints=ca.Function("slide_constraints", [Y, t, p], [cons]),
-                  constraint_names=names, guard_name="sliding foot's normal force",
+                  constraint_names=names, guard_name=gname,
                   tolerance=tolerance, dense_constraints=names, dense_guard=True,
                   common_subexpressions=False,
                   clock_from=clock_from, may_be_empty=True)
+
+
+def stick_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
+                 name: str) -> Domain:
+    """The stance foot stuck again where its slip stopped, under a phase's law: the
+    pinned dynamics in the flight coordinates (the foot where it stopped); guard the
+    cone's margin mu Fz - ``|Fx|`` (it slides again where that reaches 0; Fz cannot
+    vanish first), or -1 where the foot moves at entry (the slide before ended at the
+    takeoff or the law's switch: the domain is empty); constraints Fz, the swing foot's
+    height and the torque limit; reset the identity.  Empty where the margin is <= 0 at
+    entry: the pinned foot would need more than mu Fz the other way, and the next slide
+    starts against it."""
+    m, fl, nq, ne, nu = c.model, c.fl, c.model.nq, c.fl.ne, c.model.nu
+    Y, t, p = ca.SX.sym("Y", 2 * ne), ca.SX.sym("t"), ca.SX.sym("p", 3 * nu + 1)
+    qe, dqe = Y[:ne], Y[ne:]
+    q, dq = qe[:nq], dqe[:nq]
+    u = _law(c, phase, qe, dqe, t + p[-1], p[:3 * nu])
+    ua = c.applied(u)
+    Fz, Fx = fl.takeoff_guard(q, dq, ua)
+    cons, names = _phase_constraints(c, u, ca.vertcat(Fz, fl.feet(qe)[1, 1]),
+                                     ("stance normal force", "swing foot height"))
+    guard = ca.if_else(dqe[nq] == 0, mu * Fz - ca.fabs(Fx), -1)
+    y = ca.SX.sym("y", 2 * ne)
+    return Domain(name, 2 * ne, ca.Function(f"running_{phase}_stick", [Y, t, p],
+                                            [ca.vertcat(dqe, m.forward_dynamics(q, dq, ua),
+                                                        ca.SX.zeros(2))]),
+                  ca.Function("stick_guard", [Y, t, p], [guard]),
+                  ca.Function("stick_end", [y], [y]), h, t_max,
+                  start=start(2 * ne, c.gains, origin),
+                  constraints=ca.Function("stick_constraints", [Y, t, p], [cons]),
+                  constraint_names=names, guard_name="friction margin mu Fz - |Fx|",
+                  tolerance=tolerance, dense_constraints=names, dense_guard=True,
+                  common_subexpressions=False,
+                  clock_from=clock_from, may_be_empty=True)
+
+
+def ground_domains(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
+                   names) -> tuple:
+    """The stance foot on the ground under a phase's law after the pinned stance
+    (:data:`GROUND_PHASES`): slide, stick again where the slip stops, slide again to
+    Fz = 0 (its slip must not stop: :data:`SLIP_STOP`).  ``names`` one per domain.
+
+    Returns
+    -------
+    tuple
+        (the domains, their starts at given gains).
+    """
+    last = len(GROUND_PHASES) - 1
+    doms, starts = [], []
+    for i, (kind, name) in enumerate(zip(GROUND_PHASES, names)):
+        if kind == "slide":
+            doms.append(slide_domain(c, phase, mu, h, t_max, tolerance, origin, clock_from,
+                                     name, last=i == last))
+            starts.append(partial(slide_start, c, phase, clock_origin=origin))
+        else:
+            doms.append(stick_domain(c, phase, mu, h, t_max, tolerance, origin, clock_from,
+                                     name))
+            starts.append(partial(start, 2 * c.fl.ne, clock_origin=origin))
+    return doms, starts
 
 
 def pushoff_domain(c, mu, slack, h, t_max, tolerance, origin, clock_from) -> Domain:
