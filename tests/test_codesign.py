@@ -304,8 +304,8 @@ def test_robust_cli_out_writes_the_design_gait(method, monkeypatch, capsys, tmp_
     assert out.read_text() == '{"a gait": 1}' and design.gait_file == str(out)
     assert f"--gait {out} --controller tv" in capsys.readouterr().out
     assert main(["m1", "--robust", "--method", method, "--out",
-                 str(tmp_path / "no" / "x.json")]) == 2
-    assert "--out: folder" in capsys.readouterr().err and calls == [1]
+                 str(out / "x.json")]) == 2                 # under a file, not a folder
+    assert "is a file, not a folder" in capsys.readouterr().err and calls == [1]
 
 
 @pytest.mark.slow

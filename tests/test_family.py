@@ -328,7 +328,7 @@ def test_cli_family_and_gait_between(capsys, tmp_path, monkeypatch):
     (["--family", "f.json", "--speed", "0.75", "--mu", "0.5"], "--mu does not apply"),
     (["--resolve"], "--resolve applies"),
     (["--speeds", "0.7:0.8:0.05", "--out", "f.json"], "--out: f.json holds"),
-    (["--speeds", "0.7:0.8:0.05", "--out", "nofolder/f.json"], "--out: folder"),
+    (["--speeds", "0.7:0.8:0.05", "--out", "f.json/o.json"], "is a file, not a folder"),
 ])
 def test_cli_bad_input(argv, words, capsys, tmp_path, monkeypatch, family_path):
     monkeypatch.chdir(tmp_path)
