@@ -296,8 +296,9 @@ def screen_steps(W, bounds) -> np.ndarray:
     around (centred on the step's first node and on the one before, and their linear
     extrapolation to the step's end).  A step is flagged where its lower node value less
     :data:`SCREEN_SAFETY` times that bound is below the bound; the first step (no node
-    before it) always.  An estimate, not a proof: it holds while c'' changes by less than
-    that factor over three steps.
+    before it) always, and every step whose estimate needs a value that is NaN (a node
+    missing before the first: the nodes of a batch padded with NaN rows).  An estimate,
+    not a proof: it holds while c'' changes by less than that factor over three steps.
 
     Parameters
     ----------
@@ -318,8 +319,9 @@ def screen_steps(W, bounds) -> np.ndarray:
     d1 = W[2:] - 2 * W[1:-1] + W[:-2]            # c'' h^2 centred on steps 1.. first nodes
     curv = np.abs(d1)
     d0 = d1[:-1]                                    # ... and on the node before
-    curv[1:] = np.maximum(np.maximum(curv[1:], np.abs(d0)), np.abs(2 * d1[1:] - d0))
-    out[1:] = np.minimum(W[1:-1], W[2:]) - (SCREEN_SAFETY / 8) * curv < bounds
+    curv[1:] = np.fmax(np.fmax(curv[1:], np.abs(d0)), np.abs(2 * d1[1:] - d0))
+    with np.errstate(invalid="ignore"):             # NaN: flagged
+        out[1:] = ~(np.minimum(W[1:-1], W[2:]) - (SCREEN_SAFETY / 8) * curv >= bounds)
     return out
 
 

@@ -11,6 +11,12 @@ screen_steps`, the running cycle's screen); where a margin may dip below 0 its r
 eta at both ends of the step are taken (AD, exact) and its minimum located by Newton's
 method on the rate (:func:`~biped_casadi.simulation.kernel.minima_between`).  A minimum
 below its bound is the first invalid state, named with "between two RK4 nodes".
+
+The batched walkers (:mod:`~biped_casadi.simulation.tv_walker`,
+:mod:`~biped_casadi.simulation.vc_walker`) screen the steps of all their scenarios at once
+(:meth:`MarginCheck.first_dips`) and look inside the flagged ones only, scenario by
+scenario, with the same locator; the swing foot's minima between their nodes likewise
+(:func:`foot_dips`, :func:`~biped_casadi.simulation.kernel.swing_foot_dip`).
 """
 from __future__ import annotations
 
@@ -18,10 +24,10 @@ import casadi as ca
 import numpy as np
 
 from ..numerics import FastCall
-from .kernel import minima_between, screen_steps
-from .validity import FRICTION_TOL, node_message
+from .kernel import minima_between, screen_steps, swing_foot_dip
+from .validity import FRICTION_TOL, between_message
 
-__all__ = ["MarginCheck"]
+__all__ = ["MarginCheck", "dip_function", "foot_dips"]
 
 
 class MarginCheck:
@@ -98,8 +104,44 @@ class MarginCheck:
             (step index, eta, status) at the minimum.
         """
         near = screen_steps(W, np.zeros(W.shape[1]))[len(W) - 1 - len(steps):]
+        return self._first_flagged(between, near, steps.__getitem__)
+
+    def first_dips(self, between, W, n_steps: int, step, stop) -> dict:
+        """Per scenario of a batch, the first minimum below its bound inside its steps.
+
+        Parameters
+        ----------
+        between : callable
+            ``between(X, tau, eta, p) -> (W, dW/deta, d2W/deta2)`` (:meth:`build`).
+        W : numpy.ndarray
+            (n, s, m) margins at consecutive nodes of s scenarios, the last ``n_steps`` + 1
+            rows bracketing the steps, up to three before them (NaN where missing).
+        n_steps : int
+            Steps.
+        step : callable
+            ``step(i, j) -> (Xa, ta, length, p)``: scenario i's step j.
+        stop : array_like of int
+            (s,) how many of its steps count per scenario.
+
+        Returns
+        -------
+        dict
+            Scenario -> (step index, eta, status) at its first minimum below its bound.
+        """
+        near = screen_steps(W, np.zeros(W.shape[-1]))[W.shape[0] - 1 - n_steps:]
+        near &= (np.arange(n_steps)[:, None] < np.asarray(stop)[None, :])[:, :, None]
+        found = {}
+        for i in np.flatnonzero(near.any(axis=(0, 2))):
+            got = self._first_flagged(between, near[:, i], lambda j, i=i: step(i, j))
+            if got is not None:
+                found[int(i)] = got
+        return found
+
+    def _first_flagged(self, between, near, step):
+        """The first minimum below its bound inside the steps ``near`` flags (steps, m):
+        (step index, eta, status) or None; ``step(j)`` the step j's (Xa, ta, length, p)."""
         for j in np.flatnonzero(near.any(axis=1)):
-            Xa, ta, h, p = steps[j]
+            Xa, ta, h, p = step(j)
 
             def at(eta, Xa=Xa, ta=ta, p=p):
                 return between(Xa, ta, eta, p)
@@ -114,5 +156,77 @@ class MarginCheck:
         """The failure in words at the state of diagnostics D (one column)."""
         node = {k: (v[..., 0] if isinstance(v, np.ndarray) else v)
                 for k, v in self.schema.rows(D).items()}
-        return (node_message(status, node, self.limits, den_scale)
-                + ", between two RK4 nodes")
+        return between_message(status, node, self.limits, den_scale)
+
+
+def dip_function(rk4, foot) -> ca.Function:
+    """The swing foot at the end of the RK4 step of length eta, with its rates in eta.
+
+    Parameters
+    ----------
+    rk4 : casadi.Function
+        ``(X, tau, eta, p) -> (X_eta, tau_eta)``: the closed loop's step.
+    foot : callable
+        ``foot(X, tau, p) -> (x_sw, z_sw)`` at a state (CasADi).
+
+    Returns
+    -------
+    casadi.Function
+        ``(X, tau, eta, p) -> (z_sw, dz/deta, d2z/deta2, x_sw, X_eta)``, the ``dip`` of
+        :func:`~biped_casadi.simulation.kernel.swing_foot_dip`.
+    """
+    X, tau, eta = ca.SX.sym("X", rk4.size1_in(0)), ca.SX.sym("tau"), ca.SX.sym("eta")
+    p = ca.SX.sym("p", rk4.size1_in(3))
+    Xe, te = rk4(X, tau, eta, p)
+    x, z = foot(Xe, te, p)
+    dz = ca.jacobian(z, eta)
+    return ca.Function("swing_foot_dip", [X, tau, eta, p], [z, dz, ca.jacobian(dz, eta), x, Xe],
+                       ["X", "tau", "eta", "p"],
+                       ["z_sw", "dz_deta", "d2z_deta2", "x_sw", "X_event"])
+
+
+def foot_dips(dip, h, step, z_prev, dz_a, dz_b, stop, ground, scuff_zone: float,
+              limits) -> dict:
+    """Per scenario of a batch, the first of the swing foot's minima between two nodes
+    that is below the ground (:func:`~biped_casadi.simulation.kernel.swing_foot_dip`).
+
+    Parameters
+    ----------
+    dip : callable
+        ``dip(X, tau, eta, p)`` (:func:`dip_function`).
+    h : float or array_like
+        The RK4 step, s (or (s,) per scenario).
+    step : callable
+        ``step(i, j) -> (Xa, ta, p)``: the first node of scenario i's step j.
+    z_prev, dz_a, dz_b : numpy.ndarray
+        (s, K) per step: the height at its first node, the foot's vertical rate there
+        and at its last node.
+    stop : array_like of int
+        (s,) how many of its steps count per scenario.
+    ground : tuple of numpy.ndarray
+        (ahead, behind) per scenario, (s,) each.
+    scuff_zone : float
+        ``model.scuff_zone`` (inf: every dip below the ground is a scuff), m.
+    limits : Limits
+        ``scuffing_ignored`` and ``ground_tolerance``.
+
+    Returns
+    -------
+    dict
+        Scenario -> (j, 'strike' or 'scuffed', eta, z_sw, x_sw, X_eta).
+    """
+    K = z_prev.shape[1]
+    h = np.broadcast_to(np.asarray(h, float), (len(z_prev),))
+    with np.errstate(invalid="ignore"):
+        cand = (dz_a <= 0) & (dz_b > 0) & (np.arange(K)[None, :] < np.asarray(stop)[:, None])
+    found = {}
+    for i in np.flatnonzero(cand.any(axis=1)):
+        n = int(stop[i])
+        p = step(i, 0)[2]
+        got = swing_foot_dip(lambda X, t, eta, p=p: dip(X, t, eta, p), float(h[i]),
+                             lambda j, i=i: step(i, j)[:2], z_prev[i, :n], dz_a[i, :n],
+                             dz_b[i, :n], (ground[0][i], ground[1][i]), scuff_zone,
+                             limits.scuffing_ignored, limits.ground_tolerance)
+        if got is not None:
+            found[int(i)] = got
+    return found
