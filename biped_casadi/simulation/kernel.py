@@ -293,36 +293,54 @@ def screen_steps(W, bounds) -> np.ndarray:
 
     An output c that dips inside a step of length h goes below its lower node value by at
     most max |c''| h^2 / 8; c'' h^2 is estimated by the second differences of the nodes
-    around (centred on the step's first node and on the one before, and their linear
-    extrapolation to the step's end).  A step is flagged where its lower node value less
-    :data:`SCREEN_SAFETY` times that bound is below the bound; the first step (no node
-    before it) always, and every step whose estimate needs a value that is NaN (a node
-    missing before the first: the nodes of a batch padded with NaN rows).  An estimate,
-    not a proof: it holds while c'' changes by less than that factor over three steps.
+    around: centred on the step's first node and on the one before, and their linear
+    extrapolation to the step's end; for a step without a node before it (the first, or
+    after NaN rows: the nodes of a batch padded with them), centred on its last node and
+    the one after, and their extrapolation back to its start.  A step is flagged where
+    its lower node value less :data:`SCREEN_SAFETY` times that bound is below the bound,
+    and where no estimate can be made (fewer than three nodes, or a NaN); an output
+    above its bound by 3 max |c''| h^2 (over its nodes, NaN left out) at every node has
+    no step flagged.  An estimate, not a proof: it holds while c'' changes by less than
+    that factor over three steps.
 
     Parameters
     ----------
     W : array_like
-        (n, m): the m outputs at n >= 2 consecutive nodes.
+        (n, ...): the outputs at n >= 2 consecutive nodes (axis 0), the last axis the m
+        outputs.
     bounds : array_like
         (m,) the outputs' lower bounds.
 
     Returns
     -------
     numpy.ndarray of bool
-        (n - 1, m): per step (from node i to i + 1), per output.
+        (n - 1, ...): per step (from node i to i + 1), per output.
     """
     W = np.asarray(W, float)
-    out = np.ones((W.shape[0] - 1,) + W.shape[1:], bool)
     if W.shape[0] < 3:
+        return np.ones((W.shape[0] - 1,) + W.shape[1:], bool)
+    d1 = W[2:] - 2 * W[1:-1] + W[:-2]           # c'' h^2 centred on nodes 1 .. n - 2
+    with np.errstate(invalid="ignore"):         # every estimate is below 3 max |d1|
+        far = np.fmin.reduce(W, axis=0) - (3 * SCREEN_SAFETY / 8) * np.fmax.reduce(
+            np.abs(d1), axis=0) >= bounds       # (NaN rows left out)
+    if far.all():
+        return np.zeros((W.shape[0] - 1,) + W.shape[1:], bool)
+    if far.any():                               # the full screen where it may matter
+        out = np.zeros((W.shape[0] - 1,) + W.shape[1:], bool)
+        near = ~far
+        out[:, near] = screen_steps(W[:, near], np.broadcast_to(bounds, far.shape)[near])
         return out
-    d1 = W[2:] - 2 * W[1:-1] + W[:-2]            # c'' h^2 centred on steps 1.. first nodes
-    curv = np.abs(d1)
-    d0 = d1[:-1]                                    # ... and on the node before
-    curv[1:] = np.fmax(np.fmax(curv[1:], np.abs(d0)), np.abs(2 * d1[1:] - d0))
-    with np.errstate(invalid="ignore"):             # NaN: flagged
-        out[1:] = ~(np.minimum(W[1:-1], W[2:]) - (SCREEN_SAFETY / 8) * curv >= bounds)
-    return out
+    back = np.full((W.shape[0] - 1,) + W.shape[1:], np.nan)
+    fwd = back.copy()
+    back[1:] = np.abs(d1)                        # step i: on its first node i ...
+    back[2:] = np.fmax(np.fmax(back[2:], np.abs(d1[:-1])),   # ... and on node i - 1
+                       np.abs(2 * d1[1:] - d1[:-1]))
+    fwd[:-1] = np.abs(d1)                        # step i: on its last node i + 1 ...
+    fwd[:-2] = np.fmax(np.fmax(fwd[:-2], np.abs(d1[1:])),    # ... and on node i + 2
+                       np.abs(2 * d1[:-1] - d1[1:]))
+    curv = np.where(np.isnan(back), fwd, back)
+    with np.errstate(invalid="ignore"):          # NaN: flagged
+        return ~(np.minimum(W[:-1], W[1:]) - (SCREEN_SAFETY / 8) * curv >= bounds)
 
 
 def _flat(v) -> np.ndarray:

@@ -72,19 +72,34 @@ class MarginCheck:
 
     def build(self, rk4, margins):
         """``between(X, tau, eta, p) -> (W, dW/deta, d2W/deta2)`` on the RK4 step of
-        length eta (built at first use): ``rk4`` the closed loop's step, ``margins(X,
-        tau, p)`` the margins at a state."""
+        length eta (:meth:`function`, built at first use and kept)."""
         if self._between is None:
-            X = ca.SX.sym("X", rk4.size1_in(0))
-            tau, eta = ca.SX.sym("tau"), ca.SX.sym("eta")
-            p = ca.SX.sym("p", rk4.size1_in(3))
-            Xe, te = rk4(X, tau, eta, p)
-            W = margins(Xe, te, p)
-            dW = ca.jacobian(W, eta)
-            self._between = FastCall(ca.Function(
-                "margins_between", [X, tau, eta, p], [W, dW, ca.jacobian(dW, eta)],
-                ["X", "tau", "eta", "p"], ["W", "dW_deta", "d2W_deta2"]))
+            self._between = FastCall(self.function(rk4, margins))
         return self._between
+
+    def function(self, rk4, margins) -> ca.Function:
+        """The margins on the RK4 step of length eta and their first two rates in eta.
+
+        Parameters
+        ----------
+        rk4 : casadi.Function
+            ``(X, tau, eta, p) -> (X_eta, tau_eta)``: the closed loop's step.
+        margins : callable
+            ``margins(X, tau, p)``: the margins at a state (CasADi).
+
+        Returns
+        -------
+        casadi.Function
+            ``(X, tau, eta, p) -> (W, dW/deta, d2W/deta2)``.
+        """
+        X = ca.SX.sym("X", rk4.size1_in(0))
+        tau, eta = ca.SX.sym("tau"), ca.SX.sym("eta")
+        p = ca.SX.sym("p", rk4.size1_in(3))
+        Xe, te = rk4(X, tau, eta, p)
+        W = margins(Xe, te, p)
+        dW = ca.jacobian(W, eta)
+        return ca.Function("margins_between", [X, tau, eta, p], [W, dW, ca.jacobian(dW, eta)],
+                           ["X", "tau", "eta", "p"], ["W", "dW_deta", "d2W_deta2"])
 
     def first_dip(self, between, W, steps):
         """The first minimum below its bound inside the steps, or None.
