@@ -18,7 +18,13 @@ as in the full-order simulator.
 
 Validity.  Every node and every impact is checked with
 :mod:`biped_casadi.simulation.validity` (the same conditions as the full-order simulator,
-torque limit included); a scenario stops at its first invalid state.
+torque limit included); between the nodes, as in the simulator, the swing foot's minima
+where its vertical velocity turns upward (below the ground: a scuff behind the stance
+foot, the strike in front of it) and the stance force, friction cone and torques where
+the screen of the nodes says they may dip (:mod:`biped_casadi.simulation.margins`: the
+steps of the whole batch screened at once, the flagged ones refined by Newton's method
+on rates taken by AD, its Functions built once).  A scenario stops at its first invalid
+state; one between two nodes is named so in its message.
 
 Terrain.  ``walk(..., terrain=...)`` gives every scenario its ground heights, one per step
 (:mod:`biped_casadi.simulation.terrain`): step k strikes at z_sw = h_k, and v_c still

@@ -4,7 +4,10 @@ On the constraint surface (:class:`~biped_casadi.control.ConstraintSurface`) the
 configuration is a function of the phase alone and the state is (theta, w = dtheta/dt);
 the swing foot strikes at the phase theta^- where it reaches the ground, so a step is an
 integration in theta from the start phase to theta^-, with every node checked
-(:mod:`biped_casadi.simulation.validity`), then the impact map.  Its outcomes are those
+(:mod:`biped_casadi.simulation.validity`) and, between the nodes, the swing foot, the
+stance force, the friction cone and the torques (:mod:`biped_casadi.simulation.margins`,
+as the full-order simulator; the foot's strike is at theta^-, so any dip of it below the
+ground between two nodes is a scuff), then the impact map.  Its outcomes are those
 of every simulator (:class:`~biped_casadi.simulation.outcome.WalkBatch`).
 
 From any state at the start of a step the controller's phase-based correction h_c makes
