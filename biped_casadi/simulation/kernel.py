@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 __all__ = ["Diagnostics", "strike", "locate_strike", "locate_minimum", "swing_foot_dip",
-           "SCREEN_SAFETY", "screen_steps", "minima_between", "mapped", "threads", "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
+           "SCREEN_SAFETY", "screen_steps", "screen_far", "minima_between", "mapped", "threads", "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
 
 #: CasADi calls per reference step duration T of the simulators' integration: each call
 #: integrates a quarter of T (the Poincaré section 0.75 T falls on a boundary); RK4 steps
@@ -319,10 +319,7 @@ def screen_steps(W, bounds) -> np.ndarray:
     W = np.asarray(W, float)
     if W.shape[0] < 3:
         return np.ones((W.shape[0] - 1,) + W.shape[1:], bool)
-    d1 = W[2:] - 2 * W[1:-1] + W[:-2]           # c'' h^2 centred on nodes 1 .. n - 2
-    with np.errstate(invalid="ignore"):         # every estimate is below 3 max |d1|
-        far = np.fmin.reduce(W, axis=0) - (3 * SCREEN_SAFETY / 8) * np.fmax.reduce(
-            np.abs(d1), axis=0) >= bounds       # (NaN rows left out)
+    far = screen_far(W, bounds)
     if far.all():
         return np.zeros((W.shape[0] - 1,) + W.shape[1:], bool)
     if far.any():                               # the full screen where it may matter
@@ -330,6 +327,7 @@ def screen_steps(W, bounds) -> np.ndarray:
         near = ~far
         out[:, near] = screen_steps(W[:, near], np.broadcast_to(bounds, far.shape)[near])
         return out
+    d1 = W[2:] - 2 * W[1:-1] + W[:-2]           # c'' h^2 centred on nodes 1 .. n - 2
     back = np.full((W.shape[0] - 1,) + W.shape[1:], np.nan)
     fwd = back.copy()
     back[1:] = np.abs(d1)                        # step i: on its first node i ...
@@ -341,6 +339,33 @@ def screen_steps(W, bounds) -> np.ndarray:
     curv = np.where(np.isnan(back), fwd, back)
     with np.errstate(invalid="ignore"):          # NaN: flagged
         return ~(np.minimum(W[:-1], W[1:]) - (SCREEN_SAFETY / 8) * curv >= bounds)
+
+
+def screen_far(W, bounds, axis: int = 0) -> np.ndarray:
+    """Which outputs :func:`screen_steps` flags in none of the steps between their nodes.
+
+    Every estimate of the screen is at most 3 max |c''| h^2 over the nodes (the second
+    differences' largest, NaN left out), so an output above its bound by
+    :data:`SCREEN_SAFETY` / 8 times that at every node is far from it in every step.
+
+    Parameters
+    ----------
+    W : array_like
+        The outputs at n >= 3 consecutive nodes along ``axis``.
+    bounds : array_like
+        Their lower bounds, broadcastable to W without ``axis``.
+    axis : int
+        The nodes' axis.
+
+    Returns
+    -------
+    numpy.ndarray of bool
+        W's shape without ``axis``: True where no step can be flagged.
+    """
+    W = np.asarray(W, float)
+    with np.errstate(invalid="ignore"):
+        return np.fmin.reduce(W, axis=axis) - (3 * SCREEN_SAFETY / 8) * np.fmax.reduce(
+            np.abs(np.diff(W, 2, axis=axis)), axis=axis) >= bounds
 
 
 def _flat(v) -> np.ndarray:

@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 from ..numerics import FastCall
-from .kernel import minima_between, screen_steps, swing_foot_dip
+from .kernel import SCREEN_SAFETY, minima_between, screen_steps, swing_foot_dip
 from .validity import FRICTION_TOL, between_message
 
 __all__ = ["MarginCheck", "dip_function", "foot_dips"]
@@ -64,6 +64,45 @@ class MarginCheck:
             out += [U - u[i] for i in range(self.schema.nu)] + \
                    [U + u[i] for i in range(self.schema.nu)]
         return lib.vertcat(*out) if lib is ca else np.array(out, float)
+
+    def rows(self, D) -> np.ndarray:
+        """The torques, F_x and F_z of diagnostics D (rows, ...), stacked: (nu + 2, ...)."""
+        S = self.schema
+        return np.concatenate([S.row(D, "u"), S.row(D, "Fx")[None], S.row(D, "Fz")[None]])
+
+    def of_rows(self, R) -> np.ndarray:
+        """(n, s, m) margins at the n nodes (last axis) of s scenarios' rows R (:meth:`rows`,
+        (nu + 2, s, n))."""
+        nu = self.schema.nu
+        return self.values(R[:nu], R[nu], R[nu + 1]).T
+
+    def near(self, R) -> np.ndarray:
+        """Per scenario, whether the screen may flag a margin in a step between n >= 3
+        consecutive nodes (the last axis of rows R, :meth:`rows`).
+
+        Each margin of :meth:`values` is bounded through the rows it is linear in (its
+        lowest value, the largest of its second differences; the torques' and the
+        cone's by |u_i| and |F_x|): False where every margin is above 0 by
+        :data:`~biped_casadi.simulation.kernel.SCREEN_SAFETY` / 8 times 3 max |c''| h^2
+        at every node, as :func:`~biped_casadi.simulation.kernel.screen_far`; a NaN is
+        near.
+        """
+        lim, nu = self.limits, self.schema.nu
+        d = R[..., 2:] - R[..., 1:-1]
+        d -= R[..., 1:-1]
+        d += R[..., :-2]
+        d1 = np.maximum(d.max(axis=-1), -d.min(axis=-1))     # max |c''| h^2 per row
+        lo, hi = R.min(axis=-1), R.max(axis=-1)
+        c = 3 * SCREEN_SAFETY / 8
+        slack = [lo[nu + 1] - lim.min_normal_force - c * d1[nu + 1]]
+        if np.isfinite(lim.mu):
+            k = lim.mu + FRICTION_TOL
+            slack.append(k * lo[nu + 1] - np.maximum(hi[nu], -lo[nu])
+                         - c * (k * d1[nu + 1] + d1[nu]))
+        if "torque_limit" in self.status:
+            slack.extend(lim.torque_limit - np.maximum(hi[:nu], -lo[:nu]) - c * d1[:nu])
+        with np.errstate(invalid="ignore"):
+            return ~np.all(np.array(slack) >= 0, axis=0)
 
     def at_nodes(self, D) -> np.ndarray:
         """(n, m) margins at the n nodes of diagnostics D (rows x n)."""

@@ -448,11 +448,10 @@ class ZeroDynamicsWalker:
         alive[idx[bad]] = False
         st = dict(live=~bad, x=x[idx].copy(), tau=np.full(m, tau0), k1=k1.T.copy(),
                   z=zsw0.copy(), dz=S.row(D0, "dzsw").copy(), P=Pk, sign=sign,
-                  scale=scale[idx], w=np.full((3, m, len(self.margin.status)), np.nan),
+                  scale=scale[idx], r=self.margin.rows(D0)[..., None],
                   before=np.full((m, 2), np.nan), t_before=np.zeros(m), z_a=np.zeros(m),
                   z_b=np.zeros(m), h=np.full(m, self.h), struck=np.zeros(m, bool))
-        st["w"][-1] = self.margin.at_nodes(D0)
-        st["w_before"] = np.full_like(st["w"], np.nan)
+        st["r_before"] = np.full(st["r"].shape[:2] + (3,), np.nan)
         c0 = int(round(tau0 / (self.T / CHUNKS_PER_STEP)))
         for ci in range(c0, self.n_chunks):
             li = np.flatnonzero(st["live"])
@@ -467,7 +466,7 @@ class ZeroDynamicsWalker:
         if si.size == 0:
             return None
         return (idx[si], st["before"][si], st["t_before"][si], st["z_a"][si], st["z_b"][si],
-                sign[si], st["h"][si], st["w_before"][:, si])
+                sign[si], st["h"][si], st["r_before"][:, si])
 
     def _advance(self, k, ci, li, idx, st, ground, run, alive):
         """Chunk ci of the live scenarios ``li`` (of ``idx``) of step k: failures recorded,
@@ -508,10 +507,9 @@ class ZeroDynamicsWalker:
         first, which = self._check(Dg, st["sign"][li], st["scale"][li], zp, gl)
         failed = (which != "") & (first < i_strike)
         upto = np.where(failed, first + 1, i_strike)
-        W = np.concatenate([st["w"][:, li], self.margin.at_nodes(Dg)])
         message = np.full(li.size, "", dtype=object)
-        dips = self.margin.first_dips(between, W, K, lambda i, j: (*node(i, j)[:2], self.h,
-                                                                  node(i, j)[2]), upto)
+        R = np.concatenate([st["r"][:, li], self.margin.rows(Dg)], axis=2)   # history first
+        dips = self._margin_dips(R, K, upto, between, node)
         for i, (j, eta, status) in dips.items():          # before the nodes' failures
             D = self._state_at(*node(i, j), eta)
             self._track(run, idx[li[[i]]], D[:, :, None])
@@ -526,19 +524,45 @@ class ZeroDynamicsWalker:
         run.fail(idx[li[failed]], which[failed], k, message[failed])
         alive[idx[li[failed]]] = False
         hit = ~failed & (i_strike < K)
+        n0 = R.shape[2] - K                  # nodes before the chunk's
+        if hit.any():                        # the rows at the three nodes before the strike
+            hi_ = np.flatnonzero(hit)
+            c = i_strike[hi_, None] + n0 + np.arange(-3, 0)
+            Rb = R[:, hi_[:, None], np.maximum(c, 0)]
+            Rb[:, c < 0] = np.nan
+            st["r_before"][:, li[hi_]] = Rb
         for i in np.flatnonzero(hit):
             s_, g_ = i_strike[i], li[i]
             st["before"][g_] = st["x"][g_] if s_ == 0 else Xs[:, i, s_ - 1]
             st["t_before"][g_] = st["tau"][g_] if s_ == 0 else Ts[i, s_ - 1]
             st["z_a"][g_] = zp[i, s_]
             st["z_b"][g_], st["h"][g_] = z_end[i], h_end[i]
-            st["w_before"][:, g_] = W[s_:s_ + 3, i]
             st["struck"][g_] = True
         cont = ~failed & ~hit
         st["live"][li[~cont]] = False
         g = li[cont]
         st["x"][g], st["tau"][g], st["k1"][g] = Xs[:, cont, -1].T, Ts[cont, -1], K1[:, cont, -1].T
-        st["z"][g], st["dz"][g], st["w"][:, g] = zs[cont, -1], dzs[cont, -1], W[-3:, cont]
+        st["z"][g], st["dz"][g] = zs[cont, -1], dzs[cont, -1]
+        r = np.full(st["r"].shape[:2] + (3,), np.nan)
+        r[:, g] = R[:, cont, -3:]
+        st["r"] = r
+
+    def _margin_dips(self, R, K, upto, between, node) -> dict:
+        """The margins' first dips in the first ``upto`` steps of a chunk, R the rows
+        (:meth:`MarginCheck.rows <biped_casadi.simulation.margins.MarginCheck.rows>`) at
+        its nodes and up to three before them: screened for the scenarios whose rows say
+        a margin may come near its bound (:meth:`~biped_casadi.simulation.margins.
+        MarginCheck.near`)."""
+        nn = np.flatnonzero(self.margin.near(R) & (upto > 0))
+        if nn.size == 0:
+            return {}
+
+        def step(i, j):
+            X, t, p = node(nn[i], j)
+            return X, t, self.h, p
+
+        return {int(nn[i]): got for i, got in self.margin.first_dips(
+            between, self.margin.of_rows(R[:, nn]), K, step, upto[nn]).items()}
 
     def _dense(self):
         """The margins (:class:`~biped_casadi.simulation.margins.MarginCheck`) and the
@@ -579,7 +603,7 @@ class ZeroDynamicsWalker:
         """Locate the impact of the struck scenarios (z_sw = their h_k, ``ahead``), check
         the pre-impact state and the impulse, apply the impact map and the next step's
         start; the valid ones' pre-impact states (q, dq) into the rows of ``ends``."""
-        gi, xa, ta, za, zb, sign, h_end, w_before = struck
+        gi, xa, ta, za, zb, sign, h_end, r_before = struck
         S, nu, m = self.schema, self.nu, gi.size
         Ps = P[gi]
         hk = ahead[gi]
@@ -600,7 +624,7 @@ class ZeroDynamicsWalker:
         _, which = self._check(Dm[:, :, None], sign, scale[gi],
                                ground=(hk, np.zeros(m)))
         message, dipped = np.full(m, "", dtype=object), np.zeros(m, bool)
-        W = np.concatenate([w_before, self.margin.at_nodes(Dm)[None]])
+        W = self.margin.of_rows(np.concatenate([r_before, self.margin.rows(Dm)[..., None]], 2))
         for i, (_, e, status) in self.margin.first_dips(   # from the last node to the impact
                 self._dense()[0], W, 1, lambda i, j: (za_r[:, i], ta[i], eta[i], np.r_[
                     Ps[i], self._theta]), np.ones(m, int)).items():

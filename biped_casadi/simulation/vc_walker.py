@@ -445,9 +445,12 @@ class VirtualConstraintWalker:
                          self.limits)
         for i, got in feet.items():
             stop[i] = got[0]         # the margins before the foot's dip
-        dips = self.margin.first_dips(between, self.margin.at_nodes(st["Dg"]), self.nodes,
-                                      lambda i, j: (*node(i, j)[:2], abs(hs[i]),
-                                                    node(i, j)[2]), stop)
+        R = self.margin.rows(st["Dg"])
+        near = np.flatnonzero(self.margin.near(R) & (stop > 0))
+        dips = {int(near[i]): got for i, got in self.margin.first_dips(
+            between, self.margin.of_rows(R[:, near]), self.nodes,
+            lambda i, j: (*node(near[i], j)[:2], abs(hs[near[i]]), node(near[i], j)[2]),
+            stop[near]).items()} if near.size else {}
         for i, (j, eta, status) in {**{i: (f[0], f[2], "scuffed") for i, f in feet.items()},
                                     **dips}.items():
             zj, thj, _ = node(i, j)
