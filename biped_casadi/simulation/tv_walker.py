@@ -431,8 +431,8 @@ class ZeroDynamicsWalker:
         """Integrate step k of the scenarios ``idx`` from ``tau0`` to the strike on the
         ground (ahead, behind) of each; records failures; returns the struck scenarios'
         (indices, state and tau of the node before the strike, z_sw there and after, the
-        denominator's sign, the length of the strike's RK4 step, the margins at the three
-        nodes before it) or None."""
+        denominator's sign, the length of the strike's RK4 step, the torques and reactions
+        at the three nodes before it) or None."""
         S, m = self.schema, idx.size
         Pk = P[idx]
         R0 = np.repeat(self._R_start[tau0], m, axis=1)
@@ -494,7 +494,12 @@ class ZeroDynamicsWalker:
                 refs["r"] = self.gait.states(np.r_[st["tau"][li[0]], Ts[0, :-1]])
             return np.r_[X, refs["r"][:, j]], t, np.r_[st["P"][g], self._theta]
 
-        between, dip = self._dense()
+        def between(*a):            # built at first use
+            return self._dense()[0](*a)
+
+        def dip(*a):
+            return self._dense()[1](*a)
+
         feet = foot_dips(dip, self.h, node, zp,
                          np.concatenate([st["dz"][li][:, None], dzs[:, :-1]], axis=1), dzs,
                          i_strike, gl, self.model.scuff_zone, self.limits)
@@ -625,10 +630,13 @@ class ZeroDynamicsWalker:
                                ground=(hk, np.zeros(m)))
         message, dipped = np.full(m, "", dtype=object), np.zeros(m, bool)
         W = self.margin.of_rows(np.concatenate([r_before, self.margin.rows(Dm)[..., None]], 2))
-        for i, (_, e, status) in self.margin.first_dips(   # from the last node to the impact
-                self._dense()[0], W, 1, lambda i, j: (za_r[:, i], ta[i], eta[i], np.r_[
-                    Ps[i], self._theta]), np.ones(m, int)).items():
-            D = self._state_at(za_r[:, i], ta[i], np.r_[Ps[i], self._theta], e)
+
+        def step(i, j):                                    # from the last node to the impact
+            return za_r[:, i], ta[i], eta[i], np.r_[Ps[i], self._theta]
+
+        for i, (_, e, status) in self.margin.first_dips(lambda *a: self._dense()[0](*a), W, 1,
+                                                        step, np.ones(m, int)).items():
+            D = self._state_at(*step(i, 0)[:2], step(i, 0)[3], e)
             self._track(run, gi[[i]], D[:, :, None])
             which[i], dipped[i] = status, True
             message[i] = f"step {k + 1}: " + self.margin.message(status, D, scale[gi[i]])

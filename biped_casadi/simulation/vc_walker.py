@@ -435,7 +435,12 @@ class VirtualConstraintWalker:
         at the dip tracked in ``run``).  Returns the messages ('' none)."""
         Z, hs, sgn, k = st["Z"], st["hs"], self.direction, st["k"]
         message = np.full(idx.size, "", dtype=object)
-        between, dip = self._dense()
+
+        def between(*a):             # built at first use
+            return self._dense()[0](*a)
+
+        def dip(*a):
+            return self._dense()[1](*a)
 
         def node(i, j):              # step j's first node of scenario i: (z, theta, p)
             return Z[:, i, j], st["theta"][i] + j * hs[i], np.r_[st["p"][i], self.t_c]
