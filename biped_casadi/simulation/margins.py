@@ -85,14 +85,24 @@ class MarginCheck:
         cone's by |u_i| and |F_x|): False where every margin is above 0 by
         :data:`~biped_casadi.simulation.kernel.SCREEN_SAFETY` / 8 times 3 max |c''| h^2
         at every node, as :func:`~biped_casadi.simulation.kernel.screen_far`; a NaN is
-        near.
+        near.  The second differences are taken only where their bound by the rows'
+        ranges (|c''| h^2 <= 2 (max - min)) does not already decide.
         """
-        lim, nu = self.limits, self.schema.nu
-        d = R[..., 2:] - R[..., 1:-1]
-        d -= R[..., 1:-1]
-        d += R[..., :-2]
-        d1 = np.maximum(d.max(axis=-1), -d.min(axis=-1))     # max |c''| h^2 per row
         lo, hi = R.min(axis=-1), R.max(axis=-1)
+        near = self._near(lo, hi, 2 * (hi - lo))
+        rest = np.flatnonzero(near)
+        if rest.size:
+            Rr = R[:, rest]
+            d = Rr[..., 2:] - Rr[..., 1:-1]
+            d -= Rr[..., 1:-1]
+            d += Rr[..., :-2]
+            near[rest] = self._near(lo[:, rest], hi[:, rest],
+                                    np.maximum(d.max(axis=-1), -d.min(axis=-1)))
+        return near
+
+    def _near(self, lo, hi, d1) -> np.ndarray:
+        """:meth:`near` from the rows' extremes lo, hi and bounds d1 on their |c''| h^2."""
+        lim, nu = self.limits, self.schema.nu
         c = 3 * SCREEN_SAFETY / 8
         slack = [lo[nu + 1] - lim.min_normal_force - c * d1[nu + 1]]
         if np.isfinite(lim.mu):

@@ -494,13 +494,7 @@ class ZeroDynamicsWalker:
                 refs["r"] = self.gait.states(np.r_[st["tau"][li[0]], Ts[0, :-1]])
             return np.r_[X, refs["r"][:, j]], t, np.r_[st["P"][g], self._theta]
 
-        def between(*a):            # built at first use
-            return self._dense()[0](*a)
-
-        def dip(*a):
-            return self._dense()[1](*a)
-
-        feet = foot_dips(dip, self.h, node, zp,
+        feet = foot_dips(self._dip, self.h, node, zp,
                          np.concatenate([st["dz"][li][:, None], dzs[:, :-1]], axis=1), dzs,
                          i_strike, gl, self.model.scuff_zone, self.limits)
         z_end, h_end = zs[np.arange(li.size), np.minimum(i_strike, K - 1)], np.full(li.size,
@@ -514,7 +508,7 @@ class ZeroDynamicsWalker:
         upto = np.where(failed, first + 1, i_strike)
         message = np.full(li.size, "", dtype=object)
         R = np.concatenate([st["r"][:, li], self.margin.rows(Dg)], axis=2)   # history first
-        dips = self._margin_dips(R, K, upto, between, node)
+        dips = self._margin_dips(R, K, upto, self._between, node)
         for i, (j, eta, status) in dips.items():          # before the nodes' failures
             D = self._state_at(*node(i, j), eta)
             self._track(run, idx[li[[i]]], D[:, :, None])
@@ -597,6 +591,15 @@ class ZeroDynamicsWalker:
             self._dense_fns = tuple(FastCall(f) for f in fs)
         return self._dense_fns
 
+    def _between(self, *args):
+        """The margins between two nodes and their rates (:meth:`_dense`, built at first
+        use)."""
+        return self._dense()[0](*args)
+
+    def _dip(self, *args):
+        """The swing foot between two nodes and its rates (:meth:`_dense`)."""
+        return self._dense()[1](*args)
+
     def _state_at(self, z, tau, p, eta):
         """The diagnostics (rows, 1) at the end of the RK4 step of length eta from the
         node (z, tau) (:meth:`_dense`'s arguments)."""
@@ -634,8 +637,8 @@ class ZeroDynamicsWalker:
         def step(i, j):                                    # from the last node to the impact
             return za_r[:, i], ta[i], eta[i], np.r_[Ps[i], self._theta]
 
-        for i, (_, e, status) in self.margin.first_dips(lambda *a: self._dense()[0](*a), W, 1,
-                                                        step, np.ones(m, int)).items():
+        for i, (_, e, status) in self.margin.first_dips(self._between, W, 1, step,
+                                                        np.ones(m, int)).items():
             D = self._state_at(*step(i, 0)[:2], step(i, 0)[3], e)
             self._track(run, gi[[i]], D[:, :, None])
             which[i], dipped[i] = status, True

@@ -439,13 +439,10 @@ class VirtualConstraintWalker:
         def between(*a):             # built at first use
             return self._dense()[0](*a)
 
-        def dip(*a):
-            return self._dense()[1](*a)
-
         def node(i, j):              # step j's first node of scenario i: (z, theta, p)
             return Z[:, i, j], st["theta"][i] + j * hs[i], np.r_[st["p"][i], self.t_c]
 
-        feet = foot_dips(dip, np.abs(hs), node, rows["zsw"][:, :-1], rows["dzsw"][:, :-1],
+        feet = foot_dips(lambda *a: self._dense()[1](*a), np.abs(hs), node, rows["zsw"][:, :-1], rows["dzsw"][:, :-1],
                          rows["dzsw"][:, 1:], stop, (st["ahead"], st["behind"]), np.inf,
                          self.limits)
         for i, got in feet.items():
