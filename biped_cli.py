@@ -3,7 +3,7 @@ and a Ctrl-C meanwhile ends the command as one later would (one line, exit code 
 not with a traceback of the imports."""
 import sys
 
-__all__ = ["main"]
+__all__ = ["main", "interrupted"]
 
 
 def main() -> int:
@@ -19,11 +19,37 @@ def main() -> int:
     except (KeyboardInterrupt, ImportError) as e:
         if not _interrupted(e):
             raise
-        command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
-        print(f"biped {command}: interrupted" if command else "biped: interrupted",
-              file=sys.stderr)
-        return 130
-    return run()
+        rc = interrupted()
+    else:
+        rc = run()
+    if rc == 130:
+        _forget_the_interrupt()
+    return rc
+
+
+def interrupted(argv=None) -> int:
+    """Say that the command of ``argv`` (default the process's arguments) was
+    interrupted, in one line on stderr.
+
+    Returns
+    -------
+    int
+        130, the exit code of an interrupted command.
+    """
+    args = sys.argv[1:] if argv is None else argv
+    command = next((a for a in args if not a.startswith("-")), None)
+    print(f"biped {command}: interrupted" if command else "biped: interrupted",
+          file=sys.stderr)
+    return 130
+
+
+def _forget_the_interrupt():
+    """Clear CPython's record of a KeyboardInterrupt that left code run by ``exec`` or
+    ``eval`` of a string (a dataclass's methods are made so while a module loads): with
+    it, ``python -m`` ends the process by SIGINT once it exits (exit code -2 to its
+    parent, not 130) even though the interruption was caught and said.  Each such code
+    that completes clears the record (CPython's ``run_eval_code_obj``)."""
+    exec("")
 
 
 def _interrupted(e: BaseException) -> bool:

@@ -6,6 +6,7 @@ or leaves a stray temporary file behind."""
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 from pathlib import Path
 
@@ -91,7 +92,8 @@ def atomic_path(path):
     Parameters
     ----------
     path : str or Path
-        The file to write.  Its folder must exist; ``path`` must not be a folder.
+        The file to write; ``path`` must not be a folder.  Missing folders above it are
+        created (and removed again if the write fails).
 
     Yields
     ------
@@ -111,14 +113,33 @@ def atomic_path(path):
     if path.is_dir():
         raise IsADirectoryError(21, "Is a directory", str(path))
     tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    created = []
     try:
+        _make_folders(path.parent, created)
         yield tmp
         os.replace(tmp, path)
     except BaseException as e:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        for folder in reversed(created):          # the deepest first; left if not empty
+            with contextlib.suppress(OSError):
+                folder.rmdir()
         name_destination(e, path, tmp)
         raise
+
+
+def _make_folders(folder: Path, created: list) -> None:
+    """Create ``folder`` and its missing parents, appending each to ``created``
+    (outermost first)."""
+    missing = list(itertools.takewhile(lambda p: not p.is_dir(), (folder, *folder.parents)))
+    for p in reversed(missing):
+        try:
+            p.mkdir()
+        except FileExistsError:
+            if not p.is_dir():                  # a file there
+                raise
+            continue                            # made meanwhile by another writer
+        created.append(p)
 
 
 def name_destination(error: BaseException, path, staging=None) -> None:

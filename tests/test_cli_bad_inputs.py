@@ -197,7 +197,10 @@ CASES = [
     (["gait", "--scheme", "euler"], "invalid choice"),
     (["gait", "--speed", "5", "--out", "{root_dir}/g5.json"], "no feasible gait"),
     (["gait", "--out", "{dir}"], "--out"),
-    (["gait", "--out", "{root_dir}/no/such/gait.json"], "does not exist"),
+    # missing folders of an output are created when it is written, unless they cannot be
+    (["gait", "--out", "{file}/new/gait.json"], "cannot write {file}/new/gait.json: {file} "
+                                                 "is a file, not a folder"),
+    (["gait", "--out", "{read_only}/new/gait.json"], "cannot write", "nonroot"),
     (["gait", "--out", "{file}/gait.json"], "is a file"),
     (["gait", "--out", ""], "--out"),
     (["gait", "--out", "/dev/null"], "not a regular file"),
@@ -383,7 +386,7 @@ CASES = [
     (["simulate", *G, "--torque-limit", "0"], "--torque-limit"),
     (["simulate", *G, "--animate", "{root_dir}/walk.mp4"], ".gif"),
     (["simulate", *G, "--animate", "{dir_gif}"], "is a folder"),
-    (["simulate", *G, "--animate", "{root_dir}/no/such/walk.gif"], "does not exist"),
+    (["simulate", *G, "--animate", "{read_only}/new/walk.gif"], "cannot write", "nonroot"),
     (["simulate", *G, "--animate", "{file}/walk.gif"], "is a file"),
     (["simulate", *G, "--animate", "{sys}/walk.gif"], "cannot write"),
     (["simulate", *G, "--plot", "{file}"], "--plot"),
@@ -548,6 +551,17 @@ def _id(case) -> str:
     return " ".join(case[0])[:60] or "(no arguments)"
 
 
+def test_an_output_file_in_missing_folders_creates_them_when_written(tmp_path, capsys):
+    """As an output folder (``biped export --out a/b/law``), an output file's missing
+    folders are created, when it is written: a refused command creates none."""
+    out = tmp_path / "new" / "deeper" / "m.xml"
+    assert biped_main(["robot", "mjcf", "--out", str(out), "--foot-radius", "0.5"]) == 2
+    assert "--foot-radius" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+    assert biped_main(["robot", "mjcf", "--out", str(out)]) == 0
+    assert out.is_file() and str(out) in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("case", CASES, ids=[_id(c) for c in CASES])
 def test_bad_input_is_one_line_and_exit_2(case, files, tmp_path, monkeypatch, capsys):
     args, expect, *flags = case
@@ -682,6 +696,25 @@ RUNNING_CASES = [
 def test_bad_running_input_is_one_line_and_exit_2(case, run_files, tmp_path, monkeypatch,
                                                    capsys):
     test_bad_input_is_one_line_and_exit_2(case, run_files, tmp_path, monkeypatch, capsys)
+
+
+@pytest.mark.parametrize("gains", [["--kp", "1e300"], ["--kd", "1e300"],
+                                   ["--kp", "1e9", "--law", "computed_torque"]])
+def test_running_gains_too_stiff_for_any_step_are_refused_before_optimising(
+        gains, tmp_path, monkeypatch, capsys):
+    """Gains whose closed loop diverges at every RK4 step an optimised step can have were
+    refused only after the optimisation (about 35 s), by the check at its nodes."""
+    import analysis.cli.running as running
+
+    def optimise(*args, **kwargs):
+        raise AssertionError("optimised")
+
+    monkeypatch.setattr(running, "optimize_running", optimise)
+    assert biped_main(["running", *gains, "--out", str(tmp_path / "r.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"biped running: error: {gains[0]} {float(gains[1]):g} (above ")
+    assert "whatever step is optimised: a step is at least" in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("args", [

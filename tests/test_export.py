@@ -201,6 +201,48 @@ def test_a_virtual_constraint_run_apart_from_biped_simulates_is_said_to_be_round
     assert "reference state" in ve.apart_reason(4)
 
 
+@needs_cc
+def test_a_margin_dipping_between_two_nodes_stops_the_compiled_run_as_the_python_one(
+        vc, gait, monkeypatch):
+    """The closed loop driven by the library, with one more margin, (F_z - F*)^2 - d:
+    F* the stance force 30 % of the way between two nodes in the middle of the nominal
+    step, d a quarter of the square of that 30 %; above 0 at every node, below 0 between
+    those two.  No derivatives through the library: the margins are sampled inside the
+    flagged steps and the minimum located from their values.  The run stops as the
+    Python law's (minimum located by its AD rate) does: status, message ("between two
+    RK4 nodes"), time to 1e-8 of the RK4 step, the margin there to round-off.  With the
+    margins at the nodes only (as before) it walks."""
+    from biped_casadi.simulation import Simulator
+    from biped_casadi.simulation.margins import MarginCheck
+    ctrl, lib = vc
+    q0, dq0 = gait.q(0.0), gait.dq(0.0)
+    opts = SimulationOptions(steps=1)
+    nominal = Simulator(ctrl, opts).run(q0, dq0)
+    i = len(nominal.t) // 2
+    F_star = 0.7 * nominal.Fz[i] + 0.3 * nominal.Fz[i + 1]
+    depth = 0.25 * (0.3 * (nominal.Fz[i + 1] - nominal.Fz[i])) ** 2
+    base = MarginCheck.values
+
+    def values(self, u, Fx, Fz, lib=np):
+        extra = (Fz - F_star) ** 2 - depth
+        return lib.vertcat(base(self, u, Fx, Fz, lib), extra) if lib is not np else \
+            np.vstack([base(self, u, Fx, Fz), np.atleast_1d(extra)[None, :]])
+
+    monkeypatch.setattr(MarginCheck, "values", values)
+    sims = [Simulator(c, opts) for c in (ctrl, lib)]
+    for sim in sims:
+        sim.margin.status.append("negative_normal_force")       # the extra margin's name
+    py, cc = (sim.run(q0, dq0) for sim in sims)
+    assert py.status == cc.status == "negative_normal_force", cc.message
+    assert cc.message == py.message and cc.message.endswith(", between two RK4 nodes")
+    assert nominal.t[i] < cc.failure_time < nominal.t[i + 1]
+    assert abs(cc.failure_time - py.failure_time) <= 1e-8 * sims[1].h
+    assert (cc.Fz[-1] - F_star) ** 2 - depth == pytest.approx((py.Fz[-1] - F_star) ** 2 - depth,
+                                                              rel=1e-9)
+    monkeypatch.setattr(MarginCheck, "first_dip", lambda *args: None)   # nodes only
+    assert sims[1].run(q0, dq0).status == "ok"
+
+
 def three_link_check(model3, gait3, folder, steps):
     q0, dq0 = Perturbation.uniform(3, *PAPER).initial_state(gait3)
     for ctrl in (TimeVaryingController(gait3, M1_3),

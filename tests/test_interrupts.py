@@ -82,6 +82,94 @@ def test_python_m_is_interrupted_as_biped_is(tmp_path):
     assert loaded == "['analysis', 'analysis.cli']\n"
 
 
+def test_ctrl_c_while_the_parser_is_built_is_one_line(monkeypatch, capsys):
+    """Building the parser (some 20 ms) came before the command's handling of a Ctrl-C:
+    a traceback and the process killed by the signal."""
+    from analysis.cli import app
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(app, "build_parser", interrupted)
+    try:
+        rc = app.main(["reproduce", "--quick"])
+    except KeyboardInterrupt:                  # not this session's: fail, do not stop
+        pytest.fail("the Ctrl-C left main")
+    assert rc == 130
+    assert capsys.readouterr().err == "biped reproduce: interrupted\n"
+
+
+def test_a_ctrl_c_dropped_in_a_callback_is_sent_again(monkeypatch, capsys):
+    """A Ctrl-C raised in a weakref's callback (an import's lock, while the Dask cluster
+    started) was printed as ignored and dropped: the command ran on to its end."""
+    import weakref
+
+    from analysis.cli import app
+
+    class Thing:
+        pass
+
+    def command(args):
+        thing = Thing()
+        ref = weakref.ref(thing, lambda r: signal.raise_signal(signal.SIGINT))
+        del thing                        # the callback's Ctrl-C is dropped there
+        assert ref() is None
+        time.sleep(10)
+        return 0
+
+    monkeypatch.setattr(app, "cmd_model", command)
+    hook, t = sys.unraisablehook, time.perf_counter()
+    try:
+        rc = app.main(["model"])
+    except KeyboardInterrupt:                  # not this session's: fail, do not stop
+        pytest.fail("the Ctrl-C left main")
+    assert rc == 130 and time.perf_counter() - t < 5
+    assert capsys.readouterr().err.endswith("biped model: interrupted\n")
+    assert sys.unraisablehook is hook
+
+
+_IN_EXEC = """
+import sys
+class Interrupted:                        # a Ctrl-C while a dataclass's methods are made
+    def find_spec(self, name, path=None, target=None):
+        if name == "analysis.cli.common":
+            exec("raise KeyboardInterrupt")
+sys.meta_path.insert(0, Interrupted())
+"""
+
+
+def test_python_m_exits_130_after_a_ctrl_c_inside_exec(tmp_path):
+    """A Ctrl-C inside code run by ``exec`` of a string (dataclasses make their methods
+    so), caught and said in one line, still ended ``python -m analysis.cli`` by SIGINT
+    (exit code -2): CPython kept a record of it that ``python -m`` acts on at exit."""
+    (tmp_path / "sitecustomize.py").write_text(_IN_EXEC)
+    env = dict(os.environ, PYTHONPATH=str(tmp_path))
+    r = subprocess.run([sys.executable, "-m", "analysis.cli", "model"], capture_output=True,
+                       text=True, cwd=tmp_path, env=env, timeout=120)
+    assert (r.returncode, r.stderr) == (130, "biped model: interrupted\n"), r.stderr
+
+
+@pytest.mark.slow
+def test_python_m_interrupted_at_any_time_is_one_line_and_130(tmp_path):
+    """A Ctrl-C at times spread over the loading and the command's start (the
+    optimisation of a running step, not kept in a cache)."""
+    env = dict(os.environ, BIPED_CACHE_DIR=str(tmp_path / "cache"))
+    for delay in (0.1, 0.4, 0.7, 0.9, 1.1, 1.4, 1.8, 2.5):
+        p = subprocess.Popen([sys.executable, "-m", "analysis.cli", "running", "--no-cache",
+                              "--out", "r.json"], cwd=tmp_path, env=env, text=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        time.sleep(delay)
+        p.send_signal(signal.SIGINT)
+        try:
+            out, err = p.communicate(timeout=120)
+        finally:
+            if p.poll() is None:
+                p.kill()
+        assert p.returncode == 130 and "Traceback" not in err, (delay, p.returncode, err)
+        assert err.splitlines()[-1] == "biped running: interrupted", (delay, err)
+        assert not (tmp_path / "r.json").exists()
+
+
 _CLUSTER = """
 import gc, signal, time
 from analysis.cluster import connect

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from biped_casadi.simulation import SimulationOptions, Simulator, perturbed_initial_state
-from biped_casadi.simulation.kernel import Diagnostics, screen_steps
+from biped_casadi.simulation.kernel import (SUB_STEPS, Diagnostics, minima_sampled,
+                                           screen_steps)
 from biped_casadi.simulation.margins import MarginCheck
 from biped_casadi.simulation.validity import Limits
 
@@ -25,39 +26,77 @@ def _limits(**kw):
     return Limits(**{**base, **kw})
 
 
+@pytest.mark.parametrize("samples", [0, SUB_STEPS])
 @pytest.mark.parametrize("output, status", [(0, "negative_normal_force"), (1, "slipped"),
                                             (2, "slipped"), (3, "torque_limit"),
                                             (4, "torque_limit")])
 def test_a_margin_below_its_bound_between_two_nodes_is_found_where_the_nodes_pass(
-        output, status):
+        output, status, samples):
     """Margins c(t) = a (t - t*)^2 - d along twelve steps of 1 ms, lowest strictly inside
     the seventh (t* = 6.3 ms) and above 0 at every node: the screen flags the steps
-    near the dip and not those far from it; the minimum is located at t* and named.
-    A dip that stays above 0 is nothing."""
+    near the dip and not those far from it; the minimum is located at t* and named, by
+    its rate (samples 0) or from the margins alone (a law without derivatives: where
+    the margin is as low as at t*, to its round-off).  A dip that stays above 0 is
+    nothing."""
     h, a, t_star = 1e-3, 2e6, 6.3e-3
     lim, schema = _limits(), Diagnostics(1)            # one torque: 5 margins
     check = MarginCheck(lim, schema)
     calls = []
 
-    def between(X, tau, eta, p, depth=0.1):
-        t = tau + eta
+    def margins(t, depth):
         c = np.full(5, 50.0)
         c[output] = a * (t - t_star) ** 2 - depth
+        return c
+
+    def between(X, tau, eta, p, depth=0.1):
+        t = tau + eta
         calls.append(tau)
         dc, ddc = np.zeros(5), np.zeros(5)
         dc[output], ddc[output] = 2 * a * (t - t_star), 2 * a
-        return c, dc, ddc
+        return margins(t, depth) if samples else (margins(t, depth), dc, ddc)
 
     ts = np.arange(13) * h
-    W = np.array([between(None, t, 0.0, None)[0] for t in ts])
-    calls.clear()
+    W = np.array([margins(t, 0.1) for t in ts])
     assert W.min() > 0                                  # every node valid
     steps = [(None, t, h, None) for t in ts[:-1]]
-    j, eta, got = check.first_dip(between, W, steps)
-    assert (j, got) == (6, status) and ts[j] + eta == pytest.approx(t_star, rel=1e-12)
+    j, eta, got = check.first_dip(between, W, steps, samples)
+    assert (j, got) == (6, status)
+    if samples:         # from values: as low as the minimum, to the margin's last digit
+        assert a * (ts[j] + eta - t_star) ** 2 <= np.spacing(0.1)
+    else:
+        assert ts[j] + eta == pytest.approx(t_star, rel=1e-12)
     assert set(np.round(np.array(calls) / h).astype(int)) <= {0, 5, 6, 7}   # screened
-    W = np.array([between(None, t, 0.0, None, -0.5)[0] for t in ts])
-    assert check.first_dip(lambda *x: between(*x, depth=-0.5), W, steps) is None
+    W = np.array([margins(t, -0.5) for t in ts])
+    assert check.first_dip(lambda *x: between(*x, depth=-0.5), W, steps, samples) is None
+
+
+def test_sampled_minima_are_inside_the_step_not_at_its_nodes():
+    """From values alone (minima_sampled, 16 parts of a 1 ms step): a margin falling
+    through the step to below 0 at its last node has no minimum inside (it is that
+    node's, as where the rate has no root); a dip below 0 inside the first part, every
+    sample above 0, is found (the first part screened by the samples after it) at its
+    lowest point; one far from its bound costs no search beyond the samples, nor one not
+    flagged."""
+    h, a = 1e-3, 2e8
+    t1 = 0.3 * h / SUB_STEPS
+    d = 0.5 * a * t1 ** 2                               # c(0) = a t1^2 - d > 0
+    calls = []
+
+    def between(eta):
+        calls.append(eta)
+        return np.array([0.5 - 1e3 * eta, a * (eta - t1) ** 2 - d, -1.0, 50.0 + 1e3 * eta])
+
+    ends = between(0.0), between(h)
+    assert min(between(e)[1] for e in np.linspace(0, h, SUB_STEPS + 1)) > 0   # samples pass
+    counts = []
+    for far in (False, True):
+        calls.clear()
+        found = minima_sampled([True, True, False, far], between, h, *ends)
+        counts.append(len(calls))
+        assert [i for _, i, _ in found] == [1]
+        eta, _, v = found[0]
+        assert v < 0 and a * (eta - t1) ** 2 <= np.spacing(d)
+    assert counts[0] == counts[1] > SUB_STEPS - 1
 
 
 def test_screen_steps_is_the_running_cycles_screen():

@@ -204,6 +204,19 @@ def test_retuned_cycle_is_the_cycle_built_at_those_gains(model, run_gait, cycle,
     assert np.array_equal(cycle.controller.M1, STABLE_M1)       # the original is unchanged
 
 
+@pytest.mark.parametrize("gains", [dict(Kp=1e300), dict(Kd=1e5)])
+def test_retuned_refuses_the_gains_running_cycle_refuses(model, run_gait, cycle, gains):
+    """A retuned cycle is checked at the cycle's RK4 steps as a built one: the same
+    refusal, and the largest gain it names is accepted."""
+    with pytest.raises(ValueError, match="RK4 step") as built:
+        running_cycle(cycle.controller.with_gains(**gains))
+    with pytest.raises(ValueError) as retuned:
+        cycle.retuned(**gains)
+    assert str(retuned.value) == str(built.value)
+    (name, top), = re.findall(r"(Kp|Kd) at most ([0-9.e+]+) ", str(built.value))
+    cycle.retuned(**{name: 0.99 * float(top)})
+
+
 def test_perturbed_run_converges_at_the_spectral_radius(cycle, stable, model):
     x = stable.fixed_point.copy()
     x[model.nq:] += 1e-2
@@ -468,12 +481,13 @@ def test_a_closed_loop_option_implies_the_closed_loop(run_gait, tmp_path, capsys
                                                       monkeypatch):
     """``biped running --kp 1e300`` optimised the step, ignored the gain (no --stability)
     and exited 0: now any closed-loop option analyses the loop, which refuses the gain
-    (too stiff for its RK4 step); without one the command stays the optimisation alone."""
+    (too stiff for its RK4 step); without one the command stays the optimisation alone.
+    (1e300 is now refused before the optimisation; 1e7 only at the step's nodes.)"""
     import analysis.cli.running as cli
     monkeypatch.setattr(cli, "optimize_running", lambda *a, **k: run_gait)
     out = str(tmp_path / "r.json")
-    with pytest.raises(ValueError, match="Kp 1e[+]300.*the step supports Kp at most"):
-        cli.cmd_running(cli_args("--kp", "1e300", "--steps", "0", "--out", out))
+    with pytest.raises(ValueError, match="Kp 1e[+]07.*the step supports Kp at most"):
+        cli.cmd_running(cli_args("--kp", "1e7", "--steps", "0", "--out", out))
     capsys.readouterr()
     assert cli.cmd_running(cli_args("--out", out, "--json")) == 0
     d = json.loads(capsys.readouterr().out)
@@ -792,3 +806,36 @@ def test_the_rk4_bound_on_the_gains_is_rk4s(model, run_gait, gain, h2_bound):
             check_rk4_steps(c, dict(stance=h, flight=h))
         top = float(re.search(f"{gain} at most ([0-9.e+]+) ", str(e.value)).group(1))
         assert top == pytest.approx(limit, rel=2e-3)
+
+
+def test_rk4_reach_bounds_rk4s_stability_region():
+    """Every z with ``|P(z)|`` <= 1 lies within RK4_REACH of 0, which the region nearly
+    reaches (a polar grid of the plane)."""
+    from biped_casadi.control.running_step import RK4_REACH
+    th, r = np.meshgrid(np.linspace(0, np.pi, 2001), np.linspace(0, 4, 4001))
+    z = r * np.exp(1j * th)
+    inside = np.abs(1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24) <= 1
+    assert RK4_REACH - 2e-3 < np.abs(z[inside]).max() <= RK4_REACH
+
+
+@pytest.mark.parametrize("phase", ["stance", "flight"])
+def test_the_gains_bounds_before_a_step_hold_at_its_nodes(model, run_gait, phase):
+    """The bounds known before a step is optimised (rk4_gain_bounds) are beyond the
+    exact ones at the step's nodes at the same RK4 step, and gains beyond them are
+    refused at that step and at longer ones."""
+    from biped_casadi.control.running_step import check_rk4_steps, rk4_gain_bounds
+    n = (16 if phase == "stance" else 10) * 8
+    h = float(getattr(run_gait, f"T_{phase}")) / n
+    kp_top, kd_top = rk4_gain_bounds(model, phase, h, "pd", STABLE_M1)
+    exact = {}
+    for gain, kept in (("Kp", dict(Kd=KD)), ("Kd", dict(Kp=KP))):
+        c = RunningController(model, run_gait, M1=STABLE_M1, **kept, **{gain: 1e12})
+        with pytest.raises(ValueError) as e:
+            check_rk4_steps(c, {phase: h})
+        exact[gain] = float(re.search(f"{gain} at most ([0-9.e+]+) ", str(e.value)).group(1))
+    assert exact["Kp"] < kp_top and exact["Kd"] < kd_top, (exact, kp_top, kd_top)
+    for gains in (dict(Kp=1.01 * kp_top, Kd=0.0), dict(Kp=0.0, Kd=1.01 * kd_top)):
+        c = RunningController(model, run_gait, M1=STABLE_M1, **gains)
+        for scale in (1, 2, 10):
+            with pytest.raises(ValueError, match="RK4 step"):
+                check_rk4_steps(c, {phase: scale * h})

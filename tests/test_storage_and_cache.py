@@ -3,7 +3,9 @@ cache) and of the Parquet sweep store (round trip bit for bit, every kind of dam
 detected, other settings refused, one writer at a time)."""
 from __future__ import annotations
 
+import errno
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -163,3 +165,26 @@ def test_cache_dir_names_a_bad_folder(tmp_path):
     with pytest.raises(TypeError, match="^path must be a file name"):
         cache_dir(5)
     assert cache_dir(str(tmp_path)) == cache_dir(tmp_path) == tmp_path
+
+
+def test_an_atomic_write_creates_missing_folders_and_removes_them_if_it_fails(
+        tmp_path, monkeypatch):
+    """The folders a failed write created are removed (an earlier one is kept), and the
+    error names the file; a folder path through a file is refused."""
+    from biped_casadi.files import write_text_atomic
+    (tmp_path / "kept").mkdir()
+    out = tmp_path / "kept" / "a" / "b" / "x.json"
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    with monkeypatch.context() as m:
+        m.setattr(os, "fsync", full)
+        with pytest.raises(OSError) as e:
+            write_text_atomic(out, "{}")
+    assert e.value.filename == str(out)
+    assert [p.name for p in tmp_path.rglob("*")] == ["kept"]
+    assert write_text_atomic(out, "{}") == out and out.read_text() == "{}"
+    with pytest.raises(FileExistsError):
+        write_text_atomic(out / "y" / "z.json", "{}")
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["a", "b", "kept", "x.json"]

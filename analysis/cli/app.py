@@ -22,6 +22,7 @@ import numpy as np
 
 import biped_casadi
 from biped_casadi.numerics import NotCompiledWarning
+from biped_cli import interrupted
 
 from . import (eig, export, export_running, gait, m1, mujoco, mujoco_running, reproduce,
                robot, robust, running, simulate, sweep, terrain, view)
@@ -117,11 +118,12 @@ def main(argv=None) -> int:
     """Run ``biped`` with ``argv`` (default: the process's arguments); returns the exit
     code: 0 done, 1 a stage or run failed, 2 a user error or a failed computation (one
     line, :mod:`analysis.cli.failures`), 130 interrupted."""
-    ap = build_parser()
     try:
-        args = ap.parse_args(argv)
+        args = build_parser().parse_args(argv)
     except SystemExit as e:        # argparse already printed its one-line usage error
         return int(e.code or 0)
+    except KeyboardInterrupt:      # building the parser takes some 20 ms
+        return interrupted(argv)
     ctrl_c = _CtrlC()
     try:
         with warnings.catch_warnings(record=True) as caught, ctrl_c, named_stdout():
@@ -144,10 +146,18 @@ class _CtrlC:
     """Whether Ctrl-C was pressed while a command ran: an error that follows it (a
     library may turn the KeyboardInterrupt into its own error, e.g. CasADi's SystemError
     inside a task) is the interruption, not a failure.  Python's handler is kept (it
-    raises KeyboardInterrupt); it is only observed, from the main thread."""
+    raises KeyboardInterrupt); it is only observed, from the main thread.
+
+    Python raises it wherever the main thread runs, also in a weakref's callback or a
+    finalizer, where an error is printed ("Exception ignored in ...") and dropped: the
+    command then ran on (an import's lock callback while the Dask cluster started).
+    Such a Ctrl-C is sent to the main thread again, once the callback has returned."""
+
+    #: after a dropped Ctrl-C, the main thread is sent SIGINT again this much later, s
+    AGAIN = 0.05
 
     def __init__(self):
-        self.pressed, self._old = False, None
+        self.pressed, self._old, self._hook = False, None, None
 
     def __bool__(self):
         return self.pressed
@@ -157,15 +167,25 @@ class _CtrlC:
                 and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
             self._old = signal.default_int_handler
             signal.signal(signal.SIGINT, self._handler)
+            self._hook, sys.unraisablehook = sys.unraisablehook, self._dropped
         return self
 
     def _handler(self, signum, frame):
         self.pressed = True
         signal.default_int_handler(signum, frame)
 
+    def _dropped(self, unraisable):
+        """sys.unraisablehook: a Ctrl-C dropped where errors are ignored is sent again."""
+        if self.pressed and issubclass(unraisable.exc_type, KeyboardInterrupt):
+            threading.Timer(self.AGAIN, signal.pthread_kill,
+                            (threading.main_thread().ident, signal.SIGINT)).start()
+            return
+        self._hook(unraisable)
+
     def __exit__(self, *exc):
         if self._old is not None:
             signal.signal(signal.SIGINT, self._old)
+            sys.unraisablehook = self._hook
         return False
 
 

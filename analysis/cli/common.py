@@ -457,18 +457,26 @@ def output_dir(path, option: str) -> Path:
             raise UserError(f"{option}: {p} is a file, not a folder")
         _probe(p, option, p)
         return p
-    anc = _nearest_existing(p)
-    if not anc.is_dir():
-        raise UserError(f"{option}: cannot create folder {p}: {anc} is a file")
-    _probe(anc, option, anc)
+    _creatable(p, option, f"cannot create folder {p}")
     return p
+
+
+def _creatable(folder: Path, option: str, what: str):
+    """UserError unless the missing ``folder`` can be created: its deepest existing
+    ancestor is a folder we may write in (``what`` begins the message otherwise)."""
+    anc = _nearest_existing(folder)
+    if not anc.is_dir():
+        raise UserError(f"{option}: {what}: {anc} is a file, not a folder")
+    _probe(anc, option, anc)
 
 
 @_checked
 def output_file(path, option: str, suffixes: tuple = ()) -> Path:
     """Check, before any long work, that a file can be written at ``path``: not a folder
-    or a device, its folder exists and is writable, and (if ``suffixes``) its suffix is
-    one of them.
+    or a device, its folder writable or (when missing) creatable, and (if ``suffixes``)
+    its suffix is one of them.  Nothing is created here: the file's missing folders are
+    created when it is written (:func:`biped_casadi.files.atomic_path`), as an output
+    folder's (:func:`output_dir`).
 
     Raises
     ------
@@ -487,10 +495,8 @@ def output_file(path, option: str, suffixes: tuple = ()) -> Path:
                         f"got {str(path)!r}")
     folder = p.parent
     if not folder.exists():
-        anc = _nearest_existing(folder)
-        if not anc.is_dir():
-            raise UserError(f"{option}: cannot write {p}: {anc} is a file, not a folder")
-        raise UserError(f"{option}: folder {folder} does not exist")
+        _creatable(folder, option, f"cannot write {p}")
+        return p
     if not folder.is_dir():
         raise UserError(f"{option}: cannot write {p}: {folder} is a file, not a folder")
     _probe(folder, option, folder)

@@ -13,9 +13,10 @@ import numpy as np
 
 from analysis.design.running_m1 import choose_running_m1
 from analysis.reporting.plots import running_plot, save_figures
-from analysis.stability.running_cycle import (FLIGHT_CLOCKS, running_cycle, running_stability,
-                                              simulate_running)
+from analysis.stability.running_cycle import (FLIGHT_CLOCKS, STEPS_PER_INTERVAL, running_cycle,
+                                              running_stability, simulate_running)
 from biped_casadi.control.running import RunningController
+from biped_casadi.control.running_step import rk4_gain_bounds
 from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
 from gait_opt.running_solve import STALL_WINDOW
@@ -113,10 +114,7 @@ def running_controller(args, gait, model, engine: str = "") -> RunningController
         An ``--m1`` of another length, or, for ``engine``, no limit (a robot without
         one, and no ``--torque-limit``).
     """
-    M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
-    if len(M1) != model.nu:
-        raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
-                        f"got {len(M1)}")
+    M1 = tracking_m1(args, model)
     check_saturation(args, model)
     if engine and args.torque_limit is None \
             and not math.isfinite(model.description.torque_limit):
@@ -124,6 +122,15 @@ def running_controller(args, gait, model, engine: str = "") -> RunningController
                         f"{engine}'s motors need: give --saturate --torque-limit U")
     return RunningController(model, gait, Kp=args.kp, Kd=args.kd, M1=M1, law=args.law,
                              saturate=args.saturate, torque_limit=args.torque_limit)
+
+
+def tracking_m1(args, model) -> tuple:
+    """``--m1`` (default :data:`DEFAULT_M1`); UserError when not one number per torque."""
+    M1 = DEFAULT_M1 if args.m1 is None else tuple(args.m1)
+    if len(M1) != model.nu:
+        raise UserError(f"--m1 takes {model.nu} numbers for this robot (one per torque), "
+                        f"got {len(M1)}")
+    return M1
 
 
 def check_strides_and_perturb(strides, perturb, option: str = "--strides", low: int = 1):
@@ -318,6 +325,8 @@ def cmd_running(args):
         links = f"{model.k} link" + ("s" if model.k != 1 else "")
         raise UserError(f"--robot: {model.params.name} has legs of {links}; the running "
                         "step's built-in guess needs legs of two links (RABBIT's)")
+    if args.stability:
+        check_gains_for_steps(args, model, opts)
     say = Progress("running", quiet=args.json)
     gait = optimize_running(model, opts, cache=not args.no_cache, progress=say)
     reused = gait.solver_stats.get("cache") == "hit"
@@ -346,6 +355,28 @@ def cmd_running(args):
     if args.stability:
         _print_stability(s["stability"])
     return loop_exit_code(s.get("stability"))
+
+
+def check_gains_for_steps(args, model, opts):
+    """UserError (before the optimisation) for ``--kp`` or ``--kd`` that make the closed
+    loop's RK4 diverge at any step the optimisation can give (the shortest phase it
+    allows, over its intervals of :data:`STEPS_PER_INTERVAL` RK4 steps, or longer):
+    :func:`~biped_casadi.control.running_step.rk4_gain_bounds`.  The gains within are
+    checked at the optimised step's own steps and nodes after it."""
+    for phase, bounds, n in (("stance", opts.stance_time_bounds, opts.n_stance),
+                             ("flight", opts.flight_time_bounds, opts.n_flight)):
+        h = bounds[0] / (n * STEPS_PER_INTERVAL)
+        kp, kd = rk4_gain_bounds(model, phase, h, args.law, tracking_m1(args, model))
+        bad = [f"--{name} {v:g} (above {top:.2g})" for name, v, top in
+               (("kp", args.kp, kp), ("kd", args.kd, kd)) if v > top]
+        if bad:
+            raise UserError(
+                f"{' and '.join(bad)} make{'s' if len(bad) == 1 else ''} the {phase}'s "
+                f"output error grow at every RK4 step of the closed loop, whatever step is "
+                f"optimised: a step is at least {h:.2g} s (the shortest {phase} allowed, "
+                f"{bounds[0]:g} s, over {n} intervals of {STEPS_PER_INTERVAL} steps); "
+                f"lower {'it' if len(bad) == 1 else 'them'} (gains below are checked at "
+                "the optimised step's own RK4 steps)")
 
 
 def loop_exit_code(s: dict | None) -> int:

@@ -79,6 +79,8 @@ __all__ = ["running_cycle", "RunningCycle", "running_stability", "RunningStabili
 
 #: RK4 steps per collocation interval at most (more only costs time)
 MAX_STEPS_PER_INTERVAL = 1000
+#: and by default
+STEPS_PER_INTERVAL = 8
 
 
 def _phase_constraints(c: RunningController, u, extra, names):
@@ -179,6 +181,11 @@ class RunningCycle(HybridCycle):
         The friction coefficient and the cone's slack near takeoff, N.
     """
 
+    @property
+    def rk4_steps(self) -> dict:
+        """The RK4 step of each phase's law, s: ``{'stance': h, 'flight': h}``."""
+        return dict(stance=self.domains[0].h, flight=self.domains[-1].h)
+
     def retuned(self, Kp=None, Kd=None, M1=None) -> "RunningCycle":
         """The same cycle at other gains (None keeps the current ones).
 
@@ -191,8 +198,16 @@ class RunningCycle(HybridCycle):
         -------
         RunningCycle
             Shares every Function but the domains' entries.
+
+        Raises
+        ------
+        ValueError
+            Gains whose output error RK4 amplifies at the cycle's steps, as
+            :func:`running_cycle` refuses them
+            (:func:`~biped_casadi.control.running_step.check_rk4_steps`).
         """
         c = self.controller.with_gains(Kp, Kd, M1)
+        check_rk4_steps(c, self.rk4_steps)
         new = copy.copy(self)
         new.controller = c
         new.domains = [dataclasses.replace(d, start=_start(d.n, c.gains, origin))
@@ -206,7 +221,7 @@ class RunningCycle(HybridCycle):
 
 
 def running_cycle(controller: RunningController, mu: float | None = None,
-                  steps_per_interval: int = 8, friction_slack: float | None = None,
+                  steps_per_interval: int = STEPS_PER_INTERVAL, friction_slack: float | None = None,
                   time_limits: float = 2.0, tolerance: float = 1e-9,
                   flight_clock: str = "takeoff") -> RunningCycle:
     """The stride map of a running gait under a tracking controller (module docstring).

@@ -8,28 +8,86 @@ RK4 with step h multiplies a mode of rate lambda by P(h lambda) = 1 + z + z^2/2 
 step whatever the state, and the run diverges (Kp = 1e300 in stance: a state not finite
 after one step).  :func:`check_rk4_steps` refuses such gains before a run, naming the
 gain and the largest that the step supports with the other kept.
+
+Before a step is optimised, its nodes are unknown, but its RK4 steps are bounded below
+(the shortest phase the optimisation allows over its intervals and RK4 steps), and
+RK4's stability region lies within :data:`RK4_REACH` of 0.  With scalar gains the modes
+of a node are the roots of s^2 + Kd a s + Kp a = 0 over the eigenvalues a of A: one has
+``|s|`` >= sqrt(Kp rho) and one ``|s|`` >= Kd rho / 2, rho the spectral radius of A.
+:func:`rk4_gain_bounds` gives the gains beyond which, at every step from h on, a mode
+leaves the region at every configuration of the robot (rho at least half its smallest
+over configurations spread over the joints' range; exactly 1 for the computed torque):
+such gains fail the check whatever step is optimised.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_rk4_steps", "rk4_growth"]
+from ..model import flight_model
+
+__all__ = ["check_rk4_steps", "rk4_growth", "rk4_gain_bounds", "RK4_REACH"]
 
 #: |P| above this is growth (round-off of stable modes on the region's edge stays below)
 _GROWTH = 1.0 + 1e-9
 
 
+#: ``|P(z)|`` <= 1 implies ``|z|`` <= this: RK4's stability region lies within it (its
+#: farthest points, 2.9601..., are on the lobes beside the imaginary axis; rounded up)
+RK4_REACH = 2.961
+
+#: configurations over which :func:`rk4_gain_bounds` takes the smallest spectral radius
+_CONFIGURATIONS = 2000
+
+
+def _matrices(model, fl, M, law: str, phase: str, Q) -> list:
+    """A at the configurations Q (a column each: q in stance, qe in flight)."""
+    nu = model.nu
+    if law == "computed_torque":
+        return [np.eye(nu)]
+    D = model.D if phase == "stance" else fl.De
+    B = np.asarray(model.B if phase == "stance" else fl.Be, dtype=float)
+    Me = np.hstack([M, np.zeros((nu, Q.shape[0] - model.nq))])
+    return [Me @ np.linalg.solve(np.asarray(D(q), dtype=float), B) for q in Q.T]
+
+
 def _output_matrices(controller, phase: str) -> list:
     """A at the reference's nodes of a phase (the module docstring)."""
-    c, m, nu = controller, controller.model, controller.model.nu
-    if c.law == "computed_torque":
-        return [np.eye(nu)]
+    c = controller
     X = np.asarray(getattr(c.gait, f"x_{phase}"), dtype=float)
-    n = X.shape[0] // 2
-    D = m.D if phase == "stance" else c.fl.De
-    B = np.asarray(m.B if phase == "stance" else c.fl.Be, dtype=float)
-    M = np.hstack([c.M, np.zeros((nu, n - m.nq))])
-    return [M @ np.linalg.solve(np.asarray(D(x[:n]), dtype=float), B) for x in X.T]
+    return _matrices(c.model, c.fl, c.M, c.law, phase, X[:X.shape[0] // 2])
+
+
+def rk4_gain_bounds(model, phase: str, h: float, law: str = "pd", M1=None) -> tuple:
+    """Scalar gains beyond which RK4 amplifies a phase's output error at every step from
+    ``h`` on, whatever the reference (module docstring).
+
+    Parameters
+    ----------
+    model : BipedModel
+        The robot.
+    phase : {'stance', 'flight'}
+    h : float
+        The smallest step, s.
+    law : {'pd', 'computed_torque'}
+    M1 : array_like, optional
+        (nu,) the output's column on q1 (default zeros).
+
+    Returns
+    -------
+    (float, float)
+        Kp beyond the first, or Kd beyond the second (the other whatever it is), fail
+        :func:`check_rk4_steps` at any step of at least ``h``.
+    """
+    nu, nq = model.nu, model.nq
+    M = np.hstack([np.zeros((nu, 1)) if M1 is None else np.reshape(M1, (nu, 1)),
+                   np.eye(nu)])
+    fl = flight_model(model)
+    Q = np.random.default_rng(0).uniform(-np.pi, np.pi, (nq if phase == "stance" else fl.ne,
+                                                         _CONFIGURATIONS))
+    rho = 1.0 if law == "computed_torque" else 0.5 * min(
+        float(np.max(np.abs(np.linalg.eigvals(A)))) for A in _matrices(model, fl, M, law,
+                                                                        phase, Q))
+    return (RK4_REACH / h) ** 2 / rho, 2 * RK4_REACH / (h * rho)
 
 
 def rk4_growth(matrices, h: float, Kp, Kd) -> float:

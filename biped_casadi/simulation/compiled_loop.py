@@ -13,7 +13,10 @@ Newton iteration with the swing foot's vertical velocity at the end of the last 
 step as the slope (the exact derivative of that step would need the library's
 derivatives; with this slope Newton converges to the same root, |z_sw| < 1e-15 m, in one
 or two more iterations); the swing foot's minima between two nodes are located by
-bisection on that velocity.
+bisection on that velocity.  The stance force, the friction cone and the torques between
+the nodes are screened as for a CasADi law and, where they may dip, sampled inside the
+step and their minima located from values alone (:mod:`~biped_casadi.simulation.
+margins`).
 
 :func:`compiled_closed_loop` returns the callables :class:`~biped_casadi.simulation.
 Simulator` uses in place of its CasADi blocks.

@@ -23,7 +23,8 @@ the nodes, where the swing foot's vertical velocity goes from <= 0 to > 0 its lo
 point is found by Newton's method (the strike's); below the ground it is the strike (the
 first root before it, beyond ``model.scuff_zone``) or a scuff.  The stance force, the
 friction cone and the torques are screened between the nodes and their minima located
-where they may dip (:mod:`~biped_casadi.simulation.margins`):
+where they may dip (:mod:`~biped_casadi.simulation.margins`; by their rates, or for a
+compiled law from sampled values):
 
 - ``fell``: hip lower than ``min_hip_height`` or torso past horizontal (leaning more than
   ``max_torso_angle`` from its upright angle, the robot's ``torso_upright``);
@@ -64,7 +65,8 @@ from ..control.saturation import clip_torques
 from ..numerics import FastCall, as_vector, compiled, rk4_step
 from ..results import internal
 from .compiled_loop import compiled_closed_loop
-from .kernel import CHUNKS_PER_STEP, Diagnostics, locate_strike, strike, swing_foot_dip
+from .kernel import (CHUNKS_PER_STEP, SUB_STEPS, Diagnostics, locate_strike, strike,
+                     swing_foot_dip)
 from .margins import MarginCheck, dip_function
 from .options import SimulationOptions
 from .outcome import STATUSES, OutcomeRecorder, StepRecord, WalkOutcome
@@ -505,11 +507,14 @@ class Simulator:
         from ``starts`` ((X, tau) each; W the margins at their nodes and up to three
         before), the last ``last`` long (default h): None, or the failure (status,
         message, time), the nodes before it logged."""
-        if self._margins is None or not starts:      # a compiled law: at the nodes only
+        if not starts:
             return None
         steps = [(Xa, ta, self.h, p) for Xa, ta in starts[:-1]] + \
             [(*starts[-1], self.h if last is None else last, p)]
-        found = self.margin.first_dip(self.margin.build(self.rk4, self._margins), W, steps)
+        if self._margins is None:         # a numeric law, no derivatives: sampled margins
+            found = self.margin.first_dip(self._sampled_margins, W, steps, SUB_STEPS)
+        else:
+            found = self.margin.first_dip(self.margin.build(self.rk4, self._margins), W, steps)
         if found is None:
             return None
         j, eta, status = found
@@ -519,6 +524,12 @@ class Simulator:
         D = self.diagnostics(Xe, steps[j][1] + eta, p)[0]
         return self._log_stop(walk, k, Xe, steps[j][1] + eta, status,
                               self.margin.message(status, D, self._den_scale))
+
+    def _sampled_margins(self, X, tau, eta, p):
+        """The margins at the end of the RK4 step of length eta from (X, tau) (a numeric
+        law's closed loop, :meth:`_between`)."""
+        Xe = self.event(X, tau, eta, p)[2].ravel()
+        return self.margin.at_nodes(self.diagnostics(Xe, tau + eta, p)[0])[0]
 
     def _log_stop(self, walk, k, Xe, te, status, message):
         """Log the state Xe at tau = te of step k, where the run stops: (status, message,

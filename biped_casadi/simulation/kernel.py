@@ -31,7 +31,9 @@ import casadi as ca
 import numpy as np
 
 __all__ = ["Diagnostics", "strike", "locate_strike", "locate_minimum", "swing_foot_dip",
-           "SCREEN_SAFETY", "screen_steps", "screen_far", "minima_between", "mapped", "threads", "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
+           "SCREEN_SAFETY", "screen_steps", "screen_far", "minima_between", "SUB_STEPS",
+           "SAMPLED_TOL", "minima_sampled", "golden_minimum", "mapped", "threads",
+           "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
 
 #: CasADi calls per reference step duration T of the simulators' integration: each call
 #: integrates a quarter of T (the Poincaré section 0.75 T falls on a boundary); RK4 steps
@@ -42,6 +44,13 @@ CHUNKS_PER_STEP = 4
 #: lower node value less this many times the bound c'' h^2 / 8 on a dip inside the step
 #: (c'' from the second differences of the nodes around) is below its bound
 SCREEN_SAFETY = 2.0
+
+#: equal parts of a flagged RK4 step at which :func:`minima_sampled` takes the outputs (a
+#: law without derivatives: the compiled closed loop)
+SUB_STEPS = 16
+
+#: :func:`minima_sampled` locates a minimum to this fraction of the RK4 step
+SAMPLED_TOL = 1e-9
 
 #: most Newton iterations of :func:`locate_strike` (it stops at ``|z_sw| < 1e-15`` m, usually
 #: after 3 to 5)
@@ -405,6 +414,97 @@ def minima_between(near, r_a, r_b, between, h: float) -> list:
         eta = locate_minimum(rate, h, r_a[j], r_b[j], lambda j=j: _flat(between(0.0)[2])[j])
         if eta is not None:
             found.append((eta, int(j), float(_flat(between(eta)[0])[j])))
+    return sorted(found)
+
+
+def golden_minimum(f, a: float, b: float, tol: float):
+    """The minimum of ``f`` on [a, b] by golden-section search, from values alone.
+
+    The bracket shrinks by the golden ratio per evaluation, keeping the lower of its two
+    inner points, until it is at most ``tol`` wide (f unimodal on [a, b]; where f is
+    lowest at an end, the bracket closes on that end and keeps it).
+
+    Parameters
+    ----------
+    f : callable
+        ``f(x) -> float``.
+    a, b : float
+        The interval, a < b.
+    tol : float
+        The final bracket's width.
+
+    Returns
+    -------
+    tuple
+        (x, f(x), (lo, hi)): the lowest point found and the final bracket.
+    """
+    g = 0.5 * (np.sqrt(5.0) - 1.0)
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = f(c), f(d)
+    while b - a > tol:
+        if fc <= fd:                                    # the minimum is in [a, d]
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = f(c)
+        else:                                           # ... in [c, b]
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = f(d)
+    return (c, fc, (a, b)) if fc <= fd else (d, fd, (a, b))
+
+
+def minima_sampled(near, between, h: float, first, last, samples: int = SUB_STEPS) -> list:
+    """The minima inside one RK4 step of the outputs flagged ``near``, from values alone.
+
+    For a law without derivatives (:func:`minima_between` takes the rates).  The outputs
+    are taken at ``samples`` equal parts of the step (the RK4 step of length eta = i h /
+    samples from its first node); each output's parts are screened as the steps are
+    (:func:`screen_steps` on the samples, the first part by the samples after it).  A
+    flagged part's minimum is located by :func:`golden_minimum`, to :data:`SAMPLED_TOL`
+    h, on the two parts beside its lower end where that sample is the lowest of its
+    neighbours, else on the part itself; a minimum is one where the final bracket keeps
+    off both ends of the one searched (at a node, the lowest point is that node's,
+    checked there, as where the rate has no root inside).
+
+    Parameters
+    ----------
+    near : array_like of bool
+        (m,) the outputs to look at (:func:`screen_steps`).
+    between : callable
+        ``between(eta) -> W`` (m,): the outputs at the end of the last RK4 step of length
+        eta from the step's first node.
+    h : float
+        The step, s.
+    first, last : array_like
+        (m,) the outputs at the step's nodes.
+    samples : int
+        Equal parts of the step.
+
+    Returns
+    -------
+    list of tuple
+        (eta, output index, value), by eta.
+    """
+    near = np.flatnonzero(near)
+    if near.size == 0:
+        return []
+    etas = np.linspace(0.0, h, samples + 1)
+    V = np.array([_flat(first)] + [_flat(between(e)) for e in etas[1:-1]] + [_flat(last)])
+    found = []
+    for i in near:
+        s = V[:, i:i + 1]
+        parts = screen_steps(s, 0.0)[:, 0]
+        parts[0] = screen_steps(s[::-1], 0.0)[-1, 0]    # the first part: the samples after
+        brackets = set()
+        for k in np.flatnonzero(parts):
+            m = k + int(s[k + 1, 0] < s[k, 0])           # the part's lower end
+            lowest = all(s[m, 0] <= s[n, 0] for n in (m - 1, m + 1) if 0 <= n <= samples)
+            brackets.add((max(m - 1, 0), min(m + 1, samples)) if lowest else (k, k + 1))
+        for a, b in sorted(brackets):
+            eta, v, (lo, hi) = golden_minimum(lambda e, i=i: _flat(between(e))[i],
+                                              etas[a], etas[b], SAMPLED_TOL * h)
+            if etas[a] < lo and hi < etas[b]:
+                found.append((float(eta), int(i), float(v)))
     return sorted(found)
 
 

@@ -9,8 +9,14 @@ bound).  Between two nodes the state is the RK4 step of length eta from the firs
 step is screened by the margins at its nodes (:func:`~biped_casadi.simulation.kernel.
 screen_steps`, the running cycle's screen); where a margin may dip below 0 its rates in
 eta at both ends of the step are taken (AD, exact) and its minimum located by Newton's
-method on the rate (:func:`~biped_casadi.simulation.kernel.minima_between`).  A minimum
-below its bound is the first invalid state, named with "between two RK4 nodes".
+method on the rate (:func:`~biped_casadi.simulation.kernel.minima_between`).  A law
+without derivatives (a compiled library, :mod:`~biped_casadi.simulation.compiled_loop`)
+has the same screen; in a flagged step the margins are taken at
+:data:`~biped_casadi.simulation.kernel.SUB_STEPS` (16) equal parts of it (each the RK4
+step of that length from the first node), the parts screened alike, and a minimum
+located by golden-section search on the margin's values
+(:func:`~biped_casadi.simulation.kernel.minima_sampled`).  A minimum below its bound is
+the first invalid state, named with "between two RK4 nodes".
 
 The batched walkers (:mod:`~biped_casadi.simulation.tv_walker`,
 :mod:`~biped_casadi.simulation.vc_walker`) screen the steps of all their scenarios at once
@@ -24,7 +30,8 @@ import casadi as ca
 import numpy as np
 
 from ..numerics import FastCall
-from .kernel import SCREEN_SAFETY, minima_between, screen_steps, swing_foot_dip
+from .kernel import (SCREEN_SAFETY, minima_between, minima_sampled, screen_steps,
+                     swing_foot_dip)
 from .validity import FRICTION_TOL, between_message
 
 __all__ = ["MarginCheck", "dip_function", "foot_dips"]
@@ -150,25 +157,32 @@ class MarginCheck:
         return ca.Function("margins_between", [X, tau, eta, p], [W, dW, ca.jacobian(dW, eta)],
                            ["X", "tau", "eta", "p"], ["W", "dW_deta", "d2W_deta2"])
 
-    def first_dip(self, between, W, steps):
+    def first_dip(self, between, W, steps, samples: int = 0):
         """The first minimum below its bound inside the steps, or None.
 
         Parameters
         ----------
         between : callable
-            From :meth:`build`.
+            From :meth:`build`; with ``samples``, ``between(X, tau, eta, p) -> W`` (m,):
+            the margins alone (a law without derivatives).
         W : numpy.ndarray
             (n, m) margins at consecutive nodes (up to three before the steps').
         steps : list of tuple
             (Xa, ta, length, p) of the last len(steps) steps between the rows of W.
+        samples : int
+            0: the minima located by their rates (:func:`~biped_casadi.simulation.
+            kernel.minima_between`); else by the margins at this many equal parts of
+            the step (:func:`~biped_casadi.simulation.kernel.minima_sampled`).
 
         Returns
         -------
         tuple or None
             (step index, eta, status) at the minimum.
         """
-        near = screen_steps(W, np.zeros(W.shape[1]))[len(W) - 1 - len(steps):]
-        return self._first_flagged(between, near, steps.__getitem__)
+        base = len(W) - 1 - len(steps)
+        near = screen_steps(W, np.zeros(W.shape[1]))[base:]
+        ends = (lambda j: (W[base + j], W[base + j + 1])) if samples else None
+        return self._first_flagged(between, near, steps.__getitem__, samples, ends)
 
     def first_dips(self, between, W, n_steps: int, step, stop) -> dict:
         """Per scenario of a batch, the first minimum below its bound inside its steps.
@@ -201,17 +215,22 @@ class MarginCheck:
                 found[int(i)] = got
         return found
 
-    def _first_flagged(self, between, near, step):
+    def _first_flagged(self, between, near, step, samples: int = 0, ends=None):
         """The first minimum below its bound inside the steps ``near`` flags (steps, m):
-        (step index, eta, status) or None; ``step(j)`` the step j's (Xa, ta, length, p)."""
+        (step index, eta, status) or None; ``step(j)`` the step j's (Xa, ta, length, p);
+        with ``samples``, ``ends(j)`` the margins at its nodes (:meth:`first_dip`)."""
         for j in np.flatnonzero(near.any(axis=1)):
             Xa, ta, h, p = step(j)
 
             def at(eta, Xa=Xa, ta=ta, p=p):
                 return between(Xa, ta, eta, p)
 
-            r_a, r_b = (np.asarray(at(e)[1], float).ravel() for e in (0.0, h))
-            for eta, i, v in minima_between(near[j], r_a, r_b, at, h):
+            if samples:
+                found = minima_sampled(near[j], at, h, *ends(j), samples)
+            else:
+                r_a, r_b = (np.asarray(at(e)[1], float).ravel() for e in (0.0, h))
+                found = minima_between(near[j], r_a, r_b, at, h)
+            for eta, i, v in found:
                 if v < 0 or (i == 0 and not v > 0):
                     return int(j), eta, self.status[i]
         return None
