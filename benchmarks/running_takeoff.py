@@ -109,7 +109,8 @@ def loop(cyc, strides) -> tuple:
 def case(robot, gait, M1, strides, saturate) -> dict:
     m = load_model(robot)
     c = RunningController(m, gait, 400.0, 30.0, M1=M1, saturate=saturate)
-    cycles = {k: running_cycle(c, flight_clock=k) for k in FLIGHT_CLOCKS}
+    # the pinned foot's takeoff (the model before sliding), whose push-off this studies
+    cycles = {k: running_cycle(c, flight_clock=k, sliding=False) for k in FLIGHT_CLOCKS}
     loops, fixed = {}, {}
     for k in FLIGHT_CLOCKS:
         loops[k], fixed[k] = loop(cycles[k], strides)

@@ -51,6 +51,18 @@ def stable(cycle):
 
 
 @pytest.fixture(scope="session")
+def pinned(cycle):
+    """The model before sliding: the stance foot pinned to its takeoff, the cone with
+    its slack (``sliding=False``)."""
+    return running_cycle(cycle.controller, sliding=False)
+
+
+@pytest.fixture(scope="session")
+def pinned_stable(pinned):
+    return running_stability(pinned)
+
+
+@pytest.fixture(scope="session")
 def gait_file(run_gait, tmp_path_factory):
     return str(run_gait.save(tmp_path_factory.mktemp("run") / "run15.json"))
 
@@ -231,18 +243,19 @@ def test_perturbed_run_converges_at_the_spectral_radius(cycle, stable, model):
     c = cycle.controller
     for s in run.strides:
         assert s.fz_min >= -1e-9
-        assert s.friction_excess_max <= cycle.friction_slack
+        assert s.friction_excess_max <= cycle.friction_slack + 1e-9   # 0: it slides
         assert s.torque_max <= c.torque_limit
         assert s.landing_impulse_ratio <= cycle.mu
         assert s.swing_min >= 0 and s.other_foot_min >= -1e-9
 
 
-def test_the_pushing_foot_is_checked_between_the_nodes(cycle, stable, model):
+def test_the_pushing_foot_is_checked_between_the_nodes(pinned, pinned_stable, model):
     """0.02 rad/s less on dq1 at the fixed point: after the takeoff the foot that pushed
     off goes below the ground and is back above it at the first flight node (1.29 ms).
     The same cycle checked at its nodes only runs the stride; the RK4 step from the
     takeoff state, sampled at 400 lengths, has the foot below the ground where and as
     deep as the cycle says."""
+    cycle, stable = pinned, pinned_stable
     x = stable.fixed_point.copy()
     x[model.nq] -= 0.02
     with pytest.raises(HybridCycleError, match=r"^domain 'flight': other foot height "
@@ -272,13 +285,14 @@ def _at_nodes(cycle):
     return at_nodes
 
 
-def test_the_friction_cone_is_checked_between_the_nodes(cycle, run_gait):
+def test_the_friction_cone_is_checked_between_the_nodes(pinned, run_gait):
     """0.05 rad/s more on dq1 at the collocated landing state: the stance's largest
     (Fx - slack) / Fz, sampled at 16 lengths of the RK4 steps around its largest node,
     is between two nodes.  With mu halfway between that and the nodes' largest, the
     cycle checked at its nodes passes the stance (and stops at the landing, whose impulse
     is outside that narrower cone); checked between them it stops in that step of the
     stance at the cone.  mu only enters the constraints: the motion is the same."""
+    cycle = pinned
     x = np.asarray(run_gait.x_stance, float)[:, 0].copy()
     x[cycle.n // 2] += 0.05
     st = cycle.stride(x, record=True).passes[0]
@@ -301,7 +315,8 @@ def test_the_friction_cone_is_checked_between_the_nodes(cycle, run_gait):
             samples.append((ratio(Xe, t + eta), t + eta))
     r_between, t_between = max(samples)
     assert r_between > at_nodes[k]
-    tight = running_cycle(cycle.controller, mu=(at_nodes[k] + r_between) / 2)
+    tight = running_cycle(cycle.controller, mu=(at_nodes[k] + r_between) / 2,
+                          sliding=False)
     with pytest.raises(HybridCycleError) as at_nodes_only:      # the stance passes
         _at_nodes(tight).stride(x)
     assert at_nodes_only.value.domain == "flight" and "landing impulse" in str(
@@ -314,13 +329,15 @@ def test_the_friction_cone_is_checked_between_the_nodes(cycle, run_gait):
     assert abs(t_dip - t_between) < d.h and t_dip not in st.times
 
 
-def test_the_ground_pushes_the_foot_until_the_flight_law_lets_it_go(cycle, stable, model):
+def test_the_ground_pushes_the_foot_until_the_flight_law_lets_it_go(pinned, pinned_stable,
+                                                                     model):
     """0.01 rad/s less on dq1 at the fixed point: the stance law's normal force reaches 0
     late (0.31 ms after T_stance), the restarted flight law's first torques differ from
     the stance law's last, and under them the ground would still push the foot.  It stays
     on the ground (the push-off) until that force reaches 0; freed at the law's switch
     instead, it would start down and go below the ground between two nodes.  At the
     fixed point the push-off is empty: the foot leaves at the switch."""
+    cycle, stable = pinned, pinned_stable
     c, nq = cycle.controller, model.nq
     at_star = cycle.stride(stable.fixed_point, record=True)
     assert at_star.durations[1] == 0.0 and at_star.passes[1].times.tolist() == [0.0]
@@ -382,14 +399,16 @@ def _takeoff_jump(cyc, x):
 
 @pytest.fixture(scope="session")
 def stride_clock(cycle):
-    return running_cycle(cycle.controller, flight_clock="stride")
+    return running_cycle(cycle.controller, flight_clock="stride", sliding=False)
 
 
 def test_the_stride_clock_continues_the_stance_reference_through_takeoff(
-        model, run_gait, cycle, stable, stride_clock):
+        model, run_gait, pinned, pinned_stable, stride_clock):
     """With ``flight_clock='stride'`` the flight law starts at the stance's clock less
     T_stance, so a takeoff off the reference's time leaves the torque continuous where
-    the restarted clock jumps; the exact Jacobian carries the takeoff time into flight."""
+    the restarted clock jumps; the exact Jacobian carries the takeoff time into flight.
+    (The pinned foot's model: the takeoff is where the law switches.)"""
+    cycle, stable = pinned, pinned_stable
     x = stable.fixed_point.copy()
     x[model.nq:] += 1e-2
     jump0, st0, fl0 = _takeoff_jump(cycle, x)
@@ -427,6 +446,9 @@ def test_command_line_stability(gait_file, stable, capsys):
     out = capsys.readouterr().out
     assert f"spectral radius      {stable.spectral_radius:.4f}" in out
     assert "per-stride contraction " + " ".join(f"{v:.3g}" for v in sim["contraction"]) in out
+    assert s["sliding"] and sim["sliding"] and "slack" not in out
+    assert (f"sliding near takeoff up to {1e3 * sim['margins']['slip_max']:.3g} ms"
+            in out) and sim["margins"]["slip_max"] > 0
 
 
 def test_command_line_says_a_failed_loop_and_exits_1(gait_file, capsys):
@@ -450,10 +472,14 @@ def test_a_foot_back_below_the_ground_names_the_tangential_force(capsys):
     from analysis.cli.running import loop_exit_code
     msg = "domain 'flight': other foot height violated at t = 0.000580279 s (-6.09e-09 < 0)"
     for clock in ("takeoff", "stride"):
-        assert loop_exit_code(dict(status="failed", message=msg, flight_clock=clock)) == 1
+        assert loop_exit_code(dict(status="failed", message=msg, flight_clock=clock,
+                                   sliding=False)) == 1
         err = capsys.readouterr().err
         assert err.startswith(f"biped running: the closed loop failed: {msg}")
         assert "tangential ground force" in err and "--flight-clock" not in err
+    # a sliding foot leaves without a tangential force: no such cause is named
+    assert loop_exit_code(dict(status="failed", message=msg, sliding=True)) == 1
+    assert "tangential" not in capsys.readouterr().err
     other = "domain 'stance': torque u1 <= 150 N m violated at t = 0.00923782 s (-0.511 < 0)"
     assert loop_exit_code(dict(status="failed", message=other, flight_clock="takeoff")) == 1
     assert "tangential" not in capsys.readouterr().err
@@ -585,7 +611,7 @@ def test_the_margin_lets_a_perturbed_run_land_at_2_m_s(model):
     o = RunningOptions(speed=2.0)
     g = optimize_running(model, o, cache=True)
     assert g.success
-    cyc = running_cycle(RunningController(model, g, KP, KD, M1=STABLE_M1))
+    cyc = running_cycle(RunningController(model, g, KP, KD, M1=STABLE_M1), sliding=False)
     r = running_stability(cyc)
     assert r.status == "stable"
     x = r.fixed_point.copy()
@@ -635,13 +661,18 @@ def test_a_saturated_run_goes_on_at_the_limit_and_says_how_long(model, saturated
         assert s.torque_max > SAT_LIMIT and s.saturated_time > 0
     # the time lies between the node intervals saturated at both ends and at either end
     low = high = 0.0
-    st, po, fl = cyc.stride(r.fixed_point, record=True).passes
-    qe, dqe = c.fl.takeoff.map(po.times.size)(po.nodes[:model.nq], po.nodes[model.nq:])
-    for p, law, q, dq in ((st, c.stance_law, st.nodes[:model.nq], st.nodes[model.nq:]),
-                          (po, c.flight_law, qe, dqe),
-                          (fl, c.flight_law, fl.nodes[:c.fl.ne], fl.nodes[c.fl.ne:])):
-        clock = p.parameters[-1] if law is c.flight_law else 0.0
-        u = np.array(law.map(p.times.size)(q, dq, p.times[None, :] + clock))
+    passes = cyc.stride(r.fixed_point, record=True).passes
+    nq, ne = model.nq, c.fl.ne
+    for p, phase in zip(passes, cyc.laws):
+        N = p.times.size
+        if p.nodes.shape[0] == 2 * nq:
+            q, dq = c.fl.takeoff.map(N)(p.nodes[:nq], p.nodes[nq:])
+        else:
+            q, dq = p.nodes[:ne], p.nodes[ne:]
+        clock = p.parameters[-1] if p is not passes[0] else 0.0
+        u = np.array(c.stance_law.map(N)(q[:nq, :], dq[:nq, :], p.times[None, :] + clock)
+                     if phase == "stance" else
+                     c.flight_law.map(N)(q, dq, p.times[None, :] + clock))
         over = np.abs(u).max(axis=0) > SAT_LIMIT
         dt = np.diff(p.times)
         low += dt[over[:-1] & over[1:]].sum()

@@ -383,7 +383,9 @@ def loop_exit_code(s: dict | None) -> int:
     """1 when the closed loop of ``s`` (the ``stability`` report, or None) failed: no fixed
     point, or a perturbed run that stopped, said in one line on stderr (as ``biped
     mujoco-running``'s run that stops: exit 1 for a stage or run that failed); else 0.
-    An unstable fixed point whose run completes is a result, 0."""
+    An unstable fixed point whose run completes is a result, 0.  With the foot pinned to
+    its takeoff (``sliding`` False), a pushing foot below the ground in flight is said to
+    come from the tangential force it left with (a sliding foot leaves without one)."""
     if not s:
         return 0
     sim = s.get("simulation")
@@ -393,7 +395,7 @@ def loop_exit_code(s: dict | None) -> int:
         why = f"the perturbed run stopped at {sim.get('message', '')}"
     else:
         return 0
-    if "domain 'flight': other foot height" in why:
+    if "domain 'flight': other foot height" in why and s.get("sliding") is False:
         why += ("; the foot that pushed off went below the ground in flight: it left with a "
                 "tangential ground force where the normal force vanished (within the friction "
                 "cone's slack near takeoff), which starts it downward")
@@ -493,7 +495,7 @@ def closed_loop(model, gait, args) -> dict:
     kp = float(c.Kp[0]) if np.ptp(c.Kp) == 0 else c.Kp.tolist()
     kd = float(c.Kd[0]) if np.ptp(c.Kd) == 0 else c.Kd.tolist()
     out = dict(law=args.law, Kp=kp, Kd=kd, M1=list(M1), flight_clock=args.flight_clock,
-               clipped_at=c.clipped_at, status=r.status,
+               sliding=cyc.sliding, clipped_at=c.clipped_at, status=r.status,
                message=r.message, stable=r.stable,
                fixed_point=r.fixed_point.tolist(), fixed_point_residual=r.residual,
                fixed_point_distance=r.distance, spectral_radius=r.spectral_radius,
@@ -520,12 +522,14 @@ def closed_loop(model, gait, args) -> dict:
                        torque_max=max(s.torque_max for s in st),
                        saturated_time=sum(s.saturated_time for s in st),
                        swing_foot_min=min(s.swing_min for s in st),
-                       landing_impulse_ratio_max=max(s.landing_impulse_ratio for s in st))
+                       landing_impulse_ratio_max=max(s.landing_impulse_ratio for s in st),
+                       slip_max=max(s.slip for s in st),
+                       slide_max=max(abs(s.slide) for s in st))
     out["simulation"] = dict(steps=args.steps, perturb=args.perturb, status=run.status,
                              message=run.message, strides=len(run.strides),
                              deviations=d.tolist(), contraction=run.contraction.tolist(),
                              mean_contraction=rate, mu=cyc.mu,
-                             friction_slack=cyc.friction_slack,
+                             friction_slack=cyc.friction_slack, sliding=cyc.sliding,
                              torque_limit=c.torque_limit, saturate=c.saturate,
                              saturated_time=[s.saturated_time for s in run.strides],
                              torque_max=[s.torque_max for s in run.strides], margins=margins)
@@ -582,9 +586,14 @@ def _print_stability(s: dict):
     mg = sim["margins"]
     if mg:
         print(f"  margins              Fz >= {mg['fz_min']:.3g} N before takeoff; |Fx| - mu Fz "
-              f"<= {mg['friction_excess_max']:.3g} N (slack {sim['friction_slack']:.3g}); "
+              f"<= {mg['friction_excess_max']:.3g} N"
+              + (f" (slack {sim['friction_slack']:.3g}); " if not sim.get("sliding", False)
+                 else "; ") +
               f"|u| {'asked ' if sim.get('saturate') else ''}<= {mg['torque_max']:.1f} N m "
               f"(limit {sim['torque_limit']:g})")
+    if mg and sim.get("sliding"):
+        print(f"  sliding near takeoff up to {1e3 * mg['slip_max']:.3g} ms and "
+              f"{1e3 * mg['slide_max']:.3g} mm a stride (friction on the cone's edge)")
     if sim.get("saturate"):
         n = sum(1 for v in sim["saturated_time"] if v > 0)
         print(f"  saturation           torques clipped at {sim['torque_limit']:g} N m in {n} of "

@@ -146,6 +146,10 @@ class Domain:
         reset acts on the entry state (the domain's constraints, which hold inside it, are
         not checked; its exit constraints are).  Without it such a guard waits for a
         crossing from >= 0.
+    common_subexpressions : bool
+        Merge the equal subexpressions of the RK4 step's sensitivities (``casadi.cse``)
+        when the Functions are built: it halves a walking domain's linearisation but
+        costs a running domain seconds of build for no faster evaluation.
     """
 
     name: str
@@ -167,6 +171,7 @@ class Domain:
     dense_guard: bool = False
     clock_from: int = 0
     may_be_empty: bool = False
+    common_subexpressions: bool = True
 
     def __post_init__(self):
         f = self.vector_field
@@ -267,7 +272,8 @@ class _Compiled:
         def rhs(Xv, stage):
             return d.vector_field(Xv, t + stage * h, p)
 
-        Xn = ca.cse(rk4_step(rhs, X, h))
+        cse = ca.cse if d.common_subexpressions else (lambda e: e)
+        Xn = cse(rk4_step(rhs, X, h))
         rk4 = ca.Function(f"{_ident(d.name)}_rk4", [X, t, h, p], [Xn, t + h])
         self._d, self._rk4, self._lazy = d, rk4, {}    # built at first use, shared by copies
 
@@ -281,7 +287,7 @@ class _Compiled:
         self.step = ca.Function("step", [X, t, h, p], [Xr, tr, *node(Xr, tr)])
         Jn = ca.jtimes(Xr, X, J) + (ca.jtimes(Xr, p, Jp) if npar else 0)
         self.step_sens = ca.Function("step_sens", [X, J, t, h, p, Jp],
-                                     [Xr, ca.cse(Jn), tr, *node(Xr, tr)])
+                                     [Xr, cse(Jn), tr, *node(Xr, tr)])
         eta = ca.SX.sym("eta")
         Xe, te = rk4(X, t, eta, p)
         ge = d.guard(Xe, te, p)
@@ -293,7 +299,7 @@ class _Compiled:
                             [ca.jacobian(gY, Y), ca.jacobian(gY, p), ca.jacobian(gY, s)])
         gX, gp, gt = grads(Xe, te, p)
         self.last = ca.Function("last", [X, J, t, eta, p, Jp],
-                                [Xe, ca.cse(Je), ca.jacobian(Xe, eta), gX, gp, gt,
+                                [Xe, cse(Je), ca.jacobian(Xe, eta), gX, gp, gt,
                                  node(Xe, te)[2]])
         self.entry = entry_function(d)
         x = ca.SX.sym("x", d.n)

@@ -4,29 +4,41 @@ stance -> flight -> stance, its fixed point, its exact Jacobian and a perturbed 
 :func:`running_cycle` builds the :class:`~analysis.stability.hybrid_cycle.HybridCycle`
 of a :class:`~biped_casadi.control.running.RunningController`:
 
-- stance: x = (q, dq) (2 nq numbers, the stride map's state), the robot's
-  ``forward_dynamics`` under the law's torques (clipped when the controller saturates),
-  t the time since landing; guard the normal ground force Fz of ``takeoff_guard``
-  (the law switches to the flight's where it reaches 0 going down); constraints Fz >= 0
-  (from landing on: a landing the foot cannot stay on is refused at once; at the crossing
-  Fz is 0 to round-off), the friction cone mu Fz -/+ Fx >= 0 (with a slack near takeoff,
-  below), the swing foot above the ground and, without saturation, ``|u|`` <= the torque
-  limit; reset the identity;
-- push-off: the same state and stance dynamics under the flight law (on the extended
-  state of ``takeoff``, the foot at rest), t the time since the law's switch; guard Fz
-  under those torques; constraints the cone, the swing foot and the torque limit; reset
-  ``takeoff``.  Where the stance ends off the reference's time, the flight law's first
-  torques differ from the stance law's last, and under them the ground may still push
-  the foot (Fz > 0): the foot then stays on the ground until that force reaches 0,
-  instead of being freed at the switch with a downward acceleration.  Where Fz <= 0 at
-  the switch (at the fixed point, and whenever the flight law pulls the foot up) the
-  domain is empty (``Domain.may_be_empty``) and the foot leaves there;
+- stance: x = (q, dq) (2 nq numbers, the stride map's state), the foot pinned, the
+  robot's ``forward_dynamics`` under the law's torques (clipped when the controller
+  saturates), t the time since landing; guard the friction cone's margin
+  mu Fz - ``|Fx|`` of ``takeoff_guard`` (the foot starts to slide where it reaches 0
+  going down: off the optimised orbit always before Fz vanishes, below); constraints
+  Fz >= 0 and the cone mu Fz -/+ Fx >= 0 (from landing on: a landing the foot cannot
+  stay on, or would slide from at once, is refused), the swing foot above the ground
+  and, without saturation, ``|u|`` <= the torque limit; reset ``takeoff`` into the
+  flight coordinates (the foot at rest);
+- slide: x = (qe, dqe) (2 nq + 4), the foot held on the ground vertically only
+  (``sliding_dynamics`` of the flight model: the constrained Lagrangian with one contact
+  constraint, z of the foot 0, and the Coulomb force Fx = sigma mu Fz at the foot),
+  under the stance law (which sees q, dq), t the time since the slide began (the law's
+  clock the time since landing); sigma, the sign of the Fx the pinned foot needed at
+  entry, fixed for the slide (the foot slips against it); guard the normal force Fz
+  (the law switches to the flight's where it reaches 0 going down); constraints the
+  slip velocity against the friction force, -sigma dx_st >= 0 (a foot that stops
+  before takeoff would stick again: stick-slip is not modelled, and such a stride is
+  refused with that reason), the swing foot above the ground and the torque limit;
+  reset the identity;
+- push-off: the same sliding state and dynamics under the flight law (t the time since
+  the law's switch), sigma the slip's direction at entry; guard Fz under those
+  torques; the same constraints; reset the identity.  Where the stance ends off the
+  reference's time, the flight law's first torques differ from the stance law's last,
+  and under them the ground may still push the foot (Fz > 0): the foot then stays on
+  the ground, sliding, until that force reaches 0.  Where Fz <= 0 at the switch (at the
+  fixed point, and whenever the flight law pulls the foot up) the domain is empty
+  (``Domain.may_be_empty``) and the foot leaves there;
 - flight: x = (qe, dqe) (2 nq + 4), ``flight_dynamics``, t the time since takeoff
   (the flight law's clock: the time since the law's switch, t plus the push-off's
   duration, or with ``flight_clock='stride'`` the stance's clock continued, t plus the
   time since landing less T_stance; parameters set at entry from the time the stride
   ran, ``Domain.clock_from``);
-  guard the swing foot's height (landing where it reaches 0 going down); constraints
+  guard the swing foot's height (landing where it reaches 0 going down; the flight
+  starts where the foot left, moving as it slid); constraints
   the other foot (the one that pushed off) above the ground and the torque limit;
   exit constraints the landing's normal impulse >= 0 and inside the friction cone, the
   other foot moving up after the impact; reset ``landing_swing`` (impact and
@@ -44,13 +56,16 @@ the flight law, or the takeoff; the swing foot: the landing).
 
 Friction near takeoff.  Fz and Fx reach zero together only on the optimised orbit;
 off it (and at the closed loop's fixed point, which is not the collocation's) Fx is a
-little off zero where Fz vanishes, and mu Fz - ``|Fx|`` turns negative in the last instant
-before the foot leaves.  The cone constraints carry a slack ``friction_slack`` (N): the
-excess ``|Fx|`` - mu Fz may reach it (default 1 % of the robot's weight, the margin of
-:func:`gait_opt.running_checks.check_running` between the collocation points).  The
-pinned foot keeps that Fx to the instant Fz vanishes; freed there it starts with the
-acceleration Fx took away, downward for one sign of Fx, and the flight's check of the
-pushing foot stops such a stride (a real foot would have slid before it left).
+little off zero where Fz vanishes, so a pinned foot would need more friction than
+mu Fz in the last instant before it leaves.  The foot slides instead, from where
+``|Fx|`` reaches mu Fz to the takeoff, with Fx on the cone's edge, and leaves with
+Fx = 0 (the slide's duration and distance are in each :class:`StrideRecord`).  With
+``sliding=False`` the model before sliding: the foot pinned to the takeoff, under the
+stance law to its Fz = 0, then under the flight law while that law's Fz is > 0 (the
+push-off, in stance coordinates, reset ``takeoff``), the cone constraints carrying a
+slack ``friction_slack`` (N, default 1 % of the robot's weight): the excess
+``|Fx|`` - mu Fz may reach it, and the foot is freed with the acceleration that Fx
+took away.
 
 :func:`running_stability` finds the fixed point near the gait's first stance state
 and its eigenvalues; :func:`finite_difference_jacobian` checks the exact Jacobian;
@@ -63,6 +78,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 from dataclasses import dataclass, field
+from functools import partial
 
 import casadi as ca
 import numpy as np
@@ -71,7 +87,8 @@ from biped_casadi.control.running import FLIGHT_CLOCKS, RunningController
 from biped_casadi.control.running_step import check_rk4_steps
 from biped_casadi.results import Result
 
-from .hybrid_cycle import Domain, HybridCycle, HybridCycleError, entry_function
+from . import running_domains as rd
+from .hybrid_cycle import HybridCycle, HybridCycleError, entry_function
 
 __all__ = ["running_cycle", "RunningCycle", "running_stability", "RunningStability",
            "finite_difference_jacobian", "simulate_running", "RunningRun", "StrideRecord",
@@ -81,18 +98,6 @@ __all__ = ["running_cycle", "RunningCycle", "running_stability", "RunningStabili
 MAX_STEPS_PER_INTERVAL = 1000
 #: and by default
 STEPS_PER_INTERVAL = 8
-
-
-def _phase_constraints(c: RunningController, u, extra, names):
-    """The torque limit (without saturation; a robot without one has none) after the
-    phase's own constraints."""
-    lim = c.torque_limit
-    if c.saturate or not np.isfinite(lim):
-        return extra, names
-    cons = ca.vertcat(extra, lim - u, lim + u)
-    nu = c.model.nu
-    return cons, names + tuple(f"torque u{i + 1} <= {lim:g} N m" for i in range(nu)) \
-        + tuple(f"torque u{i + 1} >= -{lim:g} N m" for i in range(nu))
 
 
 def _real(name, v, low=0.0, strict=True, top=None) -> float:
@@ -148,18 +153,6 @@ def _state(name, v, n: int) -> np.ndarray:
     return x
 
 
-def _start(n: int, gains, clock_origin: float | None = None) -> ca.Function:
-    """Entry of a domain: X0 = x, p = the gains; with ``clock_origin`` (the domains under
-    the flight law), also the law's clock at entry, s - ``clock_origin`` (s the time since
-    the domain's ``clock_from`` entry: the switch to the flight law, or the landing)."""
-    x = ca.SX.sym("x", n)
-    k = ca.DM(np.asarray(gains, float))
-    if clock_origin is None:
-        return ca.Function("running_start", [x], [x, k])
-    s = ca.SX.sym("s")
-    return ca.Function("running_start", [x, s], [x, ca.vertcat(k, s - clock_origin)])
-
-
 class RunningCycle(HybridCycle):
     """The running stride map of :func:`running_cycle`, retunable.
 
@@ -170,7 +163,7 @@ class RunningCycle(HybridCycle):
     Parameters
     ----------
     domains : sequence of Domain
-        Stance, push-off and flight, as :func:`running_cycle` builds them (it also sets
+        The domains as :func:`running_cycle` builds them (it also sets
         the attributes below).
 
     Attributes
@@ -178,7 +171,15 @@ class RunningCycle(HybridCycle):
     controller : RunningController
         The law at the cycle's gains.
     mu, friction_slack : float
-        The friction coefficient and the cone's slack near takeoff, N.
+        The friction coefficient and the cone's slack near takeoff, N (0 with sliding).
+    sliding : bool
+        Whether the stance foot slides where it reaches the cone (module docstring).
+    laws : tuple of str
+        Each domain's law, 'stance' or 'flight'.
+    starts : list of callable
+        Each domain's start at given gains (:meth:`retuned`).
+    flight_clock : str
+        As :func:`running_cycle`.
     """
 
     @property
@@ -210,8 +211,8 @@ class RunningCycle(HybridCycle):
         check_rk4_steps(c, self.rk4_steps)
         new = copy.copy(self)
         new.controller = c
-        new.domains = [dataclasses.replace(d, start=_start(d.n, c.gains, origin))
-                       for d, origin in zip(self.domains, self.clock_origins)]
+        new.domains = [dataclasses.replace(d, start=make(c.gains))
+                       for d, make in zip(self.domains, self.starts)]
         new._fns = []
         for d, f in zip(new.domains, self._fns):
             g = copy.copy(f)
@@ -223,7 +224,7 @@ class RunningCycle(HybridCycle):
 def running_cycle(controller: RunningController, mu: float | None = None,
                   steps_per_interval: int = STEPS_PER_INTERVAL, friction_slack: float | None = None,
                   time_limits: float = 2.0, tolerance: float = 1e-9,
-                  flight_clock: str = "takeoff") -> RunningCycle:
+                  flight_clock: str = "takeoff", sliding: bool = True) -> RunningCycle:
     """The stride map of a running gait under a tracking controller (module docstring).
 
     Parameters
@@ -235,7 +236,9 @@ def running_cycle(controller: RunningController, mu: float | None = None,
     steps_per_interval : int
         RK4 steps per collocation interval of each phase.
     friction_slack : float, optional
-        How far ``|Fx|`` may exceed mu Fz in stance, N (default 1 % of the weight).
+        How far ``|Fx|`` may exceed mu Fz with the foot pinned, N.  With ``sliding`` it
+        must be 0 (the default: the foot slides where the cone is reached); without, the
+        default is 1 % of the weight (the model before sliding).
     time_limits : float
         Each phase must end within this many times its reference duration.
     tolerance : float
@@ -247,126 +250,65 @@ def running_cycle(controller: RunningController, mu: float | None = None,
         with t the time since landing, so that a takeoff earlier or later than the
         reference's does not shift the flight reference (the law's torque is continuous
         through the takeoff where the gait's is).
+    sliding : bool
+        Let the stance foot slide where it needs more friction than the ground gives
+        (the default; module docstring); False: the model before sliding, the foot
+        pinned to the takeoff with the cone's slack ``friction_slack``.
 
     Returns
     -------
     RunningCycle
-        Stance, push-off and flight; its state is the stance state (q, dq) at landing.
+        Stance, slide, push-off (sliding) and flight; without ``sliding``, stance,
+        push-off and flight.  Its state is the stance state (q, dq) at landing.
     """
     c = controller
     if not isinstance(c, RunningController):
         raise TypeError(f"controller must be a RunningController, got {type(c).__name__}")
-    m, fl, g = c.model, c.fl, c.gait
-    nq, ne, nu = m.nq, fl.ne, m.nu
+    m, g = c.model, c.gait
     if mu is None:
         mu = float(getattr(getattr(g, "options", None), "mu", 0.6))
     mu = _real("mu", mu)
     if flight_clock not in FLIGHT_CLOCKS:
         raise ValueError(f"flight_clock must be one of {', '.join(FLIGHT_CLOCKS)}, got "
                          f"{flight_clock!r}")
-    origin = float(g.T_stance) if flight_clock == "stride" else 0.0
-    clock_from = 0 if flight_clock == "stride" else 1     # landing, or the law's switch
+    if not isinstance(sliding, (bool, np.bool_)):
+        raise ValueError(f"sliding must be True or False, got {sliding!r}")
     _count("steps_per_interval", steps_per_interval, 1, MAX_STEPS_PER_INTERVAL)
     _real("time_limits", time_limits, 1.0)
     _real("tolerance", tolerance, strict=False)
     weight = m.description.total_mass * m.description.gravity
-    slack = 0.01 * weight if friction_slack is None else _real("friction_slack",
-                                                              friction_slack, strict=False)
-    t, k = ca.SX.sym("t"), ca.SX.sym("k", 3 * nu)
-
-    # ---- stance
-    X = ca.SX.sym("X", 2 * nq)
-    q, dq = X[:nq], X[nq:]
-    u = c.stance_law_k(q, dq, t, k)
-    ua = c.applied(u)
-    f_st = ca.Function("running_stance", [X, t, k],
-                       [ca.vertcat(dq, m.forward_dynamics(q, dq, ua))])
-    Fz, Fx = fl.takeoff_guard(q, dq, ua)
-    g_st = ca.Function("normal_force", [X, t, k], [Fz])
-    cons, names = _phase_constraints(
-        c, u, ca.vertcat(Fz, *_on_ground(m, mu, slack, q, Fz, Fx)),
-        ("stance normal force",) + _ON_GROUND)
-    c_st = ca.Function("stance_constraints", [X, t, k], [cons])
-    x = ca.SX.sym("x", 2 * nq)
+    slack = (0.0 if sliding else 0.01 * weight) if friction_slack is None else \
+        _real("friction_slack", friction_slack, strict=False)
+    if sliding and slack:
+        raise ValueError(f"friction_slack must be 0 with sliding (the foot slides where it "
+                         f"reaches the cone; sliding=False pins it), got {friction_slack!r}")
     h_st = float(g.T_stance) / (c.stance.n_intervals * steps_per_interval)
     h_fl = float(g.T_flight) / (c.flight.n_intervals * steps_per_interval)
     check_rk4_steps(c, dict(stance=h_st, flight=h_fl))
-    stance = Domain("stance", 2 * nq, f_st, g_st, ca.Function("switch", [x], [x]), h_st,
-                    time_limits * float(g.T_stance),
-                    start=_start(2 * nq, c.gains), constraints=c_st, constraint_names=names,
-                    guard_name="stance normal force", tolerance=tolerance,
-                    dense_constraints=names, dense_guard=True)
-    pushoff = _pushoff_domain(c, mu, slack, h_fl, time_limits * float(g.T_stance), tolerance,
-                              origin, clock_from)
-
-    # ---- flight
-    Y = ca.SX.sym("Y", 2 * ne)
-    qe, dqe = Y[:ne], Y[ne:]
-    kf = ca.SX.sym("k", 3 * nu + 1)              # the gains, then the law's clock at entry
-    uf = c.flight_law_k(qe, dqe, t + kf[-1], kf[:-1])
-    f_fl = ca.Function("running_flight", [Y, t, kf],
-                       [ca.vertcat(dqe, fl.flight_dynamics(qe, dqe, c.applied(uf)))])
-    feet = fl.feet(qe)
-    g_fl = ca.Function("swing_foot_height", [Y, t, kf], [feet[1, 1]])
-    cons, names = _phase_constraints(c, uf, feet[1, 0], ("other foot height",))
-    c_fl = ca.Function("flight_constraints", [Y, t, kf], [cons])
-    y = ca.SX.sym("y", 2 * ne)
-    qp, dqp, F, _, v_other, _ = fl.landing_swing(y[:ne], y[ne:])
-    r_fl = ca.Function("landing", [y], [ca.vertcat(qp, dqp)])
-    e_fl = ca.Function("landing_checks", [y],
-                       [ca.vertcat(F[1], mu * F[1] - F[0], mu * F[1] + F[0], v_other[1])])
-    flight = Domain("flight", 2 * ne, f_fl, g_fl, r_fl, h_fl, time_limits * float(g.T_flight),
-                    start=_start(2 * ne, c.gains, origin), constraints=c_fl,
-                    constraint_names=names,
-                    exit_constraints=e_fl,
-                    exit_constraint_names=("landing normal impulse",
-                                           "landing impulse in the cone (Fx <= mu Fz)",
-                                           "landing impulse in the cone (-Fx <= mu Fz)",
-                                           "other foot's lift-off velocity"),
-                    guard_name="swing foot height", tolerance=tolerance,
-                    dense_constraints=names, dense_guard=True, clock_from=clock_from)
-    cyc = RunningCycle([stance, pushoff, flight])
-    cyc.controller, cyc.mu, cyc.friction_slack = c, mu, slack
-    cyc.clock_origins, cyc.flight_clock = (None, origin, origin), flight_clock
+    t_st, tol = time_limits * float(g.T_stance), tolerance
+    origin = float(g.T_stance) if flight_clock == "stride" else 0.0
+    switch = 2 if sliding else 1                 # the push-off: where the flight law starts
+    clock_from = 0 if flight_clock == "stride" else switch
+    n, ne = 2 * m.nq, 2 * c.fl.ne
+    domains = [rd.stance_domain(c, mu, slack, h_st, t_st, tol, sliding)]
+    starts = [partial(rd.start, n)]
+    if sliding:
+        domains += [rd.slide_domain(c, "stance", mu, h_st, t_st, tol, 0.0, 0, "slide"),
+                    rd.slide_domain(c, "flight", mu, h_fl, t_st, tol, origin, clock_from,
+                                    "push-off")]
+        starts += [partial(rd.slide_start, c, "stance", clock_origin=0.0),
+                   partial(rd.slide_start, c, "flight", clock_origin=origin)]
+    else:
+        domains.append(rd.pushoff_domain(c, mu, slack, h_fl, t_st, tol, origin, clock_from))
+        starts.append(partial(rd.start, n, clock_origin=origin))
+    domains.append(rd.flight_domain(c, mu, h_fl, time_limits * float(g.T_flight), tol,
+                                    origin, clock_from))
+    starts.append(partial(rd.start, ne, clock_origin=origin))
+    cyc = RunningCycle(domains)
+    cyc.controller, cyc.mu, cyc.friction_slack, cyc.sliding = c, mu, slack, bool(sliding)
+    cyc.starts, cyc.flight_clock = starts, flight_clock
+    cyc.laws = ("stance",) + (("stance", "flight") if sliding else ("flight",)) + ("flight",)
     return cyc
-
-
-#: the constraints while the stance foot is on the ground, after its normal force
-_ON_GROUND = ("friction cone (Fx <= mu Fz)", "friction cone (-Fx <= mu Fz)",
-              "swing foot height")
-
-
-def _on_ground(m, mu, slack, q, Fz, Fx) -> tuple:
-    """The friction cone with its slack and the swing foot's height (:data:`_ON_GROUND`)."""
-    return mu * Fz - Fx + slack, mu * Fz + Fx + slack, m.swing_foot(q)[1]
-
-
-def _pushoff_domain(c: RunningController, mu, slack, h, t_max, tolerance, origin,
-                    clock_from) -> Domain:
-    """The push-off (module docstring): the stance foot on the ground under the flight
-    law, while the ground still pushes it."""
-    m, fl, nq, nu = c.model, c.fl, c.model.nq, c.model.nu
-    X, t = ca.SX.sym("X", 2 * nq), ca.SX.sym("t")
-    q, dq = X[:nq], X[nq:]
-    kf = ca.SX.sym("k", 3 * nu + 1)              # the gains, then the law's clock at the switch
-    qe, dqe = fl.takeoff(q, dq)
-    u = c.flight_law_k(qe, dqe, t + kf[-1], kf[:-1])
-    ua = c.applied(u)
-    Fz, Fx = fl.takeoff_guard(q, dq, ua)
-    cons, names = _phase_constraints(c, u, ca.vertcat(*_on_ground(m, mu, slack, q, Fz, Fx)),
-                                     _ON_GROUND)
-    x = ca.SX.sym("x", 2 * nq)
-    qe, dqe = fl.takeoff(x[:nq], x[nq:])
-    return Domain("push-off", 2 * nq,
-                  ca.Function("running_pushoff", [X, t, kf],
-                              [ca.vertcat(dq, m.forward_dynamics(q, dq, ua))]),
-                  ca.Function("normal_force", [X, t, kf], [Fz]),
-                  ca.Function("takeoff", [x], [ca.vertcat(qe, dqe)]), h, t_max,
-                  start=_start(2 * nq, c.gains, origin),
-                  constraints=ca.Function("pushoff_constraints", [X, t, kf], [cons]),
-                  constraint_names=names, guard_name="stance normal force",
-                  tolerance=tolerance, dense_constraints=names, dense_guard=True,
-                  clock_from=clock_from, may_be_empty=True)
 
 
 # ------------------------------------------------------------------ fixed point
@@ -527,6 +469,10 @@ class StrideRecord:
         Lowest height of the pushing foot in flight, m (likewise).
     landing_impulse_ratio : float
         ``|Fx|`` / Fz of the landing impulse.
+    slip : float
+        How long the stance foot slid before it left the ground, s (0 without sliding).
+    slide : float
+        How far it slid, m (signed, forward positive; 0 without sliding).
     """
 
     deviation: float
@@ -541,6 +487,8 @@ class StrideRecord:
     swing_min: float
     other_foot_min: float
     landing_impulse_ratio: float
+    slip: float = 0.0
+    slide: float = 0.0
 
 
 @dataclass
@@ -587,9 +535,9 @@ def _time_above(t, e) -> float:
 
 
 def _phases(durations) -> np.ndarray:
-    """(stance, flight) from the three domains' durations: the stance foot is on the
-    ground in the stance and the push-off."""
-    return np.array([durations[0] + durations[1], durations[2]])
+    """(stance, flight) from the domains' durations: the stance foot is on the ground in
+    every domain but the flight, the last."""
+    return np.array([float(np.sum(durations[:-1])), durations[-1]])
 
 
 def _lowest(nodes, ps, name: str) -> float:
@@ -597,12 +545,30 @@ def _lowest(nodes, ps, name: str) -> float:
     return float(min([np.min(nodes), *(v for _, n, v in ps.dips if n == name)]))
 
 
+def _ground_pass(cycle, ps, phase: str):
+    """The torques the law asked for and the swing foot's heights at the nodes of a pass
+    with the stance foot on the ground after the pinned stance (a slide, a push-off)."""
+    c = cycle.controller
+    fl, nq, ne = c.fl, c.model.nq, c.fl.ne
+    X, t = ps.nodes, ps.times
+    N = t.size
+    if X.shape[0] == 2 * nq:                     # the foot pinned: stance coordinates
+        qe, dqe = (np.array(v) for v in fl.takeoff.map(N)(X[:nq], X[nq:]))
+    else:
+        qe, dqe = X[:ne], X[ne:]
+    tt = t[None, :] + ps.parameters[-1]
+    u = np.array(c.stance_law.map(N)(qe[:nq], dqe[:nq], tt) if phase == "stance"
+                 else c.flight_law.map(N)(qe, dqe, tt))
+    zsw = np.array(fl.feet.map(N)(qe))[1, 1::2]
+    return u, zsw
+
+
 def _margins(cycle: HybridCycle, passes) -> dict:
     """The constraints' margins along a recorded stride."""
     c = cycle.controller
     m, fl = c.model, c.fl
     nq, ne = m.nq, fl.ne
-    st, po, fli = passes
+    st, fli = passes[0], passes[-1]
     Xs, ts = st.nodes, st.times
     N = ts.size
     us = np.array(c.stance_law.map(N)(Xs[:nq], Xs[nq:], ts[None, :]))
@@ -611,27 +577,28 @@ def _margins(cycle: HybridCycle, passes) -> dict:
     weight = m.description.total_mass * m.description.gravity
     loaded = Fz > 0.01 * weight
     zsw = np.array(m.swing_foot.map(N)(Xs[:nq])[1]).ravel()
-    Xp, tp = po.nodes, po.times
-    qe, dqe = fl.takeoff.map(tp.size)(Xp[:nq], Xp[nq:])
-    up = np.array(c.flight_law.map(tp.size)(qe, dqe, tp[None, :] + po.parameters[-1]))
-    zsp = np.array(m.swing_foot.map(tp.size)(Xp[:nq])[1]).ravel()
+    ground = [(ps, *_ground_pass(cycle, ps, law))
+              for ps, law in zip(passes[1:-1], cycle.laws[1:-1])]
     Yf, tf = fli.nodes, fli.times
     Nf = tf.size
     uf = np.array(c.flight_law.map(Nf)(Yf[:ne], Yf[ne:], tf[None, :] + fli.parameters[-1]))
     feet = np.array(fl.feet.map(Nf)(Yf[:ne]))
     y = fli.exit_state
     F = np.array(fl.landing_swing(y[:ne], y[ne:])[2]).ravel()
+    timed = [(ts, us), *((ps.times, u) for ps, u, _ in ground), (tf, uf)]
     return dict(fz_min=float(Fz[:-1].min()),
                 friction_ratio_max=float(np.max(np.abs(Fx[loaded]) / Fz[loaded], initial=0.0)),
                 friction_excess_max=float(np.max(np.abs(Fx) - cycle.mu * Fz)),
-                torque_max=float(max(np.abs(us).max(), np.abs(up).max(), np.abs(uf).max())),
+                torque_max=float(max(np.abs(u).max() for _, u in timed)),
                 saturated_time=sum(_time_above(tt, np.abs(uu).max(axis=0) - c.torque_limit)
-                                   for tt, uu in ((ts, us), (tp, up), (tf, uf)))
+                                   for tt, uu in timed)
                 if np.isfinite(c.torque_limit) else 0.0,               # no limit: never
                 swing_min=min(_lowest(zsw, st, "swing foot height"),
-                              _lowest(zsp, po, "swing foot height")),
+                              *(_lowest(z, ps, "swing foot height") for ps, _, z in ground)),
                 other_foot_min=_lowest(feet[1, 0::2], fli, "other foot height"),
-                landing_impulse_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else float("inf"))
+                landing_impulse_ratio=float(abs(F[0]) / F[1]) if F[1] > 0 else float("inf"),
+                slip=float(sum(ps.duration for ps in passes[1:-1])) if cycle.sliding else 0.0,
+                slide=float(fli.entry[nq]))
 
 
 def simulate_running(cycle: HybridCycle, x_star, start, strides: int = 20) -> RunningRun:
@@ -676,7 +643,7 @@ def simulate_running(cycle: HybridCycle, x_star, start, strides: int = 20) -> Ru
         devs.append(float(np.max(np.abs(x - xs))))
         recs.append(StrideRecord(deviation=devs[-2], next_deviation=devs[-1],
                                  durations=tuple(_phases(sv.durations).tolist()),
-                                 pushoff=float(sv.durations[1]),
+                                 pushoff=float(sv.durations[-2]),
                                  **_margins(cycle, sv.passes)))
     d = np.array(devs)
     with np.errstate(divide="ignore", invalid="ignore"):

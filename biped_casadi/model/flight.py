@@ -54,6 +54,12 @@ class FlightModel:
     (links and point masses, rotors excluded, as ``model.angular_momentum``);
     ``points(qe)`` (2 x npts, the order of ``model.point_names``);
 
+    ``sliding_dynamics(qe, dqe, u, mu_s)`` -> (ddqe, Fz): the stance foot held at
+    z_st = 0 and sliding under the ground force (mu_s Fz, Fz), the solution of
+    De ddqe + He = Be u + e_x mu_s Fz + e_z Fz, ddz_st = 0 (e_x, e_z the base's
+    coordinates); with mu_s the ratio Fx / Fz of ``takeoff_guard`` at a state with the
+    foot at rest it gives the pinned foot's ``forward_dynamics`` and ddx_st = 0;
+
     ``takeoff(q, dq)`` -> (qe, dqe): a stance state in extended coordinates (base at
     the stance foot, at the origin of the stance frame, with zero velocity);
     ``takeoff_guard(q, dq, u)`` -> (Fz, Fx): the ground force on the stance foot
@@ -136,6 +142,21 @@ class FlightModel:
         self.energy = _fn("energy", [qe, dqe], [K, V, K + V], ["qe", "dqe"], ["K", "V", "E"])
         self.points = _fn("points", [qe], [ca.horzcat(*kin.points.values())], ["qe"], ["P"])
         self._build_momentum(qe, dqe)
+        self._build_sliding(qe, dqe, u, He)
+
+    def _build_sliding(self, qe, dqe, u, He):
+        """The stance foot sliding on the ground: held on it vertically (z_st = 0, one
+        holonomic constraint), the tangential force Coulomb's, Fx = mu_s Fz."""
+        n = self.nq
+        mu_s = ca.SX.sym("mu_s")
+        ex, ez = ca.DM.zeros(self.ne), ca.DM.zeros(self.ne)
+        ex[n], ez[n + 1] = 1, 1
+        # [De  -(ez + mu_s ex); ez' 0] [ddqe; Fz] = [Be u - He; 0]  (dJ = 0: J is constant)
+        A = ca.blockcat([[self._De, -(ez + mu_s * ex)], [ez.T, ca.SX.zeros(1, 1)]])
+        sol = ca.solve(A, ca.vertcat(ca.mtimes(ca.DM(self.Be), u) - He, 0))
+        self.sliding_dynamics = _fn("sliding_dynamics", [qe, dqe, u, mu_s],
+                                    [sol[:self.ne], sol[self.ne]],
+                                    ["qe", "dqe", "u", "mu_s"], ["ddqe", "Fz"])
 
     def _build_momentum(self, qe, dqe):
         """Centre of mass, its velocity and the angular momentum about a point."""

@@ -1,0 +1,148 @@
+"""The stance foot sliding near takeoff (analysis.stability.running_cycle with
+``sliding``, biped_casadi.model.flight's ``sliding_dynamics``): the sliding dynamics
+against the pinned foot's and the energy balance, a stride whose pinned foot would
+leave the cone sliding instead, and the slip that stops before takeoff refused."""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from biped_casadi.model import flight_model
+from analysis.stability.hybrid_cycle import HybridCycle, HybridCycleError
+from analysis.stability.running_cycle import (finite_difference_jacobian, running_cycle,
+                                              running_stability)
+from analysis.stability.running_domains import SLIP_STOP
+
+
+@pytest.fixture(scope="session")
+def star(running_cycle15):
+    return running_stability(running_cycle15)
+
+
+def _states(model, k=4, seed=0):
+    rng = np.random.default_rng(seed)
+    for _ in range(k):
+        yield (rng.normal(size=model.nq) * 0.3, rng.normal(size=model.nq),
+               rng.normal(size=model.nu) * 20)
+
+
+def test_sliding_at_the_pinned_foots_ratio_is_the_pinned_dynamics(model):
+    """With the friction ratio the pinned foot needs (Fx / Fz of ``takeoff_guard``), the
+    sliding foot does not accelerate along the ground and the joints move as pinned."""
+    fl = flight_model(model)
+    nq = model.nq
+    for q, dq, u in _states(model):
+        Fz, Fx = (float(v) for v in fl.takeoff_guard(q, dq, u))
+        ddq = np.array(model.forward_dynamics(q, dq, u)).ravel()
+        qe, dqe = fl.takeoff(q, dq)
+        dde, Fs = fl.sliding_dynamics(qe, dqe, u, Fx / Fz)
+        dde = np.array(dde).ravel()
+        assert np.abs(dde[:nq] - ddq).max() < 1e-9 * max(1.0, np.abs(ddq).max())
+        assert np.abs(dde[nq:]).max() < 1e-9
+        assert abs(float(Fs) - Fz) < 1e-9 * max(1.0, abs(Fz))
+
+
+def test_sliding_power_balance(model):
+    """dE/dt along the sliding dynamics is the joints' power plus the friction force's
+    (the normal force does no work: the foot stays on the ground), from the energy's
+    own expression, for any slip velocity and friction ratio."""
+    fl = flight_model(model)
+    nq, ne = model.nq, fl.ne
+    qe, dqe, u, mus = (ca.SX.sym("qe", ne), ca.SX.sym("dqe", ne), ca.SX.sym("u", model.nu),
+                       ca.SX.sym("mu_s"))
+    dde, Fz = fl.sliding_dynamics(qe, dqe, u, mus)
+    E = fl.energy(qe, dqe)[2]
+    dE = ca.jtimes(E, ca.vertcat(qe, dqe), ca.vertcat(dqe, dde))
+    work = ca.dot(ca.mtimes(ca.DM(fl.Be), u), dqe) + mus * Fz * dqe[nq]
+    f = ca.Function("balance", [qe, dqe, u, mus], [dE, work, Fz * mus * dqe[nq]])
+    rng = np.random.default_rng(1)
+    for q, dq, uu in _states(model):
+        x = np.r_[q, rng.normal(), 0.0]
+        v = np.r_[dq, rng.normal(), 0.0]
+        a, b, friction = (float(w) for w in f(x, v, uu, rng.uniform(-0.8, 0.8)))
+        assert abs(a - b) < 1e-9 * max(1.0, abs(a))
+        assert abs(friction) > 1e-3                  # the friction's work is in the test
+
+
+def test_a_stride_slides_where_the_pinned_foot_leaves_the_cone(running_cycle15, star, model):
+    """x* + 0.01 rad/s on every velocity: pinned without a slack, the stance leaves the
+    friction cone before takeoff (the old model stopped there, or carried a slack);
+    with sliding the stride runs, the cone is never exceeded beyond round-off with the
+    foot pinned, the sliding foot's force is on the cone's edge against its velocity,
+    and the Jacobian through the slide is exact."""
+    cyc, nq = running_cycle15, model.nq
+    c, fl = cyc.controller, cyc.controller.fl
+    x = star.fixed_point.copy()
+    x[nq:] += 1e-2
+    pinned = running_cycle(c, sliding=False, friction_slack=0.0)
+    with pytest.raises(HybridCycleError, match=r"friction cone"):
+        pinned.stride(x)
+    sv = cyc.stride(x, record=True)
+    st, sl, po, fli = sv.passes
+    assert sl.duration > 1e-5                                    # 1.26 ms measured
+    N = st.times.size
+    u = c.applied(c.stance_law.map(N)(st.nodes[:nq], st.nodes[nq:], st.times[None, :]))
+    Fz, Fx = (np.array(v).ravel() for v in fl.takeoff_guard.map(N)(st.nodes[:nq],
+                                                                   st.nodes[nq:], u))
+    assert np.max(np.abs(Fx) - cyc.mu * Fz) < 1e-9
+    assert abs(abs(Fx[-1]) - cyc.mu * Fz[-1]) < 1e-9 and Fz[-1] > 0    # slides on the edge
+    sigma = sl.parameters[-2]
+    assert sigma == np.sign(Fx[-1]) and po.parameters[-2] == sigma
+    v = sl.nodes[fl.ne + nq]                                     # the slip velocity
+    assert np.all(-sigma * v >= -1e-9) and -sigma * v[-1] > 0
+    assert fli.entry[nq] == pytest.approx(sl.nodes[nq, -1] if po.duration == 0
+                                          else po.exit_state[nq])
+    J = finite_difference_jacobian(cyc, x, 1e-6)
+    A = cyc.linearise(x).A
+    assert np.abs(J - A).max() / np.abs(A).max() < 1e-6
+
+
+def test_at_the_fixed_point_the_foot_slides_briefly(running_cycle15, star):
+    """The closed loop's own orbit is not the collocated one: Fx is not 0 where Fz
+    vanishes, so its takeoff slides (a few microseconds)."""
+    assert star.status == "stable"
+    d = running_cycle15.stride(star.fixed_point).durations
+    assert 0 < d[1] < 1e-4
+
+
+def test_a_slip_that_stops_before_takeoff_is_refused(running_cycle15, star, model):
+    """The slide under the stance law entered mid-stance (the landing state, Fz ~ the
+    weight) with the foot moving at 1 cm/s: friction stops it long before Fz reaches 0,
+    and the stride is refused with the named reason (stick-slip is not modelled)."""
+    cyc, nq = running_cycle15, model.nq
+    fl = cyc.controller.fl
+    qe, dqe = (np.array(v).ravel() for v in fl.takeoff(star.fixed_point[:nq],
+                                                      star.fixed_point[nq:]))
+    dqe[nq] = 0.01
+    with pytest.raises(HybridCycleError, match=r"^domain 'slide': slip velocity \(the "
+                       r"sliding foot stops before takeoff: stick-slip not modelled\) "
+                       r"violated at t = "):
+        HybridCycle([cyc.domains[1]]).stride(np.r_[qe, dqe])
+    assert SLIP_STOP.startswith("slip velocity")
+
+
+def test_the_slack_is_the_pinned_models(running_cycle15):
+    c = running_cycle15.controller
+    assert running_cycle15.sliding and running_cycle15.friction_slack == 0.0
+    with pytest.raises(ValueError, match="friction_slack must be 0 with sliding"):
+        running_cycle(c, friction_slack=3.0)
+    with pytest.raises(ValueError, match="sliding must be"):
+        running_cycle(c, sliding="yes")
+
+
+def test_the_stride_clock_slides_too(running_cycle15, model):
+    """With the stance's clock continued through the flight, the sliding push-off and the
+    flight take the law's time from the landing: the fixed point closes and its exact
+    Jacobian, through the slide, is the central differences'."""
+    cyc = running_cycle(running_cycle15.controller, flight_clock="stride")
+    assert cyc.domains[2].clock_from == 0 and cyc.domains[3].clock_from == 0
+    r = running_stability(cyc)
+    assert r.status in ("stable", "unstable") and r.residual < 1e-10
+    sv = cyc.stride(r.fixed_point, record=True)
+    assert sv.durations[1] > 0                                 # it slides
+    g = cyc.controller.gait
+    assert sv.passes[3].parameters[-1] == pytest.approx(
+        sum(sv.durations[:3]) - g.T_stance, abs=1e-15)
+    J = finite_difference_jacobian(cyc, r.fixed_point, 1e-5)
+    assert np.abs(J - r.A).max() < 1e-6 * np.abs(r.A).max()
