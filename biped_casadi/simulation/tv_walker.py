@@ -586,8 +586,6 @@ class ZeroDynamicsWalker:
 
             fs = [self.margin.function(rk4, margins),
                   dip_function(rk4, lambda Z, t, p: self.model.swing_foot(point(Z, t, p)[0]))]
-            if self.jit:                 # compiled once per content, kept in the cache
-                fs = compiled(fs, "-O1")
             self._dense_fns = tuple(FastCall(f) for f in fs)
         return self._dense_fns
 

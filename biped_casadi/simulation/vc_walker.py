@@ -480,8 +480,6 @@ class VirtualConstraintWalker:
             fs = [self.margin.function(rk4, margins), dip_function(
                 rk4, lambda Z, thv, p: self.model.swing_foot(self._point(thv, Z[0], p[:-1],
                                                                           p[-1])[0]))]
-            if self._jit:                # compiled once per content, kept in the cache
-                fs = compiled(fs, "-O1")
             self._dense_fns = tuple(FastCall(f) for f in fs)
         return self._dense_fns
 
