@@ -30,7 +30,8 @@ import os
 import casadi as ca
 import numpy as np
 
-__all__ = ["Diagnostics", "strike", "locate_strike", "locate_minimum", "swing_foot_dip",
+__all__ = ["Diagnostics", "strike", "locate_strike", "locate_minimum", "foot_may_dip",
+           "swing_foot_dip",
            "SCREEN_SAFETY", "screen_steps", "screen_far", "minima_between", "SUB_STEPS",
            "SAMPLED_TOL", "minima_sampled", "golden_minimum", "mapped", "threads",
            "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
@@ -508,12 +509,46 @@ def minima_sampled(near, between, h: float, first, last, samples: int = SUB_STEP
     return sorted(found)
 
 
+def foot_may_dip(z_prev, dz_a, dz_b, dt, ground=None) -> np.ndarray:
+    """Which steps between two nodes may hold a minimum of the swing foot below the ground.
+
+    A minimum is where the foot's vertical velocity goes from dz_a <= 0 at a step's first
+    node to dz_b > 0 at its last.  While that velocity stays above dz_a in the step (it
+    rises to dz_b), the foot goes below its height at the first node by at most |dz_a| dt
+    (dt the step's duration); a step is flagged where that height less
+    :data:`SCREEN_SAFETY` times this is below the higher of the ground's two heights
+    (:func:`ground_height`), or where any of them is NaN.  An estimate as
+    :func:`screen_steps`: a foot's minimum a few centimetres above the ground is not
+    refined.
+
+    Parameters
+    ----------
+    z_prev, dz_a, dz_b : array_like
+        Per step: the foot's height at its first node, its vertical velocity there and at
+        its last node (m, m/s).
+    dt : array_like
+        The steps' durations, s (broadcastable against ``z_prev``).
+    ground : tuple, optional
+        (ahead, behind) ground heights, each broadcastable against ``z_prev``; None: flat.
+
+    Returns
+    -------
+    numpy.ndarray of bool
+        ``z_prev``'s shape: True where the step's minimum is to be located.
+    """
+    top = 0.0 if ground is None else np.maximum(ground[0], ground[1])
+    with np.errstate(invalid="ignore"):
+        low = np.asarray(z_prev) + SCREEN_SAFETY * np.asarray(dz_a) * dt
+        return (np.asarray(dz_a) <= 0) & (np.asarray(dz_b) > 0) & ~(low >= top)
+
+
 def swing_foot_dip(dip, h: float, step_start, z_prev, dz_a, dz_b, ground, scuff_zone: float,
-                   scuffing_ignored: bool, tolerance: float):
+                   scuffing_ignored: bool, tolerance: float, steps=None):
     """The first of the swing foot's minima between two nodes that is below the ground.
 
     The minima are in the steps where the foot's vertical velocity goes from <= 0 at the
-    first node to > 0 at the last (:func:`locate_minimum`).  Below the ground (measured
+    first node to > 0 at the last (:func:`locate_minimum`), those of them that may be below
+    the ground (:func:`foot_may_dip`).  Below the ground (measured
     from the ground under the foot there, :func:`ground_height`) it is a 'strike' when
     the foot was above it at the step's first node and is beyond ``scuff_zone`` (it
     crossed the ground going down: the strike is the first root before the minimum),
@@ -539,13 +574,17 @@ def swing_foot_dip(dip, h: float, step_start, z_prev, dz_a, dz_b, ground, scuff_
         ``model.scuffing_ignored``.
     tolerance : float
         How far below the ground the foot may graze, m.
+    steps : array_like of bool, optional
+        The steps to look at; default: :func:`foot_may_dip` with durations h.
 
     Returns
     -------
     tuple or None
         (j, 'strike' or 'scuffed', eta, z_sw, x_sw, X_eta) at the minimum.
     """
-    for j in np.flatnonzero((dz_a <= 0) & (dz_b > 0)):
+    if steps is None:
+        steps = foot_may_dip(z_prev, dz_a, dz_b, h, ground)
+    for j in np.flatnonzero(steps):
         Xa, ta = step_start(j)
 
         def rate(eta, Xa=Xa, ta=ta):

@@ -30,8 +30,8 @@ import casadi as ca
 import numpy as np
 
 from ..numerics import FastCall
-from .kernel import (SCREEN_SAFETY, minima_between, minima_sampled, screen_steps,
-                     swing_foot_dip)
+from .kernel import (SCREEN_SAFETY, foot_may_dip, minima_between, minima_sampled,
+                     screen_steps, swing_foot_dip)
 from .validity import FRICTION_TOL, between_message
 
 __all__ = ["MarginCheck", "dip_function", "foot_dips"]
@@ -269,7 +269,7 @@ def dip_function(rk4, foot) -> ca.Function:
 
 
 def foot_dips(dip, h, step, z_prev, dz_a, dz_b, stop, ground, scuff_zone: float,
-              limits) -> dict:
+              limits, dt=None) -> dict:
     """Per scenario of a batch, the first of the swing foot's minima between two nodes
     that is below the ground (:func:`~biped_casadi.simulation.kernel.swing_foot_dip`).
 
@@ -292,6 +292,10 @@ def foot_dips(dip, h, step, z_prev, dz_a, dz_b, stop, ground, scuff_zone: float,
         ``model.scuff_zone`` (inf: every dip below the ground is a scuff), m.
     limits : Limits
         ``scuffing_ignored`` and ``ground_tolerance``.
+    dt : array_like, optional
+        The steps' durations, s, broadcastable to (s, K) (default h): the steps whose
+        minimum may be below the ground (:func:`~biped_casadi.simulation.kernel.
+        foot_may_dip`) are looked at.
 
     Returns
     -------
@@ -300,8 +304,9 @@ def foot_dips(dip, h, step, z_prev, dz_a, dz_b, stop, ground, scuff_zone: float,
     """
     K = z_prev.shape[1]
     h = np.broadcast_to(np.asarray(h, float), (len(z_prev),))
-    with np.errstate(invalid="ignore"):
-        cand = (dz_a <= 0) & (dz_b > 0) & (np.arange(K)[None, :] < np.asarray(stop)[:, None])
+    cand = foot_may_dip(z_prev, dz_a, dz_b, h[:, None] if dt is None else dt,
+                        (ground[0][:, None], ground[1][:, None])) \
+        & (np.arange(K)[None, :] < np.asarray(stop)[:, None])
     found = {}
     for i in np.flatnonzero(cand.any(axis=1)):
         n = int(stop[i])
@@ -309,7 +314,7 @@ def foot_dips(dip, h, step, z_prev, dz_a, dz_b, stop, ground, scuff_zone: float,
         got = swing_foot_dip(lambda X, t, eta, p=p: dip(X, t, eta, p), float(h[i]),
                              lambda j, i=i: step(i, j)[:2], z_prev[i, :n], dz_a[i, :n],
                              dz_b[i, :n], (ground[0][i], ground[1][i]), scuff_zone,
-                             limits.scuffing_ignored, limits.ground_tolerance)
+                             limits.scuffing_ignored, limits.ground_tolerance, cand[i, :n])
         if got is not None:
             found[int(i)] = got
     return found

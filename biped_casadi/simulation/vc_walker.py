@@ -442,9 +442,10 @@ class VirtualConstraintWalker:
         def node(i, j):              # step j's first node of scenario i: (z, theta, p)
             return Z[:, i, j], st["theta"][i] + j * hs[i], np.r_[st["p"][i], self.t_c]
 
-        feet = foot_dips(lambda *a: self._dense()[1](*a), np.abs(hs), node, rows["zsw"][:, :-1], rows["dzsw"][:, :-1],
-                         rows["dzsw"][:, 1:], stop, (st["ahead"], st["behind"]), np.inf,
-                         self.limits)
+        feet = foot_dips(lambda *a: self._dense()[1](*a), np.abs(hs), node,
+                         rows["zsw"][:, :-1], rows["dzsw"][:, :-1], rows["dzsw"][:, 1:], stop,
+                         (st["ahead"], st["behind"]), np.inf, self.limits,
+                         np.diff(Z[1], axis=1))      # the steps' durations
         for i, got in feet.items():
             stop[i] = got[0]         # the margins before the foot's dip
         R = self.margin.rows(st["Dg"])
