@@ -21,7 +21,9 @@ Both controllers run on their hybrid zero dynamics, batched over directions: tim
 designs on :mod:`biped_casadi.simulation.tv_walker` (exact for every output gain),
 virtual constraints on :mod:`biped_casadi.simulation.vc_walker` (exact with their
 phase-based correction).  Both walkers check every validity condition of the full-order
-simulator at their nodes; ``tests/test_robust.py`` compares their verdicts with it.
+simulator at their nodes, and as it does the swing foot, the stance force, the friction
+cone and the torques between them too (:mod:`biped_casadi.simulation.margins`);
+``tests/test_robust.py`` compares their verdicts with it.
 """
 from __future__ import annotations
 

@@ -67,14 +67,14 @@ from ..results import internal
 from .compiled_loop import compiled_closed_loop
 from .kernel import (CHUNKS_PER_STEP, SUB_STEPS, Diagnostics, locate_strike, strike,
                      swing_foot_dip)
-from .margins import MarginCheck
+from .margins import MarginCheck, dip_function
 from .options import SimulationOptions
 from .outcome import STATUSES, OutcomeRecorder, StepRecord, WalkOutcome
 from .perturbation import perturbed_initial_state
 from .terrain import ground_levels, step_heights
-from .validity import (STRIKE_MESSAGE, Limits, first_violation, impact_message,
-                       impact_violation, node_message, node_violations, start_violation,
-                       strike_violation)
+from .validity import (STRIKE_MESSAGE, Limits, between_message, first_violation,
+                       impact_message, impact_violation, node_message, node_violations,
+                       start_violation, strike_violation)
 
 __all__ = ["SimulationOptions", "StepRecord", "SimulationResult", "Simulator", "simulate",
            "simulator", "perturbed_initial_state", "STATUSES"]
@@ -285,10 +285,7 @@ class Simulator:
         dze = ca.jacobian(ze, eta)
         event = ca.Function("impact_event", [X, tau, eta, p], [ze, dze, Xe],
                             ["X", "tau", "eta", "p"], ["z_sw", "dz_deta", "X_event"])
-        dip = ca.Function("swing_foot_dip", [X, tau, eta, p],
-                          [ze, dze, ca.jacobian(dze, eta), m.swing_foot(Xe[:nq])[0], Xe],
-                          ["X", "tau", "eta", "p"],
-                          ["z_sw", "dz_deta", "d2z_deta2", "x_sw", "X_event"])
+        dip = dip_function(self.rk4, lambda Xv, t, pv: m.swing_foot(Xv[:nq]))
         # a block of n RK4 nodes and their diagnostics in one call: the first block of a
         # step spans T (where most steps end), then quarters of T
         blocks = []
@@ -558,10 +555,8 @@ class Simulator:
         if found is None:
             return None
         j, kind, eta, z, x, Xe = found
-        return j, kind, z if kind == "strike" else (
-            f"swing foot below the ground where it cannot strike (behind the stance foot, "
-            f"or already under the ground): x_sw = {x:.4f} m, z_sw = {z:.3g} m, between two "
-            f"RK4 nodes"), eta, Xe
+        return j, kind, z if kind == "strike" else between_message(
+            "scuffed", dict(xsw=x, zsw=z), lim), eta, Xe
 
 
 class _Log:

@@ -30,9 +30,11 @@ import os
 import casadi as ca
 import numpy as np
 
-__all__ = ["Diagnostics", "strike", "locate_strike", "locate_minimum", "swing_foot_dip",
-           "SCREEN_SAFETY", "screen_steps", "minima_between", "SUB_STEPS", "SAMPLED_TOL",
-           "minima_sampled", "golden_minimum", "mapped", "threads", "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
+__all__ = ["Diagnostics", "strike", "locate_strike", "locate_minimum", "foot_may_dip",
+           "swing_foot_dip",
+           "SCREEN_SAFETY", "screen_steps", "screen_far", "minima_between", "SUB_STEPS",
+           "SAMPLED_TOL", "minima_sampled", "golden_minimum", "mapped", "threads",
+           "NEWTON_ITERATIONS", "ground_height", "CHUNKS_PER_STEP"]
 
 #: CasADi calls per reference step duration T of the simulators' integration: each call
 #: integrates a quarter of T (the Poincaré section 0.75 T falls on a boundary); RK4 steps
@@ -301,34 +303,79 @@ def screen_steps(W, bounds) -> np.ndarray:
 
     An output c that dips inside a step of length h goes below its lower node value by at
     most max |c''| h^2 / 8; c'' h^2 is estimated by the second differences of the nodes
-    around (centred on the step's first node and on the one before, and their linear
-    extrapolation to the step's end).  A step is flagged where its lower node value less
-    :data:`SCREEN_SAFETY` times that bound is below the bound; the first step (no node
-    before it) always.  An estimate, not a proof: it holds while c'' changes by less than
+    around: centred on the step's first node and on the one before, and their linear
+    extrapolation to the step's end; for a step without a node before it (the first, or
+    after NaN rows: the nodes of a batch padded with them), centred on its last node and
+    the one after, and their extrapolation back to its start.  A step is flagged where
+    its lower node value less :data:`SCREEN_SAFETY` times that bound is below the bound,
+    and where no estimate can be made (fewer than three nodes, or a NaN); an output
+    above its bound by 3 max |c''| h^2 (over its nodes, NaN left out) at every node has
+    no step flagged.  An estimate, not a proof: it holds while c'' changes by less than
     that factor over three steps.
 
     Parameters
     ----------
     W : array_like
-        (n, m): the m outputs at n >= 2 consecutive nodes.
+        (n, ...): the outputs at n >= 2 consecutive nodes (axis 0), the last axis the m
+        outputs.
     bounds : array_like
         (m,) the outputs' lower bounds.
 
     Returns
     -------
     numpy.ndarray of bool
-        (n - 1, m): per step (from node i to i + 1), per output.
+        (n - 1, ...): per step (from node i to i + 1), per output.
     """
     W = np.asarray(W, float)
-    out = np.ones((W.shape[0] - 1,) + W.shape[1:], bool)
     if W.shape[0] < 3:
+        return np.ones((W.shape[0] - 1,) + W.shape[1:], bool)
+    far = screen_far(W, bounds)
+    if far.all():
+        return np.zeros((W.shape[0] - 1,) + W.shape[1:], bool)
+    if far.any():                               # the full screen where it may matter
+        out = np.zeros((W.shape[0] - 1,) + W.shape[1:], bool)
+        near = ~far
+        out[:, near] = screen_steps(W[:, near], np.broadcast_to(bounds, far.shape)[near])
         return out
-    d1 = W[2:] - 2 * W[1:-1] + W[:-2]            # c'' h^2 centred on steps 1.. first nodes
-    curv = np.abs(d1)
-    d0 = d1[:-1]                                    # ... and on the node before
-    curv[1:] = np.maximum(np.maximum(curv[1:], np.abs(d0)), np.abs(2 * d1[1:] - d0))
-    out[1:] = np.minimum(W[1:-1], W[2:]) - (SCREEN_SAFETY / 8) * curv < bounds
-    return out
+    d1 = W[2:] - 2 * W[1:-1] + W[:-2]           # c'' h^2 centred on nodes 1 .. n - 2
+    back = np.full((W.shape[0] - 1,) + W.shape[1:], np.nan)
+    fwd = back.copy()
+    back[1:] = np.abs(d1)                        # step i: on its first node i ...
+    back[2:] = np.fmax(np.fmax(back[2:], np.abs(d1[:-1])),   # ... and on node i - 1
+                       np.abs(2 * d1[1:] - d1[:-1]))
+    fwd[:-1] = np.abs(d1)                        # step i: on its last node i + 1 ...
+    fwd[:-2] = np.fmax(np.fmax(fwd[:-2], np.abs(d1[1:])),    # ... and on node i + 2
+                       np.abs(2 * d1[:-1] - d1[1:]))
+    curv = np.where(np.isnan(back), fwd, back)
+    with np.errstate(invalid="ignore"):          # NaN: flagged
+        return ~(np.minimum(W[:-1], W[1:]) - (SCREEN_SAFETY / 8) * curv >= bounds)
+
+
+def screen_far(W, bounds, axis: int = 0) -> np.ndarray:
+    """Which outputs :func:`screen_steps` flags in none of the steps between their nodes.
+
+    Every estimate of the screen is at most 3 max |c''| h^2 over the nodes (the second
+    differences' largest, NaN left out), so an output above its bound by
+    :data:`SCREEN_SAFETY` / 8 times that at every node is far from it in every step.
+
+    Parameters
+    ----------
+    W : array_like
+        The outputs at n >= 3 consecutive nodes along ``axis``.
+    bounds : array_like
+        Their lower bounds, broadcastable to W without ``axis``.
+    axis : int
+        The nodes' axis.
+
+    Returns
+    -------
+    numpy.ndarray of bool
+        W's shape without ``axis``: True where no step can be flagged.
+    """
+    W = np.asarray(W, float)
+    with np.errstate(invalid="ignore"):
+        return np.fmin.reduce(W, axis=axis) - (3 * SCREEN_SAFETY / 8) * np.fmax.reduce(
+            np.abs(np.diff(W, 2, axis=axis)), axis=axis) >= bounds
 
 
 def _flat(v) -> np.ndarray:
@@ -462,12 +509,46 @@ def minima_sampled(near, between, h: float, first, last, samples: int = SUB_STEP
     return sorted(found)
 
 
+def foot_may_dip(z_prev, dz_a, dz_b, dt, ground=None) -> np.ndarray:
+    """Which steps between two nodes may hold a minimum of the swing foot below the ground.
+
+    A minimum is where the foot's vertical velocity goes from dz_a <= 0 at a step's first
+    node to dz_b > 0 at its last.  While that velocity stays above dz_a in the step (it
+    rises to dz_b), the foot goes below its height at the first node by at most |dz_a| dt
+    (dt the step's duration); a step is flagged where that height less
+    :data:`SCREEN_SAFETY` times this is below the higher of the ground's two heights
+    (:func:`ground_height`), or where any of them is NaN.  An estimate as
+    :func:`screen_steps`: a foot's minimum a few centimetres above the ground is not
+    refined.
+
+    Parameters
+    ----------
+    z_prev, dz_a, dz_b : array_like
+        Per step: the foot's height at its first node, its vertical velocity there and at
+        its last node (m, m/s).
+    dt : array_like
+        The steps' durations, s (broadcastable against ``z_prev``).
+    ground : tuple, optional
+        (ahead, behind) ground heights, each broadcastable against ``z_prev``; None: flat.
+
+    Returns
+    -------
+    numpy.ndarray of bool
+        ``z_prev``'s shape: True where the step's minimum is to be located.
+    """
+    top = 0.0 if ground is None else np.maximum(ground[0], ground[1])
+    with np.errstate(invalid="ignore"):
+        low = np.asarray(z_prev) + SCREEN_SAFETY * np.asarray(dz_a) * dt
+        return (np.asarray(dz_a) <= 0) & (np.asarray(dz_b) > 0) & ~(low >= top)
+
+
 def swing_foot_dip(dip, h: float, step_start, z_prev, dz_a, dz_b, ground, scuff_zone: float,
-                   scuffing_ignored: bool, tolerance: float):
+                   scuffing_ignored: bool, tolerance: float, steps=None):
     """The first of the swing foot's minima between two nodes that is below the ground.
 
     The minima are in the steps where the foot's vertical velocity goes from <= 0 at the
-    first node to > 0 at the last (:func:`locate_minimum`).  Below the ground (measured
+    first node to > 0 at the last (:func:`locate_minimum`), those of them that may be below
+    the ground (:func:`foot_may_dip`).  Below the ground (measured
     from the ground under the foot there, :func:`ground_height`) it is a 'strike' when
     the foot was above it at the step's first node and is beyond ``scuff_zone`` (it
     crossed the ground going down: the strike is the first root before the minimum),
@@ -493,13 +574,17 @@ def swing_foot_dip(dip, h: float, step_start, z_prev, dz_a, dz_b, ground, scuff_
         ``model.scuffing_ignored``.
     tolerance : float
         How far below the ground the foot may graze, m.
+    steps : array_like of bool, optional
+        The steps to look at; default: :func:`foot_may_dip` with durations h.
 
     Returns
     -------
     tuple or None
         (j, 'strike' or 'scuffed', eta, z_sw, x_sw, X_eta) at the minimum.
     """
-    for j in np.flatnonzero((dz_a <= 0) & (dz_b > 0)):
+    if steps is None:
+        steps = foot_may_dip(z_prev, dz_a, dz_b, h, ground)
+    for j in np.flatnonzero(steps):
         Xa, ta = step_start(j)
 
         def rate(eta, Xa=Xa, ta=ta):

@@ -17,6 +17,12 @@ step of that length from the first node), the parts screened alike, and a minimu
 located by golden-section search on the margin's values
 (:func:`~biped_casadi.simulation.kernel.minima_sampled`).  A minimum below its bound is
 the first invalid state, named with "between two RK4 nodes".
+
+The batched walkers (:mod:`~biped_casadi.simulation.tv_walker`,
+:mod:`~biped_casadi.simulation.vc_walker`) screen the steps of all their scenarios at once
+(:meth:`MarginCheck.first_dips`) and look inside the flagged ones only, scenario by
+scenario, with the same locator; the swing foot's minima between their nodes likewise
+(:func:`foot_dips`, :func:`~biped_casadi.simulation.kernel.swing_foot_dip`).
 """
 from __future__ import annotations
 
@@ -24,10 +30,11 @@ import casadi as ca
 import numpy as np
 
 from ..numerics import FastCall
-from .kernel import minima_between, minima_sampled, screen_steps
-from .validity import FRICTION_TOL, node_message
+from .kernel import (SCREEN_SAFETY, foot_may_dip, minima_between, minima_sampled,
+                     screen_steps, swing_foot_dip)
+from .validity import FRICTION_TOL, between_message
 
-__all__ = ["MarginCheck"]
+__all__ = ["MarginCheck", "dip_function", "foot_dips"]
 
 
 class MarginCheck:
@@ -65,6 +72,55 @@ class MarginCheck:
                    [U + u[i] for i in range(self.schema.nu)]
         return lib.vertcat(*out) if lib is ca else np.array(out, float)
 
+    def rows(self, D) -> np.ndarray:
+        """The torques, F_x and F_z of diagnostics D (rows, ...), stacked: (nu + 2, ...)."""
+        S = self.schema
+        return np.concatenate([S.row(D, "u"), S.row(D, "Fx")[None], S.row(D, "Fz")[None]])
+
+    def of_rows(self, R) -> np.ndarray:
+        """(n, s, m) margins at the n nodes (last axis) of s scenarios' rows R (:meth:`rows`,
+        (nu + 2, s, n))."""
+        nu = self.schema.nu
+        return self.values(R[:nu], R[nu], R[nu + 1]).T
+
+    def near(self, R) -> np.ndarray:
+        """Per scenario, whether the screen may flag a margin in a step between n >= 3
+        consecutive nodes (the last axis of rows R, :meth:`rows`).
+
+        Each margin of :meth:`values` is bounded through the rows it is linear in (its
+        lowest value, the largest of its second differences; the torques' and the
+        cone's by |u_i| and |F_x|): False where every margin is above 0 by
+        :data:`~biped_casadi.simulation.kernel.SCREEN_SAFETY` / 8 times 3 max |c''| h^2
+        at every node, as :func:`~biped_casadi.simulation.kernel.screen_far`; a NaN is
+        near.  The second differences are taken only where their bound by the rows'
+        ranges (|c''| h^2 <= 2 (max - min)) does not already decide.
+        """
+        lo, hi = R.min(axis=-1), R.max(axis=-1)
+        near = self._near(lo, hi, 2 * (hi - lo))
+        rest = np.flatnonzero(near)
+        if rest.size:
+            Rr = R[:, rest]
+            d = Rr[..., 2:] - Rr[..., 1:-1]
+            d -= Rr[..., 1:-1]
+            d += Rr[..., :-2]
+            near[rest] = self._near(lo[:, rest], hi[:, rest],
+                                    np.maximum(d.max(axis=-1), -d.min(axis=-1)))
+        return near
+
+    def _near(self, lo, hi, d1) -> np.ndarray:
+        """:meth:`near` from the rows' extremes lo, hi and bounds d1 on their |c''| h^2."""
+        lim, nu = self.limits, self.schema.nu
+        c = 3 * SCREEN_SAFETY / 8
+        slack = [lo[nu + 1] - lim.min_normal_force - c * d1[nu + 1]]
+        if np.isfinite(lim.mu):
+            k = lim.mu + FRICTION_TOL
+            slack.append(k * lo[nu + 1] - np.maximum(hi[nu], -lo[nu])
+                         - c * (k * d1[nu + 1] + d1[nu]))
+        if "torque_limit" in self.status:
+            slack.extend(lim.torque_limit - np.maximum(hi[:nu], -lo[:nu]) - c * d1[:nu])
+        with np.errstate(invalid="ignore"):
+            return ~np.all(np.array(slack) >= 0, axis=0)
+
     def at_nodes(self, D) -> np.ndarray:
         """(n, m) margins at the n nodes of diagnostics D (rows x n)."""
         S = self.schema
@@ -72,19 +128,34 @@ class MarginCheck:
 
     def build(self, rk4, margins):
         """``between(X, tau, eta, p) -> (W, dW/deta, d2W/deta2)`` on the RK4 step of
-        length eta (built at first use): ``rk4`` the closed loop's step, ``margins(X,
-        tau, p)`` the margins at a state."""
+        length eta (:meth:`function`, built at first use and kept)."""
         if self._between is None:
-            X = ca.SX.sym("X", rk4.size1_in(0))
-            tau, eta = ca.SX.sym("tau"), ca.SX.sym("eta")
-            p = ca.SX.sym("p", rk4.size1_in(3))
-            Xe, te = rk4(X, tau, eta, p)
-            W = margins(Xe, te, p)
-            dW = ca.jacobian(W, eta)
-            self._between = FastCall(ca.Function(
-                "margins_between", [X, tau, eta, p], [W, dW, ca.jacobian(dW, eta)],
-                ["X", "tau", "eta", "p"], ["W", "dW_deta", "d2W_deta2"]))
+            self._between = FastCall(self.function(rk4, margins))
         return self._between
+
+    def function(self, rk4, margins) -> ca.Function:
+        """The margins on the RK4 step of length eta and their first two rates in eta.
+
+        Parameters
+        ----------
+        rk4 : casadi.Function
+            ``(X, tau, eta, p) -> (X_eta, tau_eta)``: the closed loop's step.
+        margins : callable
+            ``margins(X, tau, p)``: the margins at a state (CasADi).
+
+        Returns
+        -------
+        casadi.Function
+            ``(X, tau, eta, p) -> (W, dW/deta, d2W/deta2)``.
+        """
+        X = ca.SX.sym("X", rk4.size1_in(0))
+        tau, eta = ca.SX.sym("tau"), ca.SX.sym("eta")
+        p = ca.SX.sym("p", rk4.size1_in(3))
+        Xe, te = rk4(X, tau, eta, p)
+        W = margins(Xe, te, p)
+        dW = ca.jacobian(W, eta)
+        return ca.Function("margins_between", [X, tau, eta, p], [W, dW, ca.jacobian(dW, eta)],
+                           ["X", "tau", "eta", "p"], ["W", "dW_deta", "d2W_deta2"])
 
     def first_dip(self, between, W, steps, samples: int = 0):
         """The first minimum below its bound inside the steps, or None.
@@ -110,14 +181,52 @@ class MarginCheck:
         """
         base = len(W) - 1 - len(steps)
         near = screen_steps(W, np.zeros(W.shape[1]))[base:]
+        ends = (lambda j: (W[base + j], W[base + j + 1])) if samples else None
+        return self._first_flagged(between, near, steps.__getitem__, samples, ends)
+
+    def first_dips(self, between, W, n_steps: int, step, stop) -> dict:
+        """Per scenario of a batch, the first minimum below its bound inside its steps.
+
+        Parameters
+        ----------
+        between : callable
+            ``between(X, tau, eta, p) -> (W, dW/deta, d2W/deta2)`` (:meth:`build`).
+        W : numpy.ndarray
+            (n, s, m) margins at consecutive nodes of s scenarios, the last ``n_steps`` + 1
+            rows bracketing the steps, up to three before them (NaN where missing).
+        n_steps : int
+            Steps.
+        step : callable
+            ``step(i, j) -> (Xa, ta, length, p)``: scenario i's step j.
+        stop : array_like of int
+            (s,) how many of its steps count per scenario.
+
+        Returns
+        -------
+        dict
+            Scenario -> (step index, eta, status) at its first minimum below its bound.
+        """
+        near = screen_steps(W, np.zeros(W.shape[-1]))[W.shape[0] - 1 - n_steps:]
+        near &= (np.arange(n_steps)[:, None] < np.asarray(stop)[None, :])[:, :, None]
+        found = {}
+        for i in np.flatnonzero(near.any(axis=(0, 2))):
+            got = self._first_flagged(between, near[:, i], lambda j, i=i: step(i, j))
+            if got is not None:
+                found[int(i)] = got
+        return found
+
+    def _first_flagged(self, between, near, step, samples: int = 0, ends=None):
+        """The first minimum below its bound inside the steps ``near`` flags (steps, m):
+        (step index, eta, status) or None; ``step(j)`` the step j's (Xa, ta, length, p);
+        with ``samples``, ``ends(j)`` the margins at its nodes (:meth:`first_dip`)."""
         for j in np.flatnonzero(near.any(axis=1)):
-            Xa, ta, h, p = steps[j]
+            Xa, ta, h, p = step(j)
 
             def at(eta, Xa=Xa, ta=ta, p=p):
                 return between(Xa, ta, eta, p)
 
             if samples:
-                found = minima_sampled(near[j], at, h, W[base + j], W[base + j + 1], samples)
+                found = minima_sampled(near[j], at, h, *ends(j), samples)
             else:
                 r_a, r_b = (np.asarray(at(e)[1], float).ravel() for e in (0.0, h))
                 found = minima_between(near[j], r_a, r_b, at, h)
@@ -130,5 +239,82 @@ class MarginCheck:
         """The failure in words at the state of diagnostics D (one column)."""
         node = {k: (v[..., 0] if isinstance(v, np.ndarray) else v)
                 for k, v in self.schema.rows(D).items()}
-        return (node_message(status, node, self.limits, den_scale)
-                + ", between two RK4 nodes")
+        return between_message(status, node, self.limits, den_scale)
+
+
+def dip_function(rk4, foot) -> ca.Function:
+    """The swing foot at the end of the RK4 step of length eta, with its rates in eta.
+
+    Parameters
+    ----------
+    rk4 : casadi.Function
+        ``(X, tau, eta, p) -> (X_eta, tau_eta)``: the closed loop's step.
+    foot : callable
+        ``foot(X, tau, p) -> (x_sw, z_sw)`` at a state (CasADi).
+
+    Returns
+    -------
+    casadi.Function
+        ``(X, tau, eta, p) -> (z_sw, dz/deta, d2z/deta2, x_sw, X_eta)``, the ``dip`` of
+        :func:`~biped_casadi.simulation.kernel.swing_foot_dip`.
+    """
+    X, tau, eta = ca.SX.sym("X", rk4.size1_in(0)), ca.SX.sym("tau"), ca.SX.sym("eta")
+    p = ca.SX.sym("p", rk4.size1_in(3))
+    Xe, te = rk4(X, tau, eta, p)
+    x, z = foot(Xe, te, p)
+    dz = ca.jacobian(z, eta)
+    return ca.Function("swing_foot_dip", [X, tau, eta, p], [z, dz, ca.jacobian(dz, eta), x, Xe],
+                       ["X", "tau", "eta", "p"],
+                       ["z_sw", "dz_deta", "d2z_deta2", "x_sw", "X_event"])
+
+
+def foot_dips(dip, h, step, z_prev, dz_a, dz_b, stop, ground, scuff_zone: float,
+              limits, dt=None) -> dict:
+    """Per scenario of a batch, the first of the swing foot's minima between two nodes
+    that is below the ground (:func:`~biped_casadi.simulation.kernel.swing_foot_dip`).
+
+    Parameters
+    ----------
+    dip : callable
+        ``dip(X, tau, eta, p)`` (:func:`dip_function`).
+    h : float or array_like
+        The RK4 step, s (or (s,) per scenario).
+    step : callable
+        ``step(i, j) -> (Xa, ta, p)``: the first node of scenario i's step j.
+    z_prev, dz_a, dz_b : numpy.ndarray
+        (s, K) per step: the height at its first node, the foot's vertical rate there
+        and at its last node.
+    stop : array_like of int
+        (s,) how many of its steps count per scenario.
+    ground : tuple of numpy.ndarray
+        (ahead, behind) per scenario, (s,) each.
+    scuff_zone : float
+        ``model.scuff_zone`` (inf: every dip below the ground is a scuff), m.
+    limits : Limits
+        ``scuffing_ignored`` and ``ground_tolerance``.
+    dt : array_like, optional
+        The steps' durations, s, broadcastable to (s, K) (default h): the steps whose
+        minimum may be below the ground (:func:`~biped_casadi.simulation.kernel.
+        foot_may_dip`) are looked at.
+
+    Returns
+    -------
+    dict
+        Scenario -> (j, 'strike' or 'scuffed', eta, z_sw, x_sw, X_eta).
+    """
+    K = z_prev.shape[1]
+    h = np.broadcast_to(np.asarray(h, float), (len(z_prev),))
+    cand = foot_may_dip(z_prev, dz_a, dz_b, h[:, None] if dt is None else dt,
+                        (ground[0][:, None], ground[1][:, None])) \
+        & (np.arange(K)[None, :] < np.asarray(stop)[:, None])
+    found = {}
+    for i in np.flatnonzero(cand.any(axis=1)):
+        n = int(stop[i])
+        p = step(i, 0)[2]
+        got = swing_foot_dip(lambda X, t, eta, p=p: dip(X, t, eta, p), float(h[i]),
+                             lambda j, i=i: step(i, j)[:2], z_prev[i, :n], dz_a[i, :n],
+                             dz_b[i, :n], (ground[0][i], ground[1][i]), scuff_zone,
+                             limits.scuffing_ignored, limits.ground_tolerance, cand[i, :n])
+        if got is not None:
+            found[int(i)] = got
+    return found

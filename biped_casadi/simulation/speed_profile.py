@@ -518,8 +518,9 @@ def _fold(rec: OutcomeRecorder, idx, k: int, b: WalkBatch):
     rec.max_fr[idx] = np.fmax(rec.max_fr[idx], b.max_friction_ratio)
     rec.max_ir[idx] = np.fmax(rec.max_ir[idx], b.max_impulse_ratio)
     bad = ~b.ok
-    rec.fail(idx[bad], b.status[bad], k, np.array([f"step {k + 1}: {m}" if m else ""
-                                                   for m in b.message[bad]], dtype=object))
+    rec.fail(idx[bad], b.status[bad], k, np.array(  # the walker's one step is step k + 1
+        [f"step {k + 1}: {m.removeprefix('step 1: ')}" if m else "" for m in b.message[bad]],
+        dtype=object))
 
 
 def _impact_map(model, n: int):

@@ -18,7 +18,13 @@ as in the full-order simulator.
 
 Validity.  Every node and every impact is checked with
 :mod:`biped_casadi.simulation.validity` (the same conditions as the full-order simulator,
-torque limit included); a scenario stops at its first invalid state.
+torque limit included); between the nodes, as in the simulator, the swing foot's minima
+where its vertical velocity turns upward (below the ground: a scuff behind the stance
+foot, the strike in front of it) and the stance force, friction cone and torques where
+the screen of the nodes says they may dip (:mod:`biped_casadi.simulation.margins`: the
+steps of the whole batch screened at once, the flagged ones refined by Newton's method
+on rates taken by AD, its Functions built once).  A scenario stops at its first invalid
+state; one between two nodes is named so in its message.
 
 Terrain.  ``walk(..., terrain=...)`` gives every scenario its ground heights, one per step
 (:mod:`biped_casadi.simulation.terrain`): step k strikes at z_sw = h_k, and v_c still
@@ -36,15 +42,16 @@ from ..caching import cached
 from ..control.output_law import SECTION, check_M1, decoupling_denominator
 from ..control.reference import require_reference, require_same_robot
 from ..control.zero_dynamics import denominator_samples, zero_dynamics
-from ..numerics import as_rows, compiled, rk4_step
+from ..numerics import FastCall, as_rows, compiled, rk4_step
 from ..simd import kernels
 from .kernel import (CHUNKS_PER_STEP, Diagnostics, call_batched, locate_strike, mapped,
                      strike, threads)
+from .margins import MarginCheck, dip_function, foot_dips
 from .options import SimulationOptions
 from .outcome import OutcomeRecorder, WalkBatch
 from .terrain import ground_levels, step_heights
-from .validity import (Limits, first_violation, impact_violation, node_violations,
-                       start_violation, strike_violation)
+from .validity import (Limits, between_message, first_violation, impact_violation,
+                       node_violations, start_violation, strike_violation)
 
 __all__ = ["ZeroDynamicsWalker", "zero_dynamics_walker"]
 
@@ -103,6 +110,7 @@ class ZeroDynamicsWalker:
         self.K = rk4_steps // CHUNKS_PER_STEP
         self.limits = Limits.of(self.options, model, gait)
         self.schema = Diagnostics(self.nu, outputs=False)
+        self.margin, self._dense_fns = MarginCheck(self.limits, self.schema), None
         self.zd = zero_dynamics(model)
         self.horizon = min(self.options.horizon, (gait.t_max - self.h) / self.T)
         self.n_chunks = int(math.ceil(self.horizon * CHUNKS_PER_STEP))
@@ -423,12 +431,12 @@ class ZeroDynamicsWalker:
         """Integrate step k of the scenarios ``idx`` from ``tau0`` to the strike on the
         ground (ahead, behind) of each; records failures; returns the struck scenarios'
         (indices, state and tau of the node before the strike, z_sw there and after, the
-        denominator's sign) or None."""
+        denominator's sign, the length of the strike's RK4 step, the torques and reactions
+        at the three nodes before it) or None."""
         S, m = self.schema, idx.size
         Pk = P[idx]
         R0 = np.repeat(self._R_start[tau0], m, axis=1)
         D0, k1 = self._batch("diag", x[idx].T, np.full((1, m), tau0), R0, Pk.T)
-        k1 = k1.T.copy()
         sign = np.where(S.row(D0, "den") >= 0, 1.0, -1.0)
         zsw0 = S.row(D0, "zsw")
         _, which = self._check(D0[:, :, None], sign, scale[idx], ground=ground)
@@ -438,60 +446,170 @@ class ZeroDynamicsWalker:
         bad = which != ""
         run.fail(idx[bad], which[bad], k)
         alive[idx[bad]] = False
-        live = ~bad
-        xcur, taucur, zprev = x[idx].copy(), np.full(m, tau0), zsw0.copy()
-        before = np.full((m, 2), np.nan)
-        t_before, z_a, z_b = np.zeros(m), np.zeros(m), np.zeros(m)
-        struck = np.zeros(m, bool)
+        st = dict(live=~bad, x=x[idx].copy(), tau=np.full(m, tau0), k1=k1.T.copy(),
+                  z=zsw0.copy(), dz=S.row(D0, "dzsw").copy(), P=Pk, sign=sign,
+                  scale=scale[idx], r=self.margin.rows(D0)[..., None],
+                  before=np.full((m, 2), np.nan), t_before=np.zeros(m), z_a=np.zeros(m),
+                  z_b=np.zeros(m), h=np.full(m, self.h), struck=np.zeros(m, bool))
+        st["r_before"] = np.full(st["r"].shape[:2] + (3,), np.nan)
         c0 = int(round(tau0 / (self.T / CHUNKS_PER_STEP)))
         for ci in range(c0, self.n_chunks):
-            li = np.flatnonzero(live)
+            li = np.flatnonzero(st["live"])
             if li.size == 0:
                 break
-            Xs, Ts, K1, Dg = self._chunk(xcur[li], taucur[li], k1[li], Pk[li],
-                                         self._rtab[ci])
-            if (ci + 1) / CHUNKS_PER_STEP > self.horizon + 1e-12:  # last partial chunk
-                keep = Ts[0] <= self.horizon * self.T + 1e-12
-                Xs, Ts, K1, Dg = Xs[:, :, keep], Ts[:, keep], K1[:, :, keep], Dg[:, :, keep]
-            zs = S.row(Dg, "zsw")
-            zp = np.concatenate([zprev[li][:, None], zs[:, :-1]], axis=1)
-            gl = (ground[0][li], ground[1][li])
-            hits = strike(zs, zp, S.row(Dg, "xsw"), self.model.scuff_zone,
-                          (gl[0][:, None], gl[1][:, None]))
-            i_strike = np.where(hits.any(axis=1), np.argmax(hits, axis=1), Ts.shape[1])
-            first, which = self._check(Dg, sign[li], scale[idx[li]], zp, gl)
-            failed = (which != "") & (first < i_strike)
-            upto = np.where(failed, first + 1, i_strike)
-            self._track(run, idx[li], Dg, np.arange(Ts.shape[1])[None, :] < upto[:, None])
-            run.fail(idx[li[failed]], which[failed], k)
-            alive[idx[li[failed]]] = False
-            hit = ~failed & (i_strike < Ts.shape[1])
-            for j in np.flatnonzero(hit):
-                s_, g_ = i_strike[j], li[j]
-                before[g_] = xcur[g_] if s_ == 0 else Xs[:, j, s_ - 1]
-                t_before[g_] = taucur[g_] if s_ == 0 else Ts[j, s_ - 1]
-                z_a[g_] = zprev[g_] if s_ == 0 else zs[j, s_ - 1]
-                z_b[g_] = zs[j, s_]
-                struck[g_] = True
-            cont = ~failed & ~hit
-            live[li[~cont]] = False
-            xcur[li[cont]] = Xs[:, cont, -1].T
-            taucur[li[cont]] = Ts[cont, -1]
-            k1[li[cont]] = K1[:, cont, -1].T
-            zprev[li[cont]] = zs[cont, -1]
+            self._advance(k, ci, li, idx, st, ground, run, alive)
+        struck = st["struck"]
         missing = alive[idx] & ~struck
         run.fail(idx[missing], "no_impact", k)
         alive[idx[missing]] = False
         si = np.flatnonzero(struck & alive[idx])
         if si.size == 0:
             return None
-        return idx[si], before[si], t_before[si], z_a[si], z_b[si], sign[si]
+        return (idx[si], st["before"][si], st["t_before"][si], st["z_a"][si], st["z_b"][si],
+                sign[si], st["h"][si], st["r_before"][:, si])
+
+    def _advance(self, k, ci, li, idx, st, ground, run, alive):
+        """Chunk ci of the live scenarios ``li`` (of ``idx``) of step k: failures recorded,
+        strikes and the next chunk's start into ``st``."""
+        S = self.schema
+        Xs, Ts, K1, Dg = self._chunk(st["x"][li], st["tau"][li], st["k1"][li], st["P"][li],
+                                     self._rtab[ci])
+        if (ci + 1) / CHUNKS_PER_STEP > self.horizon + 1e-12:  # last partial chunk
+            keep = Ts[0] <= self.horizon * self.T + 1e-12
+            Xs, Ts, K1, Dg = Xs[:, :, keep], Ts[:, keep], K1[:, :, keep], Dg[:, :, keep]
+        K = Ts.shape[1]
+        zs, dzs = S.row(Dg, "zsw"), S.row(Dg, "dzsw")
+        zp = np.concatenate([st["z"][li][:, None], zs[:, :-1]], axis=1)
+        gl = (ground[0][li], ground[1][li])
+        hits = strike(zs, zp, S.row(Dg, "xsw"), self.model.scuff_zone,
+                      (gl[0][:, None], gl[1][:, None]))
+        i_strike = np.where(hits.any(axis=1), np.argmax(hits, axis=1), K)
+
+        refs = {}
+
+        def node(i, j):             # the first node of step j of scenario i
+            g = li[i]
+            X, t = (st["x"][g], st["tau"][g]) if j == 0 else (Xs[:, i, j - 1], Ts[i, j - 1])
+            if "r" not in refs:     # the reference's state at the nodes (shared by all)
+                refs["r"] = self.gait.states(np.r_[st["tau"][li[0]], Ts[0, :-1]])
+            return np.r_[X, refs["r"][:, j]], t, np.r_[st["P"][g], self._theta]
+
+        feet = foot_dips(self._dip, self.h, node, zp,
+                         np.concatenate([st["dz"][li][:, None], dzs[:, :-1]], axis=1), dzs,
+                         i_strike, gl, self.model.scuff_zone, self.limits)
+        z_end, h_end = zs[np.arange(li.size), np.minimum(i_strike, K - 1)], np.full(li.size,
+                                                                                   self.h)
+        for i, (j, kind, eta, z, _, _) in feet.items():
+            i_strike[i] = j                   # the nodes from the dip's on do not count
+            if kind == "strike":
+                z_end[i], h_end[i] = z, eta
+        first, which = self._check(Dg, st["sign"][li], st["scale"][li], zp, gl)
+        failed = (which != "") & (first < i_strike)
+        upto = np.where(failed, first + 1, i_strike)
+        message = np.full(li.size, "", dtype=object)
+        R = np.concatenate([st["r"][:, li], self.margin.rows(Dg)], axis=2)   # history first
+        dips = self._margin_dips(R, K, upto, self._between, node)
+        for i, (j, eta, status) in dips.items():          # before the nodes' failures
+            D = self._state_at(*node(i, j), eta)
+            self._track(run, idx[li[[i]]], D[:, :, None])
+            failed[i], which[i], upto[i] = True, status, j
+            message[i] = f"step {k + 1}: " + self.margin.message(status, D, st["scale"][li[i]])
+        for i, (j, kind, eta, z, xf, _) in feet.items():
+            if kind == "scuffed" and not failed[i]:
+                failed[i], which[i], upto[i] = True, "scuffed", j
+                message[i] = f"step {k + 1}: " + between_message(
+                    "scuffed", dict(xsw=xf, zsw=z), self.limits)
+        self._track(run, idx[li], Dg, np.arange(K)[None, :] < upto[:, None])
+        run.fail(idx[li[failed]], which[failed], k, message[failed])
+        alive[idx[li[failed]]] = False
+        hit = ~failed & (i_strike < K)
+        n0 = R.shape[2] - K                  # nodes before the chunk's
+        if hit.any():                        # the rows at the three nodes before the strike
+            hi_ = np.flatnonzero(hit)
+            c = i_strike[hi_, None] + n0 + np.arange(-3, 0)
+            Rb = R[:, hi_[:, None], np.maximum(c, 0)]
+            Rb[:, c < 0] = np.nan
+            st["r_before"][:, li[hi_]] = Rb
+        for i in np.flatnonzero(hit):
+            s_, g_ = i_strike[i], li[i]
+            st["before"][g_] = st["x"][g_] if s_ == 0 else Xs[:, i, s_ - 1]
+            st["t_before"][g_] = st["tau"][g_] if s_ == 0 else Ts[i, s_ - 1]
+            st["z_a"][g_] = zp[i, s_]
+            st["z_b"][g_], st["h"][g_] = z_end[i], h_end[i]
+            st["struck"][g_] = True
+        cont = ~failed & ~hit
+        st["live"][li[~cont]] = False
+        g = li[cont]
+        st["x"][g], st["tau"][g], st["k1"][g] = Xs[:, cont, -1].T, Ts[cont, -1], K1[:, cont, -1].T
+        st["z"][g], st["dz"][g] = zs[cont, -1], dzs[cont, -1]
+        r = np.full(st["r"].shape[:2] + (3,), np.nan)
+        r[:, g] = R[:, cont, -3:]
+        st["r"] = r
+
+    def _margin_dips(self, R, K, upto, between, node) -> dict:
+        """The margins' first dips in the first ``upto`` steps of a chunk, R the rows
+        (:meth:`MarginCheck.rows <biped_casadi.simulation.margins.MarginCheck.rows>`) at
+        its nodes and up to three before them: screened for the scenarios whose rows say
+        a margin may come near its bound (:meth:`~biped_casadi.simulation.margins.
+        MarginCheck.near`)."""
+        nn = np.flatnonzero(self.margin.near(R) & (upto > 0))
+        if nn.size == 0:
+            return {}
+
+        def step(i, j):
+            X, t, p = node(nn[i], j)
+            return X, t, self.h, p
+
+        return {int(nn[i]): got for i, got in self.margin.first_dips(
+            between, self.margin.of_rows(R[:, nn]), K, step, upto[nn]).items()}
+
+    def _dense(self):
+        """The margins (:class:`~biped_casadi.simulation.margins.MarginCheck`) and the
+        swing foot on the last RK4 step of length eta from a node (z, tau) (z: (q_u, dq_u)
+        and the reference state; p: (P, theta)), with their rates in eta; built at first
+        use, then shared by every batch."""
+        if self._dense_fns is None:
+            zd, npar = self.zd, self.zd.n_par
+            along = zd.along(self.gait, parametric=True)
+            z, tau, eta = ca.SX.sym("z", along.size1_in(0)), ca.SX.sym("tau"), ca.SX.sym("eta")
+            pp = ca.SX.sym("p", npar + along.size1_in(3))
+            ze = rk4_step(lambda zv, c: along(zv, tau + c * eta, pp[:npar], pp[npar:])[0], z,
+                          eta)
+            rk4 = ca.Function("zd_rk4", [z, tau, eta, pp], [ze, tau + eta])
+
+            def point(Z, t, p):
+                qd, dqd, ddqd, _ = self._reference_fn(t, Z[2:], p[npar:])
+                return zd.point(Z[:2], t, ca.vertcat(qd, dqd, ddqd), p[:npar])
+
+            def margins(Z, t, p):
+                return self.margin.values(*point(Z, t, p)[3:6], lib=ca)
+
+            fs = [self.margin.function(rk4, margins),
+                  dip_function(rk4, lambda Z, t, p: self.model.swing_foot(point(Z, t, p)[0]))]
+            self._dense_fns = tuple(FastCall(f) for f in fs)
+        return self._dense_fns
+
+    def _between(self, *args):
+        """The margins between two nodes and their rates (:meth:`_dense`, built at first
+        use)."""
+        return self._dense()[0](*args)
+
+    def _dip(self, *args):
+        """The swing foot between two nodes and its rates (:meth:`_dense`)."""
+        return self._dense()[1](*args)
+
+    def _state_at(self, z, tau, p, eta):
+        """The diagnostics (rows, 1) at the end of the RK4 step of length eta from the
+        node (z, tau) (:meth:`_dense`'s arguments)."""
+        P = p[:self.zd.n_par]
+        xe = np.array(self.event(z, tau, eta, P, self._theta)[2])
+        return np.array(self.diag(xe, tau + eta, self._reference(tau + eta), P)[0])
 
     def _impact(self, k, struck, x, P, scale, run, alive, ahead, ends=None):
         """Locate the impact of the struck scenarios (z_sw = their h_k, ``ahead``), check
         the pre-impact state and the impulse, apply the impact map and the next step's
         start; the valid ones' pre-impact states (q, dq) into the rows of ``ends``."""
-        gi, xa, ta, za, zb, sign = struck
+        gi, xa, ta, za, zb, sign, h_end, r_before = struck
         S, nu, m = self.schema, self.nu, gi.size
         Ps = P[gi]
         hk = ahead[gi]
@@ -502,7 +620,7 @@ class ZeroDynamicsWalker:
                                     self._theta)
             return z.ravel() - hk, dz.ravel()
 
-        eta = locate_strike(event, self.h, za - hk, zb - hk)
+        eta = locate_strike(event, h_end, za - hk, zb - hk)
         _, _, xe, qe, dqe = self._batch("event", za_r, ta[None, :], eta[None, :], Ps.T,
                                         self._theta)
         xe = xe.T
@@ -511,7 +629,19 @@ class ZeroDynamicsWalker:
         Dm, _ = self._batch("diag", xe.T, tm[None, :], Rm, Ps.T)
         _, which = self._check(Dm[:, :, None], sign, scale[gi],
                                ground=(hk, np.zeros(m)))
-        self._track(run, gi, Dm[:, :, None])
+        message, dipped = np.full(m, "", dtype=object), np.zeros(m, bool)
+        W = self.margin.of_rows(np.concatenate([r_before, self.margin.rows(Dm)[..., None]], 2))
+
+        def step(i, j):                                    # from the last node to the impact
+            return za_r[:, i], ta[i], eta[i], np.r_[Ps[i], self._theta]
+
+        for i, (_, e, status) in self.margin.first_dips(self._between, W, 1, step,
+                                                        np.ones(m, int)).items():
+            D = self._state_at(*step(i, 0)[:2], step(i, 0)[3], e)
+            self._track(run, gi[[i]], D[:, :, None])
+            which[i], dipped[i] = status, True
+            message[i] = f"step {k + 1}: " + self.margin.message(status, D, scale[gi[i]])
+        self._track(run, gi, Dm[:, :, None], ~dipped[:, None])
         which = np.where(which == "", strike_violation(S.row(Dm, "dzsw")), which)
         xn, yn, dyn, F, vl = self._batch("impact", qe, dqe, Ps.T, self._R0)
         F, vl = F.T, vl.ravel()
@@ -521,7 +651,7 @@ class ZeroDynamicsWalker:
         finite = np.all(np.isfinite(np.c_[xn.T, yn.T, dyn.T, F]), axis=1)
         which = np.where(which == "", impact_violation(F, vl, finite, self.limits), which)
         bad = which != ""
-        run.fail(gi[bad], which[bad], k)
+        run.fail(gi[bad], which[bad], k, message[bad])
         alive[gi[bad]] = False
         go = ~bad
         if ends is not None:

@@ -27,7 +27,7 @@ from .options import friction_of
 
 __all__ = ["NODE_CHECKS", "IMPACT_CHECKS", "Limits", "node_violations", "first_violation",
            "start_violation", "strike_violation", "impact_violation", "node_message",
-           "impact_message", "STRIKE_MESSAGE"]
+           "impact_message", "between_message", "STRIKE_MESSAGE"]
 
 #: why a strike is invalid when the swing foot does not move down
 STRIKE_MESSAGE = "the swing foot reaches the ground without moving down"
@@ -309,7 +309,8 @@ def node_message(which: str, node: dict, limits: Limits, den_scale: float) -> st
     which : str
         The status (:data:`NODE_CHECKS`).
     node : dict
-        The rows at the failing node (as given to :func:`node_violations`, scalars).
+        The rows at the failing node (as given to :func:`node_violations`, scalars; only
+        those the status's words name are read).
     limits : Limits
         The thresholds.
     den_scale : float
@@ -320,25 +321,43 @@ def node_message(which: str, node: dict, limits: Limits, den_scale: float) -> st
     str
     """
     d = node
-    return {
-        "diverged": "the state is not finite",
-        "out_of_range": "the state left the range where the controller's reference is "
-                        "defined",
-        "singular": f"controller singular: decoupling denominator {d['den']:.4g} "
-                    f"(below {limits.singular_tolerance:g} of {den_scale:.4g}, eq. 23-24)",
-        "fell": f"fell: hip height {d['hip']:.4f} m, torso angle {d['torso']:.4f} rad"
-                + ("" if limits.torso_upright == 0.0 else
-                   f" (lean {float(torso_lean(d['torso'], limits.torso_upright)):.4f} rad "
-                   f"from upright, {limits.torso_upright:.4f})"),
-        "scuffed": f"swing foot below the ground where it cannot strike (behind the "
-                   f"stance foot, or already under the ground): x_sw = {d['xsw']:.4f} m, "
-                   f"z_sw = {d['zsw']:.3g} m",
-        "negative_normal_force": f"stance normal force F_z = {d['Fz']:.4g} N",
-        "slipped": f"stance foot slips: |F_x| / F_z = "
-                   f"{abs(d['Fx']) / max(d['Fz'], 1e-300):.4f} > mu = {limits.mu}",
-        "torque_limit": f"torque limit exceeded: |u| = {np.max(np.abs(d['u'])):.4g} "
-                        f"N m > {limits.torque_limit:g} N m",
-    }[which]
+    words = {
+        "diverged": lambda: "the state is not finite",
+        "out_of_range": lambda: "the state left the range where the controller's reference "
+                                "is defined",
+        "singular": lambda: f"controller singular: decoupling denominator {d['den']:.4g} "
+                            f"(below {limits.singular_tolerance:g} of {den_scale:.4g}, "
+                            f"eq. 23-24)",
+        "fell": lambda: f"fell: hip height {d['hip']:.4f} m, torso angle {d['torso']:.4f} rad"
+                        + ("" if limits.torso_upright == 0.0 else
+                           f" (lean {float(torso_lean(d['torso'], limits.torso_upright)):.4f} "
+                           f"rad from upright, {limits.torso_upright:.4f})"),
+        "scuffed": lambda: f"swing foot below the ground where it cannot strike (behind the "
+                           f"stance foot, or already under the ground): x_sw = "
+                           f"{d['xsw']:.4f} m, z_sw = {d['zsw']:.3g} m",
+        "negative_normal_force": lambda: f"stance normal force F_z = {d['Fz']:.4g} N",
+        "slipped": lambda: f"stance foot slips: |F_x| / F_z = "
+                           f"{abs(d['Fx']) / max(d['Fz'], 1e-300):.4f} > mu = {limits.mu}",
+        "torque_limit": lambda: f"torque limit exceeded: |u| = {np.max(np.abs(d['u'])):.4g} "
+                                f"N m > {limits.torque_limit:g} N m",
+    }
+    return words[which]()
+
+
+def between_message(which: str, node: dict, limits: Limits, den_scale: float = 1.0) -> str:
+    """A failure found between two integration nodes (a minimum inside an RK4 step), in
+    words: :func:`node_message` at that state, naming where it was found.
+
+    Parameters
+    ----------
+    which, node, limits, den_scale
+        As :func:`node_message`'s.
+
+    Returns
+    -------
+    str
+    """
+    return node_message(which, node, limits, den_scale) + ", between two RK4 nodes"
 
 
 def impact_message(which: str, F, v_lift: float, limits: Limits) -> str:

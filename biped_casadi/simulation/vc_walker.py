@@ -4,7 +4,10 @@ On the constraint surface (:class:`~biped_casadi.control.ConstraintSurface`) the
 configuration is a function of the phase alone and the state is (theta, w = dtheta/dt);
 the swing foot strikes at the phase theta^- where it reaches the ground, so a step is an
 integration in theta from the start phase to theta^-, with every node checked
-(:mod:`biped_casadi.simulation.validity`), then the impact map.  Its outcomes are those
+(:mod:`biped_casadi.simulation.validity`) and, between the nodes, the swing foot, the
+stance force, the friction cone and the torques (:mod:`biped_casadi.simulation.margins`,
+as the full-order simulator; the foot's strike is at theta^-, so any dip of it below the
+ground between two nodes is a scuff), then the impact map.  Its outcomes are those
 of every simulator (:class:`~biped_casadi.simulation.outcome.WalkBatch`).
 
 From any state at the start of a step the controller's phase-based correction h_c makes
@@ -23,9 +26,10 @@ from ..caching import cached
 from ..control.output_law import SECTION
 from ..control.reference import require_reference, require_same_robot
 from ..control.virtual_constraints import constraint_surface, rejoin_phase
-from ..numerics import as_count, compiled, rk4_step
+from ..numerics import FastCall, as_count, compiled, rk4_step
 from ..simd import kernels
 from .kernel import Diagnostics, call_batched, mapped, threads
+from .margins import MarginCheck, dip_function, foot_dips
 from .options import SimulationOptions
 from .outcome import OutcomeRecorder, WalkBatch
 from .terrain import ground_levels, step_heights
@@ -81,6 +85,7 @@ class VirtualConstraintWalker:
         self.nodes = as_count(nodes, "nodes")
         self.limits = Limits.of(self.options, model, gait)
         self.schema = Diagnostics(self.nu, outputs=False)
+        self.margin, self._dense_fns = MarginCheck(self.limits, self.schema), None
         self.ref_T = gait.state_at(gait.T)
         self.direction = float(np.sign(self.vmap.theta_minus - self.vmap.theta_plus))
         self._build()
@@ -88,39 +93,45 @@ class VirtualConstraintWalker:
         self.den_scale = float(np.max(np.abs(np.array(self.vmap.curve.map(ths.size)(
             ths[None, :])[2]))))
 
-    def _build(self):
-        m, vm = self.model, self.vmap
-        th, w, t, hs = ca.SX.sym("theta"), ca.SX.sym("w"), ca.SX.sym("t"), ca.SX.sym("h")
-        p = ca.SX.sym("p", self.n_par)
-        # the rejoin phase is an input: the compiled nodes hold no number of the gait
-        # but its constraints' spline (CasADi's code, compiled apart), so the gaits of a
-        # robot share their node's machine code (biped_casadi.simd)
-        tc = ca.SX.sym("t_c")
-        self.t_c = rejoin_phase(vm.vc)
-        z = ca.vertcat(w, t)
-        sgn = self.direction
-
-        def corrected(thv, wv):
-            return vm.corrected_expressions(thv, wv, p, tc)
+    def _step(self, z, th, hs, p, tc):
+        """One RK4 step of phase length hs from (w, t) = z at phase th (expressions): the
+        next (w, t) and the torques, reaction and denominator there."""
+        vm, sgn = self.vmap, self.direction
 
         # RK4 on (xi, t) with xi = w^2: d xi/d theta = 2 d2theta/dt2 is regular where the
         # phase rate w stalls (dw/dtheta = d2theta/dt2 / w is not, and RK4 on w can step
         # over a turning point); a stage past the turn has xi < 0, so w and t are NaN.
         def rhs(zv, c):
             wv = sgn * ca.sqrt(zv[0])
-            return ca.vertcat(2 * corrected(th + c * hs, wv)[5], 1 / wv)
+            return ca.vertcat(2 * vm.corrected_expressions(th + c * hs, wv, p, tc)[5], 1 / wv)
 
-        zx = rk4_step(rhs, ca.vertcat(w**2, t), hs)
+        zx = rk4_step(rhs, ca.vertcat(z[0]**2, z[1]), hs)
         zn = ca.vertcat(sgn * ca.sqrt(zx[0]), zx[1])
-        thn = th + hs
-        wn = zn[0]
-        q, Q1, Q2, dw, den, _ = corrected(thn, wn)
-        ddth = wn * dw
-        dq = Q1 * wn
-        ddq = Q1 * ddth + Q2 * wn**2
-        D, H = m.D(q), m.H(q, dq)
-        u = (ca.mtimes(D, ddq) + H)[1:]
+        return (zn, *self._point(th + hs, zn[0], p, tc))
+
+    def _point(self, th, w, p, tc):
+        """The configuration, velocity, torques, reaction and denominator on the corrected
+        surface at phase th with rate w (expressions)."""
+        m = self.model
+        q, Q1, Q2, dw, den, _ = self.vmap.corrected_expressions(th, w, p, tc)
+        ddq = Q1 * (w * dw) + Q2 * w**2
+        dq = Q1 * w
+        u = (ca.mtimes(m.D(q), ddq) + m.H(q, dq))[1:]
         Fx, Fz = m.ground_reaction_acc(q, dq, ddq)
+        return q, dq, u, Fx, Fz, den
+
+    def _build(self):
+        m = self.model
+        th, w, t, hs = ca.SX.sym("theta"), ca.SX.sym("w"), ca.SX.sym("t"), ca.SX.sym("h")
+        p = ca.SX.sym("p", self.n_par)
+        # the rejoin phase is an input: the compiled nodes hold no number of the gait
+        # but its constraints' spline (CasADi's code, compiled apart), so the gaits of a
+        # robot share their node's machine code (biped_casadi.simd)
+        tc = ca.SX.sym("t_c")
+        self.t_c = rejoin_phase(self.vmap.vc)
+        z = ca.vertcat(w, t)
+        zn, q, dq, u, Fx, Fz, den = self._step(z, th, hs, p, tc)
+        thn = th + hs
         diag = self.schema.vector(m, q, dq, u, Fx, Fz, den)
         node_tc = ca.Function("vc_node", [z, th, hs, p, tc], [ca.cse(zn), thn, ca.cse(diag)])
         node = ca.Function("vc_node_gait", [z, th, hs, p], node_tc(z, th, hs, p, self.t_c))
@@ -340,24 +351,25 @@ class VirtualConstraintWalker:
                 break
             run.scenario_steps += idx.size
             ahead, behind = (g[idx] for g in ground_levels(heights, k))
-            thm, backwards, stalled, outside, Z, Dg = self._integrate_step(
-                theta[idx], w[idx], p[idx], ahead)
-            which = self._step_verdicts(run, idx, thm, backwards, stalled, outside, Z, Dg,
-                                        ahead, behind, k == 0 and step_start)
+            st = self._integrate_step(theta[idx], w[idx], p[idx], ahead)
+            st.update(k=k, ahead=ahead, behind=behind)
+            which, message = self._step_verdicts(run, idx, st, k == 0 and step_start)
             bad = which != ""
-            run.fail(idx[bad], which[bad], k)
+            run.fail(idx[bad], which[bad], k, message[bad])
             alive[idx[bad]] = False
             ok = np.flatnonzero(~bad)
             if ok.size == 0:
                 continue
-            self._impact(run, idx[ok], k, steps, thm[ok], Z[0][ok, -1], Z[1, ok, -1],
+            Z = st["Z"]
+            self._impact(run, idx[ok], k, steps, st["thm"][ok], Z[0][ok, -1], Z[1, ok, -1],
                          alive, theta, w, p, ends)
         return run.batch()
 
-    def _integrate_step(self, theta, w, p, ahead):
-        """One step of m scenarios from phases theta with rates w: the strike phase thm,
-        whether each goes backwards, stalls or strikes outside the phase range, and the
-        nodes (w, t) Z (2, m, nodes + 1) with their diagnostics from the start on."""
+    def _integrate_step(self, theta, w, p, ahead) -> dict:
+        """One step of m scenarios from phases theta with rates w (step constants p): the
+        strike phase thm, whether each goes backwards, stalls or strikes outside the phase
+        range, the phase step hs (0 where it cannot be taken), and the nodes (w, t) Z
+        (2, m, nodes + 1) with their diagnostics Dg from the start on."""
         direction = self.direction
         lo, hi = self.vmap.vc.theta_range
         m_ = theta.size
@@ -373,44 +385,104 @@ class VirtualConstraintWalker:
         Z, TH, Dg = self._nodes(z0, theta, hs, p, self.nodes)
         Z = np.concatenate([z0[:, :, None], Z], axis=2)
         Dg = np.concatenate([D0, Dg], axis=2)
-        return thm, backwards, stalled, outside, Z, Dg
+        return dict(thm=thm, backwards=backwards, stalled=stalled, outside=outside, hs=hs,
+                    theta=theta, p=p, Z=Z, Dg=Dg)
 
-    def _step_verdicts(self, run, idx, thm, backwards, stalled, outside, Z, Dg, ahead,
-                       behind, first_step):
-        """Every node checked (the margins tracked in ``run``), then the step's start
-        (``first_step``), its phase and its strike: per scenario the first failure
-        ('' none)."""
-        S, direction = self.schema, self.direction
+    def _step_verdicts(self, run, idx, st, first_step):
+        """Every node checked, then between the nodes (the margins tracked in ``run``),
+        then the step's start (``first_step``), its phase and its strike: per scenario
+        the first failure ('' none) and its message."""
+        S, direction, Z = self.schema, self.direction, st["Z"]
         m_ = idx.size
         ws = Z[0]
-        rows = S.rows(Dg, np.all(np.isfinite(Z), axis=0))
+        rows = S.rows(st["Dg"], np.all(np.isfinite(Z), axis=0))
         zs = rows["zsw"]
         zprev = np.concatenate([zs[:, :1], zs[:, :-1]], axis=1)
         masks = node_violations(rows, self.limits, self.den_scale,
                                 np.sign(rows["den"][:, :1]), zprev,
-                                (ahead[:, None], behind[:, None]))
+                                (st["ahead"][:, None], st["behind"][:, None]))
         masks["no_impact"] = rows["finite"] & ~(ws * direction > 0)   # stalls, falls back
         first, which = first_violation(masks)
         # a NaN phase rate is a stall (xi = w^2 < 0 past the turn): no impact
         stall = ~np.isfinite(ws[np.arange(m_), np.minimum(first, self.nodes)])
         which = np.where((which == "diverged") & stall, "no_impact", which)
-        run.track(idx, S.row(Dg, "u"), S.row(Dg, "Fx"), S.row(Dg, "Fz"),
+        start = start_violation(zs[:, 0], self.limits, st["behind"]) if first_step else \
+            np.full(m_, "", dtype=object)
+        message = self._between(run, idx, st, rows, np.where(
+            (start != "") | (st["hs"] == 0), 0, np.minimum(first, self.nodes)), first, which)
+        run.track(idx, S.row(st["Dg"], "u"), S.row(st["Dg"], "Fx"), S.row(st["Dg"], "Fz"),
                   np.arange(self.nodes + 1)[None, :]
                   < np.minimum(first + 1, self.nodes + 1)[:, None])
         if first_step:
-            which = np.where(which == "", start_violation(zs[:, 0], self.limits, behind),
-                             which)
-            which = np.where(backwards & (which == ""), "out_of_range", which)
-        which = np.where(outside & (which == ""), "out_of_range", which)
-        which = np.where(stalled & (which == ""), "no_impact", which)
-        which = np.where(~np.isfinite(thm) & (which == ""), "no_impact", which)
+            which = np.where(which == "", start, which)
+            which = np.where(st["backwards"] & (which == ""), "out_of_range", which)
+        which = np.where(st["outside"] & (which == ""), "out_of_range", which)
+        which = np.where(st["stalled"] & (which == ""), "no_impact", which)
+        which = np.where(~np.isfinite(st["thm"]) & (which == ""), "no_impact", which)
         which = np.where((which == "") & ~(rows["xsw"][:, -1] > self.model.scuff_zone),
                          "no_impact", which)
         which = np.where(which == "", strike_violation(rows["dzsw"][:, -1]), which)
         with np.errstate(invalid="ignore"):     # as the simulator: no impact in time
             late = ~(Z[1, :, -1] <= self.options.horizon * self.gait.T)
         which = np.where((which == "") & late, "no_impact", which)
-        return which
+        return which, message
+
+    def _between(self, run, idx, st, rows, stop, first, which):
+        """The margins and the swing foot between the nodes of each scenario's first
+        ``stop`` steps (:mod:`~biped_casadi.simulation.margins`; every dip of the foot
+        below the ground is a scuff: this walker's strike is at theta^-): a dip there
+        ends the run before its nodes' failure (``first``, ``which`` updated, the state
+        at the dip tracked in ``run``).  Returns the messages ('' none)."""
+        Z, hs, sgn, k = st["Z"], st["hs"], self.direction, st["k"]
+        message = np.full(idx.size, "", dtype=object)
+
+        def between(*a):             # built at first use
+            return self._dense()[0](*a)
+
+        def node(i, j):              # step j's first node of scenario i: (z, theta, p)
+            return Z[:, i, j], st["theta"][i] + j * hs[i], np.r_[st["p"][i], self.t_c]
+
+        feet = foot_dips(lambda *a: self._dense()[1](*a), np.abs(hs), node,
+                         rows["zsw"][:, :-1], rows["dzsw"][:, :-1], rows["dzsw"][:, 1:], stop,
+                         (st["ahead"], st["behind"]), np.inf, self.limits,
+                         np.diff(Z[1], axis=1))      # the steps' durations
+        for i, got in feet.items():
+            stop[i] = got[0]         # the margins before the foot's dip
+        R = self.margin.rows(st["Dg"])
+        near = np.flatnonzero(self.margin.near(R) & (stop > 0))
+        dips = {int(near[i]): got for i, got in self.margin.first_dips(
+            between, self.margin.of_rows(R[:, near]), self.nodes,
+            lambda i, j: (*node(near[i], j)[:2], abs(hs[near[i]]), node(near[i], j)[2]),
+            stop[near]).items()} if near.size else {}
+        for i, (j, eta, status) in {**{i: (f[0], f[2], "scuffed") for i, f in feet.items()},
+                                    **dips}.items():
+            zj, thj, _ = node(i, j)
+            D = np.array(self.node(zj, thj, sgn * eta, st["p"][i])[2])
+            run.track(idx[[i]], *(self.schema.row(D, r)[..., None] for r in ("u", "Fx", "Fz")))
+            first[i], which[i] = j, status
+            message[i] = f"step {k + 1}: " + self.margin.message(status, D, self.den_scale)
+        return message
+
+    def _dense(self):
+        """The margins (:class:`~biped_casadi.simulation.margins.MarginCheck`) and the
+        swing foot at the end of the RK4 step of phase length sgn eta from a node
+        ((w, t), theta; p: the step constants and the rejoin phase), with their rates in
+        eta; built at first use, then shared by every batch."""
+        if self._dense_fns is None:
+            z, th, eta = ca.SX.sym("z", 2), ca.SX.sym("theta"), ca.SX.sym("eta")
+            pp = ca.SX.sym("p", self.n_par + 1)
+            hs = self.direction * eta
+            zn = self._step(z, th, hs, pp[:-1], pp[-1])[0]
+            rk4 = ca.Function("vc_rk4", [z, th, eta, pp], [zn, th + hs])
+
+            def margins(Z, thv, p):
+                return self.margin.values(*self._point(thv, Z[0], p[:-1], p[-1])[2:5], lib=ca)
+
+            fs = [self.margin.function(rk4, margins), dip_function(
+                rk4, lambda Z, thv, p: self.model.swing_foot(self._point(thv, Z[0], p[:-1],
+                                                                          p[-1])[0]))]
+            self._dense_fns = tuple(FastCall(f) for f in fs)
+        return self._dense_fns
 
     def _impact(self, run, gi, k, steps, thm, wm, tm, alive, theta, w, p, ends=None):
         """The impacts of the scenarios gi at phases thm, rates wm, times tm: recorded
