@@ -93,7 +93,9 @@ class MarginCheck:
         :data:`~biped_casadi.simulation.kernel.SCREEN_SAFETY` / 8 times 3 max |c''| h^2
         at every node, as :func:`~biped_casadi.simulation.kernel.screen_far`; a NaN is
         near.  The second differences are taken only where their bound by the rows'
-        ranges (|c''| h^2 <= 2 (max - min)) does not already decide.
+        ranges (|c''| h^2 <= 2 (max - min)) does not already decide.  A margin added to
+        :meth:`values` must be bounded here too: one missing is never screened in a
+        scenario this calls far.
         """
         lo, hi = R.min(axis=-1), R.max(axis=-1)
         near = self._near(lo, hi, 2 * (hi - lo))
