@@ -24,7 +24,8 @@ point is found by Newton's method (the strike's); below the ground it is the str
 first root before it, beyond ``model.scuff_zone``) or a scuff.  The stance force, the
 friction cone and the torques are screened between the nodes and their minima located
 where they may dip (:mod:`~biped_casadi.simulation.margins`; by their rates, or for a
-compiled law from sampled values):
+compiled law from sampled values); the fall and the singularity at the nodes only
+(:mod:`~biped_casadi.simulation.validity` says why):
 
 - ``fell``: hip lower than ``min_hip_height`` or torso past horizontal (leaning more than
   ``max_torso_angle`` from its upright angle, the robot's ``torso_upright``);

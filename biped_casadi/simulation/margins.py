@@ -16,7 +16,9 @@ has the same screen; in a flagged step the margins are taken at
 step of that length from the first node), the parts screened alike, and a minimum
 located by golden-section search on the margin's values
 (:func:`~biped_casadi.simulation.kernel.minima_sampled`).  A minimum below its bound is
-the first invalid state, named with "between two RK4 nodes".
+the first invalid state, named with "between two RK4 nodes".  The fall and the
+controller's singularity are checked at the nodes only, and why that suffices is
+:mod:`~biped_casadi.simulation.validity`'s ("At the nodes only").
 
 The batched walkers (:mod:`~biped_casadi.simulation.tv_walker`,
 :mod:`~biped_casadi.simulation.vc_walker`) screen the steps of all their scenarios at once
