@@ -10,7 +10,8 @@ import pytest
 from biped_casadi.simulation import SimulationOptions, WalkBatch, WalkOutcome, verdict
 from biped_casadi.simulation.outcome import NOT_CONVERGED, OutcomeRecorder
 from biped_casadi.simulation.validity import (NODE_CHECKS, Limits, first_violation,
-                                              impact_violation, node_message, node_violations,
+                                              impact_message, impact_violation, node_message,
+                                              node_violations,
                                               start_violation, strike_violation)
 
 LIM = Limits(mu=0.6, min_normal_force=0.0, hip_floor=0.45, max_torso_angle=math.pi / 2,
@@ -55,6 +56,17 @@ def test_each_node_condition(change, status):
     if status != "diverged":
         node = {k: (v[..., 0] if k != "u" else v[:, 0]) for k, v in rows.items()}
         assert node_message(status, node, LIM, 5.0)
+
+
+def test_a_huge_friction_ratio_is_printed_in_four_digits_not_three_hundred():
+    """Near the law's pole |F_x| / F_z reaches 1e306: the message stays one short line
+    (ordinary ratios keep their four decimals)."""
+    node = {k: (v[..., 0] if k != "u" else v[:, 0]) for k, v in _node(Fx=[7e306]).items()}
+    msg = node_message("slipped", node, LIM, 5.0)
+    assert len(msg) < 80 and f"= {7e306 / float(node['Fz']):.4g} > mu" in msg, msg
+    node = {k: (v[..., 0] if k != "u" else v[:, 0]) for k, v in _node(Fx=[200.0]).items()}
+    assert f"= {200.0 / float(node['Fz']):.4f} > mu" in node_message("slipped", node, LIM, 5.0)
+    assert "e+306 > mu" in impact_message("slipped", [7e306, 1.0], 0.1, LIM)
 
 
 def test_swing_foot_under_the_ground_in_front_is_a_strike_not_a_scuff():

@@ -365,11 +365,17 @@ def node_message(which: str, node: dict, limits: Limits, den_scale: float) -> st
                            f"{d['xsw']:.4f} m, z_sw = {d['zsw']:.3g} m",
         "negative_normal_force": lambda: f"stance normal force F_z = {d['Fz']:.4g} N",
         "slipped": lambda: f"stance foot slips: |F_x| / F_z = "
-                           f"{abs(d['Fx']) / max(d['Fz'], 1e-300):.4f} > mu = {limits.mu}",
+                           f"{_ratio(abs(d['Fx']) / max(d['Fz'], 1e-300))} > mu = {limits.mu}",
         "torque_limit": lambda: f"torque limit exceeded: |u| = {np.max(np.abs(d['u'])):.4g} "
                                 f"N m > {limits.torque_limit:g} N m",
     }
     return words[which]()
+
+
+def _ratio(x: float) -> str:
+    """A friction ratio in words: four decimals, or four digits where it is huge (near
+    the law's pole |F_x| / F_z reaches 1e306)."""
+    return f"{x:.4f}" if abs(x) < 1e4 else f"{x:.4g}"
 
 
 def between_message(which: str, node: dict, limits: Limits, den_scale: float = 1.0) -> str:
@@ -410,7 +416,7 @@ def impact_message(which: str, F, v_lift: float, limits: Limits) -> str:
         "diverged": "the impact map is not finite",
         "negative_normal_force": f"impact impulse has normal component {F[1]:.4g} N s",
         "slipped": (f"impact impulse outside the friction cone: |F_x| / F_z = "
-                    f"{abs(F[0]) / F[1]:.4f} > mu = {limits.mu}"),
+                    f"{_ratio(abs(F[0]) / F[1])} > mu = {limits.mu}"),
         "scuffed": (f"the old stance foot does not lift off after the impact "
                     f"(vertical velocity {v_lift:.4g} m/s, needs more than "
                     f"{limits.min_liftoff_speed:g})"),
