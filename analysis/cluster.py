@@ -135,11 +135,16 @@ def check_workers(client, kind: str = "numerical"):
     Raises
     ------
     ValueError
-        Naming 'scheduler', the first worker that differs and its first file.
+        Naming 'scheduler', the first worker that differs and its first file (or the
+        first file changed on disk after the worker imported the toolkit).
     """
-    from biped_casadi.caching import code_files, files_differing
-    mine = code_files(kind)
+    from biped_casadi.caching import code_edited, code_files, files_differing
+    mine, edited = code_files(kind), client.run(code_edited, kind)
     for address, theirs in sorted(client.run(code_files, kind).items()):
+        if edited.get(address):
+            raise ValueError(f"scheduler: the Dask worker {address} runs other code: "
+                             f"{edited[address]} changed on disk after it imported the "
+                             "toolkit; restart the worker")
         if differing := files_differing(mine, theirs):
             raise ValueError(f"scheduler: the Dask worker {address} runs other code: "
                              f"{differing} differs from this checkout's; "
