@@ -69,8 +69,9 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
     Raises
     ------
     ValueError
-        Naming 'scheduler': dask.distributed missing, a malformed address or none at
-        it, or no worker joined it within :data:`DASK_WORKER_TIMEOUT` seconds.
+        Naming 'scheduler': dask.distributed missing, a malformed address or no
+        scheduler answering at it within :data:`DASK_CONNECT_TIMEOUT`, or no worker
+        joined it within :data:`DASK_WORKER_TIMEOUT` seconds.
     """
     try:
         import dask
@@ -103,13 +104,16 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
         return client, cluster
     if not isinstance(scheduler, str):
         return scheduler, None
-    try:        # an address without host and port: refused before a client (its thread)
-        from distributed.comm import get_address_host_port
+    try:        # an address without host and port, or no scheduler there: refused before
+        from distributed.comm import get_address_host_port      # a client (its thread)
         get_address_host_port(scheduler)
+        _identity(scheduler)
         client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
-    except (OSError, TimeoutError, ValueError) as e:
+    except (OSError, TimeoutError, ValueError, AssertionError) as e:
+        what = "Dask's client thread did not start within 10 s" if isinstance(
+            e, AssertionError) else f"{type(e).__name__}: {e}"   # (the assertion it has)
         raise ValueError(f"scheduler: cannot connect to the Dask scheduler at {scheduler} "
-                         f"({type(e).__name__}: {e}); is 'dask scheduler' running there? "
+                         f"({what}); is 'dask scheduler' running there? "
                          "(its log prints the address to give)") from None
     try:
         client.wait_for_workers(1, timeout=DASK_WORKER_TIMEOUT)
@@ -118,6 +122,32 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
         raise ValueError(f"scheduler: no Dask worker joined {scheduler} within "
                          f"{DASK_WORKER_TIMEOUT} s ({e})") from None
     return client, None
+
+
+def _identity(address: str) -> dict:
+    """What the Dask scheduler at ``address`` says it is, asked within the connect timeout
+    (a client's handshake has none: a web server there held it for ever; one that
+    answered something else made it allocate exabytes; a worker's address fails too)."""
+    import asyncio
+    import concurrent.futures
+    from dask.utils import parse_timedelta
+    from distributed.core import rpc
+    timeout = parse_timedelta(DASK_CONNECT_TIMEOUT)
+
+    async def ask():
+        async with rpc(address, timeout=timeout) as server:
+            return await asyncio.wait_for(server.identity(n_workers=0), timeout)
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:  # (a caller's running loop)
+        try:
+            return pool.submit(asyncio.run, ask()).result()
+        except TimeoutError as e:
+            raise TimeoutError(str(e) or f"no answer within {DASK_CONNECT_TIMEOUT}") from None
+        except OSError:
+            raise
+        except Exception as e:                      # noqa: BLE001 - not Dask's answer
+            raise ValueError(f"what answers there is not a Dask scheduler ({type(e).__name__} "
+                             "reading its answer)") from None
 
 
 def check_workers(client, kind: str = "numerical"):

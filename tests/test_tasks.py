@@ -420,7 +420,58 @@ def test_a_malformed_address_is_refused_before_any_client(monkeypatch):
             cluster.connect(address)
 
 
-def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
+def test_an_address_without_a_scheduler_is_refused_within_the_connect_timeout(monkeypatch):
+    """Nothing listening; a web server (a scheduler's dashboard port: Dask's client waited
+    for its handshake for ever); a server that answers something else and hangs up (the
+    client read its bytes as a length: "internal error: MemoryError: Unable to allocate
+    3.07 EiB"): one line naming the address, within the connect timeout."""
+    import queue
+    import re
+    import socket
+    import threading
+    import time
+    from http.server import BaseHTTPRequestHandler, HTTPServer
+    from analysis import cluster
+    monkeypatch.setattr(cluster, "DASK_CONNECT_TIMEOUT", "2s")
+    web = HTTPServer(("127.0.0.1", 0), BaseHTTPRequestHandler)
+    other = socket.create_server(("127.0.0.1", 0))
+
+    def serve():
+        while True:
+            c, _ = other.accept()
+            c.recv(64)
+            c.sendall(b"HTTP/1.1 400 Bad Request\r\ncontent-length: 0\r\n\r\n")
+            c.close()
+
+    free = socket.create_server(("127.0.0.1", 0))
+    port = free.getsockname()[1]
+    free.close()
+    for target in (web.serve_forever, serve):
+        threading.Thread(target=target, daemon=True).start()
+    for p, why in ((other.getsockname()[1], r"ValueError: what answers there is not a Dask "
+                                            r"scheduler \(MemoryError"),
+                   (web.server_port, "TimeoutError: "), (port, "(OSError|TimeoutError): ")):
+        address, out = f"tcp://127.0.0.1:{p}", queue.Queue()
+        t = time.monotonic()
+        threading.Thread(target=lambda: out.put(_raised(cluster.connect, address)),
+                         daemon=True).start()
+        e = out.get(timeout=60)                      # (the old code: for ever)
+        assert time.monotonic() - t < 20
+        assert isinstance(e, ValueError) and re.match(
+            rf"scheduler: cannot connect to the Dask scheduler at {address} \({why}", str(e)), e
+        assert "\n" not in str(e)
+    web.shutdown()
+    other.close()
+
+
+def _raised(fn, *args):
+    try:
+        fn(*args)
+    except BaseException as e:                   # noqa: BLE001 - what it raised
+        return e
+
+
+def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path, monkeypatch):
     """``kill -9`` of the worker that holds a kept result another task needs: Dask makes
     it again on the other worker (a scattered copy was lost with it and failed every
     later dependant).  Then the scheduler killed: a waiting task's ``result()`` raises
@@ -434,6 +485,7 @@ def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
 
     from dask_cluster import dask_cluster
 
+    import dask.distributed
     from analysis.cli.failures import failure_line
     env = {k: v for k, v in os.environ.items() if k != "BIPED_SCHEDULER"}
     env["PYTHONPATH"] = str(Path(__file__).resolve().parent)
@@ -451,6 +503,16 @@ def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
         while holder in client.scheduler_info()["workers"] and time.time() - t0 < 30:
             time.sleep(0.2)
         assert eng.submit(add, kept, 2.0).result(timeout=60) == 11.0
+        from analysis.cluster import connect         # a worker's address, not the scheduler's
+        with pytest.raises(ValueError, match=r"\(ValueError: what answers there is not a "
+                                             r"Dask scheduler \("):
+            connect(next(iter(client.scheduler_info()["workers"])))
+        with monkeypatch.context() as m:    # Dask's client thread not started within 10 s
+            m.setattr(dask.distributed, "Client", _assertion)
+            with pytest.raises(ValueError, match=r"^scheduler: cannot connect to the Dask "
+                                                 r"scheduler at tcp://\S+ \(Dask's client "
+                                                 r"thread did not start within 10 s\); is"):
+                connect(address)
         waiting = eng.submit(started_at, 0.0, 60.0)
         os.kill(client.run_on_scheduler(os.getpid), signal.SIGKILL)
         with pytest.raises(CancelledError) as e:
@@ -462,3 +524,8 @@ def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
         assert failure_line(inside) == line
         with pytest.raises(ValueError, match="^scheduler: lost the Dask scheduler at tcp://"):
             eng.check_started()
+
+
+def _assertion(*args, **kwargs):
+    """Dask's client when its IO loop's thread did not start within 10 s."""
+    raise AssertionError
