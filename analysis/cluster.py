@@ -141,10 +141,8 @@ def _identity(address: str) -> dict:
     with concurrent.futures.ThreadPoolExecutor(1) as pool:  # (a caller's running loop)
         try:
             return pool.submit(asyncio.run, ask()).result()
-        except TimeoutError as e:
-            raise TimeoutError(str(e) or f"no answer within {DASK_CONNECT_TIMEOUT}") from None
-        except OSError:
-            raise
+        except (OSError, TimeoutError) as e:           # (asyncio's timeout says nothing)
+            raise type(e)(str(e) or f"no answer within {DASK_CONNECT_TIMEOUT}") from None
         except Exception as e:                      # noqa: BLE001 - not Dask's answer
             raise ValueError(f"what answers there is not a Dask scheduler ({type(e).__name__} "
                              "reading its answer)") from None
