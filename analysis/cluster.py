@@ -69,8 +69,9 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
     Raises
     ------
     ValueError
-        Naming 'scheduler': dask.distributed missing, a malformed address or none at
-        it, or no worker joined it within :data:`DASK_WORKER_TIMEOUT` seconds.
+        Naming 'scheduler': dask.distributed missing, a malformed address or no
+        scheduler answering at it within :data:`DASK_CONNECT_TIMEOUT`, or no worker
+        joined it within :data:`DASK_WORKER_TIMEOUT` seconds.
     """
     try:
         import dask
@@ -103,13 +104,16 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
         return client, cluster
     if not isinstance(scheduler, str):
         return scheduler, None
-    try:        # an address without host and port: refused before a client (its thread)
-        from distributed.comm import get_address_host_port
+    try:        # an address without host and port, or no scheduler there: refused before
+        from distributed.comm import get_address_host_port      # a client (its thread)
         get_address_host_port(scheduler)
+        _identity(scheduler)
         client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
-    except (OSError, TimeoutError, ValueError) as e:
+    except (OSError, TimeoutError, ValueError, AssertionError) as e:
+        what = "Dask's client thread did not start within 10 s" if isinstance(
+            e, AssertionError) else f"{type(e).__name__}: {e}"   # (the assertion it has)
         raise ValueError(f"scheduler: cannot connect to the Dask scheduler at {scheduler} "
-                         f"({type(e).__name__}: {e}); is 'dask scheduler' running there? "
+                         f"({what}); is 'dask scheduler' running there? "
                          "(its log prints the address to give)") from None
     try:
         client.wait_for_workers(1, timeout=DASK_WORKER_TIMEOUT)
@@ -118,6 +122,30 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
         raise ValueError(f"scheduler: no Dask worker joined {scheduler} within "
                          f"{DASK_WORKER_TIMEOUT} s ({e})") from None
     return client, None
+
+
+def _identity(address: str) -> dict:
+    """What the Dask scheduler at ``address`` says it is, asked within the connect timeout
+    (a client's handshake has none: a web server there held it for ever; one that
+    answered something else made it allocate exabytes; a worker's address fails too)."""
+    import asyncio
+    import concurrent.futures
+    from dask.utils import parse_timedelta
+    from distributed.core import rpc
+    timeout = parse_timedelta(DASK_CONNECT_TIMEOUT)
+
+    async def ask():
+        async with rpc(address, timeout=timeout) as server:
+            return await asyncio.wait_for(server.identity(n_workers=0), timeout)
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:  # (a caller's running loop)
+        try:
+            return pool.submit(asyncio.run, ask()).result()
+        except (OSError, TimeoutError) as e:           # (asyncio's timeout says nothing)
+            raise type(e)(str(e) or f"no answer within {DASK_CONNECT_TIMEOUT}") from None
+        except Exception as e:                      # noqa: BLE001 - not Dask's answer
+            raise ValueError(f"what answers there is not a Dask scheduler ({type(e).__name__} "
+                             "reading its answer)") from None
 
 
 def check_workers(client, kind: str = "numerical"):
@@ -135,11 +163,16 @@ def check_workers(client, kind: str = "numerical"):
     Raises
     ------
     ValueError
-        Naming 'scheduler', the first worker that differs and its first file.
+        Naming 'scheduler', the first worker that differs and its first file (or the
+        first file changed on disk after the worker imported the toolkit).
     """
-    from biped_casadi.caching import code_files, files_differing
-    mine = code_files(kind)
+    from biped_casadi.caching import code_edited, code_files, files_differing
+    mine, edited = code_files(kind), client.run(code_edited, kind)
     for address, theirs in sorted(client.run(code_files, kind).items()):
+        if edited.get(address):
+            raise ValueError(f"scheduler: the Dask worker {address} runs other code: "
+                             f"{edited[address]} changed on disk after it imported the "
+                             "toolkit; restart the worker")
         if differing := files_differing(mine, theirs):
             raise ValueError(f"scheduler: the Dask worker {address} runs other code: "
                              f"{differing} differs from this checkout's; "

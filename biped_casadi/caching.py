@@ -12,7 +12,8 @@ Code.  :func:`code_version` is the digest of the *syntax trees* of a set of modu
 versions: editing a docstring, a comment or the layout of a line keeps every result;
 changing a number or a statement gives new keys (the old results stay on disk, unused).
 Results kept in folders of their own (a sweep, a Monte Carlo) carry it, and a Dask
-worker whose code differs is refused (:mod:`analysis.tasks`).
+worker whose code differs, or whose files changed after it imported them
+(:func:`code_edited`), is refused (:mod:`analysis.tasks`).
 
 Kept results.  :class:`ResultStore` keeps one file per key in :func:`cache_dir`
 (``$BIPED_CACHE_DIR`` or ``~/.cache/biped-casadi``), written atomically and fsynced; a
@@ -38,17 +39,16 @@ import os
 import pickle
 import sys
 import threading
-import time
 from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
 
-from .files import file_path, write_bytes_atomic
+from .files import file_lock, file_path, write_bytes_atomic
 
 __all__ = ["cached", "cache_key", "cache_dir", "digest", "code_of", "CODE_SETS",
-           "code_version", "code_files", "files_differing", "argument_key", "task_key", "NotKeyable",
-           "ResultStore", "MISSING", "file_lock", "task", "TaskInfo"]
+           "code_version", "code_files", "code_edited", "files_differing", "argument_key",
+           "task_key", "NotKeyable", "ResultStore", "MISSING", "file_lock", "task", "TaskInfo"]
 
 
 # ------------------------------------------------------------------------ tasks
@@ -406,6 +406,59 @@ def _package_root(name: str):
     return Path(spec.origin).parent if spec and spec.origin else None
 
 
+def _stat(path) -> tuple | None:
+    """What changes with a file's content: size, mtime, ctime, inode (None: gone)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino
+
+
+def _python_files() -> dict:
+    """Every Python file of the three packages: relative path -> (file, its _stat)."""
+    out = {}
+    for top in ("biped_casadi", "gait_opt", "analysis"):
+        root = _package_root(top)
+        for folder, subs, names in os.walk(root) if root is not None else ():
+            subs[:] = [d for d in subs if d != "__pycache__"]
+            for n in names:
+                if n.endswith(".py"):
+                    f = Path(folder, n)
+                    out[f.relative_to(root.parent).as_posix()] = (f, _stat(f))
+    return dict(sorted(out.items()))
+
+
+#: the toolkit's files as this process imports it (this module among the first): what
+#: its modules are read from, and its code digest (the files must not change after)
+_IMPORTED = _python_files()
+
+
+def code_edited(kind: str = "numerical") -> str:
+    """The first file of a code set changed on disk since this process imported it.
+
+    Then the code that runs (modules imported before the change, and after it) and the
+    code digest (:func:`code_version`, read from the files) may differ: a Dask worker
+    refuses its tasks (:mod:`analysis.tasks`) until restarted.  A file's size, times
+    and inode are compared (a stat of each file of the set; no file is read).
+
+    Parameters
+    ----------
+    kind : str
+        A key of :data:`CODE_SETS`.
+
+    Returns
+    -------
+    str
+        The file, relative to the packages' parent folder ('' if none changed).
+    """
+    for rel in code_files(kind):
+        f, st = _IMPORTED[rel]
+        if _stat(f) != st:
+            return rel
+    return ""
+
+
 def files_differing(mine: dict, theirs: dict) -> str:
     """The first file whose code differs between two :func:`code_files` ('' if none).
 
@@ -436,23 +489,17 @@ def code_files(kind: str = "numerical") -> dict:
     -------
     dict
         Path relative to the packages' parent folder -> 16 hex digits; computed once
-        per process.
+        per process, of the files there when it imported the toolkit
+        (:func:`code_edited` says whether they changed since).
     """
     if kind not in CODE_SETS:
         raise ValueError(f"kind must be one of {sorted(CODE_SETS)}, got {kind!r}")
     if kind not in _FILES:
         paths, left_out, kept = CODE_SETS[kind]
         inside = lambda rel, ps: any(rel == p or rel.startswith(p + "/") for p in ps)  # noqa
-        out = {}
-        for top in sorted({p.split("/")[0] for p in paths}):
-            root = _package_root(top)
-            if root is None:
-                continue
-            for f in sorted(root.rglob("*.py")):
-                rel = f.relative_to(root.parent).as_posix()
-                if inside(rel, paths) and not (inside(rel, left_out) and not inside(rel, kept)):
-                    out[rel] = _file_digest(f)
-        _FILES[kind] = out
+        _FILES[kind] = {rel: _file_digest(f) for rel, (f, _) in _IMPORTED.items()
+                        if inside(rel, paths) and not (inside(rel, left_out)
+                                                       and not inside(rel, kept))}
         _save_digests()
     return _FILES[kind]
 
@@ -629,69 +676,3 @@ class ResultStore:
             write_bytes_atomic(p, data)
             return True
         return False
-
-
-# ------------------------------------------------------------------ file lock
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-@contextlib.contextmanager
-def file_lock(path: Path, poll: float = 0.2):
-    """Hold a lock file beside ``path`` among processes sharing a folder.
-
-    While another live process holds it, wait: two processes then never build the same
-    file (a compiled library) at once.  A lock left by a process that died is taken
-    over; where the folder cannot be written (or the lock's process id cannot: a full
-    disk), the block runs unguarded and no lock file is left.
-
-    Parameters
-    ----------
-    path : Path
-        The file to build.
-    poll : float
-        Seconds between looks at another process's lock.
-    """
-    lock = Path(str(path) + ".lock")
-    try:
-        lock.parent.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        yield
-        return
-    while True:
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-        except FileExistsError:
-            try:
-                pid = int(lock.read_text() or 0)
-            except (OSError, ValueError):
-                pid = 0
-            if pid and pid != os.getpid() and _alive(pid):
-                time.sleep(poll)
-                continue
-            with contextlib.suppress(OSError):
-                lock.unlink()                       # its holder died: take it over
-            continue
-        except OSError:
-            yield
-            return
-        try:
-            with os.fdopen(fd, "w") as f:
-                f.write(str(os.getpid()))
-        except OSError:                             # a full disk: no lock, no stray file
-            with contextlib.suppress(OSError):
-                lock.unlink()
-            yield
-            return
-        break
-    try:
-        yield
-    finally:
-        with contextlib.suppress(OSError):
-            lock.unlink()

@@ -2,16 +2,18 @@
 read, and writing result files safely: through a temporary file in the same folder,
 moved into place only when complete, and removed on any failure (an exception, Ctrl-C),
 so a reader never sees half a file and a failed write never damages an earlier result
-or leaves a stray temporary file behind."""
+or leaves a stray temporary file behind; and a lock file that keeps processes sharing a
+folder from building the same file at once."""
 from __future__ import annotations
 
 import contextlib
 import itertools
 import os
+import time
 from pathlib import Path
 
 __all__ = ["atomic_path", "write_text_atomic", "write_bytes_atomic", "read_text_file",
-           "name_destination", "file_path"]
+           "name_destination", "file_path", "file_lock"]
 
 
 def file_path(path, name: str = "path") -> Path:
@@ -180,3 +182,69 @@ def write_bytes_atomic(path, data: bytes) -> Path:
 def write_text_atomic(path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` through :func:`atomic_path`; returns ``path``."""
     return write_bytes_atomic(path, text.encode("utf-8"))
+
+
+# ------------------------------------------------------------------ file lock
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def file_lock(path: Path, poll: float = 0.2):
+    """Hold a lock file beside ``path`` among processes sharing a folder.
+
+    While another live process holds it, wait: two processes then never build the same
+    file (a compiled library) at once.  A lock left by a process that died is taken
+    over; where the folder cannot be written (or the lock's process id cannot: a full
+    disk), the block runs unguarded and no lock file is left.
+
+    Parameters
+    ----------
+    path : Path
+        The file to build.
+    poll : float
+        Seconds between looks at another process's lock.
+    """
+    lock = Path(str(path) + ".lock")
+    try:
+        lock.parent.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        yield
+        return
+    while True:
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                pid = int(lock.read_text() or 0)
+            except (OSError, ValueError):
+                pid = 0
+            if pid and pid != os.getpid() and _alive(pid):
+                time.sleep(poll)
+                continue
+            with contextlib.suppress(OSError):
+                lock.unlink()                       # its holder died: take it over
+            continue
+        except OSError:
+            yield
+            return
+        try:
+            with os.fdopen(fd, "w") as f:
+                f.write(str(os.getpid()))
+        except OSError:                             # a full disk: no lock, no stray file
+            with contextlib.suppress(OSError):
+                lock.unlink()
+            yield
+            return
+        break
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            lock.unlink()

@@ -73,6 +73,15 @@ def echo(x):
 
 
 @task
+def default_of(module: str, function: str, parameter: str):
+    """The default of a parameter of a function, its module imported here if not yet."""
+    import importlib
+    import inspect
+    fn = getattr(importlib.import_module(module), function)
+    return inspect.signature(fn).parameters[parameter].default
+
+
+@task
 def started_at(x, wait: float = 0.0):
     """When it started (then it sleeps ``wait`` s)."""
     t = time.time()

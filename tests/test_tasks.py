@@ -11,8 +11,8 @@ import pytest
 
 from analysis.tasks import Engine, NotKeyable, TaskError, argument_key, resolve_scheduler
 from biped_casadi.caching import _strip_docstrings
-from task_examples import (Pair, add, chain, echo, fails, pair_sum, pid, square, started_at, total,
-                           unkept, unkept_flow)
+from task_examples import (Pair, add, chain, default_of, echo, fails, pair_sum, pid, square,
+                           started_at, total, unkept, unkept_flow)
 
 
 def _tree(src):
@@ -222,17 +222,22 @@ def test_a_script_without_a_main_guard_fails_fast_with_the_reason(tmp_path):
     assert "ValueError: scheduler: the Dask cluster did not start" in out.stderr
 
 
+def _toolkit_copy(dest):
+    """A copy of the three packages in ``dest``; returns ``dest``."""
+    import shutil
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    for top in ("biped_casadi", "gait_opt", "analysis"):
+        shutil.copytree(root / top, dest / top, ignore=shutil.ignore_patterns("__pycache__"))
+    return dest
+
+
 def _code_version_of(tree, tmp_path, name):
     """code_version('numerical') of a copy of the packages (in a fresh process; the
     memo of file digests in ``tmp_path / 'cache'``, shared by the calls)."""
-    import shutil
     import subprocess
     import sys
-    from pathlib import Path
-    root = Path(__file__).resolve().parents[1]
-    dest = tmp_path / name
-    for top in ("biped_casadi", "gait_opt", "analysis"):
-        shutil.copytree(root / top, dest / top, ignore=shutil.ignore_patterns("__pycache__"))
+    dest = _toolkit_copy(tmp_path / name)
     tree(dest)
     out = subprocess.run([sys.executable, "-c", "from analysis.tasks import code_version; "
                           "print(code_version('numerical'), code_version('figures'))"],
@@ -285,13 +290,10 @@ def test_a_worker_running_other_code_is_refused(tmp_path):
     differs (one number in one module): the task fails with one line naming the module,
     and nothing is kept."""
     import os
-    import shutil
     from pathlib import Path
     from dask_cluster import dask_cluster
-    root, tests = Path(__file__).resolve().parents[1], Path(__file__).resolve().parent
-    other = tmp_path / "other"
-    for top in ("biped_casadi", "gait_opt", "analysis"):
-        shutil.copytree(root / top, other / top, ignore=shutil.ignore_patterns("__pycache__"))
+    tests = Path(__file__).resolve().parent
+    other = _toolkit_copy(tmp_path / "other")
     basin = other / "analysis" / "robustness" / "basin.py"
     basin.write_text(basin.read_text().replace("q_span: float = 0.05", "q_span: float = 0.06"))
     env = {k: v for k, v in os.environ.items() if k != "BIPED_SCHEDULER"}
@@ -309,6 +311,61 @@ def test_a_worker_running_other_code_is_refused(tmp_path):
     msg = str(e.value)
     assert "stale worker" in msg and "analysis/robustness/basin.py differs" in msg
     assert "\n" not in msg
+    assert not list((tmp_path / "cache").rglob("*.pkl"))
+
+
+#: a module the workers import with task_examples, and one imported by a task: the
+#: function, its argument, the text before its default, this run's digit and another
+_EDITS = {"imported, then checked out": ("analysis/robustness/basin.py", "basin", "q_span",
+                                         "q_span: float = 0.0", "5", "6"),
+          "digested, then edited": ("analysis/gait_metrics.py", "actuator_work", "n",
+                                    "gait, n: int = 400", "1", "2")}
+
+
+@pytest.mark.parametrize("case", list(_EDITS))
+def test_a_worker_whose_files_change_after_it_imported_them_is_refused(case, tmp_path):
+    """A real ``dask worker`` on a copy of the toolkit edited while it runs: it imported a
+    module of other code (a checkout of another version), then the file was put back to
+    this run's code before its first task (its digest, read from the files, equals this
+    run's; the module it runs does not); or it computed its digest (the ``--scheduler``
+    check), then a module it had not imported was edited, then imported by a task.  The
+    task is refused (the old code returned 0.06 or 4002) with one line naming the file
+    and saying to restart the worker, and so is the cluster; nothing is kept."""
+    import os
+    import re
+    from pathlib import Path
+    from dask_cluster import dask_cluster
+    from analysis.cluster import check_workers
+    tests = Path(__file__).resolve().parent
+    env = {k: v for k, v in os.environ.items() if k != "BIPED_SCHEDULER"}
+    rel, fn, arg, at, ours, theirs = _EDITS[case]
+    tree = _toolkit_copy(tmp_path / "tree")
+    f = tree / rel
+    text = f.read_text()
+    edited = text.replace(at + ours, at + theirs, 1)
+    assert edited != text
+    first = case.startswith("imported")
+    if first:
+        f.write_text(edited)                                 # the other version
+    with dask_cluster(tree, [dict(env, PYTHONPATH=f"{tree}:{tests}")], cwd=tmp_path,
+                      scheduler_env=dict(env, PYTHONPATH=str(tests))) as address, \
+            Engine(address, cache=tmp_path / "cache") as eng:
+        client = eng.client()
+        if first:
+            client.run(__import__, "task_examples")           # imports the basin module
+            f.write_text(text)                                # checked out: this run's code
+        else:
+            check_workers(client)                             # the digest: this run's code
+            f.write_text(edited)                              # then edited, not imported
+        with pytest.raises(TaskError) as e:
+            eng.submit(default_of, rel[:-3].replace("/", "."), fn, arg).result()
+        with pytest.raises(ValueError, match=re.escape(
+                f"runs other code: {rel} changed on disk after it imported the toolkit; "
+                "restart the worker")):
+            check_workers(client)
+    assert re.fullmatch(rf"default_of: stale worker \(tcp://127.0.0.1:\d+, pid \d+\): {rel} "
+                        r"changed on disk after it imported the toolkit; restart the worker "
+                        r"\(or the command, on a local cluster\)", str(e.value)), str(e.value)
     assert not list((tmp_path / "cache").rglob("*.pkl"))
 
 
@@ -333,7 +390,7 @@ def test_check_workers_compares_each_worker_once(monkeypatch):
             self.workers = workers
 
         def run(self, fn, kind):
-            return self.workers
+            return self.workers if fn is caching.code_files else dict.fromkeys(self.workers, "")
 
     monkeypatch.setattr(caching, "files_differing", counted)
     cluster.check_workers(Client({"tcp://a:1": mine}))
@@ -363,7 +420,58 @@ def test_a_malformed_address_is_refused_before_any_client(monkeypatch):
             cluster.connect(address)
 
 
-def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
+def test_an_address_without_a_scheduler_is_refused_within_the_connect_timeout(monkeypatch):
+    """Nothing listening; a web server (a scheduler's dashboard port: Dask's client waited
+    for its handshake for ever); a server that answers something else and hangs up (the
+    client read its bytes as a length: "internal error: MemoryError: Unable to allocate
+    3.07 EiB"): one line naming the address, within the connect timeout."""
+    import queue
+    import re
+    import socket
+    import threading
+    import time
+    from http.server import BaseHTTPRequestHandler, HTTPServer
+    from analysis import cluster
+    monkeypatch.setattr(cluster, "DASK_CONNECT_TIMEOUT", "2s")
+    web = HTTPServer(("127.0.0.1", 0), BaseHTTPRequestHandler)
+    other = socket.create_server(("127.0.0.1", 0))
+
+    def serve():
+        while True:
+            c, _ = other.accept()
+            c.recv(64)
+            c.sendall(b"HTTP/1.1 400 Bad Request\r\ncontent-length: 0\r\n\r\n")
+            c.close()
+
+    free = socket.create_server(("127.0.0.1", 0))
+    port = free.getsockname()[1]
+    free.close()
+    for target in (web.serve_forever, serve):
+        threading.Thread(target=target, daemon=True).start()
+    for p, why in ((other.getsockname()[1], r"ValueError: what answers there is not a Dask "
+                                            r"scheduler \(MemoryError"),
+                   (web.server_port, "TimeoutError: "), (port, "(OSError|TimeoutError): ")):
+        address, out = f"tcp://127.0.0.1:{p}", queue.Queue()
+        t = time.monotonic()
+        threading.Thread(target=lambda: out.put(_raised(cluster.connect, address)),
+                         daemon=True).start()
+        e = out.get(timeout=60)                      # (the old code: for ever)
+        assert time.monotonic() - t < 20
+        assert isinstance(e, ValueError) and re.match(
+            rf"scheduler: cannot connect to the Dask scheduler at {address} \({why}", str(e)), e
+        assert "\n" not in str(e)
+    web.shutdown()
+    other.close()
+
+
+def _raised(fn, *args):
+    try:
+        fn(*args)
+    except BaseException as e:                   # noqa: BLE001 - what it raised
+        return e
+
+
+def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path, monkeypatch):
     """``kill -9`` of the worker that holds a kept result another task needs: Dask makes
     it again on the other worker (a scattered copy was lost with it and failed every
     later dependant).  Then the scheduler killed: a waiting task's ``result()`` raises
@@ -377,6 +485,7 @@ def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
 
     from dask_cluster import dask_cluster
 
+    import dask.distributed
     from analysis.cli.failures import failure_line
     env = {k: v for k, v in os.environ.items() if k != "BIPED_SCHEDULER"}
     env["PYTHONPATH"] = str(Path(__file__).resolve().parent)
@@ -394,6 +503,16 @@ def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
         while holder in client.scheduler_info()["workers"] and time.time() - t0 < 30:
             time.sleep(0.2)
         assert eng.submit(add, kept, 2.0).result(timeout=60) == 11.0
+        from analysis.cluster import connect         # a worker's address, not the scheduler's
+        with pytest.raises(ValueError, match=r"\(ValueError: what answers there is not a "
+                                             r"Dask scheduler \("):
+            connect(next(iter(client.scheduler_info()["workers"])))
+        with monkeypatch.context() as m:    # Dask's client thread not started within 10 s
+            m.setattr(dask.distributed, "Client", _assertion)
+            with pytest.raises(ValueError, match=r"^scheduler: cannot connect to the Dask "
+                                                 r"scheduler at tcp://\S+ \(Dask's client "
+                                                 r"thread did not start within 10 s\); is"):
+                connect(address)
         waiting = eng.submit(started_at, 0.0, 60.0)
         os.kill(client.run_on_scheduler(os.getpid), signal.SIGKILL)
         with pytest.raises(CancelledError) as e:
@@ -405,3 +524,8 @@ def test_a_lost_worker_or_scheduler_on_a_real_cluster(tmp_path):
         assert failure_line(inside) == line
         with pytest.raises(ValueError, match="^scheduler: lost the Dask scheduler at tcp://"):
             eng.check_started()
+
+
+def _assertion(*args, **kwargs):
+    """Dask's client when its IO loop's thread did not start within 10 s."""
+    raise AssertionError

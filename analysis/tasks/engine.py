@@ -15,8 +15,8 @@ import threading
 import time
 import traceback
 
-from biped_casadi.caching import (MISSING, ResultStore, TaskInfo, code_files, code_version,
-                                  files_differing, task, task_key)
+from biped_casadi.caching import (MISSING, ResultStore, TaskInfo, code_edited, code_files,
+                                  code_version, files_differing, task, task_key)
 
 from ..cluster import check_not_bootstrapping, connect, tune_allocator
 from ..reporting.progress import progress_bar
@@ -140,16 +140,17 @@ def _one(e: BaseException) -> str:
 
 
 def _run(fn, key: str, code: str | None, args, kwargs):
-    """Run a task here or on a worker (which refuses it when its code is not ``code``,
-    the digest in the key); an error becomes a :class:`TaskError` naming the task."""
+    """Run a task here or on a worker (which refuses it, before and after, when its code
+    is not ``code``, the digest in the key); an error becomes a :class:`TaskError`
+    naming the task."""
     info = _info(fn)
     tune_allocator()
     was, _LOCAL.task = getattr(_LOCAL, "task", False), True
     t = time.perf_counter()
     try:
-        if code is not None and code_version(info.code) != code:
-            raise TaskError(info.name, _stale(info.code, code), key=key)
+        _check_code(info, key, code)
         value = fn(*_unpack(args), **_unpack(kwargs))
+        _check_code(info, key, code)            # (a module it imported, edited meanwhile)
     except Exception as e:          # noqa: BLE001 - reported with the task's name
         raise _error(info.name, e, key) from None
     finally:
@@ -161,17 +162,24 @@ def _run(fn, key: str, code: str | None, args, kwargs):
     return value
 
 
-def _stale(kind: str, code: str) -> str:
-    """Why a worker refuses a task: the first file whose code differs from the client's
+def _check_code(info: TaskInfo, key: str, code: str | None):
+    """On a worker (``code`` given), refuse a task when a file of its code changed since
+    the worker imported the toolkit (its modules and its digest may then differ), or
+    when its code is not ``code``: naming the first file that differs from the client's
     (the engine leaves the client's files in the scheduler's metadata)."""
-    mine, theirs, at = code_files(kind), {}, ""
+    if code is None or not ((edited := code_edited(info.code)) or
+                            code_version(info.code) != code):
+        return
+    theirs, at = {}, ""
     with contextlib.suppress(Exception):
         from dask.distributed import get_client, get_worker
         at = f"{get_worker().address}, "
-        theirs = get_client().get_metadata([_TOPIC, kind, code], None) or {}
-    what = files_differing(mine, theirs) if theirs else "its code"
-    return (f"stale worker ({at}pid {os.getpid()}): {what} differs from this run's code; run "
-            "the same version of the toolkit on every worker")
+        theirs = get_client().get_metadata([_TOPIC, info.code, code], None) or {}
+    why = (f"{edited} changed on disk after it imported the toolkit; restart the worker (or "
+           "the command, on a local cluster)") if edited else (
+        f"{files_differing(code_files(info.code), theirs) if theirs else 'its code'} differs "
+        "from this run's code; run the same version of the toolkit on every worker")
+    raise TaskError(info.name, f"stale worker ({at}pid {os.getpid()}): {why}", key=key)
 
 
 class Engine:
