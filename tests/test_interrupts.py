@@ -44,6 +44,23 @@ def test_an_import_error_made_of_a_ctrl_c_is_the_interruption(monkeypatch, capsy
     assert capsys.readouterr().err == "biped model: interrupted\n"
 
 
+def test_a_class_made_while_ctrl_c_is_pressed_is_the_interruption(monkeypatch, capsys):
+    """A Ctrl-C while a module makes a dataclass comes out of the class's creation as
+    ``RuntimeError: Error calling __set_name__ ...`` (caused by the KeyboardInterrupt):
+    a traceback and exit code 1."""
+    class Interrupted:
+        def find_spec(self, name, path=None, target=None):
+            if name == "analysis.cli.app":
+                raise RuntimeError("Error calling __set_name__ on 'Field' instance "
+                                   "'best' in 'StartScreen'") from KeyboardInterrupt()
+
+    monkeypatch.delitem(sys.modules, "analysis.cli.app", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [Interrupted()] + sys.meta_path)
+    monkeypatch.setattr(sys, "argv", ["biped", "model"])
+    assert biped_cli.main() == 130
+    assert capsys.readouterr().err == "biped model: interrupted\n"
+
+
 def test_an_import_error_alone_is_not_an_interruption(monkeypatch):
     class Broken:
         def find_spec(self, name, path=None, target=None):
