@@ -16,7 +16,7 @@ def main() -> int:
     """
     try:
         from analysis.cli import main as run
-    except (KeyboardInterrupt, ImportError) as e:
+    except (KeyboardInterrupt, Exception) as e:
         if not _interrupted(e):
             raise
         rc = interrupted()
@@ -53,8 +53,9 @@ def _forget_the_interrupt():
 
 
 def _interrupted(e: BaseException) -> bool:
-    """Whether ``e`` is a Ctrl-C, or an error an extension module's initialisation made
-    of one (``ImportError: initialization failed``, caused by the KeyboardInterrupt)."""
+    """Whether ``e`` is a Ctrl-C, or an error made of one: an extension module's
+    initialisation (``ImportError: initialization failed``), a class's creation
+    (``RuntimeError: Error calling __set_name__``), caused by the KeyboardInterrupt."""
     while e is not None:
         if isinstance(e, KeyboardInterrupt):
             return True

@@ -44,6 +44,23 @@ def test_an_import_error_made_of_a_ctrl_c_is_the_interruption(monkeypatch, capsy
     assert capsys.readouterr().err == "biped model: interrupted\n"
 
 
+def test_a_class_made_while_ctrl_c_is_pressed_is_the_interruption(monkeypatch, capsys):
+    """A Ctrl-C while a module makes a dataclass comes out of the class's creation as
+    ``RuntimeError: Error calling __set_name__ ...`` (caused by the KeyboardInterrupt):
+    a traceback and exit code 1."""
+    class Interrupted:
+        def find_spec(self, name, path=None, target=None):
+            if name == "analysis.cli.app":
+                raise RuntimeError("Error calling __set_name__ on 'Field' instance "
+                                   "'best' in 'StartScreen'") from KeyboardInterrupt()
+
+    monkeypatch.delitem(sys.modules, "analysis.cli.app", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [Interrupted()] + sys.meta_path)
+    monkeypatch.setattr(sys, "argv", ["biped", "model"])
+    assert biped_cli.main() == 130
+    assert capsys.readouterr().err == "biped model: interrupted\n"
+
+
 def test_an_import_error_alone_is_not_an_interruption(monkeypatch):
     class Broken:
         def find_spec(self, name, path=None, target=None):
@@ -131,6 +148,72 @@ def test_a_ctrl_c_dropped_in_a_callback_is_sent_again(monkeypatch, capsys):
     assert rc == 130 and time.perf_counter() - t < 5
     assert capsys.readouterr().err.endswith("biped model: interrupted\n")
     assert sys.unraisablehook is hook
+
+
+def test_a_ctrl_c_a_library_clears_is_sent_again(monkeypatch, capsys):
+    """CasADi's operators call Python (``shape``) while they choose an overload and clear
+    an error raised there: a Ctrl-C at that moment (building the model) vanished and the
+    command ran on to its end with exit code 0."""
+    import casadi as ca
+
+    from analysis.cli import app
+
+    size1, calls = ca.SX.size1, []
+
+    def interrupted(self, *args):       # the Ctrl-C comes while CasADi calls shape
+        calls.append(1)
+        if len(calls) == 1:
+            signal.raise_signal(signal.SIGINT)
+        return size1(self, *args)
+
+    def command(args):
+        x = ca.SX.sym("x", 2)
+        monkeypatch.setattr(ca.SX, "size1", interrupted)
+        0.5 * ca.dot(x, x)                   # CasADi clears the KeyboardInterrupt
+        monkeypatch.setattr(ca.SX, "size1", size1)
+        assert calls
+        time.sleep(10)
+        return 0
+
+    monkeypatch.setattr(app, "cmd_model", command)
+    old, t = signal.signal(signal.SIGINT, signal.default_int_handler), time.perf_counter()
+    try:
+        rc = app.main(["model"])
+    except KeyboardInterrupt:                  # not this session's: fail, do not stop
+        pytest.fail("the Ctrl-C left main")
+    finally:
+        signal.signal(signal.SIGINT, old)
+    assert rc == 130 and time.perf_counter() - t < 5
+    assert capsys.readouterr().err == "biped model: interrupted\n"
+
+
+def test_a_ctrl_c_while_the_main_thread_keeps_a_result_is_not_a_failed_task(tmp_path,
+                                                                          monkeypatch):
+    """The engine keeps on the caller's thread (its records, a task's state, close) the
+    results the keeper thread has not kept yet: a Ctrl-C in the store's fsynced write
+    there was recorded as that task's failure, and the run went on."""
+    from analysis.tasks import Engine, TaskRecord, TaskState
+
+    class Arrived:                      # a Dask future whose result is not kept yet
+        key = "square-k"
+
+        def done(self):
+            return True
+
+        def result(self):
+            return 4
+
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    eng = Engine("synchronous", cache=tmp_path)
+    eng._tasks["k"], eng._futures["k"] = TaskRecord("square", "", "k"), Arrived()
+    monkeypatch.setattr(eng.store, "write", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        eng.records
+    monkeypatch.undo()                  # not kept, not failed: kept by the next look
+    assert [r.state for r in eng.records] == [TaskState.COMPUTED]
+    assert eng.store.read("k")["value"] == 4
 
 
 _IN_EXEC = """

@@ -148,16 +148,21 @@ class _CtrlC:
     inside a task) is the interruption, not a failure.  Python's handler is kept (it
     raises KeyboardInterrupt); it is only observed, from the main thread.
 
-    Python raises it wherever the main thread runs, also in a weakref's callback or a
-    finalizer, where an error is printed ("Exception ignored in ...") and dropped: the
-    command then ran on (an import's lock callback while the Dask cluster started).
-    Such a Ctrl-C is sent to the main thread again, once the callback has returned."""
+    Python raises it wherever the main thread runs, and there it can vanish: in a
+    weakref's callback or a finalizer it is printed ("Exception ignored in ...") and
+    dropped; in Python code that a library calls it may be cleared (CasADi's operators
+    call ``shape`` while they choose an overload, and go on with the next one).  The
+    command then ran on to its end.  So the main thread is sent SIGINT again, later and
+    later, until the command has ended: raised again unless an error is already on its
+    way out (the interruption's, met in the command's clean-up)."""
 
-    #: after a dropped Ctrl-C, the main thread is sent SIGINT again this much later, s
+    #: after a Ctrl-C, the main thread is sent SIGINT again this much later, s (then
+    #: twice as late each time, at most 1 s)
     AGAIN = 0.05
 
     def __init__(self):
-        self.pressed, self._old, self._hook = False, None, None
+        self.pressed, self._old, self._hook, self._thread = False, None, None, None
+        self._wake, self._ended = threading.Event(), threading.Event()
 
     def __bool__(self):
         return self.pressed
@@ -168,23 +173,38 @@ class _CtrlC:
             self._old = signal.default_int_handler
             signal.signal(signal.SIGINT, self._handler)
             self._hook, sys.unraisablehook = sys.unraisablehook, self._dropped
+            # started here: a thread started in the handler could wait for a lock the
+            # interrupted code holds
+            self._thread = threading.Thread(target=self._again, daemon=True)
+            self._thread.start()
         return self
 
     def _handler(self, signum, frame):
+        if self._ended.is_set() or (self.pressed and sys.exc_info()[1] is not None):
+            return
         self.pressed = True
+        self._wake.set()
         signal.default_int_handler(signum, frame)
 
+    def _again(self):
+        """A thread: once Ctrl-C is pressed, SIGINT to the main thread, later and later."""
+        delay, main = self.AGAIN, threading.main_thread().ident
+        self._wake.wait()
+        while not self._ended.wait(delay):
+            signal.pthread_kill(main, signal.SIGINT)
+            delay = min(2 * delay, 1.0)
+
     def _dropped(self, unraisable):
-        """sys.unraisablehook: a Ctrl-C dropped where errors are ignored is sent again."""
-        if self.pressed and issubclass(unraisable.exc_type, KeyboardInterrupt):
-            threading.Timer(self.AGAIN, signal.pthread_kill,
-                            (threading.main_thread().ident, signal.SIGINT)).start()
-            return
-        self._hook(unraisable)
+        """sys.unraisablehook: a dropped Ctrl-C is not printed (it is raised again)."""
+        if not (self.pressed and issubclass(unraisable.exc_type, KeyboardInterrupt)):
+            self._hook(unraisable)
 
     def __exit__(self, *exc):
-        if self._old is not None:
-            signal.signal(signal.SIGINT, self._old)
+        self._ended.set()
+        if self._thread is not None:
+            self._wake.set()
+            self._thread.join()
+            signal.signal(signal.SIGINT, self._old)   # (after a SIGINT sent meanwhile)
             sys.unraisablehook = self._hook
         return False
 

@@ -237,10 +237,10 @@ class Engine:
         self._settle()
         return list(self._records)
 
-    def _settle(self):             # what has arrived and the keeper has not kept yet
-        for f in list(self._futures.values()):
+    def _settle(self):     # what has arrived and the keeper has not kept yet (on the
+        for f in list(self._futures.values()):      # caller's thread: its Ctrl-C passes)
             if not isinstance(f, cf.Future) and f.done():
-                self._keep_one(f)
+                self._keep_one(f, Exception)
 
     def client(self):
         """The Dask client (None when synchronous), connected on first use.
@@ -605,15 +605,15 @@ class Engine:
     def _keep(self):
         """The keeper thread: each task's result kept as it arrives."""
         while (f := self._kept.get()) is not None:
-            self._keep_one(f)
+            self._keep_one(f, BaseException)
 
-    def _keep_one(self, f):
+    def _keep_one(self, f, catch):
         key = _key(f)
         if self._tasks[key].state is not None:
             return
         try:                                   # (a result may fail to be kept too)
             self._finish(key, TaskState.COMPUTED, f.result(), seconds=self._seconds.pop(key, 0.0))
-        except BaseException as e:             # noqa: BLE001 - failed, cancelled, lost
+        except catch as e:                     # noqa: BLE001 - failed, cancelled, lost
             self._finish(key, TaskState.FAILED, error=e if isinstance(e, TaskError) else
                          TaskError(self._tasks[key].name, _one(e), key=key))
 
