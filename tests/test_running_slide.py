@@ -13,7 +13,7 @@ from biped_casadi.model import flight_model
 from analysis.stability.hybrid_cycle import HybridCycle, HybridCycleError
 from analysis.stability.running_cycle import (finite_difference_jacobian, running_cycle,
                                               running_stability, simulate_running)
-from analysis.stability.running_domains import SLIP_STOP, SLIP_STOPS, TAKEOFF
+from analysis.stability.running_domains import SLIP_STOP, SLIP_PART, FZ_PART
 
 
 @pytest.fixture(scope="session")
@@ -124,7 +124,7 @@ def test_a_takeoff_slide_too_short_to_gather_a_slip_is_a_takeoff(running_cycle15
     v = sl.exit_state[ne + nq]
     assert 0 < sl.duration < 1e-7 and 0 < abs(v) < 1e-12
     assert fli.entry[ne + nq] == v                       # the foot leaves as it slid
-    assert sl.part == TAKEOFF and [ps.part for ps in lin.passes[2:4]] == [None, None]
+    assert sl.part == FZ_PART and [ps.part for ps in lin.passes[2:4]] == [None, None]
     assert lin.durations[2:-1].tolist() == [0.0] * 5
     J = finite_difference_jacobian(cyc, x, 1e-6)
     assert np.abs(J - lin.A).max() / np.abs(lin.A).max() < 1e-6
@@ -151,8 +151,8 @@ def test_a_slip_that_stops_sticks_again(running_cycle15, star, model):
     sv = HybridCycle(cyc.domains[1:4]).stride(y, record=True)
     sl, st, again = sv.passes
     assert 0 < sl.duration < st.duration and again.duration > 0
-    assert sl.part == SLIP_STOPS and st.entry[ne + nq] == 0.0                   # stopped
-    assert st.part == "friction margin mu Fz - |Fx|" and again.part == TAKEOFF
+    assert sl.part == SLIP_PART and st.entry[ne + nq] == 0.0                   # stopped
+    assert st.part == "friction margin mu Fz - |Fx|" and again.part == FZ_PART
     X, t = st.nodes, st.times + st.parameters[-1]
     N = t.size
     u = c.applied(c.stance_law.map(N)(X[:nq], X[ne:ne + nq], t[None, :]))
@@ -191,6 +191,7 @@ def test_a_push_off_that_stops_slides_the_other_way(running_cycle15, star, model
     sv = cyc.stride(x2, record=True)
     po, stick, back = sv.passes[4:7]
     assert po.duration > 0 and stick.duration == 0.0 and back.duration > 0
+    assert po.part == SLIP_PART and stick.part == "friction margin mu Fz - |Fx|"   # at entry
     assert po.exit_state[cyc.controller.fl.ne + nq] != 0 and back.entry[-2] == 0.0
     assert back.parameters[-2] == -po.parameters[-2]
     run = simulate_running(cyc, star.fixed_point, x, 4)

@@ -21,7 +21,7 @@ from .hybrid_cycle import Domain
 
 __all__ = ["stance_domain", "slide_domain", "stick_domain", "ground_domains",
            "pushoff_domain", "flight_domain", "start", "slide_start", "SLIP_STOP", "ON_GROUND",
-           "GROUND_PHASES", "TAKEOFF", "SLIP_STOPS"]
+           "GROUND_PHASES", "FZ_PART", "SLIP_PART"]
 
 #: the sliding foot's velocity against the friction force (must stay >= 0 in the last
 #: slide under a law, which has no stick after it)
@@ -33,7 +33,7 @@ GROUND_PHASES = ("slide", "stick", "slide")
 
 #: the parts of a slide's guard (:func:`slide_domain`): the sliding foot's normal force
 #: reaching 0 (the takeoff, or the law's switch) and its slip stopping
-TAKEOFF, SLIP_STOPS = "sliding foot's normal force", "slip velocity"
+FZ_PART, SLIP_PART = "sliding foot's normal force", "slip velocity"
 
 #: the slip guard's ramp over the first RK4 step of a slide begun at rest, m/s
 _V_RAMP = 1.0
@@ -154,9 +154,9 @@ def slide_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
                                      (SLIP_STOP, "swing foot height"))
     y = ca.SX.sym("y", 2 * ne)
     end = ca.Function("slide_end", [y], [y])
-    parts = (TAKEOFF, SLIP_STOPS)
+    parts = (FZ_PART, SLIP_PART)
     if after == 0:
-        guard, gname, parts, skip = Fz, TAKEOFF, parts[:1], (0,)
+        guard, gname, parts, skip = Fz, FZ_PART, parts[:1], (0,)
     else:
         guard = ca.vertcat(Fz, slip + rest * _V_RAMP * ca.fmax(0, 1 - t / h))
         gname = "sliding foot's normal force or slip velocity"
