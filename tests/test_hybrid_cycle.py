@@ -382,3 +382,74 @@ def test_a_guard_that_dips_and_rises_within_a_step_is_crossed():
     slope = -0.1 + 10.0 * root
     assert np.allclose(lin.duration_gradients[0, :2], [-1 / slope, -root / slope], rtol=1e-9)
     assert abs(lin.next_state[0]) < 1e-15
+
+
+# ------------------------------------------------------------------ a guard of parts
+def _parted_cycle(skip=(1, 0), wall_reset=None):
+    """First: dX/dt = 1, a guard of two parts, 'wall' 2 - X - t (reset x -> -x, the next
+    domain skipped) and 'clock' 1.5 - t (reset the identity), empty where a part is <= 0
+    at entry.  Middle: dX/dt = 2 for 0.25 s.  Last: 0.1 s at rest, then x - 1.  The wall
+    fires first for x0 > -1, at t = 1 - x0 / 2, x = 1 + x0 / 2: P = -2 - x0 / 2; the
+    clock for x0 < -1: P = x0 + 1; the wall at entry for x0 >= 2: P = -x0 - 1."""
+    X, t, e = ca.SX.sym("X"), ca.SX.sym("t"), ca.SX(0, 1)
+    x = ca.SX.sym("x")
+    ident = ca.Function("r", [x], [x])
+    flip = ca.Function("flip", [x], [-x]) if wall_reset is None else wall_reset
+    first = Domain("first", 1, ca.Function("f0", [X, t, e], [ca.SX(1)]),
+                   ca.Function("g0", [X, t, e], [ca.vertcat(2 - X - t, 1.5 - t)]),
+                   (flip, ident), 0.01, 5.0, guard_parts=("wall", "clock"), skip=skip,
+                   may_be_empty=True)
+    middle = Domain("middle", 1, ca.Function("f1", [X, t, e], [ca.SX(2)]),
+                    ca.Function("g1", [X, t, e], [0.25 - t]), ident, 0.01, 5.0)
+    last = Domain("last", 1, ca.Function("f2", [X, t, e], [ca.SX(0)]),
+                  ca.Function("g2", [X, t, e], [0.1 - t]), ca.Function("r2", [x], [x - 1]),
+                  0.01, 5.0)
+    return HybridCycle([first, middle, last])
+
+
+def test_the_part_of_the_guard_that_fires_chooses_the_reset_and_the_skipped_domains():
+    """The part that reaches 0 first ends the domain, is named in its pass, and chooses
+    the reset and whether the middle domain runs; the Jacobian is that part's (its
+    saltation term), also where a part ends the domain at its entry."""
+    cyc = _parted_cycle()
+    lin = cyc.linearise([0.4], record=True)
+    assert [ps.part for ps in lin.passes] == ["wall", None, "guard"]
+    assert lin.durations[0] == pytest.approx(0.8, abs=1e-14)
+    assert lin.durations[1] == 0.0 and lin.passes[1].times.tolist() == [0.0]
+    assert lin.next_state[0] == pytest.approx(-2.2, abs=1e-13)
+    assert lin.A[0, 0] == pytest.approx(-0.5, abs=1e-12)
+    assert lin.duration_gradients[0, 0] == pytest.approx(-0.5, abs=1e-12)
+    lin = cyc.linearise([-1.6])
+    assert [ps.part for ps in lin.passes[:2]] == ["clock", "guard"]
+    assert lin.durations.tolist() == pytest.approx([1.5, 0.25, 0.1], abs=1e-13)
+    assert lin.next_state[0] == pytest.approx(-0.6, abs=1e-13)
+    assert lin.A[0, 0] == pytest.approx(1.0, abs=1e-12)
+    lin = cyc.linearise([2.5])
+    assert [ps.part for ps in lin.passes[:2]] == ["wall", None] and lin.durations[0] == 0.0
+    assert lin.next_state[0] == pytest.approx(-3.5, abs=1e-13)
+    assert lin.A[0, 0] == pytest.approx(-1.0, abs=1e-12)
+    for x0 in (0.4, -1.6):                         # central differences, either part
+        d = 1e-6
+        fd = (cyc.stride([x0 + d]).next_state[0] - cyc.stride([x0 - d]).next_state[0]) / (2 * d)
+        assert fd == pytest.approx(cyc.linearise([x0]).A[0, 0], abs=1e-8)
+
+
+def test_a_guard_of_parts_is_checked_when_built():
+    x = ca.SX.sym("x")
+    with pytest.raises(HybridCycleError, match=r"^domain 'first': its part 'wall' skips 3 "
+                                               r"domains, past the cycle's end$"):
+        _parted_cycle(skip=(3, 0))
+    with pytest.raises(HybridCycleError, match=r"^domain 'first': skip must be 2 whole "):
+        _parted_cycle(skip=(1,))
+    with pytest.raises(HybridCycleError, match=r"^domain 'first': the parts' resets give "):
+        _parted_cycle(wall_reset=ca.Function("two", [x], [ca.vertcat(x, x)]))
+    d = _parted_cycle().domains
+    before = Domain("before", 1, d[1].vector_field, d[1].guard, d[1].reset, 0.01, 5.0,
+                    skip=(1,))
+    with pytest.raises(HybridCycleError, match=r"^domain 'before': its part 'guard' skips "
+                                               r"domain 'first', whose reset depends on its "
+                                               r"part$"):
+        HybridCycle([before, d[0], d[2]])
+    with pytest.raises(HybridCycleError, match=r"^domain 'd': reset must be a "
+                                               r"casadi.Function or one per part"):
+        Domain("d", 1, d[0].vector_field, d[0].guard, (d[1].reset,), 0.01, 5.0)

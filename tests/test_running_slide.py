@@ -13,7 +13,7 @@ from biped_casadi.model import flight_model
 from analysis.stability.hybrid_cycle import HybridCycle, HybridCycleError
 from analysis.stability.running_cycle import (finite_difference_jacobian, running_cycle,
                                               running_stability, simulate_running)
-from analysis.stability.running_domains import SLIP_STOP, V_REST
+from analysis.stability.running_domains import SLIP_STOP, SLIP_PART, FZ_PART
 
 
 @pytest.fixture(scope="session")
@@ -108,6 +108,28 @@ def test_at_the_fixed_point_the_foot_slides_briefly(running_cycle15, star):
     assert 0 < d[1] < 1e-4
 
 
+def test_a_takeoff_slide_too_short_to_gather_a_slip_is_a_takeoff(running_cycle15, star, model):
+    """x* moved along the slide's duration gradient until it slides 5e-8 s: the slip at
+    takeoff (7.5e-13 m/s) is below what a stop's threshold of 1e-12 m/s took for a stop
+    before the guard's parts were told apart; now the slide ends on its normal-force
+    part, the stick and the second slide are skipped, the foot leaves with its slip, and
+    the Jacobian is the central differences'."""
+    cyc, nq = running_cycle15, model.nq
+    ne = cyc.controller.fl.ne
+    lin = cyc.linearise(star.fixed_point)
+    g = lin.duration_gradients[1]
+    x = star.fixed_point + (5e-8 - lin.durations[1]) * g / (g @ g)
+    lin = cyc.linearise(x, record=True)
+    sl, fli = lin.passes[1], lin.passes[-1]
+    v = sl.exit_state[ne + nq]
+    assert 0 < sl.duration < 1e-7 and 0 < abs(v) < 1e-12
+    assert fli.entry[ne + nq] == v                       # the foot leaves as it slid
+    assert sl.part == FZ_PART and [ps.part for ps in lin.passes[2:4]] == [None, None]
+    assert lin.durations[2:-1].tolist() == [0.0] * 5
+    J = finite_difference_jacobian(cyc, x, 1e-6)
+    assert np.abs(J - lin.A).max() / np.abs(lin.A).max() < 1e-6
+
+
 def _landing_slip(cyc, star, nq, v=0.01):
     """The landing state in flight coordinates with the foot slipping at ``v``."""
     qe, dqe = (np.array(w).ravel() for w in cyc.controller.fl.takeoff(star.fixed_point[:nq],
@@ -129,7 +151,8 @@ def test_a_slip_that_stops_sticks_again(running_cycle15, star, model):
     sv = HybridCycle(cyc.domains[1:4]).stride(y, record=True)
     sl, st, again = sv.passes
     assert 0 < sl.duration < st.duration and again.duration > 0
-    assert abs(sl.exit_state[ne + nq]) < V_REST and st.entry[ne + nq] == 0.0   # stopped
+    assert sl.part == SLIP_PART and st.entry[ne + nq] == 0.0                   # stopped
+    assert st.part == "friction margin mu Fz - |Fx|" and again.part == FZ_PART
     X, t = st.nodes, st.times + st.parameters[-1]
     N = t.size
     u = c.applied(c.stance_law.map(N)(X[:nq], X[ne:ne + nq], t[None, :]))
@@ -168,6 +191,7 @@ def test_a_push_off_that_stops_slides_the_other_way(running_cycle15, star, model
     sv = cyc.stride(x2, record=True)
     po, stick, back = sv.passes[4:7]
     assert po.duration > 0 and stick.duration == 0.0 and back.duration > 0
+    assert po.part == SLIP_PART and stick.part == "friction margin mu Fz - |Fx|"   # at entry
     assert po.exit_state[cyc.controller.fl.ne + nq] != 0 and back.entry[-2] == 0.0
     assert back.parameters[-2] == -po.parameters[-2]
     run = simulate_running(cyc, star.fixed_point, x, 4)

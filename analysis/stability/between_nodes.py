@@ -37,9 +37,9 @@ def _col(v) -> np.ndarray:
 
 
 def watch(d, g, c) -> np.ndarray:
-    """The watched outputs' values at a node of domain ``d`` from its guard g and
+    """The watched outputs' values at a node of domain ``d`` from its guard's parts g and
     constraints c (numbers, the domain's ``watched`` order)."""
-    return np.concatenate(([g], c))[d.watched_index]
+    return np.concatenate((np.atleast_1d(g), c))[d.watched_index]
 
 
 def screened(d, w) -> np.ndarray:

@@ -36,6 +36,9 @@ class DomainPass:
     dips : list of tuple
         (t, name, value): each minimum of a domain's ``dense_constraints`` and dense guard
         found between two nodes before the crossing (module docstring), in time order.
+    part : str or None
+        The guard's part that fired (``Domain.guard_parts``; at entry for a domain that
+        ended there), None for a domain an earlier part skipped (``Domain.skip``).
     """
 
     name: str
@@ -47,6 +50,7 @@ class DomainPass:
     times: np.ndarray | None = None
     nodes: np.ndarray | None = None
     dips: list = field(default_factory=list)
+    part: str | None = None
 
 
 @dataclass

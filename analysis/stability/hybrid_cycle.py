@@ -23,6 +23,15 @@ domain's entry and reset, and the crossing time by the implicit function theorem
 
 the saltation term of each guard.
 
+Guard parts.  A domain's guard may have named parts g = (g_1, ..., g_m) (e.g. a sliding
+foot's normal force and its slip velocity): the domain ends where the first of them
+crosses zero going down, each located as above and the earliest taken, and the pass
+says which part fired (:attr:`DomainPass.part`).  The reset may depend on that part
+(one per part), and so may the domains that follow: a part may end the next few domains
+at their entry (``Domain.skip``).  The part is a discrete choice fixed at the point of
+evaluation, as the sequence of domains is: the Jacobian is that of the part that fired,
+its saltation term from that part's gradient, exact.
+
 Between the nodes.  A domain may name outputs that must hold on the continuous solution,
 not only at its nodes: constraints (``dense_constraints``, e.g. a foot's height above the
 ground, a contact force's friction margin) and its guard (``dense_guard``), checked on
@@ -45,8 +54,6 @@ stride map is :class:`~analysis.stability.step_map.StepMap`'s S.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import casadi as ca
 import numpy as np
 
@@ -55,210 +62,10 @@ from biped_casadi.simulation.kernel import locate_strike
 
 from .between_nodes import minima, watch
 from .cycle_results import DomainPass, StrideLinearisation, StrideValue
+from .hybrid_domain import Domain, HybridCycleError
 
 __all__ = ["Domain", "HybridCycle", "HybridCycleError", "DomainPass", "StrideValue",
            "StrideLinearisation", "entry_function"]
-
-
-class HybridCycleError(ValueError):
-    """A domain of a cycle that cannot be built or traversed (one line, naming it).
-
-    The message starts with the domain's name: "domain 'flight': ...".
-
-    Parameters
-    ----------
-    domain : str
-        The domain's name (kept as the attribute ``domain``).
-    kind : str
-        'no_crossing' (the guard is not crossed within the domain's time limit),
-        'dimension' (a reset, entry or vector field of the wrong size), 'constraint' (a
-        validity constraint violated), 'not_finite' (the state diverged); kept as the
-        attribute ``kind``.
-    message : str
-        What happened, after the domain's name.
-    """
-
-    def __init__(self, domain: str, kind: str, message: str):
-        self.domain, self.kind = domain, kind
-        super().__init__(f"domain '{domain}': {message}")
-
-
-def _size(f: ca.Function, i: int, out: bool = False) -> int:
-    return f.numel_out(i) if out else f.numel_in(i)
-
-
-@dataclass
-class Domain:
-    """One domain of a hybrid cycle (module docstring).
-
-    Parameters
-    ----------
-    name : str
-        Named in every error.
-    n : int
-        Size of the domain's state x (the previous reset's output, this reset's input).
-    vector_field : casadi.Function
-        ``f(X, t, p) -> dX/dt``: the closed loop on the augmented state X (``nX``
-        numbers, X[:n] = x), t the time since entry, p the domain's parameters.
-    guard : casadi.Function
-        ``g(X, t, p)`` (scalar): the domain ends where g crosses zero going down.
-    reset : casadi.Function
-        ``Delta(x) -> x+`` (first output), x = X[:n] at the crossing, x+ the next
-        domain's state.
-    h : float
-        RK4 step, s.
-    t_max : float
-        Time limit: the guard must be crossed within it, s.
-    start : casadi.Function, optional
-        ``start(x) -> (X0, p)`` at entry, or ``start(x, s) -> (X0, p)`` with s the time
-        the stride has run before this domain since the entry of domain ``clock_from``
-        (the durations of the domains from that one to this one's predecessor; 0 in the
-        cycle's first domain); default X0 = x, no parameters.
-    arming : casadi.Function, optional
-        ``a(X, t, p)`` (scalar): a crossing counts only at a node where a > 0 (the
-        swing foot in front of the stance foot).
-    constraints : casadi.Function, optional
-        ``c(X, t, p)`` (m numbers): c >= -``tolerance`` at every node before the
-        crossing and at the crossing.
-    constraint_names : tuple of str
-        One per entry of c (default 'constraint 0', ...).
-    exit_constraints : casadi.Function, optional
-        ``e(x)`` (k numbers) >= -``tolerance`` at the crossing, e.g. the landing
-        impulse and the lift-off of the other foot.
-    exit_constraint_names : tuple of str
-        One per entry of e.
-    guard_name : str
-        The guard in words.
-    tolerance : float
-        How far below zero a constraint may go (round-off), in its own unit.
-    dense_constraints : tuple of str
-        Names of constraints (of ``constraint_names``) that must also hold between the
-        nodes (:mod:`analysis.stability.between_nodes`): screened at every step by the
-        nodes' values, their rates taken only where a step may dip below the bound.
-    dense_guard : bool
-        Look for the guard's crossing between the nodes too: a dip below 0 and back within
-        one RK4 step ends the domain at its first root.
-    clock_from : int
-        The domain (its index in the cycle, at most this one's) from whose entry the s of
-        ``start(x, s)`` is counted; 0: from the stride's start.
-    may_be_empty : bool
-        A guard at or below 0 at entry ends the domain there: a pass of duration 0 whose
-        reset acts on the entry state (the domain's constraints, which hold inside it, are
-        not checked; its exit constraints are).  Without it such a guard waits for a
-        crossing from >= 0.
-    common_subexpressions : bool
-        Merge the equal subexpressions of the RK4 step's sensitivities (``casadi.cse``)
-        when the Functions are built: it halves a walking domain's linearisation but
-        costs a running domain seconds of build for no faster evaluation.
-    """
-
-    name: str
-    n: int
-    vector_field: ca.Function
-    guard: ca.Function
-    reset: ca.Function
-    h: float
-    t_max: float
-    start: ca.Function | None = None
-    arming: ca.Function | None = None
-    constraints: ca.Function | None = None
-    constraint_names: tuple = ()
-    exit_constraints: ca.Function | None = None
-    exit_constraint_names: tuple = ()
-    guard_name: str = "guard"
-    tolerance: float = 0.0
-    dense_constraints: tuple = ()
-    dense_guard: bool = False
-    clock_from: int = 0
-    may_be_empty: bool = False
-    common_subexpressions: bool = True
-
-    def __post_init__(self):
-        f = self.vector_field
-        if not isinstance(f, ca.Function) or f.n_in() != 3:
-            raise HybridCycleError(self.name, "dimension",
-                                   "vector_field must be a casadi.Function f(X, t, p)")
-        self.nX, self.n_par = _size(f, 0), _size(f, 2)
-        if _size(f, 0, out=True) != self.nX:
-            raise HybridCycleError(self.name, "dimension",
-                                   f"the vector field gives {_size(f, 0, out=True)} numbers "
-                                   f"for a state of {self.nX}")
-        if self.n > self.nX:
-            raise HybridCycleError(self.name, "dimension",
-                                   f"state of {self.n} numbers, but the vector field "
-                                   f"integrates {self.nX}")
-        if self.start is None:
-            if self.nX != self.n or self.n_par:
-                raise HybridCycleError(self.name, "dimension",
-                                       "a start(x) -> (X0, p) is needed when the vector "
-                                       "field's state or parameters are not x alone")
-        else:
-            got = (_size(self.start, 0), _size(self.start, 0, True), _size(self.start, 1, True))
-            if self.start.n_in() not in (1, 2) or (self.start.n_in() == 2
-                                                    and _size(self.start, 1) != 1):
-                raise HybridCycleError(self.name, "dimension",
-                                       "start takes x, or x and the stride's time s (one "
-                                       "number)")
-            if got != (self.n, self.nX, self.n_par):
-                raise HybridCycleError(self.name, "dimension",
-                                       f"start maps {got[0]} numbers to ({got[1]}, {got[2]}), "
-                                       f"expected {self.n} to ({self.nX}, {self.n_par})")
-        for what in ("guard", "arming", "constraints"):
-            g = getattr(self, what)
-            if g is None:
-                continue
-            sizes = tuple(_size(g, i) for i in range(g.n_in()))
-            if sizes != (self.nX, 1, self.n_par):
-                raise HybridCycleError(self.name, "dimension",
-                                       f"{what} takes {sizes}, expected (X, t, p) of "
-                                       f"{(self.nX, 1, self.n_par)}")
-        for what in ("guard", "arming"):
-            g = getattr(self, what)
-            if g is not None and _size(g, 0, True) != 1:
-                raise HybridCycleError(self.name, "dimension", f"{what} must be a scalar")
-        if _size(self.reset, 0) != self.n:
-            raise HybridCycleError(self.name, "dimension",
-                                   f"the reset takes {_size(self.reset, 0)} numbers, the "
-                                   f"domain's state has {self.n}")
-        if self.exit_constraints is not None and _size(self.exit_constraints, 0) != self.n:
-            raise HybridCycleError(self.name, "dimension",
-                                   f"exit_constraints take {_size(self.exit_constraints, 0)} "
-                                   f"numbers, the domain's state has {self.n}")
-        self.max_steps = int(np.ceil(self.t_max / self.h - 1e-9))
-        self.constraint_names = self._names(self.constraints, self.constraint_names,
-                                            "constraint")
-        self.exit_constraint_names = self._names(self.exit_constraints,
-                                                 self.exit_constraint_names, "exit constraint")
-        unknown = [c for c in self.dense_constraints if c not in self.constraint_names]
-        if unknown:
-            raise HybridCycleError(self.name, "dimension",
-                                   f"dense_constraints names no constraint {unknown[0]!r}")
-        #: the outputs checked between the nodes: (name, index in the constraints or
-        #: None for the guard)
-        self.watched = ((((self.guard_name, None),) if self.dense_guard else ())
-                        + tuple((c, self.constraint_names.index(c))
-                                for c in self.dense_constraints))
-        #: their bounds (0 for the guard, -tolerance for a constraint) and their places
-        #: in (guard, constraints)
-        self.watched_bounds = np.array([0.0 if i is None else -self.tolerance
-                                        for _, i in self.watched])
-        self.watched_index = np.array([0 if i is None else i + 1 for _, i in self.watched],
-                                      int)
-
-    def _names(self, f, names, word):
-        if f is None:
-            return ()
-        m = _size(f, 0, True)
-        names = tuple(names) or tuple(f"{word} {i}" for i in range(m))
-        if len(names) != m:
-            raise HybridCycleError(self.name, "dimension",
-                                   f"{len(names)} names for {m} {word}s")
-        return names
-
-    @property
-    def n_next(self) -> int:
-        """Size of the reset's output, the next domain's state."""
-        return _size(self.reset, 0, out=True)
 
 
 class _Compiled:
@@ -303,17 +110,23 @@ class _Compiled:
                                  node(Xe, te)[2]])
         self.entry = entry_function(d)
         x = ca.SX.sym("x", d.n)
-        xp = d.reset(x)
-        xp = xp[0] if isinstance(xp, (list, tuple)) else xp
         e = d.exit_constraints(x) if d.exit_constraints is not None else ca.SX(0, 1)
         e = e[0] if isinstance(e, (list, tuple)) else e
-        self.reset = ca.Function("reset", [x], [xp, ca.jacobian(xp, x), e])
+        built = {}                      # one Function per distinct reset
+        for r in d.resets:
+            if id(r) not in built:
+                xp = r(x)
+                xp = xp[0] if isinstance(xp, (list, tuple)) else xp
+                built[id(r)] = ca.Function("reset", [x], [xp, ca.jacobian(xp, x), e])
+        #: ``reset(x) -> (x+, dx+/dx, exit constraints)`` of each part of the guard
+        self.resets = [built[id(r)] for r in d.resets]
 
     def _watched_outputs(self):
         """Symbols (Y, s, p) and the watched outputs W(Y, s, p)."""
         d = self._d
         Y, s, p = ca.SX.sym("Y", d.nX), ca.SX.sym("s"), ca.SX.sym("p", d.n_par)
-        out = [d.guard(Y, s, p) if i is None else d.constraints(Y, s, p)[i]
+        m = len(d.part_names)
+        out = [d.guard(Y, s, p)[i] if i < m else d.constraints(Y, s, p)[i - m]
                for _, i in d.watched]
         return Y, s, p, ca.Function("watched", [Y, s, p], [ca.vertcat(*out)])
 
@@ -375,7 +188,8 @@ class HybridCycle:
     Raises
     ------
     HybridCycleError
-        A reset gives a state of another size than the next domain takes (one line,
+        A reset gives a state of another size than the next domain takes, a part skips
+        past the cycle's end or a domain whose reset depends on its part (one line,
         naming the domain).
     """
 
@@ -396,6 +210,17 @@ class HybridCycle:
                 raise HybridCycleError(d.name, "dimension",
                                        f"clock_from must be a domain's index from 0 to {i}, "
                                        f"got {d.clock_from!r}")
+        for i, d in enumerate(self.domains):
+            for name, n_skip in zip(d.part_names, d.skips):
+                if i + n_skip >= k:
+                    raise HybridCycleError(d.name, "dimension",
+                                           f"its part '{name}' skips {n_skip} domains, past "
+                                           f"the cycle's end")
+                for o in self.domains[i + 1:i + 1 + n_skip]:
+                    if len(set(map(id, o.resets))) > 1:
+                        raise HybridCycleError(d.name, "dimension",
+                                               f"its part '{name}' skips domain '{o.name}', "
+                                               f"whose reset depends on its part")
         self.n = self.domains[0].n
         self._fns = [_Compiled(d, self.n) for d in self.domains]
 
@@ -416,23 +241,39 @@ class HybridCycle:
     def _dips(self, d: Domain, t, between, eta_max, dips):
         """Record the minima before ``eta_max`` into ``dips``; a constraint below
         -tolerance there is violated."""
+        m = len(d.part_names)
         for eta, j, v in between:
             if eta >= eta_max:
                 break
             name, k = d.watched[j]
             dips.append((t + eta, name, v))
-            if k is not None and not v >= -d.tolerance:
+            if k >= m and not v >= -d.tolerance:
                 raise HybridCycleError(d.name, "constraint",
                                        f"{name} violated at t = {t + eta:.6g} s ({v:.3g} < 0, "
                                        f"between two RK4 nodes)")
 
+    @staticmethod
+    def _crossings(d: Domain, g_prev, g, a, h, between) -> list:
+        """The guard's parts that cross zero going down in a step: (part, its value at the
+        step's first node, the bracket's end eta, its value there), the bracket's end the
+        part's first minimum below 0 between the nodes, else the step's end."""
+        if not a > 0:
+            return []
+        out = []
+        for k in range(g.size):
+            hi, g_hi = next(((e, v) for e, j, v in between if d.watched[j][1] == k and v < 0),
+                            (h, g[k]))
+            if g_prev[k] >= 0 > g_hi:
+                out.append((k, g_prev[k], hi, g_hi))
+        return out
+
     def _integrate(self, d: Domain, f, X, p, J, Jp, record):
         """RK4 from the entry state X to the step that crosses the guard: (the node before
-        it, its time, its J, the guard there, the bracket's end eta and the guard there,
-        the minima in that last step, the minima before, times, nodes)."""
+        it, its time, its J, the crossing parts (:meth:`_crossings`), the minima in that
+        last step, the minima before, times, nodes)."""
         t, h = 0.0, d.h
         g_prev, _, c = f.node(X, t, p)
-        g_prev, c = float(g_prev), _col(c)
+        g_prev, c = _col(g_prev), _col(c)
         self._check(d, c, t, d.constraint_names)
         times, nodes = ([t], [X]) if record else (None, None)
         dips = []
@@ -442,16 +283,15 @@ class HybridCycle:
                 Xn, Jn, tn, g, a, c = f.step_sens(X, J, t, h, p, Jp)
             else:
                 Xn, tn, g, a, c = f.step(X, t, h, p)
-            g, a, c = float(g), float(a), _col(c)
-            if not np.isfinite(g):
+            g, a, c = _col(g), float(a), _col(c)
+            if not np.all(np.isfinite(g)):
                 raise HybridCycleError(d.name, "not_finite",
                                        f"state not finite at t = {float(tn):.6g} s")
             w = w[-3:] + [watch(d, g, c)]
             between = minima(d, f, X, t, h, p, Xn, w) if d.watched else []
-            hi, g_hi = next(((e, v) for e, j, v in between
-                             if d.watched[j][1] is None and v < 0), (h, g))
-            if g_prev >= 0 > g_hi and a > 0:
-                return X, t, J, g_prev, hi, g_hi, between, dips, times, nodes
+            crossing = self._crossings(d, g_prev, g, a, h, between)
+            if crossing:
+                return X, t, J, crossing, between, dips, times, nodes
             self._dips(d, t, between, np.inf, dips)
             self._check(d, c, float(tn), d.constraint_names)
             X, t, g_prev = _col(Xn), float(tn), g
@@ -465,9 +305,25 @@ class HybridCycle:
                                f"limit {d.t_max:.6g} s ({d.max_steps} RK4 steps of "
                                f"{h:.4g} s)")
 
-    def _domain(self, i, x, Jx, derivatives, record, s=0.0, ds=None):
+    @staticmethod
+    def _locate(f, X, t, p, crossing) -> tuple:
+        """The part that reaches 0 first in the last step and the step's length eta there
+        (each crossing part's root by the safeguarded Newton, the earliest taken)."""
+        best = None
+        for k, g_a, hi, g_hi in crossing:
+            def event(eta_, k=k):
+                ge, dge = f.event(X, t, float(eta_[0]), p)
+                return np.array([float(ge[k])]), np.array([float(dge[k])])
+
+            eta = float(locate_strike(event, hi, g_a, g_hi)[0])
+            if best is None or eta < best[1]:
+                best = (k, eta)
+        return best
+
+    def _domain(self, i, x, Jx, derivatives, record, s=0.0, ds=None, skipped=False):
         """Domain i from its state x (with dx/dx0 = Jx) and the stride's time s (with
-        ds/dx0 = ds): the pass, the next state and its Jacobian, the duration's gradient."""
+        ds/dx0 = ds), or empty where an earlier part skips it: the pass, the next state and
+        its Jacobian, the duration's gradient, the domains its part skips."""
         d, f = self.domains[i], self._fns[i]
         X, p, XJ, pJ, Xs, ps_ = (np.array(v) for v in f.entry(x, s))
         X, p = X.ravel(), p.ravel()
@@ -478,16 +334,15 @@ class HybridCycle:
             if ds is not None:
                 J, Jp = J + Xs @ ds[None, :], Jp + ps_ @ ds[None, :]
         ns = self.n
-        if d.may_be_empty and float(f.node(X, 0.0, p)[0]) <= 0:
-            return self._empty(d, f, X0, p, J, derivatives, record)
-        X, t, J, g_prev, hi, g_hi, between, dips, times, nodes = \
+        if skipped:
+            return self._empty(d, f, X0, p, J, derivatives, record, None)
+        if d.may_be_empty:
+            ended = np.flatnonzero(_col(f.node(X, 0.0, p)[0]) <= 0)
+            if ended.size:
+                return self._empty(d, f, X0, p, J, derivatives, record, int(ended[0]))
+        X, t, J, crossing, between, dips, times, nodes = \
             self._integrate(d, f, X, p, J, Jp, record)
-
-        def event(eta_):
-            ge, dge = f.event(X, t, float(eta_[0]), p)
-            return np.array([float(ge)]), np.array([float(dge)])
-
-        eta = float(locate_strike(event, hi, g_prev, g_hi)[0])
+        k, eta = self._locate(f, X, t, p, crossing)
         self._dips(d, t, between, eta, dips)
         Xe, Je, Xeta, gX, gp, gt, ce = f.last(X, J if derivatives else np.zeros((d.nX, ns)),
                                               t, eta, p,
@@ -495,7 +350,7 @@ class HybridCycle:
         Xe = _col(Xe)
         self._check(d, ce, t + eta, d.constraint_names)
         xm = Xe[:d.n]
-        xp, R, e = f.reset(xm)
+        xp, R, e = f.resets[k](xm)
         self._check(d, e, t + eta, d.exit_constraint_names)
         xp = _col(xp)
         if record:
@@ -503,27 +358,30 @@ class HybridCycle:
             nodes.append(Xe)
         ps = DomainPass(d.name, X0, p, t + eta, xm, xp,
                         None if not record else np.array(times),
-                        None if not record else np.array(nodes).T, dips)
+                        None if not record else np.array(nodes).T, dips, d.part_names[k])
         if not derivatives:
-            return ps, xp, None, None
-        Je, Xeta, gX, gp, gt = (np.array(v) for v in (Je, Xeta, gX, gp, gt))
+            return ps, xp, None, None, d.skips[k]
+        Je, Xeta = np.array(Je), np.array(Xeta)
+        gX, gp, gt = (np.array(v)[k:k + 1] for v in (gX, gp, gt))       # the part that fired
         slope = (gX @ Xeta).item() + gt.item()
         deta = -(gX @ Je + (gp @ Jp if d.n_par else 0)) / slope        # (1, ns)
         dxm = (Je + Xeta @ deta)[:d.n]
-        return ps, xp, np.array(R) @ dxm, deta.ravel()
+        return ps, xp, np.array(R) @ dxm, deta.ravel(), d.skips[k]
 
-    def _empty(self, d: Domain, f, X, p, J, derivatives, record):
-        """A domain that ends at its entry (``may_be_empty``): duration 0, the reset of
-        the entry state."""
+    def _empty(self, d: Domain, f, X, p, J, derivatives, record, k):
+        """A domain that ends at its entry (``may_be_empty``, its part k at or below 0
+        there; or skipped, k None): duration 0, the reset of the entry state."""
         xm = X[:d.n]
-        xp, R, e = f.reset(xm)
+        xp, R, e = f.resets[0 if k is None else k](xm)
         self._check(d, e, 0.0, d.exit_constraint_names)
         xp = _col(xp)
         ps = DomainPass(d.name, X, p, 0.0, xm, xp, None if not record else np.zeros(1),
-                        None if not record else X[:, None].copy())
+                        None if not record else X[:, None].copy(),
+                        part=None if k is None else d.part_names[k])
+        skip = 0 if k is None else d.skips[k]
         if not derivatives:
-            return ps, xp, None, None
-        return ps, xp, np.array(R) @ J[:d.n], np.zeros(self.n)
+            return ps, xp, None, None, skip
+        return ps, xp, np.array(R) @ J[:d.n], np.zeros(self.n), skip
 
     def _pass(self, x0, derivatives: bool, record: bool):
         x = np.asarray(x0, float).ravel()
@@ -533,10 +391,13 @@ class HybridCycle:
         passes, grads = [], []
         s, ds = 0.0, np.zeros(self.n)
         entries = []                      # (s, ds) at each domain's entry
+        skip = 0                          # the domains still to skip
         for i, d in enumerate(self.domains):
             entries.append((s, ds))
             s0, ds0 = entries[d.clock_from]
-            ps, x, Jx, dT = self._domain(i, x, Jx, derivatives, record, s - s0, ds - ds0)
+            ps, x, Jx, dT, more = self._domain(i, x, Jx, derivatives, record, s - s0,
+                                               ds - ds0, skipped=skip > 0)
+            skip = max(skip - 1, more)
             passes.append(ps)
             grads.append(dT)
             s += ps.duration

@@ -19,20 +19,22 @@ of a :class:`~biped_casadi.control.running.RunningController`:
   under the stance law (which sees q, dq), t the time since the slide began (the law's
   clock the time since landing); sigma, -sign of the foot's velocity, or at rest the
   sign of the Fx the pinned foot needs, fixed for the slide (the foot slips against
-  it); guard min(Fz, -sigma dx_st): the normal force (the law switches to the flight's
-  where it reaches 0 going down) or the slip velocity against the friction force (the
-  slip stops); constraints that slip velocity >= 0, the swing foot above the ground and
-  the torque limit; reset the identity, a stopped slip's velocity set to 0;
+  it); a guard of two parts (``Domain.guard_parts``), the normal force Fz (the law
+  switches to the flight's where it reaches 0 going down: reset the identity, the
+  stick and the second slide skipped) and the slip velocity -sigma dx_st against the
+  friction force (the slip stops: reset its velocity to 0, the stick next), the first
+  to reach 0 ending the slide; constraints that slip velocity >= 0, the swing foot
+  above the ground and the torque limit;
 - stick: the foot pinned again where its slip stopped (the stance's dynamics in the
   flight coordinates, the foot's place kept), under the same law; guard the cone's
   margin, to the next slide; constraints Fz >= 0, the swing foot above the ground and
-  the torque limit.  Empty where the foot moves at entry (the slide ended at Fz = 0) and
-  where the margin is <= 0 at entry: the pinned foot would need more than mu Fz the
-  other way, and the next slide starts against that force;
+  the torque limit.  Skipped where the slide ended at Fz = 0; empty where the margin is
+  <= 0 at entry: the pinned foot would need more than mu Fz the other way, and the next
+  slide starts against that force;
 - slide again: as the slide to Fz = 0, but its slip must not stop (stick-slip beyond
   slide -> stick -> slide under one law is not modelled: such a stride is refused with
-  that reason, :data:`~analysis.stability.running_domains.SLIP_STOP`); empty where
-  Fz <= 0 at entry (the slide before ended there);
+  that reason, :data:`~analysis.stability.running_domains.SLIP_STOP`); skipped where
+  the slide ended at Fz = 0, empty where Fz <= 0 at entry;
 - push-off, push-off stick, push-off slide again: the same three under the flight law
   (t the time since the law's switch).  Where the stance ends off the
   reference's time, the flight law's first torques differ from the stance law's last,

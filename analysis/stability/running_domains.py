@@ -21,7 +21,7 @@ from .hybrid_cycle import Domain
 
 __all__ = ["stance_domain", "slide_domain", "stick_domain", "ground_domains",
            "pushoff_domain", "flight_domain", "start", "slide_start", "SLIP_STOP", "ON_GROUND",
-           "GROUND_PHASES", "V_REST"]
+           "GROUND_PHASES", "FZ_PART", "SLIP_PART"]
 
 #: the sliding foot's velocity against the friction force (must stay >= 0 in the last
 #: slide under a law, which has no stick after it)
@@ -31,9 +31,9 @@ SLIP_STOP = ("slip velocity (the sliding foot stops again before takeoff: stick-
 #: the foot's states on the ground after the pinned stance, under each law, in order
 GROUND_PHASES = ("slide", "stick", "slide")
 
-#: a slip velocity below this at a slide's end has stopped (m/s; the slip's stop is
-#: located to round-off, a takeoff's slip is of another order)
-V_REST = 1e-12
+#: the parts of a slide's guard (:func:`slide_domain`): the sliding foot's normal force
+#: reaching 0 (the takeoff, or the law's switch) and its slip stopping
+FZ_PART, SLIP_PART = "sliding foot's normal force", "slip velocity"
 
 #: the slip guard's ramp over the first RK4 step of a slide begun at rest, m/s
 _V_RAMP = 1.0
@@ -128,19 +128,20 @@ def _on_ground(m, mu, slack, q, Fz, Fx) -> tuple:
 
 
 def slide_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
-                 name: str, last: bool = True) -> Domain:
+                 name: str, after: int = 0) -> Domain:
     """The stance foot sliding under a phase's law (``fl.sliding_dynamics``, the
     friction force sigma mu Fz); empty where Fz <= 0 at entry.
 
-    The ``last`` slide under a law: guard the normal force (the takeoff, or the law's
-    switch); constraints the slip against the friction force (:data:`SLIP_STOP`), the
-    swing foot's height and the torque limit; reset the identity.  A slide before a
-    stick (not ``last``): guard min(Fz, the slip velocity against the friction force),
-    which ends it at the takeoff or the switch, or where the slip stops; a slide begun at
+    The last slide under a law (``after`` = 0): guard the normal force (the takeoff, or
+    the law's switch); constraints the slip against the friction force
+    (:data:`SLIP_STOP`), the swing foot's height and the torque limit; reset the
+    identity.  A slide before ``after`` more domains under the law (a stick, a slide):
+    a guard of two parts, the normal force (the takeoff or the switch: the identity,
+    and the ``after`` domains skipped) and the slip velocity against the friction
+    force (the slip stops: its velocity set to 0, the stick next); a slide begun at
     rest adds to the slip's part a ramp from ``_V_RAMP`` at entry to 0 at the first RK4
     node (the slip starts from 0 there, and has not stopped); the same constraints (the
-    slip's would bind only for a slip begun at rest that reverses within its first step);
-    reset a stopped slip's velocity (below :data:`V_REST`) to 0.
+    slip's would bind only for a slip begun at rest that reverses within its first step).
     """
     fl, nq, ne, nu = c.fl, c.model.nq, c.fl.ne, c.model.nu
     Y, t, p = ca.SX.sym("Y", 2 * ne), ca.SX.sym("t"), ca.SX.sym("p", 3 * nu + 3)
@@ -152,20 +153,21 @@ def slide_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
     cons, names = _phase_constraints(c, u, ca.vertcat(slip, fl.feet(qe)[1, 1]),
                                      (SLIP_STOP, "swing foot height"))
     y = ca.SX.sym("y", 2 * ne)
-    if last:
-        guard, gname, end = Fz, "sliding foot's normal force", y
+    end = ca.Function("slide_end", [y], [y])
+    parts = (FZ_PART, SLIP_PART)
+    if after == 0:
+        guard, gname, parts, skip = Fz, FZ_PART, parts[:1], (0,)
     else:
-        guard = ca.fmin(Fz, slip + rest * _V_RAMP * ca.fmax(0, 1 - t / h))
+        guard = ca.vertcat(Fz, slip + rest * _V_RAMP * ca.fmax(0, 1 - t / h))
         gname = "sliding foot's normal force or slip velocity"
-        v = y[ne + nq]
-        end = ca.vertcat(y[:ne + nq], ca.if_else(ca.fabs(v) < V_REST, 0, v), y[ne + nq + 1:])
+        stop = ca.vertcat(y[:ne + nq], 0, y[ne + nq + 1:])
+        end, skip = (end, ca.Function("slip_stop", [y], [stop])), (after, 0)
     return Domain(name, 2 * ne, ca.Function(f"running_{phase}_slide", [Y, t, p],
                                             [ca.vertcat(dqe, ddqe)]),
-                  ca.Function("slide_guard", [Y, t, p], [guard]),
-                  ca.Function("slide_end", [y], [end]), h, t_max,
+                  ca.Function("slide_guard", [Y, t, p], [guard]), end, h, t_max,
                   start=slide_start(c, phase, c.gains, origin),
                   constraints=ca.Function("slide_constraints", [Y, t, p], [cons]),
-                  constraint_names=names, guard_name=gname,
+                  constraint_names=names, guard_name=gname, guard_parts=parts, skip=skip,
                   tolerance=tolerance, dense_constraints=names, dense_guard=True,
                   common_subexpressions=False,
                   clock_from=clock_from, may_be_empty=True)
@@ -176,11 +178,11 @@ def stick_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
     """The stance foot stuck again where its slip stopped, under a phase's law: the
     pinned dynamics in the flight coordinates (the foot where it stopped); guard the
     cone's margin mu Fz - ``|Fx|`` (it slides again where that reaches 0; Fz cannot
-    vanish first), or -1 where the foot moves at entry (the slide before ended at the
-    takeoff or the law's switch: the domain is empty); constraints Fz, the swing foot's
-    height and the torque limit; reset the identity.  Empty where the margin is <= 0 at
-    entry: the pinned foot would need more than mu Fz the other way, and the next slide
-    starts against it."""
+    vanish first); constraints Fz, the swing foot's height and the torque limit; reset
+    the identity.  Skipped where the slide before ended at the takeoff or the law's
+    switch (its normal force's part, :func:`slide_domain`); empty where the margin is
+    <= 0 at entry: the pinned foot would need more than mu Fz the other way, and the next
+    slide starts against it."""
     m, fl, nq, ne, nu = c.model, c.fl, c.model.nq, c.fl.ne, c.model.nu
     Y, t, p = ca.SX.sym("Y", 2 * ne), ca.SX.sym("t"), ca.SX.sym("p", 3 * nu + 1)
     qe, dqe = Y[:ne], Y[ne:]
@@ -190,7 +192,7 @@ def stick_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
     Fz, Fx = fl.takeoff_guard(q, dq, ua)
     cons, names = _phase_constraints(c, u, ca.vertcat(Fz, fl.feet(qe)[1, 1]),
                                      ("stance normal force", "swing foot height"))
-    guard = ca.if_else(dqe[nq] == 0, mu * Fz - ca.fabs(Fx), -1)
+    guard = mu * Fz - ca.fabs(Fx)
     y = ca.SX.sym("y", 2 * ne)
     return Domain(name, 2 * ne, ca.Function(f"running_{phase}_stick", [Y, t, p],
                                             [ca.vertcat(dqe, m.forward_dynamics(q, dq, ua),
@@ -221,7 +223,7 @@ def ground_domains(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
     for i, (kind, name) in enumerate(zip(GROUND_PHASES, names)):
         if kind == "slide":
             doms.append(slide_domain(c, phase, mu, h, t_max, tolerance, origin, clock_from,
-                                     name, last=i == last))
+                                     name, after=last - i))
             starts.append(partial(slide_start, c, phase, clock_origin=origin))
         else:
             doms.append(stick_domain(c, phase, mu, h, t_max, tolerance, origin, clock_from,
