@@ -4,7 +4,9 @@ takeoff ('takeoff') or the stance's continued ('stride') (docs/howto/running.md,
 takeoff and the flight clock").
 
 Per case (a robot, its running gait, PD Kp 400, Kd 30, M1 = (0, .95, .95, 0) unless
-given): from the fixed point of the 'takeoff' clock plus 0.01 rad/s on every velocity
+given), the takeoff of the pinned foot (``running_cycle(..., sliding=False)``, the model
+before the sliding phase, whose failures the sliding phase answers): from the pinned
+cycle's fixed point of the 'takeoff' clock plus 0.01 rad/s on every velocity
 (the collocated landing state when there is no fixed point), the stance pass of each of
 ``--strides`` strides: its duration against T_stance, the ground force (Fz, Fx) at its
 end, the torque jump of each clock at the switch, the freed foot's vertical
@@ -14,7 +16,8 @@ the cycle's push-off: how long the foot stays on the ground under them (unilater
 contact: stance dynamics under the flight law until that force reaches 0), the
 tangential force and the foot's acceleration when it leaves, and the pushing foot's
 minima in the flight after.  Then, per clock, the stride map's
-status, spectral radius and the perturbed run (20 strides).
+status, spectral radius and the perturbed run (20 strides), with the sliding foot (the
+default model: ``loops``) and with the pinned one (``pinned_loops``).
 
 Run: ``python benchmarks/running_takeoff.py [--case ROBOT GAIT_FILE [M1 ...]] [--no-save]``
 (default: RABBIT's gaits at 1.5 and 2.0 m/s and at 2.5 m/s optimised with |u| <= 145 N m,
@@ -111,9 +114,10 @@ def case(robot, gait, M1, strides, saturate) -> dict:
     c = RunningController(m, gait, 400.0, 30.0, M1=M1, saturate=saturate)
     # the pinned foot's takeoff (the model before sliding), whose push-off this studies
     cycles = {k: running_cycle(c, flight_clock=k, sliding=False) for k in FLIGHT_CLOCKS}
-    loops, fixed = {}, {}
+    loops, pinned, fixed = {}, {}, {}
     for k in FLIGHT_CLOCKS:
-        loops[k], fixed[k] = loop(cycles[k], strides)
+        pinned[k], fixed[k] = loop(cycles[k], strides)
+        loops[k] = loop(running_cycle(c, flight_clock=k), strides)[0]    # sliding (default)
     r = fixed["takeoff"]
     x = np.asarray(gait.x_stance, float)[:, 0].copy()
     if r.status != "failed":
@@ -126,7 +130,7 @@ def case(robot, gait, M1, strides, saturate) -> dict:
         if x is None:
             break
     return dict(robot=m.params.name, speed=gait.speed, M1=list(M1), saturate=saturate,
-                T_stance=gait.T_stance, takeoffs=passes, loops=loops)
+                T_stance=gait.T_stance, takeoffs=passes, loops=loops, pinned_loops=pinned)
 
 
 def main():
@@ -154,10 +158,12 @@ def main():
             r = case(robot, g, M1, a.strides, sat)
             rows.append(r)
             what = f"{r['robot']} {g.speed:g} m/s{', clipped' if sat else ''}"
-            for k, v in r["loops"].items():
-                run.row(f"{what}, flight clock {k}: spectral radius", v["spectral_radius"],
-                        unit="")
-                print(what, k, v["status"], v.get("run_message", v["message"]), flush=True)
+            for model, key in (("sliding", "loops"), ("pinned", "pinned_loops")):
+                for k, v in r[key].items():
+                    run.row(f"{what}, flight clock {k}, {model} foot: spectral radius",
+                            v["spectral_radius"], unit="")
+                    print(what, k, model, v["status"], v.get("run_message", v["message"]),
+                          flush=True)
             for i, t in enumerate(r["takeoffs"]):
                 print(f"  takeoff {i + 1}:", {k: (round(v, 6) if isinstance(v, float) else v)
                                              for k, v in t.items()}, flush=True)
@@ -170,6 +176,9 @@ def main():
         run.data["rows"] = rows
         run.note("PD Kp 400, Kd 30; 0.01 rad/s on every velocity of the restarted clock's "
                  "fixed point (the collocated landing state when it has none)")
+        run.note("the takeoffs (stance pass, switch, push-off) are the pinned foot's "
+                 "(sliding=False); the loops are measured with the sliding foot (the "
+                 "default) and, for comparison, the pinned one")
 
 
 if __name__ == "__main__":

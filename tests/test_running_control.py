@@ -839,6 +839,22 @@ def test_the_rk4_bound_on_the_gains_is_rk4s(model, run_gait, gain, h2_bound):
         assert top == pytest.approx(limit, rel=2e-3)
 
 
+def test_a_mode_the_flow_grows_is_not_refused_as_rk4s(model, run_gait, cycle):
+    """M1 = (0, 1.1, 1.1, 0) makes the flight's A = M De^-1 Be indefinite: the frozen
+    output error has a real mode that grows in the flow itself, e^z a step, and RK4
+    follows it (|P(z)| = e^z to round-off).  That is the law's, not the step's: the gains
+    are not refused, and the cycle has a fixed point there (inside the stable band)."""
+    from biped_casadi.control.running_step import _output_matrices, rk4_growth
+    M1 = (0.0, 1.1, 1.1, 0.0)
+    c = RunningController(model, run_gait, KP, KD, M1=M1)
+    A = _output_matrices(c, "flight")
+    assert min(np.linalg.eigvals(a).real.min() for a in A) < 0      # the flow's growth
+    h = cycle.rk4_steps["flight"]
+    assert rk4_growth(A, h, c.Kp, c.Kd) <= 1 + 1e-9
+    r = running_stability(cycle.retuned(M1=M1))
+    assert r.status != "failed" and r.spectral_radius < 1, r.message
+
+
 def test_rk4_reach_bounds_rk4s_stability_region():
     """Every z with ``|P(z)|`` <= 1 lies within RK4_REACH of 0, which the region nearly
     reaches (a polar grid of the plane)."""

@@ -4,9 +4,12 @@ Near the reference the law's output error e = M (q^d - q) obeys, frozen at a sta
 reference, dd e = -A (Kp e + Kd de) (torques B u through D ddq = B u: A = M D^-1 B in
 stance, Me De^-1 Be in flight, the extended coordinates; A = I for the computed torque).
 RK4 with step h multiplies a mode of rate lambda by P(h lambda) = 1 + z + z^2/2 + z^3/6
-+ z^4/24 each step: where |P| > 1 at a reference node the error grows by that factor a
-step whatever the state, and the run diverges (Kp = 1e300 in stance: a state not finite
-after one step).  :func:`check_rk4_steps` refuses such gains before a run, naming the
++ z^4/24 each step, where the flow multiplies it by e^z: where |P| > max(1, |e^z|) at a
+reference node RK4 makes the error grow, by that factor a step, whatever the state, and
+the run diverges (Kp = 1e300 in stance: a state not finite after one step).  A mode that
+grows in the flow itself (an output whose A has a negative eigenvalue, as a large M1
+gives in flight) is the law's, not the step's: RK4 follows it (|P| = e^z to round-off
+for small z) and it is not refused.  :func:`check_rk4_steps` refuses such gains before a run, naming the
 gain and the largest that the step supports with the other kept.
 
 Before a step is optimised, its nodes are unknown, but its RK4 steps are bounded below
@@ -105,7 +108,9 @@ def rk4_growth(matrices, h: float, Kp, Kd) -> float:
     Returns
     -------
     float
-        Above 1: RK4 amplifies the output error by that factor a step.
+        The largest ``|P(z)| / max(1, |e^z|)`` over the modes z = h lambda: above 1, RK4
+        makes the output error grow by that factor a step beyond what the frozen dynamics
+        does.
     """
     Kp, Kd = np.asarray(Kp, dtype=float), np.asarray(Kd, dtype=float)
     worst = 0.0
@@ -116,8 +121,8 @@ def rk4_growth(matrices, h: float, Kp, Kd) -> float:
             if not np.all(np.isfinite(C)):
                 return np.inf
             z = h * np.linalg.eigvals(C)
-            worst = max(worst, float(np.max(np.abs(1 + z * (1 + z / 2 * (1 + z / 3 * (
-                1 + z / 4)))))))
+            p = np.abs(1 + z * (1 + z / 2 * (1 + z / 3 * (1 + z / 4))))
+            worst = max(worst, float(np.max(p / np.maximum(1.0, np.exp(z.real)))))
     return worst
 
 
