@@ -57,6 +57,8 @@ class MarginCheck:
         if not limits.saturate and np.isfinite(limits.torque_limit):
             self.status += ["torque_limit"] * (2 * nu)
         self._between = None
+        u = schema.index["u"]
+        self._rows = np.r_[np.arange(u.start, u.stop), schema.index["Fx"], schema.index["Fz"]]
 
     def values(self, u, Fx, Fz, lib=np):
         """The margins from torques (nu, ...), F_x and F_z (numbers or CasADi with
@@ -74,8 +76,7 @@ class MarginCheck:
 
     def rows(self, D) -> np.ndarray:
         """The torques, F_x and F_z of diagnostics D (rows, ...), stacked: (nu + 2, ...)."""
-        S = self.schema
-        return np.concatenate([S.row(D, "u"), S.row(D, "Fx")[None], S.row(D, "Fz")[None]])
+        return np.asarray(D)[self._rows]
 
     def of_rows(self, R) -> np.ndarray:
         """(n, s, m) margins at the n nodes (last axis) of s scenarios' rows R (:meth:`rows`,
@@ -97,29 +98,45 @@ class MarginCheck:
         :meth:`values` must be bounded here too: one missing is never screened in a
         scenario this calls far.
         """
+        flat = R.reshape(R.shape[0], -1)
+        lo, hi = flat.min(axis=1), flat.max(axis=1)
+        if self._far(lo.tolist(), hi.tolist(), (2 * (hi - lo)).tolist()):
+            return np.zeros(R.shape[1], bool)         # the whole batch's extremes decide
+        d = R[..., 2:] - R[..., 1:-1]
+        d -= R[..., 1:-1]
+        d += R[..., :-2]
+        dflat = d.reshape(d.shape[0], -1)
+        if self._far(lo.tolist(), hi.tolist(),
+                     np.maximum(dflat.max(axis=1), -dflat.min(axis=1)).tolist()):
+            return np.zeros(R.shape[1], bool)
+        d2 = np.maximum(d.max(axis=-1), -d.min(axis=-1))              # (rows, s)
         lo, hi = R.min(axis=-1), R.max(axis=-1)
-        near = self._near(lo, hi, 2 * (hi - lo))
-        rest = np.flatnonzero(near)
-        if rest.size:
-            Rr = R[:, rest]
-            d = Rr[..., 2:] - Rr[..., 1:-1]
-            d -= Rr[..., 1:-1]
-            d += Rr[..., :-2]
-            near[rest] = self._near(lo[:, rest], hi[:, rest],
-                                    np.maximum(d.max(axis=-1), -d.min(axis=-1)))
-        return near
+        return self._near(lo, hi, 2 * (hi - lo)) & self._near(lo, hi, d2)
 
-    def _near(self, lo, hi, d1) -> np.ndarray:
-        """:meth:`near` from the rows' extremes lo, hi and bounds d1 on their |c''| h^2."""
+    def _slacks(self, lo, hi, d1, lib=np) -> list:
+        """The margins' lower bounds less their screen's allowance (:meth:`near`), from the
+        rows' extremes lo, hi and bounds d1 on their |c''| h^2 (arrays, or lists of numbers
+        with ``lib=None``)."""
         lim, nu = self.limits, self.schema.nu
         c = 3 * SCREEN_SAFETY / 8
+        absmax = (lambda a, b: max(a, -b)) if lib is None else (lambda a, b: np.maximum(a, -b))
         slack = [lo[nu + 1] - lim.min_normal_force - c * d1[nu + 1]]
         if np.isfinite(lim.mu):
             k = lim.mu + FRICTION_TOL
-            slack.append(k * lo[nu + 1] - np.maximum(hi[nu], -lo[nu])
-                         - c * (k * d1[nu + 1] + d1[nu]))
+            slack.append(k * lo[nu + 1] - absmax(hi[nu], lo[nu]) - c * (k * d1[nu + 1] + d1[nu]))
         if "torque_limit" in self.status:
-            slack.extend(lim.torque_limit - np.maximum(hi[:nu], -lo[:nu]) - c * d1[:nu])
+            slack.extend(lim.torque_limit - absmax(hi[i], lo[i]) - c * d1[i] for i in range(nu))
+        return slack
+
+    def _far(self, lo, hi, d1) -> bool:
+        """Whether every margin is far from its bound (:meth:`_slacks` of numbers, each
+        the bound of every scenario's: lo the lowest, hi the highest, d1 the largest);
+        a NaN is near."""
+        return all(v >= 0 for v in self._slacks(lo, hi, d1, None))
+
+    def _near(self, lo, hi, d1) -> np.ndarray:
+        """:meth:`near` from the rows' extremes lo, hi and bounds d1 on their |c''| h^2."""
+        slack = self._slacks(lo, hi, d1)
         with np.errstate(invalid="ignore"):
             return ~np.all(np.array(slack) >= 0, axis=0)
 
@@ -304,6 +321,8 @@ def foot_dips(dip, h, step, z_prev, dz_a, dz_b, stop, ground, scuff_zone: float,
     dict
         Scenario -> (j, 'strike' or 'scuffed', eta, z_sw, x_sw, X_eta).
     """
+    if not ((dz_a <= 0) & (dz_b > 0)).any():            # no minimum in any step
+        return {}
     K = z_prev.shape[1]
     h = np.broadcast_to(np.asarray(h, float), (len(z_prev),))
     cand = foot_may_dip(z_prev, dz_a, dz_b, h[:, None] if dt is None else dt,
