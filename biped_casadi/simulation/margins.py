@@ -113,32 +113,40 @@ class MarginCheck:
         lo, hi = R.min(axis=-1), R.max(axis=-1)
         return self._near(lo, hi, 2 * (hi - lo)) & self._near(lo, hi, d2)
 
-    def _slacks(self, lo, hi, d1, lib=np) -> list:
+    def _slacks(self, lo, hi, d1) -> list:
         """The margins' lower bounds less their screen's allowance (:meth:`near`), from the
-        rows' extremes lo, hi and bounds d1 on their |c''| h^2 (arrays, or lists of numbers
-        with ``lib=None``)."""
+        rows' extremes lo, hi and bounds d1 on their |c''| h^2 (lists of numbers: each the
+        bound of every scenario's, lo the lowest, hi the highest, d1 the largest), in the
+        arithmetic of :meth:`_near`."""
         lim, nu = self.limits, self.schema.nu
         c = 3 * SCREEN_SAFETY / 8
-        absmax = (lambda a, b: max(a, -b)) if lib is None else (lambda a, b: np.maximum(a, -b))
         slack = [lo[nu + 1] - lim.min_normal_force - c * d1[nu + 1]]
         if np.isfinite(lim.mu):
             k = lim.mu + FRICTION_TOL
-            slack.append(k * lo[nu + 1] - absmax(hi[nu], lo[nu]) - c * (k * d1[nu + 1] + d1[nu]))
+            slack.append(k * lo[nu + 1] - max(hi[nu], -lo[nu]) - c * (k * d1[nu + 1] + d1[nu]))
         if "torque_limit" in self.status:
-            slack.extend(lim.torque_limit - absmax(hi[i], lo[i]) - c * d1[i] for i in range(nu))
+            slack.extend(lim.torque_limit - max(hi[i], -lo[i]) - c * d1[i] for i in range(nu))
         return slack
 
     def _far(self, lo, hi, d1) -> bool:
-        """Whether every margin is far from its bound (:meth:`_slacks` of numbers, each
-        the bound of every scenario's: lo the lowest, hi the highest, d1 the largest);
-        a NaN is near."""
-        return all(v >= 0 for v in self._slacks(lo, hi, d1, None))
+        """Whether every margin is far from its bound for every scenario (:meth:`_slacks`
+        of the whole batch's extremes); a NaN is near."""
+        return all(v >= 0 for v in self._slacks(lo, hi, d1))
 
     def _near(self, lo, hi, d1) -> np.ndarray:
         """:meth:`near` from the rows' extremes lo, hi and bounds d1 on their |c''| h^2."""
-        slack = self._slacks(lo, hi, d1)
+        lim, nu = self.limits, self.schema.nu
+        c = 3 * SCREEN_SAFETY / 8
         with np.errstate(invalid="ignore"):
-            return ~np.all(np.array(slack) >= 0, axis=0)
+            far = lo[nu + 1] - lim.min_normal_force - c * d1[nu + 1] >= 0
+            if np.isfinite(lim.mu):
+                k = lim.mu + FRICTION_TOL
+                far &= k * lo[nu + 1] - np.maximum(hi[nu], -lo[nu]) \
+                    - c * (k * d1[nu + 1] + d1[nu]) >= 0
+            if "torque_limit" in self.status:
+                far &= np.all(lim.torque_limit - np.maximum(hi[:nu], -lo[:nu]) - c * d1[:nu]
+                              >= 0, axis=0)
+        return ~far
 
     def at_nodes(self, D) -> np.ndarray:
         """(n, m) margins at the n nodes of diagnostics D (rows x n)."""
