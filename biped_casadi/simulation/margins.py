@@ -93,8 +93,10 @@ class MarginCheck:
         cone's by |u_i| and |F_x|): False where every margin is above 0 by
         :data:`~biped_casadi.simulation.kernel.SCREEN_SAFETY` / 8 times 3 max |c''| h^2
         at every node, as :func:`~biped_casadi.simulation.kernel.screen_far`; a NaN is
-        near.  The second differences are taken only where their bound by the rows'
-        ranges (|c''| h^2 <= 2 (max - min)) does not already decide.  A margin added to
+        near.  The whole batch's extremes decide first (its lowest and highest rows, their
+        ranges' bound |c''| h^2 <= 2 (max - min), then its largest second differences):
+        every scenario is far where they are far; else per scenario, far where both bounds
+        say so.  A margin added to
         :meth:`values` must be bounded here too: one missing is never screened in a
         scenario this calls far.
         """
