@@ -59,6 +59,9 @@ class MarginCheck:
         self._between = None
         u = schema.index["u"]
         self._rows = np.r_[np.arange(u.start, u.stop), schema.index["Fx"], schema.index["Fz"]]
+        # per slack of _slacks, the rows (of rows()) it is bounded through
+        self._margin_rows = [(nu + 1,)] + ([(nu, nu + 1)] if np.isfinite(limits.mu) else []) \
+            + [(i,) for i in range(nu) if "torque_limit" in self.status]
 
     def values(self, u, Fx, Fz, lib=np):
         """The margins from torques (nu, ...), F_x and F_z (numbers or CasADi with
@@ -94,26 +97,33 @@ class MarginCheck:
         :data:`~biped_casadi.simulation.kernel.SCREEN_SAFETY` / 8 times 3 max |c''| h^2
         at every node, as :func:`~biped_casadi.simulation.kernel.screen_far`; a NaN is
         near.  The whole batch's extremes decide first (its lowest and highest rows, their
-        ranges' bound |c''| h^2 <= 2 (max - min), then its largest second differences):
-        every scenario is far where they are far; else per scenario, far where both bounds
-        say so.  A margin added to
+        ranges' bound |c''| h^2 <= 2 (max - min), then the largest second differences of
+        the rows of the margins that bound leaves near): every scenario is far where
+        they are far; else per scenario, far where both bounds say so.  A margin added to
         :meth:`values` must be bounded here too: one missing is never screened in a
         scenario this calls far.
         """
         flat = R.reshape(R.shape[0], -1)
         lo, hi = flat.min(axis=1), flat.max(axis=1)
-        if self._far(lo.tolist(), hi.tolist(), (2 * (hi - lo)).tolist()):
+        d1 = 2 * (hi - lo)
+        slack = self._slacks(lo.tolist(), hi.tolist(), d1.tolist())
+        if all(v >= 0 for v in slack):
             return np.zeros(R.shape[1], bool)         # the whole batch's extremes decide
-        d = R[..., 2:] - R[..., 1:-1]
-        d -= R[..., 1:-1]
-        d += R[..., :-2]
-        dflat = d.reshape(d.shape[0], -1)
-        if self._far(lo.tolist(), hi.tolist(),
-                     np.maximum(dflat.max(axis=1), -dflat.min(axis=1)).tolist()):
+        need = sorted({r for v, rows in zip(slack, self._margin_rows) if not v >= 0
+                       for r in rows})
+        Rn = R[need]                                  # the rows of the margins left near
+        d = Rn[..., 2:] - Rn[..., 1:-1]
+        d -= Rn[..., 1:-1]
+        d += Rn[..., :-2]
+        dflat = d.reshape(len(need), -1)
+        d1[need] = np.maximum(dflat.max(axis=1), -dflat.min(axis=1))
+        if self._far(lo.tolist(), hi.tolist(), d1.tolist()):
             return np.zeros(R.shape[1], bool)
-        d2 = np.maximum(d.max(axis=-1), -d.min(axis=-1))              # (rows, s)
         lo, hi = R.min(axis=-1), R.max(axis=-1)
-        return self._near(lo, hi, 2 * (hi - lo)) & self._near(lo, hi, d2)
+        d1 = 2 * (hi - lo)
+        d2 = d1.copy()
+        d2[need] = np.maximum(d.max(axis=-1), -d.min(axis=-1))
+        return self._near(lo, hi, d1) & self._near(lo, hi, d2)
 
     def _slacks(self, lo, hi, d1) -> list:
         """The margins' lower bounds less their screen's allowance (:meth:`near`), from the
