@@ -59,6 +59,11 @@ class MarginCheck:
         if not limits.saturate and np.isfinite(limits.torque_limit):
             self.status += ["torque_limit"] * (2 * nu)
         self._between = None
+        u = schema.index["u"]
+        self._rows = np.r_[np.arange(u.start, u.stop), schema.index["Fx"], schema.index["Fz"]]
+        # per slack of _slacks, the rows (of rows()) it is bounded through
+        self._margin_rows = [(nu + 1,)] + ([(nu, nu + 1)] if np.isfinite(limits.mu) else []) \
+            + [(i,) for i in range(nu) if "torque_limit" in self.status]
 
     def values(self, u, Fx, Fz, lib=np):
         """The margins from torques (nu, ...), F_x and F_z (numbers or CasADi with
@@ -76,8 +81,7 @@ class MarginCheck:
 
     def rows(self, D) -> np.ndarray:
         """The torques, F_x and F_z of diagnostics D (rows, ...), stacked: (nu + 2, ...)."""
-        S = self.schema
-        return np.concatenate([S.row(D, "u"), S.row(D, "Fx")[None], S.row(D, "Fz")[None]])
+        return np.asarray(D)[self._rows]
 
     def of_rows(self, R) -> np.ndarray:
         """(n, s, m) margins at the n nodes (last axis) of s scenarios' rows R (:meth:`rows`,
@@ -94,36 +98,69 @@ class MarginCheck:
         cone's by |u_i| and |F_x|): False where every margin is above 0 by
         :data:`~biped_casadi.simulation.kernel.SCREEN_SAFETY` / 8 times 3 max |c''| h^2
         at every node, as :func:`~biped_casadi.simulation.kernel.screen_far`; a NaN is
-        near.  The second differences are taken only where their bound by the rows'
-        ranges (|c''| h^2 <= 2 (max - min)) does not already decide.  A margin added to
+        near.  The whole batch's extremes decide first (its lowest and highest rows, their
+        ranges' bound |c''| h^2 <= 2 (max - min), then the largest second differences of
+        the rows of the margins that bound leaves near): every scenario is far where
+        they are far; else per scenario, far where both bounds say so.  A margin added to
         :meth:`values` must be bounded here too: one missing is never screened in a
         scenario this calls far.
         """
+        flat = R.reshape(R.shape[0], -1)
+        lo, hi = flat.min(axis=1), flat.max(axis=1)
+        d1 = 2 * (hi - lo)
+        slack = self._slacks(lo.tolist(), hi.tolist(), d1.tolist())
+        if all(v >= 0 for v in slack):
+            return np.zeros(R.shape[1], bool)         # the whole batch's extremes decide
+        need = sorted({r for v, rows in zip(slack, self._margin_rows) if not v >= 0
+                       for r in rows})
+        Rn = R[need]                                  # the rows of the margins left near
+        d = Rn[..., 2:] - Rn[..., 1:-1]
+        d -= Rn[..., 1:-1]
+        d += Rn[..., :-2]
+        dflat = d.reshape(len(need), -1)
+        d1[need] = np.maximum(dflat.max(axis=1), -dflat.min(axis=1))
+        if self._far(lo.tolist(), hi.tolist(), d1.tolist()):
+            return np.zeros(R.shape[1], bool)
         lo, hi = R.min(axis=-1), R.max(axis=-1)
-        near = self._near(lo, hi, 2 * (hi - lo))
-        rest = np.flatnonzero(near)
-        if rest.size:
-            Rr = R[:, rest]
-            d = Rr[..., 2:] - Rr[..., 1:-1]
-            d -= Rr[..., 1:-1]
-            d += Rr[..., :-2]
-            near[rest] = self._near(lo[:, rest], hi[:, rest],
-                                    np.maximum(d.max(axis=-1), -d.min(axis=-1)))
-        return near
+        d1 = 2 * (hi - lo)
+        d2 = d1.copy()
+        d2[need] = np.maximum(d.max(axis=-1), -d.min(axis=-1))
+        return self._near(lo, hi, d1) & self._near(lo, hi, d2)
 
-    def _near(self, lo, hi, d1) -> np.ndarray:
-        """:meth:`near` from the rows' extremes lo, hi and bounds d1 on their |c''| h^2."""
+    def _slacks(self, lo, hi, d1) -> list:
+        """The margins' lower bounds less their screen's allowance (:meth:`near`), from the
+        rows' extremes lo, hi and bounds d1 on their |c''| h^2 (lists of numbers: each the
+        bound of every scenario's, lo the lowest, hi the highest, d1 the largest), in the
+        arithmetic of :meth:`_near`."""
         lim, nu = self.limits, self.schema.nu
         c = 3 * SCREEN_SAFETY / 8
         slack = [lo[nu + 1] - lim.min_normal_force - c * d1[nu + 1]]
         if np.isfinite(lim.mu):
             k = lim.mu + FRICTION_TOL
-            slack.append(k * lo[nu + 1] - np.maximum(hi[nu], -lo[nu])
-                         - c * (k * d1[nu + 1] + d1[nu]))
+            slack.append(k * lo[nu + 1] - max(hi[nu], -lo[nu]) - c * (k * d1[nu + 1] + d1[nu]))
         if "torque_limit" in self.status:
-            slack.extend(lim.torque_limit - np.maximum(hi[:nu], -lo[:nu]) - c * d1[:nu])
+            slack.extend(lim.torque_limit - max(hi[i], -lo[i]) - c * d1[i] for i in range(nu))
+        return slack
+
+    def _far(self, lo, hi, d1) -> bool:
+        """Whether every margin is far from its bound for every scenario (:meth:`_slacks`
+        of the whole batch's extremes); a NaN is near."""
+        return all(v >= 0 for v in self._slacks(lo, hi, d1))
+
+    def _near(self, lo, hi, d1) -> np.ndarray:
+        """:meth:`near` from the rows' extremes lo, hi and bounds d1 on their |c''| h^2."""
+        lim, nu = self.limits, self.schema.nu
+        c = 3 * SCREEN_SAFETY / 8
         with np.errstate(invalid="ignore"):
-            return ~np.all(np.array(slack) >= 0, axis=0)
+            far = lo[nu + 1] - lim.min_normal_force - c * d1[nu + 1] >= 0
+            if np.isfinite(lim.mu):
+                k = lim.mu + FRICTION_TOL
+                far &= k * lo[nu + 1] - np.maximum(hi[nu], -lo[nu]) \
+                    - c * (k * d1[nu + 1] + d1[nu]) >= 0
+            if "torque_limit" in self.status:
+                far &= np.all(lim.torque_limit - np.maximum(hi[:nu], -lo[:nu]) - c * d1[:nu]
+                              >= 0, axis=0)
+        return ~far
 
     def at_nodes(self, D) -> np.ndarray:
         """(n, m) margins at the n nodes of diagnostics D (rows x n)."""
@@ -306,6 +343,8 @@ def foot_dips(dip, h, step, z_prev, dz_a, dz_b, stop, ground, scuff_zone: float,
     dict
         Scenario -> (j, 'strike' or 'scuffed', eta, z_sw, x_sw, X_eta).
     """
+    if not ((dz_a <= 0) & (dz_b > 0)).any():            # no minimum in any step
+        return {}
     K = z_prev.shape[1]
     h = np.broadcast_to(np.asarray(h, float), (len(z_prev),))
     cand = foot_may_dip(z_prev, dz_a, dz_b, h[:, None] if dt is None else dt,

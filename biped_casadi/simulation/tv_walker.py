@@ -497,12 +497,11 @@ class ZeroDynamicsWalker:
         feet = foot_dips(self._dip, self.h, node, zp,
                          np.concatenate([st["dz"][li][:, None], dzs[:, :-1]], axis=1), dzs,
                          i_strike, gl, self.model.scuff_zone, self.limits)
-        z_end, h_end = zs[np.arange(li.size), np.minimum(i_strike, K - 1)], np.full(li.size,
-                                                                                   self.h)
+        end = {}                              # a dip's strike: its z_sw and step length
         for i, (j, kind, eta, z, _, _) in feet.items():
             i_strike[i] = j                   # the nodes from the dip's on do not count
             if kind == "strike":
-                z_end[i], h_end[i] = z, eta
+                end[i] = z, eta
         first, which = self._check(Dg, st["sign"][li], st["scale"][li], zp, gl)
         failed = (which != "") & (first < i_strike)
         upto = np.where(failed, first + 1, i_strike)
@@ -535,7 +534,7 @@ class ZeroDynamicsWalker:
             st["before"][g_] = st["x"][g_] if s_ == 0 else Xs[:, i, s_ - 1]
             st["t_before"][g_] = st["tau"][g_] if s_ == 0 else Ts[i, s_ - 1]
             st["z_a"][g_] = zp[i, s_]
-            st["z_b"][g_], st["h"][g_] = z_end[i], h_end[i]
+            st["z_b"][g_], st["h"][g_] = end.get(i, (zs[i, s_], self.h))
             st["struck"][g_] = True
         cont = ~failed & ~hit
         st["live"][li[~cont]] = False
@@ -630,13 +629,16 @@ class ZeroDynamicsWalker:
         _, which = self._check(Dm[:, :, None], sign, scale[gi],
                                ground=(hk, np.zeros(m)))
         message, dipped = np.full(m, "", dtype=object), np.zeros(m, bool)
-        W = self.margin.of_rows(np.concatenate([r_before, self.margin.rows(Dm)[..., None]], 2))
+        Rm = np.concatenate([r_before, self.margin.rows(Dm)[..., None]], 2)
+        nn = np.flatnonzero(self.margin.near(Rm))         # those the screen may flag
 
         def step(i, j):                                    # from the last node to the impact
             return za_r[:, i], ta[i], eta[i], np.r_[Ps[i], self._theta]
 
-        for i, (_, e, status) in self.margin.first_dips(self._between, W, 1, step,
-                                                        np.ones(m, int)).items():
+        dips = {int(nn[i]): got for i, got in self.margin.first_dips(
+            self._between, self.margin.of_rows(Rm[:, nn]), 1, lambda i, j: step(nn[i], j),
+            np.ones(nn.size, int)).items()} if nn.size else {}
+        for i, (_, e, status) in dips.items():
             D = self._state_at(*step(i, 0)[:2], step(i, 0)[3], e)
             self._track(run, gi[[i]], D[:, :, None])
             which[i], dipped[i] = status, True
