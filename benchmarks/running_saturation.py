@@ -50,9 +50,9 @@ def one(cyc, M1, nq, strides):
     """The radius at M1 and the perturbed run."""
     c = cyc.retuned(M1=M1)
     r = running_stability(c)
+    if r.status == "failed":        # no fixed point: its last iterate's radius means nothing
+        return dict(M1=list(M1), status=r.status, spectral_radius=None, message=r.message)
     out = dict(M1=list(M1), status=r.status, spectral_radius=r.spectral_radius)
-    if r.status == "failed":
-        return out
     x = r.fixed_point.copy()
     x[nq:] += 1e-2
     run = simulate_running(c, r.fixed_point, x, strides)
