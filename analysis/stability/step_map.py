@@ -22,9 +22,13 @@ and the controller's step start (the time-varying controller's y_i, dy_i of eq. 
 virtual constraints' correction).  Any controller with the law interface
 (:mod:`biped_casadi.control.controller`) and any plant (model error) work the same way.
 
-For the time-varying controller the full state's map has rank 2 and its non-zero
+At the periodic walk on flat ground (h = 0) the full state's map of the time-varying
+controller has rank 2 (from every step start the closed loop is its zero dynamics,
+whatever the output gains: the transversal eigenvalues are 0) and its non-zero
 eigenvalues are those of A^z of the restricted Poincaré map (eq. 20); for virtual
-constraints, rank 1 and the eigenvalue of :mod:`analysis.stability.vc_map`.
+constraints, rank 1 and the eigenvalue of :mod:`analysis.stability.vc_map`; both to the
+discretisations' accuracy (:mod:`analysis.terrain.gsn`).  Linearised at another point,
+such as a step up of 10 µm, A has other eigenvalues (the map is not linear).
 """
 from __future__ import annotations
 

@@ -19,14 +19,21 @@ of the step time (:func:`predicted_rms` also gives the transient from the period
 walk).  Hobbelen & Wisse take the same norm by finite differences of a simulator; here
 every Jacobian is exact.
 
-Where the periodic walk strikes exactly on a node of the RK4 grid (on flat ground with a
-perfect model it does, at tau = T), the discrete map has a kink there (a non-smooth
-reference continuation past T, or a knot of the virtual constraints at the impact
-phase, is met by one RK4 stage or the next); the linearisation is taken on the side of
-a step up of ``GROUND_OFFSET`` m, where the whole step lies before the strike, the side
-whose derivatives converge to the continuous-time map's.  The offset moves the norms by
-about 1e-4 relative (the eigenvalues of A by 1e-4 per 10 µm); it keeps central
-differences of the simulator with steps up to 1e-6 on one side of the kink.
+The map is linearised at the periodic walk itself, on flat ground (h = 0), so that the
+eigenvalues of A are the step map's at its fixed point: for the time-varying controller
+its two non-zero ones are those of A^z (:func:`analysis.poincare_eigenvalues`), for
+virtual constraints its one non-zero one is :func:`analysis.vc_eigenvalue`, to the two
+discretisations' accuracy (RABBIT and TALOS: 1e-8).  Linearising anywhere else moves
+them: where the law is sensitive, by a lot (TALOS's gait at 0.5 m/s under M1 = [-2.5,
+7.5, -5, 2.5]: max |eigenvalue| 0.6177 at h = 0, 0.6084 at h = 10 µm, a slope of about
+-950 per m).  The periodic walk strikes on a node of the RK4 grid (at tau = T), so the
+strike lands on one side of it or the other by round-off.  The two sides' first
+derivatives agree (within 5e-8 relative on RABBIT's gaits with 800 RK4 steps, h = +-1e-9
+m); their second derivatives do not where the reference continues past T with a jump in
+its third derivative or the virtual constraints have a knot at the impact phase, so
+central differences of the simulator across the node are accurate to the step times
+that jump only (RABBIT's robust gait, steps of 1e-6 m: 1.5e-5 relative, against 1e-8
+away from the node; ``tests/test_terrain.py`` checks them there).
 """
 from __future__ import annotations
 
@@ -39,10 +46,7 @@ from biped_casadi.results import Result, internal
 
 from ..stability.step_map import DISTURBANCES, INDICATORS, StepLinearisation, step_map
 
-__all__ = ["GaitSensitivity", "gait_sensitivity", "gsn_of", "predicted_rms", "GROUND_OFFSET"]
-
-#: the ground height at which the periodic walk is linearised, m (module docstring)
-GROUND_OFFSET = 1e-5
+__all__ = ["GaitSensitivity", "gait_sensitivity", "gsn_of", "predicted_rms"]
 
 
 @dataclass
@@ -58,7 +62,8 @@ class GaitSensitivity(Result):
         Disturbance ('ground_height' per m, 'torso_push' per N s) -> {'step_time': s per
         unit, 'step_length': m per unit, 'total': the norm}.
     spectral_radius : float
-        max ``|eigenvalue|`` of A.
+        max ``|eigenvalue|`` of A at the periodic walk (module docstring: that of A^z, or
+        the virtual constraints' eigenvalue).
     eigenvalues : list
         The largest eigenvalues of A ([re, im] pairs, by decreasing magnitude).
     step_time, step_length : float
@@ -176,7 +181,7 @@ def gait_sensitivity(controller, options=None, plant=None) -> GaitSensitivity:
     """
     sm = step_map(controller, options, plant)
     fp = sm.fixed_point()
-    lin = sm.linearise(fp.state, h=GROUND_OFFSET)
+    lin = sm.linearise(fp.state)
     norms = gsn_of(lin)
     rho = lin.spectral_radius
     status = "stable" if rho < 1 else "unstable"
