@@ -138,6 +138,27 @@ def test_codesign_node_kernel_equals_the_scalar_node(which, request):
         assert np.max(np.abs(a - b)) <= 1e-11 * max(1.0, np.max(np.abs(b)))
 
 
+def test_codesign_solve_records_what_walked_its_nodes(reduced):
+    """A solve's record names what walked its nodes: the kernel rounds differently from
+    the scalar node, so a process that could not build it gives another design (to about
+    1e-11) and its solves say so."""
+    from analysis.design.codesign.functions import NodeFunctions
+    from analysis.design.codesign.problem import _record
+    from analysis.design.codesign.reduced import NLPSolve
+    from biped_casadi.simd import available
+    tr = reduced[0]
+    res = NLPSolve(d=np.zeros(tr.n_design), lam_g=np.zeros(0), status="Solve_Succeeded",
+                   success=True, iterations=3, time=0.5, evaluations=4)
+    assert _record(res, tr)["node"] == ("kernel" if available() else "scalar")
+    kernel = tr.node
+    try:
+        tr.node = NodeFunctions(None, object())
+        assert _record(res, tr) == dict(status="Solve_Succeeded", iterations=3,
+                                        evaluations=4, time=0.5, node="scalar")
+    finally:
+        tr.node = kernel
+
+
 def test_codesign_rule_is_the_walkers(model, gait, reduced):
     """Each step's end error and duration in the NLP (100 RK4 nodes per T) equal the
     walker's at 400 per T to 1e-6: the same closed loop, the same strike."""

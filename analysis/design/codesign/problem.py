@@ -255,9 +255,13 @@ def _build_striking(p: Problem):
     return (*build(replace(p, directions=dirs, fallback_first=None)), {"first": "kept"})
 
 
-def _record(res: NLPSolve) -> dict:
+def _record(res: NLPSolve, tr) -> dict:
+    """A solve's record; ``node`` says what walked its nodes: the four-lane kernel, or
+    the scalar Function where this process could not build the kernel (which rounds
+    differently: a run whose solves ran on both is not bit-identical to one on either)."""
     return dict(status=res.status, iterations=res.iterations, evaluations=res.evaluations,
-                time=round(res.time, 2))
+                time=round(res.time, 2),
+                node="kernel" if tr.node.kernel is not None else "scalar")
 
 
 def _solved(tr, red, res: NLPSolve, records: list) -> Solve:
@@ -285,7 +289,7 @@ def solve(problem: Problem, limits: IpoptLimits) -> Solve:
     """
     tr, red, d0, lb, ub, note = _build_striking(problem)
     res = _ipopt(tr, red, d0, lb, ub, limits)
-    return _solved(tr, red, res, [dict(_record(res), **note)])
+    return _solved(tr, red, res, [dict(_record(res, tr), **note)])
 
 
 @task
@@ -319,7 +323,7 @@ def solve_continued(problem: Problem, limits: IpoptLimits, paper_steps: int) -> 
         red.tols[0] = max(target, target * (e0 / target) ** (i / max(n, 1))) if i else target
         red._last = None
         res = _ipopt(tr, red, d0 if res is None else res.d, lb, ub, limits)
-        records.append(dict(_record(res), paper_bound=float(red.tols[0]), **note))
+        records.append(dict(_record(res, tr), paper_bound=float(red.tols[0]), **note))
         if not np.all(np.isfinite(res.d)):
             break
     return _solved(tr, red, res, records)

@@ -553,7 +553,9 @@ class CodesignResult(Result):
     active_constraints : list of dict
         The constraints with the largest multipliers at the best solve, in words.
     ipopt : dict
-        The solves: status, iterations and evaluations of each, and their totals.
+        The solves: status, iterations and evaluations of each and what walked its
+        nodes (``node``: 'kernel', or 'scalar' where a process could not build the
+        four-lane kernel), and their totals.
     rounds : list of dict
         Every solve and verification (s of the NLP, verified s*, scenarios).
     directions_kept : int
