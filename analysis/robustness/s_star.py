@@ -49,8 +49,8 @@ from ..stability.poincare import poincare_map
 from ..stability.vc_map import vc_eigenvalue
 
 __all__ = ["Design", "RobustnessSettings", "RobustnessResult", "KeptDirections", "decay_steps",
-           "steps_short", "kept_directions", "robustness", "BatchSStar", "s_star_batch", "bisect_scale",
-           "walk_batch"]
+           "steps_short", "kept_directions", "robustness", "BatchSStar", "s_star_batch",
+           "bisect_scale", "walk_batch"]
 
 
 @dataclass(frozen=True)
