@@ -393,6 +393,9 @@ def test_robust_cli_prints_a_design_that_never_converges(capsys):
     assert "step None" not in out and "paper's perturbation: slipped" in out
     assert "moved from the given gait" not in out
     assert "the design counts by the checks above" in out
+    # virtual constraints' s* is over the design's 10 steps, too few for their rate
+    assert "(virtual constraints 0.016 over the same 10 steps)" in out
+    assert "--controller vc instead of --m1 and --rejoin" in out
 
 
 @pytest.mark.parametrize("make, message", [

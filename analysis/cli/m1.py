@@ -16,7 +16,8 @@ from analysis.design.codesign import (FIT, QUICK, CodesignError, CodesignSetting
                                       codesign)
 from analysis.design.designs_over_speed import family_designs
 from analysis.reporting.plots import family_designs_plot, save_figures
-from analysis.robustness import decay_steps
+from analysis.design.codesign.method import same_steps
+from analysis.robustness import steps_short
 from biped_casadi.files import write_bytes_atomic
 from biped_casadi.simulation import NOT_CONVERGED
 from biped_casadi.simulation.options import friction_of
@@ -118,7 +119,7 @@ def cmd_robust_design(args, say):
     except CodesignError as e:
         raise UserError(str(e)) from None
     if gait is not None:
-        why = no_design_reason(r)
+        why = no_design_reason(r, st)
         if why is not None:
             return _no_design(args, dict(r.to_dict(), status="no_design", success=False,
                                          message=why, design_status=r.status), why)
@@ -150,10 +151,10 @@ def save_design_gait(r, out):
     r.simulate_args = args
 
 
-def no_design_reason(r) -> str | None:
+def no_design_reason(r, st) -> str | None:
     """Why a design on a given gait is not one, in one line (None when it is: it meets
     the target, or its s* is above virtual constraints' on its gait with max|lambda| at
-    most theirs)."""
+    most theirs); ``st`` the co-design's settings (its protocol's steps)."""
     if r.status == "target_met":
         return None
     if r.max_abs <= r.vc_eigenvalue and r.s_star > r.vc_s_star:
@@ -173,7 +174,8 @@ def no_design_reason(r) -> str | None:
     return (f"no design beats virtual constraints on this gait: the best, M1 "
             f"{np.round(r.design.M1, 3).tolist()} (gait {'moved' if r.gait_free else 'fixed'}"
             f"), reaches s* {r.s_star:.3g}, stopped just above by {stop}{lam}, {paper}; "
-            f"virtual constraints reach s* {r.vc_s_star:.3g}")
+            f"virtual constraints reach s* {r.vc_s_star:.3g}"
+            + same_steps(r.vc_eigenvalue, st.robustness_settings()))
 
 
 def _no_design(args, body: dict, line: str) -> int:
@@ -190,18 +192,16 @@ def decay_note(r, st) -> str | None:
     convergence rate (:func:`analysis.robustness.decay_steps` above them), naming the
     ``biped robust`` command that measures the design over enough steps; None otherwise."""
     rs = st.robustness_settings()
-    try:
-        n = decay_steps(r.vc_eigenvalue, rs)
-    except ValueError:                      # virtual constraints not stable: no decay
-        return None
-    if n <= rs.steps:
+    n = steps_short(r.vc_eigenvalue, rs)
+    if n is None:
         return None
     m1 = " ".join(f"{v:.6g}" for v in r.design.M1)
     return (f"note: at the virtual constraints' rate {abs(r.vc_eigenvalue):.3g} a "
             f"perturbation of scale {rs.s_max:g} cannot fall below {rs.tol:g} in "
-            f"{rs.steps} steps, so s* above measures how fast the design converges; "
-            f"'biped robust --gait {r.gait_file} --m1 {m1} --rejoin {r.design.rejoin:g} "
-            f"--steps auto' walks {n} steps")
+            f"{rs.steps} steps, so s* above, the design's and virtual constraints', "
+            f"measures how fast each converges; 'biped robust --gait {r.gait_file} --m1 "
+            f"{m1} --rejoin {r.design.rejoin:g} --steps auto' walks {n} steps (with "
+            f"--controller vc instead of --m1 and --rejoin: virtual constraints' s* there)")
 
 
 def _print_design(r, st):
@@ -221,8 +221,9 @@ def _print_design(r, st):
     if r.gait_move:
         print(f"  {r.gait_move['message']}")
     print(f"  s* = {r.s_star:.4g} over {r.directions_kept} kept directions"
-          + (f" (virtual constraints {r.vc_s_star:.4g})" if r.vc_s_star == r.vc_s_star
-             else "") + f"; max|lambda| "
+          + (f" (virtual constraints {r.vc_s_star:.4g}"
+             f"{same_steps(r.vc_eigenvalue, st.robustness_settings())})"
+             if r.vc_s_star == r.vc_s_star else "") + f"; max|lambda| "
           f"{r.max_abs:.3g} (virtual constraints {r.vc_eigenvalue:.3g}); paper's "
           f"perturbation: {r.check.paper_outcome(st.verification.tol)}; peak torque "
           f"{r.peak_torque:.1f} N m")

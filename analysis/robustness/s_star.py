@@ -49,8 +49,8 @@ from ..stability.poincare import poincare_map
 from ..stability.vc_map import vc_eigenvalue
 
 __all__ = ["Design", "RobustnessSettings", "RobustnessResult", "KeptDirections", "decay_steps",
-           "kept_directions", "robustness", "BatchSStar", "s_star_batch", "bisect_scale",
-           "walk_batch"]
+           "steps_short", "kept_directions", "robustness", "BatchSStar", "s_star_batch",
+           "bisect_scale", "walk_batch"]
 
 
 @dataclass(frozen=True)
@@ -158,6 +158,32 @@ def decay_steps(eigenvalue: float, settings: RobustnessSettings | None = None) -
     if lam == 0 or start <= st.tol:
         return st.steps
     return max(st.steps, math.ceil(math.log(st.tol / start) / math.log(lam)))
+
+
+def steps_short(eigenvalue: float, settings: RobustnessSettings | None = None) -> int | None:
+    """The steps the virtual constraints' rate needs when the settings walk fewer.
+
+    Then s* over ``settings.steps`` measures how fast a design converges, for virtual
+    constraints too (often 0), not the perturbations survived (:func:`decay_steps`).
+
+    Parameters
+    ----------
+    eigenvalue : float
+        The virtual constraints' eigenvalue on the gait.
+    settings : RobustnessSettings, optional
+        The protocol (default: the defaults).
+
+    Returns
+    -------
+    int or None
+        :func:`decay_steps` when above ``settings.steps``; None when not, or when the
+        eigenvalue is not inside the unit circle (no count is enough).
+    """
+    try:
+        n = decay_steps(eigenvalue, settings)
+    except ValueError:
+        return None
+    return n if n > _settings(settings).steps else None
 
 
 @dataclass

@@ -19,7 +19,7 @@ from biped_casadi.simulation import NOT_CONVERGED
 from gait_opt import GaitOptions, gait_fields, optimize_gait
 
 from ...robustness.basin import basin
-from ...robustness.s_star import kept_directions, robustness
+from ...robustness.s_star import kept_directions, robustness, steps_short
 from ..verification import finish_check, hidden_sign_patterns, submit_check
 from .functions import TranscriptionSettings
 from .gait_move import gait_change, move_gait
@@ -381,7 +381,9 @@ class Method:
                     f"{b.get('binds')}" + (f" in step {b['step']}" if "step" in b and
                                            b.get("status") != NOT_CONVERGED else ""))
         if self.vc_ref is not None:
-            text += f"; virtual constraints reach s* {self.vc_ref.result().s_star:.3g}"
+            vc = self.vc_ref.result()
+            text += (f"; virtual constraints reach s* {vc.s_star:.3g}"
+                     + same_steps(vc.max_abs, self.rs))
         return text
 
     def screen_starts(self, starts) -> Candidate | None:
@@ -621,7 +623,8 @@ class Method:
         stop = (failure_binds(design, best.kept.directions[fail["direction"]], check.s_fail,
                               rs10) if fail and st.starts.fit_gait else {})
         if vc_ref is not None:
-            msg += f"; virtual constraints' s* {vc_s:.4g}"
+            msg += f"; virtual constraints' s* {vc_s:.4g}" + same_steps(check.vc_eigenvalue,
+                                                                       rs10)
         return CodesignResult(
             status="target_met" if met else "target_not_met", message=msg, design=design,
             check=check, gait_free=self.free, gait_change=change,
@@ -641,3 +644,9 @@ class Method:
             binds=stop,
             gait_move=self.moved.to_dict() if self.moved is not None else {})
 
+
+def same_steps(eigenvalue, rs) -> str:
+    """' over the same N steps' after virtual constraints' s* when the protocol's N steps
+    are fewer than their rate needs (:func:`~analysis.robustness.steps_short`: then it
+    measures how fast they converge, often 0), else ''."""
+    return "" if steps_short(eigenvalue, rs) is None else f" over the same {rs.steps} steps"

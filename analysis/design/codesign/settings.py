@@ -574,8 +574,13 @@ class CodesignResult(Result):
     cached : bool
         Read from the cache.
     vc_s_star : float
-        Virtual constraints' s* on the design's gait (the same protocol), NaN when not
-        measured.
+        Virtual constraints' s* on the design's gait by the same protocol as ``s_star``
+        (``settings['verification']``: ``walk_steps`` steps, below ``tol``), NaN when not
+        measured.  On a gait whose virtual-constraint rate needs more steps than that
+        (:func:`~analysis.robustness.steps_short`; the message and the printed lines then
+        say "over the same N steps") both measure how fast each converges, and theirs is
+        often 0: ``biped robust --controller vc --steps auto`` measures it over enough
+        steps (0.89 against 0.047 over 10 on RABBIT's 0.3 m/s gait, rate 0.76).
     given_gait : str
         What was done with a given gait ('fixed', 'free'; '' when none was given).
     start_screen : dict
