@@ -23,7 +23,9 @@ The map is linearised at the periodic walk itself, on flat ground (h = 0), so th
 eigenvalues of A are the step map's at its fixed point: for the time-varying controller
 its two non-zero ones are those of A^z (:func:`analysis.poincare_eigenvalues`), for
 virtual constraints its one non-zero one is :func:`analysis.vc_eigenvalue`, to the two
-discretisations' accuracy (RABBIT and TALOS: 1e-8).  Linearising anywhere else moves
+discretisations' accuracy (RABBIT: 1e-9 against A^z on a finer grid; TALOS and JVRC-1:
+1.4e-8 and 2.8e-8 against ``biped eig``'s default variational A^z, 5.8e-9 against its
+``--method ad`` on JVRC-1).  Linearising anywhere else moves
 them: where the law is sensitive, by a lot (TALOS's gait at 0.5 m/s under M1 = [-2.5,
 7.5, -5, 2.5]: max |eigenvalue| 0.6177 at h = 0, 0.6084 at h = 10 µm, a slope of about
 -950 per m).  The periodic walk strikes on a node of the RK4 grid (at tau = T), so the
