@@ -41,7 +41,9 @@ class MujocoStep:
     slip : float
         How far the stance foot's sphere slid on the floor in single support (after the
         old stance foot's lift-off, while in contact: its centre's travel less the rolling
-        r dphi), m.
+        r dphi), m.  It includes the rest of the landing's skid when the old foot lifts
+        off before MuJoCo's contact has stopped the new one (at MuJoCo's default contact
+        most of it: docs/howto/mujoco.md).
     liftoff : float
         tau at which the old stance foot lifted off, s.
     impact_travel : float
