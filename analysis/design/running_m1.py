@@ -29,7 +29,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import minimize
 
 from biped_casadi.control.output_law import check_M1_range
 from biped_casadi.results import Result
@@ -239,6 +238,7 @@ class _Objective:
 
 def _search(f, z0, nu, method, initial_step, gain_step, xatol, fatol, cap) -> str:
     """Run the optimiser on ``f`` from ``z0``; its message."""
+    from scipy.optimize import minimize         # (its import: 0.3 s of every command's)
     try:
         if method == "nelder-mead":
             simplex = [z0]

@@ -57,10 +57,10 @@ def resolve_scheduler(scheduler=None, workers: int | None = None):
                                 or workers < 1):
         raise ValueError(f"workers must be a positive integer, got {workers!r}")
     if scheduler is None:
-        try:                                    # inside a task here or on a worker
-            from dask.distributed import get_worker
-            inside = getattr(_LOCAL, "task", False) or bool(get_worker())
-        except (ImportError, ValueError):
+        try:                # inside a task here or on a worker (which imported Dask)
+            inside = getattr(_LOCAL, "task", False) or (
+                "distributed" in sys.modules and bool(sys.modules["distributed"].get_worker()))
+        except ValueError:
             inside = False
         scheduler = "synchronous" if inside else os.environ.get(SCHEDULER_ENV) or "local"
     if type(scheduler).__name__ == "Client":
