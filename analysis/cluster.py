@@ -11,8 +11,9 @@ import logging
 import multiprocessing.resource_tracker
 import signal
 
-__all__ = ["connect", "check_workers", "check_not_bootstrapping", "tune_allocator",
-           "LOCAL_CLUSTER_CONFIG", "DASK_CONNECT_TIMEOUT", "DASK_WORKER_TIMEOUT"]
+__all__ = ["connect", "close_cluster", "check_workers", "check_not_bootstrapping",
+           "tune_allocator", "LOCAL_CLUSTER_CONFIG", "DASK_CONNECT_TIMEOUT",
+           "DASK_WORKER_TIMEOUT"]
 
 #: how long to wait for a Dask scheduler to answer, and for a first worker to join it
 DASK_CONNECT_TIMEOUT = "10s"
@@ -122,6 +123,37 @@ def connect(scheduler, workers: int | None = None, preload=(), processes: bool =
         raise ValueError(f"scheduler: no Dask worker joined {scheduler} within "
                          f"{DASK_WORKER_TIMEOUT} s ({e})") from None
     return client, None
+
+
+def close_cluster(cluster, within: float = 10.0):
+    """Close a local cluster :func:`connect` started, at once while its workers start too.
+
+    Dask's nanny closes its worker only once it has started (20 s of imports under
+    load); so the worker processes still starting are killed first (as Dask kills one
+    that does not stop), their nannies ending as for workers that failed to start.
+
+    Parameters
+    ----------
+    cluster : distributed.LocalCluster
+        The cluster.
+    within : float
+        How long, s, at most, to wait for its nannies to end their starts.
+    """
+    import asyncio
+
+    async def kill_starting():
+        killed, end = set(), asyncio.get_running_loop().time() + within
+        while asyncio.get_running_loop().time() < end and (nannies := [
+                n for n in list(cluster._created) if hasattr(n, "process")
+                and n.status.name == "init"]):      # (a nanny's, not a thread's worker)
+            for w in {n.process for n in nannies} - killed - {None}:
+                if w.status.name == "starting":     # (process created: killed once)
+                    killed.add(w)
+                    await w.process.kill()
+            await asyncio.sleep(0.01)
+    with contextlib.suppress(Exception):
+        cluster.sync(kill_starting)
+    cluster.close()
 
 
 def _identity(address: str) -> dict:

@@ -3,6 +3,7 @@ command line loads, and when a terminal sends it to the whole process group (the
 Dask cluster's workers too)."""
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
 import subprocess
@@ -307,3 +308,22 @@ def test_ctrl_c_of_the_process_group_leaves_the_workers_to_this_process(tmp_path
         time.sleep(0.1)
     assert subprocess.run(["pgrep", "-a", "-g", str(p.pid)], capture_output=True,
                           text=True).stdout == ""
+
+
+def test_a_cluster_closed_while_its_workers_start_ends_them_at_once(tmp_path):
+    """Closing the engine (as a Ctrl-C does) while its local cluster's worker processes
+    were still starting waited for them to start, Dask's nanny closing only a started
+    worker (20 s of imports under load, here a minute): they are killed at once."""
+    from analysis.tasks import Engine
+    (tmp_path / "slow_start.py").write_text("import time\ntime.sleep(60)\n")
+    others = set(multiprocessing.active_children())
+    eng = Engine("local", 2, cache=False, preload=(str(tmp_path / "slow_start.py"),))
+    for _ in range(600):                # its two worker processes spawned (not started)
+        if len(workers := set(multiprocessing.active_children()) - others) == 2:
+            break
+        time.sleep(0.1)
+    start = time.monotonic()
+    eng.close()
+    assert len(workers) == 2 and time.monotonic() - start < 20
+    assert not any(w.is_alive() for w in workers)
+    assert not set(multiprocessing.active_children()) - others

@@ -18,7 +18,7 @@ import traceback
 from biped_casadi.caching import (MISSING, ResultStore, TaskInfo, code_edited, code_files,
                                   code_version, files_differing, task, task_key)
 
-from ..cluster import check_not_bootstrapping, connect, tune_allocator
+from ..cluster import check_not_bootstrapping, close_cluster, connect, tune_allocator
 from ..reporting.progress import progress_bar
 from .records import TaskError, TaskRecord, TaskState
 
@@ -329,7 +329,7 @@ class Engine:
                         self._client.close()
             with contextlib.suppress(Exception):
                 if self._cluster is not None:
-                    self._cluster.close()
+                    close_cluster(self._cluster)
         finally:
             quiet.setLevel(level)
             if self._client_level is not None:
