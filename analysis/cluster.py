@@ -207,7 +207,7 @@ def check_workers(client, kind: str = "numerical"):
                              "toolkit; restart the worker")
         if differing := files_differing(mine, theirs):
             raise ValueError(f"scheduler: the Dask worker {address} runs other code: "
-                             f"{differing} differs from this checkout's; "
+                             f"{differing} in this checkout; "
                              "run the same version of the toolkit on every worker")
 
 

@@ -401,25 +401,20 @@ def code_of(path) -> str:
 _FILES: dict = {}
 
 
-def _package_root(name: str):
-    spec = importlib.util.find_spec(name)
-    return Path(spec.origin).parent if spec and spec.origin else None
-
-
 def _stat(path) -> tuple | None:
     """What changes with a file's content: size, mtime, ctime, inode (None: gone)."""
-    try:
+    with contextlib.suppress(OSError):
         st = os.stat(path)
-    except OSError:
-        return None
-    return st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino
+        return st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino
+    return None
 
 
 def _python_files() -> dict:
     """Every Python file of the three packages: relative path -> (file, its _stat)."""
     out = {}
     for top in ("biped_casadi", "gait_opt", "analysis"):
-        root = _package_root(top)
+        spec = importlib.util.find_spec(top)
+        root = Path(spec.origin).parent if spec and spec.origin else None
         for folder, subs, names in os.walk(root) if root is not None else ():
             subs[:] = [d for d in subs if d != "__pycache__"]
             for n in names:
@@ -430,17 +425,33 @@ def _python_files() -> dict:
 
 
 #: the toolkit's files as this process imports it (this module among the first): what
-#: its modules are read from, and its code digest (the files must not change after)
+#: its modules are read from, and the stat each had then (or since, with the same code)
 _IMPORTED = _python_files()
+_READ: dict = {}
+
+
+def _read(rel: str) -> tuple:
+    """A file's code digest as first read, and whether it is of the code imported (its
+    stat still the import's, before and after: else the code that runs is not known)."""
+    if rel not in _READ:
+        f, st = _IMPORTED[rel]
+        before, d = _stat(f), ""
+        with contextlib.suppress(OSError):                 # (removed: no digest)
+            d = _file_digest(f)
+        _READ[rel] = d, bool(d) and before == st == _stat(f)
+    return _READ[rel]
 
 
 def code_edited(kind: str = "numerical") -> str:
-    """The first file of a code set changed on disk since this process imported it.
+    """The first file of a code set whose code changed on disk since it was imported.
 
     Then the code that runs (modules imported before the change, and after it) and the
-    code digest (:func:`code_version`, read from the files) may differ: a Dask worker
-    refuses its tasks (:mod:`analysis.tasks`) until restarted.  A file's size, times
-    and inode are compared (a stat of each file of the set; no file is read).
+    code digest (:func:`code_version`, read from the files) may differ: a task is
+    refused (:mod:`analysis.tasks`) until the process (a Dask worker, the command) is
+    restarted.  A file's size, times and inode are compared (a stat of each file of the
+    set); a file whose stat changed is read, and kept if its code (:func:`code_of`) is
+    the code imported (a ``touch``: its new stat is then kept too, one read).  A file
+    changed before this process first read it (:func:`code_files`) counts as changed.
 
     Parameters
     ----------
@@ -454,27 +465,38 @@ def code_edited(kind: str = "numerical") -> str:
     """
     for rel in code_files(kind):
         f, st = _IMPORTED[rel]
-        if _stat(f) != st:
+        if (now := _stat(f)) == st:
+            continue
+        (d, known), same = _read(rel), False
+        with contextlib.suppress(OSError):
+            same = known and now is not None and _file_digest(f) == d
+        if not same:
             return rel
+        if _stat(f) == now:                         # (not edited while read)
+            _IMPORTED[rel] = f, now
     return ""
 
 
-def files_differing(mine: dict, theirs: dict) -> str:
-    """The first file whose code differs between two :func:`code_files` ('' if none).
+def files_differing(ours: dict, theirs: dict) -> str:
+    """How the first file whose code differs between two :func:`code_files` differs.
 
     Parameters
     ----------
-    mine, theirs : dict
-        Two processes' :func:`code_files` of one code set.
+    ours, theirs : dict
+        This run's and another process's :func:`code_files` of one code set.
 
     Returns
     -------
     str
-        The file, with how many more differ (``'a.py (and 2 more)'``).
+        ``'a.py differs'``, ``'a.py was added'`` (in ``ours`` only) or ``'a.py was
+        removed'`` (in ``theirs`` only), with how many more differ (``'a.py differs
+        (and 2 more)'``); '' if none.
     """
-    diff = sorted(f for f in set(mine) | set(theirs) if mine.get(f) != theirs.get(f))
-    return (diff[0] + (f" (and {len(diff) - 1} more)" if len(diff) > 1 else "")) if diff \
-        else ""
+    if not (diff := sorted(f for f in set(ours) | set(theirs) if ours.get(f) != theirs.get(f))):
+        return ""
+    how = "was added" if diff[0] not in theirs else "was removed" if diff[0] not in ours \
+        else "differs"
+    return f"{diff[0]} {how}" + (f" (and {len(diff) - 1} more)" if len(diff) > 1 else "")
 
 
 def code_files(kind: str = "numerical") -> dict:
@@ -497,7 +519,7 @@ def code_files(kind: str = "numerical") -> dict:
     if kind not in _FILES:
         paths, left_out, kept = CODE_SETS[kind]
         inside = lambda rel, ps: any(rel == p or rel.startswith(p + "/") for p in ps)  # noqa
-        _FILES[kind] = {rel: _file_digest(f) for rel, (f, _) in _IMPORTED.items()
+        _FILES[kind] = {rel: _read(rel)[0] for rel in _IMPORTED
                         if inside(rel, paths) and not (inside(rel, left_out)
                                                        and not inside(rel, kept))}
         _save_digests()

@@ -82,6 +82,12 @@ def default_of(module: str, function: str, parameter: str):
 
 
 @task
+def default_of_flow(engine, module: str, function: str, parameter: str):
+    """A flow returning :func:`default_of` (run in the client)."""
+    return default_of(module, function, parameter)
+
+
+@task
 def started_at(x, wait: float = 0.0):
     """When it started (then it sleeps ``wait`` s)."""
     t = time.time()

@@ -369,6 +369,159 @@ def test_a_worker_whose_files_change_after_it_imported_them_is_refused(case, tmp
     assert not list((tmp_path / "cache").rglob("*.pkl"))
 
 
+@pytest.mark.parametrize("case", ["touched", "added"])
+def test_a_worker_whose_files_are_touched_works_one_with_a_file_added_says_so(case, tmp_path):
+    """A real ``dask worker`` on a copy of the toolkit that, after it imported the
+    toolkit and computed its code's digest, has a module it imported touched and one it
+    had not imported saved again with the same code (a new file): its tasks run and are
+    kept, and the cluster passes the check (they were refused until the worker was
+    restarted).  Or one whose copy lacked a file when it imported the toolkit, added
+    since: its tasks and the cluster are refused, naming the file as added."""
+    import os
+    import re
+    from pathlib import Path
+    from dask_cluster import dask_cluster
+    from analysis.cluster import check_workers
+    tests, tree = Path(__file__).resolve().parent, _toolkit_copy(tmp_path / "tree")
+    env = {k: v for k, v in os.environ.items() if k != "BIPED_SCHEDULER"}
+    basin, metrics = tree / "analysis/robustness/basin.py", tree / "analysis/gait_metrics.py"
+    text = metrics.read_text()
+    if case == "added":
+        metrics.unlink()
+    with dask_cluster(tree, [dict(env, PYTHONPATH=f"{tree}:{tests}")], cwd=tmp_path,
+                      scheduler_env=dict(env, PYTHONPATH=str(tests))) as address, \
+            Engine(address, cache=tmp_path / "cache") as eng:
+        client = eng.client()
+        client.run(__import__, "task_examples")           # imports the basin module
+        if case == "added":
+            assert "analysis/gait_metrics.py" not in client.run(
+                lambda: __import__("biped_casadi.caching").caching.code_files()).popitem()[1]
+            metrics.write_text(text)
+            with pytest.raises(ValueError, match=re.escape(
+                    "runs other code: analysis/gait_metrics.py was added in this checkout; ")):
+                check_workers(client)
+            with pytest.raises(TaskError, match=r"^square: stale worker \(tcp://\S+, pid \d+\): "
+                               r"analysis/gait_metrics.py was added in this run's code; run the "
+                               "same version of the toolkit on every worker$"):
+                eng.submit(square, 3.0).result()
+            return
+        check_workers(client)                             # the digest: this run's code
+        os.utime(basin, ns=(basin.stat().st_atime_ns, basin.stat().st_mtime_ns + 10**9))
+        metrics.unlink()
+        metrics.write_text(text)                          # the same code, a new file
+        assert eng.submit(default_of, "analysis.robustness.basin", "basin", "q_span"
+                          ).result() == 0.05
+        assert eng.submit(default_of, "analysis.gait_metrics", "actuator_work", "n"
+                          ).result() == 4001
+        check_workers(client)
+    assert len(list((tmp_path / "cache").rglob("*.pkl"))) == 2
+
+
+def test_a_touched_file_is_read_once_and_kept_an_edited_one_is_not(tmp_path, monkeypatch):
+    """A file of the code whose stat changed (a ``touch``, a save of the same code, a
+    comment) is read once and kept; one whose code changed, changed before it was
+    first read, or removed is the file named; files added or removed between two
+    processes' code are said so."""
+    import os
+    import biped_casadi.caching as caching
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path / "cache"))
+    files = {rel: tmp_path / rel.replace("/", "_") for rel in ("analysis/a.py", "analysis/b.py")}
+    reads = []
+
+    def imported():
+        for f in files.values():
+            f.write_text("x = 1\n")
+        monkeypatch.setattr(caching, "_IMPORTED", {r: (f, caching._stat(f)) for r, f in
+                                                   files.items()})
+        monkeypatch.setattr(caching, "_READ", {}, raising=False)
+        monkeypatch.setattr(caching, "_FILES", {})
+
+    def later(f, text=None):
+        os.utime(f, ns=(f.stat().st_atime_ns, f.stat().st_mtime_ns + 10**9))
+        if text is not None:
+            f.write_text(text)
+
+    digest = caching._file_digest
+    monkeypatch.setattr(caching, "_file_digest", lambda f: reads.append(f) or digest(f))
+    imported()
+    assert caching.code_edited() == "" and len(reads) == 2           # the code read once
+    a, b = files["analysis/a.py"], files["analysis/b.py"]
+    later(a)
+    assert caching.code_edited() == "" and len(reads) == 3           # touched: read once
+    assert caching.code_edited() == "" and len(reads) == 3           # then a stat only
+    later(b, "x = 1  # the same code\n")
+    assert caching.code_edited() == "" == caching.code_edited() and len(reads) == 4
+    later(b, "x = 2\n")
+    assert caching.code_edited() == "analysis/b.py"
+    imported()
+    later(a)                                              # before this process read it
+    assert caching.code_edited() == "analysis/a.py"
+    imported()
+    caching.code_files()
+    b.unlink()
+    assert caching.code_edited() == "analysis/b.py"
+    ours = {"a.py": "1", "b.py": "2", "c.py": "3"}
+    assert caching.files_differing(ours, ours) == ""
+    assert caching.files_differing({"a.py": "1"}, {"a.py": "1", "b.py": "2"}) == \
+        "b.py was removed"
+    assert caching.files_differing(ours, {"a.py": "1", "c.py": "3"}) == "b.py was added"
+    assert caching.files_differing(ours, {"a.py": "0", "c.py": "3"}) == \
+        "a.py differs (and 1 more)"
+
+
+def _edited_in_this_process(tmp_path, edit: str, scheduler: str = "synchronous"):
+    """A fresh process on a copy of the toolkit: it imports basin.py's module, computes
+    the code's digest, then ``edit`` ('imported': basin.py, 'not imported':
+    gait_metrics.py) is edited on disk and a task and a flow reading that module's
+    default run in it.  Returns its lines: the results, or the errors."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+    tree, tests = _toolkit_copy(tmp_path / "tree"), Path(__file__).resolve().parent
+    rel, fn, arg, at = {"imported": ("analysis/robustness/basin.py", "basin", "q_span",
+                                     "q_span: float = 0.05"),
+                        "not imported": ("analysis/gait_metrics.py", "actuator_work", "n",
+                                         "gait, n: int = 4001")}[edit]
+    script = f"""
+import pathlib
+from analysis.tasks import Engine, TaskError
+from task_examples import default_of, default_of_flow, square
+import analysis.robustness.basin
+f, args = pathlib.Path({str(tree / rel)!r}), ({rel[:-3].replace("/", ".")!r}, {fn!r}, {arg!r})
+with Engine({scheduler!r}, cache={str(tmp_path / "cache")!r}) as eng:
+    print(eng.submit(square, 2.0).result())
+    f.write_text(f.read_text().replace({at!r}, {at + "1"!r}, 1))
+    for call in (eng.submit, eng.spawn):
+        try:
+            print(call(default_of if call == eng.submit else default_of_flow, *args).result())
+        except TaskError as e:
+            print(e)
+"""
+    env = {k: v for k, v in os.environ.items() if k != "BIPED_SCHEDULER"}
+    out = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True,
+                         text=True, env=dict(env, PYTHONPATH=f"{tree}:{tests}"), timeout=300)
+    assert out.returncode == 0, out.stderr
+    return rel, out.stdout.splitlines()
+
+
+@pytest.mark.parametrize("edit", ["imported", "not imported"])
+def test_a_process_whose_files_change_after_it_imported_them_refuses_its_tasks(edit, tmp_path):
+    """The process running the tasks (synchronous) and the flows: a module of its code
+    edited on disk after it imported the toolkit and computed the code's digest.  It
+    ran the module it imported (basin's q_span 0.05, not 0.051) or the one imported
+    after the edit (actuator_work's n 40011, not 4001), either under the key of the code
+    before the edit: now the task and the flow are refused, one line naming the file
+    and saying to restart the command, and nothing is kept but the first task's."""
+    import re
+    rel, lines = _edited_in_this_process(tmp_path, edit)
+    assert lines[0] == "4.0" and len(lines) == 3, lines
+    for name, line in zip(("default_of", "default_of_flow"), lines[1:]):
+        assert re.fullmatch(rf"{name}: stale code \(pid \d+\): {rel} changed on disk after "
+                            "this process imported the toolkit; restart the command", line), line
+    assert len(list((tmp_path / "cache").rglob("*.pkl"))) == 1
+
+
 def test_check_workers_compares_each_worker_once(monkeypatch):
     """A worker that differs is compared with this process once (the message reuses the
     file found); one that runs the same code passes; a second differing worker is not
@@ -397,7 +550,7 @@ def test_check_workers_compares_each_worker_once(monkeypatch):
     assert len(calls) == 1
     calls.clear()
     with pytest.raises(ValueError, match=r"^scheduler: the Dask worker tcp://b:1 runs other "
-                                         r"code: analysis/cli/main.py differs from this"):
+                                         r"code: analysis/cli/main.py was removed in this"):
         cluster.check_workers(Client({"tcp://a:1": mine, "tcp://b:1": other,
                                       "tcp://c:1": other}))
     assert len(calls) == 2

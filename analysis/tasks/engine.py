@@ -140,17 +140,15 @@ def _one(e: BaseException) -> str:
 
 
 def _run(fn, key: str, code: str | None, args, kwargs):
-    """Run a task here or on a worker (which refuses it, before and after, when its code
-    is not ``code``, the digest in the key); an error becomes a :class:`TaskError`
-    naming the task."""
+    """Run a task here or on a worker (refused, before and after, when its code changed
+    on disk or is not ``code``, the digest in the key); an error becomes a
+    :class:`TaskError` naming the task."""
     info = _info(fn)
     tune_allocator()
     was, _LOCAL.task = getattr(_LOCAL, "task", False), True
     t = time.perf_counter()
     try:
-        _check_code(info, key, code)
-        value = fn(*_unpack(args), **_unpack(kwargs))
-        _check_code(info, key, code)            # (a module it imported, edited meanwhile)
+        value = _checked(info, key, code, lambda: fn(*_unpack(args), **_unpack(kwargs)))
     except Exception as e:          # noqa: BLE001 - reported with the task's name
         raise _error(info.name, e, key) from None
     finally:
@@ -162,13 +160,23 @@ def _run(fn, key: str, code: str | None, args, kwargs):
     return value
 
 
+def _checked(info: TaskInfo, key: str, code: str | None, call):
+    """``call()``, refused before and after it (:func:`_check_code`)."""
+    _check_code(info, key, code)
+    value = call()
+    _check_code(info, key, code)            # (a module it imported, edited meanwhile)
+    return value
+
+
 def _check_code(info: TaskInfo, key: str, code: str | None):
-    """On a worker (``code`` given), refuse a task when a file of its code changed since
-    the worker imported the toolkit (its modules and its digest may then differ), or
-    when its code is not ``code``: naming the first file that differs from the client's
-    (the engine leaves the client's files in the scheduler's metadata)."""
-    if code is None or not ((edited := code_edited(info.code)) or
-                            code_version(info.code) != code):
+    """Refuse a task when a file of its code changed since this process imported the
+    toolkit (its modules and the digest in the key may then differ), or on a worker
+    (``code`` given) when its code is not ``code``: naming the first file that differs
+    from the client's (the engine leaves the client's files in the scheduler's metadata)."""
+    if (edited := code_edited(info.code)) and code is None:    # synchronous, or a flow
+        raise TaskError(info.name, f"stale code (pid {os.getpid()}): {edited} changed on disk "
+                        "after this process imported the toolkit; restart the command", key=key)
+    if code is None or not (edited or code_version(info.code) != code):
         return
     theirs, at = {}, ""
     with contextlib.suppress(Exception):
@@ -177,8 +185,8 @@ def _check_code(info: TaskInfo, key: str, code: str | None):
         theirs = get_client().get_metadata([_TOPIC, info.code, code], None) or {}
     why = (f"{edited} changed on disk after it imported the toolkit; restart the worker (or "
            "the command, on a local cluster)") if edited else (
-        f"{files_differing(code_files(info.code), theirs) if theirs else 'its code'} differs "
-        "from this run's code; run the same version of the toolkit on every worker")
+        f"{files_differing(theirs, code_files(info.code)) if theirs else 'a file differs'} "
+        "in this run's code; run the same version of the toolkit on every worker")
     raise TaskError(info.name, f"stale worker ({at}pid {os.getpid()}): {why}", key=key)
 
 
@@ -587,8 +595,8 @@ class Engine:
             saved = self.current_stage(), getattr(_LOCAL, "flow", None)
             _LOCAL.stage, _LOCAL.flow = stage, list(inputs)
             try:
-                self._complete(key, fut, lambda: flow(self, *args, **kwargs),
-                               Exception if sync else BaseException)
+                self._complete(key, fut, lambda: _checked(_info(flow), key, None, lambda: flow(
+                    self, *args, **kwargs)), Exception if sync else BaseException)
             finally:
                 _LOCAL.stage, _LOCAL.flow = saved
 
