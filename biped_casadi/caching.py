@@ -11,9 +11,9 @@ Code.  :func:`code_version` is the digest of the *syntax trees* of a set of modu
 (:data:`CODE_SETS`) with their docstrings removed, and of the CasADi and NumPy
 versions: editing a docstring, a comment or the layout of a line keeps every result;
 changing a number or a statement gives new keys (the old results stay on disk, unused).
-Results kept in folders of their own (a sweep, a Monte Carlo) carry it, and a Dask
-worker whose code differs, or whose files changed after it imported them
-(:func:`code_edited`), is refused (:mod:`analysis.tasks`).
+Results kept in folders of their own (a sweep, a Monte Carlo) carry it; a Dask worker
+whose code differs, or a worker or command whose files' code changed after it imported
+them (:func:`code_edited`), is refused its tasks (:mod:`analysis.tasks`).
 
 Kept results.  :class:`ResultStore` keeps one file per key in :func:`cache_dir`
 (``$BIPED_CACHE_DIR`` or ``~/.cache/biped-casadi``), written atomically and fsynced; a
@@ -403,10 +403,11 @@ _FILES: dict = {}
 
 def _stat(path) -> tuple | None:
     """What changes with a file's content: size, mtime, ctime, inode (None: gone)."""
-    with contextlib.suppress(OSError):
+    try:
         st = os.stat(path)
-        return st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino
-    return None
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino
 
 
 def _python_files() -> dict:
@@ -446,12 +447,12 @@ def code_edited(kind: str = "numerical") -> str:
     """The first file of a code set whose code changed on disk since it was imported.
 
     Then the code that runs (modules imported before the change, and after it) and the
-    code digest (:func:`code_version`, read from the files) may differ: a task is
-    refused (:mod:`analysis.tasks`) until the process (a Dask worker, the command) is
-    restarted.  A file's size, times and inode are compared (a stat of each file of the
-    set); a file whose stat changed is read, and kept if its code (:func:`code_of`) is
-    the code imported (a ``touch``: its new stat is then kept too, one read).  A file
-    changed before this process first read it (:func:`code_files`) counts as changed.
+    code digest (:func:`code_version`, read from the files) may differ: its tasks are
+    refused (:mod:`analysis.tasks`) until it (a Dask worker, the command) restarts.  A
+    file's size, times and inode are compared (a stat of each file); one whose stat
+    changed is read, and kept if its code (:func:`code_of`) is the code imported (a
+    ``touch``: its new stat is then kept, one read), unless it changed before this
+    process first read it (:func:`code_files`).
 
     Parameters
     ----------
@@ -478,7 +479,7 @@ def code_edited(kind: str = "numerical") -> str:
 
 
 def files_differing(ours: dict, theirs: dict) -> str:
-    """How the first file whose code differs between two :func:`code_files` differs.
+    """How the first file that differs between two :func:`code_files` differs ('' if none).
 
     Parameters
     ----------
@@ -489,8 +490,7 @@ def files_differing(ours: dict, theirs: dict) -> str:
     -------
     str
         ``'a.py differs'``, ``'a.py was added'`` (in ``ours`` only) or ``'a.py was
-        removed'`` (in ``theirs`` only), with how many more differ (``'a.py differs
-        (and 2 more)'``); '' if none.
+        removed'`` (in ``theirs`` only), then how many more differ (``' (and 2 more)'``).
     """
     if not (diff := sorted(f for f in set(ours) | set(theirs) if ours.get(f) != theirs.get(f))):
         return ""
