@@ -489,7 +489,7 @@ def _normal_regulariser(gait, settings):
     return d.efc_R[i] if settings.cone == "elliptic" else d.efc_R[i] / 4
 
 
-def test_the_elliptic_cone_keeps_the_contact_independent_of_mu(gait):
+def test_the_elliptic_cone_keeps_the_contact_independent_of_mu(gait, tmp_path):
     """With cone='elliptic' MuJoCo regularises the contact's normal by its solref alone,
     the pyramid's at mu = 1, at every mu from 0.3 to 1e6 (the pyramidal cone's normal is
     mu^2 (1 + mu^2) / 2 of it at mu <= 1); a walk then sinks and slips the same at mu 0.6
@@ -512,3 +512,6 @@ def test_the_elliptic_cone_keeps_the_contact_independent_of_mu(gait):
     assert w["pyramidal", 0.6].max_slip > 10 * w["pyramidal", 1e6].max_slip
     with pytest.raises(ValueError, match="cone must be one of"):
         ContactSettings(cone="conical")
+    out = tmp_path / "m.xml"
+    assert biped_main(["robot", "mjcf", "--cone", "elliptic", "--out", str(out)]) == 0
+    assert 'cone="elliptic"' in out.read_text()
