@@ -424,6 +424,8 @@ CASES = [
      "--foot-radius must be smaller than the leg's last link (0.4 m"),
     (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--foot-radius", "0.5"],
      "--foot-radius must be smaller"),
+    (["robot", "mjcf", "--out", "{root_dir}/m.xml", "--cone", "conical"],
+     "argument --cone: invalid choice: 'conical'"),
     (["mujoco", *G, "--mu", "1e300", "--steps", "2", "--no-eig"], "--mu must be at most"),
     # the contact's time constant: a word other than 'auto', below two time steps, not a
     # positive number, longer than a walking step (1e300 walked, slipped, and the softer

@@ -472,3 +472,46 @@ def test_start_of_names_a_missing_gait():
     for bad in (None, "gait.json"):
         with pytest.raises(TypeError, match="^gait: a gait is needed"):
             start_of(bad)
+
+
+def _normal_regulariser(gait, settings):
+    """MuJoCo's regulariser R of the stance foot's contact normal at the gait's start: the
+    elliptic cone's first row, a quarter of the pyramid's common edge R (its four edges
+    share the normal force equally)."""
+    loop = MujocoLoop(Design.vc(gait), settings)
+    m, d = loop.m, loop.d
+    mujoco.mj_resetData(m, d)
+    d.qpos[:], d.qvel[:] = loop.initial_state(gait.q(0.0), gait.dq(0.0))
+    d.qpos[1] -= 1e-4                                      # the foot 0.1 mm into the floor
+    mujoco.mj_forward(m, d)
+    c = next(c for c in d.contact[:d.ncon] if loop.feet[0] in c.geom)
+    i = int(c.efc_address)
+    return d.efc_R[i] if settings.cone == "elliptic" else d.efc_R[i] / 4
+
+
+def test_the_elliptic_cone_keeps_the_contact_independent_of_mu(gait, tmp_path):
+    """With cone='elliptic' MuJoCo regularises the contact's normal by its solref alone,
+    the pyramid's at mu = 1, at every mu from 0.3 to 1e6 (the pyramidal cone's normal is
+    mu^2 (1 + mu^2) / 2 of it at mu <= 1); a walk then sinks and slips the same at mu 0.6
+    and 1e6, where the pyramidal cone's slip differs tenfold."""
+    el = dataclasses.replace(STIFF, cone="elliptic")
+    ref = _normal_regulariser(gait, dataclasses.replace(STIFF, mu=1.0))
+    for mu in (0.3, 0.6, 1.0, 10.0, 1e6):
+        assert 'cone="elliptic"' in mjcf(gait.model, dataclasses.replace(el, mu=mu))
+        r = _normal_regulariser(gait, dataclasses.replace(el, mu=mu))
+        assert r == pytest.approx(ref, rel=1e-12), mu
+        pyr = _normal_regulariser(gait, dataclasses.replace(STIFF, mu=mu))
+        assert pyr == pytest.approx(ref * min(1.0, mu * mu * (1 + mu * mu) / 2), rel=1e-12)
+    d = Design.vc(gait)
+    w = {(c, mu): walk(d, steps=3, settings=dataclasses.replace(STIFF, cone=c, mu=mu))
+         for c in ("elliptic", "pyramidal") for mu in (0.6, 1e6)}
+    assert all(x.success for x in w.values())
+    a, b = w["elliptic", 0.6], w["elliptic", 1e6]
+    assert b.max_slip == pytest.approx(a.max_slip, rel=0.05)
+    assert b.max_penetration == pytest.approx(a.max_penetration, rel=0.2)
+    assert w["pyramidal", 0.6].max_slip > 10 * w["pyramidal", 1e6].max_slip
+    with pytest.raises(ValueError, match="cone must be one of"):
+        ContactSettings(cone="conical")
+    out = tmp_path / "m.xml"
+    assert biped_main(["robot", "mjcf", "--cone", "elliptic", "--out", str(out)]) == 0
+    assert 'cone="elliptic"' in out.read_text()

@@ -16,8 +16,8 @@ from analysis.reporting.plots import mujoco_animation, mujoco_steps_plot, save_f
 from .common import (Progress, UserError, add_design_arguments, add_gait_arguments, add_robot,
                      check_m1_values, load_gait, output_dir, parse_m1, positive, print_json,
                      rejoin_fraction)
-from .mujoco_options import (AUTO, add_mujoco_settings, gait_settings, mujoco_settings,
-                             settings_error)
+from .mujoco_options import (AUTO, add_mujoco_settings, cone_text as _cone, gait_settings,
+                             mujoco_settings, settings_error)
 from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 
 
@@ -163,7 +163,8 @@ def _print(w, eig, figures, check=None, chosen=None, contact=None, chosen_solref
               f"solref {chosen_solref:g} s")
     print(f"MuJoCo ({s['contact']} contact: solref "
           f"{s['solref'] if s['solref'] is not None else 'MuJoCo default 0.02'} s, dt "
-          f"{s['timestep']:g} s, feet {s['foot_radius']:g} m, mu {s['mu']:g}), {w.law} law, "
+          f"{s['timestep']:g} s, feet {s['foot_radius']:g} m, mu {s['mu']:g}{_cone(s)}), "
+          f"{w.law} law, "
           f"step start from the {w.step_start}: {w.status}"
           + (f" - {w.message}" if w.message else ""))
     if chosen is None and chosen_solref is None:

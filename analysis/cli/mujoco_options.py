@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 
-from biped_casadi.mujoco import CONTACTS, ContactSettings
+from biped_casadi.mujoco import CONES, CONTACTS, ContactSettings
 from biped_casadi.simulation.options import friction_of
 
 from .common import MU_HELP, UserError
 
-__all__ = ["add_mujoco_settings", "mujoco_settings", "settings_error", "AUTO"]
+__all__ = ["add_mujoco_settings", "mujoco_settings", "settings_error", "AUTO", "cone_text"]
 
 
 #: the value of ``--timestep`` that lets ``biped mujoco`` choose it
@@ -68,6 +68,9 @@ def add_mujoco_settings(p, mu: bool = True, auto: bool = False, gait: bool = Tru
                    help="radius of the sphere feet, m (default 0.005)")
     p.add_argument("--integrator", choices=("Euler", "implicitfast", "implicit", "RK4"),
                    help="MuJoCo's integrator (default MuJoCo's, Euler)")
+    p.add_argument("--cone", choices=CONES,
+                   help="MuJoCo's friction cone (default MuJoCo's, pyramidal, whose contact's "
+                        "softness depends on mu; elliptic: independent of mu)")
     if mu:
         p.add_argument("--mu", type=float, metavar="MU",
                        help=f"friction coefficient of feet and floor ({MU_HELP})" if gait
@@ -75,7 +78,13 @@ def add_mujoco_settings(p, mu: bool = True, auto: bool = False, gait: bool = Tru
 
 
 #: the fields of the settings, each set by the option of its name
-_FIELDS = ("contact", "timestep", "solref", "foot_radius", "mu", "integrator")
+_FIELDS = ("contact", "timestep", "solref", "foot_radius", "mu", "integrator", "cone")
+
+
+def cone_text(settings: dict) -> str:
+    """', elliptic cone' for the status line of settings with MuJoCo's elliptic cone, ''
+    with its default pyramidal one."""
+    return ", elliptic cone" if settings.get("cone") == "elliptic" else ""
 
 
 def settings_error(e: ValueError) -> UserError:
@@ -110,6 +119,7 @@ def mujoco_settings(args) -> ContactSettings:
     try:
         return ContactSettings.of(args.contact, timestep=timestep, solref=solref,
                                   foot_radius=args.foot_radius,
-                                  mu=getattr(args, "mu", None), integrator=args.integrator)
+                                  mu=getattr(args, "mu", None), integrator=args.integrator,
+                                  cone=args.cone)
     except ValueError as e:
         raise settings_error(e) from None

@@ -17,7 +17,8 @@ from analysis.stability.running_cycle import running_cycle, running_stability
 
 from .common import (Progress, UserError, add_robot, check_torque_limit, load_running_gait,
                      print_json)
-from .mujoco_options import add_mujoco_settings, gait_settings, mujoco_settings, settings_error
+from .mujoco_options import (add_mujoco_settings, cone_text as _cone, gait_settings,
+                             mujoco_settings, settings_error)
 from .running import (MAX_STRIDES, add_tracking_arguments, check_strides_and_perturb,
                       check_tracking_arguments, running_controller)
 
@@ -109,7 +110,7 @@ def _clip(d) -> str:
 def _print(r, d, exact, fit):
     s, g = r.settings, r.gait
     print(f"MuJoCo (solref {s['solref'] if s['solref'] is not None else 'default 0.02'} s, dt "
-          f"{s['timestep']:g} s, feet {s['foot_radius']:g} m, mu {s['mu']:g}), M1 = "
+          f"{s['timestep']:g} s, feet {s['foot_radius']:g} m, mu {s['mu']:g}{_cone(s)}), M1 = "
           f"{r.controller['M1']}{_clip(d)}: {r.status} - {r.message}")
     if "compiled" in r.controller:
         print(f"  the law compiled from the export {r.controller['compiled']['export']}")

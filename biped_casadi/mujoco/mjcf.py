@@ -30,7 +30,12 @@ the torso to the world, ignores the rotor inertia and makes no actuators.
   1000 a resting ball sinks metres.  Above mu = 1 the option ``impratio`` is
   ``mu^2 (1 + mu^2) / 2``, which holds the normal at ``R_n`` and leaves the friction
   cone as it is: a larger mu then only makes slipping harder.  At mu <= 1 the MJCF has
-  no ``impratio`` (MuJoCo's 1).
+  no ``impratio`` (MuJoCo's 1), so there the normal is still mu's: mu^2 (1 + mu^2) / 2
+  ``R_n`` (0.245 ``R_n`` at the default 0.6, 0.049 at 0.3), and the friction's
+  regulariser, ``(1 + mu^2) R_n``, depends on mu at every mu.
+- ``cone='elliptic'`` (MuJoCo's elliptic cone) instead regularises the normal with
+  ``R_n`` and the friction with ``R_n / impratio``, neither depending on mu: mu then
+  only bounds the friction force.  The MJCF leaves ``impratio`` at MuJoCo's 1 there.
 
 :class:`Layout` maps MuJoCo's ``qpos``/``qvel`` (x, z, pitch, leg a from the hip down,
 leg b) to the toolkit's q, dq (docs: theory §1) with either leg as the stance leg, and
@@ -53,13 +58,15 @@ from ..model.description import RobotDescription
 
 __all__ = ["mjcf", "ContactSettings", "STIFF", "MUJOCO_DEFAULT", "MIN_INERTIA", "Layout",
            "layout", "floating_base_inertia", "CONTACTS", "MIN_TIMESTEP", "MAX_TIMESTEP",
-           "MAX_MU", "MAX_SOLREF"]
+           "MAX_MU", "MAX_SOLREF", "CONES"]
 
 #: kg m^2: the inertia given to a link that is a point mass (MuJoCo refuses a moving body
 #: whose inertia is below mjMINVAL = 1e-15); its effect on D is below 1e-13
 MIN_INERTIA = 1e-14
 #: the contact kinds of :func:`mjcf`
 CONTACTS = ("stiff", "default")
+#: MuJoCo's friction cones (the first, MuJoCo's default, is the MJCF's)
+CONES = ("pyramidal", "elliptic")
 #: s: the time steps a run takes (a smaller one would run for hours, a larger one misses
 #: the step's dynamics: a step lasts a few tenths of a second, walking (0.4 to 1 s for the
 #: robots measured) or running (RABBIT at 1.5 m/s: 0.36 s stance, 0.10 s flight))
@@ -112,6 +119,9 @@ class ContactSettings:
     integrator : str
         MuJoCo's integrator ('Euler', 'implicitfast', 'implicit' or 'RK4'; default
         MuJoCo's, 'Euler').
+    cone : str
+        MuJoCo's friction cone: 'pyramidal' (MuJoCo's default), whose normal and
+        friction softness depend on mu, or 'elliptic', whose do not (module docstring).
     """
 
     timestep: float = 0.002
@@ -119,6 +129,7 @@ class ContactSettings:
     foot_radius: float = 0.005
     mu: float = 0.6
     integrator: str = "Euler"
+    cone: str = "pyramidal"
 
     def __post_init__(self):
         for name in ("timestep", "foot_radius", "mu"):
@@ -150,6 +161,8 @@ class ContactSettings:
         if self.integrator not in ("Euler", "implicitfast", "implicit", "RK4"):
             raise ValueError(f"integrator must be Euler, implicitfast, implicit or RK4, got "
                              f"{self.integrator!r}")
+        if self.cone not in CONES:
+            raise ValueError(f"cone must be one of {', '.join(CONES)}, got {self.cone!r}")
 
     @classmethod
     def of(cls, contact: str = "stiff", **changes) -> "ContactSettings":
@@ -171,7 +184,7 @@ class ContactSettings:
             raise ValueError(f"contact must be one of {', '.join(CONTACTS)}, got {contact!r}")
         base = STIFF if contact == "stiff" else MUJOCO_DEFAULT
         kw = {k: getattr(base, k) for k in ("timestep", "solref", "foot_radius", "mu",
-                                             "integrator")}
+                                             "integrator", "cone")}
         kw.update({k: v for k, v in changes.items() if v is not None})
         return cls(**kw)
 
@@ -190,7 +203,8 @@ class ContactSettings:
         dict
         """
         return dict(timestep=self.timestep, solref=self.solref, foot_radius=self.foot_radius,
-                    mu=self.mu, integrator=self.integrator, contact=self.contact)
+                    mu=self.mu, integrator=self.integrator, cone=self.cone,
+                    contact=self.contact)
 
 
 #: the recommended stiff settings: dt 2 ms, solref 4 ms, 5 mm feet, mu 0.6
@@ -543,7 +557,8 @@ def mjcf(robot, settings: ContactSettings = STIFF, torque_limit: float | None = 
     inner = ["knee"] if d.k == 2 else [f"joint{j}" for j in range(1, d.k)]
     solref = "" if s.solref is None else f' solref="{_vec(s.solref, 1)}"'
     friction = f'friction="{_vec(s.mu, 0.005, 0.0001)}"'
-    ratio = "" if s.mu <= 1.0 else f' impratio="{_num(_impratio(s.mu))}"'
+    ratio = ' cone="elliptic"' if s.cone == "elliptic" else \
+        "" if s.mu <= 1.0 else f' impratio="{_num(_impratio(s.mu))}"'
     t = d.torso
     off = lambda link: link.com_offset                         # noqa: E731
     lines = [f"<mujoco model={quoteattr(d.name)}>",
