@@ -46,7 +46,7 @@ coordinates), the one MuJoCo's ``mj_fullM`` must equal.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from xml.sax.saxutils import quoteattr
 
 import casadi as ca
@@ -183,10 +183,7 @@ class ContactSettings:
         if contact not in CONTACTS:
             raise ValueError(f"contact must be one of {', '.join(CONTACTS)}, got {contact!r}")
         base = STIFF if contact == "stiff" else MUJOCO_DEFAULT
-        kw = {k: getattr(base, k) for k in ("timestep", "solref", "foot_radius", "mu",
-                                             "integrator", "cone")}
-        kw.update({k: v for k, v in changes.items() if v is not None})
-        return cls(**kw)
+        return replace(base, **{k: v for k, v in changes.items() if v is not None})
 
     @property
     def contact(self) -> str:
@@ -202,9 +199,7 @@ class ContactSettings:
         -------
         dict
         """
-        return dict(timestep=self.timestep, solref=self.solref, foot_radius=self.foot_radius,
-                    mu=self.mu, integrator=self.integrator, cone=self.cone,
-                    contact=self.contact)
+        return dict(asdict(self), contact=self.contact)
 
 
 #: the recommended stiff settings: dt 2 ms, solref 4 ms, 5 mm feet, mu 0.6
