@@ -191,3 +191,29 @@ def test_max_penetration_is_the_feet_depth_in_the_floor(gait):
         depth.append(p)
         assert check_contact(loop, q0, dq0, 2, w).tried == []
     assert 0 < depth[0] < depth[1], depth
+
+
+def test_a_friction_below_the_gaits_is_said_up_front(gait, tmp_path, capsys):
+    """A ``--mu`` below the friction ratio the gait needs (its largest |F_x| / F_z in the
+    stance, its impact impulse's) is said before the walk in one line on stderr naming
+    both (and in the JSON); the walk still runs (MuJoCo's friction is soft: between the
+    two ratios RABBIT's gait walks).  At the gait's own mu nothing is said."""
+    c = gait.check()
+    stance, impact = c["max_friction_ratio"], c["impact_friction_ratio"]
+    assert stance < impact, (stance, impact)
+    g = str(gait.save(tmp_path / "gait.json"))
+    base = ["mujoco", "--gait", g, "--controller", "vc", "--steps", "1", "--no-eig"]
+    for mu, words in ((0.9 * stance, "friction the gait needs"),
+                      ((stance + impact) / 2, "friction the gait's rigid impact needs")):
+        rc = biped_main(base + ["--mu", f"{mu:.6g}", "--json"])
+        out, err = capsys.readouterr()
+        r = json.loads(out)
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("biped mujoco: warning: --mu"), err
+        assert words in lines[0] and f"{stance:.3g}" in lines[0] and f"{impact:.3g}" in lines[0]
+        f = r["friction_needed"]
+        assert f["stance"] == stance and f["impact"] == impact and f["mu"] == float(f"{mu:.6g}")
+        assert f["warning"] == lines[0].split("warning: ", 1)[1] and "steps" in r, f
+    rc = biped_main(base + ["--json"])
+    out, err = capsys.readouterr()
+    assert rc == 0 and err == "" and json.loads(out)["friction_needed"]["warning"] == ""

@@ -3,13 +3,15 @@ MuJoCo's stride map beside the exact eigenvalues."""
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 from biped_casadi import Design, Gains
 from biped_casadi.control.compiled import CompilerError
 from biped_casadi.control.export import exported_law
-from biped_casadi.mujoco import (LAWS, SETTLE, STEP_STARTS, TOUCHDOWNS, MujocoLoop,
-                                 check_contact, check_timestep, layout, stride_map)
+from biped_casadi.mujoco import (BOUNCE_TOLERANCE, LAWS, SETTLE, STEP_STARTS, TOUCHDOWNS,
+                                 MujocoLoop, check_contact, check_timestep, layout,
+                                 stride_map)
 from analysis.in_mujoco import exact_eigenvalues
 from analysis.reporting.plots import mujoco_animation, mujoco_steps_plot, save_figures
 
@@ -24,6 +26,40 @@ from .simulate import MAX_STEPS, _check_perturbation, _perturbation
 #: the steps ``--plot``'s animation shows (in real time; a longer walk's axes would leave
 #: the robot a dot, and its GIF take minutes and tens of MB)
 ANIMATED_STEPS = 10
+
+
+def friction_needed(gait, mu: float) -> dict:
+    """The friction ``gait`` needs, and a warning when ``mu`` is below it.
+
+    Parameters
+    ----------
+    gait : Gait
+        The gait (its dense check, :meth:`gait_opt.Gait.check`).
+    mu : float
+        The floor's friction coefficient in MuJoCo.
+
+    Returns
+    -------
+    dict
+        ``stance`` (the largest |F_x| / F_z over its stance), ``impact`` (|F_x| / F_z of
+        its impact impulse), ``mu``, and ``warning``: one line when ``mu`` is below
+        either, else ''.  Not a refusal: MuJoCo's friction is soft and its impact lasts
+        a few time steps, so a walk below them can still walk (docs/howto/mujoco.md).
+    """
+    c = gait.check()
+    stance, impact = float(c["max_friction_ratio"]), float(c["impact_friction_ratio"])
+    needs = (f"|F_x| / F_z up to {stance:.3g} in its stance and {impact:.3g} in its impact "
+             "impulse")
+    if mu < stance:
+        warning = (f"--mu {mu:g} is below the friction the gait needs ({needs}): expect its "
+                   "stance foot to slide and the walk to slow down or fail")
+    elif mu < impact:
+        warning = (f"--mu {mu:g} is below the friction the gait's rigid impact needs "
+                   f"({needs}): MuJoCo's soft impact may still hold, or the landing foot "
+                   "slide")
+    else:
+        warning = ""
+    return dict(stance=stance, impact=impact, mu=float(mu), warning=warning)
 
 
 def _check(args):
@@ -67,6 +103,9 @@ def cmd_mujoco(args):
     say = Progress("mujoco", quiet=args.json)
     gait = load_gait(args, say)
     settings = gait_settings(args, settings, gait)
+    friction = friction_needed(gait, settings.mu)
+    if friction["warning"]:                     # before the walk: it qualifies all below
+        print(f"biped mujoco: warning: {friction['warning']}", file=sys.stderr, flush=True)
     model = gait.model
     design = _design(args, gait)
     perturbation = _perturbation(args, model.nq)
@@ -87,13 +126,13 @@ def cmd_mujoco(args):
     if not w.success:
         say("the same walk at finer time steps and with softer contacts (is the time step "
             "or the contact the cause?) ...")
-    check = check_timestep(loop, q0, dq0, args.steps, w)
+    check = check_timestep(loop, q0, dq0, args.steps, w, refine=args.timestep == AUTO)
     contact = check_contact(loop, q0, dq0, args.steps, w, check)
     chosen = chosen_solref = None
     if args.timestep == AUTO and check.status == "too_coarse":
         # --timestep auto: the walk, the figures and the stride map at the time step that
-        # walked (the walk again, for its log); it keeps the contact asked for, so it comes
-        # before --solref auto
+        # walked with its landings resolved (the walk again, for its log); it keeps the
+        # contact asked for, so it comes before --solref auto
         chosen = check.suggested_timestep
         say(f"--timestep auto: walking at {chosen:g} s ...")
         loop = loop.at_timestep(chosen)
@@ -112,21 +151,12 @@ def cmd_mujoco(args):
                    exact=ex, exact_max_abs=max(abs(e) for e in ex),
                    relative_residual=sm.relative_residual, stride_map=sm.to_dict())
 
-    # ---- figures
-    figures = {}
-    if args.plot:
-        say("drawing the figure and the animation ...")
-        folder = Path(args.plot)
-        title = f"In MuJoCo, {design.label()}:\nspeed, step duration and error at each touchdown"
-        figures["steps"] = save_figures({"mujoco_steps": mujoco_steps_plot([w], title=title)},
-                                        folder)[0]
-        if w.t.size:
-            figures["animation"] = mujoco_animation(w, layout(model), folder / "mujoco_walk.gif",
-                                                    max_steps=ANIMATED_STEPS)
+    figures = _figures(args.plot, design, w, say) if args.plot else {}
 
     # ---- report
     d = w.to_dict()
     d["perturbation"] = perturbation.to_dict()
+    d["friction_needed"] = friction
     d["steps_per_second"] = w.steps_per_second
     d["timestep_check"] = check.to_dict()
     d["timestep_check"]["auto_timestep"] = chosen
@@ -143,6 +173,20 @@ def cmd_mujoco(args):
     return 0 if w.success else 1
 
 
+def _figures(plot: str, design, w, say) -> dict:
+    """``--plot DIR``: the figure of the steps and the animation of the walk; their paths."""
+    say("drawing the figure and the animation ...")
+    folder, figures = Path(plot), {}
+    title = f"In MuJoCo, {design.label()}:\nspeed, step duration and error at each touchdown"
+    figures["steps"] = save_figures({"mujoco_steps": mujoco_steps_plot([w], title=title)},
+                                    folder)[0]
+    if w.t.size:
+        figures["animation"] = mujoco_animation(w, layout(design.gait.model),
+                                                folder / "mujoco_walk.gif",
+                                                max_steps=ANIMATED_STEPS)
+    return figures
+
+
 def _pct(x) -> str:
     return "n/a" if not math.isfinite(x) else f"{100 * x:+.2f} %"
 
@@ -152,11 +196,24 @@ def _ev(ev) -> str:
                            f"{e.real:.3g}{e.imag:+.3g}j" for e in ev) + "]"
 
 
+def _auto_line(check, chosen: float) -> str:
+    """``--timestep auto``'s line: why the walk below is not at the time step asked for."""
+    c, mm = check.walk, lambda x: f"{1e3 * x:.3g} mm"
+    why = (f"({c['message']})" if c["status"] != "walked" else
+           f"but its landings moved the new stance foot up to {mm(c['landing_travel'])} "
+           f"(more than {mm(check.bounce_limit)}, {100 * BOUNCE_TOLERANCE:g} % of the step)")
+    r = next(t for t in check.tried if t["timestep"] == chosen)
+    still = "" if not r["landing_travel"] > check.bounce_limit else (
+        f" (the finest time step tried: its landings still move the foot up to "
+        f"{mm(r['landing_travel'])}, not the time step alone: the friction?)")
+    return (f"--timestep auto: at {check.timestep:g} s the walk {c['status']} {why}; the walk "
+            f"below is at {chosen:g} s{still}")
+
+
 def _print(w, eig, figures, check=None, chosen=None, contact=None, chosen_solref=None):
     s = w.settings
     if chosen is not None:
-        print(f"--timestep auto: at {check.timestep:g} s the walk {check.walk['status']} "
-              f"({check.walk['message']}); the walk below is at {chosen:g} s")
+        print(_auto_line(check, chosen))
     if chosen_solref is not None:
         print(f"--solref auto: with solref {contact.solref:g} s the walk "
               f"{check.walk['status']} ({check.walk['message']}); the walk below is with "
@@ -221,7 +278,10 @@ def register(sub):
                     "eigenvalues (a least-squares fit of rollouts) beside the exact ones. "
                     "A walk that fails is walked again at a half and a quarter of the time "
                     "step: one line says whether the time step is the likely cause and which "
-                    "--timestep to use (JSON: timestep_check); and again at the same time step "
+                    "--timestep to use (JSON: timestep_check); a walk that walks but whose "
+                    "landings bounce (move the new stance foot more than 1 % of the step) "
+                    "is named there too (--timestep auto walks it at the finer time step "
+                    "that resolves them); and again at the same time step "
                     "with a contact 1.5 and 2 times softer: a second line says whether a "
                     "softer contact walks, which --solref to use and what it costs (speed "
                     "error, feet' depth into the floor; JSON: contact_check). Exit 0 when the "

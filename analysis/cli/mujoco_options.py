@@ -48,8 +48,10 @@ def add_mujoco_settings(p, mu: bool = True, auto: bool = False, gait: bool = Tru
     if auto:
         p.add_argument("--timestep", type=_timestep, metavar="S",
                        help="MuJoCo's time step, s, 1e-05 to 0.05 (default 0.002); 'auto': "
-                            "0.002, and when the walk fails there but walks at a half or a "
-                            "quarter of it, that time step")
+                            "0.002, and when the walk fails there, or its landings bounce "
+                            "(move the new stance foot more than 1 %% of the step), but it "
+                            "walks at a half or a quarter of it, that time step (the first "
+                            "whose landings stay within 1 %%, else the finest that walks)")
     else:
         p.add_argument("--timestep", type=float, metavar="S",
                        help="MuJoCo's time step, s, 1e-05 to 0.05 (default 0.002)")

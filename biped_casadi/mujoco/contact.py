@@ -88,14 +88,15 @@ def run_record(loop: MujocoLoop, q0, dq0, steps: int) -> dict:
     -------
     dict
         ``timestep``, ``solref``, ``status``, ``steps_walked``, ``speed_error``,
-        ``max_penetration`` (m, the deepest a foot went into the floor), ``message``,
-        ``wall_time``.
+        ``max_penetration`` (m, the deepest a foot went into the floor),
+        ``landing_travel`` (m, :attr:`~biped_casadi.mujoco.MujocoWalk.landing_travel`),
+        ``message``, ``wall_time``.
     """
     w = loop.run(q0, dq0, steps)
     return dict(timestep=float(loop.settings.timestep), solref=contact_time_constant(loop),
                 status=w.status, steps_walked=w.steps_walked, speed_error=w.speed_error,
-                max_penetration=w.max_penetration, message=w.message,
-                wall_time=w.wall_time)
+                max_penetration=w.max_penetration, landing_travel=w.landing_travel,
+                message=w.message, wall_time=w.wall_time)
 
 
 def contact_time_constant(loop: MujocoLoop) -> float:

@@ -200,6 +200,14 @@ class MujocoWalk(Result):
         return np.array([s.q_minus + s.dq_minus for s in self.steps])
 
     @property
+    def landing_travel(self) -> float:
+        """The largest ``|impact_travel|`` of steps 2 on (the worst landing), m.
+
+        Step 1's stance foot did not land in the walk; NaN with fewer than two steps.
+        """
+        return max((abs(s.impact_travel) for s in self.steps[1:]), default=math.nan)
+
+    @property
     def steps_per_second(self) -> float:
         """MuJoCo steps per second of wall time (with the law in the loop)."""
         return self.mujoco_steps / self.wall_time if self.wall_time > 0 else math.nan
