@@ -27,7 +27,8 @@ foot more than :data:`BOUNCE_TOLERANCE` of the gait's step length (the largest
 ``impact_travel`` of steps 2 on, :attr:`~biped_casadi.mujoco.MujocoWalk.landing_travel`)
 counts as not resolved: the check names it ('bounces', nothing run again) and, asked to
 refine (``--timestep auto``), walks it at the finer time steps until its landings are
-within the tolerance ('too_coarse'; the finest that walked when none is).  The time the
+within the tolerance ('too_coarse'; the finest that walked when none is); after a failed
+walk too, the time step suggested is the first whose landings are within it.  The time the
 foot spends off the floor does not tell: it stays 24-45 ms at 0.25 ms.  The strike speed of
 the gait, the foot's travel into the floor in one time step and the contact's time
 constant in time steps are recorded beside it.  The other remedy, a softer contact at the
