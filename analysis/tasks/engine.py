@@ -34,7 +34,6 @@ _TOPIC = "biped-task"
 _LOCAL = threading.local()
 
 
-
 def resolve_scheduler(scheduler=None, workers: int | None = None):
     """What ``scheduler`` means, the same for every function that takes it.
 
@@ -85,11 +84,6 @@ def _info(fn) -> TaskInfo:
 def _is_future(obj) -> bool:
     return isinstance(obj, cf.Future) or (type(obj).__name__ == "Future" and
                                           type(obj).__module__.startswith("distributed"))
-
-
-def _given(value):
-    """A kept or flow result as a task's (Dask makes it again if its worker is lost)."""
-    return value
 
 
 def _key(future) -> str:
@@ -329,12 +323,11 @@ class Engine:
         quiet = logging.getLogger("distributed")         # the cluster's shutdown chatter
         level, _ = quiet.level, quiet.setLevel(logging.CRITICAL + 1)   # its own too
         try:
-            if self._client is not None:
-                with contextlib.suppress(Exception):
+            with contextlib.suppress(Exception):
+                if self._client is not None and isinstance(self.scheduler, str):
+                    self._client.close()            # its own (closing cancels its tasks)
+                elif self._client is not None:      # the caller's: its tasks cancelled
                     self._client.cancel([f for f in lost.values() if not isinstance(f, cf.Future)])
-                if isinstance(self.scheduler, str):         # a client of its own
-                    with contextlib.suppress(Exception):
-                        self._client.close()
             with contextlib.suppress(Exception):
                 if self._cluster is not None:
                     close_cluster(self._cluster)
@@ -507,18 +500,19 @@ class Engine:
                 deps = inputs + [f for f in (ctx or ()) if f.done()]
                 self._tasks[key] = TaskRecord(info.name, self.current_stage()[0], key, flow=flow,
                                               deps=tuple(dict.fromkeys(map(_key, deps))))
+                if kept is MISSING:
+                    self._count_new()
             while not new and key not in self._futures:
                 self._cond.wait()
         if not new:
             fut = self._futures[key]
-        elif kept is not MISSING:
-            fut = self._set(key, self._finish(key, TaskState.REUSED, kept["value"],
-                                              seconds=kept.get("seconds", 0.0),
-                                              fut=self._holder(info, key)))
-        else:
-            self._count_new()
-            fut = self._holder(info, key)
-            if not (flow or self.scheduler == "synchronous"):
+        else:                          # its outcome here (sent to Dask: if not sent)
+            fut = cf.Future()
+            fut.key = f"{info.name.rsplit('.', 1)[-1]}-{key}"
+            if kept is not MISSING:
+                self._set(key, self._finish(key, TaskState.REUSED, kept["value"],
+                                            seconds=kept.get("seconds", 0.0), fut=fut))
+            elif not (flow or self.scheduler == "synchronous"):
                 fut = self._on_cluster(fn, key, fut, args, kwargs)
             elif flow:
                 self._flow(fn, key, self._set(key, fut), args, kwargs, inputs)
@@ -527,12 +521,6 @@ class Engine:
                     _pack(x, lambda f: f.result()) for x in (args, kwargs))))
         if ctx is not None:
             ctx.append(fut)
-        return fut
-
-    @staticmethod
-    def _holder(info, key) -> cf.Future:
-        fut = cf.Future()
-        fut.key = f"{info.name.rsplit('.', 1)[-1]}-{key}"
         return fut
 
     def _set(self, key, future):
@@ -583,7 +571,8 @@ class Engine:
             return f
         value = f.result()                     # a failed input fails the task
         if _key(f) not in self._sent:
-            self._sent[_key(f)] = client.submit(_given, value, key=f.key, pure=False,
+            from toolz import identity          # (Dask's dependency)
+            self._sent[_key(f)] = client.submit(identity, value, key=f.key, pure=False,
                                                      priority=self.current_stage()[1])
         return self._sent[_key(f)]
 
