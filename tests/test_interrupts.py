@@ -62,6 +62,35 @@ def test_a_class_made_while_ctrl_c_is_pressed_is_the_interruption(monkeypatch, c
     assert capsys.readouterr().err == "biped model: interrupted\n"
 
 
+@pytest.mark.parametrize("library", ["own error", "dropped"])
+def test_a_ctrl_c_a_library_hides_while_the_command_line_loads_is_one_line(library,
+                                                                         monkeypatch, capsys):
+    """NumPy's extension, interrupted while it loads, raises ``ImportError:
+    PyCapsule_Import could not import module "datetime"``, which does not name the
+    KeyboardInterrupt (a traceback, exit code 1); a library that drops the Ctrl-C let
+    the command run."""
+    class Hidden:
+        def find_spec(self, name, path=None, target=None):
+            if name == "analysis.cli.app":
+                try:
+                    signal.raise_signal(signal.SIGINT)
+                except KeyboardInterrupt:
+                    pass
+                if library == "own error":
+                    raise ImportError('PyCapsule_Import could not import module "datetime"')
+
+    monkeypatch.delitem(sys.modules, "analysis.cli.app", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [Hidden()] + sys.meta_path)
+    monkeypatch.setattr(sys, "argv", ["biped", "model"])
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        assert biped_cli.main() == 130
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, old)
+    assert capsys.readouterr() == ("", "biped model: interrupted\n")
+
+
 def test_an_import_error_alone_is_not_an_interruption(monkeypatch):
     class Broken:
         def find_spec(self, name, path=None, target=None):
