@@ -505,6 +505,34 @@ print(repr(caching.code_edited()), repr(caching.code_edited("figures")))
     assert out.stdout == f"{named} {named}\n"
 
 
+@pytest.mark.parametrize("change", ["touched", "edited"])
+def test_the_command_refuses_its_own_stale_code_before_any_work(change, tmp_path,
+                                                                monkeypatch):
+    """A command that runs tasks checks its own files with the scheduler, before any
+    work: a module edited after it imported the toolkit failed only the tasks it ran
+    itself and its flows, stage by stage; one touched passes."""
+    import hashlib
+    import os
+    import biped_casadi.caching as caching
+    from analysis.cli.common import UserError, check_scheduler
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path / "cache"))
+    f = tmp_path / "a.py"
+    f.write_text("x = 1\n")
+    monkeypatch.setattr(caching, "_IMPORTED", {
+        "analysis/a.py": (f, caching._stat(f), hashlib.sha256(f.read_bytes()).hexdigest())})
+    monkeypatch.setattr(caching, "_READ", {})
+    monkeypatch.setattr(caching, "_FILES", {})
+    os.utime(f, ns=(f.stat().st_atime_ns, f.stat().st_mtime_ns + 10**9))
+    if change == "touched":
+        check_scheduler(None)
+        return
+    f.write_text("x = 2\n")
+    with pytest.raises(UserError, match=r"^stale code: analysis/a.py changed on disk after "
+                                        r"this command started \(it imported the toolkit\); "
+                                        r"restart the command$"):
+        check_scheduler(None)
+
+
 def _edited_in_this_process(tmp_path, edit: str, scheduler: str = "synchronous"):
     """A fresh process on a copy of the toolkit: it imports basin.py's module, computes
     the code's digest, then ``edit`` ('imported': basin.py, 'not imported':
