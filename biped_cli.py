@@ -3,7 +3,6 @@ and a Ctrl-C meanwhile ends the command as one later would (one line, exit code 
 not with a traceback of the imports."""
 import atexit
 import gc
-import signal
 import sys
 
 __all__ = ["main", "interrupted"]
@@ -17,14 +16,14 @@ def main() -> int:
     int
         Its exit code; 130 when interrupted while loading.
     """
-    pressed: list = []
-    old = _watch(pressed)
+    pressed, put_back = [], None
     try:
         try:
+            put_back = _watch(pressed)
             from analysis.cli import main as run
         finally:
-            if old is not None:
-                signal.signal(signal.SIGINT, old)
+            if put_back is not None:
+                put_back()
     except (KeyboardInterrupt, Exception) as e:
         if not (pressed or _interrupted(e)):
             raise
@@ -68,8 +67,10 @@ def _watch(pressed: list):
     """Python's Ctrl-C handler, noting each Ctrl-C in ``pressed``: a library may turn the
     KeyboardInterrupt into an error of its own that does not name it (NumPy's
     ``ImportError: PyCapsule_Import could not import module "datetime"``, a Ctrl-C while
-    its extension loads).  Returns the handler to put back (None: Ctrl-C is not Python's
-    here, or this is not the main thread)."""
+    its extension loads).  Returns what puts Python's handler back (None: Ctrl-C is not
+    Python's here, or this is not the main thread)."""
+    import signal                    # (some ms: where a Ctrl-C is caught)
+
     def noted(signum, frame):
         pressed.append(signum)
         signal.default_int_handler(signum, frame)
@@ -80,7 +81,7 @@ def _watch(pressed: list):
         signal.signal(signal.SIGINT, noted)
     except ValueError:                                  # not the main thread
         return None
-    return signal.default_int_handler
+    return lambda: signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _interrupted(e: BaseException) -> bool:
