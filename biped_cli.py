@@ -16,14 +16,20 @@ def main() -> int:
     int
         Its exit code; 130 when interrupted while loading.
     """
+    pressed, put_back = [], None
     try:
-        from analysis.cli import main as run
+        try:
+            put_back = _watch(pressed)
+            from analysis.cli import main as run
+        finally:
+            if put_back is not None:
+                put_back()
     except (KeyboardInterrupt, Exception) as e:
-        if not _interrupted(e):
+        if not (pressed or _interrupted(e)):
             raise
         rc = interrupted()
-    else:
-        rc = run()
+    else:                     # (a Ctrl-C a library dropped while it loaded: no command)
+        rc = interrupted() if pressed else run()
     if rc == 130:
         _forget_the_interrupt()
     # no search of the whole heap for garbage cycles as Python exits (0.5-1.5 s of a warm
@@ -55,6 +61,27 @@ def _forget_the_interrupt():
     parent, not 130) even though the interruption was caught and said.  Each such code
     that completes clears the record (CPython's ``run_eval_code_obj``)."""
     exec("")
+
+
+def _watch(pressed: list):
+    """Python's Ctrl-C handler, noting each Ctrl-C in ``pressed``: a library may turn the
+    KeyboardInterrupt into an error of its own that does not name it (NumPy's
+    ``ImportError: PyCapsule_Import could not import module "datetime"``, a Ctrl-C while
+    its extension loads).  Returns what puts Python's handler back (None: Ctrl-C is not
+    Python's here, or this is not the main thread)."""
+    import signal                    # (some ms: where a Ctrl-C is caught)
+
+    def noted(signum, frame):
+        pressed.append(signum)
+        signal.default_int_handler(signum, frame)
+
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        return None
+    try:
+        signal.signal(signal.SIGINT, noted)
+    except ValueError:                                  # not the main thread
+        return None
+    return lambda: signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _interrupted(e: BaseException) -> bool:

@@ -78,8 +78,7 @@ def task(fn=None, *, version: int = 1, code: str = "numerical", name: str | None
     The function is returned unchanged (calling it runs it); it gains ``task_info``.  A
     task is a module-level function of typed arguments (numbers, arrays, dataclasses,
     models, gaits, designs) that always returns the same result for the same arguments;
-    :class:`analysis.tasks.Engine` runs it and keeps its results under
-    :func:`task_key`.
+    :class:`analysis.tasks.Engine` runs it and keeps its results under :func:`task_key`.
 
     Parameters
     ----------
@@ -349,9 +348,8 @@ def _strip_docstrings(tree):
         node = stack.pop()
         if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
             body = node.body
-            if body and isinstance(body[0], ast.Expr) and isinstance(
-                    getattr(body[0], "value", None), ast.Constant) \
-                    and isinstance(body[0].value.value, str):
+            if body and isinstance(e := body[0], ast.Expr) \
+                    and isinstance(e.value, ast.Constant) and isinstance(e.value.value, str):
                 node.body = body[1:] or [ast.Pass()]
         for name in _STATEMENT_FIELDS:
             children = getattr(node, name, None)
@@ -382,8 +380,11 @@ def code_of(path) -> str:
     -------
     str
     """
-    p = Path(path)
-    data = p.read_bytes()
+    return _code_of(Path(path), Path(path).read_bytes())
+
+
+def _code_of(p: Path, data: bytes) -> str:
+    """:func:`code_of` of the file ``p`` whose bytes are ``data``."""
     key = (str(p), hashlib.sha256(data).digest())
     with _PARSING:               # several code sets share files: each is parsed once
         for attempt in range(3):
@@ -411,7 +412,7 @@ def _stat(path) -> tuple | None:
 
 
 def _python_files() -> dict:
-    """Every Python file of the three packages: relative path -> (file, its _stat)."""
+    """The three packages' Python files: relative path -> (file, _stat, then bytes' SHA-256)."""
     out = {}
     for top in ("biped_casadi", "gait_opt", "analysis"):
         spec = importlib.util.find_spec(top)
@@ -421,25 +422,28 @@ def _python_files() -> dict:
             for n in names:
                 if n.endswith(".py"):
                     f = Path(folder, n)
-                    out[f.relative_to(root.parent).as_posix()] = (f, _stat(f))
+                    st, sha = _stat(f), ""
+                    with contextlib.suppress(OSError):
+                        sha = hashlib.sha256(f.read_bytes()).hexdigest()
+                    out[f.relative_to(root.parent).as_posix()] = (f, st, sha)
     return dict(sorted(out.items()))
 
 
-#: the toolkit's files as this process imports it (this module among the first): what
-#: its modules are read from, and the stat each had then (or since, with the same code)
+#: the toolkit's files as this process imports it (this module among the first): the stat of
+#: each then (or since, same code), its bytes' SHA-256 then (code_files does not read again)
 _IMPORTED = _python_files()
 _READ: dict = {}
 
 
 def _read(rel: str) -> tuple:
     """A file's code digest as first read, and whether it is of the code imported (its
-    stat still the import's, before and after: else the code that runs is not known)."""
+    bytes the import's: a ``touch`` since, even before this read, is the same code)."""
     if rel not in _READ:
-        f, st = _IMPORTED[rel]
-        before, d = _stat(f), ""
+        f, st, sha = _IMPORTED[rel]
+        now = d = ""
         with contextlib.suppress(OSError):                 # (removed: no digest)
-            d = _file_digest(f)
-        _READ[rel] = d, bool(d) and before == st == _stat(f)
+            now, d = _file_digest(f, sha if _stat(f) == st else "")
+        _READ[rel] = d, bool(d) and now == sha
     return _READ[rel]
 
 
@@ -451,8 +455,8 @@ def code_edited(kind: str = "numerical") -> str:
     refused (:mod:`analysis.tasks`) until it (a Dask worker, the command) restarts.  A
     file's size, times and inode are compared (a stat of each file); one whose stat
     changed is read, and kept if its code (:func:`code_of`) is the code imported (a
-    ``touch``: its new stat is then kept, one read), unless it changed before this
-    process first read it (:func:`code_files`).
+    ``touch`` at any time: its new stat is then kept, one read); until this process first
+    read it (:func:`code_files`), that code is known by its bytes as imported.
 
     Parameters
     ----------
@@ -465,16 +469,16 @@ def code_edited(kind: str = "numerical") -> str:
         The file, relative to the packages' parent folder ('' if none changed).
     """
     for rel in code_files(kind):
-        f, st = _IMPORTED[rel]
+        f, st, sha = _IMPORTED[rel]
         if (now := _stat(f)) == st:
             continue
         (d, known), same = _read(rel), False
         with contextlib.suppress(OSError):
-            same = known and now is not None and _file_digest(f) == d
+            same = known and now is not None and _file_digest(f)[1] == d
         if not same:
             return rel
         if _stat(f) == now:                         # (not edited while read)
-            _IMPORTED[rel] = f, now
+            _IMPORTED[rel] = f, now, sha
     return ""
 
 
@@ -537,20 +541,20 @@ def _digests_path() -> Path:
     return cache_dir() / f"code-digests-py{sys.version_info[0]}{sys.version_info[1]}.json"
 
 
-def _file_digest(path: Path) -> str:
-    """16 hex digits of :func:`code_of`, memoised on disk by the SHA-256 of the bytes."""
+def _file_digest(path: Path, sha: str = "") -> tuple:
+    """The SHA-256 of a file's bytes and 16 hex digits of their :func:`code_of`, memoised on
+    disk by the former (the file is read unless the memo holds ``sha``, its bytes')."""
     if not _DIGESTS_READ:
         _DIGESTS_READ.append(True)
         with contextlib.suppress(OSError, ValueError):
             memo = json.loads(_digests_path().read_text())
-            if isinstance(memo, dict):
-                _DIGESTS.update(memo)
-    sha = hashlib.sha256(path.read_bytes()).hexdigest()
-    d = _DIGESTS.get(sha)
-    if not (isinstance(d, str) and len(d) == 16):
-        d = _DIGESTS[sha] = hashlib.sha256(code_of(path).encode()).hexdigest()[:16]
-        _DIGESTS_NEW.append(sha)
-    return d
+            _DIGESTS.update(memo if isinstance(memo, dict) else {})
+    if not (isinstance(d := _DIGESTS.get(sha), str) and len(d) == 16):
+        sha = hashlib.sha256(data := path.read_bytes()).hexdigest()
+        if not (isinstance(d := _DIGESTS.get(sha), str) and len(d) == 16):
+            d = _DIGESTS[sha] = hashlib.sha256(_code_of(path, data).encode()).hexdigest()[:16]
+            _DIGESTS_NEW.append(sha)
+    return sha, d
 
 
 def _save_digests():
@@ -642,12 +646,9 @@ class ResultStore:
         -------
         bool
         """
-        if not self.enabled:
-            return True
-        try:
-            return not any(self.root.iterdir())
-        except OSError:
-            return True
+        with contextlib.suppress(OSError):
+            return not (self.enabled and any(self.root.iterdir()))
+        return True
 
     def read(self, key: str):
         """The kept record of a key.
@@ -662,12 +663,11 @@ class ResultStore:
         dict or MISSING
             ``name``, ``value``, ``seconds``.
         """
-        p = self.path(key)
-        if not self.enabled or not p.is_file():
+        if not self.enabled:
             return MISSING
         try:
-            rec = pickle.loads(p.read_bytes())
-        except Exception:            # noqa: BLE001 - a damaged entry is computed again
+            rec = pickle.loads(self.path(key).read_bytes())
+        except Exception:            # noqa: BLE001 - absent, or damaged: computed again
             return MISSING
         return rec if isinstance(rec, dict) and "value" in rec else MISSING
 

@@ -62,6 +62,50 @@ def test_a_class_made_while_ctrl_c_is_pressed_is_the_interruption(monkeypatch, c
     assert capsys.readouterr().err == "biped model: interrupted\n"
 
 
+@pytest.mark.parametrize("library", ["own error", "dropped"])
+def test_a_ctrl_c_a_library_hides_while_the_command_line_loads_is_one_line(library,
+                                                                         monkeypatch, capsys):
+    """NumPy's extension, interrupted while it loads, raises ``ImportError:
+    PyCapsule_Import could not import module "datetime"``, which does not name the
+    KeyboardInterrupt (a traceback, exit code 1); a library that drops the Ctrl-C let
+    the command run."""
+    class Hidden:
+        def find_spec(self, name, path=None, target=None):
+            if name == "analysis.cli.app":
+                try:
+                    signal.raise_signal(signal.SIGINT)
+                except KeyboardInterrupt:
+                    pass
+                if library == "own error":
+                    raise ImportError('PyCapsule_Import could not import module "datetime"')
+
+    monkeypatch.delitem(sys.modules, "analysis.cli.app", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [Hidden()] + sys.meta_path)
+    monkeypatch.setattr(sys, "argv", ["biped", "model"])
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        assert biped_cli.main() == 130
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, old)
+    assert capsys.readouterr() == ("", "biped model: interrupted\n")
+
+
+def test_a_ctrl_c_while_the_ctrl_c_handler_is_set_is_one_line(monkeypatch, capsys):
+    """Setting the handler that notes a Ctrl-C imports ``signal`` (some ms) first."""
+    def interrupted(pressed):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(biped_cli, "_watch", interrupted)
+    monkeypatch.setattr(sys, "argv", ["biped", "model"])
+    try:
+        rc = biped_cli.main()
+    except KeyboardInterrupt:                  # not this session's: fail, do not stop
+        pytest.fail("the Ctrl-C left main")
+    assert rc == 130
+    assert capsys.readouterr().err == "biped model: interrupted\n"
+
+
 def test_an_import_error_alone_is_not_an_interruption(monkeypatch):
     class Broken:
         def find_spec(self, name, path=None, target=None):
@@ -232,6 +276,28 @@ def test_python_m_exits_130_after_a_ctrl_c_inside_exec(tmp_path):
     so), caught and said in one line, still ended ``python -m analysis.cli`` by SIGINT
     (exit code -2): CPython kept a record of it that ``python -m`` acts on at exit."""
     (tmp_path / "sitecustomize.py").write_text(_IN_EXEC)
+    env = dict(os.environ, PYTHONPATH=str(tmp_path))
+    r = subprocess.run([sys.executable, "-m", "analysis.cli", "model"], capture_output=True,
+                       text=True, cwd=tmp_path, env=env, timeout=120)
+    assert (r.returncode, r.stderr) == (130, "biped model: interrupted\n"), r.stderr
+
+
+_FINDING = """
+import sys
+class Interrupted:                        # a Ctrl-C while Python looks for biped_cli
+    def find_spec(self, name, path=None, target=None):
+        if name == "biped_cli" and self in sys.meta_path:
+            sys.meta_path.remove(self)
+            raise KeyboardInterrupt
+sys.meta_path.insert(0, Interrupted())
+"""
+
+
+def test_python_m_interrupted_while_it_finds_the_entry_point_is_one_line(tmp_path):
+    """``python -m analysis.cli`` imports :mod:`biped_cli` first (an editable install's
+    import finder looks for it with ``pathlib``, some ms under load): a Ctrl-C then was
+    a traceback and the process killed by SIGINT."""
+    (tmp_path / "sitecustomize.py").write_text(_FINDING)
     env = dict(os.environ, PYTHONPATH=str(tmp_path))
     r = subprocess.run([sys.executable, "-m", "analysis.cli", "model"], capture_output=True,
                        text=True, cwd=tmp_path, env=env, timeout=120)

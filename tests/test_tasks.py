@@ -419,9 +419,10 @@ def test_a_worker_whose_files_are_touched_works_one_with_a_file_added_says_so(ca
 
 def test_a_touched_file_is_read_once_and_kept_an_edited_one_is_not(tmp_path, monkeypatch):
     """A file of the code whose stat changed (a ``touch``, a save of the same code, a
-    comment) is read once and kept; one whose code changed, changed before it was
-    first read, or removed is the file named; files added or removed between two
-    processes' code are said so."""
+    comment) is read once and kept, and so is one touched before it was first read;
+    one whose code changed, whose bytes changed before it was first read, or removed is
+    the file named; files added or removed between two processes' code are said so."""
+    import hashlib
     import os
     import biped_casadi.caching as caching
     monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path / "cache"))
@@ -431,8 +432,9 @@ def test_a_touched_file_is_read_once_and_kept_an_edited_one_is_not(tmp_path, mon
     def imported():
         for f in files.values():
             f.write_text("x = 1\n")
-        monkeypatch.setattr(caching, "_IMPORTED", {r: (f, caching._stat(f)) for r, f in
-                                                   files.items()})
+        monkeypatch.setattr(caching, "_IMPORTED", {
+            r: (f, caching._stat(f), hashlib.sha256(f.read_bytes()).hexdigest())
+            for r, f in files.items()})
         monkeypatch.setattr(caching, "_READ", {}, raising=False)
         monkeypatch.setattr(caching, "_FILES", {})
 
@@ -442,7 +444,8 @@ def test_a_touched_file_is_read_once_and_kept_an_edited_one_is_not(tmp_path, mon
             f.write_text(text)
 
     digest = caching._file_digest
-    monkeypatch.setattr(caching, "_file_digest", lambda f: reads.append(f) or digest(f))
+    monkeypatch.setattr(caching, "_file_digest",
+                        lambda f, sha="": reads.append(f) or digest(f, sha))
     imported()
     assert caching.code_edited() == "" and len(reads) == 2           # the code read once
     a, b = files["analysis/a.py"], files["analysis/b.py"]
@@ -455,6 +458,9 @@ def test_a_touched_file_is_read_once_and_kept_an_edited_one_is_not(tmp_path, mon
     assert caching.code_edited() == "analysis/b.py"
     imported()
     later(a)                                              # before this process read it
+    assert caching.code_edited() == "" == caching.code_edited()
+    imported()
+    later(a, "x = 1  # the same code\n")                  # other bytes: not known the same
     assert caching.code_edited() == "analysis/a.py"
     imported()
     caching.code_files()
@@ -467,6 +473,64 @@ def test_a_touched_file_is_read_once_and_kept_an_edited_one_is_not(tmp_path, mon
     assert caching.files_differing(ours, {"a.py": "1", "c.py": "3"}) == "b.py was added"
     assert caching.files_differing(ours, {"a.py": "0", "c.py": "3"}) == \
         "a.py differs (and 1 more)"
+
+
+@pytest.mark.parametrize("change", ["touched", "edited"])
+def test_a_file_touched_before_it_is_first_read_is_the_code_imported(change, tmp_path):
+    """A fresh process on a copy of the toolkit imports it; a module of its code is then
+    touched (or edited) before the process reads any file's code: the touch was the
+    file named as changed on disk (its tasks refused until the process restarted); the
+    edit still is."""
+    import os
+    import subprocess
+    import sys
+    tree = _toolkit_copy(tmp_path / "tree")
+    f = tree / "analysis" / "gait_metrics.py"
+    script = f"""
+import os, pathlib
+import biped_casadi.caching as caching
+f = pathlib.Path({str(f)!r})
+if {change!r} == "touched":
+    os.utime(f, ns=(f.stat().st_atime_ns, f.stat().st_mtime_ns + 10**9))
+else:
+    f.write_text(f.read_text().replace("gait, n: int = 4001", "gait, n: int = 4002", 1))
+print(repr(caching.code_edited()), repr(caching.code_edited("figures")))
+"""
+    out = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=300, env=dict(
+                             os.environ, PYTHONPATH=str(tree),
+                             BIPED_CACHE_DIR=str(tmp_path / "cache")))
+    assert out.returncode == 0, out.stderr
+    named = "''" if change == "touched" else "'analysis/gait_metrics.py'"
+    assert out.stdout == f"{named} {named}\n"
+
+
+@pytest.mark.parametrize("change", ["touched", "edited"])
+def test_the_command_refuses_its_own_stale_code_before_any_work(change, tmp_path,
+                                                                monkeypatch):
+    """A command that runs tasks checks its own files with the scheduler, before any
+    work: a module edited after it imported the toolkit failed only the tasks it ran
+    itself and its flows, stage by stage; one touched passes."""
+    import hashlib
+    import os
+    import biped_casadi.caching as caching
+    from analysis.cli.common import UserError, check_scheduler
+    monkeypatch.setenv("BIPED_CACHE_DIR", str(tmp_path / "cache"))
+    f = tmp_path / "a.py"
+    f.write_text("x = 1\n")
+    monkeypatch.setattr(caching, "_IMPORTED", {
+        "analysis/a.py": (f, caching._stat(f), hashlib.sha256(f.read_bytes()).hexdigest())})
+    monkeypatch.setattr(caching, "_READ", {})
+    monkeypatch.setattr(caching, "_FILES", {})
+    os.utime(f, ns=(f.stat().st_atime_ns, f.stat().st_mtime_ns + 10**9))
+    if change == "touched":
+        check_scheduler(None)
+        return
+    f.write_text("x = 2\n")
+    with pytest.raises(UserError, match=r"^stale code: analysis/a.py changed on disk after "
+                                        r"this command started \(it imported the toolkit\); "
+                                        r"restart the command$"):
+        check_scheduler(None)
 
 
 def _edited_in_this_process(tmp_path, edit: str, scheduler: str = "synchronous"):

@@ -2,6 +2,9 @@
 (:func:`biped_cli.main`: a Ctrl-C while it loads is one line and exit code 130)."""
 import sys
 
-from biped_cli import main
-
+try:
+    from biped_cli import main
+except KeyboardInterrupt:              # while Python looked for it (an editable install's
+    from biped_cli import interrupted  # import finder: some ms)
+    sys.exit(interrupted())
 sys.exit(main())
