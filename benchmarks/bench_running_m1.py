@@ -137,7 +137,7 @@ def figure(rows):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
     sp = [r["speed"] for r in rows]
 
     def line(vals, **kw):
@@ -152,15 +152,16 @@ def figure(rows):
     line([r["chosen"]["spectral_radius"] if r.get("chosen") else None for r in rows],
          label="chosen M1 (choose_running_m1)", color="k")
     ax.axhline(1.0, color="0.5", lw=0.8, ls=":")
-    for r in rows:
-        if r.get("gait_torque_limit") is not None:
-            ax.annotate(f"gait optimised at |u| <= {r['gait_torque_limit']:g} N m",
-                        (r["speed"], 1.0), textcoords="offset points", xytext=(-60, 8),
-                        fontsize=7, color="0.3")
-    ax.set_xlabel("running speed (m/s)")
-    ax.set_ylabel("spectral radius of the stride Jacobian")
-    ax.set_title("RABBIT running, PD Kp 400 N m/rad, Kd 30 N m s/rad")
-    ax.legend(fontsize=8)
+    notes = [f"at {r['speed']:g} m/s the gait optimised at |u| <= {r['gait_torque_limit']:g}"
+             " N m" for r in rows if r.get("gait_torque_limit") is not None and r.get("chosen")]
+    missing = [f"{r['speed']:g}" for r in rows if not r.get("chosen")]
+    notes += [f"no stable design at {', '.join(missing)} m/s"] if missing else []
+    ax.set_xlabel("\n".join(["running speed (m/s)"] + ["; ".join(notes)] * bool(notes)))
+    ax.set_ylabel("spectral radius of the stride Jacobian (-)")
+    ax.set_title(f"RABBIT running: the stride map's spectral radius against speed\n"
+                 f"PD Kp {KP:g} N m/rad, Kd {KD:g} N m s/rad, the {FOOT} stance foot",
+                 fontsize=10)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.58, 0.78))
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     return fig
