@@ -305,6 +305,9 @@ def main():
             if run.save:
                 run.write()
         page_rows(run, rows)
+        run.note("rows measured: " + "; ".join(
+            f"{r['speed']:g} m/s {r['measured']['date']} at {r['measured']['commit']}"
+            for r in rows if r.get("measured")))
         Path(a.out).mkdir(parents=True, exist_ok=True)
         run.data["figure"] = save_figure(figure(rows), Path(a.out) / "running_m1_speeds.png")
 
