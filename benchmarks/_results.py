@@ -81,13 +81,19 @@ class Run:
         self.notes.append(text)
 
     def __exit__(self, exc_type, *exc):
-        if exc_type is not None or not self.save:
-            return
+        if exc_type is None and self.save:
+            self.write()
+
+    def write(self):
+        """Write the file now (a long run saves what it has measured so far; the file is
+        replaced in one step, so an interrupted write leaves the previous one)."""
         RESULTS.mkdir(exist_ok=True)
         body = dict(name=self.name, title=self.title, date=self.started,
                     commit=commit(), machine=machine(),
                     load=dict(before=list(self.load_before), after=list(os.getloadavg())),
                     rows=self.rows, notes=self.notes, data=self.data)
         path = RESULTS / f"{self.name}.json"
-        path.write_text(json.dumps(body, indent=1) + "\n")
+        part = path.with_suffix(".json.part")
+        part.write_text(json.dumps(body, indent=1) + "\n")
+        part.replace(path)
         print(f"saved {path.relative_to(Path.cwd()) if path.is_relative_to(Path.cwd()) else path}")

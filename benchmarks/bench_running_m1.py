@@ -12,12 +12,16 @@ Jacobian, and 20 strides from the fixed point with 0.01 rad/s on every velocity 
 per-stride contraction against the radius).
 
 Run: ``python benchmarks/bench_running_m1.py [--speeds 1.0 1.5 ...] [--max-evaluations N]
-[--no-save]``; writes ``benchmarks/results/running_m1.json`` and
-``docs/_static/running_m1_speeds.png``.
+[--no-save]``; writes ``benchmarks/results/running_m1.json`` after each speed and
+``docs/_static/running_m1_speeds.png`` at the end.  Run again, it resumes: the speeds the
+file holds, measured with the same settings (gains, hand-picked M1, grid of c, evaluations,
+torque reserve, sliding foot), are not measured again; a file of other settings, of
+another benchmark or not readable is one line and exit 2.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -25,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _results import Run  # noqa: E402
+from _results import RESULTS, Run, commit  # noqa: E402
 
 from biped_casadi import rabbit  # noqa: E402
 from biped_casadi.control.running import RunningController  # noqa: E402
@@ -40,6 +44,9 @@ ROOT = Path(__file__).resolve().parents[1]
 KP, KD = 400.0, 30.0
 HAND = (0.0, 0.95, 0.95, 0.0)
 CS = np.round(np.arange(0.5, 1.501, 0.05), 4)
+TITLE = ("the running stride map's spectral radius across speeds: plain tracking, the "
+         "hand-picked M1 and the chosen one")
+FOOT = "sliding"        # running_cycle's default model of the stance foot at takeoff
 
 
 def _radius(cyc, M1):
@@ -130,7 +137,7 @@ def figure(rows):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
     sp = [r["speed"] for r in rows]
 
     def line(vals, **kw):
@@ -145,21 +152,105 @@ def figure(rows):
     line([r["chosen"]["spectral_radius"] if r.get("chosen") else None for r in rows],
          label="chosen M1 (choose_running_m1)", color="k")
     ax.axhline(1.0, color="0.5", lw=0.8, ls=":")
-    for r in rows:
-        if r.get("gait_torque_limit") is not None:
-            ax.annotate(f"gait optimised at |u| <= {r['gait_torque_limit']:g} N m",
-                        (r["speed"], 1.0), textcoords="offset points", xytext=(-60, 8),
-                        fontsize=7, color="0.3")
-    ax.set_xlabel("running speed (m/s)")
-    ax.set_ylabel("spectral radius of the stride Jacobian")
-    ax.set_title("RABBIT running, PD Kp 400 N m/rad, Kd 30 N m s/rad")
-    ax.legend(fontsize=8)
+    notes = [f"at {r['speed']:g} m/s the gait optimised at |u| <= {r['gait_torque_limit']:g}"
+             " N m" for r in rows if r.get("gait_torque_limit") is not None and r.get("chosen")]
+    missing = [f"{r['speed']:g}" for r in rows if not r.get("chosen")]
+    notes += [f"no stable design at {', '.join(missing)} m/s"] if missing else []
+    ax.set_xlabel("\n".join(["running speed (m/s)"] + ["; ".join(notes)] * bool(notes)))
+    ax.set_ylabel("spectral radius of the stride Jacobian (-)")
+    ax.set_title(f"RABBIT running: the stride map's spectral radius against speed\n"
+                 f"PD Kp {KP:g} N m/rad, Kd {KD:g} N m s/rad, the {FOOT} stance foot",
+                 fontsize=10)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.58, 0.78))
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     return fig
 
 
-def main():
+def settings(max_evaluations, reserve):
+    """What a row's figures depend on besides its speed (saved with the rows)."""
+    return dict(Kp=KP, Kd=KD, hand=list(HAND), c_grid=CS.tolist(),
+                max_evaluations=max_evaluations, reserve=reserve, foot=FOOT)
+
+
+def saved_rows(path, want, torque_limit):
+    """The rows of a saved run of this benchmark, checked against the settings ``want``.
+
+    Files written before the settings were saved whole: the grid of c is read from their
+    rows and the reserve from a row that needed it (none: any reserve matches).  Each row
+    gets ``measured``, the date and commit of the run that measured it.
+
+    Raises
+    ------
+    ValueError
+        One line: the file is not readable, is another benchmark's or was measured with
+        other settings.
+    """
+    try:
+        body = json.loads(Path(path).read_text())
+        data, rows = body["data"], body["data"]["rows"]
+        if body.get("title") != TITLE:
+            raise ValueError(f"{path}: not a result of bench_running_m1.py "
+                             f"(title {body.get('title')!r})")
+        have = {k: data[k] for k in ("Kp", "Kd", "hand", "max_evaluations")}
+        have["foot"] = data.get("foot", "not recorded")
+        grids = {tuple(r["sweep_c"]["c"]) for r in rows if "sweep_c" in r}
+        have["c_grid"] = data.get("c_grid", list(grids.pop()) if len(grids) == 1 else None)
+        used = {torque_limit - r["gait_torque_limit"] for r in rows if "default_gait" in r}
+        have["reserve"] = data.get("reserve", used.pop() if len(used) == 1 else
+                                   (want["reserve"] if not used else None))
+        speeds = [float(r["speed"]) for r in rows]
+        for r in rows:                          # when and where each row was measured
+            r.setdefault("measured", dict(date=body["date"], commit=body["commit"]))
+    except ValueError as e:
+        raise ValueError(str(e) if str(e).startswith(str(path)) else
+                         f"{path}: not readable JSON ({e})") from None
+    except OSError as e:
+        raise ValueError(f"{path}: {e.strerror}") from None
+    except (KeyError, TypeError, AttributeError) as e:
+        raise ValueError(f"{path}: not a result of bench_running_m1.py (no {e})") from None
+    diff = [f"{k} {have[k]} (now {want[k]})" for k in want if have[k] != want[k]]
+    if diff:
+        raise ValueError(f"{path}: measured with other settings: " + ", ".join(diff)
+                         + "; remove it or choose another --name")
+    if len(set(speeds)) != len(speeds):
+        raise ValueError(f"{path}: a speed twice ({sorted(speeds)})")
+    return rows
+
+
+def page_rows(run, rows):
+    """The benchmarks page's lines of the rows (those written before replaced)."""
+    run.rows.clear()
+    for row in rows:
+        ch = row.get("chosen") or {}
+        v = row["speed"]
+        for key, label in (("plain", "plain tracking"), ("hand", "hand-picked M1")):
+            run.row(f"{v:g} m/s, {label}: spectral radius", row.get(key), unit="")
+        run.row(f"{v:g} m/s, chosen M1: spectral radius", ch.get("spectral_radius"), unit="")
+        run.row(f"{v:g} m/s, the choice ({ch.get('n_evaluations')} evaluations)",
+                ch.get("seconds"), unit="s")
+
+
+def measure(m, v, a):
+    """One speed's row (the gait again with the torque reserve where nothing is feasible)."""
+    t0 = time.perf_counter()
+    row = speed_row(m, v, a.max_evaluations)
+    if row.get("gait_success") and row.get("plain") is None and \
+            row.get("hand") is None and row["best_c"]["radius"] is None and a.reserve > 0:
+        lim = m.description.torque_limit - a.reserve
+        print(f"{v:g} m/s: no design feasible ({row['hand_message']}); the gait "
+              f"again with the torque limit {lim:g} N m", flush=True)
+        row = dict(speed_row(m, v, a.max_evaluations, lim), default_gait=row)
+    row["seconds"] = time.perf_counter() - t0
+    row["measured"] = dict(date=time.strftime("%Y-%m-%d %H:%M"), commit=commit())
+    ch = row.get("chosen") or {}
+    print(f"{v:g} m/s: plain {row.get('plain')}, hand {row.get('hand')}, best c "
+          f"{row.get('best_c')}, chosen {ch.get('M1')} {ch.get('spectral_radius')} "
+          f"({row['seconds']:.0f} s)", flush=True)
+    return row
+
+
+def _arguments():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--speeds", type=float, nargs="+", default=[1.0, 1.5, 2.0, 2.5, 3.0])
     ap.add_argument("--max-evaluations", type=int, default=150)
@@ -167,60 +258,56 @@ def main():
                     help="where no design is feasible on the default gait, optimise the gait "
                          "again with the torque limit this much lower (N m) and measure that")
     ap.add_argument("--out", default=str(ROOT / "docs" / "_static"))
-    ap.add_argument("--no-save", action="store_true")
+    ap.add_argument("--no-save", action="store_true",
+                    help="write nothing (and resume from nothing)")
     ap.add_argument("--name", default="running_m1",
                     help="the results file's name (benchmarks/results/NAME.json)")
     ap.add_argument("--combine", nargs="+", metavar="FILE",
                     help="measure nothing: merge the rows of saved results (runs over parts "
-                         "of the speeds) into NAME.json and draw the figure")
-    a = ap.parse_args()
+                         "of the speeds, with these settings) into NAME.json and draw the "
+                         "figure")
+    return ap.parse_args()
+
+
+def main():
+    a = _arguments()
     from analysis.reporting.plots import save_figure
     m = rabbit()
-    with Run(a.name, "the running stride map's spectral radius across speeds: plain "
-             "tracking, the hand-picked M1 and the chosen one", save=not a.no_save) as run:
-        rows = []
+    want = settings(a.max_evaluations, a.reserve)
+    lim = m.description.torque_limit
+    try:
         if a.combine:
-            import json
-            for f in a.combine:
-                rows += json.loads(Path(f).read_text())["data"]["rows"]
-            rows.sort(key=lambda r: r["speed"])
-            for r in rows:
-                ch = r.get("chosen") or {}
-                for key, label in (("plain", "plain tracking"), ("hand", "hand-picked M1")):
-                    run.row(f"{r['speed']:g} m/s, {label}: spectral radius", r.get(key),
-                            unit="")
-                run.row(f"{r['speed']:g} m/s, chosen M1: spectral radius",
-                        ch.get("spectral_radius"), unit="")
-                run.row(f"{r['speed']:g} m/s, the choice ({ch.get('n_evaluations')} "
-                        "evaluations)", ch.get("seconds"), unit="s")
-            run.note("merged from " + ", ".join(Path(f).name for f in a.combine))
-        for v in ([] if a.combine else a.speeds):
-            t0 = time.perf_counter()
-            row = speed_row(m, v, a.max_evaluations)
-            if row.get("gait_success") and row.get("plain") is None and \
-                    row.get("hand") is None and row["best_c"]["radius"] is None \
-                    and a.reserve > 0:
-                lim = m.description.torque_limit - a.reserve
-                print(f"{v:g} m/s: no design feasible ({row['hand_message']}); the gait "
-                      f"again with the torque limit {lim:g} N m", flush=True)
-                row = dict(speed_row(m, v, a.max_evaluations, lim), default_gait=row)
-            row["seconds"] = time.perf_counter() - t0
-            rows.append(row)
-            ch = row.get("chosen") or {}
-            print(f"{v:g} m/s: plain {row.get('plain')}, hand {row.get('hand')}, best c "
-                  f"{row.get('best_c')}, chosen {ch.get('M1')} {ch.get('spectral_radius')} "
-                  f"({row['seconds']:.0f} s)", flush=True)
-            for key, label in (("plain", "plain tracking"), ("hand", "hand-picked M1")):
-                run.row(f"{v:g} m/s, {label}: spectral radius", row.get(key), unit="")
-            run.row(f"{v:g} m/s, chosen M1: spectral radius", ch.get("spectral_radius"),
-                    unit="")
-            run.row(f"{v:g} m/s, the choice ({ch.get('n_evaluations')} evaluations)",
-                    ch.get("seconds"), unit="s")
-        run.data["rows"] = rows
-        run.data["Kp"], run.data["Kd"], run.data["hand"] = KP, KD, list(HAND)
-        run.data["max_evaluations"] = a.max_evaluations
+            rows = [r for f in a.combine for r in saved_rows(f, want, lim)]
+        else:
+            path = RESULTS / f"{a.name}.json"
+            rows = saved_rows(path, want, lim) if path.exists() and not a.no_save else []
+    except ValueError as e:
+        raise SystemExit(print(f"error: {e}", file=sys.stderr) or 2)
+    if len({r["speed"] for r in rows}) != len(rows):
+        raise SystemExit(print("error: the files hold a speed twice", file=sys.stderr) or 2)
+    rows.sort(key=lambda r: r["speed"])
+    with Run(a.name, TITLE, save=not a.no_save) as run:
+        run.data.update(rows=rows, **want)
         run.note("Nelder-Mead on the exact spectral radius, from the better of the "
-                 "hand-picked M1 and the best of M1 = (0, c, c, 0) on a 0.05 grid")
+                 "hand-picked M1 and the best of M1 = (0, c, c, 0) on a 0.05 grid; "
+                 "each row's 'measured' is the date and commit of the run that measured it")
+        if a.combine:
+            run.note("merged from " + ", ".join(Path(f).name for f in a.combine))
+        elif rows:
+            print("resumed: " + ", ".join(f"{r['speed']:g}" for r in rows)
+                  + " m/s already measured", flush=True)
+        for v in [] if a.combine else a.speeds:
+            if any(r["speed"] == v for r in rows):
+                continue
+            rows.append(measure(m, v, a))
+            rows.sort(key=lambda r: r["speed"])
+            page_rows(run, rows)
+            if run.save:
+                run.write()
+        page_rows(run, rows)
+        run.note("rows measured: " + "; ".join(
+            f"{r['speed']:g} m/s {r['measured']['date']} at {r['measured']['commit']}"
+            for r in rows if r.get("measured")))
         Path(a.out).mkdir(parents=True, exist_ok=True)
         run.data["figure"] = save_figure(figure(rows), Path(a.out) / "running_m1_speeds.png")
 

@@ -7,12 +7,18 @@ off): the stride map's spectral radius, and 20 strides from the fixed point with
 mean contraction per stride after the first, the largest torque the law asked for and
 the time saturated in each completed stride.
 
+The chosen M1 are read from the choices ``benchmarks/bench_running_m1.py`` saved: 2.0 and
+2.5 m/s (the gait at 145 N m) from ``results/running_m1.json``, the gait at 140 N m from
+``results/running_m1_140.json`` (``bench_running_m1.py --speeds 2.5 --reserve 10 --name
+running_m1_140``); a missing or other choice is one line and exit 2.
+
 Run: ``python benchmarks/running_saturation.py [--strides N] [--no-save]``; writes
 ``benchmarks/results/running_saturation.json``.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -20,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _results import Run  # noqa: E402
+from _results import RESULTS, Run  # noqa: E402
 
 from biped_casadi import rabbit  # noqa: E402
 from biped_casadi.control.running import RunningController  # noqa: E402
@@ -29,21 +35,48 @@ from analysis.stability.running_cycle import (running_cycle, running_stability, 
                                               simulate_running)
 
 HAND = (0.0, 0.95, 0.95, 0.0)
-# the M1 choose_running_m1 gave (benchmarks/results/running_m1.json; the how-to)
-CHOSEN_20 = (-0.5315165122596279, 1.434598561891546, 1.0326676704468913, 0.09340438714204541)
-CHOSEN_25 = (-1.8546200457197717, 1.322012671072324, 2.562564925658691, 0.8382205038714805)
-CHOSEN_25_140 = (-1.828, 1.939, 2.066, 0.087)
-# (speed, gait's torque bound or None for the robot's, saturate, Kp, Kd, [(label, M1)])
+# the chosen M1: (results file of bench_running_m1.py, speed, the gait's torque bound)
+CHOICES = {"chosen 2.0": ("running_m1", 2.0, None), "chosen 2.5": ("running_m1", 2.5, 145.0),
+           "chosen at 140": ("running_m1_140", 2.5, 140.0)}
+# (speed, gait's torque bound or None for the robot's, saturate, Kp, Kd, [(label, M1 or
+# the key of CHOICES)])
 CASES = [
-    (2.0, None, False, 400.0, 30.0, [("hand-picked", HAND), ("chosen", CHOSEN_20)]),
-    (2.0, None, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen", CHOSEN_20)]),
-    (2.5, 145.0, False, 400.0, 30.0, [("hand-picked", HAND), ("chosen", CHOSEN_25)]),
-    (2.5, 145.0, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen", CHOSEN_25)]),
-    (2.5, 145.0, True, 400.0, 60.0, [("hand-picked", HAND), ("chosen", CHOSEN_25)]),
-    (2.5, 145.0, True, 1000.0, 100.0, [("hand-picked", HAND), ("chosen", CHOSEN_25)]),
-    (2.5, 140.0, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen at 140", CHOSEN_25_140)]),
-    (2.5, None, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen", CHOSEN_25)]),
+    (2.0, None, False, 400.0, 30.0, [("hand-picked", HAND), ("chosen", "chosen 2.0")]),
+    (2.0, None, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen", "chosen 2.0")]),
+    (2.5, 145.0, False, 400.0, 30.0, [("hand-picked", HAND), ("chosen", "chosen 2.5")]),
+    (2.5, 145.0, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen", "chosen 2.5")]),
+    (2.5, 145.0, True, 400.0, 60.0, [("hand-picked", HAND), ("chosen", "chosen 2.5")]),
+    (2.5, 145.0, True, 1000.0, 100.0, [("hand-picked", HAND), ("chosen", "chosen 2.5")]),
+    (2.5, 140.0, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen at 140", "chosen at 140")]),
+    (2.5, None, True, 400.0, 30.0, [("hand-picked", HAND), ("chosen", "chosen 2.5")]),
 ]
+
+
+def chosen_m1(name, speed, gait_limit):
+    """The M1 ``bench_running_m1.py`` chose with the sliding foot at ``speed`` on the gait
+    optimised at ``gait_limit`` (None: the robot's limit), from ``results/NAME.json``.
+
+    Raises
+    ------
+    ValueError
+        One line: no such file, row or choice, or the choice of another foot or gait.
+    """
+    path = RESULTS / f"{name}.json"
+    try:
+        data = json.loads(path.read_text())["data"]
+        row = next((r for r in data["rows"] if r["speed"] == speed), None)
+        foot = data.get("foot", "not recorded")
+    except OSError as e:
+        raise ValueError(f"{path}: {e.strerror}") from None
+    except (ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"{path}: no choice of M1 to read ({type(e).__name__}: {e})") from None
+    if foot != "sliding":
+        raise ValueError(f"{path}: foot {foot}, not the sliding one")
+    if row is None or row.get("gait_torque_limit") != gait_limit or not row.get("chosen") \
+            or row["chosen"].get("M1") is None:
+        raise ValueError(f"{path}: no M1 chosen at {speed:g} m/s on the gait at "
+                         + (f"{gait_limit:g} N m" if gait_limit else "the robot's limit"))
+    return tuple(float(x) for x in row["chosen"]["M1"])
 
 
 def one(cyc, M1, nq, strides):
@@ -73,6 +106,11 @@ def main():
     ap.add_argument("--strides", type=int, default=20)
     ap.add_argument("--no-save", action="store_true")
     a = ap.parse_args()
+    try:
+        choices = {k: chosen_m1(*v) for k, v in CHOICES.items()}
+    except ValueError as e:
+        raise SystemExit(print(f"error: {e}; run benchmarks/bench_running_m1.py first",
+                               file=sys.stderr) or 2)
     m = rabbit()
     gaits = {}
     with Run("running_saturation", "the running closed loop at 2.0 and 2.5 m/s with the "
@@ -88,6 +126,7 @@ def main():
             t0 = time.perf_counter()
             cyc = running_cycle(RunningController(m, g, kp, kd, M1=HAND, saturate=sat))
             for label, M1 in designs:
+                M1 = choices.get(M1, M1)
                 r = dict(speed=v, gait_torque_limit=lim, saturate=sat, Kp=kp, Kd=kd,
                          design=label, **one(cyc, M1, m.nq, a.strides))
                 rows.append(r)
@@ -98,6 +137,8 @@ def main():
                 print(what, r["status"], r.get("message"), flush=True)
             print(f"  {time.perf_counter() - t0:.1f} s", flush=True)
         run.data["rows"] = rows
+        run.data["chosen"] = {k: dict(M1=list(choices[k]), file=f"{v[0]}.json", speed=v[1],
+                                      gait_torque_limit=v[2]) for k, v in CHOICES.items()}
         run.note(f"0.01 rad/s on every velocity, {a.strides} strides; torque_asked is the "
                  "law's, before clipping")
 

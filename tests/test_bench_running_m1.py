@@ -1,0 +1,153 @@
+"""benchmarks/bench_running_m1.py saves each speed as it finishes and resumes from its
+file: a run stopped after one speed, run again, measures only the speeds it lacks; a
+file it cannot use (unreadable, another benchmark's, other settings) is one line and
+exit code 2.  The measurement itself is replaced by a stand-in (a speed's real row takes
+minutes); what is tested is the bookkeeping around it."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+import _results  # noqa: E402
+import bench_running_m1 as bench  # noqa: E402
+
+
+class _Robot:
+    class description:
+        torque_limit = 150.0
+
+
+def _row(v):
+    return dict(speed=v, plain=5.0 + v, hand=1.0, best_c=dict(c=0.9, radius=0.8),
+                chosen=dict(M1=[0.0, 1.0, 1.0, 0.0], spectral_radius=0.5 / v,
+                            n_evaluations=3, seconds=1.0))
+
+
+@pytest.fixture
+def env(tmp_path, monkeypatch):
+    """The results folder in tmp_path, the robot and the measurement stood in for;
+    ``env.run(*args)`` runs the benchmark's main, ``env.calls`` the speeds measured."""
+    results = tmp_path / "results"
+    monkeypatch.setattr(_results, "RESULTS", results)
+    monkeypatch.setattr(bench, "RESULTS", results)
+    monkeypatch.setattr(bench, "rabbit", lambda: _Robot)
+
+    class Env:
+        calls, stop_after, path = [], None, results / "m1.json"
+
+        @staticmethod
+        def run(*args):
+            monkeypatch.setattr(sys, "argv", ["bench_running_m1.py", "--name", "m1",
+                                              "--out", str(tmp_path), *args])
+            bench.main()
+
+    def measure(m, v, a):
+        if Env.stop_after is not None and len(Env.calls) == Env.stop_after:
+            raise KeyboardInterrupt
+        Env.calls.append(v)
+        return _row(v)
+
+    monkeypatch.setattr(bench, "measure", measure)
+    return Env
+
+
+def test_interrupted_run_resumes_without_measuring_again(env):
+    env.stop_after = 1
+    with pytest.raises(KeyboardInterrupt):
+        env.run("--speeds", "1.0", "2.0", "1.5")
+    assert env.calls == [1.0]
+    saved = json.loads(env.path.read_text())         # saved as the first speed finished
+    assert [r["speed"] for r in saved["data"]["rows"]] == [1.0]
+    assert saved["data"]["foot"] == "sliding" and saved["data"]["max_evaluations"] == 150
+    env.stop_after = None
+    env.run("--speeds", "1.0", "2.0", "1.5")
+    assert env.calls == [1.0, 2.0, 1.5]               # 1.0 not measured again
+    saved = json.loads(env.path.read_text())
+    assert [r["speed"] for r in saved["data"]["rows"]] == [1.0, 1.5, 2.0]
+    assert saved["data"]["rows"][0]["chosen"]["spectral_radius"] == 0.5
+    assert "measured" in saved["data"]["rows"][0]
+    whats = [r["what"] for r in saved["rows"]]
+    assert whats.count("1.5 m/s, chosen M1: spectral radius") == 1 and len(whats) == 12
+    env.run("--speeds", "2.0", "3.0")                 # the file's other speeds kept
+    assert env.calls == [1.0, 2.0, 1.5, 3.0]
+    assert [r["speed"] for r in json.loads(env.path.read_text())["data"]["rows"]] == \
+        [1.0, 1.5, 2.0, 3.0]
+
+
+def _refused(env, capsys, *args):
+    before = env.path.read_text()
+    with pytest.raises(SystemExit) as e:
+        env.run(*args)
+    err = capsys.readouterr().err.strip()
+    assert e.value.code == 2 and err.startswith("error: ") and "\n" not in err
+    assert env.path.read_text() == before and env.calls == [1.0]    # nothing measured
+    return err
+
+
+def test_other_settings_or_foreign_or_damaged_file_refused(env, capsys):
+    env.run("--speeds", "1.0")
+    assert "max_evaluations 150 (now 20)" in _refused(env, capsys, "--max-evaluations", "20")
+    assert "reserve 5.0 (now 3.0)" in _refused(env, capsys, "--reserve", "3")
+    body = json.loads(env.path.read_text())
+    del body["data"]["foot"]                          # written before the foot was recorded
+    env.path.write_text(json.dumps(body))
+    assert "foot not recorded (now sliding)" in _refused(env, capsys)
+    body["title"] = "something else"
+    env.path.write_text(json.dumps(body))
+    assert "not a result of bench_running_m1.py" in _refused(env, capsys)
+    env.path.write_text(json.dumps(dict(title=bench.TITLE, data={})))
+    assert "not a result of bench_running_m1.py (no 'rows')" in _refused(env, capsys)
+    env.path.write_text(env.path.read_text()[:-5])
+    assert "not readable JSON" in _refused(env, capsys)
+    assert "No such file" in _refused(env, capsys, "--combine", str(env.path) + ".none")
+
+
+def test_older_file_settings_read_from_its_rows(env):
+    """A file written before the settings were saved whole: the grid of c from its rows,
+    the reserve from a row that used it (150 - 145 N m), any reserve where none did."""
+    want = bench.settings(150, 5.0)
+    row = dict(_row(2.5), sweep_c=dict(c=want["c_grid"]), gait_torque_limit=145.0,
+               default_gait={})
+    body = dict(title=bench.TITLE, date="d", commit="c",
+                data=dict(rows=[row], Kp=400.0, Kd=30.0, hand=want["hand"],
+                          max_evaluations=150, foot="sliding"))
+    env.path.parent.mkdir()
+    env.path.write_text(json.dumps(body))
+    rows = bench.saved_rows(env.path, want, 150.0)
+    assert rows[0]["measured"] == dict(date="d", commit="c")
+    with pytest.raises(ValueError, match="reserve 5.0 .now 10"):
+        bench.saved_rows(env.path, bench.settings(150, 10.0), 150.0)
+    del row["default_gait"]
+    env.path.write_text(json.dumps(body))
+    assert bench.saved_rows(env.path, bench.settings(150, 10.0), 150.0)
+    row["sweep_c"]["c"] = [0.5, 1.0]
+    env.path.write_text(json.dumps(body))
+    with pytest.raises(ValueError, match="c_grid"):
+        bench.saved_rows(env.path, want, 150.0)
+
+
+def test_saturation_reads_the_saved_choice(env, monkeypatch):
+    """benchmarks/running_saturation.py takes its chosen M1 from these files: the row of
+    the speed and gait bound, chosen with the sliding foot; anything else is refused."""
+    import running_saturation as sat
+    env.run("--speeds", "2.5")
+    body = json.loads(env.path.read_text())
+    body["data"]["rows"][0]["gait_torque_limit"] = 145.0
+    env.path.write_text(json.dumps(body))
+    monkeypatch.setattr(sat, "RESULTS", env.path.parent)
+    assert sat.chosen_m1("m1", 2.5, 145.0) == (0.0, 1.0, 1.0, 0.0)
+    with pytest.raises(ValueError, match="no M1 chosen at 2.5 m/s on the gait at the "):
+        sat.chosen_m1("m1", 2.5, None)
+    with pytest.raises(ValueError, match="no M1 chosen at 2 m/s"):
+        sat.chosen_m1("m1", 2.0, 145.0)
+    with pytest.raises(ValueError, match="No such file"):
+        sat.chosen_m1("none", 2.5, 145.0)
+    del body["data"]["foot"]
+    env.path.write_text(json.dumps(body))
+    with pytest.raises(ValueError, match="foot not recorded, not the sliding one"):
+        sat.chosen_m1("m1", 2.5, 145.0)
