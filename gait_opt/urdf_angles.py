@@ -109,6 +109,25 @@ def _root_origin(urdf_map, pitch, dpitch):
     return -np.vstack([rf, ru]), -np.vstack([drf, dru])
 
 
+def _stance_foot_motion(model, urdf_map, nodes, columns, q, dq) -> tuple:
+    """How far (m) and how fast (m/s, None without dx, dz) the stance foot moves over the
+    step, by the base columns x, z (dx, dz) of ``nodes`` in URDF angles, read with the
+    stance leg of the model's coordinates ``q``, ``dq`` (n, N)."""
+    P, V = _hip_positions(model, q, dq)
+    o, do = _root_origin(urdf_map, nodes.q[0], nodes.dq[0])
+    bx = np.vstack([np.asarray(columns["x"], float), np.asarray(columns["z"], float)])
+    spread = float(np.max(np.ptp(bx - o - P, axis=1)))    # world foot = hip_world - hip(q)
+    if "dx" not in columns:
+        return spread, None
+    dbx = np.vstack([np.asarray(columns["dx"], float), np.asarray(columns["dz"], float)])
+    return spread, float(np.max(np.abs(dbx - do - V)))
+
+
+def _moves(spread, speed, tol) -> bool:
+    """Whether a stance foot's motion (:func:`_stance_foot_motion`) exceeds ``tol``."""
+    return not np.isfinite(spread) or spread > tol or (speed or 0.0) > tol
+
+
 def urdf_nodes(model, columns: dict, stance, where: str = "gait",
                tol: float = 0.05) -> tuple:
     """Nodes in the model's coordinates from columns in URDF angles.
@@ -169,23 +188,25 @@ def urdf_nodes(model, columns: dict, stance, where: str = "gait",
                           centre=model.description.upright_q)
     info = dict(stance=stance_name)
     if base:
-        P, V = _hip_positions(model, q, dq)
-        o, do = _root_origin(umap, nodes.q[0], nodes.dq[0])
-        bx = np.vstack([np.asarray(columns["x"], float), np.asarray(columns["z"], float)])
-        foot = bx - o - P                       # world stance foot = hip_world - hip(q)
-        spread = float(np.max(np.ptp(foot, axis=1)))
+        spread, speed = _stance_foot_motion(model, umap, nodes, columns, q, dq)
         info["stance_foot_spread"] = spread
-        if "dx" in base:
-            dbx = np.vstack([np.asarray(columns["dx"], float), np.asarray(columns["dz"], float)])
-            info["stance_foot_speed"] = float(np.max(np.abs(dbx - do - V)))
-        if not np.isfinite(spread) or spread > tol or info.get("stance_foot_speed", 0.0) > tol:
+        if speed is not None:
+            info["stance_foot_speed"] = speed
+        if _moves(spread, speed, tol):
+            other = umap.hips[2 - leg]
+            o_spread, o_speed = _stance_foot_motion(
+                model, umap, nodes, columns, *umap.to_model(
+                    nodes.q, nodes.dq, 3 - leg, continuous=True,
+                    centre=model.description.upright_q))
+            hint = (f"with --stance {other} it moves by {o_spread:.3g} m too: angles in "
+                    f"another convention (a URDF other than the data's?)"
+                    if _moves(o_spread, o_speed, tol) else
+                    f"another stance leg (--stance {other}?), angles in another convention")
             raise ValueError(
                 f"{where}: the base columns x, z say the stance foot (leg of {stance_name}) "
                 f"moves by {spread:.3g} m during the step"
-                + (f" at up to {info['stance_foot_speed']:.3g} m/s" if "dx" in base else "")
-                + f" (tolerance {tol:g}): another stance leg (--stance "
-                f"{umap.hips[2 - leg]}?), angles in another convention, or not one step "
-                f"on a pinned foot")
+                + (f" at up to {speed:.3g} m/s" if speed is not None else "")
+                + f" (tolerance {tol:g}): {hint}, or not one step on a pinned foot")
     return Nodes(nodes.t, q, dq, None, where), info
 
 

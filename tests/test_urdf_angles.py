@@ -449,6 +449,25 @@ def test_degrees_check_spares_half_turn_joints_and_finds_small_degrees():
         check_units(t, q, np.gradient(q, t, axis=1), ["pitch", "a", "b", "c"])
 
 
+@pytest.mark.parametrize("robot_file, stance, says, not_says", [
+    ("rabbit", "hip_left", "with --stance hip_right it moves by 0.204 m too: angles in "
+     "another convention", "(--stance hip_right?)"),
+    ("walker", "hip_right", "another stance leg (--stance hip_left?)", " too:")])
+def test_a_moving_stance_foot_suggests_the_other_leg_only_when_it_stays(
+        robot_file, stance, says, not_says, tmp_path, capsys):
+    """The walker's step with its base columns, read for the legs-down rabbit.urdf: its
+    stance foot moves with either leg in stance, and the line says so (it suggested the
+    other leg, which fails too); read with the other leg for the walker, it still
+    suggests the leg that keeps the foot put."""
+    urdf = URDF if robot_file == "walker" else builtin_path("rabbit").with_suffix(".urdf")
+    out = tmp_path / "gait.json"
+    assert main(["gait", "--import", str(CSV), "--robot", str(urdf), "--angles", "urdf",
+                 "--stance", stance, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert says in err and not_says not in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("column", ["x", "dx"])
 def test_a_nan_in_a_base_column_is_named(column, tmp_path, capsys):
     """A NaN in the root's position or velocity columns: one line naming the column (it
