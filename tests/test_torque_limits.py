@@ -197,3 +197,23 @@ def test_mujocos_motors_have_each_joints_range(knees):
     assert ranges(mjcf(m)) == {"hip_a": [-40.0, 40.0], "knee_a": [-20.0, 20.0],
                                "hip_b": [-40.0, 40.0], "knee_b": [-20.0, 20.0]}
     assert all(r == [-150.0, 150.0] for r in ranges(mjcf(robot("rabbit"))).values())
+
+
+def test_a_mujoco_walk_counts_clipping_per_joint(knees):
+    """The gait's hip torques (above 20 N m, within the hips' 40) are not clipped by the
+    robot's own motors (the first step: nothing is; later steps clip torques beyond a
+    joint's own limit, and apply more than 20 N m); with one limit of 20 N m for every
+    motor they are."""
+    pytest.importorskip("mujoco")
+    from biped_casadi import Design
+    from biped_casadi.mujoco import MujocoLoop
+    m, g = knees
+    loop = MujocoLoop(Design.vc(g))
+    assert loop.torque_limit == (20.0, 40.0, 40.0, 20.0) and loop.driver == "python"
+    own = loop.run(g.q(0.0), g.dq(0.0), 3)
+    assert own.status == "walked", own.message
+    first = own.steps[0]
+    assert first.clipped_time == 0.0 and first.peak_applied == first.peak_commanded > 20.0
+    assert all(20.0 < s.peak_applied <= 40.0 for s in own.steps)
+    one = MujocoLoop(Design.vc(g), torque_limit=20.0).run(g.q(0.0), g.dq(0.0), 1)
+    assert one.steps[0].clipped_time > 0.0 and one.steps[0].peak_applied == 20.0
