@@ -119,7 +119,7 @@ class FamilyFigures(Result):
         The simulator's fall bound on that lean (past it every walk is a fall), rad.
     torque_limit, mu, impact_mu : float
         The bounds of the problem (for the figures' reference lines; the torque limit of
-        a robot whose joints' limits differ is the largest, the bound on the peak |u|).
+        a robot whose joints' limits differ is the largest, the bound on the peak ``|u|``).
     """
 
     status: str

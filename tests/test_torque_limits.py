@@ -217,3 +217,24 @@ def test_a_mujoco_walk_counts_clipping_per_joint(knees):
     assert all(20.0 < s.peak_applied <= 40.0 for s in own.steps)
     one = MujocoLoop(Design.vc(g), torque_limit=20.0).run(g.q(0.0), g.dq(0.0), 1)
     assert one.steps[0].clipped_time > 0.0 and one.steps[0].peak_applied == 20.0
+
+
+def test_the_margins_take_each_joints_limit():
+    """The simulator's margins |u_i| <= U_i, numerically and symbolically, and its screen:
+    a torque of 30 N m is 10 N m inside a hip's 40 and 10 N m beyond a knee's 20."""
+    from biped_casadi.simulation.kernel import Diagnostics
+    from biped_casadi.simulation.margins import MarginCheck
+    lim = Limits(mu=0.6, min_normal_force=0.0, hip_floor=0.45, max_torso_angle=1.5,
+                 ground_tolerance=1e-9, singular_tolerance=0.01,
+                 torque_limit=(20.0, 40.0, 40.0, 20.0), min_liftoff_speed=0.0)
+    check = MarginCheck(lim, Diagnostics(4))
+    u = np.array([30.0, 30.0, -30.0, 0.0])
+    got = check.values(u, 0.0, 100.0)[3:]
+    assert got.tolist() == [-10.0, 10.0, 70.0, 20.0, 50.0, 70.0, 10.0, 20.0]
+    us = ca.SX.sym("u", 4)
+    sym = ca.Function("m", [us], [check.values(us, 0.0, 100.0, lib=ca)])
+    assert np.array(sym(u)).ravel()[3:].tolist() == got.tolist()
+    R = np.array([[30.0, 30.0, -30.0, 0.0, 0.0, 100.0]]).T[:, :, None].repeat(3, axis=2)
+    hips = R.copy()
+    hips[0] = 0.0                                        # the knee's 30 N m taken away
+    assert check.near(R).tolist() == [True] and check.near(hips).tolist() == [False]
