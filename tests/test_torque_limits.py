@@ -238,3 +238,78 @@ def test_the_margins_take_each_joints_limit():
     hips = R.copy()
     hips[0] = 0.0                                        # the knee's 30 N m taken away
     assert check.near(R).tolist() == [True] and check.near(hips).tolist() == [False]
+
+
+def _codesign_rows(m, g, settings):
+    """The reduced co-design NLP's rows on ``g`` (free), two scenarios of two steps, at a
+    small M1: (names, g, lo, hi, transcription)."""
+    from analysis.design.codesign import Reduced, Transcription
+    dirs = np.array([np.ones(2 * m.nq), np.where(np.arange(2 * m.nq) % 3 == 0, -1.0, 1.0)])
+    tr = Transcription(m, g, dirs, steps=2, free_gait=True, settings=settings)
+    red = Reduced(tr)
+    red.tols[:] = 10.0
+    red.steps[:] = 2
+    d = np.zeros(tr.n_design)
+    d[tr.i_G] = tr.gait_vector(g)
+    d[tr.i_M1], d[tr.i_rejoin], d[tr.i_s] = [0.0385, 0.6158, 0.4359, -0.6560], 0.75, 0.01
+    _, _, val, _, lo, hi = red.evaluate(d)
+    return np.array(red.names), val, lo, hi, tr
+
+
+def test_the_codesign_bounds_each_torque_by_its_joints_limit(knees):
+    """The co-design's torque rows (the gait's and the walked scenarios') take each
+    joint's limit: the gait's hip torques (above 20 N m) meet them, and the scenarios'
+    do not with one limit of 20 N m (the smallest) for every joint."""
+    from analysis.design.codesign import TranscriptionSettings
+    m, g = knees
+    names, val, lo, hi, tr = _codesign_rows(m, g, TranscriptionSettings())
+    assert tr.st.torque_limit == (20.0, 40.0, 40.0, 20.0)
+    assert tr.st.torque_margin == 0.02 * 20.0              # one margin: the smallest's
+    gait = names == "gait torque limit"
+    assert hi[gait].tolist()[:8] == [20.0, 40.0, 40.0, 20.0] * 2
+    assert np.all((lo[gait] <= val[gait]) & (val[gait] <= hi[gait]))
+    path = np.char.startswith(names.astype(str), "torque ")
+    assert path.any() and np.all(val[path] <= hi[path])     # KS rows: <= 0
+    names1, val1, _, hi1, _ = _codesign_rows(m, g, TranscriptionSettings(torque_limit=20.0))
+    path1 = np.char.startswith(names1.astype(str), "torque ")
+    assert np.any(val1[path1] > hi1[path1])
+
+
+def test_the_codesign_takes_a_robot_whose_joints_limits_differ(knees, monkeypatch):
+    """`codesign` runs such a robot (it refused it) and its method holds the NLP to each
+    joint's limit, or to the verification's one limit where it gives one."""
+    from analysis.design.codesign import CodesignSettings, Verification, api
+    from analysis.design.codesign.method import Method
+    m, g = knees
+
+    class Started(Exception):
+        pass
+
+    def engine(*args, **kwargs):
+        raise Started
+    monkeypatch.setattr(api, "Engine", engine)
+    with pytest.raises(Started):
+        api.codesign(m, CodesignSettings())
+    with pytest.raises(Started):
+        api.codesign(g)
+    assert Method(None, m, CodesignSettings()).tst.torque_limit == (20.0, 40.0, 40.0, 20.0)
+    one = CodesignSettings(verification=Verification(torque_limit=30.0))
+    assert Method(None, m, one).tst.torque_limit == 30.0
+
+
+def test_a_gait_moved_for_the_codesign_keeps_each_joint_within_its_fraction(knees):
+    """The co-design's move of a given gait takes each joint's torque to within 0.8 of
+    its own limit (16 N m at the knees, 32 at the hips; the gait's hip torque is above
+    16), and says so per torque."""
+    from analysis.design import ROBUST_GAIT
+    from analysis.design.codesign import MoveSettings, TranscriptionSettings, move_gait
+    from analysis.design.codesign.gait_move import own_values
+    m, g = knees
+    mv = move_gait(g, dict(ROBUST_GAIT), MoveSettings(), TranscriptionSettings())
+    assert mv.status == "moved", mv.message
+    assert mv.targets["torque_limit"] == (16.0, 32.0, 32.0, 16.0)
+    peaks = own_values(mv.gait)["torque_limit"]
+    assert max(peaks[1], peaks[2]) > 16.0
+    assert all(p <= u for p, u in zip(peaks, mv.targets["torque_limit"]))
+    assert mv.gait.violations() == []
+    assert "torques <= 16/32/32/16 N m" in mv.message

@@ -287,10 +287,6 @@ def codesign(robot_or_gait, settings: CodesignSettings | None = None, *, gait_fi
         model = robot_or_gait
     if gait is not None and gait.model.params != model.params:
         raise ValueError("gait: made for other robot parameters than the model")
-    if model.description.leg_torque_limits:
-        raise ValueError(f"robot: {model.params.name}'s joints have different torque limits "
-                         f"({model.description.torque_limit_text}); co-design takes one limit "
-                         f"for every joint: give the robot one torque_limit")
     # a gait given: its own flow, where "no design" is a value (the default co-design keeps
     # the flow it shares with `biped reproduce`)
     flow = codesign_flow if gait is None else given_gait_flow
