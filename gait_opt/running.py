@@ -81,7 +81,8 @@ class RunningOptions:
         ``|Fx| <= (mu - mu_margin) Fz``, 0 <= mu_margin < mu: without it the impulse lands
         on the cone's edge from 2 m/s on (RABBIT), and a perturbed closed loop slips there.
     torque_limit : float or None
-        Bound on every joint torque, N m; None: the model's (RABBIT: 150).
+        Bound on every joint torque, N m; None: the model's (RABBIT: 150; each joint's
+        own where the robot's joints' limits differ, :meth:`limit`).
     clearance : float or None
         Swing-foot clearance in stance, m: z_sw >= clearance 4 s (1 - s), s = t / Ts.
         None: 0.03 m times the robot's leg length over RABBIT's 0.8 m (:meth:`for_model`).
@@ -194,7 +195,7 @@ class RunningOptions:
                 if getattr(self, name) is None}
         return dataclasses.replace(self, **fill) if fill else self
 
-    def limit(self, model) -> float:
+    def limit(self, model):
         """The torque bound for ``model``.
 
         Parameters
@@ -204,11 +205,14 @@ class RunningOptions:
 
         Returns
         -------
-        float
-            ``torque_limit``, or the model's own when it is None, N m.
+        float or tuple of float
+            ``torque_limit``, or the model's own when it is None, N m: its
+            ``description.torque_bound``, one number per torque u1 .. u_nu where its
+            joints' limits differ.
         """
-        return float(model.description.torque_limit if self.torque_limit is None
-                     else self.torque_limit)
+        bound = model.description.torque_bound if self.torque_limit is None \
+            else self.torque_limit
+        return tuple(bound) if isinstance(bound, tuple) else float(bound)
 
 
 # ----------------------------------------------------------------- interpolation
@@ -492,12 +496,15 @@ def _dynamics(model, fl):
 def _torques(con, opts, U, umax, T, n):
     """|u| <= umax at every point and at the quarter points of every interval (where
     the quadratic torque of Hermite-Simpson overshoots its three values most), and, with
-    ``torque_rate_max``, a bound on the torque's rate between neighbouring points."""
-    bounded = con.opti.bounded
-    con.add(TORQUE_LIMIT, "N m", bounded(-umax, ca.vec(U), umax))
+    ``torque_rate_max``, a bound on the torque's rate between neighbouring points
+    (``umax``: one number, or one per torque u1 .. u_nu)."""
+    def bounded(u):                        # ca.vec runs down each column (point)
+        lim = umax if np.ndim(umax) == 0 else ca.DM(np.tile(umax, u.shape[1]))
+        return con.opti.bounded(-lim, ca.vec(u), lim)
+    con.add(TORQUE_LIMIT, "N m", bounded(U))
     u0, um, u1 = U[:, 0:-1:2], U[:, 1::2], U[:, 2::2]
     for a, b, c in ((0.375, 0.75, -0.125), (-0.125, 0.75, 0.375)):
-        con.add(TORQUE_LIMIT, "N m", bounded(-umax, ca.vec(a * u0 + b * um + c * u1), umax))
+        con.add(TORQUE_LIMIT, "N m", bounded(a * u0 + b * um + c * u1))
     if opts.torque_rate_max is not None:
         du = ca.vec(U[:, 1:] - U[:, :-1])
         step = opts.torque_rate_max * T / (2 * n)

@@ -17,6 +17,7 @@ from analysis.stability.running_cycle import (FLIGHT_CLOCKS, STEPS_PER_INTERVAL,
                                               running_stability, simulate_running)
 from biped_casadi.control.running import RunningController
 from biped_casadi.control.running_step import rk4_gain_bounds
+from biped_casadi.model.description import torque_bound_text
 from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
 from gait_opt.running_solve import STALL_WINDOW
@@ -591,7 +592,7 @@ def _print_stability(s: dict):
               + (f" (slack {sim['friction_slack']:.3g}); " if not sim.get("sliding", False)
                  else "; ") +
               f"|u| {'asked ' if sim.get('saturate') else ''}<= {mg['torque_max']:.1f} N m "
-              f"(limit {sim['torque_limit']:g})")
+              f"(limit {torque_bound_text(sim['torque_limit'])})")
     if mg and sim.get("sliding"):
         print(f"  sliding near takeoff up to {1e3 * mg['slip_max']:.3g} ms and "
               f"{1e3 * mg['slide_max']:.3g} mm a stride (friction on the cone's edge)"
@@ -599,13 +600,14 @@ def _print_stability(s: dict):
                  if mg.get("restick_max", 0.0) > 0 else ""))
     if sim.get("saturate"):
         n = sum(1 for v in sim["saturated_time"] if v > 0)
-        print(f"  saturation           torques clipped at {sim['torque_limit']:g} N m in {n} of "
+        print(f"  saturation           torques clipped at {torque_bound_text(sim['torque_limit'])}"
+              f" N m in {n} of "
               f"{len(sim['saturated_time'])} strides, {1e3 * mg.get('saturated_time', 0.0):.1f}"
               " ms in all; per stride (ms) "
               + " ".join(f"{1e3 * v:.1f}" for v in sim["saturated_time"]))
 
 
-def _print(s: dict, gait, limit: float):
+def _print(s: dict, gait, limit):
     """``biped running``'s report."""
     c = s["checks"]
     print(f"running step of {s['robot']}, saved to {s['file']} (the checks below are open "
@@ -614,7 +616,7 @@ def _print(s: dict, gait, limit: float):
     print(f"  step length          {s['step_length']:.4f} m at {s['speed']:.4f} m/s")
     print(f"  cost                 {s['cost']:.1f} N^2 m s (int u'u dt / step length)")
     print(f"  peak torque          {c['torque_max_dense']:.1f} N m (dense grid; limit "
-          f"{limit:g})")
+          f"{torque_bound_text(limit)})")
     print(f"  ground force         Fz at takeoff {c['fz_takeoff']:.2g} N, smallest "
           f"{c['fz_min_dense']:.2g} N (dense); |Fx|/Fz at most {c['friction_ratio_max']:.3f}"
           f" (mu {gait.options.mu:g}, optimised with {gait.options.mu_margin:g} below it)")
