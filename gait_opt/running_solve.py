@@ -205,10 +205,11 @@ def torque_at_limit(opti, g, groups, joints, rel=1e-3) -> list:
     -------
     list of dict
         ``joint``, ``count`` (points at the limit, both phases, the quarter points
-        counted), ``limit`` (N m), most points first; joints with none left out.
+        counted), ``limit`` (N m, the joint's), most points first; joints with none left
+        out.
     """
     ubg = _bounds(opti, g)[1]
-    counts, limit = {}, None
+    counts, limits = {}, {}
     for label, _, start, stop in groups:
         if label != TORQUE_LIMIT:
             continue
@@ -216,8 +217,8 @@ def torque_at_limit(opti, g, groups, joints, rel=1e-3) -> list:
             limit = float(ubg[i])
             if abs(float(g[i])) >= (1 - rel) * limit:
                 j = joints[(i - start) % len(joints)]
-                counts[j] = counts.get(j, 0) + 1
-    out = [dict(joint=j, count=c, limit=limit) for j, c in counts.items()]
+                counts[j], limits[j] = counts.get(j, 0) + 1, limit
+    out = [dict(joint=j, count=c, limit=limits[j]) for j, c in counts.items()]
     return sorted(out, key=lambda d: -d["count"])
 
 

@@ -123,3 +123,39 @@ def test_the_running_command_says_each_joints_limit(hips60, capsys):
     assert len(s["checks"]["torque_max_dense_each"]) == 4
     assert main(["running", "--robot", str(path)]) == 0
     assert "limit 150/60/60/150)" in capsys.readouterr().out
+
+
+def test_torques_at_their_limits_are_told_with_each_joints(hips60, monkeypatch):
+    """The step's rows |u_i| <= U_i hold each torque to its joint's limit, point after
+    point: torques held at 150, 60, 30, 10 N m put the stance knee (150) and the stance
+    hip (60) at their limits, the others at none; a failure says each one's limit."""
+    from analysis.cli.running import failure
+    from gait_opt import running
+    from gait_opt.running import running_guess
+    from gait_opt.running_solve import torque_at_limit
+    _, m, _ = hips60
+    o = RunningOptions(n_stance=4, n_flight=3).for_model(m)
+    guess = running_guess(m, o)
+    u = np.array([[150.0], [60.0], [30.0], [10.0]])
+    for phase in ("stance", "flight"):
+        guess[f"u_{phase}"] = np.repeat(u, guess[f"u_{phase}"].shape[1], axis=1)
+
+    class Built(Exception):
+        pass
+
+    def stop(con, *args):
+        raise Built(con)
+    monkeypatch.setattr(running, "solve_running", stop)
+    with pytest.raises(Built) as built:
+        optimize_running(m, o, guess)
+    con = built.value.args[0]
+    g = np.array(con.opti.debug.value(con.opti.g, con.opti.initial()), float).ravel(order="F")
+    joints = ["knee", "hip", "hip b", "knee b"]
+    points = 4 * o.n_stance + 1 + 4 * o.n_flight + 1
+    got = torque_at_limit(con.opti, g, con.groups, joints)
+    assert got == [dict(joint="knee", count=points, limit=150.0),
+                   dict(joint="hip", count=points, limit=60.0)]
+    said = failure(1.5, dict(return_status="Maximum_Iterations_Exceeded", iterations=3,
+                             torque_at_limit=got))
+    assert f"torques at their limits (knee at {points} points of its 150 N m, hip at " \
+           f"{points} points of its 60 N m)" in said

@@ -430,9 +430,13 @@ def failure(speed: float, stats: dict) -> str:
         how = f"IPOPT: {stats.get('return_status')} after {n} iterations"
     said = []
     limit = stats.get("torque_at_limit") or []
-    if limit:
+    if limit and len({d["limit"] for d in limit}) == 1:
         said.append(f"torques at their {limit[0]['limit']:g} N m limit (" + ", ".join(
             f"{d['joint']} at {d['count']} points" for d in limit) + ")")
+    elif limit:                                     # the joints' limits differ
+        said.append("torques at their limits (" + ", ".join(
+            f"{d['joint']} at {d['count']} points of its {d['limit']:g} N m" for d in limit)
+            + ")")
     for d in stats.get("violated") or []:
         said.append(f"{d['name']} violated by {d['violation']:.2g}"
                     + (f" {d['unit']}" if d["unit"] else ""))
@@ -565,7 +569,7 @@ def _print_stability(s: dict):
     clock = "" if s.get("flight_clock", "takeoff") == "takeoff" else \
         f", flight clock {s['flight_clock']}"
     if s.get("clipped_at") is not None:
-        clock += f", torques clipped at {s['clipped_at']:g} N m"
+        clock += f", torques clipped at {torque_bound_text(s['clipped_at'])} N m"
     print(f"closed loop ({s['law']}, Kp {gain(s['Kp'])}, Kd {gain(s['Kd'])}, M1 "
           f"{_exact(s['M1'])}{clock}): {s['status']}")
     if s["status"] == "failed":
