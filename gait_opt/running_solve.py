@@ -28,8 +28,8 @@ from biped_casadi.numerics import ipopt_on_one_thread, iteration_stop
 
 from .running_file import solve_or_last_iterate
 
-__all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "LabelledConstraints",
-           "STALL_FACTOR", "FEASIBLE", "STALL_WINDOW", "TORQUE_LIMIT"]
+__all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "torque_rows",
+           "LabelledConstraints", "STALL_FACTOR", "FEASIBLE", "STALL_WINDOW", "TORQUE_LIMIT"]
 
 #: the default window, iterations (``RunningOptions.stall_window``)
 STALL_WINDOW = 100
@@ -182,6 +182,42 @@ def _bounds(opti, g):
     ubg = np.array(ca.evalf(opti.ubg)).ravel()
     g = np.asarray(g, float)
     return lbg, ubg, np.maximum(lbg - g, g - ubg)
+
+
+def torque_rows(con, opts, U, umax, T, n):
+    """A phase's torque rows: |u| <= umax at every point and at the quarter points of
+    every interval (where the quadratic torque of Hermite-Simpson overshoots its three
+    values most), and, with ``torque_rate_max``, a bound on the torque's rate between
+    neighbouring points.
+
+    Parameters
+    ----------
+    con : LabelledConstraints
+        The running step's problem (the rows |u| <= umax labelled :data:`TORQUE_LIMIT`).
+    opts : RunningOptions
+        Its options (``torque_rate_max``).
+    U : casadi.MX
+        (nu, 2 n + 1) the phase's torques, point after point.
+    umax : float or tuple of float
+        The bound, N m: one number, or one per torque u1 .. u_nu
+        (:meth:`~gait_opt.running.RunningOptions.limit`).
+    T : casadi.MX
+        The phase's duration, s.
+    n : int
+        Its Hermite-Simpson intervals.
+    """
+    def bounded(u):                            # ca.vec: point after point
+        lim = umax if np.ndim(umax) == 0 else ca.DM(np.tile(umax, u.shape[1]))
+        return con.opti.bounded(-lim, ca.vec(u), lim)
+    con.add(TORQUE_LIMIT, "N m", bounded(U))
+    u0, um, u1 = U[:, 0:-1:2], U[:, 1::2], U[:, 2::2]
+    for a, b, c in ((0.375, 0.75, -0.125), (-0.125, 0.75, 0.375)):
+        con.add(TORQUE_LIMIT, "N m", bounded(a * u0 + b * um + c * u1))
+    if opts.torque_rate_max is not None:
+        du = ca.vec(U[:, 1:] - U[:, :-1])
+        step = opts.torque_rate_max * T / (2 * n)
+        con.add("torque rate bound", "N m", du <= step)
+        con.add("torque rate bound", "N m", du >= -step)
 
 
 def torque_at_limit(opti, g, groups, joints, rel=1e-3) -> list:

@@ -116,12 +116,13 @@ def test_mujocos_running_motors_have_each_joints_limit(hips60):
                      stopped.message), stopped.message
 
 
-def test_the_running_command_says_each_joints_limit(hips60, capsys):
+def test_the_running_command_says_each_joints_limit(hips60, capsys, tmp_path):
     path, _, _ = hips60
-    assert main(["running", "--robot", str(path), "--json"]) == 0
+    out = str(tmp_path / "step.json")
+    assert main(["running", "--robot", str(path), "--json", "--out", out]) == 0
     s = json.loads(capsys.readouterr().out)
     assert len(s["checks"]["torque_max_dense_each"]) == 4
-    assert main(["running", "--robot", str(path)]) == 0
+    assert main(["running", "--robot", str(path), "--out", out]) == 0
     assert "limit 150/60/60/150)" in capsys.readouterr().out
 
 

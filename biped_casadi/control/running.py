@@ -420,8 +420,9 @@ class RunningController:
 
     @property
     def clipped_at(self):
-        """The limit the torques are clipped at, N m: a float, or per torque a tuple
-        (None without ``saturate``)."""
+        """The limit the torques are clipped at, N m (None without ``saturate``).
+
+        One number, or a tuple of one per torque where the joints' limits differ."""
         return self.torque_limit if self.saturate else None
 
     def applied(self, u):
