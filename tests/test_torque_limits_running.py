@@ -78,8 +78,10 @@ def test_the_running_controller_clips_each_torque_at_its_limit(hips60):
     header = running_c_sources(exp)[RUNNING_HEADER]
     assert "torques clipped at +-(150.0, 60.0, 60.0, 150.0) (u1 .. u4, each joint's) N m" \
         in header
-    with pytest.raises(ValueError, match="torque_limit must be a positive number"):
+    with pytest.raises(ValueError, match="torque_limit must be one number or 4, one per "):
         RunningController(m, g, torque_limit=(60.0, 150.0))
+    with pytest.raises(ValueError, match="torque_limit must be a positive number"):
+        RunningController(m, g, torque_limit=(60.0, 150.0, -1.0, 60.0))
 
 
 def test_the_closed_loops_constraints_take_each_joints_limit(hips60):

@@ -118,7 +118,7 @@ class RobustDesignSettings:
         RK4 steps per T of the walker during the search (the final s* uses the
         robustness settings' own).
     mu, torque_limit, directions, steps, tol : as :class:`RobustnessSettings`
-        Friction coefficient, torque bound (N m, None: the robot's), kept directions,
+        Friction coefficient, torque bound (N m, None: the robot's own, each joint's), kept directions,
         steps walked and convergence threshold of every robustness run.
     """
 

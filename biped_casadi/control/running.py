@@ -216,11 +216,12 @@ def _torque_limit(model, torque_limit, saturate: bool):
     nu floats (one per torque); a ValueError naming ``torque_limit`` where it is none."""
     lim = _number_array("torque_limit", model.description.torque_bound
                         if torque_limit is None else torque_limit)
+    if lim.ndim > 1 or (lim.ndim == 1 and lim.size != model.nu):
+        raise ValueError(f"torque_limit must be one number or {model.nu}, one per torque, "
+                         f"got {torque_limit!r}")
     unusable = saturate and not np.all(np.isfinite(lim))    # inf: a robot without one
-    if lim.ndim > 1 or (lim.ndim == 1 and lim.size != model.nu) or not np.all(lim > 0) \
-            or (unusable and torque_limit is not None):
-        raise ValueError(f"torque_limit must be a positive number (or {model.nu}, one per "
-                         f"torque), got {torque_limit!r}")
+    if not np.all(lim > 0) or (unusable and torque_limit is not None):
+        raise ValueError(f"torque_limit must be a positive number, got {torque_limit!r}")
     if unusable:
         raise ValueError("saturate needs a torque limit: the robot has none (pass "
                          "torque_limit)")

@@ -166,7 +166,8 @@ class Verification:
     mu : float
         Friction coefficient.
     torque_limit : float, optional
-        Torque bound, N m (None: the robot's).
+        Torque bound on every joint, N m (None: the robot's own, each joint's where its
+        joints' limits differ).
     directions : int
         Kept perturbation directions.
     walk_steps : int
