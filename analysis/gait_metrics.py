@@ -118,7 +118,8 @@ class FamilyFigures(Result):
     fall_bound : float
         The simulator's fall bound on that lean (past it every walk is a fall), rad.
     torque_limit, mu, impact_mu : float
-        The bounds of the problem (for the figures' reference lines).
+        The bounds of the problem (for the figures' reference lines; the torque limit of
+        a robot whose joints' limits differ is the largest, the bound on the peak ``|u|``).
     """
 
     status: str
@@ -221,5 +222,5 @@ def family_figures(family) -> FamilyFigures:
             f"{', '.join(f'{v:g}' for v in falls)} m/s (every walk there is a fall)"
             if falls else "")), fall_bound=bound,
         robot=family.robot, branch=[r.branch for r in family.records],
-        events=list(family.events), torque_limit=o.torque_limit, mu=o.mu,
+        events=list(family.events), torque_limit=float(np.max(o.torque_limit)), mu=o.mu,
         impact_mu=o.impulse_mu, **cols)

@@ -578,7 +578,9 @@ def verify_export(folder, ctrl, q0, dq0, options: SimulationOptions | None = Non
         c_us, _ = time_example(folder, cc, calls, work)
     limit = None if law is None else law.torque_limit
     if limit is not None:             # the robot receives what the law gives, clipped alike
-        options = replace(options or SimulationOptions(), saturate=True, torque_limit=limit)
+        # per-joint bounds (a float in the options) are the robot's own: None takes them
+        options = replace(options or SimulationOptions(), saturate=True,
+                          torque_limit=limit if np.ndim(limit) == 0 else None)
     states = (compare_urdf_states if urdf else compare_states)(compiled, ctrl, n_states, seed,
                                                                limit)
     sim = compare_simulations(compiled, ctrl, q0, dq0, options, law)

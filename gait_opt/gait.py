@@ -348,7 +348,8 @@ class Gait(Reference):
         Returns
         -------
         dict
-            ``max_abs_torque`` (N m), ``min_normal_force`` (N), ``max_friction_ratio``,
+            ``max_abs_torque`` (N m; ``max_abs_torques`` per torque u1 .. u_nu),
+            ``min_normal_force`` (N), ``max_friction_ratio``,
             ``min_swing_height_inside`` and ``min_clearance_margin`` (m, inside the
             step), ``swing_height_at_T`` (m), ``strike_velocity`` and
             ``liftoff_velocity`` (m/s), ``impact_impulse`` (N s) and

@@ -43,6 +43,7 @@ def dense_check(gait, n: int) -> dict:
     return dict(
         n_points=n,
         max_abs_torque=float(np.max(np.abs(u))),
+        max_abs_torques=[float(v) for v in np.max(np.abs(u), axis=1)],
         min_normal_force=float(np.min(Fz)),
         max_friction_ratio=float(np.max(np.abs(Fx) / np.maximum(Fz, 1e-300))),
         min_swing_height_inside=float(np.min(height[inner])),
@@ -67,7 +68,9 @@ def dense_violations(gait, check: dict, tol: float) -> list:
     o = gait.options
     F = c["impact_impulse"]
     amounts = {
-        "torque limit": c["max_abs_torque"] - o.torque_limit,
+        "torque limit": (c["max_abs_torque"] - o.torque_limit if np.ndim(o.torque_limit) == 0
+                         else float(np.max(np.subtract(c["max_abs_torques"],
+                                                       o.torque_limit)))),
         "normal force": o.min_normal_force - c["min_normal_force"],
         "friction cone": c["max_friction_ratio"] - o.mu,
         "swing foot above ground": (-c["min_swing_height_inside"] + 2 * tol

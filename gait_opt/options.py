@@ -112,6 +112,15 @@ def guess_step_length(model, speed: float) -> float:
     return GUESS_STEP_LENGTH * leg_scale(model) * math.sqrt(float(speed) / reference_speed(model))
 
 
+def _per_torque(values) -> tuple:
+    """Per-torque bounds as a tuple of floats, each a positive finite number."""
+    if not values or any(isinstance(v, bool) or not isinstance(v, (int, float))
+                         or not math.isfinite(v) or not v > 0 for v in values):
+        raise ValueError(f"gait option 'torque_limit' must be a positive number, None, or "
+                         f"one positive finite number per torque, got {list(values)!r}")
+    return tuple(float(v) for v in values)
+
+
 class LegScaled(dict):
     """GaitOptions fields given for RABBIT's legs, their lengths scaled to a robot's.
 
@@ -208,9 +217,10 @@ class GaitOptions:
         A separate (design) bound on the impact impulse ratio ``|F_x| / F_z``, or None
         for ``mu``: a gait whose nominal impulse sits well inside the cone leaves room
         for the impact to move under perturbations.
-    torque_limit : float or None
-        Bound on every ``|u_i|``, N m; None (the default): the robot's own (its
-        description's ``torque_limit``; RABBIT: 150 N m), filled in by
+    torque_limit : float, tuple of float or None
+        Bound on every ``|u_i|``, N m, or one bound per torque (nu numbers, u1 .. u_nu);
+        None (the default): the robot's own (its description's ``torque_bound``: RABBIT's
+        150 N m, the joints' limits for a robot whose joints' limits differ), filled in by
         :meth:`for_model` when a gait is solved; inf for a robot without one (recorded
         with imported gaits; solving a gait needs a finite bound).
     min_normal_force : float
@@ -303,7 +313,10 @@ class GaitOptions:
     def __post_init__(self):
         c = FieldChecks(self, "gait option {!r}")
         c.numbers(("speed", "mu"))
-        c.numbers(("torque_limit",), none=True, inf=True)   # inf: the robot has none
+        if isinstance(self.torque_limit, (list, tuple)):    # per torque: finite numbers
+            object.__setattr__(self, "torque_limit", _per_torque(self.torque_limit))
+        else:
+            c.numbers(("torque_limit",), none=True, inf=True)   # inf: the robot has none
         c.numbers(("impact_mu",), none=True)
         c.numbers(("continuation",), none=True, inf=True,
                   phrase="None or a positive number (inf allowed)")
@@ -348,6 +361,8 @@ class GaitOptions:
                 del d[name]
         if d["continuation_shape"] == "ramp":
             del d["continuation_shape"]
+        if isinstance(self.torque_limit, tuple):
+            d["torque_limit"] = list(self.torque_limit)
         if self.step_length_bounds is not None:
             d["step_length_bounds"] = list(self.step_length_bounds)
         d["step_time_bounds"] = list(self.step_time_bounds)
@@ -441,5 +456,9 @@ class GaitOptions:
         """
         opts = self.with_lengths(model)
         if opts.torque_limit is None:
-            return opts.replace(torque_limit=float(model.description.torque_limit))
+            bound = model.description.torque_bound
+            return opts.replace(torque_limit=bound if isinstance(bound, tuple) else float(bound))
+        if isinstance(opts.torque_limit, tuple) and len(opts.torque_limit) != model.nu:
+            raise ValueError(f"gait option 'torque_limit' has {len(opts.torque_limit)} "
+                             f"bounds, the robot {model.params.name} {model.nu} torques")
         return opts

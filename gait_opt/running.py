@@ -48,7 +48,7 @@ from biped_casadi.option_checks import FieldChecks
 from .options import leg_scale
 from .running_cache import cached_running
 from .running_file import check_running_file, running_problem
-from .running_solve import STALL_WINDOW, TORQUE_LIMIT, LabelledConstraints, solve_running
+from .running_solve import STALL_WINDOW, LabelledConstraints, solve_running, torque_rows
 from .transcription import torso_lean_bound
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
@@ -81,7 +81,7 @@ class RunningOptions:
         ``|Fx| <= (mu - mu_margin) Fz``, 0 <= mu_margin < mu: without it the impulse lands
         on the cone's edge from 2 m/s on (RABBIT), and a perturbed closed loop slips there.
     torque_limit : float or None
-        Bound on every joint torque, N m; None: the model's (RABBIT: 150).
+        Bound on every joint torque, N m; None: the model's (RABBIT: 150; :meth:`limit`).
     clearance : float or None
         Swing-foot clearance in stance, m: z_sw >= clearance 4 s (1 - s), s = t / Ts.
         None: 0.03 m times the robot's leg length over RABBIT's 0.8 m (:meth:`for_model`).
@@ -194,7 +194,7 @@ class RunningOptions:
                 if getattr(self, name) is None}
         return dataclasses.replace(self, **fill) if fill else self
 
-    def limit(self, model) -> float:
+    def limit(self, model):
         """The torque bound for ``model``.
 
         Parameters
@@ -204,11 +204,11 @@ class RunningOptions:
 
         Returns
         -------
-        float
-            ``torque_limit``, or the model's own when it is None, N m.
+        float or tuple of float
+            ``torque_limit``, else the model's ``description.torque_bound``, N m.
         """
-        return float(model.description.torque_limit if self.torque_limit is None
-                     else self.torque_limit)
+        b = model.description.torque_bound if self.torque_limit is None else self.torque_limit
+        return b if isinstance(b, tuple) else float(b)
 
 
 # ----------------------------------------------------------------- interpolation
@@ -489,22 +489,6 @@ def _dynamics(model, fl):
     return fs, ff
 
 
-def _torques(con, opts, U, umax, T, n):
-    """|u| <= umax at every point and at the quarter points of every interval (where
-    the quadratic torque of Hermite-Simpson overshoots its three values most), and, with
-    ``torque_rate_max``, a bound on the torque's rate between neighbouring points."""
-    bounded = con.opti.bounded
-    con.add(TORQUE_LIMIT, "N m", bounded(-umax, ca.vec(U), umax))
-    u0, um, u1 = U[:, 0:-1:2], U[:, 1::2], U[:, 2::2]
-    for a, b, c in ((0.375, 0.75, -0.125), (-0.125, 0.75, 0.375)):
-        con.add(TORQUE_LIMIT, "N m", bounded(-umax, ca.vec(a * u0 + b * um + c * u1), umax))
-    if opts.torque_rate_max is not None:
-        du = ca.vec(U[:, 1:] - U[:, :-1])
-        step = opts.torque_rate_max * T / (2 * n)
-        con.add("torque rate bound", "N m", du <= step)
-        con.add("torque rate bound", "N m", du >= -step)
-
-
 def _posture(con, model, opts, Q):
     """Knees between straight and ``knee_flexion_max``, the other joints within pi of
     upright; the torso within ``torso_lean_max`` of upright."""
@@ -675,7 +659,7 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
                            opts.flight_time_bounds)
     umax = opts.limit(model)
     for U, T, n_int in ((Us, Ts, opts.n_stance), (Uf, Tf, opts.n_flight)):
-        _torques(con, opts, U, umax, T, n_int)
+        torque_rows(con, opts, U, umax, T, n_int)
     _stance_constraints(con, model, fl, opts, Xs, Us, Fs, Ts)
     _flight_constraints(con, model, fl, opts, Xf)
     p_foot = _edges(con, model, fl, opts, Xs, Xf)

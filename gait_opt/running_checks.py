@@ -49,6 +49,9 @@ class RunningReport:
         near takeoff).
     torque_max_dense : float
         Largest ``|u|`` on the dense grid of both phases, N m.
+    torque_max_dense_each : tuple of float
+        Largest ``|u_i|`` of each torque u1 .. u_nu there, N m (their largest is
+        ``torque_max_dense``).
     swing_min_stance : float
         Smallest swing-foot height in stance (dense grid), m.
     feet_min_flight : float
@@ -118,6 +121,7 @@ class RunningReport:
     momentum_drift_collocated: float
     momentum_drift_integrated: float
     momentum_scale: float
+    torque_max_dense_each: tuple = ()
 
     def as_dict(self) -> dict:
         """The figures as a plain dict.
@@ -128,15 +132,17 @@ class RunningReport:
         """
         return asdict(self)
 
-    def violations(self, torque_limit: float, tol: float = 1e-7) -> list:
+    def violations(self, torque_limit, tol: float = 1e-7) -> list:
         """The path constraints violated between the collocation points (dense grid).
 
         As :meth:`gait_opt.Gait.violations` says of a walking gait.
 
         Parameters
         ----------
-        torque_limit : float
-            The torque limit the step was made for, N m (friction: the step's own mu).
+        torque_limit : float or tuple of float
+            The torque limit the step was made for, N m (friction: the step's own mu):
+            one number, or one per torque u1 .. u_nu
+            (:meth:`gait_opt.running.RunningOptions.limit`).
         tol : float
             Amounts up to this count as satisfied (round-off where Fz and Fx vanish).
 
@@ -145,7 +151,9 @@ class RunningReport:
         list of (str, float)
             (constraint, worst amount), worst first, in N m, N and m; empty when all hold.
         """
-        amounts = {"torque limit": self.torque_max_dense - torque_limit,
+        over = self.torque_max_dense - torque_limit if np.ndim(torque_limit) == 0 else \
+            max(u - U for u, U in zip(self.torque_max_dense_each, torque_limit))
+        amounts = {"torque limit": over,
                    "normal force in stance": -self.fz_min_dense,
                    "friction cone in stance (|Fx| - mu Fz)": self.friction_excess_dense,
                    "swing foot above the ground in stance": -self.swing_min_stance,
@@ -319,7 +327,7 @@ def _stance_figures(model, fl, gait: RunningGait):
                 friction_ratio_max=float(np.max(np.abs(Fx[loaded]) / Fz[loaded], initial=0.0)),
                 friction_excess_nodes=float(np.max(np.abs(Fx_n) - mu * Fz_n)),
                 friction_excess_dense=float(np.max(np.abs(Fx) - mu * Fz)),
-                swing_min_stance=float(np.array(zsw).min())), np.abs(u).max()
+                swing_min_stance=float(np.array(zsw).min())), np.abs(u).max(axis=1)
 
 
 def _step_map(model, fl, gait: RunningGait):
@@ -374,7 +382,9 @@ def check_running(model, gait: RunningGait) -> RunningReport:
     coll = _flight_physics(fl, x, t)
     integ = _flight_physics(fl, xi, tf)
     return RunningReport(
-        **stance, torque_max_dense=float(max(u_max_s, np.abs(u).max())),
+        **stance, torque_max_dense=float(max(u_max_s.max(), np.abs(u).max())),
+        torque_max_dense_each=tuple(float(v) for v in np.maximum(u_max_s,
+                                                                 np.abs(u).max(axis=1))),
         feet_min_flight=float(min(feet[1, 0::2][inner].min(), feet[1, 1::2][inner].min())),
         flight_duration=gait.T_flight, **_edges(model, fl, gait),
         flight_end_error=float(np.max(np.abs(fl_int.y[:, -1] - gait.x_flight[:, -1]))),

@@ -28,8 +28,8 @@ from biped_casadi.numerics import ipopt_on_one_thread, iteration_stop
 
 from .running_file import solve_or_last_iterate
 
-__all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "LabelledConstraints",
-           "STALL_FACTOR", "FEASIBLE", "STALL_WINDOW", "TORQUE_LIMIT"]
+__all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "torque_rows",
+           "LabelledConstraints", "STALL_FACTOR", "FEASIBLE", "STALL_WINDOW", "TORQUE_LIMIT"]
 
 #: the default window, iterations (``RunningOptions.stall_window``)
 STALL_WINDOW = 100
@@ -184,6 +184,42 @@ def _bounds(opti, g):
     return lbg, ubg, np.maximum(lbg - g, g - ubg)
 
 
+def torque_rows(con, opts, U, umax, T, n):
+    """A phase's torque rows: |u| <= umax at every point and at the quarter points of
+    every interval (where the quadratic torque of Hermite-Simpson overshoots its three
+    values most), and, with ``torque_rate_max``, a bound on the torque's rate between
+    neighbouring points.
+
+    Parameters
+    ----------
+    con : LabelledConstraints
+        The running step's problem (the rows |u| <= umax labelled :data:`TORQUE_LIMIT`).
+    opts : RunningOptions
+        Its options (``torque_rate_max``).
+    U : casadi.MX
+        (nu, 2 n + 1) the phase's torques, point after point.
+    umax : float or tuple of float
+        The bound, N m: one number, or one per torque u1 .. u_nu
+        (:meth:`~gait_opt.running.RunningOptions.limit`).
+    T : casadi.MX
+        The phase's duration, s.
+    n : int
+        Its Hermite-Simpson intervals.
+    """
+    def bounded(u):                            # ca.vec: point after point
+        lim = umax if np.ndim(umax) == 0 else ca.DM(np.tile(umax, u.shape[1]))
+        return con.opti.bounded(-lim, ca.vec(u), lim)
+    con.add(TORQUE_LIMIT, "N m", bounded(U))
+    u0, um, u1 = U[:, 0:-1:2], U[:, 1::2], U[:, 2::2]
+    for a, b, c in ((0.375, 0.75, -0.125), (-0.125, 0.75, 0.375)):
+        con.add(TORQUE_LIMIT, "N m", bounded(a * u0 + b * um + c * u1))
+    if opts.torque_rate_max is not None:
+        du = ca.vec(U[:, 1:] - U[:, :-1])
+        step = opts.torque_rate_max * T / (2 * n)
+        con.add("torque rate bound", "N m", du <= step)
+        con.add("torque rate bound", "N m", du >= -step)
+
+
 def torque_at_limit(opti, g, groups, joints, rel=1e-3) -> list:
     """The torques at (or beyond) their limit, joint by joint.
 
@@ -205,10 +241,11 @@ def torque_at_limit(opti, g, groups, joints, rel=1e-3) -> list:
     -------
     list of dict
         ``joint``, ``count`` (points at the limit, both phases, the quarter points
-        counted), ``limit`` (N m), most points first; joints with none left out.
+        counted), ``limit`` (N m, the joint's), most points first; joints with none left
+        out.
     """
     ubg = _bounds(opti, g)[1]
-    counts, limit = {}, None
+    counts, limits = {}, {}
     for label, _, start, stop in groups:
         if label != TORQUE_LIMIT:
             continue
@@ -216,8 +253,8 @@ def torque_at_limit(opti, g, groups, joints, rel=1e-3) -> list:
             limit = float(ubg[i])
             if abs(float(g[i])) >= (1 - rel) * limit:
                 j = joints[(i - start) % len(joints)]
-                counts[j] = counts.get(j, 0) + 1
-    out = [dict(joint=j, count=c, limit=limit) for j, c in counts.items()]
+                counts[j], limits[j] = counts.get(j, 0) + 1, limit
+    out = [dict(joint=j, count=c, limit=limits[j]) for j, c in counts.items()]
     return sorted(out, key=lambda d: -d["count"])
 
 

@@ -311,7 +311,9 @@ def _point_constraints(model, opts, lay: _Layout, margins, OUT):
     con.add("actuated joints (Bezier)", lay.QA - QA_of_alpha, 0, 0)
     con.add("dynamics (collocation)", ca.horzcat(*coll), 0, 0)
     con.add("dynamics (continuity)", ca.horzcat(*cont), 0, 0)
-    umax = opts.torque_limit - margins.get("torque limit", 0.0)
+    umax = np.asarray(opts.torque_limit) - margins.get("torque limit", 0.0)
+    if umax.ndim:                    # per torque: ca.vec runs down each column (point)
+        umax = np.tile(umax, OUT.shape[1])
     mu = opts.mu - margins.get("friction cone", 0.0)
     Fx_all, Fz_all = OUT[rows["Fx"], :], OUT[rows["Fz"], :]
     con.add("torque limit", OUT[rows["u"], :], -umax, umax)
@@ -488,7 +490,7 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None, *,
     Problem
     """
     opts = opts.for_model(model)
-    if not np.isfinite(opts.torque_limit):
+    if not np.all(np.isfinite(opts.torque_limit)):
         raise ValueError(f"torque_limit: the robot {model.params.name} has no torque limit "
                          f"(its URDF gives no effort limits) and the gait's |u| <= limit "
                          f"constraint needs one: give it (--torque-limit N, or "

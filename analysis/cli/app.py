@@ -48,7 +48,7 @@ def cmd_model(args):
         return
     d = model.description
     print(f"robot {d.name}: total mass {s['total_mass']:.4g} kg, {d.k} link(s) per leg, "
-          f"{nq} joints, {model.nu} torques (limit {d.torque_limit:g} N m), g = {d.gravity:g}")
+          f"{nq} joints, {model.nu} torques (limit {d.torque_limit_text}), g = {d.gravity:g}")
     for link in (d.torso,) + d.leg:
         print(f"  {link.name:8s} mass {link.mass:g} kg, length {link.length:g} m, "
               f"com {link.com:g} m" + (f" (off its line by {link.com_offset:g} m)"

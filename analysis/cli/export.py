@@ -12,6 +12,7 @@ from biped_casadi import Gains, SimulationOptions, TimeVaryingController, Virtua
 from biped_casadi.control.compiled import CompilerError, find_c_compiler
 from biped_casadi.control.export import EXPORT_ANGLES, HEADER, c_sources, exported_law
 from biped_casadi.control.export_folder import check_destination, staged_export
+from biped_casadi.model.description import torque_bound_text
 from gait_opt.cache import cache_path
 from analysis.verify_export import SIMULATION_TOL, TORQUE_RTOL, apart_reason, verify_export
 
@@ -228,7 +229,7 @@ def _report(args, r):
             if c["controller"] == "tv" else "virtual-constraint controller fitted to the gait")
     g = c["gains"]
     if r["saturate"]:
-        desc += f", torques clipped at {r['clipped_at']:g} N m"
+        desc += f", torques clipped at {torque_bound_text(r['clipped_at'])} N m"
     print(f"  {desc}, gains Kp {g['Kp']:g} Kd {g['Kd']:g} eps {g['eps']:g} s; robot "
           f"{r['robot']} (nq {r['nq']}, nu {r['nu']}, nstate {r['nstate']})")
     print(f"  gait {r['gait_file']}, sha256 {r['gait_sha256']}")

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from biped_casadi.control.compiled import CompilerError
 from biped_casadi.control.export_folder import staged_export
+from biped_casadi.model.description import torque_bound_text
 from biped_casadi.control.export_running import (RUNNING_HEADER, RUNNING_LIBRARY,
                                                  exported_running_law, running_c_sources)
 from analysis.verify_running_export import STRIDE_TOL, verify_running_export
@@ -77,7 +78,8 @@ def _report(args, r):
     c = r["controller"]
     if r["status"] in ("written", "verified"):
         print(f"wrote {r['out']}: " + ", ".join(r["files"]))
-    clip = f", torques clipped at {c['torque_limit']:g} N m" if c["saturate"] else ""
+    clip = f", torques clipped at {torque_bound_text(c['torque_limit'])} N m" \
+        if c["saturate"] else ""
     print(f"  running controller ({c['law']}), Kp {c['Kp']}, Kd {c['Kd']}, M1 {c['M1']}"
           f"{clip}; robot {r['robot']} (nq {r['nq']}, nu {r['nu']}, flight nqe {r['nqe']})")
     print(f"  gait {r['gait_file']}, sha256 {r['gait_sha256']}")

@@ -7,6 +7,7 @@ import math
 
 from analysis.gait_metrics import lean_from, torso_fall
 from analysis.reporting.plots import gait_profiles_plot, gait_stick_plot, save_figures
+from biped_casadi.model.description import torque_bound_text
 from gait_opt import GaitOptimizationError, GaitOptions, optimize_gait
 from gait_opt.options import SMOOTH_CONTINUATION_MAX
 
@@ -163,7 +164,7 @@ def _print_gait(s: dict, gait, model, out, mu: float, past: bool, bound: float):
     print(f"  speed                {s['speed']:.6f} m/s")
     print(f"  cost                 {s['cost']:.6f} N^2 m s (int u'u dt / step length)")
     print(f"  peak torque          {s['peak_torque']:.3f} N m   (limit "
-          f"{gait.options.torque_limit:g})")
+          f"{torque_bound_text(gait.options.torque_limit)})")
     print(f"  min normal force     {s['min_normal_force']:.3f} N")
     lean_max = gait.options.torso_lean_max
     print(f"  torso lean           {s['max_torso_lean']:.4f} rad {lean_from(model)} at most"

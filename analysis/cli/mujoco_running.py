@@ -12,6 +12,7 @@ from biped_casadi.control.compiled import CompilerError
 from biped_casadi.control.compiled_running import CompiledRunningLaw
 from biped_casadi.control.export_running import RUNNING_LIBRARY
 from biped_casadi.control.running import FLIGHT_CLOCKS
+from biped_casadi.model.description import torque_bound_text
 from biped_casadi.mujoco.running import TAKEOFF_CLOCKS, RunningLoop, fit_running_map
 from analysis.stability.running_cycle import running_cycle, running_stability
 
@@ -104,7 +105,8 @@ def _ev(ev) -> str:
 
 
 def _clip(d) -> str:
-    return "" if d["clipped_at"] is None else f", torques clipped at {d['clipped_at']:g} N m"
+    return "" if d["clipped_at"] is None else \
+        f", torques clipped at {torque_bound_text(d['clipped_at'])} N m"
 
 
 def _print(r, d, exact, fit):

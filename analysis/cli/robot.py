@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from biped_casadi.files import write_text_atomic
-from biped_casadi.model.description import load_description
+from biped_casadi.model.description import load_description, torque_bound_text
 from biped_casadi.model.urdf import (MATCH_TOL, MAX_LEG, MAX_MATCH_TOL, description_toml,
                                      import_urdf, xacro_refusal)
 from biped_casadi.model.urdf_legs import check_match_tol
@@ -112,8 +112,8 @@ def cmd_import(args):
               f"com {link.com:g} m{off}, inertia {link.inertia:g} kg m^2")
     for joint, m in d.point_masses:
         print(f"  point mass {m:g} kg at the {joint}")
-    limit = f"{d.torque_limit:g} N m" if d.has_torque_limit else "none (infinite)"
-    print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 (reflected), torque limit {limit}")
+    print(f"  rotor inertia {d.rotor_inertia:g} kg m^2 (reflected), torque limit "
+          f"{d.torque_limit_text}")
     print("  joint map, URDF angle theta -> the model's angle of the joint's child link "
           "relative to its parent (the swing leg's coordinates; the stance leg's are "
           "their negatives):")
@@ -142,7 +142,8 @@ def cmd_mjcf(args):
     write_text_atomic(out, text)
     d = model.description
     summary = dict(file=str(out), robot=d.name, settings=settings.to_dict(),
-                   torque_limit=float(m.actuator_ctrlrange[0, 1]), nq=int(m.nq),
+                   torque_limit=float(min(m.actuator_ctrlrange[:, 1])),
+                   motor_limits=[float(v) for v in m.actuator_ctrlrange[:, 1]], nq=int(m.nq),
                    actuators=int(m.nu), total_mass=float(sum(m.body_mass)),
                    joints=[mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, i)
                            for i in range(m.njnt)])
@@ -152,7 +153,7 @@ def cmd_mjcf(args):
     print(f"{d.name}: MuJoCo model written to {out}")
     print(f"  joints {', '.join(summary['joints'])} (planar floating base at the hip: x, z, "
           f"pitch); {summary['actuators']} motors limited to "
-          f"{summary['torque_limit']:g} N m; total mass {summary['total_mass']:g} kg")
+          f"{torque_bound_text(sorted(set(summary['motor_limits'])))} N m; total mass {summary['total_mass']:g} kg")
     s = settings
     print(f"  {s.contact} contact (solref {s.solref if s.solref is not None else 'MuJoCo default 0.02'}"
           f" s), time step {s.timestep:g} s, sphere feet of {s.foot_radius:g} m, mu {s.mu:g}")

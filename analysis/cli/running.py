@@ -17,6 +17,7 @@ from analysis.stability.running_cycle import (FLIGHT_CLOCKS, STEPS_PER_INTERVAL,
                                               running_stability, simulate_running)
 from biped_casadi.control.running import RunningController
 from biped_casadi.control.running_step import rk4_gain_bounds
+from biped_casadi.model.description import torque_bound_text
 from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
 from gait_opt.running_solve import STALL_WINDOW
@@ -429,9 +430,13 @@ def failure(speed: float, stats: dict) -> str:
         how = f"IPOPT: {stats.get('return_status')} after {n} iterations"
     said = []
     limit = stats.get("torque_at_limit") or []
-    if limit:
+    if limit and len({d["limit"] for d in limit}) == 1:
         said.append(f"torques at their {limit[0]['limit']:g} N m limit (" + ", ".join(
             f"{d['joint']} at {d['count']} points" for d in limit) + ")")
+    elif limit:                                     # the joints' limits differ
+        said.append("torques at their limits (" + ", ".join(
+            f"{d['joint']} at {d['count']} points of its {d['limit']:g} N m" for d in limit)
+            + ")")
     for d in stats.get("violated") or []:
         said.append(f"{d['name']} violated by {d['violation']:.2g}"
                     + (f" {d['unit']}" if d["unit"] else ""))
@@ -564,7 +569,7 @@ def _print_stability(s: dict):
     clock = "" if s.get("flight_clock", "takeoff") == "takeoff" else \
         f", flight clock {s['flight_clock']}"
     if s.get("clipped_at") is not None:
-        clock += f", torques clipped at {s['clipped_at']:g} N m"
+        clock += f", torques clipped at {torque_bound_text(s['clipped_at'])} N m"
     print(f"closed loop ({s['law']}, Kp {gain(s['Kp'])}, Kd {gain(s['Kd'])}, M1 "
           f"{_exact(s['M1'])}{clock}): {s['status']}")
     if s["status"] == "failed":
@@ -591,7 +596,7 @@ def _print_stability(s: dict):
               + (f" (slack {sim['friction_slack']:.3g}); " if not sim.get("sliding", False)
                  else "; ") +
               f"|u| {'asked ' if sim.get('saturate') else ''}<= {mg['torque_max']:.1f} N m "
-              f"(limit {sim['torque_limit']:g})")
+              f"(limit {torque_bound_text(sim['torque_limit'])})")
     if mg and sim.get("sliding"):
         print(f"  sliding near takeoff up to {1e3 * mg['slip_max']:.3g} ms and "
               f"{1e3 * mg['slide_max']:.3g} mm a stride (friction on the cone's edge)"
@@ -599,13 +604,14 @@ def _print_stability(s: dict):
                  if mg.get("restick_max", 0.0) > 0 else ""))
     if sim.get("saturate"):
         n = sum(1 for v in sim["saturated_time"] if v > 0)
-        print(f"  saturation           torques clipped at {sim['torque_limit']:g} N m in {n} of "
+        print(f"  saturation           torques clipped at {torque_bound_text(sim['torque_limit'])}"
+              f" N m in {n} of "
               f"{len(sim['saturated_time'])} strides, {1e3 * mg.get('saturated_time', 0.0):.1f}"
               " ms in all; per stride (ms) "
               + " ".join(f"{1e3 * v:.1f}" for v in sim["saturated_time"]))
 
 
-def _print(s: dict, gait, limit: float):
+def _print(s: dict, gait, limit):
     """``biped running``'s report."""
     c = s["checks"]
     print(f"running step of {s['robot']}, saved to {s['file']} (the checks below are open "
@@ -614,7 +620,7 @@ def _print(s: dict, gait, limit: float):
     print(f"  step length          {s['step_length']:.4f} m at {s['speed']:.4f} m/s")
     print(f"  cost                 {s['cost']:.1f} N^2 m s (int u'u dt / step length)")
     print(f"  peak torque          {c['torque_max_dense']:.1f} N m (dense grid; limit "
-          f"{limit:g})")
+          f"{torque_bound_text(limit)})")
     print(f"  ground force         Fz at takeoff {c['fz_takeoff']:.2g} N, smallest "
           f"{c['fz_min_dense']:.2g} N (dense); |Fx|/Fz at most {c['friction_ratio_max']:.3f}"
           f" (mu {gait.options.mu:g}, optimised with {gait.options.mu_margin:g} below it)")

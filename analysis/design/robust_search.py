@@ -118,8 +118,8 @@ class RobustDesignSettings:
         RK4 steps per T of the walker during the search (the final s* uses the
         robustness settings' own).
     mu, torque_limit, directions, steps, tol : as :class:`RobustnessSettings`
-        Friction coefficient, torque bound (N m, None: the robot's), kept directions,
-        steps walked and convergence threshold of every robustness run.
+        Friction coefficient, torque bound (N m, None: the robot's own, each joint's),
+        kept directions, steps walked and convergence threshold of every robustness run.
     """
 
     gait: dict = field(default_factory=robust_gait)

@@ -613,13 +613,14 @@ def _margins(cycle: HybridCycle, passes) -> dict:
     y = fli.exit_state
     F = np.array(fl.landing_swing(y[:ne], y[ne:])[2]).ravel()
     timed = [(ts, us), *((ps.times, u) for ps, u, _ in ground), (tf, uf)]
+    U = np.reshape(c.torque_limit, (-1, 1))       # (1, 1), or per torque (nu, 1)
     return dict(fz_min=float(Fz[:-1].min()),
                 friction_ratio_max=float(np.max(np.abs(Fx[loaded]) / Fz[loaded], initial=0.0)),
                 friction_excess_max=float(np.max(np.abs(Fx) - cycle.mu * Fz)),
                 torque_max=float(max(np.abs(u).max() for _, u in timed)),
-                saturated_time=sum(_time_above(tt, np.abs(uu).max(axis=0) - c.torque_limit)
+                saturated_time=sum(_time_above(tt, np.max(np.abs(uu) - U, axis=0))
                                    for tt, uu in timed)
-                if np.isfinite(c.torque_limit) else 0.0,               # no limit: never
+                if np.all(np.isfinite(U)) else 0.0,                    # no limit: never
                 swing_min=min(_lowest(zsw, st, "swing foot height"),
                               *(_lowest(z, ps, "swing foot height") for ps, _, z in ground)),
                 other_foot_min=_lowest(feet[1, 0::2], fli, "other foot height"),

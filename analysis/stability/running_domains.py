@@ -46,13 +46,16 @@ ON_GROUND = ("friction cone (Fx <= mu Fz)", "friction cone (-Fx <= mu Fz)",
 def _phase_constraints(c, u, extra, names):
     """The torque limit (without saturation; a robot without one has none) after the
     phase's own constraints."""
-    lim = c.torque_limit
-    if c.saturate or not np.isfinite(lim):
+    lim = c.torque_limit                    # one number, or one per torque
+    if c.saturate or not np.all(np.isfinite(lim)):
         return extra, names
-    cons = ca.vertcat(extra, lim - u, lim + u)
     nu = c.model.nu
-    return cons, names + tuple(f"torque u{i + 1} <= {lim:g} N m" for i in range(nu)) \
-        + tuple(f"torque u{i + 1} >= -{lim:g} N m" for i in range(nu))
+    each = [lim] * nu if np.ndim(lim) == 0 else list(lim)
+    if np.ndim(lim):
+        lim = ca.DM(each)
+    cons = ca.vertcat(extra, lim - u, lim + u)
+    return cons, names + tuple(f"torque u{i + 1} <= {each[i]:g} N m" for i in range(nu)) \
+        + tuple(f"torque u{i + 1} >= -{each[i]:g} N m" for i in range(nu))
 
 
 def start(n: int, gains, clock_origin: float | None = None) -> ca.Function:

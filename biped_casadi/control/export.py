@@ -116,8 +116,9 @@ class ExportedLaw:
         With 'urdf': torques divided by each joint's reduction.
     front : casadi.Function or None
         With 'urdf': ``biped_front(x) -> ahead``, which finds the stance leg.
-    torque_limit : float or None
-        The law's torques are clipped at +-torque_limit, N m (``saturate``), in the
+    torque_limit : float, tuple of float or None
+        The law's torques are clipped at +-torque_limit, N m (one bound per torque where
+        the robot's joints' limits differ) (``saturate``), in the
         model's coordinates before any URDF mapping; None: not clipped.
     """
     kind: str
@@ -140,7 +141,7 @@ class ExportedLaw:
     urdf: object = field(default=None, repr=False)
     motor_side: bool = False
     front: ca.Function | None = field(default=None, repr=False)
-    torque_limit: float | None = None
+    torque_limit: float | tuple | None = None
 
 
 def hermite_state(tau, node):
@@ -260,8 +261,8 @@ def exported_law(controller, singular_fraction: float = SINGULAR_FRACTION,
         raise ValueError(f"angles: the robot {model.params.name} has no URDF joint map (give "
                          f"the robot as its .urdf file, or a description written by 'biped "
                          f"robot import')")
-    limit = float(model.description.torque_limit if torque_limit is None else torque_limit)
-    if saturate and not (math.isfinite(limit) and limit > 0):
+    limit = model.description.torque_bound if torque_limit is None else float(torque_limit)
+    if saturate and not (np.all(np.isfinite(limit)) and np.all(np.greater(limit, 0))):
         raise ValueError(f"saturate: the robot {model.params.name} has no torque limit to clip "
                          f"at (give torque_limit), got {limit!r}")
     rep = controller.singularity()
@@ -336,7 +337,10 @@ def _provenance_lines(law: ExportedLaw, provenance: dict) -> list:
                      f"{c['fit_residual']:.3g} rad")
     lines.append(f"gains: Kp = {_num(g['Kp'])}, Kd = {_num(g['Kd'])}, eps = {_num(g['eps'])} s")
     if law.torque_limit is not None:
-        lines.append(f"torques clipped at +-{_num(law.torque_limit)} N m (the model's joints)")
+        U = law.torque_limit
+        lines.append(f"torques clipped at +-{_num(U)} N m (the model's joints)" if np.ndim(U) == 0
+                     else "torques u1 .. u%d clipped at +-(%s) N m (the model's joints)"
+                     % (law.nu, ", ".join(_num(v) for v in U)))
     return lines
 
 

@@ -182,8 +182,11 @@ def _provenance_lines(law: ExportedRunningLaw, provenance: dict) -> list:
                  + ("feedforward + PD (Kp N m/rad, Kd N m s/rad)" if c["law"] == "pd" else
                     "computed torque on the outputs (Kp 1/s^2, Kd 1/s)"))
     lines.append(f"Kp = {_vector(c['Kp'])}, Kd = {_vector(c['Kd'])}, M1 = {_vector(c['M1'])}")
-    lines.append(f"torques clipped at +-{_num(c['torque_limit'])} N m" if c["saturate"] else
-                 f"torques not clipped (the robot's limit: {_num(c['torque_limit'])} N m)")
+    U = c["torque_limit"]
+    limit = _num(U) if np.ndim(U) == 0 else \
+        f"({', '.join(_num(v) for v in U)}) (u1 .. u{law.nu}, each joint's)"
+    lines.append(f"torques clipped at +-{limit} N m" if c["saturate"] else
+                 f"torques not clipped (the robot's limit: {limit} N m)")
     return lines
 
 

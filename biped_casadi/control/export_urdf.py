@@ -139,15 +139,17 @@ class UrdfAngleLaw:
         The robot's joint map.
     motor_side : bool
         Torques divided by each joint's reduction.
-    torque_limit : float, optional
-        The model's torques clipped at +-torque_limit (N m) before the mapping, as an
+    torque_limit : float or tuple of float, optional
+        The model's torques clipped at +-torque_limit (N m; one per torque where the
+        joints' limits differ) before the mapping, as an
         export that saturates clips them.
     """
 
     def __init__(self, controller, umap: UrdfMap, motor_side: bool = False,
                  torque_limit: float | None = None):
         self.controller, self.umap, self.motor_side = controller, umap, motor_side
-        self.limit = math.inf if torque_limit is None else float(torque_limit)
+        self.limit = math.inf if torque_limit is None else \
+            (float(torque_limit) if np.ndim(torque_limit) == 0 else tuple(torque_limit))
         self.nu = controller.model.nu
         #: the angles' centre: the robot's upright pose (hips near +-pi for a hanging torso)
         self.centre = controller.model.description.upright_q

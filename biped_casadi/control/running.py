@@ -211,6 +211,23 @@ def _number_array(name, value) -> np.ndarray:
         raise ValueError(f"{name} must be numbers, got {value!r}") from None
 
 
+def _torque_limit(model, torque_limit, saturate: bool):
+    """The controller's torque limit (:class:`RunningController`): a float, or a tuple of
+    nu floats (one per torque); a ValueError naming ``torque_limit`` where it is none."""
+    lim = _number_array("torque_limit", model.description.torque_bound
+                        if torque_limit is None else torque_limit)
+    if lim.ndim > 1 or (lim.ndim == 1 and lim.size != model.nu):
+        raise ValueError(f"torque_limit must be one number or {model.nu}, one per torque, "
+                         f"got {torque_limit!r}")
+    unusable = saturate and not np.all(np.isfinite(lim))    # inf: a robot without one
+    if not np.all(lim > 0) or (unusable and torque_limit is not None):
+        raise ValueError(f"torque_limit must be a positive number, got {torque_limit!r}")
+    if unusable:
+        raise ValueError("saturate needs a torque limit: the robot has none (pass "
+                         "torque_limit)")
+    return float(lim) if lim.ndim == 0 else tuple(float(v) for v in lim)
+
+
 def check_running_gait(gait, model=None, name: str | None = "gait"):
     """Refuse a running gait that no solve produces.
 
@@ -287,9 +304,11 @@ class RunningController:
         'pd' (feedforward + PD, the default) or 'computed_torque'.
     saturate : bool
         Clip the torques at ``torque_limit``.
-    torque_limit : float, optional
-        N m; default the model's (inf for a robot without one: nothing to clip, and
-        ``saturate`` then needs a finite ``torque_limit``).
+    torque_limit : float or tuple of float, optional
+        N m, one number or one per torque u1 .. u_nu; default the model's (its
+        ``description.torque_bound``: each joint's own where its joints' limits differ;
+        inf for a robot without one: nothing to clip, and ``saturate`` then needs a
+        finite ``torque_limit``).
 
     Attributes
     ----------
@@ -307,7 +326,7 @@ class RunningController:
     """
 
     def __init__(self, model, gait, Kp=400.0, Kd=30.0, M1=None, law: str = "pd",
-                 saturate: bool = False, torque_limit: float | None = None):
+                 saturate: bool = False, torque_limit=None):
         missing = [f for f in _FIELDS if not hasattr(gait, f)]
         if missing:
             raise TypeError(f"a running gait is needed (fields {', '.join(missing)} "
@@ -320,14 +339,8 @@ class RunningController:
         check_running_gait(gait, model)
         nq = model.nq
         self.model, self.gait, self.law = model, gait, law
-        lim = float(_number_array("torque_limit", model.description.torque_limit
-                                  if torque_limit is None else torque_limit))
-        if not lim > 0 or (saturate and not math.isfinite(lim)):   # inf: a robot without one
-            raise ValueError(
-                f"torque_limit must be a positive number, got {torque_limit!r}"
-                if torque_limit is not None or not lim > 0 else
-                "saturate needs a torque limit: the robot has none (pass torque_limit)")
-        self.torque_limit, self.saturate = lim, bool(saturate)
+        self.torque_limit = _torque_limit(model, torque_limit, saturate)
+        self.saturate = bool(saturate)
         fl = flight_model(model)
         self.fl = fl
         Fs = phase_derivatives(model, "stance", gait.x_stance, gait.u_stance)
@@ -407,8 +420,10 @@ class RunningController:
                            ["q", "dq", "t", "k"], ["u"])
 
     @property
-    def clipped_at(self) -> float | None:
-        """The limit the torques are clipped at, N m (None without ``saturate``)."""
+    def clipped_at(self):
+        """The limit the torques are clipped at, N m (None without ``saturate``).
+
+        One number, or a tuple of one per torque where the joints' limits differ."""
         return self.torque_limit if self.saturate else None
 
     def applied(self, u):

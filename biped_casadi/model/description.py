@@ -12,7 +12,10 @@ and the stance foot a passive point contact.  The schema (SI units throughout)::
 
     [actuators]
     torque_limit = 150.0       # N m, > 0: bound on every joint torque (the gait's default);
-                               # inf: no limit (a command that needs one says so)
+                               # inf: no limit (a command that needs one says so); or one
+                               # per joint of a leg, the same on both legs:
+                               # torque_limit = { hip = 150.0, knee = 300.0 }
+                               # (every joint of joint_names: hip, knee or joint1 ..)
     rotor_inertia = 3.32e-4    # kg m^2, >= 0: rotor inertia of each actuated joint ...
     gear_ratio = 50.0          # optional (default 1), > 0: ... reflected through the gear
                                # as rotor_inertia * gear_ratio^2 on the joint's diagonal
@@ -81,11 +84,14 @@ from importlib import resources
 from pathlib import Path
 
 from ..files import file_path, read_text_file
+from .toml_text import description_toml
+from .torque_limits import (joint_names_of, leg_limits_text, parse_torque_limit, per_torque,
+                            torque_bound_text)
 from .urdf_map import UrdfMap, urdf_map_from_dict, wrap_angle
 
 __all__ = ["Link", "RobotDescription", "load_description", "find_description",
            "description_from_dict", "description_toml", "BUILTIN", "builtin_path",
-           "torso_lean"]
+           "torso_lean", "torque_bound_text"]
 
 #: descriptions shipped with the toolkit (package data, biped_casadi/model/robots/NAME.toml)
 BUILTIN = ("rabbit", "three_link")
@@ -203,8 +209,14 @@ class RobotDescription:
     gravity : float
         m/s^2.
     torque_limit : float
-        N m, the default bound on every torque of the reference gait (and of closed-loop
-        runs); ``inf`` when the robot has none (a URDF without effort limits).
+        N m, the smallest joint's torque limit: a bound every joint's torque may reach (the
+        limit of every joint when they are equal); ``inf`` when the robot has none (a URDF
+        without effort limits).  The bounds the toolkit checks and imposes are
+        :attr:`torque_bound`.
+    leg_torque_limits : tuple of float
+        N m per joint of a leg from the hip down (hip, knee or joint1 ..), the same on both legs (the legs swap roles every step); empty (the default)
+        when every joint has ``torque_limit``.  When given, ``torque_limit`` is their
+        smallest (:func:`description_from_dict` sets both).
     source : str
         Where the description was read from (a file name; for messages, not compared).
     urdf : UrdfMap or None
@@ -225,6 +237,7 @@ class RobotDescription:
     rotor_inertia: float = 0.0
     gravity: float = 9.81
     torque_limit: float = 150.0
+    leg_torque_limits: tuple = field(default=(), repr=False)
     source: str = field(default="", compare=False, repr=False)
     urdf: UrdfMap | None = field(default=None, compare=False, repr=False)
     torso_upright: float = field(default=0.0, compare=False, repr=False)
@@ -244,6 +257,22 @@ class RobotDescription:
     def nu(self) -> int:
         """Torques: 2 k."""
         return 2 * self.k
+
+    @property
+    def torque_limits(self) -> tuple:
+        """N m, the limit of each torque u1 .. u_nu (:func:`~.torque_limits.per_torque`)."""
+        return per_torque(self.leg_torque_limits or (self.torque_limit,) * self.k)
+
+    @property
+    def torque_bound(self):
+        """The bound on the torques as the toolkit checks and imposes it.
+
+        ``torque_limit`` (a float) when every joint has the same limit, else
+        :attr:`torque_limits` (a tuple of nu floats, one per torque u_i); every check,
+        bound and clip (the gait's bounds, the simulators' checks and saturation, the C
+        export's clip, MuJoCo's ctrlrange) takes either.
+        """
+        return self.torque_limit if not self.leg_torque_limits else self.torque_limits
 
     @property
     def leg_length(self) -> float:
@@ -267,10 +296,13 @@ class RobotDescription:
     def cache_key(self):
         """What a model built from the description depends on (with the URDF map, if any).
 
-        The torso's upright angle joins it when it is not 0 (existing keys unchanged).
+        The torso's upright angle joins it when it is not 0, the joints' torque limits when
+        they differ (existing keys unchanged).
         """
         key = (self.name, self.torso, self.leg, self.point_masses, self.rotor_inertia,
                self.gravity, self.torque_limit)
+        if self.leg_torque_limits:                  # equal limits: the keys as before
+            key += (("leg_torque_limits", self.leg_torque_limits),)
         key = key if self.urdf is None else key + (self.urdf,)
         return key if self.torso_upright == 0.0 else key + (("torso_upright",
                                                               self.torso_upright),)
@@ -312,7 +344,8 @@ class RobotDescription:
         -------
         dict
             ``name``, ``gravity``, ``torso_upright`` when it is not 0, ``actuators``
-            (the reflected rotor inertia with gear_ratio 1), ``torso``, ``leg`` (a list
+            (the reflected rotor inertia with gear_ratio 1; ``torque_limit`` a number, or
+            a table by joint name where the joints' limits differ), ``torso``, ``leg`` (a list
             of link tables), ``point_masses`` and, for a robot read from a URDF,
             ``urdf`` (the joint map); :func:`description_from_dict` reads it back to an
             equal description.
@@ -320,7 +353,9 @@ class RobotDescription:
         d = dict(name=self.name, gravity=self.gravity)
         if self.torso_upright != 0.0:
             d["torso_upright"] = self.torso_upright
-        d.update(actuators=dict(torque_limit=self.torque_limit,
+        limit = self.torque_limit if not self.leg_torque_limits else \
+            dict(zip(joint_names_of(self.k), self.leg_torque_limits))
+        d.update(actuators=dict(torque_limit=limit,
                                 rotor_inertia=self.rotor_inertia, gear_ratio=1.0),
                  torso=self.torso.to_dict(), leg=[link.to_dict() for link in self.leg],
                  point_masses=dict(self.point_masses))
@@ -332,6 +367,12 @@ class RobotDescription:
     def has_torque_limit(self) -> bool:
         """Whether the robot has a (finite) torque limit."""
         return math.isfinite(self.torque_limit)
+
+    @property
+    def torque_limit_text(self) -> str:
+        """The torque limits in words (:func:`~.torque_limits.leg_limits_text`)."""
+        return leg_limits_text(joint_names_of(self.k), self.torque_limit,
+                               self.leg_torque_limits)
 
     def without_urdf(self) -> "RobotDescription":
         """The same robot without its URDF joint map (the model of its dynamics alone).
@@ -412,8 +453,7 @@ def joint_names(k: int) -> tuple:
         ``'hip'``, the joints between leg links (``'knee'`` when k = 2, else
         ``'joint1'`` ...), ``'foot'``.
     """
-    inner = ("knee",) if k == 2 else tuple(f"joint{j}" for j in range(1, k))
-    return ("hip",) + inner + ("foot",)
+    return joint_names_of(k) + ("foot",)
 
 
 # ------------------------------------------------------------------ validation
@@ -521,9 +561,6 @@ def description_from_dict(data: dict, where: str = "robot description",
         c.fail("torso_upright", f"must be an angle in rad within [-2 pi, 2 pi] (pi for a "
                                 f"torso hanging below the hip), got {data['torso_upright']!r}")
     act = c.table(data["actuators"], "actuators", _ACTUATORS, ("torque_limit", "rotor_inertia"))
-    limit = act["torque_limit"]
-    torque_limit = math.inf if (isinstance(limit, float) and limit == math.inf) else \
-        c.number(limit, "actuators.torque_limit", strict=True, bounded=False)
     rotor = c.number(act["rotor_inertia"], "actuators.rotor_inertia")
     gear = c.number(act.get("gear_ratio", 1.0), "actuators.gear_ratio", strict=True)
     torso = c.link(data["torso"], "torso", "torso")
@@ -538,6 +575,8 @@ def description_from_dict(data: dict, where: str = "robot description",
     names = [link.name for link in leg]
     if len(set(names)) != len(names):
         c.fail("leg", f"link names must differ, got {names}")
+    torque_limit, leg_limits = parse_torque_limit(c, act["torque_limit"],
+                                                  joint_names_of(len(leg)))
     pm = data.get("point_masses", {})
     allowed = joint_names(len(leg))
     c.table(pm, "point_masses", allowed, ())
@@ -546,7 +585,8 @@ def description_from_dict(data: dict, where: str = "robot description",
     # rotor_inertia * gear_ratio ** 2: the same operations as RobotParams' default
     return RobotDescription(name=name, torso=torso, leg=leg, point_masses=masses,
                             rotor_inertia=rotor * gear**2,
-                            gravity=gravity, torque_limit=torque_limit, source=source,
+                            gravity=gravity, torque_limit=torque_limit,
+                            leg_torque_limits=leg_limits, source=source,
                             urdf=urdf, torso_upright=upright + 0.0)
 
 
@@ -633,59 +673,3 @@ def find_description(name_or_path) -> RobotDescription:
         raise ValueError(f"robot: {text!r} is neither a built-in robot "
                          f"({', '.join(BUILTIN)}) nor a description file (.toml)")
     return load_description(text)
-
-
-def description_toml(d: RobotDescription, header: str = "") -> str:
-    """A description file (TOML) that loads back to a description equal to ``d``.
-
-    The schema of the module docstring; the URDF joint map, when
-    there is one, is the ``[urdf]`` table with one ``[[urdf.joints]]`` table per joint.
-
-    Parameters
-    ----------
-    d : RobotDescription
-        The robot.
-    header : str
-        Comment lines to put first (``#`` added).
-
-    Returns
-    -------
-    str
-        TOML text; numbers written with ``repr`` (exact round trip).
-    """
-    def table(t):
-        return "\n".join(f"{k} = {_value(v)}" for k, v in t.items()
-                         if not isinstance(v, list) or not v or not isinstance(v[0], dict))
-    dd = d.to_dict()
-    out = [f"# {line}" for line in header.splitlines()]
-    out += [f"name = {_q(dd['name'])}", f"gravity = {dd['gravity']!r}"]
-    if "torso_upright" in dd:
-        out += [f"torso_upright = {_value(dd['torso_upright'])}"]
-    out += ["", "[actuators]", table(dd["actuators"]), "", "[torso]", table(dd["torso"])]
-    for link in dd["leg"]:
-        out += ["", "[[leg]]", table(link)]
-    if dd["point_masses"]:
-        out += ["", "[point_masses]", table(dd["point_masses"])]
-    if "urdf" in dd:
-        out += ["", "[urdf]", table(dd["urdf"])]
-        for j in dd["urdf"]["joints"]:
-            out += ["", "[[urdf.joints]]", table(j)]
-    return "\n".join(out) + "\n"
-
-
-def _value(v) -> str:
-    """A TOML value: floats exactly (repr; inf as TOML's inf), ints, strings, lists."""
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return "inf" if v == math.inf else ("-inf" if v == -math.inf else repr(v))
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
-    return _q(v)
-
-
-def _q(s: str) -> str:
-    """A TOML basic string."""
-    return '"' + str(s).replace("\\", "\\\\").replace('"', '\\"') + '"'

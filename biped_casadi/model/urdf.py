@@ -53,9 +53,9 @@ What is read (URDF lengths in m, masses in kg, inertias in kg m^2, efforts in N 
   ``mechanicalReduction``^2 of each joint's actuator (equal for every joint), 0 without
   ``motorInertia``; each joint's ``mechanicalReduction`` is kept in the map (the motor
   side of an exported law);
-- the torque limit: the smallest ``<limit effort>``; a robot whose leg joints give none
-  (``continuous`` joints, no ``<limit>``), or give ``effort="0"`` every one (exporters'
-  "unknown"), has none (infinite, said in the notes) unless ``torque_limit=`` sets it.
+- the torque limits: per joint of a leg the smaller ``<limit effort>`` of its two legs' (none:
+  the others' smallest); without any (``continuous`` joints, no ``<limit>``, or ``effort="0"``
+  every one: exporters' "unknown") none (infinite, in the notes) unless ``torque_limit=``.
 
 Joint ``<dynamics>`` (damping, friction) is not in the model (rigid, frictionless joints),
 nor is a revolute joint's range ``<limit lower upper>`` narrower than a turn (no gait or
@@ -98,6 +98,7 @@ from urdf_parser_py import urdf as _urdf
 
 from ..files import read_text_file
 from .description import RobotDescription, description_from_dict, description_toml, joint_names
+from .torque_limits import urdf_torque_limit
 from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
 from .urdf_legs import (MATCH_TOL, MAX_MATCH_TOL, _beyond, _check_foot, check_match_tol,
                         _foot_point, _same_legs, _unequal_legs, _wider)
@@ -175,8 +176,9 @@ def _motor_inertias(text: str) -> dict:
     return out
 
 
-def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
-    """(rotor inertia, gear ratio, torque limit, reduction per joint)."""
+def _actuators(rd: _Reader, legs, text: str, torque_limit) -> tuple:
+    """(rotor inertia, gear ratio, torque limit or per-joint table, reduction per joint)."""
+    joints = [j for leg in legs for j in leg.joints]
     reductions = {}
     for t in rd.robot.transmissions:
         if isinstance(t, _urdf.PR2Transmission):
@@ -229,29 +231,8 @@ def _actuators(rd: _Reader, joints, text: str, torque_limit) -> tuple:
             rd.fail(f"reflected rotor inertias differ: joint {n!r} {v:.12g}, joint "
                     f"{next(iter(values))!r} {ref:.12g} kg m^2 (apart by {abs(v - ref):.2g}; "
                     f"the model takes one for every joint)")
-    given = sorted({e for e in efforts.values() if e is not None})
-    unlimited = [n for n, e in efforts.items() if e is None]
-    if torque_limit is not None:
-        limit = float(torque_limit)
-        rd.notes.append(f"torque limit {limit:g} N m from torque_limit (--torque-limit)"
-                        + (f"; the file's efforts: {', '.join(f'{v:g}' for v in given)} N m"
-                           if given else ""))
-    elif not given:
-        limit = math.inf
-        rd.notes.append(("every leg joint gives <limit effort=\"0\"> (what exporters write "
-                         "when they know no limit)" if all_zero else
-                         "no leg joint gives <limit effort=...> (continuous joints, no "
-                         "<limit>)")
-                        + ": the robot has no torque limit (infinite); commands that "
-                        "need one say so; set one with --torque-limit N (torque_limit=)")
-    else:
-        limit = given[0]
-        if len(given) > 1:
-            rd.notes.append(f"joint efforts differ ({', '.join(f'{v:g}' for v in given)} "
-                            f"N m): the torque limit is the smallest")
-        if unlimited:
-            rd.notes.append(f"joints without an effort limit ({', '.join(unlimited)}) take "
-                            f"the others' smallest, {limit:g} N m")
+    pairs = list(zip(*([j.name for j in leg.joints] for leg in legs)))
+    limit = urdf_torque_limit(rd.notes, pairs, efforts, all_zero, torque_limit)
     motor, gear = next(iter(rotors.values()))
     return motor, gear, limit, {n: g for n, (_, g) in rotors.items()}
 
@@ -599,7 +580,7 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
         rd.notes.append(f"the hips are {apart:.2g} m apart in the plane of motion (match_tol "
                         f"{match_tol:g}): the model's hip is that of {legs[0].joints[0].name!r}")
     _joint_notes(rd, all_joints)
-    motor, gear, limit, reductions = _actuators(rd, all_joints, text, torque_limit)
+    motor, gear, limit, reductions = _actuators(rd, legs, text, torque_limit)
     pm = {"hip": 0.0}
     torso_d, torso_up = _torso(rd, torso, hip, plane, pm)
     pm["hip"] += pm_legs[0].pop("hip", 0.0) + pm_legs[1].pop("hip", 0.0)

@@ -383,6 +383,8 @@ def c_driver_problem(loop) -> str:
     """
     if type(loop.law) is not CompiledController:       # a subclass may call it otherwise
         return "the law is not the compiled C law"
+    if not isinstance(loop.torque_limit, float):       # the C steps count against one limit
+        return "the joints' torque limits differ"
     lib, _, why = _library()
     if lib is None:
         return why

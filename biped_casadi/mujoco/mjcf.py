@@ -487,35 +487,43 @@ def _point_mass(name, mass, z) -> str:
             f'mass="{_num(mass)}" diaginertia="0 0 0"/></body>')
 
 
-def torque_limit_of(d: RobotDescription, torque_limit=None) -> float:
+def torque_limit_of(d: RobotDescription, torque_limit=None):
     """The motors' limit: ``torque_limit`` or the robot's, checked finite and positive.
 
     Parameters
     ----------
     d : RobotDescription
         The robot.
-    torque_limit : float, optional
-        N m; default the robot's.
+    torque_limit : float or tuple of float, optional
+        N m (a tuple: one per torque u1 .. u_nu); default the robot's
+        (:attr:`RobotDescription.torque_bound`).
 
     Returns
     -------
-    float
+    float or tuple of float
+        One limit for every motor, or the robot's per torque u1 .. u_nu where its joints'
+        limits differ.
 
     Raises
     ------
     ValueError
         Naming ``torque_limit`` when neither is a finite positive number.
     """
-    u = d.torque_limit if torque_limit is None else torque_limit
-    if isinstance(u, bool) or not isinstance(u, (int, float)) or not u > 0:
-        raise ValueError(f"torque_limit must be a positive number, got {u!r}")
-    if not math.isfinite(u):
-        raise ValueError(f"torque_limit: {d.name} has no finite torque limit and MuJoCo's motors "
-                         "need one (--torque-limit U on the command line)")
-    return float(u)
+    u = d.torque_bound if torque_limit is None else torque_limit
+    many = isinstance(u, (tuple, list)) and len(u) == d.nu
+    for v in (u if many else (u,)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+            raise ValueError(f"torque_limit must be a positive number, got {u!r}")
+        if not math.isfinite(v):
+            raise ValueError(f"torque_limit: {d.name} has no finite torque limit and MuJoCo's "
+                             "motors need one (--torque-limit U on the command line)")
+    if many and tuple(u[:d.k]) != tuple(u[d.k:])[::-1]:
+        raise ValueError(f"torque_limit: a joint's motor has one limit on both legs (u1 .. "
+                         f"u{d.k} the reverse of u{d.k + 1} .. u{d.nu}), got {u!r}")
+    return tuple(float(v) for v in u) if many else float(u)
 
 
-def mjcf(robot, settings: ContactSettings = STIFF, torque_limit: float | None = None) -> str:
+def mjcf(robot, settings: ContactSettings = STIFF, torque_limit=None) -> str:
     """The MJCF text of a robot (module docstring).
 
     Parameters
@@ -524,8 +532,9 @@ def mjcf(robot, settings: ContactSettings = STIFF, torque_limit: float | None = 
         The robot (a built-in name, a description file or a URDF file).
     settings : ContactSettings
         Time step, contact, feet and friction (default :data:`STIFF`).
-    torque_limit : float, optional
-        The motors' limit, N m (default the robot's).
+    torque_limit : float or tuple of float, optional
+        The motors' limit, N m (default the robot's: each joint's own); a tuple: one per
+        torque u1 .. u_nu (:func:`torque_limit_of`), the same for the joint on both legs.
 
     Returns
     -------
@@ -543,6 +552,8 @@ def mjcf(robot, settings: ContactSettings = STIFF, torque_limit: float | None = 
     if not isinstance(settings, ContactSettings):
         raise ValueError(f"settings must be ContactSettings, got {type(settings).__name__}")
     U = torque_limit_of(d, torque_limit)
+    # per joint of a leg from the hip down: the swing leg's torques u_{k+1} .. u_2k
+    leg_U = [U] * d.k if np.ndim(U) == 0 else list(U[d.k:])
     s = settings
     if s.foot_radius >= d.leg[-1].length:
         raise ValueError(f"foot_radius must be smaller than the leg's last link "
@@ -604,6 +615,6 @@ def mjcf(robot, settings: ContactSettings = STIFF, torque_limit: float | None = 
         for j in range(d.k):
             joint = "hip" if j == 0 else inner[j - 1]
             lines.append(f'    <motor name="{joint}_{leg}" joint="{joint}_{leg}" '
-                         f'ctrlrange="{_vec(-U, U)}"/>')
+                         f'ctrlrange="{_vec(-leg_U[j], leg_U[j])}"/>')
     lines += ["  </actuator>", "</mujoco>", ""]
     return "\n".join(lines)

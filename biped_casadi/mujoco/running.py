@@ -122,8 +122,10 @@ class RunningLoop:
     stop_on_saturation : bool
         End the run at the first commanded torque beyond the limit (otherwise MuJoCo clips
         it and the time clipped is recorded).
-    torque_limit : float, optional
-        The motors' limit, N m (default the controller's).
+    torque_limit : float or tuple of float, optional
+        The motors' limit, N m, or one per torque u1 .. u_nu (the same for a joint on both
+        legs); default the controller's (the robot's: each joint's own where its joints'
+        limits differ).
     liftoff_time : float
         The stance foot's force must stay zero this long for a takeoff, s; the takeoff is
         dated at its first zero.  At stiff contact (solref two time steps) the loaded foot
@@ -387,6 +389,8 @@ class _Run:
         self.loop, self.d, self.lay = loop, loop.d, loop.layout
         self.dt = float(loop.m.opt.timestep)
         self.r, self.U = loop.settings.foot_radius, loop.torque_limit
+        #: the motors' limits as an array: one number, or per torque u1 .. u_nu
+        self.Ua = np.asarray(self.U, float)
         self.records, self.devs = [], [float(np.max(np.abs(x0 - loop.x_star)))]
         self.logs = ([], [], [], [], []) if log else None
         self.status, self.message = "ran", ""
@@ -427,15 +431,18 @@ class _Run:
             return False
         umax = float(np.max(np.abs(u)))
         self.peak = max(self.peak, umax)
-        if umax > self.U:
+        over = np.abs(u) - self.Ua                         # each torque against its motor's
+        if np.any(over > 0):
             self.clipped += 1
             if loop.stop_on_saturation:
-                self.stop("saturated", f"{umax:.1f} N m commanded (limit {self.U:g}) at "
-                                       f"{t - self.t0:.4f} s into the "
+                i = int(np.argmax(over))
+                said = f"{umax:.1f} N m commanded (limit {self.U:g})" if self.Ua.ndim == 0 \
+                    else f"|u{i + 1}| = {abs(u[i]):.1f} N m commanded (its limit {self.U[i]:g})"
+                self.stop("saturated", f"{said} at {t - self.t0:.4f} s into the "
                                        f"{('stance', 'flight')[self.phase]}")
                 return False
         d.ctrl[:] = lay.G[self.leg] @ u
-        self.u_applied = np.clip(u, -self.U, self.U)       # what MuJoCo's motors apply
+        self.u_applied = np.clip(u, -self.Ua, self.Ua)     # what MuJoCo's motors apply
         if self.logs is not None:
             for a, v in zip(self.logs, (t, qpos.copy(), qvel.copy(), self.phase, self.leg)):
                 a.append(v)

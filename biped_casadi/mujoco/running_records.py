@@ -101,8 +101,9 @@ class MujocoRun(Result):
         ``law``, ``Kp``, ``Kd``, ``M1``, ``saturate``.
     settings : dict
         MuJoCo's settings.
-    torque_limit : float
-        N m.
+    torque_limit : float or tuple of float
+        N m: the motors' limit, or one per torque u1 .. u_nu where the joints' limits
+        differ.
     mujoco_steps : int
         MuJoCo steps taken.
     wall_time : float
@@ -124,7 +125,7 @@ class MujocoRun(Result):
     gait: dict
     controller: dict
     settings: dict
-    torque_limit: float
+    torque_limit: float | tuple
     mujoco_steps: int
     wall_time: float
     t: np.ndarray = field(default_factory=lambda: np.zeros(0), metadata={"dict": False})

@@ -368,6 +368,8 @@ class _Run:
         #: the torso's angle when upright (rad): falls are judged on the lean from it
         self.upright = float(loop.model.description.torso_upright)
         self.dt, self.T, self.U = float(m.opt.timestep), loop.T, loop.torque_limit
+        #: per torque, its motor's limit where the joints' limits differ (else None)
+        self.Us = None if np.ndim(self.U) == 0 else np.array(self.U, float)
         self.r = loop.settings.foot_radius
         self.A, self.G = loop.layout.A, loop.layout.G
         self.t_sec = SECTION * loop.T
@@ -395,7 +397,7 @@ class _Run:
 
     def _new_step(self):
         self.lifted, self.liftoff = False, math.nan
-        self.slip = self.travel = self.peak = 0.0
+        self.slip = self.travel = self.peak = self.peak_applied = 0.0
         self.airborne = self.clipped = 0
         self.section, self.qu_prev, self.dqu_prev = None, 0.0, 0.0
 
@@ -430,8 +432,13 @@ class _Run:
         umax = max(max(ul), -min(ul))                   # max |u_i|
         if umax > self.peak:
             self.peak = umax
-        if umax > self.U:
-            self.clipped += 1
+        if self.Us is None:
+            if umax > self.U:
+                self.clipped += 1
+        else:                                           # each torque against its motor's
+            a = np.abs(u)
+            self.clipped += bool(np.any(a > self.Us))
+            self.peak_applied = max(self.peak_applied, float(np.max(np.minimum(a, self.Us))))
         _dot(self.G[st], u, out=self.ctrl)              # G @ u, the same product
         if self.logging:
             self.log.add(self.k * self.dt, self.qpos, self.qvel, st, u)
@@ -521,7 +528,8 @@ class _Run:
             speed_error=speed / loop.speed - 1.0, period_error=tau / self.T - 1.0,
             qu_error=float(q[0]) - loop.qu_T, dqu_error=float(dq[0]) - loop.dqu_T,
             q_minus=q.tolist(), dq_minus=dq.tolist(), peak_commanded=float(self.peak),
-            peak_applied=float(min(self.peak, self.U)), clipped_time=self.clipped * self.dt,
+            peak_applied=float(min(self.peak, self.U) if self.Us is None else self.peak_applied),
+            clipped_time=self.clipped * self.dt,
             slip=float(self.slip), liftoff=self.liftoff, impact_travel=float(self.travel),
             airborne_time=self.airborne * self.dt, section=_pair(self.section),
             section_error=_pair(self.section, loop.x_star)))

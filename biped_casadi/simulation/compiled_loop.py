@@ -26,7 +26,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..control.saturation import clip_torques
+from ..control.saturation import beyond_limit, clip_torques
 from ..numerics import FastCall, rk4_step
 
 __all__ = ["compiled_closed_loop"]
@@ -58,7 +58,7 @@ class _NumericLoop:
         """The torques the plant receives, and whether they were clipped."""
         if not self.saturate:
             return u, 0.0
-        return clip_torques(u, self.limit), float(np.max(np.abs(u)) > self.limit)
+        return clip_torques(u, self.limit), beyond_limit(u, self.limit)
 
     def step(self, X, tau, h, p, u0=None):
         """One RK4 step; u0: the torques at (X, tau) when already known."""

@@ -62,7 +62,7 @@ import numpy as np
 from ..caching import cached
 from ..control.design import Design
 from ..control.output_law import SECTION
-from ..control.saturation import clip_torques
+from ..control.saturation import beyond_limit, clip_torques
 from ..numerics import FastCall, as_vector, compiled, rk4_step
 from ..results import internal
 from .compiled_loop import compiled_closed_loop
@@ -213,8 +213,11 @@ class Simulator:
         self._ref_s = self.gait.state_at(SECTION * self.T)
 
     @property
-    def torque_limit(self) -> float:
-        """The bound on every ``|u_i|`` of the runs, N m."""
+    def torque_limit(self):
+        """The bound on the runs' ``|u_i|``, N m (a float, or per torque: a tuple).
+
+        One per torque where the robot's joints' limits differ (:attr:`Limits.torque_limit`).
+        """
         return self.limits.torque_limit
 
     @property
@@ -242,7 +245,7 @@ class Simulator:
         if not self.options.saturate:
             return u, 0
         U = self.limits.torque_limit
-        return clip_torques(u, U), ca.mmax(ca.fabs(u)) > U
+        return clip_torques(u, U), beyond_limit(u, U)
 
     # ------------------------------------------------------------------ build
     def _build(self):

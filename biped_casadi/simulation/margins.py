@@ -56,7 +56,9 @@ class MarginCheck:
         self.status = ["negative_normal_force"]
         if np.isfinite(limits.mu):
             self.status += ["slipped"] * 2
-        if not limits.saturate and np.isfinite(limits.torque_limit):
+        #: per torque, its bound (the run's limit, or the joints' where they differ)
+        self.U = np.broadcast_to(np.asarray(limits.torque_limit, float), (nu,))
+        if not limits.saturate and np.all(np.isfinite(self.U)):
             self.status += ["torque_limit"] * (2 * nu)
         self._between = None
         u = schema.index["u"]
@@ -74,9 +76,10 @@ class MarginCheck:
             cone = (lim.mu + FRICTION_TOL) * Fz
             out += [cone - Fx, cone + Fx]
         if "torque_limit" in self.status:
-            U = lim.torque_limit
-            out += [U - u[i] for i in range(self.schema.nu)] + \
-                   [U + u[i] for i in range(self.schema.nu)]
+            U = [lim.torque_limit] * self.schema.nu if np.ndim(lim.torque_limit) == 0 \
+                else lim.torque_limit
+            out += [U[i] - u[i] for i in range(self.schema.nu)] + \
+                   [U[i] + u[i] for i in range(self.schema.nu)]
         return lib.vertcat(*out) if lib is ca else np.array(out, float)
 
     def rows(self, D) -> np.ndarray:
@@ -139,7 +142,7 @@ class MarginCheck:
             k = lim.mu + FRICTION_TOL
             slack.append(k * lo[nu + 1] - max(hi[nu], -lo[nu]) - c * (k * d1[nu + 1] + d1[nu]))
         if "torque_limit" in self.status:
-            slack.extend(lim.torque_limit - max(hi[i], -lo[i]) - c * d1[i] for i in range(nu))
+            slack.extend(self.U[i] - max(hi[i], -lo[i]) - c * d1[i] for i in range(nu))
         return slack
 
     def _far(self, lo, hi, d1) -> bool:
@@ -158,8 +161,8 @@ class MarginCheck:
                 far &= k * lo[nu + 1] - np.maximum(hi[nu], -lo[nu]) \
                     - c * (k * d1[nu + 1] + d1[nu]) >= 0
             if "torque_limit" in self.status:
-                far &= np.all(lim.torque_limit - np.maximum(hi[:nu], -lo[:nu]) - c * d1[:nu]
-                              >= 0, axis=0)
+                U = self.U.reshape((-1,) + (1,) * (np.ndim(hi[:nu]) - 1))
+                far &= np.all(U - np.maximum(hi[:nu], -lo[:nu]) - c * d1[:nu] >= 0, axis=0)
         return ~far
 
     def at_nodes(self, D) -> np.ndarray:

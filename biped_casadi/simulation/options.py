@@ -71,9 +71,10 @@ class SimulationOptions:
         below this fraction of its largest magnitude on the reference (the torques grow
         like its inverse).
     torque_limit : float or None
-        The run stops ('torque_limit') where some ``|u_i|`` exceeds it, N m; None
-        (default): the robot's own limit (``model.params.torque_limit``), or for a robot
-        without one the limit its gait was made for (``gait.options.torque_limit``).
+        The run stops ('torque_limit') where some ``|u_i|`` exceeds it, N m (one limit
+        for every joint); None (default): the robot's own, each joint's where they differ
+        (``model.description.torque_bound``), or for a robot without one the limit its
+        gait was made for (``gait.options.torque_limit``).
     min_liftoff_speed : float
         The old stance foot must leave the ground after an impact with at least this
         upward speed, m/s (default 0: any upward speed).
@@ -81,7 +82,7 @@ class SimulationOptions:
         Compile the closed loop to C (CasADi JIT, needs a C compiler; a few seconds
         once per controller, then about 5 times faster).
     saturate : bool
-        Clip every torque at the torque limit and keep walking (real actuators
+        Clip every torque at its torque limit and keep walking (real actuators
         saturate), instead of stopping the run with 'torque_limit'; the run reports the
         time it spent saturated.  Full-order simulator only (the walkers are the zero
         dynamics, exact only while the torques are those of the law).

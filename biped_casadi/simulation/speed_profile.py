@@ -107,7 +107,7 @@ class ProfileStep:
     peak_torque : float
         The largest ``|u_i|`` of the step, N m.
     torque_margin : float
-        The torque limit minus that, N m.
+        The torque limit minus that, N m (NaN where the joints' limits differ).
     min_normal_force : float
         The smallest stance F_z of the step, N.
     max_friction_ratio, max_impulse_ratio : float
@@ -361,7 +361,9 @@ def _profile_step(k, d, sim, res, t0) -> ProfileStep:
         duration=float(rec.duration) if rec is not None else nan, t_start=float(t0),
         step_length=float(rec.step_length) if rec is not None else nan,
         peak_torque=float(res.peak_torque),
-        torque_margin=float(sim.torque_limit - res.peak_torque),
+        # the peak is over all joints: no margin against limits that differ by joint
+        torque_margin=float(sim.torque_limit - res.peak_torque)
+        if np.ndim(sim.torque_limit) == 0 else nan,
         min_normal_force=float(res.min_normal_force),
         max_friction_ratio=float(res.max_friction_ratio),
         max_impulse_ratio=float(res.max_impulse_ratio),

@@ -89,8 +89,10 @@ class Limits:
         How far below the ground the swing foot may graze where it cannot strike, m.
     singular_tolerance : float
         Fraction of the denominator's scale below which the controller is singular.
-    torque_limit : float
-        Bound on every ``|u_i|``, N m.
+    torque_limit : float or tuple of float
+        Bound on every ``|u_i|``, N m: a float, or one per torque u1 .. u_nu where the
+        robot's joints' limits differ
+        (:attr:`~biped_casadi.model.description.RobotDescription.torque_bound`).
     min_liftoff_speed : float
         Upward speed the old stance foot needs after an impact, m/s.
     scuffing_ignored : bool
@@ -112,7 +114,7 @@ class Limits:
     max_torso_angle: float
     ground_tolerance: float
     singular_tolerance: float
-    torque_limit: float
+    torque_limit: float | tuple
     min_liftoff_speed: float
     scuffing_ignored: bool = False
     saturate: bool = False
@@ -122,8 +124,8 @@ class Limits:
     def of(cls, options, model, gait=None) -> "Limits":
         """The limits of simulation options for a robot.
 
-        The robot's own torque limit and fall height are used where the options leave
-        them unset; a robot without a torque limit (a URDF without effort limits) is held
+        The robot's own torque limits (its ``torque_bound``: per joint where they differ)
+        and fall height are used where the options leave them unset; a robot without a torque limit (a URDF without effort limits) is held
         to the one its gait was made for, as MuJoCo's motors are.  Without a friction
         coefficient in the options, the ground has the one the gait was made for
         (:func:`~biped_casadi.simulation.options.friction_of`).
@@ -142,10 +144,10 @@ class Limits:
         Limits
         """
         tl = options.torque_limit if options.torque_limit is not None \
-            else model.params.torque_limit
-        if options.torque_limit is None and not np.isfinite(tl):
+            else model.description.torque_bound
+        if options.torque_limit is None and not np.all(np.isfinite(tl)):
             tl = getattr(getattr(gait, "options", None), "torque_limit", None) or tl
-        if getattr(options, "saturate", False) and not np.isfinite(tl):
+        if getattr(options, "saturate", False) and not np.all(np.isfinite(tl)):
             raise ValueError(f"saturate: the robot {model.params.name} has no torque limit to "
                              f"clip the torques at (its URDF gives no effort limits): give "
                              f"torque_limit (--torque-limit N)")
@@ -155,10 +157,38 @@ class Limits:
                    max_torso_angle=float(options.max_torso_angle),
                    ground_tolerance=float(options.ground_tolerance),
                    singular_tolerance=float(options.singular_tolerance),
-                   torque_limit=float(tl), min_liftoff_speed=float(options.min_liftoff_speed),
+                   torque_limit=_bound(tl, model.nu), min_liftoff_speed=float(options.min_liftoff_speed),
                    scuffing_ignored=bool(model.scuffing_ignored),
                    saturate=bool(getattr(options, "saturate", False)),
                    torso_upright=float(getattr(model.description, "torso_upright", 0.0)))
+
+
+def _bound(limit, nu: int):
+    """A resolved torque bound: a float, or a tuple of nu floats (one per torque)."""
+    if np.ndim(limit) == 0:
+        return float(limit)
+    limit = tuple(float(v) for v in limit)
+    if len(limit) != nu:
+        raise ValueError(f"torque_limit: {len(limit)} bounds for {nu} torques")
+    return limit
+
+
+def _over(u, limit):
+    """Per node, whether some |u_i| (u: (nu, *S)) exceeds its bound."""
+    if np.ndim(limit) == 0:
+        return np.max(np.abs(u), axis=0) > limit
+    U = np.asarray(limit).reshape((-1,) + (1,) * (np.ndim(u) - 1))
+    return np.any(np.abs(u) > U, axis=0)
+
+
+def _torque_words(u, limit) -> str:
+    """The torque-limit failure in words: the torque most beyond its bound."""
+    if np.ndim(limit) == 0:
+        return f"torque limit exceeded: |u| = {np.max(np.abs(u)):.4g} N m > {limit:g} N m"
+    over = np.abs(np.asarray(u, float)) - np.asarray(limit)
+    i = int(np.argmax(over))
+    return (f"torque limit exceeded: |u{i + 1}| = {abs(float(u[i])):.4g} N m > its limit "
+            f"{limit[i]:g} N m")
 
 
 def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None,
@@ -216,7 +246,7 @@ def node_violations(rows: dict, limits: Limits, den_scale, den_sign, z_prev=None
             bad["scuffed"] = np.zeros_like(bad["scuffed"])
         bad["negative_normal_force"] = finite & ~(rows["Fz"] > lim.min_normal_force)
         bad["slipped"] = finite & (np.abs(rows["Fx"]) > (lim.mu + FRICTION_TOL) * rows["Fz"])
-        bad["torque_limit"] = finite & (np.max(np.abs(rows["u"]), axis=0) > lim.torque_limit)
+        bad["torque_limit"] = finite & _over(rows["u"], lim.torque_limit)
         if lim.saturate:
             bad["torque_limit"] = np.zeros_like(bad["torque_limit"])
     return bad
@@ -366,8 +396,7 @@ def node_message(which: str, node: dict, limits: Limits, den_scale: float) -> st
         "negative_normal_force": lambda: f"stance normal force F_z = {d['Fz']:.4g} N",
         "slipped": lambda: f"stance foot slips: |F_x| / F_z = "
                            f"{_ratio(abs(d['Fx']) / max(d['Fz'], 1e-300))} > mu = {limits.mu}",
-        "torque_limit": lambda: f"torque limit exceeded: |u| = {np.max(np.abs(d['u'])):.4g} "
-                                f"N m > {limits.torque_limit:g} N m",
+        "torque_limit": lambda: _torque_words(d["u"], limits.torque_limit),
     }
     return words[which]()
 

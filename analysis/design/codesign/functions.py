@@ -83,15 +83,18 @@ class TranscriptionSettings:
     mu : float
         Friction coefficient of the scenarios' stance foot and impulse (with the margin
         below).
-    torque_limit : float or None
-        N m (with the margin below); None (the default): the robot's own
-        (``model.description.torque_limit``, RABBIT 150 N m), filled in by
-        :meth:`for_model`.  The co-design passes its verification's limit.
+    torque_limit : float, tuple of float or None
+        N m (with the margin below), one bound for every torque or one per torque u1 ..
+        u_nu; None (the default): the robot's own (``model.description.torque_bound``:
+        RABBIT 150 N m, each joint's limit where the joints' limits differ), filled in by
+        :meth:`for_model`.  The co-design passes its verification's limit (the robot's
+        own when it gives none).
     torque_margin : float or None
         N m kept below the torque limit (peaks between the NLP's nodes); None (the
         default): 0.02 x the robot's own torque limit (RABBIT: 3 N m; a robot without
-        one: RABBIT's 3 N m times its weight x leg length over RABBIT's), filled in by
-        :meth:`for_model`.
+        one: RABBIT's 3 N m times its weight x leg length over RABBIT's; a robot whose
+        joints' limits differ: 0.02 x the smallest, kept below every joint's limit),
+        filled in by :meth:`for_model`.
     mu_margin : float
         Kept below mu in every cone.
     normal_force_min : float
@@ -135,7 +138,7 @@ class TranscriptionSettings:
     nodes_per_T: int = 100
     horizon: float = 1.6
     mu: float = 0.6
-    torque_limit: float | None = None
+    torque_limit: float | tuple | None = None
     torque_margin: float | None = None
     mu_margin: float = 0.02
     normal_force_min: float = 0.05
@@ -186,7 +189,8 @@ class TranscriptionSettings:
         fill = {name: value * k[kind] for name, (kind, value) in _SCALED.items()
                 if getattr(self, name) is None}
         if self.torque_limit is None:
-            fill["torque_limit"] = float(model.description.torque_limit)
+            bound = model.description.torque_bound
+            fill["torque_limit"] = bound if isinstance(bound, tuple) else float(bound)
         return replace(self, **fill) if fill else self
 
 

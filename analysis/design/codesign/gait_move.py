@@ -113,7 +113,9 @@ def own_values(gait) -> dict:
     dict
         ``impact_mu``: its impulse ratio ``|F_x| / F_z``; ``clearance``: the largest c
         with z_sw >= c 4 s (1 - s) inside the step, m; ``mu``: its largest friction
-        ratio ``|F_x| / F_z`` in single support; ``torque_limit``: its peak torque, N m.
+        ratio ``|F_x| / F_z`` in single support; ``torque_limit``: its peak torque, N m
+        (each torque's peak where its options bound each torque: a robot whose joints'
+        limits differ).
     """
     c = gait.check()
     t = np.linspace(0.0, gait.T, 2001)[1:-1]
@@ -122,7 +124,16 @@ def own_values(gait) -> dict:
     s = t / gait.T
     return dict(impact_mu=float(c["impact_friction_ratio"]),
                 clearance=float(np.min(z / (4 * s * (1 - s)))),
-                mu=float(c["max_friction_ratio"]), torque_limit=float(c["max_abs_torque"]))
+                mu=float(c["max_friction_ratio"]),
+                torque_limit=float(c["max_abs_torque"]) if np.ndim(gait.options.torque_limit)
+                == 0 else tuple(float(v) for v in c["max_abs_torques"]))
+
+
+def _each(fn, *bounds):
+    """``fn`` of numbers, or torque by torque of per-torque bounds (tuples)."""
+    if np.ndim(bounds[0]) == 0:
+        return fn(*bounds)
+    return tuple(fn(*v) for v in zip(*bounds))
 
 
 def gait_change(g_from, g_to) -> dict:
@@ -325,7 +336,7 @@ class GaitProjection(GaitTable):
         o, nu, G = self.gait.options, self.nu, self.i_G
         idx = np.array([0, 2 * self.N])
         nom, dnom = tab["nominal"][:, idx], tab["dnominal"][:, :, idx]
-        U = o.torque_limit or self.st.torque_limit
+        U = self.torque_bound(idx.size)
         rows.add(nom[:nu].T.ravel(), dnom[:nu].transpose(2, 0, 1).reshape(-1, self.nG), G,
                  -U, U, "gait torque limit")
         Fx, Fz, dFx, dFz = nom[nu], nom[nu + 1], dnom[nu], dnom[nu + 1]
@@ -344,8 +355,11 @@ def _relaxed(gait) -> dict:
     imported gait is not held to them)."""
     o, c, m = gait.options, gait.check(), gait.model
     out = {}
-    if c["max_abs_torque"] > o.torque_limit:
+    if np.ndim(o.torque_limit) == 0 and c["max_abs_torque"] > o.torque_limit:
         out["torque_limit"] = float(c["max_abs_torque"]) + 1e-6
+    elif np.ndim(o.torque_limit) and np.any(np.greater(c["max_abs_torques"], o.torque_limit)):
+        out["torque_limit"] = _each(lambda p, u: max(u, p + 1e-6), tuple(c["max_abs_torques"]),
+                                    o.torque_limit)
     if c["max_friction_ratio"] > o.mu:
         out["mu"] = float(c["max_friction_ratio"]) + 1e-6
     if c["min_normal_force"] < o.min_normal_force:
@@ -385,18 +399,19 @@ class _Move:
         self.tgt = dict(impact_mu=float(targets.get("impact_mu", b.impulse_mu)),
                         clearance=float(targets.get("clearance", b.clearance)),
                         mu=min(float(ms.path_mu), b.mu),
-                        torque_limit=float(ms.torque_fraction * b.torque_limit))
+                        torque_limit=_each(lambda u: float(ms.torque_fraction * u),
+                                           b.torque_limit))
         own, tgt = self.own, self.tgt
         self.start = {k: (min(max(own[k], 0.0), tgt[k]) if k == "clearance"
-                          else max(own[k], tgt[k])) for k in tgt}
+                          else _each(max, own[k], tgt[k])) for k in tgt}
         self.G_user = GaitTable(gait.model, gait, transcription).gait_vector(gait)
         self.records = []
 
     def bounds_at(self, f: float) -> dict:
         """The continued constraints' bounds at fraction f of the way (a bound that
         does not move stays as it is: an infinite torque limit stays infinite)."""
-        return {k: self.start[k] if self.start[k] == self.tgt[k]
-                else self.start[k] + f * (self.tgt[k] - self.start[k]) for k in self.tgt}
+        return {k: _each(lambda a, b: a if a == b else a + f * (b - a), self.start[k],
+                         self.tgt[k]) for k in self.tgt}
 
     def attempt(self, f: float, d_from, effort: float):
         """One solve at the bounds of fraction f from d_from: (G, gait) or None."""
@@ -404,7 +419,7 @@ class _Move:
         solve_opts = self.base.replace(
             impact_mu=max(b["impact_mu"] - ms.impulse_margin, 1e-3),
             clearance=b["clearance"] + ms.clearance_margin, mu=b["mu"] - ms.friction_margin,
-            torque_limit=b["torque_limit"] - ms.torque_margin)
+            torque_limit=_each(lambda u: u - ms.torque_margin, b["torque_limit"]))
         nlp = GaitProjection(Gait(g.model, solve_opts, g.alpha, g.x0, g.T), self.G_user,
                              ms.scale, self.tst, effort)
         lb, ub = nlp.gait_bounds()
@@ -464,8 +479,8 @@ class _Move:
         return (f"gait moved to impulse ratio <= {b['impact_mu']:.3g} (the given gait "
                 f"{own['impact_mu']:.3g}), swing-foot clearance >= {b['clearance']:.3g} m "
                 f"(given {own['clearance']:.3g}), friction ratio <= {b['mu']:.3g} (given "
-                f"{own['mu']:.3g}), torques <= {b['torque_limit']:.4g} N m (given "
-                f"{own['torque_limit']:.4g}) in {len(self.records)} solve(s)"
+                f"{own['mu']:.3g}), torques <= {_text(b['torque_limit'])} N m (given "
+                f"{_text(own['torque_limit'])}) in {len(self.records)} solve(s)"
                 + ("" if f_done >= 1.0 - 1e-12 else
                    f", {100 * f_done:.0f} % of the way to the targets")
                 + f"; T {change['T'][0]:.4g} -> {change['T'][1]:.4g} s, step length "
@@ -502,7 +517,7 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
     settings = settings.for_model(gait.model)
     mv = _Move(gait, targets, settings, transcription)
     own, tgt = mv.own, mv.tgt
-    if all(abs(mv.start[k] - tgt[k]) < 1e-12 for k in tgt):
+    if all(np.all(np.abs(np.subtract(mv.start[k], tgt[k])) < 1e-12) for k in tgt):
         moved = Gait(gait.model, mv.base.replace(**tgt), gait.alpha, gait.x0, gait.T,
                      solver_stats=dict(gait.solver_stats))
         return GaitMove("kept", "the gait meets the robust gait constraints already",
@@ -521,3 +536,8 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
     return GaitMove("moved" if f_done >= 1.0 - 1e-12 else "partly",
                     mv.message(f_done, change), own, tgt, own_values(last), mv.records,
                     change, gait=last)
+
+
+def _text(bound) -> str:
+    """A torque bound in words: ``'120'``, or per torque ``'16/32/32/16'``."""
+    return "/".join(f"{float(v):.4g}" for v in np.atleast_1d(bound))

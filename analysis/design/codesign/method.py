@@ -160,10 +160,11 @@ class Method:
         #: how many stable within the eigenvalue bound, the bound
         self.sampled = {}
         self.rs = st.robustness_settings()
+        # the verification's limit, or the robot's own: each joint's where they differ
         tl = st.verification.torque_limit
+        tl = self.model.description.torque_bound if tl is None else tl
         self.tst = TranscriptionSettings(
-            mu=st.verification.mu, torque_limit=float(tl if tl is not None
-                                                      else self.model.params.torque_limit),
+            mu=st.verification.mu, torque_limit=tl if isinstance(tl, tuple) else float(tl),
             **st.transcription)
         self.rejoin = float(st.rejoin)
 

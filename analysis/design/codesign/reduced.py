@@ -176,7 +176,8 @@ class Reduced:
         """What every step uses: the margined limits, the end target rT and its columns,
         the number of KS chunks and the nodes' times."""
         tr, st, nd = self.tr, self.tr.st, self.nd
-        U = st.torque_limit - st.torque_margin
+        U = st.torque_limit - st.torque_margin if np.ndim(st.torque_limit) == 0 else \
+            np.asarray(st.torque_limit, float) - st.torque_margin     # per torque u_i
         mu, mg, rho = st.mu - st.mu_margin, tr.mg, st.ks_rho
         rT = tab["r"][:, 2 * tr.N]
         drT = np.zeros((2, nd))
@@ -269,8 +270,9 @@ class Reduced:
         # per chunk of nodes (past the strike: the last point), one KS row each
         # of torque, normal force, friction and the denominator
         sc = tr.den_sign / tr.den_scale
+        Uu, Ud = (U, U) if np.ndim(U) == 0 else (U[:, None], U[:, None, None])
         rows.chunked_ks(
-            [(np.vstack([u / U - 1, -u / U - 1]), np.concatenate([du / U, -du / U])),
+            [(np.vstack([u / Uu - 1, -u / Uu - 1]), np.concatenate([du / Ud, -du / Ud])),
              (((st.normal_force_min * mg - Fz) / mg)[None], (-dFz / mg)[None]),
              (np.vstack([Fx - mu * Fz, -Fx - mu * Fz]) / mg,
               np.stack([dFx - mu * dFz, -dFx - mu * dFz]) / mg),

@@ -49,8 +49,9 @@ def physical_scales(model) -> dict:
     dict
         ``length``: leg length / RABBIT's; ``speed``: sqrt(g leg) / RABBIT's; ``impulse``:
         total mass x sqrt(g leg) / RABBIT's; ``torque``: the robot's torque limit /
-        RABBIT's (without a finite limit: weight x leg length / RABBIT's).  On RABBIT
-        every one is exactly 1.0.
+        RABBIT's (without a finite limit: weight x leg length / RABBIT's; where the
+        joints' limits differ, the smallest: a margin in N m is one number, kept below
+        every joint's limit).  On RABBIT every one is exactly 1.0.
     """
     d, r = getattr(model, "description", model), _rabbit()
     speed = _speed(d) / _speed(r)

@@ -166,7 +166,8 @@ class Verification:
     mu : float
         Friction coefficient.
     torque_limit : float, optional
-        Torque bound, N m (None: the robot's).
+        Torque bound on every joint, N m (None: the robot's own, each joint's where its
+        joints' limits differ).
     directions : int
         Kept perturbation directions.
     walk_steps : int
@@ -217,7 +218,8 @@ class MoveSettings:
     torque_margin : float or None
         N m: the torques likewise, below the limit; None (the default): 1/300 of the
         robot's own torque limit (RABBIT: 0.5 N m; a robot without one: RABBIT's
-        0.5 N m times its weight x leg length over RABBIT's), filled in by
+        0.5 N m times its weight x leg length over RABBIT's; a robot whose joints' limits
+        differ: 1/300 of the smallest, kept below every joint's limit), filled in by
         :meth:`for_model`.
     max_iter : int
         IPOPT iterations per step.
@@ -228,7 +230,8 @@ class MoveSettings:
         The friction ratio the moved gait keeps in single support (the verification's
         mu is 0.6: the margin is room for perturbations).
     torque_fraction : float
-        The moved gait's torques stay within this fraction of the torque limit.
+        The moved gait's torques stay within this fraction of the torque limit (of
+        each joint's, where the joints' limits differ).
     efforts : tuple of float
         The effort weights the co-design tries in turn (:meth:`.method.Method.setup`):
         the gait nearest the given one first, then smoother ones farther away; inf: the

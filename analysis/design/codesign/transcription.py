@@ -228,7 +228,7 @@ class GaitTable:
         idx = 2 * np.arange(1, self.N)
         nom, dnom = tab["nominal"][:, idx], tab["dnominal"][:, :, idx]
         s = idx / (2 * self.N)
-        U = o.torque_limit or self.st.torque_limit
+        U = self.torque_bound(idx.size)
         u, du = nom[:nu], dnom[:nu]
         rows.add(u.T.ravel(), du.transpose(2, 0, 1).reshape(-1, self.nG), G, -U, U,
                  "gait torque limit")
@@ -240,6 +240,13 @@ class GaitTable:
         zsw, dzsw = nom[nu + 3], dnom[nu + 3]
         rows.add(zsw - o.clearance * 4 * s * (1 - s), dzsw.T, G, 0.0, np.inf,
                  "gait swing-foot clearance")
+
+    def torque_bound(self, nodes: int):
+        """The gait's torque bound on the rows of ``nodes`` nodes' torques, node by node
+        (``u.T.ravel()``): its options' limit (else the settings'), one number or each
+        torque's (tiled), N m."""
+        U = self.gait.options.torque_limit or self.st.torque_limit
+        return U if np.ndim(U) == 0 else np.tile(np.asarray(U, float), nodes)
 
 
 class Transcription(GaitTable):

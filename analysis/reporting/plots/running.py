@@ -7,6 +7,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from biped_casadi.model import flight_model
+from biped_casadi.model.description import torque_bound_text
 from gait_opt.running_checks import dense
 
 from .common import STANCE, SWING, _figure, _stick
@@ -67,10 +68,11 @@ def _profiles(ax_q, ax_u, model, gait):
         ax.set_xlim(0.0, gait.T)
         ax.grid(alpha=0.3)
         ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7)
-    ax_u.axhline(limit, color="k", ls="--", lw=0.8)
-    ax_u.axhline(-limit, color="k", ls="--", lw=0.8)
+    for v in sorted(set(np.atleast_1d(limit).tolist())):   # each joint's where they differ
+        ax_u.axhline(v, color="k", ls="--", lw=0.8)
+        ax_u.axhline(-v, color="k", ls="--", lw=0.8)
     ax_q.set_ylabel("joint angle [rad]")
-    ax_u.set_ylabel(f"torque [N m] (limit ±{limit:g} dashed)")
+    ax_u.set_ylabel(f"torque [N m] (limit ±{torque_bound_text(limit)} dashed)")
     ax_u.set_xlabel("time from landing [s]")
 
 
