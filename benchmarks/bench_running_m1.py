@@ -12,11 +12,12 @@ Jacobian, and 20 strides from the fixed point with 0.01 rad/s on every velocity 
 per-stride contraction against the radius).
 
 Run: ``python benchmarks/bench_running_m1.py [--speeds 1.0 1.5 ...] [--max-evaluations N]
-[--no-save]``; writes ``benchmarks/results/running_m1.json`` after each speed and
-``docs/_static/running_m1_speeds.png`` at the end.  Run again, it resumes: the speeds the
-file holds, measured with the same settings (gains, hand-picked M1, grid of c, evaluations,
-torque reserve, sliding foot), are not measured again; a file of other settings, of
-another benchmark or not readable is one line and exit 2.
+[--no-save] [--recheck SPEED ...]``; writes ``benchmarks/results/running_m1.json`` after
+each speed and ``docs/_static/running_m1_speeds.png`` at the end (``--recheck 2.0``: the
+checks of that saved speed measured again, nothing else).  Run again, it resumes: the
+speeds the file holds, measured with the same settings (gains, hand-picked M1, grid of c,
+evaluations, torque reserve, sliding foot), are not measured again; a file of other
+settings, of another benchmark or not readable is one line and exit 2.
 """
 from __future__ import annotations
 
@@ -57,18 +58,20 @@ def _radius(cyc, M1):
 def _check(cyc, r, nq):
     """Central differences and a perturbed run at a design's fixed point."""
     t0 = time.perf_counter()
-    try:
-        J = finite_difference_jacobian(cyc, r.fixed_point, 1e-5)
+    try:                # a column's step shrinks where it leaves x*'s sequence of domains
+        J, steps = finite_difference_jacobian(cyc, r.fixed_point, 1e-5, return_steps=True)
         fd, fd_message = float(np.abs(J - r.A).max() / np.abs(r.A).max()), ""
-    except HybridCycleError as e:      # a fixed point on a constraint's edge
-        fd, fd_message = None, str(e)
+        steps = steps.tolist()
+    except HybridCycleError as e:      # a fixed point on a constraint's or a domain's edge
+        fd, fd_message, steps = None, str(e), None
     x = r.fixed_point.copy()
     x[nq:] += 1e-2
     run = simulate_running(cyc, r.fixed_point, x, 20)
     d = run.deviations
     mean = float((d[-1] / d[1]) ** (1 / (d.size - 2))) if d.size > 2 and d[1] > 0 else None
     st = run.strides
-    return dict(fd_relative_error=fd, fd_message=fd_message, run_status=run.status, run_message=run.message,
+    return dict(fd_relative_error=fd, fd_message=fd_message, fd_steps=steps,
+                run_status=run.status, run_message=run.message,
                 deviations=d.tolist(), contraction=run.contraction.tolist(),
                 mean_contraction_after_first=mean,
                 torque_max=max((s.torque_max for s in st), default=None),
@@ -130,6 +133,35 @@ def speed_row(m, v, max_evaluations, gait_torque_limit=None):
     if out["hand"] is not None:
         out["hand_check"] = _check(cyc.retuned(M1=HAND), rh, m.nq)
     return out
+
+
+def recheck(m, row):
+    """A saved row's checks measured again (:func:`_check`: its gait optimised again, the
+    hand-picked and the chosen M1 at their fixed points), each with the date and commit
+    it was measured at.
+
+    Raises
+    ------
+    ValueError
+        One line: a fixed point whose spectral radius is not the saved one's.
+    """
+    v = row["speed"]
+    g = optimize_running(m, RunningOptions(speed=v, torque_limit=row.get("gait_torque_limit")))
+    cyc = running_cycle(RunningController(m, g, KP, KD, M1=HAND,
+                                          torque_limit=m.description.torque_limit))
+    stamp = dict(date=time.strftime("%Y-%m-%d %H:%M"), commit=commit())
+    ch = row.get("chosen") or {}
+    for where, key, M1, saved in ((row, "hand_check", HAND, row.get("hand")),
+                                  (ch, "check", ch.get("M1"), ch.get("fresh_radius"))):
+        if key not in where:
+            continue
+        r = running_stability(cyc.retuned(M1=M1))
+        if not abs(r.spectral_radius - saved) <= 1e-9 * saved:
+            raise ValueError(f"{v:g} m/s: the fixed point at M1 {tuple(M1)} is not the saved "
+                             f"one (spectral radius {r.spectral_radius:.10g}, saved {saved:.10g})")
+        where[key] = dict(_check(cyc.retuned(M1=M1), r, m.nq), measured=stamp)
+        print(f"{v:g} m/s, {key}: central differences {where[key]['fd_relative_error']}",
+              flush=True)
 
 
 def figure(rows):
@@ -262,6 +294,9 @@ def _arguments():
                     help="write nothing (and resume from nothing)")
     ap.add_argument("--name", default="running_m1",
                     help="the results file's name (benchmarks/results/NAME.json)")
+    ap.add_argument("--recheck", type=float, nargs="+", metavar="SPEED",
+                    help="measure nothing new: the checks (central differences, the perturbed "
+                         "run) of these saved speeds again, their gaits optimised again")
     ap.add_argument("--combine", nargs="+", metavar="FILE",
                     help="measure nothing: merge the rows of saved results (runs over parts "
                          "of the speeds, with these settings) into NAME.json and draw the "
@@ -296,7 +331,17 @@ def main():
         elif rows:
             print("resumed: " + ", ".join(f"{r['speed']:g}" for r in rows)
                   + " m/s already measured", flush=True)
-        for v in [] if a.combine else a.speeds:
+        for v in a.recheck or []:
+            try:
+                recheck(m, next(r for r in rows if r["speed"] == v))
+            except StopIteration:
+                raise SystemExit(print(f"error: --recheck {v:g}: no saved row at that speed",
+                                       file=sys.stderr) or 2)
+            except ValueError as e:
+                raise SystemExit(print(f"error: {e}", file=sys.stderr) or 2)
+            if run.save:
+                run.write()
+        for v in [] if a.combine or a.recheck else a.speeds:
             if any(r["speed"] == v for r in rows):
                 continue
             rows.append(measure(m, v, a))

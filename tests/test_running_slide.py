@@ -226,3 +226,34 @@ def test_the_stride_clock_slides_too(running_cycle15, model):
         sum(sv.durations[:-1]) - g.T_stance, abs=1e-15)
     J = finite_difference_jacobian(cyc, r.fixed_point, 1e-5)
     assert np.abs(J - r.A).max() < 1e-6 * np.abs(r.A).max()
+
+
+def test_central_differences_keep_to_the_strides_sequence_of_domains(running_cycle15, star,
+                                                                      model):
+    """A state 2 um (along dq1) inside the states whose push-off lasts: P has a kink
+    where the push-off becomes empty, and a step of 1e-5 on dq1 crosses it.  The central
+    differences shrink that column's step until both sides run x's domains, and agree
+    with the exact Jacobian (a column whose step stays inside keeps it); a point on the
+    edge itself is refused."""
+    cyc, nq = running_cycle15, model.nq
+    po = cyc.kinds.index("slide", 4)                     # the push-off: the flight law's slide
+
+    def lasts(s):
+        x = star.fixed_point.copy()
+        x[nq] -= s
+        return cyc.stride(x).durations[po] > 0
+
+    lo, hi = 0.0, 0.01                                   # empty at x*, lasting at -0.01 rad/s
+    assert not lasts(lo) and lasts(hi)
+    for _ in range(30):
+        lo, hi = (lo, (lo + hi) / 2) if lasts((lo + hi) / 2) else ((lo + hi) / 2, hi)
+    x = star.fixed_point.copy()
+    x[nq] -= hi + 2e-6
+    A = cyc.linearise(x).A
+    J = finite_difference_jacobian(cyc, x, 1e-5)
+    assert np.abs(J - A).max() < 1e-6 * np.abs(A).max()
+    J, steps = finite_difference_jacobian(cyc, x, 1e-5, return_steps=True)
+    assert steps[nq] == pytest.approx(1e-6, rel=1e-12) and steps.max() == 1e-5
+    x[nq] = star.fixed_point[nq] - hi                    # on the edge: within 1e-9 of it
+    with pytest.raises(HybridCycleError, match="domain 'push-off': x is on its edge"):
+        finite_difference_jacobian(cyc, x, 1e-5, shrink=1)

@@ -65,7 +65,7 @@ from .cycle_results import DomainPass, StrideLinearisation, StrideValue
 from .hybrid_domain import Domain, HybridCycleError
 
 __all__ = ["Domain", "HybridCycle", "HybridCycleError", "DomainPass", "StrideValue",
-           "StrideLinearisation", "entry_function"]
+           "StrideLinearisation", "entry_function", "finite_difference_jacobian"]
 
 
 class _Compiled:
@@ -491,3 +491,73 @@ class HybridCycle:
             r = lin.next_state - lin.state
             lin = self.linearise(lin.state + np.linalg.solve(np.eye(self.n) - lin.A, r))
         return lin
+
+
+def _domains_run(value) -> tuple:
+    """The sequence of domains a stride ran: each domain's name, whether it lasted, and
+    the guard's part that ended it (None: skipped)."""
+    return tuple((p.name, p.duration > 0, p.part) for p in value.passes)
+
+
+def finite_difference_jacobian(cycle: HybridCycle, x, step: float = 1e-6, shrink: int = 3,
+                               return_steps: bool = False):
+    """dP/dx by central differences of the stride map, each step within x's domains.
+
+    2 n strides, more where a step leaves x's sequence of domains.  P is smooth only
+    among the states whose strides run the same domains: where x + e or x - e runs
+    another sequence (a domain that lasts on one side and is empty on the other, such as
+    a push-off of a few ns at a fixed point near the states where it is empty; or another
+    part of a guard ending a domain), P has a kink between them, and their difference
+    mixes the two pieces' slopes (an error of the order of the jump in slope, however
+    small the step beyond the kink).  Such a column's step is divided by 10, at most
+    ``shrink`` times, until both sides run x's sequence.
+
+    Parameters
+    ----------
+    cycle : HybridCycle
+        The map.
+    x : array_like
+        Where, (n,).
+    step : float
+        The difference step (> 0).
+    shrink : int
+        How many times a column's step may be divided by 10 (>= 0).
+    return_steps : bool
+        Also return the step each column used.
+
+    Returns
+    -------
+    numpy.ndarray or tuple
+        (n, n); with ``return_steps``, (J, steps), steps (n,).
+
+    Raises
+    ------
+    HybridCycleError
+        Kind 'edge': a column whose strides at x +- e run another sequence of domains
+        than x's even at ``step`` / 10 ** ``shrink`` (x on the edge of a domain, named);
+        or as :meth:`HybridCycle.stride`.
+    """
+    if isinstance(step, bool) or not isinstance(step, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(step) or step <= 0:
+        raise ValueError(f"step must be a finite number > 0, got {step!r}")
+    if isinstance(shrink, bool) or not isinstance(shrink, (int, np.integer)) or shrink < 0:
+        raise ValueError(f"shrink must be an integer from 0 up, got {shrink!r}")
+    x = np.asarray(x, float).ravel()
+    base = _domains_run(cycle.stride(x))
+    J, steps = np.zeros((cycle.n, x.size)), np.zeros(x.size)
+    for j in range(x.size):
+        for i in range(shrink + 1):
+            e = np.zeros(x.size)
+            e[j] = step / 10 ** i
+            sides = cycle.stride(x + e), cycle.stride(x - e)
+            other = [r for s in sides for r, r0 in zip(_domains_run(s), base) if r != r0]
+            if not other:
+                break
+        else:
+            name, lasted, part = other[0]
+            raise HybridCycleError(name, "edge", f"x is on its edge: column {j}'s strides at "
+                                   f"x +- {e[j]:.1e} run another sequence of domains than x's "
+                                   f"({'lasting' if lasted else 'empty'}, {part})")
+        J[:, j] = (sides[0].next_state - sides[1].next_state) / (2 * e[j])
+        steps[j] = e[j]
+    return (J, steps) if return_steps else J

@@ -22,8 +22,10 @@ class HybridCycleError(ValueError):
     kind : str
         'no_crossing' (the guard is not crossed within the domain's time limit),
         'dimension' (a reset, entry or vector field of the wrong size), 'constraint' (a
-        validity constraint violated), 'not_finite' (the state diverged); kept as the
-        attribute ``kind``.
+        validity constraint violated), 'not_finite' (the state diverged), 'edge' (a
+        state on the edge between two sequences of domains, where central differences
+        are refused: :func:`~analysis.stability.hybrid_cycle.finite_difference_jacobian`);
+        kept as the attribute ``kind``.
     message : str
         What happened, after the domain's name.
     """

@@ -99,7 +99,8 @@ from biped_casadi.control.running_step import check_rk4_steps
 from biped_casadi.results import Result
 
 from . import running_domains as rd
-from .hybrid_cycle import HybridCycle, HybridCycleError, entry_function
+from .hybrid_cycle import (HybridCycle, HybridCycleError, entry_function,
+                           finite_difference_jacobian)
 
 __all__ = ["running_cycle", "RunningCycle", "running_stability", "RunningStability",
            "finite_difference_jacobian", "simulate_running", "RunningRun", "StrideRecord",
@@ -428,32 +429,6 @@ def running_stability(cycle: HybridCycle, x0=None, tol: float = 1e-11,
                  f"{np.max(np.abs(lin.state - xc)):.1e} from the collocated state; "
                  f"spectral radius {rho:.4g}" if ok else
                  f"Newton did not close the orbit (residual {lin.residual:.1e})"))
-
-
-def finite_difference_jacobian(cycle: HybridCycle, x, step: float = 1e-6) -> np.ndarray:
-    """dP/dx by central differences of the stride map (2 n strides).
-
-    Parameters
-    ----------
-    cycle : HybridCycle
-        The map.
-    x : array_like
-        Where, (n,).
-    step : float
-        The difference step.
-
-    Returns
-    -------
-    numpy.ndarray
-        (n, n).
-    """
-    x = np.asarray(x, float).ravel()
-    J = np.zeros((cycle.n, x.size))
-    for j in range(x.size):
-        e = np.zeros(x.size)
-        e[j] = step
-        J[:, j] = (cycle.stride(x + e).next_state - cycle.stride(x - e).next_state) / (2 * step)
-    return J
 
 
 # ------------------------------------------------------------------ simulation
