@@ -11,6 +11,8 @@ import time
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
+#: the checkout: figures under it are saved by their path in it (not this machine's)
+ROOT = RESULTS.parents[1]
 
 
 def machine() -> dict:
@@ -42,6 +44,13 @@ def commit() -> str:
         return head + ("+changes" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return "?"
+
+
+def in_checkout(path) -> str:
+    """``path`` relative to the checkout when it is in it, else as given."""
+    p = Path(path)
+    return p.relative_to(ROOT).as_posix() if p.is_absolute() and p.is_relative_to(ROOT) \
+        else str(path)
 
 
 class Run:
@@ -88,6 +97,8 @@ class Run:
         """Write the file now (a long run saves what it has measured so far; the file is
         replaced in one step, so an interrupted write leaves the previous one)."""
         RESULTS.mkdir(exist_ok=True)
+        if isinstance(self.data.get("figure"), list):
+            self.data["figure"] = [in_checkout(f) for f in self.data["figure"]]
         body = dict(name=self.name, title=self.title, date=self.started,
                     commit=commit(), machine=machine(),
                     load=dict(before=list(self.load_before), after=list(os.getloadavg())),

@@ -151,3 +151,13 @@ def test_saturation_reads_the_saved_choice(env, monkeypatch):
     env.path.write_text(json.dumps(body))
     with pytest.raises(ValueError, match="foot not recorded, not the sliding one"):
         sat.chosen_m1("m1", 2.5, 145.0)
+
+
+def test_a_saved_figure_is_named_by_its_path_in_the_checkout(tmp_path, monkeypatch):
+    """A results file is committed: a figure drawn in the checkout is saved as
+    ``docs/...``, not as this machine's absolute path (a figure elsewhere as given)."""
+    monkeypatch.setattr(_results, "RESULTS", tmp_path / "results")
+    with _results.Run("figs", "figures") as run:
+        run.data["figure"] = [str(ROOT / "docs" / "_static" / "x.png"), "/elsewhere/y.png"]
+    saved = json.loads((tmp_path / "results" / "figs.json").read_text())
+    assert saved["data"]["figure"] == ["docs/_static/x.png", "/elsewhere/y.png"]
