@@ -29,7 +29,7 @@ from gait_opt.running import RunningGait
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "load_running_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
            "add_gait_arguments", "add_scheduler", "is_family_file", "require_members",
-           "check_inputs", "check_scheduler", "not_an_input", "MU_HELP", "gait_friction",
+           "check_inputs", "check_scheduler", "scheduler_and_gait", "not_an_input", "MU_HELP", "gait_friction",
            "friction_source"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
@@ -569,6 +569,28 @@ def check_scheduler(scheduler, say=None):
             client.close()
     except ValueError as e:
         raise UserError(f"--{e}") from None
+
+
+def scheduler_and_gait(args, say):
+    """:func:`check_scheduler` and :func:`load_gait` in the order that refuses bad input
+    before any work: a gait file (``--gait``) is read first (a missing one waited for the
+    code's digest and the scheduler's answer before its one line), the robot's default
+    gait after the check (optimising it is work).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``gait`` and ``scheduler`` (and what :func:`load_gait` reads).
+    say : Progress
+        The command's progress lines.
+
+    Returns
+    -------
+    Gait
+    """
+    gait = load_gait(args, say) if args.gait else None
+    check_scheduler(args.scheduler, say)
+    return gait if gait is not None else load_gait(args, say)
 
 
 def add_scheduler(p):
