@@ -573,9 +573,9 @@ def check_scheduler(scheduler, say=None):
 
 def scheduler_and_gait(args, say):
     """:func:`check_scheduler` and :func:`load_gait` in the order that refuses bad input
-    before any work: a gait file (``--gait``) is read first (a missing one waited for the
-    code's digest and the scheduler's answer before its one line), the robot's default
-    gait after the check (optimising it is work).
+    before any work: a gait file (``--gait``), or else the robot (``--robot``), is read
+    first (a missing one waited for the code's digest and the scheduler's answer before
+    its one line), the robot's default gait after the check (optimising it is work).
 
     Parameters
     ----------
@@ -588,9 +588,9 @@ def scheduler_and_gait(args, say):
     -------
     Gait
     """
-    gait = load_gait(args, say) if args.gait else None
+    gait = load_gait(args, say) if args.gait else load_model(getattr(args, "robot", None))
     check_scheduler(args.scheduler, say)
-    return gait if gait is not None else load_gait(args, say)
+    return gait if args.gait else load_gait(args, say)
 
 
 def add_scheduler(p):
