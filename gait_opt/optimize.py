@@ -12,7 +12,7 @@ import numpy as np
 
 from biped_casadi import rabbit
 from biped_casadi.caching import task
-from biped_casadi.model.description import torque_bound_text
+from biped_casadi.model.torque_limits import torque_limit_words
 from biped_casadi.results import Result, internal
 
 from .cache import cached_gait
@@ -83,8 +83,8 @@ def solve_collocation(model, opts: GaitOptions, *, verbose: bool = False,
     if not stats.get("success", False) or viol:
         raise GaitOptimizationError(
             f"no feasible gait: IPOPT status '{status}' after {stats.get('iter_count', '?')} "
-            f"iterations (speed {opts.speed:g} m/s, mu {opts.mu:g}, torque limit "
-            f"{torque_bound_text(opts.torque_limit)} N m); violated constraint families at the last iterate: "
+            f"iterations (speed {opts.speed:g} m/s, mu {opts.mu:g}, "
+            f"{torque_limit_words(opts.torque_limit)}); violated constraint families at the last iterate: "
             f"{describe_violations(viol)}. Try a lower speed, a larger mu or torque_limit, "
             f"wider step_length_bounds, or more IPOPT iterations (option "
             f"ipopt={{'max_iter': ...}}, --max-iter on the command line).",

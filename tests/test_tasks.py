@@ -533,6 +533,29 @@ def test_the_command_refuses_its_own_stale_code_before_any_work(change, tmp_path
         check_scheduler(None)
 
 
+@pytest.mark.parametrize("argv", [["sweep", "--grid", "2"], ["terrain", "--runs", "2"],
+                                  ["m1", "--robust"]])
+def test_a_command_refuses_a_bad_gait_file_before_its_code_check(argv, gait, tmp_path,
+                                                                 monkeypatch, capsys):
+    """A missing --gait (or --robot) file is one line before the stale-code check (the code's digest,
+    0.7 s and more with an empty cache, was read first); with a good file the stale code
+    is still refused, before any task."""
+    import analysis.cli.common as common
+    from analysis.cli import main
+    checked = []
+    monkeypatch.setattr(common, "code_edited", lambda: checked.append(1) or "analysis/a.py")
+    assert main([*argv, "--gait", str(tmp_path / "missing.json")]) == 2
+    assert "gait file not found" in capsys.readouterr().err and checked == []
+    if argv[0] != "sweep":                              # (sweep needs --gait)
+        assert main([*argv, "--robot", str(tmp_path / "missing.toml")]) == 2
+        assert "file not found" in capsys.readouterr().err and checked == []
+    assert main([*argv, "--gait", str(gait.save(tmp_path / "gait.json"))]) == 2
+    assert "error: stale code: analysis/a.py changed" in capsys.readouterr().err
+    assert checked == [1]
+    if argv[0] == "m1":                                 # the search: no --gait
+        assert main([*argv, "--method", "search"]) == 2 and checked == [1, 1]
+
+
 def _edited_in_this_process(tmp_path, edit: str, scheduler: str = "synchronous"):
     """A fresh process on a copy of the toolkit: it imports basin.py's module, computes
     the code's digest, then ``edit`` ('imported': basin.py, 'not imported':

@@ -313,3 +313,51 @@ def test_a_gait_moved_for_the_codesign_keeps_each_joint_within_its_fraction(knee
     assert all(p <= u for p, u in zip(peaks, mv.targets["torque_limit"]))
     assert mv.gait.violations() == []
     assert "torques <= 16/32/32/16 N m" in mv.message
+
+
+def test_no_torque_limit_is_said_in_words_not_as_inf():
+    """A robot without a torque limit (an infinite one) is 'no torque limit' where a limit
+    is printed, not 'inf N m': the bound's text, the gait optimiser's words, and the
+    co-design's gait move ('torques <= inf N m (given 30.72)' before)."""
+    import math
+    from analysis.design.codesign.gait_move import _Move
+    from biped_casadi.model.torque_limits import torque_bound_text, torque_limit_words
+    assert torque_bound_text(math.inf) == "none"
+    assert torque_bound_text((math.inf, 150.0)) == "none/150"
+    assert torque_bound_text(np.float64(150.0)) == "150"
+    assert torque_limit_words(math.inf) == "no torque limit"
+    assert torque_limit_words((math.inf,) * 4) == "no torque limit"
+    assert torque_limit_words((20.0, 40.0, 40.0, 20.0)) == "torque limit 20/40/40/20 N m"
+    mv = _Move.__new__(_Move)                       # the message of a move, no solve
+    mv.own = dict(impact_mu=0.5, clearance=0.01, mu=0.5, torque_limit=30.72)
+    mv.start = dict(impact_mu=0.5, clearance=0.01, mu=0.5, torque_limit=math.inf)
+    mv.tgt = dict(impact_mu=0.4, clearance=0.02, mu=0.4, torque_limit=math.inf)
+    mv.records = [{}]
+    change = dict(T=(0.4, 0.41), step_length=(0.3, 0.31), max_joint_change=0.01)
+    said = mv.message(1.0, change)
+    assert "no torque limit (largest 30.72 N m)" in said and "inf" not in said, said
+    mv.start["torque_limit"], mv.tgt["torque_limit"] = 40.0, 24.0
+    assert "torques <= 24 N m (given 30.72)" in mv.message(1.0, change)
+
+
+def test_a_speed_profiles_torque_margin_takes_each_joints_limit(knees):
+    """A speed profile's per-step ``torque_margin`` on a robot whose joints' limits differ
+    is the smallest over the torques of (U_i - the step's largest |u_i|) (NaN before): a
+    hip at 30.7 N m of 40 and knees at about 13 N m of 20 leave a positive margin, where
+    the smallest limit against the largest torque would be negative; with one limit it
+    is the limit minus the step's peak torque, exactly."""
+    from biped_casadi.simulation import simulate_profile
+    m, g = knees
+    c = TimeVaryingController(g, GAINS)
+    prof = simulate_profile([c] * 2)
+    U = np.array(m.description.torque_bound, float)
+    assert len(set(U)) == 2
+    for step, run in zip(prof.steps, prof.runs):
+        assert step.status == "ok"
+        peaks = np.max(np.abs(run.u), axis=0)
+        assert np.max(peaks) == step.peak_torque
+        assert step.torque_margin == np.min(U - peaks)
+        assert 0 < step.torque_margin < np.min(U) and np.min(U) - step.peak_torque < 0
+    one = simulate_profile([TimeVaryingController(g, GAINS)],
+                           options=SimulationOptions(torque_limit=50.0))
+    assert one.steps[0].torque_margin == 50.0 - one.steps[0].peak_torque

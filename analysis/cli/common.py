@@ -29,7 +29,7 @@ from gait_opt.running import RunningGait
 __all__ = ["UserError", "print_json", "load_model", "load_gait", "load_running_gait", "positive", "add_robot",
            "parse_m1", "check_m1_values", "Progress", "output_file", "output_dir",
            "add_gait_arguments", "add_scheduler", "is_family_file", "require_members",
-           "check_inputs", "check_scheduler", "not_an_input", "MU_HELP", "gait_friction",
+           "check_inputs", "check_scheduler", "scheduler_and_gait", "not_an_input", "MU_HELP", "gait_friction",
            "friction_source"]
 
 ROBOT_HELP = ("the robot: a built-in name (rabbit, three_link), a description file "
@@ -307,22 +307,27 @@ def positive(value, name):
     return value
 
 
-def check_torque_limit(args, clip_only: bool = False):
-    """``--torque-limit``: a positive number; where it is only the limit ``--saturate``
-    clips at (``clip_only``), ``--saturate`` too (UserError, one line).
+def check_torque_limit(args, verify: bool = False):
+    """``--torque-limit``: a positive number, and one some option uses: the limit
+    ``--saturate`` clips at, or (``verify``) also the limit of ``--verify``'s simulation;
+    given without them it would be ignored (UserError, one line).
 
     Parameters
     ----------
     args : argparse.Namespace
-        With ``torque_limit`` and ``saturate``.
-    clip_only : bool
-        The command gives ``--torque-limit`` no other meaning.
+        With ``torque_limit`` and ``saturate`` (and ``verify`` with ``verify``).
+    verify : bool
+        The command's ``--verify`` simulates with the limit.
     """
     if args.torque_limit is None:
         return
     positive(args.torque_limit, "--torque-limit")
-    if clip_only and not args.saturate:
+    if not verify and not args.saturate:
         raise UserError("--torque-limit is the limit --saturate clips at (add --saturate)")
+    if verify and not (args.saturate or args.verify):
+        raise UserError("--torque-limit is the limit --saturate clips the law at and "
+                        "--verify's simulation's; without either nothing uses it (add "
+                        "--saturate or --verify)")
 
 
 def check_saturation(args, model):
@@ -564,6 +569,28 @@ def check_scheduler(scheduler, say=None):
             client.close()
     except ValueError as e:
         raise UserError(f"--{e}") from None
+
+
+def scheduler_and_gait(args, say):
+    """:func:`check_scheduler` and :func:`load_gait` in the order that refuses bad input
+    before any work: a gait file (``--gait``), or else the robot (``--robot``), is read
+    first (a missing one waited for the code's digest and the scheduler's answer before
+    its one line), the robot's default gait after the check (optimising it is work).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``gait`` and ``scheduler`` (and what :func:`load_gait` reads).
+    say : Progress
+        The command's progress lines.
+
+    Returns
+    -------
+    Gait
+    """
+    gait = load_gait(args, say) if args.gait else load_model(getattr(args, "robot", None))
+    check_scheduler(args.scheduler, say)
+    return gait if args.gait else load_gait(args, say)
 
 
 def add_scheduler(p):

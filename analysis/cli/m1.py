@@ -78,7 +78,7 @@ def _robust_defaults(args):
 def cmd_robust_design(args, say):
     """``biped m1 --robust``: the co-design NLP (default) or the sampling search."""
     _robust_defaults(args)
-    check_scheduler(args.scheduler, say)
+    # --scheduler and the code checked once the inputs are read: a bad file first
     if args.method == "search":
         return _search(args, say)
     if args.gait and is_family_file(args.gait):
@@ -95,6 +95,7 @@ def cmd_robust_design(args, say):
         gait = load_gait(args, say)
         model = gait.model
         args.given["mu"] = friction_of(gait, args.given.get("mu"))
+    check_scheduler(args.scheduler, say)
     if gait is None:
         st = CodesignSettings().replace(free_gait=True, **args.given)
         say(f"robust co-design NLP: gait and M1 from the gait {st.for_model(model).gait}, "
@@ -256,6 +257,7 @@ def _family(args, say):
     folder = output_dir(args.plot, "--plot") if args.plot is not None else None
     fam = GaitFamily.load(args.gait, load_model(args.robot) if args.robot else None)
     args.given["mu"] = friction_of(fam, args.given.get("mu"))
+    check_scheduler(args.scheduler, say)
     say(f"designs over the family: the gait-fixed co-design at each of its {len(fam)} "
         "speeds (side by side), an M1 schedule over speed, one M1 for all; each measured "
         "at every speed (about a minute per speed on 2 cores the first time)")
@@ -309,6 +311,7 @@ def _search(args, say):
         not_an_input(out, "--out", {"--gait": args.gait})
     if args.plot is not None:
         raise UserError("--plot applies to --robust with a gait family (--gait FAMILY.json)")
+    check_scheduler(args.scheduler, say)
     r = robust_design(model, st, progress=say, use_cache=not args.no_cache,
                       scheduler=args.scheduler)
     if out is not None:

@@ -13,8 +13,8 @@ from analysis.reporting.plots import grid_sweep_plot, one_d_sweeps_plot, save_fi
 from analysis.sweeps import grid_points, max_grid_n, one_d_sweeps, run_sweep
 from biped_casadi.control.output_law import M1_LIMIT, check_M1_range
 
-from .common import (Progress, UserError, add_gait_arguments, add_robot, check_scheduler,
-                     load_gait, output_dir, print_json)
+from .common import (Progress, UserError, add_gait_arguments, add_robot, output_dir,
+                     print_json, scheduler_and_gait)
 
 #: --line N evaluates nu N points
 MAX_LINE = 1_000_000
@@ -29,8 +29,7 @@ def cmd_sweep(args):
     # ---- arguments, then the output folders: all before any work
     lo, hi, n = _check_arguments(args)
     say = Progress("sweep", quiet=args.json or args.no_progress)
-    check_scheduler(args.scheduler, say)      # before any file: one line, nothing left
-    gait = load_gait(args, say)
+    gait = scheduler_and_gait(args, say)      # before any output: one line, nothing left
     model = gait.model
     if args.line is None and n > max_grid_n(model.nu):
         raise UserError(f"--grid takes 2 to {max_grid_n(model.nu)} points per component for "

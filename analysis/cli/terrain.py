@@ -15,10 +15,9 @@ from biped_casadi.simulation import Terrain, TerrainFileError
 from biped_casadi.simulation.terrain import MAX_HEIGHT
 
 from .common import (add_design_arguments, Progress, UserError, add_gait_arguments, add_robot, check_m1_values,
-                     check_scheduler,
                      check_not_singular,
-                     gait_friction, load_gait, MU_HELP, output_dir, parse_m1, positive,
-                     print_json, rejoin_fraction)
+                     gait_friction, MU_HELP, output_dir, parse_m1, positive,
+                     print_json, rejoin_fraction, scheduler_and_gait)
 
 SCALES = ("mass", "inertia", "length", "torso_mass")
 
@@ -74,7 +73,6 @@ def cmd_terrain(args):
     sensitivity norm, run the Monte Carlo, then report (JSON or text) and draw."""
     gains, rejoin, profile = _check_arguments(args)
     say = Progress("terrain", quiet=args.json)
-    check_scheduler(args.scheduler, say)
     gait, spec, st = _build(args, say, gains, rejoin, profile)
 
     # ---- the exact gait sensitivity norm, then the Monte Carlo
@@ -142,7 +140,7 @@ def _check_arguments(args):
 
 def _build(args, say, gains, rejoin, profile):
     """The gait, the walker's spec (controller, plant) and the Monte Carlo settings."""
-    gait = load_gait(args, say)
+    gait = scheduler_and_gait(args, say)
     model = gait.model
     args.friction = gait_friction(args, gait)
     M1 = parse_m1(args.m1, model.nu) if args.controller == "tv" else None

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["per_torque", "torque_bound_text", "leg_limits_text", "parse_torque_limit",
+__all__ = ["per_torque", "torque_bound_text", "torque_limit_words", "leg_limits_text", "parse_torque_limit",
            "urdf_torque_limit", "joint_names_of"]
 
 
@@ -31,22 +31,51 @@ def per_torque(leg: tuple) -> tuple:
     return tuple(leg[::-1]) + tuple(leg)
 
 
-def torque_bound_text(bound) -> str:
-    """A torque bound in words (N m): ``'150'``, or one number per torque ``'300/150'``.
+def torque_bound_text(bound, fmt: str = "g") -> str:
+    """A torque bound in words (N m): ``'150'``, per torque ``'300/150'``, none ``'none'``.
+
+    An infinite limit (no limit) is written ``'none'``.
 
     Parameters
     ----------
     bound : float or sequence of float
         :attr:`~biped_casadi.model.description.RobotDescription.torque_bound` (or a
         resolved bound of that form).
+    fmt : str
+        The format of each number.
 
     Returns
     -------
     str
     """
+    return "/".join(format(v, fmt) if math.isfinite(v) else "none" for v in _entries(bound))
+
+
+def torque_limit_words(bound) -> str:
+    """A torque bound as a phrase: ``'torque limit 150 N m'``, or ``'no torque limit'``.
+
+    Per torque ``'torque limit 300/150 N m'``; ``'no torque limit'`` when every torque's
+    is infinite.
+
+    Parameters
+    ----------
+    bound : float or sequence of float
+        As in :func:`torque_bound_text`.
+
+    Returns
+    -------
+    str
+    """
+    if not any(math.isfinite(v) for v in _entries(bound)):
+        return "no torque limit"
+    return f"torque limit {torque_bound_text(bound)} N m"
+
+
+def _entries(bound) -> tuple:
+    """A torque bound's numbers: one, or one per torque."""
     if isinstance(bound, (int, float)) or getattr(bound, "ndim", 1) == 0:
-        return f"{float(bound):g}"
-    return "/".join(f"{float(v):g}" for v in bound)
+        return (float(bound),)
+    return tuple(float(v) for v in bound)
 
 
 def leg_limits_text(names, limit: float, leg: tuple) -> str:

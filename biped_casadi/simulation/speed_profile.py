@@ -107,7 +107,9 @@ class ProfileStep:
     peak_torque : float
         The largest ``|u_i|`` of the step, N m.
     torque_margin : float
-        The torque limit minus that, N m (NaN where the joints' limits differ).
+        The smallest over the torques of the limit of u_i minus the step's largest
+        ``|u_i|``, N m: the torque limit minus ``peak_torque`` where every joint has the
+        same limit (negative: a limit was passed).
     min_normal_force : float
         The smallest stance F_z of the step, N.
     max_friction_ratio, max_impulse_ratio : float
@@ -361,9 +363,7 @@ def _profile_step(k, d, sim, res, t0) -> ProfileStep:
         duration=float(rec.duration) if rec is not None else nan, t_start=float(t0),
         step_length=float(rec.step_length) if rec is not None else nan,
         peak_torque=float(res.peak_torque),
-        # the peak is over all joints: no margin against limits that differ by joint
-        torque_margin=float(sim.torque_limit - res.peak_torque)
-        if np.ndim(sim.torque_limit) == 0 else nan,
+        torque_margin=_torque_margin(sim.torque_limit, res.u),
         min_normal_force=float(res.min_normal_force),
         max_friction_ratio=float(res.max_friction_ratio),
         max_impulse_ratio=float(res.max_impulse_ratio),
@@ -371,6 +371,15 @@ def _profile_step(k, d, sim, res, t0) -> ProfileStep:
         friction_margin=float(sim.limits.mu - max(ratios)) if ratios else nan,
         q_plus=None if rec is None else rec.q_plus.copy(),
         dq_plus=None if rec is None else rec.dq_plus.copy())
+
+
+def _torque_margin(limit, u) -> float:
+    """min over i of (U_i - max |u_i|) over the logged nodes ``u`` (N, nu) of a step, the
+    nodes its ``peak_torque`` is the largest ``|u_i|`` of (NaN without one)."""
+    if u.size == 0:
+        return math.nan
+    peaks = np.fmax.reduce(np.abs(u), axis=0)    # as the run's peak: NaN nodes left out
+    return float(np.min(np.asarray(limit, float) - peaks))
 
 
 def _result(ds, steps, runs, opts, tol) -> ProfileResult:

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from biped_casadi.model.torque_limits import torque_bound_text
 from biped_casadi.results import Result, internal
 from gait_opt import Gait, GaitOptimizationError, GaitOptions, optimize_gait
 
@@ -479,8 +480,8 @@ class _Move:
         return (f"gait moved to impulse ratio <= {b['impact_mu']:.3g} (the given gait "
                 f"{own['impact_mu']:.3g}), swing-foot clearance >= {b['clearance']:.3g} m "
                 f"(given {own['clearance']:.3g}), friction ratio <= {b['mu']:.3g} (given "
-                f"{own['mu']:.3g}), torques <= {_text(b['torque_limit'])} N m (given "
-                f"{_text(own['torque_limit'])}) in {len(self.records)} solve(s)"
+                f"{own['mu']:.3g}), {_torques_text(b['torque_limit'], own['torque_limit'])} in "
+                f"{len(self.records)} solve(s)"
                 + ("" if f_done >= 1.0 - 1e-12 else
                    f", {100 * f_done:.0f} % of the way to the targets")
                 + f"; T {change['T'][0]:.4g} -> {change['T'][1]:.4g} s, step length "
@@ -538,6 +539,11 @@ def move_gait(gait, targets: dict, settings: MoveSettings,
                     change, gait=last)
 
 
-def _text(bound) -> str:
-    """A torque bound in words: ``'120'``, or per torque ``'16/32/32/16'``."""
-    return "/".join(f"{float(v):.4g}" for v in np.atleast_1d(bound))
+def _torques_text(bound, own) -> str:
+    """The torque bound and the given gait's peak torques in words: ``'torques <= 120 N m
+    (given 130)'``, per torque ``'16/32/32/16'``; ``'no torque limit (largest 30.72 N
+    m)'`` where no torque has one."""
+    if not np.any(np.isfinite(bound)):
+        return f"no torque limit (largest {torque_bound_text(own, '.4g')} N m)"
+    return f"torques <= {torque_bound_text(bound, '.4g')} N m (given " \
+           f"{torque_bound_text(own, '.4g')})"
