@@ -400,10 +400,6 @@ CASES = [
     # --verify used it)
     (["export", *G, "--out", "{root_dir}/law", "--perturb-q", "0", "0"],
      "--perturb-q takes 5 numbers"),
-    # --torque-limit without --verify or --saturate: exit 0, the limit used by nothing and
-    # the law written unclipped, without a word
-    (["export", *G, "--controller", "vc", "--out", "{root_dir}/law", "--torque-limit", "15"],
-     "without either nothing uses it (add --saturate or --verify)"),
     # ---- robust: a singular design is refused as simulate refuses it (not "slipped")
     # numpy's 'expected non-negative integer' was the whole line
     (["robust", *G, *M0, "--seed", "-1"], "--seed must be >= 0, got -1"),

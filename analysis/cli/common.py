@@ -307,27 +307,22 @@ def positive(value, name):
     return value
 
 
-def check_torque_limit(args, verify: bool = False):
-    """``--torque-limit``: a positive number, and one some option uses: the limit
-    ``--saturate`` clips at, or (``verify``) also the limit of ``--verify``'s simulation;
-    given without them it would be ignored (UserError, one line).
+def check_torque_limit(args, clip_only: bool = False):
+    """``--torque-limit``: a positive number; where it is only the limit ``--saturate``
+    clips at (``clip_only``), ``--saturate`` too (UserError, one line).
 
     Parameters
     ----------
     args : argparse.Namespace
-        With ``torque_limit`` and ``saturate`` (and ``verify`` with ``verify``).
-    verify : bool
-        The command's ``--verify`` simulates with the limit.
+        With ``torque_limit`` and ``saturate``.
+    clip_only : bool
+        The command gives ``--torque-limit`` no other meaning.
     """
     if args.torque_limit is None:
         return
     positive(args.torque_limit, "--torque-limit")
-    if not verify and not args.saturate:
+    if clip_only and not args.saturate:
         raise UserError("--torque-limit is the limit --saturate clips at (add --saturate)")
-    if verify and not (args.saturate or args.verify):
-        raise UserError("--torque-limit is the limit --saturate clips the law at and "
-                        "--verify's simulation's; without either nothing uses it (add "
-                        "--saturate or --verify)")
 
 
 def check_saturation(args, model):

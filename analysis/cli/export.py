@@ -53,7 +53,7 @@ def _check_arguments(args):
         raise UserError(f"--steps must be between 1 and {MAX_STEPS}, got {args.steps}")
     if args.mu is not None:
         positive(args.mu, "--mu")
-    check_torque_limit(args, verify=True)
+    check_torque_limit(args)
     if args.motor_side and args.angles != "urdf":
         raise UserError("--motor-side divides the URDF joints' torques by their reductions: "
                         "it needs --angles urdf")
@@ -336,9 +336,10 @@ def register(sub):
     p.add_argument("--mu", type=float,
                    help=f"friction coefficient of --verify's simulation ({MU_HELP})")
     p.add_argument("--torque-limit", type=float, metavar="U",
-                   help="with --verify: the torque limit of its simulation, N m (default "
-                        "the robot's); with --saturate: the limit the law clips at; "
-                        "refused without either (the law without --saturate never clips)")
+                   help="torque limit of --verify's simulation, N m (default the robot's); "
+                        "with --saturate also the limit the law clips at; without either "
+                        "unused (accepted: 'biped m1 --robust''s simulate_args replay here "
+                        "unchanged)")
     p.add_argument("--saturate", action="store_true",
                    help="clip the law's torques at the robot's limit (or --torque-limit), as "
                         "'biped simulate' does with saturation and 'biped export-running "

@@ -31,7 +31,7 @@ def _check(args):
     """Everything that can be checked before the gait is loaded; the C compiler of
     --verify (None without)."""
     check_tracking_arguments(args)
-    check_torque_limit(args)
+    check_torque_limit(args, clip_only=True)
     if not str(args.gait).strip():
         raise UserError("--gait: empty name")
     if not 0 <= args.strides <= 5000:

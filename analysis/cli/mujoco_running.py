@@ -26,7 +26,7 @@ from .running import (MAX_STRIDES, add_tracking_arguments, check_strides_and_per
 
 def _check(args):
     check_tracking_arguments(args)
-    check_torque_limit(args)
+    check_torque_limit(args, clip_only=True)
     check_strides_and_perturb(args.strides, args.perturb)
     if args.fit != 0 and not 30 <= args.fit <= MAX_STRIDES:
         raise UserError(f"--fit must be 0 or between 30 and {MAX_STRIDES} strides, got "

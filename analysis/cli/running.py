@@ -446,7 +446,7 @@ def failure(speed: float, stats: dict) -> str:
 
 def _stability_of_file(args):
     """``--gait FILE``: the closed loop of a saved step."""
-    check_torque_limit(args)
+    check_torque_limit(args, clip_only=True)
     given = ["--" + dest.replace("_", "-")
              for dest in (*OPTIMISE_DEFAULTS, "max_iter", "plot", "no_cache")
              if getattr(args, dest) not in (None, False)]
