@@ -18,7 +18,8 @@ point, and ``landing_swing`` (impact and relabelling) when the swing foot reache
 ground; periodicity ties its output to the first stance state.
 
 Constraints: |u| <= the model's torque limit at every point (and at the quarter points
-of every interval), the torque's rate bounded, the torques continuous through takeoff
+of every interval; a torque whose quadratic peaks above it between them has its bound
+lowered by the excess and the step solved again), the torque's rate bounded, the torques continuous through takeoff
 (so that the stance and flight accelerations agree there and the foot leaves the
 ground smoothly, docs: howto/running.md); in stance Fz >= 0 and
 |Fx| <= (mu - mu_margin) Fz, the swing foot above a parabolic clearance profile; in flight both feet
@@ -48,7 +49,8 @@ from biped_casadi.option_checks import FieldChecks
 from .options import leg_scale
 from .running_cache import cached_running
 from .running_file import check_running_file, running_problem
-from .running_solve import STALL_WINDOW, LabelledConstraints, solve_running, torque_rows
+from .running_solve import (STALL_WINDOW, LabelledConstraints, solve_running, torque_rows,
+                            within_torque_limits)
 from .transcription import torso_lean_bound
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
@@ -634,6 +636,10 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
     RunningGait
         The last iterate, whatever IPOPT's status (``gait.success`` tells); with
         ``cache``, ``gait.solver_stats['cache']`` is 'hit' or says why it was solved.
+        A torque that peaks above its limit between the points has its bound lowered
+        by the excess and the step solved again from the one found, at most three
+        times (:func:`gait_opt.running_solve.within_torque_limits`:
+        ``solver_stats['torque_tightenings']``).
     """
     opts = running_problem(model, opts, guess, RunningOptions)
     if cache:
@@ -643,6 +649,13 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
     if progress is not None:
         progress(f"optimising a running step of {model.description.name} at "
                  f"{opts.speed:g} m/s (about 10 s) ...")
+    return within_torque_limits(
+        lambda start, umax: _solve_step(model, opts, guess if start is None else start,
+                                        verbose, umax), opts.limit(model))
+
+
+def _solve_step(model, opts, guess, verbose, umax) -> RunningGait:
+    """The running step's NLP under the torque bound ``umax``, built and solved once."""
     fl = flight_model(model)
     n, nu = model.nq, model.nu
     if guess is None:
@@ -657,7 +670,6 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
                             opts.stance_time_bounds)
     Tf, Xf, Uf, _ = _phase(con, "flight", ff, 2 * fl.ne, nu, opts.n_flight,
                            opts.flight_time_bounds)
-    umax = opts.limit(model)
     for U, T, n_int in ((Us, Ts, opts.n_stance), (Uf, Tf, opts.n_flight)):
         torque_rows(con, opts, U, umax, T, n_int)
     _stance_constraints(con, model, fl, opts, Xs, Us, Fs, Ts)

@@ -29,7 +29,8 @@ from biped_casadi.numerics import ipopt_on_one_thread, iteration_stop
 from .running_file import solve_or_last_iterate
 
 __all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "torque_rows",
-           "LabelledConstraints", "STALL_FACTOR", "FEASIBLE", "STALL_WINDOW", "TORQUE_LIMIT"]
+           "torque_peaks", "within_torque_limits", "LabelledConstraints", "STALL_FACTOR",
+           "FEASIBLE", "STALL_WINDOW", "TORQUE_LIMIT", "MAX_TIGHTENINGS", "TORQUE_TOL"]
 
 #: the default window, iterations (``RunningOptions.stall_window``)
 STALL_WINDOW = 100
@@ -40,6 +41,12 @@ STALL_FACTOR = 0.5
 FEASIBLE = 1e-6
 #: the label of the rows |u| <= umax (:func:`torque_at_limit` reads them)
 TORQUE_LIMIT = "torque limit |u| <= umax"
+#: re-solves allowed for a torque beyond its limit between the points
+#: (:func:`within_torque_limits`)
+MAX_TIGHTENINGS = 3
+#: a torque at most this above its limit, N m, is within it (the tolerance of
+#: ``RunningReport.violations``)
+TORQUE_TOL = 1e-7
 
 
 class LabelledConstraints:
@@ -289,3 +296,83 @@ def violated(opti, g, groups, tol=FEASIBLE, most=3) -> list:
     out = [dict(name=k[0], unit=k[1], violation=w, count=c)
            for k, (w, c) in named.items()]
     return sorted(out, key=lambda d: -d["violation"])[:most]
+
+
+def torque_peaks(U) -> np.ndarray:
+    """The largest ``|u_i|`` of each torque on a phase's Hermite-Simpson interpolant,
+    exactly: on every interval the quadratic through its three values
+    (:func:`gait_opt.running.hermite_simpson`) peaks at an end or at its vertex.
+
+    Parameters
+    ----------
+    U : array_like
+        (nu, 2 n + 1) the phase's torques at the interval ends and midpoints, N m.
+
+    Returns
+    -------
+    numpy.ndarray
+        (nu,) the peak of each torque over the phase, N m.
+    """
+    U = np.asarray(U, dtype=float)
+    u0, um, u1 = U[:, 0:-1:2], U[:, 1::2], U[:, 2::2]
+    a, b = 2 * u0 - 4 * um + 2 * u1, -3 * u0 + 4 * um - u1      # u0 + b s + a s^2
+    s = np.divide(-b, 2 * a, out=np.zeros_like(a), where=a != 0)
+    inside = (s > 0) & (s < 1)
+    vertex = np.where(inside, u0 + b * s + a * s * s, 0.0)
+    return np.max(np.abs(np.concatenate([u0, u1, vertex], axis=1)), axis=1)
+
+
+def within_torque_limits(solve, limit, rounds=MAX_TIGHTENINGS, tol=TORQUE_TOL):
+    """A running step whose torques keep their limits between the points too.
+
+    The NLP bounds each torque at the points and the quarter points of every interval;
+    where the quadratic between them peaks above a limit (:func:`torque_peaks`), the
+    walking optimiser's remedy (:func:`gait_opt.optimize.optimize_gait`): that joint's
+    bound is lowered by its excess and the problem solved again from the step found,
+    at most ``rounds`` times.  A step within its limits is returned as solved, so a
+    step whose limits do not bind is the same bit for bit.
+
+    Parameters
+    ----------
+    solve : callable
+        ``solve(guess, umax)``: the step from a guess (None: the built-in one; or a
+        previous step) under the bound ``umax`` (a number or one per torque), a
+        :class:`~gait_opt.running.RunningGait`.
+    limit : float or tuple of float
+        The torque limit, N m (:meth:`~gait_opt.running.RunningOptions.limit`).
+    rounds : int
+        Re-solves allowed.
+    tol : float
+        An excess at most this, N m, is within the limit.
+
+    Returns
+    -------
+    RunningGait
+        The last step solved (the one before, when a re-solve failed).  After a
+        re-solve, ``solver_stats['torque_tightenings']`` lists each one's ``bound`` (N m,
+        per torque), ``excess`` (the peaks above the limit that caused it, N m),
+        ``iterations`` and ``wall_s`` (and ``failed``, IPOPT's status, if it failed);
+        ``iterations`` and ``wall_s`` are then totals over all solves.
+    """
+    gait = solve(None, limit)
+    target = np.broadcast_to(np.asarray(limit, dtype=float), (gait.u_stance.shape[0],))
+    bound, passes, first = target.copy(), [], dict(gait.solver_stats)
+    for _ in range(rounds):
+        excess = np.maximum(torque_peaks(gait.u_stance), torque_peaks(gait.u_flight)) - target
+        if not gait.success or np.all(excess <= tol):
+            break
+        bound = bound - np.where(excess > tol, excess, 0.0)
+        new = solve(gait, tuple(float(v) for v in bound))
+        passes.append(dict(bound=bound.tolist(), excess=excess.tolist(),
+                           iterations=new.solver_stats["iterations"],
+                           wall_s=new.solver_stats["wall_s"]))
+        if not new.success:
+            passes[-1]["failed"] = new.solver_stats["return_status"]
+            break
+        gait = new
+    if passes:
+        gait.solver_stats.update(
+            torque_tightenings=passes,
+            iterations=first["iterations"] + sum(p["iterations"] for p in passes),
+            wall_s=first["wall_s"] + sum(p["wall_s"] for p in passes))
+    return gait

@@ -62,8 +62,9 @@ def _physical(model, g, r, integration_tol):
     assert r.friction_excess_nodes <= 1e-6 * weight
     assert r.friction_excess_dense <= 1e-6 * weight
     assert r.swing_min_stance >= -1e-7
-    # torques within the limit between the points too (1 % for the quadratic's overshoot)
-    assert r.torque_max_dense <= 1.01 * o.limit(model)
+    # torques within the limit between the points too (where the quadratic through the
+    # points overshoots it, the bound is lowered and the step solved again)
+    assert "torque limit" not in dict(r.violations(o.limit(model)))
     # flight: a real one, both feet above the ground, the touchdown valid
     assert r.flight_duration >= o.flight_time_bounds[0] - 1e-9
     assert r.takeoff_torque_jump <= 1e-8

@@ -19,6 +19,7 @@ from biped_casadi.control.running import RunningController
 from biped_casadi.model.description import builtin_path
 from gait_opt.running import RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
+from gait_opt.running_solve import MAX_TIGHTENINGS, TORQUE_TOL, torque_peaks
 
 LIMITS = (150.0, 60.0, 60.0, 150.0)                 # u1 .. u4: knee, hip, hip, knee
 STABLE_M1 = (0.0, 0.95, 0.95, 0.0)
@@ -39,18 +40,25 @@ def hips60(tmp_path_factory):
 
 def test_the_running_step_is_bounded_per_joint(hips60):
     """Its knee pushes beyond the smallest limit (60 N m), its hips stay within theirs
-    (on the dense grid to the 1 % the quarter-point bounds allow), and the dense check
-    measures each torque against its own limit."""
+    between the points too (the quadratic through the points and quarter points peaked
+    0.07 N m above 60 N m at a hip before the bound was lowered by that and the step
+    solved again), and the dense check measures each torque against its own limit."""
     _, m, g = hips60
     assert g.success and RunningOptions().limit(m) == LIMITS
     r = check_running(m, g)
     peaks = r.torque_max_dense_each
     assert len(peaks) == 4 and max(peaks) == r.torque_max_dense
     assert peaks[0] > 100.0                                     # the stance knee
-    assert all(p <= 1.01 * u for p, u in zip(peaks, LIMITS))
-    assert max(peaks[1], peaks[2]) > 59.0                       # the hips' bound is active
-    amounts = dict(r.violations(LIMITS, tol=1.0))
-    assert "torque limit" not in amounts
+    assert all(p <= u + TORQUE_TOL for p, u in zip(peaks, LIMITS))
+    exact = np.maximum(torque_peaks(g.u_stance), torque_peaks(g.u_flight))
+    assert np.all(exact <= np.array(LIMITS) + TORQUE_TOL) and np.all(exact >= peaks)
+    assert max(peaks[1], peaks[2]) > 59.9                       # the hips' bound is active
+    assert r.violations(LIMITS) == []
+    passes = g.solver_stats["torque_tightenings"]
+    assert 1 <= len(passes) <= MAX_TIGHTENINGS and "failed" not in passes[-1]
+    first = passes[0]
+    assert max(first["excess"][1:3]) > 1e-3 and max(first["excess"][0], first["excess"][3]) < 0
+    assert first["bound"][0] == first["bound"][3] == 150.0 and max(first["bound"][1:3]) < 60.0
     assert dict(r.violations(60.0))["torque limit"] == pytest.approx(peaks[0] - 60.0)
     assert RunningOptions(torque_limit=90.0).limit(m) == 90.0
 
@@ -162,3 +170,73 @@ def test_torques_at_their_limits_are_told_with_each_joints(hips60, monkeypatch):
                              torque_at_limit=got))
     assert f"torques at their limits (knee at {points} points of its 150 N m, hip at " \
            f"{points} points of its 60 N m)" in said
+
+
+def test_torque_peaks_are_the_quadratics_exact_peaks():
+    """Each interval's quadratic peaks at an end or its vertex: the exact peak bounds a
+    fine sampling of the interpolant (within its round-off) and equals it where the
+    samples hit the vertex; a torque that does not overshoot peaks at a point."""
+    from gait_opt.running import hermite_simpson
+    rng = np.random.default_rng(3)
+    U = rng.uniform(-60.0, 60.0, (4, 9))
+    U[3] = [0.0, 10.0, 40.0, 45.0, 50.0, 55.0, 58.0, 59.0, 60.0]      # monotone, no vertex
+    tn = np.linspace(0.0, 1.0, 9)
+    t = np.linspace(0.0, 1.0, 4 * 20000 + 1)
+    _, u = hermite_simpson(tn, np.zeros((1, 9)), np.zeros((1, 9)), U, t)
+    sampled, exact = np.abs(u).max(axis=1), torque_peaks(U)
+    assert np.all(exact >= sampled - 1e-12) and np.allclose(exact, sampled, rtol=0, atol=1e-6)
+    assert exact[3] == 60.0 and np.any(exact[:3] > np.abs(U[:3]).max(axis=1))
+    a = np.array([[0.0, 1.0, 0.0]])                  # a hump: 4 s (1 - s), vertex at s = 1/2
+    assert torque_peaks(a)[0] == 1.0 and torque_peaks(-a)[0] == 1.0
+
+
+class _Step:
+    def __init__(self, peak, success=True, iterations=10):
+        self.u_stance = np.array([[0.0, peak, 0.0]])     # peaks at exactly ``peak``
+        self.u_flight = np.zeros((1, 3))
+        self.success = success
+        self.solver_stats = dict(iterations=iterations, wall_s=1.0, success=success,
+                                 return_status="Solve_Succeeded" if success else "Failed")
+
+
+def test_a_step_within_its_limits_is_solved_once():
+    """The step whose limits hold between the points is the first solve's, the same
+    object: nothing re-solved, nothing added to its statistics."""
+    from gait_opt.running_solve import within_torque_limits
+    calls, first = [], _Step(59.0)
+
+    def solve(guess, umax):
+        calls.append((guess, umax))
+        return first
+    got = within_torque_limits(solve, 60.0)
+    assert got is first and calls == [(None, 60.0)]
+    assert "torque_tightenings" not in got.solver_stats
+
+
+def test_a_torque_above_its_limit_lowers_its_bound_and_solves_again():
+    """A peak above the limit lowers the bound by its excess, the step solved again from
+    the one found; at most MAX_TIGHTENINGS times; a failed re-solve keeps the step
+    before it, and says so."""
+    from gait_opt.running_solve import within_torque_limits
+    calls = []
+
+    def solve(guess, umax):           # overshoots the bound by 0.05 more at every solve
+        calls.append((guess, umax))
+        return _Step(float(np.max(umax)) + 0.05 * len(calls))
+    got = within_torque_limits(solve, 60.0)
+    passes = got.solver_stats["torque_tightenings"]
+    assert len(calls) == 1 + MAX_TIGHTENINGS and len(passes) == MAX_TIGHTENINGS
+    assert [p["excess"][0] for p in passes] == pytest.approx([0.05] * 3)
+    assert [p["bound"][0] for p in passes] == pytest.approx([59.95, 59.9, 59.85])
+    assert [c[0] is not None for c in calls] == [False, True, True, True]
+    assert got.solver_stats["iterations"] == 40 and got.solver_stats["wall_s"] == 4.0
+
+    def converging(guess, umax):      # the re-solve lands on the limit
+        return _Step(60.05 if guess is None else 60.0)
+    assert len(within_torque_limits(converging, 60.0).solver_stats["torque_tightenings"]) == 1
+    first = _Step(60.05)
+
+    def failing(guess, umax):
+        return first if guess is None else _Step(59.0, success=False)
+    got = within_torque_limits(failing, 60.0)
+    assert got is first and got.solver_stats["torque_tightenings"][0]["failed"] == "Failed"

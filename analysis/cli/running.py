@@ -20,7 +20,7 @@ from biped_casadi.control.running_step import rk4_gain_bounds
 from biped_casadi.model.description import torque_bound_text
 from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
-from gait_opt.running_solve import STALL_WINDOW
+from gait_opt.running_solve import MAX_TIGHTENINGS, STALL_WINDOW
 
 from .common import Progress, UserError, add_robot, check_m1_values, check_saturation, \
     check_torque_limit, load_model, load_running_gait, output_dir, output_file, print_json
@@ -288,7 +288,9 @@ def _violation_notes(violations: list) -> list:
             "swing foot above the ground in stance": "m"}
     return ["between the collocation points (dense grid) VIOLATED " + "; ".join(
         f"{name} by {v:.2g} {unit.get(name, 'N')}" for name, v in violations) +
-        " (the NLP bounds them at its points only; a finer --intervals need not cut it)"]
+        " (the NLP bounds them at its points only, a torque's bound lowered by its excess "
+        f"and the step solved again up to {MAX_TIGHTENINGS} times; a finer --intervals need "
+        "not cut it)"]
 
 
 def cmd_running(args):
@@ -631,8 +633,12 @@ def _print(s: dict, gait, limit):
           f"{c['periodicity_collocated']:.1e}; phases integrated (DOP853): stance end "
           f"{c['stance_end_error']:.1e}, one interval {c['interval_error']:.1e}, step map "
           f"{c['step_map_residual']:.1e}")
+    again = s["solver"].get("torque_tightenings", [])
     print(f"  solve                {s['solver'].get('iterations')} IPOPT iterations, "
-          f"{s['solver'].get('wall_s', 0.0):.1f} s")
+          f"{s['solver'].get('wall_s', 0.0):.1f} s" + (
+              f" ({1 + len(again)} solves: a torque peaked above its limit between the "
+              f"points by {max(again[0]['excess']):.2g} N m, its bound lowered by that)"
+              if again else ""))
     for p in s.get("plots", []):
         print(f"  plot                 {p}")
     for n in s["notes"]:
