@@ -22,7 +22,7 @@ from biped_casadi.model.description import (builtin_path, description_from_dict,
 from biped_casadi.model.urdf import import_urdf
 from biped_casadi.simulation.full_order import Simulator
 from biped_casadi.simulation.validity import Limits, node_violations
-from gait_opt import GaitOptions, optimize_gait
+from gait_opt import optimize_gait
 from gait_opt.transcription import build_problem
 
 WALKER = Path(__file__).resolve().parents[1] / "docs" / "howto" / "walker" / "walker.urdf"
