@@ -73,7 +73,11 @@ def _watch(pressed: list):
 
     def noted(signum, frame):
         pressed.append(signum)
-        signal.default_int_handler(signum, frame)
+        code = getattr(frame, "f_code", None)
+        if code is not None and (code.co_filename, code.co_name) == (
+                "<frozen importlib._bootstrap>", "cb"):
+            return   # a module lock's weakref callback: Python would print the error and
+        signal.default_int_handler(signum, frame)       # drop it (noted: said at the end)
 
     if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         return None

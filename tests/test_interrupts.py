@@ -106,6 +106,31 @@ def test_a_ctrl_c_while_the_ctrl_c_handler_is_set_is_one_line(monkeypatch, capsy
     assert capsys.readouterr().err == "biped model: interrupted\n"
 
 
+def test_a_ctrl_c_in_a_module_locks_callback_is_noted_not_printed():
+    """A Ctrl-C while importlib's weakref callback of a module lock runs: raised there,
+    Python prints "Exception ignored in: <function _get_module_lock.<locals>.cb>" and
+    its traceback, and drops it; the handler notes it instead (the load's end says
+    it), and raises it anywhere else."""
+    from types import SimpleNamespace
+    in_cb = SimpleNamespace(f_code=SimpleNamespace(co_filename="<frozen importlib._bootstrap>",
+                                                   co_name="cb"))
+    old, pressed = signal.signal(signal.SIGINT, signal.default_int_handler), []
+    try:
+        put_back = biped_cli._watch(pressed)
+        handler = signal.getsignal(signal.SIGINT)
+        try:
+            handler(signal.SIGINT, in_cb)
+        except KeyboardInterrupt:              # (not this session's: fail, do not stop)
+            pytest.fail("raised in the callback, where Python prints and drops it")
+        assert pressed == [signal.SIGINT]
+        with pytest.raises(KeyboardInterrupt):
+            handler(signal.SIGINT, sys._getframe())
+        assert len(pressed) == 2
+        put_back()
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 def test_an_import_error_alone_is_not_an_interruption(monkeypatch):
     class Broken:
         def find_spec(self, name, path=None, target=None):
