@@ -86,6 +86,11 @@ def _is_future(obj) -> bool:
                                           type(obj).__module__.startswith("distributed"))
 
 
+def _given(value):
+    """A kept or flow result as a task's (Dask makes it again if its worker is lost)."""
+    return value
+
+
 def _key(future) -> str:
     """A future's content key (its Dask key is ``<name>-<content key>``)."""
     return str(future.key).rsplit("-", 1)[-1]
@@ -571,8 +576,7 @@ class Engine:
             return f
         value = f.result()                     # a failed input fails the task
         if _key(f) not in self._sent:
-            from toolz import identity          # (Dask's dependency)
-            self._sent[_key(f)] = client.submit(identity, value, key=f.key, pure=False,
+            self._sent[_key(f)] = client.submit(_given, value, key=f.key, pure=False,
                                                      priority=self.current_stage()[1])
         return self._sent[_key(f)]
 
