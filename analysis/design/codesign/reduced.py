@@ -176,8 +176,7 @@ class Reduced:
         """What every step uses: the margined limits, the end target rT and its columns,
         the number of KS chunks and the nodes' times."""
         tr, st, nd = self.tr, self.tr.st, self.nd
-        U = st.torque_limit - st.torque_margin if np.ndim(st.torque_limit) == 0 else \
-            np.asarray(st.torque_limit, float) - st.torque_margin     # per torque u_i
+        U = np.asarray(st.torque_limit, float) - st.torque_margin    # (or per torque u_i)
         mu, mg, rho = st.mu - st.mu_margin, tr.mg, st.ks_rho
         rT = tab["r"][:, 2 * tr.N]
         drT = np.zeros((2, nd))
