@@ -493,10 +493,14 @@ class HybridCycle:
         return lin
 
 
-def _domains_run(value) -> tuple:
-    """The sequence of domains a stride ran: each domain's name, whether it lasted, and
-    the guard's part that ended it (None: skipped)."""
-    return tuple((p.name, p.duration > 0, p.part) for p in value.passes)
+def _domains_run(cycle: HybridCycle, value) -> tuple:
+    """The sequence of domains a stride ran: each domain's name, whether it lasted, the
+    guard's part that ended it (None: skipped) and, where it lasted, its discrete
+    parameters (``Domain.discrete_parameters``, e.g. a slide's direction)."""
+    return tuple((p.name, p.duration > 0, p.part,
+                  tuple(p.parameters[list(d.discrete_parameters)].tolist())
+                  if p.duration > 0 else ())
+                 for d, p in zip(cycle.domains, value.passes))
 
 
 def finite_difference_jacobian(cycle: HybridCycle, x, step: float = 1e-6, shrink: int = 3,
@@ -506,11 +510,13 @@ def finite_difference_jacobian(cycle: HybridCycle, x, step: float = 1e-6, shrink
     2 n strides, more where a step leaves x's sequence of domains.  P is smooth only
     among the states whose strides run the same domains: where x + e or x - e runs
     another sequence (a domain that lasts on one side and is empty on the other, such as
-    a push-off of a few ns at a fixed point near the states where it is empty; or another
-    part of a guard ending a domain), P has a kink between them, and their difference
-    mixes the two pieces' slopes (an error of the order of the jump in slope, however
-    small the step beyond the kink).  Such a column's step is divided by 10, at most
-    ``shrink`` times, until both sides run x's sequence.
+    a push-off of a few ns at a fixed point near the states where it is empty; another
+    part of a guard ending a domain; or a lasting domain's other discrete choice,
+    ``Domain.discrete_parameters``, such as a slide the other way), P has a kink between
+    them, or a jump in curvature, and their difference mixes the two pieces (an error
+    of the order of the jump in slope, however small the step beyond the kink, or
+    growing with the step).  Such a column's step is divided by 10, at most ``shrink``
+    times, until both sides run x's sequence.
 
     Parameters
     ----------
@@ -543,21 +549,24 @@ def finite_difference_jacobian(cycle: HybridCycle, x, step: float = 1e-6, shrink
     if isinstance(shrink, bool) or not isinstance(shrink, (int, np.integer)) or shrink < 0:
         raise ValueError(f"shrink must be an integer from 0 up, got {shrink!r}")
     x = np.asarray(x, float).ravel()
-    base = _domains_run(cycle.stride(x))
+    base = _domains_run(cycle, cycle.stride(x))
     J, steps = np.zeros((cycle.n, x.size)), np.zeros(x.size)
     for j in range(x.size):
         for i in range(shrink + 1):
             e = np.zeros(x.size)
             e[j] = step / 10 ** i
             sides = cycle.stride(x + e), cycle.stride(x - e)
-            other = [r for s in sides for r, r0 in zip(_domains_run(s), base) if r != r0]
+            other = [r for s in sides for r, r0 in zip(_domains_run(cycle, s), base)
+                     if r != r0]
             if not other:
                 break
         else:
-            name, lasted, part = other[0]
+            name, lasted, part, choice = other[0]
             raise HybridCycleError(name, "edge", f"x is on its edge: column {j}'s strides at "
                                    f"x +- {e[j]:.1e} run another sequence of domains than x's "
-                                   f"({'lasting' if lasted else 'empty'}, {part})")
+                                   f"({'lasting' if lasted else 'empty'}, {part}"
+                                   + (f", discrete parameters {choice}" if choice else "")
+                                   + ")")
         J[:, j] = (sides[0].next_state - sides[1].next_state) / (2 * e[j])
         steps[j] = e[j]
     return (J, steps) if return_steps else J

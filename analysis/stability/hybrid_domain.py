@@ -112,6 +112,13 @@ class Domain:
         Merge the equal subexpressions of the RK4 step's sensitivities (``casadi.cse``)
         when the Functions are built: it halves a walking domain's linearisation but
         costs a running domain seconds of build for no faster evaluation.
+    discrete_parameters : tuple of int
+        Places in p of the parameters that ``start`` sets as a discrete choice (a sign,
+        a flag: a sliding foot's direction), constant between the states where the
+        choice changes.  The stride map is another piece of the hybrid map where a
+        lasting domain's choice differs: central differences keep each column's step
+        where x's choices hold
+        (:func:`~analysis.stability.hybrid_cycle.finite_difference_jacobian`).
     """
 
     name: str
@@ -136,6 +143,7 @@ class Domain:
     clock_from: int = 0
     may_be_empty: bool = False
     common_subexpressions: bool = True
+    discrete_parameters: tuple = ()
 
     def __post_init__(self):
         f = self.vector_field
@@ -179,6 +187,12 @@ class Domain:
         if self.arming is not None and _size(self.arming, 0, True) != 1:
             raise HybridCycleError(self.name, "dimension", "arming must be a scalar")
         self._parts()
+        self.discrete_parameters = tuple(self.discrete_parameters)
+        if any(isinstance(i, (bool, np.bool_)) or not isinstance(i, (int, np.integer))
+               or not 0 <= i < self.n_par for i in self.discrete_parameters):
+            raise HybridCycleError(self.name, "dimension",
+                                   f"discrete_parameters must be places in the domain's "
+                                   f"{self.n_par} parameters, got {self.discrete_parameters!r}")
         if self.exit_constraints is not None and _size(self.exit_constraints, 0) != self.n:
             raise HybridCycleError(self.name, "dimension",
                                    f"exit_constraints take {_size(self.exit_constraints, 0)} "

@@ -145,6 +145,8 @@ def slide_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
     rest adds to the slip's part a ramp from ``_V_RAMP`` at entry to 0 at the first RK4
     node (the slip starts from 0 there, and has not stopped); the same constraints (the
     slip's would bind only for a slip begun at rest that reverses within its first step).
+    Rest and sigma are the domain's discrete parameters: a slide the other way is
+    another piece of the stride map (``Domain.discrete_parameters``).
     """
     fl, nq, ne, nu = c.fl, c.model.nq, c.fl.ne, c.model.nu
     Y, t, p = ca.SX.sym("Y", 2 * ne), ca.SX.sym("t"), ca.SX.sym("p", 3 * nu + 3)
@@ -172,8 +174,8 @@ def slide_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
                   constraints=ca.Function("slide_constraints", [Y, t, p], [cons]),
                   constraint_names=names, guard_name=gname, guard_parts=parts, skip=skip,
                   tolerance=tolerance, dense_constraints=names, dense_guard=True,
-                  common_subexpressions=False,
-                  clock_from=clock_from, may_be_empty=True)
+                  common_subexpressions=False, clock_from=clock_from, may_be_empty=True,
+                  discrete_parameters=(3 * nu, 3 * nu + 1))       # rest and sigma
 
 
 def stick_domain(c, phase: str, mu, h, t_max, tolerance, origin, clock_from,
