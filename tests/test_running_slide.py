@@ -257,3 +257,34 @@ def test_central_differences_keep_to_the_strides_sequence_of_domains(running_cyc
     x[nq] = star.fixed_point[nq] - hi                    # on the edge: within 1e-9 of it
     with pytest.raises(HybridCycleError, match="domain 'push-off': x is on its edge"):
         finite_difference_jacobian(cyc, x, 1e-5, shrink=1)
+
+
+def test_central_differences_keep_to_the_slides_direction(running_cycle15, star, model):
+    """A state 2 um (along q1) inside the states whose slide runs x*'s way: past them the
+    foot slides the other way (the stance's cone is met on its other side), the same
+    sequence of domains and parts, but another piece of P (its curvature jumps there).
+    A step of 1e-5 on q1 crosses it and its difference is off by the jump; the column's
+    step shrinks until both sides slide x's way, and agrees with the exact Jacobian."""
+    cyc = running_cycle15
+    sl = cyc.kinds.index("slide")
+
+    def direction(s):
+        x = star.fixed_point.copy()
+        x[0] -= s
+        return cyc.stride(x).passes[sl].parameters[-2]
+
+    lo, hi = 1e-5, 1e-4                          # x*'s way at -1e-5 on q1, the other at -1e-4
+    way = direction(0.0)
+    assert direction(lo) == way and direction(hi) == -way
+    for _ in range(30):
+        lo, hi = (lo, (lo + hi) / 2) if direction((lo + hi) / 2) != way else ((lo + hi) / 2, hi)
+    x = star.fixed_point.copy()
+    x[0] -= hi - 2e-6
+    A = cyc.linearise(x).A
+    J, steps = finite_difference_jacobian(cyc, x, 1e-5, return_steps=True)
+    assert steps[0] == pytest.approx(1e-6, rel=1e-12)
+    for s in (1, -1):
+        y = x.copy()
+        y[0] += s * steps[0]
+        assert cyc.stride(y).passes[sl].parameters[-2] == way
+    assert np.abs(J[:, 0] - A[:, 0]).max() < 3e-8 * np.abs(A).max()
