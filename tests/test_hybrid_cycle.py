@@ -17,8 +17,9 @@ import pytest
 
 from analysis import poincare_map
 from analysis.design import ROBUST_GAIT
-from analysis.stability import (Domain, HybridCycle, HybridCycleError, stance_flight_cycle,
-                                step_map, vc_eigenvalue, walking_cycle)
+from analysis.stability import (Domain, HybridCycle, HybridCycleError,
+                                finite_difference_jacobian, stance_flight_cycle, step_map,
+                                vc_eigenvalue, walking_cycle)
 from biped_casadi import SimulationOptions, TimeVaryingController, VirtualConstraintController
 from biped_casadi.model import flight_model
 from biped_casadi.simulation import directions
@@ -453,3 +454,38 @@ def test_a_guard_of_parts_is_checked_when_built():
     with pytest.raises(HybridCycleError, match=r"^domain 'd': reset must be a "
                                                r"casadi.Function or one per part"):
         Domain("d", 1, d[0].vector_field, d[0].guard, (d[1].reset,), 0.01, 5.0)
+
+
+def _signed_cycle(**kw):
+    """One domain of a scalar state: its direction p = sign(x) chosen at entry, dx/dt =
+    p x for 0.555 s, P(x) = x exp(0.555 p): continuous at 0, its slope exp(0.555) on one
+    side and exp(-0.555) on the other."""
+    X, t, p, x = ca.SX.sym("X"), ca.SX.sym("t"), ca.SX.sym("p"), ca.SX.sym("x")
+    return HybridCycle([Domain("move", 1, ca.Function("f", [X, t, p], [p * X]),
+                               ca.Function("g", [X, t, p], [0.555 - t]),
+                               ca.Function("r", [x], [x]), 0.01, 5.0,
+                               start=ca.Function("s", [x], [x, ca.sign(x)]), **kw)])
+
+
+def test_central_differences_keep_to_a_domains_discrete_choice():
+    """2e-6 from where the direction changes, a step of 1e-5 mixes the two slopes; with
+    the direction a discrete parameter it shrinks to 1e-6 and gives x's slope, and a
+    point on the change itself is refused naming the choice."""
+    x = np.array([2e-6])
+    plain = _signed_cycle()
+    J, steps = finite_difference_jacobian(plain, x, 1e-5, return_steps=True)
+    assert steps[0] == 1e-5 and abs(J[0, 0] - np.exp(0.555)) > 0.1       # the two mixed
+    cyc = _signed_cycle(discrete_parameters=(0,))
+    A = cyc.linearise(x).A
+    assert A[0, 0] == pytest.approx(np.exp(0.555), rel=1e-9)
+    J, steps = finite_difference_jacobian(cyc, x, 1e-5, return_steps=True)
+    assert steps[0] == pytest.approx(1e-6, rel=1e-12)
+    assert J[0, 0] == pytest.approx(A[0, 0], rel=1e-8)
+    with pytest.raises(HybridCycleError, match=r"^domain 'move': x is on its edge: column 0"
+                                               r".*\(lasting, guard, discrete parameters "
+                                               r"\(-1\.0,\)\)$"):
+        finite_difference_jacobian(cyc, np.array([1e-12]), 1e-5, shrink=1)
+    for bad in ((1,), (True,), (0.0,)):
+        with pytest.raises(HybridCycleError, match=r"^domain 'move': discrete_parameters "
+                                                   r"must be places in the domain's 1 "):
+            _signed_cycle(discrete_parameters=bad)
