@@ -39,6 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _results import in_checkout  # noqa: E402
 from running_rigid_hold import HeldLoop, finish  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -284,7 +285,8 @@ def main(argv=None):
             dt, o = j.result()
             res["held"][f"{dt:g}"] = o
     Path(args.out).mkdir(parents=True, exist_ok=True)
-    res["figure"] = _figure(res, Path(args.out) / "mujoco_running_gap.png")
+    res["figure"] = [in_checkout(f) for f in
+                     _figure(res, Path(args.out) / "mujoco_running_gap.png")]
     res["wall_time"] = time.perf_counter() - t0
     from biped_casadi.results import json_safe
     print(json.dumps(json_safe(res), indent=1))

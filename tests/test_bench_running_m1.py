@@ -161,3 +161,23 @@ def test_a_saved_figure_is_named_by_its_path_in_the_checkout(tmp_path, monkeypat
         run.data["figure"] = [str(ROOT / "docs" / "_static" / "x.png"), "/elsewhere/y.png"]
     saved = json.loads((tmp_path / "results" / "figs.json").read_text())
     assert saved["data"]["figure"] == ["docs/_static/x.png", "/elsewhere/y.png"]
+
+
+def _strings(obj):
+    if isinstance(obj, dict):
+        for v in obj.values():
+            yield from _strings(v)
+    elif isinstance(obj, list):
+        for v in obj:
+            yield from _strings(v)
+    elif isinstance(obj, str):
+        yield obj
+
+
+def test_no_committed_result_names_a_file_of_the_machine_that_made_it():
+    """The benchmarks page reads the committed results: a file named by an absolute path
+    (``/tmp/...`` of the run that made it) points nowhere in a clone."""
+    found = {p.name: s for p in sorted((ROOT / "benchmarks" / "results").glob("*.json"))
+             for s in _strings(json.loads(p.read_text()))
+             if s.startswith("/") and Path(s).suffix in (".png", ".pdf", ".json", ".svg")}
+    assert not found, found
