@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _results import RESULTS, Run, commit  # noqa: E402
+from _results import RESULTS, Run, commit, machine  # noqa: E402
 
 from biped_casadi import rabbit  # noqa: E402
 from biped_casadi.control.running import RunningController  # noqa: E402
@@ -135,6 +135,12 @@ def speed_row(m, v, max_evaluations, gait_torque_limit=None):
     return out
 
 
+def _stamp() -> dict:
+    """When, at which commit and on which processor a row or a check was measured (the
+    file's own ``machine`` is its last run's)."""
+    return dict(date=time.strftime("%Y-%m-%d %H:%M"), commit=commit(), cpu=machine()["cpu"])
+
+
 def recheck(m, row):
     """A saved row's checks measured again (:func:`_check`: its gait optimised again, the
     hand-picked and the chosen M1 at their fixed points), each with the date and commit
@@ -149,7 +155,7 @@ def recheck(m, row):
     g = optimize_running(m, RunningOptions(speed=v, torque_limit=row.get("gait_torque_limit")))
     cyc = running_cycle(RunningController(m, g, KP, KD, M1=HAND,
                                           torque_limit=m.description.torque_limit))
-    stamp = dict(date=time.strftime("%Y-%m-%d %H:%M"), commit=commit())
+    stamp = _stamp()
     ch = row.get("chosen") or {}
     for where, key, M1, saved in ((row, "hand_check", HAND, row.get("hand")),
                                   (ch, "check", ch.get("M1"), ch.get("fresh_radius"))):
@@ -274,7 +280,7 @@ def measure(m, v, a):
               f"again with the torque limit {lim:g} N m", flush=True)
         row = dict(speed_row(m, v, a.max_evaluations, lim), default_gait=row)
     row["seconds"] = time.perf_counter() - t0
-    row["measured"] = dict(date=time.strftime("%Y-%m-%d %H:%M"), commit=commit())
+    row["measured"] = _stamp()
     ch = row.get("chosen") or {}
     print(f"{v:g} m/s: plain {row.get('plain')}, hand {row.get('hand')}, best c "
           f"{row.get('best_c')}, chosen {ch.get('M1')} {ch.get('spectral_radius')} "
@@ -325,7 +331,8 @@ def main():
         run.data.update(rows=rows, **want)
         run.note("Nelder-Mead on the exact spectral radius, from the better of the "
                  "hand-picked M1 and the best of M1 = (0, c, c, 0) on a 0.05 grid; "
-                 "each row's 'measured' is the date and commit of the run that measured it")
+                 "each row's 'measured' is the date, commit and processor of the run that "
+                 "measured it (rows measured before 2026-12-08 lack the processor)")
         if a.combine:
             run.note("merged from " + ", ".join(Path(f).name for f in a.combine))
         elif rows:
