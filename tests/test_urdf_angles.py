@@ -611,3 +611,20 @@ def test_a_nan_in_a_joint_column_names_the_line_and_column(column, tmp_path, cap
     assert f"line 6: column {column} has a NaN or infinite value" in err, err
     assert len(err.splitlines()) == 1 and " q has" not in err and " dq has" not in err, err
     assert not out.exists()
+
+
+def test_an_imported_gaits_violations_are_of_the_given_constraints(tmp_path, capsys):
+    """The constraints an imported gait is checked against are --mu, --torque-limit, ...:
+    a note names the one it violates and the amount in its unit (it said 'the default
+    gait constraint' for a limit the user gave, and gave no unit)."""
+    out = tmp_path / "gait.json"
+    args = ["gait", "--import", str(CSV), "--robot", str(URDF), "--angles", "urdf",
+            "--stance", "hip_left", "--torque-limit", "10", "--out", str(out)]
+    assert main(args + ["--json"]) == 0
+    peak = json.loads(capsys.readouterr().out)["peak_torque"]
+    assert peak > 10
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert (f"note: violates the gait constraint 'torque limit' by {peak - 10:.3g} N m "
+            "(reported, not enforced)") in text, text
+    assert "default" not in text, text
