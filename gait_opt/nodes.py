@@ -323,7 +323,7 @@ def csv_table(text: str, where: str, columns: str = "") -> tuple:
     ------
     ValueError
         Naming ``where``: empty, no header line, separated by ';' or tabs, a row of
-        another length, a value that is not a number.
+        another length, a value that is not a number or is NaN or infinite.
     """
     reader = csv.reader(io.StringIO(text))
     rows, lines = [], []                   # the rows, and the file's line of each
@@ -359,6 +359,10 @@ def csv_table(text: str, where: str, columns: str = "") -> tuple:
             k, c = next((k, c) for k, c in enumerate(r) if not _is_number(c))
             raise ValueError(f"{where}: line {i} has a value that is not a number: {c.strip()!r} "
                              f"in column {head[k] or k + 1}") from None
+        bad = [k for k, v in enumerate(data[-1]) if not np.isfinite(v)]
+        if bad:                            # named here: the arrays do not know the columns
+            raise ValueError(f"{where}: line {i}: column {head[bad[0]] or bad[0] + 1} has a "
+                             f"NaN or infinite value: {r[bad[0]].strip()!r}")
     return head, np.array(data, dtype=float).reshape(-1, len(head))
 
 

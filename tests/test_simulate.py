@@ -601,3 +601,19 @@ def test_friction_defaults_to_the_gaits(gait, tmp_path, capsys):
     assert biped_main(args + ["--mu", "0.6", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["status"] == "ok" and out["mu"] == 0.6
+
+
+def test_cli_simulate_growth_factor_counts_from_above_round_off(gait, model, tmp_path,
+                                                                capsys):
+    """An unperturbed run of the unstable M1 = 0 starts at round-off (below 1e-8, the
+    floor of the factor) and grows by the dominant eigenvalue a step: the factor the text
+    prints is measured from the first step above round-off, so it is that eigenvalue, not
+    the floor's smaller mean over all steps."""
+    from analysis import poincare_eigenvalues
+    import re
+    path = str(gait.save(tmp_path / "gait.json"))
+    assert biped_main(["simulate", "--gait", path, "--controller", "tv", "--steps", "6"]) == 0
+    text = capsys.readouterr().out
+    rate = float(re.search(r"growing, x(\S+) a step", text).group(1))
+    lam = poincare_eigenvalues(model, gait, np.zeros(4)).max_abs
+    assert lam > 1.05 and abs(rate / lam - 1) < 0.1, (rate, lam, text)

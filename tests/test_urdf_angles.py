@@ -593,3 +593,38 @@ def test_a_time_column_scaled_alone_is_named_as_such(tmp_path, capsys):
                "--stance", "hip_left", "--out", str(tmp_path / "g.json")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "\n" not in err and "by a factor 2 " in err, err
+
+
+@pytest.mark.parametrize("column", ["knee_left", "dhip_right", "pitch"])
+def test_a_nan_in_a_joint_column_names_the_line_and_column(column, tmp_path, capsys):
+    """A NaN or infinity in a joint's or the pitch's column: one line naming the file's
+    line and the column (it said 'q has a NaN or infinite value', and the file has no
+    column q)."""
+    rows = [r.split(",") for r in CSV.read_text().splitlines()]
+    rows[5][rows[0].index(column)] = "nan" if column != "pitch" else "-inf"
+    src = tmp_path / "step.csv"
+    src.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    out = tmp_path / "gait.json"
+    assert main(["gait", "--import", str(src), "--robot", str(URDF), "--angles", "urdf",
+                 "--stance", "hip_left", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"line 6: column {column} has a NaN or infinite value" in err, err
+    assert len(err.splitlines()) == 1 and " q has" not in err and " dq has" not in err, err
+    assert not out.exists()
+
+
+def test_an_imported_gaits_violations_are_of_the_given_constraints(tmp_path, capsys):
+    """The constraints an imported gait is checked against are --mu, --torque-limit, ...:
+    a note names the one it violates and the amount in its unit (it said 'the default
+    gait constraint' for a limit the user gave, and gave no unit)."""
+    out = tmp_path / "gait.json"
+    args = ["gait", "--import", str(CSV), "--robot", str(URDF), "--angles", "urdf",
+            "--stance", "hip_left", "--torque-limit", "10", "--out", str(out)]
+    assert main(args + ["--json"]) == 0
+    peak = json.loads(capsys.readouterr().out)["peak_torque"]
+    assert peak > 10
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert (f"note: violates the gait constraint 'torque limit' by {peak - 10:.3g} N m "
+            "(reported, not enforced)") in text, text
+    assert "default" not in text, text

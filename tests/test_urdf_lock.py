@@ -154,10 +154,11 @@ def test_arms_merge_into_the_torso(tmp_path):
     # that --lock-off-axis locks them (the Unitree H1 and G1 meet this first)
     with pytest.raises(ValueError) as e:
         import_urdf(p)
-    assert str(e.value).endswith("(lock the joints of the others, e.g. arms: --lock NAME, "
-                                 "lock=); 'hip_yaw_l', 'hip_yaw_r' turn(s) out of the plane "
-                                 "most joints turn in: a 3-D robot's sagittal model locks "
-                                 "every such joint with --lock-off-axis (lock_off_axis=True)")
+    assert str(e.value).endswith("(lock the joints of the others, e.g. arms: 'biped robot "
+                                 "import FILE --lock NAME', lock=); 'hip_yaw_l', 'hip_yaw_r' "
+                                 "turn(s) out of the plane most joints turn in: a 3-D robot's "
+                                 "sagittal model locks every such joint with 'biped robot "
+                                 "import FILE --lock-off-axis' (lock_off_axis=True)")
     with pytest.raises(ValueError, match=r"lock=\)$"):     # the arms' only: no such hint
         import_urdf(p, lock_off_axis=True)       # (and the plane voted is the torso's y)
     imp = import_urdf(p, lock={**SAGITTAL, **ARMS})
@@ -356,3 +357,15 @@ def test_the_sagittal_model_walks(tmp_path, capsys):
     assert main(["eig", "--gait", str(gait), "--controller", "vc", "--json"]) == 0
     body = json.loads(capsys.readouterr().out)
     assert body["success"] and body["status"] == "stable", body
+
+
+def test_a_3d_robot_given_to_another_command_is_told_where_locks_are(tmp_path, capsys):
+    """--robot FILE.urdf on a command without --lock (biped model, eig, ...): the refusal
+    names the command that locks joints (it said '--lock NAME' and '--lock-off-axis',
+    options 'biped model' does not have)."""
+    p = _write(tmp_path, biped3d_urdf(arms=True))
+    assert main(["model", "--robot", str(p)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "'biped robot import FILE --lock NAME'" in err, err
+    assert "'biped robot import FILE --lock-off-axis'" in err, err

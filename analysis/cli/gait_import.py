@@ -13,6 +13,16 @@ from .common import (UserError, load_gait, load_model, not_an_input, output_dir,
                      print_json)
 
 
+#: the units of :meth:`gait_opt.Gait.violations`' amounts, by constraint (the friction
+#: cone's is a ratio); the constraints are the gait options' (--mu, --impact-mu,
+#: --torque-limit, --clearance, or their defaults)
+VIOLATION_UNITS = {"torque limit": " N m", "normal force": " N", "friction cone": " in |F_x|/F_z",
+                   "swing foot above ground": " m", "swing-foot clearance": " m",
+                   "strike velocity": " m/s", "lift-off velocity": " m/s",
+                   "impact impulse cone": " N s", "torso lean": " rad",
+                   "stance knee (hyperextension)": " rad",
+                   "swing knee (hyperextension)": " rad"}
+
 def add_import_arguments(p):
     """--import, --angles, --stance, --import-tol, --bezier-degree, --export-csv, --gait
     and --nodes on ``biped gait``."""
@@ -106,7 +116,8 @@ def cmd_import(args):
     print(f"  friction ratio       {r.max_friction_ratio:.4f} (impact {r.impact_friction_ratio:.4f})")
     print(f"  swing-foot clearance {r.min_swing_height:.3e} m (lowest inside the step)")
     for name, v in r.violations:
-        print(f"  note: violates the default gait constraint '{name}' by {v:.3g}")
+        print(f"  note: violates the gait constraint '{name}' by {v:.3g}"
+              f"{VIOLATION_UNITS.get(name, '')} (reported, not enforced)")
     for p in s.get("plots", []):
         print(f"  plot                 {p}")
     return 0

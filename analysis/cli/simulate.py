@@ -145,10 +145,12 @@ def _settling_line(run, default_m1: bool) -> str:
     k, e = run.steps_to_converge(CONVERGED), run.unactuated_errors()
     if max(e) < ROUND_OFF or len(e) < 2:
         trend = "round-off"
-    else:                                   # the mean factor per step, first to last
-        rate = (e[-1] / max(e[0], ROUND_OFF)) ** (1 / (len(e) - 1))
+    else:       # the mean factor per step, from the first error above round-off to the last
+        j = next(i for i, x in enumerate(e) if x >= ROUND_OFF)
+        j = min(j, len(e) - 2)
+        rate = (e[-1] / max(e[j], ROUND_OFF)) ** (1 / (len(e) - 1 - j))
         trend = ("growing" if rate > 1.05 else "falling" if rate < 0.95 else "steady") \
-            + f", x{rate:.3g} a step"
+            + f", x{rate:.3g} a step" + (f" from step {j + 1}" if j else "")
     line = (f"  max(|q_u err|, |dq_u err|) {e[0]:.3g} at step 1"
             + (f", {e[-1]:.3g} at step {len(e)} ({trend})" if len(e) > 1 else "") + "; "
             + (f"below {CONVERGED:g} from step {int(k)}" if np.isfinite(k) else

@@ -466,7 +466,8 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
     if len(hips) != 2:
         rd.fail(f"the torso {torso.name!r} has {len(hips)} jointed children "
                 f"({', '.join(repr(j.name) for j, _ in hips) or 'none'}); a biped has two legs"
-                + (" (lock the joints of the others, e.g. arms: --lock NAME, lock=)"
+                + (" (lock the joints of the others, e.g. arms: 'biped robot import FILE "
+                   "--lock NAME', lock=)"
                    + _off_plane_hint(rd, torso, hips) if len(hips) > 2 else ""))
     legs = []
     for hip, parent in hips:
@@ -485,7 +486,8 @@ def _legs(rd: _Reader, torso: _Frame) -> list:
             if len(nxt) > 1:
                 rd.fail(f"link {frame.name!r} has {len(nxt)} jointed children "
                         f"({', '.join(repr(j.name) for j, _ in nxt)}): a leg is one chain "
-                        f"of links (lock the joints of the others: --lock NAME, lock=; a "
+                        f"of links (lock the joints of the others: 'biped robot import "
+                        f"FILE --lock NAME', lock=; a "
                         f"closed linkage cut open in the file, as a four-bar leg, is not one "
                         f"and locking a branch makes another robot)")
             item = nxt[0] if nxt else None
@@ -502,8 +504,8 @@ def _off_plane_hint(rd: _Reader, torso: _Frame, hips) -> str:
         return ""
     off = [j.name for j, _ in hips if j.name in off]
     return (f"; {', '.join(map(repr, off))} turn(s) out of the plane most joints turn in: "
-            f"a 3-D robot's sagittal model locks every such joint with --lock-off-axis "
-            f"(lock_off_axis=True)") if off else ""
+            f"a 3-D robot's sagittal model locks every such joint with 'biped robot "
+            f"import FILE --lock-off-axis' (lock_off_axis=True)") if off else ""
 
 
 def _jointed(rd: _Reader, frame: _Frame) -> list:
