@@ -264,6 +264,27 @@ def test_efforts_all_zero_are_no_limit(tmp_path, capsys):
     assert load_description(out) == robot("rabbit").description
 
 
+def test_efforts_far_beyond_the_robots_weight_are_said_to_look_like_a_placeholder(tmp_path):
+    """ODRI's Bolt (1.25 kg, legs of 0.4 m) gives effort="1000" on every joint: imported
+    as a 1000 N m limit without a word.  A limit of at least PLACEHOLDER_RATIO times
+    m g L is now a note; RABBIT's 150 N m (0.6 times its m g L) is not."""
+    from biped_casadi.model.torque_limits import PLACEHOLDER_RATIO
+    text = (ROBOTS / "rabbit.urdf").read_text()
+    d = robot("rabbit").description
+    weight = d.total_mass * d.gravity * d.leg_length
+    assert not any("placeholder" in n for n in import_urdf(ROBOTS / "rabbit.urdf").notes)
+    for effort, said in ((PLACEHOLDER_RATIO * weight * 1.01, True),
+                         (PLACEHOLDER_RATIO * weight * 0.99, False)):
+        p = tmp_path / "big_efforts.urdf"
+        p.write_text(text.replace('effort="150"', f'effort="{effort!r}"'))
+        imp = import_urdf(p)
+        assert imp.description.torque_limit == pytest.approx(effort)
+        notes = [n for n in imp.notes if "placeholder" in n]
+        assert len(notes) == int(said), imp.notes
+        assert not said or f"are {effort / weight:.0f} times" in notes[0], notes
+        assert not any("placeholder" in n for n in import_urdf(p, torque_limit=150.0).notes)
+
+
 def test_joint_damping_and_friction_are_said_to_be_ignored(tmp_path):
     """<dynamics damping friction> is physics the model has not (rigid, frictionless
     joints): the import says it leaves it out instead of dropping it silently."""

@@ -628,3 +628,23 @@ def test_an_imported_gaits_violations_are_of_the_given_constraints(tmp_path, cap
     assert (f"note: violates the gait constraint 'torque limit' by {peak - 10:.3g} N m "
             "(reported, not enforced)") in text, text
     assert "default" not in text, text
+
+
+def test_motor_side_without_reductions_is_said(walker_gait, tmp_path, capsys):
+    """``--motor-side`` on a URDF without transmission reductions (the Unitree H1's)
+    divided every torque by 1 without a word: the 'motors' torques' were the joints'.
+    The walker with its reductions moved into the motors' inertia (the same robot, the
+    same gait) is warned about in one line; the walker itself (50:1) is not."""
+    flat = URDF.read_text().replace("<mechanicalReduction>50</mechanicalReduction>",
+                                    "<mechanicalReduction>1</mechanicalReduction>")
+    flat = flat.replace("<motorInertia>3.32e-4</motorInertia>", "<motorInertia>0.83</motorInertia>")
+    (tmp_path / "flat.urdf").write_text(flat)
+    g = import_gait(robot(tmp_path / "flat.urdf"), CSV, angles="urdf", stance="hip_left").gait
+    for gait, warned in ((g, True), (walker_gait, False)):
+        path = gait.save(tmp_path / f"g{warned}.json")
+        out = tmp_path / f"ctrl{warned}"
+        assert main(["export", "--gait", str(path), "--controller", "vc", "--angles", "urdf",
+                     "--motor-side", "--out", str(out), "--json"]) == 0
+        err = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+        assert len(err) == int(warned), err
+        assert not warned or "every reduction is 1" in err[0]

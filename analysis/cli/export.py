@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import os
 import platform
+import sys
 import tempfile
 from pathlib import Path
 
@@ -145,6 +146,10 @@ def cmd_export(args):
         raise UserError(f"--angles urdf: the robot {gait.model.params.name} has no URDF joint "
                         f"map (give --robot FILE.urdf, a description written by 'biped robot "
                         f"import', or a gait made for one); nothing written")
+    if args.motor_side and all(j.reduction == 1.0 for j in gait.model.description.urdf.joints):
+        print("biped export: warning: --motor-side: the robot's URDF has no <transmission> "
+              "with a mechanicalReduction: every reduction is 1, so the motors' torques are "
+              "the joints'", file=sys.stderr, flush=True)
     _perturbation(args, gait.model.nq)       # its shape, also when only --verify uses it
     check_saturation(args, gait.model)
     ctrl = _controller(args, gait)

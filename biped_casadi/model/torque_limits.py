@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 __all__ = ["per_torque", "torque_bound_text", "torque_limit_words", "leg_limits_text", "parse_torque_limit",
-           "urdf_torque_limit", "joint_names_of"]
+           "urdf_torque_limit", "placeholder_note", "PLACEHOLDER_RATIO", "joint_names_of"]
 
 
 def per_torque(leg: tuple) -> tuple:
@@ -183,6 +183,33 @@ def urdf_torque_limit(notes: list, pairs, efforts: dict, all_zero: bool, torque_
     notes.append("joint efforts differ: each joint's torque limit is the smaller of its two "
                  f"legs' ({', '.join(f'{n} {v:g}' for n, v in limit.items())} N m)")
     return limit
+
+
+#: a file's effort this many times the robot's weight times its leg's length (the torque
+#: that holds the whole robot out on one straight leg) reads as an exporter's placeholder
+PLACEHOLDER_RATIO = 20.0
+
+
+def placeholder_note(notes: list, description) -> None:
+    """Say in ``notes`` when a URDF's efforts look like a placeholder: the smallest limit
+    at least :data:`PLACEHOLDER_RATIO` times m g L (a 1.25 kg robot with legs of 0.4 m and
+    ``effort="1000"``: 203 times 4.92 N m).  Real actuators give about 0.2 to 2 times.
+
+    Parameters
+    ----------
+    notes : list of str
+        The import's notes (appended to).
+    description : RobotDescription
+        The imported robot, its limits from the file's efforts.
+    """
+    weight = description.total_mass * description.gravity * description.leg_length
+    smallest = min(description.torque_limits) if description.has_torque_limit else math.inf
+    if math.isfinite(smallest) and weight > 0 and smallest >= PLACEHOLDER_RATIO * weight:
+        notes.append(f"the file's effort limits ({smallest:g} N m and up) are "
+                     f"{smallest / weight:.0f} times the robot's weight times its leg's "
+                     f"length ({weight:.3g} N m): they look like an exporter's placeholder, "
+                     "not the actuators'; give the real limit with --torque-limit N "
+                     "(torque_limit=)")
 
 
 def joint_names_of(k: int) -> tuple:

@@ -98,7 +98,7 @@ from urdf_parser_py import urdf as _urdf
 
 from ..files import read_text_file
 from .description import RobotDescription, description_from_dict, description_toml, joint_names
-from .torque_limits import urdf_torque_limit
+from .torque_limits import placeholder_note, urdf_torque_limit
 from .urdf_map import UrdfJoint, UrdfMap, wrap_angle
 from .urdf_legs import (MATCH_TOL, MAX_MATCH_TOL, _beyond, _check_foot, check_match_tol,
                         _foot_point, _same_legs, _unequal_legs, _wider)
@@ -602,6 +602,8 @@ def import_urdf(path, foot=None, tol: float = GEOMETRY_TOL,
                 torso=torso_d, leg=links[0], point_masses=pm, urdf=urdf_map.to_dict())
     rd.notes += [f"ignored: {s}" for s in said if "motorInertia" not in s]
     d = description_from_dict(data, where=where, source=str(path))
+    if torque_limit is None:
+        placeholder_note(rd.notes, d)
     locked = {k: rd.locked[k] for k in sorted(rd.locked, key=rd.order.get)}
     return UrdfImport(d, torso.name, tuple(tuple(j.name for j in leg.joints) for leg in legs),
                       feet[0][1], rd.notes, locked)
