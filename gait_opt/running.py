@@ -617,14 +617,15 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
                  f"{opts.speed:g} m/s (about 10 s) ...")
     return within_path_limits(
         lambda start, umax, points: _solve_step(
-            model, opts, guess if start is None else start, verbose, umax, points),
+            model, opts, guess if start is None else start, verbose, umax, points,
+            watch=start is None),
         opts.limit(model), lambda gait: foot_dips(model, gait))
 
 
-def _solve_step(model, opts, guess, verbose, umax, points=()) -> RunningGait:
-    """The running step's NLP under the torque bound ``umax``, the feet also bounded at
-    the times of ``points`` (:func:`gait_opt.running_clearance.clearance_rows`), built
-    and solved once."""
+def _solve_step(model, opts, guess, verbose, umax, points=(), watch=True) -> RunningGait:
+    """The running step's NLP under the torque bound ``umax``, the feet also bounded
+    where ``points`` dipped (:func:`gait_opt.running_clearance.clearance_rows`), built
+    and solved once (``watch``: the stall watch of ``solve_running``)."""
     fl = flight_model(model)
     n, nu = model.nq, model.nu
     if guess is None:
@@ -657,7 +658,7 @@ def _solve_step(model, opts, guess, verbose, umax, points=()) -> RunningGait:
     for var, key in ((Ts, "T_stance"), (Tf, "T_flight"), (Xs, "x_stance"), (Us, "u_stance"),
                      (Xf, "x_flight"), (Uf, "u_flight")):
         opti.set_initial(var, guess[key])
-    val, stats = solve_running(con, opts, verbose, model)  # last iterate if it failed
+    val, stats = solve_running(con, opts, verbose, model, watch)  # last iterate if failed
     return RunningGait(robot=model.description.name, options=opts,
                        T_stance=float(val(Ts)), T_flight=float(val(Tf)),
                        x_stance=np.array(val(Xs)), u_stance=np.array(val(Us)).reshape(nu, -1),

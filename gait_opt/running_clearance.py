@@ -11,9 +11,9 @@ swing foot 2.5 mm below the profile mid-stance.
 
 :func:`foot_dips` finds each interval's deepest dip on the dense grid of the checks
 (:func:`gait_opt.running_checks.dense`: 20 samples per interval), located more finely
-around its sample; :func:`clearance_rows` bounds the foot on that interval in the NLP,
-at the dense grid's samples and the dip's time (the interpolant is a function of the
-interval's points), and
+around its sample; :func:`clearance_rows` bounds that foot in the NLP at the dense
+grid's samples of every interval of that phase and at the dip's time (the interpolant
+is a function of the interval's points), and
 :func:`gait_opt.running_solve.within_path_limits` solves the step again from the one
 found, in the loop that lowers a torque's bound.  A step without a dip adds no row.
 """
@@ -167,13 +167,15 @@ def foot_dips(model, gait, per_interval: int = DENSE, tol: float = FOOT_TOL) -> 
 
 
 def clearance_rows(con, model, opts, phases: dict, points, per_interval: int = DENSE) -> None:
-    """Bound the feet on the intervals of ``points`` in the running step's NLP.
+    """Bound the feet that dipped at ``points`` between the points of the NLP.
 
-    A foot that dipped on an interval is held above its bound there at the dense grid's
-    samples inside the interval and at each dip's own time, on the interpolant: a bound
-    at the dip's time alone moved the dip a little along the interval at every re-solve
-    (RABBIT at 1.5 m/s with a 0.2 m clearance on 4 + 3 intervals: 1.0e-4, 2.0e-5,
-    5.5e-6, 1.2e-6 m in four solves).
+    A foot that dipped below its bound in a phase is held above it there at the dense
+    grid's samples inside every interval of that phase, and at each dip's own time, on
+    the interpolant.  A bound at the dip's time alone moved the dip a little along its
+    interval at every re-solve (RABBIT at 1.5 m/s with a 0.2 m clearance on 4 + 3
+    intervals: 1.0e-4, 2.0e-5, 5.5e-6, 1.2e-6 m in four solves), and bounds on the
+    dipping interval alone moved it to the next (ODRI's Bolt at 1 m/s, 16 + 10: from
+    stance interval 6 to 5, from flight interval 0 to 1).
 
     Parameters
     ----------
@@ -194,10 +196,14 @@ def clearance_rows(con, model, opts, phases: dict, points, per_interval: int = D
         Dense samples per interval.
     """
     names = {name: key for key, name in FEET.items()}
+    inner = set(np.arange(1, per_interval) / per_interval)
     where = {}
     for p in points:
-        key = names[p["foot"]] + (int(p["interval"]),)
-        where.setdefault(key, set(np.arange(1, per_interval) / per_interval)).add(p["s"])
+        phase, foot = names[p["foot"]]
+        n = (phases[phase][0].shape[1] - 1) // 2
+        for k in range(n):
+            where.setdefault((phase, foot, k), set(inner))
+        where[phase, foot, int(p["interval"])].add(float(p["s"]))
     for (phase, foot, k), fractions in sorted(where.items()):
         X, F, _, T = phases[phase]
         S = ca.DM(sorted(fractions)).T

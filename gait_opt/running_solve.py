@@ -134,7 +134,7 @@ class _Watch:
         return self.stopped
 
 
-def solve_running(con, opts, verbose, model):
+def solve_running(con, opts, verbose, model, watch=True):
     """Solve the running step's problem with IPOPT under the stall watch.
 
     Parameters
@@ -148,6 +148,11 @@ def solve_running(con, opts, verbose, model):
         IPOPT's iteration log.
     model : BipedModel
         The robot (the names of its joints).
+    watch : bool
+        False: no watch whatever ``stall_window`` (a re-solve of
+        :func:`within_path_limits`, from a converged step: the watch, reading its first
+        iterate's small violation as the best, stopped ODRI's Bolt's re-solve after 108
+        iterations; without it, 440).
 
     Returns
     -------
@@ -160,7 +165,7 @@ def solve_running(con, opts, verbose, model):
     """
     ipopt = {"print_level": 5 if verbose else 0, "max_iter": 3000, "tol": 1e-8,
              "mu_strategy": "adaptive", "sb": "yes", **opts.ipopt}
-    opti, window = con.opti, opts.stall_window
+    opti, window = con.opti, opts.stall_window if watch else None
     watch = None if window is None else _Watch(opti, window)
     extra = {} if watch is None else {"iteration_callback": watch.callback}
     ipopt_on_one_thread()

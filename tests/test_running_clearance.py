@@ -1,8 +1,9 @@
 """The feet of a running step above their bounds between the collocation points.
 
 The cheap case: RABBIT at 1.5 m/s on 4 + 3 intervals with a swing-foot clearance of
-0.2 m, which the swing foot rides in stance; its first solve passes 1.0e-4 m below the
-clearance profile between the first two stance points."""
+0.2 m, which the swing foot rides in stance; its first solve passes 9.3e-5 m below the
+clearance profile on the dense grid (1.0e-4 between its samples) between the first two
+stance points."""
 from __future__ import annotations
 
 import numpy as np
