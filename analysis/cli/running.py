@@ -288,9 +288,9 @@ def _violation_notes(violations: list) -> list:
             "swing foot above the ground in stance": "m"}
     return ["between the collocation points (dense grid) VIOLATED " + "; ".join(
         f"{name} by {v:.2g} {unit.get(name, 'N')}" for name, v in violations) +
-        " (the NLP bounds them at its points only, a torque's bound lowered by its excess "
-        f"and the step solved again up to {MAX_TIGHTENINGS} times; a finer --intervals need "
-        "not cut it)"]
+        " (the NLP bounds them at its points only, a torque's bound lowered by its excess, "
+        "a foot that dips bounded at the dense grid's samples, and the step solved again "
+        f"up to {MAX_TIGHTENINGS} times; a finer --intervals need not cut it)"]
 
 
 def cmd_running(args):
