@@ -623,7 +623,7 @@ def _resolves(solver: dict) -> str:
             "that"] if over > TORQUE_TOL else [])
     if dips:
         why.append(f"a foot dipped {max(d['depth'] for d in dips):.2g} m below its bound, "
-                   "bounded at that time")
+                   "held above it at the dense grid's samples")
     return f" ({1 + len(again)} solves: between the points {' and '.join(why)})"
 
 
