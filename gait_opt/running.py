@@ -24,7 +24,8 @@ lowered by the excess and the step solved again), the torque's rate bounded, the
 ground smoothly, docs: howto/running.md); in stance Fz >= 0 and
 |Fx| <= (mu - mu_margin) Fz, the swing foot above a parabolic clearance profile; in flight both feet
 above the ground (a foot that dips below its bound between the points is bounded at
-the dip's time and the step solved again, in the torques' loop); no knee hyperextension; at landing the swing foot moving down, the
+the dense grid's samples and the step solved again, in the torques' loop); no knee
+hyperextension; at landing the swing foot moving down, the
 impulse inside the cone of mu - mu_margin and the other foot moving up after the impact; the
 average speed: step length (the landing foot's x in the stance frame) = v (Ts + Tf).
 
@@ -602,8 +603,9 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
         The last iterate, whatever IPOPT's status (``gait.success`` tells); with
         ``cache``, ``gait.solver_stats['cache']`` is 'hit' or says why it was solved.
         A torque that peaks above its limit between the points has its bound lowered
-        by the excess, a foot that dips below its bound there is bounded at the dip's
-        time, and the step is solved again from the one found, at most three times
+        by the excess, a foot that dips below its bound there is bounded at the dense
+        grid's samples of that phase and the dip's time, and the step is solved again
+        from the one found (without the stall watch), at most three times
         (:func:`gait_opt.running_solve.within_path_limits`:
         ``solver_stats['tightenings']``).
     """

@@ -334,7 +334,7 @@ def within_path_limits(solve, limit, dips=None, rounds=MAX_TIGHTENINGS, tol=TORQ
     and the feet at the points; where the quadratic torque peaks above a limit between
     them (:func:`torque_peaks`), or a foot dips below its bound (``dips``), the walking
     optimiser's remedy (:func:`gait_opt.optimize.optimize_gait`): that joint's bound is
-    lowered by its excess, that foot is bounded at the dip's time too
+    lowered by its excess, that foot is held above its bound between the points too
     (:func:`gait_opt.running_clearance.clearance_rows`), and the problem is solved
     again from the step found, both in one re-solve, at most ``rounds`` times.  A step
     within its bounds is returned as solved, so a step whose bounds do not bind between
