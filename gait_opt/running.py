@@ -23,7 +23,9 @@ lowered by the excess and the step solved again), the torque's rate bounded, the
 (so that the stance and flight accelerations agree there and the foot leaves the
 ground smoothly, docs: howto/running.md); in stance Fz >= 0 and
 |Fx| <= (mu - mu_margin) Fz, the swing foot above a parabolic clearance profile; in flight both feet
-above the ground; no knee hyperextension; at landing the swing foot moving down, the
+above the ground (a foot that dips below its bound between the points is bounded at
+the dense grid's samples and the step solved again, in the torques' loop); no knee
+hyperextension; at landing the swing foot moving down, the
 impulse inside the cone of mu - mu_margin and the other foot moving up after the impact; the
 average speed: step length (the landing foot's x in the stance frame) = v (Ts + Tf).
 
@@ -48,9 +50,10 @@ from biped_casadi.option_checks import FieldChecks
 
 from .options import leg_scale
 from .running_cache import cached_running
+from .running_clearance import clearance_rows, foot_dips, hermite_simpson
 from .running_file import check_running_file, running_problem
 from .running_solve import (STALL_WINDOW, LabelledConstraints, solve_running, torque_rows,
-                            within_torque_limits)
+                            within_path_limits)
 from .transcription import torso_lean_bound
 
 __all__ = ["RunningOptions", "RunningGait", "optimize_running", "running_guess",
@@ -214,43 +217,6 @@ class RunningOptions:
 
 
 # ----------------------------------------------------------------- interpolation
-def hermite_simpson(t_nodes, X, F, U, t):
-    """The Hermite-Simpson interpolant of a collocated phase at times ``t``.
-
-    On each interval the state is the cubic whose derivative is the quadratic through
-    the dynamics at the ends and the midpoint (Kelly 2017, eq. 4.10); the torque is the
-    quadratic through its three values.
-
-    Parameters
-    ----------
-    t_nodes : array_like
-        (2 n + 1,) times of the ends and midpoints, s (even indices: interval ends).
-    X, F, U : array_like
-        (nx, 2 n + 1) states, their time derivatives and (nu, 2 n + 1) torques there.
-    t : array_like
-        Times in [t_nodes[0], t_nodes[-1]], s.
-
-    Returns
-    -------
-    tuple of numpy.ndarray
-        (x, u): (nx, len(t)) and (nu, len(t)).
-    """
-    tn, X, F, U = (np.asarray(a, dtype=float) for a in (t_nodes, X, F, U))
-    t = np.atleast_1d(np.asarray(t, dtype=float))
-    n = (tn.size - 1) // 2
-    k = np.clip(np.searchsorted(tn[::2], t, side="right") - 1, 0, n - 1)
-    i0 = 2 * k
-    h = tn[i0 + 2] - tn[i0]
-    tau = t - tn[i0]
-    s = tau / h
-    f0, fm, f1 = F[:, i0], F[:, i0 + 1], F[:, i0 + 2]
-    x = (X[:, i0] + f0 * tau + 0.5 * (-3 * f0 + 4 * fm - f1) * tau * s
-         + (2 * f0 - 4 * fm + 2 * f1) / 3 * tau * s * s)
-    u0, um, u1 = U[:, i0], U[:, i0 + 1], U[:, i0 + 2]
-    u = u0 * (1 - s) * (1 - 2 * s) + um * 4 * s * (1 - s) + u1 * s * (2 * s - 1)
-    return x, u
-
-
 def _simpson(T, values):
     """Simpson's rule over one phase: values at ends and midpoints, (2 n + 1,)."""
     n = (values.shape[1] - 1) // 2
@@ -637,9 +603,11 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
         The last iterate, whatever IPOPT's status (``gait.success`` tells); with
         ``cache``, ``gait.solver_stats['cache']`` is 'hit' or says why it was solved.
         A torque that peaks above its limit between the points has its bound lowered
-        by the excess and the step solved again from the one found, at most three
-        times (:func:`gait_opt.running_solve.within_torque_limits`:
-        ``solver_stats['torque_tightenings']``).
+        by the excess, a foot that dips below its bound there is bounded at the dense
+        grid's samples of that phase and the dip's time, and the step is solved again
+        from the one found (without the stall watch), at most three times
+        (:func:`gait_opt.running_solve.within_path_limits`:
+        ``solver_stats['tightenings']``).
     """
     opts = running_problem(model, opts, guess, RunningOptions)
     if cache:
@@ -649,13 +617,17 @@ def optimize_running(model, opts: RunningOptions | None = None, guess: dict | No
     if progress is not None:
         progress(f"optimising a running step of {model.description.name} at "
                  f"{opts.speed:g} m/s (about 10 s) ...")
-    return within_torque_limits(
-        lambda start, umax: _solve_step(model, opts, guess if start is None else start,
-                                        verbose, umax), opts.limit(model))
+    return within_path_limits(
+        lambda start, umax, points: _solve_step(
+            model, opts, guess if start is None else start, verbose, umax, points,
+            watch=start is None),
+        opts.limit(model), lambda gait: foot_dips(model, gait))
 
 
-def _solve_step(model, opts, guess, verbose, umax) -> RunningGait:
-    """The running step's NLP under the torque bound ``umax``, built and solved once."""
+def _solve_step(model, opts, guess, verbose, umax, points=(), watch=True) -> RunningGait:
+    """The running step's NLP under the torque bound ``umax``, the feet also bounded
+    where ``points`` dipped (:func:`gait_opt.running_clearance.clearance_rows`), built
+    and solved once (``watch``: the stall watch of ``solve_running``)."""
     fl = flight_model(model)
     n, nu = model.nq, model.nu
     if guess is None:
@@ -668,13 +640,15 @@ def _solve_step(model, opts, guess, verbose, umax) -> RunningGait:
     fs, ff = _dynamics(model, fl)
     Ts, Xs, Us, Fs = _phase(con, "stance", fs, 2 * n, nu, opts.n_stance,
                             opts.stance_time_bounds)
-    Tf, Xf, Uf, _ = _phase(con, "flight", ff, 2 * fl.ne, nu, opts.n_flight,
-                           opts.flight_time_bounds)
+    Tf, Xf, Uf, Ff = _phase(con, "flight", ff, 2 * fl.ne, nu, opts.n_flight,
+                            opts.flight_time_bounds)
     for U, T, n_int in ((Us, Ts, opts.n_stance), (Uf, Tf, opts.n_flight)):
         torque_rows(con, opts, U, umax, T, n_int)
     _stance_constraints(con, model, fl, opts, Xs, Us, Fs, Ts)
     _flight_constraints(con, model, fl, opts, Xf)
     p_foot = _edges(con, model, fl, opts, Xs, Xf)
+    clearance_rows(con, model, opts, {"stance": (Xs, Fs, Us, Ts), "flight": (Xf, Ff, Uf, Tf)},
+                   points)
     # torques continuous through takeoff: with a jump, the stance force under the flight's
     # first torques could be positive (the ground would hold the foot down)
     con.add("torques continuous through takeoff", "N m", Uf[:, 0] - Us[:, -1] == 0)
@@ -686,7 +660,7 @@ def _solve_step(model, opts, guess, verbose, umax) -> RunningGait:
     for var, key in ((Ts, "T_stance"), (Tf, "T_flight"), (Xs, "x_stance"), (Us, "u_stance"),
                      (Xf, "x_flight"), (Uf, "u_flight")):
         opti.set_initial(var, guess[key])
-    val, stats = solve_running(con, opts, verbose, model)  # last iterate if it failed
+    val, stats = solve_running(con, opts, verbose, model, watch)  # last iterate if failed
     return RunningGait(robot=model.description.name, options=opts,
                        T_stance=float(val(Ts)), T_flight=float(val(Tf)),
                        x_stance=np.array(val(Xs)), u_stance=np.array(val(Us)).reshape(nu, -1),

@@ -29,7 +29,7 @@ from biped_casadi.numerics import ipopt_on_one_thread, iteration_stop
 from .running_file import solve_or_last_iterate
 
 __all__ = ["stalled", "solve_running", "violated", "torque_at_limit", "torque_rows",
-           "torque_peaks", "within_torque_limits", "LabelledConstraints", "STALL_FACTOR",
+           "torque_peaks", "within_path_limits", "LabelledConstraints", "STALL_FACTOR",
            "FEASIBLE", "STALL_WINDOW", "TORQUE_LIMIT", "MAX_TIGHTENINGS", "TORQUE_TOL"]
 
 #: the default window, iterations (``RunningOptions.stall_window``)
@@ -41,8 +41,8 @@ STALL_FACTOR = 0.5
 FEASIBLE = 1e-6
 #: the label of the rows |u| <= umax (:func:`torque_at_limit` reads them)
 TORQUE_LIMIT = "torque limit |u| <= umax"
-#: re-solves allowed for a torque beyond its limit between the points
-#: (:func:`within_torque_limits`)
+#: re-solves allowed for a torque beyond its limit or a foot below its bound between the
+#: points (:func:`within_path_limits`)
 MAX_TIGHTENINGS = 3
 #: a torque at most this above its limit, N m, is within it (the tolerance of
 #: ``RunningReport.violations``)
@@ -134,7 +134,7 @@ class _Watch:
         return self.stopped
 
 
-def solve_running(con, opts, verbose, model):
+def solve_running(con, opts, verbose, model, watch=True):
     """Solve the running step's problem with IPOPT under the stall watch.
 
     Parameters
@@ -148,6 +148,11 @@ def solve_running(con, opts, verbose, model):
         IPOPT's iteration log.
     model : BipedModel
         The robot (the names of its joints).
+    watch : bool
+        False: no watch whatever ``stall_window`` (a re-solve of
+        :func:`within_path_limits`, from a converged step: the watch, reading its first
+        iterate's small violation as the best, stopped ODRI's Bolt's re-solve after 108
+        iterations; without it, 440).
 
     Returns
     -------
@@ -160,7 +165,7 @@ def solve_running(con, opts, verbose, model):
     """
     ipopt = {"print_level": 5 if verbose else 0, "max_iter": 3000, "tol": 1e-8,
              "mu_strategy": "adaptive", "sb": "yes", **opts.ipopt}
-    opti, window = con.opti, opts.stall_window
+    opti, window = con.opti, opts.stall_window if watch else None
     watch = None if window is None else _Watch(opti, window)
     extra = {} if watch is None else {"iteration_callback": watch.callback}
     ipopt_on_one_thread()
@@ -322,48 +327,60 @@ def torque_peaks(U) -> np.ndarray:
     return np.max(np.abs(np.concatenate([u0, u1, vertex], axis=1)), axis=1)
 
 
-def within_torque_limits(solve, limit, rounds=MAX_TIGHTENINGS, tol=TORQUE_TOL):
-    """A running step whose torques keep their limits between the points too.
+def within_path_limits(solve, limit, dips=None, rounds=MAX_TIGHTENINGS, tol=TORQUE_TOL):
+    """A running step whose torques and feet keep their bounds between the points too.
 
-    The NLP bounds each torque at the points and the quarter points of every interval;
-    where the quadratic between them peaks above a limit (:func:`torque_peaks`), the
-    walking optimiser's remedy (:func:`gait_opt.optimize.optimize_gait`): that joint's
-    bound is lowered by its excess and the problem solved again from the step found,
-    at most ``rounds`` times.  A step within its limits is returned as solved, so a
-    step whose limits do not bind is the same bit for bit.
+    The NLP bounds each torque at the points and the quarter points of every interval,
+    and the feet at the points; where the quadratic torque peaks above a limit between
+    them (:func:`torque_peaks`), or a foot dips below its bound (``dips``), the walking
+    optimiser's remedy (:func:`gait_opt.optimize.optimize_gait`): that joint's bound is
+    lowered by its excess, that foot is held above its bound between the points too
+    (:func:`gait_opt.running_clearance.clearance_rows`), and the problem is solved
+    again from the step found, both in one re-solve, at most ``rounds`` times.  A step
+    within its bounds is returned as solved, so a step whose bounds do not bind between
+    the points is the same bit for bit.
 
     Parameters
     ----------
     solve : callable
-        ``solve(guess, umax)``: the step from a guess (None: the built-in one; or a
-        previous step) under the bound ``umax`` (a number or one per torque), a
+        ``solve(guess, umax, points)``: the step from a guess (None: the built-in one;
+        or a previous step) under the bound ``umax`` (a number or one per torque), the
+        feet also bounded at ``points`` (a tuple of ``dips``' dicts, empty at first), a
         :class:`~gait_opt.running.RunningGait`.
     limit : float or tuple of float
         The torque limit, N m (:meth:`~gait_opt.running.RunningOptions.limit`).
+    dips : callable, optional
+        ``dips(gait)``: the feet's dips below their bounds between the points, a list
+        of dicts (:func:`gait_opt.running_clearance.foot_dips`); None: torques only.
     rounds : int
         Re-solves allowed.
     tol : float
-        An excess at most this, N m, is within the limit.
+        A torque excess at most this, N m, is within the limit (``dips`` has its own).
 
     Returns
     -------
     RunningGait
         The last step solved (the one before, when a re-solve failed).  After a
-        re-solve, ``solver_stats['torque_tightenings']`` lists each one's ``bound`` (N m,
-        per torque), ``excess`` (the peaks above the limit that caused it, N m),
-        ``iterations`` and ``wall_s`` (and ``failed``, IPOPT's status, if it failed);
-        ``iterations`` and ``wall_s`` are then totals over all solves.
+        re-solve, ``solver_stats['tightenings']`` lists each one's ``bound`` (N m, per
+        torque), ``excess`` (the torques' peaks above the limit that lowered it, N m),
+        ``dips`` (the feet's dips bounded from then on), ``iterations`` and ``wall_s``
+        (and ``failed``, IPOPT's status, if it failed); ``iterations`` and ``wall_s``
+        are then totals over all solves.
     """
-    gait = solve(None, limit)
+    gait = solve(None, limit, ())
     target = np.broadcast_to(np.asarray(limit, dtype=float), (gait.u_stance.shape[0],))
-    bound, passes, first = target.copy(), [], dict(gait.solver_stats)
+    bound, points, passes, first = target.copy(), (), [], dict(gait.solver_stats)
     for _ in range(rounds):
+        if not gait.success:
+            break
         excess = np.maximum(torque_peaks(gait.u_stance), torque_peaks(gait.u_flight)) - target
-        if not gait.success or np.all(excess <= tol):
+        low = [] if dips is None else dips(gait)
+        if np.all(excess <= tol) and not low:
             break
         bound = bound - np.where(excess > tol, excess, 0.0)
-        new = solve(gait, tuple(float(v) for v in bound))
-        passes.append(dict(bound=bound.tolist(), excess=excess.tolist(),
+        points = points + tuple(low)
+        new = solve(gait, tuple(float(v) for v in bound), points)
+        passes.append(dict(bound=bound.tolist(), excess=excess.tolist(), dips=low,
                            iterations=new.solver_stats["iterations"],
                            wall_s=new.solver_stats["wall_s"]))
         if not new.success:
@@ -372,7 +389,7 @@ def within_torque_limits(solve, limit, rounds=MAX_TIGHTENINGS, tol=TORQUE_TOL):
         gait = new
     if passes:
         gait.solver_stats.update(
-            torque_tightenings=passes,
+            tightenings=passes,
             iterations=first["iterations"] + sum(p["iterations"] for p in passes),
             wall_s=first["wall_s"] + sum(p["wall_s"] for p in passes))
     return gait

@@ -54,7 +54,7 @@ def test_the_running_step_is_bounded_per_joint(hips60):
     assert np.all(exact <= np.array(LIMITS) + TORQUE_TOL) and np.all(exact >= peaks)
     assert max(peaks[1], peaks[2]) > 59.9                       # the hips' bound is active
     assert r.violations(LIMITS) == []
-    passes = g.solver_stats["torque_tightenings"]
+    passes = g.solver_stats["tightenings"]
     assert 1 <= len(passes) <= MAX_TIGHTENINGS and "failed" not in passes[-1]
     first = passes[0]
     assert max(first["excess"][1:3]) > 1e-3 and max(first["excess"][0], first["excess"][3]) < 0
@@ -202,41 +202,41 @@ class _Step:
 def test_a_step_within_its_limits_is_solved_once():
     """The step whose limits hold between the points is the first solve's, the same
     object: nothing re-solved, nothing added to its statistics."""
-    from gait_opt.running_solve import within_torque_limits
+    from gait_opt.running_solve import within_path_limits
     calls, first = [], _Step(59.0)
 
-    def solve(guess, umax):
-        calls.append((guess, umax))
+    def solve(guess, umax, points):
+        calls.append((guess, umax, points))
         return first
-    got = within_torque_limits(solve, 60.0)
-    assert got is first and calls == [(None, 60.0)]
-    assert "torque_tightenings" not in got.solver_stats
+    got = within_path_limits(solve, 60.0, lambda gait: [])
+    assert got is first and calls == [(None, 60.0, ())]
+    assert "tightenings" not in got.solver_stats
 
 
 def test_a_torque_above_its_limit_lowers_its_bound_and_solves_again():
     """A peak above the limit lowers the bound by its excess, the step solved again from
     the one found; at most MAX_TIGHTENINGS times; a failed re-solve keeps the step
     before it, and says so."""
-    from gait_opt.running_solve import within_torque_limits
+    from gait_opt.running_solve import within_path_limits
     calls = []
 
-    def solve(guess, umax):           # overshoots the bound by 0.05 more at every solve
+    def solve(guess, umax, points):   # overshoots the bound by 0.05 more at every solve
         calls.append((guess, umax))
         return _Step(float(np.max(umax)) + 0.05 * len(calls))
-    got = within_torque_limits(solve, 60.0)
-    passes = got.solver_stats["torque_tightenings"]
+    got = within_path_limits(solve, 60.0)
+    passes = got.solver_stats["tightenings"]
     assert len(calls) == 1 + MAX_TIGHTENINGS and len(passes) == MAX_TIGHTENINGS
     assert [p["excess"][0] for p in passes] == pytest.approx([0.05] * 3)
     assert [p["bound"][0] for p in passes] == pytest.approx([59.95, 59.9, 59.85])
     assert [c[0] is not None for c in calls] == [False, True, True, True]
     assert got.solver_stats["iterations"] == 40 and got.solver_stats["wall_s"] == 4.0
 
-    def converging(guess, umax):      # the re-solve lands on the limit
+    def converging(guess, umax, points):      # the re-solve lands on the limit
         return _Step(60.05 if guess is None else 60.0)
-    assert len(within_torque_limits(converging, 60.0).solver_stats["torque_tightenings"]) == 1
+    assert len(within_path_limits(converging, 60.0).solver_stats["tightenings"]) == 1
     first = _Step(60.05)
 
-    def failing(guess, umax):
+    def failing(guess, umax, points):
         return first if guess is None else _Step(59.0, success=False)
-    got = within_torque_limits(failing, 60.0)
-    assert got is first and got.solver_stats["torque_tightenings"][0]["failed"] == "Failed"
+    got = within_path_limits(failing, 60.0)
+    assert got is first and got.solver_stats["tightenings"][0]["failed"] == "Failed"

@@ -20,7 +20,7 @@ from biped_casadi.control.running_step import rk4_gain_bounds
 from biped_casadi.model.description import torque_bound_text
 from gait_opt.running import MU_MARGIN, RunningOptions, optimize_running
 from gait_opt.running_checks import check_running
-from gait_opt.running_solve import MAX_TIGHTENINGS, STALL_WINDOW
+from gait_opt.running_solve import MAX_TIGHTENINGS, STALL_WINDOW, TORQUE_TOL
 
 from .common import Progress, UserError, add_robot, check_m1_values, check_saturation, \
     check_torque_limit, load_model, load_running_gait, output_dir, output_file, print_json
@@ -288,9 +288,9 @@ def _violation_notes(violations: list) -> list:
             "swing foot above the ground in stance": "m"}
     return ["between the collocation points (dense grid) VIOLATED " + "; ".join(
         f"{name} by {v:.2g} {unit.get(name, 'N')}" for name, v in violations) +
-        " (the NLP bounds them at its points only, a torque's bound lowered by its excess "
-        f"and the step solved again up to {MAX_TIGHTENINGS} times; a finer --intervals need "
-        "not cut it)"]
+        " (the NLP bounds them at its points only, a torque's bound lowered by its excess, "
+        "a foot that dips bounded at the dense grid's samples, and the step solved again "
+        f"up to {MAX_TIGHTENINGS} times; a finer --intervals need not cut it)"]
 
 
 def cmd_running(args):
@@ -613,6 +613,20 @@ def _print_stability(s: dict):
               + " ".join(f"{1e3 * v:.1f}" for v in sim["saturated_time"]))
 
 
+def _resolves(solver: dict) -> str:
+    """What the re-solves of the step's loop fixed between the points ('' for none)."""
+    again = solver.get("tightenings", [])
+    if not again:
+        return ""
+    over, dips = max(again[0]["excess"]), again[0].get("dips", [])
+    why = ([f"a torque peaked above its limit by {over:.2g} N m, its bound lowered by "
+            "that"] if over > TORQUE_TOL else [])
+    if dips:
+        why.append(f"a foot dipped {max(d['depth'] for d in dips):.2g} m below its bound, "
+                   "held above it at the dense grid's samples")
+    return f" ({1 + len(again)} solves: between the points {' and '.join(why)})"
+
+
 def _print(s: dict, gait, limit):
     """``biped running``'s report."""
     c = s["checks"]
@@ -633,12 +647,8 @@ def _print(s: dict, gait, limit):
           f"{c['periodicity_collocated']:.1e}; phases integrated (DOP853): stance end "
           f"{c['stance_end_error']:.1e}, one interval {c['interval_error']:.1e}, step map "
           f"{c['step_map_residual']:.1e}")
-    again = s["solver"].get("torque_tightenings", [])
     print(f"  solve                {s['solver'].get('iterations')} IPOPT iterations, "
-          f"{s['solver'].get('wall_s', 0.0):.1f} s" + (
-              f" ({1 + len(again)} solves: a torque peaked above its limit between the "
-              f"points by {max(again[0]['excess']):.2g} N m, its bound lowered by that)"
-              if again else ""))
+          f"{s['solver'].get('wall_s', 0.0):.1f} s" + _resolves(s["solver"]))
     for p in s.get("plots", []):
         print(f"  plot                 {p}")
     for n in s["notes"]:
