@@ -252,6 +252,10 @@ def _print(w, eig, figures, check=None, chosen=None, contact=None, chosen_solref
         if eig["status"] == "undetermined":
             print(f"MuJoCo's stride map on tau = 0.75 T: not determined by its rollouts "
                   f"({eig['reason']}); exact {_ev(eig['exact'])}")
+            if math.isfinite(c["approach"]):
+                s0, s1 = c["approach_steps"]
+                print(f"  MuJoCo's walk approached its cycle by a factor {c['approach']:.3g} "
+                      f"a step (steps {s0}-{s1}): its slowest multiplier, unperturbed")
         elif len(eig["mujoco"]):
             print(f"MuJoCo's stride map on tau = 0.75 T: eigenvalues {_ev(eig['mujoco'])} (fit "
                   f"residual {eig['relative_residual']:.2g} of the deviations); exact "

@@ -27,6 +27,7 @@ time section are the exact one and 0).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -39,7 +40,7 @@ from .walk import MujocoLoop
 
 __all__ = ["LimitCycle", "StrideMap", "limit_cycle", "stride_map", "fit_stride_map",
            "undetermined_reason", "HALVINGS", "JITTER_FACTOR", "SIZE_RANGE",
-           "MAX_RELATIVE_RESIDUAL"]
+           "MAX_RELATIVE_RESIDUAL", "APPROACH_RATIOS", "APPROACH_STEADY"]
 
 #: when more than a quarter of the rollouts fail, the perturbation is halved (up to this
 #: many times): a design with a small basin (a deadbeat one) has little jitter too
@@ -52,6 +53,11 @@ SIZE_RANGE = (0.02, 0.2)
 #: a fit whose residual is this large against the deviations it explains explains too
 #: little of them to name eigenvalues
 MAX_RELATIVE_RESIDUAL = 0.9
+#: the walk's approach to its cycle counts as steady when its last this many step ratios
+#: (above ten times the jitter, from step 3 on) ...
+APPROACH_RATIOS = 5
+#: ... differ by at most this
+APPROACH_STEADY = 0.02
 
 
 @dataclass
@@ -78,6 +84,13 @@ class LimitCycle(Result):
         The mean (q_u, dq_u) errors at touchdown over the second half.
     speed_error, period_error : float
         Relative errors of the mean speed and step duration there.
+    approach : float
+        The factor by which the walk's section state approached the cycle a step, where
+        that factor was steady (within :data:`APPROACH_STEADY` over its last
+        :data:`APPROACH_RATIOS` steps above ten times the jitter): MuJoCo's slowest
+        multiplier, measured without perturbing; nan when not steady.
+    approach_steps : list of int
+        The first and last step of the walk it was measured over ([] when nan).
     """
 
     status: str
@@ -89,6 +102,8 @@ class LimitCycle(Result):
     pre_impact_distance: list
     speed_error: float
     period_error: float
+    approach: float = math.nan
+    approach_steps: list = dataclasses.field(default_factory=list)
 
     SUCCESS = ("ok",)
 
@@ -207,6 +222,7 @@ def limit_cycle(loop: MujocoLoop, steps: int = 60, walk=None) -> tuple:
     pre = np.mean([[s.qu_error, s.dqu_error] for s in late], axis=0)
     speed = sum(s.step_length for s in late) / sum(s.period for s in late)
     period = float(np.mean([s.period for s in late]))
+    factor, over = _approach(X, mean, jitter)
     return LimitCycle(
         status="ok",
         message=(f"MuJoCo's cycle over steps {len(w.steps) - len(late) + 1}-{len(w.steps)}: "
@@ -214,7 +230,23 @@ def limit_cycle(loop: MujocoLoop, steps: int = 60, walk=None) -> tuple:
                  f"{dist[1]:+.3g} rad/s), repeating to ({jitter[0]:.2g}, {jitter[1]:.2g})"),
         steps=w.steps_walked, section=mean.tolist(), jitter=jitter.tolist(),
         section_distance=dist.tolist(), pre_impact_distance=pre.tolist(),
-        speed_error=speed / float(g.speed) - 1.0, period_error=period / loop.T - 1.0), w
+        speed_error=speed / float(g.speed) - 1.0, period_error=period / loop.T - 1.0,
+        approach=factor, approach_steps=over), w
+
+
+def _approach(X, mean, jitter) -> tuple:
+    """(factor, [first, last step]) of the walk's steady approach to the cycle
+    (:attr:`LimitCycle.approach`), or (nan, [])."""
+    D = np.linalg.norm(X - mean, axis=1)
+    above = D > 10 * np.linalg.norm(jitter)
+    k = [i for i in range(2, len(D) - 1) if above[i] and above[i + 1]]
+    if len(k) < APPROACH_RATIOS or k[-1] - k[-APPROACH_RATIOS] != APPROACH_RATIOS - 1:
+        return math.nan, []
+    k = np.array(k[-APPROACH_RATIOS:])
+    r = D[k + 1] / D[k]
+    if np.ptp(r) > APPROACH_STEADY:
+        return math.nan, []
+    return float(np.mean(r)), [int(k[0]) + 1, int(k[-1]) + 2]
 
 
 def fit_stride_map(X0, X1) -> tuple:
