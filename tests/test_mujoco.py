@@ -386,7 +386,8 @@ def test_no_cycle_prints_no_eigenvalues(gait, tmp_path, capsys):
 
 def test_a_stride_map_fit_not_determined_is_not_called_mujocos(tmp_path, capsys):
     """The walker (RABBIT from its URDF, on its own imported step) with the default gait's
-    deadbeat M1: MuJoCo's walk settles on a cycle (repeating to 1e-6), but the rollouts
+    deadbeat M1: MuJoCo's walk settles on a cycle (repeating to 1e-6, approached by a
+    factor 0.77 a step), but the rollouts
     from the gait's start at the default perturbation leave the map's linear range (one
     grows 2.5 times in 3 steps) and the fit's max|lambda| is 1.04 beside an exact 7e-4;
     ``biped mujoco --steps 5`` printed those as MuJoCo's eigenvalues.  Now the line and
@@ -404,11 +405,13 @@ def test_a_stride_map_fit_not_determined_is_not_called_mujocos(tmp_path, capsys)
     assert e["mujoco"] == [] and e["mujoco_max_abs"] is None, e["mujoco"]
     assert e["status"] == e["stride_map"]["status"] == "undetermined", e["status"]
     assert e["stride_map"]["max_abs"] >= 1 and "max|lambda|" in e["reason"], e["reason"]
-    assert e["stride_map"]["cycle"]["status"] == "ok"
+    c = e["stride_map"]["cycle"]                # the walk's own approach: it attracts
+    assert c["status"] == "ok" and 0 < c["approach"] < 1 and len(c["approach_steps"]) == 2
     assert biped_main(args + [str(v) for v in DEADBEAT]) == 0
     out = capsys.readouterr().out
     line = next(x for x in out.splitlines() if x.startswith("MuJoCo's stride map"))
     assert "not determined by its rollouts (max|lambda|" in line and "eigenvalues" not in line
+    assert f"approached its cycle by a factor {c['approach']:.3g} a step" in out, out
 
 
 def test_undetermined_reason():
