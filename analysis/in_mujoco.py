@@ -193,7 +193,9 @@ def engine_check(design: Design, settings: ContactSettings = STIFF, label: str =
     msg = (f"{label} ({settings.contact}): {w.status} {w.steps_walked}/{steps} steps, speed "
            f"{_pct(w.speed_error)}, period {_pct(w.period_error)}; scale {scale:g}: "
            f"{wp.status} {wp.steps_walked}/{scale_steps}; largest scale {best:g}; MuJoCo "
-           f"max|lambda| {sm.max_abs:.3g} (exact {max(abs(e) for e in ex):.3g})")
+           + (f"max|lambda| {sm.max_abs:.3g}" if sm.status != "undetermined" else
+              f"stride map not determined ({sm.reason})")
+           + f" (exact {max(abs(e) for e in ex):.3g})")
     return EngineCheck(status=w.status, message=msg, label=label, design=design.to_dict(),
                        settings=settings.to_dict(), walk=_brief(w), perturbed=_brief(wp),
                        scale=float(scale), largest_scale=best, scale_steps=int(scale_steps),

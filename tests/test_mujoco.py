@@ -336,6 +336,7 @@ def test_mujoco_command_json(gait, tmp_path, capsys):
     assert rc == 0 and r["status"] == "walked" and r["steps_walked"] == 2
     assert {"speed_error", "period_error", "steps", "eigenvalues"} <= set(r)
     e = r["eigenvalues"]
+    assert e["status"] == "ok" and e["reason"] == ""
     assert len(e["mujoco"]) == 2 and abs(e["exact_max_abs"] - abs(complex(*e["exact"][0]))) < 1e-12
     assert (tmp_path / "fig" / "mujoco_steps.png").is_file()
     assert (tmp_path / "fig" / "mujoco_walk.gif").is_file()
@@ -381,6 +382,51 @@ def test_no_cycle_prints_no_eigenvalues(gait, tmp_path, capsys):
     out = capsys.readouterr().out
     line = next(x for x in out.splitlines() if x.startswith("MuJoCo's stride map"))
     assert "nan" not in line and "[]" not in line and "no cycle" in line, line
+
+
+def test_a_stride_map_fit_not_determined_is_not_called_mujocos(tmp_path, capsys):
+    """The walker (RABBIT from its URDF, on its own imported step) with the default gait's
+    deadbeat M1: MuJoCo's walk settles on a cycle (repeating to 1e-6, approached by a
+    factor 0.77 a step), but the rollouts
+    from the gait's start at the default perturbation leave the map's linear range (one
+    grows 2.5 times in 3 steps) and the fit's max|lambda| is 1.04 beside an exact 7e-4;
+    ``biped mujoco --steps 5`` printed those as MuJoCo's eigenvalues.  Now the line and
+    the JSON (eigenvalues.status, .reason) say the fit is not determined."""
+    toml, g = tmp_path / "walker.toml", tmp_path / "wg.json"
+    assert biped_main(["robot", "import", str(WALKER), "--torque-limit", "150",
+                       "--out", str(toml)]) == 0
+    assert biped_main(["gait", "--import", str(WALKER.with_name("walker_step.csv")),
+                       "--robot", str(toml), "--angles", "urdf", "--stance", "hip_left",
+                       "--out", str(g)]) == 0
+    capsys.readouterr()
+    args = ["mujoco", "--gait", str(g), "--robot", str(toml), "--steps", "2", "--m1"]
+    assert biped_main(args + [str(v) for v in DEADBEAT] + ["--json"]) == 0
+    e = json.loads(capsys.readouterr().out)["eigenvalues"]
+    assert e["mujoco"] == [] and e["mujoco_max_abs"] is None, e["mujoco"]
+    assert e["status"] == e["stride_map"]["status"] == "undetermined", e["status"]
+    assert e["stride_map"]["max_abs"] >= 1 and "max|lambda|" in e["reason"], e["reason"]
+    c = e["stride_map"]["cycle"]                # the walk's own approach: it attracts
+    assert c["status"] == "ok" and 0 < c["approach"] < 1 and len(c["approach_steps"]) == 2
+    assert biped_main(args + [str(v) for v in DEADBEAT]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("MuJoCo's stride map"))
+    assert "not determined by its rollouts (max|lambda|" in line and "eigenvalues" not in line
+    assert f"approached its cycle by a factor {c['approach']:.3g} a step" in out, out
+
+
+def test_undetermined_reason():
+    """Each reason a fit is not MuJoCo's map, and none for a contracting fit that explains
+    its rollouts with a perturbation above the jitter."""
+    from biped_casadi.mujoco.stride import MAX_RELATIVE_RESIDUAL, LimitCycle, undetermined_reason
+    nan2 = [math.nan, math.nan]
+    cyc = LimitCycle(status="ok", message="", steps=60, section=[0.2, 0.8],
+                     jitter=[0.001, 0.01], section_distance=nan2, pre_impact_distance=nan2,
+                     speed_error=0.0, period_error=0.0)
+    assert undetermined_reason(0.5, 0.2, cyc, [0.002, 0.02]) == ""
+    assert "jitter" in undetermined_reason(0.5, 0.2, cyc, [0.001, 0.01])
+    assert ">= 1" in undetermined_reason(1.0, 0.2, cyc, [0.002, 0.02])
+    assert "residual" in undetermined_reason(0.5, MAX_RELATIVE_RESIDUAL, cyc, [0.002, 0.02])
+    assert undetermined_reason(math.nan, 0.2, cyc, [0.002, 0.02]) != ""
 
 
 def test_short_walk_says_how_to_see_the_settled_errors(gait, tmp_path, capsys):

@@ -147,7 +147,10 @@ def cmd_mujoco(args):
         say("MuJoCo's limit cycle and stride map (rollouts) ...")
         sm = stride_map(design, loop.settings, args.law, loop=loop)
         ex = exact_eigenvalues(design)
-        eig = dict(mujoco=sm.eigenvalues, mujoco_max_abs=sm.max_abs,
+        known = sm.status != "undetermined"     # else the fit's are not MuJoCo's
+        eig = dict(status=sm.status, reason=sm.reason,
+                   mujoco=sm.eigenvalues if known else [],
+                   mujoco_max_abs=sm.max_abs if known else math.nan,
                    exact=ex, exact_max_abs=max(abs(e) for e in ex),
                    relative_residual=sm.relative_residual, stride_map=sm.to_dict())
 
@@ -246,7 +249,14 @@ def _print(w, eig, figures, check=None, chosen=None, contact=None, chosen_solref
           "steps/s with the law in the loop)")
     if eig is not None:
         c = eig["stride_map"]["cycle"]
-        if len(eig["mujoco"]):
+        if eig["status"] == "undetermined":
+            print(f"MuJoCo's stride map on tau = 0.75 T: not determined by its rollouts "
+                  f"({eig['reason']}); exact {_ev(eig['exact'])}")
+            if math.isfinite(c["approach"]):
+                s0, s1 = c["approach_steps"]
+                print(f"  MuJoCo's walk approached its cycle by a factor {c['approach']:.3g} "
+                      f"a step (steps {s0}-{s1}): its slowest multiplier, unperturbed")
+        elif len(eig["mujoco"]):
             print(f"MuJoCo's stride map on tau = 0.75 T: eigenvalues {_ev(eig['mujoco'])} (fit "
                   f"residual {eig['relative_residual']:.2g} of the deviations); exact "
                   f"{_ev(eig['exact'])}")

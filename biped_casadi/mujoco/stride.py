@@ -19,9 +19,15 @@ time section are the exact one and 0).
   jitter (MuJoCo's own "eigenvalues" then exceed 1); perturbations of tenths of a rad/s
   stand out of it.  The fit's residual, against the deviations it explains, says how
   far to trust them.
+- When the fit is not determined by its data it is not presented as MuJoCo's (status
+  'undetermined', :func:`undetermined_reason`): a multiplier of modulus 1 or more on a
+  cycle the walk settled on (the rollouts left the linear range: the cycle attracts its
+  walk), a perturbation no larger than the cycle's jitter, or a relative residual of
+  :data:`MAX_RELATIVE_RESIDUAL` or more.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -33,7 +39,8 @@ from .mjcf import STIFF, ContactSettings
 from .walk import MujocoLoop
 
 __all__ = ["LimitCycle", "StrideMap", "limit_cycle", "stride_map", "fit_stride_map",
-           "HALVINGS", "JITTER_FACTOR", "SIZE_RANGE"]
+           "undetermined_reason", "HALVINGS", "JITTER_FACTOR", "SIZE_RANGE",
+           "MAX_RELATIVE_RESIDUAL", "APPROACH_RATIOS", "APPROACH_STEADY"]
 
 #: when more than a quarter of the rollouts fail, the perturbation is halved (up to this
 #: many times): a design with a small basin (a deadbeat one) has little jitter too
@@ -43,6 +50,14 @@ JITTER_FACTOR = 5.0
 #: ... within this range, rad/s (tiny perturbations are lost in the jitter, large ones
 #: meet the torque limit and the bounce of the touchdown: the map is no longer linear)
 SIZE_RANGE = (0.02, 0.2)
+#: a fit whose residual is this large against the deviations it explains explains too
+#: little of them to name eigenvalues
+MAX_RELATIVE_RESIDUAL = 0.9
+#: the walk's approach to its cycle counts as steady when its last this many step ratios
+#: (above ten times the jitter, from step 3 on) ...
+APPROACH_RATIOS = 5
+#: ... differ by at most this
+APPROACH_STEADY = 0.02
 
 
 @dataclass
@@ -69,6 +84,13 @@ class LimitCycle(Result):
         The mean (q_u, dq_u) errors at touchdown over the second half.
     speed_error, period_error : float
         Relative errors of the mean speed and step duration there.
+    approach : float
+        The factor by which the walk's section state approached the cycle a step, where
+        that factor was steady (within :data:`APPROACH_STEADY` over its last
+        :data:`APPROACH_RATIOS` steps above ten times the jitter): MuJoCo's slowest
+        multiplier, measured without perturbing; nan when not steady.
+    approach_steps : list of int
+        The first and last step of the walk it was measured over ([] when nan).
     """
 
     status: str
@@ -80,6 +102,8 @@ class LimitCycle(Result):
     pre_impact_distance: list
     speed_error: float
     period_error: float
+    approach: float = math.nan
+    approach_steps: list = dataclasses.field(default_factory=list)
 
     SUCCESS = ("ok",)
 
@@ -92,8 +116,10 @@ class StrideMap(Result):
     ----------
     status : str
         'ok'; 'rollouts_failed' when more than a quarter of the rollouts stopped before
-        their steps (the fit then rests on the others, and is doubtful); 'failed' when too
-        few steps were walked to fit.
+        their steps (the fit then rests on the others, and is doubtful); 'undetermined'
+        when the fit is not determined by its data (:func:`undetermined_reason`; ``A``
+        and ``eigenvalues`` are then the fit's, not MuJoCo's); 'failed' when too few
+        steps were walked to fit.
     message : str
         A summary line.
     A : list
@@ -124,6 +150,9 @@ class StrideMap(Result):
         Rollouts that stopped before their steps (their pairs up to there are used).
     cycle : LimitCycle
         The limit cycle.
+    reason : str
+        Why the fit is not determined by its data when the status is 'undetermined'
+        (:func:`undetermined_reason`), else ''.
     """
 
     status: str
@@ -141,6 +170,7 @@ class StrideMap(Result):
     size: list
     failed_rollouts: int
     cycle: LimitCycle
+    reason: str = ""
 
     SUCCESS = ("ok",)
 
@@ -192,6 +222,7 @@ def limit_cycle(loop: MujocoLoop, steps: int = 60, walk=None) -> tuple:
     pre = np.mean([[s.qu_error, s.dqu_error] for s in late], axis=0)
     speed = sum(s.step_length for s in late) / sum(s.period for s in late)
     period = float(np.mean([s.period for s in late]))
+    factor, over = _approach(X, mean, jitter)
     return LimitCycle(
         status="ok",
         message=(f"MuJoCo's cycle over steps {len(w.steps) - len(late) + 1}-{len(w.steps)}: "
@@ -199,7 +230,23 @@ def limit_cycle(loop: MujocoLoop, steps: int = 60, walk=None) -> tuple:
                  f"{dist[1]:+.3g} rad/s), repeating to ({jitter[0]:.2g}, {jitter[1]:.2g})"),
         steps=w.steps_walked, section=mean.tolist(), jitter=jitter.tolist(),
         section_distance=dist.tolist(), pre_impact_distance=pre.tolist(),
-        speed_error=speed / float(g.speed) - 1.0, period_error=period / loop.T - 1.0), w
+        speed_error=speed / float(g.speed) - 1.0, period_error=period / loop.T - 1.0,
+        approach=factor, approach_steps=over), w
+
+
+def _approach(X, mean, jitter) -> tuple:
+    """(factor, [first, last step]) of the walk's steady approach to the cycle
+    (:attr:`LimitCycle.approach`), or (nan, [])."""
+    D = np.linalg.norm(X - mean, axis=1)
+    above = D > 10 * np.linalg.norm(jitter)
+    k = [i for i in range(2, len(D) - 1) if above[i] and above[i + 1]]
+    if len(k) < APPROACH_RATIOS or k[-1] - k[-APPROACH_RATIOS] != APPROACH_RATIOS - 1:
+        return math.nan, []
+    k = np.array(k[-APPROACH_RATIOS:])
+    r = D[k + 1] / D[k]
+    if np.ptp(r) > APPROACH_STEADY:
+        return math.nan, []
+    return float(np.mean(r)), [int(k[0]) + 1, int(k[-1]) + 2]
 
 
 def fit_stride_map(X0, X1) -> tuple:
@@ -305,17 +352,54 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
     mx = float(np.max(np.abs(ev)))
     spread = _bootstrap(X0, X1)
     bad = failed > directions // 4
+    why = undetermined_reason(mx, rel, cycle, size)
+    head = ("" if not bad else f"{failed} of {directions} rollouts failed: ") + \
+        "MuJoCo's stride map: "
+    if why:
+        head = f"MuJoCo's stride map not determined by its rollouts ({why}); the fit's "
     return StrideMap(
-        status="rollouts_failed" if bad else "ok",
-        message=(("" if not bad else f"{failed} of {directions} rollouts failed: ")
-                 + f"MuJoCo's stride map: eigenvalues {_fmt(ev)} (max |lambda| {mx:.3g} "
+        status="undetermined" if why else "rollouts_failed" if bad else "ok",
+        message=(head + f"eigenvalues {_fmt(ev)} (max |lambda| {mx:.3g} "
                  f"+- {spread:.2g}) from {len(X0)} pairs, relative residual {rel:.2g}; "
                  f"{cycle.message}"),
         A=Lam.tolist(), eigenvalues=[complex(e) for e in ev], max_abs=mx,
         max_abs_spread=spread,
         fixed_point=xf.tolist(), residual=res.tolist(), relative_residual=rel,
         pairs=int(len(X0)), directions=int(directions), fit_steps=int(fit_steps),
-        size=size.tolist(), failed_rollouts=int(failed), cycle=cycle)
+        size=size.tolist(), failed_rollouts=int(failed), cycle=cycle, reason=why)
+
+
+def undetermined_reason(max_abs: float, relative_residual: float, cycle: LimitCycle,
+                        size) -> str:
+    """Why a stride-map fit is not determined by its data, or ''.
+
+    Parameters
+    ----------
+    max_abs : float
+        The fit's max|lambda|.
+    relative_residual : float
+        Its residual against the deviations (:attr:`StrideMap.relative_residual`).
+    cycle : LimitCycle
+        The cycle its walk settled on.
+    size : array_like
+        The rollouts' perturbation of (q_u, dq_u), rad and rad/s.
+
+    Returns
+    -------
+    str
+        '' when the fit may be read as MuJoCo's map, else the reason in a few words.
+    """
+    jit = np.asarray(cycle.jitter, float)
+    if np.all(np.asarray(size, float) <= jit):
+        return (f"perturbation ({size[0]:.2g} rad, {size[1]:.2g} rad/s) within the cycle's "
+                f"jitter ({jit[0]:.2g}, {jit[1]:.2g})")
+    if not max_abs < 1.0:
+        return (f"max|lambda| {max_abs:.3g} >= 1 on a cycle MuJoCo's walk settled on: the "
+                "rollouts left the map's linear range")
+    if not relative_residual < MAX_RELATIVE_RESIDUAL:
+        return (f"relative residual {relative_residual:.2g} >= {MAX_RELATIVE_RESIDUAL:g}: "
+                "the fit explains too little of the rollouts")
+    return ""
 
 
 def _rollouts(loop, size, directions, fit_steps) -> tuple:
