@@ -22,8 +22,10 @@ time section are the exact one and 0).
 - When the fit is not determined by its data it is not presented as MuJoCo's (status
   'undetermined', :func:`undetermined_reason`): a multiplier of modulus 1 or more on a
   cycle the walk settled on (the rollouts left the linear range: the cycle attracts its
-  walk), a perturbation no larger than the cycle's jitter, or a relative residual of
-  :data:`MAX_RELATIVE_RESIDUAL` or more.
+  walk) or a perturbation no larger than the cycle's jitter.  A large residual alone is
+  not such a case: a strongly contracting design's rollouts reach the contact's noise
+  within a step, and its fit (relative residual 0.94-0.99 in ``biped reproduce``) still
+  brackets the exact eigenvalue; the residual and the bootstrap spread are printed.
 """
 from __future__ import annotations
 
@@ -40,7 +42,7 @@ from .walk import MujocoLoop
 
 __all__ = ["LimitCycle", "StrideMap", "limit_cycle", "stride_map", "fit_stride_map",
            "undetermined_reason", "HALVINGS", "JITTER_FACTOR", "SIZE_RANGE",
-           "MAX_RELATIVE_RESIDUAL", "APPROACH_RATIOS", "APPROACH_STEADY"]
+           "APPROACH_RATIOS", "APPROACH_STEADY"]
 
 #: when more than a quarter of the rollouts fail, the perturbation is halved (up to this
 #: many times): a design with a small basin (a deadbeat one) has little jitter too
@@ -50,9 +52,6 @@ JITTER_FACTOR = 5.0
 #: ... within this range, rad/s (tiny perturbations are lost in the jitter, large ones
 #: meet the torque limit and the bounce of the touchdown: the map is no longer linear)
 SIZE_RANGE = (0.02, 0.2)
-#: a fit whose residual is this large against the deviations it explains explains too
-#: little of them to name eigenvalues
-MAX_RELATIVE_RESIDUAL = 0.9
 #: the walk's approach to its cycle counts as steady when its last this many step ratios
 #: (above ten times the jitter, from step 3 on) ...
 APPROACH_RATIOS = 5
@@ -352,7 +351,7 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
     mx = float(np.max(np.abs(ev)))
     spread = _bootstrap(X0, X1)
     bad = failed > directions // 4
-    why = undetermined_reason(mx, rel, cycle, size)
+    why = undetermined_reason(mx, cycle, size)
     head = ("" if not bad else f"{failed} of {directions} rollouts failed: ") + \
         "MuJoCo's stride map: "
     if why:
@@ -369,16 +368,13 @@ def stride_map(design: Design, settings: ContactSettings = STIFF, law: str = "c"
         size=size.tolist(), failed_rollouts=int(failed), cycle=cycle, reason=why)
 
 
-def undetermined_reason(max_abs: float, relative_residual: float, cycle: LimitCycle,
-                        size) -> str:
+def undetermined_reason(max_abs: float, cycle: LimitCycle, size) -> str:
     """Why a stride-map fit is not determined by its data, or ''.
 
     Parameters
     ----------
     max_abs : float
         The fit's max|lambda|.
-    relative_residual : float
-        Its residual against the deviations (:attr:`StrideMap.relative_residual`).
     cycle : LimitCycle
         The cycle its walk settled on.
     size : array_like
@@ -396,9 +392,6 @@ def undetermined_reason(max_abs: float, relative_residual: float, cycle: LimitCy
     if not max_abs < 1.0:
         return (f"max|lambda| {max_abs:.3g} >= 1 on a cycle MuJoCo's walk settled on: the "
                 "rollouts left the map's linear range")
-    if not relative_residual < MAX_RELATIVE_RESIDUAL:
-        return (f"relative residual {relative_residual:.2g} >= {MAX_RELATIVE_RESIDUAL:g}: "
-                "the fit explains too little of the rollouts")
     return ""
 
 
