@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-__all__ = ["dense_check", "dense_violations", "bounds_hit"]
+__all__ = ["dense_check", "dense_violations", "bounds_hit", "clearance_dip"]
 
 
 def dense_check(gait, n: int) -> dict:
@@ -28,16 +28,7 @@ def dense_check(gait, n: int) -> dict:
     H = np.array(m.H.map(n)(q, dq))
     row1 = np.einsum("jn,jn->n", D[0], ddq) + H[0]
     inner = slice(1, n - 1)
-    s = t / gait.T
-    profile = gait.options.clearance * 4 * s * (1 - s)
-    if m.scuffing_ignored:
-        # legs without knees: the swing foot must be above the ground beyond the
-        # scuff zone in front of the stance foot (transcription.py); nearer, or
-        # behind, it may graze below
-        height = np.where(xs > m.scuff_zone, zs, np.inf)
-        margin = zs - profile * (xs - m.scuff_zone) / m.description.leg_length
-    else:
-        height, margin = zs, zs - profile
+    height, margin = _clearance(gait, t / gait.T, xs, zs)
     knees = (q[list(m.stance_knees)], q[list(m.swing_knees)])
     lean = m.description.torso_lean(np.array(m.torso_angle.map(n)(q)).ravel())
     return dict(
@@ -60,6 +51,40 @@ def dense_check(gait, n: int) -> dict:
         periodicity_dq=float(np.max(np.abs(dqp - dq[:, 0]))),
         unactuated_row_residual=float(np.max(np.abs(row1))),
     )
+
+
+def _clearance(gait, s, xs, zs) -> tuple:
+    """(swing foot's height, its height above the clearance bound) at s = t / T."""
+    m = gait.model
+    profile = gait.options.clearance * 4 * s * (1 - s)
+    if m.scuffing_ignored:
+        # legs without knees: the swing foot must be above the ground beyond the
+        # scuff zone in front of the stance foot (transcription.py); nearer, or
+        # behind, it may graze below
+        height = np.where(xs > m.scuff_zone, zs, np.inf)
+        return height, zs - profile * (xs - m.scuff_zone) / m.description.leg_length
+    return zs, zs - profile
+
+
+def clearance_dip(gait, n: int = 2001) -> float:
+    """Where the swing foot is lowest under its clearance bound, on ``n`` points.
+
+    Parameters
+    ----------
+    gait : Gait
+        The gait.
+    n : int
+        Points of the dense grid (those of :meth:`Gait.check <gait_opt.Gait.check>`).
+
+    Returns
+    -------
+    float
+        s = t / T of the inner point of least height above the bound.
+    """
+    t = np.linspace(0, gait.T, n)
+    xs, zs = (np.array(v).ravel() for v in gait.model.swing_foot.map(n)(gait.q(t)))
+    _, margin = _clearance(gait, t / gait.T, xs, zs)
+    return float(t[1 + np.argmin(margin[1:-1])] / gait.T)
 
 
 def dense_violations(gait, check: dict, tol: float) -> list:

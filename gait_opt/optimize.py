@@ -18,9 +18,10 @@ from biped_casadi.results import Result, internal
 from .cache import cached_gait
 from .errors import GaitOptimizationError
 from .gait import Gait
+from .gait_checks import clearance_dip
 from .options import GaitOptions, require_model
 from .polish import polish
-from .transcription import (FIXED_BY, MARGINS, build_problem, constraint_violations,
+from .transcription import (FIXED_BY, MARGINS, _grid, build_problem, constraint_violations,
                             describe_violations, guess_step, initial_guess, make_solver,
                             warm_start_vector)
 
@@ -148,6 +149,22 @@ def _options(model, options, overrides) -> GaitOptions:
     return (opts.replace(**overrides) if overrides else opts).for_model(model)
 
 
+def _margin_family(gait, name: str) -> str:
+    """The family of :data:`MARGINS` whose node margin fixes a dense-grid violation.
+
+    The swing foot dipping under its clearance bound before the first constrained point
+    or after the last (where foot and bound meet the ground) is fixed by the foot's
+    slopes at the step's ends: a margin at the nodes only narrows such a dip.
+    """
+    family = FIXED_BY.get(name, name)
+    if family == "swing-foot clearance":
+        s = np.concatenate(_grid(gait.options))
+        s = s[(s > 1e-9) & (s < 1 - 1e-9)]
+        if not s.min() <= clearance_dip(gait) <= s.max():
+            return "swing-foot clearance at the ends"
+    return family
+
+
 def _solve(model, options: GaitOptions | None = None, *, verbose: bool = False,
            warm_start=None, max_refinements: int = 3, **overrides) -> GaitSolveResult:
     """Solve the reference-gait problem (docs: theory, the reference gait).
@@ -201,7 +218,8 @@ def _solve(model, options: GaitOptions | None = None, *, verbose: bool = False,
         passes.append(dict(iterations=r.iterations, margins=dict(margins),
                            violations=[list(v) for v in viol]))
         best = (gait, r, viol, hist, t_polish, (alpha_p, x0_p, T_p))
-        fixable = [(FIXED_BY.get(n, n), v) for n, v in viol if FIXED_BY.get(n, n) in MARGINS]
+        fixable = [(_margin_family(gait, n), v) for n, v in viol
+                   if FIXED_BY.get(n, n) in MARGINS]
         if not fixable or len(fixable) < len(viol) or attempt == max_refinements:
             break
         for n, v in fixable:          # tighten the node bounds by twice the excess

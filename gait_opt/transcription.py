@@ -155,10 +155,11 @@ def _point_functions(model, bezier_degree: int, cost: str):
     return point, point_jac, point_cost, point_hess
 
 
-def _boundary_function(model, opts: GaitOptions):
+def _boundary_function(model, opts: GaitOptions, margins=None):
     """End of step, impact (paper eq. 2-3) and periodicity, as SX of
     v_b = (T, vec(alpha), x(0), x(1)) and the speed v; returns (Function (vb, v),
-    Hessian Function (vb, lam), [(name, rows, lo, hi)])."""
+    Hessian Function (vb, lam), [(name, rows, lo, hi)]).  With a margin of the clearance
+    at the ends, the swing foot's slopes there (:func:`_clearance_slopes`)."""
     ref = reference_dynamics(model, opts.bezier_degree)
     M, nu = opts.bezier_degree, model.nu
     vb = ca.SX.sym("vb", 1 + nu * (M + 1) + 4)
@@ -185,6 +186,10 @@ def _boundary_function(model, opts: GaitOptions):
         ("impact impulse cone", ca.vertcat(F_imp[1], mu * F_imp[1] - F_imp[0],
                                            mu * F_imp[1] + F_imp[0]), 0, inf),
     ]
+    if "swing-foot clearance at the ends" in (margins or {}):
+        start = (ca.vertcat(x0[0], qa0), ca.vertcat(x0[1], dqa0))
+        families.append(_clearance_slopes(model, opts, T, start, (q_minus, dq_minus),
+                                          margins["swing-foot clearance at the ends"]))
     g = ca.cse(ca.vertcat(*[f[1] for f in families]))
     lam = ca.SX.sym("lam", g.numel())
     Hb = ca.triu(ca.hessian(ca.dot(lam, g), vb)[0])     # free of v: v T is linear in T
@@ -196,9 +201,22 @@ def _boundary_function(model, opts: GaitOptions):
 #: path-constraint families that between-node violations can be fixed for, by tightening
 #: the node constraints: family -> unit of the margin
 MARGINS = {"torque limit": "N m", "normal force": "N", "friction cone": "(ratio)",
-           "swing-foot clearance": "m", "torso lean": "rad"}
+           "swing-foot clearance": "m", "torso lean": "rad",
+           "swing-foot clearance at the ends": "m"}
 #: dense-grid families (Gait.violations) fixed by another family's margin
 FIXED_BY = {"swing foot above ground": "swing-foot clearance"}
+
+
+def _clearance_slopes(model, opts, T, start, end, margin) -> tuple:
+    """The clearance bound at s = 0 and 1, where foot and bound are 0: just inside, z_sw >=
+    bound needs dz_sw/ds >= its slope 4 clearance (times (x_sw - scuff_zone) / leg length
+    for legs without knees) at s = 0, and <= minus that at s = 1."""
+    rows = []
+    for sign, (q, dq) in ((1, start), (-1, end)):      # m per unit of s, >= margin
+        x, dz = model.swing_foot(q)[0], model.swing_foot_velocity(q, dq)[1]
+        w = (x - model.scuff_zone) / model.description.leg_length if model.scuffing_ignored else 1
+        rows.append(sign * T * dz - 4 * opts.clearance * w)
+    return ("swing-foot clearance at the ends", ca.vertcat(*rows), margin, np.inf)
 
 
 @dataclass
@@ -507,7 +525,7 @@ def build_problem(model, opts: GaitOptions, margins: dict | None = None, *,
     con, QA_of_alpha = _point_constraints(model, opts, lay, margins, OUT)
     n_linear = con.size
     g_linear = ca.vertcat(*con.g)          # the rows before the boundary (free of p)
-    bnd, bnd_hess, families = _boundary_function(model, opts)
+    bnd, bnd_hess, families = _boundary_function(model, opts, margins)
     p_nlp = ca.MX.sym("p", int(speed_parameter))
     pw = ca.MX.sym("p", int(speed_parameter))
     speed_nlp, speed_w = (p_nlp, pw) if speed_parameter else (opts.speed, opts.speed)
@@ -630,8 +648,7 @@ UNITS = {
     "friction cone": "N", "swing-foot clearance": "m", "periodicity (q)": "rad",
     "periodicity (dq)": "rad/s", "swing foot on ground at T": "m", "speed": "m",
     "step length": "m", "strike velocity": "m/s", "lift-off velocity": "m/s",
-    "impact impulse cone": "N s", "torso lean": "rad",
-}
+    "impact impulse cone": "N s", "torso lean": "rad", "swing-foot clearance at the ends": "m"}
 
 
 def constraint_violations(prob: Problem, gval: np.ndarray, tol: float = 1e-6):
