@@ -181,3 +181,40 @@ def test_no_committed_result_names_a_file_of_the_machine_that_made_it():
              for s in _strings(json.loads(p.read_text()))
              if s.startswith("/") and Path(s).suffix in (".png", ".pdf", ".json", ".svg")}
     assert not found, found
+
+
+def test_the_gait_again_with_the_reserve_where_no_design_is_stable(monkeypatch, capsys):
+    """``measure`` optimises the gait again at the limit less the reserve where the
+    robot's limit gives no stable design: none feasible, or a choice whose radius is at
+    least 1 (RABBIT at 2.5 m/s since the running step keeps its torques within the limit
+    between the points); a stable choice is kept as it is."""
+    from types import SimpleNamespace
+    calls = []
+
+    def speed_row(m, v, max_evaluations, gait_torque_limit=None):
+        calls.append(gait_torque_limit)
+        rho = radii[len(calls) - 1]
+        chosen = None if rho is None else dict(spectral_radius=rho, message=f"radius {rho}")
+        feasible = None if rho is None else 1.1        # the plain, hand-picked and best c
+        return dict(speed=v, gait_torque_limit=gait_torque_limit, gait_success=True,
+                    plain=feasible, hand=feasible, best_c=dict(c=0.7, radius=feasible),
+                    hand_message="torque u1 <= 150 N m violated", chosen=chosen)
+
+    monkeypatch.setattr(bench, "speed_row", speed_row)
+    monkeypatch.setattr(bench, "_stamp", lambda: {})
+    a = SimpleNamespace(max_evaluations=150, reserve=5.0)
+    for radii, limits in (([1.07, 0.58], [None, 145.0]), ([None, 0.58], [None, 145.0]),
+                          ([0.39], [None])):
+        calls.clear()
+        row = bench.measure(_Robot, 2.5, a)
+        assert calls == limits and row["gait_torque_limit"] == limits[-1]
+        assert ("default_gait" in row) == (len(limits) == 2)
+        if len(limits) == 2:
+            assert row["default_gait"]["chosen"] == (None if radii[0] is None else
+                                                     dict(spectral_radius=1.07,
+                                                          message="radius 1.07"))
+            assert "again with the torque limit 145 N m" in capsys.readouterr().out
+    calls.clear()
+    radii = [1.07]
+    assert "default_gait" not in bench.measure(_Robot, 2.5, SimpleNamespace(
+        max_evaluations=150, reserve=0.0)) and calls == [None]
