@@ -14,6 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import _results  # noqa: E402
+from summary_compare import leaves  # noqa: E402
 import bench_running_m1 as bench  # noqa: E402
 
 
@@ -163,23 +164,12 @@ def test_a_saved_figure_is_named_by_its_path_in_the_checkout(tmp_path, monkeypat
     assert saved["data"]["figure"] == ["docs/_static/x.png", "/elsewhere/y.png"]
 
 
-def _strings(obj):
-    if isinstance(obj, dict):
-        for v in obj.values():
-            yield from _strings(v)
-    elif isinstance(obj, list):
-        for v in obj:
-            yield from _strings(v)
-    elif isinstance(obj, str):
-        yield obj
-
-
 def test_no_committed_result_names_a_file_of_the_machine_that_made_it():
     """The benchmarks page reads the committed results: a file named by an absolute path
     (``/tmp/...`` of the run that made it) points nowhere in a clone."""
     found = {p.name: s for p in sorted((ROOT / "benchmarks" / "results").glob("*.json"))
-             for s in _strings(json.loads(p.read_text()))
-             if s.startswith("/") and Path(s).suffix in (".png", ".pdf", ".json", ".svg")}
+             for _, s in leaves(json.loads(p.read_text()))
+             if isinstance(s, str) and s.startswith("/") and Path(s).suffix in (".png", ".pdf", ".json", ".svg")}
     assert not found, found
 
 
